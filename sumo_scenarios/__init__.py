@@ -1,0 +1,1 @@
+"""The highway driving domain (paper Section 5.2) on SUMO through libsumo."""
