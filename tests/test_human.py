@@ -1,0 +1,343 @@
+"""The terminal teacher, driven through a real pseudo-terminal, and the domains' text views."""
+
+from __future__ import annotations
+
+import io
+import os
+import pty
+import re
+import select
+import signal
+import subprocess
+import sys
+import termios
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from torchcbl.human import TeachingInterrupted, TerminalTeacher
+
+PROMPT = b"action? "
+OBS = np.array([0.5], dtype=np.float32)
+
+
+def _describe(observation, info):
+    return f"x = {float(observation[0]):.3f}"
+
+
+class Person(threading.Thread):
+    """Plays the person at the other end of a pseudo-terminal.
+
+    Waits for each prompt the teacher writes to the master side, records the terminal's local
+    mode flags at that moment, then answers with the next item of ``answers``: bytes are typed,
+    a callable is called instead. The deadline only keeps a broken teacher from hanging the run.
+    """
+
+    def __init__(self, master: int, slave: int, answers, deadline: float = 20.0):
+        super().__init__(daemon=True)
+        self.master, self.slave = master, slave
+        self.answers = list(answers)
+        self.deadline = time.monotonic() + deadline
+        self.transcript = bytearray()
+        self.lflags_at_prompt: list[int] = []
+
+    def run(self) -> None:
+        sent = 0
+        while sent < len(self.answers) and time.monotonic() < self.deadline:
+            if select.select([self.master], [], [], 0.05)[0]:
+                try:
+                    self.transcript += os.read(self.master, 4096)
+                except OSError:
+                    return
+            if self.transcript.count(PROMPT) > sent:
+                self.lflags_at_prompt.append(termios.tcgetattr(self.slave)[3])
+                answer = self.answers[sent]
+                if callable(answer):
+                    answer()
+                else:
+                    os.write(self.master, answer)
+                sent += 1
+
+    def finish(self) -> str:
+        self.join(timeout=20)
+        assert not self.is_alive()
+        while select.select([self.master], [], [], 0.05)[0]:
+            try:
+                chunk = os.read(self.master, 4096)
+            except OSError:
+                break
+            if not chunk:
+                break
+            self.transcript += chunk
+        return self.transcript.decode("utf-8", errors="replace")
+
+
+@pytest.fixture
+def terminal():
+    """A pseudo-terminal (master, slave) with the slave in its normal, canonical mode."""
+    master, slave = pty.openpty()
+    yield master, slave
+    for fd in (master, slave):
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+
+
+def _teacher(slave: int, **kw) -> TerminalTeacher:
+    kw.setdefault("keys", {"w": 0, "up": 0, "a": 1, "left": 1, "d": 2, "right": 2})
+    kw.setdefault("action_names", ("stay", "left", "right"))
+    kw.setdefault("describe", _describe)
+    out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
+    return TerminalTeacher(input=slave, output=out, **kw)
+
+
+# ---------------------------------------------------------------- through a pseudo-terminal
+
+
+@pytest.mark.timeout(60)
+def test_single_keys_without_enter_choose_actions_and_terminal_is_restored(terminal):
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    keys = [b"w", b"\x1b[D", b"d", b"\x1bOA", b"A", b"\x1b[C"]  # OA: application-mode up
+    person = Person(master, slave, keys)
+    teacher = _teacher(slave)
+    person.start()
+    actions = [teacher(OBS, {}) for _ in keys]
+    shown = person.finish()
+
+    assert actions == [0, 1, 2, 0, 1, 2]
+    assert teacher.n_decisions == len(keys)
+    # While waiting for a key the terminal was non-canonical (no Enter needed) and silent.
+    assert len(person.lflags_at_prompt) == len(keys)
+    for lflag in person.lflags_at_prompt:
+        assert not lflag & termios.ICANON
+        assert not lflag & termios.ECHO
+        assert not lflag & termios.ISIG
+    assert termios.tcgetattr(slave) == before
+    assert "x = 0.500" in shown
+    assert "[w/up] stay" in shown and "[a/left] left" in shown
+    assert shown.count("-> right") == 2
+
+
+@pytest.mark.timeout(60)
+def test_an_unknown_key_reprompts_with_the_valid_keys(terminal):
+    master, slave = terminal
+    person = Person(master, slave, [b"x", b"\x1b[B", b"a"])  # x and down arrow are not mapped
+    teacher = _teacher(slave)
+    person.start()
+    action = teacher(OBS, {})
+    shown = person.finish()
+
+    assert action == 1
+    assert shown.count("action? ") == 3
+    assert "'x' is not a key here" in shown
+    assert "'down' is not a key here" in shown
+    assert "Valid keys: [w/up] stay  [a/left] left  [d/right] right  [q/Ctrl-C] quit" in shown
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("key", [b"q", b"\x03"], ids=["q", "ctrl-c"])
+def test_quit_key_raises_teaching_interrupted_and_restores_terminal(terminal, key):
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    person = Person(master, slave, [b"w", key])
+    teacher = _teacher(slave)
+    person.start()
+    assert teacher(OBS, {}) == 0
+    with pytest.raises(TeachingInterrupted):
+        teacher(OBS, {})
+    person.finish()
+    assert termios.tcgetattr(slave) == before
+    assert teacher.n_decisions == 1
+
+
+@pytest.mark.timeout(60)
+def test_keyboard_interrupt_while_waiting_restores_terminal(terminal):
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    person = Person(master, slave, [lambda: os.kill(os.getpid(), signal.SIGINT)])
+    teacher = _teacher(slave)
+    person.start()
+    with pytest.raises(TeachingInterrupted) as caught:
+        teacher(OBS, {})
+    person.finish()
+    assert isinstance(caught.value.__cause__, KeyboardInterrupt)
+    assert termios.tcgetattr(slave) == before
+
+
+@pytest.mark.timeout(60)
+def test_status_line_is_shown_and_can_be_updated(terminal):
+    master, slave = terminal
+    person = Person(master, slave, [b"w", b"w"])
+    teacher = _teacher(slave, status="warming up")
+    person.start()
+    teacher(OBS, {})
+    teacher.set_status("the agent asks: 3 of the last 20 steps")
+    teacher(OBS, {})
+    shown = person.finish()
+    first, second = shown.split("-> stay", 1)
+    assert "decision #1 | warming up" in first
+    assert "decision #2 | the agent asks: 3 of the last 20 steps" in second
+    assert "warming up" not in second
+
+
+# ------------------------------------------------------------------- line-input fallback
+
+
+def test_line_input_from_a_pipe():
+    read_fd, write_fd = os.pipe()
+    os.write(write_fd, b"x\nup\nright\n1\nD\n  \nq\n")
+    os.close(write_fd)
+    out = io.StringIO()
+    with os.fdopen(read_fd, "r") as pipe:
+        teacher = TerminalTeacher(
+            {"w": 0, "up": 0, "a": 1, "d": 2, "space": 1},
+            ("stay", "left", "right"),
+            _describe,
+            input=pipe,
+            output=out,
+        )
+        # 'x' is rejected, then 'up' (a key name); an action name; an action number;
+        # a capital letter; a line of spaces is the space key.
+        assert [teacher(OBS, {}) for _ in range(5)] == [0, 2, 1, 2, 1]
+        with pytest.raises(TeachingInterrupted, match="stopped"):
+            teacher(OBS, {})
+        with pytest.raises(TeachingInterrupted, match="closed"):
+            teacher(OBS, {})
+    assert "'x' is not a key here" in out.getvalue()
+    assert "\x1b[2J" not in out.getvalue()  # no screen clearing on a non-terminal
+
+
+def test_input_without_a_file_descriptor_reads_lines():
+    teacher = TerminalTeacher(
+        {"w": 0, "s": 1}, ("go", "stop"), input=io.StringIO("s\n"), output=io.StringIO()
+    )
+    assert teacher(np.array([1.0, 2.0]), {}) == 1
+
+
+def test_bad_key_maps_are_clear_errors():
+    names = ("a0", "a1")
+    with pytest.raises(ValueError, match="no key for action"):
+        TerminalTeacher({"w": 0}, names)
+    with pytest.raises(ValueError, match="outside 0..1"):
+        TerminalTeacher({"w": 0, "s": 2}, names)
+    with pytest.raises(ValueError, match="quit key"):
+        TerminalTeacher({"w": 0, "q": 1}, names)
+    with pytest.raises(ValueError, match="unknown key"):
+        TerminalTeacher({"w": 0, "upp": 1}, names)
+    with pytest.raises(ValueError, match="two different actions"):
+        TerminalTeacher({"up": 0, "\x1b[A": 1}, names)
+    with pytest.raises(ValueError, match="not an action index"):
+        TerminalTeacher({"w": 0, "s": "1"}, names)
+    with pytest.raises(ValueError, match="unique"):
+        TerminalTeacher({"w": 0, "s": 1}, ("go", "Go"))
+    with pytest.raises(TypeError, match="callable"):
+        TerminalTeacher({"w": 0, "s": 1}, names, describe="x")
+
+
+def test_core_human_module_imports_no_domain():
+    code = (
+        "import sys, torchcbl.human\n"
+        "print(','.join(m for m in ('corridor', 'sumo_scenarios', 'libsumo', 'pymunk')"
+        " if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""
+
+
+# ------------------------------------------------------------------------- domain views
+
+
+def _grid(view: str) -> dict[float, str]:
+    """Rows of the driving view by their distance label."""
+    rows = {}
+    for line in view.splitlines():
+        m = re.match(r"\s*([+-]\d+\.\d)m\|(.*)\|$", line)
+        if m:
+            rows[float(m.group(1))] = m.group(2)
+    return rows
+
+
+def _lane_of(row: str, mark: str) -> int:
+    """The lane index (0 right shoulder .. 4 left shoulder) of ``mark`` in a row of the view."""
+    cells = row.split(":")
+    assert len(cells) == 5
+    found = [i for i, cell in enumerate(cells) if mark in cell]
+    assert len(found) == 1, row
+    return 4 - found[0]
+
+
+def test_driving_view_places_ego_and_cars_by_lane_and_distance():
+    from sumo_scenarios.human import describe
+
+    obs = np.array([-5.0, 10.0, 25.0, 2.0], dtype=np.float32)
+    rows = _grid(describe(obs, {}))
+    assert len(rows) == 21 and max(rows) == 25.0 and min(rows) == -25.0
+    assert _lane_of(rows[0.0], "[E]") == 2
+    assert _lane_of(rows[10.0], "[#]") == 2  # 10 m ahead in the ego's lane
+    assert _lane_of(rows[-5.0], "[#]") == 1  # 5 m behind, one lane to the right
+    drawn = sum(row.count("[#]") for row in rows.values())
+    assert drawn == 2  # lane 3's car is out of range (clipped to 25) and not drawn
+
+    shoulder = _grid(describe(np.array([25, 25, 7.4, 4], dtype=np.float32), {}))
+    assert _lane_of(shoulder[0.0], "[E]") == 4
+    assert _lane_of(shoulder[7.5], "[#]") == 3
+
+
+def test_driving_view_shows_contact_and_overlap():
+    from sumo_scenarios.human import describe
+
+    obs = np.array([25.0, 0.4, -25.0, 2.0], dtype=np.float32)
+    calm = describe(obs, {})
+    touching = describe(obs, {"contact": True})
+    assert "CONTACT" not in calm
+    assert "CONTACT" in touching
+    assert _lane_of(_grid(calm)[0.0], "[X]") == 2
+
+
+@pytest.mark.parametrize("obs", [[1.0, 2.0, 3.0], [0, 0, 0, 5], [0, 0, 0, 2.5], [np.nan, 0, 0, 2]])
+def test_driving_view_rejects_bad_observations(obs):
+    from sumo_scenarios.human import describe
+
+    with pytest.raises(ValueError):
+        describe(np.asarray(obs, dtype=np.float32), {})
+
+
+def test_corridor_view_bars_are_proportional_to_distance():
+    from corridor.human import describe
+
+    view = describe(np.array([0.3, 1.5, 4.0], dtype=np.float32), {}, max_range=3.0, width=30)
+    bars = {
+        m.group(1): m.group(3)
+        for m in re.finditer(r"(left|front|right)\s+(\S+) m \|([# ]+)\|", view)
+    }
+    assert bars["left"].count("#") == 3
+    assert bars["front"].count("#") == 15
+    assert bars["right"].count("#") == 30
+    assert "max" in view.splitlines()[3] and "max" not in view.splitlines()[2]
+    for bad in ([1.0, 2.0], [1.0, -0.1, 2.0], [1.0, np.inf, 1.0]):
+        with pytest.raises(ValueError):
+            describe(np.asarray(bad), {})
+
+
+def test_domain_teachers_map_keys_to_actions():
+    from corridor.human import make_teacher as corridor_teacher
+    from sumo_scenarios.human import make_teacher as driving_teacher
+
+    corridor = corridor_teacher(input=io.StringIO(), output=io.StringIO()).keys
+    assert corridor["\x1b[A"] == corridor["w"] == 0
+    assert corridor["\x1b[D"] == corridor["a"] == 1
+    assert corridor["\x1b[C"] == corridor["d"] == 2
+    assert corridor["\x1b[B"] == corridor["s"] == 3
+    driving = driving_teacher(input=io.StringIO(), output=io.StringIO()).keys
+    assert driving[" "] == driving["w"] == driving["\x1b[A"] == 0
+    assert driving["\x1b[D"] == driving["a"] == 1
+    assert driving["\x1b[C"] == driving["d"] == 2
+
+    out = io.StringIO()
+    teacher = driving_teacher(input=io.StringIO("d\n"), output=out)
+    assert teacher(np.array([12.0, -25.0, 25.0, 1.0]), {}) == 2
+    assert "[E]" in out.getvalue() and "shift right" in out.getvalue()

@@ -1,0 +1,379 @@
+"""A human teacher at the terminal: shows the situation, reads one key per decision.
+
+:class:`TerminalTeacher` is a teacher in the sense of ``docs/architecture.md``: it is called as
+``teacher(observation, info) -> action``. Each call draws the domain's text view of the
+situation (a ``describe(observation, info) -> str`` function the domain supplies), a status line
+the caller keeps up to date (demonstrations so far, autonomy, ...), and a prompt listing the
+keys, then waits for the person to press one key.
+
+On a terminal the key is read without Enter: the terminal is switched to a non-canonical,
+no-echo mode for the duration of the read and its settings are always restored afterwards,
+also when the read is interrupted. When the input is not a terminal (a pipe, a file), one line
+is read per decision instead; a line may hold a key (``w``), a key name (``up``), an action
+name (``forward``) or an action number.
+
+Pressing ``q`` (or Ctrl-C, or closing the input) raises :class:`TeachingInterrupted`, so a
+teaching session can stop cleanly; the demonstrations it already recorded are on disk.
+
+This module is domain-free; the views live beside each domain (``corridor.human``,
+``sumo_scenarios.human``).
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from typing import IO, Any
+
+import numpy as np
+
+try:  # POSIX only; elsewhere the teacher always reads lines.
+    import termios
+except ImportError:  # pragma: no cover - exercised on Windows only
+    termios = None  # type: ignore[assignment]
+
+__all__ = ["KEY_NAMES", "TeachingInterrupted", "TerminalTeacher"]
+
+#: Names accepted in a key map for keys that are not printable characters.
+KEY_NAMES: dict[str, str] = {
+    "up": "\x1b[A",
+    "down": "\x1b[B",
+    "right": "\x1b[C",
+    "left": "\x1b[D",
+    "space": " ",
+    "enter": "\r",
+    "tab": "\t",
+}
+_LABELS = {seq: name for name, seq in KEY_NAMES.items()}
+_CTRL_C = "\x03"
+_CTRL_D = "\x04"
+_ESC = "\x1b"
+# Seconds to wait for the rest of an escape sequence after ESC (arrow keys send 3 bytes).
+_ESCAPE_WAIT = 0.05
+_CLEAR_SCREEN = "\x1b[H\x1b[2J"
+
+
+class TeachingInterrupted(Exception):
+    """The person asked to stop teaching ('q', Ctrl-C, or the input was closed).
+
+    Raised from inside a teacher call. Demonstrations recorded before the call are kept; the
+    decision being asked about is not answered.
+    """
+
+
+def _normalize_key(key: str) -> str:
+    """Map a key-map entry (a character, a key name, or an escape sequence) to what is read."""
+    if not isinstance(key, str) or not key:
+        raise ValueError(f"a key must be a non-empty string, got {key!r}")
+    lowered = key.lower()
+    if lowered in KEY_NAMES:
+        return KEY_NAMES[lowered]
+    if key == "\n":
+        return "\r"
+    if key.startswith(_ESC + "O") and len(key) == 3:  # application cursor mode arrows
+        return _ESC + "[" + key[2]
+    if len(key) == 1 or key.startswith(_ESC):
+        return key
+    raise ValueError(
+        f"unknown key {key!r}: use a single character, an escape sequence, or one of "
+        f"{sorted(KEY_NAMES)}"
+    )
+
+
+def _label(key: str) -> str:
+    """A short printable name for a key as read."""
+    if key in _LABELS:
+        return _LABELS[key]
+    if key == _CTRL_C:
+        return "Ctrl-C"
+    if len(key) == 1 and not key.isprintable():
+        return repr(key)
+    if key.startswith(_ESC):
+        return repr(key)
+    return key
+
+
+class TerminalTeacher:
+    """A teacher that asks a person at the terminal for each action, one key per decision.
+
+    Args:
+        keys: key map, key -> action index. A key is a single character (``"w"``), a name from
+            :data:`KEY_NAMES` (``"up"``, ``"left"``, ``"space"``, ...) or a raw escape sequence.
+            Letters also match in the other case when that case is not mapped itself. Every
+            action must have at least one key.
+        action_names: one name per action, in action order.
+        describe: the domain's text view, ``describe(observation, info) -> str``. Without it
+            the raw observation is shown.
+        input: where keys are read from: a file object with ``fileno()`` or a file descriptor.
+            Defaults to ``sys.stdin``. A terminal is read one key at a time; anything else one
+            line at a time.
+        output: a text stream the view is written to. Defaults to ``sys.stdout``.
+        quit_keys: keys that raise :class:`TeachingInterrupted`; Ctrl-C always does.
+        status: initial status line (see :meth:`set_status`).
+        title: an optional heading shown above the view.
+        clear_screen: redraw on a cleared screen each decision; ``None`` (default) clears only
+            when ``output`` is a terminal.
+
+    Raises:
+        ValueError: for an empty or inconsistent key map or action names.
+        TypeError: for a ``describe`` that is not callable.
+    """
+
+    def __init__(
+        self,
+        keys: Mapping[str, int],
+        action_names: Sequence[str],
+        describe: Callable[[np.ndarray, dict], str] | None = None,
+        *,
+        input: IO[Any] | int | None = None,
+        output: IO[str] | None = None,
+        quit_keys: Sequence[str] = ("q",),
+        status: str = "",
+        title: str = "",
+        clear_screen: bool | None = None,
+    ) -> None:
+        names = list(action_names)
+        if not names:
+            raise ValueError("action_names must name at least one action")
+        if any(not isinstance(n, str) or not n.strip() for n in names):
+            raise ValueError(f"action names must be non-empty strings, got {names!r}")
+        if len({n.lower() for n in names}) != len(names):
+            raise ValueError(f"action names must be unique, got {names!r}")
+        if describe is not None and not callable(describe):
+            raise TypeError(f"describe must be callable, got {type(describe).__name__}")
+        if not isinstance(keys, Mapping) or not keys:
+            raise ValueError("keys must be a non-empty mapping key -> action")
+
+        keymap: dict[str, int] = {}
+        for key, action in keys.items():
+            if isinstance(action, bool) or not isinstance(action, int | np.integer):
+                raise ValueError(f"key {key!r} maps to {action!r}, not an action index")
+            if not 0 <= int(action) < len(names):
+                raise ValueError(
+                    f"key {key!r} maps to action {action}, outside 0..{len(names) - 1}"
+                )
+            norm = _normalize_key(key)
+            if norm in keymap and keymap[norm] != int(action):
+                raise ValueError(f"key {key!r} is mapped to two different actions")
+            keymap[norm] = int(action)
+        missing = [names[a] for a in range(len(names)) if a not in keymap.values()]
+        if missing:
+            raise ValueError(f"no key for action(s) {missing}; every action needs a key")
+        quits = {_normalize_key(k) for k in quit_keys}
+        clash = sorted(_label(k) for k in quits & keymap.keys())
+        if clash:
+            raise ValueError(f"quit key(s) {clash} are also action keys")
+
+        self._keys = keymap
+        self._quit = quits | {_CTRL_C}
+        self.action_names: tuple[str, ...] = tuple(names)
+        self._describe = describe
+        self._input = sys.stdin if input is None else input
+        self._output = sys.stdout if output is None else output
+        self.status: str = status
+        """The status line shown under the view; the caller may assign it at any time."""
+        self.title = title
+        self._clear = clear_screen
+        self.n_decisions: int = 0
+        """How many decisions the person has answered so far."""
+
+    # ------------------------------------------------------------------ public
+
+    @property
+    def n_actions(self) -> int:
+        """The number of actions."""
+        return len(self.action_names)
+
+    @property
+    def keys(self) -> dict[str, int]:
+        """The key map as read from the terminal (key names resolved), key -> action."""
+        return dict(self._keys)
+
+    def set_status(self, text: str) -> None:
+        """Set the status line shown with the next view, e.g. ``"42 demos, autonomy 80%"``."""
+        self.status = str(text)
+
+    def help_text(self) -> str:
+        """The key legend: each action with its keys, then the quit keys."""
+        parts = []
+        for action, name in enumerate(self.action_names):
+            labels = [_label(k) for k, a in self._keys.items() if a == action]
+            parts.append(f"[{'/'.join(labels)}] {name}")
+        quits = [_label(k) for k in self._quit if k != _CTRL_C]
+        parts.append(f"[{'/'.join(quits + ['Ctrl-C'])}] quit")
+        return "  ".join(parts)
+
+    def __call__(self, observation: np.ndarray, info: dict | None = None) -> int:
+        """Show the situation and return the action the person chooses.
+
+        Raises:
+            TeachingInterrupted: the person pressed a quit key or Ctrl-C, or input ended.
+        """
+        info = {} if info is None else info
+        self._show(observation, info)
+        try:
+            fd = self._input_fd()
+            if fd is not None and termios is not None and os.isatty(fd):
+                action = self._ask_key(fd)
+            else:
+                action = self._ask_line()
+        except KeyboardInterrupt as exc:
+            self._write("\n")
+            raise TeachingInterrupted("teaching interrupted (Ctrl-C)") from exc
+        self.n_decisions += 1
+        self._write(f"-> {self.action_names[action]}\n")
+        return action
+
+    # ----------------------------------------------------------------- drawing
+
+    def _write(self, text: str) -> None:
+        self._output.write(text)
+        self._output.flush()
+
+    def _show(self, observation: np.ndarray, info: dict) -> None:
+        clear = self._clear
+        if clear is None:
+            isatty = getattr(self._output, "isatty", None)
+            clear = bool(isatty and isatty())
+        lines = []
+        if self.title:
+            lines.append(self.title)
+        if self._describe is not None:
+            lines.append(self._describe(observation, info).rstrip("\n"))
+        else:
+            lines.append(f"observation: {np.asarray(observation).tolist()}")
+        lines.append(
+            f"decision #{self.n_decisions + 1}" + (f" | {self.status}" if self.status else "")
+        )
+        self._write((_CLEAR_SCREEN if clear else "") + "\n".join(lines) + "\n")
+
+    def _prompt(self) -> None:
+        self._write(f"{self.help_text()}\naction? ")
+
+    def _invalid(self, what: str) -> None:
+        self._write(f"\n{what} is not a key here. Valid keys: {self.help_text()}\n")
+
+    # ----------------------------------------------------------------- reading
+
+    def _input_fd(self) -> int | None:
+        """The input's file descriptor, or None for a stream without one (e.g. StringIO)."""
+        if isinstance(self._input, int):
+            return self._input
+        try:
+            return self._input.fileno()
+        except (AttributeError, OSError, ValueError):  # io.UnsupportedOperation is both
+            return None
+
+    def _ask_key(self, fd: int) -> int:
+        saved = termios.tcgetattr(fd)
+        try:
+            mode = termios.tcgetattr(fd)
+            # Non-canonical, no echo, no signal keys (Ctrl-C arrives as a byte and is ours),
+            # no extended processing. Output processing is kept so newlines still work.
+            mode[3] &= ~(termios.ICANON | termios.ECHO | termios.ISIG | termios.IEXTEN)
+            mode[6][termios.VMIN] = 1
+            mode[6][termios.VTIME] = 0
+            termios.tcsetattr(fd, termios.TCSANOW, mode)
+            self._prompt()
+            while True:
+                key = self._read_key(fd)
+                action = self._resolve_key(key)
+                if action is not None:
+                    return action
+                self._invalid(repr(_label(key)))
+                self._write("action? ")
+        finally:
+            termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+    def _read_byte(self, fd: int) -> bytes:
+        try:
+            byte = os.read(fd, 1)
+        except OSError as exc:  # EIO once the other end of a pseudo-terminal is gone
+            raise TeachingInterrupted("teaching input closed") from exc
+        if not byte:
+            raise TeachingInterrupted("teaching input closed")
+        return byte
+
+    def _more(self, fd: int) -> bool:
+        return bool(select.select([fd], [], [], _ESCAPE_WAIT)[0])
+
+    def _read_key(self, fd: int) -> str:
+        data = self._read_byte(fd)
+        if data == b"\x1b":
+            if self._more(fd):
+                data += self._read_byte(fd)
+                if data[1:] in (b"[", b"O"):
+                    while self._more(fd):
+                        data += self._read_byte(fd)
+                        if 0x40 <= data[-1] <= 0x7E:  # final byte of a CSI sequence
+                            break
+        elif data[0] >= 0xC0:  # lead byte of a multi-byte UTF-8 character
+            extra = 1 if data[0] < 0xE0 else 2 if data[0] < 0xF0 else 3
+            for _ in range(extra):
+                data += self._read_byte(fd)
+        key = data.decode("utf-8", errors="replace")
+        if key == "\n":
+            key = "\r"
+        if key.startswith(_ESC + "O") and len(key) == 3:
+            key = _ESC + "[" + key[2]
+        return key
+
+    def _resolve_key(self, key: str) -> int | None:
+        if key in self._quit or key == _CTRL_D:
+            raise TeachingInterrupted(f"teaching stopped by the person ({_label(key)})")
+        if key in self._keys:
+            return self._keys[key]
+        if len(key) == 1 and key.swapcase() in self._keys:
+            return self._keys[key.swapcase()]
+        return None
+
+    def _read_line(self) -> str:
+        if isinstance(self._input, int):
+            chunks = []
+            while True:
+                byte = os.read(self._input, 1)
+                if not byte:
+                    break
+                chunks.append(byte)
+                if byte == b"\n":
+                    break
+            return b"".join(chunks).decode("utf-8", errors="replace")
+        line = self._input.readline()
+        if isinstance(line, bytes):
+            line = line.decode("utf-8", errors="replace")
+        return line
+
+    def _ask_line(self) -> int:
+        self._prompt()
+        while True:
+            line = self._read_line()
+            if not line:
+                raise TeachingInterrupted("teaching input closed")
+            token = line.rstrip("\r\n")
+            token = token.strip() or token[:1]  # a line of spaces means the space key
+            action = self._resolve_token(token)
+            if action is not None:
+                return action
+            self._invalid(repr(token))
+            self._write("(type a key, a key name, an action name or number, then Enter)\naction? ")
+
+    def _resolve_token(self, token: str) -> int | None:
+        lowered = token.lower()
+        if lowered == "quit" or any(token == k or lowered == _label(k) for k in self._quit):
+            raise TeachingInterrupted("teaching stopped by the person (quit)")
+        if not token:
+            return None
+        if len(token) == 1:
+            found = self._resolve_key(token)
+            if found is not None:
+                return found
+        if lowered in KEY_NAMES and KEY_NAMES[lowered] in self._keys:
+            return self._keys[KEY_NAMES[lowered]]
+        for action, name in enumerate(self.action_names):
+            if lowered == name.lower():
+                return action
+        if token.isdigit() and int(token) < self.n_actions:
+            return int(token)
+        return None
