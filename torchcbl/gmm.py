@@ -1,0 +1,589 @@
+"""The set of Gaussian mixtures of the paper's Section 4.1: one full-covariance mixture per action.
+
+``GaussianMixtureSet`` fits every candidate component count of every action in ONE batched EM
+(see :mod:`torchcbl._em`), keeps per action the count with the lowest information criterion, and
+classifies observations with Eq. 7, reporting for each the Mahalanobis distance (in standard
+deviations) to the most likely component of the chosen mixture, which the paper's confidence
+rule thresholds.
+
+Variance floor
+--------------
+Every covariance matrix gets ``floor_j`` added to its diagonal entry ``j`` (as scikit-learn's
+``reg_covar``, but per feature and scaled to the data)::
+
+    floor_j = var_floor * Var_j + 1e-6 * mean_i(Var_i)      (1e-6 if every Var_i is 0)
+
+where ``Var_j`` is the (biased) variance of feature ``j`` over ALL training observations, all
+actions together. So a discrete feature that is constant inside a component (the lane index), an
+action with a single point or with identical points, all fit without a singular matrix: such a
+component's spread along feature ``j`` is ``sqrt(floor_j)``, i.e. about 3% of that feature's
+overall standard deviation with the default ``var_floor = 1e-3``. The floor is stored in the
+``var_floor_`` buffer.
+
+Selection of the component count
+--------------------------------
+Eq. 6 sums each mixture's criterion weighted by Pr(G_a) > 0; each term depends only on its own
+mixture's count, so the joint minimum over all count combinations is reached by minimising each
+action separately, which is what ``fit`` does. ``criterion="aic"`` (default) is the standard AIC
+with free parameters p = (k-1) + k d + k d (d+1) / 2 (equal to scikit-learn's ``aic``);
+``"bic"`` is p log n - 2 L; ``"aic_paper"`` is Eq. 5 taken literally, 2 k - 2 L.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Literal, NamedTuple
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from torchcbl import _em
+
+__all__ = ["Classification", "FitReport", "GaussianMixtureSet"]
+
+Criterion = Literal["aic", "bic", "aic_paper"]
+_CRITERIA = ("aic", "bic", "aic_paper")
+_ABS_FLOOR = 1e-6
+_NUMPY_MAX_ROWS = 256  # below this many rows (CPU), classify/log_prob run in numpy: less overhead
+_LOG_2PI = math.log(2.0 * math.pi)
+_VERY_NEGATIVE = -1.0e300  # log weight of padded components in the prediction tables
+
+
+class Classification(NamedTuple):
+    """Result of :meth:`GaussianMixtureSet.classify` for N observations.
+
+    action [N] long: argmax_a p_a(o) Pr(G_a) (Eq. 7); -1 before any fit.
+    confidence [N] float64 in [0, 1]: exp(-distance^2 / 2); 0 before any fit.
+    distance [N] float64: Mahalanobis distance, in standard deviations, of o to the most likely
+        component (largest w_c N(o; mu_c, S_c)) of the chosen action's mixture; +inf before fit.
+    posterior [N, A] float64: p(a | o); uniform before any fit.
+    """
+
+    action: Tensor
+    confidence: Tensor
+    distance: Tensor
+    posterior: Tensor
+
+
+@dataclass(frozen=True, eq=False)
+class FitReport:
+    """What happened in one :meth:`GaussianMixtureSet.fit`.
+
+    Tables are [A, max_components]; column j is the candidate with j + 1 components.
+    Entries that are not candidates (j + 1 > points of the action) hold -inf log-likelihood,
+    +inf criterion, converged False and 0 iterations; ``candidate_mask`` marks the real ones.
+    ``log_likelihood`` is the total (summed over the action's points) natural-log likelihood.
+    """
+
+    criterion_name: str
+    n_points: tuple[int, ...]
+    n_components: tuple[int, ...]
+    empty_actions: tuple[int, ...]
+    candidate_mask: Tensor
+    log_likelihood: Tensor
+    criterion: Tensor
+    converged: Tensor
+    n_iter: Tensor
+    notes: tuple[str, ...]
+
+    @property
+    def all_converged(self) -> bool:
+        """True if every candidate of every action converged within max_iter."""
+        return bool(self.converged[self.candidate_mask].all())
+
+    def __str__(self) -> str:
+        lines = [f"FitReport (criterion={self.criterion_name})"]
+        for a, (n, k) in enumerate(zip(self.n_points, self.n_components, strict=True)):
+            if n == 0:
+                lines.append(f"  action {a}: no data, never predicted")
+                continue
+            m = self.candidate_mask[a]
+            conv = int(self.converged[a][m].sum())
+            lines.append(
+                f"  action {a}: {n} points, chose k={k} of {int(m.sum())} candidates "
+                f"({conv} converged), log-likelihood {float(self.log_likelihood[a, k - 1]):.4g}"
+            )
+        lines.extend(f"  note: {s}" for s in self.notes)
+        return "\n".join(lines)
+
+
+def _is_real_dtype(kind: str) -> bool:
+    return kind in "fiu"
+
+
+def _to_numpy(value: Any, name: str) -> np.ndarray:
+    if isinstance(value, np.ndarray):
+        return value
+    if isinstance(value, Tensor):
+        return value.detach().cpu().numpy()
+    try:
+        return np.asarray(value)
+    except Exception as exc:  # noqa: BLE001 - re-raised with a clear message
+        raise TypeError(
+            f"{name}: expected a numpy array or torch tensor but got {type(value).__name__}"
+        ) from exc
+
+
+def _rows_preview(rows: np.ndarray) -> str:
+    shown = ", ".join(str(int(r)) for r in rows[:10])
+    more = f" (showing the first 10 of {rows.size})" if rows.size > 10 else ""
+    return f"[{shown}]{more}"
+
+
+class GaussianMixtureSet(nn.Module):
+    """One full-covariance Gaussian mixture per action, fitted by batched EM (Section 4.1).
+
+    Args:
+        n_actions: number of discrete actions A (labels 0..A-1).
+        n_features: observation dimension D.
+        max_components: largest component count tried per action; the candidates of an action
+            with n_a points are k = 1..min(max_components, n_a).
+        criterion: "aic" (free-parameter AIC, default), "bic", or "aic_paper" (Eq. 5 literally).
+        var_floor: relative variance floor, see the module docstring (>= 0).
+        tol: EM stops when the mean per-point log-likelihood changes less than this (nats).
+        max_iter: EM iteration cap per candidate.
+        seed: seeds the k-means++ initialisation; the same seed and data give the same model.
+
+    Fitted buffers (fixed shapes, so ``state_dict`` loads into a fresh instance built with the
+    same arguments): ``weights_`` [A, K], ``means_`` [A, K, D], ``covariances_`` [A, K, D, D],
+    ``precisions_cholesky_`` [A, K, D, D], ``component_mask_`` [A, K] bool, ``log_prior_`` [A]
+    (log share of points, -inf for an action without data), ``n_points_`` [A],
+    ``n_components_`` [A] long, ``criterion_`` [A, K] (+inf where k is not a candidate),
+    ``log_likelihood_`` [A, K] (-inf where k is not a candidate), ``var_floor_`` [D].
+    ``fit_report_`` (a :class:`FitReport`) is a plain attribute, not part of the state_dict.
+    """
+
+    def __init__(
+        self,
+        n_actions: int,
+        n_features: int,
+        max_components: int = 10,
+        *,
+        criterion: Criterion = "aic",
+        var_floor: float = 1e-3,
+        tol: float = 1e-4,
+        max_iter: int = 200,
+        seed: int = 0,
+    ) -> None:
+        super().__init__()
+        for name, val in (
+            ("n_actions", n_actions),
+            ("n_features", n_features),
+            ("max_components", max_components),
+            ("max_iter", max_iter),
+        ):
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
+                raise ValueError(f"Expected {name} to be an int >= 1 but got {val!r}")
+        if criterion not in _CRITERIA:
+            raise ValueError(f"Expected criterion in {_CRITERIA} but got {criterion!r}")
+        if not (isinstance(var_floor, (int, float)) and math.isfinite(var_floor)) or var_floor < 0:
+            raise ValueError(f"Expected var_floor to be a finite float >= 0 but got {var_floor!r}")
+        if not (isinstance(tol, (int, float)) and math.isfinite(tol)) or tol <= 0:
+            raise ValueError(f"Expected tol to be a finite float > 0 but got {tol!r}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            raise ValueError(f"Expected seed to be an int but got {seed!r}")
+        self.n_actions = int(n_actions)
+        self.n_features = int(n_features)
+        self.max_components = int(max_components)
+        self.criterion: Criterion = criterion
+        self.var_floor = float(var_floor)
+        self.tol = float(tol)
+        self.max_iter = int(max_iter)
+        self.seed = int(seed)
+        a, k, d = self.n_actions, self.max_components, self.n_features
+        f64 = torch.float64
+        eye = torch.eye(d, dtype=f64).expand(a, k, d, d).clone()
+        self.register_buffer("weights_", torch.zeros(a, k, dtype=f64))
+        self.register_buffer("means_", torch.zeros(a, k, d, dtype=f64))
+        self.register_buffer("covariances_", eye.clone())
+        self.register_buffer("precisions_cholesky_", eye)
+        self.register_buffer("log_det_", torch.zeros(a, k, dtype=f64))
+        self.register_buffer("component_mask_", torch.zeros(a, k, dtype=torch.bool))
+        self.register_buffer("log_prior_", torch.full((a,), -math.inf, dtype=f64))
+        self.register_buffer("n_points_", torch.zeros(a, dtype=torch.long))
+        self.register_buffer("n_components_", torch.zeros(a, dtype=torch.long))
+        self.register_buffer("criterion_", torch.full((a, k), math.inf, dtype=f64))
+        self.register_buffer("log_likelihood_", torch.full((a, k), -math.inf, dtype=f64))
+        self.register_buffer("var_floor_", torch.zeros(d, dtype=f64))
+        self.register_buffer("fitted_", torch.zeros((), dtype=torch.bool))
+        self.fit_report_: FitReport | None = None
+        self._cache: dict[str, Any] | None = None
+
+    def extra_repr(self) -> str:
+        return (
+            f"n_actions={self.n_actions}, n_features={self.n_features}, "
+            f"max_components={self.max_components}, criterion={self.criterion!r}, "
+            f"var_floor={self.var_floor}, tol={self.tol}, max_iter={self.max_iter}, "
+            f"seed={self.seed}"
+        )
+
+    # ------------------------------------------------------------------ state and caches
+    @property
+    def is_fitted(self) -> bool:
+        """True once :meth:`fit` succeeded (or a fitted state_dict was loaded)."""
+        return bool(self.fitted_)
+
+    def _apply(self, fn: Any, recurse: bool = True) -> GaussianMixtureSet:  # type: ignore[override]
+        self._cache = None
+        return super()._apply(fn, recurse)
+
+    def _load_from_state_dict(self, *args: Any, **kwargs: Any) -> None:
+        self._cache = None
+        self.fit_report_ = None
+        super()._load_from_state_dict(*args, **kwargs)
+
+    def _tables(self) -> dict[str, Any]:
+        """Prediction tables derived from the buffers, computed once per fit/load/.to()."""
+        if self._cache is not None:
+            return self._cache
+        a, k, d = self.n_actions, self.max_components, self.n_features
+        dev = self.means_.device
+        f64 = torch.float64
+        prec = self.precisions_cholesky_.to(f64)
+        means = self.means_.to(f64)
+        mask = self.component_mask_
+        # y = x @ pcat - mu_p gives, per component, (x - mu)^T U: one matrix product for all.
+        pcat = prec.permute(2, 0, 1, 3).reshape(d, a * k * d).contiguous()
+        mu_p = torch.matmul(means.unsqueeze(-2), prec).reshape(a * k * d)
+        logw = torch.log(self.weights_.to(f64).clamp_min(1e-300))
+        const = torch.where(mask, logw + self.log_det_.to(f64) - 0.5 * d * _LOG_2PI, _VERY_NEGATIVE)
+        log_prior = self.log_prior_.to(f64)
+        cache: dict[str, Any] = {
+            "pcat": pcat,
+            "mu_p": mu_p,
+            "const": const,
+            "log_prior": log_prior,
+            "cpu": dev.type == "cpu",
+        }
+        if cache["cpu"]:
+            cache["np"] = tuple(t.detach().numpy().copy() for t in (pcat, mu_p, const, log_prior))
+        self._cache = cache
+        return cache
+
+    # ------------------------------------------------------------------ input checks
+    def _check_observations(self, observations: Any, name: str = "observations") -> np.ndarray:
+        """Validate [N, D] real, finite observations; returns a float64 numpy array."""
+        x = _to_numpy(observations, name)
+        if not _is_real_dtype(x.dtype.kind):
+            raise TypeError(
+                f"{name}: expected real numbers (float32/float64 or integers) but got dtype "
+                f"{x.dtype}; convert with .astype(float)"
+            )
+        if x.ndim != 2 or x.shape[1] != self.n_features:
+            raise ValueError(
+                f"{name}: expected shape [N, {self.n_features}] (N >= 1 rows of "
+                f"n_features={self.n_features} as given to the constructor) but got shape "
+                f"{tuple(x.shape)}; pass one observation as obs[None, :]"
+            )
+        if x.shape[0] == 0:
+            raise ValueError(
+                f"{name}: expected N >= 1 rows but got an empty array of shape {tuple(x.shape)}"
+            )
+        if x.dtype != np.float64:
+            x = x.astype(np.float64)
+        if not np.isfinite(x).all():
+            bad = np.flatnonzero(~np.isfinite(x).all(1))
+            raise ValueError(
+                f"{name}: expected finite values but rows {_rows_preview(bad)} contain NaN or "
+                "inf; remove or impute those rows"
+            )
+        return x
+
+    def _check_actions(self, actions: Any, n: int) -> np.ndarray:
+        y = _to_numpy(actions, "actions")
+        if y.dtype.kind not in "iu":
+            raise TypeError(
+                f"actions: expected integer labels in [0, {self.n_actions}) but got dtype "
+                f"{y.dtype}; convert with .astype(int)"
+            )
+        if y.ndim != 1 or y.shape[0] != n:
+            raise ValueError(
+                f"actions: expected shape [{n}] (one label per observation) but got shape "
+                f"{tuple(y.shape)}"
+            )
+        bad = np.flatnonzero((y < 0) | (y >= self.n_actions))
+        if bad.size:
+            vals = ", ".join(str(int(v)) for v in np.unique(y[bad])[:10])
+            raise ValueError(
+                f"actions: expected labels in [0, {self.n_actions}) (n_actions="
+                f"{self.n_actions}) but got values [{vals}] at rows {_rows_preview(bad)}"
+            )
+        return y.astype(np.int64)
+
+    # ------------------------------------------------------------------ fitting
+    def fit(self, observations: Any, actions: Any) -> GaussianMixtureSet:
+        """Fit one mixture per action, choosing each count by the criterion.
+
+        Args:
+            observations: [N, D] real array (numpy or torch, float32/float64), N >= 1.
+            actions: [N] integer labels in [0, n_actions).
+
+        Returns self. On any error the previously fitted state is left untouched.
+        """
+        x_np = self._check_observations(observations)
+        y_np = self._check_actions(actions, x_np.shape[0])
+        dev = self.means_.device
+        f64 = torch.float64
+        a_n, kmax, d = self.n_actions, self.max_components, self.n_features
+        x = torch.from_numpy(x_np).to(dev)
+        y = torch.from_numpy(y_np).to(dev)
+        n_total = x.shape[0]
+
+        var = x.var(0, unbiased=False)
+        mean_var = float(var.mean())
+        floor = self.var_floor * var + (_ABS_FLOOR * mean_var if mean_var > 0 else _ABS_FLOOR)
+
+        counts = torch.bincount(y, minlength=a_n)  # [A]
+        counts_np = counts.cpu().numpy()
+        n_max = int(counts_np.max())
+        centers = torch.zeros(a_n, d, dtype=f64, device=dev).index_add_(0, y, x)
+        centers = centers / counts.clamp_min(1).unsqueeze(1).to(f64)
+        order = torch.argsort(y, stable=True)
+        ys = y[order]
+        starts = torch.cumsum(counts, 0) - counts
+        pos = torch.arange(n_total, device=dev) - starts[ys]
+        xa = torch.zeros(a_n, n_max, d, dtype=f64, device=dev)
+        xa[ys, pos] = x[order] - centers[ys]  # centred per action: better conditioned M-step
+
+        k_per_action = np.minimum(counts_np, kmax)  # 0 for an empty action
+        cand_action_np = np.repeat(np.arange(a_n), k_per_action)
+        cand_k_np = np.concatenate([np.arange(1, kk + 1) for kk in k_per_action])
+        cand_action = torch.from_numpy(cand_action_np).to(dev)
+        cand_k = torch.from_numpy(cand_k_np).to(dev)
+        k_pad = int(k_per_action.max())
+        xb = xa.index_select(0, cand_action)
+        pmask = (torch.arange(n_max, device=dev) < counts[cand_action].unsqueeze(1)).to(f64)
+        cmask = (torch.arange(k_pad, device=dev) < cand_k.unsqueeze(1)).to(f64)
+        uniforms = torch.from_numpy(
+            _em.candidate_uniforms(self.seed, cand_action_np, cand_k_np, k_pad)
+        ).to(dev)
+        with torch.no_grad():
+            resp0 = _em.kmeans_init(xb, pmask, cmask, uniforms)
+            res = _em.run_em(xb, pmask, cmask, floor, resp0, self.tol, self.max_iter)
+        n_of_cand = counts[cand_action]
+        crit = _em.information_criterion(self.criterion, res.loglik, cand_k, n_of_cand, d)
+        if not bool(torch.isfinite(crit).all()):
+            raise FloatingPointError(
+                "EM produced a non-finite log-likelihood; the data may be badly scaled "
+                "(try standardising the features or a larger var_floor)"
+            )
+
+        # Tables [A, K] of every candidate.
+        col = cand_k - 1
+        crit_tab = torch.full((a_n, kmax), math.inf, dtype=f64, device=dev)
+        crit_tab[cand_action, col] = crit
+        ll_tab = torch.full((a_n, kmax), -math.inf, dtype=f64, device=dev)
+        ll_tab[cand_action, col] = res.loglik
+        conv_tab = torch.zeros(a_n, kmax, dtype=torch.bool, device=dev)
+        conv_tab[cand_action, col] = res.converged
+        iter_tab = torch.zeros(a_n, kmax, dtype=torch.long, device=dev)
+        iter_tab[cand_action, col] = res.n_iter
+        cand_mask = torch.zeros(a_n, kmax, dtype=torch.bool, device=dev)
+        cand_mask[cand_action, col] = True
+
+        # Per-action choice (Eq. 6 = sum of independent terms -> per-action argmin).
+        nonempty = torch.from_numpy(np.flatnonzero(counts_np > 0)).to(dev)
+        best_col = crit_tab.argmin(1)  # first minimum: smallest k on ties
+        offsets = torch.from_numpy(np.cumsum(k_per_action) - k_per_action).to(dev)
+        chosen_b = (offsets + best_col)[nonempty]
+        n_comp = torch.zeros(a_n, dtype=torch.long, device=dev)
+        n_comp[nonempty] = best_col[nonempty] + 1
+
+        p = res.params
+        weights = torch.zeros(a_n, kmax, dtype=f64, device=dev)
+        means = torch.zeros(a_n, kmax, d, dtype=f64, device=dev)
+        eye = torch.eye(d, dtype=f64, device=dev)
+        covs = eye.expand(a_n, kmax, d, d).clone()
+        precs = eye.expand(a_n, kmax, d, d).clone()
+        log_det = torch.zeros(a_n, kmax, dtype=f64, device=dev)
+        weights[nonempty, :k_pad] = p.weights[chosen_b]
+        means[nonempty, :k_pad] = p.means[chosen_b] + centers[nonempty].unsqueeze(1)
+        covs[nonempty, :k_pad] = p.covariances[chosen_b]
+        precs[nonempty, :k_pad] = p.prec_chol[chosen_b]
+        log_det[nonempty, :k_pad] = p.log_det[chosen_b]
+        comp_mask = torch.arange(kmax, device=dev) < n_comp.unsqueeze(1)
+        means = means * comp_mask.unsqueeze(-1)
+        covs = torch.where(comp_mask[..., None, None], covs, eye)
+        precs = torch.where(comp_mask[..., None, None], precs, eye)
+        log_det = log_det * comp_mask
+        weights = weights * comp_mask
+        log_prior = torch.where(
+            counts > 0, torch.log(counts.to(f64) / n_total), torch.tensor(-math.inf, dtype=f64)
+        )
+
+        empty = tuple(int(i) for i in np.flatnonzero(counts_np == 0))
+        notes = [f"action {i} has no data: it is never predicted (log prob -inf)" for i in empty]
+        not_conv = (cand_mask & ~conv_tab).nonzero().cpu().numpy()
+        if len(not_conv):
+            pairs = ", ".join(f"(action {i}, k={j + 1})" for i, j in not_conv[:10])
+            notes.append(
+                f"{len(not_conv)} candidate(s) did not converge in max_iter={self.max_iter}: "
+                f"{pairs}"
+            )
+        report = FitReport(
+            criterion_name=self.criterion,
+            n_points=tuple(int(c) for c in counts_np),
+            n_components=tuple(int(c) for c in n_comp.cpu()),
+            empty_actions=empty,
+            candidate_mask=cand_mask.cpu(),
+            log_likelihood=ll_tab.cpu(),
+            criterion=crit_tab.cpu(),
+            converged=conv_tab.cpu(),
+            n_iter=iter_tab.cpu(),
+            notes=tuple(notes),
+        )
+
+        # Everything succeeded: commit the new state at once.
+        with torch.no_grad():
+            for name, val in (
+                ("weights_", weights),
+                ("means_", means),
+                ("covariances_", covs),
+                ("precisions_cholesky_", precs),
+                ("log_det_", log_det),
+                ("component_mask_", comp_mask),
+                ("log_prior_", log_prior),
+                ("n_points_", counts),
+                ("n_components_", n_comp),
+                ("criterion_", crit_tab),
+                ("log_likelihood_", ll_tab),
+                ("var_floor_", floor),
+                ("fitted_", torch.ones((), dtype=torch.bool)),
+            ):
+                buf = getattr(self, name)
+                buf.copy_(val.to(device=buf.device, dtype=buf.dtype))
+        self.fit_report_ = report
+        self._cache = None
+        return self
+
+    # ------------------------------------------------------------------ prediction
+    def _component_scores_np(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        pcat, mu_p, const, _ = self._tables()["np"]
+        n = x.shape[0]
+        y = x @ pcat
+        y -= mu_p
+        y *= y
+        maha = y.reshape(n, self.n_actions, self.max_components, self.n_features).sum(-1)
+        return const - 0.5 * maha, maha
+
+    def _component_scores_torch(self, x: Tensor) -> tuple[Tensor, Tensor]:
+        t = self._tables()
+        n = x.shape[0]
+        y = x @ t["pcat"] - t["mu_p"]
+        maha = (y * y).reshape(n, self.n_actions, self.max_components, self.n_features).sum(-1)
+        return t["const"] - 0.5 * maha, maha
+
+    def _prepare(self, observations: Any) -> tuple[np.ndarray | Tensor, bool]:
+        x = self._check_observations(observations)
+        if x.shape[0] <= _NUMPY_MAX_ROWS and self._tables()["cpu"]:
+            return x, True
+        return torch.from_numpy(x).to(self.means_.device), False
+
+    def log_prob(self, observations: Any) -> Tensor:
+        """log p_a(o) + log Pr(G_a) for every observation and action (Eq. 7's terms).
+
+        observations [N, D] -> Tensor [N, A] float64 (natural log). -inf for an action without
+        data. Raises RuntimeError before any fit.
+        """
+        if not self.is_fitted:
+            raise RuntimeError("log_prob() needs a fitted model: call fit() first")
+        x, use_np = self._prepare(observations)
+        if use_np:
+            lp, _ = self._component_scores_np(x)  # type: ignore[arg-type]
+            mx = lp.max(-1, keepdims=True)
+            mix = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1))
+            return torch.from_numpy(mix + self._tables()["np"][3])
+        with torch.inference_mode():
+            lp, _ = self._component_scores_torch(x)  # type: ignore[arg-type]
+            return (torch.logsumexp(lp, -1) + self._tables()["log_prior"]).clone()
+
+    def classify(self, observations: Any) -> Classification:
+        """Classify observations [N, D] by Eq. 7 and report how sure the model is.
+
+        Returns a :class:`Classification` with fields of length N. Before any fit: action -1,
+        confidence 0, distance +inf, posterior uniform 1/A.
+        """
+        if not self.is_fitted:
+            x = self._check_observations(observations)
+            n = x.shape[0]
+            return Classification(
+                torch.full((n,), -1, dtype=torch.long),
+                torch.zeros(n, dtype=torch.float64),
+                torch.full((n,), math.inf, dtype=torch.float64),
+                torch.full((n, self.n_actions), 1.0 / self.n_actions, dtype=torch.float64),
+            )
+        x, use_np = self._prepare(observations)
+        if use_np:
+            return self._classify_np(x)  # type: ignore[arg-type]
+        with torch.inference_mode():
+            return self._classify_torch(x)  # type: ignore[arg-type]
+
+    def _classify_np(self, x: np.ndarray) -> Classification:
+        lp, maha = self._component_scores_np(x)
+        n = x.shape[0]
+        mx = lp.max(-1, keepdims=True)
+        logp = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1)) + self._tables()["np"][3]
+        action = logp.argmax(1)
+        m = logp.max(1, keepdims=True)
+        post = np.exp(logp - m)
+        post /= post.sum(1, keepdims=True)
+        rows = np.arange(n)
+        lp_a = lp[rows, action]
+        comp = lp_a.argmax(1)
+        d2 = maha[rows, action, comp]
+        dist = np.sqrt(d2)
+        return Classification(
+            torch.from_numpy(action),
+            torch.from_numpy(np.exp(-0.5 * d2)),
+            torch.from_numpy(dist),
+            torch.from_numpy(post),
+        )
+
+    def _classify_torch(self, x: Tensor) -> Classification:
+        lp, maha = self._component_scores_torch(x)
+        logp = torch.logsumexp(lp, -1) + self._tables()["log_prior"]
+        action = logp.argmax(1)
+        post = torch.softmax(logp, 1)
+        rows = torch.arange(x.shape[0], device=x.device)
+        comp = lp[rows, action].argmax(1)
+        d2 = maha[rows, action, comp]
+        return Classification(action.clone(), torch.exp(-0.5 * d2), torch.sqrt(d2), post.clone())
+
+    # ------------------------------------------------------------------ criteria
+    def _criterion_of_chosen(
+        self, kind: str, observations: Any | None, actions: Any | None
+    ) -> Tensor:
+        if not self.is_fitted:
+            raise RuntimeError(f"{kind}() needs a fitted model: call fit() first")
+        k = self.n_components_.cpu()
+        if observations is None and actions is None:
+            idx = (k - 1).clamp_min(0)
+            ll = self.log_likelihood_.cpu().to(torch.float64).gather(1, idx[:, None])[:, 0]
+            n = self.n_points_.cpu()
+        elif observations is None or actions is None:
+            raise ValueError("pass both observations and actions, or neither")
+        else:
+            x = self._check_observations(observations)
+            y = self._check_actions(actions, x.shape[0])
+            mix = self.log_prob(x).cpu() - self.log_prior_.cpu().to(torch.float64)
+            yt = torch.from_numpy(y)
+            n = torch.bincount(yt, minlength=self.n_actions)
+            ll = torch.zeros(self.n_actions, dtype=torch.float64).index_add_(
+                0, yt, mix[torch.arange(len(y)), yt]
+            )
+        out = _em.information_criterion(kind, ll, k, n.clamp_min(1), self.n_features)
+        return torch.where(n > 0, out, torch.zeros((), dtype=torch.float64))
+
+    def aic(self, observations: Any | None = None, actions: Any | None = None) -> Tensor:
+        """Free-parameter AIC [A] of each chosen mixture (2 p - 2 L, as sklearn's ``aic``).
+
+        On the training data by default, or on the given (observations [N, D], actions [N]),
+        each mixture scored on its own action's points. 0 for an action without points.
+        """
+        return self._criterion_of_chosen("aic", observations, actions)
+
+    def bic(self, observations: Any | None = None, actions: Any | None = None) -> Tensor:
+        """BIC [A] of each chosen mixture (p log n - 2 L, as sklearn's ``bic``); see aic()."""
+        return self._criterion_of_chosen("bic", observations, actions)
