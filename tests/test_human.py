@@ -14,6 +14,7 @@ import termios
 import threading
 import time
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -24,7 +25,7 @@ OBS = np.array([0.5], dtype=np.float32)
 
 
 def _describe(observation, info):
-    return f"x = {float(observation[0]):.3f}"
+    return f"x = {float(observation[0])!r}"  # exact, so a script can act on it
 
 
 class Person(threading.Thread):
@@ -117,7 +118,7 @@ def test_single_keys_without_enter_choose_actions_and_terminal_is_restored(termi
         assert not lflag & termios.ECHO
         assert not lflag & termios.ISIG
     assert termios.tcgetattr(slave) == before
-    assert "x = 0.500" in shown
+    assert re.search(r"x = 0\.5\s", shown)
     assert "[w/up] stay" in shown and "[a/left] left" in shown
     assert shown.count("-> right") == 2
 
@@ -341,3 +342,90 @@ def test_domain_teachers_map_keys_to_actions():
     teacher = driving_teacher(input=io.StringIO("d\n"), output=out)
     assert teacher(np.array([12.0, -25.0, 25.0, 1.0]), {}) == 2
     assert "[E]" in out.getvalue() and "shift right" in out.getvalue()
+
+
+# ----------------------------------------------------------------------------- end to end
+
+_PERSON_SCRIPT = r"""
+import os, re, select, sys
+
+fd = int(sys.argv[1])
+buf, answered = b"", 0
+while select.select([fd], [], [], 60)[0]:
+    try:
+        chunk = os.read(fd, 4096)
+    except OSError:
+        break
+    if not chunk:
+        break
+    buf += chunk
+    while b"action? " in buf:
+        shown, buf = buf.split(b"action? ", 1)
+        x = float(re.findall(rb"x = ([0-9.e+-]+)", shown)[-1])
+        os.write(fd, b"a" if x < 0.5 else b"\x1b[C")  # 'a' low, right arrow high
+        answered += 1
+        print(answered, flush=True)
+"""
+
+
+class ThresholdEnv(gym.Env):
+    """A tiny 1-D task: observe x in [0, 1]; action 0 is right below 0.5, action 1 above."""
+
+    observation_space = gym.spaces.Box(0.0, 1.0, shape=(1,), dtype=np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def _observe(self):
+        self._x = np.array([self.np_random.uniform(0.0, 1.0)], dtype=np.float32)
+        return self._x.copy()
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self._t = 0
+        return self._observe(), {}
+
+    def step(self, action):
+        correct = int(action) == int(self._x[0] >= 0.5)
+        self._t += 1
+        done = self._t >= 20
+        info = {"is_success": True} if done else {}
+        return self._observe(), float(correct), False, done, info
+
+
+@pytest.mark.timeout(300)
+def test_a_person_at_the_terminal_teaches_an_agent_that_asks_less_often(terminal, tmp_path):
+    from torchcbl.teaching import ConfidentTeacher, TeachingConfig
+
+    master, slave = terminal
+    person = subprocess.Popen(
+        [sys.executable, "-c", _PERSON_SCRIPT, str(master)],
+        pass_fds=(master,),
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        teacher = _teacher(
+            slave, keys={"a": 0, "left": 0, "d": 1, "right": 1}, action_names=("low", "high")
+        )
+        loop = ConfidentTeacher(
+            ThresholdEnv(),
+            teacher,
+            config=TeachingConfig(noninteractive=False, max_steps=80),
+            run_dir=tmp_path / "run",
+            seed=0,
+            progress=False,
+        )
+        loop.run()
+    finally:
+        person.terminate()
+        answers, _ = person.communicate(timeout=30)
+
+    records = loop.records
+    assert len(records) == 80
+    asked = [r.teacher_action is not None for r in records]
+    assert asked[0]  # no model yet: the agent must ask
+    # Every request went through the terminal and was answered by the person.
+    assert int(answers.split()[-1]) == sum(asked) == teacher.n_decisions
+    for r in records:
+        if r.teacher_action is not None:
+            assert r.teacher_action == int(r.observation[0] >= 0.5)
+    assert sum(asked[40:]) < sum(asked[:40])

@@ -161,13 +161,13 @@ class TerminalTeacher:
         missing = [names[a] for a in range(len(names)) if a not in keymap.values()]
         if missing:
             raise ValueError(f"no key for action(s) {missing}; every action needs a key")
-        quits = {_normalize_key(k) for k in quit_keys}
-        clash = sorted(_label(k) for k in quits & keymap.keys())
+        quits = list(dict.fromkeys(_normalize_key(k) for k in quit_keys))  # ordered, unique
+        clash = sorted(_label(k) for k in quits if k in keymap)
         if clash:
             raise ValueError(f"quit key(s) {clash} are also action keys")
 
         self._keys = keymap
-        self._quit = quits | {_CTRL_C}
+        self._quit = [*quits, _CTRL_C] if _CTRL_C not in quits else quits
         self.action_names: tuple[str, ...] = tuple(names)
         self._describe = describe
         self._input = sys.stdin if input is None else input
