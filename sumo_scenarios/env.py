@@ -1,0 +1,224 @@
+"""``DrivingEnv``: the paper's driving task (Section 5.2) as a gymnasium environment on SUMO.
+
+Observation (``float32`` [4]):
+    ``[d_right, d_middle, d_left, ego_lane]``. ``d_*`` is the signed distance, in METRES, from the
+    ego to the nearest car (smallest absolute distance) in normal lane 1 (right), 2 (middle) and
+    3 (left): car position minus ego position, so positive = ahead, negative = behind, clipped to
+    [-25, 25]. Every car is 5 m long, so ``|d| < 5`` in the ego's lane is contact. A lane with no
+    car within the clip range reads +-25 (the sign of the nearest car, or +25 if a lane were
+    empty). ``ego_lane`` is SUMO's lane index as a float: 0 right shoulder, 1 right, 2 middle,
+    3 left, 4 left shoulder (SUMO counts from the right).
+
+Actions (``Discrete(3)``): 0 stay, 1 shift one lane left (index + 1), 2 shift one lane right
+(index - 1). A shift takes effect in the same timestep; a shift off the road is clamped (the
+ego stays in its lane).
+
+One timestep = one decision = 0.25 s of driving (the paper: 500 timesteps ~ 2.1 min). The ego
+drives at exactly 60 mph; traffic keeps its lane at one exact speed per lane (20-40 mph). The
+road never ends. ``info["contact"]`` is True when, at the end of the step, the ego overlaps a car
+in the lane it is in or the lane it just left (a geometric 1-D check: SUMO's own collision list is
+unreliable). Cars are never removed on contact. Reward is ``-1`` on a contact step, else 0 (the
+learner does not use it). Episodes never terminate; they are truncated after
+``max_episode_steps``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sumo_scenarios.scenarios import (
+    EGO_SPEED_MS,
+    N_LANES,
+    TRAFFIC_LANES,
+    TrafficScenario,
+    get_scenario,
+)
+from sumo_scenarios.sim import HighwaySim, SimConfig
+
+STAY, LEFT, RIGHT = 0, 1, 2
+ACTION_NAMES = ("stay", "left", "right")
+SENSE_RANGE_M = 25.0
+"""Observation distances are clipped to +-this many metres."""
+
+
+@dataclass(frozen=True)
+class DrivingConfig:
+    """Settings of :class:`DrivingEnv`.
+
+    Attributes:
+        scenario: a named scenario (``train``, ``eval``, ``light``) or a :class:`TrafficScenario`.
+        max_episode_steps: timesteps before ``truncated`` (1000 = one paper evaluation trial).
+        start_lane: the ego's lane at reset (2 = middle), unless ``options["ego_lane"]`` says.
+        sim: SUMO settings (decision period etc.).
+    """
+
+    scenario: str | TrafficScenario = "train"
+    max_episode_steps: int = 1000
+    start_lane: int = 2
+    sim: SimConfig = field(default_factory=SimConfig)
+
+    def __post_init__(self) -> None:
+        get_scenario(self.scenario)
+        if self.max_episode_steps < 1:
+            raise ValueError("max_episode_steps must be positive")
+        if not 0 <= self.start_lane < N_LANES:
+            raise ValueError(f"start_lane must lie in [0, {N_LANES - 1}]")
+
+
+@dataclass(frozen=True)
+class Frame:
+    """What a drawing needs of one timestep (positions: front bumpers, metres along the road)."""
+
+    step: int
+    ego_pos: float
+    ego_lane: int
+    car_pos: np.ndarray
+    car_lane: np.ndarray
+    contact: bool
+    action: int | None
+
+
+class DrivingEnv(gym.Env):
+    """The driving domain on libsumo. See the module docstring for spaces and units.
+
+    Only one ``DrivingEnv`` may be live per process (libsumo holds one simulation): a second
+    raises ``RuntimeError`` until the first is closed. Always ``close()`` it.
+
+    ``reset(seed=s)`` fixes the road segment: the traffic is drawn from
+    ``SeedSequence([scenario.seed, s])``. ``reset(options={"ego_lane": k})`` starts in lane k.
+    ``reset(options={"fcd_output": path})`` asks SUMO to write FCD XML for that episode (the only
+    way this env writes a file, on explicit request; finalised on the next reset or ``close``).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(
+        self, config: DrivingConfig | None = None, *, render_mode: str | None = None, **kwargs: Any
+    ) -> None:
+        if config is None:
+            config = DrivingConfig(**kwargs)
+        elif kwargs:
+            raise TypeError("pass either a DrivingConfig or keyword settings, not both")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+        self.config = config
+        self.scenario = get_scenario(config.scenario)
+        self.render_mode = render_mode
+        self.observation_space = gym.spaces.Box(
+            low=np.array([-SENSE_RANGE_M] * 3 + [0.0], dtype=np.float32),
+            high=np.array([SENSE_RANGE_M] * 3 + [N_LANES - 1.0], dtype=np.float32),
+            dtype=np.float32,
+        )
+        self.action_space = gym.spaces.Discrete(3)
+        self._sim = HighwaySim(self.scenario, config.sim)
+        self._closing = {
+            lane: EGO_SPEED_MS - v
+            for lane, v in zip(TRAFFIC_LANES, self.scenario.lane_speeds_ms, strict=True)
+        }
+        self._t = 0
+        self._episode_seed: int | None = None
+        self._last_action: int | None = None
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"ego_lane", "fcd_output"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}")
+        if seed is None:
+            seed = int(self.np_random.integers(0, 2**31 - 1))
+        if int(seed) < 0:
+            raise ValueError("seed must be non-negative")
+        self._episode_seed = int(seed)
+        lane = int(options.get("ego_lane", self.config.start_lane))
+        fcd = options.get("fcd_output")
+        rng = np.random.default_rng(np.random.SeedSequence([self.scenario.seed, int(seed)]))
+        self._sim.reset(rng, int(seed), ego_lane=lane, fcd_path=Path(fcd) if fcd else None)
+        self._t = 0
+        self._last_action = None
+        return self._observe(), self._info()
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._episode_seed is None:
+            raise RuntimeError("call reset() before step()")
+        a = int(action)
+        if a not in (STAY, LEFT, RIGHT):
+            raise ValueError(f"action must be 0 (stay), 1 (left) or 2 (right), got {action!r}")
+        lane = self._sim.ego_lane
+        target = lane + (1 if a == LEFT else -1 if a == RIGHT else 0)
+        target = min(max(target, 0), N_LANES - 1)
+        self._sim.step(target)
+        self._t += 1
+        self._last_action = a
+        contact = self._sim.contact
+        truncated = self._t >= self.config.max_episode_steps
+        return self._observe(), -1.0 if contact else 0.0, False, truncated, self._info()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        from sumo_scenarios.render import render_frame
+
+        return render_frame(self.frame())
+
+    def close(self) -> None:
+        self._sim.close()
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def episode_seed(self) -> int | None:
+        """The seed of the current road segment (what a replay needs)."""
+        return self._episode_seed
+
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` has run."""
+        return self._sim.closed
+
+    def frame(self) -> Frame:
+        """A copy of the current scene for drawing."""
+        s = self._sim
+        return Frame(
+            self._t,
+            s.ego_pos,
+            s.ego_lane,
+            s.car_pos.copy(),
+            s.car_lane.copy(),
+            s.contact,
+            self._last_action,
+        )
+
+    def _observe(self) -> np.ndarray:
+        s = self._sim
+        rel = s.car_pos - s.ego_pos
+        obs = np.empty(4, dtype=np.float32)
+        for k, lane in enumerate(TRAFFIC_LANES):
+            r = rel[s.car_lane == lane]
+            if r.size == 0:
+                obs[k] = SENSE_RANGE_M
+            else:
+                obs[k] = min(max(r[np.argmin(np.abs(r))], -SENSE_RANGE_M), SENSE_RANGE_M)
+        obs[3] = s.ego_lane
+        return obs
+
+    def _info(self) -> dict[str, Any]:
+        s = self._sim
+        return {
+            "lane": s.ego_lane,
+            "contact": s.contact,
+            "t": self._t,
+            "episode_seed": self._episode_seed,
+            "position_m": s.distance_m,
+            "car_lane": s.car_lane.copy(),
+            "car_rel_m": s.car_pos - s.ego_pos,
+            "closing_speed_ms": dict(self._closing),
+            "step_length_s": self.config.sim.step_length_s,
+        }

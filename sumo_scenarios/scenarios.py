@@ -1,0 +1,124 @@
+"""Named traffic scenarios for the driving domain, and where the shipped SUMO files live.
+
+A :class:`TrafficScenario` fixes everything about the background traffic: one speed per normal
+lane (so speeds are exact), how densely each lane is filled, and a base seed. The road segment an
+episode drives on is drawn from ``numpy.random.SeedSequence([scenario.seed, episode_seed])``:
+the ``train`` and ``eval`` scenarios differ only in their base seed, so no training episode ever
+sees the evaluation segment ("the same road segment" for every evaluation, paper Section 5.2.1).
+
+Density calibration: with 5 m cars, the ego overlaps a car whenever their centres are closer than
+5 m, i.e. over 10 m of relative travel per car, whatever the closing speed. Always driving straight
+in a lane with ``n`` cars per metre is therefore in contact on a ``10 n`` share of timesteps; the
+middle lane's mean spacing of 33.3 m gives the paper's 30 %.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from importlib import resources
+from pathlib import Path
+
+MPH = 0.44704
+"""Metres per second in one mile per hour."""
+
+EGO_SPEED_MS = 60 * MPH
+"""The ego's fixed speed, 60 mph = 26.8224 m/s."""
+
+CAR_LENGTH_M = 5.0
+"""Length of every car (ego and traffic), metres."""
+
+N_LANES = 5
+"""Lanes on the road: 0 right shoulder, 1-3 normal lanes (right, middle, left), 4 left shoulder."""
+
+TRAFFIC_LANES = (1, 2, 3)
+"""SUMO lane indices of the three normal lanes, right to left."""
+
+LANE_NAMES = ("right shoulder", "right", "middle", "left", "left shoulder")
+
+
+def data_path(name: str) -> Path:
+    """Path of a shipped data file (``road.net.xml`` or ``driving.add.xml``)."""
+    path = Path(str(resources.files("sumo_scenarios") / "data" / name))
+    if not path.exists():
+        raise FileNotFoundError(
+            f"{path} is missing; regenerate it with `python -m sumo_scenarios.build_network`"
+        )
+    return path
+
+
+@dataclass(frozen=True)
+class TrafficScenario:
+    """Background traffic on the five-lane road.
+
+    Attributes:
+        name: scenario name (``train``, ``eval``, ...).
+        seed: base seed; combined with the episode seed to draw the road segment.
+        lane_speeds_mph: speed of every car in normal lanes 1, 2, 3 (right, middle, left), mph,
+            each within the paper's 20-40 mph.
+        mean_spacing_m: mean front-to-front distance between consecutive cars in lanes 1, 2, 3,
+            metres. Spacings are ``min_spacing_m`` plus an exponential draw.
+        min_spacing_m: smallest front-to-front spacing, metres (> 10 m so the expert can always
+            fit between two cars of a lane without contact).
+        ahead_m: cars are kept in a window from ``behind_m`` behind to ``ahead_m`` ahead of the
+            ego; a car falling out behind is recycled to the front of its lane. Metres.
+        behind_m: see ``ahead_m``.
+        start_clear_m: at reset no car is within 15 m behind or this many metres ahead of the
+            ego (in any lane), so no episode starts in or right before a contact.
+    """
+
+    name: str
+    seed: int
+    lane_speeds_mph: tuple[float, float, float] = (20.0, 30.0, 40.0)
+    mean_spacing_m: tuple[float, float, float] = (40.0, 33.3, 60.0)
+    min_spacing_m: float = 12.0
+    ahead_m: float = 200.0
+    behind_m: float = 60.0
+    start_clear_m: float = 30.0
+
+    def __post_init__(self) -> None:
+        if len(self.lane_speeds_mph) != 3 or len(self.mean_spacing_m) != 3:
+            raise ValueError("lane_speeds_mph and mean_spacing_m need one value per normal lane")
+        for v in self.lane_speeds_mph:
+            if not 20.0 <= v <= 40.0:
+                raise ValueError(f"traffic speeds must lie in 20-40 mph, got {v}")
+        if self.min_spacing_m <= 10.0:
+            raise ValueError("min_spacing_m must exceed 10 m (two car lengths)")
+        for s in self.mean_spacing_m:
+            if s < self.min_spacing_m:
+                raise ValueError("mean_spacing_m must be at least min_spacing_m")
+        if self.behind_m < 30.0 or self.ahead_m < 60.0:
+            raise ValueError("the traffic window must cover the 25 m sensing range with margin")
+
+    @property
+    def lane_speeds_ms(self) -> tuple[float, float, float]:
+        """Traffic speeds of lanes 1-3 in m/s."""
+        return tuple(v * MPH for v in self.lane_speeds_mph)  # type: ignore[return-value]
+
+    def with_seed(self, seed: int) -> TrafficScenario:
+        """The same traffic with another base seed (another family of road segments)."""
+        return replace(self, seed=int(seed))
+
+
+TRAIN = TrafficScenario(name="train", seed=1)
+"""Training traffic: segments drawn from base seed 1."""
+
+EVAL = TrafficScenario(name="eval", seed=2)
+"""Evaluation traffic: the same traffic mix on segments never used for training (base seed 2)."""
+
+LIGHT = TrafficScenario(name="light", seed=3, mean_spacing_m=(60.0, 60.0, 90.0))
+"""Lighter traffic, for demos and quick checks."""
+
+SCENARIOS: dict[str, TrafficScenario] = {s.name: s for s in (TRAIN, EVAL, LIGHT)}
+"""Named scenarios by name."""
+
+
+def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:
+    """Look a scenario up by name (or pass one through)."""
+    if isinstance(scenario, TrafficScenario):
+        return scenario
+    try:
+        return SCENARIOS[scenario]
+    except KeyError:
+        raise ValueError(
+            f"unknown scenario {scenario!r}; known: {', '.join(sorted(SCENARIOS))}"
+        ) from None

@@ -1,0 +1,291 @@
+"""The SUMO side of the driving domain: the ONLY module that imports libsumo.
+
+:class:`HighwaySim` runs one straight five-lane edge with background traffic in its lanes at
+exact, constant speeds and one ego car at exactly 60 mph that changes lane only when told.
+It keeps the road endless (see ``docs`` of :meth:`HighwaySim.step`) and counts contact
+geometrically, because SUMO's own collision list is unreliable once the ego has driven through a
+car (see ``shared/notes/sumo-and-pymunk-facts.md``).
+
+libsumo holds one simulation per process: only one :class:`HighwaySim` may be live at a time;
+a second one raises :class:`RuntimeError` until the first is closed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import libsumo
+import numpy as np
+
+from sumo_scenarios.scenarios import (
+    CAR_LENGTH_M,
+    EGO_SPEED_MS,
+    N_LANES,
+    TRAFFIC_LANES,
+    TrafficScenario,
+    data_path,
+)
+
+EDGE = "road"
+EGO = "ego"
+_LIVE: list[HighwaySim] = []
+_MAX_EXTRA_GAP_M = 250.0  # spacings are capped so a recycled car always fits on the edge
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Simulation settings.
+
+    Attributes:
+        step_length_s: one decision = one SUMO step of this many seconds (0.25 s: the paper's
+            500 timesteps were about 2.1 minutes of driving).
+        ego_start_m: the ego's front-bumper position on the edge at reset, metres.
+        shift_margin_m: when the ego comes this close (plus the traffic window) to the end of
+            the edge, every vehicle is moved back by the same distance. Metres.
+    """
+
+    step_length_s: float = 0.25
+    ego_start_m: float = 300.0
+    shift_margin_m: float = 400.0
+
+    def __post_init__(self) -> None:
+        if not 0.01 <= self.step_length_s <= 1.0:
+            raise ValueError("step_length_s must lie in [0.01, 1.0] seconds")
+
+
+class HighwaySim:
+    """One libsumo simulation of the five-lane road.
+
+    State after :meth:`reset` / :meth:`step` (positions are front bumpers along the edge, metres):
+        ``ego_pos`` (float), ``ego_lane`` (int, 0 = right shoulder .. 4 = left shoulder),
+        ``car_pos`` [N] float64, ``car_lane`` [N] int64 (1-3), ``contact`` (bool).
+    """
+
+    def __init__(self, scenario: TrafficScenario, config: SimConfig | None = None) -> None:
+        if _LIVE:
+            raise RuntimeError(
+                "a HighwaySim (DrivingEnv) is already live in this process and libsumo holds only "
+                "one simulation per process: close() it first, or use another process"
+            )
+        _LIVE.append(self)
+        self.scenario = scenario
+        self.config = config or SimConfig()
+        self._started = False
+        self._closed = False
+        self._road_length = float(libsumo_lane_length_from_net())
+        speeds = scenario.lane_speeds_ms
+        self._lane_speed = {lane: speeds[i] for i, lane in enumerate(TRAFFIC_LANES)}
+        self.ego_pos = 0.0
+        self.ego_lane = 2
+        self.prev_lane = 2
+        self.contact = False
+        self.car_ids: list[str] = []
+        self.car_lane = np.zeros(0, dtype=np.int64)
+        self.car_pos = np.zeros(0, dtype=np.float64)
+        self.distance_m = 0.0
+        self.n_recycled = 0
+        self.n_shifts = 0
+
+    # ------------------------------------------------------------------ lifecycle
+    def _args(self, seed: int, fcd_path: Path | None) -> list[str]:
+        args = [
+            "sumo",
+            "-n",
+            str(data_path("road.net.xml")),
+            "-a",
+            str(data_path("driving.add.xml")),
+            "--step-length",
+            repr(self.config.step_length_s),
+            "--collision.action",
+            "none",
+            "--no-step-log",
+            "true",
+            "--no-warnings",
+            "true",
+            "--seed",
+            str(seed % (2**31)),
+            "--begin",
+            "0",
+        ]
+        if fcd_path is not None:
+            args += ["--fcd-output", str(fcd_path)]
+        return args
+
+    def reset(
+        self,
+        rng: np.random.Generator,
+        seed: int,
+        *,
+        ego_lane: int = 2,
+        fcd_path: Path | None = None,
+    ) -> None:
+        """Start (or reload) SUMO and place the ego and the traffic of a fresh road segment.
+
+        ``rng`` draws the car spacings (the road segment); ``seed`` is SUMO's own seed.
+        ``fcd_path``, if given, makes SUMO write FCD XML there (finalised on :meth:`close` or
+        the next reset).
+        """
+        if self._closed:
+            raise RuntimeError("this simulation is closed")
+        if not 0 <= ego_lane < N_LANES:
+            raise ValueError(f"ego_lane must lie in [0, {N_LANES - 1}]")
+        args = self._args(seed, fcd_path)
+        if self._started:
+            libsumo.load(args[1:])
+        else:
+            libsumo.start(args)
+            self._started = True
+        self._rng = rng
+        self._next_id = 0
+        self.n_recycled = 0
+        self.n_shifts = 0
+        self.distance_m = 0.0
+        x0 = self.config.ego_start_m
+        libsumo.vehicle.add(
+            EGO,
+            "road",
+            typeID="ego",
+            departLane=str(ego_lane),
+            departPos=str(x0),
+            departSpeed=str(EGO_SPEED_MS),
+        )
+        libsumo.vehicle.moveTo(EGO, f"{EDGE}_{ego_lane}", x0)
+        libsumo.vehicle.setLaneChangeMode(EGO, 0)
+        libsumo.vehicle.setSpeedMode(EGO, 32)
+        libsumo.vehicle.setSpeed(EGO, EGO_SPEED_MS)
+        ids, lanes, pos = [], [], []
+        for lane in TRAFFIC_LANES:
+            x = x0 - self.scenario.behind_m + float(rng.uniform(0.0, self._spacing(lane)))
+            while x < x0 + self.scenario.ahead_m:
+                if x0 - 15.0 < x < x0 + self.scenario.start_clear_m:
+                    x += self._spacing(lane)
+                    continue
+                cid = self._add_car(lane, x)
+                ids.append(cid)
+                lanes.append(lane)
+                pos.append(x)
+                x += self._spacing(lane)
+        self.car_ids = ids
+        self.car_lane = np.asarray(lanes, dtype=np.int64)
+        self.car_pos = np.asarray(pos, dtype=np.float64)
+        self.ego_pos = x0
+        self.ego_lane = ego_lane
+        self.prev_lane = ego_lane
+        self.contact = self._contact()
+
+    def close(self) -> None:
+        """Release SUMO (finalising any FCD file) and let another simulation start."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._started:
+            libsumo.close()
+            self._started = False
+        if self in _LIVE:
+            _LIVE.remove(self)
+
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` has run."""
+        return self._closed
+
+    # ------------------------------------------------------------------ traffic
+    def _spacing(self, lane: int) -> float:
+        i = TRAFFIC_LANES.index(lane)
+        lo = self.scenario.min_spacing_m
+        gap = float(self._rng.exponential(self.scenario.mean_spacing_m[i] - lo))
+        return lo + min(gap, _MAX_EXTRA_GAP_M)
+
+    def _add_car(self, lane: int, x: float) -> str:
+        cid = f"c{self._next_id}"
+        self._next_id += 1
+        v = self._lane_speed[lane]
+        libsumo.vehicle.add(
+            cid,
+            "road",
+            typeID="traffic",
+            departLane=str(lane),
+            departPos=str(x),
+            departSpeed=str(v),
+        )
+        libsumo.vehicle.moveTo(cid, f"{EDGE}_{lane}", x)
+        libsumo.vehicle.setLaneChangeMode(cid, 0)
+        libsumo.vehicle.setSpeedMode(cid, 32)
+        libsumo.vehicle.setSpeed(cid, v)
+        return cid
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, target_lane: int) -> None:
+        """Advance one decision period with the ego heading for ``target_lane``.
+
+        ``target_lane`` is clamped to the road by the caller's contract (0..4; out of range
+        raises). In the step SUMO moves every vehicle, then puts the ego in its new lane at once.
+        Afterwards: cars more than ``behind_m`` behind the ego are recycled (remove + add +
+        moveTo, which also restores SUMO's lane order) to the front of their lane at a fresh
+        spacing, and when the ego nears the end of the edge every vehicle is moved back by the
+        same distance. No car is ever removed for good; contact never removes anything.
+        """
+        if not 0 <= target_lane < N_LANES:
+            raise ValueError(f"target_lane must lie in [0, {N_LANES - 1}], got {target_lane}")
+        if target_lane != self.ego_lane:
+            libsumo.vehicle.changeLane(EGO, target_lane, self.config.step_length_s)
+        libsumo.simulationStep()
+        get = libsumo.vehicle.getLanePosition
+        old = self.ego_pos
+        self.ego_pos = get(EGO)
+        self.distance_m += self.ego_pos - old
+        self.prev_lane = self.ego_lane
+        self.ego_lane = libsumo.vehicle.getLaneIndex(EGO)
+        ids = self.car_ids
+        pos = self.car_pos
+        for i, cid in enumerate(ids):
+            pos[i] = get(cid)
+        self.contact = self._contact()
+        behind = self.ego_pos - self.scenario.behind_m
+        if pos.min() < behind:
+            self._recycle(behind)
+        if self.ego_pos > self._road_length - self.scenario.ahead_m - self.config.shift_margin_m:
+            self._shift_back()
+
+    def _recycle(self, behind: float) -> None:
+        for i in np.flatnonzero(self.car_pos < behind):
+            lane = int(self.car_lane[i])
+            front = float(self.car_pos[self.car_lane == lane].max())
+            x = front + self._spacing(lane)
+            libsumo.vehicle.remove(self.car_ids[i])
+            self.car_ids[i] = self._add_car(lane, x)
+            self.car_pos[i] = x
+            self.n_recycled += 1
+
+    def _shift_back(self) -> None:
+        shift = self.ego_pos - self.config.ego_start_m
+        libsumo.vehicle.moveTo(EGO, f"{EDGE}_{self.ego_lane}", self.ego_pos - shift)
+        for i, cid in enumerate(self.car_ids):
+            lane = int(self.car_lane[i])
+            libsumo.vehicle.moveTo(cid, f"{EDGE}_{lane}", float(self.car_pos[i]) - shift)
+        self.ego_pos -= shift
+        self.car_pos -= shift
+        self.n_shifts += 1
+
+    def _contact(self) -> bool:
+        near = np.abs(self.car_pos - self.ego_pos) < CAR_LENGTH_M
+        if not near.any():
+            return False
+        lanes = self.car_lane[near]
+        return bool(np.any((lanes == self.ego_lane) | (lanes == self.prev_lane)))
+
+    def vehicle_positions(self) -> dict[str, tuple[float, int]]:
+        """SUMO's own view: ``{id: (front-bumper position m, lane index)}`` for every vehicle."""
+        out = {}
+        for vid in libsumo.vehicle.getIDList():
+            out[vid] = (libsumo.vehicle.getLanePosition(vid), libsumo.vehicle.getLaneIndex(vid))
+        return out
+
+
+def libsumo_lane_length_from_net() -> float:
+    """Length of the road edge in the shipped network, metres (read with sumolib)."""
+    import sumolib
+
+    net = sumolib.net.readNet(str(data_path("road.net.xml")))
+    return float(net.getEdge(EDGE).getLength())
