@@ -1,0 +1,252 @@
+"""GaussianMixtureSet against scikit-learn's GaussianMixture, plus its contract."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+import torch
+from sklearn.mixture import GaussianMixture
+
+from torchcbl import _em
+from torchcbl.gmm import Classification, GaussianMixtureSet
+
+
+def _blobs(seed: int, n_per: tuple[int, ...], d: int = 3, spread: float = 4.0):
+    """Standardised data (every feature variance exactly 1 over all rows), labels."""
+    rng = np.random.default_rng(seed)
+    xs, ys = [], []
+    for a, n in enumerate(n_per):
+        centres = rng.normal(scale=spread, size=(3, d))
+        comp = rng.integers(0, 3, size=n)
+        xs.append(centres[comp] + rng.normal(size=(n, d)) * rng.uniform(0.3, 1.0, size=d))
+        ys.append(np.full(n, a))
+    x = np.concatenate(xs)
+    x = (x - x.mean(0)) / x.std(0)
+    return x, np.concatenate(ys)
+
+
+def _shared_init(model: GaussianMixtureSet, x_a: np.ndarray, action: int, k: int):
+    """The initial parameters our fit uses for (action, k), to hand to sklearn."""
+    centre = x_a.mean(0)
+    xb = torch.from_numpy(x_a - centre)[None]
+    pmask = torch.ones(1, len(x_a), dtype=torch.float64)
+    cmask = torch.ones(1, k, dtype=torch.float64)
+    u = torch.from_numpy(_em.candidate_uniforms(model.seed, np.array([action]), np.array([k]), k))
+    resp = _em.kmeans_init(xb, pmask, cmask, u)
+    p = _em.m_step(xb, _em.outer_products(xb), resp, cmask, model.var_floor_)
+    prec = torch.linalg.inv(p.covariances[0]).numpy()
+    return p.weights[0].numpy(), p.means[0].numpy() + centre, prec
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    x, y = _blobs(0, (120, 90, 60))
+    model = GaussianMixtureSet(3, 3, max_components=6, seed=3).fit(x, y)
+    return model, x, y
+
+
+def test_each_candidate_matches_sklearn_from_the_same_initialisation(fitted):
+    model, x, y = fitted
+    floor = model.var_floor_.numpy()
+    # features standardised: one scalar floor equals sklearn's reg_covar
+    assert np.allclose(floor, floor[0], rtol=1e-12)
+    rep = model.fit_report_
+    for a in range(3):
+        x_a = x[y == a]
+        for k in range(1, 7):
+            w0, mu0, p0 = _shared_init(model, x_a, a, k)
+            gm = GaussianMixture(
+                k,
+                covariance_type="full",
+                tol=model.tol,
+                max_iter=model.max_iter,
+                reg_covar=float(floor[0]),
+                weights_init=w0,
+                means_init=mu0,
+                precisions_init=p0,
+                random_state=0,
+            ).fit(x_a)
+            ll_sk = gm.score(x_a) * len(x_a)
+            ll = float(rep.log_likelihood[a, k - 1])
+            assert ll == pytest.approx(ll_sk, rel=1e-3)
+            assert float(rep.criterion[a, k - 1]) == pytest.approx(gm.aic(x_a), rel=1e-3)
+            # formula identical to sklearn's aic() on the same log-likelihood
+            p = (k - 1) + k * 3 + k * 3 * 4 / 2
+            assert float(rep.criterion[a, k - 1]) == pytest.approx(2 * p - 2 * ll, rel=1e-12)
+
+
+def test_aic_bic_methods_equal_sklearn_formulas_on_chosen_mixtures(fitted):
+    model, x, y = fitted
+    for a in range(3):
+        x_a = x[y == a]
+        k = int(model.n_components_[a])
+        gm = GaussianMixture(k, covariance_type="full")
+        gm.weights_ = model.weights_[a, :k].numpy()
+        gm.means_ = model.means_[a, :k].numpy()
+        gm.covariances_ = model.covariances_[a, :k].numpy()
+        gm.precisions_cholesky_ = np.linalg.cholesky(np.linalg.inv(gm.covariances_))
+        gm.converged_ = True
+        gm.n_features_in_ = 3
+        assert float(model.aic()[a]) == pytest.approx(gm.aic(x_a), rel=1e-9)
+        assert float(model.bic()[a]) == pytest.approx(gm.bic(x_a), rel=1e-9)
+        assert float(model.aic(x, y)[a]) == pytest.approx(gm.aic(x_a), rel=1e-9)
+        # and log_prob equals sklearn's score_samples + log prior
+        lp = model.log_prob(x_a)[:, a].numpy()
+        prior = np.log(len(x_a) / len(x))
+        np.testing.assert_allclose(lp, gm.score_samples(x_a) + prior, rtol=1e-9)
+
+
+def test_choice_is_per_action_argmin_of_criterion(fitted):
+    model, _, _ = fitted
+    crit = model.criterion_
+    assert torch.equal(model.n_components_, crit.argmin(1) + 1)
+    assert torch.isinf(crit[~model.fit_report_.candidate_mask]).all()
+
+
+def test_eq6_joint_minimum_equals_per_action_minimum():
+    x, y = _blobs(1, (12, 5, 8), d=2)
+    model = GaussianMixtureSet(3, 2, max_components=4, criterion="aic_paper").fit(x, y)
+    crit = model.criterion_.numpy()
+    share = np.bincount(y) / len(y)
+    cands = [range(min(4, int((y == a).sum()))) for a in range(3)]
+    best = min(
+        itertools.product(*cands),
+        key=lambda ks: sum(share[a] * crit[a, k] for a, k in enumerate(ks)),
+    )
+    assert [k + 1 for k in best] == model.n_components_.tolist()
+
+
+@pytest.mark.parametrize("criterion", ["aic", "bic", "aic_paper"])
+def test_criteria_formulas(criterion):
+    x, y = _blobs(2, (40, 30), d=2)
+    model = GaussianMixtureSet(2, 2, max_components=3, criterion=criterion).fit(x, y)
+    rep = model.fit_report_
+    for a in range(2):
+        n = int((y == a).sum())
+        for k in (1, 2, 3):
+            ll = float(rep.log_likelihood[a, k - 1])
+            p = (k - 1) + 2 * k + 3 * k
+            expect = {"aic": 2 * p - 2 * ll, "bic": p * math.log(n) - 2 * ll}.get(
+                criterion, 2 * k - 2 * ll
+            )
+            assert float(rep.criterion[a, k - 1]) == pytest.approx(expect, rel=1e-12)
+
+
+def test_batched_fit_equals_fitting_actions_one_at_a_time():
+    x, y = _blobs(4, (80, 50, 30))
+    joint = GaussianMixtureSet(3, 3, max_components=5, seed=7).fit(x, y)
+    # the whole batch at once vs each candidate alone (same data, same uniforms, same floor)
+    x_a = [torch.from_numpy(x[y == a] - x[y == a].mean(0)) for a in range(3)]
+    floor = joint.var_floor_
+    n_max = max(len(t) for t in x_a)
+    cands = [(a, k) for a in range(3) for k in range(1, 6)]
+    xb = torch.zeros(len(cands), n_max, 3, dtype=torch.float64)
+    pm = torch.zeros(len(cands), n_max, dtype=torch.float64)
+    for i, (a, _) in enumerate(cands):
+        xb[i, : len(x_a[a])] = x_a[a]
+        pm[i, : len(x_a[a])] = 1
+    ks = torch.tensor([k for _, k in cands])
+    cm = (torch.arange(5) < ks[:, None]).double()
+    u = torch.from_numpy(_em.candidate_uniforms(7, np.array([a for a, _ in cands]), ks.numpy(), 5))
+    res = _em.run_em(xb, pm, cm, floor, _em.kmeans_init(xb, pm, cm, u), 1e-4, 200)
+    for i, (a, k) in enumerate(cands):
+        one = x_a[a][None]
+        ones = torch.ones(1, len(x_a[a]), dtype=torch.float64)
+        cm1 = torch.ones(1, k, dtype=torch.float64)
+        u1 = torch.from_numpy(_em.candidate_uniforms(7, np.array([a]), np.array([k]), k))
+        r1 = _em.run_em(one, ones, cm1, floor, _em.kmeans_init(one, ones, cm1, u1), 1e-4, 200)
+        assert float(res.loglik[i]) == pytest.approx(float(r1.loglik[0]), rel=1e-9)
+        assert int(res.n_iter[i]) == int(r1.n_iter[0])
+        torch.testing.assert_close(
+            res.params.means[i, :k], r1.params.means[0], rtol=1e-7, atol=1e-9
+        )
+        assert float(joint.fit_report_.log_likelihood[a, k - 1]) == pytest.approx(
+            float(r1.loglik[0]), rel=1e-9
+        )
+
+
+def test_state_dict_round_trip_classifies_identically(fitted):
+    model, x, _ = fitted
+    fresh = GaussianMixtureSet(3, 3, max_components=6, seed=3)
+    fresh.load_state_dict(model.state_dict())
+    assert fresh.is_fitted
+    a, b = model.classify(x), fresh.classify(x)
+    for f in Classification._fields:
+        assert torch.equal(getattr(a, f), getattr(b, f))
+    # loading an unfitted state resets the prediction tables too
+    fresh.load_state_dict(GaussianMixtureSet(3, 3, max_components=6).state_dict())
+    assert not fresh.is_fitted and (fresh.classify(x[:2]).action == -1).all()
+
+
+def test_to_dtype_and_back(fitted):
+    model, x, _ = fitted
+    ref = model.classify(x)
+    m2 = GaussianMixtureSet(3, 3, max_components=6, seed=3)
+    m2.load_state_dict(model.state_dict())
+    m2.to(torch.float32)
+    assert m2.means_.dtype == torch.float32
+    c = m2.classify(x)
+    assert (c.action == ref.action).float().mean() > 0.99
+    m2.to(torch.float64)
+    assert m2.classify(x).action.dtype == torch.long
+
+
+def test_numpy_and_torch_prediction_paths_agree(fitted):
+    model, x, _ = fitted
+    big = np.concatenate([x] * 2)  # above the numpy row threshold -> torch path
+    assert len(big) > 256
+    c_big = model.classify(big)
+    lp_big = model.log_prob(torch.from_numpy(big).float())
+    for start in range(0, len(big), 100):
+        sl = slice(start, start + 100)
+        c = model.classify(big[sl])
+        torch.testing.assert_close(c.distance, c_big.distance[sl])
+        torch.testing.assert_close(c.posterior, c_big.posterior[sl])
+        assert torch.equal(c.action, c_big.action[sl])
+        torch.testing.assert_close(model.log_prob(big[sl].astype(np.float32)), lp_big[sl])
+
+
+def test_classification_fields_follow_the_contract(fitted):
+    model, x, _ = fitted
+    c = model.classify(x)
+    lp = model.log_prob(x)
+    assert torch.equal(c.action, lp.argmax(1))
+    torch.testing.assert_close(c.posterior, torch.softmax(lp, 1))
+    torch.testing.assert_close(c.confidence, torch.exp(-0.5 * c.distance**2))
+    # distance: to the most likely component of the chosen mixture, brute force
+    for i in range(0, len(x), 37):
+        a = int(c.action[i])
+        k = int(model.n_components_[a])
+        best, dist = -math.inf, None
+        for j in range(k):
+            cov = model.covariances_[a, j].numpy()
+            diff = x[i] - model.means_[a, j].numpy()
+            m2 = diff @ np.linalg.solve(cov, diff)
+            score = math.log(model.weights_[a, j]) - 0.5 * (
+                m2 + np.linalg.slogdet(cov)[1] + 3 * math.log(2 * math.pi)
+            )
+            if score > best:
+                best, dist = score, math.sqrt(m2)
+        assert float(c.distance[i]) == pytest.approx(dist, rel=1e-9)
+
+
+def test_before_fit_classify_reports_no_confidence():
+    model = GaussianMixtureSet(4, 2)
+    c = model.classify(np.zeros((3, 2)))
+    assert c.action.tolist() == [-1, -1, -1]
+    assert c.confidence.tolist() == [0.0] * 3
+    assert torch.isinf(c.distance).all()
+    torch.testing.assert_close(c.posterior, torch.full((3, 4), 0.25, dtype=torch.float64))
+    with pytest.raises(RuntimeError, match="fit"):
+        model.log_prob(np.zeros((1, 2)))
+
+
+def test_seeded_fit_is_deterministic():
+    x, y = _blobs(5, (60, 60))
+    a = GaussianMixtureSet(2, 3, 5, seed=11).fit(x, y)
+    b = GaussianMixtureSet(2, 3, 5, seed=11).fit(x, y)
+    for k, v in a.state_dict().items():
+        assert torch.equal(v, b.state_dict()[k]), k
