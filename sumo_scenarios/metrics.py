@@ -1,0 +1,117 @@
+"""Metrics of the paper's Section 5.2.1 and plot helpers for Figures 6, 8, 9 and 10.
+
+All functions take plain sequences or arrays, so they work on step records from any loop:
+``contacts`` [T] bool, ``lanes`` [T] int (0 right shoulder .. 4 left shoulder), ``correct`` [T]
+bool (model prediction == teacher action), ``distances`` [T] float (Mahalanobis distance of the
+best classification, standard deviations).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from sumo_scenarios.scenarios import LANE_NAMES, N_LANES
+
+
+def collision_rate(contacts: Sequence[bool] | np.ndarray) -> float:
+    """Share of timesteps in contact with another car, in [0, 1]."""
+    c = np.asarray(contacts, dtype=bool)
+    if c.size == 0:
+        raise ValueError("collision_rate needs at least one timestep")
+    return float(c.mean())
+
+
+def lane_distribution(lanes: Sequence[int] | np.ndarray) -> np.ndarray:
+    """Share of timesteps in each lane: float64 [5] summing to 1 (index = SUMO lane)."""
+    lane = np.asarray(lanes, dtype=np.int64)
+    if lane.size == 0:
+        raise ValueError("lane_distribution needs at least one timestep")
+    if lane.min() < 0 or lane.max() >= N_LANES:
+        raise ValueError(f"lanes must lie in [0, {N_LANES - 1}]")
+    return np.bincount(lane, minlength=N_LANES) / lane.size
+
+
+def total_variation(p: Sequence[float] | np.ndarray, q: Sequence[float] | np.ndarray) -> float:
+    """Total-variation distance 0.5 * sum |p - q| between two distributions, in [0, 1]."""
+    a, b = np.asarray(p, dtype=np.float64), np.asarray(q, dtype=np.float64)
+    if a.shape != b.shape:
+        raise ValueError(f"shapes differ: {a.shape} vs {b.shape}")
+    return float(0.5 * np.abs(a - b).sum())
+
+
+def windowed_accuracy(correct: Sequence[bool] | np.ndarray, window: int = 150) -> np.ndarray:
+    """Prediction accuracy over the last ``window`` steps (fewer at the start): float64 [T]."""
+    if window < 1:
+        raise ValueError("window must be positive")
+    c = np.asarray(correct, dtype=np.float64)
+    cs = np.concatenate([[0.0], np.cumsum(c)])
+    idx = np.arange(1, c.size + 1)
+    lo = np.maximum(idx - window, 0)
+    return (cs[idx] - cs[lo]) / (idx - lo)
+
+
+def plot_accuracy(
+    ax: Any,
+    accuracy: Sequence[float] | np.ndarray,
+    *,
+    target: float | None = 0.8,
+    label: str | None = None,
+    marks: Sequence[int] = (),
+) -> None:
+    """Figures 6 and 9: windowed prediction accuracy against demonstration count."""
+    acc = np.asarray(accuracy, dtype=np.float64)
+    ax.plot(np.arange(1, acc.size + 1), 100 * acc, label=label)
+    if target is not None:
+        ax.axhline(100 * target, color="grey", ls="--", lw=0.8)
+    for m in marks:
+        ax.axvline(m, color="grey", ls=":", lw=0.8)
+    ax.set_xlabel("demonstrations")
+    ax.set_ylabel("prediction accuracy (%)")
+    ax.set_ylim(0, 100)
+
+
+def plot_lane_bars(
+    ax: Any,
+    labels: Sequence[str],
+    distributions: Sequence[Sequence[float]],
+    collision_rates: Sequence[float],
+) -> None:
+    """Figure 8: one stacked bar of lane shares per policy, collision % written beside it."""
+    dist = np.asarray(distributions, dtype=np.float64)
+    y = np.arange(len(labels))[::-1]
+    colors = ["#8c564b", "#ff7f0e", "#2ca02c", "#1f77b4", "#9467bd"]
+    left = np.zeros(len(labels))
+    for k in range(N_LANES):
+        ax.barh(y, 100 * dist[:, k], left=left, color=colors[k], label=LANE_NAMES[k])
+        left += 100 * dist[:, k]
+    for yi, c in zip(y, collision_rates, strict=True):
+        ax.text(102, yi, f"{100 * c:.1f}%", va="center", fontsize=8)
+    ax.set_yticks(y)
+    ax.set_yticklabels(labels, fontsize=8)
+    ax.set_xlim(0, 115)
+    ax.set_xlabel("time in lane (%)   |   collisions")
+    ax.legend(fontsize=7, ncol=5, loc="upper center", bbox_to_anchor=(0.5, -0.18))
+
+
+def plot_confidence_trace(
+    ax: Any,
+    distances: Sequence[float] | np.ndarray,
+    contacts: Sequence[bool] | np.ndarray,
+    *,
+    threshold: float | None = 2.0,
+) -> None:
+    """Figure 10: Mahalanobis distance of the best classification per timestep, contacts as
+    squares (a larger distance = less confident)."""
+    d = np.asarray(distances, dtype=np.float64)
+    c = np.asarray(contacts, dtype=bool)
+    t = np.arange(d.size)
+    ax.plot(t, d, lw=0.8)
+    ax.plot(t[c], d[c], "s", ms=4, mfc="none", color="red", label="contact")
+    if threshold is not None:
+        ax.axhline(threshold, color="grey", ls="--", lw=0.8)
+    ax.set_xlabel("timestep")
+    ax.set_ylabel("distance (std)")
+    ax.legend(fontsize=7)
