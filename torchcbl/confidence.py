@@ -1,0 +1,211 @@
+"""Confidence rules: when the agent acts on its own and when it asks the teacher.
+
+A rule sees a batched :class:`~torchcbl.gmm.Classification` and answers, per observation,
+"confident enough to act autonomously?" (the ``conf > autonThresh`` test of Algorithm 1 in
+Chernova & Veloso, AAMAS 2007). After every refit the loop calls ``rule.update(model, X, y)``
+with all demonstrations, so a rule may adapt its thresholds to the data; fixed rules ignore it.
+
+Every rule is *never* confident before a model exists (``action == -1``): the agent asks the
+teacher on every step until the first fit (Section 4.3).
+
+Rules shipped here:
+
+- :class:`DistanceRule` (default): confident when the observation lies within ``max_std``
+  standard deviations (Mahalanobis distance) of the most likely component of the chosen
+  mixture; the paper's corridor experiment used 2.
+- :class:`PosteriorRule`: confident when p(chosen action | o) >= ``min_posterior``; catches the
+  overlap between actions that the distance rule cannot see.
+- :class:`AutoThresholdRule`: per-action distance thresholds set from the data after each refit,
+  in the style of Chernova & Veloso (JAIR 2009); see its docstring for the exact rule.
+
+A rule serialises to a small JSON dict (``to_config``) so a run directory can rebuild it on
+resume; :func:`rule_from_config` is the inverse.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+import torch
+
+if TYPE_CHECKING:  # pragma: no cover
+    from torchcbl.gmm import Classification, GaussianMixtureSet
+
+__all__ = [
+    "AutoThresholdRule",
+    "ConfidenceRule",
+    "DistanceRule",
+    "PosteriorRule",
+    "rule_from_config",
+]
+
+
+@runtime_checkable
+class ConfidenceRule(Protocol):
+    """Decides, per classified observation, whether the agent may act autonomously."""
+
+    def is_confident(self, c: Classification) -> torch.Tensor:
+        """Bool tensor [N]: True where the model's action may be executed without asking."""
+        ...
+
+    def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
+        """Called after every refit with all demonstrations ([M, D] and [M]); may be a no-op."""
+        ...
+
+
+def _check_positive(name: str, value: float, *, upper: float | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ValueError(f"{name}: expected a finite number, got {value!r}")
+    if value <= 0 or (upper is not None and value > upper):
+        rng = f"in (0, {upper}]" if upper is not None else "> 0"
+        raise ValueError(f"{name}: expected a value {rng}, got {value!r}")
+    return float(value)
+
+
+class DistanceRule:
+    """The paper's rule: confident when ``distance <= max_std``.
+
+    ``distance`` is the Mahalanobis distance, in standard deviations, of the observation to the
+    most likely component of the chosen action's mixture. Before any fit it is +inf, so the
+    rule asks.
+
+    Args:
+        max_std: autonomy threshold in standard deviations (> 0). Default 2.0, the paper's value.
+    """
+
+    def __init__(self, max_std: float = 2.0) -> None:
+        self.max_std = _check_positive("DistanceRule.max_std", max_std)
+
+    def is_confident(self, c: Classification) -> torch.Tensor:
+        return (c.distance <= self.max_std) & (c.action >= 0)
+
+    def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
+        return None
+
+    def to_config(self) -> dict[str, Any]:
+        return {"type": "DistanceRule", "max_std": self.max_std}
+
+    def __repr__(self) -> str:
+        return f"DistanceRule(max_std={self.max_std})"
+
+
+class PosteriorRule:
+    """Confident when the posterior of the chosen action, p(a | o), is at least ``min_posterior``.
+
+    Args:
+        min_posterior: threshold in (0, 1]. Default 0.9.
+    """
+
+    def __init__(self, min_posterior: float = 0.9) -> None:
+        self.min_posterior = _check_positive(
+            "PosteriorRule.min_posterior", min_posterior, upper=1.0
+        )
+
+    def is_confident(self, c: Classification) -> torch.Tensor:
+        action = c.action
+        ok = action >= 0
+        chosen = c.posterior.gather(1, action.clamp(min=0).unsqueeze(1)).squeeze(1)
+        return (chosen >= self.min_posterior) & ok
+
+    def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
+        return None
+
+    def to_config(self) -> dict[str, Any]:
+        return {"type": "PosteriorRule", "min_posterior": self.min_posterior}
+
+    def __repr__(self) -> str:
+        return f"PosteriorRule(min_posterior={self.min_posterior})"
+
+
+class AutoThresholdRule:
+    """Per-action distance thresholds set from the demonstrations after every refit.
+
+    In the style of Chernova & Veloso (JAIR 2009, "Interactive policy learning through
+    confidence-based autonomy"), where an action's threshold is the average confidence of the
+    points the model misclassifies as that action. The exact rule here, on the Mahalanobis
+    distance:
+
+    1. After each refit, classify every demonstration with the new model.
+    2. For action ``a``, collect the distances of the demonstrations the model assigns to ``a``
+       although the teacher labelled them otherwise (its confident mistakes).
+    3. If there are any, ``threshold[a] = clip(mean(those distances), min_std, max_std)``;
+       otherwise ``threshold[a] = max_std`` (nothing contradicts the paper's default there).
+    4. Confident when ``distance < threshold[action]`` (strict: a mistake exactly at the mean
+       distance is not trusted). Before the first update every threshold is ``max_std`` and the
+       comparison is ``<=``, i.e. the rule behaves as :class:`DistanceRule` (``max_std``).
+
+    The thresholds are a pure function of the model and the demonstrations, so a resumed
+    session recomputes them exactly.
+
+    Args:
+        max_std: upper bound (and default) of every threshold, in standard deviations.
+        min_std: lower bound of every threshold (>= 0); 0 lets an action whose region is full
+            of mistakes ask on every step.
+    """
+
+    def __init__(self, max_std: float = 2.0, min_std: float = 0.0) -> None:
+        self.max_std = _check_positive("AutoThresholdRule.max_std", max_std)
+        if isinstance(min_std, bool) or not (0.0 <= float(min_std) <= self.max_std):
+            raise ValueError(
+                f"AutoThresholdRule.min_std: expected a value in [0, max_std={self.max_std}], "
+                f"got {min_std!r}"
+            )
+        self.min_std = float(min_std)
+        self.thresholds: torch.Tensor | None = None  # [A] float64, None before the first update
+
+    def is_confident(self, c: Classification) -> torch.Tensor:
+        action = c.action
+        ok = action >= 0
+        if self.thresholds is None:
+            return (c.distance <= self.max_std) & ok
+        thr = self.thresholds.to(c.distance.dtype)[action.clamp(min=0)]
+        return (c.distance < thr) & ok
+
+    def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
+        c = model.classify(observations)
+        labels = torch.as_tensor(actions, dtype=torch.long).reshape(-1)
+        n_actions = c.posterior.shape[1]
+        wrong = c.action != labels
+        thr = torch.full((n_actions,), self.max_std, dtype=torch.float64)
+        for a in range(n_actions):
+            sel = wrong & (c.action == a) & torch.isfinite(c.distance)
+            if bool(sel.any()):
+                mean = float(c.distance[sel].double().mean())
+                thr[a] = min(max(mean, self.min_std), self.max_std)
+        self.thresholds = thr
+
+    def to_config(self) -> dict[str, Any]:
+        return {"type": "AutoThresholdRule", "max_std": self.max_std, "min_std": self.min_std}
+
+    def __repr__(self) -> str:
+        return f"AutoThresholdRule(max_std={self.max_std}, min_std={self.min_std})"
+
+
+_RULES = {"DistanceRule": DistanceRule, "PosteriorRule": PosteriorRule}
+
+
+def rule_to_config(rule: Any) -> dict[str, Any]:
+    """JSON dict describing ``rule``; a custom rule without ``to_config`` is named only."""
+    to_config = getattr(rule, "to_config", None)
+    if callable(to_config):
+        return dict(to_config())
+    return {"type": f"{type(rule).__module__}.{type(rule).__qualname__}", "custom": True}
+
+
+def rule_from_config(config: dict[str, Any]) -> ConfidenceRule:
+    """Rebuild a shipped rule from :meth:`to_config` output.
+
+    Raises:
+        ValueError: for a custom rule (pass the rule object yourself) or an unknown type.
+    """
+    kind = config.get("type")
+    params = {k: v for k, v in config.items() if k != "type"}
+    if kind == "AutoThresholdRule":
+        return AutoThresholdRule(**params)
+    if kind in _RULES:
+        return _RULES[kind](**params)
+    raise ValueError(
+        f"cannot rebuild confidence rule {kind!r} from a run directory: it is not one of "
+        f"DistanceRule, PosteriorRule, AutoThresholdRule. Pass rule=<your rule> to resume()."
+    )

@@ -1,0 +1,218 @@
+"""Record types of a teaching session: frozen dataclasses validated on creation.
+
+A :class:`StepRecord` is one decision of the loop (Algorithm 1 of Chernova & Veloso, AAMAS 2007):
+what the agent saw, what the model proposed and how sure it was, what the teacher said (if
+asked), what was executed and what the environment answered. The teacher's label is stored
+apart from the executed action, so a demonstration is simply a step with a teacher label.
+
+Records are built only by the loop, :func:`torchcbl.teaching.evaluate_policy` and the session
+store; a record that breaks an invariant raises :class:`ValueError` at creation, so nothing
+inconsistent can reach the step log.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+__all__ = ["PHASES", "Phase", "StepRecord", "jsonable_info"]
+
+Phase = Literal["noninteractive", "confident", "evaluation"]
+PHASES: tuple[str, ...] = ("noninteractive", "confident", "evaluation")
+
+_MAX_INFO_ARRAY = 64  # numpy arrays in info with at most this many elements are kept as lists
+
+
+def _is_int(x: Any) -> bool:
+    return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
+
+
+def _jsonable(value: Any) -> tuple[bool, Any]:
+    """(keep, converted) for one info value; floats must be finite so the JSON stays standard."""
+    if value is None or isinstance(value, (bool, str)):
+        return True, value
+    if isinstance(value, np.bool_):
+        return True, bool(value)
+    if _is_int(value):
+        return True, int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return (True, v) if math.isfinite(v) else (False, None)
+    if isinstance(value, np.ndarray):
+        if value.size > _MAX_INFO_ARRAY:
+            return False, None
+        return _jsonable(value.tolist())
+    if isinstance(value, (list, tuple)):
+        out = []
+        for item in value:
+            keep, conv = _jsonable(item)
+            if not keep:
+                return False, None
+            out.append(conv)
+        return True, out
+    if isinstance(value, Mapping):
+        return True, jsonable_info(value)
+    return False, None
+
+
+def jsonable_info(info: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The JSON-able subset of an env's ``info`` dict.
+
+    Kept: None, bool, int, str, finite floats, numpy scalars, small numpy arrays (at most 64
+    elements, as lists), and lists / tuples / dicts made of those. Dropped: everything else
+    (objects, large arrays, non-finite floats), so a step log always holds standard JSON.
+    Keys are converted to ``str``.
+    """
+    if not info:
+        return {}
+    out: dict[str, Any] = {}
+    for key, value in info.items():
+        keep, conv = _jsonable(value)
+        if keep:
+            out[str(key)] = conv
+    return out
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """One step of a teaching session (or of a greedy evaluation).
+
+    Attributes:
+        step: index of the step in the session, from 0; consecutive across ``run`` calls and
+            resumes.
+        episode: index of the episode the step belongs to, from 0.
+        observation: the observation the decision was made on, shape [D], finite floats.
+        model_action: the model's classification (Eq. 7); -1 when there was no fitted model.
+        confidence: ``exp(-distance**2 / 2)`` in [0, 1]; None when the policy gave no
+            classification (a plain callable in :func:`~torchcbl.teaching.evaluate_policy`).
+        distance: Mahalanobis distance, in standard deviations, of the observation to the most
+            likely component of the chosen mixture; ``inf`` before any model; None as above.
+        posterior: p(a | o) for every action, shape [A]; None as above.
+        teacher_action: the teacher's label, or None when the teacher was not asked.
+        executed_action: the action sent to the environment.
+        phase: ``"noninteractive"``, ``"confident"`` (confident execution) or ``"evaluation"``.
+        autonomous: True when the model's action was executed without asking the teacher.
+        reward: the env's reward; None when the outcome was never observed (the env raised, or
+            the process stopped after the demonstration was committed and before or while its
+            action ran).
+        terminated, truncated: the env's flags. A step whose outcome was lost is ``truncated``.
+        info: JSON-able subset of the env's ``info`` after the step (see :func:`jsonable_info`);
+            the loop adds ``"torchcbl_error"`` / ``"torchcbl_interrupted"`` keys when it had to
+            cut an episode.
+        n_demonstrations: demonstrations in the session after this step.
+        autonomy_rate: share of autonomous steps among the last ``accuracy_window``
+            confident-execution steps, this one included; None before confident execution.
+        windowed_accuracy: share of the last ``accuracy_window`` demonstrations the model
+            predicted correctly before learning them; None before any demonstration.
+    """
+
+    step: int
+    episode: int
+    observation: tuple[float, ...]
+    model_action: int
+    confidence: float | None
+    distance: float | None
+    posterior: tuple[float, ...] | None
+    teacher_action: int | None
+    executed_action: int
+    phase: Phase
+    autonomous: bool
+    reward: float | None
+    terminated: bool
+    truncated: bool
+    info: dict[str, Any] = field(default_factory=dict)
+    n_demonstrations: int = 0
+    autonomy_rate: float | None = None
+    windowed_accuracy: float | None = None
+
+    def __post_init__(self) -> None:
+        def bad(what: str, expected: str, got: Any) -> ValueError:
+            return ValueError(
+                f"StepRecord.{what}: expected {expected}, got {got!r} (step {self.step!r}). "
+                "Records are built by the teaching loop; this points at a bug or a corrupted log."
+            )
+
+        for name in ("step", "episode", "n_demonstrations"):
+            v = getattr(self, name)
+            if not _is_int(v) or v < 0:
+                raise bad(name, "an int >= 0", v)
+        if not isinstance(self.observation, tuple) or not self.observation:
+            raise bad("observation", "a non-empty tuple of floats", self.observation)
+        for x in self.observation:
+            if not isinstance(x, float) or not math.isfinite(x):
+                raise bad("observation", "finite floats only", self.observation)
+        if not _is_int(self.model_action) or self.model_action < -1:
+            raise bad("model_action", "an int >= -1 (-1: no model)", self.model_action)
+        if self.confidence is not None and not (0.0 <= self.confidence <= 1.0):
+            raise bad("confidence", "a float in [0, 1] or None", self.confidence)
+        if self.distance is not None and not (self.distance >= 0.0):  # rejects NaN too
+            raise bad("distance", "a float >= 0 (inf allowed) or None", self.distance)
+        if self.posterior is not None:
+            if not isinstance(self.posterior, tuple) or not all(
+                isinstance(p, float) and 0.0 <= p <= 1.0 for p in self.posterior
+            ):
+                raise bad("posterior", "a tuple of floats in [0, 1] or None", self.posterior)
+        if self.teacher_action is not None and (
+            not _is_int(self.teacher_action) or self.teacher_action < 0
+        ):
+            raise bad("teacher_action", "an int >= 0 or None", self.teacher_action)
+        if not _is_int(self.executed_action) or self.executed_action < 0:
+            raise bad("executed_action", "an int >= 0", self.executed_action)
+        if self.phase not in PHASES:
+            raise bad("phase", f"one of {PHASES}", self.phase)
+        if not isinstance(self.autonomous, bool):
+            raise bad("autonomous", "a bool", self.autonomous)
+        if self.teacher_action is not None:
+            if self.autonomous or self.executed_action != self.teacher_action:
+                raise bad(
+                    "teacher_action",
+                    "a demonstration to be executed as labelled and not autonomous",
+                    (self.teacher_action, self.executed_action, self.autonomous),
+                )
+        elif self.phase != "evaluation":
+            if not self.autonomous or self.executed_action != self.model_action:
+                raise bad(
+                    "autonomous",
+                    "a step without a teacher label to execute the model's action",
+                    (self.model_action, self.executed_action, self.autonomous),
+                )
+        if self.phase == "noninteractive" and self.teacher_action is None:
+            raise bad("teacher_action", "a label on every non-interactive step", None)
+        if self.reward is not None and not (
+            isinstance(self.reward, float) and math.isfinite(self.reward)
+        ):
+            raise bad("reward", "a finite float or None", self.reward)
+        for name in ("terminated", "truncated"):
+            if not isinstance(getattr(self, name), bool):
+                raise bad(name, "a bool", getattr(self, name))
+        if not isinstance(self.info, dict):
+            raise bad("info", "a dict", self.info)
+        for name in ("autonomy_rate", "windowed_accuracy"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, float) and 0.0 <= v <= 1.0):
+                raise bad(name, "a float in [0, 1] or None", v)
+
+    @property
+    def is_demonstration(self) -> bool:
+        """True when the step carries a teacher label (a training point)."""
+        return self.teacher_action is not None
+
+    @property
+    def observation_array(self) -> np.ndarray:
+        """The observation as a float64 array, shape [D]."""
+        return np.asarray(self.observation, dtype=np.float64)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able dict (``distance`` inf is written as the string ``"inf"``)."""
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        d["observation"] = list(self.observation)
+        d["posterior"] = None if self.posterior is None else list(self.posterior)
+        if d["distance"] is not None and math.isinf(d["distance"]):
+            d["distance"] = "inf"
+        json.dumps(d)  # fail here, not in a consumer, if something slipped through
+        return d

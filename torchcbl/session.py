@@ -1,0 +1,439 @@
+"""Teaching sessions on disk: the run directory, its SQLite step log and model checkpoints.
+
+Run directory layout (one directory per teaching session)::
+
+    <run_dir>/
+        config.json              what the session was started with: the TeachingConfig, the
+                                 model's constructor arguments, the confidence rule, the env's
+                                 id and spaces, the session seed and the log format version
+        steps.sqlite             the step log: table ``steps``, one row per StepRecord
+        steps.sqlite-wal         SQLite's write-ahead log (present while a writer is open or
+        steps.sqlite-shm         after a crash; never delete it by hand: it may hold commits)
+        checkpoints/
+            model-00000012.pt    ``{"n_demonstrations": 12, "state_dict": ...}`` of the model
+                                 fitted on the first 12 demonstrations; one per refit, all
+                                 kept (snapshots at stages come for free)
+
+Durability. The log is opened in WAL mode with ``synchronous=NORMAL``. A commit appends the
+transaction to ``steps.sqlite-wal`` with ``write()`` before returning; the pages then sit in the
+operating system's cache, which outlives the process. So a process killed at any instant,
+SIGKILL included, loses nothing that was committed. (A power cut or kernel crash may lose the
+last transactions; that is the price of not calling ``fsync`` on every step.) The loop commits
+every demonstration (teacher label, observation, model output, counters) *before* its action is
+sent to the environment; the row is completed with the env's answer afterwards. Autonomous steps
+are batched into the next commit (at the latest after ``commit_every`` steps, or at the end of
+``run``); since commits are ordered, the log on disk is always a prefix of the session, ending
+at worst with one demonstration whose outcome was never seen. On resume that row is kept
+(the demonstration counts) and marked ``truncated`` with ``info["torchcbl_interrupted"]``.
+
+Checkpoints are written to a temporary name and renamed, so a checkpoint file is complete or
+absent. A checkpoint can lag behind the log (killed between the commit and the refit); then
+:func:`load_model` refits deterministically on the logged demonstrations instead.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import sqlite3
+from collections.abc import Iterable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+
+from torchcbl.records import StepRecord
+
+if TYPE_CHECKING:  # pragma: no cover
+    from torchcbl.gmm import GaussianMixtureSet
+    from torchcbl.teaching import GreedyPolicy
+
+__all__ = [
+    "FORMAT",
+    "IncompatibleRunDirError",
+    "latest_checkpoint",
+    "load_config",
+    "load_model",
+    "load_policy",
+    "load_records",
+]
+
+FORMAT = "torchcbl.session/1"
+CONFIG_NAME = "config.json"
+LOG_NAME = "steps.sqlite"
+CHECKPOINT_DIR = "checkpoints"
+_CKPT_RE = re.compile(r"^model-(\d{8})\.pt$")
+
+_COLUMNS = (
+    "step",
+    "episode",
+    "observation",
+    "model_action",
+    "confidence",
+    "distance",
+    "posterior",
+    "teacher_action",
+    "executed_action",
+    "phase",
+    "autonomous",
+    "reward",
+    "terminated",
+    "truncated",
+    "info",
+    "n_demonstrations",
+    "autonomy_rate",
+    "windowed_accuracy",
+    "pending",
+)
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS steps (
+    step INTEGER PRIMARY KEY,
+    episode INTEGER NOT NULL,
+    observation BLOB NOT NULL,      -- float64 little-endian, [D]
+    model_action INTEGER NOT NULL,  -- -1: no model
+    confidence REAL,
+    distance REAL,                  -- +inf before any model
+    posterior BLOB,                 -- float64 little-endian, [A]
+    teacher_action INTEGER,         -- NULL: teacher not asked
+    executed_action INTEGER NOT NULL,
+    phase TEXT NOT NULL,
+    autonomous INTEGER NOT NULL,
+    reward REAL,                    -- NULL: outcome never observed
+    terminated INTEGER NOT NULL,
+    truncated INTEGER NOT NULL,
+    info TEXT NOT NULL,             -- JSON
+    n_demonstrations INTEGER NOT NULL,
+    autonomy_rate REAL,
+    windowed_accuracy REAL,
+    pending INTEGER NOT NULL        -- 1: demonstration committed, outcome not yet written
+);
+CREATE INDEX IF NOT EXISTS steps_demonstrations ON steps(teacher_action)
+    WHERE teacher_action IS NOT NULL;
+"""
+_INSERT = f"INSERT INTO steps ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})"
+_FINISH = (
+    "UPDATE steps SET reward = ?, terminated = ?, truncated = ?, info = ?, pending = 0 "
+    "WHERE step = ?"
+)
+
+
+class IncompatibleRunDirError(ValueError):
+    """A run directory cannot be used with the given env, model, rule or configuration."""
+
+
+def _blob(values: Any) -> bytes:
+    return np.asarray(values, dtype="<f8").tobytes()
+
+
+def _unblob(blob: bytes | None) -> tuple[float, ...] | None:
+    if blob is None:
+        return None
+    return tuple(np.frombuffer(blob, dtype="<f8").tolist())
+
+
+def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+    os.replace(tmp, path)
+
+
+def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
+    """The ``config.json`` of a run directory.
+
+    Raises:
+        IncompatibleRunDirError: no config, unreadable config, or another log format.
+    """
+    path = Path(run_dir) / CONFIG_NAME
+    if not path.is_file():
+        raise IncompatibleRunDirError(
+            f"{run_dir!s} is not a teaching session directory: {CONFIG_NAME} is missing. "
+            "Start a session with ConfidentTeacher(..., run_dir=...) first."
+        )
+    try:
+        config = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise IncompatibleRunDirError(f"{path} is not readable JSON: {exc}") from exc
+    if not isinstance(config, dict) or config.get("format") != FORMAT:
+        got = config.get("format") if isinstance(config, dict) else type(config).__name__
+        raise IncompatibleRunDirError(
+            f"{path}: expected session format {FORMAT!r}, got {got!r}. This directory was "
+            "written by another version of torchcbl or by something else; use a new run_dir."
+        )
+    return config
+
+
+class SessionStore:
+    """Writer and reader of one run directory's step log and checkpoints (private helper).
+
+    Not thread-safe; one writer per run directory.
+    """
+
+    def __init__(self, run_dir: Path, *, commit_every: int = 32) -> None:
+        self.run_dir = Path(run_dir)
+        self.commit_every = commit_every
+        self._uncommitted = 0
+        (self.run_dir / CHECKPOINT_DIR).mkdir(parents=True, exist_ok=True)
+        # isolation_level=None: we issue BEGIN / COMMIT ourselves, so batching is explicit.
+        self._db = sqlite3.connect(self.run_dir / LOG_NAME, isolation_level=None)
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.execute("PRAGMA synchronous=NORMAL")
+        self._db.executescript(_SCHEMA)
+        self._in_tx = False
+
+    # -- creation ---------------------------------------------------------------------------
+
+    @classmethod
+    def create(cls, run_dir: str | os.PathLike[str], config: dict[str, Any]) -> SessionStore:
+        path = Path(run_dir)
+        if (path / CONFIG_NAME).exists() or (path / LOG_NAME).exists():
+            raise IncompatibleRunDirError(
+                f"{path} already holds a teaching session. Continue it with "
+                "ConfidentTeacher.resume(run_dir, env, teacher) or choose a new run_dir."
+            )
+        path.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(path / CONFIG_NAME, config)
+        return cls(path)
+
+    # -- writing ----------------------------------------------------------------------------
+
+    def _begin(self) -> None:
+        if not self._in_tx:
+            self._db.execute("BEGIN")
+            self._in_tx = True
+
+    def commit(self) -> None:
+        if self._in_tx:
+            self._db.execute("COMMIT")
+            self._in_tx = False
+        self._uncommitted = 0
+
+    def _maybe_commit(self) -> None:
+        self._uncommitted += 1
+        if self._uncommitted >= self.commit_every:
+            self.commit()
+
+    @staticmethod
+    def row(record: StepRecord, *, pending: bool) -> tuple[Any, ...]:
+        r = record
+        return (
+            r.step,
+            r.episode,
+            _blob(r.observation),
+            r.model_action,
+            r.confidence,
+            r.distance,
+            None if r.posterior is None else _blob(r.posterior),
+            r.teacher_action,
+            r.executed_action,
+            r.phase,
+            int(r.autonomous),
+            r.reward,
+            int(r.terminated),
+            int(r.truncated),
+            json.dumps(r.info, sort_keys=True),
+            r.n_demonstrations,
+            r.autonomy_rate,
+            r.windowed_accuracy,
+            int(pending),
+        )
+
+    def commit_demonstration(self, provisional: StepRecord) -> None:
+        """Write a demonstration (outcome fields still unknown) and commit it durably."""
+        self._begin()
+        self._db.execute(_INSERT, self.row(provisional, pending=True))
+        self.commit()
+
+    def finish(self, record: StepRecord) -> None:
+        """Complete a committed demonstration with the env's answer (batched commit)."""
+        self._begin()
+        self._db.execute(
+            _FINISH,
+            (
+                record.reward,
+                int(record.terminated),
+                int(record.truncated),
+                json.dumps(record.info, sort_keys=True),
+                record.step,
+            ),
+        )
+        self._maybe_commit()
+
+    def append(self, record: StepRecord) -> None:
+        """Write an autonomous step (batched commit)."""
+        self._begin()
+        self._db.execute(_INSERT, self.row(record, pending=False))
+        self._maybe_commit()
+
+    def finalize_pending(self) -> int:
+        """Mark demonstrations whose outcome was never written; returns how many there were."""
+        self._begin()
+        cur = self._db.execute(
+            "UPDATE steps SET truncated = 1, terminated = 0, reward = NULL, "
+            "info = ?, pending = 0 WHERE pending = 1",
+            (json.dumps({"torchcbl_interrupted": True}),),
+        )
+        self.commit()
+        return cur.rowcount
+
+    def save_checkpoint(self, model: torch.nn.Module, n_demonstrations: int) -> Path:
+        directory = self.run_dir / CHECKPOINT_DIR
+        path = directory / f"model-{n_demonstrations:08d}.pt"
+        tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
+        torch.save({"n_demonstrations": n_demonstrations, "state_dict": model.state_dict()}, tmp)
+        os.replace(tmp, path)
+        return path
+
+    def close(self) -> None:
+        try:
+            self.commit()
+        finally:
+            self._db.close()
+
+    # -- reading ----------------------------------------------------------------------------
+
+    def records(self) -> list[StepRecord]:
+        return list(_read_records(self._db))
+
+    def demonstrations(self) -> tuple[np.ndarray, np.ndarray]:
+        return _read_demonstrations(self._db)
+
+
+def _record_from_row(row: tuple[Any, ...]) -> StepRecord:
+    d = dict(zip(_COLUMNS, row, strict=True))
+    pending = bool(d.pop("pending"))
+    d["observation"] = _unblob(d["observation"])
+    d["posterior"] = _unblob(d["posterior"])
+    d["autonomous"] = bool(d["autonomous"])
+    d["terminated"] = bool(d["terminated"])
+    d["truncated"] = bool(d["truncated"])
+    d["info"] = json.loads(d["info"])
+    if pending:  # read while its writer is between commit and finish, or after a crash
+        d["truncated"], d["terminated"], d["reward"] = True, False, None
+        d["info"] = {"torchcbl_interrupted": True}
+    if d["confidence"] is not None:
+        d["confidence"] = float(d["confidence"])
+    return StepRecord(**d)
+
+
+def _read_records(db: sqlite3.Connection) -> Iterable[StepRecord]:
+    cur = db.execute(f"SELECT {', '.join(_COLUMNS)} FROM steps ORDER BY step")
+    for row in cur:
+        yield _record_from_row(row)
+
+
+def _read_demonstrations(db: sqlite3.Connection) -> tuple[np.ndarray, np.ndarray]:
+    rows = db.execute(
+        "SELECT observation, teacher_action FROM steps WHERE teacher_action IS NOT NULL "
+        "ORDER BY step"
+    ).fetchall()
+    if not rows:
+        return np.zeros((0, 0), dtype=np.float64), np.zeros(0, dtype=np.int64)
+    x = np.stack([np.frombuffer(r[0], dtype="<f8") for r in rows])
+    y = np.asarray([r[1] for r in rows], dtype=np.int64)
+    return x, y
+
+
+def _open_readonly(run_dir: str | os.PathLike[str]) -> sqlite3.Connection:
+    path = Path(run_dir) / LOG_NAME
+    if not path.is_file():
+        raise IncompatibleRunDirError(f"{path} is missing: not a teaching session directory.")
+    # Not mode=ro: reading a WAL database left by a killed writer may need to recover it.
+    return sqlite3.connect(path)
+
+
+def load_records(run_dir: str | os.PathLike[str]) -> list[StepRecord]:
+    """All step records of a run directory, in step order (safe while a writer runs)."""
+    load_config(run_dir)
+    db = _open_readonly(run_dir)
+    try:
+        return list(_read_records(db))
+    finally:
+        db.close()
+
+
+def load_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Observations [M, D] float64 and teacher labels [M] int64 of every logged demonstration."""
+    load_config(run_dir)
+    db = _open_readonly(run_dir)
+    try:
+        return _read_demonstrations(db)
+    finally:
+        db.close()
+
+
+def latest_checkpoint(
+    run_dir: str | os.PathLike[str], *, at_most: int | None = None
+) -> tuple[int, Path] | None:
+    """(n_demonstrations, path) of the newest checkpoint (with at most ``at_most`` demos)."""
+    directory = Path(run_dir) / CHECKPOINT_DIR
+    best: tuple[int, Path] | None = None
+    if directory.is_dir():
+        for entry in directory.iterdir():
+            m = _CKPT_RE.match(entry.name)
+            if m is None:
+                continue
+            n = int(m.group(1))
+            if (at_most is None or n <= at_most) and (best is None or n > best[0]):
+                best = (n, entry)
+    return best
+
+
+def build_model(config: dict[str, Any]) -> GaussianMixtureSet:
+    """A fresh, unfitted model built from a session config's ``model`` entry."""
+    from torchcbl.gmm import GaussianMixtureSet
+
+    spec = config.get("model", {})
+    if spec.get("class") != "GaussianMixtureSet":
+        raise IncompatibleRunDirError(
+            f"the session's model class is {spec.get('class')!r}; only GaussianMixtureSet "
+            "can be rebuilt from a run directory."
+        )
+    return GaussianMixtureSet(**spec["args"])
+
+
+def fit_count(n_demonstrations: int, max_new: int) -> int:
+    """Demonstrations the live model was fitted on when ``n_demonstrations`` were logged.
+
+    The loop refits every time ``max_new`` new demonstrations have accumulated, so the model
+    always stands on a multiple of ``max_new``.
+    """
+    return (n_demonstrations // max_new) * max_new
+
+
+def load_model(
+    run_dir: str | os.PathLike[str], *, n_demonstrations: int | None = None
+) -> GaussianMixtureSet:
+    """The session's model as the loop had it, from its checkpoint or refitted from the log.
+
+    Args:
+        run_dir: a session directory.
+        n_demonstrations: rebuild the model as it stood when this many demonstrations were
+            logged (default: all logged demonstrations).
+
+    Returns:
+        A GaussianMixtureSet fitted on the first ``fit_count(n, max_new)`` demonstrations
+        (unfitted when that is 0 and the session did not start from a fitted model). If the
+        matching checkpoint is missing (the process was killed between logging and saving),
+        the model is refitted deterministically on the logged demonstrations.
+    """
+    config = load_config(run_dir)
+    x, y = load_demonstrations(run_dir)
+    n = len(y) if n_demonstrations is None else min(int(n_demonstrations), len(y))
+    k = fit_count(n, int(config["teaching"]["max_new"]))
+    model = build_model(config)
+    ckpt = latest_checkpoint(run_dir, at_most=k)
+    if ckpt is not None and ckpt[0] == k:
+        state = torch.load(ckpt[1], weights_only=True)
+        model.load_state_dict(state["state_dict"])
+    elif k > 0:
+        model.fit(x[:k], y[:k])
+    return model
+
+
+def load_policy(run_dir: str | os.PathLike[str]) -> GreedyPolicy:
+    """The latest learned policy of a session directory, as a callable obs -> action."""
+    from torchcbl.teaching import GreedyPolicy
+
+    return GreedyPolicy(load_model(run_dir))
