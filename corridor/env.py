@@ -1,0 +1,141 @@
+"""``CorridorEnv``: the corridor world as a gymnasium environment (id ``torchcbl/Corridor-v0``).
+
+Observation: ``Box([0, 0, 0], [max_range] * 3, float32)``, the averaged range readings
+(left, front, right) in metres. Actions: ``Discrete(4)``, see :class:`corridor.world.Action`
+(0 forward, 1 turn left, 2 turn right, 3 u-turn).
+
+Episode = one circuit. ``reset`` puts the robot at the map's start pose. The episode is
+``terminated`` when the circuit is completed (the robot is back at the start, having followed
+the route), with ``info["is_success"] = True`` iff no wall was touched during it; it is
+``truncated`` after ``max_episode_steps`` actions (default: 3x the actions of a perfect circuit
+on the default map, i.e. 81), with ``info["is_success"] = False``. The reward is 1 for completing
+the circuit, -1 for each wall contact, 0 otherwise (the teaching loop does not use it).
+
+``info`` after ``reset`` and every ``step``:
+  ``pose`` ndarray [3] (x m, y m, heading rad); ``true_ranges`` ndarray [3] noise-free metres;
+  ``contact`` bool (this step touched a wall); ``contacts`` int (this episode);
+  ``laps`` int (circuits completed this episode); ``lap_position`` metres along the route;
+  ``progress`` fraction of the circuit in [0, 1]; ``segment`` int (route segment index);
+  ``steps`` int; and ``is_success`` bool when the episode ends.
+
+Randomness: only the sensor noise, drawn from ``self.np_random`` (seeded by ``reset(seed=)``),
+so the same seed and actions give the same observations. Envs never write files; rendering
+returns RGB arrays (see :mod:`corridor.render` to save PNGs).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from corridor.maps import CorridorMap, load_map
+from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
+
+__all__ = ["CorridorEnv", "DEFAULT_MAP"]
+
+DEFAULT_MAP = "figure2"
+
+
+class CorridorEnv(gym.Env):
+    """The robot corridor domain of the paper's Section 5.1.
+
+    Args:
+        corridor_map: a :class:`CorridorMap`, or the name of a shipped map / a JSON path.
+        world_config: robot, motion and sensor parameters.
+        max_episode_steps: actions before truncation; None = 3 x 27.
+        render_mode: None or "rgb_array".
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(
+        self,
+        corridor_map: CorridorMap | str = DEFAULT_MAP,
+        world_config: WorldConfig | None = None,
+        max_episode_steps: int | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if isinstance(corridor_map, str):
+            corridor_map = load_map(corridor_map)
+        if not isinstance(corridor_map, CorridorMap):
+            raise TypeError(f"corridor_map must be a CorridorMap or a name, got {corridor_map!r}")
+        self.world = CorridorWorld(corridor_map, world_config)
+        self.max_episode_steps = 81 if max_episode_steps is None else int(max_episode_steps)
+        if self.max_episode_steps < 1:
+            raise ValueError("max_episode_steps must be >= 1")
+        self.render_mode = render_mode
+        r = self.world.config.max_range
+        self.observation_space = spaces.Box(0.0, r, shape=(3,), dtype=np.float32)
+        self.action_space = spaces.Discrete(N_ACTIONS)
+        self._steps = 0
+        self._contacts = 0
+        self._path: list[tuple[float, float]] = []
+        self._last_obs = np.zeros(3, dtype=np.float32)
+
+    @property
+    def corridor_map(self) -> CorridorMap:
+        """The map the env runs."""
+        return self.world.map
+
+    @property
+    def path(self) -> list[tuple[float, float]]:
+        """Robot positions (metres) since the last reset, start included."""
+        return list(self._path)
+
+    def _info(self, contact: bool) -> dict[str, Any]:
+        w = self.world
+        return {
+            "pose": np.asarray(w.pose, dtype=np.float64),
+            "true_ranges": w.true_ranges(),
+            "contact": bool(contact),
+            "contacts": self._contacts,
+            "laps": w.laps,
+            "lap_position": w.lap_position,
+            "progress": w.lap_position / w.route.length,
+            "segment": w.progress.segment,
+            "steps": self._steps,
+        }
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start a circuit at the start pose; ``options`` is not used."""
+        super().reset(seed=seed)
+        self.world.reset()
+        self._steps = 0
+        self._contacts = 0
+        self._path = [self.world.pose[:2]]
+        self._last_obs = self.world.sense(self.np_random)
+        return self._last_obs.copy(), self._info(False)
+
+    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """One action, then the robot stands still and senses."""
+        if not self.action_space.contains(action):
+            raise ValueError(f"action must be an int in [0, {N_ACTIONS}), got {action!r}")
+        laps_before = self.world.laps
+        contact = self.world.step(int(action))
+        self._steps += 1
+        self._contacts += int(contact)
+        self._path.append(self.world.pose[:2])
+        self._last_obs = self.world.sense(self.np_random)
+        terminated = self.world.laps > laps_before
+        truncated = not terminated and self._steps >= self.max_episode_steps
+        reward = (1.0 if terminated else 0.0) - (1.0 if contact else 0.0)
+        info = self._info(contact)
+        if terminated or truncated:
+            info["is_success"] = bool(terminated and self._contacts == 0)
+        return self._last_obs.copy(), reward, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        """An RGB array [H, W, 3] uint8 of the map, robot, sensor rays and path so far."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array'")
+            return None
+        from corridor.render import render_rgb
+
+        return render_rgb(self.world, self._path, self._last_obs)

@@ -1,0 +1,89 @@
+"""The scripted teleoperator: drives the map's target route.
+
+:class:`CorridorExpert` is a teacher in the sense of ``docs/architecture.md``
+(``teacher(observation, info) -> action``). It uses privileged information from ``info`` — the
+robot's pose and its route segment, as a person with a joystick watching the robot would — plus
+the map's route:
+
+- On the route (within ``on_route_tolerance`` of the tracked segment and heading along it): the
+  manoeuvre planned at the segment's end node is done when the robot is at the decision point,
+  ``turn_radius`` (0.2 m) before the node's centre (within +-0.1 m); a turn there lands on the
+  centre line of the next corridor. Otherwise: forward.
+- Heading against the route: u-turn.
+- Off the route (after a mistake of the learner): a reactive rule on the noise-free ranges:
+  forward if the front is open (> ``open_range``), else turn toward the open side (left first),
+  else u-turn.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from corridor.maps import LEFT, RIGHT, STRAIGHT, UTURN, CorridorMap
+from corridor.world import Action, WorldConfig
+
+__all__ = ["CorridorExpert"]
+
+
+class CorridorExpert:
+    """Scripted expert for a :class:`CorridorMap`.
+
+    Args:
+        corridor_map: the map whose route is driven.
+        world_config: the robot's motion parameters (the turn radius sets the decision point).
+        on_route_tolerance: lateral distance (metres) from the route still counted as on it.
+        open_range: a range above this (metres) counts as open in the off-route rule.
+    """
+
+    def __init__(
+        self,
+        corridor_map: CorridorMap,
+        world_config: WorldConfig | None = None,
+        *,
+        on_route_tolerance: float = 0.1,
+        open_range: float = 0.6,
+    ) -> None:
+        self.map = corridor_map
+        self.config = world_config or WorldConfig()
+        self.route = corridor_map.route_polyline()
+        self.on_route_tolerance = float(on_route_tolerance)
+        self.open_range = float(open_range)
+
+    def __call__(self, observation: np.ndarray, info: Mapping[str, Any]) -> int:
+        """The expert's action (int, see :class:`corridor.world.Action`) for this step."""
+        try:
+            x, y, heading = (float(v) for v in info["pose"])
+            seg = int(info["segment"])
+        except KeyError as err:
+            raise KeyError(f"CorridorExpert needs info[{err.args[0]!r}] from CorridorEnv") from err
+        direction = self.route.segment_direction(seg)
+        cos_err = math.cos(heading) * direction[0] + math.sin(heading) * direction[1]
+        start = self.route.points[seg]
+        rel = np.array([x, y]) - start
+        lateral = abs(direction[0] * rel[1] - direction[1] * rel[0])
+        remaining = float(self.route.segment_lengths[seg] - np.dot(rel, direction))
+        if lateral <= self.on_route_tolerance and cos_err < -0.9:
+            return int(Action.U_TURN)
+        if lateral > self.on_route_tolerance or cos_err < 0.9:
+            return self._reactive(info)
+        kind = self.route.kinds[seg]
+        at_decision = abs(remaining - self.config.turn_radius) <= 0.1 + 1e-9
+        if kind == STRAIGHT or not at_decision:
+            if kind != STRAIGHT and remaining < self.config.turn_radius - 0.1:
+                return self._reactive(info)  # overshot the decision point
+            return int(Action.FORWARD)
+        return int({LEFT: Action.TURN_LEFT, RIGHT: Action.TURN_RIGHT, UTURN: Action.U_TURN}[kind])
+
+    def _reactive(self, info: Mapping[str, Any]) -> int:
+        left, front, right = (float(v) for v in info["true_ranges"])
+        if front > self.open_range:
+            return int(Action.FORWARD)
+        if left > self.open_range:
+            return int(Action.TURN_LEFT)
+        if right > self.open_range:
+            return int(Action.TURN_RIGHT)
+        return int(Action.U_TURN)

@@ -1,0 +1,374 @@
+"""Corridor maps as data: nodes joined by straight, axis-aligned corridors, and a target route.
+
+A map is a :class:`CorridorMap` (a frozen dataclass) usually loaded from a JSON file shipped in
+``corridor/maps/`` (see :func:`load_map`, :func:`available_maps`). All lengths are in metres.
+
+The free space is the union of the corridors: corridor ``(a, b)`` is the rectangle around the
+segment from node ``a`` to node ``b``, ``corridor_width`` wide and extended by half the width
+past both nodes, so every node is the centre of a square junction (or the centre of the last
+square of a dead end). Walls are the boundary of that union (:meth:`CorridorMap.walls`),
+computed exactly on a grid of ``grid`` metres, which every node coordinate and half the width
+must be multiples of.
+
+The target route is a closed walk over nodes (first == last). The robot starts
+``start_offset`` metres from ``route[0]`` toward ``route[1]``, heading that way; the route
+polyline (:class:`Route`) runs from that start point through the node centres back to it, and
+progress along the circuit is measured along it. At each route node the robot does one
+manoeuvre (:meth:`CorridorMap.manoeuvres`): straight on, turn left, turn right or u-turn
+(when the route comes back the way it went: the end of a dead-end spur).
+
+JSON format (all keys required unless marked)::
+
+    {"name": "figure2", "description": "...",             (description optional)
+     "corridor_width": 0.6, "grid": 0.1, "start_offset": 0.2,   (grid, start_offset optional)
+     "nodes": {"P0": [0.0, 0.0], ...},
+     "corridors": [["P0", "P1"], ...],
+     "route": ["P0", "P1", ..., "P0"]}
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "CorridorMap",
+    "Route",
+    "RouteProgress",
+    "available_maps",
+    "load_map",
+    "map_from_dict",
+]
+
+STRAIGHT, LEFT, RIGHT, UTURN = "straight", "left", "right", "uturn"
+_EPS = 1e-9
+
+
+def _on_grid(value: float, grid: float) -> bool:
+    q = value / grid
+    return abs(q - round(q)) < 1e-6
+
+
+@dataclass(frozen=True)
+class CorridorMap:
+    """A circuit of corridors (metres) and the route the expert drives through it.
+
+    Attributes:
+        name: short identifier (the JSON file's stem for shipped maps).
+        corridor_width: width of every corridor, metres.
+        nodes: node name -> (x, y) centre, metres.
+        corridors: pairs of node names joined by a straight axis-aligned corridor.
+        route: closed walk over nodes, ``route[0] == route[-1]``; consecutive nodes must be
+            joined by a corridor.
+        start_offset: the start pose is this far from ``route[0]`` toward ``route[1]``, metres.
+        grid: resolution of the wall computation, metres.
+        description: free text.
+    """
+
+    name: str
+    corridor_width: float
+    nodes: Mapping[str, tuple[float, float]]
+    corridors: tuple[tuple[str, str], ...]
+    route: tuple[str, ...]
+    start_offset: float = 0.2
+    grid: float = 0.1
+    description: str = ""
+    _cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False, hash=False)
+
+    def __post_init__(self) -> None:
+        if not self.corridor_width > 0:
+            raise ValueError(f"corridor_width must be > 0 m, got {self.corridor_width}")
+        if not self.grid > 0:
+            raise ValueError(f"grid must be > 0 m, got {self.grid}")
+        if not _on_grid(self.corridor_width / 2, self.grid):
+            raise ValueError(
+                f"half the corridor width ({self.corridor_width / 2}) must be a multiple of "
+                f"grid={self.grid}"
+            )
+        for name, xy in self.nodes.items():
+            if len(xy) != 2 or not all(_on_grid(float(v), self.grid) for v in xy):
+                raise ValueError(f"node {name!r} at {xy} is not a point on the {self.grid} grid")
+        pairs = set()
+        for a, b in self.corridors:
+            for n in (a, b):
+                if n not in self.nodes:
+                    raise ValueError(f"corridor ({a!r}, {b!r}) names unknown node {n!r}")
+            (ax, ay), (bx, by) = self.nodes[a], self.nodes[b]
+            if (abs(ax - bx) > _EPS) == (abs(ay - by) > _EPS):
+                raise ValueError(f"corridor ({a!r}, {b!r}) must be axis-aligned and non-empty")
+            pairs.add((a, b))
+            pairs.add((b, a))
+        if len(self.route) < 4 or self.route[0] != self.route[-1]:
+            raise ValueError("route must be a closed walk of at least 3 nodes (first == last)")
+        for a, b in zip(self.route[:-1], self.route[1:]):
+            if (a, b) not in pairs:
+                raise ValueError(f"route step {a!r} -> {b!r} is not a corridor")
+        first = np.subtract(self.nodes[self.route[1]], self.nodes[self.route[0]])
+        if not 0 < self.start_offset < float(np.linalg.norm(first)):
+            raise ValueError("start_offset must lie inside the route's first corridor")
+
+    # ------------------------------------------------------------------ geometry
+    def free_cells(self) -> tuple[np.ndarray, tuple[int, int]]:
+        """Boolean occupancy grid of free space ``[nx, ny]`` and the (i, j) index of x=y=0."""
+        if "cells" not in self._cache:
+            h = self.corridor_width / 2
+            rects = []
+            for a, b in self.corridors:
+                (ax, ay), (bx, by) = self.nodes[a], self.nodes[b]
+                rects.append((min(ax, bx) - h, min(ay, by) - h, max(ax, bx) + h, max(ay, by) + h))
+            g = self.grid
+            idx = np.rint(np.asarray(rects) / g).astype(int)
+            i0, j0 = idx[:, 0].min(), idx[:, 1].min()
+            cells = np.zeros((idx[:, 2].max() - i0, idx[:, 3].max() - j0), dtype=bool)
+            for x0, y0, x1, y1 in idx:
+                cells[x0 - i0 : x1 - i0, y0 - j0 : y1 - j0] = True
+            self._cache["cells"] = (cells, (int(i0), int(j0)))
+        return self._cache["cells"]
+
+    def walls(self) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+        """Wall segments ``((x0, y0), (x1, y1))`` in metres: the boundary of the free space,
+        collinear pieces merged."""
+        if "walls" in self._cache:
+            return self._cache["walls"]
+        cells, (i0, j0) = self.free_cells()
+        padded = np.pad(cells, 1)
+        g = self.grid
+        segs: list[tuple[tuple[float, float], tuple[float, float]]] = []
+        # Vertical edges: between column i-1 and i (padded coordinates).
+        diff_x = padded[1:, :] != padded[:-1, :]  # [nx+1, ny+2]
+        for i in range(diff_x.shape[0]):
+            for start, stop in _runs(diff_x[i, 1:-1]):
+                x = round((i + i0) * g, 9)
+                y0, y1 = round((start + j0) * g, 9), round((stop + j0) * g, 9)
+                segs.append(((x, y0), (x, y1)))
+        diff_y = padded[:, 1:] != padded[:, :-1]  # [nx+2, ny+1]
+        for j in range(diff_y.shape[1]):
+            for start, stop in _runs(diff_y[1:-1, j]):
+                y = round((j + j0) * g, 9)
+                x0, x1 = round((start + i0) * g, 9), round((stop + i0) * g, 9)
+                segs.append(((x0, y), (x1, y)))
+        self._cache["walls"] = segs
+        return segs
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` of the free space, metres."""
+        cells, (i0, j0) = self.free_cells()
+        g = self.grid
+        nx, ny = cells.shape
+        return (
+            round(i0 * g, 9),
+            round(j0 * g, 9),
+            round((i0 + nx) * g, 9),
+            round((j0 + ny) * g, 9),
+        )
+
+    def is_free(self, x: float, y: float) -> bool:
+        """Whether the point (x, y) (metres) lies inside the free space."""
+        cells, (i0, j0) = self.free_cells()
+        i, j = math.floor(x / self.grid) - i0, math.floor(y / self.grid) - j0
+        return 0 <= i < cells.shape[0] and 0 <= j < cells.shape[1] and bool(cells[i, j])
+
+    def start_pose(self) -> tuple[float, float, float]:
+        """``(x, y, heading)`` of the start: metres, radians."""
+        p0 = np.asarray(self.nodes[self.route[0]], dtype=float)
+        p1 = np.asarray(self.nodes[self.route[1]], dtype=float)
+        d = (p1 - p0) / np.linalg.norm(p1 - p0)
+        x, y = p0 + self.start_offset * d
+        return (float(x), float(y), float(math.atan2(d[1], d[0])))
+
+    def manoeuvres(self) -> list[str]:
+        """The manoeuvre at each route node ``route[1:]`` ('straight', 'left', 'right', 'uturn');
+        the last entry is the one at ``route[0]`` that closes the circuit."""
+        pts = [np.asarray(self.nodes[n], dtype=float) for n in self.route]
+        pts.append(pts[1])
+        out = []
+        for k in range(1, len(pts) - 1):
+            d_in, d_out = pts[k] - pts[k - 1], pts[k + 1] - pts[k]
+            cross = d_in[0] * d_out[1] - d_in[1] * d_out[0]
+            dot = float(np.dot(d_in, d_out))
+            if abs(cross) < _EPS:
+                out.append(STRAIGHT if dot > 0 else UTURN)
+            else:
+                out.append(LEFT if cross > 0 else RIGHT)
+        return out
+
+    def route_polyline(self) -> Route:
+        """The route as a :class:`Route` from the start point round to the start point."""
+        if "route" not in self._cache:
+            sx, sy, _ = self.start_pose()
+            pts = [(sx, sy)]
+            pts += [tuple(map(float, self.nodes[n])) for n in self.route[1:]]
+            pts.append((sx, sy))
+            kinds = [*self.manoeuvres(), STRAIGHT]
+            # kinds[k] is the manoeuvre at the END of segment k (the start point: straight).
+            self._cache["route"] = Route(np.asarray(pts, dtype=float), tuple(kinds))
+        return self._cache["route"]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON-ready form :func:`map_from_dict` reads back."""
+        return {
+            "name": self.name,
+            "description": self.description,
+            "corridor_width": self.corridor_width,
+            "grid": self.grid,
+            "start_offset": self.start_offset,
+            "nodes": {k: list(v) for k, v in self.nodes.items()},
+            "corridors": [list(c) for c in self.corridors],
+            "route": list(self.route),
+        }
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Maximal runs of True in a 1-D boolean array as (start, stop)."""
+    out = []
+    start = None
+    for k, v in enumerate(mask):
+        if v and start is None:
+            start = k
+        elif not v and start is not None:
+            out.append((start, k))
+            start = None
+    if start is not None:
+        out.append((start, len(mask)))
+    return out
+
+
+@dataclass(frozen=True)
+class RouteProgress:
+    """Where a pose lies on a route: unwrapped arc length (metres), segment index, the offset
+    from the segment's line (metres) and the distance left to the segment's end (metres)."""
+
+    s: float
+    segment: int
+    lateral: float
+    remaining: float
+
+
+@dataclass(frozen=True, eq=False)
+class Route:
+    """A closed polyline: ``points [K+1, 2]`` metres (first == last), ``kinds[k]`` the manoeuvre
+    at the end of segment ``k``."""
+
+    points: np.ndarray
+    kinds: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        seg = np.diff(self.points, axis=0)
+        lengths = np.linalg.norm(seg, axis=1)
+        object.__setattr__(self, "_dirs", seg / lengths[:, None])
+        object.__setattr__(self, "_lengths", lengths)
+        object.__setattr__(self, "_cum", np.concatenate([[0.0], np.cumsum(lengths)]))
+
+    @property
+    def length(self) -> float:
+        """Total length of one circuit, metres."""
+        return float(self._cum[-1])
+
+    @property
+    def segment_lengths(self) -> np.ndarray:
+        """``[K]`` metres."""
+        return self._lengths
+
+    def segment_direction(self, k: int) -> np.ndarray:
+        """Unit vector ``[2]`` of segment ``k``."""
+        return self._dirs[k]
+
+    def locate(
+        self,
+        x: float,
+        y: float,
+        heading: float,
+        s_prev: float,
+        *,
+        back: float = 0.5,
+        ahead: float = 1.0,
+        heading_weight: float = 0.3,
+    ) -> RouteProgress:
+        """Project a pose on the route near the previous unwrapped arc length ``s_prev``.
+
+        Candidates are the nearest points of every segment whose arc length, unwrapped to lie in
+        ``[s_prev - back, s_prev + ahead]``, is reachable; among them the one minimising
+        distance + ``heading_weight`` * (1 - cos(heading error)) wins, so a spur driven in and
+        out is told apart by the heading. With no candidate in the window, the progress stays.
+        """
+        p = np.array([x, y])
+        hd = np.array([math.cos(heading), math.sin(heading)])
+        length = self.length
+        best: tuple[float, float, int, float, float] | None = None
+        rel = p - self.points[:-1]
+        t = np.clip(np.einsum("kd,kd->k", rel, self._dirs), 0.0, self._lengths)
+        for k in range(len(self._lengths)):
+            q = self.points[k] + t[k] * self._dirs[k]
+            s_loc = self._cum[k] + t[k]
+            lap = math.floor((s_prev - back - s_loc) / length) + 1
+            s_abs = s_loc + lap * length
+            if s_abs > s_prev + ahead + _EPS:
+                continue
+            dist = float(np.linalg.norm(p - q))
+            cost = dist + heading_weight * (1.0 - float(np.dot(hd, self._dirs[k])))
+            if best is None or cost < best[0] - _EPS:
+                lateral = abs(float(np.cross(self._dirs[k], rel[k])))
+                best = (cost, s_abs, k, lateral, float(self._lengths[k] - t[k]))
+        if best is None:
+            k = int(np.searchsorted(self._cum, s_prev % length, side="right") - 1)
+            k = min(max(k, 0), len(self._lengths) - 1)
+            return RouteProgress(s_prev, k, math.inf, math.inf)
+        return RouteProgress(best[1], best[2], best[3], best[4])
+
+
+def map_from_dict(data: Mapping[str, Any]) -> CorridorMap:
+    """Build a :class:`CorridorMap` from the JSON form (see the module docstring)."""
+    allowed = {
+        "name",
+        "description",
+        "corridor_width",
+        "grid",
+        "start_offset",
+        "nodes",
+        "corridors",
+        "route",
+    }
+    unknown = set(data) - allowed
+    if unknown:
+        raise ValueError(f"unknown map keys {sorted(unknown)}; allowed: {sorted(allowed)}")
+    missing = {"name", "corridor_width", "nodes", "corridors", "route"} - set(data)
+    if missing:
+        raise ValueError(f"map is missing keys {sorted(missing)}")
+    kwargs: dict[str, Any] = {
+        "name": str(data["name"]),
+        "corridor_width": float(data["corridor_width"]),
+        "nodes": {str(k): (float(v[0]), float(v[1])) for k, v in data["nodes"].items()},
+        "corridors": tuple((str(a), str(b)) for a, b in data["corridors"]),
+        "route": tuple(str(n) for n in data["route"]),
+        "description": str(data.get("description", "")),
+    }
+    for key in ("grid", "start_offset"):
+        if key in data:
+            kwargs[key] = float(data[key])
+    return CorridorMap(**kwargs)
+
+
+def available_maps() -> list[str]:
+    """Names of the maps shipped in ``corridor/maps/``."""
+    folder = resources.files("corridor") / "maps"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
+
+
+def load_map(name_or_path: str | Path) -> CorridorMap:
+    """Load a shipped map by name (``"figure2"``, ``"lshape"``) or any map JSON file by path."""
+    path = Path(name_or_path)
+    if path.suffix == ".json" and path.exists():
+        text = path.read_text()
+    else:
+        res = resources.files("corridor") / "maps" / f"{name_or_path}.json"
+        if not res.is_file():
+            raise ValueError(f"unknown map {name_or_path!r}; shipped maps: {available_maps()}")
+        text = res.read_text()
+    return map_from_dict(json.loads(text))

@@ -1,0 +1,123 @@
+"""Drawing the corridor world with matplotlib (Agg): map, route, robot, sensor rays, path.
+
+Nothing here simulates; the functions read a :class:`corridor.world.CorridorWorld` or a
+:class:`corridor.maps.CorridorMap`. :func:`render_rgb` returns an RGB array (what
+``CorridorEnv.render`` returns); :func:`save_png` writes one (used by experiments, never by envs).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+from corridor.maps import CorridorMap  # noqa: E402
+from corridor.world import SENSOR_NAMES, CorridorWorld  # noqa: E402
+
+__all__ = ["draw_map", "draw_robot", "map_figure", "render_rgb", "save_png"]
+
+_RAY_COLOURS = {"left": "tab:blue", "front": "tab:green", "right": "tab:orange"}
+
+
+def draw_map(ax: Axes, corridor_map: CorridorMap, *, route: bool = True) -> None:
+    """Draw the free space, the walls and (optionally) the target route on ``ax`` (metres)."""
+    cells, (i0, j0) = corridor_map.free_cells()
+    g = corridor_map.grid
+    xmin, ymin, xmax, ymax = corridor_map.bounds()
+    ax.imshow(
+        np.where(cells.T, 1.0, 0.55),
+        origin="lower",
+        extent=(xmin, xmax, ymin, ymax),
+        cmap="gray",
+        vmin=0,
+        vmax=1,
+        interpolation="nearest",
+    )
+    for (x0, y0), (x1, y1) in corridor_map.walls():
+        ax.plot([x0, x1], [y0, y1], color="black", linewidth=2)
+    if route:
+        pts = corridor_map.route_polyline().points
+        ax.plot(pts[:, 0], pts[:, 1], color="black", linewidth=1, linestyle=":", label="route")
+    ax.set_xlim(xmin - g, xmax + g)
+    ax.set_ylim(ymin - g, ymax + g)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+
+def draw_robot(
+    ax: Axes,
+    world: CorridorWorld,
+    readings: Sequence[float] | None = None,
+) -> None:
+    """Draw the robot (circle and heading) and its three sensor rays (``readings`` in metres,
+    default: the noise-free ranges)."""
+    x, y, h = world.pose
+    r = world.config.robot_radius
+    ax.add_patch(plt.Circle((x, y), r, facecolor="tab:red", edgecolor="black", alpha=0.8))
+    ax.plot([x, x + r * math.cos(h)], [y, y + r * math.sin(h)], color="white", linewidth=2)
+    ranges = world.true_ranges() if readings is None else np.asarray(readings, dtype=float)
+    for name, offset, d in zip(SENSOR_NAMES, (math.pi / 2, 0.0, -math.pi / 2), ranges):
+        a = h + offset
+        ax.plot(
+            [x, x + d * math.cos(a)],
+            [y, y + d * math.sin(a)],
+            color=_RAY_COLOURS[name],
+            linewidth=1,
+        )
+
+
+def map_figure(
+    world: CorridorWorld,
+    path: Sequence[tuple[float, float]] | None = None,
+    readings: Sequence[float] | None = None,
+    *,
+    title: str | None = None,
+    size: float = 5.0,
+) -> Figure:
+    """A figure of the map, route, path so far (metres) and robot with its rays."""
+    fig = Figure(figsize=(size, size), dpi=80)
+    ax = fig.add_subplot()
+    draw_map(ax, world.map)
+    if path is not None and len(path) > 1:
+        p = np.asarray(path, dtype=float)
+        ax.plot(p[:, 0], p[:, 1], color="tab:red", linewidth=1, marker=".", markersize=3)
+    draw_robot(ax, world, readings)
+    ax.set_title(title or world.map.name)
+    fig.tight_layout()
+    return fig
+
+
+def render_rgb(
+    world: CorridorWorld,
+    path: Sequence[tuple[float, float]] | None = None,
+    readings: Sequence[float] | None = None,
+) -> np.ndarray:
+    """The :func:`map_figure` as an RGB array ``[H, W, 3]`` uint8."""
+    fig = map_figure(world, path, readings)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+def save_png(fig_or_rgb: Figure | np.ndarray, path: str | Path) -> Path:
+    """Write a figure or an RGB array to a PNG file; returns the path."""
+    path = Path(path)
+    if isinstance(fig_or_rgb, Figure):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        FigureCanvasAgg(fig_or_rgb)
+        fig_or_rgb.savefig(path)
+    else:
+        plt.imsave(path, np.asarray(fig_or_rgb))
+    return path

@@ -1,0 +1,250 @@
+"""The corridor world on pymunk: walls, a kinematic round robot, its range sensors and actions.
+
+This is the ONLY module of the project that imports pymunk. Units: metres, radians; headings
+are counter-clockwise from +x.
+
+Motion (exact and deterministic). The robot is a circle on a kinematic body. An action is cut
+into sub-steps of at most ``WorldConfig.substep`` metres of travel (or ``substep_angle`` radians
+of rotation); before each sub-step the new pose is tested with ``Space.shape_query``, and a
+sub-step whose position would overlap a wall is undone: the robot keeps its last free position,
+stops translating for the rest of the action (rotation, which a round robot can always do,
+completes) and the action reports a wall contact. So the robot never passes through a wall.
+
+- ``FORWARD``: ``forward_distance`` (0.20 m) straight ahead.
+- ``TURN_LEFT`` / ``TURN_RIGHT``: a quarter circle of radius ``turn_radius`` (0.20 m): the robot
+  rotates 90 degrees while advancing slowly (0.31 m of arc), ending ``turn_radius`` ahead and
+  ``turn_radius`` to the side of where it started.
+- ``U_TURN``: rotate 180 degrees in place (counter-clockwise).
+
+Sensors. Three IR-like range sensors point left (+90 deg), front and right (-90 deg) from the
+robot's centre; a reading is the distance from the centre to the nearest wall along the ray
+(``Space.segment_query_first`` with a filter that excludes the robot), saturated at
+``max_range``. While the robot stands still it takes ``n_readings`` (15) readings per sensor,
+each with Gaussian noise of standard deviation ``noise_sd + noise_sd_per_m * distance``, each
+clipped to ``[min_range, max_range]``, and reports their mean. The geometry does not change while
+standing, so the ray is cast once per sensor and the 15 readings differ by their noise only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+import pymunk
+
+from corridor.maps import CorridorMap, RouteProgress
+
+__all__ = ["Action", "CorridorWorld", "WorldConfig", "N_ACTIONS", "SENSOR_NAMES"]
+
+SENSOR_NAMES = ("left", "front", "right")
+_SENSOR_ANGLES = (math.pi / 2, 0.0, -math.pi / 2)
+_ROBOT_CATEGORY = 0b10
+_WALL_CATEGORY = 0b01
+
+
+class Action(IntEnum):
+    """The four actions of the paper's corridor robot."""
+
+    FORWARD = 0
+    TURN_LEFT = 1
+    TURN_RIGHT = 2
+    U_TURN = 3
+
+
+N_ACTIONS = len(Action)
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Robot, motion and sensor parameters (metres, radians).
+
+    The defaults describe a small round robot with IR range sensors of 1.5 m (like the Sharp
+    GP2Y0A02, 0.2-1.5 m): per-reading noise of 1 cm + 2% of the distance, averaged over 15
+    readings (so about 0.5 cm at 0.3 m and 1 cm at 1.5 m).
+    """
+
+    robot_radius: float = 0.12
+    forward_distance: float = 0.20
+    turn_radius: float = 0.20
+    substep: float = 0.02
+    substep_angle: float = math.pi / 16
+    max_range: float = 1.5
+    min_range: float = 0.05
+    noise_sd: float = 0.01
+    noise_sd_per_m: float = 0.02
+    n_readings: int = 15
+
+    def __post_init__(self) -> None:
+        for name in ("robot_radius", "forward_distance", "turn_radius", "substep", "max_range"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"WorldConfig.{name} must be > 0, got {getattr(self, name)}")
+        if not 0 < self.substep_angle <= math.pi / 2:
+            raise ValueError("WorldConfig.substep_angle must be in (0, pi/2]")
+        if not 0 <= self.min_range < self.max_range:
+            raise ValueError("WorldConfig needs 0 <= min_range < max_range")
+        if self.noise_sd < 0 or self.noise_sd_per_m < 0:
+            raise ValueError("WorldConfig noise standard deviations must be >= 0")
+        if self.n_readings < 1:
+            raise ValueError("WorldConfig.n_readings must be >= 1")
+
+
+def _wrap(angle: float) -> float:
+    """Angle wrapped to (-pi, pi]."""
+    a = math.remainder(angle, 2 * math.pi)
+    return math.pi if a == -math.pi else a
+
+
+class CorridorWorld:
+    """A corridor map in a pymunk space with one robot; tracks progress along the route.
+
+    Args:
+        corridor_map: the map (walls and route).
+        config: robot, motion and sensor parameters.
+    """
+
+    def __init__(self, corridor_map: CorridorMap, config: WorldConfig | None = None) -> None:
+        self.map = corridor_map
+        self.config = config or WorldConfig()
+        self.route = corridor_map.route_polyline()
+        self._space = pymunk.Space()
+        wall_filter = pymunk.ShapeFilter(categories=_WALL_CATEGORY)
+        for a, b in corridor_map.walls():
+            seg = pymunk.Segment(self._space.static_body, a, b, 0.0)
+            seg.filter = wall_filter
+            self._space.add(seg)
+        self._body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        self._shape = pymunk.Circle(self._body, self.config.robot_radius)
+        self._shape.filter = pymunk.ShapeFilter(categories=_ROBOT_CATEGORY, mask=_WALL_CATEGORY)
+        self._space.add(self._body, self._shape)
+        self._ray_filter = pymunk.ShapeFilter(mask=pymunk.ShapeFilter.ALL_MASKS() ^ _ROBOT_CATEGORY)
+        self._x = self._y = self._heading = 0.0
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Put the robot at the map's start pose with zero progress."""
+        x, y, h = self.map.start_pose()
+        self.set_pose(x, y, h)
+        self._s = 0.0
+        self._s_max = 0.0
+        self._progress = self.route.locate(x, y, h, 0.0)
+
+    def set_pose(self, x: float, y: float, heading: float) -> None:
+        """Place the robot (metres, radians); raises ValueError if it would overlap a wall.
+        Progress is not changed (call :meth:`reset` for that)."""
+        if self._overlaps(x, y):
+            self._body.position = (self._x, self._y)
+            raise ValueError(f"pose ({x:.3f}, {y:.3f}) overlaps a wall")
+        self._x, self._y, self._heading = float(x), float(y), _wrap(float(heading))
+        self._body.position = (self._x, self._y)
+        self._body.angle = self._heading
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """``(x, y, heading)``: metres, radians in (-pi, pi]."""
+        return (self._x, self._y, self._heading)
+
+    @property
+    def progress(self) -> RouteProgress:
+        """Where the robot is on the route (see :class:`corridor.maps.RouteProgress`)."""
+        return self._progress
+
+    @property
+    def laps(self) -> int:
+        """Circuits completed since :meth:`reset` (by the furthest progress reached)."""
+        return int(math.floor((self._s_max + 0.05) / self.route.length))
+
+    @property
+    def lap_position(self) -> float:
+        """Position along the current circuit, metres in [0, route length)."""
+        return float(self._s % self.route.length)
+
+    # ------------------------------------------------------------------ physics
+    def _overlaps(self, x: float, y: float) -> bool:
+        self._body.position = (x, y)
+        for info in self._space.shape_query(self._shape):
+            for point in info.contact_point_set.points:
+                if point.distance < -1e-9:
+                    return True
+        return False
+
+    def step(self, action: int) -> bool:
+        """Execute one action; returns True if the robot touched a wall (the move was cut)."""
+        try:
+            action = Action(int(action))
+        except ValueError:
+            raise ValueError(f"action must be one of {[int(a) for a in Action]}, got {action}")
+        cfg = self.config
+        x0, y0, h0 = self._x, self._y, self._heading
+        if action == Action.FORWARD:
+            n = max(1, math.ceil(cfg.forward_distance / cfg.substep - 1e-9))
+            cos_h, sin_h = math.cos(h0), math.sin(h0)
+
+            def pose_at(k: int) -> tuple[float, float, float]:
+                d = cfg.forward_distance * k / n
+                return (x0 + d * cos_h, y0 + d * sin_h, h0)
+
+        elif action in (Action.TURN_LEFT, Action.TURN_RIGHT):
+            sign = 1.0 if action == Action.TURN_LEFT else -1.0
+            r = cfg.turn_radius
+            arc = r * math.pi / 2
+            n = max(
+                1, math.ceil(arc / cfg.substep - 1e-9), math.ceil(math.pi / 2 / cfg.substep_angle)
+            )
+            # Centre of the arc, to the turning side.
+            cx, cy = x0 - sign * r * math.sin(h0), y0 + sign * r * math.cos(h0)
+
+            def pose_at(k: int) -> tuple[float, float, float]:
+                h = h0 + sign * (math.pi / 2) * k / n
+                return (cx + sign * r * math.sin(h), cy - sign * r * math.cos(h), h)
+
+        else:
+            n = math.ceil(math.pi / cfg.substep_angle - 1e-9)
+
+            def pose_at(k: int) -> tuple[float, float, float]:
+                return (x0, y0, h0 + math.pi * k / n)
+
+        contact = False
+        x, y = x0, y0
+        heading = h0
+        for k in range(1, n + 1):
+            nx, ny, heading = pose_at(k)
+            if contact or (nx == x and ny == y):
+                continue
+            if self._overlaps(nx, ny):
+                contact = True
+                continue
+            x, y = nx, ny
+        self._x, self._y, self._heading = x, y, _wrap(heading)
+        self._body.position = (x, y)
+        self._body.angle = self._heading
+        self._progress = self.route.locate(x, y, self._heading, self._s)
+        self._s = self._progress.s
+        self._s_max = max(self._s_max, self._s)
+        return contact
+
+    # ------------------------------------------------------------------ sensing
+    def true_ranges(self) -> np.ndarray:
+        """Noise-free distances ``[3]`` (left, front, right) from the robot centre to the nearest
+        wall, metres, saturated at ``max_range``."""
+        cfg = self.config
+        out = np.empty(3)
+        start = (self._x, self._y)
+        for i, offset in enumerate(_SENSOR_ANGLES):
+            a = self._heading + offset
+            end = (self._x + cfg.max_range * math.cos(a), self._y + cfg.max_range * math.sin(a))
+            hit = self._space.segment_query_first(start, end, 0.0, self._ray_filter)
+            out[i] = cfg.max_range if hit is None else hit.alpha * cfg.max_range
+        return out
+
+    def sense(self, rng: np.random.Generator) -> np.ndarray:
+        """One observation ``[3]`` float32 (left, front, right), metres: the mean of
+        ``n_readings`` noisy, clipped readings per sensor taken while standing still."""
+        cfg = self.config
+        true = self.true_ranges()
+        sd = cfg.noise_sd + cfg.noise_sd_per_m * true
+        readings = true + sd * rng.standard_normal((cfg.n_readings, 3))
+        np.clip(readings, cfg.min_range, cfg.max_range, out=readings)
+        return readings.mean(axis=0).astype(np.float32)
