@@ -364,7 +364,8 @@ while select.select([fd], [], [], 60)[0]:
         x = float(re.findall(rb"x = ([0-9.e+-]+)", shown)[-1])
         os.write(fd, b"a" if x < 0.5 else b"\x1b[C")  # 'a' low, right arrow high
         answered += 1
-        print(answered, flush=True)
+        shown_demos = re.findall(rb"(\d+) demonstrations so far", shown)
+        print(answered, int(shown_demos[-1]) if shown_demos else -1, flush=True)
 """
 
 
@@ -413,6 +414,9 @@ def test_a_person_at_the_terminal_teaches_an_agent_that_asks_less_often(terminal
             run_dir=tmp_path / "run",
             seed=0,
             progress=False,
+            on_step=lambda r: teacher.set_status(
+                f"{r.n_demonstrations} demonstrations so far, autonomy {r.autonomy_rate or 0:.0%}"
+            ),
         )
         loop.run()
     finally:
@@ -423,9 +427,16 @@ def test_a_person_at_the_terminal_teaches_an_agent_that_asks_less_often(terminal
     assert len(records) == 80
     asked = [r.teacher_action is not None for r in records]
     assert asked[0]  # no model yet: the agent must ask
-    # Every request went through the terminal and was answered by the person.
-    assert int(answers.split()[-1]) == sum(asked) == teacher.n_decisions
+    # Every request went through the terminal and was answered by the person, who saw the
+    # live status: before answering request k, k-1 demonstrations had been recorded.
+    lines = [tuple(map(int, line.split())) for line in answers.splitlines()]
+    assert len(lines) == sum(asked) == teacher.n_decisions
+    assert lines[0] == (1, -1)  # no status before the first step
+    assert all(demos == k - 1 for k, demos in lines[1:])
     for r in records:
         if r.teacher_action is not None:
             assert r.teacher_action == int(r.observation[0] >= 0.5)
     assert sum(asked[40:]) < sum(asked[:40])
+    # ... and what it learned from the person is right: it mostly acts correctly on its own.
+    late = records[40:]
+    assert sum(r.executed_action == int(r.observation[0] >= 0.5) for r in late) >= 0.8 * len(late)
