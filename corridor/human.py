@@ -36,14 +36,15 @@ _SENSORS = ("left", "front", "right")
 
 
 def describe(
-    observation: np.ndarray, info: dict | None = None, *, max_range: float = 3.0, width: int = 30
+    observation: np.ndarray, info: dict | None = None, *, max_range: float = 1.5, width: int = 30
 ) -> str:
     """The robot's three range readings as labelled bars.
 
     Args:
         observation: ``[left, front, right]`` distances in metres.
         info: the env's info dict; a truthy ``"contact"`` entry is shown as a warning.
-        max_range: the distance drawn as a full bar; longer readings are marked ``max``.
+        max_range: the distance drawn as a full bar (the sensor range, 1.5 m in the default
+            world); readings at or beyond it are marked ``max``.
         width: bar width in characters.
 
     Raises:
@@ -67,7 +68,7 @@ def describe(
     return "\n".join(lines)
 
 
-def make_teacher(*, max_range: float = 3.0, **kwargs: Any) -> TerminalTeacher:
+def make_teacher(*, max_range: float = 1.5, **kwargs: Any) -> TerminalTeacher:
     """A terminal teacher for the corridor robot.
 
     Args:
