@@ -28,17 +28,23 @@ def _blobs(seed: int, n_per: tuple[int, ...], d: int = 3, spread: float = 4.0):
     return x, np.concatenate(ys)
 
 
-def _shared_init(model: GaussianMixtureSet, x_a: np.ndarray, action: int, k: int):
-    """The initial parameters our fit uses for (action, k), to hand to sklearn."""
+def _single(model: GaussianMixtureSet, x_a: np.ndarray, action: int, k: int):
+    """One candidate alone through the pure EM functions: (centre, x, masks, uniforms)."""
     centre = x_a.mean(0)
     xb = torch.from_numpy(x_a - centre)[None]
     pmask = torch.ones(1, len(x_a), dtype=torch.float64)
-    cmask = torch.ones(1, k, dtype=torch.float64)
-    u = torch.from_numpy(_em.candidate_uniforms(model.seed, np.array([action]), np.array([k]), k))
+    cmask = torch.ones(1, 1, k, dtype=torch.float64)
+    u = _em.candidate_uniforms(model.seed, np.array([[action]]), np.array([[k]]), k)
+    return centre, xb, pmask, cmask, torch.from_numpy(u)
+
+
+def _shared_init(model: GaussianMixtureSet, x_a: np.ndarray, action: int, k: int):
+    """The initial parameters our fit uses for (action, k), to hand to sklearn."""
+    centre, xb, pmask, cmask, u = _single(model, x_a, action, k)
     resp = _em.kmeans_init(xb, pmask, cmask, u)
-    p = _em.m_step(xb, _em.outer_products(xb), resp, cmask, model.var_floor_)
-    prec = torch.linalg.inv(p.covariances[0]).numpy()
-    return p.weights[0].numpy(), p.means[0].numpy() + centre, prec
+    p = _em.m_step(_em.quadratic_features(xb), resp, cmask, model.var_floor_)
+    prec = torch.linalg.inv(p.covariances[0, 0]).numpy()
+    return p.weights[0, 0].numpy(), p.means[0, 0].numpy() + centre, prec
 
 
 @pytest.fixture(scope="module")
@@ -135,37 +141,37 @@ def test_criteria_formulas(criterion):
             assert float(rep.criterion[a, k - 1]) == pytest.approx(expect, rel=1e-12)
 
 
-def test_batched_fit_equals_fitting_actions_one_at_a_time():
+def test_batched_fit_equals_fitting_each_candidate_alone():
     x, y = _blobs(4, (80, 50, 30))
     joint = GaussianMixtureSet(3, 3, max_components=5, seed=7).fit(x, y)
-    # the whole batch at once vs each candidate alone (same data, same uniforms, same floor)
-    x_a = [torch.from_numpy(x[y == a] - x[y == a].mean(0)) for a in range(3)]
-    floor = joint.var_floor_
-    n_max = max(len(t) for t in x_a)
-    cands = [(a, k) for a in range(3) for k in range(1, 6)]
-    xb = torch.zeros(len(cands), n_max, 3, dtype=torch.float64)
-    pm = torch.zeros(len(cands), n_max, dtype=torch.float64)
-    for i, (a, _) in enumerate(cands):
-        xb[i, : len(x_a[a])] = x_a[a]
-        pm[i, : len(x_a[a])] = 1
-    ks = torch.tensor([k for _, k in cands])
-    cm = (torch.arange(5) < ks[:, None]).double()
-    u = torch.from_numpy(_em.candidate_uniforms(7, np.array([a for a, _ in cands]), ks.numpy(), 5))
-    res = _em.run_em(xb, pm, cm, floor, _em.kmeans_init(xb, pm, cm, u), 1e-4, 200)
-    for i, (a, k) in enumerate(cands):
-        one = x_a[a][None]
-        ones = torch.ones(1, len(x_a[a]), dtype=torch.float64)
-        cm1 = torch.ones(1, k, dtype=torch.float64)
-        u1 = torch.from_numpy(_em.candidate_uniforms(7, np.array([a]), np.array([k]), k))
-        r1 = _em.run_em(one, ones, cm1, floor, _em.kmeans_init(one, ones, cm1, u1), 1e-4, 200)
-        assert float(res.loglik[i]) == pytest.approx(float(r1.loglik[0]), rel=1e-9)
-        assert int(res.n_iter[i]) == int(r1.n_iter[0])
-        torch.testing.assert_close(
-            res.params.means[i, :k], r1.params.means[0], rtol=1e-7, atol=1e-9
-        )
-        assert float(joint.fit_report_.log_likelihood[a, k - 1]) == pytest.approx(
-            float(r1.loglik[0]), rel=1e-9
-        )
+    rep = joint.fit_report_
+    for a in range(3):
+        x_a = x[y == a]
+        for k in range(1, 6):
+            _, xb, pm, cm, u = _single(joint, x_a, a, k)
+            resp0 = _em.kmeans_init(xb, pm, cm, u)
+            one = _em.run_em(xb, pm, cm, joint.var_floor_, resp0, joint.tol, joint.max_iter)
+            assert float(rep.log_likelihood[a, k - 1]) == pytest.approx(
+                float(one.loglik[0, 0]), rel=1e-9
+            )
+            assert int(rep.n_iter[a, k - 1]) == int(one.n_iter[0, 0])
+            if k == int(joint.n_components_[a]):
+                torch.testing.assert_close(
+                    joint.means_[a, :k] - torch.from_numpy(x_a.mean(0)),
+                    one.params.means[0, 0],
+                    rtol=1e-7,
+                    atol=1e-9,
+                )
+
+
+def test_interleaving_of_rows_does_not_change_the_fit():
+    x, y = _blobs(6, (70, 40))
+    ref = GaussianMixtureSet(2, 3, max_components=4, seed=2).fit(x, y)
+    # interleave the actions' rows, keeping each action's own order
+    order = np.argsort(np.r_[np.arange(70) * 2.0, np.arange(40) * 3.0 + 0.5], kind="stable")
+    other = GaussianMixtureSet(2, 3, max_components=4, seed=2).fit(x[order], y[order])
+    for k, v in ref.state_dict().items():
+        torch.testing.assert_close(v, other.state_dict()[k], rtol=1e-9, atol=1e-12), k
 
 
 def test_state_dict_round_trip_classifies_identically(fitted):

@@ -1,26 +1,33 @@
 """Batched EM for many full-covariance Gaussian mixtures at once, as small pure functions.
 
-Every function works on a flat batch of ``B`` *candidates* (one candidate = one mixture with its
-own data and its own component count), padded to ``N`` points and ``K`` components:
+Layout. Data come in ``G`` groups (one group = one action's points), padded to ``N`` points;
+each group holds ``C`` candidate *slots* (one slot = one mixture fitted to that group's data),
+each padded to ``K`` components:
 
-- ``x``      [B, N, D] float64 observations (padding rows are zeros),
-- ``xx``     [B, N, D*D] the per-point outer products ``x x^T`` (constant over EM iterations),
-- ``pmask``  [B, N] float, 1 for a real point and 0 for padding,
-- ``cmask``  [B, K] float, 1 for a real component and 0 for padding,
-- ``floor``  [D] the variance added to every covariance diagonal (see ``GaussianMixtureSet``).
+- ``x``      [G, N, D] float64 observations (padding rows are zeros),
+- ``z``      [G, N, Q] their quadratic features (:func:`quadratic_features`),
+- ``pmask``  [G, N] float, 1 for a real point and 0 for padding,
+- ``cmask``  [G, C, K] float, 1 for a real component of that slot and 0 for padding,
+- ``floor``  [D] the variance added to every covariance diagonal.
+
+Grouping by action turns both EM steps into one large matrix product per action
+(``[N, Q] @ [Q, C*K]`` and its transpose) instead of many tiny ones per candidate. Every slot
+must hold at least one real component (pad unused slots with a copy of a real candidate).
 
 The maths follows scikit-learn's ``GaussianMixture`` (full covariances) step for step, so that
-from the same initial parameters both produce the same iterates: E-step with precision Cholesky
-factors, M-step with ``nk + 10 eps``, weights renormalised, convergence when the change of the
-mean per-point log-likelihood is below ``tol``.
+from the same initial parameters both produce the same iterates: M-step with ``nk + 10 eps``
+and renormalised weights, convergence when the change of the mean per-point log-likelihood is
+below ``tol``.
 
-Padding never reaches ``exp`` with a very negative argument (torch's float64 ``exp`` is several
-times slower on underflow): padded components get a large negative finite log weight and all
-shifted log-densities are clamped at ``_CLAMP`` before exponentiation, then masked.
+Padding never reaches ``exp`` with a huge negative argument (torch's float64 ``exp`` is several
+times slower on underflow): padded components get a large negative finite log-density and all
+shifted log-densities are clamped at ``_CLAMP`` before exponentiation. A padded component so
+receives a responsibility of at most e^-60 (~1e-26), which changes nothing measurable.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -34,24 +41,49 @@ _PAD_LOG_WEIGHT = -1.0e4
 
 
 class Params(NamedTuple):
-    """Mixture parameters of a batch of candidates.
+    """Mixture parameters of every slot, shapes [G, C, K, ...].
 
-    weights [B, K], means [B, K, D], covariances [B, K, D, D], prec_chol [B, K, D, D]
-    (upper triangular U with U U^T = inverse covariance), log_det [B, K] = log det U.
-    Padded components hold weight 0, mean 0 and identity covariance.
+    weights [G, C, K], means [G, C, K, D], covariances [G, C, K, D, D], log_det [G, C, K]
+    (= -sum log diag chol(S), the log determinant of the precision Cholesky factor) and
+    ``coef`` [G, C, K, Q]: the same Gaussians as coefficients over the quadratic features, so
+    that ``z @ coef^T`` gives log w_k + log N(x; mu_k, S_k) for every point and component in
+    one matrix product. Padded components have zero weight, covariance ``diag(floor)`` and a
+    constant, very low log-density in ``coef``.
     """
 
     weights: Tensor
     means: Tensor
     covariances: Tensor
-    prec_chol: Tensor
     log_det: Tensor
+    coef: Tensor
 
 
-def outer_products(x: Tensor) -> Tensor:
-    """[B, N, D] -> [B, N, D*D]: each point's outer product x x^T, flattened."""
-    b, n, d = x.shape
-    return (x.unsqueeze(-1) * x.unsqueeze(-2)).reshape(b, n, d * d)
+@functools.lru_cache(maxsize=64)
+def _indices(d: int, device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """Upper-triangle (i, j), full [D*D] -> packed map, packed upper positions, quad scale."""
+    iu = torch.triu_indices(d, d, device=device)
+    i, j = iu[0], iu[1]
+    du = i.numel()
+    full = torch.zeros(d, d, dtype=torch.long, device=device)
+    full[i, j] = torch.arange(du, device=device)
+    full[j, i] = torch.arange(du, device=device)
+    scale = torch.where(i == j, -0.5, -1.0).to(torch.float64)
+    return i, j, full.reshape(-1), i * d + j, scale
+
+
+def quadratic_features(x: Tensor) -> Tensor:
+    """[..., D] -> z [..., Q]: (x_i x_j for i <= j, x, 1), Q = D (D + 1) / 2 + D + 1.
+
+    Both EM steps are then single matrix products: the M-step's sufficient statistics are
+    resp^T z, and the E-step's weighted log-densities are z coef^T.
+    """
+    i, j, _, _, _ = _indices(x.shape[-1], x.device)
+    ones = torch.ones(*x.shape[:-1], 1, dtype=x.dtype, device=x.device)
+    return torch.cat([x[..., i] * x[..., j], x, ones], -1)
+
+
+def _dim_of(q: int) -> int:
+    return int(round((math.sqrt(8 * q + 1) - 3) / 2))  # q = d (d + 1) / 2 + d + 1
 
 
 def precision_cholesky(covariances: Tensor) -> tuple[Tensor, Tensor]:
@@ -69,67 +101,65 @@ def precision_cholesky(covariances: Tensor) -> tuple[Tensor, Tensor]:
         )
     eye = torch.eye(covariances.shape[-1], dtype=covariances.dtype, device=covariances.device)
     inv_chol = torch.linalg.solve_triangular(chol, eye.expand_as(chol), upper=False)
-    prec_chol = inv_chol.mT
     log_det = -torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
-    return prec_chol, log_det
+    return inv_chol.mT, log_det
 
 
-def m_step(x: Tensor, xx: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
-    """Maximisation step.
+def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
+    """Maximisation step: z [G, N, Q], resp [G, N, C, K] (zero on padded points) -> Params.
 
-    resp [B, N, K] responsibilities, already zero on padded points and components.
-    Returns the new parameters; padded components get weight 0, mean 0, identity covariance.
+    Same estimates as sklearn's ``_estimate_gaussian_parameters`` (nk + 10 eps, the floor on
+    the diagonal, weights renormalised). A covariance that is not positive definite yields NaN,
+    which the caller's final finiteness check reports.
     """
-    b, n, d = x.shape
-    k = resp.shape[-1]
-    nk = resp.sum(1) + 10.0 * _EPS  # [B, K]
-    resp_t = resp.transpose(1, 2)  # [B, K, N]
-    means = torch.bmm(resp_t, x) / nk.unsqueeze(-1)  # [B, K, D]
-    second = torch.bmm(resp_t, xx).reshape(b, k, d, d) / nk.reshape(b, k, 1, 1)
-    cov = second - means.unsqueeze(-1) * means.unsqueeze(-2)
-    cov = 0.5 * (cov + cov.mT)
-    eye = torch.eye(d, dtype=x.dtype, device=x.device)
-    cm = cmask.reshape(b, k, 1, 1)
-    cov = cov * cm + eye * (1.0 - cm)  # padded components: identity
-    cov = cov + torch.diag_embed(floor).reshape(1, 1, d, d) * cm
+    g, n, c, k = resp.shape
+    q = z.shape[-1]
+    d = _dim_of(q)
+    du = q - d - 1
+    _, _, full, upper, scale = _indices(d, z.device)
+    stats = torch.bmm(resp.reshape(g, n, c * k).transpose(1, 2), z).reshape(g, c, k, q)
+    nk = stats[..., -1] + 10.0 * _EPS
+    stats = stats / nk.unsqueeze(-1)
+    means = stats[..., du : du + d]
+    cov = stats[..., full].reshape(g, c, k, d, d)
+    cov -= means.unsqueeze(-1) * means.unsqueeze(-2)
+    cov += torch.diag_embed(floor)
     weights = nk * cmask
-    weights = weights / weights.sum(1, keepdim=True)
-    means = means * cmask.unsqueeze(-1)
-    prec_chol, log_det = precision_cholesky(cov)
-    return Params(weights, means, cov, prec_chol, log_det)
+    weights /= weights.sum(-1, keepdim=True)
+    chol, _ = torch.linalg.cholesky_ex(cov)
+    prec = torch.cholesky_inverse(chol)
+    log_det = -torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
+    lin = (prec @ means.unsqueeze(-1)).squeeze(-1)
+    quad = prec.reshape(g, c, k, d * d)[..., upper] * scale.to(z.dtype)
+    const = torch.log(weights) + log_det - 0.5 * (lin * means).sum(-1)
+    const = torch.where(cmask > 0, const - 0.5 * d * math.log(2.0 * math.pi), _PAD_LOG_WEIGHT)
+    coef = torch.cat([quad, lin, const.unsqueeze(-1)], -1)
+    return Params(weights, means, cov, log_det, coef)
+
+
+def e_step(z: Tensor, coef: Tensor, pmask: Tensor) -> tuple[Tensor, Tensor]:
+    """Expectation step: z [G, N, Q], coef [G, C, K, Q], pmask [G, N].
+
+    Returns (loglik [G, C], resp [G, N, C, K]): loglik is each slot's total log-likelihood over
+    the real points of its group; resp is zero on padded points.
+    """
+    g, c, k, q = coef.shape
+    n = z.shape[1]
+    wlp = torch.bmm(z, coef.reshape(g, c * k, q).transpose(1, 2)).reshape(g, n, c, k)
+    mx = wlp.amax(-1, keepdim=True)
+    e = wlp.sub_(mx).clamp_min_(_CLAMP).exp_()
+    s = e.sum(-1, keepdim=True)
+    loglik = ((mx + torch.log(s)).squeeze(-1) * pmask.unsqueeze(-1)).sum(1)
+    resp = e.mul_(pmask.reshape(g, n, 1, 1) / s)
+    return loglik, resp
 
 
 def log_gaussian(x: Tensor, means: Tensor, prec_chol: Tensor, log_det: Tensor) -> Tensor:
-    """log N(x_n; mu_k, S_k) for every point and component.
-
-    x [B, N, D], means [B, K, D], prec_chol [B, K, D, D], log_det [B, K] -> [B, N, K].
-    Uses y = x U - mu U with one batched matrix product for all components.
-    """
-    b, n, d = x.shape
-    k = means.shape[1]
-    p = prec_chol.permute(0, 2, 1, 3).reshape(b, d, k * d)  # [B, D, K*D]
-    y = torch.bmm(x, p)  # [B, N, K*D]
-    mu_p = torch.matmul(means.unsqueeze(-2), prec_chol).reshape(b, 1, k * d)
-    y = y - mu_p
-    maha = (y * y).reshape(b, n, k, d).sum(-1)
-    return -0.5 * (d * math.log(2.0 * math.pi) + maha) + log_det.unsqueeze(1)
-
-
-def e_step(x: Tensor, params: Params, pmask: Tensor, cmask: Tensor) -> tuple[Tensor, Tensor]:
-    """Expectation step.
-
-    Returns (loglik [B], resp [B, N, K]): loglik is the total log-likelihood of the real points
-    of each candidate; resp is zero on padded points and components.
-    """
-    log_w = torch.where(cmask > 0, torch.log(params.weights.clamp_min(1e-300)), _PAD_LOG_WEIGHT)
-    wlp = log_gaussian(x, params.means, params.prec_chol, params.log_det) + log_w.unsqueeze(1)
-    mx = wlp.amax(-1, keepdim=True)
-    e = torch.exp((wlp - mx).clamp_min(_CLAMP)) * cmask.unsqueeze(1)
-    s = e.sum(-1, keepdim=True)
-    resp = e * (pmask.unsqueeze(-1) / s)
-    lse = (mx + torch.log(s)).squeeze(-1)
-    loglik = (lse * pmask).sum(1)
-    return loglik, resp
+    """log N(x_n; mu_k, S_k), direct form: x [N, D], means [K, D], prec_chol [K, D, D],
+    log_det [K] -> [N, K]."""
+    d = x.shape[-1]
+    y = torch.einsum("nd,kde->nke", x, prec_chol) - torch.einsum("kd,kde->ke", means, prec_chol)
+    return -0.5 * (d * math.log(2.0 * math.pi) + (y * y).sum(-1)) + log_det
 
 
 def _splitmix_uniform(keys: np.ndarray) -> np.ndarray:
@@ -143,57 +173,60 @@ def _splitmix_uniform(keys: np.ndarray) -> np.ndarray:
 
 
 def candidate_uniforms(seed: int, action: np.ndarray, n_comp: np.ndarray, k: int) -> np.ndarray:
-    """[B, K] uniforms that depend only on (seed, action, component count, draw index).
+    """Uniforms [..., k] that depend only on (seed, action, component count, draw index).
 
-    So a candidate's initialisation does not depend on which other candidates share its batch:
-    fitting all actions at once equals fitting them one at a time.
+    ``action`` and ``n_comp`` are integer arrays of the same shape. A candidate's
+    initialisation so does not depend on which other candidates share its batch: fitting all
+    actions at once equals fitting them one at a time.
     """
     with np.errstate(over="ignore"):
         base = (
             np.uint64(seed & 0xFFFFFFFF) * np.uint64(0x100000001B3)
-            + action.astype(np.uint64) * np.uint64(0x9E3779B1)
-            + n_comp.astype(np.uint64) * np.uint64(0x85EBCA77)
+            + np.asarray(action).astype(np.uint64) * np.uint64(0x9E3779B1)
+            + np.asarray(n_comp).astype(np.uint64) * np.uint64(0x85EBCA77)
         )
-        keys = base[:, None] * np.uint64(1315423911) + np.arange(k, dtype=np.uint64)[None, :]
+        keys = base[..., None] * np.uint64(1315423911) + np.arange(k, dtype=np.uint64)
     return _splitmix_uniform(keys)
 
 
 def kmeans_init(
-    x: Tensor, pmask: Tensor, cmask: Tensor, uniforms: Tensor, n_lloyd: int = 20
+    x: Tensor, pmask: Tensor, cmask: Tensor, uniforms: Tensor, n_lloyd: int = 10
 ) -> Tensor:
-    """k-means++ seeding then Lloyd iterations, batched; returns one-hot resp [B, N, K].
+    """k-means++ seeding then Lloyd iterations for every slot; returns one-hot resp [G,N,C,K].
 
-    uniforms [B, K] drive the seeding draws (inverse CDF over the D^2 weights), so the result is
-    a pure function of the data and the uniforms. Lloyd stops early when no label changes.
+    x [G, N, D], pmask [G, N], cmask [G, C, K], uniforms [G, C, K] drive the seeding draws
+    (inverse CDF over the D^2 weights), so the result is a pure function of the data and the
+    uniforms. Lloyd stops early when no label changes anywhere.
     """
-    b, n, d = x.shape
-    k = cmask.shape[1]
-    centers = torch.zeros(b, k, d, dtype=x.dtype, device=x.device)
-    d2 = torch.full((b, n), math.inf, dtype=x.dtype, device=x.device)
-    rows = torch.arange(b, device=x.device)
+    g, n, d = x.shape
+    c, k = cmask.shape[1:]
+    centers = torch.zeros(g, c, k, d, dtype=x.dtype, device=x.device)
+    d2 = torch.full((g, c, n), math.inf, dtype=x.dtype, device=x.device)
+    pm = pmask.unsqueeze(1).expand(g, c, n)
+    flat_x = x.unsqueeze(1).expand(g, c, n, d)
     for j in range(k):
-        w = pmask if j == 0 else d2 * pmask
-        tot = w.sum(1, keepdim=True)
-        w = torch.where(tot > 0, w, pmask)  # all remaining distances zero: uniform draw
-        cdf = torch.cumsum(w, 1)
-        target = uniforms[:, j : j + 1] * cdf[:, -1:]
-        idx = torch.searchsorted(cdf, target, right=True).clamp_max(n - 1).squeeze(1)
-        c = x[rows, idx]  # [B, D]
-        centers[:, j] = c
-        d2 = torch.minimum(d2, ((x - c.unsqueeze(1)) ** 2).sum(-1))
-    x2 = (x * x).sum(-1, keepdim=True)
-    pad = (cmask <= 0).unsqueeze(1)
+        w = pm if j == 0 else d2 * pm
+        w = torch.where(w.sum(-1, keepdim=True) > 0, w, pm)  # all distances 0: uniform draw
+        cdf = torch.cumsum(w, -1)
+        target = uniforms[..., j : j + 1] * cdf[..., -1:]
+        idx = torch.searchsorted(cdf, target, right=True).clamp_max(n - 1)  # [G, C, 1]
+        cj = torch.gather(flat_x, 2, idx.unsqueeze(-1).expand(g, c, 1, d))  # [G, C, 1, D]
+        centers[:, :, j] = cj.squeeze(2)
+        d2 = torch.minimum(d2, ((x.unsqueeze(1) - cj) ** 2).sum(-1))
+    pad = torch.where(cmask > 0, 0.0, math.inf).to(x.dtype)  # [G, C, K]
     labels = None
+    resp = x.new_zeros(g, n, c, k)
     for _ in range(max(n_lloyd, 1)):
-        dist = x2 - 2.0 * torch.bmm(x, centers.mT) + (centers * centers).sum(-1).unsqueeze(1)
-        dist = dist.masked_fill(pad, math.inf)
-        new_labels = dist.argmin(-1)
-        resp = torch.nn.functional.one_hot(new_labels, k).to(x.dtype) * pmask.unsqueeze(-1)
-        if labels is not None and bool((new_labels == labels).all()):
+        c2 = ((centers * centers).sum(-1) + pad).reshape(g, 1, c * k)
+        dist = torch.baddbmm(c2, x, centers.reshape(g, c * k, d).transpose(1, 2), alpha=-2.0)
+        new_labels = dist.reshape(g, n, c, k).argmin(-1)  # [G, N, C]
+        if labels is not None and bool(torch.equal(new_labels, labels)):
             break
         labels = new_labels
-        counts = resp.sum(1)  # [B, K]
-        sums = torch.bmm(resp.transpose(1, 2), x)
+        resp = torch.nn.functional.one_hot(labels, k).to(x.dtype)
+        resp *= pmask.reshape(g, n, 1, 1)
+        counts = resp.sum(1)  # [G, C, K]
+        sums = torch.bmm(resp.reshape(g, n, c * k).transpose(1, 2), x).reshape(g, c, k, d)
         centers = torch.where(
             counts.unsqueeze(-1) > 0, sums / counts.clamp_min(1.0).unsqueeze(-1), centers
         )
@@ -201,16 +234,13 @@ def kmeans_init(
 
 
 class EMResult(NamedTuple):
-    """Output of :func:`run_em` for B candidates (shapes as in :class:`Params`)."""
+    """Output of :func:`run_em`: params [G, C, K, ...], loglik [G, C] (total log-likelihood
+    of the final parameters), n_iter [G, C] long, converged [G, C] bool."""
 
     params: Params
-    loglik: Tensor  # [B] total log-likelihood of the final parameters
-    n_iter: Tensor  # [B] long
-    converged: Tensor  # [B] bool
-
-
-def _take(params: Params, idx: Tensor) -> Params:
-    return Params(*(t.index_select(0, idx) for t in params))
+    loglik: Tensor
+    n_iter: Tensor
+    converged: Tensor
 
 
 def run_em(
@@ -222,62 +252,74 @@ def run_em(
     tol: float,
     max_iter: int,
 ) -> EMResult:
-    """EM for B candidates at once, from initial responsibilities resp0 [B, N, K].
+    """EM for every slot of every group at once, from initial responsibilities resp0.
 
-    Candidates that converge leave the batch, so late iterations only cost what is still running.
-    Mirrors sklearn: each iteration is an E-step (log-likelihood of the current parameters) then
-    an M-step; it stops when |mean log-likelihood change| < tol. The returned log-likelihood is
-    that of the final parameters (one extra E-step), as sklearn's ``score``.
+    Mirrors sklearn: each iteration is an E-step (log-likelihood of the current parameters)
+    then an M-step; a slot stops when |mean log-likelihood change| < tol. Stopped slots leave
+    the batch (the slot axis is compacted, and groups with nothing left are dropped), so late
+    iterations cost only what still runs; compaction happens only when some slot stops. The
+    returned log-likelihood is that of the final parameters (one extra E-step), as sklearn's
+    ``score``.
     """
-    b = x.shape[0]
-    xx = outer_products(x)
-    n_pts = pmask.sum(1)
-    params = m_step(x, xx, resp0, cmask, floor)
-    return run_em_from_params(x, xx, pmask, cmask, floor, params, n_pts, tol, max_iter, b)
-
-
-def run_em_from_params(
-    x: Tensor,
-    xx: Tensor,
-    pmask: Tensor,
-    cmask: Tensor,
-    floor: Tensor,
-    params: Params,
-    n_pts: Tensor,
-    tol: float,
-    max_iter: int,
-    b: int,
-) -> EMResult:
-    """EM loop from given initial parameters (see :func:`run_em`)."""
-    out = [t.clone() for t in params]
-    n_iter = torch.zeros(b, dtype=torch.long, device=x.device)
-    converged = torch.zeros(b, dtype=torch.bool, device=x.device)
-    active = torch.arange(b, device=x.device)
-    prev = torch.full((b,), -math.inf, dtype=x.dtype, device=x.device)
-    ax, axx, apm, acm, an = x, xx, pmask, cmask, n_pts
+    g0, n, _ = x.shape
+    c0, k = cmask.shape[1:]
+    dev = x.device
+    z0 = quadratic_features(x)
+    params = m_step(z0, resp0, cmask, floor)
+    out = [t.reshape(g0 * c0, *t.shape[2:]).clone() for t in params]
+    n_iter = torch.zeros(g0 * c0, dtype=torch.long, device=dev)
+    converged = torch.zeros(g0 * c0, dtype=torch.bool, device=dev)
+    n_pts = pmask.sum(1)  # [G]
+    # slot_id[g, c]: flat id of the slot held at (g, c); real[g, c]: False for duplicates
+    slot_id = np.arange(g0 * c0).reshape(g0, c0)
+    real = np.ones((g0, c0), dtype=bool)
+    z, pm, cm, npts = z0, pmask, cmask, n_pts
+    prev = torch.full((g0, c0), -math.inf, dtype=x.dtype, device=dev)
     for it in range(1, max_iter + 1):
-        ll, resp = e_step(ax, params, apm, acm)
-        params = m_step(ax, axx, resp, acm, floor)
-        mean_ll = ll / an
+        ll, resp = e_step(z, params.coef, pm)
+        params = m_step(z, resp, cm, floor)
+        mean_ll = ll / npts.unsqueeze(-1)
         done = (mean_ll - prev).abs() < tol
         prev = mean_ll
-        if it == max_iter or bool(done.any()):
-            stop = done | (it == max_iter)
-            gone = active[stop]
-            n_iter[gone] = it
-            converged[gone] = done[stop]
+        if it < max_iter and not bool(done.any()):
+            continue
+        stop = done.cpu().numpy() | (it == max_iter)
+        rec = stop & real
+        if rec.any():
+            pos = torch.from_numpy(np.flatnonzero(rec)).to(dev)
+            ids = torch.from_numpy(slot_id[rec]).to(dev)
+            gc = params.weights.shape[0] * params.weights.shape[1]
             for o, p in zip(out, params, strict=True):
-                o[gone] = p[stop]
-            keep = (~stop).nonzero().squeeze(1)
-            if keep.numel() == 0:
-                break
-            active = active[keep]
-            params = _take(params, keep)
-            ax, axx, apm, acm = (t.index_select(0, keep) for t in (ax, axx, apm, acm))
-            an, prev = an[keep], prev[keep]
-    final = Params(*out)
-    loglik, _ = e_step(x, final, pmask, cmask)
-    return EMResult(final, loglik, n_iter, converged)
+                o[ids] = p.reshape(gc, *p.shape[2:]).index_select(0, pos)
+            n_iter[ids] = it
+            converged[ids] = torch.from_numpy(done.cpu().numpy()[rec]).to(dev)
+        remaining = real & ~stop
+        if not remaining.any():
+            break
+        # compact: keep groups with a remaining slot, pad each to the widest with duplicates
+        keep_g = np.flatnonzero(remaining.any(1))
+        rem = remaining[keep_g]
+        width = int(rem.sum(1).max())
+        order = np.argsort(~rem, axis=1, kind="stable")[:, :width]
+        new_real = np.arange(width)[None, :] < rem.sum(1)[:, None]
+        take = keep_g[:, None] * real.shape[1] + np.where(new_real, order, order[:, :1])
+        slot_id = slot_id.reshape(-1)[take]
+        real = new_real
+        tk = torch.from_numpy(take.reshape(-1)).to(dev)
+        gk = torch.from_numpy(keep_g).to(dev)
+        g_new = keep_g.size
+        params = Params(
+            *(
+                p.reshape(-1, *p.shape[2:]).index_select(0, tk).reshape(g_new, width, *p.shape[2:])
+                for p in params
+            )
+        )
+        cm = cm.reshape(-1, k).index_select(0, tk).reshape(g_new, width, k)
+        prev = prev.reshape(-1).index_select(0, tk).reshape(g_new, width)
+        z, pm, npts = z.index_select(0, gk), pm.index_select(0, gk), npts.index_select(0, gk)
+    final = Params(*(o.reshape(g0, c0, *o.shape[1:]) for o in out))
+    loglik, _ = e_step(z0, final.coef, pmask)
+    return EMResult(final, loglik, n_iter.reshape(g0, c0), converged.reshape(g0, c0))
 
 
 def n_free_parameters(n_components: Tensor, n_features: int) -> Tensor:

@@ -348,22 +348,31 @@ class GaussianMixtureSet(nn.Module):
         xa[ys, pos] = x[order] - centers[ys]  # centred per action: better conditioned M-step
 
         k_per_action = np.minimum(counts_np, kmax)  # 0 for an empty action
-        cand_action_np = np.repeat(np.arange(a_n), k_per_action)
-        cand_k_np = np.concatenate([np.arange(1, kk + 1) for kk in k_per_action])
-        cand_action = torch.from_numpy(cand_action_np).to(dev)
-        cand_k = torch.from_numpy(cand_k_np).to(dev)
+        groups_np = np.flatnonzero(counts_np > 0)  # one EM group per action with data
+        groups = torch.from_numpy(groups_np).to(dev)
         k_pad = int(k_per_action.max())
-        xb = xa.index_select(0, cand_action)
-        pmask = (torch.arange(n_max, device=dev) < counts[cand_action].unsqueeze(1)).to(f64)
-        cmask = (torch.arange(k_pad, device=dev) < cand_k.unsqueeze(1)).to(f64)
+        # slot c of a group holds the candidate with c + 1 components; slots beyond the
+        # action's count hold a duplicate of its k = 1 candidate (computed, then ignored)
+        slot_k_np = np.arange(1, k_pad + 1)[None, :].repeat(groups_np.size, 0)
+        real_np = slot_k_np <= k_per_action[groups_np][:, None]
+        slot_k_np = np.where(real_np, slot_k_np, 1)
+        slot_k = torch.from_numpy(slot_k_np).to(dev)
+        xg = xa.index_select(0, groups)
+        pmask = (torch.arange(n_max, device=dev) < counts[groups].unsqueeze(1)).to(f64)
+        cmask = (torch.arange(k_pad, device=dev) < slot_k.unsqueeze(-1)).to(f64)
         uniforms = torch.from_numpy(
-            _em.candidate_uniforms(self.seed, cand_action_np, cand_k_np, k_pad)
+            _em.candidate_uniforms(self.seed, groups_np[:, None].repeat(k_pad, 1), slot_k_np, k_pad)
         ).to(dev)
         with torch.no_grad():
-            resp0 = _em.kmeans_init(xb, pmask, cmask, uniforms)
-            res = _em.run_em(xb, pmask, cmask, floor, resp0, self.tol, self.max_iter)
+            resp0 = _em.kmeans_init(xg, pmask, cmask, uniforms)
+            res = _em.run_em(xg, pmask, cmask, floor, resp0, self.tol, self.max_iter)
+        real = torch.from_numpy(real_np).to(dev)
+        g_idx, c_idx = real.nonzero(as_tuple=True)
+        cand_action = groups[g_idx]
+        cand_k = c_idx + 1
         n_of_cand = counts[cand_action]
-        crit = _em.information_criterion(self.criterion, res.loglik, cand_k, n_of_cand, d)
+        loglik = res.loglik[g_idx, c_idx]
+        crit = _em.information_criterion(self.criterion, loglik, cand_k, n_of_cand, d)
         if not bool(torch.isfinite(crit).all()):
             raise FloatingPointError(
                 "EM produced a non-finite log-likelihood; the data may be badly scaled "
@@ -371,25 +380,24 @@ class GaussianMixtureSet(nn.Module):
             )
 
         # Tables [A, K] of every candidate.
-        col = cand_k - 1
+        col = c_idx
         crit_tab = torch.full((a_n, kmax), math.inf, dtype=f64, device=dev)
         crit_tab[cand_action, col] = crit
         ll_tab = torch.full((a_n, kmax), -math.inf, dtype=f64, device=dev)
-        ll_tab[cand_action, col] = res.loglik
+        ll_tab[cand_action, col] = loglik
         conv_tab = torch.zeros(a_n, kmax, dtype=torch.bool, device=dev)
-        conv_tab[cand_action, col] = res.converged
+        conv_tab[cand_action, col] = res.converged[g_idx, c_idx]
         iter_tab = torch.zeros(a_n, kmax, dtype=torch.long, device=dev)
-        iter_tab[cand_action, col] = res.n_iter
+        iter_tab[cand_action, col] = res.n_iter[g_idx, c_idx]
         cand_mask = torch.zeros(a_n, kmax, dtype=torch.bool, device=dev)
         cand_mask[cand_action, col] = True
 
         # Per-action choice (Eq. 6 = sum of independent terms -> per-action argmin).
-        nonempty = torch.from_numpy(np.flatnonzero(counts_np > 0)).to(dev)
         best_col = crit_tab.argmin(1)  # first minimum: smallest k on ties
-        offsets = torch.from_numpy(np.cumsum(k_per_action) - k_per_action).to(dev)
-        chosen_b = (offsets + best_col)[nonempty]
         n_comp = torch.zeros(a_n, dtype=torch.long, device=dev)
-        n_comp[nonempty] = best_col[nonempty] + 1
+        n_comp[groups] = best_col[groups] + 1
+        chosen_c = best_col[groups]
+        g_all = torch.arange(groups.numel(), device=dev)
 
         p = res.params
         weights = torch.zeros(a_n, kmax, dtype=f64, device=dev)
@@ -398,11 +406,12 @@ class GaussianMixtureSet(nn.Module):
         covs = eye.expand(a_n, kmax, d, d).clone()
         precs = eye.expand(a_n, kmax, d, d).clone()
         log_det = torch.zeros(a_n, kmax, dtype=f64, device=dev)
-        weights[nonempty, :k_pad] = p.weights[chosen_b]
-        means[nonempty, :k_pad] = p.means[chosen_b] + centers[nonempty].unsqueeze(1)
-        covs[nonempty, :k_pad] = p.covariances[chosen_b]
-        precs[nonempty, :k_pad] = p.prec_chol[chosen_b]
-        log_det[nonempty, :k_pad] = p.log_det[chosen_b]
+        weights[groups, :k_pad] = p.weights[g_all, chosen_c]
+        means[groups, :k_pad] = p.means[g_all, chosen_c] + centers[groups].unsqueeze(1)
+        covs[groups, :k_pad] = p.covariances[g_all, chosen_c]
+        prec_chosen, log_det_chosen = _em.precision_cholesky(p.covariances[g_all, chosen_c])
+        precs[groups, :k_pad] = prec_chosen
+        log_det[groups, :k_pad] = log_det_chosen
         comp_mask = torch.arange(kmax, device=dev) < n_comp.unsqueeze(1)
         means = means * comp_mask.unsqueeze(-1)
         covs = torch.where(comp_mask[..., None, None], covs, eye)
