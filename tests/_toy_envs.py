@@ -160,7 +160,11 @@ def kill_child_main(run_dir: str, side_log: str) -> None:
     when an action is handed to the env; the parent checks every executed demonstration is in
     the step log.
     """
+    import torch
+
     from torchcbl import ConfidentTeacher, GaussianMixtureSet, PosteriorRule, TeachingConfig
+
+    torch.set_num_threads(1)
 
     world = overlap_world(episode_length=25)
     fd = os.open(side_log, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)

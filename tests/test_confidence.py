@@ -1,0 +1,87 @@
+"""Confidence rules against hand-built classifications and fitted models."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from torchcbl import AutoThresholdRule, DistanceRule, GaussianMixtureSet, PosteriorRule
+from torchcbl.confidence import rule_from_config, rule_to_config
+from torchcbl.gmm import Classification
+
+
+def cls(action, distance, posterior):
+    d = torch.tensor(distance, dtype=torch.float64)
+    return Classification(
+        torch.tensor(action),
+        torch.exp(-0.5 * d**2),
+        d,
+        torch.tensor(posterior, dtype=torch.float64),
+    )
+
+
+C = cls(
+    [-1, 0, 1, 1, 0],
+    [math.inf, 1.0, 2.0, 2.0001, 0.1],
+    [[0.5, 0.5], [0.95, 0.05], [0.2, 0.8], [0.01, 0.99], [0.9, 0.1]],
+)
+
+
+def test_distance_rule_is_the_papers_two_std():
+    assert DistanceRule().is_confident(C).tolist() == [False, True, True, False, True]
+    assert DistanceRule(1.0).is_confident(C).tolist() == [False, True, False, False, True]
+
+
+def test_posterior_rule_and_never_confident_without_a_model():
+    assert PosteriorRule(0.9).is_confident(C).tolist() == [False, True, False, True, True]
+    # Even a posterior of 1 (one action) is not confident before any fit (action -1).
+    one = cls([-1], [math.inf], [[1.0]])
+    assert PosteriorRule(0.5).is_confident(one).tolist() == [False]
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: DistanceRule(0),
+        lambda: DistanceRule(float("nan")),
+        lambda: PosteriorRule(1.5),
+        lambda: AutoThresholdRule(2.0, 3.0),
+    ],
+)
+def test_bad_thresholds_are_clear_errors(make):
+    with pytest.raises(ValueError, match="expected"):
+        make()
+
+
+def test_rules_round_trip_through_config():
+    for rule in (DistanceRule(1.5), PosteriorRule(0.8), AutoThresholdRule(2.5, 0.5)):
+        back = rule_from_config(rule_to_config(rule))
+        assert type(back) is type(rule) and rule_to_config(back) == rule_to_config(rule)
+    with pytest.raises(ValueError, match="Pass rule="):
+        rule_from_config({"type": "my.Rule", "custom": True})
+
+
+def test_auto_threshold_rule_follows_the_documented_rule():
+    rng = np.random.default_rng(0)
+    # Action 0 far away and clean; actions 1 and 2 overlap, so the model makes mistakes there.
+    x = np.concatenate([rng.normal([-10, 0], 1, (60, 2)), rng.normal([0, 0], 1, (120, 2))])
+    y = np.concatenate([np.zeros(60, int), (x[60:, 0] > 0).astype(int) + 1])
+    flip = np.flatnonzero(rng.random(120) < 0.2) + 60
+    y[flip] = 3 - y[flip]  # swap 1 <-> 2 on a fifth of the overlapping points
+    model = GaussianMixtureSet(3, 2, max_components=2, seed=0).fit(x, y)
+    rule = AutoThresholdRule(max_std=2.0)
+    c = model.classify(x)
+    # Before the first update it is the distance rule.
+    assert torch.equal(rule.is_confident(c), DistanceRule(2.0).is_confident(c))
+    rule.update(model, x, y)
+    for a in range(3):
+        wrong = (c.action == a) & (c.action != torch.as_tensor(y))
+        want = 2.0 if not wrong.any() else min(2.0, float(c.distance[wrong].mean()))
+        assert float(rule.thresholds[a]) == pytest.approx(want)
+    assert float(rule.thresholds[0]) == 2.0  # nothing contradicts the clean action
+    assert float(rule.thresholds[1:].min()) < 2.0  # the overlapping ones got stricter
+    got = rule.is_confident(c)
+    assert torch.equal(got, c.distance < rule.thresholds[c.action])

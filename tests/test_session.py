@@ -1,0 +1,264 @@
+"""Teaching sessions on disk: layout, resume, durability under SIGKILL, bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from _toy_envs import FaultyWorld, oracle, overlap_world, rare_regions_world
+
+from torchcbl import (
+    ConfidentTeacher,
+    DistanceRule,
+    GaussianMixtureSet,
+    PosteriorRule,
+    TeachingConfig,
+)
+from torchcbl.session import (
+    IncompatibleRunDirError,
+    build_model,
+    fit_count,
+    load_config,
+    load_demonstrations,
+    load_model,
+    load_policy,
+    load_records,
+)
+from torchcbl.teaching import EnvError, TeacherError
+
+TESTS = Path(__file__).parent
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """Small EM fits are ~50x slower with 2 threads on a loaded 2-core machine."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def make(env, run_dir, teacher=None, **cfg):
+    return ConfidentTeacher(
+        env,
+        teacher or oracle(env),
+        config=TeachingConfig(**cfg),
+        run_dir=run_dir,
+        progress=False,
+    )
+
+
+def same_state(a: torch.nn.Module, b: torch.nn.Module) -> bool:
+    sa, sb = a.state_dict(), b.state_dict()
+    return sa.keys() == sb.keys() and all(torch.equal(sa[k], sb[k]) for k in sa)
+
+
+def assert_model_is_fit_on_log(model, run_dir):
+    config = load_config(run_dir)
+    x, y = load_demonstrations(run_dir)
+    k = fit_count(len(y), config["teaching"]["max_new"])
+    fresh = build_model(config)
+    if k:
+        fresh.fit(x[:k], y[:k])
+    assert same_state(model, fresh)
+
+
+def test_layout_and_log_round_trip(tmp_path):
+    run = tmp_path / "run"
+    ct = make(rare_regions_world(), run, noninteractive=False, max_new=2)
+    ct.run(max_steps=120)
+    assert (run / "config.json").is_file() and (run / "steps.sqlite").is_file()
+    ckpts = sorted(p.name for p in (run / "checkpoints").iterdir())
+    assert ckpts[0] == "model-00000002.pt" and len(ckpts) == ct.n_demonstrations // 2
+    config = json.loads((run / "config.json").read_text())
+    assert config["teaching"]["max_new"] == 2 and config["rule"] == DistanceRule().to_config()
+    assert config["model"]["args"]["n_actions"] == 3 and config["env"]["n_features"] == 2
+    assert load_records(run) == ct.records  # every field survives the store
+    db = sqlite3.connect(run / "steps.sqlite")
+    assert db.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    policy = load_policy(run)
+    obs = np.array([0.2, 7.5])
+    assert policy(obs) == ct.policy(obs) == 2
+
+
+def test_resume_same_counters_and_model(tmp_path):
+    run = tmp_path / "run"
+    ct = make(rare_regions_world(), run, accuracy_window=10, max_new=3)
+    ct.run(max_steps=90)
+    ct.close()
+    back = ConfidentTeacher.resume(
+        run, rare_regions_world(), oracle(rare_regions_world()), progress=False
+    )
+    assert back.records == ct.records
+    for name in ("n_demonstrations", "autonomy_rate", "windowed_accuracy", "phase", "n_steps"):
+        assert getattr(back, name) == getattr(ct, name), name
+    assert same_state(back.model, ct.model)
+    back.run(max_steps=150)
+    assert back.records[90].episode == ct.records[-1].episode + 1  # resumed into a new episode
+    assert [r.step for r in load_records(run)] == list(range(150))
+    assert_model_is_fit_on_log(back.model, run)
+
+
+def test_stale_checkpoint_is_refitted_from_the_log(tmp_path):
+    run = tmp_path / "run"
+    ct = make(rare_regions_world(), run, noninteractive=False)
+    ct.run(max_steps=60)
+    ct.close()
+    last = max((run / "checkpoints").iterdir())
+    last.unlink()
+    back = ConfidentTeacher.resume(
+        run, rare_regions_world(), oracle(rare_regions_world()), progress=False
+    )
+    assert same_state(back.model, ct.model)
+    assert same_state(load_model(run), ct.model)
+
+
+def test_existing_or_incompatible_run_dir_is_a_clear_error(tmp_path):
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    make(env, run, max_new=2).run(max_steps=20)
+    with pytest.raises(IncompatibleRunDirError, match="already holds a teaching session"):
+        make(env, run)
+    with pytest.raises(IncompatibleRunDirError, match="features"):
+        ConfidentTeacher.resume(run, overlap_world(), oracle(overlap_world()))
+    with pytest.raises(IncompatibleRunDirError, match="max_new"):
+        ConfidentTeacher.resume(run, env, oracle(env), config=TeachingConfig(max_new=3))
+    with pytest.raises(IncompatibleRunDirError, match="rule"):
+        ConfidentTeacher.resume(run, env, oracle(env), rule=PosteriorRule())
+    with pytest.raises(IncompatibleRunDirError, match="model args"):
+        ConfidentTeacher.resume(run, env, oracle(env), model=GaussianMixtureSet(3, 2, 4))
+    with pytest.raises(IncompatibleRunDirError, match="config.json is missing"):
+        ConfidentTeacher.resume(tmp_path / "nowhere", env, oracle(env))
+    # Stop fields may change; the failed attempts did not touch the session.
+    back = ConfidentTeacher.resume(
+        run, env, oracle(env), config=TeachingConfig(max_new=2, max_steps=25), progress=False
+    )
+    back.run()
+    assert back.n_steps == 25
+
+
+@pytest.mark.parametrize(
+    "answer", [7, -1, 1.0, None, "1", True], ids=["big", "neg", "float", "none", "str", "bool"]
+)
+def test_teacher_invalid_action_is_clear_and_harmless(tmp_path, answer):
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    good = oracle(env)
+    state = {"bad": False}
+
+    def teacher(obs, info):
+        return answer if state["bad"] else good(obs, info)
+
+    ct = make(env, run, teacher)
+    ct.run(max_steps=5)
+    state["bad"] = True
+    with pytest.raises(TeacherError, match=r"expected an int action in \[0, 3\)"):
+        ct.run(max_steps=10)
+    assert ct.n_steps == 5 and load_records(run) == ct.records
+    state["bad"] = False
+    ct.run(max_steps=10)  # the same session goes on
+    assert [r.step for r in load_records(run)] == list(range(10))
+
+
+def test_teacher_raising_is_clear_and_resumable(tmp_path):
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    calls = {"n": 0}
+
+    def teacher(obs, info):
+        calls["n"] += 1
+        if calls["n"] == 8:
+            raise KeyError("joystick unplugged")
+        return env.optimal_action(obs)
+
+    ct = make(env, run, teacher)
+    with pytest.raises(TeacherError, match="joystick unplugged") as err:
+        ct.run(max_steps=20)
+    assert isinstance(err.value.__cause__, KeyError)
+    assert ct.n_steps == 7 and load_records(run) == ct.records
+    ct.close()
+    back = ConfidentTeacher.resume(run, env, teacher, progress=False)
+    back.run(max_steps=20)
+    assert back.n_steps == 20
+
+
+@pytest.mark.parametrize("mode", ["nan", "raise"])
+def test_env_failure_mid_step_keeps_the_log_resumable(tmp_path, mode):
+    run = tmp_path / "run"
+    env = FaultyWorld(rare_regions_world(), fail_at=12, mode=mode)
+    ct = make(env, run, oracle(env.unwrapped), noninteractive=False)
+    match = "non-finite" if mode == "nan" else "simulator connection lost"
+    with pytest.raises(EnvError, match=match):
+        ct.run(max_steps=40)
+    bad = ct.records[-1]
+    assert bad.step == 11 and bad.truncated and "torchcbl_error" in bad.info
+    assert (bad.reward is None) == (mode == "raise")
+    assert load_records(run) == ct.records
+    ct.run(max_steps=40)  # goes on in a fresh episode
+    assert ct.records[12].episode == bad.episode + 1
+    assert all(np.isfinite(r.observation).all() for r in ct.records)
+    ct.close()
+    back = ConfidentTeacher.resume(
+        run, rare_regions_world(), oracle(rare_regions_world()), progress=False
+    )
+    assert back.records == ct.records
+
+
+def _check_nothing_lost(run: Path, side_log: Path) -> int:
+    """Every demonstration whose action reached the env is in the log; returns #demos."""
+    records = {r.step: r for r in load_records(run)}
+    taught, executed = {}, {}
+    for line in side_log.read_text().splitlines():
+        kind, step, action = line.split()
+        (taught if kind == "T" else executed)[int(step)] = int(action)
+    for step, action in executed.items():
+        if step in taught:
+            assert step in records, f"demonstration at step {step} was executed but is lost"
+            assert records[step].teacher_action == taught[step] == action
+    assert sorted(records) == list(range(len(records)))  # a prefix, no holes
+    return sum(r.is_demonstration for r in records.values())
+
+
+def _kill_cycle(run: Path, side_log: Path, delay: float) -> None:
+    proc = subprocess.Popen(
+        [sys.executable, str(TESTS / "_toy_envs.py"), str(run), str(side_log)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        line = proc.stdout.readline()
+        assert line.strip() == "ready", proc.stderr.read()
+        time.sleep(delay)
+        assert proc.poll() is None, proc.stderr.read()
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+
+
+def test_sigkill_at_random_instants_then_resume_loses_nothing(tmp_path):
+    run = tmp_path / "run"
+    rng = random.Random(7)
+    n_demos = []
+    for i in range(4):
+        side = tmp_path / f"side{i}.log"
+        _kill_cycle(run, side, rng.uniform(0.05, 0.6))
+        n_demos.append(_check_nothing_lost(run, side))
+    assert n_demos == sorted(n_demos) and n_demos[-1] > n_demos[0]
+    env = overlap_world(episode_length=25)
+    back = ConfidentTeacher.resume(run, env, oracle(env), rule=PosteriorRule(0.9), progress=False)
+    assert back.n_demonstrations == n_demos[-1]
+    assert_model_is_fit_on_log(back.model, run)
+    back.run(max_steps=back.n_steps + 30)
+    assert [r.step for r in load_records(run)] == list(range(back.n_steps))
