@@ -107,7 +107,7 @@ class CorridorMap:
             pairs.add((b, a))
         if len(self.route) < 4 or self.route[0] != self.route[-1]:
             raise ValueError("route must be a closed walk of at least 3 nodes (first == last)")
-        for a, b in zip(self.route[:-1], self.route[1:]):
+        for a, b in zip(self.route[:-1], self.route[1:], strict=True):
             if (a, b) not in pairs:
                 raise ValueError(f"route step {a!r} -> {b!r} is not a corridor")
         first = np.subtract(self.nodes[self.route[1]], self.nodes[self.route[0]])

@@ -24,6 +24,7 @@ from corridor.world import SENSOR_NAMES, CorridorWorld  # noqa: E402
 
 __all__ = ["draw_map", "draw_robot", "map_figure", "render_rgb", "save_png"]
 
+_ANGLES = (math.pi / 2, 0.0, -math.pi / 2)
 _RAY_COLOURS = {"left": "tab:blue", "front": "tab:green", "right": "tab:orange"}
 
 
@@ -65,7 +66,7 @@ def draw_robot(
     ax.add_patch(plt.Circle((x, y), r, facecolor="tab:red", edgecolor="black", alpha=0.8))
     ax.plot([x, x + r * math.cos(h)], [y, y + r * math.sin(h)], color="white", linewidth=2)
     ranges = world.true_ranges() if readings is None else np.asarray(readings, dtype=float)
-    for name, offset, d in zip(SENSOR_NAMES, (math.pi / 2, 0.0, -math.pi / 2), ranges):
+    for name, offset, d in zip(SENSOR_NAMES, _ANGLES, ranges, strict=True):
         a = h + offset
         ax.plot(
             [x, x + d * math.cos(a)],

@@ -174,8 +174,10 @@ class CorridorWorld:
         """Execute one action; returns True if the robot touched a wall (the move was cut)."""
         try:
             action = Action(int(action))
-        except ValueError:
-            raise ValueError(f"action must be one of {[int(a) for a in Action]}, got {action}")
+        except (ValueError, TypeError) as err:
+            raise ValueError(
+                f"action must be one of {[int(a) for a in Action]}, got {action!r}"
+            ) from err
         cfg = self.config
         x0, y0, h0 = self._x, self._y, self._heading
         if action == Action.FORWARD:

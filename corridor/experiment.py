@@ -1,0 +1,486 @@
+"""The paper's Section 5.1 experiment: confident execution vs Prioritized Sweeping, many seeds.
+
+Per seed (in parallel worker processes):
+
+1. Teaching (:class:`torchcbl.ConfidentTeacher`, scripted :class:`~corridor.expert.CorridorExpert`):
+   teleoperation until 90% prediction accuracy over the last 20 moves, then confident execution
+   with the 2-std :class:`torchcbl.DistanceRule`, finished after 10 consecutive circuits with no
+   request and no wall contact (``TeachingConfig.autonomous_episodes_to_stop``).
+2. Check: the final policy drives ``eval_circuits`` (10) more circuits greedily from a fresh env.
+3. Baseline: :func:`corridor.baseline.run_prioritized_sweeping` (steps until its greedy policy
+   completes a clean circuit).
+
+Run directory layout (``run_experiment`` writes; envs never do)::
+
+    run_dir/results.json        config, seeds, versions, per-seed values, mean/sd summary
+    run_dir/summary.txt         format_summary(results)
+    run_dir/figure3.png         training data by action in the 3-D sensor space (first seed)
+    run_dir/figure4.png         the fitted mixtures, one ellipsoid (2 std) per component
+    run_dir/map.png             the map, route and the final policy's first evaluation circuit
+    run_dir/sessions/seed<k>/   each seed's teaching session (torchcbl.session format)
+
+Replay a seed with the config and seed stored in results.json: everything is seeded.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import multiprocessing as mp
+import platform
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from corridor.baseline import PrioritizedSweepingConfig, run_prioritized_sweeping
+from corridor.env import CorridorEnv
+from corridor.expert import CorridorExpert
+from corridor.maps import load_map
+from corridor.world import SENSOR_NAMES, Action, WorldConfig
+
+__all__ = [
+    "PAPER",
+    "CorridorExperimentConfig",
+    "format_summary",
+    "run_experiment",
+    "run_seed",
+]
+
+#: The paper's Section 5.1 numbers.
+PAPER: dict[str, Any] = {
+    "demonstrations_noninteractive": 46,
+    "requests_first_circuit": 3,
+    "requests_next_two_circuits": 2,
+    "demonstrations_total": 53,
+    "ps_steps": 275,
+    "components": {"forward": None, "turn_left": 1, "turn_right": None, "u_turn": None},
+    "actions_per_circuit": 26,
+}
+
+_ACTION_NAMES = [a.name.lower() for a in Action]
+
+
+def _default_teaching() -> Any:
+    from torchcbl import TeachingConfig
+
+    return TeachingConfig(
+        accuracy_window=20,
+        target_accuracy=0.9,
+        autonomous_episodes_to_stop=10,
+        max_steps=4000,
+    )
+
+
+@dataclass(frozen=True)
+class CorridorExperimentConfig:
+    """What to run. The defaults are the quick variant (10 seeds); see :meth:`full`.
+
+    Attributes:
+        map_name: a shipped map name or a map JSON path.
+        seeds: one teaching run and one Prioritized Sweeping run per seed.
+        world: robot, motion and sensor parameters.
+        teaching: the loop's settings (paper: window 20, target 90%, 10 clean circuits).
+        max_std: the DistanceRule threshold, standard deviations (paper: 2).
+        eval_circuits: greedy circuits the final policy drives after teaching.
+        ps: the Prioritized Sweeping baseline's parameters.
+    """
+
+    map_name: str = "figure2"
+    seeds: tuple[int, ...] = tuple(range(10))
+    world: WorldConfig = field(default_factory=WorldConfig)
+    teaching: Any = field(default_factory=_default_teaching)
+    max_std: float = 2.0
+    eval_circuits: int = 10
+    ps: PrioritizedSweepingConfig = field(default_factory=PrioritizedSweepingConfig)
+
+    def __post_init__(self) -> None:
+        if len(self.seeds) < 1 or len(set(self.seeds)) != len(self.seeds):
+            raise ValueError("seeds must be a non-empty tuple of distinct ints")
+        if not self.max_std > 0:
+            raise ValueError(f"max_std must be > 0, got {self.max_std}")
+        if self.eval_circuits < 1:
+            raise ValueError("eval_circuits must be >= 1")
+
+    @classmethod
+    def full(cls) -> CorridorExperimentConfig:
+        """The full variant: 30 seeds."""
+        return cls(seeds=tuple(range(30)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "map_name": self.map_name,
+            "seeds": list(self.seeds),
+            "world": dataclasses.asdict(self.world),
+            "teaching": dataclasses.asdict(self.teaching),
+            "max_std": self.max_std,
+            "eval_circuits": self.eval_circuits,
+            "ps": dataclasses.asdict(self.ps),
+        }
+
+
+def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | None) -> dict:
+    """One seed: teaching, evaluation of the final policy, Prioritized Sweeping."""
+    import torch
+
+    from torchcbl import ConfidentTeacher, DistanceRule, evaluate_policy
+
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    corridor_map = load_map(config.map_name)
+    env = CorridorEnv(corridor_map, config.world)
+    expert = CorridorExpert(corridor_map, config.world)
+    teacher = ConfidentTeacher(
+        env,
+        expert,
+        rule=DistanceRule(config.max_std),
+        config=config.teaching,
+        run_dir=session_dir,
+        seed=seed,
+        progress=False,
+    )
+    teacher.run()
+    if session_dir is not None:
+        teacher.close()
+    records = teacher.records
+    demos = [r for r in records if r.teacher_action is not None]
+    non = [r for r in demos if r.phase == "noninteractive"]
+    conf_episodes: list[int] = []
+    for r in records:
+        if r.phase == "confident" and (not conf_episodes or conf_episodes[-1] != r.episode):
+            conf_episodes.append(r.episode)
+    requests = [
+        sum(1 for r in demos if r.phase == "confident" and r.episode == e) for e in conf_episodes
+    ]
+    finished = bool(
+        teacher.config.autonomous_episodes_to_stop is not None
+        and teacher._auto_episodes_streak >= teacher.config.autonomous_episodes_to_stop
+    )
+    teach_contacts = sum(1 for r in records if r.info.get("contact"))
+    circuits_done = sum(1 for r in records if r.terminated)
+    # The final policy, on its own, for eval_circuits circuits.
+    eval_env = CorridorEnv(corridor_map, config.world)
+    ev = evaluate_policy(
+        teacher.policy, eval_env, n_episodes=config.eval_circuits, seed=1_000_000 + seed
+    )
+    ends = [r for r in ev if r.terminated or r.truncated]
+    eval_success = sum(1 for r in ends if r.info.get("is_success"))
+    first_path = [tuple(r.info["pose"][:2]) for r in ev if r.episode == 0]
+    ps = run_prioritized_sweeping(corridor_map, config.ps, world_config=config.world, seed=seed)
+    model = teacher.model
+    return {
+        "seed": seed,
+        "demonstrations_noninteractive": len(non),
+        "demonstrations_confident": len(demos) - len(non),
+        "demonstrations_total": len(demos),
+        "requests_per_circuit": requests,
+        "steps_total": len(records),
+        "circuits_total": circuits_done,
+        "contacts_while_teaching": teach_contacts,
+        "finished": finished,
+        "eval_circuits_clean": eval_success,
+        "eval_circuits": config.eval_circuits,
+        "components": dict(zip(_ACTION_NAMES, model.n_components_.tolist(), strict=True)),
+        "ps_steps": ps.steps_to_learn,
+        "ps_learned": ps.steps_to_learn is not None,
+        "ps_contacts": ps.contacts,
+        "ps_policy": list(ps.policy),
+        "seconds": time.perf_counter() - t0,
+        # For the figures (first seed only is drawn).
+        "_demo_x": [list(r.observation) for r in demos],
+        "_demo_y": [int(r.teacher_action) for r in demos],  # type: ignore[arg-type]
+        "_model": {
+            k: model.state_dict()[k].tolist() for k in ("means_", "covariances_", "component_mask_")
+        },
+        "_path": [list(map(float, p)) for p in first_path],
+    }
+
+
+def _mean_sd(values: list[float]) -> dict[str, float | None]:
+    v = [float(x) for x in values if x is not None]
+    if not v:
+        return {"mean": None, "sd": None, "n": 0}
+    return {
+        "mean": float(np.mean(v)),
+        "sd": float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
+        "n": len(v),
+    }
+
+
+def _versions() -> dict[str, str]:
+    import gymnasium
+    import pymunk
+    import torch
+
+    import torchcbl
+
+    return {
+        "python": platform.python_version(),
+        "torchcbl": torchcbl.__version__,
+        "torch": torch.__version__,
+        "numpy": np.__version__,
+        "gymnasium": gymnasium.__version__,
+        "pymunk": pymunk.version,
+    }
+
+
+def run_experiment(
+    config: CorridorExperimentConfig | None = None,
+    run_dir: str | Path = "runs/corridor",
+    *,
+    workers: int = 2,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run every seed (``workers`` processes), write the run directory, return the results.
+
+    Raises FileExistsError if ``run_dir`` already holds a results.json.
+    """
+    config = config or CorridorExperimentConfig()
+    run_dir = Path(run_dir)
+    if (run_dir / "results.json").exists():
+        raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")
+    if workers < 1:
+        raise ValueError("workers must be >= 1")
+    (run_dir / "sessions").mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    args = [(config, s, run_dir / "sessions" / f"seed{s}") for s in config.seeds]
+    per_seed: list[dict] = []
+    if workers == 1:
+        for a in args:
+            per_seed.append(run_seed(*a))
+            if progress:
+                _report(per_seed[-1])
+    else:
+        ctx = mp.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            futures = [pool.submit(run_seed, *a) for a in args]
+            for f in futures:
+                per_seed.append(f.result())
+                if progress:
+                    _report(per_seed[-1])
+    first = per_seed[0]
+    public = [{k: v for k, v in r.items() if not k.startswith("_")} for r in per_seed]
+    keys = [
+        "demonstrations_noninteractive",
+        "demonstrations_confident",
+        "demonstrations_total",
+        "steps_total",
+        "ps_steps",
+        "eval_circuits_clean",
+    ]
+    summary: dict[str, Any] = {k: _mean_sd([r[k] for r in public]) for k in keys}
+    req = [r["requests_per_circuit"] for r in public]
+    summary["requests_first_circuit"] = _mean_sd([q[0] if q else 0 for q in req])
+    summary["requests_next_two_circuits"] = _mean_sd([sum(q[1:3]) for q in req])
+    summary["components"] = {
+        a: _mean_sd([r["components"][a] for r in public]) for a in _ACTION_NAMES
+    }
+    ps_ok = [r["ps_steps"] for r in public if r["ps_steps"] is not None]
+    summary["ps_learned_share"] = len(ps_ok) / len(public)
+    # PS runs that never learned count as the step budget (a lower bound on their steps).
+    censored = [r["ps_steps"] if r["ps_steps"] is not None else config.ps.max_steps for r in public]
+    summary["ps_steps_censored_at_budget"] = _mean_sd(censored)
+    demos_mean = summary["demonstrations_total"]["mean"]
+    # Conservative ratio: learned runs only (unlearned runs could only raise it).
+    ps_mean = summary["ps_steps"]["mean"]
+    summary["ps_over_demonstrations"] = (
+        ps_mean / demos_mean if demos_mean and ps_mean is not None else None
+    )
+    summary["all_finished"] = all(r["finished"] for r in public)
+    summary["all_eval_clean"] = all(r["eval_circuits_clean"] == r["eval_circuits"] for r in public)
+    results = {
+        "experiment": "corridor (Chernova & Veloso 2007, Section 5.1)",
+        "config": config.to_dict(),
+        "seeds": list(config.seeds),
+        "versions": _versions(),
+        "paper": PAPER,
+        "actions_per_circuit": _actions_per_circuit(config),
+        "summary": summary,
+        "per_seed": public,
+        "seconds": time.perf_counter() - t0,
+        "workers": workers,
+    }
+    acc = {
+        "demonstrations_mean_le_53": demos_mean is not None and demos_mean <= 53,
+        "final_policy_10_clean_circuits": summary["all_eval_clean"],
+        "ps_at_least_4x": bool(
+            summary["ps_over_demonstrations"] is not None and summary["ps_over_demonstrations"] >= 4
+        ),
+    }
+    results["acceptance"] = acc
+    (run_dir / "results.json").write_text(json.dumps(results, indent=2, default=_json_default))
+    (run_dir / "summary.txt").write_text(format_summary(results) + "\n")
+    _figures(config, first, run_dir)
+    return results
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON-able: {type(o)}")
+
+
+def _report(r: dict) -> None:
+    print(
+        f"seed {r['seed']}: demonstrations {r['demonstrations_total']} "
+        f"({r['demonstrations_noninteractive']} + {r['demonstrations_confident']}), "
+        f"requests/circuit {r['requests_per_circuit'][:4]}, "
+        f"eval {r['eval_circuits_clean']}/{r['eval_circuits']}, PS {r['ps_steps']} steps, "
+        f"{r['seconds']:.1f} s",
+        flush=True,
+    )
+
+
+def _actions_per_circuit(config: CorridorExperimentConfig) -> int:
+    corridor_map = load_map(config.map_name)
+    env = CorridorEnv(corridor_map, config.world)
+    expert = CorridorExpert(corridor_map, config.world)
+    obs, info = env.reset(seed=0)
+    n = 0
+    while True:
+        obs, _, terminated, truncated, info = env.step(expert(obs, info))
+        n += 1
+        if terminated or truncated:
+            return n
+
+
+def _fmt(ms: dict | None, digits: int = 1) -> str:
+    if not ms or ms.get("mean") is None:
+        return "-"
+    return f"{ms['mean']:.{digits}f} ± {ms['sd']:.{digits}f}"
+
+
+def format_summary(results: dict[str, Any]) -> str:
+    """A plain-text table ``figure | paper | ours`` of a :func:`run_experiment` result."""
+    s, p = results["summary"], results["paper"]
+    rows = [
+        ("actions per circuit", p["actions_per_circuit"], str(results["actions_per_circuit"])),
+        (
+            "teleoperated demonstrations",
+            p["demonstrations_noninteractive"],
+            _fmt(s["demonstrations_noninteractive"]),
+        ),
+        (
+            "requests, first confident circuit",
+            p["requests_first_circuit"],
+            _fmt(s["requests_first_circuit"]),
+        ),
+        (
+            "requests, next two circuits",
+            p["requests_next_two_circuits"],
+            _fmt(s["requests_next_two_circuits"]),
+        ),
+        ("demonstrations in all", p["demonstrations_total"], _fmt(s["demonstrations_total"])),
+        ("Prioritized Sweeping steps (learned runs)", p["ps_steps"], _fmt(s["ps_steps"])),
+        ("PS runs that learned", "-", f"{s['ps_learned_share']:.0%}"),
+        ("PS steps, unlearned counted at budget", "-", _fmt(s["ps_steps_censored_at_budget"])),
+        (
+            "PS steps / demonstrations",
+            f"{275 / 53:.1f}",
+            "-" if s["ps_over_demonstrations"] is None else f"{s['ps_over_demonstrations']:.1f}",
+        ),
+        ("final policy clean circuits", "10", _fmt(s["eval_circuits_clean"])),
+    ]
+    for a in _ACTION_NAMES:
+        paper = p["components"].get(a)
+        rows.append((f"components, {a}", "-" if paper is None else paper, _fmt(s["components"][a])))
+    w0 = max(len(r[0]) for r in rows)
+    w1 = max(len(str(r[1])) for r in rows + [("", "paper", "")])
+    lines = [
+        f"{'figure':<{w0}} | {'paper':>{w1}} | ours (mean ± sd over {len(results['seeds'])} seeds)"
+    ]
+    lines.append("-" * len(lines[0]))
+    lines += [f"{a:<{w0}} | {str(b):>{w1}} | {c}" for a, b, c in rows]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------- figures
+_COLOURS = ["tab:blue", "tab:green", "tab:orange", "tab:red"]
+
+
+def _figures(config: CorridorExperimentConfig, first: dict, run_dir: Path) -> None:
+    from matplotlib.figure import Figure
+
+    from corridor.render import map_figure, save_png
+    from corridor.world import CorridorWorld
+
+    x = np.asarray(first["_demo_x"], dtype=float)
+    y = np.asarray(first["_demo_y"], dtype=int)
+    # Figure 3: training data by action.
+    fig = Figure(figsize=(6, 5), dpi=100)
+    ax = fig.add_subplot(projection="3d")
+    for a, name in enumerate(_ACTION_NAMES):
+        m = y == a
+        if m.any():
+            ax.scatter(x[m, 0], x[m, 1], x[m, 2], color=_COLOURS[a], label=name, s=18)
+    _axes3d(ax, config)
+    ax.set_title(f"Figure 3: training data (seed {first['seed']}, {len(y)} demonstrations)")
+    ax.legend(loc="upper left", fontsize=8)
+    save_png(fig, run_dir / "figure3.png")
+    # Figure 4: the fitted mixtures, 2-std ellipsoids.
+    fig = Figure(figsize=(6, 5), dpi=100)
+    ax = fig.add_subplot(projection="3d")
+    mdl = first["_model"]
+    means = np.asarray(mdl["means_"])
+    covs, mask = np.asarray(mdl["covariances_"]), np.asarray(mdl["component_mask_"], dtype=bool)
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 20), np.linspace(0, np.pi, 10))
+    sphere = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)], axis=-1)
+    for a, name in enumerate(_ACTION_NAMES):
+        first_label = True
+        for k in np.flatnonzero(mask[a]):
+            vals, vecs = np.linalg.eigh(covs[a, k])
+            pts = means[a, k] + 2.0 * (sphere * np.sqrt(np.maximum(vals, 0))) @ vecs.T
+            ax.plot_wireframe(
+                pts[..., 0],
+                pts[..., 1],
+                pts[..., 2],
+                color=_COLOURS[a],
+                linewidth=0.5,
+                alpha=0.6,
+                label=f"{name} ({int(mask[a].sum())})" if first_label else None,
+            )
+            first_label = False
+    _axes3d(ax, config)
+    ax.set_title("Figure 4: fitted Gaussian mixtures (2 std)")
+    ax.legend(loc="upper left", fontsize=8)
+    save_png(fig, run_dir / "figure4.png")
+    # Map with the final policy's first evaluation circuit.
+    world = CorridorWorld(load_map(config.map_name), config.world)
+    fig = map_figure(
+        world,
+        [tuple(p) for p in first["_path"]],
+        title=f"{config.map_name}: final policy, one circuit (seed {first['seed']})",
+    )
+    save_png(fig, run_dir / "map.png")
+
+
+def _axes3d(ax: Any, config: CorridorExperimentConfig) -> None:
+    r = config.world.max_range
+    for setter in (ax.set_xlim, ax.set_ylim, ax.set_zlim):
+        setter(0, r * 1.05)
+    ax.set_xlabel(f"{SENSOR_NAMES[0]} (m)")
+    ax.set_ylabel(f"{SENSOR_NAMES[1]} (m)")
+    ax.set_zlabel(f"{SENSOR_NAMES[2]} (m)")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run_dir")
+    parser.add_argument("--full", action="store_true")
+    parser.add_argument("--workers", type=int, default=2)
+    ns = parser.parse_args()
+    cfg = CorridorExperimentConfig.full() if ns.full else CorridorExperimentConfig()
+    res = run_experiment(cfg, ns.run_dir, workers=ns.workers)
+    print(format_summary(res))
