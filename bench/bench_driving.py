@@ -1,0 +1,67 @@
+"""Decisions per second of DrivingEnv with a learned GMM policy in the loop (one process).
+
+Fits a GaussianMixtureSet on expert demonstrations, then times env.step + classify on the
+evaluation scenario. Prints a table and ends with ONE line of JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+from sumo_scenarios.env import DrivingEnv
+from sumo_scenarios.expert import ScriptedExpert
+from torchcbl import GaussianMixtureSet
+from torchcbl.teaching import GreedyPolicy
+
+
+def main(n_demos: int = 600, n_steps: int = 3000) -> dict[str, float]:
+    env = DrivingEnv(scenario="train")
+    try:
+        expert = ScriptedExpert(seed=0)
+        obs, info = env.reset(seed=0)
+        xs, ys = [], []
+        for _ in range(n_demos):
+            a = expert(obs, info)
+            xs.append(obs)
+            ys.append(a)
+            obs, _, _, _, info = env.step(a)
+    finally:
+        env.close()
+    t = time.perf_counter()
+    model = GaussianMixtureSet(3, 4, 10, seed=0).fit(np.stack(xs), np.asarray(ys))
+    fit_s = time.perf_counter() - t
+    policy = GreedyPolicy(model)
+    env = DrivingEnv(scenario="eval", max_episode_steps=10**9)
+    try:
+        obs, _ = env.reset(seed=0)
+        t = time.perf_counter()
+        for _ in range(n_steps):
+            env.step(0)
+        env_only = n_steps / (time.perf_counter() - t)
+        obs, _ = env.reset(seed=0)
+        t = time.perf_counter()
+        for _ in range(n_steps):
+            obs, *_ = env.step(policy(obs))
+        with_policy = n_steps / (time.perf_counter() - t)
+    finally:
+        env.close()
+    row = {
+        "env_only_decisions_per_s": env_only,
+        "policy_decisions_per_s": with_policy,
+        "fit_s": fit_s,
+        "n_demos": n_demos,
+        "n_steps": n_steps,
+    }
+    print(f"{'measure':32s} value")
+    print(f"{'env only (decisions/s)':32s} {env_only:10.0f}")
+    print(f"{'env + GMM policy (decisions/s)':32s} {with_policy:10.0f}")
+    print(f"{f'fit on {n_demos} demos (s)':32s} {fit_s:10.3f}")
+    print(json.dumps(row))
+    return row
+
+
+if __name__ == "__main__":
+    main()
