@@ -314,7 +314,8 @@ class Route:
             dist = float(np.linalg.norm(p - q))
             cost = dist + heading_weight * (1.0 - float(np.dot(hd, self._dirs[k])))
             if best is None or cost < best[0] - _EPS:
-                lateral = abs(float(np.cross(self._dirs[k], rel[k])))
+                dk, rk = self._dirs[k], rel[k]
+                lateral = abs(float(dk[0] * rk[1] - dk[1] * rk[0]))
                 best = (cost, s_abs, k, lateral, float(self._lengths[k] - t[k]))
         if best is None:
             k = int(np.searchsorted(self._cum, s_prev % length, side="right") - 1)

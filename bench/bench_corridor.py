@@ -1,0 +1,61 @@
+"""Speed of the corridor env: actions per second including the 15-reading sensing.
+
+Drives the scripted expert (and, separately, random actions) through ``CorridorEnv`` on the
+default map and prints a table, then ONE line of JSON. Acceptance: >= 1,000 actions/s.
+Usage: .venv/bin/python bench/bench_corridor.py [--actions N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from corridor.env import CorridorEnv
+from corridor.expert import CorridorExpert
+
+
+def _run(policy: str, n: int, seed: int = 0) -> float:
+    env = CorridorEnv()
+    expert = CorridorExpert(env.corridor_map)
+    rng = np.random.default_rng(seed)
+    obs, info = env.reset(seed=seed)
+    t0 = time.perf_counter()
+    for _ in range(n):
+        a = expert(obs, info) if policy == "expert" else int(rng.integers(4))
+        obs, _, terminated, truncated, info = env.step(a)
+        if terminated or truncated:
+            obs, info = env.reset()
+    return n / (time.perf_counter() - t0)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--actions", type=int, default=5000)
+    parser.add_argument("--repeats", type=int, default=3)
+    ns = parser.parse_args()
+    rows = {}
+    for policy in ("expert", "random"):
+        rates = [_run(policy, ns.actions, seed=k) for k in range(ns.repeats)]
+        rows[policy] = max(rates)
+    print(f"{'policy':<8} | {'actions/s (best of ' + str(ns.repeats) + ')':>24}")
+    print("-" * 35)
+    for k, v in rows.items():
+        print(f"{k:<8} | {v:>24,.0f}")
+    print(
+        json.dumps(
+            {
+                "bench": "corridor_env",
+                "actions": ns.actions,
+                "expert_actions_per_s": round(rows["expert"], 1),
+                "random_actions_per_s": round(rows["random"], 1),
+                "ok": min(rows.values()) >= 1000,
+            }
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()

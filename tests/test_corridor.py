@@ -1,0 +1,273 @@
+"""Corridor domain: maps, pymunk world physics and sensors, env, expert, PS baseline, experiment."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import corridor
+from corridor.baseline import PrioritizedSweepingConfig, binary_state, run_prioritized_sweeping
+from corridor.env import CorridorEnv
+from corridor.expert import CorridorExpert
+from corridor.maps import available_maps, load_map, map_from_dict
+from corridor.world import Action, CorridorWorld, WorldConfig
+
+F, L, R, U = (int(a) for a in Action)
+
+SMALL = {
+    "name": "small",
+    "corridor_width": 0.6,
+    "nodes": {"A": [0, 0], "B": [1.0, 0], "C": [1.0, 0.8], "D": [0, 0.8]},
+    "corridors": [["A", "B"], ["B", "C"], ["C", "D"], ["D", "A"]],
+    "route": ["A", "B", "C", "D", "A"],
+}
+
+
+def drive(env: CorridorEnv, teacher, seed: int, episodes: int):
+    obs, info = env.reset(seed=seed)
+    out = []
+    for _ in range(episodes):
+        actions, observations = [], []
+        while True:
+            a = teacher(obs, info)
+            actions.append(a)
+            observations.append(obs)
+            obs, _, terminated, truncated, info = env.step(a)
+            if terminated or truncated:
+                out.append((actions, np.array(observations), terminated, info))
+                obs, info = env.reset()
+                break
+    return out
+
+
+# ---------------------------------------------------------------- maps
+def test_shipped_maps_and_walls():
+    assert {"figure2", "lshape"} <= set(available_maps())
+    m = load_map("figure2")
+    # Every wall lies on the boundary between free and blocked space.
+    for (x0, y0), (x1, y1) in m.walls():
+        mx, my = (x0 + x1) / 2, (y0 + y1) / 2
+        if x0 == x1:
+            assert m.is_free(mx - 0.01, my) != m.is_free(mx + 0.01, my)
+        else:
+            assert m.is_free(mx, my - 0.01) != m.is_free(mx, my + 0.01)
+    assert m.manoeuvres() == ["left", "straight", "uturn", "right", "left", "left"]
+    assert map_from_dict(m.to_dict()).walls() == m.walls()
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"route": ["A", "B", "C", "A"]}, "not a corridor"),
+        ({"corridors": [["A", "C"]]}, "axis-aligned"),
+        ({"nodes": {"A": [0.05, 0], "B": [1, 0], "C": [1, 0.8], "D": [0, 0.8]}}, "grid"),
+        ({"colour": "red"}, "unknown map keys"),
+        ({"route": ["A", "B", "C", "D"]}, "closed walk"),
+    ],
+)
+def test_bad_maps_are_refused(change, message):
+    with pytest.raises(ValueError, match=message):
+        map_from_dict({**SMALL, **change})
+
+
+def test_unknown_map_name():
+    with pytest.raises(ValueError, match="shipped maps"):
+        load_map("nowhere")
+
+
+# ---------------------------------------------------------------- world
+def test_sensor_readings_match_hand_computed_distances():
+    w = CorridorWorld(load_map("figure2"))
+    # Start (0.2, 0) heading east: left looks up the left corridor (open, saturated),
+    # front down the bottom corridor to x = 1.7 (1.5 m, saturated), right at the wall y = -0.3.
+    np.testing.assert_allclose(w.true_ranges(), [1.5, 1.5, 0.3], atol=1e-9)
+    w.set_pose(1.0, 0.0, 0.0)  # walls: inner block y=0.3, end wall x=1.7, outer y=-0.3
+    np.testing.assert_allclose(w.true_ranges(), [0.3, 0.7, 0.3], atol=1e-9)
+    w.set_pose(1.4, 1.6, math.pi / 2)  # in the dead end: end wall at y = 2.1
+    np.testing.assert_allclose(w.true_ranges(), [0.3, 0.5, 0.3], atol=1e-9)
+    w.set_pose(0.0, 0.5, -math.pi / 2)  # heading south in the left corridor: floor at -0.3
+    np.testing.assert_allclose(w.true_ranges(), [0.3, 0.8, 0.3], atol=1e-9)
+    # Averaged noisy readings: unbiased within a few standard errors, inside the range.
+    rng = np.random.default_rng(0)
+    obs = np.stack([w.sense(rng) for _ in range(400)])
+    cfg = w.config
+    se = (cfg.noise_sd + cfg.noise_sd_per_m * np.array([0.3, 0.8, 0.3])) / math.sqrt(15)
+    np.testing.assert_allclose(obs.mean(0), [0.3, 0.8, 0.3], atol=4 * se.max() / 20)
+    np.testing.assert_allclose(obs.std(0), se, rtol=0.2)
+    assert obs.dtype == np.float32 and (obs >= 0).all() and (obs <= cfg.max_range).all()
+
+
+def test_robot_never_passes_through_walls_and_contact_is_reported():
+    m = load_map("figure2")
+    w = CorridorWorld(m)
+    w.set_pose(1.0, 0.0, 0.0)  # 0.7 m from the end wall at x = 1.7
+    contacts = [w.step(F) for _ in range(6)]
+    x, y, h = w.pose
+    assert contacts[:2] == [False, False] and all(contacts[3:])
+    assert x <= 1.7 - w.config.robot_radius + 1e-9
+    assert x >= 1.7 - w.config.robot_radius - w.config.substep  # it did reach the wall
+    # A turn into a wall is cut short but the rotation completes.
+    w.set_pose(0.6, 0.0, 0.0)
+    assert w.step(R) is True  # the outer wall is 0.3 m to the right
+    x, y, h = w.pose
+    assert y - w.config.robot_radius >= -0.3 - 1e-9
+    assert h == pytest.approx(-math.pi / 2)
+    # Random driving never leaves the free space or overlaps a wall.
+    rng = np.random.default_rng(3)
+    w.reset()
+    for _ in range(500):
+        w.step(int(rng.integers(4)))
+        x, y, _ = w.pose
+        assert m.is_free(x, y)
+        assert min(w.true_ranges()) >= w.config.robot_radius - 1e-9
+
+
+def test_actions_geometry():
+    w = CorridorWorld(load_map("figure2"))
+    w.set_pose(0.6, 0.0, 0.0)
+    assert w.step(F) is False and w.pose == pytest.approx((0.8, 0.0, 0.0))
+    w.set_pose(1.2, 0.0, 0.0)
+    assert w.step(L) is False
+    assert w.pose == pytest.approx((1.4, 0.2, math.pi / 2))
+    assert w.step(U) is False and w.pose == pytest.approx((1.4, 0.2, -math.pi / 2))
+    with pytest.raises(ValueError, match="action"):
+        w.step(4)
+    with pytest.raises(ValueError, match="overlaps"):
+        w.set_pose(0.2, 0.25, 0.0)
+
+
+def test_world_config_validation():
+    with pytest.raises(ValueError, match="max_range"):
+        WorldConfig(min_range=2.0)
+    with pytest.raises(ValueError, match="n_readings"):
+        WorldConfig(n_readings=0)
+
+
+# ---------------------------------------------------------------- env
+def test_check_env_and_registration():
+    check_env(CorridorEnv(), skip_render_check=True)
+    env = gym.make(corridor.ENV_ID, corridor_map="lshape")
+    obs, info = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    assert env.action_space.n == 4
+    env.close()
+    with pytest.raises(ValueError, match="action"):
+        CorridorEnv().step(7)
+
+
+def test_same_seed_same_run_and_seed_matters():
+    def run(seed):
+        env = CorridorEnv()
+        obs, _ = env.reset(seed=seed)
+        rng = np.random.default_rng(5)
+        out = [obs]
+        for _ in range(60):
+            obs, *_ = env.step(int(rng.integers(4)))
+            out.append(obs)
+        return np.array(out)
+
+    np.testing.assert_array_equal(run(1), run(1))
+    assert not np.array_equal(run(1), run(2))
+
+
+@pytest.mark.parametrize("map_name, n_actions", [("figure2", 27), ("lshape", 34)])
+def test_expert_drives_clean_circuits(map_name, n_actions):
+    env = CorridorEnv(map_name)
+    expert = CorridorExpert(env.corridor_map)
+    episodes = drive(env, expert, seed=0, episodes=3)
+    for actions, _, terminated, info in episodes:
+        assert terminated and info["is_success"] and info["contacts"] == 0
+        assert len(actions) == n_actions
+        assert info["laps"] == 1
+
+
+def test_default_map_has_the_papers_properties():
+    env = CorridorEnv()
+    actions, obs, _, _ = drive(env, CorridorExpert(env.corridor_map), seed=0, episodes=1)[0]
+    actions = np.array(actions)
+    assert len(actions) >= 26 and set(actions.tolist()) == {F, L, R, U}
+    # "turn left" arises in two distinct sensor situations: right wall near vs right open.
+    left_right = obs[actions == L][:, 2]
+    assert (left_right < 0.4).any() and (left_right > 0.8).any()
+    # Forward vs turn/u-turn need near vs far front walls told apart.
+    assert obs[actions == U][:, 1].max() < obs[actions == F][:, 1].min()
+
+
+def test_wrong_way_round_is_not_a_circuit():
+    env = CorridorEnv(map_from_dict(SMALL), max_episode_steps=80)
+    obs, _ = env.reset(seed=0)
+    obs, *_ = env.step(U)  # now heading west: drive the rectangle clockwise
+    xs = []
+    for _ in range(79):
+        a = F if obs[1] > 0.6 else (R if obs[2] > 0.6 else U)
+        obs, _, terminated, truncated, info = env.step(a)
+        xs.append(info["pose"][0])
+        if terminated or truncated:
+            break
+    assert max(xs) > 0.9 and min(xs) < 0.1  # it did go round, more than once
+    assert info["contacts"] == 0
+    assert truncated and not terminated and info["is_success"] is False and info["laps"] == 0
+
+
+def test_render_rgb():
+    env = CorridorEnv(render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(F)
+    img = env.render()
+    assert img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > 5  # not blank
+
+
+# ---------------------------------------------------------------- baseline
+def test_binary_state():
+    assert binary_state(np.array([0.3, 1.5, 0.3]), 0.6) == 0b101
+    assert binary_state(np.array([1.5, 0.5, 0.3]), 0.6) == 0b011
+
+
+def test_prioritized_sweeping_learns_a_small_loop():
+    cfg = PrioritizedSweepingConfig(max_steps=1500)
+    results = [run_prioritized_sweeping(map_from_dict(SMALL), cfg, seed=s) for s in range(3)]
+    assert all(r.steps_to_learn is not None for r in results)
+    # Its learned policy: forward in a corridor (wall left and right), left at corners.
+    for r in results:
+        assert r.policy[0b101] == F and r.policy[0b011] == L
+    again = run_prioritized_sweeping(map_from_dict(SMALL), cfg, seed=0)
+    assert again == results[0]
+
+
+# ---------------------------------------------------------------- experiment
+def test_tiny_experiment_writes_results(tmp_path):
+    from corridor.experiment import CorridorExperimentConfig, format_summary, run_experiment
+
+    cfg = CorridorExperimentConfig(
+        seeds=(0, 1), eval_circuits=2, ps=PrioritizedSweepingConfig(max_steps=800)
+    )
+    res = run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
+    data = json.loads((tmp_path / "run" / "results.json").read_text())
+    s = data["summary"]
+    for key in (
+        "demonstrations_noninteractive",
+        "demonstrations_confident",
+        "demonstrations_total",
+        "requests_first_circuit",
+        "ps_steps",
+    ):
+        assert set(s[key]) == {"mean", "sd", "n"}
+    assert set(s["components"]) == {"forward", "turn_left", "turn_right", "u_turn"}
+    assert data["seeds"] == [0, 1] and data["config"]["max_std"] == 2.0
+    assert {"torch", "pymunk", "gymnasium"} <= set(data["versions"])
+    for r in data["per_seed"]:
+        assert r["finished"] and r["eval_circuits_clean"] == 2
+        assert r["demonstrations_total"] == (
+            r["demonstrations_noninteractive"] + r["demonstrations_confident"]
+        )
+    for name in ("figure3.png", "figure4.png", "map.png", "summary.txt"):
+        assert (tmp_path / "run" / name).stat().st_size > 1000
+    assert "demonstrations in all" in format_summary(res)
+    with pytest.raises(FileExistsError):
+        run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
