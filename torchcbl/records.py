@@ -20,6 +20,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+_isfinite = math.isfinite
+
 __all__ = ["PHASES", "Phase", "StepRecord", "jsonable_info"]
 
 Phase = Literal["noninteractive", "confident", "evaluation"]
@@ -131,32 +133,40 @@ class StepRecord:
     windowed_accuracy: float | None = None
 
     def __post_init__(self) -> None:
-        def bad(what: str, expected: str, got: Any) -> ValueError:
-            return ValueError(
-                f"StepRecord.{what}: expected {expected}, got {got!r} (step {self.step!r}). "
-                "Records are built by the teaching loop; this points at a bug or a corrupted log."
-            )
+        self._validate_decision()
+        self._validate_outcome()
 
+    def _bad(self, what: str, expected: str, got: Any) -> ValueError:
+        return ValueError(
+            f"StepRecord.{what}: expected {expected}, got {got!r} (step {self.step!r}). "
+            "Records are built by the teaching loop; this points at a bug or a corrupted log."
+        )
+
+    def _validate_decision(self) -> None:
+        bad = self._bad
         for name in ("step", "episode", "n_demonstrations"):
             v = getattr(self, name)
             if not _is_int(v) or v < 0:
                 raise bad(name, "an int >= 0", v)
-        if not isinstance(self.observation, tuple) or not self.observation:
-            raise bad("observation", "a non-empty tuple of floats", self.observation)
-        for x in self.observation:
-            if not isinstance(x, float) or not math.isfinite(x):
-                raise bad("observation", "finite floats only", self.observation)
+        obs = self.observation
+        if type(obs) is not tuple or not obs:
+            raise bad("observation", "a non-empty tuple of floats", obs)
+        for x in obs:
+            if type(x) is not float or not _isfinite(x):
+                raise bad("observation", "finite floats only", obs)
         if not _is_int(self.model_action) or self.model_action < -1:
             raise bad("model_action", "an int >= -1 (-1: no model)", self.model_action)
         if self.confidence is not None and not (0.0 <= self.confidence <= 1.0):
             raise bad("confidence", "a float in [0, 1] or None", self.confidence)
         if self.distance is not None and not (self.distance >= 0.0):  # rejects NaN too
             raise bad("distance", "a float >= 0 (inf allowed) or None", self.distance)
-        if self.posterior is not None:
-            if not isinstance(self.posterior, tuple) or not all(
-                isinstance(p, float) and 0.0 <= p <= 1.0 for p in self.posterior
-            ):
-                raise bad("posterior", "a tuple of floats in [0, 1] or None", self.posterior)
+        post = self.posterior
+        if post is not None:
+            if type(post) is not tuple:
+                raise bad("posterior", "a tuple of floats in [0, 1] or None", post)
+            for p in post:
+                if type(p) is not float or not (0.0 <= p <= 1.0):
+                    raise bad("posterior", "a tuple of floats in [0, 1] or None", post)
         if self.teacher_action is not None and (
             not _is_int(self.teacher_action) or self.teacher_action < 0
         ):
@@ -165,7 +175,7 @@ class StepRecord:
             raise bad("executed_action", "an int >= 0", self.executed_action)
         if self.phase not in PHASES:
             raise bad("phase", f"one of {PHASES}", self.phase)
-        if not isinstance(self.autonomous, bool):
+        if type(self.autonomous) is not bool:
             raise bad("autonomous", "a bool", self.autonomous)
         if self.teacher_action is not None:
             if self.autonomous or self.executed_action != self.teacher_action:
@@ -174,28 +184,45 @@ class StepRecord:
                     "a demonstration to be executed as labelled and not autonomous",
                     (self.teacher_action, self.executed_action, self.autonomous),
                 )
-        elif self.phase != "evaluation":
-            if not self.autonomous or self.executed_action != self.model_action:
-                raise bad(
-                    "autonomous",
-                    "a step without a teacher label to execute the model's action",
-                    (self.model_action, self.executed_action, self.autonomous),
-                )
+        elif not self.autonomous or self.executed_action != self.model_action:
+            raise bad(
+                "autonomous",
+                "a step without a teacher label to execute the model's action autonomously",
+                (self.model_action, self.executed_action, self.autonomous),
+            )
         if self.phase == "noninteractive" and self.teacher_action is None:
             raise bad("teacher_action", "a label on every non-interactive step", None)
-        if self.reward is not None and not (
-            isinstance(self.reward, float) and math.isfinite(self.reward)
-        ):
-            raise bad("reward", "a finite float or None", self.reward)
-        for name in ("terminated", "truncated"):
-            if not isinstance(getattr(self, name), bool):
-                raise bad(name, "a bool", getattr(self, name))
-        if not isinstance(self.info, dict):
-            raise bad("info", "a dict", self.info)
         for name in ("autonomy_rate", "windowed_accuracy"):
             v = getattr(self, name)
-            if v is not None and not (isinstance(v, float) and 0.0 <= v <= 1.0):
+            if v is not None and not (type(v) is float and 0.0 <= v <= 1.0):
                 raise bad(name, "a float in [0, 1] or None", v)
+
+    def _validate_outcome(self) -> None:
+        bad = self._bad
+        if self.reward is not None and not (type(self.reward) is float and _isfinite(self.reward)):
+            raise bad("reward", "a finite float or None", self.reward)
+        if type(self.terminated) is not bool:
+            raise bad("terminated", "a bool", self.terminated)
+        if type(self.truncated) is not bool:
+            raise bad("truncated", "a bool", self.truncated)
+        if type(self.info) is not dict:
+            raise bad("info", "a dict", self.info)
+
+    def with_outcome(
+        self, reward: float | None, terminated: bool, truncated: bool, info: dict[str, Any]
+    ) -> StepRecord:
+        """A copy with the env's answer filled in (only the new fields are re-validated)."""
+        new = object.__new__(StepRecord)
+        object.__setattr__(new, "__dict__", {**self.__dict__})
+        for name, value in (
+            ("reward", reward),
+            ("terminated", terminated),
+            ("truncated", truncated),
+            ("info", info),
+        ):
+            object.__setattr__(new, name, value)
+        new._validate_outcome()
+        return new
 
     @property
     def is_demonstration(self) -> bool:

@@ -37,6 +37,7 @@ import json
 import os
 import re
 import sqlite3
+import struct
 from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -109,8 +110,6 @@ CREATE TABLE IF NOT EXISTS steps (
     windowed_accuracy REAL,
     pending INTEGER NOT NULL        -- 1: demonstration committed, outcome not yet written
 );
-CREATE INDEX IF NOT EXISTS steps_demonstrations ON steps(teacher_action)
-    WHERE teacher_action IS NOT NULL;
 """
 _INSERT = f"INSERT INTO steps ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})"
 _FINISH = (
@@ -123,8 +122,15 @@ class IncompatibleRunDirError(ValueError):
     """A run directory cannot be used with the given env, model, rule or configuration."""
 
 
-def _blob(values: Any) -> bytes:
-    return np.asarray(values, dtype="<f8").tobytes()
+def _blob(values: tuple[float, ...]) -> bytes:
+    return struct.pack(f"<{len(values)}d", *values)
+
+
+_ENCODER = json.JSONEncoder(sort_keys=True, separators=(",", ":"))
+
+
+def _info_json(info: dict[str, Any]) -> str:
+    return _ENCODER.encode(info) if info else "{}"
 
 
 def _unblob(blob: bytes | None) -> tuple[float, ...] | None:
@@ -232,7 +238,7 @@ class SessionStore:
             r.reward,
             int(r.terminated),
             int(r.truncated),
-            json.dumps(r.info, sort_keys=True),
+            _info_json(r.info),
             r.n_demonstrations,
             r.autonomy_rate,
             r.windowed_accuracy,
@@ -254,7 +260,7 @@ class SessionStore:
                 record.reward,
                 int(record.terminated),
                 int(record.truncated),
-                json.dumps(record.info, sort_keys=True),
+                _info_json(record.info),
                 record.step,
             ),
         )

@@ -42,7 +42,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from torchcbl.confidence import DistanceRule, rule_from_config, rule_to_config
+from torchcbl.confidence import DistanceRule, _np, rule_from_config, rule_to_config
 from torchcbl.records import StepRecord, jsonable_info
 from torchcbl.session import (
     FORMAT,
@@ -601,11 +601,11 @@ class ConfidentTeacher:
             self._reset()
         obs, info = self._obs, self._info
         assert obs is not None
-        c = self.model.classify(torch.from_numpy(obs).unsqueeze(0))
-        model_action = int(c.action[0])
-        confidence = float(c.confidence[0])
-        distance = float(c.distance[0])
-        posterior = tuple(c.posterior[0].tolist())
+        c = self.model.classify(obs[None])
+        model_action = int(_np(c.action)[0])
+        confidence = float(_np(c.confidence)[0])
+        distance = float(_np(c.distance)[0])
+        posterior = tuple(_np(c.posterior)[0].tolist())
         phase = self._phase
         if phase == "noninteractive" or self._burst_left > 0:
             ask, burst_left = True, self._burst_left
@@ -696,12 +696,8 @@ class ConfidentTeacher:
         if error is not None:
             truncated = True
             info = {"torchcbl_error": error}
-        final = dataclasses.replace(
-            record,
-            reward=reward,
-            terminated=terminated,
-            truncated=truncated,
-            info=jsonable_info(info) if error is None else info,
+        final = record.with_outcome(
+            reward, terminated, truncated, jsonable_info(info) if error is None else info
         )
         self.records.append(final)
         if self._store is not None:
