@@ -117,7 +117,9 @@ def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
     d = _dim_of(q)
     du = q - d - 1
     _, _, full, upper, scale = _indices(d, z.device)
-    stats = torch.bmm(resp.reshape(g, n, c * k).transpose(1, 2), z).reshape(g, c, k, q)
+    # z^T resp keeps the big operand in its natural layout (faster than resp^T z)
+    stats = torch.bmm(z.transpose(1, 2), resp.reshape(g, n, c * k)).transpose(1, 2)
+    stats = stats.reshape(g, c, k, q)
     nk = stats[..., -1] + 10.0 * _EPS
     stats = stats / nk.unsqueeze(-1)
     means = stats[..., du : du + d]
@@ -137,21 +139,36 @@ def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
     return Params(weights, means, cov, log_det, coef)
 
 
-def e_step(z: Tensor, coef: Tensor, pmask: Tensor) -> tuple[Tensor, Tensor]:
+def e_step(
+    z: Tensor, coef: Tensor, pmask: Tensor, shift: Tensor | None = None
+) -> tuple[Tensor, Tensor, Tensor]:
     """Expectation step: z [G, N, Q], coef [G, C, K, Q], pmask [G, N].
 
-    Returns (loglik [G, C], resp [G, N, C, K]): loglik is each slot's total log-likelihood over
-    the real points of its group; resp is zero on padded points.
+    Returns (loglik [G, C], resp [G, N, C, K], lse [G, N, C]): loglik is each slot's total
+    log-likelihood over the real points of its group, lse the per-point log-likelihood; resp is
+    zero on padded points. ``shift`` [G, N, C] (the previous iteration's lse) replaces the
+    per-point maximum as the log-sum-exp shift, saving a pass over the largest array; if the
+    shifted sums leave a safe range (some component 40 nats below, or 550 above, the shift)
+    the step is recomputed with the exact maximum, so the result never depends on it.
     """
     g, c, k, q = coef.shape
     n = z.shape[1]
     wlp = torch.bmm(z, coef.reshape(g, c * k, q).transpose(1, 2)).reshape(g, n, c, k)
+    if shift is not None:
+        e = (wlp - shift.unsqueeze(-1)).clamp_(_CLAMP, 600.0).exp_()
+        s = e.sum(-1, keepdim=True)
+        ls = torch.log(s)
+        lo, hi = torch.aminmax(ls)
+        if float(lo) > -40.0 and float(hi) < 550.0:
+            lse = ls.squeeze(-1) + shift
+            loglik = (lse * pmask.unsqueeze(-1)).sum(1)
+            return loglik, e.mul_(pmask.reshape(g, n, 1, 1) / s), lse
     mx = wlp.amax(-1, keepdim=True)
     e = wlp.sub_(mx).clamp_min_(_CLAMP).exp_()
     s = e.sum(-1, keepdim=True)
-    loglik = ((mx + torch.log(s)).squeeze(-1) * pmask.unsqueeze(-1)).sum(1)
-    resp = e.mul_(pmask.reshape(g, n, 1, 1) / s)
-    return loglik, resp
+    lse = (mx + torch.log(s)).squeeze(-1)
+    loglik = (lse * pmask.unsqueeze(-1)).sum(1)
+    return loglik, e.mul_(pmask.reshape(g, n, 1, 1) / s), lse
 
 
 def log_gaussian(x: Tensor, means: Tensor, prec_chol: Tensor, log_det: Tensor) -> Tensor:
@@ -275,8 +292,9 @@ def run_em(
     real = np.ones((g0, c0), dtype=bool)
     z, pm, cm, npts = z0, pmask, cmask, n_pts
     prev = torch.full((g0, c0), -math.inf, dtype=x.dtype, device=dev)
+    lse = None
     for it in range(1, max_iter + 1):
-        ll, resp = e_step(z, params.coef, pm)
+        ll, resp, lse = e_step(z, params.coef, pm, lse)
         params = m_step(z, resp, cm, floor)
         mean_ll = ll / npts.unsqueeze(-1)
         done = (mean_ll - prev).abs() < tol
@@ -316,9 +334,12 @@ def run_em(
         )
         cm = cm.reshape(-1, k).index_select(0, tk).reshape(g_new, width, k)
         prev = prev.reshape(-1).index_select(0, tk).reshape(g_new, width)
+        n_now = lse.shape[1]
+        lse = lse.transpose(1, 2).reshape(-1, n_now).index_select(0, tk)
+        lse = lse.reshape(g_new, width, n_now).transpose(1, 2)
         z, pm, npts = z.index_select(0, gk), pm.index_select(0, gk), npts.index_select(0, gk)
     final = Params(*(o.reshape(g0, c0, *o.shape[1:]) for o in out))
-    loglik, _ = e_step(z0, final.coef, pmask)
+    loglik, _, _ = e_step(z0, final.coef, pmask)
     return EMResult(final, loglik, n_iter.reshape(g0, c0), converged.reshape(g0, c0))
 
 

@@ -1,0 +1,150 @@
+"""Time GaussianMixtureSet's full candidate sweep against scikit-learn's sequential sweep.
+
+Cases (the acceptance of issue 2):
+  a: 3 actions x 330 points x 4-D, k <= 15      target ours/sklearn <= 1/20
+  b: 3 actions x 3000 points x 4-D, k <= 15     target <= 1/10
+  c: 10 actions x 1000 points x 8-D, k <= 10    target <= 1/10
+  refit: 1000 points (3 actions x 4-D), k <= 15 target < 0.1 s
+sklearn: GaussianMixture per action per k, full covariances, same tol / max_iter / reg_covar
+(= our variance floor: features are standardised so the floor is one number), n_init=1,
+k-means initialisation, pinned to one thread with threadpoolctl. Ours runs torch on one
+thread too (``--threads`` to change). For each action, the log-likelihood of our chosen mixture
+is compared with sklearn's at the same k (relative difference, positive = ours lower).
+
+Usage: python bench/bench_gmm.py [--repeats 5] [--sk-repeats 1] [--threads 1] [--cases a,b,c]
+The last line printed is one JSON object with every figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+
+import numpy as np
+import torch
+from threadpoolctl import threadpool_limits
+
+from torchcbl.gmm import GaussianMixtureSet
+
+CASES = {
+    "a": (3, 330, 4, 15, 1 / 20),
+    "b": (3, 3000, 4, 15, 1 / 10),
+    "c": (10, 1000, 8, 10, 1 / 10),
+}
+TOL, MAX_ITER = 1e-4, 200
+
+
+def make_data(n_actions: int, n_per: int, d: int, seed: int = 0):
+    """Each action: a mixture of 3-5 Gaussians; features standardised over all rows."""
+    rng = np.random.default_rng(seed)
+    xs = []
+    for _ in range(n_actions):
+        m = int(rng.integers(3, 6))
+        centres = rng.normal(scale=3.0, size=(m, d))
+        scales = rng.uniform(0.3, 1.0, size=(m, d))
+        comp = rng.integers(0, m, size=n_per)
+        xs.append(centres[comp] + rng.normal(size=(n_per, d)) * scales[comp])
+    x = np.concatenate(xs)
+    x = (x - x.mean(0)) / x.std(0)
+    return x, np.repeat(np.arange(n_actions), n_per)
+
+
+def time_ours(x, y, a, d, k, repeats):
+    model = GaussianMixtureSet(a, d, k, tol=TOL, max_iter=MAX_ITER, seed=0)
+    model.fit(x, y)  # warm-up
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        model.fit(x, y)
+        times.append(time.perf_counter() - t0)
+    return model, times
+
+
+def time_sklearn(x, y, a, k, reg, repeats):
+    from sklearn.mixture import GaussianMixture
+
+    times, ll = [], {}
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        with threadpool_limits(1):
+            for act in range(a):
+                xa = x[y == act]
+                for kk in range(1, min(k, len(xa)) + 1):
+                    gm = GaussianMixture(
+                        kk,
+                        covariance_type="full",
+                        tol=TOL,
+                        max_iter=MAX_ITER,
+                        n_init=1,
+                        init_params="kmeans",
+                        reg_covar=reg,
+                        random_state=0,
+                    ).fit(xa)
+                    ll[act, kk] = gm.score(xa) * len(xa)
+        times.append(time.perf_counter() - t0)
+    return ll, times
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--sk-repeats", type=int, default=1)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--cases", default="a,b,c")
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    results: dict[str, dict] = {}
+    print(f"torch threads={torch.get_num_threads()}, sklearn threads=1, cpus={os.cpu_count()}")
+    hdr = (
+        f"{'case':<6}{'shape':>18}{'ours best':>11}{'ours med':>10}{'sklearn':>9}"
+        f"{'ratio':>8}{'target':>8}{'max |dLL|':>11}  ok"
+    )
+    print(hdr)
+    print("-" * len(hdr))
+    for name in args.cases.split(","):
+        a, n, d, k, target = CASES[name]
+        x, y = make_data(a, n, d)
+        model, ours = time_ours(x, y, a, d, k, args.repeats)
+        reg = float(model.var_floor_[0])
+        ll_sk, sk = time_sklearn(x, y, a, k, reg, args.sk_repeats)
+        rel = []
+        for act in range(a):
+            kk = int(model.n_components_[act])
+            mine = float(model.fit_report_.log_likelihood[act, kk - 1])
+            ref = ll_sk[act, kk]
+            rel.append((ref - mine) / abs(ref))
+        best, med, skb = min(ours), statistics.median(ours), min(sk)
+        ratio = best / skb
+        worst = max(abs(r) for r in rel)
+        ok = ratio <= target and worst <= 0.01
+        print(
+            f"{name:<6}{f'{a}x{n}x{d} k<={k}':>18}{best * 1e3:>9.1f}ms{med * 1e3:>8.1f}ms"
+            f"{skb:>8.2f}s{f'1/{1 / ratio:.1f}':>8}{f'1/{1 / target:.0f}':>8}{worst:>10.2%}"
+            f"  {'yes' if ok else 'NO'}"
+        )
+        results[name] = {
+            "ours_best_s": best,
+            "ours_median_s": med,
+            "sklearn_s": skb,
+            "ratio": ratio,
+            "speedup": 1 / ratio,
+            "target_ratio": target,
+            "chosen_k": model.n_components_.tolist(),
+            "rel_loglik_diff": rel,
+            "ok": ok,
+        }
+    x, y = make_data(3, 333, 4, seed=1)
+    _, rt = time_ours(x, y, 3, 4, 15, args.repeats)
+    print(
+        f"refit  3x333x4 k<=15: best {min(rt) * 1e3:.1f} ms, median "
+        f"{statistics.median(rt) * 1e3:.1f} ms (target < 100 ms)"
+    )
+    results["refit_1000"] = {"best_s": min(rt), "median_s": statistics.median(rt)}
+    print(json.dumps(results))
+
+
+if __name__ == "__main__":
+    main()
