@@ -259,6 +259,7 @@ class GaussianMixtureSet(nn.Module):
         }
         if cache["cpu"]:
             cache["np"] = tuple(t.detach().numpy().copy() for t in (pcat, mu_p, const, log_prior))
+            cache["prior_np"] = np.exp(cache["np"][3])
         self._cache = cache
         return cache
 
@@ -525,9 +526,35 @@ class GaussianMixtureSet(nn.Module):
             )
         x, use_np = self._prepare(observations)
         if use_np:
+            if x.shape[0] == 1:
+                return self._classify_one(x)  # type: ignore[arg-type]
             return self._classify_np(x)  # type: ignore[arg-type]
         with torch.inference_mode():
             return self._classify_torch(x)  # type: ignore[arg-type]
+
+    def _classify_one(self, x: np.ndarray) -> Classification:
+        """The N = 1 case of :meth:`_classify_np`, with few array ops (the teaching loop's path).
+
+        Shifts by the single largest component score: an action more than ~700 nats below the
+        best then gets posterior 0, which is its float64 value anyway.
+        """
+        pcat, mu_p, const, _ = self._tables()["np"]
+        prior = self._tables()["prior_np"]
+        y = x @ pcat
+        y -= mu_p
+        y *= y
+        maha = y.reshape(self.n_actions, self.max_components, self.n_features).sum(-1)
+        lp = const - 0.5 * maha  # [A, K]
+        e = np.exp(lp - lp.max())
+        p = e.sum(1) * prior
+        a = int(p.argmax())
+        d2 = float(maha[a, int(lp[a].argmax())])
+        return Classification(
+            torch.from_numpy(np.array([a])),
+            torch.from_numpy(np.array([math.exp(-0.5 * d2)])),
+            torch.from_numpy(np.array([math.sqrt(d2)])),
+            torch.from_numpy((p / p.sum())[None]),
+        )
 
     def _classify_np(self, x: np.ndarray) -> Classification:
         lp, maha = self._component_scores_np(x)
