@@ -1,0 +1,185 @@
+"""GaussianMixtureSet: bad input is refused clearly; degenerate data fits without NaN."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from torchcbl.gmm import Classification, GaussianMixtureSet
+
+
+def _data(seed: int = 0, n: int = 60, d: int = 3, a: int = 3):
+    rng = np.random.default_rng(seed)
+    y = np.arange(n) % a
+    x = rng.normal(size=(n, d)) + y[:, None] * 3.0
+    return x, y
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"n_actions": 0}, "n_actions"),
+        ({"n_features": -1}, "n_features"),
+        ({"max_components": 0}, "max_components"),
+        ({"max_iter": 0}, "max_iter"),
+        ({"criterion": "aicc"}, "criterion"),
+        ({"var_floor": -1.0}, "var_floor"),
+        ({"var_floor": math.nan}, "var_floor"),
+        ({"tol": 0.0}, "tol"),
+        ({"seed": 1.5}, "seed"),
+    ],
+)
+def test_constructor_rejects_bad_arguments(kwargs, match):
+    args = {"n_actions": 2, "n_features": 2} | kwargs
+    with pytest.raises(ValueError, match=match):
+        GaussianMixtureSet(**args)
+
+
+def _fitted():
+    x, y = _data()
+    return GaussianMixtureSet(3, 3, 4).fit(x, y), x, y
+
+
+@pytest.mark.parametrize(
+    ("obs", "exc", "match"),
+    [
+        (np.zeros(3), ValueError, r"expected shape \[N, 3\].*got shape \(3,\).*obs\[None, :\]"),
+        (np.zeros((2, 4)), ValueError, r"n_features=3.*got shape \(2, 4\)"),
+        (np.zeros((0, 3)), ValueError, "N >= 1"),
+        (np.zeros((2, 3), dtype=complex), TypeError, "complex"),
+        (np.array([["a", "b", "c"]]), TypeError, "real numbers"),
+        (np.zeros((2, 3), dtype=bool), TypeError, "bool"),
+    ],
+)
+def test_bad_observations_are_refused_everywhere(obs, exc, match):
+    model, _, _ = _fitted()
+    for call in (model.classify, model.log_prob):
+        with pytest.raises(exc, match=match):
+            call(obs)
+    with pytest.raises(exc, match=match):
+        model.fit(obs, np.zeros(len(obs) if obs.ndim else 1, dtype=int))
+
+
+def test_nan_and_inf_rows_are_named():
+    model, x, y = _fitted()
+    bad = x.copy()
+    bad[4, 1] = np.nan
+    bad[9, 0] = np.inf
+    with pytest.raises(ValueError, match=r"rows \[4, 9\] contain NaN or inf"):
+        model.fit(bad, y)
+    with pytest.raises(ValueError, match=r"rows \[4, 9\]"):
+        model.classify(torch.from_numpy(bad))
+
+
+@pytest.mark.parametrize(
+    ("actions", "exc", "match"),
+    [
+        (
+            lambda y: np.where(np.arange(len(y)) == 5, 3, y),
+            ValueError,
+            r"values \[3\] at rows \[5\]",
+        ),
+        (lambda y: np.where(np.arange(len(y)) == 2, -1, y), ValueError, r"\[0, 3\).*\[-1\]"),
+        (lambda y: y.astype(float), TypeError, "integer labels"),
+        (lambda y: y[:-1], ValueError, r"expected shape \[60\]"),
+        (lambda y: y[:, None], ValueError, r"expected shape \[60\]"),
+    ],
+)
+def test_bad_actions_are_refused(actions, exc, match):
+    x, y = _data()
+    with pytest.raises(exc, match=match):
+        GaussianMixtureSet(3, 3, 4).fit(x, actions(y))
+
+
+def test_failed_fit_leaves_the_previous_model_untouched():
+    model, x, y = _fitted()
+    before = {k: v.clone() for k, v in model.state_dict().items()}
+    report = model.fit_report_
+    bad = x.copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError):
+        model.fit(bad, y)
+    with pytest.raises(ValueError):
+        model.fit(x, y + 5)
+    for k, v in model.state_dict().items():
+        assert torch.equal(v, before[k]), k
+    assert model.fit_report_ is report
+
+
+def test_action_without_data_is_never_predicted_and_reported():
+    x, y = _data(a=2)  # labels 0, 1 only, model has 3 actions
+    model = GaussianMixtureSet(3, 3, 4).fit(x, y)
+    assert model.n_components_[2] == 0
+    assert model.fit_report_.empty_actions == (2,)
+    assert any("action 2 has no data" in n for n in model.fit_report_.notes)
+    assert "action 2: no data" in str(model.fit_report_)
+    probe = np.random.default_rng(1).normal(scale=10, size=(50, 3))
+    lp = model.log_prob(probe)
+    assert torch.isneginf(lp[:, 2]).all() and torch.isfinite(lp[:, :2]).all()
+    c = model.classify(probe)
+    assert (c.action != 2).all() and (c.posterior[:, 2] == 0).all()
+    assert float(model.aic()[2]) == 0.0
+
+
+def test_degenerate_actions_fit_without_nan():
+    rng = np.random.default_rng(3)
+    x0 = rng.normal(size=(30, 3))
+    x0[:, 2] = rng.integers(0, 5, size=30)  # a discrete feature (lane index)
+    x1 = np.tile([[1.0, 2.0, 3.0]], (7, 1))  # all-identical points
+    x2 = np.array([[5.0, -1.0, 2.0]])  # a single point
+    x = np.concatenate([x0, x1, x2])
+    y = np.r_[np.zeros(30, int), np.ones(7, int), [2]]
+    model = GaussianMixtureSet(3, 3, 6).fit(x, y)
+    for t in model.state_dict().values():
+        if t.is_floating_point():
+            assert not torch.isnan(t).any()
+    assert model.n_components_.tolist()[1:] == [1, 1]
+    c = model.classify(x)
+    assert torch.isfinite(c.distance).all() and not torch.isnan(c.posterior).any()
+    # the identical points and the single point are classified as their own action
+    assert (c.action[30:] == torch.tensor([1] * 7 + [2])).all()
+    # floor: var_floor * feature variance + 1e-6 * mean variance, on the diagonal
+    var = x.var(0)
+    np.testing.assert_allclose(model.var_floor_.numpy(), 1e-3 * var + 1e-6 * var.mean())
+    np.testing.assert_allclose(model.covariances_[2, 0].numpy(), np.diag(model.var_floor_))
+
+
+def test_all_data_identical_everywhere():
+    x = np.ones((5, 2))
+    model = GaussianMixtureSet(2, 2, 3).fit(x, np.array([0, 0, 0, 1, 1]))
+    c = model.classify(x)
+    assert torch.isfinite(c.distance).all() and (c.distance == 0).all()
+    torch.testing.assert_close(c.posterior[0], torch.tensor([0.6, 0.4], dtype=torch.float64))
+
+
+def test_float32_and_int_inputs_and_torch_labels():
+    x, y = _data()
+    ref = GaussianMixtureSet(3, 3, 4).fit(x.astype(np.float32).astype(np.float64), y)
+    m = GaussianMixtureSet(3, 3, 4).fit(torch.from_numpy(x.astype(np.float32)), torch.from_numpy(y))
+    for k, v in ref.state_dict().items():
+        assert torch.equal(v, m.state_dict()[k]), k
+    c = m.classify(np.round(x).astype(np.int32))
+    assert c.action.dtype == torch.long and c.distance.dtype == torch.float64
+
+
+def test_single_observation_path_matches_batch_path():
+    model, x, _ = _fitted()
+    probe = np.random.default_rng(5).normal(scale=4, size=(40, 3)) + 3
+    batch = model.classify(probe)
+    for i in range(len(probe)):
+        one = model.classify(probe[i : i + 1])
+        assert isinstance(one, Classification) and one.action.shape == (1,)
+        assert int(one.action[0]) == int(batch.action[i])
+        for f in ("confidence", "distance", "posterior"):
+            torch.testing.assert_close(getattr(one, f)[0], getattr(batch, f)[i])
+
+
+def test_aic_requires_both_or_neither_and_a_fit():
+    with pytest.raises(RuntimeError, match="fit"):
+        GaussianMixtureSet(2, 2).aic()
+    model, x, _ = _fitted()
+    with pytest.raises(ValueError, match="both"):
+        model.aic(x)
