@@ -268,3 +268,37 @@ def test_bad_config_is_a_clear_error():
     with pytest.raises(ValueError, match="n_features"):
         ConfidentTeacher(rare_regions_world(), lambda o, i: 0, model=GaussianMixtureSet(3, 5))
     torch.manual_seed(0)
+
+
+def test_refit_brings_a_snapshot_up_to_date_and_stop_reason_names_the_stop():
+    ct = make(rare_regions_world(), noninteractive=False, max_new=5)
+    ct.run(max_demonstrations=7)
+    assert ct.stop_reason == "max_demonstrations"
+    assert ct.n_demonstrations == 7
+    fitted_on = []
+    ct.on_refit = lambda model, n: fitted_on.append(n)
+    assert ct.refit() is True  # 2 demonstrations arrived since the refit at 5
+    assert fitted_on == [7]
+    assert ct.refit() is False  # nothing new: no work
+    x = np.stack([np.asarray(r.observation) for r in ct.records if r.teacher_action is not None])
+    y = np.array([r.teacher_action for r in ct.records if r.teacher_action is not None])
+    fresh = copy.deepcopy(ct.model).fit(x, y)
+    probe = torch.linspace(-3, 3, 50, dtype=torch.float64)[:, None].repeat(1, x.shape[1])
+    assert torch.equal(ct.model.classify(probe).action, fresh.classify(probe).action)
+    ct.run(max_steps=ct.n_steps + 3)
+    assert ct.stop_reason == "max_steps"
+
+
+def test_evaluate_policy_passes_info_to_a_teacher_style_policy():
+    env = rare_regions_world()
+    seen = []
+
+    def expert(obs, info):
+        seen.append(dict(info))
+        return oracle(env)(obs, info)
+
+    recs = evaluate_policy(expert, env, n_steps=5, seed=0, uses_info=True)
+    assert len(recs) == 5 and len(seen) == 5
+    assert all(r.executed_action == oracle(env)(np.asarray(r.observation), {}) for r in recs)
+    with pytest.raises(TypeError):
+        evaluate_policy(expert, env, n_steps=1, seed=0)  # a 2-argument policy needs uses_info

@@ -25,6 +25,15 @@ _EXPORTS = {
     "ConfidentTeacher": "torchcbl.teaching",
     "TeachingConfig": "torchcbl.teaching",
     "evaluate_policy": "torchcbl.teaching",
+    "GreedyPolicy": "torchcbl.teaching",
+    "TeacherError": "torchcbl.teaching",
+    "EnvError": "torchcbl.teaching",
+    "load_policy": "torchcbl.session",
+    "load_model": "torchcbl.session",
+    "load_records": "torchcbl.session",
+    "IncompatibleRunDirError": "torchcbl.session",
+    "TerminalTeacher": "torchcbl.human",
+    "TeachingInterrupted": "torchcbl.human",
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]

@@ -376,6 +376,9 @@ class ConfidentTeacher:
         self._episode_had_demo = False
         self._auto_steps_streak = 0
         self._auto_episodes_streak = 0
+        #: why the last :meth:`run` returned: "max_demonstrations", "max_steps",
+        #: "autonomous_steps", "autonomous_episodes", or None before any run.
+        self.stop_reason: str | None = None
         self._obs: np.ndarray | None = None
         self._raw_obs: Any = None
         self._info: dict = {}
@@ -580,6 +583,28 @@ class ConfidentTeacher:
             )
         return action
 
+    def refit(self) -> bool:
+        """Refit now on every recorded demonstration if any arrived since the last refit.
+
+        Use it before snapshotting the model at a stage (``copy.deepcopy(teacher.model)``) when
+        ``max_new > 1``, so the snapshot includes the latest demonstrations. Returns whether a
+        refit happened.
+        """
+        if self._new_since_refit == 0 or not self._demo_y:
+            return False
+        self._refit()
+        return True
+
+    @property
+    def autonomous_episodes_streak(self) -> int:
+        """Consecutive episodes, in the current :meth:`run`, with no request and success."""
+        return self._auto_episodes_streak
+
+    @property
+    def autonomous_steps_streak(self) -> int:
+        """Consecutive autonomous steps in the current :meth:`run`."""
+        return self._auto_steps_streak
+
     def _refit(self) -> None:
         x = np.stack(self._demo_x)
         y = np.asarray(self._demo_y, dtype=np.int64)
@@ -741,6 +766,7 @@ class ConfidentTeacher:
             )
         self._auto_steps_streak = 0
         self._auto_episodes_streak = 0
+        self.stop_reason = None
         from tqdm.auto import tqdm
 
         total = None if cfg.max_steps is None else max(cfg.max_steps - self.n_steps, 0)
@@ -750,8 +776,10 @@ class ConfidentTeacher:
                 if cfg.max_demonstrations is not None and (
                     self.n_demonstrations >= cfg.max_demonstrations
                 ):
+                    self.stop_reason = "max_demonstrations"
                     break
                 if cfg.max_steps is not None and self.n_steps >= cfg.max_steps:
+                    self.stop_reason = "max_steps"
                     break
                 self.step()
                 if self.progress:
@@ -762,11 +790,13 @@ class ConfidentTeacher:
                     cfg.autonomous_steps_to_stop is not None
                     and self._auto_steps_streak >= cfg.autonomous_steps_to_stop
                 ):
+                    self.stop_reason = "autonomous_steps"
                     break
                 if (
                     cfg.autonomous_episodes_to_stop is not None
                     and self._auto_episodes_streak >= cfg.autonomous_episodes_to_stop
                 ):
+                    self.stop_reason = "autonomous_episodes"
                     break
         finally:
             self.flush()
@@ -815,8 +845,13 @@ def evaluate_policy(
     n_steps: int | None = None,
     n_episodes: int | None = None,
     seed: int | None = None,
+    uses_info: bool = False,
 ) -> list[StepRecord]:
     """Run a policy greedily (never asking) and return one record per step.
+
+    ``policy`` is called as ``policy(observation)``; with ``uses_info=True`` it is called as a
+    teacher, ``policy(observation, info)`` with the info of the latest reset / step, so a
+    scripted expert can be evaluated exactly like a learned policy.
 
     Episodes that end are reset (the first reset with ``seed``, later ones continuing the env's
     RNG) until ``n_steps`` steps or ``n_episodes`` finished episodes, whichever comes first.
@@ -830,7 +865,7 @@ def evaluate_policy(
         if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
             raise ValueError(f"evaluate_policy: {name} must be an int >= 1, got {v!r}")
     records: list[StepRecord] = []
-    raw, _ = env.reset(seed=seed)
+    raw, info = env.reset(seed=seed)
     obs = _obs_array(raw, n_features, "env.reset")
     episode, done_episodes = 0, 0
     while (n_steps is None or len(records) < n_steps) and (
@@ -842,6 +877,8 @@ def evaluate_policy(
             answer: Any = int(c.action[0])
             confidence, distance = float(c.confidence[0]), float(c.distance[0])
             posterior = tuple(c.posterior[0].tolist())
+        elif uses_info:
+            answer = policy(np.array(raw, copy=True), dict(info or {}))
         else:
             answer = policy(np.array(raw, copy=True))
         action = _as_action(answer, n_actions)
@@ -876,7 +913,7 @@ def evaluate_policy(
         if term or trunc:
             done_episodes += 1
             episode += 1
-            raw, _ = env.reset()
+            raw, info = env.reset()
         else:
             raw = raw_next
         obs = _obs_array(raw, n_features, "env.step" if not (term or trunc) else "env.reset")
