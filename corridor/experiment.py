@@ -156,10 +156,7 @@ def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | No
     requests = [
         sum(1 for r in demos if r.phase == "confident" and r.episode == e) for e in conf_episodes
     ]
-    finished = bool(
-        teacher.config.autonomous_episodes_to_stop is not None
-        and teacher._auto_episodes_streak >= teacher.config.autonomous_episodes_to_stop
-    )
+    finished = teacher.stop_reason == "autonomous_episodes"
     teach_contacts = sum(1 for r in records if r.info.get("contact"))
     circuits_done = sum(1 for r in records if r.terminated)
     # The final policy, on its own, for eval_circuits circuits.
@@ -293,6 +290,7 @@ def run_experiment(
     summary["all_finished"] = all(r["finished"] for r in public)
     summary["all_eval_clean"] = all(r["eval_circuits_clean"] == r["eval_circuits"] for r in public)
     results = {
+        "domain": "corridor",
         "experiment": "corridor (Chernova & Veloso 2007, Section 5.1)",
         "config": config.to_dict(),
         "seeds": list(config.seeds),
@@ -316,6 +314,64 @@ def run_experiment(
     (run_dir / "summary.txt").write_text(format_summary(results) + "\n")
     _figures(config, first, run_dir)
     return results
+
+
+def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
+    """Redraw Figures 3 and 4 and the map of a run directory from its first seed's session.
+
+    Reads ``run_dir/sessions/seed<first>`` (demonstrations and latest model) and the config in
+    ``results``; returns the PNG paths written.
+    """
+    from torchcbl import evaluate_policy
+    from torchcbl.session import load_demonstrations, load_model
+    from torchcbl.teaching import GreedyPolicy
+
+    run_dir = Path(run_dir)
+    cfg = results["config"]
+    config = CorridorExperimentConfig(
+        map_name=cfg["map_name"],
+        seeds=tuple(cfg["seeds"]),
+        world=WorldConfig(**cfg["world"]),
+        max_std=cfg["max_std"],
+        eval_circuits=cfg["eval_circuits"],
+    )
+    seed = config.seeds[0]
+    session = run_dir / "sessions" / f"seed{seed}"
+    x, y = load_demonstrations(session)
+    model = load_model(session)
+    env = CorridorEnv(load_map(config.map_name), config.world)
+    ev = evaluate_policy(GreedyPolicy(model), env, n_episodes=1, seed=1_000_000 + seed)
+    first = {
+        "seed": seed,
+        "_demo_x": x.tolist(),
+        "_demo_y": y.tolist(),
+        "_model": {
+            k: model.state_dict()[k].tolist() for k in ("means_", "covariances_", "component_mask_")
+        },
+        "_path": [list(map(float, r.info["pose"][:2])) for r in ev],
+    }
+    _figures(config, first, run_dir)
+    return [run_dir / "figure3.png", run_dir / "figure4.png", run_dir / "map.png"]
+
+
+def evaluate_saved_policy(
+    session_dir: str | Path, *, n_steps: int = 1000, seed: int = 0, map_name: str = "figure2"
+) -> dict[str, Any]:
+    """Run the latest model of a corridor teaching session greedily for ``n_steps`` actions.
+
+    Returns circuits completed, circuits without wall contact, and wall contacts.
+    """
+    from torchcbl import evaluate_policy, load_policy
+
+    env = CorridorEnv(load_map(map_name), WorldConfig())
+    records = evaluate_policy(load_policy(session_dir), env, n_steps=n_steps, seed=seed)
+    ends = [r for r in records if r.terminated]
+    return {
+        "steps": len(records),
+        "circuits_completed": len(ends),
+        "circuits_clean": sum(1 for r in ends if r.info.get("is_success")),
+        "wall_contacts": sum(1 for r in records if r.info.get("contact")),
+    }
 
 
 def _json_default(o: Any) -> Any:

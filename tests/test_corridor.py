@@ -271,3 +271,13 @@ def test_tiny_experiment_writes_results(tmp_path):
     assert "demonstrations in all" in format_summary(res)
     with pytest.raises(FileExistsError):
         run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
+    # The run directory is enough to redraw the figures and to evaluate a saved policy.
+    from corridor.experiment import evaluate_saved_policy, plot_results
+
+    for name in ("figure3.png", "figure4.png"):
+        (tmp_path / "run" / name).unlink()
+    written = plot_results(data, tmp_path / "run")
+    assert all(p.stat().st_size > 1000 for p in written)
+    report = evaluate_saved_policy(tmp_path / "run" / "sessions" / "seed0", n_steps=60, seed=3)
+    assert report["steps"] == 60 and report["circuits_completed"] >= 1
+    assert report["circuits_clean"] == report["circuits_completed"]
