@@ -33,7 +33,7 @@ _EXPORTS = {
     "load_records": "torchcbl.session",
     "IncompatibleRunDirError": "torchcbl.session",
     "TerminalTeacher": "torchcbl.human",
-    "TeachingInterrupted": "torchcbl.human",
+    "TeachingInterrupted": "torchcbl.teaching",
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]

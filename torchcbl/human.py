@@ -29,6 +29,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from torchcbl.teaching import TeachingInterrupted
+
 try:  # POSIX only; elsewhere the teacher always reads lines.
     import termios
 except ImportError:  # pragma: no cover - exercised on Windows only
@@ -53,14 +55,6 @@ _ESC = "\x1b"
 # Seconds to wait for the rest of an escape sequence after ESC (arrow keys send 3 bytes).
 _ESCAPE_WAIT = 0.05
 _CLEAR_SCREEN = "\x1b[H\x1b[2J"
-
-
-class TeachingInterrupted(Exception):
-    """The person asked to stop teaching ('q', Ctrl-C, or the input was closed).
-
-    Raised from inside a teacher call. Demonstrations recorded before the call are kept; the
-    decision being asked about is not answered.
-    """
 
 
 def _normalize_key(key: str) -> str:

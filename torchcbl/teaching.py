@@ -88,6 +88,15 @@ class TeacherError(RuntimeError):
     """The teacher raised or gave an invalid action; nothing was recorded for that step."""
 
 
+class TeachingInterrupted(Exception):
+    """The teacher asked to stop teaching (a person pressed 'q' or Ctrl-C, input closed).
+
+    A teacher raises it from inside its call; the loop lets it through unwrapped, after
+    committing what was recorded: every demonstration before the interrupted decision is kept,
+    the decision being asked about is not answered, and the session can be resumed.
+    """
+
+
 class EnvError(RuntimeError):
     """The environment raised or returned a non-finite / malformed observation or reward."""
 
@@ -569,6 +578,8 @@ class ConfidentTeacher:
         step = len(self.records)
         try:
             answer = self.teacher(obs, info)
+        except TeachingInterrupted:
+            raise
         except Exception as exc:
             raise TeacherError(
                 f"the teacher raised {type(exc).__name__}: {exc} (step {step}). Nothing was "
