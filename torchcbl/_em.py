@@ -231,23 +231,24 @@ def kmeans_init(
         centers[:, :, j] = cj.squeeze(2)
         d2 = torch.minimum(d2, ((x.unsqueeze(1) - cj) ** 2).sum(-1))
     pad = torch.where(cmask > 0, 0.0, math.inf).to(x.dtype)  # [G, C, K]
+    base = (torch.arange(g * c, device=x.device) * k).reshape(g, 1, c)  # slot offsets
+    xw = (x * pmask.unsqueeze(-1)).unsqueeze(2).expand(g, n, c, d).reshape(-1, d)
+    pw = pmask.unsqueeze(-1).expand(g, n, c).reshape(-1)
     labels = None
-    resp = x.new_zeros(g, n, c, k)
     for _ in range(max(n_lloyd, 1)):
         c2 = ((centers * centers).sum(-1) + pad).reshape(g, 1, c * k)
         dist = torch.baddbmm(c2, x, centers.reshape(g, c * k, d).transpose(1, 2), alpha=-2.0)
         new_labels = dist.reshape(g, n, c, k).argmin(-1)  # [G, N, C]
-        if labels is not None and bool(torch.equal(new_labels, labels)):
+        if labels is not None and torch.equal(new_labels, labels):
             break
         labels = new_labels
-        resp = torch.nn.functional.one_hot(labels, k).to(x.dtype)
-        resp *= pmask.reshape(g, n, 1, 1)
-        counts = resp.sum(1)  # [G, C, K]
-        sums = torch.bmm(resp.reshape(g, n, c * k).transpose(1, 2), x).reshape(g, c, k, d)
-        centers = torch.where(
-            counts.unsqueeze(-1) > 0, sums / counts.clamp_min(1.0).unsqueeze(-1), centers
-        )
-    return resp
+        flat = (labels + base).reshape(-1)
+        counts = torch.zeros(g * c * k, dtype=x.dtype, device=x.device).index_add_(0, flat, pw)
+        sums = torch.zeros(g * c * k, d, dtype=x.dtype, device=x.device).index_add_(0, flat, xw)
+        counts = counts.reshape(g, c, k, 1)
+        centers = torch.where(counts > 0, sums.reshape(g, c, k, d) / counts.clamp_min(1.0), centers)
+    resp = torch.nn.functional.one_hot(labels, k).to(x.dtype)
+    return resp.mul_(pmask.reshape(g, n, 1, 1))
 
 
 class EMResult(NamedTuple):
@@ -307,8 +308,9 @@ def run_em(
             pos = torch.from_numpy(np.flatnonzero(rec)).to(dev)
             ids = torch.from_numpy(slot_id[rec]).to(dev)
             gc = params.weights.shape[0] * params.weights.shape[1]
+            k_now = params.weights.shape[-1]
             for o, p in zip(out, params, strict=True):
-                o[ids] = p.reshape(gc, *p.shape[2:]).index_select(0, pos)
+                o[ids, :k_now] = p.reshape(gc, *p.shape[2:]).index_select(0, pos)
             n_iter[ids] = it
             converged[ids] = torch.from_numpy(done.cpu().numpy()[rec]).to(dev)
         remaining = real & ~stop
@@ -332,7 +334,13 @@ def run_em(
                 for p in params
             )
         )
-        cm = cm.reshape(-1, k).index_select(0, tk).reshape(g_new, width, k)
+        k_now = cm.shape[-1]
+        cm = cm.reshape(-1, k_now).index_select(0, tk).reshape(g_new, width, k_now)
+        # the component axis shrinks to the largest count still running
+        k_new = int(cm.sum(-1).max())
+        if k_new < k_now:
+            cm = cm[..., :k_new].contiguous()
+            params = Params(*(p[:, :, :k_new].contiguous() for p in params))
         prev = prev.reshape(-1).index_select(0, tk).reshape(g_new, width)
         n_now = lse.shape[1]
         lse = lse.transpose(1, 2).reshape(-1, n_now).index_select(0, tk)
