@@ -1,0 +1,108 @@
+"""The command line: help texts, and a person teaching the driving agent through a terminal."""
+
+from __future__ import annotations
+
+import os
+import pty
+import re
+import select
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from torchcbl.cli import main
+from torchcbl.session import load_records
+
+BIN = Path(sys.executable).parent / "torchcbl"
+
+
+@pytest.mark.parametrize("command", ["reproduce", "evaluate", "replay", "plot", "teach"])
+def test_every_command_explains_itself(command, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: torchcbl " + command)
+    assert len(out.splitlines()) > 4
+
+
+def test_plot_refuses_a_directory_without_results(tmp_path):
+    with pytest.raises(SystemExit, match="results.json"):
+        main(["plot", str(tmp_path)])
+
+
+_LINE = re.compile(r"lane: \S+ \((\d)\); nearest car: (.*)")
+
+
+def _person(screen: str) -> str:
+    """A careful driver who only reads the text view: leave a lane with a car close ahead,
+    preferring to pass on the left; otherwise keep the lane."""
+    lane_s, cars = _LINE.findall(screen.replace("\r", ""))[-1]
+    lane = int(lane_s)
+    dist = {1: None, 2: None, 3: None}
+    for part in cars.split(", "):
+        name, _, value = part.partition(" ")
+        idx = {"right": 1, "middle": 2, "left": 3}[name]
+        dist[idx] = None if value == "none" else float(value.split()[0])
+
+    def clear(target: int) -> bool:
+        d = dist.get(target)
+        return target in (0, 4) or d is None or not -8.0 <= d <= 20.0
+
+    ahead = dist.get(lane)
+    if ahead is not None and 0.0 <= ahead <= 15.0:
+        if lane < 4 and clear(lane + 1):
+            return "a"
+        if lane > 0 and clear(lane - 1):
+            return "d"
+    return "w"
+
+
+def test_a_person_teaches_the_driving_agent_from_a_terminal_and_it_asks_less(tmp_path):
+    """`torchcbl teach driving` in a real pseudo-terminal, answered key by key from the screen."""
+    run_dir = tmp_path / "session"
+    master, slave = pty.openpty()
+    env = {**os.environ, "TERM": "dumb", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen(
+        [str(BIN), "teach", "driving", "--run-dir", str(run_dir), "--steps", "800"]
+        + ["--skip-noninteractive", "--seed", "3"],
+        stdin=slave,
+        stdout=slave,
+        stderr=slave,
+        env=env,
+        start_new_session=True,
+    )
+    os.close(slave)
+    screen, answered, deadline = "", 0, time.monotonic() + 240
+    try:
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([master], [], [], 1.0)
+            if ready:
+                try:
+                    chunk = os.read(master, 65536).decode(errors="replace")
+                except OSError:  # the child closed the terminal
+                    break
+                screen += chunk
+                if screen.rstrip().endswith("action?"):
+                    os.write(master, _person(screen).encode())
+                    answered += 1
+                    screen = screen[-2000:]
+            elif proc.poll() is not None:
+                break
+        assert proc.wait(timeout=30) == 0, screen[-2000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        os.close(master)
+    records = load_records(run_dir)
+    assert len(records) == 800
+    asked = [r.teacher_action is not None for r in records]
+    assert sum(asked) == answered  # every request reached the person, and only those
+    per_100 = [sum(asked[i : i + 100]) for i in range(0, 800, 100)]
+    assert per_100[0] >= 90, per_100  # at first it asks nearly every step
+    # and then less and less often (seed 3 gives 93, 80, 77, 58, 82, 53, 67, 50)
+    assert sum(per_100[-2:]) < 0.75 * sum(per_100[:2]), per_100
+    assert "saved in" in screen
