@@ -1,8 +1,11 @@
-"""Drawing the corridor world with matplotlib (Agg): map, route, robot, sensor rays, path.
+"""Drawing the corridor world with matplotlib: map, route, robot, sensor rays, path.
 
 Nothing here simulates; the functions read a :class:`corridor.world.CorridorWorld` or a
 :class:`corridor.maps.CorridorMap`. :func:`render_rgb` returns an RGB array (what
 ``CorridorEnv.render`` returns); :func:`save_png` writes one (used by experiments, never by envs).
+Figures are built with :class:`matplotlib.figure.Figure` and drawn on an Agg canvas, never through
+pyplot, so importing this module leaves the caller's matplotlib backend alone (a notebook keeps
+its inline plots).
 """
 
 from __future__ import annotations
@@ -11,16 +14,14 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.image import imsave
+from matplotlib.patches import Circle
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.axes import Axes  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-
-from corridor.maps import CorridorMap  # noqa: E402
-from corridor.world import SENSOR_NAMES, CorridorWorld  # noqa: E402
+from corridor.maps import CorridorMap
+from corridor.world import SENSOR_NAMES, CorridorWorld
 
 __all__ = ["draw_map", "draw_robot", "map_figure", "render_rgb", "save_png"]
 
@@ -63,7 +64,7 @@ def draw_robot(
     default: the noise-free ranges)."""
     x, y, h = world.pose
     r = world.config.robot_radius
-    ax.add_patch(plt.Circle((x, y), r, facecolor="tab:red", edgecolor="black", alpha=0.8))
+    ax.add_patch(Circle((x, y), r, facecolor="tab:red", edgecolor="black", alpha=0.8))
     ax.plot([x, x + r * math.cos(h)], [y, y + r * math.sin(h)], color="white", linewidth=2)
     ranges = world.true_ranges() if readings is None else np.asarray(readings, dtype=float)
     for name, offset, d in zip(SENSOR_NAMES, _ANGLES, ranges, strict=True):
@@ -120,5 +121,5 @@ def save_png(fig_or_rgb: Figure | np.ndarray, path: str | Path) -> Path:
         FigureCanvasAgg(fig_or_rgb)
         fig_or_rgb.savefig(path)
     else:
-        plt.imsave(path, np.asarray(fig_or_rgb))
+        imsave(path, np.asarray(fig_or_rgb))
     return path
