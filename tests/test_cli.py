@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import pty
 import re
@@ -106,3 +107,33 @@ def test_a_person_teaches_the_driving_agent_from_a_terminal_and_it_asks_less(tmp
     # and then less and less often (seed 3 gives 93, 80, 77, 58, 82, 53, 67, 50)
     assert sum(per_100[-2:]) < 0.75 * sum(per_100[:2]), per_100
     assert "saved in" in screen
+
+
+def test_reproduce_corridor_writes_a_summary_then_plot_and_evaluate_read_it(tmp_path, capsys):
+    out = tmp_path / "runs"
+    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
+    assert main([*argv, "--out", str(out)]) == 0
+    summary = (out / "summary.md").read_text()
+    assert "## corridor" in summary and "demonstrations in all" in summary
+    results = out / "corridor" / "results.json"
+    assert results.exists() and (out / "corridor" / "figure3.png").exists()
+    # plot redraws from the run directory alone
+    (out / "corridor" / "figure4.png").unlink()
+    assert main(["plot", str(out / "corridor")]) == 0
+    assert (out / "corridor" / "figure4.png").stat().st_size > 1000
+    # evaluate a saved policy (a teaching session directory)
+    capsys.readouterr()
+    session = out / "corridor" / "sessions" / "seed0"
+    assert main(["evaluate", str(session), "--domain", "corridor", "--steps", "60"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["steps"] == 60 and report["circuits_clean"] == report["circuits_completed"] >= 1
+
+
+def test_reproduce_never_overwrites_a_run_directory(tmp_path):
+    from torchcbl.cli import _fresh_dir
+
+    first = _fresh_dir(tmp_path / "r")
+    (first / "results.json").write_text("{}")
+    second = _fresh_dir(tmp_path / "r")
+    assert first == tmp_path / "r" and second == tmp_path / "r-2" and second.is_dir()
+    assert (first / "results.json").read_text() == "{}"

@@ -36,8 +36,7 @@ def _experiment_module(domain: str) -> Any:
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     domains = list(_DOMAINS) if args.domain == "all" else [args.domain]
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _fresh_dir(Path(args.out))
     summaries: list[str] = []
     for domain in domains:
         module = _experiment_module(domain)
@@ -63,6 +62,17 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     (out / "summary.md").write_text(text)
     print(f"\nSummary written to {out / 'summary.md'}")
     return 0
+
+
+def _fresh_dir(out: Path) -> Path:
+    """``out`` if it is new or empty, else the first free ``out-2``, ``out-3``, ... (a run
+    directory is never overwritten)."""
+    candidate, n = out, 1
+    while candidate.exists() and any(candidate.iterdir()):
+        n += 1
+        candidate = out.with_name(f"{out.name}-{n}")
+    candidate.mkdir(parents=True, exist_ok=True)
+    return candidate
 
 
 def _replace_seeds(config: Any, n_seeds: int) -> Any:
@@ -202,7 +212,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--full", action="store_true", help="the paper's full sizes (slow)")
     p.add_argument("--seeds", type=int, default=None, help="number of seeds (default: config's)")
     p.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
-    p.add_argument("--out", default="runs/reproduce", help="output directory")
+    p.add_argument(
+        "--out",
+        default="runs/reproduce",
+        help="output directory (default runs/reproduce; never overwritten: -2, -3, ... added)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_reproduce)
 
