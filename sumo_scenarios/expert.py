@@ -1,17 +1,24 @@
 """A scripted driving expert with human-like inconsistency (the teacher of Section 5.2).
 
-The expert prefers the left lane (SUMO lane 3), passes slower cars on the left shoulder (lane 4),
-or in the middle lane (2) when that lane is wide open, and uses the right lane and right shoulder
-only to escape when the lanes to its left are blocked. It never lets a car get within
-``min_gap_m`` of it in its own lane (so, as in the paper's Figure 7, no demonstration has a car
-within +-10 m in the ego's lane).
+Preferences (consistent, as a human's are): the expert's home is the left lane (SUMO lane 3).
+When a slower car ahead closes in, it passes in the middle lane (2) if that lane is visibly free
+(no car within ``[-min_gap_m, 25]`` m, the sensing range), otherwise on the left shoulder (4);
+once the passed car is behind it returns home. From the right lane or shoulder, where it only
+ends up to escape when everything to its left is blocked, it drifts back left as soon as it is
+safe. It never lets a car get within ``min_gap_m`` of it in its own lane (so, as in the paper's
+Figure 7, no demonstration has a car within +-10 m in the ego's lane).
 
-Human-like inconsistency: a lane change that is allowed but not yet necessary happens with
-probability ``hazard`` per timestep (a seeded RNG), so its exact moment varies inside the window
-where it is safe; it is forced at the last safe timestep.
+Human-like inconsistency: the exact MOMENT of a lane change varies inside the window where it is
+safe. For every event (a car closing in ahead, a passed car falling behind) the expert draws a
+fresh uniform ``u`` (seeded RNG) and acts when the gap crosses a threshold placed by ``u``
+inside the safe window: it starts a change when the car ahead is between the last safe gap and
+``change_far_m``; it returns home when the passed car is ``min_gap_m`` to
+``min_gap_m + return_spread_m`` behind. A per-event threshold, unlike a constant per-step
+probability, keeps the decision learnable: the share of demonstrations that change lane grows
+with the urgency, so the majority label flips in the middle of the window instead of never.
 
 It reads privileged information from ``info`` (every car's exact relative position and its lane's
-closing speed); everything it decides on is also visible, up to clipping, in the observation.
+closing speed); what it decides on is also visible, up to clipping, in the observation.
 """
 
 from __future__ import annotations
@@ -21,8 +28,11 @@ from typing import Any
 
 import numpy as np
 
-from sumo_scenarios.env import LEFT, RIGHT, STAY
+from sumo_scenarios.env import LEFT, RIGHT, SENSE_RANGE_M, STAY
 from sumo_scenarios.scenarios import N_LANES
+
+HOME_LANE = 3
+"""The expert's preferred lane (the left normal lane)."""
 
 
 @dataclass(frozen=True)
@@ -31,27 +41,25 @@ class ExpertConfig:
 
     Attributes:
         min_gap_m: never have a car closer than this in the ego's own lane.
-        open_m: a car ahead in the ego's lane closer than this opens the window to change lane.
+        change_far_m: the farthest gap to the car ahead at which a change may start (the window
+            of a change runs from here down to the last safe gap).
         enter_ahead_m: enter a lane only if the nearest car ahead in it will be at least this far.
-        clear_m: the middle lane counts as "wide open" (usable for passing) with no car within
-            ``[-min_gap_m, clear_m]`` (beyond the 25 m sensing range: privileged look-ahead).
-        middle_share: probability of passing in a wide-open middle lane instead of on the left
-            shoulder.
-        hazard: probability per timestep of making an allowed, not yet forced, lane change.
+        return_spread_m: a passed car must be ``min_gap_m`` plus up to this much (drawn per
+            event) behind before the expert moves back into its lane.
+        middle_pass: pass in a visibly free middle lane (else always on the left shoulder).
     """
 
     min_gap_m: float = 10.0
-    open_m: float = 22.0
+    change_far_m: float = 24.0
     enter_ahead_m: float = 16.0
-    clear_m: float = 45.0
-    middle_share: float = 0.5
-    hazard: float = 0.4
+    return_spread_m: float = 4.0
+    middle_pass: bool = False
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.hazard <= 1.0:
-            raise ValueError("hazard must lie in (0, 1]")
-        if not 5.0 <= self.min_gap_m < self.enter_ahead_m <= self.open_m + 10.0:
-            raise ValueError("need 5 <= min_gap_m < enter_ahead_m <= open_m + 10")
+        if not 5.0 <= self.min_gap_m < self.enter_ahead_m <= self.change_far_m <= SENSE_RANGE_M:
+            raise ValueError("need 5 <= min_gap_m < enter_ahead_m <= change_far_m <= 25")
+        if self.return_spread_m < 0:
+            raise ValueError("return_spread_m must be >= 0")
 
 
 class ScriptedExpert:
@@ -65,6 +73,11 @@ class ScriptedExpert:
     def __init__(self, config: ExpertConfig | None = None, *, seed: int = 0) -> None:
         self.config = config or ExpertConfig()
         self._rng = np.random.default_rng(seed)
+        self._u = float(self._rng.random())
+        self._last: tuple[int, int | None, float] | None = None  # (lane, t, gap ahead)
+
+    def _new_event(self) -> None:
+        self._u = float(self._rng.random())
 
     def __call__(self, observation: np.ndarray, info: dict[str, Any]) -> int:
         try:
@@ -75,6 +88,7 @@ class ScriptedExpert:
             dt = float(info["step_length_s"])
         except KeyError as err:
             raise ValueError(f"the expert needs DrivingEnv's info, missing {err}") from None
+        t = info.get("t")
         cfg = self.config
 
         def cars(lx: int) -> tuple[np.ndarray, float]:
@@ -82,40 +96,49 @@ class ScriptedExpert:
                 return np.zeros(0), 0.0
             return rel[car_lane == lx], closing[lx] * dt
 
-        def can_enter(lx: int, ahead: float) -> bool:
+        def can_enter(lx: int, ahead: float, behind: float = cfg.min_gap_m) -> bool:
             if not 0 <= lx < N_LANES:
                 return False
             r, c = cars(lx)
             nxt = r - c  # where the cars will be, relative to us, after this step
-            return not np.any((nxt > -cfg.min_gap_m) & (nxt < ahead))
+            return not np.any((nxt > -behind) & (nxt < ahead))
 
         r, c = cars(lane)
         ahead = r[r > 0]
         gap = float(ahead.min()) if ahead.size else np.inf
-        forced = gap - 2 * c < cfg.min_gap_m  # staying now leaves no safe step after this one
-        threatened = gap <= cfg.open_m
-        chance = self._rng.random() < cfg.hazard
+        # A new event: another lane, a gap in the decisions, or a new car ahead.
+        last = self._last
+        if (
+            last is None
+            or last[0] != lane
+            or t is None
+            or last[1] is None
+            or t != last[1] + 1
+            or gap > last[2] + 1.0
+        ):
+            self._new_event()
+        self._last = (lane, t, gap)
 
-        if threatened and (forced or chance):
-            if lane == 3 and chance and self._rng.random() < cfg.middle_share:
-                if can_enter(2, cfg.clear_m):
-                    return RIGHT  # the middle lane is wide open: pass there this time
-            if can_enter(lane + 1, cfg.enter_ahead_m):
-                return LEFT
-            if can_enter(lane - 1, cfg.enter_ahead_m):
-                return RIGHT
-            if forced and can_enter(lane - 1, cfg.min_gap_m):
-                return RIGHT
-            if forced and can_enter(lane + 1, cfg.min_gap_m):
-                return LEFT
+        last_safe = cfg.min_gap_m + 2 * c  # staying past this gap leaves no safe step
+        forced = gap < last_safe
+        trigger = last_safe + self._u * max(cfg.change_far_m - last_safe, 0.0)
+        if gap <= trigger:
+            order = [lane + 1, lane - 1]
+            if lane == HOME_LANE and cfg.middle_pass and can_enter(2, SENSE_RANGE_M):
+                order = [2, 4]
+            for lx in order:
+                if can_enter(lx, cfg.enter_ahead_m):
+                    return LEFT if lx > lane else RIGHT
+            if forced:
+                for lx in order:
+                    if can_enter(lx, cfg.min_gap_m):
+                        return LEFT if lx > lane else RIGHT
             return STAY
-        if threatened:
+        if lane == HOME_LANE:
             return STAY
-        # Not threatened: drift towards the preferred left lane when it is safe to.
-        if lane == 4:
-            if chance and can_enter(3, cfg.open_m):
-                return RIGHT
-            return STAY
-        if lane < 3 and chance and can_enter(lane + 1, cfg.enter_ahead_m):
-            return LEFT
+        # Away from home and not pressed: head home once the lane there is clear far enough.
+        target = lane - 1 if lane > HOME_LANE else lane + 1
+        behind = cfg.min_gap_m + self._u * cfg.return_spread_m
+        if can_enter(target, cfg.enter_ahead_m, behind):
+            return LEFT if target > lane else RIGHT
         return STAY

@@ -169,6 +169,14 @@ class HighwaySim:
         self.car_ids = ids
         self.car_lane = np.asarray(lanes, dtype=np.int64)
         self.car_pos = np.asarray(pos, dtype=np.float64)
+        # Per lane, where the frontmost car was placed: new cars always go one fresh spacing
+        # ahead of it, so every lane stays a stationary stream at its own density.
+        self._front = {
+            lane: float(self.car_pos[self.car_lane == lane].max())
+            if np.any(self.car_lane == lane)
+            else x0 + self.scenario.ahead_m
+            for lane in TRAFFIC_LANES
+        }
         self.ego_pos = x0
         self.ego_lane = ego_lane
         self.prev_lane = ego_lane
@@ -224,7 +232,7 @@ class HighwaySim:
         Afterwards: cars more than ``behind_m`` behind the ego are recycled (remove + add +
         moveTo, which also restores SUMO's lane order) to the front of their lane at a fresh
         spacing, and when the ego nears the end of the edge every vehicle is moved back by the
-        same distance. No car is ever removed for good; contact never removes anything.
+        same distance. Contact never removes anything.
         """
         if not 0 <= target_lane < N_LANES:
             raise ValueError(f"target_lane must lie in [0, {N_LANES - 1}], got {target_lane}")
@@ -243,20 +251,47 @@ class HighwaySim:
             pos[i] = get(cid)
         self.contact = self._contact()
         behind = self.ego_pos - self.scenario.behind_m
-        if pos.min() < behind:
-            self._recycle(behind)
+        horizon = self.ego_pos + self.scenario.ahead_m
+        for lane in TRAFFIC_LANES:  # fronts move with their lane's speed
+            self._front[lane] += self._lane_speed[lane] * self.config.step_length_s
+        if (pos.size and pos.min() < behind) or min(self._front.values()) < horizon:
+            self._recycle(behind, horizon)
         if self.ego_pos > self._road_length - self.scenario.ahead_m - self.config.shift_margin_m:
             self._shift_back()
 
-    def _recycle(self, behind: float) -> None:
-        for i in np.flatnonzero(self.car_pos < behind):
-            lane = int(self.car_lane[i])
-            front = float(self.car_pos[self.car_lane == lane].max())
-            x = front + self._spacing(lane)
+    def _recycle(self, behind: float, horizon: float) -> None:
+        """Keep every lane filled from ``behind`` to ``horizon`` at its own density.
+
+        Cars that fell more than ``behind_m`` behind the ego are taken off; each lane whose
+        frontmost placed car is less than ``ahead_m`` ahead gets new cars, one fresh spacing
+        after another, reusing the cars taken off (remove + add + moveTo, which also restores
+        SUMO's lane order). Cars not needed again are removed for good. New cars therefore
+        always enter far ahead of the ego, never next to it.
+        """
+        free = [int(i) for i in np.flatnonzero(self.car_pos < behind)]
+        keep = np.ones(len(self.car_ids), dtype=bool)
+        for i in free:
             libsumo.vehicle.remove(self.car_ids[i])
-            self.car_ids[i] = self._add_car(lane, x)
-            self.car_pos[i] = x
-            self.n_recycled += 1
+            keep[i] = False
+        new_ids, new_lane, new_pos = [], [], []
+        for lane in TRAFFIC_LANES:
+            while self._front[lane] < horizon:
+                x = self._front[lane] + self._spacing(lane)
+                self._front[lane] = x
+                cid = self._add_car(lane, x)
+                self.n_recycled += 1
+                if free:
+                    i = free.pop(0)
+                    self.car_ids[i], self.car_lane[i], self.car_pos[i] = cid, lane, x
+                    keep[i] = True
+                else:
+                    new_ids.append(cid)
+                    new_lane.append(lane)
+                    new_pos.append(x)
+        if not keep.all() or new_ids:
+            self.car_ids = [c for c, k in zip(self.car_ids, keep, strict=True) if k] + new_ids
+            self.car_lane = np.concatenate([self.car_lane[keep], np.asarray(new_lane, np.int64)])
+            self.car_pos = np.concatenate([self.car_pos[keep], np.asarray(new_pos, np.float64)])
 
     def _shift_back(self) -> None:
         shift = self.ego_pos - self.config.ego_start_m
@@ -266,6 +301,8 @@ class HighwaySim:
             libsumo.vehicle.moveTo(cid, f"{EDGE}_{lane}", float(self.car_pos[i]) - shift)
         self.ego_pos -= shift
         self.car_pos -= shift
+        for lane in TRAFFIC_LANES:
+            self._front[lane] -= shift
         self.n_shifts += 1
 
     def _contact(self) -> bool:
