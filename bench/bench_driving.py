@@ -10,6 +10,7 @@ import json
 import time
 
 import numpy as np
+import torch
 
 from sumo_scenarios.env import DrivingEnv
 from sumo_scenarios.expert import ScriptedExpert
@@ -18,6 +19,7 @@ from torchcbl.teaching import GreedyPolicy
 
 
 def main(n_demos: int = 600, n_steps: int = 3000) -> dict[str, float]:
+    torch.set_num_threads(1)  # small fits on a shared 2-core box: 2 threads are far slower
     env = DrivingEnv(scenario="train")
     try:
         expert = ScriptedExpert(seed=0)

@@ -10,8 +10,10 @@ Per seed (each in its own process: libsumo holds one simulation per process):
 - arm (b): the same expert, seed and road, non-interactive only, snapshotted at
   ``arm_b_stages`` demonstrations.
 - after the training env is closed, every snapshot, the always-straight policy and the expert
-  drive ``eval_steps`` timesteps on the held-out ``eval`` scenario (segment seed = the run seed;
-  the ``eval`` scenario's base seed is never used in training).
+  drive ``eval_steps`` timesteps on ONE held-out road segment, the same for every policy and
+  every run seed (``eval`` scenario, episode seed ``eval_segment``; the ``eval`` scenario's base
+  seed is never used in training). Run seeds vary the training traffic, the expert's timing
+  randomness and the GMM initialisation.
 
 ``run_experiment`` writes into ``run_dir``: ``results.json`` (every number, mean and sd over
 seeds, per-seed values, config, versions), ``fig8_lanes_collisions.png``,
@@ -78,7 +80,7 @@ class DrivingExperimentConfig:
     stage_every: int = 50
     burst: int = 10
     arm_b_stages: tuple[int, ...] = (600, 700, 800, 900, 1000)
-    max_new: int = 10
+    max_new: int = 5
     max_components: int = 10
     max_std: float = 2.0
     train_episode_steps: int = 1000
@@ -213,6 +215,7 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
             if label in snapshots:
                 entry["demonstrations"] = demos_at[label]
                 entry["components"] = snapshots[label].n_components_.tolist()
+                entry["fitted_on"] = int(snapshots[label].n_points_.sum())
             stages[label] = entry
             if label == "a_end_noninteractive":
                 trace = {"distance": [r.distance for r in recs], "contact": contacts}

@@ -250,3 +250,13 @@ def test_metrics():
     assert np.allclose(metrics.lane_distribution([0, 4, 4, 2]), [0.25, 0, 0.25, 0, 0.5])
     with pytest.raises(ValueError):
         metrics.lane_distribution([5])
+
+
+def test_rebuilding_the_network_reproduces_the_shipped_files(tmp_path):
+    from sumo_scenarios.build_network import build
+
+    net = build(tmp_path)
+    assert net.read_bytes() == data_path("road.net.xml").read_bytes()
+    for name in ("road.nod.xml", "road.edg.xml"):
+        shipped = data_path("road.net.xml").parent / "src" / name
+        assert (tmp_path / "src" / name).read_bytes() == shipped.read_bytes()
