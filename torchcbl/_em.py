@@ -125,7 +125,7 @@ def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
     means = stats[..., du : du + d]
     cov = stats[..., full].reshape(g, c, k, d, d)
     cov -= means.unsqueeze(-1) * means.unsqueeze(-2)
-    cov += torch.diag_embed(floor)
+    cov.diagonal(dim1=-2, dim2=-1).add_(floor)
     weights = nk * cmask
     weights /= weights.sum(-1, keepdim=True)
     chol, _ = torch.linalg.cholesky_ex(cov)
@@ -155,7 +155,7 @@ def e_step(
     n = z.shape[1]
     wlp = torch.bmm(z, coef.reshape(g, c * k, q).transpose(1, 2)).reshape(g, n, c, k)
     if shift is not None:
-        e = (wlp - shift.unsqueeze(-1)).clamp_(_CLAMP, 600.0).exp_()
+        e = wlp.sub_(shift.unsqueeze(-1)).clamp_(_CLAMP, 600.0).exp_()
         s = e.sum(-1, keepdim=True)
         ls = torch.log(s)
         lo, hi = torch.aminmax(ls)
@@ -163,6 +163,7 @@ def e_step(
             lse = ls.squeeze(-1) + shift
             loglik = (lse * pmask.unsqueeze(-1)).sum(1)
             return loglik, e.mul_(pmask.reshape(g, n, 1, 1) / s), lse
+        wlp = torch.bmm(z, coef.reshape(g, c * k, q).transpose(1, 2)).reshape(g, n, c, k)
     mx = wlp.amax(-1, keepdim=True)
     e = wlp.sub_(mx).clamp_min_(_CLAMP).exp_()
     s = e.sum(-1, keepdim=True)
