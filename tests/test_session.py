@@ -39,15 +39,6 @@ from torchcbl.teaching import EnvError, TeacherError
 TESTS = Path(__file__).parent
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """Small EM fits are ~50x slower with 2 threads on a loaded 2-core machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def make(env, run_dir, teacher=None, **cfg):
     return ConfidentTeacher(
         env,

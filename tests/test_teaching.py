@@ -26,15 +26,6 @@ from torchcbl import (
 from torchcbl.teaching import GreedyPolicy
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """Small EM fits are ~50x slower with 2 threads on a loaded 2-core machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def make(env, **cfg):
     kw = {k: cfg.pop(k) for k in ("rule", "model", "seed", "on_refit", "on_step") if k in cfg}
     return ConfidentTeacher(env, oracle(env), config=TeachingConfig(**cfg), progress=False, **kw)
