@@ -68,6 +68,9 @@ class DrivingExperimentConfig:
         train_episode_steps: training episodes are this long before the road is redrawn.
         eval_segment: the ONE held-out road segment (episode seed of the ``eval`` scenario)
             every policy of every run seed is evaluated on (the paper: "the same road segment").
+        extra_eval_segments: further held-out segments every policy also drives, for a
+            secondary average that is less tied to one road (the acceptance figures and plots
+            use ``eval_segment`` alone, the paper's protocol).
         criterion: the GMM's model-selection criterion (``aic`` or ``bic``).
     """
 
@@ -85,6 +88,7 @@ class DrivingExperimentConfig:
     max_std: float = 2.0
     train_episode_steps: int = 1000
     eval_segment: int = 0
+    extra_eval_segments: tuple[int, ...] = (1, 2, 3)
     criterion: str = "aic"
 
     def __post_init__(self) -> None:
@@ -94,6 +98,11 @@ class DrivingExperimentConfig:
             raise ValueError("confident_demos must be a multiple of stage_every")
         if min(self.eval_steps, self.max_new, self.burst, self.stage_every) < 1:
             raise ValueError("eval_steps, max_new, burst and stage_every must be positive")
+        if (
+            self.eval_segment in self.extra_eval_segments
+            or min((self.eval_segment, *self.extra_eval_segments)) < 0
+        ):
+            raise ValueError("eval segments must be distinct non-negative seeds")
         if list(self.arm_b_stages) != sorted(self.arm_b_stages) or not self.arm_b_stages:
             raise ValueError("arm_b_stages must be non-empty and increasing")
 
@@ -186,45 +195,60 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     env.close()
     episodes += env.episodes
 
-    # evaluation on the held-out segment
+    # evaluation on the held-out segment (and, as a secondary figure, a few more)
     stages: dict[str, Any] = {}
     trace: dict[str, Any] = {}
+    segments = (cfg.eval_segment, *cfg.extra_eval_segments)
     eval_env = EpisodeRecorder(DrivingEnv(scenario="eval", max_episode_steps=cfg.eval_steps))
     try:
         for label in _stage_labels(cfg):
-            eval_env.label = f"seed{seed}/eval/{label}"
-            if label == "straight":
-                policy: Any = _Straight()
-            elif label == "expert":
-                policy = ScriptedExpert(seed=10_000 + seed)
-            else:
-                policy = GreedyPolicy(snapshots[label])
-            recs = evaluate_policy(
-                policy,
-                eval_env,
-                n_steps=cfg.eval_steps,
-                seed=cfg.eval_segment,
-                uses_info=label == "expert",
-            )
-            contacts = [bool(r.info["contact"]) for r in recs]
-            lanes = [int(r.info["lane"]) for r in recs]
-            entry = {
-                "collision_rate": metrics.collision_rate(contacts),
-                "lanes": metrics.lane_distribution(lanes).tolist(),
-            }
+            per_segment = []
+            for segment in segments:
+                eval_env.label = f"seed{seed}/eval/{label}/segment{segment}"
+                if label == "straight":
+                    policy: Any = _Straight()
+                elif label == "expert":
+                    policy = ScriptedExpert(seed=10_000 + seed)
+                else:
+                    policy = GreedyPolicy(snapshots[label])
+                recs = evaluate_policy(
+                    policy,
+                    eval_env,
+                    n_steps=cfg.eval_steps,
+                    seed=segment,
+                    uses_info=label == "expert",
+                )
+                contacts = [bool(r.info["contact"]) for r in recs]
+                lanes = [int(r.info["lane"]) for r in recs]
+                per_segment.append(
+                    {
+                        "collision_rate": metrics.collision_rate(contacts),
+                        "lanes": metrics.lane_distribution(lanes).tolist(),
+                    }
+                )
+                if label == "a_end_noninteractive" and segment == cfg.eval_segment:
+                    trace = {"distance": [r.distance for r in recs], "contact": contacts}
+            entry: dict[str, Any] = dict(per_segment[0])
+            if cfg.extra_eval_segments:
+                entry["all_segments"] = {
+                    "collision_rate": float(np.mean([x["collision_rate"] for x in per_segment])),
+                    "lanes": np.mean([x["lanes"] for x in per_segment], axis=0).tolist(),
+                }
             if label in snapshots:
                 entry["demonstrations"] = demos_at[label]
                 entry["components"] = snapshots[label].n_components_.tolist()
                 entry["fitted_on"] = int(snapshots[label].n_points_.sum())
             stages[label] = entry
-            if label == "a_end_noninteractive":
-                trace = {"distance": [r.distance for r in recs], "contact": contacts}
     finally:
         eval_env.close()
     episodes += eval_env.episodes
-    expert_lanes = stages["expert"]["lanes"]
+    expert = stages["expert"]
     for entry in stages.values():
-        entry["tv_to_expert"] = metrics.total_variation(entry["lanes"], expert_lanes)
+        entry["tv_to_expert"] = metrics.total_variation(entry["lanes"], expert["lanes"])
+        if "all_segments" in entry:
+            entry["all_segments"]["tv_to_expert"] = metrics.total_variation(
+                entry["all_segments"]["lanes"], expert["all_segments"]["lanes"]
+            )
     save_records(episodes, out / "episodes.json")
     return {
         "seed": seed,
@@ -302,6 +326,14 @@ def run_experiment(
             "lanes": np.mean([x["lanes"] for x in rows], axis=0).tolist(),
             "tv_to_expert": _mean_sd([x["tv_to_expert"] for x in rows]),
         }
+        if "all_segments" in rows[0]:
+            s["all_segments"] = {
+                "collision_pct": _mean_sd(
+                    [100 * x["all_segments"]["collision_rate"] for x in rows]
+                ),
+                "lanes": np.mean([x["all_segments"]["lanes"] for x in rows], axis=0).tolist(),
+                "tv_to_expert": _mean_sd([x["all_segments"]["tv_to_expert"] for x in rows]),
+            }
         if "demonstrations" in rows[0]:
             s["demonstrations"] = _mean_sd([x["demonstrations"] for x in rows])
             s["components_total"] = _mean_sd([sum(x["components"]) for x in rows])
@@ -431,6 +463,19 @@ def format_summary(results: dict[str, Any]) -> str:
         ("Fig 8", "expert, collisions %", "~0", ms(s["expert"]["collision_pct"])),
         ("5.2", "components (arm a final)", "34", ms(s[final_a]["components_total"], "{:.1f}")),
     ]
+    if "all_segments" in s[final_a]:
+        n = 1 + len(cfg["extra_eval_segments"])
+        for label, name in (("straight", "straight"), (final_a, "arm a final"), (last_b, "arm b")):
+            a = s[label]["all_segments"]
+            rows.append(
+                ("extra", f"{name}, {n} segments, collisions %", "", ms(a["collision_pct"]))
+            )
+            if label != "straight":
+                rows.append(
+                    ("extra", f"{name}, {n} segments, TV", "", ms(a["tv_to_expert"], "{:.2f}"))
+                )
+        a = s["expert"]["all_segments"]
+        rows.append(("extra", f"expert, {n} segments, collisions %", "", ms(a["collision_pct"])))
     w = [max(len(r[i]) for r in rows + [("figure", "quantity", "paper", "ours")]) for i in range(4)]
     lines = [
         " | ".join(h.ljust(w[i]) for i, h in enumerate(("figure", "quantity", "paper", "ours")))

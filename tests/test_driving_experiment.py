@@ -22,6 +22,7 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path):
         max_new=10,
         max_components=3,
         train_episode_steps=100,
+        extra_eval_segments=(1,),
     )
     res = run_experiment(cfg, tmp_path, workers=1, progress=False)
     on_disk = json.loads((tmp_path / "results.json").read_text())
@@ -49,6 +50,9 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path):
         assert sum(entry["lanes"]) == pytest.approx(1.0)
         assert 0.0 <= entry["tv_to_expert"]["mean"] <= 1.0
     assert s["straight"]["lanes"][2] == 1.0 and s["expert"]["tv_to_expert"]["mean"] == 0.0
+    for entry in s.values():  # the secondary average over the extra held-out segments
+        assert 0.0 <= entry["all_segments"]["collision_pct"]["mean"] <= 100.0
+        assert sum(entry["all_segments"]["lanes"]) == pytest.approx(1.0)
     n_ni = on_disk["per_seed"][0]["noninteractive_demos"]
     assert s["a_plus20"]["demonstrations"]["mean"] == n_ni + 20
     for entry in on_disk["per_seed"][0]["stages"].values():  # snapshots hold every demo
@@ -64,4 +68,7 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path):
         "seed_0/episodes.json",
     ):
         assert (tmp_path / name).stat().st_size > 1000, name
-    assert "arm a final, collisions %" in format_summary(on_disk)
+    text = format_summary(on_disk)
+    assert "arm a final, collisions %" in text and "2 segments" in text
+    with pytest.raises(ValueError, match="distinct"):
+        DrivingExperimentConfig(eval_segment=1, extra_eval_segments=(1,))
