@@ -262,6 +262,122 @@ class EMResult(NamedTuple):
     converged: Tensor
 
 
+class _Layout(NamedTuple):
+    """Packed layout of the running candidates: components of every running slot side by side.
+
+    ``gid`` [G, M] numpy: global component id (slot * K0 + j) of each packed component, -1 for
+    padding; ``row`` [G, M] numpy: the candidate row (0..R-1) it belongs to, R for padding;
+    ``slot`` [G, R] numpy: flat slot id of each candidate row, -1 for padding;
+    ``groups``: the original group of each row of the batch.
+    """
+
+    gid: np.ndarray
+    row: np.ndarray
+    slot: np.ndarray
+    groups: np.ndarray
+
+
+def _pack(running: np.ndarray, slot_k: np.ndarray, k0: int) -> _Layout:
+    """Layout of the running slots: running [G0, C0] bool, slot_k [G0, C0] component counts."""
+    groups = np.flatnonzero(running.any(1))
+    n_rows = int(running[groups].sum(1).max())
+    n_comp = int((running * slot_k)[groups].sum(1).max())
+    g = groups.size
+    gid = np.full((g, n_comp), -1, dtype=np.int64)
+    row = np.full((g, n_comp), n_rows, dtype=np.int64)
+    slot = np.full((g, n_rows), -1, dtype=np.int64)
+    c0 = running.shape[1]
+    for i, g0 in enumerate(groups):
+        cs = np.flatnonzero(running[g0])
+        ks = slot_k[g0, cs]
+        slot[i, : cs.size] = g0 * c0 + cs
+        m = int(ks.sum())
+        row[i, :m] = np.repeat(np.arange(cs.size), ks)
+        within = np.arange(m) - np.repeat(np.cumsum(ks) - ks, ks)
+        gid[i, :m] = np.repeat((g0 * c0 + cs) * k0, ks) + within
+    return _Layout(gid, row, slot, groups)
+
+
+def _m_step_packed(
+    z: Tensor, resp: Tensor, rows: Tensor, valid: Tensor, row_pad: Tensor, floor: Tensor
+) -> tuple[Params, Tensor]:
+    """M-step in the packed layout: resp [G, M, N] -> (Params [G, M, ...], coef [G, M, Q]).
+
+    ``rows`` [G*M] flat candidate-row index (g * (R+1) + row), ``valid`` [G, M] 1 for a real
+    component, ``row_pad`` [G*(R+1)] 1 for a padding row (keeps its weight sum non-zero).
+    """
+    g, m, _ = resp.shape
+    q = z.shape[-1]
+    d = _dim_of(q)
+    du = q - d - 1
+    _, _, full, upper, scale = _indices(d, z.device)
+    stats = torch.bmm(resp, z)  # [G, M, Q]
+    nk = stats[..., -1] + 10.0 * _EPS
+    stats = stats / nk.unsqueeze(-1)
+    means = stats[..., du : du + d]
+    cov = stats[..., full].reshape(g, m, d, d)
+    cov -= means.unsqueeze(-1) * means.unsqueeze(-2)
+    cov.diagonal(dim1=-2, dim2=-1).add_(floor)
+    wn = (nk * valid).reshape(-1)
+    wsum = row_pad.clone().index_add_(0, rows, wn)
+    weights = (wn / wsum.index_select(0, rows)).reshape(g, m)
+    chol, _ = torch.linalg.cholesky_ex(cov)
+    prec = torch.cholesky_inverse(chol)
+    log_det = -torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
+    lin = (prec @ means.unsqueeze(-1)).squeeze(-1)
+    quad = prec.reshape(g, m, d * d)[..., upper] * scale.to(z.dtype)
+    const = torch.log(weights) + log_det - 0.5 * (lin * means).sum(-1)
+    const = torch.where(valid > 0, const - 0.5 * d * math.log(2.0 * math.pi), _PAD_LOG_WEIGHT)
+    coef = torch.cat([quad, lin, const.unsqueeze(-1)], -1)
+    return Params(weights, means, cov, log_det, coef), coef
+
+
+def _e_step_packed(
+    zt: Tensor,
+    coef: Tensor,
+    pm: Tensor,
+    rows: Tensor,
+    row_pad: Tensor,
+    row_ok: Tensor,
+    shift: Tensor | None,
+) -> tuple[Tensor, Tensor, Tensor]:
+    """E-step in the packed layout: zt [G, Q, N], coef [G, M, Q], pm [G, N].
+
+    Returns (loglik [G, R+1], resp [G, M, N], lse [G, R+1, N]); rows as in _m_step_packed,
+    row_pad [G*(R+1)] 1 on padding rows, row_ok [G, R+1] 1 on real rows. ``shift`` (the
+    previous lse) serves as the log-sum-exp shift when it keeps the sums in a safe range;
+    otherwise the exact per-candidate maximum is used.
+    """
+    g, m, _ = coef.shape
+    n = zt.shape[-1]
+    r1 = row_ok.shape[1]
+    wlp = torch.bmm(coef, zt)  # [G, M, N]
+    lse = None
+    if shift is not None:
+        sh = shift.reshape(-1, n).index_select(0, rows).reshape(g, m, n)
+        e = wlp.sub_(sh).clamp_(_CLAMP, 600.0).exp_()
+        s = torch.zeros(g * r1, n, dtype=e.dtype, device=e.device)
+        s = s.index_add_(0, rows, e.reshape(-1, n)).add_(row_pad.unsqueeze(-1))
+        ls = torch.log(s)
+        lo, hi = torch.aminmax(ls)
+        if float(lo) > -40.0 and float(hi) < 550.0:
+            lse = ls.reshape(g, r1, n) + shift
+        else:
+            wlp = torch.bmm(coef, zt)
+    if lse is None:
+        mx = torch.full((g * r1, n), -math.inf, dtype=wlp.dtype, device=wlp.device)
+        mx = mx.scatter_reduce_(0, rows.unsqueeze(-1).expand(-1, n), wlp.reshape(-1, n), "amax")
+        mx = torch.where(row_pad.unsqueeze(-1) > 0, 0.0, mx)
+        e = wlp.sub_(mx.index_select(0, rows).reshape(g, m, n)).clamp_min_(_CLAMP).exp_()
+        s = torch.zeros(g * r1, n, dtype=e.dtype, device=e.device)
+        s = s.index_add_(0, rows, e.reshape(-1, n)).add_(row_pad.unsqueeze(-1))
+        lse = (torch.log(s) + mx).reshape(g, r1, n)
+    loglik = (lse * pm.unsqueeze(1)).sum(-1)
+    inv = (pm.unsqueeze(1) * row_ok.unsqueeze(-1)).reshape(-1, n) / s
+    e.mul_(inv.index_select(0, rows).reshape(g, m, n))
+    return loglik, e, lse
+
+
 def run_em(
     x: Tensor,
     pmask: Tensor,
@@ -274,80 +390,87 @@ def run_em(
     """EM for every slot of every group at once, from initial responsibilities resp0.
 
     Mirrors sklearn: each iteration is an E-step (log-likelihood of the current parameters)
-    then an M-step; a slot stops when |mean log-likelihood change| < tol. Stopped slots leave
-    the batch (the slot axis is compacted, and groups with nothing left are dropped), so late
-    iterations cost only what still runs; compaction happens only when some slot stops. The
-    returned log-likelihood is that of the final parameters (one extra E-step), as sklearn's
-    ``score``.
+    then an M-step; a slot stops when |mean log-likelihood change| < tol. The iterations run
+    on a packed layout: the real components of every running slot of a group side by side
+    (no padding to the largest component count), with per-candidate sums done by index_add
+    over rows. Stopped slots leave the batch (the layout is re-packed only when some slot
+    stops), so late iterations cost only what still runs. The returned log-likelihood is that
+    of the final parameters (one extra E-step), as sklearn's ``score``.
     """
     g0, n, _ = x.shape
-    c0, k = cmask.shape[1:]
+    c0, k0 = cmask.shape[1:]
     dev = x.device
     z0 = quadratic_features(x)
-    params = m_step(z0, resp0, cmask, floor)
-    out = [t.reshape(g0 * c0, *t.shape[2:]).clone() for t in params]
+    params0 = m_step(z0, resp0, cmask, floor)
+    out = [t.reshape(g0 * c0 * k0, *t.shape[3:]).clone() for t in params0]
     n_iter = torch.zeros(g0 * c0, dtype=torch.long, device=dev)
     converged = torch.zeros(g0 * c0, dtype=torch.bool, device=dev)
     n_pts = pmask.sum(1)  # [G]
-    # slot_id[g, c]: flat id of the slot held at (g, c); real[g, c]: False for duplicates
-    slot_id = np.arange(g0 * c0).reshape(g0, c0)
-    real = np.ones((g0, c0), dtype=bool)
-    z, pm, cm, npts = z0, pmask, cmask, n_pts
-    prev = torch.full((g0, c0), -math.inf, dtype=x.dtype, device=dev)
-    lse = None
-    for it in range(1, max_iter + 1):
-        ll, resp, lse = e_step(z, params.coef, pm, lse)
-        params = m_step(z, resp, cm, floor)
-        mean_ll = ll / npts.unsqueeze(-1)
-        done = (mean_ll - prev).abs() < tol
-        prev = mean_ll
-        if it < max_iter and not bool(done.any()):
-            continue
-        stop = done.cpu().numpy() | (it == max_iter)
-        rec = stop & real
-        if rec.any():
-            pos = torch.from_numpy(np.flatnonzero(rec)).to(dev)
-            ids = torch.from_numpy(slot_id[rec]).to(dev)
-            gc = params.weights.shape[0] * params.weights.shape[1]
-            k_now = params.weights.shape[-1]
-            for o, p in zip(out, params, strict=True):
-                o[ids, :k_now] = p.reshape(gc, *p.shape[2:]).index_select(0, pos)
-            n_iter[ids] = it
-            converged[ids] = torch.from_numpy(done.cpu().numpy()[rec]).to(dev)
-        remaining = real & ~stop
-        if not remaining.any():
+    slot_k = cmask.sum(-1).round().long().cpu().numpy()  # [G0, C0]
+    running = np.ones((g0, c0), dtype=bool)
+    prev_all = torch.full((g0 * c0 + 1,), -math.inf, dtype=x.dtype, device=dev)
+    lse_all = None  # [G0*C0 + 1, N] last lse of every slot (by flat slot id)
+    flat_coef = out[4]  # where the current parameters are: flat_coef[src_gid[global id]]
+    src_gid = None
+    it = 0
+    while it < max_iter and running.any():
+        lay = _pack(running, slot_k, k0)
+        g, mm = lay.gid.shape
+        r = lay.slot.shape[1]
+        gk = torch.from_numpy(lay.groups).to(dev)
+        z, pm, npts = z0.index_select(0, gk), pmask.index_select(0, gk), n_pts.index_select(0, gk)
+        zt = z.transpose(1, 2)
+        valid_np = lay.gid >= 0
+        valid = torch.from_numpy(valid_np.astype(np.float64)).to(device=dev, dtype=x.dtype)
+        rows = torch.from_numpy((np.arange(g)[:, None] * (r + 1) + lay.row).reshape(-1)).to(dev)
+        slot_pad = np.concatenate([lay.slot, np.full((g, 1), -1)], 1)  # [G, R+1]
+        row_ok_np = slot_pad >= 0
+        row_ok = torch.from_numpy(row_ok_np.astype(np.float64)).to(device=dev, dtype=x.dtype)
+        row_pad = (1.0 - row_ok).reshape(-1)
+        slot_ix = torch.from_numpy(np.where(row_ok_np, slot_pad, g0 * c0).reshape(-1)).to(dev)
+        # current parameters of the packed components (padding: copy of a real one, masked)
+        first = np.where(valid_np, lay.gid, lay.gid[:, :1])
+        take = torch.from_numpy(first.reshape(-1)).to(dev)
+        if src_gid is not None:
+            take = src_gid.index_select(0, take)
+        coef = flat_coef.index_select(0, take).reshape(g, mm, -1)
+        coef = torch.where(valid.unsqueeze(-1) > 0, coef, coef[..., :1] * 0.0)
+        coef[..., -1] = torch.where(valid > 0, coef[..., -1], _PAD_LOG_WEIGHT)
+        prev = prev_all.index_select(0, slot_ix).reshape(g, r + 1)
+        shift = None
+        if lse_all is not None:
+            shift = lse_all.index_select(0, slot_ix).reshape(g, r + 1, n)
+        while True:
+            it += 1
+            ll, resp, shift = _e_step_packed(zt, coef, pm, rows, row_pad, row_ok, shift)
+            params, coef = _m_step_packed(z, resp, rows, valid, row_pad, floor)
+            mean_ll = ll / npts.unsqueeze(-1)
+            done = ((mean_ll - prev).abs() < tol) & (row_ok > 0)
+            prev = mean_ll
+            if it < max_iter and not bool(done.any()):
+                continue
             break
-        # compact: keep groups with a remaining slot, pad each to the widest with duplicates
-        keep_g = np.flatnonzero(remaining.any(1))
-        rem = remaining[keep_g]
-        width = int(rem.sum(1).max())
-        order = np.argsort(~rem, axis=1, kind="stable")[:, :width]
-        new_real = np.arange(width)[None, :] < rem.sum(1)[:, None]
-        take = keep_g[:, None] * real.shape[1] + np.where(new_real, order, order[:, :1])
-        slot_id = slot_id.reshape(-1)[take]
-        real = new_real
-        tk = torch.from_numpy(take.reshape(-1)).to(dev)
-        gk = torch.from_numpy(keep_g).to(dev)
-        g_new = keep_g.size
-        params = Params(
-            *(
-                p.reshape(-1, *p.shape[2:]).index_select(0, tk).reshape(g_new, width, *p.shape[2:])
-                for p in params
-            )
-        )
-        k_now = cm.shape[-1]
-        cm = cm.reshape(-1, k_now).index_select(0, tk).reshape(g_new, width, k_now)
-        # the component axis shrinks to the largest count still running
-        k_new = int(cm.sum(-1).max())
-        if k_new < k_now:
-            cm = cm[..., :k_new].contiguous()
-            params = Params(*(p[:, :, :k_new].contiguous() for p in params))
-        prev = prev.reshape(-1).index_select(0, tk).reshape(g_new, width)
-        n_now = lse.shape[1]
-        lse = lse.transpose(1, 2).reshape(-1, n_now).index_select(0, tk)
-        lse = lse.reshape(g_new, width, n_now).transpose(1, 2)
-        z, pm, npts = z.index_select(0, gk), pm.index_select(0, gk), npts.index_select(0, gk)
-    final = Params(*(o.reshape(g0, c0, *o.shape[1:]) for o in out))
+        stop = done.cpu().numpy() | ((it == max_iter) & row_ok_np)
+        ids_np = slot_pad[stop]
+        ids = torch.from_numpy(ids_np).to(dev)
+        n_iter[ids] = it
+        converged[ids] = torch.from_numpy(done.cpu().numpy()[stop]).to(dev)
+        sel = valid_np & stop[np.arange(g)[:, None], lay.row]
+        pos = torch.from_numpy(np.flatnonzero(sel)).to(dev)
+        dst = torch.from_numpy(lay.gid[sel]).to(dev)
+        for o, p in zip(out, params, strict=True):
+            o.index_copy_(0, dst, p.reshape(g * mm, *p.shape[2:]).index_select(0, pos))
+        running[np.unravel_index(ids_np, running.shape)] = False
+        # remember where each running component's parameters are, for the next packing
+        flat_coef = coef.reshape(g * mm, -1)
+        src = np.zeros(g0 * c0 * k0, dtype=np.int64)
+        src[lay.gid[valid_np]] = np.flatnonzero(valid_np)
+        src_gid = torch.from_numpy(src).to(dev)
+        prev_all = prev_all.index_copy(0, slot_ix, prev.reshape(-1))
+        if lse_all is None:
+            lse_all = torch.zeros(g0 * c0 + 1, n, dtype=x.dtype, device=dev)
+        lse_all = lse_all.index_copy(0, slot_ix, shift.reshape(-1, n))
+    final = Params(*(o.reshape(g0, c0, k0, *o.shape[1:]) for o in out))
     loglik, _, _ = e_step(z0, final.coef, pmask)
     return EMResult(final, loglik, n_iter.reshape(g0, c0), converged.reshape(g0, c0))
 
