@@ -350,6 +350,8 @@ def run_experiment(
         < summary[last_b]["collision_pct"]["mean"],
     }
     results = {
+        "domain": "driving",
+        "experiment": "driving (Chernova & Veloso 2007, Section 5.2)",
         "config": dataclasses.asdict(config),
         "seeds": list(config.seeds),
         "versions": _versions(),
@@ -364,19 +366,30 @@ def run_experiment(
         "seconds": time.perf_counter() - t0,
     }
     (run_dir / "results.json").write_text(json.dumps(results, indent=1))
-    _plots(results, config, run_dir)
+    plot_results(results, run_dir)
     return results
 
 
-def _plots(results: dict[str, Any], cfg: DrivingExperimentConfig, run_dir: Path) -> None:
-    import matplotlib
+def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
+    """Draw Figures 8, 6, 9 and 10 of a run from its ``results`` into ``run_dir``.
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    Returns the PNG paths written. Needs only results.json (no simulation).
+    """
+    from matplotlib.figure import Figure
+
+    run_dir = Path(run_dir)
+    cfg = results["config"]
+    written: list[Path] = []
+
+    def save(fig: Figure, name: str) -> None:
+        fig.tight_layout()
+        fig.savefig(run_dir / name, dpi=100)
+        written.append(run_dir / name)
 
     summ = results["summary"]
     labels = list(summ)
-    fig, ax = plt.subplots(figsize=(8, 0.45 * len(labels) + 1.5))
+    fig = Figure(figsize=(8, 0.45 * len(labels) + 1.5))
+    ax = fig.add_subplot()
     metrics.plot_lane_bars(
         ax,
         labels,
@@ -384,40 +397,65 @@ def _plots(results: dict[str, Any], cfg: DrivingExperimentConfig, run_dir: Path)
         [summ[k]["collision_pct"]["mean"] / 100 for k in labels],
     )
     ax.set_title("Figure 8: lane shares and collisions (mean over seeds)")
-    fig.tight_layout()
-    fig.savefig(run_dir / "fig8_lanes_collisions.png", dpi=100)
-    plt.close(fig)
+    save(fig, "fig8_lanes_collisions.png")
     first = results["per_seed"][0]
     for name, key, marks in (
         ("fig6_accuracy.png", "accuracy_a", [first["noninteractive_demos"]]),
         ("fig9_accuracy.png", "accuracy_b", [first["noninteractive_demos"]]),
     ):
-        fig, ax = plt.subplots(figsize=(7, 3))
+        fig = Figure(figsize=(7, 3))
+        ax = fig.add_subplot()
         for r in results["per_seed"]:
             acc = [np.nan if a is None else a for a in r[key]]
             metrics.plot_accuracy(
                 ax,
                 acc,
-                target=cfg.target_accuracy,
+                target=cfg["target_accuracy"],
                 label=f"seed {r['seed']}",
                 marks=marks if r is first else (),
             )
         ax.legend(fontsize=7)
         ax.set_title(
             f"{name[:4].replace('fig', 'Figure ')}: windowed prediction accuracy "
-            f"({cfg.accuracy_window} demonstrations)"
+            f"({cfg['accuracy_window']} demonstrations)"
         )
-        fig.tight_layout()
-        fig.savefig(run_dir / name, dpi=100)
-        plt.close(fig)
+        save(fig, name)
     tr = first["confidence_trace"]
     n = min(300, len(tr["distance"]))
-    fig, ax = plt.subplots(figsize=(8, 3))
-    metrics.plot_confidence_trace(ax, tr["distance"][:n], tr["contact"][:n], threshold=cfg.max_std)
+    fig = Figure(figsize=(8, 3))
+    ax = fig.add_subplot()
+    metrics.plot_confidence_trace(
+        ax, tr["distance"][:n], tr["contact"][:n], threshold=cfg["max_std"]
+    )
     ax.set_title("Figure 10: distance of the best classification (end of non-interactive phase)")
-    fig.tight_layout()
-    fig.savefig(run_dir / "fig10_confidence.png", dpi=100)
-    plt.close(fig)
+    save(fig, "fig10_confidence.png")
+    return written
+
+
+def evaluate_saved_policy(
+    session_dir: str | Path, *, n_steps: int = 1000, seed: int = 0
+) -> dict[str, Any]:
+    """Drive the latest model of a driving teaching session (e.g. ``torchcbl teach driving``)
+    greedily for ``n_steps`` timesteps on held-out evaluation segment ``seed``.
+
+    Returns the collision rate (share of timesteps in contact, %) and the lane shares
+    (index 0 = right shoulder ... 4 = left shoulder). Needs no other live DrivingEnv here.
+    """
+    from sumo_scenarios.env import DrivingEnv
+    from torchcbl import evaluate_policy, load_policy
+
+    policy = load_policy(session_dir)
+    env = DrivingEnv(scenario="eval", max_episode_steps=n_steps)
+    try:
+        recs = evaluate_policy(policy, env, n_steps=n_steps, seed=seed)
+    finally:
+        env.close()
+    return {
+        "steps": len(recs),
+        "eval_segment": seed,
+        "collision_pct": 100 * metrics.collision_rate([bool(r.info["contact"]) for r in recs]),
+        "lanes": metrics.lane_distribution([int(r.info["lane"]) for r in recs]).tolist(),
+    }
 
 
 def format_summary(results: dict[str, Any]) -> str:

@@ -6,7 +6,13 @@ import json
 
 import pytest
 
-from sumo_scenarios.experiment import DrivingExperimentConfig, format_summary, run_experiment
+from sumo_scenarios.experiment import (
+    DrivingExperimentConfig,
+    evaluate_saved_policy,
+    format_summary,
+    plot_results,
+    run_experiment,
+)
 
 
 def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path):
@@ -68,7 +74,39 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path):
         "seed_0/episodes.json",
     ):
         assert (tmp_path / name).stat().st_size > 1000, name
+    assert on_disk["domain"] == "driving"
+    # the figures can be redrawn from results.json alone
+    (tmp_path / "fig8_lanes_collisions.png").unlink()
+    written = plot_results(on_disk, tmp_path)
+    assert tmp_path / "fig8_lanes_collisions.png" in written
+    assert all(p.stat().st_size > 1000 for p in written)
     text = format_summary(on_disk)
     assert "arm a final, collisions %" in text and "2 segments" in text
     with pytest.raises(ValueError, match="distinct"):
         DrivingExperimentConfig(eval_segment=1, extra_eval_segments=(1,))
+
+
+def test_a_saved_teaching_session_is_evaluated_on_the_held_out_road(tmp_path):
+    from sumo_scenarios.env import DrivingEnv
+    from sumo_scenarios.expert import ScriptedExpert
+    from torchcbl import ConfidentTeacher, TeachingConfig
+
+    env = DrivingEnv(scenario="train", max_episode_steps=200)
+    try:
+        ct = ConfidentTeacher(
+            env,
+            ScriptedExpert(seed=0),
+            config=TeachingConfig(accuracy_window=50, target_accuracy=None, max_new=20),
+            run_dir=tmp_path / "session",
+            progress=False,
+        )
+        ct.run(max_demonstrations=120)
+        ct.close()
+    finally:
+        env.close()
+    report = evaluate_saved_policy(tmp_path / "session", n_steps=150, seed=0)
+    assert report["steps"] == 150 and report["eval_segment"] == 0
+    assert sum(report["lanes"]) == pytest.approx(1.0)
+    # the expert's habits were learned: it keeps off the right lane and right shoulder
+    assert report["lanes"][0] + report["lanes"][1] < 0.2
+    assert 0.0 <= report["collision_pct"] < 10.0
