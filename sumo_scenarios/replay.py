@@ -78,7 +78,9 @@ def load_records(path: str | Path) -> list[EpisodeRecord]:
 class EpisodeRecorder(gym.Wrapper):
     """Records every episode of a :class:`DrivingEnv` as an :class:`EpisodeRecord`.
 
-    ``episodes`` lists finished and current episodes (the current one is in progress).
+    ``episodes`` lists finished and current episodes (the current one is in progress). An
+    episode takes the ``label`` in force when it was reset; an episode in which no step was
+    taken (a reset followed at once by another) is not recorded.
     """
 
     def __init__(self, env: gym.Env, label: str = "") -> None:
@@ -99,6 +101,7 @@ class EpisodeRecorder(gym.Wrapper):
             "sim": base.config.sim,
             "episode_seed": base.episode_seed,
             "start_lane": int(info["lane"]),
+            "label": self.label,
         }
         self._actions = []
         return obs, info
@@ -109,18 +112,16 @@ class EpisodeRecorder(gym.Wrapper):
         return out
 
     def _flush(self) -> None:
-        if self._head is not None:
-            self._done.append(
-                EpisodeRecord(**self._head, actions=tuple(self._actions), label=self.label)
-            )
-            self._head = None
+        if self._head is not None and self._actions:
+            self._done.append(EpisodeRecord(**self._head, actions=tuple(self._actions)))
+        self._head = None
 
     @property
     def episodes(self) -> list[EpisodeRecord]:
         """All recorded episodes, the one in progress last."""
         cur = []
-        if self._head is not None:
-            cur = [EpisodeRecord(**self._head, actions=tuple(self._actions), label=self.label)]
+        if self._head is not None and self._actions:
+            cur = [EpisodeRecord(**self._head, actions=tuple(self._actions))]
         return self._done + cur
 
 

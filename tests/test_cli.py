@@ -137,3 +137,31 @@ def test_reproduce_never_overwrites_a_run_directory(tmp_path):
     second = _fresh_dir(tmp_path / "r")
     assert first == tmp_path / "r" and second == tmp_path / "r-2" and second.is_dir()
     assert (first / "results.json").read_text() == "{}"
+
+
+def test_replay_lists_episodes_and_exports_one_to_gif_and_fcd(tmp_path, capsys):
+    import sumolib
+
+    from sumo_scenarios.env import DrivingEnv
+    from sumo_scenarios.replay import EpisodeRecorder, save_records
+
+    env = EpisodeRecorder(DrivingEnv(scenario="eval", max_episode_steps=30), label="demo/a")
+    try:
+        for seed, label in ((0, "demo/a"), (1, "demo/b")):
+            env.label = label
+            env.reset(seed=seed)
+            for t in range(30):
+                env.step(1 if t == 5 else 0)
+    finally:
+        env.close()
+    path = tmp_path / "episodes.json"
+    save_records(env.episodes, path)
+    assert main(["replay", str(path), "--list"]) == 0
+    assert "demo/b" in capsys.readouterr().out
+    assert main(["replay", str(path), "--label", "demo/b", "--max-frames", "8"]) == 0
+    gif, fcd = tmp_path / "episodes-1.gif", tmp_path / "episodes-1.fcd.xml"
+    assert gif.stat().st_size > 1000
+    steps = list(sumolib.xml.parse(str(fcd), "timestep"))
+    assert len(steps) >= 30 and any(v.id == "ego" for v in steps[-1].vehicle)
+    with pytest.raises(SystemExit, match="--list"):
+        main(["replay", str(path), "--episode", "7"])

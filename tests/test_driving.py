@@ -242,6 +242,25 @@ def test_replay_bit_identical_fcd_and_gif(tmp_path):
     assert gif.stat().st_size > 1000
 
 
+def test_recorder_labels_episodes_at_reset_and_skips_empty_ones():
+    env = EpisodeRecorder(DrivingEnv(scenario="train", max_episode_steps=5), label="first")
+    try:
+        env.reset(seed=1)
+        for _ in range(5):
+            env.step(0)
+        env.reset()  # as evaluate_policy does after an episode ends: no step follows
+        env.label = "second"
+        env.reset(seed=2)
+        for _ in range(3):
+            env.step(1)
+    finally:
+        env.close()
+    assert [(e.label, e.episode_seed, len(e.actions)) for e in env.episodes] == [
+        ("first", 1, 5),
+        ("second", 2, 3),
+    ]
+
+
 def test_metrics():
     assert metrics.total_variation([1, 0, 0, 0, 0], [0, 1, 0, 0, 0]) == 1.0
     assert metrics.total_variation([0.5, 0.5], [0.5, 0.5]) == 0.0

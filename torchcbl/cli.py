@@ -8,7 +8,7 @@ Commands::
 
     torchcbl reproduce [corridor|driving|all] [--full] [--seeds N] [--workers N] [--out DIR]
     torchcbl evaluate RUN_DIR --domain corridor|driving [--steps N] [--seed S]
-    torchcbl replay EPISODE.json [--gif OUT.gif] [--fcd OUT.xml]
+    torchcbl replay EPISODES.json [--episode N | --label TEXT] [--gif OUT] [--fcd OUT]
     torchcbl plot RUN_DIR
     torchcbl teach corridor|driving [--run-dir DIR] [--resume]
 """
@@ -95,16 +95,27 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     replay = importlib.import_module("sumo_scenarios.replay")
-    path = Path(args.episode)
-    if args.gif is None and args.fcd is None:
-        args.gif = str(path.with_suffix(".gif"))
-        args.fcd = str(path.with_suffix(".fcd.xml"))
-    if args.fcd:
-        replay.export_fcd(path, Path(args.fcd))
-        print(f"FCD written to {args.fcd}")
-    if args.gif:
-        replay.render_gif(path, Path(args.gif))
-        print(f"GIF written to {args.gif}")
+    path = Path(args.episodes)
+    episodes = replay.load_records(path)
+    if args.list:
+        for i, ep in enumerate(episodes):
+            print(f"{i:4d}  {ep.label or '-':50s} {len(ep.actions):6d} steps")
+        return 0
+    matches = [i for i, ep in enumerate(episodes) if args.label and args.label in (ep.label or "")]
+    index = matches[0] if matches else args.episode
+    if args.label and not matches:
+        raise SystemExit(f"No episode label contains {args.label!r}; see --list.")
+    if not 0 <= index < len(episodes):
+        raise SystemExit(f"--episode must be in [0, {len(episodes)}), got {index}; see --list.")
+    record = episodes[index]
+    stem = path.with_suffix("")
+    gif = Path(args.gif) if args.gif else stem.with_name(f"{stem.name}-{index}.gif")
+    fcd = Path(args.fcd) if args.fcd else stem.with_name(f"{stem.name}-{index}.fcd.xml")
+    print(f"episode {index}: {record.label or '-'} ({len(record.actions)} steps)")
+    replay.export_fcd(record, fcd)
+    print(f"FCD written to {fcd}")
+    replay.render_gif(record, gif, max_frames=args.max_frames)
+    print(f"GIF written to {gif}")
     return 0
 
 
@@ -236,9 +247,13 @@ def _parser() -> argparse.ArgumentParser:
         help="replay a recorded SUMO episode to GIF and FCD XML",
         description="Re-simulate a recorded driving episode bit-identically and export it.",
     )
-    p.add_argument("episode", help="an episode JSON written by the driving domain")
-    p.add_argument("--gif", default=None, help="GIF output path")
-    p.add_argument("--fcd", default=None, help="SUMO FCD XML output path")
+    p.add_argument("episodes", help="an episodes.json written by the driving experiment")
+    p.add_argument("--episode", type=int, default=0, help="index of the episode (default 0)")
+    p.add_argument("--label", default=None, help="the first episode whose label contains this")
+    p.add_argument("--list", action="store_true", help="list the recorded episodes and stop")
+    p.add_argument("--gif", default=None, help="GIF output path (default beside the JSON)")
+    p.add_argument("--fcd", default=None, help="SUMO FCD XML output path (default beside it)")
+    p.add_argument("--max-frames", type=int, default=200, help="GIF frames at most")
     p.set_defaults(func=_cmd_replay)
 
     p = sub.add_parser(
