@@ -342,20 +342,38 @@ def _e_step_packed(
     row_pad: Tensor,
     row_ok: Tensor,
     shift: Tensor | None,
-) -> tuple[Tensor, Tensor, Tensor]:
+    shared: bool = False,
+) -> tuple[Tensor, Tensor, Tensor, bool]:
     """E-step in the packed layout: zt [G, Q, N], coef [G, M, Q], pm [G, N].
 
-    Returns (loglik [G, R+1], resp [G, M, N], lse [G, R+1, N]); rows as in _m_step_packed,
-    row_pad [G*(R+1)] 1 on padding rows, row_ok [G, R+1] 1 on real rows. ``shift`` (the
-    previous lse) serves as the log-sum-exp shift when it keeps the sums in a safe range;
-    otherwise the exact per-candidate maximum is used.
+    Returns (loglik [G, R+1], resp [G, M, N], lse [G, R+1, N], shared_ok); rows as in
+    _m_step_packed, row_pad [G*(R+1)] 1 on padding rows, row_ok [G, R+1] 1 on real rows.
+    The log-sum-exp shift, first choice that keeps every candidate's sums in a safe range:
+    with ``shared``, one shift per point for all candidates of a group (the largest previous
+    lse; safe when no candidate's sum falls below e^-20 of it, so the e^-60 clamp changes
+    nothing above 1e-16 relative: saves expanding a shift per component); then ``shift``
+    (the previous lse, per candidate); then the exact per-candidate maximum. ``shared_ok``
+    is False when the shared shift was tried and rejected.
     """
     g, m, _ = coef.shape
     n = zt.shape[-1]
     r1 = row_ok.shape[1]
     wlp = torch.bmm(coef, zt)  # [G, M, N]
     lse = None
-    if shift is not None:
+    shared_ok = True
+    if shift is not None and shared:
+        gs = shift.masked_fill(row_ok.unsqueeze(-1) == 0, -math.inf).amax(1, keepdim=True)
+        e = wlp.sub_(gs).clamp_(_CLAMP, 600.0).exp_()
+        s = torch.zeros(g * r1, n, dtype=e.dtype, device=e.device)
+        s = s.index_add_(0, rows, e.reshape(-1, n)).add_(row_pad.unsqueeze(-1))
+        ls = torch.log(s)
+        lo, hi = torch.aminmax(ls)
+        if float(lo) > -20.0 and float(hi) < 550.0:
+            lse = ls.reshape(g, r1, n) + gs
+        else:
+            shared_ok = False
+            wlp = torch.bmm(coef, zt)
+    if shift is not None and lse is None:
         sh = shift.reshape(-1, n).index_select(0, rows).reshape(g, m, n)
         e = wlp.sub_(sh).clamp_(_CLAMP, 600.0).exp_()
         s = torch.zeros(g * r1, n, dtype=e.dtype, device=e.device)
@@ -377,7 +395,7 @@ def _e_step_packed(
     loglik = (lse * pm.unsqueeze(1)).sum(-1)
     inv = (pm.unsqueeze(1) * row_ok.unsqueeze(-1)).reshape(-1, n) / s
     e.mul_(inv.index_select(0, rows).reshape(g, m, n))
-    return loglik, e, lse
+    return loglik, e, lse, shared_ok
 
 
 def run_em(
@@ -414,6 +432,7 @@ def run_em(
     lse_all = None  # [G0*C0 + 1, N] last lse of every slot (by flat slot id)
     flat_coef = out[4]  # where the current parameters are: flat_coef[src_gid[global id]]
     src_gid = None
+    shared = True  # try the shared shift until it is once rejected
     it = 0
     while it < max_iter and running.any():
         lay = _pack(running, slot_k, k0)
@@ -444,7 +463,9 @@ def run_em(
             shift = lse_all.index_select(0, slot_ix).reshape(g, r + 1, n)
         while True:
             it += 1
-            ll, resp, shift = _e_step_packed(zt, coef, pm, rows, row_pad, row_ok, shift)
+            ll, resp, shift, shared = _e_step_packed(
+                zt, coef, pm, rows, row_pad, row_ok, shift, shared
+            )
             params, coef = _m_step_packed(zt, resp, rows, valid, row_pad, floor)
             mean_ll = ll / npts.unsqueeze(-1)
             done = ((mean_ll - prev).abs() < tol) & (row_ok > 0)
