@@ -238,7 +238,8 @@ def kmeans_init(
     labels = None
     for _ in range(max(n_lloyd, 1)):
         c2 = ((centers * centers).sum(-1) + pad).reshape(g, 1, c * k)
-        dist = torch.baddbmm(c2, x, centers.reshape(g, c * k, d).transpose(1, 2), alpha=-2.0)
+        # x @ (-2 c)^T + |c|^2 (bmm then add: baddbmm would first copy the broadcast |c|^2)
+        dist = torch.bmm(x, centers.reshape(g, c * k, d).transpose(1, 2) * -2.0).add_(c2)
         new_labels = dist.reshape(g, n, c, k).argmin(-1)  # [G, N, C]
         if labels is not None and torch.equal(new_labels, labels):
             break
