@@ -82,6 +82,28 @@ def test_layout_and_log_round_trip(tmp_path):
     assert policy(obs) == ct.policy(obs) == 2
 
 
+def test_steps_not_yet_in_sqlite_are_in_the_journal_and_readers_see_them(tmp_path):
+    run = tmp_path / "run"
+    ct = make(rare_regions_world(), run, noninteractive=False, max_new=4)
+    ct._store.commit_every = 10**6  # keep everything in the journal: a writer mid-batch
+    for _ in range(25):
+        ct.step()
+    db = sqlite3.connect(run / "steps.sqlite")
+    assert db.execute("SELECT COUNT(*) FROM steps").fetchone()[0] == 0  # nothing committed
+    db.close()
+    assert (run / "steps.journal").stat().st_size > 0
+    assert load_records(run) == ct.records  # the journal's lines, read back exactly
+    x, y = load_demonstrations(run)
+    assert len(y) == ct.n_demonstrations
+    # a line torn by a kill mid-write (no newline) was never acknowledged: ignored
+    with open(run / "steps.journal", "ab") as f:
+        f.write(b'["s",25,0,"00')
+    assert load_records(run) == ct.records
+    ct.flush()  # a commit moves the rows to SQLite and empties the journal
+    assert (run / "steps.journal").stat().st_size == 0
+    assert load_records(run) == ct.records
+
+
 def test_resume_same_counters_and_model(tmp_path):
     run = tmp_path / "run"
     ct = make(rare_regions_world(), run, accuracy_window=10, max_new=3)
