@@ -24,7 +24,6 @@ seeds, per-seed values, config, versions), ``fig8_lanes_collisions.png``,
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import json
 import multiprocessing as mp
@@ -161,8 +160,8 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
         return t, env
 
     def snap(t: Any, label: str) -> None:
-        t.refit()  # include the demonstrations since the last periodic refit
-        snapshots[label] = copy.deepcopy(t.model)
+        # every demonstration so far, without moving the live session's refit schedule
+        snapshots[label] = t.snapshot()
         demos_at[label] = t.n_demonstrations
 
     # arm (a)

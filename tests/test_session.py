@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import random
@@ -275,3 +276,65 @@ def test_sigkill_at_random_instants_then_resume_loses_nothing(tmp_path):
     assert_model_is_fit_on_log(back.model, run)
     back.run(max_steps=back.n_steps + 30)
     assert [r.step for r in load_records(run)] == list(range(back.n_steps))
+
+
+def test_a_refit_by_hand_is_honoured_by_resume_and_load_model(tmp_path):
+    """refit() at a count off the max_new schedule: resume and load_model rebuild the model
+    the live loop had, not the one the plain schedule would give."""
+    run = tmp_path / "run"
+    ct = make(rare_regions_world(), run, noninteractive=False, max_new=5)
+    ct.run(max_demonstrations=7)
+    assert ct.refit()  # by hand, at 7
+    ct.run(max_demonstrations=13)  # the loop refits at 12
+    assert ct.n_demonstrations == 13
+    live = copy.deepcopy(ct.model)
+    ct.close()
+    assert int(live.n_points_.sum()) == 12
+    assert same_state(load_model(run), live)
+    back = ConfidentTeacher.resume(
+        run, rare_regions_world(), oracle(rare_regions_world()), progress=False
+    )
+    assert same_state(back.model, live)
+    # and the schedule goes on from 12: the next refit is at 17
+    back.run(max_demonstrations=16)
+    assert int(back.model.n_points_.sum()) == 12
+    back.run(max_demonstrations=17)
+    assert int(back.model.n_points_.sum()) == 17
+
+
+def test_snapshot_leaves_the_session_alone(tmp_path):
+    ct = make(rare_regions_world(), None, noninteractive=False, max_new=5)
+    ct.run(max_demonstrations=7)
+    before = copy.deepcopy(ct.model)
+    snap = ct.snapshot()
+    assert int(snap.n_points_.sum()) == 7 and int(ct.model.n_points_.sum()) == 5
+    assert same_state(ct.model, before)
+    ct.run(max_demonstrations=10)
+    assert int(ct.model.n_points_.sum()) == 10  # the schedule was not moved
+
+
+def test_a_failing_refit_leaves_a_whole_step(tmp_path):
+    run = tmp_path / "run"
+    calls = []
+
+    def on_refit(model, n):
+        calls.append(n)
+        if len(calls) == 2:
+            raise RuntimeError("refit callback failed")
+
+    ct = ConfidentTeacher(
+        rare_regions_world(),
+        oracle(rare_regions_world()),
+        config=TeachingConfig(noninteractive=False, max_new=2),
+        run_dir=run,
+        progress=False,
+        on_refit=on_refit,
+    )
+    with pytest.raises(RuntimeError, match="callback failed"):
+        ct.run(max_steps=50)
+    n = ct.n_steps
+    assert n == len(ct.records) and ct.records[-1].reward is not None  # the step is complete
+    ct.run(max_steps=n + 10)  # and the session simply goes on
+    assert [r.step for r in ct.records] == list(range(n + 10))
+    ct.close()
+    assert [r.step for r in load_records(run)] == list(range(n + 10))

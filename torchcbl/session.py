@@ -383,20 +383,28 @@ def _record_from_row(row: tuple[Any, ...]) -> StepRecord:
 
 
 def _rows(db: sqlite3.Connection, journal: Path | None) -> list[tuple[Any, ...]]:
-    """Every row of the log in step order, with a journal's lines applied on top."""
+    """Every row of the log in step order, with a journal's lines applied on top.
+
+    The journal is read first: a writer that commits and empties it in between has then put
+    those rows in SQLite, where the SELECT finds them. A finished SQLite row is never replaced
+    by an older journal line.
+    """
+    entries = [] if journal is None else _journal_entries(journal)
     cur = db.execute(f"SELECT {', '.join(_COLUMNS)} FROM steps ORDER BY step")
     rows = {row[0]: row for row in cur}
-    if journal is not None:
-        at = {name: i for i, name in enumerate(_COLUMNS)}
-        for kind, values in _journal_entries(journal):
-            if kind == "s":
-                rows[values[0]] = values
-            elif values[-1] in rows:
-                row = list(rows[values[-1]])
-                for name, v in zip(FINISH_FIELDS, values[:4], strict=True):
-                    row[at[name]] = v
-                row[at["pending"]] = 0
-                rows[values[-1]] = tuple(row)
+    at = {name: i for i, name in enumerate(_COLUMNS)}
+    pending = at["pending"]
+    for kind, values in entries:
+        step = values[0] if kind == "s" else values[-1]
+        if kind == "s":
+            if step not in rows or rows[step][pending]:
+                rows[step] = values
+        elif step in rows and rows[step][pending]:
+            row = list(rows[step])
+            for name, v in zip(FINISH_FIELDS, values[:4], strict=True):
+                row[at[name]] = v
+            row[pending] = 0
+            rows[step] = tuple(row)
     return [rows[k] for k in sorted(rows)]
 
 
@@ -476,12 +484,22 @@ def build_model(config: dict[str, Any]) -> GaussianMixtureSet:
 
 
 def fit_count(n_demonstrations: int, max_new: int) -> int:
-    """Demonstrations the live model was fitted on when ``n_demonstrations`` were logged.
-
-    The loop refits every time ``max_new`` new demonstrations have accumulated, so the model
-    always stands on a multiple of ``max_new``.
-    """
+    """Demonstrations the loop's model stands on after ``n_demonstrations``, when every refit
+    was the loop's own (one each time ``max_new`` new demonstrations have accumulated)."""
     return (n_demonstrations // max_new) * max_new
+
+
+def fitted_count(run_dir: str | os.PathLike[str], n_demonstrations: int, max_new: int) -> int:
+    """Demonstrations the live model stood on when ``n_demonstrations`` were logged.
+
+    The last refit the directory knows of is its newest checkpoint with at most that many
+    demonstrations (a refit may also be asked for by hand, :meth:`ConfidentTeacher.refit`, at
+    any count); from there the loop refits every ``max_new`` demonstrations. A checkpoint
+    missing because the process died before writing it is covered by the same schedule.
+    """
+    ckpt = latest_checkpoint(run_dir, at_most=n_demonstrations)
+    last = 0 if ckpt is None else ckpt[0]
+    return last + fit_count(n_demonstrations - last, max_new)
 
 
 def load_model(
@@ -495,7 +513,8 @@ def load_model(
             logged (default: all logged demonstrations).
 
     Returns:
-        A GaussianMixtureSet fitted on the first ``fit_count(n, max_new)`` demonstrations
+        A GaussianMixtureSet fitted on the first ``fitted_count(run_dir, n, max_new)``
+        demonstrations
         (unfitted when that is 0 and the session did not start from a fitted model). If the
         matching checkpoint is missing (the process was killed between logging and saving),
         the model is refitted deterministically on the logged demonstrations.
@@ -503,7 +522,7 @@ def load_model(
     config = load_config(run_dir)
     x, y = load_demonstrations(run_dir)
     n = len(y) if n_demonstrations is None else min(int(n_demonstrations), len(y))
-    k = fit_count(n, int(config["teaching"]["max_new"]))
+    k = fitted_count(run_dir, n, int(config["teaching"]["max_new"]))
     model = build_model(config)
     ckpt = latest_checkpoint(run_dir, at_most=k)
     if ckpt is not None and ckpt[0] == k:

@@ -29,6 +29,7 @@ target is None; it is skipped when ``noninteractive=False``.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import os
@@ -49,7 +50,7 @@ from torchcbl.session import (
     IncompatibleRunDirError,
     SessionStore,
     build_model,
-    fit_count,
+    fitted_count,
     latest_checkpoint,
     load_config,
     load_policy,
@@ -255,7 +256,7 @@ def _seed_for(seed: int, episode: int) -> int:
 
 def _obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
     try:
-        x = np.asarray(obs, dtype=np.float64)
+        x = np.array(obs, dtype=np.float64)  # a copy: an env may reuse its buffer in place
     except (TypeError, ValueError) as exc:
         raise EnvError(f"{where}: observation is not numeric ({exc}).") from exc
     if x.shape != (n_features,):
@@ -502,7 +503,7 @@ class ConfidentTeacher:
             if r.phase == "confident":
                 self._auto_window.append(r.autonomous)
         n = len(self._demo_y)
-        k = fit_count(n, self.config.max_new)
+        k = fitted_count(self.run_dir, n, self.config.max_new)
         assert self._store is not None
         ckpt = latest_checkpoint(self.run_dir, at_most=k)
         if ckpt is not None and ckpt[0] == k:
@@ -597,14 +598,21 @@ class ConfidentTeacher:
     def refit(self) -> bool:
         """Refit now on every recorded demonstration if any arrived since the last refit.
 
-        Use it before snapshotting the model at a stage (``copy.deepcopy(teacher.model)``) when
-        ``max_new > 1``, so the snapshot includes the latest demonstrations. Returns whether a
-        refit happened.
+        The refit schedule then counts ``max_new`` from here. To evaluate a stage without
+        changing the session, use :meth:`snapshot` instead. Returns whether a refit happened.
         """
         if self._new_since_refit == 0 or not self._demo_y:
             return False
         self._refit()
         return True
+
+    def snapshot(self) -> torch.nn.Module:
+        """A copy of the model fitted on every demonstration so far, leaving the session as it
+        is (its model and refit schedule untouched): for evaluating a learning stage."""
+        model = copy.deepcopy(self.model)
+        if self._new_since_refit and self._demo_y:
+            model.fit(np.stack(self._demo_x), np.asarray(self._demo_y, dtype=np.int64))
+        return model
 
     @property
     def autonomous_episodes_streak(self) -> int:
@@ -684,9 +692,13 @@ class ConfidentTeacher:
             if self._store is not None:
                 self._store.commit_demonstration(record)  # durable before the action runs
             self._new_since_refit += 1
-            if self._new_since_refit >= self.config.max_new:
+        try:
+            record = self._execute(record)
+        finally:
+            # Refit once the step is complete (Algorithm 1 executes the teacher's action either
+            # way), so a fit that fails leaves a whole step behind, not half of one.
+            if ask and self._new_since_refit >= self.config.max_new:
                 self._refit()
-        record = self._execute(record)
         if ask:
             self._auto_steps_streak = 0
         else:
@@ -899,9 +911,12 @@ def evaluate_policy(
                 f"[0, {n_actions}) (an unfitted GreedyPolicy answers -1)."
             )
         raw_next, r, term, trunc, info = env.step(action)
-        reward = float(r)
+        try:
+            reward = float(r)
+        except (TypeError, ValueError):
+            reward = math.nan
         if not math.isfinite(reward):
-            raise EnvError(f"env.step returned a non-finite reward {r!r}")
+            raise EnvError(f"env.step returned a reward that is not a finite number: {r!r}")
         records.append(
             StepRecord(
                 step=len(records),
@@ -924,6 +939,8 @@ def evaluate_policy(
         if term or trunc:
             done_episodes += 1
             episode += 1
+            if n_episodes is not None and done_episodes >= n_episodes:
+                break  # no reset after the last episode (for SUMO, a whole new road)
             raw, info = env.reset()
         else:
             raw = raw_next
