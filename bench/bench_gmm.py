@@ -4,7 +4,7 @@ Cases (the acceptance of issue 2):
   a: 3 actions x 330 points x 4-D, k <= 15      target ours/sklearn <= 1/20
   b: 3 actions x 3000 points x 4-D, k <= 15     target <= 1/10
   c: 10 actions x 1000 points x 8-D, k <= 10    target <= 1/10
-  refit: 1000 points (3 actions x 4-D), k <= 15 target < 0.1 s
+  refit: 1000 points (3 actions x 4-D), k <= 15, the library's defaults: target < 0.1 s
 sklearn: GaussianMixture per action per k, full covariances, same tol / max_iter / reg_covar
 (= our variance floor: features are standardised so the floor is one number), n_init=1,
 k-means initialisation, pinned to one thread with threadpoolctl. Ours runs torch on one
@@ -61,8 +61,11 @@ def make_data(n_actions: int, n_per: int, d: int, seed: int = 0):
     return x, np.repeat(np.arange(n_actions), n_per)
 
 
-def time_ours(x, y, a, d, k, repeats):
-    model = GaussianMixtureSet(a, d, k, tol=TOL, max_iter=MAX_ITER, seed=0)
+def time_ours(x, y, a, d, k, repeats, *, library_defaults=False):
+    if library_defaults:  # what a user of the teaching loop gets
+        model = GaussianMixtureSet(a, d, k, seed=0)
+    else:
+        model = GaussianMixtureSet(a, d, k, tol=TOL, max_iter=MAX_ITER, seed=0)
     model.fit(x, y)  # warm-up
     times = []
     for _ in range(repeats):
@@ -177,10 +180,10 @@ def main() -> None:
             "ok": ok,
         }
     x, y = make_data(3, 333, 4, seed=1)
-    _, rt = time_ours(x, y, 3, 4, 15, args.repeats)
+    _, rt = time_ours(x, y, 3, 4, 15, args.repeats, library_defaults=True)
     print(
-        f"refit  3x333x4 k<=15: best {min(rt) * 1e3:.1f} ms, median "
-        f"{statistics.median(rt) * 1e3:.1f} ms (target < 100 ms)"
+        f"refit  3x333x4 k<=15 (library defaults, tol=1e-3): best {min(rt) * 1e3:.1f} ms, "
+        f"median {statistics.median(rt) * 1e3:.1f} ms (target < 100 ms)"
     )
     results["refit_1000"] = {"best_s": min(rt), "median_s": statistics.median(rt)}
     model, _ = time_ours(x, y, 3, 4, 15, 1)

@@ -143,6 +143,8 @@ class GaussianMixtureSet(nn.Module):
         criterion: "aic" (free-parameter AIC, default), "bic", or "aic_paper" (Eq. 5 literally).
         var_floor: relative variance floor, see the module docstring (>= 0).
         tol: EM stops when the mean per-point log-likelihood changes less than this (nats).
+            Default 1e-3, scikit-learn's default; it keeps a refit of 1000 points (3 actions,
+            4-D, k <= 15) under 0.1 s. Use 1e-4 or less for tighter fits.
         max_iter: EM iteration cap per candidate.
         seed: seeds the k-means++ initialisation; the same seed and data give the same model.
 
@@ -163,7 +165,7 @@ class GaussianMixtureSet(nn.Module):
         *,
         criterion: Criterion = "aic",
         var_floor: float = 1e-3,
-        tol: float = 1e-4,
+        tol: float = 1e-3,
         max_iter: int = 200,
         seed: int = 0,
     ) -> None:
