@@ -153,9 +153,14 @@ def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | No
     for r in records:
         if r.phase == "confident" and (not conf_episodes or conf_episodes[-1] != r.episode):
             conf_episodes.append(r.episode)
-    requests = [
-        sum(1 for r in demos if r.phase == "confident" and r.episode == e) for e in conf_episodes
-    ]
+    # The phase usually switches mid-circuit: that circuit's confident remainder is counted
+    # apart, and "the next circuit" (the paper's 3 requests) is the first whole one.
+    switching = {r.episode for r in records if r.phase == "noninteractive"}
+    requests_all = {
+        e: sum(1 for r in demos if r.phase == "confident" and r.episode == e) for e in conf_episodes
+    }
+    requests_switching = sum(n for e, n in requests_all.items() if e in switching)
+    requests = [n for e, n in requests_all.items() if e not in switching]
     finished = teacher.stop_reason == "autonomous_episodes"
     teach_contacts = sum(1 for r in records if r.info.get("contact"))
     circuits_done = sum(1 for r in records if r.terminated)
@@ -175,6 +180,7 @@ def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | No
         "demonstrations_confident": len(demos) - len(non),
         "demonstrations_total": len(demos),
         "requests_per_circuit": requests,
+        "requests_switching_circuit": requests_switching,
         "steps_total": len(records),
         "circuits_total": circuits_done,
         "contacts_while_teaching": teach_contacts,
@@ -271,6 +277,9 @@ def run_experiment(
     ]
     summary: dict[str, Any] = {k: _mean_sd([r[k] for r in public]) for k in keys}
     req = [r["requests_per_circuit"] for r in public]
+    summary["requests_switching_circuit"] = _mean_sd(
+        [r["requests_switching_circuit"] for r in public]
+    )
     summary["requests_first_circuit"] = _mean_sd([q[0] if q else 0 for q in req])
     summary["requests_next_two_circuits"] = _mean_sd([sum(q[1:3]) for q in req])
     summary["components"] = {
@@ -427,7 +436,12 @@ def format_summary(results: dict[str, Any]) -> str:
             _fmt(s["demonstrations_noninteractive"]),
         ),
         (
-            "requests, first confident circuit",
+            "requests, rest of the circuit that switched",
+            "-",
+            _fmt(s["requests_switching_circuit"]),
+        ),
+        (
+            "requests, next (first whole) circuit",
             p["requests_first_circuit"],
             _fmt(s["requests_first_circuit"]),
         ),

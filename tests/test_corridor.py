@@ -254,6 +254,7 @@ def test_tiny_experiment_writes_results(tmp_path):
         "demonstrations_noninteractive",
         "demonstrations_confident",
         "demonstrations_total",
+        "requests_switching_circuit",
         "requests_first_circuit",
         "ps_steps",
     ):
@@ -263,6 +264,8 @@ def test_tiny_experiment_writes_results(tmp_path):
     assert {"torch", "pymunk", "gymnasium"} <= set(data["versions"])
     for r in data["per_seed"]:
         assert r["finished"] and r["eval_circuits_clean"] == 2
+        confident = r["demonstrations_confident"]
+        assert r["requests_switching_circuit"] + sum(r["requests_per_circuit"]) == confident
         assert r["demonstrations_total"] == (
             r["demonstrations_noninteractive"] + r["demonstrations_confident"]
         )
