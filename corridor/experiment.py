@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import multiprocessing as mp
-import platform
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -41,6 +40,7 @@ from corridor.env import CorridorEnv
 from corridor.expert import CorridorExpert
 from corridor.maps import load_map
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
+from torchcbl.evaluation import mean_sd, run_versions
 
 __all__ = [
     "PAPER",
@@ -203,32 +203,10 @@ def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | No
     }
 
 
-def _mean_sd(values: list[float]) -> dict[str, float | None]:
-    v = [float(x) for x in values if x is not None]
-    if not v:
-        return {"mean": None, "sd": None, "n": 0}
-    return {
-        "mean": float(np.mean(v)),
-        "sd": float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
-        "n": len(v),
-    }
-
-
 def _versions() -> dict[str, str]:
-    import gymnasium
     import pymunk
-    import torch
 
-    import torchcbl
-
-    return {
-        "python": platform.python_version(),
-        "torchcbl": torchcbl.__version__,
-        "torch": torch.__version__,
-        "numpy": np.__version__,
-        "gymnasium": gymnasium.__version__,
-        "pymunk": pymunk.version,
-    }
+    return run_versions(pymunk=pymunk.version)
 
 
 def run_experiment(
@@ -275,21 +253,21 @@ def run_experiment(
         "ps_steps",
         "eval_circuits_clean",
     ]
-    summary: dict[str, Any] = {k: _mean_sd([r[k] for r in public]) for k in keys}
+    summary: dict[str, Any] = {k: mean_sd([r[k] for r in public]) for k in keys}
     req = [r["requests_per_circuit"] for r in public]
-    summary["requests_switching_circuit"] = _mean_sd(
+    summary["requests_switching_circuit"] = mean_sd(
         [r["requests_switching_circuit"] for r in public]
     )
-    summary["requests_first_circuit"] = _mean_sd([q[0] if q else 0 for q in req])
-    summary["requests_next_two_circuits"] = _mean_sd([sum(q[1:3]) for q in req])
+    summary["requests_first_circuit"] = mean_sd([q[0] if q else 0 for q in req])
+    summary["requests_next_two_circuits"] = mean_sd([sum(q[1:3]) for q in req])
     summary["components"] = {
-        a: _mean_sd([r["components"][a] for r in public]) for a in _ACTION_NAMES
+        a: mean_sd([r["components"][a] for r in public]) for a in _ACTION_NAMES
     }
     ps_ok = [r["ps_steps"] for r in public if r["ps_steps"] is not None]
     summary["ps_learned_share"] = len(ps_ok) / len(public)
     # PS runs that never learned count as the step budget (a lower bound on their steps).
     censored = [r["ps_steps"] if r["ps_steps"] is not None else config.ps.max_steps for r in public]
-    summary["ps_steps_censored_at_budget"] = _mean_sd(censored)
+    summary["ps_steps_censored_at_budget"] = mean_sd(censored)
     demos_mean = summary["demonstrations_total"]["mean"]
     # Conservative ratio: learned runs only (unlearned runs could only raise it).
     ps_mean = summary["ps_steps"]["mean"]

@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import multiprocessing as mp
-import platform
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from sumo_scenarios import metrics
+from torchcbl.evaluation import mean_sd, run_versions
 
 PAPER = {
     "straight_collision_pct": 30.4,
@@ -273,31 +273,14 @@ class _Straight:
         return 0
 
 
-def _mean_sd(values: list[float]) -> dict[str, float]:
-    v = np.asarray(values, dtype=np.float64)
-    return {"mean": float(v.mean()), "sd": float(v.std(ddof=1)) if v.size > 1 else 0.0}
-
-
 def _versions() -> dict[str, str]:
-    import gymnasium
-    import libsumo  # noqa: F401  (present in every run)
     import sumolib
-    import torch
 
-    import torchcbl
-
-    out = {
-        "python": platform.python_version(),
-        "torch": torch.__version__,
-        "numpy": np.__version__,
-        "gymnasium": gymnasium.__version__,
-        "torchcbl": torchcbl.__version__,
-    }
     try:
-        out["sumo"] = sumolib.version.gitDescribe()
+        sumo = sumolib.version.gitDescribe()
     except Exception:  # noqa: BLE001 - best effort
-        out["sumo"] = "unknown"
-    return out
+        sumo = "unknown"
+    return run_versions(sumo=sumo)
 
 
 def run_experiment(
@@ -327,21 +310,19 @@ def run_experiment(
     for label in labels:
         rows = [r["stages"][label] for r in per_seed]
         s = {
-            "collision_pct": _mean_sd([100 * x["collision_rate"] for x in rows]),
+            "collision_pct": mean_sd([100 * x["collision_rate"] for x in rows]),
             "lanes": np.mean([x["lanes"] for x in rows], axis=0).tolist(),
-            "tv_to_expert": _mean_sd([x["tv_to_expert"] for x in rows]),
+            "tv_to_expert": mean_sd([x["tv_to_expert"] for x in rows]),
         }
         if "all_segments" in rows[0]:
             s["all_segments"] = {
-                "collision_pct": _mean_sd(
-                    [100 * x["all_segments"]["collision_rate"] for x in rows]
-                ),
+                "collision_pct": mean_sd([100 * x["all_segments"]["collision_rate"] for x in rows]),
                 "lanes": np.mean([x["all_segments"]["lanes"] for x in rows], axis=0).tolist(),
-                "tv_to_expert": _mean_sd([x["all_segments"]["tv_to_expert"] for x in rows]),
+                "tv_to_expert": mean_sd([x["all_segments"]["tv_to_expert"] for x in rows]),
             }
         if "demonstrations" in rows[0]:
-            s["demonstrations"] = _mean_sd([x["demonstrations"] for x in rows])
-            s["components_total"] = _mean_sd([sum(x["components"]) for x in rows])
+            s["demonstrations"] = mean_sd([x["demonstrations"] for x in rows])
+            s["components_total"] = mean_sd([sum(x["components"]) for x in rows])
         summary[label] = s
     final_a = f"a_plus{config.confident_demos}"
     last_b = f"b_{config.arm_b_stages[-1]}"
@@ -362,8 +343,8 @@ def run_experiment(
         "versions": _versions(),
         "paper": PAPER,
         "summary": summary,
-        "noninteractive_demos": _mean_sd([r["noninteractive_demos"] for r in per_seed]),
-        "arm_a_autonomy_in_confident_phase": _mean_sd(
+        "noninteractive_demos": mean_sd([r["noninteractive_demos"] for r in per_seed]),
+        "arm_a_autonomy_in_confident_phase": mean_sd(
             [r["arm_a_autonomy_in_confident_phase"] or 0.0 for r in per_seed]
         ),
         "acceptance": checks,
