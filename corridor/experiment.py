@@ -230,19 +230,26 @@ def run_experiment(
     t0 = time.perf_counter()
     args = [(config, s, run_dir / "sessions" / f"seed{s}") for s in config.seeds]
     per_seed: list[dict] = []
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=len(args), desc="corridor seeds", unit="seed", disable=not progress)
+
+    def done(result: dict) -> None:
+        per_seed.append(result)
+        if progress:
+            bar.write(_report(result))
+            bar.update(1)
+
     if workers == 1:
         for a in args:
-            per_seed.append(run_seed(*a))
-            if progress:
-                _report(per_seed[-1])
+            done(run_seed(*a))
     else:
         ctx = mp.get_context("spawn")
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
             futures = [pool.submit(run_seed, *a) for a in args]
             for f in futures:
-                per_seed.append(f.result())
-                if progress:
-                    _report(per_seed[-1])
+                done(f.result())
+    bar.close()
     first = per_seed[0]
     public = [{k: v for k, v in r.items() if not k.startswith("_")} for r in per_seed]
     keys = [
@@ -373,14 +380,13 @@ def _json_default(o: Any) -> Any:
     raise TypeError(f"not JSON-able: {type(o)}")
 
 
-def _report(r: dict) -> None:
-    print(
+def _report(r: dict) -> str:
+    return (
         f"seed {r['seed']}: demonstrations {r['demonstrations_total']} "
         f"({r['demonstrations_noninteractive']} + {r['demonstrations_confident']}), "
         f"requests/circuit {r['requests_per_circuit'][:4]}, "
         f"eval {r['eval_circuits_clean']}/{r['eval_circuits']}, PS {r['ps_steps']} steps, "
-        f"{r['seconds']:.1f} s",
-        flush=True,
+        f"{r['seconds']:.1f} s"
     )
 
 

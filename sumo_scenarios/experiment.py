@@ -268,6 +268,10 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     }
 
 
+def _run_seed_job(job: tuple[DrivingExperimentConfig, int, str]) -> dict[str, Any]:
+    return _run_seed(*job)
+
+
 class _Straight:
     def __call__(self, observation: np.ndarray) -> int:
         return 0
@@ -299,11 +303,15 @@ def run_experiment(
     jobs = [(config, s, str(run_dir / f"seed_{s}")) for s in config.seeds]
     per_seed = []
     ctx = mp.get_context("spawn")
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=len(jobs), desc="driving seeds", unit="seed", disable=not progress)
     with ctx.Pool(min(workers, len(jobs)), maxtasksperchild=1) as pool:
-        for res in pool.starmap(_run_seed, jobs, chunksize=1):
+        for res in pool.imap_unordered(_run_seed_job, jobs, chunksize=1):
             per_seed.append(res)
-            if progress:
-                print(f"seed {res['seed']} done", flush=True)
+            bar.update(1)
+            bar.set_postfix_str(f"seed {res['seed']} done")
+    bar.close()
     per_seed.sort(key=lambda r: r["seed"])
     labels = _stage_labels(config)
     summary: dict[str, Any] = {}
