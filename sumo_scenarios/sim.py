@@ -28,9 +28,25 @@ from sumo_scenarios.scenarios import (
 )
 
 EDGE = "road"
+ROUTE = "road"  # the one route, over EDGE (data/driving.add.xml)
 EGO = "ego"
 _LIVE: list[HighwaySim] = []
 _MAX_EXTRA_GAP_M = 250.0  # spacings are capped so a recycled car always fits on the edge
+
+
+def _insert(vid: str, type_id: str, lane: int, x: float, speed: float) -> None:
+    """Add a vehicle at lane / position ``x`` (m) NOW, at a fixed ``speed`` (m/s).
+
+    ``moveTo`` right after ``add`` skips SUMO's insertion checks, which would otherwise delay
+    the car; lane-change mode 0 and speed mode 32 keep it in its lane at exactly its speed.
+    """
+    libsumo.vehicle.add(
+        vid, ROUTE, typeID=type_id, departLane=str(lane), departPos=str(x), departSpeed=str(speed)
+    )
+    libsumo.vehicle.moveTo(vid, f"{EDGE}_{lane}", x)
+    libsumo.vehicle.setLaneChangeMode(vid, 0)
+    libsumo.vehicle.setSpeedMode(vid, 32)
+    libsumo.vehicle.setSpeed(vid, speed)
 
 
 @dataclass(frozen=True)
@@ -142,18 +158,7 @@ class HighwaySim:
         self.n_shifts = 0
         self.distance_m = 0.0
         x0 = self.config.ego_start_m
-        libsumo.vehicle.add(
-            EGO,
-            "road",
-            typeID="ego",
-            departLane=str(ego_lane),
-            departPos=str(x0),
-            departSpeed=str(EGO_SPEED_MS),
-        )
-        libsumo.vehicle.moveTo(EGO, f"{EDGE}_{ego_lane}", x0)
-        libsumo.vehicle.setLaneChangeMode(EGO, 0)
-        libsumo.vehicle.setSpeedMode(EGO, 32)
-        libsumo.vehicle.setSpeed(EGO, EGO_SPEED_MS)
+        _insert(EGO, "ego", ego_lane, x0, EGO_SPEED_MS)
         ids, lanes, pos = [], [], []
         for lane in TRAFFIC_LANES:
             x = x0 - self.scenario.behind_m + float(rng.uniform(0.0, self._spacing(lane)))
@@ -208,19 +213,7 @@ class HighwaySim:
     def _add_car(self, lane: int, x: float) -> str:
         cid = f"c{self._next_id}"
         self._next_id += 1
-        v = self._lane_speed[lane]
-        libsumo.vehicle.add(
-            cid,
-            "road",
-            typeID="traffic",
-            departLane=str(lane),
-            departPos=str(x),
-            departSpeed=str(v),
-        )
-        libsumo.vehicle.moveTo(cid, f"{EDGE}_{lane}", x)
-        libsumo.vehicle.setLaneChangeMode(cid, 0)
-        libsumo.vehicle.setSpeedMode(cid, 32)
-        libsumo.vehicle.setSpeed(cid, v)
+        _insert(cid, "traffic", lane, x, self._lane_speed[lane])
         return cid
 
     # ------------------------------------------------------------------ stepping
