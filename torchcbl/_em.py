@@ -335,6 +335,21 @@ def _m_step_packed(
     return Params(weights, means, cov, log_det, coef), coef
 
 
+def _shifted_sums(
+    wlp: Tensor, shift: Tensor, rows: Tensor, row_pad: Tensor, r1: int, *, lowest: float
+) -> tuple[Tensor, Tensor, Tensor] | None:
+    """exp(wlp - shift) [G, M, N] (in place on wlp), its per-candidate sums s [G*R1, N] and
+    log(s), or None when the shift was too far off: some candidate's log-sum below ``lowest``
+    (the clamp at _CLAMP would then cost precision) or near overflow."""
+    n = wlp.shape[-1]
+    e = wlp.sub_(shift).clamp_(_CLAMP, 600.0).exp_()
+    s = torch.zeros(wlp.shape[0] * r1, n, dtype=e.dtype, device=e.device)
+    s = s.index_add_(0, rows, e.reshape(-1, n)).add_(row_pad.unsqueeze(-1))
+    ls = torch.log(s)
+    lo, hi = torch.aminmax(ls)
+    return (e, s, ls) if float(lo) > lowest and float(hi) < 550.0 else None
+
+
 def _e_step_packed(
     zt: Tensor,
     coef: Tensor,
@@ -364,24 +379,18 @@ def _e_step_packed(
     shared_ok = True
     if shift is not None and shared:
         gs = shift.masked_fill(row_ok.unsqueeze(-1) == 0, -math.inf).amax(1, keepdim=True)
-        e = wlp.sub_(gs).clamp_(_CLAMP, 600.0).exp_()
-        s = torch.zeros(g * r1, n, dtype=e.dtype, device=e.device)
-        s = s.index_add_(0, rows, e.reshape(-1, n)).add_(row_pad.unsqueeze(-1))
-        ls = torch.log(s)
-        lo, hi = torch.aminmax(ls)
-        if float(lo) > -20.0 and float(hi) < 550.0:
+        tried = _shifted_sums(wlp, gs, rows, row_pad, r1, lowest=-20.0)
+        if tried is not None:
+            e, s, ls = tried
             lse = ls.reshape(g, r1, n) + gs
         else:
             shared_ok = False
             wlp = torch.bmm(coef, zt)
     if shift is not None and lse is None:
         sh = shift.reshape(-1, n).index_select(0, rows).reshape(g, m, n)
-        e = wlp.sub_(sh).clamp_(_CLAMP, 600.0).exp_()
-        s = torch.zeros(g * r1, n, dtype=e.dtype, device=e.device)
-        s = s.index_add_(0, rows, e.reshape(-1, n)).add_(row_pad.unsqueeze(-1))
-        ls = torch.log(s)
-        lo, hi = torch.aminmax(ls)
-        if float(lo) > -40.0 and float(hi) < 550.0:
+        tried = _shifted_sums(wlp, sh, rows, row_pad, r1, lowest=-40.0)
+        if tried is not None:
+            e, s, ls = tried
             lse = ls.reshape(g, r1, n) + shift
         else:
             wlp = torch.bmm(coef, zt)
