@@ -1,4 +1,4 @@
-"""The packed E-step gives the same result whichever log-sum-exp shift it ends up using."""
+"""The packed E-step against a direct log-sum-exp per candidate, whichever shift it uses."""
 
 from __future__ import annotations
 
@@ -17,39 +17,77 @@ def _packed_problem(seed: int = 0):
     x = torch.randn(g, n, d, generator=gen, dtype=torch.float64)
     zt = _em.quadratic_features(x).transpose(1, 2).contiguous()
     # random SPD Gaussians through the M-step of random responsibilities
-    m = sum(ks)
-    row = np.repeat(np.arange(r), ks)
+    m = sum(ks) + 1  # one padded component at the end of each batch row
+    row = np.r_[np.repeat(np.arange(r), ks), r]
     rows = torch.from_numpy((np.arange(g)[:, None] * (r + 1) + row[None]).reshape(-1))
     valid = torch.ones(g, m, dtype=torch.float64)
+    valid[:, -1] = 0.0
     row_ok = torch.ones(g, r + 1, dtype=torch.float64)
     row_ok[:, r] = 0.0
     row_pad = (1.0 - row_ok).reshape(-1)
-    resp = torch.rand(g, m, n, generator=gen, dtype=torch.float64)
+    resp = torch.rand(g, m, n, generator=gen, dtype=torch.float64) * valid.unsqueeze(-1)
     floor = torch.full((d,), 1e-2, dtype=torch.float64)
     _, coef = _em._m_step_packed(zt, resp, rows, valid, row_pad, floor)
     pm = torch.ones(g, n, dtype=torch.float64)
     pm[1, -7:] = 0.0  # padded points in the second group
-    return zt, coef, pm, rows, row_pad, row_ok
+    return zt, coef, pm, rows, row_pad, row_ok, ks
 
 
-@pytest.mark.parametrize("offset", [0.0, 0.5, 30.0, -30.0])
-@pytest.mark.parametrize("shared", [False, True])
-def test_packed_e_step_does_not_depend_on_the_shift(offset, shared):
-    zt, coef, pm, rows, row_pad, row_ok = _packed_problem()
-    ll0, resp0, lse0, _ = _em._e_step_packed(zt, coef, pm, rows, row_pad, row_ok, None)
-    shift = lse0.clone()
-    shift[:, 1] += offset  # one candidate's previous lse far off: forces the fallbacks
-    ll, resp, lse, shared_ok = _em._e_step_packed(
-        zt, coef, pm, rows, row_pad, row_ok, shift, shared
-    )
-    real = row_ok > 0
-    torch.testing.assert_close(ll[real], ll0[real], rtol=1e-12, atol=1e-10)
-    torch.testing.assert_close(resp, resp0, rtol=1e-10, atol=1e-14)
-    torch.testing.assert_close(lse[real], lse0[real], rtol=1e-12, atol=1e-10)
-    if shared and offset >= 30.0:  # the others then sum to ~e^-30 of the shared shift
-        assert not shared_ok
+def _direct(zt, coef, pm, ks):
+    """Per candidate: log-sum-exp over its components with torch.logsumexp, and resp."""
+    w = torch.bmm(coef, zt)  # [G, M, N]
+    lls, resps, start = [], [], 0
+    for k in ks:
+        part = w[:, start : start + k]
+        lse = torch.logsumexp(part, 1)  # [G, N]
+        lls.append((lse * pm).sum(-1))
+        resps.append(torch.exp(part - lse.unsqueeze(1)) * pm.unsqueeze(1))
+        start += k
+    return torch.stack(lls, 1), torch.cat(resps, 1)
+
+
+@pytest.mark.parametrize("offset", [0.0, 30.0, -650.0, -2000.0])
+def test_packed_e_step_equals_a_direct_log_sum_exp(offset):
+    zt, coef, pm, rows, row_pad, row_ok, ks = _packed_problem()
+    # one candidate's weights scaled by e^offset: beyond -600 nats the shared shift of the
+    # batch row is refused and each candidate's own maximum is used instead
+    coef[:, 1:4, -1] += offset
+    ll_ref, resp_ref = _direct(zt, coef, pm, ks)
+    work = torch.empty(coef.shape[0], coef.shape[1], zt.shape[-1], dtype=torch.float64)
+    work2 = torch.empty(coef.shape[0] * coef.shape[1], zt.shape[-1], dtype=torch.float64)
+    for buffers in [(None, None), (work, work2)]:
+        ll, resp, lse = _em._e_step_packed(zt, coef, pm, rows, row_pad, row_ok, *buffers)
+        torch.testing.assert_close(ll[:, :3], ll_ref, rtol=1e-12, atol=1e-9)
+        torch.testing.assert_close(resp[:, :-1], resp_ref, rtol=1e-10, atol=1e-14)
+        assert bool((resp[:, -1] == 0).all())  # the padded component gets nothing
+        assert bool(torch.isfinite(lse[:, :3]).all())
     # responsibilities of each candidate sum to one on real points, zero on padding
     sums = torch.zeros(2 * 4, zt.shape[-1], dtype=torch.float64)
     sums.index_add_(0, rows, resp.reshape(-1, zt.shape[-1]))
     sums = sums.reshape(2, 4, -1)[:, :3]
     torch.testing.assert_close(sums, pm.unsqueeze(1).expand_as(sums), rtol=1e-12, atol=1e-12)
+
+
+def test_pack_balances_rows_and_keeps_every_component_once():
+    running = np.ones((4, 10), dtype=bool)
+    running[1:, 5:] = False  # one group with much more left to fit than the others
+    slot_k = np.tile(np.arange(1, 11), (4, 1))
+    lay = _em._pack(running, slot_k, 10)
+    gids = lay.gid[lay.gid >= 0]
+    expect = [
+        s * 10 + j
+        for g in range(4)
+        for c in range(10)
+        if running[g, c]
+        for s in [g * 10 + c]
+        for j in range(c + 1)
+    ]
+    assert sorted(gids.tolist()) == sorted(expect)
+    for b in range(lay.gid.shape[0]):  # a row's components belong to its group's slots
+        real = lay.gid[b] >= 0
+        assert set((lay.gid[b, real] // 10 // 10).tolist()) == {int(lay.groups[b])}
+        slots = lay.slot[b][lay.row[b, real]]
+        assert bool((slots == lay.gid[b, real] // 10).all())
+    # group 0 (55 components) is split; one row per group would pad every row to 55
+    assert lay.gid.shape[1] < 55
+    assert lay.gid.size < 4 * 55

@@ -36,7 +36,7 @@ import torch
 from torch import Tensor
 
 _EPS = float(np.finfo(np.float64).eps)
-_CLAMP = -60.0  # e^-60 ~ 1e-26: negligible next to 1, and far from the subnormal range
+_CLAMP = -700.0  # e^-700 ~ 1e-304: still a normal float64 (exp stays fast), ~0 next to 1
 _PAD_LOG_WEIGHT = -1.0e4
 
 
@@ -139,37 +139,19 @@ def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
     return Params(weights, means, cov, log_det, coef)
 
 
-def e_step(
-    z: Tensor, coef: Tensor, pmask: Tensor, shift: Tensor | None = None
-) -> tuple[Tensor, Tensor, Tensor]:
-    """Expectation step: z [G, N, Q], coef [G, C, K, Q], pmask [G, N].
-
-    Returns (loglik [G, C], resp [G, N, C, K], lse [G, N, C]): loglik is each slot's total
-    log-likelihood over the real points of its group, lse the per-point log-likelihood; resp is
-    zero on padded points. ``shift`` [G, N, C] (the previous iteration's lse) replaces the
-    per-point maximum as the log-sum-exp shift, saving a pass over the largest array; if the
-    shifted sums leave a safe range (some component 40 nats below, or 550 above, the shift)
-    the step is recomputed with the exact maximum, so the result never depends on it.
+def total_log_likelihood(zt: Tensor, coef: Tensor, pmask: Tensor) -> Tensor:
+    """Each slot's total log-likelihood over the real points of its group (sklearn's ``score``
+    times the count): zt [G, Q, N] (features of the points, points last), coef [G, C, K, Q],
+    pmask [G, N] -> [G, C]. The log-sum-exp is shifted by each slot's exact maximum.
     """
     g, c, k, q = coef.shape
-    n = z.shape[1]
-    wlp = torch.bmm(z, coef.reshape(g, c * k, q).transpose(1, 2)).reshape(g, n, c, k)
-    if shift is not None:
-        e = wlp.sub_(shift.unsqueeze(-1)).clamp_(_CLAMP, 600.0).exp_()
-        s = e.sum(-1, keepdim=True)
-        ls = torch.log(s)
-        lo, hi = torch.aminmax(ls)
-        if float(lo) > -40.0 and float(hi) < 550.0:
-            lse = ls.squeeze(-1) + shift
-            loglik = (lse * pmask.unsqueeze(-1)).sum(1)
-            return loglik, e.mul_(pmask.reshape(g, n, 1, 1) / s), lse
-        wlp = torch.bmm(z, coef.reshape(g, c * k, q).transpose(1, 2)).reshape(g, n, c, k)
-    mx = wlp.amax(-1, keepdim=True)
-    e = wlp.sub_(mx).clamp_min_(_CLAMP).exp_()
-    s = e.sum(-1, keepdim=True)
-    lse = (mx + torch.log(s)).squeeze(-1)
-    loglik = (lse * pmask.unsqueeze(-1)).sum(1)
-    return loglik, e.mul_(pmask.reshape(g, n, 1, 1) / s), lse
+    n = zt.shape[-1]
+    # [C*K, Q] @ [Q, N] (points last): MKL is several times slower on [N, Q] @ [Q, C*K] here
+    wlp = torch.bmm(coef.reshape(g, c * k, q), zt).view(g, c, k, n)
+    mx = wlp.amax(2, keepdim=True)
+    s = wlp.sub_(mx).clamp_min_(_CLAMP).exp_().sum(2)
+    lse = mx.squeeze(2) + torch.log(s)  # [G, C, N]
+    return (lse * pmask.unsqueeze(1)).sum(-1)
 
 
 def log_gaussian(x: Tensor, means: Tensor, prec_chol: Tensor, log_det: Tensor) -> Tensor:
@@ -214,42 +196,67 @@ def kmeans_init(
 
     x [G, N, D], pmask [G, N], cmask [G, C, K], uniforms [G, C, K] drive the seeding draws
     (inverse CDF over the D^2 weights), so the result is a pure function of the data and the
-    uniforms. Lloyd stops early when no label changes anywhere.
+    uniforms. Lloyd stops early when no label changes anywhere; a point equally near several
+    centres goes to the first.
+
+    Layout: distances are [G, C, K, N] (points last), so that the reductions over the
+    centres of a slot run along a middle axis, vectorised over the points; torch's reductions
+    over a short last axis (and its argmin over any axis) are several times slower.
     """
     g, n, d = x.shape
     c, k = cmask.shape[1:]
-    centers = torch.zeros(g, c, k, d, dtype=x.dtype, device=x.device)
-    d2 = torch.full((g, c, n), math.inf, dtype=x.dtype, device=x.device)
+    dev, dt = x.device, x.dtype
+    centers = torch.zeros(g, c, k, d, dtype=dt, device=dev)
+    d2 = torch.full((g, c, n), math.inf, dtype=dt, device=dev)
     pm = pmask.unsqueeze(1).expand(g, c, n)
-    flat_x = x.unsqueeze(1).expand(g, c, n, d)
+    xt = x.transpose(1, 2)  # [G, D, N]
     for j in range(k):
         w = pm if j == 0 else d2 * pm
         w = torch.where(w.sum(-1, keepdim=True) > 0, w, pm)  # all distances 0: uniform draw
         cdf = torch.cumsum(w, -1)
         target = uniforms[..., j : j + 1] * cdf[..., -1:]
         idx = torch.searchsorted(cdf, target, right=True).clamp_max(n - 1)  # [G, C, 1]
-        cj = torch.gather(flat_x, 2, idx.unsqueeze(-1).expand(g, c, 1, d))  # [G, C, 1, D]
-        centers[:, :, j] = cj.squeeze(2)
-        d2 = torch.minimum(d2, ((x.unsqueeze(1) - cj) ** 2).sum(-1))
-    pad = torch.where(cmask > 0, 0.0, math.inf).to(x.dtype)  # [G, C, K]
-    base = (torch.arange(g * c, device=x.device) * k).reshape(g, 1, c)  # slot offsets
-    xw = (x * pmask.unsqueeze(-1)).unsqueeze(2).expand(g, n, c, d).reshape(-1, d)
-    pw = pmask.unsqueeze(-1).expand(g, n, c).reshape(-1)
+        cj = torch.gather(
+            xt.unsqueeze(1).expand(g, c, d, n), 3, idx.unsqueeze(2).expand(g, c, d, 1)
+        )
+        centers[:, :, j] = cj.squeeze(-1)
+        diff = xt.unsqueeze(1) - cj  # [G, C, D, N]
+        d2 = torch.minimum(d2, diff.mul_(diff).sum(2))
+    # Lloyd: |x - c|^2 - |x|^2 = [-2c, |c|^2 + pad] . [x, 1], one matrix product for all slots
+    xa = torch.cat([xt, torch.ones(g, 1, n, dtype=dt, device=dev)], 1)  # [G, D+1, N]
+    pad = ((cmask <= 0).to(dt) * 1e300).unsqueeze(-1)  # [G, C, K, 1]
+    small = torch.int8 if k <= 127 else torch.int32
+    rev = (k - 1 - torch.arange(k, device=dev)).to(small).reshape(1, 1, k, 1)
+    base = (torch.arange(g * c, device=dev) * k).reshape(g, c, 1)  # slot offsets
+    pw = pm.reshape(-1)
+    xw = (xt * pmask.unsqueeze(1)).unsqueeze(1).expand(g, c, d, n)  # [G, C, D, N]
+    dim_off = (torch.arange(d, device=dev) * (g * c * k)).reshape(1, 1, d, 1)
     labels = None
+    # reused buffers: fresh multi-MB arrays every step would cost a page fault per 4 KiB
+    dist = torch.empty(g, c * k, n, dtype=dt, device=dev)
+    near = torch.empty(g, c, k, n, dtype=torch.bool, device=dev)
+    near_i = torch.empty(g, c, k, n, dtype=small, device=dev)
     for _ in range(max(n_lloyd, 1)):
-        c2 = ((centers * centers).sum(-1) + pad).reshape(g, 1, c * k)
-        # x @ (-2 c)^T + |c|^2 (bmm then add: baddbmm would first copy the broadcast |c|^2)
-        dist = torch.bmm(x, centers.reshape(g, c * k, d).transpose(1, 2) * -2.0).add_(c2)
-        new_labels = dist.reshape(g, n, c, k).argmin(-1)  # [G, N, C]
+        cen = torch.cat([centers * -2.0, (centers * centers).sum(-1, keepdim=True) + pad], -1)
+        torch.bmm(cen.reshape(g, c * k, d + 1), xa, out=dist)
+        dist4 = dist.view(g, c, k, n)
+        torch.eq(dist4, dist4.amin(2, keepdim=True), out=near)
+        near_i.copy_(near).mul_(rev)
+        new_labels = (k - 1) - near_i.amax(2).long()  # [G, C, N], first nearest
         if labels is not None and torch.equal(new_labels, labels):
             break
         labels = new_labels
-        flat = (labels + base).reshape(-1)
-        counts = torch.zeros(g * c * k, dtype=x.dtype, device=x.device).index_add_(0, flat, pw)
-        sums = torch.zeros(g * c * k, d, dtype=x.dtype, device=x.device).index_add_(0, flat, xw)
+        flat = labels + base  # [G, C, N] global component id
+        counts = torch.bincount(flat.reshape(-1), weights=pw, minlength=g * c * k)
+        sums = torch.bincount(
+            (flat.unsqueeze(2) + dim_off).reshape(-1),
+            weights=xw.reshape(-1),
+            minlength=g * c * k * d,
+        )  # [D * G*C*K]: dimension-major
         counts = counts.reshape(g, c, k, 1)
-        centers = torch.where(counts > 0, sums.reshape(g, c, k, d) / counts.clamp_min(1.0), centers)
-    resp = torch.nn.functional.one_hot(labels, k).to(x.dtype)
+        mean = sums.reshape(d, g, c, k).permute(1, 2, 3, 0) / counts.clamp_min(1.0)
+        centers = torch.where(counts > 0, mean, centers)
+    resp = torch.nn.functional.one_hot(labels.transpose(1, 2), k).to(dt)
     return resp.mul_(pmask.reshape(g, n, 1, 1))
 
 
@@ -263,13 +270,21 @@ class EMResult(NamedTuple):
     converged: Tensor
 
 
-class _Layout(NamedTuple):
-    """Packed layout of the running candidates: components of every running slot side by side.
+_ROW_COST = 4  # per batch row overhead of the packed layout, in components
+_REPACK = 0.85  # re-pack once the running components fall to this share of the packed ones
 
-    ``gid`` [G, M] numpy: global component id (slot * K0 + j) of each packed component, -1 for
-    padding; ``row`` [G, M] numpy: the candidate row (0..R-1) it belongs to, R for padding;
-    ``slot`` [G, R] numpy: flat slot id of each candidate row, -1 for padding;
-    ``groups``: the original group of each row of the batch.
+
+class _Layout(NamedTuple):
+    """Packed layout of the running candidates: their real components side by side.
+
+    A batch row holds some running slots of one group; a group's slots may span several rows,
+    so that rows hold similar numbers of components (one row per group would pad every row to
+    the group with the most left to fit).
+
+    ``gid`` [B, M] numpy: global component id (slot * K0 + j) of each packed component, -1 for
+    padding; ``row`` [B, M] numpy: the candidate row (0..R-1) it belongs to, R for padding;
+    ``slot`` [B, R] numpy: flat slot id of each candidate row, -1 for padding;
+    ``groups`` [B]: the group whose data each batch row holds.
     """
 
     gid: np.ndarray
@@ -278,35 +293,72 @@ class _Layout(NamedTuple):
     groups: np.ndarray
 
 
+def _first_fit(sizes: np.ndarray, cap: int) -> list[list[int]]:
+    """First-fit decreasing: item indices per bin, bins of capacity ``cap``."""
+    bins: list[list[int]] = []
+    room: list[int] = []
+    for i in np.argsort(-sizes, kind="stable").tolist():
+        for b, left in enumerate(room):
+            if sizes[i] <= left:
+                bins[b].append(i)
+                room[b] -= int(sizes[i])
+                break
+        else:
+            bins.append([i])
+            room.append(cap - int(sizes[i]))
+    return bins
+
+
 def _pack(running: np.ndarray, slot_k: np.ndarray, k0: int) -> _Layout:
-    """Layout of the running slots: running [G0, C0] bool, slot_k [G0, C0] component counts."""
-    groups = np.flatnonzero(running.any(1))
-    n_rows = int(running[groups].sum(1).max())
-    n_comp = int((running * slot_k)[groups].sum(1).max())
-    g = groups.size
-    gid = np.full((g, n_comp), -1, dtype=np.int64)
-    row = np.full((g, n_comp), n_rows, dtype=np.int64)
-    slot = np.full((g, n_rows), -1, dtype=np.int64)
+    """Layout of the running slots: running [G0, C0] bool, slot_k [G0, C0] component counts.
+
+    Chooses the row capacity among a few values (the largest group's total, and the even
+    shares of the total over G..2G rows) by the padded size rows * (capacity + _ROW_COST).
+    """
     c0 = running.shape[1]
-    for i, g0 in enumerate(groups):
-        cs = np.flatnonzero(running[g0])
-        ks = slot_k[g0, cs]
-        slot[i, : cs.size] = g0 * c0 + cs
+    per_group = [(g, np.flatnonzero(running[g])) for g in np.flatnonzero(running.any(1))]
+    sizes = [slot_k[g, cs] for g, cs in per_group]
+    totals = [int(s.sum()) for s in sizes]
+    biggest = max(int(s.max()) for s in sizes)
+    n_g, total = len(per_group), sum(totals)
+    caps = {max(totals)} | {max(biggest, -(-total // b)) for b in range(n_g, 2 * n_g + 1)}
+    best: tuple[int, list[tuple[int, np.ndarray]]] | None = None
+    for cap in sorted(caps, reverse=True):
+        bins = [
+            (g, np.sort(cs[idx]))
+            for (g, cs), s in zip(per_group, sizes, strict=True)
+            for idx in _first_fit(s, cap)
+        ]
+        used = max(int(slot_k[g, cs].sum()) for g, cs in bins)
+        cost = len(bins) * (used + _ROW_COST)
+        if best is None or cost < best[0]:
+            best = (cost, bins)
+    assert best is not None
+    bins = best[1]
+    n_rows = max(cs.size for _, cs in bins)
+    n_comp = max(int(slot_k[g, cs].sum()) for g, cs in bins)
+    b_n = len(bins)
+    gid = np.full((b_n, n_comp), -1, dtype=np.int64)
+    row = np.full((b_n, n_comp), n_rows, dtype=np.int64)
+    slot = np.full((b_n, n_rows), -1, dtype=np.int64)
+    for i, (g, cs) in enumerate(bins):
+        ks = slot_k[g, cs]
+        slot[i, : cs.size] = g * c0 + cs
         m = int(ks.sum())
         row[i, :m] = np.repeat(np.arange(cs.size), ks)
         within = np.arange(m) - np.repeat(np.cumsum(ks) - ks, ks)
-        gid[i, :m] = np.repeat((g0 * c0 + cs) * k0, ks) + within
-    return _Layout(gid, row, slot, groups)
+        gid[i, :m] = np.repeat((g * c0 + cs) * k0, ks) + within
+    return _Layout(gid, row, slot, np.array([g for g, _ in bins], dtype=np.int64))
 
 
 def _m_step_packed(
     zt: Tensor, resp: Tensor, rows: Tensor, valid: Tensor, row_pad: Tensor, floor: Tensor
 ) -> tuple[Params, Tensor]:
-    """M-step in the packed layout: zt [G, Q, N] (contiguous), resp [G, M, N] -> (Params
-    [G, M, ...], coef [G, M, Q]).
+    """M-step in the packed layout: zt [B, Q, N] (contiguous), resp [B, M, N] -> (Params
+    [B, M, ...], coef [B, M, Q]).
 
-    ``rows`` [G*M] flat candidate-row index (g * (R+1) + row), ``valid`` [G, M] 1 for a real
-    component, ``row_pad`` [G*(R+1)] 1 for a padding row (keeps its weight sum non-zero).
+    ``rows`` [B*M] flat candidate-row index (b * (R+1) + row), ``valid`` [B, M] 1 for a real
+    component, ``row_pad`` [B*(R+1)] 1 for a padding row (keeps its weight sum non-zero).
     """
     g, m, _ = resp.shape
     q = zt.shape[1]
@@ -314,7 +366,7 @@ def _m_step_packed(
     du = q - d - 1
     _, _, full, upper, scale = _indices(d, zt.device)
     # zt @ resp^T: with the long N axis contiguous in both operands, ~1.7x faster than resp @ z
-    stats = torch.bmm(zt, resp.transpose(1, 2)).transpose(1, 2)  # [G, M, Q]
+    stats = torch.bmm(zt, resp.transpose(1, 2)).transpose(1, 2)  # [B, M, Q]
     nk = stats[..., -1] + 10.0 * _EPS
     stats = stats / nk.unsqueeze(-1)
     means = stats[..., du : du + d]
@@ -335,21 +387,6 @@ def _m_step_packed(
     return Params(weights, means, cov, log_det, coef), coef
 
 
-def _shifted_sums(
-    wlp: Tensor, shift: Tensor, rows: Tensor, row_pad: Tensor, r1: int, *, lowest: float
-) -> tuple[Tensor, Tensor, Tensor] | None:
-    """exp(wlp - shift) [G, M, N] (in place on wlp), its per-candidate sums s [G*R1, N] and
-    log(s), or None when the shift was too far off: some candidate's log-sum below ``lowest``
-    (the clamp at _CLAMP would then cost precision) or near overflow."""
-    n = wlp.shape[-1]
-    e = wlp.sub_(shift).clamp_(_CLAMP, 600.0).exp_()
-    s = torch.zeros(wlp.shape[0] * r1, n, dtype=e.dtype, device=e.device)
-    s = s.index_add_(0, rows, e.reshape(-1, n)).add_(row_pad.unsqueeze(-1))
-    ls = torch.log(s)
-    lo, hi = torch.aminmax(ls)
-    return (e, s, ls) if float(lo) > lowest and float(hi) < 550.0 else None
-
-
 def _e_step_packed(
     zt: Tensor,
     coef: Tensor,
@@ -357,55 +394,50 @@ def _e_step_packed(
     rows: Tensor,
     row_pad: Tensor,
     row_ok: Tensor,
-    shift: Tensor | None,
-    shared: bool = False,
-) -> tuple[Tensor, Tensor, Tensor, bool]:
-    """E-step in the packed layout: zt [G, Q, N], coef [G, M, Q], pm [G, N].
+    work: Tensor | None = None,
+    work2: Tensor | None = None,
+) -> tuple[Tensor, Tensor, Tensor]:
+    """E-step in the packed layout: zt [B, Q, N], coef [B, M, Q], pm [B, N].
 
-    Returns (loglik [G, R+1], resp [G, M, N], lse [G, R+1, N], shared_ok); rows as in
-    _m_step_packed, row_pad [G*(R+1)] 1 on padding rows, row_ok [G, R+1] 1 on real rows.
-    The log-sum-exp shift, first choice that keeps every candidate's sums in a safe range:
-    with ``shared``, one shift per point for all candidates of a group (the largest previous
-    lse; safe when no candidate's sum falls below e^-20 of it, so the e^-60 clamp changes
-    nothing above 1e-16 relative: saves expanding a shift per component); then ``shift``
-    (the previous lse, per candidate); then the exact per-candidate maximum. ``shared_ok``
-    is False when the shared shift was tried and rejected.
+    Returns (loglik [B, R+1], resp [B, M, N], lse [B, R+1, N]); rows as in _m_step_packed,
+    row_pad [B*(R+1)] 1 on padding rows, row_ok [B, R+1] 1 on real rows (resp is zero on
+    padding rows and padded points). ``work`` [B, M, N] and ``work2`` [B*M, N], if given, are
+    reused buffers (resp is returned in ``work``): fresh multi-MB arrays every iteration would
+    cost a page fault per 4 KiB.
+
+    Log-sum-exp shift: one per point and batch row, the largest weighted log-density of any of
+    its components; no gather per candidate. Every candidate's sum is then at least e^-(gap
+    between its maximum and the row's); if that gap passes 600 nats at some point (where the
+    e^-700 clamp could start to matter) the step is redone with each candidate's own maximum.
     """
-    g, m, _ = coef.shape
+    b, m, _ = coef.shape
     n = zt.shape[-1]
     r1 = row_ok.shape[1]
-    wlp = torch.bmm(coef, zt)  # [G, M, N]
-    lse = None
-    shared_ok = True
-    if shift is not None and shared:
-        gs = shift.masked_fill(row_ok.unsqueeze(-1) == 0, -math.inf).amax(1, keepdim=True)
-        tried = _shifted_sums(wlp, gs, rows, row_pad, r1, lowest=-20.0)
-        if tried is not None:
-            e, s, ls = tried
-            lse = ls.reshape(g, r1, n) + gs
-        else:
-            shared_ok = False
-            wlp = torch.bmm(coef, zt)
-    if shift is not None and lse is None:
-        sh = shift.reshape(-1, n).index_select(0, rows).reshape(g, m, n)
-        tried = _shifted_sums(wlp, sh, rows, row_pad, r1, lowest=-40.0)
-        if tried is not None:
-            e, s, ls = tried
-            lse = ls.reshape(g, r1, n) + shift
-        else:
-            wlp = torch.bmm(coef, zt)
-    if lse is None:
-        mx = torch.full((g * r1, n), -math.inf, dtype=wlp.dtype, device=wlp.device)
-        mx = mx.scatter_reduce_(0, rows.unsqueeze(-1).expand(-1, n), wlp.reshape(-1, n), "amax")
-        mx = torch.where(row_pad.unsqueeze(-1) > 0, 0.0, mx)
-        e = wlp.sub_(mx.index_select(0, rows).reshape(g, m, n)).clamp_min_(_CLAMP).exp_()
-        s = torch.zeros(g * r1, n, dtype=e.dtype, device=e.device)
-        s = s.index_add_(0, rows, e.reshape(-1, n)).add_(row_pad.unsqueeze(-1))
-        lse = (torch.log(s) + mx).reshape(g, r1, n)
+    w = torch.bmm(coef, zt, out=work) if work is not None else torch.bmm(coef, zt)
+    mx = w.amax(1, keepdim=True)  # [B, 1, N]
+    e = w.sub_(mx).clamp_min_(_CLAMP).exp_()
+    s = torch.zeros(b * r1, n, dtype=e.dtype, device=e.device)
+    s = s.index_add_(0, rows, e.view(-1, n)).add_(row_pad.unsqueeze(-1))
+    ls = torch.log(s)
+    if float(ls.min()) > -600.0:
+        lse = ls.view(b, r1, n) + mx
+    else:
+        w = torch.bmm(coef, zt, out=work) if work is not None else torch.bmm(coef, zt)
+        cmx = torch.full((b * r1, n), -math.inf, dtype=w.dtype, device=w.device)
+        cmx = cmx.scatter_reduce_(0, rows.unsqueeze(-1).expand(-1, n), w.view(-1, n), "amax")
+        cmx = torch.where(row_pad.unsqueeze(-1) > 0, 0.0, cmx)
+        e = w.sub_(cmx.index_select(0, rows).view(b, m, n)).clamp_min_(_CLAMP).exp_()
+        s = torch.zeros(b * r1, n, dtype=e.dtype, device=e.device)
+        s = s.index_add_(0, rows, e.view(-1, n)).add_(row_pad.unsqueeze(-1))
+        lse = (torch.log(s) + cmx).view(b, r1, n)
     loglik = (lse * pm.unsqueeze(1)).sum(-1)
-    inv = (pm.unsqueeze(1) * row_ok.unsqueeze(-1)).reshape(-1, n) / s
-    e.mul_(inv.index_select(0, rows).reshape(g, m, n))
-    return loglik, e, lse, shared_ok
+    inv = (pm.unsqueeze(1) * row_ok.unsqueeze(-1)).view(-1, n) / s
+    if work2 is not None:
+        spread = torch.index_select(inv, 0, rows, out=work2)
+    else:
+        spread = inv.index_select(0, rows)
+    e.mul_(spread.view(b, m, n))
+    return loglik, e, lse
 
 
 def run_em(
@@ -421,91 +453,95 @@ def run_em(
 
     Mirrors sklearn: each iteration is an E-step (log-likelihood of the current parameters)
     then an M-step; a slot stops when |mean log-likelihood change| < tol. The iterations run
-    on a packed layout: the real components of every running slot of a group side by side
-    (no padding to the largest component count), with per-candidate sums done by index_add
-    over rows. Stopped slots leave the batch (the layout is re-packed only when some slot
-    stops), so late iterations cost only what still runs. The returned log-likelihood is that
-    of the final parameters (one extra E-step), as sklearn's ``score``.
+    on a packed layout (:func:`_pack`): the real components of running slots side by side,
+    with per-candidate sums done by index_add over rows. A stopped slot's parameters are saved
+    at once; it stays in the batch, unwatched, until the running components fall below
+    ``_REPACK`` of the packed ones, and then the batch is re-packed without it, so late
+    iterations cost only what still runs. The returned log-likelihood is that of the final
+    parameters (one extra E-step), as sklearn's ``score``.
     """
     g0, n, _ = x.shape
     c0, k0 = cmask.shape[1:]
-    dev = x.device
+    dev, dt = x.device, x.dtype
     z0 = quadratic_features(x)
+    zt0 = z0.transpose(1, 2).contiguous()
     params0 = m_step(z0, resp0, cmask, floor)
     out = [t.reshape(g0 * c0 * k0, *t.shape[3:]).clone() for t in params0]
-    n_iter = torch.zeros(g0 * c0, dtype=torch.long, device=dev)
-    converged = torch.zeros(g0 * c0, dtype=torch.bool, device=dev)
+    n_iter = np.zeros(g0 * c0, dtype=np.int64)
+    converged = np.zeros(g0 * c0, dtype=bool)
     n_pts = pmask.sum(1)  # [G]
     slot_k = cmask.sum(-1).round().long().cpu().numpy()  # [G0, C0]
     running = np.ones((g0, c0), dtype=bool)
-    prev_all = torch.full((g0 * c0 + 1,), -math.inf, dtype=x.dtype, device=dev)
-    lse_all = None  # [G0*C0 + 1, N] last lse of every slot (by flat slot id)
-    flat_coef = out[4]  # where the current parameters are: flat_coef[src_gid[global id]]
-    src_gid = None
-    shared = True  # try the shared shift until it is once rejected
+    prev_all = torch.full((g0 * c0 + 1,), -math.inf, dtype=dt, device=dev)
+    cur_coef = out[4]  # where the current parameters are: cur_coef[src[global id]]
+    src = None
     it = 0
     while it < max_iter and running.any():
         lay = _pack(running, slot_k, k0)
-        g, mm = lay.gid.shape
+        b, mm = lay.gid.shape
         r = lay.slot.shape[1]
         gk = torch.from_numpy(lay.groups).to(dev)
-        z, pm, npts = z0.index_select(0, gk), pmask.index_select(0, gk), n_pts.index_select(0, gk)
-        zt = z.transpose(1, 2).contiguous()
+        zt, pm, npts = zt0.index_select(0, gk), pmask.index_select(0, gk), n_pts.index_select(0, gk)
         valid_np = lay.gid >= 0
-        valid = torch.from_numpy(valid_np.astype(np.float64)).to(device=dev, dtype=x.dtype)
-        rows = torch.from_numpy((np.arange(g)[:, None] * (r + 1) + lay.row).reshape(-1)).to(dev)
-        slot_pad = np.concatenate([lay.slot, np.full((g, 1), -1)], 1)  # [G, R+1]
+        valid = torch.from_numpy(valid_np).to(device=dev, dtype=dt)
+        rows = torch.from_numpy((np.arange(b)[:, None] * (r + 1) + lay.row).reshape(-1)).to(dev)
+        slot_pad = np.concatenate([lay.slot, np.full((b, 1), -1)], 1)  # [B, R+1]
         row_ok_np = slot_pad >= 0
-        row_ok = torch.from_numpy(row_ok_np.astype(np.float64)).to(device=dev, dtype=x.dtype)
+        row_ok = torch.from_numpy(row_ok_np).to(device=dev, dtype=dt)
         row_pad = (1.0 - row_ok).reshape(-1)
         slot_ix = torch.from_numpy(np.where(row_ok_np, slot_pad, g0 * c0).reshape(-1)).to(dev)
-        # current parameters of the packed components (padding: copy of a real one, masked)
+        # current parameters of the packed components (padding: zeros and a very low constant)
         first = np.where(valid_np, lay.gid, lay.gid[:, :1])
         take = torch.from_numpy(first.reshape(-1)).to(dev)
-        if src_gid is not None:
-            take = src_gid.index_select(0, take)
-        coef = flat_coef.index_select(0, take).reshape(g, mm, -1)
-        coef = torch.where(valid.unsqueeze(-1) > 0, coef, coef[..., :1] * 0.0)
+        if src is not None:
+            take = src.index_select(0, take)
+        coef = cur_coef.index_select(0, take).reshape(b, mm, -1)
+        coef = torch.where(valid.unsqueeze(-1) > 0, coef, 0.0)
         coef[..., -1] = torch.where(valid > 0, coef[..., -1], _PAD_LOG_WEIGHT)
-        prev = prev_all.index_select(0, slot_ix).reshape(g, r + 1)
-        shift = None
-        if lse_all is not None:
-            shift = lse_all.index_select(0, slot_ix).reshape(g, r + 1, n)
+        prev = prev_all.index_select(0, slot_ix).reshape(b, r + 1)
+        work = torch.empty(b, mm, n, dtype=dt, device=dev)
+        work2 = torch.empty(b * mm, n, dtype=dt, device=dev)
+        active = row_ok > 0  # watched rows: running, not yet stopped
+        packed = n_active = int(valid_np.sum())
         while True:
             it += 1
-            ll, resp, shift, shared = _e_step_packed(
-                zt, coef, pm, rows, row_pad, row_ok, shift, shared
-            )
+            ll, resp, _ = _e_step_packed(zt, coef, pm, rows, row_pad, row_ok, work, work2)
             params, coef = _m_step_packed(zt, resp, rows, valid, row_pad, floor)
             mean_ll = ll / npts.unsqueeze(-1)
-            done = ((mean_ll - prev).abs() < tol) & (row_ok > 0)
+            done = ((mean_ll - prev).abs() < tol) & active
             prev = mean_ll
-            if it < max_iter and not bool(done.any()):
+            last = it >= max_iter
+            if not (last or bool(done.any())):
                 continue
-            break
-        stop = done.cpu().numpy() | ((it == max_iter) & row_ok_np)
-        ids_np = slot_pad[stop]
-        ids = torch.from_numpy(ids_np).to(dev)
-        n_iter[ids] = it
-        converged[ids] = torch.from_numpy(done.cpu().numpy()[stop]).to(dev)
-        sel = valid_np & stop[np.arange(g)[:, None], lay.row]
-        pos = torch.from_numpy(np.flatnonzero(sel)).to(dev)
-        dst = torch.from_numpy(lay.gid[sel]).to(dev)
-        for o, p in zip(out, params, strict=True):
-            o.index_copy_(0, dst, p.reshape(g * mm, *p.shape[2:]).index_select(0, pos))
-        running[np.unravel_index(ids_np, running.shape)] = False
+            stop = (done | active) if last else done
+            stop_np = stop.cpu().numpy()
+            ids_np = slot_pad[stop_np]
+            n_iter[ids_np] = it
+            converged[ids_np] = done.cpu().numpy()[stop_np]
+            sel = valid_np & stop_np[np.arange(b)[:, None], lay.row]
+            pos = torch.from_numpy(np.flatnonzero(sel)).to(dev)
+            dst = torch.from_numpy(lay.gid[sel]).to(dev)
+            for o, p in zip(out, params, strict=True):
+                o.index_copy_(0, dst, p.reshape(b * mm, *p.shape[2:]).index_select(0, pos))
+            running[np.unravel_index(ids_np, running.shape)] = False
+            active &= ~stop
+            n_active -= int(sel.sum())
+            if last or n_active == 0 or n_active <= _REPACK * packed:
+                break
         # remember where each running component's parameters are, for the next packing
-        flat_coef = coef.reshape(g * mm, -1)
-        src = np.zeros(g0 * c0 * k0, dtype=np.int64)
-        src[lay.gid[valid_np]] = np.flatnonzero(valid_np)
-        src_gid = torch.from_numpy(src).to(dev)
+        cur_coef = coef.reshape(b * mm, -1)
+        src_np = np.zeros(g0 * c0 * k0, dtype=np.int64)
+        src_np[lay.gid[valid_np]] = np.flatnonzero(valid_np)
+        src = torch.from_numpy(src_np).to(dev)
         prev_all = prev_all.index_copy(0, slot_ix, prev.reshape(-1))
-        if lse_all is None:
-            lse_all = torch.zeros(g0 * c0 + 1, n, dtype=x.dtype, device=dev)
-        lse_all = lse_all.index_copy(0, slot_ix, shift.reshape(-1, n))
     final = Params(*(o.reshape(g0, c0, k0, *o.shape[1:]) for o in out))
-    loglik, _, _ = e_step(z0, final.coef, pmask)
-    return EMResult(final, loglik, n_iter.reshape(g0, c0), converged.reshape(g0, c0))
+    loglik = total_log_likelihood(zt0, final.coef, pmask)
+    return EMResult(
+        final,
+        loglik,
+        torch.from_numpy(n_iter).reshape(g0, c0).to(dev),
+        torch.from_numpy(converged).reshape(g0, c0).to(dev),
+    )
 
 
 def n_free_parameters(n_components: Tensor, n_features: int) -> Tensor:
