@@ -15,7 +15,8 @@ def _packed_problem(seed: int = 0):
     ks = [1, 3, 2]  # candidate component counts, the same in both groups
     r = len(ks)
     x = torch.randn(g, n, d, generator=gen, dtype=torch.float64)
-    zt = _em.quadratic_features(x).transpose(1, 2).contiguous()
+    zt = _em.quadratic_features(x).transpose(1, 2)
+    zt = torch.cat([zt, torch.zeros(g, 1, n, dtype=torch.float64)], 1)  # + the shift row
     # random SPD Gaussians through the M-step of random responsibilities
     m = sum(ks) + 1  # one padded component at the end of each batch row
     row = np.r_[np.repeat(np.arange(r), ks), r]
@@ -35,7 +36,7 @@ def _packed_problem(seed: int = 0):
 
 def _direct(zt, coef, pm, ks):
     """Per candidate: log-sum-exp over its components with torch.logsumexp, and resp."""
-    w = torch.bmm(coef, zt)  # [G, M, N]
+    w = torch.bmm(coef[..., :-1], zt[:, :-1])  # [G, M, N], without the shift row
     lls, resps, start = [], [], 0
     for k in ks:
         part = w[:, start : start + k]
@@ -46,21 +47,33 @@ def _direct(zt, coef, pm, ks):
     return torch.stack(lls, 1), torch.cat(resps, 1)
 
 
-@pytest.mark.parametrize("offset", [0.0, 30.0, -650.0, -2000.0])
-def test_packed_e_step_equals_a_direct_log_sum_exp(offset):
+@pytest.mark.parametrize("shift", [None, 0.0, 30.0, -30.0, 650.0, -650.0])
+@pytest.mark.parametrize("offset", [0.0, -650.0, -2000.0])
+def test_packed_e_step_equals_a_direct_log_sum_exp(offset, shift):
+    """Whatever shift row it is given (None: none), the E-step gives the direct result.
+
+    ``offset`` scales one candidate's weights by e^offset: beyond -600 nats the shared shift of
+    the batch row is refused and each candidate's own maximum is used instead; a given shift
+    600 nats off is refused too.
+    """
     zt, coef, pm, rows, row_pad, row_ok, ks = _packed_problem()
-    # one candidate's weights scaled by e^offset: beyond -600 nats the shared shift of the
-    # batch row is refused and each candidate's own maximum is used instead
-    coef[:, 1:4, -1] += offset
+    coef[:, 1:4, -2] += offset  # the constant term of candidate 1 (components 1..3)
     ll_ref, resp_ref = _direct(zt, coef, pm, ks)
     work = torch.empty(coef.shape[0], coef.shape[1], zt.shape[-1], dtype=torch.float64)
     work2 = torch.empty(coef.shape[0] * coef.shape[1], zt.shape[-1], dtype=torch.float64)
     for buffers in [(None, None), (work, work2)]:
-        ll, resp, lse = _em._e_step_packed(zt, coef, pm, rows, row_pad, row_ok, *buffers)
+        if shift is not None:  # the previous iteration's shift row, moved by ``shift`` nats
+            _em._e_step_packed(zt, coef, pm, rows, row_pad, row_ok)
+            zt[:, -1] -= shift
+        ll, resp, lse = _em._e_step_packed(
+            zt, coef, pm, rows, row_pad, row_ok, *buffers, shifted=shift is not None
+        )
         torch.testing.assert_close(ll[:, :3], ll_ref, rtol=1e-12, atol=1e-9)
         torch.testing.assert_close(resp[:, :-1], resp_ref, rtol=1e-10, atol=1e-14)
         assert bool((resp[:, -1] == 0).all())  # the padded component gets nothing
-        assert bool(torch.isfinite(lse[:, :3]).all())
+        torch.testing.assert_close(  # the shift row left for the next step: the best lse
+            -zt[:, -1], lse[:, :3].amax(1), rtol=0.0, atol=0.0
+        )
     # responsibilities of each candidate sum to one on real points, zero on padding
     sums = torch.zeros(2 * 4, zt.shape[-1], dtype=torch.float64)
     sums.index_add_(0, rows, resp.reshape(-1, zt.shape[-1]))

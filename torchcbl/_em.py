@@ -105,6 +105,26 @@ def precision_cholesky(covariances: Tensor) -> tuple[Tensor, Tensor]:
     return inv_chol.mT, log_det
 
 
+def _precision(cov: Tensor) -> tuple[Tensor, Tensor]:
+    """Precision matrices and -log det of the Cholesky factors of SPD covariances [..., D, D].
+
+    Small batched LAPACK calls cost about a microsecond per matrix whatever they do, so the
+    cheapest route is taken: for D <= 4 the LU inverse, else the inverse of the Cholesky
+    factor L and P = L^-T L^-1 (both faster here than ``cholesky_inverse``). A matrix that
+    is not positive definite gives NaN, left for the caller's final finiteness check.
+    """
+    chol, info = torch.linalg.cholesky_ex(cov)
+    log_det = -torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
+    log_det = torch.where(info == 0, log_det, math.nan)
+    if cov.shape[-1] <= 4:
+        prec, _ = torch.linalg.inv_ex(cov)
+    else:
+        eye = torch.eye(cov.shape[-1], dtype=cov.dtype, device=cov.device).expand_as(cov)
+        inv_chol = torch.linalg.solve_triangular(chol, eye, upper=False)
+        prec = inv_chol.mT @ inv_chol
+    return prec, log_det
+
+
 def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
     """Maximisation step: z [G, N, Q], resp [G, N, C, K] (zero on padded points) -> Params.
 
@@ -128,10 +148,9 @@ def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
     cov.diagonal(dim1=-2, dim2=-1).add_(floor)
     weights = nk * cmask
     weights /= weights.sum(-1, keepdim=True)
-    chol, _ = torch.linalg.cholesky_ex(cov)
-    prec = torch.cholesky_inverse(chol)
-    log_det = -torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
-    lin = (prec @ means.unsqueeze(-1)).squeeze(-1)
+    prec, log_det = _precision(cov)
+    lin = (prec * means.unsqueeze(-2)).sum(-1)  # P mu (a batched matmul of 1-column products
+    # would cost more than the rest of the M-step's small operations)
     quad = prec.reshape(g, c, k, d * d)[..., upper] * scale.to(z.dtype)
     const = torch.log(weights) + log_det - 0.5 * (lin * means).sum(-1)
     const = torch.where(cmask > 0, const - 0.5 * d * math.log(2.0 * math.pi), _PAD_LOG_WEIGHT)
@@ -189,20 +208,93 @@ def candidate_uniforms(seed: int, action: np.ndarray, n_comp: np.ndarray, k: int
     return _splitmix_uniform(keys)
 
 
+_KMEANS_POINTS = 1024  # k-means runs on at most this many points per group (an even stride)
+
+
 def kmeans_init(
     x: Tensor, pmask: Tensor, cmask: Tensor, uniforms: Tensor, n_lloyd: int = 10
 ) -> Tensor:
     """k-means++ seeding then Lloyd iterations for every slot; returns one-hot resp [G,N,C,K].
 
-    x [G, N, D], pmask [G, N], cmask [G, C, K], uniforms [G, C, K] drive the seeding draws
-    (inverse CDF over the D^2 weights), so the result is a pure function of the data and the
-    uniforms. Lloyd stops early when no label changes anywhere; a point equally near several
-    centres goes to the first.
+    x [G, N, D], pmask [G, N] (each group's real points first, then padding), cmask [G, C, K],
+    uniforms [G, C, K] drive the seeding draws (inverse CDF over the D^2 weights), so the
+    result is a pure function of the data and the uniforms. Lloyd stops early when no label
+    changes anywhere; a point equally near several centres goes to the first.
 
-    Layout: distances are [G, C, K, N] (points last), so that the reductions over the
-    centres of a slot run along a middle axis, vectorised over the points; torch's reductions
-    over a short last axis (and its argmin over any axis) are several times slower.
+    A group with more than ``_KMEANS_POINTS`` points seeds and runs Lloyd on an even stride of
+    that many of them (points i * n // 1024), and then every point goes to its nearest final
+    centre: an initialisation for EM needs no more, and it keeps k-means from costing more
+    than the EM itself on large sets. Smaller groups use all their points.
     """
+    g, n, d = x.shape
+    if n <= _KMEANS_POINTS:
+        _, labels = _lloyd(x, pmask, cmask, uniforms, n_lloyd)
+    else:
+        m = _KMEANS_POINTS
+        counts = pmask.sum(1).round().long().unsqueeze(1)  # [G, 1]
+        j = torch.arange(m, device=x.device).unsqueeze(0)
+        idx = torch.where(counts > m, j * counts // m, torch.minimum(j, counts - 1))
+        sub = torch.gather(x, 1, idx.unsqueeze(-1).expand(g, m, d))
+        centers, _ = _lloyd(sub, (j < counts).to(x.dtype), cmask, uniforms, n_lloyd)
+        labels = _nearest(_augmented(x), centers, _pad(cmask, x.dtype))
+    k = cmask.shape[2]
+    resp = torch.nn.functional.one_hot(labels.transpose(1, 2), k).to(x.dtype)
+    return resp.mul_(pmask.reshape(g, n, 1, 1))
+
+
+def _augmented(x: Tensor) -> Tensor:
+    """[G, N, D] -> [x^T; 1] [G, D+1, N]."""
+    g, n, _ = x.shape
+    return torch.cat([x.transpose(1, 2), x.new_ones(g, 1, n)], 1)
+
+
+def _pad(cmask: Tensor, dtype: torch.dtype) -> Tensor:
+    """[G, C, K] -> [G, C, K, 1]: 0 for a real component, 1e300 (never nearest) for padding."""
+    return ((cmask <= 0).to(dtype) * 1e300).unsqueeze(-1)
+
+
+def _nearest(
+    xa: Tensor, centers: Tensor, pad: Tensor, buffers: tuple[Tensor, ...] | None = None
+) -> Tensor:
+    """Index of the nearest centre of each slot: xa [G, D+1, N] (:func:`_augmented`), centers
+    [G, C, K, D], pad [G, C, K, 1] -> labels [G, C, N] long, the first on exact ties.
+
+    |x - c|^2 - |x|^2 = [-2c, |c|^2 + pad] . [x, 1]: one matrix product for all slots, laid out
+    [G, C, K, N] (points last) so that the reductions over a slot's centres run along a middle
+    axis, vectorised over the points (torch's argmin, and its reductions over a short last axis,
+    are several times slower). ``buffers`` (dist, near, near_i) are reused across calls.
+    """
+    g, c, k, d = centers.shape
+    n = xa.shape[-1]
+    small = torch.int8 if k <= 127 else torch.int32
+    if buffers is None:
+        buffers = _nearest_buffers(g, c, k, n, xa.dtype, xa.device)
+    dist, near, near_i = buffers
+    rev = (k - 1 - torch.arange(k, device=xa.device)).to(small).reshape(1, 1, k, 1)
+    cen = torch.cat([centers * -2.0, (centers * centers).sum(-1, keepdim=True) + pad], -1)
+    torch.bmm(cen.reshape(g, c * k, d + 1), xa, out=dist)
+    dist4 = dist.view(g, c, k, n)
+    torch.eq(dist4, dist4.amin(2, keepdim=True), out=near)
+    near_i.copy_(near).mul_(rev)
+    return (k - 1) - near_i.amax(2).long()
+
+
+def _nearest_buffers(
+    g: int, c: int, k: int, n: int, dtype: torch.dtype, device: torch.device
+) -> tuple[Tensor, Tensor, Tensor]:
+    small = torch.int8 if k <= 127 else torch.int32
+    return (
+        torch.empty(g, c * k, n, dtype=dtype, device=device),
+        torch.empty(g, c, k, n, dtype=torch.bool, device=device),
+        torch.empty(g, c, k, n, dtype=small, device=device),
+    )
+
+
+def _lloyd(
+    x: Tensor, pmask: Tensor, cmask: Tensor, uniforms: Tensor, n_lloyd: int
+) -> tuple[Tensor, Tensor]:
+    """k-means++ seeding and Lloyd on all the given points -> (centers [G, C, K, D], labels
+    [G, C, N] of the last assignment)."""
     g, n, d = x.shape
     c, k = cmask.shape[1:]
     dev, dt = x.device, x.dtype
@@ -222,27 +314,17 @@ def kmeans_init(
         centers[:, :, j] = cj.squeeze(-1)
         diff = xt.unsqueeze(1) - cj  # [G, C, D, N]
         d2 = torch.minimum(d2, diff.mul_(diff).sum(2))
-    # Lloyd: |x - c|^2 - |x|^2 = [-2c, |c|^2 + pad] . [x, 1], one matrix product for all slots
-    xa = torch.cat([xt, torch.ones(g, 1, n, dtype=dt, device=dev)], 1)  # [G, D+1, N]
-    pad = ((cmask <= 0).to(dt) * 1e300).unsqueeze(-1)  # [G, C, K, 1]
-    small = torch.int8 if k <= 127 else torch.int32
-    rev = (k - 1 - torch.arange(k, device=dev)).to(small).reshape(1, 1, k, 1)
+    xa = _augmented(x)
+    pad = _pad(cmask, dt)
     base = (torch.arange(g * c, device=dev) * k).reshape(g, c, 1)  # slot offsets
     pw = pm.reshape(-1)
     xw = (xt * pmask.unsqueeze(1)).unsqueeze(1).expand(g, c, d, n)  # [G, C, D, N]
     dim_off = (torch.arange(d, device=dev) * (g * c * k)).reshape(1, 1, d, 1)
-    labels = None
     # reused buffers: fresh multi-MB arrays every step would cost a page fault per 4 KiB
-    dist = torch.empty(g, c * k, n, dtype=dt, device=dev)
-    near = torch.empty(g, c, k, n, dtype=torch.bool, device=dev)
-    near_i = torch.empty(g, c, k, n, dtype=small, device=dev)
+    buffers = _nearest_buffers(g, c, k, n, dt, dev)
+    labels = None
     for _ in range(max(n_lloyd, 1)):
-        cen = torch.cat([centers * -2.0, (centers * centers).sum(-1, keepdim=True) + pad], -1)
-        torch.bmm(cen.reshape(g, c * k, d + 1), xa, out=dist)
-        dist4 = dist.view(g, c, k, n)
-        torch.eq(dist4, dist4.amin(2, keepdim=True), out=near)
-        near_i.copy_(near).mul_(rev)
-        new_labels = (k - 1) - near_i.amax(2).long()  # [G, C, N], first nearest
+        new_labels = _nearest(xa, centers, pad, buffers)
         if labels is not None and torch.equal(new_labels, labels):
             break
         labels = new_labels
@@ -256,8 +338,8 @@ def kmeans_init(
         counts = counts.reshape(g, c, k, 1)
         mean = sums.reshape(d, g, c, k).permute(1, 2, 3, 0) / counts.clamp_min(1.0)
         centers = torch.where(counts > 0, mean, centers)
-    resp = torch.nn.functional.one_hot(labels.transpose(1, 2), k).to(dt)
-    return resp.mul_(pmask.reshape(g, n, 1, 1))
+    assert labels is not None
+    return centers, labels
 
 
 class EMResult(NamedTuple):
@@ -293,19 +375,18 @@ class _Layout(NamedTuple):
     groups: np.ndarray
 
 
-def _first_fit(sizes: np.ndarray, cap: int) -> list[list[int]]:
-    """First-fit decreasing: item indices per bin, bins of capacity ``cap``."""
-    bins: list[list[int]] = []
-    room: list[int] = []
-    for i in np.argsort(-sizes, kind="stable").tolist():
-        for b, left in enumerate(room):
-            if sizes[i] <= left:
-                bins[b].append(i)
-                room[b] -= int(sizes[i])
+def _first_fit(items: list[tuple[int, int]], cap: int) -> list[tuple[int, list[int]]]:
+    """First-fit decreasing: items (size, slot) sorted by decreasing size -> bins
+    (used, slots) of capacity ``cap``."""
+    bins: list[tuple[int, list[int]]] = []
+    for size, s in items:
+        for b, (used, slots) in enumerate(bins):
+            if used + size <= cap:
+                slots.append(s)
+                bins[b] = (used + size, slots)
                 break
         else:
-            bins.append([i])
-            room.append(cap - int(sizes[i]))
+            bins.append((size, [s]))
     return bins
 
 
@@ -313,60 +394,70 @@ def _pack(running: np.ndarray, slot_k: np.ndarray, k0: int) -> _Layout:
     """Layout of the running slots: running [G0, C0] bool, slot_k [G0, C0] component counts.
 
     Chooses the row capacity among a few values (the largest group's total, and the even
-    shares of the total over G..2G rows) by the padded size rows * (capacity + _ROW_COST).
+    shares of the total over G, 1.5 G and 2 G rows) by the padded size rows * (capacity +
+    _ROW_COST).
     """
     c0 = running.shape[1]
-    per_group = [(g, np.flatnonzero(running[g])) for g in np.flatnonzero(running.any(1))]
-    sizes = [slot_k[g, cs] for g, cs in per_group]
-    totals = [int(s.sum()) for s in sizes]
-    biggest = max(int(s.max()) for s in sizes)
-    n_g, total = len(per_group), sum(totals)
-    caps = {max(totals)} | {max(biggest, -(-total // b)) for b in range(n_g, 2 * n_g + 1)}
-    best: tuple[int, list[tuple[int, np.ndarray]]] | None = None
+    ks_all = slot_k.tolist()
+    groups: list[list[tuple[int, int]]] = []  # per group: (size, flat slot), largest first
+    for g, c in zip(*np.nonzero(running), strict=True):
+        if not groups or groups[-1][0][1] // c0 != g:
+            groups.append([])
+        groups[-1].append((ks_all[g][c], int(g) * c0 + int(c)))
+    for items in groups:
+        items.sort(key=lambda it: -it[0])
+    totals = [sum(size for size, _ in items) for items in groups]
+    biggest = max(items[0][0] for items in groups)
+    n_g, total = len(groups), sum(totals)
+    caps = {max(totals)} | {max(biggest, -(-2 * total // b)) for b in (2 * n_g, 3 * n_g, 4 * n_g)}
+    best: tuple[int, list[list[int]]] | None = None
     for cap in sorted(caps, reverse=True):
-        bins = [
-            (g, np.sort(cs[idx]))
-            for (g, cs), s in zip(per_group, sizes, strict=True)
-            for idx in _first_fit(s, cap)
-        ]
-        used = max(int(slot_k[g, cs].sum()) for g, cs in bins)
-        cost = len(bins) * (used + _ROW_COST)
+        bins = [b for items in groups for b in _first_fit(items, cap)]
+        cost = len(bins) * (max(used for used, _ in bins) + _ROW_COST)
         if best is None or cost < best[0]:
-            best = (cost, bins)
+            best = (cost, [sorted(slots) for _, slots in bins])
     assert best is not None
-    bins = best[1]
-    n_rows = max(cs.size for _, cs in bins)
-    n_comp = max(int(slot_k[g, cs].sum()) for g, cs in bins)
-    b_n = len(bins)
+    rows_of = best[1]
+    # one flat pass: every (batch row, candidate, component)
+    b_n, n_rows = len(rows_of), max(len(r) for r in rows_of)
+    flat_slot = np.fromiter((s for r in rows_of for s in r), dtype=np.int64)
+    bin_of = np.repeat(np.arange(b_n), [len(r) for r in rows_of])
+    cand = np.concatenate([np.arange(len(r)) for r in rows_of])
+    ks = slot_k.reshape(-1)[flat_slot]
+    used = np.bincount(bin_of, weights=ks, minlength=b_n).astype(np.int64)
+    n_comp = int(used.max())
+    comp_bin = np.repeat(bin_of, ks)
+    start_in_bin = np.repeat(np.cumsum(used) - used, used)
+    within_bin = np.arange(comp_bin.size) - start_in_bin
+    within_slot = np.arange(ks.sum()) - np.repeat(np.cumsum(ks) - ks, ks)
     gid = np.full((b_n, n_comp), -1, dtype=np.int64)
     row = np.full((b_n, n_comp), n_rows, dtype=np.int64)
     slot = np.full((b_n, n_rows), -1, dtype=np.int64)
-    for i, (g, cs) in enumerate(bins):
-        ks = slot_k[g, cs]
-        slot[i, : cs.size] = g * c0 + cs
-        m = int(ks.sum())
-        row[i, :m] = np.repeat(np.arange(cs.size), ks)
-        within = np.arange(m) - np.repeat(np.cumsum(ks) - ks, ks)
-        gid[i, :m] = np.repeat((g * c0 + cs) * k0, ks) + within
-    return _Layout(gid, row, slot, np.array([g for g, _ in bins], dtype=np.int64))
+    gid[comp_bin, within_bin] = np.repeat(flat_slot * k0, ks) + within_slot
+    row[comp_bin, within_bin] = np.repeat(cand, ks)
+    slot[bin_of, cand] = flat_slot
+    return _Layout(gid, row, slot, np.array([r[0] // c0 for r in rows_of], dtype=np.int64))
 
 
 def _m_step_packed(
     zt: Tensor, resp: Tensor, rows: Tensor, valid: Tensor, row_pad: Tensor, floor: Tensor
 ) -> tuple[Params, Tensor]:
-    """M-step in the packed layout: zt [B, Q, N] (contiguous), resp [B, M, N] -> (Params
-    [B, M, ...], coef [B, M, Q]).
+    """M-step in the packed layout: zt [B, Q(+1), N], resp [B, M, N] -> (Params [B, M, ...],
+    coef [B, M, Q+1]).
 
-    ``rows`` [B*M] flat candidate-row index (b * (R+1) + row), ``valid`` [B, M] 1 for a real
-    component, ``row_pad`` [B*(R+1)] 1 for a padding row (keeps its weight sum non-zero).
+    Only the first Q = D (D+3) / 2 + 1 rows of ``zt`` are read (``zt`` may carry the E-step's
+    shift row below them). The returned ``coef`` ends with a column of ones, the weight of
+    that shift row; ``Params.coef`` is its first Q columns. ``rows`` [B*M] flat candidate-row
+    index (b * (R+1) + row), ``valid`` [B, M] 1 for a real component, ``row_pad`` [B*(R+1)]
+    1 for a padding row (keeps its weight sum non-zero).
     """
     g, m, _ = resp.shape
-    q = zt.shape[1]
-    d = _dim_of(q)
+    d = floor.shape[0]
+    q = d * (d + 3) // 2 + 1
     du = q - d - 1
     _, _, full, upper, scale = _indices(d, zt.device)
     # zt @ resp^T: with the long N axis contiguous in both operands, ~1.7x faster than resp @ z
-    stats = torch.bmm(zt, resp.transpose(1, 2)).transpose(1, 2)  # [B, M, Q]
+    stats = torch.bmm(zt[:, :q], resp.transpose(1, 2)).transpose(1, 2)  # [B, M, Q]
     nk = stats[..., -1] + 10.0 * _EPS
     stats = stats / nk.unsqueeze(-1)
     means = stats[..., du : du + d]
@@ -376,15 +467,15 @@ def _m_step_packed(
     wn = (nk * valid).reshape(-1)
     wsum = row_pad.clone().index_add_(0, rows, wn)
     weights = (wn / wsum.index_select(0, rows)).reshape(g, m)
-    chol, _ = torch.linalg.cholesky_ex(cov)
-    prec = torch.cholesky_inverse(chol)
-    log_det = -torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
-    lin = (prec @ means.unsqueeze(-1)).squeeze(-1)
+    prec, log_det = _precision(cov)
+    lin = (prec * means.unsqueeze(-2)).sum(-1)  # P mu (a batched matmul of 1-column products
+    # would cost more than the rest of the M-step's small operations)
     quad = prec.reshape(g, m, d * d)[..., upper] * scale.to(zt.dtype)
     const = torch.log(weights) + log_det - 0.5 * (lin * means).sum(-1)
     const = torch.where(valid > 0, const - 0.5 * d * math.log(2.0 * math.pi), _PAD_LOG_WEIGHT)
-    coef = torch.cat([quad, lin, const.unsqueeze(-1)], -1)
-    return Params(weights, means, cov, log_det, coef), coef
+    ones = torch.ones(g, m, 1, dtype=zt.dtype, device=zt.device)
+    coef = torch.cat([quad, lin, const.unsqueeze(-1), ones], -1)
+    return Params(weights, means, cov, log_det, coef[..., :q]), coef
 
 
 def _e_step_packed(
@@ -396,8 +487,14 @@ def _e_step_packed(
     row_ok: Tensor,
     work: Tensor | None = None,
     work2: Tensor | None = None,
+    shifted: bool = False,
 ) -> tuple[Tensor, Tensor, Tensor]:
-    """E-step in the packed layout: zt [B, Q, N], coef [B, M, Q], pm [B, N].
+    """E-step in the packed layout: zt [B, Q+1, N], coef [B, M, Q+1], pm [B, N].
+
+    ``zt``'s last row holds minus a log-sum-exp shift per point and ``coef``'s last column is
+    1, so the matrix product gives the shifted log-densities directly. With ``shifted`` that
+    row is tried as it is (the previous iteration's); the step then rewrites it with this
+    iteration's largest candidate log-likelihood per point, for the next.
 
     Returns (loglik [B, R+1], resp [B, M, N], lse [B, R+1, N]); rows as in _m_step_packed,
     row_pad [B*(R+1)] 1 on padding rows, row_ok [B, R+1] 1 on real rows (resp is zero on
@@ -405,32 +502,48 @@ def _e_step_packed(
     reused buffers (resp is returned in ``work``): fresh multi-MB arrays every iteration would
     cost a page fault per 4 KiB.
 
-    Log-sum-exp shift: one per point and batch row, the largest weighted log-density of any of
-    its components; no gather per candidate. Every candidate's sum is then at least e^-(gap
-    between its maximum and the row's); if that gap passes 600 nats at some point (where the
-    e^-700 clamp could start to matter) the step is redone with each candidate's own maximum.
+    Shifts, first that keeps every candidate's shifted sum in [e^-600, e^600] (beyond, the
+    e^-700 clamp could matter or exp overflow): the given row; the largest weighted
+    log-density per point of any component of the batch row; each candidate's own maximum.
     """
     b, m, _ = coef.shape
     n = zt.shape[-1]
     r1 = row_ok.shape[1]
-    w = torch.bmm(coef, zt, out=work) if work is not None else torch.bmm(coef, zt)
-    mx = w.amax(1, keepdim=True)  # [B, 1, N]
-    e = w.sub_(mx).clamp_min_(_CLAMP).exp_()
-    s = torch.zeros(b * r1, n, dtype=e.dtype, device=e.device)
-    s = s.index_add_(0, rows, e.view(-1, n)).add_(row_pad.unsqueeze(-1))
-    ls = torch.log(s)
-    if float(ls.min()) > -600.0:
-        lse = ls.view(b, r1, n) + mx
-    else:
+
+    def sums(e: Tensor) -> tuple[Tensor, Tensor]:
+        s = torch.zeros(b * r1, n, dtype=e.dtype, device=e.device)
+        s = s.index_add_(0, rows, e.view(-1, n)).add_(row_pad.unsqueeze(-1))
+        return s, torch.log(s)
+
+    def safe(ls: Tensor) -> bool:
+        lo, hi = torch.aminmax(ls)
+        return float(lo) > -600.0 and float(hi) < 600.0
+
+    lse = None
+    if shifted:
+        w = torch.bmm(coef, zt, out=work) if work is not None else torch.bmm(coef, zt)
+        e = w.clamp_(_CLAMP, 700.0).exp_()
+        s, ls = sums(e)
+        if safe(ls):
+            lse = ls.view(b, r1, n) - zt[:, -1:]
+    if lse is None:
+        zt[:, -1] = 0.0
+        w = torch.bmm(coef, zt, out=work) if work is not None else torch.bmm(coef, zt)
+        mx = w.amax(1, keepdim=True)  # [B, 1, N]
+        e = w.sub_(mx).clamp_min_(_CLAMP).exp_()
+        s, ls = sums(e)
+        if safe(ls):
+            lse = ls.view(b, r1, n) + mx
+    if lse is None:
         w = torch.bmm(coef, zt, out=work) if work is not None else torch.bmm(coef, zt)
         cmx = torch.full((b * r1, n), -math.inf, dtype=w.dtype, device=w.device)
         cmx = cmx.scatter_reduce_(0, rows.unsqueeze(-1).expand(-1, n), w.view(-1, n), "amax")
         cmx = torch.where(row_pad.unsqueeze(-1) > 0, 0.0, cmx)
         e = w.sub_(cmx.index_select(0, rows).view(b, m, n)).clamp_min_(_CLAMP).exp_()
-        s = torch.zeros(b * r1, n, dtype=e.dtype, device=e.device)
-        s = s.index_add_(0, rows, e.view(-1, n)).add_(row_pad.unsqueeze(-1))
-        lse = (torch.log(s) + cmx).view(b, r1, n)
+        s, ls = sums(e)
+        lse = (ls + cmx).view(b, r1, n)
     loglik = (lse * pm.unsqueeze(1)).sum(-1)
+    zt[:, -1] = -lse.masked_fill(row_ok.unsqueeze(-1) == 0, -math.inf).amax(1)
     inv = (pm.unsqueeze(1) * row_ok.unsqueeze(-1)).view(-1, n) / s
     if work2 is not None:
         spread = torch.index_select(inv, 0, rows, out=work2)
@@ -481,7 +594,8 @@ def run_em(
         b, mm = lay.gid.shape
         r = lay.slot.shape[1]
         gk = torch.from_numpy(lay.groups).to(dev)
-        zt, pm, npts = zt0.index_select(0, gk), pmask.index_select(0, gk), n_pts.index_select(0, gk)
+        pm, npts = pmask.index_select(0, gk), n_pts.index_select(0, gk)
+        zt = torch.cat([zt0.index_select(0, gk), zt0.new_zeros(b, 1, n)], 1)  # + shift row
         valid_np = lay.gid >= 0
         valid = torch.from_numpy(valid_np).to(device=dev, dtype=dt)
         rows = torch.from_numpy((np.arange(b)[:, None] * (r + 1) + lay.row).reshape(-1)).to(dev)
@@ -498,14 +612,17 @@ def run_em(
         coef = cur_coef.index_select(0, take).reshape(b, mm, -1)
         coef = torch.where(valid.unsqueeze(-1) > 0, coef, 0.0)
         coef[..., -1] = torch.where(valid > 0, coef[..., -1], _PAD_LOG_WEIGHT)
+        coef = torch.cat([coef, coef.new_ones(b, mm, 1)], -1)  # weight of the shift row
         prev = prev_all.index_select(0, slot_ix).reshape(b, r + 1)
         work = torch.empty(b, mm, n, dtype=dt, device=dev)
         work2 = torch.empty(b * mm, n, dtype=dt, device=dev)
         active = row_ok > 0  # watched rows: running, not yet stopped
         packed = n_active = int(valid_np.sum())
+        shifted = False
         while True:
             it += 1
-            ll, resp, _ = _e_step_packed(zt, coef, pm, rows, row_pad, row_ok, work, work2)
+            ll, resp, _ = _e_step_packed(zt, coef, pm, rows, row_pad, row_ok, work, work2, shifted)
+            shifted = True
             params, coef = _m_step_packed(zt, resp, rows, valid, row_pad, floor)
             mean_ll = ll / npts.unsqueeze(-1)
             done = ((mean_ll - prev).abs() < tol) & active
@@ -529,7 +646,7 @@ def run_em(
             if last or n_active == 0 or n_active <= _REPACK * packed:
                 break
         # remember where each running component's parameters are, for the next packing
-        cur_coef = coef.reshape(b * mm, -1)
+        cur_coef = coef[..., :-1].reshape(b * mm, -1)
         src_np = np.zeros(g0 * c0 * k0, dtype=np.int64)
         src_np[lay.gid[valid_np]] = np.flatnonzero(valid_np)
         src = torch.from_numpy(src_np).to(dev)
