@@ -25,16 +25,19 @@ def _packed_problem(seed: int = 0):
     valid[:, -1] = 0.0
     row_ok = torch.ones(g, r + 1, dtype=torch.float64)
     row_ok[:, r] = 0.0
-    row_pad = (1.0 - row_ok).reshape(-1)
     resp = torch.rand(g, m, n, generator=gen, dtype=torch.float64) * valid.unsqueeze(-1)
     floor = torch.full((d,), 1e-2, dtype=torch.float64)
-    _, coef = _em._m_step_packed(zt, resp, rows, valid, row_pad, floor)
     pm = torch.ones(g, n, dtype=torch.float64)
     pm[1, -7:] = 0.0  # padded points in the second group
-    return zt, coef, pm, rows, row_pad, row_ok, ks
+
+    def batch(buffers: bool) -> _em._Batch:
+        return _em._batch(zt.clone(), pm, rows, valid, row_ok, floor, buffers)
+
+    _, coef = _em._m_step_packed(batch(False), resp)
+    return batch, coef, pm, rows, ks
 
 
-def _direct(zt, coef, pm, ks):
+def _direct(zt, coef, pm, ks):  # zt [G, Q+1, N], coef [G, M, Q+1]
     """Per candidate: log-sum-exp over its components with torch.logsumexp, and resp."""
     w = torch.bmm(coef[..., :-1], zt[:, :-1])  # [G, M, N], without the shift row
     lls, resps, start = [], [], 0
@@ -56,27 +59,25 @@ def test_packed_e_step_equals_a_direct_log_sum_exp(offset, shift):
     the batch row is refused and each candidate's own maximum is used instead; a given shift
     600 nats off is refused too.
     """
-    zt, coef, pm, rows, row_pad, row_ok, ks = _packed_problem()
+    batch, coef, pm, rows, ks = _packed_problem()
     coef[:, 1:4, -2] += offset  # the constant term of candidate 1 (components 1..3)
-    ll_ref, resp_ref = _direct(zt, coef, pm, ks)
-    work = torch.empty(coef.shape[0], coef.shape[1], zt.shape[-1], dtype=torch.float64)
-    work2 = torch.empty(coef.shape[0] * coef.shape[1], zt.shape[-1], dtype=torch.float64)
-    for buffers in [(None, None), (work, work2)]:
+    ll_ref, resp_ref = _direct(batch(False).zt, coef, pm, ks)
+    for buffers in [False, True]:
+        bt = batch(buffers)
         if shift is not None:  # the previous iteration's shift row, moved by ``shift`` nats
-            _em._e_step_packed(zt, coef, pm, rows, row_pad, row_ok)
-            zt[:, -1] -= shift
-        ll, resp, lse = _em._e_step_packed(
-            zt, coef, pm, rows, row_pad, row_ok, *buffers, shifted=shift is not None
-        )
+            _em._e_step_packed(bt, coef)
+            bt.shift.sub_(shift)
+        ll, resp, lse = _em._e_step_packed(bt, coef, shifted=shift is not None)
         torch.testing.assert_close(ll[:, :3], ll_ref, rtol=1e-12, atol=1e-9)
         torch.testing.assert_close(resp[:, :-1], resp_ref, rtol=1e-10, atol=1e-14)
         assert bool((resp[:, -1] == 0).all())  # the padded component gets nothing
         torch.testing.assert_close(  # the shift row left for the next step: the best lse
-            -zt[:, -1], lse[:, :3].amax(1), rtol=0.0, atol=0.0
+            -bt.zt[:, -1], lse[:, :3].amax(1), rtol=0.0, atol=0.0
         )
+    n = resp.shape[-1]
     # responsibilities of each candidate sum to one on real points, zero on padding
-    sums = torch.zeros(2 * 4, zt.shape[-1], dtype=torch.float64)
-    sums.index_add_(0, rows, resp.reshape(-1, zt.shape[-1]))
+    sums = torch.zeros(2 * 4, n, dtype=torch.float64)
+    sums.index_add_(0, rows, resp.reshape(-1, n))
     sums = sums.reshape(2, 4, -1)[:, :3]
     torch.testing.assert_close(sums, pm.unsqueeze(1).expand_as(sums), rtol=1e-12, atol=1e-12)
 
@@ -104,3 +105,35 @@ def test_pack_balances_rows_and_keeps_every_component_once():
     # group 0 (55 components) is split; one row per group would pad every row to 55
     assert lay.gid.shape[1] < 55
     assert lay.gid.size < 4 * 55
+
+
+def test_packed_m_step_equals_the_padded_m_step():
+    """Same responsibilities -> same mixtures in the packed and the padded layouts."""
+    gen = torch.Generator().manual_seed(3)
+    g, n, d, ks = 2, 40, 3, [1, 3, 2]
+    x = torch.randn(g, n, d, generator=gen, dtype=torch.float64)
+    z = _em.quadratic_features(x)
+    floor = torch.full((d,), 1e-3, dtype=torch.float64)
+    c, k = len(ks), max(ks)
+    cmask = (torch.arange(k) < torch.tensor(ks).unsqueeze(-1)).to(torch.float64).expand(g, c, k)
+    resp_pad = torch.rand(g, n, c, k, generator=gen, dtype=torch.float64) * cmask.unsqueeze(1)
+    ref = _em.m_step(z, resp_pad, cmask.contiguous(), floor)
+    # packed: the real components of each group side by side, then one padded component
+    real = cmask[0].reshape(-1) > 0
+    m = int(real.sum()) + 1
+    resp = torch.zeros(g, m, n, dtype=torch.float64)
+    resp[:, :-1] = resp_pad.reshape(g, n, c * k)[:, :, real].transpose(1, 2)
+    row = np.r_[np.repeat(np.arange(c), ks), c]
+    rows = torch.from_numpy((np.arange(g)[:, None] * (c + 1) + row[None]).reshape(-1))
+    valid = torch.ones(g, m, dtype=torch.float64)
+    valid[:, -1] = 0.0
+    row_ok = torch.ones(g, c + 1, dtype=torch.float64)
+    row_ok[:, c] = 0.0
+    zt = torch.cat([z.transpose(1, 2), torch.zeros(g, 1, n, dtype=torch.float64)], 1)
+    bt = _em._batch(zt, torch.ones(g, n, dtype=torch.float64), rows, valid, row_ok, floor)
+    got, coef = _em._m_step_packed(bt, resp)
+    for name in ("weights", "means", "covariances", "log_det", "coef"):
+        want = getattr(ref, name).reshape(g, c * k, *getattr(ref, name).shape[3:])[:, real]
+        torch.testing.assert_close(getattr(got, name)[:, :-1], want, rtol=1e-10, atol=1e-12)
+    assert bool((coef[..., -1] == 1).all())  # the weight of the E-step's shift row
+    assert float(got.weights[:, -1].abs().max()) == 0.0  # the padded component weighs nothing

@@ -439,81 +439,126 @@ def _pack(running: np.ndarray, slot_k: np.ndarray, k0: int) -> _Layout:
     return _Layout(gid, row, slot, np.array([r[0] // c0 for r in rows_of], dtype=np.int64))
 
 
-def _m_step_packed(
-    zt: Tensor, resp: Tensor, rows: Tensor, valid: Tensor, row_pad: Tensor, floor: Tensor
-) -> tuple[Params, Tensor]:
-    """M-step in the packed layout: zt [B, Q(+1), N], resp [B, M, N] -> (Params [B, M, ...],
-    coef [B, M, Q+1]).
+class _Batch(NamedTuple):
+    """Constants of one packing for the packed E- and M-steps (:func:`_batch`): B batch rows,
+    M components and R+1 candidate rows each (the last one padding), N points, Q features.
 
-    Only the first Q = D (D+3) / 2 + 1 rows of ``zt`` are read (``zt`` may carry the E-step's
-    shift row below them). The returned ``coef`` ends with a column of ones, the weight of
-    that shift row; ``Params.coef`` is its first Q columns. ``rows`` [B*M] flat candidate-row
-    index (b * (R+1) + row), ``valid`` [B, M] 1 for a real component, ``row_pad`` [B*(R+1)]
-    1 for a padding row (keeps its weight sum non-zero).
+    Precomputed once per packing, so that an iteration runs as few tensor operations as
+    possible (each costs microseconds of dispatch, whatever its size).
+    """
+
+    zt: Tensor  # [B, Q+1, N] features, points last; last row: minus the shift (rewritten)
+    zt_q: Tensor  # [B, Q, N] view: the features alone
+    shift: Tensor  # [B, N] view of zt's last row
+    shift3: Tensor  # [B, 1, N] the same
+    pm1: Tensor  # [B, 1, N] 1 on real points
+    rows: Tensor  # [B*M] long: flat candidate row (b * (R+1) + row) of each component
+    row_pad: Tensor  # [B*(R+1)] 1 on padding candidate rows
+    pad_rows: Tensor  # [B*(R+1), N] the same per point (keeps their sums non-zero)
+    weight_rows: Tensor  # [B*(R+1), N] 1 on real points of real candidate rows, else 0
+    row_minf: Tensor  # [B, R+1, 1] 0 on real candidate rows, -inf on padding ones
+    valid: Tensor  # [B, M] 1 on real components
+    valid_b: Tensor  # [B, M] bool
+    ones: Tensor  # [B, M, 1]
+    floor_diag: Tensor  # [D, D] diag(variance floor)
+    work: Tensor | None  # [B, M, N] reused buffer (receives resp)
+    work2: Tensor | None  # [B*M, N] reused buffer
+
+
+def _batch(
+    zt: Tensor,
+    pm: Tensor,
+    rows: Tensor,
+    valid: Tensor,
+    row_ok: Tensor,
+    floor: Tensor,
+    buffers: bool = True,
+) -> _Batch:
+    """zt [B, Q+1, N] (features then a shift row), pm [B, N], rows [B*M], valid [B, M],
+    row_ok [B, R+1] (1 on real candidate rows), floor [D] -> _Batch. ``buffers``: allocate
+    the reused [B, M, N] buffers (fresh multi-MB arrays every iteration would cost a page
+    fault per 4 KiB)."""
+    b, q1, n = zt.shape
+    m = valid.shape[1]
+    r1 = row_ok.shape[1]
+    pad = 1.0 - row_ok
+    return _Batch(
+        zt=zt,
+        zt_q=zt[:, : q1 - 1],
+        shift=zt[:, -1],
+        shift3=zt[:, -1:],
+        pm1=pm.unsqueeze(1),
+        rows=rows,
+        row_pad=pad.reshape(-1),
+        pad_rows=pad.reshape(-1, 1).expand(b * r1, n).contiguous(),
+        weight_rows=(pm.unsqueeze(1) * row_ok.unsqueeze(-1)).reshape(-1, n),
+        row_minf=torch.where(row_ok > 0, 0.0, -math.inf).unsqueeze(-1),
+        valid=valid,
+        valid_b=valid > 0,
+        ones=valid.new_ones(b, m, 1),
+        floor_diag=torch.diag(floor),
+        work=zt.new_empty(b, m, n) if buffers else None,
+        work2=zt.new_empty(b * m, n) if buffers else None,
+    )
+
+
+def _m_step_packed(bt: _Batch, resp: Tensor) -> tuple[Params, Tensor]:
+    """M-step in the packed layout: resp [B, M, N] -> (Params [B, M, ...], coef [B, M, Q+1]).
+
+    Same estimates as :func:`m_step`. The returned ``coef`` ends with a column of ones, the
+    weight of the E-step's shift row; ``Params.coef`` is its first Q columns.
     """
     g, m, _ = resp.shape
-    d = floor.shape[0]
+    d = bt.floor_diag.shape[0]
     q = d * (d + 3) // 2 + 1
     du = q - d - 1
-    _, _, full, upper, scale = _indices(d, zt.device)
+    _, _, full, upper, scale = _indices(d, resp.device)
     # zt @ resp^T: with the long N axis contiguous in both operands, ~1.7x faster than resp @ z
-    stats = torch.bmm(zt[:, :q], resp.transpose(1, 2)).transpose(1, 2)  # [B, M, Q]
+    stats = torch.bmm(bt.zt_q, resp.transpose(1, 2)).transpose(1, 2)  # [B, M, Q]
     nk = stats[..., -1] + 10.0 * _EPS
     stats = stats / nk.unsqueeze(-1)
     means = stats[..., du : du + d]
-    cov = stats[..., full].reshape(g, m, d, d)
-    cov -= means.unsqueeze(-1) * means.unsqueeze(-2)
-    cov.diagonal(dim1=-2, dim2=-1).add_(floor)
-    wn = (nk * valid).reshape(-1)
-    wsum = row_pad.clone().index_add_(0, rows, wn)
-    weights = (wn / wsum.index_select(0, rows)).reshape(g, m)
+    cov = stats[..., full].view(g, m, d, d)
+    cov.sub_(means.unsqueeze(-1) * means.unsqueeze(-2)).add_(bt.floor_diag)
+    wn = nk * bt.valid
+    wsum = torch.index_add(bt.row_pad, 0, bt.rows, wn.view(-1))
+    weights = wn.div_(wsum.index_select(0, bt.rows).view(g, m))
     prec, log_det = _precision(cov)
     lin = (prec * means.unsqueeze(-2)).sum(-1)  # P mu (a batched matmul of 1-column products
     # would cost more than the rest of the M-step's small operations)
-    quad = prec.reshape(g, m, d * d)[..., upper] * scale.to(zt.dtype)
-    const = torch.log(weights) + log_det - 0.5 * (lin * means).sum(-1)
-    const = torch.where(valid > 0, const - 0.5 * d * math.log(2.0 * math.pi), _PAD_LOG_WEIGHT)
-    ones = torch.ones(g, m, 1, dtype=zt.dtype, device=zt.device)
-    coef = torch.cat([quad, lin, const.unsqueeze(-1), ones], -1)
+    quad = prec.reshape(g, m, d * d)[..., upper].mul_(scale)
+    const = torch.log(weights).add_(log_det).sub_((lin * means).sum(-1), alpha=0.5)
+    const = torch.where(bt.valid_b, const.add_(-0.5 * d * math.log(2.0 * math.pi)), _PAD_LOG_WEIGHT)
+    coef = torch.cat([quad, lin, const.unsqueeze(-1), bt.ones], -1)
     return Params(weights, means, cov, log_det, coef[..., :q]), coef
 
 
 def _e_step_packed(
-    zt: Tensor,
-    coef: Tensor,
-    pm: Tensor,
-    rows: Tensor,
-    row_pad: Tensor,
-    row_ok: Tensor,
-    work: Tensor | None = None,
-    work2: Tensor | None = None,
-    shifted: bool = False,
+    bt: _Batch, coef: Tensor, shifted: bool = False
 ) -> tuple[Tensor, Tensor, Tensor]:
-    """E-step in the packed layout: zt [B, Q+1, N], coef [B, M, Q+1], pm [B, N].
+    """E-step in the packed layout: coef [B, M, Q+1] (last column 1) -> (loglik [B, R+1],
+    resp [B, M, N], lse [B, R+1, N]); resp is zero on padding rows and padded points and is
+    returned in ``bt.work`` when there is one.
 
-    ``zt``'s last row holds minus a log-sum-exp shift per point and ``coef``'s last column is
-    1, so the matrix product gives the shifted log-densities directly. With ``shifted`` that
-    row is tried as it is (the previous iteration's); the step then rewrites it with this
-    iteration's largest candidate log-likelihood per point, for the next.
-
-    Returns (loglik [B, R+1], resp [B, M, N], lse [B, R+1, N]); rows as in _m_step_packed,
-    row_pad [B*(R+1)] 1 on padding rows, row_ok [B, R+1] 1 on real rows (resp is zero on
-    padding rows and padded points). ``work`` [B, M, N] and ``work2`` [B*M, N], if given, are
-    reused buffers (resp is returned in ``work``): fresh multi-MB arrays every iteration would
-    cost a page fault per 4 KiB.
+    ``bt.zt``'s last row holds minus a log-sum-exp shift per point, so the matrix product
+    gives the shifted log-densities directly. With ``shifted`` that row is tried as it is
+    (the previous iteration's); the step then rewrites it with this iteration's largest
+    candidate log-likelihood per point, for the next.
 
     Shifts, first that keeps every candidate's shifted sum in [e^-600, e^600] (beyond, the
     e^-700 clamp could matter or exp overflow): the given row; the largest weighted
     log-density per point of any component of the batch row; each candidate's own maximum.
     """
     b, m, _ = coef.shape
-    n = zt.shape[-1]
-    r1 = row_ok.shape[1]
+    n = bt.zt.shape[-1]
+    r1 = bt.row_minf.shape[1]
+
+    def product() -> Tensor:
+        return torch.bmm(coef, bt.zt, out=bt.work) if bt.work is not None else coef @ bt.zt
 
     def sums(e: Tensor) -> tuple[Tensor, Tensor]:
-        s = torch.zeros(b * r1, n, dtype=e.dtype, device=e.device)
-        s = s.index_add_(0, rows, e.view(-1, n)).add_(row_pad.unsqueeze(-1))
-        return s, torch.log(s)
+        s = torch.index_add(bt.pad_rows, 0, bt.rows, e.view(-1, n))
+        return s, torch.log(s.view(b, r1, n))
 
     def safe(ls: Tensor) -> bool:
         lo, hi = torch.aminmax(ls)
@@ -521,34 +566,33 @@ def _e_step_packed(
 
     lse = None
     if shifted:
-        w = torch.bmm(coef, zt, out=work) if work is not None else torch.bmm(coef, zt)
-        e = w.clamp_(_CLAMP, 700.0).exp_()
+        e = product().clamp_(_CLAMP, 700.0).exp_()
         s, ls = sums(e)
         if safe(ls):
-            lse = ls.view(b, r1, n) - zt[:, -1:]
+            lse = ls.sub_(bt.shift3)
     if lse is None:
-        zt[:, -1] = 0.0
-        w = torch.bmm(coef, zt, out=work) if work is not None else torch.bmm(coef, zt)
+        bt.shift.zero_()
+        w = product()
         mx = w.amax(1, keepdim=True)  # [B, 1, N]
         e = w.sub_(mx).clamp_min_(_CLAMP).exp_()
         s, ls = sums(e)
         if safe(ls):
-            lse = ls.view(b, r1, n) + mx
+            lse = ls.add_(mx)
     if lse is None:
-        w = torch.bmm(coef, zt, out=work) if work is not None else torch.bmm(coef, zt)
+        w = product()
         cmx = torch.full((b * r1, n), -math.inf, dtype=w.dtype, device=w.device)
-        cmx = cmx.scatter_reduce_(0, rows.unsqueeze(-1).expand(-1, n), w.view(-1, n), "amax")
-        cmx = torch.where(row_pad.unsqueeze(-1) > 0, 0.0, cmx)
-        e = w.sub_(cmx.index_select(0, rows).view(b, m, n)).clamp_min_(_CLAMP).exp_()
+        cmx = cmx.scatter_reduce_(0, bt.rows.unsqueeze(-1).expand(-1, n), w.view(-1, n), "amax")
+        cmx = torch.where(bt.row_pad.unsqueeze(-1) > 0, 0.0, cmx)
+        e = w.sub_(cmx.index_select(0, bt.rows).view(b, m, n)).clamp_min_(_CLAMP).exp_()
         s, ls = sums(e)
-        lse = (ls + cmx).view(b, r1, n)
-    loglik = (lse * pm.unsqueeze(1)).sum(-1)
-    zt[:, -1] = -lse.masked_fill(row_ok.unsqueeze(-1) == 0, -math.inf).amax(1)
-    inv = (pm.unsqueeze(1) * row_ok.unsqueeze(-1)).view(-1, n) / s
-    if work2 is not None:
-        spread = torch.index_select(inv, 0, rows, out=work2)
+        lse = ls.add_(cmx.view(b, r1, n))
+    loglik = (lse * bt.pm1).sum(-1)
+    torch.neg(torch.amax(lse + bt.row_minf, 1), out=bt.shift)
+    inv = bt.weight_rows / s
+    if bt.work2 is not None:
+        spread = torch.index_select(inv, 0, bt.rows, out=bt.work2)
     else:
-        spread = inv.index_select(0, rows)
+        spread = inv.index_select(0, bt.rows)
     e.mul_(spread.view(b, m, n))
     return loglik, e, lse
 
@@ -602,7 +646,8 @@ def run_em(
         slot_pad = np.concatenate([lay.slot, np.full((b, 1), -1)], 1)  # [B, R+1]
         row_ok_np = slot_pad >= 0
         row_ok = torch.from_numpy(row_ok_np).to(device=dev, dtype=dt)
-        row_pad = (1.0 - row_ok).reshape(-1)
+        bt = _batch(zt, pm, rows, valid, row_ok, floor)
+        npts1 = npts.unsqueeze(-1)
         slot_ix = torch.from_numpy(np.where(row_ok_np, slot_pad, g0 * c0).reshape(-1)).to(dev)
         # current parameters of the packed components (padding: zeros and a very low constant)
         first = np.where(valid_np, lay.gid, lay.gid[:, :1])
@@ -614,18 +659,16 @@ def run_em(
         coef[..., -1] = torch.where(valid > 0, coef[..., -1], _PAD_LOG_WEIGHT)
         coef = torch.cat([coef, coef.new_ones(b, mm, 1)], -1)  # weight of the shift row
         prev = prev_all.index_select(0, slot_ix).reshape(b, r + 1)
-        work = torch.empty(b, mm, n, dtype=dt, device=dev)
-        work2 = torch.empty(b * mm, n, dtype=dt, device=dev)
         active = row_ok > 0  # watched rows: running, not yet stopped
         packed = n_active = int(valid_np.sum())
         shifted = False
         while True:
             it += 1
-            ll, resp, _ = _e_step_packed(zt, coef, pm, rows, row_pad, row_ok, work, work2, shifted)
+            ll, resp, _ = _e_step_packed(bt, coef, shifted)
             shifted = True
-            params, coef = _m_step_packed(zt, resp, rows, valid, row_pad, floor)
-            mean_ll = ll / npts.unsqueeze(-1)
-            done = ((mean_ll - prev).abs() < tol) & active
+            params, coef = _m_step_packed(bt, resp)
+            mean_ll = ll / npts1
+            done = torch.lt((mean_ll - prev).abs_(), tol).logical_and_(active)
             prev = mean_ll
             last = it >= max_iter
             if not (last or bool(done.any())):
