@@ -312,14 +312,20 @@ def _lloyd(
             xt.unsqueeze(1).expand(g, c, d, n), 3, idx.unsqueeze(2).expand(g, c, d, 1)
         )
         centers[:, :, j] = cj.squeeze(-1)
-        diff = xt.unsqueeze(1) - cj  # [G, C, D, N]
-        d2 = torch.minimum(d2, diff.mul_(diff).sum(2))
+        # squared distances to the new centre, one coordinate at a time ([G, C, N] arrays:
+        # a [G, C, D, N] difference would be written and read three times)
+        dist2 = None
+        for i in range(d):
+            diff = xt[:, i].unsqueeze(1) - cj[:, :, i]  # [G, C, N]
+            dist2 = diff.mul_(diff) if dist2 is None else dist2.add_(diff.mul_(diff))
+        d2 = torch.minimum(d2, dist2)
     xa = _augmented(x)
     pad = _pad(cmask, dt)
     base = (torch.arange(g * c, device=dev) * k).reshape(g, c, 1)  # slot offsets
-    pw = pm.reshape(-1)
-    xw = (xt * pmask.unsqueeze(1)).unsqueeze(1).expand(g, c, d, n)  # [G, C, D, N]
-    dim_off = (torch.arange(d, device=dev) * (g * c * k)).reshape(1, 1, d, 1)
+    # per coordinate, then the count: [x_i] on real points, 0 on padding, once per slot
+    weights = [
+        w.unsqueeze(1).expand(g, c, n).reshape(-1) for w in (xa * pmask.unsqueeze(1)).unbind(1)
+    ]
     # reused buffers: fresh multi-MB arrays every step would cost a page fault per 4 KiB
     buffers = _nearest_buffers(g, c, k, n, dt, dev)
     labels = None
@@ -328,16 +334,11 @@ def _lloyd(
         if labels is not None and torch.equal(new_labels, labels):
             break
         labels = new_labels
-        flat = labels + base  # [G, C, N] global component id
-        counts = torch.bincount(flat.reshape(-1), weights=pw, minlength=g * c * k)
-        sums = torch.bincount(
-            (flat.unsqueeze(2) + dim_off).reshape(-1),
-            weights=xw.reshape(-1),
-            minlength=g * c * k * d,
-        )  # [D * G*C*K]: dimension-major
-        counts = counts.reshape(g, c, k, 1)
-        mean = sums.reshape(d, g, c, k).permute(1, 2, 3, 0) / counts.clamp_min(1.0)
-        centers = torch.where(counts > 0, mean, centers)
+        flat = (labels + base).view(-1)  # global component id of each (slot, point)
+        acc = torch.stack([torch.bincount(flat, w, minlength=g * c * k) for w in weights], -1)
+        acc = acc.view(g, c, k, d + 1)
+        counts = acc[..., d:]
+        centers = torch.where(counts > 0, acc[..., :d] / counts.clamp_min(1.0), centers)
     assert labels is not None
     return centers, labels
 
