@@ -598,6 +598,10 @@ def _e_step_packed(
     return loglik, e, lse
 
 
+def _ix(a: np.ndarray, device: torch.device) -> Tensor:
+    return torch.from_numpy(a).to(device)
+
+
 def run_em(
     x: Tensor,
     pmask: Tensor,
@@ -633,6 +637,7 @@ def run_em(
     prev_all = torch.full((g0 * c0 + 1,), -math.inf, dtype=dt, device=dev)
     cur_coef = out[4]  # where the current parameters are: cur_coef[src[global id]]
     src = None
+    saved: list[tuple[Params, np.ndarray, np.ndarray]] = []
     it = 0
     while it < max_iter and running.any():
         lay = _pack(running, slot_k, k0)
@@ -680,10 +685,7 @@ def run_em(
             n_iter[ids_np] = it
             converged[ids_np] = done.cpu().numpy()[stop_np]
             sel = valid_np & stop_np[np.arange(b)[:, None], lay.row]
-            pos = torch.from_numpy(np.flatnonzero(sel)).to(dev)
-            dst = torch.from_numpy(lay.gid[sel]).to(dev)
-            for o, p in zip(out, params, strict=True):
-                o.index_copy_(0, dst, p.reshape(b * mm, *p.shape[2:]).index_select(0, pos))
+            saved.append((params, np.flatnonzero(sel), lay.gid[sel]))  # copied out at the end
             running[np.unravel_index(ids_np, running.shape)] = False
             active &= ~stop
             n_active -= int(sel.sum())
@@ -695,6 +697,13 @@ def run_em(
         src_np[lay.gid[valid_np]] = np.flatnonzero(valid_np)
         src = torch.from_numpy(src_np).to(dev)
         prev_all = prev_all.index_copy(0, slot_ix, prev.reshape(-1))
+    # every stopped slot's parameters, as they were when it stopped, in one copy per field
+    dst = torch.from_numpy(np.concatenate([d for _, _, d in saved])).to(dev)
+    for i, o in enumerate(out):
+        src_i = [
+            p[i].reshape(-1, *p[i].shape[2:]).index_select(0, _ix(s, dev)) for p, s, _ in saved
+        ]
+        o.index_copy_(0, dst, torch.cat(src_i))
     final = Params(*(o.reshape(g0, c0, k0, *o.shape[1:]) for o in out))
     loglik = total_log_likelihood(zt0, final.coef, pmask)
     return EMResult(
