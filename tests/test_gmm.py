@@ -256,3 +256,35 @@ def test_seeded_fit_is_deterministic():
     b = GaussianMixtureSet(2, 3, 5, seed=11).fit(x, y)
     for k, v in a.state_dict().items():
         assert torch.equal(v, b.state_dict()[k]), k
+
+
+def test_kmeans_on_large_groups_uses_a_stride_and_labels_every_point():
+    """Above 1024 points a group seeds and runs Lloyd on an even stride of its points, then
+    every point goes to its nearest final centre: three far-apart blobs are found exactly,
+    and the result of a group does not depend on the other groups of the batch."""
+    rng = np.random.default_rng(5)
+    n_big, n_small, d = 3000, 200, 2
+    truth = rng.integers(0, 3, size=n_big)
+    centres = np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0]])
+    big = centres[truth] + rng.normal(size=(n_big, d))
+    small = rng.normal(size=(n_small, d))
+    x = torch.zeros(2, n_big, d, dtype=torch.float64)
+    x[0] = torch.from_numpy(big)
+    x[1, :n_small] = torch.from_numpy(small)
+    pmask = torch.zeros(2, n_big, dtype=torch.float64)
+    pmask[0] = 1.0
+    pmask[1, :n_small] = 1.0
+    cmask = torch.ones(2, 1, 3, dtype=torch.float64)
+    u = torch.from_numpy(_em.candidate_uniforms(0, np.array([[0], [1]]), np.array([[3], [3]]), 3))
+    resp = _em.kmeans_init(x, pmask, cmask, u)
+    assert resp.shape == (2, n_big, 1, 3)
+    torch.testing.assert_close(resp.sum((-1, -2)), pmask)  # one component per real point
+    labels = resp[0, :, 0].argmax(-1).numpy()
+    # the clustering equals the truth up to a renaming of the components
+    pairs = set(zip(labels.tolist(), truth.tolist(), strict=True))
+    assert len(pairs) == 3
+    alone_big = _em.kmeans_init(x[:1], pmask[:1], cmask[:1], u[:1])
+    alone_small = _em.kmeans_init(x[1:, :n_small], pmask[1:, :n_small], cmask[1:], u[1:])
+    torch.testing.assert_close(resp[:1], alone_big, rtol=0.0, atol=0.0)
+    torch.testing.assert_close(resp[1:, :n_small], alone_small, rtol=0.0, atol=0.0)
+    assert n_big > _em._KMEANS_POINTS >= n_small  # both paths are exercised

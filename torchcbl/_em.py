@@ -235,8 +235,12 @@ def kmeans_init(
         j = torch.arange(m, device=x.device).unsqueeze(0)
         idx = torch.where(counts > m, j * counts // m, torch.minimum(j, counts - 1))
         sub = torch.gather(x, 1, idx.unsqueeze(-1).expand(g, m, d))
-        centers, _ = _lloyd(sub, (j < counts).to(x.dtype), cmask, uniforms, n_lloyd)
+        centers, sub_labels = _lloyd(sub, (j < counts).to(x.dtype), cmask, uniforms, n_lloyd)
         labels = _nearest(_augmented(x), centers, _pad(cmask, x.dtype))
+        # a group of at most m points ran on all of them (in order): keep its Lloyd labels,
+        # exactly as when it is fitted alone
+        whole = (counts <= m).unsqueeze(-1)  # [G, 1, 1]
+        labels[..., :m] = torch.where(whole, sub_labels, labels[..., :m])
     k = cmask.shape[2]
     resp = torch.nn.functional.one_hot(labels.transpose(1, 2), k).to(x.dtype)
     return resp.mul_(pmask.reshape(g, n, 1, 1))
