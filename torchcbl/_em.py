@@ -115,7 +115,7 @@ def _precision(cov: Tensor) -> tuple[Tensor, Tensor]:
     """
     chol, info = torch.linalg.cholesky_ex(cov)
     log_det = -torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
-    log_det = torch.where(info == 0, log_det, math.nan)
+    log_det = log_det.masked_fill_(info != 0, math.nan)
     if cov.shape[-1] <= 4:
         prec, _ = torch.linalg.inv_ex(cov)
     else:
@@ -463,7 +463,7 @@ class _Batch(NamedTuple):
     weight_rows: Tensor  # [B*(R+1), N] 1 on real points of real candidate rows, else 0
     row_minf: Tensor  # [B, R+1, 1] 0 on real candidate rows, -inf on padding ones
     valid: Tensor  # [B, M] 1 on real components
-    valid_b: Tensor  # [B, M] bool
+    pad_b: Tensor  # [B, M] bool, True on padded components
     ones: Tensor  # [B, M, 1]
     floor_diag: Tensor  # [D, D] diag(variance floor)
     work: Tensor | None  # [B, M, N] reused buffer (receives resp)
@@ -499,7 +499,7 @@ def _batch(
         weight_rows=(pm.unsqueeze(1) * row_ok.unsqueeze(-1)).reshape(-1, n),
         row_minf=torch.where(row_ok > 0, 0.0, -math.inf).unsqueeze(-1),
         valid=valid,
-        valid_b=valid > 0,
+        pad_b=valid <= 0,
         ones=valid.new_ones(b, m, 1),
         floor_diag=torch.diag(floor),
         work=zt.new_empty(b, m, n) if buffers else None,
@@ -523,7 +523,7 @@ def _m_step_packed(bt: _Batch, resp: Tensor) -> tuple[Params, Tensor]:
     nk = stats[..., -1] + 10.0 * _EPS
     stats = stats / nk.unsqueeze(-1)
     means = stats[..., du : du + d]
-    cov = stats[..., full].view(g, m, d, d)
+    cov = stats.index_select(-1, full).view(g, m, d, d)
     cov.sub_(means.unsqueeze(-1) * means.unsqueeze(-2)).add_(bt.floor_diag)
     wn = nk * bt.valid
     wsum = torch.index_add(bt.row_pad, 0, bt.rows, wn.view(-1))
@@ -531,9 +531,9 @@ def _m_step_packed(bt: _Batch, resp: Tensor) -> tuple[Params, Tensor]:
     prec, log_det = _precision(cov)
     lin = (prec * means.unsqueeze(-2)).sum(-1)  # P mu (a batched matmul of 1-column products
     # would cost more than the rest of the M-step's small operations)
-    quad = prec.reshape(g, m, d * d)[..., upper].mul_(scale)
+    quad = prec.reshape(g, m, d * d).index_select(-1, upper).mul_(scale)
     const = torch.log(weights).add_(log_det).sub_((lin * means).sum(-1), alpha=0.5)
-    const = torch.where(bt.valid_b, const.add_(-0.5 * d * math.log(2.0 * math.pi)), _PAD_LOG_WEIGHT)
+    const = const.add_(-0.5 * d * math.log(2.0 * math.pi)).masked_fill_(bt.pad_b, _PAD_LOG_WEIGHT)
     coef = torch.cat([quad, lin, const.unsqueeze(-1), bt.ones], -1)
     return Params(weights, means, cov, log_det, coef[..., :q]), coef
 
