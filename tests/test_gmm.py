@@ -187,6 +187,19 @@ def test_state_dict_round_trip_classifies_identically(fitted):
     assert not fresh.is_fitted and (fresh.classify(x[:2]).action == -1).all()
 
 
+def test_fitted_state_is_made_of_ordinary_tensors(fitted):
+    """The EM runs in inference mode; nothing of it may leak into the module or the report
+    (an inference tensor refuses in-place updates and autograd outside that mode)."""
+    model, x, _ = fitted
+    leaked = [name for name, b in model.named_buffers() if b.is_inference()]
+    rep = model.fit_report_
+    leaked += [f for f, v in vars(rep).items() if isinstance(v, torch.Tensor) and v.is_inference()]
+    assert leaked == []
+    means = model.means_.clone().requires_grad_(True)
+    (means * 2.0).sum().backward()  # usable in a user's own autograd graph
+    model.means_.add_(0.0)  # and updatable in place
+
+
 def test_to_dtype_and_back(fitted):
     model, x, _ = fitted
     ref = model.classify(x)

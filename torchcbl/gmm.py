@@ -366,7 +366,10 @@ class GaussianMixtureSet(nn.Module):
         uniforms = torch.from_numpy(
             _em.candidate_uniforms(self.seed, groups_np[:, None].repeat(k_pad, 1), slot_k_np, k_pad)
         ).to(dev)
-        with torch.no_grad():
+        # inference mode (no view or version tracking): ~10% off the EM's many small operations;
+        # everything below reads its results through functional ops, so the fitted buffers
+        # are ordinary tensors
+        with torch.inference_mode():
             resp0 = _em.kmeans_init(xg, pmask, cmask, uniforms)
             res = _em.run_em(xg, pmask, cmask, floor, resp0, self.tol, self.max_iter)
         real = torch.from_numpy(real_np).to(dev)
