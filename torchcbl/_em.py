@@ -233,7 +233,7 @@ def kmeans_init(
         m = _KMEANS_POINTS
         counts = pmask.sum(1).round().long().unsqueeze(1)  # [G, 1]
         j = torch.arange(m, device=x.device).unsqueeze(0)
-        idx = torch.where(counts > m, j * counts // m, torch.minimum(j, counts - 1))
+        idx = torch.where(counts > m, j * counts // m, torch.minimum(j, (counts - 1).clamp_min(0)))
         sub = torch.gather(x, 1, idx.unsqueeze(-1).expand(g, m, d))
         centers, sub_labels = _lloyd(sub, (j < counts).to(x.dtype), cmask, uniforms, n_lloyd)
         labels = _nearest(_augmented(x), centers, _pad(cmask, x.dtype))
