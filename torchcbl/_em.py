@@ -173,14 +173,6 @@ def total_log_likelihood(zt: Tensor, coef: Tensor, pmask: Tensor) -> Tensor:
     return (lse * pmask.unsqueeze(1)).sum(-1)
 
 
-def log_gaussian(x: Tensor, means: Tensor, prec_chol: Tensor, log_det: Tensor) -> Tensor:
-    """log N(x_n; mu_k, S_k), direct form: x [N, D], means [K, D], prec_chol [K, D, D],
-    log_det [K] -> [N, K]."""
-    d = x.shape[-1]
-    y = torch.einsum("nd,kde->nke", x, prec_chol) - torch.einsum("kd,kde->ke", means, prec_chol)
-    return -0.5 * (d * math.log(2.0 * math.pi) + (y * y).sum(-1)) + log_det
-
-
 def _splitmix_uniform(keys: np.ndarray) -> np.ndarray:
     """Deterministic uniforms in [0, 1) from uint64 keys (splitmix64 finaliser)."""
     with np.errstate(over="ignore"):
