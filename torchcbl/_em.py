@@ -297,7 +297,7 @@ def _lloyd(
     centers = torch.zeros(g, c, k, d, dtype=dt, device=dev)
     d2 = torch.full((g, c, n), math.inf, dtype=dt, device=dev)
     pm = pmask.unsqueeze(1).expand(g, c, n)
-    xt = x.transpose(1, 2)  # [G, D, N]
+    xt = x.transpose(1, 2).contiguous()  # [G, D, N]
     for j in range(k):
         w = pm if j == 0 else d2 * pm
         w = torch.where(w.sum(-1, keepdim=True) > 0, w, pm)  # all distances 0: uniform draw
@@ -308,20 +308,21 @@ def _lloyd(
             xt.unsqueeze(1).expand(g, c, d, n), 3, idx.unsqueeze(2).expand(g, c, d, 1)
         )
         centers[:, :, j] = cj.squeeze(-1)
-        # squared distances to the new centre, one coordinate at a time ([G, C, N] arrays:
-        # a [G, C, D, N] difference would be written and read three times)
-        dist2 = None
-        for i in range(d):
-            diff = xt[:, i].unsqueeze(1) - cj[:, :, i]  # [G, C, N]
-            dist2 = diff.mul_(diff) if dist2 is None else dist2.add_(diff.mul_(diff))
+        # squared distances to the new centre, summed over the coordinates in order (a
+        # reduction over D would sum in another order: the seeding draws would move)
+        sq = xt.unsqueeze(1) - cj  # [G, C, D, N]
+        sq = sq.mul_(sq).unbind(2)
+        dist2 = sq[0] if d == 1 else sq[0] + sq[1]
+        for i in range(2, d):
+            dist2.add_(sq[i])
         d2 = torch.minimum(d2, dist2)
     xa = _augmented(x)
     pad = _pad(cmask, dt)
     base = (torch.arange(g * c, device=dev) * k).reshape(g, c, 1)  # slot offsets
-    # per coordinate, then the count: [x_i] on real points, 0 on padding, once per slot
-    weights = [
-        w.unsqueeze(1).expand(g, c, n).reshape(-1) for w in (xa * pmask.unsqueeze(1)).unbind(1)
-    ]
+    # per coordinate, then the count: [x_i; 1] on real points, 0 on padding, once per slot
+    weights = (xa * pmask.unsqueeze(1)).unsqueeze(2).expand(g, d + 1, c, n)
+    weights = weights.transpose(0, 1).reshape(d + 1, g * c * n)
+    acc = torch.empty(d + 1, g * c * k, dtype=dt, device=dev)
     # reused buffers: fresh multi-MB arrays every step would cost a page fault per 4 KiB
     buffers = _nearest_buffers(g, c, k, n, dt, dev)
     labels = None
@@ -331,10 +332,10 @@ def _lloyd(
             break
         labels = new_labels
         flat = (labels + base).view(-1)  # global component id of each (slot, point)
-        acc = torch.stack([torch.bincount(flat, w, minlength=g * c * k) for w in weights], -1)
-        acc = acc.view(g, c, k, d + 1)
-        counts = acc[..., d:]
-        centers = torch.where(counts > 0, acc[..., :d] / counts.clamp_min(1.0), centers)
+        # sums per (slot, component): one index_add over the points, in point order
+        sums = acc.zero_().index_add_(1, flat, weights).T.view(g, c, k, d + 1)
+        counts = sums[..., d:]
+        centers = torch.where(counts > 0, sums[..., :d] / counts.clamp_min(1.0), centers)
     assert labels is not None
     return centers, labels
 
@@ -627,10 +628,12 @@ def run_em(
     out = [t.reshape(g0 * c0 * k0, *t.shape[3:]).clone() for t in params0]
     n_iter = np.zeros(g0 * c0, dtype=np.int64)
     converged = np.zeros(g0 * c0, dtype=bool)
-    n_pts = pmask.sum(1)  # [G]
+    n_pts = pmask.sum(1).cpu().numpy()  # [G]
     slot_k = cmask.sum(-1).round().long().cpu().numpy()  # [G0, C0]
     running = np.ones((g0, c0), dtype=bool)
-    prev_all = torch.full((g0 * c0 + 1,), -math.inf, dtype=dt, device=dev)
+    # the convergence bookkeeping runs in numpy: a few [B, R+1] arrays per iteration, where
+    # each torch operation would cost more in dispatch than in arithmetic
+    prev_all = np.full(g0 * c0 + 1, -math.inf)
     cur_coef = out[4]  # where the current parameters are: cur_coef[src[global id]]
     src = None
     saved: list[tuple[Params, np.ndarray, np.ndarray]] = []
@@ -640,7 +643,7 @@ def run_em(
         b, mm = lay.gid.shape
         r = lay.slot.shape[1]
         gk = torch.from_numpy(lay.groups).to(dev)
-        pm, npts = pmask.index_select(0, gk), n_pts.index_select(0, gk)
+        pm, npts1 = pmask.index_select(0, gk), n_pts[lay.groups][:, None]
         zt = torch.cat([zt0.index_select(0, gk), zt0.new_zeros(b, 1, n)], 1)  # + shift row
         valid_np = lay.gid >= 0
         valid = torch.from_numpy(valid_np).to(device=dev, dtype=dt)
@@ -649,8 +652,7 @@ def run_em(
         row_ok_np = slot_pad >= 0
         row_ok = torch.from_numpy(row_ok_np).to(device=dev, dtype=dt)
         bt = _batch(zt, pm, rows, valid, row_ok, floor)
-        npts1 = npts.unsqueeze(-1)
-        slot_ix = torch.from_numpy(np.where(row_ok_np, slot_pad, g0 * c0).reshape(-1)).to(dev)
+        slot_ix = np.where(row_ok_np, slot_pad, g0 * c0).reshape(-1)
         # current parameters of the packed components (padding: zeros and a very low constant)
         first = np.where(valid_np, lay.gid, lay.gid[:, :1])
         take = torch.from_numpy(first.reshape(-1)).to(dev)
@@ -660,8 +662,8 @@ def run_em(
         coef = torch.where(valid.unsqueeze(-1) > 0, coef, 0.0)
         coef[..., -1] = torch.where(valid > 0, coef[..., -1], _PAD_LOG_WEIGHT)
         coef = torch.cat([coef, coef.new_ones(b, mm, 1)], -1)  # weight of the shift row
-        prev = prev_all.index_select(0, slot_ix).reshape(b, r + 1)
-        active = row_ok > 0  # watched rows: running, not yet stopped
+        prev = prev_all[slot_ix].reshape(b, r + 1)
+        active = row_ok_np.copy()  # watched rows: running, not yet stopped
         packed = n_active = int(valid_np.sum())
         shifted = False
         while True:
@@ -669,18 +671,17 @@ def run_em(
             ll, resp, _ = _e_step_packed(bt, coef, shifted)
             shifted = True
             params, coef = _m_step_packed(bt, resp)
-            mean_ll = ll / npts1
-            done = torch.lt((mean_ll - prev).abs_(), tol).logical_and_(active)
+            mean_ll = ll.cpu().numpy() / npts1
+            done = (np.abs(mean_ll - prev) < tol) & active
             prev = mean_ll
             last = it >= max_iter
-            if not (last or bool(done.any())):
+            if not (last or done.any()):
                 continue
             stop = (done | active) if last else done
-            stop_np = stop.cpu().numpy()
-            ids_np = slot_pad[stop_np]
+            ids_np = slot_pad[stop]
             n_iter[ids_np] = it
-            converged[ids_np] = done.cpu().numpy()[stop_np]
-            sel = valid_np & stop_np[np.arange(b)[:, None], lay.row]
+            converged[ids_np] = done[stop]
+            sel = valid_np & stop[np.arange(b)[:, None], lay.row]
             saved.append((params, np.flatnonzero(sel), lay.gid[sel]))  # copied out at the end
             running[np.unravel_index(ids_np, running.shape)] = False
             active &= ~stop
@@ -692,7 +693,7 @@ def run_em(
         src_np = np.zeros(g0 * c0 * k0, dtype=np.int64)
         src_np[lay.gid[valid_np]] = np.flatnonzero(valid_np)
         src = torch.from_numpy(src_np).to(dev)
-        prev_all = prev_all.index_copy(0, slot_ix, prev.reshape(-1))
+        prev_all[slot_ix] = prev.reshape(-1)
     # every stopped slot's parameters, as they were when it stopped, in one copy per field
     dst = torch.from_numpy(np.concatenate([d for _, _, d in saved])).to(dev)
     for i, o in enumerate(out):
