@@ -59,8 +59,9 @@ class Params(NamedTuple):
 
 
 @functools.lru_cache(maxsize=64)
-def _indices(d: int, device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
-    """Upper-triangle (i, j), full [D*D] -> packed map, packed upper positions, quad scale."""
+def _indices(d: int, device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """Upper-triangle (i, j), full [D*D] -> packed map, flat positions of the upper triangle,
+    quad scale, flat positions of the same entries in the transposed matrix."""
     iu = torch.triu_indices(d, d, device=device)
     i, j = iu[0], iu[1]
     du = i.numel()
@@ -68,7 +69,7 @@ def _indices(d: int, device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tens
     full[i, j] = torch.arange(du, device=device)
     full[j, i] = torch.arange(du, device=device)
     scale = torch.where(i == j, -0.5, -1.0).to(torch.float64)
-    return i, j, full.reshape(-1), i * d + j, scale
+    return i, j, full.reshape(-1), i * d + j, scale, j * d + i
 
 
 def quadratic_features(x: Tensor) -> Tensor:
@@ -77,7 +78,7 @@ def quadratic_features(x: Tensor) -> Tensor:
     Both EM steps are then single matrix products: the M-step's sufficient statistics are
     resp^T z, and the E-step's weighted log-densities are z coef^T.
     """
-    i, j, _, _, _ = _indices(x.shape[-1], x.device)
+    i, j, _, _, _, _ = _indices(x.shape[-1], x.device)
     ones = torch.ones(*x.shape[:-1], 1, dtype=x.dtype, device=x.device)
     return torch.cat([x[..., i] * x[..., j], x, ones], -1)
 
@@ -136,7 +137,7 @@ def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
     q = z.shape[-1]
     d = _dim_of(q)
     du = q - d - 1
-    _, _, full, upper, scale = _indices(d, z.device)
+    _, _, full, upper, scale, _ = _indices(d, z.device)
     # z^T resp keeps the big operand in its natural layout (faster than resp^T z)
     stats = torch.bmm(z.transpose(1, 2), resp.reshape(g, n, c * k)).transpose(1, 2)
     stats = stats.reshape(g, c, k, q)
@@ -352,6 +353,7 @@ class EMResult(NamedTuple):
 
 _ROW_COST = 4  # per batch row overhead of the packed layout, in components
 _REPACK = 0.85  # re-pack once the running components fall to this share of the packed ones
+_REPACK_MIN = 16384  # ... and the stopped ones hold at least this many (component, point) pairs
 
 
 class _Layout(NamedTuple):
@@ -470,16 +472,22 @@ def _batch(
     valid: Tensor,
     row_ok: Tensor,
     floor: Tensor,
-    buffers: bool = True,
+    buffers: bool | Tensor = True,
 ) -> _Batch:
     """zt [B, Q+1, N] (features then a shift row), pm [B, N], rows [B*M], valid [B, M],
-    row_ok [B, R+1] (1 on real candidate rows), floor [D] -> _Batch. ``buffers``: allocate
-    the reused [B, M, N] buffers (fresh multi-MB arrays every iteration would cost a page
-    fault per 4 KiB)."""
+    row_ok [B, R+1] (1 on real candidate rows), floor [D] -> _Batch. ``buffers``: True to
+    allocate the reused [B, M, N] buffers (fresh multi-MB arrays every iteration would cost a
+    page fault per 4 KiB), or a flat tensor of at least 2 B M N elements to carve them from."""
     b, q1, n = zt.shape
     m = valid.shape[1]
     r1 = row_ok.shape[1]
     pad = 1.0 - row_ok
+    work = work2 = None
+    if isinstance(buffers, Tensor):
+        work = buffers[: b * m * n].view(b, m, n)
+        work2 = buffers[b * m * n : 2 * b * m * n].view(b * m, n)
+    elif buffers:
+        work, work2 = zt.new_empty(b, m, n), zt.new_empty(b * m, n)
     return _Batch(
         zt=zt,
         zt_q=zt[:, : q1 - 1],
@@ -495,8 +503,8 @@ def _batch(
         pad_b=valid <= 0,
         ones=valid.new_ones(b, m, 1),
         floor_diag=torch.diag(floor),
-        work=zt.new_empty(b, m, n) if buffers else None,
-        work2=zt.new_empty(b * m, n) if buffers else None,
+        work=work,
+        work2=work2,
     )
 
 
@@ -510,7 +518,7 @@ def _m_step_packed(bt: _Batch, resp: Tensor) -> tuple[Params, Tensor]:
     d = bt.floor_diag.shape[0]
     q = d * (d + 3) // 2 + 1
     du = q - d - 1
-    _, _, full, upper, scale = _indices(d, resp.device)
+    _, _, full, upper, scale, lower = _indices(d, resp.device)
     # zt @ resp^T: with the long N axis contiguous in both operands, ~1.7x faster than resp @ z
     stats = torch.bmm(bt.zt_q, resp.transpose(1, 2)).transpose(1, 2)  # [B, M, Q]
     nk = stats[..., -1] + 10.0 * _EPS
@@ -524,7 +532,10 @@ def _m_step_packed(bt: _Batch, resp: Tensor) -> tuple[Params, Tensor]:
     prec, log_det = _precision(cov)
     lin = (prec * means.unsqueeze(-2)).sum(-1)  # P mu (a batched matmul of 1-column products
     # would cost more than the rest of the M-step's small operations)
-    quad = prec.reshape(g, m, d * d).index_select(-1, upper).mul_(scale)
+    if prec.mT.is_contiguous():  # LAPACK's column-major inverse: read it without a copy
+        quad = prec.mT.reshape(g, m, d * d).index_select(-1, lower).mul_(scale)
+    else:
+        quad = prec.reshape(g, m, d * d).index_select(-1, upper).mul_(scale)
     const = torch.log(weights).add_(log_det).sub_((lin * means).sum(-1), alpha=0.5)
     const = const.add_(-0.5 * d * math.log(2.0 * math.pi)).masked_fill_(bt.pad_b, _PAD_LOG_WEIGHT)
     coef = torch.cat([quad, lin, const.unsqueeze(-1), bt.ones], -1)
@@ -615,9 +626,10 @@ def run_em(
     on a packed layout (:func:`_pack`): the real components of running slots side by side,
     with per-candidate sums done by index_add over rows. A stopped slot's parameters are saved
     at once; it stays in the batch, unwatched, until the running components fall below
-    ``_REPACK`` of the packed ones, and then the batch is re-packed without it, so late
-    iterations cost only what still runs. The returned log-likelihood is that of the final
-    parameters (one extra E-step), as sklearn's ``score``.
+    ``_REPACK`` of the packed ones and the stopped ones hold ``_REPACK_MIN`` (component, point)
+    pairs (a re-packing costs about as much as an iteration), and then the batch is re-packed
+    without it, so late iterations cost only what still runs. The returned log-likelihood is
+    that of the final parameters (one extra E-step), as sklearn's ``score``.
     """
     g0, n, _ = x.shape
     c0, k0 = cmask.shape[1:]
@@ -634,8 +646,15 @@ def run_em(
     # the convergence bookkeeping runs in numpy: a few [B, R+1] arrays per iteration, where
     # each torch operation would cost more in dispatch than in arithmetic
     prev_all = np.full(g0 * c0 + 1, -math.inf)
-    cur_coef = out[4]  # where the current parameters are: cur_coef[src[global id]]
-    src = None
+    zt0s = torch.cat([zt0, zt0.new_zeros(g0, 1, n)], 1)  # + the E-step's shift row
+    q = zt0.shape[1]
+    # the current parameters of every running component, with the weight of the shift row,
+    # at table[src[global id]]; the last row is padding: no features, a very low constant
+    pad_coef = zt0.new_zeros(1, q + 1)
+    pad_coef[0, q - 1], pad_coef[0, q] = _PAD_LOG_WEIGHT, 1.0
+    table = torch.cat([torch.cat([out[4], out[4].new_ones(g0 * c0 * k0, 1)], 1), pad_coef])
+    src = np.arange(g0 * c0 * k0)
+    store = None  # memory of the E-step's [B, M, N] buffers, reused by every packing
     saved: list[tuple[Params, np.ndarray, np.ndarray]] = []
     it = 0
     while it < max_iter and running.any():
@@ -644,24 +663,19 @@ def run_em(
         r = lay.slot.shape[1]
         gk = torch.from_numpy(lay.groups).to(dev)
         pm, npts1 = pmask.index_select(0, gk), n_pts[lay.groups][:, None]
-        zt = torch.cat([zt0.index_select(0, gk), zt0.new_zeros(b, 1, n)], 1)  # + shift row
+        zt = zt0s.index_select(0, gk)
         valid_np = lay.gid >= 0
         valid = torch.from_numpy(valid_np).to(device=dev, dtype=dt)
         rows = torch.from_numpy((np.arange(b)[:, None] * (r + 1) + lay.row).reshape(-1)).to(dev)
         slot_pad = np.concatenate([lay.slot, np.full((b, 1), -1)], 1)  # [B, R+1]
         row_ok_np = slot_pad >= 0
         row_ok = torch.from_numpy(row_ok_np).to(device=dev, dtype=dt)
-        bt = _batch(zt, pm, rows, valid, row_ok, floor)
+        if store is None or store.numel() < 2 * b * mm * n:
+            store = zt.new_empty(2 * b * mm * n)
+        bt = _batch(zt, pm, rows, valid, row_ok, floor, store)
         slot_ix = np.where(row_ok_np, slot_pad, g0 * c0).reshape(-1)
-        # current parameters of the packed components (padding: zeros and a very low constant)
-        first = np.where(valid_np, lay.gid, lay.gid[:, :1])
-        take = torch.from_numpy(first.reshape(-1)).to(dev)
-        if src is not None:
-            take = src.index_select(0, take)
-        coef = cur_coef.index_select(0, take).reshape(b, mm, -1)
-        coef = torch.where(valid.unsqueeze(-1) > 0, coef, 0.0)
-        coef[..., -1] = torch.where(valid > 0, coef[..., -1], _PAD_LOG_WEIGHT)
-        coef = torch.cat([coef, coef.new_ones(b, mm, 1)], -1)  # weight of the shift row
+        take = np.where(valid_np, src[lay.gid], table.shape[0] - 1).reshape(-1)
+        coef = table.index_select(0, torch.from_numpy(take).to(dev)).view(b, mm, q + 1)
         prev = prev_all[slot_ix].reshape(b, r + 1)
         active = row_ok_np.copy()  # watched rows: running, not yet stopped
         packed = n_active = int(valid_np.sum())
@@ -686,13 +700,15 @@ def run_em(
             running[np.unravel_index(ids_np, running.shape)] = False
             active &= ~stop
             n_active -= int(sel.sum())
-            if last or n_active == 0 or n_active <= _REPACK * packed:
+            if (
+                last
+                or n_active == 0
+                or (n_active <= _REPACK * packed and (packed - n_active) * n >= _REPACK_MIN)
+            ):
                 break
         # remember where each running component's parameters are, for the next packing
-        cur_coef = coef[..., :-1].reshape(b * mm, -1)
-        src_np = np.zeros(g0 * c0 * k0, dtype=np.int64)
-        src_np[lay.gid[valid_np]] = np.flatnonzero(valid_np)
-        src = torch.from_numpy(src_np).to(dev)
+        table = torch.cat([coef.reshape(b * mm, q + 1), pad_coef])
+        src[lay.gid[valid_np]] = np.flatnonzero(valid_np)
         prev_all[slot_ix] = prev.reshape(-1)
     # every stopped slot's parameters, as they were when it stopped, in one copy per field
     dst = torch.from_numpy(np.concatenate([d for _, _, d in saved])).to(dev)
