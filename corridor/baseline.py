@@ -29,6 +29,7 @@ once and its result cached.
 from __future__ import annotations
 
 import heapq
+import math
 from collections import defaultdict
 from dataclasses import dataclass
 
@@ -128,7 +129,10 @@ class PrioritizedSweeping:
         if n < self.config.optimism_visits:
             return self.optimistic
         v = self.q.max(axis=1)
-        return float(self.reward_sum[s, a] / n + self.config.gamma * (self.trans[s, a] / n) @ v)
+        # math.fsum, not a BLAS dot product: the dot's last bits depend on the CPU's kernel, and
+        # the greedy ties and backup order then made runs differ between machines
+        expected = math.fsum(((self.trans[s, a] / n) * v).tolist())
+        return float(self.reward_sum[s, a] / n + self.config.gamma * expected)
 
     def _push(self, s: int, a: int) -> None:
         p = abs(self._backup_value(s, a) - self.q[s, a])
