@@ -44,16 +44,19 @@ import numpy as np
 import torch
 
 from torchcbl.confidence import DistanceRule, _np, rule_from_config, rule_to_config
+from torchcbl.errors import EnvError, IncompatibleRunDirError, TeacherError, TeachingInterrupted
+from torchcbl.policy import GreedyPolicy, as_action, check_env, evaluate_policy, obs_array
 from torchcbl.records import StepRecord, jsonable_info
 from torchcbl.session import (
     FORMAT,
-    IncompatibleRunDirError,
     SessionStore,
     build_model,
-    fitted_count,
-    latest_checkpoint,
+    label_sequence,
     load_config,
     load_policy,
+    restore_model,
+    resume_problems,
+    stored_strategy,
 )
 
 __all__ = [
@@ -62,6 +65,7 @@ __all__ = [
     "GreedyPolicy",
     "TeacherError",
     "TeachingConfig",
+    "TeachingInterrupted",
     "evaluate_policy",
     "load_policy",
 ]
@@ -83,23 +87,6 @@ _MODEL_ARG_NAMES = (
     "max_iter",
     "seed",
 )
-
-
-class TeacherError(RuntimeError):
-    """The teacher raised or gave an invalid action; nothing was recorded for that step."""
-
-
-class TeachingInterrupted(Exception):
-    """The teacher asked to stop teaching (a person pressed 'q' or Ctrl-C, input closed).
-
-    A teacher raises it from inside its call; the loop lets it through unwrapped, after
-    committing what was recorded: every demonstration before the interrupted decision is kept,
-    the decision being asked about is not answered, and the session can be resumed.
-    """
-
-
-class EnvError(RuntimeError):
-    """The environment raised or returned a non-finite / malformed observation or reward."""
 
 
 def _opt_int(name: str, value: Any, *, minimum: int) -> None:
@@ -175,64 +162,6 @@ class TeachingConfig:
         }
 
 
-class GreedyPolicy:
-    """A learned policy standing on its own: ``policy(obs [D]) -> int`` (Eq. 7, no asking).
-
-    Holds the model by reference (the live model of a session keeps learning); deep-copy the
-    policy or the model to freeze a snapshot. Picklable.
-    """
-
-    def __init__(self, model: torch.nn.Module) -> None:
-        self.model = model
-
-    def classify(self, observation: Any) -> Any:
-        """The model's Classification of one observation [D] (batched fields of length 1)."""
-        x = torch.as_tensor(np.asarray(observation, dtype=np.float64)).reshape(1, -1)
-        return self.model.classify(x)
-
-    def __call__(self, observation: Any) -> int:
-        action = int(self.classify(observation).action[0])
-        if action < 0:
-            raise RuntimeError(
-                "GreedyPolicy: the model is not fitted yet, so it has no action to give. "
-                "Teach it first (ConfidentTeacher.run) or load a fitted checkpoint."
-            )
-        return action
-
-    def __repr__(self) -> str:
-        return f"GreedyPolicy({type(self.model).__name__})"
-
-
-def _check_env(env: gym.Env) -> tuple[int, int]:
-    """(n_features, n_actions) of a supported env, or a clear ValueError."""
-    space = getattr(env, "action_space", None)
-    if not isinstance(space, gym.spaces.Discrete) or int(space.start) != 0:
-        raise ValueError(
-            f"expected an env with a Discrete action space starting at 0, got {space!r}. "
-            "Wrap the env so its actions are 0..n-1."
-        )
-    obs_space = getattr(env, "observation_space", None)
-    if (
-        not isinstance(obs_space, gym.spaces.Box)
-        or len(obs_space.shape) != 1
-        or not np.issubdtype(obs_space.dtype, np.floating)
-    ):
-        raise ValueError(
-            f"expected an env with a 1-D float Box observation space, got {obs_space!r}. "
-            "Flatten the observation (gymnasium.wrappers.FlattenObservation) and cast to float."
-        )
-    return int(obs_space.shape[0]), int(space.n)
-
-
-def _as_action(value: Any, n_actions: int) -> int | None:
-    if isinstance(value, np.ndarray) and value.ndim == 0:
-        value = value.item()
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        return None
-    value = int(value)
-    return value if 0 <= value < n_actions else None
-
-
 def _model_args(model: torch.nn.Module) -> dict[str, Any]:
     args = getattr(model, "init_args", None)
     if isinstance(args, dict):
@@ -246,30 +175,19 @@ def _model_args(model: torch.nn.Module) -> dict[str, Any]:
     return {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
 
 
+def _strategy_config(rule: Any) -> dict[str, Any]:
+    cfg = rule_to_config(rule)
+    if cfg.get("custom"):
+        return {"type": "ConfidentExecution", "rule": cfg, "custom": True}
+    return {"type": "ConfidentExecution", "rule": cfg, "relabel": False}
+
+
 def _is_fitted(model: Any) -> bool:
     return bool(getattr(model, "is_fitted", False))
 
 
 def _seed_for(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
-
-
-def _obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
-    try:
-        x = np.array(obs, dtype=np.float64)  # a copy: an env may reuse its buffer in place
-    except (TypeError, ValueError) as exc:
-        raise EnvError(f"{where}: observation is not numeric ({exc}).") from exc
-    if x.shape != (n_features,):
-        raise EnvError(
-            f"{where}: expected an observation of shape ({n_features},), got {x.shape}. "
-            "Check the env's observation_space."
-        )
-    if not np.isfinite(x).all():
-        raise EnvError(
-            f"{where}: the observation has non-finite values {x.tolist()}. Fix the env (or wrap "
-            "it to clip / replace them); nothing non-finite is ever learned from."
-        )
-    return x
 
 
 class ConfidentTeacher:
@@ -325,6 +243,7 @@ class ConfidentTeacher:
                 "teaching": dataclasses.asdict(self.config),
                 "model": {"class": type(self.model).__name__, "args": _model_args(self.model)},
                 "rule": rule_to_config(self.rule),
+                "strategy": _strategy_config(self.rule),
                 "env": self._env_config,
                 "seed": self.seed,
             }
@@ -335,7 +254,7 @@ class ConfidentTeacher:
         self._next_reset_seed: int | None = self.seed
 
     def _setup(self, env, teacher, model, rule, config, seed, progress, on_step, on_refit):
-        self.n_features, self.n_actions = _check_env(env)
+        self.n_features, self.n_actions = check_env(env)
         if not callable(teacher):
             raise TypeError(
                 f"teacher: expected a callable teacher(observation, info) -> int, got {teacher!r}"
@@ -437,83 +356,71 @@ class ConfidentTeacher:
                 different env, model, rule or learning configuration.
         """
         stored = load_config(run_dir)
-        problems: list[str] = []
-        n_features, n_actions = _check_env(env)
-        senv = stored["env"]
-        if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
-            problems.append(
-                f"env: the session has {senv['n_features']} features and {senv['n_actions']} "
-                f"actions, the given env {n_features} and {n_actions}"
-            )
-        spec_id = getattr(getattr(env, "spec", None), "id", None)
-        if senv.get("id") and spec_id and senv["id"] != spec_id:
-            problems.append(f"env id: the session used {senv['id']!r}, got {spec_id!r}")
+        n_features, n_actions = check_env(env)
         try:
             stored_config = TeachingConfig(**stored["teaching"])
         except TypeError as exc:
             raise IncompatibleRunDirError(f"{run_dir}: unreadable TeachingConfig: {exc}") from exc
-        if config is None:
-            config = stored_config
-        elif config.learning_fields() != stored_config.learning_fields():
-            diff = {
-                k: (v, config.learning_fields()[k])
-                for k, v in stored_config.learning_fields().items()
-                if config.learning_fields()[k] != v
-            }
-            problems.append(f"config (stored, given): {diff}; only the stop fields may change")
-        if model is None:
-            if not problems:
-                model = build_model(stored)
-        else:
+        config = stored_config if config is None else config
+        model_args = None
+        if model is not None:
             try:
-                args = _model_args(model)
+                model_args = _model_args(model)
             except ValueError as exc:
-                args = {"error": str(exc)}
-            if args != stored["model"]["args"]:
-                problems.append(f"model args: stored {stored['model']['args']}, given {args}")
+                model_args = {"error": str(exc)}
+        problems = resume_problems(
+            stored,
+            n_features=n_features,
+            n_actions=n_actions,
+            env_id=getattr(getattr(env, "spec", None), "id", None),
+            learning=(stored_config.learning_fields(), config.learning_fields()),
+            model_args=model_args,
+            strategy=None if rule is None else _strategy_config(rule),
+        )
         if rule is None:
             try:
-                rule = rule_from_config(stored["rule"])
+                rule = rule_from_config(stored_strategy(stored)["rule"])
             except (ValueError, TypeError) as exc:
                 problems.append(str(exc))
-        elif not rule_to_config(rule).get("custom") and rule_to_config(rule) != stored["rule"]:
-            problems.append(f"rule: stored {stored['rule']}, given {rule_to_config(rule)}")
         if problems:
             raise IncompatibleRunDirError(
                 f"cannot resume the session in {run_dir}: "
                 + "; ".join(problems)
                 + ". Resume with matching arguments, or start a new session in another run_dir."
             )
+        if model is None:
+            model = build_model(stored)
         self = cls.__new__(cls)
         self._setup(env, teacher, model, rule, config, stored["seed"], progress, on_step, on_refit)
         self._env_config = self._describe_env()
         self.run_dir = Path(run_dir)
-        self._store = SessionStore(self.run_dir, commit_every=commit_every)
-        self._store.finalize_pending()
-        self._restore(self._store.records())
+        self._store, records, corrections = SessionStore.open_for_resume(
+            self.run_dir, commit_every=commit_every
+        )
+        self._restore(records, corrections)
         return self
 
-    def _restore(self, records: list[StepRecord]) -> None:
+    def _restore(self, records: list[StepRecord], corrections: list) -> None:
         self.records = records
         for r in records:
             if r.teacher_action is not None:
-                self._demo_x.append(r.observation_array)
-                self._demo_y.append(r.teacher_action)
                 self._acc_window.append(r.model_action == r.teacher_action)
             if r.phase == "confident":
                 self._auto_window.append(r.autonomous)
-        n = len(self._demo_y)
-        k = fitted_count(self.run_dir, n, self.config.max_new)
-        assert self._store is not None
-        ckpt = latest_checkpoint(self.run_dir, at_most=k)
-        if ckpt is not None and ckpt[0] == k:
-            self.model.load_state_dict(torch.load(ckpt[1], weights_only=True)["state_dict"])
-        elif k > 0:
-            self.model.fit(np.stack(self._demo_x[:k]), np.asarray(self._demo_y[:k]))
-            self._store.save_checkpoint(self.model, k)
+        self._demo_x, self._demo_y = label_sequence(records, corrections)
+        assert self.run_dir is not None
+        k = restore_model(
+            self.run_dir,
+            self.model,
+            self._demo_x,
+            self._demo_y,
+            max_new=self.config.max_new,
+            relabel=False,
+            store=self._store,
+        )
         if k > 0:
             self.rule.update(self.model, np.stack(self._demo_x[:k]), np.asarray(self._demo_y[:k]))
-        self._new_since_refit = n - k
+        self._new_since_refit = len(self._demo_y) - k
         if any(r.phase == "confident" for r in records) or self._target_reached():
             self._phase = "confident"
         self._next_episode = records[-1].episode + 1 if records else 0
@@ -566,7 +473,7 @@ class ConfidentTeacher:
             raw, info = self.env.reset(seed=seed)
         except Exception as exc:
             raise EnvError(f"env.reset raised {type(exc).__name__}: {exc}") from exc
-        self._obs = _obs_array(raw, self.n_features, "env.reset")
+        self._obs = obs_array(raw, self.n_features, "env.reset")
         self._raw_obs, self._info = raw, dict(info or {})
         self._episode = self._next_episode
         self._next_episode += 1
@@ -586,7 +493,7 @@ class ConfidentTeacher:
                 f"the teacher raised {type(exc).__name__}: {exc} (step {step}). Nothing was "
                 "recorded for this step; fix the teacher and call run() again, or resume."
             ) from exc
-        action = _as_action(answer, self.n_actions)
+        action = as_action(answer, self.n_actions)
         if action is None:
             raise TeacherError(
                 f"the teacher answered {answer!r} at step {step}; expected an int action in "
@@ -737,7 +644,7 @@ class ConfidentTeacher:
                 error, reward = f"env.step returned a non-finite reward {r!r}", None
             else:
                 try:
-                    self._obs = _obs_array(raw, self.n_features, "env.step")
+                    self._obs = obs_array(raw, self.n_features, "env.step")
                     self._raw_obs, self._info = raw, info
                 except EnvError as exc:
                     error, cause = str(exc), exc
@@ -859,90 +766,3 @@ class ConfidentTeacher:
             f"ConfidentTeacher(steps={self.n_steps}, demonstrations={self.n_demonstrations}, "
             f"phase={self._phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
         )
-
-
-def evaluate_policy(
-    policy: Callable[[np.ndarray], int],
-    env: gym.Env,
-    *,
-    n_steps: int | None = None,
-    n_episodes: int | None = None,
-    seed: int | None = None,
-    uses_info: bool = False,
-) -> list[StepRecord]:
-    """Run a policy greedily (never asking) and return one record per step.
-
-    ``policy`` is called as ``policy(observation)``; with ``uses_info=True`` it is called as a
-    teacher, ``policy(observation, info)`` with the info of the latest reset / step, so a
-    scripted expert can be evaluated exactly like a learned policy.
-
-    Episodes that end are reset (the first reset with ``seed``, later ones continuing the env's
-    RNG) until ``n_steps`` steps or ``n_episodes`` finished episodes, whichever comes first.
-    Records have ``phase="evaluation"``, ``autonomous=True``; a :class:`GreedyPolicy` also fills
-    the confidence fields, any other callable leaves them None.
-    """
-    n_features, n_actions = _check_env(env)
-    if n_steps is None and n_episodes is None:
-        raise ValueError("evaluate_policy: give n_steps and/or n_episodes, or it never ends")
-    for name, v in (("n_steps", n_steps), ("n_episodes", n_episodes)):
-        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
-            raise ValueError(f"evaluate_policy: {name} must be an int >= 1, got {v!r}")
-    records: list[StepRecord] = []
-    raw, info = env.reset(seed=seed)
-    obs = _obs_array(raw, n_features, "env.reset")
-    episode, done_episodes = 0, 0
-    while (n_steps is None or len(records) < n_steps) and (
-        n_episodes is None or done_episodes < n_episodes
-    ):
-        confidence = distance = posterior = None
-        if isinstance(policy, GreedyPolicy):
-            c = policy.classify(obs)
-            answer: Any = int(c.action[0])
-            confidence, distance = float(c.confidence[0]), float(c.distance[0])
-            posterior = tuple(c.posterior[0].tolist())
-        elif uses_info:
-            answer = policy(np.array(raw, copy=True), dict(info or {}))
-        else:
-            answer = policy(np.array(raw, copy=True))
-        action = _as_action(answer, n_actions)
-        if action is None:
-            raise ValueError(
-                f"evaluate_policy: the policy answered {answer!r}; expected an int in "
-                f"[0, {n_actions}) (an unfitted GreedyPolicy answers -1)."
-            )
-        raw_next, r, term, trunc, info = env.step(action)
-        try:
-            reward = float(r)
-        except (TypeError, ValueError):
-            reward = math.nan
-        if not math.isfinite(reward):
-            raise EnvError(f"env.step returned a reward that is not a finite number: {r!r}")
-        records.append(
-            StepRecord(
-                step=len(records),
-                episode=episode,
-                observation=tuple(obs.tolist()),
-                model_action=action,
-                confidence=confidence,
-                distance=distance,
-                posterior=posterior,
-                teacher_action=None,
-                executed_action=action,
-                phase="evaluation",
-                autonomous=True,
-                reward=reward,
-                terminated=bool(term),
-                truncated=bool(trunc),
-                info=jsonable_info(info),
-            )
-        )
-        if term or trunc:
-            done_episodes += 1
-            episode += 1
-            if n_episodes is not None and done_episodes >= n_episodes:
-                break  # no reset after the last episode (for SUMO, a whole new road)
-            raw, info = env.reset()
-        else:
-            raw = raw_next
-        obs = _obs_array(raw, n_features, "env.step" if not (term or trunc) else "env.reset")
-    return records
