@@ -65,7 +65,7 @@ def test_no_import_cycle_inside_torchcbl():
 def test_import_torchcbl_imports_no_domain_or_simulator():
     code = (
         "import sys, torchcbl, torchcbl.teaching, torchcbl.session, torchcbl.policy, "
-        "torchcbl.confidence, torchcbl.records\n"
+        "torchcbl.confidence, torchcbl.records, torchcbl.strategies\n"
         f"print(sorted(m for m in sys.modules if m.split('.')[0] in {FORBIDDEN!r}))"
     )
     out = subprocess.run(

@@ -1,9 +1,13 @@
 """Confidence rules: when the agent acts on its own and when it asks the teacher.
 
-A rule sees a batched :class:`~torchcbl.gmm.Classification` and answers, per observation,
-"confident enough to act autonomously?" (the ``conf > autonThresh`` test of Algorithm 1 in
-Chernova & Veloso, AAMAS 2007). After every refit the loop calls ``rule.update(model, X, y)``
-with all demonstrations, so a rule may adapt its thresholds to the data; fixed rules ignore it.
+A rule sees a batched :class:`~torchcbl.gmm.Classification` and the observations it was made
+on, and answers, per observation, "confident enough to act autonomously?" (the
+``conf > autonThresh`` test of Algorithm 1 in Chernova & Veloso, AAMAS 2007). A rule is a tool
+that a strategy uses (:class:`torchcbl.strategies.ConfidentExecution` asks when its rule is not
+confident). After every refit the strategy calls ``rule.update(model, X, y)`` with the whole
+training set, so a rule may adapt its thresholds to the data; fixed rules ignore it. A rule
+written before rules saw observations (``is_confident(c)`` only) still works: the strategy
+passes the observations only to an ``is_confident`` that takes a second argument.
 
 Every rule is *never* confident before a model exists (``action == -1``): the agent asks the
 teacher on every step until the first fit (Section 4.3).
@@ -46,8 +50,9 @@ __all__ = [
 class ConfidenceRule(Protocol):
     """Decides, per classified observation, whether the agent may act autonomously."""
 
-    def is_confident(self, c: Classification) -> torch.Tensor:
-        """Bool tensor [N]: True where the model's action may be executed without asking."""
+    def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
+        """Bool tensor [N]: True where the model's action may be executed without asking.
+        ``observations`` [N, D] are the classified observations (None when not known)."""
         ...
 
     def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
@@ -86,7 +91,7 @@ class DistanceRule:
     def __init__(self, max_std: float = 2.0) -> None:
         self.max_std = _check_positive("DistanceRule.max_std", max_std)
 
-    def is_confident(self, c: Classification) -> torch.Tensor:
+    def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
         ok = (_np(c.distance) <= self.max_std) & (_np(c.action) >= 0)
         return torch.from_numpy(ok)
 
@@ -112,7 +117,7 @@ class PosteriorRule:
             "PosteriorRule.min_posterior", min_posterior, upper=1.0
         )
 
-    def is_confident(self, c: Classification) -> torch.Tensor:
+    def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
         action = _np(c.action)
         post = _np(c.posterior)
         chosen = post[np.arange(len(action)), np.maximum(action, 0)]
@@ -164,7 +169,7 @@ class AutoThresholdRule:
         self.min_std = float(min_std)
         self.thresholds: torch.Tensor | None = None  # [A] float64, None before the first update
 
-    def is_confident(self, c: Classification) -> torch.Tensor:
+    def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
         action = c.action
         ok = action >= 0
         if self.thresholds is None:

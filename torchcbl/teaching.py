@@ -1,26 +1,30 @@
-"""ConfidentTeacher: confident execution (Chernova & Veloso, AAMAS 2007, Algorithm 1).
+"""The teaching loop: ConfidentTeacher (Chernova & Veloso, AAMAS 2007, Algorithm 1, and its
+successors through a pluggable strategy).
 
-The pieces are separate and swappable, as in imitation's DAgger: the *rule* that decides when
-to ask (:mod:`torchcbl.confidence`), the *teacher* (any callable ``teacher(obs, info) -> int``),
-the *learner* (a :class:`~torchcbl.gmm.GaussianMixtureSet`) and the *collector* (this loop,
-writing every step to a :class:`~torchcbl.records.StepRecord` and, with ``run_dir``, to a
-durable session directory laid out as documented in :mod:`torchcbl.session`).
+The pieces are separate and swappable, as in imitation's DAgger: the *strategy* that decides
+whether to ask and whose action runs (:mod:`torchcbl.strategies`; the default,
+:class:`~torchcbl.strategies.ConfidentExecution`, is Algorithm 1 with a confidence rule from
+:mod:`torchcbl.confidence`), the *teacher* (any callable ``teacher(obs, info) -> int``, with an
+optional ``correct`` method), the *learner* (a :class:`~torchcbl.gmm.GaussianMixtureSet`) and
+the *collector* (this loop, writing every step to a :class:`~torchcbl.records.StepRecord`
+and, with ``run_dir``, to a durable session directory, :mod:`torchcbl.session`).
 
 One step of the loop:
 
 1. Classify the current observation with the current model (action, confidence, distance,
    posterior; before any fit: action -1, distance +inf).
-2. Non-interactive phase, or inside a teacher burst: ask the teacher. Confident execution: ask
-   the teacher only when the rule is not confident; a request starts a burst of
-   ``config.burst`` teacher moves (the paper's driving teacher gave 10). A burst ends early at
-   the end of an episode.
-3. A teacher answer is a demonstration: the model's prediction is scored against it (windowed
+2. The strategy decides whether to ask the teacher (default: always in the non-interactive
+   phase and inside a teacher burst, else when the rule is not confident).
+3. A teacher answer is a label: the model's prediction is scored against it (windowed
    prediction accuracy), it is committed to the log, and the model is refitted when
-   ``config.max_new`` demonstrations have accumulated since the last fit. Then the teacher's
-   action is executed. Otherwise the model's action is executed.
-4. The step is recorded; an episode that ends is reset and teaching goes on. Only the first
-   reset of a new session is seeded (with ``seed``); later resets continue the env's RNG. The
-   first reset after :meth:`ConfidentTeacher.resume` is seeded from (seed, episode index).
+   ``config.max_new`` labels have accumulated since the last fit. The strategy says whose
+   action is executed (default: the teacher's when asked, else the model's).
+4. The step is recorded; with a strategy that wants corrections and a teacher that has
+   ``correct``, the teacher may then relabel the observation the agent just acted on
+   autonomously (a :class:`~torchcbl.records.CorrectionRecord`, durable before the next
+   decision). An episode that ends is reset and teaching goes on. Only the first reset of a
+   new session is seeded (with ``seed``); later resets continue the env's RNG. The first reset
+   after :meth:`ConfidentTeacher.resume` is seeded from (seed, episode index).
 
 The non-interactive phase ends after the step at which the accuracy window is full
 (``accuracy_window`` demonstrations) and its accuracy is >= ``target_accuracy``; never when the
@@ -43,10 +47,10 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from torchcbl.confidence import DistanceRule, _np, rule_from_config, rule_to_config
+from torchcbl.confidence import _np, rule_to_config
 from torchcbl.errors import EnvError, IncompatibleRunDirError, TeacherError, TeachingInterrupted
 from torchcbl.policy import GreedyPolicy, as_action, check_env, evaluate_policy, obs_array
-from torchcbl.records import StepRecord, jsonable_info
+from torchcbl.records import CorrectionRecord, StepRecord, TrainingSet, jsonable_info
 from torchcbl.session import (
     FORMAT,
     SessionStore,
@@ -57,6 +61,12 @@ from torchcbl.session import (
     restore_model,
     resume_problems,
     stored_strategy,
+)
+from torchcbl.strategies import (
+    ConfidentExecution,
+    Decision,
+    strategy_from_config,
+    strategy_to_config,
 )
 
 __all__ = [
@@ -175,11 +185,22 @@ def _model_args(model: torch.nn.Module) -> dict[str, Any]:
     return {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
 
 
-def _strategy_config(rule: Any) -> dict[str, Any]:
-    cfg = rule_to_config(rule)
-    if cfg.get("custom"):
-        return {"type": "ConfidentExecution", "rule": cfg, "custom": True}
-    return {"type": "ConfidentExecution", "rule": cfg, "relabel": False}
+def _pick_strategy(rule: Any, strategy: Any) -> Any:
+    if rule is not None and strategy is not None:
+        raise ValueError(
+            "give either rule= (confident execution with that rule) or strategy=, not both; "
+            "for confident execution with a rule, pass strategy=ConfidentExecution(rule)."
+        )
+    if strategy is None:
+        return ConfidentExecution(rule)
+    for name in ("decide", "actor", "observe_label", "observe_refit", "observe_step", "bind"):
+        if not callable(getattr(strategy, name, None)):
+            raise TypeError(
+                f"strategy: expected a torchcbl.strategies.Strategy (methods bind, decide, "
+                f"actor, observe_label, observe_refit, observe_step), got {strategy!r} "
+                f"without {name}()."
+            )
+    return strategy
 
 
 def _is_fitted(model: Any) -> bool:
@@ -200,14 +221,17 @@ class ConfidentTeacher:
             It gets a copy of the env's observation and the info of the latest reset / step.
         model: the learner; default ``GaussianMixtureSet(n_actions, D, seed=seed)``. Its
             ``fit`` must be deterministic given the data (resume relies on it).
-        rule: the confidence rule; default ``DistanceRule(2.0)`` (the paper's).
+        rule: the confidence rule of the default strategy; default ``DistanceRule(2.0)``
+            (the paper's). Shorthand for ``strategy=ConfidentExecution(rule)``.
+        strategy: who asks and who acts (:mod:`torchcbl.strategies`); default
+            ``ConfidentExecution(rule)``. Give ``rule`` or ``strategy``, not both.
         config: a :class:`TeachingConfig`.
         run_dir: if given, a new session directory (see :mod:`torchcbl.session`); it must not
             already hold a session (continue one with :meth:`resume`).
         seed: seeds the first ``env.reset`` (and the default model).
         progress: show a tqdm bar with the live counters while :meth:`run` runs.
         on_step: called with each :class:`StepRecord` after it is recorded.
-        on_refit: called as ``on_refit(model, n_demonstrations)`` after each refit.
+        on_refit: called as ``on_refit(model, n_labels)`` after each refit.
         commit_every: autonomous steps batched per commit at most (demonstrations are always
             committed before their action runs).
 
@@ -225,6 +249,7 @@ class ConfidentTeacher:
         *,
         model: torch.nn.Module | None = None,
         rule: Any = None,
+        strategy: Any = None,
         config: TeachingConfig | None = None,
         run_dir: str | os.PathLike[str] | None = None,
         seed: int = 0,
@@ -233,7 +258,8 @@ class ConfidentTeacher:
         on_refit: Callable[[torch.nn.Module, int], None] | None = None,
         commit_every: int = 32,
     ) -> None:
-        self._setup(env, teacher, model, rule, config, seed, progress, on_step, on_refit)
+        strategy = _pick_strategy(rule, strategy)
+        self._setup(env, teacher, model, strategy, config, seed, progress, on_step, on_refit)
         self._env_config = self._describe_env()
         self._store: SessionStore | None = None
         self.run_dir = None if run_dir is None else Path(run_dir)
@@ -242,8 +268,8 @@ class ConfidentTeacher:
                 "format": FORMAT,
                 "teaching": dataclasses.asdict(self.config),
                 "model": {"class": type(self.model).__name__, "args": _model_args(self.model)},
-                "rule": rule_to_config(self.rule),
-                "strategy": _strategy_config(self.rule),
+                "rule": None if self.rule is None else rule_to_config(self.rule),
+                "strategy": strategy_to_config(self.strategy),
                 "env": self._env_config,
                 "seed": self.seed,
             }
@@ -253,7 +279,7 @@ class ConfidentTeacher:
                 self._store.save_checkpoint(self.model, 0)
         self._next_reset_seed: int | None = self.seed
 
-    def _setup(self, env, teacher, model, rule, config, seed, progress, on_step, on_refit):
+    def _setup(self, env, teacher, model, strategy, config, seed, progress, on_step, on_refit):
         self.n_features, self.n_actions = check_env(env)
         if not callable(teacher):
             raise TypeError(
@@ -279,14 +305,12 @@ class ConfidentTeacher:
                     f"{attr}={want}."
                 )
         self.model = model
-        self.rule = DistanceRule() if rule is None else rule
-        if not (
-            callable(getattr(self.rule, "is_confident", None))
-            and callable(getattr(self.rule, "update", None))
-        ):
-            raise TypeError(
-                f"rule: expected a ConfidenceRule (is_confident and update), got {self.rule!r}"
-            )
+        self.strategy = strategy
+        strategy.bind(n_actions=self.n_actions, n_features=self.n_features, config=self.config)
+        self._relabel = bool(getattr(strategy, "relabel", False))
+        self._corrects = bool(getattr(strategy, "wants_corrections", False)) and callable(
+            getattr(teacher, "correct", None)
+        )
         self.progress = bool(progress)
         self.on_step = on_step
         self.on_refit = on_refit
@@ -294,11 +318,10 @@ class ConfidentTeacher:
         w = self.config.accuracy_window
         self._acc_window: deque[bool] = deque(maxlen=w)
         self._auto_window: deque[bool] = deque(maxlen=w)
-        self._demo_x: list[np.ndarray] = []
-        self._demo_y: list[int] = []
+        self._labels = 0  # labels (demonstrations + corrections) so far
+        self._train = TrainingSet(relabel=self._relabel)
+        self.corrections: list[CorrectionRecord] = []
         self._new_since_refit = 0
-        self._phase = "noninteractive" if self.config.noninteractive else "confident"
-        self._burst_left = 0
         self._needs_reset = True
         self._next_episode = 0
         self._episode = 0
@@ -332,6 +355,7 @@ class ConfidentTeacher:
         *,
         model: torch.nn.Module | None = None,
         rule: Any = None,
+        strategy: Any = None,
         config: TeachingConfig | None = None,
         progress: bool = True,
         on_step: Callable[[StepRecord], None] | None = None,
@@ -348,8 +372,8 @@ class ConfidentTeacher:
 
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
-                fields may not. ``model`` / ``rule``: optional; must match the stored ones
-                (a custom rule that cannot be rebuilt must be passed).
+                fields may not. ``model`` / ``rule`` / ``strategy``: optional; must match the
+                stored ones (a custom rule or strategy that cannot be rebuilt must be passed).
 
         Raises:
             IncompatibleRunDirError: the directory is not a session, or it was written for a
@@ -375,13 +399,19 @@ class ConfidentTeacher:
             env_id=getattr(getattr(env, "spec", None), "id", None),
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
-            strategy=None if rule is None else _strategy_config(rule),
+            strategy=(
+                None
+                if rule is None and strategy is None
+                else strategy_to_config(_pick_strategy(rule, strategy))
+            ),
         )
-        if rule is None:
+        if rule is None and strategy is None:
             try:
-                rule = rule_from_config(stored_strategy(stored)["rule"])
+                strategy = strategy_from_config(stored_strategy(stored))
             except (ValueError, TypeError) as exc:
                 problems.append(str(exc))
+        else:
+            strategy = _pick_strategy(rule, strategy)
         if problems:
             raise IncompatibleRunDirError(
                 f"cannot resume the session in {run_dir}: "
@@ -391,7 +421,9 @@ class ConfidentTeacher:
         if model is None:
             model = build_model(stored)
         self = cls.__new__(cls)
-        self._setup(env, teacher, model, rule, config, stored["seed"], progress, on_step, on_refit)
+        self._setup(
+            env, teacher, model, strategy, config, stored["seed"], progress, on_step, on_refit
+        )
         self._env_config = self._describe_env()
         self.run_dir = Path(run_dir)
         self._store, records, corrections = SessionStore.open_for_resume(
@@ -400,29 +432,56 @@ class ConfidentTeacher:
         self._restore(records, corrections)
         return self
 
-    def _restore(self, records: list[StepRecord], corrections: list) -> None:
+    def _restore(self, records: list[StepRecord], corrections: list[CorrectionRecord]) -> None:
+        """Replay the log into the counters, the training set and the strategy (see
+        :mod:`torchcbl.strategies` for the order), then restore the model."""
         self.records = records
+        self.corrections = list(corrections)
+        by_step = {c.step: c for c in corrections}
+        strategy = self.strategy
         for r in records:
             if r.teacher_action is not None:
                 self._acc_window.append(r.model_action == r.teacher_action)
+                strategy.observe_label(
+                    r.observation_array,
+                    r.teacher_action,
+                    model_action=r.model_action,
+                    kind="demonstration",
+                )
+            corr = by_step.get(r.step)
+            if corr is not None:
+                strategy.observe_label(
+                    corr.observation_array,
+                    corr.action,
+                    model_action=r.model_action,
+                    kind="correction",
+                )
             if r.phase == "confident":
                 self._auto_window.append(r.autonomous)
-        self._demo_x, self._demo_y = label_sequence(records, corrections)
+            strategy.observe_step(r, None)
+        xs, ys = label_sequence(records, corrections)
+        for x, y in zip(xs, ys, strict=True):
+            self._train.add(x, y)
+        self._labels = len(ys)
         assert self.run_dir is not None
         k = restore_model(
             self.run_dir,
             self.model,
-            self._demo_x,
-            self._demo_y,
+            xs,
+            ys,
             max_new=self.config.max_new,
-            relabel=False,
+            relabel=self._relabel,
             store=self._store,
         )
         if k > 0:
-            self.rule.update(self.model, np.stack(self._demo_x[:k]), np.asarray(self._demo_y[:k]))
-        self._new_since_refit = len(self._demo_y) - k
-        if any(r.phase == "confident" for r in records) or self._target_reached():
-            self._phase = "confident"
+            if k == len(ys):
+                x, y = self._train.arrays()
+            else:
+                from torchcbl.records import training_set
+
+                x, y = training_set(xs[:k], ys[:k], relabel=self._relabel)
+            strategy.observe_refit(self.model, x, y)
+        self._new_since_refit = len(ys) - k
         self._next_episode = records[-1].episode + 1 if records else 0
         self._next_reset_seed = _seed_for(self.seed, self._next_episode)
 
@@ -430,8 +489,19 @@ class ConfidentTeacher:
 
     @property
     def n_demonstrations(self) -> int:
-        """Demonstrations (steps with a teacher label) in the session."""
-        return len(self._demo_y)
+        """Labels in the session: demonstrations (steps with a teacher label) plus
+        corrections. Refits and checkpoints count these."""
+        return self._labels
+
+    @property
+    def n_corrections(self) -> int:
+        """Corrections (labels for earlier, autonomous steps) in the session."""
+        return len(self.corrections)
+
+    @property
+    def rule(self) -> Any:
+        """The confidence rule of the strategy (None for a strategy without one)."""
+        return getattr(self.strategy, "rule", None)
 
     @property
     def n_steps(self) -> int:
@@ -452,18 +522,14 @@ class ConfidentTeacher:
 
     @property
     def phase(self) -> str:
-        """``"noninteractive"`` or ``"confident"``: the phase of the next step."""
-        return self._phase
+        """``"noninteractive"`` or ``"confident"``: the phase of the next step (the
+        strategy's; ``"confident"`` for a strategy without phases)."""
+        return str(getattr(self.strategy, "phase", "confident"))
 
     @property
     def policy(self) -> GreedyPolicy:
         """The learned policy as a callable obs -> action (live; deep-copy to freeze)."""
         return GreedyPolicy(self.model)
-
-    def _target_reached(self) -> bool:
-        t = self.config.target_accuracy
-        w = self._acc_window
-        return t is not None and len(w) == w.maxlen and sum(w) / len(w) >= t
 
     # -- the loop ---------------------------------------------------------------------------
 
@@ -479,7 +545,7 @@ class ConfidentTeacher:
         self._next_episode += 1
         self._needs_reset = False
         self._episode_had_demo = False
-        self._burst_left = 0
+        self.strategy.episode_start()
 
     def _ask(self, info: dict) -> int:
         obs = np.array(self._raw_obs, copy=True)
@@ -508,7 +574,7 @@ class ConfidentTeacher:
         The refit schedule then counts ``max_new`` from here. To evaluate a stage without
         changing the session, use :meth:`snapshot` instead. Returns whether a refit happened.
         """
-        if self._new_since_refit == 0 or not self._demo_y:
+        if self._new_since_refit == 0 or not len(self._train):
             return False
         self._refit()
         return True
@@ -517,8 +583,8 @@ class ConfidentTeacher:
         """A copy of the model fitted on every demonstration so far, leaving the session as it
         is (its model and refit schedule untouched): for evaluating a learning stage."""
         model = copy.deepcopy(self.model)
-        if self._new_since_refit and self._demo_y:
-            model.fit(np.stack(self._demo_x), np.asarray(self._demo_y, dtype=np.int64))
+        if self._new_since_refit and len(self._train):
+            model.fit(*self._train.arrays())
         return model
 
     @property
@@ -532,49 +598,55 @@ class ConfidentTeacher:
         return self._auto_steps_streak
 
     def _refit(self) -> None:
-        x = np.stack(self._demo_x)
-        y = np.asarray(self._demo_y, dtype=np.int64)
+        x, y = self._train.arrays()
         self.model.fit(x, y)
-        self.rule.update(self.model, x, y)
+        self.strategy.observe_refit(self.model, x, y)
         self._new_since_refit = 0
         if self._store is not None:
-            self._store.save_checkpoint(self.model, len(y))
+            self._store.save_checkpoint(self.model, self._labels)
         if self.on_refit is not None:
-            self.on_refit(self.model, len(y))
+            self.on_refit(self.model, self._labels)
 
     def step(self) -> StepRecord:
-        """Take one decision (Algorithm 1) and return its record.
+        """Take one decision (the strategy's; Algorithm 1 by default) and return its record.
 
         Autonomous steps reach disk in batches; call :meth:`flush` (or let :meth:`run` do it)
-        to commit them.
+        to commit them. Demonstrations and corrections reach disk before the loop goes on.
         """
         if self._needs_reset:
             self._reset()
-        obs, info = self._obs, self._info
+        obs, info, raw = self._obs, self._info, self._raw_obs
         assert obs is not None
         c = self.model.classify(obs[None])
         model_action = int(_np(c.action)[0])
         confidence = float(_np(c.confidence)[0])
         distance = float(_np(c.distance)[0])
         posterior = tuple(_np(c.posterior)[0].tolist())
-        phase = self._phase
-        if phase == "noninteractive" or self._burst_left > 0:
-            ask, burst_left = True, self._burst_left
-        else:
-            ask = not bool(self.rule.is_confident(c)[0])
-            burst_left = self.config.burst if ask else 0
+        decision: Decision = self.strategy.decide(obs, c)
+        ask, phase = bool(decision.ask), decision.phase
+        if not ask and model_action < 0:
+            raise RuntimeError(
+                f"strategy {self.strategy!r} decided not to ask before any model exists; a "
+                "strategy must ask while c.action is -1 (see torchcbl.strategies)."
+            )
         teacher_action = self._ask(info) if ask else None
+        actor = self.strategy.actor(decision, model_action, teacher_action)
         # From here on the step happens: update the counters, then log.
         step = len(self.records)
         if ask:
-            self._burst_left = max(burst_left - 1, 0) if phase == "confident" else 0
             self._acc_window.append(model_action == teacher_action)
-            self._demo_x.append(obs)
-            self._demo_y.append(teacher_action)  # type: ignore[arg-type]
+            self._labels += 1
+            self._train.add(obs, teacher_action)  # type: ignore[arg-type]
+            self.strategy.observe_label(
+                obs,
+                teacher_action,  # type: ignore[arg-type]
+                model_action=model_action,
+                kind="demonstration",
+            )
             self._episode_had_demo = True
         if phase == "confident":
             self._auto_window.append(not ask)
-        executed = teacher_action if ask else model_action
+        executed = teacher_action if actor == "teacher" else model_action
         record = StepRecord(
             step=step,
             episode=self._episode,
@@ -585,15 +657,16 @@ class ConfidentTeacher:
             posterior=posterior,
             teacher_action=teacher_action,
             executed_action=executed,  # type: ignore[arg-type]
-            phase=phase,  # type: ignore[arg-type]
+            phase=phase,
             autonomous=not ask,
             reward=None,
             terminated=False,
             truncated=False,
             info={},
-            n_demonstrations=len(self._demo_y),
+            n_demonstrations=self._labels,
             autonomy_rate=self.autonomy_rate,
             windowed_accuracy=self.windowed_accuracy,
+            actor=actor,
         )
         if ask:
             if self._store is not None:
@@ -606,12 +679,15 @@ class ConfidentTeacher:
             # way), so a fit that fails leaves a whole step behind, not half of one.
             if ask and self._new_since_refit >= self.config.max_new:
                 self._refit()
+            if len(self.records) > step:  # executed (also when the env failed afterwards)
+                self.strategy.observe_step(self.records[step], decision)
         if ask:
             self._auto_steps_streak = 0
         else:
             self._auto_steps_streak += 1
-        if phase == "noninteractive" and self._target_reached():
-            self._phase = "confident"
+            if self._corrects and self._offer_correction(record, raw, info):
+                self._auto_steps_streak = 0
+                self._episode_had_demo = True
         if record.terminated or record.truncated:
             clean = (
                 not self._episode_had_demo
@@ -622,6 +698,50 @@ class ConfidentTeacher:
         if self.on_step is not None:
             self.on_step(record)
         return record
+
+    def _offer_correction(self, record: StepRecord, raw: Any, info: dict) -> bool:
+        """Let the teacher correct the autonomous step just taken; True if it did."""
+        try:
+            answer = self.teacher.correct(  # type: ignore[attr-defined]
+                np.array(raw, copy=True), dict(info), record.executed_action
+            )
+        except TeachingInterrupted:
+            raise
+        except Exception as exc:
+            raise TeacherError(
+                f"the teacher's correct() raised {type(exc).__name__}: {exc} (step "
+                f"{record.step}). The step is recorded, no correction was; fix the teacher "
+                "and call run() again, or resume."
+            ) from exc
+        if answer is None:
+            return False
+        action = as_action(answer, self.n_actions)
+        if action is None:
+            raise TeacherError(
+                f"the teacher's correct() answered {answer!r} at step {record.step}; expected "
+                f"None or an int action in [0, {self.n_actions}). The step is recorded, no "
+                "correction was; fix the teacher and call run() again, or resume."
+            )
+        if action == record.executed_action:
+            return False
+        correction = CorrectionRecord(
+            step=record.step,
+            episode=record.episode,
+            observation=record.observation,
+            executed_action=record.executed_action,
+            action=action,
+        )
+        if self._store is not None:
+            self._store.correct(correction)  # durable before the next decision
+        self.corrections.append(correction)
+        x = record.observation_array
+        self._labels += 1
+        self._train.add(x, action)
+        self.strategy.observe_label(x, action, model_action=record.model_action, kind="correction")
+        self._new_since_refit += 1
+        if self._new_since_refit >= self.config.max_new:
+            self._refit()
+        return True
 
     def _execute(self, record: StepRecord) -> StepRecord:
         error: str | None = None
@@ -662,7 +782,6 @@ class ConfidentTeacher:
                 self._store.append(final)
         if terminated or truncated:
             self._needs_reset = True
-            self._burst_left = 0
         if error is not None:
             if self._store is not None:
                 self._store.commit()
@@ -740,7 +859,7 @@ class ConfidentTeacher:
             return "-" if v is None else f"{100 * v:.0f}%"
 
         return (
-            f"{self._phase} demos={self.n_demonstrations} "
+            f"{self.phase} demos={self.n_demonstrations} "
             f"autonomy={pct(self.autonomy_rate)} acc={pct(self.windowed_accuracy)}"
         )
 
@@ -764,5 +883,5 @@ class ConfidentTeacher:
     def __repr__(self) -> str:
         return (
             f"ConfidentTeacher(steps={self.n_steps}, demonstrations={self.n_demonstrations}, "
-            f"phase={self._phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
+            f"phase={self.phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
         )
