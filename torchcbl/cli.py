@@ -11,6 +11,7 @@ Commands::
     torchcbl replay EPISODES.json [--episode N | --label TEXT] [--gif OUT] [--fcd OUT]
     torchcbl plot RUN_DIR
     torchcbl teach corridor|driving [--run-dir DIR] [--resume]
+    torchcbl benchmark [--quick] [--strategies S,..] [--envs E,..] [--seeds N] [--ray] [--out DIR]
 """
 
 from __future__ import annotations
@@ -205,6 +206,122 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     return 0
 
 
+# The benchmark's environments: each domain ships its EnvSpec (teacher, budgets, score) in a
+# ``benchmark`` module, imported here lazily.
+_BENCH_ENVS = {"corridor": "corridor.benchmark", "driving": "sumo_scenarios.benchmark"}
+
+
+def _cmd_benchmark(args: argparse.Namespace) -> int:
+    import dataclasses
+    import importlib.util
+    import os
+
+    from torchcbl import benchmark as bm
+
+    names = [s for s in args.strategies.split(",") if s] if args.strategies else None
+    if names is None:
+        names = [
+            n
+            for n in bm.STRATEGY_PATHS
+            if importlib.util.find_spec(bm.STRATEGY_PATHS[n].partition(":")[0]) is not None
+        ]
+    bad = [n for n in names if n not in bm.STRATEGY_PATHS and ":" not in n]
+    if bad:
+        raise SystemExit(
+            f"--strategies: unknown {bad}; expected names from {sorted(bm.STRATEGY_PATHS)} "
+            "or import paths module:Class"
+        )
+    strategies = [bm.StrategySpec(n) for n in names]
+    env_names = (
+        [e for e in args.envs.split(",") if e] if args.envs is not None else list(_BENCH_ENVS)
+    )
+    bad = [e for e in env_names if e not in _BENCH_ENVS]
+    if bad:
+        raise SystemExit(f"--envs: unknown {bad}; expected some of {sorted(_BENCH_ENVS)}")
+    envs = []
+    for e in env_names:
+        spec = importlib.import_module(_BENCH_ENVS[e]).env_spec(quick=args.quick)
+        if e == "driving" and args.driving_teacher:
+            spec = dataclasses.replace(spec, teacher=args.driving_teacher)
+        envs.append(spec)
+    if args.gym_env:
+        if not args.teacher:
+            raise SystemExit("--gym-env needs --teacher module:factory (the teacher's import path)")
+        try:
+            budgets = tuple(int(b) for b in args.budgets.split(","))
+            envs.append(
+                bm.EnvSpec(
+                    name=args.gym_env,
+                    env_id=args.gym_env,
+                    teacher=args.teacher,
+                    budgets=budgets,
+                    max_steps=args.max_steps,
+                    score=args.score,
+                    eval_episodes=args.eval_episodes,
+                    eval_steps=args.eval_steps,
+                )
+            )
+        except ValueError as exc:
+            raise SystemExit(f"--gym-env: {exc}") from None
+    if not envs:
+        raise SystemExit("no environment: give --envs and/or --gym-env")
+    if args.seeds < 0:
+        raise SystemExit(f"--seeds must be >= 1, got {args.seeds}")
+    seeds = list(range(args.seeds if args.seeds else (3 if args.quick else 10)))
+    out = Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark"))
+    n_cells = len(strategies) * len(envs) * len(seeds)
+    print(
+        f"benchmark: {len(strategies)} strategies x {len(envs)} envs x {len(seeds)} seeds = "
+        f"{n_cells} cells into {out} ("
+        + (
+            f"Ray at {args.ray_address}"
+            if args.ray_address
+            else "local Ray"
+            if args.ray
+            else f"{args.workers} processes"
+        )
+        + ")",
+        flush=True,
+    )
+    count = 0
+
+    def on_cell(cell: dict, cached: bool) -> None:
+        nonlocal count
+        count += 1
+        last = cell["curve"][-1] if cell["curve"] else {"labels": 0, "performance": float("nan")}
+        print(
+            f"[{count}/{n_cells}] {cell['env']:>9} {cell['strategy']:>10} seed {cell['seed']}: "
+            + ("cached" if cached else f"{cell['wall_s']:.0f} s")
+            + f", {last['labels']} labels -> performance {last['performance']:.2f}",
+            flush=True,
+        )
+
+    t0, c0 = time.perf_counter(), os.times()
+    try:
+        summary = bm.run_benchmark(
+            strategies,
+            envs,
+            seeds,
+            out,
+            workers=args.workers,
+            use_ray=bool(args.ray or args.ray_address),
+            ray_address=args.ray_address,
+            on_cell=on_cell,
+        )
+    except (RuntimeError, ValueError, ImportError) as exc:
+        raise SystemExit(f"benchmark: {exc}") from None
+    c1 = os.times()
+    cpu = (c1.user - c0.user) + (c1.system - c0.system)
+    cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
+    print()
+    print(bm.format_table(summary))
+    print(
+        f"\nwall {time.perf_counter() - t0:.0f} s, CPU {cpu:.0f} s (this process and its "
+        f"workers); results in {out / 'results.json'}, plot {out / 'learning_curves.png'}"
+    )
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="torchcbl",
@@ -281,6 +398,36 @@ def _parser() -> argparse.ArgumentParser:
         help="start directly in confident execution (no teleoperation phase)",
     )
     p.set_defaults(func=_cmd_teach)
+
+    p = sub.add_parser(
+        "benchmark",
+        help="compare teaching strategies (CE, CBA, BC, DAgger, HG-DAgger, novelty)",
+        description="Strategies x environments x seeds with the same teacher and label "
+        "budgets; writes OUT/results.json (labels to 95%% of the teacher, performance at "
+        "budgets, attention) and OUT/learning_curves.png. Finished cells are cached in OUT, "
+        "so a rerun (or a killed sweep) continues where it stopped.",
+    )
+    p.add_argument("--quick", action="store_true", help="small budgets, 3 seeds (minutes)")
+    p.add_argument("--strategies", default=None, help="comma-separated (default: all shipped)")
+    p.add_argument(
+        "--envs", default=None, help="comma-separated of corridor,driving (default both)"
+    )
+    p.add_argument("--seeds", type=int, default=0, help="seeds 0..N-1 (default 3 quick, 10 full)")
+    p.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    p.add_argument("--ray", action="store_true", help="run the cells on a local Ray")
+    p.add_argument("--ray-address", default=None, help="run on this Ray cluster (e.g. auto)")
+    p.add_argument(
+        "--out", default=None, help="benchmark directory (default runs/benchmark[-quick])"
+    )
+    p.add_argument("--driving-teacher", default=None, help="import path of the driving teacher")
+    p.add_argument("--gym-env", default=None, help="also benchmark this gymnasium id")
+    p.add_argument("--teacher", default=None, help="--gym-env's teacher factory, module:name")
+    p.add_argument("--score", default="torchcbl.benchmark:success_rate", help="--gym-env's score")
+    p.add_argument("--budgets", default="10,20,40,80", help="--gym-env's label budgets")
+    p.add_argument("--max-steps", type=int, default=1000, help="--gym-env's step cap")
+    p.add_argument("--eval-episodes", type=int, default=10, help="--gym-env's eval episodes")
+    p.add_argument("--eval-steps", type=int, default=None, help="--gym-env's eval steps")
+    p.set_defaults(func=_cmd_benchmark)
     return parser
 
 

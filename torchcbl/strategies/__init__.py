@@ -309,10 +309,24 @@ def _build_cba(params: dict[str, Any]) -> Any:
     return ConfidenceBasedAutonomy(**params)
 
 
+def _lazy(module: str, name: str) -> Callable[[dict[str, Any]], Any]:
+    def build(params: dict[str, Any]) -> Any:
+        import importlib
+
+        return getattr(importlib.import_module(module), name)(**params)
+
+    return build
+
+
 #: name -> builder from the ``to_config`` dict (without "type" and "relabel").
 STRATEGIES: dict[str, Callable[[dict[str, Any]], Any]] = {
     "ConfidentExecution": lambda p: ConfidentExecution(rule_from_config(p["rule"])),
     "ConfidenceBasedAutonomy": _build_cba,
+    # the baselines (issue 14), one file each
+    "BehaviourCloning": _lazy("torchcbl.strategies.bc", "BehaviourCloning"),
+    "DAgger": _lazy("torchcbl.strategies.dagger", "DAgger"),
+    "HGDAgger": _lazy("torchcbl.strategies.hg_dagger", "HGDAgger"),
+    "NoveltyGated": _lazy("torchcbl.strategies.novelty", "NoveltyGated"),
 }
 
 

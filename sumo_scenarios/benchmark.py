@@ -1,0 +1,49 @@
+"""The driving domain's entry in the strategy benchmark (:mod:`torchcbl.benchmark`).
+
+:func:`teacher` is the teacher factory the benchmark imports by path
+(``"sumo_scenarios.benchmark:teacher"``). It is today's scripted expert; to benchmark another
+teacher (the human-like one), change the one line in :func:`teacher` or pass another import
+path as ``EnvSpec.teacher`` (``torchcbl benchmark --driving-teacher module:factory``).
+
+:func:`env_spec` uses the paper's Section 5.2 settings where they are cheap enough (window 150,
+target 80 %, bursts of 10, up to 10 components) with a refit every 5 labels; performance is
+the share of contact-free steps of a greedy drive on the held-out ``eval`` road segment 0
+(1 - the paper's collision rate).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["env_spec", "teacher"]
+
+
+def teacher(seed: int = 0) -> Any:
+    """The driving teacher for a run seed (today: :class:`ScriptedExpert`)."""
+    from sumo_scenarios.expert import ScriptedExpert
+
+    return ScriptedExpert(seed=seed)
+
+
+def env_spec(quick: bool = True) -> Any:
+    """The driving benchmark entry; ``quick`` = budgets up to 400 labels and a 500-step
+    evaluation drive (else up to 1000 labels, 1000 steps on 3 segments)."""
+    from torchcbl.benchmark import EnvSpec
+
+    budgets = (50, 100, 150, 200, 300, 400)
+    if not quick:
+        budgets += (500, 600, 800, 1000)
+    return EnvSpec(
+        name="driving",
+        env_id="sumo_scenarios:torchcbl/Driving-v0",
+        teacher="sumo_scenarios.benchmark:teacher",
+        budgets=budgets,
+        max_steps=1500 if quick else 4000,
+        env_kwargs={"scenario": "train", "max_episode_steps": 1000},
+        eval_env_kwargs={"scenario": "eval"},
+        score="torchcbl.benchmark:no_penalty_share",
+        eval_seeds=(0,) if quick else (0, 1, 2),
+        eval_steps=500 if quick else 1000,
+        teaching={"max_new": 5, "accuracy_window": 150, "target_accuracy": 0.8, "burst": 10},
+        model={"max_components": 10, "criterion": "aic", "tol": 1e-4},
+    )

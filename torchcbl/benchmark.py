@@ -1,0 +1,694 @@
+"""A benchmark of interactive imitation strategies: strategies x environments x seeds.
+
+Every *cell* (one strategy, one environment, one seed) teaches a fresh
+:class:`~torchcbl.gmm.GaussianMixtureSet` with :class:`~torchcbl.teaching.ConfidentTeacher`
+and the strategy, with the same teacher, refit schedule and label budgets for every strategy.
+At each label budget it snapshots the model (fitted on every label so far) and, after teaching,
+evaluates each snapshot greedily on held-out seeds of the evaluation env. A cell records:
+
+- the learning curve: ``[{"labels", "steps", "performance"}]``, one point per budget reached;
+- teacher attention: labels (demonstrations + corrections), requests (steps the teacher was
+  asked), monitored steps (requests, plus the autonomous steps a gating teacher had to watch:
+  those of a strategy that wants corrections), context switches (changes of who acted between
+  consecutive steps), corrections;
+- wrong autonomous actions: autonomous steps whose action differs from the teacher's choice
+  in that state (asked of a second, separate teacher instance, so the teacher itself is not
+  disturbed);
+- the teacher's own performance on the same evaluation seeds, wall and CPU time.
+
+The core never imports a domain: an environment is a gymnasium id (``"module:Id"`` makes
+gymnasium import the registering module first) and a teacher is an import path
+``"module:factory"``, called as ``factory(env=env, seed=seed, **teacher_kwargs)`` (each of
+``env`` and ``seed`` only if the factory takes it). The domains ship their presets
+(``corridor.benchmark``, ``sumo_scenarios.benchmark``).
+
+Cells are cached in ``OUT/cells/<hash>.json``, the hash being SHA-256 of the cell's canonical
+JSON configuration: a rerun skips finished cells, and a killed sweep resumes where it stopped
+(each cell is written atomically as it finishes). Cells run on a local process pool (one
+simulation per process: libsumo allows one per process) or on Ray (``use_ray=True``, with
+``ray_address`` for a cluster); every cell is deterministic, so both give the same figures.
+
+Results: ``OUT/results.json`` with, per (strategy, environment), ``labels_to_95pct`` (labels
+at which the performance first reaches 95 % of the teacher's; mean, sd, n; runs that never
+reach it are censored at their last label count and marked), performance at each budget,
+``final_performance``, attention and times; ``OUT/learning_curves.png`` (performance vs labels,
+one panel per environment, a line per strategy with a band of +-1 sd over seeds).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib
+import inspect
+import json
+import os
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from torchcbl.evaluation import mean_sd, run_versions
+
+__all__ = [
+    "CELL_FORMAT",
+    "EnvSpec",
+    "STRATEGY_PATHS",
+    "StrategySpec",
+    "cell_configs",
+    "cell_key",
+    "no_penalty_share",
+    "run_benchmark",
+    "run_cell",
+    "success_rate",
+    "summarize",
+]
+
+CELL_FORMAT = 1
+"""Bumped when a cell's computation changes, so old cached cells are not reused."""
+
+#: short strategy names -> import path of the class.
+STRATEGY_PATHS: dict[str, str] = {
+    "bc": "torchcbl.strategies.bc:BehaviourCloning",
+    "dagger": "torchcbl.strategies.dagger:DAgger",
+    "hg_dagger": "torchcbl.strategies.hg_dagger:HGDAgger",
+    "novelty": "torchcbl.strategies.novelty:NoveltyGated",
+    "confident": "torchcbl.strategies:ConfidentExecution",
+    "cba": "torchcbl.strategies.cba:ConfidenceBasedAutonomy",
+}
+
+
+def _import(path: str) -> Any:
+    """The object at ``"package.module:attr"`` (``attr`` may be dotted)."""
+    if not isinstance(path, str) or ":" not in path:
+        raise ValueError(f"expected an import path 'package.module:name', got {path!r}")
+    module, _, attr = path.partition(":")
+    obj: Any = importlib.import_module(module)
+    for part in attr.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+@dataclass(frozen=True)
+class StrategySpec:
+    """A strategy by name and constructor arguments.
+
+    Attributes:
+        name: a key of :data:`STRATEGY_PATHS` or an import path ``"module:Class"``.
+        params: keyword arguments of the class. For ``"confident"``, ``max_std`` (default 2)
+            builds ``ConfidentExecution(DistanceRule(max_std))``.
+        label: the name in tables and plots (default: ``name``).
+    """
+
+    name: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+    label: str | None = None
+
+    @property
+    def title(self) -> str:
+        """The name shown in tables and plots."""
+        return self.label or self.name
+
+    def build(self) -> Any:
+        """A fresh strategy object."""
+        path = STRATEGY_PATHS.get(self.name, self.name)
+        params = dict(self.params)
+        if self.name == "confident":
+            from torchcbl.confidence import DistanceRule
+            from torchcbl.strategies import ConfidentExecution
+
+            return ConfidentExecution(DistanceRule(float(params.pop("max_std", 2.0)), **params))
+        return _import(path)(**params)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "params": dict(self.params), "label": self.title}
+
+
+@dataclass(frozen=True)
+class EnvSpec:
+    """An environment with its teacher, score and budgets.
+
+    Attributes:
+        name: the name in tables and plots.
+        env_id: gymnasium id; ``"module:Id"`` imports ``module`` (which registers it) first.
+        teacher: import path of ``factory(env=..., seed=..., **teacher_kwargs) -> teacher``.
+        budgets: label budgets at which the model is snapshotted (increasing).
+        max_steps: cap on teaching steps per cell (a strategy that stops asking ends here).
+        env_kwargs: ``gymnasium.make`` keyword arguments of the teaching env.
+        eval_env_kwargs: overrides of ``env_kwargs`` for the evaluation env.
+        teacher_kwargs: extra keyword arguments of the teacher factory.
+        score: import path of ``score(records) -> float`` (higher is better) over the
+            evaluation records of one seed; default :func:`success_rate`.
+        eval_seeds: held-out reset seeds of the evaluation env (one evaluation each).
+        eval_episodes: episodes per evaluation (or None).
+        eval_steps: steps per evaluation (or None; at least one of the two).
+        teaching: :class:`~torchcbl.teaching.TeachingConfig` fields (learning ones).
+        model: :class:`~torchcbl.gmm.GaussianMixtureSet` keyword arguments (not n_actions,
+            n_features, seed).
+    """
+
+    name: str
+    env_id: str
+    teacher: str
+    budgets: tuple[int, ...]
+    max_steps: int
+    env_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    eval_env_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    teacher_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    score: str = "torchcbl.benchmark:success_rate"
+    eval_seeds: tuple[int, ...] = (1_000_000,)
+    eval_episodes: int | None = None
+    eval_steps: int | None = None
+    teaching: Mapping[str, Any] = field(default_factory=dict)
+    model: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        b = list(self.budgets)
+        if not b or any(not isinstance(x, int) or x < 1 for x in b) or b != sorted(set(b)):
+            raise ValueError(
+                f"EnvSpec {self.name!r}: budgets must be increasing ints >= 1, got {self.budgets!r}"
+            )
+        if not isinstance(self.max_steps, int) or self.max_steps < 1:
+            raise ValueError(f"EnvSpec {self.name!r}: max_steps must be an int >= 1")
+        if self.eval_episodes is None and self.eval_steps is None:
+            raise ValueError(f"EnvSpec {self.name!r}: give eval_episodes and/or eval_steps")
+        if not self.eval_seeds:
+            raise ValueError(f"EnvSpec {self.name!r}: eval_seeds must not be empty")
+        if ":" not in self.teacher:
+            raise ValueError(
+                f"EnvSpec {self.name!r}: teacher must be an import path 'module:factory', "
+                f"got {self.teacher!r}"
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        for k in ("env_kwargs", "eval_env_kwargs", "teacher_kwargs", "teaching", "model"):
+            d[k] = dict(d[k])
+        d["budgets"] = list(self.budgets)
+        d["eval_seeds"] = list(self.eval_seeds)
+        return d
+
+
+# -- scores -----------------------------------------------------------------------------------
+
+
+def success_rate(records: Sequence[Any]) -> float:
+    """Share of the finished episodes that ended with ``info["is_success"]`` truthy (an
+    evaluation cut before any episode ended scores 0)."""
+    ends = [r for r in records if r.terminated or r.truncated]
+    if not ends:
+        return 0.0
+    return sum(1 for r in ends if r.info.get("is_success")) / len(ends)
+
+
+def no_penalty_share(records: Sequence[Any]) -> float:
+    """Share of the steps with a reward >= 0 (the driving domain: 1 - collision rate)."""
+    if not records:
+        raise ValueError("no_penalty_share: no evaluation steps")
+    return sum(1 for r in records if (r.reward or 0.0) >= 0) / len(records)
+
+
+# -- one cell ---------------------------------------------------------------------------------
+
+
+def _canonical(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def cell_key(config: Mapping[str, Any]) -> str:
+    """The cache key of a cell: the first 20 hex digits of SHA-256 of its canonical JSON."""
+    return hashlib.sha256(_canonical(config).encode()).hexdigest()[:20]
+
+
+def cell_configs(
+    strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec], seeds: Sequence[int]
+) -> list[dict[str, Any]]:
+    """One JSON configuration per (env, strategy, seed), in that nesting order."""
+    return [
+        {"format": CELL_FORMAT, "env": e.to_dict(), "strategy": s.to_dict(), "seed": int(seed)}
+        for e in envs
+        for s in strategies
+        for seed in seeds
+    ]
+
+
+def _make_teacher(path: str, env: Any, seed: int, kwargs: Mapping[str, Any]) -> Any:
+    factory = _import(path)
+    try:
+        params = inspect.signature(factory).parameters
+    except (TypeError, ValueError):
+        params = {}
+    extra: dict[str, Any] = {}
+    if "env" in params:
+        extra["env"] = env
+    if "seed" in params:
+        extra["seed"] = seed
+    return factory(**extra, **kwargs)
+
+
+class _Audited(gym.Wrapper):
+    """Env wrapper that asks a separate teacher instance, before every step, what it would do
+    there (to count wrong autonomous actions without disturbing the real teacher)."""
+
+    def __init__(self, env: gym.Env, auditor: Callable[[np.ndarray, dict], int]) -> None:
+        super().__init__(env)
+        self.auditor = auditor
+        self.expected: list[int] = []
+        self._last: tuple[Any, dict] = (None, {})
+
+    def reset(self, **kwargs: Any) -> Any:
+        obs, info = self.env.reset(**kwargs)
+        self._last = (obs, dict(info or {}))
+        return obs, info
+
+    def step(self, action: Any) -> Any:
+        obs, info = self._last
+        self.expected.append(int(self.auditor(np.array(obs, copy=True), dict(info))))
+        out = self.env.step(action)
+        self._last = (out[0], dict(out[4] or {}))
+        return out
+
+
+def _evaluate(policy: Any, spec: EnvSpec, env: Any, score: Callable, uses_info: bool) -> float:
+    from torchcbl.policy import evaluate_policy
+
+    values = []
+    for s in spec.eval_seeds:
+        records = evaluate_policy(
+            policy,
+            env,
+            n_steps=spec.eval_steps,
+            n_episodes=spec.eval_episodes,
+            seed=int(s),
+            uses_info=uses_info,
+        )
+        values.append(float(score(records)))
+    return float(np.mean(values))
+
+
+def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
+    """Run one cell (see the module docstring) and return its JSON result.
+
+    Deterministic given ``config`` (one torch thread, seeded model, env and strategy), apart
+    from the ``wall_s`` / ``cpu_s`` timings.
+    """
+    import torch
+
+    from torchcbl.gmm import GaussianMixtureSet
+    from torchcbl.policy import GreedyPolicy
+    from torchcbl.strategies import correcting
+    from torchcbl.teaching import ConfidentTeacher, TeachingConfig
+
+    torch.set_num_threads(1)
+    spec = EnvSpec(
+        **{
+            **config["env"],
+            "budgets": tuple(config["env"]["budgets"]),
+            "eval_seeds": tuple(config["env"]["eval_seeds"]),
+        }
+    )
+    sspec = StrategySpec(**config["strategy"])
+    seed = int(config["seed"])
+    torch.manual_seed(seed)
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    score = _import(spec.score)
+
+    env = gym.make(spec.env_id, **dict(spec.env_kwargs))
+    snapshots: list[tuple[int, int, Any]] = []
+    try:
+        teacher = _make_teacher(spec.teacher, env, seed, spec.teacher_kwargs)
+        auditor = _make_teacher(spec.teacher, env, seed, spec.teacher_kwargs)
+        strategy = sspec.build()
+        wants_corrections = bool(getattr(strategy, "wants_corrections", False))
+        if wants_corrections and not callable(getattr(teacher, "correct", None)):
+            teacher = correcting(teacher)
+        audited = _Audited(env, auditor)
+        n_actions = int(env.action_space.n)
+        n_features = int(np.prod(env.observation_space.shape))
+        model = GaussianMixtureSet(n_actions, n_features, seed=seed, **dict(spec.model))
+        tc = TeachingConfig(**dict(spec.teaching))
+        loop = ConfidentTeacher(
+            audited, teacher, model=model, strategy=strategy, config=tc, seed=seed, progress=False
+        )
+        for budget in spec.budgets:
+            loop.run(max_demonstrations=budget, max_steps=spec.max_steps)
+            if not snapshots or snapshots[-1][0] != loop.n_demonstrations:
+                snapshots.append((loop.n_demonstrations, loop.n_steps, loop.snapshot()))
+            if loop.n_steps >= spec.max_steps:
+                break
+        records = loop.records
+        expected = audited.expected
+    finally:
+        env.close()
+    teach_wall = time.perf_counter() - wall0
+
+    steps = len(records)
+    autonomous = [r for r in records if r.teacher_action is None]
+    wrong = sum(1 for r in autonomous if r.executed_action != expected[r.step])
+    actors = [r.actor for r in records]
+    switches = sum(1 for a, b in zip(actors, actors[1:], strict=False) if a != b)
+    requests = steps - len(autonomous)
+    attention = {
+        "labels": loop.n_demonstrations,
+        "requests": requests,
+        "corrections": loop.n_corrections,
+        "monitored_steps": steps if wants_corrections else requests,
+        "context_switches": switches,
+        "teacher_actions": sum(1 for a in actors if a == "teacher"),
+        "steps": steps,
+        "autonomous_steps": len(autonomous),
+        "wrong_autonomous_actions": wrong,
+    }
+
+    eval_env = gym.make(spec.env_id, **{**dict(spec.env_kwargs), **dict(spec.eval_env_kwargs)})
+    try:
+        eval_teacher = _make_teacher(spec.teacher, eval_env, seed, spec.teacher_kwargs)
+        teacher_perf = _evaluate(eval_teacher, spec, eval_env, score, uses_info=True)
+        curve = [
+            {
+                "labels": labels,
+                "steps": n_steps,
+                "performance": _evaluate(GreedyPolicy(m), spec, eval_env, score, False),
+            }
+            for labels, n_steps, m in snapshots
+        ]
+    finally:
+        eval_env.close()
+    return {
+        "key": cell_key(config),
+        "config": dict(config),
+        "env": spec.name,
+        "strategy": sspec.title,
+        "seed": seed,
+        "curve": curve,
+        "teacher_performance": teacher_perf,
+        "attention": attention,
+        "teach_wall_s": teach_wall,
+        "wall_s": time.perf_counter() - wall0,
+        "cpu_s": time.process_time() - cpu0,
+    }
+
+
+def _run_cell_in_worker(config: Mapping[str, Any]) -> dict[str, Any]:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    return run_cell(config)
+
+
+# -- the sweep --------------------------------------------------------------------------------
+
+
+def _cell_path(out: Path, key: str) -> Path:
+    return out / "cells" / f"{key}.json"
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _load_cell(path: Path) -> dict[str, Any] | None:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None  # unreadable: recompute
+    return data if isinstance(data, dict) and "curve" in data else None
+
+
+def _execute(
+    todo: list[dict[str, Any]],
+    *,
+    workers: int,
+    use_ray: bool,
+    ray_address: str | None,
+    done: Callable[[dict[str, Any]], None],
+) -> None:
+    if not todo:
+        return
+    if use_ray:
+        try:
+            import ray
+        except ImportError as exc:
+            raise RuntimeError(
+                "Ray is not installed; install it with `pip install torchcbl[ray]` (or "
+                "`pip install ray`), or run without --ray."
+            ) from exc
+        started = not ray.is_initialized()
+        if started:
+            ray.init(
+                address=ray_address,
+                num_cpus=None if ray_address else workers,
+                include_dashboard=False,
+                log_to_driver=False,
+                runtime_env={"env_vars": {"PYTHONPATH": os.environ.get("PYTHONPATH", "")}},
+            )
+        try:
+            # max_calls=1: a fresh worker process per cell (libsumo: one simulation per process).
+            remote = ray.remote(num_cpus=1, max_calls=1)(_run_cell_in_worker)
+            pending = [remote.remote(c) for c in todo]
+            while pending:
+                ready, pending = ray.wait(pending, num_returns=1)
+                done(ray.get(ready[0]))
+        finally:
+            if started:
+                ray.shutdown()
+        return
+    if workers <= 1:
+        for c in todo:
+            done(_run_cell_in_worker(c))
+        return
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx, max_tasks_per_child=1) as pool:
+        futures = {pool.submit(_run_cell_in_worker, c) for c in todo}
+        while futures:
+            finished, futures = wait(futures, return_when=FIRST_COMPLETED)
+            for f in finished:
+                done(f.result())
+
+
+def run_benchmark(
+    strategies: Sequence[StrategySpec],
+    envs: Sequence[EnvSpec],
+    seeds: Sequence[int],
+    out_dir: str | os.PathLike[str],
+    *,
+    workers: int | None = None,
+    use_ray: bool = False,
+    ray_address: str | None = None,
+    plots: bool = True,
+    on_cell: Callable[[dict[str, Any], bool], None] | None = None,
+) -> dict[str, Any]:
+    """Run (or resume) a sweep and write ``results.json`` and the plots into ``out_dir``.
+
+    Args:
+        strategies, envs, seeds: the grid; every strategy meets every env with every seed.
+        out_dir: the benchmark directory; finished cells are cached in ``out_dir/cells``, so
+            calling again with the same grid computes only the missing cells.
+        workers: processes of the local pool (default: ``os.cpu_count()``); 1 runs in-process.
+        use_ray: run the cells as Ray tasks (``ray_address`` None: a local Ray with
+            ``workers`` CPUs; else ``ray.init(address=ray_address)``, e.g. ``"auto"``).
+        plots: write ``learning_curves.png``.
+        on_cell: called as ``on_cell(cell_result, cached)`` for every cell, cached or new.
+
+    Returns:
+        The results dict that was written to ``results.json``.
+    """
+    if not strategies or not envs or not seeds:
+        raise ValueError("run_benchmark: need at least one strategy, one env and one seed")
+    titles = [s.title for s in strategies]
+    if len(set(titles)) != len(titles):
+        raise ValueError(f"run_benchmark: strategy labels must be distinct, got {titles}")
+    out = Path(out_dir)
+    (out / "cells").mkdir(parents=True, exist_ok=True)
+    configs = cell_configs(strategies, envs, seeds)
+    results: dict[str, dict[str, Any]] = {}
+    todo = []
+    for c in configs:
+        key = cell_key(c)
+        cached = _load_cell(_cell_path(out, key))
+        if cached is not None:
+            results[key] = cached
+            if on_cell is not None:
+                on_cell(cached, True)
+        else:
+            todo.append(c)
+    wall0 = time.perf_counter()
+
+    def done(cell: dict[str, Any]) -> None:
+        _write_atomic(_cell_path(out, cell["key"]), json.dumps(cell, indent=1))
+        results[cell["key"]] = cell
+        if on_cell is not None:
+            on_cell(cell, False)
+
+    n_workers = max(1, int(workers or os.cpu_count() or 1))
+    _execute(todo, workers=n_workers, use_ray=use_ray, ray_address=ray_address, done=done)
+    cells = [results[cell_key(c)] for c in configs]
+    summary = summarize(cells, envs=[e.name for e in envs], strategies=titles)
+    summary["sweep"] = {
+        "cells": len(configs),
+        "computed": len(todo),
+        "cached": len(configs) - len(todo),
+        "seeds": [int(s) for s in seeds],
+        "engine": ("ray" if use_ray else "process_pool") if todo else "cache",
+        "workers": n_workers,
+        "wall_s_this_call": time.perf_counter() - wall0,
+        "cell_cpu_s_total": float(sum(c["cpu_s"] for c in cells)),
+        "cell_wall_s_total": float(sum(c["wall_s"] for c in cells)),
+    }
+    summary["envs"] = {e.name: e.to_dict() for e in envs}
+    summary["strategies"] = {s.title: s.to_dict() for s in strategies}
+    summary["versions"] = run_versions()
+    summary["cells"] = {c["key"]: f"cells/{c['key']}.json" for c in cells}
+    _write_atomic(out / "results.json", json.dumps(summary, indent=1))
+    if plots:
+        plot_curves(cells, out / "learning_curves.png", envs=[e.name for e in envs])
+    return summary
+
+
+# -- aggregation ------------------------------------------------------------------------------
+
+
+def _labels_to(cell: Mapping[str, Any], fraction: float) -> tuple[int, bool]:
+    """Labels at which the cell first reaches ``fraction`` x the teacher's performance, and
+    whether that is censored (never reached: the last label count, a lower bound)."""
+    target = fraction * float(cell["teacher_performance"])
+    for p in cell["curve"]:
+        if p["performance"] >= target - 1e-12:
+            return int(p["labels"]), False
+    last = cell["curve"][-1]["labels"] if cell["curve"] else 0
+    return int(last), True
+
+
+def _perf_at(cell: Mapping[str, Any], budget: int) -> float | None:
+    """Performance of the model fitted on at most ``budget`` labels (the last snapshot at or
+    below it), None if the cell had no snapshot that small."""
+    best = None
+    for p in cell["curve"]:
+        if p["labels"] <= budget:
+            best = p["performance"]
+    return best
+
+
+def summarize(
+    cells: Iterable[Mapping[str, Any]], *, envs: Sequence[str], strategies: Sequence[str]
+) -> dict[str, Any]:
+    """The results table from cell results: per env, per strategy, the figures over seeds."""
+    cells = list(cells)
+    table: dict[str, dict[str, Any]] = {}
+    for env in envs:
+        table[env] = {}
+        for strat in strategies:
+            mine = sorted(
+                (c for c in cells if c["env"] == env and c["strategy"] == strat),
+                key=lambda c: c["seed"],
+            )
+            if not mine:
+                continue
+            hits = [_labels_to(c, 0.95) for c in mine]
+            budgets = mine[0]["config"]["env"]["budgets"]
+            att = {k: mean_sd(c["attention"][k] for c in mine) for k in mine[0]["attention"]}
+            teacher = [float(c["teacher_performance"]) for c in mine]
+            table[env][strat] = {
+                "labels_to_95pct": {
+                    **mean_sd(v for v, _ in hits),
+                    "n_censored": sum(1 for _, cen in hits if cen),
+                    "lower_bound": any(cen for _, cen in hits),
+                    "per_seed": [
+                        {"seed": c["seed"], "labels": v, "censored": cen}
+                        for c, (v, cen) in zip(mine, hits, strict=True)
+                    ],
+                },
+                "final_performance": mean_sd(
+                    c["curve"][-1]["performance"] if c["curve"] else None for c in mine
+                ),
+                "final_labels": mean_sd(
+                    c["curve"][-1]["labels"] if c["curve"] else None for c in mine
+                ),
+                "performance_at_budget": {
+                    str(b): mean_sd(_perf_at(c, b) for c in mine) for b in budgets
+                },
+                "teacher_performance": mean_sd(teacher),
+                "attention": att,
+                "wall_s": mean_sd(c["wall_s"] for c in mine),
+                "cpu_s": mean_sd(c["cpu_s"] for c in mine),
+            }
+    return {"table": table}
+
+
+def format_table(summary: Mapping[str, Any]) -> str:
+    """A Markdown table of the results (one row per environment and strategy)."""
+    rows = [
+        "| env | strategy | labels to 95 % (censored) | final perf. (labels) | teacher perf. | "
+        "requests | monitored | context switches | wrong auto. actions | wall s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def ms(d: Mapping[str, Any], fmt: str = "{:.0f}") -> str:
+        if d.get("mean") is None:
+            return "-"
+        return f"{fmt.format(d['mean'])} ± {fmt.format(d['sd'])}"
+
+    for env, strategies in summary["table"].items():
+        for strat, r in strategies.items():
+            lt = r["labels_to_95pct"]
+            a = r["attention"]
+            cens = f" ({lt['n_censored']}/{lt['n']})" if lt["n_censored"] else ""
+            prefix = "≥ " if lt["lower_bound"] else ""
+            rows.append(
+                f"| {env} | {strat} | {prefix}{ms(lt)}{cens} | "
+                f"{ms(r['final_performance'], '{:.2f}')} ({ms(r['final_labels'])}) | "
+                f"{ms(r['teacher_performance'], '{:.2f}')} | {ms(a['requests'])} | "
+                f"{ms(a['monitored_steps'])} | {ms(a['context_switches'])} | "
+                f"{ms(a['wrong_autonomous_actions'])} | {ms(r['wall_s'])} |"
+            )
+    return "\n".join(rows)
+
+
+def plot_curves(
+    cells: Sequence[Mapping[str, Any]], path: str | os.PathLike[str], *, envs: Sequence[str]
+) -> Path:
+    """Performance vs labels: one panel per env, a line per strategy (mean over seeds, each
+    seed's curve held constant after its last point) with a +-1 sd band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(envs), figsize=(5.5 * len(envs), 4), squeeze=False)
+    for ax, env in zip(axes[0], envs, strict=True):
+        mine = [c for c in cells if c["env"] == env]
+        strategies = list(dict.fromkeys(c["strategy"] for c in mine))
+        for strat in strategies:
+            runs = [c for c in mine if c["strategy"] == strat and c["curve"]]
+            if not runs:
+                continue
+            grid = sorted({int(p["labels"]) for c in runs for p in c["curve"]})
+            ys = np.array([[_perf_at(c, b) for b in grid] for c in runs], dtype=float)
+            m, s = np.nanmean(ys, axis=0), np.nanstd(ys, axis=0)
+            (line,) = ax.plot(grid, m, marker=".", label=strat)
+            ax.fill_between(grid, m - s, m + s, alpha=0.15, color=line.get_color())
+        teacher = [float(c["teacher_performance"]) for c in mine]
+        if teacher:
+            t = float(np.mean(teacher))
+            ax.axhline(t, color="k", lw=0.8, ls="--", label="teacher")
+            ax.axhline(0.95 * t, color="k", lw=0.6, ls=":", label="95 % of teacher")
+        ax.set_title(env)
+        ax.set_xlabel("teacher labels")
+        ax.set_ylabel("performance (greedy, held-out seeds)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

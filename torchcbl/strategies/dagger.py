@@ -1,0 +1,127 @@
+"""DAgger (Ross, Gordon & Bagnell, AISTATS 2011) for a discrete-action GMM learner.
+
+The teacher labels every visited state. The executed action is the teacher's with probability
+``beta``, else the learner's (the mixture policy of the paper's Algorithm 3.1). ``beta`` decays
+geometrically per DAgger iteration, the paper's ``beta_i = p^(i-1)`` schedule::
+
+    beta(step) = beta0 * decay ** (step // iteration_steps)
+
+with ``step`` the 0-based index of the step in the session: iteration 1 is the first
+``iteration_steps`` steps, iteration 2 the next ones, and so on. The learner refits on all the
+labels so far, every ``TeachingConfig.max_new`` labels (more often than the paper's one refit
+per iteration: the loop's refit schedule is shared by every strategy, so the comparison is fair).
+
+The coin of step ``t`` is ``default_rng(SeedSequence([seed, t])).random()``: a function of the
+seed and the step only, so a resumed session draws the same coins as an uninterrupted one.
+With ``beta0 = 1, decay = 1`` DAgger is behaviour cloning on the teacher's trajectory; with
+``beta0 = 0`` the learner drives from its first fit on (the teacher still labels every state).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from torchcbl.strategies import Decision, LabelKind
+
+if TYPE_CHECKING:  # pragma: no cover
+    from torchcbl.gmm import Classification
+    from torchcbl.records import StepRecord
+
+__all__ = ["DAgger"]
+
+
+def _unit(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1:
+        raise ValueError(f"DAgger: {name} must be a number in [0, 1], got {value!r}")
+    return float(value)
+
+
+class DAgger:
+    """Label every state; execute the teacher's action with probability ``beta(step)``.
+
+    Args:
+        beta0: beta of the first iteration, in [0, 1] (the paper: 1).
+        decay: beta's factor per iteration, in [0, 1] (the paper's ``p``; 0.5 by default).
+        iteration_steps: steps per DAgger iteration (>= 1).
+        seed: seeds the per-step coins.
+    """
+
+    relabel = False
+    wants_corrections = False
+
+    def __init__(
+        self,
+        beta0: float = 1.0,
+        decay: float = 0.5,
+        iteration_steps: int = 50,
+        seed: int = 0,
+    ) -> None:
+        self.beta0 = _unit("beta0", beta0)
+        self.decay = _unit("decay", decay)
+        if isinstance(iteration_steps, bool) or not isinstance(iteration_steps, int):
+            raise ValueError(
+                f"DAgger: iteration_steps must be an int >= 1, got {iteration_steps!r}"
+            )
+        if iteration_steps < 1:
+            raise ValueError(
+                f"DAgger: iteration_steps must be an int >= 1, got {iteration_steps!r}"
+            )
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            raise ValueError(f"DAgger: seed must be an int, got {seed!r}")
+        self.iteration_steps = iteration_steps
+        self.seed = int(seed)
+        self._steps = 0
+
+    def beta(self, step: int) -> float:
+        """Probability that the teacher's action runs at 0-based session step ``step``."""
+        return self.beta0 * self.decay ** (step // self.iteration_steps)
+
+    def coin(self, step: int) -> float:
+        """The uniform [0, 1) draw of step ``step`` (the teacher acts iff coin < beta)."""
+        return float(np.random.default_rng(np.random.SeedSequence([self.seed, step])).random())
+
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        self.n_actions, self.n_features = int(n_actions), int(n_features)
+
+    def episode_start(self) -> None:
+        return None
+
+    def decide(self, observation: np.ndarray, c: Classification) -> Decision:
+        return Decision(True, "noninteractive", self._steps)
+
+    def actor(
+        self, decision: Decision, model_action: int, teacher_action: int | None
+    ) -> Literal["teacher", "agent"]:
+        step = int(decision.state)
+        if model_action < 0 or self.coin(step) < self.beta(step):
+            return "teacher"
+        return "agent"
+
+    def observe_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        return None
+
+    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        return None
+
+    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+        self._steps = record.step + 1
+
+    def to_config(self) -> dict[str, Any]:
+        return {
+            "type": "DAgger",
+            "beta0": self.beta0,
+            "decay": self.decay,
+            "iteration_steps": self.iteration_steps,
+            "seed": self.seed,
+            "relabel": False,
+        }
+
+    def __repr__(self) -> str:
+        return (
+            f"DAgger(beta0={self.beta0}, decay={self.decay}, "
+            f"iteration_steps={self.iteration_steps}, seed={self.seed})"
+        )

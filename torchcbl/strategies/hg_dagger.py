@@ -1,0 +1,97 @@
+"""HG-DAgger (Kelly et al., ICRA 2019): the teacher gates, taking over where the learner errs.
+
+In HG-DAgger a human watches the learner drive and takes the controls when it does something
+they would not do; only the states the human drives through are labelled, and the human hands
+control back when satisfied. On this loop's discrete steps:
+
+1. ``warmup`` demonstrations first (the teacher drives; HG-DAgger starts from a BC policy).
+2. The learner drives. After each of its steps the teacher is offered to correct it (the
+   loop's ``correct()``; a scripted teacher is wrapped with
+   :func:`torchcbl.strategies.correcting`, which corrects when its own action differs).
+   A correction is a label for the state the learner just acted in, and the teacher takes over.
+3. While the teacher is in control it labels and executes every step; it hands back after the
+   first step at which the learner's prediction (made before that label) equals its own.
+
+Difference from a human gate: the gate sees the learner's action *after* it ran (the loop has
+no look-ahead), so one wrong action is executed before each takeover, like a human's reaction
+time. The teacher must watch every autonomous step: the benchmark counts those as monitored
+steps (attention), though only corrections and takeover steps are labels. Control is not given
+back at an episode boundary (the teacher keeps driving until the learner agrees), which keeps
+the state a function of the labels alone (resume replays them in a different order than the
+live run delivers them).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from torchcbl.strategies import Decision, LabelKind
+
+if TYPE_CHECKING:  # pragma: no cover
+    from torchcbl.gmm import Classification
+    from torchcbl.records import StepRecord
+
+__all__ = ["HGDAgger"]
+
+
+class HGDAgger:
+    """Teacher-gated DAgger: learner drives; the teacher takes over when it disagrees.
+
+    Args:
+        warmup: demonstrations the teacher gives before the learner first drives (>= 0).
+    """
+
+    relabel = False
+    wants_corrections = True
+
+    def __init__(self, warmup: int = 10) -> None:
+        if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
+            raise ValueError(f"HGDAgger: warmup must be an int >= 0, got {warmup!r}")
+        self.warmup = warmup
+        self._labels = 0
+        self._control = False
+
+    @property
+    def teacher_in_control(self) -> bool:
+        """Whether the teacher drives the next step (after a correction, until agreement)."""
+        return self._control
+
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        self.n_actions, self.n_features = int(n_actions), int(n_features)
+
+    def episode_start(self) -> None:
+        return None
+
+    def decide(self, observation: np.ndarray, c: Classification) -> Decision:
+        if self._labels < self.warmup:
+            return Decision(True, "noninteractive")
+        return Decision(int(c.action[0]) < 0 or self._control, "confident")
+
+    def actor(
+        self, decision: Decision, model_action: int, teacher_action: int | None
+    ) -> Literal["teacher", "agent"]:
+        return "teacher" if decision.ask else "agent"
+
+    def observe_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        warm = self._labels < self.warmup
+        self._labels += 1
+        if kind == "correction":
+            self._control = True
+        elif self._control and not warm:
+            self._control = int(model_action) != int(action)
+
+    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        return None
+
+    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+        return None
+
+    def to_config(self) -> dict[str, Any]:
+        return {"type": "HGDAgger", "warmup": self.warmup, "relabel": False}
+
+    def __repr__(self) -> str:
+        return f"HGDAgger(warmup={self.warmup})"

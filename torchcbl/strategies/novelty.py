@@ -1,0 +1,129 @@
+"""A budget-gated novelty strategy in the style of ThriftyDAgger (Hoque et al., CoRL 2021).
+
+ThriftyDAgger asks for help when a state is novel (ensemble disagreement) beyond a threshold it
+sets from a target rate of requests: the (1 - target rate) quantile of the novelty scores seen
+so far. Here the novelty score is the GMM's own: the Mahalanobis distance, in standard
+deviations, from the observation to the most likely component of the predicted action's
+mixture (``Classification.distance``). So:
+
+1. ``warmup`` demonstrations first (the teacher drives; ThriftyDAgger starts from offline data).
+2. Then ask iff ``distance > quantile(recent, 1 - target_rate)``, where ``recent`` holds the
+   finite distances of the last ``window`` steps (``numpy.quantile``, linear interpolation),
+   and always while ``recent`` holds fewer than ``min_history`` scores or no model exists.
+   The teacher's action is executed on asked steps, the learner's otherwise.
+
+Over a long run the teacher is asked on about ``target_rate`` of the steps whatever the
+learner's competence: the budget, not the confidence, sets the attention. ThriftyDAgger's
+second gate (a learned risk Q-function) and its hand-back rule are left out: the loop hands
+control back at the next step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from torchcbl.strategies import Decision, LabelKind
+
+if TYPE_CHECKING:  # pragma: no cover
+    from torchcbl.gmm import Classification
+    from torchcbl.records import StepRecord
+
+__all__ = ["NoveltyGated"]
+
+
+class NoveltyGated:
+    """Ask when the Mahalanobis novelty exceeds its (1 - target_rate) quantile of recent steps.
+
+    Args:
+        target_rate: wanted share of asked steps, in (0, 1).
+        window: recent steps the quantile is taken over (>= 1).
+        warmup: demonstrations the teacher gives first (>= 0).
+        min_history: ask while fewer finite scores than this are in the window (>= 1).
+    """
+
+    relabel = False
+    wants_corrections = False
+
+    def __init__(
+        self,
+        target_rate: float = 0.1,
+        window: int = 200,
+        warmup: int = 10,
+        min_history: int = 10,
+    ) -> None:
+        if (
+            isinstance(target_rate, bool)
+            or not isinstance(target_rate, (int, float))
+            or not 0 < target_rate < 1
+        ):
+            raise ValueError(f"NoveltyGated: target_rate must be in (0, 1), got {target_rate!r}")
+        for name, v, lo in (
+            ("window", window, 1),
+            ("warmup", warmup, 0),
+            ("min_history", min_history, 1),
+        ):
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise ValueError(f"NoveltyGated: {name} must be an int >= {lo}, got {v!r}")
+        self.target_rate = float(target_rate)
+        self.window = window
+        self.warmup = warmup
+        self.min_history = min_history
+        self._labels = 0
+        self._scores: deque[float] = deque(maxlen=window)
+
+    def threshold(self) -> float | None:
+        """The current novelty threshold (None while the history is too short)."""
+        if len(self._scores) < self.min_history:
+            return None
+        return float(np.quantile(np.asarray(self._scores), 1.0 - self.target_rate))
+
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        self.n_actions, self.n_features = int(n_actions), int(n_features)
+
+    def episode_start(self) -> None:
+        return None
+
+    def decide(self, observation: np.ndarray, c: Classification) -> Decision:
+        if self._labels < self.warmup:
+            return Decision(True, "noninteractive")
+        t = self.threshold()
+        ask = int(c.action[0]) < 0 or t is None or float(c.distance[0]) > t
+        return Decision(ask, "confident")
+
+    def actor(
+        self, decision: Decision, model_action: int, teacher_action: int | None
+    ) -> Literal["teacher", "agent"]:
+        return "teacher" if decision.ask else "agent"
+
+    def observe_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        self._labels += 1
+
+    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        return None
+
+    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+        d = record.distance
+        if d is not None and math.isfinite(d):
+            self._scores.append(float(d))
+
+    def to_config(self) -> dict[str, Any]:
+        return {
+            "type": "NoveltyGated",
+            "target_rate": self.target_rate,
+            "window": self.window,
+            "warmup": self.warmup,
+            "min_history": self.min_history,
+            "relabel": False,
+        }
+
+    def __repr__(self) -> str:
+        return (
+            f"NoveltyGated(target_rate={self.target_rate}, window={self.window}, "
+            f"warmup={self.warmup}, min_history={self.min_history})"
+        )
