@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from torchcbl.confidence import _np
-from torchcbl.strategies import _Phased
+from torchcbl.strategies._phased import _Phased
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
