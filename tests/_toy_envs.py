@@ -109,6 +109,16 @@ def four_d_world(**kw: Any) -> ClusterWorld:
     return ClusterWorld(c, [0, 1, 2, 0], [0.4, 0.2, 0.2, 0.2], **kw)
 
 
+def six_d_world(**kw: Any) -> ClusterWorld:
+    """6-D, 3 actions, 5 regions 4 std apart (neighbouring regions of different actions
+    overlap: a region's Gaussian puts 2.3 % of its mass across each nearest-centre boundary);
+    action 0 in two regions, action 1 in two."""
+    c = np.zeros((5, 6))
+    c[1, 0] = c[2, 1] = c[3, 2] = 4.0
+    c[4, 0] = c[4, 3] = 4.0
+    return ClusterWorld(c, [0, 1, 2, 0, 1], [0.3, 0.2, 0.2, 0.15, 0.15], **kw)
+
+
 def oracle(env: ClusterWorld):
     """The optimal teacher of a ClusterWorld, as ``teacher(obs, info) -> int``."""
 
