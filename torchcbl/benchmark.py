@@ -451,8 +451,9 @@ def _execute(
                 runtime_env={"env_vars": {"PYTHONPATH": os.environ.get("PYTHONPATH", "")}},
             )
         try:
-            # max_calls=1: a fresh worker process per cell (libsumo: one simulation per process).
-            remote = ray.remote(num_cpus=1, max_calls=1)(_run_cell_in_worker)
+            # One cell per task and CPU; a cell closes its envs, so a worker process may run
+            # cells one after another (libsumo: one live simulation per process).
+            remote = ray.remote(num_cpus=1)(_run_cell_in_worker)
             pending = [remote.remote(c) for c in todo]
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
@@ -468,7 +469,9 @@ def _execute(
     import multiprocessing as mp
 
     ctx = mp.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=ctx, max_tasks_per_child=1) as pool:
+    # spawn: a fresh interpreter (no forked torch or libsumo state); workers are reused, as
+    # every cell closes its envs before it returns.
+    with ProcessPoolExecutor(min(workers, len(todo)), mp_context=ctx) as pool:
         futures = {pool.submit(_run_cell_in_worker, c) for c in todo}
         while futures:
             finished, futures = wait(futures, return_when=FIRST_COMPLETED)
@@ -628,9 +631,10 @@ def summarize(
 def format_table(summary: Mapping[str, Any]) -> str:
     """A Markdown table of the results (one row per environment and strategy)."""
     rows = [
-        "| env | strategy | labels to 95 % (censored) | final perf. (labels) | teacher perf. | "
-        "requests | monitored | context switches | wrong auto. actions | wall s |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| env | strategy | labels to 95 % (censored) | perf. at 2nd budget | final perf. "
+        "(labels) | teacher perf. | requests | monitored | context switches | "
+        "wrong auto. actions | wall s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
 
     def ms(d: Mapping[str, Any], fmt: str = "{:.0f}") -> str:
@@ -644,8 +648,11 @@ def format_table(summary: Mapping[str, Any]) -> str:
             a = r["attention"]
             cens = f" ({lt['n_censored']}/{lt['n']})" if lt["n_censored"] else ""
             prefix = "≥ " if lt["lower_bound"] else ""
+            budgets = list(r["performance_at_budget"])
+            second = budgets[min(1, len(budgets) - 1)]
+            at = f"{ms(r['performance_at_budget'][second], '{:.2f}')} @ {second}"
             rows.append(
-                f"| {env} | {strat} | {prefix}{ms(lt)}{cens} | "
+                f"| {env} | {strat} | {prefix}{ms(lt)}{cens} | {at} | "
                 f"{ms(r['final_performance'], '{:.2f}')} ({ms(r['final_labels'])}) | "
                 f"{ms(r['teacher_performance'], '{:.2f}')} | {ms(a['requests'])} | "
                 f"{ms(a['monitored_steps'])} | {ms(a['context_switches'])} | "

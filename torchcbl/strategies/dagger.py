@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from torchcbl.strategies import Decision, LabelKind
+from torchcbl.strategies._phased import Decision, LabelKind
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification

@@ -8,9 +8,13 @@ mixture (``Classification.distance``). So:
 
 1. ``warmup`` demonstrations first (the teacher drives; ThriftyDAgger starts from offline data).
 2. Then ask iff ``distance > quantile(recent, 1 - target_rate)``, where ``recent`` holds the
-   finite distances of the last ``window`` steps (``numpy.quantile``, linear interpolation),
-   and always while ``recent`` holds fewer than ``min_history`` scores or no model exists.
-   The teacher's action is executed on asked steps, the learner's otherwise.
+   finite distances of the last ``window`` steps' observations under the *current* model
+   (``numpy.quantile``, linear interpolation), and always while ``recent`` holds fewer than
+   ``min_history`` scores or no model exists. The teacher's action is executed on asked steps,
+   the learner's otherwise. At every refit the recent observations are scored again with the
+   new model (as ThriftyDAgger recomputes its threshold with the current policy): with stale
+   scores from earlier, worse models the threshold stays high and the strategy stops asking
+   long before its budget.
 
 Over a long run the teacher is asked on about ``target_rate`` of the steps whatever the
 learner's competence: the budget, not the confidence, sets the attention. ThriftyDAgger's
@@ -26,7 +30,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from torchcbl.strategies import Decision, LabelKind
+from torchcbl.strategies._phased import Decision, LabelKind
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
@@ -74,6 +78,9 @@ class NoveltyGated:
         self.min_history = min_history
         self._labels = 0
         self._scores: deque[float] = deque(maxlen=window)
+        self._observations: deque[np.ndarray] = deque(maxlen=window)
+        self._model: Any = None
+        self._rescore = False
 
     def threshold(self) -> float | None:
         """The current novelty threshold (None while the history is too short)."""
@@ -105,10 +112,20 @@ class NoveltyGated:
         self._labels += 1
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
-        return None
+        self._model = model
+        self._rescore = True  # the step being finished was scored with the previous model
+        if self._observations:
+            x = np.stack(list(self._observations))
+            d = np.asarray(model.classify(x).distance, dtype=np.float64)
+            self._scores = deque((float(v) for v in d if math.isfinite(v)), maxlen=self.window)
 
     def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+        x = record.observation_array
+        self._observations.append(x)
         d = record.distance
+        if self._rescore and self._model is not None:
+            d = float(np.asarray(self._model.classify(x[None]).distance, dtype=np.float64)[0])
+        self._rescore = False
         if d is not None and math.isfinite(d):
             self._scores.append(float(d))
 

@@ -1,0 +1,255 @@
+"""The baselines (BC, DAgger, HG-DAgger, novelty-gated) against hand-computable cases."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from _toy_envs import four_d_world, oracle, rare_regions_world
+
+from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig, evaluate_policy
+from torchcbl.gmm import Classification
+from torchcbl.records import StepRecord
+from torchcbl.strategies import correcting, strategy_from_config
+from torchcbl.strategies.bc import BehaviourCloning
+from torchcbl.strategies.dagger import DAgger
+from torchcbl.strategies.hg_dagger import HGDAgger
+from torchcbl.strategies.novelty import NoveltyGated
+
+
+def _teach(env, strategy, steps, *, teacher=None, max_new=1, run_dir=None, seed=3):
+    ct = ConfidentTeacher(
+        env,
+        teacher or oracle(env),
+        strategy=strategy,
+        model=GaussianMixtureSet(env.action_space.n, env.observation_space.shape[0], 3, seed=0),
+        config=TeachingConfig(max_new=max_new),
+        run_dir=run_dir,
+        seed=seed,
+        progress=False,
+    )
+    ct.run(max_steps=steps)
+    return ct
+
+
+def _classification(action: int, distance: float) -> Classification:
+    d = torch.tensor([distance], dtype=torch.float64)
+    return Classification(
+        torch.tensor([action]), torch.exp(-(d**2) / 2), d, torch.full((1, 3), 1 / 3)
+    )
+
+
+def _record(step: int, distance: float) -> StepRecord:
+    return StepRecord(
+        step=step,
+        episode=0,
+        observation=(float(step), 0.0),
+        model_action=0,
+        confidence=None,
+        distance=distance,
+        posterior=None,
+        teacher_action=None,
+        executed_action=0,
+        phase="confident",
+        autonomous=True,
+        reward=0.0,
+        terminated=False,
+        truncated=False,
+        info={},
+    )
+
+
+# -- behaviour cloning ---------------------------------------------------------------------------
+
+
+def test_bc_learns_exactly_the_teachers_own_trajectory():
+    env = four_d_world(episode_length=15)
+    ct = _teach(env, BehaviourCloning(), 45, max_new=5)
+    # The teacher rolled out alone from the same reset seed visits the same states.
+    alone = evaluate_policy(oracle(env), env, n_steps=45, seed=3, uses_info=True)
+    assert [r.observation for r in ct.records] == [r.observation for r in alone]
+    assert all(r.actor == "teacher" and r.teacher_action is not None for r in ct.records)
+    assert [r.executed_action for r in ct.records] == [r.executed_action for r in alone]
+    # ... and the model is the GMM set fitted on that trajectory and its labels.
+    ref = GaussianMixtureSet(3, 4, 3, seed=0)
+    ref.fit(np.array([r.observation for r in alone]), np.array([r.executed_action for r in alone]))
+    assert torch.equal(ct.model.means_, ref.means_)
+    assert torch.equal(ct.model.covariances_, ref.covariances_)
+
+
+# -- DAgger --------------------------------------------------------------------------------------
+
+
+def test_dagger_with_beta_one_is_behaviour_cloning():
+    env = four_d_world(episode_length=15)
+    bc = _teach(env, BehaviourCloning(), 45, max_new=5)
+    env2 = four_d_world(episode_length=15)
+    dg = _teach(env2, DAgger(beta0=1.0, decay=1.0, iteration_steps=7, seed=11), 45, max_new=5)
+    assert [(r.observation, r.teacher_action, r.executed_action) for r in dg.records] == [
+        (r.observation, r.teacher_action, r.executed_action) for r in bc.records
+    ]
+    assert all(r.actor == "teacher" for r in dg.records)
+    for k, v in bc.model.state_dict().items():
+        assert torch.equal(v, dg.model.state_dict()[k]), k
+
+
+def test_dagger_beta_schedule_and_coins_by_hand():
+    d = DAgger(beta0=0.8, decay=0.5, iteration_steps=10, seed=4)
+    assert [d.beta(t) for t in (0, 9, 10, 19, 20, 35)] == [0.8, 0.8, 0.4, 0.4, 0.2, 0.1]
+    coin = np.random.default_rng(np.random.SeedSequence([4, 17])).random()
+    assert d.coin(17) == coin
+    # actor: the teacher's action iff coin < beta; always the teacher's before any model
+    from torchcbl.strategies import Decision
+
+    for t in range(40):
+        want = "teacher" if d.coin(t) < d.beta(t) else "agent"
+        assert d.actor(Decision(True, "noninteractive", t), 1, 2) == want
+        assert d.actor(Decision(True, "noninteractive", t), -1, 2) == "teacher"
+
+
+def test_dagger_labels_every_state_and_executes_by_coin():
+    env = rare_regions_world(episode_length=10)
+    s = DAgger(beta0=1.0, decay=0.5, iteration_steps=10, seed=2)
+    ct = _teach(env, s, 50, max_new=5)
+    assert all(r.teacher_action is not None for r in ct.records)  # every state labelled
+    assert ct.n_demonstrations == 50
+    for r in ct.records:
+        teacher_acts = r.model_action < 0 or s.coin(r.step) < s.beta(r.step)
+        assert r.actor == ("teacher" if teacher_acts else "agent"), r.step
+        assert r.executed_action == (r.teacher_action if teacher_acts else r.model_action)
+    assert {r.actor for r in ct.records[30:]} == {"teacher", "agent"}  # beta 0.125 .. 0.0625
+
+
+def test_dagger_resumes_with_the_same_coins(tmp_path):
+    env = rare_regions_world(episode_length=10)
+    s = DAgger(decay=0.5, iteration_steps=5, seed=1)
+    part = _teach(env, s, 12, max_new=4, run_dir=tmp_path / "b")
+    part.close()
+    env3 = rare_regions_world(episode_length=10)
+    assert part.strategy._steps == 12
+    resumed = ConfidentTeacher.resume(tmp_path / "b", env3, oracle(env3), progress=False)
+    assert isinstance(resumed.strategy, DAgger)  # rebuilt from the run directory
+    assert resumed.strategy._steps == 12 and resumed.strategy.to_config() == s.to_config()
+    resumed.run(max_steps=30)
+    # the resumed env starts a new episode, so states differ; the coins follow the step index
+    for r in resumed.records[12:]:
+        s = resumed.strategy
+        teacher_acts = r.model_action < 0 or s.coin(r.step) < s.beta(r.step)
+        assert r.actor == ("teacher" if teacher_acts else "agent")
+
+
+# -- HG-DAgger -----------------------------------------------------------------------------------
+
+
+def test_hg_dagger_state_machine_by_hand():
+    s = HGDAgger(warmup=2)
+    c = _classification(0, 1.0)
+    assert s.decide(np.zeros(2), c).ask  # warm-up
+    s.observe_label(np.zeros(2), 1, model_action=-1, kind="demonstration")
+    s.observe_label(np.zeros(2), 1, model_action=0, kind="demonstration")
+    assert s.decide(np.zeros(2), c) == (False, "confident", None)  # the learner drives
+    assert s.decide(np.zeros(2), _classification(-1, np.inf)).ask  # no model: ask
+    s.observe_label(np.zeros(2), 2, model_action=0, kind="correction")  # the teacher takes over
+    assert s.teacher_in_control and s.decide(np.zeros(2), c).ask
+    s.observe_label(np.zeros(2), 2, model_action=0, kind="demonstration")  # still disagree
+    assert s.teacher_in_control
+    s.observe_label(np.zeros(2), 2, model_action=2, kind="demonstration")  # agree: hand back
+    assert not s.teacher_in_control and not s.decide(np.zeros(2), c).ask
+
+
+def test_hg_dagger_labels_only_corrections_and_takeovers():
+    env = rare_regions_world(episode_length=10, spread=2.0)
+    s = HGDAgger(warmup=3)
+    ct = _teach(env, s, 200, teacher=correcting(oracle(env)))
+    recs, corr = ct.records, ct.corrections
+    assert ct.n_corrections > 0
+    by_step = {c.step: c for c in corr}
+    for r in recs[3:]:
+        right = env.optimal_action(r.observation_array)
+        if r.autonomous:
+            # the gate: a correction exactly where the learner's executed action was wrong
+            assert (r.step in by_step) == (r.executed_action != right)
+        else:
+            assert r.actor == "teacher" and r.executed_action == right
+    # every takeover starts right after a correction and lasts until the learner agreed
+    for r in recs[4:]:
+        if not r.autonomous:
+            prev = recs[r.step - 1]
+            assert prev.step in by_step or (
+                not prev.autonomous and prev.model_action != prev.teacher_action
+            )
+    assert ct.n_demonstrations == sum(1 for r in recs if not r.autonomous) + len(corr)
+
+
+# -- novelty-gated (ThriftyDAgger style) ---------------------------------------------------------
+
+
+def test_novelty_threshold_is_the_quantile_of_recent_scores_by_hand():
+    s = NoveltyGated(target_rate=0.1, window=20, warmup=0, min_history=5)
+    for t in range(4):
+        s.observe_step(_record(t, float(t + 1)), None)
+    assert s.threshold() is None and s.decide(np.zeros(2), _classification(0, 0.0)).ask
+    for t in range(4, 20):
+        s.observe_step(_record(t, float(t + 1)), None)
+    # scores 1..20: linear 0.9 quantile at position 0.9 * 19 = 17.1 -> 18 + 0.1 = 18.1
+    assert s.threshold() == pytest.approx(18.1)
+    assert s.decide(np.zeros(2), _classification(0, 18.2)).ask
+    assert not s.decide(np.zeros(2), _classification(0, 18.0)).ask
+    assert s.decide(np.zeros(2), _classification(-1, 0.0)).ask  # no model yet
+    for t in range(20, 30):  # the window slides: scores 11..30 -> 28.1
+        s.observe_step(_record(t, float(t + 1)), None)
+    assert s.threshold() == pytest.approx(28.1)
+    s.observe_step(_record(30, float("inf")), None)  # non-finite scores are not kept
+    assert s.threshold() == pytest.approx(28.1)
+
+
+def test_novelty_rescores_recent_states_with_the_new_model():
+    class Model:
+        def classify(self, x):
+            return _classification(0, 0.0)._replace(
+                distance=torch.as_tensor(np.asarray(x)[:, 0] * 0 + 0.5, dtype=torch.float64)
+            )
+
+    s = NoveltyGated(target_rate=0.5, window=4, warmup=0, min_history=1)
+    for t in range(4):
+        s.observe_step(_record(t, 10.0 + t), None)
+    assert s.threshold() == pytest.approx(11.5)
+    s.observe_refit(Model(), np.zeros((1, 2)), np.zeros(1))
+    assert s.threshold() == pytest.approx(0.5)  # every recent state scored by the new model
+    s.observe_step(_record(4, 99.0), None)  # the refit's own step: rescored too
+    assert list(s._scores) == [0.5] * 4
+
+
+def test_novelty_asks_about_its_target_rate_after_warmup():
+    env = rare_regions_world(episode_length=20, spread=1.5)
+    s = NoveltyGated(target_rate=0.2, window=100, warmup=10, min_history=10)
+    ct = _teach(env, s, 300, max_new=5)
+    asked = np.mean([not r.autonomous for r in ct.records[100:]])
+    assert 0.1 <= asked <= 0.3, asked
+    assert all(r.executed_action == r.teacher_action for r in ct.records if not r.autonomous)
+
+
+def test_baselines_roundtrip_through_their_config():
+    for s in (
+        BehaviourCloning(),
+        DAgger(beta0=0.9, decay=0.7, iteration_steps=3, seed=5),
+        HGDAgger(warmup=4),
+        NoveltyGated(target_rate=0.05, window=50, warmup=2, min_history=7),
+    ):
+        again = strategy_from_config(s.to_config())
+        assert type(again) is type(s) and again.to_config() == s.to_config()
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: DAgger(beta0=1.5),
+        lambda: DAgger(iteration_steps=0),
+        lambda: HGDAgger(warmup=-1),
+        lambda: NoveltyGated(target_rate=1.0),
+        lambda: NoveltyGated(window=0),
+    ],
+)
+def test_baselines_reject_bad_settings(make):
+    with pytest.raises(ValueError, match="must be"):
+        make()

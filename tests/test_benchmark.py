@@ -1,0 +1,225 @@
+"""The benchmark: per-cell cache, resume after a kill, Ray equals the process pool, the table."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from torchcbl import benchmark as bm
+from torchcbl.cli import main
+
+TESTS = Path(__file__).resolve().parent
+ROOT = TESTS.parent
+
+
+def _env(**kw):
+    return bm.EnvSpec(
+        **{
+            "name": "toy",
+            "env_id": "_bench_env:BenchCluster-v0",
+            "teacher": "_bench_env:teacher",
+            "budgets": (5, 10, 20),
+            "max_steps": 60,
+            "env_kwargs": {"spread": 2.0},
+            "eval_seeds": (100, 101),
+            "eval_episodes": 3,
+            "teaching": {"max_new": 5},
+            "model": {"max_components": 2},
+            **kw,
+        }
+    )
+
+
+STRATEGIES = [bm.StrategySpec("bc"), bm.StrategySpec("dagger", {"iteration_steps": 10})]
+
+
+def _figures(cell):
+    return {k: cell[k] for k in ("key", "curve", "teacher_performance", "attention", "config")}
+
+
+def test_a_cell_reports_curve_attention_and_times():
+    (config,) = bm.cell_configs([bm.StrategySpec("hg_dagger", {"warmup": 3})], [_env()], [0])
+    cell = bm.run_cell(config)
+    assert [p["labels"] for p in cell["curve"]][:2] == [5, 10]
+    assert cell["teacher_performance"] == 1.0  # the oracle is optimal
+    a = cell["attention"]
+    assert a["steps"] == 60 and a["monitored_steps"] == 60  # the gate watches every step
+    assert a["labels"] == a["requests"] + a["corrections"]
+    # every wrong autonomous action was corrected by the (deterministic) gating teacher
+    assert a["wrong_autonomous_actions"] == a["corrections"] > 0
+    assert cell["wall_s"] > 0 and cell["cpu_s"] > 0
+    assert bm.run_cell(config)["curve"] == cell["curve"]  # deterministic
+
+
+def test_labels_to_95pct_with_censoring_by_hand():
+    def cell(seed, perfs, teacher=1.0):
+        labels = [5, 10, 20]
+        return {
+            "env": "e",
+            "strategy": "s",
+            "seed": seed,
+            "teacher_performance": teacher,
+            "curve": [{"labels": n, "performance": p} for n, p in zip(labels, perfs, strict=True)],
+            "config": {"env": {"budgets": labels}},
+            "attention": {
+                k: 1
+                for k in (
+                    "requests",
+                    "monitored_steps",
+                    "context_switches",
+                    "wrong_autonomous_actions",
+                )
+            },
+            "wall_s": 1.0,
+            "cpu_s": 1.0,
+        }
+
+    cells = [cell(0, [0.5, 0.96, 1.0]), cell(1, [0.95, 1, 1]), cell(2, [0.2, 0.5, 0.9])]
+    r = bm.summarize(cells, envs=["e"], strategies=["s"])["table"]["e"]["s"]
+    lt = r["labels_to_95pct"]
+    assert [p["labels"] for p in lt["per_seed"]] == [10, 5, 20]
+    assert [p["censored"] for p in lt["per_seed"]] == [False, False, True]
+    assert lt["mean"] == pytest.approx(35 / 3) and lt["n"] == 3 and lt["n_censored"] == 1
+    assert lt["lower_bound"] is True
+    assert r["final_performance"]["mean"] == pytest.approx((1 + 1 + 0.9) / 3)
+    assert r["performance_at_budget"]["10"]["mean"] == pytest.approx((0.96 + 1 + 0.5) / 3)
+    assert "| ≥ 12 ± 8 (1/3) | 0.82 ± 0.28 @ 10 |" in bm.format_table({"table": {"e": {"s": r}}})
+
+
+def test_rerun_uses_the_cache_and_a_changed_config_is_a_new_cell(tmp_path):
+    seen = []
+    bm.run_benchmark(STRATEGIES[:1], [_env()], [0], tmp_path, workers=1, plots=False)
+    bm.run_benchmark(
+        STRATEGIES[:1],
+        [_env(), _env(name="toy2", budgets=(5, 10))],
+        [0],
+        tmp_path,
+        workers=1,
+        on_cell=lambda c, cached: seen.append((c["env"], cached)),
+    )
+    assert seen == [("toy", True), ("toy2", False)]
+    res = json.loads((tmp_path / "results.json").read_text())
+    assert res["sweep"] == {**res["sweep"], "cells": 2, "computed": 1, "cached": 1}
+    assert set(res["table"]) == {"toy", "toy2"}
+    assert (tmp_path / "learning_curves.png").stat().st_size > 0
+
+
+_CHILD = """
+import sys
+sys.path[:0] = [{tests!r}, {root!r}]
+from torchcbl import benchmark as bm
+from test_benchmark import STRATEGIES, _env
+bm.run_benchmark(STRATEGIES, [_env(max_steps=150, budgets=(5, 10, 20, 40))], [0, 1],
+                 {out!r}, workers=1, plots=False)
+"""
+
+
+def test_killed_sweep_resumes_without_recomputing_a_finished_cell(tmp_path):
+    out = tmp_path / "bench"
+    code = _CHILD.format(tests=str(TESTS), root=str(ROOT), out=str(out))
+    child = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT)
+    cells_dir = out / "cells"
+    deadline = time.monotonic() + 300
+    try:
+        while time.monotonic() < deadline and child.poll() is None:
+            if cells_dir.exists() and list(cells_dir.glob("*.json")):
+                break
+            time.sleep(0.05)
+        assert child.poll() is None, "the sweep ended before it could be killed"
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.wait()
+    finished = {p.name: p.read_bytes() for p in cells_dir.glob("*.json")}
+    assert 1 <= len(finished) < 4
+    computed, cached = [], []
+    bm.run_benchmark(
+        STRATEGIES,
+        [_env(max_steps=150, budgets=(5, 10, 20, 40))],
+        [0, 1],
+        out,
+        workers=1,
+        plots=False,
+        on_cell=lambda c, was: (cached if was else computed).append(f"{c['key']}.json"),
+    )
+    assert sorted(cached) == sorted(finished)  # no finished cell recomputed ...
+    assert not set(computed) & set(finished) and len(computed) == 4 - len(finished)
+    for name, data in finished.items():  # ... nor rewritten
+        assert (cells_dir / name).read_bytes() == data
+    res = json.loads((out / "results.json").read_text())
+    assert res["sweep"]["cells"] == 4 and res["sweep"]["cached"] == len(finished)
+
+
+def test_local_ray_gives_the_same_cells_as_the_process_pool(tmp_path, monkeypatch):
+    pytest.importorskip("ray")
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    grid = (STRATEGIES[1:], [_env()], [0, 1])
+    pool = bm.run_benchmark(*grid, tmp_path / "pool", workers=2, plots=False)
+    ray = bm.run_benchmark(*grid, tmp_path / "ray", workers=2, use_ray=True, plots=False)
+    assert pool["sweep"]["engine"] == "process_pool" and ray["sweep"]["engine"] == "ray"
+    for key in pool["cells"]:
+        a = json.loads((tmp_path / "pool" / "cells" / f"{key}.json").read_text())
+        b = json.loads((tmp_path / "ray" / "cells" / f"{key}.json").read_text())
+        assert _figures(a) == _figures(b)
+    strip = ("wall_s", "cpu_s")
+    for env, rows in pool["table"].items():
+        for s, r in rows.items():
+            other = ray["table"][env][s]
+            assert {k: v for k, v in r.items() if k not in strip} == {
+                k: v for k, v in other.items() if k not in strip
+            }
+
+
+def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
+    monkeypatch.syspath_prepend(str(TESTS))
+    code = main(
+        [
+            "benchmark",
+            "--envs",
+            "",
+            "--gym-env",
+            "_bench_env:BenchCluster-v0",
+            "--teacher",
+            "_bench_env:teacher",
+            "--strategies",
+            "bc,novelty",
+            "--seeds",
+            "1",
+            "--workers",
+            "1",
+            "--budgets",
+            "5,10",
+            "--max-steps",
+            "40",
+            "--eval-episodes",
+            "2",
+            "--out",
+            str(tmp_path / "b"),
+        ]
+    )
+    out = capsys.readouterr().out
+    assert code == 0 and "| _bench_env:BenchCluster-v0 | novelty |" in out
+    assert "wall" in out and "CPU" in out
+    assert (tmp_path / "b" / "results.json").exists()
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--strategies", "bc,nope"], "--strategies: unknown ['nope']"),
+        (["--envs", "mars"], "--envs: unknown ['mars']"),
+        (["--envs", "", "--gym-env", "X-v0"], "--gym-env needs --teacher"),
+    ],
+)
+def test_cli_benchmark_user_mistakes_are_one_line(argv, message, tmp_path):
+    with pytest.raises(SystemExit) as exc:
+        main(["benchmark", "--out", str(tmp_path), *argv])
+    assert str(exc.value).startswith(message) and "\n" not in str(exc.value)
