@@ -11,9 +11,9 @@ evaluates each snapshot greedily on held-out seeds of the evaluation env. A cell
   asked), monitored steps (requests, plus the autonomous steps a gating teacher had to watch:
   those of a strategy that wants corrections), context switches (changes of who acted between
   consecutive steps), corrections;
-- wrong autonomous actions: autonomous steps whose action differs from the teacher's choice
-  in that state (asked of a second, separate teacher instance, so the teacher itself is not
-  disturbed);
+- wrong autonomous actions: steps on which the learner's action ran (autonomous steps, and
+  DAgger's labelled steps executed by the learner) and differs from the teacher's choice in that
+  state (asked of a second, separate teacher instance, so the teacher itself is not disturbed);
 - the teacher's own performance on the same evaluation seeds, wall and CPU time.
 
 The core never imports a domain: an environment is a gymnasium id (``"module:Id"`` makes
@@ -349,7 +349,9 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
 
     steps = len(records)
     autonomous = [r for r in records if r.teacher_action is None]
-    wrong = sum(1 for r in autonomous if r.executed_action != expected[r.step])
+    # the learner's own actions that ran: autonomous steps, and DAgger's labelled agent steps
+    agent = [r for r in records if r.actor == "agent"]
+    wrong = sum(1 for r in agent if r.executed_action != expected[r.step])
     actors = [r.actor for r in records]
     switches = sum(1 for a, b in zip(actors, actors[1:], strict=False) if a != b)
     requests = steps - len(autonomous)
@@ -362,6 +364,7 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
         "teacher_actions": sum(1 for a in actors if a == "teacher"),
         "steps": steps,
         "autonomous_steps": len(autonomous),
+        "agent_actions": len(agent),
         "wrong_autonomous_actions": wrong,
     }
 

@@ -75,6 +75,11 @@ Shipped strategies:
   phase and teacher bursts; asks when its confidence rule is not confident.
 - :class:`~torchcbl.strategies.cba.ConfidenceBasedAutonomy`: JAIR 2009's per-boundary
   thresholds, nearest-neighbour distance gate, relabelling and corrections.
+
+Baselines (for :mod:`torchcbl.benchmark`), one file each: :mod:`~torchcbl.strategies.bc`
+(behaviour cloning), :mod:`~torchcbl.strategies.dagger` (DAgger, beta schedule),
+:mod:`~torchcbl.strategies.hg_dagger` (teacher-gated HG-DAgger, through corrections),
+:mod:`~torchcbl.strategies.novelty` (ThriftyDAgger-style novelty quantile gate).
 """
 
 from __future__ import annotations
