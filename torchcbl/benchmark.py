@@ -501,6 +501,8 @@ def run_benchmark(
         out_dir: the benchmark directory; finished cells are cached in ``out_dir/cells``, so
             calling again with the same grid computes only the missing cells.
         workers: processes of the local pool (default: ``os.cpu_count()``); 1 runs in-process.
+            The pool spawns fresh interpreters, which import the caller's main module: from a
+            script, call ``run_benchmark`` under ``if __name__ == "__main__":``.
         use_ray: run the cells as Ray tasks (``ray_address`` None: a local Ray with
             ``workers`` CPUs; else ``ray.init(address=ray_address)``, e.g. ``"auto"``).
         plots: write ``learning_curves.png``.
