@@ -113,7 +113,8 @@ class TeachingConfig:
     """How the loop teaches and when it stops. Defaults follow the paper's corridor setup.
 
     Attributes:
-        max_new: refit after this many new demonstrations (>= 1).
+        max_new: refit after this many new labels (>= 1): demonstrations, and corrections
+            with a strategy that takes them.
         accuracy_window: number of most recent demonstrations the prediction accuracy is taken
             over (20 corridor, 150 driving); also the window of ``autonomy_rate``.
         target_accuracy: windowed accuracy in (0, 1] that ends the non-interactive phase;
