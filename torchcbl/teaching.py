@@ -220,6 +220,9 @@ class ConfidentTeacher:
             ``Box`` observation space of size D.
         teacher: ``teacher(observation [D] ndarray, info dict) -> int`` in ``[0, n_actions)``.
             It gets a copy of the env's observation and the info of the latest reset / step.
+            Optionally it has ``correct(observation, info, action) -> int | None``, offered
+            after each autonomous step by strategies that take corrections (see
+            :mod:`torchcbl.strategies`).
         model: the learner; default ``GaussianMixtureSet(n_actions, D, seed=seed)``. Its
             ``fit`` must be deterministic given the data (resume relies on it).
         rule: the confidence rule of the default strategy; default ``DistanceRule(2.0)``
