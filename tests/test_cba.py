@@ -209,6 +209,7 @@ def test_6d_cba_and_chi2_rule_reach_the_teacher_with_few_demonstrations(seed):
     for name, r in (("chi2", chi2), ("cba", cba)):
         assert r["return_ratio"] >= 0.95, (name, r)
         assert r["demos"] < 0.30, (name, r)
+        assert r["ct"].n_demonstrations < 0.30 * STEPS, (name, r)  # corrections counted too
     assert cba["ct"].n_corrections > 0
 
 
@@ -223,3 +224,20 @@ def test_6d_corrections_mean_fewer_wrong_autonomous_actions(seed):
     without = _teach(strategy=ConfidenceBasedAutonomy(), corrections=False, seed=seed)
     assert with_c["return_ratio"] >= 0.95, with_c
     assert with_c["wrong_autonomous"] < without["wrong_autonomous"], (with_c, without)
+
+
+def test_a_correction_survives_sigkill_like_a_demonstration(tmp_path):
+    import random
+
+    from _toy_envs import check_corrections_kept
+    from test_session import _check_nothing_lost, _kill_cycle
+
+    run = tmp_path / "run"
+    rng = random.Random(3)
+    counts = []
+    for i in range(2):
+        side = tmp_path / f"side{i}.log"
+        _kill_cycle(run, side, rng.uniform(1.0, 1.5), "cba")
+        _check_nothing_lost(run, side)
+        counts.append(check_corrections_kept(run, side)[0])
+    assert counts[-1] > 0  # the session did correct, and those corrections are on disk
