@@ -58,6 +58,15 @@ def test_a_cell_reports_curve_attention_and_times():
     assert bm.run_cell(config)["curve"] == cell["curve"]  # deterministic
 
 
+def test_dagger_counts_its_learner_executed_labelled_steps_as_wrong_actions():
+    strategy = bm.StrategySpec("dagger", {"beta0": 0.0})  # the learner acts once it has a model
+    (config,) = bm.cell_configs([strategy], [_env(env_kwargs={"spread": 3.0})], [0])
+    a = bm.run_cell(config)["attention"]
+    assert a["autonomous_steps"] == 0 and a["labels"] == a["requests"] == a["steps"] == 20
+    assert a["agent_actions"] == 20 - 5  # all but the steps before the first fit (max_new 5)
+    assert 0 < a["wrong_autonomous_actions"] < a["agent_actions"]
+
+
 def test_labels_to_95pct_with_censoring_by_hand():
     def cell(seed, perfs, teacher=1.0):
         labels = [5, 10, 20]
