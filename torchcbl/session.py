@@ -528,9 +528,33 @@ def load_model(
     if ckpt is not None and ckpt[0] == k:
         state = torch.load(ckpt[1], weights_only=True)
         model.load_state_dict(state["state_dict"])
+    elif k > 0 and config["teaching"].get("refit", "full") == "incremental":
+        replay_refits(model, run_dir, x, y, k, int(config["teaching"]["max_new"]))
     elif k > 0:
         model.fit(x[:k], y[:k])
     return model
+
+
+def replay_refits(
+    model: GaussianMixtureSet,
+    run_dir: str | os.PathLike[str],
+    x: np.ndarray,
+    y: np.ndarray,
+    k: int,
+    max_new: int,
+) -> None:
+    """Rebuild, in place, an incremental-refit session's model as it stood at ``k``
+    demonstrations when that checkpoint is missing: load the newest checkpoint before ``k``
+    (none: start unfitted) and redo the loop's incremental refits (``model.refit``) every
+    ``max_new`` demonstrations from there to ``k``. ``GaussianMixtureSet.refit`` is a pure
+    function of the state and the data, so this gives the live model bit for bit."""
+    ckpt = latest_checkpoint(run_dir, at_most=k)
+    start = 0
+    if ckpt is not None:
+        model.load_state_dict(torch.load(ckpt[1], weights_only=True)["state_dict"])
+        start = ckpt[0]
+    for j in range(start + max_new, k + 1, max_new):
+        model.refit(x[:j], y[:j])
 
 
 def load_policy(run_dir: str | os.PathLike[str]) -> GreedyPolicy:
