@@ -27,6 +27,18 @@ mixture's count, so the joint minimum over all count combinations is reached by 
 action separately, which is what ``fit`` does. ``criterion="aic"`` (default) is the standard AIC
 with free parameters p = (k-1) + k d + k d (d+1) / 2 (equal to scikit-learn's ``aic``);
 ``"bic"`` is p log n - 2 L; ``"aic_paper"`` is Eq. 5 taken literally, 2 k - 2 L.
+
+Incremental refits
+------------------
+:meth:`GaussianMixtureSet.refit` refits only the actions whose data changed, each candidate
+warm-started from its own kept parameters, and fits an action from scratch again once its data
+grew by ``refit_growth`` since its last from-scratch fit (see docs/architecture.md).
+
+Threads
+-------
+Fits and classification run on one torch thread in a scope that restores the caller's count;
+only an EM of at least :data:`SINGLE_THREAD_WORK` gets the caller's threads, and only while
+the machine has a spare core. The global setting is never changed behind the caller's back.
 """
 
 from __future__ import annotations
