@@ -137,7 +137,7 @@ def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
     q = z.shape[-1]
     d = _dim_of(q)
     du = q - d - 1
-    _, _, full, upper, scale, _ = _indices(d, z.device)
+    _, _, full, _, _, _ = _indices(d, z.device)
     # z^T resp keeps the big operand in its natural layout (faster than resp^T z)
     stats = torch.bmm(z.transpose(1, 2), resp.reshape(g, n, c * k)).transpose(1, 2)
     stats = stats.reshape(g, c, k, q)
@@ -149,10 +149,20 @@ def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
     cov.diagonal(dim1=-2, dim2=-1).add_(floor)
     weights = nk * cmask
     weights /= weights.sum(-1, keepdim=True)
+    return params_of(weights, means, cov, cmask)
+
+
+def params_of(weights: Tensor, means: Tensor, cov: Tensor, cmask: Tensor) -> Params:
+    """Params (with log_det and the quadratic-feature coefficients) of given mixtures:
+    weights [G, C, K], means [G, C, K, D], cov [G, C, K, D, D] (floor included), cmask
+    [G, C, K]. This is how :func:`m_step` finishes, and how a warm start enters :func:`run_em`.
+    """
+    g, c, k, d = means.shape
+    _, _, _, upper, scale, _ = _indices(d, means.device)
     prec, log_det = _precision(cov)
     lin = (prec * means.unsqueeze(-2)).sum(-1)  # P mu (a batched matmul of 1-column products
     # would cost more than the rest of the M-step's small operations)
-    quad = prec.reshape(g, c, k, d * d)[..., upper] * scale.to(z.dtype)
+    quad = prec.reshape(g, c, k, d * d)[..., upper] * scale.to(means.dtype)
     const = torch.log(weights) + log_det - 0.5 * (lin * means).sum(-1)
     const = torch.where(cmask > 0, const - 0.5 * d * math.log(2.0 * math.pi), _PAD_LOG_WEIGHT)
     coef = torch.cat([quad, lin, const.unsqueeze(-1)], -1)
@@ -615,11 +625,14 @@ def run_em(
     pmask: Tensor,
     cmask: Tensor,
     floor: Tensor,
-    resp0: Tensor,
+    resp0: Tensor | None,
     tol: float,
     max_iter: int,
+    params0: Params | None = None,
 ) -> EMResult:
-    """EM for every slot of every group at once, from initial responsibilities resp0.
+    """EM for every slot of every group at once, from initial responsibilities resp0 (one
+    M-step makes the first parameters) or, when resp0 is None, from given parameters
+    ``params0`` (a warm start, :func:`params_of`).
 
     Mirrors sklearn: each iteration is an E-step (log-likelihood of the current parameters)
     then an M-step; a slot stops when |mean log-likelihood change| < tol. The iterations run
@@ -636,7 +649,10 @@ def run_em(
     dev, dt = x.device, x.dtype
     z0 = quadratic_features(x)
     zt0 = z0.transpose(1, 2).contiguous()
-    params0 = m_step(z0, resp0, cmask, floor)
+    if resp0 is not None:
+        params0 = m_step(z0, resp0, cmask, floor)
+    elif params0 is None:
+        raise ValueError("run_em: pass initial responsibilities resp0 or parameters params0")
     out = [t.reshape(g0 * c0 * k0, *t.shape[3:]).clone() for t in params0]
     n_iter = np.zeros(g0 * c0, dtype=np.int64)
     converged = np.zeros(g0 * c0, dtype=bool)

@@ -27,11 +27,26 @@ mixture's count, so the joint minimum over all count combinations is reached by 
 action separately, which is what ``fit`` does. ``criterion="aic"`` (default) is the standard AIC
 with free parameters p = (k-1) + k d + k d (d+1) / 2 (equal to scikit-learn's ``aic``);
 ``"bic"`` is p log n - 2 L; ``"aic_paper"`` is Eq. 5 taken literally, 2 k - 2 L.
+
+Incremental refits
+------------------
+:meth:`GaussianMixtureSet.refit` refits only the actions whose data changed, each candidate
+warm-started from its own kept parameters, and fits an action from scratch again once its data
+grew by ``refit_growth`` since its last from-scratch fit (see docs/architecture.md).
+
+Threads
+-------
+Fits and classification run on one torch thread in a scope that restores the caller's count;
+only an EM of at least :data:`SINGLE_THREAD_WORK` gets the caller's threads, and only while
+the machine has a spare core. The global setting is never changed behind the caller's back.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple
 
@@ -41,7 +56,7 @@ from torch import Tensor, nn
 
 from torchcbl import _em
 
-__all__ = ["Classification", "FitReport", "GaussianMixtureSet"]
+__all__ = ["SINGLE_THREAD_WORK", "Classification", "FitReport", "GaussianMixtureSet"]
 
 Criterion = Literal["aic", "bic", "aic_paper"]
 _CRITERIA = ("aic", "bic", "aic_paper")
@@ -75,6 +90,9 @@ class FitReport:
     Entries that are not candidates (j + 1 > points of the action) hold -inf log-likelihood,
     +inf criterion, converged False and 0 iterations; ``candidate_mask`` marks the real ones.
     ``log_likelihood`` is the total (summed over the action's points) natural-log likelihood.
+    ``refit_kind`` says per action what this fit did: "scratch" (k-means++ start), "warm"
+    (every candidate started from its previous parameters, :meth:`GaussianMixtureSet.refit`),
+    "kept" (data unchanged, mixture kept; its table rows are those of its last fit) or "empty".
     """
 
     criterion_name: str
@@ -87,6 +105,7 @@ class FitReport:
     converged: Tensor
     n_iter: Tensor
     notes: tuple[str, ...]
+    refit_kind: tuple[str, ...] = ()
 
     @property
     def all_converged(self) -> bool:
@@ -101,9 +120,11 @@ class FitReport:
                 continue
             m = self.candidate_mask[a]
             conv = int(self.converged[a][m].sum())
+            how = f", {self.refit_kind[a]}" if self.refit_kind else ""
             lines.append(
                 f"  action {a}: {n} points, chose k={k} of {int(m.sum())} candidates "
-                f"({conv} converged), log-likelihood {float(self.log_likelihood[a, k - 1]):.4g}"
+                f"({conv} converged{how}), log-likelihood "
+                f"{float(self.log_likelihood[a, k - 1]):.4g}"
             )
         lines.extend(f"  note: {s}" for s in self.notes)
         return "\n".join(lines)
@@ -132,6 +153,74 @@ def _rows_preview(rows: np.ndarray) -> str:
     return f"[{shown}]{more}"
 
 
+_REFIT_BUFFERS = (
+    "converged_",
+    "n_iter_",
+    "data_mean_",
+    "cand_weights_",
+    "cand_means_",
+    "cand_covariances_",
+    "full_fit_points_",
+)
+
+
+def _initial_buffer(model: GaussianMixtureSet, name: str) -> Tensor:
+    """The value a buffer of :data:`_REFIT_BUFFERS` has before any fit."""
+    buf = getattr(model, name)
+    if name == "cand_covariances_":
+        return torch.eye(model.n_features, dtype=buf.dtype).expand(buf.shape).clone()
+    return torch.zeros(buf.shape, dtype=buf.dtype)
+
+
+# Thread policy (see docs/architecture.md, "Threads"). Everything in fit/refit/classify runs on
+# one torch thread, in a scope that restores the caller's count, except the EM of a problem of
+# at least this much work per iteration (points x candidate components x quadratic features),
+# which gets the caller's threads when the machine has a core to spare (1-minute load average
+# below the usable CPUs minus 0.5). Measured with bench/bench_refit.py --sections threads.
+SINGLE_THREAD_WORK = 1.0e6
+
+
+def _usable_cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not on Linux
+        return os.cpu_count() or 1
+
+
+def _spare_core() -> bool:
+    """True unless the 1-minute load average says every usable core is taken."""
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):  # no load average (Windows): trust the size rule
+        return True
+    return load < _usable_cpus() - 0.5
+
+
+def _em_threads(work: float, caller: int) -> int:
+    """Threads for an EM of ``work`` (see SINGLE_THREAD_WORK): 1 or the caller's count."""
+    if caller <= 1 or work < SINGLE_THREAD_WORK or not _spare_core():
+        return 1
+    return caller
+
+
+@contextlib.contextmanager
+def _threads(n: int) -> Iterator[None]:
+    """Run the block on ``n`` torch threads, then restore the count the caller had.
+
+    torch's thread count is process-wide: another Python thread running torch operations at
+    the same time sees ``n`` for that while.
+    """
+    before = torch.get_num_threads()
+    if n == before:
+        yield
+        return
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
 class GaussianMixtureSet(nn.Module):
     """One full-covariance Gaussian mixture per action, fitted by batched EM (Section 4.1).
 
@@ -147,13 +236,21 @@ class GaussianMixtureSet(nn.Module):
             4-D, k <= 15) under 0.1 s. Use 1e-4 or less for tighter fits.
         max_iter: EM iteration cap per candidate.
         seed: seeds the k-means++ initialisation; the same seed and data give the same model.
+        refit_growth: :meth:`refit` fits an action from scratch once its point count reached
+            ``1 + refit_growth`` times its count at its last from-scratch fit (> 0; default
+            0.25: about 5 from-scratch fits per doubling of the data).
 
     Fitted buffers (fixed shapes, so ``state_dict`` loads into a fresh instance built with the
     same arguments): ``weights_`` [A, K], ``means_`` [A, K, D], ``covariances_`` [A, K, D, D],
     ``precisions_cholesky_`` [A, K, D, D], ``component_mask_`` [A, K] bool, ``log_prior_`` [A]
     (log share of points, -inf for an action without data), ``n_points_`` [A],
     ``n_components_`` [A] long, ``criterion_`` [A, K] (+inf where k is not a candidate),
-    ``log_likelihood_`` [A, K] (-inf where k is not a candidate), ``var_floor_`` [D].
+    ``log_likelihood_`` [A, K] (-inf where k is not a candidate), ``converged_`` [A, K] bool,
+    ``n_iter_`` [A, K] long, ``var_floor_`` [D]. For :meth:`refit`, every candidate's
+    parameters (slot c = the candidate with c + 1 components, uncentred; zero weights beyond
+    it): ``cand_weights_`` [A, K, K], ``cand_means_`` [A, K, K, D], ``cand_covariances_``
+    [A, K, K, D, D]; ``data_mean_`` [A, D] (each action's mean, to detect changed data) and
+    ``full_fit_points_`` [A] long (count at the last from-scratch fit, 0 = none).
     ``fit_report_`` (a :class:`FitReport`) is a plain attribute, not part of the state_dict.
     """
 
@@ -168,6 +265,7 @@ class GaussianMixtureSet(nn.Module):
         tol: float = 1e-3,
         max_iter: int = 200,
         seed: int = 0,
+        refit_growth: float = 0.25,
     ) -> None:
         super().__init__()
         for name, val in (
@@ -186,6 +284,15 @@ class GaussianMixtureSet(nn.Module):
             raise ValueError(f"Expected tol to be a finite float > 0 but got {tol!r}")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise ValueError(f"Expected seed to be an int but got {seed!r}")
+        if (
+            isinstance(refit_growth, bool)
+            or not isinstance(refit_growth, (int, float))
+            or not math.isfinite(refit_growth)
+            or refit_growth <= 0
+        ):
+            raise ValueError(
+                f"Expected refit_growth to be a finite float > 0 but got {refit_growth!r}"
+            )
         self.n_actions = int(n_actions)
         self.n_features = int(n_features)
         self.max_components = int(max_components)
@@ -194,6 +301,7 @@ class GaussianMixtureSet(nn.Module):
         self.tol = float(tol)
         self.max_iter = int(max_iter)
         self.seed = int(seed)
+        self.refit_growth = float(refit_growth)
         a, k, d = self.n_actions, self.max_components, self.n_features
         f64 = torch.float64
         eye = torch.eye(d, dtype=f64).expand(a, k, d, d).clone()
@@ -208,7 +316,16 @@ class GaussianMixtureSet(nn.Module):
         self.register_buffer("n_components_", torch.zeros(a, dtype=torch.long))
         self.register_buffer("criterion_", torch.full((a, k), math.inf, dtype=f64))
         self.register_buffer("log_likelihood_", torch.full((a, k), -math.inf, dtype=f64))
+        self.register_buffer("converged_", torch.zeros(a, k, dtype=torch.bool))
+        self.register_buffer("n_iter_", torch.zeros(a, k, dtype=torch.long))
         self.register_buffer("var_floor_", torch.zeros(d, dtype=f64))
+        self.register_buffer("data_mean_", torch.zeros(a, d, dtype=f64))
+        self.register_buffer("cand_weights_", torch.zeros(a, k, k, dtype=f64))
+        self.register_buffer("cand_means_", torch.zeros(a, k, k, d, dtype=f64))
+        self.register_buffer(
+            "cand_covariances_", torch.eye(d, dtype=f64).expand(a, k, k, d, d).clone()
+        )
+        self.register_buffer("full_fit_points_", torch.zeros(a, dtype=torch.long))
         self.register_buffer("fitted_", torch.zeros((), dtype=torch.bool))
         self.fit_report_: FitReport | None = None
         self._cache: dict[str, Any] | None = None
@@ -218,7 +335,7 @@ class GaussianMixtureSet(nn.Module):
             f"n_actions={self.n_actions}, n_features={self.n_features}, "
             f"max_components={self.max_components}, criterion={self.criterion!r}, "
             f"var_floor={self.var_floor}, tol={self.tol}, max_iter={self.max_iter}, "
-            f"seed={self.seed}"
+            f"seed={self.seed}, refit_growth={self.refit_growth}"
         )
 
     # ------------------------------------------------------------------ state and caches
@@ -231,10 +348,17 @@ class GaussianMixtureSet(nn.Module):
         self._cache = None
         return super()._apply(fn, recurse)
 
-    def _load_from_state_dict(self, *args: Any, **kwargs: Any) -> None:
+    def _load_from_state_dict(
+        self, state_dict: dict[str, Any], prefix: str, *args: Any, **kwargs: Any
+    ) -> None:
         self._cache = None
         self.fit_report_ = None
-        super()._load_from_state_dict(*args, **kwargs)
+        # a state_dict saved before refit() existed lacks the candidates: load it with the
+        # empty defaults, so that the next refit() fits every action from scratch
+        for name in _REFIT_BUFFERS:
+            if prefix + name not in state_dict and prefix + "fitted_" in state_dict:
+                state_dict[prefix + name] = _initial_buffer(self, name)
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def _tables(self) -> dict[str, Any]:
         """Prediction tables derived from the buffers, computed once per fit/load/.to()."""
@@ -317,7 +441,9 @@ class GaussianMixtureSet(nn.Module):
 
     # ------------------------------------------------------------------ fitting
     def fit(self, observations: Any, actions: Any) -> GaussianMixtureSet:
-        """Fit one mixture per action, choosing each count by the criterion.
+        """Fit one mixture per action from scratch, choosing each count by the criterion.
+
+        Every candidate of every action starts from its k-means++ initialisation.
 
         Args:
             observations: [N, D] real array (numpy or torch, float32/float64), N >= 1.
@@ -327,6 +453,46 @@ class GaussianMixtureSet(nn.Module):
         """
         x_np = self._check_observations(observations)
         y_np = self._check_actions(actions, x_np.shape[0])
+        caller = torch.get_num_threads()
+        with _threads(1):
+            return self._fit(x_np, y_np, incremental=False, caller_threads=caller)
+
+    def refit(self, observations: Any, actions: Any) -> GaussianMixtureSet:
+        """Refit on the full data set, refitting only the actions whose data changed.
+
+        The incremental refit of the teaching loop: after new demonstrations, pass ALL the data
+        (old and new). An action whose points are unchanged (same count and bit-identical mean)
+        keeps its mixture; every other action is refitted, each of its candidate component
+        counts warm-started from that candidate's own previous parameters (all candidates are
+        kept, not only the chosen one), and the criterion chooses among the candidates again.
+        The priors Pr(G_a) and the variance floor always follow all the data.
+
+        Full-refit rule: an action is fitted from scratch (k-means++, as :meth:`fit`) instead
+        when it was never fitted from scratch, when it gains a candidate (it had fewer than
+        ``max_components`` points), or when its point count reached ``1 + refit_growth``
+        times its count at its last from-scratch fit. Warm starts so cannot keep an action in a
+        poor optimum for good, and as from-scratch fits come at geometrically growing sizes
+        their total cost stays a constant multiple of one fit at the final size.
+
+        Before any fit, ``refit`` is ``fit``. The result is a pure function of the state and
+        the data: the same seed and data sequence give the same model, bit for bit, and a
+        model loaded from this one's ``state_dict`` refits exactly as this one does.
+
+        Args:
+            observations: [N, D] real array, N >= 1, every demonstration so far.
+            actions: [N] integer labels in [0, n_actions).
+
+        Returns self. On any error the previously fitted state is left untouched.
+        """
+        x_np = self._check_observations(observations)
+        y_np = self._check_actions(actions, x_np.shape[0])
+        caller = torch.get_num_threads()
+        with _threads(1):
+            return self._fit(x_np, y_np, incremental=True, caller_threads=caller)
+
+    def _fit(
+        self, x_np: np.ndarray, y_np: np.ndarray, *, incremental: bool, caller_threads: int = 1
+    ) -> GaussianMixtureSet:
         dev = self.means_.device
         f64 = torch.float64
         a_n, kmax, d = self.n_actions, self.max_components, self.n_features
@@ -340,94 +506,105 @@ class GaussianMixtureSet(nn.Module):
 
         counts = torch.bincount(y, minlength=a_n)  # [A]
         counts_np = counts.cpu().numpy()
-        n_max = int(counts_np.max())
         centers = torch.zeros(a_n, d, dtype=f64, device=dev).index_add_(0, y, x)
         centers = centers / counts.clamp_min(1).unsqueeze(1).to(f64)
-        order = torch.argsort(y, stable=True)
-        ys = y[order]
-        starts = torch.cumsum(counts, 0) - counts
-        pos = torch.arange(n_total, device=dev) - starts[ys]
-        xa = torch.zeros(a_n, n_max, d, dtype=f64, device=dev)
-        xa[ys, pos] = x[order] - centers[ys]  # centred per action: better conditioned M-step
-
         k_per_action = np.minimum(counts_np, kmax)  # 0 for an empty action
-        groups_np = np.flatnonzero(counts_np > 0)  # one EM group per action with data
-        groups = torch.from_numpy(groups_np).to(dev)
-        k_pad = int(k_per_action.max())
-        # slot c of a group holds the candidate with c + 1 components; slots beyond the
-        # action's count hold a duplicate of its k = 1 candidate (computed, then ignored)
-        slot_k_np = np.arange(1, k_pad + 1)[None, :].repeat(groups_np.size, 0)
-        real_np = slot_k_np <= k_per_action[groups_np][:, None]
-        slot_k_np = np.where(real_np, slot_k_np, 1)
-        slot_k = torch.from_numpy(slot_k_np).to(dev)
-        xg = xa.index_select(0, groups)
-        pmask = (torch.arange(n_max, device=dev) < counts[groups].unsqueeze(1)).to(f64)
-        cmask = (torch.arange(k_pad, device=dev) < slot_k.unsqueeze(-1)).to(f64)
-        uniforms = torch.from_numpy(
-            _em.candidate_uniforms(self.seed, groups_np[:, None].repeat(k_pad, 1), slot_k_np, k_pad)
-        ).to(dev)
-        # inference mode (no view or version tracking): ~10% off the EM's many small operations;
-        # everything below reads its results through functional ops, so the fitted buffers
-        # are ordinary tensors
-        with torch.inference_mode():
-            resp0 = _em.kmeans_init(xg, pmask, cmask, uniforms)
-            res = _em.run_em(xg, pmask, cmask, floor, resp0, self.tol, self.max_iter)
-        real = torch.from_numpy(real_np).to(dev)
-        g_idx, c_idx = real.nonzero(as_tuple=True)
-        cand_action = groups[g_idx]
-        cand_k = c_idx + 1
-        n_of_cand = counts[cand_action]
-        loglik = res.loglik[g_idx, c_idx]
-        crit = _em.information_criterion(self.criterion, loglik, cand_k, n_of_cand, d)
-        if not bool(torch.isfinite(crit).all()):
-            raise FloatingPointError(
-                "EM produced a non-finite log-likelihood; the data may be badly scaled "
-                "(try standardising the features or a larger var_floor)"
+
+        # which actions to fit, and how
+        has_data = counts_np > 0
+        if incremental and self.is_fitted:
+            old_n = self.n_points_.cpu().numpy()
+            full_n = self.full_fit_points_.cpu().numpy()
+            same_mean = (centers == self.data_mean_.to(f64)).all(1).cpu().numpy()
+            changed = (counts_np != old_n) | ~same_mean
+            warm_ok = (
+                (full_n > 0)
+                & (k_per_action <= np.minimum(old_n, kmax))
+                & (counts_np < (1.0 + self.refit_growth) * full_n)
             )
+            scratch_np = changed & has_data & ~warm_ok
+            warm_np = changed & has_data & warm_ok
+        else:
+            changed = np.ones(a_n, dtype=bool)
+            scratch_np = has_data.copy()
+            warm_np = np.zeros(a_n, dtype=bool)
+        groups_np = np.flatnonzero(scratch_np | warm_np)  # one EM group per refitted action
+        groups = torch.from_numpy(groups_np).to(dev)
 
-        # Tables [A, K] of every candidate.
-        col = c_idx
-        crit_tab = torch.full((a_n, kmax), math.inf, dtype=f64, device=dev)
-        crit_tab[cand_action, col] = crit
-        ll_tab = torch.full((a_n, kmax), -math.inf, dtype=f64, device=dev)
-        ll_tab[cand_action, col] = loglik
-        conv_tab = torch.zeros(a_n, kmax, dtype=torch.bool, device=dev)
-        conv_tab[cand_action, col] = res.converged[g_idx, c_idx]
-        iter_tab = torch.zeros(a_n, kmax, dtype=torch.long, device=dev)
-        iter_tab[cand_action, col] = res.n_iter[g_idx, c_idx]
-        cand_mask = torch.zeros(a_n, kmax, dtype=torch.bool, device=dev)
-        cand_mask[cand_action, col] = True
-
-        # Per-action choice (Eq. 6 = sum of independent terms -> per-action argmin).
-        best_col = crit_tab.argmin(1)  # first minimum: smallest k on ties
-        n_comp = torch.zeros(a_n, dtype=torch.long, device=dev)
-        n_comp[groups] = best_col[groups] + 1
-        chosen_c = best_col[groups]
-        g_all = torch.arange(groups.numel(), device=dev)
-
-        p = res.params
-        weights = torch.zeros(a_n, kmax, dtype=f64, device=dev)
-        means = torch.zeros(a_n, kmax, d, dtype=f64, device=dev)
+        # start from the current tables; the refitted (or emptied) actions' rows are replaced
+        crit_tab = self.criterion_.to(f64).clone()
+        ll_tab = self.log_likelihood_.to(f64).clone()
+        conv_tab = self.converged_.clone()
+        iter_tab = self.n_iter_.clone()
+        weights = self.weights_.to(f64).clone()
+        means = self.means_.to(f64).clone()
+        covs = self.covariances_.to(f64).clone()
+        precs = self.precisions_cholesky_.to(f64).clone()
+        log_det = self.log_det_.to(f64).clone()
+        n_comp = self.n_components_.clone()
+        c_w = self.cand_weights_.to(f64).clone()
+        c_mu = self.cand_means_.to(f64).clone()
+        c_cov = self.cand_covariances_.to(f64).clone()
+        full_n_new = self.full_fit_points_.clone()
         eye = torch.eye(d, dtype=f64, device=dev)
-        covs = eye.expand(a_n, kmax, d, d).clone()
-        precs = eye.expand(a_n, kmax, d, d).clone()
-        log_det = torch.zeros(a_n, kmax, dtype=f64, device=dev)
-        weights[groups, :k_pad] = p.weights[g_all, chosen_c]
-        means[groups, :k_pad] = p.means[g_all, chosen_c] + centers[groups].unsqueeze(1)
-        covs[groups, :k_pad] = p.covariances[g_all, chosen_c]
-        prec_chosen, log_det_chosen = _em.precision_cholesky(p.covariances[g_all, chosen_c])
-        precs[groups, :k_pad] = prec_chosen
-        log_det[groups, :k_pad] = log_det_chosen
+        reset = torch.from_numpy(changed & ~(scratch_np | warm_np)).to(dev)  # emptied actions
+        if incremental and self.is_fitted and bool(reset.any()):
+            crit_tab[reset] = math.inf
+            ll_tab[reset] = -math.inf
+            conv_tab[reset] = False
+            iter_tab[reset] = 0
+            n_comp[reset] = 0
+            full_n_new[reset] = 0
+        elif not (incremental and self.is_fitted):
+            crit_tab.fill_(math.inf)
+            ll_tab.fill_(-math.inf)
+            conv_tab.fill_(False)
+            iter_tab.fill_(0)
+            n_comp.zero_()
+            full_n_new.zero_()
+
+        if groups_np.size:
+            self._fit_groups(
+                x, y, counts, centers, floor, groups_np, scratch_np, k_per_action, crit_tab,
+                ll_tab, conv_tab, iter_tab, n_comp, (c_w, c_mu, c_cov), caller_threads,
+            )  # fmt: skip
+            g_t = groups
+            full_n_new[torch.from_numpy(np.flatnonzero(scratch_np)).to(dev)] = counts[
+                torch.from_numpy(np.flatnonzero(scratch_np)).to(dev)
+            ]
+            # the chosen candidate of every refitted action
+            chosen = (n_comp[g_t] - 1).clamp_min(0)
+            w_ch = c_w[g_t, chosen]
+            mu_ch = c_mu[g_t, chosen]
+            cov_ch = c_cov[g_t, chosen]
+            m_ch = torch.arange(kmax, device=dev) < n_comp[g_t].unsqueeze(1)
+            cov_ch = torch.where(m_ch[..., None, None], cov_ch, eye)
+            prec_ch, log_det_ch = _em.precision_cholesky(cov_ch)
+            weights[g_t] = w_ch * m_ch
+            means[g_t] = mu_ch * m_ch.unsqueeze(-1)
+            covs[g_t] = cov_ch
+            precs[g_t] = torch.where(m_ch[..., None, None], prec_ch, eye)
+            log_det[g_t] = log_det_ch * m_ch
+        if bool(reset.any()):
+            weights[reset] = 0.0
+            means[reset] = 0.0
+            covs[reset] = eye
+            precs[reset] = eye
+            log_det[reset] = 0.0
+            c_w[reset] = 0.0
+            c_mu[reset] = 0.0
+            c_cov[reset] = eye
         comp_mask = torch.arange(kmax, device=dev) < n_comp.unsqueeze(1)
-        means = means * comp_mask.unsqueeze(-1)
-        covs = torch.where(comp_mask[..., None, None], covs, eye)
-        precs = torch.where(comp_mask[..., None, None], precs, eye)
-        log_det = log_det * comp_mask
-        weights = weights * comp_mask
         log_prior = torch.where(
             counts > 0, torch.log(counts.to(f64) / n_total), torch.tensor(-math.inf, dtype=f64)
         )
+        cand_mask = torch.isfinite(crit_tab)
 
+        kinds = tuple(
+            "empty" if not has_data[a] else
+            "scratch" if scratch_np[a] else "warm" if warm_np[a] else "kept"
+            for a in range(a_n)
+        )  # fmt: skip
         empty = tuple(int(i) for i in np.flatnonzero(counts_np == 0))
         notes = [f"action {i} has no data: it is never predicted (log prob -inf)" for i in empty]
         not_conv = (cand_mask & ~conv_tab).nonzero().cpu().numpy()
@@ -448,6 +625,7 @@ class GaussianMixtureSet(nn.Module):
             converged=conv_tab.cpu(),
             n_iter=iter_tab.cpu(),
             notes=tuple(notes),
+            refit_kind=kinds,
         )
 
         # Everything succeeded: commit the new state at once.
@@ -464,7 +642,14 @@ class GaussianMixtureSet(nn.Module):
                 ("n_components_", n_comp),
                 ("criterion_", crit_tab),
                 ("log_likelihood_", ll_tab),
+                ("converged_", conv_tab),
+                ("n_iter_", iter_tab),
                 ("var_floor_", floor),
+                ("data_mean_", centers),
+                ("cand_weights_", c_w),
+                ("cand_means_", c_mu),
+                ("cand_covariances_", c_cov),
+                ("full_fit_points_", full_n_new),
                 ("fitted_", torch.ones((), dtype=torch.bool)),
             ):
                 buf = getattr(self, name)
@@ -472,6 +657,155 @@ class GaussianMixtureSet(nn.Module):
         self.fit_report_ = report
         self._cache = None
         return self
+
+    def _fit_groups(
+        self,
+        x: Tensor,
+        y: Tensor,
+        counts: Tensor,
+        centers: Tensor,
+        floor: Tensor,
+        groups_np: np.ndarray,
+        scratch_np: np.ndarray,
+        k_per_action: np.ndarray,
+        crit_tab: Tensor,
+        ll_tab: Tensor,
+        conv_tab: Tensor,
+        iter_tab: Tensor,
+        n_comp: Tensor,
+        cand: tuple[Tensor, Tensor, Tensor],
+        caller_threads: int = 1,
+    ) -> None:
+        """One batched EM over the given actions (some from scratch, some warm-started);
+        writes their rows of the tables, n_comp and the kept candidates ``cand`` in place."""
+        dev = x.device
+        f64 = torch.float64
+        d = self.n_features
+        c_w, c_mu, c_cov = cand
+        groups = torch.from_numpy(groups_np).to(dev)
+        g_n = groups_np.size
+        counts_g = counts[groups]
+        n_max = int(counts_g.max())
+        # the groups' points, centred per action (a better conditioned M-step), in data order
+        sel = torch.isin(y, groups)
+        xs, ys = x[sel], y[sel]
+        gpos = torch.full((self.n_actions,), -1, dtype=torch.long, device=dev)
+        gpos[groups] = torch.arange(g_n, device=dev)
+        yg = gpos[ys]
+        order = torch.argsort(yg, stable=True)
+        ygs = yg[order]
+        starts = torch.cumsum(counts_g, 0) - counts_g
+        pos = torch.arange(ys.numel(), device=dev) - starts[ygs]
+        xg = torch.zeros(g_n, n_max, d, dtype=f64, device=dev)
+        xg[ygs, pos] = xs[order] - centers[groups][ygs]
+
+        k_pad = int(k_per_action[groups_np].max())
+        # slot c of a group holds the candidate with c + 1 components; slots beyond the
+        # action's count hold a duplicate of its k = 1 candidate (computed, then ignored)
+        slot_k_np = np.arange(1, k_pad + 1)[None, :].repeat(g_n, 0)
+        real_np = slot_k_np <= k_per_action[groups_np][:, None]
+        slot_k_np = np.where(real_np, slot_k_np, 1)
+        slot_k = torch.from_numpy(slot_k_np).to(dev)
+        pmask = (torch.arange(n_max, device=dev) < counts_g.unsqueeze(1)).to(f64)
+        cmask = (torch.arange(k_pad, device=dev) < slot_k.unsqueeze(-1)).to(f64)
+        scr = scratch_np[groups_np]
+        # inference mode (no view or version tracking): ~10% off the EM's many small operations;
+        # everything below reads its results through functional ops, so the fitted buffers
+        # are ordinary tensors
+        work = float(n_max) * float(slot_k_np.sum()) * (d * (d + 3) // 2 + 1)
+        with _threads(_em_threads(work, caller_threads)), torch.inference_mode():
+            if scr.all():
+                uniforms = torch.from_numpy(
+                    _em.candidate_uniforms(
+                        self.seed, groups_np[:, None].repeat(k_pad, 1), slot_k_np, k_pad
+                    )
+                ).to(dev)
+                resp0 = _em.kmeans_init(xg, pmask, cmask, uniforms)
+                res = _em.run_em(xg, pmask, cmask, floor, resp0, self.tol, self.max_iter)
+            else:
+                params0 = self._start_params(
+                    xg, pmask, cmask, floor, groups_np, scr, slot_k_np, k_pad, centers, cand
+                )
+                res = _em.run_em(
+                    xg, pmask, cmask, floor, None, self.tol, self.max_iter, params0=params0
+                )
+        real = torch.from_numpy(real_np).to(dev)
+        g_idx, c_idx = real.nonzero(as_tuple=True)
+        cand_action = groups[g_idx]
+        cand_k = c_idx + 1
+        loglik = res.loglik[g_idx, c_idx]
+        crit = _em.information_criterion(self.criterion, loglik, cand_k, counts[cand_action], d)
+        if not bool(torch.isfinite(crit).all()):
+            raise FloatingPointError(
+                "EM produced a non-finite log-likelihood; the data may be badly scaled "
+                "(try standardising the features or a larger var_floor)"
+            )
+        crit_tab[groups] = math.inf
+        ll_tab[groups] = -math.inf
+        conv_tab[groups] = False
+        iter_tab[groups] = 0
+        crit_tab[cand_action, c_idx] = crit
+        ll_tab[cand_action, c_idx] = loglik
+        conv_tab[cand_action, c_idx] = res.converged[g_idx, c_idx]
+        iter_tab[cand_action, c_idx] = res.n_iter[g_idx, c_idx]
+        # Per-action choice (Eq. 6 = sum of independent terms -> per-action argmin).
+        n_comp[groups] = crit_tab[groups].argmin(1) + 1  # first minimum: smallest k on ties
+        # keep every candidate (uncentred); non-candidate slots hold an empty mixture
+        p = res.params
+        eye = torch.eye(d, dtype=f64, device=dev)
+        kmax = self.max_components
+        rm = real.unsqueeze(-1)  # [G, C, 1]
+        w_new = torch.zeros(g_n, kmax, kmax, dtype=f64, device=dev)
+        mu_new = torch.zeros(g_n, kmax, kmax, d, dtype=f64, device=dev)
+        cov_new = eye.expand(g_n, kmax, kmax, d, d).clone()
+        w_new[:, :k_pad, :k_pad] = p.weights * rm
+        mu_new[:, :k_pad, :k_pad] = (p.means + centers[groups][:, None, None]) * rm[..., None]
+        cov_new[:, :k_pad, :k_pad] = torch.where(rm[..., None, None], p.covariances, eye)
+        c_w.index_copy_(0, groups, w_new)
+        c_mu.index_copy_(0, groups, mu_new)
+        c_cov.index_copy_(0, groups, cov_new)
+
+    def _start_params(
+        self,
+        xg: Tensor,
+        pmask: Tensor,
+        cmask: Tensor,
+        floor: Tensor,
+        groups_np: np.ndarray,
+        scr: np.ndarray,
+        slot_k_np: np.ndarray,
+        k_pad: int,
+        centers: Tensor,
+        cand: tuple[Tensor, Tensor, Tensor],
+    ) -> _em.Params:
+        """Initial parameters [G, C, K, ...]: k-means++ then one M-step for the groups fitted
+        from scratch, each candidate's kept parameters (re-centred) for the warm ones."""
+        dev = xg.device
+        c_w, c_mu, c_cov = cand
+        groups = torch.from_numpy(groups_np).to(dev)
+        warm_i = torch.from_numpy(np.flatnonzero(~scr)).to(dev)
+        warm_a = groups[warm_i]
+        slot = torch.from_numpy(slot_k_np[~scr] - 1).to(dev)  # [W, C]
+        rows = warm_a.unsqueeze(1)
+        w0 = c_w[rows, slot][..., :k_pad]
+        mu0 = c_mu[rows, slot][..., :k_pad, :] - centers[warm_a][:, None, None]
+        cov0 = c_cov[rows, slot][..., :k_pad, :, :]
+        warm = _em.params_of(w0, mu0, cov0, cmask[warm_i])
+        if not scr.any():
+            return warm
+        scr_i = torch.from_numpy(np.flatnonzero(scr)).to(dev)
+        uniforms = torch.from_numpy(
+            _em.candidate_uniforms(
+                self.seed, groups_np[scr][:, None].repeat(k_pad, 1), slot_k_np[scr], k_pad
+            )
+        ).to(dev)
+        xs, ps, cs = xg[scr_i], pmask[scr_i], cmask[scr_i]
+        resp0 = _em.kmeans_init(xs, ps, cs, uniforms)
+        fresh = _em.m_step(_em.quadratic_features(xs), resp0, cs, floor)
+        order = torch.argsort(torch.cat([scr_i, warm_i]))
+        return _em.Params(
+            *(torch.cat([f, w]).index_select(0, order) for f, w in zip(fresh, warm, strict=True))
+        )
 
     # ------------------------------------------------------------------ prediction
     def _component_scores_np(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -510,7 +844,7 @@ class GaussianMixtureSet(nn.Module):
             mx = lp.max(-1, keepdims=True)
             mix = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1))
             return torch.from_numpy(mix + self._tables()["np"][3])
-        with torch.inference_mode():
+        with self._predict_threads(x.shape[0]), torch.inference_mode():
             lp, _ = self._component_scores_torch(x)  # type: ignore[arg-type]
             return (torch.logsumexp(lp, -1) + self._tables()["log_prior"]).clone()
 
@@ -534,8 +868,13 @@ class GaussianMixtureSet(nn.Module):
             if x.shape[0] == 1:
                 return self._classify_one(x)  # type: ignore[arg-type]
             return self._classify_np(x)  # type: ignore[arg-type]
-        with torch.inference_mode():
+        with self._predict_threads(x.shape[0]), torch.inference_mode():
             return self._classify_torch(x)  # type: ignore[arg-type]
+
+    def _predict_threads(self, n: int) -> contextlib.AbstractContextManager[None]:
+        """The thread policy for scoring n rows: [N, D] @ [D, A*K*D] is the work."""
+        work = float(n) * self.n_actions * self.max_components * self.n_features**2
+        return _threads(_em_threads(work, torch.get_num_threads()))
 
     def _classify_one(self, x: np.ndarray) -> Classification:
         """The N = 1 case of :meth:`_classify_np`, with few array ops (the teaching loop's path).

@@ -665,22 +665,27 @@ def restore_model(
     max_new: int,
     relabel: bool,
     store: SessionStore | None = None,
+    incremental: bool = False,
 ) -> int:
     """Bring ``model`` to where the session's live model stood after the labels ``xs, ys``:
     THE one "load the checkpoint or refit" path (resume and :func:`load_model` both use it).
 
     The model stood on the first ``k = fitted_count(run_dir, len(ys), max_new)`` labels. Its
     checkpoint is loaded when present; otherwise (the process died between logging and saving)
-    the model is refitted deterministically on the training set of those labels, and with
-    ``store`` the missing checkpoint is written. Returns ``k``.
+    the model is refitted deterministically on the training set of those labels (with
+    ``incremental``, the loop's incremental refits are replayed from the newest earlier
+    checkpoint: :func:`replay_refits`), and with ``store`` the missing checkpoint is written.
+    Returns ``k``.
     """
     k = fitted_count(run_dir, len(ys), max_new)
     ckpt = latest_checkpoint(run_dir, at_most=k)
     if ckpt is not None and ckpt[0] == k:
         model.load_state_dict(torch.load(ckpt[1], weights_only=True)["state_dict"])
     elif k > 0:
-        x, y = training_set(xs[:k], ys[:k], relabel=relabel)
-        model.fit(x, y)
+        if incremental:
+            replay_refits(model, run_dir, xs, ys, k, max_new=max_new, relabel=relabel)
+        else:
+            model.fit(*training_set(xs[:k], ys[:k], relabel=relabel))
         if store is not None:
             store.save_checkpoint(model, k)
     return k
@@ -713,8 +718,33 @@ def load_model(
         y[:n].tolist(),
         max_new=int(config["teaching"]["max_new"]),
         relabel=_relabels(config),
+        incremental=config["teaching"].get("refit", "full") == "incremental",
     )
     return model
+
+
+def replay_refits(
+    model: GaussianMixtureSet,
+    run_dir: str | os.PathLike[str],
+    xs: list[np.ndarray],
+    ys: list[int],
+    k: int,
+    *,
+    max_new: int,
+    relabel: bool,
+) -> None:
+    """Rebuild, in place, an incremental-refit session's model as it stood at ``k`` labels
+    when that checkpoint is missing: load the newest checkpoint before ``k`` (none: start
+    unfitted) and redo the loop's incremental refits (``model.refit``) every ``max_new``
+    labels from there to ``k``. ``GaussianMixtureSet.refit`` is a pure function of the state
+    and the data, so this gives the live model bit for bit."""
+    ckpt = latest_checkpoint(run_dir, at_most=k)
+    start = 0
+    if ckpt is not None:
+        model.load_state_dict(torch.load(ckpt[1], weights_only=True)["state_dict"])
+        start = ckpt[0]
+    for j in range(start + max_new, k + 1, max_new):
+        model.refit(*training_set(xs[:j], ys[:j], relabel=relabel))
 
 
 def load_policy(run_dir: str | os.PathLike[str]) -> GreedyPolicy:

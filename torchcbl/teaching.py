@@ -96,6 +96,7 @@ _MODEL_ARG_NAMES = (
     "tol",
     "max_iter",
     "seed",
+    "refit_growth",
 )
 
 
@@ -115,6 +116,12 @@ class TeachingConfig:
     Attributes:
         max_new: refit after this many new labels (>= 1): demonstrations, and corrections
             with a strategy that takes them.
+        refit: "full" (default) fits the model from scratch at every refit, so it is a function
+            of the demonstrations alone; "incremental" uses ``GaussianMixtureSet.refit``: only
+            the actions whose data changed are refitted, each candidate warm-started from its
+            previous parameters, with a periodic from-scratch fit (1/7.5 to 1/9.5 of the
+            refit time of a 10,000-demonstration session with max_new = 1, the same quality:
+            bench/bench_refit.py). The model then depends on the refit history as well.
         accuracy_window: number of most recent demonstrations the prediction accuracy is taken
             over (20 corridor, 150 driving); also the window of ``autonomy_rate``.
         target_accuracy: windowed accuracy in (0, 1] that ends the non-interactive phase;
@@ -132,6 +139,7 @@ class TeachingConfig:
     """
 
     max_new: int = 1
+    refit: str = "full"
     accuracy_window: int = 20
     target_accuracy: float | None = 0.9
     noninteractive: bool = True
@@ -143,6 +151,10 @@ class TeachingConfig:
 
     def __post_init__(self) -> None:
         _opt_int("max_new", self.max_new, minimum=1)
+        if self.refit not in ("full", "incremental"):
+            raise ValueError(
+                f"TeachingConfig.refit: expected 'full' or 'incremental', got {self.refit!r}"
+            )
         _opt_int("accuracy_window", self.accuracy_window, minimum=1)
         _opt_int("burst", self.burst, minimum=1)
         for name in ("max_new", "accuracy_window", "burst"):
@@ -476,6 +488,7 @@ class ConfidentTeacher:
             max_new=self.config.max_new,
             relabel=self._relabel,
             store=self._store,
+            incremental=self.config.refit == "incremental",
         )
         if k > 0:
             if k == len(ys):
@@ -588,7 +601,8 @@ class ConfidentTeacher:
         is (its model and refit schedule untouched): for evaluating a learning stage."""
         model = copy.deepcopy(self.model)
         if self._new_since_refit and len(self._train):
-            model.fit(*self._train.arrays())
+            fit = model.refit if self.config.refit == "incremental" else model.fit
+            fit(*self._train.arrays())
         return model
 
     @property
@@ -603,7 +617,7 @@ class ConfidentTeacher:
 
     def _refit(self) -> None:
         x, y = self._train.arrays()
-        self.model.fit(x, y)
+        (self.model.refit if self.config.refit == "incremental" else self.model.fit)(x, y)
         self.strategy.observe_refit(self.model, x, y)
         self._new_since_refit = 0
         if self._store is not None:

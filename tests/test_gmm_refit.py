@@ -1,0 +1,333 @@
+"""Incremental refits (GaussianMixtureSet.refit) and the thread policy (issue 17)."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+import torch
+
+from torchcbl import _em
+from torchcbl import gmm as gmm_mod
+from torchcbl.gmm import GaussianMixtureSet
+
+
+def _stream(n: int = 400, d: int = 3, a: int = 3, seed: int = 0):
+    """n demonstrations, each action's observations from 3 Gaussian blobs, shuffled."""
+    rng = np.random.default_rng(seed)
+    centres = rng.normal(scale=3.0, size=(a, 3, d))
+    y = rng.integers(0, a, n)
+    comp = rng.integers(0, 3, n)
+    x = centres[y, comp] + rng.normal(scale=0.7, size=(n, d))
+    return x, y
+
+
+def _replay(model: GaussianMixtureSet, x, y, counts) -> GaussianMixtureSet:
+    for n in counts:
+        model.refit(x[:n], y[:n])
+    return model
+
+
+def _assert_same_state(m1: GaussianMixtureSet, m2: GaussianMixtureSet) -> None:
+    s1, s2 = m1.state_dict(), m2.state_dict()
+    assert s1.keys() == s2.keys()
+    for key in s1:
+        assert torch.equal(s1[key], s2[key]), key
+
+
+def test_refit_before_any_fit_is_fit():
+    x, y = _stream(120)
+    a = GaussianMixtureSet(3, 3, 5, seed=3).refit(x, y)
+    b = GaussianMixtureSet(3, 3, 5, seed=3).fit(x, y)
+    _assert_same_state(a, b)
+    assert a.fit_report_.refit_kind == ("scratch",) * 3
+
+
+def test_refit_on_unchanged_data_keeps_every_mixture():
+    x, y = _stream(150)
+    m = GaussianMixtureSet(3, 3, 5).fit(x, y)
+    before = {k: v.clone() for k, v in m.state_dict().items()}
+    m.refit(x, y)
+    assert m.fit_report_.refit_kind == ("kept",) * 3
+    for key, val in m.state_dict().items():
+        assert torch.equal(val, before[key]), key
+
+
+def test_one_new_point_refits_only_its_action_warm():
+    x, y = _stream(301)
+    y[-1] = 1
+    m = GaussianMixtureSet(3, 3, 5).fit(x[:300], y[:300])
+    before = {k: v.clone() for k, v in m.state_dict().items()}
+    m.refit(x, y)
+    assert m.fit_report_.refit_kind == ("kept", "warm", "kept")
+    for key in ("weights_", "means_", "covariances_", "cand_weights_", "cand_means_"):
+        for a in (0, 2):
+            assert torch.equal(getattr(m, key)[a], before[key][a]), (key, a)
+        assert not torch.equal(getattr(m, key)[1], before[key][1]), key
+    # the priors follow all the data
+    counts = np.bincount(y, minlength=3)
+    np.testing.assert_allclose(m.log_prior_.numpy(), np.log(counts / len(y)), rtol=1e-12)
+
+
+def test_warm_start_equals_sklearn_started_from_the_kept_candidate():
+    """Oracle: each warm-started candidate runs sklearn's EM from its previous parameters."""
+    from sklearn.mixture import GaussianMixture
+
+    x, y = _stream(241, d=2, seed=5)
+    y[-1] = 0
+    # var_floor=0: the floor is one number for every feature, sklearn's reg_covar
+    m = GaussianMixtureSet(3, 2, 4, var_floor=0.0, tol=1e-4, seed=1).fit(x[:240], y[:240])
+    kept = (m.cand_weights_[0].clone(), m.cand_means_[0].clone(), m.cand_covariances_[0].clone())
+    m.refit(x, y)
+    assert m.fit_report_.refit_kind[0] == "warm"
+    x0 = x[y == 0]
+    reg = float(m.var_floor_[0])
+    assert float(m.var_floor_[1]) == reg
+    for k in range(1, 5):
+        w, mu, cov = kept[0][k - 1, :k], kept[1][k - 1, :k], kept[2][k - 1, :k]
+        gm = GaussianMixture(
+            k,
+            covariance_type="full",
+            tol=1e-4,
+            max_iter=200,
+            reg_covar=reg,
+            weights_init=w.numpy(),
+            means_init=mu.numpy(),
+            precisions_init=torch.linalg.inv(cov).numpy(),
+        ).fit(x0)
+        assert float(m.fit_report_.log_likelihood[0, k - 1]) == pytest.approx(
+            gm.score(x0) * len(x0), rel=1e-9
+        )
+        assert int(m.fit_report_.n_iter[0, k - 1]) == gm.n_iter_
+
+
+def test_full_refit_rule_fits_from_scratch_after_growth():
+    x, y = _stream(300, seed=2)
+    m = GaussianMixtureSet(3, 3, 3, refit_growth=0.5).fit(x[:150], y[:150])
+    full0 = m.full_fit_points_.clone()
+    kinds = []
+    for n in range(151, 301):
+        m.refit(x[:n], y[:n])
+        a = int(y[n - 1])
+        kind = m.fit_report_.refit_kind
+        assert [kind[b] for b in range(3) if b != a] == ["kept", "kept"]
+        kinds.append((a, kind[a], int(m.n_points_[a]), int(full0[a])))
+        if kind[a] == "scratch":
+            full0[a] = m.n_points_[a]
+    for a, kind, n_a, n_full in kinds:
+        assert kind == ("scratch" if n_a >= 1.5 * n_full else "warm"), (a, n_a, n_full)
+    assert any(k == "scratch" for _, k, _, _ in kinds)
+    assert torch.equal(m.full_fit_points_, full0)
+
+
+def test_scratch_refit_matches_fit_of_that_action():
+    x, y = _stream(200, seed=4)
+    m = GaussianMixtureSet(3, 3, 5, refit_growth=0.1, seed=2).fit(x[:90], y[:90])
+    while True:  # add points until an action is refitted from scratch
+        n = int(m.n_points_.sum()) + 1
+        m.refit(x[:n], y[:n])
+        if "scratch" in m.fit_report_.refit_kind:
+            break
+    a = m.fit_report_.refit_kind.index("scratch")
+    ref = GaussianMixtureSet(3, 3, 5, refit_growth=0.1, seed=2).fit(x[:n], y[:n])
+    torch.testing.assert_close(
+        m.fit_report_.log_likelihood[a], ref.fit_report_.log_likelihood[a], rtol=1e-9, atol=0
+    )
+    assert int(m.n_components_[a]) == int(ref.n_components_[a])
+
+
+def test_same_seed_and_sequence_give_bit_identical_models():
+    x, y = _stream(200)
+    counts = [*range(1, 30), *range(30, 201, 10)]
+    a = _replay(GaussianMixtureSet(3, 3, 6, seed=9), x, y, counts)
+    b = _replay(GaussianMixtureSet(3, 3, 6, seed=9), x, y, counts)
+    _assert_same_state(a, b)
+
+
+def test_resume_after_incremental_refits_rebuilds_the_same_model():
+    x, y = _stream(200)
+    counts = [*range(1, 30), *range(30, 201, 10)]
+    live = _replay(GaussianMixtureSet(3, 3, 6, seed=9), x, y, counts[:35])
+    buf = io.BytesIO()
+    torch.save({"state_dict": live.state_dict()}, buf)  # as the session's checkpoints
+    buf.seek(0)
+    resumed = GaussianMixtureSet(3, 3, 6, seed=9)
+    resumed.load_state_dict(torch.load(buf, weights_only=True)["state_dict"])
+    _replay(live, x, y, counts[35:])
+    _replay(resumed, x, y, counts[35:])
+    assert "warm" in live.fit_report_.refit_kind or "kept" in live.fit_report_.refit_kind
+    _assert_same_state(live, resumed)
+    obs = x[:50] + 0.05
+    assert torch.equal(live.classify(obs).posterior, resumed.classify(obs).posterior)
+
+
+def test_incremental_model_is_as_good_as_a_full_refit():
+    x, y = _stream(600, seed=6)
+    # a refit every 8 demonstrations from 200 on: 50 warm starts in a row for some actions
+    inc = _replay(GaussianMixtureSet(3, 3, 6, refit_growth=1.0), x, y, range(200, 601, 8))
+    assert "warm" in inc.fit_report_.refit_kind
+    full = GaussianMixtureSet(3, 3, 6, refit_growth=1.0).fit(x, y)
+    mix_i = (inc.log_prob(x) - inc.log_prior_).numpy()
+    mix_f = (full.log_prob(x) - full.log_prior_).numpy()
+    for a in range(3):
+        ll_i, ll_f = mix_i[y == a, a].mean(), mix_f[y == a, a].mean()
+        assert ll_i >= ll_f - 0.01 * abs(ll_f), (a, ll_i, ll_f)
+    held = x + np.random.default_rng(1).normal(scale=0.2, size=x.shape)
+    agree = (inc.classify(held).action == full.classify(held).action).double().mean()
+    assert float(agree) >= 0.99
+
+
+def test_same_counts_but_other_data_is_refitted():
+    x, y = _stream(200)
+    m = GaussianMixtureSet(3, 3, 5).fit(x, y)
+    x2 = x.copy()
+    x2[y == 2] += 0.5
+    m.refit(x2, y)
+    assert m.fit_report_.refit_kind == ("kept", "kept", "warm")
+
+
+def test_an_action_that_loses_its_data_becomes_empty():
+    x, y = _stream(200)
+    m = GaussianMixtureSet(3, 3, 5).fit(x, y)
+    keep = y != 1
+    m.refit(x[keep], y[keep])
+    assert m.fit_report_.refit_kind[1] == "empty"
+    assert int(m.n_components_[1]) == 0 and not bool(m.component_mask_[1].any())
+    assert torch.isinf(m.criterion_[1]).all()
+    assert torch.isneginf(m.log_prob(x[:5])[:, 1]).all()
+    assert int(m.full_fit_points_[1]) == 0
+
+
+def test_state_dict_without_the_refit_buffers_loads_and_refits_from_scratch():
+    x, y = _stream(200)
+    m = GaussianMixtureSet(3, 3, 5).fit(x, y)
+    old = {k: v for k, v in m.state_dict().items() if k not in gmm_mod._REFIT_BUFFERS}
+    fresh = GaussianMixtureSet(3, 3, 5)
+    fresh.load_state_dict(old)  # strict: the missing buffers get their empty defaults
+    assert torch.equal(fresh.classify(x[:20]).posterior, m.classify(x[:20]).posterior)
+    fresh.refit(x, y)
+    assert fresh.fit_report_.refit_kind == ("scratch",) * 3
+    _assert_same_state(fresh, m)
+
+
+def test_refit_rejects_bad_input_and_keeps_its_state():
+    x, y = _stream(100)
+    m = GaussianMixtureSet(3, 3, 4).fit(x, y)
+    before = {k: v.clone() for k, v in m.state_dict().items()}
+    with pytest.raises(ValueError, match=r"expected shape \[N, 3\]"):
+        m.refit(x[:, :2], y)
+    with pytest.raises(ValueError, match=r"labels in \[0, 3\)"):
+        m.refit(x, y + 1)
+    for key, val in m.state_dict().items():
+        assert torch.equal(val, before[key]), key
+    with pytest.raises(ValueError, match="refit_growth"):
+        GaussianMixtureSet(3, 3, refit_growth=0.0)
+
+
+# ---------------------------------------------------------------------- thread policy
+@pytest.fixture
+def two_threads():
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    yield
+    torch.set_num_threads(before)
+
+
+def _threads_seen_by_em(monkeypatch) -> list[int]:
+    seen: list[int] = []
+    real = _em.run_em
+
+    def spy(*args, **kwargs):
+        seen.append(torch.get_num_threads())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(_em, "run_em", spy)
+    return seen
+
+
+def test_small_fits_run_on_one_thread_and_restore_the_callers_count(monkeypatch, two_threads):
+    seen = _threads_seen_by_em(monkeypatch)
+    x, y = _stream(100)
+    m = GaussianMixtureSet(3, 3, 4)
+    m.fit(x, y)
+    m.refit(np.concatenate([x, x[:1]]), np.concatenate([y, y[:1]]))
+    assert seen == [1, 1]
+    assert torch.get_num_threads() == 2
+
+
+def test_large_fits_use_the_callers_threads(monkeypatch, two_threads):
+    seen = _threads_seen_by_em(monkeypatch)
+    monkeypatch.setattr(gmm_mod, "SINGLE_THREAD_WORK", 1.0)
+    monkeypatch.setattr(gmm_mod, "_spare_core", lambda: True)
+    x, y = _stream(100)
+    GaussianMixtureSet(3, 3, 4).fit(x, y)
+    assert seen == [2]
+    assert torch.get_num_threads() == 2
+
+
+def test_a_busy_machine_gets_one_thread_whatever_the_size(monkeypatch, two_threads):
+    seen = _threads_seen_by_em(monkeypatch)
+    monkeypatch.setattr(gmm_mod, "SINGLE_THREAD_WORK", 1.0)
+    monkeypatch.setattr(gmm_mod.os, "getloadavg", lambda: (64.0, 64.0, 64.0))
+    x, y = _stream(100)
+    GaussianMixtureSet(3, 3, 4).fit(x, y)
+    assert seen == [1]
+    assert torch.get_num_threads() == 2
+
+
+def test_thread_count_is_restored_when_a_fit_fails(monkeypatch, two_threads):
+    def boom(*args, **kwargs):
+        assert torch.get_num_threads() == 1
+        raise FloatingPointError("boom")
+
+    monkeypatch.setattr(_em, "run_em", boom)
+    x, y = _stream(100)
+    with pytest.raises(FloatingPointError, match="boom"):
+        GaussianMixtureSet(3, 3, 4).fit(x, y)
+    assert torch.get_num_threads() == 2
+
+
+# ---------------------------------------------------------------------- the teaching loop
+def _session(run_dir, **cfg):
+    from _toy_envs import oracle, rare_regions_world
+
+    from torchcbl import ConfidentTeacher, TeachingConfig
+
+    env = rare_regions_world()
+    config = TeachingConfig(noninteractive=False, refit="incremental", **cfg)
+    return ConfidentTeacher(env, oracle(env), config=config, run_dir=run_dir, progress=False)
+
+
+def test_incremental_session_resumes_to_the_live_model_even_without_its_checkpoint(tmp_path):
+    import copy
+
+    from _toy_envs import oracle, rare_regions_world
+
+    from torchcbl import ConfidentTeacher
+    from torchcbl.session import CHECKPOINT_DIR, latest_checkpoint, load_model
+
+    run = tmp_path / "run"
+    ct = _session(run, max_new=2)
+    ct.run(max_demonstrations=30)
+    assert "warm" in ct.model.fit_report_.refit_kind  # the loop refits incrementally
+    live = copy.deepcopy(ct.model)
+    ct.close()
+    assert int(live.n_points_.sum()) == 30
+    # as if killed between logging the demonstrations and saving the model: the last two
+    # checkpoints are missing, resume replays the refits from the one before
+    for _ in range(2):
+        latest_checkpoint(run)[1].unlink()
+    assert latest_checkpoint(run)[0] == 26 and (run / CHECKPOINT_DIR).is_dir()
+    _assert_same_state(load_model(run), live)
+    env = rare_regions_world()
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    _assert_same_state(back.model, live)
+    assert back.config.refit == "incremental"
+
+
+def test_teaching_config_refit_mode_is_checked():
+    from torchcbl import TeachingConfig
+
+    with pytest.raises(ValueError, match="'full' or 'incremental'"):
+        TeachingConfig(refit="warm")
