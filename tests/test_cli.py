@@ -307,3 +307,100 @@ def test_replay_lists_episodes_and_exports_one_to_gif_and_fcd(tmp_path, capsys):
     capsys.readouterr()
     assert main(["replay", str(path), "--episode", "7"]) == 2
     assert "--list" in capsys.readouterr().err
+
+
+def _markdown_tables(text: str) -> dict[str, list[list[list[str]]]]:
+    """The tables of a Markdown document by the ``##`` heading they follow (its first word),
+    each as rows of cell texts, as markdown-it-py (CommonMark + GFM tables) parses them."""
+    from markdown_it import MarkdownIt
+
+    tokens = MarkdownIt("commonmark").enable("table").parse(text)
+    sections: dict[str, list[list[list[str]]]] = {}
+    section, row, in_heading = None, None, False
+    for tok in tokens:
+        if tok.type == "heading_open":
+            in_heading = tok.tag == "h2"
+        elif tok.type == "inline" and in_heading:
+            section = tok.content.split()[0] if tok.content else ""
+            sections.setdefault(section, [])
+            in_heading = False
+        elif tok.type == "table_open":
+            sections.setdefault(section, []).append([])
+        elif tok.type == "tr_open":
+            row = []
+            sections[section][-1].append(row)
+        elif tok.type == "inline" and row is not None:
+            row.append(tok.content.strip())
+        elif tok.type == "tr_close":
+            row = None
+    return sections
+
+
+def test_the_markdown_reader_finds_tables_and_not_a_dash_underlined_heading():
+    good = "## corridor (1 s)\n\n| figure | paper |\n|---|---:|\n| a | 1 |\n| b | 2 |\n"
+    assert _markdown_tables(good) == {"corridor": [[["figure", "paper"], ["a", "1"], ["b", "2"]]]}
+    dashes = "## corridor (1 s)\n\nfigure | paper\n---------------\na | 1\n"
+    assert _markdown_tables(dashes) == {"corridor": [], "figure": []}  # a setext heading
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="corridor.experiment.format_summary still writes its rule as a line of dashes "
+    "(a setext heading in Markdown); the corridor engineer's fix for issue 16 item 2 makes "
+    "this pass: then remove this mark",
+)
+def test_summary_md_is_markdown_and_its_table_parses_as_a_table(corridor_run):
+    text = (corridor_run / "summary.md").read_text()
+    sections = _markdown_tables(text)
+    assert list(sections) == ["corridor"]  # one heading per domain, no stray headings
+    (table,) = sections["corridor"]
+    header, *rows = table
+    assert header[0] == "figure" and "paper" in header and len(header) >= 3
+    assert {len(r) for r in rows} == {len(header)}
+    assert "demonstrations in all" in [r[0] for r in rows]
+    table_lines = [ln for ln in text.splitlines() if "|" in ln]
+    assert len(table_lines) == len(rows) + 2  # every line of the table is a row, plus the rule
+    assert "+-" not in text  # one notation for ±
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="sumo_scenarios.experiment.format_summary still writes a plain-text table (a '+' "
+    "rule, '+-' for ±); the driving engineer's fix for issue 16 item 2 makes this pass: then "
+    "remove this mark",
+)
+def test_summary_md_of_a_driving_run_is_markdown_too(tmp_path, monkeypatch):
+    """`torchcbl reproduce driving` at a tiny size (the settings of
+    test_driving_experiment's tiny run): its summary.md table parses as a table."""
+    import torchcbl.cli as cli
+    from sumo_scenarios.experiment import DrivingExperimentConfig
+
+    tiny = DrivingExperimentConfig(
+        seeds=(0,),
+        eval_steps=100,
+        accuracy_window=20,
+        max_noninteractive=60,
+        confident_demos=20,
+        stage_every=10,
+        burst=5,
+        arm_b_stages=(60, 80),
+        max_new=10,
+        max_components=3,
+        train_episode_steps=100,
+        extra_eval_segments=(),
+    )
+    monkeypatch.setattr(cli, "_experiment_config", lambda domain, module, args: tiny)
+    out = tmp_path / "runs"
+    argv = ["reproduce", "driving", "--workers", "1", "--no-progress", "--out", str(out)]
+    assert main(argv) == 0
+    text = (out / "summary.md").read_text()
+    sections = _markdown_tables(text)
+    assert list(sections) == ["driving"]
+    (table,) = sections["driving"]
+    header, *rows = table
+    assert header[0] == "figure" and "paper" in header and len(header) >= 3
+    assert {len(r) for r in rows} == {len(header)}
+    assert any("arm a final, collisions %" in cell for r in rows for cell in r)
+    table_lines = [ln for ln in text.splitlines() if "|" in ln]
+    assert len(table_lines) == len(rows) + 2
+    assert "+-" not in text
