@@ -29,7 +29,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from torchcbl.teaching import TeachingInterrupted
+from torchcbl.errors import TeachingInterrupted
 
 try:  # POSIX only; elsewhere the teacher always reads lines.
     import termios

@@ -1,9 +1,14 @@
 """Record types of a teaching session: frozen dataclasses validated on creation.
 
-A :class:`StepRecord` is one decision of the loop (Algorithm 1 of Chernova & Veloso, AAMAS 2007):
-what the agent saw, what the model proposed and how sure it was, what the teacher said (if
-asked), what was executed and what the environment answered. The teacher's label is stored
-apart from the executed action, so a demonstration is simply a step with a teacher label.
+A :class:`StepRecord` is one decision of the loop, whatever the strategy: what the agent saw,
+what the model proposed and how sure it was, what the teacher said (if asked), what was
+executed and who chose it (``actor``), and what the environment answered. The teacher's label
+is stored apart from the executed action, so a demonstration is simply a step with a teacher
+label, and a strategy may execute the agent's action on a labelled step (DAgger).
+
+A :class:`CorrectionRecord` is a label that arrives after its step was executed (the teacher
+overriding an autonomous action, Confidence-Based Autonomy's corrective demonstration): it
+refers to that earlier step's observation, the state at decision time.
 
 Records are built only by the loop, :func:`torchcbl.teaching.evaluate_policy` and the session
 store; a record that breaks an invariant raises :class:`ValueError` at creation, so nothing
@@ -22,10 +27,21 @@ import numpy as np
 
 _isfinite = math.isfinite
 
-__all__ = ["PHASES", "Phase", "StepRecord", "jsonable_info"]
+__all__ = [
+    "ACTORS",
+    "PHASES",
+    "Actor",
+    "CorrectionRecord",
+    "Phase",
+    "StepRecord",
+    "jsonable_info",
+    "training_set",
+]
 
 Phase = Literal["noninteractive", "confident", "evaluation"]
 PHASES: tuple[str, ...] = ("noninteractive", "confident", "evaluation")
+Actor = Literal["teacher", "agent"]
+ACTORS: tuple[str, ...] = ("teacher", "agent")
 
 _MAX_INFO_ARRAY = 64  # numpy arrays in info with at most this many elements are kept as lists
 
@@ -97,8 +113,10 @@ class StepRecord:
         posterior: p(a | o) for every action, shape [A]; None as above.
         teacher_action: the teacher's label, or None when the teacher was not asked.
         executed_action: the action sent to the environment.
-        phase: ``"noninteractive"``, ``"confident"`` (confident execution) or ``"evaluation"``.
-        autonomous: True when the model's action was executed without asking the teacher.
+        phase: ``"noninteractive"`` (the teacher is asked by design, e.g. the paper's first
+            phase), ``"confident"`` (the strategy decides per step whether to ask) or
+            ``"evaluation"``.
+        autonomous: True when the teacher was not asked (no label) and the model's action ran.
         reward: the env's reward; None when the outcome was never observed (the env raised, or
             the process stopped after the demonstration was committed and before or while its
             action ran).
@@ -111,6 +129,9 @@ class StepRecord:
             confident-execution steps, this one included; None before confident execution.
         windowed_accuracy: share of the last ``accuracy_window`` demonstrations the model
             predicted correctly before learning them; None before any demonstration.
+        actor: who chose ``executed_action``: ``"teacher"`` (it equals the label) or
+            ``"agent"`` (it equals ``model_action``). Default (None at creation): ``"teacher"``
+            when labelled, else ``"agent"`` (Algorithm 1's rule).
     """
 
     step: int
@@ -131,8 +152,11 @@ class StepRecord:
     n_demonstrations: int = 0
     autonomy_rate: float | None = None
     windowed_accuracy: float | None = None
+    actor: Actor | None = None
 
     def __post_init__(self) -> None:
+        if self.actor is None:
+            object.__setattr__(self, "actor", "agent" if self.teacher_action is None else "teacher")
         self._validate_decision()
         self._validate_outcome()
 
@@ -177,18 +201,26 @@ class StepRecord:
             raise bad("phase", f"one of {PHASES}", self.phase)
         if type(self.autonomous) is not bool:
             raise bad("autonomous", "a bool", self.autonomous)
-        if self.teacher_action is not None:
-            if self.autonomous or self.executed_action != self.teacher_action:
-                raise bad(
-                    "teacher_action",
-                    "a demonstration to be executed as labelled and not autonomous",
-                    (self.teacher_action, self.executed_action, self.autonomous),
-                )
-        elif not self.autonomous or self.executed_action != self.model_action:
+        if self.actor not in ACTORS:
+            raise bad("actor", f"one of {ACTORS}", self.actor)
+        if self.autonomous != (self.teacher_action is None):
             raise bad(
                 "autonomous",
-                "a step without a teacher label to execute the model's action autonomously",
-                (self.model_action, self.executed_action, self.autonomous),
+                "True exactly when the step has no teacher label",
+                (self.teacher_action, self.autonomous),
+            )
+        if self.actor == "teacher":
+            if self.teacher_action is None or self.executed_action != self.teacher_action:
+                raise bad(
+                    "actor",
+                    "'teacher' only on a labelled step that executed the label",
+                    (self.teacher_action, self.executed_action),
+                )
+        elif self.executed_action != self.model_action:
+            raise bad(
+                "actor",
+                "'agent' only when the model's action was executed",
+                (self.model_action, self.executed_action),
             )
         if self.phase == "noninteractive" and self.teacher_action is None:
             raise bad("teacher_action", "a label on every non-interactive step", None)
@@ -243,3 +275,88 @@ class StepRecord:
             d["distance"] = "inf"
         json.dumps(d)  # fail here, not in a consumer, if something slipped through
         return d
+
+
+@dataclass(frozen=True)
+class CorrectionRecord:
+    """A label for an earlier step: the teacher overrode an action the agent took on its own.
+
+    Attributes:
+        step: the step whose decision it corrects; its observation is the one relabelled.
+        episode: that step's episode.
+        observation: that step's observation (the state at decision time), shape [D].
+        executed_action: the action the agent executed there.
+        action: the teacher's corrected action for ``observation``.
+    """
+
+    step: int
+    episode: int
+    observation: tuple[float, ...]
+    executed_action: int
+    action: int
+
+    def __post_init__(self) -> None:
+        for name in ("step", "episode", "executed_action", "action"):
+            v = getattr(self, name)
+            if not _is_int(v) or v < 0:
+                raise ValueError(
+                    f"CorrectionRecord.{name}: expected an int >= 0, got {v!r} (step "
+                    f"{self.step!r}). Corrections are built by the teaching loop."
+                )
+
+    @property
+    def observation_array(self) -> np.ndarray:
+        """The observation as a float64 array, shape [D]."""
+        return np.asarray(self.observation, dtype=np.float64)
+
+
+def training_set(
+    xs: list[np.ndarray], ys: list[int], *, relabel: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """The training set a sequence of labels gives: observations [M, D] and actions [M].
+
+    Without ``relabel`` every label is a point (the paper's confident execution). With it, a
+    label for an observation already in the set (bit-for-bit equal) replaces that point's
+    label (Confidence-Based Autonomy: "a demonstration in a stored state relabels it"), so M
+    can be smaller than the number of labels.
+    """
+    if not ys:
+        return np.zeros((0, 0), dtype=np.float64), np.zeros(0, dtype=np.int64)
+    if not relabel:
+        return np.stack(xs), np.asarray(ys, dtype=np.int64)
+    ts = TrainingSet(relabel=True)
+    for x, y in zip(xs, ys, strict=True):
+        ts.add(x, y)
+    return ts.arrays()
+
+
+class TrainingSet:
+    """The loop's growing training set (see :func:`training_set`); O(1) per label."""
+
+    def __init__(self, *, relabel: bool) -> None:
+        self.relabel = relabel
+        self.x: list[np.ndarray] = []
+        self.y: list[int] = []
+        self._index: dict[bytes, int] = {}
+
+    def add(self, x: np.ndarray, y: int) -> bool:
+        """Add one label; returns False when it relabelled a stored point instead."""
+        if self.relabel:
+            key = np.ascontiguousarray(x, dtype=np.float64).tobytes()
+            at = self._index.get(key)
+            if at is not None:
+                self.y[at] = int(y)
+                return False
+            self._index[key] = len(self.y)
+        self.x.append(x)
+        self.y.append(int(y))
+        return True
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(observations [M, D] float64, actions [M] int64)."""
+        if not self.y:
+            return np.zeros((0, 0), dtype=np.float64), np.zeros(0, dtype=np.int64)
+        return np.stack(self.x), np.asarray(self.y, dtype=np.int64)
+
+    def __len__(self) -> int:
+        return len(self.y)

@@ -6,7 +6,10 @@ Run directory layout (one directory per teaching session)::
         config.json              what the session was started with: the TeachingConfig, the
                                  model's constructor arguments, the confidence rule, the env's
                                  id and spaces, the session seed and the log format version
-        steps.sqlite             the step log: table ``steps``, one row per StepRecord
+        steps.sqlite             the step log: table ``steps``, one row per StepRecord;
+                                 table ``corrections``, one row per CorrectionRecord (a
+                                 label for an earlier step's observation, journalled and
+                                 committed exactly like a demonstration)
         steps.sqlite-wal         SQLite's write-ahead log (present while a writer is open or
         steps.sqlite-shm         after a crash; never delete it by hand: it may hold commits)
         steps.journal            the steps not yet committed to steps.sqlite, one JSON line
@@ -56,23 +59,32 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
-from torchcbl.records import StepRecord
+from torchcbl.errors import IncompatibleRunDirError
+from torchcbl.records import CorrectionRecord, StepRecord, training_set
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import GaussianMixtureSet
-    from torchcbl.teaching import GreedyPolicy
+    from torchcbl.policy import GreedyPolicy
 
 __all__ = [
     "FORMAT",
     "IncompatibleRunDirError",
     "latest_checkpoint",
     "load_config",
+    "load_corrections",
+    "load_demonstrations",
+    "load_labels",
     "load_model",
     "load_policy",
     "load_records",
+    "restore_model",
 ]
 
-FORMAT = "torchcbl.session/1"
+FORMAT = "torchcbl.session/2"
+#: Formats this version reads. Format 1 (before strategies) has no ``actor`` column and no
+#: ``corrections`` table: its actor is derived (teacher when labelled, else agent), it has no
+#: corrections, and resuming it upgrades the directory to format 2 in place.
+READABLE_FORMATS = ("torchcbl.session/1", FORMAT)
 CONFIG_NAME = "config.json"
 LOG_NAME = "steps.sqlite"
 JOURNAL_NAME = "steps.journal"
@@ -99,7 +111,9 @@ _COLUMNS = (
     "autonomy_rate",
     "windowed_accuracy",
     "pending",
+    "actor",
 )
+_FORMAT1_COLUMNS = _COLUMNS[:-1]
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS steps (
     step INTEGER PRIMARY KEY,
@@ -120,20 +134,22 @@ CREATE TABLE IF NOT EXISTS steps (
     n_demonstrations INTEGER NOT NULL,
     autonomy_rate REAL,
     windowed_accuracy REAL,
-    pending INTEGER NOT NULL        -- 1: demonstration committed, outcome not yet written
+    pending INTEGER NOT NULL,       -- 1: demonstration committed, outcome not yet written
+    actor TEXT                      -- who chose executed_action: 'teacher' or 'agent'
+);
+CREATE TABLE IF NOT EXISTS corrections (
+    step INTEGER PRIMARY KEY,       -- the (autonomous) step whose decision-time state it relabels
+    action INTEGER NOT NULL         -- the teacher's corrected action for that step's observation
 );
 """
 _INSERT = f"INSERT INTO steps ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})"
 _REPLACE = _INSERT.replace("INSERT", "INSERT OR REPLACE", 1)
 FINISH_FIELDS = ("reward", "terminated", "truncated", "info")
+_CORRECT = "INSERT OR REPLACE INTO corrections (step, action) VALUES (?, ?)"
 _FINISH = (
     "UPDATE steps SET reward = ?, terminated = ?, truncated = ?, info = ?, pending = 0 "
     "WHERE step = ?"
 )
-
-
-class IncompatibleRunDirError(ValueError):
-    """A run directory cannot be used with the given env, model, rule or configuration."""
 
 
 def _blob(values: tuple[float, ...]) -> bytes:
@@ -158,7 +174,8 @@ _JSON_LINE = json.JSONEncoder(separators=(",", ":"))  # Infinity allowed: distan
 
 
 def _journal_line(kind: str, values: tuple[Any, ...]) -> bytes:
-    """One journal line: ``["s", *row]`` (a step row, blobs as hex) or ``["f", *finish]``."""
+    """One journal line: ``["s", *row]`` (a step row, blobs as hex), ``["f", *finish]`` or
+    ``["c", step, action]`` (a correction)."""
     if kind == "s":
         values = tuple(
             v.hex() if i in _BLOB_COLUMNS and v is not None else v for i, v in enumerate(values)
@@ -183,8 +200,26 @@ def _journal_entries(path: Path) -> list[tuple[str, tuple[Any, ...]]]:
                 bytes.fromhex(v) if i in _BLOB_COLUMNS and v is not None else v
                 for i, v in enumerate(values)
             ]
+            if len(values) == len(_FORMAT1_COLUMNS):  # written by a format-1 writer
+                values.append(_derived_actor(values[_COLUMNS.index("teacher_action")]))
         entries.append((kind, tuple(values)))
     return entries
+
+
+def _derived_actor(teacher_action: Any) -> str:
+    return "agent" if teacher_action is None else "teacher"
+
+
+def _upgrade_format1(db: sqlite3.Connection) -> bool:
+    """Add format 2's ``actor`` column to a format-1 log (in place); True if it was format 1."""
+    columns = {row[1] for row in db.execute("PRAGMA table_info(steps)")}
+    if not columns or "actor" in columns:
+        return False
+    db.execute("ALTER TABLE steps ADD COLUMN actor TEXT")
+    db.execute(
+        "UPDATE steps SET actor = CASE WHEN teacher_action IS NULL THEN 'agent' ELSE 'teacher' END"
+    )
+    return True
 
 
 def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
@@ -209,11 +244,12 @@ def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
         config = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
         raise IncompatibleRunDirError(f"{path} is not readable JSON: {exc}") from exc
-    if not isinstance(config, dict) or config.get("format") != FORMAT:
+    if not isinstance(config, dict) or config.get("format") not in READABLE_FORMATS:
         got = config.get("format") if isinstance(config, dict) else type(config).__name__
         raise IncompatibleRunDirError(
-            f"{path}: expected session format {FORMAT!r}, got {got!r}. This directory was "
-            "written by another version of torchcbl or by something else; use a new run_dir."
+            f"{path}: expected a session format among {READABLE_FORMATS}, got {got!r}. This "
+            "directory was written by another version of torchcbl or by something else; read "
+            "it with that version, or start a new session in a new run_dir."
         )
     return config
 
@@ -233,6 +269,10 @@ class SessionStore:
         self._db = sqlite3.connect(self.run_dir / LOG_NAME, isolation_level=None)
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=NORMAL")
+        if _upgrade_format1(self._db):
+            config = load_config(self.run_dir)
+            config["format"] = FORMAT
+            write_json_atomic(self.run_dir / CONFIG_NAME, config)
         self._db.executescript(_SCHEMA)
         self._in_tx = False
         journal = self.run_dir / JOURNAL_NAME
@@ -245,7 +285,8 @@ class SessionStore:
             return
         self._begin()
         for kind, values in entries:
-            self._db.execute(_REPLACE if kind == "s" else _FINISH, values)
+            sql = _REPLACE if kind == "s" else _FINISH if kind == "f" else _CORRECT
+            self._db.execute(sql, values)
         self._db.execute("COMMIT")
         self._in_tx = False
 
@@ -262,6 +303,23 @@ class SessionStore:
         path.mkdir(parents=True, exist_ok=True)
         write_json_atomic(path / CONFIG_NAME, config)
         return cls(path)
+
+    @classmethod
+    def open_for_resume(
+        cls, run_dir: str | os.PathLike[str], *, commit_every: int = 32
+    ) -> tuple[SessionStore, list[StepRecord], list[CorrectionRecord]]:
+        """Open an existing session for writing: replay its journal, mark a demonstration
+        whose outcome was never written as interrupted, upgrade a format-1 log, and return the
+        store with every record and correction."""
+        load_config(run_dir)
+        if not (Path(run_dir) / LOG_NAME).is_file():
+            raise IncompatibleRunDirError(
+                f"{Path(run_dir) / LOG_NAME} is missing: not a teaching session directory."
+            )
+        store = cls(Path(run_dir), commit_every=commit_every)
+        store.finalize_pending()
+        records = store.records()
+        return store, records, store.corrections(records)
 
     # -- writing ----------------------------------------------------------------------------
 
@@ -309,6 +367,7 @@ class SessionStore:
             r.autonomy_rate,
             r.windowed_accuracy,
             int(pending),
+            r.actor,
         )
 
     def commit_demonstration(self, provisional: StepRecord) -> None:
@@ -329,6 +388,10 @@ class SessionStore:
     def append(self, record: StepRecord) -> None:
         """Log an autonomous step."""
         self._write("s", self.row(record, pending=False), _INSERT)
+
+    def correct(self, correction: CorrectionRecord) -> None:
+        """Make a correction (a label for an earlier step's observation) durable."""
+        self._write("c", (correction.step, correction.action), _CORRECT)
 
     def finalize_pending(self) -> int:
         """Mark demonstrations whose outcome was never written; returns how many there were."""
@@ -361,8 +424,8 @@ class SessionStore:
     def records(self) -> list[StepRecord]:
         return list(_read_records(self._db))
 
-    def demonstrations(self) -> tuple[np.ndarray, np.ndarray]:
-        return _read_demonstrations(self._db)
+    def corrections(self, records: list[StepRecord]) -> list[CorrectionRecord]:
+        return _read_corrections(self._db, None, records)
 
 
 def _record_from_row(row: tuple[Any, ...]) -> StepRecord:
@@ -382,19 +445,38 @@ def _record_from_row(row: tuple[Any, ...]) -> StepRecord:
     return StepRecord(**d)
 
 
-def _rows(db: sqlite3.Connection, journal: Path | None) -> list[tuple[Any, ...]]:
-    """Every row of the log in step order, with a journal's lines applied on top.
+def _table_columns(db: sqlite3.Connection, table: str) -> set[str]:
+    return {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
+
+
+def _rows(
+    db: sqlite3.Connection, journal: Path | None
+) -> tuple[list[tuple[Any, ...]], dict[int, int]]:
+    """Every step row of the log in step order, with a journal's lines applied on top, and the
+    corrections ``{step: action}``.
 
     The journal is read first: a writer that commits and empties it in between has then put
     those rows in SQLite, where the SELECT finds them. A finished SQLite row is never replaced
-    by an older journal line.
+    by an older journal line. A format-1 log (no ``actor`` column) gets its actor derived.
     """
     entries = [] if journal is None else _journal_entries(journal)
-    cur = db.execute(f"SELECT {', '.join(_COLUMNS)} FROM steps ORDER BY step")
-    rows = {row[0]: row for row in cur}
+    columns = _table_columns(db, "steps")
+    if "actor" in columns:
+        cur = db.execute(f"SELECT {', '.join(_COLUMNS)} FROM steps ORDER BY step")
+        rows = {row[0]: row for row in cur}
+    else:
+        cur = db.execute(f"SELECT {', '.join(_FORMAT1_COLUMNS)} FROM steps ORDER BY step")
+        label = _COLUMNS.index("teacher_action")
+        rows = {row[0]: (*row, _derived_actor(row[label])) for row in cur}
+    corrections: dict[int, int] = {}
+    if _table_columns(db, "corrections"):
+        corrections = dict(db.execute("SELECT step, action FROM corrections"))
     at = {name: i for i, name in enumerate(_COLUMNS)}
     pending = at["pending"]
     for kind, values in entries:
+        if kind == "c":
+            corrections[int(values[0])] = int(values[1])
+            continue
         step = values[0] if kind == "s" else values[-1]
         if kind == "s":
             if step not in rows or rows[step][pending]:
@@ -405,24 +487,61 @@ def _rows(db: sqlite3.Connection, journal: Path | None) -> list[tuple[Any, ...]]
                 row[at[name]] = v
             row[pending] = 0
             rows[step] = tuple(row)
-    return [rows[k] for k in sorted(rows)]
+    return [rows[k] for k in sorted(rows)], corrections
 
 
 def _read_records(db: sqlite3.Connection, journal: Path | None = None) -> Iterable[StepRecord]:
-    for row in _rows(db, journal):
+    for row in _rows(db, journal)[0]:
         yield _record_from_row(row)
 
 
-def _read_demonstrations(
-    db: sqlite3.Connection, journal: Path | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    obs_i, label_i = _COLUMNS.index("observation"), _COLUMNS.index("teacher_action")
-    rows = [(r[obs_i], r[label_i]) for r in _rows(db, journal) if r[label_i] is not None]
-    if not rows:
-        return np.zeros((0, 0), dtype=np.float64), np.zeros(0, dtype=np.int64)
-    x = np.stack([np.frombuffer(r[0], dtype="<f8") for r in rows])
-    y = np.asarray([r[1] for r in rows], dtype=np.int64)
-    return x, y
+def _corrections_of(
+    records: list[StepRecord], corrections: dict[int, int]
+) -> list[CorrectionRecord]:
+    by_step = {r.step: r for r in records}
+    out = []
+    for step in sorted(corrections):
+        r = by_step.get(step)
+        if r is None:  # a correction can only follow its step; a torn log lost both
+            continue
+        out.append(
+            CorrectionRecord(
+                step=step,
+                episode=r.episode,
+                observation=r.observation,
+                executed_action=r.executed_action,
+                action=int(corrections[step]),
+            )
+        )
+    return out
+
+
+def _read_corrections(
+    db: sqlite3.Connection, journal: Path | None, records: list[StepRecord]
+) -> list[CorrectionRecord]:
+    return _corrections_of(records, _rows(db, journal)[1])
+
+
+def label_sequence(
+    records: list[StepRecord], corrections: list[CorrectionRecord]
+) -> tuple[list[np.ndarray], list[int]]:
+    """Every label of a session in the order it arrived: observations and actions.
+
+    A step's own teacher label comes first, then a correction of that step (which arrives after
+    the step was executed and before the next decision).
+    """
+    by_step = {c.step: c for c in corrections}
+    xs: list[np.ndarray] = []
+    ys: list[int] = []
+    for r in records:
+        if r.teacher_action is not None:
+            xs.append(r.observation_array)
+            ys.append(r.teacher_action)
+        c = by_step.get(r.step)
+        if c is not None:
+            xs.append(c.observation_array)
+            ys.append(c.action)
+    return xs, ys
 
 
 def _open_readonly(run_dir: str | os.PathLike[str]) -> sqlite3.Connection:
@@ -443,14 +562,49 @@ def load_records(run_dir: str | os.PathLike[str]) -> list[StepRecord]:
         db.close()
 
 
-def load_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Observations [M, D] float64 and teacher labels [M] int64 of every logged demonstration."""
+def load_corrections(run_dir: str | os.PathLike[str]) -> list[CorrectionRecord]:
+    """Every correction of a run directory (labels for earlier steps), in step order."""
     load_config(run_dir)
     db = _open_readonly(run_dir)
     try:
-        return _read_demonstrations(db, Path(run_dir) / JOURNAL_NAME)
+        rows, corrections = _rows(db, Path(run_dir) / JOURNAL_NAME)
+        return _corrections_of([_record_from_row(r) for r in rows], corrections)
     finally:
         db.close()
+
+
+def _relabels(config: dict[str, Any]) -> bool:
+    return bool(config.get("strategy", {}).get("relabel", False))
+
+
+def load_labels(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Every label of the session in arrival order (demonstrations and corrections):
+    observations [L, D] float64 and actions [L] int64, before any relabelling."""
+    load_config(run_dir)
+    db = _open_readonly(run_dir)
+    try:
+        rows, corrections = _rows(db, Path(run_dir) / JOURNAL_NAME)
+    finally:
+        db.close()
+    records = [_record_from_row(r) for r in rows]
+    xs, ys = label_sequence(records, _corrections_of(records, corrections))
+    if not ys:
+        return np.zeros((0, 0), dtype=np.float64), np.zeros(0, dtype=np.int64)
+    return np.stack(xs), np.asarray(ys, dtype=np.int64)
+
+
+def load_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+    """The session's training set: observations [M, D] float64 and labels [M] int64.
+
+    Every label in arrival order; with a strategy that relabels (``"relabel": true`` in the
+    stored strategy, e.g. Confidence-Based Autonomy), a label for an observation already stored
+    replaces that point's label instead of adding a point.
+    """
+    config = load_config(run_dir)
+    x, y = load_labels(run_dir)
+    if not len(y) or not _relabels(config):
+        return x, y
+    return training_set(list(x), y.tolist(), relabel=True)
 
 
 def latest_checkpoint(
@@ -502,6 +656,36 @@ def fitted_count(run_dir: str | os.PathLike[str], n_demonstrations: int, max_new
     return last + fit_count(n_demonstrations - last, max_new)
 
 
+def restore_model(
+    run_dir: str | os.PathLike[str],
+    model: torch.nn.Module,
+    xs: list[np.ndarray],
+    ys: list[int],
+    *,
+    max_new: int,
+    relabel: bool,
+    store: SessionStore | None = None,
+) -> int:
+    """Bring ``model`` to where the session's live model stood after the labels ``xs, ys``:
+    THE one "load the checkpoint or refit" path (resume and :func:`load_model` both use it).
+
+    The model stood on the first ``k = fitted_count(run_dir, len(ys), max_new)`` labels. Its
+    checkpoint is loaded when present; otherwise (the process died between logging and saving)
+    the model is refitted deterministically on the training set of those labels, and with
+    ``store`` the missing checkpoint is written. Returns ``k``.
+    """
+    k = fitted_count(run_dir, len(ys), max_new)
+    ckpt = latest_checkpoint(run_dir, at_most=k)
+    if ckpt is not None and ckpt[0] == k:
+        model.load_state_dict(torch.load(ckpt[1], weights_only=True)["state_dict"])
+    elif k > 0:
+        x, y = training_set(xs[:k], ys[:k], relabel=relabel)
+        model.fit(x, y)
+        if store is not None:
+            store.save_checkpoint(model, k)
+    return k
+
+
 def load_model(
     run_dir: str | os.PathLike[str], *, n_demonstrations: int | None = None
 ) -> GaussianMixtureSet:
@@ -509,32 +693,77 @@ def load_model(
 
     Args:
         run_dir: a session directory.
-        n_demonstrations: rebuild the model as it stood when this many demonstrations were
-            logged (default: all logged demonstrations).
+        n_demonstrations: rebuild the model as it stood when this many labels (demonstrations
+            and corrections) were logged (default: all of them).
 
     Returns:
-        A GaussianMixtureSet fitted on the first ``fitted_count(run_dir, n, max_new)``
-        demonstrations
+        A GaussianMixtureSet fitted on the first ``fitted_count(run_dir, n, max_new)`` labels
         (unfitted when that is 0 and the session did not start from a fitted model). If the
         matching checkpoint is missing (the process was killed between logging and saving),
-        the model is refitted deterministically on the logged demonstrations.
+        the model is refitted deterministically on the logged labels.
     """
     config = load_config(run_dir)
-    x, y = load_demonstrations(run_dir)
+    x, y = load_labels(run_dir)
     n = len(y) if n_demonstrations is None else min(int(n_demonstrations), len(y))
-    k = fitted_count(run_dir, n, int(config["teaching"]["max_new"]))
     model = build_model(config)
-    ckpt = latest_checkpoint(run_dir, at_most=k)
-    if ckpt is not None and ckpt[0] == k:
-        state = torch.load(ckpt[1], weights_only=True)
-        model.load_state_dict(state["state_dict"])
-    elif k > 0:
-        model.fit(x[:k], y[:k])
+    restore_model(
+        run_dir,
+        model,
+        list(x[:n]),
+        y[:n].tolist(),
+        max_new=int(config["teaching"]["max_new"]),
+        relabel=_relabels(config),
+    )
     return model
 
 
 def load_policy(run_dir: str | os.PathLike[str]) -> GreedyPolicy:
     """The latest learned policy of a session directory, as a callable obs -> action."""
-    from torchcbl.teaching import GreedyPolicy
+    from torchcbl.policy import GreedyPolicy
 
     return GreedyPolicy(load_model(run_dir))
+
+
+def resume_problems(
+    stored: dict[str, Any],
+    *,
+    n_features: int,
+    n_actions: int,
+    env_id: str | None,
+    learning: tuple[dict[str, Any], dict[str, Any]] | None,
+    model_args: dict[str, Any] | None,
+    strategy: dict[str, Any] | None,
+) -> list[str]:
+    """What keeps a session from resuming with the given env, configuration, model and
+    strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
+    ``model_args`` / ``strategy`` None means "rebuilt from the directory", a strategy config
+    with ``"custom": true`` is not compared."""
+    problems: list[str] = []
+    senv = stored["env"]
+    if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
+        problems.append(
+            f"env: the session has {senv['n_features']} features and {senv['n_actions']} "
+            f"actions, the given env {n_features} and {n_actions}"
+        )
+    if senv.get("id") and env_id and senv["id"] != env_id:
+        problems.append(f"env id: the session used {senv['id']!r}, got {env_id!r}")
+    if learning is not None and learning[0] != learning[1]:
+        diff = {
+            k: (v, learning[1].get(k)) for k, v in learning[0].items() if learning[1].get(k) != v
+        }
+        problems.append(f"config (stored, given): {diff}; only the stop fields may change")
+    if model_args is not None and model_args != stored["model"]["args"]:
+        problems.append(f"model args: stored {stored['model']['args']}, given {model_args}")
+    if strategy is not None and not strategy.get("custom"):
+        want = stored_strategy(stored)
+        if strategy != want:
+            problems.append(f"strategy: stored {want}, given {strategy}")
+    return problems
+
+
+def stored_strategy(stored: dict[str, Any]) -> dict[str, Any]:
+    """The strategy config of a session; a format-1 session (no ``strategy`` entry) used
+    confident execution with its stored rule."""
+    if "strategy" in stored:
+        return dict(stored["strategy"])
+    return {"type": "ConfidentExecution", "rule": stored["rule"], "relabel": False}

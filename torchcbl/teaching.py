@@ -1,26 +1,30 @@
-"""ConfidentTeacher: confident execution (Chernova & Veloso, AAMAS 2007, Algorithm 1).
+"""The teaching loop: ConfidentTeacher (Chernova & Veloso, AAMAS 2007, Algorithm 1, and its
+successors through a pluggable strategy).
 
-The pieces are separate and swappable, as in imitation's DAgger: the *rule* that decides when
-to ask (:mod:`torchcbl.confidence`), the *teacher* (any callable ``teacher(obs, info) -> int``),
-the *learner* (a :class:`~torchcbl.gmm.GaussianMixtureSet`) and the *collector* (this loop,
-writing every step to a :class:`~torchcbl.records.StepRecord` and, with ``run_dir``, to a
-durable session directory laid out as documented in :mod:`torchcbl.session`).
+The pieces are separate and swappable, as in imitation's DAgger: the *strategy* that decides
+whether to ask and whose action runs (:mod:`torchcbl.strategies`; the default,
+:class:`~torchcbl.strategies.ConfidentExecution`, is Algorithm 1 with a confidence rule from
+:mod:`torchcbl.confidence`), the *teacher* (any callable ``teacher(obs, info) -> int``, with an
+optional ``correct`` method), the *learner* (a :class:`~torchcbl.gmm.GaussianMixtureSet`) and
+the *collector* (this loop, writing every step to a :class:`~torchcbl.records.StepRecord`
+and, with ``run_dir``, to a durable session directory, :mod:`torchcbl.session`).
 
 One step of the loop:
 
 1. Classify the current observation with the current model (action, confidence, distance,
    posterior; before any fit: action -1, distance +inf).
-2. Non-interactive phase, or inside a teacher burst: ask the teacher. Confident execution: ask
-   the teacher only when the rule is not confident; a request starts a burst of
-   ``config.burst`` teacher moves (the paper's driving teacher gave 10). A burst ends early at
-   the end of an episode.
-3. A teacher answer is a demonstration: the model's prediction is scored against it (windowed
+2. The strategy decides whether to ask the teacher (default: always in the non-interactive
+   phase and inside a teacher burst, else when the rule is not confident).
+3. A teacher answer is a label: the model's prediction is scored against it (windowed
    prediction accuracy), it is committed to the log, and the model is refitted when
-   ``config.max_new`` demonstrations have accumulated since the last fit. Then the teacher's
-   action is executed. Otherwise the model's action is executed.
-4. The step is recorded; an episode that ends is reset and teaching goes on. Only the first
-   reset of a new session is seeded (with ``seed``); later resets continue the env's RNG. The
-   first reset after :meth:`ConfidentTeacher.resume` is seeded from (seed, episode index).
+   ``config.max_new`` labels have accumulated since the last fit. The strategy says whose
+   action is executed (default: the teacher's when asked, else the model's).
+4. The step is recorded; with a strategy that wants corrections and a teacher that has
+   ``correct``, the teacher may then relabel the observation the agent just acted on
+   autonomously (a :class:`~torchcbl.records.CorrectionRecord`, durable before the next
+   decision). An episode that ends is reset and teaching goes on. Only the first reset of a
+   new session is seeded (with ``seed``); later resets continue the env's RNG. The first reset
+   after :meth:`ConfidentTeacher.resume` is seeded from (seed, episode index).
 
 The non-interactive phase ends after the step at which the accuracy window is full
 (``accuracy_window`` demonstrations) and its accuracy is >= ``target_accuracy``; never when the
@@ -43,17 +47,26 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from torchcbl.confidence import DistanceRule, _np, rule_from_config, rule_to_config
-from torchcbl.records import StepRecord, jsonable_info
+from torchcbl.confidence import _np, rule_to_config
+from torchcbl.errors import EnvError, IncompatibleRunDirError, TeacherError, TeachingInterrupted
+from torchcbl.policy import GreedyPolicy, as_action, check_env, evaluate_policy, obs_array
+from torchcbl.records import CorrectionRecord, StepRecord, TrainingSet, jsonable_info
 from torchcbl.session import (
     FORMAT,
-    IncompatibleRunDirError,
     SessionStore,
     build_model,
-    fitted_count,
-    latest_checkpoint,
+    label_sequence,
     load_config,
     load_policy,
+    restore_model,
+    resume_problems,
+    stored_strategy,
+)
+from torchcbl.strategies import (
+    ConfidentExecution,
+    Decision,
+    strategy_from_config,
+    strategy_to_config,
 )
 
 __all__ = [
@@ -62,6 +75,7 @@ __all__ = [
     "GreedyPolicy",
     "TeacherError",
     "TeachingConfig",
+    "TeachingInterrupted",
     "evaluate_policy",
     "load_policy",
 ]
@@ -83,23 +97,6 @@ _MODEL_ARG_NAMES = (
     "max_iter",
     "seed",
 )
-
-
-class TeacherError(RuntimeError):
-    """The teacher raised or gave an invalid action; nothing was recorded for that step."""
-
-
-class TeachingInterrupted(Exception):
-    """The teacher asked to stop teaching (a person pressed 'q' or Ctrl-C, input closed).
-
-    A teacher raises it from inside its call; the loop lets it through unwrapped, after
-    committing what was recorded: every demonstration before the interrupted decision is kept,
-    the decision being asked about is not answered, and the session can be resumed.
-    """
-
-
-class EnvError(RuntimeError):
-    """The environment raised or returned a non-finite / malformed observation or reward."""
 
 
 def _opt_int(name: str, value: Any, *, minimum: int) -> None:
@@ -175,64 +172,6 @@ class TeachingConfig:
         }
 
 
-class GreedyPolicy:
-    """A learned policy standing on its own: ``policy(obs [D]) -> int`` (Eq. 7, no asking).
-
-    Holds the model by reference (the live model of a session keeps learning); deep-copy the
-    policy or the model to freeze a snapshot. Picklable.
-    """
-
-    def __init__(self, model: torch.nn.Module) -> None:
-        self.model = model
-
-    def classify(self, observation: Any) -> Any:
-        """The model's Classification of one observation [D] (batched fields of length 1)."""
-        x = torch.as_tensor(np.asarray(observation, dtype=np.float64)).reshape(1, -1)
-        return self.model.classify(x)
-
-    def __call__(self, observation: Any) -> int:
-        action = int(self.classify(observation).action[0])
-        if action < 0:
-            raise RuntimeError(
-                "GreedyPolicy: the model is not fitted yet, so it has no action to give. "
-                "Teach it first (ConfidentTeacher.run) or load a fitted checkpoint."
-            )
-        return action
-
-    def __repr__(self) -> str:
-        return f"GreedyPolicy({type(self.model).__name__})"
-
-
-def _check_env(env: gym.Env) -> tuple[int, int]:
-    """(n_features, n_actions) of a supported env, or a clear ValueError."""
-    space = getattr(env, "action_space", None)
-    if not isinstance(space, gym.spaces.Discrete) or int(space.start) != 0:
-        raise ValueError(
-            f"expected an env with a Discrete action space starting at 0, got {space!r}. "
-            "Wrap the env so its actions are 0..n-1."
-        )
-    obs_space = getattr(env, "observation_space", None)
-    if (
-        not isinstance(obs_space, gym.spaces.Box)
-        or len(obs_space.shape) != 1
-        or not np.issubdtype(obs_space.dtype, np.floating)
-    ):
-        raise ValueError(
-            f"expected an env with a 1-D float Box observation space, got {obs_space!r}. "
-            "Flatten the observation (gymnasium.wrappers.FlattenObservation) and cast to float."
-        )
-    return int(obs_space.shape[0]), int(space.n)
-
-
-def _as_action(value: Any, n_actions: int) -> int | None:
-    if isinstance(value, np.ndarray) and value.ndim == 0:
-        value = value.item()
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        return None
-    value = int(value)
-    return value if 0 <= value < n_actions else None
-
-
 def _model_args(model: torch.nn.Module) -> dict[str, Any]:
     args = getattr(model, "init_args", None)
     if isinstance(args, dict):
@@ -246,30 +185,30 @@ def _model_args(model: torch.nn.Module) -> dict[str, Any]:
     return {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
 
 
+def _pick_strategy(rule: Any, strategy: Any) -> Any:
+    if rule is not None and strategy is not None:
+        raise ValueError(
+            "give either rule= (confident execution with that rule) or strategy=, not both; "
+            "for confident execution with a rule, pass strategy=ConfidentExecution(rule)."
+        )
+    if strategy is None:
+        return ConfidentExecution(rule)
+    for name in ("decide", "actor", "observe_label", "observe_refit", "observe_step", "bind"):
+        if not callable(getattr(strategy, name, None)):
+            raise TypeError(
+                f"strategy: expected a torchcbl.strategies.Strategy (methods bind, decide, "
+                f"actor, observe_label, observe_refit, observe_step), got {strategy!r} "
+                f"without {name}()."
+            )
+    return strategy
+
+
 def _is_fitted(model: Any) -> bool:
     return bool(getattr(model, "is_fitted", False))
 
 
 def _seed_for(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
-
-
-def _obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
-    try:
-        x = np.array(obs, dtype=np.float64)  # a copy: an env may reuse its buffer in place
-    except (TypeError, ValueError) as exc:
-        raise EnvError(f"{where}: observation is not numeric ({exc}).") from exc
-    if x.shape != (n_features,):
-        raise EnvError(
-            f"{where}: expected an observation of shape ({n_features},), got {x.shape}. "
-            "Check the env's observation_space."
-        )
-    if not np.isfinite(x).all():
-        raise EnvError(
-            f"{where}: the observation has non-finite values {x.tolist()}. Fix the env (or wrap "
-            "it to clip / replace them); nothing non-finite is ever learned from."
-        )
-    return x
 
 
 class ConfidentTeacher:
@@ -282,14 +221,17 @@ class ConfidentTeacher:
             It gets a copy of the env's observation and the info of the latest reset / step.
         model: the learner; default ``GaussianMixtureSet(n_actions, D, seed=seed)``. Its
             ``fit`` must be deterministic given the data (resume relies on it).
-        rule: the confidence rule; default ``DistanceRule(2.0)`` (the paper's).
+        rule: the confidence rule of the default strategy; default ``DistanceRule(2.0)``
+            (the paper's). Shorthand for ``strategy=ConfidentExecution(rule)``.
+        strategy: who asks and who acts (:mod:`torchcbl.strategies`); default
+            ``ConfidentExecution(rule)``. Give ``rule`` or ``strategy``, not both.
         config: a :class:`TeachingConfig`.
         run_dir: if given, a new session directory (see :mod:`torchcbl.session`); it must not
             already hold a session (continue one with :meth:`resume`).
         seed: seeds the first ``env.reset`` (and the default model).
         progress: show a tqdm bar with the live counters while :meth:`run` runs.
         on_step: called with each :class:`StepRecord` after it is recorded.
-        on_refit: called as ``on_refit(model, n_demonstrations)`` after each refit.
+        on_refit: called as ``on_refit(model, n_labels)`` after each refit.
         commit_every: autonomous steps batched per commit at most (demonstrations are always
             committed before their action runs).
 
@@ -307,6 +249,7 @@ class ConfidentTeacher:
         *,
         model: torch.nn.Module | None = None,
         rule: Any = None,
+        strategy: Any = None,
         config: TeachingConfig | None = None,
         run_dir: str | os.PathLike[str] | None = None,
         seed: int = 0,
@@ -315,7 +258,8 @@ class ConfidentTeacher:
         on_refit: Callable[[torch.nn.Module, int], None] | None = None,
         commit_every: int = 32,
     ) -> None:
-        self._setup(env, teacher, model, rule, config, seed, progress, on_step, on_refit)
+        strategy = _pick_strategy(rule, strategy)
+        self._setup(env, teacher, model, strategy, config, seed, progress, on_step, on_refit)
         self._env_config = self._describe_env()
         self._store: SessionStore | None = None
         self.run_dir = None if run_dir is None else Path(run_dir)
@@ -324,7 +268,8 @@ class ConfidentTeacher:
                 "format": FORMAT,
                 "teaching": dataclasses.asdict(self.config),
                 "model": {"class": type(self.model).__name__, "args": _model_args(self.model)},
-                "rule": rule_to_config(self.rule),
+                "rule": None if self.rule is None else rule_to_config(self.rule),
+                "strategy": strategy_to_config(self.strategy),
                 "env": self._env_config,
                 "seed": self.seed,
             }
@@ -334,8 +279,8 @@ class ConfidentTeacher:
                 self._store.save_checkpoint(self.model, 0)
         self._next_reset_seed: int | None = self.seed
 
-    def _setup(self, env, teacher, model, rule, config, seed, progress, on_step, on_refit):
-        self.n_features, self.n_actions = _check_env(env)
+    def _setup(self, env, teacher, model, strategy, config, seed, progress, on_step, on_refit):
+        self.n_features, self.n_actions = check_env(env)
         if not callable(teacher):
             raise TypeError(
                 f"teacher: expected a callable teacher(observation, info) -> int, got {teacher!r}"
@@ -360,14 +305,12 @@ class ConfidentTeacher:
                     f"{attr}={want}."
                 )
         self.model = model
-        self.rule = DistanceRule() if rule is None else rule
-        if not (
-            callable(getattr(self.rule, "is_confident", None))
-            and callable(getattr(self.rule, "update", None))
-        ):
-            raise TypeError(
-                f"rule: expected a ConfidenceRule (is_confident and update), got {self.rule!r}"
-            )
+        self.strategy = strategy
+        strategy.bind(n_actions=self.n_actions, n_features=self.n_features, config=self.config)
+        self._relabel = bool(getattr(strategy, "relabel", False))
+        self._corrects = bool(getattr(strategy, "wants_corrections", False)) and callable(
+            getattr(teacher, "correct", None)
+        )
         self.progress = bool(progress)
         self.on_step = on_step
         self.on_refit = on_refit
@@ -375,11 +318,10 @@ class ConfidentTeacher:
         w = self.config.accuracy_window
         self._acc_window: deque[bool] = deque(maxlen=w)
         self._auto_window: deque[bool] = deque(maxlen=w)
-        self._demo_x: list[np.ndarray] = []
-        self._demo_y: list[int] = []
+        self._labels = 0  # labels (demonstrations + corrections) so far
+        self._train = TrainingSet(relabel=self._relabel)
+        self.corrections: list[CorrectionRecord] = []
         self._new_since_refit = 0
-        self._phase = "noninteractive" if self.config.noninteractive else "confident"
-        self._burst_left = 0
         self._needs_reset = True
         self._next_episode = 0
         self._episode = 0
@@ -413,6 +355,7 @@ class ConfidentTeacher:
         *,
         model: torch.nn.Module | None = None,
         rule: Any = None,
+        strategy: Any = None,
         config: TeachingConfig | None = None,
         progress: bool = True,
         on_step: Callable[[StepRecord], None] | None = None,
@@ -429,93 +372,116 @@ class ConfidentTeacher:
 
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
-                fields may not. ``model`` / ``rule``: optional; must match the stored ones
-                (a custom rule that cannot be rebuilt must be passed).
+                fields may not. ``model`` / ``rule`` / ``strategy``: optional; must match the
+                stored ones (a custom rule or strategy that cannot be rebuilt must be passed).
 
         Raises:
             IncompatibleRunDirError: the directory is not a session, or it was written for a
                 different env, model, rule or learning configuration.
         """
         stored = load_config(run_dir)
-        problems: list[str] = []
-        n_features, n_actions = _check_env(env)
-        senv = stored["env"]
-        if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
-            problems.append(
-                f"env: the session has {senv['n_features']} features and {senv['n_actions']} "
-                f"actions, the given env {n_features} and {n_actions}"
-            )
-        spec_id = getattr(getattr(env, "spec", None), "id", None)
-        if senv.get("id") and spec_id and senv["id"] != spec_id:
-            problems.append(f"env id: the session used {senv['id']!r}, got {spec_id!r}")
+        n_features, n_actions = check_env(env)
         try:
             stored_config = TeachingConfig(**stored["teaching"])
         except TypeError as exc:
             raise IncompatibleRunDirError(f"{run_dir}: unreadable TeachingConfig: {exc}") from exc
-        if config is None:
-            config = stored_config
-        elif config.learning_fields() != stored_config.learning_fields():
-            diff = {
-                k: (v, config.learning_fields()[k])
-                for k, v in stored_config.learning_fields().items()
-                if config.learning_fields()[k] != v
-            }
-            problems.append(f"config (stored, given): {diff}; only the stop fields may change")
-        if model is None:
-            if not problems:
-                model = build_model(stored)
-        else:
+        config = stored_config if config is None else config
+        model_args = None
+        if model is not None:
             try:
-                args = _model_args(model)
+                model_args = _model_args(model)
             except ValueError as exc:
-                args = {"error": str(exc)}
-            if args != stored["model"]["args"]:
-                problems.append(f"model args: stored {stored['model']['args']}, given {args}")
-        if rule is None:
+                model_args = {"error": str(exc)}
+        problems = resume_problems(
+            stored,
+            n_features=n_features,
+            n_actions=n_actions,
+            env_id=getattr(getattr(env, "spec", None), "id", None),
+            learning=(stored_config.learning_fields(), config.learning_fields()),
+            model_args=model_args,
+            strategy=(
+                None
+                if rule is None and strategy is None
+                else strategy_to_config(_pick_strategy(rule, strategy))
+            ),
+        )
+        if rule is None and strategy is None:
             try:
-                rule = rule_from_config(stored["rule"])
+                strategy = strategy_from_config(stored_strategy(stored))
             except (ValueError, TypeError) as exc:
                 problems.append(str(exc))
-        elif not rule_to_config(rule).get("custom") and rule_to_config(rule) != stored["rule"]:
-            problems.append(f"rule: stored {stored['rule']}, given {rule_to_config(rule)}")
+        else:
+            strategy = _pick_strategy(rule, strategy)
         if problems:
             raise IncompatibleRunDirError(
                 f"cannot resume the session in {run_dir}: "
                 + "; ".join(problems)
                 + ". Resume with matching arguments, or start a new session in another run_dir."
             )
+        if model is None:
+            model = build_model(stored)
         self = cls.__new__(cls)
-        self._setup(env, teacher, model, rule, config, stored["seed"], progress, on_step, on_refit)
+        self._setup(
+            env, teacher, model, strategy, config, stored["seed"], progress, on_step, on_refit
+        )
         self._env_config = self._describe_env()
         self.run_dir = Path(run_dir)
-        self._store = SessionStore(self.run_dir, commit_every=commit_every)
-        self._store.finalize_pending()
-        self._restore(self._store.records())
+        self._store, records, corrections = SessionStore.open_for_resume(
+            self.run_dir, commit_every=commit_every
+        )
+        self._restore(records, corrections)
         return self
 
-    def _restore(self, records: list[StepRecord]) -> None:
+    def _restore(self, records: list[StepRecord], corrections: list[CorrectionRecord]) -> None:
+        """Replay the log into the counters, the training set and the strategy (see
+        :mod:`torchcbl.strategies` for the order), then restore the model."""
         self.records = records
+        self.corrections = list(corrections)
+        by_step = {c.step: c for c in corrections}
+        strategy = self.strategy
         for r in records:
             if r.teacher_action is not None:
-                self._demo_x.append(r.observation_array)
-                self._demo_y.append(r.teacher_action)
                 self._acc_window.append(r.model_action == r.teacher_action)
+                strategy.observe_label(
+                    r.observation_array,
+                    r.teacher_action,
+                    model_action=r.model_action,
+                    kind="demonstration",
+                )
+            corr = by_step.get(r.step)
+            if corr is not None:
+                strategy.observe_label(
+                    corr.observation_array,
+                    corr.action,
+                    model_action=r.model_action,
+                    kind="correction",
+                )
             if r.phase == "confident":
                 self._auto_window.append(r.autonomous)
-        n = len(self._demo_y)
-        k = fitted_count(self.run_dir, n, self.config.max_new)
-        assert self._store is not None
-        ckpt = latest_checkpoint(self.run_dir, at_most=k)
-        if ckpt is not None and ckpt[0] == k:
-            self.model.load_state_dict(torch.load(ckpt[1], weights_only=True)["state_dict"])
-        elif k > 0:
-            self.model.fit(np.stack(self._demo_x[:k]), np.asarray(self._demo_y[:k]))
-            self._store.save_checkpoint(self.model, k)
+            strategy.observe_step(r, None)
+        xs, ys = label_sequence(records, corrections)
+        for x, y in zip(xs, ys, strict=True):
+            self._train.add(x, y)
+        self._labels = len(ys)
+        assert self.run_dir is not None
+        k = restore_model(
+            self.run_dir,
+            self.model,
+            xs,
+            ys,
+            max_new=self.config.max_new,
+            relabel=self._relabel,
+            store=self._store,
+        )
         if k > 0:
-            self.rule.update(self.model, np.stack(self._demo_x[:k]), np.asarray(self._demo_y[:k]))
-        self._new_since_refit = n - k
-        if any(r.phase == "confident" for r in records) or self._target_reached():
-            self._phase = "confident"
+            if k == len(ys):
+                x, y = self._train.arrays()
+            else:
+                from torchcbl.records import training_set
+
+                x, y = training_set(xs[:k], ys[:k], relabel=self._relabel)
+            strategy.observe_refit(self.model, x, y)
+        self._new_since_refit = len(ys) - k
         self._next_episode = records[-1].episode + 1 if records else 0
         self._next_reset_seed = _seed_for(self.seed, self._next_episode)
 
@@ -523,8 +489,19 @@ class ConfidentTeacher:
 
     @property
     def n_demonstrations(self) -> int:
-        """Demonstrations (steps with a teacher label) in the session."""
-        return len(self._demo_y)
+        """Labels in the session: demonstrations (steps with a teacher label) plus
+        corrections. Refits and checkpoints count these."""
+        return self._labels
+
+    @property
+    def n_corrections(self) -> int:
+        """Corrections (labels for earlier, autonomous steps) in the session."""
+        return len(self.corrections)
+
+    @property
+    def rule(self) -> Any:
+        """The confidence rule of the strategy (None for a strategy without one)."""
+        return getattr(self.strategy, "rule", None)
 
     @property
     def n_steps(self) -> int:
@@ -545,18 +522,14 @@ class ConfidentTeacher:
 
     @property
     def phase(self) -> str:
-        """``"noninteractive"`` or ``"confident"``: the phase of the next step."""
-        return self._phase
+        """``"noninteractive"`` or ``"confident"``: the phase of the next step (the
+        strategy's; ``"confident"`` for a strategy without phases)."""
+        return str(getattr(self.strategy, "phase", "confident"))
 
     @property
     def policy(self) -> GreedyPolicy:
         """The learned policy as a callable obs -> action (live; deep-copy to freeze)."""
         return GreedyPolicy(self.model)
-
-    def _target_reached(self) -> bool:
-        t = self.config.target_accuracy
-        w = self._acc_window
-        return t is not None and len(w) == w.maxlen and sum(w) / len(w) >= t
 
     # -- the loop ---------------------------------------------------------------------------
 
@@ -566,13 +539,13 @@ class ConfidentTeacher:
             raw, info = self.env.reset(seed=seed)
         except Exception as exc:
             raise EnvError(f"env.reset raised {type(exc).__name__}: {exc}") from exc
-        self._obs = _obs_array(raw, self.n_features, "env.reset")
+        self._obs = obs_array(raw, self.n_features, "env.reset")
         self._raw_obs, self._info = raw, dict(info or {})
         self._episode = self._next_episode
         self._next_episode += 1
         self._needs_reset = False
         self._episode_had_demo = False
-        self._burst_left = 0
+        self.strategy.episode_start()
 
     def _ask(self, info: dict) -> int:
         obs = np.array(self._raw_obs, copy=True)
@@ -586,7 +559,7 @@ class ConfidentTeacher:
                 f"the teacher raised {type(exc).__name__}: {exc} (step {step}). Nothing was "
                 "recorded for this step; fix the teacher and call run() again, or resume."
             ) from exc
-        action = _as_action(answer, self.n_actions)
+        action = as_action(answer, self.n_actions)
         if action is None:
             raise TeacherError(
                 f"the teacher answered {answer!r} at step {step}; expected an int action in "
@@ -601,7 +574,7 @@ class ConfidentTeacher:
         The refit schedule then counts ``max_new`` from here. To evaluate a stage without
         changing the session, use :meth:`snapshot` instead. Returns whether a refit happened.
         """
-        if self._new_since_refit == 0 or not self._demo_y:
+        if self._new_since_refit == 0 or not len(self._train):
             return False
         self._refit()
         return True
@@ -610,8 +583,8 @@ class ConfidentTeacher:
         """A copy of the model fitted on every demonstration so far, leaving the session as it
         is (its model and refit schedule untouched): for evaluating a learning stage."""
         model = copy.deepcopy(self.model)
-        if self._new_since_refit and self._demo_y:
-            model.fit(np.stack(self._demo_x), np.asarray(self._demo_y, dtype=np.int64))
+        if self._new_since_refit and len(self._train):
+            model.fit(*self._train.arrays())
         return model
 
     @property
@@ -625,49 +598,55 @@ class ConfidentTeacher:
         return self._auto_steps_streak
 
     def _refit(self) -> None:
-        x = np.stack(self._demo_x)
-        y = np.asarray(self._demo_y, dtype=np.int64)
+        x, y = self._train.arrays()
         self.model.fit(x, y)
-        self.rule.update(self.model, x, y)
+        self.strategy.observe_refit(self.model, x, y)
         self._new_since_refit = 0
         if self._store is not None:
-            self._store.save_checkpoint(self.model, len(y))
+            self._store.save_checkpoint(self.model, self._labels)
         if self.on_refit is not None:
-            self.on_refit(self.model, len(y))
+            self.on_refit(self.model, self._labels)
 
     def step(self) -> StepRecord:
-        """Take one decision (Algorithm 1) and return its record.
+        """Take one decision (the strategy's; Algorithm 1 by default) and return its record.
 
         Autonomous steps reach disk in batches; call :meth:`flush` (or let :meth:`run` do it)
-        to commit them.
+        to commit them. Demonstrations and corrections reach disk before the loop goes on.
         """
         if self._needs_reset:
             self._reset()
-        obs, info = self._obs, self._info
+        obs, info, raw = self._obs, self._info, self._raw_obs
         assert obs is not None
         c = self.model.classify(obs[None])
         model_action = int(_np(c.action)[0])
         confidence = float(_np(c.confidence)[0])
         distance = float(_np(c.distance)[0])
         posterior = tuple(_np(c.posterior)[0].tolist())
-        phase = self._phase
-        if phase == "noninteractive" or self._burst_left > 0:
-            ask, burst_left = True, self._burst_left
-        else:
-            ask = not bool(self.rule.is_confident(c)[0])
-            burst_left = self.config.burst if ask else 0
+        decision: Decision = self.strategy.decide(obs, c)
+        ask, phase = bool(decision.ask), decision.phase
+        if not ask and model_action < 0:
+            raise RuntimeError(
+                f"strategy {self.strategy!r} decided not to ask before any model exists; a "
+                "strategy must ask while c.action is -1 (see torchcbl.strategies)."
+            )
         teacher_action = self._ask(info) if ask else None
+        actor = self.strategy.actor(decision, model_action, teacher_action)
         # From here on the step happens: update the counters, then log.
         step = len(self.records)
         if ask:
-            self._burst_left = max(burst_left - 1, 0) if phase == "confident" else 0
             self._acc_window.append(model_action == teacher_action)
-            self._demo_x.append(obs)
-            self._demo_y.append(teacher_action)  # type: ignore[arg-type]
+            self._labels += 1
+            self._train.add(obs, teacher_action)  # type: ignore[arg-type]
+            self.strategy.observe_label(
+                obs,
+                teacher_action,  # type: ignore[arg-type]
+                model_action=model_action,
+                kind="demonstration",
+            )
             self._episode_had_demo = True
         if phase == "confident":
             self._auto_window.append(not ask)
-        executed = teacher_action if ask else model_action
+        executed = teacher_action if actor == "teacher" else model_action
         record = StepRecord(
             step=step,
             episode=self._episode,
@@ -678,15 +657,16 @@ class ConfidentTeacher:
             posterior=posterior,
             teacher_action=teacher_action,
             executed_action=executed,  # type: ignore[arg-type]
-            phase=phase,  # type: ignore[arg-type]
+            phase=phase,
             autonomous=not ask,
             reward=None,
             terminated=False,
             truncated=False,
             info={},
-            n_demonstrations=len(self._demo_y),
+            n_demonstrations=self._labels,
             autonomy_rate=self.autonomy_rate,
             windowed_accuracy=self.windowed_accuracy,
+            actor=actor,
         )
         if ask:
             if self._store is not None:
@@ -699,12 +679,15 @@ class ConfidentTeacher:
             # way), so a fit that fails leaves a whole step behind, not half of one.
             if ask and self._new_since_refit >= self.config.max_new:
                 self._refit()
+            if len(self.records) > step:  # executed (also when the env failed afterwards)
+                self.strategy.observe_step(self.records[step], decision)
         if ask:
             self._auto_steps_streak = 0
         else:
             self._auto_steps_streak += 1
-        if phase == "noninteractive" and self._target_reached():
-            self._phase = "confident"
+            if self._corrects and self._offer_correction(record, raw, info):
+                self._auto_steps_streak = 0
+                self._episode_had_demo = True
         if record.terminated or record.truncated:
             clean = (
                 not self._episode_had_demo
@@ -715,6 +698,50 @@ class ConfidentTeacher:
         if self.on_step is not None:
             self.on_step(record)
         return record
+
+    def _offer_correction(self, record: StepRecord, raw: Any, info: dict) -> bool:
+        """Let the teacher correct the autonomous step just taken; True if it did."""
+        try:
+            answer = self.teacher.correct(  # type: ignore[attr-defined]
+                np.array(raw, copy=True), dict(info), record.executed_action
+            )
+        except TeachingInterrupted:
+            raise
+        except Exception as exc:
+            raise TeacherError(
+                f"the teacher's correct() raised {type(exc).__name__}: {exc} (step "
+                f"{record.step}). The step is recorded, no correction was; fix the teacher "
+                "and call run() again, or resume."
+            ) from exc
+        if answer is None:
+            return False
+        action = as_action(answer, self.n_actions)
+        if action is None:
+            raise TeacherError(
+                f"the teacher's correct() answered {answer!r} at step {record.step}; expected "
+                f"None or an int action in [0, {self.n_actions}). The step is recorded, no "
+                "correction was; fix the teacher and call run() again, or resume."
+            )
+        if action == record.executed_action:
+            return False
+        correction = CorrectionRecord(
+            step=record.step,
+            episode=record.episode,
+            observation=record.observation,
+            executed_action=record.executed_action,
+            action=action,
+        )
+        if self._store is not None:
+            self._store.correct(correction)  # durable before the next decision
+        self.corrections.append(correction)
+        x = record.observation_array
+        self._labels += 1
+        self._train.add(x, action)
+        self.strategy.observe_label(x, action, model_action=record.model_action, kind="correction")
+        self._new_since_refit += 1
+        if self._new_since_refit >= self.config.max_new:
+            self._refit()
+        return True
 
     def _execute(self, record: StepRecord) -> StepRecord:
         error: str | None = None
@@ -737,7 +764,7 @@ class ConfidentTeacher:
                 error, reward = f"env.step returned a non-finite reward {r!r}", None
             else:
                 try:
-                    self._obs = _obs_array(raw, self.n_features, "env.step")
+                    self._obs = obs_array(raw, self.n_features, "env.step")
                     self._raw_obs, self._info = raw, info
                 except EnvError as exc:
                     error, cause = str(exc), exc
@@ -755,7 +782,6 @@ class ConfidentTeacher:
                 self._store.append(final)
         if terminated or truncated:
             self._needs_reset = True
-            self._burst_left = 0
         if error is not None:
             if self._store is not None:
                 self._store.commit()
@@ -833,7 +859,7 @@ class ConfidentTeacher:
             return "-" if v is None else f"{100 * v:.0f}%"
 
         return (
-            f"{self._phase} demos={self.n_demonstrations} "
+            f"{self.phase} demos={self.n_demonstrations} "
             f"autonomy={pct(self.autonomy_rate)} acc={pct(self.windowed_accuracy)}"
         )
 
@@ -857,92 +883,5 @@ class ConfidentTeacher:
     def __repr__(self) -> str:
         return (
             f"ConfidentTeacher(steps={self.n_steps}, demonstrations={self.n_demonstrations}, "
-            f"phase={self._phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
+            f"phase={self.phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
         )
-
-
-def evaluate_policy(
-    policy: Callable[[np.ndarray], int],
-    env: gym.Env,
-    *,
-    n_steps: int | None = None,
-    n_episodes: int | None = None,
-    seed: int | None = None,
-    uses_info: bool = False,
-) -> list[StepRecord]:
-    """Run a policy greedily (never asking) and return one record per step.
-
-    ``policy`` is called as ``policy(observation)``; with ``uses_info=True`` it is called as a
-    teacher, ``policy(observation, info)`` with the info of the latest reset / step, so a
-    scripted expert can be evaluated exactly like a learned policy.
-
-    Episodes that end are reset (the first reset with ``seed``, later ones continuing the env's
-    RNG) until ``n_steps`` steps or ``n_episodes`` finished episodes, whichever comes first.
-    Records have ``phase="evaluation"``, ``autonomous=True``; a :class:`GreedyPolicy` also fills
-    the confidence fields, any other callable leaves them None.
-    """
-    n_features, n_actions = _check_env(env)
-    if n_steps is None and n_episodes is None:
-        raise ValueError("evaluate_policy: give n_steps and/or n_episodes, or it never ends")
-    for name, v in (("n_steps", n_steps), ("n_episodes", n_episodes)):
-        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
-            raise ValueError(f"evaluate_policy: {name} must be an int >= 1, got {v!r}")
-    records: list[StepRecord] = []
-    raw, info = env.reset(seed=seed)
-    obs = _obs_array(raw, n_features, "env.reset")
-    episode, done_episodes = 0, 0
-    while (n_steps is None or len(records) < n_steps) and (
-        n_episodes is None or done_episodes < n_episodes
-    ):
-        confidence = distance = posterior = None
-        if isinstance(policy, GreedyPolicy):
-            c = policy.classify(obs)
-            answer: Any = int(c.action[0])
-            confidence, distance = float(c.confidence[0]), float(c.distance[0])
-            posterior = tuple(c.posterior[0].tolist())
-        elif uses_info:
-            answer = policy(np.array(raw, copy=True), dict(info or {}))
-        else:
-            answer = policy(np.array(raw, copy=True))
-        action = _as_action(answer, n_actions)
-        if action is None:
-            raise ValueError(
-                f"evaluate_policy: the policy answered {answer!r}; expected an int in "
-                f"[0, {n_actions}) (an unfitted GreedyPolicy answers -1)."
-            )
-        raw_next, r, term, trunc, info = env.step(action)
-        try:
-            reward = float(r)
-        except (TypeError, ValueError):
-            reward = math.nan
-        if not math.isfinite(reward):
-            raise EnvError(f"env.step returned a reward that is not a finite number: {r!r}")
-        records.append(
-            StepRecord(
-                step=len(records),
-                episode=episode,
-                observation=tuple(obs.tolist()),
-                model_action=action,
-                confidence=confidence,
-                distance=distance,
-                posterior=posterior,
-                teacher_action=None,
-                executed_action=action,
-                phase="evaluation",
-                autonomous=True,
-                reward=reward,
-                terminated=bool(term),
-                truncated=bool(trunc),
-                info=jsonable_info(info),
-            )
-        )
-        if term or trunc:
-            done_episodes += 1
-            episode += 1
-            if n_episodes is not None and done_episodes >= n_episodes:
-                break  # no reset after the last episode (for SUMO, a whole new road)
-            raw, info = env.reset()
-        else:
-            raw = raw_next
-        obs = _obs_array(raw, n_features, "env.step" if not (term or trunc) else "env.reset")
-    return records

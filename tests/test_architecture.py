@@ -1,0 +1,186 @@
+"""The shape of the core: no import cycles, no domain imports, old run directories still read."""
+
+from __future__ import annotations
+
+import ast
+import json
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from _toy_envs import oracle, rare_regions_world
+
+from torchcbl import ConfidentTeacher, TeachingConfig
+from torchcbl.errors import IncompatibleRunDirError
+from torchcbl.session import load_config, load_demonstrations, load_model, load_records
+
+ROOT = Path(__file__).resolve().parents[1]
+FORBIDDEN = ("corridor", "sumo_scenarios", "libsumo", "traci", "sumolib", "pymunk", "pygame")
+
+
+def _torchcbl_imports() -> dict[str, set[str]]:
+    """module -> the torchcbl modules it imports anywhere in its source (lazy ones included)."""
+    graph: dict[str, set[str]] = {}
+    for path in sorted((ROOT / "torchcbl").rglob("*.py")):
+        rel = path.relative_to(ROOT).with_suffix("")
+        parts = list(rel.parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        name = ".".join(parts)
+        deps: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                if node.module.startswith("torchcbl"):
+                    deps.add(node.module)
+                    for alias in node.names:  # `from torchcbl import _em` imports a module
+                        deps.add(f"{node.module}.{alias.name}")
+            elif isinstance(node, ast.Import):
+                deps |= {a.name for a in node.names if a.name.startswith("torchcbl")}
+        graph[name] = deps
+    return {m: {d for d in deps if d in graph and d != m} for m, deps in graph.items()}
+
+
+def test_no_import_cycle_inside_torchcbl():
+    graph = _torchcbl_imports()
+    graph.pop("torchcbl", None)  # the package's lazy export table names modules, imports none
+    graph = {m: deps - {"torchcbl"} for m, deps in graph.items()}
+    assert {"torchcbl.teaching", "torchcbl.session", "torchcbl.policy"} <= set(graph)
+    assert "torchcbl.session" in graph["torchcbl.teaching"]  # the check sees real edges
+    cycles = []
+
+    def visit(m: str, stack: list[str]) -> None:
+        for d in graph.get(m, ()):
+            if d in stack:
+                cycles.append(stack[stack.index(d) :] + [d])
+            elif len(stack) < 20:
+                visit(d, stack + [d])
+
+    for m in graph:
+        visit(m, [m])
+    assert not cycles, f"import cycles inside torchcbl: {cycles[:3]}"
+
+
+def test_import_torchcbl_imports_no_domain_or_simulator():
+    code = (
+        "import sys, torchcbl, torchcbl.teaching, torchcbl.session, torchcbl.policy, "
+        "torchcbl.confidence, torchcbl.records, torchcbl.strategies\n"
+        f"print(sorted(m for m in sys.modules if m.split('.')[0] in {FORBIDDEN!r}))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    assert out.stdout.strip() == "[]", out.stdout
+
+
+def test_public_names_stay_importable_from_torchcbl():
+    import torchcbl
+
+    for name in torchcbl.__all__:
+        assert getattr(torchcbl, name) is not None
+    from torchcbl.teaching import EnvError, GreedyPolicy, TeacherError, evaluate_policy
+
+    assert GreedyPolicy is torchcbl.GreedyPolicy and evaluate_policy is torchcbl.evaluate_policy
+    assert EnvError is torchcbl.EnvError and TeacherError is torchcbl.TeacherError
+
+
+def _session(run_dir: Path) -> list:
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(max_new=2, accuracy_window=10, max_steps=60),
+        run_dir=run_dir,
+        seed=1,
+        progress=False,
+    )
+    ct.run()
+    ct.close()
+    return load_records(run_dir)
+
+
+def _downgrade_to_format1(run_dir: Path) -> None:
+    """Make a run directory look like one written before strategies (format 1)."""
+    from torchcbl.session import _FORMAT1_COLUMNS
+
+    cols = ", ".join(_FORMAT1_COLUMNS)
+    db = sqlite3.connect(run_dir / "steps.sqlite")
+    schema = db.execute("SELECT sql FROM sqlite_master WHERE name = 'steps'").fetchone()[0]
+    old = schema.split("pending INTEGER NOT NULL,")[0] + "pending INTEGER NOT NULL)"
+    db.executescript(
+        f"ALTER TABLE steps RENAME TO new; {old}; INSERT INTO steps SELECT {cols} FROM new; "
+        "DROP TABLE new; DROP TABLE corrections;"
+    )
+    assert "actor" not in db.execute("SELECT sql FROM sqlite_master").fetchall()[0][0]
+    db.commit()
+    db.close()
+    config = json.loads((run_dir / "config.json").read_text())
+    config["format"] = "torchcbl.session/1"
+    del config["strategy"]
+    (run_dir / "config.json").write_text(json.dumps(config))
+
+
+def test_format1_run_dir_loads_and_resumes(tmp_path):
+    run = tmp_path / "run"
+    want = _session(run)
+    assert {r.actor for r in want} == {"teacher", "agent"}
+    x, y = load_demonstrations(run)
+    _downgrade_to_format1(run)
+    assert load_records(run) == want  # actor derived: teacher when labelled, else agent
+    got_x, got_y = load_demonstrations(run)
+    assert (got_x == x).all() and (got_y == y).all()
+    assert load_model(run).is_fitted
+    env = rare_regions_world(episode_length=10)
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    assert back.records == want
+    back.run(max_steps=80)
+    back.close()
+    assert load_config(run)["format"] == "torchcbl.session/2"  # upgraded in place
+    assert load_records(run)[:60] == want and len(load_records(run)) == 80
+
+
+def test_unknown_format_fails_naming_the_version(tmp_path):
+    run = tmp_path / "run"
+    _session(run)
+    config = json.loads((run / "config.json").read_text())
+    config["format"] = "torchcbl.session/99"
+    (run / "config.json").write_text(json.dumps(config))
+    with pytest.raises(IncompatibleRunDirError, match=r"torchcbl\.session/99"):
+        load_records(run)
+    env = rare_regions_world(episode_length=10)
+    with pytest.raises(IncompatibleRunDirError, match=r"got 'torchcbl\.session/99'"):
+        ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+
+
+def test_record_says_who_chose_the_executed_action():
+    from torchcbl.records import StepRecord
+
+    base = dict(
+        step=0,
+        episode=0,
+        observation=(0.0,),
+        model_action=1,
+        confidence=0.5,
+        distance=1.0,
+        posterior=(0.5, 0.5),
+        phase="confident",
+        reward=1.0,
+        terminated=False,
+        truncated=False,
+    )
+    assert StepRecord(**base, teacher_action=0, executed_action=0, autonomous=False).actor == (
+        "teacher"
+    )
+    assert StepRecord(**base, teacher_action=None, executed_action=1, autonomous=True).actor == (
+        "agent"
+    )
+    # DAgger: labelled, but the agent's action ran
+    r = StepRecord(**base, teacher_action=0, executed_action=1, autonomous=False, actor="agent")
+    assert r.is_demonstration and r.actor == "agent"
+    with pytest.raises(ValueError, match="actor"):  # the teacher cannot execute another action
+        StepRecord(**base, teacher_action=0, executed_action=1, autonomous=False, actor="teacher")
+    with pytest.raises(ValueError, match="actor"):
+        StepRecord(**base, teacher_action=None, executed_action=0, autonomous=True)
+    with pytest.raises(ValueError, match="autonomous"):
+        StepRecord(**base, teacher_action=0, executed_action=0, autonomous=True)

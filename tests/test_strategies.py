@@ -1,0 +1,135 @@
+"""The strategy seam: who asks and who acts, configured from the run directory on resume."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from _toy_envs import oracle, rare_regions_world
+
+from torchcbl import ConfidentTeacher, DistanceRule, PosteriorRule, TeachingConfig
+from torchcbl.errors import IncompatibleRunDirError
+from torchcbl.session import load_config, load_records
+from torchcbl.strategies import ConfidentExecution, Decision, strategy_from_config
+
+
+class AlwaysAskAgentActs:
+    """DAgger with beta = 0: label every step, execute the agent's action once it has one."""
+
+    relabel = False
+    wants_corrections = False
+
+    def __init__(self) -> None:
+        self.labels: list[tuple[int, str]] = []
+        self.refits: list[int] = []
+        self.steps = 0
+
+    def bind(self, *, n_actions, n_features, config):
+        self.bound = (n_actions, n_features)
+
+    def episode_start(self):
+        pass
+
+    def decide(self, observation, c):
+        return Decision(True, "confident")
+
+    def actor(self, decision, model_action, teacher_action):
+        return "agent" if model_action >= 0 else "teacher"
+
+    def observe_label(self, observation, action, *, model_action, kind):
+        self.labels.append((action, kind))
+
+    def observe_refit(self, model, observations, actions):
+        self.refits.append(len(actions))
+
+    def observe_step(self, record, decision):
+        self.steps += 1
+
+
+def test_custom_strategy_labels_every_step_and_the_agent_acts(tmp_path):
+    env = rare_regions_world(episode_length=10)
+    s = AlwaysAskAgentActs()
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        strategy=s,
+        config=TeachingConfig(max_new=5),
+        run_dir=tmp_path / "run",
+        progress=False,
+    )
+    ct.run(max_steps=40)
+    ct.close()
+    recs = load_records(tmp_path / "run")
+    assert s.bound == (3, 2) and s.steps == 40 and len(s.labels) == 40
+    assert s.refits == [5, 10, 15, 20, 25, 30, 35, 40]
+    assert all(r.teacher_action is not None and not r.autonomous for r in recs)
+    assert [r.actor for r in recs[:5]] == ["teacher"] * 5  # no model before the 5th label
+    after = recs[5:]
+    assert {r.actor for r in after} == {"agent"}
+    assert all(r.executed_action == r.model_action for r in after)
+    assert any(r.executed_action != r.teacher_action for r in after)  # the agent's, not the label
+    assert load_config(tmp_path / "run")["strategy"]["custom"] is True
+    env2 = rare_regions_world(episode_length=10)
+    with pytest.raises(IncompatibleRunDirError, match="Pass strategy="):
+        ConfidentTeacher.resume(tmp_path / "run", env2, oracle(env2), progress=False)
+    s2 = AlwaysAskAgentActs()
+    back = ConfidentTeacher.resume(
+        tmp_path / "run", env2, oracle(env2), strategy=s2, progress=False
+    )
+    back.close()
+    assert len(s2.labels) == 40 and s2.refits == [40] and s2.steps == 40  # replayed, refit once
+
+
+def test_default_strategy_is_confident_execution_and_is_rebuilt_on_resume(tmp_path):
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        rule=PosteriorRule(0.8),
+        config=TeachingConfig(max_new=2, accuracy_window=10),
+        run_dir=tmp_path / "run",
+        progress=False,
+    )
+    assert isinstance(ct.strategy, ConfidentExecution) and ct.rule.min_posterior == 0.8
+    ct.run(max_steps=120)
+    ct.close()
+    stored = load_config(tmp_path / "run")["strategy"]
+    assert stored == {
+        "type": "ConfidentExecution",
+        "rule": {"type": "PosteriorRule", "min_posterior": 0.8},
+        "relabel": False,
+    }
+    back = ConfidentTeacher.resume(tmp_path / "run", env, oracle(env), progress=False)
+    assert isinstance(back.strategy, ConfidentExecution)
+    assert back.rule.to_config() == stored["rule"]
+    assert back.phase == ct.phase == "confident"
+    with pytest.raises(IncompatibleRunDirError, match="strategy: stored"):
+        ConfidentTeacher.resume(
+            tmp_path / "run", env, oracle(env), strategy=ConfidentExecution(DistanceRule(3.0))
+        )
+    with pytest.raises(ValueError, match="not both"):
+        ConfidentTeacher(env, oracle(env), rule=DistanceRule(), strategy=ConfidentExecution())
+    with pytest.raises(ValueError, match="not one of"):
+        strategy_from_config({"type": "Nope"})
+
+
+def test_a_rule_that_takes_observations_gets_them():
+    seen: list[np.ndarray] = []
+
+    class FarFromOriginAsks(DistanceRule):
+        def is_confident(self, c, observations=None):
+            seen.append(np.asarray(observations))
+            near = np.linalg.norm(observations, axis=1) < 4.0
+            return super().is_confident(c) & __import__("torch").from_numpy(near)
+
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        rule=FarFromOriginAsks(3.0),
+        config=TeachingConfig(max_new=2, noninteractive=False),
+        progress=False,
+    )
+    ct.run(max_steps=200)
+    assert seen and all(o.shape == (1, 2) for o in seen)
+    far_auto = [r for r in ct.records if r.autonomous and np.linalg.norm(r.observation) >= 4.0]
+    assert not far_auto and any(r.autonomous for r in ct.records)

@@ -1,0 +1,180 @@
+"""The learned policy on its own: :class:`GreedyPolicy`, :func:`evaluate_policy` and the checks
+every env and teacher answer goes through before the loop or an evaluation uses it."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from torchcbl.errors import EnvError
+from torchcbl.records import StepRecord, jsonable_info
+
+__all__ = ["GreedyPolicy", "check_env", "evaluate_policy"]
+
+
+class GreedyPolicy:
+    """A learned policy standing on its own: ``policy(obs [D]) -> int`` (Eq. 7, no asking).
+
+    Holds the model by reference (the live model of a session keeps learning); deep-copy the
+    policy or the model to freeze a snapshot. Picklable.
+    """
+
+    def __init__(self, model: torch.nn.Module) -> None:
+        self.model = model
+
+    def classify(self, observation: Any) -> Any:
+        """The model's Classification of one observation [D] (batched fields of length 1)."""
+        x = torch.as_tensor(np.asarray(observation, dtype=np.float64)).reshape(1, -1)
+        return self.model.classify(x)
+
+    def __call__(self, observation: Any) -> int:
+        action = int(self.classify(observation).action[0])
+        if action < 0:
+            raise RuntimeError(
+                "GreedyPolicy: the model is not fitted yet, so it has no action to give. "
+                "Teach it first (ConfidentTeacher.run) or load a fitted checkpoint."
+            )
+        return action
+
+    def __repr__(self) -> str:
+        return f"GreedyPolicy({type(self.model).__name__})"
+
+
+def check_env(env: gym.Env) -> tuple[int, int]:
+    """(n_features, n_actions) of a supported env, or a clear ValueError."""
+    space = getattr(env, "action_space", None)
+    if not isinstance(space, gym.spaces.Discrete) or int(space.start) != 0:
+        raise ValueError(
+            f"expected an env with a Discrete action space starting at 0, got {space!r}. "
+            "Wrap the env so its actions are 0..n-1."
+        )
+    obs_space = getattr(env, "observation_space", None)
+    if (
+        not isinstance(obs_space, gym.spaces.Box)
+        or len(obs_space.shape) != 1
+        or not np.issubdtype(obs_space.dtype, np.floating)
+    ):
+        raise ValueError(
+            f"expected an env with a 1-D float Box observation space, got {obs_space!r}. "
+            "Flatten the observation (gymnasium.wrappers.FlattenObservation) and cast to float."
+        )
+    return int(obs_space.shape[0]), int(space.n)
+
+
+def as_action(value: Any, n_actions: int) -> int | None:
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        return None
+    value = int(value)
+    return value if 0 <= value < n_actions else None
+
+
+def obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
+    try:
+        x = np.array(obs, dtype=np.float64)  # a copy: an env may reuse its buffer in place
+    except (TypeError, ValueError) as exc:
+        raise EnvError(f"{where}: observation is not numeric ({exc}).") from exc
+    if x.shape != (n_features,):
+        raise EnvError(
+            f"{where}: expected an observation of shape ({n_features},), got {x.shape}. "
+            "Check the env's observation_space."
+        )
+    if not np.isfinite(x).all():
+        raise EnvError(
+            f"{where}: the observation has non-finite values {x.tolist()}. Fix the env (or wrap "
+            "it to clip / replace them); nothing non-finite is ever learned from."
+        )
+    return x
+
+
+def evaluate_policy(
+    policy: Callable[[np.ndarray], int],
+    env: gym.Env,
+    *,
+    n_steps: int | None = None,
+    n_episodes: int | None = None,
+    seed: int | None = None,
+    uses_info: bool = False,
+) -> list[StepRecord]:
+    """Run a policy greedily (never asking) and return one record per step.
+
+    ``policy`` is called as ``policy(observation)``; with ``uses_info=True`` it is called as a
+    teacher, ``policy(observation, info)`` with the info of the latest reset / step, so a
+    scripted expert can be evaluated exactly like a learned policy.
+
+    Episodes that end are reset (the first reset with ``seed``, later ones continuing the env's
+    RNG) until ``n_steps`` steps or ``n_episodes`` finished episodes, whichever comes first.
+    Records have ``phase="evaluation"``, ``autonomous=True``; a :class:`GreedyPolicy` also fills
+    the confidence fields, any other callable leaves them None.
+    """
+    n_features, n_actions = check_env(env)
+    if n_steps is None and n_episodes is None:
+        raise ValueError("evaluate_policy: give n_steps and/or n_episodes, or it never ends")
+    for name, v in (("n_steps", n_steps), ("n_episodes", n_episodes)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+            raise ValueError(f"evaluate_policy: {name} must be an int >= 1, got {v!r}")
+    records: list[StepRecord] = []
+    raw, info = env.reset(seed=seed)
+    obs = obs_array(raw, n_features, "env.reset")
+    episode, done_episodes = 0, 0
+    while (n_steps is None or len(records) < n_steps) and (
+        n_episodes is None or done_episodes < n_episodes
+    ):
+        confidence = distance = posterior = None
+        if isinstance(policy, GreedyPolicy):
+            c = policy.classify(obs)
+            answer: Any = int(c.action[0])
+            confidence, distance = float(c.confidence[0]), float(c.distance[0])
+            posterior = tuple(c.posterior[0].tolist())
+        elif uses_info:
+            answer = policy(np.array(raw, copy=True), dict(info or {}))
+        else:
+            answer = policy(np.array(raw, copy=True))
+        action = as_action(answer, n_actions)
+        if action is None:
+            raise ValueError(
+                f"evaluate_policy: the policy answered {answer!r}; expected an int in "
+                f"[0, {n_actions}) (an unfitted GreedyPolicy answers -1)."
+            )
+        raw_next, r, term, trunc, info = env.step(action)
+        try:
+            reward = float(r)
+        except (TypeError, ValueError):
+            reward = math.nan
+        if not math.isfinite(reward):
+            raise EnvError(f"env.step returned a reward that is not a finite number: {r!r}")
+        records.append(
+            StepRecord(
+                step=len(records),
+                episode=episode,
+                observation=tuple(obs.tolist()),
+                model_action=action,
+                confidence=confidence,
+                distance=distance,
+                posterior=posterior,
+                teacher_action=None,
+                executed_action=action,
+                phase="evaluation",
+                autonomous=True,
+                reward=reward,
+                terminated=bool(term),
+                truncated=bool(trunc),
+                info=jsonable_info(info),
+            )
+        )
+        if term or trunc:
+            done_episodes += 1
+            episode += 1
+            if n_episodes is not None and done_episodes >= n_episodes:
+                break  # no reset after the last episode (for SUMO, a whole new road)
+            raw, info = env.reset()
+        else:
+            raw = raw_next
+        obs = obs_array(raw, n_features, "env.step" if not (term or trunc) else "env.reset")
+    return records

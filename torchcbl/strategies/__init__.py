@@ -1,0 +1,268 @@
+"""Strategies: who asks and who acts, one small object per method.
+
+The teaching loop (:class:`torchcbl.teaching.ConfidentTeacher`) asks two questions at every
+step and leaves both to a *strategy*: do we ask the teacher for a label, and whose action is
+executed? It tells the strategy of every label, every refit and every finished step, so the
+strategy can keep whatever state it needs (a phase, a burst, thresholds, a beta schedule).
+The loop owns everything else: the env, the teacher, the model and its refit schedule
+(``TeachingConfig.max_new``), the training set, the records and the run directory.
+
+The protocol (:class:`Strategy`), in the order the loop calls it::
+
+    strategy.bind(n_actions=A, n_features=D, config=teaching_config)   # once, before anything
+    # on resume only: the log is replayed into the strategy, then one refit
+    for record in log:                       # in step order
+        if record.teacher_action is not None:
+            strategy.observe_label(obs, label, model_action=..., kind="demonstration")
+        for a correction of that step:
+            strategy.observe_label(obs, label, model_action=..., kind="correction")
+        strategy.observe_step(record, None)  # None: replayed, not live
+    strategy.observe_refit(model, X, y)      # when the resumed model is fitted
+    # every step
+    strategy.episode_start()                 # after each env.reset
+    d = strategy.decide(obs [D], c)          # c: the model's Classification, batch of 1
+    if d.ask: label = teacher(obs, info)     # TeacherError / TeachingInterrupted: nothing
+                                             # of this step happened, decide() is re-asked
+    actor = strategy.actor(d, model_action, label)   # "teacher" or "agent"
+    if d.ask: strategy.observe_label(obs, label, model_action=..., kind="demonstration")
+    ... the label is on disk, THEN the action runs, then a refit when due:
+    strategy.observe_refit(model, X, y)      # X [M, D], y [M]: the whole training set
+    strategy.observe_step(record, d)         # the finished StepRecord (outcome included)
+    if strategy.wants_corrections and actor == "agent" and the teacher corrects:
+        strategy.observe_label(obs_then, label, model_action=..., kind="correction")
+        (and a refit when due, with observe_refit)
+
+Rules a strategy must keep:
+
+- :meth:`Strategy.decide` is pure (it changes no state): the teacher may fail after it, and
+  the loop then asks again. Put state changes in ``observe_step`` (it gets the decision back,
+  with the strategy's own ``Decision.state``) and ``observe_label``.
+- Ask whenever ``c.action[0] < 0`` (no model yet): ``actor`` "agent" needs a model action.
+- ``actor`` returns ``"teacher"`` only for a step with a label; ``"agent"`` executes the
+  model's action (DAgger may do so on a labelled step: a label is recorded either way).
+- Resume must land in the same state as the live run: derive state from what
+  ``observe_label`` / ``observe_step`` / ``observe_refit`` tell you, or from a seeded RNG that
+  you advance in ``observe_step``; never from wall-clock time.
+- ``to_config()`` returns a JSON dict with ``"type"`` (the class name), every constructor
+  argument and ``"relabel"``; the run directory stores it and :func:`strategy_from_config`
+  rebuilds the strategy on resume (register a new class in ``STRATEGIES``). A strategy without
+  ``to_config`` is stored as custom and must be passed again to ``resume``.
+
+Two attributes complete the protocol:
+
+- ``relabel`` (bool): a label for an observation already in the training set (bit-for-bit
+  equal) replaces that point's label instead of adding a point (CBA).
+- ``wants_corrections`` (bool): after each autonomous step, the loop offers the teacher to
+  correct it (see "Corrections" below).
+
+The ``Decision.phase`` is recorded on the step (``StepRecord.phase``): ``"noninteractive"``
+for steps on which the teacher is asked by design, ``"confident"`` for steps on which the
+strategy decided. Only confident-phase steps count towards ``autonomy_rate`` and the
+autonomous-episode stop.
+
+Corrections (Confidence-Based Autonomy, Chernova & Veloso, JAIR 2009). A teacher may offer
+the optional method ``teacher.correct(observation, info, action) -> int | None``: it is called
+after an autonomous step with the observation and info the agent decided on and the action it
+executed; it returns the action it should have taken, or None (or the same action) to let it
+stand. A correction is a label for that earlier observation: it is journalled before the next
+decision (durable like a demonstration), added to the training set and counted towards the
+refit schedule. A scripted teacher corrects by comparing with its own choice (see
+:func:`correcting`).
+
+Shipped strategies:
+
+- :class:`ConfidentExecution` (default): the paper's Algorithm 1 with its non-interactive
+  phase and teacher bursts; asks when its confidence rule is not confident.
+- :class:`~torchcbl.strategies.cba.ConfidenceBasedAutonomy`: JAIR 2009's per-boundary
+  thresholds, nearest-neighbour distance gate, relabelling and corrections.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
+
+import numpy as np
+
+from torchcbl.confidence import DistanceRule, rule_from_config, rule_to_config
+from torchcbl.strategies._phased import Decision, LabelKind, _Phased, _rule_takes_observations
+
+if TYPE_CHECKING:  # pragma: no cover
+    from torchcbl.gmm import Classification
+    from torchcbl.records import StepRecord
+
+__all__ = [
+    "ConfidenceBasedAutonomy",
+    "ConfidentExecution",
+    "Decision",
+    "Strategy",
+    "correcting",
+    "strategy_from_config",
+    "strategy_to_config",
+]
+
+
+@runtime_checkable
+class Strategy(Protocol):
+    """Decides, per step, whether to ask the teacher and whose action runs (see the module
+    docstring for the call order and the rules)."""
+
+    relabel: bool
+    wants_corrections: bool
+
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        """Called once before any other method; ``config`` is the TeachingConfig."""
+        ...
+
+    def episode_start(self) -> None:
+        """Called after each ``env.reset``."""
+        ...
+
+    def decide(self, observation: np.ndarray, c: Classification) -> Decision:
+        """Pure: whether to ask at this observation [D] given its classification (batch 1)."""
+        ...
+
+    def actor(
+        self, decision: Decision, model_action: int, teacher_action: int | None
+    ) -> Literal["teacher", "agent"]:
+        """Whose action is executed at this step."""
+        ...
+
+    def observe_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        """Every label, in arrival order (``model_action``: what the model predicted there
+        when the label arrived's step was decided; -1 without a model)."""
+        ...
+
+    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        """After every refit, with the whole training set ([M, D], [M])."""
+        ...
+
+    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+        """After every step's outcome; ``decision`` None when replayed from the log."""
+        ...
+
+    def to_config(self) -> dict[str, Any]:
+        """JSON description (``"type"``, constructor arguments, ``"relabel"``)."""
+        ...
+
+
+class ConfidentExecution(_Phased):
+    """Confident execution (Chernova & Veloso, AAMAS 2007, Algorithm 1): the default.
+
+    Non-interactive phase and bursts as in the module docstring (their settings are the
+    TeachingConfig's ``noninteractive``, ``target_accuracy``, ``accuracy_window``, ``burst``),
+    then: ask when ``rule`` is not confident, execute the teacher's label when asked, the
+    model's action otherwise. Learns from labels only; no relabelling, no corrections.
+
+    Args:
+        rule: a :class:`~torchcbl.confidence.ConfidenceRule`; default ``DistanceRule(2.0)``
+            (the paper's). A rule whose ``is_confident`` takes a second positional argument
+            gets the observations [N, D] too (a nearest-neighbour or density gate needs them).
+    """
+
+    def __init__(self, rule: Any = None) -> None:
+        super().__init__()
+        self.rule = DistanceRule() if rule is None else rule
+        if not (
+            callable(getattr(self.rule, "is_confident", None))
+            and callable(getattr(self.rule, "update", None))
+        ):
+            raise TypeError(
+                f"rule: expected a ConfidenceRule (is_confident and update), got {self.rule!r}"
+            )
+        self._with_obs = _rule_takes_observations(self.rule)
+
+    def _confident(self, observation: np.ndarray, c: Classification) -> bool:
+        if self._with_obs:
+            return bool(self.rule.is_confident(c, observation[None])[0])
+        return bool(self.rule.is_confident(c)[0])
+
+    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        self.rule.update(model, observations, actions)
+
+    def to_config(self) -> dict[str, Any]:
+        rule = rule_to_config(self.rule)
+        out: dict[str, Any] = {"type": "ConfidentExecution", "rule": rule, "relabel": False}
+        if rule.get("custom"):
+            out["custom"] = True
+        return out
+
+    def __repr__(self) -> str:
+        return f"ConfidentExecution(rule={self.rule!r})"
+
+
+def __getattr__(name: str) -> Any:
+    if name == "ConfidenceBasedAutonomy":  # lazily: cba imports this package's base class
+        from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+        return ConfidenceBasedAutonomy
+    raise AttributeError(f"module 'torchcbl.strategies' has no attribute {name!r}")
+
+
+def strategy_to_config(strategy: Any) -> dict[str, Any]:
+    """JSON dict describing ``strategy``; one without ``to_config`` is named only (custom)."""
+    to_config = getattr(strategy, "to_config", None)
+    if callable(to_config):
+        return dict(to_config())
+    return {
+        "type": f"{type(strategy).__module__}.{type(strategy).__qualname__}",
+        "custom": True,
+        "relabel": bool(getattr(strategy, "relabel", False)),
+    }
+
+
+def _build_cba(params: dict[str, Any]) -> Any:
+    from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+    return ConfidenceBasedAutonomy(**params)
+
+
+#: name -> builder from the ``to_config`` dict (without "type" and "relabel").
+STRATEGIES: dict[str, Callable[[dict[str, Any]], Any]] = {
+    "ConfidentExecution": lambda p: ConfidentExecution(rule_from_config(p["rule"])),
+    "ConfidenceBasedAutonomy": _build_cba,
+}
+
+
+def strategy_from_config(config: dict[str, Any]) -> Any:
+    """Rebuild a shipped (or registered) strategy from its ``to_config`` dict.
+
+    Raises:
+        ValueError: a custom strategy or rule (pass it to ``resume`` yourself), or an unknown
+            type.
+    """
+    kind = config.get("type")
+    if config.get("custom"):
+        what = "rule" if kind == "ConfidentExecution" else "strategy"
+        raise ValueError(
+            f"cannot rebuild the custom {what} {config.get('rule', config)!r} from a run "
+            f"directory. Pass {what}=<your {what}> to resume()."
+        )
+    build = STRATEGIES.get(str(kind))
+    if build is None:
+        raise ValueError(
+            f"cannot rebuild strategy {kind!r} from a run directory: it is not one of "
+            f"{sorted(STRATEGIES)}. Pass strategy=<your strategy> to resume()."
+        )
+    params = {k: v for k, v in config.items() if k not in ("type", "relabel")}
+    return build(params)
+
+
+def correcting(teacher: Callable[[np.ndarray, dict], int]) -> Any:
+    """Wrap a scripted teacher so it also corrects: ``correct(obs, info, action)`` answers its
+    own choice when that differs from ``action``, else None."""
+
+    class _Correcting:
+        def __init__(self, inner: Callable[[np.ndarray, dict], int]) -> None:
+            self.inner = inner
+
+        def __call__(self, observation: np.ndarray, info: dict) -> int:
+            return self.inner(observation, info)
+
+        def correct(self, observation: np.ndarray, info: dict, action: int) -> int | None:
+            own = int(self.inner(observation, info))
+            return None if own == int(action) else own
+
+    return _Correcting(teacher)
