@@ -460,7 +460,7 @@ def _parser() -> argparse.ArgumentParser:
         type=_nonnegative_int,
         default=0,
         metavar="S",
-        help="seed of the first reset (corridor: sensor noise; driving: which held-out "
+        help="seed of the first reset (corridor: the env's noise; driving: which held-out "
         "evaluation road segment) (default 0)",
     )
     p.set_defaults(func=_cmd_evaluate)
