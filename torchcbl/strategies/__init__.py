@@ -131,8 +131,9 @@ class Strategy(Protocol):
     def observe_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
     ) -> None:
-        """Every label, in arrival order (``model_action``: what the model predicted there
-        when the label arrived's step was decided; -1 without a model)."""
+        """Every label, in arrival order. ``kind`` is ``"demonstration"`` (asked for at this
+        step) or ``"correction"`` (for an earlier autonomous step's observation);
+        ``model_action`` is the model's prediction at the labelled step (-1 without a model)."""
         ...
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:

@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
 
+from torchcbl.confidence import _np
+
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
     from torchcbl.records import StepRecord
@@ -78,7 +80,7 @@ class _Phased:
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         if self._phase == "noninteractive" or self._burst_left > 0:
             return Decision(True, self._phase, self._burst_left)
-        ask = int(c.action[0]) < 0 or not self._confident(observation, c)
+        ask = int(_np(c.action)[0]) < 0 or not self._confident(observation, c)
         return Decision(ask, self._phase, self._burst if ask else 0)
 
     def actor(
