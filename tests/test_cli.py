@@ -31,9 +31,157 @@ def test_every_command_explains_itself(command, capsys):
     assert len(out.splitlines()) > 4
 
 
-def test_plot_refuses_a_directory_without_results(tmp_path):
-    with pytest.raises(SystemExit, match="results.json"):
-        main(["plot", str(tmp_path)])
+def test_plot_refuses_a_directory_without_results(tmp_path, capsys):
+    assert main(["plot", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("torchcbl plot: error: ") and "results.json" in err
+
+
+def _arguments(parser):
+    import argparse
+
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name, command in sub.choices.items():
+        for action in command._actions:
+            if not isinstance(action, argparse._HelpAction):
+                yield name, action
+
+
+def test_every_argument_and_option_has_help_text():
+    from torchcbl.cli import _parser
+
+    missing = [
+        f"{name} {action.option_strings or action.dest}"
+        for name, action in _arguments(_parser())
+        if not (action.help or "").strip()
+    ]
+    assert not missing
+
+
+def test_the_readme_command_lines_use_the_names_of_the_help(capsys):
+    """Every placeholder (SESSION_DIR, N, ...) and option of the README's command block appears,
+    spelled the same, in that command's --help."""
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    block = readme.split("The command line (`torchcbl --help`):", 1)[1].split("```")[1]
+    lines = [ln for ln in block.splitlines() if ln.startswith("torchcbl ")]
+    assert {ln.split()[1] for ln in lines} == {
+        "reproduce",
+        "evaluate",
+        "replay",
+        "plot",
+        "teach",
+        "benchmark",
+    }
+    for line in lines:
+        command = line.split()[1]
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        usage = " ".join(capsys.readouterr().out.split("\n\n")[0].split())
+        for token in re.findall(r"--[a-z-]+|\b[A-Z][A-Z_]*(?:\.json|\.gif|\.xml)?\b", line):
+            assert token in usage, (command, token, usage)
+
+
+@pytest.fixture(scope="module")
+def corridor_run(tmp_path_factory):
+    """A quick corridor reproduction (2 seeds): a run directory holding two sessions."""
+    out = tmp_path_factory.mktemp("cli") / "runs"
+    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
+    assert main([*argv, "--out", str(out)]) == 0
+    return out
+
+
+def _user_mistakes(run: Path, tmp: Path) -> list[list[str]]:
+    session = run / "corridor" / "sessions" / "seed0"
+    not_json = tmp / "notes.md"
+    not_json.write_text("# notes\n")
+    empty = tmp / "empty"
+    empty.mkdir()
+    return [
+        ["evaluate", str(empty), "--domain", "corridor"],  # a directory, but no session
+        ["evaluate", str(run / "corridor"), "--domain", "corridor"],  # a run directory
+        ["evaluate", str(tmp / "nonexistent"), "--domain", "corridor"],
+        ["evaluate", str(session), "--domain", "driving"],  # a session of the other domain
+        ["evaluate", str(session), "--steps", "-5"],
+        ["evaluate", str(session), "--steps", "many"],
+        ["replay", str(tmp / "nonexistent.json")],
+        ["replay", str(not_json)],  # not JSON
+        ["replay", str(run / "corridor" / "results.json")],  # JSON, but not episodes
+        ["replay", str(tmp)],  # a directory
+        ["reproduce", "corridor", "--seeds", "0", "--out", str(tmp / "X")],
+        ["reproduce", "corridor", "--workers", "0", "--out", str(tmp / "X")],
+        ["plot", str(tmp / "nonexistent")],
+        ["plot", str(session)],
+        ["teach", "corridor", "--run-dir", str(session)],  # holds a session: --resume?
+        ["teach", "driving", "--resume", "--run-dir", str(session)],
+        ["teach", "corridor", "--resume", "--run-dir", str(empty)],
+        ["frobnicate"],
+    ]
+
+
+def test_a_users_mistakes_get_one_line_and_no_traceback(corridor_run, tmp_path):
+    """Each command run as a user would: exit code 2, one line on stderr that names the
+    problem, nothing on stdout, no traceback, and nothing left behind."""
+    cases = _user_mistakes(corridor_run, tmp_path)
+    procs = [
+        subprocess.Popen(
+            [str(BIN), *argv],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            stdin=subprocess.DEVNULL,
+            env={**os.environ, "TORCHCBL_TRACEBACK": ""},
+        )
+        for argv in cases
+    ]
+    for argv, proc in zip(cases, procs, strict=True):
+        out, err = proc.communicate(timeout=120)
+        assert proc.returncode == 2, (argv, out, err)
+        assert "Traceback" not in out + err, (argv, err)
+        assert out == "", (argv, out)
+        lines = err.strip().splitlines()
+        assert len(lines) == 1, (argv, err)
+        prog = "torchcbl" if argv[0] == "frobnicate" else f"torchcbl {argv[0]}"
+        assert lines[0].startswith(f"{prog}: error: "), (argv, err)
+    assert not (tmp_path / "X").exists()  # a refused reproduce leaves no directory behind
+
+
+def test_evaluate_names_the_problem(corridor_run, tmp_path, capsys):
+    """What the one line says: which sessions a run directory holds, which domain a session is
+    of, what is missing."""
+    session = corridor_run / "corridor" / "sessions" / "seed0"
+    messages = {}
+    for key, argv in {
+        "run_dir": ["evaluate", str(corridor_run / "corridor")],
+        "other_domain": ["evaluate", str(session), "--domain", "driving"],
+        "missing": ["evaluate", str(tmp_path / "nope")],
+        "replay_results": ["replay", str(corridor_run / "corridor" / "results.json")],
+    }.items():
+        assert main(argv) == 2
+        messages[key] = capsys.readouterr().err
+    assert "sessions/seed0" in messages["run_dir"] and "sessions/seed1" in messages["run_dir"]
+    assert "is a corridor session" in messages["other_domain"]
+    assert "--domain corridor" in messages["other_domain"]
+    assert "does not exist" in messages["missing"]
+    assert "not a list of recorded episodes" in messages["replay_results"]
+
+
+def test_the_domain_table_matches_the_envs():
+    """evaluate tells a session's domain by its env id or its (features, actions): both as the
+    domains' envs really are."""
+    import gymnasium as gym
+
+    import corridor
+    import sumo_scenarios
+    from torchcbl.cli import _ENV_IDS, _SHAPES
+
+    assert _ENV_IDS == {corridor.ENV_ID: "corridor", sumo_scenarios.ENV_ID: "driving"}
+    for env_id, domain in _ENV_IDS.items():
+        env = gym.make(env_id)
+        try:
+            shape = (env.observation_space.shape[0], int(env.action_space.n))
+        finally:
+            env.close()
+        assert _SHAPES[shape] == domain
 
 
 _LINE = re.compile(r"lane: \S+ \((\d)\); nearest car: (.*)")
@@ -111,10 +259,8 @@ def test_a_person_teaches_the_driving_agent_from_a_terminal_and_it_asks_less(tmp
     assert "saved in" in screen
 
 
-def test_reproduce_corridor_writes_a_summary_then_plot_and_evaluate_read_it(tmp_path, capsys):
-    out = tmp_path / "runs"
-    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
-    assert main([*argv, "--out", str(out)]) == 0
+def test_reproduce_corridor_writes_a_summary_then_plot_and_evaluate_read_it(corridor_run, capsys):
+    out = corridor_run
     summary = (out / "summary.md").read_text()
     assert "## corridor" in summary and "demonstrations in all" in summary
     results = out / "corridor" / "results.json"
@@ -123,10 +269,10 @@ def test_reproduce_corridor_writes_a_summary_then_plot_and_evaluate_read_it(tmp_
     (out / "corridor" / "figure4.png").unlink()
     assert main(["plot", str(out / "corridor")]) == 0
     assert (out / "corridor" / "figure4.png").stat().st_size > 1000
-    # evaluate a saved policy (a teaching session directory)
+    # evaluate a saved policy (a teaching session directory); the domain is read from it
     capsys.readouterr()
     session = out / "corridor" / "sessions" / "seed0"
-    assert main(["evaluate", str(session), "--domain", "corridor", "--steps", "60"]) == 0
+    assert main(["evaluate", str(session), "--steps", "60"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["steps"] == 60 and report["circuits_clean"] == report["circuits_completed"] >= 1
 
@@ -165,5 +311,103 @@ def test_replay_lists_episodes_and_exports_one_to_gif_and_fcd(tmp_path, capsys):
     assert gif.stat().st_size > 1000
     steps = list(sumolib.xml.parse(str(fcd), "timestep"))
     assert len(steps) >= 30 and any(v.id == "ego" for v in steps[-1].vehicle)
-    with pytest.raises(SystemExit, match="--list"):
-        main(["replay", str(path), "--episode", "7"])
+    capsys.readouterr()
+    assert main(["replay", str(path), "--episode", "7"]) == 2
+    assert "--list" in capsys.readouterr().err
+
+
+def _markdown_tables(text: str) -> dict[str, list[list[list[str]]]]:
+    """The tables of a Markdown document by the ``##`` heading they follow (its first word),
+    each as rows of cell texts, as markdown-it-py (CommonMark + GFM tables) parses them."""
+    from markdown_it import MarkdownIt
+
+    tokens = MarkdownIt("commonmark").enable("table").parse(text)
+    sections: dict[str, list[list[list[str]]]] = {}
+    section, row, in_heading = None, None, False
+    for tok in tokens:
+        if tok.type == "heading_open":
+            in_heading = tok.tag == "h2"
+        elif tok.type == "inline" and in_heading:
+            section = tok.content.split()[0] if tok.content else ""
+            sections.setdefault(section, [])
+            in_heading = False
+        elif tok.type == "table_open":
+            sections.setdefault(section, []).append([])
+        elif tok.type == "tr_open":
+            row = []
+            sections[section][-1].append(row)
+        elif tok.type == "inline" and row is not None:
+            row.append(tok.content.strip())
+        elif tok.type == "tr_close":
+            row = None
+    return sections
+
+
+def test_the_markdown_reader_finds_tables_and_not_a_dash_underlined_heading():
+    good = "## corridor (1 s)\n\n| figure | paper |\n|---|---:|\n| a | 1 |\n| b | 2 |\n"
+    assert _markdown_tables(good) == {"corridor": [[["figure", "paper"], ["a", "1"], ["b", "2"]]]}
+    dashes = "## corridor (1 s)\n\nfigure | paper\n---------------\na | 1\n"
+    assert _markdown_tables(dashes) == {"corridor": [], "figure": []}  # a setext heading
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="corridor.experiment.format_summary still writes its rule as a line of dashes "
+    "(a setext heading in Markdown); the corridor engineer's fix for issue 16 item 2 makes "
+    "this pass: then remove this mark",
+)
+def test_summary_md_is_markdown_and_its_table_parses_as_a_table(corridor_run):
+    text = (corridor_run / "summary.md").read_text()
+    sections = _markdown_tables(text)
+    assert list(sections) == ["corridor"]  # one heading per domain, no stray headings
+    (table,) = sections["corridor"]
+    header, *rows = table
+    assert header[0] == "figure" and "paper" in header and len(header) >= 3
+    assert {len(r) for r in rows} == {len(header)}
+    assert "demonstrations in all" in [r[0] for r in rows]
+    table_lines = [ln for ln in text.splitlines() if "|" in ln]
+    assert len(table_lines) == len(rows) + 2  # every line of the table is a row, plus the rule
+    assert "+-" not in text  # one notation for ±
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="sumo_scenarios.experiment.format_summary still writes a plain-text table (a '+' "
+    "rule, '+-' for ±); the driving engineer's fix for issue 16 item 2 makes this pass: then "
+    "remove this mark",
+)
+def test_summary_md_of_a_driving_run_is_markdown_too(tmp_path, monkeypatch):
+    """`torchcbl reproduce driving` at a tiny size (the settings of
+    test_driving_experiment's tiny run): its summary.md table parses as a table."""
+    import torchcbl.cli as cli
+    from sumo_scenarios.experiment import DrivingExperimentConfig
+
+    tiny = DrivingExperimentConfig(
+        seeds=(0,),
+        eval_steps=100,
+        accuracy_window=20,
+        max_noninteractive=60,
+        confident_demos=20,
+        stage_every=10,
+        burst=5,
+        arm_b_stages=(60, 80),
+        max_new=10,
+        max_components=3,
+        train_episode_steps=100,
+        extra_eval_segments=(),
+    )
+    monkeypatch.setattr(cli, "_experiment_config", lambda domain, module, args: tiny)
+    out = tmp_path / "runs"
+    argv = ["reproduce", "driving", "--workers", "1", "--no-progress", "--out", str(out)]
+    assert main(argv) == 0
+    text = (out / "summary.md").read_text()
+    sections = _markdown_tables(text)
+    assert list(sections) == ["driving"]
+    (table,) = sections["driving"]
+    header, *rows = table
+    assert header[0] == "figure" and "paper" in header and len(header) >= 3
+    assert {len(r) for r in rows} == {len(header)}
+    assert any("arm a final, collisions %" in cell for r in rows for cell in r)
+    table_lines = [ln for ln in text.splitlines() if "|" in ln]
+    assert len(table_lines) == len(rows) + 2
+    assert "+-" not in text

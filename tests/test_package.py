@@ -1,5 +1,7 @@
 import subprocess
 import sys
+import warnings
+from pathlib import Path
 
 import pytest
 
@@ -35,3 +37,41 @@ def test_mean_sd_by_hand():
     assert mean_sd([None]) == {"mean": None, "sd": None, "n": 0}
     v = run_versions(sim="1.2")
     assert v["sim"] == "1.2" and v["torchcbl"] == torchcbl.__version__
+
+
+ROOT = Path(__file__).parents[1]
+
+
+def test_pyproject_builds_without_a_setuptools_deprecation_warning(monkeypatch):
+    """The license as an SPDX string: the TOML-table form warns with setuptools >= 77."""
+    setuptools = pytest.importorskip("setuptools", minversion="77")
+    from setuptools.config.pyprojecttoml import apply_configuration
+    from setuptools.dist import Distribution
+
+    monkeypatch.chdir(ROOT)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        dist = apply_configuration(Distribution(), ROOT / "pyproject.toml")
+    deprecations = [
+        str(w.message).splitlines()[0]
+        for w in caught
+        if issubclass(w.category, (DeprecationWarning, setuptools.warnings.SetuptoolsWarning))
+    ]
+    assert deprecations == []
+    assert dist.metadata.name == "torchcbl"
+
+
+def test_a_test_run_ends_without_a_tool_advertisement():
+    """nbmake prints a link to itself after every run that collects notebooks; the root
+    conftest.py turns that off."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider"]
+        + ["tests/test_package.py::test_mean_sd_by_hand"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "1 passed" in proc.stdout
+    assert "nbmake" not in (proc.stdout + proc.stderr).lower()

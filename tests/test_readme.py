@@ -18,6 +18,11 @@ def test_the_python_example_runs(tmp_path, monkeypatch):
     assert scope["ct"].stop_reason == "autonomous_episodes"
     ends = [r for r in scope["records"] if r.terminated or r.truncated]
     assert len(ends) == 10 and all(r.info["is_success"] for r in ends)
+    results = scope["results"]
+    assert [e.success for e in results] == [True] * 10
+    assert sum(e.steps for e in results) == len(scope["records"])
+    # leaving the with block closed the step log: SQLite removes its write-ahead log then
+    assert not (tmp_path / "runs" / "my-session" / "steps.sqlite-wal").exists()
     assert (tmp_path / "runs" / "my-session" / "config.json").exists()
 
 

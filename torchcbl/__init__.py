@@ -27,6 +27,8 @@ _EXPORTS = {
     "ConfidentTeacher": "torchcbl.teaching",
     "TeachingConfig": "torchcbl.teaching",
     "evaluate_policy": "torchcbl.policy",
+    "episode_results": "torchcbl.policy",
+    "EpisodeResult": "torchcbl.policy",
     "GreedyPolicy": "torchcbl.policy",
     "CorrectionRecord": "torchcbl.records",
     "TeacherError": "torchcbl.errors",

@@ -7,58 +7,127 @@ core never depends on a simulator.
 Commands::
 
     torchcbl reproduce [corridor|driving|all] [--full] [--seeds N] [--workers N] [--out DIR]
-    torchcbl evaluate RUN_DIR --domain corridor|driving [--steps N] [--seed S]
-    torchcbl replay EPISODES.json [--episode N | --label TEXT] [--gif OUT] [--fcd OUT]
+    torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S]
+    torchcbl replay EPISODES.json [--episode N | --label TEXT] [--gif OUT.gif] [--fcd OUT.xml]
     torchcbl plot RUN_DIR
-    torchcbl teach corridor|driving [--run-dir DIR] [--resume]
+    torchcbl teach corridor|driving [--run-dir DIR] [--resume] [--seed S] [--steps N]
     torchcbl benchmark [--quick] [--strategies S,..] [--envs E,..] [--seeds N] [--ray] [--out DIR]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
 import json
+import os
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 _DOMAINS = {
     "corridor": "corridor.experiment",
     "driving": "sumo_scenarios.experiment",
 }
 
+# How a teaching session's config.json tells its domain: the gymnasium id the env was made
+# with (``torchcbl teach``), else the shape of its observations and actions (the experiments
+# build their envs directly, without an id). tests/test_cli.py checks both against the envs.
+_ENV_IDS = {"torchcbl/Corridor-v0": "corridor", "torchcbl/Driving-v0": "driving"}
+_SHAPES = {(3, 4): "corridor", (4, 3): "driving"}  # (n_features, n_actions)
+
+_SESSION_HINT = (
+    "expected a teaching session directory (one holding config.json, e.g. "
+    "runs/reproduce/corridor/sessions/seed0, or the --run-dir of torchcbl teach)"
+)
+_EPISODES_HINT = (
+    "expected an episodes.json written by the driving experiment "
+    "(runs/reproduce/driving/seed_<k>/episodes.json)"
+)
+
+
+class _UsageError(Exception):
+    """A mistake in what the user asked for: reported as one line, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage mistake is one line (no usage block), exit code 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {value}")
+    return value
+
+
+def _nonnegative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {value}")
+    return value
+
 
 def _experiment_module(domain: str) -> Any:
     return importlib.import_module(_DOMAINS[domain])
 
 
-def _cmd_reproduce(args: argparse.Namespace) -> int:
-    domains = list(_DOMAINS) if args.domain == "all" else [args.domain]
-    out = _fresh_dir(Path(args.out))
-    summaries: list[str] = []
-    for domain in domains:
-        module = _experiment_module(domain)
-        config_cls = next(
-            getattr(module, name)
-            for name in dir(module)
-            if name.endswith("ExperimentConfig") and isinstance(getattr(module, name), type)
-        )
+def _experiment_config(domain: str, module: Any, args: argparse.Namespace) -> Any:
+    config_cls = next(
+        getattr(module, name)
+        for name in dir(module)
+        if name.endswith("ExperimentConfig") and isinstance(getattr(module, name), type)
+    )
+    try:
         config = config_cls.full() if args.full else config_cls()
         if args.seeds is not None:
             config = _replace_seeds(config, args.seeds)
-        run_dir = out / domain
-        print(f"== {domain}: {'full' if args.full else 'quick'} run into {run_dir}", flush=True)
-        t0 = time.perf_counter()
-        results = module.run_experiment(
-            config, run_dir, workers=args.workers, progress=not args.no_progress
-        )
-        elapsed = time.perf_counter() - t0
-        summary = module.format_summary(results)
-        summaries.append(f"## {domain} ({elapsed:.0f} s, run directory `{run_dir}`)\n\n{summary}")
-        print(summary, flush=True)
+    except ValueError as exc:
+        raise _UsageError(f"the {domain} experiment refuses these settings: {exc}") from None
+    return config
+
+
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    domains = list(_DOMAINS) if args.domain == "all" else [args.domain]
+    # Every setting is checked before anything is written: a refused command leaves no trace.
+    plan = []
+    for domain in domains:
+        module = _experiment_module(domain)
+        plan.append((domain, module, _experiment_config(domain, module, args)))
+    requested = Path(args.out)
+    if requested.exists() and not requested.is_dir():
+        raise _UsageError(f"--out {requested} is a file; expected a directory (new or empty)")
+    out = _fresh_dir(requested)
+    summaries: list[str] = []
+    try:
+        for domain, module, config in plan:
+            run_dir = out / domain
+            print(f"== {domain}: {'full' if args.full else 'quick'} run into {run_dir}", flush=True)
+            t0 = time.perf_counter()
+            results = module.run_experiment(
+                config, run_dir, workers=args.workers, progress=not args.no_progress
+            )
+            elapsed = time.perf_counter() - t0
+            summary = module.format_summary(results)
+            summaries.append(
+                f"## {domain} ({elapsed:.0f} s, run directory `{run_dir}`)\n\n{summary}"
+            )
+            print(summary, flush=True)
+    except BaseException:
+        if out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # nothing was written: leave nothing behind
+        raise
     text = "\n\n".join(summaries) + "\n"
     (out / "summary.md").write_text(text)
     print(f"\nSummary written to {out / 'summary.md'}")
@@ -77,27 +146,116 @@ def _fresh_dir(out: Path) -> Path:
 
 
 def _replace_seeds(config: Any, n_seeds: int) -> Any:
-    import dataclasses
-
     fields = {f.name for f in dataclasses.fields(config)}
     if "seeds" in fields:
         return dataclasses.replace(config, seeds=tuple(range(n_seeds)))
     if "n_seeds" in fields:
         return dataclasses.replace(config, n_seeds=n_seeds)
-    raise SystemExit(f"--seeds is not supported by {type(config).__name__}")
+    raise _UsageError(f"--seeds is not supported by {type(config).__name__}")
+
+
+def _sessions_below(path: Path, limit: int = 5) -> list[Path]:
+    """Teaching session directories one to three levels below ``path`` (at most ``limit``)."""
+    found: list[Path] = []
+    for pattern in ("*/config.json", "*/*/config.json", "*/*/*/config.json"):
+        for config in sorted(path.glob(pattern)):
+            if (config.parent / "steps.sqlite").exists():
+                found.append(config.parent)
+                if len(found) >= limit:
+                    return found
+    return found
+
+
+def _session_domain(session: Path, asked: str | None, *, teach: bool = False) -> str:
+    """The domain a teaching session was taught in, read from its config.json; ``asked`` (the
+    user's --domain, if any) must agree with it."""
+    from torchcbl.session import IncompatibleRunDirError, load_config
+
+    if not session.exists():
+        raise _UsageError(f"{session} does not exist; {_SESSION_HINT}")
+    if not session.is_dir():
+        raise _UsageError(f"{session} is a file; {_SESSION_HINT}")
+    if not (session / "config.json").exists():
+        below = _sessions_below(session)
+        if below:
+            shown = ", ".join(str(p) for p in below)
+            raise _UsageError(
+                f"{session} is not a teaching session but holds sessions: {shown}"
+                f"{' ...' if len(below) == 5 else ''}; pass one of them"
+            )
+        raise _UsageError(f"{session} holds no config.json; {_SESSION_HINT}")
+    try:
+        config = load_config(session)
+    except IncompatibleRunDirError as exc:
+        raise _UsageError(str(exc)) from None
+    env = config.get("env") or {}
+    shape = (env.get("n_features"), env.get("n_actions"))
+    domain = _ENV_IDS.get(env.get("id") or "") or _SHAPES.get(shape)  # type: ignore[arg-type]
+    described = f"env id {env.get('id')!r}, {shape[0]} features, {shape[1]} actions"
+    if domain is None:
+        raise _UsageError(
+            f"{session} was taught in an env torchcbl evaluate does not know ({described}); "
+            "evaluate it in Python with torchcbl.load_policy and torchcbl.evaluate_policy"
+        )
+    if asked is not None and asked != domain:
+        raise _UsageError(
+            f"{session} is a {domain} session ({described}), not a {asked} one; "
+            + (
+                f"resume it with torchcbl teach {domain} --resume --run-dir {session}"
+                if teach
+                else f"pass --domain {domain} or leave --domain out"
+            )
+        )
+    return domain
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    module = _experiment_module(args.domain)
-    report = module.evaluate_saved_policy(Path(args.run_dir), n_steps=args.steps, seed=args.seed)
+    session = Path(args.run_dir)
+    domain = _session_domain(session, args.domain)
+    module = _experiment_module(domain)
+    report = module.evaluate_saved_policy(session, n_steps=args.steps, seed=args.seed)
     print(json.dumps(report, indent=2))
     return 0
+
+
+def _load_episodes(path: Path) -> list[Any]:
+    replay = importlib.import_module("sumo_scenarios.replay")
+    if not path.exists():
+        raise _UsageError(f"{path} does not exist; {_EPISODES_HINT}")
+    if not path.is_file():
+        raise _UsageError(f"{path} is a directory; {_EPISODES_HINT}")
+    try:
+        data = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise _UsageError(f"{path} is not JSON ({exc}); {_EPISODES_HINT}") from None
+    keys = {"scenario", "sim", "episode_seed", "start_lane", "actions"}
+    if not isinstance(data, list) or not all(
+        isinstance(d, dict) and keys <= d.keys() for d in data
+    ):
+        if isinstance(data, dict):
+            got = f"a JSON object with keys {sorted(data)[:6]}"
+        elif isinstance(data, list):
+            got = "a JSON list whose items are not recorded episodes"
+        else:
+            got = f"a JSON {type(data).__name__}"
+        nearby = sorted(path.parent.glob("seed_*/episodes.json"))[:3]
+        hint = f"this run's episodes are in {', '.join(map(str, nearby))}" if nearby else ""
+        raise _UsageError(
+            f"{path} is {got}, not a list of recorded episodes (each with {sorted(keys)}); "
+            f"{hint or _EPISODES_HINT}"
+        )
+    try:
+        return [replay.EpisodeRecord.from_dict(d) for d in data]
+    except (TypeError, ValueError, KeyError) as exc:
+        raise _UsageError(f"{path} holds an episode this version cannot read ({exc})") from None
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     replay = importlib.import_module("sumo_scenarios.replay")
     path = Path(args.episodes)
-    episodes = replay.load_records(path)
+    episodes = _load_episodes(path)
+    if not episodes:
+        raise _UsageError(f"{path} holds no episodes")
     if args.list:
         for i, ep in enumerate(episodes):
             print(f"{i:4d}  {ep.label or '-':50s} {len(ep.actions):6d} steps")
@@ -105,13 +263,16 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     matches = [i for i, ep in enumerate(episodes) if args.label and args.label in (ep.label or "")]
     index = matches[0] if matches else args.episode
     if args.label and not matches:
-        raise SystemExit(f"No episode label contains {args.label!r}; see --list.")
+        raise _UsageError(f"no episode label contains {args.label!r}; see --list")
     if not 0 <= index < len(episodes):
-        raise SystemExit(f"--episode must be in [0, {len(episodes)}), got {index}; see --list.")
+        raise _UsageError(f"--episode must be in [0, {len(episodes)}), got {index}; see --list")
     record = episodes[index]
     stem = path.with_suffix("")
     gif = Path(args.gif) if args.gif else stem.with_name(f"{stem.name}-{index}.gif")
     fcd = Path(args.fcd) if args.fcd else stem.with_name(f"{stem.name}-{index}.fcd.xml")
+    for out in (gif, fcd):
+        if not out.parent.is_dir():
+            raise _UsageError(f"cannot write {out}: directory {out.parent} does not exist")
     print(f"episode {index}: {record.label or '-'} ({len(record.actions)} steps)")
     replay.export_fcd(record, fcd)
     print(f"FCD written to {fcd}")
@@ -123,12 +284,21 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 def _cmd_plot(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     results_path = run_dir / "results.json"
-    if not results_path.exists():
-        raise SystemExit(f"Expected {results_path} (a run directory written by reproduce).")
-    results = json.loads(results_path.read_text())
-    domain = results.get("domain")
+    if not results_path.is_file():
+        raise _UsageError(
+            f"{results_path} does not exist; expected a run directory written by "
+            "torchcbl reproduce (e.g. runs/reproduce/corridor)"
+        )
+    try:
+        results = json.loads(results_path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise _UsageError(f"{results_path} is not JSON ({exc})") from None
+    domain = results.get("domain") if isinstance(results, dict) else None
     if domain not in _DOMAINS:
-        raise SystemExit(f"Expected results.json to name a domain in {sorted(_DOMAINS)}")
+        raise _UsageError(
+            f"{results_path} names domain {domain!r}; expected one of {sorted(_DOMAINS)} "
+            "(a results.json written by torchcbl reproduce)"
+        )
     written = _experiment_module(domain).plot_results(results, run_dir)
     for path in written:
         print(path)
@@ -161,11 +331,20 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     from torchcbl.teaching import ConfidentTeacher, TeachingConfig, TeachingInterrupted
 
     package, env_id, human_module, settings = _TEACH[args.domain]
+    run_dir = Path(args.run_dir)
+    if args.resume:
+        _session_domain(
+            run_dir, args.domain, teach=True
+        )  # a session of this domain, or a one-line error
+    elif (run_dir / "config.json").exists():
+        raise _UsageError(
+            f"{run_dir} already holds a teaching session; add --resume to continue it "
+            "or choose another --run-dir"
+        )
     importlib.import_module(package)  # registers the env id
     human = importlib.import_module(human_module)
     teacher = human.make_teacher(title=f"torchcbl teach {args.domain}")
     env = gym.make(env_id)
-    run_dir = Path(args.run_dir)
     asked = 0
 
     def status(record: Any) -> None:
@@ -227,7 +406,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         ]
     bad = [n for n in names if n not in bm.STRATEGY_PATHS and ":" not in n]
     if bad:
-        raise SystemExit(
+        raise _UsageError(
             f"--strategies: unknown {bad}; expected names from {sorted(bm.STRATEGY_PATHS)} "
             "or import paths module:Class"
         )
@@ -237,7 +416,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     )
     bad = [e for e in env_names if e not in _BENCH_ENVS]
     if bad:
-        raise SystemExit(f"--envs: unknown {bad}; expected some of {sorted(_BENCH_ENVS)}")
+        raise _UsageError(f"--envs: unknown {bad}; expected some of {sorted(_BENCH_ENVS)}")
     envs = []
     for e in env_names:
         spec = importlib.import_module(_BENCH_ENVS[e]).env_spec(quick=args.quick)
@@ -246,7 +425,9 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         envs.append(spec)
     if args.gym_env:
         if not args.teacher:
-            raise SystemExit("--gym-env needs --teacher module:factory (the teacher's import path)")
+            raise _UsageError(
+                "--gym-env needs --teacher module:factory (the teacher's import path)"
+            )
         try:
             budgets = tuple(int(b) for b in args.budgets.split(","))
             envs.append(
@@ -262,11 +443,9 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                 )
             )
         except ValueError as exc:
-            raise SystemExit(f"--gym-env: {exc}") from None
+            raise _UsageError(f"--gym-env: {exc}") from None
     if not envs:
-        raise SystemExit("no environment: give --envs and/or --gym-env")
-    if args.seeds < 0:
-        raise SystemExit(f"--seeds must be >= 1, got {args.seeds}")
+        raise _UsageError("no environment: give --envs and/or --gym-env")
     seeds = list(range(args.seeds if args.seeds else (3 if args.quick else 10)))
     out = Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark"))
     n_cells = len(strategies) * len(envs) * len(seeds)
@@ -309,7 +488,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             on_cell=on_cell,
         )
     except (RuntimeError, ValueError, ImportError) as exc:
-        raise SystemExit(f"benchmark: {exc}") from None
+        raise _UsageError(str(exc)) from None
     c1 = os.times()
     cpu = (c1.user - c0.user) + (c1.system - c0.system)
     cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
@@ -323,7 +502,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="torchcbl",
         description="Confidence-based learning from demonstration with Gaussian mixture sets "
         "(Chernova & Veloso, AAMAS 2007).",
@@ -336,13 +515,32 @@ def _parser() -> argparse.ArgumentParser:
         description="Run the corridor (Section 5.1) and/or driving (Section 5.2) experiment "
         "over several seeds and write results.json, figures and a summary table into --out.",
     )
-    p.add_argument("domain", nargs="?", default="all", choices=["all", *_DOMAINS])
+    p.add_argument(
+        "domain",
+        nargs="?",
+        default="all",
+        choices=["all", *_DOMAINS],
+        help="which experiment: corridor, driving or all (default all)",
+    )
     p.add_argument("--full", action="store_true", help="the paper's full sizes (slow)")
-    p.add_argument("--seeds", type=int, default=None, help="number of seeds (default: config's)")
-    p.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
+    p.add_argument(
+        "--seeds",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="run seeds 0 .. N-1 (default: the experiment's own, 10 corridor and 5 driving)",
+    )
+    p.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=2,
+        metavar="N",
+        help="parallel processes (default 2)",
+    )
     p.add_argument(
         "--out",
         default="runs/reproduce",
+        metavar="DIR",
         help="output directory (default runs/reproduce; never overwritten: -2, -3, ... added)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -351,12 +549,37 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "evaluate",
         help="evaluate a saved policy (a teaching session directory)",
-        description="Load the latest model of a teaching session and run it greedily.",
+        description="Load the latest model of a teaching session and run it greedily, never "
+        "asking; print a JSON report (corridor: circuits and wall contacts; driving: collision "
+        "rate and lane shares).",
     )
-    p.add_argument("run_dir")
-    p.add_argument("--domain", required=True, choices=list(_DOMAINS))
-    p.add_argument("--steps", type=int, default=1000, help="timesteps to run (default 1000)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "run_dir",
+        metavar="SESSION_DIR",
+        help="a teaching session directory (holding config.json), e.g. "
+        "runs/reproduce/corridor/sessions/seed0 or the --run-dir of torchcbl teach",
+    )
+    p.add_argument(
+        "--domain",
+        choices=list(_DOMAINS),
+        default=None,
+        help="the session's domain (default: read from the session; if given it must agree)",
+    )
+    p.add_argument(
+        "--steps",
+        type=_positive_int,
+        default=1000,
+        metavar="N",
+        help="timesteps to run (default 1000)",
+    )
+    p.add_argument(
+        "--seed",
+        type=_nonnegative_int,
+        default=0,
+        metavar="S",
+        help="seed of the first reset (corridor: the env's noise; driving: which held-out "
+        "evaluation road segment) (default 0)",
+    )
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser(
@@ -364,13 +587,45 @@ def _parser() -> argparse.ArgumentParser:
         help="replay a recorded SUMO episode to GIF and FCD XML",
         description="Re-simulate a recorded driving episode bit-identically and export it.",
     )
-    p.add_argument("episodes", help="an episodes.json written by the driving experiment")
-    p.add_argument("--episode", type=int, default=0, help="index of the episode (default 0)")
-    p.add_argument("--label", default=None, help="the first episode whose label contains this")
+    p.add_argument(
+        "episodes",
+        metavar="EPISODES.json",
+        help="an episodes.json written by the driving experiment "
+        "(runs/reproduce/driving/seed_<k>/episodes.json)",
+    )
+    p.add_argument(
+        "--episode",
+        type=_nonnegative_int,
+        default=0,
+        metavar="N",
+        help="index of the episode (default 0; see --list)",
+    )
+    p.add_argument(
+        "--label",
+        default=None,
+        metavar="TEXT",
+        help="the first episode whose label contains TEXT (instead of --episode)",
+    )
     p.add_argument("--list", action="store_true", help="list the recorded episodes and stop")
-    p.add_argument("--gif", default=None, help="GIF output path (default beside the JSON)")
-    p.add_argument("--fcd", default=None, help="SUMO FCD XML output path (default beside it)")
-    p.add_argument("--max-frames", type=int, default=200, help="GIF frames at most")
+    p.add_argument(
+        "--gif",
+        default=None,
+        metavar="OUT.gif",
+        help="GIF output path (default beside the JSON: EPISODES-N.gif)",
+    )
+    p.add_argument(
+        "--fcd",
+        default=None,
+        metavar="OUT.xml",
+        help="SUMO FCD XML output path (default beside the JSON: EPISODES-N.fcd.xml)",
+    )
+    p.add_argument(
+        "--max-frames",
+        type=_positive_int,
+        default=200,
+        metavar="N",
+        help="GIF frames at most (default 200)",
+    )
     p.set_defaults(func=_cmd_replay)
 
     p = sub.add_parser(
@@ -378,7 +633,12 @@ def _parser() -> argparse.ArgumentParser:
         help="redraw the figures of a run directory",
         description="Read RUN_DIR/results.json and write its figures as PNG.",
     )
-    p.add_argument("run_dir")
+    p.add_argument(
+        "run_dir",
+        metavar="RUN_DIR",
+        help="a run directory written by torchcbl reproduce (holding results.json), e.g. "
+        "runs/reproduce/corridor",
+    )
     p.set_defaults(func=_cmd_plot)
 
     p = sub.add_parser(
@@ -387,11 +647,29 @@ def _parser() -> argparse.ArgumentParser:
         description="You are the teacher: the agent shows you its situation and asks for an "
         "action (one key) whenever it is unsure; every demonstration is saved to --run-dir.",
     )
-    p.add_argument("domain", choices=list(_DOMAINS))
-    p.add_argument("--run-dir", default="runs/teach", help="session directory")
+    p.add_argument("domain", choices=list(_DOMAINS), help="which agent: corridor or driving")
+    p.add_argument(
+        "--run-dir",
+        default="runs/teach",
+        metavar="DIR",
+        help="session directory (default runs/teach)",
+    )
     p.add_argument("--resume", action="store_true", help="continue the session in --run-dir")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--steps", type=int, default=2000, help="stop after this many steps")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        metavar="S",
+        help="session seed: seeds the first reset and the model's fits (default 0; "
+        "with --resume the session's own seed is kept)",
+    )
+    p.add_argument(
+        "--steps",
+        type=_positive_int,
+        default=2000,
+        metavar="N",
+        help="stop after this many more steps (default 2000)",
+    )
     p.add_argument(
         "--skip-noninteractive",
         action="store_true",
@@ -408,16 +686,37 @@ def _parser() -> argparse.ArgumentParser:
         "so a rerun (or a killed sweep) continues where it stopped.",
     )
     p.add_argument("--quick", action="store_true", help="small budgets, 3 seeds (minutes)")
-    p.add_argument("--strategies", default=None, help="comma-separated (default: all shipped)")
     p.add_argument(
-        "--envs", default=None, help="comma-separated of corridor,driving (default both)"
+        "--strategies",
+        default=None,
+        metavar="S,..",
+        help="comma-separated names or module:Class paths (default: all shipped)",
     )
-    p.add_argument("--seeds", type=int, default=0, help="seeds 0..N-1 (default 3 quick, 10 full)")
-    p.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
-    p.add_argument("--ray", action="store_true", help="run the cells on a local Ray")
-    p.add_argument("--ray-address", default=None, help="run on this Ray cluster (e.g. auto)")
     p.add_argument(
-        "--out", default=None, help="benchmark directory (default runs/benchmark[-quick])"
+        "--envs",
+        default=None,
+        metavar="E,..",
+        help="comma-separated of corridor,driving (default both)",
+    )
+    p.add_argument(
+        "--seeds",
+        type=_nonnegative_int,
+        default=0,
+        metavar="N",
+        help="seeds 0..N-1 (default, or 0: 3 quick, 10 full)",
+    )
+    p.add_argument(
+        "--workers", type=_positive_int, default=2, metavar="N", help="local processes (default 2)"
+    )
+    p.add_argument("--ray", action="store_true", help="run the cells on a local Ray")
+    p.add_argument(
+        "--ray-address", default=None, metavar="ADDR", help="run on this Ray cluster (e.g. auto)"
+    )
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="benchmark directory (default runs/benchmark[-quick])",
     )
     p.add_argument("--driving-teacher", default=None, help="import path of the driving teacher")
     p.add_argument("--gym-env", default=None, help="also benchmark this gymnasium id")
@@ -432,9 +731,35 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``torchcbl`` console script."""
+    """Entry point of the ``torchcbl`` console script; returns the exit code.
+
+    A usage mistake (a path that is not what the command reads, a number out of range) is one
+    line on stderr and exit code 2; any other failure is one line and exit code 1 (set
+    ``TORCHCBL_TRACEBACK=1`` to see its traceback instead).
+    """
     args = _parser().parse_args(argv)
-    return int(args.func(args) or 0)
+    prog = f"torchcbl {args.command}"
+    try:
+        return int(args.func(args) or 0)
+    except _UsageError as exc:
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        if os.environ.get("TORCHCBL_TRACEBACK"):
+            raise
+        print(
+            f"{prog}: error: {type(exc).__name__}: {_one_line(exc)} "
+            "(set TORCHCBL_TRACEBACK=1 to see where)",
+            file=sys.stderr,
+        )
+        return 1
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":

@@ -4,7 +4,8 @@ every env and teacher answer goes through before the loop or an evaluation uses 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -14,7 +15,7 @@ import torch
 from torchcbl.errors import EnvError
 from torchcbl.records import StepRecord, jsonable_info
 
-__all__ = ["GreedyPolicy", "check_env", "evaluate_policy"]
+__all__ = ["EpisodeResult", "GreedyPolicy", "check_env", "episode_results", "evaluate_policy"]
 
 
 class GreedyPolicy:
@@ -99,7 +100,7 @@ def evaluate_policy(
     *,
     n_steps: int | None = None,
     n_episodes: int | None = None,
-    seed: int | None = None,
+    seed: int | Sequence[int] | None = None,
     uses_info: bool = False,
 ) -> list[StepRecord]:
     """Run a policy greedily (never asking) and return one record per step.
@@ -108,19 +109,56 @@ def evaluate_policy(
     teacher, ``policy(observation, info)`` with the info of the latest reset / step, so a
     scripted expert can be evaluated exactly like a learned policy.
 
-    Episodes that end are reset (the first reset with ``seed``, later ones continuing the env's
-    RNG) until ``n_steps`` steps or ``n_episodes`` finished episodes, whichever comes first.
-    Records have ``phase="evaluation"``, ``autonomous=True``; a :class:`GreedyPolicy` also fills
-    the confidence fields, any other callable leaves them None.
+    Episodes that end are reset until ``n_steps`` steps or ``n_episodes`` finished episodes,
+    whichever comes first; no reset follows the last episode. ``seed`` seeds the resets:
+
+    - an int (or None): the first reset gets it, later ones continue the env's RNG;
+    - a sequence of ints: episode ``i`` is reset with ``seed[i]``, so every episode is
+      reproducible on its own (e.g. ``seed=range(100, 110)`` for 10 fixed test episodes).
+      ``n_episodes`` then defaults to ``len(seed)`` and may not exceed it.
+
+    Records have ``phase="evaluation"``, ``autonomous=True`` and ``episode`` counting from 0;
+    a :class:`GreedyPolicy` also fills the confidence fields, any other callable leaves them
+    None. :func:`episode_results` turns them into per-episode returns and successes.
     """
     n_features, n_actions = check_env(env)
+    seeds: list[int] | None = None
+    if seed is not None and not isinstance(seed, (int, np.integer)):
+        try:
+            seeds = list(seed)  # type: ignore[arg-type]
+        except TypeError:
+            seeds = None
+        if (
+            seeds is None
+            or not seeds
+            or not all(
+                isinstance(s, (int, np.integer)) and not isinstance(s, (bool, np.bool_))
+                for s in seeds
+            )
+        ):
+            raise ValueError(
+                "evaluate_policy: seed must be None, an int, or a non-empty sequence of ints "
+                f"(one per episode), got {seed!r}"
+            )
+        seeds = [int(s) for s in seeds]
+        if n_episodes is None:
+            n_episodes = len(seeds)
+    elif isinstance(seed, (bool, np.bool_)):
+        raise ValueError(
+            f"evaluate_policy: seed must be None, an int or a list of ints, got {seed!r}"
+        )
     if n_steps is None and n_episodes is None:
         raise ValueError("evaluate_policy: give n_steps and/or n_episodes, or it never ends")
     for name, v in (("n_steps", n_steps), ("n_episodes", n_episodes)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
             raise ValueError(f"evaluate_policy: {name} must be an int >= 1, got {v!r}")
+    if seeds is not None and n_episodes is not None and n_episodes > len(seeds):
+        raise ValueError(
+            f"evaluate_policy: n_episodes={n_episodes} but only {len(seeds)} seeds were given; "
+            "give one seed per episode (or leave n_episodes out to run one per seed)"
+        )
     records: list[StepRecord] = []
-    raw, info = env.reset(seed=seed)
+    raw, info = env.reset(seed=seeds[0] if seeds is not None else seed)
     obs = obs_array(raw, n_features, "env.reset")
     episode, done_episodes = 0, 0
     while (n_steps is None or len(records) < n_steps) and (
@@ -173,8 +211,72 @@ def evaluate_policy(
             episode += 1
             if n_episodes is not None and done_episodes >= n_episodes:
                 break  # no reset after the last episode (for SUMO, a whole new road)
-            raw, info = env.reset()
+            raw, info = env.reset(seed=None if seeds is None else seeds[episode])
         else:
             raw = raw_next
         obs = obs_array(raw, n_features, "env.step" if not (term or trunc) else "env.reset")
     return records
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """What one episode of a list of :class:`StepRecord` came to (see :func:`episode_results`).
+
+    Attributes:
+        episode: the records' episode index.
+        steps: steps in the episode.
+        episode_return: sum of its rewards (undiscounted; steps whose outcome was never
+            observed, reward None, are left out).
+        success: the env's ``info["is_success"]`` at the episode's end as a bool; None when the
+            env did not say or the episode did not end in the records.
+        terminated, truncated: the env's flags at its last step.
+        finished: whether the episode ended (terminated or truncated) within the records;
+            False for an episode cut by ``n_steps``.
+    """
+
+    episode: int
+    steps: int
+    episode_return: float
+    success: bool | None
+    terminated: bool
+    truncated: bool
+    finished: bool
+
+
+def episode_results(records: Sequence[StepRecord]) -> list[EpisodeResult]:
+    """Per-episode returns and successes of the records of :func:`evaluate_policy` (or of a
+    teaching session, :func:`torchcbl.load_records`), in episode order.
+
+    Example::
+
+        results = episode_results(evaluate_policy(policy, env, seed=range(10)))
+        returns = [e.episode_return for e in results]
+        success_rate = sum(e.success is True for e in results) / len(results)
+    """
+    results: list[EpisodeResult] = []
+    group: list[StepRecord] = []
+
+    def close() -> None:
+        last = group[-1]
+        finished = bool(last.terminated or last.truncated)
+        flag = last.info.get("is_success") if finished else None
+        results.append(
+            EpisodeResult(
+                episode=last.episode,
+                steps=len(group),
+                episode_return=math.fsum(r.reward for r in group if r.reward is not None),
+                success=None if flag is None else bool(flag),
+                terminated=bool(last.terminated),
+                truncated=bool(last.truncated),
+                finished=finished,
+            )
+        )
+
+    for r in records:
+        if group and r.episode != group[-1].episode:
+            close()
+            group = []
+        group.append(r)
+    if group:
+        close()
+    return results

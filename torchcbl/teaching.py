@@ -37,6 +37,7 @@ import copy
 import dataclasses
 import math
 import os
+import warnings
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -86,6 +87,17 @@ STOP_FIELDS = (
     "autonomous_episodes_to_stop",
     "max_demonstrations",
     "max_steps",
+    "max_episodes",
+)
+# The stop criteria plus the settings that only say when to stop: a resumed session and a
+# run() call may change these; every other field is part of what the session learned with.
+_STOP_SETTINGS = (*STOP_FIELDS, "time_limit_is_success")
+_NO_STOP = (
+    "no stop criterion is set, so it would never end. TeachingConfig has no default stop (the "
+    "paper ties it to its domains: the corridor stops after 10 consecutive autonomous circuits "
+    "that succeed, autonomous_episodes_to_stop=10; the driving run after 650 demonstrations, "
+    "max_demonstrations=650). Set at least one of {fields} in TeachingConfig or as run(...) "
+    "arguments."
 )
 _MODEL_ARG_NAMES = (
     "n_actions",
@@ -111,14 +123,24 @@ def _opt_int(name: str, value: Any, *, minimum: int) -> None:
 
 @dataclass(frozen=True)
 class TeachingConfig:
-    """How the loop teaches and when it stops. Defaults follow the paper's corridor setup.
+    """How the loop teaches and when it stops.
+
+    The learning settings default to the paper's corridor setup. When to stop has no default
+    (the paper ties it to its domains): give at least one stop criterion, here or to
+    :meth:`ConfidentTeacher.run`, or ``run()`` refuses to start.
 
     Attributes:
         max_new: refit after this many new labels (>= 1): demonstrations, and corrections
-            with a strategy that takes them.
+            with a strategy that takes them. With ``refit="full"`` every refit fits on all the
+            labels so far, so with ``max_new=1`` a session of N labels costs about N**2 / 2
+            point-fits in all: it grows quadratically. The paper refits after each one (fine
+            for the corridor's ~50); for long sessions (hundreds or thousands of labels) raise
+            it, e.g. 10 for the driving domain's 650, which divides the total cost by about
+            10, or use ``refit="incremental"``. Requests are still decided with the latest
+            fitted model.
         refit: "full" (default) fits the model from scratch at every refit, so it is a function
-            of the demonstrations alone; "incremental" uses ``GaussianMixtureSet.refit``: only
-            the actions whose data changed are refitted, each candidate warm-started from its
+            of the labels alone; "incremental" uses ``GaussianMixtureSet.refit``: only the
+            actions whose data changed are refitted, each candidate warm-started from its
             previous parameters, with a periodic from-scratch fit (1/7.5 to 1/9.5 of the
             refit time of a 10,000-demonstration session with max_new = 1, the same quality:
             bench/bench_refit.py). The model then depends on the refit history as well.
@@ -129,13 +151,23 @@ class TeachingConfig:
         noninteractive: False starts directly in confident execution.
         burst: teacher moves per request in confident execution (10 in the driving domain).
         autonomous_steps_to_stop: stop after this many consecutive autonomous steps.
-        autonomous_episodes_to_stop: stop after this many consecutive episodes that ended with
-            no request and with ``info.get("is_success", True)`` truthy.
+        autonomous_episodes_to_stop: stop after this many consecutive successful episodes of
+            confident execution with no request. Success is never assumed: an episode succeeds
+            when the env says so at its end (``info["is_success"]`` truthy), or, if the env
+            does not say (no ``"is_success"`` key), when it was cut by the time limit
+            (``truncated``) and ``time_limit_is_success`` is True. An episode the env does not
+            judge counts as a failure otherwise (a warning says so once).
         max_demonstrations: stop when the session holds this many demonstrations.
         max_steps: stop when the session holds this many steps.
+        max_episodes: stop when the session holds this many finished episodes (ended by the
+            env, terminated or truncated).
+        time_limit_is_success: for envs that never set ``info["is_success"]``: an episode
+            that reaches its time limit (truncated, not terminated) counts as a success for
+            ``autonomous_episodes_to_stop`` (e.g. "drive 1000 steps" tasks). Default False.
 
-    The four stop fields count over the whole session for the two budgets and within one
-    ``run`` call for the two streaks; ``run(**overrides)`` may change them per call.
+    The stop fields count over the whole session for the three budgets and within one
+    ``run`` call for the two streaks; ``run(**overrides)`` may change them (and
+    ``time_limit_is_success``) per call, and a resumed session may use other values.
     """
 
     max_new: int = 1
@@ -148,6 +180,8 @@ class TeachingConfig:
     autonomous_episodes_to_stop: int | None = None
     max_demonstrations: int | None = None
     max_steps: int | None = None
+    max_episodes: int | None = None
+    time_limit_is_success: bool = False
 
     def __post_init__(self) -> None:
         _opt_int("max_new", self.max_new, minimum=1)
@@ -175,13 +209,18 @@ class TeachingConfig:
             )
         for name in STOP_FIELDS:
             _opt_int(name, getattr(self, name), minimum=1 if "autonomous" in name else 0)
+        if not isinstance(self.time_limit_is_success, bool):
+            raise ValueError(
+                "TeachingConfig.time_limit_is_success: expected a bool, got "
+                f"{self.time_limit_is_success!r}"
+            )
 
     def learning_fields(self) -> dict[str, Any]:
         """The fields a resumed session must share with its run directory (not the stops)."""
         return {
             f.name: getattr(self, f.name)
             for f in dataclasses.fields(self)
-            if f.name not in STOP_FIELDS
+            if f.name not in _STOP_SETTINGS
         }
 
 
@@ -344,8 +383,11 @@ class ConfidentTeacher:
         self._episode_had_demo = False
         self._auto_steps_streak = 0
         self._auto_episodes_streak = 0
+        self._n_episodes = 0  # finished episodes in the session
+        self._run_config: TeachingConfig | None = None  # the config of the running run()
+        self._warned_unjudged = False
         #: why the last :meth:`run` returned: "max_demonstrations", "max_steps",
-        #: "autonomous_steps", "autonomous_episodes", or None before any run.
+        #: "max_episodes", "autonomous_steps", "autonomous_episodes", or None before any run.
         self.stop_reason: str | None = None
         self._obs: np.ndarray | None = None
         self._raw_obs: Any = None
@@ -452,6 +494,7 @@ class ConfidentTeacher:
         """Replay the log into the counters, the training set and the strategy (see
         :mod:`torchcbl.strategies` for the order), then restore the model."""
         self.records = records
+        self._n_episodes = sum(1 for r in records if r.terminated or r.truncated)
         self.corrections = list(corrections)
         by_step = {c.step: c for c in corrections}
         strategy = self.strategy
@@ -522,8 +565,14 @@ class ConfidentTeacher:
 
     @property
     def n_steps(self) -> int:
-        """Steps in the session."""
+        """Steps in the session (all :meth:`run` calls and resumes together; a step is one
+        action sent to the env, asked or autonomous)."""
         return len(self.records)
+
+    @property
+    def n_episodes(self) -> int:
+        """Finished episodes in the session (the env ended them: terminated or truncated)."""
+        return self._n_episodes
 
     @property
     def windowed_accuracy(self) -> float | None:
@@ -707,15 +756,36 @@ class ConfidentTeacher:
                 self._auto_steps_streak = 0
                 self._episode_had_demo = True
         if record.terminated or record.truncated:
+            self._n_episodes += 1
             clean = (
                 not self._episode_had_demo
                 and phase == "confident"
-                and bool(self._info.get("is_success", True))
+                and self._episode_succeeded(record, self._info)
             )
             self._auto_episodes_streak = self._auto_episodes_streak + 1 if clean else 0
         if self.on_step is not None:
             self.on_step(record)
         return record
+
+    def _episode_succeeded(self, record: StepRecord, info: dict) -> bool:
+        """Success is never assumed: the env's ``info["is_success"]`` decides; without it, a
+        time-limit end counts only with ``time_limit_is_success`` (see TeachingConfig)."""
+        if "is_success" in info:
+            return bool(info["is_success"])
+        cfg = self._run_config or self.config
+        if cfg.time_limit_is_success and record.truncated and not record.terminated:
+            return True
+        if cfg.autonomous_episodes_to_stop is not None and not self._warned_unjudged:
+            self._warned_unjudged = True
+            warnings.warn(
+                f"episode {record.episode} ended without info['is_success'], so it does not "
+                "count towards autonomous_episodes_to_stop (success is never assumed). If "
+                "reaching the time limit is success for this env, set "
+                "TeachingConfig(time_limit_is_success=True); else have the env set "
+                "info['is_success'] at the end of an episode.",
+                stacklevel=3,
+            )
+        return False
 
     def _offer_correction(self, record: StepRecord, raw: Any, info: dict) -> bool:
         """Let the teacher correct the autonomous step just taken; True if it did."""
@@ -810,27 +880,32 @@ class ConfidentTeacher:
             ) from cause
         return final
 
-    def run(self, **stop_overrides: int | None) -> ConfidentTeacher:
+    def run(self, **stop_overrides: int | bool | None) -> ConfidentTeacher:
         """Teach until a stop criterion holds; may be called again to continue.
+
+        The budgets (``max_steps``, ``max_demonstrations``, ``max_episodes``) count over the
+        whole session, so ``run(max_steps=ct.n_steps + 500)`` teaches 500 more steps; the
+        streaks start from zero in each call. ``stop_reason`` then says which criterion held.
 
         Args:
             **stop_overrides: any of ``autonomous_steps_to_stop``,
-                ``autonomous_episodes_to_stop``, ``max_demonstrations``, ``max_steps``, for
-                this call only (e.g. ``run(max_demonstrations=50)`` then
-                ``copy.deepcopy(teacher.model)`` to snapshot the model at a stage).
+                ``autonomous_episodes_to_stop``, ``max_demonstrations``, ``max_steps``,
+                ``max_episodes`` and ``time_limit_is_success``, for this call only (e.g.
+                ``run(max_demonstrations=50)`` then :meth:`snapshot` to keep the model of a
+                stage).
 
         Raises:
             ValueError: unknown override, or no stop criterion at all (it would never end).
         """
-        unknown = sorted(set(stop_overrides) - set(STOP_FIELDS))
+        unknown = sorted(set(stop_overrides) - set(_STOP_SETTINGS))
         if unknown:
-            raise ValueError(f"run(): unknown stop criteria {unknown}; expected {STOP_FIELDS}")
+            raise ValueError(
+                f"run(): unknown stop criteria {unknown}; expected some of {_STOP_SETTINGS}"
+            )
         cfg = dataclasses.replace(self.config, **stop_overrides)
         if all(getattr(cfg, name) is None for name in STOP_FIELDS):
-            raise ValueError(
-                "run(): no stop criterion is set, so it would never end. Set one of "
-                f"{STOP_FIELDS} in TeachingConfig or as run(...) arguments."
-            )
+            raise ValueError("run(): " + _NO_STOP.format(fields=STOP_FIELDS))
+        self._run_config = cfg
         self._auto_steps_streak = 0
         self._auto_episodes_streak = 0
         self.stop_reason = None
@@ -847,6 +922,9 @@ class ConfidentTeacher:
                     break
                 if cfg.max_steps is not None and self.n_steps >= cfg.max_steps:
                     self.stop_reason = "max_steps"
+                    break
+                if cfg.max_episodes is not None and self._n_episodes >= cfg.max_episodes:
+                    self.stop_reason = "max_episodes"
                     break
                 self.step()
                 if self.progress:
@@ -866,6 +944,7 @@ class ConfidentTeacher:
                     self.stop_reason = "autonomous_episodes"
                     break
         finally:
+            self._run_config = None
             self.flush()
             if self.progress:
                 bar.set_postfix_str(self._postfix())

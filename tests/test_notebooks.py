@@ -1,0 +1,40 @@
+"""The notebooks render: a figure shows as an image, not as ``<Figure size ...>``.
+
+(Every notebook is also run top to bottom by nbmake, see pyproject.toml; the root conftest.py
+fails a notebook that leaves anything in its temporary directory.)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+NOTEBOOKS = Path(__file__).parents[1] / "notebooks"
+
+
+def _run_until_the_first_figure(path: Path):
+    """Execute ``path``'s code cells in order until one outputs a matplotlib figure; return
+    that cell (executed) or None if no cell shows a figure."""
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    nb = nbformat.read(path, as_version=4)
+    client = nbclient.NotebookClient(
+        nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}}
+    )
+    with client.setup_kernel():
+        for index, cell in enumerate(nb.cells):
+            if cell.cell_type != "code":
+                continue
+            client.execute_cell(cell, index)
+            shown = [o for o in cell.outputs if o.get("output_type") != "stream"]
+            if any("<Figure" in o.get("data", {}).get("text/plain", "") for o in shown):
+                return cell
+    return None
+
+
+def test_notebook_02_shows_its_first_map_as_an_image():
+    cell = _run_until_the_first_figure(NOTEBOOKS / "02_corridor_teaching.ipynb")
+    assert cell is not None and "map_figure(" in cell.source  # the map of the corridor
+    figures = [o for o in cell.outputs if "<Figure" in o.get("data", {}).get("text/plain", "")]
+    assert all("image/png" in o["data"] for o in figures), [o["data"].keys() for o in figures]

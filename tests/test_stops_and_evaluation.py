@@ -1,0 +1,144 @@
+"""When teaching stops (budgets, streaks, success never assumed) and what an evaluation's
+records come to per episode (issue 16 item 3, issue 13 item 5)."""
+
+from __future__ import annotations
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from _toy_envs import oracle, rare_regions_world
+
+from torchcbl import (
+    ConfidentTeacher,
+    EpisodeResult,
+    TeachingConfig,
+    episode_results,
+    evaluate_policy,
+)
+
+
+class _Unjudged(gym.Wrapper):
+    """The world with ``info["is_success"]`` removed (or forced to ``always``)."""
+
+    def __init__(self, env: gym.Env, always: bool | None = None) -> None:
+        super().__init__(env)
+        self.always = always
+
+    def step(self, action):
+        obs, r, term, trunc, info = self.env.step(action)
+        info = {k: v for k, v in info.items() if k != "is_success"}
+        if self.always is not None and (term or trunc):
+            info["is_success"] = self.always
+        return obs, r, term, trunc, info
+
+
+def _teacher(env, **cfg) -> ConfidentTeacher:
+    world = env.unwrapped
+    return ConfidentTeacher(
+        env, oracle(world), config=TeachingConfig(noninteractive=False, **cfg), progress=False
+    )
+
+
+def test_no_stop_criterion_is_refused_with_the_papers_stops_named():
+    with pytest.raises(ValueError, match="no default stop") as exc:
+        _teacher(rare_regions_world()).run()
+    assert "autonomous_episodes_to_stop=10" in str(exc.value)
+    assert "max_episodes" in str(exc.value)
+
+
+def test_an_episode_counts_as_a_success_only_when_the_env_says_so():
+    # The env says: as before, the streak stops the run.
+    ct = _teacher(rare_regions_world(episode_length=10), max_steps=600)
+    ct.run(autonomous_episodes_to_stop=3)
+    assert ct.stop_reason == "autonomous_episodes"
+    # The env never says: no episode counts (the old code assumed success and stopped), and a
+    # warning names the way out.
+    ct = _teacher(_Unjudged(rare_regions_world(episode_length=10)), max_steps=600)
+    with pytest.warns(UserWarning, match="time_limit_is_success"):
+        ct.run(autonomous_episodes_to_stop=3)
+    assert ct.stop_reason == "max_steps" and ct.n_steps == 600
+    assert ct.autonomous_episodes_streak == 0
+    # ... unless the user says reaching the time limit is success.
+    ct = _teacher(
+        _Unjudged(rare_regions_world(episode_length=10)), max_steps=600, time_limit_is_success=True
+    )
+    ct.run(autonomous_episodes_to_stop=3)
+    assert ct.stop_reason == "autonomous_episodes" and ct.n_steps < 600
+    assert all(r.autonomous for r in ct.records[-30:]) and ct.records[-1].truncated
+    # The env says "failure" every time: it never counts, whatever the user says, no warning.
+    ct = _teacher(
+        _Unjudged(rare_regions_world(episode_length=10), always=False),
+        max_steps=300,
+        time_limit_is_success=True,
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ct.run(autonomous_episodes_to_stop=1)
+    assert ct.stop_reason == "max_steps"
+
+
+def test_max_episodes_is_a_session_budget_that_survives_resume(tmp_path):
+    world = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        world,
+        oracle(world),
+        config=TeachingConfig(max_episodes=4),
+        run_dir=tmp_path / "s",
+        progress=False,
+    )
+    with ct:  # the context manager closes the step log
+        ct.run()
+        assert (ct.stop_reason, ct.n_episodes, ct.n_steps) == ("max_episodes", 4, 40)
+        ct.run(max_episodes=6)
+        assert (ct.n_episodes, ct.n_steps) == (6, 60)
+    world = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher.resume(tmp_path / "s", world, oracle(world), progress=False)
+    with ct:
+        assert ct.n_episodes == 6
+        ct.run(max_episodes=7)
+        assert (ct.n_episodes, ct.n_steps, ct.stop_reason) == (7, 70, "max_episodes")
+
+
+def test_evaluate_policy_seeds_every_episode_from_a_list():
+    env = rare_regions_world(episode_length=5)
+    records = evaluate_policy(oracle(env), env, seed=[3, 7, 3], uses_info=True)
+    assert len(records) == 15 and [r.episode for r in records[::5]] == [0, 1, 2]
+    obs = [np.array([r.observation for r in records if r.episode == e]) for e in range(3)]
+    assert np.array_equal(obs[0], obs[2]) and not np.array_equal(obs[0], obs[1])
+    alone = evaluate_policy(oracle(env), env, seed=7, n_episodes=1, uses_info=True)
+    assert np.array_equal(obs[1], np.array([r.observation for r in alone]))
+    # n_episodes may take fewer seeds than given, never more
+    assert len(evaluate_policy(oracle(env), env, seed=range(5), n_episodes=2, uses_info=True)) == 10
+    for bad in ([], [1.5], [True], "ab"):
+        with pytest.raises(ValueError, match="seed"):
+            evaluate_policy(oracle(env), env, seed=bad, uses_info=True)
+    with pytest.raises(ValueError, match="only 2 seeds"):
+        evaluate_policy(oracle(env), env, seed=[1, 2], n_episodes=3, uses_info=True)
+
+
+def test_episode_results_are_the_per_episode_returns_and_successes():
+    env = rare_regions_world(episode_length=5)
+    # always action 0: right in the frequent region only, so some episodes fail
+    records = evaluate_policy(lambda obs: 0, env, seed=range(12), n_steps=58)
+    results = episode_results(records)
+    assert [e.episode for e in results] == list(range(12))
+    for e in results:  # by hand from the records' own info: reward 1 for each right action
+        steps = [r for r in records if r.episode == e.episode]
+        right = [bool(r.info["optimal"]) for r in steps]
+        assert e.steps == len(steps) and e.episode_return == sum(right)
+        if e.finished:
+            assert e.success is all(right) and e.truncated and not e.terminated
+    assert {e.success for e in results[:11]} == {True, False}  # both outcomes occur
+    last = results[-1]  # cut by n_steps after 3 of its 5 steps
+    assert last == EpisodeResult(
+        episode=11,
+        steps=3,
+        episode_return=last.episode_return,
+        success=None,
+        terminated=False,
+        truncated=False,
+        finished=False,
+    )
+    assert episode_results([]) == []
