@@ -15,7 +15,8 @@ ego stays in its lane).
 
 One timestep = one decision = 0.25 s of driving (the paper: 500 timesteps ~ 2.1 min). The ego
 drives at exactly 60 mph; traffic keeps its lane, each car at its own desired speed (20-40 mph)
-under SUMO's car-following model, so cars slow down behind slower ones. The road never ends. ``info["contact"]`` is True when, at the end of the step, the ego overlaps a car
+under SUMO's car-following model, so cars slow down behind slower ones. The road never ends.
+``info["contact"]`` is True when, at the end of the step, the ego overlaps a car
 in the lane it is in or the lane it just left (a geometric 1-D check: SUMO's own collision list is
 unreliable). Cars are never removed on contact. Reward is ``-1`` on a contact step, else 0 (the
 learner does not use it). Episodes never terminate; they are truncated after

@@ -274,8 +274,27 @@ def test_replay_bit_identical_fcd_and_gif(tmp_path):
     assert len(steps) >= 40
     ids = {v.id for v in steps[-1].vehicle}
     assert "ego" in ids and len(ids) > 5
-    gif = render_gif(rec, tmp_path / "ep.gif", every=10)
+    gif = render_gif(rec, tmp_path / "ep.gif", every=10, fps=4)
     assert gif.stat().st_size > 1000
+    from PIL import Image
+
+    with Image.open(gif) as im:
+        assert im.n_frames == 5  # steps 0, 10, 20, 30, 40: the whole episode, not a prefix
+        assert im.info["duration"] == 250  # 4 frames per second, in milliseconds
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from sumo_scenarios.replay import write_sumocfg
+
+    cfg = write_sumocfg(rec, fcd, tmp_path / "ep.sumocfg")
+    sumo = Path(sys.executable).with_name("sumo")
+    out = subprocess.run(
+        [str(sumo), "-c", str(cfg)], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert out.returncode == 0, out.stderr
+    assert "teleport" not in (out.stdout + out.stderr).lower()
+    assert "error" not in (out.stdout + out.stderr).lower()
 
 
 def test_recorder_labels_episodes_at_reset_and_skips_empty_ones():

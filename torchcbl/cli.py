@@ -114,8 +114,12 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(f"episode {index}: {record.label or '-'} ({len(record.actions)} steps)")
     replay.export_fcd(record, fcd)
     print(f"FCD written to {fcd}")
-    replay.render_gif(record, gif, max_frames=args.max_frames)
-    print(f"GIF written to {gif}")
+    cfg = replay.write_sumocfg(
+        record, fcd, fcd.with_name(fcd.name.replace(".fcd.xml", "") + ".sumocfg")
+    )
+    print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {cfg})")
+    replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
+    print(f"GIF written to {gif} (every {args.every}. step, {len(record.actions)} steps)")
     return 0
 
 
@@ -253,7 +257,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--list", action="store_true", help="list the recorded episodes and stop")
     p.add_argument("--gif", default=None, help="GIF output path (default beside the JSON)")
     p.add_argument("--fcd", default=None, help="SUMO FCD XML output path (default beside it)")
-    p.add_argument("--max-frames", type=int, default=200, help="GIF frames at most")
+    p.add_argument(
+        "--max-frames", type=int, default=None, help="GIF frames at most (default: whole episode)"
+    )
+    p.add_argument("--every", type=int, default=1, help="GIF: draw every N-th timestep")
     p.set_defaults(func=_cmd_replay)
 
     p = sub.add_parser(
