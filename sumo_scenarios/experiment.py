@@ -91,8 +91,8 @@ class DrivingExperimentConfig:
     stage_every: int = 50
     burst: int = 10
     arm_b_stages: tuple[int, ...] = (600, 700, 800, 900, 1000)
-    max_new: int = 5
-    max_components: int = 40
+    max_new: int = 10
+    max_components: int = 30
     max_std: float = 2.0
     train_episode_steps: int = 1000
     eval_segment: int = 0

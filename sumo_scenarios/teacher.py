@@ -64,16 +64,20 @@ class HumanDriverConfig:
             of ``ttc_range_s`` (it then accepts a tighter gap).
         behind_m: a lane is entered only if its nearest car behind is more than this far behind
             (front bumper to front bumper).
+        hidden_ttc_s: when the nearest car of a lane is behind, a car ahead may be hidden (the
+            observation shows one car per lane); the lane is entered only if a car exactly as
+            far ahead would leave this time to contact (0: the driver takes the chance).
         toward_home_prob: with two safe neighbours, the probability of moving toward home.
         patience_steps: (low, high) inclusive range of safe steps waited before going home,
             drawn per event.
     """
 
-    home_weights: tuple[float, float, float] = (0.6, 0.3, 0.1)
+    home_weights: tuple[float, float, float] = (0.5, 0.35, 0.15)
     home_every_s: float = 30.0
     ttc_range_s: tuple[float, float] = (1.2, 2.4)
     enter_ttc_s: float = 1.2
     urgent_ttc_s: float = 0.8
+    hidden_ttc_s: float = 0.4
     behind_m: float = 6.0
     toward_home_prob: float = 0.8
     patience_steps: tuple[int, int] = (0, 3)
@@ -141,9 +145,11 @@ class HumanDriver:
         nxt = x - c * dt
         if x <= 0:
             # The nearest car is behind: a car ahead, if any, is at least |x| ahead (it would be
-            # the nearest otherwise) and unseen; assume it closes in like this one.
+            # the nearest otherwise) and unseen. A cautious driver (``hidden_ttc_s``) assumes it
+            # is exactly there and closes in like this one.
             ahead = -x - c * dt
-            return nxt < -self.config.behind_m and ahead > _CAR_M + c * need
+            hidden = self.config.hidden_ttc_s
+            return nxt < -self.config.behind_m and (hidden <= 0 or ahead > _CAR_M + c * hidden)
         return nxt > _CAR_M and (c <= 0 or (nxt - _CAR_M) / c >= need)
 
     def __call__(self, observation: np.ndarray, info: dict) -> int:
