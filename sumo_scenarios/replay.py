@@ -53,8 +53,13 @@ class EpisodeRecord:
     def from_dict(cls, d: dict[str, Any]) -> EpisodeRecord:
         """Rebuild a record written by :meth:`to_dict`."""
         sc = dict(d["scenario"])
-        for k in ("lane_speeds_mph", "mean_spacing_m"):
-            sc[k] = tuple(sc[k])
+        if "lane_speeds_mph" in sc:
+            raise ValueError(
+                "this episode was recorded with the old constant-speed traffic (lane_speeds_mph); "
+                "it cannot be replayed on today's car-following traffic: record it again"
+            )
+        sc["mean_spacing_m"] = tuple(sc["mean_spacing_m"])
+        sc["speed_ranges_mph"] = tuple(tuple(r) for r in sc["speed_ranges_mph"])
         return cls(
             scenario=TrafficScenario(**sc),
             sim=SimConfig(**d["sim"]),
