@@ -1,7 +1,8 @@
 """Decisions per second of DrivingEnv with a learned GMM policy in the loop (one process).
 
 Fits a GaussianMixtureSet on expert demonstrations, then times env.step + classify on the
-evaluation scenario, in wall-clock time and in this process's CPU time (SUMO runs in-process). Prints a table and ends with ONE line of JSON.
+evaluation scenario, in wall-clock time and in this process's CPU time (SUMO runs in-process).
+Prints a table and ends with ONE line of JSON.
 """
 
 from __future__ import annotations
