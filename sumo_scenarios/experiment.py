@@ -2,24 +2,28 @@
 
 Per seed (each in its own process: libsumo holds one simulation per process):
 
-- arm (a): the scripted expert demonstrates non-interactively on the ``train`` scenario until the
-  model predicts 80 % of the last 150 demonstrations, then confident execution (2-std distance
-  rule, bursts of 10 teacher moves) for ``confident_demos`` more demonstrations; the model is
-  snapshotted (deep copy) at the end of the non-interactive phase and every ``stage_every``
-  confident demonstrations.
-- arm (b): the same expert, seed and road, non-interactive only, snapshotted at
-  ``arm_b_stages`` demonstrations.
-- after the training env is closed, every snapshot, the always-straight policy and the expert
-  drive ``eval_steps`` timesteps on ONE held-out road segment, the same for every policy and
-  every run seed (``eval`` scenario, episode seed ``eval_segment``; the ``eval`` scenario's base
-  seed is never used in training). Run seeds vary the training traffic, the expert's timing
-  randomness and the GMM initialisation.
+- arm (a): the teacher (``teacher``: the consistent scripted expert, or the human-like one)
+  demonstrates non-interactively on the ``train`` scenario until the model predicts 80 % of the
+  last 150 demonstrations, then confident execution (2-std distance rule, bursts of 10 teacher
+  moves) for ``confident_demos`` more demonstrations; the model is snapshotted (deep copy)
+  every ``ni_stage_every`` non-interactive demonstrations, at the switch, and every
+  ``stage_every`` confident demonstrations.
+- arm (b): the same teacher, seed and road, non-interactive only, snapshotted at
+  ``arm_b_stages`` demonstrations (to 1000 in all).
+- after the training env is closed, every snapshot, the always-straight policy and the teacher
+  drive ``eval_steps`` timesteps on ONE held-out road segment of this run seed, the same for
+  every policy of the seed (``eval`` scenario, episode seed ``eval_segment + seed``; the
+  ``eval`` scenario's base seed is never used in training). Run seeds vary the training
+  traffic, the evaluation segment, the teacher's randomness and the GMM initialisation.
 
-``run_experiment`` writes into ``run_dir``: ``results.json`` (every number, mean and sd over
-seeds, per-seed values, config, versions), ``fig8_lanes_collisions.png``,
-``fig6_accuracy.png``, ``fig9_accuracy.png``, ``fig10_confidence.png`` and
+``run_experiment`` writes into ``run_dir``: ``results.json`` (``summary``: the acceptance
+figures; ``stages``: Figure 8's bars, mean and sd over seeds; ``per_seed``; config; versions;
+wall and CPU seconds), ``fig6_accuracy.png``, ``fig7_middle_lane_demos.png``,
+``fig8_lanes_collisions.png``, ``fig9_accuracy.png``, ``fig10_confidence.png``,
 ``seed_<k>/episodes.json`` (every teaching and evaluation episode, replayable with
-:mod:`sumo_scenarios.replay`).
+:mod:`sumo_scenarios.replay` and ``torchcbl replay``) and ``seed_<k>/sessions/arm_a`` and
+``arm_b`` (the teaching sessions, :mod:`torchcbl.session` format: ``torchcbl evaluate`` and
+``resume`` work on them).
 """
 
 from __future__ import annotations
