@@ -637,6 +637,7 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
         tr["distance"][start : start + n],
         tr["contact"][start : start + n],
         threshold=cfg["max_std"],
+        start=start,
     )
     s = results["summary"]
     share = s["fig10_collisions_after_low_confidence"]
