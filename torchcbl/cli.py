@@ -119,7 +119,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     )
     print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {cfg})")
     replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
-    print(f"GIF written to {gif} (every {args.every}. step, {len(record.actions)} steps)")
+    print(f"GIF written to {gif} (every {args.every} timestep(s) of {len(record.actions)})")
     return 0
 
 
