@@ -15,8 +15,7 @@ import torch
 
 from sumo_scenarios.env import DrivingEnv
 from sumo_scenarios.expert import ScriptedExpert
-from torchcbl import GaussianMixtureSet
-from torchcbl.teaching import GreedyPolicy
+from torchcbl import GaussianMixtureSet, GreedyPolicy
 
 
 def main(n_demos: int = 600, n_steps: int = 3000) -> dict[str, float]:

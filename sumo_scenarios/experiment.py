@@ -188,8 +188,14 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
 
     from sumo_scenarios.env import DrivingEnv
     from sumo_scenarios.replay import EpisodeRecorder, save_records
-    from torchcbl import ConfidentTeacher, DistanceRule, GaussianMixtureSet, TeachingConfig
-    from torchcbl.teaching import GreedyPolicy, evaluate_policy
+    from torchcbl import (
+        ConfidentTeacher,
+        DistanceRule,
+        GaussianMixtureSet,
+        GreedyPolicy,
+        TeachingConfig,
+        evaluate_policy,
+    )
 
     torch.manual_seed(seed)
     out = Path(seed_dir)
