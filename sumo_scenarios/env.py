@@ -14,8 +14,9 @@ Actions (``Discrete(3)``): 0 stay, 1 shift one lane left (index + 1), 2 shift on
 ego stays in its lane).
 
 One timestep = one decision = 0.25 s of driving (the paper: 500 timesteps ~ 2.1 min). The ego
-drives at exactly 60 mph; traffic keeps its lane at one exact speed per lane (20-40 mph). The
-road never ends. ``info["contact"]`` is True when, at the end of the step, the ego overlaps a car
+drives at exactly 60 mph; traffic keeps its lane, each car at its own desired speed (20-40 mph)
+under SUMO's car-following model, so cars slow down behind slower ones. The road never ends.
+``info["contact"]`` is True when, at the end of the step, the ego overlaps a car
 in the lane it is in or the lane it just left (a geometric 1-D check: SUMO's own collision list is
 unreliable). Cars are never removed on contact. Reward is ``-1`` on a contact step, else 0 (the
 learner does not use it). Episodes never terminate; they are truncated after
@@ -116,10 +117,6 @@ class DrivingEnv(gym.Env):
         )
         self.action_space = gym.spaces.Discrete(3)
         self._sim = HighwaySim(self.scenario, config.sim)
-        self._closing = {
-            lane: EGO_SPEED_MS - v
-            for lane, v in zip(TRAFFIC_LANES, self.scenario.lane_speeds_ms, strict=True)
-        }
         self._t = 0
         self._episode_seed: int | None = None
         self._last_action: int | None = None
@@ -210,7 +207,22 @@ class DrivingEnv(gym.Env):
         return obs
 
     def _info(self) -> dict[str, Any]:
+        """Info of a step. ``car_rel_m`` [N] / ``car_lane`` [N] / ``car_closing_ms`` [N] describe
+        every car in the traffic window (hidden state: only scripted experts may read them);
+        ``closing_speed_ms`` maps each normal lane to the closing speed (m/s, ego speed minus
+        the car's speed over the last step) of the car the observation reports for that lane,
+        which a driver sees (0 when no car is within sensing range)."""
         s = self._sim
+        rel = s.car_pos - s.ego_pos
+        car_closing = EGO_SPEED_MS - s.car_speed
+        closing = {}
+        for lane in TRAFFIC_LANES:
+            m = np.flatnonzero(s.car_lane == lane)
+            if m.size == 0:
+                closing[lane] = 0.0
+                continue
+            k = m[np.argmin(np.abs(rel[m]))]
+            closing[lane] = float(car_closing[k]) if abs(rel[k]) < SENSE_RANGE_M else 0.0
         return {
             "lane": s.ego_lane,
             "contact": s.contact,
@@ -218,7 +230,8 @@ class DrivingEnv(gym.Env):
             "episode_seed": self._episode_seed,
             "position_m": s.distance_m,
             "car_lane": s.car_lane.copy(),
-            "car_rel_m": s.car_pos - s.ego_pos,
-            "closing_speed_ms": dict(self._closing),
+            "car_rel_m": rel,
+            "car_closing_ms": car_closing,
+            "closing_speed_ms": closing,
             "step_length_s": self.config.sim.step_length_s,
         }

@@ -2,24 +2,28 @@
 
 Per seed (each in its own process: libsumo holds one simulation per process):
 
-- arm (a): the scripted expert demonstrates non-interactively on the ``train`` scenario until the
-  model predicts 80 % of the last 150 demonstrations, then confident execution (2-std distance
-  rule, bursts of 10 teacher moves) for ``confident_demos`` more demonstrations; the model is
-  snapshotted (deep copy) at the end of the non-interactive phase and every ``stage_every``
-  confident demonstrations.
-- arm (b): the same expert, seed and road, non-interactive only, snapshotted at
-  ``arm_b_stages`` demonstrations.
-- after the training env is closed, every snapshot, the always-straight policy and the expert
-  drive ``eval_steps`` timesteps on ONE held-out road segment, the same for every policy and
-  every run seed (``eval`` scenario, episode seed ``eval_segment``; the ``eval`` scenario's base
-  seed is never used in training). Run seeds vary the training traffic, the expert's timing
-  randomness and the GMM initialisation.
+- arm (a): the teacher (``teacher``: the consistent scripted expert, or the human-like one)
+  demonstrates non-interactively on the ``train`` scenario until the model predicts 80 % of the
+  last 150 demonstrations, then confident execution (2-std distance rule, bursts of 10 teacher
+  moves) for ``confident_demos`` more demonstrations; the model is snapshotted (deep copy)
+  every ``ni_stage_every`` non-interactive demonstrations, at the switch, and every
+  ``stage_every`` confident demonstrations.
+- arm (b): the same teacher, seed and road, non-interactive only, snapshotted at
+  ``arm_b_stages`` demonstrations (to 1000 in all).
+- after the training env is closed, every snapshot, the always-straight policy and the teacher
+  drive ``eval_steps`` timesteps on ONE held-out road segment of this run seed, the same for
+  every policy of the seed (``eval`` scenario, episode seed ``eval_segment + seed``; the
+  ``eval`` scenario's base seed is never used in training). Run seeds vary the training
+  traffic, the evaluation segment, the teacher's randomness and the GMM initialisation.
 
-``run_experiment`` writes into ``run_dir``: ``results.json`` (every number, mean and sd over
-seeds, per-seed values, config, versions), ``fig8_lanes_collisions.png``,
-``fig6_accuracy.png``, ``fig9_accuracy.png``, ``fig10_confidence.png`` and
+``run_experiment`` writes into ``run_dir``: ``results.json`` (``summary``: the acceptance
+figures; ``stages``: Figure 8's bars, mean and sd over seeds; ``per_seed``; config; versions;
+wall and CPU seconds), ``fig6_accuracy.png``, ``fig7_middle_lane_demos.png``,
+``fig8_lanes_collisions.png``, ``fig9_accuracy.png``, ``fig10_confidence.png``,
 ``seed_<k>/episodes.json`` (every teaching and evaluation episode, replayable with
-:mod:`sumo_scenarios.replay`).
+:mod:`sumo_scenarios.replay` and ``torchcbl replay``) and ``seed_<k>/sessions/arm_a`` and
+``arm_b`` (the teaching sessions, :mod:`torchcbl.session` format: ``torchcbl evaluate`` and
+``resume`` work on them).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import dataclasses
 import json
 import multiprocessing as mp
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -65,18 +70,23 @@ class DrivingExperimentConfig:
         max_components: candidate components per mixture.
         max_std: the confidence rule's threshold in standard deviations (the paper: 2).
         train_episode_steps: training episodes are this long before the road is redrawn.
-        eval_segment: the ONE held-out road segment (episode seed of the ``eval`` scenario)
-            every policy of every run seed is evaluated on (the paper: "the same road segment").
-        extra_eval_segments: further held-out segments every policy also drives, for a
-            secondary average that is less tied to one road (the acceptance figures and plots
-            use ``eval_segment`` alone, the paper's protocol).
+        eval_segment: run seed ``s`` evaluates every one of its policies on the ONE held-out
+            road segment ``eval_segment + s`` of the ``eval`` scenario (the paper: "the same
+            road segment" for every evaluation); different run seeds drive different segments,
+            so the mean over seeds is not tied to one road.
+        extra_eval_segments: further held-out segments (offsets like ``eval_segment``) every
+            policy also drives, for a secondary average (off in quick mode, for time).
         criterion: the GMM's model-selection criterion (``aic`` or ``bic``).
         gmm_tol: the GMM's EM tolerance. 1e-4, tighter than the library's default 1e-3: with
             1e-3 the quick run's arm (a) final policy collided more (0.6 +- 1.2 % against
             0.1 +- 0.1 %, 5 seeds), the difference lying in a few seeds' fits.
+        teacher: ``expert`` (the consistent scripted expert, :class:`ScriptedExpert`) or
+            ``human`` (the human-like teacher, :func:`sumo_scenarios.teacher.make_teacher`).
+        ni_stage_every: arm (a) is also snapshotted every this many non-interactive
+            demonstrations before the switch (Figure 8's first section).
     """
 
-    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
+    seeds: tuple[int, ...] = tuple(range(10))
     eval_steps: int = 1000
     accuracy_window: int = 150
     target_accuracy: float = 0.8
@@ -85,14 +95,16 @@ class DrivingExperimentConfig:
     stage_every: int = 50
     burst: int = 10
     arm_b_stages: tuple[int, ...] = (600, 700, 800, 900, 1000)
-    max_new: int = 5
-    max_components: int = 10
+    max_new: int = 10
+    max_components: int = 30
     max_std: float = 2.0
     train_episode_steps: int = 1000
     eval_segment: int = 0
-    extra_eval_segments: tuple[int, ...] = (1, 2, 3)
+    extra_eval_segments: tuple[int, ...] = ()
     criterion: str = "aic"
     gmm_tol: float = 1e-4
+    teacher: str = "expert"
+    ni_stage_every: int = 100
 
     def __post_init__(self) -> None:
         if not self.seeds:
@@ -108,18 +120,65 @@ class DrivingExperimentConfig:
             raise ValueError("eval segments must be distinct non-negative seeds")
         if list(self.arm_b_stages) != sorted(self.arm_b_stages) or not self.arm_b_stages:
             raise ValueError("arm_b_stages must be non-empty and increasing")
+        if self.teacher not in ("expert", "human"):
+            raise ValueError(f"teacher must be 'expert' or 'human', got {self.teacher!r}")
+        if self.ni_stage_every < 1:
+            raise ValueError("ni_stage_every must be positive")
 
     @classmethod
     def full(cls) -> DrivingExperimentConfig:
         """The paper's sizes with a refit after every demonstration, over ten seeds."""
-        return cls(seeds=tuple(range(10)), max_new=1)
+        return cls(seeds=tuple(range(20)), max_new=1, extra_eval_segments=(100, 200, 300))
 
 
-def _stage_labels(cfg: DrivingExperimentConfig) -> list[str]:
+STAGE_NAMES = {
+    "straight": "always straight (middle lane)",
+    "a_end_noninteractive": "end of non-interactive phase",
+    "expert": "teacher",
+}
+
+
+def stage_name(label: str) -> str:
+    """A readable name for a Figure 8 stage key (``ni_200``, ``a_plus50``, ``b_700``, ...)."""
+    if label in STAGE_NAMES:
+        return STAGE_NAMES[label]
+    if label.startswith("ni_"):
+        return f"non-interactive, {label[3:]} demos"
+    if label.startswith("a_plus"):
+        return f"(a) +{label[6:]} confident-execution demos"
+    if label.startswith("b_"):
+        return f"(b) non-interactive, {label[2:]} demos"
+    return label
+
+
+def _stage_labels(cfg: DrivingExperimentConfig, ni_stages: Sequence[int] = ()) -> list[str]:
     a = ["a_end_noninteractive"] + [
         f"a_plus{k}" for k in range(cfg.stage_every, cfg.confident_demos + 1, cfg.stage_every)
     ]
-    return ["straight", *a, *[f"b_{n}" for n in cfg.arm_b_stages], "expert"]
+    ni = [f"ni_{n}" for n in ni_stages]
+    return ["straight", *ni, *a, *[f"b_{n}" for n in cfg.arm_b_stages], "expert"]
+
+
+def _make_teacher(cfg: DrivingExperimentConfig, seed: int) -> Any:
+    if cfg.teacher == "human":
+        from sumo_scenarios.teacher import make_teacher
+
+        return make_teacher(seed)
+    from sumo_scenarios.expert import ScriptedExpert
+
+    return ScriptedExpert(seed=seed)
+
+
+def _low_confidence_share(
+    distances: Sequence[float], contacts: Sequence[bool], threshold: float, lookback: int = 5
+) -> tuple[list[bool], list[bool]]:
+    """Per contact onset, and per step, whether a distance above ``threshold`` occurred in the
+    ``lookback`` decisions up to and including that step (Figure 10's number)."""
+    d = np.asarray(distances, dtype=np.float64) > threshold
+    c = np.asarray(contacts, dtype=bool)
+    low = np.array([d[max(0, t - lookback + 1) : t + 1].any() for t in range(d.size)])
+    onset = c & ~np.concatenate([[False], c[:-1]])
+    return low[onset].tolist(), low.tolist()
 
 
 def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[str, Any]:
@@ -128,10 +187,15 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     torch.set_num_threads(1)  # 2 threads on a loaded 2-core box made small fits ~50x slower
 
     from sumo_scenarios.env import DrivingEnv
-    from sumo_scenarios.expert import ScriptedExpert
     from sumo_scenarios.replay import EpisodeRecorder, save_records
-    from torchcbl import ConfidentTeacher, DistanceRule, GaussianMixtureSet, TeachingConfig
-    from torchcbl.teaching import GreedyPolicy, evaluate_policy
+    from torchcbl import (
+        ConfidentTeacher,
+        DistanceRule,
+        GaussianMixtureSet,
+        GreedyPolicy,
+        TeachingConfig,
+        evaluate_policy,
+    )
 
     torch.manual_seed(seed)
     out = Path(seed_dir)
@@ -141,9 +205,10 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     demos_at: dict[str, int] = {}
 
     def teacher_for(noninteractive_only: bool) -> tuple[Any, Any]:
+        arm = "b" if noninteractive_only else "a"
         env = EpisodeRecorder(
             DrivingEnv(scenario="train", max_episode_steps=cfg.train_episode_steps),
-            label=f"seed{seed}/arm_{'b' if noninteractive_only else 'a'}/train",
+            label=f"seed{seed}/arm_{arm}/train",
         )
         tc = TeachingConfig(
             max_new=cfg.max_new,
@@ -156,12 +221,13 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
         )
         t = ConfidentTeacher(
             env,
-            ScriptedExpert(seed=seed),
+            _make_teacher(cfg, seed),
             model=model,
             rule=DistanceRule(cfg.max_std),
             config=tc,
             seed=seed,
             progress=False,
+            run_dir=out / "sessions" / f"arm_{arm}",
         )
         return t, env
 
@@ -173,16 +239,25 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     # arm (a)
     t0 = time.perf_counter()
     ta, env = teacher_for(False)
+    ni_stages = []
     while ta.phase == "noninteractive" and ta.n_demonstrations < cfg.max_noninteractive:
         ta.step()
+        n = ta.n_demonstrations
+        if n % cfg.ni_stage_every == 0 and ta.phase == "noninteractive" and n not in ni_stages:
+            snap(ta, f"ni_{n}")
+            ni_stages.append(n)
     snap(ta, "a_end_noninteractive")
     n_ni = ta.n_demonstrations
+    if ni_stages and ni_stages[-1] == n_ni:
+        snapshots.pop(f"ni_{n_ni}")
+        ni_stages.pop()
     steps_at_switch = ta.n_steps
     for k in range(cfg.stage_every, cfg.confident_demos + 1, cfg.stage_every):
         while ta.n_demonstrations < n_ni + k:
             ta.step()
         snap(ta, f"a_plus{k}")
     recs_a = ta.records
+    ta.close()
     env.close()
     episodes += env.episodes
     acc_a = [r.windowed_accuracy for r in recs_a if r.teacher_action is not None]
@@ -196,24 +271,31 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
         while tb.n_demonstrations < n:
             tb.step()
         snap(tb, f"b_{n}")
-    acc_b = [r.windowed_accuracy for r in tb.records if r.teacher_action is not None]
+    demo_recs = [r for r in tb.records if r.teacher_action is not None]
+    acc_b = [r.windowed_accuracy for r in demo_recs]
+    middle = [r for r in demo_recs if int(round(r.observation[3])) == 2]
+    fig7 = {
+        "x": [[float(v) for v in r.observation[:3]] for r in middle],
+        "action": [int(r.teacher_action) for r in middle],
+    }
+    tb.close()
     env.close()
     episodes += env.episodes
 
-    # evaluation on the held-out segment (and, as a secondary figure, a few more)
+    # evaluation on this seed's held-out segment (and, as a secondary figure, a few more)
     stages: dict[str, Any] = {}
-    trace: dict[str, Any] = {}
-    segments = (cfg.eval_segment, *cfg.extra_eval_segments)
+    traces: dict[str, Any] = {}
+    segments = tuple(x + seed for x in (cfg.eval_segment, *cfg.extra_eval_segments))
     eval_env = EpisodeRecorder(DrivingEnv(scenario="eval", max_episode_steps=cfg.eval_steps))
     try:
-        for label in _stage_labels(cfg):
+        for label in _stage_labels(cfg, ni_stages):
             per_segment = []
             for segment in segments:
                 eval_env.label = f"seed{seed}/eval/{label}/segment{segment}"
                 if label == "straight":
                     policy: Any = _Straight()
                 elif label == "expert":
-                    policy = ScriptedExpert(seed=10_000 + seed)
+                    policy = _make_teacher(cfg, 10_000 + seed)
                 else:
                     policy = GreedyPolicy(snapshots[label])
                 recs = evaluate_policy(
@@ -231,9 +313,10 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
                         "lanes": metrics.lane_distribution(lanes).tolist(),
                     }
                 )
-                if label == "a_end_noninteractive" and segment == cfg.eval_segment:
-                    trace = {"distance": [r.distance for r in recs], "contact": contacts}
+                if label in snapshots and segment == segments[0]:
+                    traces[label] = {"distance": [r.distance for r in recs], "contact": contacts}
             entry: dict[str, Any] = dict(per_segment[0])
+            entry["segment"] = segments[0]
             if cfg.extra_eval_segments:
                 entry["all_segments"] = {
                     "collision_rate": float(np.mean([x["collision_rate"] for x in per_segment])),
@@ -254,16 +337,28 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
             entry["all_segments"]["tv_to_expert"] = metrics.total_variation(
                 entry["all_segments"]["lanes"], expert["all_segments"]["lanes"]
             )
+    onsets: list[bool] = []
+    steps: list[bool] = []
+    for tr in traces.values():
+        o, a = _low_confidence_share(tr["distance"], tr["contact"], cfg.max_std)
+        onsets += o
+        steps += a
+    # Figure 10 draws the learned policy whose trace holds the most contacts (ties: earliest)
+    fig10_label = max(traces, key=lambda k: sum(traces[k]["contact"]))
     save_records(episodes, out / "episodes.json")
     return {
         "seed": seed,
         "stages": stages,
+        "ni_stages": ni_stages,
         "noninteractive_demos": n_ni,
         "arm_a_demos": ta.n_demonstrations,
         "arm_a_autonomy_in_confident_phase": autonomy_a,
         "accuracy_a": acc_a,
         "accuracy_b": acc_b,
-        "confidence_trace": trace,
+        "fig7_middle_lane_demos": fig7,
+        "fig10": {"label": fig10_label, **traces[fig10_label]},
+        "fig10_onsets_low": onsets,
+        "fig10_steps_low": steps,
         "arm_a_seconds": time_a,
     }
 
@@ -313,11 +408,14 @@ def run_experiment(
             bar.set_postfix_str(f"seed {res['seed']} done")
     bar.close()
     per_seed.sort(key=lambda r: r["seed"])
-    labels = _stage_labels(config)
-    summary: dict[str, Any] = {}
+    ni_all = sorted({n for r in per_seed for n in r["ni_stages"]})
+    labels = _stage_labels(config, ni_all)
+    stages: dict[str, Any] = {}
     for label in labels:
-        rows = [r["stages"][label] for r in per_seed]
+        rows = [r["stages"][label] for r in per_seed if label in r["stages"]]
         s = {
+            "name": stage_name(label),
+            "n": len(rows),
             "collision_pct": mean_sd([100 * x["collision_rate"] for x in rows]),
             "lanes": np.mean([x["lanes"] for x in rows], axis=0).tolist(),
             "tv_to_expert": mean_sd([x["tv_to_expert"] for x in rows]),
@@ -331,17 +429,65 @@ def run_experiment(
         if "demonstrations" in rows[0]:
             s["demonstrations"] = mean_sd([x["demonstrations"] for x in rows])
             s["components_total"] = mean_sd([sum(x["components"]) for x in rows])
-        summary[label] = s
+        stages[label] = s
     final_a = f"a_plus{config.confident_demos}"
     last_b = f"b_{config.arm_b_stages[-1]}"
+    diffs = [
+        100 * (r["stages"][final_a]["collision_rate"] - r["stages"][last_b]["collision_rate"])
+        for r in per_seed
+    ]
+    at_cap = [
+        {"seed": r["seed"], "stage": k, "components": e["components"]}
+        for r in per_seed
+        for k, e in r["stages"].items()
+        if "components" in e and max(e["components"]) >= config.max_components
+    ]
+    onsets = [x for r in per_seed for x in r["fig10_onsets_low"]]
+    steps_low = [x for r in per_seed for x in r["fig10_steps_low"]]
+    acc1000 = [
+        r["accuracy_b"][999]
+        for r in per_seed
+        if len(r["accuracy_b"]) >= 1000 and r["accuracy_b"][999] is not None
+    ]
+    summary: dict[str, Any] = {
+        "n": len(per_seed),
+        "straight": {"collision_pct": stages["straight"]["collision_pct"]},
+        "expert": {
+            "collision_pct": stages["expert"]["collision_pct"],
+            "lanes": stages["expert"]["lanes"],
+        },
+        "noninteractive_demos": mean_sd([r["noninteractive_demos"] for r in per_seed]),
+        "ni_accuracy_at_1000": mean_sd(acc1000),
+        "arm_a": {
+            "collision_pct": stages[final_a]["collision_pct"],
+            "tv_to_expert": stages[final_a]["tv_to_expert"],
+            "demonstrations": stages[final_a]["demonstrations"],
+            "lanes": stages[final_a]["lanes"],
+        },
+        "arm_b": {
+            "collision_pct": stages[last_b]["collision_pct"],
+            "tv_to_expert": stages[last_b]["tv_to_expert"],
+            "demonstrations": stages[last_b]["demonstrations"],
+            "lanes": stages[last_b]["lanes"],
+        },
+        "arm_a_minus_b_collision_pct": paired_interval(diffs),
+        "components_total": stages[final_a]["components_total"],
+        "components_at_cap": at_cap,
+        "autonomy_confident_phase": mean_sd(
+            [r["arm_a_autonomy_in_confident_phase"] or 0.0 for r in per_seed]
+        ),
+        "fig10_collisions_after_low_confidence": float(np.mean(onsets)) if onsets else None,
+        "fig10_collision_onsets": len(onsets),
+        "fig10_base_rate": float(np.mean(steps_low)) if steps_low else None,
+    }
     checks = {
         "straight_in_28_32": 28 <= summary["straight"]["collision_pct"]["mean"] <= 32,
         "expert_le_0.5": summary["expert"]["collision_pct"]["mean"] <= 0.5,
-        "arm_a_demos_le_650": summary[final_a]["demonstrations"]["mean"] <= 650,
-        "arm_a_le_2pct": summary[final_a]["collision_pct"]["mean"] <= 2.0,
-        "arm_a_tv_le_0.15": summary[final_a]["tv_to_expert"]["mean"] <= 0.15,
-        "arm_a_beats_arm_b": summary[final_a]["collision_pct"]["mean"]
-        < summary[last_b]["collision_pct"]["mean"],
+        "noninteractive_demos_250_800": 250 <= summary["noninteractive_demos"]["mean"] <= 800,
+        "arm_a_le_2pct": summary["arm_a"]["collision_pct"]["mean"] <= 2.0,
+        "arm_a_tv_le_0.15": summary["arm_a"]["tv_to_expert"]["mean"] <= 0.15,
+        "arm_a_beats_arm_b": summary["arm_a_minus_b_collision_pct"]["mean"] < 0,
+        "no_mixture_at_cap": not at_cap,
     }
     results = {
         "domain": "driving",
@@ -351,21 +497,78 @@ def run_experiment(
         "versions": _versions(),
         "paper": PAPER,
         "summary": summary,
-        "noninteractive_demos": mean_sd([r["noninteractive_demos"] for r in per_seed]),
-        "arm_a_autonomy_in_confident_phase": mean_sd(
-            [r["arm_a_autonomy_in_confident_phase"] or 0.0 for r in per_seed]
-        ),
+        "stages": stages,
         "acceptance": checks,
         "per_seed": per_seed,
         "seconds": time.perf_counter() - t0,
+        "cpu_seconds": cpu_seconds(),
     }
     (run_dir / "results.json").write_text(json.dumps(results, indent=1))
     plot_results(results, run_dir)
     return results
 
 
+def cpu_seconds() -> float:
+    """CPU time (user + system, s) of this process and its finished children so far."""
+    import resource
+
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+_T975 = (
+    12.706,
+    4.303,
+    3.182,
+    2.776,
+    2.571,
+    2.447,
+    2.365,
+    2.306,
+    2.262,
+    2.228,
+    2.201,
+    2.179,
+    2.160,
+    2.145,
+    2.131,
+    2.120,
+    2.110,
+    2.101,
+    2.093,
+    2.086,
+    2.080,
+    2.074,
+    2.069,
+    2.064,
+    2.060,
+    2.056,
+    2.052,
+    2.048,
+    2.045,
+    2.042,
+)  # Student t, 97.5 %, df = 1..30
+
+
+def paired_interval(diffs: Sequence[float]) -> dict[str, Any]:
+    """Mean of paired differences and its 95 % t interval: ``{mean, sd, n, ci95: [lo, hi]}``.
+
+    With one value the interval is ``[mean, mean]`` widened to nothing (``ci95`` None)."""
+    d = np.asarray(diffs, dtype=np.float64)
+    if d.size == 0:
+        raise ValueError("paired_interval needs at least one difference")
+    m = float(d.mean())
+    if d.size == 1:
+        return {"mean": m, "sd": 0.0, "n": 1, "ci95": None}
+    sd = float(d.std(ddof=1))
+    t = _T975[d.size - 2] if d.size - 1 <= len(_T975) else 1.96
+    half = t * sd / np.sqrt(d.size)
+    return {"mean": m, "sd": sd, "n": int(d.size), "ci95": [m - half, m + half]}
+
+
 def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
-    """Draw Figures 8, 6, 9 and 10 of a run from its ``results`` into ``run_dir``.
+    """Draw Figures 6-10 of a run from its ``results`` into ``run_dir``.
 
     Returns the PNG paths written. Needs only results.json (no simulation).
     """
@@ -380,48 +583,82 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
         fig.savefig(run_dir / name, dpi=100)
         written.append(run_dir / name)
 
-    summ = results["summary"]
-    labels = list(summ)
-    fig = Figure(figsize=(8, 0.45 * len(labels) + 1.5))
+    stages = results["stages"]
+    labels = list(stages)
+    fig = Figure(figsize=(9, 0.45 * len(labels) + 1.8))
     ax = fig.add_subplot()
+    names = [f"{stages[k]['name']} (n={stages[k]['n']})" for k in labels]
     metrics.plot_lane_bars(
         ax,
-        labels,
-        [summ[k]["lanes"] for k in labels],
-        [summ[k]["collision_pct"]["mean"] / 100 for k in labels],
+        names,
+        [stages[k]["lanes"] for k in labels],
+        [stages[k]["collision_pct"]["mean"] / 100 for k in labels],
     )
     ax.set_title("Figure 8: lane shares and collisions (mean over seeds)")
     save(fig, "fig8_lanes_collisions.png")
     first = results["per_seed"][0]
-    for name, key, marks in (
-        ("fig6_accuracy.png", "accuracy_a", [first["noninteractive_demos"]]),
-        ("fig9_accuracy.png", "accuracy_b", [first["noninteractive_demos"]]),
+    for name, key, title in (
+        ("fig6_accuracy.png", "accuracy_a", "non-interactive phase"),
+        ("fig9_accuracy.png", "accuracy_b", "1000 non-interactive demonstrations"),
     ):
         fig = Figure(figsize=(7, 3))
         ax = fig.add_subplot()
         for r in results["per_seed"]:
             acc = [np.nan if a is None else a for a in r[key]]
-            metrics.plot_accuracy(
-                ax,
-                acc,
-                target=cfg["target_accuracy"],
-                label=f"seed {r['seed']}",
-                marks=marks if r is first else (),
-            )
-        ax.legend(fontsize=7)
+            if key == "accuracy_a":
+                acc = acc[: r["noninteractive_demos"]]
+            metrics.plot_accuracy(ax, acc, target=cfg["target_accuracy"], label=f"seed {r['seed']}")
+        ax.legend(fontsize=6, ncol=2)
         ax.set_title(
             f"{name[:4].replace('fig', 'Figure ')}: windowed prediction accuracy "
-            f"({cfg['accuracy_window']} demonstrations)"
+            f"({cfg['accuracy_window']} demonstrations), {title}"
         )
         save(fig, name)
-    tr = first["confidence_trace"]
-    n = min(300, len(tr["distance"]))
+    f7 = first["fig7_middle_lane_demos"]
+    fig = Figure(figsize=(6, 5))
+    ax = fig.add_subplot(projection="3d")
+    x = np.asarray(f7["x"], dtype=np.float64).reshape(-1, 3)
+    act = np.asarray(f7["action"], dtype=np.int64)
+    for a, (nm, col) in enumerate(
+        (("stay", "tab:blue"), ("left", "tab:green"), ("right", "tab:red"))
+    ):
+        m = act == a
+        ax.scatter(x[m, 0], x[m, 1], x[m, 2], s=6, color=col, label=f"{nm} ({int(m.sum())})")
+    ax.set_xlabel("right lane (m)")
+    ax.set_ylabel("middle lane (m)")
+    ax.set_zlabel("left lane (m)")
+    ax.legend(fontsize=7)
+    ax.set_title(f"Figure 7: middle-lane demonstrations (seed {first['seed']}, arm b)")
+    save(fig, "fig7_middle_lane_demos.png")
+    tr = first["fig10"]
+    c = np.asarray(tr["contact"], dtype=bool)
+    n = min(300, c.size)
+    # the 300-step stretch holding the most contacts
+    counts = np.convolve(c.astype(float), np.ones(n), mode="valid")
+    start = int(np.argmax(counts)) if counts.size else 0
     fig = Figure(figsize=(8, 3))
     ax = fig.add_subplot()
     metrics.plot_confidence_trace(
-        ax, tr["distance"][:n], tr["contact"][:n], threshold=cfg["max_std"]
+        ax,
+        tr["distance"][start : start + n],
+        tr["contact"][start : start + n],
+        threshold=cfg["max_std"],
+        start=start,
     )
-    ax.set_title("Figure 10: distance of the best classification (end of non-interactive phase)")
+    s = results["summary"]
+    share = s["fig10_collisions_after_low_confidence"]
+    base = s["fig10_base_rate"]
+    ax.set_title(
+        f"Figure 10: distance of the best classification, {stage_name(tr['label'])}, "
+        f"steps {start}-{start + n}\n"
+        + (
+            f"contacts preceded within 5 steps by distance > {cfg['max_std']:g}: "
+            f"{100 * share:.0f}% (all steps: {100 * base:.0f}%)"
+            if share is not None
+            else "no contacts"
+        ),
+        fontsize=9,
+    )
     save(fig, "fig10_confidence.png")
     return written
 
@@ -453,68 +690,106 @@ def evaluate_saved_policy(
 
 
 def format_summary(results: dict[str, Any]) -> str:
-    """A plain-text table: figure | quantity | paper | ours (mean +- sd over seeds)."""
+    """A Markdown pipe table: figure | quantity | paper | ours (mean ± sd over seeds)."""
     s = results["summary"]
+    st = results["stages"]
     cfg = results["config"]
     final_a = f"a_plus{cfg['confident_demos']}"
-    last_b = f"b_{cfg['arm_b_stages'][-1]}"
 
-    def ms(d: dict[str, float], fmt: str = "{:.1f}") -> str:
-        return f"{fmt.format(d['mean'])} +- {fmt.format(d['sd'])}"
+    def ms(d: dict[str, Any] | None, fmt: str = "{:.1f}") -> str:
+        if not d or d.get("mean") is None:
+            return "–"
+        sd = d.get("sd")
+        return fmt.format(d["mean"]) + ("" if sd is None else f" ± {fmt.format(sd)}")
 
+    lanes = ", ".join(f"{100 * v:.0f}" for v in s["expert"]["lanes"])
+    diff = s["arm_a_minus_b_collision_pct"]
+    ci = diff.get("ci95")
+    diff_txt = f"{diff['mean']:+.2f}" + (f" (95% CI {ci[0]:+.2f} to {ci[1]:+.2f})" if ci else "")
+    share = s["fig10_collisions_after_low_confidence"]
+    base = s["fig10_base_rate"]
     rows = [
-        ("Fig 8", "straight, collisions %", "30.4", ms(s["straight"]["collision_pct"])),
+        ("Fig 8", "always straight, collisions %", "30.4", ms(s["straight"]["collision_pct"])),
+        ("Fig 8", "teacher, collisions %", "≈ 0", ms(s["expert"]["collision_pct"], "{:.2f}")),
+        ("Fig 8", "teacher, lane shares % (R-sh, R, M, L, L-sh)", "left three", lanes),
         (
             "Fig 6",
-            "non-interactive demos to 80%",
+            "non-interactive demos to 80% over 150",
             "500",
-            ms(results["noninteractive_demos"], "{:.0f}"),
+            ms(s["noninteractive_demos"], "{:.0f}"),
+        ),
+        (
+            "Fig 9",
+            "windowed accuracy at 1000 non-interactive demos",
+            "≈ 0.8",
+            ms(s["ni_accuracy_at_1000"], "{:.2f}"),
         ),
         (
             "Fig 8",
-            "end non-interactive, collisions %",
+            "end of non-interactive phase, collisions %",
             "1.3",
-            ms(s["a_end_noninteractive"]["collision_pct"]),
+            ms(st["a_end_noninteractive"]["collision_pct"]),
         ),
         (
             "Fig 8",
-            "end non-interactive, TV to expert",
-            "large",
-            ms(s["a_end_noninteractive"]["tv_to_expert"], "{:.2f}"),
+            "arm (a) final, demonstrations",
+            "650",
+            ms(s["arm_a"]["demonstrations"], "{:.0f}"),
         ),
-        ("Fig 8", "arm a final, demonstrations", "650", ms(s[final_a]["demonstrations"], "{:.0f}")),
-        ("Fig 8", "arm a final, collisions %", "1.9", ms(s[final_a]["collision_pct"])),
-        ("Fig 8", "arm a final, TV to expert", "small", ms(s[final_a]["tv_to_expert"], "{:.2f}")),
-        ("Fig 8", f"arm b {last_b[2:]} demos, collisions %", "4.0", ms(s[last_b]["collision_pct"])),
+        ("Fig 8", "arm (a) final, collisions %", "1.9", ms(s["arm_a"]["collision_pct"], "{:.2f}")),
         (
             "Fig 8",
-            f"arm b {last_b[2:]} demos, TV to expert",
+            "arm (a) final, lane TV to the teacher",
             "small",
-            ms(s[last_b]["tv_to_expert"], "{:.2f}"),
+            ms(s["arm_a"]["tv_to_expert"], "{:.2f}"),
         ),
-        ("Fig 8", "expert, collisions %", "~0", ms(s["expert"]["collision_pct"])),
-        ("5.2", "components (arm a final)", "34", ms(s[final_a]["components_total"], "{:.1f}")),
+        (
+            "Fig 8",
+            "arm (b) 1000 demos, collisions %",
+            "4.0",
+            ms(s["arm_b"]["collision_pct"], "{:.2f}"),
+        ),
+        (
+            "Fig 8",
+            "arm (b) 1000 demos, lane TV to the teacher",
+            "small",
+            ms(s["arm_b"]["tv_to_expert"], "{:.2f}"),
+        ),
+        ("Fig 8", "arm (a) − arm (b), collisions % (paired by seed)", "−2.1", diff_txt),
+        (
+            "5.2",
+            "components over the three mixtures (arm a final)",
+            "34",
+            ms(s["components_total"], "{:.1f}"),
+        ),
+        ("5.2", "mixtures at the component cap", "–", str(len(s["components_at_cap"]))),
+        (
+            "5.2",
+            "autonomous share of confident-phase steps",
+            "–",
+            ms(s["autonomy_confident_phase"], "{:.2f}"),
+        ),
+        (
+            "Fig 10",
+            "contacts preceded within 5 steps by distance > 2 (all steps)",
+            "most",
+            "–"
+            if share is None
+            else f"{100 * share:.0f}% ({100 * base:.0f}%), {s['fig10_collision_onsets']} contacts",
+        ),
     ]
-    if "all_segments" in s[final_a]:
-        n = 1 + len(cfg["extra_eval_segments"])
-        for label, name in (("straight", "straight"), (final_a, "arm a final"), (last_b, "arm b")):
-            a = s[label]["all_segments"]
-            rows.append(
-                ("extra", f"{name}, {n} segments, collisions %", "", ms(a["collision_pct"]))
-            )
-            if label != "straight":
-                rows.append(
-                    ("extra", f"{name}, {n} segments, TV", "", ms(a["tv_to_expert"], "{:.2f}"))
-                )
-        a = s["expert"]["all_segments"]
-        rows.append(("extra", f"expert, {n} segments, collisions %", "", ms(a["collision_pct"])))
-    w = [max(len(r[i]) for r in rows + [("figure", "quantity", "paper", "ours")]) for i in range(4)]
-    lines = [
-        " | ".join(h.ljust(w[i]) for i, h in enumerate(("figure", "quantity", "paper", "ours")))
-    ]
-    lines.append("-+-".join("-" * x for x in w))
-    lines += [" | ".join(c.ljust(w[i]) for i, c in enumerate(r)) for r in rows]
-    lines.append("acceptance: " + ", ".join(f"{k}={v}" for k, v in results["acceptance"].items()))
+    if "all_segments" in st[final_a]:
+        a = st[final_a]["all_segments"]
+        rows.append(
+            ("extra", "arm (a) final, all segments, collisions %", "", ms(a["collision_pct"]))
+        )
+    lines = ["| figure | quantity | paper | ours |", "|---|---|---|---|"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    lines.append("")
+    lines.append(
+        f"{s['n']} seeds, teacher `{cfg['teacher']}`. Acceptance: "
+        + ", ".join(f"{k}={v}" for k, v in results["acceptance"].items())
+    )
     return "\n".join(lines)
 
 
@@ -527,8 +802,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--full", action="store_true")
     p.add_argument("--seeds", type=int, default=None)
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--teacher", choices=("expert", "human"), default="expert")
     a = p.parse_args(argv)
     cfg = DrivingExperimentConfig.full() if a.full else DrivingExperimentConfig()
+    cfg = dataclasses.replace(cfg, teacher=a.teacher)
     if a.seeds is not None:
         cfg = dataclasses.replace(cfg, seeds=tuple(range(a.seeds)))
     print(format_summary(run_experiment(cfg, a.run_dir, workers=a.workers)))

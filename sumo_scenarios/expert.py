@@ -87,17 +87,16 @@ class ScriptedExpert:
             lane = int(info["lane"])
             rel = np.asarray(info["car_rel_m"], dtype=np.float64)
             car_lane = np.asarray(info["car_lane"])
-            closing = info["closing_speed_ms"]
+            car_closing = np.asarray(info["car_closing_ms"], dtype=np.float64)
             dt = float(info["step_length_s"])
         except KeyError as err:
             raise ValueError(f"the expert needs DrivingEnv's info, missing {err}") from None
         t = info.get("t")
         cfg = self.config
 
-        def cars(lx: int) -> tuple[np.ndarray, float]:
-            if lx not in closing:
-                return np.zeros(0), 0.0
-            return rel[car_lane == lx], closing[lx] * dt
+        def cars(lx: int) -> tuple[np.ndarray, np.ndarray]:
+            m = car_lane == lx
+            return rel[m], car_closing[m] * dt
 
         def can_enter(lx: int, ahead: float, behind: float = cfg.min_gap_m) -> bool:
             if not 0 <= lx < N_LANES:
@@ -106,9 +105,10 @@ class ScriptedExpert:
             nxt = r - c  # where the cars will be, relative to us, after this step
             return not np.any((nxt > -behind) & (nxt < ahead))
 
-        r, c = cars(lane)
+        r, cc = cars(lane)
         ahead = r[r > 0]
         gap = float(ahead.min()) if ahead.size else np.inf
+        c = float(cc[r > 0][np.argmin(ahead)]) if ahead.size else 0.0
         # A new event: another lane, a gap in the decisions, or a new car ahead.
         last = self._last
         if (

@@ -102,12 +102,13 @@ def plot_confidence_trace(
     contacts: Sequence[bool] | np.ndarray,
     *,
     threshold: float | None = 2.0,
+    start: int = 0,
 ) -> None:
     """Figure 10: Mahalanobis distance of the best classification per timestep, contacts as
-    squares (a larger distance = less confident)."""
+    squares (a larger distance = less confident); ``start`` is the first timestep's index."""
     d = np.asarray(distances, dtype=np.float64)
     c = np.asarray(contacts, dtype=bool)
-    t = np.arange(d.size)
+    t = start + np.arange(d.size)
     ax.plot(t, d, lw=0.8)
     ax.plot(t[c], d[c], "s", ms=4, mfc="none", color="red", label="contact")
     if threshold is not None:

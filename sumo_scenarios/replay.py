@@ -53,8 +53,13 @@ class EpisodeRecord:
     def from_dict(cls, d: dict[str, Any]) -> EpisodeRecord:
         """Rebuild a record written by :meth:`to_dict`."""
         sc = dict(d["scenario"])
-        for k in ("lane_speeds_mph", "mean_spacing_m"):
-            sc[k] = tuple(sc[k])
+        if "lane_speeds_mph" in sc:
+            raise ValueError(
+                "this episode was recorded with the old constant-speed traffic (lane_speeds_mph); "
+                "it cannot be replayed on today's car-following traffic: record it again"
+            )
+        sc["mean_spacing_m"] = tuple(sc["mean_spacing_m"])
+        sc["speed_ranges_mph"] = tuple(tuple(r) for r in sc["speed_ranges_mph"])
         return cls(
             scenario=TrafficScenario(**sc),
             sim=SimConfig(**d["sim"]),
@@ -185,17 +190,72 @@ def export_fcd(record: EpisodeRecord, path: str | Path) -> Path:
 
 
 def render_gif(
-    record: EpisodeRecord, path: str | Path, *, every: int = 1, max_frames: int = 200, fps: int = 8
+    record: EpisodeRecord,
+    path: str | Path,
+    *,
+    every: int = 1,
+    max_frames: int | None = None,
+    fps: float = 4.0,
 ) -> Path:
-    """Draw the episode (every ``every``-th timestep, at most ``max_frames``) into a GIF."""
+    """Draw the episode into a GIF: every ``every``-th timestep of the WHOLE episode (unless
+    ``max_frames`` caps it), played at ``fps`` frames per second (4 = real time at stride 1 and
+    0.25 s steps). The frame delay is written in milliseconds, as imageio's GIF writer expects."""
     import imageio.v2 as imageio
 
     from sumo_scenarios.render import render_frame
 
-    if every < 1 or max_frames < 1:
-        raise ValueError("every and max_frames must be positive")
+    if every < 1 or (max_frames is not None and max_frames < 1) or fps <= 0:
+        raise ValueError(
+            f"every and max_frames must be positive and fps > 0, got every={every}, "
+            f"max_frames={max_frames}, fps={fps}"
+        )
     _, shots = replay(record, frames=True)
-    images = [render_frame(f) for f in shots[::every][:max_frames]]
+    shots = shots[::every]
+    if max_frames is not None:
+        shots = shots[:max_frames]
+    images = [render_frame(f) for f in shots]
     path = Path(path)
-    imageio.mimsave(path, images, duration=1.0 / fps, loop=0)
+    imageio.mimsave(path, images, duration=1000.0 / fps, loop=0)
+    return path
+
+
+def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path) -> Path:
+    """Write a ``.sumocfg`` beside an exported FCD file, for ``sumo-gui -c PATH``.
+
+    It names the shipped network and additional file (absolute paths), the episode's step
+    length, begin 0 and end at the episode's last step, and the FCD file (as ``fcd-output``
+    of a re-run, under another name, so the recording is never overwritten). It holds no
+    routes: the traffic of an episode is placed through the API, so SUMO on its own shows the
+    empty road; use the FCD (sumo-gui's trajectory tools, or the GIF) to watch the cars.
+    """
+    from sumo_scenarios.scenarios import data_path
+
+    path = Path(path)
+    fcd = Path(fcd_path).resolve()
+    end = len(record.actions) * record.sim.step_length_s
+    text = f"""<?xml version="1.0" encoding="UTF-8"?>
+<!-- Written by sumo_scenarios.replay.write_sumocfg for episode {record.label or "-"}
+     (episode seed {record.episode_seed}); recorded FCD: {fcd.name} -->
+<configuration>
+    <input>
+        <net-file value="{data_path("road.net.xml")}"/>
+        <additional-files value="{data_path("driving.add.xml")}"/>
+    </input>
+    <time>
+        <begin value="0"/>
+        <end value="{end!r}"/>
+        <step-length value="{record.sim.step_length_s!r}"/>
+    </time>
+    <processing>
+        <collision.action value="warn"/>
+    </processing>
+    <output>
+        <fcd-output value="{fcd.with_name(fcd.stem + ".rerun.xml")}"/>
+    </output>
+    <report>
+        <no-step-log value="true"/>
+    </report>
+</configuration>
+"""
+    path.write_text(text)
     return path

@@ -1,15 +1,18 @@
 """Named traffic scenarios for the driving domain, and where the shipped SUMO files live.
 
-A :class:`TrafficScenario` fixes everything about the background traffic: one speed per normal
-lane (so speeds are exact), how densely each lane is filled, and a base seed. The road segment an
+A :class:`TrafficScenario` fixes everything about the background traffic: the range each car's
+desired speed is drawn from in each normal lane, how densely each lane is filled, and a base seed.
+Each car keeps its lane and is driven by SUMO's car-following model (Krauss, no driver noise), so a
+faster car closes up behind a slower one and platoons form. The road segment an
 episode drives on is drawn from ``numpy.random.SeedSequence([scenario.seed, episode_seed])``:
 the ``train`` and ``eval`` scenarios differ only in their base seed, so no training episode ever
 sees the evaluation segment ("the same road segment" for every evaluation, paper Section 5.2.1).
 
 Density calibration: with 5 m cars, the ego overlaps a car whenever their centres are closer than
 5 m, i.e. over 10 m of relative travel per car, whatever the closing speed. Always driving straight
-in a lane with ``n`` cars per metre is therefore in contact on a ``10 n`` share of timesteps; the
-middle lane's mean spacing of 33.3 m gives the paper's 30 %.
+in a lane with ``n`` cars per metre is therefore in contact on about a ``10 n`` share of timesteps.
+Platoons make the middle lane denser than its insertion spacing: the mean insertion spacing below
+was measured to give the paper's 30 % (``tests/test_driving.py`` checks 28-32 %).
 """
 
 from __future__ import annotations
@@ -53,8 +56,9 @@ class TrafficScenario:
     Attributes:
         name: scenario name (``train``, ``eval``, ...).
         seed: base seed; combined with the episode seed to draw the road segment.
-        lane_speeds_mph: speed of every car in normal lanes 1, 2, 3 (right, middle, left), mph,
-            each within the paper's 20-40 mph.
+        speed_ranges_mph: per normal lane 1, 2, 3 (right, middle, left), the (low, high) range,
+            in mph, each car's desired speed is drawn from (uniformly, once per car), inside the
+            paper's 20-40 mph. Actual speeds are lower behind a slower leader (car-following).
         mean_spacing_m: mean front-to-front distance between consecutive cars in lanes 1, 2, 3,
             metres. Spacings are ``min_spacing_m`` plus an exponential draw.
         min_spacing_m: smallest front-to-front spacing, metres (> 10 m so the expert can always
@@ -68,19 +72,22 @@ class TrafficScenario:
 
     name: str
     seed: int
-    lane_speeds_mph: tuple[float, float, float] = (20.0, 30.0, 40.0)
-    mean_spacing_m: tuple[float, float, float] = (40.0, 33.3, 60.0)
+    speed_ranges_mph: tuple[tuple[float, float], ...] = ((20.0, 30.0), (25.0, 35.0), (30.0, 40.0))
+    mean_spacing_m: tuple[float, float, float] = (40.0, 31.0, 60.0)
     min_spacing_m: float = 12.0
     ahead_m: float = 200.0
     behind_m: float = 60.0
     start_clear_m: float = 30.0
 
     def __post_init__(self) -> None:
-        if len(self.lane_speeds_mph) != 3 or len(self.mean_spacing_m) != 3:
-            raise ValueError("lane_speeds_mph and mean_spacing_m need one value per normal lane")
-        for v in self.lane_speeds_mph:
-            if not 20.0 <= v <= 40.0:
-                raise ValueError(f"traffic speeds must lie in 20-40 mph, got {v}")
+        if len(self.speed_ranges_mph) != 3 or len(self.mean_spacing_m) != 3:
+            raise ValueError("speed_ranges_mph and mean_spacing_m need one entry per normal lane")
+        for rng in self.speed_ranges_mph:
+            if len(rng) != 2 or not 20.0 <= rng[0] <= rng[1] <= 40.0:
+                raise ValueError(
+                    f"each speed range must be (low, high) with 20 <= low <= high <= 40 mph, "
+                    f"got {rng}"
+                )
         if self.min_spacing_m <= 10.0:
             raise ValueError("min_spacing_m must exceed 10 m (two car lengths)")
         for s in self.mean_spacing_m:
@@ -90,9 +97,9 @@ class TrafficScenario:
             raise ValueError("the traffic window must cover the 25 m sensing range with margin")
 
     @property
-    def lane_speeds_ms(self) -> tuple[float, float, float]:
-        """Traffic speeds of lanes 1-3 in m/s."""
-        return tuple(v * MPH for v in self.lane_speeds_mph)  # type: ignore[return-value]
+    def speed_ranges_ms(self) -> tuple[tuple[float, float], ...]:
+        """Desired-speed ranges of lanes 1-3 in m/s."""
+        return tuple((lo * MPH, hi * MPH) for lo, hi in self.speed_ranges_mph)
 
     def with_seed(self, seed: int) -> TrafficScenario:
         """The same traffic with another base seed (another family of road segments)."""

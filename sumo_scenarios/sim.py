@@ -1,7 +1,8 @@
 """The SUMO side of the driving domain: the ONLY module that imports libsumo.
 
-:class:`HighwaySim` runs one straight five-lane edge with background traffic in its lanes at
-exact, constant speeds and one ego car at exactly 60 mph that changes lane only when told.
+:class:`HighwaySim` runs one straight five-lane edge with background traffic that keeps its lane,
+each car at its own desired speed (20-40 mph) under SUMO's car-following model, and one ego car at
+exactly 60 mph that changes lane only when told.
 It keeps the road endless (see ``docs`` of :meth:`HighwaySim.step`) and counts contact
 geometrically, because SUMO's own collision list is unreliable once the ego has driven through a
 car (see ``shared/notes/sumo-and-pymunk-facts.md``).
@@ -18,6 +19,7 @@ from pathlib import Path
 import libsumo
 import numpy as np
 
+from sumo_scenarios.build_network import SPEED_LIMIT_MS
 from sumo_scenarios.scenarios import (
     CAR_LENGTH_M,
     EGO_SPEED_MS,
@@ -35,18 +37,23 @@ _MAX_EXTRA_GAP_M = 250.0  # spacings are capped so a recycled car always fits on
 
 
 def _insert(vid: str, type_id: str, lane: int, x: float, speed: float) -> None:
-    """Add a vehicle at lane / position ``x`` (m) NOW, at a fixed ``speed`` (m/s).
+    """Add a vehicle at lane / position ``x`` (m) NOW, at ``speed`` (m/s).
 
     ``moveTo`` right after ``add`` skips SUMO's insertion checks, which would otherwise delay
-    the car; lane-change mode 0 and speed mode 32 keep it in its lane at exactly its speed.
+    the car; lane-change mode 0 keeps it in its lane. The ego (type ``ego``) gets speed mode 32
+    and a fixed speed: it never brakes. A traffic car gets ``speed`` as its desired speed
+    (speed factor relative to the speed limit) and is left to SUMO's car-following model.
     """
     libsumo.vehicle.add(
         vid, ROUTE, typeID=type_id, departLane=str(lane), departPos=str(x), departSpeed=str(speed)
     )
     libsumo.vehicle.moveTo(vid, f"{EDGE}_{lane}", x)
     libsumo.vehicle.setLaneChangeMode(vid, 0)
-    libsumo.vehicle.setSpeedMode(vid, 32)
-    libsumo.vehicle.setSpeed(vid, speed)
+    if type_id == "ego":
+        libsumo.vehicle.setSpeedMode(vid, 32)
+        libsumo.vehicle.setSpeed(vid, speed)
+    else:
+        libsumo.vehicle.setSpeedFactor(vid, speed / SPEED_LIMIT_MS)
 
 
 @dataclass(frozen=True)
@@ -58,7 +65,9 @@ class SimConfig:
             500 timesteps were about 2.1 minutes of driving).
         ego_start_m: the ego's front-bumper position on the edge at reset, metres.
         shift_margin_m: when the ego comes this close (plus the traffic window) to the end of
-            the edge, every vehicle is moved back by the same distance. Metres.
+            the edge, every vehicle is moved back by the same distance. Metres. On the shipped
+            10 km road that first happens after about 1,350 steps, so a 1000-step episode never
+            sees a car jump.
     """
 
     step_length_s: float = 0.25
@@ -75,7 +84,9 @@ class HighwaySim:
 
     State after :meth:`reset` / :meth:`step` (positions are front bumpers along the edge, metres):
         ``ego_pos`` (float), ``ego_lane`` (int, 0 = right shoulder .. 4 = left shoulder),
-        ``car_pos`` [N] float64, ``car_lane`` [N] int64 (1-3), ``contact`` (bool).
+        ``car_pos`` [N] float64, ``car_lane`` [N] int64 (1-3), ``car_speed`` [N] float64 (m/s,
+        measured over the last step), ``car_vdes`` [N] float64 (desired speed, m/s),
+        ``contact`` (bool).
     """
 
     def __init__(self, scenario: TrafficScenario, config: SimConfig | None = None) -> None:
@@ -90,8 +101,8 @@ class HighwaySim:
         self._started = False
         self._closed = False
         self._road_length = float(libsumo_lane_length_from_net())
-        speeds = scenario.lane_speeds_ms
-        self._lane_speed = {lane: speeds[i] for i, lane in enumerate(TRAFFIC_LANES)}
+        ranges = scenario.speed_ranges_ms
+        self._speed_range = {lane: ranges[i] for i, lane in enumerate(TRAFFIC_LANES)}
         self.ego_pos = 0.0
         self.ego_lane = 2
         self.prev_lane = 2
@@ -99,6 +110,8 @@ class HighwaySim:
         self.car_ids: list[str] = []
         self.car_lane = np.zeros(0, dtype=np.int64)
         self.car_pos = np.zeros(0, dtype=np.float64)
+        self.car_speed = np.zeros(0, dtype=np.float64)
+        self.car_vdes = np.zeros(0, dtype=np.float64)
         self.distance_m = 0.0
         self.n_recycled = 0
         self.n_shifts = 0
@@ -159,29 +172,34 @@ class HighwaySim:
         self.distance_m = 0.0
         x0 = self.config.ego_start_m
         _insert(EGO, "ego", ego_lane, x0, EGO_SPEED_MS)
-        ids, lanes, pos = [], [], []
+        ids, lanes, pos, vdes = [], [], [], []
+        # Per lane, where the frontmost car was placed and its desired speed: new cars always go
+        # one fresh spacing ahead of where that car would be at its desired speed (it is never
+        # farther ahead: car-following only slows it), so every lane stays a stream at its own
+        # insertion density.
+        self._front: dict[int, list[float]] = {}
         for lane in TRAFFIC_LANES:
             x = x0 - self.scenario.behind_m + float(rng.uniform(0.0, self._spacing(lane)))
-            while x < x0 + self.scenario.ahead_m:
+            self._front[lane] = [x0 + self.scenario.ahead_m, 0.0]
+            while True:  # up to the first car at or beyond the horizon
                 if x0 - 15.0 < x < x0 + self.scenario.start_clear_m:
                     x += self._spacing(lane)
                     continue
-                cid = self._add_car(lane, x)
+                v = self._desired_speed(lane)
+                cid = self._add_car(lane, x, v)
                 ids.append(cid)
                 lanes.append(lane)
                 pos.append(x)
+                vdes.append(v)
+                self._front[lane] = [x, v]
+                if x >= x0 + self.scenario.ahead_m:
+                    break
                 x += self._spacing(lane)
         self.car_ids = ids
         self.car_lane = np.asarray(lanes, dtype=np.int64)
         self.car_pos = np.asarray(pos, dtype=np.float64)
-        # Per lane, where the frontmost car was placed: new cars always go one fresh spacing
-        # ahead of it, so every lane stays a stationary stream at its own density.
-        self._front = {
-            lane: float(self.car_pos[self.car_lane == lane].max())
-            if np.any(self.car_lane == lane)
-            else x0 + self.scenario.ahead_m
-            for lane in TRAFFIC_LANES
-        }
+        self.car_vdes = np.asarray(vdes, dtype=np.float64)
+        self.car_speed = self.car_vdes.copy()
         self.ego_pos = x0
         self.ego_lane = ego_lane
         self.prev_lane = ego_lane
@@ -210,10 +228,14 @@ class HighwaySim:
         gap = float(self._rng.exponential(self.scenario.mean_spacing_m[i] - lo))
         return lo + min(gap, _MAX_EXTRA_GAP_M)
 
-    def _add_car(self, lane: int, x: float) -> str:
+    def _desired_speed(self, lane: int) -> float:
+        lo, hi = self._speed_range[lane]
+        return float(self._rng.uniform(lo, hi))
+
+    def _add_car(self, lane: int, x: float, speed: float) -> str:
         cid = f"c{self._next_id}"
         self._next_id += 1
-        _insert(cid, "traffic", lane, x, self._lane_speed[lane])
+        _insert(cid, "traffic", lane, x, speed)
         return cid
 
     # ------------------------------------------------------------------ stepping
@@ -240,14 +262,16 @@ class HighwaySim:
         self.ego_lane = libsumo.vehicle.getLaneIndex(EGO)
         ids = self.car_ids
         pos = self.car_pos
+        old_pos = pos.copy()
         for i, cid in enumerate(ids):
             pos[i] = get(cid)
+        self.car_speed = (pos - old_pos) / self.config.step_length_s
         self.contact = self._contact()
         behind = self.ego_pos - self.scenario.behind_m
         horizon = self.ego_pos + self.scenario.ahead_m
-        for lane in TRAFFIC_LANES:  # fronts move with their lane's speed
-            self._front[lane] += self._lane_speed[lane] * self.config.step_length_s
-        if (pos.size and pos.min() < behind) or min(self._front.values()) < horizon:
+        for lane in TRAFFIC_LANES:  # nominal fronts move at their car's desired speed
+            self._front[lane][0] += self._front[lane][1] * self.config.step_length_s
+        if (pos.size and pos.min() < behind) or min(f[0] for f in self._front.values()) < horizon:
             self._recycle(behind, horizon)
         if self.ego_pos > self._road_length - self.scenario.ahead_m - self.config.shift_margin_m:
             self._shift_back()
@@ -266,25 +290,31 @@ class HighwaySim:
         for i in free:
             libsumo.vehicle.remove(self.car_ids[i])
             keep[i] = False
-        new_ids, new_lane, new_pos = [], [], []
+        new_ids, new_lane, new_pos, new_v = [], [], [], []
         for lane in TRAFFIC_LANES:
-            while self._front[lane] < horizon:
-                x = self._front[lane] + self._spacing(lane)
-                self._front[lane] = x
-                cid = self._add_car(lane, x)
+            while self._front[lane][0] < horizon:
+                x = self._front[lane][0] + self._spacing(lane)
+                v = self._desired_speed(lane)
+                self._front[lane] = [x, v]
+                cid = self._add_car(lane, x, v)
                 self.n_recycled += 1
                 if free:
                     i = free.pop(0)
                     self.car_ids[i], self.car_lane[i], self.car_pos[i] = cid, lane, x
+                    self.car_vdes[i] = self.car_speed[i] = v
                     keep[i] = True
                 else:
                     new_ids.append(cid)
                     new_lane.append(lane)
                     new_pos.append(x)
+                    new_v.append(v)
         if not keep.all() or new_ids:
             self.car_ids = [c for c, k in zip(self.car_ids, keep, strict=True) if k] + new_ids
             self.car_lane = np.concatenate([self.car_lane[keep], np.asarray(new_lane, np.int64)])
             self.car_pos = np.concatenate([self.car_pos[keep], np.asarray(new_pos, np.float64)])
+            nv = np.asarray(new_v, np.float64)
+            self.car_vdes = np.concatenate([self.car_vdes[keep], nv])
+            self.car_speed = np.concatenate([self.car_speed[keep], nv])
 
     def _shift_back(self) -> None:
         shift = self.ego_pos - self.config.ego_start_m
@@ -295,7 +325,7 @@ class HighwaySim:
         self.ego_pos -= shift
         self.car_pos -= shift
         for lane in TRAFFIC_LANES:
-            self._front[lane] -= shift
+            self._front[lane][0] -= shift
         self.n_shifts += 1
 
     def _contact(self) -> bool:

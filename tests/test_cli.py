@@ -370,12 +370,6 @@ def test_summary_md_is_markdown_and_its_table_parses_as_a_table(corridor_run):
     assert "+-" not in text  # one notation for ±
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="sumo_scenarios.experiment.format_summary still writes a plain-text table (a '+' "
-    "rule, '+-' for ±); the driving engineer's fix for issue 16 item 2 makes this pass: then "
-    "remove this mark",
-)
 def test_summary_md_of_a_driving_run_is_markdown_too(tmp_path, monkeypatch):
     """`torchcbl reproduce driving` at a tiny size (the settings of
     test_driving_experiment's tiny run): its summary.md table parses as a table."""
@@ -407,7 +401,7 @@ def test_summary_md_of_a_driving_run_is_markdown_too(tmp_path, monkeypatch):
     header, *rows = table
     assert header[0] == "figure" and "paper" in header and len(header) >= 3
     assert {len(r) for r in rows} == {len(header)}
-    assert any("arm a final, collisions %" in cell for r in rows for cell in r)
+    assert any("arm (a) final, collisions %" in cell for r in rows for cell in r)
     table_lines = [ln for ln in text.splitlines() if "|" in ln]
     assert len(table_lines) == len(rows) + 2
     assert "+-" not in text

@@ -276,8 +276,12 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(f"episode {index}: {record.label or '-'} ({len(record.actions)} steps)")
     replay.export_fcd(record, fcd)
     print(f"FCD written to {fcd}")
-    replay.render_gif(record, gif, max_frames=args.max_frames)
-    print(f"GIF written to {gif}")
+    cfg = replay.write_sumocfg(
+        record, fcd, fcd.with_name(fcd.name.replace(".fcd.xml", "") + ".sumocfg")
+    )
+    print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {cfg})")
+    replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
+    print(f"GIF written to {gif} (every {args.every} timestep(s) of {len(record.actions)})")
     return 0
 
 
@@ -617,14 +621,22 @@ def _parser() -> argparse.ArgumentParser:
         "--fcd",
         default=None,
         metavar="OUT.xml",
-        help="SUMO FCD XML output path (default beside the JSON: EPISODES-N.fcd.xml)",
+        help="SUMO FCD XML output path (default beside the JSON: EPISODES-N.fcd.xml); a "
+        ".sumocfg that opens it in sumo-gui is written beside it",
+    )
+    p.add_argument(
+        "--every",
+        type=_positive_int,
+        default=1,
+        metavar="N",
+        help="GIF: draw every N-th timestep (default 1)",
     )
     p.add_argument(
         "--max-frames",
         type=_positive_int,
-        default=200,
+        default=None,
         metavar="N",
-        help="GIF frames at most (default 200)",
+        help="GIF frames at most (default: the whole episode)",
     )
     p.set_defaults(func=_cmd_replay)
 

@@ -1,0 +1,139 @@
+"""Generic human-like timing for any teacher: reaction delay and slips of the hand.
+
+A teacher is any callable ``teacher(observation, info) -> action``. :class:`HumanTiming` wraps one
+and makes it answer like a person at a keyboard (paper Section 5: the teachers were people):
+
+- **reaction delay**: when the wrapped teacher first asks for an action other than the default
+  (``default_action``, e.g. "stay" or "forward"), the key is pressed only after a delay of
+  ``k`` steps, ``k`` drawn per event from ``delay_probs`` (``delay_probs[k]`` = P(delay = k));
+  meanwhile the default action is answered. When the key is due, what the wrapped teacher asks
+  for THEN is pressed: another non-default action if it changed its mind, and nothing (the
+  default action) if it no longer asks for one (the person saw the gap close and held back).
+- **missed key press**: with probability ``miss_prob`` a due non-default press is lost (the
+  default action is answered; the person presses again at the next step if still needed);
+- **doubled key press**: with probability ``double_prob`` a non-default press repeats at the
+  next step, whatever the wrapped teacher asks then.
+
+Everything is drawn from one seeded ``numpy`` generator, so the same seed and the same inputs give
+the same answers. Consecutive calls are recognised through ``info["t"]`` (the env's step counter)
+when present: a gap (the learner drove on its own in between, or a new episode) drops any pending
+press. Domain-free: it knows nothing of what the actions mean.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["HumanTiming", "HumanTimingConfig"]
+
+
+@dataclass(frozen=True)
+class HumanTimingConfig:
+    """Parameters of :class:`HumanTiming` (probabilities per event; delays in steps).
+
+    Attributes:
+        default_action: the action answered while a press is pending (the "do nothing" key).
+        delay_probs: ``delay_probs[k]`` is the probability of reacting ``k`` steps late.
+            Default: 0 steps 0.35, 1 step 0.45, 2 steps 0.2 (a step of the driving domain is
+            0.25 s: a 0.25-0.5 s reaction time, a person's).
+        miss_prob: probability that a due non-default press is lost.
+        double_prob: probability that a non-default press is repeated at the next step.
+    """
+
+    default_action: int = 0
+    delay_probs: tuple[float, ...] = (0.35, 0.45, 0.2)
+    miss_prob: float = 0.03
+    double_prob: float = 0.02
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.delay_probs, dtype=np.float64)
+        if p.ndim != 1 or p.size == 0 or np.any(p < 0) or not np.isclose(p.sum(), 1.0):
+            raise ValueError(
+                f"delay_probs must be non-negative probabilities summing to 1 (P(delay = k) for "
+                f"k = 0, 1, ...), got {self.delay_probs}"
+            )
+        for name in ("miss_prob", "double_prob"):
+            v = getattr(self, name)
+            if not 0.0 <= v < 1.0:
+                raise ValueError(f"{name} must lie in [0, 1), got {v}")
+
+
+class HumanTiming:
+    """Wrap ``teacher(observation, info) -> action`` with a reaction delay and slips.
+
+    Args:
+        teacher: the teacher to wrap.
+        config: a :class:`HumanTimingConfig`.
+        seed: seeds the timing draws.
+
+    Attributes:
+        n_delayed, n_missed, n_doubled: counts of each kind of event so far.
+    """
+
+    def __init__(
+        self,
+        teacher: Callable[[np.ndarray, dict], int],
+        config: HumanTimingConfig | None = None,
+        *,
+        seed: int = 0,
+    ) -> None:
+        if not callable(teacher):
+            raise TypeError(
+                f"teacher must be callable (observation, info) -> action, got {teacher!r}"
+            )
+        self.teacher = teacher
+        self.config = config or HumanTimingConfig()
+        self._rng = np.random.default_rng(seed)
+        self._delays = np.arange(len(self.config.delay_probs))
+        self._probs = np.asarray(self.config.delay_probs, dtype=np.float64)
+        self._pending: tuple[int, int] | None = None  # (action, steps left)
+        self._double: int | None = None
+        self._last_t: Any = None
+        self.n_delayed = self.n_missed = self.n_doubled = 0
+
+    def _press(self, action: int) -> int:
+        cfg = self.config
+        if self._rng.random() < cfg.miss_prob:
+            self.n_missed += 1
+            return cfg.default_action
+        if self._rng.random() < cfg.double_prob:
+            self._double = action
+            self.n_doubled += 1
+        return action
+
+    def __call__(self, observation: np.ndarray, info: dict) -> int:
+        cfg = self.config
+        t = info.get("t") if isinstance(info, dict) else None
+        if t is None or self._last_t is None or t != self._last_t + 1:
+            self._pending = None
+            self._double = None
+        self._last_t = t
+        wanted = int(self.teacher(observation, info))
+        if self._double is not None:
+            action, self._double = self._double, None
+            return action
+        if self._pending is not None:
+            _, left = self._pending
+            if left > 1:
+                self._pending = (self._pending[0], left - 1)
+                return cfg.default_action
+            self._pending = None
+            if wanted == cfg.default_action:
+                return wanted  # the person held back: the reason to press is gone
+            return self._press(wanted)
+        if wanted == cfg.default_action:
+            return wanted
+        delay = int(self._rng.choice(self._delays, p=self._probs))
+        if delay == 0:
+            return self._press(wanted)
+        self.n_delayed += 1
+        self._pending = (wanted, delay)
+        return cfg.default_action
+
+    def stats(self) -> dict[str, int]:
+        """Counts of delayed, missed and doubled presses so far."""
+        return {"delayed": self.n_delayed, "missed": self.n_missed, "doubled": self.n_doubled}
