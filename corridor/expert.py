@@ -13,7 +13,8 @@ the map's route:
   nearest step, and one that overshot turns at once. A turn from the decision point lands on the
   centre line of the next corridor. Otherwise: forward.
 - Heading against the route (within 45 degrees of its opposite), wherever the robot is: u-turn.
-- Otherwise off the route (after a mistake of the learner): a reactive rule on the noise-free
+- Otherwise off the route (after a mistake of the learner; or past the segment's end node by
+  more than half a step, down a corridor the route does not take): a reactive rule on the noise-free
   ranges: forward if the front is open (> ``open_range``), else turn toward the open side (left
   first), else u-turn. On a loop of corridors this drives on until the robot meets the route
   again; then the rules above take over (tested from random detours with motion noise).
@@ -72,7 +73,8 @@ class CorridorExpert:
         remaining = float(self.route.segment_lengths[seg] - np.dot(rel, direction))
         if cos_err < -0.7:
             return int(Action.U_TURN)
-        if lateral > self.on_route_tolerance or cos_err < 0.9:
+        overshot = remaining < -0.5 * self.config.forward_distance  # past the segment's end node
+        if lateral > self.on_route_tolerance or cos_err < 0.9 or overshot:
             return self._reactive(info)
         kind = self.route.kinds[seg]
         at_decision = remaining <= self.config.turn_radius + 0.5 * self.config.forward_distance
