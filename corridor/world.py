@@ -261,8 +261,12 @@ class CorridorWorld:
             scale = min(1.5, max(0.5, 1.0 + cfg.forward_noise * float(z[0])))
             sd = cfg.forward_heading_noise if action == Action.FORWARD else cfg.heading_noise
             err = sd * min(3.0, max(-3.0, float(z[1])))
-        # Heading offset to the commanded one before the action (0.0 exactly when exact).
-        off0 = _wrap(h0 - self._commanded) if cfg.noisy_motion else 0.0
+        # Heading offset to the commanded one before the action: the last action's heading
+        # error, or a perturbed start's; exact motion keeps it at 0.0 (last-bit differences of
+        # the two running sums are snapped away, so exact runs stay bit-identical).
+        off0 = _wrap(h0 - self._commanded)
+        if abs(off0) < 1e-9:
+            off0 = 0.0
         if action == Action.FORWARD:
             dist = cfg.forward_distance * scale
             n = max(1, math.ceil(dist / cfg.substep - 1e-9))
