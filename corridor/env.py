@@ -18,9 +18,15 @@ the circuit, -1 for each wall contact, 0 otherwise (the teaching loop does not u
   ``progress`` fraction of the circuit in [0, 1]; ``segment`` int (route segment index);
   ``steps`` int; and ``is_success`` bool when the episode ends.
 
-Randomness: only the sensor noise, drawn from ``self.np_random`` (seeded by ``reset(seed=)``),
-so the same seed and actions give the same observations. Envs never write files; rendering
-returns RGB arrays (see :mod:`corridor.render` to save PNGs).
+Randomness: the sensor noise, the motion noise (when ``WorldConfig`` asks for it) and the start
+perturbation (when ``start_perturbation`` is set), all drawn from ``self.np_random`` (seeded by
+``reset(seed=)``), so the same seed and actions give the same run.
+
+Perturbed starts (``start_perturbation=(d, a)``): each ``reset`` moves the start pose by offsets
+drawn uniformly in [-d, d] metres along x and y and [-a, a] radians of heading (redrawn until the
+robot does not overlap a wall), to test a policy off the demonstrated route.
+
+Envs never write files; rendering returns RGB arrays (see :mod:`corridor.render` to save PNGs).
 """
 
 from __future__ import annotations
@@ -47,6 +53,8 @@ class CorridorEnv(gym.Env):
         world_config: robot, motion and sensor parameters.
         max_episode_steps: actions before truncation; None = 3 x 27.
         render_mode: None or "rgb_array".
+        start_perturbation: ``(metres, radians)`` half-widths of the uniform start offsets, or
+            None for the map's exact start pose.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -57,6 +65,7 @@ class CorridorEnv(gym.Env):
         world_config: WorldConfig | None = None,
         max_episode_steps: int | None = None,
         render_mode: str | None = None,
+        start_perturbation: tuple[float, float] | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
@@ -69,6 +78,16 @@ class CorridorEnv(gym.Env):
         if self.max_episode_steps < 1:
             raise ValueError("max_episode_steps must be >= 1")
         self.render_mode = render_mode
+        if start_perturbation is not None:
+            d, a = (float(v) for v in start_perturbation)
+            half = corridor_map.corridor_width / 2 - self.world.config.robot_radius
+            if not (0 <= d < half and 0 <= a <= np.pi / 2):
+                raise ValueError(
+                    f"start_perturbation must be (metres in [0, {half:.2f}), radians in "
+                    f"[0, pi/2]), got {start_perturbation!r}"
+                )
+            start_perturbation = (d, a)
+        self.start_perturbation = start_perturbation
         r = self.world.config.max_range
         self.observation_space = spaces.Box(0.0, r, shape=(3,), dtype=np.float32)
         self.action_space = spaces.Discrete(N_ACTIONS)
@@ -106,7 +125,17 @@ class CorridorEnv(gym.Env):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start a circuit at the start pose; ``options`` is not used."""
         super().reset(seed=seed)
-        self.world.reset()
+        if self.start_perturbation is None:
+            self.world.reset()
+        else:
+            d, a = self.start_perturbation
+            while True:
+                u = self.np_random.uniform(-1.0, 1.0, size=3)
+                try:
+                    self.world.reset((d * float(u[0]), d * float(u[1]), a * float(u[2])))
+                    break
+                except ValueError:
+                    continue
         self._steps = 0
         self._contacts = 0
         self._path = [self.world.pose[:2]]
@@ -118,7 +147,7 @@ class CorridorEnv(gym.Env):
         if not self.action_space.contains(action):
             raise ValueError(f"action must be an int in [0, {N_ACTIONS}), got {action!r}")
         laps_before = self.world.laps
-        contact = self.world.step(int(action))
+        contact = self.world.step(int(action), self.np_random)
         self._steps += 1
         self._contacts += int(contact)
         self._path.append(self.world.pose[:2])

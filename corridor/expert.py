@@ -5,14 +5,19 @@
 robot's pose and its route segment, as a person with a joystick watching the robot would — plus
 the map's route:
 
-- On the route (within ``on_route_tolerance`` of the tracked segment and heading along it): the
-  manoeuvre planned at the segment's end node is done when the robot is at the decision point,
-  ``turn_radius`` (0.2 m) before the node's centre (within +-0.1 m); a turn there lands on the
+- On the route (within ``on_route_tolerance``, 0.2 m, of the tracked segment, i.e. inside its
+  corridor, and heading along it within 25 degrees): the manoeuvre planned at the segment's end
+  node is done at the decision point, ``turn_radius`` (0.2 m) before the node's centre: at the
+  first position at most half a forward step (0.1 m) before it, ``remaining <= turn_radius +
+  0.1``, so a robot whose steps vary in length (motion noise) still turns at the
+  nearest step, and one that overshot turns at once. A turn from the decision point lands on the
   centre line of the next corridor. Otherwise: forward.
-- Heading against the route: u-turn.
-- Off the route (after a mistake of the learner): a reactive rule on the noise-free ranges:
-  forward if the front is open (> ``open_range``), else turn toward the open side (left first),
-  else u-turn.
+- Heading against the route (within 45 degrees of its opposite), wherever the robot is: u-turn.
+- Otherwise off the route (after a mistake of the learner; or past the segment's end node by
+  more than half a step, down a corridor the route does not take): a reactive rule on the noise-free
+  ranges: forward if the front is open (> ``open_range``), else turn toward the open side (left
+  first), else u-turn. On a loop of corridors this drives on until the robot meets the route
+  again; then the rules above take over (tested from random detours with motion noise).
 """
 
 from __future__ import annotations
@@ -44,7 +49,7 @@ class CorridorExpert:
         corridor_map: CorridorMap,
         world_config: WorldConfig | None = None,
         *,
-        on_route_tolerance: float = 0.1,
+        on_route_tolerance: float = 0.2,
         open_range: float = 0.6,
     ) -> None:
         self.map = corridor_map
@@ -66,15 +71,14 @@ class CorridorExpert:
         rel = np.array([x, y]) - start
         lateral = abs(direction[0] * rel[1] - direction[1] * rel[0])
         remaining = float(self.route.segment_lengths[seg] - np.dot(rel, direction))
-        if lateral <= self.on_route_tolerance and cos_err < -0.9:
+        if cos_err < -0.7:
             return int(Action.U_TURN)
-        if lateral > self.on_route_tolerance or cos_err < 0.9:
+        overshot = remaining < -0.5 * self.config.forward_distance  # past the segment's end node
+        if lateral > self.on_route_tolerance or cos_err < 0.9 or overshot:
             return self._reactive(info)
         kind = self.route.kinds[seg]
-        at_decision = abs(remaining - self.config.turn_radius) <= 0.1 + 1e-9
+        at_decision = remaining <= self.config.turn_radius + 0.5 * self.config.forward_distance
         if kind == STRAIGHT or not at_decision:
-            if kind != STRAIGHT and remaining < self.config.turn_radius - 0.1:
-                return self._reactive(info)  # overshot the decision point
             return int(Action.FORWARD)
         return int({LEFT: Action.TURN_LEFT, RIGHT: Action.TURN_RIGHT, UTURN: Action.U_TURN}[kind])
 

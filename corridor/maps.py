@@ -80,7 +80,11 @@ class CorridorMap:
     start_offset: float = 0.2
     grid: float = 0.1
     description: str = ""
-    _cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False, hash=False)
+    # init=False: dataclasses.replace(m, route=...) builds a fresh, empty cache instead of
+    # sharing (and silently reusing) the original map's walls and route.
+    _cache: dict[str, Any] = field(
+        default_factory=dict, init=False, repr=False, compare=False, hash=False
+    )
 
     def __post_init__(self) -> None:
         if not self.corridor_width > 0:

@@ -23,10 +23,28 @@ from matplotlib.patches import Circle
 from corridor.maps import CorridorMap
 from corridor.world import SENSOR_NAMES, CorridorWorld
 
-__all__ = ["draw_map", "draw_robot", "map_figure", "render_rgb", "save_png"]
+__all__ = [
+    "ACTION_COLORS",
+    "PATH_COLOR",
+    "RAY_COLOR",
+    "draw_map",
+    "draw_robot",
+    "map_figure",
+    "render_rgb",
+    "save_png",
+]
+
+#: One colour per action (index = :class:`corridor.world.Action`), used by every corridor figure:
+#: forward, turn left, turn right, u-turn. They are matplotlib's first four default colours, so
+#: a plain ``ax.scatter`` per action in action order matches them too.
+ACTION_COLORS: tuple[str, str, str, str] = ("tab:blue", "tab:orange", "tab:green", "tab:red")
+#: The sensor rays on the map (no action's colour).
+RAY_COLOR = "tab:purple"
+#: The robot's path on the map (no action's colour).
+PATH_COLOR = "tab:brown"
 
 _ANGLES = (math.pi / 2, 0.0, -math.pi / 2)
-_RAY_COLOURS = {"left": "tab:blue", "front": "tab:green", "right": "tab:orange"}
+_RAY_STYLES = {"left": (0, (4, 2)), "front": "-", "right": (0, (1, 1.5))}
 
 
 def draw_map(ax: Axes, corridor_map: CorridorMap, *, route: bool = True) -> None:
@@ -47,7 +65,14 @@ def draw_map(ax: Axes, corridor_map: CorridorMap, *, route: bool = True) -> None
         ax.plot([x0, x1], [y0, y1], color="black", linewidth=2)
     if route:
         pts = corridor_map.route_polyline().points
-        ax.plot(pts[:, 0], pts[:, 1], color="black", linewidth=1, linestyle=":", label="route")
+        ax.plot(
+            pts[:, 0],
+            pts[:, 1],
+            color="black",
+            linewidth=1,
+            linestyle=":",
+            label="target route (dotted)",
+        )
     ax.set_xlim(xmin - g, xmax + g)
     ax.set_ylim(ymin - g, ymax + g)
     ax.set_aspect("equal")
@@ -60,20 +85,23 @@ def draw_robot(
     world: CorridorWorld,
     readings: Sequence[float] | None = None,
 ) -> None:
-    """Draw the robot (circle and heading) and its three sensor rays (``readings`` in metres,
-    default: the noise-free ranges)."""
+    """Draw the robot (grey circle, black heading tick) and its three sensor rays in
+    ``RAY_COLOR``, each as long as its reading (``readings`` in metres, default: the noise-free
+    ranges): left dashed, front solid, right dotted. Each ray is labelled for a legend."""
     x, y, h = world.pose
     r = world.config.robot_radius
-    ax.add_patch(Circle((x, y), r, facecolor="tab:red", edgecolor="black", alpha=0.8))
-    ax.plot([x, x + r * math.cos(h)], [y, y + r * math.sin(h)], color="white", linewidth=2)
+    ax.add_patch(Circle((x, y), r, facecolor="0.75", edgecolor="black", alpha=0.9, label="robot"))
+    ax.plot([x, x + r * math.cos(h)], [y, y + r * math.sin(h)], color="black", linewidth=2)
     ranges = world.true_ranges() if readings is None else np.asarray(readings, dtype=float)
     for name, offset, d in zip(SENSOR_NAMES, _ANGLES, ranges, strict=True):
         a = h + offset
         ax.plot(
             [x, x + d * math.cos(a)],
             [y, y + d * math.sin(a)],
-            color=_RAY_COLOURS[name],
-            linewidth=1,
+            color=RAY_COLOR,
+            linestyle=_RAY_STYLES[name],
+            linewidth=1.2,
+            label=f"{name} sensor ray (to the reading)",
         )
 
 
@@ -85,15 +113,25 @@ def map_figure(
     title: str | None = None,
     size: float = 5.0,
 ) -> Figure:
-    """A figure of the map, route, path so far (metres) and robot with its rays."""
-    fig = Figure(figsize=(size, size), dpi=80)
+    """A figure of the map, route, path so far (metres) and robot with its rays, with a legend
+    saying what each line is."""
+    fig = Figure(figsize=(size, size * 1.2), dpi=80)
     ax = fig.add_subplot()
     draw_map(ax, world.map)
     if path is not None and len(path) > 1:
         p = np.asarray(path, dtype=float)
-        ax.plot(p[:, 0], p[:, 1], color="tab:red", linewidth=1, marker=".", markersize=3)
+        ax.plot(
+            p[:, 0],
+            p[:, 1],
+            color=PATH_COLOR,
+            linewidth=1,
+            marker=".",
+            markersize=3,
+            label="robot path (a dot per action)",
+        )
     draw_robot(ax, world, readings)
     ax.set_title(title or world.map.name)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=7, frameon=False)
     fig.tight_layout()
     return fig
 

@@ -3,7 +3,7 @@
 This is the ONLY module of the project that imports pymunk. Units: metres, radians; headings
 are counter-clockwise from +x.
 
-Motion (exact and deterministic). The robot is a circle on a kinematic body. An action is cut
+Motion. The robot is a circle on a kinematic body. An action is cut
 into sub-steps of at most ``WorldConfig.substep`` metres of travel (or ``substep_angle`` radians
 of rotation); before each sub-step the new pose is tested with ``Space.shape_query``, and a
 sub-step whose position would overlap a wall is undone: the robot keeps its last free position,
@@ -15,6 +15,26 @@ completes) and the action reports a wall contact. So the robot never passes thro
   rotates 90 degrees while advancing slowly (0.31 m of arc), ending ``turn_radius`` ahead and
   ``turn_radius`` to the side of where it started.
 - ``U_TURN``: rotate 180 degrees in place (counter-clockwise).
+
+Motion noise (``WorldConfig.forward_noise``, ``heading_noise``; both 0 by default, so motion is
+exact unless asked; :meth:`WorldConfig.legged_robot` turns them on, and the Section 5.1
+experiment uses it). The paper's AIBO walked: its steps varied in length and its turns were
+imprecise. Here each action, when noisy, draws from the generator passed to
+:meth:`CorridorWorld.step`:
+
+- a length factor ``1 + forward_noise * N(0, 1)`` (clipped to [0.5, 1.5]) that scales the forward
+  distance (or the turn's radius, i.e. how far a turn advances);
+- a heading error ``N(0, 1)`` (clipped to 3 sd) times ``heading_noise`` for a turn or u-turn,
+  ``forward_heading_noise`` for a forward step (radians): the action ends at the commanded
+  heading plus this error, and a forward step walks along the erred heading (so it drifts
+  sideways, about 0.5 cm per step at 1.5 degrees).
+
+The commanded heading is the start heading plus the nominal rotations of the actions so far
+(+-90 deg a turn, 180 deg a u-turn): the heading error does not add up from action to action. It
+models a walk that holds its commanded heading within a few degrees (a gait with a heading
+reference); with errors that added up (a random walk, about 3 deg x sqrt(60) = 23 deg after ten
+circuits) no sequence of these four actions could straighten the robot, neither for a
+teleoperator nor for a learned policy, and every long run would end against a wall.
 
 Sensors. Three IR-like range sensors point left (+90 deg), front and right (-90 deg) from the
 robot's centre; a reading is the distance from the centre to the nearest wall along the ray
@@ -75,6 +95,28 @@ class WorldConfig:
     noise_sd: float = 0.01
     noise_sd_per_m: float = 0.02
     n_readings: int = 15
+    forward_noise: float = 0.0
+    heading_noise: float = 0.0
+    forward_heading_noise: float = 0.0
+
+    @classmethod
+    def legged_robot(cls, **overrides: float) -> WorldConfig:
+        """The Section 5.1 experiment's world: motion noise of a small legged robot, a forward
+        step's length (and a turn's radius) with a standard deviation of 10% (2 cm of 20 cm), a
+        turn's or u-turn's final heading with one of 3 degrees, a forward step's with 1.5
+        degrees."""
+        kwargs: dict[str, float] = {
+            "forward_noise": 0.10,
+            "heading_noise": math.radians(3.0),
+            "forward_heading_noise": math.radians(1.5),
+        }
+        kwargs.update(overrides)
+        return cls(**kwargs)
+
+    @property
+    def noisy_motion(self) -> bool:
+        """Whether actions draw motion noise (then :meth:`CorridorWorld.step` needs a generator)."""
+        return self.forward_noise > 0 or self.heading_noise > 0 or self.forward_heading_noise > 0
 
     def __post_init__(self) -> None:
         for name in ("robot_radius", "forward_distance", "turn_radius", "substep", "max_range"):
@@ -88,6 +130,17 @@ class WorldConfig:
             raise ValueError("WorldConfig noise standard deviations must be >= 0")
         if self.n_readings < 1:
             raise ValueError("WorldConfig.n_readings must be >= 1")
+        if not 0 <= self.forward_noise <= 0.3:
+            raise ValueError(
+                f"WorldConfig.forward_noise is a fraction of the step length in [0, 0.3], "
+                f"got {self.forward_noise}"
+            )
+        for name in ("heading_noise", "forward_heading_noise"):
+            if not 0 <= getattr(self, name) <= math.radians(20):
+                raise ValueError(
+                    f"WorldConfig.{name} is in radians, in [0, {math.radians(20):.3f}] "
+                    f"(20 deg), got {getattr(self, name)}; pass math.radians(degrees)"
+                )
 
 
 def _wrap(angle: float) -> float:
@@ -119,14 +172,20 @@ class CorridorWorld:
         self._shape.filter = pymunk.ShapeFilter(categories=_ROBOT_CATEGORY, mask=_WALL_CATEGORY)
         self._space.add(self._body, self._shape)
         self._ray_filter = pymunk.ShapeFilter(mask=pymunk.ShapeFilter.ALL_MASKS() ^ _ROBOT_CATEGORY)
-        self._x = self._y = self._heading = 0.0
+        self._x = self._y = self._heading = self._commanded = 0.0
         self.reset()
 
     # ------------------------------------------------------------------ state
-    def reset(self) -> None:
-        """Put the robot at the map's start pose with zero progress."""
+    def reset(self, offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        """Put the robot at the map's start pose, moved by ``offset`` = (dx m, dy m, dheading
+        rad), with zero progress. The commanded heading is the start pose's (so a heading offset
+        is an error the first action removes, see the module docstring). Raises ValueError if
+        the moved pose overlaps a wall."""
         x, y, h = self.map.start_pose()
-        self.set_pose(x, y, h)
+        dx, dy, dh = (float(v) for v in offset)
+        self.set_pose(x + dx, y + dy, h + dh)
+        self._commanded = _wrap(h)
+        x, y = x + dx, y + dy
         self._s = 0.0
         self._s_max = 0.0
         self._progress = self.route.locate(x, y, h, 0.0)
@@ -138,6 +197,7 @@ class CorridorWorld:
             self._body.position = (self._x, self._y)
             raise ValueError(f"pose ({x:.3f}, {y:.3f}) overlaps a wall")
         self._x, self._y, self._heading = float(x), float(y), _wrap(float(heading))
+        self._commanded = self._heading
         self._body.position = (self._x, self._y)
         self._body.angle = self._heading
 
@@ -170,8 +230,18 @@ class CorridorWorld:
                     return True
         return False
 
-    def step(self, action: int) -> bool:
-        """Execute one action; returns True if the robot touched a wall (the move was cut)."""
+    @property
+    def commanded_heading(self) -> float:
+        """The heading the actions so far commanded (radians): the start heading plus their
+        nominal rotations. Equal to ``pose[2]`` when motion is exact."""
+        return self._commanded
+
+    def step(self, action: int, rng: np.random.Generator | None = None) -> bool:
+        """Execute one action; returns True if the robot touched a wall (the move was cut).
+
+        ``rng`` draws the motion noise; it is required when ``config.noisy_motion`` and unused
+        (nothing drawn) otherwise.
+        """
         try:
             action = Action(int(action))
         except (ValueError, TypeError) as err:
@@ -180,33 +250,57 @@ class CorridorWorld:
             ) from err
         cfg = self.config
         x0, y0, h0 = self._x, self._y, self._heading
+        scale, err = 1.0, 0.0
+        if cfg.noisy_motion:
+            if rng is None:
+                raise ValueError(
+                    "this world has motion noise (WorldConfig.forward_noise / heading_noise > 0): "
+                    "pass a numpy Generator, world.step(action, rng)"
+                )
+            z = rng.standard_normal(2)
+            scale = min(1.5, max(0.5, 1.0 + cfg.forward_noise * float(z[0])))
+            sd = cfg.forward_heading_noise if action == Action.FORWARD else cfg.heading_noise
+            err = sd * min(3.0, max(-3.0, float(z[1])))
+        # Heading offset to the commanded one before the action: the last action's heading
+        # error, or a perturbed start's; exact motion keeps it at 0.0 (last-bit differences of
+        # the two running sums are snapped away, so exact runs stay bit-identical).
+        off0 = _wrap(h0 - self._commanded)
+        if abs(off0) < 1e-9:
+            off0 = 0.0
         if action == Action.FORWARD:
-            n = max(1, math.ceil(cfg.forward_distance / cfg.substep - 1e-9))
-            cos_h, sin_h = math.cos(h0), math.sin(h0)
+            dist = cfg.forward_distance * scale
+            n = max(1, math.ceil(dist / cfg.substep - 1e-9))
+            h1 = h0 + (err - off0)
+            cos_h, sin_h = math.cos(h1), math.sin(h1)
 
             def pose_at(k: int) -> tuple[float, float, float]:
-                d = cfg.forward_distance * k / n
-                return (x0 + d * cos_h, y0 + d * sin_h, h0)
+                d = dist * k / n
+                return (x0 + d * cos_h, y0 + d * sin_h, h0 + (h1 - h0) * k / n)
 
+            rotation = 0.0
         elif action in (Action.TURN_LEFT, Action.TURN_RIGHT):
             sign = 1.0 if action == Action.TURN_LEFT else -1.0
-            r = cfg.turn_radius
-            arc = r * math.pi / 2
+            r = cfg.turn_radius * scale
+            rotation = sign * math.pi / 2
+            turn = rotation + (err - off0)
+            arc = r * abs(turn)
             n = max(
-                1, math.ceil(arc / cfg.substep - 1e-9), math.ceil(math.pi / 2 / cfg.substep_angle)
+                1, math.ceil(arc / cfg.substep - 1e-9), math.ceil(abs(turn) / cfg.substep_angle)
             )
             # Centre of the arc, to the turning side.
             cx, cy = x0 - sign * r * math.sin(h0), y0 + sign * r * math.cos(h0)
 
             def pose_at(k: int) -> tuple[float, float, float]:
-                h = h0 + sign * (math.pi / 2) * k / n
+                h = h0 + turn * k / n
                 return (cx + sign * r * math.sin(h), cy - sign * r * math.cos(h), h)
 
         else:
-            n = math.ceil(math.pi / cfg.substep_angle - 1e-9)
+            rotation = math.pi
+            turn = rotation + (err - off0)
+            n = math.ceil(turn / cfg.substep_angle - 1e-9)
 
             def pose_at(k: int) -> tuple[float, float, float]:
-                return (x0, y0, h0 + math.pi * k / n)
+                return (x0, y0, h0 + turn * k / n)
 
         contact = False
         x, y = x0, y0
@@ -220,6 +314,8 @@ class CorridorWorld:
                 continue
             x, y = nx, ny
         self._x, self._y, self._heading = x, y, _wrap(heading)
+        if rotation:
+            self._commanded = _wrap(self._commanded + rotation)
         self._body.position = (x, y)
         self._body.angle = self._heading
         self._progress = self.route.locate(x, y, self._heading, self._s)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -233,14 +234,45 @@ def test_binary_state():
 
 
 def test_prioritized_sweeping_learns_a_small_loop():
-    cfg = PrioritizedSweepingConfig(max_steps=1500)
+    # directed: on this rectangle the undirected recency reward pays the clockwise loop as well
+    # (2 of 5 seeds settled on it); paid only for progress along the route, 5 of 5 learn.
+    cfg = PrioritizedSweepingConfig(max_steps=1500, stable_steps=100, directed=True)
     results = [run_prioritized_sweeping(map_from_dict(SMALL), cfg, seed=s) for s in range(3)]
-    assert all(r.steps_to_learn is not None for r in results)
-    # Its learned policy: forward in a corridor (wall left and right), left at corners.
+    assert all(r.steps_stable is not None for r in results)
     for r in results:
+        # Stable comes at or after the first hit, and the run stops when it is confirmed.
+        assert r.steps_first <= r.steps_stable
+        assert r.learning_steps == r.steps_stable + cfg.stable_steps - 1
+        # Its learned policy: forward in a corridor (wall left and right), left at corners.
         assert r.policy[0b101] == F and r.policy[0b011] == L
     again = run_prioritized_sweeping(map_from_dict(SMALL), cfg, seed=0)
     assert again == results[0]
+
+
+def test_prioritized_sweeping_first_hit_vs_stable(monkeypatch):
+    """Scripted greedy tables: good from step 5, lost at step 20, good again from 21 on. The
+    first hit is step 5; the stable step is 21, confirmed 50 steps later, where the run stops."""
+    import corridor.baseline as baseline
+
+    good, bad = (F,) * 8, (U,) * 8
+    step = {"t": 0}
+
+    def scripted_table(self):
+        step["t"] += 1
+        return good if 5 <= step["t"] != 20 else bad
+
+    monkeypatch.setattr(baseline.PrioritizedSweeping, "greedy_table", scripted_table)
+    monkeypatch.setattr(baseline, "_completes_circuit", lambda table, *a, **k: table == good)
+    cfg = PrioritizedSweepingConfig(max_steps=300, stable_steps=50)
+    r = run_prioritized_sweeping(map_from_dict(SMALL), cfg, seed=0)
+    assert (r.steps_first, r.steps_stable, r.learning_steps) == (5, 21, 70)
+    assert r.policies_checked == 2
+    # Too short a budget to confirm: a first hit, no stable step.
+    step["t"] = 0
+    r = run_prioritized_sweeping(
+        map_from_dict(SMALL), dataclasses.replace(cfg, max_steps=60), seed=0
+    )
+    assert (r.steps_first, r.steps_stable, r.learning_steps) == (5, None, 60)
 
 
 _PS_ON_FIGURE2 = """
@@ -249,9 +281,9 @@ from corridor.experiment import CorridorExperimentConfig
 from corridor.baseline import run_prioritized_sweeping
 from corridor.maps import load_map
 cfg = CorridorExperimentConfig()
-ps = dataclasses.replace(cfg.ps, max_steps=1000)
+ps = dataclasses.replace(cfg.ps, max_steps=600)
 r = run_prioritized_sweeping(load_map(cfg.map_name), ps, world_config=cfg.world, seed=1)
-print(json.dumps([r.steps_to_learn, list(r.policy), r.contacts]))
+print(json.dumps([r.steps_first, r.steps_stable, list(r.policy), r.contacts]))
 """
 
 
@@ -291,12 +323,16 @@ def test_tiny_experiment_writes_results(tmp_path):
         "demonstrations_total",
         "requests_switching_circuit",
         "requests_first_circuit",
-        "ps_steps",
+        "ps_steps_first",
+        "ps_steps_stable",
     ):
         assert set(s[key]) == {"mean", "sd", "n"}
     assert set(s["components"]) == {"forward", "turn_left", "turn_right", "u_turn"}
     assert data["seeds"] == [0, 1] and data["config"]["max_std"] == 2.0
     assert {"torch", "pymunk", "gymnasium"} <= set(data["versions"])
+    assert 0 <= s["eval_perturbed_clean_share"] <= 1 and 0 <= s["ps_learned_share"] <= 1
+    assert s["motion_noise"]["forward_noise"] == 0.0
+    assert s["ps_over_demonstrations"] is None or s["ps_over_demonstrations"] > 0
     for r in data["per_seed"]:
         assert r["finished"] and r["eval_circuits_clean"] == 2
         confident = r["demonstrations_confident"]
@@ -306,7 +342,15 @@ def test_tiny_experiment_writes_results(tmp_path):
         )
     for name in ("figure3.png", "figure4.png", "map.png", "summary.txt"):
         assert (tmp_path / "run" / name).stat().st_size > 1000
-    assert "demonstrations in all" in format_summary(res)
+    table = format_summary(res)
+    assert "demonstrations in all" in table and "±" in table and "+-" not in table
+    # Markdown pipe tables: each block's rows are | a | b | c |, the second a |---| rule.
+    for block in table.split("\n\n"):
+        rows = block.splitlines()
+        if rows[0].startswith("|"):
+            assert set(rows[1]) <= set("|-") and rows[1].count("|") == rows[0].count("|")
+            assert all(r.startswith("| ") and r.endswith(" |") for r in rows[:1] + rows[2:])
+            assert all(r.count("|") == rows[0].count("|") for r in rows)
     with pytest.raises(FileExistsError):
         run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
     # The run directory is enough to redraw the figures and to evaluate a saved policy.

@@ -1,0 +1,187 @@
+"""Corridor: motion noise, perturbed starts, the expert's recovery off the route, the map cache,
+the figures' palette and legends."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from corridor.env import CorridorEnv
+from corridor.expert import CorridorExpert
+from corridor.maps import load_map
+from corridor.world import Action, CorridorWorld, WorldConfig
+
+F, L, R, U = (int(a) for a in Action)
+NOISY = WorldConfig.legged_robot()
+
+
+# ---------------------------------------------------------------- map cache
+def test_replace_gives_a_map_with_its_own_cache():
+    m = load_map("figure2")
+    m.route_polyline()  # fill the cache
+    back = dataclasses.replace(m, route=tuple(reversed(m.route)))
+    # The reversed map starts from P0 toward P3 (north), not toward P1 (east).
+    assert back.start_pose() == pytest.approx((0.0, 0.2, math.pi / 2))
+    np.testing.assert_allclose(back.route_polyline().points[0], [0.0, 0.2])
+    np.testing.assert_allclose(m.route_polyline().points[0], [0.2, 0.0])
+    assert back.manoeuvres() != m.manoeuvres()
+    assert back.walls() == m.walls()  # same corridors, same walls
+
+
+# ---------------------------------------------------------------- motion noise
+def test_legged_robot_noise_magnitudes_are_documented_values():
+    assert NOISY.forward_noise == 0.10
+    assert NOISY.heading_noise == pytest.approx(math.radians(3.0))
+    assert NOISY.forward_heading_noise == pytest.approx(math.radians(1.5))
+    assert NOISY.noisy_motion and not WorldConfig().noisy_motion
+
+
+def test_forward_step_length_and_heading_spread_match_the_config():
+    """400 single forward steps in the open: length sd 10% of 0.2 m, heading sd 1.5 degrees,
+    means unbiased (each within 4 standard errors)."""
+    w = CorridorWorld(load_map("figure2"), NOISY)
+    rng = np.random.default_rng(0)
+    lengths, headings = [], []
+    for _ in range(400):
+        w.set_pose(0.2, 0.0, 0.0)  # 1.5 m of free corridor ahead
+        assert w.step(F, rng) is False
+        x, y, h = w.pose
+        lengths.append(math.hypot(x - 0.2, y))
+        headings.append(h)
+    lengths, headings = np.array(lengths), np.array(headings)
+    n = len(lengths)
+    assert abs(lengths.mean() - 0.2) < 4 * 0.02 / math.sqrt(n)
+    assert lengths.std() == pytest.approx(0.02, rel=0.15)
+    assert abs(headings.mean()) < 4 * math.radians(1.5) / math.sqrt(n)
+    assert headings.std() == pytest.approx(math.radians(1.5), rel=0.15)
+    # A forward step walks along its erred heading: the sideways drift is length * sin(error).
+    w.set_pose(0.2, 0.0, 0.0)
+    w.step(F, np.random.default_rng(7))
+    x, y, h = w.pose
+    assert y == pytest.approx((x - 0.2) * math.tan(h), abs=1e-12)
+
+
+def test_heading_errors_do_not_add_up():
+    """After 100 u-turns (3 degrees sd each) the heading is still within 3 sd of the commanded
+    one: the error is redrawn around the commanded heading, not accumulated (a random walk would
+    have an sd of 30 degrees)."""
+    w = CorridorWorld(load_map("figure2"), NOISY)
+    w.set_pose(0.0, 0.6, math.pi / 2)
+    rng = np.random.default_rng(1)
+    errors = []
+    for _ in range(100):
+        w.step(U, rng)
+        errors.append(math.remainder(w.pose[2] - w.commanded_heading, 2 * math.pi))
+    errors = np.abs(np.array(errors))
+    assert errors.max() <= 3 * NOISY.heading_noise + 1e-12
+    assert np.degrees(errors).mean() > 1.0  # the noise is there
+
+
+def test_noisy_world_needs_a_generator_and_bad_noise_is_refused():
+    w = CorridorWorld(load_map("figure2"), NOISY)
+    with pytest.raises(ValueError, match="pass a numpy Generator"):
+        w.step(F)
+    with pytest.raises(ValueError, match="fraction"):
+        WorldConfig(forward_noise=0.5)
+    with pytest.raises(ValueError, match="math.radians"):
+        WorldConfig(heading_noise=3.0)  # degrees given where radians are expected
+
+
+def test_noisy_env_same_seed_same_run():
+    def run(seed: int) -> np.ndarray:
+        env = CorridorEnv("figure2", NOISY)
+        expert = CorridorExpert(env.corridor_map, NOISY)
+        obs, info = env.reset(seed=seed)
+        poses = []
+        for _ in range(60):
+            obs, _, term, trunc, info = env.step(expert(obs, info))
+            poses.append(info["pose"])
+            if term or trunc:
+                obs, info = env.reset()
+        return np.array(poses)
+
+    np.testing.assert_array_equal(run(3), run(3))
+    assert not np.array_equal(run(3), run(4))
+
+
+# ---------------------------------------------------------------- perturbed starts
+def test_perturbed_starts_are_seeded_bounded_and_free():
+    env = CorridorEnv("figure2", NOISY, start_perturbation=(0.1, math.radians(10)))
+    x0, y0, h0 = env.corridor_map.start_pose()
+    poses = []
+    for seed in range(50):
+        _, info = env.reset(seed=seed)
+        poses.append(info["pose"])
+        assert min(info["true_ranges"]) >= env.world.config.robot_radius - 1e-9  # no overlap
+    poses = np.array(poses)
+    assert np.abs(poses[:, 0] - x0).max() <= 0.1 and np.abs(poses[:, 1] - y0).max() <= 0.1
+    assert np.abs(poses[:, 2] - h0).max() <= math.radians(10)
+    assert poses[:, 1].std() > 0.03  # they do vary
+    _, again = env.reset(seed=7)
+    np.testing.assert_array_equal(again["pose"], poses[7])
+    with pytest.raises(ValueError, match="start_perturbation"):
+        CorridorEnv("figure2", start_perturbation=(0.3, 0.1))
+
+
+# ---------------------------------------------------------------- the expert
+@pytest.mark.parametrize("map_name", ["figure2", "lshape"])
+def test_expert_with_noisy_motion_drives_clean_circuits(map_name):
+    """Measured: 149 of 150 clean circuits on each map (30 seeds x 5); here 40 circuits."""
+    env = CorridorEnv(map_name, NOISY)
+    expert = CorridorExpert(env.corridor_map, NOISY)
+    clean = completed = 0
+    for seed in range(8):
+        obs, info = env.reset(seed=seed)
+        for _ in range(5):
+            while True:
+                obs, _, term, trunc, info = env.step(expert(obs, info))
+                if term or trunc:
+                    break
+            completed += term
+            clean += info["is_success"]
+            obs, info = env.reset()
+    assert completed == 40 and clean >= 39
+
+
+def test_expert_recovers_from_detours_off_the_route():
+    """A learner's mistakes: 1-4 random actions at a random point of the circuit, with motion
+    noise. The expert then brings the robot back and completes the circuit every time."""
+    env = CorridorEnv("figure2", NOISY, max_episode_steps=120)
+    expert = CorridorExpert(env.corridor_map, NOISY)
+    rng = np.random.default_rng(0)
+    off_route = 0
+    for seed in range(30):
+        obs, info = env.reset(seed=seed)
+        detour_at, n_random = int(rng.integers(2, 24)), int(rng.integers(1, 5))
+        steps = 0
+        while True:
+            if detour_at <= steps < detour_at + n_random:
+                a = int(rng.integers(4))
+            else:
+                a = expert(obs, info)
+            steps += 1
+            obs, _, term, trunc, info = env.step(a)
+            if steps == detour_at + n_random:
+                off_route += bool(
+                    env.world.progress.lateral > expert.on_route_tolerance or expert(obs, info) != F
+                )
+            if term or trunc:
+                break
+        assert term, f"seed {seed}: the expert did not finish the circuit after a detour"
+    assert off_route >= 10  # the detours did take the robot off its way
+
+
+# ---------------------------------------------------------------- figures
+def test_one_colour_per_action_and_map_legend():
+    from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure
+
+    assert len(ACTION_COLORS) == len(Action) == len(set(ACTION_COLORS))
+    assert RAY_COLOR not in ACTION_COLORS and PATH_COLOR not in ACTION_COLORS
+    w = CorridorWorld(load_map("figure2"))
+    fig = map_figure(w, [(0.2, 0.0), (0.4, 0.0)])
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    for expected in ("route", "path", "left sensor ray", "front sensor ray", "right sensor ray"):
+        assert any(expected in label for label in labels), (expected, labels)
