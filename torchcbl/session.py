@@ -381,12 +381,11 @@ def _write_error(exc: BaseException, path: Path, what: str, after: str) -> Sessi
     """A SessionWriteError for a failed write of ``path``; ``after`` says where that leaves
     the session and what to do."""
     reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-    err = SessionWriteError(f"writing {path} failed ({reason}) while {what}. {after}")
-    err.errno = getattr(exc, "errno", None) or errno.EIO
-    err.filename = str(path)
-    return err
+    code = getattr(exc, "errno", None) or errno.EIO
+    return SessionWriteError(code, f"writing {path} failed ({reason}) while {what}. {after}")
 
 
+_write_fd = os.write  # the journal's write (a seam for the disk-full tests)
 _FREE_SPACE = "Free space (or fix the file's permissions), then call run() again or resume."
 
 
@@ -607,7 +606,7 @@ class SessionStore:
         """Append one journal line (the step is durable from here on) and queue its row."""
         line = _journal_line(kind, values)
         try:
-            written = os.write(self._journal, line)
+            written = _write_fd(self._journal, line)
             if written != len(line):
                 raise OSError(errno.ENOSPC, f"short write ({written} of {len(line)} bytes)")
         except OSError as exc:
@@ -918,28 +917,29 @@ def _connect_reader(path: Path, mode: str) -> sqlite3.Connection:
 
 
 def _open_readonly(run_dir: str | os.PathLike[str]) -> sqlite3.Connection:
-    """A connection that can never write the step log (SQLite's ``mode=ro``).
+    """A connection that can never write the step log.
 
-    On a read-only mount or directory (or a log owned by another user) a WAL-mode database
-    whose ``-shm`` file cannot be created is opened with ``immutable=1`` instead, which is
-    exact when no ``-wal`` file holds commits (a cleanly closed session).
+    A cleanly closed session (no ``-wal`` file: no WAL writer has it open) is opened with
+    SQLite's ``immutable=1``: no lock, no ``-shm`` / ``-wal`` file created, so it works on a
+    read-only mount or a directory of another user and leaves every byte and mtime as it was.
+    A session with a ``-wal`` file (a writer runs, or was killed) is opened ``mode=ro``, which
+    reads the commits in the WAL through the writer's ``-shm`` index.
     """
     path = Path(run_dir) / LOG_NAME
     _check_log_present(Path(run_dir))
+    wal = path.with_name(LOG_NAME + "-wal")
     try:
+        if not wal.exists():
+            return _connect_reader(path, "immutable=1")
         return _connect_reader(path, "mode=ro")
     except sqlite3.OperationalError as exc:
-        wal = path.with_name(LOG_NAME + "-wal")
-        if wal.exists() and wal.stat().st_size > 0:
+        if "unable to open" in str(exc) or "readonly" in str(exc):
             raise IncompatibleRunDirError(
                 f"{path} cannot be opened read-only ({exc}) and {wal} holds commits that need "
                 "write access to the directory to be read. Copy the run directory somewhere "
                 "writable (cp -a) and read the copy, or open it once with write access."
             ) from exc
-        try:
-            return _connect_reader(path, "immutable=1")
-        except sqlite3.DatabaseError as exc2:
-            raise _db_error(exc2, path) from exc2
+        raise _db_error(exc, path) from exc
     except sqlite3.DatabaseError as exc:
         raise _db_error(exc, path) from exc
 
@@ -947,11 +947,17 @@ def _open_readonly(run_dir: str | os.PathLike[str]) -> sqlite3.Connection:
 def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[int, int]]:
     """Every record and the corrections ``{step: action}`` of a run directory, read-only."""
     run = Path(run_dir)
-    db = _open_readonly(run)
-    try:
-        rows, corrections = _rows(db, run / JOURNAL_NAME, run / LOG_NAME)
-    finally:
-        db.close()
+    wal = run / (LOG_NAME + "-wal")
+    for _ in range(3):
+        had_wal = wal.exists()
+        db = _open_readonly(run)
+        try:
+            rows, corrections = _rows(db, run / JOURNAL_NAME, run / LOG_NAME)
+        finally:
+            db.close()
+        if had_wal or not wal.exists():
+            break
+        # A writer opened the session while we read without its WAL: read again through it.
     return _records_of(rows, run), corrections
 
 
