@@ -109,6 +109,16 @@ def four_d_world(**kw: Any) -> ClusterWorld:
     return ClusterWorld(c, [0, 1, 2, 0], [0.4, 0.2, 0.2, 0.2], **kw)
 
 
+def six_d_world(**kw: Any) -> ClusterWorld:
+    """6-D, 3 actions, 5 regions 4 std apart (neighbouring regions of different actions
+    overlap: a region's Gaussian puts 2.3 % of its mass across each nearest-centre boundary);
+    action 0 in two regions, action 1 in two."""
+    c = np.zeros((5, 6))
+    c[1, 0] = c[2, 1] = c[3, 2] = 4.0
+    c[4, 0] = c[4, 3] = 4.0
+    return ClusterWorld(c, [0, 1, 2, 0, 1], [0.3, 0.2, 0.2, 0.15, 0.15], **kw)
+
+
 def oracle(env: ClusterWorld):
     """The optimal teacher of a ClusterWorld, as ``teacher(obs, info) -> int``."""
 
@@ -153,12 +163,14 @@ class _SideLog(gym.Wrapper):
         return self.env.step(action)
 
 
-def kill_child_main(run_dir: str, side_log: str) -> None:
+def kill_child_main(run_dir: str, side_log: str, mode: str = "ce") -> None:
     """Create or resume a session in ``run_dir`` and teach until killed.
 
     Appends to ``side_log``: ``T <step> <label>`` when the teacher answers, ``E <step> <action>``
-    when an action is handed to the env; the parent checks every executed demonstration is in
-    the step log.
+    when an action is handed to the env, and (``mode="cba"``: Confidence-Based Autonomy with a
+    correcting teacher) ``C <step> <action>`` when the teacher corrects step ``<step>``; the
+    parent checks every executed demonstration, and every correction followed by a later
+    action, is in the log.
     """
     import torch
 
@@ -170,14 +182,31 @@ def kill_child_main(run_dir: str, side_log: str) -> None:
     fd = os.open(side_log, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
     config = TeachingConfig(max_new=1, accuracy_window=10, target_accuracy=0.8, max_steps=10**9)
     rule = PosteriorRule(0.9)
+    kw: dict[str, Any] = {"rule": rule}
+    if mode == "cba":
+        from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+        kw = {"strategy": ConfidenceBasedAutonomy()}
+        config = TeachingConfig(max_new=1, noninteractive=False, max_steps=10**9)
     exists = os.path.exists(os.path.join(run_dir, "config.json"))
     model = GaussianMixtureSet(2, 1, max_components=3, seed=0)
     holder: dict[str, Any] = {}
 
-    def teacher(obs: np.ndarray, info: dict) -> int:
-        a = world.optimal_action(obs)
-        os.write(fd, f"T {holder['env'].base + holder['env'].k} {a}\n".encode())
-        return a
+    class Teacher:
+        def __call__(self, obs: np.ndarray, info: dict) -> int:
+            a = world.optimal_action(obs)
+            os.write(fd, f"T {holder['env'].base + holder['env'].k} {a}\n".encode())
+            return a
+
+        def correct(self, obs: np.ndarray, info: dict, action: int) -> int | None:
+            a = world.optimal_action(obs)
+            if a == action:
+                return None
+            # the step just executed is the env's latest one
+            os.write(fd, f"C {holder['env'].base + holder['env'].k - 1} {a}\n".encode())
+            return a
+
+    teacher = Teacher() if mode == "cba" else Teacher().__call__
 
     if exists:
         from torchcbl.session import load_records
@@ -186,7 +215,7 @@ def kill_child_main(run_dir: str, side_log: str) -> None:
         env = _SideLog(world, fd, base)
         holder["env"] = env
         ct = ConfidentTeacher.resume(
-            run_dir, env, teacher, model=model, rule=rule, config=config, progress=False
+            run_dir, env, teacher, model=model, config=config, progress=False, **kw
         )
         assert ct.n_steps == base
     else:
@@ -196,9 +225,9 @@ def kill_child_main(run_dir: str, side_log: str) -> None:
             env,
             teacher,
             model=model,
-            rule=rule,
             config=config,
             run_dir=run_dir,
+            **kw,
             seed=0,
             progress=False,
         )
@@ -207,5 +236,32 @@ def kill_child_main(run_dir: str, side_log: str) -> None:
     ct.run()
 
 
+def check_corrections_kept(run_dir: Any, side_log: Any) -> tuple[int, int]:
+    """Every correction the teacher gave (``C`` lines) that was followed by a later action
+    reaching the env is in the run directory's log, with its action. Returns (corrections in
+    the log, corrections the kill caught before anything followed them)."""
+    from torchcbl.session import load_corrections
+
+    logged = {c.step: c.action for c in load_corrections(run_dir)}
+    given: dict[int, int] = {}
+    last_executed = -1
+    for line in open(side_log).read().splitlines():
+        kind, step, action = line.split()
+        if kind == "C":
+            given[int(step)] = int(action)
+        elif kind == "E":
+            last_executed = max(last_executed, int(step))
+    unacknowledged = 0
+    for step, action in given.items():
+        if step < last_executed:
+            assert logged.get(step) == action, (
+                f"correction of step {step} (action {action}) was followed by step "
+                f"{last_executed} but is not in the log ({logged.get(step)})"
+            )
+        elif step not in logged:
+            unacknowledged += 1
+    return len(logged), unacknowledged
+
+
 if __name__ == "__main__":
-    kill_child_main(sys.argv[1], sys.argv[2])
+    kill_child_main(*sys.argv[1:4])

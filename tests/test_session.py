@@ -243,9 +243,9 @@ def _check_nothing_lost(run: Path, side_log: Path) -> int:
     return sum(r.is_demonstration for r in records.values())
 
 
-def _kill_cycle(run: Path, side_log: Path, delay: float) -> None:
+def _kill_cycle(run: Path, side_log: Path, delay: float, mode: str = "ce") -> None:
     proc = subprocess.Popen(
-        [sys.executable, str(TESTS / "_toy_envs.py"), str(run), str(side_log)],
+        [sys.executable, str(TESTS / "_toy_envs.py"), str(run), str(side_log), mode],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

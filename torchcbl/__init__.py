@@ -22,6 +22,8 @@ _EXPORTS = {
     "PosteriorRule": "torchcbl.confidence",
     "AutoThresholdRule": "torchcbl.confidence",
     "StepRecord": "torchcbl.records",
+    "ConfidentExecution": "torchcbl.strategies",
+    "ConfidenceBasedAutonomy": "torchcbl.strategies.cba",
     "ConfidentTeacher": "torchcbl.teaching",
     "TeachingConfig": "torchcbl.teaching",
     "evaluate_policy": "torchcbl.policy",

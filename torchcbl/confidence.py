@@ -16,7 +16,8 @@ Rules shipped here:
 
 - :class:`DistanceRule` (default): confident when the observation lies within ``max_std``
   standard deviations (Mahalanobis distance) of the most likely component of the chosen
-  mixture; the paper's corridor experiment used 2.
+  mixture; the paper's corridor experiment used 2. ``DistanceRule(quantile=q)`` scales the
+  threshold with the dimension: the chi-square quantile with D degrees of freedom.
 - :class:`PosteriorRule`: confident when p(chosen action | o) >= ``min_posterior``; catches the
   overlap between actions that the distance rule cannot see.
 - :class:`AutoThresholdRule`: per-action distance thresholds set from the data after each refit,
@@ -42,6 +43,7 @@ __all__ = [
     "ConfidenceRule",
     "DistanceRule",
     "PosteriorRule",
+    "chi2_quantile",
     "rule_from_config",
 ]
 
@@ -77,31 +79,112 @@ def _check_positive(name: str, value: float, *, upper: float | None = None) -> f
     return float(value)
 
 
+def chi2_quantile(q: float, dof: int) -> float:
+    """The ``q`` quantile of the chi-square distribution with ``dof`` degrees of freedom.
+
+    Bisection on the regularised lower incomplete gamma function (``torch.special.gammainc``),
+    to float64 precision; no SciPy needed.
+    """
+    if not 0.0 < q < 1.0:
+        raise ValueError(f"chi2_quantile: expected q in (0, 1), got {q!r}")
+    if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or dof < 1:
+        raise ValueError(f"chi2_quantile: expected an int dof >= 1, got {dof!r}")
+    k = torch.tensor(dof / 2.0, dtype=torch.float64)
+
+    def cdf(x: float) -> float:
+        return float(torch.special.gammainc(k, torch.tensor(x / 2.0, dtype=torch.float64)))
+
+    lo, hi = 0.0, float(dof) + 10.0
+    while cdf(hi) < q:
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if cdf(mid) < q:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-13 * max(hi, 1.0):
+            break
+    return 0.5 * (lo + hi)
+
+
 class DistanceRule:
-    """The paper's rule: confident when ``distance <= max_std``.
+    """The paper's rule: confident when ``distance <= threshold``.
 
     ``distance`` is the Mahalanobis distance, in standard deviations, of the observation to the
     most likely component of the chosen action's mixture. Before any fit it is +inf, so the
     rule asks.
 
+    A fixed threshold does not scale with the dimension D: a Gaussian's own points lie within
+    2 standard deviations of its centre with probability 0.86 in 2-D, 0.59 in 4-D, 0.32 in
+    6-D (the squared distance is chi-square with D degrees of freedom). So the threshold may
+    be given as a ``quantile`` of that distribution instead: ``DistanceRule(quantile=0.95)``
+    is confident inside the region holding 95 % of the component's own points, i.e.
+    ``distance <= sqrt(chi2_quantile(0.95, D))`` (3.08 std in 4-D, 3.55 in 6-D). D is taken
+    from the observations (or from the model at the first update).
+
     Args:
-        max_std: autonomy threshold in standard deviations (> 0). Default 2.0, the paper's value.
+        max_std: fixed threshold in standard deviations (> 0). Default 2.0, the paper's value.
+        quantile: in (0, 1); when given, the threshold is the chi-square quantile above and
+            ``max_std`` must be left at its default.
     """
 
-    def __init__(self, max_std: float = 2.0) -> None:
+    def __init__(self, max_std: float = 2.0, *, quantile: float | None = None) -> None:
         self.max_std = _check_positive("DistanceRule.max_std", max_std)
+        self.quantile: float | None = None
+        self._thresholds: dict[int, float] = {}
+        if quantile is not None:
+            if float(max_std) != 2.0:
+                raise ValueError(
+                    f"DistanceRule: give max_std ({max_std!r}) or quantile ({quantile!r}), "
+                    "not both."
+                )
+            q = _check_positive("DistanceRule.quantile", quantile, upper=1.0)
+            if q >= 1.0:
+                raise ValueError(f"DistanceRule.quantile: expected a value in (0, 1), got {q!r}")
+            self.quantile = q
+        self._dof: int | None = None
+
+    def threshold(self, n_features: int | None = None) -> float:
+        """The threshold in standard deviations (for D = ``n_features`` with a quantile)."""
+        if self.quantile is None:
+            return self.max_std
+        d = self._dof if n_features is None else int(n_features)
+        if d is None:
+            raise ValueError(
+                "DistanceRule(quantile=...): the dimension D is not known yet; pass the "
+                "observations to is_confident or call update(model, ...) first."
+            )
+        thr = self._thresholds.get(d)
+        if thr is None:
+            thr = self._thresholds[d] = math.sqrt(chi2_quantile(self.quantile, d))
+        return thr
 
     def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
-        ok = (_np(c.distance) <= self.max_std) & (_np(c.action) >= 0)
+        if self.quantile is None:
+            thr = self.max_std
+        else:
+            d = None if observations is None else int(np.shape(observations)[-1])
+            action = _np(c.action)
+            if d is None and self._dof is None and not (action >= 0).any():
+                return torch.zeros(len(action), dtype=torch.bool)  # no model: ask anyway
+            thr = self.threshold(d)
+        ok = (_np(c.distance) <= thr) & (_np(c.action) >= 0)
         return torch.from_numpy(ok)
 
     def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
-        return None
+        n = getattr(model, "n_features", None)
+        if n is not None:
+            self._dof = int(n)
 
     def to_config(self) -> dict[str, Any]:
+        if self.quantile is not None:
+            return {"type": "DistanceRule", "quantile": self.quantile}
         return {"type": "DistanceRule", "max_std": self.max_std}
 
     def __repr__(self) -> str:
+        if self.quantile is not None:
+            return f"DistanceRule(quantile={self.quantile})"
         return f"DistanceRule(max_std={self.max_std})"
 
 

@@ -79,20 +79,20 @@ Shipped strategies:
 
 from __future__ import annotations
 
-import inspect
-from collections import deque
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Literal, NamedTuple, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
 from torchcbl.confidence import DistanceRule, rule_from_config, rule_to_config
+from torchcbl.strategies._phased import Decision, LabelKind, _Phased, _rule_takes_observations
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
     from torchcbl.records import StepRecord
 
 __all__ = [
+    "ConfidenceBasedAutonomy",
     "ConfidentExecution",
     "Decision",
     "Strategy",
@@ -100,22 +100,6 @@ __all__ = [
     "strategy_from_config",
     "strategy_to_config",
 ]
-
-LabelKind = Literal["demonstration", "correction"]
-
-
-class Decision(NamedTuple):
-    """A strategy's answer for one step.
-
-    Attributes:
-        ask: ask the teacher for a label at this step.
-        phase: ``"noninteractive"`` or ``"confident"``, recorded on the step.
-        state: anything the strategy wants back in ``observe_step`` (the loop never reads it).
-    """
-
-    ask: bool
-    phase: Literal["noninteractive", "confident"]
-    state: Any = None
 
 
 @runtime_checkable
@@ -147,8 +131,9 @@ class Strategy(Protocol):
     def observe_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
     ) -> None:
-        """Every label, in arrival order (``model_action``: what the model predicted there
-        when the label arrived's step was decided; -1 without a model)."""
+        """Every label, in arrival order. ``kind`` is ``"demonstration"`` (asked for at this
+        step) or ``"correction"`` (for an earlier autonomous step's observation);
+        ``model_action`` is the model's prediction at the labelled step (-1 without a model)."""
         ...
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
@@ -162,88 +147,6 @@ class Strategy(Protocol):
     def to_config(self) -> dict[str, Any]:
         """JSON description (``"type"``, constructor arguments, ``"relabel"``)."""
         ...
-
-
-def _rule_takes_observations(rule: Any) -> bool:
-    try:
-        params = list(inspect.signature(rule.is_confident).parameters.values())
-    except (TypeError, ValueError):
-        return False
-    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
-    return len(positional) >= 2 or any(p.kind == p.VAR_POSITIONAL for p in params)
-
-
-class _Phased:
-    """The paper's schedule, shared by the shipped strategies: a non-interactive phase (the
-    teacher acts every step) that ends once the windowed prediction accuracy reaches
-    ``config.target_accuracy`` over ``config.accuracy_window`` demonstrations (never when
-    it is None; skipped when ``config.noninteractive`` is False), then per-step decisions in
-    which each request starts a burst of ``config.burst`` teacher moves (cut at the end of
-    an episode). Subclasses say when they are confident (:meth:`_confident`)."""
-
-    relabel = False
-    wants_corrections = False
-
-    def __init__(self) -> None:
-        self._phase: Literal["noninteractive", "confident"] = "noninteractive"
-        self._burst_left = 0
-        self._burst = 1
-        self._target: float | None = None
-        self._window: deque[bool] = deque(maxlen=1)
-
-    @property
-    def phase(self) -> str:
-        """The phase of the next step."""
-        return self._phase
-
-    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
-        self.n_actions, self.n_features = int(n_actions), int(n_features)
-        self._phase = "noninteractive" if config.noninteractive else "confident"
-        self._burst = int(config.burst)
-        self._target = config.target_accuracy
-        self._window = deque(maxlen=int(config.accuracy_window))
-
-    def episode_start(self) -> None:
-        self._burst_left = 0
-
-    def _confident(self, observation: np.ndarray, c: Classification) -> bool:
-        raise NotImplementedError
-
-    def decide(self, observation: np.ndarray, c: Classification) -> Decision:
-        if self._phase == "noninteractive" or self._burst_left > 0:
-            return Decision(True, self._phase, self._burst_left)
-        ask = int(c.action[0]) < 0 or not self._confident(observation, c)
-        return Decision(ask, self._phase, self._burst if ask else 0)
-
-    def actor(
-        self, decision: Decision, model_action: int, teacher_action: int | None
-    ) -> Literal["teacher", "agent"]:
-        return "teacher" if decision.ask else "agent"
-
-    def observe_label(
-        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
-    ) -> None:
-        if kind == "demonstration":
-            self._window.append(model_action == action)
-
-    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
-        return None
-
-    def _target_reached(self) -> bool:
-        w, t = self._window, self._target
-        return t is not None and len(w) == w.maxlen and sum(w) / len(w) >= t
-
-    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
-        if decision is None:  # replayed on resume; a resumed session starts a new episode
-            if record.phase == "confident":
-                self._phase = "confident"
-        elif decision.ask:
-            left = decision.state if isinstance(decision.state, int) else 0
-            self._burst_left = max(left - 1, 0) if decision.phase == "confident" else 0
-        if record.terminated or record.truncated:
-            self._burst_left = 0
-        if self._phase == "noninteractive" and self._target_reached():
-            self._phase = "confident"
 
 
 class ConfidentExecution(_Phased):
@@ -289,6 +192,14 @@ class ConfidentExecution(_Phased):
 
     def __repr__(self) -> str:
         return f"ConfidentExecution(rule={self.rule!r})"
+
+
+def __getattr__(name: str) -> Any:
+    if name == "ConfidenceBasedAutonomy":  # lazily: cba imports this package's base class
+        from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+        return ConfidenceBasedAutonomy
+    raise AttributeError(f"module 'torchcbl.strategies' has no attribute {name!r}")
 
 
 def strategy_to_config(strategy: Any) -> dict[str, Any]:

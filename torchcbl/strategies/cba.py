@@ -1,0 +1,190 @@
+"""Confidence-Based Autonomy (Chernova & Veloso, JAIR 2009) on a Gaussian mixture set.
+
+The agent acts on its own only where two gates both pass:
+
+1. **Classification confidence at its decision boundary.** For an observation o the model
+   chooses a* = argmax_a p(a | o); the runner-up r = the second most probable action names the
+   decision boundary (a*, r). The confidence is the log-posterior margin
+   ``log p(a* | o) - log p(r | o)`` (>= 0; +inf when p(r | o) underflows to 0). The agent may
+   act only if the margin EXCEEDS ``T[a*, r]``, a threshold kept per (predicted action,
+   boundary) pair.
+2. **Nearest-neighbour distance to the stored demonstrations.** On features standardised by
+   the training set's mean and standard deviation, the Euclidean distance from o to its
+   nearest stored demonstration must be BELOW ``distance_multiplier`` (1.5, as in the authors'
+   reference implementation) times the mean leave-one-out nearest-neighbour distance of the
+   stored demonstrations.
+
+Thresholds are recomputed after every refit (resubstitution): every stored demonstration is
+classified by the new model; ``T[a, b]`` is the mean margin of the demonstrations predicted
+``a`` with runner-up ``b`` whose label is not ``a`` (the points misclassified at that
+boundary). A pair at which demonstrations were classified but none misclassified gets
+``clean_threshold`` (default 0: any positive margin is enough there; the reference
+implementation computes 0/0 = NaN there and so asks forever); a pair no demonstration was
+classified at keeps +inf, so the agent asks there (and its answer makes the pair known).
+
+Learning: a demonstration for an observation already stored (bit-for-bit equal) relabels it
+instead of adding a point (``relabel = True``); after each autonomous step the teacher may
+correct the action just taken (``wants_corrections = True``, see :mod:`torchcbl.strategies`):
+the correction relabels the observation at decision time, not the current one.
+
+Like the shipped confident execution, the strategy honours the TeachingConfig's
+non-interactive phase and bursts; JAIR 2009's CBA has no non-interactive phase, so set
+``noninteractive=False`` to run it as published (every step asks until a model exists).
+The state (thresholds, the stored set for the distance gate) is a pure function of the model
+and training set at the last refit, so a resumed session recomputes it exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from torchcbl.confidence import _np
+from torchcbl.strategies._phased import _Phased
+
+if TYPE_CHECKING:  # pragma: no cover
+    from torchcbl.gmm import Classification
+
+__all__ = ["ConfidenceBasedAutonomy", "loo_nn_distances", "posterior_margin"]
+
+_STD_FLOOR = 1e-9
+
+
+def posterior_margin(posterior: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(chosen [N], runner-up [N], margin [N]) of posteriors [N, A] (A >= 2).
+
+    margin = log p(chosen) - log p(runner-up) >= 0, +inf when the runner-up's posterior is 0.
+    """
+    post = np.asarray(posterior, dtype=np.float64)
+    order = np.argsort(-post, axis=1, kind="stable")
+    chosen, runner = order[:, 0], order[:, 1]
+    rows = np.arange(len(post))
+    with np.errstate(divide="ignore"):
+        margin = np.log(post[rows, chosen]) - np.log(post[rows, runner])
+    margin = np.where(np.isnan(margin), 0.0, margin)  # both 0: no information either way
+    return chosen, runner, margin
+
+
+def loo_nn_distances(x: np.ndarray) -> np.ndarray:
+    """Leave-one-out nearest-neighbour Euclidean distance of each row of x [M, D] (M >= 2)."""
+    sq = (x * x).sum(1)
+    d2 = sq[:, None] + sq[None, :] - 2.0 * (x @ x.T)
+    np.fill_diagonal(d2, np.inf)
+    return np.sqrt(np.maximum(d2.min(1), 0.0))
+
+
+class ConfidenceBasedAutonomy(_Phased):
+    """Confidence-Based Autonomy (JAIR 2009): per-boundary thresholds and a nearest-neighbour
+    distance gate; relabels stored states; learns from corrections (see the module docstring).
+
+    Args:
+        distance_multiplier: the distance gate is this multiple (> 0) of the mean leave-one-out
+            nearest-neighbour distance of the stored demonstrations, on standardised features.
+            Default 1.5 (the authors' reference implementation).
+        clean_threshold: the margin threshold (>= 0, log-posterior units) of a (predicted
+            action, runner-up) pair at which no stored demonstration is misclassified.
+            Default 0.0.
+
+    Attributes (after the first refit):
+        thresholds: [A, A] float64, ``thresholds[a, b]`` for prediction a, runner-up b;
+            +inf where no demonstration was classified.
+        distance_threshold: the distance gate in standardised units (0 with < 2 points: ask).
+    """
+
+    relabel = True
+    wants_corrections = True
+
+    def __init__(self, distance_multiplier: float = 1.5, clean_threshold: float = 0.0) -> None:
+        super().__init__()
+        for name, v, ok, want in (
+            ("distance_multiplier", distance_multiplier, lambda v: v > 0, "> 0"),
+            ("clean_threshold", clean_threshold, lambda v: v >= 0, ">= 0"),
+        ):
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, (int, float))
+                or not math.isfinite(v)
+                or not ok(v)
+            ):
+                raise ValueError(
+                    f"ConfidenceBasedAutonomy.{name}: expected a finite number {want}, got {v!r}"
+                )
+        self.distance_multiplier = float(distance_multiplier)
+        self.clean_threshold = float(clean_threshold)
+        self.thresholds: np.ndarray | None = None
+        self.distance_threshold = 0.0
+        self._stored: np.ndarray | None = None  # standardised training set [M, D]
+        self._mean: np.ndarray | None = None
+        self._scale: np.ndarray | None = None
+
+    # -- the two gates -----------------------------------------------------------------------
+
+    def nn_distance(self, observation: np.ndarray) -> float:
+        """Standardised distance from ``observation`` [D] to its nearest stored demonstration
+        (+inf before the first refit)."""
+        if self._stored is None:
+            return math.inf
+        z = (np.asarray(observation, dtype=np.float64) - self._mean) / self._scale
+        return float(np.sqrt(((self._stored - z) ** 2).sum(1).min()))
+
+    def _confident(self, observation: np.ndarray, c: Classification) -> bool:
+        if self.thresholds is None:
+            return False
+        post = _np(c.posterior)
+        chosen, runner, margin = posterior_margin(post[:1])
+        if int(chosen[0]) != int(_np(c.action)[0]):  # ties: trust only the model's own choice
+            return False
+        if not margin[0] > self.thresholds[chosen[0], runner[0]]:
+            return False
+        return self.nn_distance(observation) < self.distance_threshold
+
+    # -- learning ------------------------------------------------------------------------------
+
+    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        x = np.asarray(observations, dtype=np.float64)
+        y = np.asarray(actions, dtype=np.int64)
+        c = model.classify(x)
+        chosen, runner, margin = posterior_margin(_np(c.posterior))
+        a = self.n_actions
+        wrong = chosen != y
+        total = np.zeros((a, a))
+        count = np.zeros((a, a))
+        seen = np.zeros((a, a), dtype=bool)
+        seen[chosen, runner] = True
+        finite = wrong & np.isfinite(margin)
+        np.add.at(total, (chosen[finite], runner[finite]), margin[finite])
+        np.add.at(count, (chosen[finite], runner[finite]), 1.0)
+        thr = np.full((a, a), np.inf)
+        thr[seen] = self.clean_threshold
+        has = count > 0
+        thr[has] = total[has] / count[has]
+        # a pair whose misclassified points all had infinite margin: never trust it
+        inf_wrong = wrong & ~np.isfinite(margin)
+        thr[chosen[inf_wrong], runner[inf_wrong]] = np.inf
+        self.thresholds = thr
+        self._mean = x.mean(0)
+        scale = x.std(0)
+        self._scale = np.where(scale > _STD_FLOOR, scale, 1.0)
+        self._stored = (x - self._mean) / self._scale
+        if len(x) >= 2:
+            self.distance_threshold = self.distance_multiplier * float(
+                loo_nn_distances(self._stored).mean()
+            )
+        else:
+            self.distance_threshold = 0.0
+
+    def to_config(self) -> dict[str, Any]:
+        return {
+            "type": "ConfidenceBasedAutonomy",
+            "distance_multiplier": self.distance_multiplier,
+            "clean_threshold": self.clean_threshold,
+            "relabel": True,
+        }
+
+    def __repr__(self) -> str:
+        return (
+            f"ConfidenceBasedAutonomy(distance_multiplier={self.distance_multiplier}, "
+            f"clean_threshold={self.clean_threshold})"
+        )
