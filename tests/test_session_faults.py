@@ -572,6 +572,16 @@ def test_deleted_step_log_is_not_restarted_silently(tmp_path):
     goes_on(back, env, run)
 
 
+def test_a_closed_teacher_does_not_go_on_unlogged(tmp_path):
+    run = tmp_path / "run"
+    ct, env = session(run)
+    ct.run(max_steps=5)
+    ct.close()
+    with pytest.raises(IncompatibleRunDirError, match="was closed.*ConfidentTeacher.resume"):
+        ct.run(max_steps=10)
+    assert ct.n_steps == 5 and load_records(run) == ct.records
+
+
 # -- 5. one writer ----------------------------------------------------------------------------
 
 

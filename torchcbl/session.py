@@ -1128,7 +1128,7 @@ def _checkpoint_payload(
         return None, "damaged"
     if not isinstance(payload, dict) or not isinstance(payload.get("state_dict"), dict):
         return None, "damaged"
-    digest = payload.get("labels_sha256")  # absent in checkpoints of torchcbl before 0.1.1
+    digest = payload.get("labels_sha256")  # absent in checkpoints written before it existed
     if digest is not None and digest != labels_digest(xs[:n], ys[:n]):
         return None, "stale"
     return payload, ""

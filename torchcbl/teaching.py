@@ -632,6 +632,11 @@ class ConfidentTeacher:
         Autonomous steps reach disk in batches; call :meth:`flush` (or let :meth:`run` do it)
         to commit them. Demonstrations and corrections reach disk before the loop goes on.
         """
+        if self._store is None and self.run_dir is not None:
+            raise IncompatibleRunDirError(
+                f"this ConfidentTeacher was closed, so {self.run_dir} no longer records its "
+                "steps; continue the session with ConfidentTeacher.resume(run_dir, env, teacher)."
+            )
         if self._needs_reset:
             self._reset()
         obs, info, raw = self._obs, self._info, self._raw_obs
@@ -1004,8 +1009,8 @@ class ConfidentTeacher:
     def close(self) -> None:
         """Commit and close the step log. The session can be resumed from its directory."""
         if self._store is not None:
-            self._store.close()
-            self._store = None
+            store, self._store = self._store, None
+            store.close()  # releases the lock even when the final commit fails
 
     def __enter__(self) -> ConfidentTeacher:
         return self
