@@ -55,9 +55,25 @@ def teacher(obs, info):
     return 0
 
 
-def measure(kind: str, durable: bool, steps: int, model: GaussianMixtureSet, obs: np.ndarray):
+def measure(
+    kind: str,
+    durable: bool,
+    steps: int,
+    model: GaussianMixtureSet,
+    obs: np.ndarray,
+    train: tuple[np.ndarray, np.ndarray] | None = None,
+):
     env = ReplayEnv(obs)
-    if kind == "autonomous":
+    strategy = None
+    if kind == "autonomous CBA":  # both CBA gates on every step, thresholds from `train`
+        from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+        strategy = ConfidenceBasedAutonomy(distance_multiplier=1e6)  # the gate passes, timed
+        config = TeachingConfig(noninteractive=False, max_steps=steps)
+        strategy.bind(n_actions=3, n_features=obs.shape[1], config=config)
+        strategy.observe_refit(model, *train)
+        strategy.thresholds[np.isinf(strategy.thresholds)] = 0.0  # time the act path only
+    elif kind == "autonomous":
         config = TeachingConfig(noninteractive=False, max_steps=steps)
     else:  # every step asks, never refits
         config = TeachingConfig(target_accuracy=None, max_new=10**9, max_steps=steps)
@@ -67,9 +83,13 @@ def measure(kind: str, durable: bool, steps: int, model: GaussianMixtureSet, obs
             teacher,
             model=model,
             config=config,
+            strategy=strategy,
             run_dir=Path(tmp) / "run" if durable else None,
             progress=False,
         )
+        if strategy is not None:  # bind() in the constructor reset nothing it computed
+            strategy.observe_refit(model, *train)
+            strategy.thresholds[np.isinf(strategy.thresholds)] = 0.0
         t0 = _clock()
         ct.run()
         total = _clock() - t0
@@ -121,14 +141,14 @@ def main() -> None:
     inside = model.classify(obs).distance.numpy() <= 2.0
     obs = obs[inside]
     rows = []
-    for kind in ("autonomous", "demonstration"):
+    for kind in ("autonomous", "demonstration", "autonomous CBA"):
         for durable in (False, True):
-            measure(kind, durable, 300, model, obs)  # warm-up
-            rows.append(measure(kind, durable, args.steps, model, obs))
-    print(f"{'step kind':<15}{'durable log':<13}{'steps':>7}{'asked':>7}{'loop us/step':>14}")
+            measure(kind, durable, 300, model, obs, (x, y))  # warm-up
+            rows.append(measure(kind, durable, args.steps, model, obs, (x, y)))
+    print(f"{'step kind':<16}{'durable log':<13}{'steps':>7}{'asked':>7}{'loop us/step':>14}")
     for r in rows:
         print(
-            f"{r['kind']:<15}{str(r['durable']):<13}{r['steps']:>7}{r['asked']:>7}"
+            f"{r['kind']:<16}{str(r['durable']):<13}{r['steps']:>7}{r['asked']:>7}"
             f"{r['us_per_step']:>14.1f}"
         )
     worst = max(r["us_per_step"] for r in rows if r["durable"])
@@ -141,6 +161,12 @@ def main() -> None:
                 "obs_dim": 4,
                 "n_actions": 3,
                 "autonomous_us_per_step_durable": round(auto["us_per_step"], 1),
+                "cba_autonomous_us_per_step_durable": round(
+                    next(r for r in rows if r["durable"] and r["kind"] == "autonomous CBA")[
+                        "us_per_step"
+                    ],
+                    1,
+                ),
                 "worst_us_per_step_durable": round(worst, 1),
                 "budget_us": 200,
                 "ok": worst <= 200,

@@ -209,6 +209,7 @@ def test_6d_cba_and_chi2_rule_reach_the_teacher_with_few_demonstrations(seed):
     for name, r in (("chi2", chi2), ("cba", cba)):
         assert r["return_ratio"] >= 0.95, (name, r)
         assert r["demos"] < 0.30, (name, r)
+        assert r["ct"].n_demonstrations < 0.30 * STEPS, (name, r)  # corrections counted too
     assert cba["ct"].n_corrections > 0
 
 

@@ -221,8 +221,10 @@ class AutoThresholdRule:
 
     In the style of Chernova & Veloso (JAIR 2009, "Interactive policy learning through
     confidence-based autonomy"), where an action's threshold is the average confidence of the
-    points the model misclassifies as that action. The exact rule here, on the Mahalanobis
-    distance:
+    points the model misclassifies as that action; it is NOT that paper's rule (capped at
+    ``max_std``, it can only ask more than :class:`DistanceRule`): the JAIR 2009 method is
+    :class:`torchcbl.strategies.cba.ConfidenceBasedAutonomy`. The exact rule here, on the
+    Mahalanobis distance:
 
     1. After each refit, classify every demonstration with the new model.
     2. For action ``a``, collect the distances of the demonstrations the model assigns to ``a``

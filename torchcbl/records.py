@@ -124,7 +124,8 @@ class StepRecord:
         info: JSON-able subset of the env's ``info`` after the step (see :func:`jsonable_info`);
             the loop adds ``"torchcbl_error"`` / ``"torchcbl_interrupted"`` keys when it had to
             cut an episode.
-        n_demonstrations: demonstrations in the session after this step.
+        n_demonstrations: labels in the session once this step's own label (if any) is
+            counted: demonstrations plus corrections of earlier steps.
         autonomy_rate: share of autonomous steps among the last ``accuracy_window``
             confident-execution steps, this one included; None before confident execution.
         windowed_accuracy: share of the last ``accuracy_window`` demonstrations the model

@@ -120,7 +120,8 @@ class TeachingConfig:
     """How the loop teaches and when it stops. Defaults follow the paper's corridor setup.
 
     Attributes:
-        max_new: refit after this many new demonstrations (>= 1).
+        max_new: refit after this many new labels (>= 1): demonstrations, and corrections
+            with a strategy that takes them.
         accuracy_window: number of most recent demonstrations the prediction accuracy is taken
             over (20 corridor, 150 driving); also the window of ``autonomy_rate``.
         target_accuracy: windowed accuracy in (0, 1] that ends the non-interactive phase;
@@ -226,6 +227,9 @@ class ConfidentTeacher:
             ``Box`` observation space of size D.
         teacher: ``teacher(observation [D] ndarray, info dict) -> int`` in ``[0, n_actions)``.
             It gets a copy of the env's observation and the info of the latest reset / step.
+            Optionally it has ``correct(observation, info, action) -> int | None``, offered
+            after each autonomous step by strategies that take corrections (see
+            :mod:`torchcbl.strategies`).
         model: the learner; default ``GaussianMixtureSet(n_actions, D, seed=seed)``. Its
             ``fit`` must be deterministic given the data (resume relies on it).
         rule: the confidence rule of the default strategy; default ``DistanceRule(2.0)``

@@ -116,6 +116,7 @@ class ConfidenceBasedAutonomy(_Phased):
         self.thresholds: np.ndarray | None = None
         self.distance_threshold = 0.0
         self._stored: np.ndarray | None = None  # standardised training set [M, D]
+        self._stored_sq: np.ndarray | None = None  # its squared norms [M]
         self._mean: np.ndarray | None = None
         self._scale: np.ndarray | None = None
 
@@ -127,16 +128,22 @@ class ConfidenceBasedAutonomy(_Phased):
         if self._stored is None:
             return math.inf
         z = (np.asarray(observation, dtype=np.float64) - self._mean) / self._scale
-        return float(np.sqrt(((self._stored - z) ** 2).sum(1).min()))
+        d2 = float((self._stored_sq - 2.0 * (self._stored @ z)).min()) + float(z @ z)
+        return math.sqrt(max(d2, 0.0))
 
     def _confident(self, observation: np.ndarray, c: Classification) -> bool:
         if self.thresholds is None:
             return False
-        post = _np(c.posterior)
-        chosen, runner, margin = posterior_margin(post[:1])
-        if int(chosen[0]) != int(_np(c.action)[0]):  # ties: trust only the model's own choice
+        chosen = int(_np(c.action)[0])
+        post = _np(c.posterior)[0].copy()
+        p_chosen = float(post[chosen])
+        post[chosen] = -1.0
+        runner = int(post.argmax())
+        p_runner = float(post[runner])
+        if p_runner >= p_chosen:  # a tie: no margin
             return False
-        if not margin[0] > self.thresholds[chosen[0], runner[0]]:
+        margin = math.inf if p_runner <= 0.0 else math.log(p_chosen) - math.log(p_runner)
+        if not margin > self.thresholds[chosen, runner]:
             return False
         return self.nn_distance(observation) < self.distance_threshold
 
@@ -168,6 +175,7 @@ class ConfidenceBasedAutonomy(_Phased):
         scale = x.std(0)
         self._scale = np.where(scale > _STD_FLOOR, scale, 1.0)
         self._stored = (x - self._mean) / self._scale
+        self._stored_sq = (self._stored * self._stored).sum(1)
         if len(x) >= 2:
             self.distance_threshold = self.distance_multiplier * float(
                 loo_nn_distances(self._stored).mean()
