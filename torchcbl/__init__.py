@@ -38,6 +38,9 @@ _EXPORTS = {
     "load_records": "torchcbl.session",
     "load_corrections": "torchcbl.session",
     "IncompatibleRunDirError": "torchcbl.errors",
+    "CorruptSessionError": "torchcbl.errors",
+    "SessionLockedError": "torchcbl.errors",
+    "SessionWriteError": "torchcbl.errors",
     "TerminalTeacher": "torchcbl.human",
     "TeachingInterrupted": "torchcbl.errors",
 }

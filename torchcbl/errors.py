@@ -2,7 +2,15 @@
 
 from __future__ import annotations
 
-__all__ = ["EnvError", "IncompatibleRunDirError", "TeacherError", "TeachingInterrupted"]
+__all__ = [
+    "CorruptSessionError",
+    "EnvError",
+    "IncompatibleRunDirError",
+    "SessionLockedError",
+    "SessionWriteError",
+    "TeacherError",
+    "TeachingInterrupted",
+]
 
 
 class TeacherError(RuntimeError):
@@ -25,3 +33,21 @@ class EnvError(RuntimeError):
 class IncompatibleRunDirError(ValueError):
     """A run directory cannot be used with the given env, model, strategy or configuration,
     or was written in a log format this version of torchcbl cannot read."""
+
+
+class CorruptSessionError(IncompatibleRunDirError):
+    """A file of a run directory is damaged (a journal line that fails its checksum, an
+    unreadable SQLite log, a config without a required key). The message names the file, the
+    place and how to recover; torchcbl never deletes the damaged bytes."""
+
+
+class SessionLockedError(IncompatibleRunDirError):
+    """Another writer (process or ConfidentTeacher) has the run directory open. One writer
+    per session; the lock is released when that writer closes or dies (even by SIGKILL)."""
+
+
+class SessionWriteError(OSError):
+    """Writing the run directory failed (disk full, I/O error, permissions). The session in
+    memory was kept equal to what is on disk: the step being written is not part of the
+    session (or, after its action ran, was cut as interrupted); free space and call ``run()``
+    again, or resume the directory later."""

@@ -130,6 +130,24 @@ class FitReport:
         return "\n".join(lines)
 
 
+_FAR = 1e150  # |(x - mu)^T U| per coordinate beyond which squares may overflow: _classify_far
+
+
+def _merge_rows(far: np.ndarray, c_far: Any, classify: Any, x: np.ndarray) -> Any:
+    """One Classification from the far rows' and the other rows' (classified by ``classify``)."""
+    near = ~far
+    if not near.any():
+        return c_far
+    c_near = classify(x[near])
+    fields = []
+    for f_far, f_near in zip(c_far, c_near, strict=True):
+        out = torch.empty((x.shape[0], *f_far.shape[1:]), dtype=f_near.dtype)
+        out[torch.from_numpy(far)] = f_far.to(f_near.dtype)
+        out[torch.from_numpy(near)] = f_near
+        fields.append(out)
+    return type(c_far)(*fields)
+
+
 def _is_real_dtype(kind: str) -> bool:
     return kind in "fiu"
 
@@ -886,6 +904,8 @@ class GaussianMixtureSet(nn.Module):
         prior = self._tables()["prior_np"]
         y = x @ pcat
         y -= mu_p
+        if not abs(y).max() < _FAR:  # squares would overflow (or x is beyond float64 range)
+            return self._classify_far(x)
         y *= y
         maha = y.reshape(self.n_actions, self.max_components, self.n_features).sum(-1)
         lp = const - 0.5 * maha  # [A, K]
@@ -901,8 +921,16 @@ class GaussianMixtureSet(nn.Module):
         )
 
     def _classify_np(self, x: np.ndarray) -> Classification:
-        lp, maha = self._component_scores_np(x)
+        pcat, mu_p, const, _ = self._tables()["np"]
         n = x.shape[0]
+        y = x @ pcat
+        y -= mu_p
+        far = ~(abs(y).max(1) < _FAR)
+        if far.any():  # squares would overflow: those rows exactly, apart
+            return _merge_rows(far, self._classify_far(x[far]), self._classify_np, x)
+        y *= y
+        maha = y.reshape(n, self.n_actions, self.max_components, self.n_features).sum(-1)
+        lp = const - 0.5 * maha
         mx = lp.max(-1, keepdims=True)
         logp = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1)) + self._tables()["np"][3]
         action = logp.argmax(1)
@@ -929,7 +957,54 @@ class GaussianMixtureSet(nn.Module):
         rows = torch.arange(x.shape[0], device=x.device)
         comp = lp[rows, action].argmax(1)
         d2 = maha[rows, action, comp]
-        return Classification(action.clone(), torch.exp(-0.5 * d2), torch.sqrt(d2), post.clone())
+        out = Classification(action.clone(), torch.exp(-0.5 * d2), torch.sqrt(d2), post.clone())
+        far = ~(torch.isfinite(post).all(1) & torch.isfinite(d2))
+        if bool(far.any()):  # rows whose squared distances overflow: redo them exactly
+            rows_far = far.cpu().numpy()
+            c = self._classify_far(x[far].cpu().numpy())
+            dev = x.device
+            for field, value in zip(out, c, strict=True):
+                field[torch.from_numpy(rows_far).to(dev)] = value.to(dev, field.dtype)
+        return out
+
+    def _classify_far(self, x: np.ndarray) -> Classification:
+        """Classify rows whose squared Mahalanobis distances overflow float64 (an observation
+        very far from some component, e.g. 1e155 in one feature), with finite results.
+
+        Coordinates are divided by s = max(1, max |x_d|) first, so the distances (not their
+        squares) are computed without overflow; a component's log-likelihood is exact where it
+        is representable and -inf beyond. When every component's is -inf, the nearest
+        component (smallest Mahalanobis distance) decides: its action wins with posterior 1,
+        and the confidence is exp(-d^2/2) = 0. The distance is clipped to the largest float.
+        """
+        pcat, mu_p, const, log_prior = self._tables()["np"]
+        n, a, k, d = x.shape[0], self.n_actions, self.max_components, self.n_features
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            scale = np.maximum(abs(x).max(1), 1.0)[:, None]
+            y = (x / scale) @ pcat - mu_p / scale
+            valid = const > 0.5 * _VERY_NEGATIVE  # [A, K]: components that exist
+            ms = np.where(valid, (y * y).reshape(n, a, k, d).sum(-1), np.inf)  # maha / s^2
+            dist = np.minimum(scale[:, :, None] * np.sqrt(ms), np.finfo(np.float64).max)
+            lp = np.where(valid, const - 0.5 * (scale[:, :, None] ** 2 * ms), -np.inf)
+            mx = lp.max(-1, keepdims=True)
+            mx0 = np.where(np.isfinite(mx), mx, 0.0)
+            logp = mx0[..., 0] + np.log(np.exp(lp - mx0).sum(-1)) + log_prior  # [N, A]
+            best = logp.max(1, keepdims=True)
+            exact = np.isfinite(best[:, 0])
+            post = np.where(exact[:, None], np.exp(logp - np.where(exact[:, None], best, 0)), 0.0)
+            action = np.where(exact, logp.argmax(1), ms.reshape(n, a * k).argmin(1) // k)
+            rows = np.arange(n)
+            post[rows[~exact], action[~exact]] = 1.0
+            post /= post.sum(1, keepdims=True)
+            comp = np.where(exact, lp[rows, action].argmax(1), ms[rows, action].argmin(1))
+            dd = dist[rows, action, comp]
+            conf = np.exp(-0.5 * dd * dd)
+        return Classification(
+            torch.from_numpy(action),
+            torch.from_numpy(conf),
+            torch.from_numpy(dd),
+            torch.from_numpy(post),
+        )
 
     # ------------------------------------------------------------------ criteria
     def _criterion_of_chosen(

@@ -39,7 +39,7 @@ import math
 import os
 import warnings
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,11 +49,18 @@ import numpy as np
 import torch
 
 from torchcbl.confidence import _np, rule_to_config
-from torchcbl.errors import EnvError, IncompatibleRunDirError, TeacherError, TeachingInterrupted
+from torchcbl.errors import (
+    EnvError,
+    IncompatibleRunDirError,
+    SessionWriteError,
+    TeacherError,
+    TeachingInterrupted,
+)
 from torchcbl.policy import GreedyPolicy, as_action, check_env, evaluate_policy, obs_array
 from torchcbl.records import CorrectionRecord, StepRecord, TrainingSet, jsonable_info
 from torchcbl.session import (
     FORMAT,
+    LabelDigest,
     SessionStore,
     build_model,
     label_sequence,
@@ -330,8 +337,13 @@ class ConfidentTeacher:
             }
             self._store = SessionStore.create(self.run_dir, session_config)
             self._store.commit_every = commit_every
-            if _is_fitted(self.model):  # a session may start from a fitted model
-                self._store.save_checkpoint(self.model, 0)
+            try:
+                self._store.note_writer(0)
+                if _is_fitted(self.model):  # a session may start from a fitted model
+                    self._store.save_checkpoint(self.model, 0, self._digest.hexdigest())
+            except BaseException:
+                self.close()
+                raise
         self._next_reset_seed: int | None = self.seed
 
     def _setup(self, env, teacher, model, strategy, config, seed, progress, on_step, on_refit):
@@ -375,6 +387,7 @@ class ConfidentTeacher:
         self._auto_window: deque[bool] = deque(maxlen=w)
         self._labels = 0  # labels (demonstrations + corrections) so far
         self._train = TrainingSet(relabel=self._relabel)
+        self._digest = LabelDigest()  # of every label so far, stored with each checkpoint
         self.corrections: list[CorrectionRecord] = []
         self._new_since_refit = 0
         self._needs_reset = True
@@ -487,7 +500,12 @@ class ConfidentTeacher:
         self._store, records, corrections = SessionStore.open_for_resume(
             self.run_dir, commit_every=commit_every
         )
-        self._restore(records, corrections)
+        try:
+            self._store.note_writer(len(records))
+            self._restore(records, corrections)
+        except BaseException:
+            self.close()
+            raise
         return self
 
     def _restore(self, records: list[StepRecord], corrections: list[CorrectionRecord]) -> None:
@@ -521,6 +539,7 @@ class ConfidentTeacher:
         xs, ys = label_sequence(records, corrections)
         for x, y in zip(xs, ys, strict=True):
             self._train.add(x, y)
+            self._digest.update(x, y)
         self._labels = len(ys)
         assert self.run_dir is not None
         k = restore_model(
@@ -670,7 +689,7 @@ class ConfidentTeacher:
         self.strategy.observe_refit(self.model, x, y)
         self._new_since_refit = 0
         if self._store is not None:
-            self._store.save_checkpoint(self.model, self._labels)
+            self._store.save_checkpoint(self.model, self._labels, self._digest.hexdigest())
         if self.on_refit is not None:
             self.on_refit(self.model, self._labels)
 
@@ -680,6 +699,11 @@ class ConfidentTeacher:
         Autonomous steps reach disk in batches; call :meth:`flush` (or let :meth:`run` do it)
         to commit them. Demonstrations and corrections reach disk before the loop goes on.
         """
+        if self._store is None and self.run_dir is not None:
+            raise IncompatibleRunDirError(
+                f"this ConfidentTeacher was closed, so {self.run_dir} no longer records its "
+                "steps; continue the session with ConfidentTeacher.resume(run_dir, env, teacher)."
+            )
         if self._needs_reset:
             self._reset()
         obs, info, raw = self._obs, self._info, self._raw_obs
@@ -698,12 +722,51 @@ class ConfidentTeacher:
             )
         teacher_action = self._ask(info) if ask else None
         actor = self.strategy.actor(decision, model_action, teacher_action)
-        # From here on the step happens: update the counters, then log.
+        # From here on the step happens. The windows and the label count the record reports
+        # are advanced first and undone if the step cannot be logged (memory never runs ahead
+        # of disk); the training set and the strategy learn the label once it is durable.
         step = len(self.records)
+        acc, auto = self._acc_window, self._auto_window
+        acc_out = acc[0] if ask and len(acc) == acc.maxlen else None
+        auto_out = auto[0] if phase == "confident" and len(auto) == auto.maxlen else None
+
+        def undo() -> None:
+            if ask:
+                acc.pop()
+                if acc_out is not None:
+                    acc.appendleft(acc_out)
+                self._labels -= 1
+            if phase == "confident":
+                auto.pop()
+                if auto_out is not None:
+                    auto.appendleft(auto_out)
+
         if ask:
-            self._acc_window.append(model_action == teacher_action)
+            acc.append(model_action == teacher_action)
             self._labels += 1
+        if phase == "confident":
+            auto.append(not ask)
+        try:
+            record = self._record(
+                step,
+                obs,
+                model_action,
+                confidence,
+                distance,
+                posterior,
+                teacher_action,
+                actor,
+                phase,
+                ask,
+            )
+            if ask and self._store is not None:
+                self._store.commit_demonstration(record)  # durable before the action runs
+        except BaseException:
+            undo()
+            raise
+        if ask:
             self._train.add(obs, teacher_action)  # type: ignore[arg-type]
+            self._digest.update(obs, teacher_action)  # type: ignore[arg-type]
             self.strategy.observe_label(
                 obs,
                 teacher_action,  # type: ignore[arg-type]
@@ -711,36 +774,13 @@ class ConfidentTeacher:
                 kind="demonstration",
             )
             self._episode_had_demo = True
-        if phase == "confident":
-            self._auto_window.append(not ask)
-        executed = teacher_action if actor == "teacher" else model_action
-        record = StepRecord(
-            step=step,
-            episode=self._episode,
-            observation=tuple(obs.tolist()),
-            model_action=model_action,
-            confidence=confidence,
-            distance=distance,
-            posterior=posterior,
-            teacher_action=teacher_action,
-            executed_action=executed,  # type: ignore[arg-type]
-            phase=phase,
-            autonomous=not ask,
-            reward=None,
-            terminated=False,
-            truncated=False,
-            info={},
-            n_demonstrations=self._labels,
-            autonomy_rate=self.autonomy_rate,
-            windowed_accuracy=self.windowed_accuracy,
-            actor=actor,
-        )
-        if ask:
-            if self._store is not None:
-                self._store.commit_demonstration(record)  # durable before the action runs
             self._new_since_refit += 1
         try:
             record = self._execute(record)
+        except BaseException:
+            if not ask and len(self.records) == step:  # an autonomous step not logged
+                undo()
+            raise
         finally:
             # Refit once the step is complete (Algorithm 1 executes the teacher's action either
             # way), so a fit that fails leaves a whole step behind, not half of one.
@@ -787,6 +827,42 @@ class ConfidentTeacher:
             )
         return False
 
+    def _record(
+        self,
+        step,
+        obs,
+        model_action,
+        confidence,
+        distance,
+        posterior,
+        teacher_action,
+        actor,
+        phase,
+        ask,
+    ) -> StepRecord:
+        executed = teacher_action if actor == "teacher" else model_action
+        return StepRecord(
+            step=step,
+            episode=self._episode,
+            observation=tuple(obs.tolist()),
+            model_action=model_action,
+            confidence=confidence,
+            distance=distance,
+            posterior=posterior,
+            teacher_action=teacher_action,
+            executed_action=executed,  # type: ignore[arg-type]
+            phase=phase,
+            autonomous=not ask,
+            reward=None,
+            terminated=False,
+            truncated=False,
+            info={},
+            n_demonstrations=self._labels,
+            autonomy_rate=self.autonomy_rate,
+            windowed_accuracy=self.windowed_accuracy,
+            actor=actor,
+        )
+
     def _offer_correction(self, record: StepRecord, raw: Any, info: dict) -> bool:
         """Let the teacher correct the autonomous step just taken; True if it did."""
         try:
@@ -825,54 +901,109 @@ class ConfidentTeacher:
         x = record.observation_array
         self._labels += 1
         self._train.add(x, action)
+        self._digest.update(x, action)
         self.strategy.observe_label(x, action, model_action=record.model_action, kind="correction")
         self._new_since_refit += 1
         if self._new_since_refit >= self.config.max_new:
             self._refit()
         return True
 
+    def _outcome(self, out: Any) -> tuple[float, bool, bool, dict]:
+        """Check what env.step returned (but the observation): reward, flags, info."""
+        try:
+            raw, r, term, trunc, env_info = out
+        except (TypeError, ValueError):
+            raise EnvError(
+                f"env.step returned {type(out).__name__} {out!r:.80}; expected the gymnasium "
+                "5-tuple (observation, reward, terminated, truncated, info)"
+            ) from None
+        if env_info is None:
+            info: dict = {}
+        elif isinstance(env_info, Mapping):
+            info = dict(env_info)
+        else:
+            raise EnvError(f"env.step returned info {env_info!r:.80}; expected a dict")
+        flags = []
+        for name, flag in (("terminated", term), ("truncated", trunc)):
+            if not isinstance(flag, (bool, np.bool_, int, np.integer)) or flag not in (0, 1):
+                raise EnvError(f"env.step returned {name}={flag!r:.80}; expected a bool")
+            flags.append(bool(flag))
+        try:
+            reward = float(r)
+        except (TypeError, ValueError):
+            reward = math.nan
+        if not math.isfinite(reward):
+            raise EnvError(f"env.step returned a non-finite reward {r!r:.80}")
+        return reward, flags[0], flags[1], info
+
     def _execute(self, record: StepRecord) -> StepRecord:
+        """Run the record's action, log the step with its outcome and return it.
+
+        Whatever happens in the env, the step is appended to :attr:`records` and logged
+        (an env error or a Ctrl-C cuts the episode). If the log write fails, memory follows
+        disk: a demonstration (already durable) is kept as interrupted, an autonomous step is
+        dropped; either way the episode is cut and :class:`SessionWriteError` raised.
+        """
         error: str | None = None
         cause: BaseException | None = None
+        interrupt: BaseException | None = None
         reward: float | None = None
         terminated = truncated = False
         info: dict = {}
         try:
-            raw, r, term, trunc, env_info = self.env.step(record.executed_action)
+            out = self.env.step(record.executed_action)
         except Exception as exc:
             error, cause = f"env.step raised {type(exc).__name__}: {exc}", exc
+        except BaseException as exc:  # KeyboardInterrupt (Ctrl-C), SystemExit: log, re-raise
+            interrupt = exc
         else:
-            info = dict(env_info or {})
-            terminated, truncated = bool(term), bool(trunc)
             try:
-                reward = float(r)
-            except (TypeError, ValueError):
-                reward = math.nan
-            if not math.isfinite(reward):
-                error, reward = f"env.step returned a non-finite reward {r!r}", None
+                reward, terminated, truncated, info = self._outcome(out)
+            except EnvError as exc:
+                error, cause = str(exc), exc
             else:
                 try:
-                    self._obs = obs_array(raw, self.n_features, "env.step")
-                    self._raw_obs, self._info = raw, info
+                    self._obs = obs_array(out[0], self.n_features, "env.step")
+                    self._raw_obs, self._info = out[0], info
                 except EnvError as exc:
                     error, cause = str(exc), exc
-        if error is not None:
+        if interrupt is not None:
+            reward, terminated, truncated = None, False, True
+            info = {"torchcbl_interrupted": True}
+        elif error is not None:
             truncated = True
             info = {"torchcbl_error": error}
-        final = record.with_outcome(
-            reward, terminated, truncated, jsonable_info(info) if error is None else info
-        )
+        else:
+            info = jsonable_info(info)
+        final = record.with_outcome(reward, terminated, truncated, info)
         self.records.append(final)
-        if self._store is not None:
-            if final.teacher_action is not None:
-                self._store.finish(final)
-            else:
-                self._store.append(final)
         if terminated or truncated:
             self._needs_reset = True
+        if self._store is not None:
+            try:
+                if final.teacher_action is not None:
+                    self._store.finish(final)
+                else:
+                    self._store.append(final)
+            except SessionWriteError as exc:
+                self._needs_reset = True
+                if final.teacher_action is not None:  # durable as pending: reads interrupted
+                    self.records[-1] = record.with_outcome(
+                        None, False, True, {"torchcbl_interrupted": True}
+                    )
+                else:
+                    self.records.pop()
+                if interrupt is None:
+                    raise
+                interrupt.add_note(f"torchcbl: {exc}")
+        if interrupt is not None:
+            where = f" in {self.run_dir}" if self.run_dir is not None else ""
+            interrupt.add_note(
+                f"torchcbl: step {final.step} was logged as interrupted (episode cut){where}; "
+                "call run() again to go on from a fresh episode, or resume the directory."
+            )
+            raise interrupt
         if error is not None:
-            if self._store is not None:
-                self._store.commit()
             raise EnvError(
                 f"{error} (step {final.step}, action {final.executed_action}). The step is "
                 "logged with the episode cut (truncated); call run() again to continue from a "
@@ -943,9 +1074,16 @@ class ConfidentTeacher:
                 ):
                     self.stop_reason = "autonomous_episodes"
                     break
+        except BaseException as exc:
+            try:
+                self.flush()
+            except SessionWriteError as flush_error:
+                exc.add_note(f"torchcbl: also, {flush_error}")
+            raise
+        else:
+            self.flush()
         finally:
             self._run_config = None
-            self.flush()
             if self.progress:
                 bar.set_postfix_str(self._postfix())
             bar.close()
@@ -968,8 +1106,8 @@ class ConfidentTeacher:
     def close(self) -> None:
         """Commit and close the step log. The session can be resumed from its directory."""
         if self._store is not None:
-            self._store.close()
-            self._store = None
+            store, self._store = self._store, None
+            store.close()  # releases the lock even when the final commit fails
 
     def __enter__(self) -> ConfidentTeacher:
         return self

@@ -1,0 +1,744 @@
+"""Teaching sessions that survive everything: exceptions, full disks, damaged files, read-only
+readers, two writers, far observations (issue 15).
+
+Every case checks the same things afterwards (:func:`goes_on`): the error was a torchcbl error
+naming the file and the fix; memory equals disk (records, labels, the live model equals
+``load_model``, which equals a fresh fit on ``load_demonstrations``); ``run()`` in the same
+process continues; ``resume`` from disk continues; and no demonstration whose action reached
+the env was lost (:class:`Witness`).
+"""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import json
+import os
+import shutil
+import signal
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from _toy_envs import oracle, overlap_world, rare_regions_world
+from test_session import TESTS, assert_model_is_fit_on_log, same_state
+
+from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
+from torchcbl import session as S
+from torchcbl.errors import (
+    CorruptSessionError,
+    EnvError,
+    IncompatibleRunDirError,
+    SessionLockedError,
+    SessionWriteError,
+)
+from torchcbl.session import (
+    load_config,
+    load_corrections,
+    load_demonstrations,
+    load_labels,
+    load_model,
+    load_records,
+    repair_journal,
+)
+
+# -- helpers ----------------------------------------------------------------------------------
+
+
+class Witness(gym.Wrapper):
+    """Notes every label the teacher gave and every action handed to the env, by step."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.ct: ConfidentTeacher | None = None
+        self.taught: dict[int, int] = {}
+        self.executed: dict[int, int] = {}
+        self.fail: dict[int, BaseException | tuple] = {}  # env step call -> raise / return
+        self.calls = 0
+
+    def teacher(self, obs: np.ndarray, info: dict) -> int:
+        a = self.env.unwrapped.optimal_action(obs)
+        self.taught[self.ct.n_steps] = a
+        return a
+
+    def step(self, action: int):
+        self.calls += 1
+        self.executed[self.ct.n_steps] = int(action)
+        out = self.env.step(action)
+        bad = self.fail.pop(self.calls, None)
+        if isinstance(bad, BaseException):
+            raise bad
+        return out if bad is None else bad(out)
+
+    def lost(self, run: Path) -> list[int]:
+        """Steps whose label was executed in the env but are not demonstrations on disk."""
+        records = {r.step: r for r in load_records(run)}
+        return [
+            s
+            for s, a in self.executed.items()
+            if s in self.taught
+            and self.taught[s] == a
+            and (s not in records or records[s].teacher_action != a)
+        ]
+
+
+def session(
+    run: Path, world=None, commit_every: int = 32, **cfg
+) -> tuple[ConfidentTeacher, Witness]:
+    env = Witness(world or rare_regions_world())
+    ct = ConfidentTeacher(
+        env,
+        env.teacher,
+        config=TeachingConfig(**{"max_new": 2, "accuracy_window": 10, **cfg}),
+        run_dir=run,
+        progress=False,
+        commit_every=commit_every,
+    )
+    env.ct = ct
+    return ct, env
+
+
+def resume(run: Path, world=None, **kw) -> tuple[ConfidentTeacher, Witness]:
+    env = Witness(world or rare_regions_world())
+    ct = ConfidentTeacher.resume(run, env, env.teacher, progress=False, **kw)
+    env.ct = ct
+    return ct, env
+
+
+def memory_equals_disk(ct: ConfidentTeacher, run: Path) -> None:
+    assert load_records(run) == ct.records
+    assert load_corrections(run) == ct.corrections
+    x, y = load_labels(run)
+    assert len(y) == ct.n_demonstrations
+    ns = [r.n_demonstrations for r in ct.records]
+    assert ns == sorted(ns) and all(b - a <= 1 for a, b in zip(ns, ns[1:], strict=False))
+    assert same_state(load_model(run), ct.model)  # the live model is the one on disk
+    assert_model_is_fit_on_log(load_model(run), run)  # which is a fresh fit on the log
+
+
+def goes_on(ct: ConfidentTeacher, env: Witness, run: Path, world=rare_regions_world) -> None:
+    """After a fault: memory == disk; run() continues; resume continues; nothing lost."""
+    memory_equals_disk(ct, run)
+    n = ct.n_steps
+    ct.run(max_steps=n + 12)
+    assert [r.step for r in ct.records] == list(range(n + 12))
+    memory_equals_disk(ct, run)
+    assert env.lost(run) == []
+    ct.close()
+    back, env2 = resume(run, world())
+    assert back.records == ct.records and same_state(back.model, ct.model)
+    back.run(max_steps=back.n_steps + 12)
+    memory_equals_disk(back, run)
+    assert env2.lost(run) == [] and env.lost(run) == []
+    back.close()
+
+
+def files_of(run: Path) -> dict[str, tuple[int, str]]:
+    """{relative path: (mtime_ns, sha256)} of every file under a run directory."""
+    return {
+        str(p.relative_to(run)): (p.stat().st_mtime_ns, hashlib.sha256(p.read_bytes()).hexdigest())
+        for p in sorted(run.rglob("*"))
+        if p.is_file()
+    }
+
+
+def crash(ct: ConfidentTeacher) -> None:
+    """Leave the directory as a SIGKILL would: journal not committed, lock released."""
+    ct._store._release()
+    ct._store = None
+
+
+# -- 1. memory never runs ahead of disk after an exception ------------------------------------
+
+
+def test_ctrl_c_inside_env_step_on_a_demonstration(tmp_path):
+    run = tmp_path / "run"
+    ct, env = session(run)  # the non-interactive phase: every step is a demonstration
+    ct.run(max_steps=5)
+    env.fail[env.calls + 3] = KeyboardInterrupt()
+    with pytest.raises(KeyboardInterrupt) as err:
+        ct.run(max_steps=20)
+    notes = " ".join(getattr(err.value, "__notes__", []))
+    assert f"step 7 was logged as interrupted (episode cut) in {run}" in notes
+    assert "call run() again" in notes
+    last = ct.records[-1]
+    assert last.step == 7 and last.is_demonstration and last.truncated
+    assert last.info == {"torchcbl_interrupted": True} and last.reward is None
+    goes_on(ct, env, run)
+
+
+def test_ctrl_c_inside_env_step_later_in_confident_execution(tmp_path):
+    run = tmp_path / "run"
+    ct, env = session(run, noninteractive=False)
+    ct.run(max_steps=40)
+    env.fail[env.calls + 1] = KeyboardInterrupt()
+    with pytest.raises(KeyboardInterrupt):
+        ct.run(max_steps=60)
+    assert ct.records[-1].info == {"torchcbl_interrupted": True}
+    goes_on(ct, env, run)
+
+
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        (lambda out: (*out[:4], ["not", "a dict"]), r"info \['not', 'a dict'\]; expected a dict"),
+        (lambda out: (out[0], out[1], np.array([0, 1]), *out[3:]), "terminated=.*expected a bool"),
+        (lambda out: (out[0], out[1], out[2], "yes", out[4]), "truncated='yes'.*expected a bool"),
+        (lambda out: out[:3], "expected the gymnasium 5-tuple"),
+    ],
+    ids=["info-list", "terminated-array", "truncated-str", "short-tuple"],
+)
+def test_malformed_env_output_is_an_env_error(tmp_path, bad, match):
+    run = tmp_path / "run"
+    ct, env = session(run)
+    ct.run(max_steps=4)
+    env.fail[env.calls + 2] = bad
+    with pytest.raises(EnvError, match=match) as err:
+        ct.run(max_steps=20)
+    assert "call run() again" in str(err.value)
+    assert ct.records[-1].truncated and "torchcbl_error" in ct.records[-1].info
+    goes_on(ct, env, run)
+
+
+# -- 2. disk full -----------------------------------------------------------------------------
+
+
+def _failing_write(monkeypatch, which: str, *, short: bool = False):
+    """Make the next journal write of kind ``which`` fail: "demo" (a demonstration before its
+    action), "finish" (its outcome), "auto" (an autonomous step), "any"."""
+    real = os.write
+    state = {"armed": True, "hit": None}
+
+    def write(fd, data):
+        payload = json.loads(data.rpartition(b"\t")[0])
+        kind = {"f": "finish", "c": "correction"}.get(payload[0])
+        if kind is None:
+            labelled = payload[1 + S._COLUMNS.index("teacher_action")] is not None
+            kind = "demo" if labelled else "auto"
+        if state["armed"] and which in (kind, "any"):
+            state["armed"], state["hit"] = False, kind
+            if short:  # the disk fills up mid-line: part of it reaches the file
+                return real(fd, data[: len(data) // 2])
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(fd, data)
+
+    monkeypatch.setattr(S, "_write_fd", write)
+    return state
+
+
+@pytest.mark.parametrize("short", [False, True], ids=["enospc", "short-write"])
+@pytest.mark.parametrize("which", ["demo", "finish", "auto"])
+def test_journal_write_fails_disk_full(tmp_path, monkeypatch, which, short):
+    run = tmp_path / "run"
+    ct, env = session(run, noninteractive=which == "auto", commit_every=1000)
+    ct.run(max_steps=30)
+    size = (run / "steps.journal").stat().st_size
+    state = _failing_write(monkeypatch, which, short=short)
+    with pytest.raises(SessionWriteError) as err:
+        ct.run(max_steps=80)
+    assert state["hit"] == which
+    msg = str(err.value)
+    assert str(run / "steps.journal") in msg and "Free space" in msg and "run() again" in msg
+    assert err.value.errno == errno.ENOSPC
+    # nothing torn is left behind: every journal line is whole and checks out
+    assert (run / "steps.journal").stat().st_size >= size
+    assert S._scan_journal(run / "steps.journal").damaged == []
+    if which == "finish":  # the demonstration was durable before its action: kept, cut
+        assert ct.records[-1].is_demonstration and ct.records[-1].truncated
+        assert ct.records[-1].info == {"torchcbl_interrupted": True}
+    elif which == "demo":  # asked, not logged, so never executed: not in the session
+        assert ct.n_steps in env.taught and ct.n_steps not in env.executed
+    else:  # executed but not logged: not in the session, the episode is cut
+        assert ct.n_steps in env.executed and ct._needs_reset
+    monkeypatch.undo()
+    goes_on(ct, env, run)
+
+
+class FullDisk:
+    """A connection proxy whose COMMITs fail like SQLite's on a full disk (SQLite rolls the
+    transaction back itself), ``n`` times."""
+
+    def __init__(self, db: sqlite3.Connection, n: int) -> None:
+        self.db, self.n = db, n
+
+    def execute(self, sql, *args):
+        if sql == "COMMIT" and self.n > 0:
+            self.n -= 1
+            self.db.execute("ROLLBACK")
+            raise sqlite3.OperationalError("database or disk is full")
+        return self.db.execute(sql, *args)
+
+    def __getattr__(self, name):
+        return getattr(self.db, name)
+
+
+def test_sqlite_commit_fails_disk_full_then_space_is_freed(tmp_path):
+    run = tmp_path / "run"
+    ct, env = session(run, commit_every=8)
+    ct.run(max_steps=20)
+    ct._store._db = FullDisk(ct._store._db, n=10**6)
+    with pytest.raises(SessionWriteError) as err:  # the batched commits fail silently, the
+        ct.run(max_steps=45)  # flush at the end of run() says so
+    msg = str(err.value)
+    assert str(run / "steps.sqlite") in msg and "Nothing is lost" in msg and "Free space" in msg
+    assert ct.n_steps == 45  # every step was journalled: the session went on
+    memory_equals_disk(ct, run)  # readers see the journal
+    ct._store._db = ct._store._db.db  # space is freed
+    goes_on(ct, env, run)
+
+
+def _mount(*args: str) -> bool:
+    return subprocess.run(["mount", *args], capture_output=True).returncode == 0
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 1 MiB tmpfs (root only; skipped elsewhere)."""
+    where = tmp_path / "disk"
+    where.mkdir()
+    if os.geteuid() != 0 or not _mount("-t", "tmpfs", "-o", "size=1m", "tmpfs", str(where)):
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", "-l", str(where)], capture_output=True)
+
+
+def _fill(where: Path, leave: int) -> Path:
+    st = os.statvfs(where)
+    filler = where / "filler"
+    with open(filler, "wb") as f:
+        f.write(b"\0" * max(st.f_bavail * st.f_frsize - leave, 0))
+    return filler
+
+
+@pytest.mark.parametrize("leave", [0, 4096, 12288, 40960])
+def test_really_full_disk(small_disk, leave):
+    """A real full disk (tmpfs): whatever write fails first (journal line, SQLite page, WAL,
+    checkpoint), the error names the file and the fix, and once space is freed the same
+    session and a resumed one go on with nothing lost."""
+    run = small_disk / "run"
+    ct, env = session(run, world=overlap_world(), max_new=1, commit_every=4)
+    ct.run(max_steps=10)
+    filler = _fill(small_disk, leave)
+    with pytest.raises(SessionWriteError) as err:
+        ct.run(max_steps=5000)
+    msg = str(err.value)
+    assert str(run) in msg and "Free space" in msg
+    filler.unlink()
+    goes_on(ct, env, run, world=overlap_world)
+
+
+# -- 3. readers never write -------------------------------------------------------------------
+
+
+def _closed_session(run: Path, **cfg) -> None:
+    ct, _ = session(run, **cfg)
+    ct.run(max_steps=60)
+    ct.close()
+
+
+def _read_everything(run: Path):
+    return (
+        load_records(run),
+        load_corrections(run),
+        load_demonstrations(run),
+        load_model(run).state_dict(),
+    )
+
+
+def test_readers_open_the_log_read_only_and_change_nothing(tmp_path, monkeypatch):
+    run = tmp_path / "run"
+    _closed_session(run)
+    for p in run.rglob("*"):  # as read-only as root can make it
+        p.chmod(0o444 if p.is_file() else 0o555)
+    run.chmod(0o555)
+    opened = []
+    real = sqlite3.connect
+
+    def connect(database, *args, **kw):
+        opened.append(str(database))
+        return real(database, *args, **kw)
+
+    monkeypatch.setattr(S.sqlite3, "connect", connect)
+    before = files_of(run)
+    records, *_ = _read_everything(run)
+    assert files_of(run) == before  # same files, bytes and mtimes; no -wal / -shm created
+    assert opened and all("immutable=1" in o or "mode=ro" in o for o in opened)
+    assert len(records) == 60
+
+
+def test_readers_on_a_read_only_mount(tmp_path):
+    src, ro = tmp_path / "src", tmp_path / "ro"
+    src.mkdir()
+    ro.mkdir()
+    _closed_session(src / "clean")
+    ct, _ = session(src / "killed", commit_every=10**6)
+    ct.run(max_steps=40)  # committed into the -wal, the writer still holds it open
+    assert (src / "killed" / "steps.sqlite-wal").stat().st_size > 0
+    expected = {"clean": load_records(src / "clean"), "killed": ct.records}
+    crash_db = ct._store._db  # keep the WAL open (a killed writer's files stay)
+    if os.geteuid() != 0 or not _mount("--bind", str(src), str(ro)):
+        pytest.skip("cannot bind-mount here")
+    try:
+        if not _mount("-o", "remount,bind,ro", str(ro)):
+            pytest.skip("cannot remount read-only here")
+        with pytest.raises(OSError):
+            (ro / "probe").write_text("x")
+        for name in ("clean", "killed"):
+            assert load_records(ro / name) == expected[name]
+            x, y = load_demonstrations(ro / name)
+            assert len(y) == sum(r.is_demonstration for r in expected[name])
+            assert_model_is_fit_on_log(load_model(ro / name), ro / name)
+        with pytest.raises(SessionWriteError, match="write access"):
+            ConfidentTeacher.resume(
+                ro / "clean", rare_regions_world(), oracle(rare_regions_world())
+            )
+    finally:
+        subprocess.run(["umount", "-l", str(ro)], capture_output=True)
+        crash_db.close()
+
+
+# -- 4. damaged files -------------------------------------------------------------------------
+
+
+def _journalled(run: Path, steps: int = 40, **cfg) -> tuple[ConfidentTeacher, Witness]:
+    """A session whose last ``steps`` steps are only in the journal, writer gone (killed)."""
+    ct, env = session(run, **cfg)
+    ct.run(max_steps=20)
+    ct._store.commit_every = 10**6
+    for _ in range(steps):
+        ct.step()
+    crash(ct)
+    return ct, env
+
+
+def _flip(path: Path, offset: int) -> None:
+    data = bytearray(path.read_bytes())
+    data[offset] ^= 0x20
+    path.write_bytes(bytes(data))
+
+
+def test_damaged_first_journal_line_is_reported_and_every_byte_kept(tmp_path):
+    run = tmp_path / "run"
+    ct, env = _journalled(run)
+    journal = run / "steps.journal"
+    _flip(journal, 5)
+    damaged = journal.read_bytes()
+    n_lines = damaged.count(b"\n")
+    for read in (load_records, load_model, load_demonstrations):
+        with pytest.raises(CorruptSessionError) as err:
+            read(run)
+        msg = str(err.value)
+        assert f"{journal}: line 1 (byte 0) is damaged" in msg
+        assert f"{n_lines - 1} valid lines follow it" in msg and "repair_journal" in msg
+    with pytest.raises(CorruptSessionError, match="line 1"):
+        resume(run)
+    assert journal.read_bytes() == damaged  # resume refused and kept every byte
+    report = repair_journal(run)
+    assert (run / "steps.journal.damaged").read_bytes() == damaged
+    assert "kept 0 valid lines" in report and "steps.journal.damaged" in report
+    # The first uncommitted step is lost with its line; the later ones would leave a hole, so
+    # they stay in the copy only. The committed prefix goes on.
+    back, env2 = resume(run)
+    assert back.records == ct.records[:20]
+    goes_on(back, env2, run)
+
+
+def test_damaged_outcome_line_keeps_every_later_line(tmp_path):
+    run = tmp_path / "run"
+    ct, env = _journalled(run)
+    journal = run / "steps.journal"
+    lines = journal.read_bytes().split(b"\n")
+    at = next(i for i, line in enumerate(lines) if line.startswith(b'["f"'))
+    step = json.loads(lines[at].rpartition(b"\t")[0])[-1]
+    _flip(journal, sum(len(line) + 1 for line in lines[:at]) + 8)
+    with pytest.raises(CorruptSessionError, match=f"line {at + 1} "):
+        load_records(run)
+    repair_journal(run)
+    back, env2 = resume(run)
+    # every step is kept; the one whose outcome line was damaged reads as interrupted
+    assert [r.step for r in back.records] == [r.step for r in ct.records]
+    assert back.records[step].truncated and back.records[step].reward is None
+    assert [r.teacher_action for r in back.records] == [r.teacher_action for r in ct.records]
+    assert env.lost(run) == []
+    goes_on(back, env2, run)
+
+
+def test_journal_line_of_valid_json_but_the_wrong_shape(tmp_path):
+    run = tmp_path / "run"
+    ct, env = _journalled(run, steps=10)
+    journal = run / "steps.journal"
+    payload = b'["s",3]'
+    with open(journal, "ab") as f:  # a well-formed, checksummed line of the wrong shape
+        f.write(b"%s\t%08x\n" % (payload, S._crc32(payload)))
+    n = journal.read_bytes().count(b"\n")
+    with pytest.raises(CorruptSessionError, match=f"line {n} .*wrong shape"):
+        load_records(run)
+    repair_journal(run)
+    back, env2 = resume(run)
+    assert back.records == ct.records  # every real line was kept
+    goes_on(back, env2, run)
+
+
+def test_stale_checkpoint_is_not_loaded(tmp_path):
+    run, other = tmp_path / "run", tmp_path / "other"
+    _closed_session(run)
+    _closed_session(other, target_accuracy=None)  # a different log of the same size
+    last = max((run / "checkpoints").glob("model-*.pt"))
+    assert (other / "checkpoints" / last.name).exists()
+    shutil.copy(other / "checkpoints" / last.name, last)  # the log no longer matches it
+    stale_bytes = last.read_bytes()
+    assert_model_is_fit_on_log(load_model(run), run)
+    back, env = resume(run)
+    assert_model_is_fit_on_log(back.model, run)
+    assert (run / "checkpoints" / (last.name + ".stale")).read_bytes() == stale_bytes
+    goes_on(back, env, run)
+
+
+@pytest.mark.parametrize("damage", ["empty", "cut", "garbage"])
+def test_damaged_checkpoint_is_refitted_from_the_log(tmp_path, damage):
+    run = tmp_path / "run"
+    _closed_session(run)
+    last = max((run / "checkpoints").glob("model-*.pt"))
+    data = last.read_bytes()
+    last.write_bytes({"empty": b"", "cut": data[: len(data) // 2], "garbage": b"x" * 100}[damage])
+    assert_model_is_fit_on_log(load_model(run), run)
+    back, env = resume(run)
+    assert_model_is_fit_on_log(back.model, run)
+    assert (run / "checkpoints" / (last.name + ".damaged")).exists()
+    goes_on(back, env, run)
+
+
+def test_damaged_sqlite_file(tmp_path):
+    run = tmp_path / "run"
+    _closed_session(run)
+    log = run / "steps.sqlite"
+    good = log.read_bytes()
+    log.write_bytes(b"garbage!" * 64 + good[512:])
+    for read in (load_records, load_model):
+        with pytest.raises(CorruptSessionError) as err:
+            read(run)
+        assert f"{log} is not a readable SQLite database" in str(err.value)
+        assert ".recover" in str(err.value) and "changed nothing" in str(err.value)
+    with pytest.raises(CorruptSessionError, match="not a readable SQLite database"):
+        resume(run)
+    assert log.read_bytes()[:8] == b"garbage!"  # untouched
+    log.write_bytes(good)  # restored from a backup
+    back, env = resume(run)
+    goes_on(back, env, run)
+
+
+@pytest.mark.parametrize("key", ["teaching", "model", "env", "seed"])
+def test_config_missing_a_key(tmp_path, key):
+    run = tmp_path / "run"
+    _closed_session(run)
+    path = run / "config.json"
+    good = path.read_text()
+    config = json.loads(good)
+    del config[key]
+    path.write_text(json.dumps(config))
+    for call in (load_records, load_model, resume):
+        with pytest.raises(CorruptSessionError) as err:
+            call(run)
+        assert f"{path}: the key {key!r}" in str(err.value) and "restore it" in str(err.value)
+    path.write_text(good)
+    back, env = resume(run)
+    goes_on(back, env, run)
+
+
+def test_deleted_step_log_is_not_restarted_silently(tmp_path):
+    run = tmp_path / "run"
+    _closed_session(run)
+    log = run / "steps.sqlite"
+    kept = tmp_path / "kept.sqlite"
+    log.rename(kept)
+    n = len(list((run / "checkpoints").glob("model-*.pt")))
+    for call in (load_records, load_model, resume):
+        with pytest.raises(CorruptSessionError) as err:
+            call(run)
+        msg = str(err.value)
+        assert f"{log} is missing" in msg and f"{n} checkpoints" in msg and "Put it back" in msg
+    with pytest.raises(IncompatibleRunDirError, match="already holds"):
+        session(run)
+    assert not log.exists()
+    kept.rename(log)
+    back, env = resume(run)
+    goes_on(back, env, run)
+
+
+def test_a_closed_teacher_does_not_go_on_unlogged(tmp_path):
+    run = tmp_path / "run"
+    ct, env = session(run)
+    ct.run(max_steps=5)
+    ct.close()
+    with pytest.raises(IncompatibleRunDirError, match="was closed.*ConfidentTeacher.resume"):
+        ct.run(max_steps=10)
+    assert ct.n_steps == 5 and load_records(run) == ct.records
+
+
+# -- 5. one writer ----------------------------------------------------------------------------
+
+
+def test_a_second_writer_is_refused_while_the_first_runs(tmp_path):
+    run = tmp_path / "run"
+    ct, env = session(run)
+    ct.run(max_steps=15)
+    with pytest.raises(SessionLockedError) as err:
+        resume(run)
+    msg = str(err.value)
+    assert str(run / "writer.lock") in msg and f"process {os.getpid()}" in msg
+    assert "close the other ConfidentTeacher" in msg
+    ct.run(max_steps=30)  # the first writer is unharmed
+    memory_equals_disk(ct, run)
+    goes_on(ct, env, run)  # closes it; then a resume takes the lock
+
+
+def test_a_killed_writer_leaves_no_stuck_lock(tmp_path):
+    run, side = tmp_path / "run", tmp_path / "side.log"
+    proc = subprocess.Popen(
+        [sys.executable, str(TESTS / "_toy_envs.py"), str(run), str(side)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout.readline().strip() == "ready", proc.stderr.read()
+        with pytest.raises(SessionLockedError, match=f"process {proc.pid}"):
+            resume(run, overlap_world(episode_length=25), rule=S_rule())
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    back, env = resume(run, overlap_world(episode_length=25), rule=S_rule())
+    assert_model_is_fit_on_log(back.model, run)
+    back.run(max_steps=back.n_steps + 10)
+    memory_equals_disk(back, run)
+    back.close()
+
+
+def S_rule():  # noqa: N802 - the rule the kill child uses
+    from torchcbl import PosteriorRule
+
+    return PosteriorRule(0.9)
+
+
+# -- 6. far observations ----------------------------------------------------------------------
+
+
+def _two_blobs() -> GaussianMixtureSet:
+    rng = np.random.default_rng(0)
+    x = np.r_[rng.normal(0, 1, (60, 2)), rng.normal([6, 0], [1, 3], (60, 2))]
+    y = np.r_[np.zeros(60, int), np.ones(60, int)]
+    return GaussianMixtureSet(2, 2, max_components=2, seed=0).fit(x, y)
+
+
+def _nearest_component_action(model: GaussianMixtureSet, x: np.ndarray) -> tuple[int, float]:
+    """Oracle: the action of the component with the smallest Mahalanobis distance and that
+    distance, each distance ||U^T (x - mu)|| computed on x / s (s = max |x|) then times s."""
+    s = max(np.abs(x).max(), 1.0)
+    best = (np.inf, -1)
+    for a in range(model.n_actions):
+        for k in range(model.max_components):
+            if not bool(model.component_mask_[a, k]):
+                continue
+            u = model.precisions_cholesky_[a, k].double().numpy()
+            mu = model.means_[a, k].double().numpy()
+            with np.errstate(over="ignore"):
+                d = s * np.linalg.norm((x / s - mu / s) @ u)
+            best = min(best, (d, a))
+    return best[1], best[0]
+
+
+@pytest.mark.parametrize(
+    "x",
+    [[1e155, 0.0], [0.0, -1e155], [1e308, -1e308], [-3e200, 1.0], [1e160, 1e160]],
+)
+def test_far_observations_classify_with_finite_values(x, recwarn):
+    model = _two_blobs()
+    obs = np.array([x, [0.0, 0.0], [6.0, 0.0]])
+    want_a, want_d = _nearest_component_action(model, obs[0])
+    for rows in (obs[:1], obs):  # the loop's one-row path and the batch path
+        c = model.classify(rows)
+        assert torch.isfinite(c.posterior).all() and torch.isfinite(c.distance).all()
+        assert int(c.action[0]) == want_a and float(c.confidence[0]) == 0.0
+        assert c.posterior[0].tolist() == [float(a == want_a) for a in range(2)]
+        assert float(c.distance[0]) == pytest.approx(min(want_d, np.finfo(float).max), rel=1e-9)
+        assert c.action[1:].tolist() == [0, 1][: len(rows) - 1]
+    import torchcbl.gmm as G
+
+    model._cache = None
+    old, G._NUMPY_MAX_ROWS = G._NUMPY_MAX_ROWS, 0  # the torch path
+    try:
+        c2 = model.classify(obs)
+    finally:
+        G._NUMPY_MAX_ROWS = old
+        model._cache = None
+    for a, b in zip(c, c2, strict=True):
+        assert torch.allclose(a.double(), b.double(), rtol=1e-12, atol=0)
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
+
+
+def test_far_path_equals_the_plain_one_where_both_are_representable():
+    model = _two_blobs()
+    rng = np.random.default_rng(1)
+    x = rng.normal(3, 4, (200, 2)) * rng.choice([1, 10, 1e3], (200, 1))
+    plain, far = model.classify(x), model._classify_far(x)
+    assert torch.equal(plain.action, far.action)
+    for a, b in zip(plain[1:], far[1:], strict=True):
+        assert torch.allclose(a, b, rtol=1e-9, atol=1e-300)
+
+
+def test_a_far_observation_in_the_loop(tmp_path):
+    run = tmp_path / "run"
+
+    class Far(gym.Wrapper):
+        def step(self, action):
+            obs, r, term, trunc, info = self.env.step(action)
+            if self.unwrapped._t == 5:
+                obs = np.array([1e155, 0.0], dtype=np.float64)
+            return obs, r, term, trunc, info
+
+    world = rare_regions_world()
+    model = GaussianMixtureSet(3, 2, seed=0).fit(*world.sample(300, np.random.default_rng(0)))
+    env = Far(world)
+    ct = ConfidentTeacher(
+        env,
+        lambda o, i: 0,
+        model=model,
+        config=TeachingConfig(noninteractive=False, max_new=10**6, max_steps=30),
+        run_dir=run,
+        progress=False,
+    )
+    ct.run()
+    far = [r for r in ct.records if r.observation[0] == 1e155]
+    assert far and all(r.confidence == 0.0 and r.is_demonstration for r in far)
+    assert all(np.isfinite(r.posterior).all() for r in far)
+    assert load_records(run) == ct.records
+
+
+# -- 7. determinism, recorded -----------------------------------------------------------------
+
+
+def test_each_writer_records_torch_threads(tmp_path):
+    run = tmp_path / "run"
+    threads = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        ct, _ = session(run)
+        ct.run(max_steps=10)
+        ct.close()
+        torch.set_num_threads(2)
+        back, _ = resume(run)
+        back.run(max_steps=15)
+        back.close()
+    finally:
+        torch.set_num_threads(threads)
+    lines = [json.loads(x) for x in (run / "writers.jsonl").read_text().splitlines()]
+    assert [(w["first_step"], w["torch_num_threads"]) for w in lines] == [(0, 1), (10, 2)]
+    assert lines[0]["torch_version"] == torch.__version__
+    assert load_config(run)["format"] == S.FORMAT
