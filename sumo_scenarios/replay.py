@@ -219,23 +219,86 @@ def render_gif(
     return path
 
 
-def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path) -> Path:
-    """Write a ``.sumocfg`` beside an exported FCD file, for ``sumo-gui -c PATH``.
+def _write_replay_input(fcd: Path, out: Path, road_end_m: float) -> int:
+    """Copy the recorded FCD for SUMO's fcd-replay device, adding one entry per vanished car.
 
-    It names the shipped network and additional file (absolute paths), the episode's step
-    length, begin 0 and end at the episode's last step, and the FCD file (as ``fcd-output``
-    of a re-run, under another name, so the recording is never overwritten). It holds no
-    routes: the traffic of an episode is placed through the API, so SUMO on its own shows the
-    empty road; use the FCD (sumo-gui's trajectory tools, or the GIF) to watch the cars.
+    The device inserts every vehicle of the file at its first recorded place and moves it to
+    each recorded place in turn, but it never removes a vehicle whose trajectory ends: it leaves
+    only when it reaches the end of its route. A car the episode took off (recycled) is
+    therefore moved, one step after its last recorded one, to the end of its lane
+    (``road_end_m``), where it arrives and leaves in that same step. Returns how many cars got
+    such an entry.
+    """
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(fcd).getroot()
+    steps = root.findall("timestep")
+    last: dict[str, tuple[int, ET.Element]] = {}
+    for i, ts in enumerate(steps):
+        for v in ts.findall("vehicle"):
+            last[v.get("id", "")] = (i, v)
+    n = 0
+    for i, v in last.values():
+        if i + 1 < len(steps):
+            e = ET.SubElement(steps[i + 1], "vehicle", dict(v.attrib))
+            e.set("x", f"{road_end_m:.2f}")
+            e.set("pos", f"{road_end_m:.2f}")
+            n += 1
+    ET.ElementTree(root).write(out, xml_declaration=True, encoding="UTF-8")
+    return n
+
+
+def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path) -> Path:
+    """Write a ``.sumocfg`` that replays an exported FCD file in SUMO alone (``sumo-gui -c PATH``).
+
+    Beside ``fcd_path`` (the FCD written by :func:`export_fcd` for this ``record``) it writes
+    ``<fcd stem>.replay.xml``, the input of SUMO's fcd-replay device: the recorded FCD plus,
+    for every car the episode removed before its end, one entry at the end of its lane one
+    step later, where SUMO lets it leave (the device itself never removes a vehicle). The
+    configuration names the shipped network and additional file (vehicle types; absolute
+    paths), the replay input and a re-run FCD output ``<fcd stem>.rerun.xml`` (both relative,
+    so the three files move together), begin 0, the episode's end and step length, and
+    sumo-gui's delay for real time. Under it every vehicle takes its recorded lane and
+    position at every recorded step (the device moves it there; insertion checks are off so
+    cars enter exactly where they were recorded): the re-run FCD equals the recorded one in
+    every vehicle's x, y, lane and position, and in speed except at each car's first step.
+    Contacts stay possible as in the episode (``collision.action none``, as when recording).
+
+    What SUMO prints: no error and no teleport. Each removed car is moved once to the lane end,
+    which SUMO reports as "moved by TraCI" (shown for the first 3, then counted:
+    ``aggregate-warnings 3``); emergency-braking warnings are off (threshold 1000), because
+    the device sets every speed from the recording and a car enters at a speed of SUMO's
+    choosing (the device does not pass the recorded one), so the first speed change of each
+    car looks like a hard brake that the episode never had.
     """
     from sumo_scenarios.scenarios import data_path
+    from sumo_scenarios.sim import libsumo_lane_length_from_net
 
     path = Path(path)
     fcd = Path(fcd_path).resolve()
-    end = len(record.actions) * record.sim.step_length_s
+    if not fcd.is_file():
+        raise FileNotFoundError(
+            f"write_sumocfg needs the episode's FCD file, {fcd} does not exist: "
+            "write it first with export_fcd(record, path)"
+        )
+    stem = fcd.name.removesuffix(".xml").removesuffix(".fcd")
+    replay_input = fcd.with_name(stem + ".replay.xml")
+    rerun = fcd.with_name(stem + ".rerun.xml")
+    _write_replay_input(fcd, replay_input, libsumo_lane_length_from_net())
+
+    def rel(p: Path) -> str:
+        try:
+            return str(p.relative_to(path.resolve().parent))
+        except ValueError:
+            return str(p)
+
+    dt = record.sim.step_length_s
+    end = len(record.actions) * dt
     text = f"""<?xml version="1.0" encoding="UTF-8"?>
 <!-- Written by sumo_scenarios.replay.write_sumocfg for episode {record.label or "-"}
-     (episode seed {record.episode_seed}); recorded FCD: {fcd.name} -->
+     (episode seed {record.episode_seed}); recorded FCD: {fcd.name}.
+     sumo-gui -c {path.name} replays it (press play); sumo -c {path.name} replays it headless
+     and writes {rerun.name}, whose positions equal the recorded ones. -->
 <configuration>
     <input>
         <net-file value="{data_path("road.net.xml")}"/>
@@ -244,17 +307,27 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
     <time>
         <begin value="0"/>
         <end value="{end!r}"/>
-        <step-length value="{record.sim.step_length_s!r}"/>
+        <step-length value="{dt!r}"/>
     </time>
     <processing>
-        <collision.action value="warn"/>
+        <collision.action value="none"/>
+        <insertion-checks value="none"/>
+        <eager-insert value="true"/>
+        <emergencydecel.warning-threshold value="1000"/>
     </processing>
+    <fcd_replay_device>
+        <device.fcd-replay.files value="{rel(replay_input)}"/>
+    </fcd_replay_device>
     <output>
-        <fcd-output value="{fcd.with_name(fcd.stem + ".rerun.xml")}"/>
+        <fcd-output value="{rel(rerun)}"/>
     </output>
     <report>
         <no-step-log value="true"/>
+        <aggregate-warnings value="3"/>
     </report>
+    <gui_only>
+        <delay value="{dt * 1000.0!r}"/>
+    </gui_only>
 </configuration>
 """
     path.write_text(text)

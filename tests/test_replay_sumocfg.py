@@ -1,0 +1,103 @@
+"""The ``.sumocfg`` written beside a replay's FCD replays the episode in SUMO alone.
+
+Oracle: the FCD the episode itself wrote through libsumo. ``sumo -c`` (the command-line SUMO
+of the eclipse-sumo package, no Python in the loop) must reproduce every recorded vehicle's
+x, y, lane and lane position EXACTLY as written (both files at SUMO's default 2 decimals; the
+replay input is the recorded file, so there is no rounding to tolerate), report no error and
+no teleport, and show nothing else but, for each car the episode removed, one step at the end
+of the road (where SUMO lets it leave).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from sumo_scenarios.env import DrivingEnv
+from sumo_scenarios.expert import ScriptedExpert
+from sumo_scenarios.replay import EpisodeRecorder, export_fcd, write_sumocfg
+from sumo_scenarios.sim import libsumo_lane_length_from_net
+
+_STEPS = 120
+
+
+def _fcd(path: Path) -> dict[tuple[str, str], dict[str, str]]:
+    out = {}
+    for ts in ET.parse(path).getroot().iter("timestep"):
+        for v in ts.iter("vehicle"):
+            out[(ts.get("time"), v.get("id"))] = dict(v.attrib)
+    return out
+
+
+@pytest.fixture(scope="module")
+def episode(tmp_path_factory):
+    env = EpisodeRecorder(DrivingEnv(scenario="train", max_episode_steps=_STEPS), label="t")
+    expert = ScriptedExpert(seed=3)
+    try:
+        obs, info = env.reset(seed=5)
+        for _ in range(_STEPS):
+            obs, _, _, _, info = env.step(expert(obs, info))
+    finally:
+        env.close()
+    (rec,) = env.episodes
+    d = tmp_path_factory.mktemp("replay")
+    fcd = export_fcd(rec, d / "ep.fcd.xml")
+    return rec, fcd, d
+
+
+def test_sumo_alone_replays_the_recorded_positions_exactly(episode):
+    rec, fcd, d = episode
+    cfg = write_sumocfg(rec, fcd, d / "ep.sumocfg")
+    sumo = Path(sys.executable).with_name("sumo")
+    out = subprocess.run(
+        [str(sumo), "-c", str(cfg), "--statistic-output", str(d / "stats.xml")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        cwd="/",  # the configuration's relative file names resolve beside it, not in the cwd
+    )
+    log = (out.stdout + out.stderr).lower()
+    assert out.returncode == 0, out.stderr
+    assert "error" not in log and "teleport" not in log, log
+    teleports = ET.parse(d / "stats.xml").getroot().find("teleports")
+    assert teleports is not None and teleports.get("total") == "0"
+
+    recorded, rerun = _fcd(fcd), _fcd(d / "ep.rerun.xml")
+    times = sorted({t for t, _ in recorded}, key=float)
+    assert len(times) == _STEPS
+    ego_lanes = {a["lane"] for (t, vid), a in recorded.items() if vid == "ego"}
+    assert len(ego_lanes) >= 2, "the episode should hold a lane change of the ego"
+    missing = set(recorded) - set(rerun)
+    assert not missing, sorted(missing)[:5]
+    first_seen: dict[str, str] = {}
+    last_seen: dict[str, str] = {}
+    for t, vid in sorted(recorded, key=lambda k: float(k[0])):
+        first_seen.setdefault(vid, t)
+        last_seen[vid] = t
+    for key, a in recorded.items():
+        b = rerun[key]
+        for field in ("x", "y", "lane", "pos", "angle"):
+            assert a[field] == b[field], (key, field, a[field], b[field])
+        if first_seen[key[1]] != key[0]:  # a car enters at a speed of SUMO's choosing
+            assert a["speed"] == b["speed"], (key, a["speed"], b["speed"])
+
+    # the only extra entries: each car the episode removed, one step later, at the road end
+    extra = set(rerun) - set(recorded)
+    removed = {vid for vid, t in last_seen.items() if t != times[-1]}
+    assert removed, "the episode should remove (recycle) at least one car"
+    assert {vid for _, vid in extra} == removed and len(extra) == len(removed)
+    road_end = f"{libsumo_lane_length_from_net():.2f}"
+    for t, vid in extra:
+        assert times.index(t) == times.index(last_seen[vid]) + 1
+        assert rerun[(t, vid)]["pos"] == road_end
+
+
+def test_sumocfg_needs_the_exported_fcd(episode, tmp_path):
+    rec, _, _ = episode
+    with pytest.raises(FileNotFoundError, match="export_fcd"):
+        write_sumocfg(rec, tmp_path / "absent.fcd.xml", tmp_path / "x.sumocfg")
