@@ -103,7 +103,7 @@ class DrivingExperimentConfig:
     extra_eval_segments: tuple[int, ...] = ()
     criterion: str = "aic"
     gmm_tol: float = 1e-4
-    teacher: str = "expert"
+    teacher: str = "human"
     ni_stage_every: int = 100
 
     def __post_init__(self) -> None:
@@ -802,7 +802,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--full", action="store_true")
     p.add_argument("--seeds", type=int, default=None)
     p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--teacher", choices=("expert", "human"), default="expert")
+    p.add_argument("--teacher", choices=("expert", "human"), default="human")
     a = p.parse_args(argv)
     cfg = DrivingExperimentConfig.full() if a.full else DrivingExperimentConfig()
     cfg = dataclasses.replace(cfg, teacher=a.teacher)
