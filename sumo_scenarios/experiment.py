@@ -81,7 +81,8 @@ class DrivingExperimentConfig:
             1e-3 the quick run's arm (a) final policy collided more (0.6 +- 1.2 % against
             0.1 +- 0.1 %, 5 seeds), the difference lying in a few seeds' fits.
         teacher: ``expert`` (the consistent scripted expert, :class:`ScriptedExpert`) or
-            ``human`` (the human-like teacher, :func:`sumo_scenarios.teacher.make_teacher`).
+            ``human`` (the default: the human-like teacher,
+            :func:`sumo_scenarios.teacher.make_teacher`).
         ni_stage_every: arm (a) is also snapshotted every this many non-interactive
             demonstrations before the switch (Figure 8's first section).
     """
