@@ -1,9 +1,11 @@
 """The driving domain's entry in the strategy benchmark (:mod:`torchcbl.benchmark`).
 
 :func:`teacher` is the teacher factory the benchmark imports by path
-(``"sumo_scenarios.benchmark:teacher"``). It is today's scripted expert; to benchmark another
-teacher (the human-like one), change the one line in :func:`teacher` or pass another import
-path as ``EnvSpec.teacher`` (``torchcbl benchmark --driving-teacher module:factory``).
+(``"sumo_scenarios.benchmark:teacher"``). It is the human-like teacher
+(:func:`sumo_scenarios.teacher.make_teacher`), the driving experiment's default; to benchmark
+another teacher (the consistent scripted expert: ``sumo_scenarios.expert:ScriptedExpert``),
+pass its import path as ``EnvSpec.teacher`` (``torchcbl benchmark --driving-teacher
+module:factory``).
 
 :func:`env_spec` uses the paper's Section 5.2 settings where they are cheap enough (window 150,
 target 80 %, bursts of 10, up to 10 components) with a refit every 5 labels; performance is
@@ -19,10 +21,11 @@ __all__ = ["env_spec", "teacher"]
 
 
 def teacher(seed: int = 0) -> Any:
-    """The driving teacher for a run seed (today: :class:`ScriptedExpert`)."""
-    from sumo_scenarios.expert import ScriptedExpert
+    """The driving teacher for a run seed: the human-like one
+    (:func:`sumo_scenarios.teacher.make_teacher`)."""
+    from sumo_scenarios.teacher import make_teacher
 
-    return ScriptedExpert(seed=seed)
+    return make_teacher(seed)
 
 
 def env_spec(quick: bool = True) -> Any:

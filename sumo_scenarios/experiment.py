@@ -81,7 +81,8 @@ class DrivingExperimentConfig:
             1e-3 the quick run's arm (a) final policy collided more (0.6 +- 1.2 % against
             0.1 +- 0.1 %, 5 seeds), the difference lying in a few seeds' fits.
         teacher: ``expert`` (the consistent scripted expert, :class:`ScriptedExpert`) or
-            ``human`` (the human-like teacher, :func:`sumo_scenarios.teacher.make_teacher`).
+            ``human`` (the default: the human-like teacher,
+            :func:`sumo_scenarios.teacher.make_teacher`).
         ni_stage_every: arm (a) is also snapshotted every this many non-interactive
             demonstrations before the switch (Figure 8's first section).
     """
@@ -103,7 +104,7 @@ class DrivingExperimentConfig:
     extra_eval_segments: tuple[int, ...] = ()
     criterion: str = "aic"
     gmm_tol: float = 1e-4
-    teacher: str = "expert"
+    teacher: str = "human"
     ni_stage_every: int = 100
 
     def __post_init__(self) -> None:
@@ -802,7 +803,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--full", action="store_true")
     p.add_argument("--seeds", type=int, default=None)
     p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--teacher", choices=("expert", "human"), default="expert")
+    p.add_argument("--teacher", choices=("expert", "human"), default="human")
     a = p.parse_args(argv)
     cfg = DrivingExperimentConfig.full() if a.full else DrivingExperimentConfig()
     cfg = dataclasses.replace(cfg, teacher=a.teacher)
