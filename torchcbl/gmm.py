@@ -179,6 +179,10 @@ def _initial_buffer(model: GaussianMixtureSet, name: str) -> Tensor:
 # below the usable CPUs minus 0.5). Measured with bench/bench_refit.py --sections threads.
 SINGLE_THREAD_WORK = 1.0e6
 
+# A warm-started candidate's EM runs at most this many E-steps per refit (so one M-step, and
+# the second E-step measures the parameters it keeps): EM continues across refits.
+_WARM_ITER = 2
+
 
 def _usable_cpus() -> int:
     try:
@@ -652,8 +656,7 @@ class GaussianMixtureSet(nn.Module):
                 ("full_fit_points_", full_n_new),
                 ("fitted_", torch.ones((), dtype=torch.bool)),
             ):
-                buf = getattr(self, name)
-                buf.copy_(val.to(device=buf.device, dtype=buf.dtype))
+                getattr(self, name).copy_(val)  # copy_ converts dtype and device
         self.fit_report_ = report
         self._cache = None
         return self
@@ -726,9 +729,13 @@ class GaussianMixtureSet(nn.Module):
                 params0 = self._start_params(
                     xg, pmask, cmask, floor, groups_np, scr, slot_k_np, k_pad, centers, cand
                 )
+                # EM continued across refits: a warm candidate that converges keeps the
+                # parameters its last E-step measured (no extra M-step and final E-step)
                 res = _em.run_em(
-                    xg, pmask, cmask, floor, None, self.tol, self.max_iter, params0=params0
-                )
+                    xg, pmask, cmask, floor, None, self.tol, self.max_iter, params0=params0,
+                    keep_measured=np.repeat(~scr[:, None], k_pad, 1),
+                    measured_max_iter=_WARM_ITER,
+                )  # fmt: skip
         real = torch.from_numpy(real_np).to(dev)
         g_idx, c_idx = real.nonzero(as_tuple=True)
         cand_action = groups[g_idx]
