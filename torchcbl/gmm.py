@@ -621,7 +621,7 @@ class GaussianMixtureSet(nn.Module):
         report = FitReport(
             criterion_name=self.criterion,
             n_points=tuple(int(c) for c in counts_np),
-            n_components=tuple(int(c) for c in n_comp.cpu()),
+            n_components=tuple(n_comp.tolist()),
             empty_actions=empty,
             candidate_mask=cand_mask.cpu(),
             log_likelihood=ll_tab.cpu(),
@@ -690,17 +690,21 @@ class GaussianMixtureSet(nn.Module):
         counts_g = counts[groups]
         n_max = int(counts_g.max())
         # the groups' points, centred per action (a better conditioned M-step), in data order
-        sel = torch.isin(y, groups)
-        xs, ys = x[sel], y[sel]
-        gpos = torch.full((self.n_actions,), -1, dtype=torch.long, device=dev)
-        gpos[groups] = torch.arange(g_n, device=dev)
-        yg = gpos[ys]
-        order = torch.argsort(yg, stable=True)
-        ygs = yg[order]
-        starts = torch.cumsum(counts_g, 0) - counts_g
-        pos = torch.arange(ys.numel(), device=dev) - starts[ygs]
-        xg = torch.zeros(g_n, n_max, d, dtype=f64, device=dev)
-        xg[ygs, pos] = xs[order] - centers[groups][ygs]
+        if g_n == 1:  # the usual warm refit: one action (same values as the general path)
+            a0 = int(groups_np[0])
+            xg = (x[y == a0] - centers[a0]).unsqueeze(0)
+        else:
+            sel = torch.isin(y, groups)
+            xs, ys = x[sel], y[sel]
+            gpos = torch.full((self.n_actions,), -1, dtype=torch.long, device=dev)
+            gpos[groups] = torch.arange(g_n, device=dev)
+            yg = gpos[ys]
+            order = torch.argsort(yg, stable=True)
+            ygs = yg[order]
+            starts = torch.cumsum(counts_g, 0) - counts_g
+            pos = torch.arange(ys.numel(), device=dev) - starts[ygs]
+            xg = torch.zeros(g_n, n_max, d, dtype=f64, device=dev)
+            xg[ygs, pos] = xs[order] - centers[groups][ygs]
 
         k_pad = int(k_per_action[groups_np].max())
         # slot c of a group holds the candidate with c + 1 components; slots beyond the
