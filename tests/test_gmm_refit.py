@@ -350,3 +350,20 @@ def test_teaching_config_refit_mode_is_checked():
 
     with pytest.raises(ValueError, match="'full' or 'incremental'"):
         TeachingConfig(refit="warm")
+
+
+def test_warm_refit_is_one_em_step_and_its_report_does_not_cry_wolf():
+    x, y = _stream(301, seed=3)
+    y[-1] = 2
+    m = GaussianMixtureSet(3, 3, 4, tol=1e-12).fit(x[:300], y[:300])
+    m.refit(x, y)
+    r = m.fit_report_
+    assert r.refit_kind == ("kept", "kept", "warm")
+    cand = r.candidate_mask[2]
+    assert (r.n_iter[2][cand] == gmm_mod._WARM_ITER).all()
+    # tol=1e-12: one EM step cannot pass the test, yet no "did not converge" note for warm rows
+    assert not r.converged[2][cand].any()
+    assert not any("did not converge" in note for note in r.notes)
+    # ... while a from-scratch fit that runs out of iterations still says so
+    short = GaussianMixtureSet(3, 3, 4, tol=1e-12, max_iter=2).fit(x, y)
+    assert any("did not converge" in note for note in short.fit_report_.notes)

@@ -93,6 +93,10 @@ class FitReport:
     ``refit_kind`` says per action what this fit did: "scratch" (k-means++ start), "warm"
     (every candidate started from its previous parameters, :meth:`GaussianMixtureSet.refit`),
     "kept" (data unchanged, mixture kept; its table rows are those of its last fit) or "empty".
+    A warm candidate takes one EM step per refit (EM continues across refits): its
+    ``converged`` says whether that step moved its mean per-point log-likelihood by less than
+    ``tol``, its ``n_iter`` counts the E-steps (2), and the "did not converge" note lists only
+    candidates fitted from scratch.
     """
 
     criterion_name: str
@@ -611,7 +615,8 @@ class GaussianMixtureSet(nn.Module):
         )  # fmt: skip
         empty = tuple(int(i) for i in np.flatnonzero(counts_np == 0))
         notes = [f"action {i} has no data: it is never predicted (log prob -inf)" for i in empty]
-        not_conv = (cand_mask & ~conv_tab).nonzero().cpu().numpy()
+        scratch_rows = torch.from_numpy(scratch_np).to(dev).unsqueeze(1)
+        not_conv = (cand_mask & ~conv_tab & scratch_rows).nonzero().cpu().numpy()
         if len(not_conv):
             pairs = ", ".join(f"(action {i}, k={j + 1})" for i, j in not_conv[:10])
             notes.append(
