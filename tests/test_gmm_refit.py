@@ -71,7 +71,12 @@ def test_one_new_point_refits_only_its_action_warm():
 
 
 def test_warm_start_equals_sklearn_started_from_the_kept_candidate():
-    """Oracle: each warm-started candidate runs sklearn's EM from its previous parameters."""
+    """Oracle: each warm-started candidate takes sklearn's EM step(s) from its previous
+    parameters; EM continues across refits, so a refit runs _WARM_ITER - 1 M-steps and keeps
+    the parameters its last E-step measured (sklearn with max_iter = _WARM_ITER - 1)."""
+    import warnings
+
+    from sklearn.exceptions import ConvergenceWarning
     from sklearn.mixture import GaussianMixture
 
     x, y = _stream(241, d=2, seed=5)
@@ -90,16 +95,30 @@ def test_warm_start_equals_sklearn_started_from_the_kept_candidate():
             k,
             covariance_type="full",
             tol=1e-4,
-            max_iter=200,
+            max_iter=gmm_mod._WARM_ITER - 1,
             reg_covar=reg,
             weights_init=w.numpy(),
             means_init=mu.numpy(),
             precisions_init=torch.linalg.inv(cov).numpy(),
-        ).fit(x0)
+        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            gm.fit(x0)
         assert float(m.fit_report_.log_likelihood[0, k - 1]) == pytest.approx(
             gm.score(x0) * len(x0), rel=1e-9
         )
-        assert int(m.fit_report_.n_iter[0, k - 1]) == gm.n_iter_
+        np.testing.assert_allclose(m.cand_means_[0, k - 1, :k].numpy(), gm.means_, rtol=1e-9)
+        np.testing.assert_allclose(m.cand_weights_[0, k - 1, :k].numpy(), gm.weights_, rtol=1e-9)
+        assert int(m.fit_report_.n_iter[0, k - 1]) == gmm_mod._WARM_ITER
+        # converged: the kept parameters' mean log-likelihood moved by less than tol in the
+        # refit's last EM step (from the previous parameters, on the same data)
+        w0 = GaussianMixture(
+            k, covariance_type="full", reg_covar=reg, weights_init=w.numpy(),
+            means_init=mu.numpy(), precisions_init=torch.linalg.inv(cov).numpy(),
+        )  # fmt: skip
+        w0._initialize_parameters(x0, np.random.RandomState(0))
+        step = gm.score(x0) - w0.score(x0)
+        assert bool(m.fit_report_.converged[0, k - 1]) == (abs(step) < 1e-4)
 
 
 def test_full_refit_rule_fits_from_scratch_after_growth():
@@ -331,3 +350,20 @@ def test_teaching_config_refit_mode_is_checked():
 
     with pytest.raises(ValueError, match="'full' or 'incremental'"):
         TeachingConfig(refit="warm")
+
+
+def test_warm_refit_is_one_em_step_and_its_report_does_not_cry_wolf():
+    x, y = _stream(301, seed=3)
+    y[-1] = 2
+    m = GaussianMixtureSet(3, 3, 4, tol=1e-12).fit(x[:300], y[:300])
+    m.refit(x, y)
+    r = m.fit_report_
+    assert r.refit_kind == ("kept", "kept", "warm")
+    cand = r.candidate_mask[2]
+    assert (r.n_iter[2][cand] == gmm_mod._WARM_ITER).all()
+    # tol=1e-12: one EM step cannot pass the test, yet no "did not converge" note for warm rows
+    assert not r.converged[2][cand].any()
+    assert not any("did not converge" in note for note in r.notes)
+    # ... while a from-scratch fit that runs out of iterations still says so
+    short = GaussianMixtureSet(3, 3, 4, tol=1e-12, max_iter=2).fit(x, y)
+    assert any("did not converge" in note for note in short.fit_report_.notes)

@@ -93,6 +93,10 @@ class FitReport:
     ``refit_kind`` says per action what this fit did: "scratch" (k-means++ start), "warm"
     (every candidate started from its previous parameters, :meth:`GaussianMixtureSet.refit`),
     "kept" (data unchanged, mixture kept; its table rows are those of its last fit) or "empty".
+    A warm candidate takes one EM step per refit (EM continues across refits): its
+    ``converged`` says whether that step moved its mean per-point log-likelihood by less than
+    ``tol``, its ``n_iter`` counts the E-steps (2), and the "did not converge" note lists only
+    candidates fitted from scratch.
     """
 
     criterion_name: str
@@ -196,6 +200,10 @@ def _initial_buffer(model: GaussianMixtureSet, name: str) -> Tensor:
 # which gets the caller's threads when the machine has a core to spare (1-minute load average
 # below the usable CPUs minus 0.5). Measured with bench/bench_refit.py --sections threads.
 SINGLE_THREAD_WORK = 1.0e6
+
+# A warm-started candidate's EM runs at most this many E-steps per refit (so one M-step, and
+# the second E-step measures the parameters it keeps): EM continues across refits.
+_WARM_ITER = 2
 
 
 def _usable_cpus() -> int:
@@ -625,7 +633,8 @@ class GaussianMixtureSet(nn.Module):
         )  # fmt: skip
         empty = tuple(int(i) for i in np.flatnonzero(counts_np == 0))
         notes = [f"action {i} has no data: it is never predicted (log prob -inf)" for i in empty]
-        not_conv = (cand_mask & ~conv_tab).nonzero().cpu().numpy()
+        scratch_rows = torch.from_numpy(scratch_np).to(dev).unsqueeze(1)
+        not_conv = (cand_mask & ~conv_tab & scratch_rows).nonzero().cpu().numpy()
         if len(not_conv):
             pairs = ", ".join(f"(action {i}, k={j + 1})" for i, j in not_conv[:10])
             notes.append(
@@ -635,7 +644,7 @@ class GaussianMixtureSet(nn.Module):
         report = FitReport(
             criterion_name=self.criterion,
             n_points=tuple(int(c) for c in counts_np),
-            n_components=tuple(int(c) for c in n_comp.cpu()),
+            n_components=tuple(n_comp.tolist()),
             empty_actions=empty,
             candidate_mask=cand_mask.cpu(),
             log_likelihood=ll_tab.cpu(),
@@ -670,8 +679,7 @@ class GaussianMixtureSet(nn.Module):
                 ("full_fit_points_", full_n_new),
                 ("fitted_", torch.ones((), dtype=torch.bool)),
             ):
-                buf = getattr(self, name)
-                buf.copy_(val.to(device=buf.device, dtype=buf.dtype))
+                getattr(self, name).copy_(val)  # copy_ converts dtype and device
         self.fit_report_ = report
         self._cache = None
         return self
@@ -705,17 +713,21 @@ class GaussianMixtureSet(nn.Module):
         counts_g = counts[groups]
         n_max = int(counts_g.max())
         # the groups' points, centred per action (a better conditioned M-step), in data order
-        sel = torch.isin(y, groups)
-        xs, ys = x[sel], y[sel]
-        gpos = torch.full((self.n_actions,), -1, dtype=torch.long, device=dev)
-        gpos[groups] = torch.arange(g_n, device=dev)
-        yg = gpos[ys]
-        order = torch.argsort(yg, stable=True)
-        ygs = yg[order]
-        starts = torch.cumsum(counts_g, 0) - counts_g
-        pos = torch.arange(ys.numel(), device=dev) - starts[ygs]
-        xg = torch.zeros(g_n, n_max, d, dtype=f64, device=dev)
-        xg[ygs, pos] = xs[order] - centers[groups][ygs]
+        if g_n == 1:  # the usual warm refit: one action (same values as the general path)
+            a0 = int(groups_np[0])
+            xg = (x[y == a0] - centers[a0]).unsqueeze(0)
+        else:
+            sel = torch.isin(y, groups)
+            xs, ys = x[sel], y[sel]
+            gpos = torch.full((self.n_actions,), -1, dtype=torch.long, device=dev)
+            gpos[groups] = torch.arange(g_n, device=dev)
+            yg = gpos[ys]
+            order = torch.argsort(yg, stable=True)
+            ygs = yg[order]
+            starts = torch.cumsum(counts_g, 0) - counts_g
+            pos = torch.arange(ys.numel(), device=dev) - starts[ygs]
+            xg = torch.zeros(g_n, n_max, d, dtype=f64, device=dev)
+            xg[ygs, pos] = xs[order] - centers[groups][ygs]
 
         k_pad = int(k_per_action[groups_np].max())
         # slot c of a group holds the candidate with c + 1 components; slots beyond the
@@ -744,9 +756,13 @@ class GaussianMixtureSet(nn.Module):
                 params0 = self._start_params(
                     xg, pmask, cmask, floor, groups_np, scr, slot_k_np, k_pad, centers, cand
                 )
+                # EM continued across refits: a warm candidate that converges keeps the
+                # parameters its last E-step measured (no extra M-step and final E-step)
                 res = _em.run_em(
-                    xg, pmask, cmask, floor, None, self.tol, self.max_iter, params0=params0
-                )
+                    xg, pmask, cmask, floor, None, self.tol, self.max_iter, params0=params0,
+                    keep_measured=np.repeat(~scr[:, None], k_pad, 1),
+                    measured_max_iter=_WARM_ITER,
+                )  # fmt: skip
         real = torch.from_numpy(real_np).to(dev)
         g_idx, c_idx = real.nonzero(as_tuple=True)
         cand_action = groups[g_idx]
