@@ -123,6 +123,31 @@ def test_resume_same_counters_and_model(tmp_path):
     assert_model_is_fit_on_log(back.model, run)
 
 
+def test_a_session_written_before_refit_growth_resumes_with_a_given_model(tmp_path):
+    """Model arguments added later (refit_growth) take their default for an older session, so
+    resuming it with an explicitly built model of the same settings is not a mismatch; a model
+    that differs in such an argument still is."""
+    from torchcbl import GaussianMixtureSet
+
+    run = tmp_path / "run"
+    ct = make(rare_regions_world(), run, max_new=3)
+    ct.run(max_steps=40)
+    ct.close()
+    config = json.loads((run / "config.json").read_text())
+    args = dict(config["model"]["args"])
+    del config["model"]["args"]["refit_growth"]
+    (run / "config.json").write_text(json.dumps(config))
+    env = rare_regions_world()
+    back = ConfidentTeacher.resume(
+        run, env, oracle(env), model=GaussianMixtureSet(**args), progress=False
+    )
+    assert same_state(back.model, ct.model)
+    back.close()
+    other = {**args, "refit_growth": args["refit_growth"] * 2}
+    with pytest.raises(IncompatibleRunDirError, match="model args"):
+        ConfidentTeacher.resume(run, env, oracle(env), model=GaussianMixtureSet(**other))
+
+
 def test_stale_checkpoint_is_refitted_from_the_log(tmp_path):
     run = tmp_path / "run"
     ct = make(rare_regions_world(), run, noninteractive=False)

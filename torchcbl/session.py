@@ -1082,6 +1082,27 @@ def latest_checkpoint(
     return best
 
 
+def _with_default_args(args: dict[str, Any]) -> dict[str, Any]:
+    """A stored session's model arguments, completed with the constructor's defaults for the
+    arguments added since it was written (e.g. ``refit_growth``), so an older session resumes
+    with a model built with those defaults."""
+    import inspect
+
+    from torchcbl.gmm import GaussianMixtureSet
+
+    params = inspect.signature(GaussianMixtureSet.__init__).parameters
+    full = {
+        name: p.default
+        for name, p in params.items()
+        if name != "self" and p.default is not inspect.Parameter.empty
+    }
+    return {**{k: v for k, v in full.items() if k not in args and k in _DEFAULTED}, **args}
+
+
+# model arguments that sessions written before they existed lacked
+_DEFAULTED = ("refit_growth",)
+
+
 def build_model(config: dict[str, Any]) -> GaussianMixtureSet:
     """A fresh, unfitted model built from a session config's ``model`` entry."""
     from torchcbl.gmm import GaussianMixtureSet
@@ -1299,7 +1320,7 @@ def resume_problems(
             k: (v, learning[1].get(k)) for k, v in learning[0].items() if learning[1].get(k) != v
         }
         problems.append(f"config (stored, given): {diff}; only the stop fields may change")
-    if model_args is not None and model_args != stored["model"]["args"]:
+    if model_args is not None and model_args != _with_default_args(stored["model"]["args"]):
         problems.append(f"model args: stored {stored['model']['args']}, given {model_args}")
     if strategy is not None and not strategy.get("custom"):
         want = stored_strategy(stored)
