@@ -41,16 +41,44 @@ def _rule_takes_observations(rule: Any) -> bool:
     return len(positional) >= 2 or any(p.kind == p.VAR_POSITIONAL for p in params)
 
 
-class _Phased:
+class _StrategyDefaults:
+    """The protocol's defaults, for a strategy to override what it needs: remembers the
+    problem's size in ``bind``, executes the teacher's action exactly on asked steps
+    (``actor``), and ignores episode starts, labels, refits and finished steps."""
+
+    relabel = False
+    wants_corrections = False
+
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        self.n_actions, self.n_features = int(n_actions), int(n_features)
+
+    def episode_start(self) -> None:
+        return None
+
+    def actor(
+        self, decision: Decision, model_action: int, teacher_action: int | None
+    ) -> Literal["teacher", "agent"]:
+        return "teacher" if decision.ask else "agent"
+
+    def observe_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        return None
+
+    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        return None
+
+    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+        return None
+
+
+class _Phased(_StrategyDefaults):
     """The paper's schedule, shared by the shipped strategies: a non-interactive phase (the
     teacher acts every step) that ends once the windowed prediction accuracy reaches
     ``config.target_accuracy`` over ``config.accuracy_window`` demonstrations (never when
     it is None; skipped when ``config.noninteractive`` is False), then per-step decisions in
     which each request starts a burst of ``config.burst`` teacher moves (cut at the end of
     an episode). Subclasses say when they are confident (:meth:`_confident`)."""
-
-    relabel = False
-    wants_corrections = False
 
     def __init__(self) -> None:
         self._phase: Literal["noninteractive", "confident"] = "noninteractive"
@@ -83,19 +111,11 @@ class _Phased:
         ask = int(_np(c.action)[0]) < 0 or not self._confident(observation, c)
         return Decision(ask, self._phase, self._burst if ask else 0)
 
-    def actor(
-        self, decision: Decision, model_action: int, teacher_action: int | None
-    ) -> Literal["teacher", "agent"]:
-        return "teacher" if decision.ask else "agent"
-
     def observe_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
     ) -> None:
         if kind == "demonstration":
             self._window.append(model_action == action)
-
-    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
-        return None
 
     def _target_reached(self) -> bool:
         w, t = self._window, self._target

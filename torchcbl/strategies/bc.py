@@ -12,28 +12,18 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from torchcbl.strategies._phased import Decision, LabelKind
+from torchcbl.strategies._phased import Decision, _StrategyDefaults
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
-    from torchcbl.records import StepRecord
 
 __all__ = ["BehaviourCloning"]
 
 
-class BehaviourCloning:
+class BehaviourCloning(_StrategyDefaults):
     """Ask at every step and execute the teacher's action (no interaction, no state).
 
     Every step is recorded with phase ``"noninteractive"`` (asked by design)."""
-
-    relabel = False
-    wants_corrections = False
-
-    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
-        self.n_actions, self.n_features = int(n_actions), int(n_features)
-
-    def episode_start(self) -> None:
-        return None
 
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         return Decision(True, "noninteractive")
@@ -42,17 +32,6 @@ class BehaviourCloning:
         self, decision: Decision, model_action: int, teacher_action: int | None
     ) -> Literal["teacher", "agent"]:
         return "teacher"
-
-    def observe_label(
-        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
-    ) -> None:
-        return None
-
-    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
-        return None
-
-    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
-        return None
 
     def to_config(self) -> dict[str, Any]:
         return {"type": "BehaviourCloning", "relabel": False}

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from torchcbl.strategies._phased import Decision, LabelKind
+from torchcbl.strategies._phased import Decision, _StrategyDefaults
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
@@ -38,7 +38,7 @@ def _unit(name: str, value: Any) -> float:
     return float(value)
 
 
-class DAgger:
+class DAgger(_StrategyDefaults):
     """Label every state; execute the teacher's action with probability ``beta(step)``.
 
     Args:
@@ -47,9 +47,6 @@ class DAgger:
         iteration_steps: steps per DAgger iteration (>= 1).
         seed: seeds the per-step coins.
     """
-
-    relabel = False
-    wants_corrections = False
 
     def __init__(
         self,
@@ -82,12 +79,6 @@ class DAgger:
         """The uniform [0, 1) draw of step ``step`` (the teacher acts iff coin < beta)."""
         return float(np.random.default_rng(np.random.SeedSequence([self.seed, step])).random())
 
-    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
-        self.n_actions, self.n_features = int(n_actions), int(n_features)
-
-    def episode_start(self) -> None:
-        return None
-
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         return Decision(True, "noninteractive", self._steps)
 
@@ -98,14 +89,6 @@ class DAgger:
         if model_action < 0 or self.coin(step) < self.beta(step):
             return "teacher"
         return "agent"
-
-    def observe_label(
-        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
-    ) -> None:
-        return None
-
-    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
-        return None
 
     def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
         self._steps = record.step + 1

@@ -23,27 +23,25 @@ live run delivers them).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from torchcbl.strategies._phased import Decision, LabelKind
+from torchcbl.strategies._phased import Decision, LabelKind, _StrategyDefaults
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
-    from torchcbl.records import StepRecord
 
 __all__ = ["HGDAgger"]
 
 
-class HGDAgger:
+class HGDAgger(_StrategyDefaults):
     """Teacher-gated DAgger: learner drives; the teacher takes over when it disagrees.
 
     Args:
         warmup: demonstrations the teacher gives before the learner first drives (>= 0).
     """
 
-    relabel = False
     wants_corrections = True
 
     def __init__(self, warmup: int = 10) -> None:
@@ -58,21 +56,10 @@ class HGDAgger:
         """Whether the teacher drives the next step (after a correction, until agreement)."""
         return self._control
 
-    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
-        self.n_actions, self.n_features = int(n_actions), int(n_features)
-
-    def episode_start(self) -> None:
-        return None
-
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         if self._labels < self.warmup:
             return Decision(True, "noninteractive")
         return Decision(int(c.action[0]) < 0 or self._control, "confident")
-
-    def actor(
-        self, decision: Decision, model_action: int, teacher_action: int | None
-    ) -> Literal["teacher", "agent"]:
-        return "teacher" if decision.ask else "agent"
 
     def observe_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
@@ -83,12 +70,6 @@ class HGDAgger:
             self._control = True
         elif self._control and not warm:
             self._control = int(model_action) != int(action)
-
-    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
-        return None
-
-    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
-        return None
 
     def to_config(self) -> dict[str, Any]:
         return {"type": "HGDAgger", "warmup": self.warmup, "relabel": False}

@@ -26,11 +26,11 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from torchcbl.strategies._phased import Decision, LabelKind
+from torchcbl.strategies._phased import Decision, LabelKind, _StrategyDefaults
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
@@ -39,7 +39,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["NoveltyGated"]
 
 
-class NoveltyGated:
+class NoveltyGated(_StrategyDefaults):
     """Ask when the Mahalanobis novelty exceeds its (1 - target_rate) quantile of recent steps.
 
     Args:
@@ -48,9 +48,6 @@ class NoveltyGated:
         warmup: demonstrations the teacher gives first (>= 0).
         min_history: ask while fewer finite scores than this are in the window (>= 1).
     """
-
-    relabel = False
-    wants_corrections = False
 
     def __init__(
         self,
@@ -88,23 +85,12 @@ class NoveltyGated:
             return None
         return float(np.quantile(np.asarray(self._scores), 1.0 - self.target_rate))
 
-    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
-        self.n_actions, self.n_features = int(n_actions), int(n_features)
-
-    def episode_start(self) -> None:
-        return None
-
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         if self._labels < self.warmup:
             return Decision(True, "noninteractive")
         t = self.threshold()
         ask = int(c.action[0]) < 0 or t is None or float(c.distance[0]) > t
         return Decision(ask, "confident")
-
-    def actor(
-        self, decision: Decision, model_action: int, teacher_action: int | None
-    ) -> Literal["teacher", "agent"]:
-        return "teacher" if decision.ask else "agent"
 
     def observe_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
