@@ -369,23 +369,11 @@ def test_summary_md_is_markdown_and_its_table_parses_as_a_table(corridor_run):
 def test_summary_md_of_a_driving_run_is_markdown_too(tmp_path, monkeypatch):
     """`torchcbl reproduce driving` at a tiny size (the settings of
     test_driving_experiment's tiny run): its summary.md table parses as a table."""
-    import torchcbl.cli as cli
-    from sumo_scenarios.experiment import DrivingExperimentConfig
+    from _driving_tiny import tiny_config
 
-    tiny = DrivingExperimentConfig(
-        seeds=(0,),
-        eval_steps=100,
-        accuracy_window=20,
-        max_noninteractive=60,
-        confident_demos=20,
-        stage_every=10,
-        burst=5,
-        arm_b_stages=(60, 80),
-        max_new=10,
-        max_components=3,
-        train_episode_steps=100,
-        extra_eval_segments=(),
-    )
+    import torchcbl.cli as cli
+
+    tiny = tiny_config(extra_eval_segments=())
     monkeypatch.setattr(cli, "_experiment_config", lambda domain, module, args: tiny)
     out = tmp_path / "runs"
     argv = ["reproduce", "driving", "--workers", "1", "--no-progress", "--out", str(out)]

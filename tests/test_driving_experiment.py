@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import pytest
+from _driving_tiny import tiny_config
 
 from sumo_scenarios.experiment import (
     DrivingExperimentConfig,
@@ -16,20 +17,7 @@ from sumo_scenarios.experiment import (
 
 
 def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path):
-    cfg = DrivingExperimentConfig(
-        seeds=(0,),
-        eval_steps=100,
-        accuracy_window=20,
-        max_noninteractive=60,
-        confident_demos=20,
-        stage_every=10,
-        burst=5,
-        arm_b_stages=(60, 80),
-        max_new=10,
-        max_components=3,
-        train_episode_steps=100,
-        ni_stage_every=20,
-    )
+    cfg = tiny_config()
     res = run_experiment(cfg, tmp_path, workers=1, progress=False)
     on_disk = json.loads((tmp_path / "results.json").read_text())
     assert on_disk["acceptance"] == res["acceptance"]
