@@ -92,7 +92,7 @@ def test_sensor_readings_match_hand_computed_distances():
     np.testing.assert_allclose(w.true_ranges(), [1.5, 1.5, 0.3], atol=1e-9)
     w.set_pose(1.0, 0.0, 0.0)  # walls: inner block y=0.3, end wall x=1.7, outer y=-0.3
     np.testing.assert_allclose(w.true_ranges(), [0.3, 0.7, 0.3], atol=1e-9)
-    w.set_pose(1.4, 1.6, math.pi / 2)  # in the dead end: end wall at y = 2.1
+    w.set_pose(1.4, 1.8, math.pi / 2)  # in the dead end: end wall at y = 2.3
     np.testing.assert_allclose(w.true_ranges(), [0.3, 0.5, 0.3], atol=1e-9)
     w.set_pose(0.0, 0.5, -math.pi / 2)  # heading south in the left corridor: floor at -0.3
     np.testing.assert_allclose(w.true_ranges(), [0.3, 0.8, 0.3], atol=1e-9)
@@ -179,7 +179,7 @@ def test_same_seed_same_run_and_seed_matters():
     assert not np.array_equal(run(1), run(2))
 
 
-@pytest.mark.parametrize("map_name, n_actions", [("figure2", 27), ("lshape", 34)])
+@pytest.mark.parametrize("map_name, n_actions", [("figure2", 29), ("lshape", 34)])
 def test_expert_drives_clean_circuits(map_name, n_actions):
     env = CorridorEnv(map_name)
     expert = CorridorExpert(env.corridor_map)
@@ -311,7 +311,8 @@ def test_prioritized_sweeping_does_not_depend_on_the_cpus_blas_kernel():
 def test_tiny_experiment_writes_results(tmp_path):
     from corridor.experiment import CorridorExperimentConfig, format_summary, run_experiment
 
-    cfg = CorridorExperimentConfig(
+    # Exact motion keeps this test short (the default, noisy, teaches for ~100 circuits).
+    cfg = CorridorExperimentConfig.exact_motion(
         seeds=(0, 1), eval_circuits=2, ps=PrioritizedSweepingConfig(max_steps=800)
     )
     res = run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
@@ -332,9 +333,17 @@ def test_tiny_experiment_writes_results(tmp_path):
     assert {"torch", "pymunk", "gymnasium"} <= set(data["versions"])
     assert 0 <= s["eval_perturbed_clean_share"] <= 1 and 0 <= s["ps_learned_share"] <= 1
     assert s["motion_noise"]["forward_noise"] == 0.0
+    assert data["config"]["threshold_reading"] == "coverage" and s["finished_share"] == 1.0
+    assert 0 <= s["requests_model_agreed_share"] <= 1
+    blocks = s["requests_by_circuits"]
+    assert blocks[0]["circuits"] == "1-5" and blocks[0]["seeds"] == 2
+    assert data["actions_per_circuit"] == 29
     assert s["ps_over_demonstrations"] is None or s["ps_over_demonstrations"] > 0
     for r in data["per_seed"]:
         assert r["finished"] and r["eval_circuits_clean"] == 2
+        assert r["eval_failures"] == []  # clean circuits: nothing to explain
+        assert len(r["eval_perturbed_failures"]) == 2 - r["eval_perturbed_clean"]
+        assert 0 <= r["requests_model_agreed"] <= r["demonstrations_confident"]
         confident = r["demonstrations_confident"]
         assert r["requests_switching_circuit"] + sum(r["requests_per_circuit"]) == confident
         assert r["demonstrations_total"] == (
@@ -360,6 +369,8 @@ def test_tiny_experiment_writes_results(tmp_path):
         (tmp_path / "run" / name).unlink()
     written = plot_results(data, tmp_path / "run")
     assert all(p.stat().st_size > 1000 for p in written)
-    report = evaluate_saved_policy(tmp_path / "run" / "sessions" / "seed0", n_steps=60, seed=3)
+    report = evaluate_saved_policy(
+        tmp_path / "run" / "sessions" / "seed0", n_steps=60, seed=3, world_config=cfg.world
+    )
     assert report["steps"] == 60 and report["circuits_completed"] >= 1
     assert report["circuits_clean"] == report["circuits_completed"]

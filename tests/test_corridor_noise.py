@@ -174,6 +174,59 @@ def test_expert_recovers_from_detours_off_the_route():
     assert off_route >= 10  # the detours did take the robot off its way
 
 
+def test_figure2_spur_does_not_read_like_a_left_corner_under_motion_noise():
+    """Where the expert drives forward into the dead-end spur while its left sensor still sees
+    the side corridor, the front range is well beyond every front range at which it turns left,
+    so no sensor reading asks for both. With the spur 0.6 m long (before issue 12) the gap was
+    0.03 m and learned policies turned left there into the corner wall."""
+
+    def ranges(corridor_map):
+        env = CorridorEnv(corridor_map, NOISY)
+        expert = CorridorExpert(corridor_map, NOISY)
+        fwd_front, left_front = [], []
+        for seed in range(15):
+            obs, info = env.reset(seed=seed)
+            while True:
+                a = expert(obs, info)
+                left, front, _ = info["true_ranges"]
+                if a == L:
+                    left_front.append(front)
+                elif a == F and info["segment"] == 2 and left >= 1.0:
+                    fwd_front.append(front)
+                obs, _, term, trunc, info = env.step(a)
+                if term or trunc:
+                    break
+        return min(fwd_front), max(left_front)
+
+    m = load_map("figure2")
+    fwd, left = ranges(m)
+    assert fwd - left >= 0.15
+    short = dataclasses.replace(m, nodes={**m.nodes, "S": (1.4, 1.8)})
+    fwd, left = ranges(short)
+    assert fwd - left < 0.05  # the aliasing this map avoids
+
+
+# ---------------------------------------------------------------- the experiment's defaults
+def test_experiment_runs_the_noisy_robot_with_the_coverage_threshold_by_default():
+    """Chosen before any result with it: the paper's "two standard deviations" as the share of
+    a 1-D Gaussian within 2 std (0.9545), a chi-square quantile with D = 3 degrees of freedom."""
+    from scipy.stats import chi2
+
+    from corridor.experiment import CorridorExperimentConfig
+
+    cfg = CorridorExperimentConfig()
+    assert cfg.world == NOISY and cfg.max_std == 2.0 and cfg.threshold_reading == "coverage"
+    coverage = chi2.cdf(4.0, 1)  # P(|z| <= 2), 0.9545
+    assert cfg.rule().threshold(3) == pytest.approx(math.sqrt(chi2.ppf(coverage, 3)), rel=1e-9)
+    assert cfg.rule().threshold(3) == pytest.approx(2.8328, abs=1e-4)
+    literal = dataclasses.replace(cfg, threshold_reading="literal").rule()
+    assert literal.threshold(3) == 2.0
+    assert chi2.cdf(4.0, 3) == pytest.approx(0.739, abs=1e-3)  # what 2 std holds in 3-D
+    assert not CorridorExperimentConfig.exact_motion().world.noisy_motion
+    with pytest.raises(ValueError, match="threshold_reading"):
+        CorridorExperimentConfig(threshold_reading="2std")
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure
