@@ -334,9 +334,13 @@ def test_tiny_experiment_writes_results(tmp_path):
     assert 0 <= s["eval_perturbed_clean_share"] <= 1 and 0 <= s["ps_learned_share"] <= 1
     assert s["motion_noise"]["forward_noise"] == 0.0
     assert data["config"]["threshold_reading"] == "coverage" and s["finished_share"] == 1.0
-    assert 0 <= s["requests_model_agreed_share"] <= 1
     blocks = s["requests_by_circuits"]
     assert blocks[0]["circuits"] == "1-5" and blocks[0]["seeds"] == 2
+    firsts = [np.mean(r["requests_per_circuit"][:5]) for r in data["per_seed"]]
+    assert blocks[0]["mean"] == pytest.approx(np.mean(firsts))
+    agreed = sum(r["requests_model_agreed"] for r in data["per_seed"])
+    asked = sum(r["demonstrations_confident"] for r in data["per_seed"])
+    assert s["requests_model_agreed_share"] == (agreed / asked if asked else None)
     assert data["actions_per_circuit"] == 29
     assert s["ps_over_demonstrations"] is None or s["ps_over_demonstrations"] > 0
     for r in data["per_seed"]:
