@@ -494,13 +494,15 @@ def evaluate_saved_policy(
 ) -> dict[str, Any]:
     """Run the latest model of a corridor teaching session greedily for ``n_steps`` actions.
 
-    ``world_config`` defaults to the experiment's robot (noisy motion,
-    :meth:`WorldConfig.legged_robot`). Returns circuits completed, circuits without wall
-    contact, and wall contacts.
+    ``world_config`` defaults to the robot the session was taught on: for a session of
+    :func:`run_experiment` (``run_dir/sessions/seed<k>``) the world in ``run_dir/results.json``
+    (noisy motion by default), otherwise ``WorldConfig()`` (exact motion, the world of
+    ``torchcbl/Corridor-v0`` and ``torchcbl teach corridor``). Returns circuits completed,
+    circuits without wall contact, and wall contacts.
     """
     from torchcbl import evaluate_policy, load_policy
 
-    world = WorldConfig.legged_robot() if world_config is None else world_config
+    world = _session_world(Path(session_dir)) if world_config is None else world_config
     env = CorridorEnv(load_map(map_name), world)
     records = evaluate_policy(load_policy(session_dir), env, n_steps=n_steps, seed=seed)
     ends = [r for r in records if r.terminated]
@@ -510,6 +512,16 @@ def evaluate_saved_policy(
         "circuits_clean": sum(1 for r in ends if r.info.get("is_success")),
         "wall_contacts": sum(1 for r in records if r.info.get("contact")),
     }
+
+
+def _session_world(session_dir: Path) -> WorldConfig:
+    results = session_dir.parent.parent / "results.json"
+    if session_dir.parent.name == "sessions" and results.is_file():
+        try:
+            return WorldConfig(**json.loads(results.read_text())["config"]["world"])
+        except (ValueError, KeyError, TypeError):
+            pass  # not an experiment's results.json: fall back to the env's default robot
+    return WorldConfig()
 
 
 def _json_default(o: Any) -> Any:

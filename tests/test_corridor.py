@@ -21,6 +21,8 @@ from corridor.expert import CorridorExpert
 from corridor.maps import available_maps, load_map, map_from_dict
 from corridor.world import Action, CorridorWorld, WorldConfig
 
+NOISY_WORLD = WorldConfig.legged_robot()
+
 F, L, R, U = (int(a) for a in Action)
 
 SMALL = {
@@ -373,8 +375,15 @@ def test_tiny_experiment_writes_results(tmp_path):
         (tmp_path / "run" / name).unlink()
     written = plot_results(data, tmp_path / "run")
     assert all(p.stat().st_size > 1000 for p in written)
-    report = evaluate_saved_policy(
-        tmp_path / "run" / "sessions" / "seed0", n_steps=60, seed=3, world_config=cfg.world
-    )
+    session = tmp_path / "run" / "sessions" / "seed0"
+    report = evaluate_saved_policy(session, n_steps=60, seed=3)  # the run's world, from results
+    assert report == evaluate_saved_policy(session, n_steps=60, seed=3, world_config=cfg.world)
     assert report["steps"] == 60 and report["circuits_completed"] >= 1
     assert report["circuits_clean"] == report["circuits_completed"]
+    from corridor.experiment import _session_world
+
+    assert _session_world(session) == cfg.world == WorldConfig()
+    data["config"]["world"] = dataclasses.asdict(NOISY_WORLD)  # a run of the noisy default
+    (tmp_path / "run" / "results.json").write_text(json.dumps(data))
+    assert _session_world(session) == NOISY_WORLD
+    assert _session_world(tmp_path / "elsewhere") == WorldConfig()  # e.g. torchcbl teach
