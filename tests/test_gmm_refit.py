@@ -121,6 +121,100 @@ def test_warm_start_equals_sklearn_started_from_the_kept_candidate():
         assert bool(m.fit_report_.converged[0, k - 1]) == (abs(step) < 1e-4)
 
 
+def _sklearn_step(kept, k: int, x0: np.ndarray, reg: float):
+    """sklearn's GaussianMixture after one EM step (an E-step and an M-step) from the kept
+    candidate with k components, on x0."""
+    import warnings
+
+    from sklearn.exceptions import ConvergenceWarning
+    from sklearn.mixture import GaussianMixture
+
+    w, mu, cov = kept[0][k - 1, :k], kept[1][k - 1, :k], kept[2][k - 1, :k]
+    gm = GaussianMixture(
+        k, covariance_type="full", tol=1e-4, max_iter=gmm_mod._WARM_ITER - 1, reg_covar=reg,
+        weights_init=w.numpy(), means_init=mu.numpy(),
+        precisions_init=torch.linalg.inv(cov).numpy(),
+    )  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        return gm.fit(x0)
+
+
+def _warm_e_step_sizes(monkeypatch) -> list[int]:
+    """Points seen by each warm E-step: a refit on kept statistics starts with the new points
+    alone, one without them with all the action's points."""
+    sizes: list[int] = []
+    real = _em.warm_e_step
+
+    def spy(zt, *args):
+        sizes.append(int(zt.shape[1]))
+        return real(zt, *args)
+
+    monkeypatch.setattr(_em, "warm_e_step", spy)
+    return sizes
+
+
+def _refit_and_check_against_sklearn(m: GaussianMixtureSet, x, y, a: int = 0) -> None:
+    kept = (m.cand_weights_[a].clone(), m.cand_means_[a].clone(), m.cand_covariances_[a].clone())
+    m.refit(x, y)
+    assert m.fit_report_.refit_kind[a] == "warm"
+    xa = x[y == a]
+    reg = float(m.var_floor_[0])
+    for k in range(1, m.max_components + 1):
+        gm = _sklearn_step(kept, k, xa, reg)
+        assert float(m.fit_report_.log_likelihood[a, k - 1]) == pytest.approx(
+            gm.score(xa) * len(xa), rel=1e-9
+        )
+        np.testing.assert_allclose(m.cand_means_[a, k - 1, :k].numpy(), gm.means_, rtol=1e-9)
+        np.testing.assert_allclose(m.cand_weights_[a, k - 1, :k].numpy(), gm.weights_, rtol=1e-9)
+        np.testing.assert_allclose(
+            m.cand_covariances_[a, k - 1, :k].numpy(), gm.covariances_, rtol=1e-9
+        )
+
+
+def test_warm_refit_on_kept_statistics_equals_sklearn(monkeypatch):
+    """Oracle: the refit after a warm one reuses the kept sufficient statistics (its first
+    E-step sees only the new points) and still equals sklearn's EM step from the kept
+    candidates over ALL the action's points."""
+    x, y = _stream(244, d=2, seed=5)
+    y[240:] = 0
+    m = GaussianMixtureSet(3, 2, 4, var_floor=0.0, tol=1e-4, seed=1).fit(x[:240], y[:240])
+    n0 = int((y[:240] == 0).sum())
+    sizes = _warm_e_step_sizes(monkeypatch)
+    m.refit(x[:241], y[:241])  # after a from-scratch fit: no statistics yet, full E-step
+    assert sizes == [n0 + 1, n0 + 1]
+    sizes.clear()
+    _refit_and_check_against_sklearn(m, x[:242], y[:242])  # one new point
+    assert sizes == [1, n0 + 2]
+    sizes.clear()
+    _refit_and_check_against_sklearn(m, x, y)  # two new points at once
+    assert sizes == [2, n0 + 4]
+
+
+@pytest.mark.parametrize("change", ["edit", "relabel", "remove"])
+def test_changed_old_points_are_not_taken_from_the_kept_statistics(monkeypatch, change):
+    """An edited, relabelled (into action 0) or removed old point of action 0, with a new
+    point appended: the kept statistics no longer describe the old points, so the refit runs
+    its first E-step over all of them, and still equals sklearn's step on the new data."""
+    x, y = _stream(300, d=2, seed=5)
+    m = GaussianMixtureSet(3, 2, 4, var_floor=0.0, tol=1e-4, seed=1).fit(x[:250], y[:250])
+    m.refit(x[:251], y[:251])  # a warm refit: statistics kept from here on
+    x, y = x[:252].copy(), y[:252].copy()
+    y[251] = 0
+    first0 = int(np.flatnonzero(y == 0)[3])
+    if change == "edit":
+        x[first0, 1] += 0.25
+    elif change == "relabel":
+        y[int(np.flatnonzero(y == 1)[0])] = 0
+    else:
+        keep = np.arange(len(y)) != first0
+        x, y = x[keep], y[keep]
+    sizes = _warm_e_step_sizes(monkeypatch)
+    _refit_and_check_against_sklearn(m, x, y)
+    n0 = int((y == 0).sum())
+    assert sizes[:2] == [n0, n0]  # action 0 (a relabelled point also refits action 1, after)
+
+
 def test_full_refit_rule_fits_from_scratch_after_growth():
     x, y = _stream(300, seed=2)
     m = GaussianMixtureSet(3, 3, 3, refit_growth=0.5).fit(x[:150], y[:150])
@@ -254,14 +348,21 @@ def two_threads():
 
 
 def _threads_seen_by_em(monkeypatch) -> list[int]:
+    """Thread counts seen by each from-scratch EM (run_em) and each warm refit of an action
+    (its M-step)."""
     seen: list[int] = []
-    real = _em.run_em
+    real, real_warm = _em.run_em, _em.warm_m_step
 
     def spy(*args, **kwargs):
         seen.append(torch.get_num_threads())
         return real(*args, **kwargs)
 
+    def spy_warm(*args, **kwargs):
+        seen.append(torch.get_num_threads())
+        return real_warm(*args, **kwargs)
+
     monkeypatch.setattr(_em, "run_em", spy)
+    monkeypatch.setattr(_em, "warm_m_step", spy_warm)
     return seen
 
 

@@ -814,3 +814,94 @@ def information_criterion(
     if kind == "aic_paper":
         return 2.0 * n_components.to(torch.float64) - 2.0 * loglik
     raise ValueError(f"Expected criterion in ('aic', 'bic', 'aic_paper') but got {kind!r}")
+
+
+# ---------------------------------------------------------------------- warm refits
+# A warm refit (``GaussianMixtureSet.refit``) continues each candidate's EM by one step, for
+# one action's C candidates at once (candidate c has c + 1 components). It runs on the
+# candidates' real components side by side, R = C (C + 1) / 2 rows, with no packing or
+# batch bookkeeping: a handful of tensor operations per step.
+
+
+@functools.lru_cache(maxsize=64)
+def warm_rows(n_cand: int, device: torch.device) -> tuple[Tensor, Tensor, Tensor]:
+    """Rows of the real components of candidates 1..n_cand: (cand [R] long, comp [R] long,
+    indicator [C, R] float64 with 1 where row r belongs to candidate c)."""
+    cand = np.repeat(np.arange(n_cand), np.arange(1, n_cand + 1))
+    comp = np.concatenate([np.arange(c + 1) for c in range(n_cand)])
+    ind = (cand[None, :] == np.arange(n_cand)[:, None]).astype(np.float64)
+    return (
+        torch.from_numpy(cand).to(device),
+        torch.from_numpy(comp).to(device),
+        torch.from_numpy(ind).to(device),
+    )
+
+
+def quadratic_features_t(xt: Tensor) -> Tensor:
+    """[D, N] (points last) -> zt [Q, N]: :func:`quadratic_features` transposed."""
+    i, j, _, _, _, _ = _indices(xt.shape[0], xt.device)
+    return torch.cat([xt[i] * xt[j], xt, xt.new_ones(1, xt.shape[1])], 0)
+
+
+def warm_e_step(zt: Tensor, coef: Tensor, cand: Tensor, ind: Tensor) -> tuple[Tensor, Tensor]:
+    """E-step of C candidates over one action's points, with their sufficient statistics.
+
+    zt [Q, N] quadratic features (points last), coef [R, Q] the real components' weighted
+    log-density coefficients (:class:`Params` ``coef``), cand [R] and ind [C, R] from
+    :func:`warm_rows` -> (loglik [C] total log-likelihood of each candidate, stats [R, Q]
+    = sum over the points of resp * z, the M-step's sufficient statistics).
+
+    Each point's log-sum-exp is shifted by its largest component log-density over all
+    candidates; where a candidate's shifted sum falls below e^-600 (its best component far
+    below another candidate's: the e^-700 clamp could matter), every candidate is shifted
+    by its own maximum instead.
+    """
+    w = coef @ zt  # [R, N]
+    mx = w.amax(0)  # [N]
+    e = (w - mx).clamp_min_(_CLAMP).exp_()
+    s = ind @ e  # [C, N]
+    lo = float(s.amin())
+    if lo > math.exp(-600.0):
+        lse = torch.log(s).add_(mx)
+    else:  # per-candidate shifts (rare)
+        c, r = ind.shape
+        wp = torch.full((c, r, w.shape[1]), -math.inf, dtype=w.dtype, device=w.device)
+        wp[cand, torch.arange(r, device=w.device)] = w
+        cmx = wp.amax(1)  # [C, N]
+        e = (w - cmx.index_select(0, cand)).clamp_min_(_CLAMP).exp_()
+        s = ind @ e
+        lse = torch.log(s).add_(cmx)
+    e.mul_(torch.reciprocal(s).index_select(0, cand))  # responsibilities [R, N]
+    stats = (zt @ e.T).T  # zt @ resp^T: the long N axis contiguous in both operands
+    return lse.sum(1), stats
+
+
+def warm_m_step(stats: Tensor, cand: Tensor, n_cand: int, floor: Tensor) -> tuple[Tensor, ...]:
+    """M-step from sufficient statistics stats [R, Q] (:func:`warm_e_step`) -> weights [R],
+    means [R, D], covariances [R, D, D] (floor on the diagonal); the same estimates as
+    :func:`m_step` (nk + 10 eps, weights renormalised per candidate)."""
+    q = stats.shape[-1]
+    d = _dim_of(q)
+    du = q - d - 1
+    _, _, full, _, _, _ = _indices(d, stats.device)
+    nk = stats[:, -1] + 10.0 * _EPS
+    st = stats / nk.unsqueeze(-1)
+    means = st[:, du : du + d]
+    cov = st.index_select(-1, full).view(-1, d, d)
+    cov.sub_(means.unsqueeze(-1) * means.unsqueeze(-2)).add_(torch.diag(floor))
+    tot = torch.zeros(n_cand, dtype=stats.dtype, device=stats.device).index_add_(0, cand, nk)
+    return nk / tot.index_select(0, cand), means, cov
+
+
+def warm_coef(weights: Tensor, means: Tensor, cov: Tensor) -> Tensor:
+    """coef [R, Q] of real components: weights [R], means [R, D], cov [R, D, D]."""
+    r, d = means.shape
+    _, _, _, upper, scale, _ = _indices(d, means.device)
+    prec, log_det = _precision(cov)
+    lin = (prec * means.unsqueeze(-2)).sum(-1)
+    quad = prec.reshape(r, d * d)[:, upper] * scale
+    const = torch.log(weights) + log_det - 0.5 * (lin * means).sum(-1) - 0.5 * d * _LOG_2PI
+    return torch.cat([quad, lin, const.unsqueeze(-1)], -1)
+
+
+_LOG_2PI = math.log(2.0 * math.pi)
