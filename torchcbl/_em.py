@@ -629,22 +629,10 @@ def run_em(
     tol: float,
     max_iter: int,
     params0: Params | None = None,
-    keep_measured: np.ndarray | None = None,
-    measured_max_iter: int | None = None,
 ) -> EMResult:
     """EM for every slot of every group at once, from initial responsibilities resp0 (one
     M-step makes the first parameters) or, when resp0 is None, from given parameters
     ``params0`` (a warm start, :func:`params_of`).
-
-    ``keep_measured`` [G, C] bool (numpy; default all False) marks slots that, when their
-    convergence test passes, keep the parameters that iteration's E-step measured (those of
-    the previous M-step) with that E-step's log-likelihood, instead of taking one more M-step
-    and a final E-step: one M-step and one E-step fewer per slot. Used for warm starts, whose
-    EM continues across refits; from-scratch fits keep sklearn's iterates. Such a stop needs
-    the previous parameters of the same packing, so a slot whose test first passes right
-    after a re-packing stops the ordinary way. With ``measured_max_iter``, such a slot also
-    stops (keeping the measured parameters, ``converged`` False unless its test passed) after
-    that many E-steps: a warm start's EM goes on at the next refit.
 
     Mirrors sklearn: each iteration is an E-step (log-likelihood of the current parameters)
     then an M-step; a slot stops when |mean log-likelihood change| < tol. The iterations run
@@ -671,11 +659,6 @@ def run_em(
     n_pts = pmask.sum(1).cpu().numpy()  # [G]
     slot_k = cmask.sum(-1).round().long().cpu().numpy()  # [G0, C0]
     running = np.ones((g0, c0), dtype=bool)
-    keep_flat = np.zeros(g0 * c0 + 1, dtype=bool)  # + the padding rows' index
-    if keep_measured is not None:
-        keep_flat[: g0 * c0] = np.asarray(keep_measured, dtype=bool).reshape(g0 * c0)
-    final_ll = np.zeros(g0 * c0)  # the log-likelihood of the slots stopped with measured params
-    measured = np.zeros(g0 * c0, dtype=bool)
     # the convergence bookkeeping runs in numpy: a few [B, R+1] arrays per iteration, where
     # each torch operation would cost more in dispatch than in arithmetic
     prev_all = np.full(g0 * c0 + 1, -math.inf)
@@ -713,8 +696,6 @@ def run_em(
         active = row_ok_np.copy()  # watched rows: running, not yet stopped
         packed = n_active = int(valid_np.sum())
         shifted = False
-        keep_rows = keep_flat[slot_ix].reshape(b, r + 1)
-        last_params: Params | None = None  # the parameters this packing's E-step measured
         while True:
             it += 1
             ll, resp, _ = _e_step_packed(bt, coef, shifted)
@@ -723,24 +704,7 @@ def run_em(
             mean_ll = ll_np / npts1
             done = (np.abs(mean_ll - prev) < tol) & active
             prev = mean_ll
-            budget = measured_max_iter is not None and it >= measured_max_iter
-            meas = (active if budget else done) & keep_rows
-            if last_params is not None and meas.any():
-                ids_np = slot_pad[meas]
-                n_iter[ids_np] = it
-                converged[ids_np] = done[meas]
-                measured[ids_np] = True
-                final_ll[ids_np] = ll_np[meas]
-                sel = valid_np & meas[np.arange(b)[:, None], lay.row]
-                saved.append((last_params, np.flatnonzero(sel), lay.gid[sel]))
-                running[np.unravel_index(ids_np, running.shape)] = False
-                active &= ~meas
-                done &= ~meas
-                n_active -= int(sel.sum())
-                if n_active == 0:
-                    break
             params, coef = _m_step_packed(bt, resp)
-            last_params = params
             last = it >= max_iter
             if not (last or done.any()):
                 continue
@@ -771,18 +735,7 @@ def run_em(
         ]
         o.index_copy_(0, dst, torch.cat(src_i))
     final = Params(*(o.reshape(g0, c0, k0, *o.shape[1:]) for o in out))
-    if not measured.any():
-        loglik = total_log_likelihood(zt0, final.coef, pmask)
-    else:  # the final E-step only for the groups with a slot stopped the ordinary way
-        loglik = torch.from_numpy(final_ll.reshape(g0, c0)).to(device=dev, dtype=dt)
-        meas_t = torch.from_numpy(measured.reshape(g0, c0)).to(dev)
-        need = np.flatnonzero(~measured.reshape(g0, c0).all(1))
-        if need.size:
-            gi = _ix(need, dev)
-            part = total_log_likelihood(
-                zt0.index_select(0, gi), final.coef.index_select(0, gi), pmask.index_select(0, gi)
-            )
-            loglik[gi] = torch.where(meas_t[gi], loglik[gi], part)
+    loglik = total_log_likelihood(zt0, final.coef, pmask)
     return EMResult(
         final,
         loglik,

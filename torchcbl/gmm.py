@@ -195,16 +195,16 @@ _PRINT_WEIGHTS = np.ones(0)
 
 
 def _fingerprint(xa: np.ndarray) -> np.ndarray:
-    """[n, D] -> [2, D]: the sum of the rows and their sum weighted by a fixed pseudo-random
-    weight in [1, 2) per row position. Bit-identical for the same rows; an edited, removed
-    or moved row changes it (but for a coincidence). Rows are summed one after the other
-    (numpy's reduction over the leading axis), whatever the array's memory alignment."""
+    """[n, D] -> [D]: the sum of the rows weighted by a fixed pseudo-random weight in [1, 2)
+    per row position. Bit-identical for the same rows; an edited, removed or moved row
+    changes it (but for a coincidence). numpy sums over the leading axis one row after the
+    other, whatever the array's memory alignment."""
     global _PRINT_WEIGHTS
     n = xa.shape[0]
     if _PRINT_WEIGHTS.size < n:
         size = max(1024, 1 << (n - 1).bit_length())
         _PRINT_WEIGHTS = 1.0 + _em._splitmix_uniform(np.arange(size, dtype=np.uint64))
-    return np.stack([xa.sum(0), (xa * _PRINT_WEIGHTS[:n, None]).sum(0)])
+    return (xa * _PRINT_WEIGHTS[:n, None]).sum(0)
 
 
 def _initial_buffer(model: GaussianMixtureSet, name: str) -> Tensor:
@@ -378,7 +378,7 @@ class GaussianMixtureSet(nn.Module):
         self.register_buffer("cand_coef_", torch.zeros(a, k, k, q, dtype=f64))
         self.register_buffer("stats_valid_", torch.zeros(a, dtype=torch.bool))
         self.register_buffer("ref_center_", torch.zeros(a, d, dtype=f64))
-        self.register_buffer("data_print_", torch.zeros(a, 2, d, dtype=f64))
+        self.register_buffer("data_print_", torch.zeros(a, d, dtype=f64))
         self.register_buffer("fitted_", torch.zeros((), dtype=torch.bool))
         self.fit_report_: FitReport | None = None
         self._cache: dict[str, Any] | None = None
