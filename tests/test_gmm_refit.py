@@ -468,3 +468,27 @@ def test_warm_refit_is_one_em_step_and_its_report_does_not_cry_wolf():
     # ... while a from-scratch fit that runs out of iterations still says so
     short = GaussianMixtureSet(3, 3, 4, tol=1e-12, max_iter=2).fit(x, y)
     assert any("did not converge" in note for note in short.fit_report_.notes)
+
+
+def test_fingerprint_depends_on_the_rows_not_on_their_memory():
+    """The kept statistics are used only when the fingerprint of the action's first points
+    is bit-identical to the stored one, so it must not depend on where the rows lie in memory
+    (a live model and a resumed one hold the data at other addresses), and must see an edit
+    or a reordering."""
+    rng = np.random.default_rng(0)
+    for n, d in ((1, 1), (9, 3), (17, 4), (1000, 5)):
+        x = rng.normal(size=(n, d)) * 1e3
+        ref = gmm_mod._fingerprint(x)
+        for off in range(1, 8):  # every 8-byte misalignment within a cache line
+            buf = np.empty(n * d + 16)
+            view = buf[off : off + n * d].reshape(n, d)
+            view[...] = x
+            longer = np.concatenate([x, x[:3]])[:n]  # a prefix of a longer array
+            assert np.array_equal(gmm_mod._fingerprint(view), ref)
+            assert np.array_equal(gmm_mod._fingerprint(longer), ref)
+        edited = x.copy()
+        edited[n // 2, d - 1] *= 1.0 + 1e-9  # (a change of an ulp or so may round away)
+        moved = x[::-1].copy()
+        assert not np.array_equal(gmm_mod._fingerprint(edited), ref)
+        if n > 1:
+            assert not np.array_equal(gmm_mod._fingerprint(moved), ref)

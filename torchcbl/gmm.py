@@ -31,8 +31,9 @@ with free parameters p = (k-1) + k d + k d (d+1) / 2 (equal to scikit-learn's ``
 Incremental refits
 ------------------
 :meth:`GaussianMixtureSet.refit` refits only the actions whose data changed, each candidate
-warm-started from its own kept parameters, and fits an action from scratch again once its data
-grew by ``refit_growth`` since its last from-scratch fit (see docs/architecture.md).
+warm-started from its own kept parameters and sufficient statistics (one EM step per refit),
+and fits an action from scratch again once its data grew by ``refit_growth`` since its last
+from-scratch fit (see docs/architecture.md).
 
 Threads
 -------
@@ -95,7 +96,8 @@ class FitReport:
     "kept" (data unchanged, mixture kept; its table rows are those of its last fit) or "empty".
     A warm candidate takes one EM step per refit (EM continues across refits): its
     ``converged`` says whether that step moved its mean per-point log-likelihood by less than
-    ``tol``, its ``n_iter`` counts the E-steps (2), and the "did not converge" note lists only
+    ``tol``, its ``n_iter`` counts the E-steps (2, the first one often over the new points
+    only, see :meth:`GaussianMixtureSet.refit`), and the "did not converge" note lists only
     candidates fitted from scratch.
     """
 
@@ -197,8 +199,9 @@ _PRINT_WEIGHTS = np.ones(0)
 def _fingerprint(xa: np.ndarray) -> np.ndarray:
     """[n, D] -> [D]: the sum of the rows weighted by a fixed pseudo-random weight in [1, 2)
     per row position. Bit-identical for the same rows; an edited, removed or moved row
-    changes it (but for a coincidence). numpy sums over the leading axis one row after the
-    other, whatever the array's memory alignment."""
+    changes it, except for a coincidence or an edit below the sum's rounding (an ulp or so
+    of one value, which moves the statistics by as little). numpy sums over the leading axis
+    one row after the other, whatever the array's memory alignment."""
     global _PRINT_WEIGHTS
     n = xa.shape[0]
     if _PRINT_WEIGHTS.size < n:
@@ -297,7 +300,13 @@ class GaussianMixtureSet(nn.Module):
     parameters (slot c = the candidate with c + 1 components, uncentred; zero weights beyond
     it): ``cand_weights_`` [A, K, K], ``cand_means_`` [A, K, K, D], ``cand_covariances_``
     [A, K, K, D, D]; ``data_mean_`` [A, D] (each action's mean, to detect changed data) and
-    ``full_fit_points_`` [A] long (count at the last from-scratch fit, 0 = none).
+    ``full_fit_points_`` [A] long (count at the last from-scratch fit, 0 = none). After a
+    warm refit of an action, its candidates' sufficient statistics over its points
+    ``cand_stats_`` [A, K, K, Q] (Q = D (D + 3) / 2 + 1: sums of resp * (x x^T upper
+    triangle, x, 1), x centred at ``ref_center_`` [A, D]) with the coefficients they were
+    measured with ``cand_coef_`` [A, K, K, Q], ``stats_valid_`` [A] bool, and a fingerprint
+    of the points ``data_print_`` [A, D]: the next warm refit adds the new points' share to
+    them instead of an E-step over all the points.
     ``fit_report_`` (a :class:`FitReport`) is a plain attribute, not part of the state_dict.
     """
 
@@ -519,6 +528,15 @@ class GaussianMixtureSet(nn.Module):
         counts warm-started from that candidate's own previous parameters (all candidates are
         kept, not only the chosen one), and the criterion chooses among the candidates again.
         The priors Pr(G_a) and the variance floor always follow all the data.
+
+        A warm candidate takes one EM step (EM continues across refits): an E-step of its
+        kept parameters, an M-step, and the E-step of the new parameters, whose sufficient
+        statistics are kept. When the action's first points are those of its last refit
+        (appended points only: checked by count and a fingerprint of those points, so an
+        edited, relabelled or removed old point is caught), the first E-step runs over the new
+        points alone and adds their share to the kept statistics (Neal and Hinton's
+        incremental EM); otherwise it runs over all the points. Same result either way, up to
+        rounding.
 
         Full-refit rule: an action is fitted from scratch (k-means++, as :meth:`fit`) instead
         when it was never fitted from scratch, when it gains a candidate (it had fewer than
@@ -760,7 +778,7 @@ class GaussianMixtureSet(nn.Module):
         counts_g = counts[groups]
         n_max = int(counts_g.max())
         # the groups' points, centred per action (a better conditioned M-step), in data order
-        if g_n == 1:  # the usual warm refit: one action (same values as the general path)
+        if g_n == 1:  # one action (a refit's usual case): the same values as the general path
             a0 = int(groups_np[0])
             xg = (x[y == a0] - centers[a0]).unsqueeze(0)
         else:
