@@ -492,3 +492,27 @@ def test_fingerprint_depends_on_the_rows_not_on_their_memory():
         assert not np.array_equal(gmm_mod._fingerprint(edited), ref)
         if n > 1:
             assert not np.array_equal(gmm_mod._fingerprint(moved), ref)
+
+
+def test_state_dict_without_kept_statistics_refits_with_a_full_first_e_step(monkeypatch):
+    """A checkpoint written before the kept statistics existed: its warm refit runs the first
+    E-step over all the action's points, and lands where the live model does (to rounding)."""
+    x, y = _stream(202, seed=7)
+    y[200:] = 1
+    live = GaussianMixtureSet(3, 3, 4).fit(x[:200], y[:200])
+    live.refit(x[:201], y[:201])
+    new = ("cand_stats_", "cand_coef_", "stats_valid_", "ref_center_", "data_print_")
+    old = {k: v for k, v in live.state_dict().items() if k not in new}
+    resumed = GaussianMixtureSet(3, 3, 4)
+    resumed.load_state_dict(old)
+    assert not resumed.stats_valid_.any()
+    sizes = _warm_e_step_sizes(monkeypatch)
+    live.refit(x, y)
+    resumed.refit(x, y)
+    n1 = int((y == 1).sum())
+    assert sizes == [1, n1, n1, n1]  # live: kept statistics; resumed: a full first E-step
+    assert resumed.fit_report_.refit_kind == live.fit_report_.refit_kind == ("kept", "warm", "kept")
+    for key in ("cand_weights_", "cand_means_", "cand_covariances_", "log_likelihood_"):
+        a, b = getattr(live, key), getattr(resumed, key)
+        fin = torch.isfinite(a)
+        torch.testing.assert_close(b[fin], a[fin], rtol=1e-9, atol=1e-12)
