@@ -225,8 +225,9 @@ def _initial_buffer(model: GaussianMixtureSet, name: str) -> Tensor:
 # below the usable CPUs minus 0.5). Measured with bench/bench_refit.py --sections threads.
 SINGLE_THREAD_WORK = 1.0e6
 
-# A warm-started candidate's EM runs at most this many E-steps per refit (so one M-step, and
-# the second E-step measures the parameters it keeps): EM continues across refits.
+# A warm-started candidate takes one EM step per refit, reported as this many E-steps: the
+# one of its kept parameters (often over the new points alone, added to the kept statistics)
+# and the one that measures the parameters of the M-step between them.
 _WARM_ITER = 2
 
 
@@ -883,25 +884,37 @@ class GaussianMixtureSet(nn.Module):
         n_old = int(self.n_points_[a])
         c_n = min(n, kmax)
         cand_t, comp_t, ind = _em.warm_rows(c_n, dev)
+        flat = cand_t * kmax + comp_t  # rows in the [K * K] candidate slots of an action
+        f64 = torch.float64
+
+        def rows(table: Tensor) -> Tensor:  # the action's real components [R, ...]
+            return table[a].reshape(kmax * kmax, *table.shape[3:]).index_select(0, flat)
+
+        def put(table: Tensor, value: Tensor, empty: Tensor | float) -> None:  # in place
+            slots = table[a].view(kmax * kmax, *table.shape[3:])
+            if isinstance(empty, Tensor):
+                slots.copy_(empty)
+            else:
+                slots.fill_(empty)
+            slots.index_copy_(0, flat, value)
+
         fast = (
             bool(self.stats_valid_[a])
             and n > n_old
             and np.array_equal(_fingerprint(xa[:n_old]), self.data_print_[a].cpu().numpy())
         )
-        ref = self.ref_center_[a].to(torch.float64) if fast else center
+        ref = self.ref_center_[a].to(f64) if fast else center
         xt = (torch.from_numpy(xa).to(dev) - ref).T.contiguous()  # [D, n]
         work = float(n) * float(c_n * (c_n + 1) // 2) * (d * (d + 3) // 2 + 1)
         with _threads(_em_threads(work, caller_threads)), torch.inference_mode():
             zt = _em.quadratic_features_t(xt)
             if fast:  # the kept statistics plus the new points' share
-                coef0 = self.cand_coef_[a].to(torch.float64)[cand_t, comp_t]
+                coef0 = rows(self.cand_coef_.to(f64))
                 ll_add, st_add = _em.warm_e_step(zt[:, n_old:], coef0, cand_t, ind)
-                stats = self.cand_stats_[a].to(torch.float64)[cand_t, comp_t] + st_add
-                ll0 = self.log_likelihood_[a, :c_n].to(torch.float64) + ll_add
+                stats = rows(self.cand_stats_.to(f64)) + st_add
+                ll0 = self.log_likelihood_[a, :c_n].to(f64) + ll_add
             else:
-                coef0 = _em.warm_coef(
-                    c_w[a, cand_t, comp_t], c_mu[a, cand_t, comp_t] - ref, c_cov[a, cand_t, comp_t]
-                )
+                coef0 = _em.warm_coef(rows(c_w), rows(c_mu) - ref, rows(c_cov))
                 ll0, stats = _em.warm_e_step(zt, coef0, cand_t, ind)
             w1, mu1, cov1 = _em.warm_m_step(stats, cand_t, c_n, floor)
             coef1 = _em.warm_coef(w1, mu1, cov1)
@@ -922,16 +935,11 @@ class GaussianMixtureSet(nn.Module):
         conv_tab[a, :c_n] = (ll1 - ll0).abs() / n < self.tol
         iter_tab[a, :c_n] = _WARM_ITER
         n_comp[a] = int(crit.argmin()) + 1  # first minimum: smallest k on ties
-        c_w[a] = 0.0
-        c_w[a, cand_t, comp_t] = w1
-        c_mu[a] = 0.0
-        c_mu[a, cand_t, comp_t] = mu1 + ref
-        c_cov[a] = torch.eye(d, dtype=torch.float64, device=dev)
-        c_cov[a, cand_t, comp_t] = cov1
-        st_buf[a] = 0.0
-        st_buf[a, cand_t, comp_t] = stats1
-        coef_buf[a] = 0.0
-        coef_buf[a, cand_t, comp_t] = coef1
+        put(c_w, w1, 0.0)
+        put(c_mu, mu1 + ref, 0.0)
+        put(c_cov, cov1, torch.eye(d, dtype=f64, device=dev))
+        put(st_buf, stats1, 0.0)
+        put(coef_buf, coef1, 0.0)
         valid_buf[a] = True
         ref_buf[a] = ref
         print_buf[a] = torch.from_numpy(_fingerprint(xa)).to(dev)
