@@ -121,6 +121,100 @@ def test_warm_start_equals_sklearn_started_from_the_kept_candidate():
         assert bool(m.fit_report_.converged[0, k - 1]) == (abs(step) < 1e-4)
 
 
+def _sklearn_step(kept, k: int, x0: np.ndarray, reg: float):
+    """sklearn's GaussianMixture after one EM step (an E-step and an M-step) from the kept
+    candidate with k components, on x0."""
+    import warnings
+
+    from sklearn.exceptions import ConvergenceWarning
+    from sklearn.mixture import GaussianMixture
+
+    w, mu, cov = kept[0][k - 1, :k], kept[1][k - 1, :k], kept[2][k - 1, :k]
+    gm = GaussianMixture(
+        k, covariance_type="full", tol=1e-4, max_iter=gmm_mod._WARM_ITER - 1, reg_covar=reg,
+        weights_init=w.numpy(), means_init=mu.numpy(),
+        precisions_init=torch.linalg.inv(cov).numpy(),
+    )  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        return gm.fit(x0)
+
+
+def _warm_e_step_sizes(monkeypatch) -> list[int]:
+    """Points seen by each warm E-step: a refit on kept statistics starts with the new points
+    alone, one without them with all the action's points."""
+    sizes: list[int] = []
+    real = _em.warm_e_step
+
+    def spy(zt, *args):
+        sizes.append(int(zt.shape[1]))
+        return real(zt, *args)
+
+    monkeypatch.setattr(_em, "warm_e_step", spy)
+    return sizes
+
+
+def _refit_and_check_against_sklearn(m: GaussianMixtureSet, x, y, a: int = 0) -> None:
+    kept = (m.cand_weights_[a].clone(), m.cand_means_[a].clone(), m.cand_covariances_[a].clone())
+    m.refit(x, y)
+    assert m.fit_report_.refit_kind[a] == "warm"
+    xa = x[y == a]
+    reg = float(m.var_floor_[0])
+    for k in range(1, m.max_components + 1):
+        gm = _sklearn_step(kept, k, xa, reg)
+        assert float(m.fit_report_.log_likelihood[a, k - 1]) == pytest.approx(
+            gm.score(xa) * len(xa), rel=1e-9
+        )
+        np.testing.assert_allclose(m.cand_means_[a, k - 1, :k].numpy(), gm.means_, rtol=1e-9)
+        np.testing.assert_allclose(m.cand_weights_[a, k - 1, :k].numpy(), gm.weights_, rtol=1e-9)
+        np.testing.assert_allclose(
+            m.cand_covariances_[a, k - 1, :k].numpy(), gm.covariances_, rtol=1e-9
+        )
+
+
+def test_warm_refit_on_kept_statistics_equals_sklearn(monkeypatch):
+    """Oracle: the refit after a warm one reuses the kept sufficient statistics (its first
+    E-step sees only the new points) and still equals sklearn's EM step from the kept
+    candidates over ALL the action's points."""
+    x, y = _stream(244, d=2, seed=5)
+    y[240:] = 0
+    m = GaussianMixtureSet(3, 2, 4, var_floor=0.0, tol=1e-4, seed=1).fit(x[:240], y[:240])
+    n0 = int((y[:240] == 0).sum())
+    sizes = _warm_e_step_sizes(monkeypatch)
+    m.refit(x[:241], y[:241])  # after a from-scratch fit: no statistics yet, full E-step
+    assert sizes == [n0 + 1, n0 + 1]
+    sizes.clear()
+    _refit_and_check_against_sklearn(m, x[:242], y[:242])  # one new point
+    assert sizes == [1, n0 + 2]
+    sizes.clear()
+    _refit_and_check_against_sklearn(m, x, y)  # two new points at once
+    assert sizes == [2, n0 + 4]
+
+
+@pytest.mark.parametrize("change", ["edit", "relabel", "remove"])
+def test_changed_old_points_are_not_taken_from_the_kept_statistics(monkeypatch, change):
+    """An edited, relabelled (into action 0) or removed old point of action 0, with a new
+    point appended: the kept statistics no longer describe the old points, so the refit runs
+    its first E-step over all of them, and still equals sklearn's step on the new data."""
+    x, y = _stream(300, d=2, seed=5)
+    m = GaussianMixtureSet(3, 2, 4, var_floor=0.0, tol=1e-4, seed=1).fit(x[:250], y[:250])
+    m.refit(x[:251], y[:251])  # a warm refit: statistics kept from here on
+    x, y = x[:252].copy(), y[:252].copy()
+    y[251] = 0
+    first0 = int(np.flatnonzero(y == 0)[3])
+    if change == "edit":
+        x[first0, 1] += 0.25
+    elif change == "relabel":
+        y[int(np.flatnonzero(y == 1)[0])] = 0
+    else:
+        keep = np.arange(len(y)) != first0
+        x, y = x[keep], y[keep]
+    sizes = _warm_e_step_sizes(monkeypatch)
+    _refit_and_check_against_sklearn(m, x, y)
+    n0 = int((y == 0).sum())
+    assert sizes[:2] == [n0, n0]  # action 0 (a relabelled point also refits action 1, after)
+
+
 def test_full_refit_rule_fits_from_scratch_after_growth():
     x, y = _stream(300, seed=2)
     m = GaussianMixtureSet(3, 3, 3, refit_growth=0.5).fit(x[:150], y[:150])
@@ -254,14 +348,21 @@ def two_threads():
 
 
 def _threads_seen_by_em(monkeypatch) -> list[int]:
+    """Thread counts seen by each from-scratch EM (run_em) and each warm refit of an action
+    (its M-step)."""
     seen: list[int] = []
-    real = _em.run_em
+    real, real_warm = _em.run_em, _em.warm_m_step
 
     def spy(*args, **kwargs):
         seen.append(torch.get_num_threads())
         return real(*args, **kwargs)
 
+    def spy_warm(*args, **kwargs):
+        seen.append(torch.get_num_threads())
+        return real_warm(*args, **kwargs)
+
     monkeypatch.setattr(_em, "run_em", spy)
+    monkeypatch.setattr(_em, "warm_m_step", spy_warm)
     return seen
 
 
@@ -367,3 +468,51 @@ def test_warm_refit_is_one_em_step_and_its_report_does_not_cry_wolf():
     # ... while a from-scratch fit that runs out of iterations still says so
     short = GaussianMixtureSet(3, 3, 4, tol=1e-12, max_iter=2).fit(x, y)
     assert any("did not converge" in note for note in short.fit_report_.notes)
+
+
+def test_fingerprint_depends_on_the_rows_not_on_their_memory():
+    """The kept statistics are used only when the fingerprint of the action's first points
+    is bit-identical to the stored one, so it must not depend on where the rows lie in memory
+    (a live model and a resumed one hold the data at other addresses), and must see an edit
+    or a reordering."""
+    rng = np.random.default_rng(0)
+    for n, d in ((1, 1), (9, 3), (17, 4), (1000, 5)):
+        x = rng.normal(size=(n, d)) * 1e3
+        ref = gmm_mod._fingerprint(x)
+        for off in range(1, 8):  # every 8-byte misalignment within a cache line
+            buf = np.empty(n * d + 16)
+            view = buf[off : off + n * d].reshape(n, d)
+            view[...] = x
+            longer = np.concatenate([x, x[:3]])[:n]  # a prefix of a longer array
+            assert np.array_equal(gmm_mod._fingerprint(view), ref)
+            assert np.array_equal(gmm_mod._fingerprint(longer), ref)
+        edited = x.copy()
+        edited[n // 2, d - 1] *= 1.0 + 1e-9  # (a change of an ulp or so may round away)
+        moved = x[::-1].copy()
+        assert not np.array_equal(gmm_mod._fingerprint(edited), ref)
+        if n > 1:
+            assert not np.array_equal(gmm_mod._fingerprint(moved), ref)
+
+
+def test_state_dict_without_kept_statistics_refits_with_a_full_first_e_step(monkeypatch):
+    """A checkpoint written before the kept statistics existed: its warm refit runs the first
+    E-step over all the action's points, and lands where the live model does (to rounding)."""
+    x, y = _stream(202, seed=7)
+    y[200:] = 1
+    live = GaussianMixtureSet(3, 3, 4).fit(x[:200], y[:200])
+    live.refit(x[:201], y[:201])
+    new = ("cand_stats_", "cand_coef_", "stats_valid_", "ref_center_", "data_print_")
+    old = {k: v for k, v in live.state_dict().items() if k not in new}
+    resumed = GaussianMixtureSet(3, 3, 4)
+    resumed.load_state_dict(old)
+    assert not resumed.stats_valid_.any()
+    sizes = _warm_e_step_sizes(monkeypatch)
+    live.refit(x, y)
+    resumed.refit(x, y)
+    n1 = int((y == 1).sum())
+    assert sizes == [1, n1, n1, n1]  # live: kept statistics; resumed: a full first E-step
+    assert resumed.fit_report_.refit_kind == live.fit_report_.refit_kind == ("kept", "warm", "kept")
+    for key in ("cand_weights_", "cand_means_", "cand_covariances_", "log_likelihood_"):
+        a, b = getattr(live, key), getattr(resumed, key)
+        fin = torch.isfinite(a)
+        torch.testing.assert_close(b[fin], a[fin], rtol=1e-9, atol=1e-12)

@@ -629,22 +629,10 @@ def run_em(
     tol: float,
     max_iter: int,
     params0: Params | None = None,
-    keep_measured: np.ndarray | None = None,
-    measured_max_iter: int | None = None,
 ) -> EMResult:
     """EM for every slot of every group at once, from initial responsibilities resp0 (one
     M-step makes the first parameters) or, when resp0 is None, from given parameters
     ``params0`` (a warm start, :func:`params_of`).
-
-    ``keep_measured`` [G, C] bool (numpy; default all False) marks slots that, when their
-    convergence test passes, keep the parameters that iteration's E-step measured (those of
-    the previous M-step) with that E-step's log-likelihood, instead of taking one more M-step
-    and a final E-step: one M-step and one E-step fewer per slot. Used for warm starts, whose
-    EM continues across refits; from-scratch fits keep sklearn's iterates. Such a stop needs
-    the previous parameters of the same packing, so a slot whose test first passes right
-    after a re-packing stops the ordinary way. With ``measured_max_iter``, such a slot also
-    stops (keeping the measured parameters, ``converged`` False unless its test passed) after
-    that many E-steps: a warm start's EM goes on at the next refit.
 
     Mirrors sklearn: each iteration is an E-step (log-likelihood of the current parameters)
     then an M-step; a slot stops when |mean log-likelihood change| < tol. The iterations run
@@ -671,11 +659,6 @@ def run_em(
     n_pts = pmask.sum(1).cpu().numpy()  # [G]
     slot_k = cmask.sum(-1).round().long().cpu().numpy()  # [G0, C0]
     running = np.ones((g0, c0), dtype=bool)
-    keep_flat = np.zeros(g0 * c0 + 1, dtype=bool)  # + the padding rows' index
-    if keep_measured is not None:
-        keep_flat[: g0 * c0] = np.asarray(keep_measured, dtype=bool).reshape(g0 * c0)
-    final_ll = np.zeros(g0 * c0)  # the log-likelihood of the slots stopped with measured params
-    measured = np.zeros(g0 * c0, dtype=bool)
     # the convergence bookkeeping runs in numpy: a few [B, R+1] arrays per iteration, where
     # each torch operation would cost more in dispatch than in arithmetic
     prev_all = np.full(g0 * c0 + 1, -math.inf)
@@ -713,8 +696,6 @@ def run_em(
         active = row_ok_np.copy()  # watched rows: running, not yet stopped
         packed = n_active = int(valid_np.sum())
         shifted = False
-        keep_rows = keep_flat[slot_ix].reshape(b, r + 1)
-        last_params: Params | None = None  # the parameters this packing's E-step measured
         while True:
             it += 1
             ll, resp, _ = _e_step_packed(bt, coef, shifted)
@@ -723,24 +704,7 @@ def run_em(
             mean_ll = ll_np / npts1
             done = (np.abs(mean_ll - prev) < tol) & active
             prev = mean_ll
-            budget = measured_max_iter is not None and it >= measured_max_iter
-            meas = (active if budget else done) & keep_rows
-            if last_params is not None and meas.any():
-                ids_np = slot_pad[meas]
-                n_iter[ids_np] = it
-                converged[ids_np] = done[meas]
-                measured[ids_np] = True
-                final_ll[ids_np] = ll_np[meas]
-                sel = valid_np & meas[np.arange(b)[:, None], lay.row]
-                saved.append((last_params, np.flatnonzero(sel), lay.gid[sel]))
-                running[np.unravel_index(ids_np, running.shape)] = False
-                active &= ~meas
-                done &= ~meas
-                n_active -= int(sel.sum())
-                if n_active == 0:
-                    break
             params, coef = _m_step_packed(bt, resp)
-            last_params = params
             last = it >= max_iter
             if not (last or done.any()):
                 continue
@@ -771,18 +735,7 @@ def run_em(
         ]
         o.index_copy_(0, dst, torch.cat(src_i))
     final = Params(*(o.reshape(g0, c0, k0, *o.shape[1:]) for o in out))
-    if not measured.any():
-        loglik = total_log_likelihood(zt0, final.coef, pmask)
-    else:  # the final E-step only for the groups with a slot stopped the ordinary way
-        loglik = torch.from_numpy(final_ll.reshape(g0, c0)).to(device=dev, dtype=dt)
-        meas_t = torch.from_numpy(measured.reshape(g0, c0)).to(dev)
-        need = np.flatnonzero(~measured.reshape(g0, c0).all(1))
-        if need.size:
-            gi = _ix(need, dev)
-            part = total_log_likelihood(
-                zt0.index_select(0, gi), final.coef.index_select(0, gi), pmask.index_select(0, gi)
-            )
-            loglik[gi] = torch.where(meas_t[gi], loglik[gi], part)
+    loglik = total_log_likelihood(zt0, final.coef, pmask)
     return EMResult(
         final,
         loglik,
@@ -814,3 +767,94 @@ def information_criterion(
     if kind == "aic_paper":
         return 2.0 * n_components.to(torch.float64) - 2.0 * loglik
     raise ValueError(f"Expected criterion in ('aic', 'bic', 'aic_paper') but got {kind!r}")
+
+
+# ---------------------------------------------------------------------- warm refits
+# A warm refit (``GaussianMixtureSet.refit``) continues each candidate's EM by one step, for
+# one action's C candidates at once (candidate c has c + 1 components). It runs on the
+# candidates' real components side by side, R = C (C + 1) / 2 rows, with no packing or
+# batch bookkeeping: a handful of tensor operations per step.
+
+
+@functools.lru_cache(maxsize=64)
+def warm_rows(n_cand: int, device: torch.device) -> tuple[Tensor, Tensor, Tensor]:
+    """Rows of the real components of candidates 1..n_cand: (cand [R] long, comp [R] long,
+    indicator [C, R] float64 with 1 where row r belongs to candidate c)."""
+    cand = np.repeat(np.arange(n_cand), np.arange(1, n_cand + 1))
+    comp = np.concatenate([np.arange(c + 1) for c in range(n_cand)])
+    ind = (cand[None, :] == np.arange(n_cand)[:, None]).astype(np.float64)
+    return (
+        torch.from_numpy(cand).to(device),
+        torch.from_numpy(comp).to(device),
+        torch.from_numpy(ind).to(device),
+    )
+
+
+def quadratic_features_t(xt: Tensor) -> Tensor:
+    """[D, N] (points last) -> zt [Q, N]: :func:`quadratic_features` transposed."""
+    i, j, _, _, _, _ = _indices(xt.shape[0], xt.device)
+    return torch.cat([xt[i] * xt[j], xt, xt.new_ones(1, xt.shape[1])], 0)
+
+
+def warm_e_step(zt: Tensor, coef: Tensor, cand: Tensor, ind: Tensor) -> tuple[Tensor, Tensor]:
+    """E-step of C candidates over one action's points, with their sufficient statistics.
+
+    zt [Q, N] quadratic features (points last), coef [R, Q] the real components' weighted
+    log-density coefficients (:class:`Params` ``coef``), cand [R] and ind [C, R] from
+    :func:`warm_rows` -> (loglik [C] total log-likelihood of each candidate, stats [R, Q]
+    = sum over the points of resp * z, the M-step's sufficient statistics).
+
+    Each point's log-sum-exp is shifted by its largest component log-density over all
+    candidates; where a candidate's shifted sum falls below e^-600 (its best component far
+    below another candidate's: the e^-700 clamp could matter), every candidate is shifted
+    by its own maximum instead.
+    """
+    w = coef @ zt  # [R, N]
+    mx = w.amax(0)  # [N]
+    e = (w - mx).clamp_min_(_CLAMP).exp_()
+    s = ind @ e  # [C, N]
+    lo = float(s.amin())
+    if lo > math.exp(-600.0):
+        lse = torch.log(s).add_(mx)
+    else:  # per-candidate shifts (rare)
+        c, r = ind.shape
+        wp = torch.full((c, r, w.shape[1]), -math.inf, dtype=w.dtype, device=w.device)
+        wp[cand, torch.arange(r, device=w.device)] = w
+        cmx = wp.amax(1)  # [C, N]
+        e = (w - cmx.index_select(0, cand)).clamp_min_(_CLAMP).exp_()
+        s = ind @ e
+        lse = torch.log(s).add_(cmx)
+    e.mul_(torch.reciprocal(s).index_select(0, cand))  # responsibilities [R, N]
+    stats = (zt @ e.T).T  # zt @ resp^T: the long N axis contiguous in both operands
+    return lse.sum(1), stats
+
+
+def warm_m_step(stats: Tensor, cand: Tensor, n_cand: int, floor: Tensor) -> tuple[Tensor, ...]:
+    """M-step from sufficient statistics stats [R, Q] (:func:`warm_e_step`) -> weights [R],
+    means [R, D], covariances [R, D, D] (floor on the diagonal); the same estimates as
+    :func:`m_step` (nk + 10 eps, weights renormalised per candidate)."""
+    q = stats.shape[-1]
+    d = _dim_of(q)
+    du = q - d - 1
+    _, _, full, _, _, _ = _indices(d, stats.device)
+    nk = stats[:, -1] + 10.0 * _EPS
+    st = stats / nk.unsqueeze(-1)
+    means = st[:, du : du + d]
+    cov = st.index_select(-1, full).view(-1, d, d)
+    cov.sub_(means.unsqueeze(-1) * means.unsqueeze(-2)).add_(torch.diag(floor))
+    tot = torch.zeros(n_cand, dtype=stats.dtype, device=stats.device).index_add_(0, cand, nk)
+    return nk / tot.index_select(0, cand), means, cov
+
+
+def warm_coef(weights: Tensor, means: Tensor, cov: Tensor) -> Tensor:
+    """coef [R, Q] of real components: weights [R], means [R, D], cov [R, D, D]."""
+    r, d = means.shape
+    _, _, _, upper, scale, _ = _indices(d, means.device)
+    prec, log_det = _precision(cov)
+    lin = (prec * means.unsqueeze(-2)).sum(-1)
+    quad = prec.reshape(r, d * d)[:, upper] * scale
+    const = torch.log(weights) + log_det - 0.5 * (lin * means).sum(-1) - 0.5 * d * _LOG_2PI
+    return torch.cat([quad, lin, const.unsqueeze(-1)], -1)
+
+
+_LOG_2PI = math.log(2.0 * math.pi)

@@ -31,8 +31,9 @@ with free parameters p = (k-1) + k d + k d (d+1) / 2 (equal to scikit-learn's ``
 Incremental refits
 ------------------
 :meth:`GaussianMixtureSet.refit` refits only the actions whose data changed, each candidate
-warm-started from its own kept parameters, and fits an action from scratch again once its data
-grew by ``refit_growth`` since its last from-scratch fit (see docs/architecture.md).
+warm-started from its own kept parameters and sufficient statistics (one EM step per refit),
+and fits an action from scratch again once its data grew by ``refit_growth`` since its last
+from-scratch fit (see docs/architecture.md).
 
 Threads
 -------
@@ -95,7 +96,8 @@ class FitReport:
     "kept" (data unchanged, mixture kept; its table rows are those of its last fit) or "empty".
     A warm candidate takes one EM step per refit (EM continues across refits): its
     ``converged`` says whether that step moved its mean per-point log-likelihood by less than
-    ``tol``, its ``n_iter`` counts the E-steps (2), and the "did not converge" note lists only
+    ``tol``, its ``n_iter`` counts the E-steps (2, the first one often over the new points
+    only, see :meth:`GaussianMixtureSet.refit`), and the "did not converge" note lists only
     candidates fitted from scratch.
     """
 
@@ -183,7 +185,29 @@ _REFIT_BUFFERS = (
     "cand_means_",
     "cand_covariances_",
     "full_fit_points_",
+    "cand_stats_",
+    "cand_coef_",
+    "stats_valid_",
+    "ref_center_",
+    "data_print_",
 )
+
+
+_PRINT_WEIGHTS = np.ones(0)
+
+
+def _fingerprint(xa: np.ndarray) -> np.ndarray:
+    """[n, D] -> [D]: the sum of the rows weighted by a fixed pseudo-random weight in [1, 2)
+    per row position. Bit-identical for the same rows; an edited, removed or moved row
+    changes it, except for a coincidence or an edit below the sum's rounding (an ulp or so
+    of one value, which moves the statistics by as little). numpy sums over the leading axis
+    one row after the other, whatever the array's memory alignment."""
+    global _PRINT_WEIGHTS
+    n = xa.shape[0]
+    if _PRINT_WEIGHTS.size < n:
+        size = max(1024, 1 << (n - 1).bit_length())
+        _PRINT_WEIGHTS = 1.0 + _em._splitmix_uniform(np.arange(size, dtype=np.uint64))
+    return (xa * _PRINT_WEIGHTS[:n, None]).sum(0)
 
 
 def _initial_buffer(model: GaussianMixtureSet, name: str) -> Tensor:
@@ -201,8 +225,9 @@ def _initial_buffer(model: GaussianMixtureSet, name: str) -> Tensor:
 # below the usable CPUs minus 0.5). Measured with bench/bench_refit.py --sections threads.
 SINGLE_THREAD_WORK = 1.0e6
 
-# A warm-started candidate's EM runs at most this many E-steps per refit (so one M-step, and
-# the second E-step measures the parameters it keeps): EM continues across refits.
+# A warm-started candidate takes one EM step per refit, reported as this many E-steps: the
+# one of its kept parameters (often over the new points alone, added to the kept statistics)
+# and the one that measures the parameters of the M-step between them.
 _WARM_ITER = 2
 
 
@@ -276,7 +301,13 @@ class GaussianMixtureSet(nn.Module):
     parameters (slot c = the candidate with c + 1 components, uncentred; zero weights beyond
     it): ``cand_weights_`` [A, K, K], ``cand_means_`` [A, K, K, D], ``cand_covariances_``
     [A, K, K, D, D]; ``data_mean_`` [A, D] (each action's mean, to detect changed data) and
-    ``full_fit_points_`` [A] long (count at the last from-scratch fit, 0 = none).
+    ``full_fit_points_`` [A] long (count at the last from-scratch fit, 0 = none). After a
+    warm refit of an action, its candidates' sufficient statistics over its points
+    ``cand_stats_`` [A, K, K, Q] (Q = D (D + 3) / 2 + 1: sums of resp * (x x^T upper
+    triangle, x, 1), x centred at ``ref_center_`` [A, D]) with the coefficients they were
+    measured with ``cand_coef_`` [A, K, K, Q], ``stats_valid_`` [A] bool, and a fingerprint
+    of the points ``data_print_`` [A, D]: the next warm refit adds the new points' share to
+    them instead of an E-step over all the points.
     ``fit_report_`` (a :class:`FitReport`) is a plain attribute, not part of the state_dict.
     """
 
@@ -352,6 +383,12 @@ class GaussianMixtureSet(nn.Module):
             "cand_covariances_", torch.eye(d, dtype=f64).expand(a, k, k, d, d).clone()
         )
         self.register_buffer("full_fit_points_", torch.zeros(a, dtype=torch.long))
+        q = d * (d + 3) // 2 + 1
+        self.register_buffer("cand_stats_", torch.zeros(a, k, k, q, dtype=f64))
+        self.register_buffer("cand_coef_", torch.zeros(a, k, k, q, dtype=f64))
+        self.register_buffer("stats_valid_", torch.zeros(a, dtype=torch.bool))
+        self.register_buffer("ref_center_", torch.zeros(a, d, dtype=f64))
+        self.register_buffer("data_print_", torch.zeros(a, d, dtype=f64))
         self.register_buffer("fitted_", torch.zeros((), dtype=torch.bool))
         self.fit_report_: FitReport | None = None
         self._cache: dict[str, Any] | None = None
@@ -493,6 +530,15 @@ class GaussianMixtureSet(nn.Module):
         kept, not only the chosen one), and the criterion chooses among the candidates again.
         The priors Pr(G_a) and the variance floor always follow all the data.
 
+        A warm candidate takes one EM step (EM continues across refits): an E-step of its
+        kept parameters, an M-step, and the E-step of the new parameters, whose sufficient
+        statistics are kept. When the action's first points are those of its last refit
+        (appended points only: checked by count and a fingerprint of those points, so an
+        edited, relabelled or removed old point is caught), the first E-step runs over the new
+        points alone and adds their share to the kept statistics (Neal and Hinton's
+        incremental EM); otherwise it runs over all the points. Same result either way, up to
+        rounding.
+
         Full-refit rule: an action is fitted from scratch (k-means++, as :meth:`fit`) instead
         when it was never fitted from scratch, when it gains a candidate (it had fewer than
         ``max_components`` points), or when its point count reached ``1 + refit_growth``
@@ -572,6 +618,13 @@ class GaussianMixtureSet(nn.Module):
         c_mu = self.cand_means_.to(f64).clone()
         c_cov = self.cand_covariances_.to(f64).clone()
         full_n_new = self.full_fit_points_.clone()
+        stats_tab = (
+            self.cand_stats_.to(f64).clone(),
+            self.cand_coef_.to(f64).clone(),
+            self.stats_valid_.clone(),
+            self.ref_center_.to(f64).clone(),
+            self.data_print_.to(f64).clone(),
+        )
         eye = torch.eye(d, dtype=f64, device=dev)
         reset = torch.from_numpy(changed & ~(scratch_np | warm_np)).to(dev)  # emptied actions
         if incremental and self.is_fitted and bool(reset.any()):
@@ -590,10 +643,18 @@ class GaussianMixtureSet(nn.Module):
             full_n_new.zero_()
 
         if groups_np.size:
-            self._fit_groups(
-                x, y, counts, centers, floor, groups_np, scratch_np, k_per_action, crit_tab,
-                ll_tab, conv_tab, iter_tab, n_comp, (c_w, c_mu, c_cov), caller_threads,
-            )  # fmt: skip
+            scratch_groups = np.flatnonzero(scratch_np)
+            if scratch_groups.size:
+                self._fit_groups(
+                    x, y, counts, centers, floor, scratch_groups, k_per_action, crit_tab,
+                    ll_tab, conv_tab, iter_tab, n_comp, (c_w, c_mu, c_cov), caller_threads,
+                )  # fmt: skip
+                stats_tab[2][torch.from_numpy(scratch_groups).to(dev)] = False
+            for a in np.flatnonzero(warm_np):
+                self._warm_action(
+                    int(a), x_np[y_np == a], centers[a], floor, crit_tab, ll_tab, conv_tab,
+                    iter_tab, n_comp, (c_w, c_mu, c_cov), stats_tab, caller_threads,
+                )  # fmt: skip
             g_t = groups
             full_n_new[torch.from_numpy(np.flatnonzero(scratch_np)).to(dev)] = counts[
                 torch.from_numpy(np.flatnonzero(scratch_np)).to(dev)
@@ -612,6 +673,7 @@ class GaussianMixtureSet(nn.Module):
             precs[g_t] = torch.where(m_ch[..., None, None], prec_ch, eye)
             log_det[g_t] = log_det_ch * m_ch
         if bool(reset.any()):
+            stats_tab[2][reset] = False
             weights[reset] = 0.0
             means[reset] = 0.0
             covs[reset] = eye
@@ -677,6 +739,11 @@ class GaussianMixtureSet(nn.Module):
                 ("cand_means_", c_mu),
                 ("cand_covariances_", c_cov),
                 ("full_fit_points_", full_n_new),
+                ("cand_stats_", stats_tab[0]),
+                ("cand_coef_", stats_tab[1]),
+                ("stats_valid_", stats_tab[2]),
+                ("ref_center_", stats_tab[3]),
+                ("data_print_", stats_tab[4]),
                 ("fitted_", torch.ones((), dtype=torch.bool)),
             ):
                 getattr(self, name).copy_(val)  # copy_ converts dtype and device
@@ -692,7 +759,6 @@ class GaussianMixtureSet(nn.Module):
         centers: Tensor,
         floor: Tensor,
         groups_np: np.ndarray,
-        scratch_np: np.ndarray,
         k_per_action: np.ndarray,
         crit_tab: Tensor,
         ll_tab: Tensor,
@@ -702,7 +768,7 @@ class GaussianMixtureSet(nn.Module):
         cand: tuple[Tensor, Tensor, Tensor],
         caller_threads: int = 1,
     ) -> None:
-        """One batched EM over the given actions (some from scratch, some warm-started);
+        """One batched EM over the given actions, each candidate from its k-means++ start;
         writes their rows of the tables, n_comp and the kept candidates ``cand`` in place."""
         dev = x.device
         f64 = torch.float64
@@ -713,7 +779,7 @@ class GaussianMixtureSet(nn.Module):
         counts_g = counts[groups]
         n_max = int(counts_g.max())
         # the groups' points, centred per action (a better conditioned M-step), in data order
-        if g_n == 1:  # the usual warm refit: one action (same values as the general path)
+        if g_n == 1:  # one action (a refit's usual case): the same values as the general path
             a0 = int(groups_np[0])
             xg = (x[y == a0] - centers[a0]).unsqueeze(0)
         else:
@@ -738,31 +804,18 @@ class GaussianMixtureSet(nn.Module):
         slot_k = torch.from_numpy(slot_k_np).to(dev)
         pmask = (torch.arange(n_max, device=dev) < counts_g.unsqueeze(1)).to(f64)
         cmask = (torch.arange(k_pad, device=dev) < slot_k.unsqueeze(-1)).to(f64)
-        scr = scratch_np[groups_np]
         # inference mode (no view or version tracking): ~10% off the EM's many small operations;
         # everything below reads its results through functional ops, so the fitted buffers
         # are ordinary tensors
         work = float(n_max) * float(slot_k_np.sum()) * (d * (d + 3) // 2 + 1)
         with _threads(_em_threads(work, caller_threads)), torch.inference_mode():
-            if scr.all():
-                uniforms = torch.from_numpy(
-                    _em.candidate_uniforms(
-                        self.seed, groups_np[:, None].repeat(k_pad, 1), slot_k_np, k_pad
-                    )
-                ).to(dev)
-                resp0 = _em.kmeans_init(xg, pmask, cmask, uniforms)
-                res = _em.run_em(xg, pmask, cmask, floor, resp0, self.tol, self.max_iter)
-            else:
-                params0 = self._start_params(
-                    xg, pmask, cmask, floor, groups_np, scr, slot_k_np, k_pad, centers, cand
+            uniforms = torch.from_numpy(
+                _em.candidate_uniforms(
+                    self.seed, groups_np[:, None].repeat(k_pad, 1), slot_k_np, k_pad
                 )
-                # EM continued across refits: a warm candidate that converges keeps the
-                # parameters its last E-step measured (no extra M-step and final E-step)
-                res = _em.run_em(
-                    xg, pmask, cmask, floor, None, self.tol, self.max_iter, params0=params0,
-                    keep_measured=np.repeat(~scr[:, None], k_pad, 1),
-                    measured_max_iter=_WARM_ITER,
-                )  # fmt: skip
+            ).to(dev)
+            resp0 = _em.kmeans_init(xg, pmask, cmask, uniforms)
+            res = _em.run_em(xg, pmask, cmask, floor, resp0, self.tol, self.max_iter)
         real = torch.from_numpy(real_np).to(dev)
         g_idx, c_idx = real.nonzero(as_tuple=True)
         cand_action = groups[g_idx]
@@ -799,47 +852,97 @@ class GaussianMixtureSet(nn.Module):
         c_mu.index_copy_(0, groups, mu_new)
         c_cov.index_copy_(0, groups, cov_new)
 
-    def _start_params(
+    def _warm_action(
         self,
-        xg: Tensor,
-        pmask: Tensor,
-        cmask: Tensor,
+        a: int,
+        xa: np.ndarray,
+        center: Tensor,
         floor: Tensor,
-        groups_np: np.ndarray,
-        scr: np.ndarray,
-        slot_k_np: np.ndarray,
-        k_pad: int,
-        centers: Tensor,
+        crit_tab: Tensor,
+        ll_tab: Tensor,
+        conv_tab: Tensor,
+        iter_tab: Tensor,
+        n_comp: Tensor,
         cand: tuple[Tensor, Tensor, Tensor],
-    ) -> _em.Params:
-        """Initial parameters [G, C, K, ...]: k-means++ then one M-step for the groups fitted
-        from scratch, each candidate's kept parameters (re-centred) for the warm ones."""
-        dev = xg.device
+        stats_tab: tuple[Tensor, Tensor, Tensor, Tensor, Tensor],
+        caller_threads: int = 1,
+    ) -> None:
+        """One EM step for every candidate of action ``a`` (points xa [n, D], data order),
+        each from its kept parameters; writes the action's rows of the tables in place.
+
+        The first E-step (the kept parameters on the current points) is skipped when the
+        kept sufficient statistics still describe the action's first ``n_old`` points (same
+        count at least, and the same fingerprint of those points, so an edited or relabelled
+        old point is caught): the new points' share is added to them (Neal and Hinton's
+        incremental EM). Otherwise that E-step runs over all the points.
+        """
+        dev = center.device
+        d, kmax = self.n_features, self.max_components
         c_w, c_mu, c_cov = cand
-        groups = torch.from_numpy(groups_np).to(dev)
-        warm_i = torch.from_numpy(np.flatnonzero(~scr)).to(dev)
-        warm_a = groups[warm_i]
-        slot = torch.from_numpy(slot_k_np[~scr] - 1).to(dev)  # [W, C]
-        rows = warm_a.unsqueeze(1)
-        w0 = c_w[rows, slot][..., :k_pad]
-        mu0 = c_mu[rows, slot][..., :k_pad, :] - centers[warm_a][:, None, None]
-        cov0 = c_cov[rows, slot][..., :k_pad, :, :]
-        warm = _em.params_of(w0, mu0, cov0, cmask[warm_i])
-        if not scr.any():
-            return warm
-        scr_i = torch.from_numpy(np.flatnonzero(scr)).to(dev)
-        uniforms = torch.from_numpy(
-            _em.candidate_uniforms(
-                self.seed, groups_np[scr][:, None].repeat(k_pad, 1), slot_k_np[scr], k_pad
-            )
-        ).to(dev)
-        xs, ps, cs = xg[scr_i], pmask[scr_i], cmask[scr_i]
-        resp0 = _em.kmeans_init(xs, ps, cs, uniforms)
-        fresh = _em.m_step(_em.quadratic_features(xs), resp0, cs, floor)
-        order = torch.argsort(torch.cat([scr_i, warm_i]))
-        return _em.Params(
-            *(torch.cat([f, w]).index_select(0, order) for f, w in zip(fresh, warm, strict=True))
+        st_buf, coef_buf, valid_buf, ref_buf, print_buf = stats_tab
+        n = xa.shape[0]
+        n_old = int(self.n_points_[a])
+        c_n = min(n, kmax)
+        cand_t, comp_t, ind = _em.warm_rows(c_n, dev)
+        flat = cand_t * kmax + comp_t  # rows in the [K * K] candidate slots of an action
+        f64 = torch.float64
+
+        def rows(table: Tensor) -> Tensor:  # the action's real components [R, ...]
+            return table[a].reshape(kmax * kmax, *table.shape[3:]).index_select(0, flat)
+
+        def put(table: Tensor, value: Tensor, empty: Tensor | float) -> None:  # in place
+            slots = table[a].view(kmax * kmax, *table.shape[3:])
+            if isinstance(empty, Tensor):
+                slots.copy_(empty)
+            else:
+                slots.fill_(empty)
+            slots.index_copy_(0, flat, value)
+
+        fast = (
+            bool(self.stats_valid_[a])
+            and n > n_old
+            and np.array_equal(_fingerprint(xa[:n_old]), self.data_print_[a].cpu().numpy())
         )
+        ref = self.ref_center_[a].to(f64) if fast else center
+        xt = (torch.from_numpy(xa).to(dev) - ref).T.contiguous()  # [D, n]
+        work = float(n) * float(c_n * (c_n + 1) // 2) * (d * (d + 3) // 2 + 1)
+        with _threads(_em_threads(work, caller_threads)), torch.inference_mode():
+            zt = _em.quadratic_features_t(xt)
+            if fast:  # the kept statistics plus the new points' share
+                coef0 = rows(self.cand_coef_.to(f64))
+                ll_add, st_add = _em.warm_e_step(zt[:, n_old:], coef0, cand_t, ind)
+                stats = rows(self.cand_stats_.to(f64)) + st_add
+                ll0 = self.log_likelihood_[a, :c_n].to(f64) + ll_add
+            else:
+                coef0 = _em.warm_coef(rows(c_w), rows(c_mu) - ref, rows(c_cov))
+                ll0, stats = _em.warm_e_step(zt, coef0, cand_t, ind)
+            w1, mu1, cov1 = _em.warm_m_step(stats, cand_t, c_n, floor)
+            coef1 = _em.warm_coef(w1, mu1, cov1)
+            ll1, stats1 = _em.warm_e_step(zt, coef1, cand_t, ind)
+        ks = torch.arange(1, c_n + 1, device=dev)
+        crit = _em.information_criterion(self.criterion, ll1, ks, torch.tensor(n, device=dev), d)
+        if not bool(torch.isfinite(crit).all()):
+            raise FloatingPointError(
+                "EM produced a non-finite log-likelihood; the data may be badly scaled "
+                "(try standardising the features or a larger var_floor)"
+            )
+        crit_tab[a] = math.inf
+        ll_tab[a] = -math.inf
+        conv_tab[a] = False
+        iter_tab[a] = 0
+        crit_tab[a, :c_n] = crit
+        ll_tab[a, :c_n] = ll1
+        conv_tab[a, :c_n] = (ll1 - ll0).abs() / n < self.tol
+        iter_tab[a, :c_n] = _WARM_ITER
+        n_comp[a] = int(crit.argmin()) + 1  # first minimum: smallest k on ties
+        put(c_w, w1, 0.0)
+        put(c_mu, mu1 + ref, 0.0)
+        put(c_cov, cov1, torch.eye(d, dtype=f64, device=dev))
+        put(st_buf, stats1, 0.0)
+        put(coef_buf, coef1, 0.0)
+        valid_buf[a] = True
+        ref_buf[a] = ref
+        print_buf[a] = torch.from_numpy(_fingerprint(xa)).to(dev)
 
     # ------------------------------------------------------------------ prediction
     def _component_scores_np(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

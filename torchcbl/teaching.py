@@ -148,7 +148,7 @@ class TeachingConfig:
         refit: "full" (default) fits the model from scratch at every refit, so it is a function
             of the labels alone; "incremental" uses ``GaussianMixtureSet.refit``: only the
             actions whose data changed are refitted, each candidate warm-started from its
-            previous parameters, with a periodic from-scratch fit (1/7.5 to 1/9.5 of the
+            previous parameters, with a periodic from-scratch fit (1/13 to 1/23 of the
             refit time of a 10,000-demonstration session with max_new = 1, the same quality:
             bench/bench_refit.py). The model then depends on the refit history as well.
         accuracy_window: number of most recent demonstrations the prediction accuracy is taken
