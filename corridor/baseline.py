@@ -56,7 +56,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from corridor.env import CorridorEnv
 from corridor.maps import CorridorMap
 from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
 
@@ -87,9 +86,18 @@ class PrioritizedSweepingConfig:
         optimism_visits: tries of a (state, action) before its model is trusted.
         reward_step: 0 for the sample mean of a (state, action)'s rewards; else the step size of
             an exponential recency-weighted mean (after the first ``1 / reward_step`` tries).
-        epsilon: probability of a uniformly random action at a learning step.
+        epsilon: probability of a uniformly random action at a learning step (the first).
+        epsilon_decay: 0 for a constant ``epsilon``; else ``tau``, steps over which epsilon
+            halves: at learning step t it is ``epsilon * tau / (tau + t)`` (GLIE: it goes to 0
+            while its sum over steps still diverges).
         max_steps: learning steps before giving up.
-        stable_steps: consecutive learning steps the greedy policy must pass for ``steps_stable``.
+        episode_steps: a learning episode ends when the robot completes a circuit or after this
+            many actions (``CorridorEnv``'s step cap, 81); the robot is then put back at the
+            start pose, as in the teaching loop.
+        eval_circuits: clean circuits in a row, from the start pose, that the greedy policy must
+            drive to pass an evaluation.
+        stable_evaluations: consecutive passing evaluations (one after each learning episode)
+            for ``steps_stable``.
     """
 
     wall_threshold: float = 0.6
@@ -103,8 +111,11 @@ class PrioritizedSweepingConfig:
     optimism_visits: int = 2
     reward_step: float = 0.0
     epsilon: float = 0.1
+    epsilon_decay: int = 0
     max_steps: int = 5000
-    stable_steps: int = 200
+    episode_steps: int = 81
+    eval_circuits: int = 3
+    stable_evaluations: int = 3
 
     def __post_init__(self) -> None:
         if not 0 < self.gamma < 1:
@@ -114,12 +125,16 @@ class PrioritizedSweepingConfig:
             "recency_horizon",
             "optimism_visits",
             "max_steps",
-            "stable_steps",
+            "episode_steps",
+            "eval_circuits",
+            "stable_evaluations",
         ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if not 0 <= self.reward_step <= 1:
             raise ValueError(f"reward_step must be in [0, 1], got {self.reward_step}")
+        if self.epsilon_decay < 0:
+            raise ValueError(f"epsilon_decay must be >= 0 steps, got {self.epsilon_decay}")
         if not 0 <= self.epsilon <= 1:
             raise ValueError("epsilon must be in [0, 1]")
         if self.cell_size <= 0:
@@ -148,6 +163,7 @@ class PrioritizedSweeping:
         self.q = np.full((N_STATES, N_ACTIONS), self.optimistic)
         self._pred: dict[int, set[tuple[int, int]]] = defaultdict(set)
         self._queue: list[tuple[float, int, int]] = []
+        self.steps = 0
 
     def greedy_table(self) -> tuple[int, ...]:
         """The greedy action of each of the 8 states (ties to the lower index)."""
@@ -155,7 +171,10 @@ class PrioritizedSweeping:
 
     def act(self, state: int) -> int:
         """Epsilon-greedy action with random tie-breaking."""
-        if self.config.epsilon > 0 and self.rng.random() < self.config.epsilon:
+        eps = self.config.epsilon
+        if self.config.epsilon_decay:
+            eps *= self.config.epsilon_decay / (self.config.epsilon_decay + self.steps)
+        if eps > 0 and self.rng.random() < eps:
             return int(self.rng.integers(N_ACTIONS))
         row = self.q[state]
         best = np.flatnonzero(row >= row.max() - 1e-12)
@@ -178,6 +197,7 @@ class PrioritizedSweeping:
 
     def observe(self, s: int, a: int, r: float, s2: int) -> None:
         """Learn from one real transition, then sweep."""
+        self.steps += 1
         self.counts[s, a] += 1
         self.trans[s, a, s2] += 1
         # Sample mean for the first 1/reward_step visits, then an exponential recency-weighted
@@ -202,13 +222,16 @@ class PSResult:
     """Outcome of one Prioritized Sweeping run.
 
     Attributes:
-        steps_first: learning steps until the greedy policy first completed a clean circuit;
-            None if it never did within ``max_steps``.
-        steps_stable: the learning step from which the greedy policy completed a clean circuit
-            after every one of ``stable_steps`` consecutive learning steps; None if that did not
-            happen within ``max_steps``.
-        learning_steps: learning steps taken.
+        steps_first: the first learning step after which the greedy policy passed the
+            evaluation (``eval_circuits`` clean circuits in a row from the start pose; checked
+            after every step); None if it never did within ``max_steps``.
+        steps_stable: the learning step of the first of ``stable_evaluations`` consecutive
+            end-of-episode evaluations that the greedy policy passed ("learned"); None if that
+            did not happen within ``max_steps``.
+        learning_steps: learning steps taken (the run stops once ``steps_stable`` is confirmed).
         contacts: wall contacts while learning.
+        episodes: learning episodes ended.
+        circuits: learning episodes that ended with a completed circuit.
         policy: the final greedy table (state index -> action).
         policies_checked: distinct greedy tables evaluated.
     """
@@ -217,18 +240,36 @@ class PSResult:
     steps_stable: int | None
     learning_steps: int
     contacts: int
+    episodes: int
+    circuits: int
     policy: tuple[int, ...]
     policies_checked: int
 
 
 def _completes_circuit(
-    table: tuple[int, ...], env: CorridorEnv, threshold: float, seed: int
+    table: tuple[int, ...],
+    world: CorridorWorld,
+    threshold: float,
+    seed: int,
+    circuits: int = 1,
+    cap: int = 81,
 ) -> bool:
-    obs, _ = env.reset(seed=seed)
-    while True:
-        obs, _, terminated, truncated, info = env.step(table[binary_state(obs, threshold)])
-        if terminated or truncated:
-            return bool(info["is_success"])
+    """Whether the greedy ``table`` drives ``circuits`` circuits in a row from the start pose,
+    without touching a wall, each within ``cap`` actions (``CorridorEnv``'s step cap)."""
+    rng = np.random.default_rng(seed)
+    world.reset()
+    obs = world.sense(rng)
+    steps = laps = 0
+    while laps < circuits:
+        if world.step(table[binary_state(obs, threshold)], rng):
+            return False
+        steps += 1
+        if world.laps > laps:
+            laps, steps = world.laps, 0
+        elif steps >= cap:
+            return False
+        obs = world.sense(rng)
+    return True
 
 
 def run_prioritized_sweeping(
@@ -242,7 +283,7 @@ def run_prioritized_sweeping(
     config = config or PrioritizedSweepingConfig()
     rng = np.random.default_rng(seed)
     world = CorridorWorld(corridor_map, world_config)
-    eval_env = CorridorEnv(corridor_map, world_config)
+    eval_world = CorridorWorld(corridor_map, world_config)
     learner = PrioritizedSweeping(config, rng)
     last_visit: dict[tuple[int, int], int] = {}
     checked: dict[tuple[int, ...], bool] = {}
@@ -251,11 +292,24 @@ def run_prioritized_sweeping(
         x, y, _ = world.pose
         return (round(x / config.cell_size), round(y / config.cell_size))
 
+    def passes(table: tuple[int, ...]) -> bool:
+        if table not in checked:
+            checked[table] = _completes_circuit(
+                table,
+                eval_world,
+                config.wall_threshold,
+                seed=seed + 10_000,
+                circuits=config.eval_circuits,
+                cap=config.episode_steps,
+            )
+        return checked[table]
+
     s = binary_state(world.sense(rng), config.wall_threshold)
     last_visit[place()] = 0
-    contacts = 0
+    contacts = episodes = circuits = 0
     first: int | None = None
-    run_start: int | None = None
+    run: list[int] = []  # learning steps of the current run of passing evaluations
+    episode_t = 0
     for t in range(1, config.max_steps + 1):
         a = learner.act(s)
         s_before = world.progress.s
@@ -273,17 +327,32 @@ def run_prioritized_sweeping(
         learner.observe(s, a, r, s2)
         s = s2
         table = learner.greedy_table()
-        if table not in checked:
-            checked[table] = _completes_circuit(
-                table, eval_env, config.wall_threshold, seed=seed + 10_000
-            )
-        if checked[table]:
-            if first is None:
-                first = t
-            if run_start is None:
-                run_start = t
-            if t - run_start + 1 >= config.stable_steps:
-                return PSResult(first, run_start, t, contacts, table, len(checked))
-        else:
-            run_start = None
-    return PSResult(first, None, config.max_steps, contacts, learner.greedy_table(), len(checked))
+        if first is None and passes(table):
+            first = t
+        episode_t += 1
+        if world.laps > 0 or episode_t >= config.episode_steps:
+            # End of a learning episode: back to the start pose (the reset is not a transition
+            # the model learns), and one evaluation of the greedy policy.
+            episodes += 1
+            circuits += int(world.laps > 0)
+            world.reset()
+            episode_t = 0
+            s = binary_state(world.sense(rng), config.wall_threshold)
+            if passes(table):
+                run.append(t)
+                if len(run) >= config.stable_evaluations:
+                    return PSResult(
+                        first, run[0], t, contacts, episodes, circuits, table, len(checked)
+                    )
+            else:
+                run = []
+    return PSResult(
+        first,
+        None,
+        config.max_steps,
+        contacts,
+        episodes,
+        circuits,
+        learner.greedy_table(),
+        len(checked),
+    )
