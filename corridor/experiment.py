@@ -10,7 +10,8 @@ Per seed (in parallel worker processes):
    from the paper's start, and ``eval_circuits`` more from perturbed starts (``eval_perturbation``:
    up to 0.1 m in x and y, 10 degrees of heading).
 3. Baseline: :func:`corridor.baseline.run_prioritized_sweeping` (steps until its greedy policy
-   first completes a clean circuit, and until it does so for ``stable_steps`` steps in a row).
+   first drives 3 clean circuits in a row, and until it does so at 3 end-of-episode
+   evaluations in a row, "learned").
 
 The robot's motion is noisy by default, as the paper's AIBO's was: the motion noise of
 :meth:`corridor.world.WorldConfig.legged_robot` (each step's length +-10%, each turn's heading

@@ -236,24 +236,42 @@ def test_binary_state():
 
 
 def test_prioritized_sweeping_learns_a_small_loop():
-    # directed: on this rectangle the undirected recency reward pays the clockwise loop as well
-    # (2 of 5 seeds settled on it); paid only for progress along the route, 5 of 5 learn.
-    cfg = PrioritizedSweepingConfig(max_steps=1500, stable_steps=100, directed=True)
+    # directed: on this rectangle the undirected recency reward pays the clockwise loop as well;
+    # paid only for progress along the route, the runs learn the counter-clockwise circuit.
+    cfg = PrioritizedSweepingConfig(max_steps=1500, directed=True)
     results = [run_prioritized_sweeping(map_from_dict(SMALL), cfg, seed=s) for s in range(3)]
     assert all(r.steps_stable is not None for r in results)
     for r in results:
-        # Stable comes at or after the first hit, and the run stops when it is confirmed.
-        assert r.steps_first <= r.steps_stable
-        assert r.learning_steps == r.steps_stable + cfg.stable_steps - 1
+        # Stable comes at or after the first hit, and the run stops at the evaluation that
+        # confirms it (the end of a learning episode, at least 3 episodes in).
+        assert r.steps_first <= r.steps_stable < r.learning_steps
+        assert r.episodes >= cfg.stable_evaluations
         # Its learned policy: forward in a corridor (wall left and right), left at corners.
         assert r.policy[0b101] == F and r.policy[0b011] == L
     again = run_prioritized_sweeping(map_from_dict(SMALL), cfg, seed=0)
     assert again == results[0]
 
 
+def test_prioritized_sweeping_evaluation_drives_clean_circuits_in_a_row():
+    """The evaluation: ``circuits`` clean circuits in a row from the start pose, each within the
+    step cap. The hand-written wall follower (forward, left at corners) passes; turning right
+    at a corner touches a wall; u-turning everywhere never completes a circuit (cap)."""
+    from corridor.baseline import _completes_circuit
+
+    world = CorridorWorld(map_from_dict(SMALL))
+    follower = (F, F, L, L, R, F, R, U)  # by state bits left/front/right
+    assert _completes_circuit(follower, world, 0.6, seed=0, circuits=3)
+    assert world.laps == 3
+    wrong_corner = follower[:3] + (R,) + follower[4:]
+    assert not _completes_circuit(wrong_corner, world, 0.6, seed=0, circuits=3)
+    assert not _completes_circuit((U,) * 8, world, 0.6, seed=0, circuits=1, cap=20)
+
+
 def test_prioritized_sweeping_first_hit_vs_stable(monkeypatch):
-    """Scripted greedy tables: good from step 5, lost at step 20, good again from 21 on. The
-    first hit is step 5; the stable step is 21, confirmed 50 steps later, where the run stops."""
+    """Scripted greedy tables: good from step 5, bad at step 20, good again from 21 on. With
+    10-step episodes (too short for a circuit), the evaluations at the ends of episodes see
+    steps 10 (pass), 20 (fail), 30, 40, 50 (pass): the first hit is step 5, "learned" is step 30,
+    confirmed at step 50, where the run stops."""
     import corridor.baseline as baseline
 
     good, bad = (F,) * 8, (U,) * 8
@@ -265,16 +283,25 @@ def test_prioritized_sweeping_first_hit_vs_stable(monkeypatch):
 
     monkeypatch.setattr(baseline.PrioritizedSweeping, "greedy_table", scripted_table)
     monkeypatch.setattr(baseline, "_completes_circuit", lambda table, *a, **k: table == good)
-    cfg = PrioritizedSweepingConfig(max_steps=300, stable_steps=50)
+    cfg = PrioritizedSweepingConfig(max_steps=300, episode_steps=10, stable_evaluations=3)
     r = run_prioritized_sweeping(map_from_dict(SMALL), cfg, seed=0)
-    assert (r.steps_first, r.steps_stable, r.learning_steps) == (5, 21, 70)
-    assert r.policies_checked == 2
+    assert (r.steps_first, r.steps_stable, r.learning_steps) == (5, 30, 50)
+    assert (r.episodes, r.circuits, r.policies_checked) == (5, 0, 2)
     # Too short a budget to confirm: a first hit, no stable step.
     step["t"] = 0
     r = run_prioritized_sweeping(
-        map_from_dict(SMALL), dataclasses.replace(cfg, max_steps=60), seed=0
+        map_from_dict(SMALL), dataclasses.replace(cfg, max_steps=45), seed=0
     )
-    assert (r.steps_first, r.steps_stable, r.learning_steps) == (5, None, 60)
+    assert (r.steps_first, r.steps_stable, r.learning_steps) == (5, None, 45)
+
+
+def test_prioritized_sweeping_config_rejects_bad_values():
+    with pytest.raises(ValueError, match="episode_steps"):
+        PrioritizedSweepingConfig(episode_steps=0)
+    with pytest.raises(ValueError, match="stable_evaluations"):
+        PrioritizedSweepingConfig(stable_evaluations=0)
+    with pytest.raises(ValueError, match="epsilon_decay"):
+        PrioritizedSweepingConfig(epsilon_decay=-1)
 
 
 _PS_ON_FIGURE2 = """
