@@ -15,10 +15,10 @@ one sentence of the paper's Section 5.1:
   touched a wall. Measured on the 8 sensor states instead, recency rewards dithering between
   rare sensor states, and no run learned the circuit in 5,000 steps. The reward is computed from
   the robot's position; the learner only sees the 8 sensor states.
-- "(thereby encouraging circular movement through the domain)": a circuit takes 27 actions and
-  revisits each place once per circuit, so it must be seen whole: ``gamma`` = 0.99 (a horizon of
-  about 100 steps, several circuits). With 0.9 (a horizon of about 10 steps) PS learned on 6 of
-  10 seeds within 5,000 steps.
+- "(thereby encouraging circular movement through the domain)": a circuit takes 29 actions (map
+  ``figure2``) and revisits each place once per circuit, so it must be seen whole: ``gamma`` =
+  0.99 (a horizon of about 100 steps, several circuits). With 0.9 (a horizon of about 10
+  steps) PS learned on 6 of 10 seeds within 5,000 steps.
 - "took an average of 275 steps to learn the optimal policy": "learned" needs a criterion, and
   the optimal policy of a circular task is one that keeps driving the circuit. The robot learns
   in episodes, as the teaching loop teaches: an episode ends when the robot completes a circuit

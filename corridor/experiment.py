@@ -630,8 +630,12 @@ def format_summary(results: dict[str, Any]) -> str:
             _fmt(s["eval_circuits_clean"]),
         ),
         ("final policy: clean share, perturbed starts", "-", share("eval_perturbed_clean_share")),
-        ("PS steps, first clean circuit", p["ps_steps"], _fmt(s["ps_steps_first"])),
-        ("PS runs with a first clean circuit", "-", share("ps_first_share")),
+        (
+            "PS steps, first greedy table driving 3 clean circuits",
+            p["ps_steps"],
+            _fmt(s["ps_steps_first"]),
+        ),
+        ("PS runs with such a first table", "-", share("ps_first_share")),
         ("PS steps, stable (learned)", p["ps_steps"], _fmt(s["ps_steps_stable"])),
         ("PS runs that learned (stable)", "-", share("ps_learned_share")),
         (
@@ -660,7 +664,7 @@ def format_summary(results: dict[str, Any]) -> str:
         )
     per_seed = s.get("ps_per_seed")
     if per_seed:
-        lines += ["", "| seed | PS first clean circuit | PS stable |", "|---|---|---|"]
+        lines += ["", "| seed | PS first passing table | PS stable |", "|---|---|---|"]
         for r in per_seed:
             first = "-" if r["first"] is None else str(r["first"])
             stable = "-" if r["stable"] is None else str(r["stable"])
