@@ -100,6 +100,13 @@ def _perturb(base: dict[str, Any], rng: np.random.Generator) -> dict[str, Any]:
     return out
 
 
+def _defaults() -> dict[str, Any]:
+    from sumo_scenarios.teacher import HumanDriverConfig
+
+    cfg = HumanDriverConfig()
+    return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(HumanDriverConfig)}
+
+
 def _job(args: tuple) -> dict[str, Any]:
     driver, spacing, seeds, steps = args
     return measure(driver, tuple(spacing), seeds, steps)
@@ -118,17 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     seeds = range(a.first_seed, a.first_seed + a.seeds)
     if not a.search:
-        from sumo_scenarios.teacher import HumanDriverConfig
-
-        r = measure(
-            {
-                f.name: getattr(HumanDriverConfig(), f.name)
-                for f in dataclasses.fields(HumanDriverConfig)
-            },
-            None,
-            seeds,
-            a.steps,
-        )
+        r = measure(_defaults(), None, seeds, a.steps)
         lanes = np.asarray(r["lanes"]) * 100
         got = (
             f"{100 * r['collisions']:.2f}",
@@ -141,10 +138,15 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name:40s} target {target:14s} measured {value}")
         print(json.dumps({k: v for k, v in r.items() if k != "driver"}))
         return 0
-    if not a.history.exists():
-        print(f"--search needs a history of measured settings in {a.history}", file=sys.stderr)
-        return 2
-    history = [json.loads(line) for line in a.history.read_text().splitlines() if line]
+    history = []
+    if a.history.exists():
+        history = [json.loads(line) for line in a.history.read_text().splitlines() if line]
+    if not history:  # start from the defaults
+        from sumo_scenarios.scenarios import TRAIN
+
+        history = [{"driver": _defaults(), "spacing": list(TRAIN.mean_spacing_m)}]
+        history[0].update(collisions=0.0, lanes=[0.2] * 5, stay=1.0)
+        a.history.parent.mkdir(parents=True, exist_ok=True)
     best = sorted(history, key=penalty)[: a.keep]
     rng = np.random.default_rng(a.rng)
     spacings = [float(s) for s in a.left_spacings.split(",")]
