@@ -140,7 +140,6 @@ def test_human_teacher_keeps_to_the_left_three_lanes_and_rarely_the_right(human_
     assert min(lanes[3], lanes[4]) >= 0.10, lanes
 
 
-@pytest.mark.xfail(strict=True, reason="calibration gap: 0.55 % of steps in contact (target 0.5)")
 def test_human_teacher_collides_at_most_half_a_percent(human_drive):
     contacts, _, _ = human_drive
     assert metrics.collision_rate(contacts) <= 0.005
@@ -148,12 +147,21 @@ def test_human_teacher_collides_at_most_half_a_percent(human_drive):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="calibration gap: the dense middle lane holds the teacher 5.5 % of the time (target "
-    "10 %) and 95 % of its answers are 'stay' (target < 80 %); see the README",
+    reason="calibration gap: the teacher is in the dense middle lane 7.6 % of the time (target "
+    "10 %); the best settings that reached 10 % collided 0.53-0.66 % over 18 segments (README)",
 )
-def test_human_teacher_uses_the_middle_lane_and_is_no_always_stay_teacher(human_drive):
-    _, lanes, answers = human_drive
+def test_human_teacher_uses_the_middle_lane(human_drive):
+    _, lanes, _ = human_drive
     assert lanes[2] >= 0.10, lanes
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="calibration gap: 84 % of the teacher's answers are 'stay' (target < 80 %); a car met "
+    "costs two lane changes and the traffic meets one every 10-23 steps (see the README)",
+)
+def test_human_teacher_is_no_always_stay_teacher(human_drive):
+    _, _, answers = human_drive
     assert np.mean(answers == STAY) < 0.80
 
 
@@ -168,7 +176,8 @@ def _call(driver, d, lane, t, closing=(10.0, 10.0, 10.0)):
 
 
 def test_human_driver_home_lane_drifts_among_the_left_three():
-    """Redrawn on average every ``home_every_s`` (10 s = 40 steps) from the left three lanes."""
+    """Redrawn on average every ``home_every_s`` from the left three lanes (a redraw per step with
+    probability step / ``home_every_s``)."""
     driver = HumanDriver(seed=0)
     homes = []
     for t in range(4000):
@@ -177,7 +186,8 @@ def test_human_driver_home_lane_drifts_among_the_left_three():
     assert set(homes) == {2, 3, 4}
     changes = int(np.sum(np.diff(homes) != 0))
     w = np.asarray(driver.config.home_weights)
-    expected = 4000 / 40 * (1 - np.sum(w**2))  # redraws that land on another lane
+    per_step = 0.25 / driver.config.home_every_s
+    expected = 4000 * per_step * (1 - np.sum(w**2))  # redraws that land on another lane
     assert 0.6 * expected < changes < 1.4 * expected, (changes, expected)
 
 
@@ -198,7 +208,7 @@ def test_human_driver_reaction_threshold_is_drawn_per_event():
                 break
     assert len(rooms) == 40  # always moved over before contact
     assert min(rooms) >= cfg.leave_room_s[0] - 0.25 - 1e-6
-    assert max(rooms) <= 1.6 + 1e-6  # by value: shoulder 2.1 - 0.55 - 0.05, minus a margin
+    assert max(rooms) <= cfg.leave_room_s[1] + 1e-6  # the first step below the drawn threshold
     assert max(rooms) - min(rooms) >= 0.4, rooms
 
 
@@ -207,3 +217,42 @@ def test_human_driver_direction_is_not_always_left_first():
     free, the way out depends on the drifting home lane: both directions occur."""
     moves = {_call(HumanDriver(seed=s), (25.0, 25.0, 9.0), 3, 0) for s in range(30)}
     assert moves == {1, 2}
+
+
+def test_human_driver_overtakes_and_returns_once_the_car_is_past():
+    """Home: the left lane; on the left shoulder beside a slower car of the left lane, the driver
+    moves back once that car is behind by a distance drawn per event from ``return_behind_m``
+    (not before, and not always at the same distance), and not while a car it sees ahead in the
+    left lane leaves less than ``return_room_s`` of room."""
+    from sumo_scenarios.teacher import HumanDriverConfig
+
+    cfg = HumanDriverConfig(home_weights=(0.0, 1.0, 0.0), home_every_s=1e9)
+    lo, hi = cfg.return_behind_m
+    back_at = []
+    for seed in range(40):
+        driver = HumanDriver(cfg, seed=seed)
+        for t, x in enumerate(np.arange(2.0 - 2.5 * seed / 40, -25.0, -2.5)):
+            if _call(driver, (25.0, 25.0, x), 4, t) != STAY:
+                back_at.append(-x)
+                break
+    assert len(back_at) == 40, back_at
+    assert min(back_at) >= lo - 1e-6 and max(back_at) <= hi + 2.5 + 1e-6, back_at
+    assert max(back_at) - min(back_at) >= 1.5, back_at
+    # a car seen ahead in the home lane, closing at 10 m/s: back only with enough room
+    for x in (8.0, 12.0, 25.0):
+        room = (x - 5.0 - 2.5) / 10.0
+        moved = _call(HumanDriver(cfg, seed=0), (25.0, 25.0, x), 4, 0) != STAY
+        assert moved == (x >= 25.0 or room >= cfg.return_room_s), (x, room)
+
+
+def test_calibration_objective_is_the_targets_only():
+    """The search's score: 0 when every target holds, and the misses added up (collisions per
+    0.05 point above 0.42 %, shares per point), hand-computed."""
+    from sumo_scenarios.calibrate_teacher import penalty
+
+    ok = {"collisions": 0.004, "lanes": [0.02, 0.03, 0.15, 0.4, 0.4], "stay": 0.79}
+    assert penalty(ok) == 0.0
+    miss = {"collisions": 0.0052, "lanes": [0.02, 0.03, 0.076, 0.474, 0.4], "stay": 0.84}
+    assert penalty(miss) == pytest.approx(2.0 + 2.4 + 4.5)
+    no_right = {"collisions": 0.0, "lanes": [0.0, 0.0, 0.2, 0.4, 0.4], "stay": 0.7}
+    assert penalty(no_right) == pytest.approx(10.0)
