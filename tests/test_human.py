@@ -159,7 +159,11 @@ def test_quit_key_raises_teaching_interrupted_and_restores_terminal(terminal, ke
 def test_keyboard_interrupt_while_waiting_restores_terminal(terminal):
     master, slave = terminal
     before = termios.tcgetattr(slave)
-    person = Person(master, slave, [lambda: os.kill(os.getpid(), signal.SIGINT)])
+    # Ctrl-C as the kernel delivers it to a process blocked in read(): to the main thread. A
+    # process-wide os.kill may land on another thread (pytest-timeout's, tqdm's monitor), and
+    # then the main thread's read() is never interrupted (seen once in CI: a 60 s timeout).
+    main = threading.main_thread().ident
+    person = Person(master, slave, [lambda: signal.pthread_kill(main, signal.SIGINT)])
     teacher = _teacher(slave)
     person.start()
     with pytest.raises(TeachingInterrupted) as caught:
