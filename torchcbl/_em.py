@@ -121,7 +121,7 @@ def _precision(cov: Tensor) -> tuple[Tensor, Tensor]:
     """
     chol, info = torch.linalg.cholesky_ex(cov)
     log_det = -torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
-    log_det = log_det.masked_fill_(info != 0, math.nan)
+    log_det = log_det.masked_fill_(info.bool(), math.nan)  # info != 0
     if cov.shape[-1] <= 4:
         # inv_ex's own route (LU, then solve against the identity) without its wrapper's
         # extra operations: the same LAPACK calls, bit for bit
@@ -543,11 +543,13 @@ def _m_step_packed(bt: _Batch, resp: Tensor) -> tuple[Params, Tensor]:
     du = q - d - 1
     _, _, full, upper, scale, lower = _indices(d, resp.device)
     # zt @ resp^T: with the long N axis contiguous in both operands, ~1.7x faster than resp @ z
-    stats = torch.bmm(bt.zt_q, resp.transpose(1, 2)).transpose(1, 2)  # [B, M, Q]
-    nk = stats[..., -1] + 10.0 * _EPS
-    stats = stats / nk.unsqueeze(-1)
-    means = stats[..., du : du + d]
-    cov = stats.index_select(-1, full).view(g, m, d, d)
+    stats = torch.bmm(bt.zt_q, resp.transpose(1, 2))  # [B, Q, M]
+    nk = stats[:, -1] + 10.0 * _EPS  # [B, M]
+    stats = stats / nk.unsqueeze(1)
+    means = stats[:, du : du + d].transpose(1, 2)  # [B, M, D] view, M contiguous
+    # the covariance entries as whole rows of [B, Q, M] (an index_select along the last axis
+    # copies element by element), then viewed [B, M, D, D]: the same values
+    cov = stats.index_select(1, full).view(g, d, d, m).permute(0, 3, 1, 2)
     cov.sub_(means.unsqueeze(-1) * means.unsqueeze(-2)).add_(bt.floor_diag)
     wn = nk * bt.valid
     wsum = torch.index_add(bt.row_pad, 0, bt.rows, wn.view(-1))
