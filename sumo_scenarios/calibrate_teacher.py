@@ -42,6 +42,7 @@ def measure(
     """Drive the teacher (``HumanDriverConfig(**driver)``, default timing) alone on ``train``
     segments ``seeds`` for ``steps`` steps each (with the lanes' mean spacings ``spacing``, m;
     None: the scenario's). Returns collision share, lane shares [5] and "stay" share."""
+    from sumo_scenarios import metrics
     from sumo_scenarios.env import DrivingEnv
     from sumo_scenarios.scenarios import TRAIN
     from sumo_scenarios.teacher import HumanDriverConfig, make_teacher
@@ -65,8 +66,8 @@ def measure(
     return {
         "driver": driver,
         "spacing": list(scenario.mean_spacing_m),
-        "collisions": float(np.mean(contacts)),
-        "lanes": (np.bincount(lanes, minlength=5) / len(lanes)).tolist(),
+        "collisions": metrics.collision_rate(contacts),
+        "lanes": metrics.lane_distribution(lanes).tolist(),
         "stay": float(np.mean(np.asarray(answers) == 0)),
     }
 
