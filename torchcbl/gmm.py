@@ -514,11 +514,7 @@ class GaussianMixtureSet(nn.Module):
 
         Returns self. On any error the previously fitted state is left untouched.
         """
-        x_np = self._check_observations(observations)
-        y_np = self._check_actions(actions, x_np.shape[0])
-        caller = torch.get_num_threads()
-        with _threads(1):
-            return self._fit(x_np, y_np, incremental=False, caller_threads=caller)
+        return self._fit_checked(observations, actions, incremental=False)
 
     def refit(self, observations: Any, actions: Any) -> GaussianMixtureSet:
         """Refit on the full data set, refitting only the actions whose data changed.
@@ -556,11 +552,18 @@ class GaussianMixtureSet(nn.Module):
 
         Returns self. On any error the previously fitted state is left untouched.
         """
+        return self._fit_checked(observations, actions, incremental=True)
+
+    def _fit_checked(
+        self, observations: Any, actions: Any, *, incremental: bool
+    ) -> GaussianMixtureSet:
+        """Check the inputs, then fit single-threaded (the EM may take the caller's threads
+        back, see the thread policy)."""
         x_np = self._check_observations(observations)
         y_np = self._check_actions(actions, x_np.shape[0])
         caller = torch.get_num_threads()
         with _threads(1):
-            return self._fit(x_np, y_np, incremental=True, caller_threads=caller)
+            return self._fit(x_np, y_np, incremental=incremental, caller_threads=caller)
 
     def _fit(
         self, x_np: np.ndarray, y_np: np.ndarray, *, incremental: bool, caller_threads: int = 1
