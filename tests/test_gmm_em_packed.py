@@ -138,3 +138,32 @@ def test_packed_m_step_equals_the_padded_m_step(d):
         torch.testing.assert_close(getattr(got, name)[:, :-1], want, rtol=1e-10, atol=1e-12)
     assert bool((coef[..., -1] == 1).all())  # the weight of the E-step's shift row
     assert float(got.weights[:, -1].abs().max()) == 0.0  # the padded component weighs nothing
+
+
+@pytest.mark.parametrize("d", [1, 2, 3, 4, 6])  # LU route (D <= 4) and Cholesky route
+def test_precision_and_log_det_against_numpy(d):
+    """The precision matrices and -1/2 log det of SPD covariances (rows swapped or not by
+    LU's pivoting) equal numpy's inverse and slogdet; a matrix with a negative determinant
+    gives NaN, not a finite log-likelihood."""
+    rng = np.random.default_rng(d)
+    a = rng.normal(size=(50, d, d + 2))
+    cov = a @ a.transpose(0, 2, 1) / (d + 2) + 0.05 * np.eye(d)
+    cov[0] = np.diag(np.arange(1.0, d + 1))  # diagonal
+    v = np.r_[0.1, np.ones(d - 1)]
+    cov[1] = np.outer(v, v) + 0.01 * np.eye(d)  # a small first variance: LU swaps rows
+    if d > 1:
+        _, piv = torch.linalg.lu_factor(torch.from_numpy(cov[1]))
+        assert bool((piv != torch.arange(1, d + 1, dtype=piv.dtype)).any())
+    prec, log_det = _em._precision(torch.from_numpy(cov))
+    np.testing.assert_allclose(prec.numpy(), np.linalg.inv(cov), rtol=1e-9, atol=1e-12)
+    sign, logdet = np.linalg.slogdet(cov)
+    assert (sign > 0).all()
+    np.testing.assert_allclose(log_det.numpy(), -0.5 * logdet, rtol=1e-12, atol=1e-12)
+    bad = cov[:3].copy()
+    bad[0, 0, 0] = -1.0  # one negative pivot: determinant < 0 (d = 1) or indefinite
+    bad[1, 0, 0] = np.nan
+    _, ld_bad = _em._precision(torch.from_numpy(bad))
+    assert bool(torch.isnan(ld_bad[1]))
+    if np.linalg.det(bad[0]) < 0:
+        assert bool(torch.isnan(ld_bad[0]))
+    assert bool(torch.isfinite(ld_bad[2]))

@@ -112,28 +112,42 @@ def _eye(d: int, dtype: torch.dtype, device: torch.device) -> Tensor:
 
 
 def _precision(cov: Tensor) -> tuple[Tensor, Tensor]:
-    """Precision matrices and -log det of the Cholesky factors of SPD covariances [..., D, D].
+    """Precision matrices and -log det of the Cholesky factors (-1/2 log det) of SPD
+    covariances [..., D, D].
 
     Small batched LAPACK calls cost about a microsecond per matrix whatever they do, so the
-    cheapest route is taken: for D <= 4 the LU inverse, else the inverse of the Cholesky
-    factor L and P = L^-T L^-1 (both faster here than ``cholesky_inverse``). A matrix that
-    is not positive definite gives NaN, left for the caller's final finiteness check.
+    cheapest route is taken. For D <= 4, one LU factorisation gives both the inverse (solved
+    against the identity, as ``inv_ex`` does) and the determinant, prod(diag U) with its sign
+    flipped once per row swap (a Cholesky factorisation on top would cost as much again); its
+    log is summed from log |U_ii|, so no product can overflow. A non-positive determinant
+    gives NaN. The covariances here are a weighted scatter matrix plus the variance floor,
+    positive definite up to rounding far below the floor, so the determinant's sign is the
+    check that catches what can go wrong (NaN or infinite input). For larger D: the Cholesky
+    factor L (NaN when it fails), then P = L^-T L^-1 (both faster there than LU or
+    ``cholesky_inverse``). NaN is left for the caller's final finiteness check.
     """
+    d = cov.shape[-1]
+    if d <= 4:
+        lu, piv, _ = torch.linalg.lu_factor_ex(cov)
+        u = torch.diagonal(lu, dim1=-2, dim2=-1)
+        # det = prod(u) * (-1)^swaps: its log from the |u| (no overflow), NaN when it is <= 0
+        flips = (u < 0).sum(-1).add_((piv != _pivots(d, piv.dtype, cov.device)).sum(-1))
+        log_det = u.abs().log_().sum(-1).mul_(-0.5)
+        log_det = log_det.masked_fill_(flips.bitwise_and_(1).bool(), math.nan)
+        prec = torch.linalg.lu_solve(lu, piv, _eye(d, cov.dtype, cov.device).expand_as(cov))
+        return prec, log_det
     chol, info = torch.linalg.cholesky_ex(cov)
     log_det = -torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
     log_det = log_det.masked_fill_(info.bool(), math.nan)  # info != 0
-    if cov.shape[-1] <= 4:
-        # inv_ex's own route (LU, then solve against the identity) without its wrapper's
-        # extra operations: the same LAPACK calls, bit for bit
-        lu, piv, _ = torch.linalg.lu_factor_ex(cov)
-        prec = torch.linalg.lu_solve(
-            lu, piv, _eye(cov.shape[-1], cov.dtype, cov.device).expand_as(cov)
-        )
-    else:
-        eye = torch.eye(cov.shape[-1], dtype=cov.dtype, device=cov.device).expand_as(cov)
-        inv_chol = torch.linalg.solve_triangular(chol, eye, upper=False)
-        prec = inv_chol.mT @ inv_chol
-    return prec, log_det
+    eye = _eye(d, cov.dtype, cov.device).expand_as(cov)
+    inv_chol = torch.linalg.solve_triangular(chol, eye, upper=False)
+    return inv_chol.mT @ inv_chol, log_det
+
+
+@functools.lru_cache(maxsize=16)
+def _pivots(d: int, dtype: torch.dtype, device: torch.device) -> Tensor:
+    """LAPACK's pivots of an LU factorisation that swaps no rows: 1, ..., d."""
+    return torch.arange(1, d + 1, dtype=dtype, device=device)
 
 
 def m_step(z: Tensor, resp: Tensor, cmask: Tensor, floor: Tensor) -> Params:
@@ -322,6 +336,9 @@ def _lloyd(
     d2 = torch.full((g, c, n), math.inf, dtype=dt, device=dev)
     pm = pmask.unsqueeze(1).expand(g, c, n)
     xt = x.transpose(1, 2).contiguous()  # [G, D, N]
+    xt_c = [xt[:, i].unsqueeze(1) for i in range(d)]  # D x [G, 1, N]
+    sq_buf = torch.empty(g, c, n, dtype=dt, device=dev)
+    dist2 = torch.empty(g, c, n, dtype=dt, device=dev)
     for j in range(k):
         w = pm if j == 0 else d2 * pm
         w = torch.where(w.sum(-1, keepdim=True) > 0, w, pm)  # all distances 0: uniform draw
@@ -333,13 +350,16 @@ def _lloyd(
         )
         centers[:, :, j] = cj.squeeze(-1)
         # squared distances to the new centre, summed over the coordinates in order (a
-        # reduction over D would sum in another order: the seeding draws would move)
-        sq = xt.unsqueeze(1) - cj  # [G, C, D, N]
-        sq = sq.mul_(sq).unbind(2)
-        dist2 = sq[0] if d == 1 else sq[0] + sq[1]
-        for i in range(2, d):
-            dist2.add_(sq[i])
-        d2 = torch.minimum(d2, dist2)
+        # reduction over D would sum in another order: the seeding draws would move); one
+        # coordinate at a time into reused buffers ([G, C, D, N] temporaries cost more in
+        # page faults than in arithmetic)
+        for i in range(d):
+            diff = torch.sub(xt_c[i], cj[:, :, i], out=sq_buf)  # [G, C, N]
+            if i == 0:
+                torch.mul(diff, diff, out=dist2)
+            else:
+                dist2.add_(diff.mul_(diff))
+        torch.minimum(d2, dist2, out=d2)
     xa = _augmented(x)
     pad = _pad(cmask, dt)
     base = (torch.arange(g * c, device=dev) * k).reshape(g, c, 1)  # slot offsets

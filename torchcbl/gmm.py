@@ -221,8 +221,9 @@ def _initial_buffer(model: GaussianMixtureSet, name: str) -> Tensor:
 # Thread policy (see docs/architecture.md, "Threads"). Everything in fit/refit/classify runs on
 # one torch thread, in a scope that restores the caller's count, except the EM of a problem of
 # at least this much work per iteration (points x candidate components x quadratic features),
-# which gets the caller's threads when the machine has a core to spare (1-minute load average
-# below the usable CPUs minus 0.5). Measured with bench/bench_refit.py --sections threads.
+# which gets the caller's threads when the machine has a core to spare (no other process's
+# thread running on it now, see _spare_core). Measured with bench/bench_refit.py --sections
+# threads.
 SINGLE_THREAD_WORK = 1.0e6
 
 # A warm-started candidate takes one EM step per refit, reported as this many E-steps: the
@@ -238,8 +239,42 @@ def _usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
+def _running_now() -> tuple[int, int] | None:
+    """(threads running or runnable on the system now, this process's own among them, the
+    calling thread included) from /proc (Linux), or None where /proc does not say. The own
+    count is only read when the system count alone cannot settle :func:`_spare_core`."""
+    try:
+        with open("/proc/loadavg", "rb") as f:
+            running = int(f.read().split()[3].split(b"/")[0])
+        if running < _usable_cpus():
+            return running, 1
+        own = 0
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                with open(f"/proc/self/task/{tid}/stat", "rb") as f:
+                    stat = f.read()
+            except OSError:  # the thread has just ended
+                continue
+            end = stat.rindex(b")")
+            own += stat[end + 2 : end + 3] == b"R"
+    except (OSError, ValueError, IndexError):
+        return None
+    return running, max(own, 1)
+
+
 def _spare_core() -> bool:
-    """True unless the 1-minute load average says every usable core is taken."""
+    """True when another thread of ours would find a core that no other process is using.
+
+    Where /proc says (Linux), what runs now counts, not what ran over the last minute: the
+    1-minute load average lags a competing process by a minute, and counts this process's own
+    threads, so that a process that had fitted on two threads for a minute would throttle
+    itself. Elsewhere the 1-minute load average (below the usable CPUs minus 0.5); with
+    neither (Windows), the size rule alone.
+    """
+    now = _running_now()
+    if now is not None:
+        running, own = now
+        return running - own + 1 < _usable_cpus()  # others' threads + ours on one core
     try:
         load = os.getloadavg()[0]
     except (AttributeError, OSError):  # no load average (Windows): trust the size rule
