@@ -587,6 +587,23 @@ def _m_step_packed(bt: _Batch, resp: Tensor) -> tuple[Params, Tensor]:
     return Params(weights, means, cov, log_det, coef[..., :q]), coef
 
 
+def _clamp_exp_(t: Tensor, lo: float, hi: float) -> Tensor:
+    """exp(clamp(t, lo, hi)) in place. On the CPU numpy's, twice as fast per element as
+    torch's here (a contiguous float64 tensor shares its memory with the array)."""
+    if t.device.type == "cpu" and t.is_contiguous():
+        a = t.numpy()
+        np.exp(np.clip(a, lo, hi, out=a), out=a)
+        return t
+    return t.clamp_(lo, hi).exp_()
+
+
+def _log(t: Tensor) -> Tensor:
+    """log(t) into a new tensor; numpy's on the CPU (three times as fast as torch's here)."""
+    if t.device.type == "cpu":
+        return torch.from_numpy(np.log(t.numpy()))
+    return torch.log(t)
+
+
 def _e_step_packed(
     bt: _Batch, coef: Tensor, shifted: bool = False
 ) -> tuple[Tensor, Tensor, Tensor]:
@@ -612,7 +629,7 @@ def _e_step_packed(
 
     def sums(e: Tensor) -> tuple[Tensor, Tensor]:
         s = torch.index_add(bt.pad_rows, 0, bt.rows, e.view(-1, n))
-        return s, torch.log(s.view(b, r1, n))
+        return s, _log(s.view(b, r1, n))
 
     def safe(ls: Tensor) -> bool:
         lo, hi = torch.aminmax(ls)
@@ -620,7 +637,7 @@ def _e_step_packed(
 
     lse = None
     if shifted:
-        e = product().clamp_(_CLAMP, 700.0).exp_()
+        e = _clamp_exp_(product(), _CLAMP, 700.0)
         s, ls = sums(e)
         if safe(ls):
             lse = ls.sub_(bt.shift3)
@@ -628,7 +645,7 @@ def _e_step_packed(
         bt.shift.zero_()
         w = product()
         mx = w.amax(1, keepdim=True)  # [B, 1, N]
-        e = w.sub_(mx).clamp_min_(_CLAMP).exp_()
+        e = _clamp_exp_(w.sub_(mx), _CLAMP, math.inf)
         s, ls = sums(e)
         if safe(ls):
             lse = ls.add_(mx)
