@@ -238,3 +238,67 @@ def test_one_colour_per_action_and_map_legend():
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     for expected in ("route", "path", "left sensor ray", "front sensor ray", "right sensor ray"):
         assert any(expected in label for label in labels), (expected, labels)
+
+
+# ---------------------------------------------------------------- the logged confidence
+def _hand_distance(model, x: np.ndarray) -> tuple[int, float]:
+    """Eq. 7's action and the Mahalanobis distance (std) to the most likely component of its
+    mixture, from the model's buffers by plain numpy (inverse covariances, log densities)."""
+    mask = model.component_mask_.numpy()
+    w, mu, cov = (model.weights_.numpy(), model.means_.numpy(), model.covariances_.numpy())
+    log_prior = model.log_prior_.numpy()
+    d = x.shape[0]
+    scores = np.full(mask.shape, -np.inf)
+    m2 = np.full(mask.shape, np.inf)
+    for a, k in zip(*np.nonzero(mask), strict=True):
+        diff = x - mu[a, k]
+        m2[a, k] = diff @ np.linalg.inv(cov[a, k]) @ diff
+        logdet = np.linalg.slogdet(cov[a, k])[1]
+        scores[a, k] = math.log(w[a, k]) - 0.5 * (m2[a, k] + logdet + d * math.log(2 * math.pi))
+    top = scores.max()
+    with np.errstate(divide="ignore"):  # an action without data scores log(0) = -inf
+        action = int(np.argmax(np.log(np.exp(scores - top).sum(1)) + log_prior))
+    return action, math.sqrt(m2[action, int(np.argmax(scores[action]))])
+
+
+def test_logged_distance_is_to_the_most_likely_component_of_the_model_of_that_step():
+    """Every step of a noisy corridor session logs the model's action and distance for the
+    observation it recorded, under the model fitted on exactly the labels before that step
+    (not a stale or a later one), measured to the most likely component of the chosen mixture:
+    checked against a hand computation (issue 12: the confident phase's requests)."""
+    import copy
+
+    from corridor.experiment import CorridorExperimentConfig
+    from torchcbl import ConfidentTeacher
+
+    cfg = CorridorExperimentConfig()
+    corridor_map = load_map(cfg.map_name)
+    snapshots: dict[int, object] = {}
+    teacher = ConfidentTeacher(
+        CorridorEnv(corridor_map, cfg.world),
+        CorridorExpert(corridor_map, cfg.world),
+        rule=cfg.rule(),
+        config=dataclasses.replace(cfg.teaching, max_steps=160),
+        seed=3,
+        progress=False,
+        on_refit=lambda model, n: snapshots.__setitem__(n, copy.deepcopy(model)),
+    )
+    teacher.run()
+    records = teacher.records
+    labelled = [r for r in records if r.teacher_action is not None]
+    asked_confident = [r for r in labelled if r.phase == "confident"]
+    assert len(asked_confident) >= 3 and any(r.autonomous for r in records)  # both kinds seen
+    x, y = teacher._train.arrays()  # the training set is the recorded observations, in order
+    np.testing.assert_array_equal(x, np.array([r.observation for r in labelled]))
+    assert y.tolist() == [r.teacher_action for r in labelled]
+    checked = 0
+    for r in records:
+        fitted_on = r.n_demonstrations - (0 if r.autonomous else 1)  # max_new = 1
+        if fitted_on == 0:
+            assert r.model_action == -1 and math.isinf(r.distance)
+            continue
+        action, dist = _hand_distance(snapshots[fitted_on], np.asarray(r.observation, float))
+        assert r.model_action == action
+        assert r.distance == pytest.approx(dist, rel=1e-9, abs=1e-12)
+        checked += 1
+    assert checked == len(records) - 1
