@@ -268,8 +268,11 @@ def test_logged_distance_is_to_the_most_likely_component_of_the_model_of_that_st
     checked against a hand computation (issue 12: the confident phase's requests)."""
     import copy
 
+    import torch
+
     from corridor.experiment import CorridorExperimentConfig
     from torchcbl import ConfidentTeacher
+    from torchcbl.gmm import GaussianMixtureSet
 
     cfg = CorridorExperimentConfig()
     corridor_map = load_map(cfg.map_name)
@@ -288,9 +291,12 @@ def test_logged_distance_is_to_the_most_likely_component_of_the_model_of_that_st
     labelled = [r for r in records if r.teacher_action is not None]
     asked_confident = [r for r in labelled if r.phase == "confident"]
     assert len(asked_confident) >= 3 and any(r.autonomous for r in records)  # both kinds seen
-    x, y = teacher._train.arrays()  # the training set is the recorded observations, in order
-    np.testing.assert_array_equal(x, np.array([r.observation for r in labelled]))
-    assert y.tolist() == [r.teacher_action for r in labelled]
+    # The model is fitted on the recorded observations and labels (a fresh fit, deterministic).
+    fresh = GaussianMixtureSet(4, 3, seed=3).fit(
+        np.array([r.observation for r in labelled]), [r.teacher_action for r in labelled]
+    )
+    for name in ("means_", "covariances_", "component_mask_"):
+        assert torch.equal(getattr(fresh, name), getattr(teacher.model, name)), name
     checked = 0
     for r in records:
         fitted_on = r.n_demonstrations - (0 if r.autonomous else 1)  # max_new = 1
