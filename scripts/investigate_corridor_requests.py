@@ -191,7 +191,8 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     thr = runs[0]["threshold"]
     out: dict[str, Any] = {"setting": runs[0]["setting"], "seeds": len(runs), "threshold": thr}
     demos = [r["demonstrations"] for r in runs]
-    out["demonstrations"] = [float(np.mean(demos)), float(np.std(demos, ddof=1))]
+    sd = float(np.std(demos, ddof=1)) if len(demos) > 1 else math.nan
+    out["demonstrations"] = [float(np.mean(demos)), sd]
     out["teleoperated"] = _mean([r["teleoperated"] for r in runs])
     out["finished_share"] = _mean([r["finished"] for r in runs])
     out["eval_clean"] = _mean([r["eval_clean"] for r in runs])

@@ -308,3 +308,23 @@ def test_logged_distance_is_to_the_most_likely_component_of_the_model_of_that_st
         assert r.distance == pytest.approx(dist, rel=1e-9, abs=1e-12)
         checked += 1
     assert checked == len(records) - 1
+
+
+def test_request_investigation_script_runs_and_finds_few_requests_with_exact_motion():
+    """scripts/investigate_corridor_requests.py (the issue-12 investigation) stays runnable; it
+    asserts at every request that the logged distance is its hand computation. With exact
+    motion every circuit repeats, so the confident phase asks at most a few times."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "investigate_corridor_requests.py"
+    spec = importlib.util.spec_from_file_location("_investigate_requests", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    run = module.run_one("exact", 0)
+    summary = module.summarise([run])
+    assert len(run["requests"]) <= 3 and run["teleoperated"] >= 30
+    assert run["finished"] and run["eval_clean"] == 10
+    assert summary["demonstrations"][0] == run["demonstrations"] <= 45
+    assert 0.0 <= summary["fresh_request_free_share"] <= 1.0
