@@ -187,6 +187,18 @@ def _mean(xs: list[float]) -> float:
     return float(np.mean(xs)) if xs else math.nan
 
 
+def _at_streak(run: dict[str, Any], k: int) -> int | None:
+    """Demonstrations at the end of the first k whole circuits in a row without a request."""
+    done = run["teleoperated"] + sum(1 for x in run["requests"] if x["circuit"] < 0)
+    streak = 0
+    for n in run["per_circuit"]:
+        done += n
+        streak = streak + 1 if n == 0 else 0
+        if streak >= k:
+            return done
+    return None
+
+
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     thr = runs[0]["threshold"]
     out: dict[str, Any] = {"setting": runs[0]["setting"], "seeds": len(runs), "threshold": thr}
@@ -201,6 +213,11 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
         for lo, hi in BANDS
     ]
     out["final_k"] = np.mean([r["final_k"] for r in runs], 0).round(1).tolist()
+    # demonstrations given by the end of the first run of k request-free circuits in a row
+    out["demonstrations_at_streak"] = {}
+    for k in (1, 3, 5, 10):
+        reached = [v for v in (_at_streak(r, k) for r in runs) if v is not None]
+        out["demonstrations_at_streak"][k] = [_mean(reached), len(reached)]
     out["fresh_step_rate"] = _mean([r["fresh_step_rate"] for r in runs])
     # median too: a seed whose greedy circuits end pushing a wall asks at every such step
     out["fresh_step_rate_median"] = float(np.median([r["fresh_step_rate"] for r in runs]))
@@ -309,6 +326,12 @@ def main() -> None:
                 f"sd min/max median {e['forward_sd_min_cm']:.2f}/{e['forward_sd_max_cm']:.1f} cm,"
                 f" floor-level forward components {e['forward_floor_level']:.0%}"
             )
+        print(
+            "demonstrations by the first k request-free circuits in a row (k: mean, seeds): "
+            + ", ".join(
+                f"{k}: {v[0]:.1f} ({v[1]})" for k, v in s["demonstrations_at_streak"].items()
+            )
+        )
         c = s["circuits_to_10_in_a_row"]
         print(
             f"final model on 50 fresh circuits: {s['fresh_step_rate']:.2%} of steps beyond the "
