@@ -3,6 +3,9 @@
 ``python -m sumo_scenarios.calibrate_teacher`` measures the default teacher (:func:`make_teacher`
 on the ``train`` traffic) the way ``tests/test_driving_teacher.py`` does: 10 training segments x
 1000 steps, reaction delay and slips included, and prints the targets beside the measurement.
+``--seeds 100 --first-seed 10`` measures it out of sample, ``--scenario eval`` on the
+evaluation traffic, ``--no-delay`` / ``--no-slips`` without its reaction delay or its missed
+and doubled key presses (what each adds to the collisions).
 
 ``--search N`` runs the systematic search the defaults came from: N random perturbations
 (each parameter x U(0.85, 1.15), home weights renormalised, the left lane's mean spacing from
@@ -38,22 +41,30 @@ def measure(
     spacing: tuple[float, float, float] | None = None,
     seeds: range = range(10),
     steps: int = 1000,
+    *,
+    scenario: str = "train",
+    timing: Any = None,
 ) -> dict[str, Any]:
-    """Drive the teacher (``HumanDriverConfig(**driver)``, default timing) alone on ``train``
-    segments ``seeds`` for ``steps`` steps each (with the lanes' mean spacings ``spacing``, m;
-    None: the scenario's). Returns collision share, lane shares [5] and "stay" share."""
+    """Drive the teacher (``HumanDriverConfig(**driver)``; ``timing`` a
+    :class:`~torchcbl.teachers.HumanTimingConfig`, None for the default) alone on segments
+    ``seeds`` of ``scenario`` (``train``, or ``eval`` with the teacher seeded as the experiment
+    seeds it there, 10,000 + segment) for ``steps`` steps each (with the lanes' mean spacings
+    ``spacing``, m; None: the scenario's). Returns collision share, lane shares [5] and "stay"
+    share."""
     from sumo_scenarios import metrics
     from sumo_scenarios.env import DrivingEnv
-    from sumo_scenarios.scenarios import TRAIN
+    from sumo_scenarios.scenarios import SCENARIOS
     from sumo_scenarios.teacher import HumanDriverConfig, make_teacher
 
-    scenario = TRAIN if spacing is None else dataclasses.replace(TRAIN, mean_spacing_m=spacing)
+    base = SCENARIOS[scenario]
+    chosen = base if spacing is None else dataclasses.replace(base, mean_spacing_m=spacing)
+    offset = 10_000 if scenario == "eval" else 0
     cfg = HumanDriverConfig(**driver)
-    env = DrivingEnv(scenario=scenario, max_episode_steps=10**6)
+    env = DrivingEnv(scenario=chosen, max_episode_steps=10**6)
     contacts, lanes, answers = [], [], []
     try:
         for seed in seeds:
-            teacher = make_teacher(seed, driver=cfg)
+            teacher = make_teacher(offset + seed, driver=cfg, timing=timing)
             obs, info = env.reset(seed=seed)
             for _ in range(steps):
                 a = teacher(obs, info)
@@ -65,7 +76,7 @@ def measure(
         env.close()
     return {
         "driver": driver,
-        "spacing": list(scenario.mean_spacing_m),
+        "spacing": list(chosen.mean_spacing_m),
         "collisions": metrics.collision_rate(contacts),
         "lanes": metrics.lane_distribution(lanes).tolist(),
         "stay": float(np.mean(np.asarray(answers) == 0)),
@@ -123,10 +134,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=1000)
     p.add_argument("--left-spacings", default="120,150")
     p.add_argument("--rng", type=int, default=0)
+    p.add_argument("--scenario", choices=("train", "eval"), default="train")
+    p.add_argument("--no-delay", action="store_true", help="measure without reaction delay")
+    p.add_argument("--no-slips", action="store_true", help="... without missed/doubled keys")
     a = p.parse_args(argv)
     seeds = range(a.first_seed, a.first_seed + a.seeds)
     if not a.search:
-        r = measure(_defaults(), None, seeds, a.steps)
+        from torchcbl.teachers import HumanTimingConfig
+
+        timing = {}
+        if a.no_delay:
+            timing["delay_probs"] = (1.0,)
+        if a.no_slips:
+            timing.update(miss_prob=0.0, double_prob=0.0)
+        r = measure(
+            _defaults(), None, seeds, a.steps, scenario=a.scenario,
+            timing=HumanTimingConfig(**timing),
+        )  # fmt: skip
         lanes = np.asarray(r["lanes"]) * 100
         got = (
             f"{100 * r['collisions']:.2f}",
