@@ -119,12 +119,14 @@ def _precision(cov: Tensor) -> tuple[Tensor, Tensor]:
     cheapest route is taken. For D <= 4, one LU factorisation gives both the inverse (solved
     against the identity, as ``inv_ex`` does) and the determinant, prod(diag U) with its sign
     flipped once per row swap (a Cholesky factorisation on top would cost as much again); its
-    log is summed from log |U_ii|, so no product can overflow. A non-positive determinant
-    gives NaN. The covariances here are a weighted scatter matrix plus the variance floor,
-    positive definite up to rounding far below the floor, so the determinant's sign is the
-    check that catches what can go wrong (NaN or infinite input). For larger D: the Cholesky
-    factor L (NaN when it fails), then P = L^-T L^-1 (both faster there than LU or
-    ``cholesky_inverse``). NaN is left for the caller's final finiteness check.
+    log is summed from log |U_ii|, so no product can overflow. A negative determinant gives
+    NaN and a zero one +inf; a matrix with an even number of negative eigenvalues is not
+    detected (Cholesky would have failed on it). The covariances here are a weighted scatter
+    matrix plus the variance floor (at least 1e-6 of the mean variance), positive definite up
+    to rounding far below the floor, so what can go wrong is NaN or infinite input, which
+    gives a non-finite log det. For larger D: the Cholesky factor L (NaN when it fails), then
+    P = L^-T L^-1 (both faster there than LU or ``cholesky_inverse``). A non-finite value is
+    left for the caller's final finiteness check.
     """
     d = cov.shape[-1]
     if d <= 4:
@@ -587,10 +589,15 @@ def _m_step_packed(bt: _Batch, resp: Tensor) -> tuple[Params, Tensor]:
     return Params(weights, means, cov, log_det, coef[..., :q]), coef
 
 
+def _numpy_ok(t: Tensor) -> bool:
+    """Whether numpy may work on ``t``'s memory: a float64 CPU tensor outside autograd."""
+    return t.device.type == "cpu" and t.dtype == torch.float64 and not t.requires_grad
+
+
 def _clamp_exp_(t: Tensor, lo: float, hi: float) -> Tensor:
     """exp(clamp(t, lo, hi)) in place. On the CPU numpy's, twice as fast per element as
     torch's here (a contiguous float64 tensor shares its memory with the array)."""
-    if t.device.type == "cpu" and t.is_contiguous():
+    if _numpy_ok(t) and t.is_contiguous():
         a = t.numpy()
         np.exp(np.clip(a, lo, hi, out=a), out=a)
         return t
@@ -599,7 +606,7 @@ def _clamp_exp_(t: Tensor, lo: float, hi: float) -> Tensor:
 
 def _log(t: Tensor) -> Tensor:
     """log(t) into a new tensor; numpy's on the CPU (three times as fast as torch's here)."""
-    if t.device.type == "cpu":
+    if _numpy_ok(t):
         return torch.from_numpy(np.log(t.numpy()))
     return torch.log(t)
 
@@ -654,7 +661,7 @@ def _e_step_packed(
         cmx = torch.full((b * r1, n), -math.inf, dtype=w.dtype, device=w.device)
         cmx = cmx.scatter_reduce_(0, bt.rows.unsqueeze(-1).expand(-1, n), w.view(-1, n), "amax")
         cmx = torch.where(bt.row_pad.unsqueeze(-1) > 0, 0.0, cmx)
-        e = w.sub_(cmx.index_select(0, bt.rows).view(b, m, n)).clamp_min_(_CLAMP).exp_()
+        e = _clamp_exp_(w.sub_(cmx.index_select(0, bt.rows).view(b, m, n)), _CLAMP, math.inf)
         s, ls = sums(e)
         lse = ls.add_(cmx.view(b, r1, n))
     loglik = (lse * bt.pm1).sum(-1)

@@ -253,9 +253,9 @@ def _running_now() -> tuple[int, int] | None:
             try:
                 with open(f"/proc/self/task/{tid}/stat", "rb") as f:
                     stat = f.read()
-            except OSError:  # the thread has just ended
+                end = stat.rindex(b")")  # the name may hold ")": the state follows the last
+            except (OSError, ValueError):  # the thread has just ended
                 continue
-            end = stat.rindex(b")")
             own += stat[end + 2 : end + 3] == b"R"
     except (OSError, ValueError, IndexError):
         return None
@@ -274,7 +274,10 @@ def _spare_core() -> bool:
     now = _running_now()
     if now is not None:
         running, own = now
-        return running - own + 1 < _usable_cpus()  # others' threads + ours on one core
+        # a core beyond the one ours runs on is free. One sample of one instant; /proc/loadavg
+        # counts the whole machine, so in a container limited to some of its CPUs a busy host
+        # means one thread (as the load average did), and a CPU quota is not seen at all
+        return running - own + 1 < _usable_cpus()
     try:
         load = os.getloadavg()[0]
     except (AttributeError, OSError):  # no load average (Windows): trust the size rule
