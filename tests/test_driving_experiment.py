@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
+from pathlib import Path
 
 import pytest
 from _driving_tiny import tiny_config
@@ -16,7 +18,18 @@ from sumo_scenarios.experiment import (
 )
 
 
-def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path):
+def _clip_script(session, capsys) -> dict:
+    """scripts/driving_components_at_clip.py on ``session`` (caps 3) -> its JSON line."""
+    path = Path(__file__).resolve().parents[1] / "scripts" / "driving_components_at_clip.py"
+    spec = importlib.util.spec_from_file_location("driving_components_at_clip", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    capsys.readouterr()
+    assert mod.main([str(session), "--caps", "3"]) == 0
+    return json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+
+
+def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys):
     cfg = tiny_config()
     res = run_experiment(cfg, tmp_path, workers=1, progress=False)
     on_disk = json.loads((tmp_path / "results.json").read_text())
@@ -77,6 +90,13 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path):
         report = evaluate_saved_policy(tmp_path / "seed_0" / "sessions" / arm, n_steps=20)
         assert report["steps"] == 20
     assert on_disk["domain"] == "driving"
+    # the clip analysis of the README runs on a kept session: its counts are the session's
+    clip = _clip_script(tmp_path / "seed_0" / "sessions" / "arm_a", capsys)
+    assert clip["demonstrations"] == s["arm_a"]["demonstrations"]["mean"]
+    assert sum(clip["per_action"]) == clip["demonstrations"]
+    assert all(0.0 <= v <= 1.0 for v in clip["share_at_clip_per_lane"])
+    assert max(clip["caps"]["3"]["components"]) <= 3
+    assert clip["caps"]["3"]["floor_sized_on_clip"] <= clip["caps"]["3"]["floor_sized"]
     (tmp_path / "fig8_lanes_collisions.png").unlink()
     written = plot_results(on_disk, tmp_path)
     assert tmp_path / "fig8_lanes_collisions.png" in written
