@@ -862,20 +862,10 @@ class GaussianMixtureSet(nn.Module):
         cand_action = groups[g_idx]
         cand_k = c_idx + 1
         loglik = res.loglik[g_idx, c_idx]
-        crit = _em.information_criterion(self.criterion, loglik, cand_k, counts[cand_action], d)
-        if not bool(torch.isfinite(crit).all()):
-            raise FloatingPointError(
-                "EM produced a non-finite log-likelihood; the data may be badly scaled "
-                "(try standardising the features or a larger var_floor)"
-            )
-        crit_tab[groups] = math.inf
-        ll_tab[groups] = -math.inf
-        conv_tab[groups] = False
-        iter_tab[groups] = 0
-        crit_tab[cand_action, c_idx] = crit
-        ll_tab[cand_action, c_idx] = loglik
-        conv_tab[cand_action, c_idx] = res.converged[g_idx, c_idx]
-        iter_tab[cand_action, c_idx] = res.n_iter[g_idx, c_idx]
+        self._put_candidates(
+            (crit_tab, ll_tab, conv_tab, iter_tab), groups, (cand_action, c_idx), loglik,
+            cand_k, counts[cand_action], res.converged[g_idx, c_idx], res.n_iter[g_idx, c_idx],
+        )  # fmt: skip
         # Per-action choice (Eq. 6 = sum of independent terms -> per-action argmin).
         n_comp[groups] = crit_tab[groups].argmin(1) + 1  # first minimum: smallest k on ties
         # keep every candidate (uncentred); non-candidate slots hold an empty mixture
@@ -892,6 +882,39 @@ class GaussianMixtureSet(nn.Module):
         c_w.index_copy_(0, groups, w_new)
         c_mu.index_copy_(0, groups, mu_new)
         c_cov.index_copy_(0, groups, cov_new)
+
+    def _put_candidates(
+        self,
+        tables: tuple[Tensor, Tensor, Tensor, Tensor],
+        rows: Any,
+        index: tuple[Any, Any],
+        loglik: Tensor,
+        ks: Tensor,
+        n_points: Tensor,
+        converged: Any,
+        n_iter: Any,
+    ) -> Tensor:
+        """Score the fitted candidates (total log-likelihood ``loglik``, component counts
+        ``ks``, points ``n_points``) by the criterion and write them into the tables (criterion,
+        log-likelihood, converged, iterations) at ``index``, after clearing the refitted action
+        ``rows``. Returns the criterion; raises FloatingPointError on a non-finite one."""
+        d = self.n_features
+        crit = _em.information_criterion(self.criterion, loglik, ks, n_points, d)
+        if not bool(torch.isfinite(crit).all()):
+            raise FloatingPointError(
+                "EM produced a non-finite log-likelihood; the data may be badly scaled "
+                "(try standardising the features or a larger var_floor)"
+            )
+        crit_tab, ll_tab, conv_tab, iter_tab = tables
+        crit_tab[rows] = math.inf
+        ll_tab[rows] = -math.inf
+        conv_tab[rows] = False
+        iter_tab[rows] = 0
+        crit_tab[index] = crit
+        ll_tab[index] = loglik
+        conv_tab[index] = converged
+        iter_tab[index] = n_iter
+        return crit
 
     def _warm_action(
         self,
@@ -960,21 +983,11 @@ class GaussianMixtureSet(nn.Module):
             w1, mu1, cov1 = _em.warm_m_step(stats, cand_t, c_n, floor)
             coef1 = _em.warm_coef(w1, mu1, cov1)
             ll1, stats1 = _em.warm_e_step(zt, coef1, cand_t, ind)
-        ks = torch.arange(1, c_n + 1, device=dev)
-        crit = _em.information_criterion(self.criterion, ll1, ks, torch.tensor(n, device=dev), d)
-        if not bool(torch.isfinite(crit).all()):
-            raise FloatingPointError(
-                "EM produced a non-finite log-likelihood; the data may be badly scaled "
-                "(try standardising the features or a larger var_floor)"
-            )
-        crit_tab[a] = math.inf
-        ll_tab[a] = -math.inf
-        conv_tab[a] = False
-        iter_tab[a] = 0
-        crit_tab[a, :c_n] = crit
-        ll_tab[a, :c_n] = ll1
-        conv_tab[a, :c_n] = (ll1 - ll0).abs() / n < self.tol
-        iter_tab[a, :c_n] = _WARM_ITER
+        crit = self._put_candidates(
+            (crit_tab, ll_tab, conv_tab, iter_tab), a, (a, slice(0, c_n)), ll1,
+            torch.arange(1, c_n + 1, device=dev), torch.tensor(n, device=dev),
+            (ll1 - ll0).abs() / n < self.tol, _WARM_ITER,
+        )  # fmt: skip
         n_comp[a] = int(crit.argmin()) + 1  # first minimum: smallest k on ties
         put(c_w, w1, 0.0)
         put(c_mu, mu1 + ref, 0.0)
