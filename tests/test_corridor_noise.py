@@ -241,24 +241,19 @@ def test_one_colour_per_action_and_map_legend():
 
 
 # ---------------------------------------------------------------- the logged confidence
-def _hand_distance(model, x: np.ndarray) -> tuple[int, float]:
-    """Eq. 7's action and the Mahalanobis distance (std) to the most likely component of its
-    mixture, from the model's buffers by plain numpy (inverse covariances, log densities)."""
-    mask = model.component_mask_.numpy()
-    w, mu, cov = (model.weights_.numpy(), model.means_.numpy(), model.covariances_.numpy())
-    log_prior = model.log_prior_.numpy()
-    d = x.shape[0]
-    scores = np.full(mask.shape, -np.inf)
-    m2 = np.full(mask.shape, np.inf)
-    for a, k in zip(*np.nonzero(mask), strict=True):
-        diff = x - mu[a, k]
-        m2[a, k] = diff @ np.linalg.inv(cov[a, k]) @ diff
-        logdet = np.linalg.slogdet(cov[a, k])[1]
-        scores[a, k] = math.log(w[a, k]) - 0.5 * (m2[a, k] + logdet + d * math.log(2 * math.pi))
-    top = scores.max()
-    with np.errstate(divide="ignore"):  # an action without data scores log(0) = -inf
-        action = int(np.argmax(np.log(np.exp(scores - top).sum(1)) + log_prior))
-    return action, math.sqrt(m2[action, int(np.argmax(scores[action]))])
+def _investigation_script():
+    """scripts/investigate_corridor_requests.py as a module (its ``_hand`` is the numpy
+    oracle of a classification: Eq. 7's action and the distance to the most likely component
+    of its mixture, from the model's buffers by inverse covariances and log densities)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "investigate_corridor_requests.py"
+    spec = importlib.util.spec_from_file_location("_investigate_requests", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def test_logged_distance_is_to_the_most_likely_component_of_the_model_of_that_step():
@@ -287,6 +282,7 @@ def test_logged_distance_is_to_the_most_likely_component_of_the_model_of_that_st
         on_refit=lambda model, n: snapshots.__setitem__(n, copy.deepcopy(model)),
     )
     teacher.run()
+    oracle = _investigation_script()._hand
     records = teacher.records
     labelled = [r for r in records if r.teacher_action is not None]
     asked_confident = [r for r in labelled if r.phase == "confident"]
@@ -303,9 +299,9 @@ def test_logged_distance_is_to_the_most_likely_component_of_the_model_of_that_st
         if fitted_on == 0:
             assert r.model_action == -1 and math.isinf(r.distance)
             continue
-        action, dist = _hand_distance(snapshots[fitted_on], np.asarray(r.observation, float))
-        assert r.model_action == action
-        assert r.distance == pytest.approx(dist, rel=1e-9, abs=1e-12)
+        hand = oracle(snapshots[fitted_on], np.asarray(r.observation, float))
+        assert r.model_action == hand["action"]
+        assert r.distance == pytest.approx(hand["dist"], rel=1e-9, abs=1e-12)
         checked += 1
     assert checked == len(records) - 1
 
@@ -314,14 +310,7 @@ def test_request_investigation_script_runs_and_finds_few_requests_with_exact_mot
     """scripts/investigate_corridor_requests.py (the issue-12 investigation) stays runnable; it
     asserts at every request that the logged distance is its hand computation. With exact
     motion every circuit repeats, so the confident phase asks at most a few times."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "scripts" / "investigate_corridor_requests.py"
-    spec = importlib.util.spec_from_file_location("_investigate_requests", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = _investigation_script()
     run = module.run_one("exact", 0)
     summary = module.summarise([run])
     assert len(run["requests"]) <= 3 and run["teleoperated"] >= 30
