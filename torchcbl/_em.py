@@ -100,8 +100,8 @@ def precision_cholesky(covariances: Tensor) -> tuple[Tensor, Tensor]:
             "a covariance matrix is not positive definite even after the variance floor; "
             "increase var_floor"
         )
-    eye = torch.eye(covariances.shape[-1], dtype=covariances.dtype, device=covariances.device)
-    inv_chol = torch.linalg.solve_triangular(chol, eye.expand_as(chol), upper=False)
+    eye = _eye(covariances.shape[-1], covariances.dtype, covariances.device).expand_as(chol)
+    inv_chol = torch.linalg.solve_triangular(chol, eye, upper=False)
     log_det = -torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
     return inv_chol.mT, log_det
 
