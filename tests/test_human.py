@@ -163,12 +163,33 @@ def test_keyboard_interrupt_while_waiting_restores_terminal(terminal):
     # process-wide os.kill may land on another thread (pytest-timeout's, tqdm's monitor), and
     # then the main thread's read() is never interrupted (seen once in CI: a 60 s timeout).
     main = threading.main_thread().ident
-    person = Person(master, slave, [lambda: signal.pthread_kill(main, signal.SIGINT)])
-    teacher = _teacher(slave)
-    person.start()
-    with pytest.raises(TeachingInterrupted) as caught:
-        teacher(OBS, {})
-    person.finish()
+    # A SIGINT that lands after the prompt but just before the main thread blocks in read()
+    # only sets CPython's flag; its handler would run when read() returns, which it never does
+    # (seen twice in CI, under load: a 60 s timeout). So the person presses Ctrl-C again every
+    # 0.2 s until the handler has run; the handler raises once and ignores the later presses.
+    fired = threading.Event()
+
+    def once(signum, frame):
+        if not fired.is_set():
+            fired.set()
+            raise KeyboardInterrupt
+
+    def press_until_seen():
+        give_up = time.monotonic() + 20.0
+        while not fired.is_set() and time.monotonic() < give_up:
+            signal.pthread_kill(main, signal.SIGINT)
+            fired.wait(0.2)
+
+    old = signal.signal(signal.SIGINT, once)
+    try:
+        person = Person(master, slave, [press_until_seen])
+        teacher = _teacher(slave)
+        person.start()
+        with pytest.raises(TeachingInterrupted) as caught:
+            teacher(OBS, {})
+        person.finish()
+    finally:
+        signal.signal(signal.SIGINT, old)
     assert isinstance(caught.value.__cause__, KeyboardInterrupt)
     assert termios.tcgetattr(slave) == before
 
