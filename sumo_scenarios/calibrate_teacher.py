@@ -8,16 +8,17 @@ evaluation traffic, ``--no-delay`` / ``--no-slips`` without its reaction delay o
 and doubled key presses (what each adds to the collisions).
 
 ``--search N`` runs the systematic search the defaults came from: N random perturbations
-(each parameter x U(0.85, 1.15), home weights renormalised, the left lane's mean spacing from
+(each float parameter x U(0.85, 1.15), a range's width x U(0.7, 1.3), home weights x U(0.85,
+1.18) renormalised, counts such as ``cross_steps`` kept; the left lane's mean spacing from
 ``--left-spacings``) of the best ``--keep`` settings found so far (``--history``, JSON lines,
 appended to), each measured on ``--seeds`` segments from ``--first-seed`` (use other segments
 than the final check), in 2 processes (libsumo holds one simulation per process). The objective
 is the calibration targets only (:func:`penalty`), never a learning result. A search ranks
 settings on few segments, so its best is partly luck: ``--rescore K`` re-measures the K best of
 the history on ``--seeds`` other segments and ranks them by those. The defaults came from
-``--search 48 --seeds 30 --first-seed 200 --left-spacings 120`` (10 rounds, ``--rng`` 1-3 and
-6-12: 492 settings),
-then ``--rescore 10 --seeds 100 --first-seed 300``.
+``--search 48 --seeds 30 --first-seed 200 --left-spacings 120`` (``--rng`` 1-12: 492 settings,
+10 rounds of 48 and 12 of the two rounds that a setting below the 5 m floor of ``behind_m``
+stopped, since clamped), then ``--rescore 10 --seeds 100 --first-seed 300``.
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+CHECK_SEGMENTS = 30  # training segments 0-29: the calibration check (and the tests')
+
 TARGETS = (
     ("collisions %", "<= 0.5"),
     ("left three lanes %", ">= 85"),
@@ -44,7 +47,7 @@ TARGETS = (
 def measure(
     driver: dict[str, Any],
     spacing: tuple[float, float, float] | None = None,
-    seeds: range = range(30),
+    seeds: range = range(CHECK_SEGMENTS),
     steps: int = 1000,
     *,
     scenario: str = "train",
@@ -134,14 +137,15 @@ def _job(args: tuple) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--search", type=int, default=0, help="random perturbations to measure")
-    p.add_argument("--history", type=Path, default=Path("runs/teacher_calibration.jsonl"))
-    p.add_argument("--keep", type=int, default=6)
-    p.add_argument(
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--search", type=int, default=0, help="random perturbations to measure")
+    mode.add_argument(
         "--rescore", type=int, default=0,
         help="re-measure the best N settings of --history on --seeds segments, pick by those",
     )  # fmt: skip
-    p.add_argument("--seeds", type=int, default=30)
+    p.add_argument("--history", type=Path, default=Path("runs/teacher_calibration.jsonl"))
+    p.add_argument("--keep", type=int, default=6)
+    p.add_argument("--seeds", type=int, default=CHECK_SEGMENTS)
     p.add_argument("--first-seed", type=int, default=0)
     p.add_argument("--steps", type=int, default=1000)
     p.add_argument("--left-spacings", default="120,150")
@@ -151,6 +155,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-slips", action="store_true", help="... without missed/doubled keys")
     a = p.parse_args(argv)
     seeds = range(a.first_seed, a.first_seed + a.seeds)
+    if a.search < 0 or a.rescore < 0 or a.seeds < 1:
+        p.error("--search, --rescore and --seeds take a positive count")
+    if (a.search or a.rescore) and a.first_seed < CHECK_SEGMENTS:
+        p.error(
+            f"a search or rescore must use other segments than the check's 0-"
+            f"{CHECK_SEGMENTS - 1}: pass --first-seed {CHECK_SEGMENTS} or more"
+        )
+    if a.rescore and (a.scenario != "train" or a.no_delay or a.no_slips):
+        p.error("--rescore measures as the search does: no --scenario, --no-delay, --no-slips")
+    if a.rescore and not a.history.exists():
+        p.error(f"--rescore needs a search history, and {a.history} does not exist")
     if not (a.search or a.rescore):
         from torchcbl.teachers import HumanTimingConfig
 

@@ -35,13 +35,15 @@ How it decides, per step (all draws from one seeded generator):
   tighter gap; with one way out left and less than ``box_room_s`` of room it takes it.
 - **crossing to a shoulder**: when urgent, a normal lane beside a shoulder is a way out too if
   its car ahead leaves the ego more than a car length for ``cross_steps`` steps: the driver
-  crosses it (one step in it) to reach the shoulder, which is always free. From the middle lane,
-  with both neighbours too tight to stay in, this is the only way out.
+  crosses it (one step in it) to reach the shoulder, which is always free. It is weighed with
+  the safe neighbours by value, so the driver may cross toward a shoulder it prefers while the
+  other neighbour is safe; from the middle lane, with both neighbours too tight to stay in, it
+  is the only way out.
 - **overtake and return**: out of its home lane (to pass a car, or because home moved), the
   driver moves one lane back toward home once that lane looks clear: its nearest car is behind
   by more than a distance drawn per event from ``return_behind_m`` (the car it passed), or
   ahead with at least ``return_room_s`` of room, and it is safe to enter (as below: a car
-  ahead that may be hidden counts).
+  ahead that may be hidden counts; with the defaults this, not the draw, decides when).
 - **direction among the safe lanes**: the best-valued safe neighbour, ties broken at random
   (toward home when home is on either side, so not always "left first").
 
@@ -64,6 +66,7 @@ above 80 % (see the README: physics of passing and the trade-off measured).
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 from typing import Any
 
@@ -101,8 +104,9 @@ class HumanDriverConfig:
             the low end it is urgent and accepts a tighter gap (``urgent_ttc_s``).
         right_cost_s: extra cost of the right lane and right shoulder (the paper's driver used
             them rarely), seconds of room.
-        box_room_s: below this much room in its own lane, with only one neighbour safe to
-            enter, the driver takes it before it closes too (seconds; 0: off).
+        box_room_s: below this much room in its own lane, with only one way out, the driver
+            takes it before it closes too (seconds; 0: off). Below ``leave_room_s[0]``, as
+            with the defaults, it never binds: the driver is urgent there and leaves anyway.
         enter_ttc_s: a lane is entered only if its car ahead leaves at least this much room.
         urgent_ttc_s: the same, when the driver is urgent (it accepts a tighter gap).
         behind_m: a lane is entered only if its nearest car behind will be more than this far
@@ -113,12 +117,18 @@ class HumanDriverConfig:
         return_behind_m: overtake and return: out of its home lane, the driver moves back toward
             home once that lane's nearest car is behind by more than a distance drawn per event
             uniformly from this range (metres, front to front); None: no such rule (the driver
-            then moves only by value).
+            then moves only by value). The lane must also be safe to enter, a car that may be
+            hidden ahead included: with the defaults that needs the car passed 11.1 m behind,
+            beyond this range, so the draw does not bind there.
         return_room_s: ... or when that lane's nearest car is ahead with at least this much
             room (seconds).
         cross_steps: when urgent, a normal lane beside a shoulder counts as a way out if its car
             ahead leaves the ego more than a car length for this many steps (the crossing to
-            the shoulder); 0: off.
+            the shoulder); 0: off. It joins the safe neighbours and the best-valued way out is
+            taken, so the driver may cross toward a preferred shoulder while the other
+            neighbour is safe (on 100 training segments that gave 0.48 % contact, against
+            0.54 % when crossing only with no safe neighbour). It does not allow for the
+            reaction delay of the second press.
     """
 
     home_weights: tuple[float, float, float] = (0.412, 0.237, 0.351)
@@ -168,7 +178,8 @@ class HumanDriverConfig:
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        if not (isinstance(self.cross_steps, int) and self.cross_steps >= 0):
+        steps = self.cross_steps
+        if isinstance(steps, bool) or not isinstance(steps, numbers.Integral) or steps < 0:
             raise ValueError(f"cross_steps must be an int >= 0, got {self.cross_steps!r}")
         if self.behind_m < _CAR_M:
             raise ValueError(f"behind_m must be >= 5 m (a car length), got {self.behind_m}")

@@ -217,8 +217,9 @@ def test_human_driver_crosses_a_lane_to_the_shoulder_when_boxed_in_the_middle():
     the right lane and one 11 m ahead in the left lane (too close to stay in: 0.35 s of room
     after a step), the driver crosses the left lane toward the free left shoulder: that car
     leaves more than a car length for the two steps of the crossing. At 8 m it would not
-    (3 m after two steps): the driver stays boxed in; with ``cross_steps = 0`` it never
-    crosses; from the left lane the middle lane is no crossing (no shoulder beyond it)."""
+    (3 m after two steps): the driver stays boxed in; with ``cross_steps = 0``, or when not
+    urgent, it does not cross; from the left lane the middle lane is no crossing (no shoulder
+    beyond it)."""
     from sumo_scenarios.teacher import HumanDriverConfig
 
     cfg = HumanDriverConfig(home_weights=(0.0, 1.0, 0.0), home_every_s=1e9)
@@ -226,11 +227,17 @@ def test_human_driver_crosses_a_lane_to_the_shoulder_when_boxed_in_the_middle():
     assert _call(HumanDriver(cfg, seed=0), (-1.0, 12.0, 8.0), 2, 0) == STAY
     off = HumanDriverConfig(home_weights=(0.0, 1.0, 0.0), home_every_s=1e9, cross_steps=0)
     assert _call(HumanDriver(off, seed=0), (-1.0, 12.0, 11.0), 2, 0) == STAY
-    # in the left lane, car 12 m ahead; middle lane 11 m ahead; left shoulder beside: the
-    # shoulder, not a crossing of the middle lane
-    assert _call(HumanDriver(cfg, seed=0), (-1.0, 11.0, 12.0), 3, 0) == 1
+    # not urgent (0.95 s of room): no crossing, though the left lane is as before
+    assert _call(HumanDriver(cfg, seed=0), (-1.0, 17.0, 11.0), 2, 0) == STAY
+    # in the left lane, home the middle lane, car 12 m ahead; the middle lane 11 m ahead (too
+    # close to stay in) and no shoulder beyond it: not a crossing, so the left shoulder,
+    # although home is the other way
+    home_middle = HumanDriverConfig(home_weights=(1.0, 0.0, 0.0), home_every_s=1e9, lane_cost_s=2.0)
+    assert _call(HumanDriver(home_middle, seed=0), (-1.0, 11.0, 12.0), 3, 0) == 1
     with pytest.raises(ValueError, match="cross_steps"):
         HumanDriverConfig(cross_steps=-1)
+    with pytest.raises(ValueError, match="cross_steps"):
+        HumanDriverConfig(cross_steps=True)
 
 
 def _returns_at(cfg, seeds=40):
@@ -253,8 +260,8 @@ def test_human_driver_overtakes_and_returns_once_the_car_is_past():
     (not before, and not always at the same distance), and not while a car it sees ahead in the
     left lane leaves less than ``return_room_s`` of room. Nor while a car that may be hidden
     ahead (at least as far ahead as the nearest is behind, closing at ``assumed_closing_ms``)
-    would leave less than ``enter_ttc_s``: with the default 11.33 m/s that holds the driver
-    back until the car passed is 14.1 m behind, whatever it drew."""
+    would leave less than ``enter_ttc_s``: with the defaults that holds the driver back until
+    the car passed is 5 + 8.282 * (0.25 + 0.482) = 11.1 m behind, whatever it drew."""
     from sumo_scenarios.teacher import HumanDriverConfig
 
     # a driver content with 0.05 s of room in the lane it enters: the drawn distance decides
@@ -279,6 +286,29 @@ def test_human_driver_overtakes_and_returns_once_the_car_is_past():
         room = (x - 5.0 - 2.5) / 10.0
         moved = _call(HumanDriver(cfg, seed=0), (25.0, 25.0, x), 4, 0) != STAY
         assert moved == (x >= 25.0 or room >= cfg.return_room_s), (x, room)
+
+
+def test_calibration_rescore_remeasures_the_best_of_a_history(tmp_path, capsys):
+    """``--rescore K`` re-measures the K best settings of a search history on other segments
+    and prints them ranked by the new measurement; it refuses the check's segments 0-29."""
+    import json
+
+    from sumo_scenarios.calibrate_teacher import _defaults, main, penalty
+
+    history = tmp_path / "history.jsonl"
+    lucky = {"driver": _defaults(), "spacing": [40.0, 31.0, 120.0], "collisions": 0.0}
+    lucky.update(lanes=[0.02, 0.03, 0.15, 0.4, 0.4], stay=0.7)  # penalty 0: the search's best
+    worse = dict(lucky, stay=0.9)
+    history.write_text("".join(json.dumps(r) + "\n" for r in (worse, lucky)))
+    args = ["--rescore", "1", "--seeds", "2", "--steps", "40", "--history", str(history)]
+    assert main([*args, "--first-seed", "300"]) == 0
+    (line,) = capsys.readouterr().out.splitlines()
+    again = measure({}, seeds=range(300, 302), steps=40)
+    assert line.startswith(f"{0.0:6.2f} -> {penalty(again):6.2f}")
+    with pytest.raises(SystemExit) as exit_info:
+        main([*args, "--first-seed", "0"])
+    assert exit_info.value.code == 2
+    assert "other segments than the check's 0-29" in capsys.readouterr().err
 
 
 def test_calibration_objective_is_the_targets_only():
