@@ -194,6 +194,12 @@ class HumanDriver:
     Args:
         config: a :class:`HumanDriverConfig`.
         seed: seeds every draw.
+
+    Attributes:
+        last_move: why the last answer was given (for analysis; reading it changes nothing):
+            ``"stay"``; ``"leave"`` (a car closing in ahead), ``"cross"`` (leaving across a lane
+            toward a shoulder), ``"better"`` (a neighbour looked better) or ``"return"`` (back
+            toward home).
     """
 
     def __init__(self, config: HumanDriverConfig | None = None, *, seed: int = 0) -> None:
@@ -204,6 +210,7 @@ class HumanDriver:
         self._leave = self._draw_leave()
         self._return = self._draw_return()
         self._last: tuple[Any, int] | None = None  # (t, lane) of the previous call
+        self.last_move = "stay"
 
     def _draw_home(self) -> int:
         return int(self._rng.choice((2, 3, 4), p=self.config.home_weights))
@@ -289,12 +296,20 @@ class HumanDriver:
             best = max(options, key=value)
             if pressed or value(best) > value(lane) + self._margin:
                 self._redraw()
+                if not pressed:
+                    self.last_move = "better"
+                elif self._safe(best, d, closing, dt, urgent):
+                    self.last_move = "leave"
+                else:
+                    self.last_move = "cross"
                 return _LEFT if best > lane else _RIGHT
         if lane != self.home:  # back toward home once the car passed is far enough behind
             k = lane + (1 if self.home > lane else -1)
             if self._safe(k, d, closing, dt, False) and self._clear(k, d, closing, dt):
                 self._redraw()
+                self.last_move = "return"
                 return _LEFT if k > lane else _RIGHT
+        self.last_move = "stay"
         return _STAY
 
     def _redraw(self) -> None:

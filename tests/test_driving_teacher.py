@@ -223,7 +223,9 @@ def test_human_driver_crosses_a_lane_to_the_shoulder_when_boxed_in_the_middle():
     from sumo_scenarios.teacher import HumanDriverConfig
 
     cfg = HumanDriverConfig(home_weights=(0.0, 1.0, 0.0), home_every_s=1e9)
-    assert _call(HumanDriver(cfg, seed=0), (-1.0, 12.0, 11.0), 2, 0) == 1  # left
+    driver = HumanDriver(cfg, seed=0)
+    assert _call(driver, (-1.0, 12.0, 11.0), 2, 0) == 1  # left
+    assert driver.last_move == "cross"
     assert _call(HumanDriver(cfg, seed=0), (-1.0, 12.0, 8.0), 2, 0) == STAY
     off = HumanDriverConfig(home_weights=(0.0, 1.0, 0.0), home_every_s=1e9, cross_steps=0)
     assert _call(HumanDriver(off, seed=0), (-1.0, 12.0, 11.0), 2, 0) == STAY
@@ -233,7 +235,9 @@ def test_human_driver_crosses_a_lane_to_the_shoulder_when_boxed_in_the_middle():
     # close to stay in) and no shoulder beyond it: not a crossing, so the left shoulder,
     # although home is the other way
     home_middle = HumanDriverConfig(home_weights=(1.0, 0.0, 0.0), home_every_s=1e9, lane_cost_s=2.0)
-    assert _call(HumanDriver(home_middle, seed=0), (-1.0, 11.0, 12.0), 3, 0) == 1
+    driver = HumanDriver(home_middle, seed=0)
+    assert _call(driver, (-1.0, 11.0, 12.0), 3, 0) == 1
+    assert driver.last_move == "leave"
     with pytest.raises(ValueError, match="cross_steps"):
         HumanDriverConfig(cross_steps=-1)
     with pytest.raises(ValueError, match="cross_steps"):
@@ -309,6 +313,28 @@ def test_calibration_rescore_remeasures_the_best_of_a_history(tmp_path, capsys):
         main([*args, "--first-seed", "0"])
     assert exit_info.value.code == 2
     assert "other segments than the check's 0-29" in capsys.readouterr().err
+
+
+def test_contact_classification_counts_every_contact_of_the_teacher(capsys):
+    """scripts/driving_teacher_contacts.py drives the teacher as its calibration does (same
+    seeding: the same contact share as ``measure``) and gives each contact event one cause."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "driving_teacher_contacts.py"
+    spec = importlib.util.spec_from_file_location("driving_teacher_contacts", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.main(["--seeds", "3", "--first-seed", "0", "--steps", "400"]) == 0
+    r = json.loads(capsys.readouterr().out.splitlines()[-1])
+    assert r["collisions"] == measure({}, seeds=range(3), steps=400)["collisions"]
+    assert r["steps"] == 1200 and r["contact_steps"] > 0  # these segments have contacts
+    assert r["events"] == sum(r["causes"].values()) >= 1
+    rear = sum(n for c, n in r["causes"].items() if c.startswith("rear-end"))
+    assert sum(r["lanes_of_rear_ends"].values()) == rear
+    assert mod.main(["--seeds", "0"]) == 2
+    assert capsys.readouterr().err.startswith("error: ")
 
 
 def test_calibration_objective_is_the_targets_only():
