@@ -42,10 +42,7 @@ def _ways_out(driver, obs: np.ndarray, info: dict) -> bool:
     lane = int(round(float(obs[3])))
     closing = {int(k): float(v) for k, v in info["closing_speed_ms"].items()}
     dt = float(info["step_length_s"])
-    return any(
-        driver._safe(k, d, closing, dt, True) or driver._crossable(k, lane, d, closing, dt)
-        for k in (lane - 1, lane + 1)
-    )
+    return bool(driver._ways_out(lane, d, closing, dt, True))
 
 
 def classify(

@@ -282,12 +282,7 @@ class HumanDriver:
 
         pressed = room[lane] < self._leave  # a car closing in ahead: time to go
         urgent = room[lane] < cfg.leave_room_s[0]
-        options = [
-            k
-            for k in (lane - 1, lane + 1)
-            if self._safe(k, d, closing, dt, urgent)
-            or (urgent and self._crossable(k, lane, d, closing, dt))
-        ]
+        options = self._ways_out(lane, d, closing, dt, urgent)
         if options:
             # With a car ahead and one way out left, the driver takes it before that closes too
             # (it sees the cars alongside coming).
@@ -316,6 +311,18 @@ class HumanDriver:
         self._margin = self._draw_margin()
         self._leave = self._draw_leave()
         self._return = self._draw_return()
+
+    def _ways_out(
+        self, lane: int, d: np.ndarray, closing: dict, dt: float, urgent: bool
+    ) -> list[int]:
+        """The neighbour lanes the driver may move to: safe to enter, or (when urgent)
+        crossable toward a shoulder."""
+        return [
+            k
+            for k in (lane - 1, lane + 1)
+            if self._safe(k, d, closing, dt, urgent)
+            or (urgent and self._crossable(k, lane, d, closing, dt))
+        ]
 
     def _crossable(self, k: int, lane: int, d: np.ndarray, closing: dict, dt: float) -> bool:
         """Whether normal lane ``k`` next to the ego can be crossed to the shoulder beyond it:
