@@ -38,10 +38,9 @@ BOXED_STEPS = 3  # steps before a contact in which no way out means "boxed in"
 def _ways_out(driver, obs: np.ndarray, info: dict) -> bool:
     """Whether the teacher had a neighbour lane to go to (safe to enter when urgent, or
     crossable toward a shoulder), judged as it judges."""
-    d = np.asarray(obs[:3], dtype=np.float64)
-    lane = int(round(float(obs[3])))
-    closing = {int(k): float(v) for k, v in info["closing_speed_ms"].items()}
-    dt = float(info["step_length_s"])
+    from sumo_scenarios.teacher import _read
+
+    d, lane, closing, dt = _read(obs, info)
     return bool(driver._ways_out(lane, d, closing, dt, True))
 
 
@@ -118,15 +117,10 @@ def main(argv: list[str] | None = None) -> int:
     if a.seeds < 1 or a.steps < 1 or a.first_seed < 0:
         print("error: --seeds and --steps must be >= 1, --first-seed >= 0", file=sys.stderr)
         return 2
-    from torchcbl.teachers import HumanTimingConfig
+    from sumo_scenarios.calibrate_teacher import timing_config
 
-    timing: dict = {}
-    if a.no_delay:
-        timing["delay_probs"] = (1.0,)
-    if a.no_slips:
-        timing.update(miss_prob=0.0, double_prob=0.0)
     seeds = range(a.first_seed, a.first_seed + a.seeds)
-    r = classify(seeds, a.steps, a.scenario, HumanTimingConfig(**timing))
+    r = classify(seeds, a.steps, a.scenario, timing_config(a.no_delay, a.no_slips))
     print(
         f"{a.scenario} segments {seeds.start}-{seeds.stop - 1}, {r['steps']} steps: "
         f"{100 * r['collisions']:.3f} % in contact, {r['events']} contact events"

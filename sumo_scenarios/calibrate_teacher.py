@@ -91,6 +91,19 @@ def measure(
     }
 
 
+def timing_config(no_delay: bool = False, no_slips: bool = False) -> Any:
+    """The teacher's default :class:`~torchcbl.teachers.HumanTimingConfig`, without its reaction
+    delay (``no_delay``) or its missed and doubled key presses (``no_slips``)."""
+    from torchcbl.teachers import HumanTimingConfig
+
+    timing: dict[str, Any] = {}
+    if no_delay:
+        timing["delay_probs"] = (1.0,)
+    if no_slips:
+        timing.update(miss_prob=0.0, double_prob=0.0)
+    return HumanTimingConfig(**timing)
+
+
 def penalty(r: dict[str, Any]) -> float:
     """How far a measurement misses the targets: collisions per 0.05 point above 0.42 % (a margin
     under 0.5 % for the move from search segments to the check's), every share per point."""
@@ -167,16 +180,9 @@ def main(argv: list[str] | None = None) -> int:
     if a.rescore and not a.history.exists():
         p.error(f"--rescore needs a search history, and {a.history} does not exist")
     if not (a.search or a.rescore):
-        from torchcbl.teachers import HumanTimingConfig
-
-        timing = {}
-        if a.no_delay:
-            timing["delay_probs"] = (1.0,)
-        if a.no_slips:
-            timing.update(miss_prob=0.0, double_prob=0.0)
         r = measure(
             _defaults(), None, seeds, a.steps, scenario=a.scenario,
-            timing=HumanTimingConfig(**timing),
+            timing=timing_config(a.no_delay, a.no_slips),
         )  # fmt: skip
         lanes = np.asarray(r["lanes"]) * 100
         got = (

@@ -82,6 +82,27 @@ _CAR_M = 5.0
 _RANGE_M = 25.0
 
 
+def _read(observation: np.ndarray, info: dict) -> tuple[np.ndarray, int, dict[int, float], float]:
+    """What the driver sees: (distances [3] to the nearest car in lanes 1-3, m; its lane;
+    closing speed per lane, m/s; step length, s) from a DrivingEnv observation and info."""
+    obs = np.asarray(observation, dtype=np.float64)
+    if obs.shape != (4,):
+        raise ValueError(f"expected a driving observation of shape (4,), got {obs.shape}")
+    try:
+        closing = {int(k): float(v) for k, v in info["closing_speed_ms"].items()}
+        dt = float(info["step_length_s"])
+    except (KeyError, TypeError, AttributeError) as err:
+        raise ValueError(
+            f"HumanDriver needs DrivingEnv's info (closing_speed_ms, step_length_s): {err}"
+        ) from None
+    return obs[:3], int(round(obs[3])), closing, dt
+
+
+def _closing(lane: int, closing: dict) -> float:
+    """Closing speed of lane ``lane``'s nearest car (m/s), a car pulling away counted as 0."""
+    return max(float(closing.get(lane, 0.0)), 0.0)
+
+
 @dataclass(frozen=True)
 class HumanDriverConfig:
     """Parameters of :class:`HumanDriver` (seconds, metres; lanes 0 right shoulder .. 4 left
@@ -236,7 +257,7 @@ class HumanDriver:
         otherwise): assume it there, closing at ``assumed_closing_ms``."""
         x = float(d[lane - 1])
         if 0 < x < _RANGE_M:
-            return x, max(float(closing.get(lane, 0.0)), 0.0)
+            return x, _closing(lane, closing)
         return abs(x), self.config.assumed_closing_ms
 
     def _safe(self, lane: int, d: np.ndarray, closing: dict, dt: float, urgent: bool) -> bool:
@@ -252,19 +273,8 @@ class HumanDriver:
         return nxt > _CAR_M and (c <= 0 or (nxt - _CAR_M) / c >= need)
 
     def __call__(self, observation: np.ndarray, info: dict) -> int:
-        obs = np.asarray(observation, dtype=np.float64)
-        if obs.shape != (4,):
-            raise ValueError(f"expected a driving observation of shape (4,), got {obs.shape}")
-        try:
-            closing = {int(k): float(v) for k, v in info["closing_speed_ms"].items()}
-            dt = float(info["step_length_s"])
-        except (KeyError, TypeError, AttributeError) as err:
-            raise ValueError(
-                f"HumanDriver needs DrivingEnv's info (closing_speed_ms, step_length_s): {err}"
-            ) from None
+        d, lane, closing, dt = _read(observation, info)
         cfg = self.config
-        d = obs[:3]
-        lane = int(round(obs[3]))
         t = info.get("t")
         if self._rng.random() < dt / cfg.home_every_s:
             self.home = self._draw_home()
@@ -341,7 +351,7 @@ class HumanDriver:
         behind after the step (it must stay clear of the ego's rear)."""
         x = float(d[lane - 1])
         if -_RANGE_M < x <= 0:
-            c = max(float(closing.get(lane, 0.0)), 0.0)
+            c = _closing(lane, closing)
             return x - c * dt < -self.config.behind_m
         return True
 
@@ -354,7 +364,7 @@ class HumanDriver:
         x = float(d[lane - 1])
         if x <= 0:
             return -x >= self._return
-        c = max(float(closing.get(lane, 0.0)), 0.0)
+        c = _closing(lane, closing)
         if c <= 0 or x >= _RANGE_M:
             return True
         return (x - _CAR_M - c * dt) / c >= self.config.return_room_s
