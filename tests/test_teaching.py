@@ -269,6 +269,27 @@ def test_bad_config_is_a_clear_error():
     torch.manual_seed(0)
 
 
+def test_a_negative_seed_is_refused_before_a_run_directory_is_written(tmp_path):
+    # numpy and gymnasium refuse negative seeds at the first reset: a session that wrote its
+    # run directory first could then neither run nor resume
+    with pytest.raises(ValueError, match="seed: expected an int >= 0, got -1"):
+        ConfidentTeacher(rare_regions_world(), lambda o, i: 0, seed=-1, run_dir=tmp_path / "r")
+    assert not (tmp_path / "r").exists()
+
+
+def test_numpy_scalars_in_the_config_are_stored_as_python_numbers(tmp_path):
+    import json
+
+    cfg = TeachingConfig(max_new=np.int64(5), target_accuracy=np.float32(0.5), burst=np.int32(2))
+    assert (type(cfg.max_new), type(cfg.target_accuracy), type(cfg.burst)) == (int, float, int)
+    ct = ConfidentTeacher(rare_regions_world(), lambda o, i: 0, config=cfg, run_dir=tmp_path)
+    ct.close()
+    stored = json.loads((tmp_path / "config.json").read_text())["teaching"]
+    assert stored["max_new"] == 5 and stored["burst"] == 2
+    with pytest.raises(ValueError, match="max_new"):
+        TeachingConfig(max_new=np.int64(0))
+
+
 def test_refit_brings_a_snapshot_up_to_date_and_stop_reason_names_the_stop():
     ct = make(rare_regions_world(), noninteractive=False, max_new=5)
     ct.run(max_demonstrations=7)

@@ -191,6 +191,14 @@ class TeachingConfig:
     time_limit_is_success: bool = False
 
     def __post_init__(self) -> None:
+        # numpy scalars (np.int64(10), np.float32(0.9)) are taken as the Python numbers they
+        # hold, so that the config stays JSON-serialisable in a run directory
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.integer):
+                object.__setattr__(self, f.name, int(v))
+            elif isinstance(v, np.floating):
+                object.__setattr__(self, f.name, float(v))
         _opt_int("max_new", self.max_new, minimum=1)
         if self.refit not in ("full", "incremental"):
             raise ValueError(
@@ -354,6 +362,8 @@ class ConfidentTeacher:
             )
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise TypeError(f"seed: expected an int, got {seed!r}")
+        if seed < 0:  # checked before a run directory is written: a session must resume
+            raise ValueError(f"seed: expected an int >= 0, got {seed} (numpy and gymnasium seeds)")
         self.env = env
         self.teacher = teacher
         self.seed = int(seed)
