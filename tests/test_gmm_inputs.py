@@ -122,6 +122,19 @@ def test_action_without_data_is_never_predicted_and_reported():
     c = model.classify(probe)
     assert (c.action != 2).all() and (c.posterior[:, 2] == 0).all()
     assert float(model.aic()[2]) == 0.0
+    # held-out points of the action without data: likelihood 0, so +inf, never NaN
+    for crit in (model.aic(probe, np.arange(50) % 3), model.bic(probe, np.arange(50) % 3)):
+        assert torch.isfinite(crit[:2]).all() and torch.isposinf(crit[2])
+
+
+def test_low_precision_tensors_are_read_as_the_numbers_they_hold():
+    x, y = _data(a=2)
+    model = GaussianMixtureSet(2, 3, 3).fit(x, y)
+    for dtype in (torch.bfloat16, torch.float16):
+        t = torch.as_tensor(x[:20]).to(dtype)
+        want = model.classify(t.to(torch.float64))
+        got = model.classify(t)
+        assert torch.equal(got.action, want.action) and torch.equal(got.distance, want.distance)
 
 
 def test_degenerate_actions_fit_without_nan():

@@ -158,11 +158,17 @@ def _is_real_dtype(kind: str) -> bool:
     return kind in "fiu"
 
 
+_NUMPY_FLOATS = (torch.float16, torch.float32, torch.float64)
+
+
 def _to_numpy(value: Any, name: str) -> np.ndarray:
     if isinstance(value, np.ndarray):
         return value
     if isinstance(value, Tensor):
-        return value.detach().cpu().numpy()
+        value = value.detach().cpu()
+        if value.dtype.is_floating_point and value.dtype not in _NUMPY_FLOATS:
+            value = value.to(torch.float64)  # bfloat16, float8: numpy has no such dtype
+        return value.numpy()
     try:
         return np.asarray(value)
     except Exception as exc:  # noqa: BLE001 - re-raised with a clear message
@@ -1202,13 +1208,17 @@ class GaussianMixtureSet(nn.Module):
                 0, yt, mix[torch.arange(len(y)), yt]
             )
         out = _em.information_criterion(kind, ll, k, n.clamp_min(1), self.n_features)
-        return torch.where(n > 0, out, torch.zeros((), dtype=torch.float64))
+        out = torch.where(n > 0, out, torch.zeros((), dtype=torch.float64))
+        # an action without training data has no mixture: its points have likelihood 0
+        unfitted = (self.n_points_.cpu() == 0) & (n > 0)
+        return out.masked_fill(unfitted, math.inf)
 
     def aic(self, observations: Any | None = None, actions: Any | None = None) -> Tensor:
         """Free-parameter AIC [A] of each chosen mixture (2 p - 2 L, as sklearn's ``aic``).
 
         On the training data by default, or on the given (observations [N, D], actions [N]),
-        each mixture scored on its own action's points. 0 for an action without points.
+        each mixture scored on its own action's points. 0 for an action without points;
+        +inf for an action given points but fitted on none (no mixture: likelihood 0).
         """
         return self._criterion_of_chosen("aic", observations, actions)
 
