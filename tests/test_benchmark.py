@@ -226,10 +226,42 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
         (["--strategies", "bc,nope"], "--strategies: unknown ['nope']"),
         (["--envs", "mars"], "--envs: unknown ['mars']"),
         (["--envs", "", "--gym-env", "X-v0"], "--gym-env needs --teacher"),
+        (
+            ["--quick", "--envs", "corridor", "--strategies", "bc,torchcbl.strategies:Nope"],
+            "cannot import 'torchcbl.strategies:Nope'",
+        ),
+        (
+            ["--envs", "", "--gym-env", "X-v0", "--teacher", "_bench_env:teacher"]
+            + ["--eval-episodes", "0"],
+            "argument --eval-episodes: expected a whole number >= 1",
+        ),
     ],
 )
 def test_cli_benchmark_user_mistakes_are_one_line(argv, message, tmp_path, capsys):
-    code = main(["benchmark", "--out", str(tmp_path), *argv])
+    out = tmp_path / "b"
+    try:
+        code = main(["benchmark", "--out", str(out), *argv])
+    except SystemExit as exc:  # argparse's own refusals
+        code = exc.code
     err = capsys.readouterr().err
     assert code == 2
     assert err.startswith(f"torchcbl benchmark: error: {message}") and err.count("\n") == 1
+    assert not out.exists()  # refused before anything was written or run
+
+
+def test_every_import_path_is_resolved_before_a_cell_runs(tmp_path):
+    """A misspelt strategy, teacher or score fails at once with the name in the message,
+    not in a worker after other cells have run; nothing is written."""
+    cases = {
+        "torchcbl.strategies.bc:Nope": ([bm.StrategySpec("torchcbl.strategies.bc:Nope")], _env()),
+        "_bench_env:no_teacher": (STRATEGIES, _env(teacher="_bench_env:no_teacher")),
+        "no_such_module": (STRATEGIES, _env(score="no_such_module:score")),
+    }
+    for name, (strategies, env) in cases.items():
+        with pytest.raises(ImportError, match=name):
+            bm.run_benchmark(strategies, [env], [0], tmp_path / "out", workers=1)
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(ValueError, match="eval_episodes must be None or an int >= 1, got 0"):
+        _env(eval_episodes=0)
+    with pytest.raises(ValueError, match="score must be an import path"):
+        _env(score="success_rate")

@@ -90,8 +90,27 @@ def _import(path: str) -> Any:
     module, _, attr = path.partition(":")
     obj: Any = importlib.import_module(module)
     for part in attr.split("."):
-        obj = getattr(obj, part)
+        try:
+            obj = getattr(obj, part)
+        except AttributeError:
+            raise ImportError(
+                f"cannot import {path!r}: {module!r} has no attribute {attr!r}; expected an "
+                "import path 'package.module:name' of an existing object"
+            ) from None
     return obj
+
+
+def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) -> None:
+    """Resolve every import path of a benchmark (strategies, teachers, scores, gymnasium
+    registration modules) before anything runs: a misspelt name fails at once, with an
+    ImportError that names it, not in a worker after other cells have run."""
+    for s in strategies:
+        _import(STRATEGY_PATHS.get(s.name, s.name))
+    for e in envs:
+        _import(e.teacher)
+        _import(e.score)
+        if ":" in e.env_id:
+            importlib.import_module(e.env_id.partition(":")[0])
 
 
 @dataclass(frozen=True)
@@ -177,8 +196,19 @@ class EnvSpec:
             raise ValueError(f"EnvSpec {self.name!r}: max_steps must be an int >= 1")
         if self.eval_episodes is None and self.eval_steps is None:
             raise ValueError(f"EnvSpec {self.name!r}: give eval_episodes and/or eval_steps")
+        for name in ("eval_episodes", "eval_steps"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+                raise ValueError(
+                    f"EnvSpec {self.name!r}: {name} must be None or an int >= 1, got {v!r}"
+                )
         if not self.eval_seeds:
             raise ValueError(f"EnvSpec {self.name!r}: eval_seeds must not be empty")
+        if ":" not in self.score:
+            raise ValueError(
+                f"EnvSpec {self.name!r}: score must be an import path 'module:function', "
+                f"got {self.score!r}"
+            )
         if ":" not in self.teacher:
             raise ValueError(
                 f"EnvSpec {self.name!r}: teacher must be an import path 'module:factory', "
@@ -516,6 +546,7 @@ def run_benchmark(
     titles = [s.title for s in strategies]
     if len(set(titles)) != len(titles):
         raise ValueError(f"run_benchmark: strategy labels must be distinct, got {titles}")
+    _check_imports(strategies, envs)
     out = Path(out_dir)
     (out / "cells").mkdir(parents=True, exist_ok=True)
     configs = cell_configs(strategies, envs, seeds)
