@@ -468,6 +468,12 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     )
     seed = config.seeds[0]
     session = run_dir / "sessions" / f"seed{seed}"
+    if not (session / "config.json").is_file():
+        raise FileNotFoundError(
+            f"{session} holds no teaching session: the corridor figures draw seed {seed}'s "
+            "demonstrations and model from it (written by torchcbl reproduce beside "
+            "results.json); keep or copy the whole run directory"
+        )
     x, y = load_demonstrations(session)
     model = load_model(session)
     env = CorridorEnv(load_map(config.map_name), config.world)

@@ -90,14 +90,30 @@ def corridor_run(tmp_path_factory):
     return out
 
 
+def _session_without_labels(run_dir: Path) -> Path:
+    """A corridor session that was started and closed before its first demonstration."""
+    from corridor.env import CorridorEnv
+    from torchcbl import ConfidentTeacher
+
+    ConfidentTeacher(CorridorEnv(), lambda o, i: 0, run_dir=run_dir).close()
+    return run_dir
+
+
 def _user_mistakes(run: Path, tmp: Path) -> list[list[str]]:
     session = run / "corridor" / "sessions" / "seed0"
     not_json = tmp / "notes.md"
     not_json.write_text("# notes\n")
     empty = tmp / "empty"
     empty.mkdir()
+    partial = tmp / "partial"  # a results.json without what the figures need
+    partial.mkdir()
+    (partial / "results.json").write_text('{"domain": "corridor"}')
+    alone = tmp / "alone"  # a corridor results.json copied without its sessions
+    alone.mkdir()
+    (alone / "results.json").write_text((run / "corridor" / "results.json").read_text())
     return [
         ["evaluate", str(empty), "--domain", "corridor"],  # a directory, but no session
+        ["evaluate", str(_session_without_labels(tmp / "unlabelled"))],
         ["evaluate", str(run / "corridor"), "--domain", "corridor"],  # a run directory
         ["evaluate", str(tmp / "nonexistent"), "--domain", "corridor"],
         ["evaluate", str(session), "--domain", "driving"],  # a session of the other domain
@@ -111,7 +127,10 @@ def _user_mistakes(run: Path, tmp: Path) -> list[list[str]]:
         ["reproduce", "corridor", "--workers", "0", "--out", str(tmp / "X")],
         ["plot", str(tmp / "nonexistent")],
         ["plot", str(session)],
+        ["plot", str(partial)],
+        ["plot", str(alone)],
         ["teach", "corridor", "--run-dir", str(session)],  # holds a session: --resume?
+        ["teach", "corridor", "--seed", "-1", "--run-dir", str(tmp / "X")],
         ["teach", "driving", "--resume", "--run-dir", str(session)],
         ["teach", "corridor", "--resume", "--run-dir", str(empty)],
         ["frobnicate"],
@@ -163,6 +182,13 @@ def test_evaluate_names_the_problem(corridor_run, tmp_path, capsys):
     assert "--domain corridor" in messages["other_domain"]
     assert "does not exist" in messages["missing"]
     assert "not a list of recorded episodes" in messages["replay_results"]
+    assert main(["evaluate", str(_session_without_labels(tmp_path / "unlabelled"))]) == 2
+    assert "holds no demonstrations yet" in capsys.readouterr().err
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    (alone / "results.json").write_text((corridor_run / "corridor" / "results.json").read_text())
+    assert main(["plot", str(alone)]) == 2
+    assert "sessions/seed0 holds no teaching session" in capsys.readouterr().err
 
 
 def test_the_domain_table_matches_the_envs():

@@ -214,7 +214,12 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     session = Path(args.run_dir)
     domain = _session_domain(session, args.domain)
     module = _experiment_module(domain)
-    report = module.evaluate_saved_policy(session, n_steps=args.steps, seed=args.seed)
+    from torchcbl.session import IncompatibleRunDirError
+
+    try:
+        report = module.evaluate_saved_policy(session, n_steps=args.steps, seed=args.seed)
+    except IncompatibleRunDirError as exc:
+        raise _UsageError(_one_line(exc)) from None
     print(json.dumps(report, indent=2))
     return 0
 
@@ -304,7 +309,15 @@ def _cmd_plot(args: argparse.Namespace) -> int:
             f"{results_path} names domain {domain!r}; expected one of {sorted(_DOMAINS)} "
             "(a results.json written by torchcbl reproduce)"
         )
-    written = _experiment_module(domain).plot_results(results, run_dir)
+    try:
+        written = _experiment_module(domain).plot_results(results, run_dir)
+    except FileNotFoundError as exc:
+        raise _UsageError(_one_line(exc)) from None
+    except (KeyError, IndexError, TypeError, ValueError) as exc:
+        raise _UsageError(
+            f"{results_path} lacks what the {domain} figures need ({type(exc).__name__}: "
+            f"{_one_line(exc)}); expected the whole results.json written by torchcbl reproduce"
+        ) from None
     for path in written:
         print(path)
     return 0
@@ -644,7 +657,8 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "plot",
         help="redraw the figures of a run directory",
-        description="Read RUN_DIR/results.json and write its figures as PNG.",
+        description="Read RUN_DIR/results.json and write its figures as PNG (the corridor's "
+        "also read the first seed's teaching session, RUN_DIR/sessions/seed<k>).",
     )
     p.add_argument(
         "run_dir",
@@ -670,7 +684,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue the session in --run-dir")
     p.add_argument(
         "--seed",
-        type=int,
+        type=_nonnegative_int,
         default=0,
         metavar="S",
         help="session seed: seeds the first reset and the model's fits (default 0; "
@@ -737,8 +751,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--score", default="torchcbl.benchmark:success_rate", help="--gym-env's score")
     p.add_argument("--budgets", default="10,20,40,80", help="--gym-env's label budgets")
     p.add_argument("--max-steps", type=int, default=1000, help="--gym-env's step cap")
-    p.add_argument("--eval-episodes", type=int, default=10, help="--gym-env's eval episodes")
-    p.add_argument("--eval-steps", type=int, default=None, help="--gym-env's eval steps")
+    p.add_argument(
+        "--eval-episodes", type=_positive_int, default=10, help="--gym-env's eval episodes"
+    )
+    p.add_argument("--eval-steps", type=_positive_int, default=None, help="--gym-env's eval steps")
     p.set_defaults(func=_cmd_benchmark)
     return parser
 

@@ -1286,10 +1286,21 @@ def load_model(
 
 
 def load_policy(run_dir: str | os.PathLike[str]) -> GreedyPolicy:
-    """The latest learned policy of a session directory, as a callable obs -> action."""
+    """The latest learned policy of a session directory, as a callable obs -> action.
+
+    Raises:
+        IncompatibleRunDirError: the session holds no model yet (no label was logged and it
+            did not start from a fitted model): there is nothing to act with.
+    """
     from torchcbl.policy import GreedyPolicy
 
-    return GreedyPolicy(load_model(run_dir))
+    model = load_model(run_dir)
+    if not model.is_fitted:
+        raise IncompatibleRunDirError(
+            f"{run_dir} holds no demonstrations yet, so no model to act with; teach first "
+            "(resume the session), or use load_model for the unfitted model"
+        )
+    return GreedyPolicy(model)
 
 
 def resume_problems(
