@@ -4,7 +4,8 @@ Per seed (in parallel worker processes):
 
 1. Teaching (:class:`torchcbl.ConfidentTeacher`, scripted :class:`~corridor.expert.CorridorExpert`):
    teleoperation until 90% prediction accuracy over the last 20 moves, then confident execution
-   with the 2-std :class:`torchcbl.DistanceRule`, finished after 10 consecutive circuits with no
+   with :class:`torchcbl.DistanceRule` at the paper's 2 std read as a coverage (2.83 std in 3-D,
+   ``threshold_reading``), finished after 10 consecutive circuits with no
    request and no wall contact (``TeachingConfig.autonomous_episodes_to_stop``).
 2. Check: the final policy drives ``eval_circuits`` (10) more circuits greedily from a fresh env
    from the paper's start, and ``eval_circuits`` more from perturbed starts (``eval_perturbation``:
@@ -304,9 +305,9 @@ def _failures(records: list[Any]) -> list[dict[str, Any]]:
 
 
 def _versions() -> dict[str, str]:
-    import pymunk
+    from importlib.metadata import version  # the installed pymunk's, without importing it here
 
-    return run_versions(pymunk=pymunk.version)
+    return run_versions(pymunk=version("pymunk"))
 
 
 def run_experiment(

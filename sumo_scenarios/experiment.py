@@ -128,7 +128,7 @@ class DrivingExperimentConfig:
 
     @classmethod
     def full(cls) -> DrivingExperimentConfig:
-        """The paper's sizes with a refit after every demonstration, over ten seeds."""
+        """The paper's sizes with a refit after every demonstration, over 20 seeds."""
         return cls(seeds=tuple(range(20)), max_new=1, extra_eval_segments=(100, 200, 300))
 
 

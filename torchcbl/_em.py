@@ -10,9 +10,11 @@ each padded to ``K`` components:
 - ``cmask``  [G, C, K] float, 1 for a real component of that slot and 0 for padding,
 - ``floor``  [D] the variance added to every covariance diagonal.
 
-Grouping by action turns both EM steps into one large matrix product per action
-(``[N, Q] @ [Q, C*K]`` and its transpose) instead of many tiny ones per candidate. Every slot
-must hold at least one real component (pad unused slots with a copy of a real candidate).
+Grouping by action turns both EM steps into a few large matrix products (:func:`run_em`
+packs the running candidates' real components into batch rows, each row holding some of one
+action's candidates: ``[M, Q] @ [Q, N]`` per row and its transpose) instead of many tiny ones
+per candidate. Every slot must hold at least one real component (pad unused slots with a copy
+of a real candidate).
 
 The maths follows scikit-learn's ``GaussianMixture`` (full covariances) step for step, so that
 from the same initial parameters both produce the same iterates: M-step with ``nk + 10 eps``

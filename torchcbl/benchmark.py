@@ -22,7 +22,8 @@ gymnasium import the registering module first) and a teacher is an import path
 ``env`` and ``seed`` only if the factory takes it). The domains ship their presets
 (``corridor.benchmark``, ``sumo_scenarios.benchmark``).
 
-Cells are cached in ``OUT/cells/<hash>.json``, the hash being SHA-256 of the cell's canonical
+Cells are cached in ``OUT/cells/<hash>.json``, the hash being the first 20 hex digits of the
+SHA-256 of the cell's canonical
 JSON configuration: a rerun skips finished cells, and a killed sweep resumes where it stopped
 (each cell is written atomically as it finishes). Cells run on a local process pool (one
 simulation per process: libsumo allows one per process) or on Ray (``use_ray=True``, with

@@ -546,7 +546,7 @@ def _parser() -> argparse.ArgumentParser:
         type=_positive_int,
         default=None,
         metavar="N",
-        help="run seeds 0 .. N-1 (default: the experiment's own, 10 corridor and 5 driving)",
+        help="run seeds 0 .. N-1 (default: the experiment's own, 10 for each)",
     )
     p.add_argument(
         "--workers",

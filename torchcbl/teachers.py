@@ -15,9 +15,11 @@ and makes it answer like a person at a keyboard (paper Section 5: the teachers w
   next step, whatever the wrapped teacher asks then.
 
 Everything is drawn from one seeded ``numpy`` generator, so the same seed and the same inputs give
-the same answers. Consecutive calls are recognised through ``info["t"]`` (the env's step counter)
-when present: a gap (the learner drove on its own in between, or a new episode) drops any pending
-press. Domain-free: it knows nothing of what the actions mean.
+the same answers. Consecutive calls are recognised through ``info["t"]`` (the env's step
+counter): a gap (the learner drove on its own in between, or a new episode) drops any pending
+press. An env whose info has no ``"t"`` makes every call a gap: delayed presses are then missed
+presses and no press is doubled; give such an env a step counter first. Domain-free: it knows
+nothing of what the actions mean.
 """
 
 from __future__ import annotations

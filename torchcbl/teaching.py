@@ -302,8 +302,8 @@ class ConfidentTeacher:
         progress: show a tqdm bar with the live counters while :meth:`run` runs.
         on_step: called with each :class:`StepRecord` after it is recorded.
         on_refit: called as ``on_refit(model, n_labels)`` after each refit.
-        commit_every: autonomous steps batched per commit at most (demonstrations are always
-            committed before their action runs).
+        commit_every: autonomous steps batched per commit at most (a demonstration always
+            reaches disk, in the session's journal, before its action runs).
 
     Errors: a teacher that raises or answers outside the action space gives
     :class:`TeacherError`; an env that raises or returns a non-finite observation or reward
