@@ -134,18 +134,27 @@ class DrivingEnv(gym.Env):
             seed = int(self.np_random.integers(0, 2**31 - 1))
         if int(seed) < 0:
             raise ValueError("seed must be non-negative")
-        self._episode_seed = int(seed)
+        if self.closed:
+            raise RuntimeError("this DrivingEnv is closed; create a new one")
         lane = int(options.get("ego_lane", self.config.start_lane))
         fcd = options.get("fcd_output")
+        if fcd and not Path(fcd).parent.is_dir():
+            raise ValueError(
+                f"fcd_output: the directory of {str(fcd)!r} does not exist; create it first"
+            )
         rng = np.random.default_rng(np.random.SeedSequence([self.scenario.seed, int(seed)]))
+        self._episode_seed = None  # until the new segment is in place: no step() on a half reset
         self._sim.reset(rng, int(seed), ego_lane=lane, fcd_path=Path(fcd) if fcd else None)
+        self._episode_seed = int(seed)
         self._t = 0
         self._last_action = None
         return self._observe(), self._info()
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self.closed:
+            raise RuntimeError("this DrivingEnv is closed; create a new one")
         if self._episode_seed is None:
-            raise RuntimeError("call reset() before step()")
+            raise RuntimeError("call reset() before step() (none ran, or the last one failed)")
         a = int(action)
         if a not in (STAY, LEFT, RIGHT):
             raise ValueError(f"action must be 0 (stay), 1 (left) or 2 (right), got {action!r}")

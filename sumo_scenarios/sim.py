@@ -13,6 +13,8 @@ a second one raises :class:`RuntimeError` until the first is closed.
 
 from __future__ import annotations
 
+import math
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,7 +34,18 @@ from sumo_scenarios.scenarios import (
 EDGE = "road"
 ROUTE = "road"  # the one route, over EDGE (data/driving.add.xml)
 EGO = "ego"
-_LIVE: list[HighwaySim] = []
+# the live simulation, if any: weakly held, so that one dropped without close() (its finaliser
+# closes libsumo) does not keep the process's one slot forever
+_LIVE: weakref.WeakSet[HighwaySim] = weakref.WeakSet()
+
+
+def _release(state: dict[str, bool]) -> None:
+    """Close libsumo if this simulation had started it (close() or garbage collection)."""
+    if state["started"]:
+        state["started"] = False
+        libsumo.close()
+
+
 _MAX_EXTRA_GAP_M = 250.0  # spacings are capped so a recycled car always fits on the edge
 
 
@@ -77,6 +90,14 @@ class SimConfig:
     def __post_init__(self) -> None:
         if not 0.01 <= self.step_length_s <= 1.0:
             raise ValueError("step_length_s must lie in [0.01, 1.0] seconds")
+        if not (math.isfinite(self.ego_start_m) and self.ego_start_m >= 0):
+            raise ValueError(
+                f"ego_start_m must be a finite distance >= 0 m, got {self.ego_start_m}"
+            )
+        if not (math.isfinite(self.shift_margin_m) and self.shift_margin_m >= 0):
+            raise ValueError(
+                f"shift_margin_m must be a finite distance >= 0 m, got {self.shift_margin_m}"
+            )
 
 
 class HighwaySim:
@@ -90,17 +111,30 @@ class HighwaySim:
     """
 
     def __init__(self, scenario: TrafficScenario, config: SimConfig | None = None) -> None:
-        if _LIVE:
+        if len(_LIVE):
             raise RuntimeError(
                 "a HighwaySim (DrivingEnv) is already live in this process and libsumo holds only "
                 "one simulation per process: close() it first, or use another process"
             )
-        _LIVE.append(self)
         self.scenario = scenario
         self.config = config or SimConfig()
-        self._started = False
+        self._state = {"started": False}  # shared with the finaliser, which must not hold self
         self._closed = False
+        self._ready = False  # a reset has completed since the last failure
         self._road_length = float(libsumo_lane_length_from_net())
+        if self.config.ego_start_m < scenario.behind_m:
+            raise ValueError(
+                f"SimConfig.ego_start_m = {self.config.ego_start_m} m leaves no room for the "
+                f"scenario's {scenario.behind_m} m of traffic behind the ego"
+            )
+        room = self.config.ego_start_m + scenario.ahead_m + self.config.shift_margin_m
+        if room >= self._road_length:
+            raise ValueError(
+                f"SimConfig: ego_start_m + the scenario's ahead_m + shift_margin_m = {room:.0f} m "
+                f"must stay below the road's {self._road_length:.0f} m"
+            )
+        _LIVE.add(self)
+        self._finalizer = weakref.finalize(self, _release, self._state)
         ranges = scenario.speed_ranges_ms
         self._speed_range = {lane: ranges[i] for i, lane in enumerate(TRAFFIC_LANES)}
         self.ego_pos = 0.0
@@ -160,11 +194,12 @@ class HighwaySim:
         if not 0 <= ego_lane < N_LANES:
             raise ValueError(f"ego_lane must lie in [0, {N_LANES - 1}]")
         args = self._args(seed, fcd_path)
-        if self._started:
+        self._ready = False  # until this reset completes: step() would crash SUMO before
+        if self._state["started"]:
             libsumo.load(args[1:])
         else:
             libsumo.start(args)
-            self._started = True
+            self._state["started"] = True
         self._rng = rng
         self._next_id = 0
         self.n_recycled = 0
@@ -204,17 +239,16 @@ class HighwaySim:
         self.ego_lane = ego_lane
         self.prev_lane = ego_lane
         self.contact = self._contact()
+        self._ready = True
 
     def close(self) -> None:
         """Release SUMO (finalising any FCD file) and let another simulation start."""
         if self._closed:
             return
         self._closed = True
-        if self._started:
-            libsumo.close()
-            self._started = False
-        if self in _LIVE:
-            _LIVE.remove(self)
+        self._ready = False
+        self._finalizer()  # closes libsumo once, here or never again
+        _LIVE.discard(self)
 
     @property
     def closed(self) -> bool:
@@ -249,6 +283,13 @@ class HighwaySim:
         spacing, and when the ego nears the end of the edge every vehicle is moved back by the
         same distance. Contact never removes anything.
         """
+        if not self._ready:
+            raise RuntimeError(
+                "this simulation is closed"
+                if self._closed
+                else "reset() first: no reset has "
+                "completed since the simulation was made or since a reset failed"
+            )
         if not 0 <= target_lane < N_LANES:
             raise ValueError(f"target_lane must lie in [0, {N_LANES - 1}], got {target_lane}")
         if target_lane != self.ego_lane:

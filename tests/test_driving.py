@@ -59,6 +59,48 @@ def test_second_live_env_is_refused(env):
     other.close()
 
 
+def test_a_failed_reset_a_closed_env_and_a_dropped_env_never_crash_sumo(env, tmp_path):
+    """step() after a reset that SUMO refused (here: FCD output onto a directory) or after
+    close() is a clear error (on libsumo both used to reach a dead simulation: a segmentation
+    fault, or another env's); an env dropped without close() frees the process's one slot."""
+    env.reset(seed=1)
+    env.step(STAY)
+    with pytest.raises(Exception, match="Could not build output file"):
+        env.reset(seed=2, options={"fcd_output": str(tmp_path)})  # a directory
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(STAY)
+    obs, _ = env.reset(seed=2)  # and it recovers
+    with pytest.raises(ValueError, match="does not exist"):
+        env.reset(seed=2, options={"fcd_output": str(tmp_path / "no" / "x.xml")})
+    env.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        env.step(STAY)
+    dropped = DrivingEnv()
+    first = dropped.reset(seed=2)[0]
+    del dropped  # no close()
+    import gc
+
+    gc.collect()
+    fresh = DrivingEnv()
+    try:
+        np.testing.assert_array_equal(fresh.reset(seed=2)[0], first)
+        np.testing.assert_array_equal(first, obs)
+    finally:
+        fresh.close()
+
+
+def test_a_start_off_the_road_is_refused_and_keeps_no_slot():
+    from sumo_scenarios.sim import SimConfig
+
+    with pytest.raises(ValueError, match="ego_start_m"):
+        SimConfig(ego_start_m=-1.0)
+    with pytest.raises(ValueError, match="must stay below the road"):
+        DrivingEnv(sim=SimConfig(ego_start_m=9950.0))
+    with pytest.raises(ValueError, match="no room"):
+        DrivingEnv(sim=SimConfig(ego_start_m=10.0))
+    DrivingEnv().close()  # the refused ones took no slot
+
+
 def test_bad_action_and_options(env):
     env.reset(seed=0)
     with pytest.raises(ValueError):
