@@ -31,6 +31,7 @@ Envs never write files; rendering returns RGB arrays (see :mod:`corridor.render`
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import gymnasium as gym
@@ -69,10 +70,12 @@ class CorridorEnv(gym.Env):
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        if isinstance(corridor_map, str):
+        if isinstance(corridor_map, (str, os.PathLike)):
             corridor_map = load_map(corridor_map)
         if not isinstance(corridor_map, CorridorMap):
-            raise TypeError(f"corridor_map must be a CorridorMap or a name, got {corridor_map!r}")
+            raise TypeError(
+                f"corridor_map must be a CorridorMap, a map name or a path, got {corridor_map!r}"
+            )
         self.world = CorridorWorld(corridor_map, world_config)
         self.max_episode_steps = 81 if max_episode_steps is None else int(max_episode_steps)
         if self.max_episode_steps < 1:

@@ -145,6 +145,19 @@ class CorridorExperimentConfig:
             )
         if self.eval_circuits < 1:
             raise ValueError("eval_circuits must be >= 1")
+        # what the workers would only find after each seed's teaching, checked now
+        try:
+            self.rule()
+        except ValueError as exc:
+            raise ValueError(
+                f"max_std = {self.max_std} gives no usable threshold with threshold_reading="
+                f"{self.threshold_reading!r} ({exc})"
+            ) from None
+        try:
+            pert = self.eval_perturbation
+            CorridorEnv(load_map(self.map_name), self.world, start_perturbation=pert)
+        except ValueError as exc:
+            raise ValueError(f"eval_perturbation on map {self.map_name!r}: {exc}") from None
 
     @classmethod
     def full(cls) -> CorridorExperimentConfig:

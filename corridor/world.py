@@ -48,7 +48,7 @@ standing, so the ray is cast once per sensor and the 15 readings differ by their
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from enum import IntEnum
 
 import numpy as np
@@ -119,6 +119,13 @@ class WorldConfig:
         return self.forward_noise > 0 or self.heading_noise > 0 or self.forward_heading_noise > 0
 
     def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "n_readings":
+                if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                    raise ValueError(f"WorldConfig.n_readings must be an int >= 1, got {v!r}")
+            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"WorldConfig.{f.name} must be a finite number, got {v!r}")
         for name in ("robot_radius", "forward_distance", "turn_radius", "substep", "max_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"WorldConfig.{name} must be > 0, got {getattr(self, name)}")

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import multiprocessing as mp
 import time
 from collections.abc import Sequence
@@ -119,8 +120,28 @@ class DrivingExperimentConfig:
             or min((self.eval_segment, *self.extra_eval_segments)) < 0
         ):
             raise ValueError("eval segments must be distinct non-negative seeds")
-        if list(self.arm_b_stages) != sorted(self.arm_b_stages) or not self.arm_b_stages:
-            raise ValueError("arm_b_stages must be non-empty and increasing")
+        if list(self.arm_b_stages) != sorted(set(self.arm_b_stages)) or not self.arm_b_stages:
+            raise ValueError("arm_b_stages must be non-empty and strictly increasing")
+        for name in (
+            "accuracy_window",
+            "max_noninteractive",
+            "confident_demos",
+            "max_components",
+            "train_episode_steps",
+        ):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be an int >= 1, got {v!r}")
+        if not 0.0 < self.target_accuracy <= 1.0:
+            raise ValueError(f"target_accuracy must lie in (0, 1], got {self.target_accuracy!r}")
+        if not (math.isfinite(self.max_std) and self.max_std > 0):
+            raise ValueError(f"max_std must be a finite number > 0, got {self.max_std!r}")
+        if not (math.isfinite(self.gmm_tol) and self.gmm_tol > 0):
+            raise ValueError(f"gmm_tol must be a finite number > 0, got {self.gmm_tol!r}")
+        if self.criterion not in ("aic", "bic", "aic_paper"):
+            raise ValueError(
+                f"criterion must be 'aic', 'bic' or 'aic_paper', got {self.criterion!r}"
+            )
         if self.teacher not in ("expert", "human"):
             raise ValueError(f"teacher must be 'expert' or 'human', got {self.teacher!r}")
         if self.ni_stage_every < 1:

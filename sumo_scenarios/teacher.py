@@ -170,6 +170,17 @@ class HumanDriverConfig:
     cross_steps: int = 2
 
     def __post_init__(self) -> None:
+        for name, v in vars(self).items():  # every number finite (NaN passes a "<= 0" test)
+            if v is None:  # return_behind_m: off
+                continue
+            values = tuple(v) if isinstance(v, (tuple, list, np.ndarray)) else (v,)
+            if any(not isinstance(x, numbers.Real) or not np.isfinite(x) for x in values):
+                raise ValueError(f"HumanDriverConfig.{name} must hold finite numbers, got {v!r}")
+        if not 0.0 < self.urgent_ttc_s <= self.enter_ttc_s:
+            raise ValueError(
+                f"urgent_ttc_s must lie in (0, enter_ttc_s = {self.enter_ttc_s}], "
+                f"got {self.urgent_ttc_s}"
+            )
         w = np.asarray(self.home_weights, dtype=np.float64)
         if w.shape != (3,) or np.any(w < 0) or not np.isclose(w.sum(), 1.0):
             raise ValueError(

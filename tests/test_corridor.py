@@ -152,6 +152,28 @@ def test_world_config_validation():
         WorldConfig(min_range=2.0)
     with pytest.raises(ValueError, match="n_readings"):
         WorldConfig(n_readings=0)
+    # NaN passes every "> 0" test: it would make every observation NaN
+    for bad in (dict(noise_sd=math.nan), dict(max_range=math.inf), dict(n_readings=2.5)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            WorldConfig(**bad)
+
+
+def test_experiment_config_checks_what_the_workers_would_find_late():
+    from corridor.experiment import CorridorExperimentConfig
+
+    with pytest.raises(ValueError, match="eval_perturbation on map 'figure2'"):
+        CorridorExperimentConfig(eval_perturbation=(0.3, 0.1))  # wider than the corridor
+    with pytest.raises(ValueError, match="max_std = 9.0 gives no usable threshold"):
+        CorridorExperimentConfig(max_std=9.0)  # a coverage of 1.0 in float64
+
+
+def test_a_map_file_may_be_given_as_a_path():
+    from importlib import resources
+    from pathlib import Path
+
+    path = Path(str(resources.files("corridor") / "maps" / "figure2.json"))
+    by_path, by_name = CorridorEnv(path), CorridorEnv("figure2")
+    np.testing.assert_array_equal(by_path.reset(seed=4)[0], by_name.reset(seed=4)[0])
 
 
 # ---------------------------------------------------------------- env
@@ -302,6 +324,9 @@ def test_prioritized_sweeping_config_rejects_bad_values():
         PrioritizedSweepingConfig(stable_evaluations=0)
     with pytest.raises(ValueError, match="epsilon_decay"):
         PrioritizedSweepingConfig(epsilon_decay=-1)
+    for bad in (dict(min_priority=math.nan), dict(contact_penalty=math.inf), dict(n_backups=2.5)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            PrioritizedSweepingConfig(**bad)
 
 
 _PS_ON_FIGURE2 = """

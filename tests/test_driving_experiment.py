@@ -108,6 +108,22 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
         DrivingExperimentConfig(teacher="robot")
 
 
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"target_accuracy": 80},
+        {"train_episode_steps": 0},
+        {"criterion": "BIC"},
+        {"max_std": -2.0},
+        {"accuracy_window": 0},
+        {"arm_b_stages": (600, 600, 700)},
+    ],
+)
+def test_experiment_config_refuses_what_every_worker_would_fail_on(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        DrivingExperimentConfig(**bad)
+
+
 def test_paired_interval_matches_the_t_distribution():
     from sumo_scenarios.experiment import paired_interval
 

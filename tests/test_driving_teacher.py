@@ -93,6 +93,17 @@ def test_human_timing_misses_and_doubles_presses_at_the_given_rates():
         HumanTimingConfig(delay_probs=(0.5, 0.2))
 
 
+def test_driver_config_refuses_nan_and_an_urgent_gap_beyond_the_normal_one():
+    from sumo_scenarios.teacher import HumanDriverConfig
+
+    for bad in ({"room_cap_s": float("nan")}, {"margin_s": (0.0, float("inf"))}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            HumanDriverConfig(**bad)
+    with pytest.raises(ValueError, match="urgent_ttc_s"):
+        HumanDriverConfig(urgent_ttc_s=-1.0)
+    assert HumanDriverConfig(return_behind_m=None).return_behind_m is None
+
+
 def test_human_driver_reads_only_what_a_driver_sees():
     """Same observation + closing speeds -> same answer, whatever the hidden per-car state."""
     obs = np.array([25.0, 12.0, -25.0, 2.0], dtype=np.float32)
