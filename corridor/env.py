@@ -8,7 +8,9 @@ Episode = one circuit. ``reset`` puts the robot at the map's start pose. The epi
 ``terminated`` when the circuit is completed (the robot is back at the start, having followed
 the route), with ``info["is_success"] = True`` iff no wall was touched during it; it is
 ``truncated`` after ``max_episode_steps`` actions (default: 3x the actions of a perfect circuit
-on the default map, i.e. 81), with ``info["is_success"] = False``. The reward is 1 for completing
+on the default map, i.e. 81), with ``info["is_success"] = False``; a longer episode needs
+``CorridorEnv(max_episode_steps=n)`` (``gymnasium.make(ENV_ID, max_episode_steps=n)`` only wraps
+the env in a TimeLimit of n, which cannot lengthen its own 81). The reward is 1 for completing
 the circuit, -1 for each wall contact, 0 otherwise (the teaching loop does not use it).
 
 ``info`` after ``reset`` and every ``step``:

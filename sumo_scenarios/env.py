@@ -20,7 +20,9 @@ under SUMO's car-following model, so cars slow down behind slower ones. The road
 in the lane it is in or the lane it just left (a geometric 1-D check: SUMO's own collision list is
 unreliable). Cars are never removed on contact. Reward is ``-1`` on a contact step, else 0 (the
 learner does not use it). Episodes never terminate; they are truncated after
-``max_episode_steps``.
+``DrivingConfig.max_episode_steps`` (1000): for longer ones pass it to the env
+(``DrivingEnv(max_episode_steps=n)``, or ``gymnasium.make(ENV_ID, config=DrivingConfig(...))``);
+``gymnasium.make``'s own ``max_episode_steps`` only adds an outer TimeLimit.
 """
 
 from __future__ import annotations
