@@ -100,6 +100,7 @@ class CorridorEnv(gym.Env):
         self._contacts = 0
         self._path: list[tuple[float, float]] = []
         self._last_obs = np.zeros(3, dtype=np.float32)
+        self._was_reset = False  # step() before any reset would run on an unseeded generator
 
     @property
     def corridor_map(self) -> CorridorMap:
@@ -128,8 +129,11 @@ class CorridorEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Start a circuit at the start pose; ``options`` is not used."""
+        """Start a circuit at the start pose. ``options`` takes nothing (an unknown key is an
+        error, as in ``DrivingEnv``)."""
         super().reset(seed=seed)
+        if options:
+            raise ValueError(f"unknown reset options {sorted(options)}; CorridorEnv takes none")
         if self.start_perturbation is None:
             self.world.reset()
         else:
@@ -145,12 +149,15 @@ class CorridorEnv(gym.Env):
         self._contacts = 0
         self._path = [self.world.pose[:2]]
         self._last_obs = self.world.sense(self.np_random)
+        self._was_reset = True
         return self._last_obs.copy(), self._info(False)
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """One action, then the robot stands still and senses."""
         if not self.action_space.contains(action):
             raise ValueError(f"action must be an int in [0, {N_ACTIONS}), got {action!r}")
+        if not self._was_reset:
+            raise RuntimeError("call reset() before step()")
         laps_before = self.world.laps
         contact = self.world.step(int(action), self.np_random)
         self._steps += 1

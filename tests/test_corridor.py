@@ -186,6 +186,10 @@ def test_check_env_and_registration():
     env.close()
     with pytest.raises(ValueError, match="action"):
         CorridorEnv().step(7)
+    with pytest.raises(RuntimeError, match="reset"):  # its noise would be unseeded
+        CorridorEnv().step(0)
+    with pytest.raises(ValueError, match="unknown reset options"):
+        CorridorEnv().reset(seed=0, options={"start": (0, 0)})
 
 
 def test_same_seed_same_run_and_seed_matters():
