@@ -133,3 +133,50 @@ def test_a_rule_that_takes_observations_gets_them():
     assert seen and all(o.shape == (1, 2) for o in seen)
     far_auto = [r for r in ct.records if r.autonomous and np.linalg.norm(r.observation) >= 4.0]
     assert not far_auto and any(r.autonomous for r in ct.records)
+
+
+class _ActorSays(AlwaysAskAgentActs):
+    def __init__(self, says):
+        super().__init__()
+        self.says = says
+
+    def actor(self, decision, model_action, teacher_action):
+        return self.says
+
+
+@pytest.mark.parametrize("says", ["banana", "agent"])
+def test_an_impossible_actor_answer_is_a_clear_error_before_the_env_steps(says):
+    # "agent" before any model exists would execute action -1
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(env, oracle(env), strategy=_ActorSays(says), progress=False)
+    with pytest.raises(RuntimeError, match=f"actor\\(\\) returned '{says}'"):
+        ct.run(max_steps=3)
+    assert ct.n_steps == 0
+
+
+def test_a_used_strategy_instance_given_to_resume_replays_from_scratch(tmp_path):
+    """bind() starts a strategy afresh: the live instance handed to resume() replays the log
+    instead of adding it to what it had counted (HG-DAgger's warmup was cut short)."""
+    from torchcbl.strategies.hg_dagger import HGDAgger
+
+    env = rare_regions_world(episode_length=10)
+    s = HGDAgger(warmup=10)
+    ct = ConfidentTeacher(env, oracle(env), strategy=s, run_dir=tmp_path / "r", progress=False)
+    ct.run(max_steps=6)
+    ct.close()
+    env2 = rare_regions_world(episode_length=10)
+    back = ConfidentTeacher.resume(tmp_path / "r", env2, oracle(env2), strategy=s, progress=False)
+    back.run(max_steps=12)
+    back.close()
+    phases = [r.phase for r in load_records(tmp_path / "r")]
+    assert phases[:10] == ["noninteractive"] * 10 and phases[10] == "confident"
+
+
+def test_strategy_parameters_that_could_never_work_are_refused():
+    from torchcbl.strategies.dagger import DAgger
+    from torchcbl.strategies.novelty import NoveltyGated
+
+    with pytest.raises(ValueError, match="min_history must be <= window"):
+        NoveltyGated(window=5, min_history=10)  # would ask on every step
+    with pytest.raises(ValueError, match="seed must be an int >= 0"):
+        DAgger(seed=-1)  # its first coin would fail after the teacher was asked

@@ -65,11 +65,15 @@ class DAgger(_StrategyDefaults):
             raise ValueError(
                 f"DAgger: iteration_steps must be an int >= 1, got {iteration_steps!r}"
             )
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-            raise ValueError(f"DAgger: seed must be an int, got {seed!r}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"DAgger: seed must be an int >= 0, got {seed!r}")
         self.iteration_steps = iteration_steps
         self.seed = int(seed)
         self._steps = 0
+
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        super().bind(n_actions=n_actions, n_features=n_features, config=config)
+        self._steps = 0  # a session (new or resumed) replays its log from here
 
     def beta(self, step: int) -> float:
         """Probability that the teacher's action runs at 0-based session step ``step``."""

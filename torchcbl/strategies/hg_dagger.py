@@ -51,6 +51,11 @@ class HGDAgger(_StrategyDefaults):
         self._labels = 0
         self._control = False
 
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        super().bind(n_actions=n_actions, n_features=n_features, config=config)
+        self._labels = 0  # a session (new or resumed) replays its log from here
+        self._control = False
+
     @property
     def teacher_in_control(self) -> bool:
         """Whether the teacher drives the next step (after a correction, until agreement)."""

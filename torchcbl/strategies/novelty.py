@@ -69,6 +69,10 @@ class NoveltyGated(_StrategyDefaults):
         ):
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ValueError(f"NoveltyGated: {name} must be an int >= {lo}, got {v!r}")
+        if min_history > window:  # the window could never hold enough scores: it would ask always
+            raise ValueError(
+                f"NoveltyGated: min_history must be <= window, got {min_history} > {window}"
+            )
         self.target_rate = float(target_rate)
         self.window = window
         self.warmup = warmup
@@ -77,6 +81,14 @@ class NoveltyGated(_StrategyDefaults):
         self._scores: deque[float] = deque(maxlen=window)
         self._observations: deque[np.ndarray] = deque(maxlen=window)
         self._model: Any = None
+        self._rescore = False
+
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        super().bind(n_actions=n_actions, n_features=n_features, config=config)
+        self._labels = 0  # a session (new or resumed) replays its log from here
+        self._scores = deque(maxlen=self.window)
+        self._observations = deque(maxlen=self.window)
+        self._model = None
         self._rescore = False
 
     def threshold(self) -> float | None:
