@@ -243,6 +243,8 @@ def test_env_failure_mid_step_keeps_the_log_resumable(tmp_path, mode):
     assert bad.step == 11 and bad.truncated and "torchcbl_error" in bad.info
     assert (bad.reward is None) == (mode == "raise")
     assert load_records(run) == ct.records
+    cut = ct.n_episodes  # the cut episode counts, as a resume counts it (max_episodes)
+    assert cut == sum(r.terminated or r.truncated for r in ct.records) >= 1
     ct.run(max_steps=40)  # goes on in a fresh episode
     assert ct.records[12].episode == bad.episode + 1
     assert all(np.isfinite(r.observation).all() for r in ct.records)
@@ -251,6 +253,40 @@ def test_env_failure_mid_step_keeps_the_log_resumable(tmp_path, mode):
         run, rare_regions_world(), oracle(rare_regions_world()), progress=False
     )
     assert back.records == ct.records
+    assert back.n_episodes == ct.n_episodes
+
+
+def test_a_failed_refit_still_lets_the_strategy_see_its_step(tmp_path):
+    """The step whose refit raised is logged; the strategy is told of it as a resume would
+    tell it, so the live session goes on as the resumed one (here DAgger's coins)."""
+    from torchcbl.strategies.dagger import DAgger
+
+    def session(run_dir, fail):
+        env = rare_regions_world(episode_length=10)
+        calls = []
+
+        def on_refit(model, n):
+            calls.append(n)
+            if fail and len(calls) == 2:
+                raise RuntimeError("callback failed")
+
+        ct = ConfidentTeacher(
+            env,
+            oracle(env),
+            strategy=DAgger(beta0=0.5, decay=1.0, iteration_steps=5, seed=3),
+            config=TeachingConfig(max_new=2),
+            run_dir=run_dir,
+            on_refit=on_refit,
+            progress=False,
+        )
+        if fail:
+            with pytest.raises(RuntimeError, match="callback failed"):
+                ct.run(max_steps=30)
+        ct.run(max_steps=30)
+        ct.close()
+        return [(r.teacher_action is None, r.actor) for r in load_records(run_dir)]
+
+    assert session(tmp_path / "a", fail=True) == session(tmp_path / "b", fail=False)
 
 
 def _check_nothing_lost(run: Path, side_log: Path) -> int:
@@ -363,3 +399,55 @@ def test_a_failing_refit_leaves_a_whole_step(tmp_path):
     assert [r.step for r in ct.records] == list(range(n + 10))
     ct.close()
     assert [r.step for r in load_records(run)] == list(range(n + 10))
+
+
+def test_a_refit_cut_short_is_done_first_at_the_next_step(tmp_path):
+    """Ctrl-C inside a refit: the next step refits on the labels the refit was due on, so the
+    live model stays the one load_model and a resume rebuild (the schedule does not slip)."""
+    from torchcbl import GaussianMixtureSet
+    from torchcbl.session import load_model
+
+    env = rare_regions_world(episode_length=10)
+    model = GaussianMixtureSet(3, 2, 3, seed=0)
+    fitted_on, original = [], model.fit
+
+    def fit(x, y):
+        fitted_on.append(len(y))
+        if len(fitted_on) == 2:
+            raise KeyboardInterrupt
+        return original(x, y)
+
+    model.fit = fit
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        model=model,
+        config=TeachingConfig(max_new=4),
+        run_dir=tmp_path / "r",
+        progress=False,
+    )
+    with pytest.raises(KeyboardInterrupt):
+        ct.run(max_steps=30)
+    ct.run(max_steps=30)
+    ct.close()
+    assert fitted_on[:4] == [4, 8, 8, 12]  # the owed refit, on the 8 labels it was due on
+    rebuilt = load_model(tmp_path / "r")
+    for name, t in ct.model.state_dict().items():
+        assert torch.equal(t, rebuilt.state_dict()[name]), name
+
+
+def test_a_session_that_could_not_be_created_leaves_no_half_session(tmp_path):
+    run = tmp_path / "r"
+    run.mkdir()
+    (run / "checkpoints").write_text("")  # a file where the checkpoint folder goes
+    env = rare_regions_world()
+    from torchcbl.errors import SessionWriteError
+
+    with pytest.raises(SessionWriteError):
+        ConfidentTeacher(env, oracle(env), run_dir=run, progress=False)
+    assert not (run / "config.json").exists() and not (run / "steps.sqlite").exists()
+    (run / "checkpoints").unlink()
+    ct = ConfidentTeacher(env, oracle(env), run_dir=run, progress=False)  # starts afresh
+    ct.run(max_steps=3)
+    ct.close()
+    assert len(load_records(run)) == 3

@@ -441,6 +441,22 @@ def _write_error(exc: BaseException, path: Path, what: str, after: str) -> Sessi
 
 
 _write_fd = os.write  # the journal's write (a seam for the disk-full tests)
+_START_AGAIN = "free space (or fix the permissions) and start the session again"
+
+
+def _remove_new_session_files(path: Path) -> None:
+    """Undo a session creation that failed before its first step: the files it made."""
+    for name in (CONFIG_NAME, LOG_NAME, LOG_NAME + "-wal", LOG_NAME + "-shm", JOURNAL_NAME):
+        try:
+            (path / name).unlink(missing_ok=True)
+        except OSError:
+            pass
+    try:
+        (path / CHECKPOINT_DIR).rmdir()  # only if empty
+    except OSError:
+        pass
+
+
 _FREE_SPACE = "Free space (or fix the file's permissions), then call run() again or resume."
 
 
@@ -559,20 +575,26 @@ class SessionStore:
         except OSError as exc:
             raise _write_error(exc, path, "creating the run directory", _FREE_SPACE) from exc
         lock = _acquire_lock(path)
+        started = False
         try:
             if (path / CONFIG_NAME).exists() or (path / LOG_NAME).exists():
                 raise IncompatibleRunDirError(
                     f"{path} already holds a teaching session. Continue it with "
                     "ConfidentTeacher.resume(run_dir, env, teacher) or choose a new run_dir."
                 )
+            started = True
             try:
                 write_json_atomic(path / CONFIG_NAME, config)
             except OSError as exc:
                 raise _write_error(
-                    exc, path / CONFIG_NAME, "starting the session", _FREE_SPACE
+                    exc, path / CONFIG_NAME, "starting the session", _START_AGAIN
                 ) from exc
             store = cls(path, lock=lock)
-        except BaseException:
+        except BaseException as exc:
+            if started:  # nothing was recorded: leave the directory as no session, not half one
+                _remove_new_session_files(path)
+                if isinstance(exc, SessionWriteError):
+                    exc.add_note(f"torchcbl: {path} was left without a session; {_START_AGAIN}")
             lock.close()
             raise
         return store

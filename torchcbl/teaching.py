@@ -714,6 +714,10 @@ class ConfidentTeacher:
                 f"this ConfidentTeacher was closed, so {self.run_dir} no longer records its "
                 "steps; continue the session with ConfidentTeacher.resume(run_dir, env, teacher)."
             )
+        if self._new_since_refit >= self.config.max_new:
+            # a refit owed since the last step (it raised, or was interrupted): done first, on
+            # the labels it was due on, as load_model and a resume rebuild it
+            self._refit()
         if self._needs_reset:
             self._reset()
         obs, info, raw = self._obs, self._info, self._raw_obs
@@ -732,6 +736,15 @@ class ConfidentTeacher:
             )
         teacher_action = self._ask(info) if ask else None
         actor = self.strategy.actor(decision, model_action, teacher_action)
+        if not (
+            (actor == "teacher" and teacher_action is not None)
+            or (actor == "agent" and model_action >= 0)
+        ):
+            raise RuntimeError(
+                f"strategy {self.strategy!r}: actor() returned {actor!r} with the teacher's label "
+                f"{teacher_action!r} and the model's action {model_action}; expected 'teacher' "
+                "on a labelled step or 'agent' once a model exists (see torchcbl.strategies)"
+            )
         # From here on the step happens. The windows and the label count the record reports
         # are advanced first and undone if the step cannot be logged (memory never runs ahead
         # of disk); the training set and the strategy learn the label once it is durable.
@@ -785,19 +798,32 @@ class ConfidentTeacher:
             )
             self._episode_had_demo = True
             self._new_since_refit += 1
+        executed = False
         try:
             record = self._execute(record)
+            executed = True
         except BaseException:
             if not ask and len(self.records) == step:  # an autonomous step not logged
                 undo()
+            elif len(self.records) > step:  # logged with its episode cut: one more episode,
+                self._n_episodes += 1  # as a resume counts it
+                self._auto_episodes_streak = 0
             raise
         finally:
             # Refit once the step is complete (Algorithm 1 executes the teacher's action either
-            # way), so a fit that fails leaves a whole step behind, not half of one.
-            if ask and self._new_since_refit >= self.config.max_new:
-                self._refit()
-            if len(self.records) > step:  # executed (also when the env failed afterwards)
-                self.strategy.observe_step(self.records[step], decision)
+            # way), so a fit that fails leaves a whole step behind, not half of one; the
+            # strategy sees the logged step even then (a resume replays it)
+            try:
+                if ask and self._new_since_refit >= self.config.max_new:
+                    self._refit()
+            except BaseException:
+                if executed and (record.terminated or record.truncated):
+                    self._n_episodes += 1  # the step is logged: its episode ended, as on disk
+                    self._auto_episodes_streak = 0
+                raise
+            finally:
+                if len(self.records) > step:  # executed (also when the env failed afterwards)
+                    self.strategy.observe_step(self.records[step], decision)
         if ask:
             self._auto_steps_streak = 0
         else:
