@@ -63,8 +63,11 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   journal and in memory, and the next commit retries them, so a session goes on once space is
   freed. A checkpoint that cannot be written is refitted from the log when needed.
 - Readers without write access. :func:`load_records`, :func:`load_model` etc. open the log with
-  SQLite's ``immutable=1`` (a cleanly closed session: no ``-wal`` file) or ``mode=ro`` (a writer
-  runs or was killed); they never write, lock or create a file, so a read-only mount works.
+  SQLite's ``immutable=1`` (a cleanly closed session: no ``-wal`` file), and then never write,
+  lock or create a file, so a read-only mount works; or, while a writer runs or after one was
+  killed (a ``-wal`` file is there), with ``mode=ro``, under which SQLite itself takes its
+  shared locks and may create or rewrite the ``-shm`` index beside the log (never the log, the
+  journal or a checkpoint).
 - Damaged files. A journal line that fails its checksum, or is valid JSON of the wrong shape,
   is reported with its line number and byte offset by readers and by resume, which then refuse
   and change nothing; :func:`repair_journal` copies the journal aside byte for byte and keeps

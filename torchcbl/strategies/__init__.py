@@ -28,7 +28,7 @@ The protocol (:class:`Strategy`), in the order the loop calls it::
     ... the label is on disk, THEN the action runs, then a refit when due:
     strategy.observe_refit(model, X, y)      # X [M, D], y [M]: the whole training set
     strategy.observe_step(record, d)         # the finished StepRecord (outcome included)
-    if strategy.wants_corrections and actor == "agent" and the teacher corrects:
+    if strategy.wants_corrections and not d.ask and the teacher corrects:  # autonomous steps
         strategy.observe_label(obs_then, label, model_action=..., kind="correction")
         (and a refit when due, with observe_refit)
 

@@ -167,7 +167,7 @@ class ConfidenceBasedAutonomy(_Phased):
         thr[seen] = self.clean_threshold
         has = count > 0
         thr[has] = total[has] / count[has]
-        # a pair whose misclassified points all had infinite margin: never trust it
+        # a pair with any misclassified point of infinite margin: never trust it
         inf_wrong = wrong & ~np.isfinite(margin)
         thr[chosen[inf_wrong], runner[inf_wrong]] = np.inf
         self.thresholds = thr
