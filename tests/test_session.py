@@ -451,3 +451,21 @@ def test_a_session_that_could_not_be_created_leaves_no_half_session(tmp_path):
     ct.run(max_steps=3)
     ct.close()
     assert len(load_records(run)) == 3
+
+
+def test_a_full_disk_while_creating_the_log_is_a_write_error_not_a_corrupt_file(
+    tmp_path, monkeypatch
+):
+    import sqlite3
+
+    import torchcbl.session as session_module
+    from torchcbl.errors import SessionWriteError
+
+    def full(*args, **kwargs):
+        raise sqlite3.OperationalError("database or disk is full")
+
+    monkeypatch.setattr(session_module.sqlite3, "connect", full)
+    env = rare_regions_world()
+    with pytest.raises(SessionWriteError, match="Free space"):
+        ConfidentTeacher(env, oracle(env), run_dir=tmp_path / "r", progress=False)
+    assert not (tmp_path / "r" / "config.json").exists()  # no half session left behind

@@ -543,7 +543,7 @@ class SessionStore:
             upgraded = _upgrade_format1(self._db)
             self._db.executescript(_SCHEMA)
         except sqlite3.DatabaseError as exc:
-            raise _db_error(exc, log) from exc
+            raise _db_error(exc, log, writing=True) from exc
         if upgraded:
             config = load_config(self.run_dir)
             config["format"] = FORMAT
@@ -827,7 +827,7 @@ class SessionStore:
         return _corrections_of(records, _rows(self._db, None, self.run_dir / LOG_NAME)[1])
 
 
-def _db_error(exc: sqlite3.DatabaseError, path: Path) -> Exception:
+def _db_error(exc: sqlite3.DatabaseError, path: Path, *, writing: bool = False) -> Exception:
     if isinstance(exc, sqlite3.OperationalError) and "readonly" in str(exc):
         return _write_error(  # type: ignore[return-value]
             exc,
@@ -836,6 +836,11 @@ def _db_error(exc: sqlite3.DatabaseError, path: Path) -> Exception:
             "Writing a session needs write access to its directory; reading does not "
             "(load_records, load_model).",
         )
+    # a writer out of space or hitting an I/O error: the disk's trouble, not the file's
+    # (SQLITE_FULL, SQLITE_IOERR and its extended codes)
+    code = getattr(exc, "sqlite_errorcode", None)
+    if writing and ((code is not None and (code & 0xFF) in (13, 10)) or "disk is full" in str(exc)):
+        return _write_error(exc, path, "opening the step log", _FREE_SPACE)
     return CorruptSessionError(
         f"{path} is not a readable SQLite database ({exc}). torchcbl changed nothing. Restore "
         f"it from a backup, or salvage it with `sqlite3 {path} .recover | sqlite3 "
