@@ -59,6 +59,17 @@ def test_posterior_margin_and_loo_distances_by_hand():
     assert d.tolist() == pytest.approx([5.0, 1.0, 1.0])
 
 
+def test_nearest_neighbour_distances_of_a_long_session_are_taken_in_blocks():
+    # beyond 2048 points the distance matrix is formed a block of rows at a time (memory);
+    # the distances are the brute-force ones, duplicates (distance 0) included
+    x = np.random.default_rng(0).normal(size=(2600, 3))
+    x[2599] = x[7]
+    diff = x[:, None, :] - x[None, :, :]
+    brute = np.sqrt((diff * diff).sum(-1))
+    np.fill_diagonal(brute, np.inf)
+    np.testing.assert_allclose(loo_nn_distances(x), brute.min(1), rtol=0, atol=1e-9)
+
+
 class _Fixed:
     """A model whose classification is given by hand (posterior per observation's x[0])."""
 

@@ -67,12 +67,30 @@ def posterior_margin(posterior: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     return chosen, runner, margin
 
 
+_NN_BLOCK = 2048  # rows of the distance matrix at a time beyond this many points
+
+
 def loo_nn_distances(x: np.ndarray) -> np.ndarray:
-    """Leave-one-out nearest-neighbour Euclidean distance of each row of x [M, D] (M >= 2)."""
+    """Leave-one-out nearest-neighbour Euclidean distance of each row of x [M, D] (M >= 2).
+
+    Up to ``_NN_BLOCK`` points the [M, M] squared distances are formed at once; beyond, in
+    blocks of that many rows, so that memory stays O(M) per row block (a one-shot matrix at
+    10,000 demonstrations would take 0.8 GB, several times over for its temporaries).
+    """
     sq = (x * x).sum(1)
-    d2 = sq[:, None] + sq[None, :] - 2.0 * (x @ x.T)
-    np.fill_diagonal(d2, np.inf)
-    return np.sqrt(np.maximum(d2.min(1), 0.0))
+    m = len(x)
+    if m <= _NN_BLOCK:
+        d2 = sq[:, None] + sq[None, :] - 2.0 * (x @ x.T)
+        np.fill_diagonal(d2, np.inf)
+        return np.sqrt(np.maximum(d2.min(1), 0.0))
+    out = np.empty(m)
+    for i in range(0, m, _NN_BLOCK):
+        rows = slice(i, min(i + _NN_BLOCK, m))
+        d2 = sq[rows, None] + sq[None, :] - 2.0 * (x[rows] @ x.T)
+        k = np.arange(d2.shape[0])
+        d2[k, i + k] = np.inf
+        out[rows] = d2.min(1)
+    return np.sqrt(np.maximum(out, 0.0))
 
 
 class ConfidenceBasedAutonomy(_Phased):
