@@ -7,8 +7,9 @@ Observation: ``Box([0, 0, 0], [max_range] * 3, float32)``, the averaged range re
 Episode = one circuit. ``reset`` puts the robot at the map's start pose. The episode is
 ``terminated`` when the circuit is completed (the robot is back at the start, having followed
 the route), with ``info["is_success"] = True`` iff no wall was touched during it; it is
-``truncated`` after ``max_episode_steps`` actions (default: 3x the actions of a perfect circuit
-on the default map, i.e. 81), with ``info["is_success"] = False``; a longer episode needs
+``truncated`` after ``max_episode_steps`` actions (default 81: 3 x 27, the actions of a perfect
+circuit on the default map as first drawn; 29 since its spur was lengthened, so 2.8 circuits; a
+map of its own may need more), with ``info["is_success"] = False``; a longer episode needs
 ``CorridorEnv(max_episode_steps=n)`` (``gymnasium.make(ENV_ID, max_episode_steps=n)`` only wraps
 the env in a TimeLimit of n, which cannot lengthen its own 81). The reward is 1 for completing
 the circuit, -1 for each wall contact, 0 otherwise (the teaching loop does not use it).
@@ -54,7 +55,7 @@ class CorridorEnv(gym.Env):
     Args:
         corridor_map: a :class:`CorridorMap`, or the name of a shipped map / a JSON path.
         world_config: robot, motion and sensor parameters.
-        max_episode_steps: actions before truncation; None = 3 x 27.
+        max_episode_steps: actions before truncation; None = 81 (see the module docstring).
         render_mode: None or "rgb_array".
         start_perturbation: ``(metres, radians)`` half-widths of the uniform start offsets, or
             None for the map's exact start pose.
