@@ -11,8 +11,8 @@ Per seed (in parallel worker processes):
    from the paper's start, and ``eval_circuits`` more from perturbed starts (``eval_perturbation``:
    up to 0.1 m in x and y, 10 degrees of heading).
 3. Baseline: :func:`corridor.baseline.run_prioritized_sweeping` (steps until its greedy policy
-   first drives 3 clean circuits in a row, and until it does so at 3 end-of-episode
-   evaluations in a row, "learned").
+   first drives 3 clean circuits in a row, and "learned": the learning step of the first of 3
+   consecutive end-of-episode evaluations that pass).
 
 The robot's motion is noisy by default, as the paper's AIBO's was: the motion noise of
 :meth:`corridor.world.WorldConfig.legged_robot` (each step's length +-10%, each turn's heading
@@ -235,7 +235,9 @@ def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | No
         e: sum(1 for r in demos if r.phase == "confident" and r.episode == e) for e in conf_episodes
     }
     requests_switching = sum(n for e, n in requests_all.items() if e in switching)
-    requests = [n for e, n in requests_all.items() if e not in switching]
+    # whole circuits only: one cut by the step cap (the last, unfinished) is not a circuit
+    ended = {r.episode for r in records if r.terminated or r.truncated}
+    requests = [n for e, n in requests_all.items() if e not in switching and e in ended]
     # Was the model's own action the teacher's at the confident phase's requests? (If so, the
     # request was not needed in hindsight: the rule's caution, not a wrong model.)
     requests_model_agreed = sum(
@@ -390,8 +392,9 @@ def run_experiment(
     )
     summary["requests_first_circuit"] = mean_sd([q[0] if q else 0 for q in req])
     summary["requests_next_two_circuits"] = mean_sd([sum(q[1:3]) for q in req])
-    # Do the requests fall off or stay at a floor? Mean requests per whole circuit of confident
-    # execution, pooled over the seeds still teaching in each block of circuits.
+    # Do the requests fall off or stay at a floor? Requests per whole circuit of confident
+    # execution in each block of circuits: the mean, over the seeds still teaching in that
+    # block, of each seed's mean (one vote per seed, not pooled over circuits).
     summary["requests_by_circuits"] = [
         {
             "circuits": f"{a + 1}-{b}",

@@ -156,3 +156,15 @@ def test_a_saved_teaching_session_is_evaluated_on_the_held_out_road(tmp_path):
     # the expert's habits were learned: it keeps off the right lane and right shoulder
     assert report["lanes"][0] + report["lanes"][1] < 0.2
     assert 0.0 <= report["collision_pct"] < 10.0
+
+
+def test_a_seed_that_never_reaches_the_target_is_reported_as_such(tmp_path):
+    """A seed whose window never reaches the target within max_noninteractive is not counted
+    as reaching it at the cap: it is left out of "demonstrations to 80 %" and counted apart."""
+    cfg = tiny_config(target_accuracy=1.0, max_noninteractive=40, arm_b_stages=(60,))
+    res = run_experiment(cfg, tmp_path, workers=1, progress=False)
+    s = res["summary"]
+    assert res["per_seed"][0]["noninteractive_target_reached"] is False
+    assert s["noninteractive_not_reached"] == 1 and s["noninteractive_demos"]["n"] == 0
+    assert res["acceptance"]["noninteractive_demos_250_800"] is False
+    assert "1 seeds never reached it" in format_summary(res)
