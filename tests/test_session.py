@@ -469,3 +469,31 @@ def test_a_full_disk_while_creating_the_log_is_a_write_error_not_a_corrupt_file(
     with pytest.raises(SessionWriteError, match="Free space"):
         ConfidentTeacher(env, oracle(env), run_dir=tmp_path / "r", progress=False)
     assert not (tmp_path / "r" / "config.json").exists()  # no half session left behind
+
+
+def test_a_reader_racing_a_short_writer_reads_again(tmp_path, monkeypatch):
+    """A reader that opened a closed session (immutable, no WAL) while a writer then resumed,
+    committed and closed (checkpointing into the log, deleting its WAL) reads the log again
+    instead of returning what it had read before the writer's commits."""
+    import torchcbl.session as session_module
+
+    run = tmp_path / "r"
+    env = rare_regions_world()
+    ct = ConfidentTeacher(env, oracle(env), run_dir=run, progress=False)
+    ct.run(max_steps=5)
+    ct.close()
+    original, calls = session_module._rows, []
+
+    def rows_then_a_writer(*args):
+        out = original(*args)
+        calls.append(1)
+        if len(calls) == 1:  # the reader's first read (the writer's own reads come after)
+            env2 = rare_regions_world()
+            back = ConfidentTeacher.resume(run, env2, oracle(env2), progress=False)
+            back.run(max_steps=8)
+            back.close()
+            assert not (run / "steps.sqlite-wal").exists()
+        return out
+
+    monkeypatch.setattr(session_module, "_rows", rows_then_a_writer)
+    assert len(load_records(run)) == 8

@@ -1033,17 +1033,34 @@ def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[i
     """Every record and the corrections ``{step: action}`` of a run directory, read-only."""
     run = Path(run_dir)
     wal = run / (LOG_NAME + "-wal")
-    for _ in range(3):
+    log = run / LOG_NAME
+    for attempt in range(3):
         had_wal = wal.exists()
+        before = _file_state(log)
         db = _open_readonly(run)
         try:
-            rows, corrections = _rows(db, run / JOURNAL_NAME, run / LOG_NAME)
+            rows, corrections = _rows(db, run / JOURNAL_NAME, log)
+        except CorruptSessionError:
+            # an immutable read of a file a writer changed meanwhile can look damaged
+            if attempt < 2 and not had_wal and _file_state(log) != before:
+                continue
+            raise
         finally:
             db.close()
-        if had_wal or not wal.exists():
+        if had_wal or (not wal.exists() and _file_state(log) == before):
             break
-        # A writer opened the session while we read without its WAL: read again through it.
+        # A writer opened the session while we read without its WAL (and may have closed it
+        # again, checkpointing into the log): read again.
     return _records_of(rows, run), corrections
+
+
+def _file_state(path: Path) -> tuple[int, int] | None:
+    """(size, mtime in ns) of a file, None if it is gone."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns
 
 
 def load_records(run_dir: str | os.PathLike[str]) -> list[StepRecord]:
