@@ -163,7 +163,9 @@ _NUMPY_FLOATS = (torch.float16, torch.float32, torch.float64)
 
 def _to_numpy(value: Any, name: str) -> np.ndarray:
     if isinstance(value, np.ndarray):
-        return value
+        # a view with negative strides (x[::-1]) cannot become a torch tensor; a matrix or a
+        # masked array is read as the plain array it holds
+        return np.ascontiguousarray(np.asarray(value))
     if isinstance(value, Tensor):
         value = value.detach().cpu()
         if value.dtype.is_floating_point and value.dtype not in _NUMPY_FLOATS:
@@ -568,7 +570,9 @@ class GaussianMixtureSet(nn.Module):
         keeps its mixture; every other action is refitted, each of its candidate component
         counts warm-started from that candidate's own previous parameters (all candidates are
         kept, not only the chosen one), and the criterion chooses among the candidates again.
-        The priors Pr(G_a) and the variance floor always follow all the data.
+        The priors Pr(G_a) always follow all the data; the variance floor is recomputed from
+        all the data and applied to the actions refitted now (a kept action keeps the floor of
+        its last fit: with many points the floor moves little between refits).
 
         A warm candidate takes one EM step (EM continues across refits): an E-step of its
         kept parameters, an M-step, and the E-step of the new parameters, whose sufficient
@@ -577,7 +581,11 @@ class GaussianMixtureSet(nn.Module):
         edited, relabelled or removed old point is caught), the first E-step runs over the new
         points alone and adds their share to the kept statistics (Neal and Hinton's
         incremental EM); otherwise it runs over all the points. Same result either way, up to
-        rounding.
+        rounding. An action whose points changed with the same count and mean (an edit that
+        keeps both) is caught by the fingerprint of all its points and refitted too.
+        ``refit`` updates a model along a stream of demonstrations (appended, now and then
+        edited or relabelled): one warm EM step is an update, not a fit of other data, so for
+        a different data set call :meth:`fit`.
 
         Full-refit rule: an action is fitted from scratch (k-means++, as :meth:`fit`) instead
         when it was never fitted from scratch, when it gains a candidate (it had fewer than
@@ -603,6 +611,14 @@ class GaussianMixtureSet(nn.Module):
     ) -> GaussianMixtureSet:
         """Check the inputs, then fit single-threaded (the EM may take the caller's threads
         back, see the thread policy)."""
+        if self.is_fitted and self.means_.dtype != torch.float64:
+            # the refit bookkeeping compares float64 state bit for bit: a float32 copy would
+            # look changed at every refit (and float16 overflows covariances)
+            raise TypeError(
+                f"fit/refit need the model's float64 state, but it was converted to "
+                f"{self.means_.dtype} (classification works in that dtype); call "
+                ".to(torch.float64) first"
+            )
         x_np = self._check_observations(observations)
         y_np = self._check_actions(actions, x_np.shape[0])
         caller = torch.get_num_threads()
@@ -636,6 +652,11 @@ class GaussianMixtureSet(nn.Module):
             full_n = self.full_fit_points_.cpu().numpy()
             same_mean = (centers == self.data_mean_.to(f64)).all(1).cpu().numpy()
             changed = (counts_np != old_n) | ~same_mean
+            prints = self.data_print_.cpu().numpy()
+            for a in np.flatnonzero(has_data & ~changed & prints.any(1)):
+                # same count and mean: the same points? (an edit can keep both; a state saved
+                # before the fingerprint was kept at every fit holds zeros: not compared)
+                changed[a] = not np.array_equal(_fingerprint(x_np[y_np == a]), prints[a])
             warm_ok = (
                 (full_n > 0)
                 & (k_per_action <= np.minimum(old_n, kmax))
@@ -697,6 +718,8 @@ class GaussianMixtureSet(nn.Module):
                     ll_tab, conv_tab, iter_tab, n_comp, (c_w, c_mu, c_cov), caller_threads,
                 )  # fmt: skip
                 stats_tab[2][torch.from_numpy(scratch_groups).to(dev)] = False
+                for a in scratch_groups:  # what the next refit compares the points with
+                    stats_tab[4][a] = torch.from_numpy(_fingerprint(x_np[y_np == a])).to(dev)
             for a in np.flatnonzero(warm_np):
                 self._warm_action(
                     int(a), x_np[y_np == a], centers[a], floor, crit_tab, ll_tab, conv_tab,
