@@ -4,7 +4,11 @@ Cases (the acceptance of issue 2):
   a: 3 actions x 330 points x 4-D, k <= 15      target ours/sklearn <= 1/20
   b: 3 actions x 3000 points x 4-D, k <= 15     target <= 1/10
   c: 10 actions x 1000 points x 8-D, k <= 10    target <= 1/10
-  refit: 1000 points (3 actions x 4-D), k <= 15, the library's defaults: target < 0.1 s
+  refit: a full refit (``fit``) of 999 points (3 actions x 333, 4-D), k <= 15, the library's
+         defaults: target < 0.1 s (median)
+Both sides do a whole model selection: fit every candidate and measure its log-likelihood on
+the action's points for the criterion (ours in the fit's final E-step, sklearn by ``score``,
+about 2% of its sweep; the ``threadpool_limits`` scope is entered once per sweep, ~0.1%).
 sklearn: GaussianMixture per action per k, full covariances, same tol / max_iter / reg_covar
 (= our variance floor: features are standardised so the floor is one number), n_init=1,
 k-means initialisation, pinned to one thread with threadpoolctl (its fastest setting here:
@@ -211,15 +215,19 @@ def main() -> None:
         rt.append(time_fit(model, x, y, threads))
         rt1.append(time_fit(model, x, y, 1))
     print(
-        f"refit  3x333x4 k<=15 (library defaults, tol=1e-3): best {min(rt) * 1e3:.1f} ms, "
+        f"full refit (fit) of 999 points, 3x333x4 k<=15 (library defaults, tol=1e-3): "
+        f"best {min(rt) * 1e3:.1f} ms, "
         f"median {statistics.median(rt) * 1e3:.1f} ms; one thread: best {min(rt1) * 1e3:.1f} "
         f"ms, median {statistics.median(rt1) * 1e3:.1f} ms (target < 100 ms)"
     )
-    results["refit_1000"] = {
+    results["refit_1000"] = {  # the key kept for continuity: 3 x 333 = 999 points
+        "n_points": 999,
         "best_s": min(rt),
         "median_s": statistics.median(rt),
         "one_thread_best_s": min(rt1),
         "one_thread_median_s": statistics.median(rt1),
+        "target_s": 0.1,
+        "ok": statistics.median(rt) < 0.1,
     }
     one = x[:1].copy()
     per_call = []

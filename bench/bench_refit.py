@@ -17,7 +17,8 @@ Sections (``--sections``, default all):
   snippet: the README's corridor snippet (teach to 10 autonomous episodes) in a fresh process
            on torch's default threads, alone and with one competing busy process of our own
            (target: busy <= 1.3x alone), with the library's thread policy and, for reference,
-           with the policy switched off (SINGLE_THREAD_WORK = 0: torch's threads everywhere).
+           with the policy switched off (the library's thread scope replaced by a no-op:
+           torch's threads everywhere, as before issue 17).
   threads: full fits of growing size on 1 thread and on torch's default count, alone and
            beside a busy process, in alternation: where the threshold of the thread policy
            (``torchcbl.gmm.SINGLE_THREAD_WORK``) comes from.

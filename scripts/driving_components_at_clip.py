@@ -2,7 +2,8 @@
 
 The driving observation clips each lane's distance to [-25, 25] m, so a demonstration with no
 car in range in a lane carries exactly +-25 there: a point mass. This script loads the
-demonstrations of one kept teaching session (by default the reproduction's seed 0, arm (a)),
+demonstrations of one kept teaching session (by default seed 0, arm (a), of the newest
+finished reproduction among runs/reproduce, runs/reproduce-2, ...),
 reports the share of readings at the clip, refits the GMM set at each cap and counts the
 "stay" components whose variance in some distance is within 5x the variance floor, and how
 many of those are centred on the clip.
@@ -16,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -25,9 +27,22 @@ from torchcbl.session import load_records
 CLIP_M = 25.0
 
 
+def latest_reproduction(base: str = "runs") -> Path:
+    """The newest finished ``torchcbl reproduce`` run under ``base`` (``reproduce``,
+    ``reproduce-2``, ...: the command never overwrites), else ``runs/reproduce``."""
+    done = [p for p in Path(base).glob("reproduce*") if (p / "summary.md").is_file()]
+    if not done:
+        return Path(base) / "reproduce"
+    return max(done, key=lambda p: (p / "summary.md").stat().st_mtime)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("run_dir", nargs="?", default="runs/reproduce/driving/seed_0/sessions/arm_a")
+    p.add_argument(
+        "run_dir",
+        nargs="?",
+        default=str(latest_reproduction() / "driving" / "seed_0" / "sessions" / "arm_a"),
+    )
     p.add_argument("--caps", default="30,60")
     p.add_argument("--action", type=int, default=0, help="0 stay, 1 left, 2 right")
     a = p.parse_args(argv)

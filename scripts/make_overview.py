@@ -1,7 +1,8 @@
 """Compose the README's overview image from a reproduction's run directory.
 
 Usage: python scripts/make_overview.py [RUN_DIR] [OUT]
-(defaults: runs/reproduce and docs/img/overview.png). Puts the corridor's final-policy circuit
+(defaults: the newest finished run among runs/reproduce, runs/reproduce-2, ... and
+docs/img/overview.png). Puts the corridor's final-policy circuit
 (``corridor/map.png``) beside the driving experiment's Figure 8
 (``driving/fig8_lanes_collisions.png``), both scaled to the same height.
 """
@@ -12,6 +13,15 @@ import sys
 from pathlib import Path
 
 from PIL import Image
+
+
+def latest_reproduction(base: str = "runs") -> Path:
+    """The newest finished ``torchcbl reproduce`` run under ``base`` (``reproduce``,
+    ``reproduce-2``, ...: the command never overwrites), else ``runs/reproduce``."""
+    done = [p for p in Path(base).glob("reproduce*") if (p / "summary.md").is_file()]
+    if not done:
+        return Path(base) / "reproduce"
+    return max(done, key=lambda p: (p / "summary.md").stat().st_mtime)
 
 
 def main(run_dir: Path, out: Path) -> None:
@@ -35,6 +45,6 @@ def main(run_dir: Path, out: Path) -> None:
 if __name__ == "__main__":
     args = sys.argv[1:]
     main(
-        Path(args[0]) if args else Path("runs/reproduce"),
+        Path(args[0]) if args else latest_reproduction(),
         Path(args[1]) if len(args) > 1 else Path("docs/img/overview.png"),
     )

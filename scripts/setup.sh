@@ -5,20 +5,34 @@
 # The install is editable, so code changes need no reinstall: when neither pyproject.toml nor
 # this script changed since the last successful install (recorded in .venv/.setup-stamp),
 # nothing is installed again. Delete .venv/.setup-stamp to force a reinstall.
+# The interpreter: $PYTHON if set, else python3.11 if on the PATH, else python3. A .venv made by
+# another Python version, or left without pip by a failed `venv` (e.g. no python3-venv package),
+# is made again.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-PY="${PYTHON:-python3}"
+PY="${PYTHON:-$(command -v python3.11 || command -v python3)}"
 STAMP=.venv/.setup-stamp
-want="$(cat pyproject.toml scripts/setup.sh | sha256sum | cut -d' ' -f1)"
+version="$("$PY" -c 'import sys; print(sys.version.split()[0])')"
+want="$( (cat pyproject.toml scripts/setup.sh; echo "$version") | sha256sum | cut -d' ' -f1)"
 if [ -x .venv/bin/python ] && [ -x .venv/bin/torchcbl ] && [ "$(cat "$STAMP" 2>/dev/null)" = "$want" ]; then
-  echo "set-up: .venv is up to date (pyproject.toml unchanged since its install)"
+  echo "set-up: .venv is up to date (pyproject.toml and Python $version unchanged since its install)"
   exit 0
+fi
+if [ -x .venv/bin/python ]; then
+  have="$(.venv/bin/python -c 'import sys; print(sys.version.split()[0])' 2>/dev/null || true)"
+  if [ "$have" != "$version" ] || ! .venv/bin/python -m pip --version >/dev/null 2>&1; then
+    echo "set-up: .venv (Python ${have:-unknown}) is not a working venv of Python $version; making it again"
+    rm -rf .venv
+  fi
 fi
 if [ ! -x .venv/bin/python ]; then
   "$PY" -m venv .venv
 fi
 rm -f "$STAMP"
 .venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q "torch==2.13.0" || .venv/bin/python -m pip install -q "torch>=2.2"
+if ! .venv/bin/python -m pip install -q "torch==2.13.0"; then
+  echo "set-up: torch 2.13.0 could not be installed; falling back to the newest torch>=2.2" >&2
+  .venv/bin/python -m pip install -q "torch>=2.2"
+fi
 .venv/bin/python -m pip install -q -e ".[test]"
 echo "$want" > "$STAMP"
