@@ -17,23 +17,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 import numpy as np
 
+from torchcbl.cli import latest_run
 from torchcbl.gmm import GaussianMixtureSet
 from torchcbl.session import load_records
 
 CLIP_M = 25.0
-
-
-def latest_reproduction(base: str = "runs") -> Path:
-    """The newest finished ``torchcbl reproduce`` run under ``base`` (``reproduce``,
-    ``reproduce-2``, ...: the command never overwrites), else ``runs/reproduce``."""
-    done = [p for p in Path(base).glob("reproduce*") if (p / "summary.md").is_file()]
-    if not done:
-        return Path(base) / "reproduce"
-    return max(done, key=lambda p: (p / "summary.md").stat().st_mtime)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -41,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "run_dir",
         nargs="?",
-        default=str(latest_reproduction() / "driving" / "seed_0" / "sessions" / "arm_a"),
+        default=str(latest_run() / "driving" / "seed_0" / "sessions" / "arm_a"),
     )
     p.add_argument("--caps", default="30,60")
     p.add_argument("--action", type=int, default=0, help="0 stay, 1 left, 2 right")

@@ -14,14 +14,7 @@ from pathlib import Path
 
 from PIL import Image
 
-
-def latest_reproduction(base: str = "runs") -> Path:
-    """The newest finished ``torchcbl reproduce`` run under ``base`` (``reproduce``,
-    ``reproduce-2``, ...: the command never overwrites), else ``runs/reproduce``."""
-    done = [p for p in Path(base).glob("reproduce*") if (p / "summary.md").is_file()]
-    if not done:
-        return Path(base) / "reproduce"
-    return max(done, key=lambda p: (p / "summary.md").stat().st_mtime)
+from torchcbl.cli import latest_run
 
 
 def main(run_dir: Path, out: Path) -> None:
@@ -45,6 +38,6 @@ def main(run_dir: Path, out: Path) -> None:
 if __name__ == "__main__":
     args = sys.argv[1:]
     main(
-        Path(args[0]) if args else latest_reproduction(),
+        Path(args[0]) if args else latest_run(),
         Path(args[1]) if len(args) > 1 else Path("docs/img/overview.png"),
     )

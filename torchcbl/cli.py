@@ -21,6 +21,7 @@ import dataclasses
 import importlib
 import json
 import os
+import re
 import sys
 import time
 from collections.abc import Sequence
@@ -144,6 +145,18 @@ def _fresh_dir(out: Path) -> Path:
         candidate = out.with_name(f"{out.name}-{n}")
     candidate.mkdir(parents=True, exist_ok=True)
     return candidate
+
+
+def latest_run(out: Path = Path("runs/reproduce")) -> Path:
+    """The newest finished run (one holding ``summary.md``) among ``out``, ``out-2``, ...
+    (what :func:`_fresh_dir` writes), else ``out``: for scripts that read a reproduction."""
+    pattern = re.compile(re.escape(out.name) + r"(-[0-9]+)?")
+    done = [
+        p
+        for p in out.parent.glob(out.name + "*")
+        if pattern.fullmatch(p.name) and (p / "summary.md").is_file()
+    ]
+    return max(done, key=lambda p: (p / "summary.md").stat().st_mtime) if done else out
 
 
 def _replace_seeds(config: Any, n_seeds: int) -> Any:
