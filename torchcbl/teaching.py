@@ -798,16 +798,11 @@ class ConfidentTeacher:
             )
             self._episode_had_demo = True
             self._new_since_refit += 1
-        executed = False
         try:
             record = self._execute(record)
-            executed = True
         except BaseException:
             if not ask and len(self.records) == step:  # an autonomous step not logged
                 undo()
-            elif len(self.records) > step:  # logged with its episode cut: one more episode,
-                self._n_episodes += 1  # as a resume counts it
-                self._auto_episodes_streak = 0
             raise
         finally:
             # Refit once the step is complete (Algorithm 1 executes the teacher's action either
@@ -816,11 +811,6 @@ class ConfidentTeacher:
             try:
                 if ask and self._new_since_refit >= self.config.max_new:
                     self._refit()
-            except BaseException:
-                if executed and (record.terminated or record.truncated):
-                    self._n_episodes += 1  # the step is logged: its episode ended, as on disk
-                    self._auto_episodes_streak = 0
-                raise
             finally:
                 if len(self.records) > step:  # executed (also when the env failed afterwards)
                     self.strategy.observe_step(self.records[step], decision)
@@ -832,7 +822,6 @@ class ConfidentTeacher:
                 self._auto_steps_streak = 0
                 self._episode_had_demo = True
         if record.terminated or record.truncated:
-            self._n_episodes += 1
             clean = (
                 not self._episode_had_demo
                 and phase == "confident"
@@ -1013,8 +1002,12 @@ class ConfidentTeacher:
             info = jsonable_info(info)
         final = record.with_outcome(reward, terminated, truncated, info)
         self.records.append(final)
-        if terminated or truncated:
+        # the session's episode count follows the log: here, where a record is added,
+        # replaced or dropped (as a resume counts: every terminated or truncated record)
+        ended = terminated or truncated
+        if ended:
             self._needs_reset = True
+            self._n_episodes += 1
         if self._store is not None:
             try:
                 if final.teacher_action is not None:
@@ -1027,8 +1020,10 @@ class ConfidentTeacher:
                     self.records[-1] = record.with_outcome(
                         None, False, True, {"torchcbl_interrupted": True}
                     )
+                    self._n_episodes += not ended  # it now ends its episode
                 else:
                     self.records.pop()
+                    self._n_episodes -= ended
                 if interrupt is None:
                     raise
                 interrupt.add_note(f"torchcbl: {exc}")
