@@ -378,6 +378,16 @@ def run_experiment(
         "eval_circuits_clean",
     ]
     summary: dict[str, Any] = {k: mean_sd([r[k] for r in public]) for k in keys}
+    # "demonstrations in all, to 10 autonomous circuits": the seeds whose teaching got there;
+    # a seed stopped by the step cap has only a lower bound, reported apart
+    summary["demonstrations_total"] = mean_sd(
+        [r["demonstrations_total"] for r in public if r["finished"]]
+    )
+    summary["demonstrations_total_capped"] = [
+        {"seed": r["seed"], "demonstrations": r["demonstrations_total"]}
+        for r in public
+        if not r["finished"]
+    ]
     summary["eval_perturbed_clean_share"] = math.fsum(r["eval_perturbed_clean"] for r in public) / (
         len(public) * config.eval_circuits
     )
@@ -390,8 +400,11 @@ def run_experiment(
     summary["requests_switching_circuit"] = mean_sd(
         [r["requests_switching_circuit"] for r in public]
     )
-    summary["requests_first_circuit"] = mean_sd([q[0] if q else 0 for q in req])
-    summary["requests_next_two_circuits"] = mean_sd([sum(q[1:3]) for q in req])
+    # over the seeds that drove that circuit (or both circuits) whole
+    summary["requests_first_circuit"] = mean_sd([q[0] if q else None for q in req])
+    summary["requests_next_two_circuits"] = mean_sd(
+        [sum(q[1:3]) if len(q) >= 3 else None for q in req]
+    )
     # Do the requests fall off or stay at a floor? Requests per whole circuit of confident
     # execution in each block of circuits: the mean, over the seeds still teaching in that
     # block, of each seed's mean (one vote per seed, not pooled over circuits).
@@ -423,10 +436,14 @@ def run_experiment(
     ]
     summary["ps_steps_stable_censored_at_budget"] = mean_sd(censored)
     demos_mean = summary["demonstrations_total"]["mean"]
-    # Conservative ratio: learned runs only (unlearned runs could only raise it).
+    # Conservative ratios: learned runs only (unlearned runs could only raise them).
     ps_mean = summary["ps_steps_stable"]["mean"]
     summary["ps_over_demonstrations"] = (
         ps_mean / demos_mean if demos_mean and ps_mean is not None else None
+    )
+    ps_first_mean = summary["ps_steps_first"]["mean"]
+    summary["ps_first_over_demonstrations"] = (
+        ps_first_mean / demos_mean if demos_mean and ps_first_mean is not None else None
     )
     summary["all_finished"] = all(r["finished"] for r in public)
     summary["all_eval_clean"] = all(r["eval_circuits_clean"] == r["eval_circuits"] for r in public)
@@ -455,6 +472,13 @@ def run_experiment(
         "ps_at_least_4x": bool(
             summary["ps_over_demonstrations"] is not None and summary["ps_over_demonstrations"] >= 4
         ),
+        "ps_first_at_least_4x": bool(
+            summary["ps_first_over_demonstrations"] is not None
+            and summary["ps_first_over_demonstrations"] >= 4
+        ),
+        # within 0.5x-3x of the paper's 275 steps, each reading
+        "ps_steps_stable_within_0.5x_3x": _within(summary["ps_steps_stable"]["mean"]),
+        "ps_steps_first_within_0.5x_3x": _within(summary["ps_steps_first"]["mean"]),
     }
     results["acceptance"] = acc
     (run_dir / "results.json").write_text(json.dumps(results, indent=2, default=_json_default))
@@ -589,10 +613,16 @@ def _actions_per_circuit(config: CorridorExperimentConfig) -> int:
             return n
 
 
-def _fmt(ms: dict | None, digits: int = 1) -> str:
+def _fmt_ms(ms: dict | None, digits: int = 1) -> str:
     if not ms or ms.get("mean") is None:
         return "-"
+    if ms.get("sd") is None:
+        return f"{ms['mean']:.{digits}f} (n = 1)"
     return f"{ms['mean']:.{digits}f} ± {ms['sd']:.{digits}f}"
+
+
+def _within(steps: float | None, paper: float = PAPER["ps_steps"]) -> bool:
+    return steps is not None and 0.5 * paper <= steps <= 3 * paper
 
 
 def format_summary(results: dict[str, Any]) -> str:
@@ -604,6 +634,15 @@ def format_summary(results: dict[str, Any]) -> str:
         return "-" if s.get(key) is None else f"{s[key]:.0%}"
 
     ratio = s["ps_over_demonstrations"]
+    ratio_first = s.get("ps_first_over_demonstrations")
+    n = len(results["seeds"])
+
+    def _fmt(ms: dict | None, digits: int = 1) -> str:  # mean ± sd, and its seeds if not all
+        text = _fmt_ms(ms, digits)
+        if ms and ms.get("mean") is not None and ms.get("n", n) < n:
+            text += f" ({ms['n']} of {n} seeds)"
+        return text
+
     noise = s.get("motion_noise", {})
     rows = [
         (
@@ -671,11 +710,15 @@ def format_summary(results: dict[str, Any]) -> str:
             f"{275 / 53:.1f}",
             "-" if ratio is None else f"{ratio:.1f}",
         ),
+        (
+            "PS first-table steps / demonstrations",
+            f"{275 / 53:.1f}",
+            "-" if ratio_first is None else f"{ratio_first:.1f}",
+        ),
     ]
     for a in _ACTION_NAMES:
         paper = p["components"].get(a)
         rows.append((f"components, {a}", "-" if paper is None else paper, _fmt(s["components"][a])))
-    n = len(results["seeds"])
     lines = [f"| figure | paper | ours (mean ± sd over {n} seeds) |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in rows]
     if noise:

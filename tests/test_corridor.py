@@ -401,6 +401,19 @@ def test_tiny_experiment_writes_results(tmp_path):
     assert s["requests_model_agreed_share"] == (agreed / asked if asked else None)
     assert data["actions_per_circuit"] == 29
     assert s["ps_over_demonstrations"] is None or s["ps_over_demonstrations"] > 0
+    # the band for PS steps, 0.5x-3x of the paper's 275, checked for both readings
+    acc = data["acceptance"]
+    for reading in ("first", "stable"):
+        mean = s[f"ps_steps_{reading}"]["mean"]
+        assert acc[f"ps_steps_{reading}_within_0.5x_3x"] == (
+            mean is not None and 137.5 <= mean <= 825
+        )
+    if s["ps_steps_first"]["mean"] is not None:
+        total = np.mean([r["demonstrations_total"] for r in data["per_seed"]])
+        assert s["ps_first_over_demonstrations"] == pytest.approx(
+            s["ps_steps_first"]["mean"] / total
+        )
+    assert s["demonstrations_total_capped"] == []  # both seeds finished
     for r in data["per_seed"]:
         assert r["finished"] and r["eval_circuits_clean"] == 2
         assert r["eval_failures"] == []  # clean circuits: nothing to explain

@@ -33,7 +33,7 @@ def test_mean_sd_by_hand():
     from torchcbl.evaluation import mean_sd, run_versions
 
     assert mean_sd([1.0, 2.0, 3.0, None]) == {"mean": 2.0, "sd": 1.0, "n": 3}
-    assert mean_sd([5]) == {"mean": 5.0, "sd": 0.0, "n": 1}
+    assert mean_sd([5]) == {"mean": 5.0, "sd": None, "n": 1}
     assert mean_sd([None]) == {"mean": None, "sd": None, "n": 0}
     v = run_versions(sim="1.2")
     assert v["sim"] == "1.2" and v["torchcbl"] == torchcbl.__version__

@@ -677,6 +677,8 @@ def format_table(summary: Mapping[str, Any]) -> str:
     def ms(d: Mapping[str, Any], fmt: str = "{:.0f}") -> str:
         if d.get("mean") is None:
             return "-"
+        if d.get("sd") is None:
+            return f"{fmt.format(d['mean'])} (n = 1)"
         return f"{fmt.format(d['mean'])} ± {fmt.format(d['sd'])}"
 
     for env, strategies in summary["table"].items():

@@ -11,17 +11,17 @@ __all__ = ["mean_sd", "run_versions"]
 
 
 def mean_sd(values: Iterable[float | None]) -> dict[str, float | int | None]:
-    """Mean, sample standard deviation (ddof=1; 0 for one value) and count of ``values``.
+    """Mean, sample standard deviation (ddof=1) and count of ``values``.
 
     None entries (e.g. a baseline that never learned) are left out and not counted; with no
-    value left, mean and sd are None.
+    value left, mean and sd are None; with one value, sd is None (a spread needs two).
     """
     v = [float(x) for x in values if x is not None]
     if not v:
         return {"mean": None, "sd": None, "n": 0}
     return {
         "mean": float(np.mean(v)),
-        "sd": float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
+        "sd": float(np.std(v, ddof=1)) if len(v) > 1 else None,
         "n": len(v),
     }
 
