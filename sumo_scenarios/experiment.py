@@ -555,7 +555,7 @@ def run_experiment(
         # lower on average; "beats" only where the 95% interval of the paired difference is
         # below 0 (the README says which)
         "arm_a_mean_lower_than_arm_b": bool(confident) and diff["mean"] < 0,
-        "arm_a_beats_arm_b": diff["ci95"] is not None and diff["ci95"][1] < 0,
+        "arm_a_beats_arm_b": diff["ci95"] is not None and bool(diff["ci95"][1] < 0),
         "no_mixture_at_cap": not at_cap,
     }
     results = {
@@ -632,7 +632,7 @@ def paired_interval(diffs: Sequence[float]) -> dict[str, Any]:
         return {"mean": m, "sd": None, "n": 1, "ci95": None}
     sd = float(d.std(ddof=1))
     t = _T975[d.size - 2] if d.size - 1 <= len(_T975) else 1.96
-    half = t * sd / np.sqrt(d.size)
+    half = float(t * sd / np.sqrt(d.size))
     return {"mean": m, "sd": sd, "n": int(d.size), "ci95": [m - half, m + half]}
 
 

@@ -181,6 +181,18 @@ def test_hg_dagger_labels_only_corrections_and_takeovers():
     assert ct.n_demonstrations == sum(1 for r in recs if not r.autonomous) + len(corr)
 
 
+def test_hg_dagger_with_a_teacher_that_cannot_correct_says_so():
+    env = rare_regions_world(episode_length=10, spread=2.0)
+    with pytest.warns(UserWarning, match=r"never correct one.*correcting\(teacher\)"):
+        _teach(env, HGDAgger(warmup=3), 5)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _teach(env, HGDAgger(warmup=3), 5, teacher=correcting(oracle(env)))
+        _teach(env, DAgger(), 5)  # asks no corrections: nothing to say
+
+
 # -- novelty-gated (ThriftyDAgger style) ---------------------------------------------------------
 
 

@@ -261,6 +261,12 @@ def test_every_import_path_is_resolved_before_a_cell_runs(tmp_path):
         with pytest.raises(ImportError, match=name):
             bm.run_benchmark(strategies, [env], [0], tmp_path / "out", workers=1)
     assert not (tmp_path / "out").exists()
+    # a repeated env name or seed would be merged or counted twice in the tables
+    with pytest.raises(ValueError, match=r"env names must be distinct.*\['toy', 'toy'\]"):
+        bm.run_benchmark(STRATEGIES, [_env(), _env(budgets=(5,))], [0], tmp_path / "out")
+    with pytest.raises(ValueError, match=r"seeds must be distinct.*\[0, 0\]"):
+        bm.run_benchmark(STRATEGIES, [_env()], [0, 0], tmp_path / "out")
+    assert not (tmp_path / "out").exists()
     with pytest.raises(ValueError, match="eval_episodes must be None or an int >= 1, got 0"):
         _env(eval_episodes=0)
     with pytest.raises(ValueError, match="score must be an import path"):

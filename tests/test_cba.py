@@ -7,6 +7,7 @@ first two).
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -119,15 +120,16 @@ def test_demonstration_in_a_stored_state_relabels_it(tmp_path):
         flips["n"] += 1
         return 1 if flips["n"] > 6 and not obs.any() else env.optimal_action(obs)
 
-    ct = ConfidentTeacher(
-        env,
-        fickle,
-        strategy=ConfidenceBasedAutonomy(),
-        config=TeachingConfig(max_new=1, target_accuracy=None),
-        model=GaussianMixtureSet(3, 2, max_components=1),
-        run_dir=tmp_path / "run",
-        progress=False,
-    )
+    with pytest.warns(UserWarning, match="never correct"):  # demonstrations only, here
+        ct = ConfidentTeacher(
+            env,
+            fickle,
+            strategy=ConfidenceBasedAutonomy(),
+            config=TeachingConfig(max_new=1, target_accuracy=None),
+            model=GaussianMixtureSet(3, 2, max_components=1),
+            run_dir=tmp_path / "run",
+            progress=False,
+        )
     ct.run(max_steps=30)
     ct.close()
     x, y = load_demonstrations(tmp_path / "run")
@@ -187,16 +189,18 @@ STEPS = 2000
 def _teach(strategy=None, rule=None, *, corrections=False, seed=0, steps=STEPS):
     env = six_d_world(episode_length=50)
     teacher = correcting(oracle(env)) if corrections else oracle(env)
-    ct = ConfidentTeacher(
-        env,
-        teacher,
-        strategy=strategy,
-        rule=rule,
-        model=GaussianMixtureSet(3, 6, max_components=3, seed=seed),
-        config=TeachingConfig(max_new=10, accuracy_window=20, target_accuracy=0.9),
-        seed=seed,
-        progress=False,
-    )
+    wants = bool(getattr(strategy, "wants_corrections", False)) and not corrections
+    with pytest.warns(UserWarning, match="never correct") if wants else contextlib.nullcontext():
+        ct = ConfidentTeacher(
+            env,
+            teacher,
+            strategy=strategy,
+            rule=rule,
+            model=GaussianMixtureSet(3, 6, max_components=3, seed=seed),
+            config=TeachingConfig(max_new=10, accuracy_window=20, target_accuracy=0.9),
+            seed=seed,
+            progress=False,
+        )
     ct.run(max_steps=steps)
     ct.refit()
     recs = ct.records
@@ -252,3 +256,17 @@ def test_a_correction_survives_sigkill_like_a_demonstration(tmp_path):
         _check_nothing_lost(run, side)
         counts.append(check_corrections_kept(run, side)[0])
     assert counts[-1] > 0  # the session did correct, and those corrections are on disk
+
+
+def test_cba_refuses_a_single_action_env_at_once():
+    from _toy_envs import ClusterWorld
+
+    env = ClusterWorld([[0.0, 0.0]], [0], [1.0], episode_length=5)
+    with pytest.raises(ValueError, match="at least 2 actions.*got an env with 1"):
+        ConfidentTeacher(
+            env,
+            correcting(lambda obs, info: 0),
+            strategy=ConfidenceBasedAutonomy(),
+            config=TeachingConfig(noninteractive=False),
+            progress=False,
+        )

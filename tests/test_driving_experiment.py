@@ -6,6 +6,7 @@ import importlib.util
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from _driving_tiny import tiny_config
 
@@ -201,3 +202,22 @@ def test_a_seed_that_never_reaches_the_target_is_reported_as_such(tmp_path):
     assert s["arm_a"]["collision_pct"]["n"] == 0 and s["autonomy_confident_phase"]["n"] == 0
     assert s["arm_a_minus_b_collision_pct"]["n"] == 0
     assert not res["acceptance"]["arm_a_le_2pct"] and not res["acceptance"]["arm_a_beats_arm_b"]
+
+
+def test_two_seeds_give_a_paired_interval_and_a_writable_summary(tmp_path):
+    """With two seeds the paired difference has its t interval (2 seeds: t = 12.71), the
+    acceptance says "beats" only where the interval lies below 0, and results.json is written
+    (numpy scalars would not be)."""
+    res = run_experiment(tiny_config(seeds=(0, 1)), tmp_path, workers=2, progress=False)
+    on_disk = json.loads((tmp_path / "results.json").read_text())
+    d = on_disk["summary"]["arm_a_minus_b_collision_pct"]
+    diffs = [
+        100 * (r["stages"]["a_plus20"]["collision_rate"] - r["stages"]["b_80"]["collision_rate"])
+        for r in on_disk["per_seed"]
+    ]
+    half = 12.706 * abs(diffs[0] - diffs[1]) / 2**0.5 / 2**0.5
+    assert d["n"] == 2 and d["ci95"] == pytest.approx(
+        [np.mean(diffs) - half, np.mean(diffs) + half], abs=1e-3
+    )
+    assert on_disk["acceptance"]["arm_a_beats_arm_b"] == (d["ci95"][1] < 0)
+    assert on_disk["acceptance"] == res["acceptance"]

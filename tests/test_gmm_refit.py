@@ -304,6 +304,21 @@ def test_same_counts_but_other_data_is_refitted():
     assert m.fit_report_.refit_kind == ("kept", "kept", "warm")
 
 
+def test_points_at_the_origin_moved_apart_with_the_same_count_and_mean_are_refitted():
+    """Their fingerprint is zero, like a state saved before fingerprints were kept: they must
+    still be compared, else the mixture of the three points at the origin stays."""
+    x1 = np.array([[0.0, 0], [0, 0], [0, 0], [5, 5], [6, 5], [5, 6]])
+    x2 = np.array([[3.0, 0], [-3, 0], [0, 0], [5, 5], [6, 5], [5, 6]])
+    y = np.array([0, 0, 0, 1, 1, 1])
+    m = GaussianMixtureSet(2, 2, max_components=2).fit(x1, y)
+    m.refit(x2, y)
+    assert m.fit_report_.refit_kind[0] != "kept"
+    fresh = GaussianMixtureSet(2, 2, max_components=2).fit(x2, y)
+    assert float(m.covariances_[0, 0, 0, 0]) == pytest.approx(6.0, rel=0.01)
+    probe = np.array([[3.0, 0.0]])
+    assert torch.allclose(m.classify(probe).distance, fresh.classify(probe).distance)
+
+
 def test_an_action_that_loses_its_data_becomes_empty():
     x, y = _stream(200)
     m = GaussianMixtureSet(3, 3, 5).fit(x, y)
@@ -467,6 +482,39 @@ def test_incremental_session_resumes_to_the_live_model_even_without_its_checkpoi
     back = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
     _assert_same_state(back.model, live)
     assert back.config.refit == "incremental"
+
+
+def test_incremental_session_from_a_fitted_model_rebuilds_it_from_checkpoint_zero(tmp_path):
+    """A session that starts from a fitted model refits it incrementally; with only its
+    pre-fit checkpoint (model 0) left, load_model and resume replay refits from that state
+    (not a fit from scratch), so they rebuild the live model bit for bit."""
+    import copy
+
+    from _toy_envs import oracle, rare_regions_world
+
+    from torchcbl import ConfidentTeacher, TeachingConfig
+    from torchcbl.session import CHECKPOINT_DIR, load_model
+
+    env = rare_regions_world()
+    x, y = env.sample(60, np.random.default_rng(0))
+    n_actions, n_features = int(env.action_space.n), x.shape[1]
+    fitted = GaussianMixtureSet(n_actions, n_features, 3, seed=0).fit(x, y)
+    run = tmp_path / "run"
+    config = TeachingConfig(max_new=6, refit="incremental", noninteractive=False)
+    ct = ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    )
+    ct.run(max_demonstrations=12)
+    live = copy.deepcopy(ct.model)
+    ct.close()
+    kept = sorted((run / CHECKPOINT_DIR).glob("model-*.pt"))
+    assert kept[0].name == "model-00000000.pt" and len(kept) > 1
+    for path in kept[1:]:  # as if killed before any later checkpoint was saved
+        path.unlink()
+    _assert_same_state(load_model(run), live)
+    env2 = rare_regions_world()
+    back = ConfidentTeacher.resume(run, env2, oracle(env2), progress=False)
+    _assert_same_state(back.model, live)
 
 
 def test_teaching_config_refit_mode_is_checked():

@@ -363,6 +363,19 @@ def test_a_refit_by_hand_is_honoured_by_resume_and_load_model(tmp_path):
     assert int(back.model.n_points_.sum()) == 17
 
 
+def test_load_model_at_a_count_of_labels(tmp_path):
+    run = tmp_path / "run"
+    ct = make(rare_regions_world(), run, noninteractive=False, max_new=5)
+    ct.run(max_demonstrations=13)
+    ct.close()
+    assert int(load_model(run, n_demonstrations=7).n_points_.sum()) == 5  # refitted at 5
+    assert int(load_model(run, n_demonstrations=np.int64(10)).n_points_.sum()) == 10
+    assert not load_model(run, n_demonstrations=0).is_fitted
+    for bad in (-1, 14, 2.7, "3", True):
+        with pytest.raises(ValueError, match=r"expected an int from 0 to 13 .*got"):
+            load_model(run, n_demonstrations=bad)
+
+
 def test_snapshot_leaves_the_session_alone(tmp_path):
     ct = make(rare_regions_world(), None, noninteractive=False, max_new=5)
     ct.run(max_demonstrations=7)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import errno
 import hashlib
 import json
+import math
 import os
 import shutil
 import signal
@@ -180,6 +181,42 @@ def test_ctrl_c_inside_env_step_later_in_confident_execution(tmp_path):
     with pytest.raises(KeyboardInterrupt):
         ct.run(max_steps=60)
     assert ct.records[-1].info == {"torchcbl_interrupted": True}
+    goes_on(ct, env, run)
+
+
+@pytest.mark.parametrize("error", [KeyboardInterrupt(), ValueError("strategy bug")])
+def test_an_error_in_the_strategy_after_a_durable_demonstration_keeps_it(tmp_path, error):
+    """A strategy's observe_label raises (or Ctrl-C lands there) after the demonstration was
+    written: the label is kept, the step is logged as interrupted without running its action,
+    and the next steps neither reuse its number nor fail to save."""
+    from torchcbl.strategies import ConfidentExecution
+
+    class Flaky(ConfidentExecution):
+        calls = 0
+
+        def observe_label(self, *args, **kwargs):
+            Flaky.calls += 1
+            if Flaky.calls == 5:
+                raise error
+            return super().observe_label(*args, **kwargs)
+
+    run = tmp_path / "run"
+    env = Witness(rare_regions_world())
+    ct = ConfidentTeacher(
+        env,
+        env.teacher,
+        strategy=Flaky(),
+        config=TeachingConfig(max_new=2, accuracy_window=10),
+        run_dir=run,
+        progress=False,
+    )
+    env.ct = ct
+    with pytest.raises(type(error)):
+        ct.run(max_steps=12)
+    last = ct.records[-1]
+    assert last.step == 4 and last.is_demonstration and last.truncated
+    assert last.info == {"torchcbl_interrupted": True} and 4 not in env.executed
+    assert ct.n_demonstrations == 5 and len(load_labels(run)[1]) == 5
     goes_on(ct, env, run)
 
 
@@ -680,6 +717,12 @@ def test_far_observations_classify_with_finite_values(x, recwarn):
         model._cache = None
     for a, b in zip(c, c2, strict=True):
         assert torch.allclose(a.double(), b.double(), rtol=1e-12, atol=0)
+    # its log-density is 0 (log -inf) on the one-row, the batch and the torch paths, never NaN
+    for rows in (obs[:1], obs, np.tile(obs, (100, 1))):  # 300 rows: the torch path
+        lp = model.log_prob(rows)
+        assert not torch.isnan(lp).any() and bool((lp[0] == -math.inf).all())
+        assert torch.isfinite(lp[1:3]).all()
+    assert model.aic(obs, np.array([0, 0, 1])).tolist()[0] == math.inf
     assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
 
 

@@ -547,6 +547,17 @@ def run_benchmark(
     titles = [s.title for s in strategies]
     if len(set(titles)) != len(titles):
         raise ValueError(f"run_benchmark: strategy labels must be distinct, got {titles}")
+    names = [e.name for e in envs]
+    if len(set(names)) != len(names):
+        raise ValueError(
+            f"run_benchmark: env names must be distinct (tables group cells by name), got "
+            f"{names}; give each EnvSpec its own name="
+        )
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(
+            f"run_benchmark: seeds must be distinct (a repeated seed repeats the same cells and "
+            f"counts them twice), got {list(seeds)}"
+        )
     _check_imports(strategies, envs)
     out = Path(out_dir)
     (out / "cells").mkdir(parents=True, exist_ok=True)

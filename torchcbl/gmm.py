@@ -653,9 +653,12 @@ class GaussianMixtureSet(nn.Module):
             same_mean = (centers == self.data_mean_.to(f64)).all(1).cpu().numpy()
             changed = (counts_np != old_n) | ~same_mean
             prints = self.data_print_.cpu().numpy()
-            for a in np.flatnonzero(has_data & ~changed & prints.any(1)):
-                # same count and mean: the same points? (an edit can keep both; a state saved
-                # before the fingerprint was kept at every fit holds zeros: not compared)
+            # a state saved before the fingerprint was kept at every fit holds zeros there: not
+            # compared, unless the mean is zero too (points whose print is truly zero, e.g. all
+            # at the origin, must be compared: a refit is the safe side of the doubt)
+            known = prints.any(1) | ~self.data_mean_.cpu().numpy().any(1)
+            for a in np.flatnonzero(has_data & ~changed & known):
+                # same count and mean: the same points? (an edit can keep both)
                 changed[a] = not np.array_equal(_fingerprint(x_np[y_np == a]), prints[a])
             warm_ok = (
                 (full_n > 0)
@@ -1033,8 +1036,9 @@ class GaussianMixtureSet(nn.Module):
         n = x.shape[0]
         y = x @ pcat
         y -= mu_p
-        y *= y
-        maha = y.reshape(n, self.n_actions, self.max_components, self.n_features).sum(-1)
+        with np.errstate(over="ignore"):  # a far row: its squares are inf, its density 0
+            y *= y
+            maha = y.reshape(n, self.n_actions, self.max_components, self.n_features).sum(-1)
         return const - 0.5 * maha, maha
 
     def _component_scores_torch(self, x: Tensor) -> tuple[Tensor, Tensor]:
@@ -1062,7 +1066,9 @@ class GaussianMixtureSet(nn.Module):
         if use_np:
             lp, _ = self._component_scores_np(x)  # type: ignore[arg-type]
             mx = lp.max(-1, keepdims=True)
-            mix = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1))
+            mx = np.where(np.isfinite(mx), mx, 0.0)  # every component at -inf (a far row): -inf
+            with np.errstate(divide="ignore"):
+                mix = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1))
             return torch.from_numpy(mix + self._tables()["np"][3])
         with self._predict_threads(x.shape[0]), torch.inference_mode():
             lp, _ = self._component_scores_torch(x)  # type: ignore[arg-type]

@@ -85,8 +85,13 @@ and the same thread count give bit-identical models, and so bit-identical step l
 same env and teacher. With another thread count, torch's reductions are summed in another
 order: fits differ in the last bits (measured: 1e-14 on a 3000-point 6-D fit; bit-identical on
 300 points), which can flip a confidence decision near its threshold, after which the two step
-logs diverge. So resume and :func:`load_model` reproduce the live model exactly when they run
-with the thread count of the writer that refitted it (recorded in ``writers.jsonl``); the
+logs diverge. The count that matters is the one the EM ran on: with more than one intra-op
+thread, a fit of at least :data:`torchcbl.gmm.SINGLE_THREAD_WORK` uses them only while the
+machine has a core to spare (the thread policy, docs/architecture.md), so such a fit's last bits
+also depend on the machine's load at that moment; with ``torch.set_num_threads(1)`` (the
+experiments' and the benchmark's workers call it) every fit runs on one thread. So resume and
+:func:`load_model` reproduce the live model exactly when they run with the thread count of the
+writer that refitted it (recorded in ``writers.jsonl``), one thread being the sure case; the
 checkpoints, when present and matching, are loaded rather than refitted, which needs no
 particular thread count.
 """
@@ -1274,11 +1279,11 @@ def restore_model(
                 _set_aside(directory / f"model-{k:08d}.pt", "damaged")
         payload = None
     if k > 0 and incremental:
-        start = 0
+        start, loaded = 0, False
         if payload is not None:
             try:
                 model.load_state_dict(payload["state_dict"])
-                start = last
+                start, loaded = last, True
             except Exception:  # e.g. saved by another model class: replay from the start
                 start = 0
         counts = list(range(start + max_new, k + 1, max_new))
@@ -1286,9 +1291,10 @@ def restore_model(
             counts.append(k)
         for i, j in enumerate(counts):
             x, y = training_set(xs[:j], ys[:j], relabel=relabel)
-            # from the start, the first refit is a fit from scratch (whatever a failed load
-            # left in the buffers)
-            (model.fit if i == 0 and start == 0 else model.refit)(x, y)
+            # with no checkpoint loaded, the first refit is a fit from scratch (whatever a
+            # failed load left in the buffers); from a loaded one, even the pre-fit state of
+            # a session that started from a fitted model (checkpoint 0), the loop refitted
+            (model.refit if i > 0 or loaded else model.fit)(x, y)
     elif k > 0:
         x, y = training_set(xs[:k], ys[:k], relabel=relabel)
         model.fit(x, y)
@@ -1318,7 +1324,19 @@ def load_model(
     """
     config = load_config(run_dir)
     x, y = load_labels(run_dir)
-    n = len(y) if n_demonstrations is None else min(int(n_demonstrations), len(y))
+    if n_demonstrations is None:
+        n = len(y)
+    elif (
+        isinstance(n_demonstrations, bool)
+        or not isinstance(n_demonstrations, int | np.integer)
+        or not 0 <= n_demonstrations <= len(y)
+    ):
+        raise ValueError(
+            f"n_demonstrations: expected an int from 0 to {len(y)} (the labels logged in "
+            f"{run_dir}), got {n_demonstrations!r}; leave it out for all of them."
+        )
+    else:
+        n = int(n_demonstrations)
     model = build_model(config)
     restore_model(
         run_dir,

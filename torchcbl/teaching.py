@@ -385,9 +385,17 @@ class ConfidentTeacher:
         self.strategy = strategy
         strategy.bind(n_actions=self.n_actions, n_features=self.n_features, config=self.config)
         self._relabel = bool(getattr(strategy, "relabel", False))
-        self._corrects = bool(getattr(strategy, "wants_corrections", False)) and callable(
-            getattr(teacher, "correct", None)
-        )
+        wants = bool(getattr(strategy, "wants_corrections", False))
+        self._corrects = wants and callable(getattr(teacher, "correct", None))
+        if wants and not self._corrects:
+            warnings.warn(
+                f"{type(strategy).__name__} learns from corrections of its autonomous steps, "
+                f"but the teacher ({type(teacher).__name__}) has no correct(observation, info, "
+                "action) method, so it will never correct one; a scripted teacher corrects by "
+                "comparing with its own choice once wrapped: "
+                "torchcbl.strategies.correcting(teacher).",
+                stacklevel=3,
+            )
         self.progress = bool(progress)
         self.on_step = on_step
         self.on_refit = on_refit
@@ -787,17 +795,33 @@ class ConfidentTeacher:
         except BaseException:
             undo()
             raise
+        stopped: BaseException | None = None
         if ask:
-            self._train.add(obs, teacher_action)  # type: ignore[arg-type]
-            self._digest.update(obs, teacher_action)  # type: ignore[arg-type]
-            self.strategy.observe_label(
-                obs,
-                teacher_action,  # type: ignore[arg-type]
-                model_action=model_action,
-                kind="demonstration",
-            )
+            # The demonstration is durable: from here on it is kept, whatever is raised (a
+            # strategy's error, a Ctrl-C): it joins the training data and, if the strategy
+            # raised, the step is logged as interrupted without running the action.
+            added = digested = False
+            try:
+                self._train.add(obs, teacher_action)  # type: ignore[arg-type]
+                added = True
+                self._digest.update(obs, teacher_action)  # type: ignore[arg-type]
+                digested = True
+                self.strategy.observe_label(
+                    obs,
+                    teacher_action,  # type: ignore[arg-type]
+                    model_action=model_action,
+                    kind="demonstration",
+                )
+            except BaseException as exc:
+                if not added:
+                    self._train.add(obs, teacher_action)  # type: ignore[arg-type]
+                if not digested:
+                    self._digest.update(obs, teacher_action)  # type: ignore[arg-type]
+                stopped = exc
             self._episode_had_demo = True
             self._new_since_refit += 1
+        if stopped is not None:
+            self._execute(record, interrupted=stopped)  # logs the step, raises ``stopped``
         try:
             record = self._execute(record)
         except BaseException:
@@ -961,24 +985,33 @@ class ConfidentTeacher:
             raise EnvError(f"env.step returned a non-finite reward {r!r:.80}")
         return reward, flags[0], flags[1], info
 
-    def _execute(self, record: StepRecord) -> StepRecord:
+    def _execute(
+        self, record: StepRecord, *, interrupted: BaseException | None = None
+    ) -> StepRecord:
         """Run the record's action, log the step with its outcome and return it.
 
         Whatever happens in the env, the step is appended to :attr:`records` and logged
         (an env error or a Ctrl-C cuts the episode). If the log write fails, memory follows
         disk: a demonstration (already durable) is kept as interrupted, an autonomous step is
         dropped; either way the episode is cut and :class:`SessionWriteError` raised.
+        ``interrupted``: an exception raised before the action ran; the action is not run, the
+        step is logged as interrupted and the exception re-raised.
         """
         error: str | None = None
         cause: BaseException | None = None
-        interrupt: BaseException | None = None
+        interrupt: BaseException | None = interrupted
         reward: float | None = None
         terminated = truncated = False
         info: dict = {}
         try:
+            if interrupted is not None:
+                raise interrupted
             out = self.env.step(record.executed_action)
         except Exception as exc:
-            error, cause = f"env.step raised {type(exc).__name__}: {exc}", exc
+            if interrupted is not None:
+                interrupt = interrupted
+            else:
+                error, cause = f"env.step raised {type(exc).__name__}: {exc}", exc
         except BaseException as exc:  # KeyboardInterrupt (Ctrl-C), SystemExit: log, re-raise
             interrupt = exc
         else:

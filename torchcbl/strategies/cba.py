@@ -138,6 +138,15 @@ class ConfidenceBasedAutonomy(_Phased):
         self._mean: np.ndarray | None = None
         self._scale: np.ndarray | None = None
 
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        if int(n_actions) < 2:
+            raise ValueError(
+                "ConfidenceBasedAutonomy needs at least 2 actions (its confidence is the margin "
+                f"between the chosen action and the runner-up), got an env with {n_actions}; "
+                "use ConfidentExecution for a single action."
+            )
+        super().bind(n_actions=n_actions, n_features=n_features, config=config)
+
     # -- the two gates -----------------------------------------------------------------------
 
     def nn_distance(self, observation: np.ndarray) -> float:
