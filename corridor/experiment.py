@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 
 from corridor.baseline import PrioritizedSweepingConfig, run_prioritized_sweeping
-from corridor.env import CorridorEnv
+from corridor.env import DEFAULT_MAP, CorridorEnv
 from corridor.expert import CorridorExpert
 from corridor.maps import load_map
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
@@ -537,29 +537,56 @@ def evaluate_saved_policy(
     *,
     n_steps: int = 1000,
     seed: int = 0,
-    map_name: str = "figure2",
+    map_name: str | None = None,
     world_config: WorldConfig | None = None,
 ) -> dict[str, Any]:
     """Run the latest model of a corridor teaching session greedily for ``n_steps`` actions.
 
-    ``world_config`` defaults to the robot the session was taught on: for a session of
-    :func:`run_experiment` (``run_dir/sessions/seed<k>``) the world in ``run_dir/results.json``
-    (noisy motion by default), otherwise ``WorldConfig()`` (exact motion, the world of
-    ``torchcbl/Corridor-v0`` and ``torchcbl teach corridor``). Returns circuits completed,
-    circuits without wall contact, and wall contacts.
+    ``map_name`` and ``world_config`` default to the map and robot the session was taught on:
+    for a session of :func:`run_experiment` (``run_dir/sessions/seed<k>``) those in
+    ``run_dir/results.json`` (noisy motion by default); for a session of an env made with
+    ``gymnasium.make`` the ``corridor_map`` it was given (the session's config keeps the
+    arguments); otherwise the default map and ``WorldConfig()`` (exact motion, the world of
+    ``torchcbl/Corridor-v0`` and ``torchcbl teach corridor``). Returns the map driven, circuits
+    completed, circuits without wall contact, and wall contacts.
     """
     from torchcbl import evaluate_policy, load_policy
 
-    world = _session_world(Path(session_dir)) if world_config is None else world_config
+    session_dir = Path(session_dir)
+    world = _session_world(session_dir) if world_config is None else world_config
+    map_name = _session_map(session_dir) if map_name is None else map_name
     env = CorridorEnv(load_map(map_name), world)
     records = evaluate_policy(load_policy(session_dir), env, n_steps=n_steps, seed=seed)
     ends = [r for r in records if r.terminated]
     return {
+        "map": map_name,
         "steps": len(records),
         "circuits_completed": len(ends),
         "circuits_clean": sum(1 for r in ends if r.info.get("is_success")),
         "wall_contacts": sum(1 for r in records if r.info.get("contact")),
     }
+
+
+def _session_map(session_dir: Path) -> str:
+    """The map a session was taught on (see :func:`evaluate_saved_policy`)."""
+    from torchcbl.session import load_config
+
+    results = session_dir.parent.parent / "results.json"
+    if session_dir.parent.name == "sessions" and results.is_file():
+        try:
+            return str(json.loads(results.read_text())["config"]["map_name"])
+        except (ValueError, KeyError, TypeError):
+            pass  # not an experiment's results.json
+    given = (load_config(session_dir).get("env") or {}).get("kwargs") or {}
+    if "corridor_map" not in given:
+        return DEFAULT_MAP
+    if not isinstance(given["corridor_map"], str):
+        raise ValueError(
+            f"{session_dir} was taught on a map given as an object ({given['corridor_map']}), "
+            "which its config does not keep; pass map_name= (a shipped map name or a map "
+            "JSON path)"
+        )
+    return given["corridor_map"]
 
 
 def _session_world(session_dir: Path) -> WorldConfig:

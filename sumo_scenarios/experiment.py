@@ -895,17 +895,29 @@ def main(argv: list[str] | None = None) -> None:
     """``python -m sumo_scenarios.experiment RUN_DIR [--full] [--seeds N] [--workers W]``."""
     import argparse
 
-    p = argparse.ArgumentParser(description="Section 5.2 driving experiment")
+    p = argparse.ArgumentParser(
+        prog="python -m sumo_scenarios.experiment", description="Section 5.2 driving experiment"
+    )
     p.add_argument("run_dir", type=Path)
     p.add_argument("--full", action="store_true")
     p.add_argument("--seeds", type=int, default=None)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--teacher", choices=("expert", "human"), default="human")
     a = p.parse_args(argv)
+    # a mistake is p.error's message and exit code 2, before anything is written
+    if a.seeds is not None and a.seeds < 1:
+        p.error(f"--seeds: expected a number of seeds >= 1, got {a.seeds}")
+    if a.workers < 1:
+        p.error(f"--workers: expected >= 1, got {a.workers}")
+    if a.run_dir.exists() and (not a.run_dir.is_dir() or any(a.run_dir.iterdir())):
+        p.error(f"{a.run_dir} exists and is not an empty directory; choose a new RUN_DIR")
     cfg = DrivingExperimentConfig.full() if a.full else DrivingExperimentConfig()
-    cfg = dataclasses.replace(cfg, teacher=a.teacher)
-    if a.seeds is not None:
-        cfg = dataclasses.replace(cfg, seeds=tuple(range(a.seeds)))
+    try:
+        cfg = dataclasses.replace(cfg, teacher=a.teacher)
+        if a.seeds is not None:
+            cfg = dataclasses.replace(cfg, seeds=tuple(range(a.seeds)))
+    except ValueError as exc:
+        p.error(str(exc))
     print(format_summary(run_experiment(cfg, a.run_dir, workers=a.workers)))
 
 

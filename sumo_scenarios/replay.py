@@ -19,7 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from sumo_scenarios.env import DrivingConfig, DrivingEnv
-from sumo_scenarios.scenarios import TrafficScenario
+from sumo_scenarios.scenarios import N_LANES, TrafficScenario
 from sumo_scenarios.sim import SimConfig
 
 
@@ -43,6 +43,27 @@ class EpisodeRecord:
     actions: tuple[int, ...]
     label: str = ""
 
+    def __post_init__(self) -> None:
+        def is_int(v: Any) -> bool:
+            return isinstance(v, int | np.integer) and not isinstance(v, bool)
+
+        if not is_int(self.episode_seed) or self.episode_seed < 0:
+            raise ValueError(f"episode_seed: expected an int >= 0, got {self.episode_seed!r}")
+        if not is_int(self.start_lane) or not 0 <= self.start_lane < N_LANES:
+            raise ValueError(
+                f"start_lane: expected a lane index 0-{N_LANES - 1}, got {self.start_lane!r}"
+            )
+        if not isinstance(self.actions, tuple) or not self.actions:
+            raise ValueError(
+                f"actions: expected a non-empty tuple of actions, got {self.actions!r:.40}"
+            )
+        bad = [a for a in self.actions if not is_int(a) or not 0 <= a < 3]
+        if bad:
+            raise ValueError(
+                f"actions: expected 0 (stay), 1 (left) or 2 (right) at every step, got "
+                f"{bad[:3]!r}{' ...' if len(bad) > 3 else ''}"
+            )
+
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (inverse of :meth:`from_dict`)."""
         d = dataclasses.asdict(self)
@@ -60,12 +81,14 @@ class EpisodeRecord:
             )
         sc["mean_spacing_m"] = tuple(sc["mean_spacing_m"])
         sc["speed_ranges_mph"] = tuple(tuple(r) for r in sc["speed_ranges_mph"])
-        return cls(
+        if not isinstance(d["actions"], list):
+            raise ValueError(f"actions: expected a JSON list, got {d['actions']!r:.40}")
+        return cls(  # the fields are checked as they are, not coerced (1.7 is no action)
             scenario=TrafficScenario(**sc),
             sim=SimConfig(**d["sim"]),
-            episode_seed=int(d["episode_seed"]),
-            start_lane=int(d["start_lane"]),
-            actions=tuple(int(a) for a in d["actions"]),
+            episode_seed=d["episode_seed"],
+            start_lane=d["start_lane"],
+            actions=tuple(d["actions"]),
             label=str(d.get("label", "")),
         )
 

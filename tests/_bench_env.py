@@ -21,3 +21,8 @@ def teacher(env: Any) -> Any:
 
 if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="_bench_env:make_world")
+
+
+def pole_teacher(env: Any) -> Any:
+    """CartPole's textbook controller: push toward the side the pole leans to."""
+    return lambda obs, info: int(obs[2] + 0.5 * obs[3] > 0)

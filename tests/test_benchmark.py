@@ -271,3 +271,22 @@ def test_every_import_path_is_resolved_before_a_cell_runs(tmp_path):
         _env(eval_episodes=0)
     with pytest.raises(ValueError, match="score must be an import path"):
         _env(score="success_rate")
+
+
+def test_a_score_the_env_never_feeds_is_called_out_not_read_as_instant_learning(
+    tmp_path, capsys, monkeypatch
+):
+    """CartPole never sets info["is_success"]: with the default success_rate every performance,
+    the teacher's too, is 0, so "labels to 95 %" would read as the first budget. It is left
+    undefined, and the command says why."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "CartPole-v1"]
+    argv += ["--teacher", "_bench_env:pole_teacher", "--strategies", "bc", "--seeds", "1"]
+    argv += ["--workers", "1", "--budgets", "5,10", "--max-steps", "30", "--eval-episodes", "1"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the teacher scores 0 on CartPole-v1" in err and "--score" in err
+    row = json.loads((tmp_path / "b" / "results.json").read_text())["table"]["CartPole-v1"]["bc"]
+    assert row["teacher_performance"]["mean"] == 0.0
+    assert row["labels_to_95pct"]["mean"] is None
+    assert [s["labels"] for s in row["labels_to_95pct"]["per_seed"]] == [None]

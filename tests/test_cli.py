@@ -125,6 +125,12 @@ def _user_mistakes(run: Path, tmp: Path) -> list[list[str]]:
         ["replay", str(tmp)],  # a directory
         ["reproduce", "corridor", "--seeds", "0", "--out", str(tmp / "X")],
         ["reproduce", "corridor", "--workers", "0", "--out", str(tmp / "X")],
+        ["reproduce", "corridor", "--seeds", "1", "--out", str(not_json / "X")],  # under a file
+        ["reproduce", "corridor", "--seeds", "1", "--out", str(not_json)],  # a file
+        ["benchmark", "--quick", "--out", str(not_json)],
+        ["teach", "corridor", "--run-dir", str(not_json)],  # a file
+        ["teach", "corridor", "--run-dir", str(partial)],  # other files, no session
+        ["teach", "corridor", "--resume", "--skip-noninteractive", "--run-dir", str(session)],
         ["plot", str(tmp / "nonexistent")],
         ["plot", str(session)],
         ["plot", str(partial)],
@@ -184,6 +190,16 @@ def test_evaluate_names_the_problem(corridor_run, tmp_path, capsys):
     assert "not a list of recorded episodes" in messages["replay_results"]
     assert main(["evaluate", str(_session_without_labels(tmp_path / "unlabelled"))]) == 2
     assert "holds no demonstrations yet" in capsys.readouterr().err
+    # a user's own env of the driving domain's shape is not taken for the driving domain
+    from _toy_envs import ClusterWorld
+
+    from torchcbl import ConfidentTeacher
+
+    own = ClusterWorld(np.eye(4)[:3] * 5, [0, 1, 2], [1, 1, 1], episode_length=5)
+    ConfidentTeacher(own, lambda o, i: own.optimal_action(o), run_dir=tmp_path / "own").close()
+    assert main(["evaluate", str(tmp_path / "own")]) == 2
+    err = capsys.readouterr().err
+    assert "an env torchcbl evaluate does not know" in err and "4 features, 3 actions" in err
     alone = tmp_path / "alone"
     alone.mkdir()
     (alone / "results.json").write_text((corridor_run / "corridor" / "results.json").read_text())
@@ -192,22 +208,26 @@ def test_evaluate_names_the_problem(corridor_run, tmp_path, capsys):
 
 
 def test_the_domain_table_matches_the_envs():
-    """evaluate tells a session's domain by its env id or its (features, actions): both as the
-    domains' envs really are."""
+    """evaluate tells a session's domain by its env id or its (features, actions, observation
+    space): both as the domains' envs really are."""
     import gymnasium as gym
 
     import corridor
     import sumo_scenarios
-    from torchcbl.cli import _ENV_IDS, _SHAPES
+    from torchcbl.cli import _ENV_IDS, _SPACES
 
     assert _ENV_IDS == {corridor.ENV_ID: "corridor", sumo_scenarios.ENV_ID: "driving"}
     for env_id, domain in _ENV_IDS.items():
         env = gym.make(env_id)
         try:
-            shape = (env.observation_space.shape[0], int(env.action_space.n))
+            space = (
+                env.observation_space.shape[0],
+                int(env.action_space.n),
+                repr(env.observation_space),
+            )
         finally:
             env.close()
-        assert _SHAPES[shape] == domain
+        assert _SPACES[space] == domain
 
 
 _LINE = re.compile(r"lane: \S+ \((\d)\); nearest car: (.*)")
@@ -340,6 +360,27 @@ def test_replay_lists_episodes_and_exports_one_to_gif_and_fcd(tmp_path, capsys):
     capsys.readouterr()
     assert main(["replay", str(path), "--episode", "7"]) == 2
     assert "--list" in capsys.readouterr().err
+    # output paths that cannot be files, and damaged episodes: one line, nothing written
+    before = sorted(tmp_path.iterdir())
+    for flag in ("--gif", "--fcd"):
+        assert main(["replay", str(path), flag, str(tmp_path)]) == 2
+        assert f"{flag} {tmp_path} is a directory" in capsys.readouterr().err
+    good = json.loads(path.read_text())[0]
+    for field, value, says in (
+        ("actions", [0, 7, 0], "0 (stay), 1 (left) or 2 (right)"),
+        ("actions", [0, 1.7], "0 (stay), 1 (left) or 2 (right)"),
+        ("actions", "0101", "expected a JSON list"),
+        ("actions", [], "non-empty"),
+        ("start_lane", 9, "lane index 0-4"),
+        ("episode_seed", -3, "int >= 0"),
+    ):
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps([{**good, field: value}]))
+        assert main(["replay", str(bad)]) == 2, field
+        err = capsys.readouterr().err
+        assert says in err and err.count("\n") == 1, (field, err)
+        bad.unlink()
+    assert sorted(tmp_path.iterdir()) == before
 
 
 def _markdown_tables(text: str) -> dict[str, list[list[list[str]]]]:
@@ -415,3 +456,64 @@ def test_summary_md_of_a_driving_run_is_markdown_too(tmp_path, monkeypatch):
     table_lines = [ln for ln in text.splitlines() if "|" in ln]
     assert len(table_lines) == len(rows) + 2
     assert "+-" not in text
+
+
+def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(corridor_run, tmp_path):
+    """An experiment's session: the map of its results.json; a session of gymnasium.make's env:
+    the corridor_map it was made with; neither: the default map."""
+    import shutil
+
+    import gymnasium as gym
+
+    import corridor  # noqa: F401 - registers the env id
+    from corridor.experiment import evaluate_saved_policy
+    from torchcbl import ConfidentTeacher
+
+    results = json.loads((corridor_run / "corridor" / "results.json").read_text())
+    assert results["config"]["map_name"] == "figure2"
+    session = corridor_run / "corridor" / "sessions" / "seed0"
+    assert evaluate_saved_policy(session, n_steps=5)["map"] == "figure2"
+    results["config"]["map_name"] = "lshape"
+    copy = tmp_path / "run"
+    shutil.copytree(session, copy / "sessions" / "seed0")
+    (copy / "results.json").write_text(json.dumps(results))
+    assert evaluate_saved_policy(copy / "sessions" / "seed0", n_steps=5)["map"] == "lshape"
+    env = gym.make("torchcbl/Corridor-v0", corridor_map="lshape")
+    ConfidentTeacher(env, lambda o, i: 0, run_dir=tmp_path / "made", progress=False).run(
+        max_steps=3
+    ).close()
+    assert evaluate_saved_policy(tmp_path / "made", n_steps=5)["map"] == "lshape"
+    env = gym.make("torchcbl/Corridor-v0")
+    ConfidentTeacher(env, lambda o, i: 0, run_dir=tmp_path / "plain", progress=False).run(
+        max_steps=3
+    ).close()
+    assert evaluate_saved_policy(tmp_path / "plain", n_steps=5)["map"] == "figure2"
+
+
+def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
+    tmp_path, monkeypatch, capsys
+):
+    """A session whose demonstration budget is spent (the driving protocol's 650) says so, and
+    --resume teaches on past it instead of returning at once forever."""
+    import corridor.human
+    from torchcbl import cli
+
+    class Scripted:  # the terminal's person, answering "forward" to every request
+        def __call__(self, observation, info):
+            return 0
+
+        def set_status(self, text):
+            pass
+
+    monkeypatch.setattr(corridor.human, "make_teacher", lambda **kw: Scripted())
+    package, env_id, human, settings = cli._TEACH["corridor"]
+    budget = {**settings, "max_demonstrations": 5, "autonomous_episodes_to_stop": None}
+    monkeypatch.setitem(cli._TEACH, "corridor", (package, env_id, human, budget))
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "30"]) == 0
+    out = capsys.readouterr().out
+    assert "5 demonstrations over 5 steps" in out and "budget is reached" in out
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "10"]) == 0
+    out = capsys.readouterr().out
+    assert "over 15 steps" in out and "(--steps done)" in out
+    assert len(load_records(run)) == 15

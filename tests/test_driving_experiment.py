@@ -221,3 +221,31 @@ def test_two_seeds_give_a_paired_interval_and_a_writable_summary(tmp_path):
     )
     assert on_disk["acceptance"]["arm_a_beats_arm_b"] == (d["ci95"][1] < 0)
     assert on_disk["acceptance"] == res["acceptance"]
+
+
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["--seeds", "0"], "--seeds: expected a number of seeds >= 1, got 0"),
+        (["--workers", "0"], "--workers: expected >= 1, got 0"),
+        ([], "exists and is not an empty directory"),
+    ],
+)
+def test_the_module_command_refuses_a_mistake_before_writing(tmp_path, argv, says):
+    """`python -m sumo_scenarios.experiment RUN_DIR --teacher expert` (the README's way to the
+    consistent expert): a mistake is argparse's message and exit code 2, no traceback."""
+    import subprocess
+    import sys
+
+    run = tmp_path / "run"
+    if not argv:  # a RUN_DIR that already holds a run
+        run.mkdir()
+        (run / "results.json").write_text("{}")
+    proc = subprocess.run(
+        [sys.executable, "-m", "sumo_scenarios.experiment", str(run), "--teacher", "expert", *argv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2 and says in proc.stderr and "Traceback" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ([] if argv else ["results.json", "run"])

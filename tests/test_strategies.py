@@ -157,15 +157,18 @@ def test_an_impossible_actor_answer_is_a_clear_error_before_the_env_steps(says):
 def test_a_used_strategy_instance_given_to_resume_replays_from_scratch(tmp_path):
     """bind() starts a strategy afresh: the live instance handed to resume() replays the log
     instead of adding it to what it had counted (HG-DAgger's warmup was cut short)."""
+    from torchcbl.strategies import correcting
     from torchcbl.strategies.hg_dagger import HGDAgger
 
     env = rare_regions_world(episode_length=10)
     s = HGDAgger(warmup=10)
-    ct = ConfidentTeacher(env, oracle(env), strategy=s, run_dir=tmp_path / "r", progress=False)
+    teacher = correcting(oracle(env))
+    ct = ConfidentTeacher(env, teacher, strategy=s, run_dir=tmp_path / "r", progress=False)
     ct.run(max_steps=6)
     ct.close()
     env2 = rare_regions_world(episode_length=10)
-    back = ConfidentTeacher.resume(tmp_path / "r", env2, oracle(env2), strategy=s, progress=False)
+    teacher2 = correcting(oracle(env2))
+    back = ConfidentTeacher.resume(tmp_path / "r", env2, teacher2, strategy=s, progress=False)
     back.run(max_steps=12)
     back.close()
     phases = [r.phase for r in load_records(tmp_path / "r")]

@@ -609,9 +609,13 @@ def run_benchmark(
 # -- aggregation ------------------------------------------------------------------------------
 
 
-def _labels_to(cell: Mapping[str, Any], fraction: float) -> tuple[int, bool]:
+def _labels_to(cell: Mapping[str, Any], fraction: float) -> tuple[int | None, bool]:
     """Labels at which the cell first reaches ``fraction`` x the teacher's performance, and
-    whether that is censored (never reached: the last label count, a lower bound)."""
+    whether that is censored (never reached: the last label count, a lower bound). None when
+    the teacher's performance is not positive: a share of it is no target (e.g. a score that
+    the env never feeds, such as ``success_rate`` on an env without ``info["is_success"]``)."""
+    if not float(cell["teacher_performance"]) > 0:
+        return None, False
     target = fraction * float(cell["teacher_performance"])
     for p in cell["curve"]:
         if p["performance"] >= target - 1e-12:

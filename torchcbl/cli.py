@@ -34,10 +34,14 @@ _DOMAINS = {
 }
 
 # How a teaching session's config.json tells its domain: the gymnasium id the env was made
-# with (``torchcbl teach``), else the shape of its observations and actions (the experiments
-# build their envs directly, without an id). tests/test_cli.py checks both against the envs.
+# with (``torchcbl teach``), else its observation space and action count (the experiments
+# build their envs directly, without an id), so that a user's own env of the same shape is not
+# taken for a domain's. tests/test_cli.py checks both against the envs.
 _ENV_IDS = {"torchcbl/Corridor-v0": "corridor", "torchcbl/Driving-v0": "driving"}
-_SHAPES = {(3, 4): "corridor", (4, 3): "driving"}  # (n_features, n_actions)
+_SPACES = {  # (n_features, n_actions, repr of the observation space) -> domain
+    (3, 4, "Box(0.0, 1.5, (3,), float32)"): "corridor",
+    (4, 3, "Box([-25. -25. -25.   0.], [25. 25. 25.  4.], (4,), float32)"): "driving",
+}
 
 _SESSION_HINT = (
     "expected a teaching session directory (one holding config.json, e.g. "
@@ -107,9 +111,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     for domain in domains:
         module = _experiment_module(domain)
         plan.append((domain, module, _experiment_config(domain, module, args)))
-    requested = Path(args.out)
-    if requested.exists() and not requested.is_dir():
-        raise _UsageError(f"--out {requested} is a file; expected a directory (new or empty)")
+    requested = _output_dir(Path(args.out), "--out")
     out = _fresh_dir(requested)
     summaries: list[str] = []
     try:
@@ -134,6 +136,35 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     (out / "summary.md").write_text(text)
     print(f"\nSummary written to {out / 'summary.md'}")
     return 0
+
+
+def _output_dir(path: Path, flag: str) -> Path:
+    """``path`` as a directory to write into, or a one-line error: it (or a parent) exists as a
+    file. A path with no name of its own (``.``, ``..``, ``""``) is made absolute, so that a
+    fresh ``-2`` beside it is named after the directory it means."""
+    if path.name in ("", ".", ".."):
+        path = path.resolve()
+    for p in (path, *path.parents):
+        if p.exists():
+            if not p.is_dir():
+                where = "" if p == path else f" ({p} is a file)"
+                raise _UsageError(
+                    f"{flag} {path} cannot be a directory{where}; expected a new or empty "
+                    "directory path"
+                )
+            break
+    return path
+
+
+def _output_file(path: Path, flag: str) -> Path:
+    """``path`` as a file to write, or a one-line error: it is a directory, or its directory is
+    missing or a file."""
+    if path.is_dir():
+        raise _UsageError(f"{flag} {path} is a directory; expected a file path")
+    if not path.parent.is_dir():
+        what = "is a file" if path.parent.exists() else "does not exist"
+        raise _UsageError(f"cannot write {path}: directory {path.parent} {what}")
+    return path
 
 
 def _fresh_dir(out: Path) -> Path:
@@ -204,8 +235,14 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
         raise _UsageError(str(exc)) from None
     env = config.get("env") or {}
     shape = (env.get("n_features"), env.get("n_actions"))
-    domain = _ENV_IDS.get(env.get("id") or "") or _SHAPES.get(shape)  # type: ignore[arg-type]
-    described = f"env id {env.get('id')!r}, {shape[0]} features, {shape[1]} actions"
+    by_space = {k: d for k, d in _SPACES.items() if k[:2] == shape}
+    space = env.get("observation_space")
+    if space is not None:  # (a session too old to have stored it goes by its shape alone)
+        by_space = {k: d for k, d in by_space.items() if k[2] == space}
+    domain = _ENV_IDS.get(env.get("id") or "") or next(iter(by_space.values()), None)
+    described = f"env id {env.get('id')!r}, {shape[0]} features, {shape[1]} actions" + (
+        f", observations {space}" if space else ""
+    )
     if domain is None:
         raise _UsageError(
             f"{session} was taught in an env torchcbl evaluate does not know ({described}); "
@@ -289,9 +326,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     stem = path.with_suffix("")
     gif = Path(args.gif) if args.gif else stem.with_name(f"{stem.name}-{index}.gif")
     fcd = Path(args.fcd) if args.fcd else stem.with_name(f"{stem.name}-{index}.fcd.xml")
-    for out in (gif, fcd):
-        if not out.parent.is_dir():
-            raise _UsageError(f"cannot write {out}: directory {out.parent} does not exist")
+    _output_file(gif, "--gif")
+    _output_file(fcd, "--fcd")
     print(f"episode {index}: {record.label or '-'} ({len(record.actions)} steps)")
     replay.export_fcd(record, fcd)
     print(f"FCD written to {fcd}")
@@ -363,6 +399,13 @@ def _cmd_teach(args: argparse.Namespace) -> int:
 
     package, env_id, human_module, settings = _TEACH[args.domain]
     run_dir = Path(args.run_dir)
+    if run_dir.exists() and not run_dir.is_dir():
+        raise _UsageError(f"--run-dir {run_dir} is a file; expected a session directory")
+    if args.resume and args.skip_noninteractive:
+        raise _UsageError(
+            "--skip-noninteractive starts a new session without its non-interactive phase; a "
+            "resumed session keeps the phase it is in: leave it out with --resume"
+        )
     if args.resume:
         _session_domain(
             run_dir, args.domain, teach=True
@@ -372,6 +415,13 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             f"{run_dir} already holds a teaching session; add --resume to continue it "
             "or choose another --run-dir"
         )
+    elif run_dir.is_dir() and any(run_dir.iterdir()):
+        raise _UsageError(
+            f"--run-dir {run_dir} holds other files and no session; a new session needs a new "
+            "or empty directory"
+        )
+    else:
+        _output_dir(run_dir, "--run-dir")
     importlib.import_module(package)  # registers the env id
     human = importlib.import_module(human_module)
     teacher = human.make_teacher(title=f"torchcbl teach {args.domain}")
@@ -402,18 +452,32 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             progress=False,
             on_step=status,
         )
+    # --resume asks for more: the session's own budgets (the driving protocol's 650
+    # demonstrations) are lifted for this call, else a finished session could never go on
+    lifted = {"max_demonstrations": None, "max_episodes": None} if args.resume else {}
     try:
-        ct.run(max_steps=ct.n_steps + args.steps)
+        ct.run(max_steps=ct.n_steps + args.steps, **lifted)
     except TeachingInterrupted:
         print("\nStopped by the teacher.")
     finally:
         ct.close()
         env.close()
+    why = _STOP_REASONS.get(ct.stop_reason or "", "")
     print(
-        f"{ct.n_demonstrations} demonstrations over {ct.n_steps} steps saved in {run_dir}; "
-        f"continue with: torchcbl teach {args.domain} --run-dir {run_dir} --resume"
+        f"{ct.n_demonstrations} demonstrations over {ct.n_steps} steps saved in {run_dir}"
+        + (f" ({why})" if why else "")
+        + f"; continue with: torchcbl teach {args.domain} --run-dir {run_dir} --resume"
     )
     return 0
+
+
+_STOP_REASONS = {
+    "max_demonstrations": "the session's demonstration budget is reached; --resume goes past it",
+    "max_steps": "--steps done",
+    "max_episodes": "the session's episode budget is reached; --resume goes past it",
+    "autonomous_steps": "the agent drove on its own long enough: teaching is done",
+    "autonomous_episodes": "the agent drove its episodes on its own: teaching is done",
+}
 
 
 # The benchmark's environments: each domain ships its EnvSpec (teacher, budgets, score) in a
@@ -478,7 +542,9 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     if not envs:
         raise _UsageError("no environment: give --envs and/or --gym-env")
     seeds = list(range(args.seeds if args.seeds else (3 if args.quick else 10)))
-    out = Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark"))
+    out = _output_dir(
+        Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark")), "--out"
+    )
     n_cells = len(strategies) * len(envs) * len(seeds)
     print(
         f"benchmark: {len(strategies)} strategies x {len(envs)} envs x {len(seeds)} seeds = "
@@ -525,6 +591,16 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
     print()
     print(bm.format_table(summary))
+    for env_name, rows in summary["table"].items():
+        scores = [r["teacher_performance"]["mean"] for r in rows.values()]
+        if scores and all(s is not None and s <= 0 for s in scores):
+            print(
+                f"\nwarning: the teacher scores {max(scores):g} on {env_name}: the score "
+                "measures nothing there (success_rate needs an env that sets "
+                'info["is_success"]), so every performance is 0 and "labels to 95 %" is '
+                "undefined; pass --score with a score for this env",
+                file=sys.stderr,
+            )
     print(
         f"\nwall {time.perf_counter() - t0:.0f} s, CPU {cpu:.0f} s (this process and its "
         f"workers); results in {out / 'results.json'}, plot {out / 'learning_curves.png'}"

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 import math
 import os
 import warnings
@@ -426,12 +427,18 @@ class ConfidentTeacher:
 
     def _describe_env(self) -> dict[str, Any]:
         spec = getattr(self.env, "spec", None)
-        return {
+        described = {
             "id": getattr(spec, "id", None),
             "n_features": self.n_features,
             "n_actions": self.n_actions,
             "observation_space": repr(self.env.observation_space),
         }
+        kwargs = getattr(spec, "kwargs", None)
+        if kwargs:  # what gymnasium.make was given; a value JSON cannot hold: {"repr": ...}
+            described["kwargs"] = {
+                str(k): v if _jsonable(v) else {"repr": repr(v)[:200]} for k, v in kwargs.items()
+            }
+        return described
 
     # -- resume -----------------------------------------------------------------------------
 
@@ -1184,3 +1191,11 @@ class ConfidentTeacher:
             f"ConfidentTeacher(steps={self.n_steps}, demonstrations={self.n_demonstrations}, "
             f"phase={self.phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
         )
+
+
+def _jsonable(value: Any) -> bool:
+    try:
+        json.dumps(value, allow_nan=False)
+    except (TypeError, ValueError):
+        return False
+    return True
