@@ -145,6 +145,14 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=torch.get_num_threads())
     ap.add_argument("--cases", default="a,b,c")
     args = ap.parse_args()
+    for flag, v in (("--repeats", args.repeats), ("--sk-repeats", args.sk_repeats)):
+        if v < 1:
+            ap.error(f"{flag}: expected an int >= 1, got {v}")
+    if args.threads < 1:
+        ap.error(f"--threads: expected an int >= 1, got {args.threads}")
+    unknown = sorted(set(args.cases.split(",")) - set(CASES))
+    if unknown:
+        ap.error(f"--cases: unknown {unknown}; expected some of {sorted(CASES)}")
     threads = args.threads
     results: dict[str, dict] = {"torch_threads": threads, "sklearn_threads": 1}
     print(

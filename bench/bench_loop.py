@@ -5,8 +5,10 @@ out pre-drawn observations, and a constant-time teacher. The env's and the teach
 is measured separately on the same calls and subtracted. Rows:
 
 - autonomous step: classify + rule + record + (with run_dir) batched SQLite insert;
-- demonstration step: classify + teacher + record + SQLite commit BEFORE the action runs
-  (``max_new`` is set so no refit happens: refits are the learner's cost, not the loop's).
+- demonstration step: classify + teacher + record + the journal line that makes the
+  demonstration durable BEFORE the action runs (SQLite commits only every ``commit_every``
+  lines, 32 by default; ``max_new`` is set so no refit happens: refits are the learner's
+  cost, not the loop's).
 
 Usage: python bench/bench_loop.py [--steps 5000] [--cpu-time]. The last line is JSON.
 """

@@ -295,6 +295,22 @@ def main() -> None:
     ap.add_argument("--thread-repeats", type=int, default=3)
     ns = ap.parse_args()
     sections = ns.sections.split(",")
+    known = {"long", "single", "snippet", "threads"}
+    if not set(sections) <= known:
+        ap.error(f"--sections: expected some of {sorted(known)}, got {ns.sections!r}")
+    for flag, v in (
+        ("--n", ns.n),
+        ("--full-every", ns.full_every),
+        ("--snippet-repeats", ns.snippet_repeats),
+        ("--thread-repeats", ns.thread_repeats),
+    ):
+        if v < 1:
+            ap.error(f"{flag}: expected an int >= 1, got {v}")
+    if ns.n < ns.full_every:
+        ap.error(
+            f"--n ({ns.n}) must be at least --full-every ({ns.full_every}): the full refit "
+            "is timed every --full-every demonstrations"
+        )
     out: dict = {"load_average_at_start": os.getloadavg(), "cpus": os.cpu_count()}
     print(f"load average at start: {out['load_average_at_start']}, {out['cpus']} CPUs")
     if "single" in sections:

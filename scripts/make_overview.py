@@ -36,8 +36,10 @@ def main(run_dir: Path, out: Path) -> None:
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    main(
-        Path(args[0]) if args else latest_run(),
-        Path(args[1]) if len(args) > 1 else Path("docs/img/overview.png"),
-    )
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run_dir", nargs="?", type=Path, help="default: the newest finished run")
+    ap.add_argument("out", nargs="?", type=Path, default=Path("docs/img/overview.png"))
+    ns = ap.parse_args()
+    main(ns.run_dir or latest_run(), ns.out)

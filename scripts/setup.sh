@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # Create .venv (if missing) and install the project with its test tools.
-# torch is installed first, pinned to the CPU build this machine carries, so nothing else
-# pulls a CUDA build; the package itself declares a range (torch>=2.2) that it satisfies.
+# torch is installed first, pinned to 2.13.0, so nothing else picks one; the package itself
+# declares a range (torch>=2.2) that it satisfies. On this project's machines pip finds the CPU
+# build of 2.13.0 in their wheel cache; elsewhere pip's default index gives its default build
+# (on Linux x86-64 the CUDA one, several GB): set TORCH_INDEX_URL (e.g.
+# https://download.pytorch.org/whl/cpu) to take torch from another index.
 # The install is editable, so code changes need no reinstall: when neither pyproject.toml nor
 # this script changed since the last successful install (recorded in .venv/.setup-stamp),
 # nothing is installed again. Delete .venv/.setup-stamp to force a reinstall.
@@ -26,11 +29,15 @@ if [ -x .venv/bin/python ]; then
   fi
 fi
 if [ ! -x .venv/bin/python ]; then
-  "$PY" -m venv .venv
+  if ! "$PY" -m venv .venv; then
+    rm -rf .venv
+    echo "set-up: '$PY -m venv' failed; on Debian/Ubuntu install the python3.11-venv package (apt install python3.11-venv), or set PYTHON to a Python 3.11 with venv" >&2
+    exit 1
+  fi
 fi
 rm -f "$STAMP"
 .venv/bin/python -m pip install -q --upgrade pip
-if ! .venv/bin/python -m pip install -q "torch==2.13.0"; then
+if ! .venv/bin/python -m pip install -q ${TORCH_INDEX_URL:+--index-url "$TORCH_INDEX_URL"} "torch==2.13.0"; then
   echo "set-up: torch 2.13.0 could not be installed; falling back to the newest torch>=2.2" >&2
   .venv/bin/python -m pip install -q "torch>=2.2"
 fi

@@ -472,8 +472,8 @@ def _execute(
             import ray
         except ImportError as exc:
             raise RuntimeError(
-                "Ray is not installed; install it with `pip install torchcbl[ray]` (or "
-                "`pip install ray`), or run without --ray."
+                "Ray is not installed; install it into this environment with `pip install "
+                "ray` (from a checkout, `pip install -e '.[ray]'`), or run without --ray."
             ) from exc
         started = not ray.is_initialized()
         if started:

@@ -161,6 +161,9 @@ class DistanceRule:
         return thr
 
     def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
+        """Bool tensor [N]: True where the model's action may be executed without asking
+        (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
+        when known)."""
         if self.quantile is None:
             thr = self.max_std
         else:
@@ -173,6 +176,8 @@ class DistanceRule:
         return torch.from_numpy(ok)
 
     def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
+        """Called after every refit (``observations`` [M, D], ``actions`` [M]): notes the
+        model's feature count D, which a quantile threshold needs."""
         n = getattr(model, "n_features", None)
         if n is not None:
             self._dof = int(n)
@@ -201,12 +206,16 @@ class PosteriorRule:
         )
 
     def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
+        """Bool tensor [N]: True where the model's action may be executed without asking
+        (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
+        when known)."""
         action = _np(c.action)
         post = _np(c.posterior)
         chosen = post[np.arange(len(action)), np.maximum(action, 0)]
         return torch.from_numpy((chosen >= self.min_posterior) & (action >= 0))
 
     def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
+        """No state to update (``observations`` [M, D], ``actions`` [M])."""
         return None
 
     def to_config(self) -> dict[str, Any]:
@@ -255,6 +264,9 @@ class AutoThresholdRule:
         self.thresholds: torch.Tensor | None = None  # [A] float64, None before the first update
 
     def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
+        """Bool tensor [N]: True where the model's action may be executed without asking
+        (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
+        when known)."""
         action = c.action
         ok = action >= 0
         if self.thresholds is None:
@@ -263,6 +275,8 @@ class AutoThresholdRule:
         return (c.distance < thr) & ok
 
     def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
+        """Recompute the per-action thresholds from the training set (``observations``
+        [M, D], ``actions`` [M]) classified by the refitted model."""
         c = model.classify(observations)
         labels = torch.as_tensor(actions, dtype=torch.long).reshape(-1)
         n_actions = c.posterior.shape[1]

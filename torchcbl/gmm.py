@@ -335,7 +335,8 @@ class GaussianMixtureSet(nn.Module):
         seed: seeds the k-means++ initialisation; the same seed and data give the same model.
         refit_growth: :meth:`refit` fits an action from scratch once its point count reached
             ``1 + refit_growth`` times its count at its last from-scratch fit (> 0; default
-            0.25: about 5 from-scratch fits per doubling of the data).
+            0.25: about 3 from-scratch fits per doubling of the data, log 2 / log 1.25, whose
+            total cost is about 5 times one fit at the final size).
 
     Fitted buffers (fixed shapes, so ``state_dict`` loads into a fresh instance built with the
     same arguments): ``weights_`` [A, K], ``means_`` [A, K, D], ``covariances_`` [A, K, D, D],

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -14,6 +14,9 @@ import torch
 
 from torchcbl.errors import EnvError
 from torchcbl.records import StepRecord, jsonable_info
+
+if TYPE_CHECKING:  # pragma: no cover
+    from torchcbl.gmm import Classification
 
 __all__ = ["EpisodeResult", "GreedyPolicy", "check_env", "episode_results", "evaluate_policy"]
 
@@ -28,12 +31,13 @@ class GreedyPolicy:
     def __init__(self, model: torch.nn.Module) -> None:
         self.model = model
 
-    def classify(self, observation: Any) -> Any:
+    def classify(self, observation: Any) -> Classification:
         """The model's Classification of one observation [D] (batched fields of length 1)."""
         x = torch.as_tensor(np.asarray(observation, dtype=np.float64)).reshape(1, -1)
         return self.model.classify(x)
 
     def __call__(self, observation: Any) -> int:
+        """The model's action for one observation [D] (Eq. 7); RuntimeError before any fit."""
         action = int(self.classify(observation).action[0])
         if action < 0:
             raise RuntimeError(

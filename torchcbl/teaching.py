@@ -149,9 +149,10 @@ class TeachingConfig:
         refit: "full" (default) fits the model from scratch at every refit, so it is a function
             of the labels alone; "incremental" uses ``GaussianMixtureSet.refit``: only the
             actions whose data changed are refitted, each candidate warm-started from its
-            previous parameters, with a periodic from-scratch fit (1/13 to 1/23 of the
-            refit time of a 10,000-demonstration session with max_new = 1, the same quality:
-            bench/bench_refit.py). The model then depends on the refit history as well.
+            previous parameters, with a periodic from-scratch fit (about 1/11 to 1/16 of the
+            refit time of a 10,000-demonstration session with max_new = 1 on an idle machine,
+            the same quality: bench/bench_refit.py, README's speed table). The model then
+            depends on the refit history as well.
         accuracy_window: number of most recent demonstrations the prediction accuracy is taken
             over (20 corridor, 150 driving); also the window of ``autonomy_rate``.
         target_accuracy: windowed accuracy in (0, 1] that ends the non-interactive phase;

@@ -186,6 +186,8 @@ class ConfidentExecution(_Phased):
         return bool(self.rule.is_confident(c)[0])
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        """After every refit: the rule's ``update`` with the training set (``observations``
+        [M, D], ``actions`` [M])."""
         self.rule.update(model, observations, actions)
 
     def to_config(self) -> dict[str, Any]:

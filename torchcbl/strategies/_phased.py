@@ -66,6 +66,8 @@ class _StrategyDefaults:
         return None
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        """After every refit, with the training set (``observations`` [M, D], ``actions``
+        [M]); nothing to do by default."""
         return None
 
     def observe_step(self, record: StepRecord, decision: Decision | None) -> None:

@@ -177,6 +177,9 @@ class ConfidenceBasedAutonomy(_Phased):
     # -- learning ------------------------------------------------------------------------------
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        """After every refit: the per-(action, runner-up) margin thresholds and the distance
+        gate from the training set (``observations`` [M, D], ``actions`` [M]) classified by the
+        refitted model."""
         x = np.asarray(observations, dtype=np.float64)
         y = np.asarray(actions, dtype=np.int64)
         c = model.classify(x)

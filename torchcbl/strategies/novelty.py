@@ -110,6 +110,8 @@ class NoveltyGated(_StrategyDefaults):
         self._labels += 1
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        """After every refit (``observations`` [M, D], ``actions`` [M]): the recent steps'
+        novelty scores are recomputed under the refitted model."""
         self._model = model
         self._rescore = True  # the step being finished was scored with the previous model
         if self._observations:
