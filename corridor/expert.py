@@ -12,7 +12,11 @@ the map's route:
   0.1``, so a robot whose steps vary in length (motion noise) still turns at the
   nearest step, and one that overshot turns at once. A turn from the decision point lands on the
   centre line of the next corridor. Otherwise: forward.
-- Heading against the route (within 45 degrees of its opposite), wherever the robot is: u-turn.
+- Heading against the route (within 45 degrees of its opposite) in the route's corridor: u-turn.
+  (Away from the tracked segment, e.g. in a side corridor, the direction of a far segment says
+  nothing: the reactive rule below applies; turning there on the heading alone u-turned for ever
+  at the end of a side corridor once the tracker stopped following corridors the route does not
+  take.)
 - Otherwise off the route (after a mistake of the learner; or past the segment's end node by
   more than half a step, down a corridor the route does not take): a reactive rule on the noise-free
   ranges: forward if the front is open (> ``open_range``), else turn toward the open side (left
@@ -71,7 +75,7 @@ class CorridorExpert:
         rel = np.array([x, y]) - start
         lateral = abs(direction[0] * rel[1] - direction[1] * rel[0])
         remaining = float(self.route.segment_lengths[seg] - np.dot(rel, direction))
-        if cos_err < -0.7:
+        if cos_err < -0.7 and lateral <= self.on_route_tolerance:
             return int(Action.U_TURN)
         overshot = remaining < -0.5 * self.config.forward_distance  # past the segment's end node
         if lateral > self.on_route_tolerance or cos_err < 0.9 or overshot:

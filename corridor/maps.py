@@ -294,13 +294,16 @@ class Route:
         back: float = 0.5,
         ahead: float = 1.0,
         heading_weight: float = 0.3,
+        max_offset: float = math.inf,
     ) -> RouteProgress:
         """Project a pose on the route near the previous unwrapped arc length ``s_prev``.
 
         Candidates are the nearest points of every segment whose arc length, unwrapped to lie in
-        ``[s_prev - back, s_prev + ahead]``, is reachable; among them the one minimising
+        ``[s_prev - back, s_prev + ahead]``, is reachable, and which lie within ``max_offset``
+        metres of the pose (the world passes the corridor width: a corridor the route does not
+        take, e.g. one parallel to it, is not the route); among them the one minimising
         distance + ``heading_weight`` * (1 - cos(heading error)) wins, so a spur driven in and
-        out is told apart by the heading. With no candidate in the window, the progress stays.
+        out is told apart by the heading. With no candidate, the progress stays.
         """
         p = np.array([x, y])
         hd = np.array([math.cos(heading), math.sin(heading)])
@@ -316,6 +319,8 @@ class Route:
             if s_abs > s_prev + ahead + _EPS:
                 continue
             dist = float(np.linalg.norm(p - q))
+            if dist > max_offset:
+                continue
             cost = dist + heading_weight * (1.0 - float(np.dot(hd, self._dirs[k])))
             if best is None or cost < best[0] - _EPS:
                 dk, rk = self._dirs[k], rel[k]

@@ -195,7 +195,7 @@ class CorridorWorld:
         x, y = x + dx, y + dy
         self._s = 0.0
         self._s_max = 0.0
-        self._progress = self.route.locate(x, y, h, 0.0)
+        self._progress = self.route.locate(x, y, h, 0.0, max_offset=self.map.corridor_width)
 
     def set_pose(self, x: float, y: float, heading: float) -> None:
         """Place the robot (metres, radians); raises ValueError if it would overlap a wall.
@@ -325,7 +325,9 @@ class CorridorWorld:
             self._commanded = _wrap(self._commanded + rotation)
         self._body.position = (x, y)
         self._body.angle = self._heading
-        self._progress = self.route.locate(x, y, self._heading, self._s)
+        self._progress = self.route.locate(
+            x, y, self._heading, self._s, max_offset=self.map.corridor_width
+        )
         self._s = self._progress.s
         self._s_max = max(self._s_max, self._s)
         return contact
