@@ -138,7 +138,10 @@ class DrivingEnv(gym.Env):
             raise ValueError("seed must be non-negative")
         if self.closed:
             raise RuntimeError("this DrivingEnv is closed; create a new one")
-        lane = int(options.get("ego_lane", self.config.start_lane))
+        given = options.get("ego_lane", self.config.start_lane)
+        lane = _as_int(given)
+        if lane is None or not 0 <= lane < N_LANES:
+            raise ValueError(f"ego_lane: expected a lane index 0-{N_LANES - 1}, got {given!r}")
         fcd = options.get("fcd_output")
         if fcd and not Path(fcd).parent.is_dir():
             raise ValueError(
@@ -157,7 +160,7 @@ class DrivingEnv(gym.Env):
             raise RuntimeError("this DrivingEnv is closed; create a new one")
         if self._episode_seed is None:
             raise RuntimeError("call reset() before step() (none ran, or the last one failed)")
-        a = int(action)
+        a = _as_int(action)  # 1.7, "1" or True is no action: refused, not rounded
         if a not in (STAY, LEFT, RIGHT):
             raise ValueError(f"action must be 0 (stay), 1 (left) or 2 (right), got {action!r}")
         lane = self._sim.ego_lane
@@ -169,6 +172,9 @@ class DrivingEnv(gym.Env):
         contact = self._sim.contact
         truncated = self._t >= self.config.max_episode_steps
         return self._observe(), -1.0 if contact else 0.0, False, truncated, self._info()
+
+    def __reduce_ex__(self, protocol: Any) -> Any:
+        return self._sim.__reduce_ex__(protocol)  # refused, with what to do instead
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
@@ -246,3 +252,15 @@ class DrivingEnv(gym.Env):
             "closing_speed_ms": closing,
             "step_length_s": self.config.sim.step_length_s,
         }
+
+
+def _as_int(value: Any) -> int | None:
+    """``value`` as an int when it is an integer (a Python or numpy int, a 0-d integer array),
+    else None; a bool, a float or a string is not."""
+    if isinstance(value, bool | np.bool_):
+        return None
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, np.ndarray) and value.shape == () and value.dtype.kind in "iu":
+        return int(value)
+    return None

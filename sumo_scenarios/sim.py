@@ -255,6 +255,15 @@ class HighwaySim:
         """True once :meth:`close` has run."""
         return self._closed
 
+    def __reduce_ex__(self, protocol: object) -> object:
+        # copy.copy, copy.deepcopy and pickle all come here: a copy would share (or, unpickled,
+        # lack) the process's one libsumo simulation while keeping its own bookkeeping
+        raise TypeError(
+            "a HighwaySim (and the DrivingEnv holding it) owns this process's one libsumo "
+            "simulation and cannot be copied or pickled; make a new DrivingEnv instead (in "
+            "another process for a second simulation, e.g. gymnasium's AsyncVectorEnv)"
+        )
+
     # ------------------------------------------------------------------ traffic
     def _spacing(self, lane: int) -> float:
         i = TRAFFIC_LANES.index(lane)

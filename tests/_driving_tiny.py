@@ -11,7 +11,7 @@ def tiny_config(**overrides) -> DrivingExperimentConfig:
         seeds=(0,),
         eval_steps=100,
         accuracy_window=20,
-        max_noninteractive=60,
+        max_noninteractive=100,  # seed 0 reaches 80 % over 20 at 63 demonstrations
         confident_demos=20,
         stage_every=10,
         burst=5,

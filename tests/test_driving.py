@@ -103,10 +103,17 @@ def test_a_start_off_the_road_is_refused_and_keeps_no_slot():
 
 def test_bad_action_and_options(env):
     env.reset(seed=0)
-    with pytest.raises(ValueError):
-        env.step(3)
+    lane = env.step(0)[4]["lane"]
+    for bad in (3, -1, 1.7, np.float64(2.0), "1", True, None):  # refused, never rounded
+        with pytest.raises(ValueError, match="action must be 0"):
+            env.step(bad)
+    assert env.step(np.int64(0))[4]["lane"] == lane and env.step(np.array(0))[4]["lane"] == lane
     with pytest.raises(ValueError, match="unknown reset options"):
         env.reset(seed=0, options={"lane": 1})
+    for bad in (2.7, 5, -1, "2"):
+        with pytest.raises(ValueError, match="ego_lane: expected a lane index 0-4"):
+            env.reset(seed=0, options={"ego_lane": bad})
+    assert env.reset(seed=0, options={"ego_lane": np.int64(3)})[1]["lane"] == 3
     with pytest.raises(ValueError):
         TrafficScenario(name="x", seed=0, speed_ranges_mph=((10.0, 30.0), (25, 35), (30, 40)))
 
@@ -376,3 +383,16 @@ def test_rebuilding_the_network_reproduces_the_shipped_files(tmp_path):
     for name in ("road.nod.xml", "road.edg.xml"):
         shipped = data_path("road.net.xml").parent / "src" / name
         assert (tmp_path / "src" / name).read_bytes() == shipped.read_bytes()
+
+
+def test_a_driving_env_refuses_to_be_copied_or_pickled(env):
+    """A copy would drive the same libsumo simulation with its own bookkeeping (deepcopy), or
+    lack it (pickle): refused with a message that says what to do."""
+    import copy
+    import pickle
+
+    env.reset(seed=5)
+    for clone in (copy.copy, copy.deepcopy, pickle.dumps):
+        with pytest.raises(TypeError, match="cannot be copied or pickled; make a new DrivingEnv"):
+            clone(env)
+    assert env.step(0)[4]["position_m"] == pytest.approx(6.7056, abs=1e-6)  # one step, no more
