@@ -1,0 +1,132 @@
+"""Time GaussianMixtureSet on a CUDA device beside the same model on the CPU, and compare them.
+
+For each case of ``bench_gmm.py`` (a: 3 x 330 x 4-D, k <= 15; b: 3 x 3000 x 4-D, k <= 15; c:
+10 x 1000 x 8-D, k <= 10) both sides fit the whole candidate sweep from the same seed; then both
+classify one large batch of rows (``--rows``, default 1,000,000). Reported per case: the best of
+``--repeats`` fits on each side and their ratio, whether the two chose the same component
+counts, the largest relative difference of the chosen candidates' log-likelihoods, and the share
+of rows both classify alike. The CPU side runs on torch's default thread count. The GPU is
+synchronised before each clock is read. There is no target: the GMM set is built for the
+teaching loop's small fits on a CPU, and this script says what a GPU changes.
+
+Usage: python bench/bench_gmm_device.py [--repeats 3] [--rows 1000000] [--cases a,b,c]
+Needs a CUDA device (exits 2 with one line without one). The last line printed is one JSON
+object with every figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+import torch
+
+from torchcbl.gmm import GaussianMixtureSet
+
+CASES = {"a": (3, 330, 4, 15), "b": (3, 3000, 4, 15), "c": (10, 1000, 8, 10)}
+
+
+def _data(n_actions: int, n_per: int, d: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    xs = []
+    for _ in range(n_actions):
+        m = int(rng.integers(3, 6))
+        centres = rng.normal(scale=3.0, size=(m, d))
+        scales = rng.uniform(0.3, 1.0, size=(m, d))
+        comp = rng.integers(0, m, size=n_per)
+        xs.append(centres[comp] + rng.normal(size=(n_per, d)) * scales[comp])
+    x = np.concatenate(xs)
+    return (x - x.mean(0)) / x.std(0), np.repeat(np.arange(n_actions), n_per)
+
+
+def _timed(fn, device: str) -> float:
+    if device == "cuda":
+        torch.cuda.synchronize()
+    t0 = time.perf_counter()
+    fn()
+    if device == "cuda":
+        torch.cuda.synchronize()
+    return time.perf_counter() - t0
+
+
+def _side(
+    dev: str, spec: tuple[int, int, int], x: np.ndarray, y: np.ndarray, q: np.ndarray, repeats: int
+) -> tuple[GaussianMixtureSet, float, float, object]:
+    """Fit and classify on ``dev``: (model, best fit seconds, best classify seconds, result)."""
+    n_act, d, k = spec
+    m = GaussianMixtureSet(n_act, d, k, tol=1e-4, max_iter=200, seed=0).to(dev)
+    m.fit(x, y)  # warm-up (CUDA context, kernels, allocator)
+    fit_s = min(_timed(lambda: m.fit(x, y), dev) for _ in range(repeats))
+    m.classify(q[:1000])
+    box: list = []
+    cls_s = min(_timed(lambda: box.append(m.classify(q)), dev) for _ in range(repeats))
+    return m, fit_s, cls_s, box[-1]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--rows", type=int, default=1_000_000)
+    p.add_argument("--cases", default="a,b,c")
+    a = p.parse_args(argv)
+    cases = a.cases.split(",")
+    if a.repeats < 1 or a.rows < 1 or not set(cases) <= set(CASES):
+        print(
+            f"error: --repeats and --rows must be >= 1, --cases from {sorted(CASES)}",
+            file=sys.stderr,
+        )
+        return 2
+    if not torch.cuda.is_available():
+        print(
+            "error: no CUDA device visible to torch; run this on a machine with a GPU",
+            file=sys.stderr,
+        )
+        return 2
+    out: dict = {"device": torch.cuda.get_device_name(0), "torch": torch.__version__, "cases": {}}
+    print(f"{out['device']}, torch {torch.__version__}, CPU threads {torch.get_num_threads()}")
+    print(
+        f"{'case':5} {'cpu fit s':>10} {'gpu fit s':>10} {'gpu/cpu':>8} {'same k':>7} "
+        f"{'max dLL':>9} {'cpu cls s':>10} {'gpu cls s':>10} {'agree':>7}"
+    )
+    q_rng = np.random.default_rng(1)
+    for name in cases:
+        n_act, n_per, d, k = CASES[name]
+        x, y = _data(n_act, n_per, d)
+        q = q_rng.normal(scale=1.5, size=(a.rows, d))
+        sides = {dev: _side(dev, (n_act, d, k), x, y, q, a.repeats) for dev in ("cpu", "cuda")}
+        fit_s = {dev: sides[dev][1] for dev in sides}
+        cls_s = {dev: sides[dev][2] for dev in sides}
+        results = {dev: sides[dev][3] for dev in sides}
+        models = {dev: sides[dev][0] for dev in sides}
+        c, g = models["cpu"], models["cuda"]
+        same_k = g.n_components_.cpu().tolist() == c.n_components_.tolist()
+        rows = torch.arange(n_act)
+        ll_c = c.fit_report_.log_likelihood[rows, c.n_components_ - 1]
+        ll_g = g.fit_report_.log_likelihood.cpu()[rows, g.n_components_.cpu() - 1]
+        dll = float(((ll_g - ll_c).abs() / ll_c.abs()).max())
+        agree = float((results["cuda"].action.cpu() == results["cpu"].action).double().mean())
+        out["cases"][name] = {
+            "cpu_fit_s": fit_s["cpu"],
+            "gpu_fit_s": fit_s["cuda"],
+            "gpu_over_cpu_fit": fit_s["cuda"] / fit_s["cpu"],
+            "same_components": same_k,
+            "max_rel_dll": dll,
+            "rows": a.rows,
+            "cpu_classify_s": cls_s["cpu"],
+            "gpu_classify_s": cls_s["cuda"],
+            "classify_agreement": agree,
+        }
+        print(
+            f"{name:5} {fit_s['cpu']:10.3f} {fit_s['cuda']:10.3f} "
+            f"{fit_s['cuda'] / fit_s['cpu']:8.2f} {str(same_k):>7} {dll:9.1e} "
+            f"{cls_s['cpu']:10.3f} {cls_s['cuda']:10.3f} {agree:7.4f}"
+        )
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,81 @@
+"""The GMM set on a CUDA device agrees with the same model on the CPU.
+
+Skipped where torch sees no CUDA device (this project's CI machines); run on a machine with a GPU
+(``pytest tests/test_gmm_cuda.py``). The oracle is the CPU fit of the same data and seed: both
+work in float64, so they differ only in the order of floating-point sums (GPU reductions), which
+moves the last bits, not the chosen model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from torchcbl.gmm import GaussianMixtureSet
+
+pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+
+
+def _data(seed: int = 0, n_per: int = 400, d: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Three actions, each a mixture of three well-separated Gaussians (standardised)."""
+    rng = np.random.default_rng(seed)
+    xs = []
+    for _ in range(3):
+        centres = rng.normal(scale=4.0, size=(3, d))
+        comp = rng.integers(0, 3, size=n_per)
+        xs.append(centres[comp] + rng.normal(scale=0.5, size=(n_per, d)))
+    x = np.concatenate(xs)
+    x = (x - x.mean(0)) / x.std(0)
+    return x, np.repeat(np.arange(3), n_per)
+
+
+def _fit(device: str, x: np.ndarray, y: np.ndarray) -> GaussianMixtureSet:
+    return GaussianMixtureSet(3, x.shape[1], 8, tol=1e-6, max_iter=300, seed=3).to(device).fit(x, y)
+
+
+def test_fit_on_cuda_selects_the_cpu_model_and_stays_on_the_device() -> None:
+    x, y = _data()
+    cpu, gpu = _fit("cpu", x, y), _fit("cuda", x, y)
+    assert gpu.means_.device.type == "cuda"
+    assert gpu.n_components_.cpu().tolist() == cpu.n_components_.tolist()
+    ll_cpu = cpu.fit_report_.log_likelihood
+    ll_gpu = gpu.fit_report_.log_likelihood.cpu()
+    real = cpu.fit_report_.candidate_mask
+    # every candidate's total log-likelihood, not only the chosen ones
+    np.testing.assert_allclose(ll_gpu[real].numpy(), ll_cpu[real].numpy(), rtol=1e-6)
+    np.testing.assert_allclose(gpu.means_.cpu().numpy(), cpu.means_.numpy(), atol=1e-6)
+
+
+def test_classify_on_cuda_matches_cpu_for_small_and_large_batches() -> None:
+    x, y = _data()
+    cpu, gpu = _fit("cpu", x, y), _fit("cuda", x, y)
+    rng = np.random.default_rng(1)
+    for n in (5, 5000):  # below and above the numpy path's row limit
+        q = rng.normal(scale=1.5, size=(n, x.shape[1]))
+        c, g = cpu.classify(q), gpu.classify(q)
+        assert torch.equal(g.action.cpu(), c.action)
+        np.testing.assert_allclose(g.distance.cpu().numpy(), c.distance.numpy(), rtol=1e-6)
+        np.testing.assert_allclose(g.posterior.cpu().numpy(), c.posterior.numpy(), atol=1e-9)
+
+
+def test_a_cuda_state_dict_loads_into_a_fresh_cpu_model() -> None:
+    x, y = _data()
+    gpu = _fit("cuda", x, y)
+    fresh = GaussianMixtureSet(3, x.shape[1], 8, tol=1e-6, max_iter=300, seed=3)
+    fresh.load_state_dict({k: v.cpu() for k, v in gpu.state_dict().items()})
+    q = np.random.default_rng(2).normal(size=(300, x.shape[1]))
+    g, f = gpu.classify(q), fresh.classify(q)
+    assert torch.equal(g.action.cpu(), f.action)
+    np.testing.assert_allclose(g.distance.cpu().numpy(), f.distance.numpy(), rtol=1e-12)
+
+
+def test_incremental_refit_on_cuda_tracks_the_cpu_refit() -> None:
+    x, y = _data(n_per=300)
+    x2, y2 = _data(seed=5, n_per=60)
+    xa, ya = np.concatenate([x, x2]), np.concatenate([y, y2])
+    cpu, gpu = _fit("cpu", x, y), _fit("cuda", x, y)
+    cpu.refit(xa, ya)
+    gpu.refit(xa, ya)
+    assert gpu.n_components_.cpu().tolist() == cpu.n_components_.tolist()
+    np.testing.assert_allclose(gpu.means_.cpu().numpy(), cpu.means_.numpy(), atol=1e-6)
