@@ -8,7 +8,9 @@ reports the share of readings at the clip, refits the GMM set at each cap and co
 "stay" components whose variance in some distance is within 5x the variance floor, and how
 many of those are centred on the clip.
 
-Usage: python scripts/driving_components_at_clip.py [RUN_DIR] [--caps 30,60]
+Usage: python scripts/driving_components_at_clip.py [RUN_DIR] [--caps 30,60] [--var-floor F]
+``--var-floor`` is the GMM's relative variance floor (default 1e-3, the library's; the driving
+experiment uses 0.03, see ``DrivingExperimentConfig.var_floor``).
 The last line printed is one JSON object with every figure.
 """
 
@@ -36,7 +38,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--caps", default="30,60")
     p.add_argument("--action", type=int, default=0, help="0 stay, 1 left, 2 right")
+    p.add_argument("--var-floor", type=float, default=1e-3, help="relative variance floor")
     a = p.parse_args(argv)
+    if not (np.isfinite(a.var_floor) and a.var_floor >= 0):
+        print(
+            f"error: --var-floor must be a finite number >= 0, got {a.var_floor}", file=sys.stderr
+        )
+        return 2
     try:
         records = load_records(a.run_dir)
     except Exception as exc:  # a missing or unreadable session: one line, exit code 2
@@ -55,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
         "per_action": np.bincount(y, minlength=3).tolist(),
         "share_at_clip_per_lane": at_clip.mean(0).round(4).tolist(),
         "share_rows_any_at_clip": round(float(at_clip.any(1).mean()), 4),
+        "var_floor": a.var_floor,
         "caps": {},
     }
     print(
@@ -62,7 +71,9 @@ def main(argv: list[str] | None = None) -> int:
         f"{out['share_at_clip_per_lane']}; rows with one: {out['share_rows_any_at_clip']}"
     )
     for cap in (int(c) for c in a.caps.split(",")):
-        m = GaussianMixtureSet(3, x.shape[1], cap, tol=1e-4, seed=0).fit(x, y)
+        m = GaussianMixtureSet(3, x.shape[1], cap, var_floor=a.var_floor, tol=1e-4, seed=0).fit(
+            x, y
+        )
         k = int(m.n_components_[a.action])
         var = np.diagonal(m.covariances_[a.action, :k].numpy(), axis1=1, axis2=2)[:, :3]
         mu = m.means_[a.action, :k].numpy()[:, :3]

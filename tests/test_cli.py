@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sumo_scenarios.experiment import DrivingExperimentConfig
 from torchcbl.cli import main
 from torchcbl.session import load_records
 
@@ -303,6 +304,14 @@ def test_a_person_teaches_the_driving_agent_from_a_terminal_and_it_asks_less(tmp
     # over the first 200 steps (seen: [99, 77, 57, 69, 64, 31, 73, 61] requests per 100 steps)
     assert np.mean(per_100[4:]) < 0.8 * np.mean(per_100[:2]), per_100
     assert "saved in" in screen
+    # the person taught the reproduction's learner (its cap, variance floor and tolerance)
+    model = json.loads((run_dir / "config.json").read_text())["model"]["args"]
+    cfg = DrivingExperimentConfig()
+    assert (model["max_components"], model["var_floor"], model["tol"]) == (
+        cfg.max_components,
+        cfg.var_floor,
+        cfg.gmm_tol,
+    )
 
 
 def test_reproduce_corridor_writes_a_summary_then_plot_and_evaluate_read_it(corridor_run, capsys):

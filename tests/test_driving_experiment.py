@@ -144,6 +144,8 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
         {"max_std": -2.0},
         {"accuracy_window": 0},
         {"arm_b_stages": (600, 600, 700)},
+        {"var_floor": -0.01},
+        {"var_floor": float("nan")},
     ],
 )
 def test_experiment_config_refuses_what_every_worker_would_fail_on(bad):

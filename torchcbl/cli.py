@@ -392,6 +392,17 @@ _TEACH = {
 }
 
 
+def _teach_model(domain: str, seed: int) -> Any:
+    """The learner a new teach session starts with: the driving experiment's GMM set (its cap,
+    variance floor and tolerance), so a person's session is comparable with the reproduction's;
+    for the corridor the loop's default, as its experiment uses."""
+    if domain != "driving":
+        return None
+    from sumo_scenarios.experiment import DrivingExperimentConfig, make_model
+
+    return make_model(DrivingExperimentConfig(), seed)
+
+
 def _cmd_teach(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
@@ -446,6 +457,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         ct = ConfidentTeacher(
             env,
             teacher,
+            model=_teach_model(args.domain, args.seed),
             config=config,
             run_dir=run_dir,
             seed=args.seed,
