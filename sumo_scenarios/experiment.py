@@ -88,8 +88,9 @@ class DrivingExperimentConfig:
             spread along a feature is at least ``sqrt(var_floor)`` of that feature's standard
             deviation over the training set, about 3 m for the distances and 0.2 for the lane
             index at 0.03. The library's default, 1e-3 (about 0.6 m), let the AIC buy ever more
-            "stay" components collapsed on the readings clipped at +-25 m (point masses: 71 % of
-            the demonstrations carry one), so "stay" sat at any cap tried (30, 60, 100). 0.03 is
+            "stay" components collapsed on the readings clipped at +-25 m (point masses: 70 % of
+            the demonstrations carry one), so "stay" grew with the cap (22, 39 and 56 components
+            with caps 30, 40 and 60 on seed 0's arm (a) demonstrations of 2026-11-26). 0.03 is
             the smallest of 1e-3, 3e-3, 0.01, 0.02, 0.03, 0.05 at which no mixture reached a cap
             of 30 on the demonstrations of every session of 2026-11-25's quick run (10 seeds, arm
             (a) final, arm (b) at 500 and 1000), chosen on that criterion alone; the first
