@@ -1,9 +1,11 @@
 """Decisions per second of DrivingEnv with a learned GMM policy in the loop (one process).
 
-Fits a GaussianMixtureSet on expert demonstrations, then times env.step + classify on the
-evaluation scenario, in wall-clock time and in this process's CPU time (SUMO runs in-process),
-against a target of 1,000 decisions/s (issue 11). "env only" replays the same actions on the
-same segment without the policy: the same env work, so the difference is the policy's cost.
+Fits the driving experiment's GMM set (``sumo_scenarios.experiment.make_model``: its cap of 40
+and variance floor) on the human-like teacher's demonstrations, then times env.step + classify
+on the evaluation scenario, in wall-clock time and in this process's CPU time (SUMO runs
+in-process), against a target of 1,000 decisions/s (issue 11). "env only" replays the same
+actions on the same segment without the policy: the same env work, so the difference is the
+policy's cost.
 Prints a table and ends with ONE line of JSON.
 
 Usage: python bench/bench_driving.py [--demos 600] [--steps 3000]
@@ -19,8 +21,9 @@ import numpy as np
 import torch
 
 from sumo_scenarios.env import DrivingEnv
-from sumo_scenarios.expert import ScriptedExpert
-from torchcbl import GaussianMixtureSet, GreedyPolicy
+from sumo_scenarios.experiment import DrivingExperimentConfig, make_model
+from sumo_scenarios.teacher import make_teacher
+from torchcbl import GreedyPolicy
 
 TARGET = 1000.0  # decisions/s with the GMM policy in the loop
 
@@ -29,7 +32,7 @@ def main(n_demos: int = 600, n_steps: int = 3000) -> dict[str, float]:
     torch.set_num_threads(1)  # small fits on a shared 2-core box: 2 threads are far slower
     env = DrivingEnv(scenario="train")
     try:
-        expert = ScriptedExpert(seed=0)
+        expert = make_teacher(0)
         obs, info = env.reset(seed=0)
         xs, ys = [], []
         for _ in range(n_demos):
@@ -40,7 +43,7 @@ def main(n_demos: int = 600, n_steps: int = 3000) -> dict[str, float]:
     finally:
         env.close()
     t = time.perf_counter()
-    model = GaussianMixtureSet(3, 4, 10, seed=0).fit(np.stack(xs), np.asarray(ys))
+    model = make_model(DrivingExperimentConfig(), 0).fit(np.stack(xs), np.asarray(ys))
     fit_s = time.perf_counter() - t
     policy = GreedyPolicy(model)
     env = DrivingEnv(scenario="eval", max_episode_steps=10**9)
@@ -87,7 +90,7 @@ def main(n_demos: int = 600, n_steps: int = 3000) -> dict[str, float]:
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--demos", type=int, default=600, help="expert demonstrations to fit on")
+    ap.add_argument("--demos", type=int, default=600, help="teacher demonstrations to fit on")
     ap.add_argument("--steps", type=int, default=3000, help="timed decisions")
     args = ap.parse_args()
     main(args.demos, args.steps)
