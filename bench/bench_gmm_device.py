@@ -23,23 +23,11 @@ import time
 
 import numpy as np
 import torch
+from bench_gmm import make_data  # the same cases' data (bench/ is on sys.path when run)
 
 from torchcbl.gmm import GaussianMixtureSet
 
 CASES = {"a": (3, 330, 4, 15), "b": (3, 3000, 4, 15), "c": (10, 1000, 8, 10)}
-
-
-def _data(n_actions: int, n_per: int, d: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    xs = []
-    for _ in range(n_actions):
-        m = int(rng.integers(3, 6))
-        centres = rng.normal(scale=3.0, size=(m, d))
-        scales = rng.uniform(0.3, 1.0, size=(m, d))
-        comp = rng.integers(0, m, size=n_per)
-        xs.append(centres[comp] + rng.normal(size=(n_per, d)) * scales[comp])
-    x = np.concatenate(xs)
-    return (x - x.mean(0)) / x.std(0), np.repeat(np.arange(n_actions), n_per)
 
 
 def _timed(fn, device: str) -> float:
@@ -94,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     q_rng = np.random.default_rng(1)
     for name in cases:
         n_act, n_per, d, k = CASES[name]
-        x, y = _data(n_act, n_per, d)
+        x, y = make_data(n_act, n_per, d)
         q = q_rng.normal(scale=1.5, size=(a.rows, d))
         sides = {dev: _side(dev, (n_act, d, k), x, y, q, a.repeats) for dev in ("cpu", "cuda")}
         fit_s = {dev: sides[dev][1] for dev in sides}
