@@ -84,33 +84,28 @@ def main(argv: list[str] | None = None) -> int:
         n_act, n_per, d, k = CASES[name]
         x, y = make_data(n_act, n_per, d)
         q = q_rng.normal(scale=1.5, size=(a.rows, d))
-        sides = {dev: _side(dev, (n_act, d, k), x, y, q, a.repeats) for dev in ("cpu", "cuda")}
-        fit_s = {dev: sides[dev][1] for dev in sides}
-        cls_s = {dev: sides[dev][2] for dev in sides}
-        results = {dev: sides[dev][3] for dev in sides}
-        models = {dev: sides[dev][0] for dev in sides}
-        c, g = models["cpu"], models["cuda"]
+        c, fit_c, cls_c, res_c = _side("cpu", (n_act, d, k), x, y, q, a.repeats)
+        g, fit_g, cls_g, res_g = _side("cuda", (n_act, d, k), x, y, q, a.repeats)
         same_k = g.n_components_.cpu().tolist() == c.n_components_.tolist()
         rows = torch.arange(n_act)
         ll_c = c.fit_report_.log_likelihood[rows, c.n_components_ - 1]
         ll_g = g.fit_report_.log_likelihood.cpu()[rows, g.n_components_.cpu() - 1]
         dll = float(((ll_g - ll_c).abs() / ll_c.abs()).max())
-        agree = float((results["cuda"].action.cpu() == results["cpu"].action).double().mean())
+        agree = float((res_g.action.cpu() == res_c.action).double().mean())
         out["cases"][name] = {
-            "cpu_fit_s": fit_s["cpu"],
-            "gpu_fit_s": fit_s["cuda"],
-            "gpu_over_cpu_fit": fit_s["cuda"] / fit_s["cpu"],
+            "cpu_fit_s": fit_c,
+            "gpu_fit_s": fit_g,
+            "gpu_over_cpu_fit": fit_g / fit_c,
             "same_components": same_k,
             "max_rel_dll": dll,
             "rows": a.rows,
-            "cpu_classify_s": cls_s["cpu"],
-            "gpu_classify_s": cls_s["cuda"],
+            "cpu_classify_s": cls_c,
+            "gpu_classify_s": cls_g,
             "classify_agreement": agree,
         }
         print(
-            f"{name:5} {fit_s['cpu']:10.3f} {fit_s['cuda']:10.3f} "
-            f"{fit_s['cuda'] / fit_s['cpu']:8.2f} {str(same_k):>7} {dll:9.1e} "
-            f"{cls_s['cpu']:10.3f} {cls_s['cuda']:10.3f} {agree:7.4f}"
+            f"{name:5} {fit_c:10.3f} {fit_g:10.3f} {fit_g / fit_c:8.2f} {str(same_k):>7} "
+            f"{dll:9.1e} {cls_c:10.3f} {cls_g:10.3f} {agree:7.4f}"
         )
     print(json.dumps(out))
     return 0

@@ -206,11 +206,14 @@ def _stage_labels(cfg: DrivingExperimentConfig, ni_stages: Sequence[int] = ()) -
     return ["straight", *ni, *a, *[f"b_{n}" for n in cfg.arm_b_stages], "expert"]
 
 
-def make_model(config: DrivingExperimentConfig, seed: int) -> GaussianMixtureSet:
+def make_model(config: DrivingExperimentConfig | None = None, seed: int = 0) -> GaussianMixtureSet:
     """The experiment's learner: a fresh ``GaussianMixtureSet`` for the driving env (3 actions,
-    4 features) with ``config``'s cap, criterion, variance floor and EM tolerance, seeded with
-    ``seed``. ``torchcbl teach driving`` teaches this model too."""
+    4 features) with ``config``'s cap, criterion, variance floor and EM tolerance (the quick
+    defaults when None), seeded with ``seed``. ``torchcbl teach driving`` teaches this model
+    too."""
     from torchcbl import GaussianMixtureSet
+
+    config = config or DrivingExperimentConfig()
 
     return GaussianMixtureSet(
         3,

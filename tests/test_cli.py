@@ -515,9 +515,9 @@ def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
             pass
 
     monkeypatch.setattr(corridor.human, "make_teacher", lambda **kw: Scripted())
-    package, env_id, human, settings = cli._TEACH["corridor"]
+    package, env_id, human, settings, model = cli._TEACH["corridor"]
     budget = {**settings, "max_demonstrations": 5, "autonomous_episodes_to_stop": None}
-    monkeypatch.setitem(cli._TEACH, "corridor", (package, env_id, human, budget))
+    monkeypatch.setitem(cli._TEACH, "corridor", (package, env_id, human, budget, model))
     run = tmp_path / "session"
     assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "30"]) == 0
     out = capsys.readouterr().out

@@ -373,13 +373,16 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 
 # What the teach command needs per domain: the gymnasium id (registered on importing the
-# package), the module with the text view / key map, and the paper's teaching settings.
+# package), the module with the text view / key map, the paper's teaching settings, and the
+# "module:function" building the learner from a seed (the domain's experiment's, so a person's
+# session compares with the reproduction's; None: the loop's default, as the corridor's uses).
 _TEACH = {
     "corridor": (
         "corridor",
         "torchcbl/Corridor-v0",
         "corridor.human",
         dict(accuracy_window=20, target_accuracy=0.9, autonomous_episodes_to_stop=10),
+        None,
     ),
     "driving": (
         "sumo_scenarios",
@@ -388,27 +391,18 @@ _TEACH = {
         dict(
             accuracy_window=150, target_accuracy=0.8, burst=10, max_new=10, max_demonstrations=650
         ),
+        "sumo_scenarios.experiment:make_model",
     ),
 }
-
-
-def _teach_model(domain: str, seed: int) -> Any:
-    """The learner a new teach session starts with: the driving experiment's GMM set (its cap,
-    variance floor and tolerance), so a person's session is comparable with the reproduction's;
-    for the corridor the loop's default, as its experiment uses."""
-    if domain != "driving":
-        return None
-    from sumo_scenarios.experiment import DrivingExperimentConfig, make_model
-
-    return make_model(DrivingExperimentConfig(), seed)
 
 
 def _cmd_teach(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
+    from torchcbl.benchmark import _import
     from torchcbl.teaching import ConfidentTeacher, TeachingConfig, TeachingInterrupted
 
-    package, env_id, human_module, settings = _TEACH[args.domain]
+    package, env_id, human_module, settings, model_factory = _TEACH[args.domain]
     run_dir = Path(args.run_dir)
     if run_dir.exists() and not run_dir.is_dir():
         raise _UsageError(f"--run-dir {run_dir} is a file; expected a session directory")
@@ -457,7 +451,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         ct = ConfidentTeacher(
             env,
             teacher,
-            model=_teach_model(args.domain, args.seed),
+            model=_import(model_factory)(seed=args.seed) if model_factory else None,
             config=config,
             run_dir=run_dir,
             seed=args.seed,
