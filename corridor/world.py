@@ -208,6 +208,38 @@ class CorridorWorld:
         self._body.position = (self._x, self._y)
         self._body.angle = self._heading
 
+    def snapshot(self) -> tuple[float, ...]:
+        """The robot's whole state (pose, commanded heading, route progress) as an opaque,
+        hashable tuple for :meth:`restore`: a search over action sequences can branch from a
+        state without replaying the actions that led there."""
+        p = self._progress
+        return (
+            self._x,
+            self._y,
+            self._heading,
+            self._commanded,
+            self._s,
+            self._s_max,
+            p.s,
+            float(p.segment),
+            p.lateral,
+            p.remaining,
+        )
+
+    def restore(self, snapshot: tuple[float, ...]) -> None:
+        """Put the robot back in a state taken by :meth:`snapshot` (of a world on the same map)."""
+        if len(snapshot) != 10:
+            raise ValueError(
+                f"expected a snapshot of 10 numbers from CorridorWorld.snapshot(), got "
+                f"{len(snapshot)}"
+            )
+        x, y, h, cmd, s, s_max, ps, seg, lat, rem = snapshot
+        self._x, self._y, self._heading, self._commanded = x, y, h, cmd
+        self._s, self._s_max = s, s_max
+        self._progress = RouteProgress(ps, int(seg), lat, rem)
+        self._body.position = (x, y)
+        self._body.angle = h
+
     @property
     def pose(self) -> tuple[float, float, float]:
         """``(x, y, heading)``: metres, radians in (-pi, pi]."""

@@ -15,7 +15,12 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import corridor
-from corridor.baseline import PrioritizedSweepingConfig, binary_state, run_prioritized_sweeping
+from corridor.baseline import (
+    PrioritizedSweepingConfig,
+    binary_state,
+    run_prioritized_sweeping,
+    score_tables,
+)
 from corridor.env import CorridorEnv
 from corridor.expert import CorridorExpert
 from corridor.maps import available_maps, load_map, map_from_dict
@@ -322,6 +327,47 @@ def test_prioritized_sweeping_first_hit_vs_stable(monkeypatch):
         map_from_dict(SMALL), dataclasses.replace(cfg, max_steps=45), seed=0
     )
     assert (r.steps_first, r.steps_stable, r.learning_steps) == (5, None, 45)
+
+
+def test_the_baselines_reward_makes_the_route_its_best_table():
+    """Issue 12: a reward that does not pay more for bumping walls than for the route. Over
+    every behaviour of an 8-state table (exact motion), the experiment's reward puts the route's
+    table first; with the contact penalty of 1 used before, a table that turns left at the
+    spur's end (a contact on the way in and out of the turn) out-earned it."""
+    from corridor.experiment import CorridorExperimentConfig
+
+    ps = CorridorExperimentConfig().ps
+    figure2 = load_map("figure2")
+    scores = score_tables(figure2, ps, steps=400)
+    assert len(scores) > 100 and len({sc.table for sc in scores}) == len(scores)
+    best = scores[0]
+    route = {0b101: F, 0b001: F, 0b011: L, 0b010: L, 0b100: R, 0b111: U, 0b000: F}
+    assert best.drives_route and dict(best.table) == route
+    assert best.reward_per_step > scores[1].reward_per_step + 0.01
+    assert [sc.drives_route for sc in scores].count(True) == 1
+
+    old = score_tables(figure2, dataclasses.replace(ps, contact_penalty=1.0), steps=400)
+    assert not old[0].drives_route and old[0].contacts > 0
+    assert dict(old[0].table)[0b111] == L
+    rank = next(i for i, sc in enumerate(old) if sc.drives_route)
+    assert rank >= 1 and old[rank].reward_per_step == pytest.approx(best.reward_per_step)
+    with pytest.raises(ValueError, match="steps must be an int >= 1"):
+        score_tables(figure2, ps, steps=0)
+
+
+def test_a_world_snapshot_restores_the_robot_and_its_progress():
+    world = CorridorWorld(load_map("figure2"), WorldConfig.legged_robot())
+    rng = np.random.default_rng(0)
+    for a in (F, F, F, L):
+        world.step(a, rng)
+    snap = world.snapshot()
+    after = [(world.step(a, np.random.default_rng(1)), world.pose, world.progress) for a in (F, R)]
+    world.reset()
+    world.restore(snap)
+    again = [(world.step(a, np.random.default_rng(1)), world.pose, world.progress) for a in (F, R)]
+    assert again == after and hash(snap) == hash(tuple(snap))
+    with pytest.raises(ValueError, match="snapshot of 10 numbers"):
+        world.restore(snap[:3])
 
 
 def test_prioritized_sweeping_config_rejects_bad_values():
