@@ -12,6 +12,15 @@ route's actions) on the noisy robot for N seeds of ``--steps`` steps each, and p
 ranking: the route's table itself touches walls under noise (the aliasing of the 8 states),
 so the exact ranking need not hold there. About 1.5 minutes per penalty on two cores.
 
+With ``--model-check N`` it asks whether a learner that plans on the 8 states can hold the best
+table even when the best table is what it sees: the robot drives the best (exact) table with 10%
+random actions for N steps, in the learner's episodes and reward; the 8-state model of those
+steps (transition counts and sample-mean rewards, as ``PrioritizedSweeping`` keeps them) is
+solved by value iteration to its fixed point (the values Prioritized Sweeping's backups converge
+to on that model, pairs tried fewer than ``optimism_visits`` times valued optimistically), and
+its greedy table is compared with the best table on the states the best table reaches, for
+exact and noisy motion and three seeds each.
+
     PYTHONPATH=$PWD python scripts/corridor_table_search.py [--penalties 1,2] [--steps 1000]
         [--top 5] [--noisy-seeds 3]
 
@@ -31,7 +40,7 @@ import numpy as np
 from corridor.baseline import PrioritizedSweepingConfig, TableScore, binary_state, score_tables
 from corridor.experiment import CorridorExperimentConfig
 from corridor.maps import load_map
-from corridor.world import CorridorWorld, WorldConfig
+from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
 
 _NAMES = "FLRU"
 # The route's table on figure2: forward in corridors and northbound at J, left at corners, right
@@ -85,6 +94,64 @@ def _noisy(args: tuple[tuple[int, ...], PrioritizedSweepingConfig, str, int, int
     return total / steps, contacts, circuits
 
 
+def _model_greedy(
+    table: tuple[int, ...],
+    cfg: PrioritizedSweepingConfig,
+    map_name: str,
+    noisy: bool,
+    seed: int,
+    steps: int,
+    epsilon: float = 0.1,
+) -> tuple[list[int], list[bool]]:
+    """The greedy table of the 8-state model learned from ``steps`` steps of ``table`` with
+    ``epsilon`` random actions, and which states were reached."""
+    rng = np.random.default_rng(seed)
+    world = CorridorWorld(
+        load_map(map_name), WorldConfig.legged_robot() if noisy else WorldConfig()
+    )
+    n = np.zeros((8, N_ACTIONS))
+    trans = np.zeros((8, N_ACTIONS, 8))
+    rsum = np.zeros((8, N_ACTIONS))
+
+    def cell() -> tuple[int, int]:
+        x, y, _ = world.pose
+        return (round(x / cfg.cell_size), round(y / cfg.cell_size))
+
+    last = {cell(): 0}
+    s = binary_state(world.sense(rng), cfg.wall_threshold)
+    ep_t = 0
+    for t in range(1, steps + 1):
+        a = int(rng.integers(N_ACTIONS)) if rng.random() < epsilon else table[s]
+        before = world.progress.s
+        contact = world.step(a, rng)
+        s2 = binary_state(world.sense(rng), cfg.wall_threshold)
+        c = cell()
+        since = t - last[c] if c in last else cfg.recency_horizon
+        novelty = min(1.0, since / cfg.recency_horizon)
+        if cfg.directed and not world.progress.s > before + 1e-9:
+            novelty = 0.0
+        last[c] = t
+        n[s, a] += 1
+        trans[s, a, s2] += 1
+        rsum[s, a] += novelty - cfg.contact_penalty * float(contact)
+        s = s2
+        ep_t += 1
+        if world.laps > 0 or ep_t >= cfg.episode_steps:
+            world.reset()
+            ep_t = 0
+            s = binary_state(world.sense(rng), cfg.wall_threshold)
+    trusted = n >= cfg.optimism_visits
+    reward = np.where(trusted, rsum / np.maximum(n, 1), 0.0)
+    p = trans / np.maximum(n, 1)[..., None]
+    q = np.zeros((8, N_ACTIONS))
+    for _ in range(5000):
+        q_new = np.where(trusted, reward + cfg.gamma * p @ q.max(axis=1), 1 / (1 - cfg.gamma))
+        if np.abs(q_new - q).max() < 1e-10:
+            break
+        q = q_new
+    return [int(a) for a in q.argmax(axis=1)], [bool(v) for v in n.sum(axis=1) > 0]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--map", default="figure2")
@@ -92,6 +159,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=1000, help="learning steps scored per table")
     ap.add_argument("--top", type=int, default=5)
     ap.add_argument("--noisy-seeds", type=int, default=0)
+    ap.add_argument("--model-check", type=int, default=0, metavar="N")
     args = ap.parse_args()
     t0 = time.perf_counter()
     base = CorridorExperimentConfig().ps
@@ -156,6 +224,30 @@ def main() -> None:
             row["noisy_route_rank"] = rank
             row["noisy_best"] = {"table": rows[0][3], "reward": round(rows[0][0], 6)}
             row["noisy_route"] = {"contacts": rows[rank - 1][1], "circuits": rows[rank - 1][2]}
+        if args.model_check:
+            best = list(_ROUTE)
+            for st, a in scores[0].table:
+                best[st] = a
+            on_route = {st for st, _ in scores[0].table}
+            row["model_check"] = {}
+            print(f"\nthe 8-state model of {args.model_check} steps of the best table (10% random)")
+            print(
+                "| motion | seed | model's greedy table | states where it differs (best table's) |"
+            )
+            print("|---|---|---|---|")
+            for motion in ("exact", "noisy"):
+                for seed in range(3):
+                    greedy, reached = _model_greedy(
+                        tuple(best), cfg, args.map, motion == "noisy", seed, args.model_check
+                    )
+                    diff = [
+                        f"{st:03b}:{_NAMES[greedy[st]]} ({_NAMES[best[st]]})"
+                        for st in range(8)
+                        if st in on_route and reached[st] and greedy[st] != best[st]
+                    ]
+                    text = "".join(_NAMES[a] for a in greedy)
+                    print(f"| {motion} | {seed} | {text} | {', '.join(diff) or 'none'} |")
+                    row["model_check"][f"{motion}_{seed}"] = {"greedy": text, "differs": diff}
         out[f"{penalty:g}"] = row
     out["seconds"] = round(time.perf_counter() - t0, 1)
     print(json.dumps(out))
