@@ -458,6 +458,7 @@ def score_tables(
     config: PrioritizedSweepingConfig | None = None,
     *,
     steps: int = 1000,
+    world_config: WorldConfig | None = None,
 ) -> list[TableScore]:
     """Every distinct behaviour of a deterministic 8-state table, scored by the baseline's reward.
 
@@ -469,7 +470,8 @@ def score_tables(
     (on ``figure2``, 640 of the 65,536 tables). Each runs ``steps`` learning steps in the
     learner's protocol (:func:`run_prioritized_sweeping`: ``config``'s reward, episodes ending
     with a circuit or after ``episode_steps`` actions, the robot put back at the start pose, the
-    recency memory kept across episodes).
+    recency memory kept across episodes). ``world_config`` gives the robot and its sensors
+    (default :class:`WorldConfig`); its motion noise is set to 0 and the sensors read true ranges.
 
     Returns:
         The behaviours, best ``reward_per_step`` first (ties in table order).
@@ -477,7 +479,13 @@ def score_tables(
     config = config or PrioritizedSweepingConfig()
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise ValueError(f"steps must be an int >= 1, got {steps!r}")
-    world = CorridorWorld(corridor_map, WorldConfig())
+    exact = dataclasses.replace(
+        world_config or WorldConfig(),
+        forward_noise=0.0,
+        heading_noise=0.0,
+        forward_heading_noise=0.0,
+    )
+    world = CorridorWorld(corridor_map, exact)
     world.reset()
     start = world.snapshot()
     moves: dict[tuple[tuple[float, ...], int], tuple[tuple[float, ...], bool]] = {}

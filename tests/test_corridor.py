@@ -440,6 +440,10 @@ def test_tiny_experiment_writes_results(tmp_path):
     assert {"torch", "pymunk", "gymnasium"} <= set(data["versions"])
     assert 0 <= s["eval_perturbed_clean_share"] <= 1 and 0 <= s["ps_learned_share"] <= 1
     assert s["motion_noise"]["forward_noise"] == 0.0
+    best = s["ps_reward_best_table"]
+    assert best["drives_route"] and best["route_rank"] == 1 and best["contacts"] == 0
+    assert best["table"]["111"] == "u_turn" and best["table"]["100"] == "turn_right"
+    assert data["acceptance"]["ps_reward_best_table_drives_route"] is True
     assert data["config"]["threshold_reading"] == "coverage" and s["finished_share"] == 1.0
     blocks = s["requests_by_circuits"]
     assert blocks[0]["circuits"] == "1-5" and blocks[0]["seeds"] == 2
