@@ -526,3 +526,9 @@ def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
     out = capsys.readouterr().out
     assert "over 15 steps" in out and "(--steps done)" in out
     assert len(load_records(run)) == 15
+    # the person taught the reproduction's learner (its cap and variance floor)
+    from corridor.experiment import CorridorExperimentConfig
+
+    model = json.loads((run / "config.json").read_text())["model"]["args"]
+    cfg = CorridorExperimentConfig()
+    assert (model["max_components"], model["var_floor"]) == (cfg.max_components, cfg.var_floor)

@@ -170,6 +170,19 @@ def test_experiment_config_checks_what_the_workers_would_find_late():
         CorridorExperimentConfig(eval_perturbation=(0.3, 0.1))  # wider than the corridor
     with pytest.raises(ValueError, match="max_std = 9.0 gives no usable threshold"):
         CorridorExperimentConfig(max_std=9.0)  # a coverage of 1.0 in float64
+    with pytest.raises(ValueError, match="max_components must be an int >= 1, got 0"):
+        CorridorExperimentConfig(max_components=0)
+    with pytest.raises(ValueError, match="var_floor must be a finite number >= 0, got nan"):
+        CorridorExperimentConfig(var_floor=math.nan)
+
+
+def test_the_experiments_learner_has_its_cap_and_floor():
+    from corridor.experiment import CorridorExperimentConfig, make_model
+
+    cfg = CorridorExperimentConfig(max_components=7, var_floor=0.02)
+    model = make_model(cfg, seed=3)
+    assert (model.max_components, model.var_floor) == (7, 0.02)
+    assert make_model().max_components == CorridorExperimentConfig().max_components
 
 
 def test_a_map_file_may_be_given_as_a_path():

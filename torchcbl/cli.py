@@ -382,7 +382,7 @@ _TEACH = {
         "torchcbl/Corridor-v0",
         "corridor.human",
         dict(accuracy_window=20, target_accuracy=0.9, autonomous_episodes_to_stop=10),
-        None,
+        "corridor.experiment:make_model",
     ),
     "driving": (
         "sumo_scenarios",
