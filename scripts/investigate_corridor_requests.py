@@ -10,8 +10,10 @@ how the forward mixture's components evolve with the data, and the final model's
 on 50 fresh circuits (with the expected number of circuits to the stop rule's ten
 request-free circuits in a row).
 
-Settings: ``default`` (noisy motion, AIC, 2.83 std), ``exact`` (exact motion), ``literal``
-(2 std), ``aic_paper`` (the paper's Eq. 5, 2 k - 2 L), ``bic``.
+Settings: ``default`` (noisy motion, AIC, 2.83 std, the experiment's variance floor and cap),
+``exact`` (exact motion), ``literal`` (2 std), ``aic_paper`` (the paper's Eq. 5, 2 k - 2 L),
+``bic``, ``floor_1e-3`` (the default with the library's floor 1e-3 and cap 10, the GMM of every
+setting until 2026-11-26, when the README's figures from this script were measured).
 
     PYTHONPATH=$PWD python scripts/investigate_corridor_requests.py [--seeds 0-9]
         [--settings default,exact,literal,aic_paper,bic] [--out runs/investigate/requests.json]
@@ -42,7 +44,7 @@ from corridor.maps import load_map
 from torchcbl import ConfidentTeacher, evaluate_policy
 from torchcbl.gmm import GaussianMixtureSet
 
-SETTINGS = ("default", "exact", "literal", "aic_paper", "bic")
+SETTINGS = ("default", "exact", "literal", "aic_paper", "bic", "floor_1e-3")
 BANDS = ((0, 5), (5, 10), (10, 20), (20, 40), (40, 80), (80, 160))
 TAIL = 20  # circuits of the confident phase before a request counts as "tail"
 
@@ -90,6 +92,8 @@ def _config(setting: str) -> tuple[CorridorExperimentConfig, str]:
         return dataclasses.replace(base, threshold_reading="literal"), "aic"
     if setting in ("aic_paper", "bic"):
         return base, setting
+    if setting == "floor_1e-3":
+        return dataclasses.replace(base, var_floor=1e-3, max_components=10), "aic"
     raise SystemExit(f"unknown setting {setting!r}; expected some of {SETTINGS}")
 
 
@@ -126,7 +130,9 @@ def run_one(setting: str, seed: int) -> dict[str, Any]:
     t = ConfidentTeacher(
         CorridorEnv(corridor_map, cfg.world),
         teacher,
-        model=GaussianMixtureSet(4, 3, seed=seed, criterion=criterion),
+        model=GaussianMixtureSet(
+            4, 3, cfg.max_components, criterion=criterion, var_floor=cfg.var_floor, seed=seed
+        ),
         rule=rule,
         config=cfg.teaching,
         seed=seed,

@@ -182,7 +182,6 @@ def test_the_experiments_learner_has_its_cap_and_floor():
     cfg = CorridorExperimentConfig(max_components=7, var_floor=0.02)
     model = make_model(cfg, seed=3)
     assert (model.max_components, model.var_floor) == (7, 0.02)
-    assert make_model().max_components == CorridorExperimentConfig().max_components
 
 
 def test_a_map_file_may_be_given_as_a_path():
@@ -363,22 +362,30 @@ def test_the_baselines_reward_makes_the_route_its_best_table():
     assert not old[0].drives_route and old[0].contacts > 0
     assert dict(old[0].table)[0b111] == L
     rank = next(i for i, sc in enumerate(old) if sc.drives_route)
-    assert rank >= 1 and old[rank].reward_per_step == pytest.approx(best.reward_per_step)
+    # the route's run has no contact, so its reward does not depend on the penalty
+    assert old[rank].reward_per_step == pytest.approx(best.reward_per_step)
     with pytest.raises(ValueError, match="steps must be an int >= 1"):
         score_tables(figure2, ps, steps=0)
 
 
 def test_a_world_snapshot_restores_the_robot_and_its_progress():
+    """A snapshot taken past a circuit restores the pose, the commanded heading and the route
+    progress (so the circuits counted): the steps after it repeat exactly."""
     world = CorridorWorld(load_map("figure2"), WorldConfig.legged_robot())
+    route = (F, F, L, L, R, F, U, U)  # by state bits left/front/right
     rng = np.random.default_rng(0)
-    for a in (F, F, F, L):
-        world.step(a, rng)
+    while world.laps < 1:
+        world.step(route[binary_state(world.true_ranges(), 0.6)], rng)
+    for _ in range(3):
+        world.step(route[binary_state(world.true_ranges(), 0.6)], rng)
     snap = world.snapshot()
     after = [(world.step(a, np.random.default_rng(1)), world.pose, world.progress) for a in (F, R)]
     world.reset()
+    assert world.laps == 0 and world.snapshot() != snap
     world.restore(snap)
+    assert world.snapshot() == snap and world.laps == 1
     again = [(world.step(a, np.random.default_rng(1)), world.pose, world.progress) for a in (F, R)]
-    assert again == after and hash(snap) == hash(tuple(snap))
+    assert again == after
     with pytest.raises(ValueError, match="snapshot of 10 numbers"):
         world.restore(snap[:3])
 

@@ -375,7 +375,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 # What the teach command needs per domain: the gymnasium id (registered on importing the
 # package), the module with the text view / key map, the paper's teaching settings, and the
 # "module:function" building the learner from a seed (the domain's experiment's, so a person's
-# session compares with the reproduction's; None: the loop's default, as the corridor's uses).
+# session compares with the reproduction's; None would teach the loop's default learner).
 _TEACH = {
     "corridor": (
         "corridor",
