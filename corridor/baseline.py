@@ -130,6 +130,7 @@ __all__ = [
     "PSResult",
     "PrioritizedSweeping",
     "PrioritizedSweepingConfig",
+    "RecencyReward",
     "TableScore",
     "run_prioritized_sweeping",
     "score_tables",
@@ -225,6 +226,39 @@ def binary_state(observation: np.ndarray, wall_threshold: float) -> int:
     o = np.asarray(observation, dtype=float).reshape(3)
     bits = (o < wall_threshold).astype(int)
     return int(bits[0] * 4 + bits[1] * 2 + bits[2])
+
+
+class RecencyReward:
+    """The baseline's reward (module docstring): arriving in a place not visited for a while
+    earns up to 1, a wall contact costs ``contact_penalty``.
+
+    Places are square cells of ``config.cell_size`` metres; the memory of visits lasts for the
+    whole run (across episodes). Call :meth:`visit` for the start, then the instance once per
+    learning step ``t`` (1, 2, ...) with the robot's new position.
+    """
+
+    def __init__(self, config: PrioritizedSweepingConfig) -> None:
+        self.config = config
+        self._last: dict[tuple[int, int], int] = {}
+
+    def _cell(self, x: float, y: float) -> tuple[int, int]:
+        return (round(x / self.config.cell_size), round(y / self.config.cell_size))
+
+    def visit(self, t: int, x: float, y: float) -> None:
+        """Record the robot at ``(x, y)`` metres at step ``t`` without a reward."""
+        self._last[self._cell(x, y)] = t
+
+    def __call__(self, t: int, x: float, y: float, *, advanced: bool, contact: bool) -> float:
+        """The reward of step ``t``, which took the robot to ``(x, y)`` metres; ``advanced``:
+        it moved on along the route (only read when ``config.directed``)."""
+        cfg = self.config
+        cell = self._cell(x, y)
+        since = t - self._last[cell] if cell in self._last else cfg.recency_horizon
+        novelty = min(1.0, since / cfg.recency_horizon)
+        if cfg.directed and not advanced:
+            novelty = 0.0
+        self._last[cell] = t
+        return novelty - cfg.contact_penalty * float(contact)
 
 
 class PrioritizedSweeping:
@@ -362,12 +396,8 @@ def run_prioritized_sweeping(
     world = CorridorWorld(corridor_map, world_config)
     eval_world = CorridorWorld(corridor_map, world_config)
     learner = PrioritizedSweeping(config, rng)
-    last_visit: dict[tuple[int, int], int] = {}
+    reward = RecencyReward(config)
     checked: dict[tuple[int, ...], bool] = {}
-
-    def place() -> tuple[int, int]:
-        x, y, _ = world.pose
-        return (round(x / config.cell_size), round(y / config.cell_size))
 
     def passes(table: tuple[int, ...]) -> bool:
         if table not in checked:
@@ -382,7 +412,7 @@ def run_prioritized_sweeping(
         return checked[table]
 
     s = binary_state(world.sense(rng), config.wall_threshold)
-    last_visit[place()] = 0
+    reward.visit(0, *world.pose[:2])
     contacts = episodes = circuits = 0
     first: int | None = None
     run: list[int] = []  # learning steps of the current run of passing evaluations
@@ -394,13 +424,7 @@ def run_prioritized_sweeping(
         advanced = world.progress.s > s_before + 1e-9
         contacts += int(contact)
         s2 = binary_state(world.sense(rng), config.wall_threshold)
-        cell = place()
-        since = t - last_visit[cell] if cell in last_visit else config.recency_horizon
-        novelty = min(1.0, since / config.recency_horizon)
-        if config.directed and not advanced:
-            novelty = 0.0
-        r = novelty - config.contact_penalty * float(contact)
-        last_visit[cell] = t
+        r = reward(t, *world.pose[:2], advanced=advanced, contact=contact)
         learner.observe(s, a, r, s2)
         s = s2
         table = learner.greedy_table()
@@ -513,22 +537,18 @@ def score_tables(
         return moves[(snap, action)]
 
     def run(table: dict[int, int]) -> TableScore | int:
-        snap, last, ep_t = start, {}, 0
-        last[_cell(snap, config.cell_size)] = 0
+        snap, ep_t, reward = start, 0, RecencyReward(config)
+        reward.visit(0, snap[0], snap[1])
         total, contacts, episodes, circuits = 0.0, 0, 0, 0
         for t in range(1, steps + 1):
             s = state_of(snap)
             if s not in table:
                 return s
             nxt, contact, laps = move(snap, table[s])
-            cell = _cell(nxt, config.cell_size)
-            since = t - last[cell] if cell in last else config.recency_horizon
-            novelty = min(1.0, since / config.recency_horizon)
-            if config.directed and not nxt[6] > snap[6] + 1e-9:  # progress.s, as the learner
-                novelty = 0.0
-            total += novelty - config.contact_penalty * float(contact)
+            # snapshot fields: x, y at 0, 1; the route progress's s at 6, as the learner reads it
+            advanced = nxt[6] > snap[6] + 1e-9
+            total += reward(t, nxt[0], nxt[1], advanced=advanced, contact=contact)
             contacts += int(contact)
-            last[cell] = t
             snap = nxt
             ep_t += 1
             lapped = laps > 0
@@ -549,7 +569,3 @@ def score_tables(
             stack.extend({**table, out: a} for a in range(N_ACTIONS - 1, -1, -1))
     scores.sort(key=lambda sc: (-sc.reward_per_step, sc.table))
     return scores
-
-
-def _cell(snap: tuple[float, ...], size: float) -> tuple[int, int]:
-    return (round(snap[0] / size), round(snap[1] / size))

@@ -40,7 +40,13 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from corridor.baseline import PrioritizedSweepingConfig, TableScore, binary_state, score_tables
+from corridor.baseline import (
+    PrioritizedSweepingConfig,
+    RecencyReward,
+    TableScore,
+    binary_state,
+    score_tables,
+)
 from corridor.experiment import CorridorExperimentConfig
 from corridor.maps import load_map
 from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
@@ -69,36 +75,49 @@ def _break_even(scores: list[TableScore], penalty: float, steps: int) -> float |
     return max([0.0, *surplus])
 
 
-def _noisy(args: tuple[tuple[int, ...], PrioritizedSweepingConfig, str, int, int]) -> tuple:
-    table, cfg, map_name, seed, steps = args
+def _episodes(
+    table: tuple[int, ...],
+    cfg: PrioritizedSweepingConfig,
+    map_name: str,
+    noisy: bool,
+    seed: int,
+    steps: int,
+    epsilon: float = 0.0,
+):
+    """Drive ``table`` (with ``epsilon`` random actions) for ``steps`` steps in the learner's
+    episodes and reward; yields ``(state, action, reward, next state, contact, circuit done)``."""
     rng = np.random.default_rng(seed)
-    world = CorridorWorld(load_map(map_name), WorldConfig.legged_robot())
-
-    def cell() -> tuple[int, int]:
-        x, y, _ = world.pose
-        return (round(x / cfg.cell_size), round(y / cfg.cell_size))
-
-    last = {cell(): 0}
+    world = CorridorWorld(
+        load_map(map_name), WorldConfig.legged_robot() if noisy else WorldConfig()
+    )
+    reward = RecencyReward(cfg)
+    reward.visit(0, *world.pose[:2])
     s = binary_state(world.sense(rng), cfg.wall_threshold)
-    total, contacts, circuits, ep_t = 0.0, 0, 0, 0
+    ep_t = 0
     for t in range(1, steps + 1):
+        a = int(rng.integers(N_ACTIONS)) if epsilon and rng.random() < epsilon else table[s]
         before = world.progress.s
-        contact = world.step(table[s], rng)
-        s = binary_state(world.sense(rng), cfg.wall_threshold)
-        c = cell()
-        since = t - last[c] if c in last else cfg.recency_horizon
-        novelty = min(1.0, since / cfg.recency_horizon)
-        if cfg.directed and not world.progress.s > before + 1e-9:
-            novelty = 0.0
-        total += novelty - cfg.contact_penalty * float(contact)
-        contacts += int(contact)
-        last[c] = t
+        contact = world.step(a, rng)
+        s2 = binary_state(world.sense(rng), cfg.wall_threshold)
+        advanced = world.progress.s > before + 1e-9
+        r = reward(t, *world.pose[:2], advanced=advanced, contact=contact)
+        lapped = world.laps > 0
+        yield s, a, r, s2, contact, lapped
+        s = s2
         ep_t += 1
-        if world.laps > 0 or ep_t >= cfg.episode_steps:
-            circuits += int(world.laps > 0)
+        if lapped or ep_t >= cfg.episode_steps:
             world.reset()
             ep_t = 0
             s = binary_state(world.sense(rng), cfg.wall_threshold)
+
+
+def _noisy(args: tuple[tuple[int, ...], PrioritizedSweepingConfig, str, int, int]) -> tuple:
+    table, cfg, map_name, seed, steps = args
+    total, contacts, circuits = 0.0, 0, 0
+    for _, _, r, _, contact, lapped in _episodes(table, cfg, map_name, True, seed, steps):
+        total += r
+        contacts += int(contact)
+        circuits += int(lapped)
     return total / steps, contacts, circuits
 
 
@@ -113,41 +132,13 @@ def _model_greedy(
 ) -> tuple[list[int], list[bool]]:
     """The greedy table of the 8-state model learned from ``steps`` steps of ``table`` with
     ``epsilon`` random actions, and which states were reached."""
-    rng = np.random.default_rng(seed)
-    world = CorridorWorld(
-        load_map(map_name), WorldConfig.legged_robot() if noisy else WorldConfig()
-    )
     n = np.zeros((8, N_ACTIONS))
     trans = np.zeros((8, N_ACTIONS, 8))
     rsum = np.zeros((8, N_ACTIONS))
-
-    def cell() -> tuple[int, int]:
-        x, y, _ = world.pose
-        return (round(x / cfg.cell_size), round(y / cfg.cell_size))
-
-    last = {cell(): 0}
-    s = binary_state(world.sense(rng), cfg.wall_threshold)
-    ep_t = 0
-    for t in range(1, steps + 1):
-        a = int(rng.integers(N_ACTIONS)) if rng.random() < epsilon else table[s]
-        before = world.progress.s
-        contact = world.step(a, rng)
-        s2 = binary_state(world.sense(rng), cfg.wall_threshold)
-        c = cell()
-        since = t - last[c] if c in last else cfg.recency_horizon
-        novelty = min(1.0, since / cfg.recency_horizon)
-        if cfg.directed and not world.progress.s > before + 1e-9:
-            novelty = 0.0
-        last[c] = t
+    for s, a, r, s2, _, _ in _episodes(table, cfg, map_name, noisy, seed, steps, epsilon):
         n[s, a] += 1
         trans[s, a, s2] += 1
-        rsum[s, a] += novelty - cfg.contact_penalty * float(contact)
-        s = s2
-        ep_t += 1
-        if world.laps > 0 or ep_t >= cfg.episode_steps:
-            world.reset()
-            ep_t = 0
-            s = binary_state(world.sense(rng), cfg.wall_threshold)
+        rsum[s, a] += r
     trusted = n >= cfg.optimism_visits
     reward = np.where(trusted, rsum / np.maximum(n, 1), 0.0)
     p = trans / np.maximum(n, 1)[..., None]
