@@ -17,7 +17,9 @@ evaluation's). On the expert's own states it prints:
   * "after right": the step right after the expert's right turn out of the spur, with a wall
     nearer than 0.5 m on the left (the corner of the corridor that leads into the junction),
   * "before corner": the expert's last forward step before a left turn, where the walls close
-    in on both sides (both side readings below 0.5 m);
+    in on both sides (both side readings below 0.5 m),
+  * "left, walls near": the expert's left turns with both side readings below 0.5 m (a step
+    that fell short of the corner's opening);
 - the readings at those places, and where the expert turns right and u-turns;
 - each seed's demonstrations per action.
 
@@ -49,9 +51,9 @@ _NEAR = 0.5  # metres: a side reading below this is a wall beside the robot
 
 def _expert_states(
     map_name: str, world: WorldConfig, circuits: int, first_seed: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Readings [N, 3], expert actions [N], circuit index [N] and the place tags [N] (0 none,
-    1 "after right", 2 "before corner") of ``circuits`` expert circuits."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Readings [N, 3], expert actions [N], circuit index [N] and the named places (bool masks
+    [N]) of ``circuits`` expert circuits."""
     corridor_map = load_map(map_name)
     env = CorridorEnv(corridor_map, world, max_episode_steps=200)
     expert = CorridorExpert(corridor_map, world)
@@ -68,12 +70,16 @@ def _expert_states(
             obs, _, terminated, truncated, info = env.step(acts[-1])
             done = terminated or truncated
     x, a, c = np.array(xs), np.array(acts), np.array(circ)
-    tag = np.zeros(len(a), dtype=int)
+    walls_near = (x[:, 0] < _NEAR) & (x[:, 2] < _NEAR)
     after_right = np.r_[False, (a[:-1] == Action.TURN_RIGHT) & (c[1:] == c[:-1])]
-    tag[after_right & (x[:, 0] < _NEAR)] = 1
     before_left = np.r_[(a[1:] == Action.TURN_LEFT) & (c[1:] == c[:-1]), False]
-    tag[before_left & (a == Action.FORWARD) & (x[:, 0] < _NEAR) & (x[:, 2] < _NEAR)] = 2
-    return x, a, c, tag
+    places = {
+        "all": np.ones(len(a), dtype=bool),
+        "after right": after_right & (x[:, 0] < _NEAR),
+        "before corner": before_left & (a == Action.FORWARD) & walls_near,
+        "left, walls near": (a == Action.TURN_LEFT) & walls_near,
+    }
+    return x, a, c, places
 
 
 def _nearest_neighbour(train_x: np.ndarray, train_y: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -90,86 +96,103 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     results = args.run_dir / "results.json"
-    sessions = sorted((args.run_dir / "sessions").glob("seed*"), key=lambda p: int(p.name[4:]))
+    sessions = sorted(
+        (p for p in (args.run_dir / "sessions").glob("seed*") if p.name[4:].isdigit()),
+        key=lambda p: int(p.name[4:]),
+    )
     if not results.is_file() or not sessions:
         raise SystemExit(
-            f"no results.json and sessions/seed* under {args.run_dir}: expected a corridor run "
+            f"no results.json and sessions/seed<N> under {args.run_dir}: expected a corridor run "
             "directory (bash scripts/reproduce.sh writes runs/reproduce/corridor)"
         )
     if args.circuits < 2:
         raise SystemExit(f"--circuits must be >= 2 (half fit, half test), got {args.circuits}")
-    config = json.loads(results.read_text())["config"]
-    world = WorldConfig(**config["world"])
-    if config["threshold_reading"] == "literal":
-        rule = DistanceRule(config["max_std"])
+    try:
+        config = json.loads(results.read_text())["config"]
+        world = WorldConfig(**config["world"])
+        map_name, max_std, reading = (
+            config["map_name"],
+            config["max_std"],
+            config["threshold_reading"],
+        )
+    except (ValueError, KeyError, TypeError) as exc:
+        raise SystemExit(f"{results} is not a corridor run's results.json ({exc!r})") from None
+    if reading == "literal":
+        rule = DistanceRule(max_std)
     else:
-        rule = DistanceRule(quantile=math.erf(config["max_std"] / math.sqrt(2.0)))
+        rule = DistanceRule(quantile=math.erf(max_std / math.sqrt(2.0)))
     threshold = rule.threshold(3)
-    x, a, c, tag = _expert_states(config["map_name"], world, args.circuits, args.first_seed)
-    places = {
-        "all": np.ones(len(a), dtype=bool),
-        "after right": tag == 1,
-        "before corner": tag == 2,
-    }
+    x, a, c, places = _expert_states(map_name, world, args.circuits, args.first_seed)
+    names = [act.name.lower() for act in Action]
+    named = [p for p in places if p != "all"]
 
     scale = x.std(axis=0)
     fit, test = c < args.circuits // 2, c >= args.circuits // 2
     nn = _nearest_neighbour(x[fit] / scale, a[fit], x[test] / scale)
-    print(
-        f"{args.circuits} expert circuits ({len(a)} states; 'after right' "
-        f"{places['after right'].sum()}, 'before corner' {places['before corner'].sum()}); "
-        f"threshold {threshold:.2f} std"
-    )
+    print(f"{args.circuits} expert circuits, {len(a)} states; threshold {threshold:.2f} std")
     reference = {}
     for name, where in places.items():
         w = where[test]
-        reference[name] = {"states": int(w.sum()), "error": float(np.mean(nn[w] != a[test][w]))}
+        reference[name] = {"states": int(w.sum()), "error": _share(nn[w] != a[test][w])}
     print(
-        "1-NN on the readings, fitted on the first half, tested on the second: error "
+        "1-NN on the readings, fitted on the first half of the circuits, tested on the second: "
+        "error "
         + ", ".join(
-            f"{name} {r['error']:.3f} ({r['states']} states)" for name, r in reference.items()
+            f"{name} {_fmt(r['error'], 3)} ({r['states']} states)" for name, r in reference.items()
         )
     )
-    readings = {
+    rows = {
         "turns right": a == Action.TURN_RIGHT,
-        "after right": places["after right"],
         "u-turns": a == Action.U_TURN,
-        "before corner": places["before corner"],
+        **{p: places[p] for p in named},
     }
-    print("\n| the expert's states | n | readings left, front, right: mean (sd), m |")
-    print("|---|---|---|")
-    for name, where in readings.items():
-        mean, sd = x[where].mean(axis=0), x[where].std(axis=0)
-        cells = ", ".join(f"{m:.2f} ({v:.3f})" for m, v in zip(mean, sd, strict=True))
-        print(f"| {name} | {where.sum()} | {cells} |")
-    names = [act.name.lower() for act in Action]
+    print("\n| the expert's states | n | its actions | readings left, front, right: mean (sd), m |")
+    print("|---|---|---|---|")
+    for name, where in rows.items():
+        acts = ", ".join(map(str, np.bincount(a[where], minlength=len(names))))
+        if where.any():
+            mean, sd = x[where].mean(axis=0), x[where].std(axis=0)
+            cells = ", ".join(f"{m:.2f} ({v:.3f})" for m, v in zip(mean, sd, strict=True))
+        else:
+            cells = "-"
+        print(f"| {name} | {where.sum()} | {acts} | {cells} |")
     print(
-        "\n| seed | demonstrations: " + ", ".join(names) + " | another action, confident: "
-        "all | after right | before corner | its actions after right |"
+        "\n| seed | demonstrations: "
+        + ", ".join(names)
+        + " | another action, confident: all | "
+        + " | ".join(named)
+        + " | its actions: "
+        + " | ".join(named)
+        + " |"
     )
-    print("|---|---|---|---|---|---|")
+    print("|---" * (3 + 2 * len(named)) + "|")
     per_seed = []
     for session in sessions:
-        model = load_model(session)
+        try:
+            model = load_model(session)
+            _, y = load_demonstrations(session)
+        except Exception as exc:  # noqa: BLE001 - one line for any unreadable session
+            raise SystemExit(f"cannot read the session {session}: {exc}") from None
         cls = model.classify(torch.as_tensor(x))
         act = cls.action.numpy()
         confident_wrong = (act != a) & (cls.distance.numpy() <= threshold)
-        _, y = load_demonstrations(session)
         demos = np.bincount(y, minlength=len(names)).tolist()
-        shares = {name: float(confident_wrong[w].mean()) for name, w in places.items()}
-        after = np.bincount(act[places["after right"]], minlength=len(names)).tolist()
+        shares = {name: _share(confident_wrong[w]) for name, w in places.items()}
+        chosen = {p: np.bincount(act[places[p]], minlength=len(names)).tolist() for p in named}
         per_seed.append(
             {
-                "seed": session.name,
+                "seed": int(session.name[4:]),
                 "demonstrations": demos,
                 "confident_wrong": shares,
-                "actions_after_right": after,
+                "actions": chosen,
             }
         )
         print(
-            f"| {session.name[4:]} | {', '.join(map(str, demos))} | {shares['all']:.3f} | "
-            f"{shares['after right']:.2f} | {shares['before corner']:.2f} | "
-            f"{', '.join(map(str, after))} |",
+            f"| {session.name[4:]} | {', '.join(map(str, demos))} | "
+            + " | ".join(_fmt(shares[p], 3) for p in places)
+            + " | "
+            + " | ".join(", ".join(map(str, chosen[p])) for p in named)
+            + " |",
             flush=True,
         )
     print(
@@ -179,11 +202,21 @@ def main() -> None:
                 "circuits": args.circuits,
                 "first_seed": args.first_seed,
                 "threshold": threshold,
+                "actions": names,
                 "nearest_neighbour": reference,
                 "per_seed": per_seed,
             }
         )
     )
+
+
+def _share(flags: np.ndarray) -> float | None:
+    """The share of True in ``flags``; None (not NaN) when there are none."""
+    return float(flags.mean()) if len(flags) else None
+
+
+def _fmt(value: float | None, digits: int) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
 
 
 if __name__ == "__main__":

@@ -23,8 +23,15 @@ to on that model, pairs tried fewer than ``optimism_visits`` times valued optimi
 its greedy table is compared with the best table on the states the best table reaches, for
 exact and noisy motion and three seeds each.
 
+With ``--ceiling-seeds N`` it asks, for Prioritized Sweeping runs 0..N-1 of the experiment
+(its noisy robot, and exact motion), whether any 8-state table passes each run's evaluation
+(:func:`corridor.baseline.passing_tables`: the ceiling of the learned share), whether the
+route's table does (the best route-driving exact behaviour, its unreached states u-turn), and
+where the route's table first touches a wall when it fails (state, action, route segment).
+``--ceiling-seeds 100`` takes about a minute on two cores.
+
     PYTHONPATH=$PWD python scripts/corridor_table_search.py [--penalties 1,2] [--steps 1000]
-        [--top 5] [--noisy-seeds 3]
+        [--top 5] [--noisy-seeds 3] [--model-check 20000] [--ceiling-seeds 100]
 
 Ends with one JSON line of the figures.
 """
@@ -45,6 +52,8 @@ from corridor.baseline import (
     RecencyReward,
     TableScore,
     binary_state,
+    evaluation_passes,
+    passing_tables,
     score_tables,
 )
 from corridor.experiment import CorridorExperimentConfig
@@ -151,6 +160,40 @@ def _model_greedy(
     return [int(a) for a in q.argmax(axis=1)], [bool(v) for v in n.sum(axis=1) > 0]
 
 
+def _first_failure(
+    table: tuple[int, ...], cfg: PrioritizedSweepingConfig, world: CorridorWorld, seed: int
+) -> tuple[str, str, int] | None:
+    """Where ``table`` first fails run ``seed``'s evaluation, replayed as
+    :func:`evaluation_passes` drives it: (state bits, action, route segment) of the first wall
+    contact, ("cap", "-", segment) if a circuit ran out of steps; None if it passes."""
+    rng = np.random.default_rng(seed + 10_000)  # the evaluation's seed in run_prioritized_sweeping
+    world.reset()
+    obs = world.sense(rng)
+    steps = laps = 0
+    while laps < cfg.eval_circuits:
+        s = binary_state(obs, cfg.wall_threshold)
+        if world.step(table[s], rng):
+            return f"{s:03b}", _NAMES[table[s]], world.progress.segment
+        steps += 1
+        if world.laps > laps:
+            laps, steps = world.laps, 0
+        elif steps >= cfg.episode_steps:
+            return "cap", "-", world.progress.segment
+        obs = world.sense(rng)
+    return None
+
+
+def _ceiling(args: tuple[tuple[int, ...], PrioritizedSweepingConfig, str, bool, int]) -> tuple:
+    table, cfg, map_name, noisy, seed = args
+    corridor_map = load_map(map_name)
+    world_config = WorldConfig.legged_robot() if noisy else WorldConfig()
+    found = passing_tables(corridor_map, cfg, world_config=world_config, seed=seed)
+    fail = _first_failure(table, cfg, CorridorWorld(corridor_map, world_config), seed)
+    passes = evaluation_passes(corridor_map, table, cfg, world_config=world_config, seed=seed)
+    assert passes == (fail is None), "the replay disagrees with evaluation_passes"
+    return len(found), fail
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--map", default="figure2")
@@ -160,6 +203,7 @@ def main() -> None:
     ap.add_argument("--noisy-seeds", type=int, default=0)
     ap.add_argument("--noisy-top", type=int, default=10)
     ap.add_argument("--model-check", type=int, default=0, metavar="N")
+    ap.add_argument("--ceiling-seeds", type=int, default=0, metavar="N")
     args = ap.parse_args()
     t0 = time.perf_counter()
     base = CorridorExperimentConfig().ps
@@ -252,6 +296,47 @@ def main() -> None:
                     print(f"| {motion} | {seed} | {text} | {', '.join(diff) or 'none'} |")
                     row["model_check"][f"{motion}_{seed}"] = {"greedy": text, "differs": diff}
         out[f"{penalty:g}"] = row
+    if args.ceiling_seeds:
+        drives = [sc for sc in scores if sc.drives_route]
+        if not drives:
+            raise SystemExit(f"no 8-state table drives the route of {args.map}")
+        route = [_FILL] * 8
+        for st, a in drives[0].table:
+            route[st] = a
+        out["ceiling"] = {"route_table": "".join(_NAMES[a] for a in route)}
+        for motion in ("noisy", "exact"):
+            jobs = [
+                (tuple(route), cfg, args.map, motion == "noisy", k)
+                for k in range(args.ceiling_seeds)
+            ]
+            with ProcessPoolExecutor(2) as ex:
+                res = list(ex.map(_ceiling, jobs))
+            fails = [r[1] for r in res if r[1] is not None]
+            places: dict[str, int] = {}
+            for state, action, seg in fails:
+                key = f"{state} {action} segment {seg}"
+                places[key] = places.get(key, 0) + 1
+            passable = [k for k, r in enumerate(res) if r[0] > 0]
+            none_0_9 = [k for k in range(min(10, len(res))) if res[k][0] == 0]
+            print(
+                f"\n{motion} motion, PS runs 0-{args.ceiling_seeds - 1}: some table passes the "
+                f"evaluation on {len(passable)}, the route's table "
+                f"({out['ceiling']['route_table']}) on {args.ceiling_seeds - len(fails)}; runs "
+                f"no table passes among 0-9: {none_0_9}"
+            )
+            if places:
+                print(
+                    "the route's table's first contacts: "
+                    + ", ".join(
+                        f"{k}: {v}" for k, v in sorted(places.items(), key=lambda kv: -kv[1])
+                    )
+                )
+            out["ceiling"][motion] = {
+                "seeds": args.ceiling_seeds,
+                "passable": len(passable),
+                "route_passes": args.ceiling_seeds - len(fails),
+                "route_failures": places,
+            }
     out["seconds"] = round(time.perf_counter() - t0, 1)
     print(json.dumps(out))
 

@@ -18,6 +18,8 @@ import corridor
 from corridor.baseline import (
     PrioritizedSweepingConfig,
     binary_state,
+    evaluation_passes,
+    passing_tables,
     run_prioritized_sweeping,
     score_tables,
 )
@@ -368,6 +370,50 @@ def test_the_baselines_reward_makes_the_route_its_best_table():
         score_tables(figure2, ps, steps=0)
 
 
+def test_passing_tables_on_a_small_loop_is_the_hand_written_follower():
+    """On a rectangle driven counter-clockwise with exact motion the one way round is forward
+    in a corridor (walls left and right, and wall right only where a corner opens) and left at
+    a corner (walls ahead and right): the search finds that behaviour and nothing else, and a
+    full table passes the evaluation exactly when it agrees with it."""
+    small = map_from_dict(SMALL)
+    assert passing_tables(small, seed=0) == [((0b001, F), (0b011, L), (0b101, F))]
+    follower = (F, F, L, L, R, F, R, U)  # by state bits left/front/right
+    assert evaluation_passes(small, follower, seed=0)
+    assert not evaluation_passes(small, follower[:3] + (U,) + follower[4:], seed=0)
+    assert evaluation_passes(small, (U, F, U, L, U, F, U, U), seed=0)  # unreached states free
+    with pytest.raises(ValueError, match="expected 8 actions"):
+        evaluation_passes(small, (F,) * 7)
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_passing_tables_is_every_table_that_passes_the_ps_evaluation(seed):
+    """The ceiling of Prioritized Sweeping on the noisy robot. The search over behaviours
+    agrees with evaluating full tables one by one: the route's table, every table one action
+    away from it, and each found behaviour with its unreached states filled two ways pass
+    exactly when they agree with a found behaviour. On seed 2's evaluation no table passes at
+    all (in the second circuit the robot stands just after the right turn out of the spur with
+    the corner near on its left: state 100, the turn's own, where the route's table turns right
+    again into a wall), so no learner on the 8 states could learn on that seed."""
+    figure2 = load_map("figure2")
+    found = passing_tables(figure2, world_config=NOISY_WORLD, seed=seed)
+    route = {0b101: F, 0b001: F, 0b011: L, 0b010: L, 0b100: R, 0b111: U, 0b000: F, 0b110: U}
+    if seed == 0:
+        assert len(found) == 1 and dict(found[0]).items() <= route.items()
+    else:
+        assert found == []
+    base = tuple(route[s] for s in range(8))
+    tables = {base} | {base[:s] + (a,) + base[s + 1 :] for s in range(8) for a in range(4)}
+    for behaviour in found:
+        for fill in (F, U):
+            filled = [fill] * 8
+            for s, a in behaviour:
+                filled[s] = a
+            tables.add(tuple(filled))
+    for table in sorted(tables):
+        agrees = any(all(table[s] == a for s, a in b) for b in found)
+        assert evaluation_passes(figure2, table, world_config=NOISY_WORLD, seed=seed) == agrees
+
+
 def test_a_world_snapshot_restores_the_robot_and_its_progress():
     """A snapshot taken past a circuit restores the pose, the commanded heading and the route
     progress (so the circuits counted): the steps after it repeat exactly."""
@@ -464,6 +510,11 @@ def test_tiny_experiment_writes_results(tmp_path):
     assert best["drives_route"] and best["route_rank"] == 1 and best["contacts"] == 0
     assert best["table"]["111"] == "u_turn" and best["table"]["100"] == "turn_right"
     assert data["acceptance"]["ps_reward_best_table_drives_route"] is True
+    # With exact motion the route's table passes every seed's evaluation: no ceiling below 1.
+    assert [r["ps_passing_tables"] for r in data["per_seed"]] == [1, 1]
+    assert s["ps_evaluation_ceiling"] == 1.0
+    assert data["acceptance"]["ps_learned_share_ge_0_9_attainable"] is True
+    assert s["ps_first_share"] <= s["ps_evaluation_ceiling"]
     assert data["config"]["threshold_reading"] == "coverage" and s["finished_share"] == 1.0
     blocks = s["requests_by_circuits"]
     assert blocks[0]["circuits"] == "1-5" and blocks[0]["seeds"] == 2
