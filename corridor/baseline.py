@@ -50,30 +50,30 @@ sensor noise as the teaching experiment; the mean reward is the plain sample mea
 
 **Void since 2026-11-25: every figure below was scored by a route tracker that counted loops
 through corridors the route does not take as circuits** (it took the nearest route point in its
-arc-length window at any distance; it now ignores points farther than a corridor width). With
-the fixed tracker and the contact penalty of 2, noisy robot, seeds 0-9, 5,000 steps: no seed's
-greedy table drives the route (0 of 10 first, 0 learned); exact motion 3 of 10 first (312.7
-steps), 1 of 10 learned (253). With the penalty of 1 (2026-11-25): noisy 0 of 10 first, 0
-learned; ``directed`` 1 of 10 first, 0 learned; exact motion 4 of 10 first, 0 learned; exact
-and ``directed`` 3 of 10 first (310.7 steps), 2 of 10 learned (465.0). Why, now that the reward's
-best table is the route's: PS plans on a model of the 8 states, which alias places, so the model
-is not Markov; solved to its fixed point, the model of 20,000 steps of the route's own table
-with 10% random actions picks another action in 4 or 5 of the route's 7 states on every seed,
-exact or noisy (``scripts/corridor_table_search.py --model-check``). And with noise the
-evaluation itself is out of reach on some seeds: :func:`passing_tables` searches every
-distinct behaviour of the 65,536 tables against a run's evaluation, and on seeds 0-9 some table
-(the route's each time) passes on 6; on the other 4 none does, so no learner on these states
-could be counted learned there (68 of the 100 evaluations of seeds 0-99; exact motion all
-100). The route's table fails 42 of those 100 (another table passes on 10 of them;
-``scripts/corridor_table_search.py --ceiling-seeds 100``): 26 times in
-the corridor after the right turn out of the spur (15 a second right turn in state 100, wall
-left, open ahead and right, which is the turn's own state, as the corner of the corridor it
-came up stands beside it; 11 a left turn in state 010), 16 times in state 100 or 010 elsewhere,
-after a noisy step or a u-turn left a wall beside it; on seeds 0-9, 3 of the 4 at the first
-place (replayed with temporary code). Also measured with temporary code on 2026-11-26 (penalty 1,
-evaluation seeds 10,000-10,029): no wall threshold mends it; the previous action as a feature
-lifts the route's table to 24 of 30 seeds; and a model learned from the route's own table does
-not choose that table (the README has the account). The variants below were not
+arc-length window at any distance; it now ignores points farther than a corridor width). With the
+fixed tracker and the contact penalty of 2, noisy robot, seeds 0-9, 5,000 steps: no seed's greedy
+table drives the route (0 of 10 first, 0 learned); exact motion 3 of 10 first (312.7 steps), 1 of
+10 learned (253). With the penalty of 1 (2026-11-25): noisy 0 of 10 first, 0 learned; ``directed``
+1 of 10 first, 0 learned; exact motion 4 of 10 first, 0 learned; exact and ``directed`` 3 of 10
+first (310.7 steps), 2 of 10 learned (465.0). Why, now that the reward's best table is the route's:
+PS plans on a model of the 8 states, which alias places, so the model is not Markov; solved to its
+fixed point, the model of 20,000 steps of the route's own table with 10% random actions picks
+another action in 4 or 5 of the route's 7 states on every seed, exact or noisy
+(``scripts/corridor_table_search.py --model-check``). And with noise the evaluation itself is out
+of reach on some seeds: :func:`passing_tables` searches every distinct behaviour of the 65,536
+tables against a run's evaluation, and on seeds 0-9 some table (the route's each time) passes on 6;
+on the other 4 none does, so no learner on these states could be counted learned there (68 of the
+100 evaluations of seeds 0-99; exact motion all 100). The route's table fails 42 of those 100
+(another table passes on 10 of them; ``scripts/corridor_table_search.py --ceiling-seeds 100``
+prints where): 25 times at the junction after the right turn out of the spur, where the corner of
+the corridor it came up stands on its left, so the state reads 100, the turn's own, and it turns
+right again (14 times that turn touches the wall, 11 times the left turn after it does), 17 times
+elsewhere (12 a right turn in state 100 just after a u-turn near a corner); on seeds 0-9, 3 of the
+4 at the first place (replayed with temporary code). Also measured with temporary code on
+2026-11-26 (penalty 1, evaluation seeds 10,000-10,029), for the route's table with a right turn in
+state 110 (with the u-turn there, 15 of those 30 pass): no wall threshold mends it; the previous
+action as a feature lifts the route's table to 24 of 30 seeds; and a model learned from the route's
+own table does not choose that table (the README has the account). The variants below were not
 measured again; they are kept as the record of what was tried.
 
 Why the greedy policy is erratic (measured, issue 12, with the faulty tracker). On 8 aliased states
@@ -433,9 +433,16 @@ def evaluation_passes(
     greedy policy (``config.eval_circuits`` clean circuits in a row from the start pose, each
     within ``episode_steps`` actions, with that run's evaluation noise)."""
     config = config or PrioritizedSweepingConfig()
-    if len(table) != N_STATES or not all(0 <= int(a) < N_ACTIONS for a in table):
+    try:
+        ok = len(table) == N_STATES and all(
+            isinstance(a, (int, np.integer)) and not isinstance(a, bool) and 0 <= a < N_ACTIONS
+            for a in table
+        )
+    except TypeError:  # not a sequence
+        ok = False
+    if not ok:
         raise ValueError(
-            f"table: expected {N_STATES} actions in [0, {N_ACTIONS}) indexed by state, got "
+            f"table: expected {N_STATES} int actions in [0, {N_ACTIONS}) indexed by state, got "
             f"{table!r}"
         )
     return _completes_circuit(

@@ -27,7 +27,8 @@ With ``--ceiling-seeds N`` it asks, for Prioritized Sweeping runs 0..N-1 of the 
 (its noisy robot, and exact motion), whether any 8-state table passes each run's evaluation
 (:func:`corridor.baseline.passing_tables`: the ceiling of the learned share), whether the
 route's table does (the best route-driving exact behaviour, its unreached states u-turn), and
-where the route's table first touches a wall when it fails (state, action, route segment).
+where the route's table first touches a wall when it fails (state, action, the nearest node,
+the heading, the two actions before).
 ``--ceiling-seeds 100`` takes about a minute on two cores.
 
     PYTHONPATH=$PWD python scripts/corridor_table_search.py [--penalties 1,2] [--steps 1000]
@@ -162,23 +163,32 @@ def _model_greedy(
 
 def _first_failure(
     table: tuple[int, ...], cfg: PrioritizedSweepingConfig, world: CorridorWorld, seed: int
-) -> tuple[str, str, int] | None:
+) -> str | None:
     """Where ``table`` first fails run ``seed``'s evaluation, replayed as
-    :func:`evaluation_passes` drives it: (state bits, action, route segment) of the first wall
-    contact, ("cap", "-", segment) if a circuit ran out of steps; None if it passes."""
+    :func:`evaluation_passes` drives it; None if it passes. A failure reads "STATE ACTION at
+    NODE heading H after PREVIOUS": the state bits and the action of the step that touched a
+    wall (or "cap" for a circuit that ran out of steps), the map node nearest to where the
+    robot stood before it, its compass heading then, and the two actions before it."""
     rng = np.random.default_rng(seed + 10_000)  # the evaluation's seed in run_prioritized_sweeping
+    nodes = world.map.nodes
     world.reset()
     obs = world.sense(rng)
     steps = laps = 0
+    previous = ""
     while laps < cfg.eval_circuits:
         s = binary_state(obs, cfg.wall_threshold)
+        x, y, heading = world.pose
+        node = min(nodes, key=lambda n: (nodes[n][0] - x) ** 2 + (nodes[n][1] - y) ** 2)
+        compass = "ENWS"[round(heading / (np.pi / 2)) % 4]
+        where = f"at {node} heading {compass} after {previous[-2:] or '-'}"
         if world.step(table[s], rng):
-            return f"{s:03b}", _NAMES[table[s]], world.progress.segment
+            return f"{s:03b} {_NAMES[table[s]]} {where}"
+        previous += _NAMES[table[s]]
         steps += 1
         if world.laps > laps:
             laps, steps = world.laps, 0
         elif steps >= cfg.episode_steps:
-            return "cap", "-", world.progress.segment
+            return f"cap {where}"
         obs = world.sense(rng)
     return None
 
@@ -313,8 +323,7 @@ def main() -> None:
                 res = list(ex.map(_ceiling, jobs))
             fails = [r[1] for r in res if r[1] is not None]
             places: dict[str, int] = {}
-            for state, action, seg in fails:
-                key = f"{state} {action} segment {seg}"
+            for key in fails:
                 places[key] = places.get(key, 0) + 1
             passable = [k for k, r in enumerate(res) if r[0] > 0]
             none_0_9 = [k for k in range(min(10, len(res))) if res[k][0] == 0]
