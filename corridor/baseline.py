@@ -377,12 +377,14 @@ def _drive_evaluation(
     seed: int,
     circuits: int = 1,
     cap: int = 81,
+    trace: list[tuple[tuple[float, float, float], int, int, bool]] | None = None,
 ) -> bool | int:
     """Drive the greedy ``table`` (state -> action, possibly partial) from the start pose:
     True if it completes ``circuits`` circuits in a row without touching a wall, each within
     ``cap`` actions (``CorridorEnv``'s step cap); False if it fails; else the first state the
     robot met that ``table`` does not fix (the noise drawn so far depends only on the actions
-    taken, so a table that fixes it runs the same up to there)."""
+    taken, so a table that fixes it runs the same up to there). ``trace``, if given, gets
+    ``(pose before, state, action, contact)`` for each step."""
     rng = np.random.default_rng(seed)
     world.reset()
     obs = world.sense(rng)
@@ -391,7 +393,11 @@ def _drive_evaluation(
         s = binary_state(obs, threshold)
         if s not in table:
             return s
-        if world.step(table[s], rng):
+        pose = world.pose
+        contact = world.step(table[s], rng)
+        if trace is not None:
+            trace.append((pose, s, table[s], contact))
+        if contact:
             return False
         steps += 1
         if world.laps > laps:

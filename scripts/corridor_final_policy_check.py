@@ -33,17 +33,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from corridor.env import CorridorEnv
+from corridor.experiment import CorridorExperimentConfig
 from corridor.expert import CorridorExpert
 from corridor.maps import load_map
-from corridor.world import Action, WorldConfig
-from torchcbl import DistanceRule, load_model
+from corridor.world import SENSOR_NAMES, Action, WorldConfig
+from torchcbl import load_model
 from torchcbl.session import load_demonstrations
 
 _NEAR = 0.5  # metres: a side reading below this is a wall beside the robot
@@ -110,18 +110,17 @@ def main() -> None:
     try:
         config = json.loads(results.read_text())["config"]
         world = WorldConfig(**config["world"])
-        map_name, max_std, reading = (
-            config["map_name"],
-            config["max_std"],
-            config["threshold_reading"],
-        )
+        map_name = config["map_name"]
+        # the run's threshold, read as the experiment reads it
+        rule = CorridorExperimentConfig(
+            map_name=map_name,
+            world=world,
+            max_std=config["max_std"],
+            threshold_reading=config["threshold_reading"],
+        ).rule()
     except (ValueError, KeyError, TypeError) as exc:
         raise SystemExit(f"{results} is not a corridor run's results.json ({exc!r})") from None
-    if reading == "literal":
-        rule = DistanceRule(max_std)
-    else:
-        rule = DistanceRule(quantile=math.erf(max_std / math.sqrt(2.0)))
-    threshold = rule.threshold(3)
+    threshold = rule.threshold(len(SENSOR_NAMES))
     x, a, c, places = _expert_states(map_name, world, args.circuits, args.first_seed)
     names = [act.name.lower() for act in Action]
     named = [p for p in places if p != "all"]

@@ -48,12 +48,13 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from corridor.baseline import (
+from corridor.baseline import (  # the evaluation's own drive, to say where a table fails
     PrioritizedSweepingConfig,
     RecencyReward,
     TableScore,
+    _drive_evaluation,
+    _eval_seed,
     binary_state,
-    evaluation_passes,
     passing_tables,
     score_tables,
 )
@@ -164,33 +165,30 @@ def _model_greedy(
 def _first_failure(
     table: tuple[int, ...], cfg: PrioritizedSweepingConfig, world: CorridorWorld, seed: int
 ) -> str | None:
-    """Where ``table`` first fails run ``seed``'s evaluation, replayed as
-    :func:`evaluation_passes` drives it; None if it passes. A failure reads "STATE ACTION at
-    NODE heading H after PREVIOUS": the state bits and the action of the step that touched a
-    wall (or "cap" for a circuit that ran out of steps), the map node nearest to where the
-    robot stood before it, its compass heading then, and the two actions before it."""
-    rng = np.random.default_rng(seed + 10_000)  # the evaluation's seed in run_prioritized_sweeping
+    """Where ``table`` first fails run ``seed``'s evaluation (the drive of
+    :func:`evaluation_passes`); None if it passes. A failure reads "STATE ACTION at NODE heading H
+    after PREVIOUS": the state bits and the action of the step that touched a wall (or "cap" for
+    a circuit that ran out of steps), the map node nearest to where the robot stood before it,
+    its compass heading then, and the two actions before it."""
+    trace: list = []
+    passed = _drive_evaluation(
+        dict(enumerate(table)),
+        world,
+        cfg.wall_threshold,
+        _eval_seed(seed),
+        circuits=cfg.eval_circuits,
+        cap=cfg.episode_steps,
+        trace=trace,
+    )
+    if passed is True:
+        return None
+    (x, y, heading), s, a, contact = trace[-1]
     nodes = world.map.nodes
-    world.reset()
-    obs = world.sense(rng)
-    steps = laps = 0
-    previous = ""
-    while laps < cfg.eval_circuits:
-        s = binary_state(obs, cfg.wall_threshold)
-        x, y, heading = world.pose
-        node = min(nodes, key=lambda n: (nodes[n][0] - x) ** 2 + (nodes[n][1] - y) ** 2)
-        compass = "ENWS"[round(heading / (np.pi / 2)) % 4]
-        where = f"at {node} heading {compass} after {previous[-2:] or '-'}"
-        if world.step(table[s], rng):
-            return f"{s:03b} {_NAMES[table[s]]} {where}"
-        previous += _NAMES[table[s]]
-        steps += 1
-        if world.laps > laps:
-            laps, steps = world.laps, 0
-        elif steps >= cfg.episode_steps:
-            return f"cap {where}"
-        obs = world.sense(rng)
-    return None
+    node = min(nodes, key=lambda n: (nodes[n][0] - x) ** 2 + (nodes[n][1] - y) ** 2)
+    compass = "ENWS"[round(heading / (np.pi / 2)) % 4]
+    previous = "".join(_NAMES[t[2]] for t in trace[-3:-1]) or "-"
+    where = f"at {node} heading {compass} after {previous}"
+    return f"{s:03b} {_NAMES[a]} {where}" if contact else f"cap {where}"
 
 
 def _ceiling(args: tuple[tuple[int, ...], PrioritizedSweepingConfig, str, bool, int]) -> tuple:
@@ -199,8 +197,6 @@ def _ceiling(args: tuple[tuple[int, ...], PrioritizedSweepingConfig, str, bool, 
     world_config = WorldConfig.legged_robot() if noisy else WorldConfig()
     found = passing_tables(corridor_map, cfg, world_config=world_config, seed=seed)
     fail = _first_failure(table, cfg, CorridorWorld(corridor_map, world_config), seed)
-    passes = evaluation_passes(corridor_map, table, cfg, world_config=world_config, seed=seed)
-    assert passes == (fail is None), "the replay disagrees with evaluation_passes"
     return len(found), fail
 
 
