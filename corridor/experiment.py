@@ -149,6 +149,14 @@ class CorridorExperimentConfig:
             (with 1e-3 and a cap of 20 no mixture reaches the cap either, at 16 components; the
             floor is chosen because the components it removes are the floor-sized ones on the
             saturated readings). The README has the learning figures of both floors.
+        cba: also teach every seed with Confidence-Based Autonomy (Chernova & Veloso, JAIR
+            2009; :class:`torchcbl.strategies.cba.ConfidenceBasedAutonomy` with the library's
+            defaults), the paper's successor, beside the paper's confident execution: the same
+            expert (which also corrects the autonomous steps it would not have taken), model,
+            stop, step cap and evaluation seeds, and the same non-interactive phase (which
+            JAIR 2009's CBA does not have; kept so that the two differ only after it). Its
+            figures are the ``cba_*`` keys of ``per_seed`` and ``summary["cba"]``. Not part of
+            the paper's Section 5.1.
     """
 
     map_name: str = "figure2"
@@ -162,6 +170,7 @@ class CorridorExperimentConfig:
     ps: PrioritizedSweepingConfig = field(default_factory=PrioritizedSweepingConfig)
     max_components: int = 20
     var_floor: float = 0.01
+    cba: bool = True
 
     def __post_init__(self) -> None:
         if (
@@ -176,6 +185,8 @@ class CorridorExperimentConfig:
             and self.var_floor >= 0
         ):
             raise ValueError(f"var_floor must be a finite number >= 0, got {self.var_floor!r}")
+        if not isinstance(self.cba, bool):
+            raise ValueError(f"cba must be True or False, got {self.cba!r}")
         if len(self.seeds) < 1 or len(set(self.seeds)) != len(self.seeds):
             raise ValueError("seeds must be a non-empty tuple of distinct ints")
         if not self.max_std > 0:
@@ -238,6 +249,7 @@ class CorridorExperimentConfig:
             "ps": dataclasses.asdict(self.ps),
             "max_components": self.max_components,
             "var_floor": self.var_floor,
+            "cba": self.cba,
         }
 
 
@@ -257,31 +269,34 @@ def make_model(config: CorridorExperimentConfig | None = None, seed: int = 0) ->
     )
 
 
-def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | None) -> dict:
-    """One seed: teaching, evaluation of the final policy, Prioritized Sweeping."""
-    import torch
-
+def _teach(
+    config: CorridorExperimentConfig,
+    seed: int,
+    session_dir: Path | None,
+    strategy: Any,
+    teacher: Any,
+) -> tuple[dict[str, Any], Any]:
+    """One arm of one seed: teach with ``strategy`` until the stop (or the step cap), then
+    evaluate the final policy from the paper's start and from perturbed starts. Returns the
+    arm's figures and the finished loop (a :class:`torchcbl.ConfidentTeacher`)."""
     from torchcbl import ConfidentTeacher, evaluate_policy
 
-    torch.set_num_threads(1)
-    t0 = time.perf_counter()
     corridor_map = load_map(config.map_name)
     env = CorridorEnv(corridor_map, config.world)
-    expert = CorridorExpert(corridor_map, config.world)
-    teacher = ConfidentTeacher(
+    loop = ConfidentTeacher(
         env,
-        expert,
+        teacher,
         model=make_model(config, seed),
-        rule=config.rule(),
+        strategy=strategy,
         config=config.teaching,
         run_dir=session_dir,
         seed=seed,
         progress=False,
     )
-    teacher.run()
+    loop.run()
     if session_dir is not None:
-        teacher.close()
-    records = teacher.records
+        loop.close()
+    records = loop.records
     demos = [r for r in records if r.teacher_action is not None]
     non = [r for r in demos if r.phase == "noninteractive"]
     conf_episodes: list[int] = []
@@ -303,31 +318,19 @@ def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | No
     requests_model_agreed = sum(
         1 for r in demos if r.phase == "confident" and r.model_action == r.teacher_action
     )
-    finished = teacher.stop_reason == "autonomous_episodes"
-    teach_contacts = sum(1 for r in records if r.info.get("contact"))
-    circuits_done = sum(1 for r in records if r.terminated)
     # The final policy, on its own, for eval_circuits circuits.
     eval_env = CorridorEnv(corridor_map, config.world)
     ev = evaluate_policy(
-        teacher.policy, eval_env, n_episodes=config.eval_circuits, seed=1_000_000 + seed
+        loop.policy, eval_env, n_episodes=config.eval_circuits, seed=1_000_000 + seed
     )
     ends = [r for r in ev if r.terminated or r.truncated]
-    eval_success = sum(1 for r in ends if r.info.get("is_success"))
-    eval_failures = _failures(ev)
-    first_path = [tuple(r.info["pose"][:2]) for r in ev if r.episode == 0]
     # The same policy from perturbed starts, off the demonstrated route.
     pert_env = CorridorEnv(corridor_map, config.world, start_perturbation=config.eval_perturbation)
     ev_p = evaluate_policy(
-        teacher.policy, pert_env, n_episodes=config.eval_circuits, seed=2_000_000 + seed
+        loop.policy, pert_env, n_episodes=config.eval_circuits, seed=2_000_000 + seed
     )
-    pert_success = sum(1 for r in ev_p if (r.terminated or r.truncated) and r.info["is_success"])
-    pert_failures = _failures(ev_p)
-    ps = run_prioritized_sweeping(corridor_map, config.ps, world_config=config.world, seed=seed)
-    # The ceiling of any learner on the 8 states: does any table pass this run's evaluation?
-    ps_passing = passing_tables(corridor_map, config.ps, world_config=config.world, seed=seed)
-    model = teacher.model
-    return {
-        "seed": seed,
+    model = loop.model
+    figures = {
         "demonstrations_noninteractive": len(non),
         "demonstrations_confident": len(demos) - len(non),
         "demonstrations_total": len(demos),
@@ -335,29 +338,126 @@ def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | No
         "requests_switching_circuit": requests_switching,
         "requests_model_agreed": requests_model_agreed,
         "steps_total": len(records),
-        "circuits_total": circuits_done,
-        "contacts_while_teaching": teach_contacts,
-        "finished": finished,
-        "eval_circuits_clean": eval_success,
+        "circuits_total": sum(1 for r in records if r.terminated),
+        "contacts_while_teaching": sum(1 for r in records if r.info.get("contact")),
+        "finished": loop.stop_reason == "autonomous_episodes",
+        "eval_circuits_clean": sum(1 for r in ends if r.info.get("is_success")),
         "eval_circuits": config.eval_circuits,
-        "eval_perturbed_clean": pert_success,
-        "eval_failures": eval_failures,
-        "eval_perturbed_failures": pert_failures,
+        "eval_perturbed_clean": sum(
+            1 for r in ev_p if (r.terminated or r.truncated) and r.info["is_success"]
+        ),
+        "eval_failures": _failures(ev),
+        "eval_perturbed_failures": _failures(ev_p),
         "components": dict(zip(_ACTION_NAMES, model.n_components_.tolist(), strict=True)),
-        "ps_steps_first": ps.steps_first,
-        "ps_steps_stable": ps.steps_stable,
-        "ps_learned": ps.steps_stable is not None,
-        "ps_passing_tables": len(ps_passing),
-        "ps_contacts": ps.contacts,
-        "ps_policy": list(ps.policy),
-        "seconds": time.perf_counter() - t0,
         # For the figures (first seed only is drawn).
         "_demo_x": [list(r.observation) for r in demos],
         "_demo_y": [int(r.teacher_action) for r in demos],  # type: ignore[arg-type]
         "_model": {
             k: model.state_dict()[k].tolist() for k in ("means_", "covariances_", "component_mask_")
         },
-        "_path": [list(map(float, p)) for p in first_path],
+        "_path": [list(map(float, r.info["pose"][:2])) for r in ev if r.episode == 0],
+    }
+    return figures, loop
+
+
+#: The CBA arm's figures in ``per_seed`` (each under ``"cba_" + key``).
+_CBA_KEYS = (
+    "demonstrations_noninteractive",
+    "demonstrations_confident",
+    "demonstrations_total",
+    "corrections",
+    "labels_total",
+    "requests_per_circuit",
+    "requests_model_agreed",
+    "steps_total",
+    "circuits_total",
+    "contacts_while_teaching",
+    "finished",
+    "eval_circuits_clean",
+    "eval_perturbed_clean",
+    "eval_failures",
+    "eval_perturbed_failures",
+    "components",
+)
+
+
+def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | None) -> dict:
+    """One seed: teaching, evaluation of the final policy, Prioritized Sweeping, and with
+    ``config.cba`` the same teaching and evaluation under CBA (keys ``cba_*``)."""
+    import torch
+
+    from torchcbl.strategies import ConfidentExecution, correcting
+
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    corridor_map = load_map(config.map_name)
+    expert = CorridorExpert(corridor_map, config.world)
+    taught, _ = _teach(config, seed, session_dir, ConfidentExecution(config.rule()), expert)
+    out: dict[str, Any] = {"seed": seed, **taught}
+    ps = run_prioritized_sweeping(corridor_map, config.ps, world_config=config.world, seed=seed)
+    # The ceiling of any learner on the 8 states: does any table pass this run's evaluation?
+    ps_passing = passing_tables(corridor_map, config.ps, world_config=config.world, seed=seed)
+    out.update(
+        ps_steps_first=ps.steps_first,
+        ps_steps_stable=ps.steps_stable,
+        ps_learned=ps.steps_stable is not None,
+        ps_passing_tables=len(ps_passing),
+        ps_contacts=ps.contacts,
+        ps_policy=list(ps.policy),
+    )
+    if config.cba:
+        from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+        # The same expert, answering requests and correcting the autonomous steps it would
+        # have taken otherwise; the same model, stop, cap and evaluation seeds as above.
+        cba, loop = _teach(config, seed, None, ConfidenceBasedAutonomy(), correcting(expert))
+        cba["corrections"] = loop.n_corrections
+        cba["labels_total"] = loop.n_demonstrations
+        out.update({f"cba_{k}": cba[k] for k in _CBA_KEYS})
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def _requests_by_circuits(req: list[list[int]]) -> list[dict[str, Any]]:
+    """Requests per whole circuit of confident execution in each block of circuits: the mean,
+    over the seeds still teaching in that block, of each seed's mean (one vote per seed, not
+    pooled over circuits). ``req``: each seed's requests per circuit."""
+    return [
+        {
+            "circuits": f"{a + 1}-{b}",
+            "mean": _mean_or_none([float(np.mean(q[a:b])) for q in req if len(q) > a]),
+            "seeds": sum(1 for q in req if len(q) > a),
+        }
+        for a, b in _REQUEST_BLOCKS
+    ]
+
+
+def _cba_summary(public: list[dict[str, Any]], config: CorridorExperimentConfig) -> dict:
+    """The CBA arm's summary (``summary["cba"]``): its figures beside confident execution's."""
+    runs = [{k[4:]: v for k, v in r.items() if k.startswith("cba_")} for r in public]
+
+    def ms(key: str) -> dict[str, Any]:
+        return mean_sd([r[key] for r in runs])
+
+    n_requests = sum(r["demonstrations_confident"] for r in runs)
+    return {
+        # every seed's labels (a seed stopped by the step cap counts what it took by then)
+        "labels_total": ms("labels_total"),
+        # the like of confident execution's "demonstrations in all": seeds that reached the stop
+        "labels_total_finished": mean_sd([r["labels_total"] for r in runs if r["finished"]]),
+        "demonstrations_noninteractive": ms("demonstrations_noninteractive"),
+        "demonstrations_total": ms("demonstrations_total"),
+        "corrections": ms("corrections"),
+        "steps_total": ms("steps_total"),
+        "finished_share": sum(bool(r["finished"]) for r in runs) / len(runs),
+        "requests_by_circuits": _requests_by_circuits([r["requests_per_circuit"] for r in runs]),
+        "requests_model_agreed_share": (
+            sum(r["requests_model_agreed"] for r in runs) / n_requests if n_requests else None
+        ),
+        "eval_circuits_clean": ms("eval_circuits_clean"),
+        "eval_perturbed_clean_share": math.fsum(r["eval_perturbed_clean"] for r in runs)
+        / (len(runs) * config.eval_circuits),
+        "components": {a: mean_sd([r["components"][a] for r in runs]) for a in _ACTION_NAMES},
     }
 
 
@@ -468,17 +568,8 @@ def run_experiment(
     summary["requests_next_two_circuits"] = mean_sd(
         [sum(q[1:3]) if len(q) >= 3 else None for q in req]
     )
-    # Do the requests fall off or stay at a floor? Requests per whole circuit of confident
-    # execution in each block of circuits: the mean, over the seeds still teaching in that
-    # block, of each seed's mean (one vote per seed, not pooled over circuits).
-    summary["requests_by_circuits"] = [
-        {
-            "circuits": f"{a + 1}-{b}",
-            "mean": _mean_or_none([float(np.mean(q[a:b])) for q in req if len(q) > a]),
-            "seeds": sum(1 for q in req if len(q) > a),
-        }
-        for a, b in _REQUEST_BLOCKS
-    ]
+    # Do the requests fall off or stay at a floor?
+    summary["requests_by_circuits"] = _requests_by_circuits(req)
     n_requests = sum(r["demonstrations_confident"] for r in public)
     summary["requests_model_agreed_share"] = (
         sum(r["requests_model_agreed"] for r in public) / n_requests if n_requests else None
@@ -510,6 +601,8 @@ def run_experiment(
     summary["ps_first_over_demonstrations"] = (
         ps_first_mean / demos_mean if demos_mean and ps_first_mean is not None else None
     )
+    if config.cba:
+        summary["cba"] = _cba_summary(public, config)
     summary["all_finished"] = all(r["finished"] for r in public)
     summary["all_eval_clean"] = all(r["eval_circuits_clean"] == r["eval_circuits"] for r in public)
     summary["ps_per_seed"] = [
@@ -699,7 +792,13 @@ def _report(r: dict) -> str:
         f"eval {r['eval_circuits_clean']}/{r['eval_circuits']} "
         f"(perturbed {r['eval_perturbed_clean']}/{r['eval_circuits']}), "
         f"PS first {r['ps_steps_first']} stable {r['ps_steps_stable']} steps, "
-        f"{r['seconds']:.1f} s"
+        + (
+            f"CBA labels {r['cba_labels_total']} (finished {r['cba_finished']}), "
+            f"eval {r['cba_eval_circuits_clean']}/{r['eval_circuits']}, "
+            if "cba_labels_total" in r
+            else ""
+        )
+        + f"{r['seconds']:.1f} s"
     )
 
 
@@ -747,6 +846,9 @@ def format_summary(results: dict[str, Any]) -> str:
 
     def share(key: str) -> str:
         return "-" if s.get(key) is None else f"{s[key]:.0%}"
+
+    def share_of(d: dict) -> str:
+        return f"{d['finished_share']:.0%}"
 
     ratio = s["ps_over_demonstrations"]
     ratio_first = s.get("ps_first_over_demonstrations")
@@ -844,6 +946,41 @@ def format_summary(results: dict[str, Any]) -> str:
     for a in _ACTION_NAMES:
         paper = p["components"].get(a)
         rows.append((f"components, {a}", "-" if paper is None else paper, _fmt(s["components"][a])))
+    cba = s.get("cba")
+    if cba:
+        blocks = cba["requests_by_circuits"]
+        capped = f"{1 - cba['finished_share']:.0%} of seeds stopped by the step cap"
+        rows += [
+            (
+                "CBA (JAIR 2009): labels in all (demonstrations + corrections)",
+                "-",
+                f"{_fmt(cba['labels_total'])} ({capped})",
+            ),
+            ("CBA: corrections", "-", _fmt(cba["corrections"])),
+            ("CBA: teaching finished (10 clean circuits, no request)", "-", share_of(cba)),
+            (
+                "CBA: requests per circuit, circuits " + " / ".join(b["circuits"] for b in blocks),
+                "-",
+                " / ".join("-" if b["mean"] is None else f"{b['mean']:.2f}" for b in blocks),
+            ),
+            (
+                "CBA: requests at which the model's own action was the teacher's",
+                "-",
+                "-"
+                if cba["requests_model_agreed_share"] is None
+                else f"{cba['requests_model_agreed_share']:.0%}",
+            ),
+            (
+                "CBA: final policy, clean circuits out of 10, paper's start",
+                "-",
+                _fmt(cba["eval_circuits_clean"]),
+            ),
+            (
+                "CBA: final policy, clean share, perturbed starts",
+                "-",
+                f"{cba['eval_perturbed_clean_share']:.0%}",
+            ),
+        ]
     lines = [f"| figure | paper | ours (mean ± sd over {n} seeds) |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in rows]
     if noise:

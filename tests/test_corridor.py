@@ -176,6 +176,8 @@ def test_experiment_config_checks_what_the_workers_would_find_late():
         CorridorExperimentConfig(max_components=0)
     with pytest.raises(ValueError, match="var_floor must be a finite number >= 0, got nan"):
         CorridorExperimentConfig(var_floor=math.nan)
+    with pytest.raises(ValueError, match="cba must be True or False, got 'no'"):
+        CorridorExperimentConfig(cba="no")
 
 
 def test_the_experiments_learner_has_its_cap_and_floor():
@@ -550,7 +552,26 @@ def test_tiny_experiment_writes_results(tmp_path):
         )
     for name in ("figure3.png", "figure4.png", "map.png", "summary.txt"):
         assert (tmp_path / "run" / name).stat().st_size > 1000
+    # The CBA arm: the same seeds, stop and evaluation; its labels are its demonstrations and
+    # its teacher's corrections, and a seed it finished ended on 10 circuits without a request.
+    cba = s["cba"]
+    for r in data["per_seed"]:
+        assert r["cba_labels_total"] == r["cba_demonstrations_total"] + r["cba_corrections"]
+        assert r["cba_demonstrations_total"] == (
+            r["cba_demonstrations_noninteractive"] + r["cba_demonstrations_confident"]
+        )
+        assert 0 <= r["cba_eval_circuits_clean"] <= 2 and 0 <= r["cba_eval_perturbed_clean"] <= 2
+        assert len(r["cba_eval_failures"]) == 2 - r["cba_eval_circuits_clean"]
+        if r["cba_finished"]:
+            assert r["cba_requests_per_circuit"][-10:] == [0] * 10
+    assert cba["labels_total"]["mean"] == np.mean([r["cba_labels_total"] for r in data["per_seed"]])
+    assert cba["finished_share"] == np.mean([r["cba_finished"] for r in data["per_seed"]])
+    assert cba["eval_perturbed_clean_share"] == (
+        sum(r["cba_eval_perturbed_clean"] for r in data["per_seed"]) / 4
+    )
+    assert data["config"]["cba"] is True
     table = format_summary(res)
+    assert "CBA (JAIR 2009): labels in all" in table
     assert "demonstrations in all" in table and "±" in table and "+-" not in table
     # Markdown pipe tables: each block's rows are | a | b | c |, the second a |---| rule.
     for block in table.split("\n\n"):
