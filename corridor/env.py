@@ -17,6 +17,11 @@ the circuit, -1 for each wall contact, 0 otherwise (the teaching loop does not u
 ``info`` after ``reset`` and every ``step``:
   ``pose`` ndarray [3] (x m, y m, heading rad); ``true_ranges`` ndarray [3] noise-free metres;
   ``contact`` bool (this step touched a wall); ``contacts`` int (this episode);
+  ``blocked`` list of 4 ints, after a contact only (else zeros): for the robot's heading and
+  the headings a turn left, a turn right and a u-turn would give it (rotating in place), 0 if
+  a forward step without noise would take it at least half its length that way, else the side
+  of the wall that stops it (+1 left, -1 right or ahead; :meth:`CorridorWorld.blocked`: a wall
+  or corner the rays need not see counts);
   ``laps`` int (circuits completed this episode); ``lap_position`` metres along the route;
   ``progress`` fraction of the circuit in [0, 1]; ``segment`` int (route segment index);
   ``steps`` int; and ``is_success`` bool when the episode ends.
@@ -34,6 +39,7 @@ Envs never write files; rendering returns RGB arrays (see :mod:`corridor.render`
 
 from __future__ import annotations
 
+import math
 import os
 from typing import Any
 
@@ -47,6 +53,7 @@ from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
 __all__ = ["CorridorEnv", "DEFAULT_MAP"]
 
 DEFAULT_MAP = "figure2"
+_TURNS = (0.0, math.pi / 2, -math.pi / 2, math.pi)  # ahead, turn left, turn right, u-turn
 
 
 class CorridorEnv(gym.Env):
@@ -119,6 +126,8 @@ class CorridorEnv(gym.Env):
             "pose": np.asarray(w.pose, dtype=np.float64),
             "true_ranges": w.true_ranges(),
             "contact": bool(contact),
+            # after a contact: which ways does a wall stop the robot at once (and on which side)?
+            "blocked": [w.blocked(t) for t in _TURNS] if contact else [0, 0, 0, 0],
             "contacts": self._contacts,
             "laps": w.laps,
             "lap_position": w.lap_position,

@@ -240,6 +240,40 @@ class CorridorWorld:
         self._body.position = (x, y)
         self._body.angle = h
 
+    def blocked(self, turn: float = 0.0) -> int:
+        """Whether a wall stops the robot within half a forward step: 0 if a forward step
+        without noise along the commanded heading (see the module docstring) turned by ``turn``
+        radians (as after a turn made in place) takes it at least half its length; else the
+        side of the wall point it meets first, +1 left of that heading, -1 right of it or
+        straight ahead. A wall the three rays need not see counts too, e.g. a corner at the
+        robot's front-left. The robot does not move."""
+        cfg = self.config
+        n = max(1, math.ceil(0.5 * cfg.forward_distance / cfg.substep - 1e-9))
+        heading = self._commanded + float(turn)
+        cos_h, sin_h = math.cos(heading), math.sin(heading)
+        side = 0
+        try:
+            for k in range(1, n + 1):
+                d = 0.5 * cfg.forward_distance * k / n
+                self._body.position = (self._x + d * cos_h, self._y + d * sin_h)
+                deepest = None
+                for info in self._space.shape_query(self._shape):
+                    for point in info.contact_point_set.points:
+                        if point.distance < -1e-9 and (
+                            deepest is None or point.distance < deepest.distance
+                        ):
+                            deepest = point
+                if deepest is not None:
+                    # the contact, between the robot's surface and the wall's
+                    wx = 0.5 * (deepest.point_a.x + deepest.point_b.x)
+                    wy = 0.5 * (deepest.point_a.y + deepest.point_b.y)
+                    cross = cos_h * (wy - self._y) - sin_h * (wx - self._x)
+                    side = 1 if cross > 0 else -1
+                    break
+        finally:
+            self._body.position = (self._x, self._y)
+        return side
+
     @property
     def pose(self) -> tuple[float, float, float]:
         """``(x, y, heading)``: metres, radians in (-pi, pi]."""

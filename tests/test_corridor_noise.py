@@ -174,6 +174,96 @@ def test_expert_recovers_from_detours_off_the_route():
     assert off_route >= 10  # the detours did take the robot off its way
 
 
+def test_blocked_says_which_ways_a_wall_stops_the_robot_at_once():
+    """Hand-placed on figure2 (corridors 0.6 m wide, robot radius 0.12 m): for the robot's
+    heading and after a turn left, a turn right and a u-turn, 0 if a forward step is free for
+    half its length, else the side of the wall met (+1 left, -1 right or ahead)."""
+    world = CorridorWorld(load_map("figure2"), WorldConfig())
+    turns = (0.0, math.pi / 2, -math.pi / 2, math.pi)
+    cases = {
+        # west, below the junction J: the corner (1.1, 0.9) at its front-left, all rays open
+        (1.2, 0.969, math.pi): [1, -1, 0, 0],
+        (1.2, 1.2, math.pi): [0, 0, 0, 0],  # the junction's middle: free every way
+        (1.17, 1.03, -math.pi / 2): [-1, 0, 0, 0],  # south, the same corner at its front-right
+        (1.55, 0.2, 0.0): [-1, 0, 0, 0],  # east, 3 cm from the wall straight ahead
+        (0.4, 0.0, 0.0): [0, 0, 0, 0],  # the start
+    }
+    for (x, y, h), want in cases.items():
+        world.set_pose(x, y, h)
+        assert [world.blocked(t) for t in turns] == want, (x, y, h)
+        assert world.pose == (x, y, h)  # probing does not move it
+    world.set_pose(1.2, 0.969, math.pi)
+    assert min(world.true_ranges()) > 1.2  # the rays see none of it
+    env = CorridorEnv("figure2", NOISY)
+    _, info = env.reset(seed=0)
+    assert info["blocked"] == [0, 0, 0, 0]  # reported after a contact only
+
+
+def test_expert_turns_the_way_the_route_goes_when_it_faces_across_it_or_is_stopped():
+    """Hand-placed on figure2's corridor J-P3 (route segment 4, driven west along y = 1.2)."""
+    world = CorridorWorld(load_map("figure2"), WorldConfig())
+    expert = CorridorExpert(world.map, WorldConfig())
+    turns = (0.0, math.pi / 2, -math.pi / 2, math.pi)
+
+    def answer(x: float, y: float, heading: float, contact: bool) -> int:
+        world.set_pose(x, y, heading)
+        info = {
+            "pose": np.array(world.pose),
+            "segment": 4,
+            "true_ranges": world.true_ranges(),
+            "blocked": [world.blocked(t) for t in turns] if contact else [0, 0, 0, 0],
+        }
+        return expert(world.sense(np.random.default_rng(0)), info)
+
+    assert answer(0.8, 1.2, 0.0 + math.pi, False) == F  # along the route
+    assert answer(0.8, 1.2, math.pi / 2, False) == L  # facing north: the route's way is left
+    assert answer(0.8, 1.2, -math.pi / 2, False) == R  # facing south: it is right
+    # Against the corner (1.1, 0.9) below J, all rays open: forward would push on; north is
+    # free and across the route's way, east free but against it, south stopped.
+    assert answer(1.2, 0.969, math.pi, False) == F  # no contact reported: the route's forward
+    assert answer(1.2, 0.969, math.pi, True) == R
+    # In the junction's north-west corner facing north (the corner (1.1, 1.5) at its
+    # front-left): west is stopped, east leads back against the route, south is free.
+    assert answer(1.17, 1.39, math.pi / 2, True) == U
+
+
+def test_expert_gets_out_when_a_late_turn_leaves_it_against_a_corner():
+    """A learner's mistake the random detours rarely make: one of the route's manoeuvres one or
+    two steps late. Under motion noise the robot may then rest against a corner that stops every
+    forward step while all three rays read open. The expert finishes the circuit every time and
+    never answers forward where a wall stops it at once. Without ``info["blocked"]`` (the
+    expert before it had that rule) it pushed forward into the corner and some circuits never
+    ended (measured: 20 of 400)."""
+    env = CorridorEnv("figure2", NOISY, max_episode_steps=150)
+    expert = CorridorExpert(env.corridor_map, NOISY)
+    n_turns = sum(1 for k in env.corridor_map.manoeuvres() if k != "straight")
+
+    def drive(turn: int, late: int, seed: int, see_blocked: bool) -> tuple[bool, int]:
+        obs, info = env.reset(seed=seed)
+        seen, pending, stopped = 0, None, 0
+        while True:
+            shown = info if see_blocked else {k: v for k, v in info.items() if k != "blocked"}
+            a = expert(obs, shown)
+            if pending is None and a != F:
+                if seen == turn:
+                    pending = [late, a]
+                seen += 1
+            if pending and pending[0] >= 0:
+                a, pending[0] = (F if pending[0] > 0 else pending[1]), pending[0] - 1
+            elif see_blocked and info["blocked"][0]:
+                assert a != F, (turn, late, seed, info["pose"])
+                stopped += 1
+            obs, _, terminated, truncated, info = env.step(a)
+            if terminated or truncated:
+                return terminated, stopped
+
+    runs = [(t, late, s) for t in range(n_turns) for late in (1, 2) for s in range(8)]
+    results = [drive(*r, see_blocked=True) for r in runs]
+    assert all(done for done, _ in results)
+    assert sum(stopped for _, stopped in results) >= 5  # the rule was needed
+    assert not all(drive(*r, see_blocked=False)[0] for r in runs)
+
+
 def test_figure2_spur_does_not_read_like_a_left_corner_under_motion_noise():
     """Where the expert drives forward into the dead-end spur while its left sensor still sees
     the side corridor, the front range is well beyond every front range at which it turns left,
