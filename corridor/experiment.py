@@ -155,8 +155,8 @@ class CorridorExperimentConfig:
             expert (which also corrects the autonomous steps it would not have taken), model,
             stop, step cap and evaluation seeds, and the same non-interactive phase (which
             JAIR 2009's CBA does not have; kept so that the two differ only after it). Its
-            figures are the ``cba_*`` keys of ``per_seed`` and ``summary["cba"]``. Not part of
-            the paper's Section 5.1.
+            figures are the ``cba_*`` keys of ``per_seed`` and ``summary["cba"]`` (a seed's
+            ``seconds`` then counts both arms). Not part of the paper's Section 5.1.
     """
 
     map_name: str = "figure2"
@@ -949,12 +949,18 @@ def format_summary(results: dict[str, Any]) -> str:
     cba = s.get("cba")
     if cba:
         blocks = cba["requests_by_circuits"]
-        capped = f"{1 - cba['finished_share']:.0%} of seeds stopped by the step cap"
+        finished = cba["labels_total_finished"]
+        # like "demonstrations in all": the seeds that reached the stop; all seeds beside
+        head = (
+            f"{_fmt(finished)} ({finished['n']} seeds that finished)"
+            if finished.get("n")
+            else "no seed finished"
+        )
         rows += [
             (
                 "CBA (JAIR 2009): labels in all (demonstrations + corrections)",
                 "-",
-                f"{_fmt(cba['labels_total'])} ({capped})",
+                f"{head}; every seed, a capped one at its count: {_fmt(cba['labels_total'])}",
             ),
             ("CBA: corrections", "-", _fmt(cba["corrections"])),
             ("CBA: teaching finished (10 clean circuits, no request)", "-", share_of(cba)),

@@ -10,9 +10,11 @@ and the distance gate (the standardised distance to the nearest stored demonstra
 
 Prints per seed: labels, corrections, confident steps, requests and which gate refused them
 (margin only, distance only, both), the share of requests at which the model's own action
-was the teacher's, requests per circuit over the first and last 20 circuits, the margin
-thresholds of the boundaries the last 20 circuits' margin refusals fell on, and the distance
-threshold at the start of the confident phase and at the end. Ends with one JSON line.
+was the teacher's, requests per whole circuit of confident execution (as the experiment
+counts them: not the circuit in which the non-interactive phase ended) over the first and last
+20, the margin thresholds of the boundaries the last 20 circuits' margin refusals fell on,
+and the distance threshold at the start of the confident phase and at the end. Ends with one
+JSON line.
 
     PYTHONPATH=$PWD python scripts/corridor_cba_gates.py [--seeds 0-9]
 
@@ -105,7 +107,12 @@ def _seed(config: CorridorExperimentConfig, seed: int) -> dict[str, Any]:
     )
     agreed = sum(1 for _, r in asked if r.model_action == r.teacher_action)
     per_circuit = collections.Counter(r.episode for _, r in asked)
-    circuits = sorted({r.episode for r in conf if r.terminated or r.truncated})
+    # whole circuits of confident execution, as the experiment counts them: not the one in
+    # which the non-interactive phase ended
+    switching = {r.episode for r in records if r.phase == "noninteractive"}
+    circuits = sorted(
+        {r.episode for r in conf if (r.terminated or r.truncated) and r.episode not in switching}
+    )
     counts = [per_circuit[e] for e in circuits]
     late = set(circuits[-_LAST:])
     boundaries = collections.Counter(
@@ -140,6 +147,10 @@ def _seed(config: CorridorExperimentConfig, seed: int) -> dict[str, Any]:
     }
 
 
+def _text(value: float | None, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
 def _parse_seeds(text: str) -> list[int]:
     if "-" in text:
         a, b = text.split("-")
@@ -164,8 +175,9 @@ def main() -> None:
             f"| {r['seed']} | {r['labels']} | {r['corrections']} | {r['finished']} "
             f"| {r['confident_steps']} | {r['requests']} | {r['refused_by_margin_only']} "
             f"| {r['refused_by_distance_only']} | {r['refused_by_both']} "
-            f"| {r['model_agreed_share']:.0%} | {r['requests_per_circuit_first']:.2f} / "
-            f"{r['requests_per_circuit_last']:.2f} |"
+            f"| {_text(r['model_agreed_share'], '.0%')} "
+            f"| {_text(r['requests_per_circuit_first'], '.2f')} / "
+            f"{_text(r['requests_per_circuit_last'], '.2f')} |"
         )
     total = {
         k: sum(r[k] for r in rows)
@@ -177,11 +189,12 @@ def main() -> None:
         )
     }
     print()
+    n = max(total["requests"], 1)
     print(
         f"All seeds: {total['requests']} confident-phase requests, refused by the margin gate "
-        f"alone {total['refused_by_margin_only'] / total['requests']:.0%}, by the distance gate "
-        f"alone {total['refused_by_distance_only'] / total['requests']:.0%}, by both "
-        f"{total['refused_by_both'] / total['requests']:.0%}."
+        f"alone {total['refused_by_margin_only'] / n:.0%}, by the distance gate "
+        f"alone {total['refused_by_distance_only'] / n:.0%}, by both "
+        f"{total['refused_by_both'] / n:.0%}."
     )
     late = collections.Counter()
     thresholds = collections.defaultdict(list)
