@@ -64,7 +64,7 @@ from corridor.baseline import (
 )
 from corridor.env import DEFAULT_MAP, CorridorEnv
 from corridor.expert import CorridorExpert
-from corridor.maps import load_map
+from corridor.maps import CorridorMap, load_map
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
 from torchcbl.evaluation import mean_sd, run_versions
 
@@ -272,6 +272,7 @@ def make_model(config: CorridorExperimentConfig | None = None, seed: int = 0) ->
 def _teach(
     config: CorridorExperimentConfig,
     seed: int,
+    corridor_map: CorridorMap,
     session_dir: Path | None,
     strategy: Any,
     teacher: Any,
@@ -281,7 +282,6 @@ def _teach(
     arm's figures and the finished loop (a :class:`torchcbl.ConfidentTeacher`)."""
     from torchcbl import ConfidentTeacher, evaluate_policy
 
-    corridor_map = load_map(config.map_name)
     env = CorridorEnv(corridor_map, config.world)
     loop = ConfidentTeacher(
         env,
@@ -392,7 +392,8 @@ def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | No
     t0 = time.perf_counter()
     corridor_map = load_map(config.map_name)
     expert = CorridorExpert(corridor_map, config.world)
-    taught, _ = _teach(config, seed, session_dir, ConfidentExecution(config.rule()), expert)
+    confident = ConfidentExecution(config.rule())
+    taught, _ = _teach(config, seed, corridor_map, session_dir, confident, expert)
     out: dict[str, Any] = {"seed": seed, **taught}
     ps = run_prioritized_sweeping(corridor_map, config.ps, world_config=config.world, seed=seed)
     # The ceiling of any learner on the 8 states: does any table pass this run's evaluation?
@@ -410,7 +411,9 @@ def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | No
 
         # The same expert, answering requests and correcting the autonomous steps it would
         # have taken otherwise; the same model, stop, cap and evaluation seeds as above.
-        cba, loop = _teach(config, seed, None, ConfidenceBasedAutonomy(), correcting(expert))
+        cba, loop = _teach(
+            config, seed, corridor_map, None, ConfidenceBasedAutonomy(), correcting(expert)
+        )
         cba["corrections"] = loop.n_corrections
         cba["labels_total"] = loop.n_demonstrations
         out.update({f"cba_{k}": cba[k] for k in _CBA_KEYS})
@@ -432,6 +435,26 @@ def _requests_by_circuits(req: list[list[int]]) -> list[dict[str, Any]]:
     ]
 
 
+def _arm_summary(runs: list[dict[str, Any]], config: CorridorExperimentConfig) -> dict:
+    """The figures both arms report alike, from each seed's teaching figures (``runs``, keys as
+    :func:`_teach` returns them): requests per circuit in blocks, the share of requests at which
+    the model's own action was the teacher's, the share of seeds that reached the stop, the
+    final policy's clean circuits (paper's start) and clean share (perturbed starts), and the
+    components per action."""
+    n_requests = sum(r["demonstrations_confident"] for r in runs)
+    return {
+        "requests_by_circuits": _requests_by_circuits([r["requests_per_circuit"] for r in runs]),
+        "requests_model_agreed_share": (
+            sum(r["requests_model_agreed"] for r in runs) / n_requests if n_requests else None
+        ),
+        "finished_share": sum(bool(r["finished"]) for r in runs) / len(runs),
+        "eval_circuits_clean": mean_sd([r["eval_circuits_clean"] for r in runs]),
+        "eval_perturbed_clean_share": math.fsum(r["eval_perturbed_clean"] for r in runs)
+        / (len(runs) * config.eval_circuits),
+        "components": {a: mean_sd([r["components"][a] for r in runs]) for a in _ACTION_NAMES},
+    }
+
+
 def _cba_summary(public: list[dict[str, Any]], config: CorridorExperimentConfig) -> dict:
     """The CBA arm's summary (``summary["cba"]``): its figures beside confident execution's."""
     runs = [{k[4:]: v for k, v in r.items() if k.startswith("cba_")} for r in public]
@@ -439,7 +462,6 @@ def _cba_summary(public: list[dict[str, Any]], config: CorridorExperimentConfig)
     def ms(key: str) -> dict[str, Any]:
         return mean_sd([r[key] for r in runs])
 
-    n_requests = sum(r["demonstrations_confident"] for r in runs)
     return {
         # every seed's labels (a seed stopped by the step cap counts what it took by then)
         "labels_total": ms("labels_total"),
@@ -449,15 +471,7 @@ def _cba_summary(public: list[dict[str, Any]], config: CorridorExperimentConfig)
         "demonstrations_total": ms("demonstrations_total"),
         "corrections": ms("corrections"),
         "steps_total": ms("steps_total"),
-        "finished_share": sum(bool(r["finished"]) for r in runs) / len(runs),
-        "requests_by_circuits": _requests_by_circuits([r["requests_per_circuit"] for r in runs]),
-        "requests_model_agreed_share": (
-            sum(r["requests_model_agreed"] for r in runs) / n_requests if n_requests else None
-        ),
-        "eval_circuits_clean": ms("eval_circuits_clean"),
-        "eval_perturbed_clean_share": math.fsum(r["eval_perturbed_clean"] for r in runs)
-        / (len(runs) * config.eval_circuits),
-        "components": {a: mean_sd([r["components"][a] for r in runs]) for a in _ACTION_NAMES},
+        **_arm_summary(runs, config),
     }
 
 
@@ -538,7 +552,6 @@ def run_experiment(
         "steps_total",
         "ps_steps_first",
         "ps_steps_stable",
-        "eval_circuits_clean",
     ]
     summary: dict[str, Any] = {k: mean_sd([r[k] for r in public]) for k in keys}
     # "demonstrations in all, to 10 autonomous circuits": the seeds whose teaching got there;
@@ -551,9 +564,6 @@ def run_experiment(
         for r in public
         if not r["finished"]
     ]
-    summary["eval_perturbed_clean_share"] = math.fsum(r["eval_perturbed_clean"] for r in public) / (
-        len(public) * config.eval_circuits
-    )
     summary["motion_noise"] = {
         "forward_noise": config.world.forward_noise,
         "heading_noise_deg": math.degrees(config.world.heading_noise),
@@ -568,16 +578,8 @@ def run_experiment(
     summary["requests_next_two_circuits"] = mean_sd(
         [sum(q[1:3]) if len(q) >= 3 else None for q in req]
     )
-    # Do the requests fall off or stay at a floor?
-    summary["requests_by_circuits"] = _requests_by_circuits(req)
-    n_requests = sum(r["demonstrations_confident"] for r in public)
-    summary["requests_model_agreed_share"] = (
-        sum(r["requests_model_agreed"] for r in public) / n_requests if n_requests else None
-    )
-    summary["finished_share"] = sum(bool(r["finished"]) for r in public) / len(public)
-    summary["components"] = {
-        a: mean_sd([r["components"][a] for r in public]) for a in _ACTION_NAMES
-    }
+    # Do the requests fall off or stay at a floor? And the figures CBA's arm reports alike.
+    summary.update(_arm_summary(public, config))
     # "Learned" is the stable criterion; the first hit is reported beside it.
     summary["ps_learned_share"] = sum(r["ps_steps_stable"] is not None for r in public) / len(
         public

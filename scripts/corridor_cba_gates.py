@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import collections
 import json
-import math
 from typing import Any
 
 import numpy as np
@@ -38,9 +37,8 @@ from corridor.expert import CorridorExpert
 from corridor.maps import load_map
 from corridor.world import Action
 from torchcbl import ConfidentTeacher
-from torchcbl.confidence import _np
 from torchcbl.strategies import correcting
-from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+from torchcbl.strategies.cba import ConfidenceBasedAutonomy, posterior_margin
 
 _NAMES = [a.name.lower() for a in Action]
 _LAST = 20  # circuits at each end of the confident phase
@@ -58,14 +56,9 @@ class _Noting(ConfidenceBasedAutonomy):
         decided = super()._confident(observation, c)
         if self.thresholds is None:
             return decided
-        post = _np(c.posterior)[0].astype(np.float64)
-        chosen = int(_np(c.action)[0])
-        rest = post.copy()
-        rest[chosen] = -1.0
-        runner = int(rest.argmax())
-        p_c, p_r = float(post[chosen]), float(post[runner])
-        margin = math.inf if p_r <= 0.0 else math.log(p_c) - math.log(p_r)
-        margin_ok = p_r < p_c and margin > self.thresholds[chosen, runner]
+        picked, second, margin = posterior_margin(np.asarray(c.posterior, dtype=np.float64))
+        chosen, runner = int(picked[0]), int(second[0])
+        margin_ok = bool(margin[0] > self.thresholds[chosen, runner])
         distance_ok = self.nn_distance(observation) < self.distance_threshold
         assert decided == (margin_ok and distance_ok)
         self.notes.append((margin_ok, distance_ok, chosen, runner))
