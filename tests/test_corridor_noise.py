@@ -224,11 +224,68 @@ def test_expert_stopped_by_a_wall_turns_the_free_way_nearest_the_route():
     # In the junction's north-west corner facing north (the corner (1.1, 1.5) at its
     # front-left): west is stopped, east leads back against the route, south is free.
     assert answer(1.17, 1.39, math.pi / 2, 4, True) == U
-    # Facing east at P3 with the corner (0.3, 0.9) at its front-right and the route's way
-    # (segment 0, east) ahead: north and south are both free and equally across it; the tie
-    # goes away from the wall, to the left.
-    assert answer(0.09, 0.91, 0.0, 0, False) == F
-    assert answer(0.09, 0.91, 0.0, 0, True) == L
+    # Facing east at P0's north edge, the corner (0.3, 0.3) straight ahead, in the route's
+    # corridor and heading its way (segment 0, east): north and south are both free and
+    # equally across it; the tie goes away from the wall, to the left.
+    assert answer(0.1, 0.3, 0.0, 0, False) == F
+    assert answer(0.1, 0.3, 0.0, 0, True) == L
+    # Facing east at P3's south-east edge, off the route (segment 0 runs east along y = 0):
+    # the way back is west to P3, south to P0 and east, so a u-turn. (A right turn from here
+    # would end against the east wall of the corridor P3-P0.)
+    assert answer(0.09, 0.91, 0.0, 0, False) == U
+
+
+def test_expert_off_the_route_takes_the_shortest_way_back_on_the_map():
+    """Hand-placed on figure2 with the route's progress at the start of segment 5 (P3 -> P0,
+    south along x = 0), as after a detour past the junction P3: the expert drives back by the
+    map's corridors, the shortest way, to where the progress stands."""
+    world = CorridorWorld(load_map("figure2"), WorldConfig())
+    expert = CorridorExpert(world.map, WorldConfig())
+    at_p3 = float(np.sum(expert.route.segment_lengths[:5]))
+
+    def answer(x: float, y: float, heading: float) -> int:
+        world.set_pose(x, y, heading)
+        info = {
+            "pose": np.array(world.pose),
+            "segment": 5,
+            "lap_position": at_p3,
+            "true_ranges": world.true_ranges(),
+            "blocked": [0, 0, 0, 0],
+        }
+        return expert(world.sense(np.random.default_rng(0)), info)
+
+    # East along J - P3, away from P3: back west (0.8 m) rather than round by J, P1 and P0.
+    assert answer(0.6, 1.2, 0.0) == U
+    # South from J towards P1: back north to J and west to P3 (2.6 m with the turns) rather
+    # than on round P1 and P0 to P3 (3.8 m).
+    assert answer(1.4, 0.6, -math.pi / 2) == U
+    # West along P0 - P1: on to P0 and north (2.6 m) rather than back round P1, J (3.8 m).
+    assert answer(1.0, 0.0, math.pi) == F
+    # At P0's decision point: turn north now. (The reactive rule the expert had before saw
+    # the end wall 0.6 m ahead and no opening yet, and u-turned.)
+    assert answer(0.3, 0.0, math.pi) == R
+    # Heading down P3 - P0 already, past where the progress stands by less than half a metre:
+    # drive on.
+    assert answer(0.0, 0.9, -math.pi / 2) == F
+
+
+def test_expert_brings_the_robot_back_when_the_progress_is_left_behind():
+    """A detour measured on the noisy robot (seed 56 of ``scripts/corridor_expert_recovery.py``):
+    four actions at P3 leave the route's progress on segment 5 (P3 -> P0) while the robot heads
+    back east along the corridor it came by, farther from the route's point than the progress
+    follows. The expert before the map-based way back drove a loop of the corridors for the
+    rest of the episode (150 actions); now the circuit ends soon after."""
+    env = CorridorEnv("figure2", NOISY, max_episode_steps=150)
+    expert = CorridorExpert(env.corridor_map, NOISY)
+    obs, info = env.reset(seed=56)
+    forced = {21: F, 22: R, 23: U, 24: L}
+    for step in range(150):
+        obs, _, terminated, truncated, info = env.step(forced.get(step, expert(obs, info)))
+        if step == 24:
+            assert info["segment"] == 5 and math.cos(info["pose"][2]) > 0.9  # east, left behind
+        if terminated or truncated:
+            break
+    assert terminated and step < 40
 
 
 def test_expert_gets_out_when_a_late_turn_leaves_it_against_a_corner():
@@ -238,7 +295,8 @@ def test_expert_gets_out_when_a_late_turn_leaves_it_against_a_corner():
     never keeps pushing: at most a few forward steps in a row that do not move the robot (the
     noise of the heading frees some). Without ``info["blocked"]`` (the expert before it had
     that rule) it pushed on, for up to the rest of the episode, and some circuits never ended
-    (measured: 20 of 400)."""
+    (measured: 20 of 400 with the reactive off-route rule the expert had then, 31 of 400 with
+    its way back on the map)."""
     env = CorridorEnv("figure2", NOISY, max_episode_steps=150)
     expert = CorridorExpert(env.corridor_map, NOISY)
     n_turns = sum(1 for k in env.corridor_map.manoeuvres() if k != "straight")
