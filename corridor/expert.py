@@ -19,21 +19,25 @@ the map's route:
   take.)
 - Otherwise off the route (after a mistake of the learner; or past the segment's end node by
   more than half a step, down a corridor the route does not take): the shortest way back on the
-  map's corridors, as a person who knows the map would drive it (a Dijkstra search over the
-  nodes, metres driven plus one step's length per turn). Its goal is where the route's progress
-  stands, since the progress only moves on near it: leave the tracked segment's start node along
-  the segment or, within half a metre of its end, leave that end node along the next one. The
-  first action is to drive on to the next node ahead (turning there, now if the robot stands at
-  its decision point) or to turn now, where the turn lands the robot clear inside a corridor;
-  ways a wall stops (``info["blocked"]``, below) are left out. Already in the goal's corridor
-  and heading its way: forward, and the route's manoeuvre at its end. The reactive rule it
-  replaced (forward if the front was open, else a turn toward the open side, else a u-turn)
-  could not see where the progress stood: after 1-4 random actions it drove 1 of 300 circuits
-  round a loop of the corridors against the route for the rest of the episode (the progress,
-  left at the junction P3, never followed), and u-turned at corners it took for dead ends; with
-  the way back none of the 300 fails and a circuit takes 32.3 actions instead of 35.3
-  (``scripts/corridor_expert_recovery.py``). With no corridor running the robot's way (it
-  faces a side wall), the reactive rule is the fallback.
+  map's corridors, as a person who knows the map would drive it. Its goal is where the route's
+  progress stands, since the progress only follows the robot near it: to be in the tracked
+  segment's corridor heading along it, not past where the progress stands by more than half a
+  metre (within half a metre of the segment's end: in the next segment's corridor heading
+  along it). There the expert drives on and makes the route's manoeuvre at the corridor's end.
+  Elsewhere a Dijkstra search over arrivals at the map's nodes (metres driven plus one step's
+  length per turn) starts from the first actions the walls allow, judged on the map's walls
+  with exact motion: forward if half a step is free (then on to the node ahead, turning there,
+  now if the robot stands at its decision point), a turn if the first half of its quarter
+  circle is free and it ends inside a corridor, a u-turn if a step is free after it; ways
+  ``info["blocked"]`` reports stopped are left out. If the walls allow none (the robot faces a
+  side wall with no room), the turn that heads the shortest way, made where it stands, as a
+  contact would leave it. The reactive rule this replaced (forward if the front was open, else
+  a turn toward the open side, else a u-turn) could not see where the progress stood: after
+  1-4 random actions it drove 1 of 300 circuits round a loop of the corridors against the route
+  for the rest of the episode (the progress, left at the junction P3, never followed), and it
+  u-turned at corners it took for dead ends. ``scripts/corridor_expert_recovery.py`` measures
+  both against a learner's mistakes; the reactive rule is left as the fallback where no
+  corridor runs any way the robot can face.
 - Stuck: when the rules above say forward but a wall stops the robot at once
   (``info["blocked"]``, given after a contact: its body rests against a wall or a corner ahead
   that the three rays need not see; a learner's late turn at a junction leaves it pressed
@@ -45,7 +49,7 @@ the map's route:
   with a manoeuvre made one or two steps late, 20 of 400 circuits never ended (0 with it;
   wall contacts per circuit 8.3 against 1.8), after 1-4 random actions 11 of 300 (1 with it).
   These are figures of the reactive rule above, before the way back
-  (``scripts/corridor_expert_recovery.py`` and a test; with the way back, 31 of 400 and 15 of
+  (``scripts/corridor_expert_recovery.py`` and a test; with the way back, 43 of 400 and 22 of
   300 never end without this rule, 0 and 0 with it). Turning away from the wall whatever lay
   beyond rocked the robot between two turns in the inside corner of a junction.
 """
@@ -72,7 +76,8 @@ class CorridorExpert:
         corridor_map: the map whose route is driven.
         world_config: the robot's motion parameters (the turn radius sets the decision point).
         on_route_tolerance: lateral distance (metres) from the route still counted as on it.
-        open_range: a range above this (metres) counts as open in the off-route rule.
+        open_range: a range above this (metres) counts as open in the reactive fallback of the
+            way back (where no corridor runs any way the robot can face).
     """
 
     def __init__(
@@ -100,6 +105,7 @@ class CorridorExpert:
         n = len(r) - 1
         self._edges = [(r[0], r[1]), *((r[k], r[k + 1]) for k in range(1, n)), (r[0], r[1])]
         self._seg_start = np.concatenate([[0.0], np.cumsum(self.route.segment_lengths)])
+        self._walls = np.asarray(corridor_map.walls(), dtype=float)  # [M, 2 ends, 2] metres
 
     def __call__(self, observation: np.ndarray, info: Mapping[str, Any]) -> int:
         """The expert's action (int, see :class:`corridor.world.Action`) for this step."""
@@ -160,12 +166,15 @@ class CorridorExpert:
         """Off the route: the first action of the shortest way, on the map's corridors, to
         where the circuit goes on (the route's progress only moves on near where it stands).
 
-        The goal is to leave the tracked segment's start node along it or, when its end is
-        near (the progress then follows onto the next segment), the next segment's; already
-        in that corridor heading that way, drive on (and make the route's manoeuvre at its
-        end). The first action is driving on to the next node ahead or a turn now, where the
-        turn lands the robot inside a corridor; at a node the robot may then go any way.
-        Costs are metres driven plus one forward step's length per turn."""
+        The goal is to be in the tracked segment's corridor heading along it, not past where the
+        progress stands by more than half a metre (or, within half a metre of the segment's
+        end, in the next segment's corridor heading along it): there, drive on and make the
+        route's manoeuvre at the end. Else a Dijkstra search over arrivals at the map's nodes
+        (metres driven plus one forward step's length per turn), from the first actions the
+        walls allow here: drive on to the node ahead (turning there, now if the robot stands
+        at its decision point), or turn now, where the turn's arc is clear and ends inside a
+        corridor. If the walls allow none of them (the robot faces a side wall), the turn that
+        heads the shortest way, made where the robot stands as a contact would leave it."""
         step = self.config.forward_distance
         h = _axis(heading)
         hv = np.array(h, dtype=float)
@@ -175,50 +184,66 @@ class CorridorExpert:
         if lap is not None and self._seg_start[seg + 1] - float(lap) <= 0.5:
             k = (seg + 1) % len(self._edges)
         goal = self._edges[k]
-        place = self._corridor_along(p, h, 0.0)
-        if place is not None and set(place) == set(goal) and place[0] == goal[1]:
-            a, b = (self._nodes[v] for v in goal)
-            u = (b - a) / np.linalg.norm(b - a)
-            on_time = True
-            if k == seg and lap is not None:  # not already past where the progress stands
-                at = self.route.points[seg] + (float(lap) - self._seg_start[seg]) * u
-                on_time = float(np.dot(p - a, u)) <= float(np.dot(at - a, u)) + 0.5
-            if on_time:
-                if float(np.dot(b - p, hv)) > self.config.turn_radius + 0.5 * step:
-                    return int(Action.FORWARD)
-                return _turn_action(h, self._exit_direction(k))
-        # Dijkstra over arrivals (node, heading), from the first actions that are possible here:
-        # drive on to the node ahead (and turn there, now if the robot stands at its decision
-        # point), or turn now where the turn lands the robot inside a corridor
+        a_goal, b_goal = (self._nodes[v] for v in goal)
+        u_goal = (b_goal - a_goal) / np.linalg.norm(b_goal - a_goal)
+        # how far along the goal's corridor the robot may stand (metres from its start node)
+        reach = math.inf
+        if k == seg and lap is not None:
+            at = self.route.points[seg] + (float(lap) - self._seg_start[seg]) * u_goal
+            reach = float(np.dot(at - a_goal, u_goal)) + 0.5
+
+        def in_goal(place: tuple[str, str] | None, q: np.ndarray) -> bool:
+            return (
+                place is not None
+                and place == (goal[1], goal[0])  # (ahead, behind): heading along the goal
+                and float(np.dot(q - a_goal, u_goal)) <= reach
+            )
+
+        if in_goal(self._corridor_along(p, h), p):
+            if float(np.dot(b_goal - p, hv)) > self.config.turn_radius + 0.5 * step:
+                return int(Action.FORWARD)
+            return _turn_action(h, self._exit_direction(k))
         decide = self.config.turn_radius + 0.5 * step
         stopped = info.get("blocked")  # after a contact: the ways a wall stops at once
         if stopped is None:
             stopped = (0, 0, 0, 0)
         heap: list[tuple[float, int, str, tuple[int, int], int | None]] = []
-        for action, h2 in (
-            (Action.FORWARD, h),
-            (Action.TURN_LEFT, (-h[1], h[0])),
-            (Action.TURN_RIGHT, (h[1], -h[0])),
-            (Action.U_TURN, (-h[0], -h[1])),
-        ):
-            if stopped[int(action)]:
-                continue
-            q, clearance = p, 0.0
-            if action in (Action.TURN_LEFT, Action.TURN_RIGHT):  # a quarter circle
-                q = p + self.config.turn_radius * (hv + np.array(h2, dtype=float))
-                clearance = self.config.robot_radius
-            at = self._corridor_along(q, h2, clearance)
-            if at is None:
-                continue
-            turned = 0.0 if action == Action.FORWARD else step
-            if set(at) == set(goal) and at[0] == goal[1]:  # lands on the goal's corridor
-                heap.append((turned, len(heap), "", (0, 0), int(action)))
-                continue
-            t = float(np.dot(self._nodes[at[0]] - q, np.array(h2, dtype=float)))
-            if t < -0.5 * step:  # past the node ahead, facing its far wall
-                continue
-            first = None if action == Action.FORWARD and t <= decide else int(action)
-            heap.append((max(t, 0.0) + turned, len(heap), at[0], h2, first))
+        for in_place in (False, True):
+            for action, h2 in (
+                (Action.FORWARD, h),
+                (Action.TURN_LEFT, (-h[1], h[0])),
+                (Action.TURN_RIGHT, (h[1], -h[0])),
+                (Action.U_TURN, (-h[0], -h[1])),
+            ):
+                if stopped[int(action)] or (in_place and action == Action.FORWARD):
+                    continue
+                q = p
+                if not in_place and not self._free(p, h, int(action)):
+                    continue
+                if not in_place and action in (Action.TURN_LEFT, Action.TURN_RIGHT):
+                    q = p + self.config.turn_radius * (hv + np.array(h2, dtype=float))
+                place = self._corridor_along(q, h2)
+                if place is None:
+                    continue
+                turned = 0.0 if action == Action.FORWARD else step
+                if in_goal(place, q):
+                    heap.append((turned, len(heap), "", (0, 0), int(action)))
+                    continue
+                t = float(np.dot(self._nodes[place[0]] - q, np.array(h2, dtype=float)))
+                if t < -0.5 * step:  # past the node ahead, facing its far wall
+                    continue
+                at_node = action == Action.FORWARD and t <= decide
+                heap.append(
+                    (
+                        max(t, 0.0) + turned,
+                        len(heap),
+                        place[0],
+                        h2,
+                        None if at_node else int(action),
+                    )
+                )
+            if heap:
+                break
         heapq.heapify(heap)
         order = len(heap)
         seen: set[tuple[str, tuple[int, int]]] = set()
@@ -233,15 +258,39 @@ class CorridorExpert:
                 d_out = _axis_between(self._nodes[node], self._nodes[nxt])
                 c = cost + (0.0 if d_out == d_in else step)
                 act = _turn_action(d_in, d_out) if first is None else first
-                if stopped[act]:  # a turn now, at the decision point, that a wall stops
-                    continue
+                if first is None and (stopped[act] or not self._free(p, h, act)):
+                    continue  # a turn now, at the decision point, that a wall stops
                 if (node, nxt) == goal:
                     heapq.heappush(heap, (c, order, "", (0, 0), act))
                 else:
                     length = float(np.linalg.norm(self._nodes[nxt] - self._nodes[node]))
                     heapq.heappush(heap, (c + length, order, nxt, d_out, act))
                 order += 1
-        return self._reactive(info)  # no corridor runs the robot's way here
+        return self._reactive(info)  # no corridor runs any way the robot can face here
+
+    def _free(self, p: np.ndarray, h: tuple[int, int], action: int) -> bool:
+        """Whether the walls let ``action`` from ``p`` heading ``h`` start its way: the first
+        half of its motion is free of contact (exact motion; forward: half a step, as
+        ``info["blocked"]`` tests; a turn: the first half of its quarter circle, so a turn that
+        ends touching a wall still gets the robot round; a u-turn turns in place, and is free if
+        a forward step is then)."""
+        if action == Action.U_TURN:  # in place: free if the robot can then step away
+            return self._free(p, (-h[0], -h[1]), int(Action.FORWARD))
+        hv = np.array(h, dtype=float)
+        if action == Action.FORWARD:
+            pts = p + np.outer(np.linspace(0.25, 1.0, 4) * 0.5 * self.config.forward_distance, hv)
+        else:
+            side = np.array((-h[1], h[0]), dtype=float) * (
+                1.0 if action == Action.TURN_LEFT else -1.0
+            )
+            th = np.linspace(1.0, 4.0, 4) * math.pi / 16
+            r = self.config.turn_radius
+            pts = p + np.outer(r * np.sin(th), hv) + np.outer(r * (1.0 - np.cos(th)), side)
+        a, ab = self._walls[:, 0], self._walls[:, 1] - self._walls[:, 0]
+        rel = pts[:, None, :] - a[None]
+        t = np.clip(np.einsum("nmd,md->nm", rel, ab) / np.einsum("md,md->m", ab, ab), 0.0, 1.0)
+        d = np.linalg.norm(rel - t[..., None] * ab[None], axis=-1)
+        return bool(d.min() >= self.config.robot_radius - 1e-9)
 
     def _exit_direction(self, k: int) -> tuple[int, int]:
         """The direction the route leaves segment ``k``'s corridor at its end node."""
@@ -252,13 +301,11 @@ class CorridorExpert:
                 return _axis_between(self._nodes[c], self._nodes[d])
         return _axis_between(self._nodes[a], self._nodes[b])
 
-    def _corridor_along(
-        self, p: np.ndarray, h: tuple[int, int], clearance: float
-    ) -> tuple[str, str] | None:
-        """(node ahead, node behind) of the corridor running along ``h`` that holds ``p`` with
-        ``clearance`` metres to its side walls (its rectangle reaches half a width past both
-        nodes); of several (in a junction), the one whose centre line passes nearest."""
-        half = 0.5 * self.map.corridor_width - clearance + 1e-9
+    def _corridor_along(self, p: np.ndarray, h: tuple[int, int]) -> tuple[str, str] | None:
+        """(node ahead, node behind) of the corridor running along ``h`` that holds ``p`` (its
+        rectangle reaches half a width past both nodes); of several (in a junction), the one
+        whose centre line passes nearest."""
+        half = 0.5 * self.map.corridor_width + 1e-9
         best: tuple[float, str, str] | None = None
         for a, b in self.map.corridors:
             pa, pb = self._nodes[a], self._nodes[b]

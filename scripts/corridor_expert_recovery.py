@@ -6,17 +6,19 @@ Two families of mistakes on ``figure2`` with the experiment's noisy robot
 - late turns: each of the route's manoeuvres made one or two steps late (forward instead),
   40 noise seeds each (400 circuits);
 - random detours: 1-4 random actions at a random step of the circuit (300 circuits; the
-  family of ``tests/test_corridor_noise.py``, more seeds).
+  family of ``tests/test_corridor_noise.py``, more seeds);
+- long detours: 1-7 random actions at a random step, 600 circuits on each of the shipped maps
+  (``figure2``, ``lshape``) with each robot (noisy, exact motion).
 
-The expert drives the rest. Printed per family, for the expert as it is and for the same expert
-without ``info["blocked"]`` (so without its rule for a robot resting against a wall it cannot
-pass): circuits not finished within the cap, wall contacts per circuit, actions per finished
-circuit, and the longest run of forward steps that did not move the robot. Ends with one JSON
-line.
+The expert drives the rest. Printed per family, for the expert as it is and, for the first two,
+for the same expert without ``info["blocked"]`` (so without its rule for a robot resting
+against a wall it cannot pass): circuits not finished within the cap, wall contacts per
+circuit, actions per finished circuit, and the longest run of forward steps that did not move
+the robot. Ends with one JSON line.
 
     PYTHONPATH=$PWD python scripts/corridor_expert_recovery.py
 
-About 10 seconds on one core.
+About 25 seconds on one core.
 """
 
 from __future__ import annotations
@@ -69,6 +71,18 @@ def _detours(env: CorridorEnv) -> Iterator[tuple[int, Callable[[int, int], int |
         yield seed, mistake
 
 
+def _long_detours(env: CorridorEnv) -> Iterator[tuple[int, Callable[[int, int], int | None]]]:
+    rng = np.random.default_rng(1)
+    for seed in range(600):
+        at, n = int(rng.integers(2, 26)), int(rng.integers(1, 8))
+        actions = [int(a) for a in rng.integers(4, size=n)]
+
+        def mistake(step: int, expert_action: int, at=at, actions=actions):
+            return actions[step - at] if at <= step < at + len(actions) else None
+
+        yield seed, mistake
+
+
 def _drive(env: CorridorEnv, expert: CorridorExpert, seed: int, mistake, hide: bool) -> dict:
     obs, info = env.reset(seed=seed)
     step = stuck = longest = 0
@@ -93,17 +107,26 @@ def _drive(env: CorridorEnv, expert: CorridorExpert, seed: int, mistake, hide: b
 
 
 def main() -> None:
-    world = WorldConfig.legged_robot()
-    env = CorridorEnv("figure2", world, max_episode_steps=_CAP)
-    expert = CorridorExpert(env.corridor_map, world)
+    noisy, exact = WorldConfig.legged_robot(), WorldConfig()
     out: dict[str, Any] = {}
     print(
         "| mistakes | expert | circuits | not finished | contacts / circuit "
         "| actions / finished circuit | longest stuck run |"
     )
     print("|---|---|---|---|---|---|---|")
-    for family, runs in (("late turns", _late_turns), ("random detours", _detours)):
-        for label, hide in (("as is", False), ('without info["blocked"]', True)):
+    without = ('without info["blocked"]', True)
+    families = [
+        ("late turns", _late_turns, "figure2", noisy, (("as is", False), without)),
+        ("random detours", _detours, "figure2", noisy, (("as is", False), without)),
+    ]
+    for map_name in ("figure2", "lshape"):
+        for motion, world in (("noisy", noisy), ("exact", exact)):
+            name = f"long detours, {map_name}, {motion}"
+            families.append((name, _long_detours, map_name, world, (("as is", False),)))
+    for family, runs, map_name, world, variants in families:
+        env = CorridorEnv(map_name, world, max_episode_steps=_CAP)
+        expert = CorridorExpert(env.corridor_map, world)
+        for label, hide in variants:
             rows = [_drive(env, expert, seed, m, hide) for seed, m in runs(env)]
             done = [r for r in rows if r["finished"]]
             fig = {

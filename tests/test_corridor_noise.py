@@ -254,7 +254,8 @@ def test_expert_off_the_route_takes_the_shortest_way_back_on_the_map():
         }
         return expert(world.sense(np.random.default_rng(0)), info)
 
-    # East along J - P3, away from P3: back west (0.8 m) rather than round by J, P1 and P0.
+    # East along J - P3, away from P3: back west (a u-turn, 0.6 m and a left turn at P3)
+    # rather than round by J, P1 and P0.
     assert answer(0.6, 1.2, 0.0) == U
     # South from J towards P1: back north to J and west to P3 (2.6 m with the turns) rather
     # than on round P1 and P0 to P3 (3.8 m).
@@ -264,9 +265,65 @@ def test_expert_off_the_route_takes_the_shortest_way_back_on_the_map():
     # At P0's decision point: turn north now. (The reactive rule the expert had before saw
     # the end wall 0.6 m ahead and no opening yet, and u-turned.)
     assert answer(0.3, 0.0, math.pi) == R
-    # Heading down P3 - P0 already, past where the progress stands by less than half a metre:
-    # drive on.
-    assert answer(0.0, 0.9, -math.pi / 2) == F
+
+
+def test_expert_way_back_goal_walls_and_contacts():
+    """The way back's goal is where the route's progress stands, and its first action is one
+    the walls allow. Hand-placed on figure2 with exact motion; the headings 0.5 rad off the
+    corridor's make the route rule hand over to the way back."""
+    world = CorridorWorld(load_map("figure2"), WorldConfig())
+    expert = CorridorExpert(world.map, WorldConfig())
+    start = np.concatenate([[0.0], np.cumsum(expert.route.segment_lengths)])  # of each segment
+
+    def answer(x, y, heading, segment, lap, blocked=(0, 0, 0, 0)) -> int:
+        world.set_pose(x, y, heading)
+        info = {
+            "pose": np.array(world.pose),
+            "segment": segment,
+            "lap_position": lap,
+            "true_ranges": world.true_ranges(),
+            "blocked": list(blocked),
+        }
+        return expert(world.sense(np.random.default_rng(0)), info)
+
+    south = -math.pi / 2 + 0.5
+    # Down P3 - P0 (segment 5), 0.6 m below P3: on with the progress 0.4 m along, but with the
+    # progress still at P3 the robot is past where it can follow (0.5 m): back up to P3.
+    assert answer(0.0, 0.6, south, 5, start[5] + 0.4) == F
+    assert answer(0.0, 0.6, south, 5, start[5]) == U
+    # Progress on segment 4 (J -> P3, west): within half a metre of its end the goal is the
+    # next segment, so a robot already heading down P3 - P0 drives on; far from the end it
+    # must go back and come along segment 4.
+    assert answer(0.0, 0.8, -math.pi / 2, 4, start[5] - 0.3) == F
+    assert answer(0.0, 0.8, -math.pi / 2, 4, start[4]) == U
+    # Facing east on P0 - P1 with its body touching the north wall, segment 1 (P1 -> J, north)
+    # ahead: a left turn now would sweep the robot through that wall, so it is not taken (the
+    # way back checked only where a turn ended, and took it).
+    assert answer(1.04, 0.18, 0.0, 1, start[1]) != L
+    # After a contact that stops forward (info["blocked"]), forward is not taken.
+    assert answer(1.0, 0.0, math.pi, 5, start[5]) == F
+    assert answer(1.0, 0.0, math.pi, 5, start[5], blocked=(1, 0, 0, 0)) == U
+    # Facing the east wall of P3 - P0 with no room to start a turn or a step: the turn that
+    # heads the shortest way (south, the progress 0.4 m down), made where the robot stands.
+    # (Left first, as the reactive rule would, heads north, away from it.)
+    assert answer(0.15, 0.6, 0.0, 5, start[5] + 0.4) == R
+
+
+def test_expert_gets_the_robot_out_of_a_junction_corner():
+    """A detour on lshape with exact motion (seed 566, five actions at step 14) leaves the
+    robot in the corner of junction B, where forward is stopped by the corner of the corridor
+    it must take and no turn lands it clear of the walls. The way back that counted a u-turn
+    as always possible rocked it between two u-turns for the rest of the episode; a u-turn
+    counts only where a step is then possible, and the circuit ends."""
+    env = CorridorEnv("lshape", WorldConfig(), max_episode_steps=150)
+    expert = CorridorExpert(env.corridor_map, WorldConfig())
+    obs, info = env.reset(seed=566)
+    forced = {14: R, 15: R, 16: F, 17: R, 18: L}
+    for step in range(150):
+        obs, _, terminated, truncated, info = env.step(forced.get(step, expert(obs, info)))
+        if terminated or truncated:
+            break
+    assert terminated and step < 60
 
 
 def test_expert_brings_the_robot_back_when_the_progress_is_left_behind():
