@@ -352,7 +352,7 @@ def test_expert_gets_out_when_a_late_turn_leaves_it_against_a_corner():
     never keeps pushing: at most a few forward steps in a row that do not move the robot (the
     noise of the heading frees some). Without ``info["blocked"]`` (the expert before it had
     that rule) it pushed on, for up to the rest of the episode, and some circuits never ended
-    (measured: 20 of 400 with the reactive off-route rule the expert had then, 31 of 400 with
+    (measured: 20 of 400 with the reactive off-route rule the expert had then, 43 of 400 with
     its way back on the map)."""
     env = CorridorEnv("figure2", NOISY, max_episode_steps=150)
     expert = CorridorExpert(env.corridor_map, NOISY)
