@@ -23,12 +23,14 @@ the map's route:
   progress stands, since the progress only follows the robot near it: to be in the tracked
   segment's corridor heading along it, not past where the progress stands by more than half a
   metre (within half a metre of the segment's end: in the next segment's corridor heading
-  along it). There the expert drives on and makes the route's manoeuvre at the corridor's end.
+  along it). There the expert drives on and makes the route's manoeuvre at the corridor's end,
+  as on the route (not judged on the walls: a wall in the way is the stuck rule's, below).
   Elsewhere a Dijkstra search over arrivals at the map's nodes (metres driven plus one step's
   length per turn) starts from the first actions the walls allow, judged on the map's walls
   with exact motion: forward if half a step is free (then on to the node ahead, turning there,
   now if the robot stands at its decision point), a turn if the first half of its quarter
-  circle is free and it ends inside a corridor, a u-turn if a step is free after it; ways
+  circle is free and it ends inside a corridor (anywhere within its half-width: the robot may
+  end close to a wall), a u-turn if half a step is free after it; ways
   ``info["blocked"]`` reports stopped are left out. If the walls allow none (the robot faces a
   side wall with no room), the turn that heads the shortest way, made where it stands, as a
   contact would leave it. The reactive rule this replaced (forward if the front was open, else
@@ -273,7 +275,7 @@ class CorridorExpert:
         half of its motion is free of contact (exact motion; forward: half a step, as
         ``info["blocked"]`` tests; a turn: the first half of its quarter circle, so a turn that
         ends touching a wall still gets the robot round; a u-turn turns in place, and is free if
-        a forward step is then)."""
+        half a forward step is then)."""
         if action == Action.U_TURN:  # in place: free if the robot can then step away
             return self._free(p, (-h[0], -h[1]), int(Action.FORWARD))
         hv = np.array(h, dtype=float)

@@ -18,7 +18,7 @@ the robot. Ends with one JSON line.
 
     PYTHONPATH=$PWD python scripts/corridor_expert_recovery.py
 
-About 25 seconds on one core.
+About 25-30 seconds on one core.
 """
 
 from __future__ import annotations

@@ -303,18 +303,19 @@ def test_expert_way_back_goal_walls_and_contacts():
     # After a contact that stops forward (info["blocked"]), forward is not taken.
     assert answer(1.0, 0.0, math.pi, 5, start[5]) == F
     assert answer(1.0, 0.0, math.pi, 5, start[5], blocked=(1, 0, 0, 0)) == U
-    # Facing the east wall of P3 - P0 with no room to start a turn or a step: the turn that
-    # heads the shortest way (south, the progress 0.4 m down), made where the robot stands.
+    # Facing the east wall of P3 - P0, too near it to start a turn or a step, and a u-turn would
+    # face the corridor's west wall: the turn that heads the shortest way (south, the progress
+    # 0.4 m down), made where the robot stands.
     # (Left first, as the reactive rule would, heads north, away from it.)
     assert answer(0.15, 0.6, 0.0, 5, start[5] + 0.4) == R
 
 
-def test_expert_gets_the_robot_out_of_a_junction_corner():
+def test_expert_gets_the_robot_out_of_a_corner():
     """A detour on lshape with exact motion (seed 566, five actions at step 14) leaves the
-    robot in the corner of junction B, where forward is stopped by the corner of the corridor
-    it must take and no turn lands it clear of the walls. The way back that counted a u-turn
-    as always possible rocked it between two u-turns for the rest of the episode; a u-turn
-    counts only where a step is then possible, and the circuit ends."""
+    robot at the corner C, against the inside corner (1.7, 0.7) of the turn from B-C into C-D,
+    where forward is stopped by that corner and no turn lands it clear of the walls. The way
+    back that counted a u-turn as always possible rocked it between two u-turns for the rest of
+    the episode; a u-turn counts only where half a step is then free, and the circuit ends."""
     env = CorridorEnv("lshape", WorldConfig(), max_episode_steps=150)
     expert = CorridorExpert(env.corridor_map, WorldConfig())
     obs, info = env.reset(seed=566)
