@@ -29,8 +29,8 @@ the map's route:
   length per turn) starts from the first actions the walls allow, judged on the map's walls
   with exact motion: forward if half a step is free (then on to the node ahead, turning there,
   now if the robot stands at its decision point), a turn if the first half of its quarter
-  circle is free and it ends inside a corridor (anywhere within its half-width: the robot may
-  end close to a wall), a u-turn if half a step is free after it; ways
+  circle is free and it ends in a corridor clear of its side walls, a u-turn if half a step is
+  free after it; ways
   ``info["blocked"]`` reports stopped are left out. If the walls allow none (the robot faces a
   side wall with no room), the turn that heads the shortest way, made where it stands, as a
   contact would leave it. The reactive rule this replaced (forward if the front was open, else
@@ -51,7 +51,7 @@ the map's route:
   with a manoeuvre made one or two steps late, 20 of 400 circuits never ended (0 with it;
   wall contacts per circuit 8.3 against 1.8), after 1-4 random actions 11 of 300 (1 with it).
   These are figures of the reactive rule above, before the way back
-  (``scripts/corridor_expert_recovery.py`` and a test; with the way back, 43 of 400 and 22 of
+  (``scripts/corridor_expert_recovery.py`` and a test; with the way back, 27 of 400 and 15 of
   300 never end without this rule, 0 and 0 with it). Turning away from the wall whatever lay
   beyond rocked the robot between two turns in the inside corner of a junction.
 """
@@ -174,9 +174,10 @@ class CorridorExpert:
         route's manoeuvre at the end. Else a Dijkstra search over arrivals at the map's nodes
         (metres driven plus one forward step's length per turn), from the first actions the
         walls allow here: drive on to the node ahead (turning there, now if the robot stands
-        at its decision point), or turn now, where the turn's arc is clear and ends inside a
-        corridor. If the walls allow none of them (the robot faces a side wall), the turn that
-        heads the shortest way, made where the robot stands as a contact would leave it."""
+        at its decision point), or turn now, where the turn's arc is clear and ends in a
+        corridor clear of its side walls. If the walls allow none of them (the robot faces a
+        side wall), the turn that heads the shortest way, made where the robot stands as a
+        contact would leave it."""
         step = self.config.forward_distance
         h = _axis(heading)
         hv = np.array(h, dtype=float)
@@ -224,7 +225,11 @@ class CorridorExpert:
                     continue
                 if not in_place and action in (Action.TURN_LEFT, Action.TURN_RIGHT):
                     q = p + self.config.turn_radius * (hv + np.array(h2, dtype=float))
-                place = self._corridor_along(q, h2)
+                turning = action in (Action.TURN_LEFT, Action.TURN_RIGHT)
+                # a turn should end clear of the new corridor's side walls (where it stands now,
+                # after a forward step or a u-turn, the robot is where it is)
+                clear = self.config.robot_radius if turning and not in_place else 0.0
+                place = self._corridor_along(q, h2, clear)
                 if place is None:
                     continue
                 turned = 0.0 if action == Action.FORWARD else step
@@ -303,11 +308,13 @@ class CorridorExpert:
                 return _axis_between(self._nodes[c], self._nodes[d])
         return _axis_between(self._nodes[a], self._nodes[b])
 
-    def _corridor_along(self, p: np.ndarray, h: tuple[int, int]) -> tuple[str, str] | None:
+    def _corridor_along(
+        self, p: np.ndarray, h: tuple[int, int], clearance: float = 0.0
+    ) -> tuple[str, str] | None:
         """(node ahead, node behind) of the corridor running along ``h`` that holds ``p`` (its
         rectangle reaches half a width past both nodes); of several (in a junction), the one
         whose centre line passes nearest."""
-        half = 0.5 * self.map.corridor_width + 1e-9
+        half = 0.5 * self.map.corridor_width - clearance + 1e-9
         best: tuple[float, str, str] | None = None
         for a, b in self.map.corridors:
             pa, pb = self._nodes[a], self._nodes[b]

@@ -300,6 +300,9 @@ def test_expert_way_back_goal_walls_and_contacts():
     # ahead: a left turn now would sweep the robot through that wall, so it is not taken (the
     # way back checked only where a turn ended, and took it).
     assert answer(1.04, 0.18, 0.0, 1, start[1]) != L
+    # North up P1 - J, 0.5 m below J, segment 4 (J -> P3, west) to come: a left turn now would
+    # end at the edge of J - P3, against the corner (1.1, 0.9); drive on and turn at J.
+    assert answer(1.4, 0.7, math.pi / 2, 4, start[4]) == F
     # After a contact that stops forward (info["blocked"]), forward is not taken.
     assert answer(1.0, 0.0, math.pi, 5, start[5]) == F
     assert answer(1.0, 0.0, math.pi, 5, start[5], blocked=(1, 0, 0, 0)) == U
@@ -353,7 +356,7 @@ def test_expert_gets_out_when_a_late_turn_leaves_it_against_a_corner():
     never keeps pushing: at most a few forward steps in a row that do not move the robot (the
     noise of the heading frees some). Without ``info["blocked"]`` (the expert before it had
     that rule) it pushed on, for up to the rest of the episode, and some circuits never ended
-    (measured: 20 of 400 with the reactive off-route rule the expert had then, 43 of 400 with
+    (measured: 20 of 400 with the reactive off-route rule the expert had then, 27 of 400 with
     its way back on the map)."""
     env = CorridorEnv("figure2", NOISY, max_episode_steps=150)
     expert = CorridorExpert(env.corridor_map, NOISY)
