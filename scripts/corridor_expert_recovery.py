@@ -59,28 +59,28 @@ def _late_turns(env: CorridorEnv) -> Iterator[tuple[int, Callable[[int, int], in
                 yield seed, mistake
 
 
-def _detours(env: CorridorEnv) -> Iterator[tuple[int, Callable[[int, int], int | None]]]:
-    rng = np.random.default_rng(0)
-    for seed in range(300):
-        at, n = int(rng.integers(2, 24)), int(rng.integers(1, 5))
-        actions = [int(a) for a in rng.integers(4, size=n)]
+def _random_actions(
+    rng_seed: int, circuits: int, last_at: int, most: int
+) -> Callable[[CorridorEnv], Iterator[tuple[int, Callable[[int, int], int | None]]]]:
+    """A family of detours: in each circuit, 1 to ``most`` random actions from a random step
+    in [2, ``last_at``)."""
 
-        def mistake(step: int, expert_action: int, at=at, actions=actions):
-            return actions[step - at] if at <= step < at + len(actions) else None
+    def family(env: CorridorEnv) -> Iterator[tuple[int, Callable[[int, int], int | None]]]:
+        rng = np.random.default_rng(rng_seed)
+        for seed in range(circuits):
+            at, n = int(rng.integers(2, last_at)), int(rng.integers(1, most + 1))
+            actions = [int(a) for a in rng.integers(4, size=n)]
 
-        yield seed, mistake
+            def mistake(step: int, expert_action: int, at=at, actions=actions):
+                return actions[step - at] if at <= step < at + len(actions) else None
+
+            yield seed, mistake
+
+    return family
 
 
-def _long_detours(env: CorridorEnv) -> Iterator[tuple[int, Callable[[int, int], int | None]]]:
-    rng = np.random.default_rng(1)
-    for seed in range(600):
-        at, n = int(rng.integers(2, 26)), int(rng.integers(1, 8))
-        actions = [int(a) for a in rng.integers(4, size=n)]
-
-        def mistake(step: int, expert_action: int, at=at, actions=actions):
-            return actions[step - at] if at <= step < at + len(actions) else None
-
-        yield seed, mistake
+_detours = _random_actions(0, 300, 24, 4)
+_long_detours = _random_actions(1, 600, 26, 7)
 
 
 def _drive(env: CorridorEnv, expert: CorridorExpert, seed: int, mistake, hide: bool) -> dict:
