@@ -96,18 +96,28 @@ class CorridorExpert:
         self.on_route_tolerance = float(on_route_tolerance)
         self.open_range = float(open_range)
         self._nodes = {n: np.asarray(xy, dtype=float) for n, xy in corridor_map.nodes.items()}
-        self._neighbours: dict[str, list[str]] = {n: [] for n in self._nodes}
+        # the map's geometry, once: each corridor's start node, unit direction and length, the
+        # ways out of each node (next node, direction, length), and the walls as segments
+        self._corridor_lines: list[tuple[str, str, np.ndarray, np.ndarray, float]] = []
+        self._ways: dict[str, list[tuple[str, tuple[int, int], float]]] = {
+            n: [] for n in self._nodes
+        }
         for a, b in corridor_map.corridors:
-            self._neighbours[a].append(b)
-            self._neighbours[b].append(a)
+            d = self._nodes[b] - self._nodes[a]
+            length = float(np.linalg.norm(d))
+            self._corridor_lines.append((a, b, self._nodes[a], d / length, length))
+            self._ways[a].append((b, _axis_between(self._nodes[a], self._nodes[b]), length))
+            self._ways[b].append((a, _axis_between(self._nodes[b], self._nodes[a]), length))
+        walls = np.asarray(corridor_map.walls(), dtype=float)  # [M, 2 ends, 2] metres
+        self._wall_start = walls[:, 0]
+        self._wall_vec = walls[:, 1] - walls[:, 0]
+        self._wall_len2 = np.einsum("md,md->m", self._wall_vec, self._wall_vec)
         # route segment k runs along the map corridor edges[k] = (a, b), from a toward b: the
         # first and the last (start point -> route[1], route[0] -> start point) both lie on the
         # corridor route[0] - route[1]
         r = corridor_map.route
         n = len(r) - 1
         self._edges = [(r[0], r[1]), *((r[k], r[k + 1]) for k in range(1, n)), (r[0], r[1])]
-        self._seg_start = np.concatenate([[0.0], np.cumsum(self.route.segment_lengths)])
-        self._walls = np.asarray(corridor_map.walls(), dtype=float)  # [M, 2 ends, 2] metres
 
     def __call__(self, observation: np.ndarray, info: Mapping[str, Any]) -> int:
         """The expert's action (int, see :class:`corridor.world.Action`) for this step."""
@@ -184,7 +194,8 @@ class CorridorExpert:
         p = np.array([x, y])
         lap = info.get("lap_position")
         k = seg
-        if lap is not None and self._seg_start[seg + 1] - float(lap) <= 0.5:
+        starts = self.route.segment_starts
+        if lap is not None and starts[seg + 1] - float(lap) <= 0.5:
             k = (seg + 1) % len(self._edges)
         goal = self._edges[k]
         a_goal, b_goal = (self._nodes[v] for v in goal)
@@ -192,7 +203,7 @@ class CorridorExpert:
         # how far along the goal's corridor the robot may stand (metres from its start node)
         reach = math.inf
         if k == seg and lap is not None:
-            at = self.route.points[seg] + (float(lap) - self._seg_start[seg]) * u_goal
+            at = self.route.points[seg] + (float(lap) - starts[seg]) * u_goal
             reach = float(np.dot(at - a_goal, u_goal)) + 0.5
 
         def in_goal(place: tuple[str, str] | None, q: np.ndarray) -> bool:
@@ -220,23 +231,22 @@ class CorridorExpert:
             ):
                 if stopped[int(action)] or (in_place and action == Action.FORWARD):
                     continue
-                q = p
                 if not in_place and not self._free(p, h, int(action)):
                     continue
-                if not in_place and action in (Action.TURN_LEFT, Action.TURN_RIGHT):
-                    q = p + self.config.turn_radius * (hv + np.array(h2, dtype=float))
-                turning = action in (Action.TURN_LEFT, Action.TURN_RIGHT)
-                # a turn should end clear of the new corridor's side walls (where it stands now,
-                # after a forward step or a u-turn, the robot is where it is)
-                clear = self.config.robot_radius if turning and not in_place else 0.0
-                place = self._corridor_along(q, h2, clear)
+                h2v = np.array(h2, dtype=float)
+                # a quarter circle ends a turn radius on and aside, clear of the new corridor's
+                # side walls; after a forward step or a u-turn (or in place) the robot is where
+                # it is
+                arc = not in_place and action in (Action.TURN_LEFT, Action.TURN_RIGHT)
+                q = p + self.config.turn_radius * (hv + h2v) if arc else p
+                place = self._corridor_along(q, h2, self.config.robot_radius if arc else 0.0)
                 if place is None:
                     continue
                 turned = 0.0 if action == Action.FORWARD else step
                 if in_goal(place, q):
                     heap.append((turned, len(heap), "", (0, 0), int(action)))
                     continue
-                t = float(np.dot(self._nodes[place[0]] - q, np.array(h2, dtype=float)))
+                t = float(np.dot(self._nodes[place[0]] - q, h2v))
                 if t < -0.5 * step:  # past the node ahead, facing its far wall
                     continue
                 at_node = action == Action.FORWARD and t <= decide
@@ -261,8 +271,7 @@ class CorridorExpert:
             if (node, d_in) in seen:
                 continue
             seen.add((node, d_in))
-            for nxt in self._neighbours[node]:
-                d_out = _axis_between(self._nodes[node], self._nodes[nxt])
+            for nxt, d_out, length in self._ways[node]:
                 c = cost + (0.0 if d_out == d_in else step)
                 act = _turn_action(d_in, d_out) if first is None else first
                 if first is None and (stopped[act] or not self._free(p, h, act)):
@@ -270,7 +279,6 @@ class CorridorExpert:
                 if (node, nxt) == goal:
                     heapq.heappush(heap, (c, order, "", (0, 0), act))
                 else:
-                    length = float(np.linalg.norm(self._nodes[nxt] - self._nodes[node]))
                     heapq.heappush(heap, (c + length, order, nxt, d_out, act))
                 order += 1
         return self._reactive(info)  # no corridor runs any way the robot can face here
@@ -293,9 +301,9 @@ class CorridorExpert:
             th = np.linspace(1.0, 4.0, 4) * math.pi / 16
             r = self.config.turn_radius
             pts = p + np.outer(r * np.sin(th), hv) + np.outer(r * (1.0 - np.cos(th)), side)
-        a, ab = self._walls[:, 0], self._walls[:, 1] - self._walls[:, 0]
-        rel = pts[:, None, :] - a[None]
-        t = np.clip(np.einsum("nmd,md->nm", rel, ab) / np.einsum("md,md->m", ab, ab), 0.0, 1.0)
+        ab = self._wall_vec
+        rel = pts[:, None, :] - self._wall_start[None]
+        t = np.clip(np.einsum("nmd,md->nm", rel, ab) / self._wall_len2, 0.0, 1.0)
         d = np.linalg.norm(rel - t[..., None] * ab[None], axis=-1)
         return bool(d.min() >= self.config.robot_radius - 1e-9)
 
@@ -316,11 +324,7 @@ class CorridorExpert:
         whose centre line passes nearest."""
         half = 0.5 * self.map.corridor_width - clearance + 1e-9
         best: tuple[float, str, str] | None = None
-        for a, b in self.map.corridors:
-            pa, pb = self._nodes[a], self._nodes[b]
-            d = pb - pa
-            length = float(np.linalg.norm(d))
-            d = d / length
+        for a, b, pa, d, length in self._corridor_lines:
             along = float(np.dot(d, h))
             if abs(along) < 0.5:
                 continue

@@ -276,6 +276,12 @@ class Route:
         return float(self._cum[-1])
 
     @property
+    def segment_starts(self) -> np.ndarray:
+        """``[K+1]`` metres: the arc length at which each segment starts (the last entry is the
+        circuit's length)."""
+        return self._cum
+
+    @property
     def segment_lengths(self) -> np.ndarray:
         """``[K]`` metres."""
         return self._lengths

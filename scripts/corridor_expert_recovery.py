@@ -1,6 +1,6 @@
 """Does the corridor's scripted expert bring the robot back after a learner's mistake?
 
-Two families of mistakes on ``figure2`` with the experiment's noisy robot
+Three families of mistakes, the first two on ``figure2`` with the experiment's noisy robot
 (:meth:`corridor.world.WorldConfig.legged_robot`), each circuit capped at 150 actions:
 
 - late turns: each of the route's manoeuvres made one or two steps late (forward instead),
