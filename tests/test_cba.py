@@ -25,8 +25,9 @@ from torchcbl.strategies.cba import ConfidenceBasedAutonomy, loo_nn_distances, p
 
 def test_chi2_quantile_matches_scipy_and_the_dimension_argument():
     stats = pytest.importorskip("scipy.stats")
-    for q, d in [(0.95, 6), (0.5, 1), (0.999, 20), (0.01, 3), (0.95, 2)]:
-        assert chi2_quantile(q, d) == pytest.approx(stats.chi2.ppf(q, d), rel=1e-10)
+    for q, d in [(0.95, 6), (0.5, 1), (0.999, 20), (0.01, 3), (0.95, 2), (1e-9, 3), (1e-6, 1)]:
+        # relative precision also where the quantile is far below 1
+        assert chi2_quantile(q, d) == pytest.approx(stats.chi2.ppf(q, d), rel=1e-11)
     # the numbers: P(within 2 std) of a Gaussian's own points, 2-D / 4-D / 6-D
     coverage = [
         float(torch.special.gammainc(torch.tensor(d / 2.0), torch.tensor(2.0))) for d in (2, 4, 6)

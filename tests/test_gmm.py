@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 
@@ -198,6 +199,58 @@ def test_fitted_state_is_made_of_ordinary_tensors(fitted):
     means = model.means_.clone().requires_grad_(True)
     (means * 2.0).sum().backward()  # usable in a user's own autograd graph
     model.means_.add_(0.0)  # and updatable in place
+
+
+def test_predictions_are_ordinary_tensors_at_every_batch_size(fitted):
+    """Small batches take a numpy path, large ones torch's: either way the caller gets tensors
+    it may update in place and use in its own autograd graph."""
+    model, x, _ = fitted
+    big = np.concatenate([x] * 2)  # 540 rows: the torch path
+    for rows in (x[:1], x[:10], big):
+        lp, c = model.log_prob(rows), model.classify(rows)
+        for t in (lp, *c):
+            assert not t.is_inference()
+        lp.add_(1.0)
+        (c.posterior.clone().requires_grad_(True) * 2.0).sum().backward()
+
+
+def test_a_fitted_state_loads_only_into_a_model_with_its_settings(fitted):
+    """A refit continues from the saved candidates, so a state fitted under one criterion,
+    floor, seed... must not load silently into a model that would refit under others."""
+    model, x, y = fitted
+    for other in (
+        dict(seed=4),
+        dict(seed=3, criterion="bic"),
+        dict(seed=3, var_floor=0.05),
+        dict(seed=3, tol=1e-4),
+        dict(seed=3, max_iter=50),
+        dict(seed=3, refit_growth=0.5),
+    ):
+        wrong = GaussianMixtureSet(3, 3, max_components=6, **other)
+        name = next(k for k in other if k != "seed") if len(other) > 1 else "seed"
+        with pytest.raises(ValueError, match=rf"saved by a GaussianMixtureSet with {name}="):
+            wrong.load_state_dict(model.state_dict())
+        assert not wrong.is_fitted  # refused before anything was loaded
+    # a state saved before the settings were kept loads as before
+    old = {k: v for k, v in model.state_dict().items() if k != "settings_"}
+    fresh = GaussianMixtureSet(3, 3, max_components=6, seed=4)
+    fresh.load_state_dict(old)
+    assert torch.equal(fresh.classify(x).action, model.classify(x).action)
+    assert torch.equal(fresh.settings_, GaussianMixtureSet(3, 3, 6, seed=4).settings_)
+    # the settings survive a dtype round trip exactly (on a copy: the fixture is shared)
+    cast = copy.deepcopy(model).to(torch.float32).to(torch.float64)
+    GaussianMixtureSet(3, 3, max_components=6, seed=3).load_state_dict(cast.state_dict())
+
+
+def test_every_bit_of_the_seed_counts():
+    x, y = _blobs(1, (60, 60, 60))
+    a = GaussianMixtureSet(3, 3, max_components=4, seed=1).fit(x, y)
+    b = GaussianMixtureSet(3, 3, max_components=4, seed=2**32 + 1).fit(x, y)
+    c = GaussianMixtureSet(3, 3, max_components=4, seed=2**32 + 1).fit(x, y)
+    assert not torch.equal(a.means_, b.means_) and torch.equal(b.means_, c.means_)
+    for bad in (-1, 2**64, 1.0):
+        with pytest.raises(ValueError, match=r"seed to be an int in \[0, 2\*\*64\)"):
+            GaussianMixtureSet(3, 3, seed=bad)
 
 
 def test_to_dtype_and_back(fitted):

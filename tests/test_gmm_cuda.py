@@ -79,3 +79,22 @@ def test_incremental_refit_on_cuda_tracks_the_cpu_refit() -> None:
     gpu.refit(xa, ya)
     assert gpu.n_components_.cpu().tolist() == cpu.n_components_.tolist()
     np.testing.assert_allclose(gpu.means_.cpu().numpy(), cpu.means_.numpy(), atol=1e-6)
+
+
+def test_every_confidence_rule_judges_a_cuda_models_answer_as_the_cpu_models() -> None:
+    """The rules keep their thresholds on the CPU; a CUDA model's classification must not trip
+    a device mismatch in any of them (AutoThresholdRule indexed CPU thresholds with CUDA
+    actions before 2026-11-26)."""
+    from torchcbl.confidence import AutoThresholdRule, DistanceRule, PosteriorRule
+
+    x, y = _data()
+    cpu, gpu = _fit("cpu", x, y), _fit("cuda", x, y)
+    for make in (DistanceRule, PosteriorRule, AutoThresholdRule):
+        rule_cpu, rule_gpu = make(), make()
+        if isinstance(rule_cpu, AutoThresholdRule):
+            rule_cpu.update(cpu, x, y)
+            rule_gpu.update(gpu, x, y)
+            assert torch.allclose(rule_cpu.thresholds, rule_gpu.thresholds)
+        a = rule_cpu.is_confident(cpu.classify(x), x)
+        b = rule_gpu.is_confident(gpu.classify(x), x)
+        assert (a.cpu() == b.cpu()).float().mean() > 0.999, make.__name__

@@ -118,6 +118,25 @@ def test_evaluate_policy_seeds_every_episode_from_a_list():
         evaluate_policy(oracle(env), env, seed=[1, 2], n_episodes=3, uses_info=True)
 
 
+def test_evaluate_policy_stops_at_n_steps_without_another_reset():
+    """The step budget ends the run at its last step: no reset or observation check after it,
+    so a bad observation the env would give next cannot cost the records taken."""
+
+    class BadSecondReset(gym.Wrapper):
+        resets = 0
+
+        def reset(self, **kw):
+            BadSecondReset.resets += 1
+            obs, info = self.env.reset(**kw)
+            return (obs * np.nan if BadSecondReset.resets > 1 else obs), info
+
+    env = BadSecondReset(rare_regions_world(episode_length=5))
+    records = evaluate_policy(lambda obs: 0, env, seed=1, n_steps=np.int64(5))  # numpy ints too
+    assert len(records) == 5 and records[-1].truncated and BadSecondReset.resets == 1
+    with pytest.raises(ValueError, match="n_steps must be an int >= 1"):
+        evaluate_policy(lambda obs: 0, env, n_steps=np.bool_(True))
+
+
 def test_episode_results_are_the_per_episode_returns_and_successes():
     env = rare_regions_world(episode_length=5)
     # always action 0: right in the frequent region only, so some episodes fail

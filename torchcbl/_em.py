@@ -232,6 +232,9 @@ def candidate_uniforms(seed: int, action: np.ndarray, n_comp: np.ndarray, k: int
     with np.errstate(over="ignore"):
         base = (
             np.uint64(seed & 0xFFFFFFFF) * np.uint64(0x100000001B3)
+            # the seed's high 32 bits (0 below 2**32, which leaves those seeds' draws as they
+            # were before the high bits counted)
+            + np.uint64((seed >> 32) & 0xFFFFFFFF) * np.uint64(0xC2B2AE3D27D4EB4F)
             + np.asarray(action).astype(np.uint64) * np.uint64(0x9E3779B1)
             + np.asarray(n_comp).astype(np.uint64) * np.uint64(0x85EBCA77)
         )

@@ -83,7 +83,7 @@ def chi2_quantile(q: float, dof: int) -> float:
     """The ``q`` quantile of the chi-square distribution with ``dof`` degrees of freedom.
 
     Bisection on the regularised lower incomplete gamma function (``torch.special.gammainc``),
-    to float64 precision; no SciPy needed.
+    to a relative precision of 1e-13; no SciPy needed.
     """
     if not 0.0 < q < 1.0:
         raise ValueError(f"chi2_quantile: expected q in (0, 1), got {q!r}")
@@ -103,7 +103,7 @@ def chi2_quantile(q: float, dof: int) -> float:
             lo = mid
         else:
             hi = mid
-        if hi - lo <= 1e-13 * max(hi, 1.0):
+        if hi - lo <= 1e-13 * hi:
             break
     return 0.5 * (lo + hi)
 
@@ -267,25 +267,26 @@ class AutoThresholdRule:
         """Bool tensor [N]: True where the model's action may be executed without asking
         (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
         when known)."""
-        action = c.action
+        action, distance = c.action.cpu(), c.distance.cpu()  # a CUDA model's answer too
         ok = action >= 0
         if self.thresholds is None:
-            return (c.distance <= self.max_std) & ok
-        thr = self.thresholds.to(c.distance.dtype)[action.clamp(min=0)]
-        return (c.distance < thr) & ok
+            return (distance <= self.max_std) & ok
+        thr = self.thresholds.to(distance.dtype)[action.clamp(min=0)]
+        return (distance < thr) & ok
 
     def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
         """Recompute the per-action thresholds from the training set (``observations``
         [M, D], ``actions`` [M]) classified by the refitted model."""
         c = model.classify(observations)
-        labels = torch.as_tensor(actions, dtype=torch.long).reshape(-1)
+        action, distance = c.action.cpu(), c.distance.cpu()  # a CUDA model's answer too
+        labels = torch.as_tensor(actions, dtype=torch.long).cpu().reshape(-1)
         n_actions = c.posterior.shape[1]
-        wrong = c.action != labels
+        wrong = action != labels
         thr = torch.full((n_actions,), self.max_std, dtype=torch.float64)
         for a in range(n_actions):
-            sel = wrong & (c.action == a) & torch.isfinite(c.distance)
+            sel = wrong & (action == a) & torch.isfinite(distance)
             if bool(sel.any()):
-                mean = float(c.distance[sel].double().mean())
+                mean = float(distance[sel].double().mean())
                 thr[a] = min(max(mean, self.min_std), self.max_std)
         self.thresholds = thr
 

@@ -47,6 +47,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple
@@ -61,6 +62,46 @@ __all__ = ["SINGLE_THREAD_WORK", "Classification", "FitReport", "GaussianMixture
 
 Criterion = Literal["aic", "bic", "aic_paper"]
 _CRITERIA = ("aic", "bic", "aic_paper")
+# the constructor's settings that decide what fit() and refit() choose, kept in the
+# ``settings_`` buffer (in this order) so that a state_dict cannot load into a model that
+# would refit differently
+_SETTINGS = ("criterion", "var_floor", "tol", "max_iter", "seed", "refit_growth")
+
+
+def _float_bits(x: float) -> int:
+    """A float's IEEE-754 bits as an int64: exact, and untouched by a module's ``.to(dtype)``."""
+    return struct.unpack("<q", struct.pack("<d", float(x)))[0]
+
+
+def _bits_float(b: int) -> float:
+    return struct.unpack("<d", struct.pack("<q", int(b)))[0]
+
+
+def _settings_codes(model: GaussianMixtureSet) -> list[int]:
+    seed = model.seed
+    return [
+        _CRITERIA.index(model.criterion),
+        _float_bits(model.var_floor),
+        _float_bits(model.tol),
+        model.max_iter,
+        seed - 2**64 if seed >= 2**63 else seed,  # the uint64 seed's bits as an int64
+        _float_bits(model.refit_growth),
+    ]
+
+
+def _settings_values(codes: list[int]) -> dict[str, Any]:
+    """The settings that :func:`_settings_codes` encoded, by name."""
+    crit, floor, tol, max_iter, seed, growth = codes
+    return {
+        "criterion": _CRITERIA[crit] if 0 <= crit < len(_CRITERIA) else f"<code {crit}>",
+        "var_floor": _bits_float(floor),
+        "tol": _bits_float(tol),
+        "max_iter": max_iter,
+        "seed": seed + 2**64 if seed < 0 else seed,
+        "refit_growth": _bits_float(growth),
+    }
+
+
 _ABS_FLOOR = 1e-6
 _NUMPY_MAX_ROWS = 256  # below this many rows (CPU), classify/log_prob run in numpy: less overhead
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -175,7 +216,9 @@ def _to_numpy(value: Any, name: str) -> np.ndarray:
         return np.asarray(value)
     except Exception as exc:  # noqa: BLE001 - re-raised with a clear message
         raise TypeError(
-            f"{name}: expected a numpy array or torch tensor but got {type(value).__name__}"
+            f"{name}: expected a numpy array, a torch tensor or a nested sequence of numbers "
+            f"with rows of equal length, but numpy could not read the {type(value).__name__} "
+            f"given ({exc})"
         ) from exc
 
 
@@ -332,15 +375,17 @@ class GaussianMixtureSet(nn.Module):
             Default 1e-3, scikit-learn's default; it keeps a refit of 1000 points (3 actions,
             4-D, k <= 15) under 0.1 s. Use 1e-4 or less for tighter fits.
         max_iter: EM iteration cap per candidate.
-        seed: seeds the k-means++ initialisation; the same seed and data give the same model.
+        seed: seeds the k-means++ initialisation, an int in [0, 2**64); the same seed and data
+            give the same model.
         refit_growth: :meth:`refit` fits an action from scratch once its point count reached
             ``1 + refit_growth`` times its count at its last from-scratch fit (> 0; default
             0.25: about 3 from-scratch fits per doubling of the data, log 2 / log 1.25, whose
             total cost is about 5 times one fit at the final size).
 
     Fitted buffers (fixed shapes, so ``state_dict`` loads into a fresh instance built with the
-    same arguments): ``weights_`` [A, K], ``means_`` [A, K, D], ``covariances_`` [A, K, D, D],
-    ``precisions_cholesky_`` [A, K, D, D], ``component_mask_`` [A, K] bool, ``log_prior_`` [A]
+    same arguments, and only into one: see ``settings_``): ``weights_`` [A, K], ``means_``
+    [A, K, D], ``covariances_`` [A, K, D, D], ``precisions_cholesky_`` [A, K, D, D],
+    ``component_mask_`` [A, K] bool, ``log_prior_`` [A]
     (log share of points, -inf for an action without data), ``n_points_`` [A],
     ``n_components_`` [A] long, ``criterion_`` [A, K] (+inf where k is not a candidate),
     ``log_likelihood_`` [A, K] (-inf where k is not a candidate), ``converged_`` [A, K] bool,
@@ -355,6 +400,9 @@ class GaussianMixtureSet(nn.Module):
     measured with ``cand_coef_`` [A, K, K, Q], ``stats_valid_`` [A] bool, and a fingerprint
     of the points ``data_print_`` [A, D]: the next warm refit adds the new points' share to
     them instead of an E-step over all the points.
+    ``settings_`` [6] long holds the arguments that decide what a fit or refit chooses
+    (criterion, var_floor, tol, max_iter, seed, refit_growth; floats by their IEEE bits):
+    loading a state saved with other values is a ValueError that names them.
     ``fit_report_`` (a :class:`FitReport`) is a plain attribute, not part of the state_dict.
     """
 
@@ -386,8 +434,12 @@ class GaussianMixtureSet(nn.Module):
             raise ValueError(f"Expected var_floor to be a finite float >= 0 but got {var_floor!r}")
         if not (isinstance(tol, (int, float)) and math.isfinite(tol)) or tol <= 0:
             raise ValueError(f"Expected tol to be a finite float > 0 but got {tol!r}")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-            raise ValueError(f"Expected seed to be an int but got {seed!r}")
+        if (
+            isinstance(seed, bool)
+            or not isinstance(seed, (int, np.integer))
+            or not 0 <= seed < 2**64
+        ):
+            raise ValueError(f"Expected seed to be an int in [0, 2**64) but got {seed!r}")
         if (
             isinstance(refit_growth, bool)
             or not isinstance(refit_growth, (int, float))
@@ -437,6 +489,7 @@ class GaussianMixtureSet(nn.Module):
         self.register_buffer("ref_center_", torch.zeros(a, d, dtype=f64))
         self.register_buffer("data_print_", torch.zeros(a, d, dtype=f64))
         self.register_buffer("fitted_", torch.zeros((), dtype=torch.bool))
+        self.register_buffer("settings_", torch.tensor(_settings_codes(self), dtype=torch.long))
         self.fit_report_: FitReport | None = None
         self._cache: dict[str, Any] | None = None
 
@@ -461,6 +514,28 @@ class GaussianMixtureSet(nn.Module):
     def _load_from_state_dict(
         self, state_dict: dict[str, Any], prefix: str, *args: Any, **kwargs: Any
     ) -> None:
+        key = prefix + "settings_"
+        saved, fitted = state_dict.get(key), state_dict.get(prefix + "fitted_")
+        if isinstance(fitted, Tensor) and bool(fitted) and saved is not None:
+            # a fitted state: its candidates were chosen under the saved settings, and a
+            # refit continues from them (an unfitted state carries nothing to continue)
+            if isinstance(saved, Tensor) and saved.shape == self.settings_.shape:
+                given = _settings_values(saved.cpu().tolist())
+                own = _settings_values(self.settings_.cpu().tolist())
+                differ = [n for n in _SETTINGS if given[n] != own[n]]
+                if differ:
+                    raise ValueError(
+                        "load_state_dict: the state was saved by a GaussianMixtureSet with "
+                        + ", ".join(f"{n}={given[n]!r}" for n in differ)
+                        + ", this one has "
+                        + ", ".join(f"{n}={own[n]!r}" for n in differ)
+                        + "; its refits would choose other models. Build the model with the "
+                        "saved settings and load the state into it."
+                    )
+        if prefix + "fitted_" in state_dict:
+            # the settings stay this instance's own (they are its attributes); a state saved
+            # before the settings were kept has nothing to check them against
+            state_dict[key] = self.settings_.clone()
         self._cache = None
         self.fit_report_ = None
         # a state_dict saved before refit() existed lacks the candidates: load it with the
@@ -1071,9 +1146,11 @@ class GaussianMixtureSet(nn.Module):
             with np.errstate(divide="ignore"):
                 mix = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1))
             return torch.from_numpy(mix + self._tables()["np"][3])
-        with self._predict_threads(x.shape[0]), torch.inference_mode():
+        # no_grad, not inference_mode: the caller gets ordinary tensors it may modify in place
+        # or use with autograd, whatever the batch size
+        with self._predict_threads(x.shape[0]), torch.no_grad():
             lp, _ = self._component_scores_torch(x)  # type: ignore[arg-type]
-            return (torch.logsumexp(lp, -1) + self._tables()["log_prior"]).clone()
+            return torch.logsumexp(lp, -1) + self._tables()["log_prior"]
 
     def classify(self, observations: Any) -> Classification:
         """Classify observations [N, D] by Eq. 7 and report how sure the model is.
@@ -1095,7 +1172,7 @@ class GaussianMixtureSet(nn.Module):
             if x.shape[0] == 1:
                 return self._classify_one(x)  # type: ignore[arg-type]
             return self._classify_np(x)  # type: ignore[arg-type]
-        with self._predict_threads(x.shape[0]), torch.inference_mode():
+        with self._predict_threads(x.shape[0]), torch.no_grad():  # ordinary tensors out
             return self._classify_torch(x)  # type: ignore[arg-type]
 
     def _predict_threads(self, n: int) -> contextlib.AbstractContextManager[None]:

@@ -154,8 +154,12 @@ def evaluate_policy(
     if n_steps is None and n_episodes is None:
         raise ValueError("evaluate_policy: give n_steps and/or n_episodes, or it never ends")
     for name, v in (("n_steps", n_steps), ("n_episodes", n_episodes)):
-        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+        if v is not None and (
+            isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1
+        ):
             raise ValueError(f"evaluate_policy: {name} must be an int >= 1, got {v!r}")
+    n_steps = None if n_steps is None else int(n_steps)
+    n_episodes = None if n_episodes is None else int(n_episodes)
     if seeds is not None and n_episodes is not None and n_episodes > len(seeds):
         raise ValueError(
             f"evaluate_policy: n_episodes={n_episodes} but only {len(seeds)} seeds were given; "
@@ -210,6 +214,8 @@ def evaluate_policy(
                 info=jsonable_info(info),
             )
         )
+        if n_steps is not None and len(records) >= n_steps:
+            break  # the last step: no reset and no observation check after it
         if term or trunc:
             done_episodes += 1
             episode += 1
