@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from _toy_envs import oracle, rare_regions_world
 
@@ -184,3 +185,45 @@ def test_record_says_who_chose_the_executed_action():
         StepRecord(**base, teacher_action=None, executed_action=0, autonomous=True)
     with pytest.raises(ValueError, match="autonomous"):
         StepRecord(**base, teacher_action=0, executed_action=0, autonomous=True)
+
+
+def test_records_refuse_at_creation_what_would_fail_later():
+    """A value that JSON or the log cannot hold fails when the record is made, naming the
+    field, not later in to_dict or a consumer; a correction is a label for a real observation
+    and differs from what was executed."""
+    from torchcbl.records import CorrectionRecord, StepRecord
+
+    base = dict(
+        step=0,
+        episode=0,
+        observation=(0.0,),
+        model_action=1,
+        posterior=(0.5, 0.5),
+        teacher_action=None,
+        executed_action=1,
+        phase="confident",
+        autonomous=True,
+        reward=1.0,
+        terminated=False,
+        truncated=False,
+    )
+    ok = StepRecord(**base, confidence=0.5, distance=float("inf"), info={"x": [1, "a"]})
+    assert ok.to_dict()["distance"] == "inf"
+    for field, value in (
+        ("confidence", np.float32(0.5)),
+        ("confidence", True),
+        ("distance", np.float64(1.0).astype(np.float32)),
+        ("info", {"x": object()}),
+        ("info", {"x": np.int64(3)}),
+    ):
+        kw = {"confidence": 0.5, "distance": 1.0, "info": {}, field: value}
+        with pytest.raises(ValueError, match=rf"StepRecord\.{field}: expected"):
+            StepRecord(**base, **kw)
+    with pytest.raises(ValueError, match=r"StepRecord\.info: expected a dict JSON can hold"):
+        ok.with_outcome(1.0, False, False, {"x": object()})
+    CorrectionRecord(step=0, episode=0, observation=(0.5, 1.0), executed_action=0, action=1)
+    for obs in ((float("nan"), 1.0), (), [0.5, 1.0], ("a",)):
+        with pytest.raises(ValueError, match=r"CorrectionRecord\.observation: expected"):
+            CorrectionRecord(step=0, episode=0, observation=obs, executed_action=0, action=1)
+    with pytest.raises(ValueError, match=r"CorrectionRecord\.action: expected another action"):
+        CorrectionRecord(step=0, episode=0, observation=(0.5,), executed_action=1, action=1)

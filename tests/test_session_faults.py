@@ -785,3 +785,156 @@ def test_each_writer_records_torch_threads(tmp_path):
     assert [(w["first_step"], w["torch_num_threads"]) for w in lines] == [(0, 1), (10, 2)]
     assert lines[0]["torch_version"] == torch.__version__
     assert load_config(run)["format"] == S.FORMAT
+
+
+# -- a Ctrl-C that lands between a write and its bookkeeping -----------------------------------
+
+
+def _line_kind(data: bytes) -> str:
+    entry = json.loads(data.rpartition(b"\t")[0])
+    if entry[0] == "s":
+        return "autonomous" if entry[8] is None else "demonstration"  # teacher_action
+    return {"f": "outcome", "c": "correction"}[entry[0]]
+
+
+class _CtrlCAfterCommit:
+    """The session's SQLite connection, with a real SIGINT sent as its next COMMIT returns."""
+
+    def __init__(self, db: sqlite3.Connection) -> None:
+        self.db, self.armed = db, True
+
+    def execute(self, sql: str, *args):
+        out = self.db.execute(sql, *args)
+        if sql == "COMMIT" and self.armed:
+            self.armed = False
+            os.kill(os.getpid(), signal.SIGINT)
+        return out
+
+    def __getattr__(self, name: str):
+        return getattr(self.db, name)
+
+
+@pytest.mark.parametrize("where", ["demonstration", "outcome", "autonomous", "commit"])
+def test_a_real_ctrl_c_right_after_a_journal_write_or_a_commit(tmp_path, monkeypatch, where):
+    """A SIGINT that arrives just as a journal line was written (or as SQLite committed a
+    batch) waits until memory holds what disk holds: the KeyboardInterrupt still stops the
+    run, and afterwards no step is on disk that memory lacks, no number is used twice, and the
+    session goes on in this process and after a resume (before 2026-11-26 the step was on disk
+    only, the next one took its number, and every later commit failed)."""
+    run = tmp_path / "run"
+    ct, env = session(run, commit_every=4, noninteractive=False)
+    ct.run(max_steps=20)  # a model: from here on requests and autonomous steps mix
+    sent: list[str] = []
+    if where == "commit":
+        ct._store._db = _CtrlCAfterCommit(ct._store._db)
+        sent.append(where)
+    else:
+
+        def write(fd: int, data: bytes) -> int:
+            n = os.write(fd, data)
+            if not sent and _line_kind(data) == where:
+                sent.append(where)
+                os.kill(os.getpid(), signal.SIGINT)
+            return n
+
+        monkeypatch.setattr(S, "_write_fd", write)
+    with pytest.raises(KeyboardInterrupt):
+        ct.run(max_steps=400)
+    assert sent == [where]
+    monkeypatch.setattr(S, "_write_fd", os.write)
+    if where == "commit":
+        ct._store._db = ct._store._db.db
+    steps = [r.step for r in load_records(run)]
+    assert steps == list(range(len(steps))) == [r.step for r in ct.records]
+    goes_on(ct, env, run)
+
+
+# -- what a new session or a resume must not take over ----------------------------------------
+
+
+def test_a_new_session_does_not_take_over_a_journal_another_session_left(tmp_path):
+    run = tmp_path / "run"
+    ct, _ = session(run, commit_every=10**6, max_new=50)
+    for _ in range(5):
+        ct.step()
+    crash(ct)  # the steps are in the journal only
+    for name in ("config.json", "steps.sqlite", "steps.sqlite-wal", "steps.sqlite-shm"):
+        (run / name).unlink(missing_ok=True)  # "starting over" by hand, the journal left
+    with pytest.raises(
+        IncompatibleRunDirError, match=r"holds what another session left \(steps.journal\)"
+    ):
+        session(run)
+    assert (run / "steps.journal").stat().st_size > 0  # refused without touching it
+
+
+def test_resume_rebuilds_the_sessions_model_not_the_callers_fitted_one(tmp_path):
+    """At 4 labels (no refit yet, max_new 50) the session has no model; a fitted model passed
+    to resume must not decide in its place."""
+    run = tmp_path / "run"
+    ct, env = session(run, max_new=50)
+    ct.run(max_steps=4)
+    ct.close()
+    assert not load_model(run).is_fitted
+    m = GaussianMixtureSet(3, 2, seed=0)  # the session's model arguments, fitted elsewhere
+    x, y = rare_regions_world().sample(300, np.random.default_rng(1))
+    m.fit(x, 2 - y)
+    back, _ = resume(run, model=m)
+    assert not back.model.is_fitted
+    assert back.step().model_action == -1
+    back.close()
+
+
+def test_resume_compares_a_custom_strategy_by_its_type_and_relabel_flag(tmp_path):
+    from torchcbl.strategies.bc import BehaviourCloning
+    from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+    class Mine(BehaviourCloning):  # a user's strategy without to_config
+        to_config = None
+        relabel = True
+
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    cfg = TeachingConfig(max_new=5, noninteractive=False)
+    with ConfidentTeacher(
+        env,
+        oracle(env),
+        strategy=ConfidenceBasedAutonomy(),
+        config=cfg,
+        run_dir=run,
+        progress=False,
+    ) as ct:
+        ct.run(max_steps=10)
+    with pytest.raises(IncompatibleRunDirError, match="strategy: stored"):
+        ConfidentTeacher.resume(run, env, oracle(env), strategy=Mine(), progress=False)
+    mine_run = tmp_path / "mine"
+    with ConfidentTeacher(
+        env, oracle(env), strategy=Mine(), config=cfg, run_dir=mine_run, progress=False
+    ) as ct:
+        ct.run(max_steps=10)
+    ConfidentTeacher.resume(mine_run, env, oracle(env), strategy=Mine(), progress=False).close()
+    with pytest.raises(IncompatibleRunDirError, match="strategy: stored"):
+        ConfidentTeacher.resume(mine_run, env, oracle(env), strategy=BehaviourCloning())
+
+
+def test_resume_compares_what_gymnasium_make_was_given(tmp_path):
+    run = tmp_path / "run"
+
+    def teacher(obs, info):
+        return 2 if obs[1] >= 0 else 0
+
+    cfg = TeachingConfig(max_new=5)
+    with ConfidentTeacher(
+        gym.make("MountainCar-v0", goal_velocity=0.0),
+        teacher,
+        config=cfg,
+        run_dir=run,
+        progress=False,
+    ) as ct:
+        ct.run(max_steps=10)
+    with pytest.raises(
+        IncompatibleRunDirError, match=r"env kwargs .*'goal_velocity': \(0.0, 0.5\)"
+    ):
+        ConfidentTeacher.resume(run, gym.make("MountainCar-v0", goal_velocity=0.5), teacher)
+    # the same kwargs, and another render mode, resume
+    same = gym.make("MountainCar-v0", goal_velocity=0.0, render_mode="rgb_array")
+    ConfidentTeacher.resume(run, same, teacher, progress=False).close()

@@ -322,3 +322,120 @@ def test_evaluate_policy_passes_info_to_a_teacher_style_policy():
     assert all(r.executed_action == oracle(env)(np.asarray(r.observation), {}) for r in recs)
     with pytest.raises(TypeError):
         evaluate_policy(expert, env, n_steps=1, seed=0)  # a 2-argument policy needs uses_info
+
+
+def test_the_teacher_judges_an_autonomous_step_on_what_the_agent_saw():
+    """An env that reuses its observation buffer (mutated in place by step) must not show the
+    correcting teacher the next state: the correction is a label for the decision's state."""
+    import gymnasium as gym
+
+    from torchcbl.strategies.hg_dagger import HGDAgger
+
+    class InPlace(gym.Env):
+        observation_space = gym.spaces.Box(-10, 10, (2,), np.float64)
+        action_space = gym.spaces.Discrete(2)
+
+        def __init__(self):
+            self.buf = np.zeros(2)
+
+        def reset(self, *, seed=None, options=None):
+            super().reset(seed=seed)
+            self.t = 0
+            self.buf[:] = self.np_random.uniform(-1, 1, 2)
+            return self.buf, {}
+
+        def step(self, a):
+            self.t += 1
+            self.buf[:] = self.np_random.uniform(-1, 1, 2)
+            return self.buf, 0.0, False, self.t >= 20, {}
+
+    class Teacher:
+        def __init__(self):
+            self.seen = []
+
+        def __call__(self, obs, info):
+            return int(obs[0] > 0)
+
+        def correct(self, obs, info, action):
+            self.seen.append(tuple(obs.tolist()))
+            return 1 - action  # always disagrees
+
+    t = Teacher()
+    ct = ConfidentTeacher(
+        InPlace(),
+        t,
+        strategy=HGDAgger(warmup=5),
+        config=TeachingConfig(max_steps=30),
+        progress=False,
+    )
+    ct.run()
+    assert ct.corrections and len(t.seen) == len(ct.corrections)
+    assert [c.observation for c in ct.corrections] == t.seen
+
+
+def test_a_failed_first_reset_keeps_its_seed_for_the_retry():
+    """The same seed gives the same session even when the env's first reset fails and run()
+    is called again."""
+    import gymnasium as gym
+
+    from torchcbl.errors import EnvError
+
+    class FlakyReset(gym.Wrapper):
+        def __init__(self, env):
+            super().__init__(env)
+            self.calls = 0
+
+        def reset(self, **kw):
+            self.calls += 1
+            if self.calls == 1:
+                raise ConnectionError("simulator not ready")
+            return self.env.reset(**kw)
+
+    def first_observations(flaky: bool):
+        env = rare_regions_world()
+        ct = ConfidentTeacher(
+            FlakyReset(env) if flaky else env,
+            oracle(env),
+            config=TeachingConfig(max_steps=3),
+            seed=7,
+            progress=False,
+        )
+        if flaky:
+            with pytest.raises(EnvError, match="simulator not ready"):
+                ct.run()
+        ct.run()
+        return [r.observation for r in ct.records]
+
+    assert first_observations(True) == first_observations(False)
+
+
+@pytest.mark.parametrize("phase", ["non-interactive", "evaluation"])
+def test_a_strategys_unknown_phase_is_refused_before_the_teacher_is_asked(tmp_path, phase):
+    from torchcbl.session import load_records
+    from torchcbl.strategies import Decision
+    from torchcbl.strategies.bc import BehaviourCloning
+
+    class Odd(BehaviourCloning):
+        def decide(self, obs, c):
+            return Decision(True, phase)
+
+    env = rare_regions_world()
+    asked = []
+
+    def teacher(obs, info):
+        asked.append(1)
+        return oracle(env)(obs, info)
+
+    ct = ConfidentTeacher(env, teacher, strategy=Odd(), run_dir=tmp_path / "r", progress=False)
+    with pytest.raises(RuntimeError, match=rf"decided with phase '{phase}'; expected"):
+        ct.run(max_steps=3)
+    ct.close()
+    assert asked == [] and load_records(tmp_path / "r") == []
+
+
+def test_commit_every_is_checked(tmp_path):
+    env = rare_regions_world()
+    for bad in (0, "32", 2.0, True):
+        with pytest.raises(ValueError, match="commit_every: expected an int >= 1"):
+            ConfidentTeacher(env, oracle(env), run_dir=tmp_path / "r", commit_every=bad)
+        assert not (tmp_path / "r" / "config.json").exists()

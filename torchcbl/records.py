@@ -181,10 +181,11 @@ class StepRecord:
                 raise bad("observation", "finite floats only", obs)
         if not _is_int(self.model_action) or self.model_action < -1:
             raise bad("model_action", "an int >= -1 (-1: no model)", self.model_action)
-        if self.confidence is not None and not (0.0 <= self.confidence <= 1.0):
-            raise bad("confidence", "a float in [0, 1] or None", self.confidence)
-        if self.distance is not None and not (self.distance >= 0.0):  # rejects NaN too
-            raise bad("distance", "a float >= 0 (inf allowed) or None", self.distance)
+        conf, dist = self.confidence, self.distance
+        if conf is not None and not (type(conf) is float and 0.0 <= conf <= 1.0):
+            raise bad("confidence", "a float in [0, 1] or None", conf)
+        if dist is not None and not (type(dist) is float and dist >= 0.0):  # rejects NaN too
+            raise bad("distance", "a float >= 0 (inf allowed) or None", dist)
         post = self.posterior
         if post is not None:
             if type(post) is not tuple:
@@ -240,6 +241,11 @@ class StepRecord:
             raise bad("truncated", "a bool", self.truncated)
         if type(self.info) is not dict:
             raise bad("info", "a dict", self.info)
+        if self.info:
+            try:
+                json.dumps(self.info)
+            except (TypeError, ValueError) as exc:  # here, not later in to_dict or the log
+                raise bad("info", f"a dict JSON can hold ({exc})", self.info) from None
 
     def with_outcome(
         self, reward: float | None, terminated: bool, truncated: bool, info: dict[str, Any]
@@ -297,13 +303,27 @@ class CorrectionRecord:
     action: int
 
     def __post_init__(self) -> None:
+        def bad(name: str, expected: str, got: Any) -> ValueError:
+            return ValueError(
+                f"CorrectionRecord.{name}: expected {expected}, got {got!r} (step "
+                f"{self.step!r}). Corrections are built by the teaching loop."
+            )
+
         for name in ("step", "episode", "executed_action", "action"):
             v = getattr(self, name)
             if not _is_int(v) or v < 0:
-                raise ValueError(
-                    f"CorrectionRecord.{name}: expected an int >= 0, got {v!r} (step "
-                    f"{self.step!r}). Corrections are built by the teaching loop."
-                )
+                raise bad(name, "an int >= 0", v)
+        obs = self.observation
+        if (
+            type(obs) is not tuple
+            or not obs
+            or not all(type(x) is float and _isfinite(x) for x in obs)
+        ):
+            raise bad("observation", "a non-empty tuple of finite floats", obs)
+        if self.action == self.executed_action:
+            raise bad(
+                "action", f"another action than the executed {self.executed_action}", self.action
+            )
 
     @property
     def observation_array(self) -> np.ndarray:

@@ -105,9 +105,11 @@ import hashlib
 import json
 import os
 import re
+import signal
 import socket
 import sqlite3
 import struct
+import threading
 import time
 import warnings
 import zlib
@@ -449,6 +451,55 @@ def _write_error(exc: BaseException, path: Path, what: str, after: str) -> Sessi
 
 
 _write_fd = os.write  # the journal's write (a seam for the disk-full tests)
+
+
+class _InterruptHold:
+    """Hold a Ctrl-C (SIGINT) back while memory and disk are brought into step.
+
+    A ``KeyboardInterrupt`` raised between a journal write and the bookkeeping after it (or
+    between a record entering :attr:`ConfidentTeacher.records` and its journal line) would
+    leave the two out of step: a step on disk that memory lacks, whose number the next step
+    reuses. While held, SIGINT only sets a flag; :meth:`release` restores the handler and
+    returns what it would have raised (the caller decides when to raise it), or None.
+    Python delivers signals to the main thread only, and a handler that is not a Python
+    function (SIG_DFL kills the process, which the journal survives) is left alone: there the
+    hold does nothing. Holds nest: an inner one hands its catch to the outer one.
+    """
+
+    def __init__(self) -> None:
+        self._caught: tuple[int, Any] | None = None
+        self._old: Any = None
+        if threading.current_thread() is threading.main_thread():
+            old = signal.getsignal(signal.SIGINT)
+            if callable(old):
+                self._old = old
+                signal.signal(signal.SIGINT, self._hold)
+
+    def _hold(self, signum: int, frame: Any) -> None:
+        if self._caught is None:
+            self._caught = (signum, frame)
+
+    def release(self) -> BaseException | None:
+        old, self._old = self._old, None
+        if old is None:
+            return None
+        signal.signal(signal.SIGINT, old)
+        if self._caught is None:
+            return None
+        try:
+            old(*self._caught)  # the default handler raises KeyboardInterrupt
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller to raise
+            return exc
+        return None
+
+
+def _raise_held(hold: _InterruptHold) -> None:
+    """Release ``hold`` and raise what it caught, if anything."""
+    late = hold.release()
+    if late is not None:
+        raise late
+
+
 _START_AGAIN = "free space (or fix the permissions) and start the session again"
 
 
@@ -590,6 +641,19 @@ class SessionStore:
                     f"{path} already holds a teaching session. Continue it with "
                     "ConfidentTeacher.resume(run_dir, env, teacher) or choose a new run_dir."
                 )
+            journal = path / JOURNAL_NAME
+            leftovers = [journal.name] if journal.exists() and journal.stat().st_size else []
+            ckpts = path / CHECKPOINT_DIR
+            if ckpts.is_dir():
+                leftovers += sorted(
+                    f"{CHECKPOINT_DIR}/{e.name}" for e in ckpts.iterdir() if _CKPT_RE.match(e.name)
+                )
+            if leftovers:  # a new session would take another session's steps or models
+                raise IncompatibleRunDirError(
+                    f"{path} holds what another session left ({', '.join(leftovers[:3])}"
+                    f"{', ...' if len(leftovers) > 3 else ''}) but no session; choose a new "
+                    "run_dir (or move those files away)."
+                )
             started = True
             try:
                 write_json_atomic(path / CONFIG_NAME, config)
@@ -662,33 +726,53 @@ class SessionStore:
             return
         db = self._db
         assert db is not None
+        # a Ctrl-C waits for the end: between COMMIT and emptying the list, the next commit
+        # would insert the same steps again and fail on every later try
+        hold = _InterruptHold()
         try:
-            db.execute("BEGIN")
-            for sql, values in pending:
-                db.execute(sql, values)
-            db.execute("COMMIT")
-        except sqlite3.Error as exc:
-            if db.in_transaction:
-                try:
-                    db.execute("ROLLBACK")
-                except sqlite3.Error:
-                    pass
-            raise _write_error(
-                exc,
-                self.run_dir / LOG_NAME,
-                f"committing {len(pending)} journalled rows",
-                f"Nothing is lost: they stay in {JOURNAL_NAME} and the next commit retries "
-                f"them. {_FREE_SPACE}",
-            ) from exc
-        pending.clear()
-        try:
-            os.ftruncate(self._journal, 0)
-            self._journal_size = 0
-        except OSError:
-            pass  # lines also in SQLite are harmless: replaying them changes nothing
+            try:
+                db.execute("BEGIN")
+                for sql, values in pending:
+                    db.execute(sql, values)
+                db.execute("COMMIT")
+            except BaseException as exc:
+                if db.in_transaction:
+                    try:
+                        db.execute("ROLLBACK")
+                    except sqlite3.Error:
+                        pass
+                if not isinstance(exc, sqlite3.Error):
+                    raise
+                raise _write_error(
+                    exc,
+                    self.run_dir / LOG_NAME,
+                    f"committing {len(pending)} journalled rows",
+                    f"Nothing is lost: they stay in {JOURNAL_NAME} and the next commit retries "
+                    f"them. {_FREE_SPACE}",
+                ) from exc
+            pending.clear()
+            try:
+                os.ftruncate(self._journal, 0)
+                self._journal_size = 0
+            except OSError:
+                pass  # lines also in SQLite are harmless: replaying them changes nothing
+        finally:
+            _raise_held(hold)
 
     def _write(self, kind: str, values: tuple[Any, ...]) -> None:
-        """Append one journal line (the step is durable from here on) and queue its row."""
+        """Append one journal line (the step is durable from here on) and queue its row.
+
+        A full batch is committed first, so that anything raised here, a
+        :class:`SessionWriteError` of the write or whatever the commit raised but its own
+        :class:`SessionWriteError` (which is retried at the next commit), means the line is
+        not part of the session. The teaching loop holds a Ctrl-C back around this call
+        (:class:`_InterruptHold`), so none lands between the write and its bookkeeping.
+        """
+        if len(self._pending) >= self.commit_every:
+            try:
+                self.commit()
+            except SessionWriteError:
+                pass  # the rows are durable in the journal; the next commit retries them
         line = _journal_line(kind, values)
         try:
             written = _write_fd(self._journal, line)
@@ -707,11 +791,6 @@ class SessionStore:
             ) from exc
         self._journal_size += written
         self._pending.append((_SQL[kind], values))
-        if len(self._pending) >= self.commit_every:
-            try:
-                self.commit()
-            except SessionWriteError:
-                pass  # the rows are durable in the journal; the next commit retries them
 
     @staticmethod
     def row(record: StepRecord, *, pending: bool) -> tuple[Any, ...]:
@@ -1377,11 +1456,14 @@ def resume_problems(
     learning: tuple[dict[str, Any], dict[str, Any]] | None,
     model_args: dict[str, Any] | None,
     strategy: dict[str, Any] | None,
+    env_kwargs: dict[str, Any] | None = None,
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
-    ``model_args`` / ``strategy`` None means "rebuilt from the directory", a strategy config
-    with ``"custom": true`` is not compared."""
+    ``model_args`` / ``strategy`` None means "rebuilt from the directory"; of a strategy
+    config with ``"custom": true`` (no ``to_config``) only the type and relabel flag are
+    compared; ``env_kwargs``: what ``gymnasium.make`` was given for the env (plain values are
+    compared, ``render_mode`` aside)."""
     problems: list[str] = []
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
@@ -1391,6 +1473,28 @@ def resume_problems(
         )
     if senv.get("id") and env_id and senv["id"] != env_id:
         problems.append(f"env id: the session used {senv['id']!r}, got {env_id!r}")
+    if env_kwargs is not None and senv.get("id") and senv.get("id") == env_id:
+        # what gymnasium.make was given, where both sides are plain values (an object is
+        # kept only as its repr, which may name a memory address); render_mode may change
+        stored_kw = senv.get("kwargs") or {}
+        given_kw = json.loads(json.dumps(env_kwargs))  # as the session stored its own
+
+        def as_repr(v: Any) -> bool:
+            return isinstance(v, dict) and set(v) == {"repr"}
+
+        differ = {
+            k: (stored_kw.get(k), given_kw.get(k))
+            for k in sorted(set(stored_kw) | set(given_kw))
+            if k != "render_mode"
+            and not as_repr(stored_kw.get(k))
+            and not as_repr(given_kw.get(k))
+            and stored_kw.get(k) != given_kw.get(k)
+        }
+        if differ:
+            problems.append(
+                f"env kwargs (stored, given): {differ}; make the env as the session did, "
+                f"gymnasium.make({senv['id']!r}, **{stored_kw})"
+            )
     if learning is not None and learning[0] != learning[1]:
         diff = {
             k: (v, learning[1].get(k)) for k, v in learning[0].items() if learning[1].get(k) != v
@@ -1398,9 +1502,14 @@ def resume_problems(
         problems.append(f"config (stored, given): {diff}; only the stop fields may change")
     if model_args is not None and model_args != _with_default_args(stored["model"]["args"]):
         problems.append(f"model args: stored {stored['model']['args']}, given {model_args}")
-    if strategy is not None and not strategy.get("custom"):
+    if strategy is not None:
         want = stored_strategy(stored)
-        if strategy != want:
+        if strategy.get("custom") or want.get("custom"):
+            # a strategy without to_config has only its type and relabel flag to compare
+            mine = (strategy.get("type"), bool(strategy.get("relabel")))
+            if mine != (want.get("type"), bool(want.get("relabel"))):
+                problems.append(f"strategy: stored {want}, given {strategy}")
+        elif strategy != want:
             problems.append(f"strategy: stored {want}, given {strategy}")
     return problems
 

@@ -63,6 +63,8 @@ from torchcbl.session import (
     FORMAT,
     LabelDigest,
     SessionStore,
+    _InterruptHold,
+    _raise_held,
     build_model,
     label_sequence,
     load_config,
@@ -280,6 +282,22 @@ def _seed_for(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
 
 
+def _env_kwargs(env: gym.Env) -> dict[str, Any]:
+    """What ``gymnasium.make`` was given for ``env`` (its spec's kwargs), a value JSON cannot
+    hold as ``{"repr": ...}``; empty for an env not made by ``gymnasium.make``."""
+    kwargs = getattr(getattr(env, "spec", None), "kwargs", None) or {}
+    return {str(k): v if _jsonable(v) else {"repr": repr(v)[:200]} for k, v in kwargs.items()}
+
+
+def _check_commit_every(commit_every: Any) -> None:
+    if (
+        isinstance(commit_every, (bool, np.bool_))
+        or not isinstance(commit_every, (int, np.integer))
+        or commit_every < 1
+    ):
+        raise ValueError(f"commit_every: expected an int >= 1, got {commit_every!r}")
+
+
 class ConfidentTeacher:
     """Teach a discrete-action policy, asking the teacher only where the model is unsure.
 
@@ -304,8 +322,9 @@ class ConfidentTeacher:
         progress: show a tqdm bar with the live counters while :meth:`run` runs.
         on_step: called with each :class:`StepRecord` after it is recorded.
         on_refit: called as ``on_refit(model, n_labels)`` after each refit.
-        commit_every: autonomous steps batched per commit at most (a demonstration always
-            reaches disk, in the session's journal, before its action runs).
+        commit_every: journal lines (steps, demonstrations' outcomes, corrections) per SQLite
+            commit, an int >= 1; every line is durable in the session's journal as it is
+            written, and a demonstration's before its action runs.
 
     Errors: a teacher that raises or answers outside the action space gives
     :class:`TeacherError`; an env that raises or returns a non-finite observation or reward
@@ -345,6 +364,7 @@ class ConfidentTeacher:
                 "env": self._env_config,
                 "seed": self.seed,
             }
+            _check_commit_every(commit_every)
             self._store = SessionStore.create(self.run_dir, session_config)
             self._store.commit_every = commit_every
             try:
@@ -434,11 +454,9 @@ class ConfidentTeacher:
             "n_actions": self.n_actions,
             "observation_space": repr(self.env.observation_space),
         }
-        kwargs = getattr(spec, "kwargs", None)
-        if kwargs:  # what gymnasium.make was given; a value JSON cannot hold: {"repr": ...}
-            described["kwargs"] = {
-                str(k): v if _jsonable(v) else {"repr": repr(v)[:200]} for k, v in kwargs.items()
-            }
+        kwargs = _env_kwargs(self.env)
+        if kwargs:
+            described["kwargs"] = kwargs
         return described
 
     # -- resume -----------------------------------------------------------------------------
@@ -494,6 +512,7 @@ class ConfidentTeacher:
             n_features=n_features,
             n_actions=n_actions,
             env_id=getattr(getattr(env, "spec", None), "id", None),
+            env_kwargs=_env_kwargs(env),
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
             strategy=(
@@ -523,6 +542,7 @@ class ConfidentTeacher:
         )
         self._env_config = self._describe_env()
         self.run_dir = Path(run_dir)
+        _check_commit_every(commit_every)
         self._store, records, corrections = SessionStore.open_for_resume(
             self.run_dir, commit_every=commit_every
         )
@@ -568,6 +588,14 @@ class ConfidentTeacher:
             self._digest.update(x, y)
         self._labels = len(ys)
         assert self.run_dir is not None
+        from torchcbl.gmm import GaussianMixtureSet
+
+        if _is_fitted(self.model) and isinstance(self.model, GaussianMixtureSet):
+            # the model the session had is rebuilt from its directory (its checkpoint, else
+            # a refit on its labels), never taken from the caller's fitted one: at 0 labels
+            # without checkpoint 0 that one would decide where the session had no model
+            fresh = GaussianMixtureSet(**_model_args(self.model))
+            self.model.load_state_dict(fresh.state_dict())
         k = restore_model(
             self.run_dir,
             self.model,
@@ -645,11 +673,11 @@ class ConfidentTeacher:
     # -- the loop ---------------------------------------------------------------------------
 
     def _reset(self) -> None:
-        seed, self._next_reset_seed = self._next_reset_seed, None
         try:
-            raw, info = self.env.reset(seed=seed)
-        except Exception as exc:
+            raw, info = self.env.reset(seed=self._next_reset_seed)
+        except Exception as exc:  # the seed stays for the retry: the same seed, the same run
             raise EnvError(f"env.reset raised {type(exc).__name__}: {exc}") from exc
+        self._next_reset_seed = None
         self._obs = obs_array(raw, self.n_features, "env.reset")
         self._raw_obs, self._info = raw, dict(info or {})
         self._episode = self._next_episode
@@ -737,6 +765,9 @@ class ConfidentTeacher:
         if self._needs_reset:
             self._reset()
         obs, info, raw = self._obs, self._info, self._raw_obs
+        if self._corrects:  # the teacher judges the step on what the agent saw, even where
+            # the env reuses its observation buffer in place
+            raw, info = np.array(raw, copy=True), dict(info)
         assert obs is not None
         c = self.model.classify(obs[None])
         model_action = int(_np(c.action)[0])
@@ -745,6 +776,12 @@ class ConfidentTeacher:
         posterior = tuple(_np(c.posterior)[0].tolist())
         decision: Decision = self.strategy.decide(obs, c)
         ask, phase = bool(decision.ask), decision.phase
+        if phase not in ("noninteractive", "confident"):  # before the teacher is asked
+            raise RuntimeError(
+                f"strategy {self.strategy!r} decided with phase {phase!r}; expected "
+                "'noninteractive' or 'confident' (see torchcbl.strategies). Nothing was "
+                "recorded for this step."
+            )
         if not ask and model_action < 0:
             raise RuntimeError(
                 f"strategy {self.strategy!r} decided not to ask before any model exists; a "
@@ -785,6 +822,9 @@ class ConfidentTeacher:
             self._labels += 1
         if phase == "confident":
             auto.append(not ask)
+        # A Ctrl-C waits while the demonstration's line is written: once it is, the step is
+        # kept (and logged as interrupted below), never undone while it stays on disk
+        hold = _InterruptHold()
         try:
             record = self._record(
                 step,
@@ -802,8 +842,12 @@ class ConfidentTeacher:
                 self._store.commit_demonstration(record)  # durable before the action runs
         except BaseException:
             undo()
+            hold.release()  # the error raised says more than a Ctrl-C that came with it
             raise
-        stopped: BaseException | None = None
+        stopped: BaseException | None = hold.release()
+        if stopped is not None and not ask:  # nothing was written: the step never happened
+            undo()
+            raise stopped
         if ask:
             # The demonstration is durable: from here on it is kept, whatever is raised (a
             # strategy's error, a Ctrl-C): it joins the training data and, if the strategy
@@ -825,7 +869,8 @@ class ConfidentTeacher:
                     self._train.add(obs, teacher_action)  # type: ignore[arg-type]
                 if not digested:
                     self._digest.update(obs, teacher_action)  # type: ignore[arg-type]
-                stopped = exc
+                if stopped is None:
+                    stopped = exc
             self._episode_had_demo = True
             self._new_since_refit += 1
         if stopped is not None:
@@ -952,13 +997,17 @@ class ConfidentTeacher:
             executed_action=record.executed_action,
             action=action,
         )
-        if self._store is not None:
-            self._store.correct(correction)  # durable before the next decision
-        self.corrections.append(correction)
         x = record.observation_array
-        self._labels += 1
-        self._train.add(x, action)
-        self._digest.update(x, action)
+        hold = _InterruptHold()  # a Ctrl-C waits until memory holds what disk holds
+        try:
+            if self._store is not None:
+                self._store.correct(correction)  # durable before the next decision
+            self.corrections.append(correction)
+            self._labels += 1
+            self._train.add(x, action)
+            self._digest.update(x, action)
+        finally:
+            _raise_held(hold)
         self.strategy.observe_label(x, action, model_action=record.model_action, kind="correction")
         self._new_since_refit += 1
         if self._new_since_refit >= self.config.max_new:
@@ -1042,32 +1091,39 @@ class ConfidentTeacher:
         else:
             info = jsonable_info(info)
         final = record.with_outcome(reward, terminated, truncated, info)
-        self.records.append(final)
-        # the session's episode count follows the log: here, where a record is added,
-        # replaced or dropped (as a resume counts: every terminated or truncated record)
-        ended = terminated or truncated
-        if ended:
-            self._needs_reset = True
-            self._n_episodes += 1
-        if self._store is not None:
-            try:
-                if final.teacher_action is not None:
-                    self._store.finish(final)
-                else:
-                    self._store.append(final)
-            except SessionWriteError as exc:
+        # a Ctrl-C waits until the record is in memory and its line on disk, or neither
+        hold = _InterruptHold()
+        try:
+            self.records.append(final)
+            # the session's episode count follows the log: here, where a record is added,
+            # replaced or dropped (as a resume counts: every terminated or truncated record)
+            ended = terminated or truncated
+            if ended:
                 self._needs_reset = True
-                if final.teacher_action is not None:  # durable as pending: reads interrupted
-                    self.records[-1] = record.with_outcome(
-                        None, False, True, {"torchcbl_interrupted": True}
-                    )
-                    self._n_episodes += not ended  # it now ends its episode
-                else:
-                    self.records.pop()
-                    self._n_episodes -= ended
-                if interrupt is None:
-                    raise
-                interrupt.add_note(f"torchcbl: {exc}")
+                self._n_episodes += 1
+            if self._store is not None:
+                try:
+                    if final.teacher_action is not None:
+                        self._store.finish(final)
+                    else:
+                        self._store.append(final)
+                except BaseException as exc:  # the line was not written (SessionStore._write)
+                    self._needs_reset = True
+                    if final.teacher_action is not None:  # durable as pending: interrupted
+                        self.records[-1] = record.with_outcome(
+                            None, False, True, {"torchcbl_interrupted": True}
+                        )
+                        self._n_episodes += not ended  # it now ends its episode
+                    else:
+                        self.records.pop()
+                        self._n_episodes -= ended
+                    if interrupt is None or not isinstance(exc, SessionWriteError):
+                        raise
+                    interrupt.add_note(f"torchcbl: {exc}")
+        finally:
+            late = hold.release()
+        if late is not None and interrupt is None and error is None:
+            raise late  # the step is whole in memory and on disk; run() goes on from it
         if interrupt is not None:
             where = f" in {self.run_dir}" if self.run_dir is not None else ""
             interrupt.add_note(
