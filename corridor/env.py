@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -80,6 +81,14 @@ class CorridorEnv(gym.Env):
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if isinstance(world_config, Mapping):  # as gymnasium.make kwargs a config can keep
+            try:
+                world_config = WorldConfig(**world_config)
+            except TypeError as exc:
+                raise TypeError(
+                    f"world_config: expected a WorldConfig or a dict of its fields, got "
+                    f"{dict(world_config)!r} ({exc})"
+                ) from None
         if isinstance(corridor_map, (str, os.PathLike)):
             corridor_map = load_map(corridor_map)
         if not isinstance(corridor_map, CorridorMap):

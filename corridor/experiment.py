@@ -49,7 +49,7 @@ import json
 import math
 import multiprocessing as mp
 import time
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -66,7 +66,7 @@ from corridor.env import DEFAULT_MAP, CorridorEnv
 from corridor.expert import CorridorExpert
 from corridor.maps import CorridorMap, load_map
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
-from torchcbl.evaluation import mean_sd, run_versions
+from torchcbl.evaluation import mean_sd, run_versions, worker_pool
 
 if TYPE_CHECKING:
     from torchcbl import GaussianMixtureSet
@@ -251,6 +251,27 @@ class CorridorExperimentConfig:
             "var_floor": self.var_floor,
             "cba": self.cba,
         }
+
+
+def teaching_setup(
+    config: CorridorExperimentConfig | None = None,
+) -> tuple[dict[str, Any], Any, Callable[..., GaussianMixtureSet]]:
+    """What ``torchcbl teach corridor`` teaches with: the experiment's (the quick defaults when
+    ``config`` is None), so that a person's session compares with the reproduction's.
+
+    Returns:
+        The ``gymnasium.make`` kwargs of ``torchcbl/Corridor-v0`` (the map's name and the
+        robot as plain values, which the session's config keeps for ``evaluate`` and
+        ``--resume``), the confidence rule (:meth:`CorridorExperimentConfig.rule`) and the
+        learner's factory ``make(seed=0)`` (:func:`make_model`).
+    """
+    config = config or CorridorExperimentConfig()
+
+    def make(seed: int = 0) -> GaussianMixtureSet:
+        return make_model(config, seed)
+
+    kwargs = {"corridor_map": config.map_name, "world_config": dataclasses.asdict(config.world)}
+    return kwargs, config.rule(), make
 
 
 def make_model(config: CorridorExperimentConfig | None = None, seed: int = 0) -> GaussianMixtureSet:
@@ -538,7 +559,7 @@ def run_experiment(
             done(run_seed(*a))
     else:
         ctx = mp.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        with worker_pool(workers, ctx) as pool:  # a Ctrl-C stops the workers too
             futures = [pool.submit(run_seed, *a) for a in args]
             for f in futures:
                 done(f.result())
@@ -720,10 +741,13 @@ def evaluate_saved_policy(
     ``map_name`` and ``world_config`` default to the map and robot the session was taught on:
     for a session of :func:`run_experiment` (``run_dir/sessions/seed<k>``) those in
     ``run_dir/results.json`` (noisy motion by default); for a session of an env made with
-    ``gymnasium.make`` the ``corridor_map`` it was given (the session's config keeps the
-    arguments); otherwise the default map and ``WorldConfig()`` (exact motion, the world of
-    ``torchcbl/Corridor-v0`` and ``torchcbl teach corridor``). Returns the map driven, circuits
-    completed, circuits without wall contact, and wall contacts.
+    ``gymnasium.make`` the ``corridor_map`` and ``world_config`` it was given (the session's
+    config keeps them when they are plain values: a map's name, the robot as a dict, as
+    ``torchcbl teach corridor`` gives them, :func:`teaching_setup`; given as objects they are
+    not kept, and this raises ValueError unless they are passed here); otherwise the default
+    map and ``WorldConfig()`` (exact motion, the default of ``torchcbl/Corridor-v0``). Returns
+    the map and robot (``WorldConfig``'s fields) driven, the steps, circuits completed,
+    circuits without wall contact, and wall contacts.
     """
     from torchcbl import evaluate_policy, load_policy
 
@@ -735,6 +759,7 @@ def evaluate_saved_policy(
     ends = [r for r in records if r.terminated]
     return {
         "map": map_name,
+        "world": dataclasses.asdict(world),
         "steps": len(records),
         "circuits_completed": len(ends),
         "circuits_clean": sum(1 for r in ends if r.info.get("is_success")),
@@ -765,13 +790,31 @@ def _session_map(session_dir: Path) -> str:
 
 
 def _session_world(session_dir: Path) -> WorldConfig:
+    """The robot a session was taught with (see :func:`evaluate_saved_policy`)."""
+    from torchcbl.session import load_config
+
     results = session_dir.parent.parent / "results.json"
     if session_dir.parent.name == "sessions" and results.is_file():
         try:
             return WorldConfig(**json.loads(results.read_text())["config"]["world"])
         except (ValueError, KeyError, TypeError):
-            pass  # not an experiment's results.json: fall back to the env's default robot
-    return WorldConfig()
+            pass  # not an experiment's results.json: fall back to what the env was given
+    given = (load_config(session_dir).get("env") or {}).get("kwargs") or {}
+    world = given.get("world_config")
+    if world is None:
+        return WorldConfig()
+    if isinstance(world, dict) and set(world) != {"repr"}:
+        try:
+            return WorldConfig(**world)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"{session_dir}: its env's world_config {world} is not a "
+                f"WorldConfig ({exc}); pass world_config="
+            ) from None
+    raise ValueError(
+        f"{session_dir} was taught with a robot given as an object ({world}), which its "
+        "config does not keep; pass world_config= (a corridor.world.WorldConfig)"
+    )
 
 
 def _json_default(o: Any) -> Any:

@@ -33,7 +33,7 @@ import json
 import math
 import multiprocessing as mp
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -204,6 +204,27 @@ def _stage_labels(cfg: DrivingExperimentConfig, ni_stages: Sequence[int] = ()) -
     ]
     ni = [f"ni_{n}" for n in ni_stages]
     return ["straight", *ni, *a, *[f"b_{n}" for n in cfg.arm_b_stages], "expert"]
+
+
+def teaching_setup(
+    config: DrivingExperimentConfig | None = None,
+) -> tuple[dict[str, Any], Any, Callable[..., GaussianMixtureSet]]:
+    """What ``torchcbl teach driving`` teaches with: the experiment's (the quick defaults when
+    ``config`` is None), so that a person's session compares with the reproduction's.
+
+    Returns:
+        The ``gymnasium.make`` kwargs of ``torchcbl/Driving-v0`` (none: its defaults), the
+        confidence rule (``DistanceRule(config.max_std)``, as the experiment's arm (a)) and
+        the learner's factory ``make(seed=0)`` (:func:`make_model`).
+    """
+    from torchcbl import DistanceRule
+
+    config = config or DrivingExperimentConfig()
+
+    def make(seed: int = 0) -> GaussianMixtureSet:
+        return make_model(config, seed)
+
+    return {}, DistanceRule(config.max_std), make
 
 
 def make_model(config: DrivingExperimentConfig | None = None, seed: int = 0) -> GaussianMixtureSet:

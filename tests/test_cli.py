@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import pty
@@ -140,6 +141,12 @@ def _user_mistakes(run: Path, tmp: Path) -> list[list[str]]:
         ["teach", "corridor", "--seed", "-1", "--run-dir", str(tmp / "X")],
         ["teach", "driving", "--resume", "--run-dir", str(session)],
         ["teach", "corridor", "--resume", "--run-dir", str(empty)],
+        ["teach", "corridor", "--resume", "--run-dir", str(session)],  # a reproduction's
+        ["teach", "corridor", "--seed", str(2**64), "--run-dir", str(tmp / "X")],
+        ["evaluate", str(session), "--seed", str(2**64)],
+        ["replay", str(not_json), "--episode", "3", "--label", "a"],  # one or the other
+        ["benchmark", "--quick", "--envs", "corridor", "--out", str(run / "corridor")],
+        ["benchmark", "--gym-env", "CartPol-v1", "--teacher", "m:f", "--out", str(tmp / "X")],
         ["frobnicate"],
     ]
 
@@ -171,6 +178,23 @@ def test_a_users_mistakes_get_one_line_and_no_traceback(corridor_run, tmp_path):
     assert not (tmp_path / "X").exists()  # a refused reproduce leaves no directory behind
 
 
+def test_benchmark_never_writes_over_another_commands_run_directory(corridor_run, tmp_path):
+    """A benchmark's --out pointed at a reproduction's run directory is refused before any
+    cell runs, and the run's results.json is untouched."""
+    run = corridor_run / "corridor"
+    before = {p: p.read_bytes() for p in run.glob("*.json")}
+    argv = ["benchmark", "--quick", "--envs", "corridor", "--strategies", "confident"]
+    assert main([*argv, "--seeds", "1", "--out", str(run)]) == 2
+    assert {p: p.read_bytes() for p in run.glob("*.json")} == before
+    assert not (run / "cells").exists()
+
+
+def test_plot_of_reproduces_out_directory_names_the_run_directories_in_it(corridor_run, capsys):
+    assert main(["plot", str(corridor_run)]) == 2
+    err = capsys.readouterr().err
+    assert "holds one run directory per domain" in err and str(corridor_run / "corridor") in err
+
+
 def test_evaluate_names_the_problem(corridor_run, tmp_path, capsys):
     """What the one line says: which sessions a run directory holds, which domain a session is
     of, what is missing."""
@@ -190,7 +214,7 @@ def test_evaluate_names_the_problem(corridor_run, tmp_path, capsys):
     assert "does not exist" in messages["missing"]
     assert "not a list of recorded episodes" in messages["replay_results"]
     assert main(["evaluate", str(_session_without_labels(tmp_path / "unlabelled"))]) == 2
-    assert "holds no demonstrations yet" in capsys.readouterr().err
+    assert "holds 0 demonstrations and its first fit comes at" in capsys.readouterr().err
     # a user's own env of the driving domain's shape is not taken for the driving domain
     from _toy_envs import ClusterWorld
 
@@ -200,7 +224,7 @@ def test_evaluate_names_the_problem(corridor_run, tmp_path, capsys):
     ConfidentTeacher(own, lambda o, i: own.optimal_action(o), run_dir=tmp_path / "own").close()
     assert main(["evaluate", str(tmp_path / "own")]) == 2
     err = capsys.readouterr().err
-    assert "an env torchcbl evaluate does not know" in err and "4 features, 3 actions" in err
+    assert "an env torchcbl does not know" in err and "4 features, 3 actions" in err
     alone = tmp_path / "alone"
     alone.mkdir()
     (alone / "results.json").write_text((corridor_run / "corridor" / "results.json").read_text())
@@ -496,7 +520,23 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(corridor
     ConfidentTeacher(env, lambda o, i: 0, run_dir=tmp_path / "plain", progress=False).run(
         max_steps=3
     ).close()
-    assert evaluate_saved_policy(tmp_path / "plain", n_steps=5)["map"] == "figure2"
+    plain = evaluate_saved_policy(tmp_path / "plain", n_steps=5)
+    assert plain["map"] == "figure2" and plain["world"]["forward_noise"] == 0.0
+    # a robot given as an object is not kept by the session's config: evaluate says so
+    # instead of driving the default robot
+    from corridor.world import WorldConfig
+
+    env = gym.make("torchcbl/Corridor-v0", world_config=WorldConfig.legged_robot())
+    ConfidentTeacher(env, lambda o, i: 0, run_dir=tmp_path / "object", progress=False).run(
+        max_steps=3
+    ).close()
+    with pytest.raises(ValueError, match="robot given as an object"):
+        evaluate_saved_policy(tmp_path / "object", n_steps=5)
+    assert main(["evaluate", str(tmp_path / "object")]) == 2
+    noisy = evaluate_saved_policy(
+        tmp_path / "object", n_steps=5, world_config=WorldConfig.legged_robot()
+    )
+    assert noisy["world"]["forward_noise"] > 0
 
 
 def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
@@ -529,6 +569,18 @@ def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
     # the person taught the reproduction's learner (its cap and variance floor)
     from corridor.experiment import CorridorExperimentConfig
 
-    model = json.loads((run / "config.json").read_text())["model"]["args"]
+    stored = json.loads((run / "config.json").read_text())
+    model = stored["model"]["args"]
     cfg = CorridorExperimentConfig()
     assert (model["max_components"], model["var_floor"]) == (cfg.max_components, cfg.var_floor)
+    # ... at the reproduction's threshold (2.83 std, not 2) on its robot and map, which the
+    # session keeps, so that evaluate drives the robot the person taught
+    assert stored["strategy"]["rule"] == cfg.rule().to_config()
+    assert stored["env"]["kwargs"] == {
+        "corridor_map": cfg.map_name,
+        "world_config": dataclasses.asdict(cfg.world),
+    }
+    from corridor.experiment import evaluate_saved_policy
+
+    report = evaluate_saved_policy(run, n_steps=5)
+    assert report["world"] == dataclasses.asdict(cfg.world) and report["world"]["forward_noise"] > 0

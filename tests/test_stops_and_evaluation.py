@@ -4,6 +4,7 @@ records come to per episode (issue 16 item 3, issue 13 item 5)."""
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -161,3 +162,34 @@ def test_episode_results_are_the_per_episode_returns_and_successes():
         finished=False,
     )
     assert episode_results([]) == []
+
+
+def _sleep_then_write(path: str) -> None:
+    import time
+
+    time.sleep(2.0)
+    Path(path).write_text("done")
+
+
+def test_worker_pool_stops_its_workers_when_the_block_raises(tmp_path):
+    """A Ctrl-C in the parent (or any error) must not leave workers computing tasks nobody will
+    read: the queued task never starts and the running one is killed before it finishes."""
+    import multiprocessing as mp
+    import time
+
+    from torchcbl.evaluation import worker_pool
+
+    running, queued = tmp_path / "running", tmp_path / "queued"
+    with pytest.raises(KeyboardInterrupt):
+        with worker_pool(1, mp.get_context("spawn")) as pool:
+            first = pool.submit(_sleep_then_write, str(running))
+            pool.submit(_sleep_then_write, str(queued))
+            while not first.running():
+                time.sleep(0.05)
+            raise KeyboardInterrupt
+    time.sleep(3.0)  # past the time the running task would have finished
+    assert not running.exists() and not queued.exists()
+    # a block that ends normally waits for its tasks
+    with worker_pool(1, mp.get_context("spawn")) as pool:
+        pool.submit(_sleep_then_write, str(running))
+    assert running.read_text() == "done"

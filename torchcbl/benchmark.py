@@ -46,7 +46,7 @@ import json
 import os
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -54,7 +54,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from torchcbl.evaluation import mean_sd, run_versions
+from torchcbl.evaluation import mean_sd, run_versions, worker_pool
 
 __all__ = [
     "CELL_FORMAT",
@@ -505,7 +505,7 @@ def _execute(
     ctx = mp.get_context("spawn")
     # spawn: a fresh interpreter (no forked torch or libsumo state); workers are reused, as
     # every cell closes its envs before it returns.
-    with ProcessPoolExecutor(min(workers, len(todo)), mp_context=ctx) as pool:
+    with worker_pool(min(workers, len(todo)), ctx) as pool:  # a Ctrl-C stops the workers
         futures = {pool.submit(_run_cell_in_worker, c) for c in todo}
         while futures:
             finished, futures = wait(futures, return_when=FIRST_COMPLETED)

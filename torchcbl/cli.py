@@ -64,17 +64,19 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
 
 
-def _int_at_least(minimum: int) -> Any:
-    """An argparse type: a whole number >= ``minimum``, else a one-line usage error."""
+def _int_at_least(minimum: int, below: int | None = None) -> Any:
+    """An argparse type: a whole number >= ``minimum`` (and < ``below``), else a one-line
+    usage error."""
 
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             value = None
-        if value is None or value < minimum:
+        if value is None or value < minimum or (below is not None and value >= below):
+            upper = "" if below is None else f" and < {below}"
             raise argparse.ArgumentTypeError(
-                f"expected a whole number >= {minimum}, got {text!r}"
+                f"expected a whole number >= {minimum}{upper}, got {text!r}"
             ) from None
         return value
 
@@ -83,6 +85,7 @@ def _int_at_least(minimum: int) -> Any:
 
 _positive_int = _int_at_least(1)
 _nonnegative_int = _int_at_least(0)
+_seed = _int_at_least(0, 2**32)  # a seed every seeded part takes (numpy, the GMM set, SUMO)
 
 
 def _experiment_module(domain: str) -> Any:
@@ -245,8 +248,18 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
     )
     if domain is None:
         raise _UsageError(
-            f"{session} was taught in an env torchcbl evaluate does not know ({described}); "
-            "evaluate it in Python with torchcbl.load_policy and torchcbl.evaluate_policy"
+            f"{session} was taught in an env torchcbl does not know ({described}); "
+            + (
+                "resume it in Python with torchcbl.ConfidentTeacher.resume"
+                if teach
+                else "evaluate it in Python with torchcbl.load_policy and torchcbl.evaluate_policy"
+            )
+        )
+    if teach and not env.get("id"):
+        raise _UsageError(
+            f"{session} was not taught by torchcbl teach (its env was not made by "
+            "gymnasium.make: a reproduction's or a script's session), so teach cannot make its "
+            "env again; start a new session with another --run-dir"
         )
     if asked is not None and asked != domain:
         raise _UsageError(
@@ -268,7 +281,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     try:
         report = module.evaluate_saved_policy(session, n_steps=args.steps, seed=args.seed)
-    except IncompatibleRunDirError as exc:
+    except (IncompatibleRunDirError, ValueError) as exc:  # e.g. a robot its config lacks
         raise _UsageError(_one_line(exc)) from None
     print(json.dumps(report, indent=2))
     return 0
@@ -344,6 +357,12 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     results_path = run_dir / "results.json"
     if not results_path.is_file():
+        below = sorted(p.parent for p in run_dir.glob("*/results.json")) if run_dir.is_dir() else []
+        if below:
+            raise _UsageError(
+                f"{run_dir} holds one run directory per domain: "
+                f"{', '.join(str(p) for p in below)}; pass one of them"
+            )
         raise _UsageError(
             f"{results_path} does not exist; expected a run directory written by "
             "torchcbl reproduce (e.g. runs/reproduce/corridor)"
@@ -374,15 +393,15 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 # What the teach command needs per domain: the gymnasium id (registered on importing the
 # package), the module with the text view / key map, the paper's teaching settings, and the
-# "module:function" building the learner from a seed (the domain's experiment's, so a person's
-# session compares with the reproduction's; None would teach the loop's default learner).
+# "module:function" giving the domain experiment's (env kwargs, confidence rule, learner from a
+# seed), so that a person's session compares with the reproduction's.
 _TEACH = {
     "corridor": (
         "corridor",
         "torchcbl/Corridor-v0",
         "corridor.human",
         dict(accuracy_window=20, target_accuracy=0.9, autonomous_episodes_to_stop=10),
-        "corridor.experiment:make_model",
+        "corridor.experiment:teaching_setup",
     ),
     "driving": (
         "sumo_scenarios",
@@ -391,9 +410,25 @@ _TEACH = {
         dict(
             accuracy_window=150, target_accuracy=0.8, burst=10, max_new=10, max_demonstrations=650
         ),
-        "sumo_scenarios.experiment:make_model",
+        "sumo_scenarios.experiment:teaching_setup",
     ),
 }
+
+
+def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
+    """What gymnasium.make was given for a session's env, to make it again on --resume."""
+    from torchcbl.session import load_config
+
+    kwargs = (load_config(run_dir).get("env") or {}).get("kwargs") or {}
+    kept_as_repr = sorted(
+        k for k, v in kwargs.items() if isinstance(v, dict) and set(v) == {"repr"}
+    )
+    if kept_as_repr:
+        raise _UsageError(
+            f"{run_dir}'s env was made with {', '.join(kept_as_repr)} given as an object its "
+            "config does not keep; resume it in Python with ConfidentTeacher.resume and that env"
+        )
+    return {k: v for k, v in kwargs.items() if k != "render_mode"}
 
 
 def _cmd_teach(args: argparse.Namespace) -> int:
@@ -402,7 +437,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     from torchcbl.benchmark import _import
     from torchcbl.teaching import ConfidentTeacher, TeachingConfig, TeachingInterrupted
 
-    package, env_id, human_module, settings, model_factory = _TEACH[args.domain]
+    package, env_id, human_module, settings, setup_factory = _TEACH[args.domain]
     run_dir = Path(args.run_dir)
     if run_dir.exists() and not run_dir.is_dir():
         raise _UsageError(f"--run-dir {run_dir} is a file; expected a session directory")
@@ -429,8 +464,11 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         _output_dir(run_dir, "--run-dir")
     importlib.import_module(package)  # registers the env id
     human = importlib.import_module(human_module)
+    env_kwargs, rule, make_model = _import(setup_factory)()
+    if args.resume:  # the env the session was taught in, whatever teach gives a new one today
+        env_kwargs = _resume_env_kwargs(run_dir)
     teacher = human.make_teacher(title=f"torchcbl teach {args.domain}")
-    env = gym.make(env_id)
+    env = gym.make(env_id, **env_kwargs)
     asked = 0
 
     def status(record: Any) -> None:
@@ -451,7 +489,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         ct = ConfidentTeacher(
             env,
             teacher,
-            model=_import(model_factory)(seed=args.seed) if model_factory else None,
+            model=make_model(seed=args.seed),
+            rule=rule,
             config=config,
             run_dir=run_dir,
             seed=args.seed,
@@ -525,6 +564,12 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             spec = dataclasses.replace(spec, teacher=args.driving_teacher)
         envs.append(spec)
     if args.gym_env:
+        import gymnasium as gym
+
+        try:
+            gym.spec(args.gym_env)
+        except gym.error.Error as exc:
+            raise _UsageError(f"--gym-env: {_one_line(exc)}") from None
         if not args.teacher:
             raise _UsageError(
                 "--gym-env needs --teacher module:factory (the teacher's import path)"
@@ -551,6 +596,13 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     out = _output_dir(
         Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark")), "--out"
     )
+    if out.is_dir() and any(out.iterdir()) and not (out / "cells").is_dir():
+        # a benchmark writes results.json, cells/ and its plot here: never over another run
+        raise _UsageError(
+            f"--out {out} holds files and is not a benchmark's directory (no cells/); choose a "
+            "new or empty directory, or one an earlier benchmark wrote (its finished cells are "
+            "reused)"
+        )
     n_cells = len(strategies) * len(envs) * len(seeds)
     print(
         f"benchmark: {len(strategies)} strategies x {len(envs)} envs x {len(seeds)} seeds = "
@@ -641,7 +693,8 @@ def _parser() -> argparse.ArgumentParser:
         type=_positive_int,
         default=None,
         metavar="N",
-        help="run seeds 0 .. N-1 (default: the experiment's own, 10 for each)",
+        help="run seeds 0 .. N-1 (default: the experiment's own: 10 for each; with --full "
+        "30 corridor, 20 driving)",
     )
     p.add_argument(
         "--workers",
@@ -687,7 +740,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--seed",
-        type=_nonnegative_int,
+        type=_seed,
         default=0,
         metavar="S",
         help="seed of the first reset (corridor: the env's noise; driving: which held-out "
@@ -706,14 +759,15 @@ def _parser() -> argparse.ArgumentParser:
         help="an episodes.json written by the driving experiment "
         "(runs/reproduce/driving/seed_<k>/episodes.json)",
     )
-    p.add_argument(
+    which = p.add_mutually_exclusive_group()
+    which.add_argument(
         "--episode",
         type=_nonnegative_int,
         default=0,
         metavar="N",
         help="index of the episode (default 0; see --list)",
     )
-    p.add_argument(
+    which.add_argument(
         "--label",
         default=None,
         metavar="TEXT",
@@ -779,7 +833,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue the session in --run-dir")
     p.add_argument(
         "--seed",
-        type=_nonnegative_int,
+        type=_seed,
         default=0,
         metavar="S",
         help="session seed: seeds the first reset and the model's fits (default 0; "
@@ -803,7 +857,7 @@ def _parser() -> argparse.ArgumentParser:
         "benchmark",
         help="compare teaching strategies (CE, CBA, BC, DAgger, HG-DAgger, novelty)",
         description="Strategies x environments x seeds with the same teacher and label "
-        "budgets; writes OUT/results.json (labels to 95%% of the teacher, performance at "
+        "budgets; writes OUT/results.json (labels to 95% of the teacher, performance at "
         "budgets, attention) and OUT/learning_curves.png. Finished cells are cached in OUT, "
         "so a rerun (or a killed sweep) continues where it stopped.",
     )

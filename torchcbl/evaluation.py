@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import platform
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
 
 import numpy as np
 
-__all__ = ["mean_sd", "run_versions"]
+__all__ = ["mean_sd", "run_versions", "worker_pool"]
 
 
 def mean_sd(values: Iterable[float | None]) -> dict[str, float | int | None]:
@@ -42,3 +45,29 @@ def run_versions(**extra: str) -> dict[str, str]:
         "gymnasium": gymnasium.__version__,
         **extra,
     }
+
+
+@contextlib.contextmanager
+def worker_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecutor]:
+    """A :class:`~concurrent.futures.ProcessPoolExecutor` of ``workers`` processes (started by
+    the multiprocessing ``context``) that stops its workers at once when the block raises.
+
+    The executor's own ``with`` waits for the running tasks on any exit: after a Ctrl-C that
+    reached this process alone (``kill -INT``), a run went on computing seeds nobody would
+    read, and a second Ctrl-C during that wait left the interpreter hanging at exit. Here an
+    exception (KeyboardInterrupt included) cancels the queued tasks, terminates the workers
+    and is re-raised; a block that ends normally waits for its tasks as usual.
+    """
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+    try:
+        yield pool
+    except BaseException:
+        processes = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in processes:
+            if proc.is_alive():
+                proc.terminate()
+        for proc in processes:
+            proc.join(timeout=10)
+        raise
+    pool.shutdown(wait=True)

@@ -54,7 +54,9 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
 - An exception in the middle of a step (Ctrl-C inside ``env.step``, an env returning a
   malformed answer, a failing write). The loop's memory never runs ahead of disk: a step is in
   the session once its journal line is written. A Ctrl-C in ``env.step`` logs the step as
-  interrupted (episode cut) and re-raises the KeyboardInterrupt with a note; a malformed
+  interrupted (episode cut) and re-raises the KeyboardInterrupt with a note; a Ctrl-C that
+  arrives while a line is written, a record joins memory or SQLite commits a batch waits until
+  memory and disk hold the same steps, then stops the run; a malformed
   ``info`` / ``terminated`` / ``truncated`` / 5-tuple is an :class:`EnvError`.
 - A full disk. A journal write that fails (or is cut short) is undone, the file cut back to its
   previous size, and raises :class:`SessionWriteError`: that step is not in the session (a
@@ -1433,16 +1435,20 @@ def load_policy(run_dir: str | os.PathLike[str]) -> GreedyPolicy:
     """The latest learned policy of a session directory, as a callable obs -> action.
 
     Raises:
-        IncompatibleRunDirError: the session holds no model yet (no label was logged and it
-            did not start from a fitted model): there is nothing to act with.
+        IncompatibleRunDirError: the session holds no model yet (fewer labels were logged than
+            its first fit needs, ``max_new``, and it did not start from a fitted model): there
+            is nothing to act with.
     """
     from torchcbl.policy import GreedyPolicy
 
     model = load_model(run_dir)
     if not model.is_fitted:
+        n = len(load_labels(run_dir)[1])
+        first = int(load_config(run_dir)["teaching"]["max_new"])
         raise IncompatibleRunDirError(
-            f"{run_dir} holds no demonstrations yet, so no model to act with; teach first "
-            "(resume the session), or use load_model for the unfitted model"
+            f"{run_dir} holds {n} demonstration{'' if n == 1 else 's'} and its first fit comes "
+            f"at {first} (max_new), so there is no model to act with yet; teach on (resume "
+            "the session), or use load_model for the unfitted model"
         )
     return GreedyPolicy(model)
 
