@@ -566,14 +566,17 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     if args.gym_env:
         import gymnasium as gym
 
-        try:
-            gym.spec(args.gym_env)
-        except gym.error.Error as exc:
-            raise _UsageError(f"--gym-env: {_one_line(exc)}") from None
         if not args.teacher:
             raise _UsageError(
                 "--gym-env needs --teacher module:factory (the teacher's import path)"
             )
+        module, _, env_id = args.gym_env.rpartition(":")  # "module:Id" imports module first,
+        try:  # as gymnasium.make does
+            if module:
+                importlib.import_module(module)
+            gym.spec(env_id)
+        except (gym.error.Error, ImportError) as exc:
+            raise _UsageError(f"--gym-env {args.gym_env}: {_one_line(exc)}") from None
         try:
             budgets = tuple(int(b) for b in args.budgets.split(","))
             envs.append(
