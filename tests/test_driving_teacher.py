@@ -91,6 +91,11 @@ def test_human_timing_misses_and_doubles_presses_at_the_given_rates():
     assert h.stats()["doubled"] == sum(got[1::3]) // 2
     with pytest.raises(ValueError, match="summing to 1"):
         HumanTimingConfig(delay_probs=(0.5, 0.2))
+    for bad in (-1, 1.0, True, "0"):  # found only when a press was pending, before
+        with pytest.raises(ValueError, match="default_action must be an action index"):
+            HumanTimingConfig(default_action=bad)
+    with pytest.raises(ValueError, match="miss_prob must lie in"):
+        HumanTimingConfig(miss_prob=float("nan"))
 
 
 def test_driver_config_refuses_nan_and_an_urgent_gap_beyond_the_normal_one():

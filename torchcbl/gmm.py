@@ -28,6 +28,16 @@ action separately, which is what ``fit`` does. ``criterion="aic"`` (default) is 
 with free parameters p = (k-1) + k d + k d (d+1) / 2 (equal to scikit-learn's ``aic``);
 ``"bic"`` is p log n - 2 L; ``"aic_paper"`` is Eq. 5 taken literally, 2 k - 2 L.
 
+The floor decides how far the AIC can go: a component on a handful of points (or on a point
+mass, such as a range reading clipped at the sensor's maximum) gains more likelihood from a
+floor-sized spread than the AIC charges for its parameters. With the default floor, points
+drawn from ONE standard 2-D Gaussian got 5-7 components at n = 10 and 1-10 at n = 50 (five
+seeds each, cap 10; scikit-learn with the same ``reg_covar`` behaves alike), and such narrow
+components make new points look far. Both experiments therefore raise the floor, by the
+smallest value at which no mixture sits at its component cap on their demonstrations (corridor
+0.01, driving 0.03; ``docs/data/*_var_floor_2026-11-26.md``); ``criterion="bic"`` penalises
+more with small n.
+
 Incremental refits
 ------------------
 :meth:`GaussianMixtureSet.refit` refits only the actions whose data changed, each candidate

@@ -52,6 +52,9 @@ class HumanTimingConfig:
     double_prob: float = 0.02
 
     def __post_init__(self) -> None:
+        a = self.default_action
+        if isinstance(a, (bool, np.bool_)) or not isinstance(a, (int, np.integer)) or a < 0:
+            raise ValueError(f"default_action must be an action index (an int >= 0), got {a!r}")
         p = np.asarray(self.delay_probs, dtype=np.float64)
         if p.ndim != 1 or p.size == 0 or np.any(p < 0) or not np.isclose(p.sum(), 1.0):
             raise ValueError(
@@ -60,7 +63,7 @@ class HumanTimingConfig:
             )
         for name in ("miss_prob", "double_prob"):
             v = getattr(self, name)
-            if not 0.0 <= v < 1.0:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < 1.0:
                 raise ValueError(f"{name} must lie in [0, 1), got {v}")
 
 
