@@ -227,8 +227,19 @@ def test_an_error_in_the_strategy_after_a_durable_demonstration_keeps_it(tmp_pat
         (lambda out: (out[0], out[1], np.array([0, 1]), *out[3:]), "terminated=.*expected a bool"),
         (lambda out: (out[0], out[1], out[2], "yes", out[4]), "truncated='yes'.*expected a bool"),
         (lambda out: out[:3], "expected the gymnasium 5-tuple"),
+        # numbers no float holds (an OverflowError escaped the step before 2026-11-26: the
+        # demonstration stayed on disk only, and every later commit failed)
+        (lambda out: (out[0], 10**400, *out[2:]), "non-finite reward"),
+        (lambda out: ([10**400, 0.0], *out[1:]), "observation is not numeric"),
     ],
-    ids=["info-list", "terminated-array", "truncated-str", "short-tuple"],
+    ids=[
+        "info-list",
+        "terminated-array",
+        "truncated-str",
+        "short-tuple",
+        "huge-reward",
+        "huge-obs",
+    ],
 )
 def test_malformed_env_output_is_an_env_error(tmp_path, bad, match):
     run = tmp_path / "run"
@@ -847,6 +858,85 @@ def test_a_real_ctrl_c_right_after_a_journal_write_or_a_commit(tmp_path, monkeyp
     steps = [r.step for r in load_records(run)]
     assert steps == list(range(len(steps))) == [r.step for r in ct.records]
     goes_on(ct, env, run)
+
+
+def test_a_real_ctrl_c_right_after_a_corrections_line(tmp_path, monkeypatch):
+    """The correction is on disk: memory, the strategy and the refit schedule learn it before
+    the held KeyboardInterrupt stops the run (the live model then equals load_model's)."""
+    from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+    class Contrary:  # labels as the oracle, and corrects every fourth autonomous step
+        calls = 0
+
+        def __call__(self, obs, info):
+            return env.teacher(obs, info)
+
+        def correct(self, obs, info, action):
+            Contrary.calls += 1
+            return (action + 1) % 3 if Contrary.calls % 4 == 0 else None
+
+    run = tmp_path / "run"
+    env = Witness(rare_regions_world())
+    cfg = TeachingConfig(max_new=2, accuracy_window=10, noninteractive=False)
+    ct = ConfidentTeacher(
+        env,
+        Contrary(),
+        strategy=ConfidenceBasedAutonomy(),
+        config=cfg,
+        run_dir=run,
+        progress=False,
+        commit_every=4,
+    )
+    env.ct = ct
+    sent: list[int] = []
+
+    def write(fd: int, data: bytes) -> int:
+        n = os.write(fd, data)
+        if not sent and _line_kind(data) == "correction":
+            sent.append(json.loads(data.rpartition(b"\t")[0])[1])
+            os.kill(os.getpid(), signal.SIGINT)
+        return n
+
+    monkeypatch.setattr(S, "_write_fd", write)
+    with pytest.raises(KeyboardInterrupt):
+        ct.run(max_steps=600)
+    monkeypatch.setattr(S, "_write_fd", os.write)
+    assert sent and [c.step for c in ct.corrections][-1] == sent[0]
+    memory_equals_disk(ct, run)
+    n = ct.n_steps
+    ct.run(max_steps=n + 30)
+    memory_equals_disk(ct, run)
+    ct.close()
+
+
+def test_a_ctrl_c_goes_to_the_handler_the_loop_found(tmp_path, monkeypatch):
+    """The loop's hold only delays a SIGINT: a handler of the user's still gets every one,
+    outside a write at once and inside one when memory and disk agree again, and a handler
+    that does not raise lets teaching go on."""
+    seen: list[int] = []
+    old = signal.signal(signal.SIGINT, lambda signum, frame: seen.append(signum))
+    try:
+        run = tmp_path / "run"
+        ct, env = session(run, noninteractive=False)
+        ct.run(max_steps=5)
+        os.kill(os.getpid(), signal.SIGINT)  # between steps: no hold
+        assert seen == [signal.SIGINT]
+        sent: list[bool] = []
+
+        def write(fd: int, data: bytes) -> int:
+            n = os.write(fd, data)
+            if not sent:
+                sent.append(True)
+                os.kill(os.getpid(), signal.SIGINT)  # inside the hold around this line
+            return n
+
+        monkeypatch.setattr(S, "_write_fd", write)
+        ct.run(max_steps=40)  # nothing raises: the handler only notes the signal
+        assert sent and seen == [signal.SIGINT, signal.SIGINT] and ct.n_steps == 40
+        monkeypatch.setattr(S, "_write_fd", os.write)
+        goes_on(ct, env, run)
+    finally:
+        signal.signal(signal.SIGINT, old)
 
 
 # -- what a new session or a resume must not take over ----------------------------------------

@@ -83,7 +83,7 @@ def as_action(value: Any, n_actions: int) -> int | None:
 def obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
     try:
         x = np.array(obs, dtype=np.float64)  # a copy: an env may reuse its buffer in place
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise EnvError(f"{where}: observation is not numeric ({exc}).") from exc
     if x.shape != (n_features,):
         raise EnvError(

@@ -241,11 +241,14 @@ class StepRecord:
             raise bad("truncated", "a bool", self.truncated)
         if type(self.info) is not dict:
             raise bad("info", "a dict", self.info)
-        if self.info:
+        info = self.info
+        if info and not all(  # plain values (most infos) need no encoding to be known good
+            type(k) is str and type(v) in _PLAIN for k, v in info.items()
+        ):
             try:
-                json.dumps(self.info)
+                json.dumps(info)
             except (TypeError, ValueError) as exc:  # here, not later in to_dict or the log
-                raise bad("info", f"a dict JSON can hold ({exc})", self.info) from None
+                raise bad("info", f"a dict JSON can hold ({exc})", info) from None
 
     def with_outcome(
         self, reward: float | None, terminated: bool, truncated: bool, info: dict[str, Any]
@@ -282,6 +285,9 @@ class StepRecord:
             d["distance"] = "inf"
         json.dumps(d)  # fail here, not in a consumer, if something slipped through
         return d
+
+
+_PLAIN = (str, int, float, bool, type(None))
 
 
 @dataclass(frozen=True)

@@ -64,7 +64,6 @@ from torchcbl.session import (
     LabelDigest,
     SessionStore,
     _InterruptHold,
-    _raise_held,
     build_model,
     label_sequence,
     load_config,
@@ -817,15 +816,18 @@ class ConfidentTeacher:
                 if auto_out is not None:
                     auto.appendleft(auto_out)
 
-        if ask:
-            acc.append(model_action == teacher_action)
-            self._labels += 1
-        if phase == "confident":
-            auto.append(not ask)
-        # A Ctrl-C waits while the demonstration's line is written: once it is, the step is
-        # kept (and logged as interrupted below), never undone while it stays on disk
-        hold = _InterruptHold()
+        # A Ctrl-C waits while the windows advance and the demonstration's line is written:
+        # once it is, the step is kept (and logged as interrupted below), never undone while it
+        # stays on disk (an autonomous step writes nothing here: no hold, it costs ~10 us)
+        hold = _InterruptHold(active=ask and self._store is not None)
+        advanced = False
         try:
+            if ask:
+                acc.append(model_action == teacher_action)
+                self._labels += 1
+            if phase == "confident":
+                auto.append(not ask)
+            advanced = True
             record = self._record(
                 step,
                 obs,
@@ -841,10 +843,14 @@ class ConfidentTeacher:
             if ask and self._store is not None:
                 self._store.commit_demonstration(record)  # durable before the action runs
         except BaseException:
-            undo()
+            if advanced:
+                undo()
             hold.release()  # the error raised says more than a Ctrl-C that came with it
             raise
-        stopped: BaseException | None = hold.release()
+        try:  # a Ctrl-C as the hold ends lands here too: the demonstration is durable
+            stopped: BaseException | None = hold.release()
+        except BaseException as exc:
+            stopped = exc
         if stopped is not None and not ask:  # nothing was written: the step never happened
             undo()
             raise stopped
@@ -878,8 +884,12 @@ class ConfidentTeacher:
         try:
             record = self._execute(record)
         except BaseException:
-            if not ask and len(self.records) == step:  # an autonomous step not logged
-                undo()
+            if len(self.records) == step:  # raised before the record reached memory
+                self._needs_reset = True  # the env may have moved: a fresh episode next
+                if not ask:  # an autonomous step: on disk neither
+                    undo()
+                else:  # the demonstration is durable: kept, as a resume reads it
+                    self._keep_interrupted(record)
             raise
         finally:
             # Refit once the step is complete (Algorithm 1 executes the teacher's action either
@@ -908,6 +918,22 @@ class ConfidentTeacher:
         if self.on_step is not None:
             self.on_step(record)
         return record
+
+    def _keep_interrupted(self, record: StepRecord) -> None:
+        """Add a durable demonstration whose step failed before it reached memory as a resume
+        would read it (interrupted, episode cut), and log that outcome if the log takes it."""
+        final = record.with_outcome(None, False, True, {"torchcbl_interrupted": True})
+        hold = _InterruptHold()
+        try:
+            self.records.append(final)
+            self._n_episodes += 1
+            if self._store is not None:
+                try:
+                    self._store.finish(final)
+                except SessionWriteError:
+                    pass  # left pending on disk: a resume marks it interrupted alike
+        finally:
+            hold.release()  # the exception on its way out says enough
 
     def _episode_succeeded(self, record: StepRecord, info: dict) -> bool:
         """Success is never assumed: the env's ``info["is_success"]`` decides; without it, a
@@ -1006,12 +1032,19 @@ class ConfidentTeacher:
             self._labels += 1
             self._train.add(x, action)
             self._digest.update(x, action)
-        finally:
-            _raise_held(hold)
+            self._new_since_refit += 1
+        except BaseException:
+            hold.release()
+            raise
+        try:  # the strategy and the refit schedule learn the label as a resume replays it;
+            late = hold.release()  # a Ctrl-C held back (or landing now) stops the run after
+        except BaseException as exc:
+            late = exc
         self.strategy.observe_label(x, action, model_action=record.model_action, kind="correction")
-        self._new_since_refit += 1
         if self._new_since_refit >= self.config.max_new:
             self._refit()
+        if late is not None:
+            raise late
         return True
 
     def _outcome(self, out: Any) -> tuple[float, bool, bool, dict]:
@@ -1036,7 +1069,7 @@ class ConfidentTeacher:
             flags.append(bool(flag))
         try:
             reward = float(r)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             reward = math.nan
         if not math.isfinite(reward):
             raise EnvError(f"env.step returned a non-finite reward {r!r:.80}")
@@ -1072,16 +1105,18 @@ class ConfidentTeacher:
         except BaseException as exc:  # KeyboardInterrupt (Ctrl-C), SystemExit: log, re-raise
             interrupt = exc
         else:
+            # whatever reading the env's answer raises, the step is still logged below
             try:
                 reward, terminated, truncated, info = self._outcome(out)
+                self._obs = obs_array(out[0], self.n_features, "env.step")
+                self._raw_obs, self._info = out[0], info
             except EnvError as exc:
                 error, cause = str(exc), exc
-            else:
-                try:
-                    self._obs = obs_array(out[0], self.n_features, "env.step")
-                    self._raw_obs, self._info = out[0], info
-                except EnvError as exc:
-                    error, cause = str(exc), exc
+            except Exception as exc:
+                error = f"env.step's answer could not be read ({type(exc).__name__}: {exc})"
+                cause = exc
+            except BaseException as exc:  # a Ctrl-C while reading it
+                interrupt = exc
         if interrupt is not None:
             reward, terminated, truncated = None, False, True
             info = {"torchcbl_interrupted": True}
@@ -1092,7 +1127,7 @@ class ConfidentTeacher:
             info = jsonable_info(info)
         final = record.with_outcome(reward, terminated, truncated, info)
         # a Ctrl-C waits until the record is in memory and its line on disk, or neither
-        hold = _InterruptHold()
+        hold = _InterruptHold(active=self._store is not None)
         try:
             self.records.append(final)
             # the session's episode count follows the log: here, where a record is added,
