@@ -974,7 +974,8 @@ def test_resume_rebuilds_the_sessions_model_not_the_callers_fitted_one(tmp_path)
     back.close()
 
 
-def test_resume_compares_a_custom_strategy_by_its_type_and_relabel_flag(tmp_path):
+def test_resume_compares_a_custom_strategy_by_its_class_name_and_relabel_flag(tmp_path):
+    from torchcbl.strategies import correcting
     from torchcbl.strategies.bc import BehaviourCloning
     from torchcbl.strategies.cba import ConfidenceBasedAutonomy
 
@@ -987,7 +988,7 @@ def test_resume_compares_a_custom_strategy_by_its_type_and_relabel_flag(tmp_path
     cfg = TeachingConfig(max_new=5, noninteractive=False)
     with ConfidentTeacher(
         env,
-        oracle(env),
+        correcting(oracle(env)),
         strategy=ConfidenceBasedAutonomy(),
         config=cfg,
         run_dir=run,
@@ -1002,6 +1003,10 @@ def test_resume_compares_a_custom_strategy_by_its_type_and_relabel_flag(tmp_path
     ) as ct:
         ct.run(max_steps=10)
     ConfidentTeacher.resume(mine_run, env, oracle(env), strategy=Mine(), progress=False).close()
+    # the same class imported from a package instead of run as a script: its name decides
+    moved = type("Mine", (BehaviourCloning,), {"to_config": None, "relabel": True})
+    moved.__module__ = "pkg.teach"
+    ConfidentTeacher.resume(mine_run, env, oracle(env), strategy=moved(), progress=False).close()
     with pytest.raises(IncompatibleRunDirError, match="strategy: stored"):
         ConfidentTeacher.resume(mine_run, env, oracle(env), strategy=BehaviourCloning())
 
