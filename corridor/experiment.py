@@ -767,52 +767,57 @@ def evaluate_saved_policy(
     }
 
 
-def _session_map(session_dir: Path) -> str:
-    """The map a session was taught on (see :func:`evaluate_saved_policy`)."""
+def _taught_with(
+    session_dir: Path, results_key: str, kwarg: str, parse: Callable[[Any], Any]
+) -> tuple[str, Any]:
+    """Where a session's map or robot is read from (see :func:`evaluate_saved_policy`):
+    ``("results", parse(value))`` from its experiment run's ``results.json`` config,
+    ``("kwargs", value)`` from what ``gymnasium.make`` was given (as the session's config keeps
+    it, unparsed), or ``("default", None)``."""
     from torchcbl.session import load_config
 
     results = session_dir.parent.parent / "results.json"
     if session_dir.parent.name == "sessions" and results.is_file():
         try:
-            return str(json.loads(results.read_text())["config"]["map_name"])
+            return "results", parse(json.loads(results.read_text())["config"][results_key])
         except (ValueError, KeyError, TypeError):
-            pass  # not an experiment's results.json
+            pass  # not an experiment's results.json: what the env was given decides
     given = (load_config(session_dir).get("env") or {}).get("kwargs") or {}
-    if "corridor_map" not in given:
+    return ("kwargs", given[kwarg]) if kwarg in given else ("default", None)
+
+
+def _session_map(session_dir: Path) -> str:
+    """The map a session was taught on (see :func:`evaluate_saved_policy`)."""
+    source, value = _taught_with(session_dir, "map_name", "corridor_map", str)
+    if source == "default":
         return DEFAULT_MAP
-    if not isinstance(given["corridor_map"], str):
+    if source == "kwargs" and not isinstance(value, str):
         raise ValueError(
-            f"{session_dir} was taught on a map given as an object ({given['corridor_map']}), "
-            "which its config does not keep; pass map_name= (a shipped map name or a map "
-            "JSON path)"
+            f"{session_dir} was taught on a map given as an object ({value}), which its config "
+            "does not keep; pass map_name= (a shipped map name or a map JSON path)"
         )
-    return given["corridor_map"]
+    return str(value)
 
 
 def _session_world(session_dir: Path) -> WorldConfig:
     """The robot a session was taught with (see :func:`evaluate_saved_policy`)."""
-    from torchcbl.session import load_config
-
-    results = session_dir.parent.parent / "results.json"
-    if session_dir.parent.name == "sessions" and results.is_file():
-        try:
-            return WorldConfig(**json.loads(results.read_text())["config"]["world"])
-        except (ValueError, KeyError, TypeError):
-            pass  # not an experiment's results.json: fall back to what the env was given
-    given = (load_config(session_dir).get("env") or {}).get("kwargs") or {}
-    world = given.get("world_config")
-    if world is None:
+    source, value = _taught_with(
+        session_dir, "world", "world_config", lambda fields: WorldConfig(**fields)
+    )
+    if source == "default":
         return WorldConfig()
-    if isinstance(world, dict) and set(world) != {"repr"}:
+    if source == "results":
+        return value
+    if isinstance(value, dict) and set(value) != {"repr"}:
         try:
-            return WorldConfig(**world)
+            return WorldConfig(**value)
         except (TypeError, ValueError) as exc:
             raise ValueError(
-                f"{session_dir}: its env's world_config {world} is not a "
-                f"WorldConfig ({exc}); pass world_config="
+                f"{session_dir}: its env's world_config {value} is not a WorldConfig ({exc}); "
+                "pass world_config="
             ) from None
     raise ValueError(
-        f"{session_dir} was taught with a robot given as an object ({world}), which its "
+        f"{session_dir} was taught with a robot given as an object ({value}), which its "
         "config does not keep; pass world_config= (a corridor.world.WorldConfig)"
     )
 

@@ -417,12 +417,10 @@ _TEACH = {
 
 def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
     """What gymnasium.make was given for a session's env, to make it again on --resume."""
-    from torchcbl.session import load_config
+    from torchcbl.session import _kept_as_repr, load_config
 
     kwargs = (load_config(run_dir).get("env") or {}).get("kwargs") or {}
-    kept_as_repr = sorted(
-        k for k, v in kwargs.items() if isinstance(v, dict) and set(v) == {"repr"}
-    )
+    kept_as_repr = sorted(k for k, v in kwargs.items() if _kept_as_repr(v))
     if kept_as_repr:
         raise _UsageError(
             f"{run_dir}'s env was made with {', '.join(kept_as_repr)} given as an object its "

@@ -531,7 +531,7 @@ class GaussianMixtureSet(nn.Module):
             # refit continues from them (an unfitted state carries nothing to continue)
             if isinstance(saved, Tensor) and saved.shape == self.settings_.shape:
                 given = _settings_values(saved.cpu().tolist())
-                own = _settings_values(self.settings_.cpu().tolist())
+                own = {n: getattr(self, n) for n in _SETTINGS}
                 differ = [n for n in _SETTINGS if given[n] != own[n]]
                 if differ:
                     raise ValueError(

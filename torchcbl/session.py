@@ -455,6 +455,12 @@ def _write_error(exc: BaseException, path: Path, what: str, after: str) -> Sessi
 _write_fd = os.write  # the journal's write (a seam for the disk-full tests)
 
 
+def _kept_as_repr(value: Any) -> bool:
+    """Whether a stored ``gymnasium.make`` argument is the ``{"repr": ...}`` a session keeps of
+    an object JSON cannot hold (see ``ConfidentTeacher``'s env description)."""
+    return isinstance(value, dict) and set(value) == {"repr"}
+
+
 # The SIGINT handler the holds install once (main thread) and leave in place: outside a hold it
 # hands every signal to the handler it found (`_chained`), so a Ctrl-C acts as before; inside
 # one it only notes the signal. Installing it once costs ~10 us; a hold then costs ~1 us.
@@ -1509,16 +1515,12 @@ def resume_problems(
         # kept only as its repr, which may name a memory address); render_mode may change
         stored_kw = senv.get("kwargs") or {}
         given_kw = json.loads(json.dumps(env_kwargs))  # as the session stored its own
-
-        def as_repr(v: Any) -> bool:
-            return isinstance(v, dict) and set(v) == {"repr"}
-
         differ = {
             k: (stored_kw.get(k), given_kw.get(k))
             for k in sorted(set(stored_kw) | set(given_kw))
             if k != "render_mode"
-            and not as_repr(stored_kw.get(k))
-            and not as_repr(given_kw.get(k))
+            and not _kept_as_repr(stored_kw.get(k))
+            and not _kept_as_repr(given_kw.get(k))
             and stored_kw.get(k) != given_kw.get(k)
         }
         if differ:

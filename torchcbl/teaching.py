@@ -288,6 +288,12 @@ def _env_kwargs(env: gym.Env) -> dict[str, Any]:
     return {str(k): v if _jsonable(v) else {"repr": repr(v)[:200]} for k, v in kwargs.items()}
 
 
+def _as_interrupted(record: StepRecord) -> StepRecord:
+    """A demonstration whose outcome never came, as the log keeps it (and a resume reads it):
+    no reward, its episode cut."""
+    return record.with_outcome(None, False, True, {"torchcbl_interrupted": True})
+
+
 def _check_commit_every(commit_every: Any) -> None:
     if (
         isinstance(commit_every, (bool, np.bool_))
@@ -922,7 +928,7 @@ class ConfidentTeacher:
     def _keep_interrupted(self, record: StepRecord) -> None:
         """Add a durable demonstration whose step failed before it reached memory as a resume
         would read it (interrupted, episode cut), and log that outcome if the log takes it."""
-        final = record.with_outcome(None, False, True, {"torchcbl_interrupted": True})
+        final = _as_interrupted(record)
         hold = _InterruptHold()
         try:
             self.records.append(final)
@@ -1145,9 +1151,7 @@ class ConfidentTeacher:
                 except BaseException as exc:  # the line was not written (SessionStore._write)
                     self._needs_reset = True
                     if final.teacher_action is not None:  # durable as pending: interrupted
-                        self.records[-1] = record.with_outcome(
-                            None, False, True, {"torchcbl_interrupted": True}
-                        )
+                        self.records[-1] = _as_interrupted(record)
                         self._n_episodes += not ended  # it now ends its episode
                     else:
                         self.records.pop()
