@@ -21,8 +21,9 @@ Run directory layout (one directory per teaching session)::
         checkpoints/
             model-00000012.pt    ``{"n_demonstrations": 12, "labels_sha256": ...,
                                  "state_dict": ...}`` of the model fitted on the first 12
-                                 labels (and the SHA-256 of those labels); one per refit, all
-                                 kept (snapshots at stages come for free)
+                                 labels (and the SHA-256 of those labels), its tensors on the
+                                 CPU whatever the model's device; one per refit, all kept
+                                 (snapshots at stages come for free)
 
 Durability. Every step is appended to ``steps.journal`` with one ``write()`` before the loop
 goes on: a demonstration (teacher label, observation, model output, counters) before its action
@@ -905,7 +906,9 @@ class SessionStore:
         tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
         payload: dict[str, Any] = {
             "n_demonstrations": n_demonstrations,
-            "state_dict": model.state_dict(),
+            # on the CPU whatever the model's device: a session taught on a GPU resumes, and
+            # its policy loads, on a machine without one
+            "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
         }
         if digest is not None:
             payload["labels_sha256"] = digest
@@ -1316,7 +1319,9 @@ def _checkpoint_payload(
     """The checkpoint's content if it is readable and was fitted on ``xs[:n], ys[:n]``;
     else (None, "damaged" | "stale")."""
     try:
-        payload = torch.load(path, weights_only=True)
+        # map_location: a checkpoint written with CUDA tensors (before 2026-11-26) loads on a
+        # machine without CUDA instead of being set aside as damaged
+        payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception:  # empty, cut short, not a torch file: any of torch's many errors
         return None, "damaged"
     if not isinstance(payload, dict) or not isinstance(payload.get("state_dict"), dict):

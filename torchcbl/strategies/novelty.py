@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from torchcbl.confidence import _np
 from torchcbl.strategies._phased import Decision, LabelKind, _StrategyDefaults
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -116,7 +117,7 @@ class NoveltyGated(_StrategyDefaults):
         self._rescore = True  # the step being finished was scored with the previous model
         if self._observations:
             x = np.stack(list(self._observations))
-            d = np.asarray(model.classify(x).distance, dtype=np.float64)
+            d = _np(model.classify(x).distance).astype(np.float64)
             self._scores = deque((float(v) for v in d if math.isfinite(v)), maxlen=self.window)
 
     def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
@@ -124,7 +125,7 @@ class NoveltyGated(_StrategyDefaults):
         self._observations.append(x)
         d = record.distance
         if self._rescore and self._model is not None:
-            d = float(np.asarray(self._model.classify(x[None]).distance, dtype=np.float64)[0])
+            d = float(_np(self._model.classify(x[None]).distance)[0])
         self._rescore = False
         if d is not None and math.isfinite(d):
             self._scores.append(float(d))
