@@ -136,6 +136,18 @@ def test_a_session_taught_on_cuda_loads_on_a_machine_without_cuda(tmp_path):
         np.testing.assert_allclose(got[i + 1], c.distance.cpu().numpy(), rtol=1e-9)
     # the resume took the checkpoint, not a refit after setting it aside as damaged
     assert not list((tmp_path / "gpu" / "checkpoints").glob("*.damaged*"))
+    # and on a GPU again, into a CUDA model the caller passes
+    env = rare_regions_world(episode_length=10, spread=2.0)
+    back = ConfidentTeacher.resume(
+        tmp_path / "gpu",
+        env,
+        oracle(env),
+        model=GaussianMixtureSet(3, 2, 4, seed=0).to("cuda"),
+        progress=False,
+    )
+    back.close()
+    assert back.model.means_.device.type == "cuda"
+    torch.testing.assert_close(back.model.means_, gpu.model.means_, rtol=0, atol=0)
 
 
 def test_a_checkpoint_written_with_cuda_tensors_still_loads_without_cuda(tmp_path):

@@ -904,12 +904,12 @@ class SessionStore:
         directory = self.run_dir / CHECKPOINT_DIR
         path = directory / f"model-{n_demonstrations:08d}.pt"
         tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
-        payload: dict[str, Any] = {
-            "n_demonstrations": n_demonstrations,
+        state = model.state_dict()  # a new OrderedDict (its _metadata kept)
+        for name, tensor in state.items():
             # on the CPU whatever the model's device: a session taught on a GPU resumes, and
             # its policy loads, on a machine without one
-            "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
-        }
+            state[name] = tensor.detach().cpu()
+        payload: dict[str, Any] = {"n_demonstrations": n_demonstrations, "state_dict": state}
         if digest is not None:
             payload["labels_sha256"] = digest
         try:
