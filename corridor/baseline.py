@@ -73,8 +73,8 @@ elsewhere (12 a right turn in state 100 just after a u-turn near a corner); on s
 2026-11-26 (penalty 1, evaluation seeds 10,000-10,029), for the route's table with a right turn in
 state 110 (with the u-turn there, 15 of those 30 pass): no wall threshold mends it; the previous
 action as a feature lifts the route's table to 24 of 30 seeds; and a model learned from the route's
-own table does not choose that table (the README has the account). The variants below were not
-measured again; they are kept as the record of what was tried.
+own table does not choose that table (docs/reproduction.md has the account). The variants below
+were not measured again; they are kept as the record of what was tried.
 
 Why the greedy policy is erratic (measured, issue 12, with the faulty tracker). On 8 aliased states
 the learned model is not Markov: a state's transition and reward averages mix every place where it

@@ -27,8 +27,8 @@ read by default as the share of a Gaussian's points that lie within 2 standard d
 one dimension (0.9545), taken as a chi-square quantile in the D = 3 sensor dimensions: a
 Mahalanobis distance of 2.83 (``threshold_reading="coverage"``). A Mahalanobis distance of 2
 itself (``"literal"``) holds only 74% of a 3-D Gaussian's own points, so with noisy motion, where
-no two circuits repeat, the agent keeps asking (see the README). This reading was chosen on
-that principle before any result with it was seen.
+no two circuits repeat, the agent keeps asking (see docs/reproduction.md). This reading was chosen
+on that principle before any result with it was seen.
 
 Run directory layout (``run_experiment`` writes; envs never do)::
 

@@ -13,7 +13,7 @@ request-free circuits in a row).
 Settings: ``default`` (noisy motion, AIC, 2.83 std, the experiment's variance floor and cap),
 ``exact`` (exact motion), ``literal`` (2 std), ``aic_paper`` (the paper's Eq. 5, 2 k - 2 L),
 ``bic``, ``floor_1e-3`` (the default with the library's floor 1e-3 and cap 10, the GMM of every
-setting until 2026-11-26; the README gives its figures beside the default's).
+setting until 2026-11-26; docs/reproduction.md gives its figures beside the default's).
 
     PYTHONPATH=$PWD python scripts/investigate_corridor_requests.py [--seeds 0-9]
         [--settings default,exact,literal,aic_paper,bic] [--out runs/investigate/requests.json]

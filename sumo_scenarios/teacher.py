@@ -61,7 +61,7 @@ segments 200-229; the 10 best re-measured on segments 300-399 and the best of th
 shares 3.3 / 2.2 / 9.8 / 42.2 / 42.6 % (right shoulder .. left shoulder), so 94.5 % in the left
 three lanes; "stay" on 83.1 % of its answers. Out of sample, segments 1000-1099: 0.48 %; on the
 evaluation traffic, segments 10-109: 0.48 %. The issue's targets it misses: the middle lane
-under 10 % and "stay" above 80 % (see the README: physics of passing and the trade-off).
+under 10 % and "stay" above 80 % (see docs/reproduction.md: physics of passing and the trade-off).
 """
 
 from __future__ import annotations
@@ -152,7 +152,7 @@ class HumanDriverConfig:
             reaction delay of the second press.
     """
 
-    # calibrated on 2026-11-25, after the ego's decel was made a normal car's (README)
+    # calibrated on 2026-11-25, after the ego's decel was made a normal car's (docs/reproduction.md)
     home_weights: tuple[float, float, float] = (0.500, 0.188, 0.312)
     home_every_s: float = 0.5
     room_cap_s: float = 3.651

@@ -156,7 +156,7 @@ def test_human_teacher_collides_at_most_half_a_percent(human_drive):
 @pytest.mark.xfail(
     strict=True,
     reason="calibration gap: the teacher is in the dense middle lane 9.8 % of the time (target "
-    "10 %; 9.4-10.0 % on other sets of 100 segments): the traffic's physics (README)",
+    "10 %; 9.4-10.0 % on other sets of 100 segments): the traffic's physics (docs/reproduction.md)",
 )
 def test_human_teacher_uses_the_middle_lane(human_drive):
     _, lanes, _ = human_drive
@@ -166,7 +166,7 @@ def test_human_teacher_uses_the_middle_lane(human_drive):
 @pytest.mark.xfail(
     strict=True,
     reason="calibration gap: 83.1 % of the teacher's answers are 'stay' (target < 80 %); a car "
-    "met costs two lane changes and the traffic meets one every 10-23 steps (see the README)",
+    "met costs two lane changes and the traffic meets one every 10-23 steps (docs/reproduction.md)",
 )
 def test_human_teacher_is_no_always_stay_teacher(human_drive):
     _, _, stay = human_drive
