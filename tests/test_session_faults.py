@@ -340,6 +340,28 @@ def test_sqlite_commit_fails_disk_full_then_space_is_freed(tmp_path):
     goes_on(ct, env, run)
 
 
+def test_a_commit_that_conflicts_with_the_log_is_not_called_a_full_disk(tmp_path):
+    """A row already in steps.sqlite (here written by another process) makes every commit
+    fail; the message must say so instead of asking the user to free space."""
+    run = tmp_path / "run"
+    ct, env = session(run, commit_every=8)
+    ct.run(max_steps=10)  # steps 0-7 committed, 8-9 in the journal
+    other = sqlite3.connect(run / "steps.sqlite")
+    other.executescript(
+        "CREATE TEMP TABLE t AS SELECT * FROM steps WHERE step = 0; UPDATE t SET step = 12;"
+        "INSERT INTO steps SELECT * FROM t;"
+    )
+    other.close()
+    with pytest.raises(SessionWriteError) as err:
+        ct.run(max_steps=20)
+    msg = str(err.value)
+    assert "conflicts with one already in steps.sqlite" in msg and "not a full disk" in msg
+    assert "Free space" not in msg
+    assert ct.n_steps == 20  # every step was journalled: nothing was lost
+    journal = (run / "steps.journal").read_text().splitlines()
+    assert len(journal) >= 12  # steps 8-19 (and their outcome lines) wait there
+
+
 def _mount(*args: str) -> bool:
     return subprocess.run(["mount", *args], capture_output=True).returncode == 0
 

@@ -753,7 +753,9 @@ class SessionStore:
 
         Raises:
             SessionWriteError: the commit failed (e.g. disk full). Nothing is lost: the rows
-                stay in the journal and in memory, and the next commit retries them.
+                stay in the journal and in memory, and the next commit retries them. A row
+                that conflicts with one already in the log (another process wrote to it) is
+                said to be that, not a full disk: no retry mends it.
         """
         pending = self._pending
         if not pending:
@@ -777,13 +779,21 @@ class SessionStore:
                         pass
                 if not isinstance(exc, sqlite3.Error):
                     raise
-                raise _write_error(
-                    exc,
-                    self.run_dir / LOG_NAME,
-                    f"committing {len(pending)} journalled rows",
-                    f"Nothing is lost: they stay in {JOURNAL_NAME} and the next commit retries "
-                    f"them. {_FREE_SPACE}",
-                ) from exc
+                if isinstance(exc, sqlite3.IntegrityError):  # a retry cannot mend this one
+                    after = (
+                        f"A row conflicts with one already in {LOG_NAME}: another process "
+                        "wrote to this session's log, or torchcbl has a defect; it is not a "
+                        f"full disk. Nothing is lost yet: the rows stay in {JOURNAL_NAME} and "
+                        "in memory. Stop here, keep the directory as it is (do not delete the "
+                        "journal) and report it."
+                    )
+                else:
+                    after = (
+                        f"Nothing is lost: they stay in {JOURNAL_NAME} and the next commit "
+                        f"retries them. {_FREE_SPACE}"
+                    )
+                what = f"committing {len(pending)} journalled rows"
+                raise _write_error(exc, self.run_dir / LOG_NAME, what, after) from exc
             pending.clear()
             try:
                 os.ftruncate(self._journal, 0)
