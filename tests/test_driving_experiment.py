@@ -117,7 +117,7 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
         report = evaluate_saved_policy(tmp_path / "seed_0" / "sessions" / arm, n_steps=20)
         assert report["steps"] == 20
     assert on_disk["domain"] == "driving"
-    # the clip analysis of the README runs on a kept session: its counts are the session's
+    # the clip analysis of docs/reproduction.md runs on a kept session: its counts are the session's
     clip = _clip_script(tmp_path / "seed_0" / "sessions" / "arm_a", capsys)
     assert clip["demonstrations"] == s["arm_a"]["demonstrations"]["mean"]
     assert sum(clip["per_action"]) == clip["demonstrations"]
@@ -234,8 +234,8 @@ def test_two_seeds_give_a_paired_interval_and_a_writable_summary(tmp_path):
     ],
 )
 def test_the_module_command_refuses_a_mistake_before_writing(tmp_path, argv, says):
-    """`python -m sumo_scenarios.experiment RUN_DIR --teacher expert` (the README's way to the
-    consistent expert): a mistake is argparse's message and exit code 2, no traceback."""
+    """`python -m sumo_scenarios.experiment RUN_DIR --teacher expert` (docs/reproduction.md's way
+    to the consistent expert): a mistake is argparse's message and exit code 2, no traceback."""
     import subprocess
     import sys
 
