@@ -816,6 +816,7 @@ def test_each_writer_records_torch_threads(tmp_path):
         torch.set_num_threads(threads)
     lines = [json.loads(x) for x in (run / "writers.jsonl").read_text().splitlines()]
     assert [(w["first_step"], w["torch_num_threads"]) for w in lines] == [(0, 1), (10, 2)]
+    assert [w["model_device"] for w in lines] == ["cpu", "cpu"]
     assert lines[0]["torch_version"] == torch.__version__
     assert load_config(run)["format"] == S.FORMAT
 

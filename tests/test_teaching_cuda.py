@@ -10,6 +10,7 @@ of these runs lies that close to a threshold.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -126,6 +127,8 @@ def test_a_session_taught_on_cuda_loads_on_a_machine_without_cuda(tmp_path):
     gpu = _teach("cuda", "ce", tmp_path / "gpu")
     checkpoints = sorted((tmp_path / "gpu" / "checkpoints").glob("model-*.pt"))
     assert checkpoints
+    writers = (tmp_path / "gpu" / "writers.jsonl").read_text().splitlines()
+    assert json.loads(writers[0])["model_device"] == "cuda:0"
     state = torch.load(checkpoints[-1], weights_only=True)["state_dict"]
     assert {v.device.type for v in state.values()} == {"cpu"}  # device-neutral on disk
     q = np.random.default_rng(0).normal(scale=4.0, size=(200, 2))

@@ -83,20 +83,24 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   when the process dies, SIGKILL included); a second writer gets :class:`SessionLockedError`.
 
 Determinism. A refit is a deterministic function of the labels, the model's seed, and torch's
-intra-op thread count (and the BLAS / CPU, see the README): the same labels with the same seed
-and the same thread count give bit-identical models, and so bit-identical step logs for the
-same env and teacher. With another thread count, torch's reductions are summed in another
-order: fits differ in the last bits (measured: 1e-14 on a 3000-point 6-D fit; bit-identical on
-300 points), which can flip a confidence decision near its threshold, after which the two step
-logs diverge. The count that matters is the one the EM ran on: with more than one intra-op
-thread, a fit of at least :data:`torchcbl.gmm.SINGLE_THREAD_WORK` uses them only while the
-machine has a core to spare (the thread policy, docs/architecture.md), so such a fit's last bits
-also depend on the machine's load at that moment; with ``torch.set_num_threads(1)`` (the
-experiments' and the benchmark's workers call it) every fit runs on one thread. So resume and
-:func:`load_model` reproduce the live model exactly when they run with the thread count of the
-writer that refitted it (recorded in ``writers.jsonl``), one thread being the sure case; the
-checkpoints, when present and matching, are loaded rather than refitted, which needs no
-particular thread count.
+intra-op thread count (and the BLAS / CPU, see docs/reproduction.md), and of the model's device:
+the same labels with the same seed and the same thread count give bit-identical models, and so
+bit-identical step logs for the same env and teacher. With another thread count, torch's
+reductions are summed in another order: fits differ in the last bits (measured: 1e-14 on a
+3000-point 6-D fit; bit-identical on 300 points), which can flip a confidence decision near its
+threshold, after which the two step logs diverge. The count that matters is the one the EM ran
+on: with more than one intra-op thread, a fit of at least
+:data:`torchcbl.gmm.SINGLE_THREAD_WORK` uses them only while the machine has a core to spare
+(the thread policy, docs/architecture.md), so such a fit's last bits also depend on the
+machine's load at that moment; with ``torch.set_num_threads(1)`` (the experiments' and the
+benchmark's workers call it) every fit runs on one thread. So resume and :func:`load_model`
+reproduce the live model exactly when they run with the thread count of the writer that refitted
+it (recorded in ``writers.jsonl``), one thread being the sure case; the checkpoints, when
+present and matching, are loaded rather than refitted, which needs no particular thread count. A
+model on a GPU sums in another order than on the CPU (relative differences up to 5e-13 in the
+log-likelihoods measured by bench/bench_gmm_device.py), so a session taught on a GPU is
+reproduced exactly by a model on a GPU (``resume(model=...)``); ``writers.jsonl`` records each
+writer's model device.
 """
 
 from __future__ import annotations
@@ -724,12 +728,14 @@ class SessionStore:
             raise
         return store, records, corrections
 
-    def note_writer(self, first_step: int) -> None:
-        """Append who writes from ``first_step`` on to ``writers.jsonl``: torch's thread count
-        and versions (results are bit-identical only for the same thread count)."""
+    def note_writer(self, first_step: int, model_device: str = "cpu") -> None:
+        """Append who writes from ``first_step`` on to ``writers.jsonl``: torch's thread count,
+        the model's device and versions (results are bit-identical only for the same thread
+        count and device)."""
         line = json.dumps(
             {
                 "first_step": first_step,
+                "model_device": model_device,
                 "torch_num_threads": torch.get_num_threads(),
                 "torch_num_interop_threads": torch.get_num_interop_threads(),
                 "torch_version": torch.__version__,
@@ -915,10 +921,11 @@ class SessionStore:
         path = directory / f"model-{n_demonstrations:08d}.pt"
         tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
         state = model.state_dict()  # a new OrderedDict (its _metadata kept)
-        for name, tensor in state.items():
+        for name, value in state.items():
             # on the CPU whatever the model's device: a session taught on a GPU resumes, and
             # its policy loads, on a machine without one
-            state[name] = tensor.detach().cpu()
+            if isinstance(value, torch.Tensor):
+                state[name] = value.detach().cpu()
         payload: dict[str, Any] = {"n_demonstrations": n_demonstrations, "state_dict": state}
         if digest is not None:
             payload["labels_sha256"] = digest

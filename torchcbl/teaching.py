@@ -277,6 +277,13 @@ def _is_fitted(model: Any) -> bool:
     return bool(getattr(model, "is_fitted", False))
 
 
+def _model_device(model: Any) -> str:
+    """The device of the model's first buffer or parameter ("cpu" without one)."""
+    for tensor in (*getattr(model, "buffers", tuple)(), *getattr(model, "parameters", tuple)()):
+        return str(tensor.device)
+    return "cpu"
+
+
 def _seed_for(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
 
@@ -373,7 +380,7 @@ class ConfidentTeacher:
             self._store = SessionStore.create(self.run_dir, session_config)
             self._store.commit_every = commit_every
             try:
-                self._store.note_writer(0)
+                self._store.note_writer(0, _model_device(self.model))
                 if _is_fitted(self.model):  # a session may start from a fitted model
                     self._store.save_checkpoint(self.model, 0, self._digest.hexdigest())
             except BaseException:
@@ -552,7 +559,7 @@ class ConfidentTeacher:
             self.run_dir, commit_every=commit_every
         )
         try:
-            self._store.note_writer(len(records))
+            self._store.note_writer(len(records), _model_device(self.model))
             self._restore(records, corrections)
         except BaseException:
             self.close()
