@@ -532,6 +532,11 @@ def run_experiment(
 ) -> dict[str, Any]:
     """Run every seed (``workers`` processes), write the run directory, return the results.
 
+    With ``workers`` > 1 the seeds run in spawned processes, which import the caller's main
+    module: from a script, call ``run_experiment`` under ``if __name__ == "__main__":`` (or
+    pass ``workers=1``). A variant of the reproduction, e.g.
+    ``run_experiment(CorridorExperimentConfig.exact_motion(), "runs/exact")``.
+
     Raises FileExistsError if ``run_dir`` already holds a results.json.
     """
     config = config or CorridorExperimentConfig()

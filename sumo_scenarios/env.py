@@ -89,8 +89,11 @@ class Frame:
 class DrivingEnv(gym.Env):
     """The driving domain on libsumo. See the module docstring for spaces and units.
 
-    Only one ``DrivingEnv`` may be live per process (libsumo holds one simulation): a second
-    raises ``RuntimeError`` until the first is closed. Always ``close()`` it.
+    libsumo holds one simulation per process. Several ``DrivingEnv`` may exist in a process
+    (``gymnasium.utils.env_checker.check_env`` makes a second one), but the simulation belongs to
+    the one reset last: an env whose road another env's reset took over raises ``RuntimeError``
+    on ``step`` (saying so) until it is reset again. Two envs driving at once need two processes
+    (e.g. gymnasium's ``AsyncVectorEnv``). Always ``close()`` an env.
 
     ``reset(seed=s)`` fixes the road segment: the traffic is drawn from
     ``SeedSequence([scenario.seed, s])``. ``reset(options={"ego_lane": k})`` starts in lane k.

@@ -500,7 +500,12 @@ def run_experiment(
     workers: int = 2,
     progress: bool = True,
 ) -> dict[str, Any]:
-    """Run every seed (in ``workers`` processes), aggregate, write ``run_dir``; return results."""
+    """Run every seed (in ``workers`` processes), aggregate, write ``run_dir``; return results.
+
+    The seeds run in spawned processes (libsumo holds one simulation per process), which
+    import the caller's main module: from a script, call ``run_experiment`` under
+    ``if __name__ == "__main__":``.
+    """
     if workers < 1:
         raise ValueError("workers must be positive")
     run_dir = Path(run_dir)

@@ -7,8 +7,10 @@ It keeps the road endless (see ``docs`` of :meth:`HighwaySim.step`) and counts c
 geometrically, because SUMO's own collision list is unreliable once the ego has driven through a
 car (see ``shared/notes/sumo-and-pymunk-facts.md``).
 
-libsumo holds one simulation per process: only one :class:`HighwaySim` may be live at a time;
-a second one raises :class:`RuntimeError` until the first is closed.
+libsumo holds one simulation per process. Several :class:`HighwaySim` objects may exist, but the
+simulation belongs to the one whose :meth:`HighwaySim.reset` ran last: a reset of another takes it
+over, and the first then raises :class:`RuntimeError` (saying so) until it is reset again, on a
+fresh road segment. Two simulations running at once need two processes.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import math
 import weakref
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import libsumo
 import numpy as np
@@ -34,16 +37,21 @@ from sumo_scenarios.scenarios import (
 EDGE = "road"
 ROUTE = "road"  # the one route, over EDGE (data/driving.add.xml)
 EGO = "ego"
-# the live simulation, if any: weakly held, so that one dropped without close() (its finaliser
-# closes libsumo) does not keep the process's one slot forever
-_LIVE: weakref.WeakSet[HighwaySim] = weakref.WeakSet()
+# libsumo's one simulation: whether it runs, and the ``_state`` dict of the HighwaySim whose
+# reset placed the road it holds (a dict, not the object: one dropped without close() is
+# collected, and its finaliser closes libsumo if it still owned it)
+_SUMO: dict[str, Any] = {"running": False, "owner": None}
 
 
 def _release(state: dict[str, bool]) -> None:
-    """Close libsumo if this simulation had started it (close() or garbage collection)."""
-    if state["started"]:
-        state["started"] = False
-        libsumo.close()
+    """Close libsumo if this simulation owns it (close() or garbage collection); a simulation
+    that another's reset took over leaves that one running."""
+    if state["owns"]:
+        state["owns"] = False
+        _SUMO["owner"] = None
+        if _SUMO["running"]:
+            _SUMO["running"] = False
+            libsumo.close()
 
 
 _MAX_EXTRA_GAP_M = 250.0  # spacings are capped so a recycled car always fits on the edge
@@ -111,14 +119,11 @@ class HighwaySim:
     """
 
     def __init__(self, scenario: TrafficScenario, config: SimConfig | None = None) -> None:
-        if len(_LIVE):
-            raise RuntimeError(
-                "a HighwaySim (DrivingEnv) is already live in this process and libsumo holds only "
-                "one simulation per process: close() it first, or use another process"
-            )
         self.scenario = scenario
         self.config = config or SimConfig()
-        self._state = {"started": False}  # shared with the finaliser, which must not hold self
+        # whether libsumo holds this simulation's road; shared with the finaliser (which must
+        # not hold self) and cleared by another simulation's reset
+        self._state = {"owns": False}
         self._closed = False
         self._ready = False  # a reset has completed since the last failure
         self._road_length = float(libsumo_lane_length_from_net())
@@ -133,7 +138,6 @@ class HighwaySim:
                 f"SimConfig: ego_start_m + the scenario's ahead_m + shift_margin_m = {room:.0f} m "
                 f"must stay below the road's {self._road_length:.0f} m"
             )
-        _LIVE.add(self)
         self._finalizer = weakref.finalize(self, _release, self._state)
         ranges = scenario.speed_ranges_ms
         self._speed_range = {lane: ranges[i] for i, lane in enumerate(TRAFFIC_LANES)}
@@ -195,11 +199,17 @@ class HighwaySim:
             raise ValueError(f"ego_lane must lie in [0, {N_LANES - 1}]")
         args = self._args(seed, fcd_path)
         self._ready = False  # until this reset completes: step() would crash SUMO before
-        if self._state["started"]:
+        owner = _SUMO["owner"]
+        if owner is not None and owner is not self._state:
+            owner["owns"] = False  # its road goes with the load below: taken over
+        # owned from here, also if the load fails (close() then closes what is left of it)
+        _SUMO["owner"] = self._state
+        self._state["owns"] = True
+        if _SUMO["running"]:
             libsumo.load(args[1:])
         else:
             libsumo.start(args)
-            self._state["started"] = True
+            _SUMO["running"] = True
         self._rng = rng
         self._next_id = 0
         self.n_recycled = 0
@@ -247,8 +257,7 @@ class HighwaySim:
             return
         self._closed = True
         self._ready = False
-        self._finalizer()  # closes libsumo once, here or never again
-        _LIVE.discard(self)
+        self._finalizer()  # closes libsumo if this simulation owns it; runs once
 
     @property
     def closed(self) -> bool:
@@ -292,13 +301,7 @@ class HighwaySim:
         spacing, and when the ego nears the end of the edge every vehicle is moved back by the
         same distance. Contact never removes anything.
         """
-        if not self._ready:
-            raise RuntimeError(
-                "this simulation is closed"
-                if self._closed
-                else "reset() first: no reset has "
-                "completed since the simulation was made or since a reset failed"
-            )
+        self._check_owned()
         if not 0 <= target_lane < N_LANES:
             raise ValueError(f"target_lane must lie in [0, {N_LANES - 1}], got {target_lane}")
         if target_lane != self.ego_lane:
@@ -385,8 +388,27 @@ class HighwaySim:
         lanes = self.car_lane[near]
         return bool(np.any((lanes == self.ego_lane) | (lanes == self.prev_lane)))
 
+    def _check_owned(self) -> None:
+        """Raise unless libsumo holds this simulation's road, saying why not."""
+        if self._ready and self._state["owns"]:
+            return
+        if self._closed:
+            raise RuntimeError("this simulation is closed")
+        if self._ready:
+            raise RuntimeError(
+                "another DrivingEnv (HighwaySim) in this process was reset since this one, and "
+                "libsumo holds only one simulation per process: it took this one's road over. "
+                "reset() this env to go on (on a fresh road segment, taking the simulation "
+                "back), or run the two in separate processes (e.g. gymnasium's AsyncVectorEnv)"
+            )
+        raise RuntimeError(
+            "reset() first: no reset has completed since the simulation was made or since a "
+            "reset failed"
+        )
+
     def vehicle_positions(self) -> dict[str, tuple[float, int]]:
         """SUMO's own view: ``{id: (front-bumper position m, lane index)}`` for every vehicle."""
+        self._check_owned()
         out = {}
         for vid in libsumo.vehicle.getIDList():
             out[vid] = (libsumo.vehicle.getLanePosition(vid), libsumo.vehicle.getLaneIndex(vid))

@@ -235,6 +235,20 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
             + ["--eval-episodes", "0"],
             "argument --eval-episodes: expected a whole number >= 1",
         ),
+        # the --gym-env options, without --gym-env, or with a bad value, name themselves
+        (["--quick", "--envs", "corridor", "--budgets", "5,10"], "--budgets apply only to"),
+        (["--quick", "--envs", "corridor", "--teacher", "m:f"], "--teacher apply only to"),
+        (["--budgets", "10,x"], "argument --budgets: expected comma-separated whole numbers"),
+        (["--max-steps", "-5"], "argument --max-steps: expected a whole number >= 1"),
+        (
+            ["--envs", "", "--gym-env", "CartPole-v1", "--teacher", "nomod:fn"],
+            "--teacher nomod:fn: No module named 'nomod'",
+        ),
+        (
+            ["--envs", "", "--gym-env", "CartPole-v1", "--teacher", "_bench_env:pole_teacher"]
+            + ["--score", "_bench_env:nope"],
+            "--score _bench_env:nope: cannot import",
+        ),
     ],
 )
 def test_cli_benchmark_user_mistakes_are_one_line(argv, message, tmp_path, capsys):

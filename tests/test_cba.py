@@ -38,8 +38,9 @@ def test_chi2_quantile_matches_scipy_and_the_dimension_argument():
     assert rule.to_config() == {"type": "DistanceRule", "quantile": 0.95}
     with pytest.raises(ValueError, match="not both"):
         DistanceRule(3.0, quantile=0.9)
-    with pytest.raises(ValueError, match=r"in \(0, 1\)"):
-        DistanceRule(quantile=1.0)
+    for bad in (1.0, 95, 0.0, float("nan"), True):  # a share, not a percentage
+        with pytest.raises(ValueError, match=r"expected a share in \(0, 1\) \(e.g. 0.95"):
+            DistanceRule(quantile=bad)
 
 
 def test_chi2_rule_is_confident_on_the_quantile_share_of_own_points():

@@ -178,6 +178,15 @@ def test_a_users_mistakes_get_one_line_and_no_traceback(corridor_run, tmp_path):
     assert not (tmp_path / "X").exists()  # a refused reproduce leaves no directory behind
 
 
+def test_an_output_directory_that_is_a_file_is_called_a_file(tmp_path, capsys):
+    f = tmp_path / "afile"
+    f.write_text("x")
+    assert main(["benchmark", "--quick", "--envs", "corridor", "--out", str(f)]) == 2
+    assert f"--out {f} cannot be a directory: it is a file;" in capsys.readouterr().err
+    assert main(["benchmark", "--quick", "--envs", "corridor", "--out", str(f / "below")]) == 2
+    assert f"cannot be a directory: {f} is a file;" in capsys.readouterr().err
+
+
 def test_benchmark_never_writes_over_another_commands_run_directory(corridor_run, tmp_path):
     """A benchmark's --out pointed at a reproduction's run directory is refused before any
     cell runs, and the run's results.json is untouched."""
@@ -385,9 +394,17 @@ def test_replay_lists_episodes_and_exports_one_to_gif_and_fcd(tmp_path, capsys):
     save_records(env.episodes, path)
     assert main(["replay", str(path), "--list"]) == 0
     assert "demo/b" in capsys.readouterr().out
-    assert main(["replay", str(path), "--label", "demo/b", "--max-frames", "8"]) == 0
+    assert (
+        main(["replay", str(path), "--label", "demo/b", "--max-frames", "8", "--every", "2"]) == 0
+    )
     gif, fcd = tmp_path / "episodes-1.gif", tmp_path / "episodes-1.fcd.xml"
     assert gif.stat().st_size > 1000
+    import imageio.v3 as iio
+
+    assert iio.improps(gif, index=None).shape[0] == 8  # the frames the message names
+    assert (
+        "(8 frames, every 2 timestep(s): the first 14 of 30 timesteps)" in capsys.readouterr().out
+    )
     steps = list(sumolib.xml.parse(str(fcd), "timestep"))
     assert len(steps) >= 30 and any(v.id == "ego" for v in steps[-1].vehicle)
     capsys.readouterr()

@@ -174,8 +174,13 @@ def test_existing_or_incompatible_run_dir_is_a_clear_error(tmp_path):
         ConfidentTeacher.resume(run, env, oracle(env), config=TeachingConfig(max_new=3))
     with pytest.raises(IncompatibleRunDirError, match="rule"):
         ConfidentTeacher.resume(run, env, oracle(env), rule=PosteriorRule())
-    with pytest.raises(IncompatibleRunDirError, match="model args"):
+    with pytest.raises(IncompatibleRunDirError, match="model args") as err:
         ConfidentTeacher.resume(run, env, oracle(env), model=GaussianMixtureSet(3, 2, 4))
+    assert "{'max_components': (10, 4)}" in str(err.value)  # only what differs
+    with pytest.raises(IncompatibleRunDirError, match="is a file"):
+        make(env, run / "config.json")  # a file where a directory should be
+    with pytest.raises(IncompatibleRunDirError, match="is a file"):
+        make(env, run / "config.json" / "below")
     with pytest.raises(IncompatibleRunDirError, match="config.json is missing"):
         ConfidentTeacher.resume(tmp_path / "nowhere", env, oracle(env))
     # Stop fields may change; the failed attempts did not touch the session.

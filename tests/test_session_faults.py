@@ -1056,3 +1056,18 @@ def test_resume_compares_what_gymnasium_make_was_given(tmp_path):
     # the same kwargs, and another render mode, resume
     same = gym.make("MountainCar-v0", goal_velocity=0.0, render_mode="rgb_array")
     ConfidentTeacher.resume(run, same, teacher, progress=False).close()
+    # gymnasium.make's step cap is part of the env: another one is refused, the same resumes
+    with pytest.raises(
+        IncompatibleRunDirError, match=r"'max_episode_steps': \(200, 5\).*max_episode_steps=200"
+    ):
+        ConfidentTeacher.resume(
+            run, gym.make("MountainCar-v0", goal_velocity=0.0, max_episode_steps=5), teacher
+        )
+    capped = gym.make("MountainCar-v0", goal_velocity=0.0, max_episode_steps=200)
+    ConfidentTeacher.resume(run, capped, teacher, progress=False).close()
+    # a session written before the cap was kept resumes with any cap, as before
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["max_episode_steps"]
+    (run / "config.json").write_text(json.dumps(config))
+    short = gym.make("MountainCar-v0", goal_velocity=0.0, max_episode_steps=5)
+    ConfidentTeacher.resume(run, short, teacher, progress=False).close()

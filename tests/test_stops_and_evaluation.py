@@ -14,6 +14,7 @@ from _toy_envs import oracle, rare_regions_world
 from torchcbl import (
     ConfidentTeacher,
     EpisodeResult,
+    TeacherError,
     TeachingConfig,
     episode_results,
     evaluate_policy,
@@ -136,6 +137,48 @@ def test_evaluate_policy_stops_at_n_steps_without_another_reset():
     assert len(records) == 5 and records[-1].truncated and BadSecondReset.resets == 1
     with pytest.raises(ValueError, match="n_steps must be an int >= 1"):
         evaluate_policy(lambda obs: 0, env, n_steps=np.bool_(True))
+
+
+def test_evaluating_a_policy_taught_on_another_env_names_the_mismatch():
+    from _toy_envs import four_d_world
+
+    from torchcbl import GaussianMixtureSet, GreedyPolicy
+
+    env = rare_regions_world(episode_length=5)  # 2 features, 3 actions
+    model = GaussianMixtureSet(3, 4, 2, seed=0)  # taught on 4 features
+    model.fit(np.random.default_rng(0).normal(size=(30, 4)), np.arange(30) % 3)
+    with pytest.raises(ValueError, match="n_features=4 but the env has 2 features"):
+        evaluate_policy(GreedyPolicy(model), env, n_steps=5)
+    records = evaluate_policy(GreedyPolicy(model), four_d_world(episode_length=5), n_steps=5)
+    assert len(records) == 5
+
+
+def test_a_teacher_answering_with_a_0d_torch_tensor_is_understood():
+    """``logits.argmax()`` is a 0-d tensor: its integer is the action, as for numpy's."""
+    import torch
+
+    env = rare_regions_world(episode_length=5)
+    teach = oracle(env)
+    ct = ConfidentTeacher(
+        env,
+        lambda obs, info: torch.tensor(teach(obs, info)),
+        config=TeachingConfig(max_new=2, max_steps=20),
+        progress=False,
+    )
+    ct.run()
+    assert [r.teacher_action for r in ct.records[:3]] == [
+        env.optimal_action(r.observation_array) for r in ct.records[:3]
+    ]
+    assert all(type(r.teacher_action) is int for r in ct.records if r.teacher_action is not None)
+    env2 = rare_regions_world(episode_length=5)
+    bad = ConfidentTeacher(
+        env2,
+        lambda obs, info: torch.tensor(1.0),
+        progress=False,
+        config=TeachingConfig(max_new=2, max_steps=5),
+    )
+    with pytest.raises(TeacherError, match="expected an int action"):
+        bad.run()
 
 
 def test_episode_results_are_the_per_episode_returns_and_successes():

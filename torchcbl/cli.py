@@ -84,6 +84,21 @@ def _int_at_least(minimum: int, below: int | None = None) -> Any:
 
 
 _positive_int = _int_at_least(1)
+
+
+def _budgets(text: str) -> tuple[int, ...]:
+    """An argparse type: label budgets as comma-separated whole numbers >= 1."""
+    try:
+        values = tuple(int(b) for b in text.split(","))
+    except ValueError:
+        values = ()
+    if not values or min(values) < 1:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated whole numbers >= 1 (e.g. 10,20,40), got {text!r}"
+        )
+    return values
+
+
 _nonnegative_int = _int_at_least(0)
 _seed = _int_at_least(0, 2**32)  # a seed every seeded part takes (numpy, the GMM set, SUMO)
 
@@ -150,9 +165,9 @@ def _output_dir(path: Path, flag: str) -> Path:
     for p in (path, *path.parents):
         if p.exists():
             if not p.is_dir():
-                where = "" if p == path else f" ({p} is a file)"
+                where = "it is a file" if p == path else f"{p} is a file"
                 raise _UsageError(
-                    f"{flag} {path} cannot be a directory{where}; expected a new or empty "
+                    f"{flag} {path} cannot be a directory: {where}; expected a new or empty "
                     "directory path"
                 )
             break
@@ -349,7 +364,14 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     )
     print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {cfg})")
     replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
-    print(f"GIF written to {gif} (every {args.every} timestep(s) of {len(record.actions)})")
+    steps = len(record.actions)
+    frames = len(range(0, steps + 1, args.every))  # the reset's frame and one per step
+    if args.max_frames is not None and args.max_frames < frames:
+        frames = args.max_frames
+        shown = f"the first {(frames - 1) * args.every} of {steps} timesteps"
+    else:
+        shown = f"all {steps} timesteps"
+    print(f"GIF written to {gif} ({frames} frames, every {args.every} timestep(s): {shown})")
     return 0
 
 
@@ -426,7 +448,11 @@ def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
             f"{run_dir}'s env was made with {', '.join(kept_as_repr)} given as an object its "
             "config does not keep; resume it in Python with ConfidentTeacher.resume and that env"
         )
-    return {k: v for k, v in kwargs.items() if k != "render_mode"}
+    out = {k: v for k, v in kwargs.items() if k != "render_mode"}
+    steps = (load_config(run_dir).get("env") or {}).get("max_episode_steps")
+    if steps is not None:
+        out["max_episode_steps"] = steps
+    return out
 
 
 def _cmd_teach(args: argparse.Namespace) -> int:
@@ -561,6 +587,13 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         if e == "driving" and args.driving_teacher:
             spec = dataclasses.replace(spec, teacher=args.driving_teacher)
         envs.append(spec)
+    gym_only = ("teacher", "score", "budgets", "max_steps", "eval_episodes", "eval_steps")
+    given = [f"--{n.replace('_', '-')}" for n in gym_only if getattr(args, n) is not None]
+    if given and not args.gym_env:
+        raise _UsageError(
+            f"{', '.join(given)} apply only to --gym-env (the envs of --envs bring their own); "
+            "add --gym-env module:Id, or leave them out"
+        )
     if args.gym_env:
         import gymnasium as gym
 
@@ -575,17 +608,22 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             gym.spec(env_id)
         except (gym.error.Error, ImportError) as exc:
             raise _UsageError(f"--gym-env {args.gym_env}: {_one_line(exc)}") from None
+        score = args.score or "torchcbl.benchmark:success_rate"
+        for option, path in (("--teacher", args.teacher), ("--score", score)):
+            try:  # before anything runs or is printed
+                bm._import(path)
+            except (ValueError, ImportError) as exc:
+                raise _UsageError(f"{option} {path}: {_one_line(exc)}") from None
         try:
-            budgets = tuple(int(b) for b in args.budgets.split(","))
             envs.append(
                 bm.EnvSpec(
                     name=args.gym_env,
                     env_id=args.gym_env,
                     teacher=args.teacher,
-                    budgets=budgets,
-                    max_steps=args.max_steps,
-                    score=args.score,
-                    eval_episodes=args.eval_episodes,
+                    budgets=args.budgets or (10, 20, 40, 80),
+                    max_steps=args.max_steps or 1000,
+                    score=score,
+                    eval_episodes=args.eval_episodes or 10,
                     eval_steps=args.eval_steps,
                 )
             )
@@ -896,15 +934,32 @@ def _parser() -> argparse.ArgumentParser:
         help="benchmark directory (default runs/benchmark[-quick])",
     )
     p.add_argument("--driving-teacher", default=None, help="import path of the driving teacher")
-    p.add_argument("--gym-env", default=None, help="also benchmark this gymnasium id")
-    p.add_argument("--teacher", default=None, help="--gym-env's teacher factory, module:name")
-    p.add_argument("--score", default="torchcbl.benchmark:success_rate", help="--gym-env's score")
-    p.add_argument("--budgets", default="10,20,40,80", help="--gym-env's label budgets")
-    p.add_argument("--max-steps", type=int, default=1000, help="--gym-env's step cap")
     p.add_argument(
-        "--eval-episodes", type=_positive_int, default=10, help="--gym-env's eval episodes"
+        "--gym-env",
+        default=None,
+        metavar="MODULE:ID",
+        help="also benchmark this gymnasium id (module imported first, as gymnasium.make does)",
     )
-    p.add_argument("--eval-steps", type=_positive_int, default=None, help="--gym-env's eval steps")
+    g = "only with --gym-env: "
+    p.add_argument("--teacher", metavar="MODULE:NAME", help=g + "the teacher factory")
+    p.add_argument(
+        "--score",
+        metavar="MODULE:NAME",
+        help=g + "the score of an evaluation (default torchcbl.benchmark:success_rate)",
+    )
+    p.add_argument(
+        "--budgets", type=_budgets, metavar="B,..", help=g + "label budgets (default 10,20,40,80)"
+    )
+    p.add_argument(
+        "--max-steps", type=_positive_int, metavar="N", help=g + "step cap (default 1000)"
+    )
+    p.add_argument(
+        "--eval-episodes",
+        type=_positive_int,
+        metavar="N",
+        help=g + "episodes per evaluation (default 10)",
+    )
+    p.add_argument("--eval-steps", type=_positive_int, metavar="N", help=g + "steps per evaluation")
     p.set_defaults(func=_cmd_benchmark)
     return parser
 

@@ -141,10 +141,16 @@ class DistanceRule:
                     f"DistanceRule: give max_std ({max_std!r}) or quantile ({quantile!r}), "
                     "not both."
                 )
-            q = _check_positive("DistanceRule.quantile", quantile, upper=1.0)
-            if q >= 1.0:
-                raise ValueError(f"DistanceRule.quantile: expected a value in (0, 1), got {q!r}")
-            self.quantile = q
+            if (
+                isinstance(quantile, bool)
+                or not isinstance(quantile, (int, float))
+                or not 0.0 < float(quantile) < 1.0  # NaN too
+            ):
+                raise ValueError(
+                    "DistanceRule.quantile: expected a share in (0, 1) (e.g. 0.95 for 95%), "
+                    f"got {quantile!r}"
+                )
+            self.quantile = float(quantile)
         self._dof: int | None = None
 
     def threshold(self, n_features: int | None = None) -> float:

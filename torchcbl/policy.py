@@ -71,9 +71,26 @@ def check_env(env: gym.Env) -> tuple[int, int]:
     return int(obs_space.shape[0]), int(space.n)
 
 
+def _check_policy_fits(policy: Any, n_features: int, n_actions: int) -> None:
+    """A policy with a model (:class:`GreedyPolicy`) must be the env's size."""
+    model = getattr(policy, "model", None)
+    for what, want, unit in (
+        ("n_features", n_features, "features"),
+        ("n_actions", n_actions, "actions"),
+    ):
+        got = getattr(model, what, None)
+        if isinstance(got, (int, np.integer)) and int(got) != want:
+            raise ValueError(
+                f"evaluate_policy: the policy's model has {what}={int(got)} but the env has "
+                f"{want} {unit}: the policy was taught on another env. Evaluate it on the env "
+                "it was taught on (a session's config.json names it; `torchcbl evaluate "
+                "SESSION_DIR` rebuilds it)."
+            )
+
+
 def as_action(value: Any, n_actions: int) -> int | None:
-    if isinstance(value, np.ndarray) and value.ndim == 0:
-        value = value.item()
+    if isinstance(value, (np.ndarray, torch.Tensor)) and value.ndim == 0:
+        value = value.item()  # e.g. logits.argmax(); a float or bool one is refused below
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         return None
     value = int(value)
@@ -126,6 +143,7 @@ def evaluate_policy(
     None. :func:`episode_results` turns them into per-episode returns and successes.
     """
     n_features, n_actions = check_env(env)
+    _check_policy_fits(policy, n_features, n_actions)
     seeds: list[int] | None = None
     if seed is not None and not isinstance(seed, (int, np.integer)):
         try:

@@ -669,8 +669,19 @@ class SessionStore:
         path = Path(run_dir)
         try:
             path.mkdir(parents=True, exist_ok=True)
+        except (FileExistsError, NotADirectoryError) as exc:  # it, or a parent, is a file
+            raise IncompatibleRunDirError(
+                f"run_dir {str(path)!r} cannot be a directory: {exc.filename or path} is a file. "
+                "Give a new directory path for a new session (or a session's directory to "
+                "resume it)."
+            ) from exc
         except OSError as exc:
-            raise _write_error(exc, path, "creating the run directory", _FREE_SPACE) from exc
+            raise _write_error(
+                exc,
+                path,
+                "creating the run directory",
+                "Free space (or fix the directory's permissions), then create the teacher again.",
+            ) from exc
         lock = _acquire_lock(path)
         started = False
         try:
@@ -1516,13 +1527,15 @@ def resume_problems(
     model_args: dict[str, Any] | None,
     strategy: dict[str, Any] | None,
     env_kwargs: dict[str, Any] | None = None,
+    env_max_episode_steps: int | None = None,
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
     ``model_args`` / ``strategy`` None means "rebuilt from the directory"; of a strategy
     config with ``"custom": true`` (no ``to_config``) only the class name and relabel flag are
     compared; ``env_kwargs``: what ``gymnasium.make`` was given for the env (plain values are
-    compared, ``render_mode`` aside)."""
+    compared, ``render_mode`` aside), with its ``max_episode_steps`` (the spec's; sessions
+    written before 2026-11-26 do not keep it)."""
     problems: list[str] = []
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
@@ -1545,10 +1558,14 @@ def resume_problems(
             and not _kept_as_repr(given_kw.get(k))
             and stored_kw.get(k) != given_kw.get(k)
         }
+        if "max_episode_steps" in senv and senv["max_episode_steps"] != env_max_episode_steps:
+            differ["max_episode_steps"] = (senv["max_episode_steps"], env_max_episode_steps)
         if differ:
+            steps = senv.get("max_episode_steps")
+            cap = "" if steps is None else f", max_episode_steps={steps}"
             problems.append(
                 f"env kwargs (stored, given): {differ}; make the env as the session did, "
-                f"gymnasium.make({senv['id']!r}, **{stored_kw})"
+                f"gymnasium.make({senv['id']!r}{cap}, **{stored_kw})"
             )
     if learning is not None and learning[0] != learning[1]:
         diff = {
@@ -1556,7 +1573,16 @@ def resume_problems(
         }
         problems.append(f"config (stored, given): {diff}; only the stop fields may change")
     if model_args is not None and model_args != _with_default_args(stored["model"]["args"]):
-        problems.append(f"model args: stored {stored['model']['args']}, given {model_args}")
+        kept = _with_default_args(stored["model"]["args"])
+        diff = {
+            k: (kept.get(k), model_args.get(k))
+            for k in sorted(set(kept) | set(model_args))
+            if kept.get(k) != model_args.get(k)
+        }
+        problems.append(
+            f"model args (stored, given): {diff}; build the model as the session did, "
+            f"GaussianMixtureSet(**{stored['model']['args']}), or leave model= out"
+        )
     if strategy is not None:
         want = stored_strategy(stored)
         if strategy.get("custom") or want.get("custom"):

@@ -469,6 +469,8 @@ class ConfidentTeacher:
         kwargs = _env_kwargs(self.env)
         if kwargs:
             described["kwargs"] = kwargs
+        if spec is not None:  # gymnasium.make's TimeLimit (None: none), compared on resume
+            described["max_episode_steps"] = getattr(spec, "max_episode_steps", None)
         return described
 
     # -- resume -----------------------------------------------------------------------------
@@ -525,6 +527,7 @@ class ConfidentTeacher:
             n_actions=n_actions,
             env_id=getattr(getattr(env, "spec", None), "id", None),
             env_kwargs=_env_kwargs(env),
+            env_max_episode_steps=getattr(getattr(env, "spec", None), "max_episode_steps", None),
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
             strategy=(
