@@ -93,7 +93,8 @@ class DrivingEnv(gym.Env):
     (``gymnasium.utils.env_checker.check_env`` makes a second one), but the simulation belongs to
     the one reset last: an env whose road another env's reset took over raises ``RuntimeError``
     on ``step`` (saying so) until it is reset again. Two envs driving at once need two processes
-    (e.g. gymnasium's ``AsyncVectorEnv``). Always ``close()`` an env.
+    made with 'spawn' (e.g. gymnasium's ``AsyncVectorEnv(..., context="spawn")``; a process
+    forked from one with a running simulation is refused). Always ``close()`` an env.
 
     ``reset(seed=s)`` fixes the road segment: the traffic is drawn from
     ``SeedSequence([scenario.seed, s])``. ``reset(options={"ego_lane": k})`` starts in lane k.

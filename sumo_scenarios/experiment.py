@@ -810,7 +810,8 @@ def evaluate_saved_policy(
     greedily for ``n_steps`` timesteps on held-out evaluation segment ``seed``.
 
     Returns the collision rate (share of timesteps in contact, %) and the lane shares
-    (index 0 = right shoulder ... 4 = left shoulder). Needs no other live DrivingEnv here.
+    (index 0 = right shoulder ... 4 = left shoulder). It takes this process's one libsumo
+    simulation: a live DrivingEnv must be reset after it.
     """
     from sumo_scenarios.env import DrivingEnv
     from torchcbl import evaluate_policy, load_policy

@@ -176,7 +176,8 @@ def _env_for(record: EpisodeRecord) -> DrivingEnv:
 def replay(
     record: EpisodeRecord, *, fcd_output: str | Path | None = None, frames: bool = False
 ) -> tuple[ReplayResult, list[Any]]:
-    """Re-run a recorded episode (needs no other live DrivingEnv in this process).
+    """Re-run a recorded episode. It takes this process's one libsumo simulation: a live
+    DrivingEnv must be reset after it (its step says so).
 
     Returns the :class:`ReplayResult` and, if ``frames``, the list of
     :class:`~sumo_scenarios.env.Frame` per timestep (else an empty list). ``fcd_output`` makes

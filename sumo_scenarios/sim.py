@@ -16,6 +16,7 @@ fresh road segment. Two simulations running at once need two processes.
 from __future__ import annotations
 
 import math
+import os
 import weakref
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,7 +41,7 @@ EGO = "ego"
 # libsumo's one simulation: whether it runs, and the ``_state`` dict of the HighwaySim whose
 # reset placed the road it holds (a dict, not the object: one dropped without close() is
 # collected, and its finaliser closes libsumo if it still owned it)
-_SUMO: dict[str, Any] = {"running": False, "owner": None}
+_SUMO: dict[str, Any] = {"running": False, "owner": None, "pid": None}
 
 
 def _release(state: dict[str, bool]) -> None:
@@ -199,6 +200,14 @@ class HighwaySim:
             raise ValueError(f"ego_lane must lie in [0, {N_LANES - 1}]")
         args = self._args(seed, fcd_path)
         self._ready = False  # until this reset completes: step() would crash SUMO before
+        if _SUMO["running"] and _SUMO["pid"] != os.getpid():
+            raise RuntimeError(
+                "this process was forked from one whose libsumo simulation is running, and the "
+                "copy it inherited is that process's (its FCD output included): start the "
+                "simulation in a process made with 'spawn' (multiprocessing.get_context('spawn'), "
+                "gymnasium's AsyncVectorEnv(..., context='spawn')), or close the parent's env "
+                "before forking"
+            )
         owner = _SUMO["owner"]
         if owner is not None and owner is not self._state:
             owner["owns"] = False  # its road goes with the load below: taken over
@@ -208,8 +217,10 @@ class HighwaySim:
         if _SUMO["running"]:
             libsumo.load(args[1:])
         else:
+            # running from before the call: a start cut short still gets its libsumo.close()
+            # (which is harmless when nothing is loaded)
+            _SUMO["running"], _SUMO["pid"] = True, os.getpid()
             libsumo.start(args)
-            _SUMO["running"] = True
         self._rng = rng
         self._next_id = 0
         self.n_recycled = 0

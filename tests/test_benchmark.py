@@ -238,7 +238,13 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
         # the --gym-env options, without --gym-env, or with a bad value, name themselves
         (["--quick", "--envs", "corridor", "--budgets", "5,10"], "--budgets apply only to"),
         (["--quick", "--envs", "corridor", "--teacher", "m:f"], "--teacher apply only to"),
-        (["--budgets", "10,x"], "argument --budgets: expected comma-separated whole numbers"),
+        (["--budgets", "10,x"], "argument --budgets: expected increasing comma-separated"),
+        (["--budgets", "20,10"], "argument --budgets: expected increasing comma-separated"),
+        (["--envs", "corridor", "--driving-teacher", "expert"], "--driving-teacher applies only"),
+        (
+            ["--envs", "", "--gym-env", "CartPole-v1", "--teacher", ".rel:fn"],
+            "--teacher .rel:fn:",
+        ),
         (["--max-steps", "-5"], "argument --max-steps: expected a whole number >= 1"),
         (
             ["--envs", "", "--gym-env", "CartPole-v1", "--teacher", "nomod:fn"],

@@ -4,6 +4,7 @@ simulation per process."""
 from __future__ import annotations
 
 import gymnasium as gym
+import libsumo
 import numpy as np
 import pytest
 import sumolib
@@ -107,20 +108,55 @@ def test_a_failed_reset_a_closed_env_and_a_dropped_env_never_crash_sumo(env, tmp
     with pytest.raises(ValueError, match="does not exist"):
         env.reset(seed=2, options={"fcd_output": str(tmp_path / "no" / "x.xml")})
     env.close()
+    assert not libsumo.isLoaded()  # closing the owner closed SUMO
     with pytest.raises(RuntimeError, match="closed"):
         env.step(STAY)
+    # a first start that SUMO refuses: the env recovers, and its close() closes SUMO
+    starting = DrivingEnv()
+    with pytest.raises(Exception, match="Could not build output file"):
+        starting.reset(seed=2, options={"fcd_output": str(tmp_path)})
+    assert starting.reset(seed=2)[0].shape == (4,)
+    starting.close()
+    assert not libsumo.isLoaded()
     dropped = DrivingEnv()
     first = dropped.reset(seed=2)[0]
     del dropped  # no close()
     import gc
 
     gc.collect()
+    assert not libsumo.isLoaded()  # its finaliser closed SUMO
     fresh = DrivingEnv()
     try:
         np.testing.assert_array_equal(fresh.reset(seed=2)[0], first)
         np.testing.assert_array_equal(first, obs)
     finally:
         fresh.close()
+
+
+def _reset_a_driving_env(queue) -> None:
+    try:
+        e = DrivingEnv()
+        e.reset(seed=0)
+        e.close()
+        queue.put("reset")
+    except RuntimeError as exc:
+        queue.put(str(exc))
+
+
+def test_a_process_forked_from_a_running_simulation_is_refused(env):
+    """A forked child holds a copy of the parent's libsumo simulation (its FCD file too):
+    it must not load a new road into it."""
+    import multiprocessing as mp
+
+    env.reset(seed=0)
+    ctx = mp.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_reset_a_driving_env, args=(queue,))
+    child.start()
+    said = queue.get(timeout=60)
+    child.join(timeout=60)
+    assert "forked" in said and "spawn" in said
+    env.step(STAY)  # the parent's simulation is untouched
 
 
 def test_a_start_off_the_road_is_refused_and_keeps_no_slot():
@@ -132,7 +168,9 @@ def test_a_start_off_the_road_is_refused_and_keeps_no_slot():
         DrivingEnv(sim=SimConfig(ego_start_m=9950.0))
     with pytest.raises(ValueError, match="no room"):
         DrivingEnv(sim=SimConfig(ego_start_m=10.0))
-    DrivingEnv().close()  # the refused ones took no slot
+    env = DrivingEnv()  # the refused ones left nothing behind
+    env.reset(seed=0)
+    env.close()
 
 
 def test_bad_action_and_options(env):

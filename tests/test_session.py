@@ -179,8 +179,8 @@ def test_existing_or_incompatible_run_dir_is_a_clear_error(tmp_path):
     assert "{'max_components': (10, 4)}" in str(err.value)  # only what differs
     with pytest.raises(IncompatibleRunDirError, match="is a file"):
         make(env, run / "config.json")  # a file where a directory should be
-    with pytest.raises(IncompatibleRunDirError, match="is a file"):
-        make(env, run / "config.json" / "below")
+    with pytest.raises(IncompatibleRunDirError, match=f"directory: {run / 'config.json'} is a"):
+        make(env, run / "config.json" / "below" / "deeper")  # the file named, not the path
     with pytest.raises(IncompatibleRunDirError, match="config.json is missing"):
         ConfidentTeacher.resume(tmp_path / "nowhere", env, oracle(env))
     # Stop fields may change; the failed attempts did not touch the session.

@@ -92,9 +92,9 @@ def _budgets(text: str) -> tuple[int, ...]:
         values = tuple(int(b) for b in text.split(","))
     except ValueError:
         values = ()
-    if not values or min(values) < 1:
+    if not values or min(values) < 1 or list(values) != sorted(set(values)):
         raise argparse.ArgumentTypeError(
-            f"expected comma-separated whole numbers >= 1 (e.g. 10,20,40), got {text!r}"
+            f"expected increasing comma-separated whole numbers >= 1 (e.g. 10,20,40), got {text!r}"
         )
     return values
 
@@ -448,11 +448,9 @@ def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
             f"{run_dir}'s env was made with {', '.join(kept_as_repr)} given as an object its "
             "config does not keep; resume it in Python with ConfidentTeacher.resume and that env"
         )
-    out = {k: v for k, v in kwargs.items() if k != "render_mode"}
-    steps = (load_config(run_dir).get("env") or {}).get("max_episode_steps")
-    if steps is not None:
-        out["max_episode_steps"] = steps
-    return out
+    # (max_episode_steps is not needed: teach makes its env with the id's registered cap,
+    # which gymnasium.make gives again)
+    return {k: v for k, v in kwargs.items() if k != "render_mode"}
 
 
 def _cmd_teach(args: argparse.Namespace) -> int:
@@ -589,6 +587,8 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         envs.append(spec)
     gym_only = ("teacher", "score", "budgets", "max_steps", "eval_episodes", "eval_steps")
     given = [f"--{n.replace('_', '-')}" for n in gym_only if getattr(args, n) is not None]
+    if args.driving_teacher and "driving" not in env_names:
+        raise _UsageError("--driving-teacher applies only with driving in --envs")
     if given and not args.gym_env:
         raise _UsageError(
             f"{', '.join(given)} apply only to --gym-env (the envs of --envs bring their own); "
@@ -612,7 +612,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         for option, path in (("--teacher", args.teacher), ("--score", score)):
             try:  # before anything runs or is printed
                 bm._import(path)
-            except (ValueError, ImportError) as exc:
+            except (ValueError, ImportError, TypeError) as exc:  # TypeError: a relative name
                 raise _UsageError(f"{option} {path}: {_one_line(exc)}") from None
         try:
             envs.append(

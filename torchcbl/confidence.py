@@ -73,7 +73,11 @@ def _np(t: torch.Tensor | np.ndarray) -> np.ndarray:
 
 
 def _check_positive(name: str, value: float, *, upper: float | None = None) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if (
+        isinstance(value, (bool, np.bool_))
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not math.isfinite(value)
+    ):
         raise ValueError(f"{name}: expected a finite number, got {value!r}")
     if value <= 0 or (upper is not None and value > upper):
         rng = f"in (0, {upper}]" if upper is not None else "> 0"
@@ -142,8 +146,8 @@ class DistanceRule:
                     "not both."
                 )
             if (
-                isinstance(quantile, bool)
-                or not isinstance(quantile, (int, float))
+                isinstance(quantile, (bool, np.bool_))
+                or not isinstance(quantile, (int, float, np.integer, np.floating))
                 or not 0.0 < float(quantile) < 1.0  # NaN too
             ):
                 raise ValueError(

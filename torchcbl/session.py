@@ -670,10 +670,10 @@ class SessionStore:
         try:
             path.mkdir(parents=True, exist_ok=True)
         except (FileExistsError, NotADirectoryError) as exc:  # it, or a parent, is a file
+            culprit = next((p for p in (path, *path.parents) if p.is_file()), path)
             raise IncompatibleRunDirError(
-                f"run_dir {str(path)!r} cannot be a directory: {exc.filename or path} is a file. "
-                "Give a new directory path for a new session (or a session's directory to "
-                "resume it)."
+                f"run_dir {str(path)!r} cannot be a directory: {culprit} is a file. Give a new "
+                "directory path for a new session (or a session's directory to resume it)."
             ) from exc
         except OSError as exc:
             raise _write_error(
@@ -1561,8 +1561,12 @@ def resume_problems(
         if "max_episode_steps" in senv and senv["max_episode_steps"] != env_max_episode_steps:
             differ["max_episode_steps"] = (senv["max_episode_steps"], env_max_episode_steps)
         if differ:
-            steps = senv.get("max_episode_steps")
-            cap = "" if steps is None else f", max_episode_steps={steps}"
+            if "max_episode_steps" not in senv:
+                cap = ""
+            elif senv["max_episode_steps"] is None:  # no TimeLimit; -1 removes a registered one
+                cap = ", max_episode_steps=-1"
+            else:
+                cap = f", max_episode_steps={senv['max_episode_steps']}"
             problems.append(
                 f"env kwargs (stored, given): {differ}; make the env as the session did, "
                 f"gymnasium.make({senv['id']!r}{cap}, **{stored_kw})"
@@ -1579,10 +1583,14 @@ def resume_problems(
             for k in sorted(set(kept) | set(model_args))
             if kept.get(k) != model_args.get(k)
         }
-        problems.append(
-            f"model args (stored, given): {diff}; build the model as the session did, "
-            f"GaussianMixtureSet(**{stored['model']['args']}), or leave model= out"
-        )
+        if "error" in model_args:  # the given model's arguments could not be read
+            problems.append(f"model: {model_args['error']}")
+        else:
+            problems.append(
+                f"model args (stored, given): {diff}; build the model as the session did, "
+                f"{stored['model'].get('class', 'GaussianMixtureSet')}"
+                f"(**{stored['model']['args']}), or leave model= out"
+            )
     if strategy is not None:
         want = stored_strategy(stored)
         if strategy.get("custom") or want.get("custom"):
