@@ -69,15 +69,18 @@ from corridor.world import SENSOR_NAMES, Action, WorldConfig
 from torchcbl.evaluation import mean_sd, run_versions, worker_pool
 
 if TYPE_CHECKING:
-    from torchcbl import GaussianMixtureSet
+    from torchcbl import GaussianMixtureSet, TeachingConfig
 
 __all__ = [
     "PAPER",
     "CorridorExperimentConfig",
+    "evaluate_saved_policy",
     "format_summary",
     "make_model",
+    "plot_results",
     "run_experiment",
     "run_seed",
+    "teaching_setup",
 ]
 
 #: The paper's Section 5.1 numbers.
@@ -162,7 +165,7 @@ class CorridorExperimentConfig:
     map_name: str = "figure2"
     seeds: tuple[int, ...] = tuple(range(10))
     world: WorldConfig = field(default_factory=WorldConfig.legged_robot)
-    teaching: Any = field(default_factory=_default_teaching)
+    teaching: TeachingConfig = field(default_factory=_default_teaching)
     max_std: float = 2.0
     threshold_reading: str = "coverage"
     eval_circuits: int = 10
@@ -187,16 +190,50 @@ class CorridorExperimentConfig:
             raise ValueError(f"var_floor must be a finite number >= 0, got {self.var_floor!r}")
         if not isinstance(self.cba, bool):
             raise ValueError(f"cba must be True or False, got {self.cba!r}")
-        if len(self.seeds) < 1 or len(set(self.seeds)) != len(self.seeds):
-            raise ValueError("seeds must be a non-empty tuple of distinct ints")
-        if not self.max_std > 0:
-            raise ValueError(f"max_std must be > 0, got {self.max_std}")
+        from torchcbl.teaching import STOP_FIELDS, TeachingConfig
+
+        for name, want in (
+            ("world", WorldConfig),
+            ("ps", PrioritizedSweepingConfig),
+            ("teaching", TeachingConfig),
+        ):
+            if not isinstance(getattr(self, name), want):
+                raise ValueError(
+                    f"{name} must be a {want.__name__}, got {type(getattr(self, name)).__name__}"
+                )
+        if all(getattr(self.teaching, name) is None for name in STOP_FIELDS):
+            raise ValueError(
+                f"teaching: no stop criterion is set (one of {STOP_FIELDS}); the paper's is "
+                "autonomous_episodes_to_stop=10, with max_steps as a cap"
+            )
+        if (
+            not isinstance(self.seeds, (tuple, list))
+            or not self.seeds
+            or len(set(self.seeds)) != len(self.seeds)
+            or any(
+                isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0
+                for s in self.seeds
+            )
+        ):
+            raise ValueError(
+                f"seeds must be a non-empty tuple of distinct ints >= 0, got {self.seeds!r}"
+            )
+        if (
+            isinstance(self.max_std, bool)
+            or not isinstance(self.max_std, (int, float))
+            or not (math.isfinite(self.max_std) and self.max_std > 0)
+        ):
+            raise ValueError(f"max_std must be a finite number > 0, got {self.max_std!r}")
         if self.threshold_reading not in _READINGS:
             raise ValueError(
                 f"threshold_reading: expected one of {_READINGS}, got {self.threshold_reading!r}"
             )
-        if self.eval_circuits < 1:
-            raise ValueError("eval_circuits must be >= 1")
+        if (
+            isinstance(self.eval_circuits, (bool, np.bool_))
+            or not isinstance(self.eval_circuits, (int, np.integer))
+            or self.eval_circuits < 1
+        ):
+            raise ValueError(f"eval_circuits must be an int >= 1, got {self.eval_circuits!r}")
         # what the workers would only find after each seed's teaching, checked now
         try:
             self.rule()

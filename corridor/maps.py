@@ -120,7 +120,8 @@ class CorridorMap:
 
     # ------------------------------------------------------------------ geometry
     def free_cells(self) -> tuple[np.ndarray, tuple[int, int]]:
-        """Boolean occupancy grid of free space ``[nx, ny]`` and the (i, j) index of x=y=0."""
+        """Boolean occupancy grid of free space ``[nx, ny]`` and ``(i0, j0)``, the global grid
+        index of cell ``[0, 0]`` (its lower-left corner is at ``(i0 * grid, j0 * grid)`` m)."""
         if "cells" not in self._cache:
             h = self.corridor_width / 2
             rects = []

@@ -67,10 +67,19 @@ class DrivingConfig:
 
     def __post_init__(self) -> None:
         get_scenario(self.scenario)
-        if self.max_episode_steps < 1:
-            raise ValueError("max_episode_steps must be positive")
-        if not 0 <= self.start_lane < N_LANES:
-            raise ValueError(f"start_lane must lie in [0, {N_LANES - 1}]")
+        steps = self.max_episode_steps
+        if isinstance(steps, (bool, np.bool_)) or not isinstance(steps, (int, np.integer)):
+            raise ValueError(f"max_episode_steps must be an int >= 1, got {steps!r}")
+        if steps < 1:
+            raise ValueError(f"max_episode_steps must be an int >= 1, got {steps!r}")
+        if _as_int(self.start_lane) is None or not 0 <= self.start_lane < N_LANES:
+            raise ValueError(
+                f"start_lane must be a lane index 0-{N_LANES - 1}, got {self.start_lane!r}"
+            )
+        if not isinstance(self.sim, SimConfig):
+            raise ValueError(
+                f"sim must be a SimConfig (sumo_scenarios.sim), got {type(self.sim).__name__}"
+            )
 
 
 @dataclass(frozen=True)
@@ -131,6 +140,14 @@ class DrivingEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start a new road segment: ``(observation [4], info)``.
+
+        ``seed`` fixes the segment (traffic drawn from ``SeedSequence([scenario.seed, seed])``;
+        None draws one from the env's RNG). ``options``: ``ego_lane`` (0-4, default
+        ``config.start_lane``) and ``fcd_output`` (a path for SUMO's FCD XML of this episode).
+        The observation is ``[d_right, d_middle, d_left, lane]``: signed metres to the nearest
+        car of each normal lane (ahead positive, clipped to +-25 m) and the ego's lane index.
+        """
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = set(options) - {"ego_lane", "fcd_output"}
@@ -160,6 +177,10 @@ class DrivingEnv(gym.Env):
         return self._observe(), self._info()
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Drive one decision period (0.25 s): ``action`` 0 stay, 1 one lane left, 2 one lane
+        right (at the road's edge a shift is a stay). Returns ``(observation [4], reward,
+        terminated, truncated, info)``: reward -1 in a step in contact with a car, else 0;
+        never terminated; truncated after ``config.max_episode_steps`` steps."""
         if self.closed:
             raise RuntimeError("this DrivingEnv is closed; create a new one")
         if self._episode_seed is None:
@@ -181,6 +202,8 @@ class DrivingEnv(gym.Env):
         return self._sim.__reduce_ex__(protocol)  # refused, with what to do instead
 
     def render(self) -> np.ndarray | None:
+        """The current timestep drawn as an RGB image [H, W, 3] uint8 (``render_mode=
+        "rgb_array"``), else None."""
         if self.render_mode != "rgb_array":
             return None
         from sumo_scenarios.render import render_frame
@@ -188,6 +211,7 @@ class DrivingEnv(gym.Env):
         return render_frame(self.frame())
 
     def close(self) -> None:
+        """Release the SUMO simulation (if this env holds it) and finalise any FCD output."""
         self._sim.close()
 
     # ------------------------------------------------------------------ helpers

@@ -56,6 +56,14 @@ PAPER = {
 }
 
 
+def _check_whole(name: str, value: Any, minimum: int) -> None:
+    """A setting that counts: an int (not a bool) >= ``minimum``, else a ValueError."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
+
+
 @dataclass(frozen=True)
 class DrivingExperimentConfig:
     """Settings of the Section 5.2 experiment (defaults: the quick variant).
@@ -83,7 +91,8 @@ class DrivingExperimentConfig:
             so the mean over seeds is not tied to one road.
         extra_eval_segments: further held-out segments (offsets like ``eval_segment``) every
             policy also drives, for a secondary average (off in quick mode, for time).
-        criterion: the GMM's model-selection criterion (``aic`` or ``bic``).
+        criterion: the GMM's model-selection criterion (``aic``, ``bic`` or ``aic_paper``, the
+            paper's Eq. 5).
         var_floor: the GMM's relative variance floor (:mod:`torchcbl.gmm`): a component's
             spread along a feature is at least ``sqrt(var_floor)`` of that feature's standard
             deviation over the training set, about 3 m for the distances and 0.2 for the lane
@@ -128,29 +137,40 @@ class DrivingExperimentConfig:
     ni_stage_every: int = 100
 
     def __post_init__(self) -> None:
-        if not self.seeds:
-            raise ValueError("need at least one seed")
-        if self.confident_demos % self.stage_every:
-            raise ValueError("confident_demos must be a multiple of stage_every")
-        if min(self.eval_steps, self.max_new, self.burst, self.stage_every) < 1:
-            raise ValueError("eval_steps, max_new, burst and stage_every must be positive")
-        if (
-            self.eval_segment in self.extra_eval_segments
-            or min((self.eval_segment, *self.extra_eval_segments)) < 0
-        ):
-            raise ValueError("eval segments must be distinct non-negative seeds")
-        if list(self.arm_b_stages) != sorted(set(self.arm_b_stages)) or not self.arm_b_stages:
-            raise ValueError("arm_b_stages must be non-empty and strictly increasing")
         for name in (
+            "eval_steps",
             "accuracy_window",
             "max_noninteractive",
             "confident_demos",
+            "stage_every",
+            "burst",
+            "max_new",
             "max_components",
             "train_episode_steps",
+            "ni_stage_every",
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be an int >= 1, got {v!r}")
+            _check_whole(name, getattr(self, name), 1)
+        _check_whole("eval_segment", self.eval_segment, 0)
+        for name, minimum in (("seeds", 0), ("extra_eval_segments", 0), ("arm_b_stages", 1)):
+            values = getattr(self, name)
+            if not isinstance(values, (tuple, list)):
+                raise ValueError(f"{name} must be a tuple of ints, got {values!r}")
+            for v in values:
+                _check_whole(f"each of {name}", v, minimum)
+        if not self.seeds or len(set(self.seeds)) != len(self.seeds):
+            raise ValueError(f"seeds must be distinct, at least one, got {self.seeds!r}")
+        if self.confident_demos % self.stage_every:
+            raise ValueError("confident_demos must be a multiple of stage_every")
+        if self.eval_segment in self.extra_eval_segments or len(
+            set(self.extra_eval_segments)
+        ) != len(self.extra_eval_segments):
+            raise ValueError("eval segments must be distinct non-negative seeds")
+        if list(self.arm_b_stages) != sorted(set(self.arm_b_stages)) or not self.arm_b_stages:
+            raise ValueError("arm_b_stages must be non-empty and strictly increasing")
+        if isinstance(self.target_accuracy, bool) or not isinstance(
+            self.target_accuracy, (int, float)
+        ):
+            raise ValueError(f"target_accuracy must be a number, got {self.target_accuracy!r}")
         if not 0.0 < self.target_accuracy <= 1.0:
             raise ValueError(f"target_accuracy must lie in (0, 1], got {self.target_accuracy!r}")
         if not (math.isfinite(self.max_std) and self.max_std > 0):
@@ -169,8 +189,6 @@ class DrivingExperimentConfig:
             )
         if self.teacher not in ("expert", "human"):
             raise ValueError(f"teacher must be 'expert' or 'human', got {self.teacher!r}")
-        if self.ni_stage_every < 1:
-            raise ValueError("ni_stage_every must be positive")
 
     @classmethod
     def full(cls) -> DrivingExperimentConfig:
@@ -505,10 +523,15 @@ def run_experiment(
     The seeds run in spawned processes (libsumo holds one simulation per process), which
     import the caller's main module: from a script, call ``run_experiment`` under
     ``if __name__ == "__main__":``.
+
+    Raises FileExistsError if ``run_dir`` already holds a results.json (its sessions would
+    collide with the new run's).
     """
     if workers < 1:
         raise ValueError("workers must be positive")
     run_dir = Path(run_dir)
+    if (run_dir / "results.json").exists():
+        raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")
     run_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     jobs = [(config, s, str(run_dir / f"seed_{s}")) for s in config.seeds]

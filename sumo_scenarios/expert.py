@@ -83,6 +83,9 @@ class ScriptedExpert:
         self._u = float(self._rng.random())
 
     def __call__(self, observation: np.ndarray, info: dict[str, Any]) -> int:
+        """The expert's action (0 stay, 1 left, 2 right) for a :class:`DrivingEnv` observation
+        [4] (metres, metres, metres, lane index) and its info (the expert reads the lane and
+        the cars' positions relative to the ego, ``info["car_rel_m"]``, metres)."""
         try:
             lane = int(info["lane"])
             rel = np.asarray(info["car_rel_m"], dtype=np.float64)

@@ -21,9 +21,12 @@ answers), the right lane's 40 m is unchanged.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
+
+import numpy as np
 
 MPH = 0.44704
 """Metres per second in one mile per hour."""
@@ -84,6 +87,21 @@ class TrafficScenario:
     start_clear_m: float = 30.0
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str):
+            raise ValueError(f"name must be a str, got {self.name!r}")
+        if (
+            isinstance(self.seed, (bool, np.bool_))
+            or not isinstance(self.seed, (int, np.integer))
+            or self.seed < 0
+        ):
+            raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
+        numbers = [self.min_spacing_m, self.ahead_m, self.behind_m, self.start_clear_m]
+        numbers += [*self.mean_spacing_m, *(v for r in self.speed_ranges_mph for v in r)]
+        for v in numbers:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"every distance and speed must be a finite number, got {v!r}")
+        if self.start_clear_m < 0:
+            raise ValueError(f"start_clear_m must be >= 0 m, got {self.start_clear_m!r}")
         if len(self.speed_ranges_mph) != 3 or len(self.mean_spacing_m) != 3:
             raise ValueError("speed_ranges_mph and mean_spacing_m need one entry per normal lane")
         for rng in self.speed_ranges_mph:

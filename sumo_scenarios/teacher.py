@@ -285,6 +285,9 @@ class HumanDriver:
         return nxt > _CAR_M and (c <= 0 or (nxt - _CAR_M) / c >= need)
 
     def __call__(self, observation: np.ndarray, info: dict) -> int:
+        """The driver's decision (0 stay, 1 left, 2 right) for a :class:`DrivingEnv`
+        observation [4] (metres to the nearest car in lanes 1-3, lane index) and its info
+        (``closing_speed_ms``, m/s per lane, and ``step_length_s``)."""
         d, lane, closing, dt = _read(observation, info)
         cfg = self.config
         t = info.get("t")

@@ -310,3 +310,28 @@ def test_a_score_the_env_never_feeds_is_called_out_not_read_as_instant_learning(
     assert row["teacher_performance"]["mean"] == 0.0
     assert row["labels_to_95pct"]["mean"] is None
     assert [s["labels"] for s in row["labels_to_95pct"]["per_seed"]] == [None]
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        ({"teaching": {"max_nwe": 2}}, "teaching: .*max_nwe"),
+        ({"teaching": {"max_new": 0}}, "teaching: .*max_new"),
+        ({"model": {"max_componets": 2}}, "model: .*max_componets"),
+        ({"model": {"seed": 1}}, r"model: \['seed'\] come from"),
+        ({"eval_seeds": "abc"}, "eval_seeds must be a non-empty tuple of ints"),
+        ({"eval_seeds": (1.5,)}, "eval_seeds must be a non-empty tuple of ints"),
+        ({"budgets": (True,)}, "budgets must be increasing ints"),
+        ({"max_steps": True}, "max_steps must be an int"),
+    ],
+)
+def test_an_env_spec_refuses_what_every_worker_would_fail_on(bad, message):
+    with pytest.raises(ValueError, match=message):
+        _env(**bad)
+
+
+def test_a_strategy_spec_is_a_known_name_or_an_import_path():
+    for name in ("dagerr", 5):
+        with pytest.raises(ValueError, match="StrategySpec: name must be one of"):
+            bm.StrategySpec(name)
+    bm.StrategySpec("torchcbl.strategies.bc:BehaviourCloning")  # a path is resolved later

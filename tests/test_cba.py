@@ -36,8 +36,9 @@ def test_chi2_quantile_matches_scipy_and_the_dimension_argument():
     rule = DistanceRule(quantile=0.95)
     assert rule.threshold(6) == pytest.approx(math.sqrt(stats.chi2.ppf(0.95, 6)))
     assert rule.to_config() == {"type": "DistanceRule", "quantile": 0.95}
-    with pytest.raises(ValueError, match="not both"):
-        DistanceRule(3.0, quantile=0.9)
+    for max_std in (3.0, 2.0):  # the paper's value given is given too
+        with pytest.raises(ValueError, match="not both"):
+            DistanceRule(max_std, quantile=0.9)
     assert DistanceRule(quantile=np.float32(0.95)).quantile == pytest.approx(0.95)
     for bad in (1.0, 95, 0.0, float("nan"), True):  # a share, not a percentage
         with pytest.raises(ValueError, match=r"expected a share in \(0, 1\) \(e.g. 0.95"):

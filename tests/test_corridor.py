@@ -178,6 +178,19 @@ def test_experiment_config_checks_what_the_workers_would_find_late():
         CorridorExperimentConfig(var_floor=math.nan)
     with pytest.raises(ValueError, match="cba must be True or False, got 'no'"):
         CorridorExperimentConfig(cba="no")
+    from torchcbl import TeachingConfig
+
+    with pytest.raises(ValueError, match="teaching must be a TeachingConfig, got dict"):
+        CorridorExperimentConfig(teaching={"max_steps": 10})
+    with pytest.raises(ValueError, match="teaching: no stop criterion"):
+        CorridorExperimentConfig(teaching=TeachingConfig())
+    with pytest.raises(ValueError, match="world must be a WorldConfig, got dict"):
+        CorridorExperimentConfig(world={})
+    for seeds in ((0, 0), (1.5,), (-1,), 3, ()):
+        with pytest.raises(ValueError, match="seeds must be a non-empty tuple of distinct ints"):
+            CorridorExperimentConfig(seeds=seeds)
+    with pytest.raises(ValueError, match="eval_circuits must be an int >= 1, got 2.5"):
+        CorridorExperimentConfig(eval_circuits=2.5)
 
 
 def test_the_experiments_learner_has_its_cap_and_floor():

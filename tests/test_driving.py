@@ -188,6 +188,25 @@ def test_bad_action_and_options(env):
     assert env.reset(seed=0, options={"ego_lane": np.int64(3)})[1]["lane"] == 3
     with pytest.raises(ValueError):
         TrafficScenario(name="x", seed=0, speed_ranges_mph=((10.0, 30.0), (25, 35), (30, 40)))
+    for bad in (
+        {"seed": -1},
+        {"seed": "a"},
+        {"min_spacing_m": float("nan")},
+        {"ahead_m": float("inf")},
+        {"start_clear_m": -50.0},
+    ):
+        with pytest.raises(ValueError, match="seed|finite|start_clear_m"):
+            TrafficScenario(name="x", **{"seed": 0, **bad})
+    from sumo_scenarios.env import DrivingConfig
+
+    for bad in (
+        {"max_episode_steps": float("nan")},
+        {"max_episode_steps": 2.5},
+        {"start_lane": 1.5},
+        {"sim": {}},
+    ):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            DrivingConfig(**bad)
 
 
 def test_contact_matches_hand_overlap_and_actions_clamp(env):

@@ -146,6 +146,14 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
         {"arm_b_stages": (600, 600, 700)},
         {"var_floor": -0.01},
         {"var_floor": float("nan")},
+        {"stage_every": 0},  # was a ZeroDivisionError
+        {"seeds": (0, 0)},  # two workers into one seed_0
+        {"seeds": (-1,)},
+        {"eval_steps": float("nan")},
+        {"burst": 1.5},
+        {"arm_b_stages": (0, 10)},
+        {"eval_segment": 1.5},
+        {"target_accuracy": True},
     ],
 )
 def test_experiment_config_refuses_what_every_worker_would_fail_on(bad):

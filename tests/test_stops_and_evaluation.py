@@ -151,6 +151,8 @@ def test_evaluating_a_policy_taught_on_another_env_names_the_mismatch():
         evaluate_policy(GreedyPolicy(model), env, n_steps=5)
     records = evaluate_policy(GreedyPolicy(model), four_d_world(episode_length=5), n_steps=5)
     assert len(records) == 5
+    with pytest.raises(ValueError, match=r"one observation of shape \(4,\), got shape \(2, 4\)"):
+        GreedyPolicy(model)(np.zeros((2, 4)))  # a batch: model.classify is the way
 
 
 def test_a_teacher_answering_with_a_0d_torch_tensor_is_understood():

@@ -45,6 +45,7 @@ import inspect
 import json
 import os
 import time
+import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field
@@ -120,14 +121,28 @@ class StrategySpec:
 
     Attributes:
         name: a key of :data:`STRATEGY_PATHS` or an import path ``"module:Class"``.
-        params: keyword arguments of the class. For ``"confident"``, ``max_std`` (default 2)
-            builds ``ConfidentExecution(DistanceRule(max_std))``.
+        params: keyword arguments of the class. For ``"confident"``, the
+            :class:`~torchcbl.confidence.DistanceRule`'s (``max_std``, default 2, or
+            ``quantile``): ``ConfidentExecution(DistanceRule(**params))``.
         label: the name in tables and plots (default: ``name``).
     """
 
     name: str
     params: Mapping[str, Any] = field(default_factory=dict)
     label: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or (
+            self.name not in STRATEGY_PATHS and ":" not in self.name
+        ):
+            raise ValueError(
+                f"StrategySpec: name must be one of {sorted(STRATEGY_PATHS)} or an import path "
+                f"'module:Class', got {self.name!r}"
+            )
+        if not isinstance(self.params, Mapping):
+            raise ValueError(f"StrategySpec {self.name!r}: params must be a mapping")
+        if self.label is not None and not isinstance(self.label, str):
+            raise ValueError(f"StrategySpec {self.name!r}: label must be a str or None")
 
     @property
     def title(self) -> str:
@@ -142,7 +157,7 @@ class StrategySpec:
             from torchcbl.confidence import DistanceRule
             from torchcbl.strategies import ConfidentExecution
 
-            return ConfidentExecution(DistanceRule(float(params.pop("max_std", 2.0)), **params))
+            return ConfidentExecution(DistanceRule(**params))
         return _import(path)(**params)
 
     def to_dict(self) -> dict[str, Any]:
@@ -189,11 +204,19 @@ class EnvSpec:
 
     def __post_init__(self) -> None:
         b = list(self.budgets)
-        if not b or any(not isinstance(x, int) or x < 1 for x in b) or b != sorted(set(b)):
+        if (
+            not b
+            or any(isinstance(x, bool) or not isinstance(x, int) or x < 1 for x in b)
+            or b != sorted(set(b))
+        ):
             raise ValueError(
                 f"EnvSpec {self.name!r}: budgets must be increasing ints >= 1, got {self.budgets!r}"
             )
-        if not isinstance(self.max_steps, int) or self.max_steps < 1:
+        if (
+            isinstance(self.max_steps, bool)
+            or not isinstance(self.max_steps, int)
+            or self.max_steps < 1
+        ):
             raise ValueError(f"EnvSpec {self.name!r}: max_steps must be an int >= 1")
         if self.eval_episodes is None and self.eval_steps is None:
             raise ValueError(f"EnvSpec {self.name!r}: give eval_episodes and/or eval_steps")
@@ -203,8 +226,40 @@ class EnvSpec:
                 raise ValueError(
                     f"EnvSpec {self.name!r}: {name} must be None or an int >= 1, got {v!r}"
                 )
-        if not self.eval_seeds:
-            raise ValueError(f"EnvSpec {self.name!r}: eval_seeds must not be empty")
+        if not isinstance(self.name, str):
+            raise ValueError(f"EnvSpec: name must be a str, got {self.name!r}")
+        if (
+            isinstance(self.eval_seeds, (str, bytes))
+            or not self.eval_seeds
+            or any(
+                isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0
+                for s in self.eval_seeds
+            )
+        ):
+            raise ValueError(
+                f"EnvSpec {self.name!r}: eval_seeds must be a non-empty tuple of ints >= 0, "
+                f"got {self.eval_seeds!r}"
+            )
+        # what every worker would fail on at its first cell, checked now
+        from torchcbl.gmm import GaussianMixtureSet
+        from torchcbl.teaching import TeachingConfig
+
+        try:
+            TeachingConfig(**dict(self.teaching))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"EnvSpec {self.name!r}: teaching: {exc}") from None
+        taken = {"n_actions", "n_features", "seed"} & set(self.model)
+        if taken:
+            raise ValueError(
+                f"EnvSpec {self.name!r}: model: {sorted(taken)} come from the env and the cell's "
+                "seed; leave them out"
+            )
+        try:
+            inspect.signature(GaussianMixtureSet).bind(2, 2, **dict(self.model))
+        except TypeError as exc:
+            raise ValueError(
+                f"EnvSpec {self.name!r}: model: {exc} (GaussianMixtureSet's keyword arguments)"
+            ) from None
         if ":" not in self.score:
             raise ValueError(
                 f"EnvSpec {self.name!r}: score must be an import path 'module:function', "
@@ -735,7 +790,10 @@ def plot_curves(
                 continue
             grid = sorted({int(p["labels"]) for c in runs for p in c["curve"]})
             ys = np.array([[_perf_at(c, b) for b in grid] for c in runs], dtype=float)
-            m, s = np.nanmean(ys, axis=0), np.nanstd(ys, axis=0)
+            with warnings.catch_warnings():  # one run at a budget: no spread (NaN, not drawn)
+                warnings.simplefilter("ignore", RuntimeWarning)
+                # ddof=1: the sd of the tables (mean_sd), not the narrower population sd
+                m, s = np.nanmean(ys, axis=0), np.nanstd(ys, axis=0, ddof=1)
             (line,) = ax.plot(grid, m, marker=".", label=strat)
             ax.fill_between(grid, m - s, m + s, alpha=0.15, color=line.get_color())
         teacher = [float(c["teacher_performance"]) for c in mine]

@@ -130,17 +130,19 @@ class DistanceRule:
     from the observations (or from the model at the first update).
 
     Args:
-        max_std: fixed threshold in standard deviations (> 0). Default 2.0, the paper's value.
+        max_std: fixed threshold in standard deviations (> 0). Default (None) 2.0, the
+            paper's value.
         quantile: in (0, 1); when given, the threshold is the chi-square quantile above and
-            ``max_std`` must be left at its default.
+            ``max_std`` must not be given.
     """
 
-    def __init__(self, max_std: float = 2.0, *, quantile: float | None = None) -> None:
-        self.max_std = _check_positive("DistanceRule.max_std", max_std)
+    def __init__(self, max_std: float | None = None, *, quantile: float | None = None) -> None:
+        given = max_std
+        self.max_std = _check_positive("DistanceRule.max_std", 2.0 if max_std is None else max_std)
         self.quantile: float | None = None
         self._thresholds: dict[int, float] = {}
         if quantile is not None:
-            if float(max_std) != 2.0:
+            if given is not None:
                 raise ValueError(
                     f"DistanceRule: give max_std ({max_std!r}) or quantile ({quantile!r}), "
                     "not both."

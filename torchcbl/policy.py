@@ -33,8 +33,14 @@ class GreedyPolicy:
 
     def classify(self, observation: Any) -> Classification:
         """The model's Classification of one observation [D] (batched fields of length 1)."""
-        x = torch.as_tensor(np.asarray(observation, dtype=np.float64)).reshape(1, -1)
-        return self.model.classify(x)
+        x = np.asarray(observation, dtype=np.float64)
+        n_features = getattr(self.model, "n_features", None)
+        if x.ndim != 1 or (isinstance(n_features, int) and x.shape[0] != n_features):
+            raise ValueError(
+                f"GreedyPolicy: expected one observation of shape ({n_features},), got shape "
+                f"{x.shape}; for a batch [N, D] call policy.model.classify(batch)"
+            )
+        return self.model.classify(torch.as_tensor(x).reshape(1, -1))
 
     def __call__(self, observation: Any) -> int:
         """The model's action for one observation [D] (Eq. 7); RuntimeError before any fit."""

@@ -111,6 +111,10 @@ class HumanTiming:
         return action
 
     def __call__(self, observation: np.ndarray, info: dict) -> int:
+        """The wrapped teacher's action for ``observation`` [D], as the person would press it:
+        a press may come ``k`` steps late (``delay_probs``), be lost or be repeated; while one
+        is pending the answer is ``default_action`` (``info["t"]`` tells consecutive steps
+        apart)."""
         cfg = self.config
         t = info.get("t") if isinstance(info, dict) else None
         if t is None or self._last_t is None or t != self._last_t + 1:
