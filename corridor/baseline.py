@@ -232,10 +232,17 @@ class PrioritizedSweepingConfig:
             raise ValueError("cell_size must be > 0 m")
         if self.wall_threshold <= 0:
             raise ValueError("wall_threshold must be > 0 m")
+        if not isinstance(self.directed, bool):
+            raise ValueError(f"directed must be True or False, got {self.directed!r}")
+        for name in ("contact_penalty", "min_priority"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
 
 
 def binary_state(observation: np.ndarray, wall_threshold: float) -> int:
-    """The state index in [0, 8): bit 2 left, bit 1 front, bit 0 right; 1 = wall near."""
+    """The state index in [0, 8) of a corridor observation [3] (left, front, right ranges,
+    metres): bit 2 left, bit 1 front, bit 0 right; 1 = a wall nearer than ``wall_threshold``
+    metres."""
     o = np.asarray(observation, dtype=float).reshape(3)
     bits = (o < wall_threshold).astype(int)
     return int(bits[0] * 4 + bits[1] * 2 + bits[2])

@@ -96,9 +96,14 @@ class CorridorEnv(gym.Env):
                 f"corridor_map must be a CorridorMap, a map name or a path, got {corridor_map!r}"
             )
         self.world = CorridorWorld(corridor_map, world_config)
-        self.max_episode_steps = 81 if max_episode_steps is None else int(max_episode_steps)
-        if self.max_episode_steps < 1:
-            raise ValueError("max_episode_steps must be >= 1")
+        steps = 81 if max_episode_steps is None else max_episode_steps
+        if (
+            isinstance(steps, (bool, np.bool_))
+            or not isinstance(steps, (int, np.integer))
+            or steps < 1
+        ):
+            raise ValueError(f"max_episode_steps must be an int >= 1, got {steps!r}")
+        self.max_episode_steps = int(steps)
         self.render_mode = render_mode
         if start_perturbation is not None:
             d, a = (float(v) for v in start_perturbation)

@@ -381,7 +381,12 @@ def available_maps() -> list[str]:
 def load_map(name_or_path: str | Path) -> CorridorMap:
     """Load a shipped map by name (``"figure2"``, ``"lshape"``) or any map JSON file by path."""
     path = Path(name_or_path)
-    if path.suffix == ".json" and path.exists():
+    if path.suffix == ".json":  # a file path
+        if not path.is_file():
+            raise FileNotFoundError(
+                f"map file {str(path)!r} not found; give an existing map JSON file or one of the "
+                f"shipped map names {available_maps()}"
+            )
         text = path.read_text()
     else:
         res = resources.files("corridor") / "maps" / f"{name_or_path}.json"

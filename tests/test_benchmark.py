@@ -335,3 +335,10 @@ def test_a_strategy_spec_is_a_known_name_or_an_import_path():
         with pytest.raises(ValueError, match="StrategySpec: name must be one of"):
             bm.StrategySpec(name)
     bm.StrategySpec("torchcbl.strategies.bc:BehaviourCloning")  # a path is resolved later
+
+
+def test_run_benchmark_refuses_a_worker_count_below_one(tmp_path):
+    for workers in (0, -2, True):
+        with pytest.raises(ValueError, match="workers must be None"):
+            bm.run_benchmark(STRATEGIES, [_env()], [0], tmp_path / "out", workers=workers)
+    assert not (tmp_path / "out").exists()

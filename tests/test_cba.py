@@ -40,6 +40,13 @@ def test_chi2_quantile_matches_scipy_and_the_dimension_argument():
         with pytest.raises(ValueError, match="not both"):
             DistanceRule(max_std, quantile=0.9)
     assert DistanceRule(quantile=np.float32(0.95)).quantile == pytest.approx(0.95)
+    from torchcbl.confidence import AutoThresholdRule
+    from torchcbl.strategies.cba import posterior_margin
+
+    with pytest.raises(ValueError, match="AutoThresholdRule.min_std"):
+        AutoThresholdRule(min_std="1.0")
+    with pytest.raises(ValueError, match="A >= 2 actions"):
+        posterior_margin(np.ones((3, 1)))
     for bad in (1.0, 95, 0.0, float("nan"), True):  # a share, not a percentage
         with pytest.raises(ValueError, match=r"expected a share in \(0, 1\) \(e.g. 0.95"):
             DistanceRule(quantile=bad)

@@ -462,6 +462,18 @@ def test_prioritized_sweeping_config_rejects_bad_values():
     for bad in (dict(min_priority=math.nan), dict(contact_penalty=math.inf), dict(n_backups=2.5)):
         with pytest.raises(ValueError, match=next(iter(bad))):
             PrioritizedSweepingConfig(**bad)
+    for bad in (dict(directed="no"), dict(contact_penalty=-5.0), dict(min_priority=-1.0)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            PrioritizedSweepingConfig(**bad)
+
+
+def test_a_map_file_that_is_not_there_and_a_fractional_step_cap_are_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match="map file .*missing.json.* not found"):
+        load_map(tmp_path / "missing.json")
+    with pytest.raises(ValueError, match="unknown map 'nope'"):
+        load_map("nope")
+    with pytest.raises(ValueError, match="max_episode_steps must be an int >= 1, got 2.7"):
+        CorridorEnv(max_episode_steps=2.7)
 
 
 _PS_ON_FIGURE2 = """

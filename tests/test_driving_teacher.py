@@ -80,6 +80,9 @@ def test_human_timing_delays_by_the_drawn_number_of_steps_and_is_seeded():
 
 
 def test_human_timing_misses_and_doubles_presses_at_the_given_rates():
+    assert HumanTimingConfig(delay_probs=[0.5, 0.5]).delay_probs == (0.5, 0.5)  # hashable
+    with pytest.raises(TypeError, match="config must be a HumanTimingConfig, got dict"):
+        HumanTiming(lambda obs, info: 0, {"miss_prob": 0.1})
     cfg = HumanTimingConfig(delay_probs=(1.0,), miss_prob=0.2, double_prob=0.0)
     h = HumanTiming(lambda o, i: 0, cfg, seed=0)
     got = _replies(h, [1, 0] * 2000)

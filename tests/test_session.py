@@ -177,6 +177,10 @@ def test_existing_or_incompatible_run_dir_is_a_clear_error(tmp_path):
     with pytest.raises(IncompatibleRunDirError, match="model args") as err:
         ConfidentTeacher.resume(run, env, oracle(env), model=GaussianMixtureSet(3, 2, 4))
     assert "{'max_components': (10, 4)}" in str(err.value)  # only what differs
+    from torchcbl.session import restore_model
+
+    with pytest.raises(ValueError, match="max_new must be an int >= 1"):
+        restore_model(run, GaussianMixtureSet(3, 2, 4), [], [], max_new=0, relabel=False)
     with pytest.raises(IncompatibleRunDirError, match="is a file"):
         make(env, run / "config.json")  # a file where a directory should be
     with pytest.raises(IncompatibleRunDirError, match=f"directory: {run / 'config.json'} is a"):

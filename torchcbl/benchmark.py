@@ -613,6 +613,10 @@ def run_benchmark(
             f"run_benchmark: seeds must be distinct (a repeated seed repeats the same cells and "
             f"counts them twice), got {list(seeds)}"
         )
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
+    ):
+        raise ValueError(f"workers must be None (os.cpu_count()) or an int >= 1, got {workers!r}")
     _check_imports(strategies, envs)
     out = Path(out_dir)
     (out / "cells").mkdir(parents=True, exist_ok=True)

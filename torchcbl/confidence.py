@@ -269,7 +269,11 @@ class AutoThresholdRule:
 
     def __init__(self, max_std: float = 2.0, min_std: float = 0.0) -> None:
         self.max_std = _check_positive("AutoThresholdRule.max_std", max_std)
-        if isinstance(min_std, bool) or not (0.0 <= float(min_std) <= self.max_std):
+        if (
+            isinstance(min_std, (bool, np.bool_))
+            or not isinstance(min_std, (int, float, np.integer, np.floating))
+            or not 0.0 <= float(min_std) <= self.max_std
+        ):
             raise ValueError(
                 f"AutoThresholdRule.min_std: expected a value in [0, max_std={self.max_std}], "
                 f"got {min_std!r}"

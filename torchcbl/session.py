@@ -1314,6 +1314,8 @@ def build_model(config: dict[str, Any]) -> GaussianMixtureSet:
 def fit_count(n_demonstrations: int, max_new: int) -> int:
     """Demonstrations the loop's model stands on after ``n_demonstrations``, when every refit
     was the loop's own (one each time ``max_new`` new demonstrations have accumulated)."""
+    if isinstance(max_new, bool) or not isinstance(max_new, (int, np.integer)) or max_new < 1:
+        raise ValueError(f"max_new must be an int >= 1 (the refit period), got {max_new!r}")
     return (n_demonstrations // max_new) * max_new
 
 

@@ -65,6 +65,8 @@ class HumanTimingConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < 1.0:
                 raise ValueError(f"{name} must lie in [0, 1), got {v}")
+        # a tuple, whatever sequence was given: the config stays hashable, as a frozen one is
+        object.__setattr__(self, "delay_probs", tuple(float(x) for x in p))
 
 
 class HumanTiming:
@@ -89,6 +91,11 @@ class HumanTiming:
         if not callable(teacher):
             raise TypeError(
                 f"teacher must be callable (observation, info) -> action, got {teacher!r}"
+            )
+        if config is not None and not isinstance(config, HumanTimingConfig):
+            raise TypeError(
+                f"config must be a HumanTimingConfig, got {type(config).__name__}; e.g. "
+                "HumanTiming(teacher, HumanTimingConfig(miss_prob=0.05))"
             )
         self.teacher = teacher
         self.config = config or HumanTimingConfig()

@@ -58,6 +58,11 @@ def posterior_margin(posterior: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     margin = log p(chosen) - log p(runner-up) >= 0, +inf when the runner-up's posterior is 0.
     """
     post = np.asarray(posterior, dtype=np.float64)
+    if post.ndim != 2 or post.shape[1] < 2:
+        raise ValueError(
+            f"posterior_margin: expected posteriors [N, A] with A >= 2 actions, got shape "
+            f"{post.shape}"
+        )
     order = np.argsort(-post, axis=1, kind="stable")
     chosen, runner = order[:, 0], order[:, 1]
     rows = np.arange(len(post))
