@@ -53,7 +53,7 @@ _EPS = 1e-9
 
 def _on_grid(value: float, grid: float) -> bool:
     q = value / grid
-    return abs(q - round(q)) < 1e-6
+    return math.isfinite(q) and abs(q - round(q)) < 1e-6
 
 
 @dataclass(frozen=True)
@@ -87,10 +87,12 @@ class CorridorMap:
     )
 
     def __post_init__(self) -> None:
-        if not self.corridor_width > 0:
-            raise ValueError(f"corridor_width must be > 0 m, got {self.corridor_width}")
-        if not self.grid > 0:
-            raise ValueError(f"grid must be > 0 m, got {self.grid}")
+        if not (math.isfinite(self.corridor_width) and self.corridor_width > 0):
+            raise ValueError(
+                f"corridor_width must be a finite width > 0 m, got {self.corridor_width}"
+            )
+        if not (math.isfinite(self.grid) and self.grid > 0):
+            raise ValueError(f"grid must be a finite step > 0 m, got {self.grid}")
         if not _on_grid(self.corridor_width / 2, self.grid):
             raise ValueError(
                 f"half the corridor width ({self.corridor_width / 2}) must be a multiple of "

@@ -23,6 +23,7 @@ closing speed); what it decides on is also visible, up to clipping, in the obser
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -61,8 +62,12 @@ class ExpertConfig:
     def __post_init__(self) -> None:
         if not 5.0 <= self.min_gap_m < self.enter_ahead_m <= self.change_far_m <= SENSE_RANGE_M:
             raise ValueError("need 5 <= min_gap_m < enter_ahead_m <= change_far_m <= 25")
-        if self.return_spread_m < 0:
-            raise ValueError("return_spread_m must be >= 0")
+        if not (math.isfinite(self.return_spread_m) and self.return_spread_m >= 0):
+            raise ValueError(
+                f"return_spread_m must be a finite distance >= 0 m, got {self.return_spread_m!r}"
+            )
+        if not isinstance(self.middle_pass, bool):
+            raise ValueError(f"middle_pass must be True or False, got {self.middle_pass!r}")
 
 
 class ScriptedExpert:

@@ -188,6 +188,13 @@ class HumanDriverConfig:
                 f"home_weights must be 3 probabilities (middle, left, left shoulder) summing to "
                 f"1, got {self.home_weights}"
             )
+        for name in ("margin_s", "leave_room_s", "return_behind_m"):
+            v = getattr(self, name)
+            if v is not None and (not isinstance(v, (tuple, list)) or len(v) != 2):
+                raise ValueError(f"{name} must be a (low, high) pair, got {v!r}")
+        for name in ("lane_cost_s", "box_room_s"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0 s, got {getattr(self, name)}")
         lo, hi = self.margin_s
         if not 0.0 <= lo <= hi:
             raise ValueError(f"margin_s must be (low, high) with 0 <= low <= high, got {lo, hi}")

@@ -81,6 +81,8 @@ def test_shipped_maps_and_walls():
         ({"nodes": {"A": [0.05, 0], "B": [1, 0], "C": [1, 0.8], "D": [0, 0.8]}}, "grid"),
         ({"colour": "red"}, "unknown map keys"),
         ({"route": ["A", "B", "C", "D"]}, "closed walk"),
+        ({"nodes": {"A": [float("nan"), 0], "B": [1, 0], "C": [1, 0.8], "D": [0, 0.8]}}, "grid"),
+        ({"corridor_width": float("inf")}, "corridor_width must be a finite width"),
     ],
 )
 def test_bad_maps_are_refused(change, message):

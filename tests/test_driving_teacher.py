@@ -104,9 +104,20 @@ def test_human_timing_misses_and_doubles_presses_at_the_given_rates():
 def test_driver_config_refuses_nan_and_an_urgent_gap_beyond_the_normal_one():
     from sumo_scenarios.teacher import HumanDriverConfig
 
-    for bad in ({"room_cap_s": float("nan")}, {"margin_s": (0.0, float("inf"))}):
+    for bad in (
+        {"room_cap_s": float("nan")},
+        {"margin_s": (0.0, float("inf"))},
+        {"margin_s": (1.0,)},  # was an unpacking error
+        {"lane_cost_s": -1.0},
+        {"box_room_s": -1.0},
+    ):
         with pytest.raises(ValueError, match=next(iter(bad))):
             HumanDriverConfig(**bad)
+    from sumo_scenarios.expert import ExpertConfig
+
+    for bad in ({"return_spread_m": float("nan")}, {"middle_pass": "yes"}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            ExpertConfig(**bad)
     with pytest.raises(ValueError, match="urgent_ttc_s"):
         HumanDriverConfig(urgent_ttc_s=-1.0)
     assert HumanDriverConfig(return_behind_m=None).return_behind_m is None
