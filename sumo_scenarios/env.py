@@ -43,6 +43,17 @@ from sumo_scenarios.scenarios import (
 )
 from sumo_scenarios.sim import HighwaySim, SimConfig
 
+__all__ = [
+    "ACTION_NAMES",
+    "LEFT",
+    "RIGHT",
+    "SENSE_RANGE_M",
+    "STAY",
+    "DrivingConfig",
+    "DrivingEnv",
+    "Frame",
+]
+
 STAY, LEFT, RIGHT = 0, 1, 2
 ACTION_NAMES = ("stay", "left", "right")
 SENSE_RANGE_M = 25.0

@@ -46,6 +46,20 @@ from torchcbl.evaluation import mean_sd, run_versions
 if TYPE_CHECKING:
     from torchcbl.gmm import GaussianMixtureSet
 
+__all__ = [
+    "PAPER",
+    "STAGE_NAMES",
+    "DrivingExperimentConfig",
+    "evaluate_saved_policy",
+    "format_summary",
+    "make_model",
+    "paired_interval",
+    "plot_results",
+    "run_experiment",
+    "stage_name",
+    "teaching_setup",
+]
+
 PAPER = {
     "straight_collision_pct": 30.4,
     "noninteractive_demos": 500,

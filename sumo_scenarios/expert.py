@@ -32,6 +32,12 @@ import numpy as np
 from sumo_scenarios.env import LEFT, RIGHT, SENSE_RANGE_M, STAY
 from sumo_scenarios.scenarios import N_LANES
 
+__all__ = [
+    "HOME_LANE",
+    "ExpertConfig",
+    "ScriptedExpert",
+]
+
 HOME_LANE = 3
 """The expert's preferred lane (the left normal lane)."""
 

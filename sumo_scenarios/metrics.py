@@ -15,6 +15,16 @@ import numpy as np
 
 from sumo_scenarios.scenarios import LANE_NAMES, N_LANES
 
+__all__ = [
+    "collision_rate",
+    "lane_distribution",
+    "plot_accuracy",
+    "plot_confidence_trace",
+    "plot_lane_bars",
+    "total_variation",
+    "windowed_accuracy",
+]
+
 
 def collision_rate(contacts: Sequence[bool] | np.ndarray) -> float:
     """Share of timesteps in contact with another car, in [0, 1]."""

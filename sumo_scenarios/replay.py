@@ -22,6 +22,18 @@ from sumo_scenarios.env import DrivingConfig, DrivingEnv
 from sumo_scenarios.scenarios import N_LANES, TrafficScenario
 from sumo_scenarios.sim import SimConfig
 
+__all__ = [
+    "EpisodeRecord",
+    "EpisodeRecorder",
+    "ReplayResult",
+    "export_fcd",
+    "load_records",
+    "render_gif",
+    "replay",
+    "save_records",
+    "write_sumocfg",
+]
+
 
 @dataclass(frozen=True)
 class EpisodeRecord:

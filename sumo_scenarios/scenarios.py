@@ -28,6 +28,22 @@ from pathlib import Path
 
 import numpy as np
 
+__all__ = [
+    "CAR_LENGTH_M",
+    "EGO_SPEED_MS",
+    "EVAL",
+    "LANE_NAMES",
+    "LIGHT",
+    "MPH",
+    "N_LANES",
+    "SCENARIOS",
+    "TRAFFIC_LANES",
+    "TRAIN",
+    "TrafficScenario",
+    "data_path",
+    "get_scenario",
+]
+
 MPH = 0.44704
 """Metres per second in one mile per hour."""
 
