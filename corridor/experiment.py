@@ -66,7 +66,7 @@ from corridor.env import DEFAULT_MAP, CorridorEnv
 from corridor.expert import CorridorExpert
 from corridor.maps import CorridorMap, load_map
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
-from torchcbl.evaluation import mean_sd, run_versions, worker_pool
+from torchcbl.evaluation import mean_sd, progress_bar, run_versions, worker_pool
 
 if TYPE_CHECKING:
     from torchcbl import GaussianMixtureSet, TeachingConfig
@@ -586,9 +586,7 @@ def run_experiment(
     t0 = time.perf_counter()
     args = [(config, s, run_dir / "sessions" / f"seed{s}") for s in config.seeds]
     per_seed: list[dict] = []
-    from tqdm.auto import tqdm
-
-    bar = tqdm(total=len(args), desc="corridor seeds", unit="seed", disable=not progress)
+    bar = progress_bar(total=len(args), desc="corridor seeds", unit="seed", show=progress)
 
     def done(result: dict) -> None:
         per_seed.append(result)

@@ -41,7 +41,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sumo_scenarios import metrics
-from torchcbl.evaluation import mean_sd, run_versions
+from torchcbl.evaluation import mean_sd, progress_bar, run_versions
 
 if TYPE_CHECKING:
     from torchcbl.gmm import GaussianMixtureSet
@@ -551,9 +551,7 @@ def run_experiment(
     jobs = [(config, s, str(run_dir / f"seed_{s}")) for s in config.seeds]
     per_seed = []
     ctx = mp.get_context("spawn")
-    from tqdm.auto import tqdm
-
-    bar = tqdm(total=len(jobs), desc="driving seeds", unit="seed", disable=not progress)
+    bar = progress_bar(total=len(jobs), desc="driving seeds", unit="seed", show=progress)
     with ctx.Pool(min(workers, len(jobs)), maxtasksperchild=1) as pool:
         for res in pool.imap_unordered(_run_seed_job, jobs, chunksize=1):
             per_seed.append(res)
@@ -754,7 +752,7 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
 
     def save(fig: Figure, name: str) -> None:
         fig.tight_layout()
-        fig.savefig(run_dir / name, dpi=100)
+        fig.savefig(run_dir / name, dpi=100, bbox_inches="tight")  # long titles kept whole
         written.append(run_dir / name)
 
     stages = results["stages"]
@@ -939,7 +937,7 @@ def format_summary(results: dict[str, Any]) -> str:
         (
             "Fig 8",
             "arm (b) 1000 demos, lane TV to the teacher",
-            "small",
+            "-",
             ms(s["arm_b"]["tv_to_expert"], "{:.2f}"),
         ),
         ("Fig 8", "arm (a) − arm (b), collisions % (paired by seed)", "−2.1", diff_txt),

@@ -1217,10 +1217,10 @@ class ConfidentTeacher:
         self._auto_steps_streak = 0
         self._auto_episodes_streak = 0
         self.stop_reason = None
-        from tqdm.auto import tqdm
+        from torchcbl.evaluation import progress_bar
 
         total = None if cfg.max_steps is None else max(cfg.max_steps - self.n_steps, 0)
-        bar = tqdm(total=total, disable=not self.progress, unit="step", desc="teaching")
+        bar = progress_bar(total=total, desc="teaching", unit="step", show=bool(self.progress))
         try:
             while True:
                 if cfg.max_demonstrations is not None and (
