@@ -232,8 +232,9 @@ class PrioritizedSweepingConfig:
             raise ValueError("cell_size must be > 0 m")
         if self.wall_threshold <= 0:
             raise ValueError("wall_threshold must be > 0 m")
-        if not isinstance(self.directed, bool):
+        if not isinstance(self.directed, (bool, np.bool_)):
             raise ValueError(f"directed must be True or False, got {self.directed!r}")
+        object.__setattr__(self, "directed", bool(self.directed))
         for name in ("contact_penalty", "min_priority"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")

@@ -48,8 +48,9 @@ import dataclasses
 import json
 import math
 import multiprocessing as mp
+import numbers
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -206,21 +207,24 @@ class CorridorExperimentConfig:
                 f"teaching: no stop criterion is set (one of {STOP_FIELDS}); the paper's is "
                 "autonomous_episodes_to_stop=10, with max_steps as a cap"
             )
+        seeds = self.seeds
+        ok = not isinstance(seeds, (str, bytes)) and isinstance(seeds, (Sequence, np.ndarray))
+        seeds = list(seeds) if ok else []
         if (
-            not isinstance(self.seeds, (tuple, list))
-            or not self.seeds
-            or len(set(self.seeds)) != len(self.seeds)
+            not seeds
+            or len(set(seeds)) != len(seeds)
             or any(
                 isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0
-                for s in self.seeds
+                for s in seeds
             )
         ):
             raise ValueError(
                 f"seeds must be a non-empty tuple of distinct ints >= 0, got {self.seeds!r}"
             )
+        object.__setattr__(self, "seeds", tuple(int(s) for s in seeds))  # a range, numpy ints
         if (
-            isinstance(self.max_std, bool)
-            or not isinstance(self.max_std, (int, float))
+            isinstance(self.max_std, (bool, np.bool_))
+            or not isinstance(self.max_std, numbers.Real)
             or not (math.isfinite(self.max_std) and self.max_std > 0)
         ):
             raise ValueError(f"max_std must be a finite number > 0, got {self.max_std!r}")

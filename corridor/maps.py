@@ -385,7 +385,7 @@ def load_map(name_or_path: str | Path) -> CorridorMap:
     path = Path(name_or_path)
     if path.suffix == ".json":  # a file path
         if not path.is_file():
-            raise FileNotFoundError(
+            raise ValueError(
                 f"map file {str(path)!r} not found; give an existing map JSON file or one of the "
                 f"shipped map names {available_maps()}"
             )

@@ -32,6 +32,7 @@ import dataclasses
 import json
 import math
 import multiprocessing as mp
+import numbers
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -68,6 +69,13 @@ PAPER = {
     "arm_b_1000_collision_pct": 4.0,
     "final_components": 34,
 }
+
+
+def _plain(value: Any) -> Any:
+    """A numpy scalar as the Python number JSON can hold (``json.dumps``' ``default``)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON serializable")
 
 
 def _check_whole(name: str, value: Any, minimum: int) -> None:
@@ -167,10 +175,17 @@ class DrivingExperimentConfig:
         _check_whole("eval_segment", self.eval_segment, 0)
         for name, minimum in (("seeds", 0), ("extra_eval_segments", 0), ("arm_b_stages", 1)):
             values = getattr(self, name)
-            if not isinstance(values, (tuple, list)):
+            if isinstance(values, (str, bytes)) or not isinstance(values, (Sequence, np.ndarray)):
                 raise ValueError(f"{name} must be a tuple of ints, got {values!r}")
             for v in values:
                 _check_whole(f"each of {name}", v, minimum)
+            object.__setattr__(self, name, tuple(int(v) for v in values))  # plain, JSON-able
+        for f in dataclasses.fields(self):  # numpy ints and floats as plain ones (results.json)
+            v = getattr(self, f.name)
+            if isinstance(v, np.integer):
+                object.__setattr__(self, f.name, int(v))
+            elif isinstance(v, np.floating):
+                object.__setattr__(self, f.name, float(v))
         if not self.seeds or len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"seeds must be distinct, at least one, got {self.seeds!r}")
         if self.confident_demos % self.stage_every:
@@ -181,8 +196,8 @@ class DrivingExperimentConfig:
             raise ValueError("eval segments must be distinct non-negative seeds")
         if list(self.arm_b_stages) != sorted(set(self.arm_b_stages)) or not self.arm_b_stages:
             raise ValueError("arm_b_stages must be non-empty and strictly increasing")
-        if isinstance(self.target_accuracy, bool) or not isinstance(
-            self.target_accuracy, (int, float)
+        if isinstance(self.target_accuracy, (bool, np.bool_)) or not isinstance(
+            self.target_accuracy, numbers.Real
         ):
             raise ValueError(f"target_accuracy must be a number, got {self.target_accuracy!r}")
         if not 0.0 < self.target_accuracy <= 1.0:
@@ -675,7 +690,7 @@ def run_experiment(
         "seconds": time.perf_counter() - t0,
         "cpu_seconds": cpu_seconds(),
     }
-    (run_dir / "results.json").write_text(json.dumps(results, indent=1))
+    (run_dir / "results.json").write_text(json.dumps(results, indent=1, default=_plain))
     plot_results(results, run_dir)
     return results
 

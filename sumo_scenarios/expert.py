@@ -72,8 +72,9 @@ class ExpertConfig:
             raise ValueError(
                 f"return_spread_m must be a finite distance >= 0 m, got {self.return_spread_m!r}"
             )
-        if not isinstance(self.middle_pass, bool):
+        if not isinstance(self.middle_pass, (bool, np.bool_)):
             raise ValueError(f"middle_pass must be True or False, got {self.middle_pass!r}")
+        object.__setattr__(self, "middle_pass", bool(self.middle_pass))
 
 
 class ScriptedExpert:

@@ -22,6 +22,7 @@ answers), the right lane's 40 m is unchanged.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -111,10 +112,14 @@ class TrafficScenario:
             or self.seed < 0
         ):
             raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
-        numbers = [self.min_spacing_m, self.ahead_m, self.behind_m, self.start_clear_m]
-        numbers += [*self.mean_spacing_m, *(v for r in self.speed_ranges_mph for v in r)]
-        for v in numbers:
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        values = [self.min_spacing_m, self.ahead_m, self.behind_m, self.start_clear_m]
+        values += [*self.mean_spacing_m, *(v for r in self.speed_ranges_mph for v in r)]
+        for v in values:
+            if (
+                isinstance(v, (bool, np.bool_))
+                or not isinstance(v, numbers.Real)
+                or not math.isfinite(v)
+            ):
                 raise ValueError(f"every distance and speed must be a finite number, got {v!r}")
         if self.start_clear_m < 0:
             raise ValueError(f"start_clear_m must be >= 0 m, got {self.start_clear_m!r}")

@@ -190,7 +190,7 @@ class HumanDriverConfig:
             )
         for name in ("margin_s", "leave_room_s", "return_behind_m"):
             v = getattr(self, name)
-            if v is not None and (not isinstance(v, (tuple, list)) or len(v) != 2):
+            if v is not None and (not isinstance(v, (tuple, list, np.ndarray)) or len(v) != 2):
                 raise ValueError(f"{name} must be a (low, high) pair, got {v!r}")
         for name in ("lane_cost_s", "box_room_s"):
             if getattr(self, name) < 0:

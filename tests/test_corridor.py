@@ -193,6 +193,10 @@ def test_experiment_config_checks_what_the_workers_would_find_late():
             CorridorExperimentConfig(seeds=seeds)
     with pytest.raises(ValueError, match="eval_circuits must be an int >= 1, got 2.5"):
         CorridorExperimentConfig(eval_circuits=2.5)
+    # what a sweep in numpy or a range gives is accepted, as plain values
+    cfg = CorridorExperimentConfig(seeds=range(2), max_std=np.float32(2.0))
+    assert cfg.seeds == (0, 1) and type(cfg.seeds[0]) is int
+    assert PrioritizedSweepingConfig(directed=np.True_).directed is True
 
 
 def test_the_experiments_learner_has_its_cap_and_floor():
@@ -470,7 +474,7 @@ def test_prioritized_sweeping_config_rejects_bad_values():
 
 
 def test_a_map_file_that_is_not_there_and_a_fractional_step_cap_are_named(tmp_path):
-    with pytest.raises(FileNotFoundError, match="map file .*missing.json.* not found"):
+    with pytest.raises(ValueError, match="map file .*missing.json.* not found"):
         load_map(tmp_path / "missing.json")
     with pytest.raises(ValueError, match="unknown map 'nope'"):
         load_map("nope")

@@ -259,3 +259,16 @@ def test_the_module_command_refuses_a_mistake_before_writing(tmp_path, argv, say
     )
     assert proc.returncode == 2 and says in proc.stderr and "Traceback" not in proc.stderr
     assert sorted(p.name for p in tmp_path.rglob("*")) == ([] if argv else ["results.json", "run"])
+
+
+def test_numpy_and_range_settings_are_kept_as_plain_json_values():
+    """A config built from numpy values (a sweep over np.arange, say) must still write its
+    results.json: the config is stored in it."""
+    import dataclasses
+    import json
+
+    cfg = DrivingExperimentConfig(
+        seeds=range(3), confident_demos=np.int64(150), arm_b_stages=np.array([600, 1000])
+    )
+    assert cfg.seeds == (0, 1, 2) and type(cfg.confident_demos) is int
+    json.dumps(dataclasses.asdict(cfg))  # no numpy type left
