@@ -177,12 +177,11 @@ class CorridorExperimentConfig:
     cba: bool = True
 
     def __post_init__(self) -> None:
-        if (
-            isinstance(self.max_components, bool)
-            or not isinstance(self.max_components, (int, np.integer))
-            or self.max_components < 1
-        ):
-            raise ValueError(f"max_components must be an int >= 1, got {self.max_components!r}")
+        for name in ("max_components", "eval_circuits"):
+            value = getattr(self, name)
+            whole = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+            if not whole or value < 1:
+                raise ValueError(f"{name} must be an int >= 1, got {value!r}")
         if isinstance(self.var_floor, bool) or not (
             isinstance(self.var_floor, (int, float))
             and math.isfinite(self.var_floor)
@@ -232,12 +231,6 @@ class CorridorExperimentConfig:
             raise ValueError(
                 f"threshold_reading: expected one of {_READINGS}, got {self.threshold_reading!r}"
             )
-        if (
-            isinstance(self.eval_circuits, (bool, np.bool_))
-            or not isinstance(self.eval_circuits, (int, np.integer))
-            or self.eval_circuits < 1
-        ):
-            raise ValueError(f"eval_circuits must be an int >= 1, got {self.eval_circuits!r}")
         # what the workers would only find after each seed's teaching, checked now
         try:
             self.rule()

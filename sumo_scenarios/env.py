@@ -78,11 +78,11 @@ class DrivingConfig:
 
     def __post_init__(self) -> None:
         get_scenario(self.scenario)
-        steps = self.max_episode_steps
-        if isinstance(steps, (bool, np.bool_)) or not isinstance(steps, (int, np.integer)):
-            raise ValueError(f"max_episode_steps must be an int >= 1, got {steps!r}")
-        if steps < 1:
-            raise ValueError(f"max_episode_steps must be an int >= 1, got {steps!r}")
+        steps = _as_int(self.max_episode_steps)  # an int, not a bool / float / string
+        if steps is None or steps < 1:
+            raise ValueError(
+                f"max_episode_steps must be an int >= 1, got {self.max_episode_steps!r}"
+            )
         if _as_int(self.start_lane) is None or not 0 <= self.start_lane < N_LANES:
             raise ValueError(
                 f"start_lane must be a lane index 0-{N_LANES - 1}, got {self.start_lane!r}"

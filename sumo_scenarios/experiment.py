@@ -80,9 +80,8 @@ def _plain(value: Any) -> Any:
 
 def _check_whole(name: str, value: Any, minimum: int) -> None:
     """A setting that counts: an int (not a bool) >= ``minimum``, else a ValueError."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
-    if value < minimum:
+    whole = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    if not whole or value < minimum:
         raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
 
 
