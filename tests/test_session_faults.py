@@ -1071,3 +1071,49 @@ def test_resume_compares_what_gymnasium_make_was_given(tmp_path):
     (run / "config.json").write_text(json.dumps(config))
     short = gym.make("MountainCar-v0", goal_velocity=0.0, max_episode_steps=5)
     ConfidentTeacher.resume(run, short, teacher, progress=False).close()
+
+
+# -- 7. a gap in the step numbers ----------------------------------------------------------
+
+
+def test_a_step_deleted_from_the_log_is_named_and_resume_refuses(tmp_path):
+    run = tmp_path / "run"
+    _closed_session(run)
+    log = run / "steps.sqlite"
+    kept = log.read_bytes()
+    db = sqlite3.connect(log)
+    db.execute("DELETE FROM steps WHERE step IN (5, 6)")
+    db.commit()
+    db.close()
+    with pytest.warns(UserWarning, match=r"lacks 2 steps \(5, 6\) before its last one"):
+        records = load_records(run)
+    assert [r.step for r in records] == [s for s in range(60) if s not in (5, 6)]
+    before = files_of(run)
+    # Before: resume went on, numbered its first step len(records) = 58, which the log held,
+    # and every later commit failed.
+    with pytest.raises(CorruptSessionError, match=r"lacks 2 steps \(5, 6\).*Nothing was changed"):
+        resume(run)
+    assert files_of(run) == before
+    log.write_bytes(kept)  # restored from a backup
+    (run / "steps.sqlite-wal").unlink(missing_ok=True)
+    (run / "steps.sqlite-shm").unlink(missing_ok=True)
+    back, env = resume(run)
+    goes_on(back, env, run)
+
+
+def test_a_line_removed_from_the_journal_is_refused_then_repaired(tmp_path):
+    run = tmp_path / "run"
+    ct, env = _journalled(run, steps=10)
+    journal = run / "steps.journal"
+    lines = journal.read_bytes().split(b"\n")
+    at = next(i for i, line in enumerate(lines) if line.startswith(b'["s",25,'))
+    journal.write_bytes(b"\n".join(lines[:at] + lines[at + 1 :]))  # step 25's line is gone
+    with pytest.warns(UserWarning, match=r"lacks 1 step \(25\)"):
+        load_records(run)
+    with pytest.raises(CorruptSessionError, match="repair_journal"):
+        resume(run)
+    report = repair_journal(run)
+    assert "a step is missing" in report and "steps.journal.damaged" in report
+    back, env2 = resume(run)
+    assert back.records == ct.records[:25]  # the steps before the gap; the rest in the copy
+    goes_on(back, env2, run)

@@ -79,6 +79,9 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   the log and the file renamed ``.damaged`` / ``.stale``. An unreadable ``steps.sqlite``, a
   ``config.json`` missing a key, or a missing ``steps.sqlite`` beside a config are
   :class:`CorruptSessionError` naming the file and how to recover; nothing is started over.
+  Steps are numbered 0, 1, 2, ... without a gap; a log that lacks some (rows deleted by hand, a
+  journal line removed) is read with a warning naming them, and resume refuses it (it would
+  log new steps under numbers the log holds).
 - Two writers. The writer holds ``writer.lock`` with ``fcntl.flock`` (released by the kernel
   when the process dies, SIGKILL included); a second writer gets :class:`SessionLockedError`.
 
@@ -729,6 +732,15 @@ class SessionStore:
         store with every record and correction."""
         load_config(run_dir)
         _check_log_present(Path(run_dir))
+        missing = _missing_steps(_read_log(run_dir, warn=False)[0])
+        if missing:  # the loop numbers a new step len(records): it would take a logged number
+            raise CorruptSessionError(
+                f"cannot resume the session in {run_dir}: {_gap_text(missing)}. Resuming "
+                "would log new steps under numbers the log already holds. Nothing was changed. "
+                "Restore the run directory from a backup; where the lost steps were only in "
+                f"{JOURNAL_NAME} (a line removed), torchcbl.session.repair_journal(run_dir) "
+                "keeps the steps before the gap and copies the journal aside."
+            )
         store = cls(Path(run_dir), commit_every=commit_every)
         try:
             store.finalize_pending()
@@ -1177,8 +1189,28 @@ def _open_readonly(run_dir: str | os.PathLike[str]) -> sqlite3.Connection:
         raise _db_error(exc, path) from exc
 
 
-def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[int, int]]:
-    """Every record and the corrections ``{step: action}`` of a run directory, read-only."""
+def _missing_steps(records: list[StepRecord]) -> list[int]:
+    """The step numbers below the last one that the records (in step order) lack."""
+    if not records or records[-1].step + 1 == len(records):
+        return []
+    have = {r.step for r in records}
+    return [s for s in range(records[-1].step) if s not in have]
+
+
+def _gap_text(missing: list[int]) -> str:
+    shown = ", ".join(str(s) for s in missing[:5]) + (", ..." if len(missing) > 5 else "")
+    return (
+        f"its step log lacks {len(missing)} step{'' if len(missing) == 1 else 's'} ({shown}) "
+        f"before its last one: rows were deleted from {LOG_NAME} by something other than "
+        "torchcbl (a session's steps are numbered 0, 1, 2, ... without a gap)"
+    )
+
+
+def _read_log(
+    run_dir: str | os.PathLike[str], *, warn: bool = True
+) -> tuple[list[StepRecord], dict[int, int]]:
+    """Every record and the corrections ``{step: action}`` of a run directory, read-only;
+    warns when steps are missing (``warn``)."""
     run = Path(run_dir)
     wal = run / (LOG_NAME + "-wal")
     log = run / LOG_NAME
@@ -1199,7 +1231,16 @@ def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[i
             break
         # A writer opened the session while we read without its WAL (and may have closed it
         # again, checkpointing into the log): read again.
-    return _records_of(rows, run), corrections
+    records = _records_of(rows, run)
+    missing = _missing_steps(records) if warn else []
+    if missing:  # never transient: the journal is read before the SELECT (_rows_unchecked)
+        warnings.warn(
+            f"{run}: {_gap_text(missing)}. What is read is what is left: the labels and "
+            "models built from it lack the missing steps' demonstrations. Restore the run "
+            "directory from a backup to have them back.",
+            stacklevel=3,
+        )
+    return records, corrections
 
 
 def _file_state(path: Path) -> tuple[int, int] | None:
@@ -1620,8 +1661,8 @@ def stored_strategy(stored: dict[str, Any]) -> dict[str, Any]:
 
 
 def repair_journal(run_dir: str | os.PathLike[str]) -> str:
-    """Recover a session whose journal has damaged lines, keeping every byte; returns a
-    report of what was kept.
+    """Recover a session whose journal has damaged or missing lines, keeping every byte;
+    returns a report of what was kept.
 
     The journal is first copied to ``steps.journal.damaged`` (``-1``, ``-2``... if taken).
     Then it is rewritten with its valid lines before the first damaged one and every later
@@ -1636,8 +1677,24 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
     lock = _acquire_lock(run)
     try:
         scan = _scan_journal(journal)
-        if not scan.damaged:
-            return f"{journal}: no damaged line; nothing to repair."
+        db = _open_readonly(run)
+        try:
+            known = {row[0] for row in db.execute("SELECT step FROM steps")}
+        except sqlite3.DatabaseError as exc:
+            raise _db_error(exc, run / LOG_NAME) from exc
+        finally:
+            db.close()
+        next_step = max(known) + 1 if known else 0
+        kept, dropped = [], []
+        for number, kind, values in scan.entries:
+            step = values[-1] if kind == "f" else values[0]
+            ok = step in known or (kind == "s" and step == next_step)
+            if ok and kind == "s" and step == next_step:
+                known.add(step)
+                next_step += 1
+            (kept if ok else dropped).append(number)
+        if not scan.damaged and not dropped:
+            return f"{journal}: no damaged or missing line; nothing to repair."
         data = journal.read_bytes()
         for i in range(1000):
             backup = run / (JOURNAL_NAME + ".damaged" + (f"-{i}" if i else ""))
@@ -1650,23 +1707,7 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
                 os.fsync(f.fileno())
         except OSError as exc:
             raise _write_error(exc, backup, "copying the damaged journal", _FREE_SPACE) from exc
-        db = _open_readonly(run)
-        try:
-            known = {row[0] for row in db.execute("SELECT step FROM steps")}
-        except sqlite3.DatabaseError as exc:
-            raise _db_error(exc, run / LOG_NAME) from exc
-        finally:
-            db.close()
-        next_step = max(known) + 1 if known else 0
         lines = data.split(b"\n")
-        kept, dropped = [], []
-        for number, kind, values in scan.entries:
-            step = values[-1] if kind == "f" else values[0]
-            ok = step in known or (kind == "s" and step == next_step)
-            if ok and kind == "s" and step == next_step:
-                known.add(step)
-                next_step += 1
-            (kept if ok else dropped).append(number)
         tmp = journal.with_name(JOURNAL_NAME + ".tmp")
         try:
             tmp.write_bytes(b"".join(lines[n - 1] + b"\n" for n in kept))
@@ -1678,8 +1719,11 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
         lock.close()
     damaged = ", ".join(f"line {n} (byte {o}: {w})" for n, o, w in scan.damaged)
     return (
-        f"{journal}: damaged {damaged}; kept {len(kept)} valid lines, dropped "
-        f"{len(dropped)} valid lines that depend on a damaged one"
+        f"{journal}: "
+        + (f"damaged {damaged}" if damaged else "a step is missing (a line was removed)")
+        + f"; kept {len(kept)} valid lines, dropped "
+        f"{len(dropped)} valid lines that depend on a "
+        + ("damaged or missing one" if damaged else "missing one")
         + (f" (lines {dropped[0]}..{dropped[-1]})" if dropped else "")
         + f". Every original byte is in {backup}. Resume the session to continue."
     )
