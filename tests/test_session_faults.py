@@ -1073,6 +1073,23 @@ def test_resume_compares_what_gymnasium_make_was_given(tmp_path):
     ConfidentTeacher.resume(run, short, teacher, progress=False).close()
 
 
+def test_the_cap_kept_is_the_one_in_force_under_an_outer_time_limit(tmp_path):
+    def teacher(obs, info):
+        return 2 if obs[1] >= 0 else 0
+
+    for outer, in_force in ((1000, 200), (50, 50)):
+        run = tmp_path / f"run{outer}"
+        env = gym.wrappers.TimeLimit(gym.make("MountainCar-v0"), outer)
+        with ConfidentTeacher(
+            env, teacher, config=TeachingConfig(max_new=5), run_dir=run, progress=False
+        ) as ct:
+            ct.run(max_steps=10)
+        assert load_config(run)["env"]["max_episode_steps"] == in_force
+        # the plain env with the cap in force resumes (it stored the outer 1000 before)
+        plain = gym.make("MountainCar-v0", max_episode_steps=in_force)
+        ConfidentTeacher.resume(run, plain, teacher, progress=False).close()
+
+
 # -- 7. a gap in the step numbers ----------------------------------------------------------
 
 

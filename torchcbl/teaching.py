@@ -295,6 +295,21 @@ def _env_kwargs(env: gym.Env) -> dict[str, Any]:
     return {str(k): v if _jsonable(v) else {"repr": repr(v)[:200]} for k, v in kwargs.items()}
 
 
+def _episode_cap(env: gym.Env) -> int | None:
+    """The step cap in force on ``env``: the smallest of its ``TimeLimit`` wrappers' (an outer
+    ``TimeLimit(gymnasium.make(id), n)`` reports ``n`` in its spec whatever the inner cap), else
+    its spec's ``max_episode_steps`` (None: no cap)."""
+    caps = []
+    layer: Any = env
+    while isinstance(layer, gym.Wrapper):
+        if isinstance(layer, gym.wrappers.TimeLimit):
+            caps.append(int(layer._max_episode_steps))
+        layer = layer.env
+    if caps:
+        return min(caps)
+    return getattr(getattr(env, "spec", None), "max_episode_steps", None)
+
+
 def _as_interrupted(record: StepRecord) -> StepRecord:
     """A demonstration whose outcome never came, as the log keeps it (and a resume reads it):
     no reward, its episode cut."""
@@ -470,7 +485,7 @@ class ConfidentTeacher:
         if kwargs:
             described["kwargs"] = kwargs
         if spec is not None:  # gymnasium.make's TimeLimit (None: none), compared on resume
-            described["max_episode_steps"] = getattr(spec, "max_episode_steps", None)
+            described["max_episode_steps"] = _episode_cap(self.env)
         return described
 
     # -- resume -----------------------------------------------------------------------------
@@ -527,7 +542,7 @@ class ConfidentTeacher:
             n_actions=n_actions,
             env_id=getattr(getattr(env, "spec", None), "id", None),
             env_kwargs=_env_kwargs(env),
-            env_max_episode_steps=getattr(getattr(env, "spec", None), "max_episode_steps", None),
+            env_max_episode_steps=_episode_cap(env),
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
             strategy=(
