@@ -90,8 +90,30 @@ class CorridorExpert:
         on_route_tolerance: float = 0.2,
         open_range: float = 0.6,
     ) -> None:
+        if not isinstance(corridor_map, CorridorMap):
+            raise TypeError(
+                f"corridor_map: expected a CorridorMap (corridor.maps.load_map(name)), got "
+                f"{corridor_map!r:.80}"
+            )
+        if isinstance(world_config, Mapping):  # as CorridorEnv takes it
+            world_config = WorldConfig(**world_config)
+        if world_config is not None and not isinstance(world_config, WorldConfig):
+            raise TypeError(
+                f"world_config: expected a WorldConfig, a dict of its fields or None, got "
+                f"{world_config!r:.80}"
+            )
         self.map = corridor_map
         self.config = world_config or WorldConfig()
+        half = corridor_map.corridor_width / 2
+        for name, value, top, what in (
+            ("on_route_tolerance", on_route_tolerance, half, "half the corridor's width"),
+            ("open_range", open_range, self.config.max_range, "the range sensors' max_range"),
+        ):
+            ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
+                value, (bool, np.bool_)
+            )
+            if not ok or not 0 < float(value) < top:
+                raise ValueError(f"{name}: expected metres in (0, {top:g}) ({what}), got {value!r}")
         self.route = corridor_map.route_polyline()
         self.on_route_tolerance = float(on_route_tolerance)
         self.open_range = float(open_range)

@@ -258,6 +258,26 @@ def test_expert_drives_clean_circuits(map_name, n_actions):
         assert info["laps"] == 1
 
 
+@pytest.mark.parametrize(
+    "args, kwargs, error, message",
+    [
+        (("figure2",), {}, TypeError, "corridor_map: expected a CorridorMap"),
+        ((None, 0.2), {}, TypeError, "world_config: expected a WorldConfig"),
+        ((None,), {"on_route_tolerance": -0.1}, ValueError, r"on_route_tolerance: .*\(0, 0.3\)"),
+        ((None,), {"on_route_tolerance": 0.3}, ValueError, "half the corridor's width"),
+        ((None,), {"open_range": float("nan")}, ValueError, r"open_range: .*\(0, 1.5\)"),
+        ((None,), {"open_range": "0.6"}, ValueError, "open_range"),
+    ],
+)
+def test_expert_settings_are_checked(args, kwargs, error, message):
+    figure2 = load_map("figure2")
+    args = tuple(figure2 if a is None else a for a in args)
+    with pytest.raises(error, match=message):
+        CorridorExpert(*args, **kwargs)
+    # the same settings within range, and a world given as a dict as CorridorEnv takes it
+    CorridorExpert(figure2, {"forward_noise": 0.1}, on_route_tolerance=0.25, open_range=1.0)
+
+
 def test_default_map_has_the_papers_properties():
     env = CorridorEnv()
     actions, obs, _, _ = drive(env, CorridorExpert(env.corridor_map), seed=0, episodes=1)[0]
