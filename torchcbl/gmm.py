@@ -578,9 +578,11 @@ class GaussianMixtureSet(nn.Module):
             "log_prior": log_prior,
             "cpu": dev.type == "cpu",
         }
-        if cache["cpu"]:
-            cache["np"] = tuple(t.detach().numpy().copy() for t in (pcat, mu_p, const, log_prior))
-            cache["prior_np"] = np.exp(cache["np"][3])
+        # numpy copies on every device: small batches on the CPU are scored in numpy, and a
+        # row too far for the batched path is scored exactly in numpy on any device
+        # (_classify_far), a CUDA model's included
+        cache["np"] = tuple(t.detach().cpu().numpy().copy() for t in (pcat, mu_p, const, log_prior))
+        cache["prior_np"] = np.exp(cache["np"][3])
         self._cache = cache
         return cache
 
