@@ -196,3 +196,48 @@ def test_aic_requires_both_or_neither_and_a_fit():
     model, x, _ = _fitted()
     with pytest.raises(ValueError, match="both"):
         model.aic(x)
+
+
+def _nearest_real_component(model: GaussianMixtureSet, x: np.ndarray) -> tuple[int, float]:
+    """(action, Mahalanobis distance) of the nearest real component, computed directly on
+    x / s (s = max |x|) and scaled back, so that no square overflows."""
+    s = max(float(np.abs(x).max()), 1.0)
+    best = (math.inf, -1)
+    for a in range(model.n_actions):
+        for k in range(int(model.n_components_[a])):
+            u = model.precisions_cholesky_[a, k].numpy()
+            d = s * float(np.linalg.norm((x / s - model.means_[a, k].numpy() / s) @ u))
+            best = min(best, (d, a))
+    return best[1], best[0]
+
+
+@pytest.mark.parametrize(
+    ("d", "value"),
+    [
+        (2, 1e153),  # the real components' squares overflow, the padding's do not
+        (10, 1e148),  # no square overflows, but every real score is below the padding's
+    ],
+)
+def test_very_far_rows_are_never_decided_by_the_padding_components(d, value):
+    """Slots beyond an action's component count hold a padding component (mean 0, unit
+    covariance, log weight -1e300). Far enough away the real components scored below it (or
+    overflowed to -inf while it did not), and every path (one row, a batch, the torch path
+    beyond 256 rows) answered the padding's distance, posterior 1/2 each and its log-density
+    (before 2026-11-27)."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(0.0, 0.02, (200, d))
+    y = np.arange(200) % 2
+    x[y == 1] += 0.3
+    model = GaussianMixtureSet(2, d, 3, seed=0).fit(x, y)
+    assert (model.n_components_ < 3).all()  # padding slots exist
+    q = np.full((1, d), value)
+    want_a, want_d = _nearest_real_component(model, q[0])
+    for rows in (q, np.repeat(q, 3, axis=0), np.repeat(q, 300, axis=0)):
+        c = model.classify(rows)
+        assert c.action.tolist() == [want_a] * len(rows)
+        assert c.distance.tolist() == pytest.approx([want_d] * len(rows), rel=1e-9)
+        assert c.posterior[:, want_a].tolist() == [1.0] * len(rows)
+        lp = model.log_prob(rows)
+        # the real mixtures' log-density: far below the padding's -1e300 - |x|^2 / 2
+        assert bool((lp[:, want_a] >= lp[:, 1 - want_a]).all())
+        assert not bool((lp > -1.001e300).any()) and not torch.isnan(lp).any()
