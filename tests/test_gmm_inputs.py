@@ -241,3 +241,17 @@ def test_very_far_rows_are_never_decided_by_the_padding_components(d, value):
         # the real mixtures' log-density: far below the padding's -1e300 - |x|^2 / 2
         assert bool((lp[:, want_a] >= lp[:, 1 - want_a]).all())
         assert not bool((lp > -1.001e300).any()) and not torch.isnan(lp).any()
+
+
+def test_a_model_converted_from_float64_refuses_its_first_fit_too():
+    """fit/refit need the float64 state; an unfitted model converted to float32 was fitted
+    once (into float32 buffers) and refused every later fit, e.g. at the teaching loop's
+    second refit (before 2026-11-27)."""
+    x, y = _data()
+    for dtype in (torch.float32, torch.float16):
+        model = GaussianMixtureSet(3, 3, 4).to(dtype)
+        for call in (model.fit, model.refit):
+            with pytest.raises(TypeError, match=r"float64 state.*\.to\(torch\.float64\)"):
+                call(x, y)
+        assert not model.is_fitted
+        model.to(torch.float64).fit(x, y).fit(x, y)  # and back: fits as usual

@@ -704,9 +704,10 @@ class GaussianMixtureSet(nn.Module):
     ) -> GaussianMixtureSet:
         """Check the inputs, then fit single-threaded (the EM may take the caller's threads
         back, see the thread policy)."""
-        if self.is_fitted and self.means_.dtype != torch.float64:
+        if self.means_.dtype != torch.float64:
             # the refit bookkeeping compares float64 state bit for bit: a float32 copy would
-            # look changed at every refit (and float16 overflows covariances)
+            # look changed at every refit (and float16 overflows covariances). Refused before
+            # the first fit too: that fit would succeed and every later one fail
             raise TypeError(
                 f"fit/refit need the model's float64 state, but it was converted to "
                 f"{self.means_.dtype} (classification works in that dtype); call "
