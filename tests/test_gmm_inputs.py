@@ -255,3 +255,21 @@ def test_a_model_converted_from_float64_refuses_its_first_fit_too():
                 call(x, y)
         assert not model.is_fitted
         model.to(torch.float64).fit(x, y).fit(x, y)  # and back: fits as usual
+
+
+def test_numpy_float_settings_are_the_python_numbers_they_hold():
+    """var_floor=np.float32(0.01) was refused as 'Expected var_floor to be a finite float >= 0
+    but got np.float32(0.01)' (tol and refit_growth alike; the int arguments took numpy ints)
+    before 2026-11-27."""
+    model = GaussianMixtureSet(
+        2, 2, np.int64(3), var_floor=np.float32(0.01), tol=np.float64(1e-4),
+        refit_growth=np.int32(1), seed=np.uint32(5),
+    )  # fmt: skip
+    assert type(model.var_floor) is float and model.var_floor == float(np.float32(0.01))
+    assert type(model.refit_growth) is float and model.refit_growth == 1.0
+    x, y = _data(a=2, d=2)
+    fresh = GaussianMixtureSet(2, 2, 3, var_floor=float(np.float32(0.01)), tol=1e-4,
+                               refit_growth=1.0, seed=5)  # fmt: skip
+    fresh.load_state_dict(model.fit(x, y).state_dict())  # the same settings
+    with pytest.raises(ValueError, match="var_floor"):
+        GaussianMixtureSet(2, 2, var_floor=np.bool_(True))

@@ -443,6 +443,12 @@ class GaussianMixtureSet(nn.Module):
         ):
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
                 raise ValueError(f"Expected {name} to be an int >= 1 but got {val!r}")
+        # numpy numbers (np.float32(0.01) from a sweep) are the Python numbers they hold
+        var_floor, tol, refit_growth = (
+            float(v) if isinstance(v, (np.floating, np.integer)) and not isinstance(v, np.bool_)
+            else v
+            for v in (var_floor, tol, refit_growth)
+        )  # fmt: skip
         if criterion not in _CRITERIA:
             raise ValueError(f"Expected criterion in {_CRITERIA} but got {criterion!r}")
         if not (isinstance(var_floor, (int, float)) and math.isfinite(var_floor)) or var_floor < 0:
