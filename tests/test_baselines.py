@@ -265,3 +265,30 @@ def test_baselines_roundtrip_through_their_config():
 def test_baselines_reject_bad_settings(make):
     with pytest.raises(ValueError, match="must be"):
         make()
+
+
+def test_numpy_scalar_arguments_are_taken_as_the_python_numbers_they_hold():
+    """np.int64 / np.float32 arguments (a sweep over np.arange) were refused with a message
+    that contradicted itself ("window must be an int >= 1, got np.int64(100)", before
+    2026-11-27); they are stored as Python numbers, so to_config stays JSON."""
+    import json
+
+    from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+    built = [
+        DAgger(beta0=np.float32(0.5), decay=np.float64(0.25), iteration_steps=np.int64(7),
+               seed=np.uint8(3)),
+        HGDAgger(warmup=np.int32(4)),
+        NoveltyGated(target_rate=np.float32(0.25), window=np.int64(50), warmup=np.int64(2),
+                     min_history=np.int16(5)),
+        ConfidenceBasedAutonomy(distance_multiplier=np.float32(2.0),
+                                clean_threshold=np.int64(0)),
+    ]  # fmt: skip
+    for s in built:
+        config = s.to_config()
+        assert all(type(v) in (int, float, str, bool) for v in config.values()), config
+        assert strategy_from_config(json.loads(json.dumps(config))).to_config() == config
+    assert built[0].iteration_steps == 7 and built[2].window == 50
+    for bad in (lambda: HGDAgger(warmup=np.bool_(True)), lambda: DAgger(beta0=np.float32(2))):
+        with pytest.raises(ValueError):
+            bad()

@@ -293,6 +293,26 @@ def test_every_import_path_is_resolved_before_a_cell_runs(tmp_path):
         _env(score="success_rate")
 
 
+def test_seeds_are_checked_before_anything_is_written_and_a_numpy_array_is_read(tmp_path):
+    """seeds=np.arange(2) raised numpy's "truth value of an array is ambiguous"; float or
+    string seeds were truncated (0.5 and 0.7 ran the same cells twice, counted twice) and a
+    negative one failed in the cell's model (before 2026-11-27)."""
+    import numpy as np
+
+    for seeds, shown in (([0.5, 0.7], r"\[0.5, 0.7\]"), (["0"], r"\['0'\]"), ([-1], r"\[-1\]"),
+                         ([True], r"\[True\]"), (3, "got 3")):  # fmt: skip
+        with pytest.raises(ValueError, match=rf"seeds must be .*ints.*{shown}"):
+            bm.run_benchmark(STRATEGIES[:1], [_env()], seeds, tmp_path / "out", workers=1)
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(ValueError, match=r"seeds must be distinct"):
+        bm.run_benchmark(STRATEGIES[:1], [_env()], np.array([1, 1]), tmp_path / "out")
+    env = _env(budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,))
+    out = bm.run_benchmark(
+        STRATEGIES[:1], [env], np.arange(2), tmp_path / "o", workers=1, plots=False
+    )
+    assert out["sweep"]["seeds"] == [0, 1] and out["sweep"]["computed"] == 2
+
+
 def test_a_score_the_env_never_feeds_is_called_out_not_read_as_instant_learning(
     tmp_path, capsys, monkeypatch
 ):

@@ -98,3 +98,19 @@ def test_every_confidence_rule_judges_a_cuda_models_answer_as_the_cpu_models() -
         a = rule_cpu.is_confident(cpu.classify(x), x)
         b = rule_gpu.is_confident(gpu.classify(x), x)
         assert (a.cpu() == b.cpu()).float().mean() > 0.999, make.__name__
+
+
+def test_a_far_observation_classifies_on_cuda_as_on_the_cpu() -> None:
+    """A row whose squared distances overflow is scored exactly in numpy (_classify_far); a
+    CUDA model had no numpy tables for it and raised KeyError 'np' (before 2026-11-27)."""
+    x, y = _data()
+    cpu, gpu = _fit("cpu", x, y), _fit("cuda", x, y)
+    q = np.zeros((3, x.shape[1]))
+    q[0, 0] = 1e155
+    for rows in (q[:1], q, np.repeat(q, 100, axis=0)):  # one row, a batch, the torch path
+        c, g = cpu.classify(rows), gpu.classify(rows)
+        assert torch.equal(g.action.cpu(), c.action)
+        np.testing.assert_allclose(g.distance.cpu().numpy(), c.distance.numpy(), rtol=1e-6)
+        assert torch.isfinite(g.posterior).all()
+        lc, lg = cpu.log_prob(rows), gpu.log_prob(rows)
+        assert torch.equal(torch.isinf(lg.cpu()), torch.isinf(lc))

@@ -196,3 +196,80 @@ def test_aic_requires_both_or_neither_and_a_fit():
     model, x, _ = _fitted()
     with pytest.raises(ValueError, match="both"):
         model.aic(x)
+
+
+def _nearest_real_component(model: GaussianMixtureSet, x: np.ndarray) -> tuple[int, float]:
+    """(action, Mahalanobis distance) of the nearest real component, computed directly on
+    x / s (s = max |x|) and scaled back, so that no square overflows."""
+    s = max(float(np.abs(x).max()), 1.0)
+    best = (math.inf, -1)
+    for a in range(model.n_actions):
+        for k in range(int(model.n_components_[a])):
+            u = model.precisions_cholesky_[a, k].numpy()
+            d = s * float(np.linalg.norm((x / s - model.means_[a, k].numpy() / s) @ u))
+            best = min(best, (d, a))
+    return best[1], best[0]
+
+
+@pytest.mark.parametrize(
+    ("d", "value"),
+    [
+        (2, 1e153),  # the real components' squares overflow, the padding's do not
+        (10, 1e148),  # no square overflows, but every real score is below the padding's
+    ],
+)
+def test_very_far_rows_are_never_decided_by_the_padding_components(d, value):
+    """Slots beyond an action's component count hold a padding component (mean 0, unit
+    covariance, log weight -1e300). Far enough away the real components scored below it (or
+    overflowed to -inf while it did not), and every path (one row, a batch, the torch path
+    beyond 256 rows) answered the padding's distance, posterior 1/2 each and its log-density
+    (before 2026-11-27)."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(0.0, 0.02, (200, d))
+    y = np.arange(200) % 2
+    x[y == 1] += 0.3
+    model = GaussianMixtureSet(2, d, 3, seed=0).fit(x, y)
+    assert (model.n_components_ < 3).all()  # padding slots exist
+    q = np.full((1, d), value)
+    want_a, want_d = _nearest_real_component(model, q[0])
+    for rows in (q, np.repeat(q, 3, axis=0), np.repeat(q, 300, axis=0)):
+        c = model.classify(rows)
+        assert c.action.tolist() == [want_a] * len(rows)
+        assert c.distance.tolist() == pytest.approx([want_d] * len(rows), rel=1e-9)
+        assert c.posterior[:, want_a].tolist() == [1.0] * len(rows)
+        lp = model.log_prob(rows)
+        # the real mixtures' log-density: far below the padding's -1e300 - |x|^2 / 2
+        assert bool((lp[:, want_a] >= lp[:, 1 - want_a]).all())
+        assert not bool((lp > -1.001e300).any()) and not torch.isnan(lp).any()
+
+
+def test_a_model_converted_from_float64_refuses_its_first_fit_too():
+    """fit/refit need the float64 state; an unfitted model converted to float32 was fitted
+    once (into float32 buffers) and refused every later fit, e.g. at the teaching loop's
+    second refit (before 2026-11-27)."""
+    x, y = _data()
+    for dtype in (torch.float32, torch.float16):
+        model = GaussianMixtureSet(3, 3, 4).to(dtype)
+        for call in (model.fit, model.refit):
+            with pytest.raises(TypeError, match=r"float64 state.*\.to\(torch\.float64\)"):
+                call(x, y)
+        assert not model.is_fitted
+        model.to(torch.float64).fit(x, y).fit(x, y)  # and back: fits as usual
+
+
+def test_numpy_float_settings_are_the_python_numbers_they_hold():
+    """var_floor=np.float32(0.01) was refused as 'Expected var_floor to be a finite float >= 0
+    but got np.float32(0.01)' (tol and refit_growth alike; the int arguments took numpy ints)
+    before 2026-11-27."""
+    model = GaussianMixtureSet(
+        2, 2, np.int64(3), var_floor=np.float32(0.01), tol=np.float64(1e-4),
+        refit_growth=np.int32(1), seed=np.uint32(5),
+    )  # fmt: skip
+    assert type(model.var_floor) is float and model.var_floor == float(np.float32(0.01))
+    assert type(model.refit_growth) is float and model.refit_growth == 1.0
+    x, y = _data(a=2, d=2)
+    fresh = GaussianMixtureSet(2, 2, 3, var_floor=float(np.float32(0.01)), tol=1e-4,
+                               refit_growth=1.0, seed=5)  # fmt: skip
+    fresh.load_state_dict(model.fit(x, y).state_dict())  # the same settings
+    with pytest.raises(ValueError, match="var_floor"):
+        GaussianMixtureSet(2, 2, var_floor=np.bool_(True))

@@ -465,3 +465,14 @@ def test_a_person_at_the_terminal_teaches_an_agent_that_asks_less_often(terminal
     # ... and what it learned from the person is right: it mostly acts correctly on its own.
     late = records[40:]
     assert sum(r.executed_action == int(r.observation[0] >= 0.5) for r in late) >= 0.8 * len(late)
+
+
+def test_a_line_of_a_digit_that_is_no_number_is_an_invalid_key():
+    """'²' (and other digits str.isdigit accepts) is no action number: the line teacher asked
+    again for '1' but raised ValueError from int('²') (before 2026-11-27)."""
+    out = io.StringIO()
+    teacher = TerminalTeacher(
+        {"w": 0, "s": 1}, ("go", "stop"), input=io.StringIO("²\n١\n"), output=out
+    )
+    assert teacher(np.zeros(2), {}) == 1  # '²' refused, then the Arabic-Indic digit one
+    assert "'²' is not a key here" in out.getvalue()

@@ -277,6 +277,19 @@ def test_a_negative_seed_is_refused_before_a_run_directory_is_written(tmp_path):
     assert not (tmp_path / "r").exists()
 
 
+def test_a_model_converted_to_float32_is_refused_before_a_run_directory_is_written(tmp_path):
+    # a GaussianMixtureSet fits only in float64: such a session failed at its first refit
+    # after a demonstration had been logged (before 2026-11-27: at the second)
+    env = rare_regions_world()
+    model = GaussianMixtureSet(env.action_space.n, env.observation_space.shape[0]).float()
+    with pytest.raises(TypeError, match=r"model: .*torch.float32.*model.to\(torch.float64\)"):
+        ConfidentTeacher(env, oracle(env), model=model, run_dir=tmp_path / "r", progress=False)
+    assert not (tmp_path / "r").exists()
+    ct = ConfidentTeacher(env, oracle(env), model=model.double(), progress=False)
+    ct.run(max_steps=5)
+    assert ct.model.is_fitted
+
+
 def test_numpy_scalars_in_the_config_are_stored_as_python_numbers(tmp_path):
     import json
 

@@ -597,6 +597,21 @@ def run_benchmark(
     Returns:
         The results dict that was written to ``results.json``.
     """
+    if isinstance(seeds, (str, bytes)) or not isinstance(seeds, Iterable):
+        raise ValueError(f"run_benchmark: seeds must be a sequence of ints >= 0, got {seeds!r}")
+    seeds = list(seeds)  # a numpy array too (its truth value is ambiguous)
+    bad = [
+        s
+        for s in seeds
+        if isinstance(s, (bool, np.bool_))
+        or not isinstance(s, (int, np.integer))
+        or not 0 <= s < 2**64
+    ]
+    if bad:
+        raise ValueError(
+            f"run_benchmark: seeds must be ints in [0, 2**64) (each seeds a cell's model, env "
+            f"and teacher), got {bad!r}"
+        )
     if not strategies or not envs or not seeds:
         raise ValueError("run_benchmark: need at least one strategy, one env and one seed")
     titles = [s.title for s in strategies]
@@ -608,7 +623,7 @@ def run_benchmark(
             f"run_benchmark: env names must be distinct (tables group cells by name), got "
             f"{names}; give each EnvSpec its own name="
         )
-    if len(set(seeds)) != len(seeds):
+    if len({int(s) for s in seeds}) != len(seeds):
         raise ValueError(
             f"run_benchmark: seeds must be distinct (a repeated seed repeats the same cells and "
             f"counts them twice), got {list(seeds)}"

@@ -188,6 +188,11 @@ class FitReport:
 
 
 _FAR = 1e150  # |(x - mu)^T U| per coordinate beyond which squares may overflow: _classify_far
+# A component score (log w + log N) at or below this is no real component's: the padding
+# components score _VERY_NEGATIVE - maha / 2 at most. A row whose best real score is this low
+# (or overflows) would be decided by the padding (at the origin, unit covariance), so it goes
+# to the exact path, _far_scores.
+_FAR_SCORE = 0.5 * _VERY_NEGATIVE
 
 
 def _merge_rows(far: np.ndarray, c_far: Any, classify: Any, x: np.ndarray) -> Any:
@@ -438,6 +443,12 @@ class GaussianMixtureSet(nn.Module):
         ):
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
                 raise ValueError(f"Expected {name} to be an int >= 1 but got {val!r}")
+        # numpy numbers (np.float32(0.01) from a sweep) are the Python numbers they hold
+        var_floor, tol, refit_growth = (
+            float(v) if isinstance(v, (np.floating, np.integer)) and not isinstance(v, np.bool_)
+            else v
+            for v in (var_floor, tol, refit_growth)
+        )  # fmt: skip
         if criterion not in _CRITERIA:
             raise ValueError(f"Expected criterion in {_CRITERIA} but got {criterion!r}")
         if not (isinstance(var_floor, (int, float)) and math.isfinite(var_floor)) or var_floor < 0:
@@ -578,9 +589,11 @@ class GaussianMixtureSet(nn.Module):
             "log_prior": log_prior,
             "cpu": dev.type == "cpu",
         }
-        if cache["cpu"]:
-            cache["np"] = tuple(t.detach().numpy().copy() for t in (pcat, mu_p, const, log_prior))
-            cache["prior_np"] = np.exp(cache["np"][3])
+        # numpy copies on every device: small batches on the CPU are scored in numpy, and a
+        # row too far for the batched path is scored exactly in numpy on any device
+        # (_classify_far), a CUDA model's included
+        cache["np"] = tuple(t.detach().cpu().numpy().copy() for t in (pcat, mu_p, const, log_prior))
+        cache["prior_np"] = np.exp(cache["np"][3])
         self._cache = cache
         return cache
 
@@ -697,9 +710,10 @@ class GaussianMixtureSet(nn.Module):
     ) -> GaussianMixtureSet:
         """Check the inputs, then fit single-threaded (the EM may take the caller's threads
         back, see the thread policy)."""
-        if self.is_fitted and self.means_.dtype != torch.float64:
+        if self.means_.dtype != torch.float64:
             # the refit bookkeeping compares float64 state bit for bit: a float32 copy would
-            # look changed at every refit (and float16 overflows covariances)
+            # look changed at every refit (and float16 overflows covariances). Refused before
+            # the first fit too: that fit would succeed and every later one fail
             raise TypeError(
                 f"fit/refit need the model's float64 state, but it was converted to "
                 f"{self.means_.dtype} (classification works in that dtype); call "
@@ -1149,18 +1163,30 @@ class GaussianMixtureSet(nn.Module):
         if not self.is_fitted:
             raise RuntimeError("log_prob() needs a fitted model: call fit() first")
         x, use_np = self._prepare(observations)
+        has_data = np.isfinite(self._tables()["np"][3])
         if use_np:
             lp, _ = self._component_scores_np(x)  # type: ignore[arg-type]
             mx = lp.max(-1, keepdims=True)
-            mx = np.where(np.isfinite(mx), mx, 0.0)  # every component at -inf (a far row): -inf
+            # a row where an action's real components all score that low (or overflow) is
+            # scored exactly apart: the padding components would decide it
+            far = ~(mx[..., 0] > _FAR_SCORE)[:, has_data].all(1)
+            mx = np.where(np.isfinite(mx), mx, 0.0)
             with np.errstate(divide="ignore"):
-                mix = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1))
-            return torch.from_numpy(mix + self._tables()["np"][3])
+                mix = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1)) + self._tables()["np"][3]
+            if far.any():
+                mix[far] = self._far_scores(x[far])[0]  # type: ignore[index]
+            return torch.from_numpy(mix)
         # no_grad, not inference_mode: the caller gets ordinary tensors it may modify in place
         # or use with autograd, whatever the batch size
         with self._predict_threads(x.shape[0]), torch.no_grad():
             lp, _ = self._component_scores_torch(x)  # type: ignore[arg-type]
-            return torch.logsumexp(lp, -1) + self._tables()["log_prior"]
+            out = torch.logsumexp(lp, -1) + self._tables()["log_prior"]
+            low = ~(lp.amax(-1) > _FAR_SCORE)[:, torch.from_numpy(has_data).to(lp.device)]
+            far = low.any(1)
+            if bool(far.any()):
+                value = self._far_scores(x[far].cpu().numpy())[0]  # type: ignore[index]
+                out[far] = torch.from_numpy(value).to(out.device, out.dtype)
+            return out
 
     def classify(self, observations: Any) -> Classification:
         """Classify observations [N, D] by Eq. 7 and report how sure the model is.
@@ -1205,6 +1231,8 @@ class GaussianMixtureSet(nn.Module):
         y *= y
         maha = y.reshape(self.n_actions, self.max_components, self.n_features).sum(-1)
         lp = const - 0.5 * maha  # [A, K]
+        if not lp.max() > _FAR_SCORE:  # no real component scores above the padding's range
+            return self._classify_far(x)
         e = np.exp(lp - lp.max())
         p = e.sum(1) * prior
         a = int(p.argmax())
@@ -1227,6 +1255,9 @@ class GaussianMixtureSet(nn.Module):
         y *= y
         maha = y.reshape(n, self.n_actions, self.max_components, self.n_features).sum(-1)
         lp = const - 0.5 * maha
+        far = ~(lp.reshape(n, -1).max(1) > _FAR_SCORE)
+        if far.any():  # no real component scores above the padding's range: exactly apart
+            return _merge_rows(far, self._classify_far(x[far]), self._classify_np, x)
         mx = lp.max(-1, keepdims=True)
         logp = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1)) + self._tables()["np"][3]
         action = logp.argmax(1)
@@ -1255,6 +1286,7 @@ class GaussianMixtureSet(nn.Module):
         d2 = maha[rows, action, comp]
         out = Classification(action.clone(), torch.exp(-0.5 * d2), torch.sqrt(d2), post.clone())
         far = ~(torch.isfinite(post).all(1) & torch.isfinite(d2))
+        far |= ~(lp.reshape(x.shape[0], -1).amax(1) > _FAR_SCORE)  # decided by the padding
         if bool(far.any()):  # rows whose squared distances overflow: redo them exactly
             rows_far = far.cpu().numpy()
             c = self._classify_far(x[far].cpu().numpy())
@@ -1273,18 +1305,9 @@ class GaussianMixtureSet(nn.Module):
         component (smallest Mahalanobis distance) decides: its action wins with posterior 1,
         and the confidence is exp(-d^2/2) = 0. The distance is clipped to the largest float.
         """
-        pcat, mu_p, const, log_prior = self._tables()["np"]
-        n, a, k, d = x.shape[0], self.n_actions, self.max_components, self.n_features
+        n, a, k = x.shape[0], self.n_actions, self.max_components
+        logp, lp, ms, dist = self._far_scores(x)
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            scale = np.maximum(abs(x).max(1), 1.0)[:, None]
-            y = (x / scale) @ pcat - mu_p / scale
-            valid = const > 0.5 * _VERY_NEGATIVE  # [A, K]: components that exist
-            ms = np.where(valid, (y * y).reshape(n, a, k, d).sum(-1), np.inf)  # maha / s^2
-            dist = np.minimum(scale[:, :, None] * np.sqrt(ms), np.finfo(np.float64).max)
-            lp = np.where(valid, const - 0.5 * (scale[:, :, None] ** 2 * ms), -np.inf)
-            mx = lp.max(-1, keepdims=True)
-            mx0 = np.where(np.isfinite(mx), mx, 0.0)
-            logp = mx0[..., 0] + np.log(np.exp(lp - mx0).sum(-1)) + log_prior  # [N, A]
             best = logp.max(1, keepdims=True)
             exact = np.isfinite(best[:, 0])
             post = np.where(exact[:, None], np.exp(logp - np.where(exact[:, None], best, 0)), 0.0)
@@ -1301,6 +1324,25 @@ class GaussianMixtureSet(nn.Module):
             torch.from_numpy(dd),
             torch.from_numpy(post),
         )
+
+    def _far_scores(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(log p_a(o) + log Pr(G_a) [N, A], component scores [N, A, K], maha / s^2 [N, A, K],
+        distances [N, A, K]) of the real components alone (the padding scores -inf), computed
+        on x / s (s = max(1, max |x_d|)) so that no square overflows: exact where
+        representable, -inf beyond (a distance: clipped to the largest float)."""
+        pcat, mu_p, const, log_prior = self._tables()["np"]
+        n, a, k, d = x.shape[0], self.n_actions, self.max_components, self.n_features
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            scale = np.maximum(abs(x).max(1), 1.0)[:, None]
+            y = (x / scale) @ pcat - mu_p / scale
+            valid = const > _FAR_SCORE  # [A, K]: components that exist
+            ms = np.where(valid, (y * y).reshape(n, a, k, d).sum(-1), np.inf)  # maha / s^2
+            dist = np.minimum(scale[:, :, None] * np.sqrt(ms), np.finfo(np.float64).max)
+            lp = np.where(valid, const - 0.5 * (scale[:, :, None] ** 2 * ms), -np.inf)
+            mx = lp.max(-1, keepdims=True)
+            mx0 = np.where(np.isfinite(mx), mx, 0.0)
+            logp = mx0[..., 0] + np.log(np.exp(lp - mx0).sum(-1)) + log_prior  # [N, A]
+        return logp, lp, ms, dist
 
     # ------------------------------------------------------------------ criteria
     def _criterion_of_chosen(

@@ -368,6 +368,6 @@ class TerminalTeacher:
         for action, name in enumerate(self.action_names):
             if lowered == name.lower():
                 return action
-        if token.isdigit() and int(token) < self.n_actions:
+        if token.isdecimal() and int(token) < self.n_actions:  # "²" is a digit, no int
             return int(token)
         return None

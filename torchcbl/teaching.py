@@ -430,6 +430,15 @@ class ConfidentTeacher:
                     f"model.{attr} is {got} but the env has {want}; build the model with "
                     f"{attr}={want}."
                 )
+        means = getattr(model, "means_", None)
+        if isinstance(means, torch.Tensor) and means.dtype != torch.float64:
+            # refused here, before a session exists: its first refit would raise (a
+            # GaussianMixtureSet fits only in float64)
+            raise TypeError(
+                f"model: its state was converted to {means.dtype}, but teaching refits it, and "
+                "a GaussianMixtureSet fits only in float64; pass model.to(torch.float64) (a "
+                "copy converted to another dtype may classify, e.g. GreedyPolicy(copy))."
+            )
         self.model = model
         self.strategy = strategy
         strategy.bind(n_actions=self.n_actions, n_features=self.n_features, config=self.config)

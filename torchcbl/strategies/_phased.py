@@ -32,6 +32,16 @@ class Decision(NamedTuple):
     state: Any = None
 
 
+def _plain(value: Any) -> Any:
+    """A numpy integer or float as the Python number it holds (np.int64(50), np.float32(0.5):
+    accepted wherever an int or float is, and stored JSON-serialisable); anything else as is."""
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    return value
+
+
 def _rule_takes_observations(rule: Any) -> bool:
     try:
         params = list(inspect.signature(rule.is_confident).parameters.values())

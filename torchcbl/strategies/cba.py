@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from torchcbl.confidence import _np
-from torchcbl.strategies._phased import _Phased
+from torchcbl.strategies._phased import _Phased, _plain
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
@@ -121,6 +121,7 @@ class ConfidenceBasedAutonomy(_Phased):
 
     def __init__(self, distance_multiplier: float = 1.5, clean_threshold: float = 0.0) -> None:
         super().__init__()
+        distance_multiplier, clean_threshold = _plain(distance_multiplier), _plain(clean_threshold)
         for name, v, ok, want in (
             ("distance_multiplier", distance_multiplier, lambda v: v > 0, "> 0"),
             ("clean_threshold", clean_threshold, lambda v: v >= 0, ">= 0"),

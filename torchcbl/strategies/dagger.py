@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from torchcbl.strategies._phased import Decision, _StrategyDefaults
+from torchcbl.strategies._phased import Decision, _plain, _StrategyDefaults
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
@@ -55,6 +55,7 @@ class DAgger(_StrategyDefaults):
         iteration_steps: int = 50,
         seed: int = 0,
     ) -> None:
+        beta0, decay, iteration_steps, seed = map(_plain, (beta0, decay, iteration_steps, seed))
         self.beta0 = _unit("beta0", beta0)
         self.decay = _unit("decay", decay)
         if isinstance(iteration_steps, bool) or not isinstance(iteration_steps, int):

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from torchcbl.strategies._phased import Decision, LabelKind, _StrategyDefaults
+from torchcbl.strategies._phased import Decision, LabelKind, _plain, _StrategyDefaults
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
@@ -45,6 +45,7 @@ class HGDAgger(_StrategyDefaults):
     wants_corrections = True
 
     def __init__(self, warmup: int = 10) -> None:
+        warmup = _plain(warmup)
         if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
             raise ValueError(f"HGDAgger: warmup must be an int >= 0, got {warmup!r}")
         self.warmup = warmup

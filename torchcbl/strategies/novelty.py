@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from torchcbl.confidence import _np
-from torchcbl.strategies._phased import Decision, LabelKind, _StrategyDefaults
+from torchcbl.strategies._phased import Decision, LabelKind, _plain, _StrategyDefaults
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
@@ -57,6 +57,9 @@ class NoveltyGated(_StrategyDefaults):
         warmup: int = 10,
         min_history: int = 10,
     ) -> None:
+        target_rate, window, warmup, min_history = map(
+            _plain, (target_rate, window, warmup, min_history)
+        )
         if (
             isinstance(target_rate, bool)
             or not isinstance(target_rate, (int, float))
