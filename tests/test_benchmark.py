@@ -350,6 +350,27 @@ def test_an_env_spec_refuses_what_every_worker_would_fail_on(bad, message):
         _env(**bad)
 
 
+def test_an_env_spec_takes_numpy_ints_as_the_ints_they_hold():
+    np = pytest.importorskip("numpy")
+    sweep = _env(
+        budgets=tuple(np.arange(5, 25, 5)),
+        max_steps=np.int64(60),
+        eval_episodes=np.int32(3),
+        eval_seeds=np.arange(100, 102),
+    )
+    plain = _env(budgets=(5, 10, 15, 20))
+    assert sweep == plain
+    # the spec's JSON (the cache key of its cells) is the plain spec's
+    assert json.dumps(sweep.to_dict(), sort_keys=True) == json.dumps(
+        plain.to_dict(), sort_keys=True
+    )
+    for bad in ("5", 5):
+        with pytest.raises(ValueError, match="budgets must be increasing ints"):
+            _env(budgets=bad)
+    with pytest.raises(ValueError, match="eval_seeds must be a non-empty tuple"):
+        _env(eval_seeds=7)
+
+
 def test_a_strategy_spec_is_a_known_name_or_an_import_path():
     for name in ("dagerr", 5):
         with pytest.raises(ValueError, match="StrategySpec: name must be one of"):

@@ -203,43 +203,49 @@ class EnvSpec:
     model: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        b = list(self.budgets)
-        if (
-            not b
-            or any(isinstance(x, bool) or not isinstance(x, int) or x < 1 for x in b)
-            or b != sorted(set(b))
-        ):
+        def whole(x: Any) -> bool:  # an int, numpy's included (a sweep over np.arange)
+            return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
+
+        try:
+            b = [] if isinstance(self.budgets, (str, bytes)) else list(self.budgets)
+        except TypeError:  # not a sequence
+            b = []
+        if not b or any(not whole(x) or x < 1 for x in b) or b != sorted(set(b)):
             raise ValueError(
                 f"EnvSpec {self.name!r}: budgets must be increasing ints >= 1, got {self.budgets!r}"
             )
-        if (
-            isinstance(self.max_steps, bool)
-            or not isinstance(self.max_steps, int)
-            or self.max_steps < 1
-        ):
-            raise ValueError(f"EnvSpec {self.name!r}: max_steps must be an int >= 1")
+        if not whole(self.max_steps) or self.max_steps < 1:
+            raise ValueError(
+                f"EnvSpec {self.name!r}: max_steps must be an int >= 1, got {self.max_steps!r}"
+            )
         if self.eval_episodes is None and self.eval_steps is None:
             raise ValueError(f"EnvSpec {self.name!r}: give eval_episodes and/or eval_steps")
         for name in ("eval_episodes", "eval_steps"):
             v = getattr(self, name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+            if v is not None and (not whole(v) or v < 1):
                 raise ValueError(
                     f"EnvSpec {self.name!r}: {name} must be None or an int >= 1, got {v!r}"
                 )
         if not isinstance(self.name, str):
             raise ValueError(f"EnvSpec: name must be a str, got {self.name!r}")
-        if (
-            isinstance(self.eval_seeds, (str, bytes))
-            or not self.eval_seeds
-            or any(
-                isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0
-                for s in self.eval_seeds
-            )
-        ):
+        try:
+            seeds = [] if isinstance(self.eval_seeds, (str, bytes)) else list(self.eval_seeds)
+        except TypeError:  # not a sequence
+            seeds = []
+        if not seeds or any(not whole(s) or s < 0 for s in seeds):
             raise ValueError(
                 f"EnvSpec {self.name!r}: eval_seeds must be a non-empty tuple of ints >= 0, "
                 f"got {self.eval_seeds!r}"
             )
+        # stored as plain ints: the spec's JSON (the cache key of its cells) is the same for
+        # numpy ints as for the ints they hold
+        plain = object.__setattr__
+        plain(self, "budgets", tuple(int(x) for x in b))
+        plain(self, "eval_seeds", tuple(int(x) for x in seeds))
+        plain(self, "max_steps", int(self.max_steps))
+        for name in ("eval_episodes", "eval_steps"):
+            if getattr(self, name) is not None:
+                plain(self, name, int(getattr(self, name)))
         # what every worker would fail on at its first cell, checked now
         from torchcbl.gmm import GaussianMixtureSet
         from torchcbl.teaching import TeachingConfig
