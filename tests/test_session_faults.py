@@ -1073,6 +1073,16 @@ def test_resume_compares_what_gymnasium_make_was_given(tmp_path):
     ConfidentTeacher.resume(run, short, teacher, progress=False).close()
 
 
+def test_a_resume_refused_for_a_model_that_is_no_gmm_set_reads_as_one_sentence(tmp_path):
+    run = tmp_path / "run"
+    _closed_session(run)
+    with pytest.raises(IncompatibleRunDirError) as err:
+        resume(run, model=torch.nn.Linear(2, 2))
+    msg = str(err.value)
+    assert "Pass a torchcbl.GaussianMixtureSet as model. Resume with matching" in msg
+    assert ".." not in msg
+
+
 def test_the_cap_kept_is_the_one_in_force_under_an_outer_time_limit(tmp_path):
     def teacher(obs, info):
         return 2 if obs[1] >= 0 else 0

@@ -88,8 +88,10 @@ def _check_positive(name: str, value: float, *, upper: float | None = None) -> f
 def chi2_quantile(q: float, dof: int) -> float:
     """The ``q`` quantile of the chi-square distribution with ``dof`` degrees of freedom.
 
-    Bisection on the regularised lower incomplete gamma function (``torch.special.gammainc``),
-    to a relative precision of 1e-13; no SciPy needed.
+    Bisection on the regularised lower incomplete gamma function (``torch.special.gammainc``)
+    until the bracket is 1e-13 of its upper end; no SciPy needed. Its precision is
+    ``gammainc``'s: against SciPy's ``chi2.ppf``, relative errors of at most 5e-14 up to 10
+    degrees of freedom and 1e-10 up to 1,000 (measured at q = 0.5 to 0.99).
     """
     if not 0.0 < q < 1.0:
         raise ValueError(f"chi2_quantile: expected q in (0, 1), got {q!r}")

@@ -570,7 +570,7 @@ class ConfidentTeacher:
         if problems:
             raise IncompatibleRunDirError(
                 f"cannot resume the session in {run_dir}: "
-                + "; ".join(problems)
+                + "; ".join(problems).rstrip(".")
                 + ". Resume with matching arguments, or start a new session in another run_dir."
             )
         if model is None:
