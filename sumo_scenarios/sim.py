@@ -16,6 +16,7 @@ fresh road segment. Two simulations running at once need two processes.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import weakref
 from dataclasses import dataclass
@@ -97,6 +98,12 @@ class SimConfig:
     shift_margin_m: float = 400.0
 
     def __post_init__(self) -> None:
+        for name in ("step_length_s", "ego_start_m", "shift_margin_m"):
+            v = getattr(self, name)
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+                raise ValueError(f"{name} must be a number, got {v!r}")
+            # a plain float: SUMO gets it as text (``repr`` of a numpy float is not a number)
+            object.__setattr__(self, name, float(v))
         if not 0.01 <= self.step_length_s <= 1.0:
             raise ValueError("step_length_s must lie in [0.01, 1.0] seconds")
         if not (math.isfinite(self.ego_start_m) and self.ego_start_m >= 0):
