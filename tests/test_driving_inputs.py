@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from sumo_scenarios.env import DrivingConfig, DrivingEnv
+from sumo_scenarios.replay import EpisodeRecorder, load_records, replay, save_records
+from sumo_scenarios.scenarios import TrafficScenario
 from sumo_scenarios.sim import SimConfig
 
 
@@ -27,3 +29,31 @@ def test_sim_config_takes_numpy_numbers_and_sumo_starts(step):
         SimConfig(step_length_s="0.25")
     with pytest.raises(ValueError, match="shift_margin_m must be a number"):
         SimConfig(shift_margin_m=True)
+
+
+def test_a_scenario_of_numpy_numbers_drives_records_and_replays(tmp_path):
+    # a float32 spacing made every car position float32 (libsumo's moveTo refused it: "argument
+    # 3 of type 'double'"), and a numpy int seed made save_records fail (not JSON serializable)
+    scenario = TrafficScenario(
+        name="mine",
+        seed=np.int64(7),
+        min_spacing_m=np.float32(15.0),
+        mean_spacing_m=np.array([40.0, 35.0, 100.0], dtype=np.float32),
+        speed_ranges_mph=[[20, 30], [25, 35], [30, 40]],
+    )
+    env = EpisodeRecorder(DrivingEnv(scenario=scenario, max_episode_steps=30))
+    try:
+        obs, _ = env.reset(seed=3)
+        observations = [obs]
+        for k in range(30):
+            obs, *_ = env.step(k % 3)
+            observations.append(obs)
+    finally:
+        env.close()
+    save_records(env.episodes, tmp_path / "episodes.json")
+    (record,) = load_records(tmp_path / "episodes.json")
+    assert record.scenario == scenario
+    result, _ = replay(record)
+    np.testing.assert_array_equal(result.observations, np.stack(observations))
+    assert scenario.speed_ranges_mph == ((20.0, 30.0), (25.0, 35.0), (30.0, 40.0))
+    hash(scenario)  # a frozen dataclass of tuples, as the named scenarios are
