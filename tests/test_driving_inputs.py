@@ -57,3 +57,26 @@ def test_a_scenario_of_numpy_numbers_drives_records_and_replays(tmp_path):
     np.testing.assert_array_equal(result.observations, np.stack(observations))
     assert scenario.speed_ranges_mph == ((20.0, 30.0), (25.0, 35.0), (30.0, 40.0))
     hash(scenario)  # a frozen dataclass of tuples, as the named scenarios are
+
+
+def test_a_shift_margin_too_small_for_the_scenario_is_refused_and_the_least_one_drives():
+    # a margin below the farthest a new car is placed ahead let cars reach the end of the edge
+    # before the shift; SUMO removed them and step() failed after about 1,400 steps with
+    # libsumo's "Vehicle 'c51' is not known" (seed 3 of this sparse traffic, default SimConfig)
+    sparse = TrafficScenario(
+        name="sparse", seed=0, min_spacing_m=200.0, mean_spacing_m=(300.0, 300.0, 300.0)
+    )
+    with pytest.raises(ValueError, match="shift_margin_m = 400.0 m is too small"):
+        DrivingEnv(scenario=sparse, max_episode_steps=3000)
+    with pytest.raises(ValueError, match="at least 268.7 m"):
+        DrivingEnv(sim=SimConfig(shift_margin_m=100.0))
+    least = 200.0 + 250.0 + 60 * 0.44704 * 0.25
+    env = DrivingEnv(scenario=sparse, max_episode_steps=3000, sim=SimConfig(shift_margin_m=least))
+    try:
+        env.reset(seed=3)
+        truncated = False
+        while not truncated:
+            _, _, _, truncated, info = env.step(0)
+    finally:
+        env.close()
+    assert info["position_m"] > 20_000  # 20 km on the 10 km road: past at least one shift
