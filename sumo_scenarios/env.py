@@ -95,7 +95,11 @@ class DrivingConfig:
 
 @dataclass(frozen=True)
 class Frame:
-    """What a drawing needs of one timestep (positions: front bumpers, metres along the road)."""
+    """What a drawing needs of one timestep (positions: front bumpers, metres along the road).
+
+    ``prev_lane`` is the ego's lane before the step (its lane at reset on the first frame): a
+    contact counts cars in it as well as in ``ego_lane``; None when unknown.
+    """
 
     step: int
     ego_pos: float
@@ -104,6 +108,7 @@ class Frame:
     car_lane: np.ndarray
     contact: bool
     action: int | None
+    prev_lane: int | None = None
 
 
 class DrivingEnv(gym.Env):
@@ -247,6 +252,7 @@ class DrivingEnv(gym.Env):
             s.car_lane.copy(),
             s.contact,
             self._last_action,
+            s.prev_lane,
         )
 
     def _observe(self) -> np.ndarray:

@@ -3,12 +3,15 @@ valid settings, mistakes. Each test closes its env: libsumo holds one simulation
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from sumo_scenarios.env import DrivingConfig, DrivingEnv
+from sumo_scenarios.render import render_frame
 from sumo_scenarios.replay import EpisodeRecorder, load_records, replay, save_records
-from sumo_scenarios.scenarios import TrafficScenario
+from sumo_scenarios.scenarios import CAR_LENGTH_M, TrafficScenario
 from sumo_scenarios.sim import SimConfig
 
 
@@ -80,3 +83,33 @@ def test_a_shift_margin_too_small_for_the_scenario_is_refused_and_the_least_one_
     finally:
         env.close()
     assert info["position_m"] > 20_000  # 20 km on the 10 km road: past at least one shift
+
+
+def _orange_pixels(image: np.ndarray) -> int:
+    return int(np.all(image == np.array([255, 165, 0]), axis=-1).sum())
+
+
+def test_render_outlines_a_car_in_contact_in_the_lane_the_ego_just_left():
+    # contact counts the cars of the lane the ego left in this step, but the drawing looked
+    # for a prev_lane the Frame did not have: such a car was drawn as if nothing touched it
+    env = DrivingEnv(render_mode="rgb_array", max_episode_steps=10_000)
+    rng = np.random.default_rng(1)
+    try:
+        env.reset(seed=1)
+        for _ in range(2000):
+            _, _, _, _, info = env.step(int(rng.integers(3)))
+            rel, lanes = info["car_rel_m"], info["car_lane"]
+            near = np.abs(rel) < CAR_LENGTH_M
+            if info["contact"] and not np.any(lanes[near] == info["lane"]):
+                break
+        else:
+            pytest.fail("no contact with a car of the lane just left")
+        frame = env.frame()
+        image = env.render()
+    finally:
+        env.close()
+    keep = np.abs(frame.car_pos - frame.ego_pos) >= CAR_LENGTH_M
+    without = dataclasses.replace(frame, car_pos=frame.car_pos[keep], car_lane=frame.car_lane[keep])
+    # the ego is outlined either way; the car it touches adds its own outline
+    assert _orange_pixels(image) > _orange_pixels(render_frame(without)) > 0
+    assert frame.prev_lane != frame.ego_lane and frame.prev_lane in lanes[near]
