@@ -36,9 +36,16 @@ def collision_rate(contacts: Sequence[bool] | np.ndarray) -> float:
 
 def lane_distribution(lanes: Sequence[int] | np.ndarray) -> np.ndarray:
     """Share of timesteps in each lane: float64 [5] summing to 1 (index = SUMO lane)."""
-    lane = np.asarray(lanes, dtype=np.int64)
-    if lane.size == 0:
-        raise ValueError("lane_distribution needs at least one timestep")
+    raw = np.asarray(lanes)
+    if raw.ndim != 1 or raw.size == 0:
+        raise ValueError(f"lane_distribution needs a 1-D sequence of lanes, got shape {raw.shape}")
+    with np.errstate(invalid="ignore"):
+        whole = raw.dtype.kind in "iub" or (
+            raw.dtype.kind == "f" and bool(np.all(raw == np.round(raw)))
+        )
+    if not whole:  # 2.7 was truncated to lane 2 (NaN to a cast error)
+        raise ValueError(f"lanes must be whole lane indices, got {raw[:5].tolist()!r}")
+    lane = raw.astype(np.int64)
     if lane.min() < 0 or lane.max() >= N_LANES:
         raise ValueError(f"lanes must lie in [0, {N_LANES - 1}]")
     return np.bincount(lane, minlength=N_LANES) / lane.size

@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from sumo_scenarios import metrics
 from sumo_scenarios.env import DrivingConfig, DrivingEnv
 from sumo_scenarios.render import render_frame
 from sumo_scenarios.replay import EpisodeRecorder, load_records, replay, save_records
@@ -113,3 +114,17 @@ def test_render_outlines_a_car_in_contact_in_the_lane_the_ego_just_left():
     # the ego is outlined either way; the car it touches adds its own outline
     assert _orange_pixels(image) > _orange_pixels(render_frame(without)) > 0
     assert frame.prev_lane != frame.ego_lane and frame.prev_lane in lanes[near]
+
+
+def test_lane_distribution_refuses_lanes_that_are_not_whole_indices():
+    # 2.7 was truncated to lane 2 without a word
+    with pytest.raises(ValueError, match="whole lane indices"):
+        metrics.lane_distribution([2.7, 3.2, 4.9])
+    with pytest.raises(ValueError, match="whole lane indices"):
+        metrics.lane_distribution([2.0, np.nan])
+    with pytest.raises(ValueError, match="1-D"):
+        metrics.lane_distribution([[1, 2], [3, 4]])
+    # the observation's lane column (float32 whole numbers) and ints are lanes
+    obs_lanes = np.array([2.0, 3.0, 3.0, 4.0], dtype=np.float32)
+    np.testing.assert_array_equal(metrics.lane_distribution(obs_lanes), [0, 0, 0.25, 0.5, 0.25])
+    np.testing.assert_array_equal(metrics.lane_distribution([0, 4]), [0.5, 0, 0, 0, 0.5])
