@@ -128,3 +128,20 @@ def test_lane_distribution_refuses_lanes_that_are_not_whole_indices():
     obs_lanes = np.array([2.0, 3.0, 3.0, 4.0], dtype=np.float32)
     np.testing.assert_array_equal(metrics.lane_distribution(obs_lanes), [0, 0, 0.25, 0.5, 0.25])
     np.testing.assert_array_equal(metrics.lane_distribution([0, 4]), [0.5, 0, 0, 0, 0.5])
+
+
+def test_per_step_flags_that_are_not_flags_are_refused():
+    # a None (a step without a teacher's answer) made every later accuracy window NaN, a NaN
+    # counted as a contact, and a float window was numpy's IndexError
+    with pytest.raises(ValueError, match="correct must be True / False"):
+        metrics.windowed_accuracy([True, None, True], window=2)
+    with pytest.raises(ValueError, match="correct must be True / False"):
+        metrics.windowed_accuracy([1.0, np.nan, 1.0], window=2)
+    with pytest.raises(ValueError, match="window must be an int"):
+        metrics.windowed_accuracy([True, False], window=2.0)
+    with pytest.raises(ValueError, match="contacts must be True / False"):
+        metrics.collision_rate([np.nan, 0.0])
+    np.testing.assert_allclose(
+        metrics.windowed_accuracy(np.array([1, 0, 1]), window=2), [1, 0.5, 0.5]
+    )
+    assert metrics.collision_rate(np.array([True, False, False, False])) == 0.25
