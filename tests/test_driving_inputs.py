@@ -145,3 +145,25 @@ def test_per_step_flags_that_are_not_flags_are_refused():
         metrics.windowed_accuracy(np.array([1, 0, 1]), window=2), [1, 0.5, 0.5]
     )
     assert metrics.collision_rate(np.array([True, False, False, False])) == 0.25
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["--seeds", "1", "--steps", "0"], "--steps and --keep"),  # collision_rate's ValueError
+        (["--seeds", "1", "--first-seed", "-1"], "--first-seed must be >= 0"),  # numpy's
+        (["--search", "2", "--keep", "0", "--first-seed", "100"], "--steps and --keep"),  # % 0
+        (["--search", "1", "--left-spacings", "abc", "--first-seed", "100"], "--left-spacings"),
+        (["--search", "1", "--left-spacings", "5", "--first-seed", "100"], "at least 12"),
+    ],
+)
+def test_calibration_command_reports_a_mistake_in_one_line(argv, says, tmp_path, capsys):
+    # each was a traceback (from the first measurement or a pool worker), not a usage error
+    from sumo_scenarios.calibrate_teacher import main
+
+    history = tmp_path / "history.jsonl"
+    with pytest.raises(SystemExit) as exc:
+        main([*argv, "--history", str(history)])
+    assert exc.value.code == 2
+    assert says in capsys.readouterr().err
+    assert not history.exists()
