@@ -141,6 +141,9 @@ class DrivingEnv(gym.Env):
         self.config = config
         self.scenario = get_scenario(config.scenario)
         self.render_mode = render_mode
+        # real time: one frame per decision period (4 at the default 0.25 s); a recorder such
+        # as gymnasium's RecordVideo plays frames at this rate
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / config.sim.step_length_s}
         self.observation_space = gym.spaces.Box(
             low=np.array([-SENSE_RANGE_M] * 3 + [0.0], dtype=np.float32),
             high=np.array([SENSE_RANGE_M] * 3 + [N_LANES - 1.0], dtype=np.float32),

@@ -167,3 +167,17 @@ def test_calibration_command_reports_a_mistake_in_one_line(argv, says, tmp_path,
     assert exc.value.code == 2
     assert says in capsys.readouterr().err
     assert not history.exists()
+
+
+def test_render_fps_is_real_time_for_the_step_length():
+    # it was 4 whatever the step length: a video of 0.1 s steps (e.g. gymnasium's RecordVideo,
+    # which plays frames at metadata["render_fps"]) ran at 0.4 times real time
+    fast = DrivingEnv(sim=SimConfig(step_length_s=0.1), render_mode="rgb_array")
+    default = DrivingEnv(render_mode="rgb_array")
+    try:
+        assert fast.metadata["render_fps"] == pytest.approx(10.0)
+        assert default.metadata["render_fps"] == 4.0
+        assert DrivingEnv.metadata["render_fps"] == 4  # the class's own is left alone
+    finally:
+        fast.close()
+        default.close()
