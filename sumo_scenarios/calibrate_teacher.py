@@ -173,6 +173,22 @@ def main(argv: list[str] | None = None) -> int:
     seeds = range(a.first_seed, a.first_seed + a.seeds)
     if a.search < 0 or a.rescore < 0 or a.seeds < 1:
         p.error("--search, --rescore and --seeds take a positive count")
+    # mistakes as one usage line, not a traceback from a worker or the first measurement
+    if a.steps < 1 or a.keep < 1:
+        p.error(f"--steps and --keep take a count >= 1, got {a.steps} and {a.keep}")
+    if a.first_seed < 0:
+        p.error(f"--first-seed must be >= 0 (a segment seed), got {a.first_seed}")
+    try:
+        spacings = [float(s) for s in a.left_spacings.split(",")]
+    except ValueError:
+        spacings = []
+    from sumo_scenarios.scenarios import TRAIN
+
+    if not spacings or not all(TRAIN.min_spacing_m <= s < float("inf") for s in spacings):
+        p.error(
+            f"--left-spacings takes comma-separated mean spacings in metres, each at least "
+            f"{TRAIN.min_spacing_m:g}, got {a.left_spacings!r}"
+        )
     if (a.search or a.rescore) and a.first_seed < CHECK_SEGMENTS:
         p.error(
             f"a search or rescore must use other segments than the check's 0-"
@@ -203,8 +219,6 @@ def main(argv: list[str] | None = None) -> int:
     if a.history.exists():
         history = [json.loads(line) for line in a.history.read_text().splitlines() if line]
     if not history:  # start from the defaults
-        from sumo_scenarios.scenarios import TRAIN
-
         history = [{"driver": _defaults(), "spacing": list(TRAIN.mean_spacing_m)}]
         history[0].update(collisions=0.0, lanes=[0.2] * 5, stay=1.0)
         a.history.parent.mkdir(parents=True, exist_ok=True)
@@ -222,7 +236,6 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     best = sorted(history, key=penalty)[: a.keep]
     rng = np.random.default_rng(a.rng)
-    spacings = [float(s) for s in a.left_spacings.split(",")]
     jobs = []
     for i in range(a.search):
         base = best[i % len(best)]

@@ -95,7 +95,11 @@ class DrivingConfig:
 
 @dataclass(frozen=True)
 class Frame:
-    """What a drawing needs of one timestep (positions: front bumpers, metres along the road)."""
+    """What a drawing needs of one timestep (positions: front bumpers, metres along the road).
+
+    ``prev_lane`` is the ego's lane before the step (its lane at reset on the first frame): a
+    contact counts cars in it as well as in ``ego_lane``; None when unknown.
+    """
 
     step: int
     ego_pos: float
@@ -104,6 +108,7 @@ class Frame:
     car_lane: np.ndarray
     contact: bool
     action: int | None
+    prev_lane: int | None = None
 
 
 class DrivingEnv(gym.Env):
@@ -136,6 +141,9 @@ class DrivingEnv(gym.Env):
         self.config = config
         self.scenario = get_scenario(config.scenario)
         self.render_mode = render_mode
+        # real time: one frame per decision period (4 at the default 0.25 s); a recorder such
+        # as gymnasium's RecordVideo plays frames at this rate
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / config.sim.step_length_s}
         self.observation_space = gym.spaces.Box(
             low=np.array([-SENSE_RANGE_M] * 3 + [0.0], dtype=np.float32),
             high=np.array([SENSE_RANGE_M] * 3 + [N_LANES - 1.0], dtype=np.float32),
@@ -247,6 +255,7 @@ class DrivingEnv(gym.Env):
             s.car_lane.copy(),
             s.contact,
             self._last_action,
+            s.prev_lane,
         )
 
     def _observe(self) -> np.ndarray:

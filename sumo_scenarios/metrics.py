@@ -28,17 +28,36 @@ __all__ = [
 
 def collision_rate(contacts: Sequence[bool] | np.ndarray) -> float:
     """Share of timesteps in contact with another car, in [0, 1]."""
-    c = np.asarray(contacts, dtype=bool)
+    c = _flags("contacts", contacts)
     if c.size == 0:
         raise ValueError("collision_rate needs at least one timestep")
     return float(c.mean())
 
 
+def _flags(name: str, values: Sequence[bool] | np.ndarray) -> np.ndarray:
+    """``values`` as float64 0 / 1 [T]; a NaN or None (which made a NaN count as a contact, or
+    every later accuracy window NaN) or any other number is refused."""
+    try:
+        v = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be True / False per timestep, got {values!r:.60}") from None
+    if v.ndim != 1 or not np.all((v == 0.0) | (v == 1.0)):
+        raise ValueError(f"{name} must be True / False per timestep (1-D), got {values!r:.60}")
+    return v
+
+
 def lane_distribution(lanes: Sequence[int] | np.ndarray) -> np.ndarray:
     """Share of timesteps in each lane: float64 [5] summing to 1 (index = SUMO lane)."""
-    lane = np.asarray(lanes, dtype=np.int64)
-    if lane.size == 0:
-        raise ValueError("lane_distribution needs at least one timestep")
+    raw = np.asarray(lanes)
+    if raw.ndim != 1 or raw.size == 0:
+        raise ValueError(f"lane_distribution needs a 1-D sequence of lanes, got shape {raw.shape}")
+    with np.errstate(invalid="ignore"):
+        whole = raw.dtype.kind in "iub" or (
+            raw.dtype.kind == "f" and bool(np.all(raw == np.round(raw)))
+        )
+    if not whole:  # 2.7 was truncated to lane 2 (NaN to a cast error)
+        raise ValueError(f"lanes must be whole lane indices, got {raw[:5].tolist()!r}")
+    lane = raw.astype(np.int64)
     if lane.min() < 0 or lane.max() >= N_LANES:
         raise ValueError(f"lanes must lie in [0, {N_LANES - 1}]")
     return np.bincount(lane, minlength=N_LANES) / lane.size
@@ -54,9 +73,13 @@ def total_variation(p: Sequence[float] | np.ndarray, q: Sequence[float] | np.nda
 
 def windowed_accuracy(correct: Sequence[bool] | np.ndarray, window: int = 150) -> np.ndarray:
     """Prediction accuracy over the last ``window`` steps (fewer at the start): float64 [T]."""
-    if window < 1:
-        raise ValueError("window must be positive")
-    c = np.asarray(correct, dtype=np.float64)
+    if (
+        isinstance(window, (bool, np.bool_))
+        or not isinstance(window, (int, np.integer))
+        or window < 1
+    ):
+        raise ValueError(f"window must be an int >= 1, got {window!r}")
+    c = _flags("correct", correct)
     cs = np.concatenate([[0.0], np.cumsum(c)])
     idx = np.arange(1, c.size + 1)
     lo = np.maximum(idx - window, 0)

@@ -52,7 +52,8 @@ def render_frame(
     # the cars the contact is with: within a car length, in the ego's lane or the one it left
     # (the simulator's own test)
     ego_lane = int(frame.ego_lane)  # type: ignore[attr-defined]
-    contact_lanes = {ego_lane, int(getattr(frame, "prev_lane", ego_lane))}
+    prev_lane = getattr(frame, "prev_lane", None)
+    contact_lanes = {ego_lane} if prev_lane is None else {ego_lane, int(prev_lane)}
     for r, lane in zip(rel, np.asarray(frame.car_lane), strict=True):  # type: ignore[attr-defined]
         if -behind_m - CAR_LENGTH_M < r < ahead_m + CAR_LENGTH_M:
             touching = contact and abs(r) < CAR_LENGTH_M and int(lane) in contact_lanes

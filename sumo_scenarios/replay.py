@@ -307,6 +307,9 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
     choosing (the device does not pass the recorded one), so the first speed change of each
     car looks like a hard brake that the episode never had.
     """
+    import re
+    from xml.sax.saxutils import escape
+
     from sumo_scenarios.scenarios import data_path
     from sumo_scenarios.sim import libsumo_lane_length_from_net
 
@@ -328,17 +331,23 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
         except ValueError:
             return str(p)
 
+    def attr(value: object) -> str:  # a file name may hold & < > or a quote
+        return escape(str(value), {'"': "&quot;"})
+
+    def note(value: object) -> str:  # "--" may not appear inside an XML comment
+        return re.sub("-(?=-)", "- ", str(value))
+
     dt = record.sim.step_length_s
     end = len(record.actions) * dt
     text = f"""<?xml version="1.0" encoding="UTF-8"?>
-<!-- Written by sumo_scenarios.replay.write_sumocfg for episode {record.label or "-"}
-     (episode seed {record.episode_seed}); recorded FCD: {fcd.name}.
-     sumo-gui -c {path.name} replays it (press play); sumo -c {path.name} replays it headless
-     and writes {rerun.name}, whose positions equal the recorded ones. -->
+<!-- Written by sumo_scenarios.replay.write_sumocfg for episode {note(record.label or "-")}
+     (episode seed {record.episode_seed}); recorded FCD: {note(fcd.name)}.
+     sumo-gui -c {note(path.name)} replays it (press play); sumo -c {note(path.name)} replays it
+     headless and writes {note(rerun.name)}, whose positions equal the recorded ones. -->
 <configuration>
     <input>
-        <net-file value="{data_path("road.net.xml")}"/>
-        <additional-files value="{data_path("driving.add.xml")}"/>
+        <net-file value="{attr(data_path("road.net.xml"))}"/>
+        <additional-files value="{attr(data_path("driving.add.xml"))}"/>
     </input>
     <time>
         <begin value="0"/>
@@ -352,10 +361,10 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
         <emergencydecel.warning-threshold value="1000"/>
     </processing>
     <fcd_replay_device>
-        <device.fcd-replay.files value="{rel(replay_input)}"/>
+        <device.fcd-replay.files value="{attr(rel(replay_input))}"/>
     </fcd_replay_device>
     <output>
-        <fcd-output value="{rel(rerun)}"/>
+        <fcd-output value="{attr(rel(rerun))}"/>
     </output>
     <report>
         <no-step-log value="true"/>

@@ -138,6 +138,18 @@ class TrafficScenario:
                 raise ValueError("mean_spacing_m must be at least min_spacing_m")
         if self.behind_m < 30.0 or self.ahead_m < 60.0:
             raise ValueError("the traffic window must cover the 25 m sensing range with margin")
+        # plain Python numbers and tuples: libsumo takes no numpy float32 (positions computed
+        # from one stay float32) and a recorded episode's JSON no numpy int
+        set_ = object.__setattr__
+        set_(self, "seed", int(self.seed))
+        for name in ("min_spacing_m", "ahead_m", "behind_m", "start_clear_m"):
+            set_(self, name, float(getattr(self, name)))
+        set_(self, "mean_spacing_m", tuple(float(v) for v in self.mean_spacing_m))
+        set_(
+            self,
+            "speed_ranges_mph",
+            tuple((float(lo), float(hi)) for lo, hi in self.speed_ranges_mph),
+        )
 
     @property
     def speed_ranges_ms(self) -> tuple[tuple[float, float], ...]:

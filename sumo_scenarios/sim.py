@@ -16,6 +16,7 @@ fresh road segment. Two simulations running at once need two processes.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import weakref
 from dataclasses import dataclass
@@ -89,7 +90,9 @@ class SimConfig:
         shift_margin_m: when the ego comes this close (plus the traffic window) to the end of
             the edge, every vehicle is moved back by the same distance. Metres. On the shipped
             10 km road that first happens after about 1,350 steps, so a 1000-step episode never
-            sees a car jump.
+            sees a car jump. It must be at least the scenario's ``min_spacing_m`` + 250 m (the
+            largest extra spacing of a new car) + one step of the ego's travel, so that no car
+            reaches the end of the edge (the environment refuses less).
     """
 
     step_length_s: float = 0.25
@@ -97,6 +100,12 @@ class SimConfig:
     shift_margin_m: float = 400.0
 
     def __post_init__(self) -> None:
+        for name in ("step_length_s", "ego_start_m", "shift_margin_m"):
+            v = getattr(self, name)
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+                raise ValueError(f"{name} must be a number, got {v!r}")
+            # a plain float: SUMO gets it as text (``repr`` of a numpy float is not a number)
+            object.__setattr__(self, name, float(v))
         if not 0.01 <= self.step_length_s <= 1.0:
             raise ValueError("step_length_s must lie in [0.01, 1.0] seconds")
         if not (math.isfinite(self.ego_start_m) and self.ego_start_m >= 0):
@@ -138,6 +147,17 @@ class HighwaySim:
             raise ValueError(
                 f"SimConfig: ego_start_m + the scenario's ahead_m + shift_margin_m = {room:.0f} m "
                 f"must stay below the road's {self._road_length:.0f} m"
+            )
+        # a car is placed up to min_spacing_m + _MAX_EXTRA_GAP_M beyond the traffic window's
+        # front, and the ego may pass the shift point by one step's travel before the shift:
+        # with less margin a car reaches the end of the edge and SUMO removes it
+        need = scenario.min_spacing_m + _MAX_EXTRA_GAP_M + EGO_SPEED_MS * self.config.step_length_s
+        if self.config.shift_margin_m < need:
+            raise ValueError(
+                f"SimConfig.shift_margin_m = {self.config.shift_margin_m} m is too small for the "
+                f"scenario's min_spacing_m = {scenario.min_spacing_m} m: a car would reach the "
+                f"end of the road before the shift; it must be at least {need:.1f} m (the "
+                f"scenario's min_spacing_m + {_MAX_EXTRA_GAP_M:.0f} m + one step of the ego)"
             )
         self._finalizer = weakref.finalize(self, _release, self._state)
         ranges = scenario.speed_ranges_ms

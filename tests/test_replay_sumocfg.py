@@ -10,6 +10,8 @@ of the road (where SUMO lets it leave).
 
 from __future__ import annotations
 
+import dataclasses
+import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -101,3 +103,21 @@ def test_sumocfg_needs_the_exported_fcd(episode, tmp_path):
     rec, _, _ = episode
     with pytest.raises(FileNotFoundError, match="export_fcd"):
         write_sumocfg(rec, tmp_path / "absent.fcd.xml", tmp_path / "x.sumocfg")
+
+
+def test_sumocfg_is_well_formed_whatever_the_label_and_file_names(episode, tmp_path):
+    # a label or file name holding "--" ended the configuration's XML comment early and one
+    # holding "&" broke an attribute: SUMO refused the file ("'--' sequence is illegal in
+    # comment", "Could not load configuration")
+    rec, fcd, _ = episode
+    rec = dataclasses.replace(rec, label="seed0--arm_a & <b>")
+    odd = tmp_path / "R&D--ep.fcd.xml"
+    shutil.copy(fcd, odd)
+    cfg = write_sumocfg(rec, odd, tmp_path / "R&D--ep.sumocfg")
+    ET.parse(cfg)  # well-formed XML
+    sumo = Path(sys.executable).with_name("sumo")
+    out = subprocess.run(
+        [str(sumo), "-c", str(cfg)], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert out.returncode == 0, out.stderr
+    assert _fcd(tmp_path / "R&D--ep.rerun.xml").keys() >= _fcd(odd).keys()

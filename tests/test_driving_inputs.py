@@ -1,0 +1,183 @@
+"""Driving-domain settings and inputs a user may plausibly give: numpy numbers, unusual but
+valid settings, mistakes. Each test closes its env: libsumo holds one simulation per process."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from sumo_scenarios import metrics
+from sumo_scenarios.env import DrivingConfig, DrivingEnv
+from sumo_scenarios.render import render_frame
+from sumo_scenarios.replay import EpisodeRecorder, load_records, replay, save_records
+from sumo_scenarios.scenarios import CAR_LENGTH_M, TrafficScenario
+from sumo_scenarios.sim import SimConfig
+
+
+@pytest.mark.parametrize(
+    "step", [np.float64(0.25), np.float32(0.25), 0.25], ids=["float64", "float32", "float"]
+)
+def test_sim_config_takes_numpy_numbers_and_sumo_starts(step):
+    # numpy 2's repr of a numpy float ("np.float64(0.25)") was passed to SUMO as the step
+    # length: libsumo.start failed with "Invalid Number Format"
+    env = DrivingEnv(DrivingConfig(sim=SimConfig(step_length_s=step, ego_start_m=np.int64(300))))
+    try:
+        obs, info = env.reset(seed=1)
+        assert info["step_length_s"] == 0.25 and type(info["step_length_s"]) is float
+        env.step(0)
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="step_length_s must be a number"):
+        SimConfig(step_length_s="0.25")
+    with pytest.raises(ValueError, match="shift_margin_m must be a number"):
+        SimConfig(shift_margin_m=True)
+
+
+def test_a_scenario_of_numpy_numbers_drives_records_and_replays(tmp_path):
+    # a float32 spacing made every car position float32 (libsumo's moveTo refused it: "argument
+    # 3 of type 'double'"), and a numpy int seed made save_records fail (not JSON serializable)
+    scenario = TrafficScenario(
+        name="mine",
+        seed=np.int64(7),
+        min_spacing_m=np.float32(15.0),
+        mean_spacing_m=np.array([40.0, 35.0, 100.0], dtype=np.float32),
+        speed_ranges_mph=[[20, 30], [25, 35], [30, 40]],
+    )
+    env = EpisodeRecorder(DrivingEnv(scenario=scenario, max_episode_steps=30))
+    try:
+        obs, _ = env.reset(seed=3)
+        observations = [obs]
+        for k in range(30):
+            obs, *_ = env.step(k % 3)
+            observations.append(obs)
+    finally:
+        env.close()
+    save_records(env.episodes, tmp_path / "episodes.json")
+    (record,) = load_records(tmp_path / "episodes.json")
+    assert record.scenario == scenario
+    result, _ = replay(record)
+    np.testing.assert_array_equal(result.observations, np.stack(observations))
+    assert scenario.speed_ranges_mph == ((20.0, 30.0), (25.0, 35.0), (30.0, 40.0))
+    hash(scenario)  # a frozen dataclass of tuples, as the named scenarios are
+
+
+def test_a_shift_margin_too_small_for_the_scenario_is_refused_and_the_least_one_drives():
+    # a margin below the farthest a new car is placed ahead let cars reach the end of the edge
+    # before the shift; SUMO removed them and step() failed after about 1,400 steps with
+    # libsumo's "Vehicle 'c51' is not known" (seed 3 of this sparse traffic, default SimConfig)
+    sparse = TrafficScenario(
+        name="sparse", seed=0, min_spacing_m=200.0, mean_spacing_m=(300.0, 300.0, 300.0)
+    )
+    with pytest.raises(ValueError, match="shift_margin_m = 400.0 m is too small"):
+        DrivingEnv(scenario=sparse, max_episode_steps=3000)
+    with pytest.raises(ValueError, match="at least 268.7 m"):
+        DrivingEnv(sim=SimConfig(shift_margin_m=100.0))
+    least = 200.0 + 250.0 + 60 * 0.44704 * 0.25
+    env = DrivingEnv(scenario=sparse, max_episode_steps=3000, sim=SimConfig(shift_margin_m=least))
+    try:
+        env.reset(seed=3)
+        truncated = False
+        while not truncated:
+            _, _, _, truncated, info = env.step(0)
+    finally:
+        env.close()
+    assert info["position_m"] > 20_000  # 20 km on the 10 km road: past at least one shift
+
+
+def _orange_pixels(image: np.ndarray) -> int:
+    return int(np.all(image == np.array([255, 165, 0]), axis=-1).sum())
+
+
+def test_render_outlines_a_car_in_contact_in_the_lane_the_ego_just_left():
+    # contact counts the cars of the lane the ego left in this step, but the drawing looked
+    # for a prev_lane the Frame did not have: such a car was drawn as if nothing touched it
+    env = DrivingEnv(render_mode="rgb_array", max_episode_steps=10_000)
+    rng = np.random.default_rng(1)
+    try:
+        env.reset(seed=1)
+        for _ in range(2000):
+            _, _, _, _, info = env.step(int(rng.integers(3)))
+            rel, lanes = info["car_rel_m"], info["car_lane"]
+            near = np.abs(rel) < CAR_LENGTH_M
+            if info["contact"] and not np.any(lanes[near] == info["lane"]):
+                break
+        else:
+            pytest.fail("no contact with a car of the lane just left")
+        frame = env.frame()
+        image = env.render()
+    finally:
+        env.close()
+    keep = np.abs(frame.car_pos - frame.ego_pos) >= CAR_LENGTH_M
+    without = dataclasses.replace(frame, car_pos=frame.car_pos[keep], car_lane=frame.car_lane[keep])
+    # the ego is outlined either way; the car it touches adds its own outline
+    assert _orange_pixels(image) > _orange_pixels(render_frame(without)) > 0
+    assert frame.prev_lane != frame.ego_lane and frame.prev_lane in lanes[near]
+
+
+def test_lane_distribution_refuses_lanes_that_are_not_whole_indices():
+    # 2.7 was truncated to lane 2 without a word
+    with pytest.raises(ValueError, match="whole lane indices"):
+        metrics.lane_distribution([2.7, 3.2, 4.9])
+    with pytest.raises(ValueError, match="whole lane indices"):
+        metrics.lane_distribution([2.0, np.nan])
+    with pytest.raises(ValueError, match="1-D"):
+        metrics.lane_distribution([[1, 2], [3, 4]])
+    # the observation's lane column (float32 whole numbers) and ints are lanes
+    obs_lanes = np.array([2.0, 3.0, 3.0, 4.0], dtype=np.float32)
+    np.testing.assert_array_equal(metrics.lane_distribution(obs_lanes), [0, 0, 0.25, 0.5, 0.25])
+    np.testing.assert_array_equal(metrics.lane_distribution([0, 4]), [0.5, 0, 0, 0, 0.5])
+
+
+def test_per_step_flags_that_are_not_flags_are_refused():
+    # a None (a step without a teacher's answer) made every later accuracy window NaN, a NaN
+    # counted as a contact, and a float window was numpy's IndexError
+    with pytest.raises(ValueError, match="correct must be True / False"):
+        metrics.windowed_accuracy([True, None, True], window=2)
+    with pytest.raises(ValueError, match="correct must be True / False"):
+        metrics.windowed_accuracy([1.0, np.nan, 1.0], window=2)
+    with pytest.raises(ValueError, match="window must be an int"):
+        metrics.windowed_accuracy([True, False], window=2.0)
+    with pytest.raises(ValueError, match="contacts must be True / False"):
+        metrics.collision_rate([np.nan, 0.0])
+    np.testing.assert_allclose(
+        metrics.windowed_accuracy(np.array([1, 0, 1]), window=2), [1, 0.5, 0.5]
+    )
+    assert metrics.collision_rate(np.array([True, False, False, False])) == 0.25
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["--seeds", "1", "--steps", "0"], "--steps and --keep"),  # collision_rate's ValueError
+        (["--seeds", "1", "--first-seed", "-1"], "--first-seed must be >= 0"),  # numpy's
+        (["--search", "2", "--keep", "0", "--first-seed", "100"], "--steps and --keep"),  # % 0
+        (["--search", "1", "--left-spacings", "abc", "--first-seed", "100"], "--left-spacings"),
+        (["--search", "1", "--left-spacings", "5", "--first-seed", "100"], "at least 12"),
+    ],
+)
+def test_calibration_command_reports_a_mistake_in_one_line(argv, says, tmp_path, capsys):
+    # each was a traceback (from the first measurement or a pool worker), not a usage error
+    from sumo_scenarios.calibrate_teacher import main
+
+    history = tmp_path / "history.jsonl"
+    with pytest.raises(SystemExit) as exc:
+        main([*argv, "--history", str(history)])
+    assert exc.value.code == 2
+    assert says in capsys.readouterr().err
+    assert not history.exists()
+
+
+def test_render_fps_is_real_time_for_the_step_length():
+    # it was 4 whatever the step length: a video of 0.1 s steps (e.g. gymnasium's RecordVideo,
+    # which plays frames at metadata["render_fps"]) ran at 0.4 times real time
+    fast = DrivingEnv(sim=SimConfig(step_length_s=0.1), render_mode="rgb_array")
+    default = DrivingEnv(render_mode="rgb_array")
+    try:
+        assert fast.metadata["render_fps"] == pytest.approx(10.0)
+        assert default.metadata["render_fps"] == 4.0
+        assert DrivingEnv.metadata["render_fps"] == 4  # the class's own is left alone
+    finally:
+        fast.close()
+        default.close()
