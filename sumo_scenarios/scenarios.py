@@ -13,10 +13,11 @@ Density calibration: with 5 m cars, the ego overlaps a car whenever their centre
 in a lane with ``n`` cars per metre is therefore in contact on about a ``10 n`` share of timesteps.
 Platoons make the middle lane denser than its insertion spacing: the mean insertion spacing below
 was measured to give the paper's 30 % (``tests/test_driving.py`` checks 28-32 %). The other
-lanes' densities are free (the paper: "a busy road"); the left lane's mean spacing, 120 m, came
-out of the human-like teacher's calibration search (``sumo_scenarios.calibrate_teacher``, which
-tried 35-150 m: denser left lanes brought the teacher more contacts, never fewer "stay"
-answers), the right lane's 40 m is unchanged.
+lanes' densities are free (the paper: "a busy road"); the left lane's ``mean_spacing_m``, 120 m
+(a mean spacing of 109 m, after the cap on each spacing's exponential part), came out of the
+human-like teacher's calibration search (``sumo_scenarios.calibrate_teacher``, which tried
+35-150 m: denser left lanes brought the teacher more contacts, never fewer "stay" answers), the
+right lane's 40 m is unchanged.
 """
 
 from __future__ import annotations
@@ -84,7 +85,10 @@ class TrafficScenario:
             in mph, each car's desired speed is drawn from (uniformly, once per car), inside the
             paper's 20-40 mph. Actual speeds are lower behind a slower leader (car-following).
         mean_spacing_m: mean front-to-front distance between consecutive cars in lanes 1, 2, 3,
-            metres. Spacings are ``min_spacing_m`` plus an exponential draw.
+            metres, before a cap: spacings are ``min_spacing_m`` plus an exponential draw of
+            mean ``mean_spacing_m - min_spacing_m``, cut at 250 m (so that a recycled car fits
+            on the road). The cut matters only in a sparse lane: the ``train`` left lane's 120 m
+            gives spacings of 109 m on average; its 40 m and 31 m lanes lose under 0.01 m.
         min_spacing_m: smallest front-to-front spacing, metres (> 10 m so the expert can always
             fit between two cars of a lane without contact).
         ahead_m: cars are kept in a window from ``behind_m`` behind to ``ahead_m`` ahead of the
