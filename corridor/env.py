@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
@@ -76,7 +76,7 @@ class CorridorEnv(gym.Env):
         corridor_map: CorridorMap | str = DEFAULT_MAP,
         world_config: WorldConfig | None = None,
         max_episode_steps: int | None = None,
-        render_mode: str | None = None,
+        render_mode: Literal["rgb_array"] | None = None,
         start_perturbation: tuple[float, float] | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:

@@ -53,7 +53,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -168,7 +168,7 @@ class CorridorExperimentConfig:
     world: WorldConfig = field(default_factory=WorldConfig.legged_robot)
     teaching: TeachingConfig = field(default_factory=_default_teaching)
     max_std: float = 2.0
-    threshold_reading: str = "coverage"
+    threshold_reading: Literal["coverage", "literal"] = "coverage"
     eval_circuits: int = 10
     eval_perturbation: tuple[float, float] = (0.1, math.radians(10.0))
     ps: PrioritizedSweepingConfig = field(default_factory=PrioritizedSweepingConfig)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
@@ -130,7 +130,11 @@ class DrivingEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
     def __init__(
-        self, config: DrivingConfig | None = None, *, render_mode: str | None = None, **kwargs: Any
+        self,
+        config: DrivingConfig | None = None,
+        *,
+        render_mode: Literal["rgb_array"] | None = None,
+        **kwargs: Any,
     ) -> None:
         if config is None:
             config = DrivingConfig(**kwargs)

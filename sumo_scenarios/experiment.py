@@ -37,7 +37,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -45,7 +45,7 @@ from sumo_scenarios import metrics
 from torchcbl.evaluation import mean_sd, progress_bar, run_versions
 
 if TYPE_CHECKING:
-    from torchcbl.gmm import GaussianMixtureSet
+    from torchcbl.gmm import Criterion, GaussianMixtureSet
 
 __all__ = [
     "PAPER",
@@ -151,10 +151,10 @@ class DrivingExperimentConfig:
     train_episode_steps: int = 1000
     eval_segment: int = 0
     extra_eval_segments: tuple[int, ...] = ()
-    criterion: str = "aic"
+    criterion: Criterion = "aic"
     var_floor: float = 0.03
     gmm_tol: float = 1e-4
-    teacher: str = "human"
+    teacher: Literal["expert", "human"] = "human"
     ni_stage_every: int = 100
 
     def __post_init__(self) -> None:

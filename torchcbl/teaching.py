@@ -43,7 +43,7 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
@@ -181,7 +181,7 @@ class TeachingConfig:
     """
 
     max_new: int = 1
-    refit: str = "full"
+    refit: Literal["full", "incremental"] = "full"
     accuracy_window: int = 20
     target_accuracy: float | None = 0.9
     noninteractive: bool = True
