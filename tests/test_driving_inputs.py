@@ -35,6 +35,15 @@ def test_sim_config_takes_numpy_numbers_and_sumo_starts(step):
         SimConfig(shift_margin_m=True)
 
 
+def test_a_step_long_enough_to_pass_through_a_car_unseen_is_refused():
+    # contact is checked once a step; the ego passes a 20 mph car's 10 m contact window in
+    # 0.56 s, so steps up to 1.0 s (allowed before) could miss a contact
+    for step in (0.75, 1.0):
+        with pytest.raises(ValueError, match=r"\[0.01, 0.5\] seconds, got .*unseen"):
+            SimConfig(step_length_s=step)
+    assert SimConfig(step_length_s=0.5).step_length_s == 0.5
+
+
 def test_a_scenario_of_numpy_numbers_drives_records_and_replays(tmp_path):
     # a float32 spacing made every car position float32 (libsumo's moveTo refused it: "argument
     # 3 of type 'double'"), and a numpy int seed made save_records fail (not JSON serializable)
