@@ -171,6 +171,10 @@ class DrivingEnv(gym.Env):
         The observation is ``[d_right, d_middle, d_left, lane]``: signed metres to the nearest
         car of each normal lane (ahead positive, clipped to +-25 m) and the ego's lane index.
         """
+        if seed is not None:  # True is no seed; a numpy int is the int it holds
+            given, seed = seed, _as_int(seed)
+            if seed is None or seed < 0:
+                raise ValueError(f"seed: expected None or an int >= 0, got {given!r}")
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = set(options) - {"ego_lane", "fcd_output"}
@@ -178,8 +182,6 @@ class DrivingEnv(gym.Env):
             raise ValueError(f"unknown reset options {sorted(unknown)}")
         if seed is None:
             seed = int(self.np_random.integers(0, 2**31 - 1))
-        if int(seed) < 0:
-            raise ValueError("seed must be non-negative")
         if self.closed:
             raise RuntimeError("this DrivingEnv is closed; create a new one")
         given = options.get("ego_lane", self.config.start_lane)

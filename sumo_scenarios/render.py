@@ -26,6 +26,12 @@ def render_frame(
 
     ``behind_m`` / ``ahead_m`` set the visible stretch of road around the ego (metres).
     """
+    for name, value in (("behind_m", behind_m), ("ahead_m", ahead_m), ("dpi", dpi)):
+        ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
+            value, (bool, np.bool_)
+        )
+        if not ok or not 0 < value < float("inf"):
+            raise ValueError(f"{name} must be a number > 0, got {value!r}")
     ego_pos = float(frame.ego_pos)  # type: ignore[attr-defined]
     # A bare Figure on an Agg canvas: no pyplot, so the caller's backend is left alone.
     fig = Figure(figsize=(8, 2.2), dpi=dpi)

@@ -238,13 +238,23 @@ def render_gif(
     0.25 s steps). The frame delay is written in milliseconds, as imageio's GIF writer expects."""
     import imageio.v2 as imageio
 
+    from sumo_scenarios.env import _as_int
     from sumo_scenarios.render import render_frame
 
-    if every < 1 or (max_frames is not None and max_frames < 1) or fps <= 0:
+    counts_ok = all(
+        _as_int(v) is not None and v >= 1
+        for v in (every, *(() if max_frames is None else (max_frames,)))
+    )
+    fps_ok = isinstance(fps, (int, float, np.integer, np.floating)) and not isinstance(
+        fps, (bool, np.bool_)
+    )
+    if not counts_ok or not fps_ok or not 0 < fps < float("inf"):
         raise ValueError(
-            f"every and max_frames must be positive and fps > 0, got every={every}, "
-            f"max_frames={max_frames}, fps={fps}"
+            f"every and max_frames must be ints >= 1 and fps a number > 0, got every={every!r}, "
+            f"max_frames={max_frames!r}, fps={fps!r}"
         )
+    every = int(every)
+    max_frames = None if max_frames is None else int(max_frames)
     _, shots = replay(record, frames=True)
     shots = shots[::every]
     if max_frames is not None:

@@ -11,7 +11,13 @@ import pytest
 from sumo_scenarios import metrics
 from sumo_scenarios.env import DrivingConfig, DrivingEnv
 from sumo_scenarios.render import render_frame
-from sumo_scenarios.replay import EpisodeRecorder, load_records, replay, save_records
+from sumo_scenarios.replay import (
+    EpisodeRecorder,
+    load_records,
+    render_gif,
+    replay,
+    save_records,
+)
 from sumo_scenarios.scenarios import CAR_LENGTH_M, TrafficScenario
 from sumo_scenarios.sim import SimConfig
 
@@ -190,3 +196,29 @@ def test_render_fps_is_real_time_for_the_step_length():
     finally:
         fast.close()
         default.close()
+
+
+def test_reset_seeds_and_drawing_settings_are_checked(tmp_path):
+    env = DrivingEnv(max_episode_steps=40)
+    try:
+        # True was seed 1; a numpy int was refused by gymnasium's own seeding
+        for bad in (True, -1, 1.5, "3"):
+            with pytest.raises(ValueError, match="seed: expected None or an int >= 0"):
+                env.reset(seed=bad)
+        first = env.reset(seed=np.int64(3))[0]
+        np.testing.assert_array_equal(first, env.reset(seed=3)[0])
+        recorder = EpisodeRecorder(env, label="check")
+        recorder.reset(seed=3)
+        for _ in range(6):
+            recorder.step(0)
+        frame = env.frame()
+    finally:
+        env.close()
+    for bad in ({"behind_m": -5.0}, {"ahead_m": float("nan")}, {"dpi": 0}):
+        with pytest.raises(ValueError, match="must be a number > 0"):
+            render_frame(frame, **bad)
+    record = recorder.episodes[-1]
+    for bad in ({"every": 1.5}, {"every": 0}, {"max_frames": True}, {"fps": float("inf")}):
+        with pytest.raises(ValueError, match="every and max_frames must be ints"):
+            render_gif(record, tmp_path / "x.gif", **bad)
+    assert not (tmp_path / "x.gif").exists()
