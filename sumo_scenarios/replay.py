@@ -4,13 +4,16 @@ An episode is fully determined by (scenario, SUMO settings, episode seed, start 
 :class:`EpisodeRecorder` (a gymnasium wrapper) records exactly that for every episode run through
 it, and :func:`replay` re-runs it bit-identically. A replay can also be exported as SUMO FCD XML
 (:func:`export_fcd`, readable by sumolib and SUMO's tools) or drawn into a GIF
-(:func:`render_gif`). Nothing here writes a file unless asked to by name.
+(:func:`render_gif`). The episodes of a teaching session directory (``torchcbl teach driving``,
+or a ``ConfidentTeacher`` on ``torchcbl/Driving-v0``) are read as records too
+(:func:`session_episodes`). Nothing here writes a file unless asked to by name.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,6 +34,7 @@ __all__ = [
     "render_gif",
     "replay",
     "save_records",
+    "session_episodes",
     "write_sumocfg",
 ]
 
@@ -216,6 +220,104 @@ def replay(
         np.stack(o), np.asarray(lanes, dtype=np.int64), np.asarray(contacts, dtype=bool)
     )
     return result, shots
+
+
+_DRIVING_ID = "torchcbl/Driving-v0"
+
+
+def session_episodes(
+    run_dir: str | Path, *, check: bool | Sequence[int] = False
+) -> list[EpisodeRecord]:
+    """The episodes of a teaching session of the driving env, as records to replay.
+
+    The session directory is one written by ``torchcbl teach driving`` or by a
+    ``ConfidentTeacher`` on ``gymnasium.make("torchcbl/Driving-v0", ...)``. Each episode's record
+    holds the actions the session executed, its road segment (the ``episode_seed`` of its steps'
+    ``info``), its start lane (the lane of its first observation) and the env's settings (what
+    ``gymnasium.make`` was given); its label is ``"<run_dir name>/episode <k>"`` (k: the
+    session's episode number). A step whose action may never have run (a demonstration cut by
+    a crash, ``info["torchcbl_interrupted"]``) is left out, and with it its episode when it was
+    the first.
+
+    Args:
+        run_dir: the session directory.
+        check: replay every episode (True), or those at these indices of the returned list,
+            and compare its observations with the ones the session logged (bit for bit); a
+            replay that diverges (another SUMO, another traffic version) raises ValueError
+            naming the episode and the step.
+
+    Raises:
+        ValueError: not a session of the driving env, made with settings it keeps only as text
+            (an object given to ``gymnasium.make``), or (``check``) a replay that diverges.
+    """
+    from torchcbl.session import _kept_as_repr, load_config
+    from torchcbl.session import load_records as load_steps
+
+    run = Path(run_dir)
+    env = load_config(run).get("env") or {}
+    if env.get("id") != _DRIVING_ID:
+        raise ValueError(
+            f"{run} is a teaching session of {env.get('id')!r}, not of {_DRIVING_ID!r}: only "
+            "sessions of the driving env made by gymnasium.make replay from their log (the "
+            "driving experiment's episodes are in its seed_<k>/episodes.json)"
+        )
+    kwargs = dict(env.get("kwargs") or {})
+    text = sorted(k for k, v in kwargs.items() if _kept_as_repr(v))
+    if text:
+        raise ValueError(
+            f"{run}: its env was made with {', '.join(text)} given as an object, which the "
+            "session keeps only as text; its episodes cannot be rebuilt (wrap the env in "
+            "EpisodeRecorder to record them)"
+        )
+    config = DrivingConfig(**kwargs)
+    from sumo_scenarios.scenarios import get_scenario
+
+    scenario = get_scenario(config.scenario)
+    episodes: dict[int, list[Any]] = {}
+    for r in load_steps(run):
+        if r.info.get("torchcbl_interrupted"):
+            continue  # its action may never have run
+        episodes.setdefault(r.episode, []).append(r)
+    if isinstance(check, bool):
+        checked = set(range(len(episodes))) if check else set()
+    else:
+        checked = {int(i) for i in check}
+        if any(not 0 <= i < len(episodes) for i in checked):
+            raise ValueError(
+                f"check: expected indices in [0, {len(episodes)}) (the session's episodes), "
+                f"got {sorted(checked)}"
+            )
+    out = []
+    for i, (k, steps) in enumerate(episodes.items()):
+        seeds = {s.info.get("episode_seed") for s in steps}
+        if len(seeds) != 1:
+            raise ValueError(f"{run}: episode {k}'s steps name road segments {sorted(seeds)}")
+        record = EpisodeRecord(
+            scenario=scenario,
+            sim=config.sim,
+            episode_seed=int(seeds.pop()),
+            start_lane=int(steps[0].observation[3]),
+            actions=tuple(int(s.executed_action) for s in steps),
+            label=f"{run.name}/episode {k}",
+        )
+        if i in checked:
+            _check_against(record, np.asarray([s.observation for s in steps]), f"{run} {k}")
+        out.append(record)
+    return out
+
+
+def _check_against(record: EpisodeRecord, logged: np.ndarray, where: str) -> None:
+    """Raise ValueError unless the replay's decision-time observations equal ``logged`` [T, 4]."""
+    result, _ = replay(record)
+    replayed = result.observations[:-1].astype(np.float64)
+    differ = np.flatnonzero(~np.all(replayed == logged, axis=1))
+    if differ.size:
+        t = int(differ[0])
+        raise ValueError(
+            f"episode {where}: the replay diverges from the logged observations at step {t} "
+            f"(logged {logged[t].tolist()}, replayed {replayed[t].tolist()}): the session ran "
+            "on other traffic or another SUMO"
+        )
 
 
 def export_fcd(record: EpisodeRecord, path: str | Path) -> Path:

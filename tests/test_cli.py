@@ -433,6 +433,42 @@ def test_replay_lists_episodes_and_exports_one_to_gif_and_fcd(tmp_path, capsys):
     assert sorted(tmp_path.iterdir()) == before
 
 
+def test_replay_a_driving_teaching_session_checked_against_its_log(tmp_path, capsys):
+    import gymnasium as gym
+
+    import sumo_scenarios  # noqa: F401  (registers torchcbl/Driving-v0)
+    from sumo_scenarios.replay import session_episodes
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, TeachingConfig
+    from torchcbl.session import load_records
+
+    run = tmp_path / "session"
+    env = gym.make("torchcbl/Driving-v0", scenario="light", max_episode_steps=25)
+    with ConfidentTeacher(
+        env, make_teacher(0), config=TeachingConfig(max_new=10), run_dir=run, progress=False
+    ) as ct:
+        ct.run(max_steps=60)
+    episodes = session_episodes(run, check=True)  # each replay equals the log
+    steps = load_records(run)
+    assert [len(e.actions) for e in episodes] == [25, 25, 10]
+    assert [a for e in episodes for a in e.actions] == [r.executed_action for r in steps]
+    assert {e.scenario.name for e in episodes} == {"light"}
+    assert main(["replay", str(run), "--list"]) == 0
+    assert "session/episode 2" in capsys.readouterr().out
+    assert main(["replay", str(run), "--episode", "1", "--max-frames", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "the replay equals the session's log" in out
+    assert (tmp_path / "session-1.gif").is_file() and (tmp_path / "session-1.fcd.xml").is_file()
+    # the session's env given other traffic: the replay diverges, and says where
+    config = json.loads((run / "config.json").read_text())
+    config["env"]["kwargs"]["scenario"] = "train"
+    (run / "config.json").write_text(json.dumps(config))
+    assert main(["replay", str(run), "--episode", "0", "--gif", str(tmp_path / "x.gif")]) == 2
+    err = capsys.readouterr().err
+    assert "the replay diverges from the logged observations at step 0" in err
+    assert err.count("\n") == 1 and not (tmp_path / "x.gif").exists()
+
+
 def _markdown_tables(text: str) -> dict[str, list[list[list[str]]]]:
     """The tables of a Markdown document by the ``##`` heading they follow (its first word),
     each as rows of cell texts, as markdown-it-py (CommonMark + GFM tables) parses them."""

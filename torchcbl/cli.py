@@ -8,7 +8,7 @@ Commands::
 
     torchcbl reproduce [corridor|driving|all] [--full] [--seeds N] [--workers N] [--out DIR]
     torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S]
-    torchcbl replay EPISODES.json [--episode N | --label TEXT] [--gif OUT.gif] [--fcd OUT.xml]
+    torchcbl replay EPISODES.json|RUN_DIR [--episode N | --label TEXT] [--gif OUT] [--fcd OUT]
     torchcbl plot RUN_DIR
     torchcbl teach corridor|driving [--run-dir DIR] [--resume] [--seed S] [--steps N]
     torchcbl benchmark [--quick] [--strategies S,..] [--envs E,..] [--seeds N] [--ray] [--out DIR]
@@ -49,7 +49,8 @@ _SESSION_HINT = (
 )
 _EPISODES_HINT = (
     "expected an episodes.json written by the driving experiment "
-    "(runs/reproduce/driving/seed_<k>/episodes.json)"
+    "(runs/reproduce/driving/seed_<k>/episodes.json) or a driving teaching session's directory "
+    "(torchcbl teach driving --run-dir)"
 )
 
 
@@ -306,6 +307,11 @@ def _load_episodes(path: Path) -> list[Any]:
     replay = importlib.import_module("sumo_scenarios.replay")
     if not path.exists():
         raise _UsageError(f"{path} does not exist; {_EPISODES_HINT}")
+    if path.is_dir() and (path / "config.json").is_file():  # a teaching session
+        try:
+            return replay.session_episodes(path)
+        except (ValueError, TypeError) as exc:
+            raise _UsageError(str(exc)) from None
     if not path.is_file():
         raise _UsageError(f"{path} is a directory; {_EPISODES_HINT}")
     try:
@@ -351,7 +357,15 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     if not 0 <= index < len(episodes):
         raise _UsageError(f"--episode must be in [0, {len(episodes)}), got {index}; see --list")
     record = episodes[index]
-    stem = path.with_suffix("")
+    session = path.is_dir()
+    # beside the JSON, or beside (not in) a session's directory
+    stem = path.parent / path.name if session else path.with_suffix("")
+    if session:  # the session logged what it saw: the replay must see the same
+        try:
+            replay.session_episodes(path, check=[index])
+        except ValueError as exc:
+            raise _UsageError(str(exc)) from None
+        print(f"episode {index}: the replay equals the session's log, observation for observation")
     gif = Path(args.gif) if args.gif else stem.with_name(f"{stem.name}-{index}.gif")
     fcd = Path(args.fcd) if args.fcd else stem.with_name(f"{stem.name}-{index}.fcd.xml")
     _output_file(gif, "--gif")
@@ -794,9 +808,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "episodes",
-        metavar="EPISODES.json",
+        metavar="EPISODES.json|RUN_DIR",
         help="an episodes.json written by the driving experiment "
-        "(runs/reproduce/driving/seed_<k>/episodes.json)",
+        "(runs/reproduce/driving/seed_<k>/episodes.json), or a driving teaching session's "
+        "directory (torchcbl teach driving --run-dir), whose episodes are replayed and checked "
+        "against its log",
     )
     which = p.add_mutually_exclusive_group()
     which.add_argument(
@@ -817,13 +833,15 @@ def _parser() -> argparse.ArgumentParser:
         "--gif",
         default=None,
         metavar="OUT.gif",
-        help="GIF output path (default beside the JSON: EPISODES-N.gif)",
+        help="GIF output path (default beside the JSON or the session directory: "
+        "EPISODES-N.gif, RUN_DIR-N.gif)",
     )
     p.add_argument(
         "--fcd",
         default=None,
         metavar="OUT.xml",
-        help="SUMO FCD XML output path (default beside the JSON: EPISODES-N.fcd.xml); a "
+        help="SUMO FCD XML output path (default beside the JSON or the session directory: "
+        "EPISODES-N.fcd.xml, RUN_DIR-N.fcd.xml); a "
         ".sumocfg that opens it in sumo-gui is written beside it",
     )
     p.add_argument(
