@@ -594,6 +594,8 @@ class GaussianMixtureSet(nn.Module):
         # (_classify_far), a CUDA model's included
         cache["np"] = tuple(t.detach().cpu().numpy().copy() for t in (pcat, mu_p, const, log_prior))
         cache["prior_np"] = np.exp(cache["np"][3])
+        cache["has_data_np"] = np.isfinite(cache["np"][3])  # [A]: actions with a mixture
+        cache["has_data"] = torch.from_numpy(cache["has_data_np"]).to(dev)
         self._cache = cache
         return cache
 
@@ -1163,7 +1165,8 @@ class GaussianMixtureSet(nn.Module):
         if not self.is_fitted:
             raise RuntimeError("log_prob() needs a fitted model: call fit() first")
         x, use_np = self._prepare(observations)
-        has_data = np.isfinite(self._tables()["np"][3])
+        tables = self._tables()
+        has_data = tables["has_data_np"]
         if use_np:
             lp, _ = self._component_scores_np(x)  # type: ignore[arg-type]
             mx = lp.max(-1, keepdims=True)
@@ -1181,7 +1184,7 @@ class GaussianMixtureSet(nn.Module):
         with self._predict_threads(x.shape[0]), torch.no_grad():
             lp, _ = self._component_scores_torch(x)  # type: ignore[arg-type]
             out = torch.logsumexp(lp, -1) + self._tables()["log_prior"]
-            low = ~(lp.amax(-1) > _FAR_SCORE)[:, torch.from_numpy(has_data).to(lp.device)]
+            low = ~(lp.amax(-1) > _FAR_SCORE)[:, tables["has_data"]]
             far = low.any(1)
             if bool(far.any()):
                 value = self._far_scores(x[far].cpu().numpy())[0]  # type: ignore[index]
@@ -1231,9 +1234,10 @@ class GaussianMixtureSet(nn.Module):
         y *= y
         maha = y.reshape(self.n_actions, self.max_components, self.n_features).sum(-1)
         lp = const - 0.5 * maha  # [A, K]
-        if not lp.max() > _FAR_SCORE:  # no real component scores above the padding's range
+        top = lp.max()
+        if not top > _FAR_SCORE:  # no real component scores above the padding's range
             return self._classify_far(x)
-        e = np.exp(lp - lp.max())
+        e = np.exp(lp - top)
         p = e.sum(1) * prior
         a = int(p.argmax())
         d2 = float(maha[a, int(lp[a].argmax())])
