@@ -248,20 +248,27 @@ def session_episodes(
 
     Raises:
         ValueError: not a session of the driving env, made with settings it keeps only as text
-            (an object given to ``gymnasium.make``), or (``check``) a replay that diverges.
+            (an object given to ``gymnasium.make``) or that the env does not take, or
+            (``check``) a replay that diverges.
     """
     from torchcbl.session import _kept_as_repr, load_config
     from torchcbl.session import load_records as load_steps
 
-    run = Path(run_dir)
+    run = Path(run_dir).resolve()  # its name labels the episodes, "." included
     env = load_config(run).get("env") or {}
     if env.get("id") != _DRIVING_ID:
+        made = (
+            f"of {env['id']!r}"
+            if env.get("id")
+            else "of an env made without gymnasium.make (as the experiments make theirs)"
+        )
         raise ValueError(
-            f"{run} is a teaching session of {env.get('id')!r}, not of {_DRIVING_ID!r}: only "
-            "sessions of the driving env made by gymnasium.make replay from their log (the "
-            "driving experiment's episodes are in its seed_<k>/episodes.json)"
+            f"{run} is a teaching session {made}, not of {_DRIVING_ID!r}: only sessions of "
+            "the driving env made by gymnasium.make replay from their log (the driving "
+            "experiment's episodes are in its seed_<k>/episodes.json)"
         )
     kwargs = dict(env.get("kwargs") or {})
+    kwargs.pop("render_mode", None)  # drawing only: the same traffic either way
     text = sorted(k for k, v in kwargs.items() if _kept_as_repr(v))
     if text:
         raise ValueError(
@@ -269,7 +276,12 @@ def session_episodes(
             "session keeps only as text; its episodes cannot be rebuilt (wrap the env in "
             "EpisodeRecorder to record them)"
         )
-    config = DrivingConfig(**kwargs)
+    try:
+        config = DrivingConfig(**kwargs)
+    except TypeError as exc:
+        raise ValueError(
+            f"{run}: its env's settings {kwargs} are not DrivingEnv's ({exc})"
+        ) from None
     from sumo_scenarios.scenarios import get_scenario
 
     scenario = get_scenario(config.scenario)
@@ -333,16 +345,19 @@ def render_gif(
     *,
     every: int = 1,
     max_frames: int | None = None,
-    fps: float = 4.0,
+    fps: float | None = None,
 ) -> Path:
     """Draw the episode into a GIF: every ``every``-th timestep of the WHOLE episode (unless
-    ``max_frames`` caps it), played at ``fps`` frames per second (4 = real time at stride 1 and
-    0.25 s steps). The frame delay is written in milliseconds, as imageio's GIF writer expects."""
+    ``max_frames`` caps it), played at ``fps`` frames per second (default: real time at stride
+    1, one frame per step length: 4 at the default 0.25 s steps). The frame delay is written in
+    milliseconds, as imageio's GIF writer expects."""
     import imageio.v2 as imageio
 
     from sumo_scenarios.env import _as_int
     from sumo_scenarios.render import render_frame
 
+    if fps is None:
+        fps = 1.0 / record.sim.step_length_s
     counts_ok = all(
         _as_int(v) is not None and v >= 1
         for v in (every, *(() if max_frames is None else (max_frames,)))

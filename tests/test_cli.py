@@ -433,7 +433,7 @@ def test_replay_lists_episodes_and_exports_one_to_gif_and_fcd(tmp_path, capsys):
     assert sorted(tmp_path.iterdir()) == before
 
 
-def test_replay_a_driving_teaching_session_checked_against_its_log(tmp_path, capsys):
+def test_replay_a_driving_teaching_session_checked_against_its_log(tmp_path, capsys, monkeypatch):
     import gymnasium as gym
 
     import sumo_scenarios  # noqa: F401  (registers torchcbl/Driving-v0)
@@ -443,7 +443,9 @@ def test_replay_a_driving_teaching_session_checked_against_its_log(tmp_path, cap
     from torchcbl.session import load_records
 
     run = tmp_path / "session"
-    env = gym.make("torchcbl/Driving-v0", scenario="light", max_episode_steps=25)
+    env = gym.make(  # render_mode is kept with the make kwargs; it draws, it drives nothing
+        "torchcbl/Driving-v0", scenario="light", max_episode_steps=25, render_mode="rgb_array"
+    )
     with ConfidentTeacher(
         env, make_teacher(0), config=TeachingConfig(max_new=10), run_dir=run, progress=False
     ) as ct:
@@ -459,6 +461,10 @@ def test_replay_a_driving_teaching_session_checked_against_its_log(tmp_path, cap
     out = capsys.readouterr().out
     assert "the replay equals the session's log" in out
     assert (tmp_path / "session-1.gif").is_file() and (tmp_path / "session-1.fcd.xml").is_file()
+    monkeypatch.chdir(run)  # from inside the session: its name still labels the outputs
+    assert main(["replay", ".", "--episode", "2", "--max-frames", "2"]) == 0
+    assert "session/episode 2" in capsys.readouterr().out
+    assert (tmp_path / "session-2.gif").is_file()
     # the session's env given other traffic: the replay diverges, and says where
     config = json.loads((run / "config.json").read_text())
     config["env"]["kwargs"]["scenario"] = "train"

@@ -358,8 +358,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         raise _UsageError(f"--episode must be in [0, {len(episodes)}), got {index}; see --list")
     record = episodes[index]
     session = path.is_dir()
-    # beside the JSON, or beside (not in) a session's directory
-    stem = path.parent / path.name if session else path.with_suffix("")
+    # beside the JSON, or beside (not in) a session's directory ("." too)
+    stem = path.resolve() if session else path.with_suffix("")
     if session:  # the session logged what it saw: the replay must see the same
         try:
             replay.session_episodes(path, check=[index])
