@@ -1201,8 +1201,9 @@ def _gap_text(missing: list[int]) -> str:
     shown = ", ".join(str(s) for s in missing[:5]) + (", ..." if len(missing) > 5 else "")
     return (
         f"its step log lacks {len(missing)} step{'' if len(missing) == 1 else 's'} ({shown}) "
-        f"before its last one: rows were deleted from {LOG_NAME} by something other than "
-        "torchcbl (a session's steps are numbered 0, 1, 2, ... without a gap)"
+        f"before its last one: rows were deleted from {LOG_NAME}, or lines from "
+        f"{JOURNAL_NAME}, by something other than torchcbl (a session's steps are numbered 0, "
+        "1, 2, ... without a gap)"
     )
 
 
@@ -1237,7 +1238,9 @@ def _read_log(
         warnings.warn(
             f"{run}: {_gap_text(missing)}. What is read is what is left: the labels and "
             "models built from it lack the missing steps' demonstrations. Restore the run "
-            "directory from a backup to have them back.",
+            f"directory from a backup to have them back; where they were only in {JOURNAL_NAME}"
+            ", torchcbl.session.repair_journal(run_dir) keeps the steps before the gap so that "
+            "the session can be resumed.",
             stacklevel=3,
         )
     return records, corrections

@@ -310,6 +310,15 @@ def _episode_cap(env: gym.Env) -> int | None:
     return getattr(getattr(env, "spec", None), "max_episode_steps", None)
 
 
+def _resumed_cap(stored_env: Mapping[str, Any], env: gym.Env) -> int | None:
+    """The cap of ``env`` to compare with a session's: the one in force, or the outermost
+    ``TimeLimit``'s as the spec reports it where the session stored that (sessions written
+    before the cap in force was kept), so that the env the session was made with resumes."""
+    cap = _episode_cap(env)
+    legacy = getattr(getattr(env, "spec", None), "max_episode_steps", None)
+    return legacy if stored_env.get("max_episode_steps") == legacy else cap
+
+
 def _as_interrupted(record: StepRecord) -> StepRecord:
     """A demonstration whose outcome never came, as the log keeps it (and a resume reads it):
     no reward, its episode cut."""
@@ -551,7 +560,7 @@ class ConfidentTeacher:
             n_actions=n_actions,
             env_id=getattr(getattr(env, "spec", None), "id", None),
             env_kwargs=_env_kwargs(env),
-            env_max_episode_steps=_episode_cap(env),
+            env_max_episode_steps=_resumed_cap(stored.get("env") or {}, env),
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
             strategy=(
