@@ -193,6 +193,11 @@ class DrivingEnv(gym.Env):
             raise ValueError(
                 f"fcd_output: the directory of {str(fcd)!r} does not exist; create it first"
             )
+        if fcd and Path(fcd).is_dir():
+            raise ValueError(
+                f"fcd_output: {str(fcd)!r} is a directory; give the path of the XML file to write "
+                "(e.g. episode.fcd.xml inside it)"
+            )
         rng = np.random.default_rng(np.random.SeedSequence([self.scenario.seed, int(seed)]))
         self._episode_seed = None  # until the new segment is in place: no step() on a half reset
         self._sim.reset(rng, int(seed), ego_lane=lane, fcd_path=Path(fcd) if fcd else None)

@@ -205,6 +205,9 @@ def test_reset_seeds_and_drawing_settings_are_checked(tmp_path):
         for bad in (True, -1, 1.5, "3"):
             with pytest.raises(ValueError, match="seed: expected None or an int >= 0"):
                 env.reset(seed=bad)
+        # libsumo's own exception before; the env goes on after the message
+        with pytest.raises(ValueError, match="fcd_output: .* is a directory"):
+            env.reset(seed=3, options={"fcd_output": str(tmp_path)})
         first = env.reset(seed=np.int64(3))[0]
         np.testing.assert_array_equal(first, env.reset(seed=3)[0])
         recorder = EpisodeRecorder(env, label="check")
