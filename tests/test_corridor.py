@@ -681,3 +681,37 @@ def test_a_loop_through_corridors_the_route_does_not_take_is_no_circuit():
     acts += [0, 0, 1, 0, 3, 0, 0, 2, 0, 3, 0, 1, 0]
     ended = [env.step(a)[2] for a in acts]
     assert not any(ended)
+
+
+@pytest.mark.parametrize("world", [WorldConfig(), NOISY_WORLD], ids=["exact", "noisy"])
+def test_a_short_spur_turned_away_from_is_no_circuit(world):
+    """A map of one's own with a short dead-end spur (0.4 m: the route's way in and out, 0.8 m,
+    fits in the tracker's 1 m window): a robot that drives the loop but turns away at the
+    spur's junction, never going in, completed no circuit. Before, a noisy robot that turned
+    left there was credited with the spur and the env reported ``is_success`` after 22-23
+    actions (seeds 0-2). The expert, which does go in and u-turn, still completes clean
+    circuits."""
+    spur = load_map("figure2").to_dict()
+    spur["nodes"]["S"] = [1.4, 1.6]
+    spur_map = map_from_dict(spur)
+    skipping = map_from_dict({**spur, "route": ["P0", "P1", "J", "P3", "P0"]})
+    for seed in range(3):
+        # the same corridors, seed and actions: the same motion; the skipping route's env tells
+        # its own expert where it stands
+        env, twin = CorridorEnv(spur_map, world), CorridorEnv(skipping, world)
+        expert = CorridorExpert(skipping, world)
+        env.reset(seed=seed)
+        obs, info = twin.reset(seed=seed)
+        for _ in range(60):
+            action = expert(obs, info)
+            _, _, terminated, truncated, end = env.step(action)
+            obs, _, _, _, info = twin.step(action)
+            assert not terminated and not truncated
+        assert end["laps"] == 0
+        obs, info = env.reset(seed=seed)
+        expert = CorridorExpert(spur_map, world)
+        for _ in range(60):
+            obs, _, terminated, truncated, info = env.step(expert(obs, info))
+            if terminated or truncated:
+                break
+        assert terminated and info["is_success"]
