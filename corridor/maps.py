@@ -391,24 +391,58 @@ def map_from_dict(data: Mapping[str, Any]) -> CorridorMap:
         "corridors",
         "route",
     }
+    if not isinstance(data, Mapping):
+        raise ValueError(
+            f"a map is a JSON object (a dict) of keys {sorted(allowed)}, got {data!r:.80}"
+        )
     unknown = set(data) - allowed
     if unknown:
         raise ValueError(f"unknown map keys {sorted(unknown)}; allowed: {sorted(allowed)}")
     missing = {"name", "corridor_width", "nodes", "corridors", "route"} - set(data)
     if missing:
         raise ValueError(f"map is missing keys {sorted(missing)}")
+    if not isinstance(data["nodes"], Mapping):
+        raise ValueError(
+            f'map "nodes": expected an object {{"name": [x, y], ...}}, got {data["nodes"]!r:.80}'
+        )
+    nodes = {str(k): _pair(v, f"node {k!r}", _metres) for k, v in data["nodes"].items()}
+    corridors = tuple(_pair(c, "corridor", str) for c in _names(data["corridors"], "corridors"))
     kwargs: dict[str, Any] = {
         "name": str(data["name"]),
-        "corridor_width": float(data["corridor_width"]),
-        "nodes": {str(k): (float(v[0]), float(v[1])) for k, v in data["nodes"].items()},
-        "corridors": tuple((str(a), str(b)) for a, b in data["corridors"]),
-        "route": tuple(str(n) for n in data["route"]),
+        "corridor_width": _metres(data["corridor_width"], "corridor_width"),
+        "nodes": nodes,
+        "corridors": corridors,
+        "route": tuple(str(n) for n in _names(data["route"], "route")),
         "description": str(data.get("description", "")),
     }
     for key in ("grid", "start_offset"):
         if key in data:
-            kwargs[key] = float(data[key])
+            kwargs[key] = _metres(data[key], key)
     return CorridorMap(**kwargs)
+
+
+def _metres(value: Any, what: str = "coordinate") -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"map {what}: expected a number of metres, got {value!r:.80}")
+    return float(value)
+
+
+def _names(value: Any, key: str) -> list[Any]:
+    """A map's list (``corridors``, ``route``), refused if it is not a list."""
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)):
+        raise ValueError(f'map "{key}": expected a list, got {value!r:.80}')
+    return list(value)
+
+
+def _pair(value: Any, what: str, convert: Any) -> tuple[Any, Any]:
+    """Two items (a node's [x, y], a corridor's [a, b]), each converted."""
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)):
+        raise ValueError(f"map {what}: expected a list of 2, got {value!r:.80}")
+    if len(value) != 2:
+        raise ValueError(f"map {what}: expected a list of 2, got {len(value)} items {value!r:.80}")
+    if convert is _metres:
+        return (_metres(value[0], what), _metres(value[1], what))
+    return (convert(value[0]), convert(value[1]))
 
 
 def available_maps() -> list[str]:
@@ -432,4 +466,8 @@ def load_map(name_or_path: str | Path) -> CorridorMap:
         if not res.is_file():
             raise ValueError(f"unknown map {name_or_path!r}; shipped maps: {available_maps()}")
         text = res.read_text()
-    return map_from_dict(json.loads(text))
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"map {str(name_or_path)!r} is not valid JSON: {exc}") from None
+    return map_from_dict(data)

@@ -90,6 +90,39 @@ def test_bad_maps_are_refused(change, message):
         map_from_dict({**SMALL, **change})
 
 
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"nodes": [["A", 0, 0]]}, r'"nodes": expected an object'),
+        ({"nodes": {**SMALL["nodes"], "A": [0]}}, r"node 'A': expected a list of 2, got 1"),
+        ({"nodes": {**SMALL["nodes"], "A": [0, 0, 0]}}, r"node 'A': expected a list of 2, got 3"),
+        ({"nodes": {**SMALL["nodes"], "A": "0,0"}}, r"node 'A': expected a list of 2"),
+        ({"nodes": {**SMALL["nodes"], "A": ["0", 0]}}, r"node 'A': expected a number"),
+        ({"corridors": [["A", "B", "C"]]}, "corridor: expected a list of 2, got 3"),
+        ({"corridors": ["AB"]}, "corridor: expected a list of 2, got 'AB'"),
+        ({"route": "ABCDA"}, r'"route": expected a list'),
+        ({"corridor_width": None}, "corridor_width: expected a number of metres, got None"),
+        ({"start_offset": "0.2"}, "start_offset: expected a number of metres"),
+    ],
+)
+def test_malformed_map_json_is_named(change, message, tmp_path):
+    """A map of one's own with a slip in its JSON gets a ValueError naming the key, not an
+    AttributeError, IndexError or TypeError from deep inside the loader, and is not half read:
+    a node with three coordinates was taken as its first two, a route written as one string
+    as its letters."""
+    with pytest.raises(ValueError, match=message):
+        map_from_dict({**SMALL, **change})
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps({**SMALL, **change}))
+    with pytest.raises(ValueError, match=message):
+        load_map(path)
+    path.write_text(json.dumps(SMALL)[:-1])
+    with pytest.raises(ValueError, match="mine.json' is not valid JSON"):
+        load_map(path)
+    with pytest.raises(ValueError, match="a map is a JSON object"):
+        map_from_dict([SMALL])
+
+
 def test_unknown_map_name():
     with pytest.raises(ValueError, match="shipped maps"):
         load_map("nowhere")
