@@ -748,3 +748,28 @@ def test_a_short_spur_turned_away_from_is_no_circuit(world):
             if terminated or truncated:
                 break
         assert terminated and info["is_success"]
+
+
+def test_the_expert_takes_a_narrow_map_of_ones_own():
+    """A map whose corridors are 0.4 m wide (the robot is 0.24 m across): the expert's default
+    on-route tolerance, 0.2 m, is not inside such a corridor, and CorridorExpert(map) refused
+    its own default (so did run_seed on a CorridorExperimentConfig whose map_name is such a
+    file, after the config had been accepted). The default is now two thirds of half the width
+    there, and the expert drives clean circuits; on the shipped maps it stays 0.2."""
+    narrow = map_from_dict(
+        {
+            **SMALL,
+            "corridor_width": 0.4,
+            "nodes": {"A": [0, 0], "B": [2.0, 0], "C": [2.0, 1.6], "D": [0, 1.6], "S": [2.0, -0.8]},
+            "corridors": [*SMALL["corridors"], ["B", "S"]],
+            "route": ["A", "B", "S", "B", "C", "D", "A"],
+        }
+    )
+    expert = CorridorExpert(narrow)
+    assert expert.on_route_tolerance == pytest.approx(0.4 / 3)
+    assert CorridorExpert(load_map("figure2")).on_route_tolerance == 0.2
+    env = CorridorEnv(narrow)
+    ((actions, _, terminated, info),) = drive(env, expert, seed=0, episodes=1)
+    assert terminated and info["is_success"] and len(actions) == 39
+    with pytest.raises(ValueError, match="on_route_tolerance"):
+        CorridorExpert(narrow, on_route_tolerance=0.2)  # an explicit value is still checked
