@@ -6,12 +6,13 @@ robot's pose and its route segment, as a person with a joystick watching the rob
 the map's route:
 
 - On the route (within ``on_route_tolerance``, 0.2 m, of the tracked segment, i.e. inside its
-  corridor, and heading along it within 25 degrees): the manoeuvre planned at the segment's end
-  node is done at the decision point, ``turn_radius`` (0.2 m) before the node's centre: at the
-  first position at most half a forward step (0.1 m) before it, ``remaining <= turn_radius +
-  0.1``, so a robot whose steps vary in length (motion noise) still turns at the
-  nearest step, and one that overshot turns at once. A turn from the decision point lands on the
-  centre line of the next corridor. Otherwise: forward.
+  corridor (in corridors 0.4 m wide or narrower: two thirds of half the width), and heading
+  along it within 25 degrees): the manoeuvre planned at the segment's end node is done at
+  the decision point, ``turn_radius`` (0.2 m) before the node's centre: at the first position
+  at most half a forward step (0.1 m) before it, ``remaining <= turn_radius + 0.1``, so a
+  robot whose steps vary in length (motion noise) still turns at the nearest step, and one
+  that overshot turns at once. A turn from the decision point lands on the centre line of the
+  next corridor. Otherwise: forward.
 - Heading against the route (within 45 degrees of its opposite) in the route's corridor: u-turn.
   (Away from the tracked segment, e.g. in a side corridor, the direction of a far segment says
   nothing: the way back below applies; turning there on the heading alone u-turned for ever
@@ -77,7 +78,10 @@ class CorridorExpert:
     Args:
         corridor_map: the map whose route is driven.
         world_config: the robot's motion parameters (the turn radius sets the decision point).
-        on_route_tolerance: lateral distance (metres) from the route still counted as on it.
+        on_route_tolerance: lateral distance (metres) from the route still counted as on it,
+            less than half the corridor's width; None (default): 0.2, or on a map whose
+            corridors are 0.4 m wide or narrower, where 0.2 is not inside the corridor, two
+            thirds of half the width (as 0.2 is of the shipped maps' 0.3).
         open_range: a range above this (metres) counts as open in the reactive fallback of the
             way back (where no corridor runs any way the robot can face).
     """
@@ -87,7 +91,7 @@ class CorridorExpert:
         corridor_map: CorridorMap,
         world_config: WorldConfig | None = None,
         *,
-        on_route_tolerance: float = 0.2,
+        on_route_tolerance: float | None = None,
         open_range: float = 0.6,
     ) -> None:
         if not isinstance(corridor_map, CorridorMap):
@@ -105,6 +109,8 @@ class CorridorExpert:
         self.map = corridor_map
         self.config = world_config or WorldConfig()
         half = corridor_map.corridor_width / 2
+        if on_route_tolerance is None:
+            on_route_tolerance = 0.2 if 0.2 < half else 2.0 * half / 3.0
         for name, value, top, what in (
             ("on_route_tolerance", on_route_tolerance, half, "half the corridor's width"),
             ("open_range", open_range, self.config.max_range, "the range sensors' max_range"),

@@ -272,6 +272,11 @@ class Route:
         object.__setattr__(self, "_dirs", seg / lengths[:, None])
         object.__setattr__(self, "_lengths", lengths)
         object.__setattr__(self, "_cum", np.concatenate([[0.0], np.cumsum(lengths)]))
+        # the segments that end in a u-turn (the end of a dead-end spur, or wherever the route
+        # comes back the way it went)
+        object.__setattr__(
+            self, "_uturns", tuple(k for k, kind in enumerate(self.kinds) if kind == UTURN)
+        )
 
     @property
     def length(self) -> float:
@@ -312,7 +317,13 @@ class Route:
         metres of the pose (the world passes the corridor width: a corridor the route does not
         take, e.g. one parallel to it, is not the route); among them the one minimising
         distance + ``heading_weight`` * (1 - cos(heading error)) wins, so a spur driven in and
-        out is told apart by the heading. With no candidate, the progress stays.
+        out is told apart by the heading. The progress passes a u-turn (from before its node to
+        after it) only onto the way back, and onto the way back's last ``max_offset / 2``
+        metres (the junction it ends in: half the corridor's width as the world calls it) only
+        heading along it, within 60 degrees: at a short spur (out and back within ``ahead``) a
+        robot that turned away at the spur's junction, never driving in, stood within the
+        window of the way back and of the corridor after it, and was credited with the spur.
+        With no candidate, the progress stays.
         """
         p = np.array([x, y])
         hd = np.array([math.cos(heading), math.sin(heading)])
@@ -330,6 +341,8 @@ class Route:
             dist = float(np.linalg.norm(p - q))
             if dist > max_offset:
                 continue
+            if self._uturns and self._skips_uturn(k, s_prev, s_abs, hd, 0.5 * max_offset):
+                continue
             cost = dist + heading_weight * (1.0 - float(np.dot(hd, self._dirs[k])))
             if best is None or cost < best[0] - _EPS:
                 dk, rk = self._dirs[k], rel[k]
@@ -340,6 +353,30 @@ class Route:
             k = min(max(k, 0), len(self._lengths) - 1)
             return RouteProgress(s_prev, k, math.inf, math.inf)
         return RouteProgress(best[1], best[2], best[3], best[4])
+
+    def _skips_uturn(
+        self, k: int, s_prev: float, s_abs: float, hd: np.ndarray, junction: float
+    ) -> bool:
+        """Whether a candidate on segment ``k`` at unwrapped arc length ``s_abs`` passes a
+        u-turn ahead of ``s_prev`` other than onto its way back (segment ``k`` must be the one
+        after the u-turn, in the same lap), or onto the way back's last ``junction`` metres (the
+        junction it ends in) with the heading ``hd`` (unit vector) not along it, within 60
+        degrees."""
+        length = self.length
+        for ku in self._uturns:
+            u = float(self._cum[ku + 1])
+            # the u-turn's first unwrapped arc length after s_prev (a progress standing at the
+            # node has passed it: the way back starts there)
+            u_abs = u + math.ceil((s_prev + _EPS - u) / length) * length
+            if not u_abs < s_abs - _EPS:
+                continue  # the candidate does not lie beyond this u-turn
+            back = (ku + 1) % len(self._lengths)
+            end = u_abs + float(self._lengths[back])
+            if k != back or s_abs > end + _EPS:
+                return True
+            if end - s_abs < junction and float(np.dot(hd, self._dirs[back])) < 0.5:
+                return True
+        return False
 
 
 def map_from_dict(data: Mapping[str, Any]) -> CorridorMap:
@@ -354,24 +391,58 @@ def map_from_dict(data: Mapping[str, Any]) -> CorridorMap:
         "corridors",
         "route",
     }
+    if not isinstance(data, Mapping):
+        raise ValueError(
+            f"a map is a JSON object (a dict) of keys {sorted(allowed)}, got {data!r:.80}"
+        )
     unknown = set(data) - allowed
     if unknown:
         raise ValueError(f"unknown map keys {sorted(unknown)}; allowed: {sorted(allowed)}")
     missing = {"name", "corridor_width", "nodes", "corridors", "route"} - set(data)
     if missing:
         raise ValueError(f"map is missing keys {sorted(missing)}")
+    if not isinstance(data["nodes"], Mapping):
+        raise ValueError(
+            f'map "nodes": expected an object {{"name": [x, y], ...}}, got {data["nodes"]!r:.80}'
+        )
+    nodes = {str(k): _pair(v, f"node {k!r}", _metres) for k, v in data["nodes"].items()}
+    corridors = tuple(_pair(c, "corridor", str) for c in _names(data["corridors"], "corridors"))
     kwargs: dict[str, Any] = {
         "name": str(data["name"]),
-        "corridor_width": float(data["corridor_width"]),
-        "nodes": {str(k): (float(v[0]), float(v[1])) for k, v in data["nodes"].items()},
-        "corridors": tuple((str(a), str(b)) for a, b in data["corridors"]),
-        "route": tuple(str(n) for n in data["route"]),
+        "corridor_width": _metres(data["corridor_width"], "corridor_width"),
+        "nodes": nodes,
+        "corridors": corridors,
+        "route": tuple(str(n) for n in _names(data["route"], "route")),
         "description": str(data.get("description", "")),
     }
     for key in ("grid", "start_offset"):
         if key in data:
-            kwargs[key] = float(data[key])
+            kwargs[key] = _metres(data[key], key)
     return CorridorMap(**kwargs)
+
+
+def _metres(value: Any, what: str = "coordinate") -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"map {what}: expected a number of metres, got {value!r:.80}")
+    return float(value)
+
+
+def _names(value: Any, key: str) -> list[Any]:
+    """A map's list (``corridors``, ``route``), refused if it is not a list."""
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)):
+        raise ValueError(f'map "{key}": expected a list, got {value!r:.80}')
+    return list(value)
+
+
+def _pair(value: Any, what: str, convert: Any) -> tuple[Any, Any]:
+    """Two items (a node's [x, y], a corridor's [a, b]), each converted."""
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)):
+        raise ValueError(f"map {what}: expected a list of 2, got {value!r:.80}")
+    if len(value) != 2:
+        raise ValueError(f"map {what}: expected a list of 2, got {len(value)} items {value!r:.80}")
+    if convert is _metres:
+        return (_metres(value[0], what), _metres(value[1], what))
+    return (convert(value[0]), convert(value[1]))
 
 
 def available_maps() -> list[str]:
@@ -395,4 +466,8 @@ def load_map(name_or_path: str | Path) -> CorridorMap:
         if not res.is_file():
             raise ValueError(f"unknown map {name_or_path!r}; shipped maps: {available_maps()}")
         text = res.read_text()
-    return map_from_dict(json.loads(text))
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"map {str(name_or_path)!r} is not valid JSON: {exc}") from None
+    return map_from_dict(data)

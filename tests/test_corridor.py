@@ -90,6 +90,39 @@ def test_bad_maps_are_refused(change, message):
         map_from_dict({**SMALL, **change})
 
 
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"nodes": [["A", 0, 0]]}, r'"nodes": expected an object'),
+        ({"nodes": {**SMALL["nodes"], "A": [0]}}, r"node 'A': expected a list of 2, got 1"),
+        ({"nodes": {**SMALL["nodes"], "A": [0, 0, 0]}}, r"node 'A': expected a list of 2, got 3"),
+        ({"nodes": {**SMALL["nodes"], "A": "0,0"}}, r"node 'A': expected a list of 2"),
+        ({"nodes": {**SMALL["nodes"], "A": ["0", 0]}}, r"node 'A': expected a number"),
+        ({"corridors": [["A", "B", "C"]]}, "corridor: expected a list of 2, got 3"),
+        ({"corridors": ["AB"]}, "corridor: expected a list of 2, got 'AB'"),
+        ({"route": "ABCDA"}, r'"route": expected a list'),
+        ({"corridor_width": None}, "corridor_width: expected a number of metres, got None"),
+        ({"start_offset": "0.2"}, "start_offset: expected a number of metres"),
+    ],
+)
+def test_malformed_map_json_is_named(change, message, tmp_path):
+    """A map of one's own with a slip in its JSON gets a ValueError naming the key, not an
+    AttributeError, IndexError or TypeError from deep inside the loader, and is not half read:
+    a node with three coordinates was taken as its first two, a route written as one string
+    as its letters."""
+    with pytest.raises(ValueError, match=message):
+        map_from_dict({**SMALL, **change})
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps({**SMALL, **change}))
+    with pytest.raises(ValueError, match=message):
+        load_map(path)
+    path.write_text(json.dumps(SMALL)[:-1])
+    with pytest.raises(ValueError, match="mine.json' is not valid JSON"):
+        load_map(path)
+    with pytest.raises(ValueError, match="a map is a JSON object"):
+        map_from_dict([SMALL])
+
+
 def test_unknown_map_name():
     with pytest.raises(ValueError, match="shipped maps"):
         load_map("nowhere")
@@ -681,3 +714,62 @@ def test_a_loop_through_corridors_the_route_does_not_take_is_no_circuit():
     acts += [0, 0, 1, 0, 3, 0, 0, 2, 0, 3, 0, 1, 0]
     ended = [env.step(a)[2] for a in acts]
     assert not any(ended)
+
+
+@pytest.mark.parametrize("world", [WorldConfig(), NOISY_WORLD], ids=["exact", "noisy"])
+def test_a_short_spur_turned_away_from_is_no_circuit(world):
+    """A map of one's own with a short dead-end spur (0.4 m: the route's way in and out, 0.8 m,
+    fits in the tracker's 1 m window): a robot that drives the loop but turns away at the
+    spur's junction, never going in, completed no circuit. Before, a noisy robot that turned
+    left there was credited with the spur and the env reported ``is_success`` after 22-23
+    actions (seeds 0-2). The expert, which does go in and u-turn, still completes clean
+    circuits."""
+    spur = load_map("figure2").to_dict()
+    spur["nodes"]["S"] = [1.4, 1.6]
+    spur_map = map_from_dict(spur)
+    skipping = map_from_dict({**spur, "route": ["P0", "P1", "J", "P3", "P0"]})
+    for seed in range(3):
+        # the same corridors, seed and actions: the same motion; the skipping route's env tells
+        # its own expert where it stands
+        env, twin = CorridorEnv(spur_map, world), CorridorEnv(skipping, world)
+        expert = CorridorExpert(skipping, world)
+        env.reset(seed=seed)
+        obs, info = twin.reset(seed=seed)
+        for _ in range(60):
+            action = expert(obs, info)
+            _, _, terminated, truncated, end = env.step(action)
+            obs, _, _, _, info = twin.step(action)
+            assert not terminated and not truncated
+        assert end["laps"] == 0
+        obs, info = env.reset(seed=seed)
+        expert = CorridorExpert(spur_map, world)
+        for _ in range(60):
+            obs, _, terminated, truncated, info = env.step(expert(obs, info))
+            if terminated or truncated:
+                break
+        assert terminated and info["is_success"]
+
+
+def test_the_expert_takes_a_narrow_map_of_ones_own():
+    """A map whose corridors are 0.4 m wide (the robot is 0.24 m across): the expert's default
+    on-route tolerance, 0.2 m, is not inside such a corridor, and CorridorExpert(map) refused
+    its own default (so did run_seed on a CorridorExperimentConfig whose map_name is such a
+    file, after the config had been accepted). The default is now two thirds of half the width
+    there, and the expert drives clean circuits; on the shipped maps it stays 0.2."""
+    narrow = map_from_dict(
+        {
+            **SMALL,
+            "corridor_width": 0.4,
+            "nodes": {"A": [0, 0], "B": [2.0, 0], "C": [2.0, 1.6], "D": [0, 1.6], "S": [2.0, -0.8]},
+            "corridors": [*SMALL["corridors"], ["B", "S"]],
+            "route": ["A", "B", "S", "B", "C", "D", "A"],
+        }
+    )
+    expert = CorridorExpert(narrow)
+    assert expert.on_route_tolerance == pytest.approx(0.4 / 3)
+    assert CorridorExpert(load_map("figure2")).on_route_tolerance == 0.2
+    env = CorridorEnv(narrow)
+    ((actions, _, terminated, info),) = drive(env, expert, seed=0, episodes=1)
+    assert terminated and info["is_success"] and len(actions) == 39
+    with pytest.raises(ValueError, match="on_route_tolerance"):
+        CorridorExpert(narrow, on_route_tolerance=0.2)  # an explicit value is still checked
