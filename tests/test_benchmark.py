@@ -383,3 +383,28 @@ def test_run_benchmark_refuses_a_worker_count_below_one(tmp_path):
         with pytest.raises(ValueError, match="workers must be None"):
             bm.run_benchmark(STRATEGIES, [_env()], [0], tmp_path / "out", workers=workers)
     assert not (tmp_path / "out").exists()
+
+
+def test_numpy_parameters_are_the_plain_cell_and_a_non_json_one_is_refused(tmp_path):
+    """A sweep over numpy values (np.arange, np.float32) in a strategy's params or an env's
+    kwargs got a cache key of its own (str(np.int64(10)) is '"10"') and then failed writing the
+    cell it had just computed ("Object of type int64 is not JSON serializable")."""
+    np = pytest.importorskip("numpy")
+    swept = bm.StrategySpec("dagger", {"iteration_steps": np.int64(10), "decay": np.float32(0.5)})
+    plain = bm.StrategySpec("dagger", {"iteration_steps": 10, "decay": 0.5})
+    env = _env(
+        budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,),
+        env_kwargs={"spread": np.float32(2.0)}, teaching={"max_new": np.int64(5)},
+    )  # fmt: skip
+    env_plain = _env(budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,))
+    assert bm.cell_configs([swept], [env], [0]) == bm.cell_configs([plain], [env_plain], [0])
+    res = bm.run_benchmark([swept], [env], [0], tmp_path / "o", workers=1, plots=False)
+    (key,) = res["cells"]
+    assert key == bm.cell_key(bm.cell_configs([plain], [env_plain], [0])[0])
+    assert (tmp_path / "o" / "cells" / f"{key}.json").exists()
+    with pytest.raises(
+        ValueError, match=r"params\['rule'\] = <object object.* is not a JSON value"
+    ):
+        bm.StrategySpec("torchcbl.strategies:ConfidentExecution", {"rule": object()})
+    with pytest.raises(ValueError, match=r"env_kwargs\['size'\]\[1\] = .* is not a JSON value"):
+        _env(env_kwargs={"size": [1, np.zeros(2)]})

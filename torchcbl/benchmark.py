@@ -115,13 +115,34 @@ def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) 
             importlib.import_module(e.env_id.partition(":")[0])
 
 
+def _json_plain(value: Any, where: str) -> Any:
+    """``value`` with numpy scalars as the Python numbers they hold (np.int64(10) -> 10), or a
+    ValueError naming ``where`` for anything that is not a JSON value: a cell's configuration is
+    hashed into its cache key and written with the cell, so a parameter must be one (before,
+    a numpy int got a key of its own and then failed the cell's write after it had run)."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if value is None or isinstance(value, (str, bool, int, float)):
+        return value
+    if isinstance(value, Mapping):
+        return {k: _json_plain(v, f"{where}[{k!r}]") for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        items = [_json_plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        return items if isinstance(value, list) else tuple(items)
+    raise ValueError(
+        f"{where} = {value!r} is not a JSON value (a cell's configuration is stored as JSON "
+        "and hashed into its cache key); give numbers, strings, bools, None, lists or dicts"
+    )
+
+
 @dataclass(frozen=True)
 class StrategySpec:
     """A strategy by name and constructor arguments.
 
     Attributes:
         name: a key of :data:`STRATEGY_PATHS` or an import path ``"module:Class"``.
-        params: keyword arguments of the class. For ``"confident"``, the
+        params: keyword arguments of the class, JSON values (numpy scalars are taken as the
+            numbers they hold; they are part of the cells' cache key). For ``"confident"``, the
             :class:`~torchcbl.confidence.DistanceRule`'s (``max_std``, default 2, or
             ``quantile``): ``ConfidentExecution(DistanceRule(**params))``.
         label: the name in tables and plots (default: ``name``).
@@ -143,6 +164,9 @@ class StrategySpec:
             raise ValueError(f"StrategySpec {self.name!r}: params must be a mapping")
         if self.label is not None and not isinstance(self.label, str):
             raise ValueError(f"StrategySpec {self.name!r}: label must be a str or None")
+        object.__setattr__(
+            self, "params", _json_plain(self.params, f"StrategySpec {self.name!r}: params")
+        )
 
     @property
     def title(self) -> str:
@@ -185,6 +209,9 @@ class EnvSpec:
         teaching: :class:`~torchcbl.teaching.TeachingConfig` fields (learning ones).
         model: :class:`~torchcbl.gmm.GaussianMixtureSet` keyword arguments (not n_actions,
             n_features, seed).
+
+    The five mappings hold JSON values (numpy scalars are taken as the numbers they hold): the
+    spec is a cell's configuration, hashed into its cache key.
     """
 
     name: str
@@ -246,6 +273,11 @@ class EnvSpec:
         for name in ("eval_episodes", "eval_steps"):
             if getattr(self, name) is not None:
                 plain(self, name, int(getattr(self, name)))
+        for name in ("env_kwargs", "eval_env_kwargs", "teacher_kwargs", "teaching", "model"):
+            value = getattr(self, name)
+            if not isinstance(value, Mapping):
+                raise ValueError(f"EnvSpec {self.name!r}: {name} must be a mapping, got {value!r}")
+            plain(self, name, _json_plain(value, f"EnvSpec {self.name!r}: {name}"))
         # what every worker would fail on at its first cell, checked now
         from torchcbl.gmm import GaussianMixtureSet
         from torchcbl.teaching import TeachingConfig
