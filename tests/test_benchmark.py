@@ -408,3 +408,26 @@ def test_numpy_parameters_are_the_plain_cell_and_a_non_json_one_is_refused(tmp_p
         bm.StrategySpec("torchcbl.strategies:ConfidentExecution", {"rule": object()})
     with pytest.raises(ValueError, match=r"env_kwargs\['size'\]\[1\] = .* is not a JSON value"):
         _env(env_kwargs={"size": [1, np.zeros(2)]})
+
+
+def test_an_in_process_sweep_leaves_the_callers_torch_threads_and_rng_alone(tmp_path):
+    """run_benchmark(workers=1) runs its cells in the caller's process; each cell runs on one
+    torch thread from its own seed, and the caller was left with one thread (a notebook's
+    later training ran single-threaded), its global torch RNG reseeded to the last cell's seed
+    and OMP_NUM_THREADS set in its environment."""
+    import torch
+
+    threads = torch.get_num_threads()
+    omp = os.environ.get("OMP_NUM_THREADS")
+    torch.set_num_threads(2)
+    try:
+        torch.manual_seed(1234)
+        expected = torch.rand(3)
+        torch.manual_seed(1234)
+        env = _env(budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,))
+        bm.run_benchmark(STRATEGIES[:1], [env], [0, 1], tmp_path, workers=1, plots=False)
+        assert torch.get_num_threads() == 2
+        assert torch.equal(torch.rand(3), expected)
+        assert os.environ.get("OMP_NUM_THREADS") == omp
+    finally:
+        torch.set_num_threads(threads)

@@ -419,8 +419,20 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     """Run one cell (see the module docstring) and return its JSON result.
 
     Deterministic given ``config`` (one torch thread, seeded model, env and strategy), apart
-    from the ``wall_s`` / ``cpu_s`` timings.
+    from the ``wall_s`` / ``cpu_s`` timings. The caller's torch thread count and global torch
+    RNG are as they were when it returns (``run_benchmark(workers=1)`` runs cells in-process).
     """
+    import torch
+
+    threads = torch.get_num_threads()
+    try:
+        with torch.random.fork_rng(devices=[]):
+            return _run_cell(config)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     import torch
 
     from torchcbl.gmm import GaussianMixtureSet
@@ -590,8 +602,8 @@ def _execute(
                 ray.shutdown()
         return
     if workers <= 1:
-        for c in todo:
-            done(_run_cell_in_worker(c))
+        for c in todo:  # in this process: its environment variables are left alone
+            done(run_cell(c))
         return
     import multiprocessing as mp
 
