@@ -431,3 +431,17 @@ def test_an_in_process_sweep_leaves_the_callers_torch_threads_and_rng_alone(tmp_
         assert os.environ.get("OMP_NUM_THREADS") == omp
     finally:
         torch.set_num_threads(threads)
+
+
+def test_an_env_the_loop_cannot_teach_is_named_with_what_it_needs(tmp_path, capsys, monkeypatch):
+    """Pendulum's actions are a Box: the cell failed with "AttributeError: 'Box' object has no
+    attribute 'n'" (the command: exit code 1, no word of what the benchmark needs)."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    env = _env(env_id="Pendulum-v1", env_kwargs={}, teacher="_bench_env:pole_teacher")
+    with pytest.raises(ValueError, match=r"'toy' \(Pendulum-v1\): expected .* Discrete action"):
+        bm.run_benchmark(STRATEGIES[:1], [env], [0], tmp_path / "o", workers=1, plots=False)
+    argv = ["benchmark", "--envs", "", "--gym-env", "Pendulum-v1", "--strategies", "bc"]
+    argv += ["--teacher", "_bench_env:pole_teacher", "--seeds", "1", "--workers", "1"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert "Discrete action space" in err and err.count("\n") == 1

@@ -436,7 +436,7 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     import torch
 
     from torchcbl.gmm import GaussianMixtureSet
-    from torchcbl.policy import GreedyPolicy
+    from torchcbl.policy import GreedyPolicy, check_env
     from torchcbl.strategies import correcting
     from torchcbl.teaching import ConfidentTeacher, TeachingConfig
 
@@ -457,6 +457,10 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     env = gym.make(spec.env_id, **dict(spec.env_kwargs))
     snapshots: list[tuple[int, int, Any]] = []
     try:
+        try:  # what the loop takes (not an AttributeError on a Box action space's .n)
+            n_features, n_actions = check_env(env)
+        except ValueError as exc:
+            raise ValueError(f"EnvSpec {spec.name!r} ({spec.env_id}): {exc}") from None
         teacher = _make_teacher(spec.teacher, env, seed, spec.teacher_kwargs)
         auditor = _make_teacher(spec.teacher, env, seed, spec.teacher_kwargs)
         strategy = sspec.build()
@@ -464,8 +468,6 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
         if wants_corrections and not callable(getattr(teacher, "correct", None)):
             teacher = correcting(teacher)
         audited = _Audited(env, auditor)
-        n_actions = int(env.action_space.n)
-        n_features = int(np.prod(env.observation_space.shape))
         model = GaussianMixtureSet(n_actions, n_features, seed=seed, **dict(spec.model))
         tc = TeachingConfig(**dict(spec.teaching))
         loop = ConfidentTeacher(
