@@ -337,6 +337,14 @@ def test_a_score_the_env_never_feeds_is_called_out_not_read_as_instant_learning(
     [
         ({"teaching": {"max_nwe": 2}}, "teaching: .*max_nwe"),
         ({"teaching": {"max_new": 0}}, "teaching: .*max_new"),
+        # stop settings: max_episodes cut a cell short of its budgets and max_steps, and
+        # max_demonstrations / max_steps were overridden by the budgets, all without a word
+        ({"teaching": {"max_episodes": 2}}, r"teaching: \['max_episodes'\] say when to stop"),
+        ({"teaching": {"max_steps": 50}}, r"teaching: \['max_steps'\] say when to stop"),
+        (
+            {"teaching": {"max_demonstrations": 9, "autonomous_steps_to_stop": 3}},
+            r"\['autonomous_steps_to_stop', 'max_demonstrations'\] say when",
+        ),
         ({"model": {"max_componets": 2}}, "model: .*max_componets"),
         ({"model": {"seed": 1}}, r"model: \['seed'\] come from"),
         ({"eval_seeds": "abc"}, "eval_seeds must be a non-empty tuple of ints"),

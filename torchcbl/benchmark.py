@@ -206,7 +206,9 @@ class EnvSpec:
         eval_seeds: held-out reset seeds of the evaluation env (one evaluation each).
         eval_episodes: episodes per evaluation (or None).
         eval_steps: steps per evaluation (or None; at least one of the two).
-        teaching: :class:`~torchcbl.teaching.TeachingConfig` fields (learning ones).
+        teaching: :class:`~torchcbl.teaching.TeachingConfig` fields, learning ones only (a
+            stop criterion such as ``max_episodes`` is refused: a cell stops at its budgets
+            and ``max_steps``).
         model: :class:`~torchcbl.gmm.GaussianMixtureSet` keyword arguments (not n_actions,
             n_features, seed).
 
@@ -280,12 +282,19 @@ class EnvSpec:
             plain(self, name, _json_plain(value, f"EnvSpec {self.name!r}: {name}"))
         # what every worker would fail on at its first cell, checked now
         from torchcbl.gmm import GaussianMixtureSet
-        from torchcbl.teaching import TeachingConfig
+        from torchcbl.teaching import _STOP_SETTINGS, TeachingConfig
 
         try:
             TeachingConfig(**dict(self.teaching))
         except (TypeError, ValueError) as exc:
             raise ValueError(f"EnvSpec {self.name!r}: teaching: {exc}") from None
+        stops = [k for k in _STOP_SETTINGS if k in self.teaching]
+        if stops:  # a cell stops at each budget and at max_steps, and nowhere else
+            raise ValueError(
+                f"EnvSpec {self.name!r}: teaching: {stops} say when to stop, which a cell "
+                "decides (each of budgets, then max_steps); give TeachingConfig's learning "
+                "fields only"
+            )
         taken = {"n_actions", "n_features", "seed"} & set(self.model)
         if taken:
             raise ValueError(
