@@ -337,6 +337,14 @@ def test_a_score_the_env_never_feeds_is_called_out_not_read_as_instant_learning(
     [
         ({"teaching": {"max_nwe": 2}}, "teaching: .*max_nwe"),
         ({"teaching": {"max_new": 0}}, "teaching: .*max_new"),
+        # stop settings: max_episodes cut a cell short of its budgets and max_steps, and
+        # max_demonstrations / max_steps were overridden by the budgets, all without a word
+        ({"teaching": {"max_episodes": 2}}, r"teaching: \['max_episodes'\] say when to stop"),
+        ({"teaching": {"max_steps": 50}}, r"teaching: \['max_steps'\] say when to stop"),
+        (
+            {"teaching": {"max_demonstrations": 9, "autonomous_steps_to_stop": 3}},
+            r"\['autonomous_steps_to_stop', 'max_demonstrations'\] say when",
+        ),
         ({"model": {"max_componets": 2}}, "model: .*max_componets"),
         ({"model": {"seed": 1}}, r"model: \['seed'\] come from"),
         ({"eval_seeds": "abc"}, "eval_seeds must be a non-empty tuple of ints"),
@@ -383,3 +391,65 @@ def test_run_benchmark_refuses_a_worker_count_below_one(tmp_path):
         with pytest.raises(ValueError, match="workers must be None"):
             bm.run_benchmark(STRATEGIES, [_env()], [0], tmp_path / "out", workers=workers)
     assert not (tmp_path / "out").exists()
+
+
+def test_numpy_parameters_are_the_plain_cell_and_a_non_json_one_is_refused(tmp_path):
+    """A sweep over numpy values (np.arange, np.float32) in a strategy's params or an env's
+    kwargs got a cache key of its own (str(np.int64(10)) is '"10"') and then failed writing the
+    cell it had just computed ("Object of type int64 is not JSON serializable")."""
+    np = pytest.importorskip("numpy")
+    swept = bm.StrategySpec("dagger", {"iteration_steps": np.int64(10), "decay": np.float32(0.5)})
+    plain = bm.StrategySpec("dagger", {"iteration_steps": 10, "decay": 0.5})
+    env = _env(
+        budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,),
+        env_kwargs={"spread": np.float32(2.0)}, teaching={"max_new": np.int64(5)},
+    )  # fmt: skip
+    env_plain = _env(budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,))
+    assert bm.cell_configs([swept], [env], [0]) == bm.cell_configs([plain], [env_plain], [0])
+    res = bm.run_benchmark([swept], [env], [0], tmp_path / "o", workers=1, plots=False)
+    (key,) = res["cells"]
+    assert key == bm.cell_key(bm.cell_configs([plain], [env_plain], [0])[0])
+    assert (tmp_path / "o" / "cells" / f"{key}.json").exists()
+    with pytest.raises(
+        ValueError, match=r"params\['rule'\] = <object object.* is not a JSON value"
+    ):
+        bm.StrategySpec("torchcbl.strategies:ConfidentExecution", {"rule": object()})
+    with pytest.raises(ValueError, match=r"env_kwargs\['size'\]\[1\] = .* is not a JSON value"):
+        _env(env_kwargs={"size": [1, np.zeros(2)]})
+
+
+def test_an_in_process_sweep_leaves_the_callers_torch_threads_and_rng_alone(tmp_path):
+    """run_benchmark(workers=1) runs its cells in the caller's process; each cell runs on one
+    torch thread from its own seed, and the caller was left with one thread (a notebook's
+    later training ran single-threaded), its global torch RNG reseeded to the last cell's seed
+    and OMP_NUM_THREADS set in its environment."""
+    import torch
+
+    threads = torch.get_num_threads()
+    omp = os.environ.get("OMP_NUM_THREADS")
+    torch.set_num_threads(2)
+    try:
+        torch.manual_seed(1234)
+        expected = torch.rand(3)
+        torch.manual_seed(1234)
+        env = _env(budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,))
+        bm.run_benchmark(STRATEGIES[:1], [env], [0, 1], tmp_path, workers=1, plots=False)
+        assert torch.get_num_threads() == 2
+        assert torch.equal(torch.rand(3), expected)
+        assert os.environ.get("OMP_NUM_THREADS") == omp
+    finally:
+        torch.set_num_threads(threads)
+
+
+def test_an_env_the_loop_cannot_teach_is_named_with_what_it_needs(tmp_path, capsys, monkeypatch):
+    """Pendulum's actions are a Box: the cell failed with "AttributeError: 'Box' object has no
+    attribute 'n'" (the command: exit code 1, no word of what the benchmark needs)."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    env = _env(env_id="Pendulum-v1", env_kwargs={}, teacher="_bench_env:pole_teacher")
+    with pytest.raises(ValueError, match=r"'toy' \(Pendulum-v1\): expected .* Discrete action"):
+        bm.run_benchmark(STRATEGIES[:1], [env], [0], tmp_path / "o", workers=1, plots=False)
+    argv = ["benchmark", "--envs", "", "--gym-env", "Pendulum-v1", "--strategies", "bc"]
+    argv += ["--teacher", "_bench_env:pole_teacher", "--seeds", "1", "--workers", "1"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert "Discrete action space" in err and err.count("\n") == 1

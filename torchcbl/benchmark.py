@@ -115,13 +115,34 @@ def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) 
             importlib.import_module(e.env_id.partition(":")[0])
 
 
+def _json_plain(value: Any, where: str) -> Any:
+    """``value`` with numpy scalars as the Python numbers they hold (np.int64(10) -> 10), or a
+    ValueError naming ``where`` for anything that is not a JSON value: a cell's configuration is
+    hashed into its cache key and written with the cell, so a parameter must be one (before,
+    a numpy int got a key of its own and then failed the cell's write after it had run)."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if value is None or isinstance(value, (str, bool, int, float)):
+        return value
+    if isinstance(value, Mapping):
+        return {k: _json_plain(v, f"{where}[{k!r}]") for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        items = [_json_plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        return items if isinstance(value, list) else tuple(items)
+    raise ValueError(
+        f"{where} = {value!r} is not a JSON value (a cell's configuration is stored as JSON "
+        "and hashed into its cache key); give numbers, strings, bools, None, lists or dicts"
+    )
+
+
 @dataclass(frozen=True)
 class StrategySpec:
     """A strategy by name and constructor arguments.
 
     Attributes:
         name: a key of :data:`STRATEGY_PATHS` or an import path ``"module:Class"``.
-        params: keyword arguments of the class. For ``"confident"``, the
+        params: keyword arguments of the class, JSON values (numpy scalars are taken as the
+            numbers they hold; they are part of the cells' cache key). For ``"confident"``, the
             :class:`~torchcbl.confidence.DistanceRule`'s (``max_std``, default 2, or
             ``quantile``): ``ConfidentExecution(DistanceRule(**params))``.
         label: the name in tables and plots (default: ``name``).
@@ -143,6 +164,9 @@ class StrategySpec:
             raise ValueError(f"StrategySpec {self.name!r}: params must be a mapping")
         if self.label is not None and not isinstance(self.label, str):
             raise ValueError(f"StrategySpec {self.name!r}: label must be a str or None")
+        object.__setattr__(
+            self, "params", _json_plain(self.params, f"StrategySpec {self.name!r}: params")
+        )
 
     @property
     def title(self) -> str:
@@ -182,9 +206,14 @@ class EnvSpec:
         eval_seeds: held-out reset seeds of the evaluation env (one evaluation each).
         eval_episodes: episodes per evaluation (or None).
         eval_steps: steps per evaluation (or None; at least one of the two).
-        teaching: :class:`~torchcbl.teaching.TeachingConfig` fields (learning ones).
+        teaching: :class:`~torchcbl.teaching.TeachingConfig` fields, learning ones only (a
+            stop criterion such as ``max_episodes`` is refused: a cell stops at its budgets
+            and ``max_steps``).
         model: :class:`~torchcbl.gmm.GaussianMixtureSet` keyword arguments (not n_actions,
             n_features, seed).
+
+    The five mappings hold JSON values (numpy scalars are taken as the numbers they hold): the
+    spec is a cell's configuration, hashed into its cache key.
     """
 
     name: str
@@ -246,14 +275,26 @@ class EnvSpec:
         for name in ("eval_episodes", "eval_steps"):
             if getattr(self, name) is not None:
                 plain(self, name, int(getattr(self, name)))
+        for name in ("env_kwargs", "eval_env_kwargs", "teacher_kwargs", "teaching", "model"):
+            value = getattr(self, name)
+            if not isinstance(value, Mapping):
+                raise ValueError(f"EnvSpec {self.name!r}: {name} must be a mapping, got {value!r}")
+            plain(self, name, _json_plain(value, f"EnvSpec {self.name!r}: {name}"))
         # what every worker would fail on at its first cell, checked now
         from torchcbl.gmm import GaussianMixtureSet
-        from torchcbl.teaching import TeachingConfig
+        from torchcbl.teaching import _STOP_SETTINGS, TeachingConfig
 
         try:
             TeachingConfig(**dict(self.teaching))
         except (TypeError, ValueError) as exc:
             raise ValueError(f"EnvSpec {self.name!r}: teaching: {exc}") from None
+        stops = [k for k in _STOP_SETTINGS if k in self.teaching]
+        if stops:  # a cell stops at each budget and at max_steps, and nowhere else
+            raise ValueError(
+                f"EnvSpec {self.name!r}: teaching: {stops} say when to stop, which a cell "
+                "decides (each of budgets, then max_steps); give TeachingConfig's learning "
+                "fields only"
+            )
         taken = {"n_actions", "n_features", "seed"} & set(self.model)
         if taken:
             raise ValueError(
@@ -387,12 +428,24 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     """Run one cell (see the module docstring) and return its JSON result.
 
     Deterministic given ``config`` (one torch thread, seeded model, env and strategy), apart
-    from the ``wall_s`` / ``cpu_s`` timings.
+    from the ``wall_s`` / ``cpu_s`` timings. The caller's torch thread count and global torch
+    RNG are as they were when it returns (``run_benchmark(workers=1)`` runs cells in-process).
     """
     import torch
 
+    threads = torch.get_num_threads()
+    try:
+        with torch.random.fork_rng(devices=[]):
+            return _run_cell(config)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
+    import torch
+
     from torchcbl.gmm import GaussianMixtureSet
-    from torchcbl.policy import GreedyPolicy
+    from torchcbl.policy import GreedyPolicy, check_env
     from torchcbl.strategies import correcting
     from torchcbl.teaching import ConfidentTeacher, TeachingConfig
 
@@ -413,6 +466,10 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     env = gym.make(spec.env_id, **dict(spec.env_kwargs))
     snapshots: list[tuple[int, int, Any]] = []
     try:
+        try:  # what the loop takes (not an AttributeError on a Box action space's .n)
+            n_features, n_actions = check_env(env)
+        except ValueError as exc:
+            raise ValueError(f"EnvSpec {spec.name!r} ({spec.env_id}): {exc}") from None
         teacher = _make_teacher(spec.teacher, env, seed, spec.teacher_kwargs)
         auditor = _make_teacher(spec.teacher, env, seed, spec.teacher_kwargs)
         strategy = sspec.build()
@@ -420,8 +477,6 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
         if wants_corrections and not callable(getattr(teacher, "correct", None)):
             teacher = correcting(teacher)
         audited = _Audited(env, auditor)
-        n_actions = int(env.action_space.n)
-        n_features = int(np.prod(env.observation_space.shape))
         model = GaussianMixtureSet(n_actions, n_features, seed=seed, **dict(spec.model))
         tc = TeachingConfig(**dict(spec.teaching))
         loop = ConfidentTeacher(
@@ -558,8 +613,8 @@ def _execute(
                 ray.shutdown()
         return
     if workers <= 1:
-        for c in todo:
-            done(_run_cell_in_worker(c))
+        for c in todo:  # in this process: its environment variables are left alone
+            done(run_cell(c))
         return
     import multiprocessing as mp
 
