@@ -71,8 +71,10 @@ __all__ = [
     "summarize",
 ]
 
-CELL_FORMAT = 1
-"""Bumped when a cell's computation changes, so old cached cells are not reused."""
+CELL_FORMAT = 2
+"""Bumped when a cell's computation changes, so old cached cells are not reused (2: a strategy
+that takes a ``seed``, DAgger's coins, is seeded by the cell's seed unless its params give one;
+in format 1 every cell drew DAgger's coins from seed 0)."""
 
 #: short strategy names -> import path of the class.
 STRATEGY_PATHS: dict[str, str] = {
@@ -173,8 +175,10 @@ class StrategySpec:
         """The name shown in tables and plots."""
         return self.label or self.name
 
-    def build(self) -> Any:
-        """A fresh strategy object."""
+    def build(self, seed: int | None = None) -> Any:
+        """A fresh strategy object; ``seed`` (a cell's seed) seeds a strategy whose constructor
+        takes one (DAgger's coins) unless ``params`` give it, so that the seeds of a sweep are
+        independent repeats."""
         path = STRATEGY_PATHS.get(self.name, self.name)
         params = dict(self.params)
         if self.name == "confident":
@@ -182,7 +186,15 @@ class StrategySpec:
             from torchcbl.strategies import ConfidentExecution
 
             return ConfidentExecution(DistanceRule(**params))
-        return _import(path)(**params)
+        cls = _import(path)
+        if seed is not None and "seed" not in params:
+            try:
+                takes_seed = "seed" in inspect.signature(cls).parameters
+            except (TypeError, ValueError):  # no signature to read
+                takes_seed = False
+            if takes_seed:
+                params["seed"] = int(seed)
+        return cls(**params)
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "params": dict(self.params), "label": self.title}
@@ -472,7 +484,7 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
             raise ValueError(f"EnvSpec {spec.name!r} ({spec.env_id}): {exc}") from None
         teacher = _make_teacher(spec.teacher, env, seed, spec.teacher_kwargs)
         auditor = _make_teacher(spec.teacher, env, seed, spec.teacher_kwargs)
-        strategy = sspec.build()
+        strategy = sspec.build(seed)
         wants_corrections = bool(getattr(strategy, "wants_corrections", False))
         if wants_corrections and not callable(getattr(teacher, "correct", None)):
             teacher = correcting(teacher)
