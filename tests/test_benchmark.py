@@ -217,7 +217,16 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
     out = capsys.readouterr().out
     assert code == 0 and "| _bench_env:BenchCluster-v0 | novelty |" in out
     assert "wall" in out and "CPU" in out
-    assert (tmp_path / "b" / "results.json").exists()
+    env = json.loads((tmp_path / "b" / "results.json").read_text())["envs"]
+    assert env["_bench_env:BenchCluster-v0"]["eval_episodes"] == 2
+    # --eval-steps alone is the evaluation's length: the default 10 episodes cut it short before
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
+    argv += ["--workers", "1", "--budgets", "5,10", "--max-steps", "40", "--eval-steps", "60"]
+    assert main([*argv, "--out", str(tmp_path / "c")]) == 0
+    env = json.loads((tmp_path / "c" / "results.json").read_text())["envs"]
+    spec = env["_bench_env:BenchCluster-v0"]
+    assert spec["eval_steps"] == 60 and spec["eval_episodes"] is None
 
 
 @pytest.mark.parametrize(

@@ -637,7 +637,8 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                     budgets=args.budgets or (10, 20, 40, 80),
                     max_steps=args.max_steps or 1000,
                     score=score,
-                    eval_episodes=args.eval_episodes or 10,
+                    # 10 episodes unless --eval-steps alone says how long an evaluation is
+                    eval_episodes=args.eval_episodes or (None if args.eval_steps else 10),
                     eval_steps=args.eval_steps,
                 )
             )
@@ -975,9 +976,14 @@ def _parser() -> argparse.ArgumentParser:
         "--eval-episodes",
         type=_positive_int,
         metavar="N",
-        help=g + "episodes per evaluation (default 10)",
+        help=g + "episodes per evaluation (default 10; none when --eval-steps is given alone)",
     )
-    p.add_argument("--eval-steps", type=_positive_int, metavar="N", help=g + "steps per evaluation")
+    p.add_argument(
+        "--eval-steps",
+        type=_positive_int,
+        metavar="N",
+        help=g + "steps per evaluation (with --eval-episodes: whichever comes first)",
+    )
     p.set_defaults(func=_cmd_benchmark)
     return parser
 
