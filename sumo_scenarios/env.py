@@ -13,9 +13,10 @@ Actions (``Discrete(3)``): 0 stay, 1 shift one lane left (index + 1), 2 shift on
 (index - 1). A shift takes effect in the same timestep; a shift off the road is clamped (the
 ego stays in its lane).
 
-One timestep = one decision = 0.25 s of driving (the paper: 500 timesteps ~ 2.1 min). The ego
-drives at exactly 60 mph; traffic keeps its lane, each car at its own desired speed (20-40 mph)
-under SUMO's car-following model, so cars slow down behind slower ones. The road never ends.
+One timestep = one decision = ``config.sim.step_length_s`` of driving, 0.25 s by default (the
+paper: 500 timesteps ~ 2.1 min). The ego drives at exactly 60 mph; traffic keeps its lane,
+each car at its own desired speed (20-40 mph) under SUMO's car-following model, so cars slow
+down behind slower ones. The road never ends.
 ``info["contact"]`` is True when, at the end of the step, the ego overlaps a car
 in the lane it is in or the lane it just left (a geometric 1-D check: SUMO's own collision list is
 unreliable). Cars are never removed on contact. Reward is ``-1`` on a contact step, else 0 (the
@@ -207,10 +208,11 @@ class DrivingEnv(gym.Env):
         return self._observe(), self._info()
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        """Drive one decision period (0.25 s): ``action`` 0 stay, 1 one lane left, 2 one lane
-        right (at the road's edge a shift is a stay). Returns ``(observation [4], reward,
-        terminated, truncated, info)``: reward -1 in a step in contact with a car, else 0;
-        never terminated; truncated after ``config.max_episode_steps`` steps."""
+        """Drive one decision period (``config.sim.step_length_s``, 0.25 s by default):
+        ``action`` 0 stay, 1 one lane left, 2 one lane right (at the road's edge a shift is a
+        stay). Returns ``(observation [4], reward, terminated, truncated, info)``: reward -1 in
+        a step in contact with a car, else 0; never terminated; truncated after
+        ``config.max_episode_steps`` steps."""
         if self.closed:
             raise RuntimeError("this DrivingEnv is closed; create a new one")
         if self._episode_seed is None:

@@ -62,10 +62,15 @@ def test_every_argument_and_option_has_help_text():
 
 def test_the_readme_command_lines_use_the_names_of_the_help(capsys):
     """Every placeholder (SESSION_DIR, N, ...) and option of the README's command block appears,
-    spelled the same, in that command's --help."""
+    spelled the same, in that command's --help, and every option of the help in the block."""
     readme = (Path(__file__).parents[1] / "README.md").read_text()
     block = readme.split("The command line (`torchcbl --help`):", 1)[1].split("```")[1]
-    lines = [ln for ln in block.splitlines() if ln.startswith("torchcbl ")]
+    lines: list[str] = []
+    for ln in block.splitlines():  # a command's continuation lines are indented
+        if ln.startswith("torchcbl "):
+            lines.append(ln)
+        elif ln.strip() and lines:
+            lines[-1] += " " + ln.strip()
     assert {ln.split()[1] for ln in lines} == {
         "reproduce",
         "evaluate",
@@ -81,6 +86,8 @@ def test_the_readme_command_lines_use_the_names_of_the_help(capsys):
         usage = " ".join(capsys.readouterr().out.split("\n\n")[0].split())
         for token in re.findall(r"--[a-z-]+|\b[A-Z][A-Z_]*(?:\.json|\.gif|\.xml)?\b", line):
             assert token in usage, (command, token, usage)
+        for option in set(re.findall(r"--[a-z-]+", usage)) - {"--help"}:
+            assert option in line, (command, option, "missing from the README's block")
 
 
 @pytest.fixture(scope="module")

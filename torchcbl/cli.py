@@ -4,14 +4,14 @@ This is the only core module that reaches the domains (``corridor``, ``sumo_scen
 imports them lazily, inside the command that needs them, so ``torchcbl --help`` stays fast and the
 core never depends on a simulator.
 
-Commands::
+Commands (the options in full: README.md's command block, which a test holds to ``--help``)::
 
     torchcbl reproduce [corridor|driving|all] [--full] [--seeds N] [--workers N] [--out DIR]
     torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S]
-    torchcbl replay EPISODES.json|RUN_DIR [--episode N | --label TEXT] [--gif OUT] [--fcd OUT]
+    torchcbl replay EPISODES.json|RUN_DIR [--list] [--episode N | --label TEXT] [--gif OUT] ...
     torchcbl plot RUN_DIR
-    torchcbl teach corridor|driving [--run-dir DIR] [--resume] [--seed S] [--steps N]
-    torchcbl benchmark [--quick] [--strategies S,..] [--envs E,..] [--seeds N] [--ray] [--out DIR]
+    torchcbl teach corridor|driving [--run-dir DIR] [--resume] [--seed S] [--steps N] ...
+    torchcbl benchmark [--quick] [--strategies S,..] [--envs E,..] [--seeds N] [--ray] ...
 """
 
 from __future__ import annotations
@@ -804,7 +804,8 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "replay",
-        help="replay a recorded SUMO episode to GIF and FCD XML",
+        help="replay a recorded SUMO episode (or a driving session's) to GIF, FCD XML and "
+        "a .sumocfg",
         description="Re-simulate a recorded driving episode bit-identically and export it.",
     )
     p.add_argument(
@@ -952,7 +953,12 @@ def _parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="benchmark directory (default runs/benchmark[-quick])",
     )
-    p.add_argument("--driving-teacher", default=None, help="import path of the driving teacher")
+    p.add_argument(
+        "--driving-teacher",
+        default=None,
+        metavar="MODULE:NAME",
+        help="import path of the driving teacher",
+    )
     p.add_argument(
         "--gym-env",
         default=None,

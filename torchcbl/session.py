@@ -1263,6 +1263,10 @@ def load_records(run_dir: str | os.PathLike[str]) -> list[StepRecord]:
     Raises:
         CorruptSessionError: a file of the session is damaged (the message says which and how
             to recover).
+
+    Warns:
+        UserWarning: the log lacks steps (rows or journal lines removed by something other than
+            torchcbl), naming them; the records read are those that remain.
     """
     load_config(run_dir)
     return _read_log(run_dir)[0]

@@ -540,6 +540,9 @@ class ConfidentTeacher:
         Raises:
             IncompatibleRunDirError: the directory is not a session, or it was written for a
                 different env, model, rule or learning configuration.
+            CorruptSessionError: a file of the session is damaged, or its log lacks steps
+                (nothing is changed; the message says how to recover).
+            SessionLockedError: another writer has the directory open.
         """
         stored = load_config(run_dir)
         n_features, n_actions = check_env(env)
