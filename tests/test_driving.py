@@ -95,18 +95,22 @@ def test_a_second_env_takes_the_simulation_over_and_the_first_says_so(env):
 
 
 def test_a_failed_reset_a_closed_env_and_a_dropped_env_never_crash_sumo(env, tmp_path):
-    """step() after a reset that SUMO refused (here: FCD output onto a directory) or after
-    close() is a clear error (on libsumo both used to reach a dead simulation: a segmentation
-    fault, or another env's); an env dropped without close() frees the process's one slot."""
+    """step() after a reset that SUMO refused (here: FCD output to a file it cannot create) or
+    after close() is a clear error (on libsumo both used to reach a dead simulation: a
+    segmentation fault, or another env's); an env dropped without close() frees the process's
+    one slot."""
+    unwritable = "/proc/torchcbl-test.fcd.xml"  # its directory exists; no file can be made there
     env.reset(seed=1)
     env.step(STAY)
     with pytest.raises(Exception, match="Could not build output file"):
-        env.reset(seed=2, options={"fcd_output": str(tmp_path)})  # a directory
+        env.reset(seed=2, options={"fcd_output": unwritable})
     with pytest.raises(RuntimeError, match="call reset"):
         env.step(STAY)
     obs, _ = env.reset(seed=2)  # and it recovers
     with pytest.raises(ValueError, match="does not exist"):
         env.reset(seed=2, options={"fcd_output": str(tmp_path / "no" / "x.xml")})
+    with pytest.raises(ValueError, match="is a directory"):  # named before SUMO starts
+        env.reset(seed=2, options={"fcd_output": str(tmp_path)})
     env.close()
     assert not libsumo.isLoaded()  # closing the owner closed SUMO
     with pytest.raises(RuntimeError, match="closed"):
@@ -114,7 +118,7 @@ def test_a_failed_reset_a_closed_env_and_a_dropped_env_never_crash_sumo(env, tmp
     # a first start that SUMO refuses: the env recovers, and its close() closes SUMO
     starting = DrivingEnv()
     with pytest.raises(Exception, match="Could not build output file"):
-        starting.reset(seed=2, options={"fcd_output": str(tmp_path)})
+        starting.reset(seed=2, options={"fcd_output": unwritable})
     assert starting.reset(seed=2)[0].shape == (4,)
     starting.close()
     assert not libsumo.isLoaded()
