@@ -245,6 +245,10 @@ class HumanDriver:
     def __init__(self, config: HumanDriverConfig | None = None, *, seed: int = 0) -> None:
         self.config = config or HumanDriverConfig()
         self._rng = np.random.default_rng(seed)
+        w = np.asarray(self.config.home_weights, dtype=np.float64)
+        # the config accepts a sum within np.isclose of 1, numpy's choice only within ~1e-8:
+        # normalised (a sum of exactly 1, as the defaults', is unchanged)
+        self._home_p = w / w.sum()
         self.home = self._draw_home()
         self._margin = self._draw_margin()
         self._leave = self._draw_leave()
@@ -253,7 +257,7 @@ class HumanDriver:
         self.last_move = "stay"
 
     def _draw_home(self) -> int:
-        return int(self._rng.choice((2, 3, 4), p=self.config.home_weights))
+        return int(self._rng.choice((2, 3, 4), p=self._home_p))
 
     def _draw_leave(self) -> float:
         lo, hi = self.config.leave_room_s

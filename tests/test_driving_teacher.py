@@ -101,6 +101,24 @@ def test_human_timing_misses_and_doubles_presses_at_the_given_rates():
         HumanTimingConfig(miss_prob=float("nan"))
 
 
+def test_probabilities_the_configs_accept_are_usable_by_the_teachers():
+    """A config accepts probabilities whose sum is within np.isclose of 1; the teacher used to
+    pass them to numpy's choice as they were, which wants 1 to about 1e-8, so the first delayed
+    press of a session (or building the driver) failed with "Probabilities do not sum to 1"."""
+    from sumo_scenarios.teacher import HumanDriverConfig
+
+    thirds = (0.333333, 0.333333, 0.333333)  # sums to 0.999999: accepted
+    h = HumanTiming(lambda o, i: 1, HumanTimingConfig(delay_probs=thirds, miss_prob=0.0), seed=0)
+    got = [h(np.zeros(2), {"t": t}) for t in range(300)]
+    assert 0 < got.count(1) < 300 and h.stats()["delayed"] > 0
+    driver = HumanDriver(HumanDriverConfig(home_weights=thirds), seed=0)
+    homes = set()
+    for t in range(200):
+        _call(driver, (25.0, 25.0, 25.0), 4, t)
+        homes.add(driver.home)
+    assert homes == {2, 3, 4}
+
+
 def test_driver_config_refuses_nan_and_an_urgent_gap_beyond_the_normal_one():
     from sumo_scenarios.teacher import HumanDriverConfig
 

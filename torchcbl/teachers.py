@@ -101,7 +101,10 @@ class HumanTiming:
         self.config = config or HumanTimingConfig()
         self._rng = np.random.default_rng(seed)
         self._delays = np.arange(len(self.config.delay_probs))
-        self._probs = np.asarray(self.config.delay_probs, dtype=np.float64)
+        p = np.asarray(self.config.delay_probs, dtype=np.float64)
+        # the config accepts a sum within np.isclose of 1, numpy's choice only within ~1e-8:
+        # normalised, as the config promises probabilities (a sum of exactly 1 is unchanged)
+        self._probs = p / p.sum()
         self._pending: tuple[int, int] | None = None  # (action, steps left)
         self._double: int | None = None
         self._last_t: Any = None
