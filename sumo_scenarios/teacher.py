@@ -223,6 +223,12 @@ class HumanDriverConfig:
             raise ValueError(f"cross_steps must be an int >= 0, got {self.cross_steps!r}")
         if self.behind_m < _CAR_M:
             raise ValueError(f"behind_m must be >= 5 m (a car length), got {self.behind_m}")
+        # tuples, whatever sequence was given (a list, an array): the config stays hashable and
+        # comparable, as a frozen one is, and a list the caller changes later changes no driver
+        for name in ("home_weights", "margin_s", "leave_room_s", "return_behind_m"):
+            v = getattr(self, name)
+            if v is not None:
+                object.__setattr__(self, name, tuple(float(x) for x in v))
 
 
 class HumanDriver:

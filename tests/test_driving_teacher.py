@@ -119,6 +119,25 @@ def test_probabilities_the_configs_accept_are_usable_by_the_teachers():
     assert homes == {2, 3, 4}
 
 
+def test_driver_config_holds_its_own_tuples_whatever_sequences_it_was_given():
+    """A list or an array given to a HumanDriverConfig used to be kept as it was: the frozen
+    config was then unhashable (a list), its == raised (an array), and a list changed after
+    the check changed every driver built from it, unchecked."""
+    from sumo_scenarios.teacher import HumanDriverConfig
+
+    margin = [0.0, 0.2]
+    a = HumanDriverConfig(margin_s=margin, home_weights=np.array([0.5, 0.25, 0.25]))
+    b = HumanDriverConfig(margin_s=(0.0, 0.2), home_weights=(0.5, 0.25, 0.25))
+    assert a == b and hash(a) == hash(b)
+    margin[0] = 5.0  # low > high: would fail the check
+    assert a.margin_s == (0.0, 0.2)
+    c = HumanDriverConfig(leave_room_s=[1.0, 2.0], return_behind_m=[6.0, 8.0])
+    assert (c.leave_room_s, c.return_behind_m) == ((1.0, 2.0), (6.0, 8.0))
+    assert HumanDriverConfig() == HumanDriverConfig(
+        **{k: list(v) if isinstance(v, tuple) else v for k, v in vars(HumanDriverConfig()).items()}
+    )
+
+
 def test_driver_config_refuses_nan_and_an_urgent_gap_beyond_the_normal_one():
     from sumo_scenarios.teacher import HumanDriverConfig
 
