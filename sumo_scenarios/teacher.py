@@ -249,6 +249,11 @@ class HumanDriver:
     """
 
     def __init__(self, config: HumanDriverConfig | None = None, *, seed: int = 0) -> None:
+        if config is not None and not isinstance(config, HumanDriverConfig):
+            raise TypeError(
+                f"config must be a HumanDriverConfig, got {type(config).__name__}; e.g. "
+                "HumanDriver(HumanDriverConfig(home_every_s=1.0))"
+            )
         self.config = config or HumanDriverConfig()
         self._rng = np.random.default_rng(seed)
         w = np.asarray(self.config.home_weights, dtype=np.float64)

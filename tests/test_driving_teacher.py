@@ -138,6 +138,18 @@ def test_driver_config_holds_its_own_tuples_whatever_sequences_it_was_given():
     )
 
 
+def test_a_driving_teacher_given_a_dict_for_its_config_says_so_at_once():
+    """HumanTiming refused a dict config with a TypeError; HumanDriver (and make_teacher's
+    driver=) failed with "'dict' object has no attribute 'home_weights'", and ScriptedExpert
+    only at its first answer, mid-session, with "... no attribute 'min_gap_m'"."""
+    with pytest.raises(TypeError, match="config must be a HumanDriverConfig, got dict"):
+        HumanDriver({"home_every_s": 1.0})
+    with pytest.raises(TypeError, match="config must be a HumanDriverConfig, got dict"):
+        make_teacher(driver={"home_every_s": 1.0})
+    with pytest.raises(TypeError, match="config must be an ExpertConfig, got dict"):
+        ScriptedExpert({"min_gap_m": 12.0})
+
+
 def test_driver_config_refuses_nan_and_an_urgent_gap_beyond_the_normal_one():
     from sumo_scenarios.teacher import HumanDriverConfig
 
