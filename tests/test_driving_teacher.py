@@ -97,7 +97,7 @@ def test_human_timing_misses_and_doubles_presses_at_the_given_rates():
     for bad in (-1, 1.0, True, "0"):  # found only when a press was pending, before
         with pytest.raises(ValueError, match="default_action must be an action index"):
             HumanTimingConfig(default_action=bad)
-    with pytest.raises(ValueError, match="miss_prob must lie in"):
+    with pytest.raises(ValueError, match="miss_prob must be a probability in"):
         HumanTimingConfig(miss_prob=float("nan"))
 
 
@@ -148,6 +148,21 @@ def test_a_driving_teacher_given_a_dict_for_its_config_says_so_at_once():
         make_teacher(driver={"home_every_s": 1.0})
     with pytest.raises(TypeError, match="config must be an ExpertConfig, got dict"):
         ScriptedExpert({"min_gap_m": 12.0})
+
+
+def test_timing_config_takes_numpy_probabilities():
+    """miss_prob / double_prob given as a numpy float32 or int (e.g. read from an array) were
+    refused with "must lie in [0, 1), got 0.03", a value that does lie there."""
+    cfg = HumanTimingConfig(miss_prob=np.float32(0.25), double_prob=np.int64(0))
+    assert (cfg.miss_prob, cfg.double_prob) == (float(np.float32(0.25)), 0.0)
+    h = HumanTiming(
+        lambda o, i: 0, HumanTimingConfig(delay_probs=(1.0,), miss_prob=np.float32(0.25))
+    )
+    got = _replies(h, [1, 0] * 1000)
+    assert abs(got[::2].count(0) / 1000 - 0.25) < 0.05
+    for bad in (np.float32(1.0), np.bool_(False), "0.1", float("nan")):
+        with pytest.raises(ValueError, match="miss_prob must be a probability in"):
+            HumanTimingConfig(miss_prob=bad)
 
 
 def test_driver_config_refuses_nan_and_an_urgent_gap_beyond_the_normal_one():

@@ -24,6 +24,7 @@ nothing of what the actions mean.
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -63,8 +64,11 @@ class HumanTimingConfig:
             )
         for name in ("miss_prob", "double_prob"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < 1.0:
-                raise ValueError(f"{name} must lie in [0, 1), got {v}")
+            # any real number (a numpy float or int too), not a bool
+            real = isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+            if not real or not 0.0 <= v < 1.0:
+                raise ValueError(f"{name} must be a probability in [0, 1), got {v!r}")
+            object.__setattr__(self, name, float(v))
         # a tuple, whatever sequence was given: the config stays hashable, as a frozen one is
         object.__setattr__(self, "delay_probs", tuple(float(x) for x in p))
 
