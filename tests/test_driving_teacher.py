@@ -165,6 +165,17 @@ def test_timing_config_takes_numpy_probabilities():
             HumanTimingConfig(miss_prob=bad)
 
 
+def test_a_missed_press_is_pressed_again_after_a_new_reaction_delay():
+    """After a miss the person reacts again, with a delay of its own (as the calibration ran);
+    the docstring said "presses again at the next step"."""
+    cfg = HumanTimingConfig(delay_probs=(0.0, 1.0), miss_prob=0.5, double_prob=0.0)
+    h = HumanTiming(lambda o, i: 0, cfg, seed=0)
+    got = _replies(h, [1] * 400)
+    assert h.stats()["missed"] > 50
+    assert got[0] == 0 and all(a == 0 for a, b in zip(got, got[1:], strict=False) if b == 1)
+    assert all(got[k] == 0 for k in range(0, 400, 2))  # every press is one step late
+
+
 def test_driver_config_refuses_nan_and_an_urgent_gap_beyond_the_normal_one():
     from sumo_scenarios.teacher import HumanDriverConfig
 

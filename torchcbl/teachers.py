@@ -10,7 +10,8 @@ and makes it answer like a person at a keyboard (paper Section 5: the teachers w
   for THEN is pressed: another non-default action if it changed its mind, and nothing (the
   default action) if it no longer asks for one (the person saw the gap close and held back).
 - **missed key press**: with probability ``miss_prob`` a due non-default press is lost (the
-  default action is answered; the person presses again at the next step if still needed);
+  default action is answered); if the wrapped teacher still asks for it at the next step, the
+  person reacts again: a new press, with its own delay drawn from ``delay_probs``;
 - **doubled key press**: with probability ``double_prob`` a non-default press repeats at the
   next step, whatever the wrapped teacher asks then.
 
