@@ -25,9 +25,12 @@ How it decides, per step (all draws from one seeded generator):
 - **value** of a lane: its room minus ``lane_cost_s`` per lane away from the home lane, minus
   ``right_cost_s`` for the right lane and right shoulder, minus ``shoulder_cost_s`` for a
   shoulder that is not home.
-- **home lane that drifts**: the preferred lane is redrawn on average every ``home_every_s``
-  seconds from ``home_weights`` (middle, left, left shoulder): a restless preference, the
-  paper's "inconsistent about when to change lane".
+- **home lane that drifts**: at each answer the preferred lane is redrawn from ``home_weights``
+  (middle, left, left shoulder) with probability step / ``home_every_s``, so on average every
+  ``home_every_s`` seconds while the driver answers every step (the calibration); steps it is
+  not asked about do not count (after a stretch the learner drove alone, the home lane has had
+  one chance to change, not one per step): a restless preference, the paper's "inconsistent
+  about when to change lane".
 - **per-event reaction threshold**: a car closing in ahead makes the driver leave its lane once
   the lane's room falls below a threshold drawn per event from ``leave_room_s`` (not a fixed
   gap); otherwise it moves when a neighbour's value beats its own lane's by more than a margin
@@ -111,7 +114,9 @@ class HumanDriverConfig:
     Attributes:
         home_weights: probabilities of the home lane being the middle (2), left (3) and left
             shoulder (4) lane when it is redrawn.
-        home_every_s: mean time between redraws of the home lane (exponential), seconds.
+        home_every_s: mean time between redraws of the home lane while the driver answers
+            every step, seconds: each answer redraws it with probability step /
+            ``home_every_s`` (every answer when that is 1 or more); unasked steps do not count.
         room_cap_s: "room" of a lane = seconds until its car ahead would touch the ego, capped
             here (a shoulder and a lane with nothing close ahead have this much).
         lane_cost_s: what each lane away from home costs, in seconds of room.
