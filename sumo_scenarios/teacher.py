@@ -18,7 +18,8 @@ How it decides, per step (all draws from one seeded generator):
   nearest car of a lane beside the ego is behind, a car ahead may be hidden; it is then at least
   as far ahead as that one is behind (it would be the nearest otherwise), and the driver assumes
   it there, closing at ``assumed_closing_ms``. In its own lane the driver goes by the car it sees
-  ahead (a car it has just passed hides nothing it can act on: it would see one ahead appear). A
+  ahead (a car it has just passed hides nothing it can act on: it would see one ahead appear;
+  with ``return_behind_m=None`` it assumes a hidden car there too, see that field). A
   memory of earlier observations adds almost nothing to the bound (every car is slower than the
   ego, so a car ahead only comes closer and one behind only falls back: a car shown ahead stays
   shown until it has passed), so the driver has none.
@@ -143,8 +144,10 @@ class HumanDriverConfig:
         return_behind_m: overtake and return: out of its home lane, the driver moves back toward
             home once that lane's nearest car is behind by more than a distance drawn per event
             uniformly from this range (metres, front to front); None: no such rule (the driver
-            then moves only by value). The lane must also be safe to enter, a car that may be
-            hidden ahead included.
+            then moves only by value, and in its own lane it then judges a car it has passed
+            as it does one beside it, assuming a hidden car ahead at that distance: the
+            driver before the rule and the own-lane room came in). The lane must also be
+            safe to enter, a car that may be hidden ahead included.
         return_room_s: ... or when that lane's nearest car is ahead with at least this much
             room (seconds).
         cross_steps: when urgent, a normal lane beside a shoulder counts as a way out if its car
