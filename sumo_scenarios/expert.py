@@ -86,6 +86,11 @@ class ScriptedExpert:
     """
 
     def __init__(self, config: ExpertConfig | None = None, *, seed: int = 0) -> None:
+        if config is not None and not isinstance(config, ExpertConfig):
+            raise TypeError(
+                f"config must be an ExpertConfig, got {type(config).__name__}; e.g. "
+                "ScriptedExpert(ExpertConfig(min_gap_m=12.0))"
+            )
         self.config = config or ExpertConfig()
         self._rng = np.random.default_rng(seed)
         self._u = float(self._rng.random())

@@ -18,16 +18,20 @@ How it decides, per step (all draws from one seeded generator):
   nearest car of a lane beside the ego is behind, a car ahead may be hidden; it is then at least
   as far ahead as that one is behind (it would be the nearest otherwise), and the driver assumes
   it there, closing at ``assumed_closing_ms``. In its own lane the driver goes by the car it sees
-  ahead (a car it has just passed hides nothing it can act on: it would see one ahead appear). A
+  ahead (a car it has just passed hides nothing it can act on: it would see one ahead appear;
+  with ``return_behind_m=None`` it assumes a hidden car there too, see that field). A
   memory of earlier observations adds almost nothing to the bound (every car is slower than the
   ego, so a car ahead only comes closer and one behind only falls back: a car shown ahead stays
   shown until it has passed), so the driver has none.
 - **value** of a lane: its room minus ``lane_cost_s`` per lane away from the home lane, minus
   ``right_cost_s`` for the right lane and right shoulder, minus ``shoulder_cost_s`` for a
   shoulder that is not home.
-- **home lane that drifts**: the preferred lane is redrawn on average every ``home_every_s``
-  seconds from ``home_weights`` (middle, left, left shoulder): a restless preference, the
-  paper's "inconsistent about when to change lane".
+- **home lane that drifts**: at each answer the preferred lane is redrawn from ``home_weights``
+  (middle, left, left shoulder) with probability step / ``home_every_s``, so on average every
+  ``home_every_s`` seconds while the driver answers every step (the calibration); steps it is
+  not asked about do not count (after a stretch the learner drove alone, the home lane has had
+  one chance to change, not one per step): a restless preference, the paper's "inconsistent
+  about when to change lane".
 - **per-event reaction threshold**: a car closing in ahead makes the driver leave its lane once
   the lane's room falls below a threshold drawn per event from ``leave_room_s`` (not a fixed
   gap); otherwise it moves when a neighbour's value beats its own lane's by more than a margin
@@ -111,7 +115,9 @@ class HumanDriverConfig:
     Attributes:
         home_weights: probabilities of the home lane being the middle (2), left (3) and left
             shoulder (4) lane when it is redrawn.
-        home_every_s: mean time between redraws of the home lane (exponential), seconds.
+        home_every_s: mean time between redraws of the home lane while the driver answers
+            every step, seconds: each answer redraws it with probability step /
+            ``home_every_s`` (every answer when that is 1 or more); unasked steps do not count.
         room_cap_s: "room" of a lane = seconds until its car ahead would touch the ego, capped
             here (a shoulder and a lane with nothing close ahead have this much).
         lane_cost_s: what each lane away from home costs, in seconds of room.
@@ -138,8 +144,10 @@ class HumanDriverConfig:
         return_behind_m: overtake and return: out of its home lane, the driver moves back toward
             home once that lane's nearest car is behind by more than a distance drawn per event
             uniformly from this range (metres, front to front); None: no such rule (the driver
-            then moves only by value). The lane must also be safe to enter, a car that may be
-            hidden ahead included.
+            then moves only by value, and in its own lane it then judges a car it has passed
+            as it does one beside it, assuming a hidden car ahead at that distance: the
+            driver before the rule and the own-lane room came in). The lane must also be
+            safe to enter, a car that may be hidden ahead included.
         return_room_s: ... or when that lane's nearest car is ahead with at least this much
             room (seconds).
         cross_steps: when urgent, a normal lane beside a shoulder counts as a way out if its car
@@ -223,6 +231,12 @@ class HumanDriverConfig:
             raise ValueError(f"cross_steps must be an int >= 0, got {self.cross_steps!r}")
         if self.behind_m < _CAR_M:
             raise ValueError(f"behind_m must be >= 5 m (a car length), got {self.behind_m}")
+        # tuples, whatever sequence was given (a list, an array): the config stays hashable and
+        # comparable, as a frozen one is, and a list the caller changes later changes no driver
+        for name in ("home_weights", "margin_s", "leave_room_s", "return_behind_m"):
+            v = getattr(self, name)
+            if v is not None:
+                object.__setattr__(self, name, tuple(float(x) for x in v))
 
 
 class HumanDriver:
@@ -243,8 +257,17 @@ class HumanDriver:
     """
 
     def __init__(self, config: HumanDriverConfig | None = None, *, seed: int = 0) -> None:
+        if config is not None and not isinstance(config, HumanDriverConfig):
+            raise TypeError(
+                f"config must be a HumanDriverConfig, got {type(config).__name__}; e.g. "
+                "HumanDriver(HumanDriverConfig(home_every_s=1.0))"
+            )
         self.config = config or HumanDriverConfig()
         self._rng = np.random.default_rng(seed)
+        w = np.asarray(self.config.home_weights, dtype=np.float64)
+        # the config accepts a sum within np.isclose of 1, numpy's choice only within ~1e-8:
+        # normalised (a sum of exactly 1, as the defaults', is unchanged)
+        self._home_p = w / w.sum()
         self.home = self._draw_home()
         self._margin = self._draw_margin()
         self._leave = self._draw_leave()
@@ -253,7 +276,7 @@ class HumanDriver:
         self.last_move = "stay"
 
     def _draw_home(self) -> int:
-        return int(self._rng.choice((2, 3, 4), p=self.config.home_weights))
+        return int(self._rng.choice((2, 3, 4), p=self._home_p))
 
     def _draw_leave(self) -> float:
         lo, hi = self.config.leave_room_s

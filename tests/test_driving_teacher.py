@@ -97,8 +97,83 @@ def test_human_timing_misses_and_doubles_presses_at_the_given_rates():
     for bad in (-1, 1.0, True, "0"):  # found only when a press was pending, before
         with pytest.raises(ValueError, match="default_action must be an action index"):
             HumanTimingConfig(default_action=bad)
-    with pytest.raises(ValueError, match="miss_prob must lie in"):
+    with pytest.raises(ValueError, match="miss_prob must be a probability in"):
         HumanTimingConfig(miss_prob=float("nan"))
+
+
+def test_probabilities_the_configs_accept_are_usable_by_the_teachers():
+    """A config accepts probabilities whose sum is within np.isclose of 1; the teacher used to
+    pass them to numpy's choice as they were, which wants 1 to about 1e-8, so the first delayed
+    press of a session (or building the driver) failed with "Probabilities do not sum to 1"."""
+    from sumo_scenarios.teacher import HumanDriverConfig
+
+    thirds = (0.333333, 0.333333, 0.333333)  # sums to 0.999999: accepted
+    h = HumanTiming(lambda o, i: 1, HumanTimingConfig(delay_probs=thirds, miss_prob=0.0), seed=0)
+    got = [h(np.zeros(2), {"t": t}) for t in range(300)]
+    assert 0 < got.count(1) < 300 and h.stats()["delayed"] > 0
+    driver = HumanDriver(HumanDriverConfig(home_weights=thirds), seed=0)
+    homes = set()
+    for t in range(200):
+        _call(driver, (25.0, 25.0, 25.0), 4, t)
+        homes.add(driver.home)
+    assert homes == {2, 3, 4}
+
+
+def test_driver_config_holds_its_own_tuples_whatever_sequences_it_was_given():
+    """A list or an array given to a HumanDriverConfig used to be kept as it was: the frozen
+    config was then unhashable (a list), its == raised (an array), and a list changed after
+    the check changed every driver built from it, unchecked."""
+    from sumo_scenarios.teacher import HumanDriverConfig
+
+    margin = [0.0, 0.2]
+    a = HumanDriverConfig(margin_s=margin, home_weights=np.array([0.5, 0.25, 0.25]))
+    b = HumanDriverConfig(margin_s=(0.0, 0.2), home_weights=(0.5, 0.25, 0.25))
+    assert a == b and hash(a) == hash(b)
+    margin[0] = 5.0  # low > high: would fail the check
+    assert a.margin_s == (0.0, 0.2)
+    c = HumanDriverConfig(leave_room_s=[1.0, 2.0], return_behind_m=[6.0, 8.0])
+    assert (c.leave_room_s, c.return_behind_m) == ((1.0, 2.0), (6.0, 8.0))
+    assert HumanDriverConfig() == HumanDriverConfig(
+        **{k: list(v) if isinstance(v, tuple) else v for k, v in vars(HumanDriverConfig()).items()}
+    )
+
+
+def test_a_driving_teacher_given_a_dict_for_its_config_says_so_at_once():
+    """HumanTiming refused a dict config with a TypeError; HumanDriver (and make_teacher's
+    driver=) failed with "'dict' object has no attribute 'home_weights'", and ScriptedExpert
+    only at its first answer, mid-session, with "... no attribute 'min_gap_m'"."""
+    with pytest.raises(TypeError, match="config must be a HumanDriverConfig, got dict"):
+        HumanDriver({"home_every_s": 1.0})
+    with pytest.raises(TypeError, match="config must be a HumanDriverConfig, got dict"):
+        make_teacher(driver={"home_every_s": 1.0})
+    with pytest.raises(TypeError, match="config must be an ExpertConfig, got dict"):
+        ScriptedExpert({"min_gap_m": 12.0})
+
+
+def test_timing_config_takes_numpy_probabilities():
+    """miss_prob / double_prob given as a numpy float32 or int (e.g. read from an array) were
+    refused with "must lie in [0, 1), got 0.03", a value that does lie there."""
+    cfg = HumanTimingConfig(miss_prob=np.float32(0.25), double_prob=np.int64(0))
+    assert (cfg.miss_prob, cfg.double_prob) == (float(np.float32(0.25)), 0.0)
+    h = HumanTiming(
+        lambda o, i: 0, HumanTimingConfig(delay_probs=(1.0,), miss_prob=np.float32(0.25))
+    )
+    got = _replies(h, [1, 0] * 1000)
+    assert abs(got[::2].count(0) / 1000 - 0.25) < 0.05
+    for bad in (np.float32(1.0), np.bool_(False), "0.1", float("nan")):
+        with pytest.raises(ValueError, match="miss_prob must be a probability in"):
+            HumanTimingConfig(miss_prob=bad)
+
+
+def test_a_missed_press_is_pressed_again_after_a_new_reaction_delay():
+    """After a miss the person reacts again, with a delay of its own (as the calibration ran);
+    the docstring said "presses again at the next step"."""
+    cfg = HumanTimingConfig(delay_probs=(0.0, 1.0), miss_prob=0.5, double_prob=0.0)
+    h = HumanTiming(lambda o, i: 0, cfg, seed=0)
+    got = _replies(h, [1] * 400)
+    assert h.stats()["missed"] > 50
+    assert got[0] == 0 and all(a == 0 for a, b in zip(got, got[1:], strict=False) if b == 1)
+    assert all(got[k] == 0 for k in range(0, 400, 2))  # every press is one step late
 
 
 def test_driver_config_refuses_nan_and_an_urgent_gap_beyond_the_normal_one():

@@ -156,6 +156,36 @@ def test_quit_key_raises_teaching_interrupted_and_restores_terminal(terminal, ke
 
 
 @pytest.mark.timeout(60)
+def test_a_quit_key_in_the_other_case_quits_on_a_terminal_as_over_a_pipe(terminal):
+    """With caps lock on, "A" chose "left" on a terminal but "Q" was "not a key here", while a
+    line "Q" from a pipe quit; and with "Q" mapped to an action, the pipe quit on "Q" where the
+    terminal chose the action. Both now read a key alike."""
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    person = Person(master, slave, [b"Qw"])  # the old code went on to read "w" as "stay"
+    teacher = _teacher(slave)
+    person.start()
+    with pytest.raises(TeachingInterrupted):
+        teacher(OBS, {})
+    person.finish()
+    assert termios.tcgetattr(slave) == before
+    with pytest.raises(TeachingInterrupted):
+        TerminalTeacher({"w": 0}, ("go",), input=io.StringIO("Q\n"), output=io.StringIO())(OBS)
+    keys = {"w": 0, "Q": 1}  # "Q" an action key, "q" the quit key
+    piped = TerminalTeacher(keys, ("go", "back"), input=io.StringIO("Q\n"), output=io.StringIO())
+    assert piped(OBS) == 1
+    master2, slave2 = pty.openpty()
+    try:
+        person = Person(master2, slave2, [b"Q"])
+        person.start()
+        assert _teacher(slave2, keys=keys, action_names=("go", "back"))(OBS, {}) == 1
+        person.finish()
+    finally:
+        os.close(master2)
+        os.close(slave2)
+
+
+@pytest.mark.timeout(60)
 def test_keyboard_interrupt_while_waiting_restores_terminal(terminal):
     master, slave = terminal
     before = termios.tcgetattr(slave)

@@ -104,7 +104,8 @@ class TerminalTeacher:
             Defaults to ``sys.stdin``. A terminal is read one key at a time; anything else one
             line at a time.
         output: a text stream the view is written to. Defaults to ``sys.stdout``.
-        quit_keys: keys that raise :class:`TeachingInterrupted`; Ctrl-C always does.
+        quit_keys: keys that raise :class:`TeachingInterrupted`; Ctrl-C always does. A letter
+            also quits in the other case when that case is not an action key.
         status: initial status line (see :meth:`set_status`).
         title: an optional heading shown above the view.
         clear_screen: redraw on a cleared screen each decision; ``None`` (default) clears only
@@ -321,6 +322,8 @@ class TerminalTeacher:
             return self._keys[key]
         if len(key) == 1 and key.swapcase() in self._keys:
             return self._keys[key.swapcase()]
+        if len(key) == 1 and key.swapcase() in self._quit:  # "Q" with caps lock on, as "W" acts
+            raise TeachingInterrupted(f"teaching stopped by the person ({_label(key)})")
         return None
 
     def _read_line(self) -> str:
@@ -355,7 +358,10 @@ class TerminalTeacher:
 
     def _resolve_token(self, token: str) -> int | None:
         lowered = token.lower()
-        if lowered == "quit" or any(token == k or lowered == _label(k) for k in self._quit):
+        # a single character is read as a key is on a terminal (its other case quits only when
+        # not an action key); a longer token may name a quit key ("space")
+        named = len(token) > 1 and any(lowered == _label(k) for k in self._quit)
+        if lowered == "quit" or token in self._quit or named:
             raise TeachingInterrupted("teaching stopped by the person (quit)")
         if not token:
             return None

@@ -10,7 +10,8 @@ and makes it answer like a person at a keyboard (paper Section 5: the teachers w
   for THEN is pressed: another non-default action if it changed its mind, and nothing (the
   default action) if it no longer asks for one (the person saw the gap close and held back).
 - **missed key press**: with probability ``miss_prob`` a due non-default press is lost (the
-  default action is answered; the person presses again at the next step if still needed);
+  default action is answered); if the wrapped teacher still asks for it at the next step, the
+  person reacts again: a new press, with its own delay drawn from ``delay_probs``;
 - **doubled key press**: with probability ``double_prob`` a non-default press repeats at the
   next step, whatever the wrapped teacher asks then.
 
@@ -24,6 +25,7 @@ nothing of what the actions mean.
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -63,8 +65,11 @@ class HumanTimingConfig:
             )
         for name in ("miss_prob", "double_prob"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < 1.0:
-                raise ValueError(f"{name} must lie in [0, 1), got {v}")
+            # any real number (a numpy float or int too), not a bool
+            real = isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+            if not real or not 0.0 <= v < 1.0:
+                raise ValueError(f"{name} must be a probability in [0, 1), got {v!r}")
+            object.__setattr__(self, name, float(v))
         # a tuple, whatever sequence was given: the config stays hashable, as a frozen one is
         object.__setattr__(self, "delay_probs", tuple(float(x) for x in p))
 
@@ -101,7 +106,10 @@ class HumanTiming:
         self.config = config or HumanTimingConfig()
         self._rng = np.random.default_rng(seed)
         self._delays = np.arange(len(self.config.delay_probs))
-        self._probs = np.asarray(self.config.delay_probs, dtype=np.float64)
+        p = np.asarray(self.config.delay_probs, dtype=np.float64)
+        # the config accepts a sum within np.isclose of 1, numpy's choice only within ~1e-8:
+        # normalised, as the config promises probabilities (a sum of exactly 1 is unchanged)
+        self._probs = p / p.sum()
         self._pending: tuple[int, int] | None = None  # (action, steps left)
         self._double: int | None = None
         self._last_t: Any = None
