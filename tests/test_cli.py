@@ -605,6 +605,51 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(corridor
     assert noisy["world"]["forward_noise"] > 0
 
 
+def test_teach_corridor_on_a_map_of_ones_own_and_evaluate_drives_it(tmp_path, monkeypatch, capsys):
+    import corridor
+    import corridor.human
+    from corridor.experiment import evaluate_saved_policy
+    from corridor.maps import load_map
+    from torchcbl import cli
+
+    class Scripted:  # the terminal's person, answering "forward" to every request
+        def __call__(self, observation, info):
+            return 0
+
+        def set_status(self, text):
+            pass
+
+    monkeypatch.setattr(corridor.human, "make_teacher", lambda **kw: Scripted())
+    package, env_id, human, settings, model = cli._TEACH["corridor"]
+    budget = {**settings, "max_demonstrations": 5, "autonomous_episodes_to_stop": None}
+    monkeypatch.setitem(cli._TEACH, "corridor", (package, env_id, human, budget, model))
+    mine = json.loads(Path(corridor.__file__).with_name("maps").joinpath("lshape.json").read_text())
+    mine["name"] = "my_lab"
+    path = tmp_path / "maps" / "my_lab.json"
+    path.parent.mkdir()
+    path.write_text(json.dumps(mine))
+    run = tmp_path / "session"
+    monkeypatch.chdir(tmp_path)  # a relative path is kept as the full one
+    argv = ["teach", "corridor", "--run-dir", str(run), "--steps", "10"]
+    assert main([*argv, "--map", "maps/my_lab.json"]) == 0
+    stored = json.loads((run / "config.json").read_text())["env"]["kwargs"]
+    assert stored["corridor_map"] == str(path.resolve())
+    assert load_map(stored["corridor_map"]).name == "my_lab"
+    assert evaluate_saved_policy(run, n_steps=5)["map"] == str(path.resolve())
+    capsys.readouterr()
+    for extra, says in (
+        (["--map", "nowhere.json"], "--map: map file 'nowhere.json' not found"),
+        (["--map", "atlantis"], "--map: unknown map 'atlantis'"),
+        (["--map", "lshape", "--resume"], "a resumed session keeps the map"),
+    ):
+        assert main([*argv[:3], str(tmp_path / "other"), *argv[4:], *extra]) == 2, extra
+        err = capsys.readouterr().err
+        assert says in err and err.count("\n") == 1, err
+        assert not (tmp_path / "other").exists()  # nothing written
+    assert main(["teach", "driving", "--map", "lshape", "--run-dir", str(tmp_path / "d")]) == 2
+    assert "--map applies only to teach corridor" in capsys.readouterr().err
+
+
 def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
     tmp_path, monkeypatch, capsys
 ):

@@ -477,6 +477,22 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if run_dir.exists() and not run_dir.is_dir():
         raise _UsageError(f"--run-dir {run_dir} is a file; expected a session directory")
+    if args.map is not None and args.domain != "corridor":
+        raise _UsageError("--map applies only to teach corridor (the driving road is SUMO's)")
+    if args.map is not None and args.resume:
+        raise _UsageError(
+            "--map: a resumed session keeps the map it was taught on; leave --map out with --resume"
+        )
+    map_kwarg = None
+    if args.map is not None:  # a map of one's own, kept with the session by name or full path
+        from corridor.maps import available_maps, load_map
+
+        try:
+            load_map(args.map)
+        except ValueError as exc:
+            raise _UsageError(f"--map: {exc}") from None
+        shipped = args.map in available_maps()
+        map_kwarg = args.map if shipped else str(Path(args.map).resolve())
     if args.resume and args.skip_noninteractive:
         raise _UsageError(
             "--skip-noninteractive starts a new session without its non-interactive phase; a "
@@ -501,6 +517,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     importlib.import_module(package)  # registers the env id
     human = importlib.import_module(human_module)
     env_kwargs, rule, make_model = _import(setup_factory)()
+    if map_kwarg is not None:
+        env_kwargs = {**env_kwargs, "corridor_map": map_kwarg}
     if args.resume:  # the env the session was taught in, whatever teach gives a new one today
         env_kwargs = _resume_env_kwargs(run_dir)
     teacher = human.make_teacher(title=f"torchcbl teach {args.domain}")
@@ -909,6 +927,13 @@ def _parser() -> argparse.ArgumentParser:
         "--skip-noninteractive",
         action="store_true",
         help="start directly in confident execution (no teleoperation phase)",
+    )
+    p.add_argument(
+        "--map",
+        default=None,
+        metavar="NAME|PATH",
+        help="corridor: a shipped map's name or a map JSON of your own (default: the "
+        "reproduction's figure2); the session keeps it, so evaluate drives the same map",
     )
     p.set_defaults(func=_cmd_teach)
 
