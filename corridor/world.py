@@ -169,6 +169,13 @@ class CorridorWorld:
     def __init__(self, corridor_map: CorridorMap, config: WorldConfig | None = None) -> None:
         self.map = corridor_map
         self.config = config or WorldConfig()
+        if corridor_map.corridor_width <= 2 * self.config.robot_radius:
+            raise ValueError(
+                f"map {corridor_map.name!r}: its corridors ({corridor_map.corridor_width:g} m "
+                f"wide) are no wider than the robot ({2 * self.config.robot_radius:g} m across, "
+                "WorldConfig.robot_radius): it cannot drive them; widen the corridors or make "
+                "the robot smaller"
+            )
         self.route = corridor_map.route_polyline()
         self._space = pymunk.Space()
         wall_filter = pymunk.ShapeFilter(categories=_WALL_CATEGORY)

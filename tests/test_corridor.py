@@ -311,6 +311,15 @@ def test_expert_settings_are_checked(args, kwargs, error, message):
     CorridorExpert(figure2, {"forward_noise": 0.1}, on_route_tolerance=0.25, open_range=1.0)
 
 
+def test_a_map_narrower_than_the_robot_is_named_at_once():
+    small = dict(SMALL, corridor_width=0.2)
+    # "pose (0.200, 0.000) overlaps a wall" at reset before, or a start_perturbation range
+    # of "[0, -0.02)"
+    with pytest.raises(ValueError, match=r"0.2 m wide\) are no wider than the robot \(0.24 m"):
+        CorridorEnv(map_from_dict(small))
+    CorridorEnv(map_from_dict(small), {"robot_radius": 0.09}).reset(seed=0)
+
+
 def test_default_map_has_the_papers_properties():
     env = CorridorEnv()
     actions, obs, _, _ = drive(env, CorridorExpert(env.corridor_map), seed=0, episodes=1)[0]
