@@ -605,14 +605,13 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(corridor
     assert noisy["world"]["forward_noise"] > 0
 
 
-def test_teach_corridor_on_a_map_of_ones_own_and_evaluate_drives_it(tmp_path, monkeypatch, capsys):
-    import corridor
+def _scripted_corridor_person(monkeypatch) -> None:
+    """`torchcbl teach corridor` with a scripted person at the terminal (answering "forward"
+    to every request) and a budget of 5 demonstrations."""
     import corridor.human
-    from corridor.experiment import evaluate_saved_policy
-    from corridor.maps import load_map
     from torchcbl import cli
 
-    class Scripted:  # the terminal's person, answering "forward" to every request
+    class Scripted:
         def __call__(self, observation, info):
             return 0
 
@@ -623,6 +622,14 @@ def test_teach_corridor_on_a_map_of_ones_own_and_evaluate_drives_it(tmp_path, mo
     package, env_id, human, settings, model = cli._TEACH["corridor"]
     budget = {**settings, "max_demonstrations": 5, "autonomous_episodes_to_stop": None}
     monkeypatch.setitem(cli._TEACH, "corridor", (package, env_id, human, budget, model))
+
+
+def test_teach_corridor_on_a_map_of_ones_own_and_evaluate_drives_it(tmp_path, monkeypatch, capsys):
+    import corridor
+    from corridor.experiment import evaluate_saved_policy
+    from corridor.maps import load_map
+
+    _scripted_corridor_person(monkeypatch)
     mine = json.loads(Path(corridor.__file__).with_name("maps").joinpath("lshape.json").read_text())
     mine["name"] = "my_lab"
     path = tmp_path / "maps" / "my_lab.json"
@@ -655,20 +662,8 @@ def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
 ):
     """A session whose demonstration budget is spent (the driving protocol's 650) says so, and
     --resume teaches on past it instead of returning at once forever."""
-    import corridor.human
-    from torchcbl import cli
 
-    class Scripted:  # the terminal's person, answering "forward" to every request
-        def __call__(self, observation, info):
-            return 0
-
-        def set_status(self, text):
-            pass
-
-    monkeypatch.setattr(corridor.human, "make_teacher", lambda **kw: Scripted())
-    package, env_id, human, settings, model = cli._TEACH["corridor"]
-    budget = {**settings, "max_demonstrations": 5, "autonomous_episodes_to_stop": None}
-    monkeypatch.setitem(cli._TEACH, "corridor", (package, env_id, human, budget, model))
+    _scripted_corridor_person(monkeypatch)
     run = tmp_path / "session"
     assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "30"]) == 0
     out = capsys.readouterr().out
