@@ -9,10 +9,11 @@ Episode = one circuit. ``reset`` puts the robot at the map's start pose. The epi
 the route), with ``info["is_success"] = True`` iff no wall was touched during it; it is
 ``truncated`` after ``max_episode_steps`` actions (default 81: 3 x 27, the actions of a perfect
 circuit on the default map as first drawn; 29 since its spur was lengthened, so 2.8 circuits; a
-map of its own may need more), with ``info["is_success"] = False``; a longer episode needs
-``CorridorEnv(max_episode_steps=n)`` (``gymnasium.make(ENV_ID, max_episode_steps=n)`` only wraps
-the env in a TimeLimit of n, which cannot lengthen its own 81). The reward is 1 for completing
-the circuit, -1 for each wall contact, 0 otherwise (the teaching loop does not use it).
+map of its own may need more, and the env warns when its circuit does not fit), with
+``info["is_success"] = False``; a longer episode needs ``CorridorEnv(max_episode_steps=n)``
+(``gymnasium.make(ENV_ID, max_episode_steps=n)`` only wraps the env in a TimeLimit of n, which
+cannot lengthen its own 81). The reward is 1 for completing the circuit, -1 for each wall
+contact, 0 otherwise (the teaching loop does not use it).
 
 ``info`` after ``reset`` and every ``step``:
   ``pose`` ndarray [3] (x m, y m, heading rad); ``true_ranges`` ndarray [3] noise-free metres;
@@ -41,6 +42,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Mapping
 from typing import Any, Literal
 
@@ -104,6 +106,20 @@ class CorridorEnv(gym.Env):
         ):
             raise ValueError(f"max_episode_steps must be an int >= 1, got {steps!r}")
         self.max_episode_steps = int(steps)
+        # a circuit's actions with exact motion, about: a forward step per forward_distance of
+        # route, less one for each turn or u-turn (a turn from the decision point covers the
+        # corner): exactly the 29 of figure2 and the 34 of lshape
+        route = self.world.route
+        turns = sum(kind != "straight" for kind in route.kinds)
+        circuit = round(route.length / self.world.config.forward_distance) - turns
+        if circuit > self.max_episode_steps:
+            warnings.warn(
+                f"map {corridor_map.name!r}: a circuit of its route takes about {circuit} "
+                f"actions, more than max_episode_steps={self.max_episode_steps}, so every "
+                "episode is cut before a circuit ends; pass a larger max_episode_steps (the "
+                "default 81 is 2.8 circuits of figure2)",
+                stacklevel=2,
+            )
         self.render_mode = render_mode
         if start_perturbation is not None:
             d, a = (float(v) for v in start_perturbation)

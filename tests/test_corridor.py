@@ -320,6 +320,25 @@ def test_a_map_narrower_than_the_robot_is_named_at_once():
     CorridorEnv(map_from_dict(small), {"robot_radius": 0.09}).reset(seed=0)
 
 
+def test_a_map_whose_circuit_the_step_cap_cuts_says_so(recwarn):
+    big = {  # a 6 m x 4 m loop: 20 m of route, 100 forward steps less 4 turns
+        **SMALL,
+        "nodes": {"A": [0, 0], "B": [6.0, 0], "C": [6.0, 4.0], "D": [0, 4.0]},
+    }
+    with pytest.warns(UserWarning, match=r"takes about 96 actions, more than max_episode_steps=81"):
+        CorridorEnv(map_from_dict(big))
+    env = CorridorEnv(map_from_dict(big), max_episode_steps=300)
+    actions, _, terminated, info = drive(env, CorridorExpert(env.corridor_map), seed=0, episodes=1)[
+        0
+    ]
+    assert terminated and info["is_success"] and len(actions) == 96  # the estimate is exact
+    CorridorEnv("figure2", max_episode_steps=29)  # a circuit: 29 actions
+    CorridorEnv("lshape", max_episode_steps=34)
+    assert not [w for w in recwarn if "circuit of its route" in str(w.message)]
+    with pytest.warns(UserWarning, match="about 29 actions"):
+        CorridorEnv("figure2", max_episode_steps=28)
+
+
 def test_default_map_has_the_papers_properties():
     env = CorridorEnv()
     actions, obs, _, _ = drive(env, CorridorExpert(env.corridor_map), seed=0, episodes=1)[0]
