@@ -40,6 +40,7 @@ from sumo_scenarios.scenarios import (
     N_LANES,
     TRAFFIC_LANES,
     TrafficScenario,
+    _as_int,
     get_scenario,
 )
 from sumo_scenarios.sim import HighwaySim, SimConfig
@@ -313,15 +314,3 @@ class DrivingEnv(gym.Env):
             "closing_speed_ms": closing,
             "step_length_s": self.config.sim.step_length_s,
         }
-
-
-def _as_int(value: Any) -> int | None:
-    """``value`` as an int when it is an integer (a Python or numpy int, a 0-d integer array),
-    else None; a bool, a float or a string is not."""
-    if isinstance(value, bool | np.bool_):
-        return None
-    if isinstance(value, int | np.integer):
-        return int(value)
-    if isinstance(value, np.ndarray) and value.shape == () and value.dtype.kind in "iu":
-        return int(value)
-    return None

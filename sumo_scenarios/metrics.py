@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from sumo_scenarios.scenarios import LANE_NAMES, N_LANES
+from sumo_scenarios.scenarios import LANE_NAMES, N_LANES, _as_int
 
 __all__ = [
     "collision_rate",
@@ -73,11 +73,7 @@ def total_variation(p: Sequence[float] | np.ndarray, q: Sequence[float] | np.nda
 
 def windowed_accuracy(correct: Sequence[bool] | np.ndarray, window: int = 150) -> np.ndarray:
     """Prediction accuracy over the last ``window`` steps (fewer at the start): float64 [T]."""
-    if (
-        isinstance(window, (bool, np.bool_))
-        or not isinstance(window, (int, np.integer))
-        or window < 1
-    ):
+    if _as_int(window) is None or window < 1:
         raise ValueError(f"window must be an int >= 1, got {window!r}")
     c = _flags("correct", correct)
     cs = np.concatenate([[0.0], np.cumsum(c)])

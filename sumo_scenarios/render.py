@@ -13,7 +13,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from sumo_scenarios.scenarios import CAR_LENGTH_M, N_LANES
+from sumo_scenarios.scenarios import CAR_LENGTH_M, N_LANES, _is_real
 
 LANE_WIDTH_M = 3.2
 _CAR_WIDTH_M = 1.8
@@ -27,10 +27,7 @@ def render_frame(
     ``behind_m`` / ``ahead_m`` set the visible stretch of road around the ego (metres).
     """
     for name, value in (("behind_m", behind_m), ("ahead_m", ahead_m), ("dpi", dpi)):
-        ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
-            value, (bool, np.bool_)
-        )
-        if not ok or not 0 < value < float("inf"):
+        if not _is_real(value) or not 0 < value < float("inf"):
             raise ValueError(f"{name} must be a number > 0, got {value!r}")
     ego_pos = float(frame.ego_pos)  # type: ignore[attr-defined]
     # A bare Figure on an Agg canvas: no pyplot, so the caller's backend is left alone.

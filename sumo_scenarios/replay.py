@@ -22,7 +22,13 @@ import gymnasium as gym
 import numpy as np
 
 from sumo_scenarios.env import DrivingConfig, DrivingEnv
-from sumo_scenarios.scenarios import N_LANES, TrafficScenario
+from sumo_scenarios.scenarios import (
+    N_LANES,
+    TrafficScenario,
+    _as_int,
+    _is_real,
+    get_scenario,
+)
 from sumo_scenarios.sim import SimConfig
 
 __all__ = [
@@ -282,7 +288,6 @@ def session_episodes(
         raise ValueError(
             f"{run}: its env's settings {kwargs} are not DrivingEnv's ({exc})"
         ) from None
-    from sumo_scenarios.scenarios import get_scenario
 
     scenario = get_scenario(config.scenario)
     episodes: dict[int, list[Any]] = {}
@@ -353,7 +358,6 @@ def render_gif(
     milliseconds, as imageio's GIF writer expects."""
     import imageio.v2 as imageio
 
-    from sumo_scenarios.env import _as_int
     from sumo_scenarios.render import render_frame
 
     if fps is None:
@@ -362,10 +366,7 @@ def render_gif(
         _as_int(v) is not None and v >= 1
         for v in (every, *(() if max_frames is None else (max_frames,)))
     )
-    fps_ok = isinstance(fps, (int, float, np.integer, np.floating)) and not isinstance(
-        fps, (bool, np.bool_)
-    )
-    if not counts_ok or not fps_ok or not 0 < fps < float("inf"):
+    if not counts_ok or not _is_real(fps) or not 0 < fps < float("inf"):
         raise ValueError(
             f"every and max_frames must be ints >= 1 and fps a number > 0, got every={every!r}, "
             f"max_frames={max_frames!r}, fps={fps!r}"

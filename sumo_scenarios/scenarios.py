@@ -27,6 +27,7 @@ import numbers
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -74,6 +75,23 @@ def data_path(name: str) -> Path:
     return path
 
 
+def _as_int(value: Any) -> int | None:
+    """``value`` as an int when it is an integer (a Python or numpy int, a 0-d integer array),
+    else None; a bool, a float or a string is not. The domain's one integer check."""
+    if isinstance(value, bool | np.bool_):
+        return None
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, np.ndarray) and value.shape == () and value.dtype.kind in "iu":
+        return int(value)
+    return None
+
+
+def _is_real(value: Any) -> bool:
+    """Whether ``value`` is a real number (Python or numpy, int or float), not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
 @dataclass(frozen=True)
 class TrafficScenario:
     """Background traffic on the five-lane road.
@@ -110,20 +128,12 @@ class TrafficScenario:
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
             raise ValueError(f"name must be a str, got {self.name!r}")
-        if (
-            isinstance(self.seed, (bool, np.bool_))
-            or not isinstance(self.seed, (int, np.integer))
-            or self.seed < 0
-        ):
+        if _as_int(self.seed) is None or self.seed < 0:
             raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
         values = [self.min_spacing_m, self.ahead_m, self.behind_m, self.start_clear_m]
         values += [*self.mean_spacing_m, *(v for r in self.speed_ranges_mph for v in r)]
         for v in values:
-            if (
-                isinstance(v, (bool, np.bool_))
-                or not isinstance(v, numbers.Real)
-                or not math.isfinite(v)
-            ):
+            if not _is_real(v) or not math.isfinite(v):
                 raise ValueError(f"every distance and speed must be a finite number, got {v!r}")
         if self.start_clear_m < 0:
             raise ValueError(f"start_clear_m must be >= 0 m, got {self.start_clear_m!r}")

@@ -16,7 +16,6 @@ fresh road segment. Two simulations running at once need two processes.
 from __future__ import annotations
 
 import math
-import numbers
 import os
 import weakref
 from dataclasses import dataclass
@@ -33,6 +32,7 @@ from sumo_scenarios.scenarios import (
     N_LANES,
     TRAFFIC_LANES,
     TrafficScenario,
+    _is_real,
     data_path,
 )
 
@@ -104,7 +104,7 @@ class SimConfig:
     def __post_init__(self) -> None:
         for name in ("step_length_s", "ego_start_m", "shift_margin_m"):
             v = getattr(self, name)
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+            if not _is_real(v):
                 raise ValueError(f"{name} must be a number, got {v!r}")
             # a plain float: SUMO gets it as text (``repr`` of a numpy float is not a number)
             object.__setattr__(self, name, float(v))

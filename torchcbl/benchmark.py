@@ -56,6 +56,7 @@ import gymnasium as gym
 import numpy as np
 
 from torchcbl.evaluation import mean_sd, run_versions, worker_pool
+from torchcbl.records import _is_int
 
 __all__ = [
     "CELL_FORMAT",
@@ -244,18 +245,15 @@ class EnvSpec:
     model: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        def whole(x: Any) -> bool:  # an int, numpy's included (a sweep over np.arange)
-            return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
-
         try:
             b = [] if isinstance(self.budgets, (str, bytes)) else list(self.budgets)
         except TypeError:  # not a sequence
             b = []
-        if not b or any(not whole(x) or x < 1 for x in b) or b != sorted(set(b)):
+        if not b or any(not _is_int(x) or x < 1 for x in b) or b != sorted(set(b)):
             raise ValueError(
                 f"EnvSpec {self.name!r}: budgets must be increasing ints >= 1, got {self.budgets!r}"
             )
-        if not whole(self.max_steps) or self.max_steps < 1:
+        if not _is_int(self.max_steps) or self.max_steps < 1:
             raise ValueError(
                 f"EnvSpec {self.name!r}: max_steps must be an int >= 1, got {self.max_steps!r}"
             )
@@ -263,7 +261,7 @@ class EnvSpec:
             raise ValueError(f"EnvSpec {self.name!r}: give eval_episodes and/or eval_steps")
         for name in ("eval_episodes", "eval_steps"):
             v = getattr(self, name)
-            if v is not None and (not whole(v) or v < 1):
+            if v is not None and (not _is_int(v) or v < 1):
                 raise ValueError(
                     f"EnvSpec {self.name!r}: {name} must be None or an int >= 1, got {v!r}"
                 )
@@ -273,7 +271,7 @@ class EnvSpec:
             seeds = [] if isinstance(self.eval_seeds, (str, bytes)) else list(self.eval_seeds)
         except TypeError:  # not a sequence
             seeds = []
-        if not seeds or any(not whole(s) or s < 0 for s in seeds):
+        if not seeds or any(not _is_int(s) or s < 0 for s in seeds):
             raise ValueError(
                 f"EnvSpec {self.name!r}: eval_seeds must be a non-empty tuple of ints >= 0, "
                 f"got {self.eval_seeds!r}"
@@ -673,13 +671,7 @@ def run_benchmark(
     if isinstance(seeds, (str, bytes)) or not isinstance(seeds, Iterable):
         raise ValueError(f"run_benchmark: seeds must be a sequence of ints >= 0, got {seeds!r}")
     seeds = list(seeds)  # a numpy array too (its truth value is ambiguous)
-    bad = [
-        s
-        for s in seeds
-        if isinstance(s, (bool, np.bool_))
-        or not isinstance(s, (int, np.integer))
-        or not 0 <= s < 2**64
-    ]
+    bad = [s for s in seeds if not _is_int(s) or not 0 <= s < 2**64]
     if bad:
         raise ValueError(
             f"run_benchmark: seeds must be ints in [0, 2**64) (each seeds a cell's model, env "

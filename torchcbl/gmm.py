@@ -1175,7 +1175,7 @@ class GaussianMixtureSet(nn.Module):
             far = ~(mx[..., 0] > _FAR_SCORE)[:, has_data].all(1)
             mx = np.where(np.isfinite(mx), mx, 0.0)
             with np.errstate(divide="ignore"):
-                mix = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1)) + self._tables()["np"][3]
+                mix = mx[..., 0] + np.log(np.exp(lp - mx).sum(-1)) + tables["np"][3]
             if far.any():
                 mix[far] = self._far_scores(x[far])[0]  # type: ignore[index]
             return torch.from_numpy(mix)
@@ -1183,7 +1183,7 @@ class GaussianMixtureSet(nn.Module):
         # or use with autograd, whatever the batch size
         with self._predict_threads(x.shape[0]), torch.no_grad():
             lp, _ = self._component_scores_torch(x)  # type: ignore[arg-type]
-            out = torch.logsumexp(lp, -1) + self._tables()["log_prior"]
+            out = torch.logsumexp(lp, -1) + tables["log_prior"]
             low = ~(lp.amax(-1) > _FAR_SCORE)[:, tables["has_data"]]
             far = low.any(1)
             if bool(far.any()):

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from torchcbl.errors import EnvError
-from torchcbl.records import StepRecord, jsonable_info
+from torchcbl.records import StepRecord, _is_int, jsonable_info
 
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
@@ -97,7 +97,7 @@ def _check_policy_fits(policy: Any, n_features: int, n_actions: int) -> None:
 def as_action(value: Any, n_actions: int) -> int | None:
     if isinstance(value, (np.ndarray, torch.Tensor)) and value.ndim == 0:
         value = value.item()  # e.g. logits.argmax(); a float or bool one is refused below
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+    if not _is_int(value):
         return None
     value = int(value)
     return value if 0 <= value < n_actions else None
@@ -156,14 +156,7 @@ def evaluate_policy(
             seeds = list(seed)  # type: ignore[arg-type]
         except TypeError:
             seeds = None
-        if (
-            seeds is None
-            or not seeds
-            or not all(
-                isinstance(s, (int, np.integer)) and not isinstance(s, (bool, np.bool_))
-                for s in seeds
-            )
-        ):
+        if seeds is None or not seeds or not all(_is_int(s) for s in seeds):
             raise ValueError(
                 "evaluate_policy: seed must be None, an int, or a non-empty sequence of ints "
                 f"(one per episode), got {seed!r}"
@@ -178,9 +171,7 @@ def evaluate_policy(
     if n_steps is None and n_episodes is None:
         raise ValueError("evaluate_policy: give n_steps and/or n_episodes, or it never ends")
     for name, v in (("n_steps", n_steps), ("n_episodes", n_episodes)):
-        if v is not None and (
-            isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1
-        ):
+        if v is not None and (not _is_int(v) or v < 1):
             raise ValueError(f"evaluate_policy: {name} must be an int >= 1, got {v!r}")
     n_steps = None if n_steps is None else int(n_steps)
     n_episodes = None if n_episodes is None else int(n_episodes)

@@ -732,7 +732,7 @@ class SessionStore:
         store with every record and correction."""
         load_config(run_dir)
         _check_log_present(Path(run_dir))
-        missing = _missing_steps(_read_log(run_dir, warn=False)[0])
+        missing = _missing_steps(_step_numbers(Path(run_dir)))
         if missing:  # the loop numbers a new step len(records): it would take a logged number
             raise CorruptSessionError(
                 f"cannot resume the session in {run_dir}: {_gap_text(missing)}. Resuming "
@@ -744,8 +744,7 @@ class SessionStore:
         store = cls(Path(run_dir), commit_every=commit_every)
         try:
             store.finalize_pending()
-            records = store.records()
-            corrections = store.corrections(records)
+            records, corrections = store.records_and_corrections()
         except BaseException:
             store._release()
             raise
@@ -978,13 +977,11 @@ class SessionStore:
 
     # -- reading ----------------------------------------------------------------------------
 
-    def records(self) -> list[StepRecord]:
+    def records_and_corrections(self) -> tuple[list[StepRecord], list[CorrectionRecord]]:
         assert self._db is not None
-        return _records_of(_rows(self._db, None, self.run_dir / LOG_NAME)[0], self.run_dir)
-
-    def corrections(self, records: list[StepRecord]) -> list[CorrectionRecord]:
-        assert self._db is not None
-        return _corrections_of(records, _rows(self._db, None, self.run_dir / LOG_NAME)[1])
+        rows, corrections = _rows(self._db, None, self.run_dir / LOG_NAME)
+        records = _records_of(rows, self.run_dir)
+        return records, _corrections_of(records, corrections)
 
 
 def _db_error(exc: sqlite3.DatabaseError, path: Path, *, writing: bool = False) -> Exception:
@@ -1189,12 +1186,31 @@ def _open_readonly(run_dir: str | os.PathLike[str]) -> sqlite3.Connection:
         raise _db_error(exc, path) from exc
 
 
-def _missing_steps(records: list[StepRecord]) -> list[int]:
-    """The step numbers below the last one that the records (in step order) lack."""
-    if not records or records[-1].step + 1 == len(records):
+def _missing_steps(steps: list[int]) -> list[int]:
+    """The step numbers below the last one that ``steps`` (distinct, increasing) lack."""
+    if not steps or steps[-1] + 1 == len(steps):
         return []
-    have = {r.step for r in records}
-    return [s for s in range(records[-1].step) if s not in have]
+    have = set(steps)
+    return [s for s in range(steps[-1]) if s not in have]
+
+
+def _sqlite_steps(run: Path) -> set[int]:
+    """The step numbers in a session's SQLite log (not its journal), read-only."""
+    db = _open_readonly(run)
+    try:
+        return {row[0] for row in db.execute("SELECT step FROM steps")}
+    except sqlite3.DatabaseError as exc:
+        raise _db_error(exc, run / LOG_NAME) from exc
+    finally:
+        db.close()
+
+
+def _step_numbers(run: Path) -> list[int]:
+    """Every step number of a session, its journal's included, in order (no record is
+    parsed: the gap check of resume)."""
+    journal = _journal_entries(run / JOURNAL_NAME)  # before the SELECT, as _rows_unchecked
+    steps = _sqlite_steps(run) | {int(v[0]) for kind, v in journal if kind == "s"}
+    return sorted(steps)
 
 
 def _gap_text(missing: list[int]) -> str:
@@ -1207,11 +1223,9 @@ def _gap_text(missing: list[int]) -> str:
     )
 
 
-def _read_log(
-    run_dir: str | os.PathLike[str], *, warn: bool = True
-) -> tuple[list[StepRecord], dict[int, int]]:
+def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[int, int]]:
     """Every record and the corrections ``{step: action}`` of a run directory, read-only;
-    warns when steps are missing (``warn``)."""
+    warns when steps are missing."""
     run = Path(run_dir)
     wal = run / (LOG_NAME + "-wal")
     log = run / LOG_NAME
@@ -1233,7 +1247,7 @@ def _read_log(
         # A writer opened the session while we read without its WAL (and may have closed it
         # again, checkpointing into the log): read again.
     records = _records_of(rows, run)
-    missing = _missing_steps(records) if warn else []
+    missing = _missing_steps([r.step for r in records])
     if missing:  # never transient: the journal is read before the SELECT (_rows_unchecked)
         warnings.warn(
             f"{run}: {_gap_text(missing)}. What is read is what is left: the labels and "
@@ -1684,13 +1698,7 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
     lock = _acquire_lock(run)
     try:
         scan = _scan_journal(journal)
-        db = _open_readonly(run)
-        try:
-            known = {row[0] for row in db.execute("SELECT step FROM steps")}
-        except sqlite3.DatabaseError as exc:
-            raise _db_error(exc, run / LOG_NAME) from exc
-        finally:
-            db.close()
+        known = _sqlite_steps(run)
         next_step = max(known) + 1 if known else 0
         kept, dropped = [], []
         for number, kind, values in scan.entries:

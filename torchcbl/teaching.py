@@ -58,7 +58,7 @@ from torchcbl.errors import (
     TeachingInterrupted,
 )
 from torchcbl.policy import GreedyPolicy, as_action, check_env, evaluate_policy, obs_array
-from torchcbl.records import CorrectionRecord, StepRecord, TrainingSet, jsonable_info
+from torchcbl.records import CorrectionRecord, StepRecord, TrainingSet, _is_int, jsonable_info
 from torchcbl.session import (
     FORMAT,
     LabelDigest,
@@ -326,11 +326,7 @@ def _as_interrupted(record: StepRecord) -> StepRecord:
 
 
 def _check_commit_every(commit_every: Any) -> None:
-    if (
-        isinstance(commit_every, (bool, np.bool_))
-        or not isinstance(commit_every, (int, np.integer))
-        or commit_every < 1
-    ):
+    if not _is_int(commit_every) or commit_every < 1:
         raise ValueError(f"commit_every: expected an int >= 1, got {commit_every!r}")
 
 
