@@ -183,3 +183,40 @@ def test_strategy_parameters_that_could_never_work_are_refused():
         NoveltyGated(window=5, min_history=10)  # would ask on every step
     with pytest.raises(ValueError, match="seed must be an int >= 0"):
         DAgger(seed=-1)  # its first coin would fail after the teacher was asked
+
+
+class _NoEpisodeStart:
+    """A strategy of one's own that forgot the protocol's episode_start."""
+
+    relabel = False
+    wants_corrections = False
+
+    def bind(self, *, n_actions, n_features, config):
+        pass
+
+    def decide(self, observation, c):
+        return Decision(True, "confident")
+
+    def actor(self, decision, model_action, teacher_action):
+        return "teacher"
+
+    def observe_label(self, observation, action, *, model_action, kind):
+        pass
+
+    def observe_refit(self, model, observations, actions):
+        pass
+
+    def observe_step(self, record, decision):
+        pass
+
+
+def test_a_strategy_without_episode_start_is_refused_before_a_session_exists(tmp_path):
+    """The loop calls episode_start() after every reset; a strategy without it passed the
+    check and failed with a bare AttributeError at the first reset, a run directory already
+    written."""
+    env = rare_regions_world(episode_length=10)
+    with pytest.raises(TypeError, match=r"without episode_start\(\)"):
+        ConfidentTeacher(
+            env, oracle(env), strategy=_NoEpisodeStart(), run_dir=tmp_path / "r", progress=False
+        )
+    assert not (tmp_path / "r").exists()

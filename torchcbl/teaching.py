@@ -255,6 +255,18 @@ def _model_args(model: torch.nn.Module) -> dict[str, Any]:
     return {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
 
 
+# every method the loop calls on a strategy (torchcbl.strategies' protocol)
+_STRATEGY_METHODS = (
+    "bind",
+    "episode_start",
+    "decide",
+    "actor",
+    "observe_label",
+    "observe_refit",
+    "observe_step",
+)
+
+
 def _pick_strategy(rule: Any, strategy: Any) -> Any:
     if rule is not None and strategy is not None:
         raise ValueError(
@@ -263,12 +275,13 @@ def _pick_strategy(rule: Any, strategy: Any) -> Any:
         )
     if strategy is None:
         return ConfidentExecution(rule)
-    for name in ("decide", "actor", "observe_label", "observe_refit", "observe_step", "bind"):
+    for name in _STRATEGY_METHODS:
         if not callable(getattr(strategy, name, None)):
             raise TypeError(
-                f"strategy: expected a torchcbl.strategies.Strategy (methods bind, decide, "
-                f"actor, observe_label, observe_refit, observe_step), got {strategy!r} "
-                f"without {name}()."
+                f"strategy: expected a torchcbl.strategies.Strategy (methods "
+                f"{', '.join(_STRATEGY_METHODS)}), got {strategy!r} without {name}(); see "
+                "the protocol in torchcbl.strategies (an episode_start that does nothing is "
+                "`def episode_start(self): pass`)."
             )
     return strategy
 
