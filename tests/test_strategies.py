@@ -9,7 +9,7 @@ from _toy_envs import oracle, rare_regions_world
 from torchcbl import ConfidentTeacher, DistanceRule, PosteriorRule, TeachingConfig
 from torchcbl.errors import IncompatibleRunDirError
 from torchcbl.session import load_config, load_records
-from torchcbl.strategies import ConfidentExecution, Decision, strategy_from_config
+from torchcbl.strategies import ConfidentExecution, Decision, Strategy, strategy_from_config
 
 
 class AlwaysAskAgentActs:
@@ -220,3 +220,62 @@ def test_a_strategy_without_episode_start_is_refused_before_a_session_exists(tmp
             env, oracle(env), strategy=_NoEpisodeStart(), run_dir=tmp_path / "r", progress=False
         )
     assert not (tmp_path / "r").exists()
+
+
+class _SubclassedProtocol(Strategy):
+    """A strategy that subclasses the Strategy protocol and inherits its empty to_config()."""
+
+    relabel = False
+    wants_corrections = False
+
+    def bind(self, *, n_actions, n_features, config):
+        pass
+
+    def episode_start(self):
+        pass
+
+    def decide(self, observation, c):
+        return Decision(int(c.action[0]) < 0 or float(c.distance[0]) > 2.0, "confident")
+
+    def actor(self, decision, model_action, teacher_action):
+        return "teacher" if decision.ask else "agent"
+
+    def observe_label(self, observation, action, *, model_action, kind):
+        pass
+
+    def observe_refit(self, model, observations, actions):
+        pass
+
+    def observe_step(self, record, decision):
+        pass
+
+
+def test_a_subclass_of_the_protocol_without_to_config_is_stored_as_custom(tmp_path):
+    """Subclassing Strategy gives the protocol's to_config, which returns None: a session
+    with such a strategy failed to start (TypeError: 'NoneType' object is not iterable)."""
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env, oracle(env), strategy=_SubclassedProtocol(), run_dir=tmp_path / "r", progress=False
+    )
+    ct.run(max_steps=15)
+    ct.close()
+    assert load_config(tmp_path / "r")["strategy"]["custom"] is True
+    env2 = rare_regions_world(episode_length=10)
+    with pytest.raises(IncompatibleRunDirError, match="Pass strategy="):
+        ConfidentTeacher.resume(tmp_path / "r", env2, oracle(env2), progress=False)
+    back = ConfidentTeacher.resume(
+        tmp_path / "r", env2, oracle(env2), strategy=_SubclassedProtocol(), progress=False
+    )
+    back.run(max_steps=20)
+    back.close()
+    assert len(load_records(tmp_path / "r")) == 20
+
+
+def test_a_to_config_that_returns_no_dict_is_a_clear_error(tmp_path):
+    class Listy(_SubclassedProtocol):
+        def to_config(self):
+            return ["Listy"]
+
+    env = rare_regions_world(episode_length=10)
+    with pytest.raises(TypeError, match=r"Listy.to_config\(\) returned \['Listy'\]; expected"):
+        ConfidentTeacher(env, oracle(env), strategy=Listy(), run_dir=tmp_path / "r")

@@ -46,7 +46,8 @@ Rules a strategy must keep:
 - ``to_config()`` returns a JSON dict with ``"type"`` (the class name), every constructor
   argument and ``"relabel"``; the run directory stores it and :func:`strategy_from_config`
   rebuilds the strategy on resume (register a new class in ``STRATEGIES``). A strategy without
-  ``to_config`` is stored as custom and must be passed again to ``resume``.
+  ``to_config`` (or whose ``to_config`` returns None, as a subclass of :class:`Strategy` that
+  does not define one) is stored as custom and must be passed again to ``resume``.
 
 Two attributes complete the protocol:
 
@@ -84,7 +85,7 @@ Baselines (for :mod:`torchcbl.benchmark`), one file each: :mod:`~torchcbl.strate
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
@@ -210,10 +211,19 @@ def __getattr__(name: str) -> Any:
 
 
 def strategy_to_config(strategy: Any) -> dict[str, Any]:
-    """JSON dict describing ``strategy``; one without ``to_config`` is named only (custom)."""
+    """JSON dict describing ``strategy``; one without ``to_config``, or whose ``to_config``
+    returns None (a subclass of :class:`Strategy` inherits the protocol's empty one), is named
+    only (custom)."""
     to_config = getattr(strategy, "to_config", None)
-    if callable(to_config):
-        return dict(to_config())
+    config = to_config() if callable(to_config) else None
+    if config is not None:
+        if not isinstance(config, Mapping):
+            raise TypeError(
+                f"{type(strategy).__name__}.to_config() returned {config!r:.80}; expected a "
+                'JSON dict with "type" and the constructor arguments (see torchcbl.strategies), '
+                "or None to store the strategy as custom (then pass it again to resume())."
+            )
+        return dict(config)
     return {
         "type": f"{type(strategy).__module__}.{type(strategy).__qualname__}",
         "custom": True,
