@@ -452,3 +452,32 @@ def test_commit_every_is_checked(tmp_path):
         with pytest.raises(ValueError, match="commit_every: expected an int >= 1"):
             ConfidentTeacher(env, oracle(env), run_dir=tmp_path / "r", commit_every=bad)
         assert not (tmp_path / "r" / "config.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("answer", "says"),
+    [
+        (lambda obs, info: obs, r"returned ndarray .*gym < 0\.26 returns the observation alone"),
+        (lambda obs, info: (obs, "ready"), r"returned info 'ready'; expected a dict"),
+    ],
+    ids=["observation-alone", "info-not-a-dict"],
+)
+def test_a_reset_answer_that_is_not_the_gymnasium_pair_is_named_as_such(answer, says):
+    """An env written for gym < 0.26 returns the observation alone from reset; with a 2-D
+    observation it unpacked into two floats and the loop and evaluate_policy said "expected an
+    observation of shape (2,), got ()", and a non-dict info gave a bare ValueError from dict()."""
+    import gymnasium as gym
+
+    from torchcbl.errors import EnvError
+
+    class OldReset(gym.Wrapper):
+        def reset(self, **kw):
+            return answer(*self.env.reset(**kw))
+
+    env = OldReset(rare_regions_world())
+    ct = ConfidentTeacher(env, oracle(env.env), config=TeachingConfig(max_steps=3), progress=False)
+    with pytest.raises(EnvError, match=says):
+        ct.run()
+    assert ct.n_steps == 0
+    with pytest.raises(EnvError, match=says):
+        evaluate_policy(lambda obs: 0, env, n_steps=3)

@@ -4,7 +4,7 @@ every env and teacher answer goes through before the loop or an evaluation uses 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -103,6 +103,27 @@ def as_action(value: Any, n_actions: int) -> int | None:
     return value if 0 <= value < n_actions else None
 
 
+def reset_answer(out: Any) -> tuple[Any, dict]:
+    """The (observation, info) of what ``env.reset`` returned, or a clear :class:`EnvError`:
+    gymnasium's reset returns the pair, an env written for gym < 0.26 the observation alone
+    (which unpacked into two of its own values)."""
+    if not isinstance(out, tuple) or len(out) != 2:
+        raise EnvError(
+            f"env.reset returned {type(out).__name__} {out!r:.80}; expected the gymnasium pair "
+            "(observation, info). An env written for gym < 0.26 returns the observation "
+            "alone: return (observation, {}) from its reset."
+        )
+    raw, info = out
+    if info is None:
+        return raw, {}
+    if not isinstance(info, Mapping):
+        raise EnvError(
+            f"env.reset returned info {info!r:.80}; expected a dict (the second value of the "
+            "pair (observation, info)); return (observation, {}) when there is nothing to say."
+        )
+    return raw, dict(info)
+
+
 def obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
     try:
         x = np.array(obs, dtype=np.float64)  # a copy: an env may reuse its buffer in place
@@ -181,7 +202,7 @@ def evaluate_policy(
             "give one seed per episode (or leave n_episodes out to run one per seed)"
         )
     records: list[StepRecord] = []
-    raw, info = env.reset(seed=seeds[0] if seeds is not None else seed)
+    raw, info = reset_answer(env.reset(seed=seeds[0] if seeds is not None else seed))
     obs = obs_array(raw, n_features, "env.reset")
     episode, done_episodes = 0, 0
     while (n_steps is None or len(records) < n_steps) and (
@@ -236,7 +257,7 @@ def evaluate_policy(
             episode += 1
             if n_episodes is not None and done_episodes >= n_episodes:
                 break  # no reset after the last episode (for SUMO, a whole new road)
-            raw, info = env.reset(seed=None if seeds is None else seeds[episode])
+            raw, info = reset_answer(env.reset(seed=None if seeds is None else seeds[episode]))
         else:
             raw = raw_next
         obs = obs_array(raw, n_features, "env.step" if not (term or trunc) else "env.reset")

@@ -57,7 +57,14 @@ from torchcbl.errors import (
     TeacherError,
     TeachingInterrupted,
 )
-from torchcbl.policy import GreedyPolicy, as_action, check_env, evaluate_policy, obs_array
+from torchcbl.policy import (
+    GreedyPolicy,
+    as_action,
+    check_env,
+    evaluate_policy,
+    obs_array,
+    reset_answer,
+)
 from torchcbl.records import CorrectionRecord, StepRecord, TrainingSet, _is_int, jsonable_info
 from torchcbl.session import (
     FORMAT,
@@ -734,12 +741,13 @@ class ConfidentTeacher:
 
     def _reset(self) -> None:
         try:
-            raw, info = self.env.reset(seed=self._next_reset_seed)
+            out = self.env.reset(seed=self._next_reset_seed)
         except Exception as exc:  # the seed stays for the retry: the same seed, the same run
             raise EnvError(f"env.reset raised {type(exc).__name__}: {exc}") from exc
         self._next_reset_seed = None
+        raw, info = reset_answer(out)
         self._obs = obs_array(raw, self.n_features, "env.reset")
-        self._raw_obs, self._info = raw, dict(info or {})
+        self._raw_obs, self._info = raw, info
         self._episode = self._next_episode
         self._next_episode += 1
         self._needs_reset = False
