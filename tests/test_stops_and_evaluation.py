@@ -238,3 +238,27 @@ def test_worker_pool_stops_its_workers_when_the_block_raises(tmp_path):
     with worker_pool(1, mp.get_context("spawn")) as pool:
         pool.submit(_sleep_then_write, str(running))
     assert running.read_text() == "done"
+
+
+@pytest.mark.parametrize(
+    ("answer", "says"),
+    [
+        (lambda o, r, te, tr, i: (o, r, te or tr, i), r"expected the gymnasium 5-tuple"),
+        (lambda o, r, te, tr, i: (o, r, te, tr, "ok"), r"returned info 'ok'; expected a dict"),
+        (lambda o, r, te, tr, i: (o, r, np.array([te, te]), tr, i), r"terminated=.*a bool"),
+    ],
+    ids=["gym-4-tuple", "info-not-a-dict", "vector-flag"],
+)
+def test_evaluate_policy_checks_the_env_step_answer_as_teaching_does(answer, says):
+    """evaluate_policy unpacked env.step's answer unchecked: a gym < 0.26 4-tuple was a bare
+    'not enough values to unpack', a string info an AttributeError from deep inside, and a
+    flag array was read with bool() (two elements: a numpy ValueError)."""
+    from torchcbl import EnvError
+
+    class Odd(gym.Wrapper):
+        def step(self, action):
+            return answer(*self.env.step(action))
+
+    env = Odd(rare_regions_world())
+    with pytest.raises(EnvError, match=says):
+        evaluate_policy(lambda obs: 0, env, n_steps=5, seed=0)

@@ -124,6 +124,36 @@ def reset_answer(out: Any) -> tuple[Any, dict]:
     return raw, dict(info)
 
 
+def step_outcome(out: Any) -> tuple[float, bool, bool, dict]:
+    """The (reward, terminated, truncated, info) of what ``env.step`` returned (its observation
+    is checked by :func:`obs_array`), or a clear :class:`EnvError`."""
+    try:
+        _, r, term, trunc, env_info = out
+    except (TypeError, ValueError):
+        raise EnvError(
+            f"env.step returned {type(out).__name__} {out!r:.80}; expected the gymnasium "
+            "5-tuple (observation, reward, terminated, truncated, info)"
+        ) from None
+    if env_info is None:
+        info: dict = {}
+    elif isinstance(env_info, Mapping):
+        info = dict(env_info)
+    else:
+        raise EnvError(f"env.step returned info {env_info!r:.80}; expected a dict")
+    flags = []
+    for name, flag in (("terminated", term), ("truncated", trunc)):
+        if not isinstance(flag, (bool, np.bool_, int, np.integer)) or flag not in (0, 1):
+            raise EnvError(f"env.step returned {name}={flag!r:.80}; expected a bool")
+        flags.append(bool(flag))
+    try:
+        reward = float(r)
+    except (TypeError, ValueError, OverflowError):
+        reward = math.nan
+    if not math.isfinite(reward):
+        raise EnvError(f"env.step returned a non-finite reward {r!r:.80}")
+    return reward, flags[0], flags[1], info
+
+
 def obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
     try:
         x = np.array(obs, dtype=np.float64)  # a copy: an env may reuse its buffer in place
@@ -168,6 +198,11 @@ def evaluate_policy(
     Records have ``phase="evaluation"``, ``autonomous=True`` and ``episode`` counting from 0;
     a :class:`GreedyPolicy` also fills the confidence fields, any other callable leaves them
     None. :func:`episode_results` turns them into per-episode returns and successes.
+
+    The env's answers are checked as the teaching loop checks them: a reset that is not the pair
+    (observation, info), a step that is not the gymnasium 5-tuple with bool flags, a dict
+    info and a finite reward, or an observation that is not D finite numbers, is an
+    :class:`~torchcbl.errors.EnvError` saying what came back.
     """
     n_features, n_actions = check_env(env)
     _check_policy_fits(policy, n_features, n_actions)
@@ -224,13 +259,9 @@ def evaluate_policy(
                 f"evaluate_policy: the policy answered {answer!r}; expected an int in "
                 f"[0, {n_actions}) (an unfitted GreedyPolicy answers -1)."
             )
-        raw_next, r, term, trunc, info = env.step(action)
-        try:
-            reward = float(r)
-        except (TypeError, ValueError):
-            reward = math.nan
-        if not math.isfinite(reward):
-            raise EnvError(f"env.step returned a reward that is not a finite number: {r!r}")
+        out = env.step(action)
+        reward, term, trunc, info = step_outcome(out)
+        raw_next = out[0]
         records.append(
             StepRecord(
                 step=len(records),
@@ -245,8 +276,8 @@ def evaluate_policy(
                 phase="evaluation",
                 autonomous=True,
                 reward=reward,
-                terminated=bool(term),
-                truncated=bool(trunc),
+                terminated=term,
+                truncated=trunc,
                 info=jsonable_info(info),
             )
         )

@@ -36,7 +36,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
-import math
 import os
 import warnings
 from collections import deque
@@ -64,6 +63,7 @@ from torchcbl.policy import (
     evaluate_policy,
     obs_array,
     reset_answer,
+    step_outcome,
 )
 from torchcbl.records import CorrectionRecord, StepRecord, TrainingSet, _is_int, jsonable_info
 from torchcbl.session import (
@@ -1116,34 +1116,6 @@ class ConfidentTeacher:
             raise late
         return True
 
-    def _outcome(self, out: Any) -> tuple[float, bool, bool, dict]:
-        """Check what env.step returned (but the observation): reward, flags, info."""
-        try:
-            raw, r, term, trunc, env_info = out
-        except (TypeError, ValueError):
-            raise EnvError(
-                f"env.step returned {type(out).__name__} {out!r:.80}; expected the gymnasium "
-                "5-tuple (observation, reward, terminated, truncated, info)"
-            ) from None
-        if env_info is None:
-            info: dict = {}
-        elif isinstance(env_info, Mapping):
-            info = dict(env_info)
-        else:
-            raise EnvError(f"env.step returned info {env_info!r:.80}; expected a dict")
-        flags = []
-        for name, flag in (("terminated", term), ("truncated", trunc)):
-            if not isinstance(flag, (bool, np.bool_, int, np.integer)) or flag not in (0, 1):
-                raise EnvError(f"env.step returned {name}={flag!r:.80}; expected a bool")
-            flags.append(bool(flag))
-        try:
-            reward = float(r)
-        except (TypeError, ValueError, OverflowError):
-            reward = math.nan
-        if not math.isfinite(reward):
-            raise EnvError(f"env.step returned a non-finite reward {r!r:.80}")
-        return reward, flags[0], flags[1], info
-
     def _execute(
         self, record: StepRecord, *, interrupted: BaseException | None = None
     ) -> StepRecord:
@@ -1176,7 +1148,7 @@ class ConfidentTeacher:
         else:
             # whatever reading the env's answer raises, the step is still logged below
             try:
-                reward, terminated, truncated, info = self._outcome(out)
+                reward, terminated, truncated, info = step_outcome(out)
                 self._obs = obs_array(out[0], self.n_features, "env.step")
                 self._raw_obs, self._info = out[0], info
             except EnvError as exc:
