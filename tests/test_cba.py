@@ -281,3 +281,42 @@ def test_cba_refuses_a_single_action_env_at_once():
             config=TeachingConfig(noninteractive=False),
             progress=False,
         )
+
+
+def test_a_cba_instance_taught_before_decides_a_new_session_as_a_fresh_one():
+    """bind() starts CBA afresh, as every other shipped strategy: a reused instance kept the
+    thresholds and stored demonstrations of the session it taught before, so a new session
+    starting from a fitted model acted on its own at once where a fresh CBA asks (its gates
+    come from its own first refit)."""
+    import copy
+
+    env = rare_regions_world(episode_length=10)
+    cba = ConfidenceBasedAutonomy()
+    first = ConfidentTeacher(
+        env,
+        correcting(oracle(env)),
+        strategy=cba,
+        config=TeachingConfig(max_new=5, noninteractive=False),
+        progress=False,
+    )
+    first.run(max_steps=300)
+    assert cba.thresholds is not None
+    fitted = first.model
+
+    def autonomy(strategy):
+        env2 = rare_regions_world(episode_length=10)
+        ct = ConfidentTeacher(
+            env2,
+            correcting(oracle(env2)),
+            strategy=strategy,
+            model=copy.deepcopy(fitted),
+            config=TeachingConfig(max_new=50, noninteractive=False),
+            seed=3,
+            progress=False,
+        )
+        ct.run(max_steps=20)
+        return [r.autonomous for r in ct.records]
+
+    fresh = autonomy(ConfidenceBasedAutonomy())
+    assert fresh == [False] * 20  # no refit yet in this session: no gates, so it asks
+    assert autonomy(cba) == fresh

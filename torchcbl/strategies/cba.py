@@ -152,6 +152,11 @@ class ConfidenceBasedAutonomy(_Phased):
                 "use ConfidentExecution for a single action."
             )
         super().bind(n_actions=n_actions, n_features=n_features, config=config)
+        # a session (new or resumed) starts with no gates: they come from its own first refit,
+        # never from another session this instance taught
+        self.thresholds = None
+        self.distance_threshold = 0.0
+        self._stored = self._stored_sq = self._mean = self._scale = None
 
     # -- the two gates -----------------------------------------------------------------------
 
