@@ -292,3 +292,27 @@ def test_numpy_scalar_arguments_are_taken_as_the_python_numbers_they_hold():
     for bad in (lambda: HGDAgger(warmup=np.bool_(True)), lambda: DAgger(beta0=np.float32(2))):
         with pytest.raises(ValueError):
             bad()
+
+
+@pytest.mark.parametrize(
+    "make",
+    [BehaviourCloning, DAgger, lambda: HGDAgger(warmup=5), lambda: NoveltyGated(warmup=5)],
+    ids=["bc", "dagger", "hg_dagger", "novelty"],
+)
+def test_the_loops_phase_is_the_phase_of_the_next_step_for_every_baseline(make):
+    """ConfidentTeacher.phase (and the progress bar) reads the strategy's phase; the baselines
+    had none, so it said "confident" while BC and DAgger recorded every step, and HG-DAgger and
+    the novelty gate their warmup, as "noninteractive"."""
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        correcting(oracle(env)),
+        strategy=make(),
+        config=TeachingConfig(max_new=1),
+        progress=False,
+    )
+    said = []
+    for _ in range(30):
+        before = ct.phase
+        said.append((before, ct.step().phase))
+    assert all(before == recorded for before, recorded in said), said

@@ -25,6 +25,11 @@ class BehaviourCloning(_StrategyDefaults):
 
     Every step is recorded with phase ``"noninteractive"`` (asked by design)."""
 
+    @property
+    def phase(self) -> str:
+        """The phase of the next step: always ``"noninteractive"``."""
+        return "noninteractive"
+
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         return Decision(True, "noninteractive")
 

@@ -84,6 +84,11 @@ class DAgger(_StrategyDefaults):
         """The uniform [0, 1) draw of step ``step`` (the teacher acts iff coin < beta)."""
         return float(np.random.default_rng(np.random.SeedSequence([self.seed, step])).random())
 
+    @property
+    def phase(self) -> str:
+        """The phase of the next step: always ``"noninteractive"`` (every state is labelled)."""
+        return "noninteractive"
+
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         return Decision(True, "noninteractive", self._steps)
 

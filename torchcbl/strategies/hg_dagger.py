@@ -62,6 +62,12 @@ class HGDAgger(_StrategyDefaults):
         """Whether the teacher drives the next step (after a correction, until agreement)."""
         return self._control
 
+    @property
+    def phase(self) -> str:
+        """The phase of the next step: ``"noninteractive"`` during the warmup, then
+        ``"confident"``."""
+        return "noninteractive" if self._labels < self.warmup else "confident"
+
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         if self._labels < self.warmup:
             return Decision(True, "noninteractive")

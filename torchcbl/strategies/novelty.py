@@ -101,6 +101,12 @@ class NoveltyGated(_StrategyDefaults):
             return None
         return float(np.quantile(np.asarray(self._scores), 1.0 - self.target_rate))
 
+    @property
+    def phase(self) -> str:
+        """The phase of the next step: ``"noninteractive"`` during the warmup, then
+        ``"confident"``."""
+        return "noninteractive" if self._labels < self.warmup else "confident"
+
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         if self._labels < self.warmup:
             return Decision(True, "noninteractive")
