@@ -85,3 +85,44 @@ def test_auto_threshold_rule_follows_the_documented_rule():
     assert float(rule.thresholds[1:].min()) < 2.0  # the overlapping ones got stricter
     got = rule.is_confident(c)
     assert torch.equal(got, c.distance < rule.thresholds[c.action])
+
+
+def test_a_rule_reused_in_another_session_starts_from_its_own_refits():
+    """A ConfidentExecution (and its AutoThresholdRule) taught once and given to a new session
+    kept the old session's per-action thresholds: on an env with more actions and a fitted
+    model=, the first autonomous decision raised IndexError (2 thresholds, action 2); with as
+    many actions it decided on thresholds fitted to other data. bind() now resets the rule."""
+    import copy
+
+    from _toy_envs import oracle, overlap_world, rare_regions_world
+
+    from torchcbl import ConfidentTeacher, TeachingConfig
+    from torchcbl.strategies import ConfidentExecution
+
+    env = overlap_world(episode_length=10)  # 2 actions
+    used = ConfidentExecution(AutoThresholdRule())
+    first = ConfidentTeacher(
+        env, oracle(env), strategy=used, config=TeachingConfig(max_new=5), progress=False
+    )
+    first.run(max_steps=200)
+    assert used.rule.thresholds is not None and len(used.rule.thresholds) == 2
+    world = rare_regions_world(episode_length=10)  # 3 actions
+    fitted = GaussianMixtureSet(3, 2).fit(*world.sample(200, np.random.default_rng(0)))
+
+    def decisions(strategy):
+        env2 = rare_regions_world(episode_length=10)
+        ct = ConfidentTeacher(
+            env2,
+            oracle(env2),
+            strategy=strategy,
+            model=copy.deepcopy(fitted),
+            config=TeachingConfig(max_new=50, noninteractive=False),
+            seed=3,
+            progress=False,
+        )
+        ct.run(max_steps=40)
+        return [(r.autonomous, r.executed_action) for r in ct.records]
+
+    fresh = decisions(ConfidentExecution(AutoThresholdRule()))
+    assert any(auto for auto, _ in fresh)
+    assert decisions(used) == fresh

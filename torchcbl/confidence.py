@@ -7,7 +7,9 @@ that a strategy uses (:class:`torchcbl.strategies.ConfidentExecution` asks when 
 confident). After every refit the strategy calls ``rule.update(model, X, y)`` with the whole
 training set, so a rule may adapt its thresholds to the data; fixed rules ignore it. A rule
 written before rules saw observations (``is_confident(c)`` only) still works: the strategy
-passes the observations only to an ``is_confident`` that takes a second argument.
+passes the observations only to an ``is_confident`` that takes a second argument. A rule that
+keeps state from its updates may have a ``reset()`` method: the strategy calls it when a
+session starts (new or resumed), so a rule object reused in another session starts afresh.
 
 Every rule is *never* confident before a model exists (``action == -1``): the agent asks the
 teacher on every step until the first fit (Section 4.3).
@@ -198,6 +200,10 @@ class DistanceRule:
         if n is not None:
             self._dof = int(n)
 
+    def reset(self) -> None:
+        """Forget the dimension noted by :meth:`update` (a session starts)."""
+        self._dof = None
+
     def to_config(self) -> dict[str, Any]:
         if self.quantile is not None:
             return {"type": "DistanceRule", "quantile": self.quantile}
@@ -309,6 +315,11 @@ class AutoThresholdRule:
                 mean = float(distance[sel].double().mean())
                 thr[a] = min(max(mean, self.min_std), self.max_std)
         self.thresholds = thr
+
+    def reset(self) -> None:
+        """Back to the state before the first update: every threshold ``max_std`` (a session
+        starts; its thresholds come from its own refits, never another session's)."""
+        self.thresholds = None
 
     def to_config(self) -> dict[str, Any]:
         return {"type": "AutoThresholdRule", "max_std": self.max_std, "min_std": self.min_std}

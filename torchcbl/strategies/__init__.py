@@ -181,6 +181,12 @@ class ConfidentExecution(_Phased):
             )
         self._with_obs = _rule_takes_observations(self.rule)
 
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        super().bind(n_actions=n_actions, n_features=n_features, config=config)
+        reset = getattr(self.rule, "reset", None)
+        if callable(reset):  # a rule reused from another session starts afresh
+            reset()
+
     def _confident(self, observation: np.ndarray, c: Classification) -> bool:
         if self._with_obs:
             return bool(self.rule.is_confident(c, observation[None])[0])
