@@ -303,6 +303,25 @@ def test_numpy_scalars_in_the_config_are_stored_as_python_numbers(tmp_path):
         TeachingConfig(max_new=np.int64(0))
 
 
+def test_numpy_bools_in_the_config_are_taken_as_bools(tmp_path):
+    """A sweep built with numpy (a grid array, a DataFrame row) gives np.bool_ flags: the config
+    took numpy ints and floats as Python numbers but refused np.False_ for noninteractive, and
+    run(time_limit_is_success=np.True_) alike."""
+    import json
+
+    flags = np.array([False, True])
+    cfg = TeachingConfig(noninteractive=flags[0], time_limit_is_success=flags[1], max_steps=3)
+    assert (cfg.noninteractive, cfg.time_limit_is_success) == (False, True)
+    assert type(cfg.noninteractive) is bool and type(cfg.time_limit_is_success) is bool
+    ct = ConfidentTeacher(rare_regions_world(), lambda o, i: 0, config=cfg, run_dir=tmp_path)
+    ct.run(time_limit_is_success=flags[0])
+    ct.close()
+    stored = json.loads((tmp_path / "config.json").read_text())["teaching"]
+    assert stored["noninteractive"] is False and ct.records[0].phase == "confident"
+    with pytest.raises(ValueError, match="max_new"):
+        TeachingConfig(max_new=np.True_)  # a bool is no count, numpy's or Python's
+
+
 def test_refit_brings_a_snapshot_up_to_date_and_stop_reason_names_the_stop():
     ct = make(rare_regions_world(), noninteractive=False, max_new=5)
     ct.run(max_demonstrations=7)

@@ -201,11 +201,14 @@ class TeachingConfig:
     time_limit_is_success: bool = False
 
     def __post_init__(self) -> None:
-        # numpy scalars (np.int64(10), np.float32(0.9)) are taken as the Python numbers they
-        # hold, so that the config stays JSON-serialisable in a run directory
+        # numpy scalars (np.int64(10), np.float32(0.9), np.True_) are taken as the Python
+        # numbers and bools they hold, so that the config stays JSON-serialisable in a run
+        # directory (a bool stays refused where a number is expected)
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, np.integer):
+            if isinstance(v, np.bool_):
+                object.__setattr__(self, f.name, bool(v))
+            elif isinstance(v, np.integer):
                 object.__setattr__(self, f.name, int(v))
             elif isinstance(v, np.floating):
                 object.__setattr__(self, f.name, float(v))
