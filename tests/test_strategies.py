@@ -279,3 +279,20 @@ def test_a_to_config_that_returns_no_dict_is_a_clear_error(tmp_path):
     env = rare_regions_world(episode_length=10)
     with pytest.raises(TypeError, match=r"Listy.to_config\(\) returned \['Listy'\]; expected"):
         ConfidentTeacher(env, oracle(env), strategy=Listy(), run_dir=tmp_path / "r")
+
+
+def _right_of_zero(observation, info):
+    return int(observation[0] > 0)
+
+
+def test_a_correcting_teacher_pickles_like_the_teacher_it_wraps():
+    """correcting() built its wrapper class inside the function, so the wrapper of a picklable
+    teacher could not be pickled ("Can't pickle local object") and could not be sent to a
+    process pool that runs sessions in parallel."""
+    import pickle
+
+    from torchcbl.strategies import correcting
+
+    back = pickle.loads(pickle.dumps(correcting(_right_of_zero)))
+    obs = np.array([0.5, -1.0])
+    assert back(obs, {}) == 1 and back.correct(obs, {}, 0) == 1 and back.correct(obs, {}, 1) is None

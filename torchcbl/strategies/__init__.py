@@ -288,19 +288,26 @@ def strategy_from_config(config: dict[str, Any]) -> Any:
     return build(params)
 
 
+class _Correcting:
+    """A scripted teacher that also corrects (see :func:`correcting`); a module-level class, so
+    that it pickles whenever the teacher it wraps does (a process pool's arguments)."""
+
+    def __init__(self, inner: Callable[[np.ndarray, dict], int]) -> None:
+        self.inner = inner
+
+    def __call__(self, observation: np.ndarray, info: dict) -> int:
+        return self.inner(observation, info)
+
+    def correct(self, observation: np.ndarray, info: dict, action: int) -> int | None:
+        own = int(self.inner(observation, info))
+        return None if own == int(action) else own
+
+    def __repr__(self) -> str:
+        return f"correcting({self.inner!r})"
+
+
 def correcting(teacher: Callable[[np.ndarray, dict], int]) -> Any:
     """Wrap a scripted teacher so it also corrects: ``correct(obs, info, action)`` answers its
-    own choice when that differs from ``action``, else None."""
-
-    class _Correcting:
-        def __init__(self, inner: Callable[[np.ndarray, dict], int]) -> None:
-            self.inner = inner
-
-        def __call__(self, observation: np.ndarray, info: dict) -> int:
-            return self.inner(observation, info)
-
-        def correct(self, observation: np.ndarray, info: dict, action: int) -> int | None:
-            own = int(self.inner(observation, info))
-            return None if own == int(action) else own
-
+    own choice when that differs from ``action``, else None. The wrapper pickles whenever
+    ``teacher`` does."""
     return _Correcting(teacher)
