@@ -8,7 +8,8 @@ into sub-steps of at most ``WorldConfig.substep`` metres of travel (or ``substep
 of rotation); before each sub-step the new pose is tested with ``Space.shape_query``, and a
 sub-step whose position would overlap a wall is undone: the robot keeps its last free position,
 stops translating for the rest of the action (rotation, which a round robot can always do,
-completes) and the action reports a wall contact. So the robot never passes through a wall.
+completes) and the action reports a wall contact. So the robot never passes through a wall
+(``substep`` must be less than the robot's diameter, else one sub-step could jump a wall).
 
 - ``FORWARD``: ``forward_distance`` (0.20 m) straight ahead.
 - ``TURN_LEFT`` / ``TURN_RIGHT``: a quarter circle of radius ``turn_radius`` (0.20 m): the robot
@@ -131,6 +132,14 @@ class WorldConfig:
         for name in ("robot_radius", "forward_distance", "turn_radius", "substep", "max_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"WorldConfig.{name} must be > 0, got {getattr(self, name)}")
+        if not self.substep < 2 * self.robot_radius:
+            # a longer sub-step can carry the robot across a wall (walls have no thickness)
+            # between two overlap tests
+            raise ValueError(
+                f"WorldConfig.substep ({self.substep:g} m) must be less than the robot's "
+                f"diameter (2 * robot_radius = {2 * self.robot_radius:g} m), or a sub-step can "
+                "jump a wall; pass a smaller substep"
+            )
         if not 0 < self.substep_angle <= math.pi / 2:
             raise ValueError("WorldConfig.substep_angle must be in (0, pi/2]")
         if not 0 <= self.min_range < self.max_range:

@@ -801,3 +801,20 @@ def test_the_expert_takes_a_narrow_map_of_ones_own():
     assert terminated and info["is_success"] and len(actions) == 39
     with pytest.raises(ValueError, match="on_route_tolerance"):
         CorridorExpert(narrow, on_route_tolerance=0.2)  # an explicit value is still checked
+
+
+def test_a_sub_step_longer_than_the_robot_is_refused():
+    """A sub-step of more than the robot's diameter can carry it from one side of a wall to the
+    other between two overlap tests: WorldConfig(robot_radius=0.05, substep=0.25,
+    forward_distance=0.25) walked the robot out through the side wall of lshape's first
+    corridor, and on out of the map, without a contact. Such a config is now refused, naming
+    both values; a sub-step just under the diameter is taken, and stops at the wall."""
+    with pytest.raises(ValueError, match=r"substep.*0\.25.*robot_radius"):
+        WorldConfig(robot_radius=0.05, substep=0.25, forward_distance=0.25)
+    m = load_map("lshape")
+    w = CorridorWorld(m, WorldConfig(robot_radius=0.05, substep=0.099, forward_distance=0.25))
+    w.reset()
+    w.step(L)  # now facing the corridor's side wall, y = 0.3
+    contacts = [w.step(F) for _ in range(4)]
+    assert any(contacts) and m.is_free(*w.pose[:2])
+    assert w.pose[1] <= 0.3 - 0.05 + 1e-9
