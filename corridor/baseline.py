@@ -641,7 +641,7 @@ def score_tables(
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise ValueError(f"steps must be an int >= 1, got {steps!r}")
     exact = dataclasses.replace(
-        world_config or WorldConfig(),
+        CorridorWorld(corridor_map, world_config).config,  # a dict of fields or None taken
         forward_noise=0.0,
         heading_noise=0.0,
         forward_heading_noise=0.0,

@@ -41,16 +41,14 @@ Envs never write files; rendering returns RGB arrays (see :mod:`corridor.render`
 from __future__ import annotations
 
 import math
-import os
 import warnings
-from collections.abc import Mapping
 from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from corridor.maps import CorridorMap, load_map
+from corridor.maps import CorridorMap
 from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
 
 __all__ = ["CorridorEnv", "DEFAULT_MAP"]
@@ -83,21 +81,10 @@ class CorridorEnv(gym.Env):
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        if isinstance(world_config, Mapping):  # as gymnasium.make kwargs a config can keep
-            try:
-                world_config = WorldConfig(**world_config)
-            except TypeError as exc:
-                raise TypeError(
-                    f"world_config: expected a WorldConfig or a dict of its fields, got "
-                    f"{dict(world_config)!r} ({exc})"
-                ) from None
-        if isinstance(corridor_map, (str, os.PathLike)):
-            corridor_map = load_map(corridor_map)
-        if not isinstance(corridor_map, CorridorMap):
-            raise TypeError(
-                f"corridor_map must be a CorridorMap, a map name or a path, got {corridor_map!r}"
-            )
+        # a map name or path and a dict of WorldConfig fields (as gymnasium.make kwargs keep a
+        # config) are CorridorWorld's to take
         self.world = CorridorWorld(corridor_map, world_config)
+        corridor_map = self.world.map
         steps = 81 if max_episode_steps is None else max_episode_steps
         if (
             isinstance(steps, (bool, np.bool_))

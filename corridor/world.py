@@ -49,7 +49,8 @@ standing, so the ray is cast once per sensor and the 15 readings differ by their
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+import os
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, fields
 from enum import IntEnum
 from typing import Any
@@ -57,7 +58,7 @@ from typing import Any
 import numpy as np
 import pymunk
 
-from corridor.maps import CorridorMap, RouteProgress
+from corridor.maps import CorridorMap, RouteProgress, load_map
 
 __all__ = ["Action", "CorridorWorld", "WorldConfig", "N_ACTIONS", "SENSOR_NAMES"]
 
@@ -171,11 +172,37 @@ class CorridorWorld:
     """A corridor map in a pymunk space with one robot; tracks progress along the route.
 
     Args:
-        corridor_map: the map (walls and route).
-        config: robot, motion and sensor parameters.
+        corridor_map: the map (walls and route): a :class:`CorridorMap`, or the name of a shipped
+            map / a JSON path (as :class:`corridor.env.CorridorEnv` takes it).
+        config: robot, motion and sensor parameters: a :class:`WorldConfig`, a dict of its
+            fields, or None for the defaults.
     """
 
-    def __init__(self, corridor_map: CorridorMap, config: WorldConfig | None = None) -> None:
+    def __init__(
+        self,
+        corridor_map: CorridorMap | str | os.PathLike[str],
+        config: WorldConfig | Mapping[str, Any] | None = None,
+    ) -> None:
+        if isinstance(corridor_map, (str, os.PathLike)):
+            corridor_map = load_map(corridor_map)
+        if not isinstance(corridor_map, CorridorMap):
+            raise TypeError(
+                f"corridor_map: expected a CorridorMap, a map name or a map JSON path, got "
+                f"{corridor_map!r:.80}"
+            )
+        if isinstance(config, Mapping):
+            try:
+                config = WorldConfig(**config)
+            except TypeError as exc:
+                raise TypeError(
+                    f"world_config: expected a WorldConfig or a dict of its fields, got "
+                    f"{dict(config)!r} ({exc})"
+                ) from None
+        if config is not None and not isinstance(config, WorldConfig):
+            raise TypeError(
+                f"world_config: expected a WorldConfig, a dict of its fields or None, got "
+                f"{config!r:.80}"
+            )
         self.map = corridor_map
         self.config = config or WorldConfig()
         if corridor_map.corridor_width <= 2 * self.config.robot_radius:

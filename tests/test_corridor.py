@@ -818,3 +818,28 @@ def test_a_sub_step_longer_than_the_robot_is_refused():
     contacts = [w.step(F) for _ in range(4)]
     assert any(contacts) and m.is_free(*w.pose[:2])
     assert w.pose[1] <= 0.3 - 0.05 + 1e-9
+
+
+def test_the_world_and_the_baseline_take_what_the_env_takes():
+    """CorridorEnv and CorridorExpert take a map name and a dict of WorldConfig fields;
+    CorridorWorld, which the baseline's functions build, failed on either with an
+    AttributeError ('dict' object has no attribute 'robot_radius', 'str' object has no
+    attribute 'corridor_width'), score_tables with "replace() should be called on dataclass
+    instances". They now take them too, and refuse anything else by name."""
+    fields = {"forward_noise": 0.1, "heading_noise": 0.05}
+    world = CorridorWorld("lshape", fields)
+    assert world.map == load_map("lshape") and world.config == WorldConfig(**fields)
+    small = map_from_dict(SMALL)
+    ps = PrioritizedSweepingConfig(max_steps=100)
+    assert run_prioritized_sweeping(small, ps, world_config=fields, seed=0) == (
+        run_prioritized_sweeping(small, ps, world_config=WorldConfig(**fields), seed=0)
+    )
+    assert score_tables(small, ps, steps=50, world_config=fields) == score_tables(
+        small, ps, steps=50, world_config=WorldConfig(**fields)
+    )
+    with pytest.raises(TypeError, match=r"world_config: expected a WorldConfig.*'legged'"):
+        CorridorWorld(small, "legged")
+    with pytest.raises(TypeError, match="world_config.*forward_nois"):
+        CorridorWorld(small, {"forward_nois": 0.1})
+    with pytest.raises(TypeError, match="corridor_map: expected a CorridorMap"):
+        CorridorWorld(SMALL)
