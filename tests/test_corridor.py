@@ -326,7 +326,7 @@ def test_a_map_whose_circuit_the_step_cap_cuts_says_so(recwarn):
         "nodes": {"A": [0, 0], "B": [6.0, 0], "C": [6.0, 4.0], "D": [0, 4.0]},
     }
     with pytest.warns(UserWarning, match=r"takes about 96 actions, more than max_episode_steps=81"):
-        CorridorEnv(map_from_dict(big))
+        CorridorEnv(map_from_dict(big), max_episode_steps=81)
     env = CorridorEnv(map_from_dict(big), max_episode_steps=300)
     actions, _, terminated, info = drive(env, CorridorExpert(env.corridor_map), seed=0, episodes=1)[
         0
@@ -843,3 +843,21 @@ def test_the_world_and_the_baseline_take_what_the_env_takes():
         CorridorWorld(small, {"forward_nois": 0.1})
     with pytest.raises(TypeError, match="corridor_map: expected a CorridorMap"):
         CorridorWorld(SMALL)
+
+
+def test_gymnasium_make_drives_a_map_whose_circuit_is_longer_than_81_actions(recwarn):
+    """gymnasium.make takes max_episode_steps for its TimeLimit, so the env's own cap can only be
+    its default: it was 81 whatever the map, and on a map of one's own whose circuit takes more
+    (a 6 m x 4 m loop, 96 actions) every episode made with gymnasium.make (so with ``torchcbl
+    teach corridor --map``, make_vec, the benchmark) was cut before its circuit ended, under a
+    warning to pass a max_episode_steps make cannot pass. The default is now 81 or two
+    circuits of the map, whichever is more: 81 on the shipped maps (29 and 34 actions)."""
+    big = {**SMALL, "nodes": {"A": [0, 0], "B": [6.0, 0], "C": [6.0, 4.0], "D": [0, 4.0]}}
+    env = gym.make(corridor.ENV_ID, corridor_map=map_from_dict(big))
+    assert env.unwrapped.max_episode_steps == 192
+    ((actions, _, terminated, info),) = drive(
+        env, CorridorExpert(env.unwrapped.corridor_map), seed=0, episodes=1
+    )
+    assert terminated and info["is_success"] and len(actions) == 96
+    assert not [w for w in recwarn if "circuit of its route" in str(w.message)]
+    assert CorridorEnv("figure2").max_episode_steps == CorridorEnv("lshape").max_episode_steps == 81
