@@ -452,8 +452,11 @@ def available_maps() -> list[str]:
 
 
 def load_map(name_or_path: str | Path) -> CorridorMap:
-    """Load a shipped map by name (``"figure2"``, ``"lshape"``) or any map JSON file by path."""
+    """Load a shipped map by name (``"figure2"``, ``"lshape"``) or any map JSON file by path
+    (a name ending in ``.json`` is a path; so is any other existing file that no shipped map is
+    named)."""
     path = Path(name_or_path)
+    res = resources.files("corridor") / "maps" / f"{name_or_path}.json"
     if path.suffix == ".json":  # a file path
         if not path.is_file():
             raise ValueError(
@@ -461,11 +464,15 @@ def load_map(name_or_path: str | Path) -> CorridorMap:
                 f"shipped map names {available_maps()}"
             )
         text = path.read_text()
-    else:
-        res = resources.files("corridor") / "maps" / f"{name_or_path}.json"
-        if not res.is_file():
-            raise ValueError(f"unknown map {name_or_path!r}; shipped maps: {available_maps()}")
+    elif res.is_file():
         text = res.read_text()
+    elif path.is_file():  # a map file named otherwise (mymap.txt, a temporary file)
+        text = path.read_text()
+    else:
+        raise ValueError(
+            f"unknown map {str(name_or_path)!r}; shipped maps: {available_maps()}, or the path "
+            "of a map JSON file"
+        )
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:

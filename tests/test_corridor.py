@@ -861,3 +861,18 @@ def test_gymnasium_make_drives_a_map_whose_circuit_is_longer_than_81_actions(rec
     assert terminated and info["is_success"] and len(actions) == 96
     assert not [w for w in recwarn if "circuit of its route" in str(w.message)]
     assert CorridorEnv("figure2").max_episode_steps == CorridorEnv("lshape").max_episode_steps == 81
+
+
+def test_a_map_file_not_named_json_is_read(tmp_path):
+    """load_map took a path for a file only when its name ended in .json: a map kept as
+    ``mymap.txt`` (or saved by tempfile without a suffix), an existing file, was "unknown map
+    ...; shipped maps: [...]". An existing file is now read whatever its name; a shipped map's
+    name still wins over a file of that name, and a name that is neither says both ways."""
+    src = load_map("lshape")
+    for name in ("mymap.txt", "mymap"):
+        path = tmp_path / name
+        path.write_text(json.dumps(src.to_dict()))
+        assert load_map(path) == src and load_map(str(path)) == src
+        assert CorridorEnv(str(path)).corridor_map == src
+    with pytest.raises(ValueError, match=r"unknown map 'nope'; shipped maps.*or the path of a map"):
+        load_map("nope")
