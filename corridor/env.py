@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from typing import Any, Literal
 
 import gymnasium as gym
@@ -114,8 +115,22 @@ class CorridorEnv(gym.Env):
             )
         self.render_mode = render_mode
         if start_perturbation is not None:
-            d, a = (float(v) for v in start_perturbation)
             half = corridor_map.corridor_width / 2 - self.world.config.robot_radius
+            pair = (
+                (
+                    isinstance(start_perturbation, Sequence)
+                    and not isinstance(start_perturbation, (str, bytes))
+                    or isinstance(start_perturbation, np.ndarray)
+                    and start_perturbation.ndim == 1
+                )
+                and len(start_perturbation) == 2
+                and all(
+                    isinstance(v, (int, float, np.integer, np.floating))
+                    and not isinstance(v, (bool, np.bool_))
+                    for v in start_perturbation
+                )
+            )
+            d, a = (float(v) for v in start_perturbation) if pair else (math.nan, math.nan)
             if not (0 <= d < half and 0 <= a <= np.pi / 2):
                 raise ValueError(
                     f"start_perturbation must be (metres in [0, {half:.2f}), radians in "

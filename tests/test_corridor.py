@@ -876,3 +876,13 @@ def test_a_map_file_not_named_json_is_read(tmp_path):
         assert CorridorEnv(str(path)).corridor_map == src
     with pytest.raises(ValueError, match=r"unknown map 'nope'; shipped maps.*or the path of a map"):
         load_map("nope")
+
+
+@pytest.mark.parametrize("bad", [(0.1,), (0.1, 0.2, 0.3), 0.1, ("a", 0.1), "ab", np.zeros((2, 2))])
+def test_a_malformed_start_perturbation_is_named(bad):
+    """start_perturbation=(0.1,) was "not enough values to unpack (expected 2, got 1)", 0.1
+    "'float' object is not iterable", ("a", 0.1) "could not convert string to float": none said
+    which argument or what it takes. Each is now a ValueError naming start_perturbation, the
+    (metres, radians) pair it takes and the value given."""
+    with pytest.raises(ValueError, match=r"start_perturbation must be \(metres.*radians.*got"):
+        CorridorEnv(start_perturbation=bad)
