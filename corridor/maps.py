@@ -112,13 +112,21 @@ class CorridorMap:
             pairs.add((a, b))
             pairs.add((b, a))
         if len(self.route) < 4 or self.route[0] != self.route[-1]:
-            raise ValueError("route must be a closed walk of at least 3 nodes (first == last)")
+            raise ValueError(
+                "route must be a closed walk of at least 3 nodes, its first node repeated at "
+                f"the end (e.g. [A, B, C, A]), got {list(self.route)}"
+            )
         for a, b in zip(self.route[:-1], self.route[1:], strict=True):
             if (a, b) not in pairs:
                 raise ValueError(f"route step {a!r} -> {b!r} is not a corridor")
         first = np.subtract(self.nodes[self.route[1]], self.nodes[self.route[0]])
-        if not 0 < self.start_offset < float(np.linalg.norm(first)):
-            raise ValueError("start_offset must lie inside the route's first corridor")
+        length = float(np.linalg.norm(first))
+        if not 0 < self.start_offset < length:
+            raise ValueError(
+                f"start_offset must lie inside the route's first corridor, "
+                f"{self.route[0]!r} -> {self.route[1]!r}: in (0, {length:g}) m, got "
+                f"{self.start_offset!r}"
+            )
 
     # ------------------------------------------------------------------ geometry
     def free_cells(self) -> tuple[np.ndarray, tuple[int, int]]:

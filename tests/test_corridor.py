@@ -886,3 +886,21 @@ def test_a_malformed_start_perturbation_is_named(bad):
     (metres, radians) pair it takes and the value given."""
     with pytest.raises(ValueError, match=r"start_perturbation must be \(metres.*radians.*got"):
         CorridorEnv(start_perturbation=bad)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"start_offset": 0}, r"start_offset .*in \(0, 1\) m.*got 0\.0"),
+        ({"start_offset": 1.5}, r"start_offset .*'A' -> 'B'.*in \(0, 1\) m.*got 1\.5"),
+        ({"route": ["A", "B", "C", "D"]}, r"closed walk.*got \['A', 'B', 'C', 'D'\]"),
+        ({"route": ["A", "B", "A"]}, r"at least 3 nodes.*got \['A', 'B', 'A'\]"),
+    ],
+)
+def test_a_bad_route_or_start_offset_names_the_value(change, message):
+    """A route that is not a closed walk was "route must be a closed walk of at least 3 nodes
+    (first == last)" and a start offset off the first corridor "start_offset must lie inside
+    the route's first corridor", without the value given or the corridor's length: in a map of
+    one's own the slip had to be found by hand. Both now say what was given and what fits."""
+    with pytest.raises(ValueError, match=message):
+        map_from_dict({**SMALL, **change})
