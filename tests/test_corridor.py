@@ -904,3 +904,24 @@ def test_a_bad_route_or_start_offset_names_the_value(change, message):
     one's own the slip had to be found by hand. Both now say what was given and what fits."""
     with pytest.raises(ValueError, match=message):
         map_from_dict({**SMALL, **change})
+
+
+def test_the_expert_takes_a_robot_whose_sensors_reach_less_than_its_open_range():
+    """CorridorExpert's open_range (a true range above it is open, in its reactive fallback)
+    defaulted to 0.6 m and had to be less than the sensors' max_range: for a robot of one's own
+    whose sensors reach 0.6 m or less, CorridorExpert(map, WorldConfig(max_range=0.5)) refused
+    its own default ("open_range: expected metres in (0, 0.5) ..., got 0.6"), and so did the
+    benchmark's corridor teacher on such an env. The default is now 0.6, or 0.8 of max_range
+    where that is shorter; the expert drives clean circuits with such a robot."""
+    world = WorldConfig(max_range=0.5)
+    expert = CorridorExpert(load_map("figure2"), world)
+    assert expert.open_range == pytest.approx(0.4)
+    assert CorridorExpert(load_map("figure2")).open_range == 0.6
+    env = CorridorEnv("figure2", world)
+    ((actions, _, terminated, info),) = drive(env, expert, seed=0, episodes=1)
+    assert terminated and info["is_success"] and len(actions) == 29
+    from corridor.benchmark import teacher
+
+    assert teacher(env).open_range == pytest.approx(0.4)
+    with pytest.raises(ValueError, match="open_range"):
+        CorridorExpert(load_map("figure2"), world, open_range=0.6)  # a value given is checked
