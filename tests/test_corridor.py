@@ -925,3 +925,22 @@ def test_the_expert_takes_a_robot_whose_sensors_reach_less_than_its_open_range()
     assert teacher(env).open_range == pytest.approx(0.4)
     with pytest.raises(ValueError, match="open_range"):
         CorridorExpert(load_map("figure2"), world, open_range=0.6)  # a value given is checked
+
+
+def test_the_baseline_refuses_a_wall_threshold_its_sensors_cannot_reach():
+    """A reading never exceeds the sensors' max_range, so with the baseline's wall_threshold
+    (0.6 m) at or above it every wall bit is set: with WorldConfig(max_range=0.5) Prioritized
+    Sweeping learned on one state of its 8, silently, and never drove a circuit. Each of the
+    baseline's functions now refuses it, naming both values and what to pass."""
+    small, short = map_from_dict(SMALL), WorldConfig(max_range=0.5)
+    message = r"wall_threshold \(0\.6 m\) must be less than the sensors' max_range \(0\.5 m\)"
+    for call in (
+        lambda: run_prioritized_sweeping(small, world_config=short),
+        lambda: passing_tables(small, world_config=short),
+        lambda: evaluation_passes(small, (0,) * 8, world_config=short),
+        lambda: score_tables(small, steps=10, world_config=short),
+    ):
+        with pytest.raises(ValueError, match=message):
+            call()
+    ps = PrioritizedSweepingConfig(wall_threshold=0.45, max_steps=50)
+    assert run_prioritized_sweeping(small, ps, world_config=short).learning_steps == 50
