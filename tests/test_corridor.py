@@ -944,3 +944,23 @@ def test_the_baseline_refuses_a_wall_threshold_its_sensors_cannot_reach():
             call()
     ps = PrioritizedSweepingConfig(wall_threshold=0.45, max_steps=50)
     assert run_prioritized_sweeping(small, ps, world_config=short).learning_steps == 50
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"width": 10.5}, r"width: expected an int >= 1.*got 10\.5"),
+        ({"width": True}, r"width: expected an int >= 1.*got True"),
+        ({"max_range": math.nan}, r"max_range: expected metres > 0.*got nan"),
+        ({"max_range": -1.0}, r"max_range: expected metres > 0.*got -1\.0"),
+    ],
+)
+def test_the_keyboard_views_settings_are_named(kwargs, message):
+    """corridor.human.describe (the text view of the keyboard teacher, make_teacher passes its
+    max_range on) failed on width=10.5 with "can't multiply sequence by non-int of type
+    'float'", on max_range=nan with "cannot convert float NaN to integer", drew empty bars for
+    width=True, and said "max_range must be > 0 and width >= 1" without the value given."""
+    from corridor.human import describe
+
+    with pytest.raises(ValueError, match=message):
+        describe(np.array([0.3, 1.0, 0.3]), None, **kwargs)
