@@ -126,10 +126,17 @@ class WorldConfig:
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == "n_readings":
-                if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
                     raise ValueError(f"WorldConfig.n_readings must be an int >= 1, got {v!r}")
-            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                object.__setattr__(self, f.name, int(v))  # numpy ints kept plain (JSON)
+            elif (
+                isinstance(v, (bool, np.bool_))
+                or not isinstance(v, (int, float, np.integer, np.floating))
+                or not math.isfinite(v)
+            ):
                 raise ValueError(f"WorldConfig.{f.name} must be a finite number, got {v!r}")
+            else:
+                object.__setattr__(self, f.name, float(v))  # numpy numbers kept plain (JSON)
         for name in ("robot_radius", "forward_distance", "turn_radius", "substep", "max_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"WorldConfig.{name} must be > 0, got {getattr(self, name)}")

@@ -964,3 +964,21 @@ def test_the_keyboard_views_settings_are_named(kwargs, message):
 
     with pytest.raises(ValueError, match=message):
         describe(np.array([0.3, 1.0, 0.3]), None, **kwargs)
+
+
+def test_world_config_takes_numpy_numbers_as_plain_ones():
+    """A sweep over a numpy array gives numpy scalars: WorldConfig(max_range=np.int64(2)) and
+    WorldConfig(noise_sd=np.float32(0.02)) were refused as "must be a finite number", and
+    n_readings=np.int64(10) was kept as numpy, so the config's fields (as teaching_setup and a
+    session keep them) did not go to JSON. They are now taken and kept as plain int / float;
+    a bool or a non-finite value is still refused."""
+    cfg = WorldConfig(max_range=np.int64(2), noise_sd=np.float32(0.02), n_readings=np.int64(10))
+    assert cfg == WorldConfig(max_range=2.0, noise_sd=float(np.float32(0.02)), n_readings=10)
+    fields = dataclasses.asdict(cfg)
+    assert type(fields["max_range"]) is float and type(fields["n_readings"]) is int
+    assert json.loads(json.dumps(fields)) == fields
+    env = CorridorEnv("figure2", cfg)
+    assert env.observation_space.high.tolist() == [2.0, 2.0, 2.0]
+    for bad in (dict(max_range=np.bool_(True)), dict(noise_sd=np.float32("nan"))):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            WorldConfig(**bad)
