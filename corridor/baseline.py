@@ -429,6 +429,22 @@ def _completes_circuit(
     return _drive_evaluation(dict(enumerate(table)), world, threshold, seed, circuits, cap) is True
 
 
+def _world(
+    corridor_map: CorridorMap, world_config: WorldConfig | None, config: PrioritizedSweepingConfig
+) -> CorridorWorld:
+    """A world for the baseline, refused if its sensors cannot tell a wall bit from an open one:
+    a reading never exceeds ``max_range``, so with ``wall_threshold`` at or above it every bit
+    is a wall and the learner sees one state of the 8."""
+    world = CorridorWorld(corridor_map, world_config)
+    if not config.wall_threshold < world.config.max_range:
+        raise ValueError(
+            f"wall_threshold ({config.wall_threshold:g} m) must be less than the sensors' "
+            f"max_range ({world.config.max_range:g} m), or every reading is a wall and the "
+            "learner sees one state; pass PrioritizedSweepingConfig(wall_threshold=...) below it"
+        )
+    return world
+
+
 def _eval_seed(seed: int) -> int:
     """The seed of the evaluation's noise in Prioritized Sweeping run ``seed``."""
     return seed + 10_000
@@ -461,7 +477,7 @@ def evaluation_passes(
         )
     return _completes_circuit(
         tuple(int(a) for a in table),
-        CorridorWorld(corridor_map, world_config),
+        _world(corridor_map, world_config, config),
         config.wall_threshold,
         seed=_eval_seed(seed),
         circuits=config.eval_circuits,
@@ -493,7 +509,7 @@ def passing_tables(
         the behaviours in the search's order (actions tried in index order).
     """
     config = config or PrioritizedSweepingConfig()
-    world = CorridorWorld(corridor_map, world_config)
+    world = _world(corridor_map, world_config, config)
     found: list[tuple[tuple[int, int], ...]] = []
     stack: list[dict[int, int]] = [{}]
     while stack:
@@ -523,8 +539,8 @@ def run_prioritized_sweeping(
     """Learn the circuit with Prioritized Sweeping; see the module docstring for the measure."""
     config = config or PrioritizedSweepingConfig()
     rng = np.random.default_rng(seed)
-    world = CorridorWorld(corridor_map, world_config)
-    eval_world = CorridorWorld(corridor_map, world_config)
+    world = _world(corridor_map, world_config, config)
+    eval_world = _world(corridor_map, world_config, config)
     learner = PrioritizedSweeping(config, rng)
     reward = RecencyReward(config)
     checked: dict[tuple[int, ...], bool] = {}
@@ -641,7 +657,7 @@ def score_tables(
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise ValueError(f"steps must be an int >= 1, got {steps!r}")
     exact = dataclasses.replace(
-        world_config or WorldConfig(),
+        _world(corridor_map, world_config, config).config,  # a dict of fields or None taken
         forward_noise=0.0,
         heading_noise=0.0,
         forward_heading_noise=0.0,

@@ -8,12 +8,13 @@ Episode = one circuit. ``reset`` puts the robot at the map's start pose. The epi
 ``terminated`` when the circuit is completed (the robot is back at the start, having followed
 the route), with ``info["is_success"] = True`` iff no wall was touched during it; it is
 ``truncated`` after ``max_episode_steps`` actions (default 81: 3 x 27, the actions of a perfect
-circuit on the default map as first drawn; 29 since its spur was lengthened, so 2.8 circuits; a
-map of its own may need more, and the env warns when its circuit does not fit), with
-``info["is_success"] = False``; a longer episode needs ``CorridorEnv(max_episode_steps=n)``
-(``gymnasium.make(ENV_ID, max_episode_steps=n)`` only wraps the env in a TimeLimit of n, which
-cannot lengthen its own 81). The reward is 1 for completing the circuit, -1 for each wall
-contact, 0 otherwise (the teaching loop does not use it).
+circuit on the default map as first drawn; 29 since its spur was lengthened, so 2.8 circuits; on
+a map whose circuit takes more than 40 actions, two circuits; the env warns when a circuit does
+not fit in a cap one gives), with ``info["is_success"] = False``; another cap needs
+``CorridorEnv(max_episode_steps=n)`` (``gymnasium.make(ENV_ID, max_episode_steps=n)`` only wraps
+the env in a TimeLimit of n, which cannot lengthen its own default). The reward is 1 for
+completing the circuit, -1 for each wall contact, 0 otherwise (the teaching loop does not use
+it).
 
 ``info`` after ``reset`` and every ``step``:
   ``pose`` ndarray [3] (x m, y m, heading rad); ``true_ranges`` ndarray [3] noise-free metres;
@@ -41,16 +42,15 @@ Envs never write files; rendering returns RGB arrays (see :mod:`corridor.render`
 from __future__ import annotations
 
 import math
-import os
 import warnings
-from collections.abc import Mapping
+from collections.abc import Sequence
 from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from corridor.maps import CorridorMap, load_map
+from corridor.maps import CorridorMap
 from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
 
 __all__ = ["CorridorEnv", "DEFAULT_MAP"]
@@ -65,7 +65,8 @@ class CorridorEnv(gym.Env):
     Args:
         corridor_map: a :class:`CorridorMap`, or the name of a shipped map / a JSON path.
         world_config: robot, motion and sensor parameters.
-        max_episode_steps: actions before truncation; None = 81 (see the module docstring).
+        max_episode_steps: actions before truncation; None = 81, or two circuits of a map
+            whose circuit takes more than 40 actions (see the module docstring).
         render_mode: None or "rgb_array".
         start_perturbation: ``(metres, radians)`` half-widths of the uniform start offsets, or
             None for the map's exact start pose.
@@ -83,22 +84,19 @@ class CorridorEnv(gym.Env):
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        if isinstance(world_config, Mapping):  # as gymnasium.make kwargs a config can keep
-            try:
-                world_config = WorldConfig(**world_config)
-            except TypeError as exc:
-                raise TypeError(
-                    f"world_config: expected a WorldConfig or a dict of its fields, got "
-                    f"{dict(world_config)!r} ({exc})"
-                ) from None
-        if isinstance(corridor_map, (str, os.PathLike)):
-            corridor_map = load_map(corridor_map)
-        if not isinstance(corridor_map, CorridorMap):
-            raise TypeError(
-                f"corridor_map must be a CorridorMap, a map name or a path, got {corridor_map!r}"
-            )
+        # a map name or path and a dict of WorldConfig fields (as gymnasium.make kwargs keep a
+        # config) are CorridorWorld's to take
         self.world = CorridorWorld(corridor_map, world_config)
-        steps = 81 if max_episode_steps is None else max_episode_steps
+        corridor_map = self.world.map
+        # a circuit's actions with exact motion, about: a forward step per forward_distance of
+        # route, less one for each turn or u-turn (a turn from the decision point covers the
+        # corner): exactly the 29 of figure2 and the 34 of lshape
+        route = self.world.route
+        turns = sum(kind != "straight" for kind in route.kinds)
+        circuit = round(route.length / self.world.config.forward_distance) - turns
+        # the default is the only cap gymnasium.make can give the env (make keeps
+        # max_episode_steps for its TimeLimit): 81, or two circuits of a longer map's route
+        steps = max(81, 2 * circuit) if max_episode_steps is None else max_episode_steps
         if (
             isinstance(steps, (bool, np.bool_))
             or not isinstance(steps, (int, np.integer))
@@ -106,24 +104,33 @@ class CorridorEnv(gym.Env):
         ):
             raise ValueError(f"max_episode_steps must be an int >= 1, got {steps!r}")
         self.max_episode_steps = int(steps)
-        # a circuit's actions with exact motion, about: a forward step per forward_distance of
-        # route, less one for each turn or u-turn (a turn from the decision point covers the
-        # corner): exactly the 29 of figure2 and the 34 of lshape
-        route = self.world.route
-        turns = sum(kind != "straight" for kind in route.kinds)
-        circuit = round(route.length / self.world.config.forward_distance) - turns
         if circuit > self.max_episode_steps:
             warnings.warn(
                 f"map {corridor_map.name!r}: a circuit of its route takes about {circuit} "
                 f"actions, more than max_episode_steps={self.max_episode_steps}, so every "
-                "episode is cut before a circuit ends; pass a larger max_episode_steps (the "
-                "default 81 is 2.8 circuits of figure2)",
+                "episode is cut before a circuit ends; pass a larger max_episode_steps, or "
+                f"leave it None (here {max(81, 2 * circuit)}: 81, or two circuits of a longer "
+                "route)",
                 stacklevel=2,
             )
         self.render_mode = render_mode
         if start_perturbation is not None:
-            d, a = (float(v) for v in start_perturbation)
             half = corridor_map.corridor_width / 2 - self.world.config.robot_radius
+            pair = (
+                (
+                    isinstance(start_perturbation, Sequence)
+                    and not isinstance(start_perturbation, (str, bytes))
+                    or isinstance(start_perturbation, np.ndarray)
+                    and start_perturbation.ndim == 1
+                )
+                and len(start_perturbation) == 2
+                and all(
+                    isinstance(v, (int, float, np.integer, np.floating))
+                    and not isinstance(v, (bool, np.bool_))
+                    for v in start_perturbation
+                )
+            )
+            d, a = (float(v) for v in start_perturbation) if pair else (math.nan, math.nan)
             if not (0 <= d < half and 0 <= a <= np.pi / 2):
                 raise ValueError(
                     f"start_perturbation must be (metres in [0, {half:.2f}), radians in "

@@ -83,7 +83,8 @@ class CorridorExpert:
             corridors are 0.4 m wide or narrower, where 0.2 is not inside the corridor, two
             thirds of half the width (as 0.2 is of the shipped maps' 0.3).
         open_range: a range above this (metres) counts as open in the reactive fallback of the
-            way back (where no corridor runs any way the robot can face).
+            way back (where no corridor runs any way the robot can face), less than the sensors'
+            ``max_range``; None (default): 0.6, or 0.8 of ``max_range`` where that is shorter.
     """
 
     def __init__(
@@ -92,7 +93,7 @@ class CorridorExpert:
         world_config: WorldConfig | None = None,
         *,
         on_route_tolerance: float | None = None,
-        open_range: float = 0.6,
+        open_range: float | None = None,
     ) -> None:
         if not isinstance(corridor_map, CorridorMap):
             raise TypeError(
@@ -111,6 +112,8 @@ class CorridorExpert:
         half = corridor_map.corridor_width / 2
         if on_route_tolerance is None:
             on_route_tolerance = 0.2 if 0.2 < half else 2.0 * half / 3.0
+        if open_range is None:
+            open_range = min(0.6, 0.8 * self.config.max_range)
         for name, value, top, what in (
             ("on_route_tolerance", on_route_tolerance, half, "half the corridor's width"),
             ("open_range", open_range, self.config.max_range, "the range sensors' max_range"),

@@ -11,6 +11,7 @@ This module only knows the observation layout; it does not import the env or the
 from __future__ import annotations
 
 import functools
+import math
 from typing import Any
 
 import numpy as np
@@ -55,8 +56,14 @@ def describe(
         raise ValueError(f"a corridor observation is [left, front, right], got shape {obs.shape}")
     if not np.all(np.isfinite(obs)) or np.any(obs < 0):
         raise ValueError(f"sensor distances must be finite and >= 0, got {obs.tolist()}")
-    if max_range <= 0 or width < 1:
-        raise ValueError("max_range must be > 0 and width >= 1")
+    if (
+        isinstance(max_range, (bool, np.bool_))
+        or not isinstance(max_range, (int, float, np.integer, np.floating))
+        or not (math.isfinite(max_range) and max_range > 0)
+    ):
+        raise ValueError(f"max_range: expected metres > 0 (the sensors' range), got {max_range!r}")
+    if isinstance(width, (bool, np.bool_)) or not isinstance(width, (int, np.integer)) or width < 1:
+        raise ValueError(f"width: expected an int >= 1 (characters), got {width!r}")
     lines = [f"robot sensors (distance to the nearest wall; full bar = {max_range:g} m)"]
     for name, dist in zip(_SENSORS, obs, strict=True):
         filled = int(round(min(dist, max_range) / max_range * width))

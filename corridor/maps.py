@@ -112,13 +112,21 @@ class CorridorMap:
             pairs.add((a, b))
             pairs.add((b, a))
         if len(self.route) < 4 or self.route[0] != self.route[-1]:
-            raise ValueError("route must be a closed walk of at least 3 nodes (first == last)")
+            raise ValueError(
+                "route must be a closed walk of at least 3 nodes, its first node repeated at "
+                f"the end (e.g. [A, B, C, A]), got {list(self.route)}"
+            )
         for a, b in zip(self.route[:-1], self.route[1:], strict=True):
             if (a, b) not in pairs:
                 raise ValueError(f"route step {a!r} -> {b!r} is not a corridor")
         first = np.subtract(self.nodes[self.route[1]], self.nodes[self.route[0]])
-        if not 0 < self.start_offset < float(np.linalg.norm(first)):
-            raise ValueError("start_offset must lie inside the route's first corridor")
+        length = float(np.linalg.norm(first))
+        if not 0 < self.start_offset < length:
+            raise ValueError(
+                f"start_offset must lie inside the route's first corridor, "
+                f"{self.route[0]!r} -> {self.route[1]!r}: in (0, {length:g}) m, got "
+                f"{self.start_offset!r}"
+            )
 
     # ------------------------------------------------------------------ geometry
     def free_cells(self) -> tuple[np.ndarray, tuple[int, int]]:
@@ -452,8 +460,11 @@ def available_maps() -> list[str]:
 
 
 def load_map(name_or_path: str | Path) -> CorridorMap:
-    """Load a shipped map by name (``"figure2"``, ``"lshape"``) or any map JSON file by path."""
+    """Load a shipped map by name (``"figure2"``, ``"lshape"``) or any map JSON file by path
+    (a name ending in ``.json`` is a path; so is any other existing file that no shipped map is
+    named)."""
     path = Path(name_or_path)
+    res = resources.files("corridor") / "maps" / f"{name_or_path}.json"
     if path.suffix == ".json":  # a file path
         if not path.is_file():
             raise ValueError(
@@ -461,11 +472,15 @@ def load_map(name_or_path: str | Path) -> CorridorMap:
                 f"shipped map names {available_maps()}"
             )
         text = path.read_text()
-    else:
-        res = resources.files("corridor") / "maps" / f"{name_or_path}.json"
-        if not res.is_file():
-            raise ValueError(f"unknown map {name_or_path!r}; shipped maps: {available_maps()}")
+    elif res.is_file():
         text = res.read_text()
+    elif path.is_file():  # a map file named otherwise (mymap.txt, a temporary file)
+        text = path.read_text()
+    else:
+        raise ValueError(
+            f"unknown map {str(name_or_path)!r}; shipped maps: {available_maps()}, or the path "
+            "of a map JSON file"
+        )
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:

@@ -8,7 +8,8 @@ into sub-steps of at most ``WorldConfig.substep`` metres of travel (or ``substep
 of rotation); before each sub-step the new pose is tested with ``Space.shape_query``, and a
 sub-step whose position would overlap a wall is undone: the robot keeps its last free position,
 stops translating for the rest of the action (rotation, which a round robot can always do,
-completes) and the action reports a wall contact. So the robot never passes through a wall.
+completes) and the action reports a wall contact. So the robot never passes through a wall
+(``substep`` must be less than the robot's diameter, else one sub-step could jump a wall).
 
 - ``FORWARD``: ``forward_distance`` (0.20 m) straight ahead.
 - ``TURN_LEFT`` / ``TURN_RIGHT``: a quarter circle of radius ``turn_radius`` (0.20 m): the robot
@@ -48,7 +49,8 @@ standing, so the ray is cast once per sensor and the 15 readings differ by their
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+import os
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, fields
 from enum import IntEnum
 from typing import Any
@@ -56,7 +58,7 @@ from typing import Any
 import numpy as np
 import pymunk
 
-from corridor.maps import CorridorMap, RouteProgress
+from corridor.maps import CorridorMap, RouteProgress, load_map
 
 __all__ = ["Action", "CorridorWorld", "WorldConfig", "N_ACTIONS", "SENSOR_NAMES"]
 
@@ -124,13 +126,28 @@ class WorldConfig:
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == "n_readings":
-                if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
                     raise ValueError(f"WorldConfig.n_readings must be an int >= 1, got {v!r}")
-            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                object.__setattr__(self, f.name, int(v))  # numpy ints kept plain (JSON)
+            elif (
+                isinstance(v, (bool, np.bool_))
+                or not isinstance(v, (int, float, np.integer, np.floating))
+                or not math.isfinite(v)
+            ):
                 raise ValueError(f"WorldConfig.{f.name} must be a finite number, got {v!r}")
+            else:
+                object.__setattr__(self, f.name, float(v))  # numpy numbers kept plain (JSON)
         for name in ("robot_radius", "forward_distance", "turn_radius", "substep", "max_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"WorldConfig.{name} must be > 0, got {getattr(self, name)}")
+        if not self.substep < 2 * self.robot_radius:
+            # a longer sub-step can carry the robot across a wall (walls have no thickness)
+            # between two overlap tests
+            raise ValueError(
+                f"WorldConfig.substep ({self.substep:g} m) must be less than the robot's "
+                f"diameter (2 * robot_radius = {2 * self.robot_radius:g} m), or a sub-step can "
+                "jump a wall; pass a smaller substep"
+            )
         if not 0 < self.substep_angle <= math.pi / 2:
             raise ValueError("WorldConfig.substep_angle must be in (0, pi/2]")
         if not 0 <= self.min_range < self.max_range:
@@ -162,11 +179,37 @@ class CorridorWorld:
     """A corridor map in a pymunk space with one robot; tracks progress along the route.
 
     Args:
-        corridor_map: the map (walls and route).
-        config: robot, motion and sensor parameters.
+        corridor_map: the map (walls and route): a :class:`CorridorMap`, or the name of a shipped
+            map / a JSON path (as :class:`corridor.env.CorridorEnv` takes it).
+        config: robot, motion and sensor parameters: a :class:`WorldConfig`, a dict of its
+            fields, or None for the defaults.
     """
 
-    def __init__(self, corridor_map: CorridorMap, config: WorldConfig | None = None) -> None:
+    def __init__(
+        self,
+        corridor_map: CorridorMap | str | os.PathLike[str],
+        config: WorldConfig | Mapping[str, Any] | None = None,
+    ) -> None:
+        if isinstance(corridor_map, (str, os.PathLike)):
+            corridor_map = load_map(corridor_map)
+        if not isinstance(corridor_map, CorridorMap):
+            raise TypeError(
+                f"corridor_map: expected a CorridorMap, a map name or a map JSON path, got "
+                f"{corridor_map!r:.80}"
+            )
+        if isinstance(config, Mapping):
+            try:
+                config = WorldConfig(**config)
+            except TypeError as exc:
+                raise TypeError(
+                    f"world_config: expected a WorldConfig or a dict of its fields, got "
+                    f"{dict(config)!r} ({exc})"
+                ) from None
+        if config is not None and not isinstance(config, WorldConfig):
+            raise TypeError(
+                f"world_config: expected a WorldConfig, a dict of its fields or None, got "
+                f"{config!r:.80}"
+            )
         self.map = corridor_map
         self.config = config or WorldConfig()
         if corridor_map.corridor_width <= 2 * self.config.robot_radius:

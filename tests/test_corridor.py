@@ -326,7 +326,7 @@ def test_a_map_whose_circuit_the_step_cap_cuts_says_so(recwarn):
         "nodes": {"A": [0, 0], "B": [6.0, 0], "C": [6.0, 4.0], "D": [0, 4.0]},
     }
     with pytest.warns(UserWarning, match=r"takes about 96 actions, more than max_episode_steps=81"):
-        CorridorEnv(map_from_dict(big))
+        CorridorEnv(map_from_dict(big), max_episode_steps=81)
     env = CorridorEnv(map_from_dict(big), max_episode_steps=300)
     actions, _, terminated, info = drive(env, CorridorExpert(env.corridor_map), seed=0, episodes=1)[
         0
@@ -801,3 +801,184 @@ def test_the_expert_takes_a_narrow_map_of_ones_own():
     assert terminated and info["is_success"] and len(actions) == 39
     with pytest.raises(ValueError, match="on_route_tolerance"):
         CorridorExpert(narrow, on_route_tolerance=0.2)  # an explicit value is still checked
+
+
+def test_a_sub_step_longer_than_the_robot_is_refused():
+    """A sub-step of more than the robot's diameter can carry it from one side of a wall to the
+    other between two overlap tests: WorldConfig(robot_radius=0.05, substep=0.25,
+    forward_distance=0.25) walked the robot out through the side wall of lshape's first
+    corridor, and on out of the map, without a contact. Such a config is now refused, naming
+    both values; a sub-step just under the diameter is taken, and stops at the wall."""
+    with pytest.raises(ValueError, match=r"substep.*0\.25.*robot_radius"):
+        WorldConfig(robot_radius=0.05, substep=0.25, forward_distance=0.25)
+    m = load_map("lshape")
+    w = CorridorWorld(m, WorldConfig(robot_radius=0.05, substep=0.099, forward_distance=0.25))
+    w.reset()
+    w.step(L)  # now facing the corridor's side wall, y = 0.3
+    contacts = [w.step(F) for _ in range(4)]
+    assert any(contacts) and m.is_free(*w.pose[:2])
+    assert w.pose[1] <= 0.3 - 0.05 + 1e-9
+
+
+def test_the_world_and_the_baseline_take_what_the_env_takes():
+    """CorridorEnv and CorridorExpert take a map name and a dict of WorldConfig fields;
+    CorridorWorld, which the baseline's functions build, failed on either with an
+    AttributeError ('dict' object has no attribute 'robot_radius', 'str' object has no
+    attribute 'corridor_width'), score_tables with "replace() should be called on dataclass
+    instances". They now take them too, and refuse anything else by name."""
+    fields = {"forward_noise": 0.1, "heading_noise": 0.05}
+    world = CorridorWorld("lshape", fields)
+    assert world.map == load_map("lshape") and world.config == WorldConfig(**fields)
+    small = map_from_dict(SMALL)
+    ps = PrioritizedSweepingConfig(max_steps=100)
+    assert run_prioritized_sweeping(small, ps, world_config=fields, seed=0) == (
+        run_prioritized_sweeping(small, ps, world_config=WorldConfig(**fields), seed=0)
+    )
+    assert score_tables(small, ps, steps=50, world_config=fields) == score_tables(
+        small, ps, steps=50, world_config=WorldConfig(**fields)
+    )
+    with pytest.raises(TypeError, match=r"world_config: expected a WorldConfig.*'legged'"):
+        CorridorWorld(small, "legged")
+    with pytest.raises(TypeError, match="world_config.*forward_nois"):
+        CorridorWorld(small, {"forward_nois": 0.1})
+    with pytest.raises(TypeError, match="corridor_map: expected a CorridorMap"):
+        CorridorWorld(SMALL)
+
+
+def test_gymnasium_make_drives_a_map_whose_circuit_is_longer_than_81_actions(recwarn):
+    """gymnasium.make takes max_episode_steps for its TimeLimit, so the env's own cap can only be
+    its default: it was 81 whatever the map, and on a map of one's own whose circuit takes more
+    (a 6 m x 4 m loop, 96 actions) every episode made with gymnasium.make (so with ``torchcbl
+    teach corridor --map``, make_vec, the benchmark) was cut before its circuit ended, under a
+    warning to pass a max_episode_steps make cannot pass. The default is now 81 or two
+    circuits of the map, whichever is more: 81 on the shipped maps (29 and 34 actions)."""
+    big = {**SMALL, "nodes": {"A": [0, 0], "B": [6.0, 0], "C": [6.0, 4.0], "D": [0, 4.0]}}
+    env = gym.make(corridor.ENV_ID, corridor_map=map_from_dict(big))
+    assert env.unwrapped.max_episode_steps == 192
+    ((actions, _, terminated, info),) = drive(
+        env, CorridorExpert(env.unwrapped.corridor_map), seed=0, episodes=1
+    )
+    assert terminated and info["is_success"] and len(actions) == 96
+    assert not [w for w in recwarn if "circuit of its route" in str(w.message)]
+    assert CorridorEnv("figure2").max_episode_steps == CorridorEnv("lshape").max_episode_steps == 81
+
+
+def test_a_map_file_not_named_json_is_read(tmp_path):
+    """load_map took a path for a file only when its name ended in .json: a map kept as
+    ``mymap.txt`` (or saved by tempfile without a suffix), an existing file, was "unknown map
+    ...; shipped maps: [...]". An existing file is now read whatever its name; a shipped map's
+    name still wins over a file of that name, and a name that is neither says both ways."""
+    src = load_map("lshape")
+    for name in ("mymap.txt", "mymap"):
+        path = tmp_path / name
+        path.write_text(json.dumps(src.to_dict()))
+        assert load_map(path) == src and load_map(str(path)) == src
+        assert CorridorEnv(str(path)).corridor_map == src
+    with pytest.raises(ValueError, match=r"unknown map 'nope'; shipped maps.*or the path of a map"):
+        load_map("nope")
+
+
+@pytest.mark.parametrize("bad", [(0.1,), (0.1, 0.2, 0.3), 0.1, ("a", 0.1), "ab", np.zeros((2, 2))])
+def test_a_malformed_start_perturbation_is_named(bad):
+    """start_perturbation=(0.1,) was "not enough values to unpack (expected 2, got 1)", 0.1
+    "'float' object is not iterable", ("a", 0.1) "could not convert string to float": none said
+    which argument or what it takes. Each is now a ValueError naming start_perturbation, the
+    (metres, radians) pair it takes and the value given."""
+    with pytest.raises(ValueError, match=r"start_perturbation must be \(metres.*radians.*got"):
+        CorridorEnv(start_perturbation=bad)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"start_offset": 0}, r"start_offset .*in \(0, 1\) m.*got 0\.0"),
+        ({"start_offset": 1.5}, r"start_offset .*'A' -> 'B'.*in \(0, 1\) m.*got 1\.5"),
+        ({"route": ["A", "B", "C", "D"]}, r"closed walk.*got \['A', 'B', 'C', 'D'\]"),
+        ({"route": ["A", "B", "A"]}, r"at least 3 nodes.*got \['A', 'B', 'A'\]"),
+    ],
+)
+def test_a_bad_route_or_start_offset_names_the_value(change, message):
+    """A route that is not a closed walk was "route must be a closed walk of at least 3 nodes
+    (first == last)" and a start offset off the first corridor "start_offset must lie inside
+    the route's first corridor", without the value given or the corridor's length: in a map of
+    one's own the slip had to be found by hand. Both now say what was given and what fits."""
+    with pytest.raises(ValueError, match=message):
+        map_from_dict({**SMALL, **change})
+
+
+def test_the_expert_takes_a_robot_whose_sensors_reach_less_than_its_open_range():
+    """CorridorExpert's open_range (a true range above it is open, in its reactive fallback)
+    defaulted to 0.6 m and had to be less than the sensors' max_range: for a robot of one's own
+    whose sensors reach 0.6 m or less, CorridorExpert(map, WorldConfig(max_range=0.5)) refused
+    its own default ("open_range: expected metres in (0, 0.5) ..., got 0.6"), and so did the
+    benchmark's corridor teacher on such an env. The default is now 0.6, or 0.8 of max_range
+    where that is shorter; the expert drives clean circuits with such a robot."""
+    world = WorldConfig(max_range=0.5)
+    expert = CorridorExpert(load_map("figure2"), world)
+    assert expert.open_range == pytest.approx(0.4)
+    assert CorridorExpert(load_map("figure2")).open_range == 0.6
+    env = CorridorEnv("figure2", world)
+    ((actions, _, terminated, info),) = drive(env, expert, seed=0, episodes=1)
+    assert terminated and info["is_success"] and len(actions) == 29
+    from corridor.benchmark import teacher
+
+    assert teacher(env).open_range == pytest.approx(0.4)
+    with pytest.raises(ValueError, match="open_range"):
+        CorridorExpert(load_map("figure2"), world, open_range=0.6)  # a value given is checked
+
+
+def test_the_baseline_refuses_a_wall_threshold_its_sensors_cannot_reach():
+    """A reading never exceeds the sensors' max_range, so with the baseline's wall_threshold
+    (0.6 m) at or above it every wall bit is set: with WorldConfig(max_range=0.5) Prioritized
+    Sweeping learned on one state of its 8, silently, and never drove a circuit. Each of the
+    baseline's functions now refuses it, naming both values and what to pass."""
+    small, short = map_from_dict(SMALL), WorldConfig(max_range=0.5)
+    message = r"wall_threshold \(0\.6 m\) must be less than the sensors' max_range \(0\.5 m\)"
+    for call in (
+        lambda: run_prioritized_sweeping(small, world_config=short),
+        lambda: passing_tables(small, world_config=short),
+        lambda: evaluation_passes(small, (0,) * 8, world_config=short),
+        lambda: score_tables(small, steps=10, world_config=short),
+    ):
+        with pytest.raises(ValueError, match=message):
+            call()
+    ps = PrioritizedSweepingConfig(wall_threshold=0.45, max_steps=50)
+    assert run_prioritized_sweeping(small, ps, world_config=short).learning_steps == 50
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"width": 10.5}, r"width: expected an int >= 1.*got 10\.5"),
+        ({"width": True}, r"width: expected an int >= 1.*got True"),
+        ({"max_range": math.nan}, r"max_range: expected metres > 0.*got nan"),
+        ({"max_range": -1.0}, r"max_range: expected metres > 0.*got -1\.0"),
+    ],
+)
+def test_the_keyboard_views_settings_are_named(kwargs, message):
+    """corridor.human.describe (the text view of the keyboard teacher, make_teacher passes its
+    max_range on) failed on width=10.5 with "can't multiply sequence by non-int of type
+    'float'", on max_range=nan with "cannot convert float NaN to integer", drew empty bars for
+    width=True, and said "max_range must be > 0 and width >= 1" without the value given."""
+    from corridor.human import describe
+
+    with pytest.raises(ValueError, match=message):
+        describe(np.array([0.3, 1.0, 0.3]), None, **kwargs)
+
+
+def test_world_config_takes_numpy_numbers_as_plain_ones():
+    """A sweep over a numpy array gives numpy scalars: WorldConfig(max_range=np.int64(2)) and
+    WorldConfig(noise_sd=np.float32(0.02)) were refused as "must be a finite number", and
+    n_readings=np.int64(10) was kept as numpy, so the config's fields (as teaching_setup and a
+    session keep them) did not go to JSON. They are now taken and kept as plain int / float;
+    a bool or a non-finite value is still refused."""
+    cfg = WorldConfig(max_range=np.int64(2), noise_sd=np.float32(0.02), n_readings=np.int64(10))
+    assert cfg == WorldConfig(max_range=2.0, noise_sd=float(np.float32(0.02)), n_readings=10)
+    fields = dataclasses.asdict(cfg)
+    assert type(fields["max_range"]) is float and type(fields["n_readings"]) is int
+    assert json.loads(json.dumps(fields)) == fields
+    env = CorridorEnv("figure2", cfg)
+    assert env.observation_space.high.tolist() == [2.0, 2.0, 2.0]
+    for bad in (dict(max_range=np.bool_(True)), dict(noise_sd=np.float32("nan"))):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            WorldConfig(**bad)
