@@ -609,10 +609,16 @@ class GaussianMixtureSet(nn.Module):
                 f"{x.dtype}; convert with .astype(float)"
             )
         if x.ndim != 2 or x.shape[1] != self.n_features:
+            if x.ndim == 1 and self.n_features == 1:
+                hint = "; pass N observations of the one feature as x.reshape(-1, 1)"
+            elif x.ndim == 1 and x.shape[0] == self.n_features:
+                hint = "; pass one observation as obs[None, :]"
+            else:
+                hint = ""
             raise ValueError(
                 f"{name}: expected shape [N, {self.n_features}] (N >= 1 rows of "
                 f"n_features={self.n_features} as given to the constructor) but got shape "
-                f"{tuple(x.shape)}; pass one observation as obs[None, :]"
+                f"{tuple(x.shape)}{hint}"
             )
         if x.shape[0] == 0:
             raise ValueError(
