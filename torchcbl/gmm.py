@@ -729,6 +729,12 @@ class GaussianMixtureSet(nn.Module):
             )
         x_np = self._check_observations(observations)
         y_np = self._check_actions(actions, x_np.shape[0])
+        if not torch.is_inference_mode_enabled():
+            for name, buf in self._buffers.items():
+                if buf is not None and buf.is_inference():
+                    # built under torch.inference_mode(): such a buffer cannot be written in
+                    # place outside it, so it becomes an ordinary copy (same values)
+                    self._buffers[name] = buf.clone()
         caller = torch.get_num_threads()
         with _threads(1):
             return self._fit(x_np, y_np, incremental=incremental, caller_threads=caller)
