@@ -29,6 +29,10 @@ def _data(seed: int = 0, n: int = 60, d: int = 3, a: int = 3):
         ({"var_floor": -1.0}, "var_floor"),
         ({"var_floor": math.nan}, "var_floor"),
         ({"tol": 0.0}, "tol"),
+        # a bool was taken as the number it equals: var_floor=True fitted with a floor of 1.0
+        ({"var_floor": True}, "var_floor"),
+        ({"var_floor": False}, "var_floor"),
+        ({"tol": True}, "tol"),
         ({"seed": 1.5}, "seed"),
     ],
 )

@@ -451,9 +451,13 @@ class GaussianMixtureSet(nn.Module):
         )  # fmt: skip
         if criterion not in _CRITERIA:
             raise ValueError(f"Expected criterion in {_CRITERIA} but got {criterion!r}")
-        if not (isinstance(var_floor, (int, float)) and math.isfinite(var_floor)) or var_floor < 0:
+
+        def real(v: Any) -> bool:  # a bool is no number of these (True would be 1.0)
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        if not real(var_floor) or var_floor < 0:
             raise ValueError(f"Expected var_floor to be a finite float >= 0 but got {var_floor!r}")
-        if not (isinstance(tol, (int, float)) and math.isfinite(tol)) or tol <= 0:
+        if not real(tol) or tol <= 0:
             raise ValueError(f"Expected tol to be a finite float > 0 but got {tol!r}")
         if (
             isinstance(seed, bool)
