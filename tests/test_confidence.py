@@ -126,3 +126,30 @@ def test_a_rule_reused_in_another_session_starts_from_its_own_refits():
     fresh = decisions(ConfidentExecution(AutoThresholdRule()))
     assert any(auto for auto, _ in fresh)
     assert decisions(used) == fresh
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        lambda y: y[:1],  # broadcast against the model's answers: silently wrong thresholds
+        lambda y: y[:50],
+        lambda y: y[:, None],
+        lambda y: y + 0.5,  # truncated to the integer below
+        lambda y: y + 3,  # no such action
+    ],
+)
+def test_auto_threshold_update_refuses_labels_that_do_not_fit_the_observations(bad):
+    """AutoThresholdRule.update took any label vector torch could broadcast: one label for
+    100 observations set both thresholds from a comparison with that one label (action 1's
+    2.0 became 1.09), and float labels were truncated. It now names the expected shape."""
+    rng = np.random.default_rng(0)
+    x = np.r_[rng.normal(0, 1, (50, 2)), rng.normal(1.5, 1, (50, 2))]
+    y = np.r_[np.zeros(50, int), np.ones(50, int)]
+    model = GaussianMixtureSet(2, 2, 2).fit(x, y)
+    rule = AutoThresholdRule()
+    with pytest.raises(ValueError, match=r"AutoThresholdRule.update: expected"):
+        rule.update(model, x, bad(y))
+    assert rule.thresholds is None
+    for labels in (y, y.tolist(), torch.from_numpy(y), y.astype(np.uint8)):
+        rule.update(model, x, labels)
+        assert rule.thresholds is not None

@@ -201,6 +201,26 @@ def test_fitted_state_is_made_of_ordinary_tensors(fitted):
     model.means_.add_(0.0)  # and updatable in place
 
 
+def test_a_model_built_under_inference_mode_fits_outside_it(fitted):
+    """A GaussianMixtureSet constructed inside ``torch.inference_mode()`` (an evaluation
+    script's block) holds inference buffers: fit() or refit() outside that block raised
+    torch's "Inplace update to inference tensor outside InferenceMode". The fit now replaces
+    such buffers, with the same values as a model built normally."""
+    model, x, y = fitted
+    with torch.inference_mode():
+        built = GaussianMixtureSet(3, 3, max_components=6, seed=3)
+    built.fit(x, y)
+    with torch.inference_mode():
+        inside = GaussianMixtureSet(3, 3, max_components=6, seed=3).fit(x[:-20], y[:-20])
+    inside.refit(x, y)
+    plain = GaussianMixtureSet(3, 3, max_components=6, seed=3).fit(x[:-20], y[:-20]).refit(x, y)
+    for got, want in ((built, model), (inside, plain)):
+        for (name, b), (_, w) in zip(got.named_buffers(), want.named_buffers(), strict=True):
+            assert not b.is_inference() and b.dtype == w.dtype, name
+            assert torch.equal(b, w), name
+        assert torch.equal(got.classify(x).action, want.classify(x).action)
+
+
 def test_predictions_are_ordinary_tensors_at_every_batch_size(fitted):
     """Small batches take a numpy path, large ones torch's: either way the caller gets tensors
     it may update in place and use in its own autograd graph."""

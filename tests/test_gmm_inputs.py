@@ -29,6 +29,10 @@ def _data(seed: int = 0, n: int = 60, d: int = 3, a: int = 3):
         ({"var_floor": -1.0}, "var_floor"),
         ({"var_floor": math.nan}, "var_floor"),
         ({"tol": 0.0}, "tol"),
+        # a bool was taken as the number it equals: var_floor=True fitted with a floor of 1.0
+        ({"var_floor": True}, "var_floor"),
+        ({"var_floor": False}, "var_floor"),
+        ({"tol": True}, "tol"),
         ({"seed": 1.5}, "seed"),
     ],
 )
@@ -61,6 +65,25 @@ def test_bad_observations_are_refused_everywhere(obs, exc, match):
             call(obs)
     with pytest.raises(exc, match=match):
         model.fit(obs, np.zeros(len(obs) if obs.ndim else 1, dtype=int))
+
+
+def test_a_one_dimensional_array_gets_the_reshape_that_fits_it():
+    """A 1-D array was always told "pass one observation as obs[None, :]": with one feature,
+    100 values (100 observations, as scikit-learn users pass them) were sent to obs[None, :],
+    whose shape (1, 100) is refused again. Now the hint depends on the case, and an array
+    that fits neither gets none."""
+    rng = np.random.default_rng(0)
+    x1 = rng.normal(size=100)
+    y = (x1 > 0).astype(int)
+    one = GaussianMixtureSet(2, 1, 3)
+    for call in (lambda: one.fit(x1, y), lambda: one.classify(x1)):
+        with pytest.raises(ValueError, match=r"got shape \(100,\); .*x\.reshape\(-1, 1\)"):
+            call()
+    fitted = one.fit(x1.reshape(-1, 1), y)  # the hint's shape works
+    assert fitted.log_prob(x1.reshape(-1, 1)).shape == (100, 2)
+    three, _, _ = _fitted()
+    with pytest.raises(ValueError, match=r"got shape \(7,\)$"):
+        three.classify(np.zeros(7))
 
 
 def test_nan_and_inf_rows_are_named():

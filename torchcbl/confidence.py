@@ -247,6 +247,29 @@ class PosteriorRule:
         return f"PosteriorRule(min_posterior={self.min_posterior})"
 
 
+def _labels(actions: Any, n: int, n_actions: int) -> torch.Tensor:
+    """The teacher's labels as a long tensor [n], checked: one integer in [0, n_actions) per
+    observation (a label vector of another length would broadcast against the model's
+    answers, or a float label be truncated, and the thresholds come out silently wrong)."""
+    if isinstance(actions, torch.Tensor):
+        actions = actions.detach().cpu().numpy()
+    y = np.asarray(actions)
+    if y.dtype.kind not in "iu" or y.shape != (n,):
+        raise ValueError(
+            f"AutoThresholdRule.update: expected actions as integer labels of shape [{n}] "
+            f"(one per observation) but got dtype {y.dtype} and shape {tuple(y.shape)}; pass "
+            "the labels the model was fitted on"
+        )
+    bad = (y < 0) | (y >= n_actions)
+    if bad.any():
+        raise ValueError(
+            f"AutoThresholdRule.update: expected labels in [0, {n_actions}) but got "
+            f"{y[bad][0]!r} (row {int(np.flatnonzero(bad)[0])}); pass the labels the model "
+            "was fitted on"
+        )
+    return torch.from_numpy(y.astype(np.int64))
+
+
 class AutoThresholdRule:
     """Per-action distance thresholds set from the demonstrations after every refit.
 
@@ -305,8 +328,8 @@ class AutoThresholdRule:
         [M, D], ``actions`` [M]) classified by the refitted model."""
         c = model.classify(observations)
         action, distance = c.action.cpu(), c.distance.cpu()  # a CUDA model's answer too
-        labels = torch.as_tensor(actions, dtype=torch.long).cpu().reshape(-1)
         n_actions = c.posterior.shape[1]
+        labels = _labels(actions, len(action), n_actions)
         wrong = action != labels
         thr = torch.full((n_actions,), self.max_std, dtype=torch.float64)
         for a in range(n_actions):

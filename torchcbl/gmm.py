@@ -451,9 +451,13 @@ class GaussianMixtureSet(nn.Module):
         )  # fmt: skip
         if criterion not in _CRITERIA:
             raise ValueError(f"Expected criterion in {_CRITERIA} but got {criterion!r}")
-        if not (isinstance(var_floor, (int, float)) and math.isfinite(var_floor)) or var_floor < 0:
+
+        def real(v: Any) -> bool:  # a bool is no number of these (True would be 1.0)
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        if not real(var_floor) or var_floor < 0:
             raise ValueError(f"Expected var_floor to be a finite float >= 0 but got {var_floor!r}")
-        if not (isinstance(tol, (int, float)) and math.isfinite(tol)) or tol <= 0:
+        if not real(tol) or tol <= 0:
             raise ValueError(f"Expected tol to be a finite float > 0 but got {tol!r}")
         if (
             isinstance(seed, bool)
@@ -609,10 +613,16 @@ class GaussianMixtureSet(nn.Module):
                 f"{x.dtype}; convert with .astype(float)"
             )
         if x.ndim != 2 or x.shape[1] != self.n_features:
+            if x.ndim == 1 and self.n_features == 1:
+                hint = "; pass N observations of the one feature as x.reshape(-1, 1)"
+            elif x.ndim == 1 and x.shape[0] == self.n_features:
+                hint = "; pass one observation as obs[None, :]"
+            else:
+                hint = ""
             raise ValueError(
                 f"{name}: expected shape [N, {self.n_features}] (N >= 1 rows of "
                 f"n_features={self.n_features} as given to the constructor) but got shape "
-                f"{tuple(x.shape)}; pass one observation as obs[None, :]"
+                f"{tuple(x.shape)}{hint}"
             )
         if x.shape[0] == 0:
             raise ValueError(
@@ -723,6 +733,12 @@ class GaussianMixtureSet(nn.Module):
             )
         x_np = self._check_observations(observations)
         y_np = self._check_actions(actions, x_np.shape[0])
+        if not torch.is_inference_mode_enabled():
+            for name, buf in self._buffers.items():
+                if buf is not None and buf.is_inference():
+                    # built under torch.inference_mode(): such a buffer cannot be written in
+                    # place outside it, so it becomes an ordinary copy (same values)
+                    self._buffers[name] = buf.clone()
         caller = torch.get_num_threads()
         with _threads(1):
             return self._fit(x_np, y_np, incremental=incremental, caller_threads=caller)
