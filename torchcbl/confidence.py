@@ -93,7 +93,8 @@ def chi2_quantile(q: float, dof: int) -> float:
     Bisection on the regularised lower incomplete gamma function (``torch.special.gammainc``)
     until the bracket is 1e-13 of its upper end; no SciPy needed. Its precision is
     ``gammainc``'s: against SciPy's ``chi2.ppf``, relative errors of at most 5e-14 up to 10
-    degrees of freedom and 1e-10 up to 1,000 (measured at q = 0.5 to 0.99).
+    degrees of freedom and 2.3e-10 up to 1,000 (the largest at 41 degrees of freedom and
+    q = 0.5; measured at q = 0.5 to 0.99).
     """
     if not 0.0 < q < 1.0:
         raise ValueError(f"chi2_quantile: expected q in (0, 1), got {q!r}")

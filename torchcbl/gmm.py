@@ -17,8 +17,13 @@ where ``Var_j`` is the (biased) variance of feature ``j`` over ALL training obse
 actions together. So a discrete feature that is constant inside a component (the lane index), an
 action with a single point or with identical points, all fit without a singular matrix: such a
 component's spread along feature ``j`` is ``sqrt(floor_j)``, i.e. about 3% of that feature's
-overall standard deviation with the default ``var_floor = 1e-3``. The floor is stored in the
-``var_floor_`` buffer.
+overall standard deviation with the default ``var_floor = 1e-3``, as long as the features'
+scales are not far apart. The second term is shared: a feature whose variance is below
+``1e-3 * mean_i(Var_i)`` (a standard deviation some 30 times below the others' for a few
+features) gets a floor larger than its own share, up to wider than the feature itself (a
+spread of about 7 for a feature of standard deviation 1e-4 beside one of 1e4). Put features
+on comparable scales (metres with metres, or standardised) before fitting. The floor is stored
+in the ``var_floor_`` buffer.
 
 Selection of the component count
 --------------------------------
