@@ -219,6 +219,12 @@ class DistanceRule:
 class PosteriorRule:
     """Confident when the posterior of the chosen action, p(a | o), is at least ``min_posterior``.
 
+    The posterior compares only the actions the model has data for: while a single action has
+    been demonstrated its posterior is 1 everywhere, and with two or more it is near 1 far
+    from all of them. So this rule alone may stop asking after the first few labels of a
+    session without a non-interactive phase, and it never asks for far-away states;
+    :class:`DistanceRule` (the paper's) asks where the data is far.
+
     Args:
         min_posterior: threshold in (0, 1]. Default 0.9.
     """
