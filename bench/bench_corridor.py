@@ -39,6 +39,9 @@ def main() -> None:
     parser.add_argument("--actions", type=int, default=5000)
     parser.add_argument("--repeats", type=int, default=3)
     ns = parser.parse_args()
+    for flag, v in (("--actions", ns.actions), ("--repeats", ns.repeats)):
+        if v < 1:
+            parser.error(f"{flag}: expected an int >= 1, got {v}")
     rows = {}
     for policy in ("expert", "expert_noisy", "random"):
         rates = [_run(policy, ns.actions, seed=k) for k in range(ns.repeats)]

@@ -93,4 +93,7 @@ if __name__ == "__main__":
     ap.add_argument("--demos", type=int, default=600, help="teacher demonstrations to fit on")
     ap.add_argument("--steps", type=int, default=3000, help="timed decisions")
     args = ap.parse_args()
+    for flag, v in (("--demos", args.demos), ("--steps", args.steps)):
+        if v < 1:
+            ap.error(f"{flag}: expected an int >= 1, got {v}")
     main(args.demos, args.steps)

@@ -91,6 +91,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--mode", choices=("both", "ce", "cba"), default="both")
     args = parser.parse_args()
+    if args.kills < 1:
+        parser.error(f"--kills: expected an int >= 1, got {args.kills}")
     torch.set_num_threads(1)
     rng = random.Random(args.seed)
     modes = ("ce", "cba") if args.mode == "both" else (args.mode,)

@@ -130,6 +130,8 @@ def main() -> None:
         "shared with other busy processes, waiting for a core then does not count",
     )
     args = parser.parse_args()
+    if args.steps < 1:
+        parser.error(f"--steps: expected an int >= 1, got {args.steps}")
     if args.cpu_time:
         global _clock
         _clock = time.process_time

@@ -1,0 +1,50 @@
+"""The bench scripts as a user runs them: ``python bench/bench_X.py ...`` from the repository."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run(script: str, *args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run(
+        [sys.executable, str(ROOT / "bench" / script), *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=ROOT,
+        timeout=120,
+    )
+
+
+@pytest.mark.parametrize(
+    ("script", "args", "flag"),
+    [
+        ("bench_corridor.py", ["--repeats", "0"], "--repeats"),
+        ("bench_corridor.py", ["--actions", "0"], "--actions"),
+        ("bench_driving.py", ["--demos", "0"], "--demos"),
+        ("bench_driving.py", ["--steps", "-5"], "--steps"),
+        ("bench_kill_resume.py", ["--kills", "0"], "--kills"),
+        ("bench_loop.py", ["--steps", "0"], "--steps"),
+        ("bench_gmm.py", ["--repeats", "0"], "--repeats"),
+        ("bench_refit.py", ["--n", "0"], "--n"),
+    ],
+)
+def test_a_count_below_one_is_a_usage_error(script, args, flag):
+    # Before, bench_corridor --repeats 0 died in max() of an empty list, bench_loop --steps 0
+    # in a division by zero, bench_driving --demos 0 in np.stack, bench_kill_resume --kills 0
+    # with IncompatibleRunDirError; bench_corridor --actions 0 and bench_driving --steps 0
+    # printed a table of zeros and exited 0.
+    done = _run(script, *args)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert done.stdout == ""
+    last = done.stderr.strip().splitlines()[-1]
+    assert f"error: {flag}: expected an int >= 1, got {args[1]}" in last, done.stderr
