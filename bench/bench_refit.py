@@ -54,6 +54,8 @@ def stream(n: int, d: int, a: int, kind: str, seed: int = 0) -> tuple[np.ndarray
     Each action's observations: a mixture of 6 Gaussians in d dimensions. "iid": shuffled;
     "drift": sorted by feature 0 plus noise (the session explores new regions over time).
     """
+    if kind not in ("iid", "drift"):
+        raise ValueError(f"stream kind: expected 'iid' or 'drift', got {kind!r}")
     rng = np.random.default_rng(seed)
     xs, ys = [], []
     for act in range(a):
@@ -298,6 +300,8 @@ def main() -> None:
     known = {"long", "single", "snippet", "threads"}
     if not set(sections) <= known:
         ap.error(f"--sections: expected some of {sorted(known)}, got {ns.sections!r}")
+    if not set(ns.streams.split(",")) <= {"iid", "drift"}:
+        ap.error(f"--streams: expected some of ['drift', 'iid'], got {ns.streams!r}")
     for flag, v in (
         ("--n", ns.n),
         ("--full-every", ns.full_every),

@@ -48,3 +48,13 @@ def test_a_count_below_one_is_a_usage_error(script, args, flag):
     assert done.stdout == ""
     last = done.stderr.strip().splitlines()[-1]
     assert f"error: {flag}: expected an int >= 1, got {args[1]}" in last, done.stderr
+
+
+def test_bench_refit_refuses_a_stream_it_does_not_know():
+    # Before, any name but "drift" ran the shuffled stream and labelled its row with the name
+    # given: --streams drfit printed iid figures as "drfit" and exited 0.
+    done = _run("bench_refit.py", "--sections", "long", "--n", "50", "--streams", "iid,drfit")
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert done.stdout == "" and "Traceback" not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert "error: --streams: expected some of ['drift', 'iid'], got 'iid,drfit'" in last
