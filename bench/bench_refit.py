@@ -288,13 +288,38 @@ def threads_sweep(repeats: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sections", default="long,single,snippet,threads")
-    ap.add_argument("--n", type=int, default=10_000)
-    ap.add_argument("--full-every", type=int, default=50)
-    ap.add_argument("--streams", default="iid,drift")
-    ap.add_argument("--snippet-repeats", type=int, default=3)
-    ap.add_argument("--thread-repeats", type=int, default=3)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--sections",
+        default="long,single,snippet,threads",
+        help="comma-separated, of long, single, snippet, threads (default all)",
+    )
+    ap.add_argument(
+        "--n", type=int, default=10_000, help="long: demonstrations per stream (default 10000)"
+    )
+    ap.add_argument(
+        "--full-every",
+        type=int,
+        default=50,
+        help="long: time the full refit at every N-th step (default %(default)s)",
+    )
+    ap.add_argument(
+        "--streams", default="iid,drift", help="long: comma-separated, of iid, drift (default both)"
+    )
+    ap.add_argument(
+        "--snippet-repeats",
+        type=int,
+        default=3,
+        help="snippet: runs alone and busy, each (default %(default)s)",
+    )
+    ap.add_argument(
+        "--thread-repeats",
+        type=int,
+        default=3,
+        help="threads: timed fits per size and setting (default %(default)s)",
+    )
     ns = ap.parse_args()
     sections = ns.sections.split(",")
     known = {"long", "single", "snippet", "threads"}
