@@ -30,6 +30,7 @@ import copy
 import dataclasses
 import json
 import math
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -43,6 +44,9 @@ from corridor.expert import CorridorExpert
 from corridor.maps import load_map
 from torchcbl import ConfidentTeacher, evaluate_policy
 from torchcbl.gmm import GaussianMixtureSet
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _args, also when loaded by path
+from _args import seeds as seed_list  # noqa: E402
 
 SETTINGS = ("default", "exact", "literal", "aic_paper", "bic", "floor_1e-3")
 BANDS = ((0, 5), (5, 10), (10, 20), (20, 40), (40, 80), (80, 160))
@@ -290,15 +294,11 @@ def _table(summaries: list[dict[str, Any]]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", default="0-9", help="e.g. 0-9 or 0,3,5")
+    parser.add_argument("--seeds", type=seed_list, default="0-9", help="e.g. 0-9 or 0,3,5")
     parser.add_argument("--settings", default=",".join(SETTINGS))
     parser.add_argument("--out", default=None, help="write every run and summary as JSON here")
     ns = parser.parse_args()
-    if "-" in ns.seeds:
-        lo, hi = (int(v) for v in ns.seeds.split("-"))
-        seeds = list(range(lo, hi + 1))
-    else:
-        seeds = [int(v) for v in ns.seeds.split(",")]
+    seeds = ns.seeds
     torch.set_num_threads(1)
     all_runs: dict[str, list[dict[str, Any]]] = {}
     summaries = []
