@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -44,3 +45,26 @@ def test_a_malformed_number_is_a_usage_error_before_anything_runs(script, args, 
     assert done.stdout == "" and "Traceback" not in done.stderr, done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert f"error: argument {flag}: expected" in last and expected in last, last
+
+
+def _strict_json(text: str):
+    def refuse(name: str):
+        raise ValueError(f"{name} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_investigate_corridor_requests_writes_json_without_nan(tmp_path):
+    # Before, a mean or sd of nothing (the sd of one seed, a band of circuits no seed reached)
+    # was written as NaN, which is not JSON: strict readers (jq, JavaScript) refused the line.
+    out = tmp_path / "runs.json"
+    done = _run(
+        "investigate_corridor_requests.py", "--seeds", "0", "--settings", "exact", "--out", str(out)
+    )
+    assert done.returncode == 0, done.stderr
+    last = _strict_json(done.stdout.strip().splitlines()[-1])
+    summary = last["summaries"][0]
+    assert summary["seeds"] == 1 and summary["demonstrations"][1] is None
+    assert None in summary["bands"]  # circuits 81-160: not reached
+    assert _strict_json(out.read_text())["summaries"][0]["demonstrations"][1] is None
+    assert " ± - |" in done.stdout  # the table's sd of one seed
