@@ -68,3 +68,14 @@ def test_investigate_corridor_requests_writes_json_without_nan(tmp_path):
     assert None in summary["bands"]  # circuits 81-160: not reached
     assert _strict_json(out.read_text())["summaries"][0]["demonstrations"][1] is None
     assert " ± - |" in done.stdout  # the table's sd of one seed
+
+
+def test_corridor_expert_recovery_answers_help_without_running():
+    # Before, it took no arguments and ignored them: --help ran its 30-second measurement.
+    done = _run("corridor_expert_recovery.py", "--help")
+    assert done.returncode == 0 and done.stdout.startswith("usage: ")
+    assert "Does the corridor's scripted expert bring the robot back" in done.stdout
+    assert "| mistakes |" not in done.stdout
+    wrong = _run("corridor_expert_recovery.py", "--seeds", "3")
+    assert wrong.returncode == 2 and wrong.stdout == ""
+    assert "unrecognized arguments: --seeds 3" in wrong.stderr
