@@ -41,7 +41,9 @@ def main(argv: list[str] | None = None) -> int:
         default=str(latest_run() / "driving" / "seed_0" / "sessions" / "arm_a"),
     )
     p.add_argument("--caps", type=ints_at_least(1), default="30,60")
-    p.add_argument("--action", type=int, default=0, help="0 stay, 1 left, 2 right")
+    p.add_argument(
+        "--action", type=int, choices=(0, 1, 2), default=0, help="0 stay, 1 left, 2 right"
+    )
     p.add_argument("--var-floor", type=float, default=1e-3, help="relative variance floor")
     a = p.parse_args(argv)
     if not (np.isfinite(a.var_floor) and a.var_floor >= 0):

@@ -79,3 +79,13 @@ def test_corridor_expert_recovery_answers_help_without_running():
     wrong = _run("corridor_expert_recovery.py", "--seeds", "3")
     assert wrong.returncode == 2 and wrong.stdout == ""
     assert "unrecognized arguments: --seeds 3" in wrong.stderr
+
+
+@pytest.mark.parametrize("action", ["5", "-1"])
+def test_driving_components_at_clip_takes_only_the_three_actions(action):
+    # Before, --action 5 died with an IndexError after the fit, and --action -1 reported the
+    # last action's components under the name "action -1".
+    done = _run("driving_components_at_clip.py", "SESSION", "--action", action)
+    assert done.returncode == 2 and done.stdout == "" and "Traceback" not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert f"argument --action: invalid choice: {action} (choose from 0, 1, 2)" in last, last
