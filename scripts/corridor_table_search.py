@@ -205,9 +205,18 @@ def _ceiling(args: tuple[tuple[int, ...], PrioritizedSweepingConfig, str, bool, 
     return len(found), fail
 
 
+def _map_name(text: str) -> str:
+    """--map: a shipped map's name or a map JSON file that loads (argparse's error otherwise)."""
+    try:
+        load_map(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--map", default="figure2")
+    ap.add_argument("--map", type=_map_name, default="figure2")
     ap.add_argument(
         "--penalties",
         type=numbers_at_least_zero,
