@@ -89,8 +89,18 @@ def main(n_demos: int = 600, n_steps: int = 3000) -> dict[str, float]:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--demos", type=int, default=600, help="teacher demonstrations to fit on")
-    ap.add_argument("--steps", type=int, default=3000, help="timed decisions")
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--demos",
+        type=int,
+        default=600,
+        help="teacher demonstrations to fit on (default %(default)s)",
+    )
+    ap.add_argument("--steps", type=int, default=3000, help="timed decisions (default %(default)s)")
     args = ap.parse_args()
+    for flag, v in (("--demos", args.demos), ("--steps", args.steps)):
+        if v < 1:
+            ap.error(f"{flag}: expected an int >= 1, got {v}")
     main(args.demos, args.steps)

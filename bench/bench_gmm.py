@@ -139,11 +139,30 @@ def sklearn_from_our_init(model, x, y, act, k, reg):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--sk-repeats", type=int, default=3)
-    ap.add_argument("--threads", type=int, default=torch.get_num_threads())
-    ap.add_argument("--cases", default="a,b,c")
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--repeats",
+        type=int,
+        default=5,
+        help="timed sweeps of ours per case, and full refits (default %(default)s)",
+    )
+    ap.add_argument(
+        "--sk-repeats",
+        type=int,
+        default=3,
+        help="timed sweeps of scikit-learn's per case (default %(default)s)",
+    )
+    ap.add_argument(
+        "--threads",
+        type=int,
+        default=torch.get_num_threads(),
+        help="torch threads for ours (default: torch's default, here %(default)s)",
+    )
+    ap.add_argument(
+        "--cases", default="a,b,c", help="comma-separated, of a, b, c (default %(default)s)"
+    )
     args = ap.parse_args()
     for flag, v in (("--repeats", args.repeats), ("--sk-repeats", args.sk_repeats)):
         if v < 1:

@@ -55,10 +55,16 @@ def _side(
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--rows", type=int, default=1_000_000)
-    p.add_argument("--cases", default="a,b,c")
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument(
+        "--repeats", type=int, default=3, help="timed fits and classifications per side (default 3)"
+    )
+    p.add_argument(
+        "--rows", type=int, default=1_000_000, help="rows classified per case (default 1000000)"
+    )
+    p.add_argument("--cases", default="a,b,c", help="comma-separated, of a, b, c (default a,b,c)")
     a = p.parse_args(argv)
     cases = a.cases.split(",")
     if a.repeats < 1 or a.rows < 1 or not set(cases) <= set(CASES):

@@ -86,11 +86,24 @@ def _one_mode(mode: str, kills: int, rng: random.Random, tmp: Path) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--kills", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--mode", choices=("both", "ce", "cba"), default="both")
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--kills", type=int, default=20, help="SIGKILLs per mode (default %(default)s)"
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of the kill delays (default %(default)s)"
+    )
+    parser.add_argument(
+        "--mode",
+        choices=("both", "ce", "cba"),
+        default="both",
+        help="confident execution, CBA with corrections, or both (default %(default)s)",
+    )
     args = parser.parse_args()
+    if args.kills < 1:
+        parser.error(f"--kills: expected an int >= 1, got {args.kills}")
     torch.set_num_threads(1)
     rng = random.Random(args.seed)
     modes = ("ce", "cba") if args.mode == "both" else (args.mode,)

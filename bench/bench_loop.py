@@ -121,8 +121,12 @@ def measure(
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=5000)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--steps", type=int, default=5000, help="timed steps per row (default %(default)s)"
+    )
     parser.add_argument(
         "--cpu-time",
         action="store_true",
@@ -130,6 +134,8 @@ def main() -> None:
         "shared with other busy processes, waiting for a core then does not count",
     )
     args = parser.parse_args()
+    if args.steps < 1:
+        parser.error(f"--steps: expected an int >= 1, got {args.steps}")
     if args.cpu_time:
         global _clock
         _clock = time.process_time

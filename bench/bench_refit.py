@@ -54,6 +54,8 @@ def stream(n: int, d: int, a: int, kind: str, seed: int = 0) -> tuple[np.ndarray
     Each action's observations: a mixture of 6 Gaussians in d dimensions. "iid": shuffled;
     "drift": sorted by feature 0 plus noise (the session explores new regions over time).
     """
+    if kind not in ("iid", "drift"):
+        raise ValueError(f"stream kind: expected 'iid' or 'drift', got {kind!r}")
     rng = np.random.default_rng(seed)
     xs, ys = [], []
     for act in range(a):
@@ -286,18 +288,45 @@ def threads_sweep(repeats: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sections", default="long,single,snippet,threads")
-    ap.add_argument("--n", type=int, default=10_000)
-    ap.add_argument("--full-every", type=int, default=50)
-    ap.add_argument("--streams", default="iid,drift")
-    ap.add_argument("--snippet-repeats", type=int, default=3)
-    ap.add_argument("--thread-repeats", type=int, default=3)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--sections",
+        default="long,single,snippet,threads",
+        help="comma-separated, of long, single, snippet, threads (default all)",
+    )
+    ap.add_argument(
+        "--n", type=int, default=10_000, help="long: demonstrations per stream (default 10000)"
+    )
+    ap.add_argument(
+        "--full-every",
+        type=int,
+        default=50,
+        help="long: time the full refit at every N-th step (default %(default)s)",
+    )
+    ap.add_argument(
+        "--streams", default="iid,drift", help="long: comma-separated, of iid, drift (default both)"
+    )
+    ap.add_argument(
+        "--snippet-repeats",
+        type=int,
+        default=3,
+        help="snippet: runs alone and busy, each (default %(default)s)",
+    )
+    ap.add_argument(
+        "--thread-repeats",
+        type=int,
+        default=3,
+        help="threads: timed fits per size and setting (default %(default)s)",
+    )
     ns = ap.parse_args()
     sections = ns.sections.split(",")
     known = {"long", "single", "snippet", "threads"}
     if not set(sections) <= known:
         ap.error(f"--sections: expected some of {sorted(known)}, got {ns.sections!r}")
+    if not set(ns.streams.split(",")) <= {"iid", "drift"}:
+        ap.error(f"--streams: expected some of ['drift', 'iid'], got {ns.streams!r}")
     for flag, v in (
         ("--n", ns.n),
         ("--full-every", ns.full_every),

@@ -26,6 +26,8 @@ from __future__ import annotations
 import argparse
 import collections
 import json
+import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -39,6 +41,9 @@ from corridor.world import Action
 from torchcbl import ConfidentTeacher
 from torchcbl.strategies import correcting
 from torchcbl.strategies.cba import ConfidenceBasedAutonomy, posterior_margin
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _args, also when loaded by path
+from _args import seeds as seed_list  # noqa: E402
 
 _NAMES = [a.name.lower() for a in Action]
 _LAST = 20  # circuits at each end of the confident phase
@@ -144,20 +149,15 @@ def _text(value: float | None, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
-def _parse_seeds(text: str) -> list[int]:
-    if "-" in text:
-        a, b = text.split("-")
-        return list(range(int(a), int(b) + 1))
-    return [int(s) for s in text.split(",")]
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", default="0-9", help="e.g. 0-9 or 0,3,5 (default 0-9)")
+    parser.add_argument(
+        "--seeds", type=seed_list, default="0-9", help="e.g. 0-9 or 0,3,5 (default 0-9)"
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     config = CorridorExperimentConfig()
-    rows = [_seed(config, s) for s in _parse_seeds(args.seeds)]
+    rows = [_seed(config, s) for s in args.seeds]
     print(
         "| seed | labels | corrections | finished | confident steps | requests | margin only "
         "| distance only | both | model = teacher | per circuit, first 20 / last 20 |"

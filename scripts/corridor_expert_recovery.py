@@ -23,6 +23,7 @@ About 25-30 seconds on one core.
 
 from __future__ import annotations
 
+import argparse
 import json
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -146,4 +147,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    # no options: --help shows the docstring, anything else is a usage error (both exit at once)
+    argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    ).parse_args()
     main()

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +46,9 @@ from corridor.maps import load_map
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
 from torchcbl import load_model
 from torchcbl.session import load_demonstrations
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _args, also when loaded by path
+from _args import int_at_least  # noqa: E402
 
 _NEAR = 0.5  # metres: a side reading below this is a wall beside the robot
 
@@ -92,7 +96,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path)
     ap.add_argument("--circuits", type=int, default=1000)
-    ap.add_argument("--first-seed", type=int, default=3_000_000)
+    ap.add_argument("--first-seed", type=int_at_least(0), default=3_000_000)
     args = ap.parse_args()
     torch.set_num_threads(1)
     results = args.run_dir / "results.json"

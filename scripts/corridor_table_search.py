@@ -43,8 +43,10 @@ import argparse
 import dataclasses
 import itertools
 import json
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import numpy as np
 
@@ -61,6 +63,9 @@ from corridor.baseline import (  # the evaluation's own drive, to say where a ta
 from corridor.experiment import CorridorExperimentConfig
 from corridor.maps import load_map
 from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _args, also when loaded by path
+from _args import int_at_least, numbers_at_least_zero  # noqa: E402
 
 _NAMES = "FLRU"
 # The best table's actions in states it does not reach with exact motion, for --model-check
@@ -200,11 +205,27 @@ def _ceiling(args: tuple[tuple[int, ...], PrioritizedSweepingConfig, str, bool, 
     return len(found), fail
 
 
+def _map_name(text: str) -> str:
+    """--map: a shipped map's name or a map JSON file that loads (argparse's error otherwise)."""
+    try:
+        load_map(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--map", default="figure2")
-    ap.add_argument("--penalties", default="1,2", help="contact penalties, comma-separated")
-    ap.add_argument("--steps", type=int, default=1000, help="learning steps scored per table")
+    ap.add_argument("--map", type=_map_name, default="figure2")
+    ap.add_argument(
+        "--penalties",
+        type=numbers_at_least_zero,
+        default="1,2",
+        help="contact penalties, comma-separated",
+    )
+    ap.add_argument(
+        "--steps", type=int_at_least(1), default=1000, help="learning steps scored per table"
+    )
     ap.add_argument("--top", type=int, default=5)
     ap.add_argument("--noisy-seeds", type=int, default=0)
     ap.add_argument("--noisy-top", type=int, default=10)
@@ -214,7 +235,7 @@ def main() -> None:
     t0 = time.perf_counter()
     base = CorridorExperimentConfig().ps
     out: dict[str, dict] = {}
-    for penalty in (float(p) for p in args.penalties.split(",")):
+    for penalty in args.penalties:
         cfg = dataclasses.replace(base, contact_penalty=penalty)
         scores = score_tables(load_map(args.map), cfg, steps=args.steps)
         routes = [i for i, sc in enumerate(scores, 1) if sc.drives_route]

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import torch
@@ -23,12 +24,15 @@ from corridor.world import Action
 from torchcbl import GaussianMixtureSet
 from torchcbl.session import load_demonstrations
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _args, also when loaded by path
+from _args import int_at_least, numbers_at_least_zero  # noqa: E402
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path)
-    ap.add_argument("--floors", default="1e-3,3e-3,0.01,0.02,0.03,0.05")
-    ap.add_argument("--cap", type=int, default=10)
+    ap.add_argument("--floors", type=numbers_at_least_zero, default="1e-3,3e-3,0.01,0.02,0.03,0.05")
+    ap.add_argument("--cap", type=int_at_least(1), default=10)
     args = ap.parse_args()
     torch.set_num_threads(1)
     sessions = sorted((args.run_dir / "sessions").glob("seed*"), key=lambda p: int(p.name[4:]))
@@ -45,7 +49,7 @@ def main() -> None:
         + " |"
     )
     print("|---|---|---|")
-    for floor in (float(f) for f in args.floors.split(",")):
+    for floor in args.floors:
         at_cap = n_sets = 0
         most = [0] * len(names)
         for x, y in data:

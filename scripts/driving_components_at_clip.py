@@ -19,12 +19,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 
 from torchcbl.cli import latest_run
 from torchcbl.gmm import GaussianMixtureSet
 from torchcbl.session import load_records
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _args, also when loaded by path
+from _args import ints_at_least  # noqa: E402
 
 CLIP_M = 25.0
 
@@ -36,8 +40,10 @@ def main(argv: list[str] | None = None) -> int:
         nargs="?",
         default=str(latest_run() / "driving" / "seed_0" / "sessions" / "arm_a"),
     )
-    p.add_argument("--caps", default="30,60")
-    p.add_argument("--action", type=int, default=0, help="0 stay, 1 left, 2 right")
+    p.add_argument("--caps", type=ints_at_least(1), default="30,60")
+    p.add_argument(
+        "--action", type=int, choices=(0, 1, 2), default=0, help="0 stay, 1 left, 2 right"
+    )
     p.add_argument("--var-floor", type=float, default=1e-3, help="relative variance floor")
     a = p.parse_args(argv)
     if not (np.isfinite(a.var_floor) and a.var_floor >= 0):
@@ -70,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
         f"{len(x)} demonstrations; readings at +-{CLIP_M:g} m per lane (right, middle, left): "
         f"{out['share_at_clip_per_lane']}; rows with one: {out['share_rows_any_at_clip']}"
     )
-    for cap in (int(c) for c in a.caps.split(",")):
+    for cap in a.caps:
         m = GaussianMixtureSet(3, x.shape[1], cap, var_floor=a.var_floor, tol=1e-4, seed=0).fit(
             x, y
         )

@@ -30,6 +30,7 @@ import copy
 import dataclasses
 import json
 import math
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -43,6 +44,9 @@ from corridor.expert import CorridorExpert
 from corridor.maps import load_map
 from torchcbl import ConfidentTeacher, evaluate_policy
 from torchcbl.gmm import GaussianMixtureSet
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _args, also when loaded by path
+from _args import seeds as seed_list  # noqa: E402
 
 SETTINGS = ("default", "exact", "literal", "aic_paper", "bic", "floor_1e-3")
 BANDS = ((0, 5), (5, 10), (10, 20), (20, 40), (40, 80), (80, 160))
@@ -193,6 +197,17 @@ def _mean(xs: list[float]) -> float:
     return float(np.mean(xs)) if xs else math.nan
 
 
+def _no_nan(value: Any) -> Any:
+    """``value`` with every NaN (a mean or sd of nothing) as None, so the JSON is JSON."""
+    if isinstance(value, float) and math.isnan(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _no_nan(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_no_nan(v) for v in value]
+    return value
+
+
 def _at_streak(run: dict[str, Any], k: int) -> int | None:
     """Demonstrations at the end of the first k whole circuits in a row without a request."""
     done = run["teleoperated"] + sum(1 for x in run["requests"] if x["circuit"] < 0)
@@ -279,8 +294,9 @@ def _table(summaries: list[dict[str, Any]]) -> str:
     for s in summaries:
         bands = " / ".join("-" if math.isnan(b) else f"{b:.2f}" for b in s["bands"])
         d = s["demonstrations"]
+        sd = "-" if math.isnan(d[1]) else f"{d[1]:.1f}"  # one seed
         lines.append(
-            f"| {s['setting']} | {d[0]:.1f} ± {d[1]:.1f} | {s['teleoperated']:.1f} | {bands} | "
+            f"| {s['setting']} | {d[0]:.1f} ± {sd} | {s['teleoperated']:.1f} | {bands} | "
             f"{s['finished_share']:.0%} | {s['eval_clean']:.1f} | "
             f"{'/'.join(str(k) for k in s['final_k'])} | {s['fresh_step_rate']:.2%}, "
             f"{s['fresh_request_free_share']:.2f} |"
@@ -290,15 +306,11 @@ def _table(summaries: list[dict[str, Any]]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", default="0-9", help="e.g. 0-9 or 0,3,5")
+    parser.add_argument("--seeds", type=seed_list, default="0-9", help="e.g. 0-9 or 0,3,5")
     parser.add_argument("--settings", default=",".join(SETTINGS))
     parser.add_argument("--out", default=None, help="write every run and summary as JSON here")
     ns = parser.parse_args()
-    if "-" in ns.seeds:
-        lo, hi = (int(v) for v in ns.seeds.split("-"))
-        seeds = list(range(lo, hi + 1))
-    else:
-        seeds = [int(v) for v in ns.seeds.split(",")]
+    seeds = ns.seeds
     torch.set_num_threads(1)
     all_runs: dict[str, list[dict[str, Any]]] = {}
     summaries = []
@@ -349,10 +361,12 @@ def main() -> None:
     print(_table(summaries))
     if ns.out:
         Path(ns.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(ns.out).write_text(json.dumps({"summaries": summaries, "runs": all_runs}))
+        Path(ns.out).write_text(json.dumps(_no_nan({"summaries": summaries, "runs": all_runs})))
     print(
         json.dumps(
-            {"summaries": [{k: v for k, v in s.items() if k != "evolution"} for s in summaries]}
+            _no_nan(
+                {"summaries": [{k: v for k, v in s.items() if k != "evolution"} for s in summaries]}
+            )
         )
     )
 

@@ -38,3 +38,21 @@ def test_notebook_02_shows_its_first_map_as_an_image():
     assert cell is not None and "map_figure(" in cell.source  # the map of the corridor
     figures = [o for o in cell.outputs if "<Figure" in o.get("data", {}).get("text/plain", "")]
     assert all("image/png" in o["data"] for o in figures), [o["data"].keys() for o in figures]
+
+
+def test_notebook_01_says_which_component_counts_its_fit_chose():
+    """Its prose names the counts and action 1's AIC margin that its own fit prints (a single
+    Gaussian split in two showed in the plot without a word)."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "01_gmm_set.ipynb", as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    scope: dict = {}
+    exec("\n".join(code[:3]), scope)  # imports, the data, the fit
+    counts = scope["gmm"].n_components_.tolist()
+    aic = scope["gmm"].criterion_[1].tolist()
+    prose = "\n".join(c.source for c in nb.cells if c.cell_type == "markdown")
+    assert f"Here the counts are {counts}" in prose
+    assert f"({aic[1]:.1f} against {aic[0]:.1f})" in prose
+    assert counts[1] == 2 and "bic" in prose
+    bic = type(scope["gmm"])(3, 2, 6, criterion="bic", seed=0).fit(scope["X"], scope["y"])
+    assert int(bic.n_components_[1]) == 1

@@ -1,0 +1,95 @@
+"""The investigation scripts as a user runs them: ``python scripts/X.py ...``."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run(script: str, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / script), *args],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        cwd=ROOT,
+        timeout=120,
+    )
+
+
+@pytest.mark.parametrize(
+    ("script", "args", "expected"),
+    [
+        ("corridor_var_floor.py", ["RUN", "--floors", "1e-3,x"], "finite numbers >= 0"),
+        ("corridor_var_floor.py", ["RUN", "--cap", "0"], "whole number >= 1"),
+        ("corridor_table_search.py", ["--penalties", "1,two"], "finite numbers >= 0"),
+        ("corridor_table_search.py", ["--steps", "0"], "whole number >= 1"),
+        ("corridor_cba_gates.py", ["--seeds", "0-x"], "a range, e.g. 0-9"),
+        ("investigate_corridor_requests.py", ["--seeds", "3,a"], "a range, e.g. 0-9"),
+        ("driving_components_at_clip.py", ["--caps", "30,0"], "whole numbers >= 1"),
+        ("corridor_table_search.py", ["--map", "nomap"], "unknown map 'nomap'; shipped maps"),
+        ("corridor_final_policy_check.py", ["RUN", "--first-seed", "-5"], "whole number >= 0"),
+    ],
+)
+def test_a_malformed_value_is_a_usage_error_before_anything_runs(script, args, expected):
+    # Before, each died with a traceback (ValueError from float() or int(), or from
+    # GaussianMixtureSet for --cap 0), corridor_var_floor's after printing its table's header;
+    # corridor_table_search --map nomap in load_map, corridor_final_policy_check --first-seed -5
+    # in gymnasium's reset after reading the run.
+    flag = next(a for a in args if a.startswith("--"))
+    done = _run(script, *args)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert done.stdout == "" and "Traceback" not in done.stderr, done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert f"error: argument {flag}: " in last and expected in last, last
+
+
+def _strict_json(text: str):
+    def refuse(name: str):
+        raise ValueError(f"{name} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_investigate_corridor_requests_writes_json_without_nan(tmp_path):
+    # Before, a mean or sd of nothing (the sd of one seed, a band of circuits no seed reached)
+    # was written as NaN, which is not JSON: strict readers (jq, JavaScript) refused the line.
+    out = tmp_path / "runs.json"
+    done = _run(
+        "investigate_corridor_requests.py", "--seeds", "0", "--settings", "exact", "--out", str(out)
+    )
+    assert done.returncode == 0, done.stderr
+    last = _strict_json(done.stdout.strip().splitlines()[-1])
+    summary = last["summaries"][0]
+    assert summary["seeds"] == 1 and summary["demonstrations"][1] is None
+    assert None in summary["bands"]  # circuits 81-160: not reached
+    assert _strict_json(out.read_text())["summaries"][0]["demonstrations"][1] is None
+    assert " ± - |" in done.stdout  # the table's sd of one seed
+
+
+def test_corridor_expert_recovery_answers_help_without_running():
+    # Before, it took no arguments and ignored them: --help ran its 30-second measurement.
+    done = _run("corridor_expert_recovery.py", "--help")
+    assert done.returncode == 0 and done.stdout.startswith("usage: ")
+    assert "Does the corridor's scripted expert bring the robot back" in done.stdout
+    assert "| mistakes |" not in done.stdout
+    wrong = _run("corridor_expert_recovery.py", "--seeds", "3")
+    assert wrong.returncode == 2 and wrong.stdout == ""
+    assert "unrecognized arguments: --seeds 3" in wrong.stderr
+
+
+@pytest.mark.parametrize("action", ["5", "-1"])
+def test_driving_components_at_clip_takes_only_the_three_actions(action):
+    # Before, --action 5 died with an IndexError after the fit, and --action -1 reported the
+    # last action's components under the name "action -1".
+    done = _run("driving_components_at_clip.py", "SESSION", "--action", action)
+    assert done.returncode == 2 and done.stdout == "" and "Traceback" not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert f"argument --action: invalid choice: {action} (choose from 0, 1, 2)" in last, last
