@@ -286,8 +286,11 @@ class DrivingEnv(gym.Env):
         return obs
 
     def _info(self) -> dict[str, Any]:
-        """Info of a step. ``car_rel_m`` [N] / ``car_lane`` [N] / ``car_closing_ms`` [N] describe
-        every car in the traffic window (hidden state: only scripted experts may read them);
+        """Info of a step. ``car_rel_m`` / ``car_lane`` / ``car_closing_ms``, tuples of N numbers
+        (``numpy.asarray`` makes them arrays), describe every car in the traffic window (hidden
+        state: only scripted experts may read them). Tuples, not arrays: the number of cars
+        varies, and gymnasium's vector envs stack an array info into one fixed-shape array (an
+        AsyncVectorEnv of two driving envs failed at its first reset); a tuple they keep as is;
         ``closing_speed_ms`` maps each normal lane to the closing speed (m/s, ego speed minus
         the car's speed over the last step) of the car the observation reports for that lane,
         which a driver sees (0 when no car is within sensing range)."""
@@ -308,9 +311,9 @@ class DrivingEnv(gym.Env):
             "t": self._t,
             "episode_seed": self._episode_seed,
             "position_m": s.distance_m,
-            "car_lane": s.car_lane.copy(),
-            "car_rel_m": rel,
-            "car_closing_ms": car_closing,
+            "car_lane": tuple(s.car_lane.tolist()),
+            "car_rel_m": tuple(rel.tolist()),
+            "car_closing_ms": tuple(car_closing.tolist()),
             "closing_speed_ms": closing,
             "step_length_s": self.config.sim.step_length_s,
         }

@@ -114,7 +114,7 @@ def test_render_outlines_a_car_in_contact_in_the_lane_the_ego_just_left():
         env.reset(seed=1)
         for _ in range(2000):
             _, _, _, _, info = env.step(int(rng.integers(3)))
-            rel, lanes = info["car_rel_m"], info["car_lane"]
+            rel, lanes = np.asarray(info["car_rel_m"]), np.asarray(info["car_lane"])
             near = np.abs(rel) < CAR_LENGTH_M
             if info["contact"] and not np.any(lanes[near] == info["lane"]):
                 break
