@@ -113,7 +113,8 @@ class TrafficScenario:
             ego; a car falling out behind is recycled to the front of its lane. Metres.
         behind_m: see ``ahead_m``.
         start_clear_m: at reset no car is within 15 m behind or this many metres ahead of the
-            ego (in any lane), so no episode starts in or right before a contact.
+            ego (in any lane), so no episode starts in or right before a contact. At most
+            ``ahead_m``.
     """
 
     name: str
@@ -152,6 +153,14 @@ class TrafficScenario:
                 raise ValueError("mean_spacing_m must be at least min_spacing_m")
         if self.behind_m < 30.0 or self.ahead_m < 60.0:
             raise ValueError("the traffic window must cover the 25 m sensing range with margin")
+        if self.start_clear_m > self.ahead_m:
+            # the first car of each lane goes beyond the clear stretch: past the window, it can
+            # pass the end of the road, where SUMO removes it and the next step fails on it
+            raise ValueError(
+                f"start_clear_m must be at most ahead_m = {self.ahead_m} m (the clear stretch "
+                f"lies inside the traffic window ahead of the ego), got {self.start_clear_m}; "
+                "for a longer empty road ahead raise ahead_m too"
+            )
         # plain Python numbers and tuples: libsumo takes no numpy float32 (positions computed
         # from one stay float32) and a recorded episode's JSON no numpy int
         set_ = object.__setattr__

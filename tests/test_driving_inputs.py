@@ -225,3 +225,26 @@ def test_reset_seeds_and_drawing_settings_are_checked(tmp_path):
         with pytest.raises(ValueError, match="every and max_frames must be ints"):
             render_gif(record, tmp_path / "x.gif", **bad)
     assert not (tmp_path / "x.gif").exists()
+
+
+def test_a_clear_start_beyond_the_traffic_window_is_refused_and_one_up_to_it_drives():
+    # the first car of each lane went past the clear stretch, beyond the window the road's
+    # margin is sized for: with 10 km it was placed past the road's end, SUMO dropped it, and
+    # the first step failed with libsumo's "Vehicle 'c2' is not known"
+    for clear in (201.0, 1e4):
+        with pytest.raises(
+            ValueError, match=rf"start_clear_m must be at most ahead_m = 200.0 m .*got {clear}"
+        ):
+            TrafficScenario("clear", 0, start_clear_m=clear)
+    env = DrivingEnv(
+        scenario=TrafficScenario("clear", 0, start_clear_m=200.0), max_episode_steps=60
+    )
+    try:
+        _, info = env.reset(seed=0)
+        rel = np.asarray(info["car_rel_m"])
+        assert not np.any((rel > -15.0) & (rel < 200.0))
+        for _ in range(60):
+            _, _, _, truncated, info = env.step(0)
+        assert truncated and len(info["car_rel_m"]) > 0
+    finally:
+        env.close()
