@@ -64,11 +64,31 @@ def lane_distribution(lanes: Sequence[int] | np.ndarray) -> np.ndarray:
 
 
 def total_variation(p: Sequence[float] | np.ndarray, q: Sequence[float] | np.ndarray) -> float:
-    """Total-variation distance 0.5 * sum |p - q| between two distributions, in [0, 1]."""
-    a, b = np.asarray(p, dtype=np.float64), np.asarray(q, dtype=np.float64)
+    """Total-variation distance 0.5 * sum |p - q| between two distributions, in [0, 1].
+
+    ``p`` and ``q`` are shares (e.g. :func:`lane_distribution`'s): 1-D, finite, >= 0, each
+    summing to 1; counts, percentages or a NaN are refused (they gave a distance above 1, or
+    NaN, without a word)."""
+    a, b = _distribution("p", p), _distribution("q", q)
     if a.shape != b.shape:
         raise ValueError(f"shapes differ: {a.shape} vs {b.shape}")
     return float(0.5 * np.abs(a - b).sum())
+
+
+def _distribution(name: str, values: Sequence[float] | np.ndarray) -> np.ndarray:
+    """``values`` as float64 [K], refused unless they are shares summing to 1."""
+    try:
+        v = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a sequence of shares, got {values!r:.60}") from None
+    if v.ndim != 1 or v.size == 0 or not np.all(np.isfinite(v)) or np.any(v < 0):
+        raise ValueError(f"{name} must be a 1-D sequence of finite shares >= 0, got {values!r:.60}")
+    if abs(v.sum() - 1.0) > 1e-6:
+        raise ValueError(
+            f"{name} must sum to 1 (shares, as lane_distribution gives), sums to {v.sum():g}: "
+            "divide counts by their total, percentages by 100"
+        )
+    return v
 
 
 def windowed_accuracy(correct: Sequence[bool] | np.ndarray, window: int = 150) -> np.ndarray:

@@ -248,3 +248,23 @@ def test_a_clear_start_beyond_the_traffic_window_is_refused_and_one_up_to_it_dri
         assert truncated and len(info["car_rel_m"]) > 0
     finally:
         env.close()
+
+
+def test_total_variation_refuses_what_is_not_two_distributions():
+    # percentages gave 20.0 (a "distance in [0, 1]"), a NaN share gave nan, counts above 1
+    p = metrics.lane_distribution([1, 2, 2, 3, 3, 3, 3, 3, 3, 3])
+    q = metrics.lane_distribution([3, 3, 3, 4, 4, 4, 4, 4, 2, 2])
+    assert metrics.total_variation(p, q) == pytest.approx(0.5)
+    assert metrics.total_variation(p.tolist(), tuple(q)) == metrics.total_variation(p, q)
+    for bad, says in (
+        ((100 * p, 100 * q), "p must sum to 1 .* sums to 100: .* percentages by 100"),
+        ((p, np.bincount([2, 3, 3], minlength=5)), "q must sum to 1 .* sums to 3: divide counts"),
+        (([np.nan, 1.0], [0.0, 1.0]), "p must be a 1-D sequence of finite shares >= 0"),
+        (([1.5, -0.5], [0.0, 1.0]), "p must be a 1-D sequence of finite shares >= 0"),
+        ((0.5, 0.5), "p must be a 1-D sequence"),
+        (([], []), "p must be a 1-D sequence"),
+        ((["a"], [1.0]), "p must be a sequence of shares"),
+        ((p, [0.5, 0.5]), "shapes differ"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            metrics.total_variation(*bad)
