@@ -180,8 +180,9 @@ class TrafficScenario:
         return tuple((lo * MPH, hi * MPH) for lo, hi in self.speed_ranges_mph)
 
     def with_seed(self, seed: int) -> TrafficScenario:
-        """The same traffic with another base seed (another family of road segments)."""
-        return replace(self, seed=int(seed))
+        """The same traffic with another base seed (another family of road segments): an
+        int >= 0, checked as the field is (2.7 or True is refused, not truncated)."""
+        return replace(self, seed=seed)
 
 
 TRAIN = TrafficScenario(name="train", seed=1)

@@ -268,3 +268,13 @@ def test_total_variation_refuses_what_is_not_two_distributions():
     ):
         with pytest.raises(ValueError, match=says):
             metrics.total_variation(*bad)
+
+
+def test_with_seed_checks_the_seed_as_the_field_is():
+    # with_seed(2.7) was the scenario of base seed 2 and with_seed(True) of seed 1, silently
+    base = TrafficScenario("mine", 0)
+    assert base.with_seed(np.int64(5)) == TrafficScenario("mine", 5)
+    assert type(base.with_seed(np.int64(5)).seed) is int
+    for bad in (2.7, True, -1, "3"):
+        with pytest.raises(ValueError, match=rf"seed must be an int >= 0, got {bad!r}"):
+            base.with_seed(bad)
