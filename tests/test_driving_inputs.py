@@ -278,3 +278,41 @@ def test_with_seed_checks_the_seed_as_the_field_is():
     for bad in (2.7, True, -1, "3"):
         with pytest.raises(ValueError, match=rf"seed must be an int >= 0, got {bad!r}"):
             base.with_seed(bad)
+
+
+@pytest.mark.parametrize(
+    "field, bad, says",
+    [
+        # each was a TypeError of Python's own ('Value after * must be an iterable, not
+        # float', "'int' object is not iterable") or a message without the value given
+        ("mean_spacing_m", 40.0, r"mean_spacing_m needs one entry per normal lane .* got 40.0"),
+        ("mean_spacing_m", (40.0, 31.0), r"3 in all, got \(40.0, 31.0\)"),
+        ("mean_spacing_m", "abc", r"mean_spacing_m needs one entry .* got 'abc'"),
+        ("mean_spacing_m", (5.0, 31.0, 120.0), r">= min_spacing_m \(12.0\), got \(5.0, 31"),
+        ("mean_spacing_m", (None, 31.0, 120.0), r"finite number of metres .* got \(None"),
+        ("speed_ranges_mph", (20.0, 30.0), r"speed_ranges_mph needs one entry .* \(20.0, 30.0\)"),
+        ("speed_ranges_mph", None, r"speed_ranges_mph needs one entry .* got None"),
+        ("speed_ranges_mph", ((20, 30), (25, 35), 30), r"range must be \(low, high\) .* got 30"),
+        ("speed_ranges_mph", ((20, None), (25, 35), (30, 40)), r"got \(20, None\)"),
+        ("speed_ranges_mph", ((10, 30), (25, 35), (30, 40)), r"20 <= low <= high <= 40 mph"),
+        ("min_spacing_m", 8.0, r"min_spacing_m must exceed 10 m \(two car lengths\), got 8.0"),
+        ("min_spacing_m", "12", r"min_spacing_m must be a finite number of metres, got '12'"),
+        ("behind_m", 10.0, r"behind_m >= 30 m and ahead_m >= 60 m, got behind_m=10.0"),
+        ("ahead_m", 50.0, r"got behind_m=60.0, ahead_m=50.0"),
+    ],
+)
+def test_a_malformed_scenario_field_is_named_with_its_value(field, bad, says):
+    with pytest.raises(ValueError, match=says):
+        TrafficScenario("mine", 0, **{field: bad})
+
+
+def test_per_lane_fields_take_lists_and_arrays():
+    plain = TrafficScenario("mine", 0, mean_spacing_m=(40.0, 31.0, 60.0))
+    assert TrafficScenario("mine", 0, mean_spacing_m=[40, 31, 60]) == plain
+    assert TrafficScenario("mine", 0, mean_spacing_m=np.array([40.0, 31.0, 60.0])) == plain
+    ranges = np.array([[20.0, 30.0], [25.0, 35.0], [30.0, 40.0]])
+    assert TrafficScenario("mine", 0, speed_ranges_mph=ranges).speed_ranges_mph == (
+        (20.0, 30.0),
+        (25.0, 35.0),
+        (30.0, 40.0),
+    )
