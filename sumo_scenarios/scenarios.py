@@ -236,6 +236,12 @@ def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:
     """Look a scenario up by name (or pass one through)."""
     if isinstance(scenario, TrafficScenario):
         return scenario
+    if not isinstance(scenario, str):  # a dict or list was "unhashable type", a TypeError
+        raise ValueError(
+            f"scenario must be a name ({', '.join(sorted(SCENARIOS))}) or a TrafficScenario, "
+            f"got {type(scenario).__name__} {scenario!r:.80}; e.g. "
+            "TrafficScenario(name='mine', seed=0, mean_spacing_m=(40.0, 31.0, 60.0))"
+        )
     try:
         return SCENARIOS[scenario]
     except KeyError:

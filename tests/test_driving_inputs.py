@@ -316,3 +316,14 @@ def test_per_lane_fields_take_lists_and_arrays():
         (25.0, 35.0),
         (30.0, 40.0),
     )
+
+
+def test_a_scenario_that_is_neither_a_name_nor_a_traffic_scenario_is_named():
+    # a dict (say, from a config file) or a list was Python's "unhashable type: 'dict'"
+    for bad in ({"name": "mine", "seed": 0}, ["train"]):
+        with pytest.raises(ValueError, match=r"scenario must be a name \(eval, light, train\) or"):
+            DrivingConfig(scenario=bad)
+    with pytest.raises(ValueError, match=r"got dict \{'name': 'mine'"):
+        DrivingEnv(scenario={"name": "mine", "seed": 0})
+    with pytest.raises(ValueError, match="unknown scenario 'busy'; known: eval, light, train"):
+        DrivingConfig(scenario="busy")
