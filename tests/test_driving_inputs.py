@@ -327,3 +327,19 @@ def test_a_scenario_that_is_neither_a_name_nor_a_traffic_scenario_is_named():
         DrivingEnv(scenario={"name": "mine", "seed": 0})
     with pytest.raises(ValueError, match="unknown scenario 'busy'; known: eval, light, train"):
         DrivingConfig(scenario="busy")
+
+
+def test_the_human_like_teacher_takes_only_a_whole_seed():
+    # make_teacher int()-ed its seed: 1.5 and True gave seed 1's teacher, None a TypeError
+    from sumo_scenarios.teacher import make_teacher
+
+    obs = np.array([12.0, -25.0, 25.0, 2.0], dtype=np.float32)
+    info = {"closing_speed_ms": {1: 8.0, 2: 0.0, 3: 0.0}, "step_length_s": 0.25, "t": 0}
+
+    def answers(teacher):
+        return [teacher(obs, dict(info, t=t)) for t in range(40)]
+
+    assert answers(make_teacher(np.int64(7))) == answers(make_teacher(7))
+    for bad in (1.5, True, None, -1, "1"):
+        with pytest.raises(ValueError, match=rf"seed: expected an int >= 0, got {bad!r}"):
+            make_teacher(bad)
