@@ -343,3 +343,19 @@ def test_the_human_like_teacher_takes_only_a_whole_seed():
     for bad in (1.5, True, None, -1, "1"):
         with pytest.raises(ValueError, match=rf"seed: expected an int >= 0, got {bad!r}"):
             make_teacher(bad)
+
+
+def test_expert_settings_out_of_order_or_not_numbers_are_named_with_their_values():
+    # the order was refused without the values given; text was a TypeError of a comparison
+    from sumo_scenarios.expert import ExpertConfig
+
+    with pytest.raises(ValueError, match=r"change_far_m <= 25 .* got min_gap_m=10.0, "):
+        ExpertConfig(change_far_m=30.0)
+    with pytest.raises(ValueError, match=r"got min_gap_m=4.0, enter_ahead_m=16.0, change_far"):
+        ExpertConfig(min_gap_m=4.0)
+    for field, bad in (("min_gap_m", "10"), ("enter_ahead_m", None), ("change_far_m", np.nan)):
+        with pytest.raises(ValueError, match=rf"{field} must be a finite number of metres"):
+            ExpertConfig(**{field: bad})
+    with pytest.raises(ValueError, match="return_spread_m must be a finite number of metres"):
+        ExpertConfig(return_spread_m="1")
+    assert ExpertConfig(min_gap_m=np.float64(10.0)) == ExpertConfig()
