@@ -95,6 +95,18 @@ class EpisodeRecord:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> EpisodeRecord:
         """Rebuild a record written by :meth:`to_dict`."""
+        need = ("scenario", "sim", "episode_seed", "start_lane", "actions")
+        if not isinstance(d, dict) or not set(need) <= d.keys():
+            got = f"a dict with keys {sorted(map(str, d))}" if isinstance(d, dict) else repr(d)
+            raise ValueError(
+                f"an episode record is a dict with keys {list(need)} (as to_dict writes it), "
+                f"got {got:.120}"
+            )
+        if not isinstance(d["scenario"], dict) or not isinstance(d["sim"], dict):
+            raise ValueError(
+                "an episode record's scenario and sim are dicts of their fields, got "
+                f"{d['scenario']!r:.60} and {d['sim']!r:.60}"
+            )
         sc = dict(d["scenario"])
         if "lane_speeds_mph" in sc:
             raise ValueError(
@@ -121,8 +133,26 @@ def save_records(records: list[EpisodeRecord], path: str | Path) -> None:
 
 
 def load_records(path: str | Path) -> list[EpisodeRecord]:
-    """Read records written by :func:`save_records`."""
-    return [EpisodeRecord.from_dict(d) for d in json.loads(Path(path).read_text())]
+    """Read records written by :func:`save_records` (a JSON list of
+    :meth:`EpisodeRecord.to_dict`; the driving experiment's ``seed_<k>/episodes.json`` is one).
+
+    Raises:
+        ValueError: the file is not JSON or not such a list, naming the file.
+    """
+    try:
+        data = json.loads(Path(path).read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path} is not JSON ({exc}): expected episode records") from None
+    if not isinstance(data, list):
+        raise ValueError(
+            f"{path} holds a JSON {type(data).__name__}, not a list of episode records (as "
+            "save_records writes them; a teaching session's directory is read by "
+            "session_episodes)"
+        )
+    try:
+        return [EpisodeRecord.from_dict(d) for d in data]
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: {exc}") from None
 
 
 class EpisodeRecorder(gym.Wrapper):

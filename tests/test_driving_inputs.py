@@ -4,6 +4,7 @@ valid settings, mistakes. Each test closes its env: libsumo holds one simulation
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -359,3 +360,38 @@ def test_expert_settings_out_of_order_or_not_numbers_are_named_with_their_values
     with pytest.raises(ValueError, match="return_spread_m must be a finite number of metres"):
         ExpertConfig(return_spread_m="1")
     assert ExpertConfig(min_gap_m=np.float64(10.0)) == ExpertConfig()
+
+
+def test_load_records_names_a_file_that_holds_no_episode_records(tmp_path):
+    # a JSON object was "string indices must be integers", an item without an episode's keys
+    # KeyError('scenario'), a list of numbers "'int' object is not subscriptable"
+    good = EpisodeRecorder(DrivingEnv(max_episode_steps=3))
+    try:
+        good.reset(seed=1)
+        for _ in range(3):
+            good.step(0)
+    finally:
+        good.close()
+    save_records(good.episodes, tmp_path / "ok.json")
+    assert load_records(tmp_path / "ok.json") == good.episodes
+    record = good.episodes[0].to_dict()
+    cases = {
+        "object.json": ({"episodes": []}, r"object.json holds a JSON dict, not a list of episode"),
+        "numbers.json": ([1, 2], r"numbers.json: an episode record is a dict with keys .* got 1"),
+        "steps.json": ([{"step": 0}], r"keys \['scenario', .*got a dict with keys \['step'\]"),
+        "scenario.json": (
+            [dict(record, scenario="train")],
+            r"scenario and sim are dicts of their fields, got 'train'",
+        ),
+        "field.json": (
+            [dict(record, sim=dict(record["sim"], speed=1.0))],
+            r"field.json: .*unexpected keyword argument 'speed'",
+        ),
+    }
+    for name, (data, says) in cases.items():
+        (tmp_path / name).write_text(json.dumps(data))
+        with pytest.raises(ValueError, match=says):
+            load_records(tmp_path / name)
+    (tmp_path / "text.json").write_text("not json")
+    with pytest.raises(ValueError, match=r"text.json is not JSON \(Expecting value"):
+        load_records(tmp_path / "text.json")
