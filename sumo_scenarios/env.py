@@ -93,6 +93,10 @@ class DrivingConfig:
             raise ValueError(
                 f"sim must be a SimConfig (sumo_scenarios.sim), got {type(self.sim).__name__}"
             )
+        # plain ints, as SimConfig and TrafficScenario keep plain numbers: a numpy int (from a
+        # sweep over an array) made the config's asdict fail json.dumps
+        object.__setattr__(self, "max_episode_steps", int(self.max_episode_steps))
+        object.__setattr__(self, "start_lane", int(self.start_lane))
 
 
 @dataclass(frozen=True)

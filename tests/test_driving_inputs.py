@@ -395,3 +395,17 @@ def test_load_records_names_a_file_that_holds_no_episode_records(tmp_path):
     (tmp_path / "text.json").write_text("not json")
     with pytest.raises(ValueError, match=r"text.json is not JSON \(Expecting value"):
         load_records(tmp_path / "text.json")
+
+
+def test_a_driving_config_of_numpy_ints_keeps_plain_ints():
+    # kept as numpy ints, they made json.dumps of the config's asdict fail ("Object of type
+    # int64 is not JSON serializable")
+    config = DrivingConfig(start_lane=np.int64(3), max_episode_steps=np.int32(20))
+    assert config == DrivingConfig(start_lane=3, max_episode_steps=20)
+    assert type(config.start_lane) is int and type(config.max_episode_steps) is int
+    assert json.loads(json.dumps(dataclasses.asdict(config)))["start_lane"] == 3
+    env = DrivingEnv(config)
+    try:
+        assert env.reset(seed=0)[1]["lane"] == 3
+    finally:
+        env.close()
