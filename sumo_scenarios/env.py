@@ -240,7 +240,7 @@ class DrivingEnv(gym.Env):
 
     def render(self) -> np.ndarray | None:
         """The current timestep drawn as an RGB image [H, W, 3] uint8 (``render_mode=
-        "rgb_array"``), else None."""
+        "rgb_array"``), else None. Before a completed reset: RuntimeError."""
         if self.render_mode != "rgb_array":
             return None
         from sumo_scenarios.render import render_frame
@@ -263,7 +263,12 @@ class DrivingEnv(gym.Env):
         return self._sim.closed
 
     def frame(self) -> Frame:
-        """A copy of the current scene for drawing."""
+        """A copy of the current scene for drawing (after a completed reset)."""
+        if self._episode_seed is None:  # it drew an empty road with the ego at 0 m
+            raise RuntimeError(
+                "reset() first: there is no scene to draw before a reset has completed "
+                "(none ran, or the last one failed)"
+            )
         s = self._sim
         return Frame(
             self._t,

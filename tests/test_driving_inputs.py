@@ -409,3 +409,22 @@ def test_a_driving_config_of_numpy_ints_keeps_plain_ints():
         assert env.reset(seed=0)[1]["lane"] == 3
     finally:
         env.close()
+
+
+def test_drawing_before_a_reset_is_refused_not_an_empty_road():
+    # render() and frame() before any reset (or after a failed one) drew a road with no car and
+    # the ego at 0 m, as if that were the scene
+    env = DrivingEnv(render_mode="rgb_array")
+    try:
+        for draw in (env.render, env.frame):
+            with pytest.raises(RuntimeError, match="reset\\(\\) first: there is no scene to draw"):
+                draw()
+        with pytest.raises(ValueError, match="fcd_output"):
+            env.reset(seed=1, options={"fcd_output": "/nonexistent-dir/x.xml"})
+        with pytest.raises(RuntimeError, match="reset\\(\\) first"):
+            env.render()
+        env.reset(seed=1)
+        assert env.render().shape[2] == 3 and env.frame().ego_pos == 300.0
+    finally:
+        env.close()
+    assert env.render().shape[2] == 3  # the last scene stays drawable after close()
