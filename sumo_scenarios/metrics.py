@@ -128,8 +128,18 @@ def plot_lane_bars(
     distributions: Sequence[Sequence[float]],
     collision_rates: Sequence[float],
 ) -> None:
-    """Figure 8: one stacked bar of lane shares per policy, collision % written beside it."""
+    """Figure 8: one stacked bar of lane shares per policy, collision % written beside it.
+
+    ``distributions`` [P, 5] (lane shares per policy, as :func:`lane_distribution` gives) and
+    ``collision_rates`` [P] (shares, not percent) go with the P ``labels``."""
     dist = np.asarray(distributions, dtype=np.float64)
+    if dist.shape != (len(labels), N_LANES) or len(collision_rates) != len(labels):
+        # one distribution too few was drawn for every label (broadcast), 3 lanes an IndexError
+        raise ValueError(
+            f"plot_lane_bars needs one distribution over the {N_LANES} lanes and one collision "
+            f"rate per label: {len(labels)} labels, distributions of shape {dist.shape}, "
+            f"{len(collision_rates)} collision rates"
+        )
     y = np.arange(len(labels))[::-1]
     colors = ["#8c564b", "#ff7f0e", "#2ca02c", "#1f77b4", "#9467bd"]
     left = np.zeros(len(labels))
@@ -156,7 +166,11 @@ def plot_confidence_trace(
     """Figure 10: Mahalanobis distance of the best classification per timestep, contacts as
     squares (a larger distance = less confident); ``start`` is the first timestep's index."""
     d = np.asarray(distances, dtype=np.float64)
-    c = np.asarray(contacts, dtype=bool)
+    c = _flags("contacts", contacts).astype(bool)  # a NaN was drawn as a contact
+    if d.ndim != 1 or d.shape != c.shape:
+        raise ValueError(
+            f"distances and contacts need one entry per timestep each, got {d.shape} and {c.shape}"
+        )
     t = start + np.arange(d.size)
     ax.plot(t, d, lw=0.8)
     ax.plot(t[c], d[c], "s", ms=4, mfc="none", color="red", label="contact")

@@ -428,3 +428,26 @@ def test_drawing_before_a_reset_is_refused_not_an_empty_road():
     finally:
         env.close()
     assert env.render().shape[2] == 3  # the last scene stays drawable after close()
+
+
+def test_the_figure_helpers_refuse_data_that_does_not_line_up():
+    # plot_lane_bars drew one distribution for two labels (numpy broadcast it) and failed with
+    # an IndexError on 3 lanes; plot_confidence_trace failed with an IndexError on a contact
+    # list one short and drew a NaN contact as a contact
+    from matplotlib.figure import Figure
+
+    ax = Figure().add_subplot()
+    share = [0.1, 0.2, 0.3, 0.4, 0.0]
+    metrics.plot_lane_bars(ax, ["a", "b"], [share, share], [0.01, 0.02])
+    for labels, dists, rates in (
+        (["a", "b"], [share], [0.01, 0.02]),
+        (["a"], [[0.5, 0.5, 0.0]], [0.01]),
+        (["a", "b"], [share, share], [0.01]),
+    ):
+        with pytest.raises(ValueError, match="one distribution over the 5 lanes and one"):
+            metrics.plot_lane_bars(ax, labels, dists, rates)
+    metrics.plot_confidence_trace(ax, [1.0, np.inf, 2.0], [False, True, False])
+    with pytest.raises(ValueError, match=r"one entry per timestep each, got \(3,\) and \(2,\)"):
+        metrics.plot_confidence_trace(ax, [1.0, 2.0, 3.0], [True, False])
+    with pytest.raises(ValueError, match="contacts must be True / False per timestep"):
+        metrics.plot_confidence_trace(ax, [1.0, 2.0], [np.nan, 1])
