@@ -385,7 +385,8 @@ def render_gif(
     """Draw the episode into a GIF: every ``every``-th timestep of the WHOLE episode (unless
     ``max_frames`` caps it), played at ``fps`` frames per second (default: real time at stride
     1, one frame per step length: 4 at the default 0.25 s steps). The frame delay is written in
-    milliseconds, as imageio's GIF writer expects."""
+    milliseconds, as imageio's GIF writer expects. ``path`` ends in ``.gif``, in a directory
+    that exists: both are checked before the episode is replayed and drawn."""
     import imageio.v2 as imageio
 
     from sumo_scenarios.render import render_frame
@@ -401,6 +402,15 @@ def render_gif(
             f"every and max_frames must be ints >= 1 and fps a number > 0, got every={every!r}, "
             f"max_frames={max_frames!r}, fps={fps!r}"
         )
+    # checked first: these failed in imageio only after the whole replay and drawing (minutes
+    # for a long episode), a name without a suffix leaving an empty file behind
+    path = Path(path)
+    if path.suffix.lower() != ".gif":
+        raise ValueError(f"render_gif writes a GIF: give a path ending in .gif, got {str(path)!r}")
+    if path.is_dir():
+        raise ValueError(f"{str(path)!r} is a directory; give the GIF's file path (e.g. ep.gif)")
+    if not path.parent.is_dir():
+        raise ValueError(f"the directory of {str(path)!r} does not exist; create it first")
     every = int(every)
     max_frames = None if max_frames is None else int(max_frames)
     _, shots = replay(record, frames=True)
@@ -408,7 +418,6 @@ def render_gif(
     if max_frames is not None:
         shots = shots[:max_frames]
     images = [render_frame(f) for f in shots]
-    path = Path(path)
     imageio.mimsave(path, images, duration=1000.0 / fps, loop=0)
     return path
 

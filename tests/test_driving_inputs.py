@@ -451,3 +451,32 @@ def test_the_figure_helpers_refuse_data_that_does_not_line_up():
         metrics.plot_confidence_trace(ax, [1.0, 2.0, 3.0], [True, False])
     with pytest.raises(ValueError, match="contacts must be True / False per timestep"):
         metrics.plot_confidence_trace(ax, [1.0, 2.0], [np.nan, 1])
+
+
+def test_render_gif_checks_its_path_before_replaying(tmp_path, monkeypatch):
+    # a missing directory, a directory, or a name imageio cannot place failed only after the
+    # whole replay and drawing; a name without a suffix left an empty file behind
+    import sumo_scenarios.replay as replay_module
+
+    env = EpisodeRecorder(DrivingEnv(max_episode_steps=3))
+    try:
+        env.reset(seed=1)
+        for _ in range(3):
+            env.step(0)
+    finally:
+        env.close()
+    (record,) = env.episodes
+    replays = []
+    real = replay_module.replay
+    monkeypatch.setattr(replay_module, "replay", lambda *a, **k: replays.append(1) or real(*a, **k))
+    (tmp_path / "dir.gif").mkdir()
+    for bad, says in (
+        (tmp_path / "absent" / "ep.gif", "the directory of .* does not exist; create it first"),
+        (tmp_path / "dir.gif", "is a directory; give the GIF's file path"),
+        (tmp_path / "ep", "render_gif writes a GIF: give a path ending in .gif"),
+        (tmp_path / "ep.mp4", "render_gif writes a GIF: give a path ending in .gif, got .*ep.mp4"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            render_gif(record, bad)
+    assert not replays and not (tmp_path / "ep").exists()
+    assert render_gif(record, tmp_path / "ep.GIF").stat().st_size > 0
