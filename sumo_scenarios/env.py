@@ -147,7 +147,10 @@ class DrivingEnv(gym.Env):
         elif kwargs:
             raise TypeError("pass either a DrivingConfig or keyword settings, not both")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+            raise ValueError(
+                f"render_mode must be None or one of {self.metadata['render_modes']} (the env "
+                f"draws frames as images; show them yourself), got {render_mode!r}"
+            )
         self.config = config
         self.scenario = get_scenario(config.scenario)
         self.render_mode = render_mode

@@ -480,3 +480,10 @@ def test_render_gif_checks_its_path_before_replaying(tmp_path, monkeypatch):
             render_gif(record, bad)
     assert not replays and not (tmp_path / "ep").exists()
     assert render_gif(record, tmp_path / "ep.GIF").stat().st_size > 0
+
+
+def test_an_unknown_render_mode_is_named():
+    # "render_mode must be one of ['rgb_array']" did not say what was given
+    for bad in ("human", "rgb"):
+        with pytest.raises(ValueError, match=rf"one of \['rgb_array'\] .* got '{bad}'"):
+            DrivingEnv(render_mode=bad)
