@@ -487,3 +487,27 @@ def test_an_unknown_render_mode_is_named():
     for bad in ("human", "rgb"):
         with pytest.raises(ValueError, match=rf"one of \['rgb_array'\] .* got '{bad}'"):
             DrivingEnv(render_mode=bad)
+
+
+def test_a_step_length_sumo_cannot_run_is_refused_and_a_float32_one_runs_exactly():
+    # SUMO counts whole milliseconds: 0.0125 s ran as 0.013 s (the ego moved 0.3487 m a step,
+    # not 0.3353) while speeds were measured over, and the teachers told, 0.0125 s
+    from sumo_scenarios.scenarios import EGO_SPEED_MS
+
+    for bad, near in ((0.0125, 0.012), (0.2505, 0.25)):
+        with pytest.raises(
+            ValueError, match=rf"whole number of milliseconds .* got {bad}; e.g. {near}"
+        ):
+            SimConfig(step_length_s=bad)
+    assert SimConfig(step_length_s=np.float32(0.1)).step_length_s == 0.1
+    env = DrivingEnv(sim=SimConfig(step_length_s=np.float32(0.013)))
+    try:
+        _, info = env.reset(seed=1)
+        start = info["position_m"]
+        for _ in range(10):
+            _, _, _, _, info = env.step(0)
+    finally:
+        env.close()
+    assert info["step_length_s"] == 0.013
+    moved = (info["position_m"] - start) / 10
+    assert moved == pytest.approx(EGO_SPEED_MS * info["step_length_s"], rel=1e-9)
