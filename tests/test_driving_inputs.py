@@ -511,3 +511,18 @@ def test_a_step_length_sumo_cannot_run_is_refused_and_a_float32_one_runs_exactly
     assert info["step_length_s"] == 0.013
     moved = (info["position_m"] - start) / 10
     assert moved == pytest.approx(EGO_SPEED_MS * info["step_length_s"], rel=1e-9)
+
+
+def test_the_keyboard_teachers_row_height_is_checked_when_it_is_made():
+    # make_teacher took any metres_per_row and the session failed at its first question
+    # ("'<' not supported between instances of 'int' and 'str'"); True drew 1 m rows
+    from sumo_scenarios.human import describe, make_teacher
+
+    obs = np.array([10.0, -5.0, 25.0, 2.0], dtype=np.float32)
+    for bad in ("2", None, True, 0, 30, np.nan):
+        with pytest.raises(ValueError, match=r"metres_per_row must be metres in \(0, 25\], got"):
+            make_teacher(metres_per_row=bad)
+        with pytest.raises(ValueError, match="metres_per_row must be metres"):
+            describe(obs, metres_per_row=bad)
+    assert describe(obs, metres_per_row=np.float32(5.0)) == describe(obs, metres_per_row=5.0)
+    make_teacher(metres_per_row=5)
