@@ -93,6 +93,10 @@ class DrivingConfig:
             raise ValueError(
                 f"sim must be a SimConfig (sumo_scenarios.sim), got {type(self.sim).__name__}"
             )
+        # plain ints, as SimConfig and TrafficScenario keep plain numbers: a numpy int (from a
+        # sweep over an array) made the config's asdict fail json.dumps
+        object.__setattr__(self, "max_episode_steps", int(self.max_episode_steps))
+        object.__setattr__(self, "start_lane", int(self.start_lane))
 
 
 @dataclass(frozen=True)
@@ -143,7 +147,10 @@ class DrivingEnv(gym.Env):
         elif kwargs:
             raise TypeError("pass either a DrivingConfig or keyword settings, not both")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+            raise ValueError(
+                f"render_mode must be None or one of {self.metadata['render_modes']} (the env "
+                f"draws frames as images; show them yourself), got {render_mode!r}"
+            )
         self.config = config
         self.scenario = get_scenario(config.scenario)
         self.render_mode = render_mode
@@ -236,7 +243,7 @@ class DrivingEnv(gym.Env):
 
     def render(self) -> np.ndarray | None:
         """The current timestep drawn as an RGB image [H, W, 3] uint8 (``render_mode=
-        "rgb_array"``), else None."""
+        "rgb_array"``), else None. Before a completed reset: RuntimeError."""
         if self.render_mode != "rgb_array":
             return None
         from sumo_scenarios.render import render_frame
@@ -259,7 +266,12 @@ class DrivingEnv(gym.Env):
         return self._sim.closed
 
     def frame(self) -> Frame:
-        """A copy of the current scene for drawing."""
+        """A copy of the current scene for drawing (after a completed reset)."""
+        if self._episode_seed is None:  # it drew an empty road with the ego at 0 m
+            raise RuntimeError(
+                "reset() first: there is no scene to draw before a reset has completed "
+                "(none ran, or the last one failed)"
+            )
         s = self._sim
         return Frame(
             self._t,
@@ -286,8 +298,11 @@ class DrivingEnv(gym.Env):
         return obs
 
     def _info(self) -> dict[str, Any]:
-        """Info of a step. ``car_rel_m`` [N] / ``car_lane`` [N] / ``car_closing_ms`` [N] describe
-        every car in the traffic window (hidden state: only scripted experts may read them);
+        """Info of a step. ``car_rel_m`` / ``car_lane`` / ``car_closing_ms``, tuples of N numbers
+        (``numpy.asarray`` makes them arrays), describe every car in the traffic window (hidden
+        state: only scripted experts may read them). Tuples, not arrays: the number of cars
+        varies, and gymnasium's vector envs stack an array info into one fixed-shape array (an
+        AsyncVectorEnv of two driving envs failed at its first reset); a tuple they keep as is;
         ``closing_speed_ms`` maps each normal lane to the closing speed (m/s, ego speed minus
         the car's speed over the last step) of the car the observation reports for that lane,
         which a driver sees (0 when no car is within sensing range)."""
@@ -308,9 +323,9 @@ class DrivingEnv(gym.Env):
             "t": self._t,
             "episode_seed": self._episode_seed,
             "position_m": s.distance_m,
-            "car_lane": s.car_lane.copy(),
-            "car_rel_m": rel,
-            "car_closing_ms": car_closing,
+            "car_lane": tuple(s.car_lane.tolist()),
+            "car_rel_m": tuple(rel.tolist()),
+            "car_closing_ms": tuple(car_closing.tolist()),
             "closing_speed_ms": closing,
             "step_length_s": self.config.sim.step_length_s,
         }

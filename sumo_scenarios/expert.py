@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from sumo_scenarios.env import LEFT, RIGHT, SENSE_RANGE_M, STAY
-from sumo_scenarios.scenarios import N_LANES
+from sumo_scenarios.scenarios import N_LANES, _is_real
 
 __all__ = [
     "HOME_LANE",
@@ -66,8 +66,16 @@ class ExpertConfig:
     middle_pass: bool = False
 
     def __post_init__(self) -> None:
+        for name in ("min_gap_m", "change_far_m", "enter_ahead_m", "return_spread_m"):
+            v = getattr(self, name)
+            if not _is_real(v) or not math.isfinite(v):
+                raise ValueError(f"{name} must be a finite number of metres, got {v!r}")
         if not 5.0 <= self.min_gap_m < self.enter_ahead_m <= self.change_far_m <= SENSE_RANGE_M:
-            raise ValueError("need 5 <= min_gap_m < enter_ahead_m <= change_far_m <= 25")
+            raise ValueError(
+                "need 5 <= min_gap_m < enter_ahead_m <= change_far_m <= 25 (metres; 25 is the "
+                f"sensing range), got min_gap_m={self.min_gap_m!r}, "
+                f"enter_ahead_m={self.enter_ahead_m!r}, change_far_m={self.change_far_m!r}"
+            )
         if not (math.isfinite(self.return_spread_m) and self.return_spread_m >= 0):
             raise ValueError(
                 f"return_spread_m must be a finite distance >= 0 m, got {self.return_spread_m!r}"

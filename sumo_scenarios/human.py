@@ -36,6 +36,16 @@ def _center(text: str) -> str:
     return text.center(_CELL)
 
 
+def _check_metres_per_row(value: Any) -> None:
+    """Refuse a row height that is not metres in (0, 25] (a text or None was a TypeError of a
+    comparison, True a 1 m row)."""
+    number = isinstance(value, int | float | np.integer | np.floating) and not isinstance(
+        value, bool | np.bool_
+    )
+    if not number or not 0 < value <= _RANGE:
+        raise ValueError(f"metres_per_row must be metres in (0, {_RANGE:g}], got {value!r}")
+
+
 def describe(
     observation: np.ndarray, info: dict | None = None, *, metres_per_row: float = 2.5
 ) -> str:
@@ -63,8 +73,7 @@ def describe(
     ego = int(round(obs[3]))
     if abs(obs[3] - ego) > 1e-3 or not 0 <= ego < _N_LANES:
         raise ValueError(f"ego lane must be an integer 0..4, got {obs[3]}")
-    if not 0 < metres_per_row <= _RANGE:
-        raise ValueError(f"metres_per_row must be in (0, {_RANGE}], got {metres_per_row}")
+    _check_metres_per_row(metres_per_row)
 
     half = int(round(_RANGE / metres_per_row))
     n_rows = 2 * half + 1
@@ -100,6 +109,7 @@ def make_teacher(*, metres_per_row: float = 2.5, **kwargs: Any) -> TerminalTeach
         **kwargs: passed to :class:`~torchcbl.human.TerminalTeacher` (``input``, ``output``,
             ``status``, ``title``, ...); ``keys`` and ``action_names`` may be overridden.
     """
+    _check_metres_per_row(metres_per_row)  # before a session starts, not at its first question
     kwargs.setdefault("keys", KEYS)
     kwargs.setdefault("action_names", ACTION_NAMES)
     kwargs.setdefault("describe", functools.partial(describe, metres_per_row=metres_per_row))

@@ -64,11 +64,31 @@ def lane_distribution(lanes: Sequence[int] | np.ndarray) -> np.ndarray:
 
 
 def total_variation(p: Sequence[float] | np.ndarray, q: Sequence[float] | np.ndarray) -> float:
-    """Total-variation distance 0.5 * sum |p - q| between two distributions, in [0, 1]."""
-    a, b = np.asarray(p, dtype=np.float64), np.asarray(q, dtype=np.float64)
+    """Total-variation distance 0.5 * sum |p - q| between two distributions, in [0, 1].
+
+    ``p`` and ``q`` are shares (e.g. :func:`lane_distribution`'s): 1-D, finite, >= 0, each
+    summing to 1; counts, percentages or a NaN are refused (they gave a distance above 1, or
+    NaN, without a word)."""
+    a, b = _distribution("p", p), _distribution("q", q)
     if a.shape != b.shape:
         raise ValueError(f"shapes differ: {a.shape} vs {b.shape}")
     return float(0.5 * np.abs(a - b).sum())
+
+
+def _distribution(name: str, values: Sequence[float] | np.ndarray) -> np.ndarray:
+    """``values`` as float64 [K], refused unless they are shares summing to 1."""
+    try:
+        v = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a sequence of shares, got {values!r:.60}") from None
+    if v.ndim != 1 or v.size == 0 or not np.all(np.isfinite(v)) or np.any(v < 0):
+        raise ValueError(f"{name} must be a 1-D sequence of finite shares >= 0, got {values!r:.60}")
+    if abs(v.sum() - 1.0) > 1e-6:
+        raise ValueError(
+            f"{name} must sum to 1 (shares, as lane_distribution gives), sums to {v.sum():g}: "
+            "divide counts by their total, percentages by 100"
+        )
+    return v
 
 
 def windowed_accuracy(correct: Sequence[bool] | np.ndarray, window: int = 150) -> np.ndarray:
@@ -108,8 +128,18 @@ def plot_lane_bars(
     distributions: Sequence[Sequence[float]],
     collision_rates: Sequence[float],
 ) -> None:
-    """Figure 8: one stacked bar of lane shares per policy, collision % written beside it."""
+    """Figure 8: one stacked bar of lane shares per policy, collision % written beside it.
+
+    ``distributions`` [P, 5] (lane shares per policy, as :func:`lane_distribution` gives) and
+    ``collision_rates`` [P] (shares, not percent) go with the P ``labels``."""
     dist = np.asarray(distributions, dtype=np.float64)
+    if dist.shape != (len(labels), N_LANES) or len(collision_rates) != len(labels):
+        # one distribution too few was drawn for every label (broadcast), 3 lanes an IndexError
+        raise ValueError(
+            f"plot_lane_bars needs one distribution over the {N_LANES} lanes and one collision "
+            f"rate per label: {len(labels)} labels, distributions of shape {dist.shape}, "
+            f"{len(collision_rates)} collision rates"
+        )
     y = np.arange(len(labels))[::-1]
     colors = ["#8c564b", "#ff7f0e", "#2ca02c", "#1f77b4", "#9467bd"]
     left = np.zeros(len(labels))
@@ -136,7 +166,11 @@ def plot_confidence_trace(
     """Figure 10: Mahalanobis distance of the best classification per timestep, contacts as
     squares (a larger distance = less confident); ``start`` is the first timestep's index."""
     d = np.asarray(distances, dtype=np.float64)
-    c = np.asarray(contacts, dtype=bool)
+    c = _flags("contacts", contacts).astype(bool)  # a NaN was drawn as a contact
+    if d.ndim != 1 or d.shape != c.shape:
+        raise ValueError(
+            f"distances and contacts need one entry per timestep each, got {d.shape} and {c.shape}"
+        )
     t = start + np.arange(d.size)
     ax.plot(t, d, lw=0.8)
     ax.plot(t[c], d[c], "s", ms=4, mfc="none", color="red", label="contact")

@@ -95,6 +95,18 @@ class EpisodeRecord:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> EpisodeRecord:
         """Rebuild a record written by :meth:`to_dict`."""
+        need = ("scenario", "sim", "episode_seed", "start_lane", "actions")
+        if not isinstance(d, dict) or not set(need) <= d.keys():
+            got = f"a dict with keys {sorted(map(str, d))}" if isinstance(d, dict) else repr(d)
+            raise ValueError(
+                f"an episode record is a dict with keys {list(need)} (as to_dict writes it), "
+                f"got {got:.120}"
+            )
+        if not isinstance(d["scenario"], dict) or not isinstance(d["sim"], dict):
+            raise ValueError(
+                "an episode record's scenario and sim are dicts of their fields, got "
+                f"{d['scenario']!r:.60} and {d['sim']!r:.60}"
+            )
         sc = dict(d["scenario"])
         if "lane_speeds_mph" in sc:
             raise ValueError(
@@ -121,8 +133,26 @@ def save_records(records: list[EpisodeRecord], path: str | Path) -> None:
 
 
 def load_records(path: str | Path) -> list[EpisodeRecord]:
-    """Read records written by :func:`save_records`."""
-    return [EpisodeRecord.from_dict(d) for d in json.loads(Path(path).read_text())]
+    """Read records written by :func:`save_records` (a JSON list of
+    :meth:`EpisodeRecord.to_dict`; the driving experiment's ``seed_<k>/episodes.json`` is one).
+
+    Raises:
+        ValueError: the file is not JSON or not such a list, naming the file.
+    """
+    try:
+        data = json.loads(Path(path).read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path} is not JSON ({exc}): expected episode records") from None
+    if not isinstance(data, list):
+        raise ValueError(
+            f"{path} holds a JSON {type(data).__name__}, not a list of episode records (as "
+            "save_records writes them; a teaching session's directory is read by "
+            "session_episodes)"
+        )
+    try:
+        return [EpisodeRecord.from_dict(d) for d in data]
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: {exc}") from None
 
 
 class EpisodeRecorder(gym.Wrapper):
@@ -355,7 +385,8 @@ def render_gif(
     """Draw the episode into a GIF: every ``every``-th timestep of the WHOLE episode (unless
     ``max_frames`` caps it), played at ``fps`` frames per second (default: real time at stride
     1, one frame per step length: 4 at the default 0.25 s steps). The frame delay is written in
-    milliseconds, as imageio's GIF writer expects."""
+    milliseconds, as imageio's GIF writer expects. ``path`` ends in ``.gif``, in a directory
+    that exists: both are checked before the episode is replayed and drawn."""
     import imageio.v2 as imageio
 
     from sumo_scenarios.render import render_frame
@@ -371,6 +402,15 @@ def render_gif(
             f"every and max_frames must be ints >= 1 and fps a number > 0, got every={every!r}, "
             f"max_frames={max_frames!r}, fps={fps!r}"
         )
+    # checked first: these failed in imageio only after the whole replay and drawing (minutes
+    # for a long episode), a name without a suffix leaving an empty file behind
+    path = Path(path)
+    if path.suffix.lower() != ".gif":
+        raise ValueError(f"render_gif writes a GIF: give a path ending in .gif, got {str(path)!r}")
+    if path.is_dir():
+        raise ValueError(f"{str(path)!r} is a directory; give the GIF's file path (e.g. ep.gif)")
+    if not path.parent.is_dir():
+        raise ValueError(f"the directory of {str(path)!r} does not exist; create it first")
     every = int(every)
     max_frames = None if max_frames is None else int(max_frames)
     _, shots = replay(record, frames=True)
@@ -378,7 +418,6 @@ def render_gif(
     if max_frames is not None:
         shots = shots[:max_frames]
     images = [render_frame(f) for f in shots]
-    path = Path(path)
     imageio.mimsave(path, images, duration=1000.0 / fps, loop=0)
     return path
 

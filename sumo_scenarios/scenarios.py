@@ -92,6 +92,26 @@ def _is_real(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
+def _items(value: Any) -> list[Any] | None:
+    """``value``'s items when it is a sequence (a tuple, a list, an array), else None."""
+    if isinstance(value, str | bytes) or (isinstance(value, np.ndarray) and value.ndim == 0):
+        return None
+    try:
+        return list(value)
+    except TypeError:
+        return None
+
+
+def _per_lane(name: str, value: Any) -> list[Any]:
+    """``value``'s three entries (normal lanes 1, 2, 3), else a ValueError naming ``name``."""
+    items = _items(value)
+    if items is None or len(items) != len(TRAFFIC_LANES):
+        raise ValueError(
+            f"{name} needs one entry per normal lane (right, middle, left), 3 in all, got {value!r}"
+        )
+    return items
+
+
 @dataclass(frozen=True)
 class TrafficScenario:
     """Background traffic on the five-lane road.
@@ -113,7 +133,8 @@ class TrafficScenario:
             ego; a car falling out behind is recycled to the front of its lane. Metres.
         behind_m: see ``ahead_m``.
         start_clear_m: at reset no car is within 15 m behind or this many metres ahead of the
-            ego (in any lane), so no episode starts in or right before a contact.
+            ego (in any lane), so no episode starts in or right before a contact. At most
+            ``ahead_m``.
     """
 
     name: str
@@ -130,28 +151,50 @@ class TrafficScenario:
             raise ValueError(f"name must be a str, got {self.name!r}")
         if _as_int(self.seed) is None or self.seed < 0:
             raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
-        values = [self.min_spacing_m, self.ahead_m, self.behind_m, self.start_clear_m]
-        values += [*self.mean_spacing_m, *(v for r in self.speed_ranges_mph for v in r)]
-        for v in values:
+        for name in ("min_spacing_m", "ahead_m", "behind_m", "start_clear_m"):
+            v = getattr(self, name)
             if not _is_real(v) or not math.isfinite(v):
-                raise ValueError(f"every distance and speed must be a finite number, got {v!r}")
+                raise ValueError(f"{name} must be a finite number of metres, got {v!r}")
+        ranges = _per_lane("speed_ranges_mph", self.speed_ranges_mph)
+        spacings = _per_lane("mean_spacing_m", self.mean_spacing_m)
+        for rng in ranges:
+            pair = _items(rng)
+            if (
+                pair is None
+                or len(pair) != 2
+                or not all(_is_real(v) and math.isfinite(v) for v in pair)
+                or not 20.0 <= pair[0] <= pair[1] <= 40.0
+            ):
+                raise ValueError(
+                    "speed_ranges_mph: each lane's range must be (low, high) with "
+                    f"20 <= low <= high <= 40 mph, got {rng!r}"
+                )
         if self.start_clear_m < 0:
             raise ValueError(f"start_clear_m must be >= 0 m, got {self.start_clear_m!r}")
-        if len(self.speed_ranges_mph) != 3 or len(self.mean_spacing_m) != 3:
-            raise ValueError("speed_ranges_mph and mean_spacing_m need one entry per normal lane")
-        for rng in self.speed_ranges_mph:
-            if len(rng) != 2 or not 20.0 <= rng[0] <= rng[1] <= 40.0:
-                raise ValueError(
-                    f"each speed range must be (low, high) with 20 <= low <= high <= 40 mph, "
-                    f"got {rng}"
-                )
         if self.min_spacing_m <= 10.0:
-            raise ValueError("min_spacing_m must exceed 10 m (two car lengths)")
-        for s in self.mean_spacing_m:
-            if s < self.min_spacing_m:
-                raise ValueError("mean_spacing_m must be at least min_spacing_m")
+            raise ValueError(
+                f"min_spacing_m must exceed 10 m (two car lengths), got {self.min_spacing_m!r}"
+            )
+        for v in spacings:
+            if not _is_real(v) or not math.isfinite(v) or v < self.min_spacing_m:
+                raise ValueError(
+                    "mean_spacing_m: each lane's mean spacing must be a finite number of metres "
+                    f">= min_spacing_m ({self.min_spacing_m!r}), got {self.mean_spacing_m!r}"
+                )
         if self.behind_m < 30.0 or self.ahead_m < 60.0:
-            raise ValueError("the traffic window must cover the 25 m sensing range with margin")
+            raise ValueError(
+                "the traffic window must cover the 25 m sensing range with margin: behind_m "
+                f">= 30 m and ahead_m >= 60 m, got behind_m={self.behind_m!r}, "
+                f"ahead_m={self.ahead_m!r}"
+            )
+        if self.start_clear_m > self.ahead_m:
+            # the first car of each lane goes beyond the clear stretch: past the window, it can
+            # pass the end of the road, where SUMO removes it and the next step fails on it
+            raise ValueError(
+                f"start_clear_m must be at most ahead_m = {self.ahead_m} m (the clear stretch "
+                f"lies inside the traffic window ahead of the ego), got {self.start_clear_m}; "
+                "for a longer empty road ahead raise ahead_m too"
+            )
         # plain Python numbers and tuples: libsumo takes no numpy float32 (positions computed
         # from one stay float32) and a recorded episode's JSON no numpy int
         set_ = object.__setattr__
@@ -171,8 +214,9 @@ class TrafficScenario:
         return tuple((lo * MPH, hi * MPH) for lo, hi in self.speed_ranges_mph)
 
     def with_seed(self, seed: int) -> TrafficScenario:
-        """The same traffic with another base seed (another family of road segments)."""
-        return replace(self, seed=int(seed))
+        """The same traffic with another base seed (another family of road segments): an
+        int >= 0, checked as the field is (2.7 or True is refused, not truncated)."""
+        return replace(self, seed=seed)
 
 
 TRAIN = TrafficScenario(name="train", seed=1)
@@ -192,6 +236,12 @@ def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:
     """Look a scenario up by name (or pass one through)."""
     if isinstance(scenario, TrafficScenario):
         return scenario
+    if not isinstance(scenario, str):  # a dict or list was "unhashable type", a TypeError
+        raise ValueError(
+            f"scenario must be a name ({', '.join(sorted(SCENARIOS))}) or a TrafficScenario, "
+            f"got {type(scenario).__name__} {scenario!r:.80}; e.g. "
+            "TrafficScenario(name='mine', seed=0, mean_spacing_m=(40.0, 31.0, 60.0))"
+        )
     try:
         return SCENARIOS[scenario]
     except KeyError:

@@ -85,7 +85,8 @@ class SimConfig:
 
     Attributes:
         step_length_s: one decision = one SUMO step of this many seconds (0.25 s: the paper's
-            500 timesteps were about 2.1 minutes of driving), at most 0.5 s: contact is checked
+            500 timesteps were about 2.1 minutes of driving), a whole number of milliseconds
+            (SUMO's time resolution), at most 0.5 s: contact is checked
             at the end of each step, and the ego (60 mph) passes a car of 20 mph within a car
             length (10 m of relative travel) in 0.56 s.
         ego_start_m: the ego's front-bumper position on the edge at reset, metres.
@@ -108,11 +109,23 @@ class SimConfig:
                 raise ValueError(f"{name} must be a number, got {v!r}")
             # a plain float: SUMO gets it as text (``repr`` of a numpy float is not a number)
             object.__setattr__(self, name, float(v))
+        ms = self.step_length_s * 1000.0
+        if math.isfinite(ms) and abs(ms - round(ms)) <= 1e-3:
+            # the float SUMO runs: np.float32(0.1) is 0.10000000149011612 as a float (a Python
+            # float of whole milliseconds, 0.25 say, stays the same float)
+            object.__setattr__(self, "step_length_s", round(ms) / 1000.0)
         if not 0.01 <= self.step_length_s <= 0.5:
             raise ValueError(
                 f"step_length_s must lie in [0.01, 0.5] seconds, got {self.step_length_s}: "
                 "contact is checked once a step, and a car at 20 mph stays within a car length "
                 "of the ego for 0.56 s, so a longer step can pass through it unseen"
+            )
+        if abs(ms - round(ms)) > 1e-3:  # not snapped above
+            # SUMO counts time in whole milliseconds: 0.0125 s ran as 0.013 s while speeds were
+            # measured over (and the teachers told) 0.0125 s, 4 % off
+            raise ValueError(
+                f"step_length_s must be a whole number of milliseconds (SUMO's time step), got "
+                f"{self.step_length_s!r}; e.g. {round(ms) / 1000.0!r}"
             )
         if not (math.isfinite(self.ego_start_m) and self.ego_start_m >= 0):
             raise ValueError(

@@ -76,6 +76,7 @@ from typing import Any
 
 import numpy as np
 
+from sumo_scenarios.scenarios import _as_int
 from torchcbl.teachers import HumanTiming, HumanTimingConfig
 
 __all__ = ["HumanDriver", "HumanDriverConfig", "make_teacher"]
@@ -437,7 +438,11 @@ def make_teacher(
     timing: HumanTimingConfig | None = None,
 ) -> HumanTiming:
     """The default human-like driving teacher: :class:`HumanDriver` in
-    :class:`~torchcbl.teachers.HumanTiming` (stay = the default key), both seeded from ``seed``."""
-    ss = np.random.SeedSequence([int(seed), 5_2])
+    :class:`~torchcbl.teachers.HumanTiming` (stay = the default key), both seeded from ``seed``
+    (an int >= 0; a numpy int is the int it holds)."""
+    given, seed = seed, _as_int(seed)  # 1.5 or True was int()-ed: another seed's teacher
+    if seed is None or seed < 0:
+        raise ValueError(f"seed: expected an int >= 0, got {given!r}")
+    ss = np.random.SeedSequence([seed, 5_2])
     a, b = (int(s.generate_state(1)[0]) for s in ss.spawn(2))
     return HumanTiming(HumanDriver(driver, seed=a), timing or HumanTimingConfig(), seed=b)

@@ -94,6 +94,46 @@ def test_a_second_env_takes_the_simulation_over_and_the_first_says_so(env):
         first.close()
 
 
+def test_an_async_vector_env_of_driving_envs_runs_and_matches_single_envs():
+    """Two driving envs in an AsyncVectorEnv (the documented way to run two at once): their
+    info's per-car entries used to be arrays whose length (the number of cars) differs between
+    segments, and gymnasium stacks an array info into one fixed-shape array: the first reset
+    failed ('could not broadcast input array from shape (18,) into shape (22,)')."""
+    seeds, actions = [1, 2], [[STAY, LEFT], [RIGHT, STAY], [STAY, STAY]]
+    expected = []
+    for k, seed in enumerate(seeds):
+        single = DrivingEnv()
+        try:
+            obs, info = single.reset(seed=seed)
+            run, cars = [obs], [len(info["car_rel_m"])]
+            for a in actions:
+                run.append(single.step(a[k])[0])
+        finally:
+            single.close()
+        expected.append((np.stack(run), cars[0]))
+    assert expected[0][1] != expected[1][1]  # segments with different numbers of cars
+    venv = gym.vector.AsyncVectorEnv(
+        [lambda: gym.make(sumo_scenarios.ENV_ID) for _ in seeds], context="spawn"
+    )
+    try:
+        obs, info = venv.reset(seed=seeds)
+        run = [obs]
+        for a in actions:
+            obs, _, _, _, info = venv.step(np.array(a))
+            run.append(obs)
+    except BaseException:
+        venv.close(terminate=True)  # a plain close waits for the failed call's answer forever
+        raise
+    venv.close()
+    got = np.stack(run)  # [T, env, 4]
+    for k in range(len(seeds)):
+        np.testing.assert_array_equal(got[:, k], expected[k][0])
+        rel = np.asarray(info["car_rel_m"][k])
+        lanes = np.asarray(info["car_lane"][k])
+        assert rel.shape == lanes.shape and rel.size > 0
+        assert info["lane"][k] == got[-1, k, 3]
+
+
 def test_a_failed_reset_a_closed_env_and_a_dropped_env_never_crash_sumo(env, tmp_path):
     """step() after a reset that SUMO refused (here: FCD output to a file it cannot create) or
     after close() is a clear error (on libsumo both used to reach a dead simulation: a
@@ -223,7 +263,7 @@ def test_contact_matches_hand_overlap_and_actions_clamp(env):
         a = [STAY, RIGHT, RIGHT, LEFT, STAY, STAY][t % 6]
         prev = info["lane"]
         obs, _, _, _, info = env.step(a)
-        rel, lanes = info["car_rel_m"], info["car_lane"]
+        rel, lanes = np.asarray(info["car_rel_m"]), np.asarray(info["car_lane"])
         lanes_checked = {prev, info["lane"]}
         hand = bool(np.any((np.abs(rel) < CAR_LENGTH_M) & np.isin(lanes, list(lanes_checked))))
         assert info["contact"] == hand

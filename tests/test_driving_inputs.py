@@ -4,6 +4,7 @@ valid settings, mistakes. Each test closes its env: libsumo holds one simulation
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -114,7 +115,7 @@ def test_render_outlines_a_car_in_contact_in_the_lane_the_ego_just_left():
         env.reset(seed=1)
         for _ in range(2000):
             _, _, _, _, info = env.step(int(rng.integers(3)))
-            rel, lanes = info["car_rel_m"], info["car_lane"]
+            rel, lanes = np.asarray(info["car_rel_m"]), np.asarray(info["car_lane"])
             near = np.abs(rel) < CAR_LENGTH_M
             if info["contact"] and not np.any(lanes[near] == info["lane"]):
                 break
@@ -225,3 +226,303 @@ def test_reset_seeds_and_drawing_settings_are_checked(tmp_path):
         with pytest.raises(ValueError, match="every and max_frames must be ints"):
             render_gif(record, tmp_path / "x.gif", **bad)
     assert not (tmp_path / "x.gif").exists()
+
+
+def test_a_clear_start_beyond_the_traffic_window_is_refused_and_one_up_to_it_drives():
+    # the first car of each lane went past the clear stretch, beyond the window the road's
+    # margin is sized for: with 10 km it was placed past the road's end, SUMO dropped it, and
+    # the first step failed with libsumo's "Vehicle 'c2' is not known"
+    for clear in (201.0, 1e4):
+        with pytest.raises(
+            ValueError, match=rf"start_clear_m must be at most ahead_m = 200.0 m .*got {clear}"
+        ):
+            TrafficScenario("clear", 0, start_clear_m=clear)
+    env = DrivingEnv(
+        scenario=TrafficScenario("clear", 0, start_clear_m=200.0), max_episode_steps=60
+    )
+    try:
+        _, info = env.reset(seed=0)
+        rel = np.asarray(info["car_rel_m"])
+        assert not np.any((rel > -15.0) & (rel < 200.0))
+        for _ in range(60):
+            _, _, _, truncated, info = env.step(0)
+        assert truncated and len(info["car_rel_m"]) > 0
+    finally:
+        env.close()
+
+
+def test_total_variation_refuses_what_is_not_two_distributions():
+    # percentages gave 20.0 (a "distance in [0, 1]"), a NaN share gave nan, counts above 1
+    p = metrics.lane_distribution([1, 2, 2, 3, 3, 3, 3, 3, 3, 3])
+    q = metrics.lane_distribution([3, 3, 3, 4, 4, 4, 4, 4, 2, 2])
+    assert metrics.total_variation(p, q) == pytest.approx(0.5)
+    assert metrics.total_variation(p.tolist(), tuple(q)) == metrics.total_variation(p, q)
+    for bad, says in (
+        ((100 * p, 100 * q), "p must sum to 1 .* sums to 100: .* percentages by 100"),
+        ((p, np.bincount([2, 3, 3], minlength=5)), "q must sum to 1 .* sums to 3: divide counts"),
+        (([np.nan, 1.0], [0.0, 1.0]), "p must be a 1-D sequence of finite shares >= 0"),
+        (([1.5, -0.5], [0.0, 1.0]), "p must be a 1-D sequence of finite shares >= 0"),
+        ((0.5, 0.5), "p must be a 1-D sequence"),
+        (([], []), "p must be a 1-D sequence"),
+        ((["a"], [1.0]), "p must be a sequence of shares"),
+        ((p, [0.5, 0.5]), "shapes differ"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            metrics.total_variation(*bad)
+
+
+def test_with_seed_checks_the_seed_as_the_field_is():
+    # with_seed(2.7) was the scenario of base seed 2 and with_seed(True) of seed 1, silently
+    base = TrafficScenario("mine", 0)
+    assert base.with_seed(np.int64(5)) == TrafficScenario("mine", 5)
+    assert type(base.with_seed(np.int64(5)).seed) is int
+    for bad in (2.7, True, -1, "3"):
+        with pytest.raises(ValueError, match=rf"seed must be an int >= 0, got {bad!r}"):
+            base.with_seed(bad)
+
+
+@pytest.mark.parametrize(
+    "field, bad, says",
+    [
+        # each was a TypeError of Python's own ('Value after * must be an iterable, not
+        # float', "'int' object is not iterable") or a message without the value given
+        ("mean_spacing_m", 40.0, r"mean_spacing_m needs one entry per normal lane .* got 40.0"),
+        ("mean_spacing_m", (40.0, 31.0), r"3 in all, got \(40.0, 31.0\)"),
+        ("mean_spacing_m", "abc", r"mean_spacing_m needs one entry .* got 'abc'"),
+        ("mean_spacing_m", (5.0, 31.0, 120.0), r">= min_spacing_m \(12.0\), got \(5.0, 31"),
+        ("mean_spacing_m", (None, 31.0, 120.0), r"finite number of metres .* got \(None"),
+        ("speed_ranges_mph", (20.0, 30.0), r"speed_ranges_mph needs one entry .* \(20.0, 30.0\)"),
+        ("speed_ranges_mph", None, r"speed_ranges_mph needs one entry .* got None"),
+        ("speed_ranges_mph", ((20, 30), (25, 35), 30), r"range must be \(low, high\) .* got 30"),
+        ("speed_ranges_mph", ((20, None), (25, 35), (30, 40)), r"got \(20, None\)"),
+        ("speed_ranges_mph", ((10, 30), (25, 35), (30, 40)), r"20 <= low <= high <= 40 mph"),
+        ("min_spacing_m", 8.0, r"min_spacing_m must exceed 10 m \(two car lengths\), got 8.0"),
+        ("min_spacing_m", "12", r"min_spacing_m must be a finite number of metres, got '12'"),
+        ("behind_m", 10.0, r"behind_m >= 30 m and ahead_m >= 60 m, got behind_m=10.0"),
+        ("ahead_m", 50.0, r"got behind_m=60.0, ahead_m=50.0"),
+    ],
+)
+def test_a_malformed_scenario_field_is_named_with_its_value(field, bad, says):
+    with pytest.raises(ValueError, match=says):
+        TrafficScenario("mine", 0, **{field: bad})
+
+
+def test_per_lane_fields_take_lists_and_arrays():
+    plain = TrafficScenario("mine", 0, mean_spacing_m=(40.0, 31.0, 60.0))
+    assert TrafficScenario("mine", 0, mean_spacing_m=[40, 31, 60]) == plain
+    assert TrafficScenario("mine", 0, mean_spacing_m=np.array([40.0, 31.0, 60.0])) == plain
+    ranges = np.array([[20.0, 30.0], [25.0, 35.0], [30.0, 40.0]])
+    assert TrafficScenario("mine", 0, speed_ranges_mph=ranges).speed_ranges_mph == (
+        (20.0, 30.0),
+        (25.0, 35.0),
+        (30.0, 40.0),
+    )
+
+
+def test_a_scenario_that_is_neither_a_name_nor_a_traffic_scenario_is_named():
+    # a dict (say, from a config file) or a list was Python's "unhashable type: 'dict'"
+    for bad in ({"name": "mine", "seed": 0}, ["train"]):
+        with pytest.raises(ValueError, match=r"scenario must be a name \(eval, light, train\) or"):
+            DrivingConfig(scenario=bad)
+    with pytest.raises(ValueError, match=r"got dict \{'name': 'mine'"):
+        DrivingEnv(scenario={"name": "mine", "seed": 0})
+    with pytest.raises(ValueError, match="unknown scenario 'busy'; known: eval, light, train"):
+        DrivingConfig(scenario="busy")
+
+
+def test_the_human_like_teacher_takes_only_a_whole_seed():
+    # make_teacher int()-ed its seed: 1.5 and True gave seed 1's teacher, None a TypeError
+    from sumo_scenarios.teacher import make_teacher
+
+    obs = np.array([12.0, -25.0, 25.0, 2.0], dtype=np.float32)
+    info = {"closing_speed_ms": {1: 8.0, 2: 0.0, 3: 0.0}, "step_length_s": 0.25, "t": 0}
+
+    def answers(teacher):
+        return [teacher(obs, dict(info, t=t)) for t in range(40)]
+
+    assert answers(make_teacher(np.int64(7))) == answers(make_teacher(7))
+    for bad in (1.5, True, None, -1, "1"):
+        with pytest.raises(ValueError, match=rf"seed: expected an int >= 0, got {bad!r}"):
+            make_teacher(bad)
+
+
+def test_expert_settings_out_of_order_or_not_numbers_are_named_with_their_values():
+    # the order was refused without the values given; text was a TypeError of a comparison
+    from sumo_scenarios.expert import ExpertConfig
+
+    with pytest.raises(ValueError, match=r"change_far_m <= 25 .* got min_gap_m=10.0, "):
+        ExpertConfig(change_far_m=30.0)
+    with pytest.raises(ValueError, match=r"got min_gap_m=4.0, enter_ahead_m=16.0, change_far"):
+        ExpertConfig(min_gap_m=4.0)
+    for field, bad in (("min_gap_m", "10"), ("enter_ahead_m", None), ("change_far_m", np.nan)):
+        with pytest.raises(ValueError, match=rf"{field} must be a finite number of metres"):
+            ExpertConfig(**{field: bad})
+    with pytest.raises(ValueError, match="return_spread_m must be a finite number of metres"):
+        ExpertConfig(return_spread_m="1")
+    assert ExpertConfig(min_gap_m=np.float64(10.0)) == ExpertConfig()
+
+
+def test_load_records_names_a_file_that_holds_no_episode_records(tmp_path):
+    # a JSON object was "string indices must be integers", an item without an episode's keys
+    # KeyError('scenario'), a list of numbers "'int' object is not subscriptable"
+    good = EpisodeRecorder(DrivingEnv(max_episode_steps=3))
+    try:
+        good.reset(seed=1)
+        for _ in range(3):
+            good.step(0)
+    finally:
+        good.close()
+    save_records(good.episodes, tmp_path / "ok.json")
+    assert load_records(tmp_path / "ok.json") == good.episodes
+    record = good.episodes[0].to_dict()
+    cases = {
+        "object.json": ({"episodes": []}, r"object.json holds a JSON dict, not a list of episode"),
+        "numbers.json": ([1, 2], r"numbers.json: an episode record is a dict with keys .* got 1"),
+        "steps.json": ([{"step": 0}], r"keys \['scenario', .*got a dict with keys \['step'\]"),
+        "scenario.json": (
+            [dict(record, scenario="train")],
+            r"scenario and sim are dicts of their fields, got 'train'",
+        ),
+        "field.json": (
+            [dict(record, sim=dict(record["sim"], speed=1.0))],
+            r"field.json: .*unexpected keyword argument 'speed'",
+        ),
+    }
+    for name, (data, says) in cases.items():
+        (tmp_path / name).write_text(json.dumps(data))
+        with pytest.raises(ValueError, match=says):
+            load_records(tmp_path / name)
+    (tmp_path / "text.json").write_text("not json")
+    with pytest.raises(ValueError, match=r"text.json is not JSON \(Expecting value"):
+        load_records(tmp_path / "text.json")
+
+
+def test_a_driving_config_of_numpy_ints_keeps_plain_ints():
+    # kept as numpy ints, they made json.dumps of the config's asdict fail ("Object of type
+    # int64 is not JSON serializable")
+    config = DrivingConfig(start_lane=np.int64(3), max_episode_steps=np.int32(20))
+    assert config == DrivingConfig(start_lane=3, max_episode_steps=20)
+    assert type(config.start_lane) is int and type(config.max_episode_steps) is int
+    assert json.loads(json.dumps(dataclasses.asdict(config)))["start_lane"] == 3
+    env = DrivingEnv(config)
+    try:
+        assert env.reset(seed=0)[1]["lane"] == 3
+    finally:
+        env.close()
+
+
+def test_drawing_before_a_reset_is_refused_not_an_empty_road():
+    # render() and frame() before any reset (or after a failed one) drew a road with no car and
+    # the ego at 0 m, as if that were the scene
+    env = DrivingEnv(render_mode="rgb_array")
+    try:
+        for draw in (env.render, env.frame):
+            with pytest.raises(RuntimeError, match="reset\\(\\) first: there is no scene to draw"):
+                draw()
+        with pytest.raises(ValueError, match="fcd_output"):
+            env.reset(seed=1, options={"fcd_output": "/nonexistent-dir/x.xml"})
+        with pytest.raises(RuntimeError, match="reset\\(\\) first"):
+            env.render()
+        env.reset(seed=1)
+        assert env.render().shape[2] == 3 and env.frame().ego_pos == 300.0
+    finally:
+        env.close()
+    assert env.render().shape[2] == 3  # the last scene stays drawable after close()
+
+
+def test_the_figure_helpers_refuse_data_that_does_not_line_up():
+    # plot_lane_bars drew one distribution for two labels (numpy broadcast it) and failed with
+    # an IndexError on 3 lanes; plot_confidence_trace failed with an IndexError on a contact
+    # list one short and drew a NaN contact as a contact
+    from matplotlib.figure import Figure
+
+    ax = Figure().add_subplot()
+    share = [0.1, 0.2, 0.3, 0.4, 0.0]
+    metrics.plot_lane_bars(ax, ["a", "b"], [share, share], [0.01, 0.02])
+    for labels, dists, rates in (
+        (["a", "b"], [share], [0.01, 0.02]),
+        (["a"], [[0.5, 0.5, 0.0]], [0.01]),
+        (["a", "b"], [share, share], [0.01]),
+    ):
+        with pytest.raises(ValueError, match="one distribution over the 5 lanes and one"):
+            metrics.plot_lane_bars(ax, labels, dists, rates)
+    metrics.plot_confidence_trace(ax, [1.0, np.inf, 2.0], [False, True, False])
+    with pytest.raises(ValueError, match=r"one entry per timestep each, got \(3,\) and \(2,\)"):
+        metrics.plot_confidence_trace(ax, [1.0, 2.0, 3.0], [True, False])
+    with pytest.raises(ValueError, match="contacts must be True / False per timestep"):
+        metrics.plot_confidence_trace(ax, [1.0, 2.0], [np.nan, 1])
+
+
+def test_render_gif_checks_its_path_before_replaying(tmp_path, monkeypatch):
+    # a missing directory, a directory, or a name imageio cannot place failed only after the
+    # whole replay and drawing; a name without a suffix left an empty file behind
+    import sumo_scenarios.replay as replay_module
+
+    env = EpisodeRecorder(DrivingEnv(max_episode_steps=3))
+    try:
+        env.reset(seed=1)
+        for _ in range(3):
+            env.step(0)
+    finally:
+        env.close()
+    (record,) = env.episodes
+    replays = []
+    real = replay_module.replay
+    monkeypatch.setattr(replay_module, "replay", lambda *a, **k: replays.append(1) or real(*a, **k))
+    (tmp_path / "dir.gif").mkdir()
+    for bad, says in (
+        (tmp_path / "absent" / "ep.gif", "the directory of .* does not exist; create it first"),
+        (tmp_path / "dir.gif", "is a directory; give the GIF's file path"),
+        (tmp_path / "ep", "render_gif writes a GIF: give a path ending in .gif"),
+        (tmp_path / "ep.mp4", "render_gif writes a GIF: give a path ending in .gif, got .*ep.mp4"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            render_gif(record, bad)
+    assert not replays and not (tmp_path / "ep").exists()
+    assert render_gif(record, tmp_path / "ep.GIF").stat().st_size > 0
+
+
+def test_an_unknown_render_mode_is_named():
+    # "render_mode must be one of ['rgb_array']" did not say what was given
+    for bad in ("human", "rgb"):
+        with pytest.raises(ValueError, match=rf"one of \['rgb_array'\] .* got '{bad}'"):
+            DrivingEnv(render_mode=bad)
+
+
+def test_a_step_length_sumo_cannot_run_is_refused_and_a_float32_one_runs_exactly():
+    # SUMO counts whole milliseconds: 0.0125 s ran as 0.013 s (the ego moved 0.3487 m a step,
+    # not 0.3353) while speeds were measured over, and the teachers told, 0.0125 s
+    from sumo_scenarios.scenarios import EGO_SPEED_MS
+
+    for bad, near in ((0.0125, 0.012), (0.2505, 0.25)):
+        with pytest.raises(
+            ValueError, match=rf"whole number of milliseconds .* got {bad}; e.g. {near}"
+        ):
+            SimConfig(step_length_s=bad)
+    assert SimConfig(step_length_s=np.float32(0.1)).step_length_s == 0.1
+    env = DrivingEnv(sim=SimConfig(step_length_s=np.float32(0.013)))
+    try:
+        _, info = env.reset(seed=1)
+        start = info["position_m"]
+        for _ in range(10):
+            _, _, _, _, info = env.step(0)
+    finally:
+        env.close()
+    assert info["step_length_s"] == 0.013
+    moved = (info["position_m"] - start) / 10
+    assert moved == pytest.approx(EGO_SPEED_MS * info["step_length_s"], rel=1e-9)
+
+
+def test_the_keyboard_teachers_row_height_is_checked_when_it_is_made():
+    # make_teacher took any metres_per_row and the session failed at its first question
+    # ("'<' not supported between instances of 'int' and 'str'"); True drew 1 m rows
+    from sumo_scenarios.human import describe, make_teacher
+
+    obs = np.array([10.0, -5.0, 25.0, 2.0], dtype=np.float32)
+    for bad in ("2", None, True, 0, 30, np.nan):
+        with pytest.raises(ValueError, match=r"metres_per_row must be metres in \(0, 25\], got"):
+            make_teacher(metres_per_row=bad)
+        with pytest.raises(ValueError, match="metres_per_row must be metres"):
+            describe(obs, metres_per_row=bad)
+    assert describe(obs, metres_per_row=np.float32(5.0)) == describe(obs, metres_per_row=5.0)
+    make_teacher(metres_per_row=5)
