@@ -690,3 +690,49 @@ def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
 
     report = evaluate_saved_policy(run, n_steps=5)
     assert report["world"] == dataclasses.asdict(cfg.world) and report["world"]["forward_noise"] > 0
+
+
+def test_replay_never_writes_over_the_recording_it_replays(tmp_path, capsys):
+    """--gif or --fcd naming the episodes file, a file of the session being replayed, or each
+    other (or the .sumocfg / fcd-replay input written beside the FCD): one line, exit code 2,
+    nothing written. (--fcd EPISODES.json wrote the FCD over the recorded episodes.)"""
+    import gymnasium as gym
+
+    import sumo_scenarios  # noqa: F401  (registers torchcbl/Driving-v0)
+    from sumo_scenarios.env import DrivingEnv
+    from sumo_scenarios.replay import EpisodeRecorder, save_records
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher
+
+    env = EpisodeRecorder(DrivingEnv(scenario="eval", max_episode_steps=5), label="demo/a")
+    try:
+        env.reset(seed=0)
+        for _ in range(5):
+            env.step(0)
+    finally:
+        env.close()
+    episodes = tmp_path / "episodes.json"
+    save_records(env.episodes, episodes)
+    run = tmp_path / "session"
+    env = gym.make("torchcbl/Driving-v0", scenario="light", max_episode_steps=5)
+    with ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False) as ct:
+        ct.run(max_steps=5)
+    files = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    ep, a = str(episodes), tmp_path / "a"
+    clash = "one output would overwrite the other"
+    for argv, says in (
+        ([ep, "--fcd", ep], "is the episodes file being replayed"),
+        ([ep, "--gif", ep], "is the episodes file being replayed"),
+        ([str(run), "--fcd", str(run / "steps.sqlite")], "is a file of the session"),
+        ([str(run), "--gif", str(run / "config.json")], "is a file of the session"),
+        ([ep, "--gif", f"{a}.xml", "--fcd", f"{a}.xml"], clash),
+        ([ep, "--gif", f"{a}.sumocfg", "--fcd", f"{a}.fcd.xml"], clash),
+        ([ep, "--gif", f"{a}.replay.xml", "--fcd", f"{a}.fcd.xml"], clash),
+    ):
+        assert main(["replay", *argv, "--max-frames", "2"]) == 2, argv
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1, (argv, err)
+        assert says in err, (argv, err)
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == files
+    assert main(["replay", str(episodes), "--max-frames", "2"]) == 0  # the defaults, beside it
+    assert episodes.read_bytes() == files[episodes]

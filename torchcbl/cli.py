@@ -360,22 +360,22 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     session = path.is_dir()
     # beside the JSON, or beside (not in) a session's directory ("." too)
     stem = path.resolve() if session else path.with_suffix("")
+    gif = Path(args.gif) if args.gif else stem.with_name(f"{stem.name}-{index}.gif")
+    fcd = Path(args.fcd) if args.fcd else stem.with_name(f"{stem.name}-{index}.fcd.xml")
+    _output_file(gif, "--gif")
+    _output_file(fcd, "--fcd")
+    cfg = fcd.with_name(fcd.name.replace(".fcd.xml", "") + ".sumocfg")
+    _replay_outputs_spare(path, gif, fcd, cfg)
     if session:  # the session logged what it saw: the replay must see the same
         try:
             replay.session_episodes(path, check=[index])
         except ValueError as exc:
             raise _UsageError(str(exc)) from None
         print(f"episode {index}: the replay equals the session's log, observation for observation")
-    gif = Path(args.gif) if args.gif else stem.with_name(f"{stem.name}-{index}.gif")
-    fcd = Path(args.fcd) if args.fcd else stem.with_name(f"{stem.name}-{index}.fcd.xml")
-    _output_file(gif, "--gif")
-    _output_file(fcd, "--fcd")
     print(f"episode {index}: {record.label or '-'} ({len(record.actions)} steps)")
     replay.export_fcd(record, fcd)
     print(f"FCD written to {fcd}")
-    cfg = replay.write_sumocfg(
-        record, fcd, fcd.with_name(fcd.name.replace(".fcd.xml", "") + ".sumocfg")
-    )
+    cfg = replay.write_sumocfg(record, fcd, cfg)
     print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {cfg})")
     replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
     steps = len(record.actions)
@@ -387,6 +387,37 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         shown = f"all {steps} timesteps"
     print(f"GIF written to {gif} ({frames} frames, every {args.every} timestep(s): {shown})")
     return 0
+
+
+def _replay_outputs_spare(source: Path, gif: Path, fcd: Path, cfg: Path) -> None:
+    """A one-line error, before anything is written, if a file replay writes (the GIF, the
+    FCD, the .sumocfg and the fcd-replay input beside it) is the episodes file being replayed or
+    a file of the session being replayed (its log, its config), or is another of the outputs:
+    writing it would destroy the recording, or one output would overwrite another."""
+    # (write_sumocfg names its fcd-replay input so)
+    replay_input = fcd.with_name(fcd.name.removesuffix(".xml").removesuffix(".fcd") + ".replay.xml")
+    outputs = [
+        (f"--gif {gif}", gif),
+        (f"--fcd {fcd}", fcd),
+        (f"the .sumocfg of --fcd, {cfg},", cfg),
+        (f"the fcd-replay input of --fcd, {replay_input},", replay_input),
+    ]
+    source = source.resolve()
+    seen: dict[Path, str] = {}
+    for what, out in outputs:
+        target = out.resolve()
+        if target == source or (source.is_dir() and source in target.parents and target.exists()):
+            kept = "the episodes file" if target == source else f"a file of the session {source}"
+            raise _UsageError(
+                f"{what} is {kept} being replayed: writing it would destroy the recording; "
+                "choose another path (or leave --gif/--fcd out: the default is beside it)"
+            )
+        if target in seen:
+            raise _UsageError(
+                f"{what} is also {seen[target].rstrip(',')}: one output would overwrite the "
+                "other; give --gif and --fcd paths apart"
+            )
+        seen[target] = what
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
