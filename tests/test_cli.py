@@ -692,17 +692,10 @@ def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
     assert report["world"] == dataclasses.asdict(cfg.world) and report["world"]["forward_noise"] > 0
 
 
-def test_replay_never_writes_over_the_recording_it_replays(tmp_path, capsys):
-    """--gif or --fcd naming the episodes file, a file of the session being replayed, or each
-    other (or the .sumocfg / fcd-replay input written beside the FCD): one line, exit code 2,
-    nothing written. (--fcd EPISODES.json wrote the FCD over the recorded episodes.)"""
-    import gymnasium as gym
-
-    import sumo_scenarios  # noqa: F401  (registers torchcbl/Driving-v0)
+def _recorded_episodes(path: Path) -> Path:
+    """An episodes.json of one 5-step driving episode, as the driving experiment writes."""
     from sumo_scenarios.env import DrivingEnv
     from sumo_scenarios.replay import EpisodeRecorder, save_records
-    from sumo_scenarios.teacher import make_teacher
-    from torchcbl import ConfidentTeacher
 
     env = EpisodeRecorder(DrivingEnv(scenario="eval", max_episode_steps=5), label="demo/a")
     try:
@@ -711,8 +704,21 @@ def test_replay_never_writes_over_the_recording_it_replays(tmp_path, capsys):
             env.step(0)
     finally:
         env.close()
-    episodes = tmp_path / "episodes.json"
-    save_records(env.episodes, episodes)
+    save_records(env.episodes, path)
+    return path
+
+
+def test_replay_never_writes_over_the_recording_it_replays(tmp_path, capsys):
+    """--gif or --fcd naming the episodes file, a file of the session being replayed, or each
+    other (or the .sumocfg / fcd-replay input written beside the FCD): one line, exit code 2,
+    nothing written. (--fcd EPISODES.json wrote the FCD over the recorded episodes.)"""
+    import gymnasium as gym
+
+    import sumo_scenarios  # noqa: F401  (registers torchcbl/Driving-v0)
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher
+
+    episodes = _recorded_episodes(tmp_path / "episodes.json")
     run = tmp_path / "session"
     env = gym.make("torchcbl/Driving-v0", scenario="light", max_episode_steps=5)
     with ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False) as ct:
@@ -722,12 +728,9 @@ def test_replay_never_writes_over_the_recording_it_replays(tmp_path, capsys):
     clash = "one output would overwrite the other"
     for argv, says in (
         ([ep, "--fcd", ep], "is the episodes file being replayed"),
-        ([ep, "--gif", ep], "is the episodes file being replayed"),
         ([str(run), "--fcd", str(run / "steps.sqlite")], "is a file of the session"),
-        ([str(run), "--gif", str(run / "config.json")], "is a file of the session"),
-        ([ep, "--gif", f"{a}.xml", "--fcd", f"{a}.xml"], clash),
-        ([ep, "--gif", f"{a}.sumocfg", "--fcd", f"{a}.fcd.xml"], clash),
-        ([ep, "--gif", f"{a}.replay.xml", "--fcd", f"{a}.fcd.xml"], clash),
+        ([str(run), "--fcd", str(run / "config.json")], "is a file of the session"),
+        ([ep, "--gif", f"{a}.gif", "--fcd", f"{a}.gif"], clash),
     ):
         assert main(["replay", *argv, "--max-frames", "2"]) == 2, argv
         out, err = capsys.readouterr()
@@ -736,3 +739,25 @@ def test_replay_never_writes_over_the_recording_it_replays(tmp_path, capsys):
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == files
     assert main(["replay", str(episodes), "--max-frames", "2"]) == 0  # the defaults, beside it
     assert episodes.read_bytes() == files[episodes]
+
+
+def test_replay_gif_path_must_name_a_gif(tmp_path):
+    """--gif without .gif: one line, exit code 2 and nothing written. (The image writer, which
+    picks its format by the name, failed after the FCD and .sumocfg were written, with a
+    warning and an "Exception ignored ... Traceback" on stderr, and left an empty file.)"""
+    episodes = _recorded_episodes(tmp_path / "episodes.json")
+    for name in ("replay", "replay.png"):
+        proc = subprocess.run(
+            [str(BIN), "replay", str(episodes), "--gif", str(tmp_path / name), "--max-frames", "2"],
+            capture_output=True,
+            text=True,
+            env={**os.environ, "TORCHCBL_TRACEBACK": ""},
+        )
+        assert proc.returncode == 2 and proc.stdout == "", (name, proc)
+        assert proc.stderr.count("\n") == 1, (name, proc.stderr)
+        assert "expected a file name ending in .gif" in proc.stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.json"]
+    assert (
+        main(["replay", str(episodes), "--gif", str(tmp_path / "r.GIF"), "--max-frames", "2"]) == 0
+    )
+    assert (tmp_path / "r.GIF").stat().st_size > 0

@@ -363,6 +363,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     gif = Path(args.gif) if args.gif else stem.with_name(f"{stem.name}-{index}.gif")
     fcd = Path(args.fcd) if args.fcd else stem.with_name(f"{stem.name}-{index}.fcd.xml")
     _output_file(gif, "--gif")
+    if gif.suffix.lower() != ".gif":  # the writer picks its format by the name
+        raise _UsageError(
+            f"--gif {gif}: expected a file name ending in .gif, e.g. {gif.with_suffix('.gif')}"
+        )
     _output_file(fcd, "--fcd")
     cfg = fcd.with_name(fcd.name.replace(".fcd.xml", "") + ".sumocfg")
     _replay_outputs_spare(path, gif, fcd, cfg)
