@@ -761,3 +761,39 @@ def test_replay_gif_path_must_name_a_gif(tmp_path):
         main(["replay", str(episodes), "--gif", str(tmp_path / "r.GIF"), "--max-frames", "2"]) == 0
     )
     assert (tmp_path / "r.GIF").stat().st_size > 0
+
+
+def test_ctrl_c_during_a_run_with_worker_processes_is_one_line(tmp_path):
+    """Ctrl-C at a terminal (SIGINT to the whole process group) while two worker processes
+    teach: exit code 130 and the one line "interrupted". (The workers, terminated, left the
+    multiprocessing lock of their tqdm bars behind, and the resource tracker added a two-line
+    "leaked semaphore objects" warning.)"""
+    import signal
+
+    out = tmp_path / "runs"
+    proc = subprocess.Popen(
+        [str(BIN), "reproduce", "corridor", "--seeds", "2", "--workers", "2", "--no-progress"]
+        + ["--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+        start_new_session=True,  # a process group of its own, as a terminal's job
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        env={**os.environ, "TORCHCBL_TRACEBACK": ""},
+    )
+    try:
+        sessions = out / "corridor" / "sessions"
+        deadline = time.monotonic() + 300
+        # both workers are teaching (a model is saved only inside the teaching loop)
+        while not all(any((sessions / s / "checkpoints").glob("*.pt")) for s in ("seed0", "seed1")):
+            assert proc.poll() is None and time.monotonic() < deadline, proc.poll()
+            time.sleep(0.2)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert err == "torchcbl reproduce: interrupted\n"
