@@ -797,3 +797,49 @@ def test_ctrl_c_during_a_run_with_worker_processes_is_one_line(tmp_path):
             proc.wait()
     assert proc.returncode == 130, err
     assert err == "torchcbl reproduce: interrupted\n"
+
+
+def _unwritable_directory(tmp_path: Path) -> Path:
+    """A directory no file can be made in: a read-only one of the test's own, or, for root
+    (whom permission bits do not stop), Linux's /sys."""
+    import tempfile
+
+    if os.geteuid() != 0:
+        readonly = tmp_path / "readonly"
+        readonly.mkdir()
+        readonly.chmod(0o555)
+        return readonly
+    try:
+        tempfile.TemporaryFile(dir="/sys").close()
+    except OSError:
+        return Path("/sys")
+    pytest.skip("no directory here that this user cannot write to")
+
+
+def test_an_output_directory_that_cannot_be_written_is_refused_before_the_run(tmp_path):
+    """--out, --run-dir, --gif and --fcd where no file can be made: exit code 2 and one line
+    that names the directory, before anything runs. (The run started and failed at its first
+    file, exit code 1 with the bare OSError; replay --gif wrote the FCD and .sumocfg first and
+    then added imageio's "Exception ignored ... Traceback" to stderr.)"""
+    locked = _unwritable_directory(tmp_path)
+    episodes = _recorded_episodes(tmp_path / "episodes.json")
+    cases = [
+        ["reproduce", "corridor", "--seeds", "1", "--out", str(locked / "runs")],
+        ["benchmark", "--quick", "--envs", "corridor", "--seeds", "1"]
+        + ["--strategies", "bc", "--out", str(locked / "bench")],
+        ["teach", "corridor", "--steps", "3", "--run-dir", str(locked / "session")],
+        ["replay", str(episodes), "--max-frames", "2", "--gif", str(locked / "r.gif")],
+        ["replay", str(episodes), "--max-frames", "2", "--fcd", str(locked / "r.fcd.xml")],
+    ]
+    for argv in cases:
+        proc = subprocess.run(
+            [str(BIN), *argv],
+            capture_output=True,
+            text=True,
+            stdin=subprocess.DEVNULL,
+            env={**os.environ, "TORCHCBL_TRACEBACK": ""},
+        )
+        assert proc.returncode == 2 and proc.stdout == "", (argv, proc)
+        assert proc.stderr.count("\n") == 1, (argv, proc.stderr)
+        assert f"cannot write in {locked}" in proc.stderr, (argv, proc.stderr)
+    assert sorted(p.name for p in tmp_path.iterdir() if p != locked) == ["episodes.json"]

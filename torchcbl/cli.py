@@ -159,8 +159,9 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
 def _output_dir(path: Path, flag: str) -> Path:
     """``path`` as a directory to write into, or a one-line error: it (or a parent) exists as a
-    file. A path with no name of its own (``.``, ``..``, ``""``) is made absolute, so that a
-    fresh ``-2`` beside it is named after the directory it means."""
+    file, or the directory it is (or would be made in) cannot be written. A path with no name
+    of its own (``.``, ``..``, ``""``) is made absolute, so that a fresh ``-2`` beside it is
+    named after the directory it means."""
     if path.name in ("", ".", ".."):
         path = path.resolve()
     for p in (path, *path.parents):
@@ -171,18 +172,36 @@ def _output_dir(path: Path, flag: str) -> Path:
                     f"{flag} {path} cannot be a directory: {where}; expected a new or empty "
                     "directory path"
                 )
+            _check_writable(p, f"{flag} {path}")
             break
     return path
 
 
+def _check_writable(directory: Path, what: str) -> None:
+    """A one-line error if no file can be made in ``directory`` (read-only, not one's own):
+    found before a run starts, not when its first file is written. A file is made and removed
+    to know, as permission bits alone do not tell (root, read-only mounts, ACLs)."""
+    import tempfile
+
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError as exc:
+        raise _UsageError(
+            f"{what}: cannot write in {directory} ({exc.strerror or exc}); choose a directory "
+            "you can write to"
+        ) from None
+
+
 def _output_file(path: Path, flag: str) -> Path:
     """``path`` as a file to write, or a one-line error: it is a directory, or its directory is
-    missing or a file."""
+    missing, a file or not writable."""
     if path.is_dir():
         raise _UsageError(f"{flag} {path} is a directory; expected a file path")
     if not path.parent.is_dir():
         what = "is a file" if path.parent.exists() else "does not exist"
         raise _UsageError(f"cannot write {path}: directory {path.parent} {what}")
+    _check_writable(path.parent, f"{flag} {path}")
     return path
 
 
@@ -193,7 +212,13 @@ def _fresh_dir(out: Path) -> Path:
     while candidate.exists() and any(candidate.iterdir()):
         n += 1
         candidate = out.with_name(f"{out.name}-{n}")
-    candidate.mkdir(parents=True, exist_ok=True)
+    try:
+        candidate.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # e.g. out is writable, its parent (for out-2) is not
+        raise _UsageError(
+            f"--out {out}: cannot make {candidate} ({exc.strerror or exc}); choose a directory "
+            "you can write to"
+        ) from None
     return candidate
 
 
