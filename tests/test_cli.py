@@ -843,3 +843,42 @@ def test_an_output_directory_that_cannot_be_written_is_refused_before_the_run(tm
         assert proc.stderr.count("\n") == 1, (argv, proc.stderr)
         assert f"cannot write in {locked}" in proc.stderr, (argv, proc.stderr)
     assert sorted(p.name for p in tmp_path.iterdir() if p != locked) == ["episodes.json"]
+
+
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["--strategies", "nope:Thing"], "--strategies nope:Thing: cannot import it (No module"),
+        (["--strategies", ".rel:X"], "--strategies .rel:X: cannot make it (TypeError"),
+        (
+            ["--strategies", "torchcbl.gmm:GaussianMixtureSet"],
+            "--strategies torchcbl.gmm:GaussianMixtureSet: cannot make it (TypeError",
+        ),
+        (
+            ["--strategies", "collections:OrderedDict"],
+            "--strategies collections:OrderedDict: OrderedDict is not a strategy",
+        ),
+        (["--strategies", ",,"], "--strategies ',,' names no strategy"),
+        (
+            ["--envs", "driving", "--driving-teacher", "expert"],
+            "--driving-teacher expert: expected",
+        ),
+        (
+            ["--envs", "driving", "--driving-teacher", "nope:x"],
+            "--driving-teacher nope:x: No module",
+        ),
+    ],
+)
+def test_benchmark_checks_strategy_and_teacher_paths_before_the_run(argv, says, tmp_path, capsys):
+    """An import path of --strategies or --driving-teacher that gives no strategy / teacher:
+    one line naming the option, exit code 2, nothing printed or written. (A class that needs
+    arguments, a relative name or a non-strategy failed with exit code 1 after the run's header
+    was printed, some leaving an empty OUT/cells behind; a missing module's error named no
+    option.)"""
+    out = tmp_path / "bench"
+    args = ["benchmark", "--quick", "--envs", "corridor", "--seeds", "1", "--out", str(out)]
+    assert main([*args, *argv]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured
+    assert captured.err.startswith(f"torchcbl benchmark: error: {says}"), captured.err
+    assert not out.exists()

@@ -644,6 +644,36 @@ _STOP_REASONS = {
 _BENCH_ENVS = {"corridor": "corridor.benchmark", "driving": "sumo_scenarios.benchmark"}
 
 
+def _check_strategy(spec: Any) -> None:
+    """A one-line error unless ``spec`` (a --strategies import path) gives a strategy: the
+    class imports, is made without arguments (the command gives it none) and has the
+    :class:`torchcbl.strategies.Strategy` methods."""
+    from torchcbl.strategies import Strategy
+
+    try:
+        strategy = spec.build(seed=0)
+    except ImportError as exc:
+        text = _one_line(exc)
+        if text.startswith("cannot import"):  # it names the path and what it expected
+            raise _UsageError(f"{text} (--strategies)") from None
+        raise _UsageError(
+            f"--strategies {spec.name}: cannot import it ({text}); expected module:Class of a "
+            "strategy that takes no arguments, or a shipped name"
+        ) from None
+    except Exception as exc:  # the user's class: whatever it raises, it is not usable here
+        text = _one_line(exc)
+        raise _UsageError(
+            f"--strategies {spec.name}: cannot make it ({type(exc).__name__}: {text}); expected "
+            "module:Class of a strategy that takes no arguments, or a shipped name"
+        ) from None
+    if not isinstance(strategy, Strategy):
+        raise _UsageError(
+            f"--strategies {spec.name}: {type(strategy).__name__} is not a strategy; expected "
+            "a class with the methods of torchcbl.strategies.Strategy (bind, decide, actor, "
+            "observe_label, observe_refit, observe_step, ...)"
+        )
+
+
 def _cmd_benchmark(args: argparse.Namespace) -> int:
     import dataclasses
     import importlib.util
@@ -664,13 +694,28 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             f"--strategies: unknown {bad}; expected names from {sorted(bm.STRATEGY_PATHS)} "
             "or import paths module:Class"
         )
+    if not names:
+        raise _UsageError(
+            f"--strategies {args.strategies!r} names no strategy; expected names from "
+            f"{sorted(bm.STRATEGY_PATHS)} or import paths module:Class, comma-separated"
+        )
     strategies = [bm.StrategySpec(n) for n in names]
+    for spec in strategies:  # a path of one's own: made once now, before anything is written
+        if spec.name not in bm.STRATEGY_PATHS:
+            _check_strategy(spec)
     env_names = (
         [e for e in args.envs.split(",") if e] if args.envs is not None else list(_BENCH_ENVS)
     )
     bad = [e for e in env_names if e not in _BENCH_ENVS]
     if bad:
         raise _UsageError(f"--envs: unknown {bad}; expected some of {sorted(_BENCH_ENVS)}")
+    if args.driving_teacher and "driving" in env_names:
+        try:
+            bm._import(args.driving_teacher)
+        except (ValueError, ImportError, TypeError) as exc:  # TypeError: a relative name
+            raise _UsageError(
+                f"--driving-teacher {args.driving_teacher}: {_one_line(exc)}"
+            ) from None
     envs = []
     for e in env_names:
         spec = importlib.import_module(_BENCH_ENVS[e]).env_spec(quick=args.quick)
