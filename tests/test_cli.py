@@ -890,3 +890,24 @@ def test_benchmark_checks_strategy_and_teacher_paths_before_the_run(argv, says, 
     assert captured.out == "" and captured.err.count("\n") == 1, captured
     assert captured.err.startswith(f"torchcbl benchmark: error: {says}"), captured.err
     assert not out.exists()
+
+
+def test_the_commands_teach_says_to_run_work_for_a_path_with_a_space(tmp_path, monkeypatch, capsys):
+    """The "continue with: torchcbl teach ..." line (and the "resume it with" of a domain
+    mistake) is a command that runs as printed: a --run-dir with a space or a quote is quoted.
+    (It was printed bare, so a copied `--run-dir my runs/it's` was three words and a quote.)"""
+    import shlex
+
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "my runs" / "it's"
+    run.parent.mkdir()
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    told = capsys.readouterr().out.rsplit("continue with: ", 1)[1].strip()
+    argv = shlex.split(told)
+    assert argv[:2] == ["torchcbl", "teach"] and argv[argv.index("--run-dir") + 1] == str(run)
+    assert main([*argv[1:], "--steps", "3"]) == 0  # it resumes the session
+    assert len(load_records(run)) == 6
+    capsys.readouterr()
+    assert main(["teach", "driving", "--resume", "--run-dir", str(run)]) == 2
+    told = capsys.readouterr().err.rsplit("resume it with ", 1)[1].strip()
+    assert shlex.split(told)[1:] == ["teach", "corridor", "--resume", "--run-dir", str(run)]

@@ -306,7 +306,7 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
         raise _UsageError(
             f"{session} is a {domain} session ({described}), not a {asked} one; "
             + (
-                f"resume it with torchcbl teach {domain} --resume --run-dir {session}"
+                f"resume it with torchcbl teach {domain} --resume --run-dir {_shell(session)}"
                 if teach
                 else f"pass --domain {domain} or leave --domain out"
             )
@@ -405,7 +405,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     replay.export_fcd(record, fcd)
     print(f"FCD written to {fcd}")
     cfg = replay.write_sumocfg(record, fcd, cfg)
-    print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {cfg})")
+    print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {_shell(cfg)})")
     replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
     steps = len(record.actions)
     frames = len(range(0, steps + 1, args.every))  # the reset's frame and one per step
@@ -625,7 +625,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     print(
         f"{ct.n_demonstrations} demonstrations over {ct.n_steps} steps saved in {run_dir}"
         + (f" ({why})" if why else "")
-        + f"; continue with: torchcbl teach {args.domain} --run-dir {run_dir} --resume"
+        + f"; continue with: torchcbl teach {args.domain} --run-dir {_shell(run_dir)} --resume"
     )
     return 0
 
@@ -1150,6 +1150,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 1
+
+
+def _shell(path: Path) -> str:
+    """``path`` as a shell word, for a command line the user is told to run (a path with a
+    space or a quote in it, quoted)."""
+    import shlex
+
+    return shlex.quote(str(path))
 
 
 def _one_line(exc: BaseException) -> str:
