@@ -911,3 +911,33 @@ def test_the_commands_teach_says_to_run_work_for_a_path_with_a_space(tmp_path, m
     assert main(["teach", "driving", "--resume", "--run-dir", str(run)]) == 2
     told = capsys.readouterr().err.rsplit("resume it with ", 1)[1].strip()
     assert shlex.split(told)[1:] == ["teach", "corridor", "--resume", "--run-dir", str(run)]
+
+
+def test_a_session_whose_own_map_file_moved_says_to_put_it_back(tmp_path, monkeypatch, capsys):
+    """teach corridor --map PATH keeps the map by its full path; once the file is moved,
+    evaluate and teach --resume say so in one line (exit code 2) and that the file goes back
+    there. (teach --resume failed with exit code 1 and, like evaluate, told the user to "give
+    an existing map JSON file", which neither command takes for a session.)"""
+    import corridor
+
+    _scripted_corridor_person(monkeypatch)
+    mine = tmp_path / "mine.json"
+    mine.write_text(Path(corridor.__file__).with_name("maps").joinpath("lshape.json").read_text())
+    run = tmp_path / "session"
+    assert (
+        main(["teach", "corridor", "--run-dir", str(run), "--map", str(mine), "--steps", "3"]) == 0
+    )
+    mine.rename(tmp_path / "moved.json")
+    capsys.readouterr()
+    for argv in (
+        ["evaluate", str(run), "--steps", "3"],
+        ["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"taught on the map file {mine}" in err, err
+        assert "put that file back there" in err
+    assert len(load_records(run)) == 3
+    (tmp_path / "moved.json").rename(mine)
+    assert main(["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"]) == 0
+    assert len(load_records(run)) == 6

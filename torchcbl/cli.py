@@ -314,9 +314,28 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
     return domain
 
 
+def _session_map_exists(session: Path, domain: str) -> None:
+    """A one-line error if a corridor session's own map file (``teach corridor --map PATH``
+    keeps it by its full path) is not there any more: neither evaluate nor teach --resume
+    takes another map, so the way on is to put the file back."""
+    from torchcbl.session import load_config
+
+    kwargs = (load_config(session).get("env") or {}).get("kwargs") or {}
+    name = kwargs.get("corridor_map")
+    if domain != "corridor" or not isinstance(name, str) or not name.endswith(".json"):
+        return  # (a shipped map goes by its name)
+    if not Path(name).is_file():
+        raise _UsageError(
+            f"{session} was taught on the map file {name}, which is not there any more; put "
+            "that file back there (a session keeps its map: evaluate and teach --resume "
+            "drive the map it was taught on)"
+        )
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     session = Path(args.run_dir)
     domain = _session_domain(session, args.domain)
+    _session_map_exists(session, domain)
     module = _experiment_module(domain)
     from torchcbl.session import IncompatibleRunDirError
 
@@ -562,6 +581,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         _session_domain(
             run_dir, args.domain, teach=True
         )  # a session of this domain, or a one-line error
+        _session_map_exists(run_dir, args.domain)
     elif (run_dir / "config.json").exists():
         raise _UsageError(
             f"{run_dir} already holds a teaching session; add --resume to continue it "
