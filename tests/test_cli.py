@@ -941,3 +941,22 @@ def test_a_session_whose_own_map_file_moved_says_to_put_it_back(tmp_path, monkey
     (tmp_path / "moved.json").rename(mine)
     assert main(["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"]) == 0
     assert len(load_records(run)) == 6
+
+
+def test_teach_resume_of_a_damaged_session_is_a_one_line_mistake(tmp_path, monkeypatch, capsys):
+    """teach --resume of a session with a damaged log is told as evaluate tells it: one line,
+    exit code 2, and the session's files untouched. (It was exit code 1, with the error's
+    class name and the TORCHCBL_TRACEBACK hint around the same text.)"""
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    with open(run / "steps.journal", "a") as journal:
+        journal.write('garbage\n{"x":')
+    files = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    for argv in (["evaluate", str(run)], ["teach", "corridor", "--resume", "--run-dir", str(run)]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "steps.journal: line" in err and "is damaged" in err, err
+        assert "CorruptSessionError" not in err and "TORCHCBL_TRACEBACK" not in err, err
+    assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == files

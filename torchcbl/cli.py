@@ -617,7 +617,13 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         )
 
     if args.resume:
-        ct = ConfidentTeacher.resume(run_dir, env, teacher, progress=False, on_step=status)
+        from torchcbl.errors import IncompatibleRunDirError
+
+        try:  # (a session another process is teaching, a damaged log: as evaluate says them)
+            ct = ConfidentTeacher.resume(run_dir, env, teacher, progress=False, on_step=status)
+        except IncompatibleRunDirError as exc:
+            env.close()
+            raise _UsageError(_one_line(exc)) from None
     else:
         config = TeachingConfig(noninteractive=not args.skip_noninteractive, **settings)
         ct = ConfidentTeacher(
