@@ -524,6 +524,15 @@ def _run_seed_job(job: tuple[DrivingExperimentConfig, int, str]) -> dict[str, An
     return _run_seed(*job)
 
 
+def _worker_ignores_ctrl_c() -> None:
+    """A seed worker leaves Ctrl-C to the parent, which stops the pool: a terminal's Ctrl-C
+    reaches every process of the group, and a worker that took it printed its traceback (a
+    multiprocessing.Pool worker does not catch KeyboardInterrupt) under the command's line."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 class _Straight:
     def __call__(self, observation: np.ndarray) -> int:
         return 0
@@ -566,7 +575,9 @@ def run_experiment(
     per_seed = []
     ctx = mp.get_context("spawn")
     bar = progress_bar(total=len(jobs), desc="driving seeds", unit="seed", show=progress)
-    with ctx.Pool(min(workers, len(jobs)), maxtasksperchild=1) as pool:
+    with ctx.Pool(
+        min(workers, len(jobs)), initializer=_worker_ignores_ctrl_c, maxtasksperchild=1
+    ) as pool:  # a Ctrl-C (in the parent) leaves the block, which terminates the workers
         for res in pool.imap_unordered(_run_seed_job, jobs, chunksize=1):
             per_seed.append(res)
             bar.update(1)

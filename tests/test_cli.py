@@ -690,3 +690,273 @@ def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
 
     report = evaluate_saved_policy(run, n_steps=5)
     assert report["world"] == dataclasses.asdict(cfg.world) and report["world"]["forward_noise"] > 0
+
+
+def _recorded_episodes(path: Path) -> Path:
+    """An episodes.json of one 5-step driving episode, as the driving experiment writes."""
+    from sumo_scenarios.env import DrivingEnv
+    from sumo_scenarios.replay import EpisodeRecorder, save_records
+
+    env = EpisodeRecorder(DrivingEnv(scenario="eval", max_episode_steps=5), label="demo/a")
+    try:
+        env.reset(seed=0)
+        for _ in range(5):
+            env.step(0)
+    finally:
+        env.close()
+    save_records(env.episodes, path)
+    return path
+
+
+def test_replay_never_writes_over_the_recording_it_replays(tmp_path, capsys):
+    """--gif or --fcd naming the episodes file, a file of the session being replayed, or each
+    other (or the .sumocfg / fcd-replay input written beside the FCD): one line, exit code 2,
+    nothing written. (--fcd EPISODES.json wrote the FCD over the recorded episodes.)"""
+    import gymnasium as gym
+
+    import sumo_scenarios  # noqa: F401  (registers torchcbl/Driving-v0)
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher
+
+    episodes = _recorded_episodes(tmp_path / "episodes.json")
+    run = tmp_path / "session"
+    env = gym.make("torchcbl/Driving-v0", scenario="light", max_episode_steps=5)
+    with ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False) as ct:
+        ct.run(max_steps=5)
+    files = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    ep, a = str(episodes), tmp_path / "a"
+    clash = "one output would overwrite the other"
+    for argv, says in (
+        ([ep, "--fcd", ep], "is the episodes file being replayed"),
+        ([str(run), "--fcd", str(run / "steps.sqlite")], "is a file of the session"),
+        ([str(run), "--fcd", str(run / "config.json")], "is a file of the session"),
+        ([ep, "--gif", f"{a}.gif", "--fcd", f"{a}.gif"], clash),
+    ):
+        assert main(["replay", *argv, "--max-frames", "2"]) == 2, argv
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1, (argv, err)
+        assert says in err, (argv, err)
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == files
+    assert main(["replay", str(episodes), "--max-frames", "2"]) == 0  # the defaults, beside it
+    assert episodes.read_bytes() == files[episodes]
+
+
+def test_replay_gif_path_must_name_a_gif(tmp_path):
+    """--gif without .gif: one line, exit code 2 and nothing written. (The image writer, which
+    picks its format by the name, failed after the FCD and .sumocfg were written, with a
+    warning and an "Exception ignored ... Traceback" on stderr, and left an empty file.)"""
+    episodes = _recorded_episodes(tmp_path / "episodes.json")
+    for name in ("replay", "replay.png"):
+        proc = subprocess.run(
+            [str(BIN), "replay", str(episodes), "--gif", str(tmp_path / name), "--max-frames", "2"],
+            capture_output=True,
+            text=True,
+            env={**os.environ, "TORCHCBL_TRACEBACK": ""},
+        )
+        assert proc.returncode == 2 and proc.stdout == "", (name, proc)
+        assert proc.stderr.count("\n") == 1, (name, proc.stderr)
+        assert "expected a file name ending in .gif" in proc.stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.json"]
+    assert (
+        main(["replay", str(episodes), "--gif", str(tmp_path / "r.GIF"), "--max-frames", "2"]) == 0
+    )
+    assert (tmp_path / "r.GIF").stat().st_size > 0
+
+
+# where each domain's seed k saves its models (only inside its teaching loop)
+_CHECKPOINTS = {
+    "corridor": "corridor/sessions/seed{k}/checkpoints",
+    "driving": "driving/seed_{k}/sessions/arm_a/checkpoints",
+}
+
+
+@pytest.mark.parametrize("domain", ["corridor", "driving"])
+def test_ctrl_c_during_a_run_with_worker_processes_is_one_line(domain, tmp_path):
+    """Ctrl-C at a terminal (SIGINT to the whole process group) while two worker processes
+    teach: exit code 130 and the one line "interrupted". (corridor: the workers, terminated,
+    left the multiprocessing lock of their tqdm bars behind, and the resource tracker added a
+    two-line "leaked semaphore objects" warning; driving: a worker of the multiprocessing.Pool
+    that took the SIGINT printed its traceback, in most runs.)"""
+    import signal
+
+    out = tmp_path / "runs"
+    proc = subprocess.Popen(
+        [str(BIN), "reproduce", domain, "--seeds", "2", "--workers", "2", "--no-progress"]
+        + ["--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+        start_new_session=True,  # a process group of its own, as a terminal's job
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        env={**os.environ, "TORCHCBL_TRACEBACK": ""},
+    )
+    try:
+        deadline = time.monotonic() + 300
+        # both workers are teaching
+        while not all(any((out / _CHECKPOINTS[domain].format(k=k)).glob("*.pt")) for k in (0, 1)):
+            assert proc.poll() is None and time.monotonic() < deadline, proc.poll()
+            time.sleep(0.1)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert err == "torchcbl reproduce: interrupted\n"
+
+
+def _unwritable_directory(tmp_path: Path) -> Path:
+    """A directory no file can be made in: a read-only one of the test's own, or, for root
+    (whom permission bits do not stop), Linux's /sys."""
+    import tempfile
+
+    if os.geteuid() != 0:
+        readonly = tmp_path / "readonly"
+        readonly.mkdir()
+        readonly.chmod(0o555)
+        return readonly
+    try:
+        tempfile.TemporaryFile(dir="/sys").close()
+    except OSError:
+        return Path("/sys")
+    pytest.skip("no directory here that this user cannot write to")
+
+
+def test_an_output_directory_that_cannot_be_written_is_refused_before_the_run(tmp_path):
+    """--out, --run-dir, --gif and --fcd where no file can be made: exit code 2 and one line
+    that names the directory, before anything runs. (The run started and failed at its first
+    file, exit code 1 with the bare OSError; replay --gif wrote the FCD and .sumocfg first and
+    then added imageio's "Exception ignored ... Traceback" to stderr.)"""
+    locked = _unwritable_directory(tmp_path)
+    episodes = _recorded_episodes(tmp_path / "episodes.json")
+    cases = [
+        ["reproduce", "corridor", "--seeds", "1", "--out", str(locked / "runs")],
+        ["benchmark", "--quick", "--envs", "corridor", "--seeds", "1"]
+        + ["--strategies", "bc", "--out", str(locked / "bench")],
+        ["teach", "corridor", "--steps", "3", "--run-dir", str(locked / "session")],
+        ["replay", str(episodes), "--max-frames", "2", "--gif", str(locked / "r.gif")],
+        ["replay", str(episodes), "--max-frames", "2", "--fcd", str(locked / "r.fcd.xml")],
+    ]
+    for argv in cases:
+        proc = subprocess.run(
+            [str(BIN), *argv],
+            capture_output=True,
+            text=True,
+            stdin=subprocess.DEVNULL,
+            env={**os.environ, "TORCHCBL_TRACEBACK": ""},
+        )
+        assert proc.returncode == 2 and proc.stdout == "", (argv, proc)
+        assert proc.stderr.count("\n") == 1, (argv, proc.stderr)
+        assert f"cannot write in {locked}" in proc.stderr, (argv, proc.stderr)
+    assert sorted(p.name for p in tmp_path.iterdir() if p != locked) == ["episodes.json"]
+
+
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["--strategies", "nope:Thing"], "--strategies nope:Thing: cannot import it (No module"),
+        (["--strategies", ".rel:X"], "--strategies .rel:X: cannot make it (TypeError"),
+        (
+            ["--strategies", "torchcbl.gmm:GaussianMixtureSet"],
+            "--strategies torchcbl.gmm:GaussianMixtureSet: cannot make it (TypeError",
+        ),
+        (
+            ["--strategies", "collections:OrderedDict"],
+            "--strategies collections:OrderedDict: OrderedDict is not a strategy",
+        ),
+        (["--strategies", ",,"], "--strategies ',,' names no strategy"),
+        (
+            ["--envs", "driving", "--driving-teacher", "expert"],
+            "--driving-teacher expert: expected",
+        ),
+        (
+            ["--envs", "driving", "--driving-teacher", "nope:x"],
+            "--driving-teacher nope:x: No module",
+        ),
+    ],
+)
+def test_benchmark_checks_strategy_and_teacher_paths_before_the_run(argv, says, tmp_path, capsys):
+    """An import path of --strategies or --driving-teacher that gives no strategy / teacher:
+    one line naming the option, exit code 2, nothing printed or written. (A class that needs
+    arguments, a relative name or a non-strategy failed with exit code 1 after the run's header
+    was printed, some leaving an empty OUT/cells behind; a missing module's error named no
+    option.)"""
+    out = tmp_path / "bench"
+    args = ["benchmark", "--quick", "--envs", "corridor", "--seeds", "1", "--out", str(out)]
+    assert main([*args, *argv]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured
+    assert captured.err.startswith(f"torchcbl benchmark: error: {says}"), captured.err
+    assert not out.exists()
+
+
+def test_the_commands_teach_says_to_run_work_for_a_path_with_a_space(tmp_path, monkeypatch, capsys):
+    """The "continue with: torchcbl teach ..." line (and the "resume it with" of a domain
+    mistake) is a command that runs as printed: a --run-dir with a space or a quote is quoted.
+    (It was printed bare, so a copied `--run-dir my runs/it's` was three words and a quote.)"""
+    import shlex
+
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "my runs" / "it's"
+    run.parent.mkdir()
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    told = capsys.readouterr().out.rsplit("continue with: ", 1)[1].strip()
+    argv = shlex.split(told)
+    assert argv[:2] == ["torchcbl", "teach"] and argv[argv.index("--run-dir") + 1] == str(run)
+    assert main([*argv[1:], "--steps", "3"]) == 0  # it resumes the session
+    assert len(load_records(run)) == 6
+    capsys.readouterr()
+    assert main(["teach", "driving", "--resume", "--run-dir", str(run)]) == 2
+    told = capsys.readouterr().err.rsplit("resume it with ", 1)[1].strip()
+    assert shlex.split(told)[1:] == ["teach", "corridor", "--resume", "--run-dir", str(run)]
+
+
+def test_a_session_whose_own_map_file_moved_says_to_put_it_back(tmp_path, monkeypatch, capsys):
+    """teach corridor --map PATH keeps the map by its full path; once the file is moved,
+    evaluate and teach --resume say so in one line (exit code 2) and that the file goes back
+    there. (teach --resume failed with exit code 1 and, like evaluate, told the user to "give
+    an existing map JSON file", which neither command takes for a session.)"""
+    import corridor
+
+    _scripted_corridor_person(monkeypatch)
+    mine = tmp_path / "mine.json"
+    mine.write_text(Path(corridor.__file__).with_name("maps").joinpath("lshape.json").read_text())
+    run = tmp_path / "session"
+    assert (
+        main(["teach", "corridor", "--run-dir", str(run), "--map", str(mine), "--steps", "3"]) == 0
+    )
+    mine.rename(tmp_path / "moved.json")
+    capsys.readouterr()
+    for argv in (
+        ["evaluate", str(run), "--steps", "3"],
+        ["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"taught on the map file {mine}" in err, err
+        assert "put that file back there" in err
+    assert len(load_records(run)) == 3
+    (tmp_path / "moved.json").rename(mine)
+    assert main(["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"]) == 0
+    assert len(load_records(run)) == 6
+
+
+def test_teach_resume_of_a_damaged_session_is_a_one_line_mistake(tmp_path, monkeypatch, capsys):
+    """teach --resume of a session with a damaged log is told as evaluate tells it: one line,
+    exit code 2, and the session's files untouched. (It was exit code 1, with the error's
+    class name and the TORCHCBL_TRACEBACK hint around the same text.)"""
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    with open(run / "steps.journal", "a") as journal:
+        journal.write('garbage\n{"x":')
+    files = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    for argv in (["evaluate", str(run)], ["teach", "corridor", "--resume", "--run-dir", str(run)]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "steps.journal: line" in err and "is damaged" in err, err
+        assert "CorruptSessionError" not in err and "TORCHCBL_TRACEBACK" not in err, err
+    assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == files

@@ -159,8 +159,9 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
 def _output_dir(path: Path, flag: str) -> Path:
     """``path`` as a directory to write into, or a one-line error: it (or a parent) exists as a
-    file. A path with no name of its own (``.``, ``..``, ``""``) is made absolute, so that a
-    fresh ``-2`` beside it is named after the directory it means."""
+    file, or the directory it is (or would be made in) cannot be written. A path with no name
+    of its own (``.``, ``..``, ``""``) is made absolute, so that a fresh ``-2`` beside it is
+    named after the directory it means."""
     if path.name in ("", ".", ".."):
         path = path.resolve()
     for p in (path, *path.parents):
@@ -171,18 +172,36 @@ def _output_dir(path: Path, flag: str) -> Path:
                     f"{flag} {path} cannot be a directory: {where}; expected a new or empty "
                     "directory path"
                 )
+            _check_writable(p, f"{flag} {path}")
             break
     return path
 
 
+def _check_writable(directory: Path, what: str) -> None:
+    """A one-line error if no file can be made in ``directory`` (read-only, not one's own):
+    found before a run starts, not when its first file is written. A file is made and removed
+    to know, as permission bits alone do not tell (root, read-only mounts, ACLs)."""
+    import tempfile
+
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError as exc:
+        raise _UsageError(
+            f"{what}: cannot write in {directory} ({exc.strerror or exc}); choose a directory "
+            "you can write to"
+        ) from None
+
+
 def _output_file(path: Path, flag: str) -> Path:
     """``path`` as a file to write, or a one-line error: it is a directory, or its directory is
-    missing or a file."""
+    missing, a file or not writable."""
     if path.is_dir():
         raise _UsageError(f"{flag} {path} is a directory; expected a file path")
     if not path.parent.is_dir():
         what = "is a file" if path.parent.exists() else "does not exist"
         raise _UsageError(f"cannot write {path}: directory {path.parent} {what}")
+    _check_writable(path.parent, f"{flag} {path}")
     return path
 
 
@@ -193,7 +212,13 @@ def _fresh_dir(out: Path) -> Path:
     while candidate.exists() and any(candidate.iterdir()):
         n += 1
         candidate = out.with_name(f"{out.name}-{n}")
-    candidate.mkdir(parents=True, exist_ok=True)
+    try:
+        candidate.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # e.g. out is writable, its parent (for out-2) is not
+        raise _UsageError(
+            f"--out {out}: cannot make {candidate} ({exc.strerror or exc}); choose a directory "
+            "you can write to"
+        ) from None
     return candidate
 
 
@@ -281,7 +306,7 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
         raise _UsageError(
             f"{session} is a {domain} session ({described}), not a {asked} one; "
             + (
-                f"resume it with torchcbl teach {domain} --resume --run-dir {session}"
+                f"resume it with torchcbl teach {domain} --resume --run-dir {_shell(session)}"
                 if teach
                 else f"pass --domain {domain} or leave --domain out"
             )
@@ -289,9 +314,28 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
     return domain
 
 
+def _session_map_exists(session: Path, domain: str) -> None:
+    """A one-line error if a corridor session's own map file (``teach corridor --map PATH``
+    keeps it by its full path) is not there any more: neither evaluate nor teach --resume
+    takes another map, so the way on is to put the file back."""
+    from torchcbl.session import load_config
+
+    kwargs = (load_config(session).get("env") or {}).get("kwargs") or {}
+    name = kwargs.get("corridor_map")
+    if domain != "corridor" or not isinstance(name, str) or not name.endswith(".json"):
+        return  # (a shipped map goes by its name)
+    if not Path(name).is_file():
+        raise _UsageError(
+            f"{session} was taught on the map file {name}, which is not there any more; put "
+            "that file back there (a session keeps its map: evaluate and teach --resume "
+            "drive the map it was taught on)"
+        )
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     session = Path(args.run_dir)
     domain = _session_domain(session, args.domain)
+    _session_map_exists(session, domain)
     module = _experiment_module(domain)
     from torchcbl.session import IncompatibleRunDirError
 
@@ -360,23 +404,27 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     session = path.is_dir()
     # beside the JSON, or beside (not in) a session's directory ("." too)
     stem = path.resolve() if session else path.with_suffix("")
+    gif = Path(args.gif) if args.gif else stem.with_name(f"{stem.name}-{index}.gif")
+    fcd = Path(args.fcd) if args.fcd else stem.with_name(f"{stem.name}-{index}.fcd.xml")
+    _output_file(gif, "--gif")
+    if gif.suffix.lower() != ".gif":  # the writer picks its format by the name
+        raise _UsageError(
+            f"--gif {gif}: expected a file name ending in .gif, e.g. {gif.with_suffix('.gif')}"
+        )
+    _output_file(fcd, "--fcd")
+    cfg = fcd.with_name(fcd.name.replace(".fcd.xml", "") + ".sumocfg")
+    _replay_outputs_spare(path, gif, fcd, cfg)
     if session:  # the session logged what it saw: the replay must see the same
         try:
             replay.session_episodes(path, check=[index])
         except ValueError as exc:
             raise _UsageError(str(exc)) from None
         print(f"episode {index}: the replay equals the session's log, observation for observation")
-    gif = Path(args.gif) if args.gif else stem.with_name(f"{stem.name}-{index}.gif")
-    fcd = Path(args.fcd) if args.fcd else stem.with_name(f"{stem.name}-{index}.fcd.xml")
-    _output_file(gif, "--gif")
-    _output_file(fcd, "--fcd")
     print(f"episode {index}: {record.label or '-'} ({len(record.actions)} steps)")
     replay.export_fcd(record, fcd)
     print(f"FCD written to {fcd}")
-    cfg = replay.write_sumocfg(
-        record, fcd, fcd.with_name(fcd.name.replace(".fcd.xml", "") + ".sumocfg")
-    )
-    print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {cfg})")
+    cfg = replay.write_sumocfg(record, fcd, cfg)
+    print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {_shell(cfg)})")
     replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
     steps = len(record.actions)
     frames = len(range(0, steps + 1, args.every))  # the reset's frame and one per step
@@ -387,6 +435,37 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         shown = f"all {steps} timesteps"
     print(f"GIF written to {gif} ({frames} frames, every {args.every} timestep(s): {shown})")
     return 0
+
+
+def _replay_outputs_spare(source: Path, gif: Path, fcd: Path, cfg: Path) -> None:
+    """A one-line error, before anything is written, if a file replay writes (the GIF, the
+    FCD, the .sumocfg and the fcd-replay input beside it) is the episodes file being replayed or
+    a file of the session being replayed (its log, its config), or is another of the outputs:
+    writing it would destroy the recording, or one output would overwrite another."""
+    # (write_sumocfg names its fcd-replay input so)
+    replay_input = fcd.with_name(fcd.name.removesuffix(".xml").removesuffix(".fcd") + ".replay.xml")
+    outputs = [
+        (f"--gif {gif}", gif),
+        (f"--fcd {fcd}", fcd),
+        (f"the .sumocfg of --fcd, {cfg},", cfg),
+        (f"the fcd-replay input of --fcd, {replay_input},", replay_input),
+    ]
+    source = source.resolve()
+    seen: dict[Path, str] = {}
+    for what, out in outputs:
+        target = out.resolve()
+        if target == source or (source.is_dir() and source in target.parents and target.exists()):
+            kept = "the episodes file" if target == source else f"a file of the session {source}"
+            raise _UsageError(
+                f"{what} is {kept} being replayed: writing it would destroy the recording; "
+                "choose another path (or leave --gif/--fcd out: the default is beside it)"
+            )
+        if target in seen:
+            raise _UsageError(
+                f"{what} is also {seen[target].rstrip(',')}: one output would overwrite the "
+                "other; give --gif and --fcd paths apart"
+            )
+        seen[target] = what
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
@@ -502,6 +581,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         _session_domain(
             run_dir, args.domain, teach=True
         )  # a session of this domain, or a one-line error
+        _session_map_exists(run_dir, args.domain)
     elif (run_dir / "config.json").exists():
         raise _UsageError(
             f"{run_dir} already holds a teaching session; add --resume to continue it "
@@ -537,7 +617,13 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         )
 
     if args.resume:
-        ct = ConfidentTeacher.resume(run_dir, env, teacher, progress=False, on_step=status)
+        from torchcbl.errors import IncompatibleRunDirError
+
+        try:  # (a session another process is teaching, a damaged log: as evaluate says them)
+            ct = ConfidentTeacher.resume(run_dir, env, teacher, progress=False, on_step=status)
+        except IncompatibleRunDirError as exc:
+            env.close()
+            raise _UsageError(_one_line(exc)) from None
     else:
         config = TeachingConfig(noninteractive=not args.skip_noninteractive, **settings)
         ct = ConfidentTeacher(
@@ -565,7 +651,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     print(
         f"{ct.n_demonstrations} demonstrations over {ct.n_steps} steps saved in {run_dir}"
         + (f" ({why})" if why else "")
-        + f"; continue with: torchcbl teach {args.domain} --run-dir {run_dir} --resume"
+        + f"; continue with: torchcbl teach {args.domain} --run-dir {_shell(run_dir)} --resume"
     )
     return 0
 
@@ -582,6 +668,36 @@ _STOP_REASONS = {
 # The benchmark's environments: each domain ships its EnvSpec (teacher, budgets, score) in a
 # ``benchmark`` module, imported here lazily.
 _BENCH_ENVS = {"corridor": "corridor.benchmark", "driving": "sumo_scenarios.benchmark"}
+
+
+def _check_strategy(spec: Any) -> None:
+    """A one-line error unless ``spec`` (a --strategies import path) gives a strategy: the
+    class imports, is made without arguments (the command gives it none) and has the
+    :class:`torchcbl.strategies.Strategy` methods."""
+    from torchcbl.strategies import Strategy
+
+    try:
+        strategy = spec.build(seed=0)
+    except ImportError as exc:
+        text = _one_line(exc)
+        if text.startswith("cannot import"):  # it names the path and what it expected
+            raise _UsageError(f"{text} (--strategies)") from None
+        raise _UsageError(
+            f"--strategies {spec.name}: cannot import it ({text}); expected module:Class of a "
+            "strategy that takes no arguments, or a shipped name"
+        ) from None
+    except Exception as exc:  # the user's class: whatever it raises, it is not usable here
+        text = _one_line(exc)
+        raise _UsageError(
+            f"--strategies {spec.name}: cannot make it ({type(exc).__name__}: {text}); expected "
+            "module:Class of a strategy that takes no arguments, or a shipped name"
+        ) from None
+    if not isinstance(strategy, Strategy):
+        raise _UsageError(
+            f"--strategies {spec.name}: {type(strategy).__name__} is not a strategy; expected "
+            "a class with the methods of torchcbl.strategies.Strategy (bind, decide, actor, "
+            "observe_label, observe_refit, observe_step, ...)"
+        )
 
 
 def _cmd_benchmark(args: argparse.Namespace) -> int:
@@ -604,13 +720,28 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             f"--strategies: unknown {bad}; expected names from {sorted(bm.STRATEGY_PATHS)} "
             "or import paths module:Class"
         )
+    if not names:
+        raise _UsageError(
+            f"--strategies {args.strategies!r} names no strategy; expected names from "
+            f"{sorted(bm.STRATEGY_PATHS)} or import paths module:Class, comma-separated"
+        )
     strategies = [bm.StrategySpec(n) for n in names]
+    for spec in strategies:  # a path of one's own: made once now, before anything is written
+        if spec.name not in bm.STRATEGY_PATHS:
+            _check_strategy(spec)
     env_names = (
         [e for e in args.envs.split(",") if e] if args.envs is not None else list(_BENCH_ENVS)
     )
     bad = [e for e in env_names if e not in _BENCH_ENVS]
     if bad:
         raise _UsageError(f"--envs: unknown {bad}; expected some of {sorted(_BENCH_ENVS)}")
+    if args.driving_teacher and "driving" in env_names:
+        try:
+            bm._import(args.driving_teacher)
+        except (ValueError, ImportError, TypeError) as exc:  # TypeError: a relative name
+            raise _UsageError(
+                f"--driving-teacher {args.driving_teacher}: {_one_line(exc)}"
+            ) from None
     envs = []
     for e in env_names:
         spec = importlib.import_module(_BENCH_ENVS[e]).env_spec(quick=args.quick)
@@ -1045,6 +1176,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 1
+
+
+def _shell(path: Path) -> str:
+    """``path`` as a shell word, for a command line the user is told to run (a path with a
+    space or a quote in it, quoted)."""
+    import shlex
+
+    return shlex.quote(str(path))
 
 
 def _one_line(exc: BaseException) -> str:

@@ -62,6 +62,19 @@ def run_versions(**extra: str) -> dict[str, str]:
     }
 
 
+def _worker_start() -> None:
+    """Run in each worker of :func:`worker_pool` as it starts: its tqdm bars (the teaching
+    loop's, hidden in a worker) take a thread lock instead of the multiprocessing lock tqdm
+    makes by default, a named semaphore that a worker terminated after a Ctrl-C never
+    releases; the resource tracker then printed a "leaked semaphore objects" warning under
+    the command's one line."""
+    import threading
+
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())
+
+
 @contextlib.contextmanager
 def worker_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecutor]:
     """A :class:`~concurrent.futures.ProcessPoolExecutor` of ``workers`` processes (started by
@@ -73,7 +86,7 @@ def worker_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecut
     exception (KeyboardInterrupt included) cancels the queued tasks, terminates the workers
     and is re-raised; a block that ends normally waits for its tasks as usual.
     """
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_worker_start)
     try:
         yield pool
     except BaseException:
