@@ -960,3 +960,32 @@ def test_teach_resume_of_a_damaged_session_is_a_one_line_mistake(tmp_path, monke
         assert err.count("\n") == 1 and "steps.journal: line" in err and "is damaged" in err, err
         assert "CorruptSessionError" not in err and "TORCHCBL_TRACEBACK" not in err, err
     assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == files
+
+
+def test_output_into_a_pipe_whose_reader_left_ends_quietly(corridor_run):
+    """``torchcbl evaluate DIR | head -1``: once the reader has gone, the command stops as a
+    command killed by SIGPIPE does (exit 141, nothing on stderr), where it used to report
+    'error: BrokenPipeError' with exit code 1. Also run as ``python -m torchcbl``."""
+    session = corridor_run / "corridor" / "sessions" / "seed0"
+    for cmd in ([str(BIN)], [sys.executable, "-m", "torchcbl"]):
+        proc = subprocess.Popen(
+            [*cmd, "evaluate", str(session), "--steps", "30"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            stdin=subprocess.DEVNULL,
+            env={**os.environ, "TORCHCBL_TRACEBACK": ""},
+        )
+        proc.stdout.close()  # the reader leaves before the command writes anything
+        err = proc.stderr.read().decode()
+        proc.wait(timeout=120)
+        assert proc.returncode == 141, (cmd, err)
+        assert err == "", (cmd, err)
+    # with a reader the same command writes its JSON and exits 0
+    done = subprocess.run(
+        [sys.executable, "-m", "torchcbl", "evaluate", str(session), "--steps", "30"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["steps"] == 30

@@ -1167,15 +1167,42 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError as exc:
+        if not _stdout_closed():
+            return _failure(prog, exc)
+        # the reader of our output went away (`torchcbl evaluate DIR | head -1`): stop quietly,
+        # as a command killed by SIGPIPE does, and keep the interpreter's own final flush from
+        # writing to the closed pipe again
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
     except Exception as exc:
-        if os.environ.get("TORCHCBL_TRACEBACK"):
-            raise
-        print(
-            f"{prog}: error: {type(exc).__name__}: {_one_line(exc)} "
-            "(set TORCHCBL_TRACEBACK=1 to see where)",
-            file=sys.stderr,
-        )
-        return 1
+        return _failure(prog, exc)
+
+
+def _failure(prog: str, exc: Exception) -> int:
+    """One line on stderr for an unexpected failure (exit code 1), or its traceback with
+    ``TORCHCBL_TRACEBACK=1``."""
+    if os.environ.get("TORCHCBL_TRACEBACK"):
+        raise exc
+    print(
+        f"{prog}: error: {type(exc).__name__}: {_one_line(exc)} "
+        "(set TORCHCBL_TRACEBACK=1 to see where)",
+        file=sys.stderr,
+    )
+    return 1
+
+
+def _stdout_closed() -> bool:
+    """True when nothing reads our standard output any more (its pipe's reader has exited)."""
+    try:
+        import select
+
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & select.POLLERR for _, ev in poller.poll(0))
+    except (AttributeError, OSError, ValueError):  # no poll (Windows) or no real stdout
+        return True
 
 
 def _shell(path: Path) -> str:
