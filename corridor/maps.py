@@ -461,9 +461,10 @@ def available_maps() -> list[str]:
 
 def load_map(name_or_path: str | Path) -> CorridorMap:
     """Load a shipped map by name (``"figure2"``, ``"lshape"``) or any map JSON file by path
-    (a name ending in ``.json`` is a path; so is any other existing file that no shipped map is
-    named)."""
+    (a name ending in ``.json`` is a path; so is any other existing file, unless it is a
+    shipped map's bare name: ``"figure2"`` is the shipped map, ``"./figure2"`` the file)."""
     path = Path(name_or_path)
+    shipped = str(name_or_path) in available_maps()  # a bare shipped name, never a path
     res = resources.files("corridor") / "maps" / f"{name_or_path}.json"
     if path.suffix == ".json":  # a file path
         if not path.is_file():
@@ -472,7 +473,7 @@ def load_map(name_or_path: str | Path) -> CorridorMap:
                 f"shipped map names {available_maps()}"
             )
         text = path.read_text()
-    elif res.is_file():
+    elif shipped:
         text = res.read_text()
     elif path.is_file():  # a map file named otherwise (mymap.txt, a temporary file)
         text = path.read_text()

@@ -8,6 +8,7 @@ import math
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -876,6 +877,18 @@ def test_a_map_file_not_named_json_is_read(tmp_path):
         assert CorridorEnv(str(path)).corridor_map == src
     with pytest.raises(ValueError, match=r"unknown map 'nope'; shipped maps.*or the path of a map"):
         load_map("nope")
+
+
+def test_a_map_path_without_a_suffix_loads_that_file_not_its_json_sibling(tmp_path):
+    """A path without a suffix was first looked up as a shipped map, by joining it onto the
+    package's maps folder, which an absolute path replaces: /x/mymap loaded /x/mymap.json when
+    both existed. A path loads that exact file; only a bare shipped name is a shipped map."""
+    (tmp_path / "mymap").write_text(json.dumps(load_map("lshape").to_dict()))
+    (tmp_path / "mymap.json").write_text(json.dumps(load_map("figure2").to_dict()))
+    assert load_map(tmp_path / "mymap").name == "lshape"
+    assert load_map(str(tmp_path / "mymap")).name == "lshape"
+    assert load_map(tmp_path / "mymap.json").name == "figure2"
+    assert load_map("figure2") == load_map(Path(corridor.__file__).parent / "maps" / "figure2.json")
 
 
 @pytest.mark.parametrize("bad", [(0.1,), (0.1, 0.2, 0.3), 0.1, ("a", 0.1), "ab", np.zeros((2, 2))])
