@@ -500,3 +500,20 @@ def test_a_reset_answer_that_is_not_the_gymnasium_pair_is_named_as_such(answer, 
     assert ct.n_steps == 0
     with pytest.raises(EnvError, match=says):
         evaluate_policy(lambda obs: 0, env, n_steps=3)
+
+
+def test_a_reset_answer_given_as_a_list_pair_is_taken():
+    """The pair check of reset (c2b367f) took only a tuple, so an env whose reset returns
+    ``[obs, info]`` (accepted before it, as step's five values still are in a list) was refused
+    as a gym < 0.26 env. A list of two is the pair too, in the loop and in evaluate_policy."""
+    import gymnasium as gym
+
+    class ListReset(gym.Wrapper):
+        def reset(self, **kw):
+            return list(self.env.reset(**kw))
+
+    env = ListReset(rare_regions_world())
+    ct = ConfidentTeacher(env, oracle(env.env), config=TeachingConfig(max_steps=5), progress=False)
+    ct.run()
+    assert ct.n_steps == 5
+    assert len(evaluate_policy(lambda obs: 0, env, n_steps=5)) == 5

@@ -107,7 +107,7 @@ def reset_answer(out: Any) -> tuple[Any, dict]:
     """The (observation, info) of what ``env.reset`` returned, or a clear :class:`EnvError`:
     gymnasium's reset returns the pair, an env written for gym < 0.26 the observation alone
     (which unpacked into two of its own values)."""
-    if not isinstance(out, tuple) or len(out) != 2:
+    if not isinstance(out, (tuple, list)) or len(out) != 2:
         raise EnvError(
             f"env.reset returned {type(out).__name__} {out!r:.80}; expected the gymnasium pair "
             "(observation, info). An env written for gym < 0.26 returns the observation "
@@ -119,7 +119,8 @@ def reset_answer(out: Any) -> tuple[Any, dict]:
     if not isinstance(info, Mapping):
         raise EnvError(
             f"env.reset returned info {info!r:.80}; expected a dict (the second value of the "
-            "pair (observation, info)); return (observation, {}) when there is nothing to say."
+            "pair (observation, info)); return (observation, {}) when there is nothing to say "
+            "(an env written for gym < 0.26 returns the observation alone)."
         )
     return raw, dict(info)
 
