@@ -434,7 +434,9 @@ def _world(
 ) -> CorridorWorld:
     """A world for the baseline, refused if its sensors cannot tell a wall bit from an open one:
     a reading never exceeds ``max_range``, so with ``wall_threshold`` at or above it every bit
-    is a wall and the learner sees one state of the 8."""
+    is a wall and the learner sees one state of the 8. (At ``max_range`` itself too: a ray that
+    sees no wall reads ``max_range`` less noise, as its clipped readings average below it; e.g.
+    0.588-0.595 m for 0.6 m on the default sensors.)"""
     world = CorridorWorld(corridor_map, world_config)
     if not config.wall_threshold < world.config.max_range:
         raise ValueError(
