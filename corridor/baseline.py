@@ -29,9 +29,9 @@ one sentence of the paper's Section 5.1:
 - "took an average of 275 steps to learn the optimal policy": "learned" needs a criterion, and
   the optimal policy of a circular task is one that keeps driving the circuit. The robot learns
   in episodes, as the teaching loop teaches: an episode ends when the robot completes a circuit
-  or after ``episode_steps`` (81, ``CorridorEnv``'s step cap) actions, and the robot is put
-  back at the start pose. After each episode the greedy policy (argmax of Q, ties to the lower
-  action index) is evaluated, the usual protocol of RL papers: does it drive
+  or after ``episode_steps`` (81, ``CorridorEnv``'s default cap on the shipped maps) actions,
+  and the robot is put back at the start pose. After each episode the greedy policy (argmax of
+  Q, ties to the lower action index) is evaluated, the usual protocol of RL papers: does it drive
   ``eval_circuits`` (3) circuits in a row from the start pose with no wall contact, each within
   81 actions? (The evaluation runs in a separate world with a fixed seed, is not counted as
   learning, and is cached per distinct table of 8 actions.) ``steps_stable``, the measure of
@@ -175,8 +175,9 @@ class PrioritizedSweepingConfig:
             while its sum over steps still diverges).
         max_steps: learning steps before giving up.
         episode_steps: a learning episode ends when the robot completes a circuit or after this
-            many actions (``CorridorEnv``'s step cap, 81); the robot is then put back at the
-            start pose, as in the teaching loop.
+            many actions (81: ``CorridorEnv``'s default cap on the shipped maps; the env's
+            default is two circuits on a map whose circuit takes more than 40 actions, so raise
+            this there); the robot is then put back at the start pose, as in the teaching loop.
         eval_circuits: clean circuits in a row, from the start pose, that the greedy policy must
             drive to pass an evaluation.
         stable_evaluations: consecutive passing evaluations (one after each learning episode)
@@ -389,10 +390,10 @@ def _drive_evaluation(
 ) -> bool | int:
     """Drive the greedy ``table`` (state -> action, possibly partial) from the start pose:
     True if it completes ``circuits`` circuits in a row without touching a wall, each within
-    ``cap`` actions (``CorridorEnv``'s step cap); False if it fails; else the first state the
-    robot met that ``table`` does not fix (the noise drawn so far depends only on the actions
-    taken, so a table that fixes it runs the same up to there). ``trace``, if given, gets
-    ``(pose before, state, action, contact)`` for each step."""
+    ``cap`` actions (``CorridorEnv``'s default on the shipped maps); False if it fails; else the
+    first state the robot met that ``table`` does not fix (the noise drawn so far depends only on
+    the actions taken, so a table that fixes it runs the same up to there). ``trace``, if given,
+    gets ``(pose before, state, action, contact)`` for each step."""
     rng = np.random.default_rng(seed)
     world.reset()
     obs = world.sense(rng)
@@ -425,7 +426,8 @@ def _completes_circuit(
     cap: int = 81,
 ) -> bool:
     """Whether the greedy ``table`` drives ``circuits`` circuits in a row from the start pose,
-    without touching a wall, each within ``cap`` actions (``CorridorEnv``'s step cap)."""
+    without touching a wall, each within ``cap`` actions (``CorridorEnv``'s default on the
+    shipped maps)."""
     return _drive_evaluation(dict(enumerate(table)), world, threshold, seed, circuits, cap) is True
 
 
