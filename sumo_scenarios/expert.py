@@ -70,6 +70,7 @@ class ExpertConfig:
             v = getattr(self, name)
             if not _is_real(v) or not math.isfinite(v):
                 raise ValueError(f"{name} must be a finite number of metres, got {v!r}")
+            object.__setattr__(self, name, float(v))  # plain, JSON-able (a numpy float too)
         if not 5.0 <= self.min_gap_m < self.enter_ahead_m <= self.change_far_m <= SENSE_RANGE_M:
             raise ValueError(
                 "need 5 <= min_gap_m < enter_ahead_m <= change_far_m <= 25 (metres; 25 is the "

@@ -362,6 +362,18 @@ def test_expert_settings_out_of_order_or_not_numbers_are_named_with_their_values
     assert ExpertConfig(min_gap_m=np.float64(10.0)) == ExpertConfig()
 
 
+def test_expert_settings_are_kept_as_plain_numbers():
+    """DrivingConfig, SimConfig and WorldConfig keep numpy numbers as plain ones; ExpertConfig
+    kept them as given, so a config from a numpy sweep failed json.dumps (found in review)."""
+    import json
+
+    from sumo_scenarios.expert import ExpertConfig
+
+    config = ExpertConfig(min_gap_m=np.float32(12.0), change_far_m=np.int64(24))
+    assert type(config.min_gap_m) is float and type(config.change_far_m) is float
+    assert json.loads(json.dumps(dataclasses.asdict(config)))["min_gap_m"] == 12.0
+
+
 def test_load_records_names_a_file_that_holds_no_episode_records(tmp_path):
     # a JSON object was "string indices must be integers", an item without an episode's keys
     # KeyError('scenario'), a list of numbers "'int' object is not subscriptable"
