@@ -185,7 +185,7 @@ def test_existing_or_incompatible_run_dir_is_a_clear_error(tmp_path):
         make(env, run / "config.json")  # a file where a directory should be
     with pytest.raises(IncompatibleRunDirError, match=f"directory: {run / 'config.json'} is a"):
         make(env, run / "config.json" / "below" / "deeper")  # the file named, not the path
-    with pytest.raises(IncompatibleRunDirError, match="config.json is missing"):
+    with pytest.raises(IncompatibleRunDirError, match="nowhere does not exist"):
         ConfidentTeacher.resume(tmp_path / "nowhere", env, oracle(env))
     # Stop fields may change; the failed attempts did not touch the session.
     back = ConfidentTeacher.resume(
@@ -519,3 +519,33 @@ def test_a_reader_racing_a_short_writer_reads_again(tmp_path, monkeypatch):
 
     monkeypatch.setattr(session_module, "_rows", rows_then_a_writer)
     assert len(load_records(run)) == 8
+
+
+def test_readers_say_what_is_wrong_with_a_path_that_is_no_session_directory(tmp_path, monkeypatch):
+    """A file of a session, a file elsewhere, a path that does not exist and an empty directory
+    are each refused with what they are, not all as 'config.json is missing'."""
+    run = tmp_path / "run"
+    make(rare_regions_world(), run, max_new=2).run(max_steps=10)
+    for name in ("steps.sqlite", "config.json"):
+        with pytest.raises(IncompatibleRunDirError) as err:
+            load_records(run / name)
+        msg = str(err.value)
+        assert f"{run / name} is a file; expected a teaching session directory" in msg
+        assert f"give the directory it is in, {str(run)!r}" in msg
+        assert "missing" not in msg
+    stray = tmp_path / "notes.txt"
+    stray.write_text("x")
+    with pytest.raises(IncompatibleRunDirError, match=r"notes\.txt is a file; expected a") as err:
+        load_model(stray)
+    assert "give the directory" not in str(err.value)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(IncompatibleRunDirError) as err:
+        load_records("runs/nowhere")
+    msg = str(err.value)
+    assert "runs/nowhere does not exist" in msg and f"working directory, {tmp_path}" in msg
+    with pytest.raises(IncompatibleRunDirError, match="'~' is not expanded"):
+        load_records("~/runs/nowhere-at-all")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(IncompatibleRunDirError, match="empty is not a teaching session directory"):
+        load_records(tmp_path / "empty")
+    assert load_records(run) == load_records(str(run) + "/")  # a session still reads

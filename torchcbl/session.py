@@ -419,11 +419,28 @@ def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
     """The ``config.json`` of a run directory.
 
     Raises:
-        IncompatibleRunDirError: no config, or another log format.
+        IncompatibleRunDirError: no config (the message says whether the path does not
+            exist, is a file, or is a directory without one), or another log format.
         CorruptSessionError: unreadable config, or one missing a required key.
     """
     path = Path(run_dir) / CONFIG_NAME
     if not path.is_file():
+        given = Path(run_dir)
+        if given.is_file():  # e.g. the session's steps.sqlite or config.json itself
+            inside = (given.parent / CONFIG_NAME).is_file()
+            raise IncompatibleRunDirError(
+                f"{run_dir!s} is a file; expected a teaching session directory (one holding "
+                f"{CONFIG_NAME})"
+                + (f": give the directory it is in, {str(given.parent)!r}." if inside else ".")
+            )
+        if not given.exists():
+            raise IncompatibleRunDirError(
+                f"{run_dir!s} does not exist; expected a teaching session directory (one "
+                f"holding {CONFIG_NAME}). Check the path (relative paths are taken from the "
+                f"working directory, {os.getcwd()}"
+                + ("; '~' is not expanded: use os.path.expanduser" if "~" in str(run_dir) else "")
+                + "), or start a session there with ConfidentTeacher(..., run_dir=...)."
+            )
         raise IncompatibleRunDirError(
             f"{run_dir!s} is not a teaching session directory: {CONFIG_NAME} is missing. "
             "Start a session with ConfidentTeacher(..., run_dir=...) first."
