@@ -549,3 +549,36 @@ def test_readers_say_what_is_wrong_with_a_path_that_is_no_session_directory(tmp_
     with pytest.raises(IncompatibleRunDirError, match="empty is not a teaching session directory"):
         load_records(tmp_path / "empty")
     assert load_records(run) == load_records(str(run) + "/")  # a session still reads
+
+
+def test_a_session_without_labels_reads_them_as_zero_rows_of_its_features(tmp_path):
+    """load_labels and load_demonstrations of a session with no label are [0, D], D the
+    session's feature count, so they stack with another session's (they were [0, 0])."""
+    from torchcbl.session import load_labels
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(300, 2))
+    fitted = GaussianMixtureSet(3, 2, seed=0).fit(x, (x[:, 0] > 0).astype(int) + (x[:, 1] > 1))
+    env = rare_regions_world()
+    quiet = tmp_path / "quiet"  # a fitted start and a rule that never asks: steps, no label
+    with ConfidentTeacher(
+        env,
+        oracle(env),
+        model=fitted,
+        rule=DistanceRule(1e6),
+        config=TeachingConfig(noninteractive=False, max_steps=15),
+        run_dir=quiet,
+        progress=False,
+    ) as ct:
+        ct.run()
+    assert len(load_records(quiet)) == 15 and ct.n_demonstrations == 0
+    empty = tmp_path / "empty"  # created and closed before its first step
+    make(rare_regions_world(), empty, max_steps=5).close()
+    taught = tmp_path / "taught"
+    make(rare_regions_world(), taught, max_new=2).run(max_steps=20)
+    for run in (quiet, empty):
+        for xs, ys in (load_labels(run), load_demonstrations(run)):
+            assert xs.shape == (0, 2) and xs.dtype == np.float64
+            assert ys.shape == (0,) and ys.dtype == np.int64
+    xs = np.concatenate([load_demonstrations(r)[0] for r in (quiet, taught, empty)])
+    assert xs.shape == (len(load_demonstrations(taught)[1]), 2)

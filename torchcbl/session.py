@@ -1316,17 +1316,20 @@ def _relabels(config: dict[str, Any]) -> bool:
 
 def load_labels(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
     """Every label of the session in arrival order (demonstrations and corrections):
-    observations [L, D] float64 and actions [L] int64, before any relabelling."""
-    load_config(run_dir)
+    observations [L, D] float64 and actions [L] int64, before any relabelling (D is the
+    session's feature count also when there are no labels: [0, D])."""
+    config = load_config(run_dir)
     records, corrections = _read_log(run_dir)
     xs, ys = label_sequence(records, _corrections_of(records, corrections))
     if not ys:
-        return np.zeros((0, 0), dtype=np.float64), np.zeros(0, dtype=np.int64)
+        n_features = int(config["env"]["n_features"])
+        return np.zeros((0, n_features), dtype=np.float64), np.zeros(0, dtype=np.int64)
     return np.stack(xs), np.asarray(ys, dtype=np.int64)
 
 
 def load_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """The session's training set: observations [M, D] float64 and labels [M] int64.
+    """The session's training set: observations [M, D] float64 and labels [M] int64 ([0, D]
+    and [0] when the session has no label).
 
     Every label in arrival order; with a strategy that relabels (``"relabel": true`` in the
     stored strategy, e.g. Confidence-Based Autonomy), a label for an observation already stored
