@@ -582,3 +582,48 @@ def test_a_session_without_labels_reads_them_as_zero_rows_of_its_features(tmp_pa
             assert ys.shape == (0,) and ys.dtype == np.int64
     xs = np.concatenate([load_demonstrations(r)[0] for r in (quiet, taught, empty)])
     assert xs.shape == (len(load_demonstrations(taught)[1]), 2)
+
+
+def test_records_keep_numpy_integers_as_ints_and_go_through_json():
+    """StepRecord and CorrectionRecord took numpy integers as ints but kept them as numpy, so
+    to_dict (and the step log) failed with 'Object of type int64 is not JSON serializable'."""
+    from torchcbl.records import CorrectionRecord, StepRecord
+
+    def step(i):
+        return StepRecord(
+            step=i(4),
+            episode=i(1),
+            observation=(0.5, -0.25),
+            model_action=i(2),
+            confidence=0.5,
+            distance=1.2,
+            posterior=(0.2, 0.3, 0.5),
+            teacher_action=i(2),
+            executed_action=i(2),
+            phase="confident",
+            autonomous=False,
+            reward=1.0,
+            terminated=False,
+            truncated=False,
+            n_demonstrations=i(3),
+        )
+
+    plain = step(int)
+    for kind in (np.int64, np.int32, np.uint8):
+        r = step(kind)
+        assert r == plain and json.loads(json.dumps(r.to_dict())) == plain.to_dict()
+        for name in ("step", "episode", "model_action", "teacher_action", "executed_action"):
+            assert type(getattr(r, name)) is int
+        assert type(r.n_demonstrations) is int
+        assert type(r.with_outcome(0.0, True, False, {}).step) is int
+        c = CorrectionRecord(
+            step=kind(4),
+            episode=kind(1),
+            observation=(0.5,),
+            executed_action=kind(0),
+            action=kind(1),
+        )
+        assert c == CorrectionRecord(4, 1, (0.5,), 0, 1)
+        assert all(type(v) is int for v in (c.step, c.episode, c.executed_action, c.action))
+    with pytest.raises(ValueError, match=r"StepRecord\.step: expected an int >= 0"):
+        step(np.float64)  # floats are still refused

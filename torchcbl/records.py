@@ -133,6 +133,8 @@ class StepRecord:
         actor: who chose ``executed_action``: ``"teacher"`` (it equals the label) or
             ``"agent"`` (it equals ``model_action``). Default (None at creation): ``"teacher"``
             when labelled, else ``"agent"`` (Algorithm 1's rule).
+
+    The int fields take numpy integers too and keep them as Python ints.
     """
 
     step: int
@@ -160,6 +162,7 @@ class StepRecord:
             object.__setattr__(self, "actor", "agent" if self.teacher_action is None else "teacher")
         self._validate_decision()
         self._validate_outcome()
+        _plain_ints(self, _STEP_INTS)
 
     def _bad(self, what: str, expected: str, got: Any) -> ValueError:
         return ValueError(
@@ -288,6 +291,23 @@ class StepRecord:
 
 
 _PLAIN = (str, int, float, bool, type(None))
+_STEP_INTS = (
+    "step",
+    "episode",
+    "n_demonstrations",
+    "model_action",
+    "teacher_action",
+    "executed_action",
+)
+
+
+def _plain_ints(record: Any, names: tuple[str, ...]) -> None:
+    """Store a validated numpy integer field as a Python int, so that the record goes through
+    JSON (:meth:`StepRecord.to_dict`) and into the step log as one the loop builds."""
+    for name in names:
+        v = getattr(record, name)
+        if v is not None and type(v) is not int:
+            object.__setattr__(record, name, int(v))
 
 
 @dataclass(frozen=True)
@@ -330,6 +350,7 @@ class CorrectionRecord:
             raise bad(
                 "action", f"another action than the executed {self.executed_action}", self.action
             )
+        _plain_ints(self, ("step", "episode", "executed_action", "action"))
 
     @property
     def observation_array(self) -> np.ndarray:
