@@ -627,3 +627,19 @@ def test_records_keep_numpy_integers_as_ints_and_go_through_json():
         assert all(type(v) is int for v in (c.step, c.episode, c.executed_action, c.action))
     with pytest.raises(ValueError, match=r"StepRecord\.step: expected an int >= 0"):
         step(np.float64)  # floats are still refused
+
+
+def test_latest_checkpoint_of_a_path_that_is_no_session_is_an_error_not_none(tmp_path):
+    """latest_checkpoint answered None ('no checkpoint') for a mistyped path or a file, where
+    the other readers say what the path is."""
+    from torchcbl.session import latest_checkpoint
+
+    run = tmp_path / "run"
+    make(rare_regions_world(), run, max_new=2).run(max_steps=40)
+    n, path = latest_checkpoint(run)
+    assert path == run / "checkpoints" / f"model-{n:08d}.pt" and n >= 2
+    assert latest_checkpoint(run, at_most=1) is None  # a session without such a checkpoint
+    with pytest.raises(IncompatibleRunDirError, match="does not exist"):
+        latest_checkpoint(tmp_path / "rnu")
+    with pytest.raises(IncompatibleRunDirError, match="is a file"):
+        latest_checkpoint(run / "steps.sqlite")

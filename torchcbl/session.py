@@ -1345,7 +1345,14 @@ def load_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np
 def latest_checkpoint(
     run_dir: str | os.PathLike[str], *, at_most: int | None = None
 ) -> tuple[int, Path] | None:
-    """(n_demonstrations, path) of the newest checkpoint (with at most ``at_most`` demos)."""
+    """(n_demonstrations, path) of the newest checkpoint (with at most ``at_most`` demos);
+    None when the session has none.
+
+    Raises:
+        IncompatibleRunDirError: ``run_dir`` is not a session directory (no ``config.json``).
+    """
+    if not (Path(run_dir) / CONFIG_NAME).is_file():
+        load_config(run_dir)  # raises, saying what the path is
     directory = Path(run_dir) / CHECKPOINT_DIR
     best: tuple[int, Path] | None = None
     if directory.is_dir():
