@@ -474,6 +474,76 @@ def test_readers_on_a_read_only_mount(tmp_path):
         crash_db.close()
 
 
+_READ_AS_ANOTHER_USER = """
+import json, os, sys
+from torchcbl.session import load_records
+if os.geteuid() == 0:  # root reads everything: read as nobody, as a colleague would
+    os.setgid(65534)
+    os.setuid(65534)
+out = {}
+for run in sys.argv[1:]:
+    try:
+        out[run] = ["ok", len(load_records(run))]
+    except Exception as exc:
+        out[run] = [type(exc).__name__, str(exc)]
+print(json.dumps(out))
+"""
+
+
+def test_a_session_this_user_may_not_read_is_said_to_be_that(tmp_path):
+    """Another user's session whose files (or directory) this user may not read: each reader
+    names the file and says it is a permission, not a damaged config ('restore it from a
+    backup'), a -wal that needs write access (there was none) or a missing config."""
+    import tempfile
+
+    base = Path(tempfile.mkdtemp(prefix="torchcbl-perm-"))  # pytest's tmp is private to root
+    runs = {name: base / name for name in ("config", "log", "wal", "journal", "dir", "fine")}
+    try:
+        for name in ("config", "log", "dir", "fine"):
+            _closed_session(runs[name])
+        live = []
+        for name in ("wal", "journal"):  # a writer runs: a -wal, and steps in the journal
+            ct, _ = session(runs[name], commit_every=10**6)
+            ct.run(max_steps=40)
+            live.append(ct)
+        assert (runs["wal"] / "steps.sqlite-wal").stat().st_size > 0
+        subprocess.run(["chmod", "-R", "a+rX", str(base)], check=True)
+        denied = {
+            "config": runs["config"] / "config.json",
+            "log": runs["log"] / "steps.sqlite",
+            "wal": runs["wal"] / "steps.sqlite-wal",
+            "journal": runs["journal"] / "steps.journal",
+            "dir": runs["dir"],
+        }
+        for p in denied.values():
+            p.chmod(0)
+        env = {**os.environ, "PYTHONPATH": str(TESTS.parent)}
+        proc = subprocess.run(
+            [sys.executable, "-c", _READ_AS_ANOTHER_USER, *map(str, runs.values())],
+            capture_output=True,
+            text=True,
+            cwd=base,
+            env=env,
+            timeout=120,
+        )
+        assert proc.returncode == 0, proc.stderr
+        got = json.loads(proc.stdout)
+        assert got[str(runs["fine"])] == ["ok", 60]  # a readable session reads
+        for name, path in denied.items():
+            kind, msg = got[str(runs[name])]
+            named = path / "config.json" if name == "dir" else path
+            assert kind == "IncompatibleRunDirError", (name, msg)
+            assert msg.startswith(f"{named} cannot be read by this user (permission denied)")
+            assert "chmod -R a+rX" in msg and "changed nothing" in msg
+            assert "backup" not in msg and "holds commits" not in msg and "missing" not in msg
+        for ct in live:
+            ct.close()
+    finally:
+        for p in (base, *base.iterdir()):
+            p.chmod(0o755)
+        shutil.rmtree(base)
+
+
 # -- 4. damaged files -------------------------------------------------------------------------
 
 

@@ -70,7 +70,8 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   lock or create a file, so a read-only mount works; or, while a writer runs or after one was
   killed (a ``-wal`` file is there), with ``mode=ro``, under which SQLite itself takes its
   shared locks and may create or rewrite the ``-shm`` index beside the log (never the log, the
-  journal or a checkpoint).
+  journal or a checkpoint). A file of the session this user may not read (another user's
+  session) is an :class:`IncompatibleRunDirError` naming it.
 - Damaged files. A journal line that fails its checksum, or is valid JSON of the wrong shape,
   is reported with its line number and byte offset by readers and by resume, which then refuse
   and change nothing; :func:`repair_journal` copies the journal aside byte for byte and keeps
@@ -325,6 +326,8 @@ def _scan_journal(path: Path) -> _JournalScan:
         data = path.read_bytes()
     except FileNotFoundError:
         return _JournalScan([], [])
+    except PermissionError:
+        raise _no_read_access(path) from None
     except OSError as exc:
         raise IncompatibleRunDirError(f"{path} cannot be read: {exc}") from exc
     entries, damaged = [], []
@@ -367,6 +370,16 @@ def _journal_entries(path: Path) -> list[tuple[str, tuple[Any, ...]]]:
             "does not depend on a damaged one, and reports what it could not keep."
         )
     return [(kind, values) for _, kind, values in scan.entries]
+
+
+def _no_read_access(path: Path) -> IncompatibleRunDirError:
+    """The error for a file of a session this user may not read (another user's session)."""
+    return IncompatibleRunDirError(
+        f"{path} cannot be read by this user (permission denied). Reading a session needs "
+        "read access to its files and read and search (x) access to its directory and the "
+        "ones above it; torchcbl changed nothing. Ask the session's owner for access (e.g. "
+        "chmod -R a+rX on the run directory), or read a copy they make."
+    )
 
 
 def _derived_actor(teacher_action: Any) -> str:
@@ -424,6 +437,12 @@ def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
         CorruptSessionError: unreadable config, or one missing a required key.
     """
     path = Path(run_dir) / CONFIG_NAME
+    try:
+        os.stat(path)
+    except PermissionError:  # the directory, or one above it, may not be searched
+        raise _no_read_access(path) from None
+    except OSError:
+        pass  # said below: missing, or the path is a file
     if not path.is_file():
         given = Path(run_dir)
         if given.is_file():  # e.g. the session's steps.sqlite or config.json itself
@@ -447,6 +466,8 @@ def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
         )
     try:
         config = json.loads(path.read_text())
+    except PermissionError:
+        raise _no_read_access(path) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise CorruptSessionError(
             f"{path} is not readable JSON ({exc}). It is written once when the session "
@@ -1192,7 +1213,11 @@ def _open_readonly(run_dir: str | os.PathLike[str]) -> sqlite3.Connection:
             return _connect_reader(path, "immutable=1")
         return _connect_reader(path, "mode=ro")
     except sqlite3.OperationalError as exc:
-        if "unable to open" in str(exc) or "readonly" in str(exc):
+        shm = path.with_name(LOG_NAME + "-shm")
+        for p in (path, wal, shm):  # a file this user may not read (another user's session)
+            if p.exists() and not os.access(p, os.R_OK):
+                raise _no_read_access(p) from exc
+        if ("unable to open" in str(exc) or "readonly" in str(exc)) and wal.exists():
             raise IncompatibleRunDirError(
                 f"{path} cannot be opened read-only ({exc}) and {wal} holds commits that need "
                 "write access to the directory to be read. Copy the run directory somewhere "
