@@ -26,3 +26,17 @@ if ENV_ID not in registry:
 def pole_teacher(env: Any) -> Any:
     """CartPole's textbook controller: push toward the side the pole leans to."""
     return lambda obs, info: int(obs[2] + 0.5 * obs[3] > 0)
+
+
+def glitchy_teacher(env: Any, seed: int) -> Any:
+    """The oracle, except that on seed 1 it raises at its third call (a teacher's bug that
+    shows on one cell of a sweep only)."""
+    inner, calls = oracle(env.unwrapped), [0]
+
+    def teach(obs: Any, info: dict) -> int:
+        calls[0] += 1
+        if seed == 1 and calls[0] == 3:
+            raise ValueError("sensor glitch")
+        return inner(obs, info)
+
+    return teach

@@ -468,10 +468,41 @@ def test_an_env_the_loop_cannot_teach_is_named_with_what_it_needs(tmp_path, caps
     attribute 'n'" (the command: exit code 1, no word of what the benchmark needs)."""
     monkeypatch.syspath_prepend(str(TESTS))
     env = _env(env_id="Pendulum-v1", env_kwargs={}, teacher="_bench_env:pole_teacher")
-    with pytest.raises(ValueError, match=r"'toy' \(Pendulum-v1\): expected .* Discrete action"):
+    with pytest.raises(bm.CellError, match=r"'toy' \(Pendulum-v1\): expected .* Discrete action"):
         bm.run_benchmark(STRATEGIES[:1], [env], [0], tmp_path / "o", workers=1, plots=False)
     argv = ["benchmark", "--envs", "", "--gym-env", "Pendulum-v1", "--strategies", "bc"]
     argv += ["--teacher", "_bench_env:pole_teacher", "--seeds", "1", "--workers", "1"]
     assert main([*argv, "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
     assert "Discrete action space" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_failing_cell_is_named_and_the_finished_cells_are_kept(
+    workers, tmp_path, monkeypatch, capsys
+):
+    """A teacher that raised on one seed stopped the sweep with its bare message ("the teacher
+    raised ValueError: sensor glitch (step 2) ..."): nothing said which of the cells it was."""
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    env = _env(teacher="_bench_env:glitchy_teacher", budgets=(5,), max_steps=10)
+    seeds = [0, 1] if workers == 1 else [1]
+    with pytest.raises(bm.CellError) as caught:
+        bm.run_benchmark(STRATEGIES[:1], [env], seeds, tmp_path, workers=workers, plots=False)
+    (config,) = bm.cell_configs(STRATEGIES[:1], [env], [1])
+    text = str(caught.value)
+    assert text.startswith(f"cell {bm.cell_key(config)} (env 'toy', strategy 'bc', seed 1) failed")
+    assert "sensor glitch" in text and str(tmp_path / "cells") in text
+    assert caught.value.config == config and "sensor glitch" in str(caught.value.__cause__)
+    kept = [json.loads(p.read_text())["seed"] for p in (tmp_path / "cells").glob("*.json")]
+    assert kept == ([0] if workers == 1 else [])  # the cell before it is kept
+    if workers == 1:  # and at the command line: one line, the cell named
+        argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+        argv += ["--teacher", "_bench_env:glitchy_teacher", "--strategies", "bc", "--seeds", "2"]
+        argv += ["--workers", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+        monkeypatch.syspath_prepend(str(TESTS))
+        assert main([*argv, "--out", str(tmp_path / "cli")]) == 2
+        err = capsys.readouterr().err
+        assert "(env '_bench_env:BenchCluster-v0', strategy 'bc', seed 1) failed" in err
+        assert err.startswith("torchcbl benchmark: error: cell ") and err.count("\n") == 1

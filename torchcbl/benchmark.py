@@ -60,6 +60,7 @@ from torchcbl.records import _is_int
 
 __all__ = [
     "CELL_FORMAT",
+    "CellError",
     "EnvSpec",
     "STRATEGY_PATHS",
     "StrategySpec",
@@ -583,6 +584,23 @@ def _load_cell(path: Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) and "curve" in data else None
 
 
+class CellError(RuntimeError):
+    """A cell of a sweep failed: the message names the cell (env, strategy, seed and key) and
+    the cause (also ``__cause__``); ``config`` is the cell's configuration. The cells finished
+    before it are kept, so running the same sweep again computes only the rest."""
+
+    def __init__(self, config: Mapping[str, Any], cause: BaseException, out: Path) -> None:
+        self.config = dict(config)
+        self.key = cell_key(config)
+        text = " ".join(str(cause).split()) or type(cause).__name__
+        super().__init__(
+            f"cell {self.key} (env {config['env']['name']!r}, strategy "
+            f"{config['strategy']['label']!r}, seed {config['seed']}) failed: "
+            f"{type(cause).__name__}: {text} -- the cells finished before it are kept in "
+            f"{out / 'cells'}; fix the cause and run the same sweep again to compute the rest"
+        )
+
+
 def _execute(
     todo: list[dict[str, Any]],
     *,
@@ -590,7 +608,11 @@ def _execute(
     use_ray: bool,
     ray_address: str | None,
     done: Callable[[dict[str, Any]], None],
+    out: Path,
 ) -> None:
+    """Run the cells of ``todo`` and hand each result to ``done`` as it comes; the first cell
+    that raises stops the sweep with a :class:`CellError` naming it (any other cell that
+    finished meanwhile is handed to ``done`` first)."""
     if not todo:
         return
     if use_ray:
@@ -614,17 +636,28 @@ def _execute(
             # One cell per task and CPU; a cell closes its envs, so a worker process may run
             # cells one after another (libsumo: one live simulation per process).
             remote = ray.remote(num_cpus=1)(_run_cell_in_worker)
-            pending = [remote.remote(c) for c in todo]
+            configs = {remote.remote(c): c for c in todo}
+            pending = list(configs)
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
-                done(ray.get(ready[0]))
+                try:
+                    cell = ray.get(ready[0])
+                except Exception as exc:  # a RayTaskError: the cell's own exception is its cause
+                    cause = getattr(exc, "cause", None)
+                    cause = cause if isinstance(cause, BaseException) else exc
+                    raise CellError(configs[ready[0]], cause, out) from cause
+                done(cell)
         finally:
             if started:
                 ray.shutdown()
         return
     if workers <= 1:
         for c in todo:  # in this process: its environment variables are left alone
-            done(run_cell(c))
+            try:
+                cell = run_cell(c)
+            except Exception as exc:
+                raise CellError(c, exc, out) from exc
+            done(cell)
         return
     import multiprocessing as mp
 
@@ -632,11 +665,17 @@ def _execute(
     # spawn: a fresh interpreter (no forked torch or libsumo state); workers are reused, as
     # every cell closes its envs before it returns.
     with worker_pool(min(workers, len(todo)), ctx) as pool:  # a Ctrl-C stops the workers
-        futures = {pool.submit(_run_cell_in_worker, c) for c in todo}
-        while futures:
-            finished, futures = wait(futures, return_when=FIRST_COMPLETED)
-            for f in finished:
-                done(f.result())
+        futures = {pool.submit(_run_cell_in_worker, c): c for c in todo}
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            failed = [f for f in finished if f.exception() is not None]
+            for f in finished:  # the cells that finished with a failed one are kept too
+                if f.exception() is None:
+                    done(f.result())
+            if failed:
+                exc = failed[0].exception()
+                raise CellError(futures[failed[0]], exc, out) from exc
 
 
 def run_benchmark(
@@ -667,6 +706,10 @@ def run_benchmark(
 
     Returns:
         The results dict that was written to ``results.json``.
+
+    Raises:
+        CellError: a cell raised; it names the cell and has the cell's exception as its
+            ``__cause__``. The sweep stops there; the cells finished before it are kept.
     """
     if isinstance(seeds, (str, bytes)) or not isinstance(seeds, Iterable):
         raise ValueError(f"run_benchmark: seeds must be a sequence of ints >= 0, got {seeds!r}")
@@ -721,7 +764,7 @@ def run_benchmark(
             on_cell(cell, False)
 
     n_workers = max(1, int(workers or os.cpu_count() or 1))
-    _execute(todo, workers=n_workers, use_ray=use_ray, ray_address=ray_address, done=done)
+    _execute(todo, workers=n_workers, use_ray=use_ray, ray_address=ray_address, done=done, out=out)
     cells = [results[cell_key(c)] for c in configs]
     summary = summarize(cells, envs=[e.name for e in envs], strategies=titles)
     summary["sweep"] = {
