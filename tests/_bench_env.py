@@ -40,3 +40,9 @@ def glitchy_teacher(env: Any, seed: int) -> Any:
         return inner(obs, info)
 
     return teach
+
+
+def steps_over_budget(records: Any) -> float:
+    """A cost-like score, higher when better and below 0 for every policy (the teacher too):
+    minus the number of evaluation steps."""
+    return -float(len(records))

@@ -506,3 +506,30 @@ def test_a_failing_cell_is_named_and_the_finished_cells_are_kept(
         err = capsys.readouterr().err
         assert "(env '_bench_env:BenchCluster-v0', strategy 'bc', seed 1) failed" in err
         assert err.startswith("torchcbl benchmark: error: cell ") and err.count("\n") == 1
+
+
+def test_a_teacher_scoring_below_zero_is_not_blamed_on_success_rate(tmp_path, capsys, monkeypatch):
+    """With --score a return-like score (the teacher: -14), the warning said "success_rate
+    needs an env that sets info["is_success"] ... every performance is 0 ... pass --score",
+    none of it true; the plot drew "95 % of teacher" above the teacher's line (0.95 x -14)."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--score", "_bench_env:steps_over_budget"]
+    argv += ["--strategies", "bc", "--seeds", "1", "--workers", "1", "--budgets", "5"]
+    argv += ["--max-steps", "10", "--eval-episodes", "1", "--out", str(tmp_path / "b")]
+    import matplotlib.figure
+
+    drawn = []
+    save = matplotlib.figure.Figure.savefig
+
+    def savefig(fig, *args, **kwargs):
+        drawn.extend(line.get_label() for ax in fig.axes for line in ax.get_lines())
+        return save(fig, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "warning: the teacher scores -10 on _bench_env:BenchCluster-v0" in err
+    assert '"labels to 95 %" needs a teacher score above 0' in err
+    assert "_bench_env:steps_over_budget" in err and "success_rate" not in err
+    assert "teacher" in drawn and "95 % of teacher" not in drawn

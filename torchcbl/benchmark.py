@@ -927,7 +927,8 @@ def plot_curves(
         if teacher:
             t = float(np.mean(teacher))
             ax.axhline(t, color="k", lw=0.8, ls="--", label="teacher")
-            ax.axhline(0.95 * t, color="k", lw=0.6, ls=":", label="95 % of teacher")
+            if t > 0:  # no target for a teacher at or below 0: 0.95 x -100 is above it
+                ax.axhline(0.95 * t, color="k", lw=0.6, ls=":", label="95 % of teacher")
         ax.set_title(env)
         ax.set_xlabel("teacher labels")
         ax.set_ylabel("performance (greedy, held-out seeds)")

@@ -855,11 +855,19 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     for env_name, rows in summary["table"].items():
         scores = [r["teacher_performance"]["mean"] for r in rows.values()]
         if scores and all(s is not None and s <= 0 for s in scores):
-            print(
-                f"\nwarning: the teacher scores {max(scores):g} on {env_name}: the score "
-                "measures nothing there (success_rate needs an env that sets "
+            score = summary["envs"][env_name]["score"]
+            why = (
+                "the score measures nothing there (success_rate needs an env that sets "
                 'info["is_success"]), so every performance is 0 and "labels to 95 %" is '
-                "undefined; pass --score with a score for this env",
+                "undefined; pass --score with a score for this env"
+                if score == "torchcbl.benchmark:success_rate" and max(scores) == 0
+                else f'"labels to 95 %" needs a teacher score above 0 (95 % of it is the '
+                f"target), so it is undefined there; give --score one that is positive for the "
+                f"teacher and higher when better (a return shifted by its worst value, say), "
+                f"not {score}"
+            )
+            print(
+                f"\nwarning: the teacher scores {max(scores):g} on {env_name}: {why}",
                 file=sys.stderr,
             )
     print(
