@@ -234,6 +234,9 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
     [
         (["--strategies", "bc,nope"], "--strategies: unknown ['nope']"),
         (["--envs", "mars"], "--envs: unknown ['mars']"),
+        # a repeated name: the Python API's "give each EnvSpec its own name=", after the header
+        (["--envs", "corridor,corridor"], "--envs corridor,corridor: ['corridor'] given more"),
+        (["--strategies", "bc,dagger,bc"], "--strategies bc,dagger,bc: ['bc'] given more than"),
         (["--envs", "", "--gym-env", "X-v0"], "--gym-env needs --teacher"),
         (
             ["--quick", "--envs", "corridor", "--strategies", "bc,torchcbl.strategies:Nope"],
