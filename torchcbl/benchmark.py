@@ -438,21 +438,30 @@ def _evaluate(policy: Any, spec: EnvSpec, env: Any, score: Callable, uses_info: 
 def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     """Run one cell (see the module docstring) and return its JSON result.
 
-    Deterministic given ``config`` (one torch thread, seeded model, env and strategy), apart
-    from the ``wall_s`` / ``cpu_s`` timings. The caller's torch thread count and global torch
-    RNG are as they were when it returns (``run_benchmark(workers=1)`` runs cells in-process).
+    Deterministic given ``config`` (one torch thread, seeded model, env and strategy, and the
+    global numpy and ``random`` RNGs seeded from the cell's seed, for a teacher, env or
+    strategy of one's own that draws from them), apart from the ``wall_s`` / ``cpu_s``
+    timings. The caller's torch thread count and global torch, numpy and ``random`` RNGs are
+    as they were when it returns (``run_benchmark(workers=1)`` runs cells in-process).
     """
+    import random
+
     import torch
 
     threads = torch.get_num_threads()
+    np_state, py_state = np.random.get_state(), random.getstate()  # noqa: NPY002
     try:
         with torch.random.fork_rng(devices=[]):
             return _run_cell(config)
     finally:
         torch.set_num_threads(threads)
+        np.random.set_state(np_state)  # noqa: NPY002
+        random.setstate(py_state)
 
 
 def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
+    import random
+
     import torch
 
     from torchcbl.gmm import GaussianMixtureSet
@@ -471,6 +480,10 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     sspec = StrategySpec(**config["strategy"])
     seed = int(config["seed"])
     torch.manual_seed(seed)
+    # the global RNGs a teacher, env or strategy of one's own may draw from (the shipped ones
+    # do not): otherwise a cell's figures depend on what ran before it in the process
+    np.random.seed([seed & 0xFFFFFFFF, seed >> 32])  # noqa: NPY002
+    random.seed(seed)
     wall0, cpu0 = time.perf_counter(), time.process_time()
     score = _import(spec.score)
 
