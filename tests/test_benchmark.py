@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -565,3 +566,29 @@ def test_a_cell_is_the_same_whatever_the_callers_numpy_and_random_state():
         assert (np.random.random(), random.random()) == expected  # noqa: NPY002
     assert cells[0] == cells[1]
     assert cells[0]["attention"]["corrections"] > 0  # the sloppy teacher's answers mattered
+
+
+def test_a_score_that_is_not_a_finite_number_is_named_not_tabled(tmp_path):
+    """A mean over the finished episodes of an evaluation cut before any ended is NaN: the
+    sweep went on and wrote "nan ± nan" into every performance column of the table (and NaN,
+    not JSON, into results.json), with no word of why; a score returning None failed with
+    float()'s TypeError."""
+    env = _env(budgets=(5,), max_steps=10, eval_episodes=None, eval_steps=3)
+    for score, shown in (("mean_finished_length", "nan"), ("no_score", "None")):
+        with pytest.raises(bm.CellError) as caught:
+            bm.run_benchmark(
+                STRATEGIES[:1],
+                [dataclasses.replace(env, score=f"_bench_env:{score}")],
+                [0],
+                tmp_path / score,
+                workers=1,
+                plots=False,
+            )
+        text = str(caught.value)
+        assert f"score _bench_env:{score} returned {shown} for the teacher on evaluation" in text
+        assert "(3 steps, 0 finished episodes); expected a finite number" in text
+        assert not (tmp_path / score / "results.json").exists()
+    # a score that is finite once an episode ends: the same env with 10-step episodes
+    fine = dataclasses.replace(env, score="_bench_env:mean_finished_length", eval_steps=25)
+    out = bm.run_benchmark(STRATEGIES[:1], [fine], [0], tmp_path / "ok", workers=1, plots=False)
+    assert out["table"]["toy"]["bc"]["teacher_performance"]["mean"] == 10.0

@@ -215,8 +215,8 @@ class EnvSpec:
         env_kwargs: ``gymnasium.make`` keyword arguments of the teaching env.
         eval_env_kwargs: overrides of ``env_kwargs`` for the evaluation env.
         teacher_kwargs: extra keyword arguments of the teacher factory.
-        score: import path of ``score(records) -> float`` (higher is better) over the
-            evaluation records of one seed; default :func:`success_rate`.
+        score: import path of ``score(records) -> float`` (finite, higher is better) over
+            the evaluation records of one seed; default :func:`success_rate`.
         eval_seeds: held-out reset seeds of the evaluation env (one evaluation each).
         eval_episodes: episodes per evaluation (or None).
         eval_steps: steps per evaluation (or None; at least one of the two).
@@ -418,7 +418,13 @@ class _Audited(gym.Wrapper):
         return out
 
 
-def _evaluate(policy: Any, spec: EnvSpec, env: Any, score: Callable, uses_info: bool) -> float:
+def _evaluate(
+    policy: Any, spec: EnvSpec, env: Any, score: Callable, uses_info: bool, what: str
+) -> float:
+    """The mean of ``score`` over the evaluations of ``policy`` on ``spec.eval_seeds``; a score
+    that is not a finite number (NaN from a mean over no finished episode, None) is a
+    ValueError naming the score, the seed and ``what`` was evaluated: it would be a NaN in
+    every figure of the table (and results.json), not an error."""
     from torchcbl.policy import evaluate_policy
 
     values = []
@@ -431,7 +437,20 @@ def _evaluate(policy: Any, spec: EnvSpec, env: Any, score: Callable, uses_info: 
             seed=int(s),
             uses_info=uses_info,
         )
-        values.append(float(score(records)))
+        value = score(records)
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            number = float("nan")
+        if isinstance(value, (bool, np.bool_)) or not np.isfinite(number):
+            ends = sum(1 for r in records if r.terminated or r.truncated)
+            raise ValueError(
+                f"EnvSpec {spec.name!r}: score {spec.score} returned {value!r} for {what} on "
+                f"evaluation seed {s} ({len(records)} steps, {ends} finished episodes); "
+                "expected a finite number, higher is better, for every evaluation (give "
+                "eval_steps long enough for an episode to end, or a score defined without one)"
+            )
+        values.append(number)
     return float(np.mean(values))
 
 
@@ -542,12 +561,14 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     eval_env = gym.make(spec.env_id, **{**dict(spec.env_kwargs), **dict(spec.eval_env_kwargs)})
     try:
         eval_teacher = _make_teacher(spec.teacher, eval_env, seed, spec.teacher_kwargs)
-        teacher_perf = _evaluate(eval_teacher, spec, eval_env, score, uses_info=True)
+        teacher_perf = _evaluate(eval_teacher, spec, eval_env, score, True, "the teacher")
         curve = [
             {
                 "labels": labels,
                 "steps": n_steps,
-                "performance": _evaluate(GreedyPolicy(m), spec, eval_env, score, False),
+                "performance": _evaluate(
+                    GreedyPolicy(m), spec, eval_env, score, False, f"the model of {labels} labels"
+                ),
             }
             for labels, n_steps, m in snapshots
         ]
