@@ -592,3 +592,27 @@ def test_a_score_that_is_not_a_finite_number_is_named_not_tabled(tmp_path):
     fine = dataclasses.replace(env, score="_bench_env:mean_finished_length", eval_steps=25)
     out = bm.run_benchmark(STRATEGIES[:1], [fine], [0], tmp_path / "ok", workers=1, plots=False)
     assert out["table"]["toy"]["bc"]["teacher_performance"]["mean"] == 10.0
+
+
+def test_a_strategys_params_are_checked_before_any_cell_runs(tmp_path):
+    """StrategySpec("dagger", {"beta": 0.3}) (DAgger takes beta0) failed in its first cell,
+    after every cell of the strategies before it had run; an out-of-range value too."""
+    cases = [
+        (("dagger", {"beta": 0.3}), r"unexpected keyword argument 'beta'"),
+        (("dagger", {"beta0": 3}), r"beta0 must be a number in \[0, 1\], got 3"),
+        (("confident", {"max_std": -1}), r"DistanceRule.max_std: expected a value > 0"),
+    ]
+    for (name, params), cause in cases:
+        ran = []
+        with pytest.raises(
+            ValueError, match=rf"StrategySpec '{name}': cannot make {name} .*{cause}"
+        ):
+            bm.run_benchmark(
+                [bm.StrategySpec("bc"), bm.StrategySpec(name, params)],
+                [_env(budgets=(5,), max_steps=10)],
+                [0],
+                tmp_path / "out",
+                workers=1,
+                on_cell=lambda cell, cached, ran=ran: ran.append(cell["strategy"]),
+            )
+        assert ran == [] and not (tmp_path / "out").exists()

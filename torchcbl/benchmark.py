@@ -109,9 +109,20 @@ def _import(path: str) -> Any:
 def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) -> None:
     """Resolve every import path of a benchmark (strategies, teachers, scores, gymnasium
     registration modules) before anything runs: a misspelt name fails at once, with an
-    ImportError that names it, not in a worker after other cells have run."""
+    ImportError that names it, not in a worker after other cells have run. Each strategy is
+    made once from its params too, so a misspelt or refused parameter is a ValueError naming
+    the strategy now, not after every cell of the strategies before it."""
     for s in strategies:
         _import(STRATEGY_PATHS.get(s.name, s.name))
+        try:
+            s.build(seed=0)
+        except Exception as exc:  # the class's own refusal of its arguments, whatever it is
+            text = " ".join(str(exc).split()) or type(exc).__name__
+            raise ValueError(
+                f"StrategySpec {s.title!r}: cannot make {s.name} with params "
+                f"{dict(s.params)}: {type(exc).__name__}: {text}; fix its params (the keyword "
+                "arguments of its constructor)"
+            ) from exc
     for e in envs:
         _import(e.teacher)
         _import(e.score)
