@@ -616,3 +616,31 @@ def test_a_strategys_params_are_checked_before_any_cell_runs(tmp_path):
                 on_cell=lambda cell, cached, ran=ran: ran.append(cell["strategy"]),
             )
         assert ran == [] and not (tmp_path / "out").exists()
+
+
+def test_teacher_kwargs_that_do_not_fit_the_factory_are_refused_before_any_cell_runs(tmp_path):
+    """A misspelt teacher keyword, or a seed the cell passes itself, failed in the env's first
+    cell (TypeError: got an unexpected keyword argument / multiple values for 'seed'), after
+    every cell of the envs listed before it had run."""
+    first = _env(name="first", budgets=(5,), max_steps=10)
+    cases = [
+        (_env(name="x", teacher_kwargs={"greedy": True}), r"unexpected keyword .*'greedy'"),
+        (
+            _env(name="x", teacher="_bench_env:glitchy_teacher", teacher_kwargs={"seed": 3}),
+            r"\['seed'\] come from the cell; leave them out",
+        ),
+    ]
+    for env, cause in cases:
+        ran = []
+        with pytest.raises(
+            ValueError, match=rf"EnvSpec 'x': teacher_kwargs .* do not fit .*{cause}"
+        ):
+            bm.run_benchmark(
+                STRATEGIES[:1],
+                [first, env],
+                [0],
+                tmp_path / "out",
+                workers=1,
+                on_cell=lambda cell, cached, ran=ran: ran.append(cell["env"]),
+            )
+        assert ran == [] and not (tmp_path / "out").exists()

@@ -124,7 +124,25 @@ def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) 
                 "arguments of its constructor)"
             ) from exc
     for e in envs:
-        _import(e.teacher)
+        factory = _import(e.teacher)
+        try:
+            params = inspect.signature(factory).parameters
+        except (TypeError, ValueError):  # no signature to read: the cell will tell
+            params = None
+        if params is not None:
+            given = {k: None for k in ("env", "seed") if k in params}
+            taken = sorted(set(given) & set(e.teacher_kwargs))
+            try:
+                if taken:
+                    raise TypeError(f"{taken} come from the cell; leave them out")
+                inspect.signature(factory).bind_partial(**given, **dict(e.teacher_kwargs))
+            except TypeError as exc:
+                raise ValueError(
+                    f"EnvSpec {e.name!r}: teacher_kwargs {dict(e.teacher_kwargs)} do not fit "
+                    f"{e.teacher}{inspect.signature(factory)}: {exc} (it is called as "
+                    "factory(env=..., seed=..., **teacher_kwargs), each of env and seed only if "
+                    "it takes it)"
+                ) from None
         _import(e.score)
         if ":" in e.env_id:
             importlib.import_module(e.env_id.partition(":")[0])
