@@ -294,6 +294,17 @@ def test_every_import_path_is_resolved_before_a_cell_runs(tmp_path):
         with pytest.raises(ImportError, match=name):
             bm.run_benchmark(strategies, [env], [0], tmp_path / "out", workers=1)
     assert not (tmp_path / "out").exists()
+    # a misspelt env id of a second env: gymnasium's NameNotFound came from its first cell,
+    # after the first env's cells had run
+    with pytest.raises(ValueError, match=r"EnvSpec 'x': env_id '_bench_env:BenchClustr-v0': "):
+        bm.run_benchmark(
+            STRATEGIES[:1],
+            [_env(), _env(name="x", env_id="_bench_env:BenchClustr-v0")],
+            [0],
+            tmp_path / "out",
+            workers=1,
+        )
+    assert not (tmp_path / "out").exists()
     # a repeated env name or seed would be merged or counted twice in the tables
     with pytest.raises(ValueError, match=r"env names must be distinct.*\['toy', 'toy'\]"):
         bm.run_benchmark(STRATEGIES, [_env(), _env(budgets=(5,))], [0], tmp_path / "out")

@@ -144,8 +144,16 @@ def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) 
                     "it takes it)"
                 ) from None
         _import(e.score)
-        if ":" in e.env_id:
-            importlib.import_module(e.env_id.partition(":")[0])
+        module, _, env_id = e.env_id.rpartition(":")  # as gymnasium.make reads "module:Id"
+        if module:
+            importlib.import_module(module)
+        try:
+            gym.spec(env_id)
+        except gym.error.Error as exc:  # a misspelt or unregistered id
+            raise ValueError(
+                f"EnvSpec {e.name!r}: env_id {e.env_id!r}: {exc}; expected a registered "
+                "gymnasium id ('module:Id' imports the module that registers it first)"
+            ) from None
 
 
 def _json_plain(value: Any, where: str) -> Any:
