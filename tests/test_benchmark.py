@@ -655,3 +655,21 @@ def test_teacher_kwargs_that_do_not_fit_the_factory_are_refused_before_any_cell_
                 on_cell=lambda cell, cached, ran=ran: ran.append(cell["env"]),
             )
         assert ran == [] and not (tmp_path / "out").exists()
+
+
+def test_a_worker_killed_mid_sweep_is_not_blamed_on_another_cell(tmp_path, monkeypatch):
+    """A worker killed by a signal (the out-of-memory killer) breaks the pool: every unfinished
+    cell then fails with BrokenProcessPool, and the error named whichever of them the wait
+    returned first (seed 2's cell for a death in seed 1's) as the cell that failed."""
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    env = _env(teacher="_bench_env:dying_teacher", budgets=(5,), max_steps=10)
+    with pytest.raises(RuntimeError) as caught:
+        bm.run_benchmark(STRATEGIES[:1], [env], [0, 1, 2], tmp_path, workers=2, plots=False)
+    assert not isinstance(caught.value, bm.CellError)
+    text = str(caught.value)
+    assert text.startswith("a worker process died abruptly (killed by a signal, or out of memory)")
+    assert str(tmp_path / "cells") in text and "run the same sweep again" in text
+    kept = [json.loads(p.read_text())["seed"] for p in (tmp_path / "cells").glob("*.json")]
+    assert 1 not in kept

@@ -48,6 +48,7 @@ import time
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -746,6 +747,15 @@ def _execute(
                     done(f.result())
             if failed:
                 exc = failed[0].exception()
+                if isinstance(exc, BrokenProcessPool):  # every unfinished cell gets it: the
+                    # dead worker's cell is not known, so naming one would blame the wrong one
+                    n_left = len(failed) + len(pending)
+                    raise RuntimeError(
+                        f"a worker process died abruptly (killed by a signal, or out of memory) "
+                        f"while it ran one of the {n_left} unfinished cells; the cells finished "
+                        f"before are kept in {out / 'cells'}: run the same sweep again to compute "
+                        "the rest (with fewer workers if memory ran out)"
+                    ) from exc
                 raise CellError(futures[failed[0]], exc, out) from exc
 
 
