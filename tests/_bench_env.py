@@ -102,3 +102,19 @@ def dying_teacher(env: Any, seed: int) -> Any:
         return inner(obs, info)
 
     return teach
+
+
+def failing_sweep(out: str) -> None:
+    """A sweep whose one cell fails (glitchy_teacher on seed 1), to run in a process of one's
+    own."""
+    from torchcbl import benchmark as bm
+
+    env = bm.EnvSpec(
+        name="toy",
+        env_id="_bench_env:BenchCluster-v0",
+        teacher="_bench_env:glitchy_teacher",
+        budgets=(5,),
+        max_steps=10,
+        eval_episodes=1,
+    )
+    bm.run_benchmark([bm.StrategySpec("bc")], [env], [1], out, workers=1, plots=False)

@@ -673,3 +673,22 @@ def test_a_worker_killed_mid_sweep_is_not_blamed_on_another_cell(tmp_path, monke
     assert str(tmp_path / "cells") in text and "run the same sweep again" in text
     kept = [json.loads(p.read_text())["seed"] for p in (tmp_path / "cells").glob("*.json")]
     assert 1 not in kept
+
+
+def test_a_cell_error_comes_back_from_a_process_of_ones_own(tmp_path, monkeypatch):
+    """A sweep run in a worker process of one's own (a pool of sweeps, a notebook's executor)
+    sends its CellError back pickled; CellError(config, cause, out) could not be rebuilt from
+    its message, so the parent got a BrokenProcessPool or an unpickling TypeError instead."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    import _bench_env
+
+    with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as pool:
+        exc = pool.submit(_bench_env.failing_sweep, str(tmp_path)).exception()
+    assert isinstance(exc, bm.CellError), repr(exc)
+    assert "(env 'toy', strategy 'bc', seed 1) failed: TeacherError" in str(exc)
+    assert exc.config["seed"] == 1 and exc.key == bm.cell_key(exc.config)

@@ -672,6 +672,18 @@ class CellError(RuntimeError):
             f"{out / 'cells'}; fix the cause and run the same sweep again to compute the rest"
         )
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # pickled as its message and config (a sweep run inside a worker process of one's
+        # own sends it back to the parent); the cause itself may not pickle
+        return (_rebuild_cell_error, (str(self), self.config))
+
+
+def _rebuild_cell_error(message: str, config: dict[str, Any]) -> CellError:
+    exc = CellError.__new__(CellError)
+    RuntimeError.__init__(exc, message)
+    exc.config, exc.key = config, cell_key(config)
+    return exc
+
 
 def _execute(
     todo: list[dict[str, Any]],
