@@ -26,3 +26,95 @@ if ENV_ID not in registry:
 def pole_teacher(env: Any) -> Any:
     """CartPole's textbook controller: push toward the side the pole leans to."""
     return lambda obs, info: int(obs[2] + 0.5 * obs[3] > 0)
+
+
+def glitchy_teacher(env: Any, seed: int) -> Any:
+    """The oracle, except that on seed 1 it raises at its third call (a teacher's bug that
+    shows on one cell of a sweep only)."""
+    inner, calls = oracle(env.unwrapped), [0]
+
+    def teach(obs: Any, info: dict) -> int:
+        calls[0] += 1
+        if seed == 1 and calls[0] == 3:
+            raise ValueError("sensor glitch")
+        return inner(obs, info)
+
+    return teach
+
+
+def steps_over_budget(records: Any) -> float:
+    """A cost-like score, higher when better and below 0 for every policy (the teacher too):
+    minus the number of evaluation steps."""
+    return -float(len(records))
+
+
+def sloppy_teacher(env: Any) -> Any:
+    """The oracle, answering at random on a share of the steps drawn from numpy's and Python's
+    global RNGs (as a quick teacher of one's own often does)."""
+    import random
+
+    import numpy as np
+
+    inner = oracle(env.unwrapped)
+
+    def teach(obs: Any, info: dict) -> int:
+        if np.random.random() < 0.3:  # noqa: NPY002
+            return random.randrange(env.action_space.n)
+        return inner(obs, info)
+
+    return teach
+
+
+def mean_finished_length(records: Any) -> float:
+    """The mean length of the evaluation's finished episodes: NaN (numpy's mean of nothing)
+    when none finished."""
+    import warnings
+
+    import numpy as np
+
+    lengths, n = [], 0
+    for r in records:
+        n += 1
+        if r.terminated or r.truncated:
+            lengths.append(n)
+            n = 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return float(np.mean(lengths))
+
+
+def no_score(records: Any) -> None:
+    """A score that forgot its return statement."""
+
+
+def dying_teacher(env: Any, seed: int) -> Any:
+    """The oracle, except that on seed 1 its process is killed at its third call (a worker
+    taken by the kernel's out-of-memory killer)."""
+    import os
+    import signal
+
+    inner, calls = oracle(env.unwrapped), [0]
+
+    def teach(obs: Any, info: dict) -> int:
+        calls[0] += 1
+        if seed == 1 and calls[0] == 3:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return inner(obs, info)
+
+    return teach
+
+
+def failing_sweep(out: str) -> None:
+    """A sweep whose one cell fails (glitchy_teacher on seed 1), to run in a process of one's
+    own."""
+    from torchcbl import benchmark as bm
+
+    env = bm.EnvSpec(
+        name="toy",
+        env_id="_bench_env:BenchCluster-v0",
+        teacher="_bench_env:glitchy_teacher",
+        budgets=(5,),
+        max_steps=10,
+        eval_episodes=1,
+    )
+    bm.run_benchmark([bm.StrategySpec("bc")], [env], [1], out, workers=1, plots=False)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -234,6 +235,9 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
     [
         (["--strategies", "bc,nope"], "--strategies: unknown ['nope']"),
         (["--envs", "mars"], "--envs: unknown ['mars']"),
+        # a repeated name: the Python API's "give each EnvSpec its own name=", after the header
+        (["--envs", "corridor,corridor"], "--envs corridor,corridor: ['corridor'] given more"),
+        (["--strategies", "bc,dagger,bc"], "--strategies bc,dagger,bc: ['bc'] given more than"),
         (["--envs", "", "--gym-env", "X-v0"], "--gym-env needs --teacher"),
         (
             ["--quick", "--envs", "corridor", "--strategies", "bc,torchcbl.strategies:Nope"],
@@ -289,6 +293,17 @@ def test_every_import_path_is_resolved_before_a_cell_runs(tmp_path):
     for name, (strategies, env) in cases.items():
         with pytest.raises(ImportError, match=name):
             bm.run_benchmark(strategies, [env], [0], tmp_path / "out", workers=1)
+    assert not (tmp_path / "out").exists()
+    # a misspelt env id of a second env: gymnasium's NameNotFound came from its first cell,
+    # after the first env's cells had run
+    with pytest.raises(ValueError, match=r"EnvSpec 'x': env_id '_bench_env:BenchClustr-v0': "):
+        bm.run_benchmark(
+            STRATEGIES[:1],
+            [_env(), _env(name="x", env_id="_bench_env:BenchClustr-v0")],
+            [0],
+            tmp_path / "out",
+            workers=1,
+        )
     assert not (tmp_path / "out").exists()
     # a repeated env name or seed would be merged or counted twice in the tables
     with pytest.raises(ValueError, match=r"env names must be distinct.*\['toy', 'toy'\]"):
@@ -468,10 +483,212 @@ def test_an_env_the_loop_cannot_teach_is_named_with_what_it_needs(tmp_path, caps
     attribute 'n'" (the command: exit code 1, no word of what the benchmark needs)."""
     monkeypatch.syspath_prepend(str(TESTS))
     env = _env(env_id="Pendulum-v1", env_kwargs={}, teacher="_bench_env:pole_teacher")
-    with pytest.raises(ValueError, match=r"'toy' \(Pendulum-v1\): expected .* Discrete action"):
+    with pytest.raises(bm.CellError, match=r"'toy' \(Pendulum-v1\): expected .* Discrete action"):
         bm.run_benchmark(STRATEGIES[:1], [env], [0], tmp_path / "o", workers=1, plots=False)
     argv = ["benchmark", "--envs", "", "--gym-env", "Pendulum-v1", "--strategies", "bc"]
     argv += ["--teacher", "_bench_env:pole_teacher", "--seeds", "1", "--workers", "1"]
     assert main([*argv, "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
     assert "Discrete action space" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_failing_cell_is_named_and_the_finished_cells_are_kept(
+    workers, tmp_path, monkeypatch, capsys
+):
+    """A teacher that raised on one seed stopped the sweep with its bare message ("the teacher
+    raised ValueError: sensor glitch (step 2) ..."): nothing said which of the cells it was."""
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    env = _env(teacher="_bench_env:glitchy_teacher", budgets=(5,), max_steps=10)
+    seeds = [0, 1] if workers == 1 else [1]
+    with pytest.raises(bm.CellError) as caught:
+        bm.run_benchmark(STRATEGIES[:1], [env], seeds, tmp_path, workers=workers, plots=False)
+    (config,) = bm.cell_configs(STRATEGIES[:1], [env], [1])
+    text = str(caught.value)
+    assert text.startswith(f"cell {bm.cell_key(config)} (env 'toy', strategy 'bc', seed 1) failed")
+    assert "sensor glitch" in text and str(tmp_path / "cells") in text
+    assert caught.value.config == config and "sensor glitch" in str(caught.value.__cause__)
+    kept = [json.loads(p.read_text())["seed"] for p in (tmp_path / "cells").glob("*.json")]
+    assert kept == ([0] if workers == 1 else [])  # the cell before it is kept
+    if workers == 1:  # and at the command line: one line, the cell named
+        argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+        argv += ["--teacher", "_bench_env:glitchy_teacher", "--strategies", "bc", "--seeds", "2"]
+        argv += ["--workers", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+        monkeypatch.syspath_prepend(str(TESTS))
+        assert main([*argv, "--out", str(tmp_path / "cli")]) == 2
+        err = capsys.readouterr().err
+        assert "(env '_bench_env:BenchCluster-v0', strategy 'bc', seed 1) failed" in err
+        assert err.startswith("torchcbl benchmark: error: cell ") and err.count("\n") == 1
+
+
+def test_a_teacher_scoring_below_zero_is_not_blamed_on_success_rate(tmp_path, capsys, monkeypatch):
+    """With --score a return-like score (the teacher: -14), the warning said "success_rate
+    needs an env that sets info["is_success"] ... every performance is 0 ... pass --score",
+    none of it true; the plot drew "95 % of teacher" above the teacher's line (0.95 x -14)."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--score", "_bench_env:steps_over_budget"]
+    argv += ["--strategies", "bc", "--seeds", "1", "--workers", "1", "--budgets", "5"]
+    argv += ["--max-steps", "10", "--eval-episodes", "1", "--out", str(tmp_path / "b")]
+    import matplotlib.figure
+
+    drawn = []
+    save = matplotlib.figure.Figure.savefig
+
+    def savefig(fig, *args, **kwargs):
+        drawn.extend(line.get_label() for ax in fig.axes for line in ax.get_lines())
+        return save(fig, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "warning: the teacher scores -10 on _bench_env:BenchCluster-v0" in err
+    assert '"labels to 95 %" needs a teacher score above 0' in err
+    assert "_bench_env:steps_over_budget" in err and "success_rate" not in err
+    assert "teacher" in drawn and "95 % of teacher" not in drawn
+
+
+def test_a_cell_is_the_same_whatever_the_callers_numpy_and_random_state():
+    """A teacher of one's own that draws from numpy's or Python's global RNG made a cell depend
+    on what ran before it in the process (HG-DAgger here: 59 steps and 10 wrong actions after
+    np.random.seed(1), 75 and 12 after np.random.seed(2)), so the process pool, Ray and an
+    in-process sweep could cache different figures for one key. A cell seeds both from its
+    seed, and gives the caller its own states back."""
+    import random
+
+    import numpy as np
+
+    env = _env(teacher="_bench_env:sloppy_teacher", budgets=(5, 10, 20), max_steps=80)
+    (config,) = bm.cell_configs([bm.StrategySpec("hg_dagger")], [env], [0])
+    cells = []
+    for caller_seed in (1, 2):
+        np.random.seed(caller_seed)  # noqa: NPY002
+        random.seed(caller_seed)
+        cells.append(_figures(bm.run_cell(config)))
+        # the caller's global RNGs go on as if the cell had not run
+        np.random.seed(caller_seed)  # noqa: NPY002
+        random.seed(caller_seed)
+        expected = (np.random.random(), random.random())  # noqa: NPY002
+        np.random.seed(caller_seed)  # noqa: NPY002
+        random.seed(caller_seed)
+        bm.run_cell(config)
+        assert (np.random.random(), random.random()) == expected  # noqa: NPY002
+    assert cells[0] == cells[1]
+    assert cells[0]["attention"]["corrections"] > 0  # the sloppy teacher's answers mattered
+
+
+def test_a_score_that_is_not_a_finite_number_is_named_not_tabled(tmp_path):
+    """A mean over the finished episodes of an evaluation cut before any ended is NaN: the
+    sweep went on and wrote "nan ± nan" into every performance column of the table (and NaN,
+    not JSON, into results.json), with no word of why; a score returning None failed with
+    float()'s TypeError."""
+    env = _env(budgets=(5,), max_steps=10, eval_episodes=None, eval_steps=3)
+    for score, shown in (("mean_finished_length", "nan"), ("no_score", "None")):
+        with pytest.raises(bm.CellError) as caught:
+            bm.run_benchmark(
+                STRATEGIES[:1],
+                [dataclasses.replace(env, score=f"_bench_env:{score}")],
+                [0],
+                tmp_path / score,
+                workers=1,
+                plots=False,
+            )
+        text = str(caught.value)
+        assert f"score _bench_env:{score} returned {shown} for the teacher on evaluation" in text
+        assert "(3 steps, 0 finished episodes); expected a finite number" in text
+        assert not (tmp_path / score / "results.json").exists()
+    # a score that is finite once an episode ends: the same env with 10-step episodes
+    fine = dataclasses.replace(env, score="_bench_env:mean_finished_length", eval_steps=25)
+    out = bm.run_benchmark(STRATEGIES[:1], [fine], [0], tmp_path / "ok", workers=1, plots=False)
+    assert out["table"]["toy"]["bc"]["teacher_performance"]["mean"] == 10.0
+
+
+def test_a_strategys_params_are_checked_before_any_cell_runs(tmp_path):
+    """StrategySpec("dagger", {"beta": 0.3}) (DAgger takes beta0) failed in its first cell,
+    after every cell of the strategies before it had run; an out-of-range value too."""
+    cases = [
+        (("dagger", {"beta": 0.3}), r"unexpected keyword argument 'beta'"),
+        (("dagger", {"beta0": 3}), r"beta0 must be a number in \[0, 1\], got 3"),
+        (("confident", {"max_std": -1}), r"DistanceRule.max_std: expected a value > 0"),
+    ]
+    for (name, params), cause in cases:
+        ran = []
+        with pytest.raises(
+            ValueError, match=rf"StrategySpec '{name}': cannot make {name} .*{cause}"
+        ):
+            bm.run_benchmark(
+                [bm.StrategySpec("bc"), bm.StrategySpec(name, params)],
+                [_env(budgets=(5,), max_steps=10)],
+                [0],
+                tmp_path / "out",
+                workers=1,
+                on_cell=lambda cell, cached, ran=ran: ran.append(cell["strategy"]),
+            )
+        assert ran == [] and not (tmp_path / "out").exists()
+
+
+def test_teacher_kwargs_that_do_not_fit_the_factory_are_refused_before_any_cell_runs(tmp_path):
+    """A misspelt teacher keyword, or a seed the cell passes itself, failed in the env's first
+    cell (TypeError: got an unexpected keyword argument / multiple values for 'seed'), after
+    every cell of the envs listed before it had run."""
+    first = _env(name="first", budgets=(5,), max_steps=10)
+    cases = [
+        (_env(name="x", teacher_kwargs={"greedy": True}), r"unexpected keyword .*'greedy'"),
+        (
+            _env(name="x", teacher="_bench_env:glitchy_teacher", teacher_kwargs={"seed": 3}),
+            r"\['seed'\] come from the cell; leave them out",
+        ),
+    ]
+    for env, cause in cases:
+        ran = []
+        with pytest.raises(
+            ValueError, match=rf"EnvSpec 'x': teacher_kwargs .* do not fit .*{cause}"
+        ):
+            bm.run_benchmark(
+                STRATEGIES[:1],
+                [first, env],
+                [0],
+                tmp_path / "out",
+                workers=1,
+                on_cell=lambda cell, cached, ran=ran: ran.append(cell["env"]),
+            )
+        assert ran == [] and not (tmp_path / "out").exists()
+
+
+def test_a_worker_killed_mid_sweep_is_not_blamed_on_another_cell(tmp_path, monkeypatch):
+    """A worker killed by a signal (the out-of-memory killer) breaks the pool: every unfinished
+    cell then fails with BrokenProcessPool, and the error named whichever of them the wait
+    returned first (seed 2's cell for a death in seed 1's) as the cell that failed."""
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    env = _env(teacher="_bench_env:dying_teacher", budgets=(5,), max_steps=10)
+    with pytest.raises(RuntimeError) as caught:
+        bm.run_benchmark(STRATEGIES[:1], [env], [0, 1, 2], tmp_path, workers=2, plots=False)
+    assert not isinstance(caught.value, bm.CellError)
+    text = str(caught.value)
+    assert text.startswith("a worker process died abruptly (killed by a signal, or out of memory)")
+    assert str(tmp_path / "cells") in text and "run the same sweep again" in text
+    kept = [json.loads(p.read_text())["seed"] for p in (tmp_path / "cells").glob("*.json")]
+    assert 1 not in kept
+
+
+def test_a_cell_error_comes_back_from_a_process_of_ones_own(tmp_path, monkeypatch):
+    """A sweep run in a worker process of one's own (a pool of sweeps, a notebook's executor)
+    sends its CellError back pickled; CellError(config, cause, out) could not be rebuilt from
+    its message, so the parent got a BrokenProcessPool or an unpickling TypeError instead."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    import _bench_env
+
+    with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as pool:
+        exc = pool.submit(_bench_env.failing_sweep, str(tmp_path)).exception()
+    assert isinstance(exc, bm.CellError), repr(exc)
+    assert "(env 'toy', strategy 'bc', seed 1) failed: TeacherError" in str(exc)
+    assert exc.config["seed"] == 1 and exc.key == bm.cell_key(exc.config)

@@ -48,6 +48,7 @@ import time
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,6 +61,7 @@ from torchcbl.records import _is_int
 
 __all__ = [
     "CELL_FORMAT",
+    "CellError",
     "EnvSpec",
     "STRATEGY_PATHS",
     "StrategySpec",
@@ -108,14 +110,51 @@ def _import(path: str) -> Any:
 def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) -> None:
     """Resolve every import path of a benchmark (strategies, teachers, scores, gymnasium
     registration modules) before anything runs: a misspelt name fails at once, with an
-    ImportError that names it, not in a worker after other cells have run."""
+    ImportError that names it, not in a worker after other cells have run. Each strategy is
+    made once from its params too, so a misspelt or refused parameter is a ValueError naming
+    the strategy now, not after every cell of the strategies before it."""
     for s in strategies:
         _import(STRATEGY_PATHS.get(s.name, s.name))
+        try:
+            s.build(seed=0)
+        except Exception as exc:  # the class's own refusal of its arguments, whatever it is
+            text = " ".join(str(exc).split()) or type(exc).__name__
+            raise ValueError(
+                f"StrategySpec {s.title!r}: cannot make {s.name} with params "
+                f"{dict(s.params)}: {type(exc).__name__}: {text}; fix its params (the keyword "
+                "arguments of its constructor)"
+            ) from exc
     for e in envs:
-        _import(e.teacher)
+        factory = _import(e.teacher)
+        try:
+            params = inspect.signature(factory).parameters
+        except (TypeError, ValueError):  # no signature to read: the cell will tell
+            params = None
+        if params is not None:
+            given = {k: None for k in ("env", "seed") if k in params}
+            taken = sorted(set(given) & set(e.teacher_kwargs))
+            try:
+                if taken:
+                    raise TypeError(f"{taken} come from the cell; leave them out")
+                inspect.signature(factory).bind_partial(**given, **dict(e.teacher_kwargs))
+            except TypeError as exc:
+                raise ValueError(
+                    f"EnvSpec {e.name!r}: teacher_kwargs {dict(e.teacher_kwargs)} do not fit "
+                    f"{e.teacher}{inspect.signature(factory)}: {exc} (it is called as "
+                    "factory(env=..., seed=..., **teacher_kwargs), each of env and seed only if "
+                    "it takes it)"
+                ) from None
         _import(e.score)
-        if ":" in e.env_id:
-            importlib.import_module(e.env_id.partition(":")[0])
+        module, _, env_id = e.env_id.rpartition(":")  # as gymnasium.make reads "module:Id"
+        if module:
+            importlib.import_module(module)
+        try:
+            gym.spec(env_id)
+        except gym.error.Error as exc:  # a misspelt or unregistered id
+            raise ValueError(
+                f"EnvSpec {e.name!r}: env_id {e.env_id!r}: {exc}; expected a registered "
+                "gymnasium id ('module:Id' imports the module that registers it first)"
+            ) from None
 
 
 def _json_plain(value: Any, where: str) -> Any:
@@ -214,8 +253,8 @@ class EnvSpec:
         env_kwargs: ``gymnasium.make`` keyword arguments of the teaching env.
         eval_env_kwargs: overrides of ``env_kwargs`` for the evaluation env.
         teacher_kwargs: extra keyword arguments of the teacher factory.
-        score: import path of ``score(records) -> float`` (higher is better) over the
-            evaluation records of one seed; default :func:`success_rate`.
+        score: import path of ``score(records) -> float`` (finite, higher is better) over
+            the evaluation records of one seed; default :func:`success_rate`.
         eval_seeds: held-out reset seeds of the evaluation env (one evaluation each).
         eval_episodes: episodes per evaluation (or None).
         eval_steps: steps per evaluation (or None; at least one of the two).
@@ -417,7 +456,13 @@ class _Audited(gym.Wrapper):
         return out
 
 
-def _evaluate(policy: Any, spec: EnvSpec, env: Any, score: Callable, uses_info: bool) -> float:
+def _evaluate(
+    policy: Any, spec: EnvSpec, env: Any, score: Callable, uses_info: bool, what: str
+) -> float:
+    """The mean of ``score`` over the evaluations of ``policy`` on ``spec.eval_seeds``; a score
+    that is not a finite number (NaN from a mean over no finished episode, None) is a
+    ValueError naming the score, the seed and ``what`` was evaluated: it would be a NaN in
+    every figure of the table (and results.json), not an error."""
     from torchcbl.policy import evaluate_policy
 
     values = []
@@ -430,28 +475,50 @@ def _evaluate(policy: Any, spec: EnvSpec, env: Any, score: Callable, uses_info: 
             seed=int(s),
             uses_info=uses_info,
         )
-        values.append(float(score(records)))
+        value = score(records)
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            number = float("nan")
+        if isinstance(value, (bool, np.bool_)) or not np.isfinite(number):
+            ends = sum(1 for r in records if r.terminated or r.truncated)
+            raise ValueError(
+                f"EnvSpec {spec.name!r}: score {spec.score} returned {value!r} for {what} on "
+                f"evaluation seed {s} ({len(records)} steps, {ends} finished episodes); "
+                "expected a finite number, higher is better, for every evaluation (give "
+                "eval_steps long enough for an episode to end, or a score defined without one)"
+            )
+        values.append(number)
     return float(np.mean(values))
 
 
 def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     """Run one cell (see the module docstring) and return its JSON result.
 
-    Deterministic given ``config`` (one torch thread, seeded model, env and strategy), apart
-    from the ``wall_s`` / ``cpu_s`` timings. The caller's torch thread count and global torch
-    RNG are as they were when it returns (``run_benchmark(workers=1)`` runs cells in-process).
+    Deterministic given ``config`` (one torch thread, seeded model, env and strategy, and the
+    global numpy and ``random`` RNGs seeded from the cell's seed, for a teacher, env or
+    strategy of one's own that draws from them), apart from the ``wall_s`` / ``cpu_s``
+    timings. The caller's torch thread count and global torch, numpy and ``random`` RNGs are
+    as they were when it returns (``run_benchmark(workers=1)`` runs cells in-process).
     """
+    import random
+
     import torch
 
     threads = torch.get_num_threads()
+    np_state, py_state = np.random.get_state(), random.getstate()  # noqa: NPY002
     try:
         with torch.random.fork_rng(devices=[]):
             return _run_cell(config)
     finally:
         torch.set_num_threads(threads)
+        np.random.set_state(np_state)  # noqa: NPY002
+        random.setstate(py_state)
 
 
 def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
+    import random
+
     import torch
 
     from torchcbl.gmm import GaussianMixtureSet
@@ -470,6 +537,10 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     sspec = StrategySpec(**config["strategy"])
     seed = int(config["seed"])
     torch.manual_seed(seed)
+    # the global RNGs a teacher, env or strategy of one's own may draw from (the shipped ones
+    # do not): otherwise a cell's figures depend on what ran before it in the process
+    np.random.seed([seed & 0xFFFFFFFF, seed >> 32])  # noqa: NPY002
+    random.seed(seed)
     wall0, cpu0 = time.perf_counter(), time.process_time()
     score = _import(spec.score)
 
@@ -528,12 +599,14 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     eval_env = gym.make(spec.env_id, **{**dict(spec.env_kwargs), **dict(spec.eval_env_kwargs)})
     try:
         eval_teacher = _make_teacher(spec.teacher, eval_env, seed, spec.teacher_kwargs)
-        teacher_perf = _evaluate(eval_teacher, spec, eval_env, score, uses_info=True)
+        teacher_perf = _evaluate(eval_teacher, spec, eval_env, score, True, "the teacher")
         curve = [
             {
                 "labels": labels,
                 "steps": n_steps,
-                "performance": _evaluate(GreedyPolicy(m), spec, eval_env, score, False),
+                "performance": _evaluate(
+                    GreedyPolicy(m), spec, eval_env, score, False, f"the model of {labels} labels"
+                ),
             }
             for labels, n_steps, m in snapshots
         ]
@@ -583,6 +656,35 @@ def _load_cell(path: Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) and "curve" in data else None
 
 
+class CellError(RuntimeError):
+    """A cell of a sweep failed: the message names the cell (env, strategy, seed and key) and
+    the cause (also ``__cause__``); ``config`` is the cell's configuration. The cells finished
+    before it are kept, so running the same sweep again computes only the rest."""
+
+    def __init__(self, config: Mapping[str, Any], cause: BaseException, out: Path) -> None:
+        self.config = dict(config)
+        self.key = cell_key(config)
+        text = " ".join(str(cause).split()) or type(cause).__name__
+        super().__init__(
+            f"cell {self.key} (env {config['env']['name']!r}, strategy "
+            f"{config['strategy']['label']!r}, seed {config['seed']}) failed: "
+            f"{type(cause).__name__}: {text} -- the cells finished before it are kept in "
+            f"{out / 'cells'}; fix the cause and run the same sweep again to compute the rest"
+        )
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # pickled as its message and config (a sweep run inside a worker process of one's
+        # own sends it back to the parent); the cause itself may not pickle
+        return (_rebuild_cell_error, (str(self), self.config))
+
+
+def _rebuild_cell_error(message: str, config: dict[str, Any]) -> CellError:
+    exc = CellError.__new__(CellError)
+    RuntimeError.__init__(exc, message)
+    exc.config, exc.key = config, cell_key(config)
+    return exc
+
+
 def _execute(
     todo: list[dict[str, Any]],
     *,
@@ -590,7 +692,11 @@ def _execute(
     use_ray: bool,
     ray_address: str | None,
     done: Callable[[dict[str, Any]], None],
+    out: Path,
 ) -> None:
+    """Run the cells of ``todo`` and hand each result to ``done`` as it comes; the first cell
+    that raises stops the sweep with a :class:`CellError` naming it (any other cell that
+    finished meanwhile is handed to ``done`` first)."""
     if not todo:
         return
     if use_ray:
@@ -614,17 +720,28 @@ def _execute(
             # One cell per task and CPU; a cell closes its envs, so a worker process may run
             # cells one after another (libsumo: one live simulation per process).
             remote = ray.remote(num_cpus=1)(_run_cell_in_worker)
-            pending = [remote.remote(c) for c in todo]
+            configs = {remote.remote(c): c for c in todo}
+            pending = list(configs)
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
-                done(ray.get(ready[0]))
+                try:
+                    cell = ray.get(ready[0])
+                except Exception as exc:  # a RayTaskError: the cell's own exception is its cause
+                    cause = getattr(exc, "cause", None)
+                    cause = cause if isinstance(cause, BaseException) else exc
+                    raise CellError(configs[ready[0]], cause, out) from cause
+                done(cell)
         finally:
             if started:
                 ray.shutdown()
         return
     if workers <= 1:
         for c in todo:  # in this process: its environment variables are left alone
-            done(run_cell(c))
+            try:
+                cell = run_cell(c)
+            except Exception as exc:
+                raise CellError(c, exc, out) from exc
+            done(cell)
         return
     import multiprocessing as mp
 
@@ -632,11 +749,26 @@ def _execute(
     # spawn: a fresh interpreter (no forked torch or libsumo state); workers are reused, as
     # every cell closes its envs before it returns.
     with worker_pool(min(workers, len(todo)), ctx) as pool:  # a Ctrl-C stops the workers
-        futures = {pool.submit(_run_cell_in_worker, c) for c in todo}
-        while futures:
-            finished, futures = wait(futures, return_when=FIRST_COMPLETED)
-            for f in finished:
-                done(f.result())
+        futures = {pool.submit(_run_cell_in_worker, c): c for c in todo}
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            failed = [f for f in finished if f.exception() is not None]
+            for f in finished:  # the cells that finished with a failed one are kept too
+                if f.exception() is None:
+                    done(f.result())
+            if failed:
+                exc = failed[0].exception()
+                if isinstance(exc, BrokenProcessPool):  # every unfinished cell gets it: the
+                    # dead worker's cell is not known, so naming one would blame the wrong one
+                    n_left = len(failed) + len(pending)
+                    raise RuntimeError(
+                        f"a worker process died abruptly (killed by a signal, or out of memory) "
+                        f"while it ran one of the {n_left} unfinished cells; the cells finished "
+                        f"before are kept in {out / 'cells'}: run the same sweep again to compute "
+                        "the rest (with fewer workers if memory ran out)"
+                    ) from exc
+                raise CellError(futures[failed[0]], exc, out) from exc
 
 
 def run_benchmark(
@@ -667,6 +799,10 @@ def run_benchmark(
 
     Returns:
         The results dict that was written to ``results.json``.
+
+    Raises:
+        CellError: a cell raised; it names the cell and has the cell's exception as its
+            ``__cause__``. The sweep stops there; the cells finished before it are kept.
     """
     if isinstance(seeds, (str, bytes)) or not isinstance(seeds, Iterable):
         raise ValueError(f"run_benchmark: seeds must be a sequence of ints >= 0, got {seeds!r}")
@@ -721,7 +857,7 @@ def run_benchmark(
             on_cell(cell, False)
 
     n_workers = max(1, int(workers or os.cpu_count() or 1))
-    _execute(todo, workers=n_workers, use_ray=use_ray, ray_address=ray_address, done=done)
+    _execute(todo, workers=n_workers, use_ray=use_ray, ray_address=ray_address, done=done, out=out)
     cells = [results[cell_key(c)] for c in configs]
     summary = summarize(cells, envs=[e.name for e in envs], strategies=titles)
     summary["sweep"] = {
@@ -884,7 +1020,8 @@ def plot_curves(
         if teacher:
             t = float(np.mean(teacher))
             ax.axhline(t, color="k", lw=0.8, ls="--", label="teacher")
-            ax.axhline(0.95 * t, color="k", lw=0.6, ls=":", label="95 % of teacher")
+            if t > 0:  # no target for a teacher at or below 0: 0.95 x -100 is above it
+                ax.axhline(0.95 * t, color="k", lw=0.6, ls=":", label="95 % of teacher")
         ax.set_title(env)
         ax.set_xlabel("teacher labels")
         ax.set_ylabel("performance (greedy, held-out seeds)")

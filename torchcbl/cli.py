@@ -725,6 +725,11 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             f"--strategies {args.strategies!r} names no strategy; expected names from "
             f"{sorted(bm.STRATEGY_PATHS)} or import paths module:Class, comma-separated"
         )
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:  # the tables need one row per strategy
+        raise _UsageError(
+            f"--strategies {args.strategies}: {twice} given more than once; name each strategy once"
+        )
     strategies = [bm.StrategySpec(n) for n in names]
     for spec in strategies:  # a path of one's own: made once now, before anything is written
         if spec.name not in bm.STRATEGY_PATHS:
@@ -735,6 +740,9 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     bad = [e for e in env_names if e not in _BENCH_ENVS]
     if bad:
         raise _UsageError(f"--envs: unknown {bad}; expected some of {sorted(_BENCH_ENVS)}")
+    twice = sorted({e for e in env_names if env_names.count(e) > 1})
+    if twice:
+        raise _UsageError(f"--envs {args.envs}: {twice} given more than once; name each env once")
     if args.driving_teacher and "driving" in env_names:
         try:
             bm._import(args.driving_teacher)
@@ -855,11 +863,19 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     for env_name, rows in summary["table"].items():
         scores = [r["teacher_performance"]["mean"] for r in rows.values()]
         if scores and all(s is not None and s <= 0 for s in scores):
-            print(
-                f"\nwarning: the teacher scores {max(scores):g} on {env_name}: the score "
-                "measures nothing there (success_rate needs an env that sets "
+            score = summary["envs"][env_name]["score"]
+            why = (
+                "the score measures nothing there (success_rate needs an env that sets "
                 'info["is_success"]), so every performance is 0 and "labels to 95 %" is '
-                "undefined; pass --score with a score for this env",
+                "undefined; pass --score with a score for this env"
+                if score == "torchcbl.benchmark:success_rate" and max(scores) == 0
+                else f'"labels to 95 %" needs a teacher score above 0 (95 % of it is the '
+                f"target), so it is undefined there; give --score one that is positive for the "
+                f"teacher and higher when better (a return shifted by its worst value, say), "
+                f"not {score}"
+            )
+            print(
+                f"\nwarning: the teacher scores {max(scores):g} on {env_name}: {why}",
                 file=sys.stderr,
             )
     print(
