@@ -17,9 +17,10 @@ Per seed (each in its own process: libsumo holds one simulation per process):
   traffic, the evaluation segment, the teacher's randomness and the GMM initialisation.
 
 ``run_experiment`` writes into ``run_dir``: ``results.json`` (``summary``: the acceptance
-figures; ``stages``: Figure 8's bars, mean and sd over seeds; ``per_seed``; config; versions;
-wall and CPU seconds), ``fig6_accuracy.png``, ``fig7_middle_lane_demos.png``,
-``fig8_lanes_collisions.png``, ``fig9_accuracy.png``, ``fig10_confidence.png``,
+figures; ``stages``: Figure 8's bars, mean and sd over seeds; ``per_seed``, one entry per seed
+in the order of ``seeds``; config; versions; wall and CPU seconds), ``fig6_accuracy.png``,
+``fig7_middle_lane_demos.png``, ``fig8_lanes_collisions.png``, ``fig9_accuracy.png``,
+``fig10_confidence.png``,
 ``seed_<k>/episodes.json`` (every teaching and evaluation episode, replayable with
 :mod:`sumo_scenarios.replay` and ``torchcbl replay``) and ``seed_<k>/sessions/arm_a`` and
 ``arm_b`` (the teaching sessions, :mod:`torchcbl.session` format: ``torchcbl evaluate`` and
@@ -583,7 +584,10 @@ def run_experiment(
             bar.update(1)
             bar.set_postfix_str(f"seed {res['seed']} done")
     bar.close()
-    per_seed.sort(key=lambda r: r["seed"])
+    # in the config's order of seeds, as results["seeds"] lists them (the workers end in any
+    # order); the first seed's is the one Figure 7 draws
+    order = {s: i for i, s in enumerate(config.seeds)}
+    per_seed.sort(key=lambda r: order[r["seed"]])
     ni_all = sorted({n for r in per_seed for n in r["ni_stages"]})
     labels = _stage_labels(config, ni_all)
     stages: dict[str, Any] = {}

@@ -233,6 +233,16 @@ def test_two_seeds_give_a_paired_interval_and_a_writable_summary(tmp_path):
     assert on_disk["acceptance"] == res["acceptance"]
 
 
+def test_per_seed_follows_the_configs_order_of_seeds(tmp_path):
+    """per_seed[i] is seeds[i]'s, with seeds given out of order, whichever worker ends first;
+    Figure 7 draws the first seed given."""
+    res = run_experiment(tiny_config(seeds=(1, 0)), tmp_path, workers=1, progress=False)
+    on_disk = json.loads((tmp_path / "results.json").read_text())
+    assert on_disk["seeds"] == [1, 0]
+    assert [r["seed"] for r in on_disk["per_seed"]] == [1, 0]
+    assert [r["seed"] for r in res["per_seed"]] == [1, 0]
+
+
 @pytest.mark.parametrize(
     "argv, says",
     [
