@@ -571,12 +571,26 @@ def run_experiment(
     pass ``workers=1``). A variant of the reproduction, e.g.
     ``run_experiment(CorridorExperimentConfig.exact_motion(), "runs/exact")``.
 
-    Raises FileExistsError if ``run_dir`` already holds a results.json.
+    Raises FileExistsError if ``run_dir`` already holds a results.json, or a teaching session
+    of one of ``config.seeds`` (left by a run that was stopped before it wrote results.json):
+    a seed's session is never overwritten.
     """
     config = config or CorridorExperimentConfig()
     run_dir = Path(run_dir)
     if (run_dir / "results.json").exists():
         raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")
+    taken = [
+        f"sessions/seed{s}"
+        for s in config.seeds
+        if (run_dir / "sessions" / f"seed{s}").is_dir()
+        and any((run_dir / "sessions" / f"seed{s}").iterdir())
+    ]
+    if taken:
+        raise FileExistsError(
+            f"{run_dir} already holds the teaching sessions of seeds of this run "
+            f"({', '.join(taken)}), left by an earlier run that did not finish (it has no "
+            "results.json); choose a new run_dir, or delete this one to run again"
+        )
     if workers < 1:
         raise ValueError("workers must be >= 1")
     (run_dir / "sessions").mkdir(parents=True, exist_ok=True)

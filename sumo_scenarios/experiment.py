@@ -562,14 +562,26 @@ def run_experiment(
     import the caller's main module: from a script, call ``run_experiment`` under
     ``if __name__ == "__main__":``.
 
-    Raises FileExistsError if ``run_dir`` already holds a results.json (its sessions would
-    collide with the new run's).
+    Raises FileExistsError if ``run_dir`` already holds a results.json, or a seed directory
+    (``seed_<k>``) of one of ``config.seeds`` (left by a run that was stopped before it wrote
+    results.json): its sessions would collide with the new run's.
     """
     if workers < 1:
         raise ValueError("workers must be positive")
     run_dir = Path(run_dir)
     if (run_dir / "results.json").exists():
         raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")
+    taken = [
+        f"seed_{s}"
+        for s in config.seeds
+        if (run_dir / f"seed_{s}").is_dir() and any((run_dir / f"seed_{s}").iterdir())
+    ]
+    if taken:
+        raise FileExistsError(
+            f"{run_dir} already holds the seed directories of seeds of this run "
+            f"({', '.join(taken)}), left by an earlier run that did not finish (it has no "
+            "results.json); choose a new run_dir, or delete this one to run again"
+        )
     run_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     jobs = [(config, s, str(run_dir / f"seed_{s}")) for s in config.seeds]

@@ -444,6 +444,30 @@ def test_experiment_runs_the_noisy_robot_with_the_coverage_threshold_by_default(
         CorridorExperimentConfig(threshold_reading="2std")
 
 
+def _tiny_experiment(**overrides):
+    """The corridor experiment at a size that runs in seconds (exact motion, no CBA arm)."""
+    from corridor.baseline import PrioritizedSweepingConfig
+    from corridor.experiment import CorridorExperimentConfig
+
+    settings = dict(
+        seeds=(0,), cba=False, eval_circuits=2, ps=PrioritizedSweepingConfig(max_steps=300)
+    )
+    return CorridorExperimentConfig.exact_motion(**{**settings, **overrides})
+
+
+def test_a_run_dir_left_by_a_stopped_run_is_refused_before_any_seed_runs(tmp_path):
+    """A run stopped before results.json leaves its seeds' sessions: a new run into that
+    directory is refused at once, naming them, instead of failing on the session it would
+    overwrite (after the seeds before it ran) with a pointer to ConfidentTeacher.resume."""
+    from corridor.experiment import run_experiment
+
+    run_experiment(_tiny_experiment(), tmp_path, workers=1, progress=False)
+    (tmp_path / "results.json").unlink()  # as if stopped before it was written
+    with pytest.raises(FileExistsError, match=r"sessions/seed0\), left by an earlier run"):
+        run_experiment(_tiny_experiment(seeds=(1, 0)), tmp_path, workers=1, progress=False)
+    assert not (tmp_path / "sessions" / "seed1").exists()
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure

@@ -233,6 +233,17 @@ def test_two_seeds_give_a_paired_interval_and_a_writable_summary(tmp_path):
     assert on_disk["acceptance"] == res["acceptance"]
 
 
+def test_a_run_dir_left_by_a_stopped_run_is_refused_before_any_seed_runs(tmp_path):
+    """A run stopped before results.json leaves its seeds' sessions: a new run into that
+    directory is refused at once, naming them, instead of failing in a worker on the session
+    it would overwrite (after the seeds before it ran) with a pointer to ConfidentTeacher.resume."""
+    run_experiment(tiny_config(seeds=(0,)), tmp_path, workers=1, progress=False)
+    (tmp_path / "results.json").unlink()  # as if stopped before it was written
+    with pytest.raises(FileExistsError, match=r"seed_0\), left by an earlier run"):
+        run_experiment(tiny_config(seeds=(1, 0)), tmp_path, workers=1, progress=False)
+    assert not (tmp_path / "seed_1").exists()
+
+
 def test_per_seed_follows_the_configs_order_of_seeds(tmp_path):
     """per_seed[i] is seeds[i]'s, with seeds given out of order, whichever worker ends first;
     Figure 7 draws the first seed given."""
