@@ -962,6 +962,12 @@ def format_summary(results: dict[str, Any]) -> str:
         return text
 
     noise = s.get("motion_noise", {})
+    # the run's own settings name its rows (a variant's need not be the paper's 10 and 3)
+    cfg = results.get("config", {})
+    n_eval = cfg.get("eval_circuits", 10)
+    n_stop = cfg.get("teaching", {}).get("autonomous_episodes_to_stop", 10)
+    stop = f" ({n_stop} clean circuits, no request)" if n_stop else ""
+    n_ps = cfg.get("ps", {}).get("eval_circuits", 3)
     rows = [
         (
             "actions per circuit (expert, exact motion)",
@@ -989,7 +995,7 @@ def format_summary(results: dict[str, Any]) -> str:
             _fmt(s["requests_next_two_circuits"]),
         ),
         ("demonstrations in all", p["demonstrations_total"], _fmt(s["demonstrations_total"])),
-        ("teaching finished (10 clean circuits, no request)", "yes", share("finished_share")),
+        (f"teaching finished{stop}", "yes", share("finished_share")),
         (
             "requests per circuit, circuits "
             + " / ".join(b["circuits"] for b in s.get("requests_by_circuits", [])),
@@ -1005,13 +1011,13 @@ def format_summary(results: dict[str, Any]) -> str:
             share("requests_model_agreed_share"),
         ),
         (
-            "final policy: clean circuits out of 10, paper's start",
+            f"final policy: clean circuits out of {n_eval}, paper's start",
             "10",
             _fmt(s["eval_circuits_clean"]),
         ),
         ("final policy: clean share, perturbed starts", "-", share("eval_perturbed_clean_share")),
         (
-            "PS steps, first greedy table driving 3 clean circuits",
+            f"PS steps, first greedy table driving {n_ps} clean circuits",
             p["ps_steps"],
             _fmt(s["ps_steps_first"]),
         ),
@@ -1064,7 +1070,7 @@ def format_summary(results: dict[str, Any]) -> str:
                 f"{head}; every seed, a capped one at its count: {_fmt(cba['labels_total'])}",
             ),
             ("CBA: corrections", "-", _fmt(cba["corrections"])),
-            ("CBA: teaching finished (10 clean circuits, no request)", "-", share_of(cba)),
+            (f"CBA: teaching finished{stop}", "-", share_of(cba)),
             (
                 "CBA: requests per circuit, circuits " + " / ".join(b["circuits"] for b in blocks),
                 "-",
@@ -1078,7 +1084,7 @@ def format_summary(results: dict[str, Any]) -> str:
                 else f"{cba['requests_model_agreed_share']:.0%}",
             ),
             (
-                "CBA: final policy, clean circuits out of 10, paper's start",
+                f"CBA: final policy, clean circuits out of {n_eval}, paper's start",
                 "-",
                 _fmt(cba["eval_circuits_clean"]),
             ),

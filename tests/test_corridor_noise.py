@@ -468,6 +468,27 @@ def test_a_run_dir_left_by_a_stopped_run_is_refused_before_any_seed_runs(tmp_pat
     assert not (tmp_path / "sessions" / "seed1").exists()
 
 
+def test_the_summary_names_the_variants_own_circuit_counts(tmp_path):
+    """summary.txt's rows say the circuits this run evaluated and stopped on, not the paper's
+    10 and 3 whatever the config said."""
+    from corridor.baseline import PrioritizedSweepingConfig
+    from corridor.experiment import CorridorExperimentConfig, run_experiment
+
+    teaching = dataclasses.replace(
+        CorridorExperimentConfig().teaching, autonomous_episodes_to_stop=3
+    )
+    ps = PrioritizedSweepingConfig(max_steps=300, eval_circuits=2)
+    cfg = _tiny_experiment(teaching=teaching, ps=ps, cba=True)
+    run_experiment(cfg, tmp_path, workers=1, progress=False)
+    text = (tmp_path / "summary.txt").read_text()
+    assert "| final policy: clean circuits out of 2, paper's start | 10 |" in text
+    assert "| teaching finished (3 clean circuits, no request) | yes |" in text
+    assert "| PS steps, first greedy table driving 2 clean circuits | 275 |" in text
+    assert "CBA: final policy, clean circuits out of 2" in text
+    assert "CBA: teaching finished (3 clean circuits" in text
+    assert "out of 10" not in text and "(10 clean circuits" not in text
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure
