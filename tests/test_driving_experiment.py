@@ -131,6 +131,11 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
     lines = [ln for ln in text.splitlines() if ln.startswith("|")]
     assert lines[1] == "|---|---|---|---|" and all(ln.endswith("|") for ln in lines)
     assert "+-" not in text and "± 0.0" not in text  # one seed: no made-up spread
+    # the rows name this run's target, window and arm (b) size, not the paper's 80 %, 150, 1000
+    assert "| Fig 6 | non-interactive demos to 80% over 20 | 500 |" in text
+    assert "| Fig 8 | arm (b) 80 demos, collisions % | 4.0 |" in text
+    assert "| Fig 8 | arm (b) 80 demos, lane TV to the teacher |" in text
+    assert "over 150" not in text and "arm (b) 1000" not in text
     with pytest.raises(ValueError, match="teacher"):
         DrivingExperimentConfig(teacher="robot")
 
