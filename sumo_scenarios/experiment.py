@@ -202,16 +202,17 @@ class DrivingExperimentConfig:
             raise ValueError(f"target_accuracy must be a number, got {self.target_accuracy!r}")
         if not 0.0 < self.target_accuracy <= 1.0:
             raise ValueError(f"target_accuracy must lie in (0, 1], got {self.target_accuracy!r}")
-        if not (math.isfinite(self.max_std) and self.max_std > 0):
-            raise ValueError(f"max_std must be a finite number > 0, got {self.max_std!r}")
+        for name in ("max_std", "gmm_tol"):  # a number (not a bool, not text), finite, > 0
+            v = getattr(self, name)
+            real = isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+            if not (real and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
         if isinstance(self.var_floor, bool) or not (
             isinstance(self.var_floor, (int, float))
             and math.isfinite(self.var_floor)
             and self.var_floor >= 0
         ):
             raise ValueError(f"var_floor must be a finite number >= 0, got {self.var_floor!r}")
-        if not (math.isfinite(self.gmm_tol) and self.gmm_tol > 0):
-            raise ValueError(f"gmm_tol must be a finite number > 0, got {self.gmm_tol!r}")
         if self.criterion not in ("aic", "bic", "aic_paper"):
             raise ValueError(
                 f"criterion must be 'aic', 'bic' or 'aic_paper', got {self.criterion!r}"

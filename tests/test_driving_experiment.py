@@ -159,6 +159,11 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
         {"arm_b_stages": (0, 10)},
         {"eval_segment": 1.5},
         {"target_accuracy": True},
+        {"max_std": "2"},  # was Python's 'must be real number, not str'
+        {"max_std": True},  # was taken as a threshold of 1
+        {"max_std": None},
+        {"gmm_tol": "1e-4"},
+        {"gmm_tol": None},
     ],
 )
 def test_experiment_config_refuses_what_every_worker_would_fail_on(bad):
