@@ -438,12 +438,23 @@ _CBA_KEYS = (
 
 def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | None) -> dict:
     """One seed: teaching, evaluation of the final policy, Prioritized Sweeping, and with
-    ``config.cba`` the same teaching and evaluation under CBA (keys ``cba_*``)."""
+    ``config.cba`` the same teaching and evaluation under CBA (keys ``cba_*``).
+
+    Torch runs on one thread meanwhile (as in every worker, so that ``workers=1`` gives the
+    results of ``workers=2``); the caller's thread count is restored after."""
     import torch
 
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _run_seed(config, seed, session_dir)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | None) -> dict:
     from torchcbl.strategies import ConfidentExecution, correcting
 
-    torch.set_num_threads(1)
     t0 = time.perf_counter()
     corridor_map = load_map(config.map_name)
     expert = CorridorExpert(corridor_map, config.world)

@@ -489,6 +489,23 @@ def test_the_summary_names_the_variants_own_circuit_counts(tmp_path):
     assert "out of 10" not in text and "(10 clean circuits" not in text
 
 
+def test_a_run_in_this_process_gives_torchs_threads_back():
+    """workers=1 runs the seed here on one torch thread (as the workers do); the caller's
+    thread count is restored after, not left at 1 for whatever it runs next."""
+    import torch
+
+    from corridor.experiment import run_seed
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        out = run_seed(_tiny_experiment(eval_circuits=1), 0, None)
+        assert out["seed"] == 0 and out["finished"]
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure
