@@ -95,7 +95,8 @@ class DrivingExperimentConfig:
         eval_steps: timesteps per evaluation trial (the paper: 1000).
         accuracy_window: prediction-accuracy window (the paper: 150).
         target_accuracy: ends the non-interactive phase (the paper: 0.8).
-        max_noninteractive: cap on non-interactive demonstrations if the target is never met.
+        max_noninteractive: cap on non-interactive demonstrations if the target is never met
+            (at least ``accuracy_window``: the window must fill for the target to be met).
         confident_demos: confident-execution demonstrations in arm (a) (the paper: 150).
         stage_every: evaluate arm (a) every this many confident demonstrations (the paper: 50).
         burst: teacher moves per request (the paper: 10).
@@ -188,6 +189,13 @@ class DrivingExperimentConfig:
                 object.__setattr__(self, f.name, float(v))
         if not self.seeds or len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"seeds must be distinct, at least one, got {self.seeds!r}")
+        if self.max_noninteractive < self.accuracy_window:
+            raise ValueError(
+                f"max_noninteractive ({self.max_noninteractive}) is below accuracy_window "
+                f"({self.accuracy_window}): the window is never full, so the non-interactive "
+                "phase could never reach target_accuracy and arm (a) would have no confident "
+                "phase; raise max_noninteractive to at least accuracy_window"
+            )
         if self.confident_demos % self.stage_every:
             raise ValueError("confident_demos must be a multiple of stage_every")
         if self.eval_segment in self.extra_eval_segments or len(

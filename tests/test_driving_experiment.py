@@ -164,6 +164,8 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
         {"max_std": None},
         {"gmm_tol": "1e-4"},
         {"gmm_tol": None},
+        # the window never fills: no seed could reach the target (ran, all "not reached")
+        {"max_noninteractive": 100, "accuracy_window": 150},
     ],
 )
 def test_experiment_config_refuses_what_every_worker_would_fail_on(bad):
