@@ -101,6 +101,13 @@ _READINGS = ("coverage", "literal")
 _REQUEST_BLOCKS = ((0, 5), (5, 10), (10, 20), (20, 40), (40, 80), (80, 160))
 
 
+def _check_whole(name: str, value: Any, minimum: int) -> None:
+    """A setting that counts: an int (not a bool) >= ``minimum``, else a ValueError."""
+    whole = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    if not whole or value < minimum:
+        raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
+
+
 def _mean_or_none(values: list[float]) -> float | None:
     return math.fsum(values) / len(values) if values else None
 
@@ -602,8 +609,7 @@ def run_experiment(
             f"({', '.join(taken)}), left by an earlier run that did not finish (it has no "
             "results.json); choose a new run_dir, or delete this one to run again"
         )
-    if workers < 1:
-        raise ValueError("workers must be >= 1")
+    _check_whole("workers", workers, 1)
     (run_dir / "sessions").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     args = [(config, s, run_dir / "sessions" / f"seed{s}") for s in config.seeds]

@@ -575,8 +575,7 @@ def run_experiment(
     (``seed_<k>``) of one of ``config.seeds`` (left by a run that was stopped before it wrote
     results.json): its sessions would collide with the new run's.
     """
-    if workers < 1:
-        raise ValueError("workers must be positive")
+    _check_whole("workers", workers, 1)
     run_dir = Path(run_dir)
     if (run_dir / "results.json").exists():
         raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")

@@ -506,6 +506,15 @@ def test_a_run_in_this_process_gives_torchs_threads_back():
         torch.set_num_threads(before)
 
 
+@pytest.mark.parametrize("workers", ["2", 2.5, None, 0, True])
+def test_workers_must_be_a_whole_number_of_processes(tmp_path, workers):
+    from corridor.experiment import run_experiment
+
+    with pytest.raises(ValueError, match=r"workers must be an int >= 1, got "):
+        run_experiment(_tiny_experiment(), tmp_path / "run", workers=workers, progress=False)
+    assert not (tmp_path / "run").exists()
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure

@@ -256,6 +256,13 @@ def test_a_run_dir_left_by_a_stopped_run_is_refused_before_any_seed_runs(tmp_pat
     assert not (tmp_path / "seed_1").exists()
 
 
+@pytest.mark.parametrize("workers", ["2", 2.5, None, 0, True])
+def test_workers_must_be_a_whole_number_of_processes(tmp_path, workers):
+    with pytest.raises(ValueError, match=r"workers must be an int >= 1, got "):
+        run_experiment(tiny_config(), tmp_path / "run", workers=workers, progress=False)
+    assert not (tmp_path / "run").exists()
+
+
 def test_per_seed_follows_the_configs_order_of_seeds(tmp_path):
     """per_seed[i] is seeds[i]'s, with seeds given out of order, whichever worker ends first;
     Figure 7 draws the first seed given."""
