@@ -65,7 +65,7 @@ from corridor.baseline import (
 )
 from corridor.env import DEFAULT_MAP, CorridorEnv
 from corridor.expert import CorridorExpert
-from corridor.maps import CorridorMap, load_map
+from corridor.maps import CorridorMap, available_maps, load_map
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
 from torchcbl.evaluation import mean_sd, progress_bar, run_versions, worker_pool
 
@@ -128,7 +128,8 @@ class CorridorExperimentConfig:
     """What to run. The defaults are the quick variant (10 seeds); see :meth:`full`.
 
     Attributes:
-        map_name: a shipped map name or a map JSON path.
+        map_name: a shipped map name or a map JSON path (kept as its absolute path, which
+            ``results.json`` records).
         seeds: one teaching run and one Prioritized Sweeping run per seed.
         world: robot, motion and sensor parameters (default: the noisy motion of
             :meth:`WorldConfig.legged_robot`).
@@ -238,6 +239,15 @@ class CorridorExperimentConfig:
             raise ValueError(
                 f"threshold_reading: expected one of {_READINGS}, got {self.threshold_reading!r}"
             )
+        # a map file by its absolute path, so that results.json names it from any directory
+        # (plot_results, evaluate_saved_policy, a replay); a shipped map by its name
+        if not isinstance(self.map_name, (str, Path)):
+            raise ValueError(
+                f"map_name must be a shipped map name or a map JSON path, got {self.map_name!r}"
+            )
+        if str(self.map_name) not in available_maps() and Path(self.map_name).is_file():
+            object.__setattr__(self, "map_name", str(Path(self.map_name).resolve()))
+        object.__setattr__(self, "map_name", str(self.map_name))
         # what the workers would only find after each seed's teaching, checked now
         try:
             self.rule()
@@ -1188,7 +1198,7 @@ def _figures(config: CorridorExperimentConfig, first: dict, run_dir: Path) -> No
     fig = map_figure(
         world,
         [tuple(p) for p in first["_path"]],
-        title=f"{config.map_name}: final policy, one circuit (seed {first['seed']})",
+        title=f"{Path(config.map_name).name}: final policy, one circuit (seed {first['seed']})",
     )
     save_png(fig, run_dir / "map.png")
 

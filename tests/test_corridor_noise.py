@@ -515,6 +515,35 @@ def test_workers_must_be_a_whole_number_of_processes(tmp_path, workers):
     assert not (tmp_path / "run").exists()
 
 
+def test_a_run_on_a_map_file_given_by_a_relative_path_redraws_from_elsewhere(tmp_path, monkeypatch):
+    """results.json records a map file by its absolute path: the run's figures redraw and its
+    sessions evaluate from another working directory (the relative path named no file there)."""
+    import json
+    from importlib import resources
+
+    from corridor.experiment import evaluate_saved_policy, plot_results, run_experiment
+
+    work, elsewhere = tmp_path / "work", tmp_path / "elsewhere"
+    (work / "maps").mkdir(parents=True)
+    elsewhere.mkdir()
+    shipped = resources.files("corridor") / "maps" / "figure2.json"
+    (work / "maps" / "mine.json").write_text(shipped.read_text())
+    monkeypatch.chdir(work)
+    cfg = _tiny_experiment(map_name="maps/mine.json")
+    assert cfg.map_name == str(work / "maps" / "mine.json")
+    run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
+    monkeypatch.chdir(elsewhere)
+    results = json.loads((tmp_path / "run" / "results.json").read_text())
+    assert results["config"]["map_name"] == str(work / "maps" / "mine.json")
+    (tmp_path / "run" / "map.png").unlink()
+    plot_results(results, tmp_path / "run")
+    assert (tmp_path / "run" / "map.png").stat().st_size > 1000
+    report = evaluate_saved_policy(tmp_path / "run" / "sessions" / "seed0", n_steps=30)
+    assert report["steps"] == 30 and report["map"] == str(work / "maps" / "mine.json")
+    # a shipped map keeps its name
+    assert _tiny_experiment(map_name="lshape").map_name == "lshape"
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure
