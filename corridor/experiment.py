@@ -780,6 +780,8 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
         max_std=cfg["max_std"],
         threshold_reading=cfg.get("threshold_reading", "literal"),
         eval_circuits=cfg["eval_circuits"],
+        # the run's own: another robot or map may need a narrower one than the default
+        eval_perturbation=tuple(cfg.get("eval_perturbation", (0.1, math.radians(10.0)))),
     )
     seed = config.seeds[0]
     session = run_dir / "sessions" / f"seed{seed}"

@@ -544,6 +544,23 @@ def test_a_run_on_a_map_file_given_by_a_relative_path_redraws_from_elsewhere(tmp
     assert _tiny_experiment(map_name="lshape").map_name == "lshape"
 
 
+def test_plot_results_redraws_a_run_with_its_own_perturbed_starts(tmp_path):
+    """A bigger robot needs narrower perturbed starts than the default 0.1 m: the run takes
+    them, and plot_results redraws it with them (it refused it with the default's message)."""
+    import json
+
+    from corridor.experiment import plot_results, run_experiment
+
+    cfg = _tiny_experiment(
+        world=WorldConfig(robot_radius=0.2), eval_perturbation=(0.05, 0.1), eval_circuits=1
+    )
+    run_experiment(cfg, tmp_path, workers=1, progress=False)
+    (tmp_path / "figure3.png").unlink()
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert tmp_path / "figure3.png" in plot_results(results, tmp_path)
+    assert (tmp_path / "figure3.png").stat().st_size > 1000
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure
