@@ -789,13 +789,15 @@ def paired_interval(diffs: Sequence[float]) -> dict[str, Any]:
 
 
 def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
-    """Draw Figures 6-10 of a run from its ``results`` into ``run_dir``.
+    """Draw Figures 6-10 of a run from its ``results`` into ``run_dir`` (created if need be:
+    the run's own directory, or another one to redraw the figures apart).
 
     Returns the PNG paths written. Needs only results.json (no simulation).
     """
     from matplotlib.figure import Figure
 
     run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
     cfg = results["config"]
     written: list[Path] = []
 

@@ -127,6 +127,10 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
     (tmp_path / "fig8_lanes_collisions.png").unlink()
     written = plot_results(on_disk, tmp_path)
     assert tmp_path / "fig8_lanes_collisions.png" in written
+    # results.json alone redraws them into a directory of one's own, made for them
+    apart = plot_results(on_disk, tmp_path / "redrawn" / "variant")
+    assert [p.name for p in apart] == [p.name for p in written] and len(apart) == 5
+    assert all(p.parent == tmp_path / "redrawn" / "variant" and p.is_file() for p in apart)
     text = format_summary(on_disk)
     lines = [ln for ln in text.splitlines() if ln.startswith("|")]
     assert lines[1] == "|---|---|---|---|" and all(ln.endswith("|") for ln in lines)
