@@ -39,7 +39,8 @@ Run directory layout (``run_experiment`` writes; envs never do)::
     run_dir/map.png             the map, route and the final policy's first evaluation circuit
     run_dir/sessions/seed<k>/   each seed's teaching session (torchcbl.session format)
 
-Replay a seed with the config and seed stored in results.json: everything is seeded.
+Replay a seed with the config and seed stored in results.json: everything is seeded
+(``run_seed(CorridorExperimentConfig.from_dict(results["config"]), seed, None)``).
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ import math
 import multiprocessing as mp
 import numbers
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -286,8 +287,48 @@ class CorridorExperimentConfig:
             return DistanceRule(self.max_std)
         return DistanceRule(quantile=math.erf(self.max_std / math.sqrt(2.0)))
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> CorridorExperimentConfig:
+        """The config that :meth:`to_dict` wrote (``results.json``'s ``"config"``), to replay a
+        run or vary it: ``CorridorExperimentConfig.from_dict(results["config"])``. ``world``,
+        ``teaching`` and ``ps`` are dicts of their dataclasses' fields; a key left out takes
+        its default."""
+        from torchcbl import TeachingConfig
+
+        if not isinstance(data, Mapping):
+            raise ValueError(
+                f"expected a dict of CorridorExperimentConfig's fields (results.json's "
+                f"'config'), got {type(data).__name__}"
+            )
+        if "config" in data and "per_seed" in data:
+            raise ValueError(
+                "expected a dict of CorridorExperimentConfig's fields, got a whole results.json; "
+                'pass its "config": from_dict(results["config"])'
+            )
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ValueError(
+                f"unknown CorridorExperimentConfig fields {unknown}; its fields: {sorted(names)}"
+            )
+        kwargs = dict(data)
+        for name, kind in (
+            ("world", WorldConfig),
+            ("teaching", TeachingConfig),
+            ("ps", PrioritizedSweepingConfig),
+        ):
+            if isinstance(kwargs.get(name), Mapping):
+                try:
+                    kwargs[name] = kind(**kwargs[name])
+                except TypeError as exc:
+                    raise ValueError(f"{name}: not {kind.__name__}'s fields ({exc})") from None
+        for name in ("seeds", "eval_perturbation"):
+            if isinstance(kwargs.get(name), list):
+                kwargs[name] = tuple(kwargs[name])
+        return cls(**kwargs)
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form."""
+        """JSON-ready form (:meth:`from_dict` reads it back)."""
         return {
             "map_name": self.map_name,
             "seeds": list(self.seeds),

@@ -561,6 +561,35 @@ def test_plot_results_redraws_a_run_with_its_own_perturbed_starts(tmp_path):
     assert (tmp_path / "figure3.png").stat().st_size > 1000
 
 
+def test_a_seed_replays_from_the_config_in_results_json(tmp_path):
+    """results.json's config reads back into the config that ran (from_dict), and run_seed on
+    it gives that seed's figures again; what is not such a config is refused by name."""
+    import json
+
+    from corridor.baseline import PrioritizedSweepingConfig
+    from corridor.experiment import CorridorExperimentConfig, run_experiment, run_seed
+
+    cfg = _tiny_experiment(
+        seeds=(1,), eval_perturbation=(0.05, 0.1), ps=PrioritizedSweepingConfig(max_steps=200)
+    )
+    run_experiment(cfg, tmp_path, workers=1, progress=False)
+    results = json.loads((tmp_path / "results.json").read_text())
+    again = CorridorExperimentConfig.from_dict(results["config"])
+    assert again == cfg and again.to_dict() == results["config"]
+    replay = run_seed(again, 1, None)
+    stored = results["per_seed"][0]
+    assert {k: replay[k] for k in stored if k != "seconds"} == {
+        k: v for k, v in stored.items() if k != "seconds"
+    }
+    assert CorridorExperimentConfig.from_dict({"seeds": [4]}).seeds == (4,)  # the rest: defaults
+    with pytest.raises(ValueError, match=r"unknown CorridorExperimentConfig fields \['seed'\]"):
+        CorridorExperimentConfig.from_dict({"seed": 1})
+    with pytest.raises(ValueError, match="world: not WorldConfig's fields"):
+        CorridorExperimentConfig.from_dict({"world": {"radius": 0.1}})
+    with pytest.raises(ValueError, match="expected a dict of CorridorExperimentConfig's fields"):
+        CorridorExperimentConfig.from_dict(results)  # the whole results.json
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure
