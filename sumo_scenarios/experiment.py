@@ -197,13 +197,21 @@ class DrivingExperimentConfig:
                 "phase; raise max_noninteractive to at least accuracy_window"
             )
         if self.confident_demos % self.stage_every:
-            raise ValueError("confident_demos must be a multiple of stage_every")
+            raise ValueError(
+                f"confident_demos must be a multiple of stage_every, got {self.confident_demos} "
+                f"and {self.stage_every}"
+            )
         if self.eval_segment in self.extra_eval_segments or len(
             set(self.extra_eval_segments)
         ) != len(self.extra_eval_segments):
-            raise ValueError("eval segments must be distinct non-negative seeds")
+            raise ValueError(
+                "eval segments must be distinct non-negative seeds, got eval_segment "
+                f"{self.eval_segment} and extra_eval_segments {self.extra_eval_segments}"
+            )
         if list(self.arm_b_stages) != sorted(set(self.arm_b_stages)) or not self.arm_b_stages:
-            raise ValueError("arm_b_stages must be non-empty and strictly increasing")
+            raise ValueError(
+                f"arm_b_stages must be non-empty and strictly increasing, got {self.arm_b_stages}"
+            )
         if isinstance(self.target_accuracy, (bool, np.bool_)) or not isinstance(
             self.target_accuracy, numbers.Real
         ):

@@ -177,6 +177,19 @@ def test_experiment_config_refuses_what_every_worker_would_fail_on(bad):
         DrivingExperimentConfig(**bad)
 
 
+@pytest.mark.parametrize(
+    "bad, says",
+    [
+        ({"confident_demos": 150, "stage_every": 40}, "stage_every, got 150 and 40"),
+        ({"arm_b_stages": (700, 600)}, r"strictly increasing, got \(700, 600\)"),
+        ({"eval_segment": 3, "extra_eval_segments": (3,)}, r"eval_segment 3 and .* \(3,\)"),
+    ],
+)
+def test_config_refusals_name_the_values_given(bad, says):
+    with pytest.raises(ValueError, match=says):
+        DrivingExperimentConfig(**bad)
+
+
 def test_paired_interval_matches_the_t_distribution():
     from sumo_scenarios.experiment import paired_interval
 
