@@ -257,8 +257,17 @@ class CorridorExperimentConfig:
                 f"max_std = {self.max_std} gives no usable threshold with threshold_reading="
                 f"{self.threshold_reading!r} ({exc})"
             ) from None
+        pert = self.eval_perturbation
+        pair = isinstance(pert, (Sequence, np.ndarray)) and not isinstance(pert, (str, bytes))
+        if not pair or len(pert) != 2:
+            # (the env takes None for unperturbed starts; the experiment's second evaluation
+            # is from perturbed ones, and results.json stores the pair)
+            raise ValueError(
+                f"eval_perturbation must be a (metres, radians) pair, got {pert!r}; e.g. the "
+                "default (0.1, math.radians(10))"
+            )
+        object.__setattr__(self, "eval_perturbation", tuple(pert))
         try:
-            pert = self.eval_perturbation
             CorridorEnv(load_map(self.map_name), self.world, start_perturbation=pert)
         except ValueError as exc:
             raise ValueError(f"eval_perturbation on map {self.map_name!r}: {exc}") from None

@@ -590,6 +590,23 @@ def test_a_seed_replays_from_the_config_in_results_json(tmp_path):
         CorridorExperimentConfig.from_dict(results)  # the whole results.json
 
 
+def test_eval_perturbation_must_be_a_pair_up_front():
+    """None passed the config (the env takes it) and the run then failed writing results.json
+    after every seed had run; now the config refuses it. A list or array is kept as a pair."""
+    import json
+
+    for bad in (None, 0.1, (0.1,), "ab"):
+        with pytest.raises(ValueError, match=r"eval_perturbation must be a \(metres, radians\)"):
+            _tiny_experiment(eval_perturbation=bad)
+    for given in ([0.05, 0.1], np.array([0.05, 0.1])):
+        cfg = _tiny_experiment(eval_perturbation=given)
+        assert cfg.eval_perturbation == (0.05, 0.1)
+        assert json.loads(json.dumps(cfg.to_dict(), default=float))["eval_perturbation"] == [
+            0.05,
+            0.1,
+        ]
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure
