@@ -268,7 +268,11 @@ class CorridorExperimentConfig:
             )
         object.__setattr__(self, "eval_perturbation", tuple(pert))
         try:
-            CorridorEnv(load_map(self.map_name), self.world, start_perturbation=pert)
+            corridor_map = load_map(self.map_name)
+        except ValueError as exc:
+            raise ValueError(f"map_name: {exc}") from None
+        try:
+            CorridorEnv(corridor_map, self.world, start_perturbation=pert)
         except ValueError as exc:
             raise ValueError(f"eval_perturbation on map {self.map_name!r}: {exc}") from None
 

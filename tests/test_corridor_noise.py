@@ -607,6 +607,20 @@ def test_eval_perturbation_must_be_a_pair_up_front():
         ]
 
 
+def test_an_unknown_or_broken_map_is_named_as_the_map(tmp_path):
+    """The map's own fault is the map_name's, not 'eval_perturbation on map ...'."""
+    from corridor.experiment import CorridorExperimentConfig
+
+    with pytest.raises(ValueError, match=r"^map_name: unknown map 'nomap'; shipped maps"):
+        CorridorExperimentConfig(map_name="nomap")
+    broken = tmp_path / "broken.json"
+    broken.write_text("{not json")
+    with pytest.raises(ValueError, match=r"^map_name: map .*broken.json' is not valid JSON"):
+        CorridorExperimentConfig(map_name=str(broken))
+    with pytest.raises(ValueError, match=r"^eval_perturbation on map 'figure2'"):
+        CorridorExperimentConfig(eval_perturbation=(0.3, 0.1))  # still the perturbation's
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure
