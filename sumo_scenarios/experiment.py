@@ -914,6 +914,7 @@ def evaluate_saved_policy(
     from sumo_scenarios.env import DrivingEnv
     from torchcbl import evaluate_policy, load_policy
 
+    _check_whole("n_steps", n_steps, 1)  # before the env's own 'max_episode_steps' says it
     policy = load_policy(session_dir)
     env = DrivingEnv(scenario="eval", max_episode_steps=n_steps)
     try:

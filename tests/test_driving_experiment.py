@@ -116,6 +116,9 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
     for arm in ("arm_a", "arm_b"):
         report = evaluate_saved_policy(tmp_path / "seed_0" / "sessions" / arm, n_steps=20)
         assert report["steps"] == 20
+    for bad in (0, 2.5, "10"):  # named as given, not as the env's max_episode_steps
+        with pytest.raises(ValueError, match=f"^n_steps must be an int >= 1, got {bad!r}"):
+            evaluate_saved_policy(tmp_path / "seed_0" / "sessions" / "arm_a", n_steps=bad)
     assert on_disk["domain"] == "driving"
     # the clip analysis of docs/reproduction.md runs on a kept session: its counts are the session's
     clip = _clip_script(tmp_path / "seed_0" / "sessions" / "arm_a", capsys)
