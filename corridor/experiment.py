@@ -1268,14 +1268,26 @@ def _axes3d(ax: Any, config: CorridorExperimentConfig) -> None:
     ax.set_zlabel(f"{SENSOR_NAMES[2]} (m)")
 
 
-if __name__ == "__main__":  # pragma: no cover
+def main(argv: list[str] | None = None) -> None:
+    """``python -m corridor.experiment RUN_DIR [--full] [--workers W]``."""
     import argparse
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run_dir")
+    parser = argparse.ArgumentParser(
+        prog="python -m corridor.experiment", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument("run_dir", type=Path)
     parser.add_argument("--full", action="store_true")
     parser.add_argument("--workers", type=int, default=2)
-    ns = parser.parse_args()
+    ns = parser.parse_args(argv)
+    # a mistake is parser.error's one line and exit code 2, before anything is written
+    if ns.workers < 1:
+        parser.error(f"--workers: expected >= 1, got {ns.workers}")
+    if ns.run_dir.exists() and (not ns.run_dir.is_dir() or any(ns.run_dir.iterdir())):
+        parser.error(f"{ns.run_dir} exists and is not an empty directory; choose a new RUN_DIR")
     cfg = CorridorExperimentConfig.full() if ns.full else CorridorExperimentConfig()
     res = run_experiment(cfg, ns.run_dir, workers=ns.workers)
     print(format_summary(res))
+
+
+if __name__ == "__main__":
+    main()

@@ -621,6 +621,33 @@ def test_an_unknown_or_broken_map_is_named_as_the_map(tmp_path):
         CorridorExperimentConfig(eval_perturbation=(0.3, 0.1))  # still the perturbation's
 
 
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["--workers", "0"], "--workers: expected >= 1, got 0"),
+        ([], "exists and is not an empty directory"),
+    ],
+)
+def test_the_module_command_refuses_a_mistake_before_writing(tmp_path, argv, says):
+    """`python -m corridor.experiment RUN_DIR`: a mistake is argparse's one line and exit code
+    2 (as sumo_scenarios.experiment's), not run_experiment's traceback."""
+    import subprocess
+    import sys
+
+    run = tmp_path / "run"
+    if not argv:  # a RUN_DIR that already holds a run
+        run.mkdir()
+        (run / "results.json").write_text("{}")
+    proc = subprocess.run(
+        [sys.executable, "-m", "corridor.experiment", str(run), *argv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2 and says in proc.stderr and "Traceback" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ([] if argv else ["results.json", "run"])
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure
