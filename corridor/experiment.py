@@ -39,7 +39,8 @@ Run directory layout (``run_experiment`` writes; envs never do)::
     run_dir/map.png             the map, route and the final policy's first evaluation circuit
     run_dir/sessions/seed<k>/   each seed's teaching session (torchcbl.session format)
 
-Replay a seed with the config and seed stored in results.json: everything is seeded.
+Replay a seed with the config and seed stored in results.json: everything is seeded
+(``run_seed(CorridorExperimentConfig.from_dict(results["config"]), seed, None)``).
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ import math
 import multiprocessing as mp
 import numbers
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -65,7 +66,7 @@ from corridor.baseline import (
 )
 from corridor.env import DEFAULT_MAP, CorridorEnv
 from corridor.expert import CorridorExpert
-from corridor.maps import CorridorMap, load_map
+from corridor.maps import CorridorMap, available_maps, load_map
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
 from torchcbl.evaluation import mean_sd, progress_bar, run_versions, worker_pool
 
@@ -101,6 +102,13 @@ _READINGS = ("coverage", "literal")
 _REQUEST_BLOCKS = ((0, 5), (5, 10), (10, 20), (20, 40), (40, 80), (80, 160))
 
 
+def _check_whole(name: str, value: Any, minimum: int) -> None:
+    """A setting that counts: an int (not a bool) >= ``minimum``, else a ValueError."""
+    whole = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    if not whole or value < minimum:
+        raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
+
+
 def _mean_or_none(values: list[float]) -> float | None:
     return math.fsum(values) / len(values) if values else None
 
@@ -121,7 +129,8 @@ class CorridorExperimentConfig:
     """What to run. The defaults are the quick variant (10 seeds); see :meth:`full`.
 
     Attributes:
-        map_name: a shipped map name or a map JSON path.
+        map_name: a shipped map name or a map JSON path (kept as its absolute path, which
+            ``results.json`` records).
         seeds: one teaching run and one Prioritized Sweeping run per seed.
         world: robot, motion and sensor parameters (default: the noisy motion of
             :meth:`WorldConfig.legged_robot`).
@@ -231,6 +240,15 @@ class CorridorExperimentConfig:
             raise ValueError(
                 f"threshold_reading: expected one of {_READINGS}, got {self.threshold_reading!r}"
             )
+        # a map file by its absolute path, so that results.json names it from any directory
+        # (plot_results, evaluate_saved_policy, a replay); a shipped map by its name
+        if not isinstance(self.map_name, (str, Path)):
+            raise ValueError(
+                f"map_name must be a shipped map name or a map JSON path, got {self.map_name!r}"
+            )
+        if str(self.map_name) not in available_maps() and Path(self.map_name).is_file():
+            object.__setattr__(self, "map_name", str(Path(self.map_name).resolve()))
+        object.__setattr__(self, "map_name", str(self.map_name))
         # what the workers would only find after each seed's teaching, checked now
         try:
             self.rule()
@@ -239,9 +257,22 @@ class CorridorExperimentConfig:
                 f"max_std = {self.max_std} gives no usable threshold with threshold_reading="
                 f"{self.threshold_reading!r} ({exc})"
             ) from None
+        pert = self.eval_perturbation
+        pair = isinstance(pert, (Sequence, np.ndarray)) and not isinstance(pert, (str, bytes))
+        if not pair or len(pert) != 2:
+            # (the env takes None for unperturbed starts; the experiment's second evaluation
+            # is from perturbed ones, and results.json stores the pair)
+            raise ValueError(
+                f"eval_perturbation must be a (metres, radians) pair, got {pert!r}; e.g. the "
+                "default (0.1, math.radians(10))"
+            )
+        object.__setattr__(self, "eval_perturbation", tuple(pert))
         try:
-            pert = self.eval_perturbation
-            CorridorEnv(load_map(self.map_name), self.world, start_perturbation=pert)
+            corridor_map = load_map(self.map_name)
+        except ValueError as exc:
+            raise ValueError(f"map_name: {exc}") from None
+        try:
+            CorridorEnv(corridor_map, self.world, start_perturbation=pert)
         except ValueError as exc:
             raise ValueError(f"eval_perturbation on map {self.map_name!r}: {exc}") from None
 
@@ -269,8 +300,48 @@ class CorridorExperimentConfig:
             return DistanceRule(self.max_std)
         return DistanceRule(quantile=math.erf(self.max_std / math.sqrt(2.0)))
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> CorridorExperimentConfig:
+        """The config that :meth:`to_dict` wrote (``results.json``'s ``"config"``), to replay a
+        run or vary it: ``CorridorExperimentConfig.from_dict(results["config"])``. ``world``,
+        ``teaching`` and ``ps`` are dicts of their dataclasses' fields; a key left out takes
+        its default."""
+        from torchcbl import TeachingConfig
+
+        if not isinstance(data, Mapping):
+            raise ValueError(
+                f"expected a dict of CorridorExperimentConfig's fields (results.json's "
+                f"'config'), got {type(data).__name__}"
+            )
+        if "config" in data and "per_seed" in data:
+            raise ValueError(
+                "expected a dict of CorridorExperimentConfig's fields, got a whole results.json; "
+                'pass its "config": from_dict(results["config"])'
+            )
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ValueError(
+                f"unknown CorridorExperimentConfig fields {unknown}; its fields: {sorted(names)}"
+            )
+        kwargs = dict(data)
+        for name, kind in (
+            ("world", WorldConfig),
+            ("teaching", TeachingConfig),
+            ("ps", PrioritizedSweepingConfig),
+        ):
+            if isinstance(kwargs.get(name), Mapping):
+                try:
+                    kwargs[name] = kind(**kwargs[name])
+                except TypeError as exc:
+                    raise ValueError(f"{name}: not {kind.__name__}'s fields ({exc})") from None
+        for name in ("seeds", "eval_perturbation"):
+            if isinstance(kwargs.get(name), list):
+                kwargs[name] = tuple(kwargs[name])
+        return cls(**kwargs)
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form."""
+        """JSON-ready form (:meth:`from_dict` reads it back)."""
         return {
             "map_name": self.map_name,
             "seeds": list(self.seeds),
@@ -438,12 +509,23 @@ _CBA_KEYS = (
 
 def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | None) -> dict:
     """One seed: teaching, evaluation of the final policy, Prioritized Sweeping, and with
-    ``config.cba`` the same teaching and evaluation under CBA (keys ``cba_*``)."""
+    ``config.cba`` the same teaching and evaluation under CBA (keys ``cba_*``).
+
+    Torch runs on one thread meanwhile (as in every worker, so that ``workers=1`` gives the
+    results of ``workers=2``); the caller's thread count is restored after."""
     import torch
 
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _run_seed(config, seed, session_dir)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | None) -> dict:
     from torchcbl.strategies import ConfidentExecution, correcting
 
-    torch.set_num_threads(1)
     t0 = time.perf_counter()
     corridor_map = load_map(config.map_name)
     expert = CorridorExpert(corridor_map, config.world)
@@ -571,14 +653,27 @@ def run_experiment(
     pass ``workers=1``). A variant of the reproduction, e.g.
     ``run_experiment(CorridorExperimentConfig.exact_motion(), "runs/exact")``.
 
-    Raises FileExistsError if ``run_dir`` already holds a results.json.
+    Raises FileExistsError if ``run_dir`` already holds a results.json, or a teaching session
+    of one of ``config.seeds`` (left by a run that was stopped before it wrote results.json):
+    a seed's session is never overwritten.
     """
     config = config or CorridorExperimentConfig()
     run_dir = Path(run_dir)
     if (run_dir / "results.json").exists():
         raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")
-    if workers < 1:
-        raise ValueError("workers must be >= 1")
+    taken = [
+        f"sessions/seed{s}"
+        for s in config.seeds
+        if (run_dir / "sessions" / f"seed{s}").is_dir()
+        and any((run_dir / "sessions" / f"seed{s}").iterdir())
+    ]
+    if taken:
+        raise FileExistsError(
+            f"{run_dir} already holds the teaching sessions of seeds of this run "
+            f"({', '.join(taken)}), left by an earlier run that did not finish (it has no "
+            "results.json); choose a new run_dir, or delete this one to run again"
+        )
+    _check_whole("workers", workers, 1)
     (run_dir / "sessions").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     args = [(config, s, run_dir / "sessions" / f"seed{s}") for s in config.seeds]
@@ -739,6 +834,8 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
         max_std=cfg["max_std"],
         threshold_reading=cfg.get("threshold_reading", "literal"),
         eval_circuits=cfg["eval_circuits"],
+        # the run's own: another robot or map may need a narrower one than the default
+        eval_perturbation=tuple(cfg.get("eval_perturbation", (0.1, math.radians(10.0)))),
     )
     seed = config.seeds[0]
     session = run_dir / "sessions" / f"seed{seed}"
@@ -948,6 +1045,12 @@ def format_summary(results: dict[str, Any]) -> str:
         return text
 
     noise = s.get("motion_noise", {})
+    # the run's own settings name its rows (a variant's need not be the paper's 10 and 3)
+    cfg = results.get("config", {})
+    n_eval = cfg.get("eval_circuits", 10)
+    n_stop = cfg.get("teaching", {}).get("autonomous_episodes_to_stop", 10)
+    stop = f" ({n_stop} clean circuits, no request)" if n_stop else ""
+    n_ps = cfg.get("ps", {}).get("eval_circuits", 3)
     rows = [
         (
             "actions per circuit (expert, exact motion)",
@@ -975,7 +1078,7 @@ def format_summary(results: dict[str, Any]) -> str:
             _fmt(s["requests_next_two_circuits"]),
         ),
         ("demonstrations in all", p["demonstrations_total"], _fmt(s["demonstrations_total"])),
-        ("teaching finished (10 clean circuits, no request)", "yes", share("finished_share")),
+        (f"teaching finished{stop}", "yes", share("finished_share")),
         (
             "requests per circuit, circuits "
             + " / ".join(b["circuits"] for b in s.get("requests_by_circuits", [])),
@@ -991,13 +1094,13 @@ def format_summary(results: dict[str, Any]) -> str:
             share("requests_model_agreed_share"),
         ),
         (
-            "final policy: clean circuits out of 10, paper's start",
+            f"final policy: clean circuits out of {n_eval}, paper's start",
             "10",
             _fmt(s["eval_circuits_clean"]),
         ),
         ("final policy: clean share, perturbed starts", "-", share("eval_perturbed_clean_share")),
         (
-            "PS steps, first greedy table driving 3 clean circuits",
+            f"PS steps, first greedy table driving {n_ps} clean circuits",
             p["ps_steps"],
             _fmt(s["ps_steps_first"]),
         ),
@@ -1050,7 +1153,7 @@ def format_summary(results: dict[str, Any]) -> str:
                 f"{head}; every seed, a capped one at its count: {_fmt(cba['labels_total'])}",
             ),
             ("CBA: corrections", "-", _fmt(cba["corrections"])),
-            ("CBA: teaching finished (10 clean circuits, no request)", "-", share_of(cba)),
+            (f"CBA: teaching finished{stop}", "-", share_of(cba)),
             (
                 "CBA: requests per circuit, circuits " + " / ".join(b["circuits"] for b in blocks),
                 "-",
@@ -1064,7 +1167,7 @@ def format_summary(results: dict[str, Any]) -> str:
                 else f"{cba['requests_model_agreed_share']:.0%}",
             ),
             (
-                "CBA: final policy, clean circuits out of 10, paper's start",
+                f"CBA: final policy, clean circuits out of {n_eval}, paper's start",
                 "-",
                 _fmt(cba["eval_circuits_clean"]),
             ),
@@ -1151,7 +1254,7 @@ def _figures(config: CorridorExperimentConfig, first: dict, run_dir: Path) -> No
     fig = map_figure(
         world,
         [tuple(p) for p in first["_path"]],
-        title=f"{config.map_name}: final policy, one circuit (seed {first['seed']})",
+        title=f"{Path(config.map_name).name}: final policy, one circuit (seed {first['seed']})",
     )
     save_png(fig, run_dir / "map.png")
 
@@ -1165,14 +1268,26 @@ def _axes3d(ax: Any, config: CorridorExperimentConfig) -> None:
     ax.set_zlabel(f"{SENSOR_NAMES[2]} (m)")
 
 
-if __name__ == "__main__":  # pragma: no cover
+def main(argv: list[str] | None = None) -> None:
+    """``python -m corridor.experiment RUN_DIR [--full] [--workers W]``."""
     import argparse
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run_dir")
+    parser = argparse.ArgumentParser(
+        prog="python -m corridor.experiment", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument("run_dir", type=Path)
     parser.add_argument("--full", action="store_true")
     parser.add_argument("--workers", type=int, default=2)
-    ns = parser.parse_args()
+    ns = parser.parse_args(argv)
+    # a mistake is parser.error's one line and exit code 2, before anything is written
+    if ns.workers < 1:
+        parser.error(f"--workers: expected >= 1, got {ns.workers}")
+    if ns.run_dir.exists() and (not ns.run_dir.is_dir() or any(ns.run_dir.iterdir())):
+        parser.error(f"{ns.run_dir} exists and is not an empty directory; choose a new RUN_DIR")
     cfg = CorridorExperimentConfig.full() if ns.full else CorridorExperimentConfig()
     res = run_experiment(cfg, ns.run_dir, workers=ns.workers)
     print(format_summary(res))
+
+
+if __name__ == "__main__":
+    main()

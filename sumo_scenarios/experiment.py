@@ -17,9 +17,10 @@ Per seed (each in its own process: libsumo holds one simulation per process):
   traffic, the evaluation segment, the teacher's randomness and the GMM initialisation.
 
 ``run_experiment`` writes into ``run_dir``: ``results.json`` (``summary``: the acceptance
-figures; ``stages``: Figure 8's bars, mean and sd over seeds; ``per_seed``; config; versions;
-wall and CPU seconds), ``fig6_accuracy.png``, ``fig7_middle_lane_demos.png``,
-``fig8_lanes_collisions.png``, ``fig9_accuracy.png``, ``fig10_confidence.png``,
+figures; ``stages``: Figure 8's bars, mean and sd over seeds; ``per_seed``, one entry per seed
+in the order of ``seeds``; config; versions; wall and CPU seconds), ``fig6_accuracy.png``,
+``fig7_middle_lane_demos.png``, ``fig8_lanes_collisions.png``, ``fig9_accuracy.png``,
+``fig10_confidence.png``,
 ``seed_<k>/episodes.json`` (every teaching and evaluation episode, replayable with
 :mod:`sumo_scenarios.replay` and ``torchcbl replay``) and ``seed_<k>/sessions/arm_a`` and
 ``arm_b`` (the teaching sessions, :mod:`torchcbl.session` format: ``torchcbl evaluate`` and
@@ -94,7 +95,8 @@ class DrivingExperimentConfig:
         eval_steps: timesteps per evaluation trial (the paper: 1000).
         accuracy_window: prediction-accuracy window (the paper: 150).
         target_accuracy: ends the non-interactive phase (the paper: 0.8).
-        max_noninteractive: cap on non-interactive demonstrations if the target is never met.
+        max_noninteractive: cap on non-interactive demonstrations if the target is never met
+            (at least ``accuracy_window``: the window must fill for the target to be met).
         confident_demos: confident-execution demonstrations in arm (a) (the paper: 150).
         stage_every: evaluate arm (a) every this many confident demonstrations (the paper: 50).
         burst: teacher moves per request (the paper: 10).
@@ -187,30 +189,46 @@ class DrivingExperimentConfig:
                 object.__setattr__(self, f.name, float(v))
         if not self.seeds or len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"seeds must be distinct, at least one, got {self.seeds!r}")
+        if self.max_noninteractive < self.accuracy_window:
+            raise ValueError(
+                f"max_noninteractive ({self.max_noninteractive}) is below accuracy_window "
+                f"({self.accuracy_window}): the window is never full, so the non-interactive "
+                "phase could never reach target_accuracy and arm (a) would have no confident "
+                "phase; raise max_noninteractive to at least accuracy_window"
+            )
         if self.confident_demos % self.stage_every:
-            raise ValueError("confident_demos must be a multiple of stage_every")
+            raise ValueError(
+                f"confident_demos must be a multiple of stage_every, got {self.confident_demos} "
+                f"and {self.stage_every}"
+            )
         if self.eval_segment in self.extra_eval_segments or len(
             set(self.extra_eval_segments)
         ) != len(self.extra_eval_segments):
-            raise ValueError("eval segments must be distinct non-negative seeds")
+            raise ValueError(
+                "eval segments must be distinct non-negative seeds, got eval_segment "
+                f"{self.eval_segment} and extra_eval_segments {self.extra_eval_segments}"
+            )
         if list(self.arm_b_stages) != sorted(set(self.arm_b_stages)) or not self.arm_b_stages:
-            raise ValueError("arm_b_stages must be non-empty and strictly increasing")
+            raise ValueError(
+                f"arm_b_stages must be non-empty and strictly increasing, got {self.arm_b_stages}"
+            )
         if isinstance(self.target_accuracy, (bool, np.bool_)) or not isinstance(
             self.target_accuracy, numbers.Real
         ):
             raise ValueError(f"target_accuracy must be a number, got {self.target_accuracy!r}")
         if not 0.0 < self.target_accuracy <= 1.0:
             raise ValueError(f"target_accuracy must lie in (0, 1], got {self.target_accuracy!r}")
-        if not (math.isfinite(self.max_std) and self.max_std > 0):
-            raise ValueError(f"max_std must be a finite number > 0, got {self.max_std!r}")
+        for name in ("max_std", "gmm_tol"):  # a number (not a bool, not text), finite, > 0
+            v = getattr(self, name)
+            real = isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+            if not (real and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
         if isinstance(self.var_floor, bool) or not (
             isinstance(self.var_floor, (int, float))
             and math.isfinite(self.var_floor)
             and self.var_floor >= 0
         ):
             raise ValueError(f"var_floor must be a finite number >= 0, got {self.var_floor!r}")
-        if not (math.isfinite(self.gmm_tol) and self.gmm_tol > 0):
-            raise ValueError(f"gmm_tol must be a finite number > 0, got {self.gmm_tol!r}")
         if self.criterion not in ("aic", "bic", "aic_paper"):
             raise ValueError(
                 f"criterion must be 'aic', 'bic' or 'aic_paper', got {self.criterion!r}"
@@ -561,14 +579,25 @@ def run_experiment(
     import the caller's main module: from a script, call ``run_experiment`` under
     ``if __name__ == "__main__":``.
 
-    Raises FileExistsError if ``run_dir`` already holds a results.json (its sessions would
-    collide with the new run's).
+    Raises FileExistsError if ``run_dir`` already holds a results.json, or a seed directory
+    (``seed_<k>``) of one of ``config.seeds`` (left by a run that was stopped before it wrote
+    results.json): its sessions would collide with the new run's.
     """
-    if workers < 1:
-        raise ValueError("workers must be positive")
+    _check_whole("workers", workers, 1)
     run_dir = Path(run_dir)
     if (run_dir / "results.json").exists():
         raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")
+    taken = [
+        f"seed_{s}"
+        for s in config.seeds
+        if (run_dir / f"seed_{s}").is_dir() and any((run_dir / f"seed_{s}").iterdir())
+    ]
+    if taken:
+        raise FileExistsError(
+            f"{run_dir} already holds the seed directories of seeds of this run "
+            f"({', '.join(taken)}), left by an earlier run that did not finish (it has no "
+            "results.json); choose a new run_dir, or delete this one to run again"
+        )
     run_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     jobs = [(config, s, str(run_dir / f"seed_{s}")) for s in config.seeds]
@@ -583,7 +612,10 @@ def run_experiment(
             bar.update(1)
             bar.set_postfix_str(f"seed {res['seed']} done")
     bar.close()
-    per_seed.sort(key=lambda r: r["seed"])
+    # in the config's order of seeds, as results["seeds"] lists them (the workers end in any
+    # order); the first seed's is the one Figure 7 draws
+    order = {s: i for i, s in enumerate(config.seeds)}
+    per_seed.sort(key=lambda r: order[r["seed"]])
     ni_all = sorted({n for r in per_seed for n in r["ni_stages"]})
     labels = _stage_labels(config, ni_all)
     stages: dict[str, Any] = {}
@@ -765,13 +797,15 @@ def paired_interval(diffs: Sequence[float]) -> dict[str, Any]:
 
 
 def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
-    """Draw Figures 6-10 of a run from its ``results`` into ``run_dir``.
+    """Draw Figures 6-10 of a run from its ``results`` into ``run_dir`` (created if need be:
+    the run's own directory, or another one to redraw the figures apart).
 
     Returns the PNG paths written. Needs only results.json (no simulation).
     """
     from matplotlib.figure import Figure
 
     run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
     cfg = results["config"]
     written: list[Path] = []
 
@@ -796,7 +830,11 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     first = results["per_seed"][0]
     for name, key, title in (
         ("fig6_accuracy.png", "accuracy_a", "non-interactive phase"),
-        ("fig9_accuracy.png", "accuracy_b", "1000 non-interactive demonstrations"),
+        (
+            "fig9_accuracy.png",
+            "accuracy_b",
+            f"{cfg['arm_b_stages'][-1]} non-interactive demonstrations",
+        ),
     ):
         fig = Figure(figsize=(7, 3))
         ax = fig.add_subplot()
@@ -876,6 +914,7 @@ def evaluate_saved_policy(
     from sumo_scenarios.env import DrivingEnv
     from torchcbl import evaluate_policy, load_policy
 
+    _check_whole("n_steps", n_steps, 1)  # before the env's own 'max_episode_steps' says it
     policy = load_policy(session_dir)
     env = DrivingEnv(scenario="eval", max_episode_steps=n_steps)
     try:
@@ -896,6 +935,9 @@ def format_summary(results: dict[str, Any]) -> str:
     st = results["stages"]
     cfg = results["config"]
     final_a = f"a_plus{cfg['confident_demos']}"
+    # the run's own settings name its rows (a variant's need not be the paper's 80 %, 150, 1000)
+    to_target = f"{100 * cfg['target_accuracy']:g}% over {cfg['accuracy_window']}"
+    n_b = cfg["arm_b_stages"][-1]
 
     def ms(d: dict[str, Any] | None, fmt: str = "{:.1f}") -> str:
         if not d or d.get("mean") is None:
@@ -919,7 +961,7 @@ def format_summary(results: dict[str, Any]) -> str:
         ("Fig 8", "teacher, lane shares % (R-sh, R, M, L, L-sh)", "left three", lanes),
         (
             "Fig 6",
-            "non-interactive demos to 80% over 150",
+            f"non-interactive demos to {to_target}",
             "500",
             ms(s["noninteractive_demos"], "{:.0f}")
             + (
@@ -955,13 +997,13 @@ def format_summary(results: dict[str, Any]) -> str:
         ),
         (
             "Fig 8",
-            "arm (b) 1000 demos, collisions %",
+            f"arm (b) {n_b} demos, collisions %",
             "4.0",
             ms(s["arm_b"]["collision_pct"], "{:.2f}"),
         ),
         (
             "Fig 8",
-            "arm (b) 1000 demos, lane TV to the teacher",
+            f"arm (b) {n_b} demos, lane TV to the teacher",
             "-",
             ms(s["arm_b"]["tv_to_expert"], "{:.2f}"),
         ),

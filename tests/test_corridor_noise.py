@@ -444,6 +444,210 @@ def test_experiment_runs_the_noisy_robot_with_the_coverage_threshold_by_default(
         CorridorExperimentConfig(threshold_reading="2std")
 
 
+def _tiny_experiment(**overrides):
+    """The corridor experiment at a size that runs in seconds (exact motion, no CBA arm)."""
+    from corridor.baseline import PrioritizedSweepingConfig
+    from corridor.experiment import CorridorExperimentConfig
+
+    settings = dict(
+        seeds=(0,), cba=False, eval_circuits=2, ps=PrioritizedSweepingConfig(max_steps=300)
+    )
+    return CorridorExperimentConfig.exact_motion(**{**settings, **overrides})
+
+
+def test_a_run_dir_left_by_a_stopped_run_is_refused_before_any_seed_runs(tmp_path):
+    """A run stopped before results.json leaves its seeds' sessions: a new run into that
+    directory is refused at once, naming them, instead of failing on the session it would
+    overwrite (after the seeds before it ran) with a pointer to ConfidentTeacher.resume."""
+    from corridor.experiment import run_experiment
+
+    run_experiment(_tiny_experiment(), tmp_path, workers=1, progress=False)
+    (tmp_path / "results.json").unlink()  # as if stopped before it was written
+    with pytest.raises(FileExistsError, match=r"sessions/seed0\), left by an earlier run"):
+        run_experiment(_tiny_experiment(seeds=(1, 0)), tmp_path, workers=1, progress=False)
+    assert not (tmp_path / "sessions" / "seed1").exists()
+
+
+def test_the_summary_names_the_variants_own_circuit_counts(tmp_path):
+    """summary.txt's rows say the circuits this run evaluated and stopped on, not the paper's
+    10 and 3 whatever the config said."""
+    from corridor.baseline import PrioritizedSweepingConfig
+    from corridor.experiment import CorridorExperimentConfig, run_experiment
+
+    teaching = dataclasses.replace(
+        CorridorExperimentConfig().teaching, autonomous_episodes_to_stop=3
+    )
+    ps = PrioritizedSweepingConfig(max_steps=300, eval_circuits=2)
+    cfg = _tiny_experiment(teaching=teaching, ps=ps, cba=True)
+    run_experiment(cfg, tmp_path, workers=1, progress=False)
+    text = (tmp_path / "summary.txt").read_text()
+    assert "| final policy: clean circuits out of 2, paper's start | 10 |" in text
+    assert "| teaching finished (3 clean circuits, no request) | yes |" in text
+    assert "| PS steps, first greedy table driving 2 clean circuits | 275 |" in text
+    assert "CBA: final policy, clean circuits out of 2" in text
+    assert "CBA: teaching finished (3 clean circuits" in text
+    assert "out of 10" not in text and "(10 clean circuits" not in text
+
+
+def test_a_run_in_this_process_gives_torchs_threads_back():
+    """workers=1 runs the seed here on one torch thread (as the workers do); the caller's
+    thread count is restored after, not left at 1 for whatever it runs next."""
+    import torch
+
+    from corridor.experiment import run_seed
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        out = run_seed(_tiny_experiment(eval_circuits=1), 0, None)
+        assert out["seed"] == 0 and out["finished"]
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
+
+
+@pytest.mark.parametrize("workers", ["2", 2.5, None, 0, True])
+def test_workers_must_be_a_whole_number_of_processes(tmp_path, workers):
+    from corridor.experiment import run_experiment
+
+    with pytest.raises(ValueError, match=r"workers must be an int >= 1, got "):
+        run_experiment(_tiny_experiment(), tmp_path / "run", workers=workers, progress=False)
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_run_on_a_map_file_given_by_a_relative_path_redraws_from_elsewhere(tmp_path, monkeypatch):
+    """results.json records a map file by its absolute path: the run's figures redraw and its
+    sessions evaluate from another working directory (the relative path named no file there)."""
+    import json
+    from importlib import resources
+
+    from corridor.experiment import evaluate_saved_policy, plot_results, run_experiment
+
+    work, elsewhere = tmp_path / "work", tmp_path / "elsewhere"
+    (work / "maps").mkdir(parents=True)
+    elsewhere.mkdir()
+    shipped = resources.files("corridor") / "maps" / "figure2.json"
+    (work / "maps" / "mine.json").write_text(shipped.read_text())
+    monkeypatch.chdir(work)
+    cfg = _tiny_experiment(map_name="maps/mine.json")
+    assert cfg.map_name == str(work / "maps" / "mine.json")
+    run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
+    monkeypatch.chdir(elsewhere)
+    results = json.loads((tmp_path / "run" / "results.json").read_text())
+    assert results["config"]["map_name"] == str(work / "maps" / "mine.json")
+    (tmp_path / "run" / "map.png").unlink()
+    plot_results(results, tmp_path / "run")
+    assert (tmp_path / "run" / "map.png").stat().st_size > 1000
+    report = evaluate_saved_policy(tmp_path / "run" / "sessions" / "seed0", n_steps=30)
+    assert report["steps"] == 30 and report["map"] == str(work / "maps" / "mine.json")
+    # a shipped map keeps its name
+    assert _tiny_experiment(map_name="lshape").map_name == "lshape"
+
+
+def test_plot_results_redraws_a_run_with_its_own_perturbed_starts(tmp_path):
+    """A bigger robot needs narrower perturbed starts than the default 0.1 m: the run takes
+    them, and plot_results redraws it with them (it refused it with the default's message)."""
+    import json
+
+    from corridor.experiment import plot_results, run_experiment
+
+    cfg = _tiny_experiment(
+        world=WorldConfig(robot_radius=0.2), eval_perturbation=(0.05, 0.1), eval_circuits=1
+    )
+    run_experiment(cfg, tmp_path, workers=1, progress=False)
+    (tmp_path / "figure3.png").unlink()
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert tmp_path / "figure3.png" in plot_results(results, tmp_path)
+    assert (tmp_path / "figure3.png").stat().st_size > 1000
+
+
+def test_a_seed_replays_from_the_config_in_results_json(tmp_path):
+    """results.json's config reads back into the config that ran (from_dict), and run_seed on
+    it gives that seed's figures again; what is not such a config is refused by name."""
+    import json
+
+    from corridor.baseline import PrioritizedSweepingConfig
+    from corridor.experiment import CorridorExperimentConfig, run_experiment, run_seed
+
+    cfg = _tiny_experiment(
+        seeds=(1,), eval_perturbation=(0.05, 0.1), ps=PrioritizedSweepingConfig(max_steps=200)
+    )
+    run_experiment(cfg, tmp_path, workers=1, progress=False)
+    results = json.loads((tmp_path / "results.json").read_text())
+    again = CorridorExperimentConfig.from_dict(results["config"])
+    assert again == cfg and again.to_dict() == results["config"]
+    replay = run_seed(again, 1, None)
+    stored = results["per_seed"][0]
+    assert {k: replay[k] for k in stored if k != "seconds"} == {
+        k: v for k, v in stored.items() if k != "seconds"
+    }
+    assert CorridorExperimentConfig.from_dict({"seeds": [4]}).seeds == (4,)  # the rest: defaults
+    with pytest.raises(ValueError, match=r"unknown CorridorExperimentConfig fields \['seed'\]"):
+        CorridorExperimentConfig.from_dict({"seed": 1})
+    with pytest.raises(ValueError, match="world: not WorldConfig's fields"):
+        CorridorExperimentConfig.from_dict({"world": {"radius": 0.1}})
+    with pytest.raises(ValueError, match="expected a dict of CorridorExperimentConfig's fields"):
+        CorridorExperimentConfig.from_dict(results)  # the whole results.json
+
+
+def test_eval_perturbation_must_be_a_pair_up_front():
+    """None passed the config (the env takes it) and the run then failed writing results.json
+    after every seed had run; now the config refuses it. A list or array is kept as a pair."""
+    import json
+
+    for bad in (None, 0.1, (0.1,), "ab"):
+        with pytest.raises(ValueError, match=r"eval_perturbation must be a \(metres, radians\)"):
+            _tiny_experiment(eval_perturbation=bad)
+    for given in ([0.05, 0.1], np.array([0.05, 0.1])):
+        cfg = _tiny_experiment(eval_perturbation=given)
+        assert cfg.eval_perturbation == (0.05, 0.1)
+        assert json.loads(json.dumps(cfg.to_dict(), default=float))["eval_perturbation"] == [
+            0.05,
+            0.1,
+        ]
+
+
+def test_an_unknown_or_broken_map_is_named_as_the_map(tmp_path):
+    """The map's own fault is the map_name's, not 'eval_perturbation on map ...'."""
+    from corridor.experiment import CorridorExperimentConfig
+
+    with pytest.raises(ValueError, match=r"^map_name: unknown map 'nomap'; shipped maps"):
+        CorridorExperimentConfig(map_name="nomap")
+    broken = tmp_path / "broken.json"
+    broken.write_text("{not json")
+    with pytest.raises(ValueError, match=r"^map_name: map .*broken.json' is not valid JSON"):
+        CorridorExperimentConfig(map_name=str(broken))
+    with pytest.raises(ValueError, match=r"^eval_perturbation on map 'figure2'"):
+        CorridorExperimentConfig(eval_perturbation=(0.3, 0.1))  # still the perturbation's
+
+
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["--workers", "0"], "--workers: expected >= 1, got 0"),
+        ([], "exists and is not an empty directory"),
+    ],
+)
+def test_the_module_command_refuses_a_mistake_before_writing(tmp_path, argv, says):
+    """`python -m corridor.experiment RUN_DIR`: a mistake is argparse's one line and exit code
+    2 (as sumo_scenarios.experiment's), not run_experiment's traceback."""
+    import subprocess
+    import sys
+
+    run = tmp_path / "run"
+    if not argv:  # a RUN_DIR that already holds a run
+        run.mkdir()
+        (run / "results.json").write_text("{}")
+    proc = subprocess.run(
+        [sys.executable, "-m", "corridor.experiment", str(run), *argv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2 and says in proc.stderr and "Traceback" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ([] if argv else ["results.json", "run"])
+
+
 # ---------------------------------------------------------------- figures
 def test_one_colour_per_action_and_map_legend():
     from corridor.render import ACTION_COLORS, PATH_COLOR, RAY_COLOR, map_figure

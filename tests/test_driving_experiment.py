@@ -116,6 +116,9 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
     for arm in ("arm_a", "arm_b"):
         report = evaluate_saved_policy(tmp_path / "seed_0" / "sessions" / arm, n_steps=20)
         assert report["steps"] == 20
+    for bad in (0, 2.5, "10"):  # named as given, not as the env's max_episode_steps
+        with pytest.raises(ValueError, match=f"^n_steps must be an int >= 1, got {bad!r}"):
+            evaluate_saved_policy(tmp_path / "seed_0" / "sessions" / "arm_a", n_steps=bad)
     assert on_disk["domain"] == "driving"
     # the clip analysis of docs/reproduction.md runs on a kept session: its counts are the session's
     clip = _clip_script(tmp_path / "seed_0" / "sessions" / "arm_a", capsys)
@@ -127,10 +130,19 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
     (tmp_path / "fig8_lanes_collisions.png").unlink()
     written = plot_results(on_disk, tmp_path)
     assert tmp_path / "fig8_lanes_collisions.png" in written
+    # results.json alone redraws them into a directory of one's own, made for them
+    apart = plot_results(on_disk, tmp_path / "redrawn" / "variant")
+    assert [p.name for p in apart] == [p.name for p in written] and len(apart) == 5
+    assert all(p.parent == tmp_path / "redrawn" / "variant" and p.is_file() for p in apart)
     text = format_summary(on_disk)
     lines = [ln for ln in text.splitlines() if ln.startswith("|")]
     assert lines[1] == "|---|---|---|---|" and all(ln.endswith("|") for ln in lines)
     assert "+-" not in text and "± 0.0" not in text  # one seed: no made-up spread
+    # the rows name this run's target, window and arm (b) size, not the paper's 80 %, 150, 1000
+    assert "| Fig 6 | non-interactive demos to 80% over 20 | 500 |" in text
+    assert "| Fig 8 | arm (b) 80 demos, collisions % | 4.0 |" in text
+    assert "| Fig 8 | arm (b) 80 demos, lane TV to the teacher |" in text
+    assert "over 150" not in text and "arm (b) 1000" not in text
     with pytest.raises(ValueError, match="teacher"):
         DrivingExperimentConfig(teacher="robot")
 
@@ -154,10 +166,30 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
         {"arm_b_stages": (0, 10)},
         {"eval_segment": 1.5},
         {"target_accuracy": True},
+        {"max_std": "2"},  # was Python's 'must be real number, not str'
+        {"max_std": True},  # was taken as a threshold of 1
+        {"max_std": None},
+        {"gmm_tol": "1e-4"},
+        {"gmm_tol": None},
+        # the window never fills: no seed could reach the target (ran, all "not reached")
+        {"max_noninteractive": 100, "accuracy_window": 150},
     ],
 )
 def test_experiment_config_refuses_what_every_worker_would_fail_on(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
+        DrivingExperimentConfig(**bad)
+
+
+@pytest.mark.parametrize(
+    "bad, says",
+    [
+        ({"confident_demos": 150, "stage_every": 40}, "stage_every, got 150 and 40"),
+        ({"arm_b_stages": (700, 600)}, r"strictly increasing, got \(700, 600\)"),
+        ({"eval_segment": 3, "extra_eval_segments": (3,)}, r"eval_segment 3 and .* \(3,\)"),
+    ],
+)
+def test_config_refusals_name_the_values_given(bad, says):
+    with pytest.raises(ValueError, match=says):
         DrivingExperimentConfig(**bad)
 
 
@@ -231,6 +263,34 @@ def test_two_seeds_give_a_paired_interval_and_a_writable_summary(tmp_path):
     )
     assert on_disk["acceptance"]["arm_a_beats_arm_b"] == (d["ci95"][1] < 0)
     assert on_disk["acceptance"] == res["acceptance"]
+
+
+def test_a_run_dir_left_by_a_stopped_run_is_refused_before_any_seed_runs(tmp_path):
+    """A run stopped before results.json leaves its seeds' sessions: a new run into that
+    directory is refused at once, naming them, instead of failing in a worker on the session
+    it would overwrite (after the seeds before it ran) with a pointer to ConfidentTeacher.resume."""
+    run_experiment(tiny_config(seeds=(0,)), tmp_path, workers=1, progress=False)
+    (tmp_path / "results.json").unlink()  # as if stopped before it was written
+    with pytest.raises(FileExistsError, match=r"seed_0\), left by an earlier run"):
+        run_experiment(tiny_config(seeds=(1, 0)), tmp_path, workers=1, progress=False)
+    assert not (tmp_path / "seed_1").exists()
+
+
+@pytest.mark.parametrize("workers", ["2", 2.5, None, 0, True])
+def test_workers_must_be_a_whole_number_of_processes(tmp_path, workers):
+    with pytest.raises(ValueError, match=r"workers must be an int >= 1, got "):
+        run_experiment(tiny_config(), tmp_path / "run", workers=workers, progress=False)
+    assert not (tmp_path / "run").exists()
+
+
+def test_per_seed_follows_the_configs_order_of_seeds(tmp_path):
+    """per_seed[i] is seeds[i]'s, with seeds given out of order, whichever worker ends first;
+    Figure 7 draws the first seed given."""
+    res = run_experiment(tiny_config(seeds=(1, 0)), tmp_path, workers=1, progress=False)
+    on_disk = json.loads((tmp_path / "results.json").read_text())
+    assert on_disk["seeds"] == [1, 0]
+    assert [r["seed"] for r in on_disk["per_seed"]] == [1, 0]
+    assert [r["seed"] for r in res["per_seed"]] == [1, 0]
 
 
 @pytest.mark.parametrize(
