@@ -20,6 +20,7 @@ import signal
 import sqlite3
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import gymnasium as gym
@@ -1033,6 +1034,30 @@ def test_a_ctrl_c_goes_to_the_handler_the_loop_found(tmp_path, monkeypatch):
         goes_on(ct, env, run)
     finally:
         signal.signal(signal.SIGINT, old)
+
+
+def test_a_ctrl_c_after_a_handler_of_ones_own_was_put_back_stops_the_loop(tmp_path):
+    """A handler of one's own installed for a while and then put back as it was (old =
+    signal.signal(SIGINT, mine) ... signal.signal(SIGINT, old)) left the loop's SIGINT hook
+    handing every later Ctrl-C to that handler, long gone: a Ctrl-C no longer raised
+    KeyboardInterrupt, in the loop or outside it (seen as the real-Ctrl-C tests failing after
+    such a test). The hook put back hands it to what it wrapped, the default handler."""
+    run = tmp_path / "run"
+    ct, env = session(run, noninteractive=False)
+    ct.run(max_steps=5)  # the loop's hold puts its hook in front of the default handler
+    seen: list[int] = []
+    old = signal.signal(signal.SIGINT, lambda signum, frame: seen.append(signum))
+    try:
+        ct.run(max_steps=10)  # a hold while one's own handler is in place
+        os.kill(os.getpid(), signal.SIGINT)
+        assert seen == [signal.SIGINT]
+    finally:
+        signal.signal(signal.SIGINT, old)
+    with pytest.raises(KeyboardInterrupt):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(1)
+    assert seen == [signal.SIGINT]
+    goes_on(ct, env, run)
 
 
 # -- what a new session or a resume must not take over ----------------------------------------

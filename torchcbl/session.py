@@ -507,20 +507,38 @@ def _kept_as_repr(value: Any) -> bool:
     return isinstance(value, dict) and set(value) == {"repr"}
 
 
-# The SIGINT handler the holds install once (main thread) and leave in place: outside a hold it
-# hands every signal to the handler it found (`_chained`), so a Ctrl-C acts as before; inside
-# one it only notes the signal. Installing it once costs ~10 us; a hold then costs ~1 us.
+# The SIGINT hook the holds install (main thread) and leave in place: outside a hold it hands
+# every signal to the handler it was put in front of, so a Ctrl-C acts as before; inside one it
+# only notes the signal. Each hook holds its own handler (`_hook`), so a handler of the user's
+# put in for a while and then replaced by the hook it replaced (old = signal.signal(SIGINT,
+# mine) ... signal.signal(SIGINT, old)) is forgotten with it. Installing a hook costs ~10 us; a
+# hold then costs ~1 us.
 _hold_depth = 0
 _held: list[tuple[int, Any]] = []
-_chained: Any = None
 
 
-def _sigint(signum: int, frame: Any) -> None:
-    if _hold_depth > 0:
-        if not _held:
-            _held.append((signum, frame))
-        return
-    _chained(signum, frame)
+def _hook(chained: Any) -> Any:
+    """A SIGINT handler in front of ``chained``: noted during a hold, else handed on."""
+
+    def _sigint(signum: int, frame: Any) -> None:
+        if _hold_depth > 0:
+            if not _held:
+                _held.append((signum, frame))
+            return
+        chained(signum, frame)
+
+    _sigint.torchcbl_chained = chained  # type: ignore[attr-defined]
+    return _sigint
+
+
+def _deliver(signum: int, frame: Any) -> None:
+    """Hand a held SIGINT to the handler in force now (the one behind our hook)."""
+    handler = signal.getsignal(signal.SIGINT)
+    handler = getattr(handler, "torchcbl_chained", handler)
+    if callable(handler):
+        handler(signum, frame)  # the default handler raises KeyboardInterrupt
+    elif handler == signal.SIG_DFL:
+        signal.raise_signal(signum)  # what it would have done: end the process
 
 
 class _InterruptHold:
@@ -535,22 +553,20 @@ class _InterruptHold:
     handler that is not a Python function (SIG_DFL kills the process, which the journal
     survives; SIG_IGN) is left alone: there, and with ``active=False``, the hold does nothing.
 
-    The first hold installs :func:`_sigint` in front of the handler it finds and leaves it
-    there (a later handler of the user's is wrapped again at the next hold): outside a hold
-    it passes every signal straight on.
+    A hold that finds a handler other than a hook of ours installs a hook in front of it
+    (:func:`_hook`) and leaves it there: outside a hold it passes every signal straight on.
     """
 
     def __init__(self, active: bool = True) -> None:
-        global _hold_depth, _chained
+        global _hold_depth
         self._on = False
         if not active or threading.current_thread() is not threading.main_thread():
             return
         current = signal.getsignal(signal.SIGINT)
-        if current is not _sigint:
+        if not hasattr(current, "torchcbl_chained"):
             if not callable(current):
                 return
-            _chained = current
-            signal.signal(signal.SIGINT, _sigint)
+            signal.signal(signal.SIGINT, _hook(current))
         _hold_depth += 1
         self._on = True
 
@@ -566,7 +582,7 @@ class _InterruptHold:
             return None
         signum, frame = _held.pop()
         try:
-            _chained(signum, frame)  # the default handler raises KeyboardInterrupt
+            _deliver(signum, frame)
         except BaseException as exc:  # noqa: BLE001 - handed to the caller to raise
             return exc
         return None
