@@ -815,6 +815,17 @@ def run_experiment(
     return results
 
 
+_FIGURE_FIELDS = (
+    "map_name",
+    "seeds",
+    "world",
+    "max_std",
+    "threshold_reading",
+    "eval_circuits",
+    "eval_perturbation",
+)
+
+
 def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     """Redraw Figures 3 and 4 and the map of a run directory from its first seed's session.
 
@@ -827,15 +838,11 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
 
     run_dir = Path(run_dir)
     cfg = results["config"]
-    config = CorridorExperimentConfig(
-        map_name=cfg["map_name"],
-        seeds=tuple(cfg["seeds"]),
-        world=WorldConfig(**cfg["world"]),
-        max_std=cfg["max_std"],
-        threshold_reading=cfg.get("threshold_reading", "literal"),
-        eval_circuits=cfg["eval_circuits"],
-        # the run's own: another robot or map may need a narrower one than the default
-        eval_perturbation=tuple(cfg.get("eval_perturbation", (0.1, math.radians(10.0)))),
+    # the fields the figures read, the run's own (another robot or map may need a narrower
+    # eval_perturbation than the default); a results.json from before threshold_reading was
+    # stored was taught with the literal reading
+    config = CorridorExperimentConfig.from_dict(
+        {"threshold_reading": "literal", **{k: cfg[k] for k in _FIGURE_FIELDS if k in cfg}}
     )
     seed = config.seeds[0]
     session = run_dir / "sessions" / f"seed{seed}"
