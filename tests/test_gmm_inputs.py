@@ -296,3 +296,40 @@ def test_numpy_float_settings_are_the_python_numbers_they_hold():
     fresh.load_state_dict(model.fit(x, y).state_dict())  # the same settings
     with pytest.raises(ValueError, match="var_floor"):
         GaussianMixtureSet(2, 2, var_floor=np.bool_(True))
+
+
+def test_parameters_a_dtype_cannot_hold_are_refused_not_answered_with_nan():
+    """A fitted model converted to float16 (or a state_dict holding NaN) classified every
+    observation with distance NaN, log_prob NaN and an arbitrary action, without a word: a
+    mean beyond float16's 65504 or a standard deviation below ~1.5e-5 overflows to inf there
+    (before 2026-11-27). Now such a model refuses to predict, naming the buffers and what to
+    do; a float16 model whose parameters fit still classifies."""
+    rng = np.random.default_rng(0)
+    y = np.arange(60) % 3
+    offset = rng.normal(size=(60, 2)) + 1e5 + y[:, None]  # means beyond 65504
+    tiny = (rng.normal(size=(60, 2)) + y[:, None]) * 1e-5  # precisions beyond 65504
+    for x, bad in ((offset, "means_"), (tiny, "precisions_cholesky_")):
+        model = GaussianMixtureSet(3, 2, 3).fit(x, y)
+        half = GaussianMixtureSet(3, 2, 3).to(torch.float16)
+        half.load_state_dict(model.state_dict())
+        for rows in (x[:1], x[:5], np.tile(x, (5, 1))):  # the N = 1, numpy and torch paths
+            for call in (half.classify, half.log_prob):
+                with pytest.raises(RuntimeError, match=rf"non-finite.*{bad}.*float16.*float64"):
+                    call(rows)
+        with pytest.raises(RuntimeError, match="non-finite"):
+            half.aic(x, y)
+        back = half.to(torch.float64)  # converting back cannot restore them
+        with pytest.raises(RuntimeError, match=rf"{bad}.*round trip through float16"):
+            back.classify(x)
+    x, y = _data()
+    model = GaussianMixtureSet(3, 3, 4).fit(x, y)
+    state = {k: v.clone() for k, v in model.state_dict().items()}
+    state["weights_"][0, 0] = math.nan
+    damaged = GaussianMixtureSet(3, 3, 4)
+    damaged.load_state_dict(state)
+    with pytest.raises(RuntimeError, match=r"weights_: .*NaN or inf"):
+        damaged.classify(x)
+    half = GaussianMixtureSet(3, 3, 4).to(torch.float16)
+    half.load_state_dict(model.state_dict())
+    c = half.classify(x)
+    assert bool(torch.isfinite(c.distance).all()) and (c.action == model.classify(x).action).all()

@@ -579,6 +579,7 @@ class GaussianMixtureSet(nn.Module):
         """Prediction tables derived from the buffers, computed once per fit/load/.to()."""
         if self._cache is not None:
             return self._cache
+        self._check_finite_state()
         a, k, d = self.n_actions, self.max_components, self.n_features
         dev = self.means_.device
         f64 = torch.float64
@@ -607,6 +608,41 @@ class GaussianMixtureSet(nn.Module):
         cache["has_data"] = torch.from_numpy(cache["has_data_np"]).to(dev)
         self._cache = cache
         return cache
+
+    def _check_finite_state(self) -> None:
+        """Refuse to predict from parameters that are not finite (NaN answers otherwise).
+
+        A model converted to float16 cannot hold a mean beyond +-65504 or a precision above
+        it (a standard deviation below about 1.5e-5): those become inf, and every distance
+        and log-probability NaN. A state_dict holding NaN or inf is refused the same way.
+        """
+        bad = [
+            name
+            for name in ("weights_", "means_", "precisions_cholesky_", "log_det_")
+            if not bool(torch.isfinite(getattr(self, name)).all())
+        ]
+        prior = self.log_prior_
+        if bool((torch.isnan(prior) | (prior == math.inf)).any()):
+            bad.append("log_prior_")
+        if not bad:
+            return
+        dtype = self.means_.dtype
+        if dtype != torch.float64:
+            why = (
+                f"the model was converted to {dtype}, whose range cannot hold them (float16: "
+                "a mean beyond +-65504 or a standard deviation below about 1.5e-5); converting "
+                "it back does not restore them: load the float64 state_dict of the fitted "
+                "model (or refit) and keep it in float64 or float32"
+            )
+        else:
+            why = (
+                "its state holds NaN or inf (a damaged state_dict, or a round trip through "
+                "float16): load the float64 state_dict of the fitted model, or refit"
+            )
+        raise RuntimeError(
+            "GaussianMixtureSet: cannot classify or score observations with non-finite "
+            f"parameters in {', '.join(bad)}: {why}"
+        )
 
     # ------------------------------------------------------------------ input checks
     def _check_observations(self, observations: Any, name: str = "observations") -> np.ndarray:
@@ -1181,7 +1217,8 @@ class GaussianMixtureSet(nn.Module):
         """log p_a(o) + log Pr(G_a) for every observation and action (Eq. 7's terms).
 
         observations [N, D] -> Tensor [N, A] float64 (natural log). -inf for an action without
-        data. Raises RuntimeError before any fit.
+        data. Raises RuntimeError before any fit, and when the model's parameters are not
+        finite (converted to float16, which cannot hold them, or loaded from a damaged state).
         """
         if not self.is_fitted:
             raise RuntimeError("log_prob() needs a fitted model: call fit() first")
@@ -1216,7 +1253,8 @@ class GaussianMixtureSet(nn.Module):
         """Classify observations [N, D] by Eq. 7 and report how sure the model is.
 
         Returns a :class:`Classification` with fields of length N. Before any fit: action -1,
-        confidence 0, distance +inf, posterior uniform 1/A.
+        confidence 0, distance +inf, posterior uniform 1/A. Raises RuntimeError when the
+        fitted parameters are not finite (see :meth:`log_prob`).
         """
         if not self.is_fitted:
             x = self._check_observations(observations)
