@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
 from torchcbl.gmm import Classification, GaussianMixtureSet
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _data(seed: int = 0, n: int = 60, d: int = 3, a: int = 3):
@@ -333,3 +338,47 @@ def test_parameters_a_dtype_cannot_hold_are_refused_not_answered_with_nan():
     half.load_state_dict(model.state_dict())
     c = half.classify(x)
     assert bool(torch.isfinite(c.distance).all()) and (c.action == model.classify(x).action).all()
+
+
+_PEAK_SCRIPT = """
+import resource, sys
+import numpy as np
+from torchcbl.gmm import GaussianMixtureSet
+rng = np.random.default_rng(0)
+y = np.arange(400) % 4
+x = rng.normal(size=(400, 3)) * (1 + np.arange(400) % 7)[:, None] + y[:, None] * 3
+model = GaussianMixtureSet(4, 3, 20, var_floor=0.0).fit(x, y)
+assert min(model.n_components_.tolist()) >= 15, model.n_components_
+q = rng.normal(size=(300_000, 3)) * 5
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+c = model.classify(q)
+lp = model.log_prob(q)
+print((resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="ru_maxrss in KiB: Linux")
+def test_a_large_batch_is_scored_in_bounded_memory():
+    """classify/log_prob of N observations held an [N, A*K*D] float64 array and its square
+    at once: 300,000 points (7 MB) of a 4-action, 3-D model with k <= 20 raised the process's
+    peak memory by 1.3 GB, a 1000 x 1000 decision map by ~5 GB (before 2026-11-27). Now a large
+    batch is scored in blocks of rows (peak ~0.35 GB here, whatever N), with the same answers."""
+    out = subprocess.run(
+        [sys.executable, "-c", _PEAK_SCRIPT], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    assert float(out.stdout.split()[-1]) < 700.0  # MiB
+    rng = np.random.default_rng(1)
+    y = np.arange(400) % 4
+    x = rng.normal(size=(400, 3)) + y[:, None] * 3
+    model = GaussianMixtureSet(4, 3, 20).fit(x, y)
+    q = rng.normal(size=(150_000, 3)) * 4
+    q[-1] = 1e200  # a far row in the last block: scored exactly there
+    big, lp = model.classify(q), model.log_prob(q)
+    assert big.action.shape == (150_000,) and lp.shape == (150_000, 4)
+    for start in range(0, len(q), 30_000):  # the same rows in smaller batches
+        sl = slice(start, start + 30_000)
+        c = model.classify(q[sl])
+        assert torch.equal(c.action, big.action[sl])
+        torch.testing.assert_close(c.distance, big.distance[sl], rtol=1e-12, atol=0)
+        torch.testing.assert_close(c.posterior, big.posterior[sl], rtol=1e-12, atol=1e-300)
+        torch.testing.assert_close(model.log_prob(q[sl]), lp[sl], rtol=1e-12, atol=0)

@@ -119,6 +119,9 @@ def _settings_values(codes: list[int]) -> dict[str, Any]:
 
 _ABS_FLOOR = 1e-6
 _NUMPY_MAX_ROWS = 256  # below this many rows (CPU), classify/log_prob run in numpy: less overhead
+# larger batches are scored in blocks of rows whose [rows, A*K*D] scores hold at most this many
+# float64 values (128 MiB): memory stays bounded whatever N (a decision map of 10^6 points)
+_BLOCK_VALUES = 1 << 24
 _LOG_2PI = math.log(2.0 * math.pi)
 _VERY_NEGATIVE = -1.0e300  # log weight of padded components in the prediction tables
 
@@ -1240,21 +1243,32 @@ class GaussianMixtureSet(nn.Module):
         # no_grad, not inference_mode: the caller gets ordinary tensors it may modify in place
         # or use with autograd, whatever the batch size
         with self._predict_threads(x.shape[0]), torch.no_grad():
-            lp, _ = self._component_scores_torch(x)  # type: ignore[arg-type]
-            out = torch.logsumexp(lp, -1) + tables["log_prior"]
-            low = ~(lp.amax(-1) > _FAR_SCORE)[:, tables["has_data"]]
-            far = low.any(1)
-            if bool(far.any()):
-                value = self._far_scores(x[far].cpu().numpy())[0]  # type: ignore[index]
-                out[far] = torch.from_numpy(value).to(out.device, out.dtype)
-            return out
+            return torch.cat([self._log_prob_torch(b) for b in self._blocks(x)])  # type: ignore[arg-type]
+
+    def _blocks(self, x: Tensor) -> list[Tensor]:
+        """x [N, D] as consecutive blocks of rows of at most ``_BLOCK_VALUES`` scores each."""
+        rows = max(1, _BLOCK_VALUES // (self.n_actions * self.max_components * self.n_features))
+        return list(torch.split(x, rows)) if x.shape[0] > rows else [x]
+
+    def _log_prob_torch(self, x: Tensor) -> Tensor:
+        tables = self._tables()
+        lp, _ = self._component_scores_torch(x)
+        out = torch.logsumexp(lp, -1) + tables["log_prior"]
+        low = ~(lp.amax(-1) > _FAR_SCORE)[:, tables["has_data"]]
+        far = low.any(1)
+        if bool(far.any()):
+            value = self._far_scores(x[far].cpu().numpy())[0]
+            out[far] = torch.from_numpy(value).to(out.device, out.dtype)
+        return out
 
     def classify(self, observations: Any) -> Classification:
         """Classify observations [N, D] by Eq. 7 and report how sure the model is.
 
         Returns a :class:`Classification` with fields of length N. Before any fit: action -1,
         confidence 0, distance +inf, posterior uniform 1/A. Raises RuntimeError when the
-        fitted parameters are not finite (see :meth:`log_prob`).
+        fitted parameters are not finite (see :meth:`log_prob`). A large batch is scored in
+        blocks of rows (at most 2**24 component coordinates, A * K * D per row, at a time), so
+        its memory stays bounded whatever N; :meth:`log_prob` alike.
         """
         if not self.is_fitted:
             x = self._check_observations(observations)
@@ -1271,7 +1285,10 @@ class GaussianMixtureSet(nn.Module):
                 return self._classify_one(x)  # type: ignore[arg-type]
             return self._classify_np(x)  # type: ignore[arg-type]
         with self._predict_threads(x.shape[0]), torch.no_grad():  # ordinary tensors out
-            return self._classify_torch(x)  # type: ignore[arg-type]
+            blocks = [self._classify_torch(b) for b in self._blocks(x)]  # type: ignore[arg-type]
+        if len(blocks) == 1:
+            return blocks[0]
+        return Classification(*(torch.cat(field) for field in zip(*blocks, strict=True)))
 
     def _predict_threads(self, n: int) -> contextlib.AbstractContextManager[None]:
         """The thread policy for scoring n rows: [N, D] @ [D, A*K*D] is the work."""
