@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from torchcbl import AutoThresholdRule, DistanceRule, GaussianMixtureSet, PosteriorRule
-from torchcbl.confidence import rule_from_config, rule_to_config
+from torchcbl.confidence import chi2_quantile, rule_from_config, rule_to_config
 from torchcbl.gmm import Classification
 
 
@@ -153,3 +153,19 @@ def test_auto_threshold_update_refuses_labels_that_do_not_fit_the_observations(b
     for labels in (y, y.tolist(), torch.from_numpy(y), y.astype(np.uint8)):
         rule.update(model, x, labels)
         assert rule.thresholds is not None
+
+
+def test_chi2_quantile_is_right_in_both_tails():
+    """chi2_quantile(1e-100, 1) returned 3.4e-60 (SciPy: 1.6e-200): its 200 halvings of
+    [0, dof + 10] stopped far above a tiny quantile; near q = 1, gammainc rounds to 1 - a few
+    ulps, so q = 1 - 1e-15 came out 0.17% low and 1 - 1e-10 2.6e-8 low (before 2026-11-27).
+    Now both tails match SciPy, and every q up to 0.999 (the corridor's DistanceRule(quantile=
+    0.9545) included) gives the same bits as before."""
+    stats = pytest.importorskip("scipy.stats")
+    for d in (1, 2, 3, 10, 100, 1000):
+        for q in (1e-300, 1e-100, 1e-30, 1e-12, 0.9995, 1 - 1e-6, 1 - 1e-10, 1 - 1e-15):
+            want = stats.chi2.ppf(q, d)
+            if want > 0:  # 0 where the quantile is below the smallest float
+                assert chi2_quantile(q, d) == pytest.approx(want, rel=1e-10, abs=0), (q, d)
+    assert chi2_quantile(0.9545, 3) == 8.024894669075394  # the corridor's threshold squared
+    assert chi2_quantile(0.95, 4) == 9.487729036781218
