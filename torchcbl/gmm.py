@@ -55,6 +55,11 @@ Threads
 Fits and classification run on one torch thread in a scope that restores the caller's count;
 only an EM of at least :data:`SINGLE_THREAD_WORK` gets the caller's threads, and only while
 the machine has a spare core. The global setting is never changed behind the caller's back.
+Such an EM's last bits can depend on the count it got, and so on the machine's load at that
+moment: a matrix product over many points may split its sums between threads (one action of
+20,000 points, 4-D, k <= 8 fitted on one and on two threads differed in the 14th digit). On
+one torch thread (``torch.set_num_threads(1)``, as the experiments' workers run) every fit and
+refit is reproducible bit for bit.
 """
 
 from __future__ import annotations
@@ -751,7 +756,9 @@ class GaussianMixtureSet(nn.Module):
 
         Before any fit, ``refit`` is ``fit``. The result is a pure function of the state and
         the data: the same seed and data sequence give the same model, bit for bit, and a
-        model loaded from this one's ``state_dict`` refits exactly as this one does.
+        model loaded from this one's ``state_dict`` refits exactly as this one does (on one
+        torch thread; an EM large enough to take the caller's threads may differ in its last
+        bits with the count it got, see the module's "Threads").
 
         Args:
             observations: [N, D] real array, N >= 1, every demonstration so far.
