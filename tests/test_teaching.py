@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import pickle
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -205,6 +206,56 @@ def test_policy_stands_alone_and_evaluates():
     assert len(plain) == 7 and plain[0].confidence is None
     again = evaluate_policy(policy, rare_regions_world(episode_length=10), n_episodes=3, seed=5)
     assert again == recs
+
+
+class _ActedOn(gym.Wrapper):
+    """Notes, for every env.step, the observation the env was in when the action ran."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.acted_on: list[tuple[float, ...]] = []
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self.now = tuple(np.asarray(obs, dtype=np.float64).tolist())
+        return obs, info
+
+    def step(self, action):
+        self.acted_on.append(self.now)
+        out = self.env.step(action)
+        self.now = tuple(np.asarray(out[0], dtype=np.float64).tolist())
+        return out
+
+
+def test_evaluating_on_the_teaching_env_mid_episode_starts_a_new_episode(tmp_path):
+    """evaluate_policy on the env a session teaches on, with the session in the middle of an
+    episode, moves the env under the loop: its next step must not decide, label and record on
+    the observation it held from before, which the env no longer shows."""
+    env = _ActedOn(rare_regions_world(episode_length=10))
+    ct = ConfidentTeacher(
+        env, oracle(env.unwrapped), config=TeachingConfig(), run_dir=tmp_path / "s",
+        progress=False,
+    )  # fmt: skip
+    ct.run(max_steps=15)  # stops in the middle of episode 1
+    evaluate_policy(ct.policy, env, n_steps=3, seed=7)
+    with pytest.warns(UserWarning, match="left unfinished"):
+        ct.run(max_steps=20)
+    recs = ct.records
+    # every step's record holds the observation its action ran in
+    teaching = env.acted_on[:15] + env.acted_on[18:]
+    assert [r.observation for r in recs] == teaching
+    assert [r.episode for r in recs[14:17]] == [1, 2, 2]  # episode 1 left unfinished
+    assert not (recs[14].terminated or recs[14].truncated)
+    ct.close()
+    again = ConfidentTeacher.resume(tmp_path / "s", env, oracle(env.unwrapped), progress=False)
+    assert again.records == recs and again.n_episodes == ct.n_episodes == 1
+    again.close()
+    # an evaluation on an env of its own leaves the session's episode whole
+    other = make(rare_regions_world(episode_length=10))
+    other.run(max_steps=15)
+    evaluate_policy(other.policy, rare_regions_world(episode_length=10), n_steps=3, seed=7)
+    other.run(max_steps=20)
+    assert [r.episode for r in other.records[14:17]] == [1, 1, 1]
 
 
 def _demos_to_reach(env_fn, seed, eval_x, eval_y, **cfg):

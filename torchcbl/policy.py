@@ -4,6 +4,7 @@ every env and teacher answer goes through before the loop or an evaluation uses 
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -54,6 +55,31 @@ class GreedyPolicy:
 
     def __repr__(self) -> str:
         return f"GreedyPolicy({type(self.model).__name__})"
+
+
+# Who last moved each env object (keyed weakly by its unwrapped core, so that a wrapper and the
+# env it wraps are one env): a teaching loop notes its own token after each of its resets, and
+# evaluate_policy a fresh one as it starts. A loop that finds another token on its env in the
+# middle of an episode knows the env moved under it (ConfidentTeacher.step).
+_ENV_USERS: weakref.WeakKeyDictionary[Any, object] = weakref.WeakKeyDictionary()
+
+
+def _note_env_user(env: Any, token: object) -> None:
+    """Note ``token`` as the last user of ``env`` (an env that cannot be weakly referenced or
+    hashed is not tracked)."""
+    try:
+        _ENV_USERS[getattr(env, "unwrapped", env)] = token
+    except TypeError:
+        pass
+
+
+def _env_user(env: Any, default: object = None) -> object:
+    """The token last noted on ``env``; ``default`` for an env no one noted or that is not
+    tracked."""
+    try:
+        return _ENV_USERS.get(getattr(env, "unwrapped", env), default)
+    except TypeError:
+        return default
 
 
 def check_env(env: gym.Env) -> tuple[int, int]:
@@ -200,6 +226,12 @@ def evaluate_policy(
     a :class:`GreedyPolicy` also fills the confidence fields, any other callable leaves them
     None. :func:`episode_results` turns them into per-episode returns and successes.
 
+    The env is reset first. Evaluating on the env a :class:`~torchcbl.teaching.ConfidentTeacher`
+    teaches on, between its steps, moves that env away from the observation the loop holds:
+    the loop notices at its next step, leaves the episode it was in unfinished (as a resume
+    does) and starts a new one, with a warning. To keep the session's episodes whole, evaluate
+    on an env of its own (``gymnasium.make`` it again).
+
     The env's answers are checked as the teaching loop checks them: a reset that is not the pair
     (observation, info), a step that is not the gymnasium 5-tuple with bool flags, a dict
     info and a finite reward, or an observation that is not D finite numbers, is an
@@ -238,6 +270,7 @@ def evaluate_policy(
             "give one seed per episode (or leave n_episodes out to run one per seed)"
         )
     records: list[StepRecord] = []
+    _note_env_user(env, object())  # a teaching loop mid-episode on this env starts a new one
     raw, info = reset_answer(env.reset(seed=seeds[0] if seeds is not None else seed))
     obs = obs_array(raw, n_features, "env.reset")
     episode, done_episodes = 0, 0
