@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import pickle
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -511,6 +512,33 @@ def test_a_strategys_unknown_phase_is_refused_before_the_teacher_is_asked(tmp_pa
 
     ct = ConfidentTeacher(env, teacher, strategy=Odd(), run_dir=tmp_path / "r", progress=False)
     with pytest.raises(RuntimeError, match=rf"decided with phase '{phase}'; expected"):
+        ct.run(max_steps=3)
+    ct.close()
+    assert asked == [] and load_records(tmp_path / "r") == []
+
+
+@pytest.mark.parametrize("answer", [(True, "confident"), None], ids=["tuple", "none"])
+def test_a_decide_that_returns_no_decision_is_named_before_the_teacher_is_asked(tmp_path, answer):
+    """A strategy of one's own whose decide() returns a plain tuple, or nothing (a subclass of
+    the Strategy protocol that left decide() out), is named with what a Decision is."""
+    from torchcbl.session import load_records
+    from torchcbl.strategies.bc import BehaviourCloning
+
+    class Mine(BehaviourCloning):
+        def decide(self, obs, c):
+            return answer
+
+    env = rare_regions_world()
+    asked = []
+
+    def teacher(obs, info):
+        asked.append(1)
+        return oracle(env)(obs, info)
+
+    ct = ConfidentTeacher(env, teacher, strategy=Mine(), run_dir=tmp_path / "r", progress=False)
+    with pytest.raises(
+        RuntimeError, match=rf"decide\(\) returned {re.escape(repr(answer))}; expected a .*Decision"
+    ):
         ct.run(max_steps=3)
     ct.close()
     assert asked == [] and load_records(tmp_path / "r") == []

@@ -856,6 +856,13 @@ class ConfidentTeacher:
         distance = float(_np(c.distance)[0])
         posterior = tuple(_np(c.posterior)[0].tolist())
         decision: Decision = self.strategy.decide(obs, c)
+        if not (hasattr(decision, "ask") and hasattr(decision, "phase")):
+            raise RuntimeError(
+                f"strategy {self.strategy!r}: decide() returned {decision!r:.80}; expected a "
+                "torchcbl.strategies.Decision(ask, phase, state=None), e.g. "
+                "Decision(True, 'confident') (see torchcbl.strategies). Nothing was recorded "
+                "for this step."
+            )
         ask, phase = bool(decision.ask), decision.phase
         if phase not in ("noninteractive", "confident"):  # before the teacher is asked
             raise RuntimeError(
