@@ -544,6 +544,55 @@ def test_a_decide_that_returns_no_decision_is_named_before_the_teacher_is_asked(
     assert asked == [] and load_records(tmp_path / "r") == []
 
 
+class _Observing(gym.Env):
+    """An env observing ``space`` (sampled), with 2 actions, 5 steps an episode."""
+
+    def __init__(self, space):
+        self.observation_space = space
+        self.action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.observation_space.seed(seed)
+        self.t = 0
+        return self.observation_space.sample(), {}
+
+    def step(self, action):
+        self.t += 1
+        return self.observation_space.sample(), 0.0, False, self.t >= 5, {}
+
+
+@pytest.mark.parametrize(
+    ("space", "wrap"),
+    [
+        (gym.spaces.Box(0, 4, (2,), np.int64), "DtypeObservation(env, np.float64)"),
+        (gym.spaces.Box(0.0, 1.0, (1, 3), np.float32), "FlattenObservation(env)"),
+        (
+            gym.spaces.Dict(
+                {"pos": gym.spaces.Box(0, 4, (2,), np.int64), "goal": gym.spaces.Discrete(3)}
+            ),
+            "DtypeObservation(gymnasium.wrappers.FlattenObservation(env), np.float64)",
+        ),
+    ],
+    ids=["int-box", "row-box", "dict-with-ints"],
+)
+def test_an_observation_space_that_is_no_1d_float_box_is_refused_with_the_wrapper_that_fits(
+    space, wrap
+):
+    """An integer grid position, a [1, D] row or a Dict with integer parts: the refusal names
+    the gymnasium wrapper(s) that make the env one the loop takes, and that wrapping works.
+    (It said 'Flatten the observation (FlattenObservation) and cast to float' for all, and an
+    integer Box stays integer when flattened.)"""
+    env = _Observing(space)
+    with pytest.raises(ValueError, match=re.escape(f"env = gymnasium.wrappers.{wrap}.")) as info:
+        ConfidentTeacher(env, lambda obs, i: 0, progress=False)
+    advice = str(info.value).split("env = ")[1].rstrip(".")
+    wrapped = eval(advice, {"gymnasium": gym, "np": np, "env": env})
+    ct = ConfidentTeacher(wrapped, lambda obs, i: int(obs[0] > 1), progress=False)
+    ct.run(max_steps=12)
+    assert ct.n_steps == 12 and ct.n_episodes == 2
+
+
 def test_commit_every_is_checked(tmp_path):
     env = rare_regions_world()
     for bad in (0, "32", 2.0, True):

@@ -98,9 +98,29 @@ def check_env(env: gym.Env) -> tuple[int, int]:
     ):
         raise ValueError(
             f"expected an env with a 1-D float Box observation space, got {obs_space!r}. "
-            "Flatten the observation (gymnasium.wrappers.FlattenObservation) and cast to float."
+            + _obs_space_hint(obs_space)
         )
     return int(obs_space.shape[0]), int(space.n)
+
+
+def _obs_space_hint(space: Any) -> str:
+    """How to wrap an env whose observation space is not a 1-D float Box into one."""
+    flat = "gymnasium.wrappers.FlattenObservation(env)"
+    cast = "gymnasium.wrappers.DtypeObservation(env, np.float64)"
+    try:
+        flat_space = gym.spaces.flatten_space(space)
+    except Exception:  # noqa: BLE001 - a space gymnasium cannot flatten (or no space at all)
+        return (
+            f"Wrap the env so that it observes a 1-D float array (for a Dict, Tuple or "
+            f"multi-dimensional Box space: {flat}; for integer observations: {cast})."
+        )
+    flat_needed = not (isinstance(space, gym.spaces.Box) and len(space.shape) == 1)
+    cast_needed = not np.issubdtype(flat_space.dtype, np.floating)
+    if flat_needed and cast_needed:
+        return f"Flatten it and cast it to float: env = {cast.replace('(env', '(' + flat)}."
+    if flat_needed:
+        return f"Flatten it: env = {flat}."
+    return f"Cast it to float: env = {cast}."
 
 
 def _check_policy_fits(policy: Any, n_features: int, n_actions: int) -> None:
