@@ -344,6 +344,41 @@ def test_numpy_numbers_and_tuples_in_to_config_are_stored_and_resume(tmp_path):
         )
 
 
+class _OneBool:
+    """A rule of one's own answering one bool (or a 0-d tensor) instead of one per row."""
+
+    def __init__(self, zero_d):
+        self.zero_d = zero_d
+
+    def is_confident(self, c):
+        near = c.distance[0] <= 2.0
+        return near if self.zero_d else bool(near)
+
+    def update(self, model, observations, actions):
+        pass
+
+
+@pytest.mark.parametrize("zero_d", [False, True], ids=["bool", "0-d-tensor"])
+def test_a_rule_answering_one_bool_is_told_it_answers_one_per_row(tmp_path, zero_d):
+    """It failed in the loop with "'bool' object is not subscriptable" or torch's "invalid index
+    of a 0-dim tensor", which name neither the rule nor what it should return."""
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        rule=_OneBool(zero_d),
+        config=TeachingConfig(noninteractive=False, max_new=3),
+        run_dir=tmp_path / "r",
+        progress=False,
+    )
+    with pytest.raises(
+        TypeError, match=r"_OneBool object .*is_confident\(\) returned .*expected one bool per "
+    ):
+        ct.run(max_steps=20)
+    ct.close()
+    assert len(load_records(tmp_path / "r")) == 3  # the steps before the first fit, asked
+
+
 def _right_of_zero(observation, info):
     return int(observation[0] > 0)
 

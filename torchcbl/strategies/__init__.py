@@ -189,8 +189,18 @@ class ConfidentExecution(_Phased):
 
     def _confident(self, observation: np.ndarray, c: Classification) -> bool:
         if self._with_obs:
-            return bool(self.rule.is_confident(c, observation[None])[0])
-        return bool(self.rule.is_confident(c)[0])
+            answer = self.rule.is_confident(c, observation[None])
+        else:
+            answer = self.rule.is_confident(c)
+        try:
+            return bool(answer[0])
+        except (TypeError, IndexError, KeyError):  # a bool, a 0-d tensor or array: no rows
+            raise TypeError(
+                f"rule {self.rule!r}: is_confident() returned {answer!r:.80}; expected one bool "
+                "per classified observation, a bool tensor [N] (the loop classifies one "
+                "observation at a time: N = 1), e.g. `return c.distance <= 2.0`. Nothing was "
+                "recorded for this step."
+            ) from None
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
         """After every refit: the rule's ``update`` with the training set (``observations``
