@@ -209,6 +209,32 @@ def test_episode_results_are_the_per_episode_returns_and_successes():
     assert episode_results([]) == []
 
 
+def test_evaluate_policy_calls_a_greedypolicy_subclass_of_ones_own():
+    """A GreedyPolicy subclass that answers in its own __call__ (an action mask, exploration)
+    is called, as evaluate_policy says a policy is; its action was ignored for the model's,
+    so evaluating a masked policy measured the unmasked one. The confidence fields stay."""
+    from torchcbl import GreedyPolicy
+
+    env = rare_regions_world(episode_length=10)
+    ct = _teacher(env, max_steps=200)
+    ct.run()
+
+    class NeverZero(GreedyPolicy):
+        def __call__(self, observation):
+            action = super().__call__(observation)
+            return 1 if action == 0 else action
+
+    plain = evaluate_policy(ct.policy, rare_regions_world(episode_length=10), n_steps=60, seed=4)
+    assert 0 in {r.executed_action for r in plain}  # the model does answer 0 on these
+    masked = evaluate_policy(
+        NeverZero(ct.model), rare_regions_world(episode_length=10), n_steps=60, seed=4
+    )
+    assert 0 not in {r.executed_action for r in masked}
+    assert all(r.distance is not None and r.posterior is not None for r in masked)
+    first = masked[0]
+    assert first.observation == plain[0].observation and first.distance == plain[0].distance
+
+
 def _sleep_then_write(path: str) -> None:
     import time
 

@@ -243,8 +243,9 @@ def evaluate_policy(
       ``n_episodes`` then defaults to ``len(seed)`` and may not exceed it.
 
     Records have ``phase="evaluation"``, ``autonomous=True`` and ``episode`` counting from 0;
-    a :class:`GreedyPolicy` also fills the confidence fields, any other callable leaves them
-    None. :func:`episode_results` turns them into per-episode returns and successes.
+    a :class:`GreedyPolicy` (a subclass too, whose own ``__call__`` then gives the action) also
+    fills the confidence fields, any other callable leaves them None. :func:`episode_results`
+    turns them into per-episode returns and successes.
 
     The env is reset first. Evaluating on the env a :class:`~torchcbl.teaching.ConfidentTeacher`
     teaches on, between its steps, moves that env away from the observation the loop holds:
@@ -289,6 +290,10 @@ def evaluate_policy(
             f"evaluate_policy: n_episodes={n_episodes} but only {len(seeds)} seeds were given; "
             "give one seed per episode (or leave n_episodes out to run one per seed)"
         )
+    # a GreedyPolicy's classification fills the confidence fields; its action is the model's
+    # unless a subclass answers in a __call__ of its own (masking, exploration), which is called
+    greedy = isinstance(policy, GreedyPolicy)
+    own_call = not greedy or type(policy).__call__ is not GreedyPolicy.__call__
     records: list[StepRecord] = []
     _note_env_user(env, object())  # a teaching loop mid-episode on this env starts a new one
     raw, info = reset_answer(env.reset(seed=seeds[0] if seeds is not None else seed))
@@ -298,14 +303,15 @@ def evaluate_policy(
         n_episodes is None or done_episodes < n_episodes
     ):
         confidence = distance = posterior = None
-        if isinstance(policy, GreedyPolicy):
-            c = policy.classify(obs)
-            answer: Any = int(c.action[0])
+        answer: Any = None
+        if greedy:
+            c = policy.classify(obs)  # type: ignore[attr-defined]
+            answer = int(c.action[0])
             confidence, distance = float(c.confidence[0]), float(c.distance[0])
             posterior = tuple(c.posterior[0].tolist())
-        elif uses_info:
-            answer = policy(np.array(raw, copy=True), dict(info or {}))
-        else:
+        if own_call and uses_info:
+            answer = policy(np.array(raw, copy=True), dict(info or {}))  # type: ignore[call-arg]
+        elif own_call:
             answer = policy(np.array(raw, copy=True))
         action = as_action(answer, n_actions)
         if action is None:
