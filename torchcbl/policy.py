@@ -384,6 +384,16 @@ def episode_results(records: Sequence[StepRecord]) -> list[EpisodeResult]:
     """Per-episode returns and successes of the records of :func:`evaluate_policy` (or of a
     teaching session, :func:`torchcbl.load_records`), in episode order.
 
+    An episode is a run of consecutive records with the same ``episode`` index; a record after
+    one that ended its episode (terminated or truncated), or whose ``step`` does not follow the
+    one before (a list that starts again from step 0), starts a new one. So the records of
+    several evaluations may be joined (each numbers its episodes from 0)::
+
+        records = []
+        for s in range(10):
+            records += evaluate_policy(policy, env, n_episodes=1, seed=s)
+        results = episode_results(records)  # 10 episodes
+
     Example::
 
         results = episode_results(evaluate_policy(policy, env, seed=range(10)))
@@ -410,9 +420,16 @@ def episode_results(records: Sequence[StepRecord]) -> list[EpisodeResult]:
         )
 
     for r in records:
-        if group and r.episode != group[-1].episode:
-            close()
-            group = []
+        if group:
+            prev = group[-1]
+            if (
+                r.episode != prev.episode
+                or prev.terminated
+                or prev.truncated
+                or r.step <= prev.step
+            ):
+                close()
+                group = []
         group.append(r)
     if group:
         close()
