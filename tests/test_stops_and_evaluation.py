@@ -209,6 +209,53 @@ def test_episode_results_are_the_per_episode_returns_and_successes():
     assert episode_results([]) == []
 
 
+def test_episode_results_of_joined_evaluations_keep_their_episodes_apart():
+    """Joining the records of several evaluations (one per seed, each numbering its episodes
+    from 0) made episode_results merge them into one episode: 3 circuits of 10 steps came out
+    as one of 30 steps with the three returns summed and the last one's success."""
+    world = rare_regions_world(episode_length=10)
+    teacher = oracle(world)
+    records, alone = [], []
+    for s in range(3):
+        one = evaluate_policy(teacher, world, n_episodes=1, seed=s, uses_info=True)
+        records += one
+        alone += episode_results(one)
+    assert [r.episode for r in records] == [0] * 30
+    assert episode_results(records) == alone and len(alone) == 3
+    assert [e.steps for e in alone] == [10, 10, 10]
+    # evaluations cut by n_steps (their episode unfinished) are told apart by their steps
+    cut = [evaluate_policy(teacher, world, n_steps=4, seed=s, uses_info=True) for s in (0, 1)]
+    got = episode_results(cut[0] + cut[1])
+    assert got == episode_results(cut[0]) + episode_results(cut[1])
+    assert [(e.steps, e.finished) for e in got] == [(4, False), (4, False)]
+
+
+def test_evaluate_policy_calls_a_greedypolicy_subclass_of_ones_own():
+    """A GreedyPolicy subclass that answers in its own __call__ (an action mask, exploration)
+    is called, as evaluate_policy says a policy is; its action was ignored for the model's,
+    so evaluating a masked policy measured the unmasked one. The confidence fields stay."""
+    from torchcbl import GreedyPolicy
+
+    env = rare_regions_world(episode_length=10)
+    ct = _teacher(env, max_steps=200)
+    ct.run()
+
+    class NeverZero(GreedyPolicy):
+        def __call__(self, observation):
+            action = super().__call__(observation)
+            return 1 if action == 0 else action
+
+    plain = evaluate_policy(ct.policy, rare_regions_world(episode_length=10), n_steps=60, seed=4)
+    assert 0 in {r.executed_action for r in plain}  # the model does answer 0 on these
+    masked = evaluate_policy(
+        NeverZero(ct.model), rare_regions_world(episode_length=10), n_steps=60, seed=4
+    )
+    assert 0 not in {r.executed_action for r in masked}
+    assert all(r.distance is not None and r.posterior is not None for r in masked)
+    first = masked[0]
+    assert first.observation == plain[0].observation and first.distance == plain[0].distance
+
+
 def _sleep_then_write(path: str) -> None:
     import time
 

@@ -281,6 +281,104 @@ def test_a_to_config_that_returns_no_dict_is_a_clear_error(tmp_path):
         ConfidentTeacher(env, oracle(env), strategy=Listy(), run_dir=tmp_path / "r")
 
 
+class _Swept(_SubclassedProtocol):
+    """A strategy of one's own built from a sweep's numpy numbers, with a tuple parameter."""
+
+    def __init__(self, margin, sizes):
+        self.margin, self.sizes = margin, sizes
+
+    def to_config(self):
+        return {"type": "_Swept", "margin": self.margin, "sizes": self.sizes, "relabel": False}
+
+
+class _SweptRule:
+    def __init__(self, max_std):
+        self.max_std = max_std
+
+    def is_confident(self, c):
+        return c.distance <= float(self.max_std)
+
+    def update(self, model, observations, actions):
+        pass
+
+    def to_config(self):
+        return {"type": "_SweptRule", "max_std": self.max_std}
+
+
+def test_numpy_numbers_and_tuples_in_to_config_are_stored_and_resume(tmp_path):
+    """A strategy or rule of one's own whose to_config() holds a numpy number (a sweep's
+    np.float32(0.5)) failed to start a session with json's bare 'Object of type float32 is not
+    JSON serializable'; one holding a tuple started, but config.json read it back as a list,
+    so resuming with the same strategy was refused ('strategy: stored ..., given ...'). Both
+    are stored as JSON holds them and resume; a value JSON cannot hold is named."""
+    for name, kw in [
+        ("strategy", {"strategy": _Swept(np.float32(0.5), (np.int64(2), 3))}),
+        ("rule", {"rule": _SweptRule(np.float32(2.5))}),
+    ]:
+        env = rare_regions_world(episode_length=10)
+        ct = ConfidentTeacher(env, oracle(env), run_dir=tmp_path / name, progress=False, **kw)
+        ct.run(max_steps=15)
+        ct.close()
+        stored = load_config(tmp_path / name)["strategy"]
+        if name == "strategy":
+            assert stored == {"type": "_Swept", "margin": 0.5, "sizes": [2, 3], "relabel": False}
+        else:
+            assert stored["rule"] == {"type": "_SweptRule", "max_std": 2.5}
+        kw = {
+            "strategy": _Swept(np.float32(0.5), (2, 3))
+            if name == "strategy"
+            else ConfidentExecution(_SweptRule(2.5))
+        }
+        back = ConfidentTeacher.resume(tmp_path / name, env, oracle(env), progress=False, **kw)
+        back.run(max_steps=20)
+        back.close()
+        assert len(load_records(tmp_path / name)) == 20
+    env = rare_regions_world(episode_length=10)
+    with pytest.raises(TypeError, match=r"_Swept.to_config\(\) returned .*config.json cannot hold"):
+        ConfidentTeacher(
+            env, oracle(env), strategy=_Swept({1, 2}, ()), run_dir=tmp_path / "s", progress=False
+        )
+    with pytest.raises(TypeError, match=r"_SweptRule.to_config\(\) returned .*cannot hold"):
+        ConfidentTeacher(
+            env, oracle(env), rule=_SweptRule(object()), run_dir=tmp_path / "r", progress=False
+        )
+
+
+class _OneBool:
+    """A rule of one's own answering one bool (or a 0-d tensor) instead of one per row."""
+
+    def __init__(self, zero_d):
+        self.zero_d = zero_d
+
+    def is_confident(self, c):
+        near = c.distance[0] <= 2.0
+        return near if self.zero_d else bool(near)
+
+    def update(self, model, observations, actions):
+        pass
+
+
+@pytest.mark.parametrize("zero_d", [False, True], ids=["bool", "0-d-tensor"])
+def test_a_rule_answering_one_bool_is_told_it_answers_one_per_row(tmp_path, zero_d):
+    """It failed in the loop with "'bool' object is not subscriptable" or torch's "invalid index
+    of a 0-dim tensor", which name neither the rule nor what it should return."""
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        rule=_OneBool(zero_d),
+        config=TeachingConfig(noninteractive=False, max_new=3),
+        run_dir=tmp_path / "r",
+        progress=False,
+    )
+    with pytest.raises(
+        TypeError, match=r"_OneBool object .*is_confident\(\) returned .*expected one bool per "
+    ):
+        ct.run(max_steps=20)
+    ct.close()
+    assert len(load_records(tmp_path / "r")) == 3  # the steps before the first fit, asked
+
+
 def _right_of_zero(observation, info):
     return int(observation[0] > 0)
 

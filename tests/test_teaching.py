@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import copy
 import pickle
+import re
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -205,6 +207,56 @@ def test_policy_stands_alone_and_evaluates():
     assert len(plain) == 7 and plain[0].confidence is None
     again = evaluate_policy(policy, rare_regions_world(episode_length=10), n_episodes=3, seed=5)
     assert again == recs
+
+
+class _ActedOn(gym.Wrapper):
+    """Notes, for every env.step, the observation the env was in when the action ran."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.acted_on: list[tuple[float, ...]] = []
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self.now = tuple(np.asarray(obs, dtype=np.float64).tolist())
+        return obs, info
+
+    def step(self, action):
+        self.acted_on.append(self.now)
+        out = self.env.step(action)
+        self.now = tuple(np.asarray(out[0], dtype=np.float64).tolist())
+        return out
+
+
+def test_evaluating_on_the_teaching_env_mid_episode_starts_a_new_episode(tmp_path):
+    """evaluate_policy on the env a session teaches on, with the session in the middle of an
+    episode, moves the env under the loop: its next step must not decide, label and record on
+    the observation it held from before, which the env no longer shows."""
+    env = _ActedOn(rare_regions_world(episode_length=10))
+    ct = ConfidentTeacher(
+        env, oracle(env.unwrapped), config=TeachingConfig(), run_dir=tmp_path / "s",
+        progress=False,
+    )  # fmt: skip
+    ct.run(max_steps=15)  # stops in the middle of episode 1
+    evaluate_policy(ct.policy, env, n_steps=3, seed=7)
+    with pytest.warns(UserWarning, match="left unfinished"):
+        ct.run(max_steps=20)
+    recs = ct.records
+    # every step's record holds the observation its action ran in
+    teaching = env.acted_on[:15] + env.acted_on[18:]
+    assert [r.observation for r in recs] == teaching
+    assert [r.episode for r in recs[14:17]] == [1, 2, 2]  # episode 1 left unfinished
+    assert not (recs[14].terminated or recs[14].truncated)
+    ct.close()
+    again = ConfidentTeacher.resume(tmp_path / "s", env, oracle(env.unwrapped), progress=False)
+    assert again.records == recs and again.n_episodes == ct.n_episodes == 1
+    again.close()
+    # an evaluation on an env of its own leaves the session's episode whole
+    other = make(rare_regions_world(episode_length=10))
+    other.run(max_steps=15)
+    evaluate_policy(other.policy, rare_regions_world(episode_length=10), n_steps=3, seed=7)
+    other.run(max_steps=20)
+    assert [r.episode for r in other.records[14:17]] == [1, 1, 1]
 
 
 def _demos_to_reach(env_fn, seed, eval_x, eval_y, **cfg):
@@ -463,6 +515,82 @@ def test_a_strategys_unknown_phase_is_refused_before_the_teacher_is_asked(tmp_pa
         ct.run(max_steps=3)
     ct.close()
     assert asked == [] and load_records(tmp_path / "r") == []
+
+
+@pytest.mark.parametrize("answer", [(True, "confident"), None], ids=["tuple", "none"])
+def test_a_decide_that_returns_no_decision_is_named_before_the_teacher_is_asked(tmp_path, answer):
+    """A strategy of one's own whose decide() returns a plain tuple, or nothing (a subclass of
+    the Strategy protocol that left decide() out), is named with what a Decision is."""
+    from torchcbl.session import load_records
+    from torchcbl.strategies.bc import BehaviourCloning
+
+    class Mine(BehaviourCloning):
+        def decide(self, obs, c):
+            return answer
+
+    env = rare_regions_world()
+    asked = []
+
+    def teacher(obs, info):
+        asked.append(1)
+        return oracle(env)(obs, info)
+
+    ct = ConfidentTeacher(env, teacher, strategy=Mine(), run_dir=tmp_path / "r", progress=False)
+    with pytest.raises(
+        RuntimeError, match=rf"decide\(\) returned {re.escape(repr(answer))}; expected a .*Decision"
+    ):
+        ct.run(max_steps=3)
+    ct.close()
+    assert asked == [] and load_records(tmp_path / "r") == []
+
+
+class _Observing(gym.Env):
+    """An env observing ``space`` (sampled), with 2 actions, 5 steps an episode."""
+
+    def __init__(self, space):
+        self.observation_space = space
+        self.action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.observation_space.seed(seed)
+        self.t = 0
+        return self.observation_space.sample(), {}
+
+    def step(self, action):
+        self.t += 1
+        return self.observation_space.sample(), 0.0, False, self.t >= 5, {}
+
+
+@pytest.mark.parametrize(
+    ("space", "wrap"),
+    [
+        (gym.spaces.Box(0, 4, (2,), np.int64), "DtypeObservation(env, np.float64)"),
+        (gym.spaces.Box(0.0, 1.0, (1, 3), np.float32), "FlattenObservation(env)"),
+        (
+            gym.spaces.Dict(
+                {"pos": gym.spaces.Box(0, 4, (2,), np.int64), "goal": gym.spaces.Discrete(3)}
+            ),
+            "DtypeObservation(gymnasium.wrappers.FlattenObservation(env), np.float64)",
+        ),
+    ],
+    ids=["int-box", "row-box", "dict-with-ints"],
+)
+def test_an_observation_space_that_is_no_1d_float_box_is_refused_with_the_wrapper_that_fits(
+    space, wrap
+):
+    """An integer grid position, a [1, D] row or a Dict with integer parts: the refusal names
+    the gymnasium wrapper(s) that make the env one the loop takes, and that wrapping works.
+    (It said 'Flatten the observation (FlattenObservation) and cast to float' for all, and an
+    integer Box stays integer when flattened.)"""
+    env = _Observing(space)
+    with pytest.raises(ValueError, match=re.escape(f"env = gymnasium.wrappers.{wrap}.")) as info:
+        ConfidentTeacher(env, lambda obs, i: 0, progress=False)
+    advice = str(info.value).split("env = ")[1].rstrip(".")
+    wrapped = eval(advice, {"gymnasium": gym, "np": np, "env": env})
+    ct = ConfidentTeacher(wrapped, lambda obs, i: int(obs[0] > 1), progress=False)
+    ct.run(max_steps=12)
+    assert ct.n_steps == 12 and ct.n_episodes == 2
 
 
 def test_commit_every_is_checked(tmp_path):

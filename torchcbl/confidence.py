@@ -31,7 +31,9 @@ resume; :func:`rule_from_config` is the inverse.
 
 from __future__ import annotations
 
+import json
 import math
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -379,11 +381,42 @@ class AutoThresholdRule:
 _RULES = {"DistanceRule": DistanceRule, "PosteriorRule": PosteriorRule}
 
 
+def _json_form(config: Any, what: str) -> dict[str, Any]:
+    """``config`` (a rule's or strategy's ``to_config()``, named ``what``) as a run directory's
+    config.json holds it and reads it back: numpy numbers as the Python numbers they hold,
+    tuples as lists, so that a resumed session compares like with like. A value JSON cannot
+    hold is a TypeError naming ``what``."""
+
+    def plain(value: Any) -> Any:
+        if isinstance(value, np.generic):  # np.float32(0.5), np.int64(3), np.True_
+            return value.item()
+        raise TypeError(f"{type(value).__name__} {value!r:.60} is not JSON")
+
+    if not isinstance(config, Mapping):
+        raise TypeError(
+            f'{what} returned {config!r:.80}; expected a JSON dict with "type" and the '
+            "constructor arguments"
+        )
+    try:
+        return dict(json.loads(json.dumps(dict(config), default=plain)))
+    except (TypeError, ValueError) as exc:
+        raise TypeError(
+            f"{what} returned {dict(config)!r:.120}, which a run directory's config.json cannot "
+            f"hold ({exc}); return plain numbers, strings, lists and dicts with string keys "
+            "(int(...) or float(...) of a numpy number)."
+        ) from None
+
+
 def rule_to_config(rule: Any) -> dict[str, Any]:
-    """JSON dict describing ``rule``; a custom rule without ``to_config`` is named only."""
+    """JSON dict describing ``rule``, as config.json reads back (numpy numbers as Python
+    numbers, tuples as lists); a custom rule without ``to_config`` is named only.
+
+    Raises:
+        TypeError: ``to_config()`` returned no dict, or one JSON cannot hold.
+    """
     to_config = getattr(rule, "to_config", None)
     if callable(to_config):
-        return dict(to_config())
+        return _json_form(to_config(), f"{type(rule).__name__}.to_config()")
     return {"type": f"{type(rule).__module__}.{type(rule).__qualname__}", "custom": True}
 
 

@@ -4,6 +4,7 @@ every env and teacher answer goes through before the loop or an evaluation uses 
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -56,6 +57,31 @@ class GreedyPolicy:
         return f"GreedyPolicy({type(self.model).__name__})"
 
 
+# Who last moved each env object (keyed weakly by its unwrapped core, so that a wrapper and the
+# env it wraps are one env): a teaching loop notes its own token after each of its resets, and
+# evaluate_policy a fresh one as it starts. A loop that finds another token on its env in the
+# middle of an episode knows the env moved under it (ConfidentTeacher.step).
+_ENV_USERS: weakref.WeakKeyDictionary[Any, object] = weakref.WeakKeyDictionary()
+
+
+def _note_env_user(env: Any, token: object) -> None:
+    """Note ``token`` as the last user of ``env`` (an env that cannot be weakly referenced or
+    hashed is not tracked)."""
+    try:
+        _ENV_USERS[getattr(env, "unwrapped", env)] = token
+    except TypeError:
+        pass
+
+
+def _env_user(env: Any, default: object = None) -> object:
+    """The token last noted on ``env``; ``default`` for an env no one noted or that is not
+    tracked."""
+    try:
+        return _ENV_USERS.get(getattr(env, "unwrapped", env), default)
+    except TypeError:
+        return default
+
+
 def check_env(env: gym.Env) -> tuple[int, int]:
     """(n_features, n_actions) of a supported env, or a clear ValueError."""
     space = getattr(env, "action_space", None)
@@ -72,9 +98,29 @@ def check_env(env: gym.Env) -> tuple[int, int]:
     ):
         raise ValueError(
             f"expected an env with a 1-D float Box observation space, got {obs_space!r}. "
-            "Flatten the observation (gymnasium.wrappers.FlattenObservation) and cast to float."
+            + _obs_space_hint(obs_space)
         )
     return int(obs_space.shape[0]), int(space.n)
+
+
+def _obs_space_hint(space: Any) -> str:
+    """How to wrap an env whose observation space is not a 1-D float Box into one."""
+    flat = "gymnasium.wrappers.FlattenObservation(env)"
+    cast = "gymnasium.wrappers.DtypeObservation(env, np.float64)"
+    try:
+        flat_space = gym.spaces.flatten_space(space)
+    except Exception:  # noqa: BLE001 - a space gymnasium cannot flatten (or no space at all)
+        return (
+            f"Wrap the env so that it observes a 1-D float array (for a Dict, Tuple or "
+            f"multi-dimensional Box space: {flat}; for integer observations: {cast})."
+        )
+    flat_needed = not (isinstance(space, gym.spaces.Box) and len(space.shape) == 1)
+    cast_needed = not np.issubdtype(flat_space.dtype, np.floating)
+    if flat_needed and cast_needed:
+        return f"Flatten it and cast it to float: env = {cast.replace('(env', '(' + flat)}."
+    if flat_needed:
+        return f"Flatten it: env = {flat}."
+    return f"Cast it to float: env = {cast}."
 
 
 def _check_policy_fits(policy: Any, n_features: int, n_actions: int) -> None:
@@ -197,8 +243,15 @@ def evaluate_policy(
       ``n_episodes`` then defaults to ``len(seed)`` and may not exceed it.
 
     Records have ``phase="evaluation"``, ``autonomous=True`` and ``episode`` counting from 0;
-    a :class:`GreedyPolicy` also fills the confidence fields, any other callable leaves them
-    None. :func:`episode_results` turns them into per-episode returns and successes.
+    a :class:`GreedyPolicy` (a subclass too, whose own ``__call__`` then gives the action) also
+    fills the confidence fields, any other callable leaves them None. :func:`episode_results`
+    turns them into per-episode returns and successes.
+
+    The env is reset first. Evaluating on the env a :class:`~torchcbl.teaching.ConfidentTeacher`
+    teaches on, between its steps, moves that env away from the observation the loop holds:
+    the loop notices at its next step, leaves the episode it was in unfinished (as a resume
+    does) and starts a new one, with a warning. To keep the session's episodes whole, evaluate
+    on an env of its own (``gymnasium.make`` it again).
 
     The env's answers are checked as the teaching loop checks them: a reset that is not the pair
     (observation, info), a step that is not the gymnasium 5-tuple with bool flags, a dict
@@ -237,7 +290,12 @@ def evaluate_policy(
             f"evaluate_policy: n_episodes={n_episodes} but only {len(seeds)} seeds were given; "
             "give one seed per episode (or leave n_episodes out to run one per seed)"
         )
+    # a GreedyPolicy's classification fills the confidence fields; its action is the model's
+    # unless a subclass answers in a __call__ of its own (masking, exploration), which is called
+    greedy = isinstance(policy, GreedyPolicy)
+    own_call = not greedy or type(policy).__call__ is not GreedyPolicy.__call__
     records: list[StepRecord] = []
+    _note_env_user(env, object())  # a teaching loop mid-episode on this env starts a new one
     raw, info = reset_answer(env.reset(seed=seeds[0] if seeds is not None else seed))
     obs = obs_array(raw, n_features, "env.reset")
     episode, done_episodes = 0, 0
@@ -245,14 +303,15 @@ def evaluate_policy(
         n_episodes is None or done_episodes < n_episodes
     ):
         confidence = distance = posterior = None
-        if isinstance(policy, GreedyPolicy):
-            c = policy.classify(obs)
-            answer: Any = int(c.action[0])
+        answer: Any = None
+        if greedy:
+            c = policy.classify(obs)  # type: ignore[attr-defined]
+            answer = int(c.action[0])
             confidence, distance = float(c.confidence[0]), float(c.distance[0])
             posterior = tuple(c.posterior[0].tolist())
-        elif uses_info:
-            answer = policy(np.array(raw, copy=True), dict(info or {}))
-        else:
+        if own_call and uses_info:
+            answer = policy(np.array(raw, copy=True), dict(info or {}))  # type: ignore[call-arg]
+        elif own_call:
             answer = policy(np.array(raw, copy=True))
         action = as_action(answer, n_actions)
         if action is None:
@@ -325,6 +384,16 @@ def episode_results(records: Sequence[StepRecord]) -> list[EpisodeResult]:
     """Per-episode returns and successes of the records of :func:`evaluate_policy` (or of a
     teaching session, :func:`torchcbl.load_records`), in episode order.
 
+    An episode is a run of consecutive records with the same ``episode`` index; a record after
+    one that ended its episode (terminated or truncated), or whose ``step`` does not follow the
+    one before (a list that starts again from step 0), starts a new one. So the records of
+    several evaluations may be joined (each numbers its episodes from 0)::
+
+        records = []
+        for s in range(10):
+            records += evaluate_policy(policy, env, n_episodes=1, seed=s)
+        results = episode_results(records)  # 10 episodes
+
     Example::
 
         results = episode_results(evaluate_policy(policy, env, seed=range(10)))
@@ -351,9 +420,16 @@ def episode_results(records: Sequence[StepRecord]) -> list[EpisodeResult]:
         )
 
     for r in records:
-        if group and r.episode != group[-1].episode:
-            close()
-            group = []
+        if group:
+            prev = group[-1]
+            if (
+                r.episode != prev.episode
+                or prev.terminated
+                or prev.truncated
+                or r.step <= prev.step
+            ):
+                close()
+                group = []
         group.append(r)
     if group:
         close()

@@ -24,7 +24,11 @@ One step of the loop:
    autonomously (a :class:`~torchcbl.records.CorrectionRecord`, durable before the next
    decision). An episode that ends is reset and teaching goes on. Only the first reset of a
    new session is seeded (with ``seed``); later resets continue the env's RNG. The first reset
-   after :meth:`ConfidentTeacher.resume` is seeded from (seed, episode index).
+   after :meth:`ConfidentTeacher.resume` is seeded from (seed, episode index). An env that
+   :func:`~torchcbl.policy.evaluate_policy` or another loop reset or stepped since this loop's
+   last step no longer shows the observation the loop holds: the loop leaves its episode
+   unfinished (as a resume does) and starts a new one, with a warning. (Stepping the env by
+   hand between the loop's steps cannot be noticed: don't.)
 
 The non-interactive phase ends after the step at which the accuracy window is full
 (``accuracy_window`` demonstrations) and its accuracy is >= ``target_accuracy``; never when the
@@ -58,6 +62,8 @@ from torchcbl.errors import (
 )
 from torchcbl.policy import (
     GreedyPolicy,
+    _env_user,
+    _note_env_user,
     as_action,
     check_env,
     evaluate_policy,
@@ -507,6 +513,7 @@ class ConfidentTeacher:
         #: "max_episodes", "autonomous_steps", "autonomous_episodes", or None before any run.
         self.stop_reason: str | None = None
         self._obs: np.ndarray | None = None
+        self._env_token = object()  # noted on the env at each reset (torchcbl.policy)
         self._raw_obs: Any = None
         self._info: dict = {}
 
@@ -748,6 +755,7 @@ class ConfidentTeacher:
         except Exception as exc:  # the seed stays for the retry: the same seed, the same run
             raise EnvError(f"env.reset raised {type(exc).__name__}: {exc}") from exc
         self._next_reset_seed = None
+        _note_env_user(self.env, self._env_token)
         raw, info = reset_answer(out)
         self._obs = obs_array(raw, self.n_features, "env.reset")
         self._raw_obs, self._info = raw, info
@@ -833,6 +841,8 @@ class ConfidentTeacher:
             # a refit owed since the last step (it raised, or was interrupted): done first, on
             # the labels it was due on, as load_model and a resume rebuild it
             self._refit()
+        if not self._needs_reset and _env_user(self.env, self._env_token) is not self._env_token:
+            self._cut_moved_episode()
         if self._needs_reset:
             self._reset()
         obs, info, raw = self._obs, self._info, self._raw_obs
@@ -846,6 +856,13 @@ class ConfidentTeacher:
         distance = float(_np(c.distance)[0])
         posterior = tuple(_np(c.posterior)[0].tolist())
         decision: Decision = self.strategy.decide(obs, c)
+        if not (hasattr(decision, "ask") and hasattr(decision, "phase")):
+            raise RuntimeError(
+                f"strategy {self.strategy!r}: decide() returned {decision!r:.80}; expected a "
+                "torchcbl.strategies.Decision(ask, phase, state=None), e.g. "
+                "Decision(True, 'confident') (see torchcbl.strategies). Nothing was recorded "
+                "for this step."
+            )
         ask, phase = bool(decision.ask), decision.phase
         if phase not in ("noninteractive", "confident"):  # before the teacher is asked
             raise RuntimeError(
@@ -990,6 +1007,21 @@ class ConfidentTeacher:
         if self.on_step is not None:
             self.on_step(record)
         return record
+
+    def _cut_moved_episode(self) -> None:
+        """The env was reset or stepped by someone else (evaluate_policy, another loop) since
+        this loop's last step: the observation it holds is no longer the env's, so the episode
+        is left unfinished, as a resume leaves one, and the next step starts a new one."""
+        self._needs_reset = True
+        last = self.records[-1].step if self.records else None
+        warnings.warn(
+            f"ConfidentTeacher: its env was used by something else (evaluate_policy, or another "
+            f"ConfidentTeacher) since its last step ({last}) in episode {self._episode}, so the "
+            "env no longer shows the observation the loop holds; that episode is left unfinished "
+            "(as a resume leaves one) and teaching goes on from a fresh episode. Evaluate on an "
+            "env of its own (gymnasium.make it again) to keep the session's episodes whole.",
+            stacklevel=3,
+        )
 
     def _keep_interrupted(self, record: StepRecord) -> None:
         """Add a durable demonstration whose step failed before it reached memory as a resume

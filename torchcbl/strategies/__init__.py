@@ -90,7 +90,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
-from torchcbl.confidence import DistanceRule, rule_from_config, rule_to_config
+from torchcbl.confidence import DistanceRule, _json_form, rule_from_config, rule_to_config
 from torchcbl.strategies._phased import Decision, LabelKind, _Phased, _rule_takes_observations
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -189,8 +189,18 @@ class ConfidentExecution(_Phased):
 
     def _confident(self, observation: np.ndarray, c: Classification) -> bool:
         if self._with_obs:
-            return bool(self.rule.is_confident(c, observation[None])[0])
-        return bool(self.rule.is_confident(c)[0])
+            answer = self.rule.is_confident(c, observation[None])
+        else:
+            answer = self.rule.is_confident(c)
+        try:
+            return bool(answer[0])
+        except (TypeError, IndexError, KeyError):  # a bool, a 0-d tensor or array: no rows
+            raise TypeError(
+                f"rule {self.rule!r}: is_confident() returned {answer!r:.80}; expected one bool "
+                "per classified observation, a bool tensor [N] (the loop classifies one "
+                "observation at a time: N = 1), e.g. `return c.distance <= 2.0`. Nothing was "
+                "recorded for this step."
+            ) from None
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
         """After every refit: the rule's ``update`` with the training set (``observations``
@@ -217,9 +227,15 @@ def __getattr__(name: str) -> Any:
 
 
 def strategy_to_config(strategy: Any) -> dict[str, Any]:
-    """JSON dict describing ``strategy``; one without ``to_config``, or whose ``to_config``
-    returns None (a subclass of :class:`Strategy` inherits the protocol's empty one), is named
-    only (custom)."""
+    """JSON dict describing ``strategy``, as config.json reads back (numpy numbers as Python
+    numbers, tuples as lists); one without ``to_config``, or whose ``to_config`` returns None
+    (a subclass of :class:`Strategy` inherits the protocol's empty one), is named only
+    (custom).
+
+    Raises:
+        TypeError: ``to_config()`` returned something other than a dict or None, or a dict
+            JSON cannot hold.
+    """
     to_config = getattr(strategy, "to_config", None)
     config = to_config() if callable(to_config) else None
     if config is not None:
@@ -229,7 +245,7 @@ def strategy_to_config(strategy: Any) -> dict[str, Any]:
                 'JSON dict with "type" and the constructor arguments (see torchcbl.strategies), '
                 "or None to store the strategy as custom (then pass it again to resume())."
             )
-        return dict(config)
+        return _json_form(config, f"{type(strategy).__name__}.to_config()")
     return {
         "type": f"{type(strategy).__module__}.{type(strategy).__qualname__}",
         "custom": True,
