@@ -235,6 +235,27 @@ def test_calibration_command_names_a_history_that_is_not_one(content, says, mode
         assert history.read_text() == json.dumps(good) + "\n" + content
 
 
+def test_a_refused_reset_changes_no_later_road(tmp_path):
+    # a reset refused for its ego_lane or fcd_output had already drawn the next road's seed
+    # from the env's RNG (or reseeded it): the user's next reset() drove another road
+    first, second = DrivingEnv(), DrivingEnv()
+    try:
+        first.reset(seed=3)
+        want = [first.reset()[1]["episode_seed"], first.reset()[1]["episode_seed"]]
+        second.reset(seed=3)
+        with pytest.raises(ValueError, match="ego_lane"):
+            second.reset(options={"ego_lane": 9})
+        with pytest.raises(ValueError, match="fcd_output"):
+            second.reset(options={"fcd_output": str(tmp_path / "missing" / "ep.fcd.xml")})
+        with pytest.raises(ValueError, match="ego_lane"):
+            second.reset(seed=11, options={"ego_lane": -1})
+        got = [second.reset()[1]["episode_seed"], second.reset()[1]["episode_seed"]]
+        assert got == want
+    finally:
+        first.close()
+        second.close()
+
+
 def test_render_fps_is_real_time_for_the_step_length():
     # it was 4 whatever the step length: a video of 0.1 s steps (e.g. gymnasium's RecordVideo,
     # which plays frames at metadata["render_fps"]) ran at 0.4 times real time
