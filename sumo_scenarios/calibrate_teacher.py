@@ -151,6 +151,52 @@ def _job(args: tuple) -> dict[str, Any]:
     return measure(driver, tuple(spacing), seeds, steps)
 
 
+_HISTORY_KEYS = ("driver", "spacing", "collisions", "lanes", "stay")
+
+
+def _read_history(path: Path) -> list[dict[str, Any]]:
+    """The measurements of a search history (JSON lines, as a search appends them), [] when
+    ``path`` does not exist. ValueError, naming the file and the line, for anything else: a
+    directory, a line that is not JSON, or one that is not a measurement of a
+    :class:`HumanDriverConfig` (another file given by mistake, or a history of an older teacher
+    whose settings have other names)."""
+    from sumo_scenarios.teacher import HumanDriverConfig
+
+    if not path.exists():
+        return []
+    what = "a search history (JSON lines, one measurement each, as --search appends them)"
+    if not path.is_file():
+        raise ValueError(f"--history {path} is not a file: expected {what}")
+    try:
+        lines = path.read_text().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--history {path} cannot be read ({exc}): expected {what}") from None
+    history = []
+    for n, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            r = json.loads(line)
+        except json.JSONDecodeError:
+            raise ValueError(f"--history {path}, line {n}: not JSON; expected {what}") from None
+        if not isinstance(r, dict) or not set(_HISTORY_KEYS) <= r.keys():
+            got = f"keys {sorted(map(str, r))}" if isinstance(r, dict) else type(r).__name__
+            raise ValueError(
+                f"--history {path}, line {n}: not a measurement (needs {list(_HISTORY_KEYS)}, "
+                f"got {got:.100}); expected {what}"
+            )
+        try:
+            HumanDriverConfig(**r["driver"])
+            penalty(r)
+        except (TypeError, ValueError, IndexError) as exc:
+            raise ValueError(
+                f"--history {path}, line {n}: not a measurement of today's teacher ({exc}); "
+                "start a new history"
+            ) from None
+        history.append(r)
+    return history
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     mode = p.add_mutually_exclusive_group()
@@ -215,9 +261,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name:40s} target {target:14s} measured {value}")
         print(json.dumps({k: v for k, v in r.items() if k != "driver"}))
         return 0
-    history = []
-    if a.history.exists():
-        history = [json.loads(line) for line in a.history.read_text().splitlines() if line]
+    try:
+        history = _read_history(a.history)
+    except ValueError as exc:
+        p.error(str(exc))
     if not history:  # start from the defaults
         history = [{"driver": _defaults(), "spacing": list(TRAIN.mean_spacing_m)}]
         history[0].update(collisions=0.0, lanes=[0.2] * 5, stay=1.0)

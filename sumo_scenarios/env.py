@@ -184,13 +184,10 @@ class DrivingEnv(gym.Env):
             given, seed = seed, _as_int(seed)
             if seed is None or seed < 0:
                 raise ValueError(f"seed: expected None or an int >= 0, got {given!r}")
-        super().reset(seed=seed)
         options = dict(options or {})
         unknown = set(options) - {"ego_lane", "fcd_output"}
         if unknown:
             raise ValueError(f"unknown reset options {sorted(unknown)}")
-        if seed is None:
-            seed = int(self.np_random.integers(0, 2**31 - 1))
         if self.closed:
             raise RuntimeError("this DrivingEnv is closed; create a new one")
         given = options.get("ego_lane", self.config.start_lane)
@@ -207,6 +204,10 @@ class DrivingEnv(gym.Env):
                 f"fcd_output: {str(fcd)!r} is a directory; give the path of the XML file to write "
                 "(e.g. episode.fcd.xml inside it)"
             )
+        # the env's RNG only once the call is known good: a refused reset changes no later road
+        super().reset(seed=seed)
+        if seed is None:
+            seed = int(self.np_random.integers(0, 2**31 - 1))
         rng = np.random.default_rng(np.random.SeedSequence([self.scenario.seed, int(seed)]))
         self._episode_seed = None  # until the new segment is in place: no step() on a half reset
         self._sim.reset(rng, int(seed), ego_lane=lane, fcd_path=Path(fcd) if fcd else None)

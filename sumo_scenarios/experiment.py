@@ -46,6 +46,7 @@ from sumo_scenarios import metrics
 from torchcbl.evaluation import mean_sd, progress_bar, run_versions
 
 if TYPE_CHECKING:
+    from sumo_scenarios.sim import SimConfig
     from torchcbl.gmm import Criterion, GaussianMixtureSet
 
 __all__ = [
@@ -902,21 +903,49 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
 
 
 def evaluate_saved_policy(
-    session_dir: str | Path, *, n_steps: int = 1000, seed: int = 0
+    session_dir: str | Path, *, n_steps: int = 1000, seed: int = 0, sim: SimConfig | None = None
 ) -> dict[str, Any]:
     """Drive the latest model of a driving teaching session (e.g. ``torchcbl teach driving``)
     greedily for ``n_steps`` timesteps on held-out evaluation segment ``seed``.
 
-    Returns the collision rate (share of timesteps in contact, %) and the lane shares
-    (index 0 = right shoulder ... 4 = left shoulder). It takes this process's one libsumo
-    simulation: a live DrivingEnv must be reset after it.
+    The traffic is the held-out ``eval`` scenario; the SUMO settings (``sim``: the step length,
+    which sets how far the traffic moves between two decisions) and the start lane are the
+    session's own: those its env was given by ``gymnasium.make`` (``sim``, ``start_lane``; the
+    session's config keeps a plain start lane, but a ``SimConfig`` or ``DrivingConfig`` only as
+    text, so such a session raises ValueError unless ``sim`` is passed here, and a
+    ``DrivingConfig``'s start lane is not known: the middle lane is driven); otherwise the
+    defaults (``SimConfig()``, the middle lane), as ``torchcbl teach driving`` and the experiment
+    teach. An env made without ``gymnasium.make`` keeps nothing in the session: the defaults are
+    driven, whatever it was given. ``sim``, when given, is driven whatever the session kept.
+
+    Returns the collision rate (share of timesteps in contact, %), the lane shares (index 0 =
+    right shoulder ... 4 = left shoulder), and the SUMO settings and start lane driven. It takes
+    this process's one libsumo simulation: a live DrivingEnv must be reset after it.
     """
-    from sumo_scenarios.env import DrivingEnv
+    from sumo_scenarios.env import DrivingConfig, DrivingEnv
+    from sumo_scenarios.sim import SimConfig
     from torchcbl import evaluate_policy, load_policy
 
     _check_whole("n_steps", n_steps, 1)  # before the env's own 'max_episode_steps' says it
+    if sim is not None and not isinstance(sim, SimConfig):
+        raise ValueError(
+            f"sim must be a SimConfig (sumo_scenarios.sim), got {type(sim).__name__} {sim!r:.80}"
+        )
+    start_lane, taught_sim = _session_settings(Path(session_dir))
+    if sim is None:
+        if taught_sim is not None:
+            raise ValueError(
+                f"{session_dir} was taught on a driving env given its SUMO settings as an "
+                f"object ({taught_sim}), which its config keeps only as text: evaluating it on "
+                "the default SimConfig() would drive other dynamics; pass sim= (a "
+                "sumo_scenarios.sim.SimConfig, as the session was given it)"
+            )
+        sim = SimConfig()
     policy = load_policy(session_dir)
-    env = DrivingEnv(scenario="eval", max_episode_steps=n_steps)
+    config = DrivingConfig(
+        scenario="eval", max_episode_steps=n_steps, start_lane=start_lane, sim=sim
+    )
+    env = DrivingEnv(config)
     try:
         recs = evaluate_policy(policy, env, n_steps=n_steps, seed=seed)
     finally:
@@ -926,7 +955,28 @@ def evaluate_saved_policy(
         "eval_segment": seed,
         "collision_pct": 100 * metrics.collision_rate([bool(r.info["contact"]) for r in recs]),
         "lanes": metrics.lane_distribution([int(r.info["lane"]) for r in recs]).tolist(),
+        "start_lane": config.start_lane,
+        "sim": dataclasses.asdict(sim),
     }
+
+
+def _session_settings(session_dir: Path) -> tuple[int, str | None]:
+    """The start lane a driving session's env was made with (2 if it kept none) and the text of
+    its SUMO settings when they were given as an object (``sim`` or ``config``; None if not)."""
+    import re
+
+    from torchcbl.session import _kept_as_repr, load_config
+
+    kwargs = (load_config(session_dir).get("env") or {}).get("kwargs") or {}
+    for name in ("sim", "config"):
+        value = kwargs.get(name)
+        if value is not None:
+            return 2, str(value["repr"]) if _kept_as_repr(value) else repr(value)
+    lane = kwargs.get("start_lane", 2)
+    if _kept_as_repr(lane):  # a numpy int: "np.int64(3)" (numpy 1: "3")
+        found = re.fullmatch(r"(?:\w+(?:\.\w+)*\()?(\d+)\)?", lane["repr"])
+        lane = int(found.group(1)) if found else 2
+    return (lane if isinstance(lane, int) and not isinstance(lane, bool) else 2), None
 
 
 def format_summary(results: dict[str, Any]) -> str:

@@ -229,6 +229,76 @@ def test_a_saved_teaching_session_is_evaluated_on_the_held_out_road(tmp_path):
     assert 0.0 <= report["collision_pct"] < 10.0
 
 
+def _taught(run_dir: Path, **make_kwargs) -> None:
+    """A short session of the scripted expert on ``gymnasium.make``'s driving env."""
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.expert import ScriptedExpert
+    from torchcbl import ConfidentTeacher, TeachingConfig
+
+    env = gym.make(sumo_scenarios.ENV_ID, max_episode_steps=100, **make_kwargs)
+    try:
+        ct = ConfidentTeacher(
+            env,
+            ScriptedExpert(seed=0),
+            config=TeachingConfig(accuracy_window=20, target_accuracy=None, max_new=20),
+            run_dir=run_dir,
+            progress=False,
+        )
+        ct.run(max_demonstrations=60)
+        ct.close()
+    finally:
+        env.close()
+
+
+def _driven(session: Path, n_steps: int, **config) -> dict:
+    """The oracle: the session's policy on the eval road, in an env made here by hand."""
+    from sumo_scenarios.env import DrivingConfig, DrivingEnv
+    from torchcbl import evaluate_policy, load_policy
+
+    env = DrivingEnv(DrivingConfig(scenario="eval", max_episode_steps=n_steps, **config))
+    try:
+        recs = evaluate_policy(load_policy(session), env, n_steps=n_steps, seed=0)
+    finally:
+        env.close()
+    return {
+        "collision_pct": 100 * float(np.mean([r.info["contact"] for r in recs])),
+        "lanes": [int(r.info["lane"]) for r in recs],
+    }
+
+
+def test_a_session_is_evaluated_with_the_step_length_and_start_lane_it_was_taught_with(tmp_path):
+    """A session of an env made with other SUMO settings or another start lane was evaluated on
+    the defaults (0.25 s steps, the middle lane) without a word: a policy taught at 0.1 s steps
+    got a collision rate of another driving task. The start lane (kept) is driven; the SUMO
+    settings (kept only as text) are asked for, or taken as given."""
+    from sumo_scenarios.sim import SimConfig
+    from torchcbl.cli import main
+
+    n = 60
+    _taught(tmp_path / "lane", start_lane=4)
+    report = evaluate_saved_policy(tmp_path / "lane", n_steps=n)
+    want = _driven(tmp_path / "lane", n, start_lane=4)
+    assert want["lanes"] != _driven(tmp_path / "lane", n)["lanes"]  # the start lane matters
+    assert report["lanes"] == [want["lanes"].count(k) / n for k in range(5)]
+    assert report["collision_pct"] == want["collision_pct"]
+    assert report["start_lane"] == 4 and report["sim"]["step_length_s"] == 0.25
+
+    fast = SimConfig(step_length_s=0.1)
+    _taught(tmp_path / "fast", sim=fast)
+    with pytest.raises(ValueError, match=r"SUMO settings as an object.*step_length_s=0\.1"):
+        evaluate_saved_policy(tmp_path / "fast", n_steps=n)
+    assert main(["evaluate", str(tmp_path / "fast"), "--steps", "10"]) == 2  # one line
+    report = evaluate_saved_policy(tmp_path / "fast", n_steps=n, sim=fast)
+    want = _driven(tmp_path / "fast", n, sim=fast)
+    assert report["lanes"] == [want["lanes"].count(k) / n for k in range(5)]
+    assert report["collision_pct"] == want["collision_pct"]
+    assert report["sim"]["step_length_s"] == 0.1 and report["start_lane"] == 2
+    with pytest.raises(ValueError, match="sim must be a SimConfig"):
+        evaluate_saved_policy(tmp_path / "fast", n_steps=n, sim={"step_length_s": 0.1})
+
+
 def test_a_seed_that_never_reaches_the_target_is_reported_as_such(tmp_path):
     """A seed whose window never reaches the target within max_noninteractive is not counted
     as reaching it at the cap: it is left out of "demonstrations to 80 %" and counted apart,

@@ -185,6 +185,77 @@ def test_calibration_command_reports_a_mistake_in_one_line(argv, says, tmp_path,
     assert not history.exists()
 
 
+@pytest.mark.parametrize(
+    ("content", "says"),
+    [
+        (None, "is not a file"),  # a directory: IsADirectoryError
+        ("garbage\n", "line 1: not JSON"),  # JSONDecodeError
+        ('{"t": 3, "episode": 0}\n', "line 1: not a measurement"),  # a session's log: KeyError
+        ("[1, 2]\n", "line 1: not a measurement"),
+        # settings today's HumanDriverConfig does not take (a history of an older teacher):
+        # a TypeError in a search worker
+        ("STALE", "line 1: not a measurement of today's teacher"),
+    ],
+)
+@pytest.mark.parametrize("mode", ["--search", "--rescore"])
+def test_calibration_command_names_a_history_that_is_not_one(content, says, mode, tmp_path, capsys):
+    # each was a traceback, from reading the history or from a worker
+    from sumo_scenarios.calibrate_teacher import _defaults, main
+
+    good = {"driver": _defaults(), "spacing": [40.0, 31.0, 120.0], "collisions": 0.0}
+    good.update(lanes=[0.02, 0.03, 0.15, 0.4, 0.4], stay=0.7)
+    if content == "STALE":
+        stale = dict(good, driver={**_defaults(), "patience_s": 1.0})
+        content = json.dumps(stale) + "\n"
+    history = tmp_path / "history.jsonl"
+    if content is None:
+        history.mkdir()
+    else:
+        history.write_text(json.dumps(good) + "\n" + content)
+        says = says.replace("line 1", "line 2")  # the bad line, after a good one
+    with pytest.raises(SystemExit) as exc:
+        main(
+            [
+                mode,
+                "1",
+                "--seeds",
+                "1",
+                "--steps",
+                "1",
+                "--first-seed",
+                "100",
+                "--history",
+                str(history),
+            ]
+        )
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert says in err and str(history) in err and "Traceback" not in err
+    if content is not None:  # nothing appended to it
+        assert history.read_text() == json.dumps(good) + "\n" + content
+
+
+def test_a_refused_reset_changes_no_later_road(tmp_path):
+    # a reset refused for its ego_lane or fcd_output had already drawn the next road's seed
+    # from the env's RNG (or reseeded it): the user's next reset() drove another road
+    first, second = DrivingEnv(), DrivingEnv()
+    try:
+        first.reset(seed=3)
+        want = [first.reset()[1]["episode_seed"], first.reset()[1]["episode_seed"]]
+        second.reset(seed=3)
+        with pytest.raises(ValueError, match="ego_lane"):
+            second.reset(options={"ego_lane": 9})
+        with pytest.raises(ValueError, match="fcd_output"):
+            second.reset(options={"fcd_output": str(tmp_path / "missing" / "ep.fcd.xml")})
+        with pytest.raises(ValueError, match="ego_lane"):
+            second.reset(seed=11, options={"ego_lane": -1})
+        got = [second.reset()[1]["episode_seed"], second.reset()[1]["episode_seed"]]
+        assert got == want
+    finally:
+        first.close()
+        second.close()
+
+
 def test_render_fps_is_real_time_for_the_step_length():
     # it was 4 whatever the step length: a video of 0.1 s steps (e.g. gymnasium's RecordVideo,
     # which plays frames at metadata["render_fps"]) ran at 0.4 times real time
