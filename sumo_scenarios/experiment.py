@@ -137,6 +137,11 @@ class DrivingExperimentConfig:
             :func:`sumo_scenarios.teacher.make_teacher`).
         ni_stage_every: arm (a) is also snapshotted every this many non-interactive
             demonstrations before the switch (Figure 8's first section).
+        max_confident_steps: cap on arm (a)'s confident-execution steps. A learner that has
+            stopped asking (a large ``max_std``) would never collect ``confident_demos``; past
+            the cap the seed's run raises RuntimeError naming how far it got. The default holds
+            ``confident_demos`` at an autonomy of 99 % (the quick run's seeds acted on their
+            own at 10-42 % of that phase's steps).
     """
 
     seeds: tuple[int, ...] = tuple(range(10))
@@ -159,6 +164,7 @@ class DrivingExperimentConfig:
     gmm_tol: float = 1e-4
     teacher: Literal["expert", "human"] = "human"
     ni_stage_every: int = 100
+    max_confident_steps: int = 20_000
 
     def __post_init__(self) -> None:
         for name in (
@@ -172,6 +178,7 @@ class DrivingExperimentConfig:
             "max_components",
             "train_episode_steps",
             "ni_stage_every",
+            "max_confident_steps",
         ):
             _check_whole(name, getattr(self, name), 1)
         _check_whole("eval_segment", self.eval_segment, 0)
@@ -428,6 +435,16 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     steps_at_switch = ta.n_steps
     for k in range(cfg.stage_every, cfg.confident_demos + 1, cfg.stage_every):
         while ta.n_demonstrations < n_ni + k:
+            if ta.n_steps - steps_at_switch >= cfg.max_confident_steps:
+                got = ta.n_demonstrations - n_ni
+                ta.close()
+                env.close()
+                raise RuntimeError(
+                    f"seed {seed}: arm (a)'s confident phase took max_confident_steps "
+                    f"({cfg.max_confident_steps}) steps and collected {got} of "
+                    f"{cfg.confident_demos} demonstrations: the learner almost never asks at "
+                    f"max_std={cfg.max_std}; lower max_std or raise max_confident_steps"
+                )
             ta.step()
         snap(ta, f"a_plus{k}")
     recs_a = ta.records

@@ -171,6 +171,7 @@ def test_tiny_run_writes_every_acceptance_figure_and_the_plots(tmp_path, capsys)
         {"max_std": None},
         {"gmm_tol": "1e-4"},
         {"gmm_tol": None},
+        {"max_confident_steps": 0},
         # the window never fills: no seed could reach the target (ran, all "not reached")
         {"max_noninteractive": 100, "accuracy_window": 150},
     ],
@@ -402,3 +403,14 @@ def test_numpy_and_range_settings_are_kept_as_plain_json_values():
     )
     assert cfg.seeds == (0, 1, 2) and type(cfg.confident_demos) is int
     json.dumps(dataclasses.asdict(cfg))  # no numpy type left
+
+
+def test_a_learner_that_stops_asking_ends_the_run_with_an_error_not_a_hang(tmp_path):
+    """With a threshold so wide that the learner is always confident, arm (a)'s confident
+    phase never collected its demonstrations: the run looped for ever, printing nothing. It
+    now stops at max_confident_steps with an error naming how far it got."""
+    cfg = tiny_config(max_std=1000.0, max_confident_steps=40)
+    with pytest.raises(
+        RuntimeError, match=r"max_confident_steps \(40\) steps and collected 0 of 20"
+    ):
+        run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
