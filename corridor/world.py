@@ -220,6 +220,13 @@ class CorridorWorld:
                 "the robot smaller"
             )
         self.route = corridor_map.route_polyline()
+        # The route tracker's arc-length window (Route.locate's back and ahead, 0.5 m and 1 m)
+        # holds the longest advance of one action of the default robot, a turn's 2 x 0.2 m,
+        # 2.5 times over; for a robot whose actions go farther it is scaled to hold theirs as
+        # well: with 1 m ahead a step of 0.6 m turned at a corner (1.2 m on) was never credited
+        # and the progress stood still for the rest of the episode.
+        scale = max(1.0, max(self.config.forward_distance, 2 * self.config.turn_radius) / 0.4)
+        self._window = {"back": 0.5 * scale, "ahead": 1.0 * scale}
         self._space = pymunk.Space()
         wall_filter = pymunk.ShapeFilter(categories=_WALL_CATEGORY)
         for a, b in corridor_map.walls():
@@ -247,7 +254,9 @@ class CorridorWorld:
         x, y = x + dx, y + dy
         self._s = 0.0
         self._s_max = 0.0
-        self._progress = self.route.locate(x, y, h, 0.0, max_offset=self.map.corridor_width)
+        self._progress = self.route.locate(
+            x, y, h, 0.0, max_offset=self.map.corridor_width, **self._window
+        )
 
     def set_pose(self, x: float, y: float, heading: float) -> None:
         """Place the robot (metres, radians); raises ValueError if it would overlap a wall.
@@ -452,7 +461,7 @@ class CorridorWorld:
         self._body.position = (x, y)
         self._body.angle = self._heading
         self._progress = self.route.locate(
-            x, y, self._heading, self._s, max_offset=self.map.corridor_width
+            x, y, self._heading, self._s, max_offset=self.map.corridor_width, **self._window
         )
         self._s = self._progress.s
         self._s_max = max(self._s_max, self._s)

@@ -995,3 +995,33 @@ def test_world_config_takes_numpy_numbers_as_plain_ones():
     for bad in (dict(max_range=np.bool_(True)), dict(noise_sd=np.float32("nan"))):
         with pytest.raises(ValueError, match=next(iter(bad))):
             WorldConfig(**bad)
+
+
+@pytest.mark.parametrize(
+    "robot, n_actions",
+    [
+        (dict(forward_distance=0.6, turn_radius=0.6), 45),
+        (dict(forward_distance=1.2, turn_radius=0.8), 25),
+    ],
+)
+def test_the_route_tracker_follows_a_robot_whose_actions_go_farther_than_a_metre(robot, n_actions):
+    """A bigger robot in 2 m corridors: the route tracker looked for the robot at most 1 m
+    ahead of its progress, so a turn of radius 0.6 m at a corner (1.2 m on along the route) or
+    a forward step of 1.2 m was never credited, the progress stood still for the rest of the
+    episode and the expert turned on the spot until the step cap (no circuit, or a wall contact
+    in a loop of turns). The tracker's window now scales with the robot's longest action
+    (unchanged for the default robot), and the expert drives clean circuits."""
+    big = map_from_dict(
+        {
+            "name": "big",
+            "corridor_width": 2.0,
+            "nodes": {"A": [0, 0], "B": [10, 0], "C": [10, 5], "D": [0, 5]},
+            "corridors": [["A", "B"], ["B", "C"], ["C", "D"], ["D", "A"]],
+            "route": ["A", "B", "C", "D", "A"],
+        }
+    )
+    env = CorridorEnv(big, WorldConfig(robot_radius=0.3, max_range=5.0, **robot))
+    episodes = drive(env, CorridorExpert(big, env.world.config), seed=0, episodes=2)
+    for actions, _, terminated, info in episodes:
+        assert terminated and info["is_success"] and info["laps"] == 1
+        assert len(actions) == n_actions
