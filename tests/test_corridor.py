@@ -418,6 +418,7 @@ def test_prioritized_sweeping_evaluation_drives_clean_circuits_in_a_row():
     assert not _completes_circuit((U,) * 8, world, 0.6, seed=0, circuits=1, cap=20)
 
 
+@pytest.mark.filterwarnings("ignore:map 'small'.*episode_steps=10:UserWarning")
 def test_prioritized_sweeping_first_hit_vs_stable(monkeypatch):
     """Scripted greedy tables: good from step 5, bad at step 20, good again from 21 on. With
     10-step episodes (too short for a circuit), the evaluations at the ends of episodes see
@@ -1025,3 +1026,40 @@ def test_the_route_tracker_follows_a_robot_whose_actions_go_farther_than_a_metre
     for actions, _, terminated, info in episodes:
         assert terminated and info["is_success"] and info["laps"] == 1
         assert len(actions) == n_actions
+
+
+def test_the_baseline_says_when_a_circuit_does_not_fit_in_its_episode(tmp_path, recwarn):
+    """On a map of one's own whose circuit takes more than 81 actions (a 6 m x 4 m loop, 96),
+    teaching runs to the env's default cap of two circuits, but Prioritized Sweeping kept its
+    episode_steps of 81: no learning episode completed a circuit, no evaluation (each circuit
+    within episode_steps actions) could pass, and the experiment reported the baseline as
+    never learning, with an evaluation ceiling of 0, without a word. The baseline now warns
+    and names the cap to pass, and CorridorExperimentConfig refuses such a ps up front. The
+    shipped maps (29 and 34 actions) run as before."""
+    from corridor.experiment import CorridorExperimentConfig
+
+    big = {**SMALL, "nodes": {"A": [0, 0], "B": [6.0, 0], "C": [6.0, 4.0], "D": [0, 4.0]}}
+    quick = PrioritizedSweepingConfig(max_steps=5)
+    message = r"takes about 96 actions, more than PrioritizedSweepingConfig.episode_steps=81"
+    with pytest.warns(UserWarning, match=message) as caught:
+        run_prioritized_sweeping(map_from_dict(big), quick, seed=0)
+    assert "episode_steps=192" in str(caught[0].message)
+    with pytest.warns(UserWarning, match=message):
+        passing_tables(map_from_dict(big), quick)
+    recwarn.clear()
+    run_prioritized_sweeping(map_from_dict(big), dataclasses.replace(quick, episode_steps=192))
+    run_prioritized_sweeping(load_map("figure2"), quick)
+    assert not [w for w in recwarn if "circuit of its route" in str(w.message)]
+    path = tmp_path / "big.json"
+    path.write_text(json.dumps(big))
+    with pytest.raises(
+        ValueError,
+        match=r"ps.episode_steps=81 is less than the about 96 .*"
+        r"PrioritizedSweepingConfig\(episode_steps=192\)",
+    ):
+        CorridorExperimentConfig(map_name=str(path))
+    cfg = CorridorExperimentConfig(
+        map_name=str(path), ps=PrioritizedSweepingConfig(episode_steps=192)
+    )
+    assert cfg.ps.episode_steps == 192
+    assert CorridorExperimentConfig().ps.episode_steps == 81
