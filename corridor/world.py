@@ -246,7 +246,7 @@ class CorridorWorld:
         """Put the robot at the map's start pose, moved by ``offset`` = (dx m, dy m, dheading
         rad), with zero progress. The commanded heading is the start pose's (so a heading offset
         is an error the first action removes, see the module docstring). Raises ValueError if
-        the moved pose overlaps a wall."""
+        the moved pose overlaps a wall or lies outside the corridors (:meth:`set_pose`)."""
         x, y, h = self.map.start_pose()
         dx, dy, dh = (float(v) for v in offset)
         self.set_pose(x + dx, y + dy, h + dh)
@@ -259,8 +259,19 @@ class CorridorWorld:
         )
 
     def set_pose(self, x: float, y: float, heading: float) -> None:
-        """Place the robot (metres, radians); raises ValueError if it would overlap a wall.
-        Progress is not changed (call :meth:`reset` for that)."""
+        """Place the robot (metres, radians); raises ValueError if a value is not finite, if
+        its centre lies outside the map's corridors (in the solid between them, or beyond the
+        map) or if it would overlap a wall. Progress is not changed (call :meth:`reset` for
+        that)."""
+        if not all(math.isfinite(float(v)) for v in (x, y, heading)):
+            raise ValueError(f"pose must be finite metres and radians, got ({x}, {y}, {heading})")
+        if not self.map.is_free(x, y):
+            xmin, ymin, xmax, ymax = self.map.bounds()
+            raise ValueError(
+                f"pose ({x:.3f}, {y:.3f}) lies outside the corridors of map {self.map.name!r} "
+                f"(in the solid between them, or beyond the map's x in [{xmin:g}, {xmax:g}], "
+                f"y in [{ymin:g}, {ymax:g}] m); place the robot in a corridor"
+            )
         if self._overlaps(x, y):
             self._body.position = (self._x, self._y)
             raise ValueError(f"pose ({x:.3f}, {y:.3f}) overlaps a wall")

@@ -1063,3 +1063,29 @@ def test_the_baseline_says_when_a_circuit_does_not_fit_in_its_episode(tmp_path, 
     )
     assert cfg.ps.episode_steps == 192
     assert CorridorExperimentConfig().ps.episode_steps == 81
+
+
+def test_the_robot_cannot_be_placed_outside_the_corridors():
+    """set_pose (and reset's offset) refused only a pose whose robot overlapped a wall, so a
+    pose inside the solid block between figure2's corridors, (0.7, 0.6), was taken: the robot
+    lived in the wall, its rays reading 0.3, 0.4 and 0.3 m and its steps moving it freely;
+    (5, 5) beyond the map was taken too, and a NaN or infinite pose silently. Each is now a
+    ValueError saying what is wrong, and the robot stays where it was; a pose in a corridor is
+    placed as before."""
+    w = CorridorWorld("figure2")
+    w.set_pose(1.0, 0.0, 0.0)
+    for bad, message in (
+        ((0.7, 0.6, 0.0), r"pose \(0.700, 0.600\) lies outside the corridors of map 'figure2'"),
+        ((5.0, 5.0, 0.0), r"x in \[-0.3, 1.7\], y in \[-0.3, 2.3\] m\); place the robot"),
+        ((math.nan, 0.0, 0.0), "pose must be finite"),
+        ((0.5, 0.0, math.inf), "pose must be finite"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            w.set_pose(*bad)
+        assert w.pose == (1.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match="lies outside the corridors"):
+        w.reset((5.0, 5.0, 0.0))
+    with pytest.raises(ValueError, match="overlaps a wall"):
+        w.set_pose(0.2, 0.25, 0.0)
+    w.set_pose(1.4, 1.8, math.pi / 2)
+    assert w.pose == (1.4, 1.8, math.pi / 2)
