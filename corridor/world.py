@@ -221,11 +221,15 @@ class CorridorWorld:
             )
         self.route = corridor_map.route_polyline()
         # The route tracker's arc-length window (Route.locate's back and ahead, 0.5 m and 1 m)
-        # holds the longest advance of one action of the default robot, a turn's 2 x 0.2 m,
-        # 2.5 times over; for a robot whose actions go farther it is scaled to hold theirs as
-        # well: with 1 m ahead a step of 0.6 m turned at a corner (1.2 m on) was never credited
-        # and the progress stood still for the rest of the episode.
-        scale = max(1.0, max(self.config.forward_distance, 2 * self.config.turn_radius) / 0.4)
+        # must hold the farthest the progress moves in one action: the action's advance (a
+        # turn's 2 x turn_radius at most, a step's forward_distance) plus, at a corner, up to a
+        # corridor's width (a robot off the centre line projects on the corridors before and
+        # after the corner up to a width apart): 0.4 + 0.6 = 1 m for the default robot on the
+        # shipped maps. Scaled up where that is more: with 1 m ahead a robot whose turn (or
+        # step) went farther, or one that cut a corner of a 1 m wide corridor on its inner
+        # side, was never credited, and the progress stood still for the rest of the episode.
+        advance = max(self.config.forward_distance, 2 * self.config.turn_radius)
+        scale = max(1.0, corridor_map.corridor_width + advance)  # metres over the default 1 m
         self._window = {"back": 0.5 * scale, "ahead": 1.0 * scale}
         self._space = pymunk.Space()
         wall_filter = pymunk.ShapeFilter(categories=_WALL_CATEGORY)
