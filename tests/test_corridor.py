@@ -1123,3 +1123,16 @@ def test_the_route_tracker_follows_a_robot_that_cuts_a_corner_of_a_wide_corridor
         if terminated or truncated:
             break
     assert terminated and info["laps"] == 1 and t + 1 == 53
+
+
+@pytest.mark.parametrize("bad", ["1.5", None, 0, True, math.inf])
+def test_the_keyboard_teacher_checks_its_full_bar_distance_when_it_is_made(bad):
+    """corridor.human.make_teacher(max_range=...) took any value and handed it to describe, so
+    a bad one ('1.5' from a config, None, 0) failed only at the session's first question, with
+    the session already started. It is now refused when the teacher is made, with describe's
+    message (as the driving teacher's row height is)."""
+    from corridor.human import make_teacher
+
+    with pytest.raises(ValueError, match=r"max_range: expected metres > 0 \(the sensors' range\)"):
+        make_teacher(max_range=bad)
+    assert make_teacher(max_range=np.float32(2.0)) is not None
