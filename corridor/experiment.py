@@ -147,8 +147,8 @@ class CorridorExperimentConfig:
             start and again from perturbed starts.
         eval_perturbation: ``(metres, radians)`` half-widths of the perturbed starts' offsets.
         ps: the Prioritized Sweeping baseline's parameters (on a map whose circuit takes more
-            than its ``episode_steps``, 81 by default, pass a larger one: such a config is
-            refused).
+            than its ``episode_steps``, 81 by default, pass a larger one; its ``wall_threshold``
+            must lie below ``world.max_range``: a config that breaks either is refused).
         max_components: candidate components per mixture (20: searched to 20 with
             ``var_floor`` 0.01, the AIC took at most 11 on the 111 training sets below).
         var_floor: the GMM's relative variance floor (:mod:`torchcbl.gmm`): a component's
@@ -277,6 +277,14 @@ class CorridorExperimentConfig:
             env = CorridorEnv(corridor_map, self.world, start_perturbation=pert)
         except ValueError as exc:
             raise ValueError(f"eval_perturbation on map {self.map_name!r}: {exc}") from None
+        if not self.ps.wall_threshold < self.world.max_range:
+            # (run_prioritized_sweeping refuses it too, but only after each seed's teaching)
+            raise ValueError(
+                f"ps.wall_threshold ({self.ps.wall_threshold:g} m) must be less than the "
+                f"robot's sensor range, world.max_range ({self.world.max_range:g} m), or every "
+                "reading is a wall and the Prioritized Sweeping baseline sees one state; pass "
+                "ps=PrioritizedSweepingConfig(wall_threshold=...) below it"
+            )
         circuit = _circuit_actions(env.world)
         if circuit > self.ps.episode_steps:
             # (teaching runs to CorridorEnv's default cap, two circuits on such a map; the

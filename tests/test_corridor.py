@@ -222,6 +222,14 @@ def test_experiment_config_checks_what_the_workers_would_find_late():
         CorridorExperimentConfig(teaching=TeachingConfig())
     with pytest.raises(ValueError, match="world must be a WorldConfig, got dict"):
         CorridorExperimentConfig(world={})
+    # a robot whose sensors never read past the baseline's wall threshold: the baseline raised
+    # only after each seed's teaching had run (its session left in the run directory)
+    short = WorldConfig(max_range=0.5)
+    with pytest.raises(
+        ValueError, match=r"ps.wall_threshold \(0.6 m\) must be less than .*max_range \(0.5 m\)"
+    ):
+        CorridorExperimentConfig(world=short)
+    CorridorExperimentConfig(world=short, ps=PrioritizedSweepingConfig(wall_threshold=0.4))
     for seeds in ((0, 0), (1.5,), (-1,), 3, ()):
         with pytest.raises(ValueError, match="seeds must be a non-empty tuple of distinct ints"):
             CorridorExperimentConfig(seeds=seeds)
