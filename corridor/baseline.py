@@ -128,12 +128,14 @@ from __future__ import annotations
 import dataclasses
 import heapq
 import math
+import warnings
 from collections import defaultdict
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
+from corridor.env import _circuit_actions, _default_steps
 from corridor.maps import CorridorMap
 from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
 
@@ -177,7 +179,9 @@ class PrioritizedSweepingConfig:
         episode_steps: a learning episode ends when the robot completes a circuit or after this
             many actions (81: ``CorridorEnv``'s default cap on the shipped maps; the env's
             default is two circuits on a map whose circuit takes more than 40 actions, so raise
-            this there); the robot is then put back at the start pose, as in the teaching loop.
+            this there: the baseline's functions warn when a circuit does not fit, as its
+            evaluation can then never pass); the robot is then put back at the start pose, as in
+            the teaching loop.
         eval_circuits: clean circuits in a row, from the start pose, that the greedy policy must
             drive to pass an evaluation.
         stable_evaluations: consecutive passing evaluations (one after each learning episode)
@@ -446,6 +450,16 @@ def _world(
             f"max_range ({world.config.max_range:g} m), or every reading is a wall and the "
             "learner sees one state; pass PrioritizedSweepingConfig(wall_threshold=...) below it"
         )
+    circuit = _circuit_actions(world)
+    if circuit > config.episode_steps:
+        warnings.warn(
+            f"map {world.map.name!r}: a circuit of its route takes about {circuit} actions, "
+            f"more than PrioritizedSweepingConfig.episode_steps={config.episode_steps}, so no "
+            "learning episode completes a circuit and no evaluation can pass; pass "
+            f"PrioritizedSweepingConfig(episode_steps={_default_steps(world)}), CorridorEnv's "
+            "default cap on this map (81, or two circuits of a longer route)",
+            stacklevel=3,
+        )
     return world
 
 
@@ -544,7 +558,7 @@ def run_prioritized_sweeping(
     config = config or PrioritizedSweepingConfig()
     rng = np.random.default_rng(seed)
     world = _world(corridor_map, world_config, config)
-    eval_world = _world(corridor_map, world_config, config)
+    eval_world = CorridorWorld(corridor_map, world.config)
     learner = PrioritizedSweeping(config, rng)
     reward = RecencyReward(config)
     checked: dict[tuple[int, ...], bool] = {}

@@ -59,6 +59,21 @@ DEFAULT_MAP = "figure2"
 _TURNS = (0.0, math.pi / 2, -math.pi / 2, math.pi)  # ahead, turn left, turn right, u-turn
 
 
+def _circuit_actions(world: CorridorWorld) -> int:
+    """About how many actions a circuit of ``world``'s route takes with exact motion: a forward
+    step per ``forward_distance`` of route, less one for each turn or u-turn (a turn from the
+    decision point covers the corner); exactly the 29 of figure2 and the 34 of lshape."""
+    route = world.route
+    turns = sum(kind != "straight" for kind in route.kinds)
+    return round(route.length / world.config.forward_distance) - turns
+
+
+def _default_steps(world: CorridorWorld) -> int:
+    """``CorridorEnv``'s default step cap for ``world``'s map and robot: 81, or two circuits of
+    a route whose circuit takes more than 40 actions."""
+    return max(81, 2 * _circuit_actions(world))
+
+
 class CorridorEnv(gym.Env):
     """The robot corridor domain of the paper's Section 5.1.
 
@@ -88,15 +103,10 @@ class CorridorEnv(gym.Env):
         # config) are CorridorWorld's to take
         self.world = CorridorWorld(corridor_map, world_config)
         corridor_map = self.world.map
-        # a circuit's actions with exact motion, about: a forward step per forward_distance of
-        # route, less one for each turn or u-turn (a turn from the decision point covers the
-        # corner): exactly the 29 of figure2 and the 34 of lshape
-        route = self.world.route
-        turns = sum(kind != "straight" for kind in route.kinds)
-        circuit = round(route.length / self.world.config.forward_distance) - turns
+        circuit = _circuit_actions(self.world)
         # the default is the only cap gymnasium.make can give the env (make keeps
         # max_episode_steps for its TimeLimit): 81, or two circuits of a longer map's route
-        steps = max(81, 2 * circuit) if max_episode_steps is None else max_episode_steps
+        steps = _default_steps(self.world) if max_episode_steps is None else max_episode_steps
         if (
             isinstance(steps, (bool, np.bool_))
             or not isinstance(steps, (int, np.integer))
@@ -109,8 +119,8 @@ class CorridorEnv(gym.Env):
                 f"map {corridor_map.name!r}: a circuit of its route takes about {circuit} "
                 f"actions, more than max_episode_steps={self.max_episode_steps}, so every "
                 "episode is cut before a circuit ends; pass a larger max_episode_steps, or "
-                f"leave it None (here {max(81, 2 * circuit)}: 81, or two circuits of a longer "
-                "route)",
+                f"leave it None (here {_default_steps(self.world)}: 81, or two circuits of a "
+                "longer route)",
                 stacklevel=2,
             )
         self.render_mode = render_mode

@@ -64,7 +64,7 @@ from corridor.baseline import (
     run_prioritized_sweeping,
     score_tables,
 )
-from corridor.env import DEFAULT_MAP, CorridorEnv
+from corridor.env import DEFAULT_MAP, CorridorEnv, _circuit_actions
 from corridor.expert import CorridorExpert
 from corridor.maps import CorridorMap, available_maps, load_map
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
@@ -146,7 +146,9 @@ class CorridorExperimentConfig:
         eval_circuits: greedy circuits the final policy drives after teaching, from the paper's
             start and again from perturbed starts.
         eval_perturbation: ``(metres, radians)`` half-widths of the perturbed starts' offsets.
-        ps: the Prioritized Sweeping baseline's parameters.
+        ps: the Prioritized Sweeping baseline's parameters (on a map whose circuit takes more
+            than its ``episode_steps``, 81 by default, pass a larger one; its ``wall_threshold``
+            must lie below ``world.max_range``: a config that breaks either is refused).
         max_components: candidate components per mixture (20: searched to 20 with
             ``var_floor`` 0.01, the AIC took at most 11 on the 111 training sets below).
         var_floor: the GMM's relative variance floor (:mod:`torchcbl.gmm`): a component's
@@ -272,9 +274,28 @@ class CorridorExperimentConfig:
         except ValueError as exc:
             raise ValueError(f"map_name: {exc}") from None
         try:
-            CorridorEnv(corridor_map, self.world, start_perturbation=pert)
+            env = CorridorEnv(corridor_map, self.world, start_perturbation=pert)
         except ValueError as exc:
             raise ValueError(f"eval_perturbation on map {self.map_name!r}: {exc}") from None
+        if not self.ps.wall_threshold < self.world.max_range:
+            # (run_prioritized_sweeping refuses it too, but only after each seed's teaching)
+            raise ValueError(
+                f"ps.wall_threshold ({self.ps.wall_threshold:g} m) must be less than the "
+                f"robot's sensor range, world.max_range ({self.world.max_range:g} m), or every "
+                "reading is a wall and the Prioritized Sweeping baseline sees one state; pass "
+                "ps=PrioritizedSweepingConfig(wall_threshold=...) below it"
+            )
+        circuit = _circuit_actions(env.world)
+        if circuit > self.ps.episode_steps:
+            # (teaching runs to CorridorEnv's default cap, two circuits on such a map; the
+            # baseline's episodes and evaluation circuits would be cut before a circuit ends)
+            raise ValueError(
+                f"ps.episode_steps={self.ps.episode_steps} is less than the about {circuit} "
+                f"actions a circuit of map {self.map_name!r} takes, so the Prioritized Sweeping "
+                "baseline could never complete a circuit nor pass its evaluation; pass "
+                f"ps=PrioritizedSweepingConfig(episode_steps={env.max_episode_steps}), the "
+                "teaching env's step cap on this map (81, or two circuits of a longer route)"
+            )
 
     @classmethod
     def full(cls) -> CorridorExperimentConfig:
@@ -841,9 +862,13 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     # the fields the figures read, the run's own (another robot or map may need a narrower
     # eval_perturbation than the default); a results.json from before threshold_reading was
     # stored was taught with the literal reading
-    config = CorridorExperimentConfig.from_dict(
-        {"threshold_reading": "literal", **{k: cfg[k] for k in _FIGURE_FIELDS if k in cfg}}
-    )
+    fields = {"threshold_reading": "literal", **{k: cfg[k] for k in _FIGURE_FIELDS if k in cfg}}
+    # and the baseline's episode length, which the config checks against the map's circuit (a
+    # map whose circuit takes more than 81 actions was run with a longer one)
+    episode_steps = (cfg.get("ps") or {}).get("episode_steps")
+    if episode_steps is not None:
+        fields["ps"] = {"episode_steps": episode_steps}
+    config = CorridorExperimentConfig.from_dict(fields)
     seed = config.seeds[0]
     session = run_dir / "sessions" / f"seed{seed}"
     if not (session / "config.json").is_file():

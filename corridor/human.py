@@ -36,6 +36,16 @@ KEYS: dict[str, int] = {
 _SENSORS = ("left", "front", "right")
 
 
+def _check_max_range(max_range: Any) -> None:
+    """Refuse a full-bar distance that is not a finite number of metres > 0."""
+    if (
+        isinstance(max_range, (bool, np.bool_))
+        or not isinstance(max_range, (int, float, np.integer, np.floating))
+        or not (math.isfinite(max_range) and max_range > 0)
+    ):
+        raise ValueError(f"max_range: expected metres > 0 (the sensors' range), got {max_range!r}")
+
+
 def describe(
     observation: np.ndarray, info: dict | None = None, *, max_range: float = 1.5, width: int = 30
 ) -> str:
@@ -56,12 +66,7 @@ def describe(
         raise ValueError(f"a corridor observation is [left, front, right], got shape {obs.shape}")
     if not np.all(np.isfinite(obs)) or np.any(obs < 0):
         raise ValueError(f"sensor distances must be finite and >= 0, got {obs.tolist()}")
-    if (
-        isinstance(max_range, (bool, np.bool_))
-        or not isinstance(max_range, (int, float, np.integer, np.floating))
-        or not (math.isfinite(max_range) and max_range > 0)
-    ):
-        raise ValueError(f"max_range: expected metres > 0 (the sensors' range), got {max_range!r}")
+    _check_max_range(max_range)
     if isinstance(width, (bool, np.bool_)) or not isinstance(width, (int, np.integer)) or width < 1:
         raise ValueError(f"width: expected an int >= 1 (characters), got {width!r}")
     lines = [f"robot sensors (distance to the nearest wall; full bar = {max_range:g} m)"]
@@ -82,7 +87,11 @@ def make_teacher(*, max_range: float = 1.5, **kwargs: Any) -> TerminalTeacher:
         max_range: passed to :func:`describe`.
         **kwargs: passed to :class:`~torchcbl.human.TerminalTeacher` (``input``, ``output``,
             ``status``, ``title``, ...); ``keys`` and ``action_names`` may be overridden.
+
+    Raises:
+        ValueError: if ``max_range`` is not metres > 0 (here, not at the first question).
     """
+    _check_max_range(max_range)  # before a session starts, not at its first question
     kwargs.setdefault("keys", KEYS)
     kwargs.setdefault("action_names", ACTION_NAMES)
     kwargs.setdefault("describe", functools.partial(describe, max_range=max_range))

@@ -321,7 +321,9 @@ class Route:
         """Project a pose on the route near the previous unwrapped arc length ``s_prev``.
 
         Candidates are the nearest points of every segment whose arc length, unwrapped to lie in
-        ``[s_prev - back, s_prev + ahead]``, is reachable, and which lie within ``max_offset``
+        ``[s_prev - back, s_prev + ahead]`` (the world scales both up where the corridor's
+        width plus the robot's longest action, a turn's 2 x 0.2 m by default, exceeds 1 m), is
+        reachable, and which lie within ``max_offset``
         metres of the pose (the world passes the corridor width: a corridor the route does not
         take, e.g. one parallel to it, is not the route); among them the one minimising
         distance + ``heading_weight`` * (1 - cos(heading error)) wins, so a spur driven in and

@@ -220,6 +220,17 @@ class CorridorWorld:
                 "the robot smaller"
             )
         self.route = corridor_map.route_polyline()
+        # The route tracker's arc-length window (Route.locate's back and ahead, 0.5 m and 1 m)
+        # must hold the farthest the progress moves in one action: the action's advance (a
+        # turn's 2 x turn_radius at most, a step's forward_distance) plus, at a corner, up to a
+        # corridor's width (a robot off the centre line projects on the corridors before and
+        # after the corner up to a width apart): 0.4 + 0.6 = 1 m for the default robot on the
+        # shipped maps. Scaled up where that is more: with 1 m ahead a robot whose turn (or
+        # step) went farther, or one that cut a corner of a 1 m wide corridor on its inner
+        # side, was never credited, and the progress stood still for the rest of the episode.
+        advance = max(self.config.forward_distance, 2 * self.config.turn_radius)
+        scale = max(1.0, corridor_map.corridor_width + advance)  # metres over the default 1 m
+        self._window = {"back": 0.5 * scale, "ahead": 1.0 * scale}
         self._space = pymunk.Space()
         wall_filter = pymunk.ShapeFilter(categories=_WALL_CATEGORY)
         for a, b in corridor_map.walls():
@@ -239,7 +250,7 @@ class CorridorWorld:
         """Put the robot at the map's start pose, moved by ``offset`` = (dx m, dy m, dheading
         rad), with zero progress. The commanded heading is the start pose's (so a heading offset
         is an error the first action removes, see the module docstring). Raises ValueError if
-        the moved pose overlaps a wall."""
+        the moved pose overlaps a wall or lies outside the corridors (:meth:`set_pose`)."""
         x, y, h = self.map.start_pose()
         dx, dy, dh = (float(v) for v in offset)
         self.set_pose(x + dx, y + dy, h + dh)
@@ -247,11 +258,24 @@ class CorridorWorld:
         x, y = x + dx, y + dy
         self._s = 0.0
         self._s_max = 0.0
-        self._progress = self.route.locate(x, y, h, 0.0, max_offset=self.map.corridor_width)
+        self._progress = self.route.locate(
+            x, y, h, 0.0, max_offset=self.map.corridor_width, **self._window
+        )
 
     def set_pose(self, x: float, y: float, heading: float) -> None:
-        """Place the robot (metres, radians); raises ValueError if it would overlap a wall.
-        Progress is not changed (call :meth:`reset` for that)."""
+        """Place the robot (metres, radians); raises ValueError if a value is not finite, if
+        its centre lies outside the map's corridors (in the solid between them, or beyond the
+        map) or if it would overlap a wall. Progress is not changed (call :meth:`reset` for
+        that)."""
+        if not all(math.isfinite(float(v)) for v in (x, y, heading)):
+            raise ValueError(f"pose must be finite metres and radians, got ({x}, {y}, {heading})")
+        if not self.map.is_free(x, y):
+            xmin, ymin, xmax, ymax = self.map.bounds()
+            raise ValueError(
+                f"pose ({x:.3f}, {y:.3f}) lies outside the corridors of map {self.map.name!r} "
+                f"(in the solid between them, or beyond the map's x in [{xmin:g}, {xmax:g}], "
+                f"y in [{ymin:g}, {ymax:g}] m); place the robot in a corridor"
+            )
         if self._overlaps(x, y):
             self._body.position = (self._x, self._y)
             raise ValueError(f"pose ({x:.3f}, {y:.3f}) overlaps a wall")
@@ -452,7 +476,7 @@ class CorridorWorld:
         self._body.position = (x, y)
         self._body.angle = self._heading
         self._progress = self.route.locate(
-            x, y, self._heading, self._s, max_offset=self.map.corridor_width
+            x, y, self._heading, self._s, max_offset=self.map.corridor_width, **self._window
         )
         self._s = self._progress.s
         self._s_max = max(self._s_max, self._s)

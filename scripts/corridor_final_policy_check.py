@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from corridor.baseline import PrioritizedSweepingConfig
 from corridor.env import CorridorEnv
 from corridor.experiment import CorridorExperimentConfig
 from corridor.expert import CorridorExpert
@@ -121,6 +122,7 @@ def main() -> None:
             world=world,
             max_std=config["max_std"],
             threshold_reading=config["threshold_reading"],
+            ps=PrioritizedSweepingConfig(**config.get("ps", {})),  # a long map's cap, as run
         ).rule()
     except (ValueError, KeyError, TypeError) as exc:
         raise SystemExit(f"{results} is not a corridor run's results.json ({exc!r})") from None

@@ -222,6 +222,14 @@ def test_experiment_config_checks_what_the_workers_would_find_late():
         CorridorExperimentConfig(teaching=TeachingConfig())
     with pytest.raises(ValueError, match="world must be a WorldConfig, got dict"):
         CorridorExperimentConfig(world={})
+    # a robot whose sensors never read past the baseline's wall threshold: the baseline raised
+    # only after each seed's teaching had run (its session left in the run directory)
+    short = WorldConfig(max_range=0.5)
+    with pytest.raises(
+        ValueError, match=r"ps.wall_threshold \(0.6 m\) must be less than .*max_range \(0.5 m\)"
+    ):
+        CorridorExperimentConfig(world=short)
+    CorridorExperimentConfig(world=short, ps=PrioritizedSweepingConfig(wall_threshold=0.4))
     for seeds in ((0, 0), (1.5,), (-1,), 3, ()):
         with pytest.raises(ValueError, match="seeds must be a non-empty tuple of distinct ints"):
             CorridorExperimentConfig(seeds=seeds)
@@ -418,6 +426,7 @@ def test_prioritized_sweeping_evaluation_drives_clean_circuits_in_a_row():
     assert not _completes_circuit((U,) * 8, world, 0.6, seed=0, circuits=1, cap=20)
 
 
+@pytest.mark.filterwarnings("ignore:map 'small'.*episode_steps=10:UserWarning")
 def test_prioritized_sweeping_first_hit_vs_stable(monkeypatch):
     """Scripted greedy tables: good from step 5, bad at step 20, good again from 21 on. With
     10-step episodes (too short for a circuit), the evaluations at the ends of episodes see
@@ -995,3 +1004,143 @@ def test_world_config_takes_numpy_numbers_as_plain_ones():
     for bad in (dict(max_range=np.bool_(True)), dict(noise_sd=np.float32("nan"))):
         with pytest.raises(ValueError, match=next(iter(bad))):
             WorldConfig(**bad)
+
+
+@pytest.mark.parametrize(
+    "robot, n_actions",
+    [
+        (dict(forward_distance=0.6, turn_radius=0.6), 45),
+        (dict(forward_distance=1.2, turn_radius=0.8), 25),
+    ],
+)
+def test_the_route_tracker_follows_a_robot_whose_actions_go_farther_than_a_metre(robot, n_actions):
+    """A bigger robot in 2 m corridors: the route tracker looked for the robot at most 1 m
+    ahead of its progress, so a turn of radius 0.6 m at a corner (1.2 m on along the route) or
+    a forward step of 1.2 m was never credited, the progress stood still for the rest of the
+    episode and the expert turned on the spot until the step cap (no circuit, or a wall contact
+    in a loop of turns). The tracker's window now scales with the robot's longest action
+    (unchanged for the default robot), and the expert drives clean circuits."""
+    big = map_from_dict(
+        {
+            "name": "big",
+            "corridor_width": 2.0,
+            "nodes": {"A": [0, 0], "B": [10, 0], "C": [10, 5], "D": [0, 5]},
+            "corridors": [["A", "B"], ["B", "C"], ["C", "D"], ["D", "A"]],
+            "route": ["A", "B", "C", "D", "A"],
+        }
+    )
+    env = CorridorEnv(big, WorldConfig(robot_radius=0.3, max_range=5.0, **robot))
+    episodes = drive(env, CorridorExpert(big, env.world.config), seed=0, episodes=2)
+    for actions, _, terminated, info in episodes:
+        assert terminated and info["is_success"] and info["laps"] == 1
+        assert len(actions) == n_actions
+
+
+def test_the_baseline_says_when_a_circuit_does_not_fit_in_its_episode(tmp_path, recwarn):
+    """On a map of one's own whose circuit takes more than 81 actions (a 6 m x 4 m loop, 96),
+    teaching runs to the env's default cap of two circuits, but Prioritized Sweeping kept its
+    episode_steps of 81: no learning episode completed a circuit, no evaluation (each circuit
+    within episode_steps actions) could pass, and the experiment reported the baseline as
+    never learning, with an evaluation ceiling of 0, without a word. The baseline now warns
+    and names the cap to pass, and CorridorExperimentConfig refuses such a ps up front. The
+    shipped maps (29 and 34 actions) run as before."""
+    from corridor.experiment import CorridorExperimentConfig
+
+    big = {**SMALL, "nodes": {"A": [0, 0], "B": [6.0, 0], "C": [6.0, 4.0], "D": [0, 4.0]}}
+    quick = PrioritizedSweepingConfig(max_steps=5)
+    message = r"takes about 96 actions, more than PrioritizedSweepingConfig.episode_steps=81"
+    with pytest.warns(UserWarning, match=message) as caught:
+        run_prioritized_sweeping(map_from_dict(big), quick, seed=0)
+    assert "episode_steps=192" in str(caught[0].message)
+    with pytest.warns(UserWarning, match=message):
+        passing_tables(map_from_dict(big), quick)
+    recwarn.clear()
+    run_prioritized_sweeping(map_from_dict(big), dataclasses.replace(quick, episode_steps=192))
+    run_prioritized_sweeping(load_map("figure2"), quick)
+    assert not [w for w in recwarn if "circuit of its route" in str(w.message)]
+    path = tmp_path / "big.json"
+    path.write_text(json.dumps(big))
+    with pytest.raises(
+        ValueError,
+        match=r"ps.episode_steps=81 is less than the about 96 .*"
+        r"PrioritizedSweepingConfig\(episode_steps=192\)",
+    ):
+        CorridorExperimentConfig(map_name=str(path))
+    cfg = CorridorExperimentConfig(
+        map_name=str(path), ps=PrioritizedSweepingConfig(episode_steps=192)
+    )
+    assert cfg.ps.episode_steps == 192
+    assert CorridorExperimentConfig().ps.episode_steps == 81
+
+
+def test_the_robot_cannot_be_placed_outside_the_corridors():
+    """set_pose (and reset's offset) refused only a pose whose robot overlapped a wall, so a
+    pose inside the solid block between figure2's corridors, (0.7, 0.6), was taken: the robot
+    lived in the wall, its rays reading 0.3, 0.4 and 0.3 m and its steps moving it freely;
+    (5, 5) beyond the map was taken too, and a NaN or infinite pose silently. Each is now a
+    ValueError saying what is wrong, and the robot stays where it was; a pose in a corridor is
+    placed as before."""
+    w = CorridorWorld("figure2")
+    w.set_pose(1.0, 0.0, 0.0)
+    for bad, message in (
+        ((0.7, 0.6, 0.0), r"pose \(0.700, 0.600\) lies outside the corridors of map 'figure2'"),
+        ((5.0, 5.0, 0.0), r"x in \[-0.3, 1.7\], y in \[-0.3, 2.3\] m\); place the robot"),
+        ((math.nan, 0.0, 0.0), "pose must be finite"),
+        ((0.5, 0.0, math.inf), "pose must be finite"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            w.set_pose(*bad)
+        assert w.pose == (1.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match="lies outside the corridors"):
+        w.reset((5.0, 5.0, 0.0))
+    with pytest.raises(ValueError, match="overlaps a wall"):
+        w.set_pose(0.2, 0.25, 0.0)
+    w.set_pose(1.4, 1.8, math.pi / 2)
+    assert w.pose == (1.4, 1.8, math.pi / 2)
+
+
+def test_the_route_tracker_follows_a_robot_that_cuts_a_corner_of_a_wide_corridor():
+    """On a loop of 1 m wide corridors, a robot driving up the inner side of a corridor and
+    turning left early at its corner projects on the next corridor 1.07 m further along the
+    route than on the one it left: beyond the tracker's 1 m window, so the progress stood still
+    at the corner for the rest of the episode and the expert, steered by it, never finished
+    the circuit (16 of 100 circuits after 1-4 random actions, exact motion, measured with
+    temporary code). The window now holds the corridor's width plus the robot's longest action
+    (1 m on the shipped maps, as before), and the expert takes over from the scripted actions
+    and ends the circuit."""
+    wide = map_from_dict(
+        {
+            "name": "wide",
+            "corridor_width": 1.0,
+            "nodes": {"A": [0, 0], "B": [4, 0], "C": [4, 2], "D": [0, 2]},
+            "corridors": [["A", "B"], ["B", "C"], ["C", "D"], ["D", "A"]],
+            "route": ["A", "B", "C", "D", "A"],
+        }
+    )
+    env = CorridorEnv(wide)
+    expert = CorridorExpert(wide)
+    # round the first corner, up the right corridor, then u-turn, right, right (against the
+    # inner wall), up the inner side and an early left turn at (3.62, 1.51)
+    script = [F] * 18 + [L] + [F] * 4 + [U, R, R] + [F] * 3 + [L]
+    obs, info = env.reset(seed=0)
+    for t in range(env.max_episode_steps):
+        a = script[t] if t < len(script) else expert(obs, info)
+        obs, _, terminated, truncated, info = env.step(a)
+        if t == len(script) - 1:
+            assert info["pose"][0] == pytest.approx(3.42, abs=0.01)  # in the top corridor
+        if terminated or truncated:
+            break
+    assert terminated and info["laps"] == 1 and t + 1 == 53
+
+
+@pytest.mark.parametrize("bad", ["1.5", None, 0, True, math.inf])
+def test_the_keyboard_teacher_checks_its_full_bar_distance_when_it_is_made(bad):
+    """corridor.human.make_teacher(max_range=...) took any value and handed it to describe, so
+    a bad one ('1.5' from a config, None, 0) failed only at the session's first question, with
+    the session already started. It is now refused when the teacher is made, with describe's
+    message (as the driving teacher's row height is)."""
+    from corridor.human import make_teacher
+
+    with pytest.raises(ValueError, match=r"max_range: expected metres > 0 \(the sensors' range\)"):
+        make_teacher(max_range=bad)
+    assert make_teacher(max_range=np.float32(2.0)) is not None

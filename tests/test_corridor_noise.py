@@ -738,3 +738,36 @@ def test_request_investigation_script_runs_and_finds_few_requests_with_exact_mot
     assert run["finished"] and run["eval_clean"] == 10
     assert summary["demonstrations"][0] == run["demonstrations"] <= 45
     assert 0.0 <= summary["fresh_request_free_share"] <= 1.0
+
+
+def test_plot_results_redraws_a_run_on_a_map_whose_circuit_is_longer_than_81_actions(tmp_path):
+    """A run on a map whose circuit takes 96 actions needs the baseline's episode_steps above
+    them (CorridorExperimentConfig refuses the default 81 there): plot_results rebuilt the
+    run's config from the fields the figures read, without ps, and so refused the run it was
+    redrawing ("ps.episode_steps=81 is less than the about 96 actions ..."). It now keeps the
+    run's episode_steps and redraws."""
+    import json
+
+    from corridor.baseline import PrioritizedSweepingConfig
+    from corridor.experiment import plot_results, run_experiment
+    from torchcbl import TeachingConfig
+
+    big = {
+        "name": "big",
+        "corridor_width": 0.6,
+        "nodes": {"A": [0, 0], "B": [6.0, 0], "C": [6.0, 4.0], "D": [0, 4.0]},
+        "corridors": [["A", "B"], ["B", "C"], ["C", "D"], ["D", "A"]],
+        "route": ["A", "B", "C", "D", "A"],
+    }
+    (tmp_path / "big.json").write_text(json.dumps(big))
+    cfg = _tiny_experiment(
+        map_name=str(tmp_path / "big.json"),
+        ps=PrioritizedSweepingConfig(max_steps=50, episode_steps=192),
+        teaching=TeachingConfig(accuracy_window=20, autonomous_episodes_to_stop=1, max_steps=200),
+        eval_circuits=1,
+    )
+    run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
+    (tmp_path / "run" / "map.png").unlink()
+    results = json.loads((tmp_path / "run" / "results.json").read_text())
+    assert tmp_path / "run" / "map.png" in plot_results(results, tmp_path / "run")
+    assert (tmp_path / "run" / "map.png").stat().st_size > 1000
