@@ -23,7 +23,9 @@ Run directory layout (one directory per teaching session)::
                                  "state_dict": ...}`` of the model fitted on the first 12
                                  labels (and the SHA-256 of those labels), its tensors on the
                                  CPU whatever the model's device; one per refit, all kept
-                                 (snapshots at stages come for free)
+                                 (snapshots at stages come for free). A session started from
+                                 a fitted model has its model-00000000.pt, written before
+                                 config.json: no label can refit it
 
 Durability. Every step is appended to ``steps.journal`` with one ``write()`` before the loop
 goes on: a demonstration (teacher label, observation, model output, counters) before its action
@@ -64,7 +66,8 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   demonstration whose outcome line failed is kept, as interrupted, since its label was durable
   before its action ran). A SQLite commit that fails is rolled back; its rows stay in the
   journal and in memory, and the next commit retries them, so a session goes on once space is
-  freed. A checkpoint that cannot be written is refitted from the log when needed.
+  freed. A checkpoint that cannot be written is refitted from the log when needed; a new
+  session's starting model (checkpoint 0) that cannot be written leaves no session.
 - Readers without write access. :func:`load_records`, :func:`load_model` etc. open the log with
   SQLite's ``immutable=1`` (a cleanly closed session: no ``-wal`` file), and then never write,
   lock or create a file, so a read-only mount works; or, while a writer runs or after one was
@@ -600,7 +603,14 @@ _START_AGAIN = "free space (or fix the permissions) and start the session again"
 
 def _remove_new_session_files(path: Path) -> None:
     """Undo a session creation that failed before its first step: the files it made."""
-    for name in (CONFIG_NAME, LOG_NAME, LOG_NAME + "-wal", LOG_NAME + "-shm", JOURNAL_NAME):
+    for name in (
+        CONFIG_NAME,
+        LOG_NAME,
+        LOG_NAME + "-wal",
+        LOG_NAME + "-shm",
+        JOURNAL_NAME,
+        f"{CHECKPOINT_DIR}/model-{0:08d}.pt",  # the starting model (create found no checkpoint)
+    ):
         try:
             (path / name).unlink(missing_ok=True)
         except OSError:
@@ -650,6 +660,44 @@ def _acquire_lock(run_dir: Path) -> Any:
     except OSError:
         pass  # the lock holds without the note
     return f
+
+
+_CHECKPOINT_LATER = (
+    "The session and its model in memory are intact and the step log is complete; a missing "
+    "checkpoint is refitted from the log on resume and by load_model. " + _FREE_SPACE
+)
+
+
+def _write_checkpoint(
+    run_dir: Path,
+    model: torch.nn.Module,
+    n_demonstrations: int,
+    digest: str | None,
+    after: str = _CHECKPOINT_LATER,
+) -> Path:
+    """Write ``checkpoints/model-<n>.pt`` under a temporary name, then rename it into place;
+    a failure is a :class:`SessionWriteError` ending with ``after``."""
+    directory = run_dir / CHECKPOINT_DIR
+    path = directory / f"model-{n_demonstrations:08d}.pt"
+    tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
+    state = model.state_dict()  # a new OrderedDict (its _metadata kept)
+    for name, value in state.items():
+        # on the CPU whatever the model's device: a session taught on a GPU resumes, and
+        # its policy loads, on a machine without one
+        if isinstance(value, torch.Tensor):
+            state[name] = value.detach().cpu()
+    payload: dict[str, Any] = {"n_demonstrations": n_demonstrations, "state_dict": state}
+    if digest is not None:
+        payload["labels_sha256"] = digest
+    try:
+        torch.save(payload, tmp)
+        os.replace(tmp, path)
+    except (OSError, RuntimeError) as exc:
+        tmp.unlink(missing_ok=True)
+        raise _write_error(
+            exc, path, f"saving the model fitted on {n_demonstrations} labels", after
+        ) from exc
+    return path
 
 
 class SessionStore:
@@ -722,7 +770,16 @@ class SessionStore:
     # -- creation ---------------------------------------------------------------------------
 
     @classmethod
-    def create(cls, run_dir: str | os.PathLike[str], config: dict[str, Any]) -> SessionStore:
+    def create(
+        cls,
+        run_dir: str | os.PathLike[str],
+        config: dict[str, Any],
+        initial_model: torch.nn.Module | None = None,
+    ) -> SessionStore:
+        """Make a new session directory; ``initial_model``: the fitted model the session starts
+        from, saved as checkpoint 0 before ``config.json`` is written, so that a directory with
+        a config always holds it (a kill in between leaves no session, not one without its
+        model)."""
         path = Path(run_dir)
         try:
             path.mkdir(parents=True, exist_ok=True)
@@ -761,6 +818,14 @@ class SessionStore:
                     "run_dir (or move those files away)."
                 )
             started = True
+            if initial_model is not None:  # a resume can only load it: no label refits it
+                try:
+                    ckpts.mkdir(exist_ok=True)
+                except OSError as exc:
+                    raise _write_error(exc, ckpts, "starting the session", _START_AGAIN) from exc
+                _write_checkpoint(
+                    path, initial_model, 0, LabelDigest().hexdigest(), after=_START_AGAIN
+                )
             try:
                 write_json_atomic(path / CONFIG_NAME, config)
             except OSError as exc:
@@ -993,32 +1058,7 @@ class SessionStore:
     ) -> Path:
         """Write the model fitted on the first ``n_demonstrations`` labels, with ``digest``
         (:func:`labels_digest` of those labels) to tell it from a stale one later."""
-        directory = self.run_dir / CHECKPOINT_DIR
-        path = directory / f"model-{n_demonstrations:08d}.pt"
-        tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
-        state = model.state_dict()  # a new OrderedDict (its _metadata kept)
-        for name, value in state.items():
-            # on the CPU whatever the model's device: a session taught on a GPU resumes, and
-            # its policy loads, on a machine without one
-            if isinstance(value, torch.Tensor):
-                state[name] = value.detach().cpu()
-        payload: dict[str, Any] = {"n_demonstrations": n_demonstrations, "state_dict": state}
-        if digest is not None:
-            payload["labels_sha256"] = digest
-        try:
-            torch.save(payload, tmp)
-            os.replace(tmp, path)
-        except (OSError, RuntimeError) as exc:
-            tmp.unlink(missing_ok=True)
-            raise _write_error(
-                exc,
-                path,
-                f"saving the model fitted on {n_demonstrations} labels",
-                "The session and its model in memory are intact and the step log is complete; "
-                "a missing checkpoint is refitted from the log on resume and by load_model. "
-                + _FREE_SPACE,
-            ) from exc
-        return path
+        return _write_checkpoint(self.run_dir, model, n_demonstrations, digest)
 
     def close(self) -> None:
         """Commit and close; the lock is released even if the commit fails (the journal

@@ -420,12 +420,16 @@ class ConfidentTeacher:
                 "seed": self.seed,
             }
             _check_commit_every(commit_every)
-            self._store = SessionStore.create(self.run_dir, session_config)
+            # a session may start from a fitted model: its checkpoint 0, written with the
+            # session (a resume can only load it, no label refits it)
+            self._store = SessionStore.create(
+                self.run_dir,
+                session_config,
+                initial_model=self.model if _is_fitted(self.model) else None,
+            )
             self._store.commit_every = commit_every
             try:
                 self._store.note_writer(0, _model_device(self.model))
-                if _is_fitted(self.model):  # a session may start from a fitted model
-                    self._store.save_checkpoint(self.model, 0, self._digest.hexdigest())
             except BaseException:
                 self.close()
                 raise
