@@ -1340,3 +1340,61 @@ def test_a_session_from_a_fitted_model_killed_as_it_starts_resumes_with_that_mod
     fitted = GaussianMixtureSet(3, 2, seed=0)
     fitted.load_state_dict(torch.load(started, weights_only=True))
     _started_from(run, fitted)
+
+
+@pytest.mark.parametrize("damage", ["deleted", "garbage"])
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_lost_starting_model_is_named_not_replaced_by_a_fresh_one(tmp_path, damage, refit):
+    """Checkpoint 0 of a session started from a fitted model deleted (the docs say a missing
+    checkpoint is refitted from the log) or damaged: where the session's model still stands on
+    it (no refit since, or incremental refits that start from it) resume and load_model refuse
+    with CorruptSessionError naming the file and leave it as it is; they rebuilt an unfitted
+    model, or a fit from scratch, in its place. A full refit since does not need it."""
+    env, fitted = _fitted_start()
+    run = tmp_path / "run"
+    config = TeachingConfig(max_new=4, refit=refit, noninteractive=False)
+    ct = ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    )
+    ct.run(max_steps=40)
+    assert 4 <= ct.n_demonstrations < 40  # refits came, and autonomous steps on the model
+    live = ct.model.state_dict()
+    ct.close()
+    zero = run / "checkpoints" / "model-00000000.pt"
+    for later in zero.parent.glob("model-*.pt"):  # as if killed before any later was saved
+        if later != zero:
+            later.unlink()
+    if damage == "deleted":
+        zero.unlink()
+    else:
+        zero.write_bytes(b"not a checkpoint")
+    before = files_of(run)
+    if refit == "full":  # a fit from scratch on the labels is the live model
+        assert same_state(load_model(run), ct.model)
+        back, _ = resume(run)
+        assert all(torch.equal(back.model.state_dict()[k], v) for k, v in live.items())
+        back.close()
+        return
+    with pytest.raises(CorruptSessionError, match=r"started from a fitted model.*model-00000000"):
+        load_model(run)
+    with pytest.raises(CorruptSessionError, match=r"incremental refits start from it"):
+        resume(run)
+    assert (zero.exists(), damage) in ((False, "deleted"), (True, "garbage"))
+    assert files_of(run).keys() == before.keys()  # nothing set aside
+
+
+def test_a_session_still_on_its_starting_model_refuses_to_resume_without_it(tmp_path):
+    env, fitted = _fitted_start()
+    run = tmp_path / "run"
+    config = TeachingConfig(max_new=50, noninteractive=False)
+    ct = ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    )
+    ct.run(max_steps=10)
+    assert ct.model.is_fitted and any(r.autonomous for r in ct.records)
+    ct.close()
+    (run / "checkpoints" / "model-00000000.pt").unlink()
+    with pytest.raises(CorruptSessionError, match="no refit came since"):
+        resume(run)
+    with pytest.raises(CorruptSessionError, match="no refit came since"):
+        S.load_policy(run)

@@ -5,7 +5,8 @@ Run directory layout (one directory per teaching session)::
     <run_dir>/
         config.json              what the session was started with: the TeachingConfig, the
                                  model's constructor arguments, the confidence rule, the env's
-                                 id and spaces, the session seed and the log format version
+                                 id and spaces, the session seed, the log format version and
+                                 whether it started from a fitted model (``starts_fitted``)
         steps.sqlite             the step log: table ``steps``, one row per StepRecord;
                                  table ``corrections``, one row per CorrectionRecord (a
                                  label for an earlier step's observation, journalled and
@@ -80,7 +81,10 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   and change nothing; :func:`repair_journal` copies the journal aside byte for byte and keeps
   every line that does not depend on a damaged one. A checkpoint that cannot be read, or whose
   ``labels_sha256`` does not match the log (stale), is never loaded: the model is refitted from
-  the log and the file renamed ``.damaged`` / ``.stale``. An unreadable ``steps.sqlite``, a
+  the log and the file renamed ``.damaged`` / ``.stale``; except the checkpoint 0 of a session
+  started from a fitted model, which no label can refit: where the session still stands on it
+  (no refit since, or incremental refits) it is a :class:`CorruptSessionError` naming the file,
+  left as it is. An unreadable ``steps.sqlite``, a
   ``config.json`` missing a key, or a missing ``steps.sqlite`` beside a config are
   :class:`CorruptSessionError` naming the file and how to recover; nothing is started over.
   Steps are numbered 0, 1, 2, ... without a gap; a log that lacks some (rows deleted by hand, a
@@ -1554,6 +1558,7 @@ def restore_model(
     relabel: bool,
     store: SessionStore | None = None,
     incremental: bool = False,
+    starts_fitted: bool = False,
 ) -> int:
     """Bring ``model`` to where the session's live model stood after the labels ``xs, ys``:
     THE one "load the checkpoint or refit" path (resume and :func:`load_model` both use it).
@@ -1569,9 +1574,26 @@ def restore_model(
     With ``incremental`` (``TeachingConfig.refit="incremental"``) the loop's incremental
     refits (``GaussianMixtureSet.refit``, a pure function of the state and the data) are
     replayed from that checkpoint's state instead, so the model is the live one bit for bit.
-    Returns ``k``.
+    ``starts_fitted``: the session started from a fitted model (config.json's
+    ``"starts_fitted"``), which only checkpoint 0 holds and no label can refit: where the model
+    still stands on it (``k`` is 0, or the refits are incremental) and it cannot be loaded,
+    :class:`CorruptSessionError`, the file left as it is. Returns ``k``.
     """
-    last, payload = 0, None
+
+    def lost_start(why: str) -> CorruptSessionError:
+        on_it = (
+            "no refit came since, so the session's model is that one"
+            if k == 0
+            else "its incremental refits start from it"
+        )
+        return CorruptSessionError(
+            f"cannot rebuild the model of the session in {run_dir}: the session started from a "
+            f"fitted model, which only {CHECKPOINT_DIR}/model-{0:08d}.pt holds, and that file is "
+            f"{why} ({on_it}); no label can refit it. The file was left as it is: restore it "
+            "from a backup, or start a new session"
+        )
+
+    last, payload, why0 = 0, None, "missing"
     directory = Path(run_dir) / CHECKPOINT_DIR
     found = []
     if directory.is_dir():
@@ -1584,14 +1606,20 @@ def restore_model(
         if payload is not None:
             last = n
             break
-        if store is not None:
+        if n == 0:
+            why0 = why
+        if store is not None and not (n == 0 and starts_fitted):  # that one: kept as it is
             _set_aside(path, why)
     k = last + fit_count(len(ys) - last, max_new)
+    if starts_fitted and payload is None and (k == 0 or incremental):
+        raise lost_start(why0)
     if k == last and payload is not None:
         try:
             model.load_state_dict(payload["state_dict"])
             return k
         except Exception:  # e.g. saved by another model class: refit below
+            if starts_fitted and k == 0:
+                raise lost_start("unreadable as this model's state") from None
             if store is not None:
                 _set_aside(directory / f"model-{k:08d}.pt", "damaged")
         payload = None
@@ -1602,6 +1630,8 @@ def restore_model(
                 model.load_state_dict(payload["state_dict"])
                 start, loaded = last, True
             except Exception:  # e.g. saved by another model class: replay from the start
+                if starts_fitted and last == 0:
+                    raise lost_start("unreadable as this model's state") from None
                 start = 0
         counts = list(range(start + max_new, k + 1, max_new))
         if not counts or counts[-1] != k:  # a hand refit off the schedule
@@ -1663,6 +1693,7 @@ def load_model(
         max_new=int(config["teaching"]["max_new"]),
         relabel=_relabels(config),
         incremental=config["teaching"].get("refit", "full") == "incremental",
+        starts_fitted=config.get("starts_fitted") is True,
     )
     return model
 

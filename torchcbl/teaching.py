@@ -418,6 +418,7 @@ class ConfidentTeacher:
                 "strategy": strategy_to_config(self.strategy),
                 "env": self._env_config,
                 "seed": self.seed,
+                "starts_fitted": _is_fitted(self.model),  # then checkpoint 0 alone holds it
             }
             _check_commit_every(commit_every)
             # a session may start from a fitted model: its checkpoint 0, written with the
@@ -616,6 +617,7 @@ class ConfidentTeacher:
         )
         self._env_config = self._describe_env()
         self.run_dir = Path(run_dir)
+        self._starts_fitted = stored.get("starts_fitted") is True
         _check_commit_every(commit_every)
         self._store, records, corrections = SessionStore.open_for_resume(
             self.run_dir, commit_every=commit_every
@@ -679,6 +681,7 @@ class ConfidentTeacher:
             relabel=self._relabel,
             store=self._store,
             incremental=self.config.refit == "incremental",
+            starts_fitted=self._starts_fitted,
         )
         if k > 0:
             if k == len(ys):
