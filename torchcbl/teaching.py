@@ -24,7 +24,8 @@ One step of the loop:
    autonomously (a :class:`~torchcbl.records.CorrectionRecord`, durable before the next
    decision). An episode that ends is reset and teaching goes on. Only the first reset of a
    new session is seeded (with ``seed``); later resets continue the env's RNG. The first reset
-   after :meth:`ConfidentTeacher.resume` is seeded from (seed, episode index).
+   after :meth:`ConfidentTeacher.resume` is seeded from (seed, episode index); with ``seed``
+   itself where the session logged no step yet, so that it starts as the new session did.
 
 The non-interactive phase ends after the step at which the accuracy window is full
 (``accuracy_window`` demonstrations) and its accuracy is >= ``target_accuracy``; never when the
@@ -554,7 +555,9 @@ class ConfidentTeacher:
         are rebuilt from the log; the model is the checkpoint matching the logged
         demonstrations, or is refitted on them deterministically if that checkpoint is missing.
         A demonstration logged but never executed (the process died in between) is kept.
-        The env is reset into a new episode (seeded from the session seed and episode index).
+        The env is reset into a new episode (seeded from the session seed and episode index; a
+        session that logged no step yet, e.g. stopped at its first request, is reset with the
+        session seed, as the new session was, and so goes on as it would have).
 
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
@@ -693,7 +696,9 @@ class ConfidentTeacher:
             strategy.observe_refit(self.model, x, y)
         self._new_since_refit = len(ys) - k
         self._next_episode = records[-1].episode + 1 if records else 0
-        self._next_reset_seed = _seed_for(self.seed, self._next_episode)
+        # nothing logged: the session's first reset (seeded with the seed itself) is still to
+        # come, and the resumed session starts as the uninterrupted one did
+        self._next_reset_seed = _seed_for(self.seed, self._next_episode) if records else self.seed
 
     # -- counters ---------------------------------------------------------------------------
 
