@@ -478,6 +478,25 @@ def test_an_in_process_sweep_leaves_the_callers_torch_threads_and_rng_alone(tmp_
         torch.set_num_threads(threads)
 
 
+def test_an_in_process_sweep_leaves_the_callers_cuda_generators_alone(tmp_path, monkeypatch):
+    """A cell seeds torch's CPU generator (and gives the caller's back); it reseeded every CUDA
+    generator as well (torch.manual_seed), which run_cell does not give back: after
+    run_benchmark(workers=1) the caller's CUDA draws followed the last cell's seed (on a machine
+    without CUDA, torch queues the seed for when CUDA starts)."""
+    import torch
+
+    reseeded = []
+    monkeypatch.setattr(torch.cuda, "manual_seed_all", lambda seed: reseeded.append(seed))
+    monkeypatch.setattr(torch.cuda, "manual_seed", lambda seed: reseeded.append(seed))
+    before = torch.cuda.get_rng_state_all() if torch.cuda.is_initialized() else None
+    env = _env(budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,))
+    bm.run_benchmark(STRATEGIES[:1], [env], [0, 1], tmp_path, workers=1, plots=False)
+    assert reseeded == []
+    if before is not None:
+        after = torch.cuda.get_rng_state_all()
+        assert all(torch.equal(a, b) for a, b in zip(before, after, strict=True))
+
+
 def test_an_env_the_loop_cannot_teach_is_named_with_what_it_needs(tmp_path, capsys, monkeypatch):
     """Pendulum's actions are a Box: the cell failed with "AttributeError: 'Box' object has no
     attribute 'n'" (the command: exit code 1, no word of what the benchmark needs)."""

@@ -40,12 +40,13 @@ from torchcbl.teaching import EnvError, TeacherError
 TESTS = Path(__file__).parent
 
 
-def make(env, run_dir, teacher=None, **cfg):
+def make(env, run_dir, teacher=None, seed=0, **cfg):
     return ConfidentTeacher(
         env,
         teacher or oracle(env),
         config=TeachingConfig(**cfg),
         run_dir=run_dir,
+        seed=seed,
         progress=False,
     )
 
@@ -121,6 +122,32 @@ def test_resume_same_counters_and_model(tmp_path):
     assert back.records[90].episode == ct.records[-1].episode + 1  # resumed into a new episode
     assert [r.step for r in load_records(run)] == list(range(150))
     assert_model_is_fit_on_log(back.model, run)
+
+
+def test_a_session_stopped_at_its_first_request_resumes_as_it_would_have_gone_on(tmp_path):
+    """Nothing logged yet (the person stopped at the first request, or the process was killed
+    there): the resumed session's first reset is the new session's (seeded with its seed), so
+    it teaches exactly what the session would have taught uninterrupted. It was seeded from
+    (seed, episode 0) and started from another observation."""
+    from torchcbl import TeachingInterrupted
+
+    def stops_at_once(obs, info):
+        raise TeachingInterrupted("not now")
+
+    config = dict(max_new=1, accuracy_window=10, target_accuracy=0.8)
+    ref = make(rare_regions_world(), tmp_path / "ref", seed=7, **config)
+    ref.run(max_steps=60)
+    run = tmp_path / "run"
+    ct = make(rare_regions_world(), run, teacher=stops_at_once, seed=7, **config)
+    with pytest.raises(TeachingInterrupted):
+        ct.run(max_steps=60)
+    ct.close()
+    assert load_records(run) == []
+    env = rare_regions_world()
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    back.run(max_steps=60)
+    assert back.records == ref.records
+    assert same_state(back.model, ref.model)
 
 
 def test_a_session_written_before_refit_growth_resumes_with_a_given_model(tmp_path):

@@ -1249,3 +1249,152 @@ def test_a_line_removed_from_the_journal_is_refused_then_repaired(tmp_path):
     back, env2 = resume(run)
     assert back.records == ct.records[:25]  # the steps before the gap; the rest in the copy
     goes_on(back, env2, run)
+
+
+# -- a session that starts from a fitted model ------------------------------------------------
+
+
+def _fitted_start() -> tuple[gym.Env, GaussianMixtureSet]:
+    env = rare_regions_world()
+    x, y = env.sample(120, np.random.default_rng(0))
+    return env, GaussianMixtureSet(3, 2, seed=0).fit(x, y)
+
+
+def _started_from(run: Path, model: GaussianMixtureSet) -> None:
+    """Either ``run`` holds no session, or one that resumes with the model it started from."""
+    if not (run / "config.json").exists():
+        with pytest.raises(IncompatibleRunDirError):
+            load_config(run)
+        return
+    env = rare_regions_world()
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    try:
+        assert back.model.is_fitted, "resumed without the model the session started from"
+        assert same_state(back.model, model)
+        assert same_state(load_model(run), model)
+    finally:
+        back.close()
+
+
+def test_a_session_from_a_fitted_model_that_cannot_save_it_leaves_no_session(tmp_path, monkeypatch):
+    """Disk full as the starting model's checkpoint 0 is written: the constructor fails and
+    leaves no session behind (there was one, which resumed with an unfitted model: no label
+    can refit the model a session starts from); once space is freed the session starts."""
+    env, fitted = _fitted_start()
+    run = tmp_path / "run"
+    real = torch.save
+
+    def full(obj, f, *args, **kw):
+        if isinstance(obj, dict) and obj.get("n_demonstrations") == 0:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(obj, f, *args, **kw)
+
+    monkeypatch.setattr(S.torch, "save", full)
+    config = TeachingConfig(max_new=5, noninteractive=False)
+    with pytest.raises(SessionWriteError, match="model-00000000.pt") as err:
+        ConfidentTeacher(env, oracle(env), model=fitted, config=config, run_dir=run)
+    assert "left without a session" in " ".join(getattr(err.value, "__notes__", []))
+    _started_from(run, fitted)
+    monkeypatch.setattr(S.torch, "save", real)
+    ct = ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    )
+    ct.run(max_steps=3)  # fewer labels than max_new: still the model it started from
+    ct.close()
+    _started_from(run, fitted)
+
+
+_KILLED_AT_CHECKPOINT_0 = """
+import os, signal, sys
+import numpy as np, torch
+sys.path[:0] = [{tests!r}, {root!r}]
+from _toy_envs import oracle, rare_regions_world
+from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
+from torchcbl import session as S
+env = rare_regions_world()
+x, y = env.sample(120, np.random.default_rng(0))
+fitted = GaussianMixtureSet(3, 2, seed=0).fit(x, y)
+torch.save(fitted.state_dict(), {started!r})
+real = torch.save
+def save(obj, f, *args, **kw):
+    if isinstance(obj, dict) and obj.get("n_demonstrations") == 0:
+        real(obj, f, *args, **kw)
+        os.kill(os.getpid(), signal.SIGKILL)  # killed as checkpoint 0 is written
+    return real(obj, f, *args, **kw)
+S.torch.save = save
+ConfidentTeacher(env, oracle(env), model=fitted, config=TeachingConfig(max_new=5),
+                 run_dir={run!r}, progress=False)
+"""
+
+
+def test_a_session_from_a_fitted_model_killed_as_it_starts_resumes_with_that_model(tmp_path):
+    """SIGKILL while the starting model's checkpoint 0 is written: the directory holds no
+    session, never one that resumes with an unfitted model in place of the one it started
+    from (a config.json was written before checkpoint 0)."""
+    run, started = tmp_path / "run", tmp_path / "started.pt"
+    code = _KILLED_AT_CHECKPOINT_0.format(
+        tests=str(TESTS), root=str(TESTS.parent), started=str(started), run=str(run)
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    fitted = GaussianMixtureSet(3, 2, seed=0)
+    fitted.load_state_dict(torch.load(started, weights_only=True))
+    _started_from(run, fitted)
+
+
+@pytest.mark.parametrize("damage", ["deleted", "garbage"])
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_lost_starting_model_is_named_not_replaced_by_a_fresh_one(tmp_path, damage, refit):
+    """Checkpoint 0 of a session started from a fitted model deleted (the docs say a missing
+    checkpoint is refitted from the log) or damaged: where the session's model still stands on
+    it (no refit since, or incremental refits that start from it) resume and load_model refuse
+    with CorruptSessionError naming the file and leave it as it is; they rebuilt an unfitted
+    model, or a fit from scratch, in its place. A full refit since does not need it."""
+    env, fitted = _fitted_start()
+    run = tmp_path / "run"
+    config = TeachingConfig(max_new=4, refit=refit, noninteractive=False)
+    ct = ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    )
+    ct.run(max_steps=40)
+    assert 4 <= ct.n_demonstrations < 40  # refits came, and autonomous steps on the model
+    live = ct.model.state_dict()
+    ct.close()
+    zero = run / "checkpoints" / "model-00000000.pt"
+    for later in zero.parent.glob("model-*.pt"):  # as if killed before any later was saved
+        if later != zero:
+            later.unlink()
+    if damage == "deleted":
+        zero.unlink()
+    else:
+        zero.write_bytes(b"not a checkpoint")
+    before = files_of(run)
+    if refit == "full":  # a fit from scratch on the labels is the live model
+        assert same_state(load_model(run), ct.model)
+        back, _ = resume(run)
+        assert all(torch.equal(back.model.state_dict()[k], v) for k, v in live.items())
+        back.close()
+        return
+    with pytest.raises(CorruptSessionError, match=r"started from a fitted model.*model-00000000"):
+        load_model(run)
+    with pytest.raises(CorruptSessionError, match=r"incremental refits start from it"):
+        resume(run)
+    assert (zero.exists(), damage) in ((False, "deleted"), (True, "garbage"))
+    assert files_of(run).keys() == before.keys()  # nothing set aside
+
+
+def test_a_session_still_on_its_starting_model_refuses_to_resume_without_it(tmp_path):
+    env, fitted = _fitted_start()
+    run = tmp_path / "run"
+    config = TeachingConfig(max_new=50, noninteractive=False)
+    ct = ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    )
+    ct.run(max_steps=10)
+    assert ct.model.is_fitted and any(r.autonomous for r in ct.records)
+    ct.close()
+    (run / "checkpoints" / "model-00000000.pt").unlink()
+    with pytest.raises(CorruptSessionError, match="no refit came since"):
+        resume(run)
+    with pytest.raises(CorruptSessionError, match="no refit came since"):
+        S.load_policy(run)

@@ -496,10 +496,11 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     """Run one cell (see the module docstring) and return its JSON result.
 
     Deterministic given ``config`` (one torch thread, seeded model, env and strategy, and the
-    global numpy and ``random`` RNGs seeded from the cell's seed, for a teacher, env or
-    strategy of one's own that draws from them), apart from the ``wall_s`` / ``cpu_s``
-    timings. The caller's torch thread count and global torch, numpy and ``random`` RNGs are
-    as they were when it returns (``run_benchmark(workers=1)`` runs cells in-process).
+    global numpy, ``random`` and torch CPU RNGs seeded from the cell's seed, for a teacher, env
+    or strategy of one's own that draws from them), apart from the ``wall_s`` / ``cpu_s``
+    timings. The caller's torch thread count and global torch (CPU and CUDA), numpy and
+    ``random`` RNGs are as they were when it returns (``run_benchmark(workers=1)`` runs cells
+    in-process).
     """
     import random
 
@@ -536,7 +537,9 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     )
     sspec = StrategySpec(**config["strategy"])
     seed = int(config["seed"])
-    torch.manual_seed(seed)
+    # the CPU generator only (run_cell gives it back): torch.manual_seed would also reseed the
+    # caller's CUDA generators (now, or as CUDA starts), which no cell uses and none restores
+    torch.random.default_generator.manual_seed(seed)
     # the global RNGs a teacher, env or strategy of one's own may draw from (the shipped ones
     # do not): otherwise a cell's figures depend on what ran before it in the process
     np.random.seed([seed & 0xFFFFFFFF, seed >> 32])  # noqa: NPY002

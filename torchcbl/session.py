@@ -5,7 +5,8 @@ Run directory layout (one directory per teaching session)::
     <run_dir>/
         config.json              what the session was started with: the TeachingConfig, the
                                  model's constructor arguments, the confidence rule, the env's
-                                 id and spaces, the session seed and the log format version
+                                 id and spaces, the session seed, the log format version and
+                                 whether it started from a fitted model (``starts_fitted``)
         steps.sqlite             the step log: table ``steps``, one row per StepRecord;
                                  table ``corrections``, one row per CorrectionRecord (a
                                  label for an earlier step's observation, journalled and
@@ -23,7 +24,9 @@ Run directory layout (one directory per teaching session)::
                                  "state_dict": ...}`` of the model fitted on the first 12
                                  labels (and the SHA-256 of those labels), its tensors on the
                                  CPU whatever the model's device; one per refit, all kept
-                                 (snapshots at stages come for free)
+                                 (snapshots at stages come for free). A session started from
+                                 a fitted model has its model-00000000.pt, written before
+                                 config.json: no label can refit it
 
 Durability. Every step is appended to ``steps.journal`` with one ``write()`` before the loop
 goes on: a demonstration (teacher label, observation, model output, counters) before its action
@@ -64,7 +67,8 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   demonstration whose outcome line failed is kept, as interrupted, since its label was durable
   before its action ran). A SQLite commit that fails is rolled back; its rows stay in the
   journal and in memory, and the next commit retries them, so a session goes on once space is
-  freed. A checkpoint that cannot be written is refitted from the log when needed.
+  freed. A checkpoint that cannot be written is refitted from the log when needed; a new
+  session's starting model (checkpoint 0) that cannot be written leaves no session.
 - Readers without write access. :func:`load_records`, :func:`load_model` etc. open the log with
   SQLite's ``immutable=1`` (a cleanly closed session: no ``-wal`` file), and then never write,
   lock or create a file, so a read-only mount works; or, while a writer runs or after one was
@@ -77,7 +81,10 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   and change nothing; :func:`repair_journal` copies the journal aside byte for byte and keeps
   every line that does not depend on a damaged one. A checkpoint that cannot be read, or whose
   ``labels_sha256`` does not match the log (stale), is never loaded: the model is refitted from
-  the log and the file renamed ``.damaged`` / ``.stale``. An unreadable ``steps.sqlite``, a
+  the log and the file renamed ``.damaged`` / ``.stale``; except the checkpoint 0 of a session
+  started from a fitted model, which no label can refit: where the session still stands on it
+  (no refit since, or incremental refits) it is a :class:`CorruptSessionError` naming the file,
+  left as it is. An unreadable ``steps.sqlite``, a
   ``config.json`` missing a key, or a missing ``steps.sqlite`` beside a config are
   :class:`CorruptSessionError` naming the file and how to recover; nothing is started over.
   Steps are numbered 0, 1, 2, ... without a gap; a log that lacks some (rows deleted by hand, a
@@ -600,7 +607,14 @@ _START_AGAIN = "free space (or fix the permissions) and start the session again"
 
 def _remove_new_session_files(path: Path) -> None:
     """Undo a session creation that failed before its first step: the files it made."""
-    for name in (CONFIG_NAME, LOG_NAME, LOG_NAME + "-wal", LOG_NAME + "-shm", JOURNAL_NAME):
+    for name in (
+        CONFIG_NAME,
+        LOG_NAME,
+        LOG_NAME + "-wal",
+        LOG_NAME + "-shm",
+        JOURNAL_NAME,
+        f"{CHECKPOINT_DIR}/model-{0:08d}.pt",  # the starting model (create found no checkpoint)
+    ):
         try:
             (path / name).unlink(missing_ok=True)
         except OSError:
@@ -650,6 +664,44 @@ def _acquire_lock(run_dir: Path) -> Any:
     except OSError:
         pass  # the lock holds without the note
     return f
+
+
+_CHECKPOINT_LATER = (
+    "The session and its model in memory are intact and the step log is complete; a missing "
+    "checkpoint is refitted from the log on resume and by load_model. " + _FREE_SPACE
+)
+
+
+def _write_checkpoint(
+    run_dir: Path,
+    model: torch.nn.Module,
+    n_demonstrations: int,
+    digest: str | None,
+    after: str = _CHECKPOINT_LATER,
+) -> Path:
+    """Write ``checkpoints/model-<n>.pt`` under a temporary name, then rename it into place;
+    a failure is a :class:`SessionWriteError` ending with ``after``."""
+    directory = run_dir / CHECKPOINT_DIR
+    path = directory / f"model-{n_demonstrations:08d}.pt"
+    tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
+    state = model.state_dict()  # a new OrderedDict (its _metadata kept)
+    for name, value in state.items():
+        # on the CPU whatever the model's device: a session taught on a GPU resumes, and
+        # its policy loads, on a machine without one
+        if isinstance(value, torch.Tensor):
+            state[name] = value.detach().cpu()
+    payload: dict[str, Any] = {"n_demonstrations": n_demonstrations, "state_dict": state}
+    if digest is not None:
+        payload["labels_sha256"] = digest
+    try:
+        torch.save(payload, tmp)
+        os.replace(tmp, path)
+    except (OSError, RuntimeError) as exc:
+        tmp.unlink(missing_ok=True)
+        raise _write_error(
+            exc, path, f"saving the model fitted on {n_demonstrations} labels", after
+        ) from exc
+    return path
 
 
 class SessionStore:
@@ -722,7 +774,16 @@ class SessionStore:
     # -- creation ---------------------------------------------------------------------------
 
     @classmethod
-    def create(cls, run_dir: str | os.PathLike[str], config: dict[str, Any]) -> SessionStore:
+    def create(
+        cls,
+        run_dir: str | os.PathLike[str],
+        config: dict[str, Any],
+        initial_model: torch.nn.Module | None = None,
+    ) -> SessionStore:
+        """Make a new session directory; ``initial_model``: the fitted model the session starts
+        from, saved as checkpoint 0 before ``config.json`` is written, so that a directory with
+        a config always holds it (a kill in between leaves no session, not one without its
+        model)."""
         path = Path(run_dir)
         try:
             path.mkdir(parents=True, exist_ok=True)
@@ -761,6 +822,14 @@ class SessionStore:
                     "run_dir (or move those files away)."
                 )
             started = True
+            if initial_model is not None:  # a resume can only load it: no label refits it
+                try:
+                    ckpts.mkdir(exist_ok=True)
+                except OSError as exc:
+                    raise _write_error(exc, ckpts, "starting the session", _START_AGAIN) from exc
+                _write_checkpoint(
+                    path, initial_model, 0, LabelDigest().hexdigest(), after=_START_AGAIN
+                )
             try:
                 write_json_atomic(path / CONFIG_NAME, config)
             except OSError as exc:
@@ -993,32 +1062,7 @@ class SessionStore:
     ) -> Path:
         """Write the model fitted on the first ``n_demonstrations`` labels, with ``digest``
         (:func:`labels_digest` of those labels) to tell it from a stale one later."""
-        directory = self.run_dir / CHECKPOINT_DIR
-        path = directory / f"model-{n_demonstrations:08d}.pt"
-        tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
-        state = model.state_dict()  # a new OrderedDict (its _metadata kept)
-        for name, value in state.items():
-            # on the CPU whatever the model's device: a session taught on a GPU resumes, and
-            # its policy loads, on a machine without one
-            if isinstance(value, torch.Tensor):
-                state[name] = value.detach().cpu()
-        payload: dict[str, Any] = {"n_demonstrations": n_demonstrations, "state_dict": state}
-        if digest is not None:
-            payload["labels_sha256"] = digest
-        try:
-            torch.save(payload, tmp)
-            os.replace(tmp, path)
-        except (OSError, RuntimeError) as exc:
-            tmp.unlink(missing_ok=True)
-            raise _write_error(
-                exc,
-                path,
-                f"saving the model fitted on {n_demonstrations} labels",
-                "The session and its model in memory are intact and the step log is complete; "
-                "a missing checkpoint is refitted from the log on resume and by load_model. "
-                + _FREE_SPACE,
-            ) from exc
-        return path
+        return _write_checkpoint(self.run_dir, model, n_demonstrations, digest)
 
     def close(self) -> None:
         """Commit and close; the lock is released even if the commit fails (the journal
@@ -1514,6 +1558,7 @@ def restore_model(
     relabel: bool,
     store: SessionStore | None = None,
     incremental: bool = False,
+    starts_fitted: bool = False,
 ) -> int:
     """Bring ``model`` to where the session's live model stood after the labels ``xs, ys``:
     THE one "load the checkpoint or refit" path (resume and :func:`load_model` both use it).
@@ -1529,9 +1574,26 @@ def restore_model(
     With ``incremental`` (``TeachingConfig.refit="incremental"``) the loop's incremental
     refits (``GaussianMixtureSet.refit``, a pure function of the state and the data) are
     replayed from that checkpoint's state instead, so the model is the live one bit for bit.
-    Returns ``k``.
+    ``starts_fitted``: the session started from a fitted model (config.json's
+    ``"starts_fitted"``), which only checkpoint 0 holds and no label can refit: where the model
+    still stands on it (``k`` is 0, or the refits are incremental) and it cannot be loaded,
+    :class:`CorruptSessionError`, the file left as it is. Returns ``k``.
     """
-    last, payload = 0, None
+
+    def lost_start(why: str) -> CorruptSessionError:
+        on_it = (
+            "no refit came since, so the session's model is that one"
+            if k == 0
+            else "its incremental refits start from it"
+        )
+        return CorruptSessionError(
+            f"cannot rebuild the model of the session in {run_dir}: the session started from a "
+            f"fitted model, which only {CHECKPOINT_DIR}/model-{0:08d}.pt holds, and that file is "
+            f"{why} ({on_it}); no label can refit it. The file was left as it is: restore it "
+            "from a backup, or start a new session"
+        )
+
+    last, payload, why0 = 0, None, "missing"
     directory = Path(run_dir) / CHECKPOINT_DIR
     found = []
     if directory.is_dir():
@@ -1544,14 +1606,20 @@ def restore_model(
         if payload is not None:
             last = n
             break
-        if store is not None:
+        if n == 0:
+            why0 = why
+        if store is not None and not (n == 0 and starts_fitted):  # that one: kept as it is
             _set_aside(path, why)
     k = last + fit_count(len(ys) - last, max_new)
+    if starts_fitted and payload is None and (k == 0 or incremental):
+        raise lost_start(why0)
     if k == last and payload is not None:
         try:
             model.load_state_dict(payload["state_dict"])
             return k
         except Exception:  # e.g. saved by another model class: refit below
+            if starts_fitted and k == 0:
+                raise lost_start("unreadable as this model's state") from None
             if store is not None:
                 _set_aside(directory / f"model-{k:08d}.pt", "damaged")
         payload = None
@@ -1562,6 +1630,8 @@ def restore_model(
                 model.load_state_dict(payload["state_dict"])
                 start, loaded = last, True
             except Exception:  # e.g. saved by another model class: replay from the start
+                if starts_fitted and last == 0:
+                    raise lost_start("unreadable as this model's state") from None
                 start = 0
         counts = list(range(start + max_new, k + 1, max_new))
         if not counts or counts[-1] != k:  # a hand refit off the schedule
@@ -1623,6 +1693,7 @@ def load_model(
         max_new=int(config["teaching"]["max_new"]),
         relabel=_relabels(config),
         incremental=config["teaching"].get("refit", "full") == "incremental",
+        starts_fitted=config.get("starts_fitted") is True,
     )
     return model
 

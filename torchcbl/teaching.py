@@ -24,11 +24,12 @@ One step of the loop:
    autonomously (a :class:`~torchcbl.records.CorrectionRecord`, durable before the next
    decision). An episode that ends is reset and teaching goes on. Only the first reset of a
    new session is seeded (with ``seed``); later resets continue the env's RNG. The first reset
-   after :meth:`ConfidentTeacher.resume` is seeded from (seed, episode index). An env that
-   :func:`~torchcbl.policy.evaluate_policy` or another loop reset or stepped since this loop's
-   last step no longer shows the observation the loop holds: the loop leaves its episode
-   unfinished (as a resume does) and starts a new one, with a warning. (Stepping the env by
-   hand between the loop's steps cannot be noticed: don't.)
+   after :meth:`ConfidentTeacher.resume` is seeded from (seed, episode index); with ``seed``
+   itself where the session logged no step yet, so that it starts as the new session did. An
+   env that :func:`~torchcbl.policy.evaluate_policy` or another loop reset or stepped since
+   this loop's last step no longer shows the observation the loop holds: the loop leaves its
+   episode unfinished (as a resume does) and starts a new one, with a warning. (Stepping the
+   env by hand between the loop's steps cannot be noticed: don't.)
 
 The non-interactive phase ends after the step at which the accuracy window is full
 (``accuracy_window`` demonstrations) and its accuracy is >= ``target_accuracy``; never when the
@@ -424,14 +425,19 @@ class ConfidentTeacher:
                 "strategy": strategy_to_config(self.strategy),
                 "env": self._env_config,
                 "seed": self.seed,
+                "starts_fitted": _is_fitted(self.model),  # then checkpoint 0 alone holds it
             }
             _check_commit_every(commit_every)
-            self._store = SessionStore.create(self.run_dir, session_config)
+            # a session may start from a fitted model: its checkpoint 0, written with the
+            # session (a resume can only load it, no label refits it)
+            self._store = SessionStore.create(
+                self.run_dir,
+                session_config,
+                initial_model=self.model if _is_fitted(self.model) else None,
+            )
             self._store.commit_every = commit_every
             try:
                 self._store.note_writer(0, _model_device(self.model))
-                if _is_fitted(self.model):  # a session may start from a fitted model
-                    self._store.save_checkpoint(self.model, 0, self._digest.hexdigest())
             except BaseException:
                 self.close()
                 raise
@@ -556,7 +562,9 @@ class ConfidentTeacher:
         are rebuilt from the log; the model is the checkpoint matching the logged
         demonstrations, or is refitted on them deterministically if that checkpoint is missing.
         A demonstration logged but never executed (the process died in between) is kept.
-        The env is reset into a new episode (seeded from the session seed and episode index).
+        The env is reset into a new episode (seeded from the session seed and episode index; a
+        session that logged no step yet, e.g. stopped at its first request, is reset with the
+        session seed, as the new session was, and so goes on as it would have).
 
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
@@ -619,6 +627,7 @@ class ConfidentTeacher:
         )
         self._env_config = self._describe_env()
         self.run_dir = Path(run_dir)
+        self._starts_fitted = stored.get("starts_fitted") is True
         _check_commit_every(commit_every)
         self._store, records, corrections = SessionStore.open_for_resume(
             self.run_dir, commit_every=commit_every
@@ -682,6 +691,7 @@ class ConfidentTeacher:
             relabel=self._relabel,
             store=self._store,
             incremental=self.config.refit == "incremental",
+            starts_fitted=self._starts_fitted,
         )
         if k > 0:
             if k == len(ys):
@@ -693,7 +703,9 @@ class ConfidentTeacher:
             strategy.observe_refit(self.model, x, y)
         self._new_since_refit = len(ys) - k
         self._next_episode = records[-1].episode + 1 if records else 0
-        self._next_reset_seed = _seed_for(self.seed, self._next_episode)
+        # nothing logged: the session's first reset (seeded with the seed itself) is still to
+        # come, and the resumed session starts as the uninterrupted one did
+        self._next_reset_seed = _seed_for(self.seed, self._next_episode) if records else self.seed
 
     # -- counters ---------------------------------------------------------------------------
 
