@@ -37,7 +37,10 @@ Run directory layout (``run_experiment`` writes; envs never do)::
     run_dir/figure3.png         training data by action in the 3-D sensor space (first seed)
     run_dir/figure4.png         the fitted mixtures, one ellipsoid (2 std) per component
     run_dir/map.png             the map, route and the final policy's first evaluation circuit
-    run_dir/sessions/seed<k>/   each seed's teaching session (torchcbl.session format)
+    run_dir/sessions/seed<k>/   each seed's teaching session (torchcbl.session format), the
+                                confident-execution arm's: the CBA arm keeps no session, only
+                                its figures in results.json (scripts/corridor_cba_gates.py
+                                teaches it again, seed for seed)
 
 Replay a seed with the config and seed stored in results.json: everything is seeded
 (``run_seed(CorridorExperimentConfig.from_dict(results["config"]), seed, None)``).
@@ -171,7 +174,8 @@ class CorridorExperimentConfig:
             stop, step cap and evaluation seeds, and the same non-interactive phase (which
             JAIR 2009's CBA does not have; kept so that the two differ only after it). Its
             figures are the ``cba_*`` keys of ``per_seed`` and ``summary["cba"]`` (a seed's
-            ``seconds`` then counts both arms). Not part of the paper's Section 5.1.
+            ``seconds`` then counts both arms); its sessions are not kept in ``run_dir``. Not
+            part of the paper's Section 5.1.
     """
 
     map_name: str = "figure2"

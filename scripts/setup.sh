@@ -8,7 +8,8 @@
 # The install is editable, so code changes need no reinstall: when neither pyproject.toml nor
 # this script changed since the last successful install (recorded in .venv/.setup-stamp),
 # nothing is installed again. Delete .venv/.setup-stamp to force a reinstall.
-# The interpreter: $PYTHON if set, else python3.11 if on the PATH, else python3. A .venv made by
+# The interpreter: $PYTHON if set, else python3.11 if on the PATH, else python3; it must be
+# Python 3.11 or newer (pyproject.toml's requires-python), else nothing is done. A .venv made by
 # another Python version, or left without pip by a failed `venv` (e.g. no python3-venv package),
 # is made again.
 set -euo pipefail
@@ -16,6 +17,12 @@ cd "$(dirname "$0")/.."
 PY="${PYTHON:-$(command -v python3.11 || command -v python3)}"
 STAMP=.venv/.setup-stamp
 version="$("$PY" -c 'import sys; print(sys.version.split()[0])')"
+# pyproject.toml's requires-python: said before anything is made or downloaded
+IFS=. read -r major minor _ <<< "$version"
+if [ "${major:-0}" -lt 3 ] || { [ "$major" -eq 3 ] && [ "${minor:-0}" -lt 11 ]; }; then
+  echo "set-up: $PY is Python $version; torchcbl needs Python 3.11 or newer: install python3.11 (or newer), or set PYTHON to one" >&2
+  exit 1
+fi
 want="$( (cat pyproject.toml scripts/setup.sh; echo "$version") | sha256sum | cut -d' ' -f1)"
 if [ -x .venv/bin/python ] && [ -x .venv/bin/torchcbl ] && [ "$(cat "$STAMP" 2>/dev/null)" = "$want" ]; then
   echo "set-up: .venv is up to date (pyproject.toml and Python $version unchanged since its install)"

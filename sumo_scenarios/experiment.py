@@ -16,9 +16,11 @@ Per seed (each in its own process: libsumo holds one simulation per process):
   ``eval`` scenario's base seed is never used in training). Run seeds vary the training
   traffic, the evaluation segment, the teacher's randomness and the GMM initialisation.
 
-``run_experiment`` writes into ``run_dir``: ``results.json`` (``summary``: the acceptance
-figures; ``stages``: Figure 8's bars, mean and sd over seeds; ``per_seed``, one entry per seed
-in the order of ``seeds``; config; versions; wall and CPU seconds), ``fig6_accuracy.png``,
+``run_experiment`` writes into ``run_dir``: ``results.json`` (``summary``: the figures,
+mean and sd over seeds; ``acceptance``: each of the README's targets for this domain and
+whether it holds; ``stages``: Figure 8's bars, mean and sd over seeds; ``per_seed``, one entry
+per seed in the order of ``seeds``; ``paper``: the paper's figures; config; versions; wall and
+CPU seconds), ``fig6_accuracy.png``,
 ``fig7_middle_lane_demos.png``, ``fig8_lanes_collisions.png``, ``fig9_accuracy.png``,
 ``fig10_confidence.png``,
 ``seed_<k>/episodes.json`` (every teaching and evaluation episode, replayable with

@@ -12,7 +12,7 @@ Density calibration: with 5 m cars, the ego overlaps a car whenever their centre
 5 m, i.e. over 10 m of relative travel per car, whatever the closing speed. Always driving straight
 in a lane with ``n`` cars per metre is therefore in contact on about a ``10 n`` share of timesteps.
 Platoons make the middle lane denser than its insertion spacing: the mean insertion spacing below
-was measured to give the paper's 30 % (``tests/test_driving.py`` checks 28-32 %). The other
+was measured to give the paper's 30 % (``tests/test_driving_teacher.py`` checks 28-32 %). The other
 lanes' densities are free (the paper: "a busy road"); the left lane's ``mean_spacing_m``, 120 m
 (a mean spacing of 109 m, after the cap on each spacing's exponential part), came out of the
 human-like teacher's calibration search (``sumo_scenarios.calibrate_teacher``, which tried

@@ -3,9 +3,10 @@
 :class:`HighwaySim` runs one straight five-lane edge with background traffic that keeps its lane,
 each car at its own desired speed (20-40 mph) under SUMO's car-following model, and one ego car at
 exactly 60 mph that changes lane only when told.
-It keeps the road endless (see ``docs`` of :meth:`HighwaySim.step`) and counts contact
-geometrically, because SUMO's own collision list is unreliable once the ego has driven through a
-car (see ``shared/notes/sumo-and-pymunk-facts.md``).
+It keeps the road endless (see :meth:`HighwaySim.step`) and counts contact geometrically (a
+car whose front bumper is within a car length of the ego's, in the lane the ego is in or the one
+it just left), because SUMO's own collision list is unreliable once the ego has driven through a
+car.
 
 libsumo holds one simulation per process. Several :class:`HighwaySim` objects may exist, but the
 simulation belongs to the one whose :meth:`HighwaySim.reset` ran last: a reset of another takes it

@@ -60,9 +60,8 @@ def test_every_argument_and_option_has_help_text():
     assert not missing
 
 
-def test_the_readme_command_lines_use_the_names_of_the_help(capsys):
-    """Every placeholder (SESSION_DIR, N, ...) and option of the README's command block appears,
-    spelled the same, in that command's --help, and every option of the help in the block."""
+def _readme_command_lines() -> list[str]:
+    """The README's command block, one line per command (continuation lines joined)."""
     readme = (Path(__file__).parents[1] / "README.md").read_text()
     block = readme.split("The command line (`torchcbl --help`):", 1)[1].split("```")[1]
     lines: list[str] = []
@@ -71,6 +70,13 @@ def test_the_readme_command_lines_use_the_names_of_the_help(capsys):
             lines.append(ln)
         elif ln.strip() and lines:
             lines[-1] += " " + ln.strip()
+    return lines
+
+
+def test_the_readme_command_lines_use_the_names_of_the_help(capsys):
+    """Every placeholder (SESSION_DIR, N, ...) and option of the README's command block appears,
+    spelled the same, in that command's --help, and every option of the help in the block."""
+    lines = _readme_command_lines()
     assert {ln.split()[1] for ln in lines} == {
         "reproduce",
         "evaluate",
@@ -88,6 +94,23 @@ def test_the_readme_command_lines_use_the_names_of_the_help(capsys):
             assert token in usage, (command, token, usage)
         for option in set(re.findall(r"--[a-z-]+", usage)) - {"--help"}:
             assert option in line, (command, option, "missing from the README's block")
+
+
+def test_each_readme_placeholder_means_what_the_readme_says(capsys):
+    """The README defines RUN_DIR as a run directory of torchcbl reproduce and SESSION_DIR as a
+    teaching session. replay's directory is a driving teaching session (a reproduce run
+    directory is refused), so it is a SESSION_DIR, in the block and in replay's --help; only
+    plot takes a RUN_DIR."""
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    assert "`RUN_DIR` is a run directory of\n`torchcbl reproduce`" in readme
+    assert "`SESSION_DIR` is a teaching session" in readme
+    lines = {ln.split()[1]: ln for ln in _readme_command_lines()}
+    assert {c for c, ln in lines.items() if "RUN_DIR" in ln} == {"plot"}
+    assert {c for c, ln in lines.items() if "SESSION_DIR" in ln} == {"evaluate", "replay"}
+    with pytest.raises(SystemExit):
+        main(["replay", "--help"])
+    help_text = capsys.readouterr().out
+    assert "RUN_DIR" not in help_text and "EPISODES.json|SESSION_DIR" in help_text
 
 
 @pytest.fixture(scope="module")

@@ -75,3 +75,21 @@ def test_a_test_run_ends_without_a_tool_advertisement():
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "1 passed" in proc.stdout
     assert "nbmake" not in (proc.stdout + proc.stderr).lower()
+
+
+def test_requires_python_admits_only_pythons_the_code_runs_on():
+    """The loop and the session store add a note to the exception they re-raise (a Ctrl-C in
+    env.step, a failed write: BaseException.add_note, PEP 678, new in Python 3.11); on 3.10
+    that call is an AttributeError in place of the KeyboardInterrupt or SessionWriteError.
+    So pip must refuse every Python before 3.11, as the README's set-up assumes 3.11."""
+    import tomllib
+
+    from packaging.specifiers import SpecifierSet
+
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    admits = SpecifierSet(meta["project"]["requires-python"])
+    oldest = min(v for v in ((3, m) for m in range(6, 20)) if admits.contains(f"{v[0]}.{v[1]}.0"))
+    assert oldest >= (3, 11), f"requires-python admits Python {oldest[0]}.{oldest[1]}"
+    assert sys.version_info >= oldest  # the suite itself runs on an admitted Python
+    # ruff lints for the same oldest Python (it would otherwise accept 3.11-only code)
+    assert meta["tool"]["ruff"]["target-version"] == f"py{oldest[0]}{oldest[1]}"

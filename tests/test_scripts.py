@@ -93,3 +93,29 @@ def test_driving_components_at_clip_takes_only_the_three_actions(action):
     assert done.returncode == 2 and done.stdout == "" and "Traceback" not in done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert f"argument --action: invalid choice: {action} (choose from 0, 1, 2)" in last, last
+
+
+def test_setup_refuses_a_python_older_than_3_11_before_making_anything(tmp_path):
+    """scripts/setup.sh on a Python that pyproject.toml's requires-python refuses (3.10, the
+    python3 of Ubuntu 22.04, which it takes when no python3.11 is on the PATH) stops at once
+    with one line naming the version and what to do, instead of making .venv and installing
+    torch only for pip to refuse torchcbl itself at the end."""
+    checkout = tmp_path / "checkout"
+    (checkout / "scripts").mkdir(parents=True)
+    for name in ("pyproject.toml", "scripts/setup.sh"):
+        (checkout / name).write_bytes((ROOT / name).read_bytes())
+    fake = tmp_path / "python3.10"  # answers setup.sh's version question, does nothing else
+    fake.write_text("#!/bin/sh\necho 3.10.13\n")
+    fake.chmod(0o755)
+    proc = subprocess.run(
+        ["bash", str(checkout / "scripts" / "setup.sh")],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHON": str(fake)},
+        timeout=60,
+    )
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert proc.stderr.count("\n") == 1, proc.stderr
+    assert "Python 3.10.13" in proc.stderr and "3.11 or newer" in proc.stderr, proc.stderr
+    assert "PYTHON" in proc.stderr  # what to do: point PYTHON at a newer one
+    assert not (checkout / ".venv").exists()

@@ -8,7 +8,7 @@ Commands (the options in full: README.md's command block, which a test holds to 
 
     torchcbl reproduce [corridor|driving|all] [--full] [--seeds N] [--workers N] [--out DIR]
     torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S]
-    torchcbl replay EPISODES.json|RUN_DIR [--list] [--episode N | --label TEXT] [--gif OUT] ...
+    torchcbl replay EPISODES.json|SESSION_DIR [--list] [--episode N | --label TEXT] [--gif OUT] ...
     torchcbl plot RUN_DIR
     torchcbl teach corridor|driving [--run-dir DIR] [--resume] [--seed S] [--steps N] ...
     torchcbl benchmark [--quick] [--strategies S,..] [--envs E,..] [--seeds N] [--ray] ...
@@ -975,7 +975,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "episodes",
-        metavar="EPISODES.json|RUN_DIR",
+        metavar="EPISODES.json|SESSION_DIR",
         help="an episodes.json written by the driving experiment "
         "(runs/reproduce/driving/seed_<k>/episodes.json), or a driving teaching session's "
         "directory (torchcbl teach driving --run-dir), whose episodes are replayed and checked "
@@ -1001,14 +1001,14 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="OUT.gif",
         help="GIF output path (default beside the JSON or the session directory: "
-        "EPISODES-N.gif, RUN_DIR-N.gif)",
+        "EPISODES-N.gif, SESSION_DIR-N.gif)",
     )
     p.add_argument(
         "--fcd",
         default=None,
         metavar="OUT.xml",
         help="SUMO FCD XML output path (default beside the JSON or the session directory: "
-        "EPISODES-N.fcd.xml, RUN_DIR-N.fcd.xml); a "
+        "EPISODES-N.fcd.xml, SESSION_DIR-N.fcd.xml); a "
         ".sumocfg that opens it in sumo-gui is written beside it",
     )
     p.add_argument(

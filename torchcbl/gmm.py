@@ -53,8 +53,10 @@ from-scratch fit (see docs/architecture.md).
 Threads
 -------
 Fits and classification run on one torch thread in a scope that restores the caller's count;
-only an EM of at least :data:`SINGLE_THREAD_WORK` gets the caller's threads, and only while
-the machine has a spare core. The global setting is never changed behind the caller's back.
+only work of at least :data:`SINGLE_THREAD_WORK` gets the caller's threads (an EM: its largest
+action's points x candidate components x quadratic features; classifying a batch of more than 256
+rows: rows x actions x components x D**2), and only while the machine has a spare core. The
+global setting is never changed behind the caller's back.
 Such an EM's last bits can depend on the count it got, and so on the machine's load at that
 moment: a matrix product over many points may split its sums between threads (one action of
 20,000 points, 4-D, k <= 8 fitted on one and on two threads differed in the 14th digit). On

@@ -886,7 +886,7 @@ class SessionStore:
                 "torch_version": torch.__version__,
                 "numpy_version": np.__version__,
                 "pid": os.getpid(),
-                "started_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(),
+                "started_utc": datetime.datetime.now(datetime.UTC).isoformat(),
             },
             sort_keys=True,
         )
