@@ -444,6 +444,41 @@ def test_readers_open_the_log_read_only_and_change_nothing(tmp_path, monkeypatch
     assert len(records) == 60
 
 
+def test_a_writer_closing_while_a_reader_reads_leaves_no_wal_behind(tmp_path):
+    """A reader (mode=ro, as the readers open a session whose writer runs) in the middle of a
+    read as the writer closed kept SQLite from removing the -wal and -shm, and no read-only
+    connection removes them: the cleanly closed session kept both for good, looked like one
+    whose writer was killed, and could no longer be read where its -shm cannot be written. The
+    writer now waits for the read to end and removes them."""
+    import threading
+
+    run = tmp_path / "run"
+    ct, _ = session(run, commit_every=10**6)
+    ct.run(max_steps=40)
+    ct.flush()  # the steps are in the -wal
+    assert (run / "steps.sqlite-wal").exists()
+    reading, rows = threading.Event(), []
+
+    def reader() -> None:
+        db = sqlite3.connect(f"{(run / 'steps.sqlite').resolve().as_uri()}?mode=ro", uri=True)
+        try:
+            db.execute("BEGIN")
+            rows.append(db.execute("SELECT COUNT(*) FROM steps").fetchone()[0])
+            reading.set()
+            time.sleep(0.3)  # still reading as the writer closes
+        finally:
+            db.close()
+
+    thread = threading.Thread(target=reader)
+    thread.start()
+    assert reading.wait(30)
+    ct.close()
+    thread.join()
+    assert rows == [40]
+    assert not (run / "steps.sqlite-wal").exists() and not (run / "steps.sqlite-shm").exists()
+    assert load_records(run) == ct.records
+
+
 def test_readers_on_a_read_only_mount(tmp_path):
     src, ro = tmp_path / "src", tmp_path / "ro"
     src.mkdir()

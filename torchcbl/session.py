@@ -10,8 +10,10 @@ Run directory layout (one directory per teaching session)::
                                  table ``corrections``, one row per CorrectionRecord (a
                                  label for an earlier step's observation, journalled and
                                  committed exactly like a demonstration)
-        steps.sqlite-wal         SQLite's write-ahead log (present while a writer is open or
-        steps.sqlite-shm         after a crash; never delete it by hand: it may hold commits)
+        steps.sqlite-wal         SQLite's write-ahead log (present while a writer is open,
+        steps.sqlite-shm         after a crash, or when a reader held the log for over 2 s as
+                                 the writer closed; never delete it by hand: it may hold
+                                 commits)
         steps.journal            the steps not yet committed to steps.sqlite, one JSON line
                                  each with its CRC-32 (empty after a clean close; never delete
                                  it by hand)
@@ -613,6 +615,36 @@ def _remove_new_session_files(path: Path) -> None:
 
 _FREE_SPACE = "Free space (or fix the file's permissions), then call run() again or resume."
 
+#: How long a closing writer waits for readers to let go of the log (seconds), see _close_wal.
+_WAL_CLOSE_WAIT_S = 2.0
+
+
+def _close_wal(log: Path) -> None:
+    """After the writer's connection closed: fold the ``-wal`` into the log and remove it
+    with the ``-shm``, as SQLite does when the last connection closes.
+
+    SQLite does so only when it can lock the log alone; a reader (``mode=ro``) reading at that
+    moment keeps both files, and a read-only connection never removes them, so a cleanly
+    closed session looked like one whose writer runs or was killed (readers then need the
+    ``-shm`` and so write access). The writer, still holding its lock, opens the log again
+    until it is alone, for at most :data:`_WAL_CLOSE_WAIT_S` (a reader holds it for one read);
+    past that the files stay, which is harmless (readers use ``mode=ro``) and the next writer
+    removes them."""
+    wal = log.with_name(LOG_NAME + "-wal")
+    deadline = time.monotonic() + _WAL_CLOSE_WAIT_S
+    while wal.exists() and log.exists():  # (never a new, empty log in its place)
+        try:
+            db = sqlite3.connect(log, isolation_level=None)
+            try:
+                db.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchone()
+            finally:
+                db.close()  # the last connection: folds and removes -wal and -shm
+        except sqlite3.Error:
+            return  # e.g. a full disk: the next writer does it
+        if not wal.exists() or time.monotonic() > deadline:
+            return
+        time.sleep(0.005)
+
 
 def _acquire_lock(run_dir: Path) -> Any:
     """Take the run directory's writer lock (``writer.lock``, fcntl.flock: released by the
@@ -712,6 +744,7 @@ class SessionStore:
         if self._db is not None:
             self._db.close()
             self._db = None
+            _close_wal(self.run_dir / LOG_NAME)
         if self._journal >= 0:
             os.close(self._journal)
             self._journal = -1
