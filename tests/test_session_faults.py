@@ -1107,10 +1107,39 @@ def test_a_new_session_does_not_take_over_a_journal_another_session_left(tmp_pat
     for name in ("config.json", "steps.sqlite", "steps.sqlite-wal", "steps.sqlite-shm"):
         (run / name).unlink(missing_ok=True)  # "starting over" by hand, the journal left
     with pytest.raises(
-        IncompatibleRunDirError, match=r"holds what another session left \(steps.journal\)"
+        IncompatibleRunDirError, match=r"holds what another session left \(steps.journal, "
     ):
         session(run)
     assert (run / "steps.journal").stat().st_size > 0  # refused without touching it
+
+
+def test_a_new_session_does_not_take_over_a_writers_file_another_session_left(tmp_path):
+    """A session created where another one left its writers.jsonl appended its writer to
+    the other's: its first line said that writer started at the other's step 0, and the
+    other's resumes read as this session's writers (thread counts, devices, from which step),
+    the record that says which thread count reproduces which step. It is refused, as a
+    journal or checkpoints left there are, and the file is left as it was."""
+    run = tmp_path / "run"
+    ct, _ = session(run)
+    ct.run(max_steps=10)
+    ct.close()
+    back, _ = resume(run)
+    back.run(max_steps=20)
+    back.close()
+    for name in ("config.json", "steps.sqlite"):  # "starting over" by hand
+        (run / name).unlink()
+    shutil.rmtree(run / "checkpoints")
+    before = (run / "writers.jsonl").read_bytes()
+    with pytest.raises(
+        IncompatibleRunDirError, match=r"holds what another session left \(writers.jsonl\)"
+    ):
+        session(run)
+    assert (run / "writers.jsonl").read_bytes() == before
+    assert not (run / "config.json").exists()
+    (run / "writers.jsonl").unlink()  # moved away: a new session starts there
+    ct, _ = session(run)
+    ct.close()
+    assert [json.loads(line)["first_step"] for line in (run / "writers.jsonl").open()] == [0]
 
 
 def test_resume_rebuilds_the_sessions_model_not_the_callers_fitted_one(tmp_path):

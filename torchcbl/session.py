@@ -780,14 +780,19 @@ class SessionStore:
                     f"{path} already holds a teaching session. Continue it with "
                     "ConfidentTeacher.resume(run_dir, env, teacher) or choose a new run_dir."
                 )
-            journal = path / JOURNAL_NAME
-            leftovers = [journal.name] if journal.exists() and journal.stat().st_size else []
+            # a journal's steps, a writers.jsonl's writers (whose step numbers and thread
+            # counts would read as this session's) and checkpoints belong to another session
+            leftovers = [
+                name
+                for name in (JOURNAL_NAME, WRITERS_NAME)
+                if (path / name).exists() and (path / name).stat().st_size
+            ]
             ckpts = path / CHECKPOINT_DIR
             if ckpts.is_dir():
                 leftovers += sorted(
                     f"{CHECKPOINT_DIR}/{e.name}" for e in ckpts.iterdir() if _CKPT_RE.match(e.name)
                 )
-            if leftovers:  # a new session would take another session's steps or models
+            if leftovers:  # a new session would take another session's steps, writers, models
                 raise IncompatibleRunDirError(
                     f"{path} holds what another session left ({', '.join(leftovers[:3])}"
                     f"{', ...' if len(leftovers) > 3 else ''}) but no session; choose a new "
