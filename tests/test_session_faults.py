@@ -1269,6 +1269,54 @@ def test_the_cap_kept_is_the_one_in_force_under_an_outer_time_limit(tmp_path):
     ConfidentTeacher.resume(tmp_path / "run1000", same, teacher, progress=False).close()
 
 
+def test_the_cap_kept_is_the_envs_own_so_a_resume_never_changes_it(tmp_path):
+    """A corridor env made by gymnasium.make has no TimeLimit: its cap is its own, resolved
+    from the map when not given (81, or two circuits of a longer route), and the session kept
+    only the spec's None. A session on a map whose circuit takes more than 40 actions, taught
+    when the default was 81, resumed with today's 2 circuits without a word. The cap in force
+    is now kept, so an env whose own cap differs (as another version's default would give) is
+    refused, naming the cap and how to make the env with it."""
+    import corridor
+    from corridor.expert import CorridorExpert
+
+    loop = tmp_path / "loop.json"
+    loop.write_text(
+        json.dumps(
+            {
+                "name": "loop",
+                "corridor_width": 0.6,
+                "nodes": {"A": [0, 0], "B": [6.0, 0], "C": [6.0, 4.0], "D": [0, 4.0]},
+                "corridors": [["A", "B"], ["B", "C"], ["C", "D"], ["D", "A"]],
+                "route": ["A", "B", "C", "D", "A"],
+            }
+        )
+    )
+
+    def make(cap=None):
+        env = gym.make(corridor.ENV_ID, corridor_map=str(loop))
+        if cap is not None:  # the env as a version with another default makes it
+            env.unwrapped.max_episode_steps = cap
+        return env
+
+    env = make()
+    teacher = CorridorExpert(env.unwrapped.corridor_map)
+    run = tmp_path / "run"
+    with ConfidentTeacher(env, teacher, run_dir=run, progress=False) as ct:
+        ct.run(max_steps=5)
+    assert env.unwrapped.max_episode_steps == 192
+    assert load_config(run)["env"]["max_episode_steps"] == 192
+    with pytest.raises(
+        IncompatibleRunDirError, match=r"'max_episode_steps': \(192, 81\).*max_episode_steps=192"
+    ):
+        ConfidentTeacher.resume(run, make(cap=81), teacher, progress=False)
+    ConfidentTeacher.resume(run, make(), teacher, progress=False).close()
+    # a session that kept the spec's None (before the cap in force was kept) still resumes
+    config = json.loads((run / "config.json").read_text())
+    config["env"]["max_episode_steps"] = None
+    (run / "config.json").write_text(json.dumps(config))
+    ConfidentTeacher.resume(run, make(), teacher, progress=False).close()
+
+
 # -- 7. a gap in the step numbers ----------------------------------------------------------
 
 

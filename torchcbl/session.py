@@ -1704,8 +1704,9 @@ def resume_problems(
     ``model_args`` / ``strategy`` None means "rebuilt from the directory"; of a strategy
     config with ``"custom": true`` (no ``to_config``) only the class name and relabel flag are
     compared; ``env_kwargs``: what ``gymnasium.make`` was given for the env (plain values are
-    compared, ``render_mode`` aside), with its ``max_episode_steps`` (the spec's; sessions
-    written before 2026-11-26 do not keep it)."""
+    compared, ``render_mode`` aside), with its ``max_episode_steps`` (the cap in force: the
+    smallest TimeLimit's or the env's own; sessions written before 2026-11-26 do not keep it,
+    and those written before 2026-11-27 kept None for an env with a cap of its own only)."""
     problems: list[str] = []
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):

@@ -326,14 +326,20 @@ def _env_kwargs(env: gym.Env) -> dict[str, Any]:
 
 def _episode_cap(env: gym.Env) -> int | None:
     """The step cap in force on ``env``: the smallest of its ``TimeLimit`` wrappers' (an outer
-    ``TimeLimit(gymnasium.make(id), n)`` reports ``n`` in its spec whatever the inner cap), else
-    its spec's ``max_episode_steps`` (None: no cap)."""
+    ``TimeLimit(gymnasium.make(id), n)`` reports ``n`` in its spec whatever the inner cap) and
+    of the env's own, an int ``max_episode_steps`` attribute of the unwrapped env (e.g.
+    ``CorridorEnv``'s, resolved from its map when not given: a version whose default differs
+    then gives another cap); without a wrapper, its spec's ``max_episode_steps`` (None: no
+    cap)."""
     caps = []
     layer: Any = env
     while isinstance(layer, gym.Wrapper):
         if isinstance(layer, gym.wrappers.TimeLimit):
             caps.append(int(layer._max_episode_steps))
         layer = layer.env
+    own = getattr(getattr(env, "unwrapped", layer), "max_episode_steps", None)
+    if _is_int(own) and own >= 1:
+        caps.append(int(own))
     if caps:
         return min(caps)
     return getattr(getattr(env, "spec", None), "max_episode_steps", None)
@@ -528,7 +534,7 @@ class ConfidentTeacher:
         kwargs = _env_kwargs(self.env)
         if kwargs:
             described["kwargs"] = kwargs
-        if spec is not None:  # gymnasium.make's TimeLimit (None: none), compared on resume
+        if spec is not None:  # the cap in force (TimeLimit or the env's own), compared on resume
             described["max_episode_steps"] = _episode_cap(self.env)
         return described
 
