@@ -459,7 +459,8 @@ def test_an_in_process_sweep_leaves_the_callers_torch_threads_and_rng_alone(tmp_
     """run_benchmark(workers=1) runs its cells in the caller's process; each cell runs on one
     torch thread from its own seed, and the caller was left with one thread (a notebook's
     later training ran single-threaded), its global torch RNG reseeded to the last cell's seed
-    and OMP_NUM_THREADS set in its environment."""
+    and OMP_NUM_THREADS set in its environment. Its results said the engine was
+    "process_pool"; they say "in_process"."""
     import torch
 
     threads = torch.get_num_threads()
@@ -470,7 +471,11 @@ def test_an_in_process_sweep_leaves_the_callers_torch_threads_and_rng_alone(tmp_
         expected = torch.rand(3)
         torch.manual_seed(1234)
         env = _env(budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,))
-        bm.run_benchmark(STRATEGIES[:1], [env], [0, 1], tmp_path, workers=1, plots=False)
+        res = bm.run_benchmark(STRATEGIES[:1], [env], [0, 1], tmp_path, workers=1, plots=False)
+        assert res["sweep"]["engine"] == "in_process" and res["sweep"]["workers"] == 1
+        assert json.loads((tmp_path / "results.json").read_text())["sweep"]["engine"] == (
+            "in_process"
+        )
         assert torch.get_num_threads() == 2
         assert torch.equal(torch.rand(3), expected)
         assert os.environ.get("OMP_NUM_THREADS") == omp

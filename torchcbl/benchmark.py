@@ -865,7 +865,12 @@ def run_benchmark(
         "computed": len(todo),
         "cached": len(configs) - len(todo),
         "seeds": [int(s) for s in seeds],
-        "engine": ("ray" if use_ray else "process_pool") if todo else "cache",
+        # (the cells of workers=1 ran in this process: _execute)
+        "engine": (
+            ("ray" if use_ray else "process_pool" if n_workers > 1 else "in_process")
+            if todo
+            else "cache"
+        ),
         "workers": n_workers,
         "wall_s_this_call": time.perf_counter() - wall0,
         "cell_cpu_s_total": float(sum(c["cpu_s"] for c in cells)),
