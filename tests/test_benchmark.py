@@ -584,6 +584,24 @@ def test_a_cell_is_the_same_whatever_the_callers_numpy_and_random_state():
     assert cells[0]["attention"]["corrections"] > 0  # the sloppy teacher's answers mattered
 
 
+def test_a_sweep_that_stops_early_leaves_no_earlier_results_that_read_as_its_own(tmp_path):
+    """A sweep into an OUT where an earlier (other) sweep had finished, stopped by a failing
+    cell (or Ctrl-C), left the earlier results.json and learning_curves.png there: they read
+    as the new sweep's results. A sweep now removes them first; one that finishes writes its
+    own, and running the earlier sweep again rewrites its results from its cached cells."""
+    env = _env(budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,))
+    earlier = bm.run_benchmark(STRATEGIES[:1], [env], [0], tmp_path, workers=1)
+    assert (tmp_path / "results.json").is_file() and (tmp_path / "learning_curves.png").is_file()
+    glitchy = dataclasses.replace(env, teacher="_bench_env:glitchy_teacher")
+    with pytest.raises(bm.CellError, match="seed 1"):
+        bm.run_benchmark(STRATEGIES[:1], [glitchy], [0, 1], tmp_path, workers=1)
+    assert not (tmp_path / "results.json").exists()
+    assert not (tmp_path / "learning_curves.png").exists()
+    again = bm.run_benchmark(STRATEGIES[:1], [env], [0], tmp_path, workers=1, plots=False)
+    assert again["sweep"]["cached"] == 1 and again["table"] == earlier["table"]
+    assert not (tmp_path / "learning_curves.png").exists()  # no plot asked: none of another
+
+
 def test_a_score_that_is_not_a_finite_number_is_named_not_tabled(tmp_path):
     """A mean over the finished episodes of an evaluation cut before any ended is NaN: the
     sweep went on and wrote "nan ± nan" into every performance column of the table (and NaN,
