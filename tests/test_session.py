@@ -643,3 +643,21 @@ def test_latest_checkpoint_of_a_path_that_is_no_session_is_an_error_not_none(tmp
         latest_checkpoint(tmp_path / "rnu")
     with pytest.raises(IncompatibleRunDirError, match="is a file"):
         latest_checkpoint(run / "steps.sqlite")
+
+
+def test_latest_checkpoint_refuses_an_at_most_that_is_no_count(tmp_path):
+    """at_most="5" failed inside the comparison with TypeError "'<=' not supported between
+    instances of 'int' and 'str'"; -1 answered None (no checkpoint) and 2.5 the checkpoint
+    at 2, both without a word. Each is now a ValueError saying what at_most takes."""
+    from torchcbl.session import latest_checkpoint
+
+    run = tmp_path / "run"
+    make(rare_regions_world(), run, max_new=2).run(max_steps=40)
+    for bad in ("5", -1, 2.5, True):
+        with pytest.raises(ValueError, match=r"at_most must be None .* or an int >= 0"):
+            latest_checkpoint(run, at_most=bad)
+    assert latest_checkpoint(run, at_most=np.int64(2)) == (
+        2,
+        run / "checkpoints" / "model-00000002.pt",
+    )
+    assert latest_checkpoint(run, at_most=0) is None

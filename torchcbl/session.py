@@ -1429,7 +1429,17 @@ def latest_checkpoint(
 
     Raises:
         IncompatibleRunDirError: ``run_dir`` is not a session directory (no ``config.json``).
+        ValueError: ``at_most`` is not None or an int >= 0.
     """
+    if at_most is not None and (
+        isinstance(at_most, (bool, np.bool_))
+        or not isinstance(at_most, (int, np.integer))
+        or at_most < 0
+    ):
+        raise ValueError(
+            f"latest_checkpoint: at_most must be None (the newest checkpoint) or an int >= 0 "
+            f"(a count of labels), got {at_most!r}"
+        )
     if not (Path(run_dir) / CONFIG_NAME).is_file():
         load_config(run_dir)  # raises, saying what the path is
     directory = Path(run_dir) / CHECKPOINT_DIR
