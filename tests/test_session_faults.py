@@ -731,6 +731,39 @@ def test_config_missing_a_key(tmp_path, key):
     goes_on(back, env, run)
 
 
+@pytest.mark.parametrize(
+    "field, value, says",
+    [
+        ("max_new", 0, "max_new 0, not an int >= 1"),
+        ("max_new", "5", "max_new '5', not an int >= 1"),
+        ("accuracy_window", -3, "no valid TeachingConfig (TeachingConfig.accuracy_window"),
+    ],
+)
+def test_config_with_a_teaching_value_no_session_takes(tmp_path, field, value, says):
+    """A config.json edited by hand to a value no TeachingConfig takes: resume raised the
+    config's bare ValueError ("TeachingConfig.max_new: expected None or an int >= 1, got 0"),
+    and load_model int()'s ("invalid literal for int() with base 10") or fit_count's, none
+    naming the file. Each is now a CorruptSessionError naming config.json and the way back."""
+    run = tmp_path / "run"
+    _closed_session(run)
+    path = run / "config.json"
+    good = path.read_text()
+    config = json.loads(good)
+    config["teaching"][field] = value
+    path.write_text(json.dumps(config))
+    before = files_of(run)
+    calls = (load_model, load_demonstrations, resume) if field == "max_new" else (resume,)
+    for call in calls:
+        with pytest.raises(CorruptSessionError) as err:
+            call(run)
+        assert str(err.value).startswith(f"{path}: ") and says in str(err.value)
+        assert "edited or damaged" in str(err.value)
+    assert files_of(run) == before
+    path.write_text(good)
+    back, env = resume(run)
+    goes_on(back, env, run)
+
+
 def test_deleted_step_log_is_not_restarted_silently(tmp_path):
     run = tmp_path / "run"
     _closed_session(run)

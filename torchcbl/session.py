@@ -427,6 +427,9 @@ def _config_problem(config: dict[str, Any]) -> str | None:
             return f"the key 'env' has no int {key!r}"
     if "max_new" not in config["teaching"]:
         return "the key 'teaching' has no 'max_new'"
+    max_new = config["teaching"]["max_new"]
+    if type(max_new) is not int or max_new < 1:  # every reader refits by it
+        return f"the key 'teaching' has max_new {max_new!r}, not an int >= 1 (the refit period)"
     return None
 
 
@@ -436,7 +439,8 @@ def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
     Raises:
         IncompatibleRunDirError: no config (the message says whether the path does not
             exist, is a file, or is a directory without one), or another log format.
-        CorruptSessionError: unreadable config, or one missing a required key.
+        CorruptSessionError: unreadable config, or one missing a required key (or whose
+            ``teaching.max_new`` is no int >= 1).
     """
     path = Path(run_dir) / CONFIG_NAME
     try:

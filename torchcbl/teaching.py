@@ -54,6 +54,7 @@ import torch
 
 from torchcbl.confidence import _np, rule_to_config
 from torchcbl.errors import (
+    CorruptSessionError,
     EnvError,
     IncompatibleRunDirError,
     SessionWriteError,
@@ -580,8 +581,15 @@ class ConfidentTeacher:
         n_features, n_actions = check_env(env)
         try:
             stored_config = TeachingConfig(**stored["teaching"])
-        except TypeError as exc:
+        except TypeError as exc:  # a field this version does not know (a newer torchcbl's)
             raise IncompatibleRunDirError(f"{run_dir}: unreadable TeachingConfig: {exc}") from exc
+        except ValueError as exc:  # a value no TeachingConfig takes: edited or damaged
+            raise CorruptSessionError(
+                f"{Path(run_dir) / 'config.json'}: its 'teaching' entry is no valid "
+                f"TeachingConfig ({exc}). The file was edited or damaged; restore it from a "
+                "backup or a copy of the run directory, or put the value the session was "
+                "started with back. Nothing was changed."
+            ) from exc
         config = stored_config if config is None else config
         model_args = None
         if model is not None:
