@@ -606,7 +606,14 @@ _START_AGAIN = "free space (or fix the permissions) and start the session again"
 
 def _remove_new_session_files(path: Path) -> None:
     """Undo a session creation that failed before its first step: the files it made."""
-    for name in (CONFIG_NAME, LOG_NAME, LOG_NAME + "-wal", LOG_NAME + "-shm", JOURNAL_NAME):
+    for name in (
+        CONFIG_NAME,
+        LOG_NAME,
+        LOG_NAME + "-wal",
+        LOG_NAME + "-shm",
+        JOURNAL_NAME,
+        WRITERS_NAME,
+    ):
         try:
             (path / name).unlink(missing_ok=True)
         except OSError:
@@ -818,6 +825,18 @@ class SessionStore:
             lock.close()
             raise
         return store
+
+    def discard_new(self) -> None:
+        """Undo :meth:`create` for a session that failed before its first step (nothing is
+        recorded): close it and remove its files while still holding the lock, so that the
+        directory holds no session and creating it again starts afresh."""
+        lock, self._lock = self._lock, None
+        try:
+            self._release()
+            _remove_new_session_files(self.run_dir)
+        finally:
+            if lock is not None:
+                lock.close()
 
     @classmethod
     def open_for_resume(

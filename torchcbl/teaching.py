@@ -439,8 +439,17 @@ class ConfidentTeacher:
                 self._store.note_writer(0, _model_device(self.model))
                 if _is_fitted(self.model):  # a session may start from a fitted model
                     self._store.save_checkpoint(self.model, 0, self._digest.hexdigest())
-            except BaseException:
-                self.close()
+            except BaseException as exc:
+                # nothing is recorded yet: no half session (a resume would start from an
+                # unfitted model, the fitted one's checkpoint missing and no log to refit on)
+                store, self._store = self._store, None
+                store.discard_new()
+                if isinstance(exc, SessionWriteError):
+                    exc.add_note(
+                        f"torchcbl: nothing was recorded, and {self.run_dir} was left without "
+                        "a session; free space (or fix the permissions) and create the teacher "
+                        "again."
+                    )
                 raise
         self._next_reset_seed: int | None = self.seed
 
