@@ -291,6 +291,8 @@ def evaluate_policy(
             raise ValueError(f"evaluate_policy: {name} must be an int >= 1, got {v!r}")
     n_steps = None if n_steps is None else int(n_steps)
     n_episodes = None if n_episodes is None else int(n_episodes)
+    if seeds is None and seed is not None:
+        seed = int(seed)  # gymnasium's reset takes a Python int only, not np.int64(3)
     if seeds is not None and n_episodes is not None and n_episodes > len(seeds):
         raise ValueError(
             f"evaluate_policy: n_episodes={n_episodes} but only {len(seeds)} seeds were given; "
