@@ -584,6 +584,22 @@ def test_a_cell_is_the_same_whatever_the_callers_numpy_and_random_state():
     assert cells[0]["attention"]["corrections"] > 0  # the sloppy teacher's answers mattered
 
 
+@pytest.mark.parametrize("workers, says", [("1", "in this process"), ("2", "2 processes")])
+def test_the_command_says_where_the_cells_run(workers, says, tmp_path, monkeypatch, capsys):
+    """torchcbl benchmark --workers 1 announced "(1 processes)", but such a sweep runs its
+    cells in the command's own process, no pool started."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
+    argv += ["--workers", workers, "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.endswith(f"cells into {tmp_path / 'out'} ({says})"), first
+
+
 def test_a_sweep_that_stops_early_leaves_no_earlier_results_that_read_as_its_own(tmp_path):
     """A sweep into an OUT where an earlier (other) sweep had finished, stopped by a failing
     cell (or Ctrl-C), left the earlier results.json and learning_curves.png there: they read

@@ -841,6 +841,8 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             else "local Ray"
             if args.ray
             else f"{args.workers} processes"
+            if args.workers > 1
+            else "in this process"  # run_benchmark runs workers=1 in-process
         )
         + ")",
         flush=True,
