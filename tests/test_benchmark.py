@@ -459,7 +459,8 @@ def test_an_in_process_sweep_leaves_the_callers_torch_threads_and_rng_alone(tmp_
     """run_benchmark(workers=1) runs its cells in the caller's process; each cell runs on one
     torch thread from its own seed, and the caller was left with one thread (a notebook's
     later training ran single-threaded), its global torch RNG reseeded to the last cell's seed
-    and OMP_NUM_THREADS set in its environment."""
+    and OMP_NUM_THREADS set in its environment. Its results said the engine was
+    "process_pool"; they say "in_process"."""
     import torch
 
     threads = torch.get_num_threads()
@@ -470,7 +471,11 @@ def test_an_in_process_sweep_leaves_the_callers_torch_threads_and_rng_alone(tmp_
         expected = torch.rand(3)
         torch.manual_seed(1234)
         env = _env(budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,))
-        bm.run_benchmark(STRATEGIES[:1], [env], [0, 1], tmp_path, workers=1, plots=False)
+        res = bm.run_benchmark(STRATEGIES[:1], [env], [0, 1], tmp_path, workers=1, plots=False)
+        assert res["sweep"]["engine"] == "in_process" and res["sweep"]["workers"] == 1
+        assert json.loads((tmp_path / "results.json").read_text())["sweep"]["engine"] == (
+            "in_process"
+        )
         assert torch.get_num_threads() == 2
         assert torch.equal(torch.rand(3), expected)
         assert os.environ.get("OMP_NUM_THREADS") == omp
@@ -596,6 +601,40 @@ def test_a_cell_is_the_same_whatever_the_callers_numpy_and_random_state():
         assert (np.random.random(), random.random()) == expected  # noqa: NPY002
     assert cells[0] == cells[1]
     assert cells[0]["attention"]["corrections"] > 0  # the sloppy teacher's answers mattered
+
+
+@pytest.mark.parametrize("workers, says", [("1", "in this process"), ("2", "2 processes")])
+def test_the_command_says_where_the_cells_run(workers, says, tmp_path, monkeypatch, capsys):
+    """torchcbl benchmark --workers 1 announced "(1 processes)", but such a sweep runs its
+    cells in the command's own process, no pool started."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
+    argv += ["--workers", workers, "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.endswith(f"cells into {tmp_path / 'out'} ({says})"), first
+
+
+def test_a_sweep_that_stops_early_leaves_no_earlier_results_that_read_as_its_own(tmp_path):
+    """A sweep into an OUT where an earlier (other) sweep had finished, stopped by a failing
+    cell (or Ctrl-C), left the earlier results.json and learning_curves.png there: they read
+    as the new sweep's results. A sweep now removes them first; one that finishes writes its
+    own, and running the earlier sweep again rewrites its results from its cached cells."""
+    env = _env(budgets=(5,), max_steps=10, eval_episodes=1, eval_seeds=(100,))
+    earlier = bm.run_benchmark(STRATEGIES[:1], [env], [0], tmp_path, workers=1)
+    assert (tmp_path / "results.json").is_file() and (tmp_path / "learning_curves.png").is_file()
+    glitchy = dataclasses.replace(env, teacher="_bench_env:glitchy_teacher")
+    with pytest.raises(bm.CellError, match="seed 1"):
+        bm.run_benchmark(STRATEGIES[:1], [glitchy], [0, 1], tmp_path, workers=1)
+    assert not (tmp_path / "results.json").exists()
+    assert not (tmp_path / "learning_curves.png").exists()
+    again = bm.run_benchmark(STRATEGIES[:1], [env], [0], tmp_path, workers=1, plots=False)
+    assert again["sweep"]["cached"] == 1 and again["table"] == earlier["table"]
+    assert not (tmp_path / "learning_curves.png").exists()  # no plot asked: none of another
 
 
 def test_a_score_that_is_not_a_finite_number_is_named_not_tabled(tmp_path):

@@ -234,6 +234,42 @@ def test_plot_of_reproduces_out_directory_names_the_run_directories_in_it(corrid
     assert "holds one run directory per domain" in err and str(corridor_run / "corridor") in err
 
 
+def test_plot_into_a_read_only_run_directory_is_one_line_and_exit_2(corridor_run, tmp_path, capsys):
+    """A run directory where no figure can be written (a read-only mount, another user's run):
+    plot drew the first figure and failed writing it, exit code 1 with the bare OSError. It is
+    a usage mistake: one line that says where the figures go and how to plot, exit code 2,
+    before anything is drawn."""
+    import shutil
+
+    src, ro = tmp_path / "src", tmp_path / "ro"
+    shutil.copytree(corridor_run / "corridor", src)
+    before = sorted(p.name for p in src.iterdir())
+    if os.geteuid() != 0:
+        ro = src
+        ro.chmod(0o555)
+    else:
+        ro.mkdir()
+        mount = ["mount", "--bind", str(src), str(ro)]
+        if subprocess.run(mount, capture_output=True).returncode != 0:
+            pytest.skip("cannot bind-mount here")
+    try:
+        if ro != src:
+            remount = ["mount", "-o", "remount,bind,ro", str(ro)]
+            if subprocess.run(remount, capture_output=True).returncode != 0:
+                pytest.skip("cannot remount read-only here")
+        code = main(["plot", str(ro)])
+    finally:
+        if ro != src:
+            subprocess.run(["umount", "-l", str(ro)], capture_output=True)
+        src.chmod(0o755)
+    out, err = capsys.readouterr()
+    assert code == 2 and out == "", err
+    assert err.count("\n") == 1, err
+    assert err.startswith(f"torchcbl plot: error: cannot write the figures into {ro} (")
+    assert "plot the copy" in err
+    assert sorted(p.name for p in src.iterdir()) == before
+
+
 def test_evaluate_names_the_problem(corridor_run, tmp_path, capsys):
     """What the one line says: which sessions a run directory holds, which domain a session is
     of, what is missing."""

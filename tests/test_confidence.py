@@ -129,26 +129,31 @@ def test_a_rule_reused_in_another_session_starts_from_its_own_refits():
 
 
 @pytest.mark.parametrize(
-    "bad",
+    "bad, error",
     [
-        lambda y: y[:1],  # broadcast against the model's answers: silently wrong thresholds
-        lambda y: y[:50],
-        lambda y: y[:, None],
-        lambda y: y + 0.5,  # truncated to the integer below
-        lambda y: y + 3,  # no such action
+        (lambda y: y[:1], ValueError),  # broadcast against the model's answers: wrong thresholds
+        (lambda y: y[:50], ValueError),
+        (lambda y: y[:, None], ValueError),
+        (lambda y: y + 0.5, TypeError),  # truncated to the integer below
+        (lambda y: y.astype(float), TypeError),
+        (lambda y: y + 3, ValueError),  # no such action
     ],
 )
-def test_auto_threshold_update_refuses_labels_that_do_not_fit_the_observations(bad):
+def test_auto_threshold_update_refuses_labels_that_do_not_fit_the_observations(bad, error):
     """AutoThresholdRule.update took any label vector torch could broadcast: one label for
     100 observations set both thresholds from a comparison with that one label (action 1's
-    2.0 became 1.09), and float labels were truncated. It now names the expected shape."""
+    2.0 became 1.09), and float labels were truncated. It now names the expected shape. Float
+    labels are a TypeError, as GaussianMixtureSet.fit says them (update said ValueError, so
+    code catching the fit's error for the same labels missed the rule's)."""
     rng = np.random.default_rng(0)
     x = np.r_[rng.normal(0, 1, (50, 2)), rng.normal(1.5, 1, (50, 2))]
     y = np.r_[np.zeros(50, int), np.ones(50, int)]
     model = GaussianMixtureSet(2, 2, 2).fit(x, y)
     rule = AutoThresholdRule()
-    with pytest.raises(ValueError, match=r"AutoThresholdRule.update: expected"):
+    with pytest.raises(error, match=r"AutoThresholdRule.update: expected"):
         rule.update(model, x, bad(y))
+    with pytest.raises(error):  # the fit refuses the same labels the same way
+        GaussianMixtureSet(2, 2, 2).fit(x, bad(y))
     assert rule.thresholds is None
     for labels in (y, y.tolist(), torch.from_numpy(y), y.astype(np.uint8)):
         rule.update(model, x, labels)

@@ -502,6 +502,40 @@ def test_a_session_that_could_not_be_created_leaves_no_half_session(tmp_path):
     assert len(load_records(run)) == 3
 
 
+def test_a_fitted_starting_model_that_cannot_be_saved_leaves_no_half_session(tmp_path, monkeypatch):
+    """A session may start from a fitted model, kept as checkpoint 0. When that checkpoint
+    could not be written (disk full), the error said the session was intact and a missing
+    checkpoint is refitted from the log; but with no label logged there is nothing to refit
+    on: creating the teacher again said the directory held a session, and its resume started
+    from an unfitted model, the starting model lost. Nothing is recorded at that point, so
+    the directory is now left without a session and creating the teacher again starts it."""
+    import errno
+
+    from torchcbl.errors import SessionWriteError
+
+    env = rare_regions_world()
+    x, y = env.sample(300, np.random.default_rng(0))
+    fitted = GaussianMixtureSet(3, 2, seed=0).fit(x, y)
+    run = tmp_path / "r"
+    real_save = torch.save
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(torch, "save", full)
+    with pytest.raises(SessionWriteError, match="No space left") as err:
+        ConfidentTeacher(env, oracle(env), model=fitted, run_dir=run, progress=False)
+    assert "left without a session" in "\n".join(getattr(err.value, "__notes__", []))
+    assert sorted(p.name for p in run.iterdir()) == ["writer.lock"]
+    monkeypatch.setattr(torch, "save", real_save)
+    ct = ConfidentTeacher(env, oracle(env), model=fitted, run_dir=run, progress=False)
+    ct.close()
+    assert load_model(run).is_fitted and same_state(load_model(run), fitted)
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    assert back.model.is_fitted
+    back.close()
+
+
 def test_a_full_disk_while_creating_the_log_is_a_write_error_not_a_corrupt_file(
     tmp_path, monkeypatch
 ):
@@ -670,3 +704,21 @@ def test_latest_checkpoint_of_a_path_that_is_no_session_is_an_error_not_none(tmp
         latest_checkpoint(tmp_path / "rnu")
     with pytest.raises(IncompatibleRunDirError, match="is a file"):
         latest_checkpoint(run / "steps.sqlite")
+
+
+def test_latest_checkpoint_refuses_an_at_most_that_is_no_count(tmp_path):
+    """at_most="5" failed inside the comparison with TypeError "'<=' not supported between
+    instances of 'int' and 'str'"; -1 answered None (no checkpoint) and 2.5 the checkpoint
+    at 2, both without a word. Each is now a ValueError saying what at_most takes."""
+    from torchcbl.session import latest_checkpoint
+
+    run = tmp_path / "run"
+    make(rare_regions_world(), run, max_new=2).run(max_steps=40)
+    for bad in ("5", -1, 2.5, True):
+        with pytest.raises(ValueError, match=r"at_most must be None .* or an int >= 0"):
+            latest_checkpoint(run, at_most=bad)
+    assert latest_checkpoint(run, at_most=np.int64(2)) == (
+        2,
+        run / "checkpoints" / "model-00000002.pt",
+    )
+    assert latest_checkpoint(run, at_most=0) is None

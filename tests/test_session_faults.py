@@ -444,6 +444,41 @@ def test_readers_open_the_log_read_only_and_change_nothing(tmp_path, monkeypatch
     assert len(records) == 60
 
 
+def test_a_writer_closing_while_a_reader_reads_leaves_no_wal_behind(tmp_path):
+    """A reader (mode=ro, as the readers open a session whose writer runs) in the middle of a
+    read as the writer closed kept SQLite from removing the -wal and -shm, and no read-only
+    connection removes them: the cleanly closed session kept both for good, looked like one
+    whose writer was killed, and could no longer be read where its -shm cannot be written. The
+    writer now waits for the read to end and removes them."""
+    import threading
+
+    run = tmp_path / "run"
+    ct, _ = session(run, commit_every=10**6)
+    ct.run(max_steps=40)
+    ct.flush()  # the steps are in the -wal
+    assert (run / "steps.sqlite-wal").exists()
+    reading, rows = threading.Event(), []
+
+    def reader() -> None:
+        db = sqlite3.connect(f"{(run / 'steps.sqlite').resolve().as_uri()}?mode=ro", uri=True)
+        try:
+            db.execute("BEGIN")
+            rows.append(db.execute("SELECT COUNT(*) FROM steps").fetchone()[0])
+            reading.set()
+            time.sleep(0.3)  # still reading as the writer closes
+        finally:
+            db.close()
+
+    thread = threading.Thread(target=reader)
+    thread.start()
+    assert reading.wait(30)
+    ct.close()
+    thread.join()
+    assert rows == [40]
+    assert not (run / "steps.sqlite-wal").exists() and not (run / "steps.sqlite-shm").exists()
+    assert load_records(run) == ct.records
+
+
 def test_readers_on_a_read_only_mount(tmp_path):
     src, ro = tmp_path / "src", tmp_path / "ro"
     src.mkdir()
@@ -691,6 +726,39 @@ def test_config_missing_a_key(tmp_path, key):
         with pytest.raises(CorruptSessionError) as err:
             call(run)
         assert f"{path}: the key {key!r}" in str(err.value) and "restore it" in str(err.value)
+    path.write_text(good)
+    back, env = resume(run)
+    goes_on(back, env, run)
+
+
+@pytest.mark.parametrize(
+    "field, value, says",
+    [
+        ("max_new", 0, "max_new 0, not an int >= 1"),
+        ("max_new", "5", "max_new '5', not an int >= 1"),
+        ("accuracy_window", -3, "no valid TeachingConfig (TeachingConfig.accuracy_window"),
+    ],
+)
+def test_config_with_a_teaching_value_no_session_takes(tmp_path, field, value, says):
+    """A config.json edited by hand to a value no TeachingConfig takes: resume raised the
+    config's bare ValueError ("TeachingConfig.max_new: expected None or an int >= 1, got 0"),
+    and load_model int()'s ("invalid literal for int() with base 10") or fit_count's, none
+    naming the file. Each is now a CorruptSessionError naming config.json and the way back."""
+    run = tmp_path / "run"
+    _closed_session(run)
+    path = run / "config.json"
+    good = path.read_text()
+    config = json.loads(good)
+    config["teaching"][field] = value
+    path.write_text(json.dumps(config))
+    before = files_of(run)
+    calls = (load_model, load_demonstrations, resume) if field == "max_new" else (resume,)
+    for call in calls:
+        with pytest.raises(CorruptSessionError) as err:
+            call(run)
+        assert str(err.value).startswith(f"{path}: ") and says in str(err.value)
+        assert "edited or damaged" in str(err.value)
+    assert files_of(run) == before
     path.write_text(good)
     back, env = resume(run)
     goes_on(back, env, run)
@@ -1072,10 +1140,39 @@ def test_a_new_session_does_not_take_over_a_journal_another_session_left(tmp_pat
     for name in ("config.json", "steps.sqlite", "steps.sqlite-wal", "steps.sqlite-shm"):
         (run / name).unlink(missing_ok=True)  # "starting over" by hand, the journal left
     with pytest.raises(
-        IncompatibleRunDirError, match=r"holds what another session left \(steps.journal\)"
+        IncompatibleRunDirError, match=r"holds what another session left \(steps.journal, "
     ):
         session(run)
     assert (run / "steps.journal").stat().st_size > 0  # refused without touching it
+
+
+def test_a_new_session_does_not_take_over_a_writers_file_another_session_left(tmp_path):
+    """A session created where another one left its writers.jsonl appended its writer to
+    the other's: its first line said that writer started at the other's step 0, and the
+    other's resumes read as this session's writers (thread counts, devices, from which step),
+    the record that says which thread count reproduces which step. It is refused, as a
+    journal or checkpoints left there are, and the file is left as it was."""
+    run = tmp_path / "run"
+    ct, _ = session(run)
+    ct.run(max_steps=10)
+    ct.close()
+    back, _ = resume(run)
+    back.run(max_steps=20)
+    back.close()
+    for name in ("config.json", "steps.sqlite"):  # "starting over" by hand
+        (run / name).unlink()
+    shutil.rmtree(run / "checkpoints")
+    before = (run / "writers.jsonl").read_bytes()
+    with pytest.raises(
+        IncompatibleRunDirError, match=r"holds what another session left \(writers.jsonl\)"
+    ):
+        session(run)
+    assert (run / "writers.jsonl").read_bytes() == before
+    assert not (run / "config.json").exists()
+    (run / "writers.jsonl").unlink()  # moved away: a new session starts there
+    ct, _ = session(run)
+    ct.close()
+    assert [json.loads(line)["first_step"] for line in (run / "writers.jsonl").open()] == [0]
 
 
 def test_resume_rebuilds_the_sessions_model_not_the_callers_fitted_one(tmp_path):
@@ -1203,6 +1300,54 @@ def test_the_cap_kept_is_the_one_in_force_under_an_outer_time_limit(tmp_path):
     (tmp_path / "run1000" / "config.json").write_text(json.dumps(config))
     same = gym.wrappers.TimeLimit(gym.make("MountainCar-v0"), 1000)
     ConfidentTeacher.resume(tmp_path / "run1000", same, teacher, progress=False).close()
+
+
+def test_the_cap_kept_is_the_envs_own_so_a_resume_never_changes_it(tmp_path):
+    """A corridor env made by gymnasium.make has no TimeLimit: its cap is its own, resolved
+    from the map when not given (81, or two circuits of a longer route), and the session kept
+    only the spec's None. A session on a map whose circuit takes more than 40 actions, taught
+    when the default was 81, resumed with today's 2 circuits without a word. The cap in force
+    is now kept, so an env whose own cap differs (as another version's default would give) is
+    refused, naming the cap and how to make the env with it."""
+    import corridor
+    from corridor.expert import CorridorExpert
+
+    loop = tmp_path / "loop.json"
+    loop.write_text(
+        json.dumps(
+            {
+                "name": "loop",
+                "corridor_width": 0.6,
+                "nodes": {"A": [0, 0], "B": [6.0, 0], "C": [6.0, 4.0], "D": [0, 4.0]},
+                "corridors": [["A", "B"], ["B", "C"], ["C", "D"], ["D", "A"]],
+                "route": ["A", "B", "C", "D", "A"],
+            }
+        )
+    )
+
+    def make(cap=None):
+        env = gym.make(corridor.ENV_ID, corridor_map=str(loop))
+        if cap is not None:  # the env as a version with another default makes it
+            env.unwrapped.max_episode_steps = cap
+        return env
+
+    env = make()
+    teacher = CorridorExpert(env.unwrapped.corridor_map)
+    run = tmp_path / "run"
+    with ConfidentTeacher(env, teacher, run_dir=run, progress=False) as ct:
+        ct.run(max_steps=5)
+    assert env.unwrapped.max_episode_steps == 192
+    assert load_config(run)["env"]["max_episode_steps"] == 192
+    with pytest.raises(
+        IncompatibleRunDirError, match=r"'max_episode_steps': \(192, 81\).*max_episode_steps=192"
+    ):
+        ConfidentTeacher.resume(run, make(cap=81), teacher, progress=False)
+    ConfidentTeacher.resume(run, make(), teacher, progress=False).close()
+    # a session that kept the spec's None (before the cap in force was kept) still resumes
+    config = json.loads((run / "config.json").read_text())
+    config["env"]["max_episode_steps"] = None
+    (run / "config.json").write_text(json.dumps(config))
+    ConfidentTeacher.resume(run, make(), teacher, progress=False).close()
 
 
 # -- 7. a gap in the step numbers ----------------------------------------------------------

@@ -120,6 +120,35 @@ def test_evaluate_policy_seeds_every_episode_from_a_list():
         evaluate_policy(oracle(env), env, seed=[1, 2], n_episodes=3, uses_info=True)
 
 
+def test_evaluate_policy_refuses_a_negative_seed_before_it_runs():
+    """A negative seed reached gymnasium's reset, whose error ("Seed must be greater or equal
+    to zero") named neither evaluate_policy nor the argument; one in a list did so only at
+    that episode's reset, after the episodes before it had run."""
+    env = rare_regions_world(episode_length=5)
+    calls = []
+    for bad, says in (
+        (-1, "got seed=-1"),
+        (np.int64(-3), "got seed=-3"),
+        ([3, -1], r"got -1 in seed=\[3, -1\]"),
+        (range(-2, 3), r"got -2 in seed=range\(-2, 3\)"),
+    ):
+        with pytest.raises(ValueError, match=r"evaluate_policy: seeds must be ints >= 0.*" + says):
+            evaluate_policy(lambda obs: calls.append(obs) or 0, env, seed=bad, n_steps=20)
+    assert calls == []  # refused before the policy was asked anything
+    assert len(evaluate_policy(lambda obs: 0, env, seed=0, n_steps=5)) == 5
+
+
+def test_evaluate_policy_takes_a_numpy_int_seed_as_the_int_it_holds():
+    """A seed drawn from a numpy array (np.int64(3)) passed evaluate_policy's check and was
+    handed as it was to env.reset, where gymnasium refused it ("Seed must be a python
+    integer, actual type: <class 'numpy.int64'>"); a list of numpy ints was converted. It is
+    now the episode the Python int gives."""
+    env = rare_regions_world(episode_length=5)
+    want = evaluate_policy(lambda obs: 0, env, seed=3, n_episodes=1)
+    for seed in (np.int64(3), np.uint32(3), np.arange(3, 4)[0]):
+        assert evaluate_policy(lambda obs: 0, env, seed=seed, n_episodes=1) == want
+
+
 def test_evaluate_policy_stops_at_n_steps_without_another_reset():
     """The step budget ends the run at its last step: no reset or observation check after it,
     so a bad observation the env would give next cannot cost the records taken."""

@@ -797,7 +797,9 @@ def run_benchmark(
             script, call ``run_benchmark`` under ``if __name__ == "__main__":``.
         use_ray: run the cells as Ray tasks (``ray_address`` None: a local Ray with
             ``workers`` CPUs; else ``ray.init(address=ray_address)``, e.g. ``"auto"``).
-        plots: write ``learning_curves.png``.
+        plots: write ``learning_curves.png``. The ``results.json`` and plot an earlier sweep
+            left in ``out_dir`` are removed first, so what is there is this sweep's or
+            nothing (a sweep that stops early writes neither).
         on_cell: called as ``on_cell(cell_result, cached)`` for every cell, cached or new.
 
     Returns:
@@ -838,6 +840,12 @@ def run_benchmark(
         raise ValueError(f"workers must be None (os.cpu_count()) or an int >= 1, got {workers!r}")
     _check_imports(strategies, envs)
     out = Path(out_dir)
+    if (out / "cells").is_dir():
+        # An earlier sweep's results and plot would read as this one's if it stops early (a
+        # failed cell, Ctrl-C) or draws no plot; its cells stay, so running it again rewrites
+        # them at once. (Files of that name in a directory no sweep wrote are not a sweep's.)
+        for name in ("results.json", "learning_curves.png"):
+            (out / name).unlink(missing_ok=True)
     (out / "cells").mkdir(parents=True, exist_ok=True)
     configs = cell_configs(strategies, envs, seeds)
     results: dict[str, dict[str, Any]] = {}
@@ -868,7 +876,12 @@ def run_benchmark(
         "computed": len(todo),
         "cached": len(configs) - len(todo),
         "seeds": [int(s) for s in seeds],
-        "engine": ("ray" if use_ray else "process_pool") if todo else "cache",
+        # (the cells of workers=1 ran in this process: _execute)
+        "engine": (
+            ("ray" if use_ray else "process_pool" if n_workers > 1 else "in_process")
+            if todo
+            else "cache"
+        ),
         "workers": n_workers,
         "wall_s_this_call": time.perf_counter() - wall0,
         "cell_cpu_s_total": float(sum(c["cpu_s"] for c in cells)),

@@ -492,6 +492,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
             f"{results_path} names domain {domain!r}; expected one of {sorted(_DOMAINS)} "
             "(a results.json written by torchcbl reproduce)"
         )
+    _check_figures_writable(run_dir)
     try:
         written = _experiment_module(domain).plot_results(results, run_dir)
     except FileNotFoundError as exc:
@@ -504,6 +505,22 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     for path in written:
         print(path)
     return 0
+
+
+def _check_figures_writable(run_dir: Path) -> None:
+    """A one-line error, before any figure is drawn, if no file can be made in ``run_dir``
+    (a read-only mount, another user's run; found as :func:`_check_writable` does)."""
+    import tempfile
+
+    try:
+        with tempfile.TemporaryFile(dir=run_dir):
+            pass
+    except OSError as exc:
+        raise _UsageError(
+            f"cannot write the figures into {run_dir} ({exc.strerror or exc}): plot writes "
+            f"them beside its results.json; copy the run directory somewhere you can write "
+            f"(cp -r {_shell(run_dir)} DIR) and plot the copy"
+        ) from None
 
 
 # What the teach command needs per domain: the gymnasium id (registered on importing the
@@ -824,6 +841,8 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             else "local Ray"
             if args.ray
             else f"{args.workers} processes"
+            if args.workers > 1
+            else "in this process"  # run_benchmark runs workers=1 in-process
         )
         + ")",
         flush=True,

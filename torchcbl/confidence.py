@@ -281,11 +281,16 @@ def _labels(actions: Any, n: int, n_actions: int) -> torch.Tensor:
     if isinstance(actions, torch.Tensor):
         actions = actions.detach().cpu().numpy()
     y = np.asarray(actions)
-    if y.dtype.kind not in "iu" or y.shape != (n,):
+    if y.dtype.kind not in "iu":  # a TypeError, as GaussianMixtureSet.fit says it
+        raise TypeError(
+            f"AutoThresholdRule.update: expected actions as integer labels but got dtype "
+            f"{y.dtype}; pass the labels the model was fitted on (convert with .astype(int))"
+        )
+    if y.shape != (n,):
         raise ValueError(
             f"AutoThresholdRule.update: expected actions as integer labels of shape [{n}] "
-            f"(one per observation) but got dtype {y.dtype} and shape {tuple(y.shape)}; pass "
-            "the labels the model was fitted on"
+            f"(one per observation) but got shape {tuple(y.shape)}; pass the labels the model "
+            "was fitted on"
         )
     bad = (y < 0) | (y >= n_actions)
     if bad.any():
@@ -352,7 +357,13 @@ class AutoThresholdRule:
 
     def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
         """Recompute the per-action thresholds from the training set (``observations``
-        [M, D], ``actions`` [M]) classified by the refitted model."""
+        [M, D], ``actions`` [M]) classified by the refitted model.
+
+        Raises:
+            TypeError: ``actions`` are not integers (as :meth:`GaussianMixtureSet.fit`).
+            ValueError: ``actions`` is not one label per observation, or holds a label
+                outside ``[0, n_actions)``.
+        """
         c = model.classify(observations)
         action, distance = c.action.cpu(), c.distance.cpu()  # a CUDA model's answer too
         n_actions = c.posterior.shape[1]

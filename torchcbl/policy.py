@@ -237,8 +237,8 @@ def evaluate_policy(
     Episodes that end are reset until ``n_steps`` steps or ``n_episodes`` finished episodes,
     whichever comes first; no reset follows the last episode. ``seed`` seeds the resets:
 
-    - an int (or None): the first reset gets it, later ones continue the env's RNG;
-    - a sequence of ints: episode ``i`` is reset with ``seed[i]``, so every episode is
+    - an int >= 0 (or None): the first reset gets it, later ones continue the env's RNG;
+    - a sequence of ints >= 0: episode ``i`` is reset with ``seed[i]``, so every episode is
       reproducible on its own (e.g. ``seed=range(100, 110)`` for 10 fixed test episodes).
       ``n_episodes`` then defaults to ``len(seed)`` and may not exceed it.
 
@@ -278,6 +278,12 @@ def evaluate_policy(
         raise ValueError(
             f"evaluate_policy: seed must be None, an int or a list of ints, got {seed!r}"
         )
+    negative = [s for s in (seeds if seeds is not None else [seed]) if s is not None and s < 0]
+    if negative:  # (gymnasium's reset refuses it with a message of its own)
+        where = f"seed={int(seed)}" if seeds is None else f"{negative[0]} in seed={seed!r}"
+        raise ValueError(
+            f"evaluate_policy: seeds must be ints >= 0 (each seeds an env.reset), got {where}"
+        )
     if n_steps is None and n_episodes is None:
         raise ValueError("evaluate_policy: give n_steps and/or n_episodes, or it never ends")
     for name, v in (("n_steps", n_steps), ("n_episodes", n_episodes)):
@@ -285,6 +291,8 @@ def evaluate_policy(
             raise ValueError(f"evaluate_policy: {name} must be an int >= 1, got {v!r}")
     n_steps = None if n_steps is None else int(n_steps)
     n_episodes = None if n_episodes is None else int(n_episodes)
+    if seeds is None and seed is not None:
+        seed = int(seed)  # gymnasium's reset takes a Python int only, not np.int64(3)
     if seeds is not None and n_episodes is not None and n_episodes > len(seeds):
         raise ValueError(
             f"evaluate_policy: n_episodes={n_episodes} but only {len(seeds)} seeds were given; "

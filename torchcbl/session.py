@@ -11,8 +11,10 @@ Run directory layout (one directory per teaching session)::
                                  table ``corrections``, one row per CorrectionRecord (a
                                  label for an earlier step's observation, journalled and
                                  committed exactly like a demonstration)
-        steps.sqlite-wal         SQLite's write-ahead log (present while a writer is open or
-        steps.sqlite-shm         after a crash; never delete it by hand: it may hold commits)
+        steps.sqlite-wal         SQLite's write-ahead log (present while a writer is open,
+        steps.sqlite-shm         after a crash, or when a reader held the log for over 2 s as
+                                 the writer closed; never delete it by hand: it may hold
+                                 commits)
         steps.journal            the steps not yet committed to steps.sqlite, one JSON line
                                  each with its CRC-32 (empty after a clean close; never delete
                                  it by hand)
@@ -432,6 +434,9 @@ def _config_problem(config: dict[str, Any]) -> str | None:
             return f"the key 'env' has no int {key!r}"
     if "max_new" not in config["teaching"]:
         return "the key 'teaching' has no 'max_new'"
+    max_new = config["teaching"]["max_new"]
+    if type(max_new) is not int or max_new < 1:  # every reader refits by it
+        return f"the key 'teaching' has max_new {max_new!r}, not an int >= 1 (the refit period)"
     return None
 
 
@@ -441,7 +446,8 @@ def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
     Raises:
         IncompatibleRunDirError: no config (the message says whether the path does not
             exist, is a file, or is a directory without one), or another log format.
-        CorruptSessionError: unreadable config, or one missing a required key.
+        CorruptSessionError: unreadable config, or one missing a required key (or whose
+            ``teaching.max_new`` is no int >= 1).
     """
     path = Path(run_dir) / CONFIG_NAME
     try:
@@ -613,6 +619,7 @@ def _remove_new_session_files(path: Path) -> None:
         LOG_NAME + "-wal",
         LOG_NAME + "-shm",
         JOURNAL_NAME,
+        WRITERS_NAME,
         f"{CHECKPOINT_DIR}/model-{0:08d}.pt",  # the starting model (create found no checkpoint)
     ):
         try:
@@ -626,6 +633,36 @@ def _remove_new_session_files(path: Path) -> None:
 
 
 _FREE_SPACE = "Free space (or fix the file's permissions), then call run() again or resume."
+
+#: How long a closing writer waits for readers to let go of the log (seconds), see _close_wal.
+_WAL_CLOSE_WAIT_S = 2.0
+
+
+def _close_wal(log: Path) -> None:
+    """After the writer's connection closed: fold the ``-wal`` into the log and remove it
+    with the ``-shm``, as SQLite does when the last connection closes.
+
+    SQLite does so only when it can lock the log alone; a reader (``mode=ro``) reading at that
+    moment keeps both files, and a read-only connection never removes them, so a cleanly
+    closed session looked like one whose writer runs or was killed (readers then need the
+    ``-shm`` and so write access). The writer, still holding its lock, opens the log again
+    until it is alone, for at most :data:`_WAL_CLOSE_WAIT_S` (a reader holds it for one read);
+    past that the files stay, which is harmless (readers use ``mode=ro``) and the next writer
+    removes them."""
+    wal = log.with_name(LOG_NAME + "-wal")
+    deadline = time.monotonic() + _WAL_CLOSE_WAIT_S
+    while wal.exists() and log.exists():  # (never a new, empty log in its place)
+        try:
+            db = sqlite3.connect(log, isolation_level=None)
+            try:
+                db.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchone()
+            finally:
+                db.close()  # the last connection: folds and removes -wal and -shm
+        except sqlite3.Error:
+            return  # e.g. a full disk: the next writer does it
+        if not wal.exists() or time.monotonic() > deadline:
+            return
+        time.sleep(0.005)
 
 
 def _acquire_lock(run_dir: Path) -> Any:
@@ -764,6 +801,7 @@ class SessionStore:
         if self._db is not None:
             self._db.close()
             self._db = None
+            _close_wal(self.run_dir / LOG_NAME)
         if self._journal >= 0:
             os.close(self._journal)
             self._journal = -1
@@ -808,14 +846,19 @@ class SessionStore:
                     f"{path} already holds a teaching session. Continue it with "
                     "ConfidentTeacher.resume(run_dir, env, teacher) or choose a new run_dir."
                 )
-            journal = path / JOURNAL_NAME
-            leftovers = [journal.name] if journal.exists() and journal.stat().st_size else []
+            # a journal's steps, a writers.jsonl's writers (whose step numbers and thread
+            # counts would read as this session's) and checkpoints belong to another session
+            leftovers = [
+                name
+                for name in (JOURNAL_NAME, WRITERS_NAME)
+                if (path / name).exists() and (path / name).stat().st_size
+            ]
             ckpts = path / CHECKPOINT_DIR
             if ckpts.is_dir():
                 leftovers += sorted(
                     f"{CHECKPOINT_DIR}/{e.name}" for e in ckpts.iterdir() if _CKPT_RE.match(e.name)
                 )
-            if leftovers:  # a new session would take another session's steps or models
+            if leftovers:  # a new session would take another session's steps, writers, models
                 raise IncompatibleRunDirError(
                     f"{path} holds what another session left ({', '.join(leftovers[:3])}"
                     f"{', ...' if len(leftovers) > 3 else ''}) but no session; choose a new "
@@ -845,6 +888,18 @@ class SessionStore:
             lock.close()
             raise
         return store
+
+    def discard_new(self) -> None:
+        """Undo :meth:`create` for a session that failed before its first step (nothing is
+        recorded): close it and remove its files while still holding the lock, so that the
+        directory holds no session and creating it again starts afresh."""
+        lock, self._lock = self._lock, None
+        try:
+            self._release()
+            _remove_new_session_files(self.run_dir)
+        finally:
+            if lock is not None:
+                lock.close()
 
     @classmethod
     def open_for_resume(
@@ -1435,7 +1490,17 @@ def latest_checkpoint(
 
     Raises:
         IncompatibleRunDirError: ``run_dir`` is not a session directory (no ``config.json``).
+        ValueError: ``at_most`` is not None or an int >= 0.
     """
+    if at_most is not None and (
+        isinstance(at_most, (bool, np.bool_))
+        or not isinstance(at_most, (int, np.integer))
+        or at_most < 0
+    ):
+        raise ValueError(
+            f"latest_checkpoint: at_most must be None (the newest checkpoint) or an int >= 0 "
+            f"(a count of labels), got {at_most!r}"
+        )
     if not (Path(run_dir) / CONFIG_NAME).is_file():
         load_config(run_dir)  # raises, saying what the path is
     directory = Path(run_dir) / CHECKPOINT_DIR
@@ -1737,8 +1802,9 @@ def resume_problems(
     ``model_args`` / ``strategy`` None means "rebuilt from the directory"; of a strategy
     config with ``"custom": true`` (no ``to_config``) only the class name and relabel flag are
     compared; ``env_kwargs``: what ``gymnasium.make`` was given for the env (plain values are
-    compared, ``render_mode`` aside), with its ``max_episode_steps`` (the spec's; sessions
-    written before 2026-11-26 do not keep it)."""
+    compared, ``render_mode`` aside), with its ``max_episode_steps`` (the cap in force: the
+    smallest TimeLimit's or the env's own; sessions written before 2026-11-26 do not keep it,
+    and those written before 2026-11-27 kept None for an env with a cap of its own only)."""
     problems: list[str] = []
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):

@@ -55,6 +55,7 @@ import torch
 
 from torchcbl.confidence import _np, rule_to_config
 from torchcbl.errors import (
+    CorruptSessionError,
     EnvError,
     IncompatibleRunDirError,
     SessionWriteError,
@@ -327,14 +328,20 @@ def _env_kwargs(env: gym.Env) -> dict[str, Any]:
 
 def _episode_cap(env: gym.Env) -> int | None:
     """The step cap in force on ``env``: the smallest of its ``TimeLimit`` wrappers' (an outer
-    ``TimeLimit(gymnasium.make(id), n)`` reports ``n`` in its spec whatever the inner cap), else
-    its spec's ``max_episode_steps`` (None: no cap)."""
+    ``TimeLimit(gymnasium.make(id), n)`` reports ``n`` in its spec whatever the inner cap) and
+    of the env's own, an int ``max_episode_steps`` attribute of the unwrapped env (e.g.
+    ``CorridorEnv``'s, resolved from its map when not given: a version whose default differs
+    then gives another cap); without a wrapper, its spec's ``max_episode_steps`` (None: no
+    cap)."""
     caps = []
     layer: Any = env
     while isinstance(layer, gym.Wrapper):
         if isinstance(layer, gym.wrappers.TimeLimit):
             caps.append(int(layer._max_episode_steps))
         layer = layer.env
+    own = getattr(getattr(env, "unwrapped", layer), "max_episode_steps", None)
+    if _is_int(own) and own >= 1:
+        caps.append(int(own))
     if caps:
         return min(caps)
     return getattr(getattr(env, "spec", None), "max_episode_steps", None)
@@ -438,8 +445,17 @@ class ConfidentTeacher:
             self._store.commit_every = commit_every
             try:
                 self._store.note_writer(0, _model_device(self.model))
-            except BaseException:
-                self.close()
+            except BaseException as exc:
+                # nothing is recorded yet: no half session (the directory is left without one,
+                # checkpoint 0 of a fitted starting model included)
+                store, self._store = self._store, None
+                store.discard_new()
+                if isinstance(exc, SessionWriteError):
+                    exc.add_note(
+                        f"torchcbl: nothing was recorded, and {self.run_dir} was left without "
+                        "a session; free space (or fix the permissions) and create the teacher "
+                        "again."
+                    )
                 raise
         self._next_reset_seed: int | None = self.seed
 
@@ -534,7 +550,7 @@ class ConfidentTeacher:
         kwargs = _env_kwargs(self.env)
         if kwargs:
             described["kwargs"] = kwargs
-        if spec is not None:  # gymnasium.make's TimeLimit (None: none), compared on resume
+        if spec is not None:  # the cap in force (TimeLimit or the env's own), compared on resume
             described["max_episode_steps"] = _episode_cap(self.env)
         return described
 
@@ -582,8 +598,15 @@ class ConfidentTeacher:
         n_features, n_actions = check_env(env)
         try:
             stored_config = TeachingConfig(**stored["teaching"])
-        except TypeError as exc:
+        except TypeError as exc:  # a field this version does not know (a newer torchcbl's)
             raise IncompatibleRunDirError(f"{run_dir}: unreadable TeachingConfig: {exc}") from exc
+        except ValueError as exc:  # a value no TeachingConfig takes: edited or damaged
+            raise CorruptSessionError(
+                f"{Path(run_dir) / 'config.json'}: its 'teaching' entry is no valid "
+                f"TeachingConfig ({exc}). The file was edited or damaged; restore it from a "
+                "backup or a copy of the run directory, or put the value the session was "
+                "started with back. Nothing was changed."
+            ) from exc
         config = stored_config if config is None else config
         model_args = None
         if model is not None:
