@@ -867,11 +867,13 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     # eval_perturbation than the default); a results.json from before threshold_reading was
     # stored was taught with the literal reading
     fields = {"threshold_reading": "literal", **{k: cfg[k] for k in _FIGURE_FIELDS if k in cfg}}
-    # and the baseline's episode length, which the config checks against the map's circuit (a
-    # map whose circuit takes more than 81 actions was run with a longer one)
-    episode_steps = (cfg.get("ps") or {}).get("episode_steps")
-    if episode_steps is not None:
-        fields["ps"] = {"episode_steps": episode_steps}
+    # and what of the baseline the config checks against the map and the robot: its episode
+    # length (a map whose circuit takes more than 81 actions was run with a longer one) and its
+    # wall threshold (a robot whose sensors reach 0.6 m or less was run with a lower one)
+    ps = cfg.get("ps") or {}
+    kept = {k: ps[k] for k in ("episode_steps", "wall_threshold") if ps.get(k) is not None}
+    if kept:
+        fields["ps"] = kept
     config = CorridorExperimentConfig.from_dict(fields)
     seed = config.seeds[0]
     session = run_dir / "sessions" / f"seed{seed}"

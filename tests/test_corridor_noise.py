@@ -771,3 +771,25 @@ def test_plot_results_redraws_a_run_on_a_map_whose_circuit_is_longer_than_81_act
     results = json.loads((tmp_path / "run" / "results.json").read_text())
     assert tmp_path / "run" / "map.png" in plot_results(results, tmp_path / "run")
     assert (tmp_path / "run" / "map.png").stat().st_size > 1000
+
+
+def test_plot_results_redraws_a_run_whose_sensors_reach_less_than_the_default_threshold(tmp_path):
+    """A robot whose sensors reach 0.5 m runs the baseline with a wall threshold below it
+    (the config refuses the default 0.6 m there): plot_results rebuilt the run's config without
+    the run's threshold and so refused the run it was redrawing ("ps.wall_threshold (0.6 m)
+    must be less than ... world.max_range (0.5 m)"). It now keeps the run's threshold."""
+    import json
+
+    from corridor.baseline import PrioritizedSweepingConfig
+    from corridor.experiment import plot_results, run_experiment
+
+    cfg = _tiny_experiment(
+        world=WorldConfig(max_range=0.5),
+        ps=PrioritizedSweepingConfig(max_steps=50, wall_threshold=0.4),
+        eval_circuits=1,
+    )
+    run_experiment(cfg, tmp_path, workers=1, progress=False)
+    (tmp_path / "figure3.png").unlink()
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert tmp_path / "figure3.png" in plot_results(results, tmp_path)
+    assert (tmp_path / "figure3.png").stat().st_size > 1000
