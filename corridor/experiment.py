@@ -49,6 +49,7 @@ Replay a seed with the config and seed stored in results.json: everything is see
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 import multiprocessing as mp
@@ -920,6 +921,11 @@ def evaluate_saved_policy(
     map and ``WorldConfig()`` (exact motion, the default of ``torchcbl/Corridor-v0``). Returns
     the map and robot (``WorldConfig``'s fields) driven, the steps, circuits completed,
     circuits without wall contact, and wall contacts.
+
+    Raises:
+        ValueError: among others, the session's own map file (``torchcbl teach corridor --map
+            PATH``, which keeps the SHA-256 of its bytes) changed since the session started
+            (unless ``map_name`` is given).
     """
     from torchcbl import evaluate_policy, load_policy
 
@@ -959,7 +965,8 @@ def _taught_with(
 
 
 def _session_map(session_dir: Path) -> str:
-    """The map a session was taught on (see :func:`evaluate_saved_policy`)."""
+    """The map a session was taught on (see :func:`evaluate_saved_policy`); a ValueError if
+    it is a map file that changed since (:func:`_check_session_map`)."""
     source, value = _taught_with(session_dir, "map_name", "corridor_map", str)
     if source == "default":
         return DEFAULT_MAP
@@ -968,7 +975,46 @@ def _session_map(session_dir: Path) -> str:
             f"{session_dir} was taught on a map given as an object ({value}), which its config "
             "does not keep; pass map_name= (a shipped map name or a map JSON path)"
         )
+    if source == "kwargs":
+        _check_session_map(session_dir, str(value))
     return str(value)
+
+
+#: The key of a session config's ``env`` entry that holds the SHA-256 of the bytes of the map
+#: file it was taught on (``torchcbl teach corridor --map PATH`` writes it when it starts the
+#: session; sessions started before 2026-11-27, or on a shipped map, have none).
+_MAP_DIGEST_KEY = "corridor_map_sha256"
+
+
+def _map_digest(path: str | Path) -> str:
+    """The SHA-256 (hex) of a map file's bytes."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def _check_session_map(session_dir: Path, map_path: str) -> None:
+    """A ValueError if the map file a session was taught on (its config's ``corridor_map``)
+    is no longer the file it was: its SHA-256 differs from the one the session kept. A session
+    that kept none (started before its map's digest was kept, or on a shipped map) passes."""
+    from torchcbl.session import load_config
+
+    kept = (load_config(session_dir).get("env") or {}).get(_MAP_DIGEST_KEY)
+    if not isinstance(kept, str):
+        return
+    try:
+        now = _map_digest(map_path)
+    except OSError as exc:
+        raise ValueError(
+            f"{session_dir} was taught on the map file {map_path}, which cannot be read "
+            f"({exc.strerror or exc}); put that file back there (a session keeps its map: "
+            "evaluate and teach --resume drive the map it was taught on)"
+        ) from None
+    if now != kept:
+        raise ValueError(
+            f"{session_dir} was taught on the map file {map_path}, which has changed since (its "
+            f"SHA-256 is {now[:12]}..., the session's {kept[:12]}...); put the file back as it "
+            "was (a session keeps its map: evaluate and teach --resume drive the map it was "
+            "taught on), or teach a new session on the changed map (teach corridor --map)"
+        )
 
 
 def _session_world(session_dir: Path) -> WorldConfig:

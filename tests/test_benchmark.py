@@ -750,3 +750,37 @@ def test_a_cell_error_comes_back_from_a_process_of_ones_own(tmp_path, monkeypatc
     assert isinstance(exc, bm.CellError), repr(exc)
     assert "(env 'toy', strategy 'bc', seed 1) failed: TeacherError" in str(exc)
     assert exc.config["seed"] == 1 and exc.key == bm.cell_key(exc.config)
+
+
+def test_plot_curves_leaves_the_callers_matplotlib_backend_and_figures_alone(tmp_path):
+    """plot_curves called matplotlib.use("Agg"): in a notebook, inline figures stopped showing
+    after it (the backend stayed switched). It draws on a bare Figure now, so the caller's
+    backend, open figures and rcParams are as they were, and the PNG is still written."""
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    cells = [
+        {
+            "env": "e",
+            "strategy": strat,
+            "teacher_performance": 1.0,
+            "curve": [
+                {"labels": n, "performance": p + 0.01 * seed} for n, p in ((5, 0.2), (10, 0.9))
+            ],
+        }
+        for strat in ("cbl", "bc")
+        for seed in range(2)
+    ]
+    old = matplotlib.get_backend()
+    plt.switch_backend("svg")  # stands for the caller's own (inline, interactive) backend
+    try:
+        mine = plt.figure()
+        rc = {k: str(v) for k, v in matplotlib.rcParams.items()}
+        out = bm.plot_curves(cells, tmp_path / "curves.png", envs=["e"])
+        assert matplotlib.get_backend() == "svg"
+        assert plt.get_fignums() == [mine.number] and plt.gcf() is mine
+        assert {k: str(v) for k, v in matplotlib.rcParams.items()} == rc
+        assert out.read_bytes().startswith(b"\x89PNG")
+    finally:
+        plt.close("all")
+        plt.switch_backend(old)

@@ -1002,6 +1002,50 @@ def test_a_session_whose_own_map_file_moved_says_to_put_it_back(tmp_path, monkey
     assert len(load_records(run)) == 6
 
 
+def test_a_session_whose_own_map_file_changed_refuses_it(tmp_path, monkeypatch, capsys):
+    """teach corridor --map PATH kept only the file's path: once the file was edited, evaluate
+    and teach --resume drove the edited map without a word, though the session "keeps it". The
+    session keeps the file's SHA-256 now; a changed file is one line (exit code 2) at the
+    command line and a ValueError in Python, naming the file; the file put back as it was goes
+    on. A session that kept no digest (started before) drives the file as it is, as before."""
+    import corridor
+    from corridor.experiment import evaluate_saved_policy
+
+    _scripted_corridor_person(monkeypatch)
+    mine = tmp_path / "mine.json"
+    original = Path(corridor.__file__).with_name("maps").joinpath("lshape.json").read_text()
+    mine.write_text(original)
+    run = tmp_path / "session"
+    assert (
+        main(["teach", "corridor", "--run-dir", str(run), "--map", str(mine), "--steps", "3"]) == 0
+    )
+    edited = json.loads(original)
+    edited["name"] = "edited"
+    mine.write_text(json.dumps(edited))
+    capsys.readouterr()
+    for argv in (
+        ["evaluate", str(run), "--steps", "3"],
+        ["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"taught on the map file {mine}, which has changed" in err
+        assert "put the file back as it was" in err, err
+    with pytest.raises(ValueError, match="which has changed since"):
+        evaluate_saved_policy(run, n_steps=3)
+    assert len(load_records(run)) == 3  # nothing recorded on the changed map
+    mine.write_text(original)
+    assert main(["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"]) == 0
+    assert len(load_records(run)) == 6
+    assert evaluate_saved_policy(run, n_steps=3)["map"] == str(mine)
+    # a session started before the digest was kept: the file as it is
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["corridor_map_sha256"]
+    (run / "config.json").write_text(json.dumps(config))
+    mine.write_text(json.dumps(edited))
+    assert main(["evaluate", str(run), "--steps", "3"]) == 0
+
+
 def test_teach_resume_of_a_damaged_session_is_a_one_line_mistake(tmp_path, monkeypatch, capsys):
     """teach --resume of a session with a damaged log is told as evaluate tells it: one line,
     exit code 2, and the session's files untouched. (It was exit code 1, with the error's

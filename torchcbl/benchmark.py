@@ -1010,13 +1010,17 @@ def plot_curves(
     cells: Sequence[Mapping[str, Any]], path: str | os.PathLike[str], *, envs: Sequence[str]
 ) -> Path:
     """Performance vs labels: one panel per env, a line per strategy (mean over seeds, each
-    seed's curve held constant after its last point) with a +-1 sd band."""
-    import matplotlib
+    seed's curve held constant after its last point) with a +-1 sd band.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Drawn on a bare :class:`matplotlib.figure.Figure` with an Agg canvas, never through pyplot:
+    the caller's backend (a notebook's inline plots) and open figures are left as they were.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    fig, axes = plt.subplots(1, len(envs), figsize=(5.5 * len(envs), 4), squeeze=False)
+    fig = Figure(figsize=(5.5 * len(envs), 4))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(envs), squeeze=False)
     for ax, env in zip(axes[0], envs, strict=True):
         mine = [c for c in cells if c["env"] == env]
         strategies = list(dict.fromkeys(c["strategy"] for c in mine))
@@ -1046,5 +1050,4 @@ def plot_curves(
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out, dpi=110)
-    plt.close(fig)
     return out
