@@ -593,6 +593,16 @@ def test_an_observation_space_that_is_no_1d_float_box_is_refused_with_the_wrappe
     assert ct.n_steps == 12 and ct.n_episodes == 2
 
 
+def test_the_cast_advice_names_the_wrapper_of_an_older_gymnasium(monkeypatch):
+    """gymnasium before 1.0 (pyproject allows 0.29) has no wrappers.DtypeObservation, only the
+    experimental DtypeObservationV0: the refusal names the one the installed gymnasium has."""
+    monkeypatch.delattr(gym.wrappers, "DtypeObservation")
+    env = _Observing(gym.spaces.Box(0, 4, (2,), np.int64))
+    want = "env = gymnasium.experimental.wrappers.DtypeObservationV0(env, np.float64)."
+    with pytest.raises(ValueError, match=re.escape(want)):
+        ConfidentTeacher(env, lambda obs, i: 0, progress=False)
+
+
 def test_commit_every_is_checked(tmp_path):
     env = rare_regions_world()
     for bad in (0, "32", 2.0, True):

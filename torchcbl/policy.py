@@ -106,7 +106,12 @@ def check_env(env: gym.Env) -> tuple[int, int]:
 def _obs_space_hint(space: Any) -> str:
     """How to wrap an env whose observation space is not a 1-D float Box into one."""
     flat = "gymnasium.wrappers.FlattenObservation(env)"
-    cast = "gymnasium.wrappers.DtypeObservation(env, np.float64)"
+    # the cast wrapper of the gymnasium installed: DtypeObservation from 1.0 on, the
+    # experimental DtypeObservationV0 before (pyproject allows gymnasium >= 0.29)
+    if hasattr(gym.wrappers, "DtypeObservation"):
+        cast = "gymnasium.wrappers.DtypeObservation(env, np.float64)"
+    else:
+        cast = "gymnasium.experimental.wrappers.DtypeObservationV0(env, np.float64)"
     try:
         flat_space = gym.spaces.flatten_space(space)
     except Exception:  # noqa: BLE001 - a space gymnasium cannot flatten (or no space at all)
