@@ -1543,3 +1543,28 @@ def test_a_session_still_on_its_starting_model_refuses_to_resume_without_it(tmp_
         resume(run)
     with pytest.raises(CorruptSessionError, match="no refit came since"):
         S.load_policy(run)
+
+
+def test_a_later_checkpoint_this_model_cannot_load_replays_from_the_starting_model(tmp_path):
+    """A session started from a fitted model, refit="incremental": its newest checkpoint has
+    the right labels but a state this model cannot load (written by another model class).
+    The refits were replayed from a fit from scratch, a model unlike the live one; they are
+    now replayed from checkpoint 0, the starting model, as the live loop made them."""
+    env, fitted = _fitted_start()
+    run = tmp_path / "run"
+    config = TeachingConfig(max_new=4, refit="incremental", noninteractive=False)
+    ct = ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    )
+    ct.run(max_steps=40)
+    assert ct.n_demonstrations >= 8  # two refits at least: a checkpoint after checkpoint 0
+    ct.close()
+    newest = max((run / "checkpoints").glob("model-*.pt"))
+    assert newest.name != "model-00000000.pt"
+    payload = torch.load(newest, weights_only=True)
+    payload["state_dict"] = {"not_this_model": torch.zeros(1)}
+    torch.save(payload, newest)
+    assert same_state(load_model(run), ct.model)
+    back, _ = resume(run)
+    assert same_state(back.model, ct.model)
+    back.close()

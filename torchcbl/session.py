@@ -1698,6 +1698,17 @@ def restore_model(
                 if starts_fitted and last == 0:
                     raise lost_start("unreadable as this model's state") from None
                 start = 0
+        if starts_fitted and not loaded:
+            # a later checkpoint this model could not load: the incremental refits are
+            # replayed from the starting model (checkpoint 0), not from a fit from scratch
+            zero, why = _checkpoint_payload(directory / f"model-{0:08d}.pt", 0, xs, ys)
+            if zero is None:
+                raise lost_start(why)
+            try:
+                model.load_state_dict(zero["state_dict"])
+            except Exception:
+                raise lost_start("unreadable as this model's state") from None
+            start, loaded = 0, True
         counts = list(range(start + max_new, k + 1, max_new))
         if not counts or counts[-1] != k:  # a hand refit off the schedule
             counts.append(k)
