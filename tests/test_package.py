@@ -59,6 +59,9 @@ def test_pyproject_builds_without_a_setuptools_deprecation_warning(monkeypatch):
     ]
     assert deprecations == []
     assert dist.metadata.name == "torchcbl"
+    # the MIT license's text ships with the package (the license requires its notice)
+    assert dist.metadata.license_files == ["LICENSE"]
+    assert "MIT License" in (ROOT / "LICENSE").read_text()
 
 
 def test_a_test_run_ends_without_a_tool_advertisement():
