@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from sumo_scenarios import metrics
-from torchcbl.evaluation import mean_sd, progress_bar, run_versions
+from torchcbl.evaluation import check_workers_start, mean_sd, progress_bar, run_versions
 
 if TYPE_CHECKING:
     from sumo_scenarios.sim import SimConfig
@@ -601,7 +601,8 @@ def run_experiment(
 
     Raises FileExistsError if ``run_dir`` already holds a results.json, or a seed directory
     (``seed_<k>``) of one of ``config.seeds`` (left by a run that was stopped before it wrote
-    results.json): its sessions would collide with the new run's.
+    results.json): its sessions would collide with the new run's. Raises RuntimeError, before
+    anything is written, if a spawned process cannot start (a script without that guard).
     """
     _check_whole("workers", workers, 1)
     run_dir = Path(run_dir)
@@ -618,11 +619,13 @@ def run_experiment(
             f"({', '.join(taken)}), left by an earlier run that did not finish (it has no "
             "results.json); choose a new run_dir, or delete this one to run again"
         )
+    ctx = mp.get_context("spawn")
+    # a worker that fails at start-up is replaced by the pool for ever: the run would hang
+    check_workers_start(ctx)
     run_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     jobs = [(config, s, str(run_dir / f"seed_{s}")) for s in config.seeds]
     per_seed = []
-    ctx = mp.get_context("spawn")
     bar = progress_bar(total=len(jobs), desc="driving seeds", unit="seed", show=progress)
     with ctx.Pool(
         min(workers, len(jobs)), initializer=_worker_ignores_ctrl_c, maxtasksperchild=1

@@ -414,3 +414,23 @@ def test_a_learner_that_stops_asking_ends_the_run_with_an_error_not_a_hang(tmp_p
         RuntimeError, match=r"max_confident_steps \(40\) steps and collected 0 of 20"
     ):
         run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
+
+
+def test_a_script_without_the_main_guard_fails_with_an_error_that_names_it(tmp_path):
+    """A script that calls run_experiment at its top level: every spawned worker re-ran the
+    script, failed at start-up (exit code 1), and the multiprocessing.Pool replaced it for
+    ever: the run hung, printing a traceback per worker. It now stops with one error that
+    names the script and the guard, before anything is written."""
+    from _unguarded import run_unguarded
+
+    code, err = run_unguarded(
+        tmp_path,
+        "from _driving_tiny import tiny_config\n"
+        "from sumo_scenarios.experiment import run_experiment\n"
+        "run_experiment(tiny_config(), 'run', workers=1, progress=False)\n",
+    )
+    last = err.strip().splitlines()[-1]
+    assert code == 1 and last.startswith("RuntimeError: worker processes cannot start: "), err
+    assert str(tmp_path / "unguarded.py") in last and "exited with code 1" in last
+    assert 'under `if __name__ == "__main__":`' in last
+    assert not (tmp_path / "run").exists()
