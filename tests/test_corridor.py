@@ -1144,3 +1144,24 @@ def test_the_keyboard_teacher_checks_its_full_bar_distance_when_it_is_made(bad):
     with pytest.raises(ValueError, match=r"max_range: expected metres > 0 \(the sensors' range\)"):
         make_teacher(max_range=bad)
     assert make_teacher(max_range=np.float32(2.0)) is not None
+
+
+def test_an_experiment_script_without_the_main_guard_fails_with_an_error_that_names_it(
+    tmp_path,
+):
+    """run_experiment with workers at a script's top level: each spawned worker re-ran the
+    script and exited at start-up, and the run ended in a bare BrokenProcessPool ("A process
+    in the process pool was terminated abruptly"). It now names the script and the guard."""
+    from _unguarded import run_unguarded
+
+    code, err = run_unguarded(
+        tmp_path,
+        "from corridor.experiment import CorridorExperimentConfig, run_experiment\n"
+        "run_experiment(CorridorExperimentConfig(seeds=(0, 1)), 'run', workers=2,\n"
+        "               progress=False)\n",
+    )
+    last = err.strip().splitlines()[-1]
+    assert code == 1 and last.startswith("RuntimeError: worker processes cannot start: "), err
+    assert str(tmp_path / "unguarded.py") in last and "exited with code 1" in last
+    assert 'under `if __name__ == "__main__":`' in last
+    assert not list((tmp_path / "run").glob("sessions/*"))

@@ -130,7 +130,13 @@ def worker_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecut
     read, and a second Ctrl-C during that wait left the interpreter hanging at exit. Here an
     exception (KeyboardInterrupt included) cancels the queued tasks, terminates the workers
     and is re-raised; a block that ends normally waits for its tasks as usual.
+
+    First :func:`check_workers_start` starts one process of ``context``: a worker that fails
+    at start-up (a script without ``if __name__ == "__main__":``) raises its RuntimeError,
+    which names the guard, instead of breaking the pool (a BrokenProcessPool that reads like
+    a worker killed mid-task).
     """
+    check_workers_start(context)
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_worker_start)
     try:
         yield pool
