@@ -83,9 +83,9 @@ def check_workers_start(context: Any = None) -> None:
 
     A spawned process first re-imports the program's main module; a script that starts a run
     at its top level, outside ``if __name__ == "__main__":``, makes every worker start that
-    run again there, and fail at start-up (exit code 1). A ``multiprocessing.Pool`` replaced
-    such workers for ever (the run hung, printing their tracebacks), and a process pool
-    executor reported a worker that died abruptly.
+    run again there, and fail at start-up (exit code 1). A ``multiprocessing.Pool`` replaces
+    such workers for ever (the run hangs, printing their tracebacks), and a process pool
+    executor reports a worker that died abruptly.
 
     Raises:
         RuntimeError: the process exited with a nonzero code or was killed; the message
