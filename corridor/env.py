@@ -34,7 +34,10 @@ perturbation (when ``start_perturbation`` is set), all drawn from ``self.np_rand
 
 Perturbed starts (``start_perturbation=(d, a)``): each ``reset`` moves the start pose by offsets
 drawn uniformly in [-d, d] metres along x and y and [-a, a] radians of heading (redrawn until the
-robot does not overlap a wall), to test a policy off the demonstrated route.
+robot does not overlap a wall), to test a policy off the demonstrated route. ``a`` is less than
+pi/4 (45 degrees): the first action turns the robot back to the start heading's axis (see
+:meth:`CorridorWorld.reset`), so a larger offset, nearer another axis, would mislead whoever
+steers by the axis the robot faces.
 
 Envs never write files; rendering returns RGB arrays (see :mod:`corridor.render` to save PNGs).
 """
@@ -83,8 +86,9 @@ class CorridorEnv(gym.Env):
         max_episode_steps: actions before truncation; None = 81, or two circuits of a map
             whose circuit takes more than 40 actions (see the module docstring).
         render_mode: None or "rgb_array".
-        start_perturbation: ``(metres, radians)`` half-widths of the uniform start offsets, or
-            None for the map's exact start pose.
+        start_perturbation: ``(metres, radians)`` half-widths of the uniform start offsets
+            (metres less than half the corridor's width less the robot's radius, radians less
+            than pi/4), or None for the map's exact start pose.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -141,10 +145,18 @@ class CorridorEnv(gym.Env):
                 )
             )
             d, a = (float(v) for v in start_perturbation) if pair else (math.nan, math.nan)
-            if not (0 <= d < half and 0 <= a <= np.pi / 2):
+            if not (0 <= d < half and 0 <= a < np.pi / 4):
+                why = (
+                    ": a heading offset of 45 degrees or more can face the robot as near "
+                    "another axis as the start heading's, while its first action turns it "
+                    "back to the start heading's axis, so an expert (or policy) that steers "
+                    "by the nearest axis can drive into a wall"
+                    if a >= np.pi / 4
+                    else ""
+                )
                 raise ValueError(
                     f"start_perturbation must be (metres in [0, {half:.2f}), radians in "
-                    f"[0, pi/2]), got {start_perturbation!r}"
+                    f"[0, pi/4)), got {start_perturbation!r}{why}"
                 )
             start_perturbation = (d, a)
         self.start_perturbation = start_perturbation

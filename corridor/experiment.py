@@ -149,7 +149,8 @@ class CorridorExperimentConfig:
             Gaussian's own points).
         eval_circuits: greedy circuits the final policy drives after teaching, from the paper's
             start and again from perturbed starts.
-        eval_perturbation: ``(metres, radians)`` half-widths of the perturbed starts' offsets.
+        eval_perturbation: ``(metres, radians)`` half-widths of the perturbed starts' offsets
+            (radians less than pi/4, see :class:`~corridor.env.CorridorEnv`).
         ps: the Prioritized Sweeping baseline's parameters (on a map whose circuit takes more
             than its ``episode_steps``, 81 by default, pass a larger one; its ``wall_threshold``
             must lie below ``world.max_range``: a config that breaks either is refused).

@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from sumo_scenarios import metrics
-from torchcbl.evaluation import mean_sd, progress_bar, run_versions
+from torchcbl.evaluation import check_workers_start, mean_sd, progress_bar, run_versions
 
 if TYPE_CHECKING:
     from sumo_scenarios.sim import SimConfig
@@ -558,14 +558,79 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     }
 
 
-def _run_seed_job(job: tuple[DrivingExperimentConfig, int, str]) -> dict[str, Any]:
-    return _run_seed(*job)
+def _seed_worker(job: tuple[DrivingExperimentConfig, int, str], conn: Any) -> None:
+    """One seed in a process of its own (libsumo holds one simulation per process): send back
+    ``("ok", result)``, or ``("error", exception)`` with its traceback, through ``conn``."""
+    from multiprocessing.pool import ExceptionWithTraceback
+
+    _worker_ignores_ctrl_c()
+    try:
+        reply: tuple[str, Any] = ("ok", _run_seed(*job))
+    except Exception as exc:  # re-raised in the parent, the worker's traceback as its cause
+        reply = ("error", ExceptionWithTraceback(exc, exc.__traceback__))
+    conn.send(reply)
+    conn.close()
+
+
+def _run_seeds(
+    jobs: list[tuple[DrivingExperimentConfig, int, str]],
+    workers: int,
+    ctx: Any,
+    done: Callable[[dict[str, Any]], None],
+) -> None:
+    """Run each job's seed in a fresh process of ``ctx``, ``workers`` at a time, in the order
+    given, and hand each result to ``done`` as it comes. A seed's exception is re-raised here;
+    a worker that dies without a result (killed by a signal: the out-of-memory killer) stops
+    the run with a RuntimeError naming its seed (a multiprocessing.Pool waited for its result
+    for ever). On any exit by an exception (Ctrl-C included) the other workers are stopped."""
+    from multiprocessing.connection import wait
+
+    waiting = list(jobs)
+    running: dict[Any, tuple[Any, int]] = {}  # result pipe -> (process, seed)
+    try:
+        while waiting or running:
+            while waiting and len(running) < workers:
+                job = waiting.pop(0)
+                reader, writer = ctx.Pipe(duplex=False)
+                proc = ctx.Process(target=_seed_worker, args=(job, writer), daemon=True)
+                proc.start()
+                writer.close()  # the worker's end: its exit makes the pipe readable
+                running[reader] = (proc, job[1])
+            for reader in wait(list(running)):
+                proc, seed = running.pop(reader)
+                try:
+                    kind, value = reader.recv()
+                except EOFError:
+                    proc.join()
+                    code = proc.exitcode
+                    how = (
+                        f"was killed by signal {-code} (the out-of-memory killer sends 9)"
+                        if code is not None and code < 0
+                        else f"exited with code {code}"
+                    )
+                    raise RuntimeError(
+                        f"the worker process of seed {seed} {how} before it sent its result; "
+                        "the run stops without a results.json: run it again into a new "
+                        "run_dir (with fewer workers if memory ran out)"
+                    ) from None
+                finally:
+                    reader.close()
+                proc.join()
+                if kind == "error":
+                    raise value
+                done(value)
+    finally:
+        for proc, _ in running.values():
+            if proc.is_alive():
+                proc.terminate()
+        for proc, _ in running.values():
+            proc.join()
 
 
 def _worker_ignores_ctrl_c() -> None:
-    """A seed worker leaves Ctrl-C to the parent, which stops the pool: a terminal's Ctrl-C
-    reaches every process of the group, and a worker that took it printed its traceback (a
-    multiprocessing.Pool worker does not catch KeyboardInterrupt) under the command's line."""
+    """A seed worker leaves Ctrl-C to the parent, which stops the workers: a terminal's Ctrl-C
+    reaches every process of the group, and a worker that took it printed its traceback
+    under the command's line."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -601,7 +666,10 @@ def run_experiment(
 
     Raises FileExistsError if ``run_dir`` already holds a results.json, or a seed directory
     (``seed_<k>``) of one of ``config.seeds`` (left by a run that was stopped before it wrote
-    results.json): its sessions would collide with the new run's.
+    results.json): its sessions would collide with the new run's. Raises RuntimeError, before
+    anything is written, if a spawned process cannot start (a script without that guard), and
+    if a seed's worker dies (killed by a signal) before it sends its result; a seed's own
+    exception is re-raised, with the worker's traceback as its cause.
     """
     _check_whole("workers", workers, 1)
     run_dir = Path(run_dir)
@@ -618,19 +686,21 @@ def run_experiment(
             f"({', '.join(taken)}), left by an earlier run that did not finish (it has no "
             "results.json); choose a new run_dir, or delete this one to run again"
         )
+    ctx = mp.get_context("spawn")
+    # a worker that fails at start-up: the error names the main guard, before anything runs
+    check_workers_start(ctx)
     run_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     jobs = [(config, s, str(run_dir / f"seed_{s}")) for s in config.seeds]
     per_seed = []
-    ctx = mp.get_context("spawn")
     bar = progress_bar(total=len(jobs), desc="driving seeds", unit="seed", show=progress)
-    with ctx.Pool(
-        min(workers, len(jobs)), initializer=_worker_ignores_ctrl_c, maxtasksperchild=1
-    ) as pool:  # a Ctrl-C (in the parent) leaves the block, which terminates the workers
-        for res in pool.imap_unordered(_run_seed_job, jobs, chunksize=1):
-            per_seed.append(res)
-            bar.update(1)
-            bar.set_postfix_str(f"seed {res['seed']} done")
+
+    def done(res: dict[str, Any]) -> None:
+        per_seed.append(res)
+        bar.update(1)
+        bar.set_postfix_str(f"seed {res['seed']} done")
+
+    _run_seeds(jobs, workers, ctx, done)  # a Ctrl-C (in the parent) stops the workers
     bar.close()
     # in the config's order of seeds, as results["seeds"] lists them (the workers end in any
     # order); the first seed's is the one Figure 7 draws

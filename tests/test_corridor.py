@@ -910,6 +910,29 @@ def test_a_malformed_start_perturbation_is_named(bad):
         CorridorEnv(start_perturbation=bad)
 
 
+def test_a_start_heading_offset_of_45_degrees_or_more_is_refused():
+    """The world turns the robot back to the start heading's axis at its first action, while
+    the expert steers by the axis nearest the heading it reads: from an offset beyond 45
+    degrees the two disagree (at 60 degrees, 12 of 100 expert circuits from perturbed starts
+    touched a wall, exact motion). Such offsets were accepted up to 90 degrees; they are now
+    refused, saying why, while 10 degrees (the experiment's) and up to 45 still run."""
+    from corridor.experiment import CorridorExperimentConfig
+
+    for degrees in (45, 60, 90):
+        with pytest.raises(ValueError, match=r"radians in \[0, pi/4\)\), got .*45 degrees"):
+            CorridorEnv(start_perturbation=(0.1, math.radians(degrees)))
+    with pytest.raises(ValueError, match=r"^eval_perturbation on map 'figure2': .*pi/4"):
+        CorridorExperimentConfig(eval_perturbation=(0.1, math.radians(60)))
+    env = CorridorEnv(start_perturbation=(0.1, math.radians(44)))
+    expert = CorridorExpert(env.corridor_map, env.world.config)
+    for seed in range(10):  # the largest offsets taken: the expert's circuits stay clean
+        obs, info = env.reset(seed=seed)
+        while info["laps"] < 1:  # a circuit ends the episode
+            obs, _, _, truncated, info = env.step(expert(obs, info))
+            assert not info["contact"] and not truncated, seed
+    assert CorridorExperimentConfig().eval_perturbation == (0.1, math.radians(10))
+
+
 @pytest.mark.parametrize(
     "change, message",
     [
@@ -1144,3 +1167,24 @@ def test_the_keyboard_teacher_checks_its_full_bar_distance_when_it_is_made(bad):
     with pytest.raises(ValueError, match=r"max_range: expected metres > 0 \(the sensors' range\)"):
         make_teacher(max_range=bad)
     assert make_teacher(max_range=np.float32(2.0)) is not None
+
+
+def test_an_experiment_script_without_the_main_guard_fails_with_an_error_that_names_it(
+    tmp_path,
+):
+    """run_experiment with workers at a script's top level: each spawned worker re-ran the
+    script and exited at start-up, and the run ended in a bare BrokenProcessPool ("A process
+    in the process pool was terminated abruptly"). It now names the script and the guard."""
+    from _unguarded import run_unguarded
+
+    code, err = run_unguarded(
+        tmp_path,
+        "from corridor.experiment import CorridorExperimentConfig, run_experiment\n"
+        "run_experiment(CorridorExperimentConfig(seeds=(0, 1)), 'run', workers=2,\n"
+        "               progress=False)\n",
+    )
+    last = err.strip().splitlines()[-1]
+    assert code == 1 and last.startswith("RuntimeError: worker processes cannot start: "), err
+    assert str(tmp_path / "unguarded.py") in last and "exited with code 1" in last
+    assert 'under `if __name__ == "__main__":`' in last
+    assert not list((tmp_path / "run").glob("sessions/*"))

@@ -808,6 +808,8 @@ def run_benchmark(
     Raises:
         CellError: a cell raised; it names the cell and has the cell's exception as its
             ``__cause__``. The sweep stops there; the cells finished before it are kept.
+        RuntimeError: a worker process of the local pool could not start (a script without
+            the guard above), or died while it ran a cell.
     """
     if isinstance(seeds, (str, bytes)) or not isinstance(seeds, Iterable):
         raise ValueError(f"run_benchmark: seeds must be a sequence of ints >= 0, got {seeds!r}")

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import contextlib
+import multiprocessing as mp
 import platform
+import sys
 from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
 
-__all__ = ["mean_sd", "progress_bar", "run_versions", "worker_pool"]
+__all__ = ["check_workers_start", "mean_sd", "progress_bar", "run_versions", "worker_pool"]
 
 
 def progress_bar(*, total: int | None, desc: str, unit: str, show: bool) -> Any:
@@ -75,6 +77,49 @@ def _worker_start() -> None:
     tqdm.set_lock(threading.RLock())
 
 
+def check_workers_start(context: Any = None) -> None:
+    """Start one process of the multiprocessing ``context`` (None: the default) that does
+    nothing, and raise if it does not end cleanly, before a run starts its worker processes.
+
+    A spawned process first re-imports the program's main module; a script that starts a run
+    at its top level, outside ``if __name__ == "__main__":``, makes every worker start that
+    run again there, and fail at start-up (exit code 1). A ``multiprocessing.Pool`` replaces
+    such workers for ever (the run hangs, printing their tracebacks), and a process pool
+    executor reports a worker that died abruptly.
+
+    Raises:
+        RuntimeError: the process exited with a nonzero code or was killed; the message
+            names the main module and the guard. (The process's own traceback, if any, is
+            on stderr above it.)
+    """
+    ctx = context if context is not None else mp.get_context()
+    probe = ctx.Process(target=int, name="torchcbl-start-check")  # int(): does nothing
+    probe.start()
+    try:
+        probe.join()
+    finally:
+        if probe.is_alive():  # a Ctrl-C during the join
+            probe.terminate()
+            probe.join()
+    code = probe.exitcode
+    if code == 0:
+        return
+    how = (
+        f"was killed by signal {-code}"
+        if code is not None and code < 0
+        else f"exited with code {code}"
+    )
+    main = getattr(sys.modules.get("__main__"), "__file__", None)
+    raise RuntimeError(
+        f"worker processes cannot start: a new process, which first re-imports this program's "
+        f"main module ({main or 'its __main__'}), {how} before it could run anything (its "
+        "traceback, if any, is above). A script that starts a run with worker processes must "
+        'start it under `if __name__ == "__main__":`, or each worker runs the script\'s '
+        "top-level code again as it starts and fails; put the call under that guard (or fix "
+        "what the traceback shows)"
+    )
+
+
 @contextlib.contextmanager
 def worker_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecutor]:
     """A :class:`~concurrent.futures.ProcessPoolExecutor` of ``workers`` processes (started by
@@ -85,7 +130,13 @@ def worker_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecut
     read, and a second Ctrl-C during that wait left the interpreter hanging at exit. Here an
     exception (KeyboardInterrupt included) cancels the queued tasks, terminates the workers
     and is re-raised; a block that ends normally waits for its tasks as usual.
+
+    First :func:`check_workers_start` starts one process of ``context``: a worker that fails
+    at start-up (a script without ``if __name__ == "__main__":``) raises its RuntimeError,
+    which names the guard, instead of breaking the pool (a BrokenProcessPool that reads like
+    a worker killed mid-task).
     """
+    check_workers_start(context)
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_worker_start)
     try:
         yield pool
