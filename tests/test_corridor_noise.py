@@ -793,3 +793,63 @@ def test_plot_results_redraws_a_run_whose_sensors_reach_less_than_the_default_th
     results = json.loads((tmp_path / "results.json").read_text())
     assert tmp_path / "figure3.png" in plot_results(results, tmp_path)
     assert (tmp_path / "figure3.png").stat().st_size > 1000
+
+
+_KILLS_A_SEED_WORKER = """
+import os, signal, sys, threading, time
+from pathlib import Path
+sys.path[:0] = [{tests!r}, {root!r}]
+from test_corridor_noise import _tiny_experiment
+from corridor.experiment import run_experiment
+
+
+def kill_a_seed_worker():
+    while not Path("run/sessions/seed0/config.json").exists():  # a seed is teaching
+        time.sleep(0.02)
+    me = os.getpid()
+    for pid in open(f"/proc/{{me}}/task/{{me}}/children").read().split():
+        if b"spawn_main" in open(f"/proc/{{pid}}/cmdline", "rb").read():
+            os.kill(int(pid), signal.SIGKILL)  # as the out-of-memory killer does
+            break
+
+
+if __name__ == "__main__":
+    threading.Thread(target=kill_a_seed_worker, daemon=True).start()
+    run_experiment(_tiny_experiment(seeds=(0, 1)), "run", workers=2, progress=False)
+"""
+
+
+def test_a_seed_worker_killed_by_a_signal_is_named_as_such(tmp_path):
+    """A seed's worker killed mid-seed (the out-of-memory killer) broke the process pool, and
+    the run ended with concurrent.futures' bare BrokenProcessPool ("A process in the process
+    pool was terminated abruptly ..."). It now says a worker died, and what to do."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    if not Path(f"/proc/{os.getpid()}/task/{os.getpid()}/children").exists():
+        pytest.skip("needs Linux's /proc/<pid>/task/<tid>/children to find the worker")
+    tests = Path(__file__).resolve().parent
+    script = tmp_path / "killer.py"
+    script.write_text(_KILLS_A_SEED_WORKER.format(tests=str(tests), root=str(tests.parent)))
+    proc = subprocess.Popen(
+        [sys.executable, str(script)],
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        _, err = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        _, err = proc.communicate()
+        raise AssertionError(f"the run still waited after 120 s; stderr:\n{err[-2000:]}") from None
+    last = err.strip().splitlines()[-1]
+    assert proc.returncode == 1, err
+    assert last.startswith("RuntimeError: a worker process died abruptly"), err[-2000:]
+    assert not (tmp_path / "run" / "results.json").exists()
