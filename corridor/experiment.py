@@ -884,6 +884,12 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     kept = {k: ps[k] for k in ("episode_steps", "wall_threshold") if ps.get(k) is not None}
     if kept:
         fields["ps"] = kept
+    # the figures do not read eval_perturbation: it is kept for the config's checks against the
+    # robot, and its heading offset capped below the pi/4 refused since 2026-11-27, so that a
+    # run made before with a wider offset still redraws
+    pert = fields.get("eval_perturbation")
+    if isinstance(pert, (list, tuple)) and len(pert) == 2 and isinstance(pert[1], (int, float)):
+        fields["eval_perturbation"] = [pert[0], min(pert[1], math.nextafter(math.pi / 4, 0.0))]
     config = CorridorExperimentConfig.from_dict(fields)
     seed = config.seeds[0]
     session = run_dir / "sessions" / f"seed{seed}"

@@ -853,3 +853,20 @@ def test_a_seed_worker_killed_by_a_signal_is_named_as_such(tmp_path):
     assert proc.returncode == 1, err
     assert last.startswith("RuntimeError: a worker process died abruptly"), err[-2000:]
     assert not (tmp_path / "run" / "results.json").exists()
+
+
+def test_plot_results_redraws_a_run_made_with_a_heading_offset_now_refused(tmp_path):
+    """Start-heading offsets of pi/4 or more are refused since 2026-11-27 (the expert steers
+    by the wrong axis there), but a run made before with one must still redraw: the figures
+    do not read eval_perturbation, and plot_results refused it ("results.json lacks what the
+    corridor figures need")."""
+    import json
+    import math
+
+    from corridor.experiment import plot_results, run_experiment
+
+    run_experiment(_tiny_experiment(eval_circuits=1), tmp_path, workers=1, progress=False)
+    results = json.loads((tmp_path / "results.json").read_text())
+    results["config"]["eval_perturbation"] = [0.1, math.radians(60)]
+    (tmp_path / "figure3.png").unlink()
+    assert tmp_path / "figure3.png" in plot_results(results, tmp_path)
