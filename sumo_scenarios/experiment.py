@@ -561,14 +561,30 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
 def _seed_worker(job: tuple[DrivingExperimentConfig, int, str], conn: Any) -> None:
     """One seed in a process of its own (libsumo holds one simulation per process): send back
     ``("ok", result)``, or ``("error", exception)`` with its traceback, through ``conn``."""
+    import traceback
     from multiprocessing.pool import ExceptionWithTraceback
 
     _worker_ignores_ctrl_c()
+    error: Exception | None = None
     try:
         reply: tuple[str, Any] = ("ok", _run_seed(*job))
     except Exception as exc:  # re-raised in the parent, the worker's traceback as its cause
+        error = exc
         reply = ("error", ExceptionWithTraceback(exc, exc.__traceback__))
-    conn.send(reply)
+    try:
+        conn.send(reply)  # pickled whole before anything is written
+    except Exception as exc:  # what cannot be pickled goes back as text
+        what = "".join(traceback.format_exception(error if error is not None else exc))
+        conn.send(
+            (
+                "error",
+                RuntimeError(
+                    f"seed {job[1]}'s worker could not send back its "
+                    f"{'exception' if error is not None else 'result'}, which cannot be "
+                    f"pickled ({exc}):\n{what}"
+                ),
+            )
+        )
     conn.close()
 
 
@@ -600,7 +616,7 @@ def _run_seeds(
                 proc, seed = running.pop(reader)
                 try:
                     kind, value = reader.recv()
-                except EOFError:
+                except (EOFError, OSError):  # OSError: it died part-way through sending
                     proc.join()
                     code = proc.exitcode
                     how = (

@@ -492,3 +492,51 @@ def test_a_seed_worker_killed_by_a_signal_stops_the_run_with_an_error_not_a_hang
     assert proc.returncode == 1, err
     assert last.startswith("RuntimeError: the worker process of seed 0 was killed by signal 9")
     assert not (tmp_path / "run" / "results.json").exists()
+
+
+_RAISES_WHAT_CANNOT_BE_PICKLED = """
+import sys
+sys.path[:0] = [{tests!r}, {root!r}]
+import sumo_scenarios.experiment as experiment
+from _driving_tiny import tiny_config
+
+
+class Unpicklable(Exception):
+    def __reduce__(self):
+        raise TypeError("this exception stays in its process")
+
+
+def failing_seed(cfg, seed, seed_dir):  # runs in the worker: this module is its __mp_main__
+    raise Unpicklable("the seed's own message")
+
+
+experiment._run_seed = failing_seed
+
+if __name__ == "__main__":
+    experiment.run_experiment(tiny_config(), "run", workers=1, progress=False)
+"""
+
+
+def test_a_seed_exception_that_cannot_be_pickled_keeps_its_message(tmp_path):
+    """A seed whose exception cannot be pickled: the worker could not send it back and the run
+    said only "the worker process of seed 0 exited with code 1 ... (with fewer workers if
+    memory ran out)". The seed's message and traceback now come back as text."""
+    import subprocess
+    import sys
+
+    tests = Path(__file__).resolve().parent
+    script = tmp_path / "unpicklable.py"
+    script.write_text(
+        _RAISES_WHAT_CANNOT_BE_PICKLED.format(tests=str(tests), root=str(tests.parent))
+    )
+    proc = subprocess.run(
+        [sys.executable, str(script)],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 1, proc.stderr
+    assert "RuntimeError: seed 0's worker could not send back its exception" in proc.stderr
+    assert "Unpicklable: the seed's own message" in proc.stderr
+    assert "exited with code" not in proc.stderr
