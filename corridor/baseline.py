@@ -209,11 +209,14 @@ class PrioritizedSweepingConfig:
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             if f.type in ("int", int):
-                if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
                     raise ValueError(f"{f.name} must be an int, got {v!r}")
+                object.__setattr__(self, f.name, int(v))  # plain, JSON-able (results.json)
             elif f.type in ("float", float):
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                number = isinstance(v, (int, float, np.integer, np.floating))
+                if isinstance(v, (bool, np.bool_)) or not number or not math.isfinite(v):
                     raise ValueError(f"{f.name} must be a finite number, got {v!r}")
+                object.__setattr__(self, f.name, float(v))  # as WorldConfig takes numpy ones
         if not 0 < self.gamma < 1:
             raise ValueError(f"gamma must be in (0, 1), got {self.gamma}")
         for name in (

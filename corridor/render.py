@@ -93,6 +93,12 @@ def draw_robot(
     ax.add_patch(Circle((x, y), r, facecolor="0.75", edgecolor="black", alpha=0.9, label="robot"))
     ax.plot([x, x + r * math.cos(h)], [y, y + r * math.sin(h)], color="black", linewidth=2)
     ranges = world.true_ranges() if readings is None else np.asarray(readings, dtype=float)
+    if ranges.shape != (len(SENSOR_NAMES),):
+        raise ValueError(
+            f"readings: expected {len(SENSOR_NAMES)} ranges in metres "
+            f"({', '.join(SENSOR_NAMES)}), got shape {ranges.shape}; pass the env's observation "
+            "(or leave readings out for the noise-free ranges)"
+        )
     for name, offset, d in zip(SENSOR_NAMES, _ANGLES, ranges, strict=True):
         a = h + offset
         ax.plot(

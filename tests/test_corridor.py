@@ -385,6 +385,18 @@ def test_render_rgb():
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 5  # not blank
 
 
+def test_render_rgb_names_readings_of_the_wrong_length():
+    """Readings that are not the three ranges gave zip's 'argument 3 is shorter than
+    arguments 1-2'; now a ValueError that says what readings are."""
+    from corridor.render import render_rgb
+
+    world = CorridorWorld("figure2")
+    for bad in ([0.3, 1.5], [[0.3, 1.5, 0.3]], [0.3, 1.5, 0.3, 0.2]):
+        with pytest.raises(ValueError, match=r"readings: expected 3 ranges in metres"):
+            render_rgb(world, readings=bad)
+    assert render_rgb(world, readings=[0.3, 1.5, 0.3]).ndim == 3
+
+
 # ---------------------------------------------------------------- baseline
 def test_binary_state():
     assert binary_state(np.array([0.3, 1.5, 0.3]), 0.6) == 0b101
@@ -1188,3 +1200,16 @@ def test_an_experiment_script_without_the_main_guard_fails_with_an_error_that_na
     assert str(tmp_path / "unguarded.py") in last and "exited with code 1" in last
     assert 'under `if __name__ == "__main__":`' in last
     assert not list((tmp_path / "run").glob("sessions/*"))
+
+
+def test_prioritized_sweeping_config_takes_numpy_numbers_as_plain_ones():
+    """A sweep's np.float32 / np.int64 (as WorldConfig takes them) were refused ('must be a
+    finite number, got np.float32(0.5)'); they are now taken and kept as plain numbers, and
+    numpy bools are refused as bools are."""
+    ps = PrioritizedSweepingConfig(wall_threshold=np.float32(0.5), max_steps=np.int64(100))
+    assert type(ps.wall_threshold) is float and ps.wall_threshold == pytest.approx(0.5)
+    assert type(ps.max_steps) is int and ps.max_steps == 100
+    json.dumps(dataclasses.asdict(ps))  # JSON-able, as results.json stores it
+    for bad in (dict(max_steps=np.bool_(True)), dict(gamma=np.float64("nan"))):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            PrioritizedSweepingConfig(**bad)
