@@ -265,3 +265,36 @@ def test_every_public_name_exists_and_its_classes_and_functions_say_what_they_ar
         obj = getattr(mod, name)  # AttributeError: __all__ names a missing object
         if inspect.isclass(obj) or inspect.isfunction(obj):
             assert inspect.getdoc(obj), f"{module}.{name} has no docstring"
+
+
+def test_a_format1_upgrade_that_cannot_write_its_config_is_a_session_write_error(
+    tmp_path, monkeypatch
+):
+    """Disk full as a format-1 session's config.json is rewritten as format 2 on resume: a
+    bare OSError escaped, and the log, already upgraded, left the config at format 1 for good.
+    Now a SessionWriteError names the file and what to do, and the next resume upgrades it."""
+    import errno
+    import os
+
+    from torchcbl.errors import SessionWriteError
+
+    run = tmp_path / "run"
+    want = _session(run)
+    _downgrade_to_format1(run)
+    real = os.replace
+
+    def full(src, dst, *args, **kwargs):
+        if str(dst).endswith("config.json"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(os, "replace", full)
+    env = rare_regions_world(episode_length=10)
+    with pytest.raises(SessionWriteError, match=r"config\.json.*Free space"):
+        ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    monkeypatch.setattr(os, "replace", real)
+    assert load_config(run)["format"] == "torchcbl.session/1"
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    assert back.records == want
+    back.close()
+    assert load_config(run)["format"] == "torchcbl.session/2"

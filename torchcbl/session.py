@@ -784,10 +784,19 @@ class SessionStore:
             self._db.executescript(_SCHEMA)
         except sqlite3.DatabaseError as exc:
             raise _db_error(exc, log, writing=True) from exc
-        if upgraded:
-            config = load_config(self.run_dir)
+        config = load_config(self.run_dir)
+        if upgraded or config.get("format") != FORMAT:
+            # also where an earlier open upgraded the log but could not write config.json
             config["format"] = FORMAT
-            write_json_atomic(self.run_dir / CONFIG_NAME, config)
+            try:
+                write_json_atomic(self.run_dir / CONFIG_NAME, config)
+            except OSError as exc:
+                raise _write_error(
+                    exc,
+                    self.run_dir / CONFIG_NAME,
+                    "upgrading the session to format 2",
+                    _FREE_SPACE,
+                ) from exc
         for kind, values in entries:  # steps a killed writer left only in the journal
             self._pending.append((_REPLACE if kind == "s" else _SQL[kind], values))
         self.commit()
