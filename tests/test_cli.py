@@ -972,20 +972,28 @@ def test_the_commands_teach_says_to_run_work_for_a_path_with_a_space(tmp_path, m
     assert shlex.split(told)[1:] == ["teach", "corridor", "--resume", "--run-dir", str(run)]
 
 
+def _teach_on_a_map_file(tmp_path, monkeypatch) -> tuple[Path, Path, str]:
+    """teach corridor --map tmp_path/mine.json (a copy of lshape) for 3 steps; returns the
+    map file, the session directory and the map's text."""
+    import corridor
+
+    _scripted_corridor_person(monkeypatch)
+    mine = tmp_path / "mine.json"
+    original = Path(corridor.__file__).with_name("maps").joinpath("lshape.json").read_text()
+    mine.write_text(original)
+    run = tmp_path / "session"
+    assert (
+        main(["teach", "corridor", "--run-dir", str(run), "--map", str(mine), "--steps", "3"]) == 0
+    )
+    return mine, run, original
+
+
 def test_a_session_whose_own_map_file_moved_says_to_put_it_back(tmp_path, monkeypatch, capsys):
     """teach corridor --map PATH keeps the map by its full path; once the file is moved,
     evaluate and teach --resume say so in one line (exit code 2) and that the file goes back
     there. (teach --resume failed with exit code 1 and, like evaluate, told the user to "give
     an existing map JSON file", which neither command takes for a session.)"""
-    import corridor
-
-    _scripted_corridor_person(monkeypatch)
-    mine = tmp_path / "mine.json"
-    mine.write_text(Path(corridor.__file__).with_name("maps").joinpath("lshape.json").read_text())
-    run = tmp_path / "session"
-    assert (
-        main(["teach", "corridor", "--run-dir", str(run), "--map", str(mine), "--steps", "3"]) == 0
-    )
+    mine, run, _ = _teach_on_a_map_file(tmp_path, monkeypatch)
     mine.rename(tmp_path / "moved.json")
     capsys.readouterr()
     for argv in (
@@ -1008,17 +1016,9 @@ def test_a_session_whose_own_map_file_changed_refuses_it(tmp_path, monkeypatch, 
     session keeps the file's SHA-256 now; a changed file is one line (exit code 2) at the
     command line and a ValueError in Python, naming the file; the file put back as it was goes
     on. A session that kept no digest (started before) drives the file as it is, as before."""
-    import corridor
     from corridor.experiment import evaluate_saved_policy
 
-    _scripted_corridor_person(monkeypatch)
-    mine = tmp_path / "mine.json"
-    original = Path(corridor.__file__).with_name("maps").joinpath("lshape.json").read_text()
-    mine.write_text(original)
-    run = tmp_path / "session"
-    assert (
-        main(["teach", "corridor", "--run-dir", str(run), "--map", str(mine), "--steps", "3"]) == 0
-    )
+    mine, run, original = _teach_on_a_map_file(tmp_path, monkeypatch)
     edited = json.loads(original)
     edited["name"] = "edited"
     mine.write_text(json.dumps(edited))

@@ -1187,18 +1187,14 @@ def test_an_experiment_script_without_the_main_guard_fails_with_an_error_that_na
     """run_experiment with workers at a script's top level: each spawned worker re-ran the
     script and exited at start-up, and the run ended in a bare BrokenProcessPool ("A process
     in the process pool was terminated abruptly"). It now names the script and the guard."""
-    from _unguarded import run_unguarded
+    from _scripts import run_unguarded
 
-    code, err = run_unguarded(
+    run_unguarded(
         tmp_path,
         "from corridor.experiment import CorridorExperimentConfig, run_experiment\n"
         "run_experiment(CorridorExperimentConfig(seeds=(0, 1)), 'run', workers=2,\n"
         "               progress=False)\n",
     )
-    last = err.strip().splitlines()[-1]
-    assert code == 1 and last.startswith("RuntimeError: worker processes cannot start: "), err
-    assert str(tmp_path / "unguarded.py") in last and "exited with code 1" in last
-    assert 'under `if __name__ == "__main__":`' in last
     assert not list((tmp_path / "run").glob("sessions/*"))
 
 

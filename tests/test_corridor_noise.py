@@ -796,25 +796,14 @@ def test_plot_results_redraws_a_run_whose_sensors_reach_less_than_the_default_th
 
 
 _KILLS_A_SEED_WORKER = """
-import os, signal, sys, threading, time
-from pathlib import Path
-sys.path[:0] = [{tests!r}, {root!r}]
+import threading
+from _scripts import kill_a_worker_when
 from test_corridor_noise import _tiny_experiment
 from corridor.experiment import run_experiment
 
-
-def kill_a_seed_worker():
-    while not Path("run/sessions/seed0/config.json").exists():  # a seed is teaching
-        time.sleep(0.02)
-    me = os.getpid()
-    for pid in open(f"/proc/{{me}}/task/{{me}}/children").read().split():
-        if b"spawn_main" in open(f"/proc/{{pid}}/cmdline", "rb").read():
-            os.kill(int(pid), signal.SIGKILL)  # as the out-of-memory killer does
-            break
-
-
 if __name__ == "__main__":
-    threading.Thread(target=kill_a_seed_worker, daemon=True).start()
+    marker = "run/sessions/seed0/config.json"  # a seed is teaching
+    threading.Thread(target=kill_a_worker_when, args=(marker,), daemon=True).start()
     run_experiment(_tiny_experiment(seeds=(0, 1)), "run", workers=2, progress=False)
 """
 
@@ -823,34 +812,12 @@ def test_a_seed_worker_killed_by_a_signal_is_named_as_such(tmp_path):
     """A seed's worker killed mid-seed (the out-of-memory killer) broke the process pool, and
     the run ended with concurrent.futures' bare BrokenProcessPool ("A process in the process
     pool was terminated abruptly ..."). It now says a worker died, and what to do."""
-    import os
-    import signal
-    import subprocess
-    import sys
-    from pathlib import Path
+    from _scripts import run_script, skip_without_proc_children
 
-    if not Path(f"/proc/{os.getpid()}/task/{os.getpid()}/children").exists():
-        pytest.skip("needs Linux's /proc/<pid>/task/<tid>/children to find the worker")
-    tests = Path(__file__).resolve().parent
-    script = tmp_path / "killer.py"
-    script.write_text(_KILLS_A_SEED_WORKER.format(tests=str(tests), root=str(tests.parent)))
-    proc = subprocess.Popen(
-        [sys.executable, str(script)],
-        cwd=tmp_path,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        stdin=subprocess.DEVNULL,
-        text=True,
-        start_new_session=True,
-    )
-    try:
-        _, err = proc.communicate(timeout=120)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        _, err = proc.communicate()
-        raise AssertionError(f"the run still waited after 120 s; stderr:\n{err[-2000:]}") from None
+    skip_without_proc_children()
+    code, err = run_script(tmp_path, _KILLS_A_SEED_WORKER, timeout=120)
     last = err.strip().splitlines()[-1]
-    assert proc.returncode == 1, err
+    assert code == 1, err
     assert last.startswith("RuntimeError: a worker process died abruptly"), err[-2000:]
     assert not (tmp_path / "run" / "results.json").exists()
 
