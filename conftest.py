@@ -44,3 +44,43 @@ def pytest_terminal_summary(config: pytest.Config) -> None:
     # is turned off before nbmake's hook reads it; pytest's own summary is unchanged.
     if getattr(config.option, "nbmake", False):
         config.option.nbmake = False
+
+
+def _sigint_state() -> tuple[object, ...]:
+    """What decides whether a Ctrl-C raises KeyboardInterrupt in this process: the handler
+    behind torchcbl's hook, torchcbl's hold depth and held signal, and the main thread's mask."""
+    import signal
+    import sys
+
+    handler = signal.getsignal(signal.SIGINT)
+    handler = getattr(handler, "torchcbl_chained", handler)
+    session = sys.modules.get("torchcbl.session")
+    hold = (session._hold_depth, list(session._held)) if session is not None else (0, [])
+    blocked = signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    return handler, *hold, blocked
+
+
+@pytest.fixture(autouse=True)
+def _ctrl_c_left_as_found(request: pytest.FixtureRequest) -> Generator[None, None, None]:
+    """A test that leaves Ctrl-C handled otherwise than it found it fails, naming what changed,
+    and the state is put back: once (2026-11-27) six real-Ctrl-C tests of test_session_faults
+    failed in a full run with "DID NOT RAISE KeyboardInterrupt", and no subset showed why."""
+    import signal
+    import sys
+
+    before = _sigint_state()
+    yield
+    after = _sigint_state()
+    if after == before:
+        return
+    signal.signal(signal.SIGINT, before[0])  # type: ignore[arg-type]
+    session = sys.modules.get("torchcbl.session")
+    if session is not None:
+        session._hold_depth, session._held[:] = before[1], before[2]
+    if after[3] != before[3]:
+        how = signal.SIG_UNBLOCK if not before[3] else signal.SIG_BLOCK
+        signal.pthread_sigmask(how, [signal.SIGINT])
+    names = ("SIGINT handler", "torchcbl hold depth", "held signal", "SIGINT blocked")
+    pairs = zip(names, before, after, strict=True)
+    changed = [f"{n}: {b!r} -> {a!r}" for n, b, a in pairs if a != b]
+    pytest.fail(f"{request.node.nodeid} left Ctrl-C handling changed: {'; '.join(changed)}")
