@@ -39,6 +39,9 @@ pi/4 (45 degrees): the first action turns the robot back to the start heading's 
 :meth:`CorridorWorld.reset`), so a larger offset, nearer another axis, would mislead whoever
 steers by the axis the robot faces.
 
+A session taught in this env keeps the digest of its map (:meth:`CorridorEnv.describe_inputs`),
+so resuming it on a map edited since is refused.
+
 Envs never write files; rendering returns RGB arrays (see :mod:`corridor.render` to save PNGs).
 """
 
@@ -53,7 +56,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from corridor.maps import CorridorMap
+from corridor.maps import CorridorMap, map_digest
 from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
 
 __all__ = ["CorridorEnv", "DEFAULT_MAP"]
@@ -173,6 +176,13 @@ class CorridorEnv(gym.Env):
     def corridor_map(self) -> CorridorMap:
         """The map the env runs."""
         return self.world.map
+
+    def describe_inputs(self) -> dict[str, str]:
+        """What identifies this env's map beyond the name it was given: ``{"corridor_map_sha256":
+        hex}`` (:func:`corridor.maps.map_digest`). A teaching session keeps it and
+        :meth:`torchcbl.ConfidentTeacher.resume` refuses an env whose map differs (a map file
+        edited since, or another ``CorridorMap`` object)."""
+        return {"corridor_map_sha256": map_digest(self.world.map)}
 
     @property
     def path(self) -> list[tuple[float, float]]:

@@ -49,7 +49,6 @@ Replay a seed with the config and seed stored in results.json: everything is see
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 import multiprocessing as mp
@@ -71,7 +70,7 @@ from corridor.baseline import (
 )
 from corridor.env import DEFAULT_MAP, CorridorEnv, _circuit_actions
 from corridor.expert import CorridorExpert
-from corridor.maps import CorridorMap, available_maps, load_map
+from corridor.maps import CorridorMap, available_maps, load_map, map_digest
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
 from torchcbl.evaluation import mean_sd, progress_bar, run_versions, worker_pool
 
@@ -938,9 +937,10 @@ def evaluate_saved_policy(
     circuits without wall contact, and wall contacts.
 
     Raises:
-        ValueError: among others, the session's own map file (``torchcbl teach corridor --map
-            PATH``, which keeps the SHA-256 of its bytes) changed since the session started
-            (unless ``map_name`` is given).
+        ValueError: among others, the map the session was taught on (a map file, or a
+            shipped map of another torchcbl version) changed since the session started: the
+            session keeps its digest, ``CorridorEnv.describe_inputs()`` (unless ``map_name``
+            is given).
     """
     from torchcbl import evaluate_policy, load_policy
 
@@ -990,46 +990,59 @@ def _session_map(session_dir: Path) -> str:
             f"{session_dir} was taught on a map given as an object ({value}), which its config "
             "does not keep; pass map_name= (a shipped map name or a map JSON path)"
         )
-    if source == "kwargs":
-        _check_session_map(session_dir, str(value))
-    return str(value)
+    name = DEFAULT_MAP if source == "default" else str(value)
+    results = session_dir.parent.parent / "results.json"
+    _check_session_map(session_dir, name, named_by=results if source == "results" else None)
+    return name
 
 
-#: The key of a session config's ``env`` entry that holds the SHA-256 of the bytes of the map
-#: file it was taught on (``torchcbl teach corridor --map PATH`` writes it when it starts the
-#: session; sessions started before 2026-11-27, or on a shipped map, have none).
-_MAP_DIGEST_KEY = "corridor_map_sha256"
-
-
-def _map_digest(path: str | Path) -> str:
-    """The SHA-256 (hex) of a map file's bytes."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def _check_session_map(session_dir: Path, map_path: str) -> None:
-    """A ValueError if the map file a session was taught on (its config's ``corridor_map``)
-    is no longer the file it was: its SHA-256 differs from the one the session kept. A session
-    that kept none (started before its map's digest was kept, or on a shipped map) passes."""
+def _check_session_map(session_dir: Path, map_name: str, named_by: Path | None = None) -> None:
+    """A ValueError if the map a session was taught on (a shipped name or a map file, as its
+    config keeps it or as ``named_by``, its experiment's results.json, names it) is no longer
+    the map it was: its digest (:func:`corridor.maps.map_digest`, which the session's config
+    keeps as ``CorridorEnv.describe_inputs()`` said it) differs. A session that kept none
+    (started before 2026-11-27) passes."""
     from torchcbl.session import load_config
 
-    kept = (load_config(session_dir).get("env") or {}).get(_MAP_DIGEST_KEY)
+    inputs = (load_config(session_dir).get("env") or {}).get("inputs") or {}
+    kept = inputs.get("corridor_map_sha256")
     if not isinstance(kept, str):
         return
+    shipped = map_name in available_maps()
+    what = f"the shipped map {map_name!r}" if shipped else f"the map file {map_name}"
     try:
-        now = _map_digest(map_path)
-    except OSError as exc:
+        now = map_digest(load_map(map_name))
+    except (OSError, ValueError) as exc:
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
         raise ValueError(
-            f"{session_dir} was taught on the map file {map_path}, which cannot be read "
-            f"({exc.strerror or exc}); put that file back there (a session keeps its map: "
-            "evaluate and teach --resume drive the map it was taught on)"
+            f"{session_dir} was taught on {what}, which cannot be read ({why}); put that "
+            "file back there as it was (a session keeps its map: evaluate and teach --resume "
+            "drive the map it was taught on)"
         ) from None
-    if now != kept:
+    if now == kept:
+        return
+    if named_by is not None:
         raise ValueError(
-            f"{session_dir} was taught on the map file {map_path}, which has changed since (its "
-            f"SHA-256 is {now[:12]}..., the session's {kept[:12]}...); put the file back as it "
-            "was (a session keeps its map: evaluate and teach --resume drive the map it was "
-            "taught on), or teach a new session on the changed map (teach corridor --map)"
+            f"{session_dir} was not taught on {what}, which its run's {named_by} names (the "
+            f"map's digest is {now[:12]}..., the session's {kept[:12]}...): that file was "
+            "edited, or the map changed since; restore the run directory as the experiment "
+            "wrote it, or pass map_name= to drive another map on purpose"
         )
+    if shipped:
+        fix = (
+            "this torchcbl ships another version of it: evaluate the session with the torchcbl "
+            "version it was taught with, or teach a new session"
+        )
+    else:
+        fix = (
+            "put the file back as it was (a session keeps its map: evaluate and teach --resume "
+            "drive the map it was taught on), or teach a new session on the changed map "
+            "(teach corridor --map)"
+        )
+    raise ValueError(
+        f"{session_dir} was taught on {what}, which has changed since (its digest is "
+        f"{now[:12]}..., the session's {kept[:12]}...); {fix}"
+    )
 
 
 def _session_world(session_dir: Path) -> WorldConfig:

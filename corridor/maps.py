@@ -28,6 +28,7 @@ JSON format (all keys required unless marked)::
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections.abc import Mapping
@@ -238,6 +239,24 @@ class CorridorMap:
             "corridors": [list(c) for c in self.corridors],
             "route": list(self.route),
         }
+
+
+def map_digest(corridor_map: CorridorMap) -> str:
+    """The SHA-256 (hex) of what a map makes the robot drive: its corridors, their width, the
+    route and the start (:meth:`CorridorMap.to_dict` less ``name`` and ``description``, as
+    canonical JSON). The same map from a JSON file, a shipped name or a ``CorridorMap`` gives
+    the same digest; an edit that moves a wall or the route gives another."""
+    data = corridor_map.to_dict()
+    del data["name"], data["description"]
+    text = json.dumps(data, sort_keys=True, separators=(",", ":"), default=_plain)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _plain(value: Any) -> Any:
+    """A numpy number as the Python number JSON writes (see :func:`map_digest`)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"a map field holds {value!r}, which is not a number or a name")
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:

@@ -623,7 +623,7 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(corridor
 
     import gymnasium as gym
 
-    import corridor  # noqa: F401 - registers the env id
+    import corridor  # registers the env id
     from corridor.experiment import evaluate_saved_policy
     from torchcbl import ConfidentTeacher
 
@@ -631,11 +631,19 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(corridor
     assert results["config"]["map_name"] == "figure2"
     session = corridor_run / "corridor" / "sessions" / "seed0"
     assert evaluate_saved_policy(session, n_steps=5)["map"] == "figure2"
-    results["config"]["map_name"] = "lshape"
+    # the results.json names the map (here as a file of the same map), not the env's kwargs;
+    # one that names a map other than the session drove is refused
+    mine = tmp_path / "mine.json"
+    shutil.copy(Path(corridor.__file__).with_name("maps") / "figure2.json", mine)
+    results["config"]["map_name"] = str(mine)
     copy = tmp_path / "run"
     shutil.copytree(session, copy / "sessions" / "seed0")
     (copy / "results.json").write_text(json.dumps(results))
-    assert evaluate_saved_policy(copy / "sessions" / "seed0", n_steps=5)["map"] == "lshape"
+    assert evaluate_saved_policy(copy / "sessions" / "seed0", n_steps=5)["map"] == str(mine)
+    results["config"]["map_name"] = "lshape"
+    (copy / "results.json").write_text(json.dumps(results))
+    with pytest.raises(ValueError, match="was not taught on the shipped map 'lshape', which its"):
+        evaluate_saved_policy(copy / "sessions" / "seed0", n_steps=5)
     env = gym.make("torchcbl/Corridor-v0", corridor_map="lshape")
     ConfidentTeacher(env, lambda o, i: 0, run_dir=tmp_path / "made", progress=False).run(
         max_steps=3
@@ -1013,14 +1021,16 @@ def test_a_session_whose_own_map_file_moved_says_to_put_it_back(tmp_path, monkey
 def test_a_session_whose_own_map_file_changed_refuses_it(tmp_path, monkeypatch, capsys):
     """teach corridor --map PATH kept only the file's path: once the file was edited, evaluate
     and teach --resume drove the edited map without a word, though the session "keeps it". The
-    session keeps the file's SHA-256 now; a changed file is one line (exit code 2) at the
+    session keeps the map's digest now; a changed file is one line (exit code 2) at the
     command line and a ValueError in Python, naming the file; the file put back as it was goes
-    on. A session that kept no digest (started before) drives the file as it is, as before."""
+    on, and so does one only renamed or reworded. A session that kept no digest (started
+    before) drives the file as it is, as before."""
     from corridor.experiment import evaluate_saved_policy
 
     mine, run, original = _teach_on_a_map_file(tmp_path, monkeypatch)
     edited = json.loads(original)
-    edited["name"] = "edited"
+    edited["nodes"]["B"] = [2.5, 0.0]  # a longer first corridor
+    edited["nodes"]["C"] = [2.5, 1.0]
     mine.write_text(json.dumps(edited))
     capsys.readouterr()
     for argv in (
@@ -1034,13 +1044,14 @@ def test_a_session_whose_own_map_file_changed_refuses_it(tmp_path, monkeypatch, 
     with pytest.raises(ValueError, match="which has changed since"):
         evaluate_saved_policy(run, n_steps=3)
     assert len(load_records(run)) == 3  # nothing recorded on the changed map
-    mine.write_text(original)
+    renamed = {**json.loads(original), "name": "mine", "description": "my copy"}
+    mine.write_text(json.dumps(renamed, indent=4))
     assert main(["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"]) == 0
     assert len(load_records(run)) == 6
     assert evaluate_saved_policy(run, n_steps=3)["map"] == str(mine)
     # a session started before the digest was kept: the file as it is
     config = json.loads((run / "config.json").read_text())
-    del config["env"]["corridor_map_sha256"]
+    del config["env"]["inputs"]
     (run / "config.json").write_text(json.dumps(config))
     mine.write_text(json.dumps(edited))
     assert main(["evaluate", str(run), "--steps", "3"]) == 0

@@ -258,6 +258,33 @@ def test_a_map_file_may_be_given_as_a_path():
     np.testing.assert_array_equal(by_path.reset(seed=4)[0], by_name.reset(seed=4)[0])
 
 
+def test_a_session_keeps_its_map_and_refuses_another_on_resume(tmp_path):
+    """CorridorEnv describes its map by a digest of what the robot drives, the same for the
+    map by name, by file and as an object; a session made in Python keeps it, and resuming
+    on a map object with one node moved is refused (the config kept such a map only as its
+    repr, which the resume could not compare)."""
+    from torchcbl import ConfidentTeacher, IncompatibleRunDirError
+
+    path = Path(corridor.__file__).with_name("maps") / "lshape.json"
+    lshape = load_map("lshape")
+    digests = {
+        CorridorEnv(m).describe_inputs()["corridor_map_sha256"] for m in ("lshape", path, lshape)
+    }
+    assert len(digests) == 1
+    assert CorridorEnv(dataclasses.replace(lshape, name="x")).describe_inputs() == {
+        "corridor_map_sha256": digests.pop()
+    }
+    moved = map_from_dict({**lshape.to_dict(), "start_offset": 0.3})
+    run = tmp_path / "run"
+    env = CorridorEnv(lshape)
+    expert = CorridorExpert(lshape)
+    with ConfidentTeacher(env, expert, run_dir=run, progress=False) as ct:
+        ct.run(max_steps=5)
+    with pytest.raises(IncompatibleRunDirError, match="env inputs .*corridor_map_sha256"):
+        ConfidentTeacher.resume(run, CorridorEnv(moved), expert, progress=False)
+    ConfidentTeacher.resume(run, CorridorEnv("lshape"), expert, progress=False).close()
+
+
 # ---------------------------------------------------------------- env
 def test_check_env_and_registration():
     check_env(CorridorEnv(), skip_render_check=True)

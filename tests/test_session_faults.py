@@ -1268,6 +1268,54 @@ def test_resume_compares_what_gymnasium_make_was_given(tmp_path):
     ConfidentTeacher.resume(run, short, teacher, progress=False).close()
 
 
+class _FileWorld(gym.Wrapper):
+    """rare_regions_world, told to depend on a file: describe_inputs() gives its digest."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(rare_regions_world())
+        self.path = path
+
+    def describe_inputs(self) -> dict[str, str]:
+        return {"centres_sha256": hashlib.sha256(self.path.read_bytes()).hexdigest()}
+
+    @property
+    def unwrapped(self):  # an env of one's own: the hook sits on the unwrapped env
+        return self
+
+
+def test_resume_refuses_an_env_whose_described_inputs_changed(tmp_path):
+    """An env that reads more than its make() arguments (a file) describes it: the session
+    keeps the description and a resume on the file edited since is refused, naming what
+    differs; the file put back resumes, and a session that kept none resumes as before."""
+    data = tmp_path / "centres.txt"
+    data.write_text("0 0\n4 4\n")
+    run = tmp_path / "run"
+    env = _FileWorld(data)
+    with ConfidentTeacher(env, oracle(env.env), run_dir=run, progress=False) as ct:
+        ct.run(max_steps=10)
+    kept = load_config(run)["env"]["inputs"]
+    assert kept == {"centres_sha256": hashlib.sha256(data.read_bytes()).hexdigest()}
+    data.write_text("0 0\n5 5\n")
+    with pytest.raises(IncompatibleRunDirError, match=r"env inputs \(stored, given\): "):
+        ConfidentTeacher.resume(run, env, oracle(env.env), progress=False)
+    assert len(load_records(run)) == 10
+    data.write_text("0 0\n4 4\n")
+    ConfidentTeacher.resume(run, env, oracle(env.env), progress=False).close()
+    config = load_config(run)
+    del config["env"]["inputs"]  # as a session written before 2026-11-27
+    (run / "config.json").write_text(json.dumps(config))
+    data.write_text("0 0\n5 5\n")
+    ConfidentTeacher.resume(run, env, oracle(env.env), progress=False).close()
+
+
+def test_a_describe_inputs_that_is_no_dict_of_plain_values_is_named(tmp_path):
+    env = _FileWorld(tmp_path / "x")
+    env.describe_inputs = lambda: {"when": object()}
+    with pytest.raises(TypeError, match=r"_FileWorld.describe_inputs\(\) must return a dict"):
+        ConfidentTeacher(env, oracle(env.env), run_dir=tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_resume_refused_for_a_model_that_is_no_gmm_set_reads_as_one_sentence(tmp_path):
     run = tmp_path / "run"
     _closed_session(run)

@@ -316,9 +316,9 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
 
 def _session_map_exists(session: Path, domain: str) -> None:
     """A one-line error if a corridor session's own map file (``teach corridor --map PATH``
-    keeps it by its full path and the SHA-256 of its bytes) is not there any more, or has
-    changed since the session started: neither evaluate nor teach --resume takes another map,
-    so the way on is to put the file back as it was."""
+    keeps it by its full path; the session keeps the map's digest) is not there any more, or
+    has changed since the session started: neither evaluate nor teach --resume takes another
+    map, so the way on is to put the file back as it was."""
     from torchcbl.session import load_config
 
     kwargs = (load_config(session).get("env") or {}).get("kwargs") or {}
@@ -584,7 +584,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         raise _UsageError(
             "--map: a resumed session keeps the map it was taught on; leave --map out with --resume"
         )
-    map_kwarg = map_digest = None
+    map_kwarg = None
     if args.map is not None:  # a map of one's own, kept with the session by name or full path
         from corridor.maps import available_maps, load_map
 
@@ -594,8 +594,6 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             raise _UsageError(f"--map: {exc}") from None
         shipped = args.map in available_maps()
         map_kwarg = args.map if shipped else str(Path(args.map).resolve())
-        if not shipped:  # kept with the session: a file changed later is refused, not driven
-            map_digest = _experiment_module("corridor")._map_digest(map_kwarg)
     if args.resume and args.skip_noninteractive:
         raise _UsageError(
             "--skip-noninteractive starts a new session without its non-interactive phase; a "
@@ -665,8 +663,6 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     # demonstrations) are lifted for this call, else a finished session could never go on
     lifted = {"max_demonstrations": None, "max_episodes": None} if args.resume else {}
     try:
-        if map_digest is not None:  # (a new session's: --map and --resume do not go together)
-            _keep_map_digest(run_dir, map_digest)
         ct.run(max_steps=ct.n_steps + args.steps, **lifted)
     except TeachingInterrupted:
         print("\nStopped by the teacher.")
@@ -680,16 +676,6 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         + f"; continue with: torchcbl teach {args.domain} --run-dir {_shell(run_dir)} --resume"
     )
     return 0
-
-
-def _keep_map_digest(run_dir: Path, digest: str) -> None:
-    """Add the SHA-256 of a new corridor session's own map file to its config's ``env`` entry,
-    so that teach --resume and evaluate refuse the file once it changes."""
-    from torchcbl.session import CONFIG_NAME, load_config, write_json_atomic
-
-    config = load_config(run_dir)
-    config["env"][_experiment_module("corridor")._MAP_DIGEST_KEY] = digest
-    write_json_atomic(run_dir / CONFIG_NAME, config)
 
 
 _STOP_REASONS = {

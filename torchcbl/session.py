@@ -5,8 +5,9 @@ Run directory layout (one directory per teaching session)::
     <run_dir>/
         config.json              what the session was started with: the TeachingConfig, the
                                  model's constructor arguments, the confidence rule, the env's
-                                 id and spaces, the session seed, the log format version and
-                                 whether it started from a fitted model (``starts_fitted``)
+                                 id, spaces, make() arguments and ``describe_inputs()``, the
+                                 session seed, the log format version and whether it started
+                                 from a fitted model (``starts_fitted``)
         steps.sqlite             the step log: table ``steps``, one row per StepRecord;
                                  table ``corrections``, one row per CorrectionRecord (a
                                  label for an earlier step's observation, journalled and
@@ -1816,6 +1817,7 @@ def resume_problems(
     strategy: dict[str, Any] | None,
     env_kwargs: dict[str, Any] | None = None,
     env_max_episode_steps: int | None = None,
+    env_inputs: dict[str, Any] | None = None,
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
@@ -1824,7 +1826,9 @@ def resume_problems(
     compared; ``env_kwargs``: what ``gymnasium.make`` was given for the env (plain values are
     compared, ``render_mode`` aside), with its ``max_episode_steps`` (the cap in force: the
     smallest TimeLimit's or the env's own; sessions written before 2026-11-26 do not keep it,
-    and those written before 2026-11-27 kept None for an env with a cap of its own only)."""
+    and those written before 2026-11-27 kept None for an env with a cap of its own only);
+    ``env_inputs``: the env's ``describe_inputs()`` (None: it has none), compared with the
+    session's where the session kept one (sessions written before 2026-11-27 did not)."""
     problems: list[str] = []
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
@@ -1860,6 +1864,19 @@ def resume_problems(
                 f"env kwargs (stored, given): {differ}; make the env as the session did, "
                 f"gymnasium.make({senv['id']!r}{cap}, **{stored_kw})"
             )
+    kept_inputs = senv.get("inputs")
+    if isinstance(kept_inputs, dict) and kept_inputs != (env_inputs or {}):
+        given = env_inputs or {}
+        differ = {
+            k: (kept_inputs.get(k), given.get(k))
+            for k in sorted(set(kept_inputs) | set(given))
+            if kept_inputs.get(k) != given.get(k)
+        }
+        problems.append(
+            f"env inputs (stored, given): {differ}; the env reads other inputs than the "
+            "session was taught on (its describe_inputs() differs, e.g. a file edited since): "
+            "give it the inputs as they were"
+        )
     if learning is not None and learning[0] != learning[1]:
         diff = {
             k: (v, learning[1].get(k)) for k, v in learning[0].items() if learning[1].get(k) != v

@@ -326,6 +326,31 @@ def _env_kwargs(env: gym.Env) -> dict[str, Any]:
     return {str(k): v if _jsonable(v) else {"repr": repr(v)[:200]} for k, v in kwargs.items()}
 
 
+def _env_inputs(env: gym.Env) -> dict[str, Any] | None:
+    """What the unwrapped env's ``describe_inputs()`` says identifies what it reads beyond its
+    ``gymnasium.make`` arguments (a map file's digest, say), or None for an env without one.
+
+    Raises:
+        TypeError: ``describe_inputs()`` gave something other than a dict of str keys and
+            plain JSON values (str, int, float, bool, None).
+    """
+    describe = getattr(getattr(env, "unwrapped", env), "describe_inputs", None)
+    if not callable(describe):
+        return None
+    inputs = describe()
+    plain = (str, int, float, bool, type(None))
+    if not (
+        isinstance(inputs, dict)
+        and all(isinstance(k, str) and isinstance(v, plain) for k, v in inputs.items())
+    ):
+        raise TypeError(
+            f"{type(env.unwrapped).__name__}.describe_inputs() must return a dict of str keys "
+            f"and plain JSON values (str, int, float, bool or None), got {inputs!r}; return "
+            "e.g. {'my_file_sha256': hashlib.sha256(data).hexdigest()}"
+        )
+    return dict(inputs)
+
+
 def _episode_cap(env: gym.Env) -> int | None:
     """The step cap in force on ``env``: the smallest of its ``TimeLimit`` wrappers' (an outer
     ``TimeLimit(gymnasium.make(id), n)`` reports ``n`` in its spec whatever the inner cap) and
@@ -372,7 +397,12 @@ class ConfidentTeacher:
 
     Args:
         env: a ``gymnasium.Env`` with a ``Discrete`` action space (from 0) and a 1-D float
-            ``Box`` observation space of size D.
+            ``Box`` observation space of size D. An env that reads more than its
+            ``gymnasium.make`` arguments (a file whose contents may change) may define
+            ``describe_inputs() -> dict`` on its unwrapped class: str keys and plain JSON
+            values that identify those inputs (e.g. a file's SHA-256). The session keeps it in
+            its ``config.json`` and :meth:`resume` refuses an env whose description differs
+            (``CorridorEnv`` describes its map so).
         teacher: ``teacher(observation [D] ndarray, info dict) -> int`` in ``[0, n_actions)``.
             It gets a copy of the env's observation and the info of the latest reset / step.
             Optionally it has ``correct(observation, info, action) -> int | None``, offered
@@ -552,6 +582,9 @@ class ConfidentTeacher:
             described["kwargs"] = kwargs
         if spec is not None:  # the cap in force (TimeLimit or the env's own), compared on resume
             described["max_episode_steps"] = _episode_cap(self.env)
+        inputs = _env_inputs(self.env)
+        if inputs is not None:  # what the env reads beyond its arguments, compared on resume
+            described["inputs"] = inputs
         return described
 
     # -- resume -----------------------------------------------------------------------------
@@ -621,6 +654,7 @@ class ConfidentTeacher:
             env_id=getattr(getattr(env, "spec", None), "id", None),
             env_kwargs=_env_kwargs(env),
             env_max_episode_steps=_resumed_cap(stored.get("env") or {}, env),
+            env_inputs=_env_inputs(env),
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
             strategy=(
