@@ -55,7 +55,6 @@ import multiprocessing as mp
 import numbers
 import time
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -718,17 +717,14 @@ def run_experiment(
             done(run_seed(*a))
     else:
         ctx = mp.get_context("spawn")
-        with worker_pool(workers, ctx) as pool:  # a Ctrl-C stops the workers too
+        died = (  # which seed's worker died is not known
+            "the run stops without a results.json: run it again into a new run_dir (with "
+            "fewer workers if memory ran out)"
+        )
+        with worker_pool(workers, ctx, running="one of the seeds", after=died) as pool:
             futures = [pool.submit(run_seed, *a) for a in args]
-            try:
-                for f in futures:
-                    done(f.result())
-            except BrokenProcessPool as exc:  # which seed's worker died is not known
-                raise RuntimeError(
-                    "a worker process died abruptly (killed by a signal, or out of memory) "
-                    "while it ran one of the seeds; the run stops without a results.json: run "
-                    "it again into a new run_dir (with fewer workers if memory ran out)"
-                ) from exc
+            for f in futures:
+                done(f.result())  # a Ctrl-C or a dead worker stops the workers too
     bar.close()
     first = per_seed[0]
     public = [{k: v for k, v in r.items() if not k.startswith("_")} for r in per_seed]

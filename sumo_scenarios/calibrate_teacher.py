@@ -30,11 +30,14 @@ import argparse
 import dataclasses
 import json
 import sys
+from concurrent.futures import as_completed
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from torchcbl.evaluation import worker_pool
 
 CHECK_SEGMENTS = 100  # training segments 0-99: the calibration check (and the tests')
 
@@ -144,6 +147,13 @@ def _defaults() -> dict[str, Any]:
 
     cfg = HumanDriverConfig()
     return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(HumanDriverConfig)}
+
+
+def _pool(running: str, after: str) -> Any:
+    """Two spawned workers (libsumo holds one simulation per process); a worker that dies (the
+    out-of-memory killer) stops the command with a RuntimeError saying so, where a
+    ``multiprocessing.Pool`` would have waited for its result for ever."""
+    return worker_pool(2, get_context("spawn"), running=running, after=after)
 
 
 def _job(args: tuple) -> dict[str, Any]:
@@ -272,8 +282,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.rescore:
         top = sorted(history, key=penalty)[: a.rescore]
         jobs = [(r["driver"], r["spacing"], seeds, a.steps) for r in top]
-        with get_context("spawn").Pool(2) as pool:
-            again = pool.map(_job, jobs)
+        with _pool("one of the drivers it rescores", "run the rescore again") as pool:
+            again = list(pool.map(_job, jobs))
         for old, new in sorted(zip(top, again, strict=True), key=lambda p: penalty(p[1])):
             print(
                 f"{penalty(old):6.2f} -> {penalty(new):6.2f}",
@@ -288,9 +298,10 @@ def main(argv: list[str] | None = None) -> int:
         base = best[i % len(best)]
         spacing = [*base["spacing"][:2], float(rng.choice(spacings))]
         jobs.append((_perturb(base["driver"], rng), spacing, seeds, a.steps))
-    with get_context("spawn").Pool(2) as pool, a.history.open("a") as f:
-        for r in pool.imap_unordered(_job, jobs):
-            f.write(json.dumps(r) + "\n")
+    kept = f"{a.history} keeps the drivers measured before: run the search again to go on"
+    with _pool("one of the drivers it measures", kept) as pool, a.history.open("a") as f:
+        for done in as_completed([pool.submit(_job, job) for job in jobs]):
+            f.write(json.dumps(done.result()) + "\n")
             f.flush()
     for r in sorted([json.loads(x) for x in a.history.read_text().splitlines() if x], key=penalty)[
         :5

@@ -727,7 +727,8 @@ def test_a_worker_killed_mid_sweep_is_not_blamed_on_another_cell(tmp_path, monke
         bm.run_benchmark(STRATEGIES[:1], [env], [0, 1, 2], tmp_path, workers=2, plots=False)
     assert not isinstance(caught.value, bm.CellError)
     text = str(caught.value)
-    assert text.startswith("a worker process died abruptly (killed by a signal, or out of memory)")
+    assert text.startswith("a worker process was killed by SIGKILL (the out-of-memory killer")
+    assert "while it ran one of the unfinished cells" in text
     assert str(tmp_path / "cells") in text and "run the same sweep again" in text
     kept = [json.loads(p.read_text())["seed"] for p in (tmp_path / "cells").glob("*.json")]
     assert 1 not in kept

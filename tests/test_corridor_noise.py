@@ -818,7 +818,8 @@ def test_a_seed_worker_killed_by_a_signal_is_named_as_such(tmp_path):
     code, err = run_script(tmp_path, _KILLS_A_SEED_WORKER, timeout=120)
     last = err.strip().splitlines()[-1]
     assert code == 1, err
-    assert last.startswith("RuntimeError: a worker process died abruptly"), err[-2000:]
+    assert last.startswith("RuntimeError: a worker process was killed by SIGKILL"), err[-2000:]
+    assert "while it ran one of the seeds; the run stops without a results.json" in last
     assert not (tmp_path / "run" / "results.json").exists()
 
 

@@ -751,7 +751,13 @@ def _execute(
     ctx = mp.get_context("spawn")
     # spawn: a fresh interpreter (no forked torch or libsumo state); workers are reused, as
     # every cell closes its envs before it returns.
-    with worker_pool(min(workers, len(todo)), ctx) as pool:  # a Ctrl-C stops the workers
+    died = (  # what worker_pool adds to how a worker died mid-cell
+        f"the cells finished before are kept in {out / 'cells'}: run the same sweep again to "
+        "compute the rest (with fewer workers if memory ran out)"
+    )
+    with worker_pool(
+        min(workers, len(todo)), ctx, running="one of the unfinished cells", after=died
+    ) as pool:  # a Ctrl-C stops the workers
         futures = {pool.submit(_run_cell_in_worker, c): c for c in todo}
         pending = set(futures)
         while pending:
@@ -764,13 +770,7 @@ def _execute(
                 exc = failed[0].exception()
                 if isinstance(exc, BrokenProcessPool):  # every unfinished cell gets it: the
                     # dead worker's cell is not known, so naming one would blame the wrong one
-                    n_left = len(failed) + len(pending)
-                    raise RuntimeError(
-                        f"a worker process died abruptly (killed by a signal, or out of memory) "
-                        f"while it ran one of the {n_left} unfinished cells; the cells finished "
-                        f"before are kept in {out / 'cells'}: run the same sweep again to compute "
-                        "the rest (with fewer workers if memory ran out)"
-                    ) from exc
+                    raise exc  # worker_pool says how the worker died
                 raise CellError(futures[failed[0]], exc, out) from exc
 
 

@@ -5,9 +5,11 @@ from __future__ import annotations
 import contextlib
 import multiprocessing as mp
 import platform
+import signal
 import sys
 from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import numpy as np
@@ -120,10 +122,41 @@ def check_workers_start(context: Any = None) -> None:
     )
 
 
+def _how_a_worker_died(exitcodes: Iterable[int | None]) -> str:
+    """How the dead worker of a broken pool ended, from its processes' exit codes after the
+    pool terminated the others (SIGTERM): the first other code, else SIGTERM itself."""
+    codes = [c for c in exitcodes if c is not None and c != 0]
+    dead = [c for c in codes if c != -signal.SIGTERM] or codes
+    if not dead:
+        return "died abruptly"
+    code = dead[0]
+    if code > 0:
+        return (
+            f"exited with code {code} in the middle of a task (os._exit, or native code "
+            "that ended the process)"
+        )
+    try:
+        name = signal.Signals(-code).name
+    except ValueError:
+        name = f"signal {-code}"
+    why = " (the out-of-memory killer sends it)" if code == -signal.SIGKILL else ""
+    return f"was killed by {name}{why}"
+
+
 @contextlib.contextmanager
-def worker_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecutor]:
+def worker_pool(
+    workers: int,
+    context: Any = None,
+    *,
+    running: str = "one of its tasks",
+    after: str = "run it again (with fewer workers if memory ran out)",
+) -> Iterator[ProcessPoolExecutor]:
     """A :class:`~concurrent.futures.ProcessPoolExecutor` of ``workers`` processes (started by
     the multiprocessing ``context``) that stops its workers at once when the block raises.
+
+    A worker that dies in the middle of a task (the out-of-memory killer) breaks the pool:
+    the ``BrokenProcessPool`` the block raises becomes a RuntimeError saying how it died (its
+    signal or exit code) while it ran ``running``, then ``after`` (what to do).
 
     The executor's own ``with`` waits for the running tasks on any exit: after a Ctrl-C that
     reached this process alone (``kill -INT``), a run went on computing seeds nobody would
@@ -140,7 +173,7 @@ def worker_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecut
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_worker_start)
     try:
         yield pool
-    except BaseException:
+    except BaseException as exc:
         processes = list((getattr(pool, "_processes", None) or {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
         for proc in processes:
@@ -148,5 +181,8 @@ def worker_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecut
                 proc.terminate()
         for proc in processes:
             proc.join(timeout=10)
+        if isinstance(exc, BrokenProcessPool):
+            how = _how_a_worker_died(proc.exitcode for proc in processes)
+            raise RuntimeError(f"a worker process {how} while it ran {running}; {after}") from exc
         raise
     pool.shutdown(wait=True)
