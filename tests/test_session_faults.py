@@ -1535,6 +1535,63 @@ def test_a_session_from_a_fitted_model_killed_as_it_starts_resumes_with_that_mod
     _started_from(run, fitted)
 
 
+_KILLED_AFTER_CONFIG = """
+import os, signal, sys
+import numpy as np
+sys.path[:0] = [{tests!r}, {root!r}]
+from _toy_envs import oracle, rare_regions_world
+from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
+from torchcbl import session as S
+env = rare_regions_world()
+model = GaussianMixtureSet(3, 2, seed=0)
+if {fitted!r}:
+    model.fit(*env.sample(120, np.random.default_rng(0)))
+real = S.write_json_atomic
+def write(path, data):
+    real(path, data)
+    os.kill(os.getpid(), signal.SIGKILL)  # config.json is written, the step log is not yet
+S.write_json_atomic = write
+ConfidentTeacher(env, oracle(env), model=model, config=TeachingConfig(max_new=5),
+                 run_dir={run!r}, progress=False)
+"""
+
+
+@pytest.mark.parametrize("fitted", [False, True], ids=["new-model", "fitted-model"])
+def test_a_session_killed_between_its_config_and_its_log_resumes_as_a_new_one(tmp_path, fitted):
+    """SIGKILL after a new session's config.json was written and before its step log: the
+    directory was no session for a new teacher ("already holds a teaching session") and a
+    broken one for resume and the readers ("steps.sqlite is missing ... put it back"), a dead
+    end. Nothing of it ran, so it reads as a session of no step, and resumes into the run the
+    uninterrupted session makes."""
+    run = tmp_path / "run"
+    code = _KILLED_AFTER_CONFIG.format(
+        tests=str(TESTS), root=str(TESTS.parent), fitted=fitted, run=str(run)
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    assert not (run / "steps.sqlite").exists() and (run / "config.json").exists()
+    assert load_records(run) == []
+    env = rare_regions_world()
+    ct = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    ct.run(max_steps=30)
+    ct.close()
+    model = GaussianMixtureSet(3, 2, seed=0)
+    if fitted:
+        model.fit(*env.sample(120, np.random.default_rng(0)))
+    whole = tmp_path / "whole"
+    cfg = TeachingConfig(max_new=5)
+    env = rare_regions_world()
+    with ConfidentTeacher(
+        env, oracle(env), model=model, config=cfg, run_dir=whole, progress=False
+    ) as ct:
+        ct.run(max_steps=30)
+    assert load_records(run) == load_records(whole)
+    # a log deleted from a session that ran is still named, not taken for an unborn one
+    (whole / "steps.sqlite").unlink()
+    with pytest.raises(CorruptSessionError, match="steps.sqlite is missing"):
+        load_records(whole)
+
+
 @pytest.mark.parametrize("damage", ["deleted", "garbage"])
 @pytest.mark.parametrize("refit", ["full", "incremental"])
 def test_a_lost_starting_model_is_named_not_replaced_by_a_fresh_one(tmp_path, damage, refit):

@@ -46,7 +46,9 @@ while a writer runs. The log is therefore always a prefix of the session, ending
 one demonstration whose outcome was never seen (the process died between the two writes, or
 before the action ran); on resume that row is kept (the demonstration counts) and marked
 ``truncated`` with ``info["torchcbl_interrupted"]``. A line torn by the kill (no newline) was
-never acknowledged and is ignored: its action never ran.
+never acknowledged and is ignored: its action never ran. A new session killed after its
+``config.json`` was written and before its log was (nothing of it ran) reads as a session of no
+step and resumes as one, into the run the uninterrupted session makes.
 
 Why a journal: a SQLite commit rewrites at least one whole page into the WAL (tens of
 microseconds, plus periodic checkpoints), while a journal line is one small ``write()``; this
@@ -1168,9 +1170,23 @@ def _db_error(exc: sqlite3.DatabaseError, path: Path, *, writing: bool = False) 
     )
 
 
+def _unborn(run_dir: Path) -> bool:
+    """Whether a session directory was left by a creation killed after its ``config.json``
+    was written and before its step log was: no log, ``-wal``, journal or writers file, and
+    no checkpoint but the starting model's 0. Nothing of it ran, so nothing is lost: it reads
+    as a session of no step and resumes as one (the log is created then)."""
+    if any((run_dir / n).exists() for n in (LOG_NAME, LOG_NAME + "-wal", JOURNAL_NAME)):
+        return False
+    if (run_dir / WRITERS_NAME).exists():
+        return False
+    ckpts = run_dir / CHECKPOINT_DIR
+    kept = [e.name for e in ckpts.iterdir() if _CKPT_RE.match(e.name)] if ckpts.is_dir() else []
+    return kept in ([], [f"model-{0:08d}.pt"])
+
+
 def _check_log_present(run_dir: Path) -> None:
     log = run_dir / LOG_NAME
-    if log.is_file():
+    if log.is_file() or _unborn(run_dir):
         return
     directory = run_dir / CHECKPOINT_DIR
     n = len(list(directory.glob("model-*.pt"))) if directory.is_dir() else 0
@@ -1333,6 +1349,10 @@ def _open_readonly(run_dir: str | os.PathLike[str]) -> sqlite3.Connection:
     path = Path(run_dir) / LOG_NAME
     _check_log_present(Path(run_dir))
     wal = path.with_name(LOG_NAME + "-wal")
+    if not path.exists():  # a session whose creation was killed before its log: no step yet
+        db = sqlite3.connect(":memory:")
+        db.executescript(_SCHEMA)
+        return db
     try:
         if not wal.exists():
             return _connect_reader(path, "immutable=1")
