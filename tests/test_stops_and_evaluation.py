@@ -81,6 +81,26 @@ def test_an_episode_counts_as_a_success_only_when_the_env_says_so():
     assert ct.stop_reason == "max_steps"
 
 
+def test_an_is_success_of_none_is_the_env_not_saying_as_episode_results_reads_it():
+    """info["is_success"] = None counted as a failure the env reported (no warning, and
+    time_limit_is_success ignored), where episode_results reads None as "not said"."""
+
+    class SaysNone(gym.Wrapper):
+        def step(self, action):
+            obs, r, term, trunc, info = self.env.step(action)
+            return obs, r, term, trunc, {**info, "is_success": None}
+
+    env = SaysNone(rare_regions_world(episode_length=10))
+    ct = _teacher(env, max_steps=600)
+    with pytest.warns(UserWarning, match="time_limit_is_success"):
+        ct.run(autonomous_episodes_to_stop=3)
+    assert ct.stop_reason == "max_steps"
+    assert {e.success for e in episode_results(ct.records)} == {None}
+    ct = _teacher(env, max_steps=600, time_limit_is_success=True)
+    ct.run(autonomous_episodes_to_stop=3)
+    assert ct.stop_reason == "autonomous_episodes" and ct.n_steps < 600
+
+
 def test_max_episodes_is_a_session_budget_that_survives_resume(tmp_path):
     world = rare_regions_world(episode_length=10)
     ct = ConfidentTeacher(

@@ -179,7 +179,7 @@ class TeachingConfig:
         autonomous_episodes_to_stop: stop after this many consecutive successful episodes of
             confident execution with no request. Success is never assumed: an episode succeeds
             when the env says so at its end (``info["is_success"]`` truthy), or, if the env
-            does not say (no ``"is_success"`` key), when it was cut by the time limit
+            does not say (no ``"is_success"`` key, or None), when it was cut by the time limit
             (``truncated``) and ``time_limit_is_success`` is True. An episode the env does not
             judge counts as a failure otherwise (a warning says so once).
         max_demonstrations: stop when the session holds this many demonstrations.
@@ -1111,7 +1111,7 @@ class ConfidentTeacher:
     def _episode_succeeded(self, record: StepRecord, info: dict) -> bool:
         """Success is never assumed: the env's ``info["is_success"]`` decides; without it, a
         time-limit end counts only with ``time_limit_is_success`` (see TeachingConfig)."""
-        if "is_success" in info:
+        if info.get("is_success") is not None:  # None: the env does not say, as absent
             return bool(info["is_success"])
         cfg = self._run_config or self.config
         if cfg.time_limit_is_success and record.truncated and not record.terminated:
