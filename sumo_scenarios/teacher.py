@@ -249,6 +249,9 @@ class HumanDriver:
     Args:
         config: a :class:`HumanDriverConfig`.
         seed: seeds every draw.
+        step_length_s: the env's step length the teacher was made for (its reaction delays
+            are counted in steps, :func:`make_teacher`): a call whose ``info["step_length_s"]``
+            differs raises ValueError. None: any.
 
     Attributes:
         last_move: why the last answer was given (for analysis; reading it changes nothing):
@@ -257,7 +260,20 @@ class HumanDriver:
             toward home).
     """
 
-    def __init__(self, config: HumanDriverConfig | None = None, *, seed: int = 0) -> None:
+    def __init__(
+        self,
+        config: HumanDriverConfig | None = None,
+        *,
+        seed: int = 0,
+        step_length_s: float | None = None,
+    ) -> None:
+        if step_length_s is not None and not (
+            isinstance(step_length_s, numbers.Real)
+            and not isinstance(step_length_s, (bool, np.bool_))
+            and 0 < step_length_s < np.inf
+        ):
+            raise ValueError(f"step_length_s: expected seconds > 0, got {step_length_s!r}")
+        self.step_length_s = None if step_length_s is None else float(step_length_s)
         if config is not None and not isinstance(config, HumanDriverConfig):
             raise TypeError(
                 f"config must be a HumanDriverConfig, got {type(config).__name__}; e.g. "
@@ -320,6 +336,12 @@ class HumanDriver:
         observation [4] (metres to the nearest car in lanes 1-3, lane index) and its info
         (``closing_speed_ms``, m/s per lane, and ``step_length_s``)."""
         d, lane, closing, dt = _read(observation, info)
+        if self.step_length_s is not None and not np.isclose(dt, self.step_length_s):
+            raise ValueError(
+                f"this teacher was made for steps of {self.step_length_s:g} s (its reaction "
+                f"delays are counted in steps) and the env's steps are {dt:g} s; make it with "
+                f"make_teacher(seed, step_length_s={dt:g})"
+            )
         cfg = self.config
         t = info.get("t")
         if self._rng.random() < dt / cfg.home_every_s:
@@ -431,18 +453,55 @@ class HumanDriver:
         return float(min(max(g - _CAR_M - c * dt, 0.0) / c, cap))
 
 
+_TIMING_STEP_S = 0.25  # the step length HumanTimingConfig's default delays are counted in
+
+
+def timing_for_step_length(step_length_s: float) -> HumanTimingConfig:
+    """The default :class:`~torchcbl.teachers.HumanTimingConfig` for steps of
+    ``step_length_s`` seconds: its reaction times (0, 0.25 and 0.5 s with probabilities 0.35,
+    0.45 and 0.2, counted in 0.25 s steps) in steps of this length, a time between two step
+    counts split between them so that the mean reaction time stays 0.2125 s. For 0.25 s, the
+    default config itself."""
+    default = HumanTimingConfig()
+    if np.isclose(step_length_s, _TIMING_STEP_S):
+        return default
+    probs: dict[int, float] = {}
+    for k, p in enumerate(default.delay_probs):
+        steps = round(k * _TIMING_STEP_S / step_length_s, 9)  # 0.5 / 0.1 is 5, not 5.0...01
+        low = int(np.floor(steps))
+        frac = steps - low
+        probs[low] = probs.get(low, 0.0) + p * (1.0 - frac)
+        if frac > 0:
+            probs[low + 1] = probs.get(low + 1, 0.0) + p * frac
+    delays = tuple(probs.get(k, 0.0) for k in range(max(probs) + 1))
+    return HumanTimingConfig(
+        default_action=default.default_action,
+        delay_probs=delays,
+        miss_prob=default.miss_prob,
+        double_prob=default.double_prob,
+    )
+
+
 def make_teacher(
     seed: int = 0,
     *,
     driver: HumanDriverConfig | None = None,
     timing: HumanTimingConfig | None = None,
+    step_length_s: float = _TIMING_STEP_S,
 ) -> HumanTiming:
     """The default human-like driving teacher: :class:`HumanDriver` in
     :class:`~torchcbl.teachers.HumanTiming` (stay = the default key), both seeded from ``seed``
-    (an int >= 0; a numpy int is the int it holds)."""
+    (an int >= 0; a numpy int is the int it holds).
+
+    ``step_length_s``: the env's step length (``SimConfig.step_length_s``, 0.25 s by default).
+    The timing's delays are counted in steps, so the default timing is made for it
+    (:func:`timing_for_step_length`), and the teacher refuses an env whose steps differ (a
+    ``timing`` given is taken as it is, its delays in steps of this length)."""
     given, seed = seed, _as_int(seed)  # 1.5 or True was int()-ed: another seed's teacher
     if seed is None or seed < 0:
         raise ValueError(f"seed: expected an int >= 0, got {given!r}")
     ss = np.random.SeedSequence([seed, 5_2])
     a, b = (int(s.generate_state(1)[0]) for s in ss.spawn(2))
-    return HumanTiming(HumanDriver(driver, seed=a), timing or HumanTimingConfig(), seed=b)
+    person = HumanDriver(driver, seed=a, step_length_s=step_length_s)  # checks the length
+    timing = timing or timing_for_step_length(float(step_length_s))
+    return HumanTiming(person, timing, seed=b)

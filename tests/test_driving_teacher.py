@@ -213,6 +213,28 @@ def test_human_driver_reads_only_what_a_driver_sees():
     assert isinstance(teacher, HumanTiming) and isinstance(teacher.teacher, HumanDriver)
 
 
+def test_the_teachers_reaction_times_are_seconds_whatever_the_step_length():
+    """HumanTiming counts its delays in steps, made for the driving domain's 0.25 s: an env
+    with another step length gave the person other reaction times in seconds, silently.
+    make_teacher(step_length_s=) now counts the same reaction times in its steps (mean 0.2125
+    s) and the teacher refuses an env whose steps differ; at 0.25 s nothing changes."""
+    from sumo_scenarios.teacher import timing_for_step_length
+
+    assert make_teacher(3).config == HumanTimingConfig() == timing_for_step_length(0.25)
+    for step, delays in ((0.1, (0.35, 0.0, 0.225, 0.225, 0.0, 0.2)), (0.5, (0.575, 0.425))):
+        cfg = make_teacher(3, step_length_s=step).config
+        np.testing.assert_allclose(cfg.delay_probs, delays, atol=1e-12)
+        mean_s = step * float(np.dot(cfg.delay_probs, np.arange(len(cfg.delay_probs))))
+        assert mean_s == pytest.approx(0.2125)
+    obs = np.array([25.0, 25.0, 25.0, 2.0], dtype=np.float32)
+    info = {"closing_speed_ms": {1: 0.0, 2: 0.0, 3: 0.0}, "step_length_s": 0.25, "t": 0}
+    with pytest.raises(ValueError, match=r"made for steps of 0.1 s .* make_teacher\(seed, "):
+        make_teacher(3, step_length_s=0.1)(obs, info)
+    assert make_teacher(3, step_length_s=0.1)(obs, dict(info, step_length_s=0.1)) in (0, 1, 2)
+    with pytest.raises(ValueError, match="step_length_s: expected seconds > 0, got 0"):
+        make_teacher(3, step_length_s=0)
+
+
 # ---------------------------------------------------------------- the human-like teacher (item 2)
 
 

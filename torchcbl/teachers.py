@@ -43,7 +43,9 @@ class HumanTimingConfig:
         default_action: the action answered while a press is pending (the "do nothing" key).
         delay_probs: ``delay_probs[k]`` is the probability of reacting ``k`` steps late.
             Default: 0 steps 0.35, 1 step 0.45, 2 steps 0.2 (a step of the driving domain is
-            0.25 s: a 0.25-0.5 s reaction time, a person's).
+            0.25 s: a 0.25-0.5 s reaction time, a person's; for another step length
+            ``sumo_scenarios.teacher.timing_for_step_length`` counts the same times in its
+            steps).
         miss_prob: probability that a due non-default press is lost.
         double_prob: probability that a non-default press is repeated at the next step.
     """
