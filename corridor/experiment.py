@@ -977,27 +977,27 @@ def _taught_with(
 
 def _session_map(session_dir: Path) -> str:
     """The map a session was taught on (see :func:`evaluate_saved_policy`); a ValueError if
-    it is a map file that changed since (:func:`_check_session_map`)."""
+    it is not the map the session kept the digest of (:func:`_check_session_map`)."""
     source, value = _taught_with(session_dir, "map_name", "corridor_map", str)
-    if source == "default":
-        return DEFAULT_MAP
     if source == "kwargs" and not isinstance(value, str):
         raise ValueError(
             f"{session_dir} was taught on a map given as an object ({value}), which its config "
             "does not keep; pass map_name= (a shipped map name or a map JSON path)"
         )
     name = DEFAULT_MAP if source == "default" else str(value)
-    results = session_dir.parent.parent / "results.json"
-    _check_session_map(session_dir, name, named_by=results if source == "results" else None)
+    _check_session_map(session_dir, name, source)
     return name
 
 
-def _check_session_map(session_dir: Path, map_name: str, named_by: Path | None = None) -> None:
-    """A ValueError if the map a session was taught on (a shipped name or a map file, as its
-    config keeps it or as ``named_by``, its experiment's results.json, names it) is no longer
-    the map it was: its digest (:func:`corridor.maps.map_digest`, which the session's config
-    keeps as ``CorridorEnv.describe_inputs()`` said it) differs. A session that kept none
-    (started before 2026-11-27) passes."""
+def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs") -> None:
+    """A ValueError if ``map_name`` (a shipped name or a map file) is not the map the session
+    was taught on: its digest (:func:`corridor.maps.map_digest`) differs from the one the
+    session's config keeps (``CorridorEnv.describe_inputs()``). ``source`` says where the name
+    comes from (:func:`_taught_with`): ``"kwargs"``, the env's make() arguments (the map file,
+    or a shipped map, changed since); ``"results"``, the run's results.json (that, or the file
+    names another map than the session drove); ``"default"``, neither (the session's env was
+    made without them, e.g. ``CorridorEnv(my_map)``). A session that kept no digest (started
+    before 2026-11-27) passes."""
     from torchcbl.session import load_config
 
     inputs = (load_config(session_dir).get("env") or {}).get("inputs") or {}
@@ -1017,27 +1017,36 @@ def _check_session_map(session_dir: Path, map_name: str, named_by: Path | None =
         ) from None
     if now == kept:
         return
-    if named_by is not None:
+    digests = f"(its digest is {now[:12]}..., the session's map's {kept[:12]}...)"
+    if source == "default":
         raise ValueError(
-            f"{session_dir} was not taught on {what}, which its run's {named_by} names (the "
-            f"map's digest is {now[:12]}..., the session's {kept[:12]}...): that file was "
-            "edited, or the map changed since; restore the run directory as the experiment "
-            "wrote it, or pass map_name= to drive another map on purpose"
+            f"{session_dir} was taught on a map its config does not name (its env was made "
+            f"without gymnasium.make, e.g. CorridorEnv(my_map)), not the default {what} "
+            f"{digests}; pass map_name= (the map it was taught on: a shipped name or a map "
+            "JSON path)"
         )
     if shipped:
+        cause = "this torchcbl ships another version of that map"
         fix = (
-            "this torchcbl ships another version of it: evaluate the session with the torchcbl "
-            "version it was taught with, or teach a new session"
+            "evaluate the session with the torchcbl version it was taught with, or teach a new one"
         )
     else:
+        cause = "the file was edited since"
         fix = (
             "put the file back as it was (a session keeps its map: evaluate and teach --resume "
             "drive the map it was taught on), or teach a new session on the changed map "
             "(teach corridor --map)"
         )
+    if source == "results":
+        raise ValueError(
+            f"{session_dir} was taught on another map than {what}, which its run's "
+            f"{session_dir.parent.parent / 'results.json'} names {digests}: {cause}, or "
+            f"results.json was edited; {fix}, or restore the run directory as the experiment "
+            "wrote it (map_name= drives another map on purpose)"
+        )
+    how = f": {cause}" if shipped else ""
     raise ValueError(
-        f"{session_dir} was taught on {what}, which has changed since (its digest is "
-        f"{now[:12]}..., the session's {kept[:12]}...); {fix}"
+        f"{session_dir} was taught on {what}, which has changed since {digests}{how}; {fix}"
     )
 
 

@@ -248,15 +248,20 @@ def map_digest(corridor_map: CorridorMap) -> str:
     the same digest; an edit that moves a wall or the route gives another."""
     data = corridor_map.to_dict()
     del data["name"], data["description"]
-    text = json.dumps(data, sort_keys=True, separators=(",", ":"), default=_plain)
+    text = json.dumps(_floats(data), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _plain(value: Any) -> Any:
-    """A numpy number as the Python number JSON writes (see :func:`map_digest`)."""
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"a map field holds {value!r}, which is not a number or a name")
+def _floats(value: Any) -> Any:
+    """``value`` with every number a float (a map's 2 and 2.0 are one coordinate, and a map
+    file gives 2.0), for :func:`map_digest`."""
+    if isinstance(value, dict):
+        return {str(k): _floats(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_floats(v) for v in value]
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
+        return value
+    return float(value)
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:

@@ -20,12 +20,15 @@ from typing import Any
 __all__ = ["env_spec", "teacher"]
 
 
-def teacher(seed: int = 0) -> Any:
+def teacher(seed: int = 0, env: Any = None) -> Any:
     """The driving teacher for a run seed: the human-like one
-    (:func:`sumo_scenarios.teacher.make_teacher`)."""
+    (:func:`sumo_scenarios.teacher.make_teacher`), made for ``env``'s step length (a
+    ``DrivingEnv``, wrapped or not; None: the default 0.25 s)."""
     from sumo_scenarios.teacher import make_teacher
 
-    return make_teacher(seed)
+    if env is None:
+        return make_teacher(seed)
+    return make_teacher(seed, step_length_s=env.unwrapped.config.sim.step_length_s)
 
 
 def env_spec(quick: bool = True) -> Any:

@@ -462,6 +462,12 @@ def timing_for_step_length(step_length_s: float) -> HumanTimingConfig:
     0.45 and 0.2, counted in 0.25 s steps) in steps of this length, a time between two step
     counts split between them so that the mean reaction time stays 0.2125 s. For 0.25 s, the
     default config itself."""
+    if not (
+        isinstance(step_length_s, numbers.Real)
+        and not isinstance(step_length_s, (bool, np.bool_))
+        and 0 < step_length_s < np.inf
+    ):
+        raise ValueError(f"step_length_s: expected seconds > 0, got {step_length_s!r}")
     default = HumanTimingConfig()
     if np.isclose(step_length_s, _TIMING_STEP_S):
         return default

@@ -271,9 +271,9 @@ def test_a_session_keeps_its_map_and_refuses_another_on_resume(tmp_path):
         CorridorEnv(m).describe_inputs()["corridor_map_sha256"] for m in ("lshape", path, lshape)
     }
     assert len(digests) == 1
-    assert CorridorEnv(dataclasses.replace(lshape, name="x")).describe_inputs() == {
-        "corridor_map_sha256": digests.pop()
-    }
+    whole = {k: (int(x), int(y)) for k, (x, y) in lshape.nodes.items()}  # 2 where a file has 2.0
+    for same in (dataclasses.replace(lshape, name="x"), dataclasses.replace(lshape, nodes=whole)):
+        assert CorridorEnv(same).describe_inputs() == {"corridor_map_sha256": next(iter(digests))}
     moved = map_from_dict({**lshape.to_dict(), "start_offset": 0.3})
     run = tmp_path / "run"
     env = CorridorEnv(lshape)
@@ -283,6 +283,12 @@ def test_a_session_keeps_its_map_and_refuses_another_on_resume(tmp_path):
     with pytest.raises(IncompatibleRunDirError, match="env inputs .*corridor_map_sha256"):
         ConfidentTeacher.resume(run, CorridorEnv(moved), expert, progress=False)
     ConfidentTeacher.resume(run, CorridorEnv("lshape"), expert, progress=False).close()
+    # its config names no map (no gymnasium.make): evaluate does not drive the default one
+    from corridor.experiment import evaluate_saved_policy
+
+    with pytest.raises(ValueError, match="a map its config does not name .* pass map_name="):
+        evaluate_saved_policy(run, n_steps=3)
+    assert evaluate_saved_policy(run, n_steps=3, map_name="lshape")["map"] == "lshape"
 
 
 # ---------------------------------------------------------------- env

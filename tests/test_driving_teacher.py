@@ -233,6 +233,16 @@ def test_the_teachers_reaction_times_are_seconds_whatever_the_step_length():
     assert make_teacher(3, step_length_s=0.1)(obs, dict(info, step_length_s=0.1)) in (0, 1, 2)
     with pytest.raises(ValueError, match="step_length_s: expected seconds > 0, got 0"):
         make_teacher(3, step_length_s=0)
+    with pytest.raises(ValueError, match="step_length_s: expected seconds > 0, got -0.1"):
+        timing_for_step_length(-0.1)
+    # the benchmark's teacher factory reads the env's step length
+    from sumo_scenarios.benchmark import teacher as bench_teacher
+    from sumo_scenarios.sim import SimConfig
+
+    env = DrivingEnv(sim=SimConfig(step_length_s=0.1))
+    assert bench_teacher(3, env=env).config == make_teacher(3, step_length_s=0.1).config
+    assert bench_teacher(3).config == HumanTimingConfig()
+    env.close()
 
 
 # ---------------------------------------------------------------- the human-like teacher (item 2)

@@ -1309,9 +1309,11 @@ def test_resume_refuses_an_env_whose_described_inputs_changed(tmp_path):
     ConfidentTeacher.resume(run, env, oracle(env.env), progress=False).close()
 
 
-def test_a_describe_inputs_that_is_no_dict_of_plain_values_is_named(tmp_path):
+@pytest.mark.parametrize("value", [object(), math.nan, np.int64(3)], ids=["object", "nan", "int64"])
+def test_a_describe_inputs_that_is_no_dict_of_plain_values_is_named(tmp_path, value):
+    """Also NaN, which JSON keeps but which never equals itself (every resume was refused)."""
     env = _FileWorld(tmp_path / "x")
-    env.describe_inputs = lambda: {"when": object()}
+    env.describe_inputs = lambda: {"when": value}
     with pytest.raises(TypeError, match=r"_FileWorld.describe_inputs\(\) must return a dict"):
         ConfidentTeacher(env, oracle(env.env), run_dir=tmp_path / "run", progress=False)
     assert not (tmp_path / "run").exists()
@@ -1547,30 +1549,58 @@ env = rare_regions_world()
 model = GaussianMixtureSet(3, 2, seed=0)
 if {fitted!r}:
     model.fit(*env.sample(120, np.random.default_rng(0)))
-real = S.write_json_atomic
+real, connect = S.write_json_atomic, S.sqlite3.connect
 def write(path, data):
     real(path, data)
-    os.kill(os.getpid(), signal.SIGKILL)  # config.json is written, the step log is not yet
-S.write_json_atomic = write
+    if {where!r} == "config":
+        os.kill(os.getpid(), signal.SIGKILL)  # config.json is written, the step log is not yet
+class Killing:  # the log's connection: SIGKILL after WAL mode is asked for, or the tables
+    def __init__(self, db): self.db = db
+    def __getattr__(self, name): return getattr(self.db, name)
+    def execute(self, sql, *args):
+        out = self.db.execute(sql, *args)
+        if {where!r} == "wal" and sql.startswith("PRAGMA journal_mode"):
+            os.kill(os.getpid(), signal.SIGKILL)  # an empty file and SQLite's hot -journal
+        return out
+    def executescript(self, sql):
+        out = self.db.executescript(sql)
+        if {where!r} == "schema":
+            os.kill(os.getpid(), signal.SIGKILL)  # the tables, and not our journal yet
+        return out
+def open_log(database, *args, **kw):
+    db = connect(database, *args, **kw)
+    if str(database).endswith("steps.sqlite") and {where!r} == "connect":
+        os.kill(os.getpid(), signal.SIGKILL)  # an empty file: no header, no table
+    return Killing(db) if str(database).endswith("steps.sqlite") else db
+S.write_json_atomic, S.sqlite3.connect = write, open_log
 ConfidentTeacher(env, oracle(env), model=model, config=TeachingConfig(max_new=5),
                  run_dir={run!r}, progress=False)
 """
 
 
-@pytest.mark.parametrize("fitted", [False, True], ids=["new-model", "fitted-model"])
-def test_a_session_killed_between_its_config_and_its_log_resumes_as_a_new_one(tmp_path, fitted):
-    """SIGKILL after a new session's config.json was written and before its step log: the
-    directory was no session for a new teacher ("already holds a teaching session") and a
-    broken one for resume and the readers ("steps.sqlite is missing ... put it back"), a dead
-    end. Nothing of it ran, so it reads as a session of no step, and resumes into the run the
+@pytest.mark.parametrize(
+    ("where", "fitted"),
+    [("config", False), ("config", True), ("connect", False), ("wal", False), ("schema", False)],
+    ids=["no-log", "no-log-fitted-model", "log-empty", "log-empty-hot-journal", "log-tables"],
+)
+def test_a_session_killed_between_its_config_and_its_log_resumes_as_a_new_one(
+    tmp_path, where, fitted
+):
+    """SIGKILL after a new session's config.json was written and before its log was opened
+    in full (no log, an empty file, one with SQLite's hot -journal, one with its tables but
+    not our journal): the directory was no session for a
+    new teacher ("already holds a teaching session") and a broken one for resume and the
+    readers ("steps.sqlite is missing ... put it back", "no such table: steps"), a dead end.
+    Nothing of it ran, so it reads as a session of no step, and resumes into the run the
     uninterrupted session makes."""
     run = tmp_path / "run"
     code = _KILLED_AFTER_CONFIG.format(
-        tests=str(TESTS), root=str(TESTS.parent), fitted=fitted, run=str(run)
+        tests=str(TESTS), root=str(TESTS.parent), fitted=fitted, run=str(run), where=where
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert proc.returncode == -signal.SIGKILL, proc.stderr
-    assert not (run / "steps.sqlite").exists() and (run / "config.json").exists()
+    log = run / "steps.sqlite"
+    assert (where == "config") == (not log.exists()) and (run / "config.json").exists()
     assert load_records(run) == []
     env = rare_regions_world()
     ct = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
@@ -1587,8 +1617,10 @@ def test_a_session_killed_between_its_config_and_its_log_resumes_as_a_new_one(tm
     ) as ct:
         ct.run(max_steps=30)
     assert load_records(run) == load_records(whole)
-    # a log deleted from a session that ran is still named, not taken for an unborn one
-    (whole / "steps.sqlite").unlink()
+    # a log deleted from a session that ran is still named, not taken for an unborn one,
+    # with its writers file and checkpoints gone too (its journal says it opened)
+    for path in (whole / "steps.sqlite", whole / "writers.jsonl", *whole.glob("checkpoints/*")):
+        path.unlink()
     with pytest.raises(CorruptSessionError, match="steps.sqlite is missing"):
         load_records(whole)
 

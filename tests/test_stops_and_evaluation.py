@@ -336,30 +336,29 @@ def test_worker_pool_stops_its_workers_when_the_block_raises(tmp_path):
     assert running.read_text() == "done"
 
 
-def _end_this_process(how: str) -> None:
-    import os
-    import signal
-
-    if how == "exit":
-        os._exit(3)
-    os.kill(os.getpid(), signal.SIGKILL)
-
-
 def test_a_worker_that_dies_mid_task_is_said_as_it_died():
     """A worker's death broke the pool; every caller said "died abruptly (killed by a signal,
-    or out of memory)", wrong for a worker that exited with a code of its own. The pool's
-    error now names the signal or the code, the task and what to do."""
+    or out of memory)", wrong for a worker that exited with a code of its own or sent back an
+    exception that cannot be unpickled. The pool's error now names the signal, the code or
+    the unpickling, the task and what to do; the other worker, which the broken pool stops
+    with SIGTERM, is not taken for the dead one."""
     import multiprocessing as mp
+    import time
+
+    from _scripts import end_this_process
 
     from torchcbl.evaluation import worker_pool
 
     for how, says in (
         ("kill", "a worker process was killed by SIGKILL (the out-of-memory killer sends it)"),
         ("exit", "a worker process exited with code 3 in the middle of a task"),
+        ("exit-0", "a worker process exited with code 0 in the middle of a task"),
+        ("unpicklable", "a worker process sent back a result or an exception that cannot be"),
     ):
         with pytest.raises(RuntimeError) as caught:
-            with worker_pool(1, mp.get_context("spawn"), running="seed 7", after="go on") as p:
-                p.submit(_end_this_process, how).result()
+            with worker_pool(2, mp.get_context("spawn"), running="seed 7", after="go on") as p:
+                p.submit(time.sleep, 0.5)  # the other worker: terminated by the broken pool
+                p.submit(end_this_process, how).result()
         assert str(caught.value).startswith(says), caught.value
         assert str(caught.value).endswith(" while it ran seed 7; go on")
 

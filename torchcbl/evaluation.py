@@ -122,15 +122,22 @@ def check_workers_start(context: Any = None) -> None:
     )
 
 
-def _how_a_worker_died(exitcodes: Iterable[int | None]) -> str:
-    """How the dead worker of a broken pool ended, from its processes' exit codes after the
-    pool terminated the others (SIGTERM): the first other code, else SIGTERM itself."""
-    codes = [c for c in exitcodes if c is not None and c != 0]
-    dead = [c for c in codes if c != -signal.SIGTERM] or codes
+def _how_a_worker_died(broken: BaseException, exitcodes: Iterable[int | None]) -> str:
+    """How a pool broke: a result or exception a worker sent back that cannot be unpickled
+    (the pool's error then has the reading's traceback as its cause), else how the dead worker
+    ended, from the processes' exit codes after the pool terminated the others (SIGTERM): the
+    first other code, else SIGTERM itself."""
+    if broken.__cause__ is not None:
+        return (
+            "sent back a result or an exception that cannot be unpickled here (the traceback "
+            "above shows the reading)"
+        )
+    codes = [c for c in exitcodes if c is not None]
+    dead = [c for c in codes if c != -signal.SIGTERM] or [c for c in codes if c != 0]
     if not dead:
         return "died abruptly"
     code = dead[0]
-    if code > 0:
+    if code >= 0:
         return (
             f"exited with code {code} in the middle of a task (os._exit, or native code "
             "that ended the process)"
@@ -154,9 +161,11 @@ def worker_pool(
     """A :class:`~concurrent.futures.ProcessPoolExecutor` of ``workers`` processes (started by
     the multiprocessing ``context``) that stops its workers at once when the block raises.
 
-    A worker that dies in the middle of a task (the out-of-memory killer) breaks the pool:
-    the ``BrokenProcessPool`` the block raises becomes a RuntimeError saying how it died (its
-    signal or exit code) while it ran ``running``, then ``after`` (what to do).
+    A worker that dies in the middle of a task (the out-of-memory killer) breaks the pool, as
+    does a result or exception it sends back that cannot be unpickled: the
+    ``BrokenProcessPool`` the block raises becomes a RuntimeError saying which, and how the
+    worker died (its signal or exit code), while it ran ``running``, then ``after`` (what to
+    do).
 
     The executor's own ``with`` waits for the running tasks on any exit: after a Ctrl-C that
     reached this process alone (``kill -INT``), a run went on computing seeds nobody would
@@ -182,7 +191,7 @@ def worker_pool(
         for proc in processes:
             proc.join(timeout=10)
         if isinstance(exc, BrokenProcessPool):
-            how = _how_a_worker_died(proc.exitcode for proc in processes)
+            how = _how_a_worker_died(exc, (proc.exitcode for proc in processes))
             raise RuntimeError(f"a worker process {how} while it ran {running}; {after}") from exc
         raise
     pool.shutdown(wait=True)

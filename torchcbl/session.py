@@ -1172,16 +1172,31 @@ def _db_error(exc: sqlite3.DatabaseError, path: Path, *, writing: bool = False) 
 
 def _unborn(run_dir: Path) -> bool:
     """Whether a session directory was left by a creation killed after its ``config.json``
-    was written and before its step log was: no log, ``-wal``, journal or writers file, and
-    no checkpoint but the starting model's 0. Nothing of it ran, so nothing is lost: it reads
-    as a session of no step and resumes as one (the log is created then)."""
-    if any((run_dir / n).exists() for n in (LOG_NAME, LOG_NAME + "-wal", JOURNAL_NAME)):
-        return False
-    if (run_dir / WRITERS_NAME).exists():
+    was written and before its log was opened in full: no journal (the last file an opening
+    creates) and no writers file, no checkpoint but the starting model's 0, and a step log
+    that is absent or holds no step table (SQLite creates the file, then its header, then the
+    tables). Nothing of it ran, so nothing is lost: it reads as a session of no step and
+    resumes as one (the log is made whole then)."""
+    if (run_dir / JOURNAL_NAME).exists() or (run_dir / WRITERS_NAME).exists():
         return False
     ckpts = run_dir / CHECKPOINT_DIR
     kept = [e.name for e in ckpts.iterdir() if _CKPT_RE.match(e.name)] if ckpts.is_dir() else []
-    return kept in ([], [f"model-{0:08d}.pt"])
+    if kept not in ([], [f"model-{0:08d}.pt"]):
+        return False
+    log = run_dir / LOG_NAME
+    if not log.exists() or log.stat().st_size == 0:
+        return True
+    try:  # (read only: the -wal, if any, is read through a private connection of its own)
+        db = sqlite3.connect(f"{log.resolve().as_uri()}?mode=ro", uri=True)
+        try:
+            found = db.execute(
+                "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'steps'"
+            ).fetchone()[0]
+        finally:
+            db.close()
+    except sqlite3.Error:
+        return False  # a damaged log is said as such by whoever opens it next
+    return found == 0
 
 
 def _check_log_present(run_dir: Path) -> None:
@@ -1349,7 +1364,7 @@ def _open_readonly(run_dir: str | os.PathLike[str]) -> sqlite3.Connection:
     path = Path(run_dir) / LOG_NAME
     _check_log_present(Path(run_dir))
     wal = path.with_name(LOG_NAME + "-wal")
-    if not path.exists():  # a session whose creation was killed before its log: no step yet
+    if not path.is_file() or _unborn(Path(run_dir)):  # its creation was killed: no step yet
         db = sqlite3.connect(":memory:")
         db.executescript(_SCHEMA)
         return db

@@ -41,6 +41,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
+import math
 import os
 import warnings
 from collections import deque
@@ -334,21 +335,26 @@ def _env_inputs(env: gym.Env) -> dict[str, Any] | None:
         TypeError: ``describe_inputs()`` gave something other than a dict of str keys and
             plain JSON values (str, int, float, bool, None).
     """
-    describe = getattr(getattr(env, "unwrapped", env), "describe_inputs", None)
+    unwrapped = getattr(env, "unwrapped", env)
+    describe = getattr(unwrapped, "describe_inputs", None)
     if not callable(describe):
         return None
     inputs = describe()
-    plain = (str, int, float, bool, type(None))
+
+    def plain(v: Any) -> bool:  # what JSON keeps and gives back equal (no NaN: NaN != NaN)
+        if isinstance(v, float):
+            return math.isfinite(v)
+        return v is None or type(v) in (str, int, bool)
+
     if not (
-        isinstance(inputs, dict)
-        and all(isinstance(k, str) and isinstance(v, plain) for k, v in inputs.items())
+        isinstance(inputs, dict) and all(isinstance(k, str) and plain(v) for k, v in inputs.items())
     ):
         raise TypeError(
-            f"{type(env.unwrapped).__name__}.describe_inputs() must return a dict of str keys "
-            f"and plain JSON values (str, int, float, bool or None), got {inputs!r}; return "
-            "e.g. {'my_file_sha256': hashlib.sha256(data).hexdigest()}"
+            f"{type(unwrapped).__name__}.describe_inputs() must return a dict of str keys and "
+            f"plain JSON values (str, int, a finite float, bool or None), got {inputs!r}; "
+            "return e.g. {'my_file_sha256': hashlib.sha256(data).hexdigest()}"
         )
-    return dict(inputs)
+    return {k: float(v) if isinstance(v, float) else v for k, v in inputs.items()}
 
 
 def _episode_cap(env: gym.Env) -> int | None:
