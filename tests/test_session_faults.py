@@ -1302,6 +1302,10 @@ def test_resume_refuses_an_env_whose_described_inputs_changed(tmp_path):
     assert len(load_records(run)) == 10
     data.write_text("0 0\n4 4\n")
     ConfidentTeacher.resume(run, env, oracle(env.env), progress=False).close()
+    data.rename(tmp_path / "moved.txt")  # describe_inputs() raises: an EnvError, as the loop's
+    with pytest.raises(EnvError, match=r"_FileWorld.describe_inputs\(\) raised FileNotFound"):
+        ConfidentTeacher.resume(run, env, oracle(env.env), progress=False)
+    (tmp_path / "moved.txt").rename(data)
     config = load_config(run)
     del config["env"]["inputs"]  # as a session written before 2026-11-27
     (run / "config.json").write_text(json.dumps(config))

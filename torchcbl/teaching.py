@@ -334,12 +334,19 @@ def _env_inputs(env: gym.Env) -> dict[str, Any] | None:
     Raises:
         TypeError: ``describe_inputs()`` gave something other than a dict of str keys and
             plain JSON values (str, int, float, bool, None).
+        EnvError: ``describe_inputs()`` raised (its exception is the cause).
     """
     unwrapped = getattr(env, "unwrapped", env)
     describe = getattr(unwrapped, "describe_inputs", None)
     if not callable(describe):
         return None
-    inputs = describe()
+    try:
+        inputs = describe()
+    except Exception as exc:
+        raise EnvError(
+            f"{type(unwrapped).__name__}.describe_inputs() raised {type(exc).__name__}: {exc} "
+            "(what the env reads, e.g. a file, cannot be described now; nothing was changed)"
+        ) from exc
 
     def plain(v: Any) -> bool:  # what JSON keeps and gives back equal (no NaN: NaN != NaN)
         if isinstance(v, float):
