@@ -67,12 +67,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cases", default="a,b,c", help="comma-separated, of a, b, c (default a,b,c)")
     a = p.parse_args(argv)
     cases = a.cases.split(",")
-    if a.repeats < 1 or a.rows < 1 or not set(cases) <= set(CASES):
-        print(
-            f"error: --repeats and --rows must be >= 1, --cases from {sorted(CASES)}",
-            file=sys.stderr,
-        )
-        return 2
+    for flag, v in (("--repeats", a.repeats), ("--rows", a.rows)):
+        if v < 1:
+            p.error(f"{flag}: expected an int >= 1, got {v}")
+    if not set(cases) <= set(CASES):
+        p.error(f"--cases: expected some of {sorted(CASES)}, got {a.cases!r}")
     if not torch.cuda.is_available():
         print(
             "error: no CUDA device visible to torch; run this on a machine with a GPU",

@@ -36,6 +36,7 @@ def _run(script: str, *args: str) -> subprocess.CompletedProcess:
         ("bench_loop.py", ["--steps", "0"], "--steps"),
         ("bench_gmm.py", ["--repeats", "0"], "--repeats"),
         ("bench_refit.py", ["--n", "0"], "--n"),
+        ("bench_gmm_device.py", ["--rows", "-3"], "--rows"),
     ],
 )
 def test_a_count_below_one_is_a_usage_error(script, args, flag):
@@ -59,6 +60,17 @@ def test_bench_refit_refuses_a_stream_it_does_not_know():
     assert done.stdout == "" and "Traceback" not in done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert "error: --streams: expected some of ['drift', 'iid'], got 'iid,drfit'" in last
+
+
+def test_bench_gmm_device_names_the_case_it_does_not_know():
+    # Before, any bad argument (--repeats 0, --rows -3, --cases a,d) printed the same
+    # "error: --repeats and --rows must be >= 1, --cases from [...]": neither which flag
+    # nor what was given. Checked before the CUDA device, so this runs without a GPU.
+    done = _run("bench_gmm_device.py", "--cases", "a,d")
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert done.stdout == "" and "Traceback" not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert "error: --cases: expected some of ['a', 'b', 'c'], got 'a,d'" in last, done.stderr
 
 
 @pytest.mark.parametrize("script", sorted(p.name for p in (ROOT / "bench").glob("bench_*.py")))
