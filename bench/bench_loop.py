@@ -20,6 +20,7 @@ import json
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
@@ -79,7 +80,10 @@ def measure(
         config = TeachingConfig(noninteractive=False, max_steps=steps)
     else:  # every step asks, never refits
         config = TeachingConfig(target_accuracy=None, max_new=10**9, max_steps=steps)
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+        # CBA's warning that this teacher never corrects: by design here (the act path is
+        # timed), and printed to stderr it would follow the JSON line in `2>&1` output
+        warnings.filterwarnings("ignore", "ConfidenceBasedAutonomy learns from corrections")
         ct = ConfidentTeacher(
             env,
             teacher,
