@@ -8,11 +8,11 @@ Usage: .venv/bin/python bench/bench_corridor.py [--actions 5000] [--repeats 3]
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 
 import numpy as np
+from _parser import Parser
 
 from corridor.env import CorridorEnv
 from corridor.expert import CorridorExpert
@@ -35,9 +35,7 @@ def _run(policy: str, n: int, seed: int = 0) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = Parser(__doc__)
     parser.add_argument(
         "--actions", type=int, default=5000, help="actions timed per run (default %(default)s)"
     )

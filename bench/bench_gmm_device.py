@@ -16,13 +16,13 @@ object with every figure.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
 
 import numpy as np
 import torch
+from _parser import Parser
 from bench_gmm import make_data  # the same cases' data (bench/ is on sys.path when run)
 
 from torchcbl.gmm import GaussianMixtureSet
@@ -55,9 +55,7 @@ def _side(
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    p = Parser(__doc__)
     p.add_argument(
         "--repeats", type=int, default=3, help="timed fits and classifications per side (default 3)"
     )

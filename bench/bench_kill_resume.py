@@ -14,7 +14,6 @@ The last line is JSON.
 
 from __future__ import annotations
 
-import argparse
 import json
 import random
 import sys
@@ -26,6 +25,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 import test_session as ts  # noqa: E402
+from _parser import Parser  # noqa: E402
 from _toy_envs import check_corrections_kept, oracle, overlap_world  # noqa: E402
 
 from torchcbl import ConfidentTeacher, PosteriorRule  # noqa: E402
@@ -90,9 +90,7 @@ def _one_mode(mode: str, kills: int, rng: random.Random, tmp: Path) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = Parser(__doc__)
     parser.add_argument(
         "--kills", type=int, default=20, help="SIGKILLs per mode (default %(default)s)"
     )

@@ -15,7 +15,6 @@ Usage: python bench/bench_loop.py [--steps 5000] [--cpu-time]. The last line is 
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import tempfile
@@ -28,6 +27,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from _parser import Parser  # noqa: E402
 from _toy_envs import four_d_world  # noqa: E402
 
 from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig  # noqa: E402
@@ -125,9 +125,7 @@ def measure(
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = Parser(__doc__)
     parser.add_argument(
         "--steps", type=int, default=5000, help="timed steps per row (default %(default)s)"
     )

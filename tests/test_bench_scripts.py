@@ -43,13 +43,15 @@ def test_a_count_below_one_is_a_usage_error(script, args, flag):
     # Before, bench_corridor --repeats 0 died in max() of an empty list, bench_loop --steps 0
     # in a division by zero, bench_driving --demos 0 in np.stack, bench_kill_resume --kills 0
     # with IncompatibleRunDirError; bench_corridor --actions 0 and bench_driving --steps 0
-    # printed a table of zeros and exited 0.
+    # printed a table of zeros and exited 0. And the error is one line, as the torchcbl
+    # command's: before, argparse's usage block (one to three lines) came first.
     done = _run(script, *args)
     assert done.returncode == 2, (done.stdout, done.stderr)
     assert "Traceback" not in done.stderr, done.stderr
     assert done.stdout == ""
-    last = done.stderr.strip().splitlines()[-1]
-    assert f"error: {flag}: expected an int >= 1, got {args[1]}" in last, done.stderr
+    (line,) = done.stderr.strip().splitlines()
+    assert f"{script}: error: {flag}: expected an int >= 1, got {args[1]}" in line, line
+    assert line.endswith(f"see {script} --help"), line
 
 
 def test_bench_refit_refuses_a_stream_it_does_not_know():
