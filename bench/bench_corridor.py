@@ -57,11 +57,13 @@ def main() -> None:
     print("-" * 39)
     for k, v in rows.items():
         print(f"{k:<12} | {v:>24,.0f}")
+    print(f"target >= 1,000 actions/s in every row: {'ok' if min(rows.values()) >= 1000 else 'NO'}")
     print(
         json.dumps(
             {
                 "bench": "corridor_env",
                 "actions": ns.actions,
+                "repeats": ns.repeats,  # each rate is the best of this many runs
                 "expert_actions_per_s": round(rows["expert"], 1),
                 "expert_noisy_actions_per_s": round(rows["expert_noisy"], 1),
                 "random_actions_per_s": round(rows["random"], 1),

@@ -10,6 +10,9 @@ is measured separately on the same calls and subtracted. Rows:
   lines, 32 by default; ``max_new`` is set so no refit happens: refits are the learner's
   cost, not the loop's).
 
+Budget: <= 200 us per step in every durable row (the JSON's "ok"); on a machine that other
+processes load, the wall clock counts the waits for a core too (``--cpu-time`` does not).
+
 Usage: python bench/bench_loop.py [--steps 5000] [--cpu-time]. The last line is JSON.
 """
 
@@ -52,6 +55,7 @@ class ReplayEnv(gym.Env):
 
 
 _clock = time.perf_counter
+BUDGET_US = 200  # per step, every durable row
 
 
 def teacher(obs, info):
@@ -162,6 +166,11 @@ def main() -> None:
             f"{r['us_per_step']:>14.1f}"
         )
     worst = max(r["us_per_step"] for r in rows if r["durable"])
+    clock = "CPU" if args.cpu_time else "wall-clock"
+    print(
+        f"worst durable step {worst:.1f} us ({clock}), budget <= {BUDGET_US:.0f} us: "
+        f"{'ok' if worst <= BUDGET_US else 'NO'}"
+    )
     auto = next(r for r in rows if r["durable"] and r["kind"] == "autonomous")
     print(
         json.dumps(
@@ -178,8 +187,8 @@ def main() -> None:
                     1,
                 ),
                 "worst_us_per_step_durable": round(worst, 1),
-                "budget_us": 200,
-                "ok": worst <= 200,
+                "budget_us": BUDGET_US,
+                "ok": worst <= BUDGET_US,
             }
         )
     )
