@@ -13,12 +13,12 @@ Usage: python bench/bench_driving.py [--demos 600] [--steps 3000]
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 
 import numpy as np
 import torch
+from _parser import Parser
 
 from sumo_scenarios.env import DrivingEnv
 from sumo_scenarios.experiment import DrivingExperimentConfig, make_model
@@ -89,9 +89,7 @@ def main(n_demos: int = 600, n_steps: int = 3000) -> dict[str, float]:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = Parser(__doc__)
     ap.add_argument(
         "--demos",
         type=int,

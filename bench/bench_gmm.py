@@ -34,7 +34,6 @@ The last line printed is one JSON object with every figure.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import statistics
@@ -42,6 +41,7 @@ import time
 
 import numpy as np
 import torch
+from _parser import Parser
 from threadpoolctl import threadpool_limits
 
 from torchcbl import _em
@@ -139,9 +139,7 @@ def sklearn_from_our_init(model, x, y, act, k, reg):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = Parser(__doc__)
     ap.add_argument(
         "--repeats",
         type=int,

@@ -16,13 +16,13 @@ object with every figure.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
 
 import numpy as np
 import torch
+from _parser import Parser
 from bench_gmm import make_data  # the same cases' data (bench/ is on sys.path when run)
 
 from torchcbl.gmm import GaussianMixtureSet
@@ -55,9 +55,7 @@ def _side(
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    p = Parser(__doc__)
     p.add_argument(
         "--repeats", type=int, default=3, help="timed fits and classifications per side (default 3)"
     )
@@ -67,12 +65,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cases", default="a,b,c", help="comma-separated, of a, b, c (default a,b,c)")
     a = p.parse_args(argv)
     cases = a.cases.split(",")
-    if a.repeats < 1 or a.rows < 1 or not set(cases) <= set(CASES):
-        print(
-            f"error: --repeats and --rows must be >= 1, --cases from {sorted(CASES)}",
-            file=sys.stderr,
-        )
-        return 2
+    for flag, v in (("--repeats", a.repeats), ("--rows", a.rows)):
+        if v < 1:
+            p.error(f"{flag}: expected an int >= 1, got {v}")
+    if not set(cases) <= set(CASES):
+        p.error(f"--cases: expected some of {sorted(CASES)}, got {a.cases!r}")
     if not torch.cuda.is_available():
         print(
             "error: no CUDA device visible to torch; run this on a machine with a GPU",

@@ -14,7 +14,6 @@ The last line is JSON.
 
 from __future__ import annotations
 
-import argparse
 import json
 import random
 import sys
@@ -26,6 +25,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 import test_session as ts  # noqa: E402
+from _parser import Parser  # noqa: E402
 from _toy_envs import check_corrections_kept, oracle, overlap_world  # noqa: E402
 
 from torchcbl import ConfidentTeacher, PosteriorRule  # noqa: E402
@@ -37,12 +37,15 @@ def _one_mode(mode: str, kills: int, rng: random.Random, tmp: Path) -> dict:
     lost = lost_corrections = caught_unacknowledged = 0
     n_corr = 0
     print(f"-- mode {mode}")
-    print(f"{'kill':>4}{'delay s':>9}{'steps':>8}{'demos':>8}{'corr':>6}{'lost':>6}")
+    # "lost": this cycle lost a label, "lost corr": a correction (cba); -1: not counted
+    print(
+        f"{'kill':>4}{'delay s':>9}{'steps':>8}{'demos':>8}{'corr':>6}{'lost':>6}{'lost corr':>11}"
+    )
     for i in range(kills):
         side = tmp / f"side-{mode}-{i}.log"
         delay = rng.uniform(0.05, 1.0)
         ts._kill_cycle(run, side, delay, mode)
-        bad = 0
+        bad = bad_corr = 0
         try:
             n_demos = ts._check_nothing_lost(run, side)
         except AssertionError as exc:
@@ -54,11 +57,11 @@ def _one_mode(mode: str, kills: int, rng: random.Random, tmp: Path) -> dict:
                 caught_unacknowledged += unack
             except AssertionError as exc:
                 print(exc)
-                lost_corrections += 1
-                bad = 1
+                n_corr, bad_corr = -1, 1
         lost += bad
+        lost_corrections += bad_corr
         n_steps = len(ts.load_records(run))
-        print(f"{i:>4}{delay:>9.2f}{n_steps:>8}{n_demos:>8}{n_corr:>6}{bad:>6}")
+        print(f"{i:>4}{delay:>9.2f}{n_steps:>8}{n_demos:>8}{n_corr:>6}{bad:>6}{bad_corr:>11}")
     env = overlap_world(episode_length=25)
     if mode == "cba":
         back = ConfidentTeacher.resume(run, env, correcting(oracle(env)), progress=False)
@@ -76,7 +79,8 @@ def _one_mode(mode: str, kills: int, rng: random.Random, tmp: Path) -> dict:
         "cycles_with_lost_labels": lost,
         "cycles_with_lost_corrections": lost_corrections,
         "steps": back.n_steps,
-        "labels": back.n_demonstrations,
+        "labels": back.n_demonstrations,  # demonstrations plus corrections
+        "demonstrations": back.n_demonstrations - back.n_corrections,
         "corrections": back.n_corrections,
         "corrections_killed_before_acknowledged": caught_unacknowledged,
         "model_equals_fit_on_log": model_ok,
@@ -86,9 +90,7 @@ def _one_mode(mode: str, kills: int, rng: random.Random, tmp: Path) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = Parser(__doc__)
     parser.add_argument(
         "--kills", type=int, default=20, help="SIGKILLs per mode (default %(default)s)"
     )
@@ -114,7 +116,9 @@ def main() -> None:
         "bench": "kill_resume",
         "kills_per_mode": args.kills,
         "lost_anything": any(
-            r["cycles_with_lost_labels"] or not r["model_equals_fit_on_log"]
+            r["cycles_with_lost_labels"]
+            or r["cycles_with_lost_corrections"]
+            or not r["model_equals_fit_on_log"]
             for r in results.values()
         ),
         **results,

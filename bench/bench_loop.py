@@ -10,16 +10,19 @@ is measured separately on the same calls and subtracted. Rows:
   lines, 32 by default; ``max_new`` is set so no refit happens: refits are the learner's
   cost, not the loop's).
 
+Budget: <= 200 us per step in every durable row (the JSON's "ok"); on a machine that other
+processes load, the wall clock counts the waits for a core too (``--cpu-time`` does not).
+
 Usage: python bench/bench_loop.py [--steps 5000] [--cpu-time]. The last line is JSON.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
@@ -27,6 +30,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from _parser import Parser  # noqa: E402
 from _toy_envs import four_d_world  # noqa: E402
 
 from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig  # noqa: E402
@@ -51,6 +55,7 @@ class ReplayEnv(gym.Env):
 
 
 _clock = time.perf_counter
+BUDGET_US = 200  # per step, every durable row
 
 
 def teacher(obs, info):
@@ -79,7 +84,10 @@ def measure(
         config = TeachingConfig(noninteractive=False, max_steps=steps)
     else:  # every step asks, never refits
         config = TeachingConfig(target_accuracy=None, max_new=10**9, max_steps=steps)
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+        # CBA's warning that this teacher never corrects: by design here (the act path is
+        # timed), and printed to stderr it would follow the JSON line in `2>&1` output
+        warnings.filterwarnings("ignore", "ConfidenceBasedAutonomy learns from corrections")
         ct = ConfidentTeacher(
             env,
             teacher,
@@ -121,9 +129,7 @@ def measure(
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = Parser(__doc__)
     parser.add_argument(
         "--steps", type=int, default=5000, help="timed steps per row (default %(default)s)"
     )
@@ -160,6 +166,11 @@ def main() -> None:
             f"{r['us_per_step']:>14.1f}"
         )
     worst = max(r["us_per_step"] for r in rows if r["durable"])
+    clock = "CPU" if args.cpu_time else "wall-clock"
+    print(
+        f"worst durable step {worst:.1f} us ({clock}), budget <= {BUDGET_US:.0f} us: "
+        f"{'ok' if worst <= BUDGET_US else 'NO'}"
+    )
     auto = next(r for r in rows if r["durable"] and r["kind"] == "autonomous")
     print(
         json.dumps(
@@ -176,8 +187,8 @@ def main() -> None:
                     1,
                 ),
                 "worst_us_per_step_durable": round(worst, 1),
-                "budget_us": 200,
-                "ok": worst <= 200,
+                "budget_us": BUDGET_US,
+                "ok": worst <= BUDGET_US,
             }
         )
     )

@@ -29,7 +29,6 @@ The last line printed is one JSON object with every figure.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import os
@@ -41,6 +40,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import torch
+from _parser import Parser
 
 from torchcbl import gmm as gmm_mod
 from torchcbl.gmm import GaussianMixtureSet
@@ -288,9 +288,7 @@ def threads_sweep(repeats: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = Parser(__doc__)
     ap.add_argument(
         "--sections",
         default="long,single,snippet,threads",

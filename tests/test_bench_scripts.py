@@ -36,19 +36,22 @@ def _run(script: str, *args: str) -> subprocess.CompletedProcess:
         ("bench_loop.py", ["--steps", "0"], "--steps"),
         ("bench_gmm.py", ["--repeats", "0"], "--repeats"),
         ("bench_refit.py", ["--n", "0"], "--n"),
+        ("bench_gmm_device.py", ["--rows", "-3"], "--rows"),
     ],
 )
 def test_a_count_below_one_is_a_usage_error(script, args, flag):
     # Before, bench_corridor --repeats 0 died in max() of an empty list, bench_loop --steps 0
     # in a division by zero, bench_driving --demos 0 in np.stack, bench_kill_resume --kills 0
     # with IncompatibleRunDirError; bench_corridor --actions 0 and bench_driving --steps 0
-    # printed a table of zeros and exited 0.
+    # printed a table of zeros and exited 0. And the error is one line, as the torchcbl
+    # command's: before, argparse's usage block (one to three lines) came first.
     done = _run(script, *args)
     assert done.returncode == 2, (done.stdout, done.stderr)
     assert "Traceback" not in done.stderr, done.stderr
     assert done.stdout == ""
-    last = done.stderr.strip().splitlines()[-1]
-    assert f"error: {flag}: expected an int >= 1, got {args[1]}" in last, done.stderr
+    (line,) = done.stderr.strip().splitlines()
+    assert f"{script}: error: {flag}: expected an int >= 1, got {args[1]}" in line, line
+    assert line.endswith(f"see {script} --help"), line
 
 
 def test_bench_refit_refuses_a_stream_it_does_not_know():
@@ -59,6 +62,17 @@ def test_bench_refit_refuses_a_stream_it_does_not_know():
     assert done.stdout == "" and "Traceback" not in done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert "error: --streams: expected some of ['drift', 'iid'], got 'iid,drfit'" in last
+
+
+def test_bench_gmm_device_names_the_case_it_does_not_know():
+    # Before, any bad argument (--repeats 0, --rows -3, --cases a,d) printed the same
+    # "error: --repeats and --rows must be >= 1, --cases from [...]": neither which flag
+    # nor what was given. Checked before the CUDA device, so this runs without a GPU.
+    done = _run("bench_gmm_device.py", "--cases", "a,d")
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert done.stdout == "" and "Traceback" not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert "error: --cases: expected some of ['a', 'b', 'c'], got 'a,d'" in last, done.stderr
 
 
 @pytest.mark.parametrize("script", sorted(p.name for p in (ROOT / "bench").glob("bench_*.py")))
