@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
@@ -62,6 +63,19 @@ def test_bench_refit_refuses_a_stream_it_does_not_know():
     assert done.stdout == "" and "Traceback" not in done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert "error: --streams: expected some of ['drift', 'iid'], got 'iid,drfit'" in last
+
+
+def test_bench_refit_ends_with_strict_json_when_an_action_has_no_point():
+    # Before, a session too short for every action to have a point (--n 2 over 3 actions)
+    # wrote NaN into the last line, which is no JSON (json.loads takes it only leniently).
+    done = _run("bench_refit.py", "--sections", "long", "--n", "2", "--full-every", "2")
+    assert done.returncode == 0, done.stderr
+
+    def refuse(name: str) -> None:
+        raise AssertionError(f"{name} in the JSON line")
+
+    out = json.loads(done.stdout.strip().splitlines()[-1], parse_constant=refuse)
+    assert None in out["long"][0]["mean_ll_full"]
 
 
 def test_bench_gmm_device_names_the_case_it_does_not_know():
