@@ -956,6 +956,16 @@ def evaluate_saved_policy(
     }
 
 
+def _pass_to_evaluate(keyword: str, what: str) -> str:
+    """What to do when a session does not say what to drive: the keyword is
+    :func:`evaluate_saved_policy`'s, so the message names the function (``torchcbl evaluate``,
+    which reports these errors too, has no such option)."""
+    return (
+        f"pass {keyword}= ({what}) to corridor.experiment.evaluate_saved_policy in Python "
+        "(torchcbl evaluate has no option for it)"
+    )
+
+
 def _taught_with(
     session_dir: Path, results_key: str, kwarg: str, parse: Callable[[Any], Any]
 ) -> tuple[str, Any]:
@@ -982,7 +992,8 @@ def _session_map(session_dir: Path) -> str:
     if source == "kwargs" and not isinstance(value, str):
         raise ValueError(
             f"{session_dir} was taught on a map given as an object ({value}), which its config "
-            "does not keep; pass map_name= (a shipped map name or a map JSON path)"
+            "does not keep; "
+            + _pass_to_evaluate("map_name", "a shipped map name or a map JSON path")
         )
     name = DEFAULT_MAP if source == "default" else str(value)
     _check_session_map(session_dir, name, source)
@@ -1021,9 +1032,11 @@ def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs")
     if source == "default":
         raise ValueError(
             f"{session_dir} was taught on a map its config does not name (its env was made "
-            f"without gymnasium.make, e.g. CorridorEnv(my_map)), not the default {what} "
-            f"{digests}; pass map_name= (the map it was taught on: a shipped name or a map "
-            "JSON path)"
+            f"without gymnasium.make, e.g. CorridorEnv(my_map)), not {what}, the default "
+            f"{digests}; "
+            + _pass_to_evaluate(
+                "map_name", "the map it was taught on: a shipped name or a map JSON path"
+            )
         )
     if shipped:
         cause = "this torchcbl ships another version of that map"
@@ -1065,11 +1078,11 @@ def _session_world(session_dir: Path) -> WorldConfig:
         except (TypeError, ValueError) as exc:
             raise ValueError(
                 f"{session_dir}: its env's world_config {value} is not a WorldConfig ({exc}); "
-                "pass world_config="
+                + _pass_to_evaluate("world_config", "a corridor.world.WorldConfig")
             ) from None
     raise ValueError(
         f"{session_dir} was taught with a robot given as an object ({value}), which its "
-        "config does not keep; pass world_config= (a corridor.world.WorldConfig)"
+        "config does not keep; " + _pass_to_evaluate("world_config", "a corridor.world.WorldConfig")
     )
 
 

@@ -1043,7 +1043,9 @@ def evaluate_saved_policy(
                 f"{session_dir} was taught on a driving env given its SUMO settings as an "
                 f"object ({taught_sim}), which its config keeps only as text: evaluating it on "
                 "the default SimConfig() would drive other dynamics; pass sim= (a "
-                "sumo_scenarios.sim.SimConfig, as the session was given it)"
+                "sumo_scenarios.sim.SimConfig, as the session was given it) to "
+                "sumo_scenarios.experiment.evaluate_saved_policy in Python (torchcbl evaluate "
+                "has no option for it)"
             )
         sim = SimConfig()
     policy = load_policy(session_dir)

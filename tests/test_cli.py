@@ -672,6 +672,42 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(corridor
     assert noisy["world"]["forward_noise"] > 0
 
 
+def test_evaluate_of_a_session_it_cannot_rebuild_names_the_python_call(tmp_path, capsys):
+    """A session whose env was given its map, robot or SUMO settings as objects keeps them only
+    as text: `torchcbl evaluate` cannot drive it, and its one line names the function and the
+    keyword that can (it said "pass map_name=", an option the command does not have)."""
+    import gymnasium as gym
+
+    import sumo_scenarios  # noqa: F401  (registers torchcbl/Driving-v0)
+    from corridor.maps import load_map
+    from corridor.world import WorldConfig
+    from sumo_scenarios.sim import SimConfig
+    from torchcbl import ConfidentTeacher
+
+    cases = {
+        "map": ("Corridor", {"corridor_map": load_map("lshape")}, "map_name=", "corridor"),
+        "robot": (
+            "Corridor",
+            {"world_config": WorldConfig.legged_robot()},
+            "world_config=",
+            "corridor",
+        ),
+        "sim": ("Driving", {"sim": SimConfig(step_length_s=0.5)}, "sim=", "sumo_scenarios"),
+    }
+    for name, (domain, kwargs, keyword, package) in cases.items():
+        env = gym.make(f"torchcbl/{domain}-v0", **kwargs)
+        ConfidentTeacher(env, lambda o, i: 0, run_dir=tmp_path / name, progress=False).run(
+            max_steps=2
+        ).close()
+        env.close()
+        capsys.readouterr()
+        assert main(["evaluate", str(tmp_path / name)]) == 2
+        err = capsys.readouterr().err
+        assert len(err.splitlines()) == 1, err
+        assert f"pass {keyword} (" in err
+        assert f"to {package}.experiment.evaluate_saved_policy in Python" in err, err
+
+
 def _scripted_corridor_person(monkeypatch) -> None:
     """`torchcbl teach corridor` with a scripted person at the terminal (answering "forward"
     to every request) and a budget of 5 demonstrations."""
