@@ -46,7 +46,7 @@ rm -f "$STAMP"
 .venv/bin/python -m pip install -q --upgrade pip
 if ! .venv/bin/python -m pip install -q ${TORCH_INDEX_URL:+--index-url "$TORCH_INDEX_URL"} "torch==2.13.0"; then
   echo "set-up: torch 2.13.0 could not be installed; falling back to the newest torch>=2.2" >&2
-  .venv/bin/python -m pip install -q "torch>=2.2"
+  .venv/bin/python -m pip install -q ${TORCH_INDEX_URL:+--index-url "$TORCH_INDEX_URL"} "torch>=2.2"
 fi
 .venv/bin/python -m pip install -q -e ".[test]"
 echo "$want" > "$STAMP"
