@@ -6,7 +6,8 @@ Sections (``--sections``, default all):
            (incremental) runs at every step; the full refit (``fit`` on all data, today's loop)
            is timed at every ``--full-every``-th step, right after the incremental refit of the
            same step (alternation: a slow spell of the machine hits both), and its total is
-           the sum of those times times ``--full-every`` (1 = every step, exact but ~10 min).
+           the sum of those times times ``--full-every``, the last one standing also for the
+           steps after it when ``--n`` is no multiple (1 = every step, exact but ~10 min).
            Targets: total incremental <= 1/10 of total full; the final incremental model's
            mean log-likelihood per point, per action, within 1 % of (or better than) a full
            fit's on the same data; >= 99 % agreement of the picked actions on 5,000 held-out

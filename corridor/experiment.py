@@ -1011,8 +1011,8 @@ def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs")
     before 2026-11-27) passes."""
     from torchcbl.session import load_config
 
-    inputs = (load_config(session_dir).get("env") or {}).get("inputs") or {}
-    kept = inputs.get("corridor_map_sha256")
+    env = load_config(session_dir).get("env") or {}
+    kept = (env.get("inputs") or {}).get("corridor_map_sha256")
     if not isinstance(kept, str):
         return
     shipped = map_name in available_maps()
@@ -1029,7 +1029,7 @@ def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs")
     if now == kept:
         return
     digests = f"(its digest is {now[:12]}..., the session's map's {kept[:12]}...)"
-    if source == "default":
+    if source == "default" and not env.get("id"):  # no gymnasium.make: the map was an object
         raise ValueError(
             f"{session_dir} was taught on a map its config does not name (its env was made "
             f"without gymnasium.make, e.g. CorridorEnv(my_map)), not {what}, the default "
@@ -1055,7 +1055,8 @@ def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs")
             f"{session_dir} was taught on another map than {what}, which its run's "
             f"{session_dir.parent.parent / 'results.json'} names {digests}: {cause}, or "
             f"results.json was edited; {fix}, or restore the run directory as the experiment "
-            "wrote it (map_name= drives another map on purpose)"
+            "wrote it; to drive another map on purpose, "
+            + _pass_to_evaluate("map_name", "a shipped map name or a map JSON path")
         )
     how = f": {cause}" if shipped else ""
     raise ValueError(

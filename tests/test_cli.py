@@ -616,7 +616,9 @@ def test_summary_md_of_a_driving_run_is_markdown_too(tmp_path, monkeypatch):
     assert "+-" not in text
 
 
-def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(corridor_run, tmp_path):
+def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(
+    corridor_run, tmp_path, capsys
+):
     """An experiment's session: the map of its results.json; a session of gymnasium.make's env:
     the corridor_map it was made with; neither: the default map."""
     import shutil
@@ -644,6 +646,9 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(corridor
     (copy / "results.json").write_text(json.dumps(results))
     with pytest.raises(ValueError, match="on another map than the shipped map 'lshape', which"):
         evaluate_saved_policy(copy / "sessions" / "seed0", n_steps=5)
+    assert main(["evaluate", str(copy / "sessions" / "seed0"), "--steps", "5"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "to corridor.experiment.evaluate_saved_policy in Python" in err
     env = gym.make("torchcbl/Corridor-v0", corridor_map="lshape")
     ConfidentTeacher(env, lambda o, i: 0, run_dir=tmp_path / "made", progress=False).run(
         max_steps=3

@@ -289,6 +289,15 @@ def test_a_session_keeps_its_map_and_refuses_another_on_resume(tmp_path):
     with pytest.raises(ValueError, match="a map its config does not name .* pass map_name="):
         evaluate_saved_policy(run, n_steps=3)
     assert evaluate_saved_policy(run, n_steps=3, map_name="lshape")["map"] == "lshape"
+    # made by gymnasium.make on the default map, which a later torchcbl ships changed
+    made = tmp_path / "made"
+    with ConfidentTeacher(gym.make(corridor.ENV_ID), expert, run_dir=made, progress=False) as ct:
+        ct.run(max_steps=3)
+    config = json.loads((made / "config.json").read_text())
+    config["env"]["inputs"]["corridor_map_sha256"] = "0" * 64  # as another version's figure2
+    (made / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match="'figure2', which has changed .* ships another version"):
+        evaluate_saved_policy(made, n_steps=3)
 
 
 # ---------------------------------------------------------------- env

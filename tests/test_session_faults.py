@@ -1621,6 +1621,14 @@ def test_a_session_killed_between_its_config_and_its_log_resumes_as_a_new_one(
     ) as ct:
         ct.run(max_steps=30)
     assert load_records(run) == load_records(whole)
+    # a session that ran, without its journal, writers file and checkpoints: read as it is,
+    # and the look at its log for tables creates no -wal or -shm (a reader writes nothing)
+    bare = tmp_path / "bare"
+    shutil.copytree(whole, bare)
+    for path in (bare / "steps.journal", bare / "writers.jsonl", *bare.glob("checkpoints/*")):
+        path.unlink()
+    assert load_records(bare) == load_records(whole)
+    assert not list(bare.glob("steps.sqlite-*"))
     # a log deleted from a session that ran is still named, not taken for an unborn one,
     # with its writers file and checkpoints gone too (its journal says it opened)
     for path in (whole / "steps.sqlite", whole / "writers.jsonl", *whole.glob("checkpoints/*")):

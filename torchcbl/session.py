@@ -1186,8 +1186,11 @@ def _unborn(run_dir: Path) -> bool:
     log = run_dir / LOG_NAME
     if not log.exists() or log.stat().st_size == 0:
         return True
-    try:  # (read only: the -wal, if any, is read through a private connection of its own)
-        db = sqlite3.connect(f"{log.resolve().as_uri()}?mode=ro", uri=True)
+    # read only, as the readers open a log: immutable=1 creates no -wal or -shm file; with a
+    # -wal there (its tables may be only in it), mode=ro
+    mode = "mode=ro" if log.with_name(LOG_NAME + "-wal").exists() else "immutable=1"
+    try:
+        db = sqlite3.connect(f"{log.resolve().as_uri()}?{mode}", uri=True)
         try:
             found = db.execute(
                 "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'steps'"
