@@ -394,3 +394,24 @@ def test_a_correcting_teacher_pickles_like_the_teacher_it_wraps():
     back = pickle.loads(pickle.dumps(correcting(_right_of_zero)))
     obs = np.array([0.5, -1.0])
     assert back(obs, {}) == 1 and back.correct(obs, {}, 0) == 1 and back.correct(obs, {}, 1) is None
+
+
+def test_a_strategy_class_instead_of_an_instance_is_a_clear_error(tmp_path):
+    """A class has the protocol's methods, unbound: it passed the check and failed in bind()
+    with "missing 1 required positional argument: 'self'"."""
+    from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+    env = rare_regions_world(episode_length=10)
+    with pytest.raises(
+        TypeError,
+        match=r"got the class ConfidenceBasedAutonomy.*"
+        r"strategy=ConfidenceBasedAutonomy\(\)",
+    ):
+        ConfidentTeacher(
+            env,
+            oracle(env),
+            strategy=ConfidenceBasedAutonomy,
+            run_dir=tmp_path / "r",
+            progress=False,
+        )
+    assert not (tmp_path / "r").exists()

@@ -294,6 +294,11 @@ def _pick_strategy(rule: Any, strategy: Any) -> Any:
         )
     if strategy is None:
         return ConfidentExecution(rule)
+    if isinstance(strategy, type):  # its methods are there, unbound: bind() would lack self
+        raise TypeError(
+            f"strategy: expected a strategy object, got the class {strategy.__name__}; pass an "
+            f"instance, e.g. strategy={strategy.__name__}()."
+        )
     for name in _STRATEGY_METHODS:
         if not callable(getattr(strategy, name, None)):
             raise TypeError(
