@@ -415,3 +415,16 @@ def test_a_strategy_class_instead_of_an_instance_is_a_clear_error(tmp_path):
             progress=False,
         )
     assert not (tmp_path / "r").exists()
+
+
+def test_a_rule_class_instead_of_an_instance_is_a_clear_error(tmp_path):
+    """A rule class has is_confident and update, unbound: it passed the check and failed at
+    bind() with "missing 1 required positional argument: 'self'"."""
+    env = rare_regions_world(episode_length=10)
+    with pytest.raises(TypeError, match=r"got the class DistanceRule.*DistanceRule\(\)"):
+        ConfidentExecution(DistanceRule)
+    with pytest.raises(TypeError, match=r"got the class PosteriorRule.*PosteriorRule\(\)"):
+        ConfidentTeacher(
+            env, oracle(env), rule=PosteriorRule, run_dir=tmp_path / "r", progress=False
+        )
+    assert not (tmp_path / "r").exists()

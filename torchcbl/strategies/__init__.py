@@ -172,6 +172,11 @@ class ConfidentExecution(_Phased):
     def __init__(self, rule: Any = None) -> None:
         super().__init__()
         self.rule = DistanceRule() if rule is None else rule
+        if isinstance(self.rule, type):  # its methods are there, unbound: they would lack self
+            raise TypeError(
+                f"rule: expected a ConfidenceRule object, got the class {self.rule.__name__}; "
+                f"pass an instance, e.g. {self.rule.__name__}()."
+            )
         if not (
             callable(getattr(self.rule, "is_confident", None))
             and callable(getattr(self.rule, "update", None))
