@@ -234,6 +234,8 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
     "argv, message",
     [
         (["--strategies", "bc,nope"], "--strategies: unknown ['nope']"),
+        # "" names no strategy (as --envs "" names no env), not all six
+        (["--strategies", "", "--envs", "", "--gym-env", "X-v0"], "--strategies '' names no"),
         (["--envs", "mars"], "--envs: unknown ['mars']"),
         # a repeated name: the Python API's "give each EnvSpec its own name=", after the header
         (["--envs", "corridor,corridor"], "--envs corridor,corridor: ['corridor'] given more"),

@@ -729,7 +729,8 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
 
     from torchcbl import benchmark as bm
 
-    names = [s for s in args.strategies.split(",") if s] if args.strategies else None
+    # None: all shipped; "" names none (an error below), as --envs "" names no domain env
+    names = [s for s in args.strategies.split(",") if s] if args.strategies is not None else None
     if names is None:
         names = [
             n
