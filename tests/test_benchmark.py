@@ -234,6 +234,8 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
     "argv, message",
     [
         (["--strategies", "bc,nope"], "--strategies: unknown ['nope']"),
+        # "" names no strategy (as --envs "" names no env), not all six
+        (["--strategies", "", "--envs", "", "--gym-env", "X-v0"], "--strategies '' names no"),
         (["--envs", "mars"], "--envs: unknown ['mars']"),
         # a repeated name: the Python API's "give each EnvSpec its own name=", after the header
         (["--envs", "corridor,corridor"], "--envs corridor,corridor: ['corridor'] given more"),
@@ -259,6 +261,11 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
             "--teacher .rel:fn:",
         ),
         (["--max-steps", "-5"], "argument --max-steps: expected a whole number >= 1"),
+        (
+            ["--envs", "", "--gym-env", "_bench_env:BenchCluster-v0", "--teacher"]
+            + ["_bench_env:teacher", "--max-steps", "50"],
+            "--budgets 10,20,40,80 (the default): [80] above --max-steps 50",
+        ),
         (
             ["--envs", "", "--gym-env", "CartPole-v1", "--teacher", "nomod:fn"],
             "--teacher nomod:fn: No module named 'nomod'",
@@ -375,6 +382,8 @@ def test_a_score_the_env_never_feeds_is_called_out_not_read_as_instant_learning(
         ({"eval_seeds": (1.5,)}, "eval_seeds must be a non-empty tuple of ints"),
         ({"budgets": (True,)}, "budgets must be increasing ints"),
         ({"max_steps": True}, "max_steps must be an int"),
+        # one label per step at most: budget 20 of 15 steps is never reached by any strategy
+        ({"max_steps": 15}, r"budgets \[20\] are above max_steps 15; .* raise max_steps"),
     ],
 )
 def test_an_env_spec_refuses_what_every_worker_would_fail_on(bad, message):

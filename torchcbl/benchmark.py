@@ -249,7 +249,8 @@ class EnvSpec:
         env_id: gymnasium id; ``"module:Id"`` imports ``module`` (which registers it) first.
         teacher: import path of ``factory(env=..., seed=..., **teacher_kwargs) -> teacher``.
         budgets: label budgets at which the model is snapshotted (increasing).
-        max_steps: cap on teaching steps per cell (a strategy that stops asking ends here).
+        max_steps: cap on teaching steps per cell (a strategy that stops asking ends here); at
+            least the last budget (a step brings one label at most).
         env_kwargs: ``gymnasium.make`` keyword arguments of the teaching env.
         eval_env_kwargs: overrides of ``env_kwargs`` for the evaluation env.
         teacher_kwargs: extra keyword arguments of the teacher factory.
@@ -295,6 +296,14 @@ class EnvSpec:
         if not _is_int(self.max_steps) or self.max_steps < 1:
             raise ValueError(
                 f"EnvSpec {self.name!r}: max_steps must be an int >= 1, got {self.max_steps!r}"
+            )
+        above = [int(x) for x in b if x > self.max_steps]
+        if above:  # a step brings one label at most (a request's, or a correction's)
+            raise ValueError(
+                f"EnvSpec {self.name!r}: budgets {above} are above max_steps {self.max_steps}; "
+                "a cell takes at most one label per step, so no strategy could reach them and "
+                "their performance_at_budget would be read at fewer labels; raise max_steps "
+                "or drop those budgets"
             )
         if self.eval_episodes is None and self.eval_steps is None:
             raise ValueError(f"EnvSpec {self.name!r}: give eval_episodes and/or eval_steps")

@@ -729,7 +729,8 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
 
     from torchcbl import benchmark as bm
 
-    names = [s for s in args.strategies.split(",") if s] if args.strategies else None
+    # None: all shipped; "" names none (an error below), as --envs "" names no domain env
+    names = [s for s in args.strategies.split(",") if s] if args.strategies is not None else None
     if names is None:
         names = [
             n
@@ -807,14 +808,25 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                 bm._import(path)
             except (ValueError, ImportError, TypeError) as exc:  # TypeError: a relative name
                 raise _UsageError(f"{option} {path}: {_one_line(exc)}") from None
+        budgets, max_steps = args.budgets or (10, 20, 40, 80), args.max_steps or 1000
+        above = [b for b in budgets if b > max_steps]
+        if above:  # as EnvSpec refuses them, in the options' names
+            raise _UsageError(
+                f"--budgets {','.join(map(str, budgets))}"
+                + ("" if args.budgets else " (the default)")
+                + f": {above} above --max-steps {max_steps}"
+                + ("" if args.max_steps else " (the default)")
+                + "; a cell takes at most one label per step, so no strategy could reach them; "
+                "raise --max-steps or give --budgets up to it"
+            )
         try:
             envs.append(
                 bm.EnvSpec(
                     name=args.gym_env,
                     env_id=args.gym_env,
                     teacher=args.teacher,
-                    budgets=args.budgets or (10, 20, 40, 80),
-                    max_steps=args.max_steps or 1000,
+                    budgets=budgets,
+                    max_steps=max_steps,
                     score=score,
                     # 10 episodes unless --eval-steps alone says how long an evaluation is
                     eval_episodes=args.eval_episodes or (None if args.eval_steps else 10),
