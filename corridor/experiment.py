@@ -71,7 +71,7 @@ from corridor.env import DEFAULT_MAP, CorridorEnv, _circuit_actions
 from corridor.expert import CorridorExpert
 from corridor.maps import CorridorMap, available_maps, load_map, map_digest
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
-from torchcbl.evaluation import mean_sd, progress_bar, run_versions, worker_pool
+from torchcbl.evaluation import figure_style, mean_sd, progress_bar, run_versions, worker_pool
 
 if TYPE_CHECKING:
     from torchcbl import GaussianMixtureSet, TeachingConfig
@@ -856,6 +856,7 @@ _FIGURE_FIELDS = (
 )
 
 
+@figure_style()
 def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     """Redraw Figures 3 and 4 and the map of a run directory from its first seed's session.
 

@@ -22,6 +22,7 @@ from matplotlib.patches import Circle
 
 from corridor.maps import CorridorMap
 from corridor.world import SENSOR_NAMES, CorridorWorld
+from torchcbl.evaluation import figure_style
 
 __all__ = [
     "ACTION_COLORS",
@@ -111,6 +112,7 @@ def draw_robot(
         )
 
 
+@figure_style()
 def map_figure(
     world: CorridorWorld,
     path: Sequence[tuple[float, float]] | None = None,
@@ -142,6 +144,7 @@ def map_figure(
     return fig
 
 
+@figure_style()
 def render_rgb(
     world: CorridorWorld,
     path: Sequence[tuple[float, float]] | None = None,
@@ -156,6 +159,7 @@ def render_rgb(
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
 
+@figure_style()
 def save_png(fig_or_rgb: Figure | np.ndarray, path: str | Path) -> Path:
     """Write a figure or an RGB array to a PNG file; returns the path."""
     path = Path(path)

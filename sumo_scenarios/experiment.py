@@ -45,7 +45,13 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from sumo_scenarios import metrics
-from torchcbl.evaluation import check_workers_start, mean_sd, progress_bar, run_versions
+from torchcbl.evaluation import (
+    check_workers_start,
+    figure_style,
+    mean_sd,
+    progress_bar,
+    run_versions,
+)
 
 if TYPE_CHECKING:
     from sumo_scenarios.sim import SimConfig
@@ -902,6 +908,7 @@ def paired_interval(diffs: Sequence[float]) -> dict[str, Any]:
     return {"mean": m, "sd": sd, "n": int(d.size), "ci95": [m - half, m + half]}
 
 
+@figure_style()
 def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     """Draw Figures 6-10 of a run from its ``results`` into ``run_dir`` (created if need be:
     the run's own directory, or another one to redraw the figures apart).

@@ -14,11 +14,13 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
 from sumo_scenarios.scenarios import CAR_LENGTH_M, N_LANES, _is_real
+from torchcbl.evaluation import figure_style
 
 LANE_WIDTH_M = 3.2
 _CAR_WIDTH_M = 1.8
 
 
+@figure_style()
 def render_frame(
     frame: object, *, behind_m: float = 30.0, ahead_m: float = 60.0, dpi: int = 80
 ) -> np.ndarray:

@@ -427,6 +427,26 @@ def test_render_rgb():
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 5  # not blank
 
 
+def test_frames_and_run_figures_keep_their_look_whatever_the_callers_style(tmp_path):
+    """A notebook's style (plt.style.use("dark_background"), rcParams) changed the env's frames
+    and the PNGs an experiment writes into its run directory; they are drawn in matplotlib's
+    default style now, and the caller's settings are as they were afterwards."""
+    import matplotlib
+    import matplotlib.style
+
+    from corridor.render import map_figure, render_rgb, save_png
+
+    world = CorridorWorld("lshape")
+    plain = render_rgb(world)
+    save_png(map_figure(world), tmp_path / "plain.png")
+    with matplotlib.style.context("dark_background"), matplotlib.rc_context({"lines.linewidth": 6}):
+        dark = render_rgb(world)
+        save_png(map_figure(world), tmp_path / "dark.png")
+        assert matplotlib.rcParams["lines.linewidth"] == 6  # the caller's, back
+    np.testing.assert_array_equal(dark, plain)
+    assert (tmp_path / "dark.png").read_bytes() == (tmp_path / "plain.png").read_bytes()
+
+
 def test_render_rgb_names_readings_of_the_wrong_length():
     """Readings that are not the three ranges gave zip's 'argument 3 is shorter than
     arguments 1-2'; now a ValueError that says what readings are."""

@@ -56,7 +56,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from torchcbl.evaluation import mean_sd, run_versions, worker_pool
+from torchcbl.evaluation import figure_style, mean_sd, run_versions, worker_pool
 from torchcbl.records import _is_int
 
 __all__ = [
@@ -1017,6 +1017,7 @@ def format_table(summary: Mapping[str, Any]) -> str:
     return "\n".join(rows)
 
 
+@figure_style()
 def plot_curves(
     cells: Sequence[Mapping[str, Any]], path: str | os.PathLike[str], *, envs: Sequence[str]
 ) -> Path:

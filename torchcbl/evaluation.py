@@ -14,7 +14,14 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_workers_start", "mean_sd", "progress_bar", "run_versions", "worker_pool"]
+__all__ = [
+    "check_workers_start",
+    "figure_style",
+    "mean_sd",
+    "progress_bar",
+    "run_versions",
+    "worker_pool",
+]
 
 
 def progress_bar(*, total: int | None, desc: str, unit: str, show: bool) -> Any:
@@ -30,6 +37,18 @@ def progress_bar(*, total: int | None, desc: str, unit: str, show: bool) -> Any:
     else:
         from tqdm import tqdm
     return tqdm(total=total, desc=desc, unit=unit, disable=not show)
+
+
+@contextlib.contextmanager
+def figure_style() -> Iterator[None]:
+    """Matplotlib's default style for the figures drawn inside: a run directory's PNGs and a
+    rendered frame come out the same whatever the caller's rcParams, ``matplotlibrc`` or
+    ``plt.style.use`` (a notebook's dark theme), and the caller's settings are back afterwards.
+    The backend is left alone. Also a decorator: ``@figure_style()``."""
+    import matplotlib.style
+
+    with matplotlib.style.context("default"):
+        yield
 
 
 def mean_sd(values: Iterable[float | None]) -> dict[str, float | int | None]:
