@@ -88,3 +88,17 @@ def test_notebook_02_redraws_its_live_plot_at_most_about_once_a_second():
     elapsed = time.monotonic() - start
     assert len(scope["ct"].records) == 400
     assert len(updates) <= elapsed + 2, (len(updates), elapsed)
+
+
+def test_notebook_02_prints_the_threshold_its_prose_gives(capsys):
+    """Its prose reads the paper's rule as 2.83 std in 3-D; its set-up cell printed the rule as
+    ``DistanceRule(quantile=0.9544997361036416)``, a number the prose never names."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "02_corridor_teaching.ipynb", as_version=4)
+    setup = next(c.source for c in nb.cells if c.cell_type == "code")
+    scope: dict = {}
+    exec("\n".join(ln for ln in setup.splitlines() if not ln.startswith("%")), scope)
+    shown = f"{scope['rule'].threshold(3):.2f} std"
+    assert shown == "2.83 std"
+    prose = "\n".join(c.source for c in nb.cells if c.cell_type == "markdown")
+    assert shown in prose and shown in capsys.readouterr().out
