@@ -102,3 +102,18 @@ def test_notebook_02_prints_the_threshold_its_prose_gives(capsys):
     assert shown == "2.83 std"
     prose = "\n".join(c.source for c in nb.cells if c.cell_type == "markdown")
     assert shown in prose and shown in capsys.readouterr().out
+
+
+def test_the_notebooks_import_nothing_they_do_not_use():
+    """A newcomer copies a notebook's imports; 03 imported numpy and never used it (ruff
+    skips the notebooks, see pyproject.toml, so only this catches it)."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("ruff")
+    run = subprocess.run(
+        [sys.executable, "-m", "ruff", "check", "--no-cache", "--select", "F401", str(NOTEBOOKS)],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
