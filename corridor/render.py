@@ -112,7 +112,6 @@ def draw_robot(
         )
 
 
-@figure_style()
 def map_figure(
     world: CorridorWorld,
     path: Sequence[tuple[float, float]] | None = None,
@@ -159,7 +158,6 @@ def render_rgb(
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
 
-@figure_style()
 def save_png(fig_or_rgb: Figure | np.ndarray, path: str | Path) -> Path:
     """Write a figure or an RGB array to a PNG file; returns the path."""
     path = Path(path)

@@ -14,7 +14,6 @@ from typing import Any
 import numpy as np
 
 from sumo_scenarios.scenarios import LANE_NAMES, N_LANES, _as_int
-from torchcbl.evaluation import figure_style
 
 __all__ = [
     "collision_rate",
@@ -103,7 +102,6 @@ def windowed_accuracy(correct: Sequence[bool] | np.ndarray, window: int = 150) -
     return (cs[idx] - cs[lo]) / (idx - lo)
 
 
-@figure_style()
 def plot_accuracy(
     ax: Any,
     accuracy: Sequence[float] | np.ndarray,
@@ -124,7 +122,6 @@ def plot_accuracy(
     ax.set_ylim(0, 100)
 
 
-@figure_style()
 def plot_lane_bars(
     ax: Any,
     labels: Sequence[str],
@@ -158,7 +155,6 @@ def plot_lane_bars(
     ax.legend(fontsize=7, ncol=5, loc="upper center", bbox_to_anchor=(0.5, -0.18))
 
 
-@figure_style()
 def plot_confidence_trace(
     ax: Any,
     distances: Sequence[float] | np.ndarray,

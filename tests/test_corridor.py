@@ -427,24 +427,28 @@ def test_render_rgb():
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 5  # not blank
 
 
-def test_frames_and_run_figures_keep_their_look_whatever_the_callers_style(tmp_path):
-    """A notebook's style (plt.style.use("dark_background"), rcParams) changed the env's frames
-    and the PNGs an experiment writes into its run directory; they are drawn in matplotlib's
-    default style now, and the caller's settings are as they were afterwards."""
+def test_frames_keep_their_look_whatever_the_callers_style():
+    """A notebook's style (plt.style.use("dark_background"), rcParams) changed the env's
+    frames (and the PNGs an experiment writes into its run directory); they are drawn in
+    matplotlib's default style now, the caller's settings as they were afterwards, also when
+    threads render at once. A Figure handed back to draw on (map_figure) keeps the caller's
+    style: what the caller adds to it matches it."""
+    from concurrent.futures import ThreadPoolExecutor
+
     import matplotlib
     import matplotlib.style
 
-    from corridor.render import map_figure, render_rgb, save_png
+    from corridor.render import map_figure, render_rgb
 
     world = CorridorWorld("lshape")
     plain = render_rgb(world)
-    save_png(map_figure(world), tmp_path / "plain.png")
     with matplotlib.style.context("dark_background"), matplotlib.rc_context({"lines.linewidth": 6}):
-        dark = render_rgb(world)
-        save_png(map_figure(world), tmp_path / "dark.png")
+        np.testing.assert_array_equal(render_rgb(world), plain)
+        with ThreadPoolExecutor(4) as pool:
+            for frame in pool.map(lambda _: render_rgb(world), range(12)):
+                np.testing.assert_array_equal(frame, plain)
         assert matplotlib.rcParams["lines.linewidth"] == 6  # the caller's, back
-    np.testing.assert_array_equal(dark, plain)
-    assert (tmp_path / "dark.png").read_bytes() == (tmp_path / "plain.png").read_bytes()
+        assert map_figure(world).get_facecolor()[:3] == (0.0, 0.0, 0.0)  # the caller's style
 
 
 def test_render_rgb_names_readings_of_the_wrong_length():

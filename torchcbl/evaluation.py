@@ -7,6 +7,7 @@ import multiprocessing as mp
 import platform
 import signal
 import sys
+import threading
 from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -39,15 +40,23 @@ def progress_bar(*, total: int | None, desc: str, unit: str, show: bool) -> Any:
     return tqdm(total=total, desc=desc, unit=unit, disable=not show)
 
 
+# matplotlib's style is process-wide (rcParams): contexts entered in several threads at once
+# would each restore what another set, and the caller's settings would be lost for good
+_STYLE_LOCK = threading.RLock()
+
+
 @contextlib.contextmanager
 def figure_style() -> Iterator[None]:
-    """Matplotlib's default style for the figures drawn inside: a run directory's PNGs and a
-    rendered frame come out the same whatever the caller's rcParams, ``matplotlibrc`` or
-    ``plt.style.use`` (a notebook's dark theme), and the caller's settings are back afterwards.
-    The backend is left alone. Also a decorator: ``@figure_style()``."""
+    """Matplotlib's default style for the figures drawn and written inside: a run directory's
+    PNGs and a rendered frame come out the same whatever the caller's rcParams,
+    ``matplotlibrc`` or ``plt.style.use`` (a notebook's dark theme), and the caller's settings
+    are back afterwards. The backend is left alone. matplotlib keeps its style for the whole
+    process, so the blocks of several threads take turns. Only for what is finished inside
+    the block (an RGB array, a PNG): a Figure handed back to a caller to draw on stays in the
+    caller's style. Also a decorator: ``@figure_style()``."""
     import matplotlib.style
 
-    with matplotlib.style.context("default"):
+    with _STYLE_LOCK, matplotlib.style.context("default"):
         yield
 
 
