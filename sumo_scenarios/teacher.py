@@ -76,7 +76,7 @@ from typing import Any
 
 import numpy as np
 
-from sumo_scenarios.scenarios import _as_int
+from sumo_scenarios.scenarios import _as_int, _is_real
 from torchcbl.teachers import HumanTiming, HumanTimingConfig
 
 __all__ = ["HumanDriver", "HumanDriverConfig", "make_teacher"]
@@ -240,6 +240,13 @@ class HumanDriverConfig:
                 object.__setattr__(self, name, tuple(float(x) for x in v))
 
 
+def _seconds(step_length_s: Any) -> float:
+    """A step length, seconds > 0 (a ValueError naming it otherwise)."""
+    if not (_is_real(step_length_s) and 0 < step_length_s < np.inf):
+        raise ValueError(f"step_length_s: expected seconds > 0, got {step_length_s!r}")
+    return float(step_length_s)
+
+
 class HumanDriver:
     """Lane preferences of a human driver: ``teacher(observation, info) -> action``.
 
@@ -267,13 +274,7 @@ class HumanDriver:
         seed: int = 0,
         step_length_s: float | None = None,
     ) -> None:
-        if step_length_s is not None and not (
-            isinstance(step_length_s, numbers.Real)
-            and not isinstance(step_length_s, (bool, np.bool_))
-            and 0 < step_length_s < np.inf
-        ):
-            raise ValueError(f"step_length_s: expected seconds > 0, got {step_length_s!r}")
-        self.step_length_s = None if step_length_s is None else float(step_length_s)
+        self.step_length_s = None if step_length_s is None else _seconds(step_length_s)
         if config is not None and not isinstance(config, HumanDriverConfig):
             raise TypeError(
                 f"config must be a HumanDriverConfig, got {type(config).__name__}; e.g. "
@@ -462,12 +463,7 @@ def timing_for_step_length(step_length_s: float) -> HumanTimingConfig:
     0.45 and 0.2, counted in 0.25 s steps) in steps of this length, a time between two step
     counts split between them so that the mean reaction time stays 0.2125 s. For 0.25 s, the
     default config itself."""
-    if not (
-        isinstance(step_length_s, numbers.Real)
-        and not isinstance(step_length_s, (bool, np.bool_))
-        and 0 < step_length_s < np.inf
-    ):
-        raise ValueError(f"step_length_s: expected seconds > 0, got {step_length_s!r}")
+    step_length_s = _seconds(step_length_s)
     default = HumanTimingConfig()
     if np.isclose(step_length_s, _TIMING_STEP_S):
         return default

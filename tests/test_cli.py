@@ -1037,6 +1037,22 @@ def _teach_on_a_map_file(tmp_path, monkeypatch) -> tuple[Path, Path, str]:
     return mine, run, original
 
 
+def _evaluate_and_resume_refuse(run: Path, capsys) -> list[str]:
+    """evaluate and teach --resume of the session in ``run``, each refused in one line with exit
+    code 2: their stderr."""
+    capsys.readouterr()
+    said = []
+    for argv in (
+        ["evaluate", str(run), "--steps", "3"],
+        ["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1, err
+        said.append(err)
+    return said
+
+
 def test_a_session_whose_own_map_file_moved_says_to_put_it_back(tmp_path, monkeypatch, capsys):
     """teach corridor --map PATH keeps the map by its full path; once the file is moved,
     evaluate and teach --resume say so in one line (exit code 2) and that the file goes back
@@ -1044,14 +1060,8 @@ def test_a_session_whose_own_map_file_moved_says_to_put_it_back(tmp_path, monkey
     an existing map JSON file", which neither command takes for a session.)"""
     mine, run, _ = _teach_on_a_map_file(tmp_path, monkeypatch)
     mine.rename(tmp_path / "moved.json")
-    capsys.readouterr()
-    for argv in (
-        ["evaluate", str(run), "--steps", "3"],
-        ["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"],
-    ):
-        assert main(argv) == 2, argv
-        err = capsys.readouterr().err
-        assert err.count("\n") == 1 and f"taught on the map file {mine}" in err, err
+    for err in _evaluate_and_resume_refuse(run, capsys):
+        assert f"taught on the map file {mine}" in err, err
         assert "put that file back there" in err
     assert len(load_records(run)) == 3
     (tmp_path / "moved.json").rename(mine)
@@ -1073,14 +1083,8 @@ def test_a_session_whose_own_map_file_changed_refuses_it(tmp_path, monkeypatch, 
     edited["nodes"]["B"] = [2.5, 0.0]  # a longer first corridor
     edited["nodes"]["C"] = [2.5, 1.0]
     mine.write_text(json.dumps(edited))
-    capsys.readouterr()
-    for argv in (
-        ["evaluate", str(run), "--steps", "3"],
-        ["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"],
-    ):
-        assert main(argv) == 2, argv
-        err = capsys.readouterr().err
-        assert err.count("\n") == 1 and f"taught on the map file {mine}, which has changed" in err
+    for err in _evaluate_and_resume_refuse(run, capsys):
+        assert f"taught on the map file {mine}, which has changed" in err, err
         assert "put the file back as it was" in err, err
     with pytest.raises(ValueError, match="which has changed since"):
         evaluate_saved_policy(run, n_steps=3)
