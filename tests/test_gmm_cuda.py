@@ -114,3 +114,23 @@ def test_a_far_observation_classifies_on_cuda_as_on_the_cpu() -> None:
         assert torch.isfinite(g.posterior).all()
         lc, lg = cpu.log_prob(rows), gpu.log_prob(rows)
         assert torch.equal(torch.isinf(lg.cpu()), torch.isinf(lc))
+
+
+def test_a_cuda_fit_and_refit_repeat_bit_for_bit() -> None:
+    """Same data and seed on the same GPU: the same model to the last bit (the README's
+    determinism note), for a fit large enough to spread its sums over many blocks."""
+    x, y = _data(n_per=3000, d=6)
+    more, more_y = _data(seed=7, n_per=200, d=6)
+    models = []
+    for _ in range(2):
+        m = _fit("cuda", x, y)
+        one = {k: v.clone() for k, v in m.state_dict().items()}
+        m.refit(np.concatenate([x, more]), np.concatenate([y, more_y]))
+        models.append((one, m.state_dict(), m.classify(more)))
+    (fit_a, refit_a, cls_a), (fit_b, refit_b, cls_b) = models
+    for a, b in ((fit_a, fit_b), (refit_a, refit_b)):
+        assert a.keys() == b.keys()
+        for key in a:
+            assert torch.equal(a[key], b[key]), key
+    assert torch.equal(cls_a.distance, cls_b.distance)
+    assert torch.equal(cls_a.posterior, cls_b.posterior)

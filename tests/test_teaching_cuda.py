@@ -166,3 +166,30 @@ def test_a_checkpoint_written_with_cuda_tensors_still_loads_without_cuda(tmp_pat
     np.testing.assert_array_equal(got[0], want)
     np.testing.assert_array_equal(got[2], want)
     assert not list((tmp_path / "gpu" / "checkpoints").glob("*.damaged*"))
+
+
+@pytest.mark.parametrize("name", ["ce", "cba"])
+def test_a_session_taught_on_cuda_is_reproduced_exactly_by_a_cuda_model(tmp_path, name):
+    """The determinism note (README, torchcbl.session): a session taught on a GPU is reproduced
+    exactly by a model on a GPU, both by teaching it again and by refitting it from its log."""
+    first = _teach("cuda", name, tmp_path / "a")
+    _teach("cuda", name, tmp_path / "b")
+    a, b = load_records(tmp_path / "a"), load_records(tmp_path / "b")
+    assert len(a) == 150
+    assert a == b  # every field, distances and posteriors to the last bit
+    # refitted from the log on a GPU: the checkpoints after the first set aside by hand
+    for path in sorted((tmp_path / "a" / "checkpoints").glob("model-*.pt"))[1:]:
+        path.unlink()
+    env = rare_regions_world(episode_length=10, spread=2.0)
+    back = ConfidentTeacher.resume(
+        tmp_path / "a",
+        env,
+        correcting(oracle(env)) if STRATEGIES[name][1] else oracle(env),
+        model=GaussianMixtureSet(3, 2, 4, seed=0).to("cuda"),
+        progress=False,
+    )
+    back.close()
+    live, refit = first.model.state_dict(), back.model.state_dict()
+    assert live.keys() == refit.keys()
+    for key in live:
+        assert torch.equal(live[key], refit[key]), key

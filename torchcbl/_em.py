@@ -74,6 +74,25 @@ def _indices(d: int, device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tens
     return i, j, full.reshape(-1), i * d + j, scale, j * d + i
 
 
+def index_sum(
+    base: Tensor, dim: int, index: Tensor, source: Tensor, *, copy: bool = False
+) -> Tensor:
+    """``base.index_add_(dim, index, source)`` (into a copy of ``base`` with ``copy``), summed in
+    the same order every run on every device.
+
+    On the CPU this is torch's ``index_add_``, a loop in index order. On CUDA ``index_add_``
+    adds with atomics, whose order, and so whose last bits, change from run to run (measured on
+    an H200: two fits of the same data and seed differed, and so did two teaching sessions); there
+    the sums go through ``index_put_(accumulate=True)``, torch's sort-based kernel, the one its
+    deterministic mode uses for ``index_add`` on CUDA.
+    """
+    out = base.clone() if copy else base
+    if out.device.type == "cpu":
+        return out.index_add_(dim, index, source)
+    out.movedim(dim, 0).index_put_((index,), source.movedim(dim, 0), accumulate=True)
+    return out
+
+
 def quadratic_features(x: Tensor) -> Tensor:
     """[..., D] -> z [..., Q]: (x_i x_j for i <= j, x, 1), Q = D (D + 1) / 2 + D + 1.
 
@@ -384,7 +403,7 @@ def _lloyd(
         labels = new_labels
         flat = (labels + base).view(-1)  # global component id of each (slot, point)
         # sums per (slot, component): one index_add over the points, in point order
-        sums = acc.zero_().index_add_(1, flat, weights).T.view(g, c, k, d + 1)
+        sums = index_sum(acc.zero_(), 1, flat, weights).T.view(g, c, k, d + 1)
         counts = sums[..., d:]
         centers = torch.where(counts > 0, sums[..., :d] / counts.clamp_min(1.0), centers)
     assert labels is not None
@@ -579,7 +598,7 @@ def _m_step_packed(bt: _Batch, resp: Tensor) -> tuple[Params, Tensor]:
     cov = stats.index_select(1, full).view(g, d, d, m).permute(0, 3, 1, 2)
     cov.sub_(means.unsqueeze(-1) * means.unsqueeze(-2)).add_(bt.floor_diag)
     wn = nk * bt.valid
-    wsum = torch.index_add(bt.row_pad, 0, bt.rows, wn.view(-1))
+    wsum = index_sum(bt.row_pad, 0, bt.rows, wn.view(-1), copy=True)
     weights = wn.div_(wsum.index_select(0, bt.rows).view(g, m))
     prec, log_det = _precision(cov)
     lin = (prec * means.unsqueeze(-2)).sum(-1)  # P mu (a batched matmul of 1-column products
@@ -625,7 +644,7 @@ def _e_step_packed(
         return torch.bmm(coef, bt.zt, out=bt.work) if bt.work is not None else coef @ bt.zt
 
     def sums(e: Tensor) -> tuple[Tensor, Tensor]:
-        s = torch.index_add(bt.pad_rows, 0, bt.rows, e.view(-1, n))
+        s = index_sum(bt.pad_rows, 0, bt.rows, e.view(-1, n), copy=True)
         return s, torch.log(s.view(b, r1, n))
 
     def safe(ls: Tensor) -> bool:
@@ -891,7 +910,7 @@ def warm_m_step(stats: Tensor, cand: Tensor, n_cand: int, floor: Tensor) -> tupl
     means = st[:, du : du + d]
     cov = st.index_select(-1, full).view(-1, d, d)
     cov.sub_(means.unsqueeze(-1) * means.unsqueeze(-2)).add_(torch.diag(floor))
-    tot = torch.zeros(n_cand, dtype=stats.dtype, device=stats.device).index_add_(0, cand, nk)
+    tot = index_sum(torch.zeros(n_cand, dtype=stats.dtype, device=stats.device), 0, cand, nk)
     return nk / tot.index_select(0, cand), means, cov
 
 

@@ -812,7 +812,7 @@ class GaussianMixtureSet(nn.Module):
 
         counts = torch.bincount(y, minlength=a_n)  # [A]
         counts_np = counts.cpu().numpy()
-        centers = torch.zeros(a_n, d, dtype=f64, device=dev).index_add_(0, y, x)
+        centers = _em.index_sum(torch.zeros(a_n, d, dtype=f64, device=dev), 0, y, x)
         centers = centers / counts.clamp_min(1).unsqueeze(1).to(f64)
         k_per_action = np.minimum(counts_np, kmax)  # 0 for an empty action
 

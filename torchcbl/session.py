@@ -115,8 +115,9 @@ it (recorded in ``writers.jsonl``), one thread being the sure case; the checkpoi
 present and matching, are loaded rather than refitted, which needs no particular thread count. A
 model on a GPU sums in another order than on the CPU (relative differences up to 5e-13 in the
 log-likelihoods measured by bench/bench_gmm_device.py), so a session taught on a GPU is
-reproduced exactly by a model on a GPU (``resume(model=...)``); ``writers.jsonl`` records each
-writer's model device.
+reproduced exactly by a model on the same kind of GPU (``resume(model=...)``; the EM's sums on
+CUDA run in a fixed order, checked on an H200 by tests/test_teaching_cuda.py);
+``writers.jsonl`` records each writer's model device.
 """
 
 from __future__ import annotations
