@@ -168,10 +168,11 @@ def test_a_checkpoint_written_with_cuda_tensors_still_loads_without_cuda(tmp_pat
     assert not list((tmp_path / "gpu" / "checkpoints").glob("*.damaged*"))
 
 
-@pytest.mark.parametrize("name", ["ce", "cba"])
+@pytest.mark.parametrize("name", sorted(STRATEGIES))
 def test_a_session_taught_on_cuda_is_reproduced_exactly_by_a_cuda_model(tmp_path, name):
     """The determinism note (README, torchcbl.session): a session taught on a GPU is reproduced
-    exactly by a model on a GPU, both by teaching it again and by refitting it from its log."""
+    exactly by a model on a GPU, both by teaching it again and by refitting it from its log, under
+    every shipped strategy."""
     first = _teach("cuda", name, tmp_path / "a")
     _teach("cuda", name, tmp_path / "b")
     a, b = load_records(tmp_path / "a"), load_records(tmp_path / "b")
