@@ -50,8 +50,9 @@ class EpisodeRecord:
     """One recorded episode.
 
     Attributes:
-        scenario: the traffic scenario (all its fields, so a replay does not depend on names).
-        sim: the SUMO settings.
+        scenario: the traffic scenario (all its fields, so a replay does not depend on names);
+            a scenario's name (``"train"``) is taken as that scenario.
+        sim: the SUMO settings (a :class:`~sumo_scenarios.sim.SimConfig`).
         episode_seed: the seed passed to ``reset`` (fixes the road segment).
         start_lane: the ego's lane at reset.
         actions: the executed actions, one per timestep.
@@ -69,6 +70,14 @@ class EpisodeRecord:
         def is_int(v: Any) -> bool:
             return isinstance(v, int | np.integer) and not isinstance(v, bool)
 
+        # the scenario itself, not its name: to_dict writes its fields, which from_dict (and
+        # so load_records) needs; a name was saved as the name, and the file read back refused
+        object.__setattr__(self, "scenario", get_scenario(self.scenario))
+        if not isinstance(self.sim, SimConfig):
+            raise ValueError(
+                f"sim: expected a SimConfig (sumo_scenarios.sim), got {type(self.sim).__name__} "
+                f"{self.sim!r:.60}"
+            )
         if not is_int(self.episode_seed) or self.episode_seed < 0:
             raise ValueError(f"episode_seed: expected an int >= 0, got {self.episode_seed!r}")
         if not is_int(self.start_lane) or not 0 <= self.start_lane < N_LANES:

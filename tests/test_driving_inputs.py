@@ -609,3 +609,20 @@ def test_the_keyboard_teachers_row_height_is_checked_when_it_is_made():
             describe(obs, metres_per_row=bad)
     assert describe(obs, metres_per_row=np.float32(5.0)) == describe(obs, metres_per_row=5.0)
     make_teacher(metres_per_row=5)
+
+
+def test_a_record_made_with_a_scenario_name_is_saved_as_one_load_records_reads(tmp_path):
+    # EpisodeRecord took scenario="train" and replayed it, and save_records wrote it as the name,
+    # which load_records (and torchcbl replay) then refused: "scenario and sim are dicts of
+    # their fields, got 'train'"; a sim that is no SimConfig failed only in the replay
+    from sumo_scenarios.replay import EpisodeRecord
+    from sumo_scenarios.scenarios import TRAIN
+
+    record = EpisodeRecord("train", SimConfig(), episode_seed=5, start_lane=2, actions=(0, 1))
+    assert record.scenario == TRAIN
+    save_records([record], tmp_path / "mine.json")
+    assert load_records(tmp_path / "mine.json") == [record]
+    with pytest.raises(ValueError, match=r"unknown scenario 'trian'"):
+        EpisodeRecord("trian", SimConfig(), episode_seed=5, start_lane=2, actions=(0,))
+    with pytest.raises(ValueError, match=r"sim: expected a SimConfig .* got dict"):
+        EpisodeRecord(TRAIN, {"step_length_s": 0.25}, episode_seed=5, start_lane=2, actions=(0,))
