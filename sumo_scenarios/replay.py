@@ -169,7 +169,8 @@ class EpisodeRecorder(gym.Wrapper):
 
     ``episodes`` lists finished and current episodes (the current one is in progress). An
     episode takes the ``label`` in force when it was reset; an episode in which no step was
-    taken (a reset followed at once by another) is not recorded.
+    taken (a reset followed at once by another) is not recorded. A reset the env refuses
+    (a bad seed or option) ends nothing: the episode it left running goes on being recorded.
     """
 
     def __init__(self, env: gym.Env, label: str = "") -> None:
@@ -182,8 +183,10 @@ class EpisodeRecorder(gym.Wrapper):
         self._head: dict[str, Any] | None = None
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
-        self._flush()
+        # the episode ends once the env's reset has run: a reset it refuses (a bad option)
+        # leaves the episode running, and steps taken after it still belong to it
         obs, info = self.env.reset(**kwargs)
+        self._flush()
         base: DrivingEnv = self.env.unwrapped  # type: ignore[assignment]
         self._head = {
             "scenario": base.scenario,

@@ -626,3 +626,24 @@ def test_a_record_made_with_a_scenario_name_is_saved_as_one_load_records_reads(t
         EpisodeRecord("trian", SimConfig(), episode_seed=5, start_lane=2, actions=(0,))
     with pytest.raises(ValueError, match=r"sim: expected a SimConfig .* got dict"):
         EpisodeRecord(TRAIN, {"step_length_s": 0.25}, episode_seed=5, start_lane=2, actions=(0,))
+
+
+def test_the_recorder_keeps_recording_an_episode_a_refused_reset_left_running():
+    # a reset the env refuses (an unknown option) leaves its episode running, and stepping on
+    # is allowed; the recorder had closed that episode before the env's reset refused, so the
+    # steps that followed were recorded nowhere (and the record ended two steps early)
+    env = EpisodeRecorder(DrivingEnv(max_episode_steps=10))
+    try:
+        env.reset(seed=1)
+        env.step(0)
+        with pytest.raises(ValueError, match="unknown reset options"):
+            env.reset(seed=2, options={"ego_lan": 3})
+        env.step(1)
+        env.step(2)
+        (record,) = env.episodes
+        assert (record.episode_seed, record.actions) == (1, (0, 1, 2))
+        env.reset(seed=3)
+        env.step(0)
+    finally:
+        env.close()
+    assert [(e.episode_seed, e.actions) for e in env.episodes] == [(1, (0, 1, 2)), (3, (0,))]
