@@ -647,3 +647,18 @@ def test_the_recorder_keeps_recording_an_episode_a_refused_reset_left_running():
     finally:
         env.close()
     assert [(e.episode_seed, e.actions) for e in env.episodes] == [(1, (0, 1, 2)), (3, (0,))]
+
+
+def test_a_config_that_is_no_driving_config_is_named():
+    # DrivingEnv("eval") (the scenario given where the config goes) and gymnasium.make(...,
+    # config={...}) were AttributeError: "'str' object has no attribute 'scenario'"
+    import gymnasium
+
+    import sumo_scenarios
+
+    with pytest.raises(
+        TypeError, match=r"expected a DrivingConfig .*, got str 'eval'; .*scenario='eval'"
+    ):
+        DrivingEnv("eval")
+    with pytest.raises(TypeError, match=r"expected a DrivingConfig .*, got dict .*keywords"):
+        gymnasium.make(sumo_scenarios.ENV_ID, config={"scenario": "eval"})
