@@ -122,8 +122,14 @@ class EpisodeRecord:
                 "this episode was recorded with the old constant-speed traffic (lane_speeds_mph); "
                 "it cannot be replayed on today's car-following traffic: record it again"
             )
-        sc["mean_spacing_m"] = tuple(sc["mean_spacing_m"])
-        sc["speed_ranges_mph"] = tuple(tuple(r) for r in sc["speed_ranges_mph"])
+        # written by every to_dict since the traffic got per-car speeds: a default in their
+        # place would replay other traffic (TrafficScenario checks them and makes lists tuples)
+        lacking = [k for k in ("mean_spacing_m", "speed_ranges_mph") if k not in sc]
+        if lacking:
+            raise ValueError(
+                f"an episode record's scenario lacks {' and '.join(lacking)} (to_dict writes "
+                f"every field of the scenario), got the fields {sorted(map(str, sc))}"
+            )
         if not isinstance(d["actions"], list):
             raise ValueError(f"actions: expected a JSON list, got {d['actions']!r:.40}")
         return cls(  # the fields are checked as they are, not coerced (1.7 is no action)

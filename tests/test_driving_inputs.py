@@ -662,3 +662,24 @@ def test_a_config_that_is_no_driving_config_is_named():
         DrivingEnv("eval")
     with pytest.raises(TypeError, match=r"expected a DrivingConfig .*, got dict .*keywords"):
         gymnasium.make(sumo_scenarios.ENV_ID, config={"scenario": "eval"})
+
+
+def test_load_records_names_a_damaged_scenario_of_a_record(tmp_path):
+    # a record whose scenario lacked mean_spacing_m escaped load_records as KeyError
+    # ('mean_spacing_m'), and a per-lane field that is no list read "'int' object is not
+    # iterable"
+    from sumo_scenarios.replay import EpisodeRecord
+
+    record = EpisodeRecord("train", SimConfig(), episode_seed=5, start_lane=2, actions=(0,))
+    good = record.to_dict()
+    cases = (
+        ("mean_spacing_m", None, r"bad.json: .*scenario lacks mean_spacing_m"),
+        ("speed_ranges_mph", 5, r"bad.json: speed_ranges_mph needs one entry per normal lane"),
+    )
+    for field, value, says in cases:
+        scenario = {k: v for k, v in good["scenario"].items() if k != field}
+        if value is not None:
+            scenario[field] = value
+        (tmp_path / "bad.json").write_text(json.dumps([dict(good, scenario=scenario)]))
+        with pytest.raises(ValueError, match=says):
+            load_records(tmp_path / "bad.json")
