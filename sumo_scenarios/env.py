@@ -146,6 +146,18 @@ class DrivingEnv(gym.Env):
             config = DrivingConfig(**kwargs)
         elif kwargs:
             raise TypeError("pass either a DrivingConfig or keyword settings, not both")
+        elif not isinstance(config, DrivingConfig):  # "'str' object has no attribute ..."
+            hint = (
+                f"DrivingEnv(scenario={config!r}) for a scenario by name"
+                if isinstance(config, str)
+                else "the settings as keywords, DrivingEnv(scenario='eval', max_episode_steps="
+                "500) or gymnasium.make(ENV_ID, scenario='eval', ...), or config=DrivingConfig("
+                "scenario='eval', ...)"
+            )
+            raise TypeError(
+                f"config: expected a DrivingConfig (sumo_scenarios.env), got "
+                f"{type(config).__name__} {config!r:.60}; e.g. {hint}"
+            )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be None or one of {self.metadata['render_modes']} (the env "

@@ -50,8 +50,9 @@ class EpisodeRecord:
     """One recorded episode.
 
     Attributes:
-        scenario: the traffic scenario (all its fields, so a replay does not depend on names).
-        sim: the SUMO settings.
+        scenario: the traffic scenario (all its fields, so a replay does not depend on names);
+            a scenario's name (``"train"``) is taken as that scenario.
+        sim: the SUMO settings (a :class:`~sumo_scenarios.sim.SimConfig`).
         episode_seed: the seed passed to ``reset`` (fixes the road segment).
         start_lane: the ego's lane at reset.
         actions: the executed actions, one per timestep.
@@ -69,6 +70,14 @@ class EpisodeRecord:
         def is_int(v: Any) -> bool:
             return isinstance(v, int | np.integer) and not isinstance(v, bool)
 
+        # the scenario itself, not its name: to_dict writes its fields, which from_dict (and
+        # so load_records) needs; a name was saved as the name, and the file read back refused
+        object.__setattr__(self, "scenario", get_scenario(self.scenario))
+        if not isinstance(self.sim, SimConfig):
+            raise ValueError(
+                f"sim: expected a SimConfig (sumo_scenarios.sim), got {type(self.sim).__name__} "
+                f"{self.sim!r:.60}"
+            )
         if not is_int(self.episode_seed) or self.episode_seed < 0:
             raise ValueError(f"episode_seed: expected an int >= 0, got {self.episode_seed!r}")
         if not is_int(self.start_lane) or not 0 <= self.start_lane < N_LANES:
@@ -113,8 +122,14 @@ class EpisodeRecord:
                 "this episode was recorded with the old constant-speed traffic (lane_speeds_mph); "
                 "it cannot be replayed on today's car-following traffic: record it again"
             )
-        sc["mean_spacing_m"] = tuple(sc["mean_spacing_m"])
-        sc["speed_ranges_mph"] = tuple(tuple(r) for r in sc["speed_ranges_mph"])
+        # written by every to_dict since the traffic got per-car speeds: a default in their
+        # place would replay other traffic (TrafficScenario checks them and makes lists tuples)
+        lacking = [k for k in ("mean_spacing_m", "speed_ranges_mph") if k not in sc]
+        if lacking:
+            raise ValueError(
+                f"an episode record's scenario lacks {' and '.join(lacking)} (to_dict writes "
+                f"every field of the scenario), got the fields {sorted(map(str, sc))}"
+            )
         if not isinstance(d["actions"], list):
             raise ValueError(f"actions: expected a JSON list, got {d['actions']!r:.40}")
         return cls(  # the fields are checked as they are, not coerced (1.7 is no action)
@@ -160,7 +175,8 @@ class EpisodeRecorder(gym.Wrapper):
 
     ``episodes`` lists finished and current episodes (the current one is in progress). An
     episode takes the ``label`` in force when it was reset; an episode in which no step was
-    taken (a reset followed at once by another) is not recorded.
+    taken (a reset followed at once by another) is not recorded. A reset the env refuses
+    (a bad seed or option) ends nothing: the episode it left running goes on being recorded.
     """
 
     def __init__(self, env: gym.Env, label: str = "") -> None:
@@ -173,8 +189,10 @@ class EpisodeRecorder(gym.Wrapper):
         self._head: dict[str, Any] | None = None
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
-        self._flush()
+        # the episode ends once the env's reset has run: a reset it refuses (a bad option)
+        # leaves the episode running, and steps taken after it still belong to it
         obs, info = self.env.reset(**kwargs)
+        self._flush()
         base: DrivingEnv = self.env.unwrapped  # type: ignore[assignment]
         self._head = {
             "scenario": base.scenario,

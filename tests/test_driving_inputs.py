@@ -609,3 +609,77 @@ def test_the_keyboard_teachers_row_height_is_checked_when_it_is_made():
             describe(obs, metres_per_row=bad)
     assert describe(obs, metres_per_row=np.float32(5.0)) == describe(obs, metres_per_row=5.0)
     make_teacher(metres_per_row=5)
+
+
+def test_a_record_made_with_a_scenario_name_is_saved_as_one_load_records_reads(tmp_path):
+    # EpisodeRecord took scenario="train" and replayed it, and save_records wrote it as the name,
+    # which load_records (and torchcbl replay) then refused: "scenario and sim are dicts of
+    # their fields, got 'train'"; a sim that is no SimConfig failed only in the replay
+    from sumo_scenarios.replay import EpisodeRecord
+    from sumo_scenarios.scenarios import TRAIN
+
+    record = EpisodeRecord("train", SimConfig(), episode_seed=5, start_lane=2, actions=(0, 1))
+    assert record.scenario == TRAIN
+    save_records([record], tmp_path / "mine.json")
+    assert load_records(tmp_path / "mine.json") == [record]
+    with pytest.raises(ValueError, match=r"unknown scenario 'trian'"):
+        EpisodeRecord("trian", SimConfig(), episode_seed=5, start_lane=2, actions=(0,))
+    with pytest.raises(ValueError, match=r"sim: expected a SimConfig .* got dict"):
+        EpisodeRecord(TRAIN, {"step_length_s": 0.25}, episode_seed=5, start_lane=2, actions=(0,))
+
+
+def test_the_recorder_keeps_recording_an_episode_a_refused_reset_left_running():
+    # a reset the env refuses (an unknown option) leaves its episode running, and stepping on
+    # is allowed; the recorder had closed that episode before the env's reset refused, so the
+    # steps that followed were recorded nowhere (and the record ended two steps early)
+    env = EpisodeRecorder(DrivingEnv(max_episode_steps=10))
+    try:
+        env.reset(seed=1)
+        env.step(0)
+        with pytest.raises(ValueError, match="unknown reset options"):
+            env.reset(seed=2, options={"ego_lan": 3})
+        env.step(1)
+        env.step(2)
+        (record,) = env.episodes
+        assert (record.episode_seed, record.actions) == (1, (0, 1, 2))
+        env.reset(seed=3)
+        env.step(0)
+    finally:
+        env.close()
+    assert [(e.episode_seed, e.actions) for e in env.episodes] == [(1, (0, 1, 2)), (3, (0,))]
+
+
+def test_a_config_that_is_no_driving_config_is_named():
+    # DrivingEnv("eval") (the scenario given where the config goes) and gymnasium.make(...,
+    # config={...}) were AttributeError: "'str' object has no attribute 'scenario'"
+    import gymnasium
+
+    import sumo_scenarios
+
+    with pytest.raises(
+        TypeError, match=r"expected a DrivingConfig .*, got str 'eval'; .*scenario='eval'"
+    ):
+        DrivingEnv("eval")
+    with pytest.raises(TypeError, match=r"expected a DrivingConfig .*, got dict .*keywords"):
+        gymnasium.make(sumo_scenarios.ENV_ID, config={"scenario": "eval"})
+
+
+def test_load_records_names_a_damaged_scenario_of_a_record(tmp_path):
+    # a record whose scenario lacked mean_spacing_m escaped load_records as KeyError
+    # ('mean_spacing_m'), and a per-lane field that is no list read "'int' object is not
+    # iterable"
+    from sumo_scenarios.replay import EpisodeRecord
+
+    record = EpisodeRecord("train", SimConfig(), episode_seed=5, start_lane=2, actions=(0,))
+    good = record.to_dict()
+    cases = (
+        ("mean_spacing_m", None, r"bad.json: .*scenario lacks mean_spacing_m"),
+        ("speed_ranges_mph", 5, r"bad.json: speed_ranges_mph needs one entry per normal lane"),
+    )
+    for field, value, says in cases:
+        scenario = {k: v for k, v in good["scenario"].items() if k != field}
+        if value is not None:
+            scenario[field] = value
+        (tmp_path / "bad.json").write_text(json.dumps([dict(good, scenario=scenario)]))
+        with pytest.raises(ValueError, match=says):
+            load_records(tmp_path / "bad.json")
