@@ -571,3 +571,15 @@ def test_in_a_notebook_the_keys_are_typed_into_the_input_box():
 def test_in_a_notebook_whose_frontend_takes_no_input_the_error_says_so():
     out = _in_a_kernel(None)
     assert "RAISED" in out and "input box" in out and "torchcbl teach" in out, out
+
+
+def test_a_process_started_with_its_stdin_closed_has_no_input_to_read(monkeypatch):
+    """Python sets sys.stdin to None when fd 0 is closed (`torchcbl teach corridor <&-`): the
+    default TerminalTeacher failed with AttributeError "'NoneType' object has no attribute
+    'readline'" (the loop's TeacherError, exit code 1). No input is input closed."""
+    monkeypatch.setattr(sys, "stdin", None)
+    out = io.StringIO()
+    teacher = TerminalTeacher({"w": 0}, ("stay",), output=out)
+    with pytest.raises(TeachingInterrupted, match="teaching input closed"):
+        teacher(OBS, {})
+    assert out.getvalue().endswith(PROMPT.decode())

@@ -341,6 +341,8 @@ class TerminalTeacher:
         return None
 
     def _read_line(self) -> str:
+        if self._input is None:  # sys.stdin of a process started with fd 0 closed
+            return ""
         if isinstance(self._input, int):
             chunks = []
             while True:
