@@ -676,3 +676,14 @@ def test_human_timing_takes_numpy_and_0d_integer_answers():
     cfg = HumanTimingConfig(delay_probs=(1.0,), miss_prob=0.0, double_prob=0.0)
     for answer in (np.int64(2), np.array(2), torch.tensor(2)):
         assert HumanTiming(lambda obs, info, a=answer: a, cfg)(np.zeros(2), {"t": 0}) == 2
+
+
+def test_an_empty_run_dir_is_refused_not_taken_as_the_working_directory(tmp_path, monkeypatch):
+    """Path("") is ".": run_dir="" (say os.environ.get("RUN_DIR", "") meant as "none") wrote a
+    session's files among whatever the working directory held."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "notes.txt").write_text("mine")
+    env = rare_regions_world()
+    with pytest.raises(ValueError, match=r"run_dir: expected a directory path or None, got ''"):
+        ConfidentTeacher(env, oracle(env), run_dir="", progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
