@@ -506,3 +506,80 @@ def test_a_line_of_a_digit_that_is_no_number_is_an_invalid_key():
     )
     assert teacher(np.zeros(2), {}) == 1  # '²' refused, then the Arabic-Indic digit one
     assert "'²' is not a key here" in out.getvalue()
+
+
+_KERNEL_CELL = """
+import sys
+sys.path.insert(0, {root!r})
+import numpy as np
+from torchcbl.human import TerminalTeacher
+teacher = TerminalTeacher({{"w": 0, "a": 1}}, ("stay", "left"))
+try:
+    print("ANSWERS", teacher(np.zeros(1), {{}}), teacher(np.zeros(1), {{}}))
+except BaseException as exc:
+    print("RAISED", type(exc).__name__, exc)
+"""
+
+
+def _in_a_kernel(typed: list[str] | None) -> str:
+    """Run a cell that asks a default TerminalTeacher twice in a Jupyter kernel (whose stdin
+    is a closed pipe, as in a notebook) and answer its input requests with ``typed``, as the
+    notebook's input box would (None: a frontend that takes no input); the cell's output."""
+    jupyter_client = pytest.importorskip("jupyter_client")
+    pytest.importorskip("ipykernel")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    km, kc = jupyter_client.manager.start_new_kernel(kernel_name="python3")
+    try:
+        msg_id = kc.execute(_KERNEL_CELL.format(root=root), allow_stdin=typed is not None)
+        answers = list(typed or [])
+        out = []
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            if answers:
+                try:
+                    req = kc.get_stdin_msg(timeout=0.05)
+                except Exception:  # noqa: BLE001 - queue.Empty: no request yet
+                    req = None
+                if req is not None and req["msg_type"] == "input_request":
+                    kc.input(answers.pop(0))
+            try:
+                msg = kc.get_iopub_msg(timeout=0.05)
+            except Exception:  # noqa: BLE001 - queue.Empty
+                continue
+            if msg["parent_header"].get("msg_id") != msg_id:
+                continue
+            if msg["msg_type"] == "stream":
+                out.append(msg["content"]["text"])
+            elif msg["msg_type"] == "status" and msg["content"]["execution_state"] == "idle":
+                break
+        return "".join(out)
+    finally:
+        kc.stop_channels()
+        km.shutdown_kernel(now=True)
+
+
+def test_in_a_notebook_the_keys_are_typed_into_the_input_box():
+    """A notebook's kernel has a closed pipe as stdin: the default TerminalTeacher read end of
+    input there and raised TeachingInterrupted ("teaching input closed") at its first
+    decision, so a person could never teach from a notebook. It asks through the notebook's
+    input box (the kernel's input()) now; an empty entry asks again."""
+    out = _in_a_kernel(["", "a", "stay"])
+    assert "ANSWERS 1 0" in out, out
+    assert "not a key here" in out  # the empty entry
+
+
+def test_in_a_notebook_whose_frontend_takes_no_input_the_error_says_so():
+    out = _in_a_kernel(None)
+    assert "RAISED" in out and "input box" in out and "torchcbl teach" in out, out
+
+
+def test_a_process_started_with_its_stdin_closed_has_no_input_to_read(monkeypatch):
+    """Python sets sys.stdin to None when fd 0 is closed (`torchcbl teach corridor <&-`): the
+    default TerminalTeacher failed with AttributeError "'NoneType' object has no attribute
+    'readline'" (the loop's TeacherError, exit code 1). No input is input closed."""
+    monkeypatch.setattr(sys, "stdin", None)
+    out = io.StringIO()
+    teacher = TerminalTeacher({"w": 0}, ("stay",), output=out)
+    with pytest.raises(TeachingInterrupted, match="teaching input closed"):
+        teacher(OBS, {})
+    assert out.getvalue().endswith(PROMPT.decode())

@@ -645,3 +645,45 @@ def test_a_reset_answer_given_as_a_list_pair_is_taken():
     ct.run()
     assert ct.n_steps == 5
     assert len(evaluate_policy(lambda obs: 0, env, n_steps=5)) == 5
+
+
+@pytest.mark.parametrize("answer", [1.7, np.float64(2.0), "2", True, None])
+def test_human_timing_refuses_a_wrapped_answer_that_is_no_action_index(answer):
+    """HumanTiming passed the wrapped teacher's answer through int(): 1.7 became a
+    demonstration of action 1, "2" of action 2 and True of action 1, where the loop refuses
+    each from a bare teacher; None gave int()'s own message."""
+    from torchcbl import TeacherError
+    from torchcbl.teachers import HumanTiming, HumanTimingConfig
+
+    cfg = HumanTimingConfig(delay_probs=(1.0,), miss_prob=0.0, double_prob=0.0)
+    env = rare_regions_world(episode_length=5)
+    ct = ConfidentTeacher(
+        env,
+        HumanTiming(lambda obs, info: answer, cfg),
+        config=TeachingConfig(max_steps=3),
+        progress=False,
+    )
+    with pytest.raises(
+        TeacherError, match="HumanTiming: the wrapped teacher .*expected an int action"
+    ):
+        ct.run()
+    assert ct.n_steps == 0 and ct.n_demonstrations == 0
+
+
+def test_human_timing_takes_numpy_and_0d_integer_answers():
+    from torchcbl.teachers import HumanTiming, HumanTimingConfig
+
+    cfg = HumanTimingConfig(delay_probs=(1.0,), miss_prob=0.0, double_prob=0.0)
+    for answer in (np.int64(2), np.array(2), torch.tensor(2)):
+        assert HumanTiming(lambda obs, info, a=answer: a, cfg)(np.zeros(2), {"t": 0}) == 2
+
+
+def test_an_empty_run_dir_is_refused_not_taken_as_the_working_directory(tmp_path, monkeypatch):
+    """Path("") is ".": run_dir="" (say os.environ.get("RUN_DIR", "") meant as "none") wrote a
+    session's files among whatever the working directory held."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "notes.txt").write_text("mine")
+    env = rare_regions_world()
+    with pytest.raises(ValueError, match=r"run_dir: expected a directory path or None, got ''"):
+        ConfidentTeacher(env, oracle(env), run_dir="", progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]

@@ -12,6 +12,9 @@ also when the read is interrupted. When the input is not a terminal (a pipe, a f
 is read per decision instead; a line may hold a key (``w``), a key name (``up``), an action
 name (``forward``) or an action number.
 
+In a notebook (a Jupyter kernel, whose own stdin is a closed pipe) each key is typed into the
+notebook's input box, the kernel's ``input()``, one line per decision as from a pipe.
+
 Pressing ``q`` (or Ctrl-C, or closing the input) raises :class:`TeachingInterrupted`, so a
 teaching session can stop cleanly; the demonstrations it already recorded are on disk.
 
@@ -21,6 +24,7 @@ This module is domain-free; the views live beside each domain (``corridor.human`
 
 from __future__ import annotations
 
+import builtins
 import os
 import select
 import sys
@@ -89,6 +93,13 @@ def _label(key: str) -> str:
     return key
 
 
+def _frontend_input() -> Callable[[], str] | None:
+    """``input`` where a frontend replaced Python's own (a Jupyter kernel forwards it to the
+    notebook's input box while a cell runs), else None."""
+    current = builtins.input
+    return None if getattr(current, "__self__", None) is builtins else current
+
+
 class TerminalTeacher:
     """A teacher that asks a person at the terminal for each action, one key per decision.
 
@@ -102,7 +113,7 @@ class TerminalTeacher:
             the raw observation is shown.
         input: where keys are read from: a file object with ``fileno()`` or a file descriptor.
             Defaults to ``sys.stdin``. A terminal is read one key at a time; anything else one
-            line at a time.
+            line at a time; by default, in a notebook, one line at a time from its input box.
         output: a text stream the view is written to. Defaults to ``sys.stdout``.
         quit_keys: keys that raise :class:`TeachingInterrupted`; Ctrl-C always does. A letter
             also quits in the other case when that case is not an action key.
@@ -166,6 +177,7 @@ class TerminalTeacher:
         self.action_names: tuple[str, ...] = tuple(names)
         self._describe = describe
         self._input = sys.stdin if input is None else input
+        self._default_input = input is None
         self._output = sys.stdout if output is None else output
         self.status: str = status
         """The status line shown under the view; the caller may assign it at any time."""
@@ -212,8 +224,10 @@ class TerminalTeacher:
             fd = self._input_fd()
             if fd is not None and termios is not None and os.isatty(fd):
                 action = self._ask_key(fd)
+            elif self._default_input and _frontend_input() is not None:
+                action = self._ask_line(self._read_frontend_line)
             else:
-                action = self._ask_line()
+                action = self._ask_line(self._read_line)
         except KeyboardInterrupt as exc:
             self._write("\n")
             raise TeachingInterrupted("teaching interrupted (Ctrl-C)") from exc
@@ -327,6 +341,8 @@ class TerminalTeacher:
         return None
 
     def _read_line(self) -> str:
+        if self._input is None:  # sys.stdin of a process started with fd 0 closed
+            return ""
         if isinstance(self._input, int):
             chunks = []
             while True:
@@ -342,10 +358,26 @@ class TerminalTeacher:
             line = line.decode("utf-8", errors="replace")
         return line
 
-    def _ask_line(self) -> int:
+    def _read_frontend_line(self) -> str:
+        """One entry of a notebook's input box (the kernel's ``input()``), with its newline."""
+        frontend = _frontend_input()
+        assert frontend is not None
+        try:
+            return frontend() + "\n"  # an empty entry is an empty line, not the end of input
+        except EOFError:
+            return ""
+        except NotImplementedError as exc:  # IPython's StdinNotImplementedError
+            raise RuntimeError(
+                "TerminalTeacher: this notebook's frontend takes no typed input (its kernel "
+                f"answered input() with {type(exc).__name__}: {exc}), so there is no input box "
+                "to type keys into; teach in a frontend that has one (Jupyter Notebook or Lab, "
+                "VS Code), or from a terminal (`torchcbl teach ...`, or a script run there)"
+            ) from exc
+
+    def _ask_line(self, read_line: Callable[[], str]) -> int:
         self._prompt()
         while True:
-            line = self._read_line()
+            line = read_line()
             if not line:
                 raise TeachingInterrupted("teaching input closed")
             token = line.rstrip("\r\n")

@@ -76,6 +76,21 @@ class HumanTimingConfig:
         object.__setattr__(self, "delay_probs", tuple(float(x) for x in p))
 
 
+def _action_index(answer: Any, teacher: Any) -> int:
+    """The wrapped teacher's answer as an int (a numpy int or a 0-d integer array or tensor,
+    such as ``logits.argmax()``, too); anything else is refused, not rounded, as the loop
+    refuses it from a bare teacher (its range is checked there, against the env's actions)."""
+    value = answer
+    if getattr(value, "ndim", None) == 0 and callable(getattr(value, "item", None)):
+        value = value.item()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ValueError(
+            f"HumanTiming: the wrapped teacher ({type(teacher).__name__}) answered {answer!r:.80}; "
+            "expected an int action index (it is not rounded); make it return an int"
+        )
+    return int(value)
+
+
 class HumanTiming:
     """Wrap ``teacher(observation, info) -> action`` with a reaction delay and slips.
 
@@ -138,7 +153,7 @@ class HumanTiming:
             self._pending = None
             self._double = None
         self._last_t = t
-        wanted = int(self.teacher(observation, info))
+        wanted = _action_index(self.teacher(observation, info), self.teacher)
         if self._double is not None:
             action, self._double = self._double, None
             return action

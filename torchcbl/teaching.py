@@ -468,6 +468,13 @@ class ConfidentTeacher:
         on_refit: Callable[[torch.nn.Module, int], None] | None = None,
         commit_every: int = 32,
     ) -> None:
+        if isinstance(run_dir, str) and not run_dir.strip():
+            # Path("") is the working directory: the session would be written among its files
+            raise ValueError(
+                f"run_dir: expected a directory path or None, got {run_dir!r}; pass None to "
+                "teach without a session directory, or '.' to write the session into the "
+                f"working directory ({Path.cwd()})."
+            )
         strategy = _pick_strategy(rule, strategy)
         self._setup(env, teacher, model, strategy, config, seed, progress, on_step, on_refit)
         self._env_config = self._describe_env()
