@@ -118,3 +118,8 @@ def failing_sweep(out: str) -> None:
         eval_episodes=1,
     )
     bm.run_benchmark([bm.StrategySpec("bc")], [env], [1], out, workers=1, plots=False)
+
+
+def bare_teacher(obs: Any, info: dict) -> int:
+    """A teacher itself, not a factory that returns one (what --teacher must name)."""
+    return 0

@@ -811,3 +811,34 @@ def test_plot_curves_leaves_the_callers_matplotlib_backend_and_figures_alone(tmp
     finally:
         plt.close("all")
         plt.switch_backend(old)
+
+
+def test_a_teacher_given_where_its_factory_belongs_is_refused_before_any_cell_runs(
+    tmp_path, capsys, monkeypatch
+):
+    """EnvSpec.teacher (--teacher) names a factory that returns the teacher; naming the teacher
+    itself, teacher(obs, info), passed the up-front check and failed in the env's first cell
+    (TypeError: teacher() missing 2 required positional arguments), after every cell of the
+    envs listed before it had run, with nothing saying that a factory was expected."""
+    first = _env(name="first", budgets=(5,), max_steps=10)
+    bare = _env(name="x", teacher="_bench_env:bare_teacher")
+    ran = []
+    with pytest.raises(
+        ValueError, match=r"EnvSpec .x.: teacher ._bench_env:bare_teacher. must name a factory"
+    ):
+        bm.run_benchmark(
+            STRATEGIES[:1],
+            [first, bare],
+            [0],
+            tmp_path / "out",
+            workers=1,
+            on_cell=lambda cell, cached: ran.append(cell["env"]),
+        )
+    assert ran == [] and not (tmp_path / "out").exists()
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:bare_teacher", "--out", str(tmp_path / "cli")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "factory" in err and "(obs, info)" in err
+    assert not (tmp_path / "cli").exists()

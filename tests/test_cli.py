@@ -39,6 +39,19 @@ def test_plot_refuses_a_directory_without_results(tmp_path, capsys):
     assert err.startswith("torchcbl plot: error: ") and "results.json" in err
 
 
+def test_plot_of_a_benchmark_directory_says_where_its_plot_is(tmp_path, capsys):
+    """`torchcbl plot OUT` on a torchcbl benchmark's OUT said "results.json names domain
+    None; expected one of ['corridor', 'driving']", as if the file were damaged."""
+    out = tmp_path / "bench"
+    out.mkdir()
+    results = {"table": {}, "sweep": {}, "envs": [], "strategies": [], "cells": []}
+    (out / "results.json").write_text(json.dumps(results))
+    assert main(["plot", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "None" not in err
+    assert "torchcbl benchmark" in err and str(out / "learning_curves.png") in err
+
+
 def _arguments(parser):
     import argparse
 

@@ -428,3 +428,48 @@ def test_a_rule_class_instead_of_an_instance_is_a_clear_error(tmp_path):
             env, oracle(env), rule=PosteriorRule, run_dir=tmp_path / "r", progress=False
         )
     assert not (tmp_path / "r").exists()
+
+
+class _EveryNth(_SubclassedProtocol):
+    """Ask every n-th step (and while there is no model), else act; rebuilt from its config."""
+
+    def __init__(self, n: int = 3) -> None:
+        self.n = n
+        self.steps = 0
+
+    def decide(self, observation, c):
+        return Decision(int(c.action[0]) < 0 or self.steps % self.n == 0, "confident")
+
+    def actor(self, decision, model_action, teacher_action):
+        return "teacher" if teacher_action is not None else "agent"
+
+    def observe_step(self, record, decision):
+        self.steps += 1
+
+    def to_config(self):
+        return {"type": "EveryNth", "n": self.n, "relabel": False}
+
+
+def test_a_strategy_class_registered_in_strategies_is_rebuilt_on_resume(tmp_path, monkeypatch):
+    """The module docstring says to register a new class in STRATEGIES; registering the class
+    built it with the config dict as its first argument (n = {'n': 4}), so a resumed session
+    without strategy= failed at its first step with a TypeError from deep inside decide()."""
+    from torchcbl import strategies
+
+    monkeypatch.setitem(strategies.STRATEGIES, "EveryNth", _EveryNth)
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env, oracle(env), strategy=_EveryNth(4), run_dir=tmp_path / "r", progress=False
+    )
+    ct.run(max_steps=12)
+    ct.close()
+    env2 = rare_regions_world(episode_length=10)
+    back = ConfidentTeacher.resume(tmp_path / "r", env2, oracle(env2), progress=False)
+    assert isinstance(back.strategy, _EveryNth) and back.strategy.n == 4
+    assert back.strategy.steps == 12  # the log was replayed into it
+    back.run(max_steps=20)
+    back.close()
+    recs = load_records(tmp_path / "r")
+    asked = [r.step for r in recs if r.teacher_action is not None and r.model_action >= 0]
+    assert asked and all(s % 4 == 0 for s in asked)
+    assert any(s >= 12 for s in asked)

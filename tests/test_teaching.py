@@ -321,6 +321,18 @@ def test_bad_config_is_a_clear_error():
     torch.manual_seed(0)
 
 
+@pytest.mark.parametrize("field", ["max_new", "accuracy_window", "burst"])
+@pytest.mark.parametrize("value", [0, 2.5, None])
+def test_a_learning_setting_that_must_be_an_int_says_so_not_that_none_would_do(field, value):
+    """TeachingConfig(max_new=0) said "expected None or an int >= 1": a user who then gave
+    None was refused again, as these three settings take no None."""
+    with pytest.raises(ValueError) as err:
+        TeachingConfig(**{field: value})
+    assert str(err.value) == f"TeachingConfig.{field}: expected an int >= 1, got {value!r}"
+    with pytest.raises(ValueError, match=r"max_steps: expected None or an int >= 0, got -1"):
+        TeachingConfig(max_steps=-1)  # a stop field does take None (no such stop)
+
+
 def test_a_negative_seed_is_refused_before_a_run_directory_is_written(tmp_path):
     # numpy and gymnasium refuse negative seeds at the first reset: a session that wrote its
     # run directory first could then neither run nor resume

@@ -144,6 +144,18 @@ def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) 
                     "factory(env=..., seed=..., **teacher_kwargs), each of env and seed only if "
                     "it takes it)"
                 ) from None
+            try:  # every argument the call does not give has a default
+                inspect.signature(factory).bind(**given, **dict(e.teacher_kwargs))
+            except TypeError as exc:
+                names = ", ".join(params)
+                raise ValueError(
+                    f"EnvSpec {e.name!r}: teacher {e.teacher!r} must name a factory that "
+                    "returns the teacher, called as factory(env=..., seed=..., "
+                    "**teacher_kwargs) (env and seed only if it takes them), but "
+                    f"{e.teacher}({names}) needs arguments that call does not give ({exc}); "
+                    "give them in teacher_kwargs or, if it is the teacher itself, name a "
+                    "factory that returns it (e.g. def make_teacher(env): return my_teacher)"
+                ) from None
         _import(e.score)
         module, _, env_id = e.env_id.rpartition(":")  # as gymnasium.make reads "module:Id"
         if module:

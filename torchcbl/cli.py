@@ -492,6 +492,13 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise _UsageError(f"{results_path} is not JSON ({exc})") from None
     domain = results.get("domain") if isinstance(results, dict) else None
+    if domain is None and isinstance(results, dict) and {"table", "sweep"} <= results.keys():
+        raise _UsageError(
+            f"{results_path} is a torchcbl benchmark's, whose plot is "
+            f"{run_dir / 'learning_curves.png'}, written by the sweep (run the same "
+            "torchcbl benchmark command again to redraw it: its cells are cached); torchcbl "
+            "plot takes a run directory of torchcbl reproduce"
+        )
     if domain not in _DOMAINS:
         raise _UsageError(
             f"{results_path} names domain {domain!r}; expected one of {sorted(_DOMAINS)} "

@@ -137,13 +137,12 @@ _MODEL_ARG_NAMES = (
 )
 
 
-def _opt_int(name: str, value: Any, *, minimum: int) -> None:
-    if value is None:
+def _opt_int(name: str, value: Any, *, minimum: int, optional: bool = True) -> None:
+    if value is None and optional:
         return
     if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise ValueError(
-            f"TeachingConfig.{name}: expected None or an int >= {minimum}, got {value!r}"
-        )
+        expected = f"None or an int >= {minimum}" if optional else f"an int >= {minimum}"
+        raise ValueError(f"TeachingConfig.{name}: expected {expected}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -223,16 +222,13 @@ class TeachingConfig:
                 object.__setattr__(self, f.name, int(v))
             elif isinstance(v, np.floating):
                 object.__setattr__(self, f.name, float(v))
-        _opt_int("max_new", self.max_new, minimum=1)
+        _opt_int("max_new", self.max_new, minimum=1, optional=False)
         if self.refit not in ("full", "incremental"):
             raise ValueError(
                 f"TeachingConfig.refit: expected 'full' or 'incremental', got {self.refit!r}"
             )
-        _opt_int("accuracy_window", self.accuracy_window, minimum=1)
-        _opt_int("burst", self.burst, minimum=1)
-        for name in ("max_new", "accuracy_window", "burst"):
-            if getattr(self, name) is None:
-                raise ValueError(f"TeachingConfig.{name}: expected an int >= 1, got None")
+        _opt_int("accuracy_window", self.accuracy_window, minimum=1, optional=False)
+        _opt_int("burst", self.burst, minimum=1, optional=False)
         if self.target_accuracy is not None and (
             isinstance(self.target_accuracy, bool)
             or not isinstance(self.target_accuracy, (int, float))

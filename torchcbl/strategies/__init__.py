@@ -45,7 +45,9 @@ Rules a strategy must keep:
   you advance in ``observe_step``; never from wall-clock time.
 - ``to_config()`` returns a JSON dict with ``"type"`` (the class name), every constructor
   argument and ``"relabel"``; the run directory stores it and :func:`strategy_from_config`
-  rebuilds the strategy on resume (register a new class in ``STRATEGIES``). A strategy without
+  rebuilds the strategy on resume (register a new class in ``STRATEGIES`` under that type,
+  ``STRATEGIES["MyStrategy"] = MyStrategy``, in the process that resumes; it is called with
+  the dict's other keys as keyword arguments). A strategy without
   ``to_config`` (or whose ``to_config`` returns None, as a subclass of :class:`Strategy` that
   does not define one) is stored as custom and must be passed again to ``resume``.
 
@@ -273,8 +275,9 @@ def _lazy(module: str, name: str) -> Callable[[dict[str, Any]], Any]:
     return build
 
 
-#: name -> builder from the ``to_config`` dict (without "type" and "relabel").
-STRATEGIES: dict[str, Callable[[dict[str, Any]], Any]] = {
+#: name -> the strategy's class, called with the ``to_config`` dict's keys (without "type" and
+#: "relabel") as keyword arguments; or a function, called with that dict (the shipped ones).
+STRATEGIES: dict[str, Callable[..., Any]] = {
     "ConfidentExecution": lambda p: ConfidentExecution(rule_from_config(p["rule"])),
     "ConfidenceBasedAutonomy": _build_cba,
     # the baselines (issue 14), one file each
@@ -306,6 +309,8 @@ def strategy_from_config(config: dict[str, Any]) -> Any:
             f"{sorted(STRATEGIES)}. Pass strategy=<your strategy> to resume()."
         )
     params = {k: v for k, v in config.items() if k not in ("type", "relabel")}
+    if isinstance(build, type):  # a class registered as the module docstring says
+        return build(**params)
     return build(params)
 
 
