@@ -88,6 +88,22 @@ class CorridorMap:
     )
 
     def __post_init__(self) -> None:
+        # a map built in Python is held to what a map file is (map_from_dict): plain floats
+        # (numpy numbers made to_dict() fail in json.dumps), its own copy of the nodes (one the
+        # caller moved afterwards moved the map's, past these checks), and a named ValueError
+        # for a slip (not a TypeError from deep inside)
+        for key in ("corridor_width", "grid", "start_offset"):
+            object.__setattr__(self, key, _metres(getattr(self, key), key))
+        if not isinstance(self.nodes, Mapping):
+            raise ValueError(
+                f'map "nodes": expected a mapping {{name: (x, y)}} of metres, got '
+                f"{self.nodes!r:.80}"
+            )
+        nodes = {k: _pair(v, f"node {k!r}", _metres) for k, v in self.nodes.items()}
+        object.__setattr__(self, "nodes", nodes)
+        corridors = tuple(_pair(c, "corridor", _same) for c in _names(self.corridors, "corridors"))
+        object.__setattr__(self, "corridors", corridors)
+        object.__setattr__(self, "route", tuple(_names(self.route, "route")))
         if not (math.isfinite(self.corridor_width) and self.corridor_width > 0):
             raise ValueError(
                 f"corridor_width must be a finite width > 0 m, got {self.corridor_width}"
@@ -461,6 +477,11 @@ def _metres(value: Any, what: str = "coordinate") -> float:
     return float(value)
 
 
+def _same(value: Any) -> Any:
+    """A corridor's node name, as given."""
+    return value
+
+
 def _names(value: Any, key: str) -> list[Any]:
     """A map's list (``corridors``, ``route``), refused if it is not a list."""
     if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)):
@@ -469,8 +490,10 @@ def _names(value: Any, key: str) -> list[Any]:
 
 
 def _pair(value: Any, what: str, convert: Any) -> tuple[Any, Any]:
-    """Two items (a node's [x, y], a corridor's [a, b]), each converted."""
-    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)):
+    """Two items (a node's [x, y], a corridor's [a, b]; a 1-D numpy array too), each
+    converted."""
+    listed = isinstance(value, (list, tuple)) or isinstance(value, np.ndarray) and value.ndim == 1
+    if isinstance(value, (str, bytes, Mapping)) or not listed:
         raise ValueError(f"map {what}: expected a list of 2, got {value!r:.80}")
     if len(value) != 2:
         raise ValueError(f"map {what}: expected a list of 2, got {len(value)} items {value!r:.80}")

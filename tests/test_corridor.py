@@ -26,7 +26,7 @@ from corridor.baseline import (
 )
 from corridor.env import CorridorEnv
 from corridor.expert import CorridorExpert
-from corridor.maps import available_maps, load_map, map_from_dict
+from corridor.maps import CorridorMap, available_maps, load_map, map_digest, map_from_dict
 from corridor.world import Action, CorridorWorld, WorldConfig
 
 NOISY_WORLD = WorldConfig.legged_robot()
@@ -122,6 +122,42 @@ def test_malformed_map_json_is_named(change, message, tmp_path):
         load_map(path)
     with pytest.raises(ValueError, match="a map is a JSON object"):
         map_from_dict([SMALL])
+
+
+def test_corridor_map_object_is_checked_and_json_ready():
+    """A CorridorMap built in Python is held to what a map file is: its numbers become plain
+    floats (numpy coordinates, e.g. from np.arange, made to_dict() fail in json.dumps although
+    it is "the JSON-ready form"), the map keeps its own copy of the nodes (a node the caller
+    moved afterwards moved the map's, past its checks and its cached walls), and a slip gets a
+    ValueError naming the field (it was a TypeError "must be real number, not str", or an
+    AttributeError "'list' object has no attribute 'items'")."""
+    nodes = {
+        k: np.asarray(v, dtype=np.int64 if k == "A" else float) for k, v in SMALL["nodes"].items()
+    }
+    base = {
+        "name": "mine",
+        "corridor_width": np.float64(0.6),
+        "nodes": nodes,
+        "corridors": [tuple(c) for c in SMALL["corridors"]],
+        "route": list(SMALL["route"]),
+    }
+    m = CorridorMap(**base)
+    back = map_from_dict(json.loads(json.dumps(m.to_dict())))
+    assert back == m and map_digest(back) == map_digest(m)
+    nodes["A"][0] = 5  # the caller's array, not the map's node
+    assert m.nodes["A"] == (0.0, 0.0) and m.walls() == back.walls()
+    for change, message in [
+        ({"corridor_width": "0.6"}, "corridor_width: expected a number of metres, got '0.6'"),
+        ({"start_offset": None}, "start_offset: expected a number of metres, got None"),
+        ({"grid": True}, "grid: expected a number of metres, got True"),
+        ({"nodes": list(SMALL["nodes"].items())}, 'nodes": expected a mapping'),
+        ({"nodes": {**SMALL["nodes"], "A": 0}}, "node 'A': expected a list of 2, got 0"),
+        ({"nodes": {**SMALL["nodes"], "A": ("0", 0)}}, "node 'A': expected a number of metres"),
+        ({"corridors": [("A", "B", "C")]}, "corridor: expected a list of 2, got 3"),
+        ({"route": "ABCDA"}, 'route": expected a list'),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            CorridorMap(**{**base, **change})
 
 
 def test_unknown_map_name():
