@@ -508,6 +508,23 @@ def available_maps() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
 
 
+def _read_map_file(path: Path) -> str:
+    """A map file's text (UTF-8, as JSON is); a ValueError naming the file if it is not text
+    (e.g. a PNG of the map given for its JSON) or cannot be read."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(
+            f"map file {str(path)!r} is not a map JSON file (not UTF-8 text: {exc.reason} at "
+            f"byte {exc.start}); give the JSON file of the map (see corridor.maps)"
+        ) from None
+    except OSError as exc:
+        raise ValueError(
+            f"map file {str(path)!r} cannot be read ({exc.strerror or exc}); give a map JSON "
+            "file this user can read"
+        ) from None
+
+
 def load_map(name_or_path: str | Path) -> CorridorMap:
     """Load a shipped map by name (``"figure2"``, ``"lshape"``) or any map JSON file by path
     (a name ending in ``.json`` is a path; so is any other existing file, unless it is a
@@ -521,11 +538,11 @@ def load_map(name_or_path: str | Path) -> CorridorMap:
                 f"map file {str(path)!r} not found; give an existing map JSON file or one of the "
                 f"shipped map names {available_maps()}"
             )
-        text = path.read_text()
+        text = _read_map_file(path)
     elif shipped:
-        text = res.read_text()
+        text = res.read_text(encoding="utf-8")
     elif path.is_file():  # a map file named otherwise (mymap.txt, a temporary file)
-        text = path.read_text()
+        text = _read_map_file(path)
     else:
         raise ValueError(
             f"unknown map {str(name_or_path)!r}; shipped maps: {available_maps()}, or the path "

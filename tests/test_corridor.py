@@ -6,6 +6,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -158,6 +159,22 @@ def test_corridor_map_object_is_checked_and_json_ready():
     ]:
         with pytest.raises(ValueError, match=message):
             CorridorMap(**{**base, **change})
+
+
+def test_map_file_not_text_is_named(tmp_path, capsys):
+    """A file that is not a map's text (the map.png an experiment draws, given for the map
+    JSON) is refused naming the file and what is wanted; it was UnicodeDecodeError's "'utf-8'
+    codec can't decode byte 0x89 in position 0", so teach --map said only that."""
+    from torchcbl.cli import main
+
+    png = tmp_path / "map.png"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
+    message = r"map file '.*map.png' is not a map JSON file \(not UTF-8 text"
+    with pytest.raises(ValueError, match=message):
+        load_map(png)
+    assert main(["teach", "corridor", "--map", str(png), "--run-dir", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and re.search(message, err), err
 
 
 def test_unknown_map_name():
