@@ -549,7 +549,28 @@ def load_map(name_or_path: str | Path) -> CorridorMap:
             "of a map JSON file"
         )
     try:
-        data = json.loads(text)
+        data = json.loads(text, object_pairs_hook=_once)
     except json.JSONDecodeError as exc:
         raise ValueError(f"map {str(name_or_path)!r} is not valid JSON: {exc}") from None
+    except _GivenTwice as exc:
+        raise ValueError(
+            f"map {str(name_or_path)!r}: the key {exc.args[0]!r} is given twice in one object "
+            "(a map key or a node name written twice; JSON would keep the last silently); "
+            "give each once"
+        ) from None
     return map_from_dict(data)
+
+
+class _GivenTwice(Exception):
+    """A key written twice in one JSON object of a map file."""
+
+
+def _once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object's dict (``json.loads``'s ``object_pairs_hook``); :class:`_GivenTwice` if
+    a key is written twice."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _GivenTwice(key)
+        out[key] = value
+    return out

@@ -177,6 +177,21 @@ def test_map_file_not_text_is_named(tmp_path, capsys):
     assert "\n" not in err and re.search(message, err), err
 
 
+def test_map_file_key_given_twice_is_refused(tmp_path):
+    """A map file with a key given twice (a second "route" added to try another and the first
+    left in, a node line copied and its name left as it was) is refused naming the key; JSON
+    keeps the last silently, so the map drove the route below the other one, or said a corridor
+    was not axis-aligned for a node the file placed where it is."""
+    text = json.dumps(SMALL)[:-1]
+    path = tmp_path / "mine.json"
+    path.write_text(text + ', "route": ["A", "D", "C", "B", "A"]}')
+    with pytest.raises(ValueError, match=r"mine.json.* key 'route' is given twice"):
+        load_map(path)
+    path.write_text(text.replace('"D": [0, 0.8]', '"D": [0, 0.8], "D": [0.5, 1.6]') + "}")
+    with pytest.raises(ValueError, match=r"mine.json.* key 'D' is given twice"):
+        load_map(path)
+
+
 def test_unknown_map_name():
     with pytest.raises(ValueError, match="shipped maps"):
         load_map("nowhere")
