@@ -192,6 +192,35 @@ def test_map_file_key_given_twice_is_refused(tmp_path):
         load_map(path)
 
 
+def test_session_on_relative_map_path_evaluated_elsewhere(tmp_path, monkeypatch, capsys):
+    """A session taught in Python on gymnasium.make(..., corridor_map="mine.json") keeps that
+    relative path; evaluated from another directory, evaluate said the file "is not there any
+    more" (and evaluate_saved_policy that it "cannot be read ... not found"), sending the user
+    to look for a deleted file that is where it always was. Both now say the path is relative
+    to the directory the session was taught from, and to run from there."""
+    from corridor.experiment import evaluate_saved_policy
+    from torchcbl import ConfidentTeacher
+    from torchcbl.cli import main
+
+    taught = tmp_path / "project"
+    taught.mkdir()
+    (taught / "mine.json").write_text(json.dumps(SMALL))
+    monkeypatch.chdir(taught)
+    env = gym.make("torchcbl/Corridor-v0", corridor_map="mine.json")
+    ct = ConfidentTeacher(env, CorridorExpert(load_map("mine.json")), run_dir="s", progress=False)
+    ct.run(max_steps=3)
+    ct.close()
+    monkeypatch.chdir(tmp_path)
+    message = r"mine.json, a path relative to the directory the session was taught from"
+    assert main(["evaluate", "project/s", "--steps", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "not there any more" not in err and re.search(message, err), err
+    with pytest.raises(ValueError, match=message):
+        evaluate_saved_policy("project/s", n_steps=2)
+    monkeypatch.chdir(taught)  # from there, it evaluates
+    assert evaluate_saved_policy("s", n_steps=2)["steps"] == 2
+
+
 def test_unknown_map_name():
     with pytest.raises(ValueError, match="shipped maps"):
         load_map("nowhere")
