@@ -1001,6 +1001,24 @@ def _session_map(session_dir: Path) -> str:
     return name
 
 
+def _relative_map_elsewhere(session_dir: Path, map_name: str) -> str:
+    """What to say when a session's map is a file named by a relative path (``gymnasium.make``
+    given ``corridor_map="mine.json"`` keeps it so) that is not found from the current
+    directory: the path is relative to the directory the session was taught from, and the
+    file is not gone; empty when that is not the case."""
+    path = Path(map_name)
+    a_path = map_name.endswith(".json") or len(path.parts) > 1  # not a shipped map's name
+    if not a_path or map_name in available_maps() or path.is_absolute() or path.is_file():
+        return ""
+    return (
+        f"{session_dir} was taught on the map file {map_name}, a path relative to the "
+        f"directory the session was taught from, which is not found from here ({Path.cwd()}); "
+        "run this from the directory the session was taught from, or put the file back there "
+        "if it is gone (a new session keeps a map file from anywhere when gymnasium.make is "
+        "given its full path)"
+    )
+
+
 def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs") -> None:
     """A ValueError if ``map_name`` (a shipped name or a map file) is not the map the session
     was taught on: its digest (:func:`corridor.maps.map_digest`) differs from the one the
@@ -1018,6 +1036,9 @@ def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs")
         return
     shipped = map_name in available_maps()
     what = f"the shipped map {map_name!r}" if shipped else f"the map file {map_name}"
+    elsewhere = _relative_map_elsewhere(session_dir, map_name)
+    if elsewhere:
+        raise ValueError(elsewhere)
     try:
         now = map_digest(load_map(map_name))
     except (OSError, ValueError) as exc:

@@ -88,6 +88,22 @@ class CorridorMap:
     )
 
     def __post_init__(self) -> None:
+        # a map built in Python is held to what a map file is (map_from_dict): plain floats
+        # (numpy numbers made to_dict() fail in json.dumps), its own copy of the nodes (one the
+        # caller moved afterwards moved the map's, past these checks), and a named ValueError
+        # for a slip (not a TypeError from deep inside)
+        for key in ("corridor_width", "grid", "start_offset"):
+            object.__setattr__(self, key, _metres(getattr(self, key), key))
+        if not isinstance(self.nodes, Mapping):
+            raise ValueError(
+                f'map "nodes": expected a mapping {{name: (x, y)}} of metres, got '
+                f"{self.nodes!r:.80}"
+            )
+        nodes = {k: _pair(v, f"node {k!r}", _metres) for k, v in self.nodes.items()}
+        object.__setattr__(self, "nodes", nodes)
+        corridors = tuple(_pair(c, "corridor", _same) for c in _names(self.corridors, "corridors"))
+        object.__setattr__(self, "corridors", corridors)
+        object.__setattr__(self, "route", tuple(_names(self.route, "route")))
         if not (math.isfinite(self.corridor_width) and self.corridor_width > 0):
             raise ValueError(
                 f"corridor_width must be a finite width > 0 m, got {self.corridor_width}"
@@ -461,6 +477,11 @@ def _metres(value: Any, what: str = "coordinate") -> float:
     return float(value)
 
 
+def _same(value: Any) -> Any:
+    """A corridor's node name, as given."""
+    return value
+
+
 def _names(value: Any, key: str) -> list[Any]:
     """A map's list (``corridors``, ``route``), refused if it is not a list."""
     if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)):
@@ -469,8 +490,10 @@ def _names(value: Any, key: str) -> list[Any]:
 
 
 def _pair(value: Any, what: str, convert: Any) -> tuple[Any, Any]:
-    """Two items (a node's [x, y], a corridor's [a, b]), each converted."""
-    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)):
+    """Two items (a node's [x, y], a corridor's [a, b]; a 1-D numpy array too), each
+    converted."""
+    listed = isinstance(value, (list, tuple)) or isinstance(value, np.ndarray) and value.ndim == 1
+    if isinstance(value, (str, bytes, Mapping)) or not listed:
         raise ValueError(f"map {what}: expected a list of 2, got {value!r:.80}")
     if len(value) != 2:
         raise ValueError(f"map {what}: expected a list of 2, got {len(value)} items {value!r:.80}")
@@ -483,6 +506,23 @@ def available_maps() -> list[str]:
     """Names of the maps shipped in ``corridor/maps/``."""
     folder = resources.files("corridor") / "maps"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
+
+
+def _read_map_file(path: Path) -> str:
+    """A map file's text (UTF-8, as JSON is); a ValueError naming the file if it is not text
+    (e.g. a PNG of the map given for its JSON) or cannot be read."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(
+            f"map file {str(path)!r} is not a map JSON file (not UTF-8 text: {exc.reason} at "
+            f"byte {exc.start}); give the JSON file of the map (see corridor.maps)"
+        ) from None
+    except OSError as exc:
+        raise ValueError(
+            f"map file {str(path)!r} cannot be read ({exc.strerror or exc}); give a map JSON "
+            "file this user can read"
+        ) from None
 
 
 def load_map(name_or_path: str | Path) -> CorridorMap:
@@ -498,18 +538,39 @@ def load_map(name_or_path: str | Path) -> CorridorMap:
                 f"map file {str(path)!r} not found; give an existing map JSON file or one of the "
                 f"shipped map names {available_maps()}"
             )
-        text = path.read_text()
+        text = _read_map_file(path)
     elif shipped:
-        text = res.read_text()
+        text = res.read_text(encoding="utf-8")
     elif path.is_file():  # a map file named otherwise (mymap.txt, a temporary file)
-        text = path.read_text()
+        text = _read_map_file(path)
     else:
         raise ValueError(
             f"unknown map {str(name_or_path)!r}; shipped maps: {available_maps()}, or the path "
             "of a map JSON file"
         )
     try:
-        data = json.loads(text)
+        data = json.loads(text, object_pairs_hook=_once)
     except json.JSONDecodeError as exc:
         raise ValueError(f"map {str(name_or_path)!r} is not valid JSON: {exc}") from None
+    except _GivenTwice as exc:
+        raise ValueError(
+            f"map {str(name_or_path)!r}: the key {exc.args[0]!r} is given twice in one object "
+            "(a map key or a node name written twice; JSON would keep the last silently); "
+            "give each once"
+        ) from None
     return map_from_dict(data)
+
+
+class _GivenTwice(Exception):
+    """A key written twice in one JSON object of a map file."""
+
+
+def _once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object's dict (``json.loads``'s ``object_pairs_hook``); :class:`_GivenTwice` if
+    a key is written twice."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _GivenTwice(key)
+        out[key] = value
+    return out

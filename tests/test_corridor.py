@@ -6,6 +6,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -26,7 +27,7 @@ from corridor.baseline import (
 )
 from corridor.env import CorridorEnv
 from corridor.expert import CorridorExpert
-from corridor.maps import available_maps, load_map, map_from_dict
+from corridor.maps import CorridorMap, available_maps, load_map, map_digest, map_from_dict
 from corridor.world import Action, CorridorWorld, WorldConfig
 
 NOISY_WORLD = WorldConfig.legged_robot()
@@ -122,6 +123,102 @@ def test_malformed_map_json_is_named(change, message, tmp_path):
         load_map(path)
     with pytest.raises(ValueError, match="a map is a JSON object"):
         map_from_dict([SMALL])
+
+
+def test_corridor_map_object_is_checked_and_json_ready():
+    """A CorridorMap built in Python is held to what a map file is: its numbers become plain
+    floats (numpy coordinates, e.g. from np.arange, made to_dict() fail in json.dumps although
+    it is "the JSON-ready form"), the map keeps its own copy of the nodes (a node the caller
+    moved afterwards moved the map's, past its checks and its cached walls), and a slip gets a
+    ValueError naming the field (it was a TypeError "must be real number, not str", or an
+    AttributeError "'list' object has no attribute 'items'")."""
+    nodes = {
+        k: np.asarray(v, dtype=np.int64 if k == "A" else float) for k, v in SMALL["nodes"].items()
+    }
+    base = {
+        "name": "mine",
+        "corridor_width": np.float64(0.6),
+        "nodes": nodes,
+        "corridors": [tuple(c) for c in SMALL["corridors"]],
+        "route": list(SMALL["route"]),
+    }
+    m = CorridorMap(**base)
+    back = map_from_dict(json.loads(json.dumps(m.to_dict())))
+    assert back == m and map_digest(back) == map_digest(m)
+    nodes["A"][0] = 5  # the caller's array, not the map's node
+    assert m.nodes["A"] == (0.0, 0.0) and m.walls() == back.walls()
+    for change, message in [
+        ({"corridor_width": "0.6"}, "corridor_width: expected a number of metres, got '0.6'"),
+        ({"start_offset": None}, "start_offset: expected a number of metres, got None"),
+        ({"grid": True}, "grid: expected a number of metres, got True"),
+        ({"nodes": list(SMALL["nodes"].items())}, 'nodes": expected a mapping'),
+        ({"nodes": {**SMALL["nodes"], "A": 0}}, "node 'A': expected a list of 2, got 0"),
+        ({"nodes": {**SMALL["nodes"], "A": ("0", 0)}}, "node 'A': expected a number of metres"),
+        ({"corridors": [("A", "B", "C")]}, "corridor: expected a list of 2, got 3"),
+        ({"route": "ABCDA"}, 'route": expected a list'),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            CorridorMap(**{**base, **change})
+
+
+def test_map_file_not_text_is_named(tmp_path, capsys):
+    """A file that is not a map's text (the map.png an experiment draws, given for the map
+    JSON) is refused naming the file and what is wanted; it was UnicodeDecodeError's "'utf-8'
+    codec can't decode byte 0x89 in position 0", so teach --map said only that."""
+    from torchcbl.cli import main
+
+    png = tmp_path / "map.png"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
+    message = r"map file '.*map.png' is not a map JSON file \(not UTF-8 text"
+    with pytest.raises(ValueError, match=message):
+        load_map(png)
+    assert main(["teach", "corridor", "--map", str(png), "--run-dir", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and re.search(message, err), err
+
+
+def test_map_file_key_given_twice_is_refused(tmp_path):
+    """A map file with a key given twice (a second "route" added to try another and the first
+    left in, a node line copied and its name left as it was) is refused naming the key; JSON
+    keeps the last silently, so the map drove the route below the other one, or said a corridor
+    was not axis-aligned for a node the file placed where it is."""
+    text = json.dumps(SMALL)[:-1]
+    path = tmp_path / "mine.json"
+    path.write_text(text + ', "route": ["A", "D", "C", "B", "A"]}')
+    with pytest.raises(ValueError, match=r"mine.json.* key 'route' is given twice"):
+        load_map(path)
+    path.write_text(text.replace('"D": [0, 0.8]', '"D": [0, 0.8], "D": [0.5, 1.6]') + "}")
+    with pytest.raises(ValueError, match=r"mine.json.* key 'D' is given twice"):
+        load_map(path)
+
+
+def test_session_on_relative_map_path_evaluated_elsewhere(tmp_path, monkeypatch, capsys):
+    """A session taught in Python on gymnasium.make(..., corridor_map="mine.json") keeps that
+    relative path; evaluated from another directory, evaluate said the file "is not there any
+    more" (and evaluate_saved_policy that it "cannot be read ... not found"), sending the user
+    to look for a deleted file that is where it always was. Both now say the path is relative
+    to the directory the session was taught from, and to run from there."""
+    from corridor.experiment import evaluate_saved_policy
+    from torchcbl import ConfidentTeacher
+    from torchcbl.cli import main
+
+    taught = tmp_path / "project"
+    taught.mkdir()
+    (taught / "mine.json").write_text(json.dumps(SMALL))
+    monkeypatch.chdir(taught)
+    env = gym.make("torchcbl/Corridor-v0", corridor_map="mine.json")
+    ct = ConfidentTeacher(env, CorridorExpert(load_map("mine.json")), run_dir="s", progress=False)
+    ct.run(max_steps=3)
+    ct.close()
+    monkeypatch.chdir(tmp_path)
+    message = r"mine.json, a path relative to the directory the session was taught from"
+    assert main(["evaluate", "project/s", "--steps", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "not there any more" not in err and re.search(message, err), err
+    with pytest.raises(ValueError, match=message):
+        evaluate_saved_policy("project/s", n_steps=2)
+    monkeypatch.chdir(taught)  # from there, it evaluates
+    assert evaluate_saved_policy("s", n_steps=2)["steps"] == 2
 
 
 def test_unknown_map_name():

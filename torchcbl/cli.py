@@ -325,6 +325,9 @@ def _session_map_exists(session: Path, domain: str) -> None:
     name = kwargs.get("corridor_map")
     if domain != "corridor" or not isinstance(name, str):
         return
+    elsewhere = _experiment_module("corridor")._relative_map_elsewhere(session, name)
+    if elsewhere:
+        raise _UsageError(elsewhere)
     if name.endswith(".json") and not Path(name).is_file():  # (a shipped map goes by its name)
         raise _UsageError(
             f"{session} was taught on the map file {name}, which is not there any more; put "
