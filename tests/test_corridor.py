@@ -221,6 +221,30 @@ def test_session_on_relative_map_path_evaluated_elsewhere(tmp_path, monkeypatch,
     assert evaluate_saved_policy("s", n_steps=2)["steps"] == 2
 
 
+def test_session_on_a_map_path_object_is_evaluated_and_resumed(tmp_path, capsys):
+    """gymnasium.make(..., corridor_map=Path(...)) worked, but the session kept the Path only
+    as its repr, so evaluate and teach --resume refused the session as made with an object
+    its config does not keep; a path is kept as the str it names."""
+    from pathlib import Path
+
+    from torchcbl import ConfidentTeacher
+    from torchcbl.cli import main
+    from torchcbl.session import load_config
+
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps(SMALL))
+    env = gym.make("torchcbl/Corridor-v0", corridor_map=Path(path))
+    run_dir = tmp_path / "s"
+    ct = ConfidentTeacher(env, CorridorExpert(load_map(path)), run_dir=run_dir, progress=False)
+    ct.run(max_steps=3)
+    ct.close()
+    assert load_config(run_dir)["env"]["kwargs"]["corridor_map"] == str(path)
+    assert main(["evaluate", str(run_dir), "--steps", "2"]) == 0, capsys.readouterr().err
+    env = gym.make("torchcbl/Corridor-v0", corridor_map=str(path))  # the same map, as a str
+    back = ConfidentTeacher.resume(run_dir, env, CorridorExpert(load_map(path)), progress=False)
+    back.close()
+
+
 def test_unknown_map_name():
     with pytest.raises(ValueError, match="shipped maps"):
         load_map("nowhere")

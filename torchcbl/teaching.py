@@ -324,10 +324,17 @@ def _seed_for(seed: int, episode: int) -> int:
 
 
 def _env_kwargs(env: gym.Env) -> dict[str, Any]:
-    """What ``gymnasium.make`` was given for ``env`` (its spec's kwargs), a value JSON cannot
-    hold as ``{"repr": ...}``; empty for an env not made by ``gymnasium.make``."""
+    """What ``gymnasium.make`` was given for ``env`` (its spec's kwargs): a path
+    (``os.PathLike``, a ``pathlib.Path`` say) as the str it names, a value JSON cannot hold as
+    ``{"repr": ...}``; empty for an env not made by ``gymnasium.make``."""
     kwargs = getattr(getattr(env, "spec", None), "kwargs", None) or {}
-    return {str(k): v if _jsonable(v) else {"repr": repr(v)[:200]} for k, v in kwargs.items()}
+
+    def kept(v: Any) -> Any:
+        if isinstance(v, os.PathLike) and isinstance(os.fspath(v), str):
+            return os.fspath(v)  # make() reads the str as it read the path
+        return v if _jsonable(v) else {"repr": repr(v)[:200]}
+
+    return {str(k): kept(v) for k, v in kwargs.items()}
 
 
 def _env_inputs(env: gym.Env) -> dict[str, Any] | None:
