@@ -142,11 +142,7 @@ class DrivingEnv(gym.Env):
         render_mode: Literal["rgb_array"] | None = None,
         **kwargs: Any,
     ) -> None:
-        if config is None:
-            config = DrivingConfig(**kwargs)
-        elif kwargs:
-            raise TypeError("pass either a DrivingConfig or keyword settings, not both")
-        elif not isinstance(config, DrivingConfig):  # "'str' object has no attribute ..."
+        if config is not None and not isinstance(config, DrivingConfig):  # (with keywords too)
             hint = (
                 f"DrivingEnv(scenario={config!r}) for a scenario by name"
                 if isinstance(config, str)
@@ -158,6 +154,10 @@ class DrivingEnv(gym.Env):
                 f"config: expected a DrivingConfig (sumo_scenarios.env), got "
                 f"{type(config).__name__} {config!r:.60}; e.g. {hint}"
             )
+        if config is None:
+            config = DrivingConfig(**kwargs)
+        elif kwargs:
+            raise TypeError("pass either a DrivingConfig or keyword settings, not both")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be None or one of {self.metadata['render_modes']} (the env "

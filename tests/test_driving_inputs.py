@@ -662,6 +662,9 @@ def test_a_config_that_is_no_driving_config_is_named():
         DrivingEnv("eval")
     with pytest.raises(TypeError, match=r"expected a DrivingConfig .*, got dict .*keywords"):
         gymnasium.make(sumo_scenarios.ENV_ID, config={"scenario": "eval"})
+    # with keyword settings beside it, too (it said "not both" of a DrivingConfig never given)
+    with pytest.raises(TypeError, match=r"expected a DrivingConfig .*, got str 'eval'"):
+        DrivingEnv("eval", max_episode_steps=200)
 
 
 def test_load_records_names_a_damaged_scenario_of_a_record(tmp_path):
