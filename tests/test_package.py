@@ -1,3 +1,4 @@
+import shutil
 import subprocess
 import sys
 import warnings
@@ -37,6 +38,29 @@ def test_mean_sd_by_hand():
     assert mean_sd([None]) == {"mean": None, "sd": None, "n": 0}
     v = run_versions(sim="1.2")
     assert v["sim"] == "1.2" and v["torchcbl"] == torchcbl.__version__
+
+
+def test_run_versions_name_the_commit_of_the_checkout_that_ran():
+    """A results.json said torchcbl 0.1.0 for every commit of the project, so two run
+    directories made by different code (whose figures differ) could not be told apart, nor
+    a run replayed on the code that made it. From a git checkout, the versions name its
+    commit, and whether tracked files differed from it."""
+    from torchcbl.evaluation import run_versions
+
+    root = Path(torchcbl.__file__).resolve().parents[1]
+    git = shutil.which("git")
+    if git is None:
+        pytest.skip("no git")
+    top = subprocess.run(
+        [git, "-C", str(root), "rev-parse", "--show-toplevel"], capture_output=True, text=True
+    )
+    if top.returncode or Path(top.stdout.strip()).resolve() != root:
+        pytest.skip("torchcbl is not imported from a git checkout")
+    head = subprocess.run(
+        [git, "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+    ).stdout.strip()
+    source = run_versions()["torchcbl_source"]
+    assert source in (f"git {head}", f"git {head} with uncommitted changes"), source
 
 
 ROOT = Path(__file__).parents[1]

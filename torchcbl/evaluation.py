@@ -76,9 +76,49 @@ def mean_sd(values: Iterable[float | None]) -> dict[str, float | int | None]:
     }
 
 
+def _source_revision() -> str:
+    """The git commit of the checkout torchcbl is imported from, ``"git SHA"`` (``" with
+    uncommitted changes"`` added when tracked files differ from it); ``"unknown (...)"`` for
+    an installed copy or without git. Only the project's own checkout counts: a copy
+    installed inside another repository (a virtual environment in a user's project) does not
+    take that repository's commit."""
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    import torchcbl
+
+    root = Path(torchcbl.__file__).resolve().parents[1]
+    git = shutil.which("git")
+    if git is None:
+        return "unknown (no git)"
+
+    def run(*args: str) -> subprocess.CompletedProcess[str] | None:
+        try:
+            return subprocess.run(
+                [git, "-C", str(root), *args], capture_output=True, text=True, timeout=30
+            )
+        except (OSError, subprocess.SubprocessError):
+            return None
+
+    top = run("rev-parse", "--show-toplevel")
+    if top is None or top.returncode or Path(top.stdout.strip()).resolve() != root:
+        return "unknown (not a git checkout)"
+    head = run("rev-parse", "HEAD")
+    changed = run("status", "--porcelain", "--untracked-files=no")
+    if head is None or head.returncode or changed is None or changed.returncode:
+        return "unknown (git failed)"
+    return f"git {head.stdout.strip()}" + (
+        " with uncommitted changes" if changed.stdout.strip() else ""
+    )
+
+
 def run_versions(**extra: str) -> dict[str, str]:
     """Versions of Python and the core's dependencies, plus ``extra`` (a domain's simulator),
-    for a results.json to say what produced it."""
+    for a results.json to say what produced it. ``torchcbl_source`` names the commit of the
+    git checkout that ran, ``"git SHA"`` (plus ``" with uncommitted changes"`` when tracked
+    files differed from it), or ``"unknown (...)"`` for an installed copy: the package's
+    version stays the same across commits whose figures differ."""
     import gymnasium
     import torch
 
@@ -87,6 +127,7 @@ def run_versions(**extra: str) -> dict[str, str]:
     return {
         "python": platform.python_version(),
         "torchcbl": torchcbl.__version__,
+        "torchcbl_source": _source_revision(),
         "torch": torch.__version__,
         "numpy": np.__version__,
         "gymnasium": gymnasium.__version__,
