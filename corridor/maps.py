@@ -99,11 +99,15 @@ class CorridorMap:
                 f'map "nodes": expected a mapping {{name: (x, y)}} of metres, got '
                 f"{self.nodes!r:.80}"
             )
-        nodes = {k: _pair(v, f"node {k!r}", _metres) for k, v in self.nodes.items()}
+        # node names as str, as a file has them (JSON keys are str): a map of int names wrote a
+        # file that read back as another map, with another digest
+        nodes = {str(k): _pair(v, f"node {k!r}", _metres) for k, v in self.nodes.items()}
         object.__setattr__(self, "nodes", nodes)
-        corridors = tuple(_pair(c, "corridor", _same) for c in _names(self.corridors, "corridors"))
+        corridors = tuple(_pair(c, "corridor", str) for c in _names(self.corridors, "corridors"))
         object.__setattr__(self, "corridors", corridors)
-        object.__setattr__(self, "route", tuple(_names(self.route, "route")))
+        object.__setattr__(self, "route", tuple(str(n) for n in _names(self.route, "route")))
+        object.__setattr__(self, "name", str(self.name))
+        object.__setattr__(self, "description", str(self.description or ""))
         if not (math.isfinite(self.corridor_width) and self.corridor_width > 0):
             raise ValueError(
                 f"corridor_width must be a finite width > 0 m, got {self.corridor_width}"
@@ -463,7 +467,7 @@ def map_from_dict(data: Mapping[str, Any]) -> CorridorMap:
         "nodes": nodes,
         "corridors": corridors,
         "route": tuple(str(n) for n in _names(data["route"], "route")),
-        "description": str(data.get("description", "")),
+        "description": data.get("description") or "",  # (str in CorridorMap; null is "")
     }
     for key in ("grid", "start_offset"):
         if key in data:
@@ -475,11 +479,6 @@ def _metres(value: Any, what: str = "coordinate") -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ValueError(f"map {what}: expected a number of metres, got {value!r:.80}")
     return float(value)
-
-
-def _same(value: Any) -> Any:
-    """A corridor's node name, as given."""
-    return value
 
 
 def _names(value: Any, key: str) -> list[Any]:

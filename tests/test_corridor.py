@@ -147,6 +147,12 @@ def test_corridor_map_object_is_checked_and_json_ready():
     assert back == m and map_digest(back) == map_digest(m)
     nodes["A"][0] = 5  # the caller's array, not the map's node
     assert m.nodes["A"] == (0.0, 0.0) and m.walls() == back.walls()
+    # node names that are not str (from enumerate, say) are read as a file reads them: the
+    # map written and read back is the same map, with the same digest
+    numbered = {i: SMALL["nodes"][k] for i, k in enumerate("ABCD")}
+    m = CorridorMap("mine", 0.6, numbered, ((0, 1), (1, 2), (2, 3), (3, 0)), (0, 1, 2, 3, 0))
+    back = map_from_dict(json.loads(json.dumps(m.to_dict())))
+    assert back == m and map_digest(back) == map_digest(m)
     for change, message in [
         ({"corridor_width": "0.6"}, "corridor_width: expected a number of metres, got '0.6'"),
         ({"start_offset": None}, "start_offset: expected a number of metres, got None"),
