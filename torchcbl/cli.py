@@ -496,11 +496,16 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         raise _UsageError(f"{results_path} is not JSON ({exc})") from None
     domain = results.get("domain") if isinstance(results, dict) else None
     if domain is None and isinstance(results, dict) and {"table", "sweep"} <= results.keys():
+        png = run_dir / "learning_curves.png"
+        where = (
+            f"whose plot is {png}, written by the sweep"
+            if png.is_file()
+            else f"whose sweep wrote no plot ({png}: run_benchmark(..., plots=False) writes none)"
+        )
         raise _UsageError(
-            f"{results_path} is a torchcbl benchmark's, whose plot is "
-            f"{run_dir / 'learning_curves.png'}, written by the sweep (run the same "
-            "torchcbl benchmark command again to redraw it: its cells are cached); torchcbl "
-            "plot takes a run directory of torchcbl reproduce"
+            f"{results_path} is a torchcbl benchmark's, {where}; run the same torchcbl "
+            "benchmark command again to draw it anew (its cells are cached); torchcbl plot "
+            "takes a run directory of torchcbl reproduce"
         )
     if domain not in _DOMAINS:
         raise _UsageError(
