@@ -1072,6 +1072,12 @@ def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs")
             "drive the map it was taught on), or teach a new session on the changed map "
             "(teach corridor --map)"
         )
+    if not shipped and not Path(map_name).is_absolute():  # read from here: maybe another file
+        fix = (
+            f"if the session was taught from another directory than this one ({Path.cwd()}), "
+            f"run this from there ({map_name} is a path relative to it, and this is another "
+            "file of that name); else " + fix
+        )
     if source == "results":
         raise ValueError(
             f"{session_dir} was taught on another map than {what}, which its run's "

@@ -223,6 +223,17 @@ def test_session_on_relative_map_path_evaluated_elsewhere(tmp_path, monkeypatch,
     assert "not there any more" not in err and re.search(message, err), err
     with pytest.raises(ValueError, match=message):
         evaluate_saved_policy("project/s", n_steps=2)
+    # where another file of that name is, the message does not only say to overwrite it
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "mine.json").write_text(json.dumps({**SMALL, "start_offset": 0.3}))
+    monkeypatch.chdir(other)
+    message = r"taught from another directory than this one .*, run this from there"
+    assert main(["evaluate", "../project/s", "--steps", "2"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and re.search(message, err), err
+    with pytest.raises(ValueError, match=message):
+        evaluate_saved_policy("../project/s", n_steps=2)
     monkeypatch.chdir(taught)  # from there, it evaluates
     assert evaluate_saved_policy("s", n_steps=2)["steps"] == 2
 
