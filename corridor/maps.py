@@ -511,7 +511,7 @@ def _read_map_file(path: Path) -> str:
     """A map file's text (UTF-8, as JSON is); a ValueError naming the file if it is not text
     (e.g. a PNG of the map given for its JSON) or cannot be read."""
     try:
-        return path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8-sig")  # a BOM (Notepad) is no part of the JSON
     except UnicodeDecodeError as exc:
         raise ValueError(
             f"map file {str(path)!r} is not a map JSON file (not UTF-8 text: {exc.reason} at "

@@ -167,6 +167,14 @@ def test_corridor_map_object_is_checked_and_json_ready():
             CorridorMap(**{**base, **change})
 
 
+def test_map_file_with_a_byte_order_mark_loads(tmp_path):
+    """Windows editors (Notepad) save UTF-8 with a byte-order mark; such a map file was
+    refused as 'not valid JSON: Unexpected UTF-8 BOM'."""
+    path = tmp_path / "mine.json"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(SMALL).encode())
+    assert load_map(path) == map_from_dict(SMALL)
+
+
 def test_map_file_not_text_is_named(tmp_path, capsys):
     """A file that is not a map's text (the map.png an experiment draws, given for the map
     JSON) is refused naming the file and what is wanted; it was UnicodeDecodeError's "'utf-8'
