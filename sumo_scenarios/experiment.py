@@ -18,7 +18,8 @@ Per seed (each in its own process: libsumo holds one simulation per process):
 
 ``run_experiment`` writes into ``run_dir``: ``results.json`` (``summary``: the figures,
 mean and sd over seeds; ``acceptance``: each of the README's targets for this domain and
-whether it holds; ``stages``: Figure 8's bars, mean and sd over seeds; ``per_seed``, one entry
+whether it holds; ``stages``: Figure 8's bars, mean and sd over seeds (arm (a)'s confident
+stages over the seeds that had a confident phase); ``per_seed``, one entry
 per seed in the order of ``seeds``; ``paper``: the paper's figures; config; versions; wall and
 CPU seconds), ``fig6_accuracy.png``,
 ``fig7_middle_lane_demos.png``, ``fig8_lanes_collisions.png``, ``fig9_accuracy.png``,
@@ -732,7 +733,17 @@ def run_experiment(
     labels = _stage_labels(config, ni_all)
     stages: dict[str, Any] = {}
     for label in labels:
-        rows = [r["stages"][label] for r in per_seed if label in r["stages"]]
+        # arm (a)'s confident stages over the seeds that had a confident phase, as arm (a)'s
+        # summary: a seed whose window never reached the target took more non-interactive
+        # demonstrations under these labels (a stage no seed reached is left out)
+        seeds = [
+            r
+            for r in per_seed
+            if r["noninteractive_target_reached"] or not label.startswith("a_plus")
+        ]
+        rows = [r["stages"][label] for r in seeds if label in r["stages"]]
+        if not rows:
+            continue
         s = {
             "name": stage_name(label),
             "n": len(rows),
@@ -749,7 +760,7 @@ def run_experiment(
         if "demonstrations" in rows[0]:
             s["demonstrations"] = mean_sd([x["demonstrations"] for x in rows])
             s["components_total"] = mean_sd([sum(x["components"]) for x in rows])
-        counts = [r["fig10_counts"][label] for r in per_seed if label in r["fig10_counts"]]
+        counts = [r["fig10_counts"][label] for r in seeds if label in r["fig10_counts"]]
         if counts:
             s["low_confidence_before_contact"] = _pool_low_confidence(counts)
         stages[label] = s
@@ -1211,7 +1222,7 @@ def format_summary(results: dict[str, Any]) -> str:
             f"{s['fig10_all_snapshots']['runs']} runs",
         ),
     ]
-    if "all_segments" in st[final_a]:
+    if "all_segments" in st.get(final_a, {}):  # (absent where no seed had a confident phase)
         a = st[final_a]["all_segments"]
         rows.append(
             ("extra", "arm (a) final, all segments, collisions %", "", ms(a["collision_pct"]))

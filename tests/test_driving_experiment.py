@@ -315,6 +315,10 @@ def test_a_seed_that_never_reaches_the_target_is_reported_as_such(tmp_path):
     assert s["arm_a"]["collision_pct"]["n"] == 0 and s["autonomy_confident_phase"]["n"] == 0
     assert s["arm_a_minus_b_collision_pct"]["n"] == 0
     assert not res["acceptance"]["arm_a_le_2pct"] and not res["acceptance"]["arm_a_beats_arm_b"]
+    # nor in Figure 8's "arm (a) +k" bars, which were its non-interactive demonstrations
+    assert res["per_seed"][0]["stages"]["a_plus10"]  # evaluated, and kept per seed
+    assert not [k for k in res["stages"] if k.startswith("a_plus")]
+    assert {"a_end_noninteractive", "b_60", "expert"} <= set(res["stages"])
 
 
 def test_two_seeds_give_a_paired_interval_and_a_writable_summary(tmp_path):
