@@ -842,3 +842,29 @@ def test_a_teacher_given_where_its_factory_belongs_is_refused_before_any_cell_ru
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "factory" in err and "(obs, info)" in err
     assert not (tmp_path / "cli").exists()
+
+
+@pytest.mark.parametrize(
+    "gym_env, says",
+    [
+        # a namespaced id whose package was not imported: gymnasium said only "Namespace mygrid
+        # not found. Have you installed the proper package for mygrid?"
+        ("mygrid/Point-v0", "--gym-env mygrid:mygrid/Point-v0"),
+        ("Point-v0", "--gym-env mymodule:Point-v0"),
+        # the module was imported, but it does not register that id
+        ("_bench_env:Point-v0", "_bench_env was imported but registers no such id"),
+    ],
+)
+def test_an_env_id_without_its_module_says_how_to_name_the_module(
+    gym_env, says, tmp_path, capsys, monkeypatch
+):
+    """`--gym-env mygrid/Point-v0`, the id without the module that registers it, gave
+    gymnasium's bare "Namespace mygrid not found" (or "Environment `Point` doesn't exist"),
+    nothing saying that --gym-env takes module:Id."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", gym_env, "--teacher", "_bench_env:teacher"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--gym-env {gym_env}: " in err
+    assert says in err, err
+    assert not (tmp_path / "b").exists()

@@ -810,8 +810,22 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             if module:
                 importlib.import_module(module)
             gym.spec(env_id)
-        except (gym.error.Error, ImportError) as exc:
+        except ImportError as exc:
             raise _UsageError(f"--gym-env {args.gym_env}: {_one_line(exc)}") from None
+        except gym.error.Error as exc:  # not registered (after importing module, if given)
+            if module:
+                hint = (
+                    f"{module} was imported but registers no such id; give the id its "
+                    "register(id=...) call gives"
+                )
+            else:  # the id alone: only gymnasium's own and those of packages already imported
+                guess = env_id.partition("/")[0] if "/" in env_id else "mymodule"
+                hint = (
+                    "if a module of yours registers it, name that module first: "
+                    f"--gym-env {guess}:{env_id} (module:Id, as gymnasium.make reads it)"
+                )
+            text = _one_line(exc).rstrip(".")
+            raise _UsageError(f"--gym-env {args.gym_env}: {text}; {hint}") from None
         score = args.score or "torchcbl.benchmark:success_rate"
         for option, path in (("--teacher", args.teacher), ("--score", score)):
             try:  # before anything runs or is printed
