@@ -868,3 +868,18 @@ def test_an_env_id_without_its_module_says_how_to_name_the_module(
     assert err.count("\n") == 1 and f"--gym-env {gym_env}: " in err
     assert says in err, err
     assert not (tmp_path / "b").exists()
+
+
+def test_the_help_says_gym_env_adds_to_the_default_envs(capsys):
+    """--gym-env adds an env to --envs, whose default is corridor and driving: a newcomer who
+    gave --gym-env alone started the full sweep, the driving domain included, and neither
+    --help nor docs/benchmark.md said so (nor that --envs "" leaves the domains out)."""
+    with pytest.raises(SystemExit):
+        main(["benchmark", "--help"])
+    text = " ".join(capsys.readouterr().out.split("options:", 1)[1].split())
+    gym_env = text.split("--gym-env MODULE:ID", 1)[1].split("--teacher MODULE:NAME", 1)[0]
+    assert "corridor and driving" in gym_env and '--envs ""' in gym_env
+    envs = text.split("--envs E,..", 1)[1].split("--seeds N", 1)[0]
+    assert "--gym-env" in envs and '""' in envs
+    doc = " ".join((ROOT / "docs" / "benchmark.md").read_text().split())
+    assert 'without --envs "" it runs beside corridor and driving' in doc.replace("`", "")

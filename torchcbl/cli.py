@@ -1164,7 +1164,8 @@ def _parser() -> argparse.ArgumentParser:
         "--envs",
         default=None,
         metavar="E,..",
-        help="comma-separated of corridor,driving (default both)",
+        help='comma-separated of corridor,driving (default both, with --gym-env too; "" for '
+        "none, e.g. to run --gym-env alone)",
     )
     p.add_argument(
         "--seeds",
@@ -1196,7 +1197,9 @@ def _parser() -> argparse.ArgumentParser:
         "--gym-env",
         default=None,
         metavar="MODULE:ID",
-        help="also benchmark this gymnasium id (module imported first, as gymnasium.make does)",
+        help="also benchmark this gymnasium id (module imported first, as gymnasium.make "
+        "does), beside the --envs ones: by default corridor and driving, the full sweep; add "
+        '--envs "" to run this env alone',
     )
     g = "only with --gym-env: "
     p.add_argument("--teacher", metavar="MODULE:NAME", help=g + "the teacher factory")
