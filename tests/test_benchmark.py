@@ -883,3 +883,18 @@ def test_the_help_says_gym_env_adds_to_the_default_envs(capsys):
     assert "--gym-env" in envs and '""' in envs
     doc = " ".join((ROOT / "docs" / "benchmark.md").read_text().split())
     assert 'without --envs "" it runs beside corridor and driving' in doc.replace("`", "")
+
+
+def test_a_strategy_that_needs_parameters_is_told_how_to_give_them(tmp_path, capsys, monkeypatch):
+    """--strategies takes names only; a class of one's own that needs a parameter was refused
+    with "expected module:Class of a strategy that takes no arguments", nothing saying how to
+    give it one (a functools.partial or a subclass named instead, or StrategySpec's params in
+    Python)."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "_bench_env:StrategyWithParams"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "missing 1 required positional argument: 'horizon'" in err
+    assert "functools.partial" in err and "StrategySpec(" in err and "params" in err
+    assert not (tmp_path / "b").exists()

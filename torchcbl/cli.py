@@ -722,7 +722,10 @@ def _check_strategy(spec: Any) -> None:
         text = _one_line(exc)
         raise _UsageError(
             f"--strategies {spec.name}: cannot make it ({type(exc).__name__}: {text}); expected "
-            "module:Class of a strategy that takes no arguments, or a shipped name"
+            "module:Class of a strategy that takes no arguments, or a shipped name: the command "
+            "gives a strategy no parameters, so fix them in a module of yours and name that "
+            "(Mine = functools.partial(MyStrategy, param=value), or a subclass), or give them "
+            "in Python, StrategySpec(name, params) with torchcbl.benchmark.run_benchmark"
         ) from None
     if not isinstance(strategy, Strategy):
         raise _UsageError(
