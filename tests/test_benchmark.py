@@ -898,3 +898,29 @@ def test_a_strategy_that_needs_parameters_is_told_how_to_give_them(tmp_path, cap
     assert err.count("\n") == 1 and "missing 1 required positional argument: 'horizon'" in err
     assert "functools.partial" in err and "StrategySpec(" in err and "params" in err
     assert not (tmp_path / "b").exists()
+
+
+@pytest.mark.timeout(60)
+def test_a_ray_address_where_nothing_listens_is_refused_not_waited_on(
+    tmp_path, capsys, monkeypatch
+):
+    """--ray-address host:port with no Ray there (a typo, a cluster not started yet) left the
+    command printing Ray's "Failed to connect to GCS" warnings for about a quarter of an hour
+    (ray.init's 20 tries of some 40 s each) before any error."""
+    pytest.importorskip("ray")
+    import socket
+
+    monkeypatch.syspath_prepend(str(TESTS))
+    with socket.socket() as s:  # a port nothing listens on (free a moment ago)
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
+    argv += ["--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    t0 = time.monotonic()
+    code = main([*argv, "--ray-address", f"127.0.0.1:{port}", "--out", str(tmp_path / "b")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert f"Ray at 127.0.0.1:{port}: nothing answers at " in err and "ray start" in err
+    assert time.monotonic() - t0 < 30
+    assert not list((tmp_path / "b" / "cells").glob("*.json"))
