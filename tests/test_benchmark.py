@@ -924,3 +924,23 @@ def test_a_ray_address_where_nothing_listens_is_refused_not_waited_on(
     assert f"Ray at 127.0.0.1:{port}: nothing answers at " in err and "ray start" in err
     assert time.monotonic() - t0 < 30
     assert not list((tmp_path / "b" / "cells").glob("*.json"))
+
+
+def test_a_module_in_the_current_directory_is_said_to_need_pythonpath(
+    tmp_path, capsys, monkeypatch
+):
+    """A teacher (or strategy, or env module) in a file of the current directory, named as
+    mine:make, was refused with a bare "No module named 'mine'": the torchcbl console script,
+    unlike python -m or a script, does not import from the current directory, and nothing
+    said so."""
+    (tmp_path / "mine.py").write_text("def make(env):\n    return lambda obs, info: 0\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    for extra in (["--teacher", "mine:make"], ["--teacher", "_bench_env:teacher"]):
+        more = ["--strategies", "mine:Strategy"] if extra[1] != "mine:make" else []
+        assert main([*argv, *extra, *more, "--out", str(tmp_path / "b")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "No module named 'mine'" in err, err
+        assert "mine.py is in the current directory" in err and "PYTHONPATH=" in err, err
+    assert not (tmp_path / "b").exists()

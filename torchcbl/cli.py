@@ -702,6 +702,23 @@ _STOP_REASONS = {
 _BENCH_ENVS = {"corridor": "corridor.benchmark", "driving": "sumo_scenarios.benchmark"}
 
 
+def _cwd_hint(exc: BaseException) -> str:
+    """For a module not found that is a file or package of the current directory: that the
+    torchcbl command (a console script, unlike ``python -m`` or a script) does not import from
+    there, and what to do; else ""."""
+    name = getattr(exc, "name", None) if isinstance(exc, ModuleNotFoundError) else None
+    if not name:
+        return ""
+    top, here = name.partition(".")[0], Path.cwd()
+    found = next((f for f in (f"{top}.py", f"{top}/") if (here / f.rstrip("/")).exists()), None)
+    if found is None:
+        return ""
+    return (
+        f" ({found} is in the current directory, which the torchcbl command does not import "
+        "from: run it as PYTHONPATH=$PWD torchcbl ..., or install your package)"
+    )
+
+
 def _check_strategy(spec: Any) -> None:
     """A one-line error unless ``spec`` (a --strategies import path) gives a strategy: the
     class imports, is made without arguments (the command gives it none) and has the
@@ -711,7 +728,7 @@ def _check_strategy(spec: Any) -> None:
     try:
         strategy = spec.build(seed=0)
     except ImportError as exc:
-        text = _one_line(exc)
+        text = _one_line(exc) + _cwd_hint(exc)
         if text.startswith("cannot import"):  # it names the path and what it expected
             raise _UsageError(f"{text} (--strategies)") from None
         raise _UsageError(
@@ -784,7 +801,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             bm._import(args.driving_teacher)
         except (ValueError, ImportError, TypeError) as exc:  # TypeError: a relative name
             raise _UsageError(
-                f"--driving-teacher {args.driving_teacher}: {_one_line(exc)}"
+                f"--driving-teacher {args.driving_teacher}: {_one_line(exc)}{_cwd_hint(exc)}"
             ) from None
     envs = []
     for e in env_names:
@@ -814,7 +831,9 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                 importlib.import_module(module)
             gym.spec(env_id)
         except ImportError as exc:
-            raise _UsageError(f"--gym-env {args.gym_env}: {_one_line(exc)}") from None
+            raise _UsageError(
+                f"--gym-env {args.gym_env}: {_one_line(exc)}{_cwd_hint(exc)}"
+            ) from None
         except gym.error.Error as exc:  # not registered (after importing module, if given)
             if module:
                 hint = (
@@ -834,7 +853,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             try:  # before anything runs or is printed
                 bm._import(path)
             except (ValueError, ImportError, TypeError) as exc:  # TypeError: a relative name
-                raise _UsageError(f"{option} {path}: {_one_line(exc)}") from None
+                raise _UsageError(f"{option} {path}: {_one_line(exc)}{_cwd_hint(exc)}") from None
         budgets, max_steps = args.budgets or (10, 20, 40, 80), args.max_steps or 1000
         above = [b for b in budgets if b > max_steps]
         if above:  # as EnvSpec refuses them, in the options' names
@@ -917,7 +936,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             on_cell=on_cell,
         )
     except (RuntimeError, ValueError, ImportError) as exc:
-        raise _UsageError(str(exc)) from None
+        raise _UsageError(str(exc) + _cwd_hint(exc)) from None
     c1 = os.times()
     cpu = (c1.user - c0.user) + (c1.system - c0.system)
     cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
