@@ -944,3 +944,67 @@ def test_a_module_in_the_current_directory_is_said_to_need_pythonpath(
         assert err.count("\n") == 1 and "No module named 'mine'" in err, err
         assert "mine.py is in the current directory" in err and "PYTHONPATH=" in err, err
     assert not (tmp_path / "b").exists()
+
+
+_POOL_CHILD = """
+import sys
+sys.path[:0] = [{tests!r}, {root!r}]
+from torchcbl import benchmark as bm
+from test_benchmark import STRATEGIES, _env
+if __name__ == "__main__":
+    bm.run_benchmark(STRATEGIES, [_env(max_steps=150, budgets=(5, 10, 20, 40))], range(6),
+                     {out!r}, workers=2, plots=False)
+"""
+
+
+def _children(pid):
+    kids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            kids.append(int(stat.parent.name))
+    return kids
+
+
+def _running(pid):
+    try:  # a zombie has exited (waiting for whoever adopted it to reap it)
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_a_sweep_killed_outright_leaves_no_worker_processes_behind(tmp_path):
+    """A process-pool sweep killed with SIGKILL (kill -9, the OOM killer taking the driver; or
+    SIGTERM, SIGHUP, whose default kills Python without its cleanup) left its worker processes
+    running for ever, each holding its interpreter, torch and (driving) a SUMO simulation,
+    blocked on a queue that nobody would write to again."""
+    out = tmp_path / "bench"
+    script = tmp_path / "sweep.py"
+    script.write_text(_POOL_CHILD.format(tests=str(TESTS), root=str(ROOT), out=str(out)))
+    child = subprocess.Popen([sys.executable, str(script)], cwd=tmp_path)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and child.poll() is None:
+            if list((out / "cells").glob("*.json")):  # the workers run cells
+                workers = _children(child.pid)
+                break
+            time.sleep(0.05)
+        assert child.poll() is None and workers, "the sweep ended before it could be killed"
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.wait()
+    deadline = time.monotonic() + 10
+    alive = workers
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.1)
+        alive = [p for p in workers if _running(p)]
+    try:
+        assert not alive, "worker processes outlived the killed sweep"
+    finally:
+        for p in alive:  # (those this test started)
+            os.kill(p, signal.SIGKILL)
