@@ -123,3 +123,12 @@ def failing_sweep(out: str) -> None:
 def bare_teacher(obs: Any, info: dict) -> int:
     """A teacher itself, not a factory that returns one (what --teacher must name)."""
     return 0
+
+
+class StrategyWithParams:
+    """A strategy of one's own whose constructor needs a parameter (the command gives none)."""
+
+    def __new__(cls, horizon: int) -> Any:
+        from torchcbl.strategies.dagger import DAgger
+
+        return DAgger(iteration_steps=horizon)

@@ -842,3 +842,169 @@ def test_a_teacher_given_where_its_factory_belongs_is_refused_before_any_cell_ru
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "factory" in err and "(obs, info)" in err
     assert not (tmp_path / "cli").exists()
+
+
+@pytest.mark.parametrize(
+    "gym_env, says",
+    [
+        # a namespaced id whose package was not imported: gymnasium said only "Namespace mygrid
+        # not found. Have you installed the proper package for mygrid?"
+        ("mygrid/Point-v0", "--gym-env mygrid:mygrid/Point-v0"),
+        ("Point-v0", "--gym-env mymodule:Point-v0"),
+        # the module was imported, but it does not register that id
+        ("_bench_env:Point-v0", "_bench_env was imported but registers no such id"),
+    ],
+)
+def test_an_env_id_without_its_module_says_how_to_name_the_module(
+    gym_env, says, tmp_path, capsys, monkeypatch
+):
+    """`--gym-env mygrid/Point-v0`, the id without the module that registers it, gave
+    gymnasium's bare "Namespace mygrid not found" (or "Environment `Point` doesn't exist"),
+    nothing saying that --gym-env takes module:Id."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", gym_env, "--teacher", "_bench_env:teacher"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--gym-env {gym_env}: " in err
+    assert says in err, err
+    assert not (tmp_path / "b").exists()
+
+
+def test_the_help_says_gym_env_adds_to_the_default_envs(capsys):
+    """--gym-env adds an env to --envs, whose default is corridor and driving: a newcomer who
+    gave --gym-env alone started the full sweep, the driving domain included, and neither
+    --help nor docs/benchmark.md said so (nor that --envs "" leaves the domains out)."""
+    with pytest.raises(SystemExit):
+        main(["benchmark", "--help"])
+    text = " ".join(capsys.readouterr().out.split("options:", 1)[1].split())
+    gym_env = text.split("--gym-env MODULE:ID", 1)[1].split("--teacher MODULE:NAME", 1)[0]
+    assert "corridor and driving" in gym_env and '--envs ""' in gym_env
+    envs = text.split("--envs E,..", 1)[1].split("--seeds N", 1)[0]
+    assert "--gym-env" in envs and '""' in envs
+    doc = " ".join((ROOT / "docs" / "benchmark.md").read_text().split())
+    assert 'without --envs "" it runs beside corridor and driving' in doc.replace("`", "")
+
+
+def test_a_strategy_that_needs_parameters_is_told_how_to_give_them(tmp_path, capsys, monkeypatch):
+    """--strategies takes names only; a class of one's own that needs a parameter was refused
+    with "expected module:Class of a strategy that takes no arguments", nothing saying how to
+    give it one (a functools.partial or a subclass named instead, or StrategySpec's params in
+    Python)."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "_bench_env:StrategyWithParams"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "missing 1 required positional argument: 'horizon'" in err
+    assert "functools.partial" in err and "StrategySpec(" in err and "params" in err
+    assert not (tmp_path / "b").exists()
+
+
+@pytest.mark.timeout(60)
+def test_a_ray_address_where_nothing_listens_is_refused_not_waited_on(
+    tmp_path, capsys, monkeypatch
+):
+    """--ray-address host:port with no Ray there (a typo, a cluster not started yet) left the
+    command printing Ray's "Failed to connect to GCS" warnings for about a quarter of an hour
+    (ray.init's 20 tries of some 40 s each) before any error."""
+    pytest.importorskip("ray")
+    import socket
+
+    monkeypatch.syspath_prepend(str(TESTS))
+    with socket.socket() as s:  # a port nothing listens on (free a moment ago)
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
+    argv += ["--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    t0 = time.monotonic()
+    code = main([*argv, "--ray-address", f"127.0.0.1:{port}", "--out", str(tmp_path / "b")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert f"Ray at 127.0.0.1:{port}: nothing answers at " in err and "ray start" in err
+    assert time.monotonic() - t0 < 30
+    assert not list((tmp_path / "b" / "cells").glob("*.json"))
+
+
+def test_a_module_in_the_current_directory_is_said_to_need_pythonpath(
+    tmp_path, capsys, monkeypatch
+):
+    """A teacher (or strategy, or env module) in a file of the current directory, named as
+    mine:make, was refused with a bare "No module named 'mine'": the torchcbl console script,
+    unlike python -m or a script, does not import from the current directory, and nothing
+    said so."""
+    (tmp_path / "mine.py").write_text("def make(env):\n    return lambda obs, info: 0\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    for extra in (["--teacher", "mine:make"], ["--teacher", "_bench_env:teacher"]):
+        more = ["--strategies", "mine:Strategy"] if extra[1] != "mine:make" else []
+        assert main([*argv, *extra, *more, "--out", str(tmp_path / "b")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "No module named 'mine'" in err, err
+        assert "mine.py is in the current directory" in err and "PYTHONPATH=" in err, err
+    assert not (tmp_path / "b").exists()
+
+
+_POOL_CHILD = """
+import sys
+sys.path[:0] = [{tests!r}, {root!r}]
+from torchcbl import benchmark as bm
+from test_benchmark import STRATEGIES, _env
+if __name__ == "__main__":
+    bm.run_benchmark(STRATEGIES, [_env(max_steps=150, budgets=(5, 10, 20, 40))], range(6),
+                     {out!r}, workers=2, plots=False)
+"""
+
+
+def _children(pid):
+    kids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            kids.append(int(stat.parent.name))
+    return kids
+
+
+def _running(pid):
+    try:  # a zombie has exited (waiting for whoever adopted it to reap it)
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_a_sweep_killed_outright_leaves_no_worker_processes_behind(tmp_path):
+    """A process-pool sweep killed with SIGKILL (kill -9, the OOM killer taking the driver; or
+    SIGTERM, SIGHUP, whose default kills Python without its cleanup) left its worker processes
+    running for ever, each holding its interpreter, torch and (driving) a SUMO simulation,
+    blocked on a queue that nobody would write to again."""
+    out = tmp_path / "bench"
+    script = tmp_path / "sweep.py"
+    script.write_text(_POOL_CHILD.format(tests=str(TESTS), root=str(ROOT), out=str(out)))
+    child = subprocess.Popen([sys.executable, str(script)], cwd=tmp_path)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and child.poll() is None:
+            if list((out / "cells").glob("*.json")):  # the workers run cells
+                workers = _children(child.pid)
+                break
+            time.sleep(0.05)
+        assert child.poll() is None and workers, "the sweep ended before it could be killed"
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.wait()
+    deadline = time.monotonic() + 10
+    alive = workers
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.1)
+        alive = [p for p in workers if _running(p)]
+    try:
+        assert not alive, "worker processes outlived the killed sweep"
+    finally:
+        for p in alive:  # (those this test started)
+            os.kill(p, signal.SIGKILL)

@@ -709,6 +709,36 @@ def _rebuild_cell_error(message: str, config: dict[str, Any]) -> CellError:
     return exc
 
 
+def _check_ray_address(address: str, timeout: float = 10.0) -> None:
+    """A RuntimeError unless something answers at the Ray cluster address ``address``
+    (``host:port``; ``"auto"``, ``"local"`` and ``ray://`` addresses are left to Ray, which
+    refuses them at once when nothing is there). Ray itself, given a host and port where
+    nothing listens, retries its connection for about a quarter of an hour (20 tries of some
+    40 s), printing warnings, before it fails."""
+    import socket
+
+    if "://" in address or address in ("auto", "local"):
+        return
+    try:  # where ray.init connects: localhost and 127.0.0.1 become this node's IP
+        from ray._private.services import canonicalize_bootstrap_address
+
+        target = canonicalize_bootstrap_address(address) or address
+    except Exception:  # a Ray without it, or an address it refuses (ray.init will say)
+        target = address
+    host, _, port = target.rpartition(":")
+    if not host or not port.isdigit():
+        return  # not host:port: ray.init says what it expected
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise RuntimeError(
+            f"Ray at {address}: nothing answers at {target} "
+            f"({' '.join(str(exc).split()) or type(exc).__name__}); expected the address of a "
+            "running Ray cluster's head node (host:port, the GCS port that `ray start --head` "
+            "prints, 6379 by default): start Ray there first, or fix the address"
+        ) from None
+
+
 def _execute(
     todo: list[dict[str, Any]],
     *,
@@ -733,6 +763,8 @@ def _execute(
             ) from exc
         started = not ray.is_initialized()
         if started:
+            if ray_address is not None:
+                _check_ray_address(ray_address)
             ray.init(
                 address=ray_address,
                 num_cpus=None if ray_address else workers,
@@ -817,7 +849,8 @@ def run_benchmark(
             The pool spawns fresh interpreters, which import the caller's main module: from a
             script, call ``run_benchmark`` under ``if __name__ == "__main__":``.
         use_ray: run the cells as Ray tasks (``ray_address`` None: a local Ray with
-            ``workers`` CPUs; else ``ray.init(address=ray_address)``, e.g. ``"auto"``).
+            ``workers`` CPUs; else ``ray.init(address=ray_address)``, e.g. ``"auto"``; a
+            ``host:port`` where nothing answers within 10 s is a RuntimeError).
         plots: write ``learning_curves.png``. The ``results.json`` and plot an earlier sweep
             left in ``out_dir`` are removed first, so what is there is this sweep's or
             nothing (a sweep that stops early writes neither).

@@ -707,6 +707,23 @@ _STOP_REASONS = {
 _BENCH_ENVS = {"corridor": "corridor.benchmark", "driving": "sumo_scenarios.benchmark"}
 
 
+def _cwd_hint(exc: BaseException) -> str:
+    """For a module not found that is a file or package of the current directory: that the
+    torchcbl command (a console script, unlike ``python -m`` or a script) does not import from
+    there, and what to do; else ""."""
+    name = getattr(exc, "name", None) if isinstance(exc, ModuleNotFoundError) else None
+    if not name:
+        return ""
+    top, here = name.partition(".")[0], Path.cwd()
+    found = next((f for f in (f"{top}.py", f"{top}/") if (here / f.rstrip("/")).exists()), None)
+    if found is None:
+        return ""
+    return (
+        f" ({found} is in the current directory, which the torchcbl command does not import "
+        "from: run it as PYTHONPATH=$PWD torchcbl ..., or install your package)"
+    )
+
+
 def _check_strategy(spec: Any) -> None:
     """A one-line error unless ``spec`` (a --strategies import path) gives a strategy: the
     class imports, is made without arguments (the command gives it none) and has the
@@ -716,7 +733,7 @@ def _check_strategy(spec: Any) -> None:
     try:
         strategy = spec.build(seed=0)
     except ImportError as exc:
-        text = _one_line(exc)
+        text = _one_line(exc) + _cwd_hint(exc)
         if text.startswith("cannot import"):  # it names the path and what it expected
             raise _UsageError(f"{text} (--strategies)") from None
         raise _UsageError(
@@ -727,7 +744,10 @@ def _check_strategy(spec: Any) -> None:
         text = _one_line(exc)
         raise _UsageError(
             f"--strategies {spec.name}: cannot make it ({type(exc).__name__}: {text}); expected "
-            "module:Class of a strategy that takes no arguments, or a shipped name"
+            "module:Class of a strategy that takes no arguments, or a shipped name: the command "
+            "gives a strategy no parameters, so fix them in a module of yours and name that "
+            "(Mine = functools.partial(MyStrategy, param=value), or a subclass), or give them "
+            "in Python, StrategySpec(name, params) with torchcbl.benchmark.run_benchmark"
         ) from None
     if not isinstance(strategy, Strategy):
         raise _UsageError(
@@ -786,7 +806,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             bm._import(args.driving_teacher)
         except (ValueError, ImportError, TypeError) as exc:  # TypeError: a relative name
             raise _UsageError(
-                f"--driving-teacher {args.driving_teacher}: {_one_line(exc)}"
+                f"--driving-teacher {args.driving_teacher}: {_one_line(exc)}{_cwd_hint(exc)}"
             ) from None
     envs = []
     for e in env_names:
@@ -815,14 +835,30 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             if module:
                 importlib.import_module(module)
             gym.spec(env_id)
-        except (gym.error.Error, ImportError) as exc:
-            raise _UsageError(f"--gym-env {args.gym_env}: {_one_line(exc)}") from None
+        except ImportError as exc:
+            raise _UsageError(
+                f"--gym-env {args.gym_env}: {_one_line(exc)}{_cwd_hint(exc)}"
+            ) from None
+        except gym.error.Error as exc:  # not registered (after importing module, if given)
+            if module:
+                hint = (
+                    f"{module} was imported but registers no such id; give the id its "
+                    "register(id=...) call gives"
+                )
+            else:  # the id alone: only gymnasium's own and those of packages already imported
+                guess = env_id.partition("/")[0] if "/" in env_id else "mymodule"
+                hint = (
+                    "if a module of yours registers it, name that module first: "
+                    f"--gym-env {guess}:{env_id} (module:Id, as gymnasium.make reads it)"
+                )
+            text = _one_line(exc).rstrip(".")
+            raise _UsageError(f"--gym-env {args.gym_env}: {text}; {hint}") from None
         score = args.score or "torchcbl.benchmark:success_rate"
         for option, path in (("--teacher", args.teacher), ("--score", score)):
             try:  # before anything runs or is printed
                 bm._import(path)
             except (ValueError, ImportError, TypeError) as exc:  # TypeError: a relative name
-                raise _UsageError(f"{option} {path}: {_one_line(exc)}") from None
+                raise _UsageError(f"{option} {path}: {_one_line(exc)}{_cwd_hint(exc)}") from None
         budgets, max_steps = args.budgets or (10, 20, 40, 80), args.max_steps or 1000
         above = [b for b in budgets if b > max_steps]
         if above:  # as EnvSpec refuses them, in the options' names
@@ -905,7 +941,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             on_cell=on_cell,
         )
     except (RuntimeError, ValueError, ImportError) as exc:
-        raise _UsageError(str(exc)) from None
+        raise _UsageError(str(exc) + _cwd_hint(exc)) from None
     c1 = os.times()
     cpu = (c1.user - c0.user) + (c1.system - c0.system)
     cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
@@ -1155,7 +1191,8 @@ def _parser() -> argparse.ArgumentParser:
         "--envs",
         default=None,
         metavar="E,..",
-        help="comma-separated of corridor,driving (default both)",
+        help='comma-separated of corridor,driving (default both, with --gym-env too; "" for '
+        "none, e.g. to run --gym-env alone)",
     )
     p.add_argument(
         "--seeds",
@@ -1187,7 +1224,9 @@ def _parser() -> argparse.ArgumentParser:
         "--gym-env",
         default=None,
         metavar="MODULE:ID",
-        help="also benchmark this gymnasium id (module imported first, as gymnasium.make does)",
+        help="also benchmark this gymnasium id (module imported first, as gymnasium.make "
+        "does), beside the --envs ones: by default corridor and driving, the full sweep; add "
+        '--envs "" to run this env alone',
     )
     g = "only with --gym-env: "
     p.add_argument("--teacher", metavar="MODULE:NAME", help=g + "the teacher factory")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing as mp
+import os
 import platform
 import signal
 import sys
@@ -135,17 +136,50 @@ def run_versions(**extra: str) -> dict[str, str]:
     }
 
 
-def _worker_start() -> None:
+def _worker_start(parent: int | None = None) -> None:
     """Run in each worker of :func:`worker_pool` as it starts: its tqdm bars (the teaching
     loop's, hidden in a worker) take a thread lock instead of the multiprocessing lock tqdm
     makes by default, a named semaphore that a worker terminated after a Ctrl-C never
     releases; the resource tracker then printed a "leaked semaphore objects" warning under
-    the command's one line."""
+    the command's one line.
+
+    And the worker ends itself once ``parent`` (the process of the pool) is gone: killed
+    outright (SIGKILL; or SIGTERM, SIGHUP, which end Python without its cleanup) it cannot
+    stop its workers, which waited for ever on a queue that nobody would write to again (each
+    holding its interpreter, torch and perhaps a SUMO simulation). Its task's result could no
+    longer be delivered anyway."""
     import threading
 
     from tqdm import tqdm
 
     tqdm.set_lock(threading.RLock())
+    if parent is not None:
+        threading.Thread(
+            target=_exit_when_orphaned, args=(parent,), name="torchcbl-parent-watch", daemon=True
+        ).start()
+
+
+def _exit_when_orphaned(parent: int, every: float = 0.5) -> None:
+    """Exit at once when the process ``parent`` is gone: polled as this process's parent
+    (spawn, fork), else, when another process started this one (a forkserver context), by
+    its pid."""
+    import time
+
+    direct = os.getppid() == parent
+    while True:
+        if direct:
+            gone = os.getppid() != parent
+        else:
+            try:
+                os.kill(parent, 0)  # signal 0: is it there? (sends nothing)
+                gone = False
+            except ProcessLookupError:
+                gone = True
+            except OSError:  # there, but not ours to signal
+                gone = False
+        if gone:
+            os._exit(1)
+        time.sleep(every)
 
 
 def check_workers_start(context: Any = None) -> None:
@@ -248,7 +282,12 @@ def worker_pool(
     a worker killed mid-task).
     """
     check_workers_start(context)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_worker_start)
+    pool = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=context,
+        initializer=_worker_start,
+        initargs=(os.getpid(),),
+    )
     try:
         yield pool
     except BaseException as exc:
