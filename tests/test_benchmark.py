@@ -917,13 +917,19 @@ def test_a_ray_address_where_nothing_listens_is_refused_not_waited_on(
     argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
     argv += ["--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    assert main([*argv, "--workers", "1", "--out", str(tmp_path / "b")]) == 0  # a finished sweep
+    capsys.readouterr()
+    before = {p.name: p.read_bytes() for p in (tmp_path / "b").iterdir() if p.is_file()}
+    assert "results.json" in before
     t0 = time.monotonic()
+    argv[argv.index("--seeds") + 1] = "2"  # a cell to compute
     code = main([*argv, "--ray-address", f"127.0.0.1:{port}", "--out", str(tmp_path / "b")])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
     assert f"Ray at 127.0.0.1:{port}: nothing answers at " in err and "ray start" in err
     assert time.monotonic() - t0 < 30
-    assert not list((tmp_path / "b" / "cells").glob("*.json"))
+    # refused before the sweep's directory is touched: its results and plot are kept
+    assert {p.name: p.read_bytes() for p in (tmp_path / "b").iterdir() if p.is_file()} == before
 
 
 def test_a_module_in_the_current_directory_is_said_to_need_pythonpath(

@@ -44,6 +44,7 @@ import importlib
 import inspect
 import json
 import os
+import sys
 import time
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -763,8 +764,6 @@ def _execute(
             ) from exc
         started = not ray.is_initialized()
         if started:
-            if ray_address is not None:
-                _check_ray_address(ray_address)
             ray.init(
                 address=ray_address,
                 num_cpus=None if ray_address else workers,
@@ -895,6 +894,10 @@ def run_benchmark(
     ):
         raise ValueError(f"workers must be None (os.cpu_count()) or an int >= 1, got {workers!r}")
     _check_imports(strategies, envs)
+    if use_ray and ray_address is not None:  # before the output directory is touched
+        ray = sys.modules.get("ray")  # (a Ray already started is used as it is)
+        if ray is None or not ray.is_initialized():
+            _check_ray_address(ray_address)
     out = Path(out_dir)
     if (out / "cells").is_dir():
         # An earlier sweep's results and plot would read as this one's if it stops early (a
