@@ -132,3 +132,10 @@ class StrategyWithParams:
         from torchcbl.strategies.dagger import DAgger
 
         return DAgger(iteration_steps=horizon)
+
+
+class StrategyThatFails:
+    """A strategy class whose constructor fails for a reason of its own (no parameter missing)."""
+
+    def __init__(self) -> None:
+        raise RuntimeError("needs a licence file")

@@ -853,6 +853,9 @@ def test_a_teacher_given_where_its_factory_belongs_is_refused_before_any_cell_ru
         ("Point-v0", "--gym-env mymodule:Point-v0"),
         # the module was imported, but it does not register that id
         ("_bench_env:Point-v0", "_bench_env was imported but registers no such id"),
+        # gymnasium knows the name, only not that version or spelling: no module hint
+        ("CartPole-v9", "versioned environments"),
+        ("Cartpole-v1", "Did you mean"),
     ],
 )
 def test_an_env_id_without_its_module_says_how_to_name_the_module(
@@ -867,6 +870,7 @@ def test_an_env_id_without_its_module_says_how_to_name_the_module(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"--gym-env {gym_env}: " in err
     assert says in err, err
+    assert ("name that module first" in err) == (gym_env in ("mygrid/Point-v0", "Point-v0")), err
     assert not (tmp_path / "b").exists()
 
 
@@ -898,6 +902,12 @@ def test_a_strategy_that_needs_parameters_is_told_how_to_give_them(tmp_path, cap
     assert err.count("\n") == 1 and "missing 1 required positional argument: 'horizon'" in err
     assert "functools.partial" in err and "StrategySpec(" in err and "params" in err
     assert not (tmp_path / "b").exists()
+    # a constructor failing for another reason is not told about parameters
+    argv[-1] = "_bench_env:StrategyThatFails"
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "RuntimeError: needs a licence file" in err, err
+    assert "functools.partial" not in err and "no parameters" not in err, err
 
 
 @pytest.mark.timeout(60)
@@ -950,6 +960,16 @@ def test_a_module_in_the_current_directory_is_said_to_need_pythonpath(
         assert err.count("\n") == 1 and "No module named 'mine'" in err, err
         assert "mine.py is in the current directory" in err and "PYTHONPATH=" in err, err
     assert not (tmp_path / "b").exists()
+    # a package of the current directory that imports (it is on the path) but lacks a module
+    # of its own: no PYTHONPATH hint, the user already gave it
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "teach.py").write_text("import pkg.helpers\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert main([*argv, "--teacher", "pkg.teach:make", "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "No module named 'pkg.helpers'" in err, err
+    assert "PYTHONPATH" not in err, err
 
 
 _POOL_CHILD = """

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib
+import importlib.util
 import json
 import os
 import re
@@ -718,6 +718,11 @@ def _cwd_hint(exc: BaseException) -> str:
     found = next((f for f in (f"{top}.py", f"{top}/") if (here / f.rstrip("/")).exists()), None)
     if found is None:
         return ""
+    try:  # imported from the path after all (PYTHONPATH given): a module inside it is missing
+        if importlib.util.find_spec(top) is not None:
+            return ""
+    except (ImportError, ValueError):
+        pass
     return (
         f" ({found} is in the current directory, which the torchcbl command does not import "
         "from: run it as PYTHONPATH=$PWD torchcbl ..., or install your package)"
@@ -742,12 +747,17 @@ def _check_strategy(spec: Any) -> None:
         ) from None
     except Exception as exc:  # the user's class: whatever it raises, it is not usable here
         text = _one_line(exc)
+        params = (  # a call the signature refused (a parameter missing, say), not its own error
+            ": the command gives a strategy no parameters, so fix them in a module of yours "
+            "and name that (Mine = functools.partial(MyStrategy, param=value), or a subclass), "
+            "or give them in Python, StrategySpec(name, params) with "
+            "torchcbl.benchmark.run_benchmark"
+            if isinstance(exc, TypeError)
+            else ""
+        )
         raise _UsageError(
             f"--strategies {spec.name}: cannot make it ({type(exc).__name__}: {text}); expected "
-            "module:Class of a strategy that takes no arguments, or a shipped name: the command "
-            "gives a strategy no parameters, so fix them in a module of yours and name that "
-            "(Mine = functools.partial(MyStrategy, param=value), or a subclass), or give them "
-            "in Python, StrategySpec(name, params) with torchcbl.benchmark.run_benchmark"
+            f"module:Class of a strategy that takes no arguments, or a shipped name{params}"
         ) from None
     if not isinstance(strategy, Strategy):
         raise _UsageError(
@@ -845,6 +855,10 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                     f"{module} was imported but registers no such id; give the id its "
                     "register(id=...) call gives"
                 )
+            elif isinstance(exc, (gym.error.VersionNotFound, gym.error.DeprecatedEnv)) or (
+                "did you mean" in str(exc).lower()
+            ):  # gymnasium knows the name: another version or spelling, which it names
+                hint = "give an id that gymnasium registers"
             else:  # the id alone: only gymnasium's own and those of packages already imported
                 guess = env_id.partition("/")[0] if "/" in env_id else "mymodule"
                 hint = (
