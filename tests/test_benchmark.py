@@ -1034,3 +1034,52 @@ def test_a_sweep_killed_outright_leaves_no_worker_processes_behind(tmp_path):
     finally:
         for p in alive:  # (those this test started)
             os.kill(p, signal.SIGKILL)
+
+
+_FORKSERVER_CHILD = """
+import multiprocessing as mp, os, sys, time
+sys.path[:0] = [{root!r}]
+from torchcbl.evaluation import worker_pool
+
+
+def task(marker):
+    open(f"{{marker}}.{{os.getpid()}}", "w").close()
+    time.sleep(600)
+
+
+if __name__ == "__main__":
+    with worker_pool(2, mp.get_context("forkserver")) as pool:
+        futures = [pool.submit(task, sys.argv[1]) for _ in range(2)]
+        futures[0].result()
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_forkserver_workers_end_while_their_killed_pool_is_not_yet_reaped(tmp_path):
+    """Under a forkserver context a worker is no child of the pool's process, so it watches
+    that process by its pid; a pool killed outright but not yet reaped by its own parent (a
+    zombie) answered that check as alive, and its workers ran on (4 of 4 after 3 s)."""
+    script = tmp_path / "pool.py"
+    script.write_text(_FORKSERVER_CHILD.format(root=str(ROOT)))
+    marker = tmp_path / "started"
+    child = subprocess.Popen([sys.executable, str(script), str(marker)], cwd=tmp_path)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and child.poll() is None and len(workers) < 2:
+            workers = [int(p.suffix[1:]) for p in tmp_path.glob("started.*")]
+            time.sleep(0.05)
+        assert child.poll() is None and len(workers) == 2, "the workers did not start"
+        os.kill(child.pid, signal.SIGKILL)  # and not reaped (no wait) until the workers are seen
+        deadline = time.monotonic() + 10
+        alive = workers
+        while alive and time.monotonic() < deadline:
+            time.sleep(0.1)
+            alive = [p for p in workers if _running(p)]
+        try:
+            assert not alive, "worker processes outlived their killed pool"
+        finally:
+            for p in alive:  # (those this test started)
+                os.kill(p, signal.SIGKILL)
+    finally:
+        child.wait()

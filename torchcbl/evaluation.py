@@ -103,10 +103,19 @@ def _source_revision() -> str:
             return None
 
     top = run("rev-parse", "--show-toplevel")
-    if top is None or top.returncode or Path(top.stdout.strip()).resolve() != root:
+    if top is None:
+        return "unknown (git failed)"
+    if top.returncode:  # not a repository, or one git refuses (another owner's, say)
+        why = " ".join(top.stderr.split()[:12]) or "git failed"
+        return (
+            "unknown (not a git checkout)" if "not a git repository" in why else f"unknown ({why})"
+        )
+    if Path(top.stdout.strip()).resolve() != root:
         return "unknown (not a git checkout)"
     head = run("rev-parse", "HEAD")
-    changed = run("status", "--porcelain", "--untracked-files=no")
+    # --no-optional-locks: no index.lock taken to refresh the index (a user's own git commit
+    # at that moment would fail on it)
+    changed = run("--no-optional-locks", "status", "--porcelain", "--untracked-files=no")
     if head is None or head.returncode or changed is None or changed.returncode:
         return "unknown (git failed)"
     return f"git {head.stdout.strip()}" + (
@@ -170,16 +179,31 @@ def _exit_when_orphaned(parent: int, every: float = 0.5) -> None:
         if direct:
             gone = os.getppid() != parent
         else:
-            try:
-                os.kill(parent, 0)  # signal 0: is it there? (sends nothing)
-                gone = False
-            except ProcessLookupError:
-                gone = True
-            except OSError:  # there, but not ours to signal
-                gone = False
+            gone = not _alive(parent)
         if gone:
             os._exit(1)
         time.sleep(every)
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs: there, and not a zombie (a killed process its parent has
+    not yet reaped answers signal 0 as if alive)."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except FileNotFoundError:
+        return False
+    except OSError:  # no /proc (macOS): signal 0 asks whether it is there, and sends nothing
+        pass
+    if os.name == "nt":  # signal 0 is CTRL_C_EVENT there
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # there, but not ours to signal
+        return True
+    return True
 
 
 def check_workers_start(context: Any = None) -> None:
