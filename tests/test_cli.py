@@ -50,7 +50,7 @@ def test_plot_of_a_benchmark_directory_says_where_its_plot_is(tmp_path, capsys):
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "None" not in err
     assert "torchcbl benchmark" in err and str(out / "learning_curves.png") in err
-    assert "wrote no plot" in err  # a sweep run with plots=False: none to point at
+    assert "left no plot" in err  # a sweep run with plots=False: none to point at
     (out / "learning_curves.png").write_bytes(b"")
     assert main(["plot", str(out)]) == 2
     err = capsys.readouterr().err

@@ -500,12 +500,13 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         where = (
             f"whose plot is {png}, written by the sweep"
             if png.is_file()
-            else f"whose sweep wrote no plot ({png}: run_benchmark(..., plots=False) writes none)"
+            else f"whose sweep left no plot ({png}: e.g. run_benchmark(..., plots=False), or "
+            "stopped before drawing it)"
         )
         raise _UsageError(
-            f"{results_path} is a torchcbl benchmark's, {where}; run the same torchcbl "
-            "benchmark command again to draw it anew (its cells are cached); torchcbl plot "
-            "takes a run directory of torchcbl reproduce"
+            f"{results_path} is a torchcbl benchmark's, {where}; run the same sweep again "
+            "(torchcbl benchmark, or run_benchmark with plots=True) to draw it anew from its "
+            "cached cells; torchcbl plot takes a run directory of torchcbl reproduce"
         )
     if domain not in _DOMAINS:
         raise _UsageError(
