@@ -17,7 +17,8 @@ The protocol (:class:`Strategy`), in the order the loop calls it::
         for a correction of that step:
             strategy.observe_label(obs, label, model_action=..., kind="correction")
         strategy.observe_step(record, None)  # None: replayed, not live
-    strategy.observe_refit(model, X, y)      # when the resumed model is fitted
+    strategy.observe_refit(model, X, y)      # when the resumed model stands on labels (not
+                                             # before the first refit, as in the live run)
     # every step
     strategy.episode_start()                 # after each env.reset
     d = strategy.decide(obs [D], c)          # c: the model's Classification, batch of 1
