@@ -4,10 +4,12 @@ Run directory layout (one directory per teaching session)::
 
     <run_dir>/
         config.json              what the session was started with: the TeachingConfig, the
-                                 model's constructor arguments, the confidence rule, the env's
-                                 id, spaces, make() arguments and ``describe_inputs()``, the
-                                 session seed, the log format version and whether it started
-                                 from a fitted model (``starts_fitted``)
+                                 model's class and constructor arguments, the strategy
+                                 (``to_config``) and its confidence rule, the env's id,
+                                 spaces, make() arguments, step cap and
+                                 ``describe_inputs()``, the session seed, the log format
+                                 version and whether it started from a fitted model
+                                 (``starts_fitted``)
         steps.sqlite             the step log: table ``steps``, one row per StepRecord;
                                  table ``corrections``, one row per CorrectionRecord (a
                                  label for an earlier step's observation, journalled and
