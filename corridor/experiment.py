@@ -79,6 +79,7 @@ if TYPE_CHECKING:
 __all__ = [
     "PAPER",
     "CorridorExperimentConfig",
+    "check_session_map",
     "evaluate_saved_policy",
     "format_summary",
     "make_model",
@@ -984,6 +985,32 @@ def _taught_with(
             pass  # not an experiment's results.json: what the env was given decides
     given = (load_config(session_dir).get("env") or {}).get("kwargs") or {}
     return ("kwargs", given[kwarg]) if kwarg in given else ("default", None)
+
+
+def check_session_map(session_dir: str | Path) -> None:
+    """Check that the map file a session was made on (``gymnasium.make(...,
+    corridor_map=...)``, as ``torchcbl teach corridor --map`` makes it) is there and is the map
+    the session kept the digest of, before it is evaluated or resumed: a ValueError that says
+    what to do otherwise (the file gone, moved, edited, or a relative path read from another
+    directory). A session made without a map name (a shipped default, a map object) passes:
+    :func:`evaluate_saved_policy` checks those."""
+    from torchcbl.session import load_config
+
+    session_dir = Path(session_dir)
+    kwargs = (load_config(session_dir).get("env") or {}).get("kwargs") or {}
+    name = kwargs.get("corridor_map")
+    if not isinstance(name, str):
+        return
+    elsewhere = _relative_map_elsewhere(session_dir, name)
+    if elsewhere:
+        raise ValueError(elsewhere)
+    if name.endswith(".json") and not Path(name).is_file():  # (a shipped map goes by its name)
+        raise ValueError(
+            f"{session_dir} was taught on the map file {name}, which is not there any more; put "
+            "that file back there (a session keeps its map: evaluate and teach --resume "
+            "drive the map it was taught on)"
+        )
+    _check_session_map(session_dir, name)
 
 
 def _session_map(session_dir: Path) -> str:

@@ -319,23 +319,10 @@ def _session_map_exists(session: Path, domain: str) -> None:
     keeps it by its full path; the session keeps the map's digest) is not there any more, or
     has changed since the session started: neither evaluate nor teach --resume takes another
     map, so the way on is to put the file back as it was."""
-    from torchcbl.session import load_config
-
-    kwargs = (load_config(session).get("env") or {}).get("kwargs") or {}
-    name = kwargs.get("corridor_map")
-    if domain != "corridor" or not isinstance(name, str):
+    if domain != "corridor":
         return
-    elsewhere = _experiment_module("corridor")._relative_map_elsewhere(session, name)
-    if elsewhere:
-        raise _UsageError(elsewhere)
-    if name.endswith(".json") and not Path(name).is_file():  # (a shipped map goes by its name)
-        raise _UsageError(
-            f"{session} was taught on the map file {name}, which is not there any more; put "
-            "that file back there (a session keeps its map: evaluate and teach --resume "
-            "drive the map it was taught on)"
-        )
     try:
-        _experiment_module("corridor")._check_session_map(session, name)
+        _experiment_module("corridor").check_session_map(session)
     except ValueError as exc:
         raise _UsageError(_one_line(exc)) from None
 
