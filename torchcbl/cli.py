@@ -682,6 +682,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         ct.run(max_steps=ct.n_steps + args.steps, **lifted)
     except TeachingInterrupted:
         print("\nStopped by the teacher.")
+    except KeyboardInterrupt:  # Ctrl-C between two requests (the agent acting on its own)
+        print("\nStopped by the teacher (Ctrl-C).")
     finally:
         ct.close()
         env.close()
