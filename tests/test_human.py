@@ -399,6 +399,36 @@ def test_domain_teachers_map_keys_to_actions():
     assert "[E]" in out.getvalue() and "shift right" in out.getvalue()
 
 
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("rows", [24, 40])
+def test_a_view_taller_than_the_terminal_says_its_top_is_cut_off(terminal, rows):
+    """The driving view (title, legend, lane names, 21 rows of road, status, keys) is about 30
+    lines: on a terminal of the usual 24 rows the title, the legend, the lane names and the
+    road far ahead scrolled away unsaid. The screen now says so, and how to see it all."""
+    import fcntl
+    import struct
+
+    from sumo_scenarios.human import make_teacher
+
+    master, slave = terminal
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", rows, 80, 0, 0))
+    person = Person(master, slave, [b"w"])
+    out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
+    teacher = make_teacher(input=slave, output=out, status="step 1 | demonstrations 1")
+    person.start()
+    assert teacher(np.array([10.0, -25.0, 25.0, 2.0], dtype=np.float32), {}) == 0
+    shown = person.finish()
+    if rows == 24:
+        note = re.search(r"the top (\d+) lines are cut off: (\d+) rows needed, 24 shown", shown)
+        assert note, shown[-600:]
+        screen = shown.split("\x1b[2J")[-1].split("action? ")[0].splitlines()
+        needed = sum(max(1, -(-len(line) // 80)) for line in screen) + 1  # + the prompt's
+        assert int(note.group(2)) == needed and int(note.group(1)) == needed - 24
+        assert "enlarge the window" in shown
+    else:
+        assert "rows" not in shown and "[E]" in shown
+
+
 # ----------------------------------------------------------------------------- end to end
 
 _PERSON_SCRIPT = r"""

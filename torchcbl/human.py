@@ -4,7 +4,9 @@
 ``teacher(observation, info) -> action``. Each call draws the domain's text view of the
 situation (a ``describe(observation, info) -> str`` function the domain supplies), a status line
 the caller keeps up to date (demonstrations so far, autonomy, ...), and a prompt listing the
-keys, then waits for the person to press one key.
+keys, then waits for the person to press one key. On a terminal too short for all of it (the
+driving view is about 30 lines, a terminal's usual height 24), whose top then scrolls away, a
+line above the keys says how many lines are cut off and to enlarge the window.
 
 On a terminal the key is read without Enter: the terminal is switched to a non-canonical,
 no-echo mode for the duration of the read and its settings are always restored afterwards,
@@ -256,7 +258,38 @@ class TerminalTeacher:
         lines.append(
             f"decision #{self.n_decisions + 1}" + (f" | {self.status}" if self.status else "")
         )
+        if clear:
+            lines += self._cut_off_note(lines)
         self._write((_CLEAR_SCREEN if clear else "") + "\n".join(lines) + "\n")
+
+    def _cut_off_note(self, lines: list[str]) -> list[str]:
+        """A line saying the screen is taller than the output terminal, whose top then scrolls
+        away (the driving view is ~30 lines, a terminal's usual height 24), else nothing."""
+        try:
+            columns, rows = os.get_terminal_size(self._output.fileno())
+        except (AttributeError, OSError, ValueError):  # not a terminal, or no size known
+            return []
+        if rows < 1 or columns < 1:  # a pseudo-terminal nobody sized
+            return []
+
+        def height(text: str) -> int:  # terminal rows, a line longer than the width wrapping
+            return sum(max(1, -(-len(line) // columns)) for line in text.split("\n"))
+
+        # the screen: these lines, the key legend and the prompt line
+        used = sum(height(line) for line in lines) + height(self.help_text()) + 1
+        if used <= rows:
+            return []
+        note, note_rows = "", 1
+        for _ in range(3):  # the note's own rows count, and its numbers set its length
+            needed = used + note_rows
+            note = (
+                f"(the top {needed - rows} lines are cut off: {needed} rows needed, {rows} "
+                "shown; enlarge the window)"
+            )
+            if height(note) == note_rows:
+                break
+            note_rows = height(note)
+        return [note]
 
     def _prompt(self) -> None:
         self._write(f"{self.help_text()}\naction? ")
