@@ -852,6 +852,33 @@ def test_ctrl_c_between_two_requests_stops_as_at_a_request(tmp_path, monkeypatch
     assert len(load_records(run)) == 10
 
 
+def test_a_resumed_session_shows_its_counts_from_its_first_request(tmp_path, monkeypatch):
+    """The status line (step, phase, demonstrations, accuracy, autonomy) was set after each
+    step only, so the first request of a resumed session showed a bare "decision #1": the
+    person coming back saw neither how many demonstrations they had given nor the phase."""
+    import corridor.human
+
+    _scripted_corridor_person(monkeypatch)
+    seen = []
+
+    class Person:
+        status = ""
+
+        def __call__(self, observation, info):
+            seen.append(self.status)
+            return 0
+
+        def set_status(self, text):
+            self.status = text
+
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    monkeypatch.setattr(corridor.human, "make_teacher", lambda **kw: Person())
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "1"]) == 0
+    assert seen and "step 3 " in seen[0] and "demonstrations 3 " in seen[0], seen
+    assert "phase noninteractive" in seen[0]
+
+
 def _recorded_episodes(path: Path) -> Path:
     """An episodes.json of one 5-step driving episode, as the driving experiment writes."""
     from sumo_scenarios.env import DrivingEnv
