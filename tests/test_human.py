@@ -240,6 +240,31 @@ def test_status_line_is_shown_and_can_be_updated(terminal):
     assert "warming up" not in second
 
 
+@pytest.mark.timeout(60)
+def test_a_key_typed_before_the_request_is_shown_does_not_answer_it(terminal):
+    """A key pressed while the agent acted on its own (or a second press, a held arrow's
+    repeat) waited in the terminal's buffer and answered the next request at once: a
+    demonstration for a situation the person never saw. It is dropped now; a quit key typed
+    ahead still quits."""
+    master, slave = terminal
+    os.write(master, b"d")  # pressed between two requests
+    time.sleep(0.1)
+    person = Person(master, slave, [b"w"])
+    teacher = _teacher(slave)
+    person.start()
+    assert teacher(OBS, {}) == 0  # the key pressed after seeing the request
+    shown = person.finish()
+    assert shown.count("-> ") == 1 and "-> stay" in shown
+
+    before = termios.tcgetattr(slave)
+    os.write(master, b"dQ")  # "Q": caps lock on, as at a request
+    time.sleep(0.1)
+    with pytest.raises(TeachingInterrupted):
+        teacher(OBS, {})
+    assert termios.tcgetattr(slave) == before
+    assert teacher.n_decisions == 1
+
+
 # ------------------------------------------------------------------- line-input fallback
 
 

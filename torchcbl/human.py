@@ -10,9 +10,10 @@ line above the keys says how many lines are cut off and to enlarge the window.
 
 On a terminal the key is read without Enter: the terminal is switched to a non-canonical,
 no-echo mode for the duration of the read and its settings are always restored afterwards,
-also when the read is interrupted. When the input is not a terminal (a pipe, a file), one line
-is read per decision instead; a line may hold a key (``w``), a key name (``up``), an action
-name (``forward``) or an action number.
+also when the read is interrupted. Keys typed before a request is shown (while the agent acts on
+its own) are dropped, not taken as its answer; a quit key among them still quits. When the
+input is not a terminal (a pipe, a file), one line is read per decision instead; a line may
+hold a key (``w``), a key name (``up``), an action name (``forward``) or an action number.
 
 In a notebook (a Jupyter kernel, whose own stdin is a closed pipe) each key is typed into the
 notebook's input box, the kernel's ``input()``, one line per decision as from a pipe.
@@ -318,6 +319,7 @@ class TerminalTeacher:
             mode[6][termios.VMIN] = 1
             mode[6][termios.VTIME] = 0
             termios.tcsetattr(fd, termios.TCSANOW, mode)
+            self._drop_typed_ahead(fd)
             self._prompt()
             while True:
                 key = self._read_key(fd)
@@ -328,6 +330,20 @@ class TerminalTeacher:
                 self._write("action? ")
         finally:
             termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+    def _drop_typed_ahead(self, fd: int) -> None:
+        """Drop the keys typed before this request was shown (while the agent acted on its own,
+        a second press, a held key's repeat): they would answer a situation the person has not
+        seen. A quit key among them still quits."""
+        pending = b""
+        while select.select([fd], [], [], 0)[0]:
+            pending += self._read_byte(fd)
+        typed = pending.decode("utf-8", errors="replace")
+        for key in self._quit:
+            if len(key) > 1 and key in typed:  # a quit key that is an escape sequence
+                raise TeachingInterrupted(f"teaching stopped by the person ({_label(key)})")
+        for char in typed:
+            self._resolve_key(char)  # raises for a quit key, as at a request
 
     def _read_byte(self, fd: int) -> bytes:
         try:
