@@ -731,9 +731,9 @@ def test_evaluate_of_a_session_it_cannot_rebuild_names_the_python_call(tmp_path,
         assert f"to {package}.experiment.evaluate_saved_policy in Python" in err, err
 
 
-def _scripted_corridor_person(monkeypatch) -> None:
+def _scripted_corridor_person(monkeypatch, max_demonstrations: int | None = 5) -> None:
     """`torchcbl teach corridor` with a scripted person at the terminal (answering "forward"
-    to every request) and a budget of 5 demonstrations."""
+    to every request) and a budget of 5 demonstrations (by default)."""
     import corridor.human
     from torchcbl import cli
 
@@ -746,7 +746,11 @@ def _scripted_corridor_person(monkeypatch) -> None:
 
     monkeypatch.setattr(corridor.human, "make_teacher", lambda **kw: Scripted())
     package, env_id, human, settings, model = cli._TEACH["corridor"]
-    budget = {**settings, "max_demonstrations": 5, "autonomous_episodes_to_stop": None}
+    budget = {
+        **settings,
+        "max_demonstrations": max_demonstrations,
+        "autonomous_episodes_to_stop": None,
+    }
     monkeypatch.setitem(cli._TEACH, "corridor", (package, env_id, human, budget, model))
 
 
@@ -816,6 +820,63 @@ def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
 
     report = evaluate_saved_policy(run, n_steps=5)
     assert report["world"] == dataclasses.asdict(cfg.world) and report["world"]["forward_noise"] > 0
+
+
+def test_ctrl_c_between_two_requests_stops_as_at_a_request(tmp_path, monkeypatch, capsys):
+    """Ctrl-C (the help's "[q/Ctrl-C] quit") pressed while no key is awaited (the env steps, the
+    agent drives on its own between two requests) ended with "torchcbl teach: interrupted" and
+    exit code 130: no word that the demonstrations were saved, nor how to continue. It now
+    stops as at a request."""
+    import signal
+
+    from corridor.env import CorridorEnv
+
+    _scripted_corridor_person(monkeypatch, max_demonstrations=None)
+    step, calls = CorridorEnv.step, []
+
+    def step_then_ctrl_c(self, action):
+        calls.append(action)
+        if len(calls) == 7:  # Ctrl-C lands while the env steps, as it mostly would
+            signal.raise_signal(signal.SIGINT)
+        return step(self, action)
+
+    monkeypatch.setattr(CorridorEnv, "step", step_then_ctrl_c)
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "30"]) == 0
+    captured = capsys.readouterr()
+    assert "interrupted" not in captured.err
+    assert "Stopped by the teacher" in captured.out
+    assert "7 demonstrations over 7 steps saved in" in captured.out and "--resume" in captured.out
+    assert len(load_records(run)) == 7
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "3"]) == 0
+    assert len(load_records(run)) == 10
+
+
+def test_a_resumed_session_shows_its_counts_from_its_first_request(tmp_path, monkeypatch):
+    """The status line (step, phase, demonstrations, accuracy, autonomy) was set after each
+    step only, so the first request of a resumed session showed a bare "decision #1": the
+    person coming back saw neither how many demonstrations they had given nor the phase."""
+    import corridor.human
+
+    _scripted_corridor_person(monkeypatch)
+    seen = []
+
+    class Person:
+        status = ""
+
+        def __call__(self, observation, info):
+            seen.append(self.status)
+            return 0
+
+        def set_status(self, text):
+            self.status = text
+
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    monkeypatch.setattr(corridor.human, "make_teacher", lambda **kw: Person())
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "1"]) == 0
+    assert seen and "step 3 " in seen[0] and "demonstrations 3 " in seen[0], seen
+    assert "phase noninteractive" in seen[0]
 
 
 def _recorded_episodes(path: Path) -> Path:

@@ -240,6 +240,31 @@ def test_status_line_is_shown_and_can_be_updated(terminal):
     assert "warming up" not in second
 
 
+@pytest.mark.timeout(60)
+def test_a_key_typed_before_the_request_is_shown_does_not_answer_it(terminal):
+    """A key pressed while the agent acted on its own (or a second press, a held arrow's
+    repeat) waited in the terminal's buffer and answered the next request at once: a
+    demonstration for a situation the person never saw. It is dropped now; a quit key typed
+    ahead still quits."""
+    master, slave = terminal
+    os.write(master, b"d")  # pressed between two requests
+    time.sleep(0.1)
+    person = Person(master, slave, [b"w"])
+    teacher = _teacher(slave)
+    person.start()
+    assert teacher(OBS, {}) == 0  # the key pressed after seeing the request
+    shown = person.finish()
+    assert shown.count("-> ") == 1 and "-> stay" in shown
+
+    before = termios.tcgetattr(slave)
+    os.write(master, b"dQ")  # "Q": caps lock on, as at a request
+    time.sleep(0.1)
+    with pytest.raises(TeachingInterrupted):
+        teacher(OBS, {})
+    assert termios.tcgetattr(slave) == before
+    assert teacher.n_decisions == 1
+
+
 # ------------------------------------------------------------------- line-input fallback
 
 
@@ -397,6 +422,36 @@ def test_domain_teachers_map_keys_to_actions():
     teacher = driving_teacher(input=io.StringIO("d\n"), output=out)
     assert teacher(np.array([12.0, -25.0, 25.0, 1.0]), {}) == 2
     assert "[E]" in out.getvalue() and "shift right" in out.getvalue()
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("rows", [24, 40])
+def test_a_view_taller_than_the_terminal_says_its_top_is_cut_off(terminal, rows):
+    """The driving view (title, legend, lane names, 21 rows of road, status, keys) is about 30
+    lines: on a terminal of the usual 24 rows the title, the legend, the lane names and the
+    road far ahead scrolled away unsaid. The screen now says so, and how to see it all."""
+    import fcntl
+    import struct
+
+    from sumo_scenarios.human import make_teacher
+
+    master, slave = terminal
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", rows, 80, 0, 0))
+    person = Person(master, slave, [b"w"])
+    out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
+    teacher = make_teacher(input=slave, output=out, status="step 1 | demonstrations 1")
+    person.start()
+    assert teacher(np.array([10.0, -25.0, 25.0, 2.0], dtype=np.float32), {}) == 0
+    shown = person.finish()
+    if rows == 24:
+        note = re.search(r"the top (\d+) lines are cut off: (\d+) rows needed, 24 shown", shown)
+        assert note, shown[-600:]
+        screen = shown.split("\x1b[2J")[-1].split("action? ")[0].splitlines()
+        needed = sum(max(1, -(-len(line) // 80)) for line in screen) + 1  # + the prompt's
+        assert int(note.group(2)) == needed and int(note.group(1)) == needed - 24
+        assert "enlarge the window" in shown
+    else:
+        assert "rows" not in shown and "[E]" in shown
 
 
 # ----------------------------------------------------------------------------- end to end

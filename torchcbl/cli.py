@@ -628,15 +628,12 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         env_kwargs = _resume_env_kwargs(run_dir)
     teacher = human.make_teacher(title=f"torchcbl teach {args.domain}")
     env = gym.make(env_id, **env_kwargs)
-    asked = 0
 
-    def status(record: Any) -> None:
-        nonlocal asked
-        asked += record.teacher_action is not None
+    def status(record: Any = None) -> None:  # after each step, and before the first
         rate = ct.autonomy_rate
         acc = ct.windowed_accuracy
         teacher.set_status(
-            f"step {record.step + 1} | phase {ct.phase} | demonstrations {ct.n_demonstrations}"
+            f"step {ct.n_steps} | phase {ct.phase} | demonstrations {ct.n_demonstrations}"
             f" | prediction accuracy {'-' if acc is None else f'{100 * acc:.0f}%'}"
             f" | autonomy {'-' if rate is None else f'{100 * rate:.0f}%'}"
         )
@@ -665,10 +662,13 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     # --resume asks for more: the session's own budgets (the driving protocol's 650
     # demonstrations) are lifted for this call, else a finished session could never go on
     lifted = {"max_demonstrations": None, "max_episodes": None} if args.resume else {}
+    status()  # a resumed session's counts from its first request on
     try:
         ct.run(max_steps=ct.n_steps + args.steps, **lifted)
     except TeachingInterrupted:
         print("\nStopped by the teacher.")
+    except KeyboardInterrupt:  # Ctrl-C between two requests (the agent acting on its own)
+        print("\nStopped by the teacher (Ctrl-C).")
     finally:
         ct.close()
         env.close()

@@ -4,13 +4,16 @@
 ``teacher(observation, info) -> action``. Each call draws the domain's text view of the
 situation (a ``describe(observation, info) -> str`` function the domain supplies), a status line
 the caller keeps up to date (demonstrations so far, autonomy, ...), and a prompt listing the
-keys, then waits for the person to press one key.
+keys, then waits for the person to press one key. On a terminal too short for all of it (the
+driving view is about 30 lines, a terminal's usual height 24), whose top then scrolls away, a
+line above the keys says how many lines are cut off and to enlarge the window.
 
 On a terminal the key is read without Enter: the terminal is switched to a non-canonical,
 no-echo mode for the duration of the read and its settings are always restored afterwards,
-also when the read is interrupted. When the input is not a terminal (a pipe, a file), one line
-is read per decision instead; a line may hold a key (``w``), a key name (``up``), an action
-name (``forward``) or an action number.
+also when the read is interrupted. Keys typed before a request is shown (while the agent acts on
+its own) are dropped, not taken as its answer; a quit key among them still quits. When the
+input is not a terminal (a pipe, a file), one line is read per decision instead; a line may
+hold a key (``w``), a key name (``up``), an action name (``forward``) or an action number.
 
 In a notebook (a Jupyter kernel, whose own stdin is a closed pipe) each key is typed into the
 notebook's input box, the kernel's ``input()``, one line per decision as from a pipe.
@@ -256,7 +259,38 @@ class TerminalTeacher:
         lines.append(
             f"decision #{self.n_decisions + 1}" + (f" | {self.status}" if self.status else "")
         )
+        if clear:
+            lines += self._cut_off_note(lines)
         self._write((_CLEAR_SCREEN if clear else "") + "\n".join(lines) + "\n")
+
+    def _cut_off_note(self, lines: list[str]) -> list[str]:
+        """A line saying the screen is taller than the output terminal, whose top then scrolls
+        away (the driving view is ~30 lines, a terminal's usual height 24), else nothing."""
+        try:
+            columns, rows = os.get_terminal_size(self._output.fileno())
+        except (AttributeError, OSError, ValueError):  # not a terminal, or no size known
+            return []
+        if rows < 1 or columns < 1:  # a pseudo-terminal nobody sized
+            return []
+
+        def height(text: str) -> int:  # terminal rows, a line longer than the width wrapping
+            return sum(max(1, -(-len(line) // columns)) for line in text.split("\n"))
+
+        # the screen: these lines, the key legend and the prompt line
+        used = sum(height(line) for line in lines) + height(self.help_text()) + 1
+        if used <= rows:
+            return []
+        note, note_rows = "", 1
+        for _ in range(3):  # the note's own rows count, and its numbers set its length
+            needed = used + note_rows
+            note = (
+                f"(the top {needed - rows} lines are cut off: {needed} rows needed, {rows} "
+                "shown; enlarge the window)"
+            )
+            if height(note) == note_rows:
+                break
+            note_rows = height(note)
+        return [note]
 
     def _prompt(self) -> None:
         self._write(f"{self.help_text()}\naction? ")
@@ -285,6 +319,7 @@ class TerminalTeacher:
             mode[6][termios.VMIN] = 1
             mode[6][termios.VTIME] = 0
             termios.tcsetattr(fd, termios.TCSANOW, mode)
+            self._drop_typed_ahead(fd)
             self._prompt()
             while True:
                 key = self._read_key(fd)
@@ -295,6 +330,20 @@ class TerminalTeacher:
                 self._write("action? ")
         finally:
             termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+    def _drop_typed_ahead(self, fd: int) -> None:
+        """Drop the keys typed before this request was shown (while the agent acted on its own,
+        a second press, a held key's repeat): they would answer a situation the person has not
+        seen. A quit key among them still quits."""
+        pending = b""
+        while select.select([fd], [], [], 0)[0]:
+            pending += self._read_byte(fd)
+        typed = pending.decode("utf-8", errors="replace")
+        for key in self._quit:
+            if len(key) > 1 and key in typed:  # a quit key that is an escape sequence
+                raise TeachingInterrupted(f"teaching stopped by the person ({_label(key)})")
+        for char in typed:
+            self._resolve_key(char)  # raises for a quit key, as at a request
 
     def _read_byte(self, fd: int) -> bytes:
         try:
