@@ -38,6 +38,7 @@ import json
 import math
 import multiprocessing as mp
 import numbers
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -50,6 +51,7 @@ from sumo_scenarios import metrics
 from torchcbl.evaluation import (
     check_workers_start,
     clear_unfinished,
+    die_with_parent,
     figure_style,
     finished_seeds,
     mean_sd,
@@ -570,13 +572,16 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     }
 
 
-def _seed_worker(job: tuple[DrivingExperimentConfig, int, str], conn: Any) -> None:
+def _seed_worker(
+    job: tuple[DrivingExperimentConfig, int, str], conn: Any, parent: int | None = None
+) -> None:
     """One seed in a process of its own (libsumo holds one simulation per process): send back
     ``("ok", result)``, or ``("error", exception)`` with its traceback, through ``conn``."""
     import traceback
     from multiprocessing.pool import ExceptionWithTraceback
 
     _worker_ignores_ctrl_c()
+    die_with_parent(parent)  # a main process killed alone (kill -9) takes its workers along
     error: Exception | None = None
     try:
         cfg, _, seed_dir = job
@@ -625,7 +630,9 @@ def _run_seeds(
             while waiting and len(running) < workers:
                 job = waiting.pop(0)
                 reader, writer = ctx.Pipe(duplex=False)
-                proc = ctx.Process(target=_seed_worker, args=(job, writer), daemon=True)
+                proc = ctx.Process(
+                    target=_seed_worker, args=(job, writer, os.getpid()), daemon=True
+                )
                 proc.start()
                 writer.close()  # the worker's end: its exit makes the pipe readable
                 running[reader] = (proc, job[1])

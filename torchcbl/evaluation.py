@@ -139,17 +139,37 @@ def run_versions(**extra: str) -> dict[str, str]:
     }
 
 
-def _worker_start() -> None:
+def _worker_start(parent: int | None = None) -> None:
     """Run in each worker of :func:`worker_pool` as it starts: its tqdm bars (the teaching
     loop's, hidden in a worker) take a thread lock instead of the multiprocessing lock tqdm
     makes by default, a named semaphore that a worker terminated after a Ctrl-C never
     releases; the resource tracker then printed a "leaked semaphore objects" warning under
-    the command's one line."""
+    the command's one line. And it dies with ``parent`` (:func:`die_with_parent`)."""
     import threading
 
     from tqdm import tqdm
 
     tqdm.set_lock(threading.RLock())
+    die_with_parent(parent)
+
+
+def die_with_parent(parent: int | None = None) -> None:
+    """Have the kernel kill this worker process when its parent dies (Linux; elsewhere
+    nothing). A run whose main process alone was killed (``kill -9``, the out-of-memory
+    killer) left its workers computing their seeds, writing into seed directories that a
+    resumed run clears and runs again. ``parent``: the pid the worker was started by; if it
+    is no longer this process's parent (it died before this call), the worker exits now."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # no libc to ask: as elsewhere
+        return
+    if parent is not None and os.getppid() != parent:
+        os._exit(1)
 
 
 def check_workers_start(context: Any = None) -> None:
@@ -252,7 +272,12 @@ def worker_pool(
     a worker killed mid-task).
     """
     check_workers_start(context)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_worker_start)
+    pool = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=context,
+        initializer=_worker_start,
+        initargs=(os.getpid(),),
+    )
     try:
         yield pool
     except BaseException as exc:
