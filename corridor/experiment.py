@@ -40,7 +40,9 @@ Run directory layout (``run_experiment`` writes; envs never do)::
     run_dir/sessions/seed<k>/   each seed's teaching session (torchcbl.session format), the
                                 confident-execution arm's: the CBA arm keeps no session, only
                                 its figures in results.json (scripts/corridor_cba_gates.py
-                                teaches it again, seed for seed)
+                                teaches it again, seed for seed); and seed_result.json, the
+                                seed's result and config, written as it ends (what
+                                run_experiment(..., resume=True) takes from a stopped run)
 
 Replay a seed with the config and seed stored in results.json: everything is seeded
 (``run_seed(CorridorExperimentConfig.from_dict(results["config"]), seed, None)``).
@@ -71,7 +73,18 @@ from corridor.env import DEFAULT_MAP, CorridorEnv, _circuit_actions
 from corridor.expert import CorridorExpert
 from corridor.maps import CorridorMap, available_maps, load_map, map_digest
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
-from torchcbl.evaluation import figure_style, mean_sd, progress_bar, run_versions, worker_pool
+from torchcbl.evaluation import (
+    SEED_RESULT,
+    clear_unfinished,
+    figure_style,
+    finished_seeds,
+    mean_sd,
+    progress_bar,
+    run_versions,
+    worker_pool,
+    write_atomically,
+    write_seed_result,
+)
 
 if TYPE_CHECKING:
     from torchcbl import GaussianMixtureSet, TeachingConfig
@@ -672,6 +685,7 @@ def run_experiment(
     *,
     workers: int = 2,
     progress: bool = True,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """Run every seed (``workers`` processes), write the run directory, return the results.
 
@@ -680,13 +694,29 @@ def run_experiment(
     pass ``workers=1``). A variant of the reproduction, e.g.
     ``run_experiment(CorridorExperimentConfig.exact_motion(), "runs/exact")``.
 
-    Raises FileExistsError if ``run_dir`` already holds a results.json, or a teaching session
-    of one of ``config.seeds`` (left by a run that was stopped before it wrote results.json):
-    a seed's session is never overwritten.
+    Each seed's result is written, with the config, into its session directory
+    (``sessions/seed<k>/seed_result.json``) when the seed ends. ``resume=True`` continues a
+    run that was stopped (Ctrl-C, a kill, a reboot) in ``run_dir``: a finished seed is taken
+    from that file, a seed stopped part-way is cleared and run again from scratch, the others
+    are run; the results, summary and figures are those of a run never stopped.
+
+    Raises FileExistsError if ``run_dir`` already holds a results.json, or (without
+    ``resume``) a teaching session of one of ``config.seeds`` (left by a run that was stopped
+    before it wrote results.json): a seed's session is never overwritten. With ``resume``,
+    raises :class:`torchcbl.evaluation.ResumeError` (a ValueError) if a finished seed was run
+    with another config (the message names the settings that differ) or ``run_dir`` holds
+    seeds this config does not run.
     """
     config = config or CorridorExperimentConfig()
     run_dir = Path(run_dir)
-    if (run_dir / "results.json").exists():
+    _check_whole("workers", workers, 1)
+    if not isinstance(resume, bool):
+        raise ValueError(f"resume must be True or False, got {resume!r}")
+    done_before: dict[int, dict] = {}
+    if resume:
+        done_before = _finished_seeds(config, run_dir)
+        clear_unfinished(_seed_dirs(config, run_dir), done_before)
+    elif (run_dir / "results.json").exists():
         raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")
     taken = [
         f"sessions/seed{s}"
@@ -694,28 +724,34 @@ def run_experiment(
         if (run_dir / "sessions" / f"seed{s}").is_dir()
         and any((run_dir / "sessions" / f"seed{s}").iterdir())
     ]
-    if taken:
+    if taken and not resume:
         raise FileExistsError(
             f"{run_dir} already holds the teaching sessions of seeds of this run "
             f"({', '.join(taken)}), left by an earlier run that did not finish (it has no "
-            "results.json); choose a new run_dir, or delete this one to run again"
+            "results.json); choose a new run_dir, or delete this one to run again, or resume "
+            "it (run_experiment(..., resume=True), torchcbl reproduce --resume)"
         )
-    _check_whole("workers", workers, 1)
     (run_dir / "sessions").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    args = [(config, s, run_dir / "sessions" / f"seed{s}") for s in config.seeds]
-    per_seed: list[dict] = []
-    bar = progress_bar(total=len(args), desc="corridor seeds", unit="seed", show=progress)
+    dirs = _seed_dirs(config, run_dir)
+    args = [(config, s, dirs[s]) for s in config.seeds if s not in done_before]
+    by_seed: dict[int, dict] = {}
+    bar = progress_bar(total=len(config.seeds), desc="corridor seeds", unit="seed", show=progress)
 
     def done(result: dict) -> None:
-        per_seed.append(result)
+        by_seed[result["seed"]] = result
         if progress:
             bar.write(_report(result))
             bar.update(1)
 
+    for s in config.seeds:
+        if s in done_before:
+            if progress:
+                bar.write(f"seed {s}: finished before, taken from {dirs[s] / SEED_RESULT}")
+            done(done_before[s])
     if workers == 1:
         for a in args:
-            done(run_seed(*a))
+            done(_run_and_keep(*a))
     else:
         ctx = mp.get_context("spawn")
         died = (  # which seed's worker died is not known
@@ -723,10 +759,12 @@ def run_experiment(
             "fewer workers if memory ran out)"
         )
         with worker_pool(workers, ctx, running="one of the seeds", after=died) as pool:
-            futures = [pool.submit(run_seed, *a) for a in args]
+            futures = [pool.submit(_run_and_keep, *a) for a in args]
             for f in futures:
                 done(f.result())  # a Ctrl-C or a dead worker stops the workers too
     bar.close()
+    # in the config's order of seeds, as read back from their files (a run resumed or not)
+    per_seed = [by_seed[s] for s in config.seeds]
     first = per_seed[0]
     public = [{k: v for k, v in r.items() if not k.startswith("_")} for r in per_seed]
     keys = [
@@ -840,10 +878,47 @@ def run_experiment(
         "ps_steps_first_within_0.5x_3x": _within(summary["ps_steps_first"]["mean"]),
     }
     results["acceptance"] = acc
-    (run_dir / "results.json").write_text(json.dumps(results, indent=2, default=_json_default))
     (run_dir / "summary.txt").write_text(format_summary(results) + "\n")
     _figures(config, first, run_dir)
+    # last, whole or not at all: a run directory with results.json is a finished one
+    write_atomically(run_dir / "results.json", json.dumps(results, indent=2, default=_json_default))
     return results
+
+
+def _seed_dirs(config: CorridorExperimentConfig, run_dir: Path) -> dict[int, Path]:
+    """Each seed's directory in ``run_dir``: its teaching session and its finished result."""
+    return {s: run_dir / "sessions" / f"seed{s}" for s in config.seeds}
+
+
+def _finished_seeds(config: CorridorExperimentConfig, run_dir: str | Path) -> dict[int, dict]:
+    """The seeds a resume of ``run_dir`` takes from their files (reads only; see
+    :func:`torchcbl.evaluation.finished_seeds`)."""
+    run_dir = Path(run_dir)
+    dirs = _seed_dirs(config, run_dir)
+    sessions = run_dir / "sessions"
+    strays = (
+        sorted(
+            p
+            for p in sessions.iterdir()
+            if p.is_dir() and p.name.startswith("seed") and p not in dirs.values()
+        )
+        if sessions.is_dir()
+        else []
+    )
+    return finished_seeds(
+        run_dir,
+        dirs,
+        config.to_dict(),
+        strays,
+        "resume with the config it was started with, or choose a new run_dir",
+    )
+
+
+def _run_and_keep(config: CorridorExperimentConfig, seed: int, session_dir: Path) -> dict:
+    """:func:`run_seed`, its result written into ``session_dir`` with the config when it ends,
+    and returned as the file holds it."""
+    result = run_seed(config, seed, session_dir)
+    return write_seed_result(session_dir, config.to_dict(), result, _json_default)
 
 
 _FIGURE_FIELDS = (

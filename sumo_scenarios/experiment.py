@@ -27,7 +27,8 @@ CPU seconds), ``fig6_accuracy.png``,
 ``seed_<k>/episodes.json`` (every teaching and evaluation episode, replayable with
 :mod:`sumo_scenarios.replay` and ``torchcbl replay``) and ``seed_<k>/sessions/arm_a`` and
 ``arm_b`` (the teaching sessions, :mod:`torchcbl.session` format: ``torchcbl evaluate`` and
-``resume`` work on them).
+``resume`` work on them), and ``seed_<k>/seed_result.json`` (the seed's result and config,
+written as it ends: what ``run_experiment(..., resume=True)`` takes from a stopped run).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ import json
 import math
 import multiprocessing as mp
 import numbers
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -48,10 +50,15 @@ import numpy as np
 from sumo_scenarios import metrics
 from torchcbl.evaluation import (
     check_workers_start,
+    clear_unfinished,
+    die_with_parent,
     figure_style,
+    finished_seeds,
     mean_sd,
     progress_bar,
     run_versions,
+    write_atomically,
+    write_seed_result,
 )
 
 if TYPE_CHECKING:
@@ -565,16 +572,24 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     }
 
 
-def _seed_worker(job: tuple[DrivingExperimentConfig, int, str], conn: Any) -> None:
+def _seed_worker(
+    job: tuple[DrivingExperimentConfig, int, str], conn: Any, parent: int | None = None
+) -> None:
     """One seed in a process of its own (libsumo holds one simulation per process): send back
     ``("ok", result)``, or ``("error", exception)`` with its traceback, through ``conn``."""
     import traceback
     from multiprocessing.pool import ExceptionWithTraceback
 
     _worker_ignores_ctrl_c()
+    die_with_parent(parent)  # a main process killed alone (kill -9) takes its workers along
     error: Exception | None = None
     try:
-        reply: tuple[str, Any] = ("ok", _run_seed(*job))
+        cfg, _, seed_dir = job
+        result = _run_seed(*job)
+        # kept with the config when the seed ends (a resume takes it), and sent back as the
+        # file holds it, so that a run resumed or not aggregates the same values
+        kept = write_seed_result(seed_dir, dataclasses.asdict(cfg), result, _plain)
+        reply: tuple[str, Any] = ("ok", kept)
     except Exception as exc:  # re-raised in the parent, the worker's traceback as its cause
         error = exc
         reply = ("error", ExceptionWithTraceback(exc, exc.__traceback__))
@@ -615,7 +630,9 @@ def _run_seeds(
             while waiting and len(running) < workers:
                 job = waiting.pop(0)
                 reader, writer = ctx.Pipe(duplex=False)
-                proc = ctx.Process(target=_seed_worker, args=(job, writer), daemon=True)
+                proc = ctx.Process(
+                    target=_seed_worker, args=(job, writer, os.getpid()), daemon=True
+                )
                 proc.start()
                 writer.close()  # the worker's end: its exit makes the pipe readable
                 running[reader] = (proc, job[1])
@@ -680,6 +697,7 @@ def run_experiment(
     *,
     workers: int = 2,
     progress: bool = True,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """Run every seed (in ``workers`` processes), aggregate, write ``run_dir``; return results.
 
@@ -687,42 +705,62 @@ def run_experiment(
     import the caller's main module: from a script, call ``run_experiment`` under
     ``if __name__ == "__main__":``.
 
-    Raises FileExistsError if ``run_dir`` already holds a results.json, or a seed directory
-    (``seed_<k>``) of one of ``config.seeds`` (left by a run that was stopped before it wrote
-    results.json): its sessions would collide with the new run's. Raises RuntimeError, before
+    Each seed's result is written, with the config, into its directory
+    (``seed_<k>/seed_result.json``) when the seed ends. ``resume=True`` continues a run that
+    was stopped (Ctrl-C, a kill, a reboot) in ``run_dir``: a finished seed is taken from that
+    file, a seed stopped part-way is cleared and run again from scratch, the others are run;
+    the results and figures are those of a run never stopped.
+
+    Raises FileExistsError if ``run_dir`` already holds a results.json, or (without
+    ``resume``) a seed directory (``seed_<k>``) of one of ``config.seeds`` (left by a run that
+    was stopped before it wrote results.json): its sessions would collide with the new run's.
+    With ``resume``, raises :class:`torchcbl.evaluation.ResumeError` (a ValueError) if a
+    finished seed was run with another config (the message names the settings that differ)
+    or ``run_dir`` holds seeds this config does not run. Raises RuntimeError, before
     anything is written, if a spawned process cannot start (a script without that guard), and
     if a seed's worker dies (killed by a signal) before it sends its result; a seed's own
     exception is re-raised, with the worker's traceback as its cause.
     """
     _check_whole("workers", workers, 1)
+    if not isinstance(resume, bool):
+        raise ValueError(f"resume must be True or False, got {resume!r}")
     run_dir = Path(run_dir)
-    if (run_dir / "results.json").exists():
+    done_before: dict[int, dict[str, Any]] = {}
+    if resume:
+        done_before = _finished_seeds(config, run_dir)
+    elif (run_dir / "results.json").exists():
         raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")
     taken = [
         f"seed_{s}"
         for s in config.seeds
         if (run_dir / f"seed_{s}").is_dir() and any((run_dir / f"seed_{s}").iterdir())
     ]
-    if taken:
+    if taken and not resume:
         raise FileExistsError(
             f"{run_dir} already holds the seed directories of seeds of this run "
             f"({', '.join(taken)}), left by an earlier run that did not finish (it has no "
-            "results.json); choose a new run_dir, or delete this one to run again"
+            "results.json); choose a new run_dir, or delete this one to run again, or resume "
+            "it (run_experiment(..., resume=True), torchcbl reproduce --resume)"
         )
     ctx = mp.get_context("spawn")
     # a worker that fails at start-up: the error names the main guard, before anything runs
     check_workers_start(ctx)
+    if resume:
+        clear_unfinished(_seed_dirs(config, run_dir), done_before)
     run_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    jobs = [(config, s, str(run_dir / f"seed_{s}")) for s in config.seeds]
+    jobs = [(config, s, str(run_dir / f"seed_{s}")) for s in config.seeds if s not in done_before]
     per_seed = []
-    bar = progress_bar(total=len(jobs), desc="driving seeds", unit="seed", show=progress)
+    bar = progress_bar(total=len(config.seeds), desc="driving seeds", unit="seed", show=progress)
 
     def done(res: dict[str, Any]) -> None:
         per_seed.append(res)
         bar.update(1)
         bar.set_postfix_str(f"seed {res['seed']} done")
 
+    for s in config.seeds:
+        if s in done_before:
+            done(done_before[s])
     _run_seeds(jobs, workers, ctx, done)  # a Ctrl-C (in the parent) stops the workers
     bar.close()
     # in the config's order of seeds, as results["seeds"] lists them (the workers end in any
@@ -855,9 +893,40 @@ def run_experiment(
         "seconds": time.perf_counter() - t0,
         "cpu_seconds": cpu_seconds(),
     }
-    (run_dir / "results.json").write_text(json.dumps(results, indent=1, default=_plain))
     plot_results(results, run_dir)
+    # last, whole or not at all: a run directory with results.json is a finished one
+    write_atomically(run_dir / "results.json", json.dumps(results, indent=1, default=_plain))
     return results
+
+
+def _seed_dirs(config: DrivingExperimentConfig, run_dir: Path) -> dict[int, Path]:
+    """Each seed's directory in ``run_dir``: its sessions, episodes and finished result."""
+    return {s: run_dir / f"seed_{s}" for s in config.seeds}
+
+
+def _finished_seeds(config: DrivingExperimentConfig, run_dir: str | Path) -> dict[int, dict]:
+    """The seeds a resume of ``run_dir`` takes from their files (reads only; see
+    :func:`torchcbl.evaluation.finished_seeds`)."""
+    import re
+
+    run_dir = Path(run_dir)
+    dirs = _seed_dirs(config, run_dir)
+    strays = (
+        sorted(
+            p
+            for p in run_dir.iterdir()
+            if p.is_dir() and re.fullmatch(r"seed_\d+", p.name) and p not in dirs.values()
+        )
+        if run_dir.is_dir()
+        else []
+    )
+    return finished_seeds(
+        run_dir,
+        dirs,
+        dataclasses.asdict(config),
+        strays,
+        "resume with the config it was started with, or choose a new run_dir",
+    )
 
 
 def cpu_seconds() -> float:

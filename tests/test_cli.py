@@ -634,6 +634,62 @@ def test_summary_md_of_a_driving_run_is_markdown_too(tmp_path, monkeypatch):
     assert "+-" not in text
 
 
+def test_reproduce_resume_continues_a_stopped_run_and_refuses_other_settings(
+    tmp_path, monkeypatch, capsys
+):
+    """`torchcbl reproduce --resume --out DIR` (tiny driving runs, --seeds honoured): a domain
+    that finished is taken from its results.json, a stopped one from its seeds' files, and the
+    run ends as the one never stopped; other settings, other domains, a finished run and a
+    missing directory are refused with one line and exit code 2, naming what differs."""
+    from _driving_tiny import tiny_config
+
+    import torchcbl.cli as cli
+
+    monkeypatch.setattr(
+        cli,
+        "_experiment_config",
+        lambda domain, module, args: tiny_config(seeds=tuple(range(args.seeds or 1))),
+    )
+    out = tmp_path / "runs"
+    argv = ["reproduce", "driving", "--workers", "1", "--no-progress", "--out", str(out)]
+    assert main(argv) == 0
+    untimed = re.compile(r"\(\d+ s, ")
+    summary = untimed.sub("", (out / "summary.md").read_text())
+    results = (out / "driving" / "results.json").read_text()
+    capsys.readouterr()
+
+    def refused(*extra: str) -> str:
+        assert main([*argv[:-1], *extra]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1, err
+        return err
+
+    assert "holds summary.md: its run finished" in refused(str(out), "--resume")
+    (out / "summary.md").unlink()  # stopped after the driving run, before the summary
+    err = refused(str(out), "--resume", "--seeds", "2")
+    assert "finished with other settings: seeds ([0] there, [0, 1] here)" in err
+    corridor = ["reproduce", "corridor", "--no-progress", "--resume", "--out", str(out)]
+    assert main(corridor) == 2
+    assert "holds a driving run too, which this command does not run" in capsys.readouterr().err
+    assert "does not exist" in refused(str(tmp_path / "nowhere"), "--resume")
+    assert main([*argv, "--resume"]) == 0
+    assert untimed.sub("", (out / "summary.md").read_text()) == summary
+    assert (out / "driving" / "results.json").read_text() == results
+    # stopped in the driving run: seed 0 finished, no results.json
+    (out / "summary.md").unlink()
+    (out / "driving" / "results.json").unlink()
+    err = refused(str(out), "--resume", "--seeds", "2")
+    assert "seed 0's finished result" in err and "seeds ([0] there, [0, 1] here)" in err
+    assert not (out / "driving" / "seed_1").exists()
+    assert main([*argv, "--resume"]) == 0
+    assert untimed.sub("", (out / "summary.md").read_text()) == summary
+    on_disk = json.loads((out / "driving" / "results.json").read_text())
+    expected = json.loads(results)
+    for key in ("seconds", "cpu_seconds"):
+        on_disk.pop(key), expected.pop(key)
+    assert on_disk == expected
+
+
 def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(
     corridor_run, tmp_path, capsys
 ):

@@ -468,6 +468,65 @@ def test_a_run_dir_left_by_a_stopped_run_is_refused_before_any_seed_runs(tmp_pat
     assert not (tmp_path / "sessions" / "seed1").exists()
 
 
+def _untimed(value):
+    """A results.json without its timing keys (which a resumed run cannot share)."""
+    if isinstance(value, dict):
+        return {k: _untimed(v) for k, v in value.items() if k not in ("seconds", "wall")}
+    if isinstance(value, list):
+        return [_untimed(v) for v in value]
+    return value
+
+
+def test_a_stopped_run_resumes_to_the_results_and_figures_of_a_run_never_stopped(
+    tmp_path, monkeypatch
+):
+    """resume=True takes a finished seed from its seed_result.json, runs again the seed that
+    was stopped part-way (its session there, no result), and writes the results.json, summary
+    and figures of the run never stopped; a resume with another config, or of a finished run,
+    is refused, naming what differs."""
+    import json
+    import shutil
+
+    import corridor.experiment
+    from corridor.experiment import run_experiment
+    from torchcbl.evaluation import ResumeError
+
+    # for time: the reward's table ranking over 50 steps, not 1000 (both runs alike)
+    score = corridor.experiment.score_tables
+    monkeypatch.setattr(
+        corridor.experiment, "score_tables", lambda *a, **k: score(*a, steps=50, **k)
+    )
+    cfg = _tiny_experiment(seeds=(0, 1))
+    whole, stopped = tmp_path / "whole", tmp_path / "stopped"
+    run_experiment(cfg, whole, workers=1, progress=False)
+    # as if killed while seed 1 ran: seed 0 finished, seed 1's session has no result yet
+    shutil.copytree(whole, stopped)
+    for name in ("results.json", "summary.txt", "figure3.png", "figure4.png", "map.png"):
+        (stopped / name).unlink()
+    (stopped / "sessions" / "seed1" / "seed_result.json").unlink()
+    kept = stopped / "sessions" / "seed0" / "seed_result.json"
+    marked = json.loads(kept.read_text())
+    marked["result"]["seconds"] = -1.0  # taken from the file, not run again
+    kept.write_text(json.dumps(marked))
+    run_experiment(cfg, stopped, workers=1, progress=False, resume=True)
+    resumed = json.loads((stopped / "results.json").read_text())
+    assert resumed["per_seed"][0]["seconds"] == -1.0
+    assert _untimed(resumed) == _untimed(json.loads((whole / "results.json").read_text()))
+    for name in ("summary.txt", "figure3.png", "figure4.png", "map.png"):
+        assert (stopped / name).read_bytes() == (whole / name).read_bytes(), name
+    with pytest.raises(FileExistsError, match="its run finished, there is nothing to resume"):
+        run_experiment(cfg, stopped, workers=1, progress=False, resume=True)
+    (stopped / "results.json").unlink()
+    other = dataclasses.replace(cfg, eval_circuits=3)
+    with pytest.raises(ResumeError, match=r"seed 0's .* eval_circuits \(2 there, 3 here\); resume"):
+        run_experiment(other, stopped, workers=1, progress=False, resume=True)
+    with pytest.raises(
+        ResumeError, match=r"seeds that this config does not run \(sessions/seed1\)"
+    ):
+        run_experiment(_tiny_experiment(), stopped, workers=1, progress=False, resume=True)
+    assert kept.is_file() and (stopped / "sessions" / "seed1" / "seed_result.json").is_file()
+
+
 def test_the_summary_names_the_variants_own_circuit_counts(tmp_path):
     """summary.txt's rows say the circuits this run evaluated and stopped on, not the paper's
     10 and 3 whatever the config said."""

@@ -351,6 +351,61 @@ def test_a_run_dir_left_by_a_stopped_run_is_refused_before_any_seed_runs(tmp_pat
     assert not (tmp_path / "seed_1").exists()
 
 
+@pytest.fixture(scope="module")
+def two_seeds(tmp_path_factory):
+    """A tiny run of seeds (1, 0), given out of order: its results and directory."""
+    run_dir = tmp_path_factory.mktemp("two_seeds")
+    return run_experiment(tiny_config(seeds=(1, 0)), run_dir, workers=1, progress=False), run_dir
+
+
+def _untimed(value):
+    """A results.json without its timing keys (which a resumed run cannot share)."""
+    timing = ("seconds", "cpu_seconds", "arm_a_seconds")
+    if isinstance(value, dict):
+        return {k: _untimed(v) for k, v in value.items() if k not in timing}
+    if isinstance(value, list):
+        return [_untimed(v) for v in value]
+    return value
+
+
+def test_a_stopped_run_resumes_to_the_results_and_figures_of_a_run_never_stopped(
+    two_seeds, tmp_path
+):
+    """resume=True takes a finished seed from seed_<k>/seed_result.json, clears and runs
+    again the seed that was stopped part-way, and writes the results.json and figures of the
+    run never stopped; another config is refused, naming what differs."""
+    import shutil
+
+    from torchcbl.evaluation import ResumeError
+
+    cfg = tiny_config(seeds=(1, 0))
+    whole, stopped = two_seeds[1], tmp_path / "stopped"
+    pngs = sorted(p.name for p in whole.glob("*.png"))
+    assert len(pngs) == 5
+    # as if killed while seed 0 ran: seed 1 finished, seed 0 left part of its directory
+    shutil.copytree(whole, stopped)
+    for name in ("results.json", *pngs):
+        (stopped / name).unlink()
+    (stopped / "seed_0" / "seed_result.json").unlink()
+    (stopped / "seed_0" / "episodes.json").write_text("{")  # half-written
+    kept = stopped / "seed_1" / "seed_result.json"
+    marked = json.loads(kept.read_text())
+    marked["result"]["arm_a_seconds"] = -1.0  # taken from the file, not run again
+    kept.write_text(json.dumps(marked))
+    other = tiny_config(seeds=(1, 0), eval_steps=90)
+    with pytest.raises(ResumeError, match=r"seed 1's .* eval_steps \(100 there, 90 here\); resume"):
+        run_experiment(other, stopped, workers=1, progress=False, resume=True)
+    run_experiment(cfg, stopped, workers=1, progress=False, resume=True)
+    resumed = json.loads((stopped / "results.json").read_text())
+    assert resumed["per_seed"][0]["arm_a_seconds"] == -1.0
+    assert _untimed(resumed) == _untimed(json.loads((whole / "results.json").read_text()))
+    for name in pngs:
+        assert (stopped / name).read_bytes() == (whole / name).read_bytes(), name
+    assert (stopped / "seed_0" / "episodes.json").read_bytes() == (
+        whole / "seed_0" / "episodes.json"
+    ).read_bytes()
+
+
 @pytest.mark.parametrize("workers", ["2", 2.5, None, 0, True])
 def test_workers_must_be_a_whole_number_of_processes(tmp_path, workers):
     with pytest.raises(ValueError, match=r"workers must be an int >= 1, got "):
@@ -358,11 +413,11 @@ def test_workers_must_be_a_whole_number_of_processes(tmp_path, workers):
     assert not (tmp_path / "run").exists()
 
 
-def test_per_seed_follows_the_configs_order_of_seeds(tmp_path):
+def test_per_seed_follows_the_configs_order_of_seeds(two_seeds):
     """per_seed[i] is seeds[i]'s, with seeds given out of order, whichever worker ends first;
     Figure 7 draws the first seed given."""
-    res = run_experiment(tiny_config(seeds=(1, 0)), tmp_path, workers=1, progress=False)
-    on_disk = json.loads((tmp_path / "results.json").read_text())
+    res, run_dir = two_seeds
+    on_disk = json.loads((run_dir / "results.json").read_text())
     assert on_disk["seeds"] == [1, 0]
     assert [r["seed"] for r in on_disk["per_seed"]] == [1, 0]
     assert [r["seed"] for r in res["per_seed"]] == [1, 0]

@@ -3,6 +3,8 @@ records come to per episode (issue 16 item 3, issue 13 item 5)."""
 
 from __future__ import annotations
 
+import os
+import sys
 import warnings
 from pathlib import Path
 
@@ -334,6 +336,49 @@ def test_worker_pool_stops_its_workers_when_the_block_raises(tmp_path):
     with worker_pool(1, mp.get_context("spawn")) as pool:
         pool.submit(_sleep_then_write, str(running))
     assert running.read_text() == "done"
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` still runs (a zombie, dead but not yet reaped, does not)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state not in ("Z", "X")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_worker_pool_workers_die_with_a_main_process_killed_alone(tmp_path):
+    """A main process killed alone (kill -9, the out-of-memory killer) left its workers
+    computing their tasks: a stopped reproduction's seeds went on writing into the seed
+    directories that a resumed run clears and runs again. They now die with it."""
+    import subprocess
+    import time
+
+    script = tmp_path / "main.py"
+    script.write_text(
+        "import multiprocessing as mp, os, time\n"
+        "from torchcbl.evaluation import worker_pool\n"
+        "if __name__ == '__main__':\n"
+        "    with worker_pool(1, mp.get_context('spawn')) as pool:\n"
+        "        print(pool.submit(os.getpid).result(), flush=True)\n"
+        "        pool.submit(time.sleep, 60)\n"
+        "        time.sleep(0.5)\n"
+        "        os.kill(os.getpid(), 9)\n"
+    )
+    out = tmp_path / "out.txt"  # not a pipe: a worker left alive would hold it open
+    with open(out, "w") as f:
+        proc = subprocess.run([sys.executable, str(script)], stdout=f, timeout=60)
+    assert proc.returncode == -9
+    worker = int(out.read_text().split()[0])
+    try:
+        deadline = time.monotonic() + 5.0
+        while _alive(worker) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _alive(worker)
+    finally:
+        if _alive(worker):
+            os.kill(worker, 9)
 
 
 def test_a_worker_that_dies_mid_task_is_said_as_it_died():

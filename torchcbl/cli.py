@@ -7,6 +7,7 @@ core never depends on a simulator.
 Commands (the options in full: README.md's command block, which a test holds to ``--help``)::
 
     torchcbl reproduce [corridor|driving|all] [--full] [--seeds N] [--workers N] [--out DIR]
+                       [--resume]
     torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S]
     torchcbl replay EPISODES.json|SESSION_DIR [--list] [--episode N | --label TEXT] [--gif OUT] ...
     torchcbl plot RUN_DIR
@@ -131,15 +132,34 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         module = _experiment_module(domain)
         plan.append((domain, module, _experiment_config(domain, module, args)))
     requested = _output_dir(Path(args.out), "--out")
-    out = _fresh_dir(requested)
+    finished = _resume_plan(requested, plan) if args.resume else {}
+    out = requested if args.resume else _fresh_dir(requested)
     summaries: list[str] = []
     try:
         for domain, module, config in plan:
             run_dir = out / domain
-            print(f"== {domain}: {'full' if args.full else 'quick'} run into {run_dir}", flush=True)
+            if domain in finished:
+                print(f"== {domain}: finished before, taken from {run_dir}", flush=True)
+                results = finished[domain]
+                elapsed = results.get("seconds", 0.0)
+                summary = module.format_summary(results)
+                summaries.append(
+                    f"## {domain} ({elapsed:.0f} s, run directory `{run_dir}`)\n\n{summary}"
+                )
+                print(summary, flush=True)
+                continue
+            how = "resumed" if args.resume else "run"
+            print(
+                f"== {domain}: {'full' if args.full else 'quick'} {how} into {run_dir}",
+                flush=True,
+            )
             t0 = time.perf_counter()
             results = module.run_experiment(
-                config, run_dir, workers=args.workers, progress=not args.no_progress
+                config,
+                run_dir,
+                workers=args.workers,
+                progress=not args.no_progress,
+                resume=args.resume,
             )
             elapsed = time.perf_counter() - t0
             summary = module.format_summary(results)
@@ -148,13 +168,69 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             )
             print(summary, flush=True)
     except BaseException:
-        if out.is_dir() and not any(out.iterdir()):
-            out.rmdir()  # nothing was written: leave nothing behind
+        if not args.resume and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # nothing was written: leave nothing behind (a resumed one is kept)
         raise
     text = "\n\n".join(summaries) + "\n"
-    (out / "summary.md").write_text(text)
+    from torchcbl.evaluation import write_atomically
+
+    write_atomically(out / "summary.md", text)  # whole or not at all: it marks a finished run
     print(f"\nSummary written to {out / 'summary.md'}")
     return 0
+
+
+def _resume_plan(out: Path, plan: list[tuple[str, Any, Any]]) -> dict[str, Any]:
+    """What ``reproduce --resume`` takes from ``out``, checked before anything is written: the
+    results of each domain that finished (its results.json, run with these settings), by
+    domain. A run stopped part-way is refused (one line) where it was started otherwise: with
+    other settings (--full, --seeds: the settings that differ are named) or other domains, or
+    where it finished (its summary.md)."""
+    from torchcbl.evaluation import ResumeError, config_differences, plain_json
+
+    again = "give the settings it was started with (the same domain, --full and --seeds)"
+    if not out.is_dir():
+        raise _UsageError(
+            f"--resume: {out} does not exist; expected the --out directory of a stopped "
+            "torchcbl reproduce run (without --resume a new run starts there)"
+        )
+    if (out / "summary.md").is_file():
+        raise _UsageError(
+            f"--resume: {out} holds summary.md: its run finished, there is nothing to resume; "
+            "without --resume a new run starts beside it"
+        )
+    wanted = {domain for domain, _, _ in plan}
+    other = sorted(d for d in _DOMAINS if d not in wanted and (out / d).exists())
+    if other:
+        raise _UsageError(
+            f"--resume: {out} holds a {' and a '.join(other)} run too, which this command does "
+            f"not run: it was started as another torchcbl reproduce; {again}"
+        )
+    finished: dict[str, Any] = {}
+    for domain, module, config in plan:
+        run_dir = out / domain
+        stored = config.to_dict() if hasattr(config, "to_dict") else dataclasses.asdict(config)
+        if (run_dir / "results.json").is_file():
+            try:
+                results = json.loads((run_dir / "results.json").read_text())
+                differ = config_differences(results["config"], plain_json(stored))
+            except (OSError, ValueError, KeyError, TypeError) as exc:
+                raise _UsageError(
+                    f"--resume: {run_dir / 'results.json'} is not a results.json of torchcbl "
+                    f"reproduce ({_one_line(exc)}); expected the --out directory of a stopped "
+                    "run"
+                ) from None
+            if differ:
+                raise _UsageError(
+                    f"--resume: the {domain} run in {run_dir} finished with other settings: "
+                    f"{'; '.join(differ)}; {again}"
+                )
+            finished[domain] = results
+            continue
+        try:
+            module._finished_seeds(config, run_dir)
+        except ResumeError as exc:
+            raise _UsageError(f"--resume: the {domain} run: {exc.core}; {again}") from None
+    return finished
 
 
 def _output_dir(path: Path, flag: str) -> Path:
@@ -1016,6 +1092,12 @@ def _parser() -> argparse.ArgumentParser:
         default="runs/reproduce",
         metavar="DIR",
         help="output directory (default runs/reproduce; never overwritten: -2, -3, ... added)",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the stopped run in --out (the same domain, --full and --seeds): its "
+        "finished seeds are kept, a seed stopped part-way runs again",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_reproduce)

@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import multiprocessing as mp
 import os
 import platform
+import shutil
 import signal
 import sys
 import threading
 from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -150,18 +153,28 @@ def _worker_start(parent: int | None = None) -> None:
     loop's, hidden in a worker) take a thread lock instead of the multiprocessing lock tqdm
     makes by default, a named semaphore that a worker terminated after a Ctrl-C never
     releases; the resource tracker then printed a "leaked semaphore objects" warning under
-    the command's one line.
-
-    And the worker ends itself once ``parent`` (the process of the pool) is gone: killed
-    outright (SIGKILL; or SIGTERM, SIGHUP, which end Python without its cleanup) it cannot
-    stop its workers, which waited for ever on a queue that nobody would write to again (each
-    holding its interpreter, torch and perhaps a SUMO simulation). Its task's result could no
-    longer be delivered anyway."""
+    the command's one line. And it dies with ``parent`` (:func:`die_with_parent`)."""
     import threading
 
     from tqdm import tqdm
 
     tqdm.set_lock(threading.RLock())
+    die_with_parent(parent)
+
+
+def die_with_parent(parent: int | None) -> None:
+    """End this worker process once ``parent`` (the process that started it, a pool's or an
+    experiment's main process) is gone. Killed outright (SIGKILL: ``kill -9``, the
+    out-of-memory killer; or SIGTERM, SIGHUP, which end Python without its cleanup) a main
+    process cannot stop its workers: a pool's waited for ever on a queue nobody would write
+    to again, an experiment's ran its seed to the end, writing into a seed directory that a
+    resumed run clears and runs again. A daemon thread polls every 0.5 s: as this process's
+    parent (spawn, fork), else, when another process started this one (a forkserver
+    context), by its pid. None: nothing is watched. (The kernel's parent-death signal would
+    also fire when the parent's *thread* that started this process ends, while the parent
+    lives on.)"""
+    import threading
+
     if parent is not None:
         threading.Thread(
             target=_exit_when_orphaned, args=(parent,), name="torchcbl-parent-watch", daemon=True
@@ -169,9 +182,7 @@ def _worker_start(parent: int | None = None) -> None:
 
 
 def _exit_when_orphaned(parent: int, every: float = 0.5) -> None:
-    """Exit at once when the process ``parent`` is gone: polled as this process's parent
-    (spawn, fork), else, when another process started this one (a forkserver context), by
-    its pid."""
+    """Exit at once when the process ``parent`` is gone (see :func:`die_with_parent`)."""
     import time
 
     direct = os.getppid() == parent
@@ -327,3 +338,147 @@ def worker_pool(
             raise RuntimeError(f"a worker process {how} while it ran {running}; {after}") from exc
         raise
     pool.shutdown(wait=True)
+
+
+# ---------------------------------------------------------------------------- resuming a run
+
+#: The file in a seed's directory that holds its finished result and the config it was run
+#: with (written atomically when the seed ends; a seed directory without it did not finish).
+SEED_RESULT = "seed_result.json"
+
+
+class ResumeError(ValueError):
+    """A run directory that a resume refuses: ``core`` says why (what differs), the message
+    adds what to do."""
+
+    def __init__(self, core: str, remedy: str) -> None:
+        super().__init__(f"{core}; {remedy}")
+        self.core = core
+
+
+def plain_json(value: Any, default: Any = None) -> Any:
+    """``value`` as JSON gives it back (tuples as lists, numpy scalars as numbers, ...):
+    what a result read back from its file holds."""
+    return json.loads(json.dumps(value, default=default))
+
+
+def write_seed_result(
+    seed_dir: Any, config: dict[str, Any], result: dict[str, Any], default: Any = None
+) -> dict[str, Any]:
+    """Write ``result`` and the run's ``config`` (JSON form) into ``seed_dir/seed_result.json``
+    atomically (a temporary file renamed over it: a run killed while writing leaves no result),
+    and return the result as it reads back from the file."""
+    path = Path(seed_dir) / SEED_RESULT
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = json.dumps({"config": config, "result": result}, default=default)
+    write_atomically(path, text)
+    return json.loads(text)["result"]
+
+
+def write_atomically(path: Any, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file renamed over it: a reader (a
+    resume) finds the whole file or none."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _short(value: Any, width: int = 60) -> str:
+    """``value`` for a one-line message: a run of whole numbers as ``[0, ..., 29]``, else its
+    repr cut at ``width`` characters."""
+    run = isinstance(value, list) and len(value) > 3
+    if run and all(type(v) is int for v in value) and value == list(range(value[0], value[-1] + 1)):
+        return f"[{value[0]}, ..., {value[-1]}]"
+    text = repr(value)
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def config_differences(stored: Any, wanted: Any, prefix: str = "") -> list[str]:
+    """The settings in which ``stored`` (a config's JSON form, as a file holds it) differs
+    from ``wanted`` (the same form): ``"name (X there, Y here)"``, nested fields dotted."""
+    if isinstance(stored, dict) and isinstance(wanted, dict):
+        out: list[str] = []
+        for key in [*stored, *(k for k in wanted if k not in stored)]:
+            name = f"{prefix}{key}"
+            if key not in wanted:
+                out.append(f"{name} (set there, not known here)")
+            elif key not in stored:
+                out.append(f"{name} (not set there, {_short(wanted[key])} here)")
+            else:
+                out += config_differences(stored[key], wanted[key], f"{name}.")
+        return out
+    if stored == wanted:
+        return []
+    return [f"{prefix.rstrip('.') or 'config'} ({_short(stored)} there, {_short(wanted)} here)"]
+
+
+def finished_seeds(
+    run_dir: Any,
+    seed_dirs: dict[int, Any],
+    config: dict[str, Any],
+    strays: list[Any],
+    remedy: str,
+) -> dict[int, dict[str, Any]]:
+    """What a resume of ``run_dir`` takes: the finished result of each seed of ``seed_dirs``
+    (seed -> its directory) whose ``seed_result.json`` was run with ``config`` (the run's
+    config in its JSON form). Reads only; a seed directory without a readable result is one
+    the resume clears and runs again.
+
+    Raises:
+        FileExistsError: ``run_dir`` holds results.json (its run finished).
+        ResumeError: a finished seed was run with another config (the message names the
+            settings that differ), or ``strays`` (seed directories of seeds this config does
+            not run) is not empty. ``remedy`` ends the message.
+    """
+    run_dir = Path(run_dir)
+    if (run_dir / "results.json").exists():
+        raise FileExistsError(
+            f"{run_dir} already holds results.json: its run finished, there is nothing to "
+            "resume; choose a new run_dir"
+        )
+    if strays:
+        names = ", ".join(str(Path(p).relative_to(run_dir)) for p in strays)
+        raise ResumeError(
+            f"{run_dir} holds seeds that this config does not run ({names}): it was started "
+            "with other seeds",
+            remedy,
+        )
+    wanted = plain_json(config)
+    done: dict[int, dict[str, Any]] = {}
+    for seed, seed_dir in seed_dirs.items():
+        stored = _read_seed_result(Path(seed_dir))
+        if stored is None:
+            continue
+        differ = config_differences(stored["config"], wanted)
+        if differ:
+            raise ResumeError(
+                f"seed {seed}'s finished result in {Path(seed_dir) / SEED_RESULT} was run with "
+                f"other settings: {'; '.join(differ)}",
+                remedy,
+            )
+        done[seed] = stored["result"]
+    return done
+
+
+def _read_seed_result(seed_dir: Any) -> dict[str, Any] | None:
+    """A seed directory's ``{"config", "result"}``, or None where it holds no readable one."""
+    try:
+        data = json.loads((seed_dir / SEED_RESULT).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(data, dict) or not {"config", "result"} <= set(data):
+        return None
+    return data
+
+
+def clear_unfinished(seed_dirs: dict[int, Any], finished: Iterable[int]) -> None:
+    """Remove the directory of each seed of ``seed_dirs`` (seed -> directory) not in
+    ``finished``: a seed stopped part-way is run again from scratch."""
+    done = set(finished)
+    for seed, seed_dir in seed_dirs.items():
+        if seed not in done and Path(seed_dir).exists():
+            shutil.rmtree(seed_dir)
