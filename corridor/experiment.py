@@ -78,6 +78,7 @@ from torchcbl.evaluation import (
     clear_unfinished,
     figure_style,
     finished_seeds,
+    hold_run_dir,
     mean_sd,
     progress_bar,
     run_versions,
@@ -679,7 +680,7 @@ def _versions() -> dict[str, str]:
     return run_versions(pymunk=version("pymunk"))
 
 
-def run_experiment(
+def _run_experiment(
     config: CorridorExperimentConfig | None = None,
     run_dir: str | Path = "runs/corridor",
     *,
@@ -687,26 +688,7 @@ def run_experiment(
     progress: bool = True,
     resume: bool = False,
 ) -> dict[str, Any]:
-    """Run every seed (``workers`` processes), write the run directory, return the results.
-
-    With ``workers`` > 1 the seeds run in spawned processes, which import the caller's main
-    module: from a script, call ``run_experiment`` under ``if __name__ == "__main__":`` (or
-    pass ``workers=1``). A variant of the reproduction, e.g.
-    ``run_experiment(CorridorExperimentConfig.exact_motion(), "runs/exact")``.
-
-    Each seed's result is written, with the config, into its session directory
-    (``sessions/seed<k>/seed_result.json``) when the seed ends. ``resume=True`` continues a
-    run that was stopped (Ctrl-C, a kill, a reboot) in ``run_dir``: a finished seed is taken
-    from that file, a seed stopped part-way is cleared and run again from scratch, the others
-    are run; the results, summary and figures are those of a run never stopped.
-
-    Raises FileExistsError if ``run_dir`` already holds a results.json, or (without
-    ``resume``) a teaching session of one of ``config.seeds`` (left by a run that was stopped
-    before it wrote results.json): a seed's session is never overwritten. With ``resume``,
-    raises :class:`torchcbl.evaluation.ResumeError` (a ValueError) if a finished seed was run
-    with another config (the message names the settings that differ) or ``run_dir`` holds
-    seeds this config does not run.
-    """
+    """The body of :func:`run_experiment`, with ``run_dir`` held."""
     config = config or CorridorExperimentConfig()
     run_dir = Path(run_dir)
     _check_whole("workers", workers, 1)
@@ -755,8 +737,9 @@ def run_experiment(
     else:
         ctx = mp.get_context("spawn")
         died = (  # which seed's worker died is not known
-            "the run stops without a results.json: run it again into a new run_dir (with "
-            "fewer workers if memory ran out)"
+            "the run stops without a results.json; its finished seeds are kept: resume it "
+            "(torchcbl reproduce --resume --out DIR, or run_experiment(..., resume=True)), "
+            "with fewer workers if memory ran out"
         )
         with worker_pool(workers, ctx, running="one of the seeds", after=died) as pool:
             futures = [pool.submit(_run_and_keep, *a) for a in args]
@@ -885,6 +868,41 @@ def run_experiment(
     return results
 
 
+def run_experiment(
+    config: CorridorExperimentConfig | None = None,
+    run_dir: str | Path = "runs/corridor",
+    *,
+    workers: int = 2,
+    progress: bool = True,
+    resume: bool = False,
+) -> dict[str, Any]:
+    """Run every seed (``workers`` processes), write the run directory, return the results.
+
+    With ``workers`` > 1 the seeds run in spawned processes, which import the caller's main
+    module: from a script, call ``run_experiment`` under ``if __name__ == "__main__":`` (or
+    pass ``workers=1``). A variant of the reproduction, e.g.
+    ``run_experiment(CorridorExperimentConfig.exact_motion(), "runs/exact")``.
+
+    Each seed's result is written, with the config, into its session directory
+    (``sessions/seed<k>/seed_result.json``) when the seed ends. ``resume=True`` continues a
+    run that was stopped (Ctrl-C, a kill, a reboot) in ``run_dir``: a finished seed is taken
+    from that file, a seed stopped part-way is cleared and run again from scratch, the others
+    are run; the results, summary and figures are those of a run never stopped.
+
+    Raises FileExistsError if ``run_dir`` already holds a results.json, or (without
+    ``resume``) a teaching session of one of ``config.seeds`` (left by a run that was stopped
+    before it wrote results.json): a seed's session is never overwritten. With ``resume``,
+    raises :class:`torchcbl.evaluation.ResumeError` (a ValueError) if a finished seed was run
+    with another config (the message names the settings that differ) or ``run_dir`` holds
+    seeds this config does not run.
+
+    Raises :class:`torchcbl.evaluation.RunDirLockedError` while another run writes into
+    ``run_dir`` (it holds ``run_dir/.run.lock``).
+    """
+    with hold_run_dir(run_dir):  # one run at a time in a run directory
+        return _run_experiment(config, run_dir, workers=workers, progress=progress, resume=resume)
+
+
 def _seed_dirs(config: CorridorExperimentConfig, run_dir: Path) -> dict[int, Path]:
     """Each seed's directory in ``run_dir``: its teaching session and its finished result."""
     return {s: run_dir / "sessions" / f"seed{s}" for s in config.seeds}
@@ -911,6 +929,7 @@ def _finished_seeds(config: CorridorExperimentConfig, run_dir: str | Path) -> di
         config.to_dict(),
         strays,
         "resume with the config it was started with, or choose a new run_dir",
+        _versions(),
     )
 
 
@@ -918,7 +937,7 @@ def _run_and_keep(config: CorridorExperimentConfig, seed: int, session_dir: Path
     """:func:`run_seed`, its result written into ``session_dir`` with the config when it ends,
     and returned as the file holds it."""
     result = run_seed(config, seed, session_dir)
-    return write_seed_result(session_dir, config.to_dict(), result, _json_default)
+    return write_seed_result(session_dir, config.to_dict(), result, _json_default, _versions())
 
 
 _FIGURE_FIELDS = (

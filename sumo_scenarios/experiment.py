@@ -54,6 +54,7 @@ from torchcbl.evaluation import (
     die_with_parent,
     figure_style,
     finished_seeds,
+    hold_run_dir,
     mean_sd,
     progress_bar,
     run_versions,
@@ -588,7 +589,7 @@ def _seed_worker(
         result = _run_seed(*job)
         # kept with the config when the seed ends (a resume takes it), and sent back as the
         # file holds it, so that a run resumed or not aggregates the same values
-        kept = write_seed_result(seed_dir, dataclasses.asdict(cfg), result, _plain)
+        kept = write_seed_result(seed_dir, dataclasses.asdict(cfg), result, _plain, _versions())
         reply: tuple[str, Any] = ("ok", kept)
     except Exception as exc:  # re-raised in the parent, the worker's traceback as its cause
         error = exc
@@ -650,8 +651,9 @@ def _run_seeds(
                     )
                     raise RuntimeError(
                         f"the worker process of seed {seed} {how} before it sent its result; "
-                        "the run stops without a results.json: run it again into a new "
-                        "run_dir (with fewer workers if memory ran out)"
+                        "the run stops without a results.json; its finished seeds are kept: "
+                        "resume it (torchcbl reproduce --resume --out DIR, or "
+                        "run_experiment(..., resume=True)), with fewer workers if memory ran out"
                     ) from None
                 finally:
                     reader.close()
@@ -691,7 +693,7 @@ def _versions() -> dict[str, str]:
     return run_versions(sumo=sumo)
 
 
-def run_experiment(
+def _run_experiment(
     config: DrivingExperimentConfig,
     run_dir: str | Path,
     *,
@@ -699,28 +701,7 @@ def run_experiment(
     progress: bool = True,
     resume: bool = False,
 ) -> dict[str, Any]:
-    """Run every seed (in ``workers`` processes), aggregate, write ``run_dir``; return results.
-
-    The seeds run in spawned processes (libsumo holds one simulation per process), which
-    import the caller's main module: from a script, call ``run_experiment`` under
-    ``if __name__ == "__main__":``.
-
-    Each seed's result is written, with the config, into its directory
-    (``seed_<k>/seed_result.json``) when the seed ends. ``resume=True`` continues a run that
-    was stopped (Ctrl-C, a kill, a reboot) in ``run_dir``: a finished seed is taken from that
-    file, a seed stopped part-way is cleared and run again from scratch, the others are run;
-    the results and figures are those of a run never stopped.
-
-    Raises FileExistsError if ``run_dir`` already holds a results.json, or (without
-    ``resume``) a seed directory (``seed_<k>``) of one of ``config.seeds`` (left by a run that
-    was stopped before it wrote results.json): its sessions would collide with the new run's.
-    With ``resume``, raises :class:`torchcbl.evaluation.ResumeError` (a ValueError) if a
-    finished seed was run with another config (the message names the settings that differ)
-    or ``run_dir`` holds seeds this config does not run. Raises RuntimeError, before
-    anything is written, if a spawned process cannot start (a script without that guard), and
-    if a seed's worker dies (killed by a signal) before it sends its result; a seed's own
-    exception is re-raised, with the worker's traceback as its cause.
-    """
+    """The body of :func:`run_experiment`, with ``run_dir`` held."""
     _check_whole("workers", workers, 1)
     if not isinstance(resume, bool):
         raise ValueError(f"resume must be True or False, got {resume!r}")
@@ -899,6 +880,43 @@ def run_experiment(
     return results
 
 
+def run_experiment(
+    config: DrivingExperimentConfig,
+    run_dir: str | Path,
+    *,
+    workers: int = 2,
+    progress: bool = True,
+    resume: bool = False,
+) -> dict[str, Any]:
+    """Run every seed (in ``workers`` processes), aggregate, write ``run_dir``; return results.
+
+    The seeds run in spawned processes (libsumo holds one simulation per process), which
+    import the caller's main module: from a script, call ``run_experiment`` under
+    ``if __name__ == "__main__":``.
+
+    Each seed's result is written, with the config, into its directory
+    (``seed_<k>/seed_result.json``) when the seed ends. ``resume=True`` continues a run that
+    was stopped (Ctrl-C, a kill, a reboot) in ``run_dir``: a finished seed is taken from that
+    file, a seed stopped part-way is cleared and run again from scratch, the others are run;
+    the results and figures are those of a run never stopped.
+
+    Raises FileExistsError if ``run_dir`` already holds a results.json, or (without
+    ``resume``) a seed directory (``seed_<k>``) of one of ``config.seeds`` (left by a run that
+    was stopped before it wrote results.json): its sessions would collide with the new run's.
+    With ``resume``, raises :class:`torchcbl.evaluation.ResumeError` (a ValueError) if a
+    finished seed was run with another config (the message names the settings that differ)
+    or ``run_dir`` holds seeds this config does not run. Raises RuntimeError, before
+    anything is written, if a spawned process cannot start (a script without that guard), and
+    if a seed's worker dies (killed by a signal) before it sends its result; a seed's own
+    exception is re-raised, with the worker's traceback as its cause.
+
+    Raises :class:`torchcbl.evaluation.RunDirLockedError` while another run writes into
+    ``run_dir`` (it holds ``run_dir/.run.lock``).
+    """
+    with hold_run_dir(run_dir):  # one run at a time in a run directory
+        return _run_experiment(config, run_dir, workers=workers, progress=progress, resume=resume)
+
+
 def _seed_dirs(config: DrivingExperimentConfig, run_dir: Path) -> dict[int, Path]:
     """Each seed's directory in ``run_dir``: its sessions, episodes and finished result."""
     return {s: run_dir / f"seed_{s}" for s in config.seeds}
@@ -926,6 +944,7 @@ def _finished_seeds(config: DrivingExperimentConfig, run_dir: str | Path) -> dic
         dataclasses.asdict(config),
         strays,
         "resume with the config it was started with, or choose a new run_dir",
+        _versions(),
     )
 
 

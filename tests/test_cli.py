@@ -688,6 +688,40 @@ def test_reproduce_resume_continues_a_stopped_run_and_refuses_other_settings(
     for key in ("seconds", "cpu_seconds"):
         on_disk.pop(key), expected.pop(key)
     assert on_disk == expected
+    # stopped again; another run still writing into it (it survived a lost terminal): refused
+    (out / "summary.md").unlink()
+    (out / "driving" / "results.json").unlink()
+    import fcntl
+
+    with open(out / "driving" / ".run.lock", "a") as held:
+        fcntl.flock(held.fileno(), fcntl.LOCK_EX)
+        assert "is being written by another run" in refused(str(out), "--resume")
+    assert (out / "driving" / "seed_0" / "seed_result.json").is_file()
+    # a directory that holds something else than a run: refused, not filled with a new run
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    assert "holds no driving directory" in refused(str(other), "--resume")
+    assert sorted(p.name for p in other.iterdir()) == ["notes.txt"]
+
+
+def test_reproduce_interrupted_says_how_to_go_on(tmp_path, monkeypatch, capsys):
+    """Ctrl-C during a reproduction printed 'interrupted' alone, though its finished seeds are
+    kept and --resume goes on from them."""
+    import corridor.experiment
+
+    def stopped(config, run_dir, **kwargs):
+        (run_dir / "sessions").mkdir(parents=True)  # a seed or more written
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(corridor.experiment, "run_experiment", stopped)
+    out = tmp_path / "runs"
+    assert main(["reproduce", "corridor", "--no-progress", "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert err.strip() == (
+        f"torchcbl reproduce: interrupted (its finished seeds are kept: go on with the same "
+        f"command plus --resume --out {out})"
+    )
 
 
 def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(

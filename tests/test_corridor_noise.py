@@ -525,6 +525,22 @@ def test_a_stopped_run_resumes_to_the_results_and_figures_of_a_run_never_stopped
     ):
         run_experiment(_tiny_experiment(), stopped, workers=1, progress=False, resume=True)
     assert kept.is_file() and (stopped / "sessions" / "seed1" / "seed_result.json").is_file()
+    # a seed computed by other code (another commit, torch, pymunk) is not mixed in
+    marked = json.loads(kept.read_text())
+    marked["versions"]["torchcbl_source"] = "git 0000000"
+    kept.write_text(json.dumps(marked))
+    with pytest.raises(ResumeError, match=r"seed 0's .* other code: torchcbl_source \('git 0000"):
+        run_experiment(cfg, stopped, workers=1, progress=False, resume=True)
+    # nor is a run directory another run is writing into (a resume from a second shell)
+    import fcntl
+
+    from torchcbl.evaluation import RunDirLockedError
+
+    with open(stopped / ".run.lock", "a") as held:
+        fcntl.flock(held.fileno(), fcntl.LOCK_EX)
+        with pytest.raises(RunDirLockedError, match="is being written by another run"):
+            run_experiment(cfg, stopped, workers=1, progress=False, resume=True)
+    assert kept.is_file() and (stopped / "sessions" / "seed1" / "seed_result.json").is_file()
 
 
 def test_the_summary_names_the_variants_own_circuit_counts(tmp_path):

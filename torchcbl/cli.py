@@ -154,22 +154,32 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
                 flush=True,
             )
             t0 = time.perf_counter()
-            results = module.run_experiment(
-                config,
-                run_dir,
-                workers=args.workers,
-                progress=not args.no_progress,
-                resume=args.resume,
-            )
+            from torchcbl.evaluation import RunDirLockedError
+
+            try:
+                results = module.run_experiment(
+                    config,
+                    run_dir,
+                    workers=args.workers,
+                    progress=not args.no_progress,
+                    resume=args.resume,
+                )
+            except RunDirLockedError as exc:
+                raise _UsageError(f"--out {out}: {exc}") from None
             elapsed = time.perf_counter() - t0
             summary = module.format_summary(results)
             summaries.append(
                 f"## {domain} ({elapsed:.0f} s, run directory `{run_dir}`)\n\n{summary}"
             )
             print(summary, flush=True)
-    except BaseException:
+    except BaseException as exc:
         if not args.resume and out.is_dir() and not any(out.iterdir()):
             out.rmdir()  # nothing was written: leave nothing behind (a resumed one is kept)
+        elif isinstance(exc, KeyboardInterrupt):  # main says it in its one line
+            exc.note = (  # type: ignore[attr-defined]
+                " (its finished seeds are kept: go on with the same command plus --resume "
+                f"--out {_shell(out)})"
+            )
         raise
     text = "\n\n".join(summaries) + "\n"
     from torchcbl.evaluation import write_atomically
@@ -205,6 +215,13 @@ def _resume_plan(out: Path, plan: list[tuple[str, Any, Any]]) -> dict[str, Any]:
             f"--resume: {out} holds a {' and a '.join(other)} run too, which this command does "
             f"not run: it was started as another torchcbl reproduce; {again}"
         )
+    if any(out.iterdir()) and not any((out / d).exists() for d in wanted):
+        names = " or ".join(f"{d}" for d in sorted(wanted))
+        raise _UsageError(
+            f"--resume: {out} holds no {names} directory of a torchcbl reproduce run; expected "
+            "the --out directory of a stopped run (the one that holds "
+            f"{' and '.join(f'{d}/' for d in sorted(wanted))}), or an empty one"
+        )
     finished: dict[str, Any] = {}
     for domain, module, config in plan:
         run_dir = out / domain
@@ -228,8 +245,9 @@ def _resume_plan(out: Path, plan: list[tuple[str, Any, Any]]) -> dict[str, Any]:
             continue
         try:
             module._finished_seeds(config, run_dir)
-        except ResumeError as exc:
-            raise _UsageError(f"--resume: the {domain} run: {exc.core}; {again}") from None
+        except ResumeError as exc:  # other settings (say which to give), or other code
+            fix = again if "settings" in exc.core else exc.remedy
+            raise _UsageError(f"--resume: the {domain} run: {exc.core}; {fix}") from None
     return finished
 
 
@@ -1355,8 +1373,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except _UsageError as exc:
         print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        more = getattr(exc, "note", "")  # reproduce: how to go on
+        print(f"{prog}: interrupted{more}", file=sys.stderr)
         return 130
     except BrokenPipeError as exc:
         if not _stdout_closed():

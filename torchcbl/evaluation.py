@@ -354,6 +354,7 @@ class ResumeError(ValueError):
     def __init__(self, core: str, remedy: str) -> None:
         super().__init__(f"{core}; {remedy}")
         self.core = core
+        self.remedy = remedy
 
 
 def plain_json(value: Any, default: Any = None) -> Any:
@@ -363,14 +364,19 @@ def plain_json(value: Any, default: Any = None) -> Any:
 
 
 def write_seed_result(
-    seed_dir: Any, config: dict[str, Any], result: dict[str, Any], default: Any = None
+    seed_dir: Any,
+    config: dict[str, Any],
+    result: dict[str, Any],
+    default: Any = None,
+    versions: dict[str, str] | None = None,
 ) -> dict[str, Any]:
-    """Write ``result`` and the run's ``config`` (JSON form) into ``seed_dir/seed_result.json``
-    atomically (a temporary file renamed over it: a run killed while writing leaves no result),
-    and return the result as it reads back from the file."""
+    """Write ``result``, the run's ``config`` (JSON form) and the ``versions`` of the code that
+    computed it (:func:`run_versions`) into ``seed_dir/seed_result.json`` atomically (a
+    temporary file renamed over it: a run killed while writing leaves no result), and return
+    the result as it reads back from the file."""
     path = Path(seed_dir) / SEED_RESULT
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps({"config": config, "result": result}, default=default)
+    text = json.dumps({"config": config, "result": result, "versions": versions}, default=default)
     write_atomically(path, text)
     return json.loads(text)["result"]
 
@@ -422,17 +428,19 @@ def finished_seeds(
     config: dict[str, Any],
     strays: list[Any],
     remedy: str,
+    versions: dict[str, str] | None = None,
 ) -> dict[int, dict[str, Any]]:
     """What a resume of ``run_dir`` takes: the finished result of each seed of ``seed_dirs``
     (seed -> its directory) whose ``seed_result.json`` was run with ``config`` (the run's
-    config in its JSON form). Reads only; a seed directory without a readable result is one
-    the resume clears and runs again.
+    config in its JSON form) and, where ``versions`` is given, by the code of those versions
+    (:func:`run_versions`: the commit, torch, the simulator, ...). Reads only; a seed directory
+    without a readable result is one the resume clears and runs again.
 
     Raises:
         FileExistsError: ``run_dir`` holds results.json (its run finished).
-        ResumeError: a finished seed was run with another config (the message names the
-            settings that differ), or ``strays`` (seed directories of seeds this config does
-            not run) is not empty. ``remedy`` ends the message.
+        ResumeError: a finished seed was run with another config or by other code (the
+            message names what differs), or ``strays`` (seed directories of seeds this config
+            does not run) is not empty. ``remedy`` ends the message.
     """
     run_dir = Path(run_dir)
     if (run_dir / "results.json").exists():
@@ -460,6 +468,18 @@ def finished_seeds(
                 f"other settings: {'; '.join(differ)}",
                 remedy,
             )
+        kept = stored.get("versions")
+        if versions is not None and kept != plain_json(versions):
+            what = (
+                "; ".join(config_differences(kept, plain_json(versions)))
+                if isinstance(kept, dict)
+                else "its versions are not recorded"
+            )
+            raise ResumeError(
+                f"seed {seed}'s finished result in {Path(seed_dir) / SEED_RESULT} was computed "
+                f"by other code: {what} (seeds of two versions would be mixed in one result)",
+                "resume with the code it was started with, or choose a new run_dir",
+            )
         done[seed] = stored["result"]
     return done
 
@@ -473,6 +493,61 @@ def _read_seed_result(seed_dir: Any) -> dict[str, Any] | None:
     if not isinstance(data, dict) or not {"config", "result"} <= set(data):
         return None
     return data
+
+
+class RunDirLockedError(RuntimeError):
+    """Another process is running an experiment into the same run directory."""
+
+
+@contextlib.contextmanager
+def hold_run_dir(run_dir: Any) -> Iterator[None]:
+    """Hold ``run_dir`` (made if missing) for one experiment run: an ``fcntl.flock`` on its
+    ``.run.lock`` (released by the kernel when the process dies, SIGKILL included). A second
+    run into it, a resume from another shell while the first survives under nohup or tmux
+    say, would clear and rewrite the seed directories the first is writing:
+    :class:`RunDirLockedError`, naming the holder's pid. Where flock is missing, nothing."""
+    run_dir = Path(run_dir)
+    try:
+        import fcntl
+    except ImportError:  # not a POSIX system
+        yield
+        return
+    made = [p for p in (run_dir, *run_dir.parents) if not p.exists()]
+    run_dir.mkdir(parents=True, exist_ok=True)
+    lock = run_dir / ".run.lock"
+    try:
+        with _locked(lock, fcntl):
+            yield
+    except BaseException:
+        # a run refused (or stopped) before it wrote anything leaves no trace: the directories
+        # made here for the lock go again
+        if made and [p.name for p in run_dir.iterdir()] == [lock.name]:
+            lock.unlink()
+            for p in made:
+                with contextlib.suppress(OSError):
+                    p.rmdir()
+        raise
+
+
+@contextlib.contextmanager
+def _locked(lock: Path, fcntl: Any) -> Iterator[None]:
+    """The flock of :func:`hold_run_dir` on ``lock``, with the holder's pid written in it."""
+    run_dir = lock.parent
+    with open(lock, "a+", encoding="utf-8") as f:
+        try:
+            fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.seek(0)
+            holder = f.read().strip() or "unknown"
+            raise RunDirLockedError(
+                f"{run_dir} is being written by another run (pid {holder}, which holds "
+                f"{run_dir / '.run.lock'}); wait for it to end, or stop it, then resume"
+            ) from None
+        f.seek(0)
+        f.truncate()
+        f.write(str(os.getpid()))
+        f.flush()
+        yield
 
 
 def clear_unfinished(seed_dirs: dict[int, Any], finished: Iterable[int]) -> None:
