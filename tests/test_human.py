@@ -265,6 +265,48 @@ def test_a_key_typed_before_the_request_is_shown_does_not_answer_it(terminal):
     assert teacher.n_decisions == 1
 
 
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(
+    "typed",
+    [b"\x1bOQ", b"\x1b[1;2Q", b"\x1bq", b"\x1bOq", b"d\x1bOQ\x1bOq"],
+    ids=["F2", "shift-F2", "alt-q", "keypad-1", "several"],
+)
+def test_a_key_ending_in_q_typed_ahead_is_dropped_not_taken_for_the_quit_key(terminal, typed):
+    """F2 (ESC O Q), Shift-F2, Alt-q (ESC q) or keypad 1 in application mode (ESC O q) typed
+    before a request quit the session: the pending bytes were checked one by one, so the
+    sequence's last "q"/"Q" counted as the quit key, where at a request the same key is "not a
+    key here". Typed ahead they are dropped like any other key."""
+    master, slave = terminal
+    os.write(master, typed)
+    time.sleep(0.1)
+    person = Person(master, slave, [b"w"])
+    teacher = _teacher(slave)
+    person.start()
+    assert teacher(OBS, {}) == 0  # the key pressed after seeing the request
+    shown = person.finish()
+    assert shown.count("-> ") == 1 and "-> stay" in shown
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(
+    "typed",
+    [b"q", b"Q", b"\x1bOQq", b"\x1b[21~", b"\x1bOP"],
+    ids=["q", "Q", "F2-then-q", "F10-a-quit-key", "F1-a-quit-key"],
+)
+def test_a_quit_key_typed_ahead_still_quits(terminal, typed):
+    """A quit key's whole escape sequence quits too; F1 (ESC O P) did not, as the key map reads
+    it as ESC [ P and the pending bytes were searched for that."""
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    os.write(master, typed)
+    time.sleep(0.1)
+    teacher = _teacher(slave, quit_keys=("q", "\x1b[21~", "\x1bOP"))
+    with pytest.raises(TeachingInterrupted):
+        teacher(OBS, {})
+    assert termios.tcgetattr(slave) == before
+    assert teacher.n_decisions == 0
+
+
 # ------------------------------------------------------------------- line-input fallback
 
 

@@ -96,6 +96,47 @@ def _label(key: str) -> str:
     return key
 
 
+def _key_length(data: bytes) -> int | None:
+    """How many bytes of ``data`` (not empty) the first key takes, as a terminal sends keys: an
+    escape sequence (ESC [ ... final byte, ESC O x, ESC and one byte for Alt-x), a UTF-8
+    character, or one byte. None when ``data`` ends inside the key and more bytes are needed."""
+    if data[0] == 0x1B:
+        if len(data) == 1:
+            return None  # a lone ESC, or the start of a sequence
+        if data[1:2] not in (b"[", b"O"):
+            return 2
+        for end in range(2, len(data)):
+            if 0x40 <= data[end] <= 0x7E:  # final byte of a CSI sequence
+                return end + 1
+        return None
+    if data[0] >= 0xC0:  # lead byte of a multi-byte UTF-8 character
+        size = 2 if data[0] < 0xE0 else 3 if data[0] < 0xF0 else 4
+        return size if len(data) >= size else None
+    return 1
+
+
+def _decode_key(data: bytes) -> str:
+    """The key for the bytes of one key, in the form the key map uses."""
+    key = data.decode("utf-8", errors="replace")
+    if key == "\n":
+        key = "\r"
+    if key.startswith(_ESC + "O") and len(key) == 3:  # application mode, as ESC [ x
+        key = _ESC + "[" + key[2]
+    return key
+
+
+def _split_keys(data: bytes) -> tuple[list[str], bytes]:
+    """The keys in ``data``, and the bytes at its end that start a key cut off there."""
+    keys = []
+    while data:
+        length = _key_length(data)
+        if length is None:
+            break
+        keys.append(_decode_key(data[:length]))
+        data = data[length:]
+    return keys, data
+
+
 def _frontend_input() -> Callable[[], str] | None:
     """``input`` where a frontend replaced Python's own (a Jupyter kernel forwards it to the
     notebook's input box while a cell runs), else None."""
@@ -334,16 +375,20 @@ class TerminalTeacher:
     def _drop_typed_ahead(self, fd: int) -> None:
         """Drop the keys typed before this request was shown (while the agent acted on its own,
         a second press, a held key's repeat): they would answer a situation the person has not
-        seen. A quit key among them still quits."""
+        seen. A quit key among them still quits. The pending bytes are split into keys as at a
+        request, so an escape sequence ending in "q" (F2 is ESC O Q) is one key, not a quit."""
         pending = b""
-        while select.select([fd], [], [], 0)[0]:
-            pending += self._read_byte(fd)
-        typed = pending.decode("utf-8", errors="replace")
-        for key in self._quit:
-            if len(key) > 1 and key in typed:  # a quit key that is an escape sequence
-                raise TeachingInterrupted(f"teaching stopped by the person ({_label(key)})")
-        for char in typed:
-            self._resolve_key(char)  # raises for a quit key, as at a request
+        while True:
+            while select.select([fd], [], [], 0)[0]:
+                pending += self._read_byte(fd)
+            keys, pending = _split_keys(pending)
+            for key in keys:
+                self._resolve_key(key)  # raises for a quit key, as at a request
+            if not pending:
+                return
+            if not self._more(fd):  # a key cut off at the end whose rest never came
+                self._resolve_key(_decode_key(pending))
+                return
 
     def _read_byte(self, fd: int) -> bytes:
         try:
@@ -359,24 +404,11 @@ class TerminalTeacher:
 
     def _read_key(self, fd: int) -> str:
         data = self._read_byte(fd)
-        if data == b"\x1b":
-            if self._more(fd):
-                data += self._read_byte(fd)
-                if data[1:] in (b"[", b"O"):
-                    while self._more(fd):
-                        data += self._read_byte(fd)
-                        if 0x40 <= data[-1] <= 0x7E:  # final byte of a CSI sequence
-                            break
-        elif data[0] >= 0xC0:  # lead byte of a multi-byte UTF-8 character
-            extra = 1 if data[0] < 0xE0 else 2 if data[0] < 0xF0 else 3
-            for _ in range(extra):
-                data += self._read_byte(fd)
-        key = data.decode("utf-8", errors="replace")
-        if key == "\n":
-            key = "\r"
-        if key.startswith(_ESC + "O") and len(key) == 3:
-            key = _ESC + "[" + key[2]
-        return key
+        while _key_length(data) is None:
+            if data[0] == 0x1B and not self._more(fd):  # a lone ESC, or a cut-off sequence
+                break
+            data += self._read_byte(fd)
+        return _decode_key(data)
 
     def _resolve_key(self, key: str) -> int | None:
         if key in self._quit or key == _CTRL_D:
