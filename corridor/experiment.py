@@ -716,7 +716,10 @@ def _run_experiment(
     (run_dir / "sessions").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     dirs = _seed_dirs(config, run_dir)
-    args = [(config, s, dirs[s]) for s in config.seeds if s not in done_before]
+    # the code's versions as this run starts (its workers import this code): each seed's
+    # result keeps them, and a resume compares them (not the checkout as a seed ends)
+    versions = _versions()
+    args = [(config, s, dirs[s], versions) for s in config.seeds if s not in done_before]
     by_seed: dict[int, dict] = {}
     bar = progress_bar(total=len(config.seeds), desc="corridor seeds", unit="seed", show=progress)
 
@@ -738,7 +741,8 @@ def _run_experiment(
         ctx = mp.get_context("spawn")
         died = (  # which seed's worker died is not known
             "the run stops without a results.json; its finished seeds are kept: resume it "
-            "(torchcbl reproduce --resume --out DIR, or run_experiment(..., resume=True)), "
+            "(the same torchcbl reproduce command plus --resume --out DIR, or "
+            "run_experiment(..., resume=True)), "
             "with fewer workers if memory ran out"
         )
         with worker_pool(workers, ctx, running="one of the seeds", after=died) as pool:
@@ -833,7 +837,7 @@ def _run_experiment(
         "experiment": "corridor (Chernova & Veloso 2007, Section 5.1)",
         "config": config.to_dict(),
         "seeds": list(config.seeds),
-        "versions": _versions(),
+        "versions": versions,
         "paper": PAPER,
         "actions_per_circuit": _actions_per_circuit(config),
         "summary": summary,
@@ -933,11 +937,13 @@ def _finished_seeds(config: CorridorExperimentConfig, run_dir: str | Path) -> di
     )
 
 
-def _run_and_keep(config: CorridorExperimentConfig, seed: int, session_dir: Path) -> dict:
+def _run_and_keep(
+    config: CorridorExperimentConfig, seed: int, session_dir: Path, versions: dict[str, str]
+) -> dict:
     """:func:`run_seed`, its result written into ``session_dir`` with the config when it ends,
     and returned as the file holds it."""
     result = run_seed(config, seed, session_dir)
-    return write_seed_result(session_dir, config.to_dict(), result, _json_default, _versions())
+    return write_seed_result(session_dir, config.to_dict(), result, _json_default, versions)
 
 
 _FIGURE_FIELDS = (

@@ -574,7 +574,10 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
 
 
 def _seed_worker(
-    job: tuple[DrivingExperimentConfig, int, str], conn: Any, parent: int | None = None
+    job: tuple[DrivingExperimentConfig, int, str],
+    conn: Any,
+    parent: int | None = None,
+    versions: dict[str, str] | None = None,
 ) -> None:
     """One seed in a process of its own (libsumo holds one simulation per process): send back
     ``("ok", result)``, or ``("error", exception)`` with its traceback, through ``conn``."""
@@ -589,7 +592,7 @@ def _seed_worker(
         result = _run_seed(*job)
         # kept with the config when the seed ends (a resume takes it), and sent back as the
         # file holds it, so that a run resumed or not aggregates the same values
-        kept = write_seed_result(seed_dir, dataclasses.asdict(cfg), result, _plain, _versions())
+        kept = write_seed_result(seed_dir, dataclasses.asdict(cfg), result, _plain, versions)
         reply: tuple[str, Any] = ("ok", kept)
     except Exception as exc:  # re-raised in the parent, the worker's traceback as its cause
         error = exc
@@ -616,6 +619,7 @@ def _run_seeds(
     workers: int,
     ctx: Any,
     done: Callable[[dict[str, Any]], None],
+    versions: dict[str, str] | None = None,
 ) -> None:
     """Run each job's seed in a fresh process of ``ctx``, ``workers`` at a time, in the order
     given, and hand each result to ``done`` as it comes. A seed's exception is re-raised here;
@@ -632,7 +636,7 @@ def _run_seeds(
                 job = waiting.pop(0)
                 reader, writer = ctx.Pipe(duplex=False)
                 proc = ctx.Process(
-                    target=_seed_worker, args=(job, writer, os.getpid()), daemon=True
+                    target=_seed_worker, args=(job, writer, os.getpid(), versions), daemon=True
                 )
                 proc.start()
                 writer.close()  # the worker's end: its exit makes the pipe readable
@@ -652,8 +656,9 @@ def _run_seeds(
                     raise RuntimeError(
                         f"the worker process of seed {seed} {how} before it sent its result; "
                         "the run stops without a results.json; its finished seeds are kept: "
-                        "resume it (torchcbl reproduce --resume --out DIR, or "
-                        "run_experiment(..., resume=True)), with fewer workers if memory ran out"
+                        "resume it (the same torchcbl reproduce command plus --resume --out "
+                        "DIR, or run_experiment(..., resume=True)), with fewer workers if memory "
+                        "ran out"
                     ) from None
                 finally:
                     reader.close()
@@ -731,6 +736,9 @@ def _run_experiment(
     run_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     jobs = [(config, s, str(run_dir / f"seed_{s}")) for s in config.seeds if s not in done_before]
+    # the code's versions as this run starts (its workers import this code): each seed's
+    # result keeps them, and a resume compares them (not the checkout as a seed ends)
+    versions = _versions()
     per_seed = []
     bar = progress_bar(total=len(config.seeds), desc="driving seeds", unit="seed", show=progress)
 
@@ -742,7 +750,7 @@ def _run_experiment(
     for s in config.seeds:
         if s in done_before:
             done(done_before[s])
-    _run_seeds(jobs, workers, ctx, done)  # a Ctrl-C (in the parent) stops the workers
+    _run_seeds(jobs, workers, ctx, done, versions)  # a Ctrl-C (in the parent) stops them
     bar.close()
     # in the config's order of seeds, as results["seeds"] lists them (the workers end in any
     # order); the first seed's is the one Figure 7 draws
@@ -865,7 +873,7 @@ def _run_experiment(
         "experiment": "driving (Chernova & Veloso 2007, Section 5.2)",
         "config": dataclasses.asdict(config),
         "seeds": list(config.seeds),
-        "versions": _versions(),
+        "versions": versions,
         "paper": PAPER,
         "summary": summary,
         "stages": stages,

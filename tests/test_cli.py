@@ -703,6 +703,14 @@ def test_reproduce_resume_continues_a_stopped_run_and_refuses_other_settings(
     (other / "notes.txt").write_text("mine")
     assert "holds no driving directory" in refused(str(other), "--resume")
     assert sorted(p.name for p in other.iterdir()) == ["notes.txt"]
+    # a finished seed computed by other code: said so, with what to do about code (not settings)
+    kept = out / "driving" / "seed_0" / "seed_result.json"
+    stored = json.loads(kept.read_text())
+    stored["versions"]["torch"] = "0.0.1"
+    kept.write_text(json.dumps(stored))
+    err = refused(str(out), "--resume")
+    assert "computed by other code: torch ('0.0.1' there" in err, err
+    assert "resume with the code it was started with" in err and "give the settings" not in err
 
 
 def test_reproduce_interrupted_says_how_to_go_on(tmp_path, monkeypatch, capsys):

@@ -177,8 +177,9 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             out.rmdir()  # nothing was written: leave nothing behind (a resumed one is kept)
         elif isinstance(exc, KeyboardInterrupt):  # main says it in its one line
             exc.note = (  # type: ignore[attr-defined]
-                " (its finished seeds are kept: go on with the same command plus --resume "
-                f"--out {_shell(out)})"
+                " (its finished seeds are kept: go on with the same command"
+                + ("" if args.resume else f" plus --resume --out {_shell(out)}")
+                + ")"
             )
         raise
     text = "\n\n".join(summaries) + "\n"
@@ -245,8 +246,13 @@ def _resume_plan(out: Path, plan: list[tuple[str, Any, Any]]) -> dict[str, Any]:
             continue
         try:
             module._finished_seeds(config, run_dir)
-        except ResumeError as exc:  # other settings (say which to give), or other code
-            fix = again if "settings" in exc.core else exc.remedy
+        except ResumeError as exc:  # other settings or seeds (say which to give), other code
+            fix = (
+                again
+                if exc.kind in ("settings", "seeds")
+                else "resume with the code it was started with (the versions named there), or "
+                "start a new run without --resume"
+            )
             raise _UsageError(f"--resume: the {domain} run: {exc.core}; {fix}") from None
     return finished
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import multiprocessing as mp
 import os
@@ -121,9 +122,14 @@ def _source_revision() -> str:
     changed = run("--no-optional-locks", "status", "--porcelain", "--untracked-files=no")
     if head is None or head.returncode or changed is None or changed.returncode:
         return "unknown (git failed)"
-    return f"git {head.stdout.strip()}" + (
-        " with uncommitted changes" if changed.stdout.strip() else ""
-    )
+    if not changed.stdout.strip():
+        return f"git {head.stdout.strip()}"
+    # which uncommitted changes: two different edits of the same commit are two codes
+    diff = run("--no-optional-locks", "diff", "HEAD")
+    if diff is None or diff.returncode:
+        return f"git {head.stdout.strip()} with uncommitted changes"
+    digest = hashlib.sha256(diff.stdout.encode()).hexdigest()[:12]
+    return f"git {head.stdout.strip()} with uncommitted changes (diff {digest})"
 
 
 def run_versions(**extra: str) -> dict[str, str]:
@@ -351,10 +357,13 @@ class ResumeError(ValueError):
     """A run directory that a resume refuses: ``core`` says why (what differs), the message
     adds what to do."""
 
-    def __init__(self, core: str, remedy: str) -> None:
+    def __init__(self, core: str, remedy: str, kind: str = "settings") -> None:
         super().__init__(f"{core}; {remedy}")
         self.core = core
         self.remedy = remedy
+        self.kind = kind
+        """What differs: ``"settings"`` (the config), ``"seeds"`` (seeds this config does not
+        run) or ``"code"`` (the versions of the code that computed a finished seed)."""
 
 
 def plain_json(value: Any, default: Any = None) -> Any:
@@ -454,6 +463,7 @@ def finished_seeds(
             f"{run_dir} holds seeds that this config does not run ({names}): it was started "
             "with other seeds",
             remedy,
+            "seeds",
         )
     wanted = plain_json(config)
     done: dict[int, dict[str, Any]] = {}
@@ -479,6 +489,7 @@ def finished_seeds(
                 f"seed {seed}'s finished result in {Path(seed_dir) / SEED_RESULT} was computed "
                 f"by other code: {what} (seeds of two versions would be mixed in one result)",
                 "resume with the code it was started with, or choose a new run_dir",
+                "code",
             )
         done[seed] = stored["result"]
     return done
@@ -515,24 +526,6 @@ def hold_run_dir(run_dir: Any) -> Iterator[None]:
     made = [p for p in (run_dir, *run_dir.parents) if not p.exists()]
     run_dir.mkdir(parents=True, exist_ok=True)
     lock = run_dir / ".run.lock"
-    try:
-        with _locked(lock, fcntl):
-            yield
-    except BaseException:
-        # a run refused (or stopped) before it wrote anything leaves no trace: the directories
-        # made here for the lock go again
-        if made and [p.name for p in run_dir.iterdir()] == [lock.name]:
-            lock.unlink()
-            for p in made:
-                with contextlib.suppress(OSError):
-                    p.rmdir()
-        raise
-
-
-@contextlib.contextmanager
-def _locked(lock: Path, fcntl: Any) -> Iterator[None]:
-    """The flock of :func:`hold_run_dir` on ``lock``, with the holder's pid written in it."""
-    run_dir = lock.parent
     with open(lock, "a+", encoding="utf-8") as f:
         try:
             fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -541,13 +534,24 @@ def _locked(lock: Path, fcntl: Any) -> Iterator[None]:
             holder = f.read().strip() or "unknown"
             raise RunDirLockedError(
                 f"{run_dir} is being written by another run (pid {holder}, which holds "
-                f"{run_dir / '.run.lock'}); wait for it to end, or stop it, then resume"
+                f"{lock}); wait for it to end, or stop it, then run again (with --resume / "
+                "resume=True to go on from its finished seeds)"
             ) from None
         f.seek(0)
         f.truncate()
         f.write(str(os.getpid()))
         f.flush()
-        yield
+        try:
+            yield
+        except BaseException:
+            # a run refused (or stopped) before it wrote anything leaves no trace: the
+            # directories made here for the lock go again (while it is still held)
+            if made and [p.name for p in run_dir.iterdir()] == [lock.name]:
+                lock.unlink()
+                for p in made:
+                    with contextlib.suppress(OSError):
+                        p.rmdir()
+            raise
 
 
 def clear_unfinished(seed_dirs: dict[int, Any], finished: Iterable[int]) -> None:
