@@ -11,7 +11,9 @@ line above the keys says how many lines are cut off and to enlarge the window.
 On a terminal the key is read without Enter: the terminal is switched to a non-canonical,
 no-echo mode for the duration of the read and its settings are always restored afterwards,
 also when the read is interrupted. Keys typed before a request is shown (while the agent acts on
-its own) are dropped, not taken as its answer; a quit key among them still quits. When the
+its own) are dropped, not taken as its answer; a quit key among them still quits. (Their timing
+is lost: Esc and a key typed ahead read as one Alt-key, so Esc then q typed ahead does not
+quit; q at the request does.) When the
 input is not a terminal (a pipe, a file), one line is read per decision instead; a line may
 hold a key (``w``), a key name (``up``), an action name (``forward``) or an action number.
 
