@@ -1089,7 +1089,10 @@ def test_ctrl_c_during_a_run_with_worker_processes_is_one_line(domain, tmp_path)
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
     assert proc.returncode == 130, err
-    assert err == "torchcbl reproduce: interrupted\n"
+    assert err == (
+        "torchcbl reproduce: interrupted (its finished seeds are kept: go on with the same "
+        f"command plus --resume --out {out})\n"
+    )
 
 
 def _unwritable_directory(tmp_path: Path) -> Path:
