@@ -1024,15 +1024,21 @@ def test_a_sweep_killed_outright_leaves_no_worker_processes_behind(tmp_path):
         os.kill(child.pid, signal.SIGKILL)
     finally:
         child.wait()
-    deadline = time.monotonic() + 10
-    alive = workers
+    _assert_all_end(workers, "worker processes outlived the killed sweep")
+
+
+def _assert_all_end(pids: list[int], message: str, within: float = 10.0) -> None:
+    """Every process of ``pids`` ends within ``within`` seconds, else ``message``; those still
+    running are killed (they are the test's own)."""
+    deadline = time.monotonic() + within
+    alive = pids
     while alive and time.monotonic() < deadline:
         time.sleep(0.1)
-        alive = [p for p in workers if _running(p)]
+        alive = [p for p in pids if _running(p)]
     try:
-        assert not alive, "worker processes outlived the killed sweep"
+        assert not alive, message
     finally:
-        for p in alive:  # (those this test started)
+        for p in alive:
             os.kill(p, signal.SIGKILL)
 
 
@@ -1071,15 +1077,6 @@ def test_forkserver_workers_end_while_their_killed_pool_is_not_yet_reaped(tmp_pa
             time.sleep(0.05)
         assert child.poll() is None and len(workers) == 2, "the workers did not start"
         os.kill(child.pid, signal.SIGKILL)  # and not reaped (no wait) until the workers are seen
-        deadline = time.monotonic() + 10
-        alive = workers
-        while alive and time.monotonic() < deadline:
-            time.sleep(0.1)
-            alive = [p for p in workers if _running(p)]
-        try:
-            assert not alive, "worker processes outlived their killed pool"
-        finally:
-            for p in alive:  # (those this test started)
-                os.kill(p, signal.SIGKILL)
+        _assert_all_end(workers, "worker processes outlived their killed pool")
     finally:
         child.wait()

@@ -240,14 +240,10 @@ def test_status_line_is_shown_and_can_be_updated(terminal):
     assert "warming up" not in second
 
 
-@pytest.mark.timeout(60)
-def test_a_key_typed_before_the_request_is_shown_does_not_answer_it(terminal):
-    """A key pressed while the agent acted on its own (or a second press, a held arrow's
-    repeat) waited in the terminal's buffer and answered the next request at once: a
-    demonstration for a situation the person never saw. It is dropped now; a quit key typed
-    ahead still quits."""
-    master, slave = terminal
-    os.write(master, b"d")  # pressed between two requests
+def _typed_ahead_then_w(master: int, slave: int, typed: bytes) -> TerminalTeacher:
+    """``typed`` waiting in the terminal before a request, then "w" pressed at it: the request
+    must take the "w" (stay), the keys typed ahead dropped. Returns the teacher."""
+    os.write(master, typed)
     time.sleep(0.1)
     person = Person(master, slave, [b"w"])
     teacher = _teacher(slave)
@@ -255,7 +251,17 @@ def test_a_key_typed_before_the_request_is_shown_does_not_answer_it(terminal):
     assert teacher(OBS, {}) == 0  # the key pressed after seeing the request
     shown = person.finish()
     assert shown.count("-> ") == 1 and "-> stay" in shown
+    return teacher
 
+
+@pytest.mark.timeout(60)
+def test_a_key_typed_before_the_request_is_shown_does_not_answer_it(terminal):
+    """A key pressed while the agent acted on its own (or a second press, a held arrow's
+    repeat) waited in the terminal's buffer and answered the next request at once: a
+    demonstration for a situation the person never saw. It is dropped now; a quit key typed
+    ahead still quits."""
+    master, slave = terminal
+    teacher = _typed_ahead_then_w(master, slave, b"d")  # "d" pressed between two requests
     before = termios.tcgetattr(slave)
     os.write(master, b"dQ")  # "Q": caps lock on, as at a request
     time.sleep(0.1)
@@ -276,15 +282,7 @@ def test_a_key_ending_in_q_typed_ahead_is_dropped_not_taken_for_the_quit_key(ter
     before a request quit the session: the pending bytes were checked one by one, so the
     sequence's last "q"/"Q" counted as the quit key, where at a request the same key is "not a
     key here". Typed ahead they are dropped like any other key."""
-    master, slave = terminal
-    os.write(master, typed)
-    time.sleep(0.1)
-    person = Person(master, slave, [b"w"])
-    teacher = _teacher(slave)
-    person.start()
-    assert teacher(OBS, {}) == 0  # the key pressed after seeing the request
-    shown = person.finish()
-    assert shown.count("-> ") == 1 and "-> stay" in shown
+    _typed_ahead_then_w(*terminal, typed)
 
 
 @pytest.mark.timeout(60)
