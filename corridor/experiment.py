@@ -78,7 +78,7 @@ from torchcbl.evaluation import (
     clear_unfinished,
     figure_style,
     finished_seeds,
-    hold_run_dir,
+    holding_run_dir,
     mean_sd,
     progress_bar,
     run_versions,
@@ -680,7 +680,8 @@ def _versions() -> dict[str, str]:
     return run_versions(pymunk=version("pymunk"))
 
 
-def _run_experiment(
+@holding_run_dir  # one run at a time in a run directory
+def run_experiment(
     config: CorridorExperimentConfig | None = None,
     run_dir: str | Path = "runs/corridor",
     *,
@@ -688,7 +689,29 @@ def _run_experiment(
     progress: bool = True,
     resume: bool = False,
 ) -> dict[str, Any]:
-    """The body of :func:`run_experiment`, with ``run_dir`` held."""
+    """Run every seed (``workers`` processes), write the run directory, return the results.
+
+    With ``workers`` > 1 the seeds run in spawned processes, which import the caller's main
+    module: from a script, call ``run_experiment`` under ``if __name__ == "__main__":`` (or
+    pass ``workers=1``). A variant of the reproduction, e.g.
+    ``run_experiment(CorridorExperimentConfig.exact_motion(), "runs/exact")``.
+
+    Each seed's result is written, with the config, into its session directory
+    (``sessions/seed<k>/seed_result.json``) when the seed ends. ``resume=True`` continues a
+    run that was stopped (Ctrl-C, a kill, a reboot) in ``run_dir``: a finished seed is taken
+    from that file, a seed stopped part-way is cleared and run again from scratch, the others
+    are run; the results, summary and figures are those of a run never stopped.
+
+    Raises FileExistsError if ``run_dir`` already holds a results.json, or (without
+    ``resume``) a teaching session of one of ``config.seeds`` (left by a run that was stopped
+    before it wrote results.json): a seed's session is never overwritten. With ``resume``,
+    raises :class:`torchcbl.evaluation.ResumeError` (a ValueError) if a finished seed was run
+    with another config (the message names the settings that differ) or ``run_dir`` holds
+    seeds this config does not run.
+
+    Raises :class:`torchcbl.evaluation.RunDirLockedError` while another run writes into
+    ``run_dir`` (it holds ``run_dir/.run.lock``).
+    """
     config = config or CorridorExperimentConfig()
     run_dir = Path(run_dir)
     _check_whole("workers", workers, 1)
@@ -870,41 +893,6 @@ def _run_experiment(
     # last, whole or not at all: a run directory with results.json is a finished one
     write_atomically(run_dir / "results.json", json.dumps(results, indent=2, default=_json_default))
     return results
-
-
-def run_experiment(
-    config: CorridorExperimentConfig | None = None,
-    run_dir: str | Path = "runs/corridor",
-    *,
-    workers: int = 2,
-    progress: bool = True,
-    resume: bool = False,
-) -> dict[str, Any]:
-    """Run every seed (``workers`` processes), write the run directory, return the results.
-
-    With ``workers`` > 1 the seeds run in spawned processes, which import the caller's main
-    module: from a script, call ``run_experiment`` under ``if __name__ == "__main__":`` (or
-    pass ``workers=1``). A variant of the reproduction, e.g.
-    ``run_experiment(CorridorExperimentConfig.exact_motion(), "runs/exact")``.
-
-    Each seed's result is written, with the config, into its session directory
-    (``sessions/seed<k>/seed_result.json``) when the seed ends. ``resume=True`` continues a
-    run that was stopped (Ctrl-C, a kill, a reboot) in ``run_dir``: a finished seed is taken
-    from that file, a seed stopped part-way is cleared and run again from scratch, the others
-    are run; the results, summary and figures are those of a run never stopped.
-
-    Raises FileExistsError if ``run_dir`` already holds a results.json, or (without
-    ``resume``) a teaching session of one of ``config.seeds`` (left by a run that was stopped
-    before it wrote results.json): a seed's session is never overwritten. With ``resume``,
-    raises :class:`torchcbl.evaluation.ResumeError` (a ValueError) if a finished seed was run
-    with another config (the message names the settings that differ) or ``run_dir`` holds
-    seeds this config does not run.
-
-    Raises :class:`torchcbl.evaluation.RunDirLockedError` while another run writes into
-    ``run_dir`` (it holds ``run_dir/.run.lock``).
-    """
-    with hold_run_dir(run_dir):  # one run at a time in a run directory
-        return _run_experiment(config, run_dir, workers=workers, progress=progress, resume=resume)
 
 
 def _seed_dirs(config: CorridorExperimentConfig, run_dir: Path) -> dict[int, Path]:

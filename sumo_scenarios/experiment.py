@@ -54,7 +54,7 @@ from torchcbl.evaluation import (
     die_with_parent,
     figure_style,
     finished_seeds,
-    hold_run_dir,
+    holding_run_dir,
     mean_sd,
     progress_bar,
     run_versions,
@@ -698,7 +698,8 @@ def _versions() -> dict[str, str]:
     return run_versions(sumo=sumo)
 
 
-def _run_experiment(
+@holding_run_dir  # one run at a time in a run directory
+def run_experiment(
     config: DrivingExperimentConfig,
     run_dir: str | Path,
     *,
@@ -706,7 +707,31 @@ def _run_experiment(
     progress: bool = True,
     resume: bool = False,
 ) -> dict[str, Any]:
-    """The body of :func:`run_experiment`, with ``run_dir`` held."""
+    """Run every seed (in ``workers`` processes), aggregate, write ``run_dir``; return results.
+
+    The seeds run in spawned processes (libsumo holds one simulation per process), which
+    import the caller's main module: from a script, call ``run_experiment`` under
+    ``if __name__ == "__main__":``.
+
+    Each seed's result is written, with the config, into its directory
+    (``seed_<k>/seed_result.json``) when the seed ends. ``resume=True`` continues a run that
+    was stopped (Ctrl-C, a kill, a reboot) in ``run_dir``: a finished seed is taken from that
+    file, a seed stopped part-way is cleared and run again from scratch, the others are run;
+    the results and figures are those of a run never stopped.
+
+    Raises FileExistsError if ``run_dir`` already holds a results.json, or (without
+    ``resume``) a seed directory (``seed_<k>``) of one of ``config.seeds`` (left by a run that
+    was stopped before it wrote results.json): its sessions would collide with the new run's.
+    With ``resume``, raises :class:`torchcbl.evaluation.ResumeError` (a ValueError) if a
+    finished seed was run with another config (the message names the settings that differ)
+    or ``run_dir`` holds seeds this config does not run. Raises RuntimeError, before
+    anything is written, if a spawned process cannot start (a script without that guard), and
+    if a seed's worker dies (killed by a signal) before it sends its result; a seed's own
+    exception is re-raised, with the worker's traceback as its cause.
+
+    Raises :class:`torchcbl.evaluation.RunDirLockedError` while another run writes into
+    ``run_dir`` (it holds ``run_dir/.run.lock``).
+    """
     _check_whole("workers", workers, 1)
     if not isinstance(resume, bool):
         raise ValueError(f"resume must be True or False, got {resume!r}")
@@ -886,43 +911,6 @@ def _run_experiment(
     # last, whole or not at all: a run directory with results.json is a finished one
     write_atomically(run_dir / "results.json", json.dumps(results, indent=1, default=_plain))
     return results
-
-
-def run_experiment(
-    config: DrivingExperimentConfig,
-    run_dir: str | Path,
-    *,
-    workers: int = 2,
-    progress: bool = True,
-    resume: bool = False,
-) -> dict[str, Any]:
-    """Run every seed (in ``workers`` processes), aggregate, write ``run_dir``; return results.
-
-    The seeds run in spawned processes (libsumo holds one simulation per process), which
-    import the caller's main module: from a script, call ``run_experiment`` under
-    ``if __name__ == "__main__":``.
-
-    Each seed's result is written, with the config, into its directory
-    (``seed_<k>/seed_result.json``) when the seed ends. ``resume=True`` continues a run that
-    was stopped (Ctrl-C, a kill, a reboot) in ``run_dir``: a finished seed is taken from that
-    file, a seed stopped part-way is cleared and run again from scratch, the others are run;
-    the results and figures are those of a run never stopped.
-
-    Raises FileExistsError if ``run_dir`` already holds a results.json, or (without
-    ``resume``) a seed directory (``seed_<k>``) of one of ``config.seeds`` (left by a run that
-    was stopped before it wrote results.json): its sessions would collide with the new run's.
-    With ``resume``, raises :class:`torchcbl.evaluation.ResumeError` (a ValueError) if a
-    finished seed was run with another config (the message names the settings that differ)
-    or ``run_dir`` holds seeds this config does not run. Raises RuntimeError, before
-    anything is written, if a spawned process cannot start (a script without that guard), and
-    if a seed's worker dies (killed by a signal) before it sends its result; a seed's own
-    exception is re-raised, with the worker's traceback as its cause.
-
-    Raises :class:`torchcbl.evaluation.RunDirLockedError` while another run writes into
-    ``run_dir`` (it holds ``run_dir/.run.lock``).
-    """
-    with hold_run_dir(run_dir):  # one run at a time in a run directory
-        return _run_experiment(config, run_dir, workers=workers, progress=progress, resume=resume)
 
 
 def _seed_dirs(config: DrivingExperimentConfig, run_dir: Path) -> dict[int, Path]:

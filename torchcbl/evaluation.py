@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
+import inspect
 import json
 import multiprocessing as mp
 import os
@@ -12,11 +14,11 @@ import shutil
 import signal
 import sys
 import threading
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -28,6 +30,8 @@ __all__ = [
     "run_versions",
     "worker_pool",
 ]
+
+T = TypeVar("T")
 
 
 def progress_bar(*, total: int | None, desc: str, unit: str, show: bool) -> Any:
@@ -552,6 +556,21 @@ def hold_run_dir(run_dir: Any) -> Iterator[None]:
                     with contextlib.suppress(OSError):
                         p.rmdir()
             raise
+
+
+def holding_run_dir(run: Callable[..., T]) -> Callable[..., T]:
+    """Decorate an experiment's ``run_experiment(config, run_dir, ...)``: each call holds its
+    ``run_dir`` (:func:`hold_run_dir`) while it runs."""
+    signature = inspect.signature(run)
+
+    @functools.wraps(run)
+    def held(*args: Any, **kwargs: Any) -> T:
+        bound = signature.bind(*args, **kwargs)
+        bound.apply_defaults()
+        with hold_run_dir(bound.arguments["run_dir"]):
+            return run(*args, **kwargs)
+
+    return held
 
 
 def clear_unfinished(seed_dirs: dict[int, Any], finished: Iterable[int]) -> None:
