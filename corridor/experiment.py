@@ -98,6 +98,7 @@ __all__ = [
     "format_summary",
     "make_model",
     "plot_results",
+    "resumable_seeds",
     "run_experiment",
     "run_seed",
     "teaching_setup",
@@ -719,7 +720,7 @@ def run_experiment(
         raise ValueError(f"resume must be True or False, got {resume!r}")
     done_before: dict[int, dict] = {}
     if resume:
-        done_before = _finished_seeds(config, run_dir)
+        done_before = resumable_seeds(config, run_dir)
         clear_unfinished(_seed_dirs(config, run_dir), done_before)
     elif (run_dir / "results.json").exists():
         raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")
@@ -900,9 +901,10 @@ def _seed_dirs(config: CorridorExperimentConfig, run_dir: Path) -> dict[int, Pat
     return {s: run_dir / "sessions" / f"seed{s}" for s in config.seeds}
 
 
-def _finished_seeds(config: CorridorExperimentConfig, run_dir: str | Path) -> dict[int, dict]:
-    """The seeds a resume of ``run_dir`` takes from their files (reads only; see
-    :func:`torchcbl.evaluation.finished_seeds`)."""
+def resumable_seeds(config: CorridorExperimentConfig, run_dir: str | Path) -> dict[int, dict]:
+    """The seeds a resume of ``run_dir`` takes from their files, seed -> its result (reads
+    only: ``torchcbl reproduce --resume`` checks a run with it before anything is written;
+    raises as :func:`torchcbl.evaluation.finished_seeds`)."""
     run_dir = Path(run_dir)
     dirs = _seed_dirs(config, run_dir)
     sessions = run_dir / "sessions"

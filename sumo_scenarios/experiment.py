@@ -75,6 +75,7 @@ __all__ = [
     "make_model",
     "paired_interval",
     "plot_results",
+    "resumable_seeds",
     "run_experiment",
     "stage_name",
     "teaching_setup",
@@ -738,7 +739,7 @@ def run_experiment(
     run_dir = Path(run_dir)
     done_before: dict[int, dict[str, Any]] = {}
     if resume:
-        done_before = _finished_seeds(config, run_dir)
+        done_before = resumable_seeds(config, run_dir)
     elif (run_dir / "results.json").exists():
         raise FileExistsError(f"{run_dir} already holds results.json; choose a new run_dir")
     taken = [
@@ -918,9 +919,10 @@ def _seed_dirs(config: DrivingExperimentConfig, run_dir: Path) -> dict[int, Path
     return {s: run_dir / f"seed_{s}" for s in config.seeds}
 
 
-def _finished_seeds(config: DrivingExperimentConfig, run_dir: str | Path) -> dict[int, dict]:
-    """The seeds a resume of ``run_dir`` takes from their files (reads only; see
-    :func:`torchcbl.evaluation.finished_seeds`)."""
+def resumable_seeds(config: DrivingExperimentConfig, run_dir: str | Path) -> dict[int, dict]:
+    """The seeds a resume of ``run_dir`` takes from their files, seed -> its result (reads
+    only: ``torchcbl reproduce --resume`` checks a run with it before anything is written;
+    raises as :func:`torchcbl.evaluation.finished_seeds`)."""
     import re
 
     run_dir = Path(run_dir)

@@ -245,7 +245,7 @@ def _resume_plan(out: Path, plan: list[tuple[str, Any, Any]]) -> dict[str, Any]:
             finished[domain] = results
             continue
         try:
-            module._finished_seeds(config, run_dir)
+            module.resumable_seeds(config, run_dir)
         except ResumeError as exc:  # other settings or seeds (say which to give), other code
             fix = (
                 again
