@@ -942,6 +942,45 @@ def test_a_ray_address_where_nothing_listens_is_refused_not_waited_on(
     assert {p.name: p.read_bytes() for p in (tmp_path / "b").iterdir() if p.is_file()} == before
 
 
+@pytest.mark.timeout(60)
+def test_ray_address_auto_with_no_cluster_is_refused_before_the_out_directory(
+    tmp_path, capsys, monkeypatch
+):
+    """--ray-address auto where no Ray cluster runs exited 1 with Ray's ConnectionError (the
+    probe skipped "auto") after the output directory had been created; and where a stale
+    ray_current_cluster file of a cluster since stopped names an address, Ray retried it for
+    about a quarter of an hour."""
+    import socket
+
+    ray = pytest.importorskip("ray")
+    from ray._private.services import find_gcs_addresses
+
+    if find_gcs_addresses():
+        pytest.skip("a Ray cluster runs on this machine")
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    monkeypatch.setenv("RAY_TMPDIR", str(tmp_path))  # ray start writes into its ray/
+    (tmp_path / "ray").mkdir()
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
+    argv += ["--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    argv += ["--ray-address", "auto", "--out", str(tmp_path / "b")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no running Ray cluster" in err and "ray start" in err, err
+    assert not (tmp_path / "b").exists()
+    with socket.socket() as s:  # a cluster's address, stopped since
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    (tmp_path / "ray" / "ray_current_cluster").write_text(f"127.0.0.1:{port}\n")
+    t0 = time.monotonic()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Ray at auto: nothing answers at " in err, err
+    assert time.monotonic() - t0 < 30 and not (tmp_path / "b").exists()
+    assert not ray.is_initialized()
+
+
 def test_a_module_in_the_current_directory_is_said_to_need_pythonpath(
     tmp_path, capsys, monkeypatch
 ):

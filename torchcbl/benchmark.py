@@ -712,18 +712,25 @@ def _rebuild_cell_error(message: str, config: dict[str, Any]) -> CellError:
 
 def _check_ray_address(address: str, timeout: float = 10.0) -> None:
     """A RuntimeError unless something answers at the Ray cluster address ``address``
-    (``host:port``; ``"auto"``, ``"local"`` and ``ray://`` addresses are left to Ray, which
-    refuses them at once when nothing is there). Ray itself, given a host and port where
-    nothing listens, retries its connection for about a quarter of an hour (20 tries of some
-    40 s), printing warnings, before it fails."""
+    (``host:port``, or ``"auto"``: the cluster ``RAY_ADDRESS`` or the last ``ray start`` on
+    this machine names; ``"local"`` and ``ray://`` addresses are left to Ray). Ray itself,
+    given a host and port where nothing listens (a typo, or the file a stopped cluster left
+    behind for ``"auto"``), retries its connection for about a quarter of an hour (20 tries of
+    some 40 s), printing warnings, before it fails."""
     import socket
 
-    if "://" in address or address in ("auto", "local"):
+    if "://" in address or address == "local":
         return
     try:  # where ray.init connects: localhost and 127.0.0.1 become this node's IP
         from ray._private.services import canonicalize_bootstrap_address
 
         target = canonicalize_bootstrap_address(address) or address
+    except ConnectionError:  # "auto": no RAY_ADDRESS, no cluster file, no GCS process
+        raise RuntimeError(
+            "Ray at auto: no running Ray cluster found on this machine (RAY_ADDRESS is unset "
+            "and no `ray start` left its address); start one with `ray start --head`, give "
+            "its address as host:port, or use --ray for a Ray of this command's own"
+        ) from None
     except Exception:  # a Ray without it, or an address it refuses (ray.init will say)
         target = address
     host, _, port = target.rpartition(":")
