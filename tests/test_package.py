@@ -1,4 +1,5 @@
 import hashlib
+import os
 import shutil
 import subprocess
 import sys
@@ -69,6 +70,58 @@ def test_run_versions_name_the_commit_of_the_checkout_that_ran():
     else:  # which changes, too: two different edits of one commit are two codes
         digest = hashlib.sha256(dirty.encode()).hexdigest()[:12]
         assert source == f"git {head} with uncommitted changes (diff {digest})", source
+
+
+def test_a_new_module_not_yet_added_to_git_marks_the_source_as_changed(tmp_path):
+    """A results.json named its code "git SHA" with no change marked when the edit that made
+    its figures was a new module not yet `git add`-ed (only tracked files were compared), so
+    `reproduce --resume` took seeds of other code as this code's. Untracked files in the
+    packages count now, by content; a file elsewhere in the checkout (notes, a scratch
+    script) does not."""
+    git = shutil.which("git")
+    if git is None:
+        pytest.skip("no git")
+    clone = tmp_path / "clone"  # a checkout of this code, committed
+    for package in ("torchcbl", "corridor", "sumo_scenarios"):
+        shutil.copytree(
+            Path(__file__).parents[1] / package,
+            clone / package,
+            ignore=shutil.ignore_patterns("__py*"),
+        )
+    (clone / ".gitignore").write_text("__pycache__/\n")
+    for args in (["init", "-q"], ["add", "-A"], ["commit", "-qm", "code"]):
+        subprocess.run(
+            [git, "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=clone, check=True
+        )
+    script = """
+from pathlib import Path
+from torchcbl.evaluation import run_versions
+def source():
+    return run_versions()["torchcbl_source"]
+clean = source()
+Path("notes.md").write_text("my notes")
+Path("scratch.py").write_text("print(1)")
+aside = source()
+Path("corridor/_mine.py").write_text("A = 1")
+one = source()
+Path("corridor/_mine.py").write_text("A = 2")
+two = source()
+print(repr((clean, aside, one, two)))
+"""
+    proc = subprocess.run(
+        [sys.executable, "-c", script],
+        cwd=clone,
+        env={**os.environ, "PYTHONPATH": str(clone)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    clean, aside, one, two = eval(proc.stdout.strip().splitlines()[-1])
+    assert clean.startswith("git ") and "uncommitted" not in clean, clean
+    assert aside == clean
+    assert one.startswith(clean + " with uncommitted changes (diff "), one
+    assert two != one and two.startswith(clean + " with uncommitted changes (diff "), two
 
 
 ROOT = Path(__file__).parents[1]

@@ -85,9 +85,13 @@ def mean_sd(values: Iterable[float | None]) -> dict[str, float | int | None]:
     }
 
 
+_PACKAGES = ("torchcbl", "corridor", "sumo_scenarios")  # the code a run's figures come from
+
+
 def _source_revision() -> str:
     """The git commit of the checkout torchcbl is imported from, ``"git SHA"`` (``" with
-    uncommitted changes"`` added when tracked files differ from it); ``"unknown (...)"`` for
+    uncommitted changes"`` added when tracked files differ from it or the packages hold files
+    not yet added); ``"unknown (...)"`` for
     an installed copy or without git. Only the project's own checkout counts: a copy
     installed inside another repository (a virtual environment in a user's project) does not
     take that repository's commit."""
@@ -124,24 +128,37 @@ def _source_revision() -> str:
     # --no-optional-locks: no index.lock taken to refresh the index (a user's own git commit
     # at that moment would fail on it)
     changed = run("--no-optional-locks", "status", "--porcelain", "--untracked-files=no")
+    # files not yet added in the packages (a new module an edit imports) are code too; notes
+    # or scratch files elsewhere in the checkout are not
+    new = run("ls-files", "--others", "--exclude-standard", "-z", "--", *_PACKAGES)
     if head is None or head.returncode or changed is None or changed.returncode:
         return "unknown (git failed)"
-    if not changed.stdout.strip():
+    if new is None or new.returncode:
+        return "unknown (git failed)"
+    untracked = sorted(p for p in new.stdout.split("\0") if p)
+    if not changed.stdout.strip() and not untracked:
         return f"git {head.stdout.strip()}"
     # which uncommitted changes: two different edits of the same commit are two codes
     diff = run("--no-optional-locks", "diff", "HEAD")
     if diff is None or diff.returncode:
         return f"git {head.stdout.strip()} with uncommitted changes"
-    digest = hashlib.sha256(diff.stdout.encode()).hexdigest()[:12]
-    return f"git {head.stdout.strip()} with uncommitted changes (diff {digest})"
+    h = hashlib.sha256(diff.stdout.encode())
+    for path in untracked:
+        try:
+            content = (root / path).read_bytes()
+        except OSError:  # gone meanwhile, or unreadable
+            content = b""
+        h.update(b"\0" + path.encode() + b"\0" + hashlib.sha256(content).digest())
+    return f"git {head.stdout.strip()} with uncommitted changes (diff {h.hexdigest()[:12]})"
 
 
 def run_versions(**extra: str) -> dict[str, str]:
     """Versions of Python and the core's dependencies, plus ``extra`` (a domain's simulator),
     for a results.json to say what produced it. ``torchcbl_source`` names the commit of the
     git checkout that ran, ``"git SHA"`` (plus ``" with uncommitted changes"`` when tracked
-    files differed from it), or ``"unknown (...)"`` for an installed copy: the package's
-    version stays the same across commits whose figures differ."""
+    files differed from it or the packages held files not yet added to git), or
+    ``"unknown (...)"`` for an installed copy: the package's version stays the same across
+    commits whose figures differ."""
     import gymnasium
     import torch
 
