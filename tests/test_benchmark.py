@@ -889,25 +889,66 @@ def test_the_help_says_gym_env_adds_to_the_default_envs(capsys):
     assert 'without --envs "" it runs beside corridor and driving' in doc.replace("`", "")
 
 
+def test_strategy_parameters_are_given_on_the_command_line(tmp_path, capsys, monkeypatch):
+    """The command gave a strategy no parameters: DAgger with another iteration length, or
+    confident execution with another threshold, needed a module of one's own or a Python
+    script. --strategy-param S.KEY=VALUE gives them (JSON values, else strings); they are part
+    of each cell's key, so a sweep with other values computes its cells again."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc,dagger,confident"]
+    argv += ["--seeds", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    argv += ["--workers", "1", "--out", str(tmp_path / "b")]
+    given = ["--strategy-param", "dagger.iteration_steps=3"]
+    given += ["--strategy-param", "confident.max_std=2.5"]
+    assert main([*argv, *given]) == 0
+    cells = [json.loads(p.read_text()) for p in (tmp_path / "b" / "cells").glob("*.json")]
+    params = {c["config"]["strategy"]["name"]: c["config"]["strategy"]["params"] for c in cells}
+    assert params == {"bc": {}, "dagger": {"iteration_steps": 3}, "confident": {"max_std": 2.5}}
+    capsys.readouterr()
+    given[1] = "dagger.iteration_steps=4"  # another value: that strategy's cell again
+    assert main([*argv, *given]) == 0
+    out = capsys.readouterr().out
+    assert out.count("cached") == 2 and "dagger seed 0: cached" not in out, out
+    mistakes = {
+        "dagger": "expected S.KEY=VALUE",
+        "dagger.=3": "expected S.KEY=VALUE",
+        "cba.distance_factor=2": "cba is not among --strategies",
+        "dagger.beta=0.3": "unexpected keyword argument 'beta'",
+    }
+    for param, says in mistakes.items():
+        assert main([*argv, "--strategy-param", param, "--out", str(tmp_path / "x")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"{says}" in err, (param, err)
+    twice = ["--strategy-param", "dagger.iteration_steps=3"] * 2
+    assert main([*argv, *twice, "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "dagger.iteration_steps given twice" in err, err
+    assert not (tmp_path / "x").exists()
+
+
 def test_a_strategy_that_needs_parameters_is_told_how_to_give_them(tmp_path, capsys, monkeypatch):
-    """--strategies takes names only; a class of one's own that needs a parameter was refused
-    with "expected module:Class of a strategy that takes no arguments", nothing saying how to
-    give it one (a functools.partial or a subclass named instead, or StrategySpec's params in
-    Python)."""
+    """A class of one's own that needs a parameter was refused with "expected module:Class of
+    a strategy that takes no arguments", nothing saying how to give it one; it is told
+    --strategy-param (or StrategySpec's params in Python), and made when given them."""
     monkeypatch.syspath_prepend(str(TESTS))
     argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "_bench_env:StrategyWithParams"]
     assert main([*argv, "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "missing 1 required positional argument: 'horizon'" in err
-    assert "functools.partial" in err and "StrategySpec(" in err and "params" in err
-    assert not (tmp_path / "b").exists()
+    assert "--strategy-param _bench_env:StrategyWithParams.KEY=VALUE" in err, err
+    assert "StrategySpec(" in err and not (tmp_path / "b").exists()
+    given = ["--strategy-param", "_bench_env:StrategyWithParams.horizon=5", "--seeds", "1"]
+    given += ["--budgets", "5", "--max-steps", "10", "--eval-episodes", "1", "--workers", "1"]
+    assert main([*argv, *given, "--out", str(tmp_path / "b")]) == 0  # as told
+    capsys.readouterr()
     # a constructor failing for another reason is not told about parameters
     argv[-1] = "_bench_env:StrategyThatFails"
-    assert main([*argv, "--out", str(tmp_path / "b")]) == 2
+    assert main([*argv, "--out", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "RuntimeError: needs a licence file" in err, err
-    assert "functools.partial" not in err and "no parameters" not in err, err
+    assert "--strategy-param" not in err and "StrategySpec" not in err, err
 
 
 @pytest.mark.timeout(60)

@@ -819,7 +819,7 @@ def _cwd_hint(exc: BaseException) -> str:
 
 def _check_strategy(spec: Any) -> None:
     """A one-line error unless ``spec`` (a --strategies import path) gives a strategy: the
-    class imports, is made without arguments (the command gives it none) and has the
+    class imports, is made with the --strategy-param given for it and has the
     :class:`torchcbl.strategies.Strategy` methods."""
     from torchcbl.strategies import Strategy
 
@@ -831,21 +831,19 @@ def _check_strategy(spec: Any) -> None:
             raise _UsageError(f"{text} (--strategies)") from None
         raise _UsageError(
             f"--strategies {spec.name}: cannot import it ({text}); expected module:Class of a "
-            "strategy that takes no arguments, or a shipped name"
+            "strategy, or a shipped name"
         ) from None
     except Exception as exc:  # the user's class: whatever it raises, it is not usable here
         text = _one_line(exc)
         params = (  # a call the signature refused (a parameter missing, say), not its own error
-            ": the command gives a strategy no parameters, so fix them in a module of yours "
-            "and name that (Mine = functools.partial(MyStrategy, param=value), or a subclass), "
-            "or give them in Python, StrategySpec(name, params) with "
-            "torchcbl.benchmark.run_benchmark"
+            f": give its parameters with --strategy-param {spec.name}.KEY=VALUE (in Python, "
+            "StrategySpec(name, params) with torchcbl.benchmark.run_benchmark)"
             if isinstance(exc, TypeError)
             else ""
         )
         raise _UsageError(
             f"--strategies {spec.name}: cannot make it ({type(exc).__name__}: {text}); expected "
-            f"module:Class of a strategy that takes no arguments, or a shipped name{params}"
+            f"module:Class of a strategy, or a shipped name{params}"
         ) from None
     if not isinstance(strategy, Strategy):
         raise _UsageError(
@@ -853,6 +851,33 @@ def _check_strategy(spec: Any) -> None:
             "a class with the methods of torchcbl.strategies.Strategy (bind, decide, actor, "
             "observe_label, observe_refit, observe_step, ...)"
         )
+
+
+def _strategy_params(given: list[str], names: list[str]) -> dict[str, dict[str, Any]]:
+    """The --strategy-param S.KEY=VALUE options as {strategy: {key: value}}: a value is read
+    as JSON (a number, true, null, a list) where it is JSON, else as the string given."""
+    params: dict[str, dict[str, Any]] = {}
+    for item in given:
+        target, eq, text = item.partition("=")
+        name, dot, key = target.rpartition(".")
+        if not eq or not dot or not name or not key.isidentifier():
+            raise _UsageError(
+                f"--strategy-param {item!r}: expected S.KEY=VALUE, a strategy of --strategies, "
+                "one of its constructor's keywords and a value (e.g. dagger.iteration_steps=20)"
+            )
+        if name not in names:
+            raise _UsageError(
+                f"--strategy-param {item}: {name} is not among --strategies ({','.join(names)}); "
+                "name the strategy as --strategies does"
+            )
+        if key in params.setdefault(name, {}):
+            raise _UsageError(f"--strategy-param: {name}.{key} given twice; give each once")
+        try:
+            value = json.loads(text)
+        except ValueError:
+            value = text
+        params[name][key] = value
+    return params
 
 
 def _cmd_benchmark(args: argparse.Namespace) -> int:
@@ -886,7 +911,8 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         raise _UsageError(
             f"--strategies {args.strategies}: {twice} given more than once; name each strategy once"
         )
-    strategies = [bm.StrategySpec(n) for n in names]
+    params = _strategy_params(args.strategy_param or [], names)
+    strategies = [bm.StrategySpec(n, params.get(n, {})) for n in names]
     for spec in strategies:  # a path of one's own: made once now, before anything is written
         if spec.name not in bm.STRATEGY_PATHS:
             _check_strategy(spec)
@@ -1294,6 +1320,15 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="S,..",
         help="comma-separated names or module:Class paths (default: all shipped)",
+    )
+    p.add_argument(
+        "--strategy-param",
+        action="append",
+        default=None,
+        metavar="S.KEY=VALUE",
+        help="a keyword argument of strategy S's constructor, VALUE read as JSON where it is "
+        "JSON, else as a string (e.g. dagger.iteration_steps=20, confident.max_std=3; for "
+        "confident they are the DistanceRule's); repeat for more. Part of each cell's key",
     )
     p.add_argument(
         "--envs",
