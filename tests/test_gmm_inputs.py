@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -204,6 +205,34 @@ def test_float32_and_int_inputs_and_torch_labels():
         assert torch.equal(v, m.state_dict()[k]), k
     c = m.classify(np.round(x).astype(np.int32))
     assert c.action.dtype == torch.long and c.distance.dtype == torch.float64
+
+
+def test_read_only_arrays_are_read_without_a_warning():
+    """A read-only array (np.load(..., mmap_mode="r"), np.broadcast_to, a JAX or
+    copy-on-write pandas array) went to torch.from_numpy as it was: fit, refit and the
+    classify/log_prob of a batch of more than 256 rows warned "The given NumPy array is not
+    writable ... writing to this tensor will result in undefined behavior" (an error under
+    -W error). The data are read, never written: they are now copied first when read-only."""
+    x, y = _data(n=300)
+    x.setflags(write=False)
+    y.setflags(write=False)
+    warn_always = torch.is_warn_always_enabled()
+    torch.set_warn_always(True)  # torch warns once per process otherwise
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            model = GaussianMixtureSet(3, 3, 4).fit(x, y)
+            model.refit(x, y)
+            c = model.classify(x)
+            lp = model.log_prob(x)
+            aic = model.aic(x, y)
+    finally:
+        torch.set_warn_always(warn_always)
+    ref = GaussianMixtureSet(3, 3, 4).fit(x.copy(), y.copy())
+    for k, v in ref.state_dict().items():
+        assert torch.equal(v, model.state_dict()[k]), k
+    assert all(torch.equal(a, b) for a, b in zip(c, ref.classify(x.copy()), strict=True))
+    assert torch.equal(lp, ref.log_prob(x.copy())) and torch.equal(aic, ref.aic(x.copy(), y))
 
 
 def test_single_observation_path_matches_batch_path():

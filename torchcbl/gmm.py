@@ -656,7 +656,7 @@ class GaussianMixtureSet(nn.Module):
 
     # ------------------------------------------------------------------ input checks
     def _check_observations(self, observations: Any, name: str = "observations") -> np.ndarray:
-        """Validate [N, D] real, finite observations; returns a float64 numpy array."""
+        """Validate [N, D] real, finite observations; returns a writable float64 numpy array."""
         x = _to_numpy(observations, name)
         if not _is_real_dtype(x.dtype.kind):
             raise TypeError(
@@ -679,7 +679,10 @@ class GaussianMixtureSet(nn.Module):
             raise ValueError(
                 f"{name}: expected N >= 1 rows but got an empty array of shape {tuple(x.shape)}"
             )
-        if x.dtype != np.float64:
+        if x.dtype != np.float64 or not x.flags.writeable:
+            # a read-only array (np.load(mmap_mode="r"), np.broadcast_to) is copied too: fit
+            # and large batches hand it to torch.from_numpy, which warns on it (nothing here
+            # writes to it)
             x = x.astype(np.float64)
         if not np.isfinite(x).all():
             bad = np.flatnonzero(~np.isfinite(x).all(1))
