@@ -507,7 +507,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             f"--gif {gif}: expected a file name ending in .gif, e.g. {gif.with_suffix('.gif')}"
         )
     _output_file(fcd, "--fcd")
-    cfg = fcd.with_name(fcd.name.replace(".fcd.xml", "") + ".sumocfg")
+    # EP.fcd.xml(.gz) -> EP.sumocfg
+    cfg = fcd.with_name(fcd.name.removesuffix(".gz").replace(".fcd.xml", "") + ".sumocfg")
     _replay_outputs_spare(path, gif, fcd, cfg)
     if session:  # the session logged what it saw: the replay must see the same
         try:
@@ -538,7 +539,8 @@ def _replay_outputs_spare(source: Path, gif: Path, fcd: Path, cfg: Path) -> None
     a file of the session being replayed (its log, its config), or is another of the outputs:
     writing it would destroy the recording, or one output would overwrite another."""
     # (write_sumocfg names its fcd-replay input so)
-    replay_input = fcd.with_name(fcd.name.removesuffix(".xml").removesuffix(".fcd") + ".replay.xml")
+    stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
+    replay_input = fcd.with_name(stem + ".replay.xml")
     outputs = [
         (f"--gif {gif}", gif),
         (f"--fcd {fcd}", fcd),
@@ -1203,7 +1205,7 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="OUT.xml",
         help="SUMO FCD XML output path (default beside the JSON or the session directory: "
-        "EPISODES-N.fcd.xml, SESSION_DIR-N.fcd.xml); a "
+        "EPISODES-N.fcd.xml, SESSION_DIR-N.fcd.xml; a name ending in .gz is gzipped); a "
         ".sumocfg that opens it in sumo-gui is written beside it",
     )
     p.add_argument(
