@@ -531,3 +531,39 @@ def test_a_driving_env_refuses_to_be_copied_or_pickled(env):
         with pytest.raises(TypeError, match="cannot be copied or pickled; make a new DrivingEnv"):
             clone(env)
     assert env.step(0)[4]["position_m"] == pytest.approx(6.7056, abs=1e-6)  # one step, no more
+
+
+def test_the_env_runs_from_a_directory_whose_path_holds_a_comma(tmp_path):
+    """A checkout or install under a path with a comma ("OneDrive - Acme, Inc/..."): the env
+    resets and steps. (SUMO splits the file lists -n and -a at commas: every reset failed with
+    'TraCIException: Process Error' after "Error: File '.../Acme' is not accessible".)"""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    site = tmp_path / "Acme, Inc"
+    shutil.copytree(
+        Path(sumo_scenarios.__file__).parent,
+        site / "sumo_scenarios",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    code = (
+        "import sumo_scenarios.env as E\n"
+        "assert ',' in E.__file__, E.__file__\n"
+        "env = E.DrivingEnv(scenario='light')\n"
+        "obs, _ = env.reset(seed=0)\n"
+        "obs, *_ = env.step(1)\n"
+        "env.close()\n"
+        "print(int(obs[3]))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0 and out.stdout.strip() == "3", out.stderr[-2000:]
