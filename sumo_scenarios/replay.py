@@ -490,6 +490,10 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
     every vehicle's x, y, lane and position, and in speed except at each car's first step.
     Contacts stay possible as in the episode (``collision.action none``, as when recording).
 
+    A file the configuration lists (the replay input, named after the FCD, and the shipped
+    network and vehicle types) may not hold a comma in its path, which SUMO splits file lists
+    at: ValueError, before anything is written.
+
     What SUMO prints: no error and no teleport. Each removed car is moved once to the lane end,
     which SUMO reports as "moved by TraCI" (shown for the first 3, then counted:
     ``aggregate-warnings 3``); emergency-braking warnings are off (threshold 1000), because
@@ -514,13 +518,28 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
     stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
     replay_input = fcd.with_name(stem + ".replay.xml")
     rerun = fcd.with_name(stem + ".rerun.xml")
-    _write_replay_input(fcd, replay_input, libsumo_lane_length_from_net())
 
     def rel(p: Path) -> str:
         try:
             return str(p.relative_to(path.resolve().parent))
         except ValueError:
             return str(p)
+
+    # SUMO splits these options' file lists at commas, with no way to escape one: a .sumocfg
+    # naming such a file was written, and `sumo -c` then failed ("Cannot read file 'a'")
+    listed = {
+        "the FCD's name (its fcd-replay input, named after it)": rel(replay_input),
+        "the shipped network's path": str(data_path("road.net.xml")),
+        "the shipped vehicle types' path": str(data_path("driving.add.xml")),
+    }
+    commas = [f"{what} ({value})" for what, value in listed.items() if "," in value]
+    if commas:
+        raise ValueError(
+            f"a .sumocfg cannot name a file whose path holds a comma (SUMO splits file lists "
+            f"at commas), and {' and '.join(commas)} holds one: give the FCD a name without a "
+            "comma, or move the package to a path without one"
+        )
+    _write_replay_input(fcd, replay_input, libsumo_lane_length_from_net())
 
     def attr(value: object) -> str:  # a file name may hold & < > or a quote
         return escape(str(value), {'"': "&quot;"})

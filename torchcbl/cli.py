@@ -510,6 +510,11 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     # EP.fcd.xml(.gz) -> EP.sumocfg
     cfg = fcd.with_name(fcd.name.removesuffix(".gz").replace(".fcd.xml", "") + ".sumocfg")
     _replay_outputs_spare(path, gif, fcd, cfg)
+    if "," in fcd.name:  # before anything is written (write_sumocfg refuses it after the FCD)
+        raise _UsageError(
+            f"--fcd {fcd}: the .sumocfg beside it names its fcd-replay input after it, and SUMO "
+            "splits file lists at commas; give --fcd a name without a comma"
+        )
     if session:  # the session logged what it saw: the replay must see the same
         try:
             replay.session_episodes(path, check=[index])
@@ -519,7 +524,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(f"episode {index}: {record.label or '-'} ({len(record.actions)} steps)")
     replay.export_fcd(record, fcd)
     print(f"FCD written to {fcd}")
-    cfg = replay.write_sumocfg(record, fcd, cfg)
+    try:
+        cfg = replay.write_sumocfg(record, fcd, cfg)
+    except ValueError as exc:  # the package under a path with a comma
+        raise _UsageError(str(exc)) from None
     print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {_shell(cfg)})")
     replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
     steps = len(record.actions)
