@@ -287,6 +287,14 @@ class HighwaySim:
                 "gymnasium's AsyncVectorEnv(..., context='spawn')), or close the parent's env "
                 "before forking"
             )
+        if not _SUMO["running"] and libsumo.simulation.isLoaded():
+            # a libsumo.start of the caller's own: a start here would replace it without a word
+            raise RuntimeError(
+                "this process's libsumo already runs a simulation not started by "
+                "sumo_scenarios (a libsumo.start of your own), and libsumo holds one "
+                "simulation per process: close it (libsumo.close()) before resetting a "
+                "DrivingEnv, or run the two in separate processes"
+            )
         owner = _SUMO["owner"]
         if owner is not None and owner is not self._state:
             owner["owns"] = False  # its road goes with the load below: taken over

@@ -567,3 +567,30 @@ def test_the_env_runs_from_a_directory_whose_path_holds_a_comma(tmp_path):
         cwd=tmp_path,
     )
     assert out.returncode == 0 and out.stdout.strip() == "3", out.stderr[-2000:]
+
+
+def test_a_simulation_started_outside_the_env_is_not_silently_replaced():
+    """A researcher's own libsumo simulation in the same process (libsumo.start by hand): the
+    env's reset refuses, saying what to do, and the researcher's simulation runs on. (It was
+    replaced without a word: libsumo holds one simulation per process, and a second
+    libsumo.start replaces the first; its clock went from 3 s back to 0.25 s.)"""
+    libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+    try:
+        for _ in range(3):
+            libsumo.simulationStep()
+        env = DrivingEnv(scenario="light")
+        try:
+            with pytest.raises(RuntimeError, match=r"not started by sumo_scenarios.*close it"):
+                env.reset(seed=0)
+        finally:
+            env.close()
+        assert libsumo.simulation.getTime() == 3.0
+        libsumo.simulationStep()  # still the researcher's
+    finally:
+        libsumo.close()
+    env = DrivingEnv(scenario="light")  # once it is closed, the env starts its own
+    try:
+        env.reset(seed=0)
+        env.step(STAY)
+    finally:
+        env.close()
