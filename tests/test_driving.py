@@ -574,6 +574,10 @@ def test_a_simulation_started_outside_the_env_is_not_silently_replaced():
     env's reset refuses, saying what to do, and the researcher's simulation runs on. (It was
     replaced without a word: libsumo holds one simulation per process, and a second
     libsumo.start replaces the first; its clock went from 3 s back to 0.25 s.)"""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
     libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
     try:
         for _ in range(3):
