@@ -125,7 +125,8 @@ class DrivingEnv(gym.Env):
     the one reset last: an env whose road another env's reset took over raises ``RuntimeError``
     on ``step`` (saying so) until it is reset again. Two envs driving at once need two processes
     made with 'spawn' (e.g. gymnasium's ``AsyncVectorEnv(..., context="spawn")``; a process
-    forked from one with a running simulation is refused). Always ``close()`` an env.
+    forked from one with a running simulation is refused), and so is a reset while a
+    simulation of your own (``libsumo.start``) runs in the process. Always ``close()`` an env.
 
     ``reset(seed=s)`` fixes the road segment: the traffic is drawn from
     ``SeedSequence([scenario.seed, s])``. ``reset(options={"ego_lane": k})`` starts in lane k.

@@ -450,9 +450,13 @@ def _write_replay_input(fcd: Path, out: Path, road_end_m: float) -> int:
     (``road_end_m``), where it arrives and leaves in that same step. Returns how many cars got
     such an entry.
     """
+    import gzip
     import xml.etree.ElementTree as ET
 
-    root = ET.parse(fcd).getroot()
+    with fcd.open("rb") as f:  # SUMO gzips an output whose name ends in .gz
+        zipped = f.read(2) == b"\x1f\x8b"
+    with (gzip.open if zipped else open)(fcd, "rb") as f:
+        root = ET.parse(f).getroot()
     steps = root.findall("timestep")
     last: dict[str, tuple[int, ET.Element]] = {}
     for i, ts in enumerate(steps):
@@ -472,7 +476,8 @@ def _write_replay_input(fcd: Path, out: Path, road_end_m: float) -> int:
 def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path) -> Path:
     """Write a ``.sumocfg`` that replays an exported FCD file in SUMO alone (``sumo-gui -c PATH``).
 
-    Beside ``fcd_path`` (the FCD written by :func:`export_fcd` for this ``record``) it writes
+    Beside ``fcd_path`` (the FCD written by :func:`export_fcd` for this ``record``; gzipped
+    too, as SUMO writes it for a name ending in ``.gz``) it writes
     ``<fcd stem>.replay.xml``, the input of SUMO's fcd-replay device: the recorded FCD plus,
     for every car the episode removed before its end, one entry at the end of its lane one
     step later, where SUMO lets it leave (the device itself never removes a vehicle). The
@@ -484,6 +489,10 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
     cars enter exactly where they were recorded): the re-run FCD equals the recorded one in
     every vehicle's x, y, lane and position, and in speed except at each car's first step.
     Contacts stay possible as in the episode (``collision.action none``, as when recording).
+
+    A file the configuration lists (the replay input, named after the FCD, and the shipped
+    network and vehicle types) may not hold a comma in its path, which SUMO splits file lists
+    at: ValueError, before anything is written.
 
     What SUMO prints: no error and no teleport. Each removed car is moved once to the lane end,
     which SUMO reports as "moved by TraCI" (shown for the first 3, then counted:
@@ -505,16 +514,32 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
             f"write_sumocfg needs the episode's FCD file, {fcd} does not exist: "
             "write it first with export_fcd(record, path)"
         )
-    stem = fcd.name.removesuffix(".xml").removesuffix(".fcd")
+    # (a gzipped FCD, "ep.fcd.xml.gz", is read as such; its replay input and re-run are plain)
+    stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
     replay_input = fcd.with_name(stem + ".replay.xml")
     rerun = fcd.with_name(stem + ".rerun.xml")
-    _write_replay_input(fcd, replay_input, libsumo_lane_length_from_net())
 
     def rel(p: Path) -> str:
         try:
             return str(p.relative_to(path.resolve().parent))
         except ValueError:
             return str(p)
+
+    # SUMO splits these options' file lists at commas, with no way to escape one: a .sumocfg
+    # naming such a file was written, and `sumo -c` then failed ("Cannot read file 'a'")
+    listed = {
+        "the FCD's name (its fcd-replay input, named after it)": rel(replay_input),
+        "the shipped network's path": str(data_path("road.net.xml")),
+        "the shipped vehicle types' path": str(data_path("driving.add.xml")),
+    }
+    commas = [f"{what} ({value})" for what, value in listed.items() if "," in value]
+    if commas:
+        raise ValueError(
+            f"a .sumocfg cannot name a file whose path holds a comma (SUMO splits file lists "
+            f"at commas), and {' and '.join(commas)} holds one: give the FCD a name without a "
+            "comma, or move the package to a path without one"
+        )
+    _write_replay_input(fcd, replay_input, libsumo_lane_length_from_net())
 
     def attr(value: object) -> str:  # a file name may hold & < > or a quote
         return escape(str(value), {'"': "&quot;"})

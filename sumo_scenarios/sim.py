@@ -16,8 +16,11 @@ fresh road segment. Two simulations running at once need two processes.
 
 from __future__ import annotations
 
+import atexit
 import math
 import os
+import shutil
+import tempfile
 import weakref
 from dataclasses import dataclass
 from pathlib import Path
@@ -55,6 +58,42 @@ def _release(state: dict[str, bool]) -> None:
         if _SUMO["running"]:
             _SUMO["running"] = False
             libsumo.close()
+
+
+# per process (a forked child makes its own): the directory of the copies _sumo_input makes
+_INPUT_COPIES: dict[int, Path] = {}
+
+
+def _sumo_input(name: str) -> str:
+    """The path SUMO is given for the shipped data file ``name`` (``-n``, ``-a``).
+
+    SUMO splits these options' file lists at commas, with no way to escape one: under a path
+    holding a comma (a checkout in "OneDrive - Acme, Inc") every start failed. There, SUMO
+    is given a copy in a temporary directory of this process, removed when the process ends.
+    """
+    path = data_path(name)
+    if "," not in str(path):
+        return str(path)
+    pid = os.getpid()
+    if pid not in _INPUT_COPIES:
+        copies = Path(tempfile.mkdtemp(prefix="torchcbl-sumo-"))
+        if "," in str(copies):
+            shutil.rmtree(copies, ignore_errors=True)
+            raise RuntimeError(
+                f"SUMO cannot open {path}: it splits file names at commas, and this path holds "
+                f"one, as does the temporary directory ({copies.parent}) its copy would go to; "
+                "set TMPDIR to a directory whose path has no comma (or move the package)"
+            )
+        atexit.register(_remove_copies, pid, copies)
+        _INPUT_COPIES[pid] = copies
+    copy = _INPUT_COPIES[pid] / name
+    shutil.copyfile(path, copy)  # each start: the copy is the shipped file as it is now
+    return str(copy)
+
+
+def _remove_copies(pid: int, copies: Path) -> None:
+    if os.getpid() == pid:  # not from a forked child, whose parent still uses them
+        shutil.rmtree(copies, ignore_errors=True)
 
 
 _MAX_EXTRA_GAP_M = 250.0  # spacings are capped so a recycled car always fits on the edge
@@ -200,9 +239,9 @@ class HighwaySim:
         args = [
             "sumo",
             "-n",
-            str(data_path("road.net.xml")),
+            _sumo_input("road.net.xml"),
             "-a",
-            str(data_path("driving.add.xml")),
+            _sumo_input("driving.add.xml"),
             "--step-length",
             repr(self.config.step_length_s),
             "--collision.action",
@@ -247,6 +286,14 @@ class HighwaySim:
                 "simulation in a process made with 'spawn' (multiprocessing.get_context('spawn'), "
                 "gymnasium's AsyncVectorEnv(..., context='spawn')), or close the parent's env "
                 "before forking"
+            )
+        if not _SUMO["running"] and libsumo.simulation.isLoaded():
+            # a libsumo.start of the caller's own: a start here would replace it without a word
+            raise RuntimeError(
+                "this process's libsumo already runs a simulation not started by "
+                "sumo_scenarios (a libsumo.start of your own), and libsumo holds one "
+                "simulation per process: close it (libsumo.close()) before resetting a "
+                "DrivingEnv, or run the two in separate processes"
             )
         owner = _SUMO["owner"]
         if owner is not None and owner is not self._state:

@@ -1026,6 +1026,41 @@ def test_replay_never_writes_over_the_recording_it_replays(tmp_path, capsys):
     assert episodes.read_bytes() == files[episodes]
 
 
+def test_replay_to_a_gzipped_fcd_writes_a_sumocfg_that_sumo_runs(tmp_path, capsys):
+    """--fcd EP.fcd.xml.gz (SUMO writes a gzipped FCD for a name ending in .gz): the FCD, a
+    .sumocfg named EP.sumocfg and the GIF are written, and `sumo -c` replays the recorded
+    positions. (The replay stopped after the FCD with 'ParseError: not well-formed (invalid
+    token): line 1, column 0': the .sumocfg's writer read the gzipped file as plain XML.)"""
+    import gzip
+    import xml.etree.ElementTree as ET
+
+    episodes = _recorded_episodes(tmp_path / "episodes.json")
+    fcd = tmp_path / "ep.fcd.xml.gz"
+    gif = tmp_path / "ep.gif"
+    argv = ["replay", str(episodes), "--fcd", str(fcd), "--gif", str(gif), "--max-frames", "2"]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert fcd.read_bytes()[:2] == b"\x1f\x8b" and gif.stat().st_size > 0
+    cfg = tmp_path / "ep.sumocfg"
+    assert f"SUMO configuration written to {cfg}" in capsys.readouterr().out
+    sumo = Path(sys.executable).with_name("sumo")
+    out = subprocess.run(
+        [str(sumo), "-c", str(cfg)], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert out.returncode == 0, out.stderr
+
+    def rows(root: ET.Element) -> dict[tuple[str | None, str | None], tuple]:
+        return {
+            (ts.get("time"), v.get("id")): (v.get("x"), v.get("lane"), v.get("pos"))
+            for ts in root.iter("timestep")
+            for v in ts.iter("vehicle")
+        }
+
+    with gzip.open(fcd) as f:
+        recorded = rows(ET.parse(f).getroot())
+    rerun = rows(ET.parse(tmp_path / "ep.rerun.xml").getroot())
+    assert len(recorded) > 5 and all(rerun.get(k) == v for k, v in recorded.items())
+
+
 def test_replay_gif_path_must_name_a_gif(tmp_path):
     """--gif without .gif: one line, exit code 2 and nothing written. (The image writer, which
     picks its format by the name, failed after the FCD and .sumocfg were written, with a

@@ -531,3 +531,70 @@ def test_a_driving_env_refuses_to_be_copied_or_pickled(env):
         with pytest.raises(TypeError, match="cannot be copied or pickled; make a new DrivingEnv"):
             clone(env)
     assert env.step(0)[4]["position_m"] == pytest.approx(6.7056, abs=1e-6)  # one step, no more
+
+
+def test_the_env_runs_from_a_directory_whose_path_holds_a_comma(tmp_path):
+    """A checkout or install under a path with a comma ("OneDrive - Acme, Inc/..."): the env
+    resets and steps. (SUMO splits the file lists -n and -a at commas: every reset failed with
+    'TraCIException: Process Error' after "Error: File '.../Acme' is not accessible".)"""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    site = tmp_path / "Acme, Inc"
+    shutil.copytree(
+        Path(sumo_scenarios.__file__).parent,
+        site / "sumo_scenarios",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    code = (
+        "import sumo_scenarios.env as E\n"
+        "assert ',' in E.__file__, E.__file__\n"
+        "env = E.DrivingEnv(scenario='light')\n"
+        "obs, _ = env.reset(seed=0)\n"
+        "obs, *_ = env.step(1)\n"
+        "env.close()\n"
+        "print(int(obs[3]))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0 and out.stdout.strip() == "3", out.stderr[-2000:]
+
+
+def test_a_simulation_started_outside_the_env_is_not_silently_replaced():
+    """A researcher's own libsumo simulation in the same process (libsumo.start by hand): the
+    env's reset refuses, saying what to do, and the researcher's simulation runs on. (It was
+    replaced without a word: libsumo holds one simulation per process, and a second
+    libsumo.start replaces the first; its clock went from 3 s back to 0.25 s.)"""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
+    libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+    try:
+        for _ in range(3):
+            libsumo.simulationStep()
+        env = DrivingEnv(scenario="light")
+        try:
+            with pytest.raises(RuntimeError, match=r"not started by sumo_scenarios.*close it"):
+                env.reset(seed=0)
+        finally:
+            env.close()
+        assert libsumo.simulation.getTime() == 3.0
+        libsumo.simulationStep()  # still the researcher's
+    finally:
+        libsumo.close()
+    env = DrivingEnv(scenario="light")  # once it is closed, the env starts its own
+    try:
+        env.reset(seed=0)
+        env.step(STAY)
+    finally:
+        env.close()

@@ -121,3 +121,39 @@ def test_sumocfg_is_well_formed_whatever_the_label_and_file_names(episode, tmp_p
     )
     assert out.returncode == 0, out.stderr
     assert _fcd(tmp_path / "R&D--ep.rerun.xml").keys() >= _fcd(odd).keys()
+
+
+def test_a_file_name_with_a_comma_is_refused_before_anything_is_written(episode, tmp_path):
+    """SUMO splits a .sumocfg's file lists at commas: for an FCD named 'seed0,arm_a.fcd.xml' a
+    configuration naming 'seed0,arm_a.replay.xml' was written, and `sumo -c` failed with
+    "Cannot read file 'seed0'". Now write_sumocfg says so and writes nothing, and torchcbl
+    replay --fcd refuses such a name in one line before the replay."""
+    from sumo_scenarios.replay import save_records
+
+    rec, fcd, _ = episode
+    odd = tmp_path / "seed0,arm_a.fcd.xml"
+    shutil.copy(fcd, odd)
+    with pytest.raises(ValueError, match="comma.*give the FCD a name without a comma"):
+        write_sumocfg(rec, odd, tmp_path / "ep.sumocfg")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [odd.name]
+
+    episodes = tmp_path / "episodes.json"
+    save_records([dataclasses.replace(rec, actions=rec.actions[:3])], episodes)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "torchcbl",
+            "replay",
+            str(episodes),
+            "--fcd",
+            str(tmp_path / "a,b.xml"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert out.returncode == 2 and out.stdout == "", out
+    assert out.stderr.count("\n") == 1 and "without a comma" in out.stderr, out.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([odd.name, episodes.name])

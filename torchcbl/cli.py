@@ -507,8 +507,14 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             f"--gif {gif}: expected a file name ending in .gif, e.g. {gif.with_suffix('.gif')}"
         )
     _output_file(fcd, "--fcd")
-    cfg = fcd.with_name(fcd.name.replace(".fcd.xml", "") + ".sumocfg")
+    # EP.fcd.xml(.gz) -> EP.sumocfg
+    cfg = fcd.with_name(fcd.name.removesuffix(".gz").replace(".fcd.xml", "") + ".sumocfg")
     _replay_outputs_spare(path, gif, fcd, cfg)
+    if "," in fcd.name:  # before anything is written (write_sumocfg refuses it after the FCD)
+        raise _UsageError(
+            f"--fcd {fcd}: the .sumocfg beside it names its fcd-replay input after it, and SUMO "
+            "splits file lists at commas; give --fcd a name without a comma"
+        )
     if session:  # the session logged what it saw: the replay must see the same
         try:
             replay.session_episodes(path, check=[index])
@@ -518,7 +524,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(f"episode {index}: {record.label or '-'} ({len(record.actions)} steps)")
     replay.export_fcd(record, fcd)
     print(f"FCD written to {fcd}")
-    cfg = replay.write_sumocfg(record, fcd, cfg)
+    try:
+        cfg = replay.write_sumocfg(record, fcd, cfg)
+    except ValueError as exc:  # the package under a path with a comma
+        raise _UsageError(str(exc)) from None
     print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {_shell(cfg)})")
     replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
     steps = len(record.actions)
@@ -538,7 +547,8 @@ def _replay_outputs_spare(source: Path, gif: Path, fcd: Path, cfg: Path) -> None
     a file of the session being replayed (its log, its config), or is another of the outputs:
     writing it would destroy the recording, or one output would overwrite another."""
     # (write_sumocfg names its fcd-replay input so)
-    replay_input = fcd.with_name(fcd.name.removesuffix(".xml").removesuffix(".fcd") + ".replay.xml")
+    stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
+    replay_input = fcd.with_name(stem + ".replay.xml")
     outputs = [
         (f"--gif {gif}", gif),
         (f"--fcd {fcd}", fcd),
@@ -1229,7 +1239,7 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="OUT.xml",
         help="SUMO FCD XML output path (default beside the JSON or the session directory: "
-        "EPISODES-N.fcd.xml, SESSION_DIR-N.fcd.xml); a "
+        "EPISODES-N.fcd.xml, SESSION_DIR-N.fcd.xml; a name ending in .gz is gzipped); a "
         ".sumocfg that opens it in sumo-gui is written beside it",
     )
     p.add_argument(
