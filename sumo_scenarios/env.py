@@ -234,7 +234,11 @@ class DrivingEnv(gym.Env):
         ``action`` 0 stay, 1 one lane left, 2 one lane right (at the road's edge a shift is a
         stay). Returns ``(observation [4], reward, terminated, truncated, info)``: reward -1 in
         a step in contact with a car, else 0; never terminated; truncated after
-        ``config.max_episode_steps`` steps."""
+        ``config.max_episode_steps`` steps. ``info``: ``lane`` (the ego's, 0 right shoulder to
+        4 left shoulder), ``contact`` (bool), ``t`` (steps since reset), ``episode_seed``,
+        ``position_m`` (metres the ego has driven since reset, not SUMO's lane position),
+        ``step_length_s``, ``closing_speed_ms`` (per lane, m/s) and the hidden traffic state
+        ``car_rel_m`` / ``car_lane`` / ``car_closing_ms`` (for scripted experts only)."""
         if self.closed:
             raise RuntimeError("this DrivingEnv is closed; create a new one")
         if self._episode_seed is None:
