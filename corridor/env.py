@@ -233,8 +233,23 @@ class CorridorEnv(gym.Env):
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """One action, then the robot stands still and senses."""
-        if not self.action_space.contains(action):
-            raise ValueError(f"action must be an int in [0, {N_ACTIONS}), got {action!r}")
+        # a bool is no action (gymnasium's Discrete takes True as 1): refused, as DrivingEnv
+        # and the teaching loop refuse it
+        if isinstance(action, (bool, np.bool_)) or not self.action_space.contains(action):
+            integer = isinstance(action, (int, np.integer)) and not isinstance(
+                action, (bool, np.bool_)
+            )
+            raise ValueError(
+                f"action must be an int in [0, {N_ACTIONS}) (0 forward, 1 turn left, 2 turn "
+                f"right, 3 u-turn), got {action!r}"
+                + (
+                    ""
+                    if integer
+                    else "; pass int(action) of an integer action (a 0-d tensor or array, "
+                    "e.g. GaussianMixtureSet.classify(obs[None]).action[0]); a bool or a "
+                    "float is not rounded"
+                )
+            )
         if not self._was_reset:
             raise RuntimeError("call reset() before step()")
         laps_before = self.world.laps

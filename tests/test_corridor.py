@@ -462,6 +462,25 @@ def test_check_env_and_registration():
         CorridorEnv().reset(seed=0, options={"start": (0, 0)})
 
 
+def test_a_bool_is_no_action_and_a_refused_action_says_what_to_pass():
+    """CorridorEnv.step(True) turned the robot left (gymnasium's Discrete counts a bool as the
+    int 1), where the driving env and the teaching loop refuse a bool; and a refused action,
+    such as the 0-d tensor of GaussianMixtureSet.classify(...).action[0], was named without
+    saying what to pass."""
+    torch = pytest.importorskip("torch")
+    env = CorridorEnv()
+    env.reset(seed=0)
+    pose = env.world.pose
+    for bad in (True, False, np.bool_(True), 1.0, torch.tensor(1), 4, -1):
+        with pytest.raises(ValueError, match=r"action must be an int in \[0, 4\)") as err:
+            env.step(bad)
+        if not isinstance(bad, int) or isinstance(bad, bool):
+            assert "int(action)" in str(err.value), bad
+    assert env.world.pose == pose  # nothing moved
+    env.step(np.int64(1))  # a numpy int is an int
+    env.step(np.array(2))
+
+
 def test_same_seed_same_run_and_seed_matters():
     def run(seed):
         env = CorridorEnv()

@@ -101,6 +101,25 @@ def test_human_timing_misses_and_doubles_presses_at_the_given_rates():
         HumanTimingConfig(miss_prob=float("nan"))
 
 
+def test_human_timing_says_once_when_the_info_has_no_step_counter():
+    """HumanTiming tells consecutive steps apart by info["t"]; on an env without it (the
+    corridor's info counts "steps") every call is a gap, so each delayed press was silently
+    lost and re-drawn at the next call, a teacher far slower than the configured one. It now
+    warns, once, saying what to add."""
+    import warnings
+
+    cfg = HumanTimingConfig(delay_probs=(0.0, 1.0), miss_prob=0.0, double_prob=0.0)
+    h = HumanTiming(lambda o, i: 1, cfg, seed=0)
+    with pytest.warns(UserWarning, match=r"no 't'.*step counter") as caught:
+        replies = [h(np.zeros(2), {"steps": k}) for k in range(5)]
+    assert len(caught) == 1
+    assert replies == [0] * 5  # the delay of one step never ends: every call is a gap
+    timed = HumanTiming(lambda o, i: 1, cfg, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert [timed(np.zeros(2), {"t": k}) for k in range(3)] == [0, 1, 0]
+
+
 def test_probabilities_the_configs_accept_are_usable_by_the_teachers():
     """A config accepts probabilities whose sum is within np.isclose of 1; the teacher used to
     pass them to numpy's choice as they were, which wants 1 to about 1e-8, so the first delayed

@@ -262,6 +262,27 @@ def test_a_fitted_state_loads_only_into_a_model_with_its_settings(fitted):
     GaussianMixtureSet(3, 3, max_components=6, seed=3).load_state_dict(cast.state_dict())
 
 
+def test_a_state_of_other_sizes_is_refused_naming_the_constructor_arguments(fitted):
+    """Reloading a saved model into one built with another max_components (or action or
+    feature count) raised torch's RuntimeError listing a dozen buffer shapes, naming no
+    constructor argument; it is a ValueError saying which sizes differ and what to build."""
+    model, _, _ = fitted  # GaussianMixtureSet(3, 3, max_components=6, seed=3)
+    for args, differ in (
+        ((3, 3), "max_components=10"),
+        ((4, 3, 6), "n_actions=4"),
+        ((3, 2, 6), "n_features=2"),
+    ):
+        wrong = GaussianMixtureSet(*args, seed=3)
+        with pytest.raises(ValueError) as err:
+            wrong.load_state_dict(model.state_dict())
+        msg = str(err.value)
+        assert "n_actions=3, n_features=3, max_components=6" in msg and differ in msg
+        assert "GaussianMixtureSet(3, 3, max_components=6" in msg  # what to build
+        assert not wrong.is_fitted
+        with pytest.raises(ValueError, match="max_components=6"):  # unfitted states too
+            wrong.load_state_dict(GaussianMixtureSet(3, 3, max_components=6).state_dict())
+
+
 def test_every_bit_of_the_seed_counts():
     x, y = _blobs(1, (60, 60, 60))
     a = GaussianMixtureSet(3, 3, max_components=4, seed=1).fit(x, y)

@@ -473,3 +473,23 @@ def test_a_strategy_class_registered_in_strategies_is_rebuilt_on_resume(tmp_path
     asked = [r.step for r in recs if r.teacher_action is not None and r.model_action >= 0]
     assert asked and all(s % 4 == 0 for s in asked)
     assert any(s >= 12 for s in asked)
+
+
+def test_a_shipped_strategy_in_ones_own_loop_says_when_it_was_not_bound():
+    """Driven by a loop of one's own, ConfidentExecution (and CBA) never bound asked on every
+    step forever without a word (its phase never left the non-interactive one), and bound with
+    config=None failed with AttributeError: 'NoneType' object has no attribute
+    'noninteractive'. Both now say what bind() wants."""
+    from torchcbl import ConfidenceBasedAutonomy, GaussianMixtureSet
+
+    x = np.array([[0.0, 0.0], [0.1, 0.0], [3.0, 3.0], [3.1, 3.0]])
+    model = GaussianMixtureSet(2, 2, max_components=1).fit(x, np.array([0, 0, 1, 1]))
+    c = model.classify(x[:1])
+    for strategy in (ConfidentExecution(DistanceRule(quantile=0.95)), ConfidenceBasedAutonomy()):
+        with pytest.raises(RuntimeError, match=r"bind\(n_actions=.*config=TeachingConfig"):
+            strategy.decide(x[0], c)
+        for bad in (None, {"noninteractive": False}):
+            with pytest.raises(TypeError, match=r"expected a TeachingConfig.*got"):
+                strategy.bind(n_actions=2, n_features=2, config=bad)
+        strategy.bind(n_actions=2, n_features=2, config=TeachingConfig(noninteractive=False))
+        strategy.decide(x[0], c)  # bound: it decides

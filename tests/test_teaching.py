@@ -659,6 +659,7 @@ def test_a_reset_answer_given_as_a_list_pair_is_taken():
     assert len(evaluate_policy(lambda obs: 0, env, n_steps=5)) == 5
 
 
+@pytest.mark.filterwarnings("ignore:HumanTiming. the info given to the teacher has no 't'")
 @pytest.mark.parametrize("answer", [1.7, np.float64(2.0), "2", True, None])
 def test_human_timing_refuses_a_wrapped_answer_that_is_no_action_index(answer):
     """HumanTiming passed the wrapped teacher's answer through int(): 1.7 became a

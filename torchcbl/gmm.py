@@ -413,7 +413,9 @@ class GaussianMixtureSet(nn.Module):
             total cost is about 5 times one fit at the final size).
 
     Fitted buffers (fixed shapes, so ``state_dict`` loads into a fresh instance built with the
-    same arguments, and only into one: see ``settings_``): ``weights_`` [A, K], ``means_``
+    same arguments, and only into one: a state of other sizes, ``n_actions``, ``n_features``
+    or ``max_components``, is a ValueError that names them, and see ``settings_``):
+    ``weights_`` [A, K], ``means_``
     [A, K, D], ``covariances_`` [A, K, D, D], ``precisions_cholesky_`` [A, K, D, D],
     ``component_mask_`` [A, K] bool, ``log_prior_`` [A]
     (log share of points, -inf for an action without data), ``n_points_`` [A],
@@ -554,6 +556,22 @@ class GaussianMixtureSet(nn.Module):
     def _load_from_state_dict(
         self, state_dict: dict[str, Any], prefix: str, *args: Any, **kwargs: Any
     ) -> None:
+        # the sizes first: torch's own refusal lists a dozen buffer shapes and names neither
+        # the constructor argument that differs nor what to do
+        weights, means = state_dict.get(prefix + "weights_"), state_dict.get(prefix + "means_")
+        if isinstance(weights, Tensor) and isinstance(means, Tensor) and means.dim() == 3:
+            a, k, d = means.shape
+            given = {"n_actions": a, "n_features": d, "max_components": k}
+            own = {n: getattr(self, n) for n in given}
+            if given != own or tuple(weights.shape) != (a, k):
+                raise ValueError(
+                    "load_state_dict: the state was saved by a GaussianMixtureSet("
+                    + ", ".join(f"{n}={v}" for n, v in given.items())
+                    + "), this one has "
+                    + ", ".join(f"{n}={v}" for n, v in own.items())
+                    + f"; build the model with those sizes, GaussianMixtureSet({a}, {d}, "
+                    f"max_components={k}, ...), and load the state into it."
+                )
         key = prefix + "settings_"
         saved, fitted = state_dict.get(key), state_dict.get(prefix + "fitted_")
         if isinstance(fitted, Tensor) and bool(fitted) and saved is not None:

@@ -19,13 +19,14 @@ Everything is drawn from one seeded ``numpy`` generator, so the same seed and th
 the same answers. Consecutive calls are recognised through ``info["t"]`` (the env's step
 counter): a gap (the learner drove on its own in between, or a new episode) drops any pending
 press. An env whose info has no ``"t"`` makes every call a gap: delayed presses are then missed
-presses and no press is doubled; give such an env a step counter first. Domain-free: it knows
-nothing of what the actions mean.
+presses and no press is doubled (HumanTiming warns once); give such an env a step counter first.
+Domain-free: it knows nothing of what the actions mean.
 """
 
 from __future__ import annotations
 
 import numbers
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -130,6 +131,7 @@ class HumanTiming:
         self._pending: tuple[int, int] | None = None  # (action, steps left)
         self._double: int | None = None
         self._last_t: Any = None
+        self._warned_no_t = False
         self.n_delayed = self.n_missed = self.n_doubled = 0
 
     def _press(self, action: int) -> int:
@@ -149,6 +151,16 @@ class HumanTiming:
         apart)."""
         cfg = self.config
         t = info.get("t") if isinstance(info, dict) else None
+        if t is None and not self._warned_no_t:
+            self._warned_no_t = True
+            warnings.warn(
+                "HumanTiming: the info given to the teacher has no 't' (the env's step "
+                "counter), so every call counts as the first of a new run of steps: a delayed "
+                "press is lost and drawn again at the next call, and no press is doubled. Give "
+                "the env a step counter (info['t'] = the step's index in its episode, e.g. in "
+                "a gymnasium.Wrapper) to get the configured reaction times.",
+                stacklevel=2,
+            )
         if t is None or self._last_t is None or t != self._last_t + 1:
             self._pending = None
             self._double = None

@@ -84,6 +84,10 @@ class _StrategyDefaults:
         return None
 
 
+# the TeachingConfig fields the phase schedule reads in bind()
+_SCHEDULE = ("noninteractive", "target_accuracy", "accuracy_window", "burst")
+
+
 class _Phased(_StrategyDefaults):
     """The paper's schedule, shared by the shipped strategies: a non-interactive phase (the
     teacher acts every step) that ends once the windowed prediction accuracy reaches
@@ -98,6 +102,7 @@ class _Phased(_StrategyDefaults):
         self._burst = 1
         self._target: float | None = None
         self._window: deque[bool] = deque(maxlen=1)
+        self._bound = False
 
     @property
     def phase(self) -> str:
@@ -105,11 +110,21 @@ class _Phased(_StrategyDefaults):
         return self._phase
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        missing = [n for n in _SCHEDULE if not hasattr(config, n)]
+        if missing:  # a loop of one's own may pass None or a dict
+            raise TypeError(
+                f"{type(self).__name__}.bind: expected a TeachingConfig as config (its "
+                f"{', '.join(_SCHEDULE)} set the phases), got {config!r:.80}, which lacks "
+                f"{', '.join(missing)}; pass "
+                "torchcbl.TeachingConfig() for the paper's schedule, or "
+                "TeachingConfig(noninteractive=False) to decide from the first step."
+            )
         self.n_actions, self.n_features = int(n_actions), int(n_features)
         self._phase = "noninteractive" if config.noninteractive else "confident"
         self._burst = int(config.burst)
         self._target = config.target_accuracy
         self._window = deque(maxlen=int(config.accuracy_window))
+        self._bound = True
 
     def episode_start(self) -> None:
         self._burst_left = 0
@@ -118,6 +133,12 @@ class _Phased(_StrategyDefaults):
         raise NotImplementedError
 
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
+        if not self._bound:  # unbound, the phase would never leave the non-interactive one
+            raise RuntimeError(
+                f"{type(self).__name__}.decide: the strategy was not bound; call "
+                "bind(n_actions=A, n_features=D, config=TeachingConfig(...)) once before it "
+                "(ConfidentTeacher does; a loop of one's own must)."
+            )
         if self._phase == "noninteractive" or self._burst_left > 0:
             return Decision(True, self._phase, self._burst_left)
         ask = int(_np(c.action)[0]) < 0 or not self._confident(observation, c)
