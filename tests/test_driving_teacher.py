@@ -101,6 +101,33 @@ def test_human_timing_misses_and_doubles_presses_at_the_given_rates():
         HumanTimingConfig(miss_prob=float("nan"))
 
 
+def test_a_person_watching_corrects_only_with_a_key_press():
+    """As a correcting teacher (CBA, HG-DAgger: correct() at every autonomous step) the timed
+    person answered the default key while a press was pending or after a lost one, so a
+    learner that did just what the person wanted was "corrected" to the default: with a
+    teacher that always agrees with the learner, 98 of 200 steps came back as corrections.
+    A correction is a key press that differs from the learner's action; no press, none."""
+    from torchcbl.strategies import correcting
+
+    cfg = HumanTimingConfig(delay_probs=(0.35, 0.45, 0.2), miss_prob=0.1, double_prob=0.0)
+    wants = [int(x) for x in np.random.default_rng(1).integers(0, 3, 300)]
+    for teacher in (
+        HumanTiming(lambda o, i: int(o[0]), cfg, seed=0),
+        correcting(HumanTiming(lambda o, i: int(o[0]), cfg, seed=0)),
+    ):
+        # the learner does what the person wants at every step: nothing to correct
+        got = [teacher.correct(np.array([a, 0.0]), {"t": t}, a) for t, a in enumerate(wants)]
+        assert got == [None] * len(wants)
+    # the learner stays where the person wants a lane change: the press, when it lands
+    h = HumanTiming(lambda o, i: 1, cfg, seed=0)
+    got = [h.correct(np.zeros(2), {"t": t}, 0) for t in range(400)]
+    assert set(got) == {None, 1} and 0.3 < got.count(1) / 400 < 0.7  # a press per reaction
+    # the learner changes lanes where the person wants to stay (the default, no key to
+    # wait for): corrected at once, every time
+    h = HumanTiming(lambda o, i: 0, cfg, seed=0)
+    assert [h.correct(np.zeros(2), {"t": t}, 2) for t in range(50)] == [0] * 50
+
+
 def test_human_timing_says_once_when_the_info_has_no_step_counter():
     """HumanTiming tells consecutive steps apart by info["t"]; on an env without it (the
     corridor's info counts "steps") every call is a gap, so each delayed press was silently

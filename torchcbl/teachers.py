@@ -15,6 +15,12 @@ and makes it answer like a person at a keyboard (paper Section 5: the teachers w
 - **doubled key press**: with probability ``double_prob`` a non-default press repeats at the
   next step, whatever the wrapped teacher asks then.
 
+As a correcting teacher (:meth:`HumanTiming.correct`, asked at every autonomous step by CBA and
+HG-DAgger) the person corrects with a key press that differs from the learner's action: while a
+press is pending, or after a lost one, there is none (until 2026-11-27 the default action
+answered then counted as a correction, so a learner that did what the person wanted was
+"corrected" to the default).
+
 Everything is drawn from one seeded ``numpy`` generator, so the same seed and the same inputs give
 the same answers. Consecutive calls are recognised through ``info["t"]`` (the env's step
 counter): a gap (the learner drove on its own in between, or a new episode) drops any pending
@@ -132,12 +138,14 @@ class HumanTiming:
         self._double: int | None = None
         self._last_t: Any = None
         self._warned_no_t = False
+        self._no_press = False  # the last answer was the default for want of a press
         self.n_delayed = self.n_missed = self.n_doubled = 0
 
     def _press(self, action: int) -> int:
         cfg = self.config
         if self._rng.random() < cfg.miss_prob:
             self.n_missed += 1
+            self._no_press = True
             return cfg.default_action
         if self._rng.random() < cfg.double_prob:
             self._double = action
@@ -165,6 +173,7 @@ class HumanTiming:
             self._pending = None
             self._double = None
         self._last_t = t
+        self._no_press = False  # set where the default is answered for want of a press
         wanted = _action_index(self.teacher(observation, info), self.teacher)
         if self._double is not None:
             action, self._double = self._double, None
@@ -173,6 +182,7 @@ class HumanTiming:
             _, left = self._pending
             if left > 1:
                 self._pending = (self._pending[0], left - 1)
+                self._no_press = True
                 return cfg.default_action
             self._pending = None
             if wanted == cfg.default_action:
@@ -185,7 +195,20 @@ class HumanTiming:
             return self._press(wanted)
         self.n_delayed += 1
         self._pending = (wanted, delay)
+        self._no_press = True
         return cfg.default_action
+
+    def correct(self, observation: np.ndarray, info: dict, action: int) -> int | None:
+        """The person watching the learner's autonomous ``action`` (for strategies that take
+        corrections: CBA, HG-DAgger): a correction is a key press that differs from it, with
+        the same timing as :meth:`__call__` (one call per step, either method). While a press
+        is pending, or after one is lost, there is no press and so no correction; where the
+        person wants the default action (no key to wait for) and the learner did another,
+        the correction is the default, at once."""
+        answer = self(observation, info)
+        if self._no_press or answer == int(action):
+            return None
+        return answer
 
     def stats(self) -> dict[str, int]:
         """Counts of delayed, missed and doubled presses so far."""

@@ -326,6 +326,9 @@ class _Correcting:
         return self.inner(observation, info)
 
     def correct(self, observation: np.ndarray, info: dict, action: int) -> int | None:
+        inner_correct = getattr(self.inner, "correct", None)
+        if callable(inner_correct):  # a teacher that corrects in its own way (HumanTiming)
+            return inner_correct(observation, info, action)
         own = int(self.inner(observation, info))
         return None if own == int(action) else own
 
@@ -335,6 +338,7 @@ class _Correcting:
 
 def correcting(teacher: Callable[[np.ndarray, dict], int]) -> Any:
     """Wrap a scripted teacher so it also corrects: ``correct(obs, info, action)`` answers its
-    own choice when that differs from ``action``, else None. The wrapper pickles whenever
-    ``teacher`` does."""
+    own choice when that differs from ``action``, else None (a teacher with a ``correct`` of
+    its own, such as :class:`~torchcbl.teachers.HumanTiming`, is asked through it). The
+    wrapper pickles whenever ``teacher`` does."""
     return _Correcting(teacher)
