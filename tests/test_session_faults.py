@@ -10,11 +10,13 @@ the env was lost (:class:`Witness`).
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import hashlib
 import json
 import math
 import os
+import resource
 import shutil
 import signal
 import sqlite3
@@ -403,6 +405,38 @@ def test_really_full_disk(small_disk, leave):
     assert str(run) in msg and "Free space" in msg
     filler.unlink()
     goes_on(ct, env, run, world=overlap_world)
+
+
+@contextlib.contextmanager
+def file_size_limit(nbytes: int):
+    """A full disk without root: a write past ``nbytes`` of a file fails with EFBIG
+    (RLIMIT_FSIZE, its SIGXFSZ ignored), in this process, for the block."""
+    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (nbytes, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, handler)
+
+
+def test_a_session_that_cannot_start_on_a_full_disk_says_which_file(tmp_path):
+    """On a full disk a new session's writer.lock gets no room for its note either; the note's
+    write was buffered, so closing the lock file wrote it again and raised a bare
+    ``OSError: [Errno 28] No space left on device`` that hid the SessionWriteError naming
+    config.json and the fix (and, at the command line, was all the user was told)."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    with file_size_limit(0), pytest.raises(OSError) as err:
+        ConfidentTeacher(env, oracle(env), run_dir=run, progress=False)
+    assert type(err.value) is SessionWriteError, repr(err.value)
+    assert str(run / "config.json") in str(err.value) and "free space" in str(err.value)
+    assert not (run / "config.json").exists()
+    ct = ConfidentTeacher(env, oracle(env), run_dir=run, progress=False)  # space freed
+    ct.run(max_steps=3)
+    ct.close()
+    assert len(load_records(run)) == 3
 
 
 # -- 3. readers never write -------------------------------------------------------------------

@@ -700,10 +700,11 @@ def _acquire_lock(run_dir: Path) -> Any:
             "Reading meanwhile needs no lock (load_records, load_model)."
         ) from None
     try:
-        f.seek(0)
-        f.truncate()
-        f.write(f"process {os.getpid()} on {socket.gethostname()}\n")
-        f.flush()
+        # straight to the file, not through f's buffer: a note that does not fit (full disk)
+        # would stay buffered, and closing the lock would write it again and raise, hiding
+        # the error that closing it goes with
+        os.ftruncate(f.fileno(), 0)
+        os.write(f.fileno(), f"process {os.getpid()} on {socket.gethostname()}\n".encode())
     except OSError:
         pass  # the lock holds without the note
     return f
