@@ -1282,6 +1282,27 @@ def test_a_session_whose_own_map_file_changed_refuses_it(tmp_path, monkeypatch, 
     assert main(["evaluate", str(run), "--steps", "3"]) == 0
 
 
+def test_teach_that_could_not_start_on_a_full_disk_starts_when_run_again(
+    tmp_path, monkeypatch, capsys
+):
+    """A teach whose session could not start (the disk full as config.json was written) said
+    to free space and start the session again; the same command then said "--run-dir ... holds
+    other files and no session": the run directory kept the writer.lock of the failed start
+    and the config.json.tmp it could not finish."""
+    from test_session_faults import file_size_limit
+
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    argv = ["teach", "corridor", "--run-dir", str(run), "--steps", "1"]
+    with file_size_limit(500):  # the lock's note fits, config.json does not
+        assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert str(run / "config.json") in err and "free space" in err and err.count("\n") == 1
+    assert not (run / "config.json.tmp").exists()
+    assert main(argv) == 0, capsys.readouterr().err  # space freed: the same command
+    assert len(load_records(run)) == 1
+
+
 def test_teach_resume_of_a_damaged_session_is_a_one_line_mistake(tmp_path, monkeypatch, capsys):
     """teach --resume of a session with a damaged log is told as evaluate tells it: one line,
     exit code 2, and the session's files untouched. (It was exit code 1, with the error's

@@ -675,6 +675,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
     from torchcbl.benchmark import _import
+    from torchcbl.session import LOCK_NAME
     from torchcbl.teaching import ConfidentTeacher, TeachingConfig, TeachingInterrupted
 
     package, env_id, human_module, settings, setup_factory = _TEACH[args.domain]
@@ -712,7 +713,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             f"{run_dir} already holds a teaching session; add --resume to continue it "
             "or choose another --run-dir"
         )
-    elif run_dir.is_dir() and any(run_dir.iterdir()):
+    elif run_dir.is_dir() and any(p.name != LOCK_NAME for p in run_dir.iterdir()):
+        # (the writer lock alone is what a session that could not start leaves)
         raise _UsageError(
             f"--run-dir {run_dir} holds other files and no session; a new session needs a new "
             "or empty directory"

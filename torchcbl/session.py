@@ -414,9 +414,18 @@ def _upgrade_format1(db: sqlite3.Connection) -> bool:
 
 
 def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
+    """Write ``data`` to ``path`` through ``<name>.tmp`` renamed over it; a write that fails
+    (full disk) leaves neither ``path`` changed nor the ``.tmp`` behind."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise
 
 
 #: Keys a session config must have, with what each must be (checked by :func:`load_config`).
