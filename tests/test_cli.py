@@ -1303,6 +1303,22 @@ def test_teach_that_could_not_start_on_a_full_disk_starts_when_run_again(
     assert len(load_records(run)) == 1
 
 
+def test_reproduce_on_a_full_disk_names_the_file_it_could_not_write(tmp_path, capsys):
+    """reproduce on a full disk said only "error: OSError: [Errno 28] No space left on device":
+    the pid written into the run directory's .run.lock stayed in the file object's buffer, and
+    closing the lock raised that bare OSError. The run now meets the full disk at its first
+    real write, and the line names that file and says to free space."""
+    from test_session_faults import file_size_limit
+
+    out = tmp_path / "out"
+    argv = ["reproduce", "corridor", "--seeds", "1", "--workers", "1", "--no-progress"]
+    with file_size_limit(0):
+        assert main([*argv, "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "free space" in err, err
+    assert str(out / "corridor" / "sessions" / "seed0" / "config.json") in err, err
+
+
 def test_teach_resume_of_a_damaged_session_is_a_one_line_mistake(tmp_path, monkeypatch, capsys):
     """teach --resume of a session with a damaged log is told as evaluate tells it: one line,
     exit code 2, and the session's files untouched. (It was exit code 1, with the error's
