@@ -439,6 +439,23 @@ def test_a_session_that_cannot_start_on_a_full_disk_says_which_file(tmp_path):
     assert len(load_records(run)) == 3
 
 
+def test_a_checkpoint_that_does_not_fit_on_the_disk_says_the_disk_is_full(tmp_path):
+    """A checkpoint written on a full disk failed inside torch.save, whose error is its C++
+    assertion: the user read "writing .../model-00000002.pt failed ([enforce fail at
+    inline_container.cc:672] . unexpected pos 576 vs 534)", with errno 5 (EIO), and nothing
+    saying the disk was full."""
+    run = tmp_path / "run"
+    ct, env = session(run)
+    with file_size_limit(1000), pytest.raises(SessionWriteError) as err:  # a line fits
+        ct.run(max_steps=5)
+    msg = str(err.value)
+    assert str(run / "checkpoints" / "model-00000002.pt") in msg, msg
+    assert "(File too large)" in msg and "enforce fail" not in msg, msg
+    assert err.value.errno == errno.EFBIG
+    assert not list((run / "checkpoints").iterdir())  # no part of it is left
+    goes_on(ct, env, run)
+
+
 # -- 3. readers never write -------------------------------------------------------------------
 
 

@@ -128,6 +128,7 @@ import datetime
 import errno
 import fcntl
 import hashlib
+import io
 import json
 import os
 import re
@@ -747,7 +748,12 @@ def _write_checkpoint(
     if digest is not None:
         payload["labels_sha256"] = digest
     try:
-        torch.save(payload, tmp)
+        # the bytes written by Python, not by torch.save: a full disk is then an OSError
+        # saying so (ENOSPC), where torch.save's own writer fails with a C++ assertion
+        # ("[enforce fail at inline_container.cc:...] unexpected pos ...")
+        buffer = io.BytesIO()
+        torch.save(payload, buffer)
+        tmp.write_bytes(buffer.getvalue())
         os.replace(tmp, path)
     except (OSError, RuntimeError) as exc:
         tmp.unlink(missing_ok=True)
