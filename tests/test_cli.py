@@ -1319,6 +1319,49 @@ def test_reproduce_on_a_full_disk_names_the_file_it_could_not_write(tmp_path, ca
     assert str(out / "corridor" / "sessions" / "seed0" / "config.json") in err, err
 
 
+def test_teach_stopped_by_a_full_disk_says_how_to_continue_at_the_command_line(
+    tmp_path, monkeypatch, capsys
+):
+    """The disk filling up while a person teaches ended teach with the session's error alone,
+    whose advice is the Python API's ("call run() again or resume"), without what the line of
+    a teach stopped otherwise says: what is saved and the command that continues. The person
+    now reads both, and that command continues the session with every demonstration kept."""
+    import resource
+    import signal
+
+    import corridor.human
+
+    _scripted_corridor_person(monkeypatch, max_demonstrations=None)
+    hard = resource.getrlimit(resource.RLIMIT_FSIZE)[1]
+    answers = []
+
+    class Person:
+        def __call__(self, observation, info):
+            answers.append(0)
+            if len(answers) == 4:  # the disk is full from the 4th answer on
+                resource.setrlimit(resource.RLIMIT_FSIZE, (0, hard))
+            return 0
+
+        def set_status(self, text):
+            pass
+
+    monkeypatch.setattr(corridor.human, "make_teacher", lambda **kw: Person())
+    run = tmp_path / "session"
+    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    limits = resource.getrlimit(resource.RLIMIT_FSIZE)
+    try:
+        rc = main(["teach", "corridor", "--run-dir", str(run), "--steps", "10"])
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, limits)
+        signal.signal(signal.SIGXFSZ, handler)
+    err = capsys.readouterr().err
+    assert rc == 1 and err.count("\n") == 1 and "steps.sqlite failed" in err, err
+    assert "3 demonstrations over 3 steps are saved" in err, err
+    assert f"continue with: torchcbl teach corridor --run-dir {run} --resume" in err, err
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "2"]) == 0
+    assert len(load_records(run)) == 5
+
+
 def test_teach_resume_of_a_damaged_session_is_a_one_line_mistake(tmp_path, monkeypatch, capsys):
     """teach --resume of a session with a damaged log is told as evaluate tells it: one line,
     exit code 2, and the session's files untouched. (It was exit code 1, with the error's
