@@ -765,6 +765,31 @@ def test_damaged_sqlite_file(tmp_path):
     goes_on(back, env, run)
 
 
+def test_a_session_copied_without_its_wal_file_is_said_to_lack_it(tmp_path):
+    """A session not closed cleanly (killed, or copied while its writer ran) has its commits
+    in steps.sqlite-wal, the tables themselves included until the first checkpoint. Read
+    without that file (deleted as a temporary file, or left behind by a copy), the log was
+    called "not a readable SQLite database (no such table: steps)", with the advice to salvage
+    it with sqlite3's .recover, which finds nothing: the steps were never in that file. The
+    error now names the missing -wal file and says to put it back."""
+    run, copy = tmp_path / "run", tmp_path / "copy"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=20)
+    assert (run / "steps.sqlite-wal").exists()
+    copy.mkdir()
+    for name in ("config.json", "steps.sqlite", "steps.journal", "writers.jsonl"):
+        shutil.copy2(run / name, copy / name)  # the -wal and -shm left behind
+    for read in (load_records, load_model, resume):
+        with pytest.raises(CorruptSessionError) as err:
+            read(copy)
+        msg = str(err.value)
+        assert str(copy / "steps.sqlite-wal") in msg and "is missing" in msg, msg
+        assert "back beside steps.sqlite" in msg and ".recover" not in msg, msg
+    shutil.copy2(run / "steps.sqlite-wal", copy / "steps.sqlite-wal")  # put back
+    assert load_records(copy) == ct.records
+    ct.close()
+
+
 @pytest.mark.parametrize("key", ["teaching", "model", "env", "seed"])
 def test_config_missing_a_key(tmp_path, key):
     run = tmp_path / "run"

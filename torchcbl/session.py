@@ -1182,6 +1182,19 @@ def _db_error(exc: sqlite3.DatabaseError, path: Path, *, writing: bool = False) 
     code = getattr(exc, "sqlite_errorcode", None)
     if writing and ((code is not None and (code & 0xFF) in (13, 10)) or "disk is full" in str(exc)):
         return _write_error(exc, path, "opening the step log", _FREE_SPACE)
+    wal = path.with_name(LOG_NAME + "-wal")
+    ran = any(path.with_name(name).exists() for name in (JOURNAL_NAME, WRITERS_NAME))
+    if "no such table: steps" in str(exc) and ran and not wal.exists():
+        # a writer ran, and its tables are not in the log: they were only in its WAL (no
+        # checkpoint since the session started: it was never closed cleanly), now missing
+        return CorruptSessionError(
+            f"{path} holds no steps table although a writer logged into it, and {wal} is "
+            "missing: a session that was not closed cleanly (killed, or copied while it ran) "
+            "keeps its commits in that file, here all of them. torchcbl changed "
+            f"nothing. Put {wal.name} back beside {path.name} (from the directory it was "
+            "copied from, or a backup), then read or resume the session again; do not delete "
+            "it by hand."
+        )
     return CorruptSessionError(
         f"{path} is not a readable SQLite database ({exc}). torchcbl changed nothing. Restore "
         f"it from a backup, or salvage it with `sqlite3 {path} .recover | sqlite3 "
