@@ -1317,6 +1317,86 @@ def test_a_session_whose_own_map_file_changed_refuses_it(tmp_path, monkeypatch, 
     assert main(["evaluate", str(run), "--steps", "3"]) == 0
 
 
+def test_teach_that_could_not_start_on_a_full_disk_starts_when_run_again(
+    tmp_path, monkeypatch, capsys
+):
+    """A teach whose session could not start (the disk full as config.json was written) said
+    to free space and start the session again; the same command then said "--run-dir ... holds
+    other files and no session": the run directory kept the writer.lock of the failed start
+    and the config.json.tmp it could not finish."""
+    from test_session_faults import file_size_limit
+
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    argv = ["teach", "corridor", "--run-dir", str(run), "--steps", "1"]
+    with file_size_limit(500):  # the lock's note fits, config.json does not
+        assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert str(run / "config.json") in err and "free space" in err and err.count("\n") == 1
+    assert not (run / "config.json.tmp").exists()
+    assert main(argv) == 0, capsys.readouterr().err  # space freed: the same command
+    assert len(load_records(run)) == 1
+
+
+def test_reproduce_on_a_full_disk_names_the_file_it_could_not_write(tmp_path, capsys):
+    """reproduce on a full disk said only "error: OSError: [Errno 28] No space left on device":
+    the pid written into the run directory's .run.lock stayed in the file object's buffer, and
+    closing the lock raised that bare OSError. The run now meets the full disk at its first
+    real write, and the line names that file and says to free space."""
+    from test_session_faults import file_size_limit
+
+    out = tmp_path / "out"
+    argv = ["reproduce", "corridor", "--seeds", "1", "--workers", "1", "--no-progress"]
+    with file_size_limit(0):
+        assert main([*argv, "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "free space" in err, err
+    assert str(out / "corridor" / "sessions" / "seed0" / "config.json") in err, err
+
+
+def test_teach_stopped_by_a_full_disk_says_how_to_continue_at_the_command_line(
+    tmp_path, monkeypatch, capsys
+):
+    """The disk filling up while a person teaches ended teach with the session's error alone,
+    whose advice is the Python API's ("call run() again or resume"), without what the line of
+    a teach stopped otherwise says: what is saved and the command that continues. The person
+    now reads both, and that command continues the session with every demonstration kept."""
+    import resource
+    import signal
+
+    import corridor.human
+
+    _scripted_corridor_person(monkeypatch, max_demonstrations=None)
+    hard = resource.getrlimit(resource.RLIMIT_FSIZE)[1]
+    answers = []
+
+    class Person:
+        def __call__(self, observation, info):
+            answers.append(0)
+            if len(answers) == 4:  # the disk is full from the 4th answer on
+                resource.setrlimit(resource.RLIMIT_FSIZE, (0, hard))
+            return 0
+
+        def set_status(self, text):
+            pass
+
+    monkeypatch.setattr(corridor.human, "make_teacher", lambda **kw: Person())
+    run = tmp_path / "session"
+    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    limits = resource.getrlimit(resource.RLIMIT_FSIZE)
+    try:
+        rc = main(["teach", "corridor", "--run-dir", str(run), "--steps", "10"])
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, limits)
+        signal.signal(signal.SIGXFSZ, handler)
+    err = capsys.readouterr().err
+    assert rc == 1 and err.count("\n") == 1 and "steps.sqlite failed" in err, err
+    assert "3 demonstrations over 3 steps are saved" in err, err
+    assert f"continue with: torchcbl teach corridor --run-dir {run} --resume" in err, err
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "2"]) == 0
+    assert len(load_records(run)) == 5
+
+
 def test_teach_resume_of_a_damaged_session_is_a_one_line_mistake(tmp_path, monkeypatch, capsys):
     """teach --resume of a session with a damaged log is told as evaluate tells it: one line,
     exit code 2, and the session's files untouched. (It was exit code 1, with the error's

@@ -10,11 +10,13 @@ the env was lost (:class:`Witness`).
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import hashlib
 import json
 import math
 import os
+import resource
 import shutil
 import signal
 import sqlite3
@@ -405,6 +407,55 @@ def test_really_full_disk(small_disk, leave):
     goes_on(ct, env, run, world=overlap_world)
 
 
+@contextlib.contextmanager
+def file_size_limit(nbytes: int):
+    """A full disk without root: a write past ``nbytes`` of a file fails with EFBIG
+    (RLIMIT_FSIZE, its SIGXFSZ ignored), in this process, for the block."""
+    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (nbytes, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, handler)
+
+
+def test_a_session_that_cannot_start_on_a_full_disk_says_which_file(tmp_path):
+    """On a full disk a new session's writer.lock gets no room for its note either; the note's
+    write was buffered, so closing the lock file wrote it again and raised a bare
+    ``OSError: [Errno 28] No space left on device`` that hid the SessionWriteError naming
+    config.json and the fix (and, at the command line, was all the user was told)."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    with file_size_limit(0), pytest.raises(OSError) as err:
+        ConfidentTeacher(env, oracle(env), run_dir=run, progress=False)
+    assert type(err.value) is SessionWriteError, repr(err.value)
+    assert str(run / "config.json") in str(err.value) and "free space" in str(err.value)
+    assert not (run / "config.json").exists()
+    ct = ConfidentTeacher(env, oracle(env), run_dir=run, progress=False)  # space freed
+    ct.run(max_steps=3)
+    ct.close()
+    assert len(load_records(run)) == 3
+
+
+def test_a_checkpoint_that_does_not_fit_on_the_disk_says_the_disk_is_full(tmp_path):
+    """A checkpoint written on a full disk failed inside torch.save, whose error is its C++
+    assertion: the user read "writing .../model-00000002.pt failed ([enforce fail at
+    inline_container.cc:672] . unexpected pos 576 vs 534)", with errno 5 (EIO), and nothing
+    saying the disk was full."""
+    run = tmp_path / "run"
+    ct, env = session(run)
+    with file_size_limit(1000), pytest.raises(SessionWriteError) as err:  # a line fits
+        ct.run(max_steps=5)
+    msg = str(err.value)
+    assert str(run / "checkpoints" / "model-00000002.pt") in msg, msg
+    assert "(File too large)" in msg and "enforce fail" not in msg, msg
+    assert err.value.errno == errno.EFBIG
+    assert not list((run / "checkpoints").iterdir())  # no part of it is left
+    goes_on(ct, env, run)
+
+
 # -- 3. readers never write -------------------------------------------------------------------
 
 
@@ -712,6 +763,31 @@ def test_damaged_sqlite_file(tmp_path):
     log.write_bytes(good)  # restored from a backup
     back, env = resume(run)
     goes_on(back, env, run)
+
+
+def test_a_session_copied_without_its_wal_file_is_said_to_lack_it(tmp_path):
+    """A session not closed cleanly (killed, or copied while its writer ran) has its commits
+    in steps.sqlite-wal, the tables themselves included until the first checkpoint. Read
+    without that file (deleted as a temporary file, or left behind by a copy), the log was
+    called "not a readable SQLite database (no such table: steps)", with the advice to salvage
+    it with sqlite3's .recover, which finds nothing: the steps were never in that file. The
+    error now names the missing -wal file and says to put it back."""
+    run, copy = tmp_path / "run", tmp_path / "copy"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=20)
+    assert (run / "steps.sqlite-wal").exists()
+    copy.mkdir()
+    for name in ("config.json", "steps.sqlite", "steps.journal", "writers.jsonl"):
+        shutil.copy2(run / name, copy / name)  # the -wal and -shm left behind
+    for read in (load_records, load_model, resume):
+        with pytest.raises(CorruptSessionError) as err:
+            read(copy)
+        msg = str(err.value)
+        assert str(copy / "steps.sqlite-wal") in msg and "is missing" in msg, msg
+        assert "back beside steps.sqlite" in msg and ".recover" not in msg, msg
+    shutil.copy2(run / "steps.sqlite-wal", copy / "steps.sqlite-wal")  # put back
+    assert load_records(copy) == ct.records
+    ct.close()
 
 
 @pytest.mark.parametrize("key", ["teaching", "model", "env", "seed"])

@@ -685,6 +685,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
     from torchcbl.benchmark import _import
+    from torchcbl.errors import SessionWriteError
+    from torchcbl.session import LOCK_NAME
     from torchcbl.teaching import ConfidentTeacher, TeachingConfig, TeachingInterrupted
 
     package, env_id, human_module, settings, setup_factory = _TEACH[args.domain]
@@ -722,7 +724,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             f"{run_dir} already holds a teaching session; add --resume to continue it "
             "or choose another --run-dir"
         )
-    elif run_dir.is_dir() and any(run_dir.iterdir()):
+    elif run_dir.is_dir() and any(p.name != LOCK_NAME for p in run_dir.iterdir()):
+        # (the writer lock alone is what a session that could not start leaves)
         raise _UsageError(
             f"--run-dir {run_dir} holds other files and no session; a new session needs a new "
             "or empty directory"
@@ -773,20 +776,31 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     # demonstrations) are lifted for this call, else a finished session could never go on
     lifted = {"max_demonstrations": None, "max_episodes": None} if args.resume else {}
     status()  # a resumed session's counts from its first request on
+    go_on = f"continue with: torchcbl teach {args.domain} --run-dir {_shell(run_dir)} --resume"
     try:
-        ct.run(max_steps=ct.n_steps + args.steps, **lifted)
-    except TeachingInterrupted:
-        print("\nStopped by the teacher.")
-    except KeyboardInterrupt:  # Ctrl-C between two requests (the agent acting on its own)
-        print("\nStopped by the teacher (Ctrl-C).")
-    finally:
-        ct.close()
-        env.close()
+        try:
+            ct.run(max_steps=ct.n_steps + args.steps, **lifted)
+        except TeachingInterrupted:
+            print("\nStopped by the teacher.")
+        except KeyboardInterrupt:  # Ctrl-C between two requests (the agent acting on its own)
+            print("\nStopped by the teacher (Ctrl-C).")
+        finally:
+            try:
+                ct.close()
+            finally:
+                env.close()
+    except SessionWriteError as exc:  # the disk filled up: what was recorded is kept
+        print(
+            f"torchcbl teach: error: {_one_line(exc)} {ct.n_demonstrations} demonstrations "
+            f"over {ct.n_steps} steps are saved in {run_dir}; free space, then {go_on}",
+            file=sys.stderr,
+        )
+        return 1
     why = _STOP_REASONS.get(ct.stop_reason or "", "")
     print(
         f"{ct.n_demonstrations} demonstrations over {ct.n_steps} steps saved in {run_dir}"
         + (f" ({why})" if why else "")
-        + f"; continue with: torchcbl teach {args.domain} --run-dir {_shell(run_dir)} --resume"
+        + f"; {go_on}"
     )
     return 0
 

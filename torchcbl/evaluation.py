@@ -558,10 +558,14 @@ def hold_run_dir(run_dir: Any) -> Iterator[None]:
                 f"{lock}); wait for it to end, or stop it, then run again (with --resume / "
                 "resume=True to go on from its finished seeds)"
             ) from None
-        f.seek(0)
-        f.truncate()
-        f.write(str(os.getpid()))
-        f.flush()
+        try:
+            # straight to the file, not through f's buffer: a pid that does not fit (a full
+            # disk) would stay buffered and make closing the lock raise a bare OSError in
+            # place of the error the run meets at its first real write, which names the file
+            os.ftruncate(f.fileno(), 0)
+            os.write(f.fileno(), str(os.getpid()).encode())
+        except OSError:
+            pass  # the lock holds without the pid
         try:
             yield
         except BaseException:

@@ -128,6 +128,7 @@ import datetime
 import errno
 import fcntl
 import hashlib
+import io
 import json
 import os
 import re
@@ -414,9 +415,18 @@ def _upgrade_format1(db: sqlite3.Connection) -> bool:
 
 
 def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
+    """Write ``data`` to ``path`` through ``<name>.tmp`` renamed over it; a write that fails
+    (full disk) leaves neither ``path`` changed nor the ``.tmp`` behind."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise
 
 
 #: Keys a session config must have, with what each must be (checked by :func:`load_config`).
@@ -700,10 +710,11 @@ def _acquire_lock(run_dir: Path) -> Any:
             "Reading meanwhile needs no lock (load_records, load_model)."
         ) from None
     try:
-        f.seek(0)
-        f.truncate()
-        f.write(f"process {os.getpid()} on {socket.gethostname()}\n")
-        f.flush()
+        # straight to the file, not through f's buffer: a note that does not fit (full disk)
+        # would stay buffered, and closing the lock would write it again and raise, hiding
+        # the error that closing it goes with
+        os.ftruncate(f.fileno(), 0)
+        os.write(f.fileno(), f"process {os.getpid()} on {socket.gethostname()}\n".encode())
     except OSError:
         pass  # the lock holds without the note
     return f
@@ -737,7 +748,12 @@ def _write_checkpoint(
     if digest is not None:
         payload["labels_sha256"] = digest
     try:
-        torch.save(payload, tmp)
+        # the bytes written by Python, not by torch.save: a full disk is then an OSError
+        # saying so (ENOSPC), where torch.save's own writer fails with a C++ assertion
+        # ("[enforce fail at inline_container.cc:...] unexpected pos ...")
+        buffer = io.BytesIO()
+        torch.save(payload, buffer)
+        tmp.write_bytes(buffer.getvalue())
         os.replace(tmp, path)
     except (OSError, RuntimeError) as exc:
         tmp.unlink(missing_ok=True)
@@ -1166,6 +1182,19 @@ def _db_error(exc: sqlite3.DatabaseError, path: Path, *, writing: bool = False) 
     code = getattr(exc, "sqlite_errorcode", None)
     if writing and ((code is not None and (code & 0xFF) in (13, 10)) or "disk is full" in str(exc)):
         return _write_error(exc, path, "opening the step log", _FREE_SPACE)
+    wal = path.with_name(LOG_NAME + "-wal")
+    ran = any(path.with_name(name).exists() for name in (JOURNAL_NAME, WRITERS_NAME))
+    if "no such table: steps" in str(exc) and ran and not wal.exists():
+        # a writer ran, and its tables are not in the log: they were only in its WAL (no
+        # checkpoint since the session started: it was never closed cleanly), now missing
+        return CorruptSessionError(
+            f"{path} holds no steps table although a writer logged into it, and {wal} is "
+            "missing: a session that was not closed cleanly (killed, or copied while it ran) "
+            "keeps its commits in that file, here all of them. torchcbl changed "
+            f"nothing. Put {wal.name} back beside {path.name} (from the directory it was "
+            "copied from, or a backup), then read or resume the session again; do not delete "
+            "it by hand."
+        )
     return CorruptSessionError(
         f"{path} is not a readable SQLite database ({exc}). torchcbl changed nothing. Restore "
         f"it from a backup, or salvage it with `sqlite3 {path} .recover | sqlite3 "
