@@ -135,7 +135,7 @@ def test_each_readme_placeholder_means_what_the_readme_says(capsys):
 def corridor_run(tmp_path_factory):
     """A quick corridor reproduction (2 seeds): a run directory holding two sessions."""
     out = tmp_path_factory.mktemp("cli") / "runs"
-    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
+    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "2", "--no-progress"]
     assert main([*argv, "--out", str(out)]) == 0
     return out
 

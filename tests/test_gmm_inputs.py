@@ -235,6 +235,27 @@ def test_read_only_arrays_are_read_without_a_warning():
     assert torch.equal(lp, ref.log_prob(x.copy())) and torch.equal(aic, ref.aic(x.copy(), y))
 
 
+def test_a_policy_reads_a_read_only_observation_without_a_warning():
+    """GreedyPolicy handed a read-only observation (a row of an np.load(mmap_mode="r")
+    dataset, an env's frozen buffer) to torch.as_tensor as it was: "The given NumPy array is
+    not writable" at every call (an error under -W error)."""
+    from torchcbl import GreedyPolicy
+
+    x, y = _data(n=60)
+    policy = GreedyPolicy(GaussianMixtureSet(3, 3, 2).fit(x, y))
+    row = x[7].copy()
+    row.setflags(write=False)
+    warn_always = torch.is_warn_always_enabled()
+    torch.set_warn_always(True)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            action = policy(row)
+    finally:
+        torch.set_warn_always(warn_always)
+    assert action == policy(x[7].copy())
+
+
 def test_single_observation_path_matches_batch_path():
     model, x, _ = _fitted()
     probe = np.random.default_rng(5).normal(scale=4, size=(40, 3)) + 3

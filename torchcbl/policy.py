@@ -41,7 +41,8 @@ class GreedyPolicy:
                 f"GreedyPolicy: expected one observation of shape ({n_features},), got shape "
                 f"{x.shape}; for a batch [N, D] call policy.model.classify(batch)"
             )
-        return self.model.classify(torch.as_tensor(x).reshape(1, -1))
+        # a copy: a read-only row (a memory-mapped dataset) made torch.as_tensor warn
+        return self.model.classify(torch.tensor(x).reshape(1, -1))
 
     def __call__(self, observation: Any) -> int:
         """The model's action for one observation [D] (Eq. 7); RuntimeError before any fit."""
