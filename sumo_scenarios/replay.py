@@ -386,7 +386,14 @@ def _check_against(record: EpisodeRecord, logged: np.ndarray, where: str) -> Non
 
 
 def export_fcd(record: EpisodeRecord, path: str | Path) -> Path:
-    """Write the episode's SUMO FCD XML (every vehicle, every timestep) to ``path``."""
+    """Write the episode's SUMO FCD XML (every vehicle, every timestep) to ``path`` (gzipped
+    when the name ends in ``.gz``, as SUMO writes it).
+
+    One ``<timestep>`` per action, T in all: SUMO labels a state with the time its step began,
+    so the timestep of time ``k * step_length_s`` holds the state after the env's step
+    ``k + 1`` (``info["t"] == k + 1``), and the state at reset is not in the file (a GIF of
+    the episode has T + 1 frames). The ego's ``x`` there is the road's start offset plus
+    ``info["position_m"]`` (``SimConfig.ego_start_m``, 300 m by default)."""
     path = Path(path)
     replay(record, fcd_output=path)
     return path
