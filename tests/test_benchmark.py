@@ -422,7 +422,7 @@ def test_a_cells_seed_seeds_daggers_coins_unless_its_params_do():
     assert spec.build(3).seed == 3 and spec.build().seed == 0
     assert bm.StrategySpec("dagger", {"seed": 7}).build(3).seed == 7  # the params' seed wins
     assert bm.StrategySpec("bc").build(3) is not None  # a strategy without a seed is as before
-    assert bm.CELL_FORMAT == 3  # cached cells of formats 1 and 2 are recomputed
+    assert bm.CELL_FORMAT == 4  # cached cells of formats 1 to 3 are recomputed
 
 
 def test_a_strategy_spec_is_a_known_name_or_an_import_path():

@@ -106,11 +106,13 @@ def test_a_person_watching_corrects_only_with_a_key_press():
     person answered the default key while a press was pending or after a lost one, so a
     learner that did just what the person wanted was "corrected" to the default: with a
     teacher that always agrees with the learner, 98 of 200 steps came back as corrections.
-    A correction is a key press that differs from the learner's action; no press, none."""
+    A correction is a key press that differs from the learner's action; no press, none; and
+    where the learner does what the person wants, nothing is pressed (no doubled press of a
+    key pressed for nothing either)."""
     from torchcbl.strategies import correcting
 
-    cfg = HumanTimingConfig(delay_probs=(0.35, 0.45, 0.2), miss_prob=0.1, double_prob=0.0)
-    wants = [int(x) for x in np.random.default_rng(1).integers(0, 3, 300)]
+    cfg = HumanTimingConfig(delay_probs=(0.35, 0.45, 0.2), miss_prob=0.1, double_prob=0.1)
+    wants = [int(x) for x in np.random.default_rng(1).integers(0, 3, 2000)]
     for teacher in (
         HumanTiming(lambda o, i: int(o[0]), cfg, seed=0),
         correcting(HumanTiming(lambda o, i: int(o[0]), cfg, seed=0)),
@@ -126,6 +128,12 @@ def test_a_person_watching_corrects_only_with_a_key_press():
     # wait for): corrected at once, every time
     h = HumanTiming(lambda o, i: 0, cfg, seed=0)
     assert [h.correct(np.zeros(2), {"t": t}, 2) for t in range(50)] == [0] * 50
+    # a press decided and still pending does not hold back that correction
+    late = HumanTimingConfig(delay_probs=(0.0, 0.0, 1.0), miss_prob=0.0, double_prob=0.0)
+    h = HumanTiming(lambda o, i: int(o[0]), late, seed=0)
+    steps = [(1, 0), (0, 2), (0, 0)]  # (wanted, learner's action)
+    got = [h.correct(np.array([w, 0.0]), {"t": t}, a) for t, (w, a) in enumerate(steps)]
+    assert got == [None, 0, None]
 
 
 def test_human_timing_says_once_when_the_info_has_no_step_counter():

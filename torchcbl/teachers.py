@@ -16,10 +16,10 @@ and makes it answer like a person at a keyboard (paper Section 5: the teachers w
   next step, whatever the wrapped teacher asks then.
 
 As a correcting teacher (:meth:`HumanTiming.correct`, asked at every autonomous step by CBA and
-HG-DAgger) the person corrects with a key press that differs from the learner's action: while a
-press is pending, or after a lost one, there is none (until 2026-11-27 the default action
-answered then counted as a correction, so a learner that did what the person wanted was
-"corrected" to the default).
+HG-DAgger) the person corrects with a key press that differs from the learner's action: where
+the learner does what the person wants nothing is pressed, and while a press is pending, or
+after a lost one, there is none (until 2026-11-27 the default action answered then counted as a
+correction, so a learner that did what the person wanted was "corrected" to the default).
 
 Everything is drawn from one seeded ``numpy`` generator, so the same seed and the same inputs give
 the same answers. Consecutive calls are recognised through ``info["t"]`` (the env's step
@@ -138,14 +138,12 @@ class HumanTiming:
         self._double: int | None = None
         self._last_t: Any = None
         self._warned_no_t = False
-        self._no_press = False  # the last answer was the default for want of a press
         self.n_delayed = self.n_missed = self.n_doubled = 0
 
     def _press(self, action: int) -> int:
         cfg = self.config
         if self._rng.random() < cfg.miss_prob:
             self.n_missed += 1
-            self._no_press = True
             return cfg.default_action
         if self._rng.random() < cfg.double_prob:
             self._double = action
@@ -158,6 +156,26 @@ class HumanTiming:
         is pending the answer is ``default_action`` (``info["t"]`` tells consecutive steps
         apart)."""
         cfg = self.config
+        wanted = self._next_step(observation, info)
+        if self._double is not None:
+            action, self._double = self._double, None
+            return action
+        if self._pending is not None:
+            _, left = self._pending
+            if left > 1:
+                self._pending = (self._pending[0], left - 1)
+                return cfg.default_action
+            self._pending = None
+            if wanted == cfg.default_action:
+                return wanted  # the person held back: the reason to press is gone
+            return self._press(wanted)
+        if wanted == cfg.default_action:
+            return wanted
+        return self._react(wanted)
+
+    def _next_step(self, observation: np.ndarray, info: dict) -> int:
+        """Advance to this call's step (a gap drops a pending or doubled press) and return
+        the wrapped teacher's action."""
         t = info.get("t") if isinstance(info, dict) else None
         if t is None and not self._warned_no_t:
             self._warned_no_t = True
@@ -167,48 +185,60 @@ class HumanTiming:
                 "press is lost and drawn again at the next call, and no press is doubled. Give "
                 "the env a step counter (info['t'] = the step's index in its episode, e.g. in "
                 "a gymnasium.Wrapper) to get the configured reaction times.",
-                stacklevel=2,
+                stacklevel=3,  # the caller of __call__ / correct
             )
         if t is None or self._last_t is None or t != self._last_t + 1:
             self._pending = None
             self._double = None
         self._last_t = t
-        self._no_press = False  # set where the default is answered for want of a press
-        wanted = _action_index(self.teacher(observation, info), self.teacher)
-        if self._double is not None:
-            action, self._double = self._double, None
-            return action
-        if self._pending is not None:
-            _, left = self._pending
-            if left > 1:
-                self._pending = (self._pending[0], left - 1)
-                self._no_press = True
-                return cfg.default_action
-            self._pending = None
-            if wanted == cfg.default_action:
-                return wanted  # the person held back: the reason to press is gone
-            return self._press(wanted)
-        if wanted == cfg.default_action:
-            return wanted
+        return _action_index(self.teacher(observation, info), self.teacher)
+
+    def _react(self, wanted: int) -> int:
+        """The person decides to press ``wanted`` (not the default): now, or after a drawn
+        delay (the default is answered meanwhile)."""
         delay = int(self._rng.choice(self._delays, p=self._probs))
         if delay == 0:
             return self._press(wanted)
         self.n_delayed += 1
         self._pending = (wanted, delay)
-        self._no_press = True
-        return cfg.default_action
+        return self.config.default_action
 
     def correct(self, observation: np.ndarray, info: dict, action: int) -> int | None:
         """The person watching the learner's autonomous ``action`` (for strategies that take
-        corrections: CBA, HG-DAgger): a correction is a key press that differs from it, with
-        the same timing as :meth:`__call__` (one call per step, either method). While a press
-        is pending, or after one is lost, there is no press and so no correction; where the
-        person wants the default action (no key to wait for) and the learner did another,
-        the correction is the default, at once."""
-        answer = self(observation, info)
-        if self._no_press or answer == int(action):
+        corrections: CBA, HG-DAgger; one call per step, this or :meth:`__call__`): a
+        correction is a key press that differs from ``action``, else None.
+
+        Where the learner does what the person wants, there is nothing to press (and no draw
+        is made; a press decided earlier and still pending is dropped). Where the person wants
+        another non-default action, they react as to a request: the press comes after a drawn
+        delay (no correction meanwhile), may be lost, or repeated at the next step (a slip,
+        which corrects if the learner then does otherwise). Where the person wants the default
+        action (no key to wait for) and the learner did another, the correction is the default,
+        at once."""
+        cfg = self.config
+        action = int(action)
+        wanted = self._next_step(observation, info)
+        if self._double is not None:  # the key pressed again: a slip of the hand
+            pressed, self._double = self._double, None
+            return None if pressed == action else pressed
+        if wanted == action:
+            self._pending = None  # the reason to press is gone
             return None
-        return answer
+        if wanted == cfg.default_action:
+            self._pending = None
+            return wanted
+        if self._pending is not None:
+            _, left = self._pending
+            if left > 1:
+                self._pending = (self._pending[0], left - 1)
+                return None
+            self._pending = None
+            return self._correction(self._press(wanted), wanted)
+        return self._correction(self._react(wanted), wanted)
+
+    def _correction(self, answer: int, wanted: int) -> int | None:
+        # the key press, if one landed (not a lost one, not one still pending)
+        return wanted if answer == wanted else None
 
     def stats(self) -> dict[str, int]:
         """Counts of delayed, missed and doubled presses so far."""
