@@ -63,12 +63,20 @@ def test_run_versions_name_the_commit_of_the_checkout_that_ran():
     ).stdout.strip()
     source = run_versions()["torchcbl_source"]
     dirty = subprocess.run(
-        [git, "-C", str(root), "diff", "HEAD"], capture_output=True, text=True, check=True
+        [git, "-C", str(root), "diff", "HEAD"], capture_output=True, check=True
     ).stdout
-    if not dirty:
+    new = subprocess.run(
+        [git, "-C", str(root), "ls-files", "--others", "--exclude-standard", "--"]
+        + ["torchcbl", "corridor", "sumo_scenarios"],
+        capture_output=True,
+        check=True,
+    ).stdout
+    if new:  # the other test checks what untracked files do to the code
+        assert source.startswith(f"git {head} with uncommitted changes (diff "), source
+    elif not dirty:
         assert source == f"git {head}", source
     else:  # which changes, too: two different edits of one commit are two codes
-        digest = hashlib.sha256(dirty.encode()).hexdigest()[:12]
+        digest = hashlib.sha256(dirty).hexdigest()[:12]
         assert source == f"git {head} with uncommitted changes (diff {digest})", source
 
 
@@ -106,7 +114,15 @@ Path("corridor/_mine.py").write_text("A = 1")
 one = source()
 Path("corridor/_mine.py").write_text("A = 2")
 two = source()
-print(repr((clean, aside, one, two)))
+import os
+os.remove("corridor/_mine.py")
+Path("corridor/__init__.py").write_bytes(Path("corridor/__init__.py").read_bytes() + b"# caf\\xe9")
+latin = source()  # a tracked edit that is not UTF-8
+open(b"corridor/_caf\\xe9.txt", "wb").write(b"x")
+named = source()  # an untracked file whose name is not UTF-8
+os.symlink("/nonexistent/target", "corridor/_link")
+linked = source()  # a dangling link
+print(repr((clean, aside, one, two, latin, named, linked)))
 """
     proc = subprocess.run(
         [sys.executable, "-c", script],
@@ -117,11 +133,15 @@ print(repr((clean, aside, one, two)))
         timeout=120,
     )
     assert proc.returncode == 0, proc.stderr
-    clean, aside, one, two = eval(proc.stdout.strip().splitlines()[-1])
+    clean, aside, one, two, latin, named, linked = eval(proc.stdout.strip().splitlines()[-1])
     assert clean.startswith("git ") and "uncommitted" not in clean, clean
     assert aside == clean
     assert one.startswith(clean + " with uncommitted changes (diff "), one
     assert two != one and two.startswith(clean + " with uncommitted changes (diff "), two
+    # bytes that are not UTF-8 (a diff, a file name) and a dangling link: each another code
+    later = [latin, named, linked]
+    assert all(v.startswith(clean + " with uncommitted changes (diff ") for v in later), later
+    assert len({one, two, *later}) == 5, later
 
 
 ROOT = Path(__file__).parents[1]

@@ -106,23 +106,26 @@ def _source_revision() -> str:
     if git is None:
         return "unknown (no git)"
 
-    def run(*args: str) -> subprocess.CompletedProcess[str] | None:
+    def run(*args: str) -> subprocess.CompletedProcess[bytes] | None:
+        # bytes: a diff or a file name need not be UTF-8 (a latin-1 comment, a file named
+        # by another system), and decoding them as text raised UnicodeDecodeError
         try:
-            return subprocess.run(
-                [git, "-C", str(root), *args], capture_output=True, text=True, timeout=30
-            )
+            return subprocess.run([git, "-C", str(root), *args], capture_output=True, timeout=30)
         except (OSError, subprocess.SubprocessError):
             return None
+
+    def text(out: bytes) -> str:
+        return out.decode("utf-8", errors="replace").strip()
 
     top = run("rev-parse", "--show-toplevel")
     if top is None:
         return "unknown (git failed)"
     if top.returncode:  # not a repository, or one git refuses (another owner's, say)
-        why = " ".join(top.stderr.split()[:12]) or "git failed"
+        why = " ".join(text(top.stderr).split()[:12]) or "git failed"
         return (
             "unknown (not a git checkout)" if "not a git repository" in why else f"unknown ({why})"
         )
-    if Path(top.stdout.strip()).resolve() != root:
+    if Path(os.fsdecode(top.stdout.strip())).resolve() != root:
         return "unknown (not a git checkout)"
     head = run("rev-parse", "HEAD")
     # --no-optional-locks: no index.lock taken to refresh the index (a user's own git commit
@@ -135,21 +138,39 @@ def _source_revision() -> str:
         return "unknown (git failed)"
     if new is None or new.returncode:
         return "unknown (git failed)"
-    untracked = sorted(p for p in new.stdout.split("\0") if p)
+    sha = text(head.stdout)
+    untracked = sorted(p for p in new.stdout.split(b"\0") if p)
     if not changed.stdout.strip() and not untracked:
-        return f"git {head.stdout.strip()}"
+        return f"git {sha}"
     # which uncommitted changes: two different edits of the same commit are two codes
     diff = run("--no-optional-locks", "diff", "HEAD")
     if diff is None or diff.returncode:
-        return f"git {head.stdout.strip()} with uncommitted changes"
-    h = hashlib.sha256(diff.stdout.encode())
+        return f"git {sha} with uncommitted changes"
+    h = hashlib.sha256(diff.stdout)
     for path in untracked:
-        try:
-            content = (root / path).read_bytes()
-        except OSError:  # gone meanwhile, or unreadable
-            content = b""
-        h.update(b"\0" + path.encode() + b"\0" + hashlib.sha256(content).digest())
-    return f"git {head.stdout.strip()} with uncommitted changes (diff {h.hexdigest()[:12]})"
+        h.update(b"\0" + path + b"\0" + _file_digest(os.path.join(os.fsencode(root), path)))
+    return f"git {sha} with uncommitted changes (diff {h.hexdigest()[:12]})"
+
+
+def _file_digest(path: bytes) -> bytes:
+    """SHA-256 of what an untracked ``path`` is: a file's contents (read in blocks), a
+    symbolic link's target (not followed: it may dangle, or name a device), or only its kind
+    (a directory, such as a repository nested in a package, which git lists as ``dir/``)."""
+    import stat
+
+    try:
+        st = os.lstat(path)
+        if stat.S_ISLNK(st.st_mode):
+            return hashlib.sha256(b"link\0" + os.readlink(path)).digest()
+        if not stat.S_ISREG(st.st_mode):
+            return hashlib.sha256(b"not a file").digest()
+        h = hashlib.sha256(b"file\0")
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+        return h.digest()
+    except OSError:  # gone meanwhile, or unreadable
+        return hashlib.sha256(b"unreadable").digest()
 
 
 def run_versions(**extra: str) -> dict[str, str]:
