@@ -16,7 +16,6 @@ fresh road segment. Two simulations running at once need two processes.
 
 from __future__ import annotations
 
-import atexit
 import math
 import os
 import shutil
@@ -60,40 +59,34 @@ def _release(state: dict[str, bool]) -> None:
             libsumo.close()
 
 
-# per process (a forked child makes its own): the directory of the copies _sumo_input makes
-_INPUT_COPIES: dict[int, Path] = {}
-
-
-def _sumo_input(name: str) -> str:
-    """The path SUMO is given for the shipped data file ``name`` (``-n``, ``-a``).
+def _sumo_inputs() -> tuple[list[str], Path | None]:
+    """SUMO's ``-n`` and ``-a`` arguments (the shipped network and vehicle types), and the
+    temporary directory of copies to remove once SUMO has loaded them (None: no copies).
 
     SUMO splits these options' file lists at commas, with no way to escape one: under a path
-    holding a comma (a checkout in "OneDrive - Acme, Inc") every start failed. There, SUMO
-    is given a copy in a temporary directory of this process, removed when the process ends.
+    holding a comma (a checkout in "OneDrive - Acme, Inc") every start failed. There SUMO is
+    given copies in a fresh temporary directory, which the caller removes as soon as the start
+    or load returns (SUMO reads them then only), so no process, forked worker or killed one,
+    leaves copies behind for longer than a load.
     """
-    path = data_path(name)
-    if "," not in str(path):
-        return str(path)
-    pid = os.getpid()
-    if pid not in _INPUT_COPIES:
-        copies = Path(tempfile.mkdtemp(prefix="torchcbl-sumo-"))
-        if "," in str(copies):
-            shutil.rmtree(copies, ignore_errors=True)
-            raise RuntimeError(
-                f"SUMO cannot open {path}: it splits file names at commas, and this path holds "
-                f"one, as does the temporary directory ({copies.parent}) its copy would go to; "
-                "set TMPDIR to a directory whose path has no comma (or move the package)"
-            )
-        atexit.register(_remove_copies, pid, copies)
-        _INPUT_COPIES[pid] = copies
-    copy = _INPUT_COPIES[pid] / name
-    shutil.copyfile(path, copy)  # each start: the copy is the shipped file as it is now
-    return str(copy)
-
-
-def _remove_copies(pid: int, copies: Path) -> None:
-    if os.getpid() == pid:  # not from a forked child, whose parent still uses them
+    net, add = data_path("road.net.xml"), data_path("driving.add.xml")
+    if "," not in str(net) and "," not in str(add):
+        return ["-n", str(net), "-a", str(add)], None
+    copies = Path(tempfile.mkdtemp(prefix="torchcbl-sumo-"))
+    if "," in str(copies):
         shutil.rmtree(copies, ignore_errors=True)
+        raise RuntimeError(
+            f"SUMO cannot open {net}: it splits file names at commas, and this path holds one, "
+            f"as does the temporary directory ({copies.parent}) its copy would go to; set "
+            "TMPDIR to a directory whose path has no comma (or move the package)"
+        )
+    try:
+        for p in (net, add):
+            shutil.copyfile(p, copies / p.name)
+    except BaseException:
+        shutil.rmtree(copies, ignore_errors=True)
+        raise
+    return ["-n", str(copies / net.name), "-a", str(copies / add.name)], copies
 
 
 _MAX_EXTRA_GAP_M = 250.0  # spacings are capped so a recycled car always fits on the edge
@@ -235,13 +228,10 @@ class HighwaySim:
         self.n_shifts = 0
 
     # ------------------------------------------------------------------ lifecycle
-    def _args(self, seed: int, fcd_path: Path | None) -> list[str]:
+    def _args(self, inputs: list[str], seed: int, fcd_path: Path | None) -> list[str]:
         args = [
             "sumo",
-            "-n",
-            _sumo_input("road.net.xml"),
-            "-a",
-            _sumo_input("driving.add.xml"),
+            *inputs,
             "--step-length",
             repr(self.config.step_length_s),
             "--collision.action",
@@ -277,7 +267,6 @@ class HighwaySim:
             raise RuntimeError("this simulation is closed")
         if not 0 <= ego_lane < N_LANES:
             raise ValueError(f"ego_lane must lie in [0, {N_LANES - 1}]")
-        args = self._args(seed, fcd_path)
         self._ready = False  # until this reset completes: step() would crash SUMO before
         if _SUMO["running"] and _SUMO["pid"] != os.getpid():
             raise RuntimeError(
@@ -301,13 +290,19 @@ class HighwaySim:
         # owned from here, also if the load fails (close() then closes what is left of it)
         _SUMO["owner"] = self._state
         self._state["owns"] = True
-        if _SUMO["running"]:
-            libsumo.load(args[1:])
-        else:
-            # running from before the call: a start cut short still gets its libsumo.close()
-            # (which is harmless when nothing is loaded)
-            _SUMO["running"], _SUMO["pid"] = True, os.getpid()
-            libsumo.start(args)
+        inputs, copies = _sumo_inputs()
+        args = self._args(inputs, seed, fcd_path)
+        try:
+            if _SUMO["running"]:
+                libsumo.load(args[1:])
+            else:
+                # running from before the call: a start cut short still gets its
+                # libsumo.close() (which is harmless when nothing is loaded)
+                _SUMO["running"], _SUMO["pid"] = True, os.getpid()
+                libsumo.start(args)
+        finally:
+            if copies is not None:  # read by the load: not needed any more
+                shutil.rmtree(copies, ignore_errors=True)
         self._rng = rng
         self._next_id = 0
         self.n_recycled = 0

@@ -536,7 +536,8 @@ def test_a_driving_env_refuses_to_be_copied_or_pickled(env):
 def test_the_env_runs_from_a_directory_whose_path_holds_a_comma(tmp_path):
     """A checkout or install under a path with a comma ("OneDrive - Acme, Inc/..."): the env
     resets and steps. (SUMO splits the file lists -n and -a at commas: every reset failed with
-    'TraCIException: Process Error' after "Error: File '.../Acme' is not accessible".)"""
+    'TraCIException: Process Error' after "Error: File '.../Acme' is not accessible".) The
+    copies SUMO is given there are removed as soon as it has loaded them."""
     import shutil
     import subprocess
     import sys
@@ -548,14 +549,18 @@ def test_the_env_runs_from_a_directory_whose_path_holds_a_comma(tmp_path):
         site / "sumo_scenarios",
         ignore=shutil.ignore_patterns("__pycache__"),
     )
+    (tmp_path / "tmp").mkdir()
     code = (
+        "import os\n"
         "import sumo_scenarios.env as E\n"
         "assert ',' in E.__file__, E.__file__\n"
         "env = E.DrivingEnv(scenario='light')\n"
         "obs, _ = env.reset(seed=0)\n"
+        "left = os.listdir(os.environ['TMPDIR'])\n"  # the copies SUMO loaded: gone at once
+        "obs, _ = env.reset(seed=1)\n"
         "obs, *_ = env.step(1)\n"
         "env.close()\n"
-        "print(int(obs[3]))\n"
+        "print(int(obs[3]), left + os.listdir(os.environ['TMPDIR']))\n"
     )
     out = subprocess.run(
         [sys.executable, "-c", code],
@@ -563,10 +568,11 @@ def test_the_env_runs_from_a_directory_whose_path_holds_a_comma(tmp_path):
         text=True,
         timeout=60,
         check=False,
-        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
+        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin", "TMPDIR": str(tmp_path / "tmp")},
         cwd=tmp_path,
     )
-    assert out.returncode == 0 and out.stdout.strip() == "3", out.stderr[-2000:]
+    # (a forked worker ends without atexit: copies kept until the process ended stayed)
+    assert out.returncode == 0 and out.stdout.strip() == "3 []", out.stdout + out.stderr[-2000:]
 
 
 def test_a_simulation_started_outside_the_env_is_not_silently_replaced():
