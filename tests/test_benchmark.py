@@ -915,6 +915,10 @@ def test_strategy_parameters_are_given_on_the_command_line(tmp_path, capsys, mon
         "dagger.=3": "expected S.KEY=VALUE",
         "cba.distance_factor=2": "cba is not among --strategies",
         "dagger.beta=0.3": "unexpected keyword argument 'beta'",
+        # Python's spellings and numbers JSON does not read were passed on as strings
+        "dagger.iteration_steps=.5": "'.5' is not a JSON value",
+        "dagger.iteration_steps=1_0": "'1_0' is not a JSON value",
+        "dagger.relabel=False": "'False' is not a JSON value",
     }
     for param, says in mistakes.items():
         assert main([*argv, "--strategy-param", param, "--out", str(tmp_path / "x")]) == 2

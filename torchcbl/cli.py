@@ -877,6 +877,13 @@ def _check_strategy(spec: Any) -> None:
         )
 
 
+def _float_or_none(text: str) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
 def _strategy_params(given: list[str], names: list[str]) -> dict[str, dict[str, Any]]:
     """The --strategy-param S.KEY=VALUE options as {strategy: {key: value}}: a value is read
     as JSON (a number, true, null, a list) where it is JSON, else as the string given."""
@@ -900,6 +907,14 @@ def _strategy_params(given: list[str], names: list[str]) -> dict[str, dict[str, 
             value = json.loads(text)
         except ValueError:
             value = text
+            if text.strip() in ("True", "False", "None") or _float_or_none(text) is not None:
+                # Python's spelling or a number JSON does not read: a string would reach the
+                # constructor ("False" is true), so say how to write it
+                raise _UsageError(
+                    f"--strategy-param {item}: {text!r} is not a JSON value; write numbers as "
+                    "JSON does (0.5, 3, 1e-3), true / false / null, or a string in double "
+                    f"quotes ({name}.{key}='\"{text}\"')"
+                ) from None
         params[name][key] = value
     return params
 
