@@ -1443,3 +1443,47 @@ def test_output_into_a_pipe_whose_reader_left_ends_quietly(corridor_run):
     )
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["steps"] == 30
+
+
+def test_teach_starts_from_prior_demonstrations_of_a_file_or_an_earlier_session(
+    tmp_path, monkeypatch, capsys
+):
+    """--prior-demonstrations FILE.npz or DIR: the session keeps them and every fit includes
+    them; a file that is not what it reads is one line and exit code 2, nothing taught."""
+    from torchcbl.session import load_demonstrations, load_prior_demonstrations
+
+    _scripted_corridor_person(monkeypatch)
+    first = tmp_path / "first"
+    assert main(["teach", "corridor", "--run-dir", str(first), "--steps", "30"]) == 0
+    x, y = load_demonstrations(first)
+    prior = tmp_path / "prior.npz"
+    np.savez(prior, observations=x, actions=y)
+    for source, run, n in ((prior, tmp_path / "second", 5), (tmp_path / "second", None, 10)):
+        run = run or tmp_path / "third"
+        argv = ["teach", "corridor", "--run-dir", str(run), "--steps", "30"]
+        assert main([*argv, "--prior-demonstrations", str(source)]) == 0
+        px, py = load_prior_demonstrations(run)
+        assert len(py) == n and np.array_equal(px[:5], x) and np.array_equal(py[:5], y)
+        assert len(load_demonstrations(run)[1]) == 5  # its own budget, the prior aside
+    capsys.readouterr()
+    np.save(tmp_path / "one.npy", x)
+    np.savez(tmp_path / "keys.npz", obs=x, act=y)
+    np.savez(tmp_path / "flat.npz", observations=x[:, 0], actions=y)
+    np.savez(tmp_path / "range.npz", observations=x, actions=y + 7)
+    (tmp_path / "text.npz").write_text("not numpy")
+    for source, says in (
+        (tmp_path / "nowhere.npz", "no such file or directory; expected a .npz file"),
+        (tmp_path / "one.npy", "a single array (.npy), not a .npz"),
+        (tmp_path / "text.npz", "not a readable .npz"),
+        (tmp_path / "keys.npz", "without 'observations' and 'actions'"),
+        (tmp_path / "flat.npz", "shape [N, 3]"),
+        (tmp_path / "range.npz", "actions must be in [0, 4)"),
+    ):
+        argv = ["teach", "corridor", "--run-dir", str(tmp_path / "bad"), "--steps", "30"]
+        assert main([*argv, "--prior-demonstrations", str(source)]) == 2, source
+        err = capsys.readouterr().err
+        assert says in err and err.count("\n") == 1, err
+        assert not (tmp_path / "bad" / "config.json").exists()
+    argv = ["teach", "corridor", "--run-dir", str(first), "--resume", "--steps", "3"]
+    assert main([*argv, "--prior-demonstrations", str(prior)]) == 2
+    assert "a resumed session keeps the prior" in capsys.readouterr().err

@@ -681,6 +681,56 @@ def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
     return {k: v for k, v in kwargs.items() if k != "render_mode"}
 
 
+_PRIOR_EXPECTED = (
+    "expected a .npz file holding the arrays 'observations' [N, D] and 'actions' [N] (as "
+    "numpy.savez(path, observations=..., actions=...) writes them), or a teaching session "
+    "directory (its labels, after its own prior demonstrations)"
+)
+
+
+def _read_prior_demonstrations(path: Path) -> tuple[Any, Any]:
+    """``--prior-demonstrations``: (observations, actions) from a .npz file or a session
+    directory, or a one-line error. Their shapes and values are checked by ConfidentTeacher."""
+    import numpy as np
+
+    flag = f"--prior-demonstrations {path}"
+    if path.is_dir():
+        from torchcbl.errors import CorruptSessionError, IncompatibleRunDirError
+        from torchcbl.session import load_demonstrations, load_prior_demonstrations
+
+        try:
+            x0, y0 = load_prior_demonstrations(path)
+            x1, y1 = load_demonstrations(path)
+        except (IncompatibleRunDirError, CorruptSessionError) as exc:
+            raise _UsageError(f"{flag}: {_one_line(exc)}") from None
+        return np.concatenate([x0, x1]), np.concatenate([y0, y1])
+    if not path.is_file():
+        raise _UsageError(f"{flag}: no such file or directory; {_PRIOR_EXPECTED}")
+    try:
+        npz = np.load(path, allow_pickle=False)
+    except Exception as exc:  # not a numpy file, cut short, pickled arrays: numpy's errors
+        raise _UsageError(
+            f"{flag}: not a readable .npz ({type(exc).__name__}: {_one_line(exc)}); "
+            f"{_PRIOR_EXPECTED}"
+        ) from None
+    if not isinstance(npz, np.lib.npyio.NpzFile):
+        raise _UsageError(f"{flag}: a single array (.npy), not a .npz; {_PRIOR_EXPECTED}")
+    with npz:
+        missing = [k for k in ("observations", "actions") if k not in npz.files]
+        if missing:
+            lacks = " and ".join(map(repr, missing))
+            raise _UsageError(
+                f"{flag}: it holds the arrays {npz.files}, without {lacks}; {_PRIOR_EXPECTED}"
+            )
+        try:
+            return npz["observations"], npz["actions"]
+        except Exception as exc:  # an object array (pickle refused), a damaged member
+            raise _UsageError(
+                f"{flag}: its arrays cannot be read ({type(exc).__name__}: {_one_line(exc)}); "
+                f"{_PRIOR_EXPECTED}"
+            ) from None
+
+
 def _cmd_teach(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
@@ -709,6 +759,14 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             raise _UsageError(f"--map: {exc}") from None
         shipped = args.map in available_maps()
         map_kwarg = args.map if shipped else str(Path(args.map).resolve())
+    if args.resume and args.prior_demonstrations is not None:
+        raise _UsageError(
+            "--prior-demonstrations: a resumed session keeps the prior demonstrations it started "
+            "from (prior.npz in its directory); leave --prior-demonstrations out with --resume"
+        )
+    prior = None
+    if args.prior_demonstrations is not None:
+        prior = _read_prior_demonstrations(Path(args.prior_demonstrations))
     if args.resume and args.skip_noninteractive:
         raise _UsageError(
             "--skip-noninteractive starts a new session without its non-interactive phase; a "
@@ -761,17 +819,27 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             raise _UsageError(_one_line(exc)) from None
     else:
         config = TeachingConfig(noninteractive=not args.skip_noninteractive, **settings)
-        ct = ConfidentTeacher(
-            env,
-            teacher,
-            model=make_model(seed=args.seed),
-            rule=rule,
-            config=config,
-            run_dir=run_dir,
-            seed=args.seed,
-            progress=False,
-            on_step=status,
-        )
+        try:
+            ct = ConfidentTeacher(
+                env,
+                teacher,
+                model=make_model(seed=args.seed),
+                prior_demonstrations=prior,
+                rule=rule,
+                config=config,
+                run_dir=run_dir,
+                seed=args.seed,
+                progress=False,
+                on_step=status,
+            )
+        except (ValueError, TypeError) as exc:
+            env.close()
+            if prior is not None and str(exc).startswith("prior_demonstrations:"):
+                what = str(exc).removeprefix("prior_demonstrations:")
+                raise _UsageError(
+                    f"--prior-demonstrations {args.prior_demonstrations}: {_one_line(what)}"
+                ) from None
+            raise
     # --resume asks for more: the session's own budgets (the driving protocol's 650
     # demonstrations) are lifted for this call, else a finished session could never go on
     lifted = {"max_demonstrations": None, "max_episodes": None} if args.resume else {}
@@ -1334,6 +1402,14 @@ def _parser() -> argparse.ArgumentParser:
         "--skip-noninteractive",
         action="store_true",
         help="start directly in confident execution (no teleoperation phase)",
+    )
+    p.add_argument(
+        "--prior-demonstrations",
+        default=None,
+        metavar="FILE.npz|DIR",
+        help="start from demonstrations you already have: a .npz with arrays 'observations' "
+        "[N, D] and 'actions' [N], or an earlier session's directory (its labels); every fit "
+        "includes them, the session keeps them, and they do not count as its demonstrations",
     )
     p.add_argument(
         "--map",

@@ -9,7 +9,14 @@ Run directory layout (one directory per teaching session)::
                                  spaces, make() arguments, step cap and
                                  ``describe_inputs()``, the session seed, the log format
                                  version and whether it started from a fitted model
-                                 (``starts_fitted``)
+                                 (``starts_fitted``); for a session with prior
+                                 demonstrations, ``"prior"``: their count and the
+                                 SHA-256 of prior.npz (and format 3, which a torchcbl
+                                 without prior demonstrations refuses to read)
+        prior.npz                the prior demonstrations the session started from
+                                 (``observations`` [N, D] float64, ``actions`` [N] int64),
+                                 written with the session, before config.json; the first
+                                 labels of every fit (absent without them)
         steps.sqlite             the step log: table ``steps``, one row per StepRecord;
                                  table ``corrections``, one row per CorrectionRecord (a
                                  label for an earlier step's observation, journalled and
@@ -31,7 +38,10 @@ Run directory layout (one directory per teaching session)::
                                  CPU whatever the model's device; one per refit, all kept
                                  (snapshots at stages come for free). A session started from
                                  a fitted model has its model-00000000.pt, written before
-                                 config.json: no label can refit it
+                                 config.json: no label can refit it; a session with prior
+                                 demonstrations has its model fitted on them alone as
+                                 model-00000000.pt, and its checkpoints' SHA-256 covers
+                                 the prior's labels first
 
 Durability. Every step is appended to ``steps.journal`` with one ``write()`` before the loop
 goes on: a demonstration (teacher label, observation, model output, counters) before its action
@@ -91,7 +101,9 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   the log and the file renamed ``.damaged`` / ``.stale``; except the checkpoint 0 of a session
   started from a fitted model, which no label can refit: where the session still stands on it
   (no refit since, or incremental refits) it is a :class:`CorruptSessionError` naming the file,
-  left as it is. An unreadable ``steps.sqlite``, a
+  left as it is. A ``prior.npz`` that is missing, or whose SHA-256 is not the one config.json
+  recorded, is a :class:`CorruptSessionError` naming it for every reader and for resume
+  (never a model fitted without the prior). An unreadable ``steps.sqlite``, a
   ``config.json`` missing a key, or a missing ``steps.sqlite`` beside a config are
   :class:`CorruptSessionError` naming the file and how to recover; nothing is started over.
   Steps are numbered 0, 1, 2, ... without a gap; a log that lacks some (rows deleted by hand, a
@@ -172,17 +184,24 @@ __all__ = [
     "load_labels",
     "load_model",
     "load_policy",
+    "load_prior_demonstrations",
     "load_records",
     "repair_journal",
     "restore_model",
 ]
 
 FORMAT = "torchcbl.session/2"
+#: The format of a session that starts from prior demonstrations (``prior.npz``, its SHA-256
+#: in config.json's ``"prior"``): format 2 plus that file. Its own number, so that a torchcbl
+#: that does not know prior demonstrations refuses the session instead of fitting its model
+#: without them; a session without a prior keeps format 2.
+PRIOR_FORMAT = "torchcbl.session/3"
 #: Formats this version reads. Format 1 (before strategies) has no ``actor`` column and no
 #: ``corrections`` table: its actor is derived (teacher when labelled, else agent), it has no
 #: corrections, and resuming it upgrades the directory to format 2 in place.
-READABLE_FORMATS = ("torchcbl.session/1", FORMAT)
+READABLE_FORMATS = ("torchcbl.session/1", FORMAT, PRIOR_FORMAT)
 CONFIG_NAME = "config.json"
+PRIOR_NAME = "prior.npz"
 LOG_NAME = "steps.sqlite"
 JOURNAL_NAME = "steps.journal"
 LOCK_NAME = "writer.lock"
@@ -429,6 +448,21 @@ def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
         raise
 
 
+def _write_atomic(path: Path, data: bytes, what: str, after: str) -> None:
+    """Write ``data`` to ``path`` through ``.<name>.tmp`` renamed over it: the file is whole or
+    absent; a failure is a :class:`SessionWriteError` ending with ``after``."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except OSError as exc:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise _write_error(exc, path, what, after) from exc
+
+
 #: Keys a session config must have, with what each must be (checked by :func:`load_config`).
 _REQUIRED = {
     "teaching": (dict, "the TeachingConfig fields"),
@@ -453,6 +487,21 @@ def _config_problem(config: dict[str, Any]) -> str | None:
     max_new = config["teaching"]["max_new"]
     if type(max_new) is not int or max_new < 1:  # every reader refits by it
         return f"the key 'teaching' has max_new {max_new!r}, not an int >= 1 (the refit period)"
+    prior = config.get("prior")
+    if config.get("format") == PRIOR_FORMAT or prior is not None:
+        if config.get("format") != PRIOR_FORMAT:
+            return f"it has a 'prior' entry, which only format {PRIOR_FORMAT!r} sessions have"
+        if not (
+            isinstance(prior, dict)
+            and isinstance(prior.get("sha256"), str)
+            and type(prior.get("n_demonstrations")) is int
+            and prior["n_demonstrations"] >= 1
+        ):
+            return (
+                "the key 'prior' should hold the session's prior demonstrations "
+                '{"file": "prior.npz", "sha256": ..., "n_demonstrations": N >= 1}, got '
+                + ("missing" if prior is None else repr(prior))
+            )
     return None
 
 
@@ -636,6 +685,7 @@ def _remove_new_session_files(path: Path) -> None:
         LOG_NAME + "-shm",
         JOURNAL_NAME,
         WRITERS_NAME,
+        PRIOR_NAME,  # create found none: refused as another session's leftover
         f"{CHECKPOINT_DIR}/model-{0:08d}.pt",  # the starting model (create found no checkpoint)
     ):
         try:
@@ -807,8 +857,9 @@ class SessionStore:
         except sqlite3.DatabaseError as exc:
             raise _db_error(exc, log, writing=True) from exc
         config = load_config(self.run_dir)
-        if upgraded or config.get("format") != FORMAT:
+        if upgraded or config.get("format") == "torchcbl.session/1":
             # also where an earlier open upgraded the log but could not write config.json
+            # (a format-3 session, one with prior demonstrations, keeps its format)
             config["format"] = FORMAT
             try:
                 write_json_atomic(self.run_dir / CONFIG_NAME, config)
@@ -848,11 +899,16 @@ class SessionStore:
         run_dir: str | os.PathLike[str],
         config: dict[str, Any],
         initial_model: torch.nn.Module | None = None,
+        *,
+        initial_digest: str | None = None,
+        prior: bytes | None = None,
     ) -> SessionStore:
         """Make a new session directory; ``initial_model``: the fitted model the session starts
-        from, saved as checkpoint 0 before ``config.json`` is written, so that a directory with
-        a config always holds it (a kill in between leaves no session, not one without its
-        model)."""
+        from, saved as checkpoint 0 (with ``initial_digest``, default: that of no label) before
+        ``config.json`` is written, so that a directory with a config always holds it (a kill
+        in between leaves no session, not one without its model); ``prior``: the bytes of the
+        session's prior demonstrations (:func:`prior_bytes`), written to ``prior.npz`` before
+        ``config.json`` too (under a temporary name, then renamed)."""
         path = Path(run_dir)
         try:
             path.mkdir(parents=True, exist_ok=True)
@@ -884,6 +940,8 @@ class SessionStore:
                 for name in (JOURNAL_NAME, WRITERS_NAME)
                 if (path / name).exists() and (path / name).stat().st_size
             ]
+            if (path / PRIOR_NAME).exists():
+                leftovers.append(PRIOR_NAME)
             ckpts = path / CHECKPOINT_DIR
             if ckpts.is_dir():
                 leftovers += sorted(
@@ -896,14 +954,15 @@ class SessionStore:
                     "run_dir (or move those files away)."
                 )
             started = True
+            if prior is not None:
+                _write_atomic(path / PRIOR_NAME, prior, "starting the session", _START_AGAIN)
             if initial_model is not None:  # a resume can only load it: no label refits it
                 try:
                     ckpts.mkdir(exist_ok=True)
                 except OSError as exc:
                     raise _write_error(exc, ckpts, "starting the session", _START_AGAIN) from exc
-                _write_checkpoint(
-                    path, initial_model, 0, LabelDigest().hexdigest(), after=_START_AGAIN
-                )
+                digest = LabelDigest().hexdigest() if initial_digest is None else initial_digest
+                _write_checkpoint(path, initial_model, 0, digest, after=_START_AGAIN)
             try:
                 write_json_atomic(path / CONFIG_NAME, config)
             except OSError as exc:
@@ -1662,6 +1721,96 @@ def labels_digest(xs: list[np.ndarray], ys: list[int]) -> str:
     return d.hexdigest()
 
 
+def prior_bytes(observations: np.ndarray, actions: np.ndarray) -> bytes:
+    """The ``prior.npz`` of a session's prior demonstrations: ``observations`` [N, D] as
+    little-endian float64 and ``actions`` [N] as little-endian int64 (no pickled object)."""
+    buffer = io.BytesIO()
+    np.savez(
+        buffer,
+        observations=np.ascontiguousarray(observations, dtype="<f8"),
+        actions=np.ascontiguousarray(actions, dtype="<i8"),
+    )
+    return buffer.getvalue()
+
+
+def _read_prior(
+    run_dir: str | os.PathLike[str], config: dict[str, Any]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The prior demonstrations of a session (observations [N, D] float64, actions [N] int64),
+    read from its ``prior.npz`` and checked against the SHA-256 its config.json keeps; None for
+    a session without them.
+
+    Raises:
+        CorruptSessionError: the file is missing, changed or unreadable (never a session
+            taught on without it).
+    """
+    entry = config.get("prior")
+    if entry is None:
+        return None
+    path = Path(run_dir) / PRIOR_NAME
+    n = entry["n_demonstrations"]
+    restore = (
+        f"The session started from {n} prior demonstrations kept in that file, and every "
+        "fit of its model includes them, so it is not read or taught on without them. Restore "
+        "the file from a backup or a copy of the run directory. Nothing was changed."
+    )
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise CorruptSessionError(f"{path} is missing. {restore}") from None
+    except PermissionError:
+        raise _no_read_access(path) from None
+    except OSError as exc:
+        raise CorruptSessionError(f"{path} cannot be read ({exc}). {restore}") from exc
+    digest = hashlib.sha256(data).hexdigest()
+    if digest != entry["sha256"]:
+        raise CorruptSessionError(
+            f"{path} was changed or damaged: its SHA-256 is {digest}, the session recorded "
+            f"{entry['sha256']} in {CONFIG_NAME} when it started. {restore}"
+        )
+    n_features, n_actions = config["env"]["n_features"], config["env"]["n_actions"]
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+            x, y = npz["observations"], npz["actions"]
+    except Exception as exc:  # not a zip, a key missing, a pickled array: any of numpy's errors
+        raise CorruptSessionError(
+            f"{path} is not a readable prior-demonstrations file ({type(exc).__name__}: {exc})."
+            f" {restore}"
+        ) from exc
+    if not (
+        x.dtype == np.float64
+        and y.dtype == np.int64
+        and x.shape == (n, n_features)
+        and y.shape == (n,)
+        and np.isfinite(x).all()
+        and ((y >= 0) & (y < n_actions)).all()
+    ):
+        raise CorruptSessionError(
+            f"{path} holds observations {x.dtype} {x.shape} and actions {y.dtype} {y.shape}; "
+            f"expected finite float64 ({n}, {n_features}) and int64 ({n},) in [0, {n_actions})"
+            f", as {CONFIG_NAME} says. {restore}"
+        )
+    return x, y
+
+
+def load_prior_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+    """The prior demonstrations a session started from (``ConfidentTeacher(...,
+    prior_demonstrations=...)``): observations [N, D] float64 and actions [N] int64, as kept
+    in its ``prior.npz``; [0, D] and [0] for a session without them. They are not in
+    :func:`load_labels` / :func:`load_demonstrations` (the session's own labels), but every fit
+    of the session's model stands on them first.
+
+    Raises:
+        CorruptSessionError: the file is missing or does not match the SHA-256 in config.json.
+    """
+    config = load_config(run_dir)
+    prior = _read_prior(run_dir, config)
+    if prior is None:
+        n_features = int(config["env"]["n_features"])
+        return np.zeros((0, n_features), dtype=np.float64), np.zeros(0, dtype=np.int64)
+    return prior
+
+
 def _checkpoint_payload(
     path: Path, n: int, xs: list[np.ndarray], ys: list[int]
 ) -> tuple[dict[str, Any] | None, str]:
@@ -1704,6 +1853,7 @@ def restore_model(
     store: SessionStore | None = None,
     incremental: bool = False,
     starts_fitted: bool = False,
+    prior: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> int:
     """Bring ``model`` to where the session's live model stood after the labels ``xs, ys``:
     THE one "load the checkpoint or refit" path (resume and :func:`load_model` both use it).
@@ -1722,7 +1872,10 @@ def restore_model(
     ``starts_fitted``: the session started from a fitted model (config.json's
     ``"starts_fitted"``), which only checkpoint 0 holds and no label can refit: where the model
     still stands on it (``k`` is 0, or the refits are incremental) and it cannot be loaded,
-    :class:`CorruptSessionError`, the file left as it is. Returns ``k``.
+    :class:`CorruptSessionError`, the file left as it is. ``prior``: the session's prior
+    demonstrations (:func:`load_prior_demonstrations`), the first labels of every fit (and of
+    every checkpoint's digest): the loop fitted the model on them alone before its first step,
+    so with them the model is fitted also at ``k`` = 0. Returns ``k``.
     """
 
     def lost_start(why: str) -> CorruptSessionError:
@@ -1738,6 +1891,9 @@ def restore_model(
             "from a backup, or start a new session"
         )
 
+    px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
+    base = len(py)  # the prior's labels come first in every fit and digest
+    all_xs, all_ys = px + list(xs), py + list(ys)
     last, payload, why0 = 0, None, "missing"
     directory = Path(run_dir) / CHECKPOINT_DIR
     found = []
@@ -1747,7 +1903,7 @@ def restore_model(
             if m is not None and int(m.group(1)) <= len(ys):
                 found.append((int(m.group(1)), entry))
     for n, path in sorted(found, reverse=True):
-        payload, why = _checkpoint_payload(path, n, xs, ys)
+        payload, why = _checkpoint_payload(path, base + n, all_xs, all_ys)
         if payload is not None:
             last = n
             break
@@ -1768,7 +1924,7 @@ def restore_model(
             if store is not None:
                 _set_aside(directory / f"model-{k:08d}.pt", "damaged")
         payload = None
-    if k > 0 and incremental:
+    if (k > 0 or base) and incremental:
         start, loaded = 0, False
         if payload is not None:
             try:
@@ -1781,7 +1937,7 @@ def restore_model(
         if starts_fitted and not loaded:
             # a later checkpoint this model could not load: the incremental refits are
             # replayed from the starting model (checkpoint 0), not from a fit from scratch
-            zero, why = _checkpoint_payload(directory / f"model-{0:08d}.pt", 0, xs, ys)
+            zero, why = _checkpoint_payload(directory / f"model-{0:08d}.pt", base, all_xs, all_ys)
             if zero is None:
                 raise lost_start(why)
             try:
@@ -1789,21 +1945,25 @@ def restore_model(
             except Exception:
                 raise lost_start("unreadable as this model's state") from None
             start, loaded = 0, True
+        if base and not loaded:  # the loop fitted on the prior alone before its first step
+            model.fit(*training_set(px, py, relabel=relabel))
+            start, loaded = 0, True
         counts = list(range(start + max_new, k + 1, max_new))
-        if not counts or counts[-1] != k:  # a hand refit off the schedule
+        if k > start and (not counts or counts[-1] != k):  # a hand refit off the schedule
             counts.append(k)
         for i, j in enumerate(counts):
-            x, y = training_set(xs[:j], ys[:j], relabel=relabel)
+            x, y = training_set(all_xs[: base + j], all_ys[: base + j], relabel=relabel)
             # with no checkpoint loaded, the first refit is a fit from scratch (whatever a
             # failed load left in the buffers); from a loaded one, even the pre-fit state of
             # a session that started from a fitted model (checkpoint 0), the loop refitted
             (model.refit if i > 0 or loaded else model.fit)(x, y)
-    elif k > 0:
-        x, y = training_set(xs[:k], ys[:k], relabel=relabel)
+    elif k > 0 or base:
+        x, y = training_set(all_xs[: base + k], all_ys[: base + k], relabel=relabel)
         model.fit(x, y)
         if store is not None:
             try:
-                store.save_checkpoint(model, k, labels_digest(xs[:k], ys[:k]))
+                digest = labels_digest(all_xs[: base + k], all_ys[: base + k])
+                store.save_checkpoint(model, k, digest)
             except SessionWriteError as exc:
                 warnings.warn(str(exc), stacklevel=2)
     return k
@@ -1820,8 +1980,9 @@ def load_model(
             and corrections) were logged (default: all of them).
 
     Returns:
-        A GaussianMixtureSet fitted on the labels the live model stood on after ``n`` labels
-        (unfitted when there were none and the session did not start from a fitted model),
+        A GaussianMixtureSet fitted on the labels the live model stood on after ``n`` labels,
+        a session's prior demonstrations first (unfitted when there were none and the session
+        started from neither a fitted model nor prior demonstrations),
         see :func:`restore_model`. If the matching checkpoint is missing, damaged or stale,
         the model is refitted deterministically on the logged labels (nothing is written).
     """
@@ -1850,6 +2011,7 @@ def load_model(
         relabel=_relabels(config),
         incremental=config["teaching"].get("refit", "full") == "incremental",
         starts_fitted=config.get("starts_fitted") is True,
+        prior=_read_prior(run_dir, config),
     )
     return model
 

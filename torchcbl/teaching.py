@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -77,13 +78,17 @@ from torchcbl.policy import (
 from torchcbl.records import CorrectionRecord, StepRecord, TrainingSet, _is_int, jsonable_info
 from torchcbl.session import (
     FORMAT,
+    PRIOR_FORMAT,
+    PRIOR_NAME,
     LabelDigest,
     SessionStore,
     _InterruptHold,
+    _read_prior,
     build_model,
     label_sequence,
     load_config,
     load_policy,
+    prior_bytes,
     restore_model,
     resume_problems,
     stored_strategy,
@@ -184,7 +189,9 @@ class TeachingConfig:
             does not say (no ``"is_success"`` key, or None), when it was cut by the time limit
             (``truncated``) and ``time_limit_is_success`` is True. An episode the env does not
             judge counts as a failure otherwise (a warning says so once).
-        max_demonstrations: stop when the session holds this many demonstrations.
+        max_demonstrations: stop when the session holds this many demonstrations (its own
+            labels, as :attr:`ConfidentTeacher.n_demonstrations`: prior demonstrations do not
+            count).
         max_steps: stop when the session holds this many steps.
         max_episodes: stop when the session holds this many finished episodes (ended by the
             env, terminated or truncated).
@@ -410,6 +417,66 @@ def _as_interrupted(record: StepRecord) -> StepRecord:
     return record.with_outcome(None, False, True, {"torchcbl_interrupted": True})
 
 
+def _check_prior(value: Any, n_features: int, n_actions: int) -> tuple[np.ndarray, np.ndarray]:
+    """``prior_demonstrations`` as (observations [N, D] float64, actions [N] int64), read-only
+    copies; a ValueError / TypeError saying what was expected, what was given and what to do."""
+    name = "prior_demonstrations"
+    want = f"a pair (observations [N, {n_features}], actions [N]) with N >= 1"
+    if isinstance(value, (str, os.PathLike)):
+        raise TypeError(
+            f"{name}: expected {want}, got the path {os.fspath(value)!r}; load it first, e.g. "
+            "d = numpy.load(path); prior_demonstrations=(d['observations'], d['actions'])."
+        )
+    if isinstance(value, Mapping) or not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise TypeError(
+            f"{name}: expected {want}, got {type(value).__name__} {value!r:.80}; e.g. "
+            "prior_demonstrations=torchcbl.session.load_demonstrations(earlier_run_dir)."
+        )
+    x, y = (np.asarray(v) for v in value)
+    if x.dtype.kind not in "iuf" or x.ndim != 2 or x.shape[1] != n_features:
+        raise ValueError(
+            f"{name}: expected observations as a real-number array of shape [N, {n_features}] "
+            f"(the env's {n_features} features), got {x.dtype} {x.shape}"
+            + ("; one feature per row: observations.reshape(-1, 1)" if x.ndim == 1 else "")
+            + "."
+        )
+    if x.shape[0] < 1:
+        raise ValueError(
+            f"{name}: expected at least one demonstration, got 0; leave it out (None) to start "
+            "without prior demonstrations."
+        )
+    bad = ~np.isfinite(x.astype(np.float64)).all(axis=1)
+    if bad.any():
+        raise ValueError(
+            f"{name}: observations must be finite; row {int(bad.argmax())} is "
+            f"{x[int(bad.argmax())].tolist()} ({int(bad.sum())} rows with NaN or inf in all); "
+            "drop or repair those rows."
+        )
+    if y.dtype.kind not in "iu" or y.shape != (x.shape[0],):
+        raise ValueError(
+            f"{name}: expected actions as an int array of shape [{x.shape[0]}] (one per "
+            f"observation), got {y.dtype} {y.shape}"
+            + (
+                "; whole numbers stored as floats: actions.astype(numpy.int64)"
+                if y.dtype.kind == "f"
+                else ""
+            )
+            + "."
+        )
+    out = (y < 0) | (y >= n_actions)
+    if out.any():
+        raise ValueError(
+            f"{name}: actions must be in [0, {n_actions}) (the env's Discrete({n_actions})); "
+            f"action {int(y[int(out.argmax())])} at row {int(out.argmax())} ({int(out.sum())} "
+            "out of range in all)."
+        )
+    x = np.array(x, dtype=np.float64, order="C")
+    y = np.array(y, dtype=np.int64)
+    x.flags.writeable = False
+    y.flags.writeable = False
+    return x, y
+
+
 def _check_commit_every(commit_every: Any) -> None:
     if not _is_int(commit_every) or commit_every < 1:
         raise ValueError(f"commit_every: expected an int >= 1, got {commit_every!r}")
@@ -432,7 +499,22 @@ class ConfidentTeacher:
             after each autonomous step by strategies that take corrections (see
             :mod:`torchcbl.strategies`).
         model: the learner; default ``GaussianMixtureSet(n_actions, D, seed=seed)``. Its
-            ``fit`` must be deterministic given the data (resume relies on it).
+            ``fit`` must be deterministic given the data (resume relies on it). A fitted model
+            starts the session from it (kept as checkpoint 0), until the first refit.
+        prior_demonstrations: labels the session starts from, e.g. logged data, an earlier
+            session's (``torchcbl.session.load_demonstrations(run_dir)``) or a BC data set:
+            ``(observations [N, D], actions [N])``, N >= 1, finite, actions in
+            ``[0, n_actions)``. The model is fitted on them before the first decision, and
+            every refit fits them first, then the session's own labels, in that fixed order;
+            the strategy's ``observe_refit`` sees them. They are the teacher's labels of no
+            step of this session: :attr:`n_demonstrations`, ``max_demonstrations``, the log's
+            counts and the checkpoints' numbers count the session's own labels only
+            (:attr:`n_prior` and :attr:`prior_demonstrations` say what the prior holds). The
+            session keeps them in its directory (``prior.npz``, its SHA-256 in config.json),
+            so :meth:`resume` and ``load_model`` use them without being given them again, and
+            refuse a session whose file is missing or changed. Not with a fitted ``model``
+            (the first refit would replace it by a fit on the prior anyway): pass an unfitted
+            one, or the prior alone.
         rule: the confidence rule of the default strategy; default ``DistanceRule(2.0)``
             (the paper's). Shorthand for ``strategy=ConfidentExecution(rule)``.
         strategy: who asks and who acts (:mod:`torchcbl.strategies`); default
@@ -443,7 +525,8 @@ class ConfidentTeacher:
         seed: seeds the first ``env.reset`` (and the default model).
         progress: show a tqdm bar with the live counters while :meth:`run` runs.
         on_step: called with each :class:`StepRecord` after it is recorded.
-        on_refit: called as ``on_refit(model, n_labels)`` after each refit.
+        on_refit: called as ``on_refit(model, n_labels)`` after each refit (not for the fit
+            on ``prior_demonstrations`` before the first step).
         commit_every: journal lines (steps, demonstrations' outcomes, corrections) per SQLite
             commit, an int >= 1; every line is durable in the session's journal as it is
             written, and a demonstration's before its action runs.
@@ -461,6 +544,7 @@ class ConfidentTeacher:
         teacher: Teacher,
         *,
         model: torch.nn.Module | None = None,
+        prior_demonstrations: Any = None,
         rule: Any = None,
         strategy: Any = None,
         config: TeachingConfig | None = None,
@@ -479,28 +563,53 @@ class ConfidentTeacher:
                 f"working directory ({Path.cwd()})."
             )
         strategy = _pick_strategy(rule, strategy)
+        if prior_demonstrations is not None and _is_fitted(model):
+            raise ValueError(
+                "give prior_demonstrations= or a fitted model=, not both: the session fits its "
+                "model on the prior demonstrations before its first step (and on them and its "
+                "own labels at every refit), so the fitted model would never be used. Pass an "
+                "unfitted model (e.g. GaussianMixtureSet(...) with the arguments you want), or "
+                "the fitted model alone."
+            )
         self._setup(env, teacher, model, strategy, config, seed, progress, on_step, on_refit)
+        starts_fitted = _is_fitted(self.model)
+        prior = None
+        if prior_demonstrations is not None:
+            self._set_prior(*_check_prior(prior_demonstrations, self.n_features, self.n_actions))
+            prior = prior_bytes(*self._prior)
+            x, y = self._train.arrays()
+            self.model.fit(x, y)  # before the first decision, as a resume rebuilds it
+            self.strategy.observe_refit(self.model, x, y)
         self._env_config = self._describe_env()
         self._store: SessionStore | None = None
         self.run_dir = None if run_dir is None else Path(run_dir)
         if self.run_dir is not None:
             session_config = {
-                "format": FORMAT,
+                "format": FORMAT if prior is None else PRIOR_FORMAT,
                 "teaching": dataclasses.asdict(self.config),
                 "model": {"class": type(self.model).__name__, "args": _model_args(self.model)},
                 "rule": None if self.rule is None else rule_to_config(self.rule),
                 "strategy": strategy_to_config(self.strategy),
                 "env": self._env_config,
                 "seed": self.seed,
-                "starts_fitted": _is_fitted(self.model),  # then checkpoint 0 alone holds it
+                "starts_fitted": starts_fitted,  # then checkpoint 0 alone holds it
             }
+            if prior is not None:
+                session_config["prior"] = {
+                    "file": PRIOR_NAME,
+                    "sha256": hashlib.sha256(prior).hexdigest(),
+                    "n_demonstrations": self.n_prior,
+                }
             _check_commit_every(commit_every)
             # a session may start from a fitted model: its checkpoint 0, written with the
-            # session (a resume can only load it, no label refits it)
+            # session (a resume can only load it, no label refits it); one with prior
+            # demonstrations has its model fitted on them as checkpoint 0, and them in prior.npz
             self._store = SessionStore.create(
                 self.run_dir,
                 session_config,
                 initial_model=self.model if _is_fitted(self.model) else None,
+                initial_digest=None if prior is None else self._digest.hexdigest(),
+                prior=prior,
             )
             self._store.commit_every = commit_every
             try:
@@ -518,6 +627,14 @@ class ConfidentTeacher:
                     )
                 raise
         self._next_reset_seed: int | None = self.seed
+
+    def _set_prior(self, x: np.ndarray, y: np.ndarray) -> None:
+        """Take the prior demonstrations (read-only arrays) as the first labels of the
+        training set and of the label digest the checkpoints carry."""
+        self._prior = (x, y)
+        for row, action in zip(x, y.tolist(), strict=True):
+            self._train.add(row, action)
+            self._digest.update(row, action)
 
     def _setup(self, env, teacher, model, strategy, config, seed, progress, on_step, on_refit):
         self.n_features, self.n_actions = check_env(env)
@@ -580,6 +697,7 @@ class ConfidentTeacher:
         self._labels = 0  # labels (demonstrations + corrections) so far
         self._train = TrainingSet(relabel=self._relabel)
         self._digest = LabelDigest()  # of every label so far, stored with each checkpoint
+        self._prior: tuple[np.ndarray, np.ndarray] | None = None  # see _set_prior
         self.corrections: list[CorrectionRecord] = []
         self._new_since_refit = 0
         self._needs_reset = True
@@ -706,12 +824,17 @@ class ConfidentTeacher:
                 + "; ".join(problems).rstrip(".")
                 + ". Resume with matching arguments, or start a new session in another run_dir."
             )
+        prior = _read_prior(run_dir, stored)  # a missing or changed prior.npz: refused here
         if model is None:
             model = build_model(stored)
         self = cls.__new__(cls)
         self._setup(
             env, teacher, model, strategy, config, stored["seed"], progress, on_step, on_refit
         )
+        if prior is not None:
+            for a in prior:
+                a.flags.writeable = False
+            self._set_prior(*prior)
         self._env_config = self._describe_env()
         self.run_dir = Path(run_dir)
         self._starts_fitted = stored.get("starts_fitted") is True
@@ -779,14 +902,18 @@ class ConfidentTeacher:
             store=self._store,
             incremental=self.config.refit == "incremental",
             starts_fitted=self._starts_fitted,
+            prior=self._prior,
         )
-        if k > 0:
+        if k > 0 or self._prior is not None:
             if k == len(ys):
                 x, y = self._train.arrays()
             else:
                 from torchcbl.records import training_set
 
-                x, y = training_set(xs[:k], ys[:k], relabel=self._relabel)
+                px, py = ([], []) if self._prior is None else self._prior
+                x, y = training_set(
+                    [*px, *xs[:k]], [*np.asarray(py).tolist(), *ys[:k]], relabel=self._relabel
+                )
             strategy.observe_refit(self.model, x, y)
         self._new_since_refit = len(ys) - k
         self._next_episode = records[-1].episode + 1 if records else 0
@@ -799,8 +926,26 @@ class ConfidentTeacher:
     @property
     def n_demonstrations(self) -> int:
         """Labels in the session: demonstrations (steps with a teacher label) plus
-        corrections. Refits and checkpoints count these."""
+        corrections. Refits and checkpoints count these; prior demonstrations do not count
+        (:attr:`n_prior`)."""
         return self._labels
+
+    @property
+    def n_prior(self) -> int:
+        """Prior demonstrations the session started from (0 without); they are in every fit
+        but not in :attr:`n_demonstrations`."""
+        return 0 if self._prior is None else len(self._prior[1])
+
+    @property
+    def prior_demonstrations(self) -> tuple[np.ndarray, np.ndarray]:
+        """The prior demonstrations, ``(observations [N, D] float64, actions [N] int64)``,
+        read-only ([0, D] and [0] without)."""
+        if self._prior is None:
+            x = np.zeros((0, self.n_features), dtype=np.float64)
+            y = np.zeros(0, dtype=np.int64)
+            x.flags.writeable = y.flags.writeable = False
+            return x, y
+        return self._prior
 
     @property
     def n_corrections(self) -> int:

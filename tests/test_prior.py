@@ -1,0 +1,221 @@
+"""A teaching session that starts from prior demonstrations (logged data, an earlier session's
+labels, a BC data set): ``ConfidentTeacher(..., prior_demonstrations=(x, y))``."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from _toy_envs import oracle, rare_regions_world
+
+from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
+from torchcbl.errors import CorruptSessionError, IncompatibleRunDirError
+from torchcbl.records import training_set
+from torchcbl.session import (
+    load_config,
+    load_demonstrations,
+    load_model,
+    load_policy,
+    load_prior_demonstrations,
+    load_records,
+)
+from torchcbl.strategies import ConfidenceBasedAutonomy, correcting
+
+
+def prior(n=60, seed=1):
+    return rare_regions_world().sample(n, np.random.default_rng(seed))
+
+
+def make(run_dir, demos=None, teacher=None, strategy=None, seed=3, **cfg):
+    env = rare_regions_world()
+    return ConfidentTeacher(
+        env,
+        teacher or oracle(env),
+        prior_demonstrations=demos,
+        strategy=strategy,
+        config=TeachingConfig(**{"noninteractive": False, **cfg}),
+        run_dir=run_dir,
+        seed=seed,
+        progress=False,
+    )
+
+
+def same_state(a, b):
+    sa, sb = a.state_dict(), b.state_dict()
+    return sa.keys() == sb.keys() and all(torch.equal(sa[k], sb[k]) for k in sa)
+
+
+def fit_on(demos, run_dir, k, relabel=False):
+    """A model fitted as the session's should be: the prior first, then its first k labels."""
+    x, y = load_demonstrations(run_dir)
+    xs = [*demos[0], *x[:k]]
+    ys = [*np.asarray(demos[1]).tolist(), *y[:k].tolist()]
+    model = GaussianMixtureSet(3, 2, seed=3)
+    return model.fit(*training_set(xs, ys, relabel=relabel))
+
+
+def test_a_prior_is_fitted_before_the_first_decision_and_in_every_refit(tmp_path):
+    demos = prior()
+    without = make(tmp_path / "none")
+    without.run(max_steps=200)
+    ct = make(tmp_path / "run", demos, max_new=3)
+    first = ct.step()
+    assert first.model_action >= 0 and np.isfinite(first.distance)  # a model from the start
+    ct.run(max_steps=200)
+    assert ct.n_demonstrations < without.n_demonstrations  # it asks less
+    k = ct.n_demonstrations // 3 * 3
+    assert k and same_state(ct.model, fit_on(demos, ct.run_dir, k))  # the prior is kept
+    assert ct.n_prior == 60
+    x, y = ct.prior_demonstrations
+    assert np.array_equal(x, demos[0]) and np.array_equal(y, demos[1])
+    with pytest.raises(ValueError, match="read-only"):
+        x[0, 0] = 1.0
+    ct.close()
+    x, y = load_prior_demonstrations(ct.run_dir)
+    assert np.array_equal(x, demos[0]) and np.array_equal(y, demos[1])
+    assert same_state(load_model(ct.run_dir), ct.model)
+    assert same_state(load_model(ct.run_dir, n_demonstrations=0), fit_on(demos, ct.run_dir, 0))
+    for p in (ct.run_dir / "checkpoints").iterdir():  # refitted from the log and the prior
+        p.unlink()
+    assert same_state(load_model(ct.run_dir), ct.model)
+    obs = np.array([0.2, 7.5])
+    assert load_policy(ct.run_dir)(obs) == ct.policy(obs)
+
+
+def test_the_budgets_and_counts_are_the_sessions_own_labels(tmp_path):
+    ct = make(tmp_path / "run", prior(), max_demonstrations=5)
+    ct.run()
+    assert ct.stop_reason == "max_demonstrations"
+    assert ct.n_demonstrations == 5 and ct.n_prior == 60
+    assert max(r.n_demonstrations for r in load_records(ct.run_dir)) == 5
+    assert len(load_demonstrations(ct.run_dir)[1]) == 5
+    names = sorted(p.name for p in (ct.run_dir / "checkpoints").iterdir())
+    assert names == [f"model-{n:08d}.pt" for n in range(6)]
+    ct.close()
+
+
+def test_a_resumed_session_with_a_prior_goes_on_as_the_uninterrupted_one(tmp_path):
+    """The prior is read back from the session directory, never given again: a session
+    stopped at its first request resumes into exactly the run the uninterrupted one made (CBA,
+    whose thresholds and distance gate come from observe_refit on the prior), and one stopped
+    later resumes with the same counters, model and thresholds."""
+    from torchcbl import TeachingInterrupted
+
+    demos = prior()
+    env = rare_regions_world()
+
+    def cba():
+        return ConfidenceBasedAutonomy()
+
+    ref = make(tmp_path / "ref", demos, teacher=correcting(oracle(env)), strategy=cba(), max_new=5)
+    start = ref.strategy.thresholds.copy()
+    assert np.isfinite(start).any()  # computed on the prior before step 0
+    ref.run(max_steps=80)
+
+    def stops_at_once(obs, info):
+        raise TeachingInterrupted("not now")
+
+    run = tmp_path / "run"
+    with pytest.warns(UserWarning, match="never correct one"):
+        ct = make(run, demos, teacher=stops_at_once, strategy=cba(), max_new=5)
+    with pytest.raises(TeachingInterrupted):
+        ct.run(max_steps=80)
+    ct.close()
+    back = ConfidentTeacher.resume(run, env, correcting(oracle(env)), progress=False)
+    assert back.n_prior == 60 and np.array_equal(back.strategy.thresholds, start)
+    back.run(max_steps=80)
+    assert back.records == ref.records and back.corrections == ref.corrections
+    assert same_state(back.model, ref.model)
+    back.close()
+    # resumed mid-session: the same state, and the format stays the one of a prior session
+    again = ConfidentTeacher.resume(run, env, correcting(oracle(env)), progress=False)
+    assert again.records == ref.records and same_state(again.model, ref.model)
+    assert np.array_equal(again.strategy.thresholds, ref.strategy.thresholds)
+    again.run(max_steps=120)
+    again.close()
+    assert load_config(run)["format"] == "torchcbl.session/3"
+    assert same_state(load_model(run), again.model)
+
+
+def test_incremental_refits_with_a_prior_are_replayed_from_the_prior_fit(tmp_path):
+    ct = make(tmp_path / "run", prior(), max_new=2, refit="incremental")
+    ct.run(max_steps=60)
+    ct.close()
+    for p in (ct.run_dir / "checkpoints").iterdir():
+        p.unlink()
+    assert same_state(load_model(ct.run_dir), ct.model)
+
+
+def test_a_missing_or_changed_prior_file_is_refused(tmp_path):
+    run = tmp_path / "run"
+    make(run, prior()).close()
+    env = rare_regions_world()
+    path = run / "prior.npz"
+    data = path.read_bytes()
+    writers = (run / "writers.jsonl").read_text()
+    path.write_bytes(data[:-1] + bytes([data[-1] ^ 1]))
+    for read in (
+        lambda: ConfidentTeacher.resume(run, env, oracle(env), progress=False),
+        lambda: load_model(run),
+        lambda: load_prior_demonstrations(run),
+    ):
+        with pytest.raises(CorruptSessionError, match=r"prior\.npz was changed or damaged"):
+            read()
+    assert (run / "writers.jsonl").read_text() == writers  # resume opened nothing
+    path.unlink()
+    with pytest.raises(CorruptSessionError, match=r"prior\.npz is missing.*Restore the file"):
+        ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    path.write_bytes(data)
+    ConfidentTeacher.resume(run, env, oracle(env), progress=False).close()
+    # its config.json entry is what holds the session to its prior: without it, refused
+    config = json.loads((run / "config.json").read_text())
+    del config["prior"]
+    (run / "config.json").write_text(json.dumps(config))
+    with pytest.raises(CorruptSessionError, match="'prior'"):
+        load_model(run)
+
+
+def test_a_torchcbl_without_prior_demonstrations_refuses_such_a_session(tmp_path, monkeypatch):
+    import torchcbl.session as S
+
+    make(tmp_path / "plain").close()
+    make(tmp_path / "run", prior()).close()
+    assert load_config(tmp_path / "plain")["format"] == "torchcbl.session/2"
+    monkeypatch.setattr(S, "READABLE_FORMATS", ("torchcbl.session/1", "torchcbl.session/2"))
+    load_config(tmp_path / "plain")
+    with pytest.raises(IncompatibleRunDirError, match="session/3"):
+        load_config(tmp_path / "run")
+
+
+@pytest.mark.parametrize(
+    ("demos", "error", "match"),
+    [
+        ("prior.npz", TypeError, r"got the path 'prior.npz'; load it first"),
+        (np.zeros((3, 2)), TypeError, r"expected a pair \(observations \[N, 2\], actions \[N\]\)"),
+        ((np.zeros((3, 3)), np.zeros(3, int)), ValueError, r"shape \[N, 2\].*got float64 \(3, 3\)"),
+        ((np.zeros(3), np.zeros(3, int)), ValueError, r"reshape\(-1, 1\)"),
+        ((np.zeros((0, 2)), np.zeros(0, int)), ValueError, "at least one demonstration, got 0"),
+        (([[0.0, np.nan]], [0]), ValueError, r"finite; row 0 is \[0.0, nan\]"),
+        ((np.zeros((2, 2)), [0.0, 1.0]), ValueError, r"int array.*astype\(numpy.int64\)"),
+        ((np.zeros((2, 2)), [0, 1, 2]), ValueError, r"shape \[2\].*got int64 \(3,\)"),
+        ((np.zeros((2, 2)), [0, 3]), ValueError, r"in \[0, 3\).*action 3 at row 1"),
+        (([[True, False]], [0]), ValueError, "real-number array"),
+    ],
+)
+def test_bad_prior_demonstrations_say_what_was_expected(tmp_path, demos, error, match):
+    with pytest.raises(error, match=match):
+        make(tmp_path / "run", demos)
+    assert not (tmp_path / "run").exists()  # refused before a session was written
+
+
+def test_a_fitted_model_and_a_prior_are_refused_together(tmp_path):
+    env = rare_regions_world()
+    demos = prior()
+    fitted = GaussianMixtureSet(3, 2, seed=0).fit(*demos)
+    with pytest.raises(ValueError, match="prior_demonstrations= or a fitted model=, not both"):
+        ConfidentTeacher(
+            env, oracle(env), model=fitted, prior_demonstrations=demos, run_dir=tmp_path / "r"
+        )
+    assert not (tmp_path / "r").exists()
