@@ -139,3 +139,17 @@ class StrategyThatFails:
 
     def __init__(self) -> None:
         raise RuntimeError("needs a licence file")
+
+
+def noisy_teacher(env: Any, seed: int) -> Any:
+    """The oracle, answering at random on 20 % of its calls, drawn from its own generator
+    seeded by the cell's seed (a stochastic teacher, as the driving domain's person is)."""
+    import numpy as np
+
+    inner, rng = oracle(env.unwrapped), np.random.default_rng(seed)
+
+    def teach(obs: Any, info: dict) -> int:
+        wanted = inner(obs, info)
+        return int(rng.integers(0, 2)) if rng.random() < 0.2 else wanted
+
+    return teach

@@ -55,6 +55,8 @@ def test_a_cell_reports_curve_attention_and_times():
     assert a["labels"] == a["requests"] + a["corrections"]
     # every wrong autonomous action was corrected by the (deterministic) gating teacher
     assert a["wrong_autonomous_actions"] == a["corrections"] > 0
+    assert a["wrong_autonomous_rate"] == a["wrong_autonomous_actions"] / a["agent_actions"]
+    assert a["auditor_disagreement"] == 0.0  # a deterministic teacher agrees with itself
     assert cell["wall_s"] > 0 and cell["cpu_s"] > 0
     assert bm.run_cell(config)["curve"] == cell["curve"]  # deterministic
 
@@ -66,6 +68,31 @@ def test_dagger_counts_its_learner_executed_labelled_steps_as_wrong_actions():
     assert a["autonomous_steps"] == 0 and a["labels"] == a["requests"] == a["steps"] == 20
     assert a["agent_actions"] == 20 - 5  # all but the steps before the first fit (max_new 5)
     assert 0 < a["wrong_autonomous_actions"] < a["agent_actions"]
+
+
+def test_a_stochastic_teachers_disagreement_with_its_auditor_is_reported_beside_the_rate():
+    """Wrong autonomous actions are counted against a second teacher instance asked at every
+    step; a stochastic teacher (the driving domain's person) disagrees with itself, so a count
+    alone ranked learners by how long they drove (review: per learner action the driving
+    rates were 0.18-0.28, the auditor's disagreement with the real teacher 0.22-0.28). A cell
+    reports the rate per learner action and that disagreement on the steps the teacher
+    answered, and the table shows both."""
+    spec = _env(
+        teacher="_bench_env:noisy_teacher",
+        env_kwargs={"spread": 1.0},
+        teaching={"noninteractive": False, "max_new": 5},
+    )
+    # (a teacher asked at every step, as a gating one is, draws in step with its auditor)
+    (config,) = bm.cell_configs([bm.StrategySpec("confident")], [spec], [0])
+    a = bm.run_cell(config)["attention"]
+    assert 0.05 < a["auditor_disagreement"] < 0.6, a  # two draws of 20 % noise, 2 actions
+    assert a["agent_actions"] > 0, a
+    assert a["wrong_autonomous_rate"] == a["wrong_autonomous_actions"] / a["agent_actions"]
+    cells = [bm.run_cell(config)]
+    table = bm.format_table(bm.summarize(cells, envs=[spec.name], strategies=["confident"]))
+    assert "wrong auto. actions (rate) | auditor ≠ teacher |" in table
+    row = table.splitlines()[-1]
+    assert f"({a['wrong_autonomous_rate']:.2f}) | {a['auditor_disagreement']:.2f} |" in row, row
 
 
 def test_labels_to_95pct_with_censoring_by_hand():
@@ -422,7 +449,7 @@ def test_a_cells_seed_seeds_daggers_coins_unless_its_params_do():
     assert spec.build(3).seed == 3 and spec.build().seed == 0
     assert bm.StrategySpec("dagger", {"seed": 7}).build(3).seed == 7  # the params' seed wins
     assert bm.StrategySpec("bc").build(3) is not None  # a strategy without a seed is as before
-    assert bm.CELL_FORMAT == 4  # cached cells of formats 1 to 3 are recomputed
+    assert bm.CELL_FORMAT == 5  # cached cells of formats 1 to 4 are recomputed
 
 
 def test_a_strategy_spec_is_a_known_name_or_an_import_path():

@@ -75,14 +75,15 @@ __all__ = [
     "summarize",
 ]
 
-CELL_FORMAT = 4
+CELL_FORMAT = 5
 """Bumped when a cell's computation changes, so old cached cells are not reused (2: a strategy
 that takes a ``seed``, DAgger's coins, is seeded by the cell's seed unless its params give one;
 in format 1 every cell drew DAgger's coins from seed 0. 4: a timed human teacher,
 :class:`~torchcbl.teachers.HumanTiming`, the driving default, corrects only with a key press,
 and presses nothing where the learner does what it wants; in format 2 a pending or lost press
 counted as a correction to the default action, and format 3, a day's intermediate, still drew
-presses, and so doubled ones, where the learner agreed)."""
+presses, and so doubled ones, where the learner agreed. 5: a cell's attention holds
+``wrong_autonomous_rate`` and ``auditor_disagreement``)."""
 
 #: short strategy names -> import path of the class.
 STRATEGY_PATHS: dict[str, str] = {
@@ -609,6 +610,11 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     # the learner's own actions that ran: autonomous steps, and DAgger's labelled agent steps
     agent = [r for r in records if r.actor == "agent"]
     wrong = sum(1 for r in agent if r.executed_action != expected[r.step])
+    # the auditor is another instance of the teacher, asked at every step: where the real
+    # teacher answered, how often it answers otherwise (a stochastic teacher, such as the
+    # driving domain's, disagrees with itself): the floor under the wrong-action rate
+    asked = [r for r in records if r.teacher_action is not None]
+    disagree = sum(1 for r in asked if r.teacher_action != expected[r.step])
     actors = [r.actor for r in records]
     switches = sum(1 for a, b in zip(actors, actors[1:], strict=False) if a != b)
     requests = steps - len(autonomous)
@@ -623,6 +629,8 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
         "autonomous_steps": len(autonomous),
         "agent_actions": len(agent),
         "wrong_autonomous_actions": wrong,
+        "wrong_autonomous_rate": wrong / len(agent) if agent else None,
+        "auditor_disagreement": disagree / len(asked) if asked else None,
     }
 
     eval_env = gym.make(spec.env_id, **{**dict(spec.env_kwargs), **dict(spec.eval_env_kwargs)})
@@ -1046,8 +1054,8 @@ def format_table(summary: Mapping[str, Any]) -> str:
     rows = [
         "| env | strategy | labels to 95 % (censored) | perf. at 2nd budget | final perf. "
         "(labels) | teacher perf. | requests | monitored | context switches | "
-        "wrong auto. actions | wall s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "wrong auto. actions (rate) | auditor ≠ teacher | wall s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
 
     def ms(d: Mapping[str, Any], fmt: str = "{:.0f}") -> str:
@@ -1056,6 +1064,9 @@ def format_table(summary: Mapping[str, Any]) -> str:
         if d.get("sd") is None:
             return f"{fmt.format(d['mean'])} (n = 1)"
         return f"{fmt.format(d['mean'])} ± {fmt.format(d['sd'])}"
+
+    def rate(d: Mapping[str, Any] | None) -> str:  # a share, mean over the seeds that have one
+        return "-" if not d or d.get("mean") is None else f"{d['mean']:.2f}"
 
     for env, strategies in summary["table"].items():
         for strat, r in strategies.items():
@@ -1071,7 +1082,8 @@ def format_table(summary: Mapping[str, Any]) -> str:
                 f"{ms(r['final_performance'], '{:.2f}')} ({ms(r['final_labels'])}) | "
                 f"{ms(r['teacher_performance'], '{:.2f}')} | {ms(a['requests'])} | "
                 f"{ms(a['monitored_steps'])} | {ms(a['context_switches'])} | "
-                f"{ms(a['wrong_autonomous_actions'])} | {ms(r['wall_s'])} |"
+                f"{ms(a['wrong_autonomous_actions'])} ({rate(a.get('wrong_autonomous_rate'))}) | "
+                f"{rate(a.get('auditor_disagreement'))} | {ms(r['wall_s'])} |"
             )
     return "\n".join(rows)
 
