@@ -1450,7 +1450,7 @@ def test_teach_starts_from_prior_demonstrations_of_a_file_or_an_earlier_session(
 ):
     """--prior-demonstrations FILE.npz or DIR: the session keeps them and every fit includes
     them; a file that is not what it reads is one line and exit code 2, nothing taught."""
-    from torchcbl.session import load_demonstrations, load_prior_demonstrations
+    from torchcbl.session import load_demonstrations, load_labels, load_prior_demonstrations
 
     _scripted_corridor_person(monkeypatch)
     first = tmp_path / "first"
@@ -1464,7 +1464,7 @@ def test_teach_starts_from_prior_demonstrations_of_a_file_or_an_earlier_session(
         assert main([*argv, "--prior-demonstrations", str(source)]) == 0
         px, py = load_prior_demonstrations(run)
         assert len(py) == n and np.array_equal(px[:5], x) and np.array_equal(py[:5], y)
-        assert len(load_demonstrations(run)[1]) == 5  # its own budget, the prior aside
+        assert len(load_labels(run)[1]) == 5  # its own budget, the prior aside
     capsys.readouterr()
     np.save(tmp_path / "one.npy", x)
     np.savez(tmp_path / "keys.npz", obs=x, act=y)

@@ -16,6 +16,7 @@ from torchcbl.records import training_set
 from torchcbl.session import (
     load_config,
     load_demonstrations,
+    load_labels,
     load_model,
     load_policy,
     load_prior_demonstrations,
@@ -49,7 +50,7 @@ def same_state(a, b):
 
 def fit_on(demos, run_dir, k, relabel=False):
     """A model fitted as the session's should be: the prior first, then its first k labels."""
-    x, y = load_demonstrations(run_dir)
+    x, y = load_labels(run_dir)
     xs = [*demos[0], *x[:k]]
     ys = [*np.asarray(demos[1]).tolist(), *y[:k].tolist()]
     model = GaussianMixtureSet(3, 2, seed=3)
@@ -90,7 +91,8 @@ def test_the_budgets_and_counts_are_the_sessions_own_labels(tmp_path):
     assert ct.stop_reason == "max_demonstrations"
     assert ct.n_demonstrations == 5 and ct.n_prior == 60
     assert max(r.n_demonstrations for r in load_records(ct.run_dir)) == 5
-    assert len(load_demonstrations(ct.run_dir)[1]) == 5
+    assert len(load_labels(ct.run_dir)[1]) == 5
+    assert len(load_demonstrations(ct.run_dir)[1]) == 65  # the training set: the prior too
     names = sorted(p.name for p in (ct.run_dir / "checkpoints").iterdir())
     assert names == [f"model-{n:08d}.pt" for n in range(6)]
     ct.close()
@@ -219,3 +221,34 @@ def test_a_fitted_model_and_a_prior_are_refused_together(tmp_path):
             env, oracle(env), model=fitted, prior_demonstrations=demos, run_dir=tmp_path / "r"
         )
     assert not (tmp_path / "r").exists()
+
+
+def test_an_earlier_sessions_training_set_starts_the_next_one_relabelled_as_it_was(tmp_path):
+    """prior_demonstrations=load_demonstrations(earlier): the earlier session's training set,
+    what its model stands on. With a relabelling strategy (CBA), a label for a prior
+    observation replaces the prior's label; the README's recipe (its prior, then its labels,
+    concatenated) kept both, so the next session was fitted on contradicting rows (review: 17
+    of 81)."""
+    env = rare_regions_world()
+    probe = make(tmp_path / "probe")
+    probe.run(max_steps=30)
+    seen = np.stack([r.observation_array for r in probe.records[:20]])
+    wrong = np.array([(env.optimal_action(o) + 1) % 3 for o in seen])  # at states it will see
+    x, y = prior(40)
+    demos = (np.concatenate([seen, x]), np.concatenate([wrong, y]))
+    ct = make(
+        tmp_path / "cba",
+        demos,
+        teacher=correcting(oracle(env)),
+        strategy=ConfidenceBasedAutonomy(),
+        max_new=3,
+    )
+    ct.run(max_steps=30)
+    snapshot = ct.snapshot()
+    ct.close()
+    tx, ty = load_demonstrations(ct.run_dir)
+    assert len(ty) < 60 + ct.n_demonstrations  # relabelled prior rows are not repeated
+    assert same_state(GaussianMixtureSet(3, 2, seed=3).fit(tx, ty), snapshot)
+    nxt = make(tmp_path / "next", (tx, ty))
+    assert same_state(nxt.model, snapshot)  # the next session starts where this one stood
+    nxt.close()

@@ -696,14 +696,12 @@ def _read_prior_demonstrations(path: Path) -> tuple[Any, Any]:
     flag = f"--prior-demonstrations {path}"
     if path.is_dir():
         from torchcbl.errors import CorruptSessionError, IncompatibleRunDirError
-        from torchcbl.session import load_demonstrations, load_prior_demonstrations
+        from torchcbl.session import load_demonstrations
 
-        try:
-            x0, y0 = load_prior_demonstrations(path)
-            x1, y1 = load_demonstrations(path)
+        try:  # its training set: its own prior first, relabelled as its strategy relabels
+            return load_demonstrations(path)
         except (IncompatibleRunDirError, CorruptSessionError) as exc:
             raise _UsageError(f"{flag}: {_one_line(exc)}") from None
-        return np.concatenate([x0, x1]), np.concatenate([y0, y1])
     if not path.is_file():
         raise _UsageError(f"{flag}: no such file or directory; {_PRIOR_EXPECTED}")
     try:
@@ -764,9 +762,6 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             "--prior-demonstrations: a resumed session keeps the prior demonstrations it started "
             "from (prior.npz in its directory); leave --prior-demonstrations out with --resume"
         )
-    prior = None
-    if args.prior_demonstrations is not None:
-        prior = _read_prior_demonstrations(Path(args.prior_demonstrations))
     if args.resume and args.skip_noninteractive:
         raise _UsageError(
             "--skip-noninteractive starts a new session without its non-interactive phase; a "
@@ -790,6 +785,9 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         )
     else:
         _output_dir(run_dir, "--run-dir")
+    prior = None  # read after the run directory's checks: a file that may be large
+    if args.prior_demonstrations is not None:
+        prior = _read_prior_demonstrations(Path(args.prior_demonstrations))
     importlib.import_module(package)  # registers the env id
     human = importlib.import_module(human_module)
     env_kwargs, rule, make_model = _import(setup_factory)()

@@ -102,10 +102,11 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   started from a fitted model, which no label can refit: where the session still stands on it
   (no refit since, or incremental refits) it is a :class:`CorruptSessionError` naming the file,
   left as it is. A ``prior.npz`` that is missing, or whose SHA-256 is not the one config.json
-  recorded, is a :class:`CorruptSessionError` naming it for every reader and for resume
-  (never a model fitted without the prior). An unreadable ``steps.sqlite``, a
-  ``config.json`` missing a key, or a missing ``steps.sqlite`` beside a config are
-  :class:`CorruptSessionError` naming the file and how to recover; nothing is started over.
+  recorded, is a :class:`CorruptSessionError` naming it for every reader of the training set
+  or the model and for resume (never a model fitted without the prior). An unreadable
+  ``steps.sqlite``, a ``config.json`` missing a key, or a missing ``steps.sqlite`` beside a
+  config are :class:`CorruptSessionError` naming the file and how to recover; nothing is
+  started over.
   Steps are numbered 0, 1, 2, ... without a gap; a log that lacks some (rows deleted by hand, a
   journal line removed) is read with a warning naming them, and resume refuses it (it would
   log new steps under numbers the log holds).
@@ -1607,15 +1608,24 @@ def load_labels(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray
 
 
 def load_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """The session's training set: observations [M, D] float64 and labels [M] int64 ([0, D]
-    and [0] when the session has no label).
+    """The session's training set, what its model's every fit stands on: observations [M, D]
+    float64 and labels [M] int64 ([0, D] and [0] when the session has none).
 
-    Every label in arrival order; with a strategy that relabels (``"relabel": true`` in the
-    stored strategy, e.g. Confidence-Based Autonomy), a label for an observation already stored
-    replaces that point's label instead of adding a point.
+    The prior demonstrations the session started from, if any (:func:`load_prior_demonstrations`),
+    then its own labels in arrival order (:func:`load_labels`); with a strategy that relabels
+    (``"relabel": true`` in the stored strategy, e.g. Confidence-Based Autonomy), a label for
+    an observation already stored, a prior one included, replaces that point's label instead
+    of adding a point. So ``prior_demonstrations=load_demonstrations(earlier_run_dir)`` starts
+    a session from everything an earlier one was fitted on.
+
+    Raises:
+        CorruptSessionError: the session's ``prior.npz`` is missing or changed.
     """
     config = load_config(run_dir)
+    px, py = load_prior_demonstrations(run_dir)
     x, y = load_labels(run_dir)
+    if len(py):
+        x, y = np.concatenate([px, x]), np.concatenate([py, y])
     if not len(y) or not _relabels(config):
         return x, y
     return training_set(list(x), y.tolist(), relabel=True)
@@ -1797,8 +1807,8 @@ def load_prior_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarr
     """The prior demonstrations a session started from (``ConfidentTeacher(...,
     prior_demonstrations=...)``): observations [N, D] float64 and actions [N] int64, as kept
     in its ``prior.npz``; [0, D] and [0] for a session without them. They are not in
-    :func:`load_labels` / :func:`load_demonstrations` (the session's own labels), but every fit
-    of the session's model stands on them first.
+    :func:`load_labels` (the session's own labels); :func:`load_demonstrations` (the training
+    set) and every fit of the session's model take them first.
 
     Raises:
         CorruptSessionError: the file is missing or does not match the SHA-256 in config.json.
