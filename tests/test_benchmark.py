@@ -452,6 +452,55 @@ def test_a_cells_seed_seeds_daggers_coins_unless_its_params_do():
     assert bm.CELL_FORMAT == 5  # cached cells of formats 1 to 4 are recomputed
 
 
+def test_a_strategy_takes_its_own_teaching_settings_over_the_envs():
+    """Every strategy took its env's TeachingConfig, so the `cba` row always had confident
+    execution's non-interactive phase, and CBA as JAIR 2009 publishes it (no such phase)
+    could not run beside it (science review). StrategySpec(teaching=...) overrides the env's
+    learning fields for that strategy's cells; the override is part of their key."""
+    published = bm.StrategySpec("cba", label="cba-jair", teaching={"noninteractive": False})
+    plain = bm.StrategySpec("cba")
+    assert "teaching" not in plain.to_dict()  # a spec without it keeps its cells' key
+    spec = _env(teacher="_bench_env:teacher")
+    cells = {
+        c["strategy"]["label"]: bm.run_cell(c)
+        for c in bm.cell_configs([plain, published], [spec], [0])
+    }
+    a, b = cells["cba"]["attention"], cells["cba-jair"]["attention"]
+    # the phase asks at every step until its window is full; without it the learner acts
+    assert b["agent_actions"] > a["agent_actions"], (a, b)
+    assert cells["cba"]["key"] != cells["cba-jair"]["key"]
+    for teaching, says in (
+        ({"max_episodes": 3}, "say when to stop"),
+        ({"nonintractive": False}, "nonintractive"),
+        ({"accuracy_window": 0}, "accuracy_window"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            bm.StrategySpec("cba", teaching=teaching)
+
+
+def test_strategy_teaching_is_given_on_the_command_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc,cba"]
+    argv += ["--seeds", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    argv += ["--workers", "1", "--out", str(tmp_path / "b")]
+    given = ["--strategy-teaching", "cba.noninteractive=false"]
+    assert main([*argv, *given]) == 0
+    cells = [json.loads(p.read_text()) for p in (tmp_path / "b" / "cells").glob("*.json")]
+    teaching = {c["strategy"]: c["config"]["strategy"].get("teaching") for c in cells}
+    assert teaching == {"bc": None, "cba": {"noninteractive": False}}
+    capsys.readouterr()
+    for bad, says in (
+        ("cba.nonintractive=false", "nonintractive"),
+        ("cba.max_episodes=3", "say when to stop"),
+        ("dagger.noninteractive=false", "dagger is not among --strategies"),
+    ):
+        assert main([*argv, "--strategy-teaching", bad, "--out", str(tmp_path / "x")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and says in err and "--strategy-teaching" in err, err
+    assert not (tmp_path / "x").exists()
+
+
 def test_a_strategy_spec_is_a_known_name_or_an_import_path():
     for name in ("dagerr", 5):
         with pytest.raises(ValueError, match="StrategySpec: name must be one of"):

@@ -130,6 +130,18 @@ def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) 
                 f"{dict(s.params)}: {type(exc).__name__}: {text}; fix its params (the keyword "
                 "arguments of its constructor)"
             ) from exc
+    from torchcbl.teaching import TeachingConfig
+
+    for s in strategies:
+        for e in envs:
+            if s.teaching:
+                try:
+                    TeachingConfig(**{**dict(e.teaching), **dict(s.teaching)})
+                except (TypeError, ValueError) as exc:
+                    raise ValueError(
+                        f"StrategySpec {s.title!r}: its teaching {dict(s.teaching)} over EnvSpec "
+                        f"{e.name!r}'s {dict(e.teaching)}: {exc}"
+                    ) from None
     for e in envs:
         factory = _import(e.teacher)
         try:
@@ -206,11 +218,16 @@ class StrategySpec:
             :class:`~torchcbl.confidence.DistanceRule`'s (``max_std``, default 2, or
             ``quantile``): ``ConfidentExecution(DistanceRule(**params))``.
         label: the name in tables and plots (default: ``name``).
+        teaching: :class:`~torchcbl.teaching.TeachingConfig` learning fields that this
+            strategy's cells take over the env's ``teaching`` (JSON values, part of the cells'
+            key), e.g. ``{"noninteractive": False}`` for CBA as JAIR 2009 publishes it,
+            without confident execution's non-interactive phase.
     """
 
     name: str
     params: Mapping[str, Any] = field(default_factory=dict)
     label: str | None = None
+    teaching: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or (
@@ -227,6 +244,26 @@ class StrategySpec:
         object.__setattr__(
             self, "params", _json_plain(self.params, f"StrategySpec {self.name!r}: params")
         )
+        if not isinstance(self.teaching, Mapping):
+            raise ValueError(
+                f"StrategySpec {self.name!r}: teaching must be a mapping of TeachingConfig "
+                f"fields, got {self.teaching!r}"
+            )
+        teaching = _json_plain(self.teaching, f"StrategySpec {self.name!r}: teaching")
+        from torchcbl.teaching import _STOP_SETTINGS, TeachingConfig
+
+        stops = [k for k in _STOP_SETTINGS if k in teaching]
+        if stops:  # a cell stops at each budget and at max_steps, and nowhere else
+            raise ValueError(
+                f"StrategySpec {self.name!r}: teaching: {stops} say when to stop, which a cell "
+                "decides (each of budgets, then max_steps); give TeachingConfig's learning "
+                "fields only"
+            )
+        try:  # a misspelt field or a refused value now, not in the first cell
+            TeachingConfig(**teaching)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"StrategySpec {self.name!r}: teaching: {exc}") from None
+        object.__setattr__(self, "teaching", teaching)
 
     @property
     def title(self) -> str:
@@ -255,7 +292,10 @@ class StrategySpec:
         return cls(**params)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "params": dict(self.params), "label": self.title}
+        out = {"name": self.name, "params": dict(self.params), "label": self.title}
+        if self.teaching:  # (absent when empty: the cells of a spec without it keep their key)
+            out["teaching"] = dict(self.teaching)
+        return out
 
 
 @dataclass(frozen=True)
@@ -589,7 +629,7 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
             teacher = correcting(teacher)
         audited = _Audited(env, auditor)
         model = GaussianMixtureSet(n_actions, n_features, seed=seed, **dict(spec.model))
-        tc = TeachingConfig(**dict(spec.teaching))
+        tc = TeachingConfig(**{**dict(spec.teaching), **dict(sspec.teaching)})
         loop = ConfidentTeacher(
             audited, teacher, model=model, strategy=strategy, config=tc, seed=seed, progress=False
         )

@@ -950,25 +950,38 @@ def _float_or_none(text: str) -> float | None:
         return None
 
 
-def _strategy_params(given: list[str], names: list[str]) -> dict[str, dict[str, Any]]:
-    """The --strategy-param S.KEY=VALUE options as {strategy: {key: value}}: a value is read
-    as JSON (a number, true, null, a list) where it is JSON, else as the string given."""
+def _strategy_params(
+    given: list[str], names: list[str], option: str = "--strategy-param"
+) -> dict[str, dict[str, Any]]:
+    """The --strategy-param (or --strategy-teaching) S.KEY=VALUE options as {strategy: {key:
+    value}}: a value is read as JSON (a number, true, null, a list) where it is JSON, else as
+    the string given."""
     params: dict[str, dict[str, Any]] = {}
+    example = (
+        "cba.noninteractive=false"
+        if option == "--strategy-teaching"
+        else "dagger.iteration_steps=20"
+    )
     for item in given:
         target, eq, text = item.partition("=")
         name, dot, key = target.rpartition(".")
         if not eq or not dot or not name or not key.isidentifier():
             raise _UsageError(
-                f"--strategy-param {item!r}: expected S.KEY=VALUE, a strategy of --strategies, "
-                "one of its constructor's keywords and a value (e.g. dagger.iteration_steps=20)"
+                f"{option} {item!r}: expected S.KEY=VALUE, a strategy of --strategies, "
+                + (
+                    "a TeachingConfig field"
+                    if option == "--strategy-teaching"
+                    else "one of its constructor's keywords"
+                )
+                + f" and a value (e.g. {example})"
             )
         if name not in names:
             raise _UsageError(
-                f"--strategy-param {item}: {name} is not among --strategies ({','.join(names)}); "
+                f"{option} {item}: {name} is not among --strategies ({','.join(names)}); "
                 "name the strategy as --strategies does"
             )
         if key in params.setdefault(name, {}):
-            raise _UsageError(f"--strategy-param: {name}.{key} given twice; give each once")
+            raise _UsageError(f"{option}: {name}.{key} given twice; give each once")
         try:
             value = json.loads(text)
         except ValueError:
@@ -977,7 +990,7 @@ def _strategy_params(given: list[str], names: list[str]) -> dict[str, dict[str, 
                 # Python's spelling or a number JSON does not read: a string would reach the
                 # constructor ("False" is true), so say how to write it
                 raise _UsageError(
-                    f"--strategy-param {item}: {text!r} is not a JSON value; write numbers as "
+                    f"{option} {item}: {text!r} is not a JSON value; write numbers as "
                     "JSON does (0.5, 3, 1e-3), true / false / null, or a string in double "
                     f"quotes ({name}.{key}='\"{text}\"')"
                 ) from None
@@ -1017,7 +1030,13 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             f"--strategies {args.strategies}: {twice} given more than once; name each strategy once"
         )
     params = _strategy_params(args.strategy_param or [], names)
-    strategies = [bm.StrategySpec(n, params.get(n, {})) for n in names]
+    teaching = _strategy_params(args.strategy_teaching or [], names, "--strategy-teaching")
+    try:
+        strategies = [
+            bm.StrategySpec(n, params.get(n, {}), teaching=teaching.get(n, {})) for n in names
+        ]
+    except ValueError as exc:  # a teaching field it does not know, or a value it refuses
+        raise _UsageError(f"--strategy-teaching: {_one_line(exc)}") from None
     for spec in strategies:  # a path of one's own: made once now, before anything is written
         if spec.name not in bm.STRATEGY_PATHS:
             _check_strategy(spec)
@@ -1442,6 +1461,16 @@ def _parser() -> argparse.ArgumentParser:
         help="a keyword argument of strategy S's constructor, VALUE read as JSON where it is "
         "JSON, else as a string (e.g. dagger.iteration_steps=20, confident.max_std=3; for "
         "confident they are the DistanceRule's); repeat for more. Part of each cell's key",
+    )
+    p.add_argument(
+        "--strategy-teaching",
+        action="append",
+        default=None,
+        metavar="S.KEY=VALUE",
+        help="a TeachingConfig learning field for strategy S's cells over the env's teaching "
+        "settings (e.g. cba.noninteractive=false: CBA without confident execution's "
+        "non-interactive phase, as JAIR 2009 publishes it); repeat for more. Part of each "
+        "cell's key",
     )
     p.add_argument(
         "--envs",
