@@ -119,7 +119,11 @@ def test_labels_to_95pct_with_censoring_by_hand():
         }
 
     cells = [cell(0, [0.5, 0.96, 1.0]), cell(1, [0.95, 1, 1]), cell(2, [0.2, 0.5, 0.9])]
+    # a newer cell beside older ones (summarize is public): its extra keys are averaged over
+    # the cells that have them, not a KeyError
+    cells[1]["attention"] = {**cells[1]["attention"], "wrong_autonomous_rate": 0.25}
     r = bm.summarize(cells, envs=["e"], strategies=["s"])["table"]["e"]["s"]
+    assert r["attention"]["wrong_autonomous_rate"] == {"mean": 0.25, "sd": None, "n": 1}
     lt = r["labels_to_95pct"]
     assert [p["labels"] for p in lt["per_seed"]] == [10, 5, 20]
     assert [p["censored"] for p in lt["per_seed"]] == [False, False, True]

@@ -1060,7 +1060,9 @@ def summarize(
                 continue
             hits = [_labels_to(c, 0.95) for c in mine]
             budgets = mine[0]["config"]["env"]["budgets"]
-            att = {k: mean_sd(c["attention"][k] for c in mine) for k in mine[0]["attention"]}
+            # every key any seed's cell has (a cell of an older format lacks the newer ones)
+            keys = dict.fromkeys(k for c in mine for k in c["attention"])
+            att = {k: mean_sd(c["attention"].get(k) for c in mine) for k in keys}
             teacher = [float(c["teacher_performance"]) for c in mine]
             table[env][strat] = {
                 "labels_to_95pct": {

@@ -684,7 +684,8 @@ def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
 _PRIOR_EXPECTED = (
     "expected a .npz file holding the arrays 'observations' [N, D] and 'actions' [N] (as "
     "numpy.savez(path, observations=..., actions=...) writes them), or a teaching session "
-    "directory (its labels, after its own prior demonstrations)"
+    "directory (its training set: its own prior demonstrations, then its labels, relabelled "
+    "as its strategy relabels)"
 )
 
 
@@ -1425,7 +1426,8 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="FILE.npz|DIR",
         help="start from demonstrations you already have: a .npz with arrays 'observations' "
-        "[N, D] and 'actions' [N], or an earlier session's directory (its labels); every fit "
+        "[N, D] and 'actions' [N], or an earlier session's directory (its training set); every "
+        "fit "
         "includes them, the session keeps them, and they do not count as its demonstrations",
     )
     p.add_argument(
