@@ -1513,6 +1513,7 @@ def test_teach_starts_from_prior_demonstrations_of_a_file_or_an_earlier_session(
         (tmp_path / "keys.npz", "without 'observations' and 'actions'"),
         (tmp_path / "flat.npz", "shape [N, 3]"),
         (tmp_path / "range.npz", "actions must be in [0, 4)"),
+        (_session_without_labels(tmp_path / "empty"), "that session holds no demonstrations"),
     ):
         argv = ["teach", "corridor", "--run-dir", str(tmp_path / "bad"), "--steps", "30"]
         assert main([*argv, "--prior-demonstrations", str(source)]) == 2, source

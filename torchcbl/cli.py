@@ -700,9 +700,15 @@ def _read_prior_demonstrations(path: Path) -> tuple[Any, Any]:
         from torchcbl.session import load_demonstrations
 
         try:  # its training set: its own prior first, relabelled as its strategy relabels
-            return load_demonstrations(path)
+            x, y = load_demonstrations(path)
         except (IncompatibleRunDirError, CorruptSessionError) as exc:
             raise _UsageError(f"{flag}: {_one_line(exc)}") from None
+        if not len(y):  # (ConfidentTeacher's refusal says "leave it out (None)", Python's)
+            raise _UsageError(
+                f"{flag}: that session holds no demonstrations yet; teach it first (torchcbl "
+                "teach ... --resume), or leave --prior-demonstrations out"
+            )
+        return x, y
     if not path.is_file():
         raise _UsageError(f"{flag}: no such file or directory; {_PRIOR_EXPECTED}")
     try:
