@@ -695,6 +695,15 @@ def _read_prior_demonstrations(path: Path) -> tuple[Any, Any]:
     import numpy as np
 
     flag = f"--prior-demonstrations {path}"
+    if path.is_dir() and not (path / "config.json").exists():
+        below = _sessions_below(path)
+        if below:  # a run directory (runs/reproduce/corridor) or a folder of sessions
+            shown = ", ".join(str(p) for p in below)
+            raise _UsageError(
+                f"{flag}: {path} is not a teaching session but holds sessions: {shown}"
+                f"{' ...' if len(below) == 5 else ''}; pass one of them"
+            )
+        raise _UsageError(f"{flag}: {path} holds no config.json; {_PRIOR_EXPECTED}")
     if path.is_dir():
         from torchcbl.errors import CorruptSessionError, IncompatibleRunDirError
         from torchcbl.session import load_demonstrations
