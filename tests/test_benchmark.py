@@ -1244,3 +1244,26 @@ def test_forkserver_workers_end_while_their_killed_pool_is_not_yet_reaped(tmp_pa
         _assert_all_end(workers, "worker processes outlived their killed pool")
     finally:
         child.wait()
+
+
+def test_a_python_spelt_value_is_told_its_json_spelling(tmp_path, capsys, monkeypatch):
+    """--strategy-teaching cba.noninteractive=False (Python's spelling, as StrategySpec's
+    teaching={"noninteractive": False} is written) was refused with the advice to quote it as
+    a string, cba.noninteractive='"False"', which the next run refuses again (a bool is
+    wanted); a number JSON does not read (.5, 1_0) was told the same. The advice is the JSON
+    spelling of the value meant."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "cba,dagger"]
+    argv += ["--out", str(tmp_path / "b")]
+    for option, given, advice in (
+        ("--strategy-teaching", "cba.noninteractive=False", "(cba.noninteractive=false)"),
+        ("--strategy-param", "dagger.relabel=True", "(dagger.relabel=true)"),
+        ("--strategy-param", "dagger.seed=None", "(dagger.seed=null)"),
+        ("--strategy-param", "dagger.decay=.5", "(dagger.decay=0.5)"),
+        ("--strategy-param", "dagger.iteration_steps=1_0", "(dagger.iteration_steps=10)"),
+    ):
+        assert main([*argv, option, given]) == 2, given
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and advice in err, err
+    assert not (tmp_path / "b").exists()

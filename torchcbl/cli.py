@@ -953,11 +953,18 @@ def _check_strategy(spec: Any) -> None:
         )
 
 
-def _float_or_none(text: str) -> float | None:
-    try:
-        return float(text)
-    except ValueError:
-        return None
+def _json_spelling(text: str) -> str | None:
+    """The JSON spelling of a value written as Python writes it (``False``, ``None``, ``.5``,
+    ``1_0``); None for text that reads as no such value (a string)."""
+    words = {"True": "true", "False": "false", "None": "null"}
+    if text.strip() in words:
+        return words[text.strip()]
+    for kind in (int, float):
+        try:
+            return json.dumps(kind(text))
+        except ValueError:
+            pass
+    return None
 
 
 def _strategy_params(
@@ -996,13 +1003,15 @@ def _strategy_params(
             value = json.loads(text)
         except ValueError:
             value = text
-            if text.strip() in ("True", "False", "None") or _float_or_none(text) is not None:
+            meant = _json_spelling(text)
+            if meant is not None:
                 # Python's spelling or a number JSON does not read: a string would reach the
-                # constructor ("False" is true), so say how to write it
+                # constructor ("False" is true), so say how to write the value meant
                 raise _UsageError(
                     f"{option} {item}: {text!r} is not a JSON value; write numbers as "
-                    "JSON does (0.5, 3, 1e-3), true / false / null, or a string in double "
-                    f"quotes ({name}.{key}='\"{text}\"')"
+                    "JSON does (0.5, 3, 1e-3) and true / false / null in lower case "
+                    f"({name}.{key}={meant}), or a string in double quotes "
+                    f"({name}.{key}='\"{text}\"')"
                 ) from None
         params[name][key] = value
     return params
