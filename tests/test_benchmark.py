@@ -1267,3 +1267,26 @@ def test_a_python_spelt_value_is_told_its_json_spelling(tmp_path, capsys, monkey
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and advice in err, err
     assert not (tmp_path / "b").exists()
+
+
+def test_a_misspelt_teaching_field_is_told_the_fields_there_are(tmp_path, capsys, monkeypatch):
+    """--strategy-teaching cba.noninteractiv=false (or StrategySpec / EnvSpec teaching with a
+    misspelt key) was refused with Python's "TeachingConfig.__init__() got an unexpected
+    keyword argument 'noninteractiv'", which names no field it takes; the error names the
+    unknown key and the learning fields a cell takes."""
+    fields = "['accuracy_window', 'burst', 'max_new', 'noninteractive', 'refit', "
+    for make in (
+        lambda: bm.StrategySpec("cba", teaching={"noninteractiv": False}),
+        lambda: _env(teaching={"noninteractiv": False}),
+    ):
+        with pytest.raises(ValueError) as info:
+            make()
+        assert "unknown field 'noninteractiv'" in str(info.value), info.value
+        assert fields in str(info.value) and "__init__" not in str(info.value), info.value
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "cba"]
+    argv += ["--strategy-teaching", "cba.noninteractiv=false", "--out", str(tmp_path / "b")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "unknown field 'noninteractiv'" in err and fields in err, err
