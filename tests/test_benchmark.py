@@ -1290,3 +1290,14 @@ def test_a_misspelt_teaching_field_is_told_the_fields_there_are(tmp_path, capsys
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "unknown field 'noninteractiv'" in err and fields in err, err
+
+
+def test_two_settings_of_one_strategy_without_labels_are_told_to_label_them(tmp_path):
+    """Two StrategySpecs of one strategy with other teaching settings (CBA with and without the
+    non-interactive phase, as docs/benchmark.md suggests) and no label: refused with "strategy
+    labels must be distinct, got ['cba', 'cba']", not saying what to do; it says to give
+    each a label= of its own (as the env names' error does)."""
+    plain, published = bm.StrategySpec("cba"), bm.StrategySpec("cba", teaching={"burst": 2})
+    with pytest.raises(ValueError, match=r"\['cba', 'cba'\]; give each StrategySpec its own "):
+        bm.run_benchmark([plain, published], [_env()], [0], tmp_path / "out")
+    assert not (tmp_path / "out").exists()

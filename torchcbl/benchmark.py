@@ -941,7 +941,11 @@ def run_benchmark(
         raise ValueError("run_benchmark: need at least one strategy, one env and one seed")
     titles = [s.title for s in strategies]
     if len(set(titles)) != len(titles):
-        raise ValueError(f"run_benchmark: strategy labels must be distinct, got {titles}")
+        raise ValueError(
+            f"run_benchmark: strategy labels must be distinct (tables group cells by label), got "
+            f"{titles}; give each StrategySpec its own label= (e.g. StrategySpec('cba', "
+            "teaching={'noninteractive': False}, label='cba-jair') beside StrategySpec('cba'))"
+        )
     names = [e.name for e in envs]
     if len(set(names)) != len(names):
         raise ValueError(
