@@ -1244,3 +1244,60 @@ def test_forkserver_workers_end_while_their_killed_pool_is_not_yet_reaped(tmp_pa
         _assert_all_end(workers, "worker processes outlived their killed pool")
     finally:
         child.wait()
+
+
+def test_a_python_spelt_value_is_told_its_json_spelling(tmp_path, capsys, monkeypatch):
+    """--strategy-teaching cba.noninteractive=False (Python's spelling, as StrategySpec's
+    teaching={"noninteractive": False} is written) was refused with the advice to quote it as
+    a string, cba.noninteractive='"False"', which the next run refuses again (a bool is
+    wanted); a number JSON does not read (.5, 1_0) was told the same. The advice is the JSON
+    spelling of the value meant."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "cba,dagger"]
+    argv += ["--out", str(tmp_path / "b")]
+    for option, given, advice in (
+        ("--strategy-teaching", "cba.noninteractive=False", "(cba.noninteractive=false)"),
+        ("--strategy-param", "dagger.relabel=True", "(dagger.relabel=true)"),
+        ("--strategy-param", "dagger.seed=None", "(dagger.seed=null)"),
+        ("--strategy-param", "dagger.decay=.5", "(dagger.decay=0.5)"),
+        ("--strategy-param", "dagger.iteration_steps=1_0", "(dagger.iteration_steps=10)"),
+    ):
+        assert main([*argv, option, given]) == 2, given
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and advice in err, err
+    assert not (tmp_path / "b").exists()
+
+
+def test_a_misspelt_teaching_field_is_told_the_fields_there_are(tmp_path, capsys, monkeypatch):
+    """--strategy-teaching cba.noninteractiv=false (or StrategySpec / EnvSpec teaching with a
+    misspelt key) was refused with Python's "TeachingConfig.__init__() got an unexpected
+    keyword argument 'noninteractiv'", which names no field it takes; the error names the
+    unknown key and the learning fields a cell takes."""
+    fields = "['accuracy_window', 'burst', 'max_new', 'noninteractive', 'refit', "
+    for make in (
+        lambda: bm.StrategySpec("cba", teaching={"noninteractiv": False}),
+        lambda: _env(teaching={"noninteractiv": False}),
+    ):
+        with pytest.raises(ValueError) as info:
+            make()
+        assert "unknown field 'noninteractiv'" in str(info.value), info.value
+        assert fields in str(info.value) and "__init__" not in str(info.value), info.value
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "cba"]
+    argv += ["--strategy-teaching", "cba.noninteractiv=false", "--out", str(tmp_path / "b")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "unknown field 'noninteractiv'" in err and fields in err, err
+
+
+def test_two_settings_of_one_strategy_without_labels_are_told_to_label_them(tmp_path):
+    """Two StrategySpecs of one strategy with other teaching settings (CBA with and without the
+    non-interactive phase, as docs/benchmark.md suggests) and no label: refused with "strategy
+    labels must be distinct, got ['cba', 'cba']", not saying what to do; it says to give
+    each a label= of its own (as the env names' error does)."""
+    plain, published = bm.StrategySpec("cba"), bm.StrategySpec("cba", teaching={"burst": 2})
+    with pytest.raises(ValueError, match=r"\['cba', 'cba'\]; give each StrategySpec its own "):
+        bm.run_benchmark([plain, published], [_env()], [0], tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -1523,3 +1523,29 @@ def test_teach_starts_from_prior_demonstrations_of_a_file_or_an_earlier_session(
     argv = ["teach", "corridor", "--run-dir", str(first), "--resume", "--steps", "3"]
     assert main([*argv, "--prior-demonstrations", str(prior)]) == 2
     assert "a resumed session keeps the prior" in capsys.readouterr().err
+
+
+def test_prior_demonstrations_of_a_directory_that_is_no_session_says_which_are(tmp_path, capsys):
+    """--prior-demonstrations DIR with DIR a run directory holding sessions (a reproduction's
+    runs/reproduce/corridor, a folder of one's sessions) or no session at all was told
+    "config.json is missing. Start a session with ConfidentTeacher(..., run_dir=...) first",
+    a Python hint for a command-line mistake; it names the sessions below DIR to pass instead,
+    or says what the option reads, as evaluate does."""
+    from _toy_envs import ClusterWorld
+
+    from torchcbl import ConfidentTeacher
+
+    world = ClusterWorld(np.eye(3) * 5, [0, 1, 2], [1, 1, 1], episode_length=5)
+    session = tmp_path / "runs" / "sessions" / "seed0"
+    ConfidentTeacher(world, lambda o, i: world.optimal_action(o), run_dir=session).close()
+    (tmp_path / "empty").mkdir()
+    argv = ["teach", "corridor", "--run-dir", str(tmp_path / "new"), "--steps", "3"]
+    for given, says in (
+        (tmp_path / "runs", f"is not a teaching session but holds sessions: {session}; pass"),
+        (tmp_path / "empty", "holds no config.json; expected a .npz file"),
+    ):
+        assert main([*argv, "--prior-demonstrations", str(given)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and says in err, err
+        assert "ConfidentTeacher" not in err, err
+    assert not (tmp_path / "new" / "config.json").exists()

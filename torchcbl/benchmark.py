@@ -187,6 +187,34 @@ def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) 
             ) from None
 
 
+def _check_teaching(teaching: Mapping[str, Any], where: str) -> None:
+    """``teaching`` as TeachingConfig learning fields, or a ValueError naming ``where``: an
+    unknown key is named with the fields there are (not Python's "unexpected keyword")."""
+    import dataclasses
+
+    from torchcbl.teaching import _STOP_SETTINGS, TeachingConfig
+
+    names = {f.name for f in dataclasses.fields(TeachingConfig)}
+    unknown = [k for k in teaching if k not in names]
+    if unknown:
+        learning = sorted(names - set(_STOP_SETTINGS))
+        raise ValueError(
+            f"{where}: unknown field{'s' if len(unknown) > 1 else ''} "
+            f"{', '.join(map(repr, unknown))}; expected TeachingConfig's learning fields "
+            f"{learning}"
+        )
+    stops = [k for k in _STOP_SETTINGS if k in teaching]
+    if stops:  # a cell stops at each budget and at max_steps, and nowhere else
+        raise ValueError(
+            f"{where}: {stops} say when to stop, which a cell decides (each of budgets, then "
+            "max_steps); give TeachingConfig's learning fields only"
+        )
+    try:  # a refused value now, not in the first cell
+        TeachingConfig(**teaching)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
 def _json_plain(value: Any, where: str) -> Any:
     """``value`` with numpy scalars as the Python numbers they hold (np.int64(10) -> 10), or a
     ValueError naming ``where`` for anything that is not a JSON value: a cell's configuration is
@@ -250,19 +278,7 @@ class StrategySpec:
                 f"fields, got {self.teaching!r}"
             )
         teaching = _json_plain(self.teaching, f"StrategySpec {self.name!r}: teaching")
-        from torchcbl.teaching import _STOP_SETTINGS, TeachingConfig
-
-        stops = [k for k in _STOP_SETTINGS if k in teaching]
-        if stops:  # a cell stops at each budget and at max_steps, and nowhere else
-            raise ValueError(
-                f"StrategySpec {self.name!r}: teaching: {stops} say when to stop, which a cell "
-                "decides (each of budgets, then max_steps); give TeachingConfig's learning "
-                "fields only"
-            )
-        try:  # a misspelt field or a refused value now, not in the first cell
-            TeachingConfig(**teaching)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"StrategySpec {self.name!r}: teaching: {exc}") from None
+        _check_teaching(teaching, f"StrategySpec {self.name!r}: teaching")
         object.__setattr__(self, "teaching", teaching)
 
     @property
@@ -398,19 +414,8 @@ class EnvSpec:
             plain(self, name, _json_plain(value, f"EnvSpec {self.name!r}: {name}"))
         # what every worker would fail on at its first cell, checked now
         from torchcbl.gmm import GaussianMixtureSet
-        from torchcbl.teaching import _STOP_SETTINGS, TeachingConfig
 
-        try:
-            TeachingConfig(**dict(self.teaching))
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"EnvSpec {self.name!r}: teaching: {exc}") from None
-        stops = [k for k in _STOP_SETTINGS if k in self.teaching]
-        if stops:  # a cell stops at each budget and at max_steps, and nowhere else
-            raise ValueError(
-                f"EnvSpec {self.name!r}: teaching: {stops} say when to stop, which a cell "
-                "decides (each of budgets, then max_steps); give TeachingConfig's learning "
-                "fields only"
-            )
+        _check_teaching(self.teaching, f"EnvSpec {self.name!r}: teaching")
         taken = {"n_actions", "n_features", "seed"} & set(self.model)
         if taken:
             raise ValueError(
@@ -936,7 +941,11 @@ def run_benchmark(
         raise ValueError("run_benchmark: need at least one strategy, one env and one seed")
     titles = [s.title for s in strategies]
     if len(set(titles)) != len(titles):
-        raise ValueError(f"run_benchmark: strategy labels must be distinct, got {titles}")
+        raise ValueError(
+            f"run_benchmark: strategy labels must be distinct (tables group cells by label), got "
+            f"{titles}; give each StrategySpec its own label= (e.g. StrategySpec('cba', "
+            "teaching={'noninteractive': False}, label='cba-jair') beside StrategySpec('cba'))"
+        )
     names = [e.name for e in envs]
     if len(set(names)) != len(names):
         raise ValueError(

@@ -695,6 +695,15 @@ def _read_prior_demonstrations(path: Path) -> tuple[Any, Any]:
     import numpy as np
 
     flag = f"--prior-demonstrations {path}"
+    if path.is_dir() and not (path / "config.json").exists():
+        below = _sessions_below(path)
+        if below:  # a run directory (runs/reproduce/corridor) or a folder of sessions
+            shown = ", ".join(str(p) for p in below)
+            raise _UsageError(
+                f"{flag}: {path} is not a teaching session but holds sessions: {shown}"
+                f"{' ...' if len(below) == 5 else ''}; pass one of them"
+            )
+        raise _UsageError(f"{flag}: {path} holds no config.json; {_PRIOR_EXPECTED}")
     if path.is_dir():
         from torchcbl.errors import CorruptSessionError, IncompatibleRunDirError
         from torchcbl.session import load_demonstrations
@@ -950,11 +959,18 @@ def _check_strategy(spec: Any) -> None:
         )
 
 
-def _float_or_none(text: str) -> float | None:
-    try:
-        return float(text)
-    except ValueError:
-        return None
+def _json_spelling(text: str) -> str | None:
+    """The JSON spelling of a value written as Python writes it (``False``, ``None``, ``.5``,
+    ``1_0``); None for text that reads as no such value (a string)."""
+    words = {"True": "true", "False": "false", "None": "null"}
+    if text.strip() in words:
+        return words[text.strip()]
+    for kind in (int, float):
+        try:
+            return json.dumps(kind(text))
+        except ValueError:
+            pass
+    return None
 
 
 def _strategy_params(
@@ -993,13 +1009,15 @@ def _strategy_params(
             value = json.loads(text)
         except ValueError:
             value = text
-            if text.strip() in ("True", "False", "None") or _float_or_none(text) is not None:
+            meant = _json_spelling(text)
+            if meant is not None:
                 # Python's spelling or a number JSON does not read: a string would reach the
-                # constructor ("False" is true), so say how to write it
+                # constructor ("False" is true), so say how to write the value meant
                 raise _UsageError(
                     f"{option} {item}: {text!r} is not a JSON value; write numbers as "
-                    "JSON does (0.5, 3, 1e-3), true / false / null, or a string in double "
-                    f"quotes ({name}.{key}='\"{text}\"')"
+                    "JSON does (0.5, 3, 1e-3) and true / false / null in lower case "
+                    f"({name}.{key}={meant}), or a string in double quotes "
+                    f"({name}.{key}='\"{text}\"')"
                 ) from None
         params[name][key] = value
     return params
