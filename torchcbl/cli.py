@@ -1451,8 +1451,9 @@ def _parser() -> argparse.ArgumentParser:
         metavar="FILE.npz|DIR",
         help="start from demonstrations you already have: a .npz with arrays 'observations' "
         "[N, D] and 'actions' [N], or an earlier session's directory (its training set); every "
-        "fit "
-        "includes them, the session keeps them, and they do not count as its demonstrations",
+        "fit includes them, the session keeps them, and they do not count as its "
+        "demonstrations (the non-interactive phase still asks at every step until its window "
+        "is full: with a good prior, add --skip-noninteractive)",
     )
     p.add_argument(
         "--map",
