@@ -11,6 +11,7 @@ import select
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -215,9 +216,7 @@ def _user_mistakes(run: Path, tmp: Path) -> list[list[str]]:
     ]
 
 
-def test_a_users_mistakes_get_one_line_and_no_traceback(
-    corridor_run, tmp_path, capsys, monkeypatch
-):
+def test_a_users_mistakes_get_one_line_and_no_traceback(corridor_run, tmp_path, capfd, monkeypatch):
     """Each command run as a user would: exit code 2, one line on stderr that names the
     problem, nothing on stdout, no traceback, and nothing left behind. The first mistake of
     each command runs as its own process (the console script, as a user runs it); the rest
@@ -240,12 +239,17 @@ def test_a_users_mistakes_get_one_line_and_no_traceback(
     for i, argv in enumerate(cases):
         if i in procs:
             continue
-        try:
-            code = main(list(argv))
-        except SystemExit as exc:  # argparse's own refusals
-            code = exc.code
-        captured = capsys.readouterr()
-        results.append((argv, code, captured.out, captured.err))
+        # (a warning, which the console script would print on stderr, and anything written
+        # to the file descriptors count as output too)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                code = main(list(argv))
+            except SystemExit as exc:  # argparse's own refusals
+                code = exc.code
+        captured = capfd.readouterr()
+        err = captured.err + "".join(f"{w.category.__name__}: {w.message}\n" for w in caught)
+        results.append((argv, code, captured.out, err))
     for i, proc in procs.items():
         out, err = proc.communicate(timeout=120)
         results.append((cases[i], proc.returncode, out, err))

@@ -1453,7 +1453,8 @@ def _parser() -> argparse.ArgumentParser:
         "[N, D] and 'actions' [N], or an earlier session's directory (its training set); every "
         "fit includes them, the session keeps them, and they do not count as its "
         "demonstrations (the non-interactive phase still asks at every step until its window "
-        "is full: with a good prior, add --skip-noninteractive)",
+        "is full and its accuracy reaches the target: with a good prior, add "
+        "--skip-noninteractive)",
     )
     p.add_argument(
         "--map",
