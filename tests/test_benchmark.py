@@ -1002,8 +1002,9 @@ def test_strategy_parameters_are_given_on_the_command_line(tmp_path, capsys, mon
     }
     for param, says in mistakes.items():
         assert main([*argv, "--strategy-param", param, "--out", str(tmp_path / "x")]) == 2
-        err = capsys.readouterr().err
+        out, err = capsys.readouterr()
         assert err.count("\n") == 1 and f"{says}" in err, (param, err)
+        assert out == "", (param, out)  # refused before the sweep's plan is printed
     twice = ["--strategy-param", "dagger.iteration_steps=3"] * 2
     assert main([*argv, *twice, "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err

@@ -1065,6 +1065,15 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     for spec in strategies:  # a path of one's own: made once now, before anything is written
         if spec.name not in bm.STRATEGY_PATHS:
             _check_strategy(spec)
+        elif spec.params:  # a shipped one given parameters: refused now, before the plan line
+            try:
+                spec.build(seed=0)
+            except Exception as exc:
+                raise _UsageError(
+                    f"--strategy-param: cannot make {spec.name} with {dict(spec.params)} "
+                    f"({type(exc).__name__}: {_one_line(exc)}); give keywords its constructor "
+                    "takes, with values it accepts"
+                ) from None
     env_names = (
         [e for e in args.envs.split(",") if e] if args.envs is not None else list(_BENCH_ENVS)
     )
