@@ -40,6 +40,11 @@ def _env(**kw):
 
 STRATEGIES = [bm.StrategySpec("bc"), bm.StrategySpec("dagger", {"iteration_steps": 10})]
 
+# `torchcbl benchmark` on the registered toy env alone (tests/_bench_env.py; the tests put
+# tests/ on sys.path), and the smallest sweep of it: one seed, one budget of 5 labels
+_TOY_SWEEP = ("benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0")
+_ONE_TINY_CELL = ["--seeds", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+
 
 def _figures(cell):
     return {k: cell[k] for k in ("key", "curve", "teacher_performance", "attention", "config")}
@@ -252,7 +257,7 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
     env = json.loads((tmp_path / "b" / "results.json").read_text())["envs"]
     assert env["_bench_env:BenchCluster-v0"]["eval_episodes"] == 2
     # --eval-steps alone is the evaluation's length: the default 10 episodes cut it short before
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
     argv += ["--workers", "1", "--budgets", "5,10", "--max-steps", "40", "--eval-steps", "60"]
     assert main([*argv, "--out", str(tmp_path / "c")]) == 0
@@ -484,9 +489,9 @@ def test_a_strategy_takes_its_own_teaching_settings_over_the_envs():
 
 def test_strategy_teaching_is_given_on_the_command_line(tmp_path, capsys, monkeypatch):
     monkeypatch.syspath_prepend(str(TESTS))
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc,cba"]
-    argv += ["--seeds", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    argv += _ONE_TINY_CELL
     argv += ["--workers", "1", "--out", str(tmp_path / "b")]
     given = ["--strategy-teaching", "cba.noninteractive=false"]
     assert main([*argv, *given]) == 0
@@ -626,7 +631,7 @@ def test_a_failing_cell_is_named_and_the_finished_cells_are_kept(
     kept = [json.loads(p.read_text())["seed"] for p in (tmp_path / "cells").glob("*.json")]
     assert kept == ([0] if workers == 1 else [])  # the cell before it is kept
     if workers == 1:  # and at the command line: one line, the cell named
-        argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+        argv = list(_TOY_SWEEP)
         argv += ["--teacher", "_bench_env:glitchy_teacher", "--strategies", "bc", "--seeds", "2"]
         argv += ["--workers", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
         monkeypatch.syspath_prepend(str(TESTS))
@@ -641,7 +646,7 @@ def test_a_teacher_scoring_below_zero_is_not_blamed_on_success_rate(tmp_path, ca
     needs an env that sets info["is_success"] ... every performance is 0 ... pass --score",
     none of it true; the plot drew "95 % of teacher" above the teacher's line (0.95 x -14)."""
     monkeypatch.syspath_prepend(str(TESTS))
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:teacher", "--score", "_bench_env:steps_over_budget"]
     argv += ["--strategies", "bc", "--seeds", "1", "--workers", "1", "--budgets", "5"]
     argv += ["--max-steps", "10", "--eval-episodes", "1", "--out", str(tmp_path / "b")]
@@ -700,7 +705,7 @@ def test_the_command_says_where_the_cells_run(workers, says, tmp_path, monkeypat
     monkeypatch.setenv(
         "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
     )
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
     argv += ["--workers", workers, "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
     assert main([*argv, "--out", str(tmp_path / "out")]) == 0
@@ -916,7 +921,7 @@ def test_a_teacher_given_where_its_factory_belongs_is_refused_before_any_cell_ru
         )
     assert ran == [] and not (tmp_path / "out").exists()
     monkeypatch.syspath_prepend(str(TESTS))
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:bare_teacher", "--out", str(tmp_path / "cli")]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
@@ -975,9 +980,9 @@ def test_strategy_parameters_are_given_on_the_command_line(tmp_path, capsys, mon
     script. --strategy-param S.KEY=VALUE gives them (JSON values, else strings); they are part
     of each cell's key, so a sweep with other values computes its cells again."""
     monkeypatch.syspath_prepend(str(TESTS))
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc,dagger,confident"]
-    argv += ["--seeds", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    argv += _ONE_TINY_CELL
     argv += ["--workers", "1", "--out", str(tmp_path / "b")]
     given = ["--strategy-param", "dagger.iteration_steps=3"]
     given += ["--strategy-param", "confident.max_std=2.5"]
@@ -1017,7 +1022,7 @@ def test_a_strategy_that_needs_parameters_is_told_how_to_give_them(tmp_path, cap
     a strategy that takes no arguments", nothing saying how to give it one; it is told
     --strategy-param (or StrategySpec's params in Python), and made when given them."""
     monkeypatch.syspath_prepend(str(TESTS))
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "_bench_env:StrategyWithParams"]
     assert main([*argv, "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
@@ -1050,7 +1055,7 @@ def test_a_ray_address_where_nothing_listens_is_refused_not_waited_on(
     with socket.socket() as s:  # a port nothing listens on (free a moment ago)
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
     argv += ["--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
     assert main([*argv, "--workers", "1", "--out", str(tmp_path / "b")]) == 0  # a finished sweep
@@ -1087,7 +1092,7 @@ def test_ray_address_auto_with_no_cluster_is_refused_before_the_out_directory(
     monkeypatch.setenv("RAY_TMPDIR", str(tmp_path))  # ray start writes into its ray/
     (tmp_path / "ray").mkdir()
     monkeypatch.syspath_prepend(str(TESTS))
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
     argv += ["--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
     argv += ["--ray-address", "auto", "--out", str(tmp_path / "b")]
@@ -1117,7 +1122,7 @@ def test_a_module_in_the_current_directory_is_said_to_need_pythonpath(
     (tmp_path / "mine.py").write_text("def make(env):\n    return lambda obs, info: 0\n")
     monkeypatch.chdir(tmp_path)
     monkeypatch.syspath_prepend(str(TESTS))
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     for extra in (["--teacher", "mine:make"], ["--teacher", "_bench_env:teacher"]):
         more = ["--strategies", "mine:Strategy"] if extra[1] != "mine:make" else []
         assert main([*argv, *extra, *more, "--out", str(tmp_path / "b")]) == 2
@@ -1254,7 +1259,7 @@ def test_a_python_spelt_value_is_told_its_json_spelling(tmp_path, capsys, monkey
     wanted); a number JSON does not read (.5, 1_0) was told the same. The advice is the JSON
     spelling of the value meant."""
     monkeypatch.syspath_prepend(str(TESTS))
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "cba,dagger"]
     argv += ["--out", str(tmp_path / "b")]
     for option, given, advice in (
@@ -1285,7 +1290,7 @@ def test_a_misspelt_teaching_field_is_told_the_fields_there_are(tmp_path, capsys
         assert "unknown field 'noninteractiv'" in str(info.value), info.value
         assert fields in str(info.value) and "__init__" not in str(info.value), info.value
     monkeypatch.syspath_prepend(str(TESTS))
-    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv = list(_TOY_SWEEP)
     argv += ["--teacher", "_bench_env:teacher", "--strategies", "cba"]
     argv += ["--strategy-teaching", "cba.noninteractiv=false", "--out", str(tmp_path / "b")]
     assert main(argv) == 2

@@ -1622,10 +1622,10 @@ def load_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np
         CorruptSessionError: the session's ``prior.npz`` is missing or changed.
     """
     config = load_config(run_dir)
-    px, py = load_prior_demonstrations(run_dir)
+    prior = _read_prior(run_dir, config)  # (this config: not read again for the prior)
     x, y = load_labels(run_dir)
-    if len(py):
-        x, y = np.concatenate([px, x]), np.concatenate([py, y])
+    if prior is not None:
+        x, y = np.concatenate([prior[0], x]), np.concatenate([prior[1], y])
     if not len(y) or not _relabels(config):
         return x, y
     return training_set(list(x), y.tolist(), relabel=True)
