@@ -336,6 +336,24 @@ def _how_a_worker_died(broken: BaseException, exitcodes: Iterable[int | None]) -
     return f"was killed by {name}{why}"
 
 
+class _RecordingPool(ProcessPoolExecutor):
+    """A process pool that keeps every worker process it started (``started``), so that the
+    exit code of one that died stays at hand whatever the pool's own bookkeeping dropped: a
+    CI run once named SIGTERM (the pool's termination of the others) where the test's worker
+    had been SIGKILLed, its process no longer among the pool's (not reproduced since)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self.started: list[Any] = []
+        super().__init__(*args, **kwargs)
+
+    def _spawn_process(self) -> None:  # CPython's hook for each worker it starts
+        before = set((self._processes or {}).keys())  # type: ignore[attr-defined]
+        super()._spawn_process()  # type: ignore[misc]
+        for pid, proc in (self._processes or {}).items():  # type: ignore[attr-defined]
+            if pid not in before:
+                self.started.append(proc)
+
+
 @contextlib.contextmanager
 def worker_pool(
     workers: int,
@@ -365,7 +383,7 @@ def worker_pool(
     a worker killed mid-task).
     """
     check_workers_start(context)
-    pool = ProcessPoolExecutor(
+    pool = _RecordingPool(
         max_workers=workers,
         mp_context=context,
         initializer=_worker_start,
@@ -374,7 +392,7 @@ def worker_pool(
     try:
         yield pool
     except BaseException as exc:
-        processes = list((getattr(pool, "_processes", None) or {}).values())
+        processes = list(pool.started) or list((getattr(pool, "_processes", None) or {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
         for proc in processes:
             if proc.is_alive():
