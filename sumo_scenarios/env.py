@@ -261,8 +261,9 @@ class DrivingEnv(gym.Env):
 
     def render(self) -> np.ndarray | None:
         """The current timestep drawn as an RGB image [H, W, 3] uint8 (``render_mode=
-        "rgb_array"``), else None. Before a completed reset: RuntimeError."""
+        "rgb_array"``), else None with a warning. Before a completed reset: RuntimeError."""
         if self.render_mode != "rgb_array":
+            gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array'")
             return None
         from sumo_scenarios.render import render_frame
 

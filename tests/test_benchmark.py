@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from torchcbl import benchmark as bm
@@ -896,6 +897,57 @@ def test_plot_curves_leaves_the_callers_matplotlib_backend_and_figures_alone(tmp
     finally:
         plt.close("all")
         plt.switch_backend(old)
+
+
+@pytest.mark.parametrize(
+    "score, bounded",
+    [
+        ("torchcbl.benchmark:success_rate", True),
+        ("torchcbl.benchmark:no_penalty_share", True),
+        ("_bench_env:mean_return", False),  # a score of one's own: its range is not known
+    ],
+)
+def test_plot_curves_keeps_the_sd_band_of_a_share_within_0_and_1(
+    tmp_path, monkeypatch, score, bounded
+):
+    """The learning curves' +-1 sd band was drawn as mean +- sd whatever the score: for the
+    shipped scores, shares in [0, 1], it went above 1 (a success rate of 1.08) and below 0.
+    The band of a share is clipped to [0, 1]; the mean line is as it was, and the band of a
+    score whose range is not known is not clipped."""
+    from matplotlib.collections import PolyCollection
+    from matplotlib.figure import Figure
+
+    drawn = []
+    savefig = Figure.savefig
+
+    def keep(fig, *args, **kwargs):
+        drawn.append(fig)
+        return savefig(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    # 5 labels: 0.0 and 0.3 (mean - sd < 0); 10 labels: 1.0 and 0.6 (mean + sd > 1)
+    cells = [
+        {
+            "env": "e",
+            "strategy": "cbl",
+            "config": {"env": {"score": score}},
+            "teacher_performance": 1.0,
+            "curve": [{"labels": 5, "performance": lo}, {"labels": 10, "performance": hi}],
+        }
+        for lo, hi in ((0.0, 1.0), (0.3, 0.6))
+    ]
+    bm.plot_curves(cells, tmp_path / "curves.png", envs=["e"])
+    (ax,) = drawn[0].axes
+    (band,) = [c for c in ax.collections if isinstance(c, PolyCollection)]
+    y = np.concatenate([p.vertices[:, 1] for p in band.get_paths()])
+    mean = np.array([0.15, 0.8])
+    sd = np.std([[0.0, 1.0], [0.3, 0.6]], axis=0, ddof=1)
+    np.testing.assert_allclose(ax.lines[0].get_ydata(), mean)  # the mean line is untouched
+    if bounded:
+        assert y.min() == pytest.approx(0.0) and y.max() == pytest.approx(1.0)
+    else:
+        assert y.min() == pytest.approx((mean - sd)[0])
+        assert y.max() == pytest.approx((mean + sd)[1])
 
 
 def test_a_teacher_given_where_its_factory_belongs_is_refused_before_any_cell_runs(

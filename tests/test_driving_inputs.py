@@ -513,6 +513,23 @@ def test_drawing_before_a_reset_is_refused_not_an_empty_road():
     assert env.render().shape[2] == 3  # the last scene stays drawable after close()
 
 
+def test_render_without_a_render_mode_warns_and_says_what_to_pass():
+    """DrivingEnv.render() of an env made without render_mode (gymnasium.make(ENV_ID)) returned
+    None and said nothing, where gymnasium's own envs and CorridorEnv warn: a user drawing
+    frames got None with no hint why. It warns now, naming render_mode='rgb_array'."""
+    import gymnasium as gym
+
+    import sumo_scenarios
+
+    env = gym.make(sumo_scenarios.ENV_ID)
+    try:
+        env.reset(seed=1)
+        with pytest.warns(UserWarning, match="render_mode=None; pass render_mode='rgb_array'"):
+            assert env.render() is None
+    finally:
+        env.close()
+
+
 def test_the_figure_helpers_refuse_data_that_does_not_line_up():
     # plot_lane_bars drew one distribution for two labels (numpy broadcast it) and failed with
     # an IndexError on 3 lanes; plot_confidence_trace failed with an IndexError on a contact

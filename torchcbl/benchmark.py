@@ -467,6 +467,14 @@ def no_penalty_share(records: Sequence[Any]) -> float:
     return sum(1 for r in records if (r.reward or 0.0) >= 0) / len(records)
 
 
+# the range of the shipped scores (shares): plot_curves clips their +-1 sd band to it; a score
+# of one's own, whose range is not known, has its band drawn unclipped
+_SCORE_RANGES: dict[str, tuple[float, float]] = {
+    "torchcbl.benchmark:success_rate": (0.0, 1.0),
+    "torchcbl.benchmark:no_penalty_share": (0.0, 1.0),
+}
+
+
 # -- one cell ---------------------------------------------------------------------------------
 
 
@@ -1144,7 +1152,8 @@ def plot_curves(
     cells: Sequence[Mapping[str, Any]], path: str | os.PathLike[str], *, envs: Sequence[str]
 ) -> Path:
     """Performance vs labels: one panel per env, a line per strategy (mean over seeds, each
-    seed's curve held constant after its last point) with a +-1 sd band.
+    seed's curve held constant after its last point) with a +-1 sd band, clipped to [0, 1]
+    for the shipped scores (:func:`success_rate`, :func:`no_penalty_share`: shares).
 
     Drawn on a bare :class:`matplotlib.figure.Figure` with an Agg canvas, never through pyplot:
     the caller's backend (a notebook's inline plots) and open figures are left as they were.
@@ -1169,7 +1178,18 @@ def plot_curves(
                 # ddof=1: the sd of the tables (mean_sd), not the narrower population sd
                 m, s = np.nanmean(ys, axis=0), np.nanstd(ys, axis=0, ddof=1)
             (line,) = ax.plot(grid, m, marker=".", label=strat)
-            ax.fill_between(grid, m - s, m + s, alpha=0.15, color=line.get_color())
+            # a share's band stops at 0 and 1 (mean + sd of 1.0 and 0.6 is 1.08); the mean line
+            # and every number of the results are as computed
+            scores = {c.get("config", {}).get("env", {}).get("score") for c in runs}
+            one = scores.pop() if len(scores) == 1 else None
+            lo, hi = _SCORE_RANGES.get(one, (-np.inf, np.inf))
+            ax.fill_between(
+                grid,
+                np.clip(m - s, lo, hi),
+                np.clip(m + s, lo, hi),
+                alpha=0.15,
+                color=line.get_color(),
+            )
         teacher = [float(c["teacher_performance"]) for c in mine]
         if teacher:
             t = float(np.mean(teacher))
