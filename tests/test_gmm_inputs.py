@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+from torchcbl import AutoThresholdRule
 from torchcbl.gmm import Classification, GaussianMixtureSet
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -432,3 +433,40 @@ def test_a_large_batch_is_scored_in_bounded_memory():
         torch.testing.assert_close(c.distance, big.distance[sl], rtol=1e-12, atol=0)
         torch.testing.assert_close(c.posterior, big.posterior[sl], rtol=1e-12, atol=1e-300)
         torch.testing.assert_close(model.log_prob(q[sl]), lp[sl], rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize(
+    ("wrap", "fix"),
+    [
+        (lambda a: a, ".astype(int)"),
+        (torch.from_numpy, ".long()"),
+        (lambda a: a.tolist(), "numpy.asarray(actions, dtype=int)"),
+    ],
+)
+def test_labels_of_the_wrong_dtype_get_the_conversion_their_container_has(wrap, fix):
+    """Float labels were told "convert with .astype(int)" whatever held them: a torch tensor
+    has no .astype (an AttributeError for whoever followed the advice), nor has a list."""
+    x, y = _data()
+    model = GaussianMixtureSet(3, 3, 4)
+    with pytest.raises(TypeError, match="integer labels") as err:
+        model.fit(x, wrap(y.astype(np.float32)))
+    assert str(err.value).endswith(f"convert with {fix}")
+    model.fit(x, y)
+    with pytest.raises(TypeError, match="integer labels") as err:
+        AutoThresholdRule().update(model, x, wrap(y.astype(np.float32)))
+    assert f"convert with {fix}" in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("wrap", "fix"),
+    [
+        (lambda a: a, ".astype(float)"),
+        (torch.from_numpy, ".double()"),
+        (lambda a: a.tolist(), "numpy.asarray(observations, dtype=float)"),
+    ],
+)
+def test_observations_of_the_wrong_dtype_get_the_conversion_their_container_has(wrap, fix):
+    x, y = _data()
+    with pytest.raises(TypeError, match="real numbers") as err:
+        GaussianMixtureSet(3, 3, 4).fit(wrap(x.astype(np.complex64)), y)
+    assert str(err.value).endswith(f"convert with {fix}")

@@ -212,6 +212,35 @@ def test_bad_prior_demonstrations_say_what_was_expected(tmp_path, demos, error, 
     assert not (tmp_path / "run").exists()  # refused before a session was written
 
 
+@pytest.mark.parametrize("kind", ["npz", "dict", "array", "triple"])
+def test_a_prior_that_is_not_a_pair_is_described_in_one_line_with_the_fix(tmp_path, kind):
+    """A prior given as the .npz file `teach --prior-demonstrations` reads (numpy.load), a dict
+    of its arrays, one array or three items was refused with the repr of the arrays cut at 80
+    characters, several lines of zeros; and the loaded .npz was not told how to pass on."""
+    x, y = np.zeros((200, 2)), np.zeros(200, dtype=np.int64)
+    np.savez(tmp_path / "prior.npz", observations=x, actions=y)
+    demos = {
+        "npz": np.load(tmp_path / "prior.npz"),
+        "dict": {"observations": x, "actions": y},
+        "array": x,
+        "triple": (x, y, 1),
+    }[kind]
+    with pytest.raises(TypeError) as err:
+        make(tmp_path / "run", demos)
+    message = str(err.value)
+    assert "\n" not in message and "0., 0." not in message, message
+    got = {
+        "npz": "got NpzFile with keys ['observations', 'actions']",
+        "dict": "got dict with keys ['observations', 'actions']",
+        "array": "got ndarray of shape (200, 2)",
+        "triple": "got tuple of 3 items",
+    }[kind]
+    assert got in message, message
+    if kind in ("npz", "dict"):
+        assert "prior_demonstrations=(d['observations'], d['actions'])" in message
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_fitted_model_and_a_prior_are_refused_together(tmp_path):
     env = rare_regions_world()
     demos = prior()

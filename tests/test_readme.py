@@ -32,3 +32,44 @@ def test_quickstart_has_two_commands_and_ci_runs_the_test_one():
     assert commands == ["bash scripts/reproduce.sh", "bash scripts/test.sh"]
     ci = (ROOT / ".ci" / "run").read_text()
     assert "\nbash scripts/test.sh\n" in ci
+
+
+def _section(text: str, heading: str) -> str:
+    """The body of the Markdown section ``heading`` (a whole heading line), to the next heading
+    of its level or above."""
+    level = heading.split(" ")[0]
+    body = text.split(f"\n{heading}\n", 1)[1]
+    stop = re.search(rf"^#{{1,{len(level)}}} ", body, re.M)
+    return body[: stop.start()] if stop else body
+
+
+def _anchors(path: Path) -> set[str]:
+    """GitHub's anchors of a Markdown file's headings."""
+    headings = re.findall(r"^#+ (.*)$", path.read_text(), re.M)
+    return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-") for h in headings}
+
+
+def test_the_tables_section_opens_with_how_they_were_made_and_the_rerun_log_is_in_the_docs():
+    """The tables' section opens with the command, the machine, how long and that the same seed
+    gives the same run; the log of reruns (commits and their timings) is in
+    docs/reproduction.md's "Reruns", which the opening points to."""
+    section = _section(README, "## The paper's numbers beside ours")
+    opening = section.strip().split("\n\n")[0]
+    for fact in ("bash scripts/reproduce.sh", "2-core machine", "7-8 minutes", "same seed"):
+        assert fact in opening, fact
+    commit = r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7}\b"
+    assert not re.findall(commit, opening), "commit hashes belong to docs/reproduction.md"
+    assert "(docs/reproduction.md#reruns)" in opening
+    reproduction = ROOT / "docs" / "reproduction.md"
+    assert "reruns" in _anchors(reproduction)
+    reruns = _section(reproduction.read_text(), "### Reruns")
+    for run in ("790ca71", "81faa65", "2935d51", "9667e86", "8b3eef3", "82db9a9", "87cb124"):
+        assert run in reruns, run
+
+
+def test_the_readmes_links_into_the_docs_name_files_and_headings_that_exist():
+    for target in re.findall(r"\]\((docs/[^)\s]+)\)", README):
+        path, _, anchor = target.partition("#")
+        assert (ROOT / path).exists(), target
+        if anchor and path.endswith(".md"):
+            assert anchor in _anchors(ROOT / path), target

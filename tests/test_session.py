@@ -612,6 +612,28 @@ def test_readers_say_what_is_wrong_with_a_path_that_is_no_session_directory(tmp_
     assert load_records(run) == load_records(str(run) + "/")  # a session still reads
 
 
+def test_readers_given_a_directory_of_sessions_name_the_sessions_in_it(tmp_path):
+    """load_records("runs/reproduce/corridor"), a reproduction's run directory whose sessions are
+    in sessions/seed<k>, said "config.json is missing. Start a session with
+    ConfidentTeacher(..., run_dir=...) first": advice to teach anew, for a directory that holds
+    the sessions asked for. It names them (as torchcbl evaluate does) and says to pass one."""
+    run = tmp_path / "corridor"
+    for seed in (0, 1):
+        make(rare_regions_world(), run / "sessions" / f"seed{seed}", max_new=2).run(
+            max_steps=3
+        ).close()
+    for reader in (load_records, load_model, load_demonstrations):
+        with pytest.raises(IncompatibleRunDirError) as err:
+            reader(run)
+        msg = str(err.value)
+        assert f"{run} is not a teaching session directory but holds sessions: " in msg, msg
+        assert f"{run / 'sessions' / 'seed0'}, {run / 'sessions' / 'seed1'}; pass one" in msg
+        assert "ConfidentTeacher" not in msg
+    with pytest.raises(IncompatibleRunDirError) as err:
+        ConfidentTeacher.resume(run, rare_regions_world(), lambda o, i: 0)
+    assert "holds sessions" in str(err.value)
+
+
 def test_a_session_without_labels_reads_them_as_zero_rows_of_its_features(tmp_path):
     """load_labels and load_demonstrations of a session with no label are [0, D], D the
     session's feature count, so they stack with another session's (they were [0, 0])."""

@@ -321,6 +321,26 @@ def test_bad_config_is_a_clear_error():
     torch.manual_seed(0)
 
 
+@pytest.mark.parametrize("env", ["torchcbl/Corridor-v0", None])
+def test_an_env_id_or_no_env_in_place_of_an_env_says_to_make_one(env, tmp_path):
+    """ConfidentTeacher("CartPole-v1", ...) said "expected an env with a Discrete action space
+    starting at 0, got None": the action space of an object that is no env at all."""
+    session, world = tmp_path / "session", rare_regions_world()
+    ConfidentTeacher(world, oracle(world), run_dir=session, progress=False).run(max_steps=3).close()
+    for call in (
+        lambda: ConfidentTeacher(env, oracle(world), run_dir=tmp_path / "new"),
+        lambda: ConfidentTeacher.resume(session, env, oracle(world)),
+        lambda: evaluate_policy(lambda o: 0, env, n_steps=1),
+    ):
+        with pytest.raises(TypeError) as err:
+            call()
+        message = str(err.value)
+        assert message.startswith(f"expected a gymnasium.Env, got {type(env).__name__} {env!r}")
+        if isinstance(env, str):
+            assert f"gymnasium.make({env!r})" in message
+    assert not (tmp_path / "new").exists()
+
+
 @pytest.mark.parametrize("field", ["max_new", "accuracy_window", "burst"])
 @pytest.mark.parametrize("value", [0, 2.5, None])
 def test_a_learning_setting_that_must_be_an_int_says_so_not_that_none_would_do(field, value):

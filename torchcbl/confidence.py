@@ -279,12 +279,19 @@ def _labels(actions: Any, n: int, n_actions: int) -> torch.Tensor:
     observation (a label vector of another length would broadcast against the model's
     answers, or a float label be truncated, and the thresholds come out silently wrong)."""
     if isinstance(actions, torch.Tensor):
-        actions = actions.detach().cpu().numpy()
-    y = np.asarray(actions)
+        y = actions.detach().cpu().numpy()
+        fix = ".long()"
+    else:
+        y = np.asarray(actions)
+        fix = (
+            ".astype(int)"
+            if isinstance(actions, np.ndarray)
+            else "numpy.asarray(actions, dtype=int)"
+        )
     if y.dtype.kind not in "iu":  # a TypeError, as GaussianMixtureSet.fit says it
         raise TypeError(
             f"AutoThresholdRule.update: expected actions as integer labels but got dtype "
-            f"{y.dtype}; pass the labels the model was fitted on (convert with .astype(int))"
+            f"{y.dtype}; pass the labels the model was fitted on (convert with {fix})"
         )
     if y.shape != (n,):
         raise ValueError(

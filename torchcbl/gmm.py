@@ -252,6 +252,16 @@ def _to_numpy(value: Any, name: str) -> np.ndarray:
         ) from exc
 
 
+def _conversion(value: Any, name: str, to: str) -> str:
+    """How to convert ``value`` (what the caller passed as ``name``) to ``to`` ("int" or
+    "float") in its own kind of container."""
+    if isinstance(value, Tensor):
+        return ".long()" if to == "int" else ".double()"
+    if isinstance(value, np.ndarray):
+        return f".astype({to})"
+    return f"numpy.asarray({name}, dtype={to})"
+
+
 def _rows_preview(rows: np.ndarray) -> str:
     shown = ", ".join(str(int(r)) for r in rows[:10])
     more = f" (showing the first 10 of {rows.size})" if rows.size > 10 else ""
@@ -679,7 +689,7 @@ class GaussianMixtureSet(nn.Module):
         if not _is_real_dtype(x.dtype.kind):
             raise TypeError(
                 f"{name}: expected real numbers (float32/float64 or integers) but got dtype "
-                f"{x.dtype}; convert with .astype(float)"
+                f"{x.dtype}; convert with {_conversion(observations, name, 'float')}"
             )
         if x.ndim != 2 or x.shape[1] != self.n_features:
             if x.ndim == 1 and self.n_features == 1:
@@ -715,7 +725,7 @@ class GaussianMixtureSet(nn.Module):
         if y.dtype.kind not in "iu":
             raise TypeError(
                 f"actions: expected integer labels in [0, {self.n_actions}) but got dtype "
-                f"{y.dtype}; convert with .astype(int)"
+                f"{y.dtype}; convert with {_conversion(actions, 'actions', 'int')}"
             )
         if y.ndim != 1 or y.shape[0] != n:
             raise ValueError(

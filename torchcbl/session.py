@@ -506,6 +506,20 @@ def _config_problem(config: dict[str, Any]) -> str | None:
     return None
 
 
+def _sessions_below(path: Path, limit: int = 5) -> list[Path]:
+    """Teaching session directories one to three levels below ``path`` (at most ``limit``),
+    as a reproduction's run directory holds them (``sessions/seed<k>``,
+    ``seed_<k>/sessions/arm_a``)."""
+    found: list[Path] = []
+    for pattern in ("*/" + CONFIG_NAME, "*/*/" + CONFIG_NAME, "*/*/*/" + CONFIG_NAME):
+        for config in sorted(path.glob(pattern)):
+            if (config.parent / LOG_NAME).exists():
+                found.append(config.parent)
+                if len(found) >= limit:
+                    return found
+    return found
+
+
 def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
     """The ``config.json`` of a run directory.
 
@@ -538,6 +552,12 @@ def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
                 f"working directory, {os.getcwd()}"
                 + ("; '~' is not expanded: use os.path.expanduser" if "~" in str(run_dir) else "")
                 + "), or start a session there with ConfidentTeacher(..., run_dir=...)."
+            )
+        below = _sessions_below(given)
+        if below:  # a reproduction's run directory (runs/reproduce/corridor), a folder of them
+            raise IncompatibleRunDirError(
+                f"{run_dir!s} is not a teaching session directory but holds sessions: "
+                f"{', '.join(str(s) for s in below)}; pass one of them."
             )
         raise IncompatibleRunDirError(
             f"{run_dir!s} is not a teaching session directory: {CONFIG_NAME} is missing. "

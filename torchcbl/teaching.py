@@ -428,10 +428,23 @@ def _check_prior(value: Any, n_features: int, n_actions: int) -> tuple[np.ndarra
             "d = numpy.load(path); prior_demonstrations=(d['observations'], d['actions'])."
         )
     if isinstance(value, Mapping) or not isinstance(value, (tuple, list)) or len(value) != 2:
-        raise TypeError(
-            f"{name}: expected {want}, got {type(value).__name__} {value!r:.80}; e.g. "
-            "prior_demonstrations=torchcbl.session.load_demonstrations(earlier_run_dir)."
-        )
+        got = type(value).__name__
+        if isinstance(value, Mapping):  # a dict, or numpy.load's NpzFile
+            keys = list(value.keys())
+            got += f" with keys {keys!r:.200}"
+        elif hasattr(value, "shape"):
+            got += f" of shape {tuple(value.shape)}"
+        elif isinstance(value, (tuple, list)):
+            got += f" of {len(value)} items"
+        else:
+            got += f" {value!r:.80}"
+        fix = "e.g. prior_demonstrations=torchcbl.session.load_demonstrations(earlier_run_dir)"
+        if isinstance(value, Mapping) and {"observations", "actions"} <= set(keys):
+            fix = (
+                "pass its two arrays: prior_demonstrations=(d['observations'], d['actions']), "
+                f"d being this {type(value).__name__}"
+            )
+        raise TypeError(f"{name}: expected {want}, got {' '.join(got.split())}; {fix}.")
     x, y = (np.asarray(v) for v in value)
     if x.dtype.kind not in "iuf" or x.ndim != 2 or x.shape[1] != n_features:
         raise ValueError(
