@@ -480,6 +480,40 @@ def _write_replay_input(fcd: Path, out: Path, road_end_m: float) -> int:
     return n
 
 
+def _refuse_commas(fcd_path: str | Path, path: str | Path) -> None:
+    """Raise ValueError if a file the ``.sumocfg`` at ``path`` would list holds a comma in its
+    path (SUMO splits file lists at commas, with no way to escape one: a configuration naming
+    such a file was written, and ``sumo -c`` then failed with "Cannot read file 'a'").
+
+    The files: the fcd-replay input named after ``fcd_path`` (relative to the configuration's
+    directory) and the shipped network and vehicle types. It reads and writes nothing, so a
+    caller can check before writing the FCD (``torchcbl replay`` does).
+    """
+    from sumo_scenarios.scenarios import data_path
+
+    fcd = Path(fcd_path).resolve()
+    stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
+    replay_input = fcd.with_name(stem + ".replay.xml")
+    try:
+        named = str(replay_input.relative_to(Path(path).resolve().parent))
+    except ValueError:
+        named = str(replay_input)
+    if "," in named:
+        raise ValueError(
+            f"a .sumocfg cannot name a file whose path holds a comma (SUMO splits file lists "
+            f"at commas), and the FCD's fcd-replay input, named after it ({named}), holds one: "
+            "give the FCD a name without a comma"
+        )
+    shipped = [str(data_path(n)) for n in ("road.net.xml", "driving.add.xml")]
+    if any("," in p for p in shipped):
+        raise ValueError(
+            f"a .sumocfg cannot name a file whose path holds a comma (SUMO splits file lists "
+            f"at commas), and the shipped network and vehicle types it names "
+            f"({' and '.join(shipped)}) are under a path with one: move the package "
+            "(sumo_scenarios) to a path without a comma"
+        )
+
+
 def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path) -> Path:
     """Write a ``.sumocfg`` that replays an exported FCD file in SUMO alone (``sumo-gui -c PATH``).
 
@@ -532,20 +566,7 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
         except ValueError:
             return str(p)
 
-    # SUMO splits these options' file lists at commas, with no way to escape one: a .sumocfg
-    # naming such a file was written, and `sumo -c` then failed ("Cannot read file 'a'")
-    listed = {
-        "the FCD's name (its fcd-replay input, named after it)": rel(replay_input),
-        "the shipped network's path": str(data_path("road.net.xml")),
-        "the shipped vehicle types' path": str(data_path("driving.add.xml")),
-    }
-    commas = [f"{what} ({value})" for what, value in listed.items() if "," in value]
-    if commas:
-        raise ValueError(
-            f"a .sumocfg cannot name a file whose path holds a comma (SUMO splits file lists "
-            f"at commas), and {' and '.join(commas)} holds one: give the FCD a name without a "
-            "comma, or move the package to a path without one"
-        )
+    _refuse_commas(fcd, path)
     _write_replay_input(fcd, replay_input, libsumo_lane_length_from_net())
 
     def attr(value: object) -> str:  # a file name may hold & < > or a quote

@@ -157,3 +157,41 @@ def test_a_file_name_with_a_comma_is_refused_before_anything_is_written(episode,
     assert out.returncode == 2 and out.stdout == "", out
     assert out.stderr.count("\n") == 1 and "without a comma" in out.stderr, out.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([odd.name, episodes.name])
+
+
+def test_replay_from_a_package_under_a_comma_path_refuses_before_writing(tmp_path):
+    """The package installed under a path with a comma ("OneDrive - Acme, Inc/..."): the
+    .sumocfg would name the shipped network and vehicle types by that path, which SUMO splits
+    at the comma. torchcbl replay wrote the episode's FCD (and printed two lines) before
+    refusing the .sumocfg; now it refuses in one line on stderr and writes nothing, naming the
+    package's path as the cause (not the FCD's name)."""
+    import sumo_scenarios
+    from sumo_scenarios.replay import EpisodeRecord, save_records
+    from sumo_scenarios.scenarios import get_scenario
+    from sumo_scenarios.sim import SimConfig
+
+    site = tmp_path / "Acme, Inc"
+    shutil.copytree(
+        Path(sumo_scenarios.__file__).parent,
+        site / "sumo_scenarios",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    episodes = out_dir / "episodes.json"
+    save_records([EpisodeRecord(get_scenario("light"), SimConfig(), 0, 2, (0, 1, 0))], episodes)
+    root = Path(__file__).resolve().parents[1]  # torchcbl itself from this checkout
+    out = subprocess.run(
+        [sys.executable, "-m", "torchcbl", "replay", str(episodes)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={"PYTHONPATH": f"{site}:{root}", "PATH": "/usr/bin:/bin"},
+        cwd=tmp_path,
+    )
+    assert out.returncode == 2 and out.stdout == "", out
+    assert out.stderr.count("\n") == 1, out.stderr
+    assert "Acme, Inc" in out.stderr and "move the package" in out.stderr, out.stderr
+    assert "give the FCD a name" not in out.stderr, out.stderr
+    assert [p.name for p in out_dir.iterdir()] == [episodes.name]
