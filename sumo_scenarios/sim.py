@@ -45,7 +45,15 @@ EGO = "ego"
 # libsumo's one simulation: whether it runs, and the ``_state`` dict of the HighwaySim whose
 # reset placed the road it holds (a dict, not the object: one dropped without close() is
 # collected, and its finaliser closes libsumo if it still owned it)
-_SUMO: dict[str, Any] = {"running": False, "owner": None, "pid": None}
+_SUMO: dict[str, Any] = {"running": False, "owner": None, "pid": None, "options": None}
+# options SUMO reports for the simulation a reset of ours loaded (_SUMO["options"]): another
+# simulation (libsumo.close() and a libsumo.start of the caller's own) reports others
+_OPTIONS = ("net-file", "additional-files", "step-length", "collision.action", "seed", "fcd-output")
+
+
+def _options() -> tuple[str, ...]:
+    """The options of the simulation libsumo holds (it must hold one), as SUMO reports them."""
+    return tuple(libsumo.simulation.getOption(k) for k in _OPTIONS)
 
 
 def _release(state: dict[str, bool]) -> None:
@@ -276,7 +284,11 @@ class HighwaySim:
                 "gymnasium's AsyncVectorEnv(..., context='spawn')), or close the parent's env "
                 "before forking"
             )
-        if not _SUMO["running"] and libsumo.simulation.isLoaded():
+        if libsumo.simulation.isLoaded() and (
+            not _SUMO["running"]
+            # ours closed (libsumo.close()) and one of the caller's started in its place
+            or (_SUMO["options"] is not None and _options() != _SUMO["options"])
+        ):
             # a libsumo.start of the caller's own: a start here would replace it without a word
             raise RuntimeError(
                 "this process's libsumo already runs a simulation not started by "
@@ -292,6 +304,7 @@ class HighwaySim:
         self._state["owns"] = True
         inputs, copies = _sumo_inputs()
         args = self._args(inputs, seed, fcd_path)
+        _SUMO["options"] = None  # unknown until the load below completes
         try:
             if _SUMO["running"]:
                 libsumo.load(args[1:])
@@ -303,6 +316,7 @@ class HighwaySim:
         finally:
             if copies is not None:  # read by the load: not needed any more
                 shutil.rmtree(copies, ignore_errors=True)
+        _SUMO["options"] = _options()
         self._rng = rng
         self._next_id = 0
         self.n_recycled = 0

@@ -604,3 +604,33 @@ def test_a_simulation_started_outside_the_env_is_not_silently_replaced():
         env.step(STAY)
     finally:
         env.close()
+
+
+def test_a_simulation_started_over_the_envs_own_is_not_silently_replaced():
+    """The researcher closes the env's libsumo simulation and starts one of their own: the
+    env's next reset refuses, saying what to do, and theirs runs on. (The env still counted
+    libsumo as running its own and loaded over theirs without a word: their clock went from 3 s
+    back to 0 s.) Once theirs is closed, the env resets again."""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
+    env = DrivingEnv(scenario="light")
+    try:
+        env.reset(seed=0)
+        env.step(STAY)
+        libsumo.close()
+        libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+        try:
+            for _ in range(3):
+                libsumo.simulationStep()
+            with pytest.raises(RuntimeError, match=r"not started by sumo_scenarios.*close it"):
+                env.reset(seed=1)
+            assert libsumo.simulation.getTime() == 3.0
+            libsumo.simulationStep()  # still the researcher's
+        finally:
+            libsumo.close()
+        env.reset(seed=1)  # theirs closed: the env starts its own again
+        assert env.step(STAY)[4]["position_m"] == pytest.approx(6.7056, abs=1e-6)
+    finally:
+        env.close()
