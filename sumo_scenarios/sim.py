@@ -56,15 +56,27 @@ def _options() -> tuple[str, ...]:
     return tuple(libsumo.simulation.getOption(k) for k in _OPTIONS)
 
 
+def _replaced() -> bool:
+    """Whether libsumo, believed to run our simulation, holds another: the user closed ours
+    and started their own (its options differ from those of our last load)."""
+    return (
+        _SUMO["options"] is not None
+        and libsumo.simulation.isLoaded()
+        and _options() != _SUMO["options"]
+    )
+
+
 def _release(state: dict[str, bool]) -> None:
     """Close libsumo if this simulation owns it (close() or garbage collection); a simulation
-    that another's reset took over leaves that one running."""
+    that another's reset took over leaves that one running, and so does one the user started
+    after closing ours (libsumo.close() and a libsumo.start of their own)."""
     if state["owns"]:
         state["owns"] = False
         _SUMO["owner"] = None
         if _SUMO["running"]:
             _SUMO["running"] = False
-            libsumo.close()
+            if not _replaced():
+                libsumo.close()
 
 
 def _sumo_inputs() -> tuple[list[str], Path | None]:
@@ -287,7 +299,7 @@ class HighwaySim:
         if libsumo.simulation.isLoaded() and (
             not _SUMO["running"]
             # ours closed (libsumo.close()) and one of the caller's started in its place
-            or (_SUMO["options"] is not None and _options() != _SUMO["options"])
+            or _replaced()
         ):
             # a libsumo.start of the caller's own: a start here would replace it without a word
             raise RuntimeError(

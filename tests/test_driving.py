@@ -634,3 +634,36 @@ def test_a_simulation_started_over_the_envs_own_is_not_silently_replaced():
         assert env.step(STAY)[4]["position_m"] == pytest.approx(6.7056, abs=1e-6)
     finally:
         env.close()
+
+
+def test_closing_the_env_leaves_a_simulation_the_user_started_in_its_place_running():
+    """The researcher closes the env's libsumo simulation and starts one of their own: the
+    env's close(), or its collection when dropped unclosed, leaves theirs running. (Both
+    closed it: libsumo.close() on a simulation that was no longer the env's.)"""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
+    try:
+        for how in ("close", "collect"):
+            env = DrivingEnv(scenario="light")
+            env.reset(seed=0)
+            libsumo.close()
+            libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+            libsumo.simulationStep()
+            if how == "close":
+                env.close()
+            del env
+            gc.collect()
+            assert libsumo.simulation.isLoaded(), how
+            libsumo.simulationStep()  # still the researcher's
+            assert libsumo.simulation.getTime() == 2.0
+            libsumo.close()
+    finally:
+        libsumo.close()
+    env = DrivingEnv(scenario="light")  # theirs closed: an env starts its own
+    try:
+        env.reset(seed=0)
+        env.step(STAY)
+    finally:
+        env.close()
