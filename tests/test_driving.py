@@ -636,6 +636,36 @@ def test_a_simulation_started_over_the_envs_own_is_not_silently_replaced():
         env.close()
 
 
+def test_a_step_after_the_user_closed_the_envs_simulation_says_so():
+    """The researcher closes the env's libsumo simulation (and maybe starts their own): the
+    env's step raises a RuntimeError saying what happened and what to do, and leaves their
+    simulation untouched. (It stepped theirs once and then failed inside libsumo, "Vehicle
+    'ego' is not known."; with none running, "A network was not yet constructed.")"""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
+    env = DrivingEnv(scenario="light")
+    try:
+        env.reset(seed=0)
+        env.step(STAY)
+        libsumo.close()
+        with pytest.raises(RuntimeError, match=r"closed outside this env.*reset\(\)"):
+            env.step(STAY)
+        libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+        try:
+            libsumo.simulationStep()
+            with pytest.raises(RuntimeError, match=r"not started by sumo_scenarios.*close it"):
+                env.step(STAY)
+            assert libsumo.simulation.getTime() == 1.0  # theirs was not stepped
+        finally:
+            libsumo.close()
+        env.reset(seed=1)  # theirs closed: the env starts its own again
+        env.step(STAY)
+    finally:
+        env.close()
+
+
 def test_closing_the_env_leaves_a_simulation_the_user_started_in_its_place_running():
     """The researcher closes the env's libsumo simulation and starts one of their own: the
     env's close(), or its collection when dropped unclosed, leaves theirs running. (Both
