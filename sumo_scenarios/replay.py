@@ -447,8 +447,43 @@ def render_gif(
     return path
 
 
-def _write_replay_input(fcd: Path, out: Path, road_end_m: float) -> int:
-    """Copy the recorded FCD for SUMO's fcd-replay device, adding one entry per vanished car.
+def _read_fcd(fcd: Path, record: EpisodeRecord) -> Any:
+    """The root element of ``fcd``, refused (ValueError naming the file) unless it is an FCD
+    of ``record``'s length and step length: one ``<timestep>`` per action, ``k *
+    step_length_s`` seconds for the k-th (SUMO writes times to the millisecond or 2 decimals)."""
+    import gzip
+    import xml.etree.ElementTree as ET
+    import zlib
+
+    hint = "expected the episode's FCD file, written by export_fcd(record, path)"
+    with fcd.open("rb") as f:  # SUMO gzips an output whose name ends in .gz
+        zipped = f.read(2) == b"\x1f\x8b"
+    try:
+        with (gzip.open if zipped else open)(fcd, "rb") as f:
+            root = ET.parse(f).getroot()
+    except (ET.ParseError, EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        raise ValueError(f"{fcd} is not XML ({exc}): {hint}") from None
+    if root.tag != "fcd-export":
+        raise ValueError(
+            f"{fcd} is not an FCD file (its root element is <{root.tag}>, not <fcd-export>): {hint}"
+        )
+    try:
+        times = [float(ts.get("time", "")) for ts in root.findall("timestep")]
+    except ValueError:
+        raise ValueError(f"{fcd} has a <timestep> whose time is not a number: {hint}") from None
+    dt, n = record.sim.step_length_s, len(record.actions)
+    if len(times) != n or any(abs(t - k * dt) > 0.0051 for k, t in enumerate(times)):
+        apart = f" {times[1] - times[0]:.3g} s apart" if len(times) > 1 else ""
+        raise ValueError(
+            f"{fcd} holds {len(times)} timesteps{apart}, and the record has {n} steps of "
+            f"{dt:g} s: it is not this record's FCD; write it with export_fcd(record, path)"
+        )
+    return root
+
+
+def _write_replay_input(root: Any, out: Path, road_end_m: float) -> int:
+    """Write the recorded FCD (its parsed ``root``) for SUMO's fcd-replay device to ``out``, adding
+    one entry per vanished car.
 
     The device inserts every vehicle of the file at its first recorded place and moves it to
     each recorded place in turn, but it never removes a vehicle whose trajectory ends: it leaves
@@ -457,13 +492,8 @@ def _write_replay_input(fcd: Path, out: Path, road_end_m: float) -> int:
     (``road_end_m``), where it arrives and leaves in that same step. Returns how many cars got
     such an entry.
     """
-    import gzip
     import xml.etree.ElementTree as ET
 
-    with fcd.open("rb") as f:  # SUMO gzips an output whose name ends in .gz
-        zipped = f.read(2) == b"\x1f\x8b"
-    with (gzip.open if zipped else open)(fcd, "rb") as f:
-        root = ET.parse(f).getroot()
     steps = root.findall("timestep")
     last: dict[str, tuple[int, ET.Element]] = {}
     for i, ts in enumerate(steps):
@@ -567,7 +597,8 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
             return str(p)
 
     _refuse_commas(fcd, path)
-    _write_replay_input(fcd, replay_input, libsumo_lane_length_from_net())
+    root = _read_fcd(fcd, record)
+    _write_replay_input(root, replay_input, libsumo_lane_length_from_net())
 
     def attr(value: object) -> str:  # a file name may hold & < > or a quote
         return escape(str(value), {'"': "&quot;"})

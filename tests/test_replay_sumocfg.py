@@ -195,3 +195,32 @@ def test_replay_from_a_package_under_a_comma_path_refuses_before_writing(tmp_pat
     assert "Acme, Inc" in out.stderr and "move the package" in out.stderr, out.stderr
     assert "give the FCD a name" not in out.stderr, out.stderr
     assert [p.name for p in out_dir.iterdir()] == [episodes.name]
+
+
+def test_sumocfg_refuses_a_file_that_is_not_the_records_fcd(episode, tmp_path):
+    """write_sumocfg given a file that is not an FCD (a ParseError from the XML reader, or a
+    .sumocfg written for any XML), or the FCD of an episode of another length or step length
+    (a .sumocfg written that replays it at the wrong times and stops at the wrong end): a
+    ValueError naming the file and what was expected, and nothing written."""
+    rec, fcd, _ = episode
+    text = tmp_path / "notes.txt"
+    text.write_text("not xml")
+    other = tmp_path / "routes.xml"
+    other.write_text("<routes/>")
+    shorter = tmp_path / "short.fcd.xml"
+    root = ET.parse(fcd).getroot()
+    for ts in root.findall("timestep")[10:]:
+        root.remove(ts)
+    ET.ElementTree(root).write(shorter)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    for path, says in [
+        (text, r"notes\.txt is not XML"),
+        (other, r"routes\.xml is not an FCD file"),
+        (shorter, r"short\.fcd\.xml holds 10 timesteps.*120 steps of 0\.25 s"),
+    ]:
+        with pytest.raises(ValueError, match=says):
+            write_sumocfg(rec, path, tmp_path / "ep.sumocfg")
+    slower = dataclasses.replace(rec, sim=dataclasses.replace(rec.sim, step_length_s=0.1))
+    with pytest.raises(ValueError, match=r"ep\.fcd\.xml holds 120 timesteps 0.25 s apart"):
+        write_sumocfg(slower, fcd, tmp_path / "ep.sumocfg")
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
