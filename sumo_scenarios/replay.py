@@ -563,7 +563,9 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
 
     A file the configuration lists (the replay input, named after the FCD, and the shipped
     network and vehicle types) may not hold a comma in its path, which SUMO splits file lists
-    at: ValueError, before anything is written.
+    at: ValueError, before anything is written; so are an FCD that is not this record's (not
+    FCD XML, or another number of timesteps or step length) and a ``path`` that is a directory
+    or lies in one that does not exist.
 
     What SUMO prints: no error and no teleport. Each removed car is moved once to the lane end,
     which SUMO reports as "moved by TraCI" (shown for the first 3, then counted:
@@ -585,6 +587,11 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
             f"write_sumocfg needs the episode's FCD file, {fcd} does not exist: "
             "write it first with export_fcd(record, path)"
         )
+    # checked first: open() failed on these only once the replay input was written
+    if path.is_dir():
+        raise ValueError(f"{str(path)!r} is a directory; give the .sumocfg's file path")
+    if not path.parent.is_dir():
+        raise ValueError(f"the directory of {str(path)!r} does not exist; create it first")
     # (a gzipped FCD, "ep.fcd.xml.gz", is read as such; its replay input and re-run are plain)
     stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
     replay_input = fcd.with_name(stem + ".replay.xml")

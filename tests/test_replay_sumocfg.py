@@ -224,3 +224,19 @@ def test_sumocfg_refuses_a_file_that_is_not_the_records_fcd(episode, tmp_path):
     with pytest.raises(ValueError, match=r"ep\.fcd\.xml holds 120 timesteps 0.25 s apart"):
         write_sumocfg(slower, fcd, tmp_path / "ep.sumocfg")
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_sumocfg_path_is_checked_before_anything_is_written(episode, tmp_path):
+    """write_sumocfg to a directory, or into one that does not exist: the replay input beside
+    the FCD was written first, and then open() failed (IsADirectoryError, FileNotFoundError).
+    Now a ValueError says what to give, and nothing is written."""
+    rec, fcd, _ = episode
+    odd = tmp_path / "ep.fcd.xml"
+    shutil.copy(fcd, odd)
+    for path, says in [
+        (tmp_path, "is a directory; give the .sumocfg's file path"),
+        (tmp_path / "missing" / "ep.sumocfg", "does not exist; create it first"),
+    ]:
+        with pytest.raises(ValueError, match=says):
+            write_sumocfg(rec, odd, path)
+        assert [p.name for p in tmp_path.iterdir()] == [odd.name]
