@@ -564,8 +564,22 @@ class HighwaySim:
 
 
 def libsumo_lane_length_from_net() -> float:
-    """Length of the road edge in the shipped network, metres (read with sumolib)."""
+    """Length of the road edge in the shipped network, metres (read with sumolib).
+
+    Raises:
+        RuntimeError: the file is not a network holding the edge (changed or damaged), naming
+            it and the command that rebuilds it.
+    """
+    import xml.sax
+
     import sumolib
 
-    net = sumolib.net.readNet(str(data_path("road.net.xml")))
-    return float(net.getEdge(EDGE).getLength())
+    path = data_path("road.net.xml")
+    try:
+        return float(sumolib.net.readNet(str(path)).getEdge(EDGE).getLength())
+    except (xml.sax.SAXException, KeyError) as exc:  # sumolib's words: "'road'", "syntax error"
+        what = f"no edge {EDGE!r}" if isinstance(exc, KeyError) else f"not XML: {exc}"
+        raise RuntimeError(
+            f"{path} is not the shipped road network ({what}): it was changed or damaged; "
+            "rebuild it with `python -m sumo_scenarios.build_network` (or reinstall the package)"
+        ) from None

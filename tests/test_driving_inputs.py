@@ -739,3 +739,49 @@ def test_an_fcd_output_naming_a_shipped_data_file_is_refused(tmp_path):
         assert line.startswith("fcd_output: "), line
         assert name in line and "shipped" in line, line
     assert {n: (data / n).read_bytes() for n in before} == before
+
+
+def test_a_damaged_shipped_network_is_named_with_the_way_to_rebuild_it(tmp_path):
+    """The shipped road.net.xml overwritten (by an FCD, as an fcd_output naming it once did) or
+    truncated: DrivingEnv() failed with a bare KeyError 'road' or sumolib's SAXParseException.
+    Now a RuntimeError names the file and the command that rebuilds it. Run on a copy of the
+    package, in a process of its own."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import sumo_scenarios
+
+    site = tmp_path / "site"
+    shutil.copytree(
+        Path(sumo_scenarios.__file__).parent,
+        site / "sumo_scenarios",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    code = (
+        "from sumo_scenarios.env import DrivingEnv\n"
+        "from sumo_scenarios.scenarios import data_path\n"
+        "for text in ('<fcd-export/>', '<net version=', ''):\n"
+        "    data_path('road.net.xml').write_text(text)\n"
+        "    try:\n"
+        "        DrivingEnv(scenario='light')\n"
+        "        print('accepted')\n"
+        "    except RuntimeError as exc:\n"
+        "        print(exc)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr[-2000:]
+    lines = out.stdout.splitlines()
+    assert len(lines) == 3, out.stdout
+    for line in lines:
+        assert str(site / "sumo_scenarios" / "data" / "road.net.xml") in line, line
+        assert "python -m sumo_scenarios.build_network" in line, line
