@@ -28,6 +28,7 @@ learner does not use it). Episodes never terminate; they are truncated after
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -41,6 +42,7 @@ from sumo_scenarios.scenarios import (
     TRAFFIC_LANES,
     TrafficScenario,
     _as_int,
+    data_path,
     get_scenario,
 )
 from sumo_scenarios.sim import HighwaySim, SimConfig
@@ -217,6 +219,13 @@ class DrivingEnv(gym.Env):
                 f"fcd_output: {str(fcd)!r} is a directory; give the path of the XML file to write "
                 "(e.g. episode.fcd.xml inside it)"
             )
+        for name in ("road.net.xml", "driving.add.xml") if fcd else ():
+            # SUMO reads it, then writes the FCD over it: the install is broken for good
+            if Path(fcd).exists() and os.path.samefile(fcd, data_path(name)):
+                raise ValueError(
+                    f"fcd_output: {str(fcd)!r} is the shipped {name} (sumo_scenarios' data), "
+                    "which SUMO would overwrite with the episode's FCD; give another path"
+                )
         # the env's RNG only once the call is known good: a refused reset changes no later road
         super().reset(seed=seed)
         if seed is None:

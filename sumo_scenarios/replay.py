@@ -447,8 +447,43 @@ def render_gif(
     return path
 
 
-def _write_replay_input(fcd: Path, out: Path, road_end_m: float) -> int:
-    """Copy the recorded FCD for SUMO's fcd-replay device, adding one entry per vanished car.
+def _read_fcd(fcd: Path, record: EpisodeRecord) -> Any:
+    """The root element of ``fcd``, refused (ValueError naming the file) unless it is an FCD
+    of ``record``'s length and step length: one ``<timestep>`` per action, ``k *
+    step_length_s`` seconds for the k-th (SUMO writes times to the millisecond or 2 decimals)."""
+    import gzip
+    import xml.etree.ElementTree as ET
+    import zlib
+
+    hint = "expected the episode's FCD file, written by export_fcd(record, path)"
+    with fcd.open("rb") as f:  # SUMO gzips an output whose name ends in .gz
+        zipped = f.read(2) == b"\x1f\x8b"
+    try:
+        with (gzip.open if zipped else open)(fcd, "rb") as f:
+            root = ET.parse(f).getroot()
+    except (ET.ParseError, EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        raise ValueError(f"{fcd} is not XML ({exc}): {hint}") from None
+    if root.tag != "fcd-export":
+        raise ValueError(
+            f"{fcd} is not an FCD file (its root element is <{root.tag}>, not <fcd-export>): {hint}"
+        )
+    try:
+        times = [float(ts.get("time", "")) for ts in root.findall("timestep")]
+    except ValueError:
+        raise ValueError(f"{fcd} has a <timestep> whose time is not a number: {hint}") from None
+    dt, n = record.sim.step_length_s, len(record.actions)
+    if len(times) != n or any(abs(t - k * dt) > 0.0051 for k, t in enumerate(times)):
+        apart = f" {times[1] - times[0]:.3g} s apart" if len(times) > 1 else ""
+        raise ValueError(
+            f"{fcd} holds {len(times)} timesteps{apart}, and the record has {n} steps of "
+            f"{dt:g} s: it is not this record's FCD; write it with export_fcd(record, path)"
+        )
+    return root
+
+
+def _write_replay_input(root: Any, out: Path, road_end_m: float) -> int:
+    """Write the recorded FCD (its parsed ``root``) for SUMO's fcd-replay device to ``out``, adding
+    one entry per vanished car.
 
     The device inserts every vehicle of the file at its first recorded place and moves it to
     each recorded place in turn, but it never removes a vehicle whose trajectory ends: it leaves
@@ -457,13 +492,8 @@ def _write_replay_input(fcd: Path, out: Path, road_end_m: float) -> int:
     (``road_end_m``), where it arrives and leaves in that same step. Returns how many cars got
     such an entry.
     """
-    import gzip
     import xml.etree.ElementTree as ET
 
-    with fcd.open("rb") as f:  # SUMO gzips an output whose name ends in .gz
-        zipped = f.read(2) == b"\x1f\x8b"
-    with (gzip.open if zipped else open)(fcd, "rb") as f:
-        root = ET.parse(f).getroot()
     steps = root.findall("timestep")
     last: dict[str, tuple[int, ET.Element]] = {}
     for i, ts in enumerate(steps):
@@ -478,6 +508,40 @@ def _write_replay_input(fcd: Path, out: Path, road_end_m: float) -> int:
             n += 1
     ET.ElementTree(root).write(out, xml_declaration=True, encoding="UTF-8")
     return n
+
+
+def _refuse_commas(fcd_path: str | Path, path: str | Path) -> None:
+    """Raise ValueError if a file the ``.sumocfg`` at ``path`` would list holds a comma in its
+    path (SUMO splits file lists at commas, with no way to escape one: a configuration naming
+    such a file was written, and ``sumo -c`` then failed with "Cannot read file 'a'").
+
+    The files: the fcd-replay input named after ``fcd_path`` (relative to the configuration's
+    directory) and the shipped network and vehicle types. It reads and writes nothing, so a
+    caller can check before writing the FCD (``torchcbl replay`` does).
+    """
+    from sumo_scenarios.scenarios import data_path
+
+    fcd = Path(fcd_path).resolve()
+    stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
+    replay_input = fcd.with_name(stem + ".replay.xml")
+    try:
+        named = str(replay_input.relative_to(Path(path).resolve().parent))
+    except ValueError:
+        named = str(replay_input)
+    if "," in named:
+        raise ValueError(
+            f"a .sumocfg cannot name a file whose path holds a comma (SUMO splits file lists "
+            f"at commas), and the FCD's fcd-replay input, named after it ({named}), holds one: "
+            "give the FCD a name without a comma"
+        )
+    shipped = [str(data_path(n)) for n in ("road.net.xml", "driving.add.xml")]
+    if any("," in p for p in shipped):
+        raise ValueError(
+            f"a .sumocfg cannot name a file whose path holds a comma (SUMO splits file lists "
+            f"at commas), and the shipped network and vehicle types it names "
+            f"({' and '.join(shipped)}) are under a path with one: move the package "
+            "(sumo_scenarios) to a path without a comma"
+        )
 
 
 def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path) -> Path:
@@ -499,7 +563,9 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
 
     A file the configuration lists (the replay input, named after the FCD, and the shipped
     network and vehicle types) may not hold a comma in its path, which SUMO splits file lists
-    at: ValueError, before anything is written.
+    at: ValueError, before anything is written; so are an FCD that is not this record's (not
+    FCD XML, or another number of timesteps or step length) and a ``path`` that is a directory
+    or lies in one that does not exist.
 
     What SUMO prints: no error and no teleport. Each removed car is moved once to the lane end,
     which SUMO reports as "moved by TraCI" (shown for the first 3, then counted:
@@ -521,6 +587,11 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
             f"write_sumocfg needs the episode's FCD file, {fcd} does not exist: "
             "write it first with export_fcd(record, path)"
         )
+    # checked first: open() failed on these only once the replay input was written
+    if path.is_dir():
+        raise ValueError(f"{str(path)!r} is a directory; give the .sumocfg's file path")
+    if not path.parent.is_dir():
+        raise ValueError(f"the directory of {str(path)!r} does not exist; create it first")
     # (a gzipped FCD, "ep.fcd.xml.gz", is read as such; its replay input and re-run are plain)
     stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
     replay_input = fcd.with_name(stem + ".replay.xml")
@@ -532,21 +603,9 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
         except ValueError:
             return str(p)
 
-    # SUMO splits these options' file lists at commas, with no way to escape one: a .sumocfg
-    # naming such a file was written, and `sumo -c` then failed ("Cannot read file 'a'")
-    listed = {
-        "the FCD's name (its fcd-replay input, named after it)": rel(replay_input),
-        "the shipped network's path": str(data_path("road.net.xml")),
-        "the shipped vehicle types' path": str(data_path("driving.add.xml")),
-    }
-    commas = [f"{what} ({value})" for what, value in listed.items() if "," in value]
-    if commas:
-        raise ValueError(
-            f"a .sumocfg cannot name a file whose path holds a comma (SUMO splits file lists "
-            f"at commas), and {' and '.join(commas)} holds one: give the FCD a name without a "
-            "comma, or move the package to a path without one"
-        )
-    _write_replay_input(fcd, replay_input, libsumo_lane_length_from_net())
+    _refuse_commas(fcd, path)
+    root = _read_fcd(fcd, record)
+    _write_replay_input(root, replay_input, libsumo_lane_length_from_net())
 
     def attr(value: object) -> str:  # a file name may hold & < > or a quote
         return escape(str(value), {'"': "&quot;"})

@@ -45,18 +45,53 @@ EGO = "ego"
 # libsumo's one simulation: whether it runs, and the ``_state`` dict of the HighwaySim whose
 # reset placed the road it holds (a dict, not the object: one dropped without close() is
 # collected, and its finaliser closes libsumo if it still owned it)
-_SUMO: dict[str, Any] = {"running": False, "owner": None, "pid": None}
+_SUMO: dict[str, Any] = {"running": False, "owner": None, "pid": None, "options": None}
+# options SUMO reports for the simulation a reset of ours loaded (_SUMO["options"]): another
+# simulation (libsumo.close() and a libsumo.start of the caller's own) reports others
+_OPTIONS = ("net-file", "additional-files", "step-length", "collision.action", "seed", "fcd-output")
+
+
+def _options() -> dict[str, str]:
+    """The options of the simulation libsumo holds (it must hold one), as SUMO reports them."""
+    return {k: libsumo.simulation.getOption(k) for k in _OPTIONS}
+
+
+def _gone() -> str | None:
+    """Why libsumo, believed to run our simulation, does not (checked before every step, so
+    only the two options that tell another simulation apart best, about 1.5 us): "closed" (the
+    user closed it), "replaced" (and started their own), None while it is ours."""
+    if not libsumo.simulation.isLoaded():
+        return "closed"
+    ours = _SUMO["options"]
+    get = libsumo.simulation.getOption
+    if ours is not None and (
+        get("seed") != ours["seed"] or get("additional-files") != ours["additional-files"]
+    ):
+        return "replaced"
+    return None
+
+
+def _replaced() -> bool:
+    """Whether libsumo, believed to run our simulation, holds another: the user closed ours
+    and started their own (its options differ from those of our last load)."""
+    return (
+        _SUMO["options"] is not None
+        and libsumo.simulation.isLoaded()
+        and _options() != _SUMO["options"]
+    )
 
 
 def _release(state: dict[str, bool]) -> None:
     """Close libsumo if this simulation owns it (close() or garbage collection); a simulation
-    that another's reset took over leaves that one running."""
+    that another's reset took over leaves that one running, and so does one the user started
+    after closing ours (libsumo.close() and a libsumo.start of their own)."""
     if state["owns"]:
         state["owns"] = False
         _SUMO["owner"] = None
         if _SUMO["running"]:
             _SUMO["running"] = False
-            libsumo.close()
+            if not _replaced():
+                libsumo.close()
 
 
 def _sumo_inputs() -> tuple[list[str], Path | None]:
@@ -276,7 +311,11 @@ class HighwaySim:
                 "gymnasium's AsyncVectorEnv(..., context='spawn')), or close the parent's env "
                 "before forking"
             )
-        if not _SUMO["running"] and libsumo.simulation.isLoaded():
+        if libsumo.simulation.isLoaded() and (
+            not _SUMO["running"]
+            # ours closed (libsumo.close()) and one of the caller's started in its place
+            or _replaced()
+        ):
             # a libsumo.start of the caller's own: a start here would replace it without a word
             raise RuntimeError(
                 "this process's libsumo already runs a simulation not started by "
@@ -292,6 +331,7 @@ class HighwaySim:
         self._state["owns"] = True
         inputs, copies = _sumo_inputs()
         args = self._args(inputs, seed, fcd_path)
+        _SUMO["options"] = None  # unknown until the load below completes
         try:
             if _SUMO["running"]:
                 libsumo.load(args[1:])
@@ -303,6 +343,7 @@ class HighwaySim:
         finally:
             if copies is not None:  # read by the load: not needed any more
                 shutil.rmtree(copies, ignore_errors=True)
+        _SUMO["options"] = _options()
         self._rng = rng
         self._next_id = 0
         self.n_recycled = 0
@@ -484,7 +525,21 @@ class HighwaySim:
     def _check_owned(self) -> None:
         """Raise unless libsumo holds this simulation's road, saying why not."""
         if self._ready and self._state["owns"]:
-            return
+            gone = _gone()
+            if gone is None:
+                return
+            if gone == "closed":
+                raise RuntimeError(
+                    "this env's libsumo simulation was closed outside this env "
+                    "(libsumo.close()): reset() this env to start a new one (on a fresh road "
+                    "segment)"
+                )
+            raise RuntimeError(
+                "this process's libsumo runs a simulation not started by sumo_scenarios (a "
+                "libsumo.start of your own, after this env's was closed with libsumo.close()), "
+                "and libsumo holds one simulation per process: close it (libsumo.close()) and "
+                "reset() this env, or run the two in separate processes"
+            )
         if self._closed:
             raise RuntimeError("this simulation is closed")
         if self._ready:
@@ -509,8 +564,22 @@ class HighwaySim:
 
 
 def libsumo_lane_length_from_net() -> float:
-    """Length of the road edge in the shipped network, metres (read with sumolib)."""
+    """Length of the road edge in the shipped network, metres (read with sumolib).
+
+    Raises:
+        RuntimeError: the file is not a network holding the edge (changed or damaged), naming
+            it and the command that rebuilds it.
+    """
+    import xml.sax
+
     import sumolib
 
-    net = sumolib.net.readNet(str(data_path("road.net.xml")))
-    return float(net.getEdge(EDGE).getLength())
+    path = data_path("road.net.xml")
+    try:
+        return float(sumolib.net.readNet(str(path)).getEdge(EDGE).getLength())
+    except (xml.sax.SAXException, KeyError) as exc:  # sumolib's words: "'road'", "syntax error"
+        what = f"no edge {EDGE!r}" if isinstance(exc, KeyError) else f"not XML: {exc}"
+        raise RuntimeError(
+            f"{path} is not the shipped road network ({what}): it was changed or damaged; "
+            "rebuild it with `python -m sumo_scenarios.build_network` (or reinstall the package)"
+        ) from None

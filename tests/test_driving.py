@@ -604,3 +604,96 @@ def test_a_simulation_started_outside_the_env_is_not_silently_replaced():
         env.step(STAY)
     finally:
         env.close()
+
+
+def test_a_simulation_started_over_the_envs_own_is_not_silently_replaced():
+    """The researcher closes the env's libsumo simulation and starts one of their own: the
+    env's next reset refuses, saying what to do, and theirs runs on. (The env still counted
+    libsumo as running its own and loaded over theirs without a word: their clock went from 3 s
+    back to 0 s.) Once theirs is closed, the env resets again."""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
+    env = DrivingEnv(scenario="light")
+    try:
+        env.reset(seed=0)
+        env.step(STAY)
+        libsumo.close()
+        libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+        try:
+            for _ in range(3):
+                libsumo.simulationStep()
+            with pytest.raises(RuntimeError, match=r"not started by sumo_scenarios.*close it"):
+                env.reset(seed=1)
+            assert libsumo.simulation.getTime() == 3.0
+            libsumo.simulationStep()  # still the researcher's
+        finally:
+            libsumo.close()
+        env.reset(seed=1)  # theirs closed: the env starts its own again
+        assert env.step(STAY)[4]["position_m"] == pytest.approx(6.7056, abs=1e-6)
+    finally:
+        env.close()
+
+
+def test_a_step_after_the_user_closed_the_envs_simulation_says_so():
+    """The researcher closes the env's libsumo simulation (and maybe starts their own): the
+    env's step raises a RuntimeError saying what happened and what to do, and leaves their
+    simulation untouched. (It stepped theirs once and then failed inside libsumo, "Vehicle
+    'ego' is not known."; with none running, "A network was not yet constructed.")"""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
+    env = DrivingEnv(scenario="light")
+    try:
+        env.reset(seed=0)
+        env.step(STAY)
+        libsumo.close()
+        with pytest.raises(RuntimeError, match=r"closed outside this env.*reset\(\)"):
+            env.step(STAY)
+        libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+        try:
+            libsumo.simulationStep()
+            with pytest.raises(RuntimeError, match=r"not started by sumo_scenarios.*close it"):
+                env.step(STAY)
+            assert libsumo.simulation.getTime() == 1.0  # theirs was not stepped
+        finally:
+            libsumo.close()
+        env.reset(seed=1)  # theirs closed: the env starts its own again
+        env.step(STAY)
+    finally:
+        env.close()
+
+
+def test_closing_the_env_leaves_a_simulation_the_user_started_in_its_place_running():
+    """The researcher closes the env's libsumo simulation and starts one of their own: the
+    env's close(), or its collection when dropped unclosed, leaves theirs running. (Both
+    closed it: libsumo.close() on a simulation that was no longer the env's.)"""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
+    try:
+        for how in ("close", "collect"):
+            env = DrivingEnv(scenario="light")
+            env.reset(seed=0)
+            libsumo.close()
+            libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+            libsumo.simulationStep()
+            if how == "close":
+                env.close()
+            del env
+            gc.collect()
+            assert libsumo.simulation.isLoaded(), how
+            libsumo.simulationStep()  # still the researcher's
+            assert libsumo.simulation.getTime() == 2.0
+            libsumo.close()
+    finally:
+        libsumo.close()
+    env = DrivingEnv(scenario="light")  # theirs closed: an env starts its own
+    try:
+        env.reset(seed=0)
+        env.step(STAY)
+    finally:
+        env.close()

@@ -703,3 +703,102 @@ def test_load_records_names_a_damaged_scenario_of_a_record(tmp_path):
         (tmp_path / "bad.json").write_text(json.dumps([dict(good, scenario=scenario)]))
         with pytest.raises(ValueError, match=says):
             load_records(tmp_path / "bad.json")
+
+
+def test_an_fcd_output_naming_a_shipped_data_file_is_refused(tmp_path):
+    """reset(options={"fcd_output": <the shipped road.net.xml or driving.add.xml>}): SUMO read
+    the file and then wrote the episode's FCD over it, which broke the install for good (every
+    later DrivingEnv failed with KeyError 'road'). Now the reset refuses, naming the file, and
+    the file is unchanged. Run on a copy of the package, in a process of its own."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import sumo_scenarios
+
+    site = tmp_path / "site"
+    shutil.copytree(
+        Path(sumo_scenarios.__file__).parent,
+        site / "sumo_scenarios",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    data = site / "sumo_scenarios" / "data"
+    before = {n: (data / n).read_bytes() for n in ("road.net.xml", "driving.add.xml")}
+    (tmp_path / "link.xml").symlink_to(data / "driving.add.xml")
+    code = (
+        "import sys\n"
+        "from sumo_scenarios.env import DrivingEnv\n"
+        "env = DrivingEnv(scenario='light')\n"
+        "for path in sys.argv[1:]:\n"
+        "    try:\n"
+        "        env.reset(seed=0, options={'fcd_output': path})\n"
+        "        env.step(0)\n"
+        "        print('accepted', path)\n"
+        "    except ValueError as exc:\n"
+        "        print(exc)\n"
+        "env.reset(seed=0)\n"
+        "env.close()\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code, str(data / "road.net.xml"), str(tmp_path / "link.xml")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr[-2000:]
+    lines = out.stdout.splitlines()
+    assert len(lines) == 2, out.stdout
+    for line, name in zip(lines, ("road.net.xml", "link.xml"), strict=True):
+        assert line.startswith("fcd_output: "), line
+        assert name in line and "shipped" in line, line
+    assert {n: (data / n).read_bytes() for n in before} == before
+
+
+def test_a_damaged_shipped_network_is_named_with_the_way_to_rebuild_it(tmp_path):
+    """The shipped road.net.xml overwritten (by an FCD, as an fcd_output naming it once did) or
+    truncated: DrivingEnv() failed with a bare KeyError 'road' or sumolib's SAXParseException.
+    Now a RuntimeError names the file and the command that rebuilds it. Run on a copy of the
+    package, in a process of its own."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import sumo_scenarios
+
+    site = tmp_path / "site"
+    shutil.copytree(
+        Path(sumo_scenarios.__file__).parent,
+        site / "sumo_scenarios",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    code = (
+        "from sumo_scenarios.env import DrivingEnv\n"
+        "from sumo_scenarios.scenarios import data_path\n"
+        "for text in ('<fcd-export/>', '<net version=', ''):\n"
+        "    data_path('road.net.xml').write_text(text)\n"
+        "    try:\n"
+        "        DrivingEnv(scenario='light')\n"
+        "        print('accepted')\n"
+        "    except RuntimeError as exc:\n"
+        "        print(exc)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr[-2000:]
+    lines = out.stdout.splitlines()
+    assert len(lines) == 3, out.stdout
+    for line in lines:
+        assert str(site / "sumo_scenarios" / "data" / "road.net.xml") in line, line
+        assert "python -m sumo_scenarios.build_network" in line, line

@@ -157,3 +157,86 @@ def test_a_file_name_with_a_comma_is_refused_before_anything_is_written(episode,
     assert out.returncode == 2 and out.stdout == "", out
     assert out.stderr.count("\n") == 1 and "without a comma" in out.stderr, out.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([odd.name, episodes.name])
+
+
+def test_replay_from_a_package_under_a_comma_path_refuses_before_writing(tmp_path):
+    """The package installed under a path with a comma ("OneDrive - Acme, Inc/..."): the
+    .sumocfg would name the shipped network and vehicle types by that path, which SUMO splits
+    at the comma. torchcbl replay wrote the episode's FCD (and printed two lines) before
+    refusing the .sumocfg; now it refuses in one line on stderr and writes nothing, naming the
+    package's path as the cause (not the FCD's name)."""
+    import sumo_scenarios
+    from sumo_scenarios.replay import EpisodeRecord, save_records
+    from sumo_scenarios.scenarios import get_scenario
+    from sumo_scenarios.sim import SimConfig
+
+    site = tmp_path / "Acme, Inc"
+    shutil.copytree(
+        Path(sumo_scenarios.__file__).parent,
+        site / "sumo_scenarios",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    episodes = out_dir / "episodes.json"
+    save_records([EpisodeRecord(get_scenario("light"), SimConfig(), 0, 2, (0, 1, 0))], episodes)
+    root = Path(__file__).resolve().parents[1]  # torchcbl itself from this checkout
+    out = subprocess.run(
+        [sys.executable, "-m", "torchcbl", "replay", str(episodes)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={"PYTHONPATH": f"{site}:{root}", "PATH": "/usr/bin:/bin"},
+        cwd=tmp_path,
+    )
+    assert out.returncode == 2 and out.stdout == "", out
+    assert out.stderr.count("\n") == 1, out.stderr
+    assert "Acme, Inc" in out.stderr and "move the package" in out.stderr, out.stderr
+    assert "give the FCD a name" not in out.stderr, out.stderr
+    assert [p.name for p in out_dir.iterdir()] == [episodes.name]
+
+
+def test_sumocfg_refuses_a_file_that_is_not_the_records_fcd(episode, tmp_path):
+    """write_sumocfg given a file that is not an FCD (a ParseError from the XML reader, or a
+    .sumocfg written for any XML), or the FCD of an episode of another length or step length
+    (a .sumocfg written that replays it at the wrong times and stops at the wrong end): a
+    ValueError naming the file and what was expected, and nothing written."""
+    rec, fcd, _ = episode
+    text = tmp_path / "notes.txt"
+    text.write_text("not xml")
+    other = tmp_path / "routes.xml"
+    other.write_text("<routes/>")
+    shorter = tmp_path / "short.fcd.xml"
+    root = ET.parse(fcd).getroot()
+    for ts in root.findall("timestep")[10:]:
+        root.remove(ts)
+    ET.ElementTree(root).write(shorter)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    for path, says in [
+        (text, r"notes\.txt is not XML"),
+        (other, r"routes\.xml is not an FCD file"),
+        (shorter, r"short\.fcd\.xml holds 10 timesteps.*120 steps of 0\.25 s"),
+    ]:
+        with pytest.raises(ValueError, match=says):
+            write_sumocfg(rec, path, tmp_path / "ep.sumocfg")
+    slower = dataclasses.replace(rec, sim=dataclasses.replace(rec.sim, step_length_s=0.1))
+    with pytest.raises(ValueError, match=r"ep\.fcd\.xml holds 120 timesteps 0.25 s apart"):
+        write_sumocfg(slower, fcd, tmp_path / "ep.sumocfg")
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_sumocfg_path_is_checked_before_anything_is_written(episode, tmp_path):
+    """write_sumocfg to a directory, or into one that does not exist: the replay input beside
+    the FCD was written first, and then open() failed (IsADirectoryError, FileNotFoundError).
+    Now a ValueError says what to give, and nothing is written."""
+    rec, fcd, _ = episode
+    odd = tmp_path / "ep.fcd.xml"
+    shutil.copy(fcd, odd)
+    for path, says in [
+        (tmp_path, "is a directory; give the .sumocfg's file path"),
+        (tmp_path / "missing" / "ep.sumocfg", "does not exist; create it first"),
+    ]:
+        with pytest.raises(ValueError, match=says):
+            write_sumocfg(rec, odd, path)
+        assert [p.name for p in tmp_path.iterdir()] == [odd.name]

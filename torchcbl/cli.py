@@ -515,6 +515,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             f"--fcd {fcd}: the .sumocfg beside it names its fcd-replay input after it, and SUMO "
             "splits file lists at commas; give --fcd a name without a comma"
         )
+    try:  # the .sumocfg names the shipped files too: refused before the FCD is written
+        replay._refuse_commas(fcd, cfg)
+    except ValueError as exc:  # the package under a path with a comma
+        raise _UsageError(str(exc)) from None
     if session:  # the session logged what it saw: the replay must see the same
         try:
             replay.session_episodes(path, check=[index])
