@@ -170,3 +170,54 @@ def test_a_strategy_of_ones_own_runs_in_the_benchmark_by_its_import_path(tmp_pat
     assert spec["params"] == {"threshold": 0.2}
     row = results["table"]["_bench_env:BenchCluster-v0"]["test_user_strategy:SafeAsk"]
     assert row["final_labels"]["mean"] == 5
+
+
+class AskWhileUnsure:
+    """The smallest strategy of one's own: no ``to_config`` (the docs: stored as custom, passed
+    again to resume), ask until a model exists or where its distance is above 2 std."""
+
+    relabel = False
+    wants_corrections = False
+
+    def bind(self, *, n_actions, n_features, config):
+        pass
+
+    def episode_start(self):
+        pass
+
+    def decide(self, observation, c):
+        return Decision(int(c.action[0]) < 0 or float(c.distance[0]) > 2.0, "confident")
+
+    def actor(self, decision, model_action, teacher_action):
+        return "teacher" if decision.ask else "agent"
+
+    def observe_label(self, observation, action, *, model_action, kind):
+        pass
+
+    def observe_refit(self, model, observations, actions):
+        pass
+
+    def observe_step(self, record, decision):
+        pass
+
+
+class WithoutEpisodeStart(SafeAsk):
+    episode_start = None
+
+
+def test_the_benchmark_takes_the_strategies_the_loop_takes(tmp_path, capsys):
+    """`torchcbl benchmark` refused a strategy without to_config ("AskWhileUnsure is not a
+    strategy; expected a class with the methods of torchcbl.strategies.Strategy (bind, decide,
+    actor, observe_label, observe_refit, observe_step, ...)", every one of which it has),
+    though ConfidentTeacher runs it and the docs make to_config optional; and a class that
+    does lack a method was not told which."""
+    argv = [*_TOY_SWEEP, "--strategies", "test_user_strategy:AskWhileUnsure"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 0, capsys.readouterr().err
+    assert (tmp_path / "b" / "results.json").exists()
+    capsys.readouterr()
+    argv = [*_TOY_SWEEP, "--strategies", "test_user_strategy:WithoutEpisodeStart"]
+    assert main([*argv, "--out", str(tmp_path / "c")]) == 2
+    out, err = capsys.readouterr()
+    assert not out and err.count("\n") == 1, err
+    assert "test_user_strategy:WithoutEpisodeStart" in err and "episode_start()" in err, err
+    assert not (tmp_path / "c").exists()
