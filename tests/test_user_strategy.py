@@ -17,6 +17,7 @@ import pytest
 from _toy_envs import oracle, rare_regions_world
 
 from torchcbl import ConfidentTeacher, TeachingConfig
+from torchcbl import benchmark as bm
 from torchcbl.cli import main
 from torchcbl.errors import IncompatibleRunDirError
 from torchcbl.session import load_config, load_records
@@ -221,3 +222,21 @@ def test_the_benchmark_takes_the_strategies_the_loop_takes(tmp_path, capsys):
     assert not out and err.count("\n") == 1, err
     assert "test_user_strategy:WithoutEpisodeStart" in err and "episode_start()" in err, err
     assert not (tmp_path / "c").exists()
+
+
+def test_run_benchmark_refuses_a_class_that_is_not_a_strategy_before_any_cell_runs(tmp_path):
+    """In Python, a strategy lacking a method of the protocol was refused only when its first
+    cell ran (a CellError), after every cell of the strategies before it had run (hours, in a
+    real sweep); a misspelt parameter is refused before anything runs, and so is it now."""
+    env = bm.EnvSpec(
+        name="toy",
+        env_id="_bench_env:BenchCluster-v0",
+        teacher="_bench_env:teacher",
+        budgets=(5,),
+        max_steps=10,
+        eval_episodes=1,
+    )
+    specs = [bm.StrategySpec("bc"), bm.StrategySpec("test_user_strategy:WithoutEpisodeStart")]
+    with pytest.raises(ValueError, match=r"WithoutEpisodeStart.*without episode_start\(\)"):
+        bm.run_benchmark(specs, [env], [0], tmp_path / "b", workers=1, plots=False)
+    assert not (tmp_path / "b").exists()  # bc's cell did not run
