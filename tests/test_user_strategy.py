@@ -240,3 +240,25 @@ def test_run_benchmark_refuses_a_class_that_is_not_a_strategy_before_any_cell_ru
     with pytest.raises(ValueError, match=r"WithoutEpisodeStart.*without episode_start\(\)"):
         bm.run_benchmark(specs, [env], [0], tmp_path / "b", workers=1, plots=False)
     assert not (tmp_path / "b").exists()  # bc's cell did not run
+
+
+class RelabellingSafeAsk(SafeAsk):
+    """Relabels (a label for a stored observation replaces it), but its to_config, written
+    from SafeAsk's, does not say so."""
+
+    relabel = True
+
+
+def test_a_to_config_that_misstates_relabel_is_refused_before_the_session_starts(tmp_path):
+    """The session's readers take "relabel" from the stored to_config(), the loop from the
+    strategy's attribute. A relabelling strategy whose to_config() left it out (or said false)
+    ran, and then load_demonstrations handed back another training set than the one the live
+    model was fitted on (a probe on rounded observations: 60 labels where the loop,
+    relabelling repeated observations, had 30), with no word; the session now refuses to
+    start, saying what to return."""
+    env = rare_regions_world(episode_length=10)
+    with pytest.raises(TypeError, match=r'RelabellingSafeAsk.*"relabel": True'):
+        ConfidentTeacher(
+            env, oracle(env), strategy=RelabellingSafeAsk(), run_dir=tmp_path / "r", progress=False
+        )
+    assert not (tmp_path / "r").exists()

@@ -241,19 +241,31 @@ def strategy_to_config(strategy: Any) -> dict[str, Any]:
     (custom).
 
     Raises:
-        TypeError: ``to_config()`` returned something other than a dict or None, or a dict
-            JSON cannot hold.
+        TypeError: ``to_config()`` returned something other than a dict or None, a dict
+            JSON cannot hold, or one whose ``"relabel"`` (false when absent) is not the
+            strategy's ``relabel`` (a session's readers, ``load_demonstrations`` and
+            ``load_model``, relabel as the stored dict says).
     """
     to_config = getattr(strategy, "to_config", None)
     config = to_config() if callable(to_config) else None
     if config is not None:
+        name = type(strategy).__name__
         if not isinstance(config, Mapping):
             raise TypeError(
-                f"{type(strategy).__name__}.to_config() returned {config!r:.80}; expected a "
+                f"{name}.to_config() returned {config!r:.80}; expected a "
                 'JSON dict with "type" and the constructor arguments (see torchcbl.strategies), '
                 "or None to store the strategy as custom (then pass it again to resume())."
             )
-        return _json_form(config, f"{type(strategy).__name__}.to_config()")
+        relabel = bool(getattr(strategy, "relabel", False))
+        if bool(config.get("relabel", False)) != relabel:
+            given = repr(config["relabel"]) if "relabel" in config else "nothing"
+            raise TypeError(
+                f'{name}.to_config() gives "relabel": {given}, but {name}.relabel is '
+                f"{relabel}; the session's readers relabel as the stored dict says, so it "
+                f'would read another training set than the one taught: return "relabel": '
+                f"{relabel} in to_config()."
+            )
+        return _json_form(config, f"{name}.to_config()")
     return {
         "type": f"{type(strategy).__module__}.{type(strategy).__qualname__}",
         "custom": True,
