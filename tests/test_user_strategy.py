@@ -262,3 +262,26 @@ def test_a_to_config_that_misstates_relabel_is_refused_before_the_session_starts
             env, oracle(env), strategy=RelabellingSafeAsk(), run_dir=tmp_path / "r", progress=False
         )
     assert not (tmp_path / "r").exists()
+
+
+class RenamedArgument(SafeAsk):
+    """Its constructor calls k ``neighbours``; its to_config, SafeAsk's, stores ``k``."""
+
+    def __init__(self, threshold: float = 0.3, neighbours: int = 5) -> None:
+        super().__init__(threshold, neighbours)
+
+    def to_config(self):
+        return {**super().to_config(), "type": "RenamedArgument"}
+
+
+def test_a_registered_class_its_stored_config_does_not_fit_is_told_why(tmp_path, monkeypatch):
+    """A registered class whose to_config() keys are not its constructor's arguments failed
+    to resume with "RenamedArgument.__init__() got an unexpected keyword argument 'k'. Resume
+    with matching arguments", which says neither where the 'k' came from nor what to change."""
+    monkeypatch.setitem(STRATEGIES, "RenamedArgument", RenamedArgument)
+    _teach(tmp_path / "r", RenamedArgument(), 12)
+    with pytest.raises(IncompatibleRunDirError) as caught:
+        _resume(tmp_path / "r")
+    text = str(caught.value)
+    assert "unexpected keyword argument 'k'" in text, text
+    assert "to_config()" in text and "constructor" in text and "strategy=" in text, text

@@ -307,6 +307,7 @@ def strategy_from_config(config: dict[str, Any]) -> Any:
     Raises:
         ValueError: a custom strategy or rule (pass it to ``resume`` yourself), or an unknown
             type.
+        TypeError: the class does not take the dict's keys as keyword arguments.
     """
     kind = config.get("type")
     if config.get("custom"):
@@ -322,9 +323,16 @@ def strategy_from_config(config: dict[str, Any]) -> Any:
             f"{sorted(STRATEGIES)}. Pass strategy=<your strategy> to resume()."
         )
     params = {k: v for k, v in config.items() if k not in ("type", "relabel")}
-    if isinstance(build, type):  # a class registered as the module docstring says
-        return build(**params)
-    return build(params)
+    try:
+        if isinstance(build, type):  # a class registered as the module docstring says
+            return build(**params)
+        return build(params)
+    except TypeError as exc:  # the stored keys are not the constructor's keyword arguments
+        raise TypeError(
+            f"cannot rebuild strategy {kind!r} from a run directory as {kind}(**{params!r:.200}): "
+            f'{exc}; the keys of its to_config() (other than "type" and "relabel") must be '
+            "its constructor's keyword arguments. Pass strategy=<your strategy> to resume()."
+        ) from exc
 
 
 class _Correcting:
