@@ -108,8 +108,10 @@ def test_a_strategy_of_ones_own_teaches_and_resumes_from_a_closed_session(tmp_pa
     assert {r.actor for r in recs} == {"teacher", "agent"}
     assert load_config(tmp_path / "r")["strategy"] == live.to_config()
     # a fresh process knows no SafeAsk: it is passed again, or registered as documented
-    with pytest.raises(IncompatibleRunDirError, match="Pass strategy="):
+    with pytest.raises(IncompatibleRunDirError, match="Pass strategy=") as caught:
         _resume(tmp_path / "r")
+    # (it said only that; registering, which the module docstring tells, was not named)
+    assert "torchcbl.strategies.STRATEGIES['SafeAsk'] = " in str(caught.value)
     monkeypatch.setitem(STRATEGIES, "SafeAsk", SafeAsk)
     back = _resume(tmp_path / "r")
     assert isinstance(back.strategy, SafeAsk) and back.strategy.threshold == 0.2

@@ -104,6 +104,7 @@ __all__ = [
     "ConfidenceBasedAutonomy",
     "ConfidentExecution",
     "Decision",
+    "STRATEGIES",
     "Strategy",
     "correcting",
     "strategy_from_config",
@@ -320,7 +321,8 @@ def strategy_from_config(config: dict[str, Any]) -> Any:
     if build is None:
         raise ValueError(
             f"cannot rebuild strategy {kind!r} from a run directory: it is not one of "
-            f"{sorted(STRATEGIES)}. Pass strategy=<your strategy> to resume()."
+            f"{sorted(STRATEGIES)}. Pass strategy=<your strategy> to resume(), or register "
+            f"its class first: torchcbl.strategies.STRATEGIES[{kind!r}] = <your class>."
         )
     params = {k: v for k, v in config.items() if k not in ("type", "relabel")}
     try:
