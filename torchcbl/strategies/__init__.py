@@ -43,7 +43,8 @@ Rules a strategy must keep:
   model's action (DAgger may do so on a labelled step: a label is recorded either way).
 - Resume must land in the same state as the live run: derive state from what
   ``observe_label`` / ``observe_step`` / ``observe_refit`` tell you, or from a seeded RNG that
-  you advance in ``observe_step``; never from wall-clock time.
+  you advance in ``observe_step``; never from wall-clock time. Reset that state in ``bind``:
+  a resume may be handed the live run's object, and replays the whole log into it.
 - ``to_config()`` returns a JSON dict with ``"type"`` (the class name), every constructor
   argument and ``"relabel"``; the run directory stores it and :func:`strategy_from_config`
   rebuilds the strategy on resume (register a new class in ``STRATEGIES`` under that type,
@@ -121,7 +122,10 @@ class Strategy(Protocol):
     wants_corrections: bool
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
-        """Called once before any other method; ``config`` is the TeachingConfig."""
+        """Called once per session (new or resumed) before any other method; ``config`` is the
+        TeachingConfig. Start the strategy's state afresh here, not in ``__init__``: the same
+        object may be passed to another session or to ``resume``, which replays the log into
+        it."""
         ...
 
     def episode_start(self) -> None:
