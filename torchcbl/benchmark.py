@@ -117,12 +117,15 @@ def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) 
     """Resolve every import path of a benchmark (strategies, teachers, scores, gymnasium
     registration modules) before anything runs: a misspelt name fails at once, with an
     ImportError that names it, not in a worker after other cells have run. Each strategy is
-    made once from its params too, so a misspelt or refused parameter is a ValueError naming
-    the strategy now, not after every cell of the strategies before it."""
+    made once from its params too, so a misspelt or refused parameter, or a class that lacks
+    a method the loop calls, is a ValueError naming the strategy now, not after every cell of
+    the strategies before it."""
+    from torchcbl.teaching import TeachingConfig, _pick_strategy
+
     for s in strategies:
         _import(STRATEGY_PATHS.get(s.name, s.name))
         try:
-            s.build(seed=0)
+            strategy = s.build(seed=0)
         except Exception as exc:  # the class's own refusal of its arguments, whatever it is
             text = " ".join(str(exc).split()) or type(exc).__name__
             raise ValueError(
@@ -130,7 +133,10 @@ def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) 
                 f"{dict(s.params)}: {type(exc).__name__}: {text}; fix its params (the keyword "
                 "arguments of its constructor)"
             ) from exc
-    from torchcbl.teaching import TeachingConfig
+        try:  # the loop's own check, as the cell would make it
+            _pick_strategy(None, strategy)
+        except TypeError as exc:
+            raise ValueError(f"StrategySpec {s.title!r}: {exc}") from None
 
     for s in strategies:
         for e in envs:

@@ -930,8 +930,9 @@ def _cwd_hint(exc: BaseException) -> str:
 def _check_strategy(spec: Any) -> None:
     """A one-line error unless ``spec`` (a --strategies import path) gives a strategy: the
     class imports, is made with the --strategy-param given for it and has the
-    :class:`torchcbl.strategies.Strategy` methods."""
-    from torchcbl.strategies import Strategy
+    methods :class:`~torchcbl.teaching.ConfidentTeacher` calls (``to_config`` is optional, as
+    for the loop: a strategy without it is stored as custom)."""
+    from torchcbl.teaching import _pick_strategy
 
     try:
         strategy = spec.build(seed=0)
@@ -955,12 +956,13 @@ def _check_strategy(spec: Any) -> None:
             f"--strategies {spec.name}: cannot make it ({type(exc).__name__}: {text}); expected "
             f"module:Class of a strategy, or a shipped name{params}"
         ) from None
-    if not isinstance(strategy, Strategy):
+    try:  # the loop's own check: it names the method that is missing
+        _pick_strategy(None, strategy)
+    except TypeError as exc:
         raise _UsageError(
-            f"--strategies {spec.name}: {type(strategy).__name__} is not a strategy; expected "
-            "a class with the methods of torchcbl.strategies.Strategy (bind, decide, actor, "
-            "observe_label, observe_refit, observe_step, ...)"
-        )
+            f"--strategies {spec.name}: {type(strategy).__name__} is not a strategy: "
+            f"{_one_line(exc).removeprefix('strategy: ')}"
+        ) from None
 
 
 def _json_spelling(text: str) -> str | None:

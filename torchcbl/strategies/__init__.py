@@ -43,7 +43,8 @@ Rules a strategy must keep:
   model's action (DAgger may do so on a labelled step: a label is recorded either way).
 - Resume must land in the same state as the live run: derive state from what
   ``observe_label`` / ``observe_step`` / ``observe_refit`` tell you, or from a seeded RNG that
-  you advance in ``observe_step``; never from wall-clock time.
+  you advance in ``observe_step``; never from wall-clock time. Reset that state in ``bind``:
+  a resume may be handed the live run's object, and replays the whole log into it.
 - ``to_config()`` returns a JSON dict with ``"type"`` (the class name), every constructor
   argument and ``"relabel"``; the run directory stores it and :func:`strategy_from_config`
   rebuilds the strategy on resume (register a new class in ``STRATEGIES`` under that type,
@@ -104,6 +105,7 @@ __all__ = [
     "ConfidenceBasedAutonomy",
     "ConfidentExecution",
     "Decision",
+    "STRATEGIES",
     "Strategy",
     "correcting",
     "strategy_from_config",
@@ -120,7 +122,10 @@ class Strategy(Protocol):
     wants_corrections: bool
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
-        """Called once before any other method; ``config`` is the TeachingConfig."""
+        """Called once per session (new or resumed) before any other method; ``config`` is the
+        TeachingConfig. Start the strategy's state afresh here, not in ``__init__``: the same
+        object may be passed to another session or to ``resume``, which replays the log into
+        it."""
         ...
 
     def episode_start(self) -> None:
@@ -241,19 +246,31 @@ def strategy_to_config(strategy: Any) -> dict[str, Any]:
     (custom).
 
     Raises:
-        TypeError: ``to_config()`` returned something other than a dict or None, or a dict
-            JSON cannot hold.
+        TypeError: ``to_config()`` returned something other than a dict or None, a dict
+            JSON cannot hold, or one whose ``"relabel"`` (false when absent) is not the
+            strategy's ``relabel`` (a session's readers, ``load_demonstrations`` and
+            ``load_model``, relabel as the stored dict says).
     """
     to_config = getattr(strategy, "to_config", None)
     config = to_config() if callable(to_config) else None
     if config is not None:
+        name = type(strategy).__name__
         if not isinstance(config, Mapping):
             raise TypeError(
-                f"{type(strategy).__name__}.to_config() returned {config!r:.80}; expected a "
+                f"{name}.to_config() returned {config!r:.80}; expected a "
                 'JSON dict with "type" and the constructor arguments (see torchcbl.strategies), '
                 "or None to store the strategy as custom (then pass it again to resume())."
             )
-        return _json_form(config, f"{type(strategy).__name__}.to_config()")
+        relabel = bool(getattr(strategy, "relabel", False))
+        if bool(config.get("relabel", False)) != relabel:
+            given = repr(config["relabel"]) if "relabel" in config else "nothing"
+            raise TypeError(
+                f'{name}.to_config() gives "relabel": {given}, but {name}.relabel is '
+                f"{relabel}; the session's readers relabel as the stored dict says, so it "
+                f'would read another training set than the one taught: return "relabel": '
+                f"{relabel} in to_config()."
+            )
+        return _json_form(config, f"{name}.to_config()")
     return {
         "type": f"{type(strategy).__module__}.{type(strategy).__qualname__}",
         "custom": True,
@@ -295,6 +312,7 @@ def strategy_from_config(config: dict[str, Any]) -> Any:
     Raises:
         ValueError: a custom strategy or rule (pass it to ``resume`` yourself), or an unknown
             type.
+        TypeError: the class does not take the dict's keys as keyword arguments.
     """
     kind = config.get("type")
     if config.get("custom"):
@@ -307,12 +325,20 @@ def strategy_from_config(config: dict[str, Any]) -> Any:
     if build is None:
         raise ValueError(
             f"cannot rebuild strategy {kind!r} from a run directory: it is not one of "
-            f"{sorted(STRATEGIES)}. Pass strategy=<your strategy> to resume()."
+            f"{sorted(STRATEGIES)}. Pass strategy=<your strategy> to resume(), or register "
+            f"its class first: torchcbl.strategies.STRATEGIES[{kind!r}] = <your class>."
         )
     params = {k: v for k, v in config.items() if k not in ("type", "relabel")}
-    if isinstance(build, type):  # a class registered as the module docstring says
-        return build(**params)
-    return build(params)
+    try:
+        if isinstance(build, type):  # a class registered as the module docstring says
+            return build(**params)
+        return build(params)
+    except TypeError as exc:  # the stored keys are not the constructor's keyword arguments
+        raise TypeError(
+            f"cannot rebuild strategy {kind!r} from a run directory as {kind}(**{params!r:.200}): "
+            f'{exc}; the keys of its to_config() (other than "type" and "relabel") must be '
+            "its constructor's keyword arguments. Pass strategy=<your strategy> to resume()."
+        ) from exc
 
 
 class _Correcting:
