@@ -287,3 +287,17 @@ def test_a_registered_class_its_stored_config_does_not_fit_is_told_why(tmp_path,
     text = str(caught.value)
     assert "unexpected keyword argument 'k'" in text, text
     assert "to_config()" in text and "constructor" in text and "strategy=" in text, text
+
+
+def test_a_session_stored_before_the_relabel_check_still_resumes_with_a_warning(tmp_path):
+    """Sessions made before the check above may hold a to_config() that misstates "relabel"
+    (here: stored by SafeAsk, resumed by RelabellingSafeAsk, whose to_config() is the same
+    dict). Such a session resumed before the check; it then failed with a bare TypeError
+    that no change of the class could get past (the stored dict is compared exactly). It
+    resumes as before, with a warning that the session's readers do not relabel."""
+    _teach(tmp_path / "r", SafeAsk(threshold=0.2), 30)
+    with pytest.warns(UserWarning, match=r'"relabel": False.*load_demonstrations'):
+        ct = _resume(tmp_path / "r", strategy=RelabellingSafeAsk(threshold=0.2))
+    ct.run(max_steps=40)  # the session's total
+    ct.close()
+    assert len(load_records(tmp_path / "r")) == 40

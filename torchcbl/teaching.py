@@ -291,6 +291,23 @@ _STRATEGY_METHODS = (
 )
 
 
+def _warn_misstated_relabel(stored: dict[str, Any], strategy: Any) -> None:
+    """Warn where a resumed session's stored ``"relabel"`` is not the strategy's (a session
+    made before ``strategy_to_config`` refused that): the loop relabels as the strategy says,
+    the session's readers as the stored dict says."""
+    relabel = bool(getattr(strategy, "relabel", False))
+    if bool(stored.get("relabel", False)) != relabel:
+        warnings.warn(
+            f'this session\'s config.json stores "relabel": {bool(stored.get("relabel"))} '
+            f"for its strategy, but {type(strategy).__name__}.relabel is {relabel}: the loop "
+            "relabels as the strategy says, while load_demonstrations and load_model read "
+            "this session as the stored value says (another training set). To read it as "
+            "taught, start a new session with a to_config() that states relabel truly.",
+            UserWarning,
+            stacklevel=3,
+        )
+
+
 def _pick_strategy(rule: Any, strategy: Any) -> Any:
     if rule is not None and strategy is not None:
         raise ValueError(
@@ -821,7 +838,8 @@ class ConfidentTeacher:
             strategy=(
                 None
                 if rule is None and strategy is None
-                else strategy_to_config(_pick_strategy(rule, strategy))
+                # unchecked: a session stored before the "relabel" check may misstate it
+                else strategy_to_config(_pick_strategy(rule, strategy), check_relabel=False)
             ),
         )
         if rule is None and strategy is None:
@@ -831,6 +849,7 @@ class ConfidentTeacher:
                 problems.append(str(exc))
         else:
             strategy = _pick_strategy(rule, strategy)
+            _warn_misstated_relabel(stored_strategy(stored), strategy)
         if problems:
             raise IncompatibleRunDirError(
                 f"cannot resume the session in {run_dir}: "

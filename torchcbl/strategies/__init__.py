@@ -239,11 +239,14 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module 'torchcbl.strategies' has no attribute {name!r}")
 
 
-def strategy_to_config(strategy: Any) -> dict[str, Any]:
+def strategy_to_config(strategy: Any, *, check_relabel: bool = True) -> dict[str, Any]:
     """JSON dict describing ``strategy``, as config.json reads back (numpy numbers as Python
     numbers, tuples as lists); one without ``to_config``, or whose ``to_config`` returns None
     (a subclass of :class:`Strategy` inherits the protocol's empty one), is named only
     (custom).
+
+    ``check_relabel=False`` skips the ``"relabel"`` check below: a resume compares the dict
+    with a stored one, and a session stored before the check may hold a misstated one.
 
     Raises:
         TypeError: ``to_config()`` returned something other than a dict or None, a dict
@@ -262,7 +265,7 @@ def strategy_to_config(strategy: Any) -> dict[str, Any]:
                 "or None to store the strategy as custom (then pass it again to resume())."
             )
         relabel = bool(getattr(strategy, "relabel", False))
-        if bool(config.get("relabel", False)) != relabel:
+        if check_relabel and bool(config.get("relabel", False)) != relabel:
             given = repr(config["relabel"]) if "relabel" in config else "nothing"
             raise TypeError(
                 f'{name}.to_config() gives "relabel": {given}, but {name}.relabel is '
