@@ -64,6 +64,40 @@ def test_rules_round_trip_through_config():
         rule_from_config({"type": "my.Rule", "custom": True})
 
 
+def test_a_quantile_distance_rule_says_it_has_no_fixed_max_std():
+    """DistanceRule(quantile=...) set max_std = 2.0, the paper's fixed threshold it does not
+    use: reading rule.max_std said 2 std where threshold(D) gives the chi-square one (3.08 std
+    in 4-D at 0.95). It is None now; every threshold, and the stored configs (as a session's
+    config.json holds them) with their round trips, are as before."""
+    from torchcbl.strategies import strategy_from_config
+
+    stored = {  # a session's config.json "strategy" entries, as written before and now
+        "quantile": {
+            "type": "ConfidentExecution",
+            "rule": {"type": "DistanceRule", "quantile": 0.95},
+            "relabel": False,
+        },
+        "max_std": {
+            "type": "ConfidentExecution",
+            "rule": {"type": "DistanceRule", "max_std": 2.0},
+            "relabel": False,
+        },
+    }
+    by_quantile = strategy_from_config(stored["quantile"])
+    assert by_quantile.rule.max_std is None and by_quantile.rule.quantile == 0.95
+    assert by_quantile.rule.threshold(4) == pytest.approx(3.0802, abs=1e-4)
+    assert by_quantile.to_config() == stored["quantile"]
+    by_std = strategy_from_config(stored["max_std"])
+    assert by_std.rule.max_std == 2.0 and by_std.rule.quantile is None
+    assert by_std.rule.threshold(4) == 2.0 and by_std.to_config() == stored["max_std"]
+    assert DistanceRule().max_std == 2.0 and DistanceRule(quantile=0.9).max_std is None
+    rule = DistanceRule(quantile=0.95)
+    rule.update(GaussianMixtureSet(2, 4), None, None)  # notes D = 4
+    near = cls([0, 1, 1], [2.0, 3.08, 3.09], [[0.9, 0.1], [0.1, 0.9], [0.1, 0.9]])
+    assert rule.is_confident(near).tolist() == [True, True, False]
+    assert repr(rule) == "DistanceRule(quantile=0.95)"
+
+
 def test_auto_threshold_rule_follows_the_documented_rule():
     rng = np.random.default_rng(0)
     # Action 0 far away and clean; actions 1 and 2 overlap, so the model makes mistakes there.

@@ -21,7 +21,13 @@ from torchcbl import benchmark as bm
 from torchcbl.cli import main
 from torchcbl.errors import IncompatibleRunDirError
 from torchcbl.session import load_config, load_records
-from torchcbl.strategies import STRATEGIES, Decision
+from torchcbl.strategies import (
+    STRATEGIES,
+    ConfidenceBasedAutonomy,
+    ConfidentExecution,
+    Decision,
+    correcting,
+)
 
 TESTS = Path(__file__).resolve().parent
 
@@ -301,3 +307,51 @@ def test_a_session_stored_before_the_relabel_check_still_resumes_with_a_warning(
     ct.run(max_steps=40)  # the session's total
     ct.close()
     assert len(load_records(tmp_path / "r")) == 40
+
+
+class DAgger(SafeAsk):
+    """A user's class that happens to share a shipped strategy's name, and describes itself
+    with settings the shipped DAgger also takes."""
+
+    def to_config(self):
+        return {"type": "DAgger", "beta0": 1.0, "decay": 0.5, "iteration_steps": 50, "seed": 0}
+
+
+def test_a_to_config_type_that_names_another_shipped_class_is_refused_at_start(
+    tmp_path, monkeypatch
+):
+    """strategy_from_config rebuilds by the stored "type" alone: a session of a user's class
+    whose to_config() said "type": "DAgger" resumed (without strategy=) as the shipped DAgger,
+    another strategy, with no word. The session now refuses to start, saying what to rename;
+    a subclass of the shipped class is still taken (it resumes as its parent, documented), and
+    so is the user's class once registered under that name."""
+    from torchcbl.strategies.dagger import DAgger as ShippedDAgger
+
+    env = rare_regions_world(episode_length=10)
+    with pytest.raises(TypeError, match=r'"type": \'DAgger\'.*test_user_strategy\.DAgger'):
+        ConfidentTeacher(
+            env, oracle(env), strategy=DAgger(), run_dir=tmp_path / "r", progress=False
+        )
+    assert not (tmp_path / "r").exists()
+
+    class Mine(ShippedDAgger):  # keeps the parent's to_config
+        pass
+
+    ConfidentTeacher(env, oracle(env), strategy=Mine(), run_dir=tmp_path / "s", progress=False)
+    # the same through the shipped builder functions (ConfidentExecution's, CBA's)
+    for shipped in (ConfidentExecution(), ConfidenceBasedAutonomy()):
+        config = shipped.to_config()
+        kind = config["type"]
+        user = type(kind, (SafeAsk,), {"to_config": lambda self, c=config: dict(c)})()
+        user.relabel = shipped.relabel
+        with pytest.raises(TypeError, match=f"\"type\": '{kind}'"):
+            ConfidentTeacher(
+                env, oracle(env), strategy=user, run_dir=tmp_path / "u", progress=False
+            )
+        sub = type("Sub", (type(shipped),), {})()
+        ConfidentTeacher(
+            env, correcting(oracle(env)), strategy=sub, run_dir=tmp_path / kind, progress=False
+        )
+    assert not (tmp_path / "u").exists()
+    monkeypatch.setitem(STRATEGIES, "DAgger", DAgger)
+    ConfidentTeacher(env, oracle(env), strategy=DAgger(), run_dir=tmp_path / "t", progress=False)

@@ -530,7 +530,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(f"FCD written to {fcd}")
     try:
         cfg = replay.write_sumocfg(record, fcd, cfg)
-    except ValueError as exc:  # the package under a path with a comma
+    except ValueError as exc:  # its checks not made above (the commas were): the FCD just
+        # written does not read back as this record's, or the .sumocfg path is a directory
         raise _UsageError(str(exc)) from None
     print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {_shell(cfg)})")
     replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)

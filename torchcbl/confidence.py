@@ -159,11 +159,17 @@ class DistanceRule:
             paper's value.
         quantile: in (0, 1); when given, the threshold is the chi-square quantile above and
             ``max_std`` must not be given.
+
+    Attributes:
+        max_std: the fixed threshold in standard deviations, or None when ``quantile`` is
+            given (the threshold then depends on D: :meth:`threshold`).
+        quantile: the share given, or None for a fixed threshold.
     """
 
     def __init__(self, max_std: float | None = None, *, quantile: float | None = None) -> None:
         given = max_std
-        self.max_std = _check_positive("DistanceRule.max_std", 2.0 if max_std is None else max_std)
+        fixed = _check_positive("DistanceRule.max_std", 2.0 if max_std is None else max_std)
+        self.max_std: float | None = fixed if quantile is None else None
         self.quantile: float | None = None
         self._thresholds: dict[int, float] = {}
         if quantile is not None:
@@ -186,7 +192,7 @@ class DistanceRule:
 
     def threshold(self, n_features: int | None = None) -> float:
         """The threshold in standard deviations (for D = ``n_features`` with a quantile)."""
-        if self.quantile is None:
+        if self.max_std is not None:  # no quantile
             return self.max_std
         d = self._dof if n_features is None else int(n_features)
         if d is None:
@@ -203,7 +209,7 @@ class DistanceRule:
         """Bool tensor [N]: True where the model's action may be executed without asking
         (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
         when known)."""
-        if self.quantile is None:
+        if self.max_std is not None:  # no quantile
             thr = self.max_std
         else:
             d = None if observations is None else int(np.shape(observations)[-1])

@@ -155,6 +155,9 @@ def _check_policy_fits(policy: Any, n_features: int, n_actions: int) -> None:
 
 
 def as_action(value: Any, n_actions: int) -> int | None:
+    """``value`` as an action index in [0, ``n_actions``), or None when it is not one: an int or
+    numpy integer, or a 0-d integer array or tensor (e.g. ``logits.argmax()``); a bool, a
+    float (even 1.0) or an index out of range is None, for the caller to refuse."""
     if isinstance(value, (np.ndarray, torch.Tensor)) and value.ndim == 0:
         value = value.item()  # e.g. logits.argmax(); a float or bool one is refused below
     if not _is_int(value):
@@ -216,6 +219,9 @@ def step_outcome(out: Any) -> tuple[float, bool, bool, dict]:
 
 
 def obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
+    """``obs`` as a new float64 array [D] (D = ``n_features``), never a view of the env's
+    buffer, or an :class:`~torchcbl.errors.EnvError` naming ``where`` (e.g. ``"env.step"``)
+    when it is not numeric, not of shape (D,) or not finite."""
     try:
         x = np.array(obs, dtype=np.float64)  # a copy: an env may reuse its buffer in place
     except (TypeError, ValueError, OverflowError) as exc:
@@ -234,7 +240,7 @@ def obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
 
 
 def evaluate_policy(
-    policy: Callable[[np.ndarray], int],
+    policy: Callable[[np.ndarray], int] | Callable[[np.ndarray, dict], int],
     env: gym.Env,
     *,
     n_steps: int | None = None,
@@ -245,8 +251,11 @@ def evaluate_policy(
     """Run a policy greedily (never asking) and return one record per step.
 
     ``policy`` is called as ``policy(observation)``; with ``uses_info=True`` it is called as a
-    teacher, ``policy(observation, info)`` with the info of the latest reset / step, so a
-    scripted expert can be evaluated exactly like a learned policy.
+    teacher, ``policy(observation, info)`` with the info (a dict) of the latest reset / step,
+    so a scripted expert can be evaluated exactly like a learned policy. ``observation`` is a
+    copy of the env's observation [D] as the env returned it; the answer is an action index
+    in [0, A) (an int, a numpy integer or a 0-d integer array / tensor), anything else a
+    ValueError.
 
     Episodes that end are reset until ``n_steps`` steps or ``n_episodes`` finished episodes,
     whichever comes first; no reset follows the last episode. ``seed`` seeds the resets:

@@ -96,6 +96,7 @@ from torchcbl.session import (
 from torchcbl.strategies import (
     ConfidentExecution,
     Decision,
+    _check_rebuilt_as_itself,
     strategy_from_config,
     strategy_to_config,
 )
@@ -614,12 +615,16 @@ class ConfidentTeacher:
         self._store: SessionStore | None = None
         self.run_dir = None if run_dir is None else Path(run_dir)
         if self.run_dir is not None:
+            stored_strategy_config = strategy_to_config(self.strategy)
+            # only here, as a session starts: a stored session of such a strategy (from before
+            # this check) still resumes with strategy= passed
+            _check_rebuilt_as_itself(self.strategy, stored_strategy_config)
             session_config = {
                 "format": FORMAT if prior is None else PRIOR_FORMAT,
                 "teaching": dataclasses.asdict(self.config),
                 "model": {"class": type(self.model).__name__, "args": _model_args(self.model)},
                 "rule": None if self.rule is None else rule_to_config(self.rule),
-                "strategy": strategy_to_config(self.strategy),
+                "strategy": stored_strategy_config,
                 "env": self._env_config,
                 "seed": self.seed,
                 "starts_fitted": starts_fitted,  # then checkpoint 0 alone holds it

@@ -49,7 +49,12 @@ Rules a strategy must keep:
   argument and ``"relabel"``; the run directory stores it and :func:`strategy_from_config`
   rebuilds the strategy on resume (register a new class in ``STRATEGIES`` under that type,
   ``STRATEGIES["MyStrategy"] = MyStrategy``, in the process that resumes; it is called with
-  the dict's other keys as keyword arguments). A strategy without
+  the dict's other keys as keyword arguments). The ``"type"`` must name the strategy's own
+  class: a session refuses to start with a class whose ``"type"`` names a ``STRATEGIES``
+  entry that rebuilds another class (a class of one's own called ``DAgger``). A subclass
+  of that class passes: one that keeps its parent's ``to_config`` is stored as, and resumes
+  as, its parent (pass it again to ``resume``, or give it a ``"type"`` of its own and
+  register it, if it behaves otherwise). A strategy without
   ``to_config`` (or whose ``to_config`` returns None, as a subclass of :class:`Strategy` that
   does not define one) is stored as custom and must be passed again to ``resume``.
 
@@ -89,6 +94,7 @@ Baselines (for :mod:`torchcbl.benchmark`), one file each: :mod:`~torchcbl.strate
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
@@ -281,6 +287,10 @@ def strategy_to_config(strategy: Any, *, check_relabel: bool = True) -> dict[str
     }
 
 
+def _build_ce(params: dict[str, Any]) -> Any:
+    return ConfidentExecution(rule_from_config(params["rule"]))
+
+
 def _build_cba(params: dict[str, Any]) -> Any:
     from torchcbl.strategies.cba import ConfidenceBasedAutonomy
 
@@ -293,13 +303,18 @@ def _lazy(module: str, name: str) -> Callable[[dict[str, Any]], Any]:
 
         return getattr(importlib.import_module(module), name)(**params)
 
+    build._builds = (module, name)  # type: ignore[attr-defined]
     return build
 
+
+# the class each shipped builder function builds, as (module, name): checked without importing
+_build_ce._builds = (__name__, "ConfidentExecution")  # type: ignore[attr-defined]
+_build_cba._builds = ("torchcbl.strategies.cba", "ConfidenceBasedAutonomy")  # type: ignore[attr-defined]
 
 #: name -> the strategy's class, called with the ``to_config`` dict's keys (without "type" and
 #: "relabel") as keyword arguments; or a function, called with that dict (the shipped ones).
 STRATEGIES: dict[str, Callable[..., Any]] = {
-    "ConfidentExecution": lambda p: ConfidentExecution(rule_from_config(p["rule"])),
+    "ConfidentExecution": _build_ce,
     "ConfidenceBasedAutonomy": _build_cba,
     # the baselines (issue 14), one file each
     "BehaviourCloning": _lazy("torchcbl.strategies.bc", "BehaviourCloning"),
@@ -307,6 +322,50 @@ STRATEGIES: dict[str, Callable[..., Any]] = {
     "HGDAgger": _lazy("torchcbl.strategies.hg_dagger", "HGDAgger"),
     "NoveltyGated": _lazy("torchcbl.strategies.novelty", "NoveltyGated"),
 }
+
+
+def _check_rebuilt_as_itself(strategy: Any, config: Mapping[str, Any]) -> None:
+    """Refuse, when a session starts, a strategy whose stored ``to_config`` ``"type"`` names a
+    :data:`STRATEGIES` entry that would rebuild it (on a resume without ``strategy=``) as a
+    class it is not an instance of: a user's class called ``DAgger`` describing itself as
+    ``"DAgger"`` would resume as the shipped DAgger, with no word.
+
+    An instance of the entry's class passes, and so does an instance of a subclass of it
+    (``class Mine(DAgger)`` keeping the parent's ``to_config``): it is stored as, and resumes
+    as, its parent; many such subclasses only add to the parent (a hook, a log), and refusing
+    them would break them. A function a user registered under a name is not checked (what it
+    builds is the user's choice), nor is a name not in STRATEGIES (its resume asks for
+    ``strategy=``), nor a custom config (never rebuilt).
+
+    Raises:
+        TypeError: the entry builds another class; the message says what to rename.
+    """
+    if config.get("custom"):
+        return
+    kind = config.get("type")
+    entry = STRATEGIES.get(str(kind))
+    builds = entry if isinstance(entry, type) else getattr(entry, "_builds", None)
+    if builds is None:
+        return
+    if isinstance(builds, tuple):  # a shipped builder: a module not imported yet holds no
+        module, name = builds  # class the strategy could be an instance of
+        builds = getattr(sys.modules.get(module), name, None)
+        where = f"{module}.{name}"
+    else:
+        where = f"{builds.__module__}.{builds.__qualname__}"
+    if isinstance(builds, type) and isinstance(strategy, builds):
+        return
+    cls = type(strategy)
+    own = f"{cls.__module__}.{cls.__qualname__}"
+    raise TypeError(
+        f'{cls.__name__}.to_config() gives "type": {kind!r}, under which '
+        f"torchcbl.strategies.STRATEGIES rebuilds {where}, and {own} is neither that class "
+        "nor a subclass of it: a resume without strategy= would go on with another strategy. "
+        f'Return a "type" of its own in to_config(), e.g. "type": {own!r}, and register it '
+        f"where the session resumes (torchcbl.strategies.STRATEGIES[{own!r}] = "
+        f"{cls.__qualname__}); or register {cls.__qualname__} under {kind!r} in STRATEGIES "
+        "before the session starts."
+    )
 
 
 def strategy_from_config(config: dict[str, Any]) -> Any:
