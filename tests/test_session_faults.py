@@ -1794,3 +1794,89 @@ def test_a_later_checkpoint_this_model_cannot_load_replays_from_the_starting_mod
     back, _ = resume(run)
     assert same_state(back.model, ct.model)
     back.close()
+
+
+# -- power cuts: every file put in place is on the disk ---------------------------------------
+
+
+def test_every_file_put_in_place_is_flushed_before_its_rename_and_its_directory_after(
+    tmp_path, monkeypatch
+):
+    """config.json, prior.npz, the checkpoints, a repaired journal, the benchmark's cells and
+    results.json, and the evaluation's files were written to a temporary name and renamed over
+    the target, but (in the session) never fsynced: after a power cut the rename can be on the
+    disk and the content not, so config.json or a checkpoint read back empty; and no directory
+    was fsynced after its rename (the benchmark and evaluation fsynced the file only), so the
+    rename itself could be lost. A power cut cannot be staged here; the test records each
+    os.replace torchcbl makes and checks that the renamed file's own inode was fsynced before
+    it and its directory after it, which is what makes the file survive one."""
+    from torchcbl.cli import main
+    from torchcbl.evaluation import write_atomically
+
+    events: list[tuple[str, tuple[int, int], Path | None]] = []
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd):
+        st = os.fstat(fd)
+        events.append(("fsync", (st.st_dev, st.st_ino), None))
+        return real_fsync(fd)
+
+    def replace(src, dst, *args, **kwargs):
+        st = os.stat(src)
+        events.append(("replace", (st.st_dev, st.st_ino), Path(dst)))
+        return real_replace(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "replace", replace)
+
+    run = tmp_path / "run"
+    env = Witness(rare_regions_world())
+    prior = env.unwrapped.sample(30, np.random.default_rng(0))
+    ct = ConfidentTeacher(
+        env,
+        env.teacher,
+        config=TeachingConfig(max_new=2, accuracy_window=10),
+        run_dir=run,
+        progress=False,
+        prior_demonstrations=prior,
+    )
+    env.ct = ct
+    ct.run(max_steps=20)
+    ct._store.commit_every = 10**6  # the next steps only in the journal, then a line lost
+    for _ in range(6):
+        ct.step()
+    crash(ct)
+    journal = run / "steps.journal"
+    lines = journal.read_bytes().split(b"\n")
+    journal.write_bytes(b"\n".join(lines[:1] + lines[2:]))
+    repair_journal(run)
+    write_atomically(tmp_path / "summary.md", "done\n")
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc"]
+    argv += ["--seeds", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    argv += ["--workers", "1", "--out", str(tmp_path / "bench")]
+    assert main(argv) == 0
+
+    renamed = {}
+    for i, (kind, inode, dst) in enumerate(events):
+        if kind != "replace":
+            continue
+        st = os.stat(dst.parent)
+        directory = (st.st_dev, st.st_ino)
+        renamed[dst.relative_to(tmp_path).as_posix()] = (
+            ("fsync", inode, None) in events[:i],
+            ("fsync", directory, None) in events[i + 1 :],
+        )
+    for name in (
+        "run/prior.npz",
+        "run/config.json",
+        "run/checkpoints/model-00000000.pt",
+        "run/checkpoints/model-00000002.pt",
+        "run/steps.journal",
+        "summary.md",
+        "bench/results.json",
+    ):
+        assert renamed.pop(name) == (True, True), name
+    cells = [n for n in renamed if n.startswith("bench/cells/")]
+    assert cells and all(renamed.pop(n) == (True, True) for n in cells), cells
+    assert all(v == (True, True) for v in renamed.values()), renamed

@@ -66,8 +66,9 @@ Why a journal: a SQLite commit rewrites at least one whole page into the WAL (te
 microseconds, plus periodic checkpoints), while a journal line is one small ``write()``; this
 keeps the loop's own cost per step within the 200 us budget with every step durable.
 
-Checkpoints are written to a temporary name and renamed, so a checkpoint file is complete or
-absent. A checkpoint can lag behind the log (killed between the commit and the refit); then
+Checkpoints, like ``config.json`` and ``prior.npz``, are written to a temporary name, fsynced,
+renamed, and their directory fsynced, so a checkpoint file is complete or absent, after a power
+cut too. A checkpoint can lag behind the log (killed between the commit and the refit); then
 :func:`load_model` refits deterministically on the logged demonstrations instead.
 
 What else can go wrong, and what happens (every case is tested in tests/test_session_faults.py):
@@ -160,6 +161,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
+from torchcbl._durable import write_durably
 from torchcbl.errors import (
     CorruptSessionError,
     IncompatibleRunDirError,
@@ -435,12 +437,12 @@ def _upgrade_format1(db: sqlite3.Connection) -> bool:
 
 
 def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
-    """Write ``data`` to ``path`` through ``<name>.tmp`` renamed over it; a write that fails
-    (full disk) leaves neither ``path`` changed nor the ``.tmp`` behind."""
+    """Write ``data`` to ``path`` through ``<name>.tmp`` renamed over it, durably (fsynced
+    before the rename, the directory after: :func:`torchcbl._durable.write_durably`); a write
+    that fails (full disk) leaves neither ``path`` changed nor the ``.tmp`` behind."""
     tmp = path.with_name(path.name + ".tmp")
     try:
-        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
-        os.replace(tmp, path)
+        write_durably(path, (json.dumps(data, indent=2, sort_keys=True) + "\n").encode(), tmp)
     except BaseException:
         try:
             tmp.unlink(missing_ok=True)
@@ -450,12 +452,12 @@ def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
 
 
 def _write_atomic(path: Path, data: bytes, what: str, after: str) -> None:
-    """Write ``data`` to ``path`` through ``.<name>.tmp`` renamed over it: the file is whole or
-    absent; a failure is a :class:`SessionWriteError` ending with ``after``."""
+    """Write ``data`` to ``path`` through ``.<name>.tmp`` renamed over it, durably: the file is
+    whole or absent, power cut included; a failure is a :class:`SessionWriteError` ending with
+    ``after``."""
     tmp = path.with_name(f".{path.name}.tmp")
     try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
+        write_durably(path, data, tmp)
     except OSError as exc:
         try:
             tmp.unlink(missing_ok=True)
@@ -804,8 +806,7 @@ def _write_checkpoint(
         # ("[enforce fail at inline_container.cc:...] unexpected pos ...")
         buffer = io.BytesIO()
         torch.save(payload, buffer)
-        tmp.write_bytes(buffer.getvalue())
-        os.replace(tmp, path)
+        write_durably(path, buffer.getvalue(), tmp)
     except (OSError, RuntimeError) as exc:
         tmp.unlink(missing_ok=True)
         raise _write_error(
@@ -2209,8 +2210,7 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
         lines = data.split(b"\n")
         tmp = journal.with_name(JOURNAL_NAME + ".tmp")
         try:
-            tmp.write_bytes(b"".join(lines[n - 1] + b"\n" for n in kept))
-            os.replace(tmp, journal)
+            write_durably(journal, b"".join(lines[n - 1] + b"\n" for n in kept), tmp)
         except OSError as exc:
             tmp.unlink(missing_ok=True)
             raise _write_error(exc, journal, "rewriting the journal", _FREE_SPACE) from exc
