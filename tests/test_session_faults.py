@@ -790,6 +790,65 @@ def test_a_session_copied_without_its_wal_file_is_said_to_lack_it(tmp_path):
     ct.close()
 
 
+@pytest.mark.parametrize("where", ["a resume", "a checkpoint", "a resume, then the journal"])
+def test_a_wal_lost_after_its_tables_reached_the_log_is_said_to_be_missing(tmp_path, where):
+    """Once steps.sqlite holds the tables (a writer closed cleanly, or SQLite checkpointed the
+    WAL into it, which it does by itself every ~4 MB), a session read without its -wal file
+    (deleted by hand, or left out of a copy) read as the shorter session the log held at that
+    point: load_records, load_demonstrations and load_model gave fewer steps and labels with no
+    word, and resume went on after them, numbering its new steps over the lost ones. The
+    writer now keeps in writer.lock how many steps and corrections it committed, and a log
+    holding fewer is an error naming the missing -wal, changing nothing; with the -wal put
+    back every step reads again, and removing writer.lock accepts the loss."""
+    run, copy = tmp_path / "run", tmp_path / "copy"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=20)
+    if where.startswith("a resume"):
+        ct.close()
+        ct, env = resume(run, commit_every=4)
+    else:  # as SQLite's automatic checkpoint does, with the writer running
+        other = sqlite3.connect(run / "steps.sqlite")
+        assert other.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchone()[0] == 0
+        other.close()
+    ct.run(max_steps=40)  # committed into the -wal (run() commits at its end)
+    assert (run / "steps.sqlite-wal").stat().st_size > 0
+    assert (run / "steps.journal").stat().st_size == 0
+    if where.endswith("journal"):  # and 5 more steps only in the journal (killed then)
+        ct._store.commit_every = 10**6
+        for _ in range(5):
+            ct.step()
+    want = load_records(run)
+    assert len(want) == 45 if where.endswith("journal") else 40
+    shutil.copytree(
+        run, copy, ignore=shutil.ignore_patterns("steps.sqlite-wal", "steps.sqlite-shm")
+    )
+    before = files_of(copy)
+    for read in (load_records, load_demonstrations, load_model, resume, repair_journal):
+        with pytest.raises(CorruptSessionError) as err:
+            read(copy)
+        msg = str(err.value)
+        assert str(copy / "steps.sqlite-wal") in msg and "is missing" in msg, msg
+        assert "committed 40 steps" in msg and "holds 20 of those" in msg, msg
+        assert "remove " + str(copy / "writer.lock") in msg and "changed nothing" in msg, msg
+    assert files_of(copy) == before  # nothing changed
+    shutil.copy2(run / "steps.sqlite-wal", copy / "steps.sqlite-wal")  # put back
+    assert load_records(copy) == want
+    lost = tmp_path / "lost"
+    shutil.copytree(
+        run, lost, ignore=shutil.ignore_patterns("steps.sqlite-wal", "steps.sqlite-shm")
+    )
+    (lost / "writer.lock").unlink()  # the loss accepted: the 20 steps left read and resume
+    if where.endswith("journal"):  # the journal's steps follow a gap: as a line lost from it
+        with pytest.warns(UserWarning, match=r"lacks 20 steps \(20, 21,"):
+            load_records(lost)
+        repair_journal(lost)
+    assert load_records(lost) == want[:20]
+    back, _ = resume(lost)
+    assert back.records == want[:20]
+    back.close()
+    ct.close()
+
+
 @pytest.mark.parametrize("key", ["teaching", "model", "env", "seed"])
 def test_config_missing_a_key(tmp_path, key):
     run = tmp_path / "run"
