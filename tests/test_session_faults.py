@@ -849,6 +849,35 @@ def test_a_wal_lost_after_its_tables_reached_the_log_is_said_to_be_missing(tmp_p
     ct.close()
 
 
+def test_a_journal_deleted_while_it_held_steps_is_said_to_be_missing(tmp_path):
+    """A writer killed with steps only in steps.journal (not yet committed to steps.sqlite),
+    whose journal was then deleted by hand or left out of a copy, read as the shorter session
+    in steps.sqlite: 20 of 25 steps, with no word, and resume went on after them. writer.lock
+    now also says whether the journal holds lines not yet committed (set before the first line
+    after a commit, cleared by the commit), so a missing journal that held some is an error
+    naming it and changing nothing; one that held none (a cleanly closed session's) is not."""
+    run, copy = tmp_path / "run", tmp_path / "copy"
+    ct, env = _journalled(run, steps=5, commit_every=4)  # killed: 5 steps only in the journal
+    want = load_records(run)
+    assert len(want) == 25
+    shutil.copytree(run, copy, ignore=shutil.ignore_patterns("steps.journal"))
+    before = files_of(copy)
+    for read in (load_records, load_labels, load_model, resume, repair_journal):
+        with pytest.raises(CorruptSessionError) as err:
+            read(copy)
+        msg = str(err.value)
+        assert str(copy / "steps.journal") + " is missing" in msg, msg
+        assert "changed nothing" in msg and "writer.lock" in msg, msg
+    assert files_of(copy) == before
+    shutil.copy2(run / "steps.journal", copy / "steps.journal")  # put back
+    assert load_records(copy) == want
+    back, _ = resume(copy)
+    assert back.records == want
+    back.close()
+    (copy / "steps.journal").unlink()  # closed cleanly: the journal held nothing
+    assert load_records(copy) == want
+
+
 @pytest.mark.parametrize("key", ["teaching", "model", "env", "seed"])
 def test_config_missing_a_key(tmp_path, key):
     run = tmp_path / "run"

@@ -29,9 +29,10 @@ Run directory layout (one directory per teaching session)::
                                  each with its CRC-32 (empty after a clean close; never delete
                                  it by hand)
         writer.lock              held (fcntl.flock) by the one writer; says which process,
-                                 and how many steps and corrections its writers committed to
-                                 steps.sqlite (rewritten in place after each commit; kept
-                                 from one writer to the next)
+                                 how many steps and corrections its writers committed to
+                                 steps.sqlite, and whether steps.journal holds lines not yet
+                                 committed (rewritten in place; kept from one writer to the
+                                 next)
         writers.jsonl            one line per writer (start or resume): the first step it
                                  wrote, torch's thread count, torch / numpy versions
         checkpoints/
@@ -122,8 +123,11 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   ``writer.lock``'s committed counts: a log holding fewer steps or corrections than they say
   is a :class:`CorruptSessionError` for every reader, resume and :func:`repair_journal`,
   naming the missing ``-wal`` (or, with one there, an older log or a power cut), changing
-  nothing; removing ``writer.lock`` accepts the loss. A copy without ``writer.lock`` (or a
-  session whose last writer was a torchcbl without these counts) is not checked.
+  nothing; removing ``writer.lock`` accepts the loss. Likewise a missing ``steps.journal``
+  that ``writer.lock`` says held lines not yet committed (the writer was killed with steps
+  only there) is a :class:`CorruptSessionError` naming it; one that held none (a cleanly
+  closed session's) is not. A copy without ``writer.lock`` (or a session whose last writer
+  was a torchcbl without these notes) is not checked.
 - Two writers. The writer holds ``writer.lock`` with ``fcntl.flock`` (released by the kernel
   when the process dies, SIGKILL included); a second writer gets :class:`SessionLockedError`.
 
@@ -798,26 +802,31 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
     return f
 
 
-#: writer.lock's second line: what the writer has committed to steps.sqlite so far (fixed
-#: width, rewritten in place after each commit), so that a log found holding less (its -wal
-#: lost) is said to be that instead of read as a shorter session.
-_COMMITTED_LINE = "committed to steps.sqlite: %12d steps, %12d corrections\n"
-_COMMITTED_RE = re.compile(rb"committed to steps\.sqlite: +(\d+) steps, +(\d+) corrections\n")
+#: writer.lock's second line: what the writer has committed to steps.sqlite so far, and
+#: whether steps.journal holds lines not yet committed ("lines", set before the first line
+#: after a commit; "empty", set by the commit); fixed width, rewritten in place. So a log
+#: found holding less (its -wal lost) or a journal missing that held lines is said to be that
+#: instead of read as a shorter session.
+_COMMITTED_LINE = "committed to steps.sqlite: %12d steps, %12d corrections; steps.journal: %s\n"
+_COMMITTED_RE = re.compile(
+    rb"committed to steps\.sqlite: +(\d+) steps, +(\d+) corrections; "
+    rb"steps\.journal: (empty|lines)\n"
+)
 
 
-def _read_committed(run_dir: Path) -> tuple[int, int] | None:
-    """(steps, corrections) the session's writers committed, as writer.lock says; None when
-    it says nothing (no lock file, one this user may not read, or one written by a torchcbl
-    that did not note it)."""
+def _read_committed(run_dir: Path) -> tuple[int, int, bool] | None:
+    """(steps, corrections, whether the journal holds lines not yet committed) the session's
+    writers committed, as writer.lock says; None when it says nothing (no lock file, one this
+    user may not read, or one written by a torchcbl that did not note it)."""
     try:
         m = _COMMITTED_RE.search((run_dir / LOCK_NAME).read_bytes())
     except OSError:
         return None
-    return None if m is None else (int(m.group(1)), int(m.group(2)))
+    return None if m is None else (int(m.group(1)), int(m.group(2)), m.group(3) == b"lines")
 
 
 def _check_committed(
-    run_dir: Path, committed: tuple[int, int] | None, steps: list[int], n_corrections: int
+    run_dir: Path, committed: tuple[int, int, bool] | None, steps: list[int], n_corrections: int
 ) -> None:
     """Raise if the log (steps.sqlite, its -wal and the journal: its step numbers ``steps``,
     in order, and ``n_corrections``) lacks the last steps, or corrections, its writers
@@ -825,12 +834,22 @@ def _check_committed(
     missing before others the log holds are a gap, said by the readers and resume.)"""
     if committed is None:
         return
+    journal, lock = run_dir / JOURNAL_NAME, run_dir / LOCK_NAME
+    if committed[2] and not journal.exists():
+        raise CorruptSessionError(
+            f"{journal} is missing, but {lock} says it held steps its writer had not yet "
+            f"committed to {LOG_NAME} (the writer was killed, or the directory copied while "
+            f"it ran): they are only in that file. Put it back (from the directory it was "
+            "copied from, or a backup), then read or resume the session again; never delete "
+            f"it by hand. torchcbl changed nothing. If it is lost for good, remove {lock} (with "
+            "no writer running) to read and resume the session with what is left."
+        )
     n_steps = bisect.bisect_left(steps, committed[0])  # those below the committed count
     if n_steps and steps[n_steps - 1] != n_steps - 1:
         return  # a gap among them: rows deleted by hand, said as such (_gap_text)
     if n_steps >= committed[0] and n_corrections >= committed[1]:
         return
-    log, lock = run_dir / LOG_NAME, run_dir / LOCK_NAME
+    log = run_dir / LOG_NAME
     wal = log.with_name(LOG_NAME + "-wal")
     if not wal.exists():
         why = (
@@ -920,6 +939,7 @@ class SessionStore:
         self._n_committed = 0  # steps in steps.sqlite, up to the last one
         self._corrected: set[int] = set()  # the steps that have a correction there
         self._note_at = -1  # where writer.lock's committed line starts (-1: not written)
+        self._journal_noted = False  # writer.lock says the journal holds uncommitted lines
         try:
             self._open()
         except BaseException:
@@ -1194,7 +1214,8 @@ class SessionStore:
                 elif sql is not _FINISH:
                     self._n_committed = max(self._n_committed, values[0] + 1)
             pending.clear()
-            if (n, c) != (self._n_committed, len(self._corrected)):
+            if (n, c) != (self._n_committed, len(self._corrected)) or self._journal_noted:
+                self._journal_noted = False  # its lines are all in steps.sqlite now
                 self._note_committed()
             try:
                 os.ftruncate(self._journal, 0)
@@ -1210,14 +1231,18 @@ class SessionStore:
         (or none), never a false alarm."""
         if self._lock is None:
             return
-        line = (_COMMITTED_LINE % (self._n_committed, len(self._corrected))).encode()
+        line = _COMMITTED_LINE % (
+            self._n_committed,
+            len(self._corrected),
+            "lines" if self._journal_noted else "empty",
+        )
         fd = self._lock.fileno()
         try:
             if self._note_at < 0:  # the first note of this writer: after the holder line
                 head = os.pread(fd, 4096, 0).split(b"\n", 1)[0]
                 self._note_at = len(head) + 1 if head else 0
                 os.ftruncate(fd, self._note_at)
-            os.pwrite(fd, line, self._note_at)
+            os.pwrite(fd, line.encode(), self._note_at)
         except OSError:
             pass
 
@@ -1236,6 +1261,9 @@ class SessionStore:
             except SessionWriteError:
                 pass  # the rows are durable in the journal; the next commit retries them
         line = _journal_line(kind, values)
+        if not self._journal_noted:  # before the line: a kill after it finds the note
+            self._journal_noted = True
+            self._note_committed()
         try:
             written = _write_fd(self._journal, line)
             if written != len(line):
