@@ -790,6 +790,94 @@ def test_a_session_copied_without_its_wal_file_is_said_to_lack_it(tmp_path):
     ct.close()
 
 
+@pytest.mark.parametrize("where", ["a resume", "a checkpoint", "a resume, then the journal"])
+def test_a_wal_lost_after_its_tables_reached_the_log_is_said_to_be_missing(tmp_path, where):
+    """Once steps.sqlite holds the tables (a writer closed cleanly, or SQLite checkpointed the
+    WAL into it, which it does by itself every ~4 MB), a session read without its -wal file
+    (deleted by hand, or left out of a copy) read as the shorter session the log held at that
+    point: load_records, load_demonstrations and load_model gave fewer steps and labels with no
+    word, and resume went on after them, numbering its new steps over the lost ones. The
+    writer now keeps in writer.lock how many steps and corrections it committed, and a log
+    holding fewer is an error naming the missing -wal, changing nothing; with the -wal put
+    back every step reads again, and removing writer.lock accepts the loss."""
+    run, copy = tmp_path / "run", tmp_path / "copy"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=20)
+    if where.startswith("a resume"):
+        ct.close()
+        ct, env = resume(run, commit_every=4)
+    else:  # as SQLite's automatic checkpoint does, with the writer running
+        other = sqlite3.connect(run / "steps.sqlite")
+        assert other.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchone()[0] == 0
+        other.close()
+    ct.run(max_steps=40)  # committed into the -wal (run() commits at its end)
+    assert (run / "steps.sqlite-wal").stat().st_size > 0
+    assert (run / "steps.journal").stat().st_size == 0
+    if where.endswith("journal"):  # and 5 more steps only in the journal (killed then)
+        ct._store.commit_every = 10**6
+        for _ in range(5):
+            ct.step()
+    want = load_records(run)
+    assert len(want) == 45 if where.endswith("journal") else 40
+    shutil.copytree(
+        run, copy, ignore=shutil.ignore_patterns("steps.sqlite-wal", "steps.sqlite-shm")
+    )
+    before = files_of(copy)
+    for read in (load_records, load_demonstrations, load_model, resume, repair_journal):
+        with pytest.raises(CorruptSessionError) as err:
+            read(copy)
+        msg = str(err.value)
+        assert str(copy / "steps.sqlite-wal") in msg and "is missing" in msg, msg
+        assert "committed 40 steps" in msg and "holds 20 of those" in msg, msg
+        assert "remove " + str(copy / "writer.lock") in msg and "changed nothing" in msg, msg
+    assert files_of(copy) == before  # nothing changed
+    shutil.copy2(run / "steps.sqlite-wal", copy / "steps.sqlite-wal")  # put back
+    assert load_records(copy) == want
+    lost = tmp_path / "lost"
+    shutil.copytree(
+        run, lost, ignore=shutil.ignore_patterns("steps.sqlite-wal", "steps.sqlite-shm")
+    )
+    (lost / "writer.lock").unlink()  # the loss accepted: the 20 steps left read and resume
+    if where.endswith("journal"):  # the journal's steps follow a gap: as a line lost from it
+        with pytest.warns(UserWarning, match=r"lacks 20 steps \(20, 21,"):
+            load_records(lost)
+        repair_journal(lost)
+    assert load_records(lost) == want[:20]
+    back, _ = resume(lost)
+    assert back.records == want[:20]
+    back.close()
+    ct.close()
+
+
+def test_a_journal_deleted_while_it_held_steps_is_said_to_be_missing(tmp_path):
+    """A writer killed with steps only in steps.journal (not yet committed to steps.sqlite),
+    whose journal was then deleted by hand or left out of a copy, read as the shorter session
+    in steps.sqlite: 20 of 25 steps, with no word, and resume went on after them. writer.lock
+    now also says whether the journal holds lines not yet committed (set before the first line
+    after a commit, cleared by the commit), so a missing journal that held some is an error
+    naming it and changing nothing; one that held none (a cleanly closed session's) is not."""
+    run, copy = tmp_path / "run", tmp_path / "copy"
+    ct, env = _journalled(run, steps=5, commit_every=4)  # killed: 5 steps only in the journal
+    want = load_records(run)
+    assert len(want) == 25
+    shutil.copytree(run, copy, ignore=shutil.ignore_patterns("steps.journal"))
+    before = files_of(copy)
+    for read in (load_records, load_labels, load_model, resume, repair_journal):
+        with pytest.raises(CorruptSessionError) as err:
+            read(copy)
+        msg = str(err.value)
+        assert str(copy / "steps.journal") + " is missing" in msg, msg
+        assert "changed nothing" in msg and "writer.lock" in msg, msg
+    assert files_of(copy) == before
+    shutil.copy2(run / "steps.journal", copy / "steps.journal")  # put back
+    assert load_records(copy) == want
+    back, _ = resume(copy)
+    assert back.records == want
+    back.close()
+    (copy / "steps.journal").unlink()  # closed cleanly: the journal held nothing
+    assert load_records(copy) == want
+
+
 @pytest.mark.parametrize("key", ["teaching", "model", "env", "seed"])
 def test_config_missing_a_key(tmp_path, key):
     run = tmp_path / "run"
@@ -1794,3 +1882,89 @@ def test_a_later_checkpoint_this_model_cannot_load_replays_from_the_starting_mod
     back, _ = resume(run)
     assert same_state(back.model, ct.model)
     back.close()
+
+
+# -- power cuts: every file put in place is on the disk ---------------------------------------
+
+
+def test_every_file_put_in_place_is_flushed_before_its_rename_and_its_directory_after(
+    tmp_path, monkeypatch
+):
+    """config.json, prior.npz, the checkpoints, a repaired journal, the benchmark's cells and
+    results.json, and the evaluation's files were written to a temporary name and renamed over
+    the target, but (in the session) never fsynced: after a power cut the rename can be on the
+    disk and the content not, so config.json or a checkpoint read back empty; and no directory
+    was fsynced after its rename (the benchmark and evaluation fsynced the file only), so the
+    rename itself could be lost. A power cut cannot be staged here; the test records each
+    os.replace torchcbl makes and checks that the renamed file's own inode was fsynced before
+    it and its directory after it, which is what makes the file survive one."""
+    from torchcbl.cli import main
+    from torchcbl.evaluation import write_atomically
+
+    events: list[tuple[str, tuple[int, int], Path | None]] = []
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd):
+        st = os.fstat(fd)
+        events.append(("fsync", (st.st_dev, st.st_ino), None))
+        return real_fsync(fd)
+
+    def replace(src, dst, *args, **kwargs):
+        st = os.stat(src)
+        events.append(("replace", (st.st_dev, st.st_ino), Path(dst)))
+        return real_replace(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "replace", replace)
+
+    run = tmp_path / "run"
+    env = Witness(rare_regions_world())
+    prior = env.unwrapped.sample(30, np.random.default_rng(0))
+    ct = ConfidentTeacher(
+        env,
+        env.teacher,
+        config=TeachingConfig(max_new=2, accuracy_window=10),
+        run_dir=run,
+        progress=False,
+        prior_demonstrations=prior,
+    )
+    env.ct = ct
+    ct.run(max_steps=20)
+    ct._store.commit_every = 10**6  # the next steps only in the journal, then a line lost
+    for _ in range(6):
+        ct.step()
+    crash(ct)
+    journal = run / "steps.journal"
+    lines = journal.read_bytes().split(b"\n")
+    journal.write_bytes(b"\n".join(lines[:1] + lines[2:]))
+    repair_journal(run)
+    write_atomically(tmp_path / "summary.md", "done\n")
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc"]
+    argv += ["--seeds", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    argv += ["--workers", "1", "--out", str(tmp_path / "bench")]
+    assert main(argv) == 0
+
+    renamed = {}
+    for i, (kind, inode, dst) in enumerate(events):
+        if kind != "replace":
+            continue
+        st = os.stat(dst.parent)
+        directory = (st.st_dev, st.st_ino)
+        renamed[dst.relative_to(tmp_path).as_posix()] = (
+            ("fsync", inode, None) in events[:i],
+            ("fsync", directory, None) in events[i + 1 :],
+        )
+    for name in (
+        "run/prior.npz",
+        "run/config.json",
+        "run/checkpoints/model-00000000.pt",
+        "run/checkpoints/model-00000002.pt",
+        "run/steps.journal",
+        "summary.md",
+        "bench/results.json",
+    ):
+        assert renamed.pop(name) == (True, True), name
+    cells = [n for n in renamed if n.startswith("bench/cells/")]
+    assert cells and all(renamed.pop(n) == (True, True) for n in cells), cells
+    assert all(v == (True, True) for v in renamed.values()), renamed

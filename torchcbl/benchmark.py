@@ -57,6 +57,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from torchcbl._durable import write_durably
 from torchcbl.evaluation import figure_style, mean_sd, run_versions, worker_pool
 from torchcbl.records import _is_int
 
@@ -736,12 +737,7 @@ def _cell_path(out: Path, key: str) -> Path:
 
 
 def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    write_durably(path, text.encode("utf-8"), path.with_name(f".{path.name}.{os.getpid()}.tmp"))
 
 
 def _load_cell(path: Path) -> dict[str, Any] | None:

@@ -22,6 +22,8 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from torchcbl._durable import write_durably
+
 __all__ = [
     "check_workers_start",
     "figure_style",
@@ -451,15 +453,11 @@ def write_seed_result(
 
 
 def write_atomically(path: Any, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file renamed over it: a reader (a
-    resume) finds the whole file or none."""
+    """Write ``text`` (UTF-8) to ``path`` through a temporary file renamed over it, fsynced
+    before the rename and its directory after: a reader (a resume) finds the whole file or
+    none, after a power cut too."""
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    write_durably(path, text.encode("utf-8"), path.with_name(path.name + ".tmp"))
 
 
 def _short(value: Any, width: int = 60) -> str:

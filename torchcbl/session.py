@@ -28,7 +28,11 @@ Run directory layout (one directory per teaching session)::
         steps.journal            the steps not yet committed to steps.sqlite, one JSON line
                                  each with its CRC-32 (empty after a clean close; never delete
                                  it by hand)
-        writer.lock              held (fcntl.flock) by the one writer; says which process
+        writer.lock              held (fcntl.flock) by the one writer; says which process,
+                                 how many steps and corrections its writers committed to
+                                 steps.sqlite, and whether steps.journal holds lines not yet
+                                 committed (rewritten in place; kept from one writer to the
+                                 next)
         writers.jsonl            one line per writer (start or resume): the first step it
                                  wrote, torch's thread count, torch / numpy versions
         checkpoints/
@@ -66,8 +70,9 @@ Why a journal: a SQLite commit rewrites at least one whole page into the WAL (te
 microseconds, plus periodic checkpoints), while a journal line is one small ``write()``; this
 keeps the loop's own cost per step within the 200 us budget with every step durable.
 
-Checkpoints are written to a temporary name and renamed, so a checkpoint file is complete or
-absent. A checkpoint can lag behind the log (killed between the commit and the refit); then
+Checkpoints, like ``config.json`` and ``prior.npz``, are written to a temporary name, fsynced,
+renamed, and their directory fsynced, so a checkpoint file is complete or absent, after a power
+cut too. A checkpoint can lag behind the log (killed between the commit and the refit); then
 :func:`load_model` refits deterministically on the logged demonstrations instead.
 
 What else can go wrong, and what happens (every case is tested in tests/test_session_faults.py):
@@ -110,6 +115,19 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   Steps are numbered 0, 1, 2, ... without a gap; a log that lacks some (rows deleted by hand, a
   journal line removed) is read with a warning naming them, and resume refuses it (it would
   log new steps under numbers the log holds).
+- A lost ``-wal``. A session not closed cleanly keeps its latest commits in
+  ``steps.sqlite-wal``, all of them until SQLite first checkpoints it into the log. Without
+  that file (deleted by hand, left out of a copy), a log without its tables is a
+  :class:`CorruptSessionError` naming the missing file; a log with them, which would read as
+  a shorter session (the steps since the last checkpoint or clean close gone), is told by
+  ``writer.lock``'s committed counts: a log holding fewer steps or corrections than they say
+  is a :class:`CorruptSessionError` for every reader, resume and :func:`repair_journal`,
+  naming the missing ``-wal`` (or, with one there, an older log or a power cut), changing
+  nothing; removing ``writer.lock`` accepts the loss. Likewise a missing ``steps.journal``
+  that ``writer.lock`` says held lines not yet committed (the writer was killed with steps
+  only there) is a :class:`CorruptSessionError` naming it; one that held none (a cleanly
+  closed session's) is not. A copy without ``writer.lock`` (or a session whose last writer
+  was a torchcbl without these notes) is not checked.
 - Two writers. The writer holds ``writer.lock`` with ``fcntl.flock`` (released by the kernel
   when the process dies, SIGKILL included); a second writer gets :class:`SessionLockedError`.
 
@@ -137,6 +155,7 @@ CUDA run in a fixed order, checked on an H200 by tests/test_teaching_cuda.py);
 
 from __future__ import annotations
 
+import bisect
 import datetime
 import errno
 import fcntl
@@ -160,6 +179,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
+from torchcbl._durable import write_durably
 from torchcbl.errors import (
     CorruptSessionError,
     IncompatibleRunDirError,
@@ -435,12 +455,12 @@ def _upgrade_format1(db: sqlite3.Connection) -> bool:
 
 
 def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
-    """Write ``data`` to ``path`` through ``<name>.tmp`` renamed over it; a write that fails
-    (full disk) leaves neither ``path`` changed nor the ``.tmp`` behind."""
+    """Write ``data`` to ``path`` through ``<name>.tmp`` renamed over it, durably (fsynced
+    before the rename, the directory after: :func:`torchcbl._durable.write_durably`); a write
+    that fails (full disk) leaves neither ``path`` changed nor the ``.tmp`` behind."""
     tmp = path.with_name(path.name + ".tmp")
     try:
-        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
-        os.replace(tmp, path)
+        write_durably(path, (json.dumps(data, indent=2, sort_keys=True) + "\n").encode(), tmp)
     except BaseException:
         try:
             tmp.unlink(missing_ok=True)
@@ -450,12 +470,12 @@ def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
 
 
 def _write_atomic(path: Path, data: bytes, what: str, after: str) -> None:
-    """Write ``data`` to ``path`` through ``.<name>.tmp`` renamed over it: the file is whole or
-    absent; a failure is a :class:`SessionWriteError` ending with ``after``."""
+    """Write ``data`` to ``path`` through ``.<name>.tmp`` renamed over it, durably: the file is
+    whole or absent, power cut included; a failure is a :class:`SessionWriteError` ending with
+    ``after``."""
     tmp = path.with_name(f".{path.name}.tmp")
     try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
+        write_durably(path, data, tmp)
     except OSError as exc:
         try:
             tmp.unlink(missing_ok=True)
@@ -752,12 +772,16 @@ def _close_wal(log: Path) -> None:
         time.sleep(0.005)
 
 
-def _acquire_lock(run_dir: Path) -> Any:
+def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
     """Take the run directory's writer lock (``writer.lock``, fcntl.flock: released by the
-    kernel when the holder closes it or dies, SIGKILL included). Returns the open lock file."""
+    kernel when the holder closes it or dies, SIGKILL included) and note the holder in it,
+    keeping what the last writer committed unless ``new_session``. Returns the open lock
+    file."""
     path = run_dir / LOCK_NAME
     try:
-        f = open(path, "a+")  # noqa: SIM115 - held open for the writer's life
+        # held open for the writer's life; not O_APPEND, so that the committed line is
+        # rewritten in place (pwrite appends on an O_APPEND file on Linux)
+        f = os.fdopen(os.open(path, os.O_RDWR | os.O_CREAT, 0o644), "r+")
     except OSError as exc:
         raise _write_error(
             exc,
@@ -770,7 +794,7 @@ def _acquire_lock(run_dir: Path) -> Any:
         fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as exc:
         f.seek(0)
-        holder = f.read().strip() or "unknown"
+        holder = (f.read().splitlines() or ["unknown"])[0]
         f.close()
         if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
             raise _write_error(exc, path, "locking the session", _FREE_SPACE) from exc
@@ -781,14 +805,93 @@ def _acquire_lock(run_dir: Path) -> Any:
             "Reading meanwhile needs no lock (load_records, load_model)."
         ) from None
     try:
+        # what the last writer committed stays (its log is checked against it before a
+        # writer opens it, see _check_committed); the writer then notes its own counts
+        committed = None if new_session else _COMMITTED_RE.search(os.pread(f.fileno(), 4096, 0))
         # straight to the file, not through f's buffer: a note that does not fit (full disk)
         # would stay buffered, and closing the lock would write it again and raise, hiding
         # the error that closing it goes with
         os.ftruncate(f.fileno(), 0)
-        os.write(f.fileno(), f"process {os.getpid()} on {socket.gethostname()}\n".encode())
+        os.write(
+            f.fileno(),
+            f"process {os.getpid()} on {socket.gethostname()}\n".encode()
+            + (committed.group(0) if committed else b""),
+        )
     except OSError:
         pass  # the lock holds without the note
     return f
+
+
+#: writer.lock's second line: what the writer has committed to steps.sqlite so far, and
+#: whether steps.journal holds lines not yet committed ("lines", set before the first line
+#: after a commit; "empty", set by the commit); fixed width, rewritten in place. So a log
+#: found holding less (its -wal lost) or a journal missing that held lines is said to be that
+#: instead of read as a shorter session.
+_COMMITTED_LINE = "committed to steps.sqlite: %12d steps, %12d corrections; steps.journal: %s\n"
+_COMMITTED_RE = re.compile(
+    rb"committed to steps\.sqlite: +(\d+) steps, +(\d+) corrections; "
+    rb"steps\.journal: (empty|lines)\n"
+)
+
+
+def _read_committed(run_dir: Path) -> tuple[int, int, bool] | None:
+    """(steps, corrections, whether the journal holds lines not yet committed) the session's
+    writers committed, as writer.lock says; None when it says nothing (no lock file, one this
+    user may not read, or one written by a torchcbl that did not note it)."""
+    try:
+        m = _COMMITTED_RE.search((run_dir / LOCK_NAME).read_bytes())
+    except OSError:
+        return None
+    return None if m is None else (int(m.group(1)), int(m.group(2)), m.group(3) == b"lines")
+
+
+def _check_committed(
+    run_dir: Path, committed: tuple[int, int, bool] | None, steps: list[int], n_corrections: int
+) -> None:
+    """Raise if the log (steps.sqlite, its -wal and the journal: its step numbers ``steps``,
+    in order, and ``n_corrections``) lacks the last steps, or corrections, its writers
+    committed (``committed``, read before the log), as it does without its -wal. (Steps
+    missing before others the log holds are a gap, said by the readers and resume.)"""
+    if committed is None:
+        return
+    journal, lock = run_dir / JOURNAL_NAME, run_dir / LOCK_NAME
+    if committed[2] and not journal.exists():
+        raise CorruptSessionError(
+            f"{journal} is missing, but {lock} says it held steps its writer had not yet "
+            f"committed to {LOG_NAME} (the writer was killed, or the directory copied while "
+            f"it ran): they are only in that file. Put it back (from the directory it was "
+            "copied from, or a backup), then read or resume the session again; never delete "
+            f"it by hand. torchcbl changed nothing. If it is lost for good, remove {lock} (with "
+            "no writer running) to read and resume the session with what is left."
+        )
+    n_steps = bisect.bisect_left(steps, committed[0])  # those below the committed count
+    if n_steps and steps[n_steps - 1] != n_steps - 1:
+        return  # a gap among them: rows deleted by hand, said as such (_gap_text)
+    if n_steps >= committed[0] and n_corrections >= committed[1]:
+        return
+    log = run_dir / LOG_NAME
+    wal = log.with_name(LOG_NAME + "-wal")
+    if not wal.exists():
+        why = (
+            f"{wal} is missing: a session that was not closed cleanly (killed, or copied "
+            "while it ran) keeps its latest commits in that file. Put it back beside "
+            f"{log.name} (from the directory it was copied from, or a backup), then read or "
+            "resume the session again; never delete it by hand. (Or the last rows were deleted "
+            f"from {log.name} by something other than torchcbl.)"
+        )
+    else:
+        why = (
+            f"{log.name} or {wal.name} is older than the session (restored from a backup, "
+            "replaced, or copied while its writer ran), or a power cut lost commits not yet "
+            "on the disk. Put the session's own files back if you have them."
+        )
+    raise CorruptSessionError(
+        f"{run_dir}: its writer committed {committed[0]} steps and {committed[1]} corrections "
+        f"({lock} says so), but the log holds {n_steps} of those steps and {n_corrections} "
+        f"corrections: the rest are not in the session's files. {why} torchcbl changed "
+        f"nothing. If they are lost for good, remove {lock} (with no writer running) to read "
+        "and resume the session with what is left."
+    )
 
 
 _CHECKPOINT_LATER = (
@@ -824,8 +927,7 @@ def _write_checkpoint(
         # ("[enforce fail at inline_container.cc:...] unexpected pos ...")
         buffer = io.BytesIO()
         torch.save(payload, buffer)
-        tmp.write_bytes(buffer.getvalue())
-        os.replace(tmp, path)
+        write_durably(path, buffer.getvalue(), tmp)
     except (OSError, RuntimeError) as exc:
         tmp.unlink(missing_ok=True)
         raise _write_error(
@@ -854,6 +956,10 @@ class SessionStore:
         self._journal = -1
         self._journal_size = 0
         self._pending: list[tuple[str, tuple[Any, ...]]] = []
+        self._n_committed = 0  # steps in steps.sqlite, up to the last one
+        self._corrected: set[int] = set()  # the steps that have a correction there
+        self._note_at = -1  # where writer.lock's committed line starts (-1: not written)
+        self._journal_noted = False  # writer.lock says the journal holds uncommitted lines
         try:
             self._open()
         except BaseException:
@@ -894,6 +1000,13 @@ class SessionStore:
         for kind, values in entries:  # steps a killed writer left only in the journal
             self._pending.append((_REPLACE if kind == "s" else _SQL[kind], values))
         self.commit()
+        try:
+            top = self._db.execute("SELECT MAX(step) FROM steps").fetchone()[0]
+            self._corrected = {row[0] for row in self._db.execute("SELECT step FROM corrections")}
+        except sqlite3.DatabaseError as exc:
+            raise _db_error(exc, log, writing=True) from exc
+        self._n_committed = 0 if top is None else top + 1
+        self._note_committed()
         try:
             self._journal = os.open(journal, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
             os.ftruncate(self._journal, 0)
@@ -946,7 +1059,7 @@ class SessionStore:
                 "creating the run directory",
                 "Free space (or fix the directory's permissions), then create the teacher again.",
             ) from exc
-        lock = _acquire_lock(path)
+        lock = _acquire_lock(path, new_session=True)
         started = False
         try:
             if (path / CONFIG_NAME).exists() or (path / LOG_NAME).exists():
@@ -1021,7 +1134,10 @@ class SessionStore:
         store with every record and correction."""
         load_config(run_dir)
         _check_log_present(Path(run_dir))
-        missing = _missing_steps(_step_numbers(Path(run_dir)))
+        committed = _read_committed(Path(run_dir))  # before the log: a writer commits first
+        steps, n_corrections = _step_numbers(Path(run_dir))
+        _check_committed(Path(run_dir), committed, steps, n_corrections)
+        missing = _missing_steps(steps)
         if missing:  # the loop numbers a new step len(records): it would take a logged number
             raise CorruptSessionError(
                 f"cannot resume the session in {run_dir}: {_gap_text(missing)}. Resuming "
@@ -1111,7 +1227,16 @@ class SessionStore:
                     )
                 what = f"committing {len(pending)} journalled rows"
                 raise _write_error(exc, self.run_dir / LOG_NAME, what, after) from exc
+            n, c = self._n_committed, len(self._corrected)
+            for sql, values in pending:
+                if sql is _CORRECT:
+                    self._corrected.add(values[0])
+                elif sql is not _FINISH:
+                    self._n_committed = max(self._n_committed, values[0] + 1)
             pending.clear()
+            if (n, c) != (self._n_committed, len(self._corrected)) or self._journal_noted:
+                self._journal_noted = False  # its lines are all in steps.sqlite now
+                self._note_committed()
             try:
                 os.ftruncate(self._journal, 0)
                 self._journal_size = 0
@@ -1119,6 +1244,27 @@ class SessionStore:
                 pass  # lines also in SQLite are harmless: replaying them changes nothing
         finally:
             _raise_held(hold)
+
+    def _note_committed(self) -> None:
+        """Note in writer.lock what steps.sqlite holds (after a commit): one ``pwrite`` in
+        place. Best-effort: a note that cannot be written leaves the check on a lower count
+        (or none), never a false alarm."""
+        if self._lock is None:
+            return
+        line = _COMMITTED_LINE % (
+            self._n_committed,
+            len(self._corrected),
+            "lines" if self._journal_noted else "empty",
+        )
+        fd = self._lock.fileno()
+        try:
+            if self._note_at < 0:  # the first note of this writer: after the holder line
+                head = os.pread(fd, 4096, 0).split(b"\n", 1)[0]
+                self._note_at = len(head) + 1 if head else 0
+                os.ftruncate(fd, self._note_at)
+            os.pwrite(fd, line.encode(), self._note_at)
+        except OSError:
+            pass
 
     def _write(self, kind: str, values: tuple[Any, ...]) -> None:
         """Append one journal line (the step is durable from here on) and queue its row.
@@ -1135,6 +1281,9 @@ class SessionStore:
             except SessionWriteError:
                 pass  # the rows are durable in the journal; the next commit retries them
         line = _journal_line(kind, values)
+        if not self._journal_noted:  # before the line: a kill after it finds the note
+            self._journal_noted = True
+            self._note_committed()
         try:
             written = _write_fd(self._journal, line)
             if written != len(line):
@@ -1522,12 +1671,28 @@ def _sqlite_steps(run: Path) -> set[int]:
         db.close()
 
 
-def _step_numbers(run: Path) -> list[int]:
+def _step_numbers(run: Path) -> tuple[list[int], int]:
     """Every step number of a session, its journal's included, in order (no record is
-    parsed: the gap check of resume)."""
+    parsed: the gap check of resume), and how many steps have a correction."""
     journal = _journal_entries(run / JOURNAL_NAME)  # before the SELECT, as _rows_unchecked
-    steps = _sqlite_steps(run) | {int(v[0]) for kind, v in journal if kind == "s"}
-    return sorted(steps)
+    return _logged(run, journal)
+
+
+def _logged(run: Path, journal: list[tuple[str, tuple[Any, ...]]]) -> tuple[list[int], int]:
+    """:func:`_step_numbers` with the journal's entries given (read before the log)."""
+    db = _open_readonly(run)
+    try:
+        steps = {row[0] for row in db.execute("SELECT step FROM steps")}
+        corrected = set()
+        if _table_columns(db, "corrections"):
+            corrected = {row[0] for row in db.execute("SELECT step FROM corrections")}
+    except sqlite3.DatabaseError as exc:
+        raise _db_error(exc, run / LOG_NAME) from exc
+    finally:
+        db.close()
+    steps |= {int(v[0]) for kind, v in journal if kind == "s"}
+    corrected |= {int(v[0]) for kind, v in journal if kind == "c"}
+    return sorted(steps), len(corrected)
 
 
 def _gap_text(missing: list[int]) -> str:
@@ -1546,6 +1711,7 @@ def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[i
     run = Path(run_dir)
     wal = run / (LOG_NAME + "-wal")
     log = run / LOG_NAME
+    committed = _read_committed(run)  # before the log: a writer commits, then notes it
     for attempt in range(3):
         had_wal = wal.exists()
         before = _file_state(log)
@@ -1563,6 +1729,7 @@ def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[i
             break
         # A writer opened the session while we read without its WAL (and may have closed it
         # again, checkpointing into the log): read again.
+    _check_committed(run, committed, [row[0] for row in rows], len(corrections))
     records = _records_of(rows, run)
     missing = _missing_steps([r.step for r in records])
     if missing:  # never transient: the journal is read before the SELECT (_rows_unchecked)
@@ -2199,6 +2366,9 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
     load_config(run)
     _check_log_present(run)
     journal = run / JOURNAL_NAME
+    committed = _read_committed(run)
+    valid = [(kind, values) for _, kind, values in _scan_journal(journal).entries]
+    _check_committed(run, committed, *_logged(run, valid))  # (before the lock: no change)
     lock = _acquire_lock(run)
     try:
         scan = _scan_journal(journal)
@@ -2229,8 +2399,7 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
         lines = data.split(b"\n")
         tmp = journal.with_name(JOURNAL_NAME + ".tmp")
         try:
-            tmp.write_bytes(b"".join(lines[n - 1] + b"\n" for n in kept))
-            os.replace(tmp, journal)
+            write_durably(journal, b"".join(lines[n - 1] + b"\n" for n in kept), tmp)
         except OSError as exc:
             tmp.unlink(missing_ok=True)
             raise _write_error(exc, journal, "rewriting the journal", _FREE_SPACE) from exc
