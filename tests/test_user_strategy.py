@@ -355,3 +355,29 @@ def test_a_to_config_type_that_names_another_shipped_class_is_refused_at_start(
     assert not (tmp_path / "u").exists()
     monkeypatch.setitem(STRATEGIES, "DAgger", DAgger)
     ConfidentTeacher(env, oracle(env), strategy=DAgger(), run_dir=tmp_path / "t", progress=False)
+
+
+def test_an_instance_made_before_its_module_was_reloaded_still_starts_a_session(
+    tmp_path, monkeypatch
+):
+    """importlib.reload (or IPython's autoreload) puts a new class object in the module, and
+    instances made before keep the old one. The check above compared class objects, so such
+    a DAgger (and, after a reload of torchcbl.strategies, the default ConfidentExecution)
+    was refused with "torchcbl.strategies.dagger.DAgger is neither that class nor a
+    subclass of it". A class of the same module and qualified name is the same strategy."""
+    import torchcbl.strategies.dagger as dagger_module
+
+    old = dagger_module.DAgger
+    skip = ("__dict__", "__weakref__")
+    reloaded = type(
+        old.__name__, old.__bases__, {k: v for k, v in vars(old).items() if k not in skip}
+    )
+    made_before = old()
+    monkeypatch.setattr(dagger_module, "DAgger", reloaded)
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env, oracle(env), strategy=made_before, run_dir=tmp_path / "r", progress=False
+    )
+    ct.run(max_steps=5)
+    ct.close()
+    assert len(load_records(tmp_path / "r")) == 5

@@ -324,6 +324,10 @@ STRATEGIES: dict[str, Callable[..., Any]] = {
 }
 
 
+def _names(cls: type) -> tuple[str, str]:
+    return cls.__module__, cls.__qualname__
+
+
 def _check_rebuilt_as_itself(strategy: Any, config: Mapping[str, Any]) -> None:
     """Refuse, when a session starts, a strategy whose stored ``to_config`` ``"type"`` names a
     :data:`STRATEGIES` entry that would rebuild it (on a resume without ``strategy=``) as a
@@ -353,9 +357,14 @@ def _check_rebuilt_as_itself(strategy: Any, config: Mapping[str, Any]) -> None:
         where = f"{module}.{name}"
     else:
         where = f"{builds.__module__}.{builds.__qualname__}"
-    if isinstance(builds, type) and isinstance(strategy, builds):
-        return
     cls = type(strategy)
+    if isinstance(builds, type) and (
+        isinstance(strategy, builds)
+        # or the class was reloaded since the instance was made (importlib.reload,
+        # IPython's autoreload): the same module and qualified name is the same strategy
+        or any(_names(c) == _names(builds) for c in cls.__mro__)
+    ):
+        return
     own = f"{cls.__module__}.{cls.__qualname__}"
     raise TypeError(
         f'{cls.__name__}.to_config() gives "type": {kind!r}, under which '
