@@ -208,3 +208,22 @@ def test_chi2_quantile_is_right_in_both_tails():
                 assert chi2_quantile(q, d) == pytest.approx(want, rel=1e-10, abs=0), (q, d)
     assert chi2_quantile(0.9545, 3) == 8.024894669075394  # the corridor's threshold squared
     assert chi2_quantile(0.95, 4) == 9.487729036781218
+
+
+def test_a_quantile_rule_pickled_before_max_std_became_none_keeps_its_quantile():
+    """Until c5f2f09 a quantile rule also held max_std = 2.0; that commit made threshold()
+    and is_confident() read max_std first, so such a rule, unpickled (a notebook's saved
+    object, a process pool's argument), went on at 2.0 std instead of its quantile."""
+    import pickle
+
+    old = DistanceRule.__new__(DistanceRule)
+    old.__dict__.update(max_std=2.0, quantile=0.95, _thresholds={}, _dof=None)
+    rule = pickle.loads(pickle.dumps(old))
+    assert rule.threshold(4) == pytest.approx(3.0802, abs=1e-4)
+    c = Classification(
+        action=torch.tensor([0, 0]),
+        confidence=torch.tensor([0.04, 0.002], dtype=torch.float64),
+        distance=torch.tensor([2.5, 3.5], dtype=torch.float64),
+        posterior=torch.tensor([[1.0], [1.0]], dtype=torch.float64),
+    )
+    assert rule.is_confident(c, np.zeros((2, 4))).tolist() == [True, False]

@@ -192,8 +192,8 @@ class DistanceRule:
 
     def threshold(self, n_features: int | None = None) -> float:
         """The threshold in standard deviations (for D = ``n_features`` with a quantile)."""
-        if self.max_std is not None:  # no quantile
-            return self.max_std
+        if self.quantile is None:
+            return float(self.max_std)  # type: ignore[arg-type]
         d = self._dof if n_features is None else int(n_features)
         if d is None:
             raise ValueError(
@@ -209,8 +209,8 @@ class DistanceRule:
         """Bool tensor [N]: True where the model's action may be executed without asking
         (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
         when known)."""
-        if self.max_std is not None:  # no quantile
-            thr = self.max_std
+        if self.quantile is None:
+            thr = float(self.max_std)  # type: ignore[arg-type]
         else:
             d = None if observations is None else int(np.shape(observations)[-1])
             action = _np(c.action)
