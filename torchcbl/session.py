@@ -120,14 +120,17 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   that file (deleted by hand, left out of a copy), a log without its tables is a
   :class:`CorruptSessionError` naming the missing file; a log with them, which would read as
   a shorter session (the steps since the last checkpoint or clean close gone), is told by
-  ``writer.lock``'s committed counts: a log holding fewer steps or corrections than they say
-  is a :class:`CorruptSessionError` for every reader, resume and :func:`repair_journal`,
-  naming the missing ``-wal`` (or, with one there, an older log or a power cut), changing
-  nothing; removing ``writer.lock`` accepts the loss. Likewise a missing ``steps.journal``
-  that ``writer.lock`` says held lines not yet committed (the writer was killed with steps
-  only there) is a :class:`CorruptSessionError` naming it; one that held none (a cleanly
-  closed session's) is not. A copy without ``writer.lock`` (or a session whose last writer
-  was a torchcbl without these notes) is not checked.
+  ``writer.lock``'s committed counts: a log holding fewer steps or corrections than they say,
+  its ``-wal`` missing, is a :class:`CorruptSessionError` for every reader, resume and
+  :func:`repair_journal`, naming the missing ``-wal``, changing nothing; removing
+  ``writer.lock`` accepts the loss. With the ``-wal`` there, a log holding fewer is what a
+  copy taken while the writer ran holds (``cp -a`` and rsync take ``writer.lock`` last, after
+  the writer committed more) or what a power cut left: it is read, and resumed, as it is, with
+  a warning naming both counts; resume then notes its own counts. Likewise a missing
+  ``steps.journal`` that ``writer.lock`` says held lines not yet committed (the writer was
+  killed with steps only there) is a :class:`CorruptSessionError` naming it; one that held
+  none (a cleanly closed session's) is not. A copy without ``writer.lock`` (or a session whose
+  last writer was a torchcbl without these notes) is not checked.
 - Two writers. The writer holds ``writer.lock`` with ``fcntl.flock`` (released by the kernel
   when the process dies, SIGKILL included); a second writer gets :class:`SessionLockedError`.
 
@@ -846,12 +849,20 @@ def _read_committed(run_dir: Path) -> tuple[int, int, bool] | None:
 
 
 def _check_committed(
-    run_dir: Path, committed: tuple[int, int, bool] | None, steps: list[int], n_corrections: int
+    run_dir: Path,
+    committed: tuple[int, int, bool] | None,
+    steps: list[int],
+    n_corrections: int,
+    stacklevel: int,
 ) -> None:
     """Raise if the log (steps.sqlite, its -wal and the journal: its step numbers ``steps``,
     in order, and ``n_corrections``) lacks the last steps, or corrections, its writers
-    committed (``committed``, read before the log), as it does without its -wal. (Steps
-    missing before others the log holds are a gap, said by the readers and resume.)"""
+    committed (``committed``, read before the log), as it does without its -wal, or if the
+    journal is missing while it held steps not yet committed. With the -wal and the journal
+    there, a log holding fewer is what a copy taken while the writer ran holds (cp and rsync
+    take writer.lock last) or what a power cut left: warned (``stacklevel`` for
+    :func:`warnings.warn`), and read as it is. (Steps missing before others the log holds are
+    a gap, said by the readers and resume.)"""
     if committed is None:
         return
     journal, lock = run_dir / JOURNAL_NAME, run_dir / LOCK_NAME
@@ -871,26 +882,30 @@ def _check_committed(
         return
     log = run_dir / LOG_NAME
     wal = log.with_name(LOG_NAME + "-wal")
-    if not wal.exists():
-        why = (
-            f"{wal} is missing: a session that was not closed cleanly (killed, or copied "
-            "while it ran) keeps its latest commits in that file. Put it back beside "
-            f"{log.name} (from the directory it was copied from, or a backup), then read or "
-            "resume the session again; never delete it by hand. (Or the last rows were deleted "
-            f"from {log.name} by something other than torchcbl.)"
+    if wal.exists():  # the files are all there: an earlier state of the session, read as is
+        warnings.warn(
+            f"{run_dir}: {lock.name} says its writer committed {committed[0]} steps and "
+            f"{committed[1]} corrections, but the log holds {n_steps} of those steps and "
+            f"{n_corrections} corrections. Either the directory was copied while its writer "
+            f"ran (cp and rsync take {lock.name} last, after the writer committed more; the "
+            "copy holds the session as it was earlier), or a power cut lost commits not yet "
+            f"on the disk (or an older {log.name} was put back). What the files hold is read; "
+            f"a resume goes on from there and notes its own counts in {lock.name}. For the "
+            "steps missing here, read the directory this one was copied from, once its writer "
+            "has stopped.",
+            stacklevel=stacklevel + 1,
         )
-    else:
-        why = (
-            f"{log.name} or {wal.name} is older than the session (restored from a backup, "
-            "replaced, or copied while its writer ran), or a power cut lost commits not yet "
-            "on the disk. Put the session's own files back if you have them."
-        )
+        return
     raise CorruptSessionError(
         f"{run_dir}: its writer committed {committed[0]} steps and {committed[1]} corrections "
         f"({lock} says so), but the log holds {n_steps} of those steps and {n_corrections} "
-        f"corrections: the rest are not in the session's files. {why} torchcbl changed "
-        f"nothing. If they are lost for good, remove {lock} (with no writer running) to read "
-        "and resume the session with what is left."
+        f"corrections: the rest are not in the session's files. {wal} is missing: a session "
+        "that was not closed cleanly (killed, or copied while it ran) keeps its latest commits "
+        f"in that file. Put it back beside {log.name} (from the directory it was copied from, "
+        "or a backup), then read or resume the session again; never delete it by hand. (Or "
+        f"the last rows were deleted from {log.name} by something other than torchcbl.) "
+        f"torchcbl changed nothing. If they are lost for good, remove {lock} (with no writer "
+        "running) to read and resume the session with what is left."
     )
 
 
@@ -1136,7 +1151,7 @@ class SessionStore:
         _check_log_present(Path(run_dir))
         committed = _read_committed(Path(run_dir))  # before the log: a writer commits first
         steps, n_corrections = _step_numbers(Path(run_dir))
-        _check_committed(Path(run_dir), committed, steps, n_corrections)
+        _check_committed(Path(run_dir), committed, steps, n_corrections, stacklevel=3)
         missing = _missing_steps(steps)
         if missing:  # the loop numbers a new step len(records): it would take a logged number
             raise CorruptSessionError(
@@ -1729,7 +1744,7 @@ def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[i
             break
         # A writer opened the session while we read without its WAL (and may have closed it
         # again, checkpointing into the log): read again.
-    _check_committed(run, committed, [row[0] for row in rows], len(corrections))
+    _check_committed(run, committed, [row[0] for row in rows], len(corrections), stacklevel=3)
     records = _records_of(rows, run)
     missing = _missing_steps([r.step for r in records])
     if missing:  # never transient: the journal is read before the SELECT (_rows_unchecked)
@@ -2368,7 +2383,8 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
     journal = run / JOURNAL_NAME
     committed = _read_committed(run)
     valid = [(kind, values) for _, kind, values in _scan_journal(journal).entries]
-    _check_committed(run, committed, *_logged(run, valid))  # (before the lock: no change)
+    # before the lock: an error changes nothing
+    _check_committed(run, committed, *_logged(run, valid), stacklevel=2)
     lock = _acquire_lock(run)
     try:
         scan = _scan_journal(journal)
