@@ -895,6 +895,37 @@ def test_a_session_copied_while_its_writer_ran_reads_and_resumes_with_a_warning(
         back.close()
 
 
+def test_a_torn_read_of_writer_locks_counts_is_not_taken_for_a_count(tmp_path):
+    """The writer rewrites writer.lock's count line in place and readers read it without a
+    lock, so a read that overlaps the rewrite can see the new line's first bytes and the old
+    one's last: from 19 to 20 steps, "          29" (as "999" to "1000" reads as "1999"),
+    more steps than the log holds: a false warning (an error without the -wal). A line whose
+    CRC-32 does not match is now read as no count. Every tear of the file between its note at
+    19 steps and at 20 (a prefix of one, the rest of the other) reads the 20 steps with no
+    warning; so does a tear that leaves the line cut short."""
+    run = tmp_path / "run"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=19)  # run() commits at its end, and notes the count
+    at_19 = (run / "writer.lock").read_bytes()
+    ct.run(max_steps=20)
+    at_20 = (run / "writer.lock").read_bytes()
+    assert len(at_19) == len(at_20) and at_19 != at_20
+    want = load_records(run)
+    torn = {a[:k] + b[k:] for a, b in ((at_19, at_20), (at_20, at_19)) for k in range(len(a))}
+    torn |= {at_20[:k] for k in range(len(at_20))}
+    assert b"committed to steps.sqlite:           29 steps" in b"".join(torn)
+    try:
+        for lock in sorted(torn):
+            (run / "writer.lock").write_bytes(lock)
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                assert load_records(run) == want, lock
+    finally:
+        (run / "writer.lock").write_bytes(at_20)
+        ct.close()
+    assert load_records(run) == want
+
+
 def test_a_journal_deleted_while_it_held_steps_is_said_to_be_missing(tmp_path):
     """A writer killed with steps only in steps.journal (not yet committed to steps.sqlite),
     whose journal was then deleted by hand or left out of a copy, read as the shorter session

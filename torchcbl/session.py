@@ -810,7 +810,7 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
     try:
         # what the last writer committed stays (its log is checked against it before a
         # writer opens it, see _check_committed); the writer then notes its own counts
-        committed = None if new_session else _COMMITTED_RE.search(os.pread(f.fileno(), 4096, 0))
+        committed = None if new_session else _committed_line(os.pread(f.fileno(), 4096, 0))
         # straight to the file, not through f's buffer: a note that does not fit (full disk)
         # would stay buffered, and closing the lock would write it again and raise, hiding
         # the error that closing it goes with
@@ -818,7 +818,7 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
         os.write(
             f.fileno(),
             f"process {os.getpid()} on {socket.gethostname()}\n".encode()
-            + (committed.group(0) if committed else b""),
+            + (committed.group(0) if committed else b""),  # a torn or damaged one not kept
         )
     except OSError:
         pass  # the lock holds without the note
@@ -827,25 +827,35 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
 
 #: writer.lock's second line: what the writer has committed to steps.sqlite so far, and
 #: whether steps.journal holds lines not yet committed ("lines", set before the first line
-#: after a commit; "empty", set by the commit); fixed width, rewritten in place. So a log
-#: found holding less (its -wal lost) or a journal missing that held lines is said to be that
-#: instead of read as a shorter session.
-_COMMITTED_LINE = "committed to steps.sqlite: %12d steps, %12d corrections; steps.journal: %s\n"
+#: after a commit; "empty", set by the commit), then a tab and the CRC-32 of what precedes it
+#: in 8 hex digits, as journal lines end; fixed width, rewritten in place. So a log found
+#: holding less (its -wal lost) or a journal missing that held lines is said to be that
+#: instead of read as a shorter session. Readers read it without a lock: a read overlapping
+#: the rewrite can mix the two lines (999 -> 1000 read as 1999), which the CRC tells.
+_COMMITTED_LINE = "committed to steps.sqlite: %12d steps, %12d corrections; steps.journal: %s"
 _COMMITTED_RE = re.compile(
-    rb"committed to steps\.sqlite: +(\d+) steps, +(\d+) corrections; "
-    rb"steps\.journal: (empty|lines)\n"
+    rb"(committed to steps\.sqlite: +(\d+) steps, +(\d+) corrections; "
+    rb"steps\.journal: (empty|lines))\t([0-9a-f]{8})\n"
 )
+
+
+def _committed_line(data: bytes) -> re.Match[bytes] | None:
+    """writer.lock's committed line in ``data`` (the file's bytes), None if there is none or
+    its CRC-32 does not match (a read torn by the writer's rewrite, or a damaged file)."""
+    m = _COMMITTED_RE.search(data)
+    return m if m is not None and int(m.group(5), 16) == _crc32(m.group(1)) else None
 
 
 def _read_committed(run_dir: Path) -> tuple[int, int, bool] | None:
     """(steps, corrections, whether the journal holds lines not yet committed) the session's
     writers committed, as writer.lock says; None when it says nothing (no lock file, one this
-    user may not read, or one written by a torchcbl that did not note it)."""
+    user may not read, one written by a torchcbl that did not note it, or a line read while
+    the writer rewrote it)."""
     try:
-        m = _COMMITTED_RE.search((run_dir / LOCK_NAME).read_bytes())
+        m = _committed_line((run_dir / LOCK_NAME).read_bytes())
     except OSError:
         return None
-    return None if m is None else (int(m.group(1)), int(m.group(2)), m.group(3) == b"lines")
+    return None if m is None else (int(m.group(2)), int(m.group(3)), m.group(4) == b"lines")
 
 
 def _check_committed(
@@ -1266,18 +1276,18 @@ class SessionStore:
         (or none), never a false alarm."""
         if self._lock is None:
             return
-        line = _COMMITTED_LINE % (
-            self._n_committed,
-            len(self._corrected),
-            "lines" if self._journal_noted else "empty",
-        )
+        line = (
+            _COMMITTED_LINE
+            % (self._n_committed, len(self._corrected), "lines" if self._journal_noted else "empty")
+        ).encode()
+        line = b"%s\t%08x\n" % (line, _crc32(line))
         fd = self._lock.fileno()
         try:
             if self._note_at < 0:  # the first note of this writer: after the holder line
                 head = os.pread(fd, 4096, 0).split(b"\n", 1)[0]
                 self._note_at = len(head) + 1 if head else 0
                 os.ftruncate(fd, self._note_at)
-            os.pwrite(fd, line.encode(), self._note_at)
+            os.pwrite(fd, line, self._note_at)
         except OSError:
             pass
 
