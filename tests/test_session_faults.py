@@ -23,6 +23,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
@@ -847,6 +848,82 @@ def test_a_wal_lost_after_its_tables_reached_the_log_is_said_to_be_missing(tmp_p
     assert back.records == want[:20]
     back.close()
     ct.close()
+
+
+def test_a_session_copied_while_its_writer_ran_reads_and_resumes_with_a_warning(tmp_path):
+    """cp -a and rsync copy writer.lock last (in name order), so a copy taken while the writer
+    runs can hold a writer.lock that counts commits made after the log was copied. Every
+    reader, resume and repair_journal refused such a copy with a CorruptSessionError ("the
+    rest are not in the session's files"), though its -wal and journal are there and it reads
+    as a consistent earlier state of the session, as it did before writer.lock held counts.
+    With the -wal and the journal present, a log holding fewer steps than writer.lock says is
+    read and resumed with a warning naming both counts and the two causes (a copy taken while
+    the writer ran, a power cut); resume then notes its own counts, so later reads say
+    nothing. (A missing -wal or journal stays an error: the tests above.)"""
+    run, copy = tmp_path / "run", tmp_path / "copy"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=20)
+    want = load_records(run)
+    shutil.copytree(run, copy, ignore=shutil.ignore_patterns("writer.lock"))
+    ct.run(max_steps=30)  # the writer commits 10 more steps meanwhile
+    shutil.copy2(run / "writer.lock", copy / "writer.lock")  # copied last
+    ct.close()
+    assert (copy / "steps.sqlite-wal").exists() and (copy / "steps.journal").exists()
+    said = (
+        r"writer\.lock says its writer committed 30 steps and 0 corrections, but the log "
+        r"holds 20 of those steps and 0 corrections.*copied while its writer ran.*power cut"
+    )
+    before = files_of(copy)
+    for read in (load_records, load_labels, load_model):
+        with pytest.warns(UserWarning, match=said):
+            read(copy)
+    with pytest.warns(UserWarning, match=said):
+        assert load_records(copy) == want
+    after = files_of(copy)  # the readers changed nothing (but SQLite's index of the -wal)
+    assert after.pop("steps.sqlite-shm") and before.pop("steps.sqlite-shm") and after == before
+    with pytest.warns(UserWarning, match=said):
+        repair_journal(copy)
+    with pytest.warns(UserWarning, match=said):
+        back, _ = resume(copy)
+    assert back.records == want
+    back.run(max_steps=26)
+    back.close()
+    with warnings.catch_warnings():  # resume noted the counts it has: no warning since
+        warnings.simplefilter("error")
+        assert load_records(copy)[:20] == want and len(load_records(copy)) == 26
+        back, _ = resume(copy)
+        back.close()
+
+
+def test_a_torn_read_of_writer_locks_counts_is_not_taken_for_a_count(tmp_path):
+    """The writer rewrites writer.lock's count line in place and readers read it without a
+    lock, so a read that overlaps the rewrite can see the new line's first bytes and the old
+    one's last: from 19 to 20 steps, "          29" (as "999" to "1000" reads as "1999"),
+    more steps than the log holds: a false warning (an error without the -wal). A line whose
+    CRC-32 does not match is now read as no count. Every tear of the file between its note at
+    19 steps and at 20 (a prefix of one, the rest of the other) reads the 20 steps with no
+    warning; so does a tear that leaves the line cut short."""
+    run = tmp_path / "run"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=19)  # run() commits at its end, and notes the count
+    at_19 = (run / "writer.lock").read_bytes()
+    ct.run(max_steps=20)
+    at_20 = (run / "writer.lock").read_bytes()
+    assert len(at_19) == len(at_20) and at_19 != at_20
+    want = load_records(run)
+    torn = {a[:k] + b[k:] for a, b in ((at_19, at_20), (at_20, at_19)) for k in range(len(a))}
+    torn |= {at_20[:k] for k in range(len(at_20))}
+    assert b"committed to steps.sqlite:           29 steps" in b"".join(torn)
+    try:
+        for lock in sorted(torn):
+            (run / "writer.lock").write_bytes(lock)
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                assert load_records(run) == want, lock
+    finally:
+        (run / "writer.lock").write_bytes(at_20)
+        ct.close()
+    assert load_records(run) == want
 
 
 def test_a_journal_deleted_while_it_held_steps_is_said_to_be_missing(tmp_path):

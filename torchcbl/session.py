@@ -120,14 +120,17 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   that file (deleted by hand, left out of a copy), a log without its tables is a
   :class:`CorruptSessionError` naming the missing file; a log with them, which would read as
   a shorter session (the steps since the last checkpoint or clean close gone), is told by
-  ``writer.lock``'s committed counts: a log holding fewer steps or corrections than they say
-  is a :class:`CorruptSessionError` for every reader, resume and :func:`repair_journal`,
-  naming the missing ``-wal`` (or, with one there, an older log or a power cut), changing
-  nothing; removing ``writer.lock`` accepts the loss. Likewise a missing ``steps.journal``
-  that ``writer.lock`` says held lines not yet committed (the writer was killed with steps
-  only there) is a :class:`CorruptSessionError` naming it; one that held none (a cleanly
-  closed session's) is not. A copy without ``writer.lock`` (or a session whose last writer
-  was a torchcbl without these notes) is not checked.
+  ``writer.lock``'s committed counts: a log holding fewer steps or corrections than they say,
+  its ``-wal`` missing, is a :class:`CorruptSessionError` for every reader, resume and
+  :func:`repair_journal`, naming the missing ``-wal``, changing nothing; removing
+  ``writer.lock`` accepts the loss. With the ``-wal`` there, a log holding fewer is what a
+  copy taken while the writer ran holds (``cp -a`` and rsync take ``writer.lock`` last, after
+  the writer committed more) or what a power cut left: it is read, and resumed, as it is, with
+  a warning naming both counts; resume then notes its own counts. Likewise a missing
+  ``steps.journal`` that ``writer.lock`` says held lines not yet committed (the writer was
+  killed with steps only there) is a :class:`CorruptSessionError` naming it; one that held
+  none (a cleanly closed session's) is not. A copy without ``writer.lock`` (or a session whose
+  last writer was a torchcbl without these notes) is not checked.
 - Two writers. The writer holds ``writer.lock`` with ``fcntl.flock`` (released by the kernel
   when the process dies, SIGKILL included); a second writer gets :class:`SessionLockedError`.
 
@@ -807,7 +810,7 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
     try:
         # what the last writer committed stays (its log is checked against it before a
         # writer opens it, see _check_committed); the writer then notes its own counts
-        committed = None if new_session else _COMMITTED_RE.search(os.pread(f.fileno(), 4096, 0))
+        committed = None if new_session else _committed_line(os.pread(f.fileno(), 4096, 0))
         # straight to the file, not through f's buffer: a note that does not fit (full disk)
         # would stay buffered, and closing the lock would write it again and raise, hiding
         # the error that closing it goes with
@@ -815,7 +818,7 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
         os.write(
             f.fileno(),
             f"process {os.getpid()} on {socket.gethostname()}\n".encode()
-            + (committed.group(0) if committed else b""),
+            + (committed.group(0) if committed else b""),  # a torn or damaged one not kept
         )
     except OSError:
         pass  # the lock holds without the note
@@ -824,34 +827,52 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
 
 #: writer.lock's second line: what the writer has committed to steps.sqlite so far, and
 #: whether steps.journal holds lines not yet committed ("lines", set before the first line
-#: after a commit; "empty", set by the commit); fixed width, rewritten in place. So a log
-#: found holding less (its -wal lost) or a journal missing that held lines is said to be that
-#: instead of read as a shorter session.
-_COMMITTED_LINE = "committed to steps.sqlite: %12d steps, %12d corrections; steps.journal: %s\n"
+#: after a commit; "empty", set by the commit), then a tab and the CRC-32 of what precedes it
+#: in 8 hex digits, as journal lines end; fixed width, rewritten in place. So a log found
+#: holding less (its -wal lost) or a journal missing that held lines is said to be that
+#: instead of read as a shorter session. Readers read it without a lock: a read overlapping
+#: the rewrite can mix the two lines (999 -> 1000 read as 1999), which the CRC tells.
+_COMMITTED_LINE = "committed to steps.sqlite: %12d steps, %12d corrections; steps.journal: %s"
 _COMMITTED_RE = re.compile(
-    rb"committed to steps\.sqlite: +(\d+) steps, +(\d+) corrections; "
-    rb"steps\.journal: (empty|lines)\n"
+    rb"(committed to steps\.sqlite: +(\d+) steps, +(\d+) corrections; "
+    rb"steps\.journal: (empty|lines))\t([0-9a-f]{8})\n"
 )
+
+
+def _committed_line(data: bytes) -> re.Match[bytes] | None:
+    """writer.lock's committed line in ``data`` (the file's bytes), None if there is none or
+    its CRC-32 does not match (a read torn by the writer's rewrite, or a damaged file)."""
+    m = _COMMITTED_RE.search(data)
+    return m if m is not None and int(m.group(5), 16) == _crc32(m.group(1)) else None
 
 
 def _read_committed(run_dir: Path) -> tuple[int, int, bool] | None:
     """(steps, corrections, whether the journal holds lines not yet committed) the session's
     writers committed, as writer.lock says; None when it says nothing (no lock file, one this
-    user may not read, or one written by a torchcbl that did not note it)."""
+    user may not read, one written by a torchcbl that did not note it, or a line read while
+    the writer rewrote it)."""
     try:
-        m = _COMMITTED_RE.search((run_dir / LOCK_NAME).read_bytes())
+        m = _committed_line((run_dir / LOCK_NAME).read_bytes())
     except OSError:
         return None
-    return None if m is None else (int(m.group(1)), int(m.group(2)), m.group(3) == b"lines")
+    return None if m is None else (int(m.group(2)), int(m.group(3)), m.group(4) == b"lines")
 
 
 def _check_committed(
-    run_dir: Path, committed: tuple[int, int, bool] | None, steps: list[int], n_corrections: int
+    run_dir: Path,
+    committed: tuple[int, int, bool] | None,
+    steps: list[int],
+    n_corrections: int,
+    stacklevel: int,
 ) -> None:
     """Raise if the log (steps.sqlite, its -wal and the journal: its step numbers ``steps``,
     in order, and ``n_corrections``) lacks the last steps, or corrections, its writers
-    committed (``committed``, read before the log), as it does without its -wal. (Steps
-    missing before others the log holds are a gap, said by the readers and resume.)"""
+    committed (``committed``, read before the log), as it does without its -wal, or if the
+    journal is missing while it held steps not yet committed. With the -wal and the journal
+    there, a log holding fewer is what a copy taken while the writer ran holds (cp and rsync
+    take writer.lock last) or what a power cut left: warned (``stacklevel`` for
+    :func:`warnings.warn`), and read as it is. (Steps missing before others the log holds are
+    a gap, said by the readers and resume.)"""
     if committed is None:
         return
     journal, lock = run_dir / JOURNAL_NAME, run_dir / LOCK_NAME
@@ -871,26 +892,30 @@ def _check_committed(
         return
     log = run_dir / LOG_NAME
     wal = log.with_name(LOG_NAME + "-wal")
-    if not wal.exists():
-        why = (
-            f"{wal} is missing: a session that was not closed cleanly (killed, or copied "
-            "while it ran) keeps its latest commits in that file. Put it back beside "
-            f"{log.name} (from the directory it was copied from, or a backup), then read or "
-            "resume the session again; never delete it by hand. (Or the last rows were deleted "
-            f"from {log.name} by something other than torchcbl.)"
+    if wal.exists():  # the files are all there: an earlier state of the session, read as is
+        warnings.warn(
+            f"{run_dir}: {lock.name} says its writer committed {committed[0]} steps and "
+            f"{committed[1]} corrections, but the log holds {n_steps} of those steps and "
+            f"{n_corrections} corrections. Either the directory was copied while its writer "
+            f"ran (cp and rsync take {lock.name} last, after the writer committed more; the "
+            "copy holds the session as it was earlier), or a power cut lost commits not yet "
+            f"on the disk (or an older {log.name} was put back). What the files hold is read; "
+            f"a resume goes on from there and notes its own counts in {lock.name}. For the "
+            "steps missing here, read the directory this one was copied from, once its writer "
+            "has stopped.",
+            stacklevel=stacklevel + 1,
         )
-    else:
-        why = (
-            f"{log.name} or {wal.name} is older than the session (restored from a backup, "
-            "replaced, or copied while its writer ran), or a power cut lost commits not yet "
-            "on the disk. Put the session's own files back if you have them."
-        )
+        return
     raise CorruptSessionError(
         f"{run_dir}: its writer committed {committed[0]} steps and {committed[1]} corrections "
         f"({lock} says so), but the log holds {n_steps} of those steps and {n_corrections} "
-        f"corrections: the rest are not in the session's files. {why} torchcbl changed "
-        f"nothing. If they are lost for good, remove {lock} (with no writer running) to read "
-        "and resume the session with what is left."
+        f"corrections: the rest are not in the session's files. {wal} is missing: a session "
+        "that was not closed cleanly (killed, or copied while it ran) keeps its latest commits "
+        f"in that file. Put it back beside {log.name} (from the directory it was copied from, "
+        "or a backup), then read or resume the session again; never delete it by hand. (Or "
+        f"the last rows were deleted from {log.name} by something other than torchcbl.) "
+        f"torchcbl changed nothing. If they are lost for good, remove {lock} (with no writer "
+        "running) to read and resume the session with what is left."
     )
 
 
@@ -1136,7 +1161,7 @@ class SessionStore:
         _check_log_present(Path(run_dir))
         committed = _read_committed(Path(run_dir))  # before the log: a writer commits first
         steps, n_corrections = _step_numbers(Path(run_dir))
-        _check_committed(Path(run_dir), committed, steps, n_corrections)
+        _check_committed(Path(run_dir), committed, steps, n_corrections, stacklevel=3)
         missing = _missing_steps(steps)
         if missing:  # the loop numbers a new step len(records): it would take a logged number
             raise CorruptSessionError(
@@ -1251,18 +1276,18 @@ class SessionStore:
         (or none), never a false alarm."""
         if self._lock is None:
             return
-        line = _COMMITTED_LINE % (
-            self._n_committed,
-            len(self._corrected),
-            "lines" if self._journal_noted else "empty",
-        )
+        line = (
+            _COMMITTED_LINE
+            % (self._n_committed, len(self._corrected), "lines" if self._journal_noted else "empty")
+        ).encode()
+        line = b"%s\t%08x\n" % (line, _crc32(line))
         fd = self._lock.fileno()
         try:
             if self._note_at < 0:  # the first note of this writer: after the holder line
                 head = os.pread(fd, 4096, 0).split(b"\n", 1)[0]
                 self._note_at = len(head) + 1 if head else 0
                 os.ftruncate(fd, self._note_at)
-            os.pwrite(fd, line.encode(), self._note_at)
+            os.pwrite(fd, line, self._note_at)
         except OSError:
             pass
 
@@ -1729,7 +1754,7 @@ def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[i
             break
         # A writer opened the session while we read without its WAL (and may have closed it
         # again, checkpointing into the log): read again.
-    _check_committed(run, committed, [row[0] for row in rows], len(corrections))
+    _check_committed(run, committed, [row[0] for row in rows], len(corrections), stacklevel=3)
     records = _records_of(rows, run)
     missing = _missing_steps([r.step for r in records])
     if missing:  # never transient: the journal is read before the SELECT (_rows_unchecked)
@@ -2368,7 +2393,8 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
     journal = run / JOURNAL_NAME
     committed = _read_committed(run)
     valid = [(kind, values) for _, kind, values in _scan_journal(journal).entries]
-    _check_committed(run, committed, *_logged(run, valid))  # (before the lock: no change)
+    # before the lock: an error changes nothing
+    _check_committed(run, committed, *_logged(run, valid), stacklevel=2)
     lock = _acquire_lock(run)
     try:
         scan = _scan_journal(journal)
