@@ -847,6 +847,7 @@ class ConfidentTeacher:
                 else strategy_to_config(_pick_strategy(rule, strategy), check_relabel=False)
             ),
         )
+        given_strategy = strategy is not None
         if rule is None and strategy is None:
             try:
                 strategy = strategy_from_config(stored_strategy(stored))
@@ -854,13 +855,14 @@ class ConfidentTeacher:
                 problems.append(str(exc))
         else:
             strategy = _pick_strategy(rule, strategy)
-            _warn_misstated_relabel(stored_strategy(stored), strategy)
         if problems:
             raise IncompatibleRunDirError(
                 f"cannot resume the session in {run_dir}: "
                 + "; ".join(problems).rstrip(".")
                 + ". Resume with matching arguments, or start a new session in another run_dir."
             )
+        if rule is not None or given_strategy:  # a refused resume has said enough
+            _warn_misstated_relabel(stored_strategy(stored), strategy)
         prior = _read_prior(run_dir, stored)  # a missing or changed prior.npz: refused here
         if model is None:
             model = build_model(stored)
