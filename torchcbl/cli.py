@@ -530,8 +530,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(f"FCD written to {fcd}")
     try:
         cfg = replay.write_sumocfg(record, fcd, cfg)
-    except ValueError as exc:  # its checks not made above (the commas were): the FCD just
-        # written does not read back as this record's, or the .sumocfg path is a directory
+    except ValueError as exc:  # its one check not made above (the commas and directories
+        # were): the FCD just written does not read back as this record's
         raise _UsageError(str(exc)) from None
     print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {_shell(cfg)})")
     replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
@@ -550,7 +550,8 @@ def _replay_outputs_spare(source: Path, gif: Path, fcd: Path, cfg: Path) -> None
     """A one-line error, before anything is written, if a file replay writes (the GIF, the
     FCD, the .sumocfg and the fcd-replay input beside it) is the episodes file being replayed or
     a file of the session being replayed (its log, its config), or is another of the outputs:
-    writing it would destroy the recording, or one output would overwrite another."""
+    writing it would destroy the recording, or one output would overwrite another; or if it is
+    a directory (the GIF and FCD are checked so before, the two files beside the FCD here)."""
     # (write_sumocfg names its fcd-replay input so)
     stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
     replay_input = fcd.with_name(stem + ".replay.xml")
@@ -569,6 +570,11 @@ def _replay_outputs_spare(source: Path, gif: Path, fcd: Path, cfg: Path) -> None
             raise _UsageError(
                 f"{what} is {kept} being replayed: writing it would destroy the recording; "
                 "choose another path (or leave --gif/--fcd out: the default is beside it)"
+            )
+        if out.is_dir():
+            raise _UsageError(
+                f"{what} is a directory; expected a file path: move it away or give "
+                "--fcd another name"
             )
         if target in seen:
             raise _UsageError(
