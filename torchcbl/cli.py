@@ -510,7 +510,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     # EP.fcd.xml(.gz) -> EP.sumocfg
     cfg = fcd.with_name(fcd.name.removesuffix(".gz").replace(".fcd.xml", "") + ".sumocfg")
     _replay_outputs_spare(path, gif, fcd, cfg)
-    if "," in fcd.name:  # before anything is written (write_sumocfg refuses it after the FCD)
+    # (_refuse_commas below refuses this too, but names the fcd-replay input, not --fcd)
+    if "," in fcd.name:
         raise _UsageError(
             f"--fcd {fcd}: the .sumocfg beside it names its fcd-replay input after it, and SUMO "
             "splits file lists at commas; give --fcd a name without a comma"
@@ -552,9 +553,8 @@ def _replay_outputs_spare(source: Path, gif: Path, fcd: Path, cfg: Path) -> None
     a file of the session being replayed (its log, its config), or is another of the outputs:
     writing it would destroy the recording, or one output would overwrite another; or if it is
     a directory (the GIF and FCD are checked so before, the two files beside the FCD here)."""
-    # (write_sumocfg names its fcd-replay input so)
-    stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
-    replay_input = fcd.with_name(stem + ".replay.xml")
+    replay = importlib.import_module("sumo_scenarios.replay")
+    replay_input = replay._beside_fcd(fcd, ".replay.xml")  # as write_sumocfg names it
     outputs = [
         (f"--gif {gif}", gif),
         (f"--fcd {fcd}", fcd),
