@@ -1234,6 +1234,20 @@ def test_an_output_directory_that_cannot_be_written_is_refused_before_the_run(tm
     assert sorted(p.name for p in tmp_path.iterdir() if p != locked) == ["episodes.json"]
 
 
+def test_benchmark_names_a_non_strategy_by_its_type_not_its_repr(tmp_path, capsys):
+    """--strategies builtins:object: the one line names the spec as written and the type, and
+    which methods it lacks, not the object's repr. (It said "got <object object at
+    0x7f46531362f0> without bind()": a memory address, different in every run.)"""
+    out = tmp_path / "bench"
+    assert main(["benchmark", "--strategies", "builtins:object", "--out", str(out)]) == 2
+    stdout, err = capsys.readouterr()
+    assert stdout == "" and err.count("\n") == 1, err
+    assert "--strategies builtins:object: object is not a strategy" in err, err
+    assert " at 0x" not in err and "<object" not in err, err
+    assert "it has no bind(), episode_start(), decide()" in err, err
+    assert not out.exists()
+
+
 @pytest.mark.parametrize(
     "argv, says",
     [

@@ -939,7 +939,7 @@ def _check_strategy(spec: Any) -> None:
     class imports, is made with the --strategy-param given for it and has the
     methods :class:`~torchcbl.teaching.ConfidentTeacher` calls (``to_config`` is optional, as
     for the loop: a strategy without it is stored as custom)."""
-    from torchcbl.teaching import _pick_strategy
+    from torchcbl.teaching import _STRATEGY_METHODS, _pick_strategy
 
     try:
         strategy = spec.build(seed=0)
@@ -963,12 +963,21 @@ def _check_strategy(spec: Any) -> None:
             f"--strategies {spec.name}: cannot make it ({type(exc).__name__}: {text}); expected "
             f"module:Class of a strategy, or a shipped name{params}"
         ) from None
-    try:  # the loop's own check: it names the method that is missing
+    try:  # the loop's own check
         _pick_strategy(None, strategy)
     except TypeError as exc:
+        # named by its type: the loop's message shows the object's repr (a memory address)
+        missing = [n for n in _STRATEGY_METHODS if not callable(getattr(strategy, n, None))]
+        why = (
+            f"it has no {', '.join(f'{n}()' for n in missing)} (a torchcbl.strategies.Strategy "
+            f"has the methods {', '.join(_STRATEGY_METHODS)}); see the protocol in "
+            "torchcbl.strategies (an episode_start that does nothing is "
+            "`def episode_start(self): pass`)"
+            if missing and not isinstance(strategy, type)
+            else _one_line(exc).removeprefix("strategy: ")
+        )
         raise _UsageError(
-            f"--strategies {spec.name}: {type(strategy).__name__} is not a strategy: "
-            f"{_one_line(exc).removeprefix('strategy: ')}"
+            f"--strategies {spec.name}: {type(strategy).__name__} is not a strategy: {why}"
         ) from None
 
 
