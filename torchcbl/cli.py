@@ -343,22 +343,10 @@ def _replace_seeds(config: Any, n_seeds: int) -> Any:
     raise _UsageError(f"--seeds is not supported by {type(config).__name__}")
 
 
-def _sessions_below(path: Path, limit: int = 5) -> list[Path]:
-    """Teaching session directories one to three levels below ``path`` (at most ``limit``)."""
-    found: list[Path] = []
-    for pattern in ("*/config.json", "*/*/config.json", "*/*/*/config.json"):
-        for config in sorted(path.glob(pattern)):
-            if (config.parent / "steps.sqlite").exists():
-                found.append(config.parent)
-                if len(found) >= limit:
-                    return found
-    return found
-
-
 def _session_domain(session: Path, asked: str | None, *, teach: bool = False) -> str:
     """The domain a teaching session was taught in, read from its config.json; ``asked`` (the
     user's --domain, if any) must agree with it."""
-    from torchcbl.session import IncompatibleRunDirError, load_config
+    from torchcbl.session import IncompatibleRunDirError, _sessions_below, load_config
 
     if not session.exists():
         raise _UsageError(f"{session} does not exist; {_SESSION_HINT}")
@@ -707,6 +695,8 @@ def _read_prior_demonstrations(path: Path) -> tuple[Any, Any]:
 
     flag = f"--prior-demonstrations {path}"
     if path.is_dir() and not (path / "config.json").exists():
+        from torchcbl.session import _sessions_below
+
         below = _sessions_below(path)
         if below:  # a run directory (runs/reproduce/corridor) or a folder of sessions
             shown = ", ".join(str(p) for p in below)
