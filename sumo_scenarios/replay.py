@@ -510,6 +510,14 @@ def _write_replay_input(root: Any, out: Path, road_end_m: float) -> int:
     return n
 
 
+def _beside_fcd(fcd: Path, suffix: str) -> Path:
+    """A file :func:`write_sumocfg` writes or names beside the FCD ``fcd``: the FCD's name
+    less ``.gz``, ``.xml`` and ``.fcd`` (each if it ends so, in that order), plus ``suffix``:
+    ``.replay.xml`` (the fcd-replay input) or ``.rerun.xml`` (the re-run FCD output)."""
+    stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
+    return fcd.with_name(stem + suffix)
+
+
 def _refuse_commas(fcd_path: str | Path, path: str | Path) -> None:
     """Raise ValueError if a file the ``.sumocfg`` at ``path`` would list holds a comma in its
     path (SUMO splits file lists at commas, with no way to escape one: a configuration naming
@@ -521,9 +529,7 @@ def _refuse_commas(fcd_path: str | Path, path: str | Path) -> None:
     """
     from sumo_scenarios.scenarios import data_path
 
-    fcd = Path(fcd_path).resolve()
-    stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
-    replay_input = fcd.with_name(stem + ".replay.xml")
+    replay_input = _beside_fcd(Path(fcd_path).resolve(), ".replay.xml")
     try:
         named = str(replay_input.relative_to(Path(path).resolve().parent))
     except ValueError:
@@ -593,9 +599,8 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
     if not path.parent.is_dir():
         raise ValueError(f"the directory of {str(path)!r} does not exist; create it first")
     # (a gzipped FCD, "ep.fcd.xml.gz", is read as such; its replay input and re-run are plain)
-    stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
-    replay_input = fcd.with_name(stem + ".replay.xml")
-    rerun = fcd.with_name(stem + ".rerun.xml")
+    replay_input = _beside_fcd(fcd, ".replay.xml")
+    rerun = _beside_fcd(fcd, ".rerun.xml")
 
     def rel(p: Path) -> str:
         try:

@@ -66,12 +66,23 @@ LANE_NAMES = ("right shoulder", "right", "middle", "left", "left shoulder")
 
 
 def data_path(name: str) -> Path:
-    """Path of a shipped data file (``road.net.xml`` or ``driving.add.xml``)."""
+    """Path of a shipped data file (``road.net.xml`` or ``driving.add.xml``).
+
+    Raises:
+        FileNotFoundError: the file is missing (a damaged install), naming it and how to
+            restore it: the network is rebuilt by ``python -m sumo_scenarios.build_network``,
+            the vehicle types (written by hand) only come back with the package.
+    """
     path = Path(str(resources.files("sumo_scenarios") / "data" / name))
     if not path.exists():
-        raise FileNotFoundError(
-            f"{path} is missing; regenerate it with `python -m sumo_scenarios.build_network`"
+        fix = (
+            "rebuild it with `python -m sumo_scenarios.build_network` (or reinstall the package)"
+            if name == "road.net.xml"
+            else "it is written by hand and shipped, not generated: reinstall the package "
+            f"(sumo_scenarios), or in a git checkout restore it with `git checkout -- "
+            f"sumo_scenarios/data/{name}`"
         )
+        raise FileNotFoundError(f"{path} is missing: the install is damaged; {fix}")
     return path
 
 

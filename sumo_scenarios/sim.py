@@ -56,17 +56,33 @@ def _options() -> dict[str, str]:
     return {k: libsumo.simulation.getOption(k) for k in _OPTIONS}
 
 
-def _gone() -> str | None:
-    """Why libsumo, believed to run our simulation, does not (checked before every step, so
-    only the two options that tell another simulation apart best, about 1.5 us): "closed" (the
-    user closed it), "replaced" (and started their own), None while it is ours."""
+def _gone(time_ms: int, vehicles: int) -> str | None:
+    """Why libsumo, believed to run our simulation, does not as we left it (checked before
+    every step, so only what tells another simulation apart best, under 1 us): "closed" (the
+    user closed it), "replaced" (and started their own), "stepped" (the user stepped ours),
+    None while it is ours as we left it.
+
+    ``time_ms`` is the time our simulation is at (its steps since the reset times the step
+    length, milliseconds, SUMO's resolution); at 0 (no step since the reset) ``vehicles``,
+    how many vehicles the reset placed, tells a fresh simulation of the user's apart too: its
+    seed and additional file can be ours (SUMO's default seed with our vehicle types, as a
+    ``write_sumocfg`` configuration runs), its time and vehicles hardly.
+    """
     if not libsumo.simulation.isLoaded():
         return "closed"
     ours = _SUMO["options"]
+    if ours is None:
+        return None
     get = libsumo.simulation.getOption
-    if ours is not None and (
-        get("seed") != ours["seed"] or get("additional-files") != ours["additional-files"]
-    ):
+    if get("seed") != ours["seed"] or get("additional-files") != ours["additional-files"]:
+        return "replaced"
+    if round(libsumo.simulation.getTime() * 1000.0) != time_ms:
+        # ours, stepped by hand, still holds the ego and reports our options (a fresh one
+        # of the user's, with our vehicle types, has no vehicle yet)
+        return (
+            "stepped" if _options() == ours and EGO in libsumo.vehicle.getIDList() else "replaced"
+        )
+    if time_ms == 0 and libsumo.vehicle.getIDCount() != vehicles:
         return "replaced"
     return None
 
@@ -261,6 +277,7 @@ class HighwaySim:
         self.distance_m = 0.0
         self.n_recycled = 0
         self.n_shifts = 0
+        self._steps = 0
 
     # ------------------------------------------------------------------ lifecycle
     def _args(self, inputs: list[str], seed: int, fcd_path: Path | None) -> list[str]:
@@ -349,6 +366,7 @@ class HighwaySim:
         self.n_recycled = 0
         self.n_shifts = 0
         self.distance_m = 0.0
+        self._steps = 0  # SUMO steps since the load (its time: this many step lengths)
         x0 = self.config.ego_start_m
         _insert(EGO, "ego", ego_lane, x0, EGO_SPEED_MS)
         ids, lanes, pos, vdes = [], [], [], []
@@ -441,6 +459,7 @@ class HighwaySim:
         if target_lane != self.ego_lane:
             libsumo.vehicle.changeLane(EGO, target_lane, self.config.step_length_s)
         libsumo.simulationStep()
+        self._steps += 1
         get = libsumo.vehicle.getLanePosition
         old = self.ego_pos
         self.ego_pos = get(EGO)
@@ -525,7 +544,8 @@ class HighwaySim:
     def _check_owned(self) -> None:
         """Raise unless libsumo holds this simulation's road, saying why not."""
         if self._ready and self._state["owns"]:
-            gone = _gone()
+            ms = self._steps * round(self.config.step_length_s * 1000.0)
+            gone = _gone(ms, len(self.car_ids) + 1)  # the cars and the ego
             if gone is None:
                 return
             if gone == "closed":
@@ -533,6 +553,14 @@ class HighwaySim:
                     "this env's libsumo simulation was closed outside this env "
                     "(libsumo.close()): reset() this env to start a new one (on a fresh road "
                     "segment)"
+                )
+            if gone == "stepped":
+                raise RuntimeError(
+                    "this env's libsumo simulation was stepped outside this env (a "
+                    f"libsumo.simulationStep() of your own: its time is "
+                    f"{libsumo.simulation.getTime()!r} s, the env's {ms / 1000.0!r} s), and the "
+                    "env's measured speeds and road bookkeeping no longer hold: reset() this env "
+                    "to go on (on a fresh road segment); step it only through the env"
                 )
             raise RuntimeError(
                 "this process's libsumo runs a simulation not started by sumo_scenarios (a "

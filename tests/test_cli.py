@@ -1065,6 +1065,25 @@ def test_replay_never_writes_over_the_recording_it_replays(tmp_path, capsys):
     assert episodes.read_bytes() == files[episodes]
 
 
+def test_replay_refuses_a_sumocfg_or_replay_input_path_that_is_a_directory(tmp_path, capsys):
+    """The .sumocfg (EP.sumocfg) or the fcd-replay input (EP.replay.xml) written beside --fcd
+    EP.fcd.xml is a directory: one line, exit code 2, nothing written. (The FCD was written
+    first, and only then was the .sumocfg refused; a replay input that was a directory ended
+    in a bare IsADirectoryError.)"""
+    episodes = _recorded_episodes(tmp_path / "episodes.json")
+    fcd = tmp_path / "ep.fcd.xml"
+    for name in ("ep.sumocfg", "ep.replay.xml"):
+        (tmp_path / name).mkdir()
+        files = sorted(p.name for p in tmp_path.iterdir())
+        argv = ["replay", str(episodes), "--fcd", str(fcd), "--max-frames", "2"]
+        assert main(argv) == 2, name
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1, (name, out, err)
+        assert f"{tmp_path / name}, is a directory; expected a file path" in err, (name, err)
+        assert sorted(p.name for p in tmp_path.iterdir()) == files, name
+        (tmp_path / name).rmdir()
+
+
 def test_replay_to_a_gzipped_fcd_writes_a_sumocfg_that_sumo_runs(tmp_path, capsys):
     """--fcd EP.fcd.xml.gz (SUMO writes a gzipped FCD for a name ending in .gz): the FCD, a
     .sumocfg named EP.sumocfg and the GIF are written, and `sumo -c` replays the recorded
@@ -1213,6 +1232,20 @@ def test_an_output_directory_that_cannot_be_written_is_refused_before_the_run(tm
         assert proc.stderr.count("\n") == 1, (argv, proc.stderr)
         assert f"cannot write in {locked}" in proc.stderr, (argv, proc.stderr)
     assert sorted(p.name for p in tmp_path.iterdir() if p != locked) == ["episodes.json"]
+
+
+def test_benchmark_names_a_non_strategy_by_its_type_not_its_repr(tmp_path, capsys):
+    """--strategies builtins:object: the one line names the spec as written and the type, and
+    which methods it lacks, not the object's repr. (It said "got <object object at
+    0x7f46531362f0> without bind()": a memory address, different in every run.)"""
+    out = tmp_path / "bench"
+    assert main(["benchmark", "--strategies", "builtins:object", "--out", str(out)]) == 2
+    stdout, err = capsys.readouterr()
+    assert stdout == "" and err.count("\n") == 1, err
+    assert "--strategies builtins:object: object is not a strategy" in err, err
+    assert " at 0x" not in err and "<object" not in err, err
+    assert "it has no bind(), episode_start(), decide()" in err, err
+    assert not out.exists()
 
 
 @pytest.mark.parametrize(

@@ -666,6 +666,61 @@ def test_a_step_after_the_user_closed_the_envs_simulation_says_so():
         env.close()
 
 
+def test_a_step_over_a_user_simulation_with_the_envs_seed_and_vehicle_types_says_so():
+    """The researcher closes the env's libsumo simulation and starts one of their own with the
+    env's vehicle types and SUMO's default seed, 23423 (as sumo -c on a write_sumocfg
+    configuration does), which is also the env's SUMO seed for reset(seed=23423): the env's
+    step raises the RuntimeError saying what happened, at once after the reset or later, and
+    leaves theirs untouched. (Both options the step compared matched, so theirs passed as the
+    env's: it was stepped, and the env then failed inside libsumo, "Vehicle 'ego' is not
+    known".)"""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
+    env = DrivingEnv(scenario="light")
+    theirs = ["sumo", "-n", str(data_path("road.net.xml")), "-a", str(data_path("driving.add.xml"))]
+    try:
+        for steps in (0, 2):
+            env.reset(seed=23423)
+            for _ in range(steps):
+                env.step(STAY)
+            libsumo.close()
+            libsumo.start([*theirs, "--step-length", "0.25", "--no-step-log", "true"])
+            try:
+                assert libsumo.simulation.getOption("seed") == "23423"
+                with pytest.raises(RuntimeError, match=r"not started by sumo_scenarios.*close it"):
+                    env.step(STAY)
+                assert libsumo.simulation.getTime() == 0.0, steps  # theirs was not stepped
+            finally:
+                libsumo.close()
+        env.reset(seed=1)  # theirs closed: the env starts its own again
+        env.step(STAY)
+    finally:
+        env.close()
+
+
+def test_a_step_after_the_user_stepped_the_envs_simulation_says_so():
+    """libsumo.simulationStep() called by hand on the env's own simulation: the env's next step
+    raises a RuntimeError saying so (its cars' speeds, measured over one step, and its road
+    bookkeeping would be off), not that another simulation replaced it; a reset goes on."""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
+    env = DrivingEnv(scenario="light")
+    try:
+        env.reset(seed=0)
+        env.step(STAY)
+        libsumo.simulationStep()
+        with pytest.raises(RuntimeError, match=r"stepped outside this env.*reset\(\)"):
+            env.step(STAY)
+        env.reset(seed=1)
+        env.step(STAY)
+    finally:
+        env.close()
+
+
 def test_closing_the_env_leaves_a_simulation_the_user_started_in_its_place_running():
     """The researcher closes the env's libsumo simulation and starts one of their own: the
     env's close(), or its collection when dropped unclosed, leaves theirs running. (Both

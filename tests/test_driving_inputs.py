@@ -802,3 +802,64 @@ def test_a_damaged_shipped_network_is_named_with_the_way_to_rebuild_it(tmp_path)
     for line in lines:
         assert str(site / "sumo_scenarios" / "data" / "road.net.xml") in line, line
         assert "python -m sumo_scenarios.build_network" in line, line
+
+
+def test_a_missing_shipped_data_file_is_named_with_the_way_to_restore_it(tmp_path):
+    """A shipped data file deleted: DrivingEnv() (road.net.xml) or reset() (driving.add.xml,
+    also when the fcd_output check compares a path with it) raises a FileNotFoundError naming
+    the file and how to restore it. (For driving.add.xml it said "regenerate it with `python -m
+    sumo_scenarios.build_network`", which writes only the network: the vehicle types are
+    hand-written, and the advice left the install broken.) Run on a copy of the package, in a
+    process of its own."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import sumo_scenarios
+
+    site = tmp_path / "site"
+    shutil.copytree(
+        Path(sumo_scenarios.__file__).parent,
+        site / "sumo_scenarios",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    data = site / "sumo_scenarios" / "data"
+    (tmp_path / "old.fcd.xml").write_text("<fcd-export/>")
+    code = (
+        "import os\n"
+        "from sumo_scenarios.env import DrivingEnv\n"
+        "from sumo_scenarios.scenarios import data_path\n"
+        "env = DrivingEnv(scenario='light')\n"
+        "for options in ({'fcd_output': 'old.fcd.xml'}, {}):\n"
+        "    try:\n"
+        "        env.reset(seed=0, options=options)\n"
+        "        print('accepted')\n"
+        "    except FileNotFoundError as exc:\n"
+        "        print(exc)\n"
+        "env.close()\n"
+        "os.remove(data_path('road.net.xml'))\n"
+        "try:\n"
+        "    DrivingEnv(scenario='light')\n"
+        "    print('accepted')\n"
+        "except FileNotFoundError as exc:\n"
+        "    print(exc)\n"
+    )
+    (data / "driving.add.xml").unlink()
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr[-2000:]
+    lines = out.stdout.splitlines()
+    assert len(lines) == 3, out.stdout
+    for line in lines[:2]:
+        assert line.startswith(f"{data / 'driving.add.xml'} is missing"), line
+        assert "reinstall" in line and "build_network" not in line, line
+    assert lines[2].startswith(f"{data / 'road.net.xml'} is missing"), lines[2]
+    assert "python -m sumo_scenarios.build_network" in lines[2], lines[2]

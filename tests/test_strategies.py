@@ -112,6 +112,50 @@ def test_default_strategy_is_confident_execution_and_is_rebuilt_on_resume(tmp_pa
         strategy_from_config({"type": "Nope"})
 
 
+def test_a_failed_rebuild_names_the_call_made_and_advises_on_keys_only_when_they_are_wrong(
+    monkeypatch,
+):
+    """strategy_from_config turned every TypeError into "as X(**params): ...; the keys of its
+    to_config() must be its constructor's keyword arguments", also when a registered function
+    (called with the dict) or the shipped ConfidentExecution builder (which rebuilds the rule)
+    was the call, or when the constructor took the keys and refused a value's type. Now the
+    message names the call made, and gives the key advice only where the keys do not fit."""
+    from torchcbl import strategies
+
+    class Picky:
+        def __init__(self, k: int = 1) -> None:
+            if not isinstance(k, int):
+                raise TypeError(f"k must be an int, got {k!r}")
+
+    def build(params):
+        return Picky(**params)
+
+    monkeypatch.setitem(strategies.STRATEGIES, "Picky", Picky)
+    monkeypatch.setitem(strategies.STRATEGIES, "PickyFn", build)
+    advice = "must be its constructor's keyword arguments"
+    with pytest.raises(TypeError) as err:  # the keys fit, a value does not
+        strategy_from_config({"type": "Picky", "k": "a"})
+    msg = str(err.value)
+    assert "Picky(**{'k': 'a'}) raised TypeError: k must be an int, got 'a'" in msg, msg
+    assert advice not in msg and "strategy=<your strategy>" in msg, msg
+    with pytest.raises(TypeError) as err:  # a key the constructor does not take
+        strategy_from_config({"type": "Picky", "j": 1})
+    msg = str(err.value)
+    assert "as Picky(**{'j': 1})" in msg and advice in msg, msg
+    with pytest.raises(TypeError) as err:  # a function, called with the dict
+        strategy_from_config({"type": "PickyFn", "j": 1, "relabel": False})
+    msg = str(err.value)
+    assert "STRATEGIES['PickyFn']({'j': 1})" in msg and "PickyFn(**" not in msg, msg
+    assert advice not in msg and "unexpected keyword argument 'j'" in msg, msg
+    with pytest.raises(TypeError) as err:  # the shipped builder rebuilds the rule
+        strategy_from_config(
+            {"type": "ConfidentExecution", "rule": {"type": "DistanceRule", "j": 1}}
+        )
+    msg = str(err.value)
+    assert "ConfidentExecution(rule_from_config({'type': 'DistanceRule', 'j': 1}))" in msg, msg
+    assert advice not in msg and "unexpected keyword argument 'j'" in msg, msg
+
+
 def test_a_rule_that_takes_observations_gets_them():
     seen: list[np.ndarray] = []
 

@@ -343,22 +343,10 @@ def _replace_seeds(config: Any, n_seeds: int) -> Any:
     raise _UsageError(f"--seeds is not supported by {type(config).__name__}")
 
 
-def _sessions_below(path: Path, limit: int = 5) -> list[Path]:
-    """Teaching session directories one to three levels below ``path`` (at most ``limit``)."""
-    found: list[Path] = []
-    for pattern in ("*/config.json", "*/*/config.json", "*/*/*/config.json"):
-        for config in sorted(path.glob(pattern)):
-            if (config.parent / "steps.sqlite").exists():
-                found.append(config.parent)
-                if len(found) >= limit:
-                    return found
-    return found
-
-
 def _session_domain(session: Path, asked: str | None, *, teach: bool = False) -> str:
     """The domain a teaching session was taught in, read from its config.json; ``asked`` (the
     user's --domain, if any) must agree with it."""
-    from torchcbl.session import IncompatibleRunDirError, load_config
+    from torchcbl.session import IncompatibleRunDirError, _sessions_below, load_config
 
     if not session.exists():
         raise _UsageError(f"{session} does not exist; {_SESSION_HINT}")
@@ -510,7 +498,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     # EP.fcd.xml(.gz) -> EP.sumocfg
     cfg = fcd.with_name(fcd.name.removesuffix(".gz").replace(".fcd.xml", "") + ".sumocfg")
     _replay_outputs_spare(path, gif, fcd, cfg)
-    if "," in fcd.name:  # before anything is written (write_sumocfg refuses it after the FCD)
+    # (_refuse_commas below refuses this too, but names the fcd-replay input, not --fcd)
+    if "," in fcd.name:
         raise _UsageError(
             f"--fcd {fcd}: the .sumocfg beside it names its fcd-replay input after it, and SUMO "
             "splits file lists at commas; give --fcd a name without a comma"
@@ -530,8 +519,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(f"FCD written to {fcd}")
     try:
         cfg = replay.write_sumocfg(record, fcd, cfg)
-    except ValueError as exc:  # its checks not made above (the commas were): the FCD just
-        # written does not read back as this record's, or the .sumocfg path is a directory
+    except ValueError as exc:  # its one check not made above (the commas and directories
+        # were): the FCD just written does not read back as this record's
         raise _UsageError(str(exc)) from None
     print(f"SUMO configuration written to {cfg} (open with: sumo-gui -c {_shell(cfg)})")
     replay.render_gif(record, gif, every=args.every, max_frames=args.max_frames)
@@ -550,10 +539,10 @@ def _replay_outputs_spare(source: Path, gif: Path, fcd: Path, cfg: Path) -> None
     """A one-line error, before anything is written, if a file replay writes (the GIF, the
     FCD, the .sumocfg and the fcd-replay input beside it) is the episodes file being replayed or
     a file of the session being replayed (its log, its config), or is another of the outputs:
-    writing it would destroy the recording, or one output would overwrite another."""
-    # (write_sumocfg names its fcd-replay input so)
-    stem = fcd.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".fcd")
-    replay_input = fcd.with_name(stem + ".replay.xml")
+    writing it would destroy the recording, or one output would overwrite another; or if it is
+    a directory (the GIF and FCD are checked so before, the two files beside the FCD here)."""
+    replay = importlib.import_module("sumo_scenarios.replay")
+    replay_input = replay._beside_fcd(fcd, ".replay.xml")  # as write_sumocfg names it
     outputs = [
         (f"--gif {gif}", gif),
         (f"--fcd {fcd}", fcd),
@@ -569,6 +558,11 @@ def _replay_outputs_spare(source: Path, gif: Path, fcd: Path, cfg: Path) -> None
             raise _UsageError(
                 f"{what} is {kept} being replayed: writing it would destroy the recording; "
                 "choose another path (or leave --gif/--fcd out: the default is beside it)"
+            )
+        if out.is_dir():
+            raise _UsageError(
+                f"{what} is a directory; expected a file path: move it away or give "
+                "--fcd another name"
             )
         if target in seen:
             raise _UsageError(
@@ -701,6 +695,8 @@ def _read_prior_demonstrations(path: Path) -> tuple[Any, Any]:
 
     flag = f"--prior-demonstrations {path}"
     if path.is_dir() and not (path / "config.json").exists():
+        from torchcbl.session import _sessions_below
+
         below = _sessions_below(path)
         if below:  # a run directory (runs/reproduce/corridor) or a folder of sessions
             shown = ", ".join(str(p) for p in below)
@@ -933,7 +929,7 @@ def _check_strategy(spec: Any) -> None:
     class imports, is made with the --strategy-param given for it and has the
     methods :class:`~torchcbl.teaching.ConfidentTeacher` calls (``to_config`` is optional, as
     for the loop: a strategy without it is stored as custom)."""
-    from torchcbl.teaching import _pick_strategy
+    from torchcbl.teaching import _STRATEGY_METHODS, _pick_strategy
 
     try:
         strategy = spec.build(seed=0)
@@ -957,12 +953,21 @@ def _check_strategy(spec: Any) -> None:
             f"--strategies {spec.name}: cannot make it ({type(exc).__name__}: {text}); expected "
             f"module:Class of a strategy, or a shipped name{params}"
         ) from None
-    try:  # the loop's own check: it names the method that is missing
+    try:  # the loop's own check
         _pick_strategy(None, strategy)
     except TypeError as exc:
+        # named by its type: the loop's message shows the object's repr (a memory address)
+        missing = [n for n in _STRATEGY_METHODS if not callable(getattr(strategy, n, None))]
+        why = (
+            f"it has no {', '.join(f'{n}()' for n in missing)} (a torchcbl.strategies.Strategy "
+            f"has the methods {', '.join(_STRATEGY_METHODS)}); see the protocol in "
+            "torchcbl.strategies (an episode_start that does nothing is "
+            "`def episode_start(self): pass`)"
+            if missing and not isinstance(strategy, type)
+            else _one_line(exc).removeprefix("strategy: ")
+        )
         raise _UsageError(
-            f"--strategies {spec.name}: {type(strategy).__name__} is not a strategy: "
-            f"{_one_line(exc).removeprefix('strategy: ')}"
+            f"--strategies {spec.name}: {type(strategy).__name__} is not a strategy: {why}"
         ) from None
 
 

@@ -286,18 +286,15 @@ def _labels(actions: Any, n: int, n_actions: int) -> torch.Tensor:
     answers, or a float label be truncated, and the thresholds come out silently wrong)."""
     if isinstance(actions, torch.Tensor):
         y = actions.detach().cpu().numpy()
-        fix = ".long()"
     else:
         y = np.asarray(actions)
-        fix = (
-            ".astype(int)"
-            if isinstance(actions, np.ndarray)
-            else "numpy.asarray(actions, dtype=int)"
-        )
     if y.dtype.kind not in "iu":  # a TypeError, as GaussianMixtureSet.fit says it
+        from torchcbl.gmm import _conversion  # the same advice as fit's
+
         raise TypeError(
             f"AutoThresholdRule.update: expected actions as integer labels but got dtype "
-            f"{y.dtype}; pass the labels the model was fitted on (convert with {fix})"
+            f"{y.dtype}; pass the labels the model was fitted on (convert with "
+            f"{_conversion(actions, 'actions', 'int')})"
         )
     if y.shape != (n,):
         raise ValueError(

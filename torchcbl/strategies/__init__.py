@@ -383,7 +383,9 @@ def strategy_from_config(config: dict[str, Any]) -> Any:
     Raises:
         ValueError: a custom strategy or rule (pass it to ``resume`` yourself), or an unknown
             type.
-        TypeError: the class does not take the dict's keys as keyword arguments.
+        TypeError: the rebuild raised one (the message names the call made: the class with
+            the dict's keys as keyword arguments, or the function registered, with the dict),
+            e.g. the class does not take the dict's keys as keyword arguments.
     """
     kind = config.get("type")
     if config.get("custom"):
@@ -404,12 +406,48 @@ def strategy_from_config(config: dict[str, Any]) -> Any:
         if isinstance(build, type):  # a class registered as the module docstring says
             return build(**params)
         return build(params)
-    except TypeError as exc:  # the stored keys are not the constructor's keyword arguments
-        raise TypeError(
-            f"cannot rebuild strategy {kind!r} from a run directory as {kind}(**{params!r:.200}): "
-            f'{exc}; the keys of its to_config() (other than "type" and "relabel") must be '
-            "its constructor's keyword arguments. Pass strategy=<your strategy> to resume()."
-        ) from exc
+    except TypeError as exc:
+        raise TypeError(_rebuild_failed(str(kind), build, params, exc)) from exc
+
+
+def _rebuild_failed(
+    kind: str, build: Callable[..., Any], params: dict[str, Any], exc: Exception
+) -> str:
+    """The message for a TypeError from ``STRATEGIES[kind]`` called with ``params``: the call
+    made, and the advice on the keys only where the keys do not fit the constructor (not where
+    the constructor refused a value, nor for a registered function, whose keys are its own)."""
+    import inspect
+
+    cls = build if isinstance(build, type) else None
+    builds = getattr(build, "_builds", None)
+    if cls is None and isinstance(builds, tuple):  # a shipped builder: imported by the call
+        cls = getattr(sys.modules.get(builds[0]), builds[1], None)
+    shown = f"{params!r:.200}"
+    if build is _build_ce:
+        call, cls = f"ConfidentExecution(rule_from_config({params.get('rule')!r:.200}))", None
+    elif isinstance(cls, type):
+        call = f"{cls.__name__}(**{shown})"
+    else:
+        name = getattr(build, "__name__", type(build).__name__)
+        call = f"STRATEGIES[{kind!r}]({shown}) (the function {name}, given the dict)"
+    keys_fit = True
+    if isinstance(cls, type):
+        try:
+            inspect.signature(cls).bind(**params)
+        except TypeError:
+            keys_fit = False
+        except ValueError:  # no signature to check against
+            pass
+    if not keys_fit:
+        return (
+            f"cannot rebuild strategy {kind!r} from a run directory as {call}: {exc}; the keys "
+            'of its to_config() (other than "type" and "relabel") must be its constructor\'s '
+            "keyword arguments. Pass strategy=<your strategy> to resume()."
+        )
+    return (
+        f"cannot rebuild strategy {kind!r} from a run directory: {call} raised TypeError: "
+        f"{exc}. Pass strategy=<your strategy> to resume()."
+    )
 
 
 class _Correcting:
