@@ -12,6 +12,12 @@ libsumo holds one simulation per process. Several :class:`HighwaySim` objects ma
 simulation belongs to the one whose :meth:`HighwaySim.reset` ran last: a reset of another takes it
 over, and the first then raises :class:`RuntimeError` (saying so) until it is reset again, on a
 fresh road segment. Two simulations running at once need two processes.
+
+A simulation the user started with libsumo (``libsumo.start``, also after closing ours with
+``libsumo.close()``) is never loaded over, closed or stepped: a reset refuses to start while it
+runs, and close leaves it running. Before every step the simulation checks that libsumo still
+holds ours as we left it, SUMO's clock included, and raises :class:`RuntimeError` saying what
+happened (closed, stepped by hand, or replaced by the user's own) instead of stepping.
 """
 
 from __future__ import annotations

@@ -1785,11 +1785,16 @@ def load_records(run_dir: str | os.PathLike[str]) -> list[StepRecord]:
 
     Raises:
         CorruptSessionError: a file of the session is damaged (the message says which and how
-            to recover).
+            to recover); or its ``-wal`` is missing and the log lacks steps or corrections
+            ``writer.lock`` says were committed, or its journal is missing and ``writer.lock``
+            says it held steps not yet committed (the module docstring, "A lost -wal").
 
     Warns:
         UserWarning: the log lacks steps (rows or journal lines removed by something other than
-            torchcbl), naming them; the records read are those that remain.
+            torchcbl), naming them; the records read are those that remain. Or the log holds
+            fewer steps or corrections than ``writer.lock`` says were committed, its ``-wal``
+            and journal there (a copy taken while the writer ran, or a power cut): what the
+            files hold is read.
     """
     load_config(run_dir)
     return _read_log(run_dir)[0]
@@ -2386,6 +2391,9 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
     valid line that still gives a gap-free log: a step that continues the log, an outcome or
     a correction of a step the log has. The lines it drops (steps after a lost one) stay in the
     copy. Afterwards the session resumes as usual. Needs the writer lock (no writer running).
+    A session whose ``-wal`` or journal is missing while ``writer.lock`` says it held steps the
+    log lacks is refused first (:class:`CorruptSessionError`, nothing changed): no rewrite of
+    the journal mends that.
     """
     run = Path(run_dir)
     load_config(run)

@@ -804,11 +804,21 @@ class ConfidentTeacher:
                 stored ones (a custom rule or strategy that cannot be rebuilt must be passed).
 
         Raises:
+            TypeError: ``env`` is not an env (an env id: make it first with
+                ``gymnasium.make``).
             IncompatibleRunDirError: the directory is not a session, or it was written for a
                 different env, model, rule or learning configuration.
-            CorruptSessionError: a file of the session is damaged, or its log lacks steps
-                (nothing is changed; the message says how to recover).
+            CorruptSessionError: a file of the session is damaged, its log lacks steps, or its
+                ``-wal`` or journal is missing while ``writer.lock`` says it held steps the log
+                lacks (nothing is changed; the message says how to recover).
             SessionLockedError: another writer has the directory open.
+
+        Warns:
+            UserWarning: the log holds fewer steps than ``writer.lock`` says were committed,
+                its ``-wal`` there (a copy taken while the writer ran, or a power cut): the
+                session goes on from what the files hold. Or the stored strategy's
+                ``"relabel"`` is not the strategy's (a session stored before a new session
+                refused that): the loop relabels as the strategy says, the readers as stored.
         """
         stored = load_config(run_dir)
         n_features, n_actions = check_env(env)

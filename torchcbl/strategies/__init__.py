@@ -9,7 +9,8 @@ The loop owns everything else: the env, the teacher, the model and its refit sch
 
 The protocol (:class:`Strategy`), in the order the loop calls it::
 
-    strategy.bind(n_actions=A, n_features=D, config=teaching_config)   # once, before anything
+    strategy.bind(n_actions=A, n_features=D, config=teaching_config)   # once per session
+                                             # (new or resumed), before anything
     # on resume only: the log is replayed into the strategy, then one refit
     for record in log:                       # in step order
         if record.teacher_action is not None:
@@ -51,10 +52,16 @@ Rules a strategy must keep:
   ``STRATEGIES["MyStrategy"] = MyStrategy``, in the process that resumes; it is called with
   the dict's other keys as keyword arguments). The ``"type"`` must name the strategy's own
   class: a session refuses to start with a class whose ``"type"`` names a ``STRATEGIES``
-  entry that rebuilds another class (a class of one's own called ``DAgger``). A subclass
+  entry that rebuilds another class (a class of one's own called ``DAgger``). Classes are
+  compared by module and qualified name, so an object made before its module was reloaded
+  (``importlib.reload``, IPython's autoreload) passes. A subclass
   of that class passes: one that keeps its parent's ``to_config`` is stored as, and resumes
   as, its parent (pass it again to ``resume``, or give it a ``"type"`` of its own and
-  register it, if it behaves otherwise). A strategy without
+  register it, if it behaves otherwise). ``"relabel"`` must be the strategy's ``relabel``
+  attribute (it may be left out when that is False): the session's readers relabel as the
+  stored dict says, so a session refuses to start with a dict that misstates it (a
+  TypeError, nothing written); a session stored before that check resumes with a warning
+  naming both values. A strategy without
   ``to_config`` (or whose ``to_config`` returns None, as a subclass of :class:`Strategy` that
   does not define one) is stored as custom and must be passed again to ``resume``.
 
