@@ -851,8 +851,9 @@ def test_a_wal_lost_after_its_tables_reached_the_log_is_said_to_be_missing(tmp_p
 
 
 def test_a_session_copied_while_its_writer_ran_reads_and_resumes_with_a_warning(tmp_path):
-    """cp -a and rsync copy writer.lock last (in name order), so a copy taken while the writer
-    runs can hold a writer.lock that counts commits made after the log was copied. Every
+    """A copy that takes writer.lock after the log (rsync does, by name order; GNU cp -a goes
+    in directory order, either way) taken while the writer runs can hold a writer.lock that
+    counts commits made after the log was copied. Every
     reader, resume and repair_journal refused such a copy with a CorruptSessionError ("the
     rest are not in the session's files"), though its -wal and journal are there and it reads
     as a consistent earlier state of the session, as it did before writer.lock held counts.

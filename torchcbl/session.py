@@ -123,14 +123,14 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   ``writer.lock``'s committed counts: a log holding fewer steps or corrections than they say,
   its ``-wal`` missing, is a :class:`CorruptSessionError` for every reader, resume and
   :func:`repair_journal`, naming the missing ``-wal``, changing nothing; removing
-  ``writer.lock`` accepts the loss. With the ``-wal`` there, a log holding fewer is what a
-  copy taken while the writer ran holds (``cp -a`` and rsync take ``writer.lock`` last, after
-  the writer committed more) or what a power cut left: it is read, and resumed, as it is, with
-  a warning naming both counts; resume then notes its own counts. Likewise a missing
-  ``steps.journal`` that ``writer.lock`` says held lines not yet committed (the writer was
-  killed with steps only there) is a :class:`CorruptSessionError` naming it; one that held
-  none (a cleanly closed session's) is not. A copy without ``writer.lock`` (or a session whose
-  last writer was a torchcbl without these notes) is not checked.
+  ``writer.lock`` accepts the loss. With the ``-wal`` there, a log holding fewer is what a copy
+  taken while the writer ran holds (a copy that took ``writer.lock`` after the log, as rsync
+  does by name order, after the writer committed more) or what a power cut left: it is read, and
+  resumed, as it is, with a warning naming both counts; resume then notes its own counts.
+  Likewise a missing ``steps.journal`` that ``writer.lock`` says held lines not yet committed
+  (the writer was killed with steps only there) is a :class:`CorruptSessionError` naming it; one
+  that held none (a cleanly closed session's) is not. A copy without ``writer.lock`` (or a
+  session whose last writer was a torchcbl without these notes) is not checked.
 - Two writers. The writer holds ``writer.lock`` with ``fcntl.flock`` (released by the kernel
   when the process dies, SIGKILL included); a second writer gets :class:`SessionLockedError`.
 
@@ -869,10 +869,10 @@ def _check_committed(
     in order, and ``n_corrections``) lacks the last steps, or corrections, its writers
     committed (``committed``, read before the log), as it does without its -wal, or if the
     journal is missing while it held steps not yet committed. With the -wal and the journal
-    there, a log holding fewer is what a copy taken while the writer ran holds (cp and rsync
-    take writer.lock last) or what a power cut left: warned (``stacklevel`` for
-    :func:`warnings.warn`), and read as it is. (Steps missing before others the log holds are
-    a gap, said by the readers and resume.)"""
+    there, a log holding fewer is what a copy taken while the writer ran holds (a copy that took
+    writer.lock after the log: rsync does, by name order) or what a power cut left: warned
+    (``stacklevel`` for :func:`warnings.warn`), and read as it is. (Steps missing before others
+    the log holds are a gap, said by the readers and resume.)"""
     if committed is None:
         return
     journal, lock = run_dir / JOURNAL_NAME, run_dir / LOCK_NAME
@@ -897,9 +897,10 @@ def _check_committed(
             f"{run_dir}: {lock.name} says its writer committed {committed[0]} steps and "
             f"{committed[1]} corrections, but the log holds {n_steps} of those steps and "
             f"{n_corrections} corrections. Either the directory was copied while its writer "
-            f"ran (cp and rsync take {lock.name} last, after the writer committed more; the "
-            "copy holds the session as it was earlier), or a power cut lost commits not yet "
-            f"on the disk (or an older {log.name} was put back). What the files hold is read; "
+            f"ran (a copy that took {lock.name} after the log, as rsync does by name order, "
+            "after the writer committed more; the copy holds the session as it was "
+            "earlier), or a power cut lost commits not yet on the disk (or an older "
+            f"{log.name} was put back). What the files hold is read; "
             f"a resume goes on from there and notes its own counts in {lock.name}. For the "
             "steps missing here, read the directory this one was copied from, once its writer "
             "has stopped.",
