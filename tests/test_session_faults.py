@@ -927,6 +927,49 @@ def test_a_torn_read_of_writer_locks_counts_is_not_taken_for_a_count(tmp_path):
     assert load_records(run) == want
 
 
+def test_a_writer_that_cannot_note_itself_in_writer_lock_keeps_the_count_there(
+    tmp_path, monkeypatch
+):
+    """A new writer notes itself in writer.lock, keeping the last writer's count line. It
+    truncated the file to nothing and then wrote the holder and count lines, so a write that
+    failed (a full disk: the error is swallowed, the lock holds without the note) or a SIGKILL
+    between the two left writer.lock without the count: a -wal lost after that was read as a
+    shorter session with no word, until the writer's next note. Here every write to
+    writer.lock fails while a resume takes it: the count line of the last writer is still
+    there, and once writes go through again the writer notes its own."""
+    run = tmp_path / "run"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=20)
+    ct.close()
+    count = b"committed to steps.sqlite:           20 steps"
+    assert count in (run / "writer.lock").read_bytes()
+
+    def lock_fd(fd: int) -> bool:
+        return os.readlink(f"/proc/self/fd/{fd}").endswith("writer.lock")
+
+    def failing(real):
+        def write(fd, *args):
+            if lock_fd(fd):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            return real(fd, *args)
+
+        return write
+
+    real_write, real_pwrite = os.write, os.pwrite
+    monkeypatch.setattr(os, "write", failing(real_write))
+    monkeypatch.setattr(os, "pwrite", failing(real_pwrite))
+    ct, env = resume(run, commit_every=4)
+    assert count in (run / "writer.lock").read_bytes()
+    monkeypatch.setattr(os, "write", real_write)
+    monkeypatch.setattr(os, "pwrite", real_pwrite)
+    ct.run(max_steps=24)  # a commit: the writer's own note
+    lock = (run / "writer.lock").read_bytes()
+    assert b"committed to steps.sqlite:           24 steps" in lock, lock
+    assert len(lock.splitlines()) == 2, lock
+    ct.close()
+    assert len(load_records(run)) == 24
+
+
 def test_a_journal_deleted_while_it_held_steps_is_said_to_be_missing(tmp_path):
     """A writer killed with steps only in steps.journal (not yet committed to steps.sqlite),
     whose journal was then deleted by hand or left out of a copy, read as the shorter session

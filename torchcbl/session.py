@@ -811,15 +811,15 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
         # what the last writer committed stays (its log is checked against it before a
         # writer opens it, see _check_committed); the writer then notes its own counts
         committed = None if new_session else _committed_line(os.pread(f.fileno(), 4096, 0))
+        note = f"process {os.getpid()} on {socket.gethostname()}\n".encode() + (
+            committed.group(0) if committed else b""  # a torn or damaged one not kept
+        )
         # straight to the file, not through f's buffer: a note that does not fit (full disk)
         # would stay buffered, and closing the lock would write it again and raise, hiding
-        # the error that closing it goes with
-        os.ftruncate(f.fileno(), 0)
-        os.write(
-            f.fileno(),
-            f"process {os.getpid()} on {socket.gethostname()}\n".encode()
-            + (committed.group(0) if committed else b""),  # a torn or damaged one not kept
-        )
+        # the error that closing it goes with. Written over the old note, then cut to its
+        # length: never a moment (a SIGKILL, a write that fails) without the count line
+        if os.pwrite(f.fileno(), note, 0) == len(note):
+            os.ftruncate(f.fileno(), len(note))
     except OSError:
         pass  # the lock holds without the note
     return f
@@ -1286,9 +1286,14 @@ class SessionStore:
         try:
             if self._note_at < 0:  # the first note of this writer: after the holder line
                 head = os.pread(fd, 4096, 0).split(b"\n", 1)[0]
-                self._note_at = len(head) + 1 if head else 0
-                os.ftruncate(fd, self._note_at)
-            os.pwrite(fd, line, self._note_at)
+                at = len(head) + 1 if head else 0
+                # over the last writer's note, then cut to its end (once written whole): the
+                # count line is never gone, as it was between a truncation and the write
+                if os.pwrite(fd, line, at) == len(line):
+                    os.ftruncate(fd, at + len(line))
+                    self._note_at = at
+            else:
+                os.pwrite(fd, line, self._note_at)
         except OSError:
             pass
 
