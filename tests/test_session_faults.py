@@ -896,6 +896,41 @@ def test_a_session_copied_while_its_writer_ran_reads_and_resumes_with_a_warning(
         back.close()
 
 
+def test_a_readers_warning_about_the_session_points_at_the_readers_caller(tmp_path):
+    """The warnings of a copy taken while the writer ran, and of steps missing from the log,
+    named torchcbl's own session.py as their place for load_model and load_demonstrations
+    (and load_policy), which read the log through load_labels: a user filtering warnings by
+    module, or reading where one came from, was sent into torchcbl. Every reader's warnings
+    now point at the line that called it, here this file."""
+    run, copy = tmp_path / "run", tmp_path / "copy"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=20)
+    shutil.copytree(run, copy, ignore=shutil.ignore_patterns("writer.lock"))
+    ct.run(max_steps=30)  # the writer commits 10 more steps meanwhile
+    shutil.copy2(run / "writer.lock", copy / "writer.lock")  # copied last
+    ct.close()
+    gap = tmp_path / "gap"
+    shutil.copytree(run, gap)
+    db = sqlite3.connect(gap / "steps.sqlite")
+    db.execute("DELETE FROM steps WHERE step IN (5, 6)")
+    db.commit()
+    db.close()
+    readers = (
+        load_records,
+        load_labels,
+        load_corrections,
+        load_demonstrations,
+        load_model,
+        S.load_policy,
+    )
+    for where, said in ((copy, "copied while its writer ran"), (gap, r"lacks 2 steps \(5, 6\)")):
+        for read in readers:
+            with pytest.warns(UserWarning, match=said) as got:
+                read(where)
+            places = {(Path(w.filename).name, read.__name__) for w in got}
+            assert places == {(Path(__file__).name, read.__name__)}, places
+
+
 def test_a_torn_read_of_writer_locks_counts_is_not_taken_for_a_count(tmp_path):
     """The writer rewrites writer.lock's count line in place and readers read it without a
     lock, so a read that overlaps the rewrite can see the new line's first bytes and the old

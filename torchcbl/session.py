@@ -1736,9 +1736,12 @@ def _gap_text(missing: list[int]) -> str:
     )
 
 
-def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[int, int]]:
+def _read_log(
+    run_dir: str | os.PathLike[str], *, depth: int = 0
+) -> tuple[list[StepRecord], dict[int, int]]:
     """Every record and the corrections ``{step: action}`` of a run directory, read-only;
-    warns when steps are missing."""
+    warns when steps are missing. The warnings point at the caller of the public reader that
+    called this, ``depth`` frames of torchcbl's own between them."""
     run = Path(run_dir)
     wal = run / (LOG_NAME + "-wal")
     log = run / LOG_NAME
@@ -1760,7 +1763,8 @@ def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[i
             break
         # A writer opened the session while we read without its WAL (and may have closed it
         # again, checkpointing into the log): read again.
-    _check_committed(run, committed, [row[0] for row in rows], len(corrections), stacklevel=3)
+    steps = [row[0] for row in rows]
+    _check_committed(run, committed, steps, len(corrections), stacklevel=3 + depth)
     records = _records_of(rows, run)
     missing = _missing_steps([r.step for r in records])
     if missing:  # never transient: the journal is read before the SELECT (_rows_unchecked)
@@ -1770,7 +1774,7 @@ def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[i
             f"directory from a backup to have them back; where they were only in {JOURNAL_NAME}"
             ", torchcbl.session.repair_journal(run_dir) keeps the steps before the gap so that "
             "the session can be resumed.",
-            stacklevel=3,
+            stacklevel=3 + depth,
         )
     return records, corrections
 
@@ -1821,8 +1825,14 @@ def load_labels(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray
     """Every label of the session in arrival order (demonstrations and corrections):
     observations [L, D] float64 and actions [L] int64, before any relabelling (D is the
     session's feature count also when there are no labels: [0, D])."""
+    return _labels(run_dir)
+
+
+def _labels(run_dir: str | os.PathLike[str], *, depth: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`load_labels` for torchcbl's readers, its warnings pointing at the caller of the
+    public reader that called it, ``depth`` frames of torchcbl's own between them."""
     config = load_config(run_dir)
-    records, corrections = _read_log(run_dir)
+    records, corrections = _read_log(run_dir, depth=depth + 1)
     xs, ys = label_sequence(records, _corrections_of(records, corrections))
     if not ys:
         n_features = int(config["env"]["n_features"])
@@ -1846,7 +1856,7 @@ def load_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np
     """
     config = load_config(run_dir)
     prior = _read_prior(run_dir, config)  # (this config: not read again for the prior)
-    x, y = load_labels(run_dir)
+    x, y = _labels(run_dir)
     if prior is not None:
         x, y = np.concatenate([prior[0], x]), np.concatenate([prior[1], y])
     if not len(y) or not _relabels(config):
@@ -2219,8 +2229,13 @@ def load_model(
         see :func:`restore_model`. If the matching checkpoint is missing, damaged or stale,
         the model is refitted deterministically on the logged labels (nothing is written).
     """
+    return _model(run_dir, n_demonstrations)
+
+
+def _model(run_dir: str | os.PathLike[str], n_demonstrations: int | None) -> GaussianMixtureSet:
+    """:func:`load_model` for a public reader, its warnings pointing at that reader's caller."""
     config = load_config(run_dir)
-    x, y = load_labels(run_dir)
+    x, y = _labels(run_dir, depth=1)
     if n_demonstrations is None:
         n = len(y)
     elif (
@@ -2259,9 +2274,9 @@ def load_policy(run_dir: str | os.PathLike[str]) -> GreedyPolicy:
     """
     from torchcbl.policy import GreedyPolicy
 
-    model = load_model(run_dir)
+    model = _model(run_dir, None)
     if not model.is_fitted:
-        n = len(load_labels(run_dir)[1])
+        n = len(_labels(run_dir)[1])
         first = int(load_config(run_dir)["teaching"]["max_new"])
         raise IncompatibleRunDirError(
             f"{run_dir} holds {n} demonstration{'' if n == 1 else 's'} and its first fit comes "
