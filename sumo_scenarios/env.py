@@ -125,7 +125,8 @@ class DrivingEnv(gym.Env):
     libsumo holds one simulation per process. Several ``DrivingEnv`` may exist in a process
     (``gymnasium.utils.env_checker.check_env`` makes a second one), but the simulation belongs to
     the one reset last: an env whose road another env's reset took over raises ``RuntimeError``
-    on ``step`` (saying so) until it is reset again. Two envs driving at once need two processes
+    on ``step`` (saying so) until it is reset again, and so does an env whose last step was cut
+    short (a Ctrl-C inside it). Two envs driving at once need two processes
     made with 'spawn' (e.g. gymnasium's ``AsyncVectorEnv(..., context="spawn")``; a process
     forked from one with a running simulation is refused), and so is a reset while a
     simulation of your own (``libsumo.start``) runs in the process. Always ``close()`` an env.

@@ -17,7 +17,9 @@ A simulation the user started with libsumo (``libsumo.start``, also after closin
 ``libsumo.close()``) is never loaded over, closed or stepped: a reset refuses to start while it
 runs, and close leaves it running. Before every step the simulation checks that libsumo still
 holds ours as we left it, SUMO's clock included, and raises :class:`RuntimeError` saying what
-happened (closed, stepped by hand, or replaced by the user's own) instead of stepping.
+happened (closed, stepped by hand, or replaced by the user's own) instead of stepping. A step
+cut short (a Ctrl-C, or an error raised inside it) leaves SUMO and the bookkeeping apart: every
+later step raises :class:`RuntimeError` saying so until a reset.
 """
 
 from __future__ import annotations
@@ -245,6 +247,10 @@ class HighwaySim:
         self._state = {"owns": False}
         self._closed = False
         self._ready = False  # a reset has completed since the last failure
+        # a step is under way: set once step()'s checks passed, cleared when it completes (or
+        # by a reset or close); still set before a step, the last one was cut short (a Ctrl-C
+        # or an error inside it) and left SUMO and the bookkeeping out of step
+        self._stepping = False
         self._road_length = float(libsumo_lane_length_from_net())
         if self.config.ego_start_m < scenario.behind_m:
             raise ValueError(
@@ -326,6 +332,7 @@ class HighwaySim:
         if not 0 <= ego_lane < N_LANES:
             raise ValueError(f"ego_lane must lie in [0, {N_LANES - 1}]")
         self._ready = False  # until this reset completes: step() would crash SUMO before
+        self._stepping = False  # the road a cut-short step left is replaced below
         if _SUMO["running"] and _SUMO["pid"] != os.getpid():
             raise RuntimeError(
                 "this process was forked from one whose libsumo simulation is running, and the "
@@ -415,6 +422,7 @@ class HighwaySim:
             return
         self._closed = True
         self._ready = False
+        self._stepping = False
         self._finalizer()  # closes libsumo if this simulation owns it; runs once
 
     @property
@@ -462,6 +470,7 @@ class HighwaySim:
         self._check_owned()
         if not 0 <= target_lane < N_LANES:
             raise ValueError(f"target_lane must lie in [0, {N_LANES - 1}], got {target_lane}")
+        self._stepping = True  # until the end: cut short, the next step refuses
         if target_lane != self.ego_lane:
             libsumo.vehicle.changeLane(EGO, target_lane, self.config.step_length_s)
         libsumo.simulationStep()
@@ -487,6 +496,7 @@ class HighwaySim:
             self._recycle(behind, horizon)
         if self.ego_pos > self._road_length - self.scenario.ahead_m - self.config.shift_margin_m:
             self._shift_back()
+        self._stepping = False
 
     def _recycle(self, behind: float, horizon: float) -> None:
         """Keep every lane filled from ``behind`` to ``horizon`` at its own density.
@@ -549,6 +559,14 @@ class HighwaySim:
 
     def _check_owned(self) -> None:
         """Raise unless libsumo holds this simulation's road, saying why not."""
+        if self._stepping:
+            # a Ctrl-C raised as SUMO's step returned, or anything raised in the bookkeeping
+            # after it: SUMO's clock, the cars and the env's arrays no longer agree
+            raise RuntimeError(
+                "the env's last step did not finish (interrupted or raised inside it), and "
+                "SUMO and the env's road bookkeeping no longer agree: reset() to go on (on a "
+                "fresh road segment)"
+            )
         if self._ready and self._state["owns"]:
             ms = self._steps * round(self.config.step_length_s * 1000.0)
             gone = _gone(ms, len(self.car_ids) + 1)  # the cars and the ego

@@ -851,8 +851,9 @@ def test_a_wal_lost_after_its_tables_reached_the_log_is_said_to_be_missing(tmp_p
 
 
 def test_a_session_copied_while_its_writer_ran_reads_and_resumes_with_a_warning(tmp_path):
-    """cp -a and rsync copy writer.lock last (in name order), so a copy taken while the writer
-    runs can hold a writer.lock that counts commits made after the log was copied. Every
+    """A copy that takes writer.lock after the log (rsync does, by name order; GNU cp -a goes
+    in directory order, either way) taken while the writer runs can hold a writer.lock that
+    counts commits made after the log was copied. Every
     reader, resume and repair_journal refused such a copy with a CorruptSessionError ("the
     rest are not in the session's files"), though its -wal and journal are there and it reads
     as a consistent earlier state of the session, as it did before writer.lock held counts.
@@ -895,6 +896,41 @@ def test_a_session_copied_while_its_writer_ran_reads_and_resumes_with_a_warning(
         back.close()
 
 
+def test_a_readers_warning_about_the_session_points_at_the_readers_caller(tmp_path):
+    """The warnings of a copy taken while the writer ran, and of steps missing from the log,
+    named torchcbl's own session.py as their place for load_model and load_demonstrations
+    (and load_policy), which read the log through load_labels: a user filtering warnings by
+    module, or reading where one came from, was sent into torchcbl. Every reader's warnings
+    now point at the line that called it, here this file."""
+    run, copy = tmp_path / "run", tmp_path / "copy"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=20)
+    shutil.copytree(run, copy, ignore=shutil.ignore_patterns("writer.lock"))
+    ct.run(max_steps=30)  # the writer commits 10 more steps meanwhile
+    shutil.copy2(run / "writer.lock", copy / "writer.lock")  # copied last
+    ct.close()
+    gap = tmp_path / "gap"
+    shutil.copytree(run, gap)
+    db = sqlite3.connect(gap / "steps.sqlite")
+    db.execute("DELETE FROM steps WHERE step IN (5, 6)")
+    db.commit()
+    db.close()
+    readers = (
+        load_records,
+        load_labels,
+        load_corrections,
+        load_demonstrations,
+        load_model,
+        S.load_policy,
+    )
+    for where, said in ((copy, "copied while its writer ran"), (gap, r"lacks 2 steps \(5, 6\)")):
+        for read in readers:
+            with pytest.warns(UserWarning, match=said) as got:
+                read(where)
+            places = {(Path(w.filename).name, read.__name__) for w in got}
+            assert places == {(Path(__file__).name, read.__name__)}, places
+
+
 def test_a_torn_read_of_writer_locks_counts_is_not_taken_for_a_count(tmp_path):
     """The writer rewrites writer.lock's count line in place and readers read it without a
     lock, so a read that overlaps the rewrite can see the new line's first bytes and the old
@@ -924,6 +960,49 @@ def test_a_torn_read_of_writer_locks_counts_is_not_taken_for_a_count(tmp_path):
         (run / "writer.lock").write_bytes(at_20)
         ct.close()
     assert load_records(run) == want
+
+
+def test_a_writer_that_cannot_note_itself_in_writer_lock_keeps_the_count_there(
+    tmp_path, monkeypatch
+):
+    """A new writer notes itself in writer.lock, keeping the last writer's count line. It
+    truncated the file to nothing and then wrote the holder and count lines, so a write that
+    failed (a full disk: the error is swallowed, the lock holds without the note) or a SIGKILL
+    between the two left writer.lock without the count: a -wal lost after that was read as a
+    shorter session with no word, until the writer's next note. Here every write to
+    writer.lock fails while a resume takes it: the count line of the last writer is still
+    there, and once writes go through again the writer notes its own."""
+    run = tmp_path / "run"
+    ct, env = session(run, commit_every=4)
+    ct.run(max_steps=20)
+    ct.close()
+    count = b"committed to steps.sqlite:           20 steps"
+    assert count in (run / "writer.lock").read_bytes()
+
+    def lock_fd(fd: int) -> bool:
+        return os.readlink(f"/proc/self/fd/{fd}").endswith("writer.lock")
+
+    def failing(real):
+        def write(fd, *args):
+            if lock_fd(fd):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            return real(fd, *args)
+
+        return write
+
+    real_write, real_pwrite = os.write, os.pwrite
+    monkeypatch.setattr(os, "write", failing(real_write))
+    monkeypatch.setattr(os, "pwrite", failing(real_pwrite))
+    ct, env = resume(run, commit_every=4)
+    assert count in (run / "writer.lock").read_bytes()
+    monkeypatch.setattr(os, "write", real_write)
+    monkeypatch.setattr(os, "pwrite", real_pwrite)
+    ct.run(max_steps=24)  # a commit: the writer's own note
+    lock = (run / "writer.lock").read_bytes()
+    assert b"committed to steps.sqlite:           24 steps" in lock, lock
+    assert len(lock.splitlines()) == 2, lock
+    ct.close()
+    assert len(load_records(run)) == 24
 
 
 def test_a_journal_deleted_while_it_held_steps_is_said_to_be_missing(tmp_path):

@@ -123,14 +123,14 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   ``writer.lock``'s committed counts: a log holding fewer steps or corrections than they say,
   its ``-wal`` missing, is a :class:`CorruptSessionError` for every reader, resume and
   :func:`repair_journal`, naming the missing ``-wal``, changing nothing; removing
-  ``writer.lock`` accepts the loss. With the ``-wal`` there, a log holding fewer is what a
-  copy taken while the writer ran holds (``cp -a`` and rsync take ``writer.lock`` last, after
-  the writer committed more) or what a power cut left: it is read, and resumed, as it is, with
-  a warning naming both counts; resume then notes its own counts. Likewise a missing
-  ``steps.journal`` that ``writer.lock`` says held lines not yet committed (the writer was
-  killed with steps only there) is a :class:`CorruptSessionError` naming it; one that held
-  none (a cleanly closed session's) is not. A copy without ``writer.lock`` (or a session whose
-  last writer was a torchcbl without these notes) is not checked.
+  ``writer.lock`` accepts the loss. With the ``-wal`` there, a log holding fewer is what a copy
+  taken while the writer ran holds (a copy that took ``writer.lock`` after the log, as rsync
+  does by name order, after the writer committed more) or what a power cut left: it is read, and
+  resumed, as it is, with a warning naming both counts; resume then notes its own counts.
+  Likewise a missing ``steps.journal`` that ``writer.lock`` says held lines not yet committed
+  (the writer was killed with steps only there) is a :class:`CorruptSessionError` naming it; one
+  that held none (a cleanly closed session's) is not. A copy without ``writer.lock`` (or a
+  session whose last writer was a torchcbl without these notes) is not checked.
 - Two writers. The writer holds ``writer.lock`` with ``fcntl.flock`` (released by the kernel
   when the process dies, SIGKILL included); a second writer gets :class:`SessionLockedError`.
 
@@ -811,15 +811,15 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
         # what the last writer committed stays (its log is checked against it before a
         # writer opens it, see _check_committed); the writer then notes its own counts
         committed = None if new_session else _committed_line(os.pread(f.fileno(), 4096, 0))
+        note = f"process {os.getpid()} on {socket.gethostname()}\n".encode() + (
+            committed.group(0) if committed else b""  # a torn or damaged one not kept
+        )
         # straight to the file, not through f's buffer: a note that does not fit (full disk)
         # would stay buffered, and closing the lock would write it again and raise, hiding
-        # the error that closing it goes with
-        os.ftruncate(f.fileno(), 0)
-        os.write(
-            f.fileno(),
-            f"process {os.getpid()} on {socket.gethostname()}\n".encode()
-            + (committed.group(0) if committed else b""),  # a torn or damaged one not kept
-        )
+        # the error that closing it goes with. Written over the old note, then cut to its
+        # length: never a moment (a SIGKILL, a write that fails) without the count line
+        if os.pwrite(f.fileno(), note, 0) == len(note):
+            os.ftruncate(f.fileno(), len(note))
     except OSError:
         pass  # the lock holds without the note
     return f
@@ -869,10 +869,10 @@ def _check_committed(
     in order, and ``n_corrections``) lacks the last steps, or corrections, its writers
     committed (``committed``, read before the log), as it does without its -wal, or if the
     journal is missing while it held steps not yet committed. With the -wal and the journal
-    there, a log holding fewer is what a copy taken while the writer ran holds (cp and rsync
-    take writer.lock last) or what a power cut left: warned (``stacklevel`` for
-    :func:`warnings.warn`), and read as it is. (Steps missing before others the log holds are
-    a gap, said by the readers and resume.)"""
+    there, a log holding fewer is what a copy taken while the writer ran holds (a copy that took
+    writer.lock after the log: rsync does, by name order) or what a power cut left: warned
+    (``stacklevel`` for :func:`warnings.warn`), and read as it is. (Steps missing before others
+    the log holds are a gap, said by the readers and resume.)"""
     if committed is None:
         return
     journal, lock = run_dir / JOURNAL_NAME, run_dir / LOCK_NAME
@@ -897,9 +897,10 @@ def _check_committed(
             f"{run_dir}: {lock.name} says its writer committed {committed[0]} steps and "
             f"{committed[1]} corrections, but the log holds {n_steps} of those steps and "
             f"{n_corrections} corrections. Either the directory was copied while its writer "
-            f"ran (cp and rsync take {lock.name} last, after the writer committed more; the "
-            "copy holds the session as it was earlier), or a power cut lost commits not yet "
-            f"on the disk (or an older {log.name} was put back). What the files hold is read; "
+            f"ran (a copy that took {lock.name} after the log, as rsync does by name order, "
+            "after the writer committed more; the copy holds the session as it was "
+            "earlier), or a power cut lost commits not yet on the disk (or an older "
+            f"{log.name} was put back). What the files hold is read; "
             f"a resume goes on from there and notes its own counts in {lock.name}. For the "
             "steps missing here, read the directory this one was copied from, once its writer "
             "has stopped.",
@@ -1285,9 +1286,14 @@ class SessionStore:
         try:
             if self._note_at < 0:  # the first note of this writer: after the holder line
                 head = os.pread(fd, 4096, 0).split(b"\n", 1)[0]
-                self._note_at = len(head) + 1 if head else 0
-                os.ftruncate(fd, self._note_at)
-            os.pwrite(fd, line, self._note_at)
+                at = len(head) + 1 if head else 0
+                # over the last writer's note, then cut to its end (once written whole): the
+                # count line is never gone, as it was between a truncation and the write
+                if os.pwrite(fd, line, at) == len(line):
+                    os.ftruncate(fd, at + len(line))
+                    self._note_at = at
+            else:
+                os.pwrite(fd, line, self._note_at)
         except OSError:
             pass
 
@@ -1730,9 +1736,12 @@ def _gap_text(missing: list[int]) -> str:
     )
 
 
-def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[int, int]]:
+def _read_log(
+    run_dir: str | os.PathLike[str], *, depth: int = 0
+) -> tuple[list[StepRecord], dict[int, int]]:
     """Every record and the corrections ``{step: action}`` of a run directory, read-only;
-    warns when steps are missing."""
+    warns when steps are missing. The warnings point at the caller of the public reader that
+    called this, ``depth`` frames of torchcbl's own between them."""
     run = Path(run_dir)
     wal = run / (LOG_NAME + "-wal")
     log = run / LOG_NAME
@@ -1754,7 +1763,8 @@ def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[i
             break
         # A writer opened the session while we read without its WAL (and may have closed it
         # again, checkpointing into the log): read again.
-    _check_committed(run, committed, [row[0] for row in rows], len(corrections), stacklevel=3)
+    steps = [row[0] for row in rows]
+    _check_committed(run, committed, steps, len(corrections), stacklevel=3 + depth)
     records = _records_of(rows, run)
     missing = _missing_steps([r.step for r in records])
     if missing:  # never transient: the journal is read before the SELECT (_rows_unchecked)
@@ -1764,7 +1774,7 @@ def _read_log(run_dir: str | os.PathLike[str]) -> tuple[list[StepRecord], dict[i
             f"directory from a backup to have them back; where they were only in {JOURNAL_NAME}"
             ", torchcbl.session.repair_journal(run_dir) keeps the steps before the gap so that "
             "the session can be resumed.",
-            stacklevel=3,
+            stacklevel=3 + depth,
         )
     return records, corrections
 
@@ -1815,8 +1825,14 @@ def load_labels(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray
     """Every label of the session in arrival order (demonstrations and corrections):
     observations [L, D] float64 and actions [L] int64, before any relabelling (D is the
     session's feature count also when there are no labels: [0, D])."""
+    return _labels(run_dir)
+
+
+def _labels(run_dir: str | os.PathLike[str], *, depth: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`load_labels` for torchcbl's readers, its warnings pointing at the caller of the
+    public reader that called it, ``depth`` frames of torchcbl's own between them."""
     config = load_config(run_dir)
-    records, corrections = _read_log(run_dir)
+    records, corrections = _read_log(run_dir, depth=depth + 1)
     xs, ys = label_sequence(records, _corrections_of(records, corrections))
     if not ys:
         n_features = int(config["env"]["n_features"])
@@ -1840,7 +1856,7 @@ def load_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np
     """
     config = load_config(run_dir)
     prior = _read_prior(run_dir, config)  # (this config: not read again for the prior)
-    x, y = load_labels(run_dir)
+    x, y = _labels(run_dir)
     if prior is not None:
         x, y = np.concatenate([prior[0], x]), np.concatenate([prior[1], y])
     if not len(y) or not _relabels(config):
@@ -2213,8 +2229,13 @@ def load_model(
         see :func:`restore_model`. If the matching checkpoint is missing, damaged or stale,
         the model is refitted deterministically on the logged labels (nothing is written).
     """
+    return _model(run_dir, n_demonstrations)
+
+
+def _model(run_dir: str | os.PathLike[str], n_demonstrations: int | None) -> GaussianMixtureSet:
+    """:func:`load_model` for a public reader, its warnings pointing at that reader's caller."""
     config = load_config(run_dir)
-    x, y = load_labels(run_dir)
+    x, y = _labels(run_dir, depth=1)
     if n_demonstrations is None:
         n = len(y)
     elif (
@@ -2253,9 +2274,9 @@ def load_policy(run_dir: str | os.PathLike[str]) -> GreedyPolicy:
     """
     from torchcbl.policy import GreedyPolicy
 
-    model = load_model(run_dir)
+    model = _model(run_dir, None)
     if not model.is_fitted:
-        n = len(load_labels(run_dir)[1])
+        n = len(_labels(run_dir)[1])
         first = int(load_config(run_dir)["teaching"]["max_new"])
         raise IncompatibleRunDirError(
             f"{run_dir} holds {n} demonstration{'' if n == 1 else 's'} and its first fit comes "
