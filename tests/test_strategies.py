@@ -537,3 +537,30 @@ def test_a_shipped_strategy_in_ones_own_loop_says_when_it_was_not_bound():
                 strategy.bind(n_actions=2, n_features=2, config=bad)
         strategy.bind(n_actions=2, n_features=2, config=TeachingConfig(noninteractive=False))
         strategy.decide(x[0], c)  # bound: it decides
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [
+        lambda s: s.pop("rule"),
+        lambda s: s.update(rule="DistanceRule"),
+        lambda s: s.update(max_std=3.0),
+    ],
+    ids=["no rule", "rule not a dict", "a key it does not take"],
+)
+def test_a_damaged_confident_execution_entry_is_refused_on_resume_saying_so(tmp_path, damage):
+    """A config.json whose confident-execution entry lost its "rule" (or holds a rule that is
+    not a dict) failed resume with a bare KeyError / AttributeError; one with a key the
+    strategy does not take resumed as if it were not there. Each is refused as the session's
+    other mismatches are, naming the stored entry."""
+    import json
+
+    env = rare_regions_world(episode_length=10)
+    with ConfidentTeacher(env, oracle(env), run_dir=tmp_path, progress=False) as ct:
+        ct.run(max_steps=5)
+    path = tmp_path / "config.json"
+    config = json.loads(path.read_text())
+    damage(config["strategy"])
+    path.write_text(json.dumps(config))
+    with pytest.raises(IncompatibleRunDirError, match=r"ConfidentExecution.*\"rule\""):
+        ConfidentTeacher.resume(tmp_path, env, oracle(env), progress=False)

@@ -295,7 +295,14 @@ def strategy_to_config(strategy: Any, *, check_relabel: bool = True) -> dict[str
 
 
 def _build_ce(params: dict[str, Any]) -> Any:
-    return ConfidentExecution(rule_from_config(params["rule"]))
+    rule = params.get("rule")
+    if set(params) != {"rule"} or not isinstance(rule, Mapping):
+        raise ValueError(
+            f"cannot rebuild ConfidentExecution from {params!r:.200}: expected exactly "
+            '"rule", a dict as rule_to_config() writes it (config.json was changed or '
+            "damaged). Pass strategy=ConfidentExecution(<your rule>) to resume()."
+        )
+    return ConfidentExecution(rule_from_config(dict(rule)))
 
 
 def _build_cba(params: dict[str, Any]) -> Any:
