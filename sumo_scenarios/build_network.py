@@ -98,7 +98,10 @@ def build(out_dir: Path = DATA_DIR) -> Path:
     return net
 
 
-_HEADER = re.compile(r"<!-- generated on .*? by Eclipse SUMO netconvert (\S+)\n.*?-->", re.S)
+# "netconvert 1.28.0" since SUMO 1.25, "netconvert Version 1.24.0" before
+_HEADER = re.compile(
+    r"<!-- generated on .*? by Eclipse SUMO netconvert (?:Version )?(\S+)\n.*?-->", re.S
+)
 
 
 def _reproducible(text: str) -> str:

@@ -620,6 +620,8 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
 
     dt = record.sim.step_length_s
     end = len(record.actions) * dt
+    # device.fcd-replay.file: SUMO 1.28 renamed it "files" and still reads "file"; SUMO before
+    # 1.28 (an admitted eclipse-sumo, or a sumo-gui of the user's own) knows only "file"
     text = f"""<?xml version="1.0" encoding="UTF-8"?>
 <!-- Written by sumo_scenarios.replay.write_sumocfg for episode {note(record.label or "-")}
      (episode seed {record.episode_seed}); recorded FCD: {note(fcd.name)}.
@@ -642,7 +644,7 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
         <emergencydecel.warning-threshold value="1000"/>
     </processing>
     <fcd_replay_device>
-        <device.fcd-replay.files value="{attr(rel(replay_input))}"/>
+        <device.fcd-replay.file value="{attr(rel(replay_input))}"/>
     </fcd_replay_device>
     <output>
         <fcd-output value="{attr(rel(rerun))}"/>

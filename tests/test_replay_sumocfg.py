@@ -123,6 +123,20 @@ def test_sumocfg_is_well_formed_whatever_the_label_and_file_names(episode, tmp_p
     assert _fcd(tmp_path / "R&D--ep.rerun.xml").keys() >= _fcd(odd).keys()
 
 
+def test_sumocfg_names_the_replay_input_with_the_option_every_admitted_sumo_reads(
+    episode, tmp_path
+):
+    """SUMO 1.28 renamed ``device.fcd-replay.file`` to ``device.fcd-replay.files`` and still
+    reads the old name; SUMO 1.20-1.27 (an admitted eclipse-sumo, or a sumo-gui of the user's
+    own) know only the old one. A configuration naming the new one made their
+    ``sumo -c`` fail with "No option with the name 'device.fcd-replay.files' exists"."""
+    rec, fcd, _ = episode
+    cfg = ET.parse(write_sumocfg(rec, fcd, tmp_path / "ep.sumocfg")).getroot()
+    (device,) = cfg.iter("fcd_replay_device")
+    assert [option.tag for option in device] == ["device.fcd-replay.file"]
+    assert Path(device[0].get("value")).name == "ep.replay.xml"
+
+
 def test_a_file_name_with_a_comma_is_refused_before_anything_is_written(episode, tmp_path):
     """SUMO splits a .sumocfg's file lists at commas: for an FCD named 'seed0,arm_a.fcd.xml' a
     configuration naming 'seed0,arm_a.replay.xml' was written, and `sumo -c` failed with
