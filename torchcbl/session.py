@@ -775,10 +775,11 @@ def _close_wal(log: Path) -> None:
         time.sleep(0.005)
 
 
-def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
+def _acquire_lock(run_dir: Path) -> Any:
     """Take the run directory's writer lock (``writer.lock``, fcntl.flock: released by the
     kernel when the holder closes it or dies, SIGKILL included) and note the holder in it,
-    keeping what the last writer committed unless ``new_session``. Returns the open lock
+    keeping what the last writer committed (a new session drops it once it knows the
+    directory holds no session: :func:`_note_holder`). Returns the open lock
     file."""
     path = run_dir / LOCK_NAME
     try:
@@ -807,10 +808,18 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
             "that process, then resume; a writer that died releases the lock by itself. "
             "Reading meanwhile needs no lock (load_records, load_model)."
         ) from None
+    _note_holder(f, keep_count=True)
+    return f
+
+
+def _note_holder(f: Any, *, keep_count: bool) -> None:
+    """Note this process as ``writer.lock``'s holder (``f``: the open, locked file), keeping
+    the last writer's count line if ``keep_count``; a note that cannot be written is left out
+    (the lock holds without it)."""
     try:
         # what the last writer committed stays (its log is checked against it before a
         # writer opens it, see _check_committed); the writer then notes its own counts
-        committed = None if new_session else _committed_line(os.pread(f.fileno(), 4096, 0))
+        committed = _committed_line(os.pread(f.fileno(), 4096, 0)) if keep_count else None
         note = f"process {os.getpid()} on {socket.gethostname()}\n".encode() + (
             committed.group(0) if committed else b""  # a torn or damaged one not kept
         )
@@ -822,7 +831,6 @@ def _acquire_lock(run_dir: Path, *, new_session: bool = False) -> Any:
             os.ftruncate(f.fileno(), len(note))
     except OSError:
         pass  # the lock holds without the note
-    return f
 
 
 #: writer.lock's second line: what the writer has committed to steps.sqlite so far, and
@@ -1085,7 +1093,9 @@ class SessionStore:
                 "creating the run directory",
                 "Free space (or fix the directory's permissions), then create the teacher again.",
             ) from exc
-        lock = _acquire_lock(path, new_session=True)
+        # the last writer's count kept until the directory is known to hold no session: a
+        # refused start must not drop the count of the session it was refused for
+        lock = _acquire_lock(path)
         started = False
         try:
             if (path / CONFIG_NAME).exists() or (path / LOG_NAME).exists():
@@ -1093,6 +1103,7 @@ class SessionStore:
                     f"{path} already holds a teaching session. Continue it with "
                     "ConfidentTeacher.resume(run_dir, env, teacher) or choose a new run_dir."
                 )
+            _note_holder(lock, keep_count=False)  # a count left by no session: not this one's
             # a journal's steps, a writers.jsonl's writers (whose step numbers and thread
             # counts would read as this session's) and checkpoints belong to another session
             leftovers = [
