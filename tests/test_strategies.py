@@ -564,3 +564,34 @@ def test_a_damaged_confident_execution_entry_is_refused_on_resume_saying_so(tmp_
     path.write_text(json.dumps(config))
     with pytest.raises(IncompatibleRunDirError, match=r"ConfidentExecution.*\"rule\""):
         ConfidentTeacher.resume(tmp_path, env, oracle(env), progress=False)
+
+
+@pytest.mark.parametrize("entry", [None, "ConfidentExecution", {"type": 3}])
+def test_a_config_whose_strategy_entry_is_not_a_strategy_dict_is_a_corrupt_session(tmp_path, entry):
+    """A config.json whose "strategy" entry is not a dict (null, a string) or names its type
+    with something other than a string failed resume with a bare TypeError or ValueError (given a
+    strategy) or "'NoneType' object is not iterable" (without), and load_demonstrations and
+    load_model with an AttributeError. It is a damaged session, said as the other damaged
+    config.json entries are."""
+    import json
+
+    from torchcbl.errors import CorruptSessionError
+    from torchcbl.session import load_demonstrations, load_model
+
+    env = rare_regions_world(episode_length=10)
+    with ConfidentTeacher(env, oracle(env), run_dir=tmp_path, progress=False) as ct:
+        ct.run(max_steps=5)
+    path = tmp_path / "config.json"
+    config = json.loads(path.read_text())
+    config["strategy"] = entry
+    path.write_text(json.dumps(config))
+    for call in (
+        lambda: ConfidentTeacher.resume(tmp_path, env, oracle(env), progress=False),
+        lambda: ConfidentTeacher.resume(
+            tmp_path, env, oracle(env), strategy=ConfidentExecution(), progress=False
+        ),
+        lambda: load_demonstrations(tmp_path),
+        lambda: load_model(tmp_path),
+    ):
+        with pytest.raises(CorruptSessionError, match="'strategy'"):
+            call()
