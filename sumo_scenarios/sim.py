@@ -25,6 +25,7 @@ later step raises :class:`RuntimeError` saying so until a reset.
 from __future__ import annotations
 
 import math
+import operator
 import os
 import shutil
 import tempfile
@@ -468,6 +469,13 @@ class HighwaySim:
         same distance. Contact never removes anything.
         """
         self._check_owned()
+        try:
+            target_lane = operator.index(target_lane)  # an int or numpy integer, not 2.0
+        except TypeError:
+            raise TypeError(
+                f"target_lane must be a whole lane number in [0, {N_LANES - 1}], got "
+                f"{target_lane!r}; pass int(lane)"
+            ) from None
         if not 0 <= target_lane < N_LANES:
             raise ValueError(f"target_lane must lie in [0, {N_LANES - 1}], got {target_lane}")
         self._stepping = True  # until the end: cut short, the next step refuses

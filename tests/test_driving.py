@@ -837,3 +837,17 @@ def test_a_step_after_one_cut_short_says_so_and_a_reset_goes_on(monkeypatch, cal
             env.step(LEFT)
     finally:
         env.close()
+
+
+def test_a_lane_that_is_not_a_whole_number_is_refused_before_the_step_starts(env):
+    """HighwaySim.step(2.5) passed the range check and then failed inside libsumo after the
+    step had begun, so every later step refused ("the env's last step did not finish")
+    until a reset. A lane that is not a whole number is refused first; the simulation goes
+    on."""
+    env.reset(seed=3)
+    sim = env._sim
+    for lane in (2.5, np.float64(2.0), "2"):
+        with pytest.raises(TypeError, match="target_lane must be a whole lane number"):
+            sim.step(lane)
+    sim.step(np.int64(2))
+    sim.step(2)
