@@ -127,8 +127,8 @@ def test_sumocfg_names_the_replay_input_with_the_option_every_admitted_sumo_read
     episode, tmp_path
 ):
     """SUMO 1.28 renamed ``device.fcd-replay.file`` to ``device.fcd-replay.files`` and still
-    reads the old name; SUMO 1.20-1.27 (an admitted eclipse-sumo, or a sumo-gui of the user's
-    own) know only the old one. A configuration naming the new one made their
+    reads the old name; SUMO 1.20-1.27 (1.22-1.27 an admitted eclipse-sumo, any of them a
+    sumo-gui of the user's own) know only the old one. A configuration naming the new one made their
     ``sumo -c`` fail with "No option with the name 'device.fcd-replay.files' exists"."""
     rec, fcd, _ = episode
     cfg = ET.parse(write_sumocfg(rec, fcd, tmp_path / "ep.sumocfg")).getroot()

@@ -1513,6 +1513,7 @@ def test_resume_rebuilds_the_sessions_model_not_the_callers_fitted_one(tmp_path)
     back.close()
 
 
+@pytest.mark.filterwarnings("error::UserWarning")  # a refused resume warns of nothing
 def test_resume_compares_a_custom_strategy_by_its_class_name_and_relabel_flag(tmp_path):
     from torchcbl.strategies import correcting
     from torchcbl.strategies.bc import BehaviourCloning
