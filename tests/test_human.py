@@ -678,3 +678,20 @@ def test_a_process_started_with_its_stdin_closed_has_no_input_to_read(monkeypatc
     with pytest.raises(TeachingInterrupted, match="teaching input closed"):
         teacher(OBS, {})
     assert out.getvalue().endswith(PROMPT.decode())
+
+
+@pytest.mark.timeout(60)
+def test_a_special_key_that_is_no_action_is_named_readably(terminal):
+    """Esc, F2 (ESC O Q), Alt-x and Ctrl-Z (a byte, the terminal's signal keys being off) were
+    refused as "'\\\\x1b[Q'" is not a key here: the key's repr quoted a second time, escapes
+    doubled, unreadable to the person. They are named as a keyboard names them now."""
+    master, slave = terminal
+    typed = [b"\x1b", b"\x1bOQ", b"\x1bx", b"\x1a", b"\x7f", b"a"]
+    person = Person(master, slave, typed)
+    teacher = _teacher(slave)
+    person.start()
+    assert teacher(OBS, {}) == 1
+    shown = person.finish()
+    for name in ("Esc", "F2", "Alt-x", "Ctrl-Z", "Backspace"):
+        assert f"'{name}' is not a key here" in shown, shown
+    assert "\\x" not in shown

@@ -64,6 +64,8 @@ _ESC = "\x1b"
 # Seconds to wait for the rest of an escape sequence after ESC (arrow keys send 3 bytes).
 _ESCAPE_WAIT = 0.05
 _CLEAR_SCREEN = "\x1b[H\x1b[2J"
+# F1-F4 after ESC, as read (ESC O P is read as ESC [ P), for naming a key that is no action.
+_FUNCTION_KEYS = {"[P": "F1", "[Q": "F2", "[R": "F3", "[S": "F4"}
 
 
 def _normalize_key(key: str) -> str:
@@ -86,15 +88,25 @@ def _normalize_key(key: str) -> str:
 
 
 def _label(key: str) -> str:
-    """A short printable name for a key as read."""
+    """A short printable name for a key as read, as a keyboard names it: ``up``, ``Ctrl-Z``,
+    ``Esc``, ``Alt-x``, ``F2``; another escape sequence as ``Esc`` and its printable rest."""
     if key in _LABELS:
         return _LABELS[key]
-    if key == _CTRL_C:
-        return "Ctrl-C"
-    if len(key) == 1 and not key.isprintable():
-        return repr(key)
+    if key == "\x7f":
+        return "Backspace"
+    if len(key) == 1 and ord(key) < 0x20 and key != _ESC:  # Ctrl-A is 1, ... Ctrl-_ is 31
+        return f"Ctrl-{chr(ord(key) + 0x40)}"
+    if key == _ESC:
+        return "Esc"
     if key.startswith(_ESC):
-        return repr(key)
+        rest = key[1:]
+        if len(rest) == 1 and rest.isprintable():
+            return f"Alt-{rest}"
+        if rest in _FUNCTION_KEYS:
+            return _FUNCTION_KEYS[rest]
+        return "Esc " + (rest if rest.isprintable() else repr(rest)[1:-1])
+    if len(key) == 1 and not key.isprintable():
+        return repr(key)[1:-1]
     return key
 
 
