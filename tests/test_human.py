@@ -695,3 +695,17 @@ def test_a_special_key_that_is_no_action_is_named_readably(terminal):
     for name in ("Esc", "F2", "Alt-x", "Ctrl-Z", "Backspace"):
         assert f"'{name}' is not a key here" in shown, shown
     assert "\\x" not in shown
+
+
+def test_a_line_teacher_says_which_number_is_which_action():
+    """Reading lines (a pipe, a notebook), an invalid entry was answered "(type a key, a key
+    name, an action name or number, then Enter)", but the legend numbers no action and the
+    numbers count from 0: a person typing "1" for the first action, "forward", taught "turn
+    left". The hint now says each action's number."""
+    out = io.StringIO()
+    names = ("forward", "turn left", "turn right", "u-turn")
+    teacher = TerminalTeacher(
+        {"w": 0, "a": 1, "d": 2, "s": 3}, names, input=io.StringIO("x\n0\n"), output=out
+    )
+    assert teacher(np.zeros(3), {}) == 0
+    assert "0 forward, 1 turn left, 2 turn right, 3 u-turn" in out.getvalue(), out.getvalue()

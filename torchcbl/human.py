@@ -481,7 +481,11 @@ class TerminalTeacher:
             if action is not None:
                 return action
             self._invalid(repr(token))
-            self._write("(type a key, a key name, an action name or number, then Enter)\naction? ")
+            numbers = ", ".join(f"{a} {name}" for a, name in enumerate(self.action_names))
+            self._write(
+                f"(type a key, a key name, an action name or its number ({numbers}), then "
+                "Enter)\naction? "
+            )
 
     def _resolve_token(self, token: str) -> int | None:
         lowered = token.lower()
