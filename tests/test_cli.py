@@ -1016,6 +1016,24 @@ def test_a_resumed_session_shows_its_counts_from_its_first_request(tmp_path, mon
     assert "phase noninteractive" in seen[0]
 
 
+def test_a_resumed_session_says_where_it_stands_before_the_agent_drives(
+    tmp_path, monkeypatch, capsys
+):
+    """teach --resume printed nothing until its first request: a session whose agent was sure
+    everywhere drove its --steps on its own and printed only its last line, so the person who
+    came back saw a silent terminal, then the end, never where the session had stood nor that
+    a new episode began. It now says so before the first step."""
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    capsys.readouterr()
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "2"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith(f"Resuming the session in {run} at step 3"), first
+    assert "3 demonstrations" in first and "phase noninteractive" in first
+    assert "new episode" in first and "2 more steps" in first
+
+
 def _recorded_episodes(path: Path) -> Path:
     """An episodes.json of one 5-step driving episode, as the driving experiment writes."""
     from sumo_scenarios.env import DrivingEnv
