@@ -709,3 +709,45 @@ def test_a_line_teacher_says_which_number_is_which_action():
     )
     assert teacher(np.zeros(3), {}) == 0
     assert "0 forward, 1 turn left, 2 turn right, 3 u-turn" in out.getvalue(), out.getvalue()
+
+
+_ASKED_IN_A_PROCESS = """
+import sys
+sys.path.insert(0, {root!r})
+import numpy as np
+from torchcbl.human import TerminalTeacher
+TerminalTeacher({{"w": 0}}, ("stay",), input=0)(np.zeros(1), {{}})
+"""
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_a_process_killed_while_it_waits_for_a_key_leaves_the_terminal_as_it_was(terminal, signum):
+    """`kill PID` (SIGTERM: a timeout, a service manager) of `torchcbl teach` waiting for a key
+    ended the process at once, its terminal left without echo, line editing or Ctrl-C (seen in
+    tmux: `stty -a` after it said -isig -icanon -iexten -echo). The process still dies of the
+    signal, as before, with the terminal restored first."""
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    child = subprocess.Popen(
+        [sys.executable, "-c", _ASKED_IN_A_PROCESS.format(root=root)],
+        stdin=slave,
+        stdout=slave,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        shown, deadline = b"", time.monotonic() + 30
+        while PROMPT not in shown and time.monotonic() < deadline:
+            if select.select([master], [], [], 0.1)[0]:
+                shown += os.read(master, 4096)
+        assert PROMPT in shown, shown
+        # again every 0.2 s: one that lands just before read() blocks only sets a flag
+        while child.poll() is None and time.monotonic() < deadline:
+            child.send_signal(signum)
+            time.sleep(0.2)
+    finally:
+        child.kill()
+        child.wait()
+    assert child.returncode == -signum
+    assert termios.tcgetattr(slave) == before

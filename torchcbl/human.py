@@ -30,10 +30,13 @@ This module is domain-free; the views live beside each domain (``corridor.human`
 from __future__ import annotations
 
 import builtins
+import contextlib
 import os
 import select
+import signal
 import sys
-from collections.abc import Callable, Mapping, Sequence
+import threading
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import IO, Any
 
 import numpy as np
@@ -149,6 +152,35 @@ def _split_keys(data: bytes) -> tuple[list[str], bytes]:
         keys.append(_decode_key(data[:length]))
         data = data[length:]
     return keys, data
+
+
+@contextlib.contextmanager
+def _restored_before_a_fatal_signal(fd: int, saved: list[Any]) -> Iterator[None]:
+    """While in place, SIGTERM and SIGHUP whose default action (the process ends at once, no
+    ``finally`` run) is set restore the terminal ``fd`` to ``saved`` first, then end the process
+    by the signal as before; else a ``kill`` during a key's read left the terminal without echo
+    or line editing. Only in the main thread (where Python runs signal handlers)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def restore_then_die(signum: int, frame: Any) -> None:
+        try:
+            termios.tcsetattr(fd, termios.TCSANOW, saved)
+        except (termios.error, OSError):  # the terminal is gone (SIGHUP): nothing to restore
+            pass
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+
+    replaced = {}
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(signum) is signal.SIG_DFL:
+            replaced[signum] = signal.signal(signum, restore_then_die)
+    try:
+        yield
+    finally:
+        for signum, handler in replaced.items():
+            signal.signal(signum, handler)
 
 
 def _frontend_input() -> Callable[[], str] | None:
@@ -366,6 +398,10 @@ class TerminalTeacher:
 
     def _ask_key(self, fd: int) -> int:
         saved = termios.tcgetattr(fd)
+        with _restored_before_a_fatal_signal(fd, saved):
+            return self._ask_key_raw(fd, saved)
+
+    def _ask_key_raw(self, fd: int, saved: list[Any]) -> int:
         try:
             mode = termios.tcgetattr(fd)
             # Non-canonical, no echo, no signal keys (Ctrl-C arrives as a byte and is ours),
