@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import os
 import pty
@@ -1032,6 +1033,25 @@ def test_a_resumed_session_says_where_it_stands_before_the_agent_drives(
     assert first.startswith(f"Resuming the session in {run} at step 3"), first
     assert "3 demonstrations" in first and "phase noninteractive" in first
     assert "new episode" in first and "2 more steps" in first
+
+
+@pytest.mark.parametrize(
+    ("typed", "said"),
+    [("w\nw\n", "Stopped: the input ended"), ("w\nq\n", "Stopped by the teacher.")],
+    ids=["input-ends", "q"],
+)
+def test_teach_says_whether_the_person_stopped_or_the_input_ended(
+    tmp_path, monkeypatch, capsys, typed, said
+):
+    """Keys piped in (a script, a notebook-like stdin) that ran out ended with "Stopped by the
+    teacher.", as if the person had pressed q: nothing said that the input had ended."""
+    monkeypatch.setattr(sys, "stdin", io.StringIO(typed))
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "10"]) == 0
+    out = capsys.readouterr().out
+    assert said in out, out
+    assert f"{typed.count('w')} demonstrations over" in out  # each key before the end kept
+    assert ("Stopped by the teacher" in out) == (said == "Stopped by the teacher.")
 
 
 def _recorded_episodes(path: Path) -> Path:

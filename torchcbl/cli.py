@@ -870,8 +870,13 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     try:
         try:
             ct.run(max_steps=ct.n_steps + args.steps, **lifted)
-        except TeachingInterrupted:
-            print("\nStopped by the teacher.")
+        except TeachingInterrupted as exc:  # q, Ctrl-C at a request, or no more input
+            ended = str(exc).endswith("input closed")  # TerminalTeacher's words for it
+            print(
+                "\nStopped: the input ended, no key left to read."
+                if ended
+                else "\nStopped by the teacher."
+            )
         except KeyboardInterrupt:  # Ctrl-C between two requests (the agent acting on its own)
             print("\nStopped by the teacher (Ctrl-C).")
         finally:
