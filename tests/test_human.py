@@ -751,3 +751,30 @@ def test_a_process_killed_while_it_waits_for_a_key_leaves_the_terminal_as_it_was
         child.wait()
     assert child.returncode == -signum
     assert termios.tcgetattr(slave) == before
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("columns", [50, 80])
+def test_a_view_wider_than_the_terminal_says_so(terminal, columns):
+    """On a terminal narrower than the driving view (a split pane of 50 columns) each row of
+    the road wrapped, the right shoulder's cell drawn at the start of the next line, and
+    nothing said that the window was too narrow (only a view too tall was told)."""
+    import fcntl
+    import struct
+
+    from sumo_scenarios.human import describe, make_teacher
+
+    master, slave = terminal
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 60, columns, 0, 0))
+    person = Person(master, slave, [b"w"])
+    out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
+    teacher = make_teacher(input=slave, output=out)
+    obs = np.array([10.0, -25.0, 25.0, 0.0], dtype=np.float32)  # the ego on the right shoulder
+    person.start()
+    assert teacher(obs, {}) == 0
+    shown = person.finish()
+    wide = max(len(line) for line in describe(obs).splitlines())
+    told = f"the view is {wide} columns wide, the window {columns}"
+    assert (told in shown) == (columns < wide), shown[-800:]
+    if columns < wide:
+        assert "widen the window" in shown

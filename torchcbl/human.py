@@ -6,7 +6,8 @@ situation (a ``describe(observation, info) -> str`` function the domain supplies
 the caller keeps up to date (demonstrations so far, autonomy, ...), and a prompt listing the
 keys, then waits for the person to press one key. On a terminal too short for all of it (the
 driving view is about 30 lines, a terminal's usual height 24), whose top then scrolls away, a
-line above the keys says how many lines are cut off and to enlarge the window.
+line above the keys says how many lines are cut off and to enlarge the window; on one narrower
+than the view (the driving view is about 70 columns), whose lines then wrap, a line says so.
 
 On a terminal the key is read without Enter: the terminal is switched to a non-canonical,
 no-echo mode for the duration of the read and its settings are always restored afterwards,
@@ -340,19 +341,21 @@ class TerminalTeacher:
         if self.title:
             lines.append(self.title)
         if self._describe is not None:
-            lines.append(self._describe(observation, info).rstrip("\n"))
+            view = self._describe(observation, info).rstrip("\n")
         else:
-            lines.append(f"observation: {np.asarray(observation).tolist()}")
+            view = f"observation: {np.asarray(observation).tolist()}"
+        lines.append(view)
         lines.append(
             f"decision #{self.n_decisions + 1}" + (f" | {self.status}" if self.status else "")
         )
         if clear:
-            lines += self._cut_off_note(lines)
+            lines += self._cut_off_note(lines, view)
         self._write((_CLEAR_SCREEN if clear else "") + "\n".join(lines) + "\n")
 
-    def _cut_off_note(self, lines: list[str]) -> list[str]:
-        """A line saying the screen is taller than the output terminal, whose top then scrolls
-        away (the driving view is ~30 lines, a terminal's usual height 24), else nothing."""
+    def _cut_off_note(self, lines: list[str], view: str) -> list[str]:
+        """Lines saying the view is wider than the output terminal, its lines then wrapping (the
+        driving view is about 70 columns), and that the screen is taller, its top then scrolling
+        away (the driving view is ~30 lines, a terminal's usual height 24); else nothing."""
         try:
             columns, rows = os.get_terminal_size(self._output.fileno())
         except (AttributeError, OSError, ValueError):  # not a terminal, or no size known
@@ -363,10 +366,17 @@ class TerminalTeacher:
         def height(text: str) -> int:  # terminal rows, a line longer than the width wrapping
             return sum(max(1, -(-len(line) // columns)) for line in text.split("\n"))
 
-        # the screen: these lines, the key legend and the prompt line
-        used = sum(height(line) for line in lines) + height(self.help_text()) + 1
+        notes = []
+        wide = max(len(line) for line in view.split("\n"))
+        if wide > columns:
+            notes.append(
+                f"(the view is {wide} columns wide, the window {columns}: its lines wrap; widen "
+                "the window)"
+            )
+        # the screen: these lines, the notes, the key legend and the prompt line
+        used = sum(height(line) for line in lines + notes) + height(self.help_text()) + 1
         if used <= rows:
-            return []
+            return notes
         note, note_rows = "", 1
         for _ in range(3):  # the note's own rows count, and its numbers set its length
             needed = used + note_rows
@@ -377,7 +387,7 @@ class TerminalTeacher:
             if height(note) == note_rows:
                 break
             note_rows = height(note)
-        return [note]
+        return [*notes, note]
 
     def _prompt(self) -> None:
         self._write(f"{self.help_text()}\naction? ")
