@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import os
 import pty
@@ -1014,6 +1015,43 @@ def test_a_resumed_session_shows_its_counts_from_its_first_request(tmp_path, mon
     assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "1"]) == 0
     assert seen and "step 3 " in seen[0] and "demonstrations 3 " in seen[0], seen
     assert "phase noninteractive" in seen[0]
+
+
+def test_a_resumed_session_says_where_it_stands_before_the_agent_drives(
+    tmp_path, monkeypatch, capsys
+):
+    """teach --resume printed nothing until its first request: a session whose agent was sure
+    everywhere drove its --steps on its own and printed only its last line, so the person who
+    came back saw a silent terminal, then the end, never where the session had stood nor that
+    a new episode began. It now says so before the first step."""
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    capsys.readouterr()
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "2"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith(f"Resuming the session in {run} at step 3"), first
+    assert "3 demonstrations" in first and "phase noninteractive" in first
+    assert "new episode" in first and "2 more steps" in first
+
+
+@pytest.mark.parametrize(
+    ("typed", "said"),
+    [("w\nw\n", "Stopped: the input ended"), ("w\nq\n", "Stopped by the teacher.")],
+    ids=["input-ends", "q"],
+)
+def test_teach_says_whether_the_person_stopped_or_the_input_ended(
+    tmp_path, monkeypatch, capsys, typed, said
+):
+    """Keys piped in (a script, a notebook-like stdin) that ran out ended with "Stopped by the
+    teacher.", as if the person had pressed q: nothing said that the input had ended."""
+    monkeypatch.setattr(sys, "stdin", io.StringIO(typed))
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "10"]) == 0
+    out = capsys.readouterr().out
+    assert said in out, out
+    assert f"{typed.count('w')} demonstrations over" in out  # each key before the end kept
+    assert ("Stopped by the teacher" in out) == (said == "Stopped by the teacher.")
 
 
 def _recorded_episodes(path: Path) -> Path:

@@ -678,3 +678,103 @@ def test_a_process_started_with_its_stdin_closed_has_no_input_to_read(monkeypatc
     with pytest.raises(TeachingInterrupted, match="teaching input closed"):
         teacher(OBS, {})
     assert out.getvalue().endswith(PROMPT.decode())
+
+
+@pytest.mark.timeout(60)
+def test_a_special_key_that_is_no_action_is_named_readably(terminal):
+    """Esc, F2 (ESC O Q), Alt-x and Ctrl-Z (a byte, the terminal's signal keys being off) were
+    refused as "'\\\\x1b[Q'" is not a key here: the key's repr quoted a second time, escapes
+    doubled, unreadable to the person. They are named as a keyboard names them now."""
+    master, slave = terminal
+    typed = [b"\x1b", b"\x1bOQ", b"\x1bx", b"\x1a", b"\x7f", b"a"]
+    person = Person(master, slave, typed)
+    teacher = _teacher(slave)
+    person.start()
+    assert teacher(OBS, {}) == 1
+    shown = person.finish()
+    for name in ("Esc", "F2", "Alt-x", "Ctrl-Z", "Backspace"):
+        assert f"'{name}' is not a key here" in shown, shown
+    assert "\\x" not in shown
+
+
+def test_a_line_teacher_says_which_number_is_which_action():
+    """Reading lines (a pipe, a notebook), an invalid entry was answered "(type a key, a key
+    name, an action name or number, then Enter)", but the legend numbers no action and the
+    numbers count from 0: a person typing "1" for the first action, "forward", taught "turn
+    left". The hint now says each action's number."""
+    out = io.StringIO()
+    names = ("forward", "turn left", "turn right", "u-turn")
+    teacher = TerminalTeacher(
+        {"w": 0, "a": 1, "d": 2, "s": 3}, names, input=io.StringIO("x\n0\n"), output=out
+    )
+    assert teacher(np.zeros(3), {}) == 0
+    assert "0 forward, 1 turn left, 2 turn right, 3 u-turn" in out.getvalue(), out.getvalue()
+
+
+_ASKED_IN_A_PROCESS = """
+import sys
+sys.path.insert(0, {root!r})
+import numpy as np
+from torchcbl.human import TerminalTeacher
+TerminalTeacher({{"w": 0}}, ("stay",), input=0)(np.zeros(1), {{}})
+"""
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_a_process_killed_while_it_waits_for_a_key_leaves_the_terminal_as_it_was(terminal, signum):
+    """`kill PID` (SIGTERM: a timeout, a service manager) of `torchcbl teach` waiting for a key
+    ended the process at once, its terminal left without echo, line editing or Ctrl-C (seen in
+    tmux: `stty -a` after it said -isig -icanon -iexten -echo). The process still dies of the
+    signal, as before, with the terminal restored first."""
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    child = subprocess.Popen(
+        [sys.executable, "-c", _ASKED_IN_A_PROCESS.format(root=root)],
+        stdin=slave,
+        stdout=slave,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        shown, deadline = b"", time.monotonic() + 30
+        while PROMPT not in shown and time.monotonic() < deadline:
+            if select.select([master], [], [], 0.1)[0]:
+                shown += os.read(master, 4096)
+        assert PROMPT in shown, shown
+        # again every 0.2 s: one that lands just before read() blocks only sets a flag
+        while child.poll() is None and time.monotonic() < deadline:
+            child.send_signal(signum)
+            time.sleep(0.2)
+    finally:
+        child.kill()
+        child.wait()
+    assert child.returncode == -signum
+    assert termios.tcgetattr(slave) == before
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("columns", [50, 80])
+def test_a_view_wider_than_the_terminal_says_so(terminal, columns):
+    """On a terminal narrower than the driving view (a split pane of 50 columns) each row of
+    the road wrapped, the right shoulder's cell drawn at the start of the next line, and
+    nothing said that the window was too narrow (only a view too tall was told)."""
+    import fcntl
+    import struct
+
+    from sumo_scenarios.human import describe, make_teacher
+
+    master, slave = terminal
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 60, columns, 0, 0))
+    person = Person(master, slave, [b"w"])
+    out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
+    teacher = make_teacher(input=slave, output=out)
+    obs = np.array([10.0, -25.0, 25.0, 0.0], dtype=np.float32)  # the ego on the right shoulder
+    person.start()
+    assert teacher(obs, {}) == 0
+    shown = person.finish()
+    wide = max(len(line) for line in describe(obs).splitlines())
+    told = f"the view is {wide} columns wide, the window {columns}"
+    assert (told in shown) == (columns < wide), shown[-800:]
+    if columns < wide:
+        assert "widen the window" in shown

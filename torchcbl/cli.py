@@ -859,12 +859,24 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     # demonstrations) are lifted for this call, else a finished session could never go on
     lifted = {"max_demonstrations": None, "max_episodes": None} if args.resume else {}
     status()  # a resumed session's counts from its first request on
+    if args.resume:  # before the agent drives: it may go on alone for all of --steps
+        print(
+            f"Resuming the session in {run_dir} at step {ct.n_steps} ({ct.n_demonstrations} "
+            f"demonstrations, phase {ct.phase}), in a new episode: the agent acts on its own "
+            f"where it is sure and asks you where it is not; {args.steps} more steps at most.",
+            flush=True,
+        )
     go_on = f"continue with: torchcbl teach {args.domain} --run-dir {_shell(run_dir)} --resume"
     try:
         try:
             ct.run(max_steps=ct.n_steps + args.steps, **lifted)
-        except TeachingInterrupted:
-            print("\nStopped by the teacher.")
+        except TeachingInterrupted as exc:  # q, Ctrl-C at a request, or no more input
+            ended = str(exc).endswith("input closed")  # TerminalTeacher's words for it
+            print(
+                "\nStopped: the input ended, no key left to read."
+                if ended
+                else "\nStopped by the teacher."
+            )
         except KeyboardInterrupt:  # Ctrl-C between two requests (the agent acting on its own)
             print("\nStopped by the teacher (Ctrl-C).")
         finally:

@@ -6,7 +6,8 @@ situation (a ``describe(observation, info) -> str`` function the domain supplies
 the caller keeps up to date (demonstrations so far, autonomy, ...), and a prompt listing the
 keys, then waits for the person to press one key. On a terminal too short for all of it (the
 driving view is about 30 lines, a terminal's usual height 24), whose top then scrolls away, a
-line above the keys says how many lines are cut off and to enlarge the window.
+line above the keys says how many lines are cut off and to enlarge the window; on one narrower
+than the view (the driving view is about 70 columns), whose lines then wrap, a line says so.
 
 On a terminal the key is read without Enter: the terminal is switched to a non-canonical,
 no-echo mode for the duration of the read and its settings are always restored afterwards,
@@ -30,10 +31,13 @@ This module is domain-free; the views live beside each domain (``corridor.human`
 from __future__ import annotations
 
 import builtins
+import contextlib
 import os
 import select
+import signal
 import sys
-from collections.abc import Callable, Mapping, Sequence
+import threading
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import IO, Any
 
 import numpy as np
@@ -64,6 +68,8 @@ _ESC = "\x1b"
 # Seconds to wait for the rest of an escape sequence after ESC (arrow keys send 3 bytes).
 _ESCAPE_WAIT = 0.05
 _CLEAR_SCREEN = "\x1b[H\x1b[2J"
+# F1-F4 after ESC, as read (ESC O P is read as ESC [ P), for naming a key that is no action.
+_FUNCTION_KEYS = {"[P": "F1", "[Q": "F2", "[R": "F3", "[S": "F4"}
 
 
 def _normalize_key(key: str) -> str:
@@ -86,15 +92,25 @@ def _normalize_key(key: str) -> str:
 
 
 def _label(key: str) -> str:
-    """A short printable name for a key as read."""
+    """A short printable name for a key as read, as a keyboard names it: ``up``, ``Ctrl-Z``,
+    ``Esc``, ``Alt-x``, ``F2``; another escape sequence as ``Esc`` and its printable rest."""
     if key in _LABELS:
         return _LABELS[key]
-    if key == _CTRL_C:
-        return "Ctrl-C"
-    if len(key) == 1 and not key.isprintable():
-        return repr(key)
+    if key == "\x7f":
+        return "Backspace"
+    if len(key) == 1 and ord(key) < 0x20 and key != _ESC:  # Ctrl-A is 1, ... Ctrl-_ is 31
+        return f"Ctrl-{chr(ord(key) + 0x40)}"
+    if key == _ESC:
+        return "Esc"
     if key.startswith(_ESC):
-        return repr(key)
+        rest = key[1:]
+        if len(rest) == 1 and rest.isprintable():
+            return f"Alt-{rest}"
+        if rest in _FUNCTION_KEYS:
+            return _FUNCTION_KEYS[rest]
+        return "Esc " + (rest if rest.isprintable() else repr(rest)[1:-1])
+    if len(key) == 1 and not key.isprintable():
+        return repr(key)[1:-1]
     return key
 
 
@@ -137,6 +153,35 @@ def _split_keys(data: bytes) -> tuple[list[str], bytes]:
         keys.append(_decode_key(data[:length]))
         data = data[length:]
     return keys, data
+
+
+@contextlib.contextmanager
+def _restored_before_a_fatal_signal(fd: int, saved: list[Any]) -> Iterator[None]:
+    """While in place, SIGTERM and SIGHUP whose default action (the process ends at once, no
+    ``finally`` run) is set restore the terminal ``fd`` to ``saved`` first, then end the process
+    by the signal as before; else a ``kill`` during a key's read left the terminal without echo
+    or line editing. Only in the main thread (where Python runs signal handlers)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def restore_then_die(signum: int, frame: Any) -> None:
+        try:
+            termios.tcsetattr(fd, termios.TCSANOW, saved)
+        except (termios.error, OSError):  # the terminal is gone (SIGHUP): nothing to restore
+            pass
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+
+    replaced = {}
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(signum) is signal.SIG_DFL:
+            replaced[signum] = signal.signal(signum, restore_then_die)
+    try:
+        yield
+    finally:
+        for signum, handler in replaced.items():
+            signal.signal(signum, handler)
 
 
 def _frontend_input() -> Callable[[], str] | None:
@@ -296,19 +341,21 @@ class TerminalTeacher:
         if self.title:
             lines.append(self.title)
         if self._describe is not None:
-            lines.append(self._describe(observation, info).rstrip("\n"))
+            view = self._describe(observation, info).rstrip("\n")
         else:
-            lines.append(f"observation: {np.asarray(observation).tolist()}")
+            view = f"observation: {np.asarray(observation).tolist()}"
+        lines.append(view)
         lines.append(
             f"decision #{self.n_decisions + 1}" + (f" | {self.status}" if self.status else "")
         )
         if clear:
-            lines += self._cut_off_note(lines)
+            lines += self._cut_off_note(lines, view)
         self._write((_CLEAR_SCREEN if clear else "") + "\n".join(lines) + "\n")
 
-    def _cut_off_note(self, lines: list[str]) -> list[str]:
-        """A line saying the screen is taller than the output terminal, whose top then scrolls
-        away (the driving view is ~30 lines, a terminal's usual height 24), else nothing."""
+    def _cut_off_note(self, lines: list[str], view: str) -> list[str]:
+        """Lines saying the view is wider than the output terminal, its lines then wrapping (the
+        driving view is about 70 columns), and that the screen is taller, its top then scrolling
+        away (the driving view is ~30 lines, a terminal's usual height 24); else nothing."""
         try:
             columns, rows = os.get_terminal_size(self._output.fileno())
         except (AttributeError, OSError, ValueError):  # not a terminal, or no size known
@@ -319,10 +366,17 @@ class TerminalTeacher:
         def height(text: str) -> int:  # terminal rows, a line longer than the width wrapping
             return sum(max(1, -(-len(line) // columns)) for line in text.split("\n"))
 
-        # the screen: these lines, the key legend and the prompt line
-        used = sum(height(line) for line in lines) + height(self.help_text()) + 1
+        notes = []
+        wide = max(len(line) for line in view.split("\n"))
+        if wide > columns:
+            notes.append(
+                f"(the view is {wide} columns wide, the window {columns}: its lines wrap; widen "
+                "the window)"
+            )
+        # the screen: these lines, the notes, the key legend and the prompt line
+        used = sum(height(line) for line in lines + notes) + height(self.help_text()) + 1
         if used <= rows:
-            return []
+            return notes
         note, note_rows = "", 1
         for _ in range(3):  # the note's own rows count, and its numbers set its length
             needed = used + note_rows
@@ -333,7 +387,7 @@ class TerminalTeacher:
             if height(note) == note_rows:
                 break
             note_rows = height(note)
-        return [note]
+        return [*notes, note]
 
     def _prompt(self) -> None:
         self._write(f"{self.help_text()}\naction? ")
@@ -354,6 +408,10 @@ class TerminalTeacher:
 
     def _ask_key(self, fd: int) -> int:
         saved = termios.tcgetattr(fd)
+        with _restored_before_a_fatal_signal(fd, saved):
+            return self._ask_key_raw(fd, saved)
+
+    def _ask_key_raw(self, fd: int, saved: list[Any]) -> int:
         try:
             mode = termios.tcgetattr(fd)
             # Non-canonical, no echo, no signal keys (Ctrl-C arrives as a byte and is ours),
@@ -469,7 +527,11 @@ class TerminalTeacher:
             if action is not None:
                 return action
             self._invalid(repr(token))
-            self._write("(type a key, a key name, an action name or number, then Enter)\naction? ")
+            numbers = ", ".join(f"{a} {name}" for a, name in enumerate(self.action_names))
+            self._write(
+                f"(type a key, a key name, an action name or its number ({numbers}), then "
+                "Enter)\naction? "
+            )
 
     def _resolve_token(self, token: str) -> int | None:
         lowered = token.lower()
