@@ -1624,3 +1624,24 @@ def test_prior_demonstrations_of_a_directory_that_is_no_session_says_which_are(t
         assert err.count("\n") == 1 and says in err, err
         assert "ConfidentTeacher" not in err, err
     assert not (tmp_path / "new" / "config.json").exists()
+
+
+def test_teach_resume_of_a_session_being_taught_elsewhere_says_what_to_do_at_the_terminal(
+    tmp_path, monkeypatch, capsys
+):
+    """teach --resume of a session another writer holds said "close the other
+    ConfidentTeacher (close() or a with-block)": Python advice, at the command line, to a
+    person whose other teach runs in another terminal. It says to stop that teach there."""
+    import fcntl
+
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    capsys.readouterr()
+    with open(run / "writer.lock", "r+") as other:  # another writer holds the session
+        fcntl.flock(other.fileno(), fcntl.LOCK_EX)
+        assert main(["teach", "corridor", "--resume", "--run-dir", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "with-block" not in err and "close()" not in err, err
+    assert "is being taught by another writer" in err and "q or Ctrl-C" in err, err

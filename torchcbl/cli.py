@@ -825,10 +825,17 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         )
 
     if args.resume:
-        from torchcbl.errors import IncompatibleRunDirError
+        from torchcbl.errors import IncompatibleRunDirError, SessionLockedError
 
         try:  # (a session another process is teaching, a damaged log: as evaluate says them)
             ct = ConfidentTeacher.resume(run_dir, env, teacher, progress=False, on_step=status)
+        except SessionLockedError as exc:  # the library's words are for Python: say the CLI's
+            env.close()
+            raise _UsageError(
+                f"{run_dir} is being taught by another writer ({exc.holder}): one writer per "
+                "session. Stop that teach (q or Ctrl-C in its terminal) or end that process, "
+                "then run this again; reading it meanwhile works (torchcbl evaluate)."
+            ) from None
         except IncompatibleRunDirError as exc:
             env.close()
             raise _UsageError(_one_line(exc)) from None

@@ -43,7 +43,14 @@ class CorruptSessionError(IncompatibleRunDirError):
 
 class SessionLockedError(IncompatibleRunDirError):
     """Another writer (process or ConfidentTeacher) has the run directory open. One writer
-    per session; the lock is released when that writer closes or dies (even by SIGKILL)."""
+    per session; the lock is released when that writer closes or dies (even by SIGKILL).
+
+    Attributes:
+        holder: the holder as ``writer.lock`` names it ("process PID on HOST"), or
+            "unknown".
+    """
+
+    holder: str = "unknown"
 
 
 class SessionWriteError(OSError):

@@ -811,12 +811,14 @@ def _acquire_lock(run_dir: Path) -> Any:
         f.close()
         if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
             raise _write_error(exc, path, "locking the session", _FREE_SPACE) from exc
-        raise SessionLockedError(
+        err = SessionLockedError(
             f"{run_dir} is already open for writing ({path} is locked by {holder}). One writer "
             "per session: close the other ConfidentTeacher (close() or a with-block) or stop "
             "that process, then resume; a writer that died releases the lock by itself. "
             "Reading meanwhile needs no lock (load_records, load_model)."
-        ) from None
+        )
+        err.holder = holder
+        raise err from None
     _note_holder(f, keep_count=True)
     return f
 
