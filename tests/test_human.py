@@ -712,7 +712,8 @@ def test_a_line_teacher_says_which_number_is_which_action():
 
 
 _ASKED_IN_A_PROCESS = """
-import sys
+import signal, sys
+signal.signal(signal.SIGHUP, signal.SIG_DFL)  # as a terminal's process has it (not under nohup)
 sys.path.insert(0, {root!r})
 import numpy as np
 from torchcbl.human import TerminalTeacher
@@ -742,10 +743,8 @@ def test_a_process_killed_while_it_waits_for_a_key_leaves_the_terminal_as_it_was
             if select.select([master], [], [], 0.1)[0]:
                 shown += os.read(master, 4096)
         assert PROMPT in shown, shown
-        # again every 0.2 s: one that lands just before read() blocks only sets a flag
-        while child.poll() is None and time.monotonic() < deadline:
-            child.send_signal(signum)
-            time.sleep(0.2)
+        child.send_signal(signum)  # once, as kill does: the wait for a key wakes for it
+        child.wait(timeout=max(deadline - time.monotonic(), 1))
     finally:
         child.kill()
         child.wait()
@@ -778,3 +777,30 @@ def test_a_view_wider_than_the_terminal_says_so(terminal, columns):
     assert (told in shown) == (columns < wide), shown[-800:]
     if columns < wide:
         assert "widen the window" in shown
+
+
+@pytest.mark.timeout(60)
+def test_waiting_for_a_key_leaves_the_programs_own_signal_handlers_as_they_were(terminal):
+    """While a key is read, SIGTERM and SIGHUP at their default action get a handler that
+    restores the terminal first; a program's own handler, or an ignored SIGHUP (nohup), is
+    left alone, and after the read every handler is what it was."""
+    master, slave = terminal
+    own = []
+
+    def handler(signum, frame):
+        own.append(signum)
+
+    old_term = signal.signal(signal.SIGTERM, handler)
+    old_hup = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        person = Person(master, slave, [b"w"])
+        out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
+        teacher = TerminalTeacher({"w": 0}, ("stay",), input=slave, output=out)
+        person.start()
+        assert teacher(np.zeros(1), {}) == 0
+        person.finish()
+        assert signal.getsignal(signal.SIGTERM) is handler
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGTERM, old_term)
+        signal.signal(signal.SIGHUP, old_hup)

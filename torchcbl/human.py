@@ -67,6 +67,8 @@ _CTRL_D = "\x04"
 _ESC = "\x1b"
 # Seconds to wait for the rest of an escape sequence after ESC (arrow keys send 3 bytes).
 _ESCAPE_WAIT = 0.05
+# how often a wait for a key wakes, so that a signal's Python handler runs (seconds)
+_SIGNAL_WAIT = 0.2
 _CLEAR_SCREEN = "\x1b[H\x1b[2J"
 # F1-F4 after ESC, as read (ESC O P is read as ESC [ P), for naming a key that is no action.
 _FUNCTION_KEYS = {"[P": "F1", "[Q": "F2", "[R": "F3", "[S": "F4"}
@@ -174,10 +176,10 @@ def _restored_before_a_fatal_signal(fd: int, saved: list[Any]) -> Iterator[None]
         os.kill(os.getpid(), signum)
 
     replaced = {}
-    for signum in (signal.SIGTERM, signal.SIGHUP):
-        if signal.getsignal(signum) is signal.SIG_DFL:
-            replaced[signum] = signal.signal(signum, restore_then_die)
-    try:
+    try:  # installed inside: a Ctrl-C between two installs still puts the first one back
+        for signum in (signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(signum) is signal.SIG_DFL:
+                replaced[signum] = signal.signal(signum, restore_then_die)
         yield
     finally:
         for signum, handler in replaced.items():
@@ -452,6 +454,12 @@ class TerminalTeacher:
 
     def _read_byte(self, fd: int) -> bytes:
         try:
+            # waited for in short selects, not in one blocking read: a SIGTERM that lands
+            # after Python's last check and before a blocking read() only sets a flag, and
+            # its handler (which restores the terminal, then ends the process) would run at
+            # the next key; between selects it runs within _SIGNAL_WAIT seconds
+            while not select.select([fd], [], [], _SIGNAL_WAIT)[0]:
+                pass
             byte = os.read(fd, 1)
         except OSError as exc:  # EIO once the other end of a pseudo-terminal is gone
             raise TeachingInterrupted("teaching input closed") from exc
