@@ -566,10 +566,10 @@ def test_a_damaged_confident_execution_entry_is_refused_on_resume_saying_so(tmp_
         ConfidentTeacher.resume(tmp_path, env, oracle(env), progress=False)
 
 
-@pytest.mark.parametrize("entry", [None, "ConfidentExecution", {"type": 3}])
+@pytest.mark.parametrize("entry", [None, "ConfidentExecution", ["ConfidentExecution"]])
 def test_a_config_whose_strategy_entry_is_not_a_strategy_dict_is_a_corrupt_session(tmp_path, entry):
-    """A config.json whose "strategy" entry is not a dict (null, a string) or names its type
-    with something other than a string failed resume with a bare TypeError or ValueError (given a
+    """A config.json whose "strategy" entry is not a dict (null, a string, a list) failed
+    resume with a bare TypeError or ValueError (given a
     strategy) or "'NoneType' object is not iterable" (without), and load_demonstrations and
     load_model with an AttributeError. It is a damaged session, said as the other damaged
     config.json entries are."""

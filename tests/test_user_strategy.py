@@ -381,3 +381,19 @@ def test_an_instance_made_before_its_module_was_reloaded_still_starts_a_session(
     ct.run(max_steps=5)
     ct.close()
     assert len(load_records(tmp_path / "r")) == 5
+
+
+@pytest.mark.parametrize("kind", [None, 3, ["SafeAsk"]])
+def test_a_to_config_whose_type_is_not_a_name_is_refused_before_the_session_starts(tmp_path, kind):
+    """A to_config() whose "type" was not a string (None, a number, a list) started a
+    session whose config.json its own readers then could not use as one (the type names the
+    class to rebuild and to compare on resume). It is refused at the start, nothing written."""
+
+    class Typed(SafeAsk):
+        def to_config(self):
+            return {**super().to_config(), "type": kind}
+
+    env = rare_regions_world(episode_length=10)
+    with pytest.raises(TypeError, match=r'Typed.to_config\(\) gives "type": .*a string'):
+        ConfidentTeacher(env, oracle(env), strategy=Typed(), run_dir=tmp_path / "r", progress=False)
+    assert not (tmp_path / "r").exists()

@@ -512,13 +512,11 @@ def _config_problem(config: dict[str, Any]) -> str | None:
     if type(max_new) is not int or max_new < 1:  # every reader refits by it
         return f"the key 'teaching' has max_new {max_new!r}, not an int >= 1 (the refit period)"
     strategy = config.get("strategy")
-    # a dict; its "type" a name where given (a user's to_config() may have left it out)
-    if "strategy" in config and not (
-        isinstance(strategy, dict) and isinstance(strategy.get("type", ""), str)
-    ):
+    # a dict (its "type" is read with str(): a user's to_config() may have left it out, or
+    # given a session made before strategy_to_config refused that something else)
+    if "strategy" in config and not isinstance(strategy, dict):
         return (
-            "the key 'strategy' should hold the strategy's to_config() dict (its \"type\" "
-            f"a name), got {strategy!r:.200}"
+            f"the key 'strategy' should hold the strategy's to_config() dict, got {strategy!r:.200}"
         )
     prior = config.get("prior")
     if config.get("format") == PRIOR_FORMAT or prior is not None:

@@ -258,12 +258,13 @@ def strategy_to_config(strategy: Any, *, check_relabel: bool = True) -> dict[str
     (a subclass of :class:`Strategy` inherits the protocol's empty one), is named only
     (custom).
 
-    ``check_relabel=False`` skips the ``"relabel"`` check below: a resume compares the dict
-    with a stored one, and a session stored before the check may hold a misstated one.
+    ``check_relabel=False`` skips the checks of ``"type"`` and ``"relabel"`` below: a resume
+    compares the dict with a stored one, and a session stored before the checks may fail them.
 
     Raises:
         TypeError: ``to_config()`` returned something other than a dict or None, a dict
-            JSON cannot hold, or one whose ``"relabel"`` (false when absent) is not the
+            JSON cannot hold, one whose ``"type"`` is not a string, or one whose
+            ``"relabel"`` (false when absent) is not the
             strategy's ``relabel`` (a session's readers, ``load_demonstrations`` and
             ``load_model``, relabel as the stored dict says).
     """
@@ -276,6 +277,12 @@ def strategy_to_config(strategy: Any, *, check_relabel: bool = True) -> dict[str
                 f"{name}.to_config() returned {config!r:.80}; expected a "
                 'JSON dict with "type" and the constructor arguments (see torchcbl.strategies), '
                 "or None to store the strategy as custom (then pass it again to resume())."
+            )
+        if check_relabel and "type" in config and not isinstance(config["type"], str):
+            raise TypeError(
+                f'{name}.to_config() gives "type": {config["type"]!r:.80}; expected a string, '
+                "the name the strategy is rebuilt and compared by on resume (e.g. "
+                f'"type": {name!r}).'
             )
         relabel = bool(getattr(strategy, "relabel", False))
         if check_relabel and bool(config.get("relabel", False)) != relabel:
