@@ -1645,3 +1645,4 @@ def test_teach_resume_of_a_session_being_taught_elsewhere_says_what_to_do_at_the
     assert err.count("\n") == 1, err
     assert "with-block" not in err and "close()" not in err, err
     assert "is being taught by another writer" in err and "q or Ctrl-C" in err, err
+    assert "(process " in err, err  # the holder, as writer.lock names it

@@ -2127,18 +2127,28 @@ def test_every_file_put_in_place_is_flushed_before_its_rename_and_its_directory_
     assert all(v == (True, True) for v in renamed.values()), renamed
 
 
-def test_a_new_session_refused_on_an_existing_one_leaves_its_count_in_writer_lock(tmp_path):
-    """Starting a new session in a directory that holds one is refused; but the refusal came
-    after the new writer had noted itself in writer.lock as a new session's, without the
-    last writer's count line. Steps then lost from that session's log (here its last 4 rows,
-    as a lost -wal loses them) read as a shorter session with no word. The count survives
-    the refusal, and the loss is an error."""
-    run = tmp_path / "run"
+@pytest.mark.parametrize("refused_for", ["a session", "what a session left"])
+def test_a_new_session_refused_on_an_existing_one_leaves_its_count_in_writer_lock(
+    tmp_path, refused_for
+):
+    """Starting a new session in a directory that holds one (or what one left: its log and
+    config moved aside for a moment) is refused; but the refusal came after the new writer
+    had noted itself in writer.lock as a new session's, without the last writer's count
+    line. Steps then lost from that session's log (here its last 4 rows, as a lost -wal
+    loses them) read as a shorter session with no word. The count survives the refusal, and
+    the loss is an error."""
+    run, aside = tmp_path / "run", tmp_path / "aside"
     ct, env = session(run, commit_every=4)
     ct.run(max_steps=20)
     ct.close()
-    with pytest.raises(IncompatibleRunDirError, match="already holds a teaching session"):
+    moved = ("config.json", "steps.sqlite") if refused_for.startswith("what") else ()
+    aside.mkdir()
+    for name in moved:
+        shutil.move(run / name, aside / name)
+    with pytest.raises(IncompatibleRunDirError, match="already holds|another session left"):
         session(run)
+    for name in moved:
+        shutil.move(aside / name, run / name)
     db = sqlite3.connect(run / "steps.sqlite")
     db.execute("DELETE FROM steps WHERE step >= 16")
     db.commit()

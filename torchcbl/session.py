@@ -1112,7 +1112,6 @@ class SessionStore:
                     f"{path} already holds a teaching session. Continue it with "
                     "ConfidentTeacher.resume(run_dir, env, teacher) or choose a new run_dir."
                 )
-            _note_holder(lock, keep_count=False)  # a count left by no session: not this one's
             # a journal's steps, a writers.jsonl's writers (whose step numbers and thread
             # counts would read as this session's) and checkpoints belong to another session
             leftovers = [
@@ -1133,6 +1132,7 @@ class SessionStore:
                     f"{', ...' if len(leftovers) > 3 else ''}) but no session; choose a new "
                     "run_dir (or move those files away)."
                 )
+            _note_holder(lock, keep_count=False)  # a count left by no session: not this one's
             started = True
             if prior is not None:
                 _write_atomic(path / PRIOR_NAME, prior, "starting the session", _START_AGAIN)
