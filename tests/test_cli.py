@@ -1050,7 +1050,8 @@ def test_teach_says_whether_the_person_stopped_or_the_input_ended(
     assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "10"]) == 0
     out = capsys.readouterr().out
     assert said in out, out
-    assert f"{typed.count('w')} demonstrations over" in out  # each key before the end kept
+    n = typed.count("w")  # each key before the end kept
+    assert f"{n} demonstration{'' if n == 1 else 's'} over" in out
     assert ("Stopped by the teacher" in out) == (said == "Stopped by the teacher.")
 
 
@@ -1646,3 +1647,12 @@ def test_teach_resume_of_a_session_being_taught_elsewhere_says_what_to_do_at_the
     assert "with-block" not in err and "close()" not in err, err
     assert "is being taught by another writer" in err and "q or Ctrl-C" in err, err
     assert "(process " in err, err  # the holder, as writer.lock names it
+
+
+def test_teach_counts_one_demonstration_and_one_step_in_the_singular(tmp_path, monkeypatch, capsys):
+    """A teach stopped after its first key said "1 demonstrations over 1 steps saved"."""
+    monkeypatch.setattr(sys, "stdin", io.StringIO("w\n"))
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "10"]) == 0
+    out = capsys.readouterr().out
+    assert "1 demonstration over 1 step saved in" in out, out

@@ -893,18 +893,20 @@ def _cmd_teach(args: argparse.Namespace) -> int:
                 env.close()
     except SessionWriteError as exc:  # the disk filled up: what was recorded is kept
         print(
-            f"torchcbl teach: error: {_one_line(exc)} {ct.n_demonstrations} demonstrations "
-            f"over {ct.n_steps} steps are saved in {run_dir}; free space, then {go_on}",
+            f"torchcbl teach: error: {_one_line(exc)} {_saved(ct)} are saved in {run_dir}; "
+            f"free space, then {go_on}",
             file=sys.stderr,
         )
         return 1
     why = _STOP_REASONS.get(ct.stop_reason or "", "")
-    print(
-        f"{ct.n_demonstrations} demonstrations over {ct.n_steps} steps saved in {run_dir}"
-        + (f" ({why})" if why else "")
-        + f"; {go_on}"
-    )
+    print(f"{_saved(ct)} saved in {run_dir}" + (f" ({why})" if why else "") + f"; {go_on}")
     return 0
+
+
+def _saved(ct: Any) -> str:
+    """ "N demonstrations over M steps", in the singular where a count is 1."""
+    d, n = ct.n_demonstrations, ct.n_steps
+    return f"{d} demonstration{'' if d == 1 else 's'} over {n} step{'' if n == 1 else 's'}"
 
 
 _STOP_REASONS = {
