@@ -1502,7 +1502,7 @@ def test_teach_stopped_by_a_full_disk_says_how_to_continue_at_the_command_line(
         signal.signal(signal.SIGXFSZ, handler)
     err = capsys.readouterr().err
     assert rc == 1 and err.count("\n") == 1 and "steps.sqlite failed" in err, err
-    assert "3 demonstrations over 3 steps are saved" in err, err
+    assert f"Saved in {run}: 3 demonstrations over 3 steps;" in err, err
     assert f"continue with: torchcbl teach corridor --run-dir {run} --resume" in err, err
     assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "2"]) == 0
     assert len(load_records(run)) == 5

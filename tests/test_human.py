@@ -792,13 +792,20 @@ def test_waiting_for_a_key_leaves_the_programs_own_signal_handlers_as_they_were(
 
     old_term = signal.signal(signal.SIGTERM, handler)
     old_hup = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    during = []
+
+    def look_then_press():  # while the key is awaited
+        during.append((signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGHUP)))
+        os.write(master, b"w")
+
     try:
-        person = Person(master, slave, [b"w"])
+        person = Person(master, slave, [look_then_press])
         out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
         teacher = TerminalTeacher({"w": 0}, ("stay",), input=slave, output=out)
         person.start()
         assert teacher(np.zeros(1), {}) == 0
         person.finish()
+        assert during == [(handler, signal.SIG_IGN)]
         assert signal.getsignal(signal.SIGTERM) is handler
         assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
     finally:

@@ -893,7 +893,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
                 env.close()
     except SessionWriteError as exc:  # the disk filled up: what was recorded is kept
         print(
-            f"torchcbl teach: error: {_one_line(exc)} {_saved(ct)} are saved in {run_dir}; "
+            f"torchcbl teach: error: {_one_line(exc)} Saved in {run_dir}: {_saved(ct)}; "
             f"free space, then {go_on}",
             file=sys.stderr,
         )
