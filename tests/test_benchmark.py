@@ -829,6 +829,44 @@ def test_a_worker_killed_mid_sweep_is_not_blamed_on_another_cell(tmp_path, monke
     assert 1 not in kept
 
 
+def test_a_killed_worker_is_named_when_the_pools_own_thread_reaps_it_first(tmp_path, monkeypatch):
+    """The pool's own thread, seeing the pool broken, terminates and joins every worker while
+    the sweep's error handling does the same: the two reap the same processes. The thread
+    that lost the race to a process's exit got "no such child" and read no exit code, so a
+    CI run named SIGTERM (the others' termination) for the SIGKILLed worker. Here the pool's
+    thread is slowed between reaping a worker and keeping its code, as the race does."""
+    import threading
+
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    real = os.waitpid
+
+    killed_reaped = threading.Event()
+
+    def reaped_first_elsewhere(pid, flags):
+        if threading.current_thread() is threading.main_thread():
+            try:  # a look without reaping: the killed worker is left to the pool's thread
+                seen = os.waitid(os.P_PID, pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+            except ChildProcessError:
+                seen = None
+            if seen is not None and seen.si_code == os.CLD_KILLED:
+                killed_reaped.wait(timeout=5)
+            return real(pid, flags)
+        got = real(pid, flags)
+        if got[0] == pid and os.WIFSIGNALED(got[1]) and os.WTERMSIG(got[1]) == signal.SIGKILL:
+            killed_reaped.set()
+            time.sleep(3.0)  # reaped: its code kept only after this
+        return got
+
+    monkeypatch.setattr(os, "waitpid", reaped_first_elsewhere)
+    env = _env(teacher="_bench_env:dying_teacher", budgets=(5,), max_steps=10)
+    with pytest.raises(RuntimeError) as caught:
+        bm.run_benchmark(STRATEGIES[:1], [env], [0, 1, 2], tmp_path, workers=2, plots=False)
+    text = str(caught.value)
+    assert text.startswith("a worker process was killed by SIGKILL (the out-of-memory killer"), text
+
+
 def test_a_script_without_the_main_guard_is_told_so_not_that_a_worker_was_killed(tmp_path):
     """run_benchmark with a pool, at a script's top level: each spawned worker re-ran the
     script and exited with code 1 at start-up, and the sweep said "a worker process died

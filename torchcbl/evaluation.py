@@ -340,9 +340,9 @@ def _how_a_worker_died(broken: BaseException, exitcodes: Iterable[int | None]) -
 
 class _RecordingPool(ProcessPoolExecutor):
     """A process pool that keeps every worker process it started (``started``), so that the
-    exit code of one that died stays at hand whatever the pool's own bookkeeping dropped: a
-    CI run once named SIGTERM (the pool's termination of the others) where the test's worker
-    had been SIGKILLed, its process no longer among the pool's (not reproduced since)."""
+    exit code of one that died stays at hand whatever the pool's own bookkeeping dropped.
+    (A CI run that named SIGTERM for a SIGKILLed worker had another cause: the pool's own
+    thread reaping it; see :func:`worker_pool`.)"""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self.started: list[Any] = []
@@ -395,12 +395,19 @@ def worker_pool(
         yield pool
     except BaseException as exc:
         processes = list(pool.started) or list((getattr(pool, "_processes", None) or {}).values())
+        manager = getattr(pool, "_executor_manager_thread", None)  # shutdown() forgets it
         pool.shutdown(wait=False, cancel_futures=True)
         for proc in processes:
             if proc.is_alive():
                 proc.terminate()
         for proc in processes:
             proc.join(timeout=10)
+        # the pool's own thread, seeing it broken, terminates and joins the workers too: a
+        # process it reaped read here as "no such child", no exit code, until that thread
+        # kept the code (a CI run named SIGTERM for a SIGKILLed worker); once it has ended,
+        # every code is kept
+        if manager is not None and manager is not threading.current_thread():
+            manager.join(timeout=10)
         if isinstance(exc, BrokenProcessPool):
             how = _how_a_worker_died(exc, (proc.exitcode for proc in processes))
             raise RuntimeError(f"a worker process {how} while it ran {running}; {after}") from exc
