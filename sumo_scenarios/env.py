@@ -180,7 +180,6 @@ class DrivingEnv(gym.Env):
         )
         self.action_space = gym.spaces.Discrete(3)
         self._sim = HighwaySim(self.scenario, config.sim)
-        self._t = 0
         self._episode_seed: int | None = None
         self._last_action: int | None = None
 
@@ -235,7 +234,6 @@ class DrivingEnv(gym.Env):
         self._episode_seed = None  # until the new segment is in place: no step() on a half reset
         self._sim.reset(rng, int(seed), ego_lane=lane, fcd_path=Path(fcd) if fcd else None)
         self._episode_seed = int(seed)
-        self._t = 0
         self._last_action = None
         return self._observe(), self._info()
 
@@ -260,7 +258,6 @@ class DrivingEnv(gym.Env):
         target = lane + (1 if a == LEFT else -1 if a == RIGHT else 0)
         target = min(max(target, 0), N_LANES - 1)
         self._sim.step(target)
-        self._t += 1
         self._last_action = a
         contact = self._sim.contact
         truncated = self._t >= self.config.max_episode_steps
@@ -268,6 +265,11 @@ class DrivingEnv(gym.Env):
 
     def __reduce_ex__(self, protocol: Any) -> Any:
         return self._sim.__reduce_ex__(protocol)  # refused, with what to do instead
+
+    @property
+    def _t(self) -> int:
+        """Steps of this episode: the simulation's own count, one per step()."""
+        return self._sim.steps
 
     def render(self) -> np.ndarray | None:
         """The current timestep drawn as an RGB image [H, W, 3] uint8 (``render_mode=

@@ -431,6 +431,12 @@ class HighwaySim:
         """True once :meth:`close` has run."""
         return self._closed
 
+    @property
+    def steps(self) -> int:
+        """SUMO steps since the last reset (its time is this many step lengths); a step cut
+        short counts once SUMO has stepped."""
+        return self._steps
+
     def __reduce_ex__(self, protocol: object) -> object:
         # copy.copy, copy.deepcopy and pickle all come here: a copy would share (or, unpickled,
         # lack) the process's one libsumo simulation while keeping its own bookkeeping
