@@ -840,6 +840,8 @@ class ConfidentTeacher:
                 model_args = _model_args(model)
             except ValueError as exc:
                 model_args = {"error": str(exc)}
+        # the strategy given (a rule: confident execution with it), None to rebuild the stored
+        given = None if rule is None and strategy is None else _pick_strategy(rule, strategy)
         problems = resume_problems(
             stored,
             n_features=n_features,
@@ -852,27 +854,26 @@ class ConfidentTeacher:
             model_args=model_args,
             strategy=(
                 None
-                if rule is None and strategy is None
+                if given is None
                 # unchecked: a session stored before the "relabel" check may misstate it
-                else strategy_to_config(_pick_strategy(rule, strategy), check_relabel=False)
+                else strategy_to_config(given, check_relabel=False)
             ),
         )
-        given_strategy = strategy is not None
-        if rule is None and strategy is None:
+        if given is None:
             try:
                 strategy = strategy_from_config(stored_strategy(stored))
             except (ValueError, TypeError) as exc:
                 problems.append(str(exc))
         else:
-            strategy = _pick_strategy(rule, strategy)
+            strategy = given
         if problems:
             raise IncompatibleRunDirError(
                 f"cannot resume the session in {run_dir}: "
                 + "; ".join(problems).rstrip(".")
                 + ". Resume with matching arguments, or start a new session in another run_dir."
             )
-        if rule is not None or given_strategy:  # a refused resume has said enough
-            _warn_misstated_relabel(stored_strategy(stored), strategy)
+        if given is not None:  # (a refused resume has said enough)
+            _warn_misstated_relabel(stored_strategy(stored), given)
         prior = _read_prior(run_dir, stored)  # a missing or changed prior.npz: refused here
         if model is None:
             model = build_model(stored)
