@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -705,15 +706,10 @@ def test_load_records_names_a_damaged_scenario_of_a_record(tmp_path):
             load_records(tmp_path / "bad.json")
 
 
-def test_an_fcd_output_naming_a_shipped_data_file_is_refused(tmp_path):
-    """reset(options={"fcd_output": <the shipped road.net.xml or driving.add.xml>}): SUMO read
-    the file and then wrote the episode's FCD over it, which broke the install for good (every
-    later DrivingEnv failed with KeyError 'road'). Now the reset refuses, naming the file, and
-    the file is unchanged. Run on a copy of the package, in a process of its own."""
+def _package_copy(tmp_path):
+    """A copy of the sumo_scenarios package in ``tmp_path/site`` (a test may damage its data
+    files; the checkout's stay as they are)."""
     import shutil
-    import subprocess
-    import sys
-    from pathlib import Path
 
     import sumo_scenarios
 
@@ -723,6 +719,34 @@ def test_an_fcd_output_naming_a_shipped_data_file_is_refused(tmp_path):
         site / "sumo_scenarios",
         ignore=shutil.ignore_patterns("__pycache__"),
     )
+    return site
+
+
+def _run_on(site, tmp_path, code, *args):
+    """The lines ``code`` prints, run by a process of its own on the package copy ``site``
+    (in ``tmp_path``); it must exit 0."""
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-c", code, *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr[-2000:]
+    return out.stdout.splitlines()
+
+
+def test_an_fcd_output_naming_a_shipped_data_file_is_refused(tmp_path):
+    """reset(options={"fcd_output": <the shipped road.net.xml or driving.add.xml>}): SUMO read
+    the file and then wrote the episode's FCD over it, which broke the install for good (every
+    later DrivingEnv failed with KeyError 'road'). Now the reset refuses, naming the file, and
+    the file is unchanged. Run on a copy of the package, in a process of its own."""
+    site = _package_copy(tmp_path)
     data = site / "sumo_scenarios" / "data"
     before = {n: (data / n).read_bytes() for n in ("road.net.xml", "driving.add.xml")}
     (tmp_path / "link.xml").symlink_to(data / "driving.add.xml")
@@ -740,18 +764,8 @@ def test_an_fcd_output_naming_a_shipped_data_file_is_refused(tmp_path):
         "env.reset(seed=0)\n"
         "env.close()\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code, str(data / "road.net.xml"), str(tmp_path / "link.xml")],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
-        cwd=tmp_path,
-    )
-    assert out.returncode == 0, out.stdout + out.stderr[-2000:]
-    lines = out.stdout.splitlines()
-    assert len(lines) == 2, out.stdout
+    lines = _run_on(site, tmp_path, code, str(data / "road.net.xml"), str(tmp_path / "link.xml"))
+    assert len(lines) == 2, lines
     for line, name in zip(lines, ("road.net.xml", "link.xml"), strict=True):
         assert line.startswith("fcd_output: "), line
         assert name in line and "shipped" in line, line
@@ -763,19 +777,7 @@ def test_a_damaged_shipped_network_is_named_with_the_way_to_rebuild_it(tmp_path)
     truncated: DrivingEnv() failed with a bare KeyError 'road' or sumolib's SAXParseException.
     Now a RuntimeError names the file and the command that rebuilds it. Run on a copy of the
     package, in a process of its own."""
-    import shutil
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    import sumo_scenarios
-
-    site = tmp_path / "site"
-    shutil.copytree(
-        Path(sumo_scenarios.__file__).parent,
-        site / "sumo_scenarios",
-        ignore=shutil.ignore_patterns("__pycache__"),
-    )
+    site = _package_copy(tmp_path)
     code = (
         "from sumo_scenarios.env import DrivingEnv\n"
         "from sumo_scenarios.scenarios import data_path\n"
@@ -787,18 +789,8 @@ def test_a_damaged_shipped_network_is_named_with_the_way_to_rebuild_it(tmp_path)
         "    except RuntimeError as exc:\n"
         "        print(exc)\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
-        cwd=tmp_path,
-    )
-    assert out.returncode == 0, out.stdout + out.stderr[-2000:]
-    lines = out.stdout.splitlines()
-    assert len(lines) == 3, out.stdout
+    lines = _run_on(site, tmp_path, code)
+    assert len(lines) == 3, lines
     for line in lines:
         assert str(site / "sumo_scenarios" / "data" / "road.net.xml") in line, line
         assert "python -m sumo_scenarios.build_network" in line, line
@@ -811,19 +803,7 @@ def test_a_missing_shipped_data_file_is_named_with_the_way_to_restore_it(tmp_pat
     sumo_scenarios.build_network`", which writes only the network: the vehicle types are
     hand-written, and the advice left the install broken.) Run on a copy of the package, in a
     process of its own."""
-    import shutil
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    import sumo_scenarios
-
-    site = tmp_path / "site"
-    shutil.copytree(
-        Path(sumo_scenarios.__file__).parent,
-        site / "sumo_scenarios",
-        ignore=shutil.ignore_patterns("__pycache__"),
-    )
+    site = _package_copy(tmp_path)
     data = site / "sumo_scenarios" / "data"
     (tmp_path / "old.fcd.xml").write_text("<fcd-export/>")
     code = (
@@ -846,18 +826,8 @@ def test_a_missing_shipped_data_file_is_named_with_the_way_to_restore_it(tmp_pat
         "    print(exc)\n"
     )
     (data / "driving.add.xml").unlink()
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
-        cwd=tmp_path,
-    )
-    assert out.returncode == 0, out.stdout + out.stderr[-2000:]
-    lines = out.stdout.splitlines()
-    assert len(lines) == 3, out.stdout
+    lines = _run_on(site, tmp_path, code)
+    assert len(lines) == 3, lines
     for line in lines[:2]:
         assert line.startswith(f"{data / 'driving.add.xml'} is missing"), line
         assert "reinstall" in line and "build_network" not in line, line
