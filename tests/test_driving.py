@@ -3,6 +3,7 @@ simulation per process."""
 
 from __future__ import annotations
 
+import gc
 import os
 
 import gymnasium as gym
@@ -617,16 +618,24 @@ def test_the_env_runs_from_a_directory_whose_path_holds_a_comma(tmp_path):
     assert out.returncode == 0 and out.stdout.strip() == "3 []", out.stdout + out.stderr[-2000:]
 
 
-def test_a_simulation_started_outside_the_env_is_not_silently_replaced():
+# a simulation of the researcher's own, on the shipped road
+_THEIRS = ["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"]
+
+
+@pytest.fixture
+def libsumo_free():
+    """libsumo holds no simulation as the test starts (an env an earlier test dropped
+    unclosed releases it when collected)."""
+    gc.collect()
+    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
+
+
+def test_a_simulation_started_outside_the_env_is_not_silently_replaced(libsumo_free):
     """A researcher's own libsumo simulation in the same process (libsumo.start by hand): the
     env's reset refuses, saying what to do, and the researcher's simulation runs on. (It was
     replaced without a word: libsumo holds one simulation per process, and a second
     libsumo.start replaces the first; its clock went from 3 s back to 0.25 s.)"""
-    import gc
-
-    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
-    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
-    libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+    libsumo.start(_THEIRS)
     try:
         for _ in range(3):
             libsumo.simulationStep()
@@ -648,21 +657,17 @@ def test_a_simulation_started_outside_the_env_is_not_silently_replaced():
         env.close()
 
 
-def test_a_simulation_started_over_the_envs_own_is_not_silently_replaced():
+def test_a_simulation_started_over_the_envs_own_is_not_silently_replaced(libsumo_free):
     """The researcher closes the env's libsumo simulation and starts one of their own: the
     env's next reset refuses, saying what to do, and theirs runs on. (The env still counted
     libsumo as running its own and loaded over theirs without a word: their clock went from 3 s
     back to 0 s.) Once theirs is closed, the env resets again."""
-    import gc
-
-    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
-    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
     env = DrivingEnv(scenario="light")
     try:
         env.reset(seed=0)
         env.step(STAY)
         libsumo.close()
-        libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+        libsumo.start(_THEIRS)
         try:
             for _ in range(3):
                 libsumo.simulationStep()
@@ -678,15 +683,11 @@ def test_a_simulation_started_over_the_envs_own_is_not_silently_replaced():
         env.close()
 
 
-def test_a_step_after_the_user_closed_the_envs_simulation_says_so():
+def test_a_step_after_the_user_closed_the_envs_simulation_says_so(libsumo_free):
     """The researcher closes the env's libsumo simulation (and maybe starts their own): the
     env's step raises a RuntimeError saying what happened and what to do, and leaves their
     simulation untouched. (It stepped theirs once and then failed inside libsumo, "Vehicle
     'ego' is not known."; with none running, "A network was not yet constructed.")"""
-    import gc
-
-    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
-    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
     env = DrivingEnv(scenario="light")
     try:
         env.reset(seed=0)
@@ -694,7 +695,7 @@ def test_a_step_after_the_user_closed_the_envs_simulation_says_so():
         libsumo.close()
         with pytest.raises(RuntimeError, match=r"closed outside this env.*reset\(\)"):
             env.step(STAY)
-        libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+        libsumo.start(_THEIRS)
         try:
             libsumo.simulationStep()
             with pytest.raises(RuntimeError, match=r"not started by sumo_scenarios.*close it"):
@@ -708,7 +709,7 @@ def test_a_step_after_the_user_closed_the_envs_simulation_says_so():
         env.close()
 
 
-def test_a_step_over_a_user_simulation_with_the_envs_seed_and_vehicle_types_says_so():
+def test_a_step_over_a_user_simulation_with_the_envs_seed_and_vehicle_types_says_so(libsumo_free):
     """The researcher closes the env's libsumo simulation and starts one of their own with the
     env's vehicle types and SUMO's default seed, 23423 (as sumo -c on a write_sumocfg
     configuration does), which is also the env's SUMO seed for reset(seed=23423): the env's
@@ -716,10 +717,6 @@ def test_a_step_over_a_user_simulation_with_the_envs_seed_and_vehicle_types_says
     leaves theirs untouched. (Both options the step compared matched, so theirs passed as the
     env's: it was stepped, and the env then failed inside libsumo, "Vehicle 'ego' is not
     known".)"""
-    import gc
-
-    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
-    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
     env = DrivingEnv(scenario="light")
     theirs = ["sumo", "-n", str(data_path("road.net.xml")), "-a", str(data_path("driving.add.xml"))]
     try:
@@ -742,14 +739,10 @@ def test_a_step_over_a_user_simulation_with_the_envs_seed_and_vehicle_types_says
         env.close()
 
 
-def test_a_step_after_the_user_stepped_the_envs_simulation_says_so():
+def test_a_step_after_the_user_stepped_the_envs_simulation_says_so(libsumo_free):
     """libsumo.simulationStep() called by hand on the env's own simulation: the env's next step
     raises a RuntimeError saying so (its cars' speeds, measured over one step, and its road
     bookkeeping would be off), not that another simulation replaced it; a reset goes on."""
-    import gc
-
-    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
-    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
     env = DrivingEnv(scenario="light")
     try:
         env.reset(seed=0)
@@ -763,20 +756,16 @@ def test_a_step_after_the_user_stepped_the_envs_simulation_says_so():
         env.close()
 
 
-def test_closing_the_env_leaves_a_simulation_the_user_started_in_its_place_running():
+def test_closing_the_env_leaves_a_simulation_the_user_started_in_its_place_running(libsumo_free):
     """The researcher closes the env's libsumo simulation and starts one of their own: the
     env's close(), or its collection when dropped unclosed, leaves theirs running. (Both
     closed it: libsumo.close() on a simulation that was no longer the env's.)"""
-    import gc
-
-    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
-    assert not libsumo.simulation.isLoaded(), "an earlier test left an env's simulation running"
     try:
         for how in ("close", "collect"):
             env = DrivingEnv(scenario="light")
             env.reset(seed=0)
             libsumo.close()
-            libsumo.start(["sumo", "-n", str(data_path("road.net.xml")), "--no-step-log", "true"])
+            libsumo.start(_THEIRS)
             libsumo.simulationStep()
             if how == "close":
                 env.close()
