@@ -277,7 +277,9 @@ class TerminalTeacher:
         self.title = title
         self._clear = clear_screen
         self.n_decisions: int = 0
-        """How many decisions the person has answered so far."""
+        """How many decisions the person has answered so far; the status line shows the next
+        as ``decision #(n_decisions + 1)``. A caller resuming a session may set it to the
+        session's answered requests so the numbering goes on."""
 
     # ------------------------------------------------------------------ public
 
