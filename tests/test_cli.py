@@ -1017,6 +1017,24 @@ def test_a_resumed_session_shows_its_counts_from_its_first_request(tmp_path, mon
     assert "phase noninteractive" in seen[0]
 
 
+def test_a_resumed_session_numbers_its_decisions_on_from_the_stored_ones(
+    tmp_path, monkeypatch, capsys
+):
+    """The status line's "decision #N" counted this process's answers only: the first request
+    of `teach --resume` after 3 answered ones said "decision #1" beside "demonstrations 3". It
+    goes on from the session's answered requests now (4, 5)."""
+    run = tmp_path / "session"
+    monkeypatch.setattr(sys, "stdin", io.StringIO("w\nw\nw\n"))
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    assert "decision #3 | step 2 " in capsys.readouterr().out
+    monkeypatch.setattr(sys, "stdin", io.StringIO("w\nw\n"))
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "2"]) == 0
+    shown = re.findall(
+        r"decision #(\d+) \| step (\d+) \| .*demonstrations (\d+) ", capsys.readouterr().out
+    )
+    assert shown == [("4", "3", "3"), ("5", "4", "4")], shown
+
+
 def test_a_resumed_session_says_where_it_stands_before_the_agent_drives(
     tmp_path, monkeypatch, capsys
 ):

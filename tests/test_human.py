@@ -811,3 +811,37 @@ def test_waiting_for_a_key_leaves_the_programs_own_signal_handlers_as_they_were(
     finally:
         signal.signal(signal.SIGTERM, old_term)
         signal.signal(signal.SIGHUP, old_hup)
+
+
+@pytest.mark.timeout(60)
+def test_a_terminal_on_a_file_descriptor_above_1023_is_read(terminal):
+    """select.select() takes no file descriptor >= 1024 (FD_SETSIZE): a teacher whose terminal
+    had such a number (a notebook kernel or a harness with many SUMO and log files open) raised
+    ValueError "filedescriptor out of range in select()" at its first key. Typed-ahead keys,
+    a lone Esc (the wait for an escape sequence's rest) and an arrow key are read there now."""
+    import fcntl
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard != resource.RLIM_INFINITY and hard < 1100:
+        pytest.skip(f"the hard limit on open files ({hard}) leaves no descriptor above 1023")
+    master, slave = terminal
+    if soft != resource.RLIM_INFINITY and soft < 1100:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
+    try:
+        high = fcntl.fcntl(slave, fcntl.F_DUPFD, 1024)  # the lowest free one >= 1024
+        try:
+            before = termios.tcgetattr(high)
+            os.write(master, b"d")  # typed ahead: dropped
+            time.sleep(0.1)
+            person = Person(master, high, [b"\x1b", b"\x1b[D"])
+            teacher = _teacher(high)
+            person.start()
+            assert teacher(OBS, {}) == 1
+            shown = person.finish()
+            assert "'Esc' is not a key here" in shown and "-> left" in shown
+            assert termios.tcgetattr(high) == before
+        finally:
+            os.close(high)
+    finally:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))

@@ -839,6 +839,11 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         except IncompatibleRunDirError as exc:
             env.close()
             raise _UsageError(_one_line(exc)) from None
+        from torchcbl.human import TerminalTeacher
+
+        if isinstance(teacher, TerminalTeacher):  # "decision #N" goes on from the session's
+            # answered requests (read from its log, which stays as it is)
+            teacher.n_decisions = sum(r.teacher_action is not None for r in ct.records)
     else:
         config = TeachingConfig(noninteractive=not args.skip_noninteractive, **settings)
         try:

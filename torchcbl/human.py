@@ -33,7 +33,7 @@ from __future__ import annotations
 import builtins
 import contextlib
 import os
-import select
+import selectors
 import signal
 import sys
 import threading
@@ -277,7 +277,9 @@ class TerminalTeacher:
         self.title = title
         self._clear = clear_screen
         self.n_decisions: int = 0
-        """How many decisions the person has answered so far."""
+        """How many decisions the person has answered so far; the status line shows the next
+        as ``decision #(n_decisions + 1)``. A caller resuming a session may set it to the
+        session's answered requests so the numbering goes on."""
 
     # ------------------------------------------------------------------ public
 
@@ -410,10 +412,12 @@ class TerminalTeacher:
 
     def _ask_key(self, fd: int) -> int:
         saved = termios.tcgetattr(fd)
-        with _restored_before_a_fatal_signal(fd, saved):
-            return self._ask_key_raw(fd, saved)
+        # a selector, not select.select(), which refuses a descriptor >= 1024 (FD_SETSIZE)
+        with _restored_before_a_fatal_signal(fd, saved), selectors.DefaultSelector() as waits:
+            waits.register(fd, selectors.EVENT_READ)
+            return self._ask_key_raw(fd, saved, waits)
 
-    def _ask_key_raw(self, fd: int, saved: list[Any]) -> int:
+    def _ask_key_raw(self, fd: int, saved: list[Any], waits: selectors.BaseSelector) -> int:
         try:
             mode = termios.tcgetattr(fd)
             # Non-canonical, no echo, no signal keys (Ctrl-C arrives as a byte and is ours),
@@ -422,10 +426,10 @@ class TerminalTeacher:
             mode[6][termios.VMIN] = 1
             mode[6][termios.VTIME] = 0
             termios.tcsetattr(fd, termios.TCSANOW, mode)
-            self._drop_typed_ahead(fd)
+            self._drop_typed_ahead(fd, waits)
             self._prompt()
             while True:
-                key = self._read_key(fd)
+                key = self._read_key(fd, waits)
                 action = self._resolve_key(key)
                 if action is not None:
                     return action
@@ -434,31 +438,31 @@ class TerminalTeacher:
         finally:
             termios.tcsetattr(fd, termios.TCSADRAIN, saved)
 
-    def _drop_typed_ahead(self, fd: int) -> None:
+    def _drop_typed_ahead(self, fd: int, waits: selectors.BaseSelector) -> None:
         """Drop the keys typed before this request was shown (while the agent acted on its own,
         a second press, a held key's repeat): they would answer a situation the person has not
         seen. A quit key among them still quits. The pending bytes are split into keys as at a
         request, so an escape sequence ending in "q" (F2 is ESC O Q) is one key, not a quit."""
         pending = b""
         while True:
-            while select.select([fd], [], [], 0)[0]:
-                pending += self._read_byte(fd)
+            while waits.select(0):
+                pending += self._read_byte(fd, waits)
             keys, pending = _split_keys(pending)
             for key in keys:
                 self._resolve_key(key)  # raises for a quit key, as at a request
             if not pending:
                 return
-            if not self._more(fd):  # a key cut off at the end whose rest never came
+            if not self._more(waits):  # a key cut off at the end whose rest never came
                 self._resolve_key(_decode_key(pending))
                 return
 
-    def _read_byte(self, fd: int) -> bytes:
+    def _read_byte(self, fd: int, waits: selectors.BaseSelector) -> bytes:
         try:
             # waited for in short selects, not in one blocking read: a SIGTERM that lands
             # after Python's last check and before a blocking read() only sets a flag, and
             # its handler (which restores the terminal, then ends the process) would run at
             # the next key; between selects it runs within _SIGNAL_WAIT seconds
-            while not select.select([fd], [], [], _SIGNAL_WAIT)[0]:
+            while not waits.select(_SIGNAL_WAIT):
                 pass
             byte = os.read(fd, 1)
         except OSError as exc:  # EIO once the other end of a pseudo-terminal is gone
@@ -467,15 +471,15 @@ class TerminalTeacher:
             raise TeachingInterrupted("teaching input closed")
         return byte
 
-    def _more(self, fd: int) -> bool:
-        return bool(select.select([fd], [], [], _ESCAPE_WAIT)[0])
+    def _more(self, waits: selectors.BaseSelector) -> bool:
+        return bool(waits.select(_ESCAPE_WAIT))
 
-    def _read_key(self, fd: int) -> str:
-        data = self._read_byte(fd)
+    def _read_key(self, fd: int, waits: selectors.BaseSelector) -> str:
+        data = self._read_byte(fd, waits)
         while _key_length(data) is None:
-            if data[0] == 0x1B and not self._more(fd):  # a lone ESC, or a cut-off sequence
+            if data[0] == 0x1B and not self._more(waits):  # a lone ESC, or a cut-off sequence
                 break
-            data += self._read_byte(fd)
+            data += self._read_byte(fd, waits)
         return _decode_key(data)
 
     def _resolve_key(self, key: str) -> int | None:
