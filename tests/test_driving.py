@@ -828,6 +828,45 @@ def test_a_step_after_one_cut_short_says_so_and_a_reset_goes_on(monkeypatch, cal
         env.close()
 
 
+def test_drawing_after_a_step_cut_short_is_refused_like_the_next_step(monkeypatch):
+    """render() and frame() after a step cut short (a Ctrl-C while the cars were read back)
+    drew the half-updated scene: the ego moved, the cars partly where they were, and the step
+    count of the new step. Like the next step they raise, saying the last step did not finish
+    and to reset(); after close() too (the scene is still half updated); a reset draws again."""
+    import gc
+
+    gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
+    real = libsumo.vehicle.getLanePosition
+    calls = []
+
+    def cut(vid):
+        calls.append(vid)
+        if len(calls) == 3:  # the ego and one car read back, then the Ctrl-C
+            raise KeyboardInterrupt
+        return real(vid)
+
+    for close_first in (False, True):
+        calls.clear()
+        env = DrivingEnv(scenario="train", render_mode="rgb_array")
+        try:
+            env.reset(seed=0)
+            env.step(STAY)
+            monkeypatch.setattr(libsumo.vehicle, "getLanePosition", cut)
+            with pytest.raises(KeyboardInterrupt):
+                env.step(STAY)
+            monkeypatch.setattr(libsumo.vehicle, "getLanePosition", real)
+            if close_first:
+                env.close()
+            for draw in (env.frame, env.render):
+                with pytest.raises(RuntimeError, match=r"last step did not finish.*reset\(\)"):
+                    draw()
+            if not close_first:
+                env.reset(seed=1)
+                assert env.frame().step == 0 and env.render().shape[2] == 3
+        finally:
+            env.close()
+
+
 def test_a_lane_that_is_not_a_whole_number_is_refused_before_the_step_starts(env):
     """HighwaySim.step(2.5) passed the range check and then failed inside libsumo after the
     step had begun, so every later step refused ("the env's last step did not finish")
