@@ -867,6 +867,37 @@ def test_drawing_after_a_step_cut_short_is_refused_like_the_next_step(monkeypatc
             env.close()
 
 
+def test_a_ctrl_c_right_after_the_simulation_stepped_does_not_delay_truncation(monkeypatch):
+    """A Ctrl-C that lands as HighwaySim.step returns, before DrivingEnv.step counted the step:
+    the env kept its own counter beside the simulation's, so it missed that step and every
+    later info["t"] and the truncation came one step late. The env's count is the
+    simulation's: the step after the interrupted one is step 3 of 3, truncated."""
+    from sumo_scenarios.sim import HighwaySim
+
+    real = HighwaySim.step
+    fired = []
+
+    def then_interrupt(self, target_lane):
+        real(self, target_lane)  # the simulation stepped; the signal comes as it returns
+        if not fired:
+            fired.append(target_lane)
+            raise KeyboardInterrupt
+
+    env = DrivingEnv(scenario="train", max_episode_steps=3)
+    try:
+        env.reset(seed=0)
+        assert env.step(STAY)[4]["t"] == 1
+        monkeypatch.setattr(HighwaySim, "step", then_interrupt)
+        with pytest.raises(KeyboardInterrupt):
+            env.step(STAY)
+        monkeypatch.setattr(HighwaySim, "step", real)
+        *_, truncated, info = env.step(STAY)
+        assert (info["t"], truncated) == (3, True)
+        assert env.frame().step == 3
+    finally:
+        env.close()
+
+
 def test_a_lane_that_is_not_a_whole_number_is_refused_before_the_step_starts(env):
     """HighwaySim.step(2.5) passed the range check and then failed inside libsumo after the
     step had begun, so every later step refused ("the env's last step did not finish")
