@@ -563,6 +563,39 @@ def test_the_network_builds_with_a_netconvert_that_writes_version_in_its_header(
     )
 
 
+def _fake_netconvert(tmp_path, script: str):
+    """A netconvert on PATH (ahead of this Python's eclipse-sumo one) running ``script``."""
+    fake = tmp_path / "bin" / "netconvert"
+    fake.parent.mkdir()
+    fake.write_text("#!/bin/sh\n" + script)
+    fake.chmod(0o755)
+    return fake
+
+
+def test_a_netconvert_that_fails_is_named_with_its_own_error(tmp_path, monkeypatch):
+    """build() runs the first netconvert on PATH, which may be another SUMO install's (older
+    than the 1.22 floor, say) than this Python's eclipse-sumo. When it failed, the user got
+    subprocess's CalledProcessError listing the whole command, with netconvert's own message
+    swallowed (captured, never shown). The error names the netconvert that ran and where it
+    came from, its exit status and message, and the eclipse-sumo one to use instead."""
+    import sys
+    from pathlib import Path
+
+    from sumo_scenarios.build_network import build
+
+    fake = _fake_netconvert(
+        tmp_path, "echo \"Error: On processing option '--no-turnarounds'\" >&2\nexit 3\n"
+    )
+    monkeypatch.setenv("PATH", f"{fake.parent}{os.pathsep}{os.environ['PATH']}")
+    with pytest.raises(RuntimeError) as e:
+        build(tmp_path / "out")
+    msg = str(e.value)
+    assert "\n" not in msg, msg
+    assert f"{fake} (the first on PATH)" in msg, msg
+    assert "exit status 3" in msg and "On processing option '--no-turnarounds'" in msg, msg
+    assert str(Path(sys.executable).with_name("netconvert")) in msg, msg
+
+
 def test_a_driving_env_refuses_to_be_copied_or_pickled(env):
     """A copy would drive the same libsumo simulation with its own bookkeeping (deepcopy), or
     lack it (pickle): refused with a message that says what to do."""
