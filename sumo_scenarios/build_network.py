@@ -156,12 +156,26 @@ def _reproducible(text: str) -> str:
     return out
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
+    """The command line: build the network, print its path; returns the exit code (a failure
+    is one line on stderr and exit code 1)."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=DATA_DIR, help="data directory")
     args = parser.parse_args(argv)
-    print(build(args.out))
+    try:
+        net = build(args.out)
+    except (OSError, RuntimeError) as exc:  # netconvert missing or failed, --out unwritable
+        msg = str(exc)
+        if isinstance(exc, OSError) and exc.filename is not None:
+            msg = (
+                f"cannot write into --out {args.out} ({exc.strerror}: {exc.filename}); give "
+                "a directory you can write to"
+            )
+        print(f"{parser.prog}: error: {msg}", file=sys.stderr)
+        return 1
+    print(net)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

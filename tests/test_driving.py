@@ -596,6 +596,37 @@ def test_a_netconvert_that_fails_is_named_with_its_own_error(tmp_path, monkeypat
     assert str(Path(sys.executable).with_name("netconvert")) in msg, msg
 
 
+@pytest.mark.parametrize("case", ["netconvert fails", "--out is a file"])
+def test_the_build_network_command_fails_in_one_line_not_a_traceback(tmp_path, case):
+    """`python -m sumo_scenarios.build_network` (the fix other errors name for a damaged
+    network) answered a netconvert that failed, or an --out it cannot write into, with a
+    Python traceback. Now one line on stderr, naming what failed, and exit code 1."""
+    import subprocess
+    import sys
+
+    env = dict(os.environ)
+    out = tmp_path / "out"
+    if case == "netconvert fails":
+        fake = _fake_netconvert(tmp_path, 'echo "Error: no such option" >&2\nexit 1\n')
+        env["PATH"] = f"{fake.parent}{os.pathsep}{env['PATH']}"
+        says = f"netconvert failed: {fake} (the first on PATH), exit status 1: Error: no such"
+    else:
+        out.write_text("")
+        says = f"cannot write into --out {out} ("
+    proc = subprocess.run(
+        [sys.executable, "-m", "sumo_scenarios.build_network", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
+    assert proc.returncode == 1, proc.stderr
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.startswith("build_network.py: error: ") and says in proc.stderr
+    assert case == "netconvert fails" or "give a directory you can write to" in proc.stderr
+    assert proc.stdout == ""
+
+
 def test_a_driving_env_refuses_to_be_copied_or_pickled(env):
     """A copy would drive the same libsumo simulation with its own bookkeeping (deepcopy), or
     lack it (pickle): refused with a message that says what to do."""
