@@ -56,17 +56,48 @@ _EDGES = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
+def _wheel_netconvert() -> Path:
+    """Where this Python's eclipse-sumo wheel puts netconvert (beside the interpreter)."""
+    return Path(sys.executable).with_name("netconvert")
+
+
 def _netconvert() -> str:
-    exe = shutil.which("netconvert") or str(Path(sys.executable).with_name("netconvert"))
+    exe = shutil.which("netconvert") or str(_wheel_netconvert())
     if not Path(exe).exists():
         raise FileNotFoundError("netconvert not found; install the eclipse-sumo wheel")
     return exe
 
 
+def _failed(exe: str, exc: OSError | subprocess.CalledProcessError) -> str:
+    """One line: which netconvert failed (the first on PATH may be another SUMO install's
+    than this Python's eclipse-sumo), how, and which one to use instead."""
+    wheel = _wheel_netconvert()
+    ours = Path(exe) == wheel
+    if isinstance(exc, subprocess.CalledProcessError):
+        said = [line.strip() for line in (exc.stderr or "").splitlines() if line.strip()]
+        why = f"exit status {exc.returncode}: {said[-1] if said else 'no message'}"
+    else:
+        why = str(exc)
+    where = "this Python's eclipse-sumo" if ours else "the first on PATH"
+    fix = (
+        "reinstall eclipse-sumo (pip install --force-reinstall 'eclipse-sumo>=1.22')"
+        if ours
+        else f"use this Python's eclipse-sumo one ({wheel}, SUMO 1.22 or newer is needed): put "
+        f"{wheel.parent} first on PATH, or take the other SUMO off it"
+    )
+    return f"netconvert failed: {exe} ({where}), {why}; {fix}"
+
+
 def build(out_dir: Path = DATA_DIR) -> Path:
     """Write the plain-XML sources into ``out_dir/src`` and convert them to ``road.net.xml``.
 
-    Returns the path of the network file.
+    Returns the path of the network file. netconvert is the first on PATH, else this Python's
+    eclipse-sumo one.
+
+    Raises:
+        FileNotFoundError: no netconvert was found.
+        RuntimeError: netconvert failed; the message names the one that ran, its exit status
+            and last error line, and which one to use instead.
     """
     src = out_dir / "src"
     src.mkdir(parents=True, exist_ok=True)
@@ -75,25 +106,31 @@ def build(out_dir: Path = DATA_DIR) -> Path:
         _EDGES.format(n_lanes=N_LANES, speed=SPEED_LIMIT_MS, width=LANE_WIDTH_M)
     )
     net = out_dir / "road.net.xml"
-    subprocess.run(
-        [
-            _netconvert(),
-            "--node-files",
-            str(src / "road.nod.xml"),
-            "--edge-files",
-            str(src / "road.edg.xml"),
-            "--output-file",
-            str(net),
-            "--no-turnarounds",
-            "true",
-            "--output.street-names",
-            "false",
-            "--no-warnings",
-            "true",
-        ],
-        check=True,
-        capture_output=True,
-    )
+    exe = _netconvert()
+    try:
+        subprocess.run(
+            [
+                exe,
+                "--node-files",
+                str(src / "road.nod.xml"),
+                "--edge-files",
+                str(src / "road.edg.xml"),
+                "--output-file",
+                str(net),
+                "--no-turnarounds",
+                "true",
+                "--output.street-names",
+                "false",
+                "--no-warnings",
+                "true",
+            ],
+            check=True,
+            capture_output=True,
+            encoding="utf-8",
+            errors="replace",
+        )
+    except (OSError, subprocess.CalledProcessError) as exc:
+        raise RuntimeError(_failed(exe, exc)) from None
     net.write_text(_reproducible(net.read_text()))
     return net
 
@@ -119,12 +156,26 @@ def _reproducible(text: str) -> str:
     return out
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
+    """The command line: build the network, print its path; returns the exit code (a failure
+    is one line on stderr and exit code 1)."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=DATA_DIR, help="data directory")
     args = parser.parse_args(argv)
-    print(build(args.out))
+    try:
+        net = build(args.out)
+    except (OSError, RuntimeError) as exc:  # netconvert missing or failed, --out unwritable
+        msg = str(exc)
+        if isinstance(exc, OSError) and exc.filename is not None:
+            msg = (
+                f"cannot write into --out {args.out} ({exc.strerror}: {exc.filename}); give "
+                "a directory you can write to"
+            )
+        print(f"{parser.prog}: error: {msg}", file=sys.stderr)
+        return 1
+    print(net)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -273,7 +273,8 @@ class DrivingEnv(gym.Env):
 
     def render(self) -> np.ndarray | None:
         """The current timestep drawn as an RGB image [H, W, 3] uint8 (``render_mode=
-        "rgb_array"``), else None with a warning. Before a completed reset: RuntimeError."""
+        "rgb_array"``), else None with a warning. Before a completed reset, or after a step
+        cut short (a Ctrl-C inside it) until a reset: RuntimeError."""
         if self.render_mode != "rgb_array":
             gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array'")
             return None
@@ -297,11 +298,17 @@ class DrivingEnv(gym.Env):
         return self._sim.closed
 
     def frame(self) -> Frame:
-        """A copy of the current scene for drawing (after a completed reset)."""
+        """A copy of the current scene for drawing (after a completed reset; not after a step
+        cut short, whose scene is half updated)."""
         if self._episode_seed is None:  # it drew an empty road with the ego at 0 m
             raise RuntimeError(
                 "reset() first: there is no scene to draw before a reset has completed "
                 "(none ran, or the last one failed)"
+            )
+        if self._sim.cut_short:  # as step() after it: the ego moved, the cars in part
+            raise RuntimeError(
+                "the env's last step did not finish (interrupted or raised inside it), and its "
+                "scene is half updated: reset() to draw again (on a fresh road segment)"
             )
         s = self._sim
         return Frame(

@@ -423,13 +423,19 @@ class HighwaySim:
             return
         self._closed = True
         self._ready = False
-        self._stepping = False
+        # _stepping stays: the bookkeeping a cut-short step left is still half updated
         self._finalizer()  # closes libsumo if this simulation owns it; runs once
 
     @property
     def closed(self) -> bool:
         """True once :meth:`close` has run."""
         return self._closed
+
+    @property
+    def cut_short(self) -> bool:
+        """True when the last :meth:`step` did not finish (a Ctrl-C or an error inside it):
+        the state (``ego_pos``, ``car_pos`` ...) is half updated until a :meth:`reset`."""
+        return self._stepping
 
     @property
     def steps(self) -> int:
@@ -573,7 +579,7 @@ class HighwaySim:
 
     def _check_owned(self) -> None:
         """Raise unless libsumo holds this simulation's road, saying why not."""
-        if self._stepping:
+        if self._stepping and not self._closed:
             # a Ctrl-C raised as SUMO's step returned, or anything raised in the bookkeeping
             # after it: SUMO's clock, the cars and the env's arrays no longer agree
             raise RuntimeError(
