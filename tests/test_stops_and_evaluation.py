@@ -408,6 +408,46 @@ def test_a_worker_that_dies_mid_task_is_said_as_it_died():
         assert str(caught.value).endswith(" while it ran seed 7; go on")
 
 
+def test_a_worker_that_dies_while_tasks_are_still_submitted_is_said_as_it_died(monkeypatch):
+    """A worker that died while the block was still submitting tasks (a pool of two: the first
+    died as the second started) broke the pool between submit's look at it and the second
+    worker's start, which then pickled the call queue the broken pool had closed: CPython's
+    bare "OSError: handle is closed" came out of submit, not the pool's own error naming the
+    signal. Here the second worker's start waits until the pool has seen the first one die,
+    as the race does; the pool's error names SIGKILL, the task and what to do."""
+    import multiprocessing as mp
+    import signal
+    import time
+    from concurrent.futures.process import _process_worker
+    from multiprocessing.context import SpawnProcess
+
+    from torchcbl.evaluation import worker_pool
+
+    real_start = SpawnProcess.start
+    workers = []
+
+    def start(proc):
+        if getattr(proc, "_target", None) is not _process_worker:  # the start-up check
+            return real_start(proc)
+        if workers:  # the second worker: the first dies, and the pool sees it, first
+            os.kill(workers[0].pid, signal.SIGKILL)
+            call_queue = proc._args[0]  # the broken pool closes its reading end
+            deadline = time.monotonic() + 10.0
+            while not call_queue._reader.closed and time.monotonic() < deadline:
+                time.sleep(0.01)
+        real_start(proc)
+        workers.append(proc)
+
+    monkeypatch.setattr(SpawnProcess, "start", start)
+    with pytest.raises(RuntimeError) as caught:
+        with worker_pool(2, mp.get_context("spawn"), running="seed 7", after="go on") as pool:
+            for _ in range(4):
+                pool.submit(time.sleep, 0.1)
+    says = "a worker process was killed by SIGKILL (the out-of-memory killer sends it)"
+    assert str(caught.value) == f"{says} while it ran seed 7; go on", caught.value
+    assert len(workers) == 1  # the second never started
+
+
 @pytest.mark.parametrize(
     ("answer", "says"),
     [

@@ -15,7 +15,7 @@ import signal
 import sys
 import threading
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any, TypeVar
@@ -355,6 +355,20 @@ class _RecordingPool(ProcessPoolExecutor):
             if pid not in before:
                 self.started.append(proc)
 
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future[Any]:
+        """As the executor's, except that a pool a worker's death broke while this call ran
+        raises BrokenProcessPool, as it does once broken. (CPython looks at the pool, then
+        starts a worker if one is missing; a pool broken in between has closed the call queue
+        that worker is started with, and the start raised a bare "OSError: handle is
+        closed".)"""
+        try:
+            return super().submit(fn, *args, **kwargs)
+        except OSError:
+            broken = getattr(self, "_broken", False)  # CPython's mark of a broken pool
+            if not broken:
+                raise
+            raise BrokenProcessPool(broken) from None
+
 
 @contextlib.contextmanager
 def worker_pool(
@@ -369,9 +383,9 @@ def worker_pool(
 
     A worker that dies in the middle of a task (the out-of-memory killer) breaks the pool, as
     does a result or exception it sends back that cannot be unpickled: the
-    ``BrokenProcessPool`` the block raises becomes a RuntimeError saying which, and how the
-    worker died (its signal or exit code), while it ran ``running``, then ``after`` (what to
-    do).
+    ``BrokenProcessPool`` the block raises (from a future, or from ``submit`` while the block
+    still submits tasks) becomes a RuntimeError saying which, and how the worker died (its
+    signal or exit code), while it ran ``running``, then ``after`` (what to do).
 
     The executor's own ``with`` waits for the running tasks on any exit: after a Ctrl-C that
     reached this process alone (``kill -INT``), a run went on computing seeds nobody would
