@@ -4,6 +4,7 @@ records come to per episode (issue 16 item 3, issue 13 item 5)."""
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import warnings
 from pathlib import Path
@@ -406,6 +407,93 @@ def test_a_worker_that_dies_mid_task_is_said_as_it_died():
                 p.submit(end_this_process, how).result()
         assert str(caught.value).startswith(says), caught.value
         assert str(caught.value).endswith(" while it ran seed 7; go on")
+
+
+def test_a_worker_that_dies_while_tasks_are_still_submitted_is_said_as_it_died(monkeypatch):
+    """A worker that died while the block was still submitting tasks (a pool of two: the first
+    died as the second started) broke the pool between submit's look at it and the second
+    worker's start, which then pickled the call queue the broken pool had closed: CPython's
+    bare "OSError: handle is closed" came out of submit, not the pool's own error naming the
+    signal. Here the second worker's start waits until the pool has seen the first one die,
+    as the race does; the pool's error names SIGKILL, the task and what to do."""
+    import multiprocessing as mp
+    import time
+    from concurrent.futures.process import _process_worker
+    from multiprocessing.context import SpawnProcess
+
+    from torchcbl.evaluation import worker_pool
+
+    real_start = SpawnProcess.start
+    workers = []
+
+    def start(proc):
+        if getattr(proc, "_target", None) is not _process_worker:  # the start-up check
+            return real_start(proc)
+        if workers:  # the second worker: the first dies, and the pool sees it, first
+            os.kill(workers[0].pid, signal.SIGKILL)
+            call_queue = proc._args[0]  # the broken pool closes its reading end
+            deadline = time.monotonic() + 10.0
+            while not call_queue._reader.closed and time.monotonic() < deadline:
+                time.sleep(0.01)
+        real_start(proc)
+        workers.append(proc)
+
+    monkeypatch.setattr(SpawnProcess, "start", start)
+    with pytest.raises(RuntimeError) as caught:
+        with worker_pool(2, mp.get_context("spawn"), running="seed 7", after="go on") as pool:
+            for _ in range(4):
+                pool.submit(time.sleep, 0.1)
+    says = "a worker process was killed by SIGKILL (the out-of-memory killer sends it)"
+    assert str(caught.value) == f"{says} while it ran seed 7; go on", caught.value
+    assert len(workers) == 1  # the second never started
+
+
+@pytest.mark.skipif(not hasattr(signal, "pthread_kill"), reason="signals a thread (POSIX)")
+def test_a_ctrl_c_as_a_worker_starts_leaves_no_worker_behind(monkeypatch):
+    """A Ctrl-C (SIGINT) that came while submit started a worker, after the process was
+    started but before the pool had kept it, raised KeyboardInterrupt there; the pool's
+    Ctrl-C handling terminated the workers it knew of, and that one ran on (in a notebook,
+    for as long as the kernel; or it died printing a traceback). Here the SIGINT comes as
+    the second worker's start returns; every worker the pool started is gone (terminated and
+    reaped: signal 0 finds no process) when the block's KeyboardInterrupt comes out."""
+    import multiprocessing as mp
+    import threading
+    import time
+    from concurrent.futures.process import _process_worker
+    from multiprocessing.context import SpawnProcess
+
+    from torchcbl.evaluation import worker_pool
+
+    real_start = SpawnProcess.start
+    pids = []
+
+    def start(proc):
+        worker = getattr(proc, "_target", None) is _process_worker  # not the start-up check
+        real_start(proc)
+        if worker:
+            pids.append(proc.pid)
+            if len(pids) == 2:  # a Ctrl-C to this thread: its handler runs before this returns
+                signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+
+    def running(pid):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+
+    monkeypatch.setattr(SpawnProcess, "start", start)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with worker_pool(3, mp.get_context("spawn")) as pool:
+                for _ in range(6):
+                    pool.submit(time.sleep, 5)
+        assert len(pids) == 2
+        assert [p for p in pids if running(p)] == []
+    finally:
+        for p in pids:
+            if running(p):
+                os.kill(p, signal.SIGKILL)
 
 
 @pytest.mark.parametrize(

@@ -15,7 +15,7 @@ import signal
 import sys
 import threading
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any, TypeVar
@@ -338,6 +338,38 @@ def _how_a_worker_died(broken: BaseException, exitcodes: Iterable[int | None]) -
     return f"was killed by {name}{why}"
 
 
+@contextlib.contextmanager
+def _ctrl_c_held() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) that comes while the block runs in the main thread, and act on
+    it as the handler in place would (KeyboardInterrupt, by default) once the block has ended.
+
+    A worker process is started, then kept by the pool: a KeyboardInterrupt in between left
+    a process nobody terminated (it ran on as long as the main process did, or died printing
+    a traceback). A second Ctrl-C is not held (a start that hangs can still be stopped).
+    Elsewhere (another thread, a SIGINT ignored or left to the system) the block runs as it
+    is."""
+    old = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(old):
+        yield
+        return
+    held: list[Any] = []
+
+    def hold(signum: int, frame: Any) -> None:
+        if held:
+            held.clear()
+            old(signum, frame)
+        else:
+            held.append(frame)
+
+    signal.signal(signal.SIGINT, hold)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+        if held:
+            old(signal.SIGINT, held[0])
+
+
 class _RecordingPool(ProcessPoolExecutor):
     """A process pool that keeps every worker process it started (``started``), so that the
     exit code of one that died stays at hand whatever the pool's own bookkeeping dropped.
@@ -349,11 +381,26 @@ class _RecordingPool(ProcessPoolExecutor):
         super().__init__(*args, **kwargs)
 
     def _spawn_process(self) -> None:  # CPython's hook for each worker it starts
-        before = set((self._processes or {}).keys())  # type: ignore[attr-defined]
-        super()._spawn_process()  # type: ignore[misc]
-        for pid, proc in (self._processes or {}).items():  # type: ignore[attr-defined]
-            if pid not in before:
-                self.started.append(proc)
+        with _ctrl_c_held():  # a worker started is kept before a Ctrl-C stops the pool
+            before = set((self._processes or {}).keys())  # type: ignore[attr-defined]
+            super()._spawn_process()  # type: ignore[misc]
+            for pid, proc in (self._processes or {}).items():  # type: ignore[attr-defined]
+                if pid not in before:
+                    self.started.append(proc)
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future[Any]:
+        """As the executor's, except that a pool a worker's death broke while this call ran
+        raises BrokenProcessPool, as it does once broken. (CPython looks at the pool, then
+        starts a worker if one is missing; a pool broken in between has closed the call queue
+        that worker is started with, and the start raised a bare "OSError: handle is
+        closed".)"""
+        try:
+            return super().submit(fn, *args, **kwargs)
+        except OSError:
+            broken = getattr(self, "_broken", False)  # CPython's mark of a broken pool
+            if not broken:
+                raise
+            raise BrokenProcessPool(broken) from None
 
 
 @contextlib.contextmanager
@@ -369,9 +416,9 @@ def worker_pool(
 
     A worker that dies in the middle of a task (the out-of-memory killer) breaks the pool, as
     does a result or exception it sends back that cannot be unpickled: the
-    ``BrokenProcessPool`` the block raises becomes a RuntimeError saying which, and how the
-    worker died (its signal or exit code), while it ran ``running``, then ``after`` (what to
-    do).
+    ``BrokenProcessPool`` the block raises (from a future, or from ``submit`` while the block
+    still submits tasks) becomes a RuntimeError saying which, and how the worker died (its
+    signal or exit code), while it ran ``running``, then ``after`` (what to do).
 
     The executor's own ``with`` waits for the running tasks on any exit: after a Ctrl-C that
     reached this process alone (``kill -INT``), a run went on computing seeds nobody would
