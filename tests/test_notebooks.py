@@ -117,3 +117,38 @@ def test_the_notebooks_import_nothing_they_do_not_use():
         text=True,
     )
     assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_notebook_02_draws_the_robot_that_drove_the_learned_policys_circuit():
+    """Its evaluation cell drove the learned policy on an env of its own but drew the teaching
+    env's robot beside that path: a robot, with its sensor rays, where the evaluated one never
+    ended. Here its set-up, teaching (capped at 400 steps) and evaluation cells run: the robot in
+    the figure stands at the path's last pose."""
+    import dataclasses
+
+    from matplotlib.patches import Circle
+
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "02_corridor_teaching.ipynb", as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    setup, teach = code[0], code[2]
+    evaluation = next(c for c in code if "evaluate_policy(" in c)
+    assert "map_figure(" in evaluation
+
+    class Handle:
+        def update(self, figure):
+            pass
+
+    scope: dict = {}
+    exec("\n".join(ln for ln in setup.splitlines() if not ln.startswith("%")), scope)
+    experiment = scope["experiment"]
+    scope["experiment"] = dataclasses.replace(
+        experiment, teaching=dataclasses.replace(experiment.teaching, max_steps=400)
+    )
+    scope["display"] = lambda *args, **kwargs: Handle()
+    exec(teach, scope)
+    *body, last = evaluation.rstrip().splitlines()
+    exec("\n".join(body) + "\nfigure = " + last, scope)
+    robots = [p for p in scope["figure"].axes[0].patches if isinstance(p, Circle)]
+    assert len(robots) == 1
+    assert robots[0].center == pytest.approx(scope["path"][-1], abs=1e-9)
