@@ -152,3 +152,17 @@ def test_notebook_02_draws_the_robot_that_drove_the_learned_policys_circuit():
     robots = [p for p in scope["figure"].axes[0].patches if isinstance(p, Circle)]
     assert len(robots) == 1
     assert robots[0].center == pytest.approx(scope["path"][-1], abs=1e-9)
+
+
+def test_notebook_01_round_trip_cell_runs_after_the_fit_alone():
+    """Its save-and-load cell, the one a newcomer copies to keep a model, compared the two
+    models on ``grid``, a name the plotting cell defines: run without that figure it failed with
+    a NameError. Here only the imports, the data, the fit and that cell run."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "01_gmm_set.ipynb", as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    round_trip = next(c for c in code if "load_state_dict(" in c)
+    scope: dict = {}
+    exec("\n".join([*code[:3], round_trip]), scope)
+    fresh, gmm, X = scope["fresh"], scope["gmm"], scope["X"]
+    assert fresh is not gmm and fresh.classify(X).action.tolist() == gmm.classify(X).action.tolist()
