@@ -166,3 +166,19 @@ def test_notebook_01_round_trip_cell_runs_after_the_fit_alone():
     exec("\n".join([*code[:3], round_trip]), scope)
     fresh, gmm, X = scope["fresh"], scope["gmm"], scope["X"]
     assert fresh is not gmm and fresh.classify(X).action.tolist() == gmm.classify(X).action.tolist()
+
+
+def test_notebook_01_labels_the_axes_of_its_figure():
+    """Its figure of the components and the ask-region had a title but no axis labels, so a
+    reader could not tell which of the observation's two features runs along which axis. Here its
+    cells up to the figure run (without its ``plt.show()``, so no backend is involved)."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "01_gmm_set.ipynb", as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    figure_cell = next(i for i, c in enumerate(code) if "plt.show()" in c)
+    scope: dict = {}
+    exec("\n".join(code[: figure_cell + 1]).replace("plt.show()", ""), scope)
+    scope["plt"].close(scope["fig"])
+    (ax,) = scope["fig"].axes
+    labels = ax.get_xlabel(), ax.get_ylabel()
+    assert all(labels) and labels[0] != labels[1], labels
