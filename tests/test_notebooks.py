@@ -182,3 +182,31 @@ def test_notebook_01_labels_the_axes_of_its_figure():
     (ax,) = scope["fig"].axes
     labels = ax.get_xlabel(), ax.get_ylabel()
     assert all(labels) and labels[0] != labels[1], labels
+
+
+def test_notebook_02_labels_both_axes_of_both_live_panels():
+    """Its live plot's right-hand panel (the windowed accuracy, a share from 0 to 1) had no
+    y-axis label. Here its set-up and teaching cells run, the teaching capped at 30 steps, with a
+    stand-in for ``display``; every panel of the live figure names both its axes."""
+    import dataclasses
+
+    class Handle:
+        def update(self, figure):
+            pass
+
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "02_corridor_teaching.ipynb", as_version=4)
+    setup, _, teach = [c.source for c in nb.cells if c.cell_type == "code"][:3]
+    scope: dict = {}
+    exec("\n".join(ln for ln in setup.splitlines() if not ln.startswith("%")), scope)
+    experiment = scope["experiment"]
+    scope["experiment"] = dataclasses.replace(
+        experiment, teaching=dataclasses.replace(experiment.teaching, max_steps=30)
+    )
+    scope["display"] = lambda *args, **kwargs: Handle()
+    exec(teach, scope)
+    panels = scope["live"].axes
+    assert len(panels) == 2
+    assert all(ax.get_xlabel() and ax.get_ylabel() for ax in panels), [
+        (ax.get_xlabel(), ax.get_ylabel()) for ax in panels
+    ]
