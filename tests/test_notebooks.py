@@ -117,3 +117,96 @@ def test_the_notebooks_import_nothing_they_do_not_use():
         text=True,
     )
     assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_notebook_02_draws_the_robot_that_drove_the_learned_policys_circuit():
+    """Its evaluation cell drove the learned policy on an env of its own but drew the teaching
+    env's robot beside that path: a robot, with its sensor rays, where the evaluated one never
+    ended. Here its set-up, teaching (capped at 400 steps) and evaluation cells run: the robot in
+    the figure stands at the path's last pose."""
+    import dataclasses
+
+    from matplotlib.patches import Circle
+
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "02_corridor_teaching.ipynb", as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    setup, teach = code[0], code[2]
+    evaluation = next(c for c in code if "evaluate_policy(" in c)
+    assert "map_figure(" in evaluation
+
+    class Handle:
+        def update(self, figure):
+            pass
+
+    scope: dict = {}
+    exec("\n".join(ln for ln in setup.splitlines() if not ln.startswith("%")), scope)
+    experiment = scope["experiment"]
+    scope["experiment"] = dataclasses.replace(
+        experiment, teaching=dataclasses.replace(experiment.teaching, max_steps=400)
+    )
+    scope["display"] = lambda *args, **kwargs: Handle()
+    exec(teach, scope)
+    *body, last = evaluation.rstrip().splitlines()
+    exec("\n".join(body) + "\nfigure = " + last, scope)
+    robots = [p for p in scope["figure"].axes[0].patches if isinstance(p, Circle)]
+    assert len(robots) == 1
+    assert robots[0].center == pytest.approx(scope["path"][-1], abs=1e-9)
+
+
+def test_notebook_01_round_trip_cell_runs_after_the_fit_alone():
+    """Its save-and-load cell, the one a newcomer copies to keep a model, compared the two
+    models on ``grid``, a name the plotting cell defines: run without that figure it failed with
+    a NameError. Here only the imports, the data, the fit and that cell run."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "01_gmm_set.ipynb", as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    round_trip = next(c for c in code if "load_state_dict(" in c)
+    scope: dict = {}
+    exec("\n".join([*code[:3], round_trip]), scope)
+    fresh, gmm, X = scope["fresh"], scope["gmm"], scope["X"]
+    assert fresh is not gmm and fresh.classify(X).action.tolist() == gmm.classify(X).action.tolist()
+
+
+def test_notebook_01_labels_the_axes_of_its_figure():
+    """Its figure of the components and the ask-region had a title but no axis labels, so a
+    reader could not tell which of the observation's two features runs along which axis. Here its
+    cells up to the figure run (without its ``plt.show()``, so no backend is involved)."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "01_gmm_set.ipynb", as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    figure_cell = next(i for i, c in enumerate(code) if "plt.show()" in c)
+    scope: dict = {}
+    exec("\n".join(code[: figure_cell + 1]).replace("plt.show()", ""), scope)
+    scope["plt"].close(scope["fig"])
+    (ax,) = scope["fig"].axes
+    labels = ax.get_xlabel(), ax.get_ylabel()
+    assert all(labels) and labels[0] != labels[1], labels
+
+
+def test_notebook_02_labels_both_axes_of_both_live_panels():
+    """Its live plot's right-hand panel (the windowed accuracy, a share from 0 to 1) had no
+    y-axis label. Here its set-up and teaching cells run, the teaching capped at 30 steps, with a
+    stand-in for ``display``; every panel of the live figure names both its axes."""
+    import dataclasses
+
+    class Handle:
+        def update(self, figure):
+            pass
+
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "02_corridor_teaching.ipynb", as_version=4)
+    setup, _, teach = [c.source for c in nb.cells if c.cell_type == "code"][:3]
+    scope: dict = {}
+    exec("\n".join(ln for ln in setup.splitlines() if not ln.startswith("%")), scope)
+    experiment = scope["experiment"]
+    scope["experiment"] = dataclasses.replace(
+        experiment, teaching=dataclasses.replace(experiment.teaching, max_steps=30)
+    )
+    scope["display"] = lambda *args, **kwargs: Handle()
+    exec(teach, scope)
+    panels = scope["live"].axes
+    assert len(panels) == 2
+    assert all(ax.get_xlabel() and ax.get_ylabel() for ax in panels), [
+        (ax.get_xlabel(), ax.get_ylabel()) for ax in panels
+    ]
