@@ -9,7 +9,10 @@ with typing's own introspection (get_type_hints, get_overloads) and the source's
 from __future__ import annotations
 
 import ast
+import typing
 from pathlib import Path
+
+import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,3 +37,18 @@ def test_every_public_name_of_torchcbl_is_seen_by_a_type_checker():
                     assert alias.asname == alias.name, f"{alias.name}: not re-exported"
                     typed[alias.name] = imp.module
     assert typed == torchcbl._EXPORTS
+
+
+def test_the_fitted_buffers_are_tensors_to_a_type_checker():
+    """A GaussianMixtureSet's fitted state is nn.Module buffers (registered in __init__),
+    which a type checker reads through nn.Module.__getattr__ as `Tensor | Module`: a user's
+    documented `model.n_components_.tolist()` was an error ("Module" has no attribute
+    "tolist"), and so was any arithmetic on `means_` or `weights_`. Each buffer is
+    declared a Tensor on the class."""
+    from torchcbl.gmm import GaussianMixtureSet
+
+    hints = typing.get_type_hints(GaussianMixtureSet)
+    buffers = dict(GaussianMixtureSet(2, 3, max_components=2).named_buffers())
+    assert {"n_components_", "means_", "weights_", "settings_"} <= set(buffers)
+    wrong = {name: hints.get(name) for name in buffers if hints.get(name) is not torch.Tensor}
+    assert not wrong, f"buffers not typed as Tensor: {wrong}"

@@ -448,6 +448,35 @@ class GaussianMixtureSet(nn.Module):
     ``fit_report_`` (a :class:`FitReport`) is a plain attribute, not part of the state_dict.
     """
 
+    # The buffers registered in __init__, typed for a type checker (nn.Module's __getattr__
+    # says Tensor | Module); shapes in the class docstring.
+    weights_: Tensor
+    means_: Tensor
+    covariances_: Tensor
+    precisions_cholesky_: Tensor
+    log_det_: Tensor
+    component_mask_: Tensor
+    log_prior_: Tensor
+    n_points_: Tensor
+    n_components_: Tensor
+    criterion_: Tensor
+    log_likelihood_: Tensor
+    converged_: Tensor
+    n_iter_: Tensor
+    var_floor_: Tensor
+    data_mean_: Tensor
+    cand_weights_: Tensor
+    cand_means_: Tensor
+    cand_covariances_: Tensor
+    full_fit_points_: Tensor
+    cand_stats_: Tensor
+    cand_coef_: Tensor
+    stats_valid_: Tensor
+    ref_center_: Tensor
+    data_print_: Tensor
+    fitted_: Tensor
+    settings_: Tensor
+
     def __init__(
         self,
         n_actions: int,
