@@ -9,12 +9,30 @@ with typing's own introspection (get_type_hints, get_overloads) and the source's
 from __future__ import annotations
 
 import ast
+import types
 import typing
 from pathlib import Path
+from typing import Any, Literal
 
+import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _members(hint: Any) -> list[Any]:
+    """The types a hint admits, out of its unions (a generic as its origin class)."""
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        return [m for a in typing.get_args(hint) for m in _members(a)]
+    if origin is not None and origin is not Literal:
+        return [origin]
+    return [type(None) if hint is None else hint]
+
+
+def _admits(hint: Any, cls: type) -> bool:
+    """Whether a value of class ``cls`` passes ``hint`` (Any passes everything)."""
+    return any(m is Any or (isinstance(m, type) and issubclass(cls, m)) for m in _members(hint))
 
 
 def test_every_public_name_of_torchcbl_is_seen_by_a_type_checker():
@@ -52,3 +70,38 @@ def test_the_fitted_buffers_are_tensors_to_a_type_checker():
     assert {"n_components_", "means_", "weights_", "settings_"} <= set(buffers)
     wrong = {name: hints.get(name) for name in buffers if hints.get(name) is not torch.Tensor}
     assert not wrong, f"buffers not typed as Tensor: {wrong}"
+
+
+def _policy_hint(func: Any) -> tuple[list[Any], Any]:
+    """(parameter types, answer type) of a function's ``policy`` / ``teacher`` Callable."""
+    hints = typing.get_type_hints(func)
+    hint = hints.get("policy", hints.get("teacher"))
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        hint = typing.get_args(hint)[0]  # (policy: one Callable per arity, the same answer)
+    params, answer = typing.get_args(hint)
+    return params, answer
+
+
+def test_a_policy_or_teacher_may_answer_a_numpy_integer_or_a_0d_tensor():
+    """evaluate_policy documents the answer as an int, a numpy integer or a 0-d integer array
+    or tensor (``logits.argmax()``), and the teaching loop takes a teacher's alike, but both
+    hints said ``-> int``: a policy returning ``np.argmax(q)`` or ``logits.argmax()`` was an
+    error to a type checker. The hints take what the code takes; the code takes those answers
+    (checked here on a toy world)."""
+    from _toy_envs import oracle, rare_regions_world
+
+    from torchcbl import ConfidentTeacher, TeachingConfig, evaluate_policy
+
+    for func in (evaluate_policy, ConfidentTeacher.__init__, ConfidentTeacher.resume):
+        _, answer = _policy_hint(func)
+        for cls in (int, np.int64, np.ndarray, torch.Tensor):
+            assert _admits(answer, cls), (func.__qualname__, answer, cls)
+    env = rare_regions_world()
+    best = oracle(env)
+    as_tensor = lambda obs, info: torch.tensor(best(obs, info))  # noqa: E731
+    as_numpy = lambda obs: np.int64(best(obs, {}))  # noqa: E731
+    ct = ConfidentTeacher(env, as_tensor, config=TeachingConfig(max_steps=3), progress=False)
+    assert [r.teacher_action for r in ct.run().records] == [
+        best(np.asarray(r.observation), {}) for r in ct.records
+    ]
+    assert len(evaluate_policy(as_numpy, env, n_steps=3)) == 3

@@ -21,6 +21,10 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["EpisodeResult", "GreedyPolicy", "check_env", "episode_results", "evaluate_policy"]
 
+#: What a policy or a teacher may answer as its action (:func:`as_action` takes it): an int, a
+#: numpy integer, or a 0-d integer array or tensor (e.g. ``logits.argmax()``).
+ActionAnswer = int | np.integer[Any] | np.ndarray | torch.Tensor
+
 
 class GreedyPolicy:
     """A learned policy standing on its own: ``policy(obs [D]) -> int`` (Eq. 7, no asking).
@@ -240,7 +244,8 @@ def obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
 
 
 def evaluate_policy(
-    policy: Callable[[np.ndarray], int] | Callable[[np.ndarray, dict], int],
+    policy: Callable[[np.ndarray], ActionAnswer]
+    | Callable[[np.ndarray, dict[str, Any]], ActionAnswer],
     env: gym.Env,
     *,
     n_steps: int | None = None,

@@ -65,6 +65,7 @@ from torchcbl.errors import (
     TeachingInterrupted,
 )
 from torchcbl.policy import (
+    ActionAnswer,
     GreedyPolicy,
     _env_user,
     _note_env_user,
@@ -112,7 +113,8 @@ __all__ = [
     "load_policy",
 ]
 
-Teacher = Callable[[np.ndarray, dict], int]
+# an int action, or what as_action takes for one (a numpy integer, a 0-d array or tensor)
+Teacher = Callable[[np.ndarray, dict[str, Any]], ActionAnswer]
 STOP_FIELDS = (
     "autonomous_steps_to_stop",
     "autonomous_episodes_to_stop",
@@ -524,11 +526,11 @@ class ConfidentTeacher:
             values that identify those inputs (e.g. a file's SHA-256). The session keeps it in
             its ``config.json`` and :meth:`resume` refuses an env whose description differs
             (``CorridorEnv`` describes its map so).
-        teacher: ``teacher(observation [D] ndarray, info dict) -> int`` in ``[0, n_actions)``.
-            It gets a copy of the env's observation and the info of the latest reset / step.
-            Optionally it has ``correct(observation, info, action) -> int | None``, offered
-            after each autonomous step by strategies that take corrections (see
-            :mod:`torchcbl.strategies`).
+        teacher: ``teacher(observation [D] ndarray, info dict) -> int`` in ``[0, n_actions)``
+            (or a numpy integer, or a 0-d integer array or tensor). It gets a copy of the env's
+            observation and the info of the latest reset / step. Optionally it has
+            ``correct(observation, info, action) -> int | None``, offered after each autonomous
+            step by strategies that take corrections (see :mod:`torchcbl.strategies`).
         model: the learner; default ``GaussianMixtureSet(n_actions, D, seed=seed)``. Its
             ``fit`` must be deterministic given the data (resume relies on it). A fitted model
             starts the session from it (kept as checkpoint 0), until the first refit.
