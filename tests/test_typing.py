@@ -105,3 +105,22 @@ def test_a_policy_or_teacher_may_answer_a_numpy_integer_or_a_0d_tensor():
         best(np.asarray(r.observation), {}) for r in ct.records
     ]
     assert len(evaluate_policy(as_numpy, env, n_steps=3)) == 3
+
+
+def test_evaluate_policy_pairs_a_teacher_with_uses_info():
+    """``evaluate_policy(teacher, env, ...)`` without ``uses_info=True`` calls a two-argument
+    teacher with one and fails at its first step; the hint (one Callable of either arity for
+    any ``uses_info``) let it through. Overloads pair them: uses_info omitted or False takes a
+    policy(observation), True a teacher(observation, info); a bool known only at run time
+    takes either."""
+    from torchcbl import evaluate_policy
+
+    arity: dict[Any, set[int]] = {}
+    for overload in typing.get_overloads(evaluate_policy):
+        hints = typing.get_type_hints(overload)
+        flag, policy = hints["uses_info"], hints["policy"]
+        key = typing.get_args(flag) if typing.get_origin(flag) is Literal else flag
+        union = typing.get_origin(policy) in (typing.Union, types.UnionType)
+        calls = typing.get_args(policy) if union else (policy,)
+        arity[key] = {len(typing.get_args(c)[0]) for c in calls}
+    assert arity == {(False,): {1}, (True,): {2}, bool: {1, 2}}, arity

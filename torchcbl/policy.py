@@ -7,7 +7,7 @@ import math
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import gymnasium as gym
 import numpy as np
@@ -241,6 +241,43 @@ def obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
             "it to clip / replace them); nothing non-finite is ever learned from."
         )
     return x
+
+
+@overload
+def evaluate_policy(
+    policy: Callable[[np.ndarray], ActionAnswer],
+    env: gym.Env,
+    *,
+    n_steps: int | None = None,
+    n_episodes: int | None = None,
+    seed: int | Sequence[int] | None = None,
+    uses_info: Literal[False] = False,
+) -> list[StepRecord]: ...
+
+
+@overload
+def evaluate_policy(
+    policy: Callable[[np.ndarray, dict[str, Any]], ActionAnswer],
+    env: gym.Env,
+    *,
+    n_steps: int | None = None,
+    n_episodes: int | None = None,
+    seed: int | Sequence[int] | None = None,
+    uses_info: Literal[True],
+) -> list[StepRecord]: ...
+
+
+@overload
+def evaluate_policy(
+    policy: Callable[[np.ndarray], ActionAnswer]
+    | Callable[[np.ndarray, dict[str, Any]], ActionAnswer],
+    env: gym.Env,
+    *,
+    n_steps: int | None = None,
+    n_episodes: int | None = None,
+    seed: int | Sequence[int] | None = None,
+    uses_info: bool,
+) -> list[StepRecord]: ...
 
 
 def evaluate_policy(
