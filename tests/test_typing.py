@@ -124,3 +124,21 @@ def test_evaluate_policy_pairs_a_teacher_with_uses_info():
         calls = typing.get_args(policy) if union else (policy,)
         arity[key] = {len(typing.get_args(c)[0]) for c in calls}
     assert arity == {(False,): {1}, (True,): {2}, bool: {1, 2}}, arity
+
+
+def test_the_model_a_session_hands_out_is_typed_as_the_model_given():
+    """The loop's learner is whatever ``model=`` gave (a GaussianMixtureSet by default), but
+    ``on_refit`` was hinted to take a bare ``torch.nn.Module`` and ``snapshot()`` to return
+    one: a callback ``on_refit(model: GaussianMixtureSet, n: int)`` (as
+    scripts/investigate_corridor_requests.py has) was an error, and so was
+    ``ct.snapshot().classify(x)`` (nn.Module's attributes read as ``Tensor | Module``). Both
+    are typed as the ``model`` attribute is: any learner."""
+    from torchcbl import ConfidentTeacher, GaussianMixtureSet
+
+    for func in (ConfidentTeacher.__init__, ConfidentTeacher.resume):
+        callback, none = typing.get_args(typing.get_type_hints(func)["on_refit"])
+        (model, _), _ = typing.get_args(callback)
+        assert none is type(None)
+        assert model is Any or issubclass(model, GaussianMixtureSet), (func, model)
+    snapshot = typing.get_type_hints(ConfidentTeacher.snapshot)["return"]
+    assert snapshot is Any or issubclass(snapshot, GaussianMixtureSet), snapshot

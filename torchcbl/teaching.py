@@ -585,7 +585,7 @@ class ConfidentTeacher:
         seed: int = 0,
         progress: bool = True,
         on_step: Callable[[StepRecord], None] | None = None,
-        on_refit: Callable[[torch.nn.Module, int], None] | None = None,
+        on_refit: Callable[[Any, int], None] | None = None,
         commit_every: int = 32,
     ) -> None:
         if isinstance(run_dir, str) and not run_dir.strip():
@@ -787,7 +787,7 @@ class ConfidentTeacher:
         config: TeachingConfig | None = None,
         progress: bool = True,
         on_step: Callable[[StepRecord], None] | None = None,
-        on_refit: Callable[[torch.nn.Module, int], None] | None = None,
+        on_refit: Callable[[Any, int], None] | None = None,
         commit_every: int = 32,
     ) -> ConfidentTeacher:
         """Continue a session from its run directory, killed or cleanly stopped.
@@ -1093,9 +1093,11 @@ class ConfidentTeacher:
         self._refit()
         return True
 
-    def snapshot(self) -> torch.nn.Module:
+    def snapshot(self) -> Any:
         """A copy of the model fitted on every demonstration so far, leaving the session as it
-        is (its model and refit schedule untouched): for evaluating a learning stage."""
+        is (its model and refit schedule untouched): for evaluating a learning stage. Of the
+        model's own class (a :class:`~torchcbl.gmm.GaussianMixtureSet` unless ``model=`` gave
+        another), as :attr:`model` is."""
         model = copy.deepcopy(self.model)
         if self._new_since_refit and len(self._train):
             fit = model.refit if self.config.refit == "incremental" else model.fit
