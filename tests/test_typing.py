@@ -142,3 +142,23 @@ def test_the_model_a_session_hands_out_is_typed_as_the_model_given():
         assert model is Any or issubclass(model, GaussianMixtureSet), (func, model)
     snapshot = typing.get_type_hints(ConfidentTeacher.snapshot)["return"]
     assert snapshot is Any or issubclass(snapshot, GaussianMixtureSet), snapshot
+
+
+def _fits(func: Any, **given: type) -> bool:
+    """Whether some overload of ``func`` takes these keyword arguments of these classes."""
+    for overload in typing.get_overloads(func) or [func]:
+        hints = typing.get_type_hints(overload)
+        if all(name in hints and _admits(hints[name], cls) for name, cls in given.items()):
+            return True
+    return False
+
+
+def test_distance_rule_takes_max_std_or_quantile_not_both():
+    """``DistanceRule(2.0, quantile=0.95)`` is a ValueError ("give max_std or quantile, not
+    both"), but one signature with both optional let a type checker pass it. An overload
+    each: max_std (or neither), or quantile alone."""
+    from torchcbl import DistanceRule
+
+    assert _fits(DistanceRule.__init__, max_std=float, quantile=type(None))
+    assert _fits(DistanceRule.__init__, max_std=type(None), quantile=float)
+    assert not _fits(DistanceRule.__init__, max_std=float, quantile=float)
