@@ -9,6 +9,7 @@ with typing's own introspection (get_type_hints, get_overloads) and the source's
 from __future__ import annotations
 
 import ast
+import inspect
 import types
 import typing
 from pathlib import Path
@@ -162,3 +163,17 @@ def test_distance_rule_takes_max_std_or_quantile_not_both():
     assert _fits(DistanceRule.__init__, max_std=float, quantile=type(None))
     assert _fits(DistanceRule.__init__, max_std=type(None), quantile=float)
     assert not _fits(DistanceRule.__init__, max_std=float, quantile=float)
+
+
+def test_aic_and_bic_take_observations_and_actions_together():
+    """``model.aic(X)`` without the actions is a ValueError ("pass both observations and
+    actions, or neither"), but both were optional in one signature. An overload each: no
+    arguments, or both."""
+    from torchcbl import GaussianMixtureSet
+
+    for method in (GaussianMixtureSet.aic, GaussianMixtureSet.bic):
+        shapes = set()
+        for overload in typing.get_overloads(method):
+            params = list(inspect.signature(overload).parameters.values())[1:]
+            shapes.add(tuple((p.name, p.default is p.empty) for p in params))
+        assert shapes == {(), (("observations", True), ("actions", True))}, shapes

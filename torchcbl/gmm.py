@@ -72,7 +72,7 @@ import os
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal, NamedTuple, overload
 
 import numpy as np
 import torch
@@ -1521,6 +1521,13 @@ class GaussianMixtureSet(nn.Module):
         unfitted = (self.n_points_.cpu() == 0) & (n > 0)
         return out.masked_fill(unfitted, math.inf)
 
+    # both observations and actions, or neither (a ValueError at run time)
+    @overload
+    def aic(self) -> Tensor: ...
+
+    @overload
+    def aic(self, observations: Any, actions: Any) -> Tensor: ...
+
     def aic(self, observations: Any | None = None, actions: Any | None = None) -> Tensor:
         """Free-parameter AIC [A] of each chosen mixture (2 p - 2 L, as sklearn's ``aic``).
 
@@ -1529,6 +1536,12 @@ class GaussianMixtureSet(nn.Module):
         +inf for an action given points but fitted on none (no mixture: likelihood 0).
         """
         return self._criterion_of_chosen("aic", observations, actions)
+
+    @overload
+    def bic(self) -> Tensor: ...
+
+    @overload
+    def bic(self, observations: Any, actions: Any) -> Tensor: ...
 
     def bic(self, observations: Any | None = None, actions: Any | None = None) -> Tensor:
         """BIC [A] of each chosen mixture (p log n - 2 L, as sklearn's ``bic``); see aic()."""
