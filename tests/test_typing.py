@@ -177,3 +177,31 @@ def test_aic_and_bic_take_observations_and_actions_together():
             params = list(inspect.signature(overload).parameters.values())[1:]
             shapes.add(tuple((p.name, p.default is p.empty) for p in params))
         assert shapes == {(), (("observations", True), ("actions", True))}, shapes
+
+
+def test_corridor_env_hints_take_a_map_path_and_a_dict_of_world_fields():
+    """CorridorEnv takes a map as a CorridorMap, a shipped name or a JSON path (a Path, too),
+    and the robot as a WorldConfig or a dict of its fields (as gymnasium.make kwargs keep it,
+    teaching_setup's), but its hints said ``CorridorMap | str`` and ``WorldConfig | None``,
+    and load_map's ``str | Path`` (CorridorWorld hands it any os.PathLike): correct calls were
+    errors to a type checker. The hints take what the code takes, checked here by running it."""
+    import os
+
+    from corridor.env import CorridorEnv
+    from corridor.maps import load_map
+    from corridor.world import WorldConfig
+
+    shipped = ROOT / "corridor" / "maps" / "lshape.json"
+
+    class MapPath(os.PathLike):  # an os.PathLike that is not a pathlib.Path
+        def __fspath__(self) -> str:
+            return str(shipped)
+
+    assert _admits(typing.get_type_hints(load_map)["name_or_path"], MapPath)
+    assert load_map(MapPath()).name == "lshape"
+    hints = typing.get_type_hints(CorridorEnv.__init__)
+    assert _admits(hints["corridor_map"], Path) and _admits(hints["corridor_map"], MapPath)
+    assert _admits(hints["world_config"], dict)
+    env = CorridorEnv(corridor_map=shipped, world_config={"forward_noise": 0.1})
+    assert env.corridor_map.name == "lshape"
+    assert env.world.config == WorldConfig(forward_noise=0.1)
