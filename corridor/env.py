@@ -48,8 +48,9 @@ Envs never write files; rendering returns RGB arrays (see :mod:`corridor.render`
 from __future__ import annotations
 
 import math
+import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 import gymnasium as gym
@@ -85,7 +86,8 @@ class CorridorEnv(gym.Env):
 
     Args:
         corridor_map: a :class:`CorridorMap`, or the name of a shipped map / a JSON path.
-        world_config: robot, motion and sensor parameters.
+        world_config: robot, motion and sensor parameters: a :class:`WorldConfig`, a dict of
+            its fields (as ``gymnasium.make`` kwargs keep it), or None for the defaults.
         max_episode_steps: actions before truncation; None = 81, or two circuits of a map
             whose circuit takes more than 40 actions (see the module docstring).
         render_mode: None or "rgb_array".
@@ -98,8 +100,8 @@ class CorridorEnv(gym.Env):
 
     def __init__(
         self,
-        corridor_map: CorridorMap | str = DEFAULT_MAP,
-        world_config: WorldConfig | None = None,
+        corridor_map: CorridorMap | str | os.PathLike[str] = DEFAULT_MAP,
+        world_config: WorldConfig | Mapping[str, Any] | None = None,
         max_episode_steps: int | None = None,
         render_mode: Literal["rgb_array"] | None = None,
         start_perturbation: tuple[float, float] | None = None,

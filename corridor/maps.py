@@ -31,6 +31,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
@@ -524,7 +525,7 @@ def _read_map_file(path: Path) -> str:
         ) from None
 
 
-def load_map(name_or_path: str | Path) -> CorridorMap:
+def load_map(name_or_path: str | os.PathLike[str]) -> CorridorMap:
     """Load a shipped map by name (``"figure2"``, ``"lshape"``) or any map JSON file by path
     (a name ending in ``.json`` is a path; so is any other existing file, unless it is a
     shipped map's bare name: ``"figure2"`` is the shipped map, ``"./figure2"`` the file)."""

@@ -201,3 +201,29 @@ def test_requires_python_admits_only_pythons_the_code_runs_on():
     assert sys.version_info >= oldest  # the suite itself runs on an admitted Python
     # ruff lints for the same oldest Python (it would otherwise accept 3.11-only code)
     assert meta["tool"]["ruff"]["target-version"] == f"py{oldest[0]}{oldest[1]}"
+
+
+def test_the_packages_ship_their_type_hints(monkeypatch):
+    """The public API has type hints, but no package carried the PEP 561 marker, so a user's
+    mypy or pyright ignored them (every torchcbl name was Any). Each package has a py.typed,
+    pyproject's package data names it (setuptools >= 69 also adds it unasked; the declaration
+    keeps it shipped whatever the backend) and the wheel gets it (what build_py would copy,
+    worked out without building)."""
+    pytest.importorskip("setuptools", minversion="77")
+    import tomllib
+    from importlib.resources import files
+
+    from setuptools.config.pyprojecttoml import apply_configuration
+    from setuptools.dist import Distribution
+
+    monkeypatch.chdir(ROOT)
+    dist = apply_configuration(Distribution(), ROOT / "pyproject.toml")
+    dist.include_package_data = False  # only what pyproject declares (and no egg-info written)
+    build_py = dist.get_command_obj("build_py")
+    build_py.ensure_finalized()
+    shipped = {(pkg, name) for pkg, _src, _build, names in build_py.data_files for name in names}
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    for package in ("torchcbl", "corridor", "sumo_scenarios"):
+        assert files(package).joinpath("py.typed").is_file(), package
+        assert "py.typed" in declared["package-data"].get(package, []), package
+        assert (package, "py.typed") in shipped, package

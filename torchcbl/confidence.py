@@ -34,7 +34,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, overload, runtime_checkable
 
 import numpy as np
 import torch
@@ -165,6 +165,13 @@ class DistanceRule:
             given (the threshold then depends on D: :meth:`threshold`).
         quantile: the share given, or None for a fixed threshold.
     """
+
+    # max_std or quantile, not both (a ValueError at run time): one overload each
+    @overload
+    def __init__(self, max_std: float | None = None, *, quantile: None = None) -> None: ...
+
+    @overload
+    def __init__(self, max_std: None = None, *, quantile: float) -> None: ...
 
     def __init__(self, max_std: float | None = None, *, quantile: float | None = None) -> None:
         given = max_std

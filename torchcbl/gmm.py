@@ -72,7 +72,7 @@ import os
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal, NamedTuple, overload
 
 import numpy as np
 import torch
@@ -447,6 +447,35 @@ class GaussianMixtureSet(nn.Module):
     loading a state saved with other values is a ValueError that names them.
     ``fit_report_`` (a :class:`FitReport`) is a plain attribute, not part of the state_dict.
     """
+
+    # The buffers registered in __init__, typed for a type checker (nn.Module's __getattr__
+    # says Tensor | Module); shapes in the class docstring.
+    weights_: Tensor
+    means_: Tensor
+    covariances_: Tensor
+    precisions_cholesky_: Tensor
+    log_det_: Tensor
+    component_mask_: Tensor
+    log_prior_: Tensor
+    n_points_: Tensor
+    n_components_: Tensor
+    criterion_: Tensor
+    log_likelihood_: Tensor
+    converged_: Tensor
+    n_iter_: Tensor
+    var_floor_: Tensor
+    data_mean_: Tensor
+    cand_weights_: Tensor
+    cand_means_: Tensor
+    cand_covariances_: Tensor
+    full_fit_points_: Tensor
+    cand_stats_: Tensor
+    cand_coef_: Tensor
+    stats_valid_: Tensor
+    ref_center_: Tensor
+    data_print_: Tensor
+    fitted_: Tensor
+    settings_: Tensor
 
     def __init__(
         self,
@@ -1492,6 +1521,13 @@ class GaussianMixtureSet(nn.Module):
         unfitted = (self.n_points_.cpu() == 0) & (n > 0)
         return out.masked_fill(unfitted, math.inf)
 
+    # both observations and actions, or neither (a ValueError at run time)
+    @overload
+    def aic(self) -> Tensor: ...
+
+    @overload
+    def aic(self, observations: Any, actions: Any) -> Tensor: ...
+
     def aic(self, observations: Any | None = None, actions: Any | None = None) -> Tensor:
         """Free-parameter AIC [A] of each chosen mixture (2 p - 2 L, as sklearn's ``aic``).
 
@@ -1500,6 +1536,12 @@ class GaussianMixtureSet(nn.Module):
         +inf for an action given points but fitted on none (no mixture: likelihood 0).
         """
         return self._criterion_of_chosen("aic", observations, actions)
+
+    @overload
+    def bic(self) -> Tensor: ...
+
+    @overload
+    def bic(self, observations: Any, actions: Any) -> Tensor: ...
 
     def bic(self, observations: Any | None = None, actions: Any | None = None) -> Tensor:
         """BIC [A] of each chosen mixture (p log n - 2 L, as sklearn's ``bic``); see aic()."""

@@ -7,7 +7,7 @@ import math
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import gymnasium as gym
 import numpy as np
@@ -20,6 +20,10 @@ if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
 
 __all__ = ["EpisodeResult", "GreedyPolicy", "check_env", "episode_results", "evaluate_policy"]
+
+#: What a policy or a teacher may answer as its action (:func:`as_action` takes it): an int, a
+#: numpy integer, or a 0-d integer array or tensor (e.g. ``logits.argmax()``).
+ActionAnswer = int | np.integer[Any] | np.ndarray | torch.Tensor
 
 
 class GreedyPolicy:
@@ -239,8 +243,46 @@ def obs_array(obs: Any, n_features: int, where: str) -> np.ndarray:
     return x
 
 
+@overload
 def evaluate_policy(
-    policy: Callable[[np.ndarray], int] | Callable[[np.ndarray, dict], int],
+    policy: Callable[[np.ndarray], ActionAnswer],
+    env: gym.Env,
+    *,
+    n_steps: int | None = None,
+    n_episodes: int | None = None,
+    seed: int | Sequence[int] | None = None,
+    uses_info: Literal[False] = False,
+) -> list[StepRecord]: ...
+
+
+@overload
+def evaluate_policy(
+    policy: Callable[[np.ndarray, dict[str, Any]], ActionAnswer],
+    env: gym.Env,
+    *,
+    n_steps: int | None = None,
+    n_episodes: int | None = None,
+    seed: int | Sequence[int] | None = None,
+    uses_info: Literal[True],
+) -> list[StepRecord]: ...
+
+
+@overload
+def evaluate_policy(
+    policy: Callable[[np.ndarray], ActionAnswer]
+    | Callable[[np.ndarray, dict[str, Any]], ActionAnswer],
+    env: gym.Env,
+    *,
+    n_steps: int | None = None,
+    n_episodes: int | None = None,
+    seed: int | Sequence[int] | None = None,
+    uses_info: bool,
+) -> list[StepRecord]: ...
+
+
+def evaluate_policy(
+    policy: Callable[[np.ndarray], ActionAnswer]
+    | Callable[[np.ndarray, dict[str, Any]], ActionAnswer],
     env: gym.Env,
     *,
     n_steps: int | None = None,

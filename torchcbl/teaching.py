@@ -65,6 +65,7 @@ from torchcbl.errors import (
     TeachingInterrupted,
 )
 from torchcbl.policy import (
+    ActionAnswer,
     GreedyPolicy,
     _env_user,
     _note_env_user,
@@ -112,7 +113,8 @@ __all__ = [
     "load_policy",
 ]
 
-Teacher = Callable[[np.ndarray, dict], int]
+# an int action, or what as_action takes for one (a numpy integer, a 0-d array or tensor)
+Teacher = Callable[[np.ndarray, dict[str, Any]], ActionAnswer]
 STOP_FIELDS = (
     "autonomous_steps_to_stop",
     "autonomous_episodes_to_stop",
@@ -524,11 +526,11 @@ class ConfidentTeacher:
             values that identify those inputs (e.g. a file's SHA-256). The session keeps it in
             its ``config.json`` and :meth:`resume` refuses an env whose description differs
             (``CorridorEnv`` describes its map so).
-        teacher: ``teacher(observation [D] ndarray, info dict) -> int`` in ``[0, n_actions)``.
-            It gets a copy of the env's observation and the info of the latest reset / step.
-            Optionally it has ``correct(observation, info, action) -> int | None``, offered
-            after each autonomous step by strategies that take corrections (see
-            :mod:`torchcbl.strategies`).
+        teacher: ``teacher(observation [D] ndarray, info dict) -> int`` in ``[0, n_actions)``
+            (or a numpy integer, or a 0-d integer array or tensor). It gets a copy of the env's
+            observation and the info of the latest reset / step. Optionally it has
+            ``correct(observation, info, action) -> int | None``, offered after each autonomous
+            step by strategies that take corrections (see :mod:`torchcbl.strategies`).
         model: the learner; default ``GaussianMixtureSet(n_actions, D, seed=seed)``. Its
             ``fit`` must be deterministic given the data (resume relies on it). A fitted model
             starts the session from it (kept as checkpoint 0), until the first refit.
@@ -583,7 +585,7 @@ class ConfidentTeacher:
         seed: int = 0,
         progress: bool = True,
         on_step: Callable[[StepRecord], None] | None = None,
-        on_refit: Callable[[torch.nn.Module, int], None] | None = None,
+        on_refit: Callable[[Any, int], None] | None = None,
         commit_every: int = 32,
     ) -> None:
         if isinstance(run_dir, str) and not run_dir.strip():
@@ -785,7 +787,7 @@ class ConfidentTeacher:
         config: TeachingConfig | None = None,
         progress: bool = True,
         on_step: Callable[[StepRecord], None] | None = None,
-        on_refit: Callable[[torch.nn.Module, int], None] | None = None,
+        on_refit: Callable[[Any, int], None] | None = None,
         commit_every: int = 32,
     ) -> ConfidentTeacher:
         """Continue a session from its run directory, killed or cleanly stopped.
@@ -1091,9 +1093,11 @@ class ConfidentTeacher:
         self._refit()
         return True
 
-    def snapshot(self) -> torch.nn.Module:
+    def snapshot(self) -> Any:
         """A copy of the model fitted on every demonstration so far, leaving the session as it
-        is (its model and refit schedule untouched): for evaluating a learning stage."""
+        is (its model and refit schedule untouched): for evaluating a learning stage. Of the
+        model's own class (a :class:`~torchcbl.gmm.GaussianMixtureSet` unless ``model=`` gave
+        another), as :attr:`model` is."""
         model = copy.deepcopy(self.model)
         if self._new_since_refit and len(self._train):
             fit = model.refit if self.config.refit == "incremental" else model.fit
