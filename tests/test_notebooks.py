@@ -210,3 +210,25 @@ def test_notebook_02_labels_both_axes_of_both_live_panels():
     assert all(ax.get_xlabel() and ax.get_ylabel() for ax in panels), [
         (ax.get_xlabel(), ax.get_ylabel()) for ax in panels
     ]
+
+
+def test_notebook_03_draws_its_road_at_the_steps_its_titles_name():
+    """Its road cell took frames where its loop index was 20, 60 and 100, after 21, 61 and 101
+    steps: the frames, titled with the env's own count of steps since reset (``t=``), read
+    t=21, 61, 101 under code that names 20, 60, 100. Here its set-up and road cells run (120
+    SUMO steps in this process, without ``plt.show()``): the frames drawn are those at steps
+    20, 60 and 100."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "03_driving.ipynb", as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    setup, road = code[0], next(c for c in code if "env.frame()" in c)
+    assert "(20, 60, 100)" in road
+    scope: dict = {}
+    exec(setup, scope)
+    try:
+        exec(road.replace("plt.show()", ""), scope)
+    finally:
+        scope["run_tmp"].cleanup()
+    scope["plt"].close(scope["fig"])
+    # render_frame titles each image "t={frame.step}"
+    assert [f.step for f in scope["frames"]] == [20, 60, 100]
