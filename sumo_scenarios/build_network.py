@@ -5,10 +5,11 @@ One command rebuilds the shipped network::
     python -m sumo_scenarios.build_network
 
 It writes the plain node/edge XML sources to ``sumo_scenarios/data/src/`` and runs SUMO's
-``netconvert`` on them, producing ``sumo_scenarios/data/road.net.xml``. netconvert's header comment
-(a timestamp and absolute paths) is replaced by a fixed one, so a rebuild reproduces the shipped
-file byte for byte. The vehicle types and the
-single route live in ``sumo_scenarios/data/driving.add.xml`` (hand-written, also shipped).
+``netconvert`` on them (this Python's eclipse-sumo one, beside the interpreter; the first on
+PATH only where there is none), producing ``sumo_scenarios/data/road.net.xml``. netconvert's
+header comment (a timestamp and absolute paths) is replaced by a fixed one, so a rebuild
+reproduces the shipped file byte for byte. The vehicle types and the single route live in
+``sumo_scenarios/data/driving.add.xml`` (hand-written, also shipped).
 
 The road: one straight edge ``road`` of :data:`ROAD_LENGTH_M` metres (10 km: a 1000-step episode
 at 60 mph covers 6.7 km, so no car is ever moved back within one) with five lanes. SUMO counts
@@ -62,15 +63,23 @@ def _wheel_netconvert() -> Path:
 
 
 def _netconvert() -> str:
-    exe = shutil.which("netconvert") or str(_wheel_netconvert())
-    if not Path(exe).exists():
-        raise FileNotFoundError("netconvert not found; install the eclipse-sumo wheel")
+    """This Python's eclipse-sumo netconvert (the declared dependency, matched to libsumo),
+    else the first on PATH (another SUMO install's, of whatever version)."""
+    wheel = _wheel_netconvert()
+    if wheel.exists():
+        return str(wheel)
+    exe = shutil.which("netconvert")
+    if exe is None:
+        raise FileNotFoundError(
+            f"netconvert not found: none beside this Python ({wheel}) nor on PATH; install "
+            "the eclipse-sumo wheel (pip install 'eclipse-sumo>=1.22')"
+        )
     return exe
 
 
 def _failed(exe: str, exc: OSError | subprocess.CalledProcessError) -> str:
-    """One line: which netconvert failed (the first on PATH may be another SUMO install's
-    than this Python's eclipse-sumo), how, and which one to use instead."""
+    """One line: which netconvert failed (this Python's eclipse-sumo one, or, where it has
+    none, the first on PATH, another SUMO install's), how, and what to do."""
     wheel = _wheel_netconvert()
     ours = Path(exe) == wheel
     if isinstance(exc, subprocess.CalledProcessError):
@@ -82,8 +91,8 @@ def _failed(exe: str, exc: OSError | subprocess.CalledProcessError) -> str:
     fix = (
         "reinstall eclipse-sumo (pip install --force-reinstall 'eclipse-sumo>=1.22')"
         if ours
-        else f"use this Python's eclipse-sumo one ({wheel}, SUMO 1.22 or newer is needed): put "
-        f"{wheel.parent} first on PATH, or take the other SUMO off it"
+        else "install eclipse-sumo into this Python (pip install 'eclipse-sumo>=1.22', SUMO "
+        f"1.22 or newer is needed): its netconvert ({wheel}) is run before any on PATH"
     )
     return f"netconvert failed: {exe} ({where}), {why}; {fix}"
 
@@ -91,8 +100,8 @@ def _failed(exe: str, exc: OSError | subprocess.CalledProcessError) -> str:
 def build(out_dir: Path = DATA_DIR) -> Path:
     """Write the plain-XML sources into ``out_dir/src`` and convert them to ``road.net.xml``.
 
-    Returns the path of the network file. netconvert is the first on PATH, else this Python's
-    eclipse-sumo one.
+    Returns the path of the network file. netconvert is this Python's eclipse-sumo one (beside
+    ``sys.executable``), else, where there is none, the first on PATH.
 
     Raises:
         FileNotFoundError: no netconvert was found.

@@ -105,6 +105,9 @@ class DrivingConfig:
 class Frame:
     """What a drawing needs of one timestep (positions: front bumpers, metres along the road).
 
+    ``step`` is the steps taken since reset (``info["t"]`` of the step that led here; 0 at
+    reset); :func:`~sumo_scenarios.render.render_frame` titles the image ``t=<step>``.
+
     ``prev_lane`` is the ego's lane before the step (its lane at reset on the first frame): a
     contact counts cars in it as well as in ``ego_lane``; None when unknown.
     """

@@ -49,6 +49,7 @@ import numpy as np
 
 from sumo_scenarios import metrics
 from torchcbl.evaluation import (
+    _ctrl_c_held,
     check_workers_start,
     clear_unfinished,
     die_with_parent,
@@ -626,7 +627,8 @@ def _run_seeds(
     given, and hand each result to ``done`` as it comes. A seed's exception is re-raised here;
     a worker that dies without a result (killed by a signal: the out-of-memory killer) stops
     the run with a RuntimeError naming its seed (a multiprocessing.Pool waited for its result
-    for ever). On any exit by an exception (Ctrl-C included) the other workers are stopped."""
+    for ever). On any exit by an exception (Ctrl-C included, one that came as a worker
+    started too) the other workers are stopped."""
     from multiprocessing.connection import wait
 
     waiting = list(jobs)
@@ -639,9 +641,10 @@ def _run_seeds(
                 proc = ctx.Process(
                     target=_seed_worker, args=(job, writer, os.getpid(), versions), daemon=True
                 )
-                proc.start()
-                writer.close()  # the worker's end: its exit makes the pipe readable
-                running[reader] = (proc, job[1])
+                with _ctrl_c_held():  # a worker started is kept before a Ctrl-C stops them
+                    proc.start()
+                    writer.close()  # the worker's end: its exit makes the pipe readable
+                    running[reader] = (proc, job[1])
             for reader in wait(list(running)):
                 proc, seed = running.pop(reader)
                 try:

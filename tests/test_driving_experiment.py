@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -550,3 +552,43 @@ def test_a_seed_exception_that_cannot_be_pickled_keeps_its_message(tmp_path):
     assert "RuntimeError: seed 0's worker could not send back its exception" in err
     assert "Unpicklable: the seed's own message" in err
     assert "exited with code" not in err
+
+
+@pytest.mark.skipif(not hasattr(signal, "pthread_kill"), reason="signals a thread (POSIX)")
+def test_a_ctrl_c_as_a_seed_worker_starts_leaves_no_worker_behind(tmp_path, monkeypatch):
+    """A Ctrl-C (SIGINT) that came after a seed's worker process was started but before the
+    run had kept it raised KeyboardInterrupt there; the run stopped the workers it knew of,
+    and that one ran its seed on (in a notebook, for as long as the kernel). Here the SIGINT
+    comes as the second seed's start returns; every seed worker started is gone (terminated
+    and reaped: signal 0 finds no process) when run_experiment's KeyboardInterrupt comes out."""
+    import threading
+    from multiprocessing.context import SpawnProcess
+
+    real_start = SpawnProcess.start
+    pids = []
+
+    def start(proc):
+        seed = getattr(getattr(proc, "_target", None), "__name__", "") == "_seed_worker"
+        real_start(proc)
+        if seed:  # not the start-up check
+            pids.append(proc.pid)
+            if len(pids) == 2:  # a Ctrl-C to this thread: its handler runs before this returns
+                signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+
+    def running(pid):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+
+    monkeypatch.setattr(SpawnProcess, "start", start)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_experiment(tiny_config(seeds=(0, 1, 2)), tmp_path, workers=3, progress=False)
+        assert len(pids) == 2
+        assert [p for p in pids if running(p)] == []
+    finally:
+        for p in pids:
+            if running(p):
+                os.kill(p, signal.SIGKILL)

@@ -210,3 +210,55 @@ def test_notebook_02_labels_both_axes_of_both_live_panels():
     assert all(ax.get_xlabel() and ax.get_ylabel() for ax in panels), [
         (ax.get_xlabel(), ax.get_ylabel()) for ax in panels
     ]
+
+
+def test_notebook_03_draws_its_road_at_the_steps_its_titles_name():
+    """Its road cell took frames where its loop index was 20, 60 and 100, after 21, 61 and 101
+    steps: the frames, titled with the env's own count of steps since reset (``t=``), read
+    t=21, 61, 101 under code that names 20, 60, 100. Here its set-up and road cells run (120
+    SUMO steps in this process, without ``plt.show()``): the frames drawn are those at steps
+    20, 60 and 100."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "03_driving.ipynb", as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    setup, road = code[0], next(c for c in code if "env.frame()" in c)
+    assert "(20, 60, 100)" in road
+    scope: dict = {}
+    exec(setup, scope)
+    try:
+        exec(road.replace("plt.show()", ""), scope)
+    finally:
+        scope["run_tmp"].cleanup()
+    scope["plt"].close(scope["fig"])
+    # render_frame titles each image "t={frame.step}"
+    assert [f.step for f in scope["frames"]] == [20, 60, 100]
+
+
+def test_notebook_01_asks_by_the_confidence_rule_not_by_a_number_of_its_own(capsys):
+    """Its probe cell printed "ask" as ``distance > 2``, a threshold of its own beside the
+    figure's ``DistanceRule(2.0)``: copied for the corridor (2.83 std) it asked wrongly. Here
+    the imports, the data, the fit and the probe cell run with another rule in the place of
+    ``DistanceRule`` (a quantile rule, 0.67 std in 2-D, which also needs the observations to
+    know D): the printed asks are that rule's."""
+    import re
+
+    import numpy as np
+
+    from torchcbl import DistanceRule
+
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / "01_gmm_set.ipynb", as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    probe_cell = next(c for c in code if "probe =" in c)
+    scope: dict = {}
+    exec("\n".join(code[:3]), scope)  # imports, the data, the fit
+    stand_in = DistanceRule(quantile=0.2)
+    scope["DistanceRule"] = lambda *args, **kwargs: stand_in
+    capsys.readouterr()
+    exec(probe_cell, scope)
+    printed = re.findall(r"distance ([\d.]+) std.*ask: (True|False)", capsys.readouterr().out)
+    probe = scope["probe"]
+    wanted = (~stand_in.is_confident(scope["gmm"].classify(probe), probe)).tolist()
+    assert [ask == "True" for _, ask in printed] == wanted
+    assert len(wanted) == len(probe) and wanted != [float(d) > 2 for d, _ in printed]
+    assert np.isclose(stand_in.threshold(2), 0.668, atol=1e-3)
