@@ -496,6 +496,31 @@ def test_a_ctrl_c_as_a_worker_starts_leaves_no_worker_behind(monkeypatch):
                 os.kill(p, signal.SIGKILL)
 
 
+def _ctrl_c_handler_here() -> str:
+    return repr(signal.getsignal(signal.SIGINT))
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="the fork start method (POSIX)")
+def test_a_forked_worker_takes_ctrl_c_as_the_parent_did_before_it_started_it():
+    """worker_pool holds a Ctrl-C while it starts a worker. A worker forked then (the fork
+    start method, multiprocessing's default on Linux before Python 3.14) inherited the
+    temporary holding handler and never left the hold: its first Ctrl-C was swallowed. Each
+    worker now starts with the handler the parent had before the hold (here Python's
+    default, which raises KeyboardInterrupt)."""
+    import multiprocessing as mp
+
+    from torchcbl.evaluation import worker_pool
+
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with worker_pool(2, mp.get_context("fork")) as pool:
+            seen = {pool.submit(_ctrl_c_handler_here).result() for _ in range(4)}
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert seen == {repr(signal.default_int_handler)}, seen
+
+
 @pytest.mark.parametrize(
     ("answer", "says"),
     [
