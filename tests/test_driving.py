@@ -978,8 +978,11 @@ def test_drawing_after_a_step_cut_short_is_refused_like_the_next_step(monkeypatc
     """render() and frame() after a step cut short (a Ctrl-C while the cars were read back)
     drew the half-updated scene: the ego moved, the cars partly where they were, and the step
     count of the new step. Like the next step they raise, saying the last step did not finish
-    and to reset(); after close() too (the scene is still half updated); a reset draws again."""
+    and to reset(); a reset draws again. After close() too (the scene is still half updated),
+    but the message said "reset() to draw again" while reset() on a closed env raises "this
+    DrivingEnv is closed; create a new one": closed, it says to create a new env."""
     import gc
+    import re
 
     gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
     real = libsumo.vehicle.getLanePosition
@@ -1003,9 +1006,12 @@ def test_drawing_after_a_step_cut_short_is_refused_like_the_next_step(monkeypatc
             monkeypatch.setattr(libsumo.vehicle, "getLanePosition", real)
             if close_first:
                 env.close()
+            says = r"closed.*create a new" if close_first else r"reset\(\) to draw again"
             for draw in (env.frame, env.render):
-                with pytest.raises(RuntimeError, match=r"last step did not finish.*reset\(\)"):
+                with pytest.raises(RuntimeError, match=r"last step did not finish") as e:
                     draw()
+                assert re.search(says, str(e.value)), e.value
+                assert not close_first or "reset()" not in str(e.value), e.value
             if not close_first:
                 env.reset(seed=1)
                 assert env.frame().step == 0 and env.render().shape[2] == 3
