@@ -143,6 +143,35 @@ def test_evaluate_policy_seeds_every_episode_from_a_list():
         evaluate_policy(oracle(env), env, seed=[1, 2], n_episodes=3, uses_info=True)
 
 
+class _ExpertOfObsAndInfo:
+    def __call__(self, obs: np.ndarray, info: dict) -> int:
+        return 0
+
+
+def test_evaluate_policy_names_uses_info_for_a_policy_of_observation_and_info():
+    """A teacher-style callable (obs, info) given to evaluate_policy without uses_info=True
+    was called as policy(obs) and failed with Python's own "missing 1 required positional
+    argument: 'info'" from inside the loop. Its signature is read first: the error says how
+    it will be called, what it takes and to pass uses_info=True. A callable that can be
+    called with the observation alone is run; a TypeError of its own is not reworded."""
+    env = rare_regions_world(episode_length=5)
+    for policy, name in ((oracle(env), "teacher"), (_ExpertOfObsAndInfo(), "_ExpertOfObsAndInfo")):
+        with pytest.raises(TypeError) as e:
+            evaluate_policy(policy, env, seed=0, n_steps=5)
+        msg = str(e.value)
+        assert msg.startswith("evaluate_policy: ") and "policy(observation)" in msg, msg
+        assert name in msg and "(obs, info)" in msg and "pass uses_info=True" in msg, msg
+    records = evaluate_policy(oracle(env), env, seed=0, n_steps=5, uses_info=True)
+    assert len(records) == 5
+    assert len(evaluate_policy(lambda obs, info=None: 0, env, seed=0, n_steps=5)) == 5
+
+    def wrong(obs):
+        return len(None)  # the policy's own TypeError
+
+    with pytest.raises(TypeError, match="has no len"):
+        evaluate_policy(wrong, env, seed=0, n_steps=5)
+
+
 def test_evaluate_policy_refuses_a_negative_seed_before_it_runs():
     """A negative seed reached gymnasium's reset, whose error ("Seed must be greater or equal
     to zero") named neither evaluate_policy nor the argument; one in a list did so only at
