@@ -172,6 +172,18 @@ def test_evaluate_policy_names_uses_info_for_a_policy_of_observation_and_info():
         evaluate_policy(wrong, env, seed=0, n_steps=5)
 
 
+def test_evaluate_policy_with_uses_info_names_a_policy_of_the_observation_alone():
+    """uses_info=True calls policy(observation, info); a policy of the observation alone failed
+    with Python's "takes 1 positional argument but 2 were given". Its signature is read
+    first: the error says how it is called, what it takes and to leave uses_info out."""
+    env = rare_regions_world(episode_length=5)
+    with pytest.raises(TypeError) as e:
+        evaluate_policy(lambda obs: 0, env, seed=0, n_steps=5, uses_info=True)
+    msg = str(e.value)
+    assert msg.startswith("evaluate_policy: ") and "policy(observation, info)" in msg, msg
+    assert "<lambda> takes (obs)" in msg and "leave uses_info out" in msg, msg
+
+
 def test_evaluate_policy_refuses_a_negative_seed_before_it_runs():
     """A negative seed reached gymnasium's reset, whose error ("Seed must be greater or equal
     to zero") named neither evaluate_policy nor the argument; one in a list did so only at

@@ -387,13 +387,19 @@ def evaluate_policy(
     # unless a subclass answers in a __call__ of its own (masking, exploration), which is called
     greedy = isinstance(policy, GreedyPolicy)
     own_call = not greedy or type(policy).__call__ is not GreedyPolicy.__call__
-    takes = _cannot_take(policy, 1) if own_call and not uses_info else None
-    if takes is not None:
+    takes = _cannot_take(policy, 2 if uses_info else 1) if own_call else None
+    if takes is not None and not uses_info:
         raise TypeError(
             f"evaluate_policy: the policy is called as policy(observation) (uses_info=False), "
             f"but {takes}: it needs more arguments. For a policy of the observation and the "
             "info, called policy(observation, info) like a teacher (a scripted expert), pass "
             "uses_info=True"
+        )
+    if takes is not None:
+        raise TypeError(
+            f"evaluate_policy: with uses_info=True the policy is called as "
+            f"policy(observation, info), but {takes}. For a policy of the observation alone, "
+            "leave uses_info out (False)"
         )
     records: list[StepRecord] = []
     _note_env_user(env, object())  # a teaching loop mid-episode on this env starts a new one
