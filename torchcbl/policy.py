@@ -317,7 +317,8 @@ def evaluate_policy(
     so a scripted expert can be evaluated exactly like a learned policy. ``observation`` is a
     copy of the env's observation [D] as the env returned it; the answer is an action index
     in [0, A) (an int, a numpy integer or a 0-d integer array / tensor), anything else a
-    ValueError.
+    ValueError. A policy whose signature cannot take that call (``policy(obs, info)`` without
+    ``uses_info=True``, or the reverse) is a TypeError before the env is reset.
 
     Episodes that end are reset until ``n_steps`` steps or ``n_episodes`` finished episodes,
     whichever comes first; no reset follows the last episode. ``seed`` seeds the resets:
