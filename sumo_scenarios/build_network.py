@@ -77,14 +77,24 @@ def _netconvert() -> str:
     return exe
 
 
+def _said(stderr: str) -> str:
+    """What a failed netconvert said, in one line: its "Error:" lines joined by "; ", else its
+    last line other than the "Quitting (on error)." it closes every failure with."""
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
+    errors = [line for line in lines if line.startswith("Error:")]
+    if errors:
+        return "; ".join(errors)
+    said = [line for line in lines if line != "Quitting (on error)."]
+    return said[-1] if said else "no message"
+
+
 def _failed(exe: str, exc: OSError | subprocess.CalledProcessError) -> str:
     """One line: which netconvert failed (this Python's eclipse-sumo one, or, where it has
     none, the first on PATH, another SUMO install's), how, and what to do."""
     wheel = _wheel_netconvert()
     ours = Path(exe) == wheel
     if isinstance(exc, subprocess.CalledProcessError):
-        said = [line.strip() for line in (exc.stderr or "").splitlines() if line.strip()]
-        why = f"exit status {exc.returncode}: {said[-1] if said else 'no message'}"
+        why = f"exit status {exc.returncode}: {_said(exc.stderr or '')}"
     else:
         why = str(exc)
     where = "this Python's eclipse-sumo" if ours else "the first on PATH"
@@ -106,7 +116,7 @@ def build(out_dir: Path = DATA_DIR) -> Path:
     Raises:
         FileNotFoundError: no netconvert was found.
         RuntimeError: netconvert failed; the message names the one that ran, its exit status
-            and last error line, and which one to use instead.
+            and error lines, and which one to use instead.
     """
     src = out_dir / "src"
     src.mkdir(parents=True, exist_ok=True)

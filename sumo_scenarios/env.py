@@ -309,9 +309,14 @@ class DrivingEnv(gym.Env):
                 "(none ran, or the last one failed)"
             )
         if self._sim.cut_short:  # as step() after it: the ego moved, the cars in part
+            fix = (
+                "this DrivingEnv is closed, so it cannot be reset: create a new one to draw again"
+                if self.closed
+                else "reset() to draw again (on a fresh road segment)"
+            )
             raise RuntimeError(
                 "the env's last step did not finish (interrupted or raised inside it), and its "
-                "scene is half updated: reset() to draw again (on a fresh road segment)"
+                f"scene is half updated: {fix}"
             )
         s = self._sim
         return Frame(

@@ -601,18 +601,29 @@ def test_this_pythons_netconvert_is_run_before_the_first_on_path(tmp_path, monke
     assert net.read_text() == _BUILT_FROM_THE_1_24_HEADER
 
 
+# What the real netconvert writes on stderr when it fails (here: two node files it cannot open):
+# its errors, then always "Quitting (on error)."
+_FAILS_AS_NETCONVERT_DOES = (
+    "echo \"Error: Could not open nodes-file 'missing.nod.xml'.\" >&2\n"
+    "echo 'Error: No nodes loaded.' >&2\n"
+    "echo 'Quitting (on error).' >&2\n"
+)
+_NETCONVERT_SAID = "Error: Could not open nodes-file 'missing.nod.xml'.; Error: No nodes loaded."
+
+
 @pytest.mark.parametrize("which", ["this Python's", "the first on PATH"])
 def test_a_netconvert_that_fails_is_named_with_its_own_error(tmp_path, monkeypatch, which):
     """build() runs this Python's eclipse-sumo netconvert, else (none beside this Python) the
     first on PATH, which may be another SUMO install's (older than the 1.22 floor, say). When
     it failed, the user got subprocess's CalledProcessError listing the whole command, with
     netconvert's own message swallowed (captured, never shown). The error names the netconvert
-    that ran and where it came from, its exit status and message, and what to do."""
+    that ran and where it came from, its exit status and message, and what to do.
+
+    The stand-in fails as the real one does: its "Error:" lines, then "Quitting (on error).";
+    the message kept only that last line, dropping the errors. It keeps every "Error:" line."""
     from sumo_scenarios.build_network import build
 
-    fake = _fake_netconvert(
-        tmp_path, "echo \"Error: On processing option '--no-turnarounds'\" >&2\nexit 3\n"
-    )
+    fake = _fake_netconvert(tmp_path, _FAILS_AS_NETCONVERT_DOES + "exit 3\n")
     if which == "this Python's":
         _as_this_pythons(monkeypatch, fake.parent)
         where, fix = "this Python's eclipse-sumo", "reinstall eclipse-sumo"
@@ -625,8 +636,31 @@ def test_a_netconvert_that_fails_is_named_with_its_own_error(tmp_path, monkeypat
     msg = str(e.value)
     assert "\n" not in msg, msg
     assert f"{fake} ({where}" in msg, msg
-    assert "exit status 3" in msg and "On processing option '--no-turnarounds'" in msg, msg
+    assert f"exit status 3: {_NETCONVERT_SAID}; " in msg, msg
+    assert "Quitting" not in msg, msg
     assert fix in msg, msg
+
+
+@pytest.mark.parametrize(
+    "stderr, said",
+    [
+        ("Warning: odd input\nsegfault in loader\nQuitting (on error).\n", "segfault in loader"),
+        ("Quitting (on error).\n", "no message"),
+        ("", "no message"),
+    ],
+)
+def test_a_netconvert_failing_without_error_lines_is_named_by_its_last_words(
+    tmp_path, monkeypatch, stderr, said
+):
+    """With no "Error:" line, the message gives netconvert's last line that says something,
+    not its closing "Quitting (on error).", or "no message" where there is none."""
+    from sumo_scenarios.build_network import build
+
+    fake = _fake_netconvert(tmp_path, f"printf '{stderr}' >&2\nexit 1\n")
+    _as_this_pythons(monkeypatch, fake.parent)
+    with pytest.raises(RuntimeError) as e:
+        build(tmp_path / "out")
+    assert f"exit status 1: {said}; reinstall" in str(e.value), str(e.value)
 
 
 _BUILD_NETWORK_AS_IF_BESIDE = """
@@ -646,10 +680,11 @@ def test_the_build_network_command_fails_in_one_line_not_a_traceback(tmp_path, c
     import sys
 
     out = tmp_path / "out"
-    fake = _fake_netconvert(tmp_path, 'echo "Error: no such option" >&2\nexit 1\n')
+    fake = _fake_netconvert(tmp_path, _FAILS_AS_NETCONVERT_DOES + "exit 1\n")
     if case == "netconvert fails":
         says = (
-            f"netconvert failed: {fake} (this Python's eclipse-sumo), exit status 1: Error: no such"
+            f"netconvert failed: {fake} (this Python's eclipse-sumo), exit status 1: "
+            f"{_NETCONVERT_SAID}; reinstall"
         )
     else:
         out.write_text("")
@@ -943,8 +978,11 @@ def test_drawing_after_a_step_cut_short_is_refused_like_the_next_step(monkeypatc
     """render() and frame() after a step cut short (a Ctrl-C while the cars were read back)
     drew the half-updated scene: the ego moved, the cars partly where they were, and the step
     count of the new step. Like the next step they raise, saying the last step did not finish
-    and to reset(); after close() too (the scene is still half updated); a reset draws again."""
+    and to reset(); a reset draws again. After close() too (the scene is still half updated),
+    but the message said "reset() to draw again" while reset() on a closed env raises "this
+    DrivingEnv is closed; create a new one": closed, it says to create a new env."""
     import gc
+    import re
 
     gc.collect()  # an env an earlier test dropped unclosed releases libsumo when collected
     real = libsumo.vehicle.getLanePosition
@@ -968,9 +1006,12 @@ def test_drawing_after_a_step_cut_short_is_refused_like_the_next_step(monkeypatc
             monkeypatch.setattr(libsumo.vehicle, "getLanePosition", real)
             if close_first:
                 env.close()
+            says = r"closed.*create a new" if close_first else r"reset\(\) to draw again"
             for draw in (env.frame, env.render):
-                with pytest.raises(RuntimeError, match=r"last step did not finish.*reset\(\)"):
+                with pytest.raises(RuntimeError, match=r"last step did not finish") as e:
                     draw()
+                assert re.search(says, str(e.value)), e.value
+                assert not close_first or "reset()" not in str(e.value), e.value
             if not close_first:
                 env.reset(seed=1)
                 assert env.frame().step == 0 and env.render().shape[2] == 3

@@ -845,3 +845,30 @@ def test_a_terminal_on_a_file_descriptor_above_1023_is_read(terminal):
             os.close(high)
     finally:
         resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("refusal", [OSError(22, "Invalid argument"), ValueError("bad fd")])
+def test_a_terminal_the_default_selector_refuses_is_read_with_select(
+    terminal, monkeypatch, refusal
+):
+    """The teacher waits for a key with selectors.DefaultSelector (epoll on Linux, kqueue on
+    macOS). kqueue refuses some terminal devices (/dev/tty among them): registering one
+    raised that OSError at the first key, and teaching stopped. A refused registration now
+    falls back to select() (selectors.SelectSelector, for descriptors below 1024)."""
+    import selectors
+
+    class Refuses(selectors.DefaultSelector):  # type: ignore[misc, valid-type]
+        def register(self, fileobj, events, data=None):
+            raise refusal
+
+    monkeypatch.setattr(selectors, "DefaultSelector", Refuses)
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    person = Person(master, slave, [b"a", b"\x1b[C"])
+    teacher = _teacher(slave)
+    person.start()
+    assert [teacher(OBS, {}), teacher(OBS, {})] == [1, 2]
+    shown = person.finish()
+    assert "-> left" in shown and "-> right" in shown
+    assert termios.tcgetattr(slave) == before

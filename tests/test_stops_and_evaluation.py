@@ -143,6 +143,47 @@ def test_evaluate_policy_seeds_every_episode_from_a_list():
         evaluate_policy(oracle(env), env, seed=[1, 2], n_episodes=3, uses_info=True)
 
 
+class _ExpertOfObsAndInfo:
+    def __call__(self, obs: np.ndarray, info: dict) -> int:
+        return 0
+
+
+def test_evaluate_policy_names_uses_info_for_a_policy_of_observation_and_info():
+    """A teacher-style callable (obs, info) given to evaluate_policy without uses_info=True
+    was called as policy(obs) and failed with Python's own "missing 1 required positional
+    argument: 'info'" from inside the loop. Its signature is read first: the error says how
+    it will be called, what it takes and to pass uses_info=True. A callable that can be
+    called with the observation alone is run; a TypeError of its own is not reworded."""
+    env = rare_regions_world(episode_length=5)
+    for policy, name in ((oracle(env), "teacher"), (_ExpertOfObsAndInfo(), "_ExpertOfObsAndInfo")):
+        with pytest.raises(TypeError) as e:
+            evaluate_policy(policy, env, seed=0, n_steps=5)
+        msg = str(e.value)
+        assert msg.startswith("evaluate_policy: ") and "policy(observation)" in msg, msg
+        assert name in msg and "(obs, info)" in msg and "pass uses_info=True" in msg, msg
+    records = evaluate_policy(oracle(env), env, seed=0, n_steps=5, uses_info=True)
+    assert len(records) == 5
+    assert len(evaluate_policy(lambda obs, info=None: 0, env, seed=0, n_steps=5)) == 5
+
+    def wrong(obs):
+        return len(None)  # the policy's own TypeError
+
+    with pytest.raises(TypeError, match="has no len"):
+        evaluate_policy(wrong, env, seed=0, n_steps=5)
+
+
+def test_evaluate_policy_with_uses_info_names_a_policy_of_the_observation_alone():
+    """uses_info=True calls policy(observation, info); a policy of the observation alone failed
+    with Python's "takes 1 positional argument but 2 were given". Its signature is read
+    first: the error says how it is called, what it takes and to leave uses_info out."""
+    env = rare_regions_world(episode_length=5)
+    with pytest.raises(TypeError) as e:
+        evaluate_policy(lambda obs: 0, env, seed=0, n_steps=5, uses_info=True)
+    msg = str(e.value)
+    assert msg.startswith("evaluate_policy: ") and "policy(observation, info)" in msg, msg
+    assert "<lambda> takes (obs)" in msg and "leave uses_info out" in msg, msg
+
+
 def test_evaluate_policy_refuses_a_negative_seed_before_it_runs():
     """A negative seed reached gymnasium's reset, whose error ("Seed must be greater or equal
     to zero") named neither evaluate_policy nor the argument; one in a list did so only at
@@ -494,6 +535,31 @@ def test_a_ctrl_c_as_a_worker_starts_leaves_no_worker_behind(monkeypatch):
         for p in pids:
             if running(p):
                 os.kill(p, signal.SIGKILL)
+
+
+def _ctrl_c_handler_here() -> str:
+    return repr(signal.getsignal(signal.SIGINT))
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="the fork start method (POSIX)")
+def test_a_forked_worker_takes_ctrl_c_as_the_parent_did_before_it_started_it():
+    """worker_pool holds a Ctrl-C while it starts a worker. A worker forked then (the fork
+    start method, multiprocessing's default on Linux before Python 3.14) inherited the
+    temporary holding handler and never left the hold: its first Ctrl-C was swallowed. Each
+    worker now starts with the handler the parent had before the hold (here Python's
+    default, which raises KeyboardInterrupt)."""
+    import multiprocessing as mp
+
+    from torchcbl.evaluation import worker_pool
+
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with worker_pool(2, mp.get_context("fork")) as pool:
+            seen = {pool.submit(_ctrl_c_handler_here).result() for _ in range(4)}
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert seen == {repr(signal.default_int_handler)}, seen
 
 
 @pytest.mark.parametrize(

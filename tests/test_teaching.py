@@ -43,6 +43,26 @@ def test_before_any_model_every_step_asks():
     assert ct.model.is_fitted  # refitted after the 4th demonstration
 
 
+def test_a_teacher_of_the_observation_alone_is_refused_before_anything_runs(tmp_path):
+    """The loop calls teacher(observation, info). A policy-style teacher of the observation
+    alone was taken, and the session stopped at its first request with a TeacherError around
+    Python's "takes 1 positional argument but 2 were given", its run directory already
+    written. Its signature is read first: a TypeError says how a teacher is called, what
+    this one takes and how to wrap it, and no run directory is made. A teacher with an
+    optional info, or *args, is taken."""
+    env = rare_regions_world()
+    with pytest.raises(TypeError) as e:
+        ConfidentTeacher(env, lambda obs: 0, run_dir=tmp_path / "s", progress=False)
+    msg = str(e.value)
+    assert "teacher(observation, info)" in msg and "<lambda> takes (obs)" in msg, msg
+    assert "lambda obs, info:" in msg, msg
+    assert not (tmp_path / "s").exists()
+    for teacher in (lambda obs, info=None: 0, lambda *args: 0):
+        ct = ConfidentTeacher(env, teacher, progress=False)
+        ct.run(max_steps=2)
+        assert [r.teacher_action for r in ct.records] == [0, 0]
+
+
 def test_windowed_accuracy_and_phase_switch_as_specified():
     ct = make(rare_regions_world(), accuracy_window=10, target_accuracy=0.9, max_new=1)
     ct.run(max_steps=80)

@@ -203,11 +203,13 @@ def _worker_start(parent: int | None = None) -> None:
     loop's, hidden in a worker) take a thread lock instead of the multiprocessing lock tqdm
     makes by default, a named semaphore that a worker terminated after a Ctrl-C never
     releases; the resource tracker then printed a "leaked semaphore objects" warning under
-    the command's one line. And it dies with ``parent`` (:func:`die_with_parent`)."""
+    the command's one line. And it dies with ``parent`` (:func:`die_with_parent`). A worker
+    forked while the pool held Ctrl-C takes it as the parent did before (:func:`_ctrl_c_held`)."""
     import threading
 
     from tqdm import tqdm
 
+    _undo_ctrl_c_hold()
     tqdm.set_lock(threading.RLock())
     die_with_parent(parent)
 
@@ -361,6 +363,7 @@ def _ctrl_c_held() -> Iterator[None]:
         else:
             held.append(frame)
 
+    hold._before_hold = old  # type: ignore[attr-defined]  # for _undo_ctrl_c_hold
     signal.signal(signal.SIGINT, hold)
     try:
         yield
@@ -368,6 +371,19 @@ def _ctrl_c_held() -> Iterator[None]:
         signal.signal(signal.SIGINT, old)
         if held:
             old(signal.SIGINT, held[0])
+
+
+def _undo_ctrl_c_hold() -> None:
+    """In a process forked inside :func:`_ctrl_c_held` (its parent's block), put back the
+    SIGINT handler that was in place before the hold. A fork child copies the holding handler
+    and never leaves the block, so it swallowed its first Ctrl-C. Elsewhere it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    handler = signal.getsignal(signal.SIGINT)
+    while hasattr(handler, "_before_hold"):  # a hold inside a hold holds the outer one
+        handler = handler._before_hold
+    if handler is not signal.getsignal(signal.SIGINT):
+        signal.signal(signal.SIGINT, handler)
 
 
 class _RecordingPool(ProcessPoolExecutor):

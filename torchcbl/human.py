@@ -157,6 +157,20 @@ def _split_keys(data: bytes) -> tuple[list[str], bytes]:
     return keys, data
 
 
+def _key_waits(fd: int) -> selectors.BaseSelector:
+    """A selector waiting for ``fd`` to be readable: the system's best (epoll, kqueue), not
+    select.select(), which refuses a descriptor >= 1024 (FD_SETSIZE). Where that one refuses
+    the device (kqueue does some terminals, /dev/tty among them), select() (below 1024)."""
+    waits: selectors.BaseSelector = selectors.DefaultSelector()
+    try:
+        waits.register(fd, selectors.EVENT_READ)
+    except (OSError, ValueError):
+        waits.close()
+        waits = selectors.SelectSelector()  # holds no OS resource to leak if this raises
+        waits.register(fd, selectors.EVENT_READ)
+    return waits
+
+
 @contextlib.contextmanager
 def _restored_before_a_fatal_signal(fd: int, saved: list[Any]) -> Iterator[None]:
     """While in place, SIGTERM and SIGHUP whose default action (the process ends at once, no
@@ -412,9 +426,7 @@ class TerminalTeacher:
 
     def _ask_key(self, fd: int) -> int:
         saved = termios.tcgetattr(fd)
-        # a selector, not select.select(), which refuses a descriptor >= 1024 (FD_SETSIZE)
-        with _restored_before_a_fatal_signal(fd, saved), selectors.DefaultSelector() as waits:
-            waits.register(fd, selectors.EVENT_READ)
+        with _restored_before_a_fatal_signal(fd, saved), _key_waits(fd) as waits:
             return self._ask_key_raw(fd, saved, waits)
 
     def _ask_key_raw(self, fd: int, saved: list[Any], waits: selectors.BaseSelector) -> int:

@@ -3,6 +3,7 @@ every env and teacher answer goes through before the loop or an evaluation uses 
 
 from __future__ import annotations
 
+import inspect
 import math
 import weakref
 from collections.abc import Callable, Mapping, Sequence
@@ -158,6 +159,25 @@ def _check_policy_fits(policy: Any, n_features: int, n_actions: int) -> None:
             )
 
 
+def _cannot_take(fn: Any, n_args: int) -> str | None:
+    """Why ``fn`` cannot be called with ``n_args`` positional arguments, as its signature says
+    (e.g. "teacher takes (obs, info)"), or None where it can or its signature is unknown (a
+    builtin). Read before any call, so that a TypeError of ``fn``'s own is never reworded."""
+    try:
+        params = list(inspect.signature(fn).parameters.values())
+    except (TypeError, ValueError):
+        return None
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    required = sum(p.default is p.empty for p in positional)
+    varargs = any(p.kind is p.VAR_POSITIONAL for p in params)
+    if required <= n_args and (varargs or len(positional) >= n_args):
+        return None
+    shown = [p.name if p.default is p.empty else f"{p.name}=..." for p in positional]
+    shown += [f"*{p.name}" for p in params if p.kind is p.VAR_POSITIONAL]
+    name = getattr(fn, "__qualname__", None) or type(fn).__name__
+    return f"{name} takes ({', '.join(shown)})"
+
+
 def as_action(value: Any, n_actions: int) -> int | None:
     """``value`` as an action index in [0, ``n_actions``), or None when it is not one: an int or
     numpy integer, or a 0-d integer array or tensor (e.g. ``logits.argmax()``); a bool, a
@@ -297,7 +317,8 @@ def evaluate_policy(
     so a scripted expert can be evaluated exactly like a learned policy. ``observation`` is a
     copy of the env's observation [D] as the env returned it; the answer is an action index
     in [0, A) (an int, a numpy integer or a 0-d integer array / tensor), anything else a
-    ValueError.
+    ValueError. A policy whose signature cannot take that call (``policy(obs, info)`` without
+    ``uses_info=True``, or the reverse) is a TypeError before the env is reset.
 
     Episodes that end are reset until ``n_steps`` steps or ``n_episodes`` finished episodes,
     whichever comes first; no reset follows the last episode. ``seed`` seeds the resets:
@@ -367,6 +388,20 @@ def evaluate_policy(
     # unless a subclass answers in a __call__ of its own (masking, exploration), which is called
     greedy = isinstance(policy, GreedyPolicy)
     own_call = not greedy or type(policy).__call__ is not GreedyPolicy.__call__
+    takes = _cannot_take(policy, 2 if uses_info else 1) if own_call else None
+    if takes is not None and not uses_info:
+        raise TypeError(
+            f"evaluate_policy: the policy is called as policy(observation) (uses_info=False), "
+            f"but {takes}: it needs more arguments. For a policy of the observation and the "
+            "info, called policy(observation, info) like a teacher (a scripted expert), pass "
+            "uses_info=True"
+        )
+    if takes is not None:
+        raise TypeError(
+            f"evaluate_policy: with uses_info=True the policy is called as "
+            f"policy(observation, info), but {takes}. For a policy of the observation alone, "
+            "leave uses_info out (False)"
+        )
     records: list[StepRecord] = []
     _note_env_user(env, object())  # a teaching loop mid-episode on this env starts a new one
     raw, info = reset_answer(env.reset(seed=seeds[0] if seeds is not None else seed))

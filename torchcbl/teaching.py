@@ -67,6 +67,7 @@ from torchcbl.errors import (
 from torchcbl.policy import (
     ActionAnswer,
     GreedyPolicy,
+    _cannot_take,
     _env_user,
     _note_env_user,
     as_action,
@@ -678,6 +679,13 @@ class ConfidentTeacher:
         if not callable(teacher):
             raise TypeError(
                 f"teacher: expected a callable teacher(observation, info) -> int, got {teacher!r}"
+            )
+        takes = _cannot_take(teacher, 2)
+        if takes is not None:
+            raise TypeError(
+                f"teacher: a teacher is called as teacher(observation, info), but {takes}; "
+                "give it an info parameter (it may ignore it), or wrap a policy of the "
+                "observation alone: lambda obs, info: policy(obs)"
             )
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise TypeError(f"seed: expected an int, got {seed!r}")
