@@ -57,22 +57,25 @@ _EDGES = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
-def _wheel_netconvert() -> Path:
-    """Where this Python's eclipse-sumo wheel puts netconvert (beside the interpreter)."""
-    return Path(sys.executable).with_name("netconvert")
+def _wheel_netconvert() -> str | None:
+    """This Python's eclipse-sumo netconvert, beside the interpreter (found as the shell finds
+    a command there: ``netconvert.exe`` on Windows), or None where there is none."""
+    if not sys.executable:  # an embedded interpreter may not know its own
+        return None
+    return shutil.which("netconvert", path=str(Path(sys.executable).parent))
 
 
 def _netconvert() -> str:
     """This Python's eclipse-sumo netconvert (the declared dependency, matched to libsumo),
     else the first on PATH (another SUMO install's, of whatever version)."""
     wheel = _wheel_netconvert()
-    if wheel.exists():
-        return str(wheel)
+    if wheel is not None:
+        return wheel
     exe = shutil.which("netconvert")
     if exe is None:
         raise FileNotFoundError(
-            f"netconvert not found: none beside this Python ({wheel}) nor on PATH; install "
-            "the eclipse-sumo wheel (pip install 'eclipse-sumo>=1.22')"
+            f"netconvert not found: none beside this Python ({sys.executable or 'unknown'}) "
+            "nor on PATH; install the eclipse-sumo wheel (pip install 'eclipse-sumo>=1.22')"
         )
     return exe
 
@@ -92,7 +95,7 @@ def _failed(exe: str, exc: OSError | subprocess.CalledProcessError) -> str:
     """One line: which netconvert failed (this Python's eclipse-sumo one, or, where it has
     none, the first on PATH, another SUMO install's), how, and what to do."""
     wheel = _wheel_netconvert()
-    ours = Path(exe) == wheel
+    ours = wheel is not None and Path(exe) == Path(wheel)
     if isinstance(exc, subprocess.CalledProcessError):
         why = f"exit status {exc.returncode}: {_said(exc.stderr or '')}"
     else:
@@ -102,7 +105,8 @@ def _failed(exe: str, exc: OSError | subprocess.CalledProcessError) -> str:
         "reinstall eclipse-sumo (pip install --force-reinstall 'eclipse-sumo>=1.22')"
         if ours
         else "install eclipse-sumo into this Python (pip install 'eclipse-sumo>=1.22', SUMO "
-        f"1.22 or newer is needed): its netconvert ({wheel}) is run before any on PATH"
+        f"1.22 or newer is needed): its netconvert (beside {sys.executable}) is run before any "
+        "on PATH"
     )
     return f"netconvert failed: {exe} ({where}), {why}; {fix}"
 

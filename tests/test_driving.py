@@ -630,7 +630,7 @@ def test_a_netconvert_that_fails_is_named_with_its_own_error(tmp_path, monkeypat
     else:
         _as_this_pythons(monkeypatch, tmp_path / "no-sumo")
         _first_on_path(monkeypatch, fake)
-        where, fix = "the first on PATH", f"its netconvert ({tmp_path / 'no-sumo'}"
+        where, fix = "the first on PATH", f"its netconvert (beside {tmp_path / 'no-sumo'}"
     with pytest.raises(RuntimeError) as e:
         build(tmp_path / "out")
     msg = str(e.value)
@@ -639,6 +639,23 @@ def test_a_netconvert_that_fails_is_named_with_its_own_error(tmp_path, monkeypat
     assert f"exit status 3: {_NETCONVERT_SAID}; " in msg, msg
     assert "Quitting" not in msg, msg
     assert fix in msg, msg
+
+
+def test_an_interpreter_that_does_not_know_its_own_path_builds_with_path_s_netconvert(
+    tmp_path, monkeypatch
+):
+    """An embedded interpreter may have an empty ``sys.executable``; looking beside it for this
+    Python's eclipse-sumo netconvert raised ValueError ("PosixPath('.') has an empty name")
+    before PATH was looked at. There is none beside it, so the first on PATH runs."""
+    import sys
+
+    from sumo_scenarios.build_network import build
+
+    fake = _fake_netconvert(tmp_path, _WRITES_THE_1_24_HEADER)
+    monkeypatch.setattr(sys, "executable", "")
+    _first_on_path(monkeypatch, fake)
+    net = build(tmp_path / "out")
+    assert net.read_text() == _BUILT_FROM_THE_1_24_HEADER
 
 
 @pytest.mark.parametrize(

@@ -63,6 +63,35 @@ def test_a_teacher_of_the_observation_alone_is_refused_before_anything_runs(tmp_
         assert [r.teacher_action for r in ct.records] == [0, 0]
 
 
+def test_a_teacher_that_wraps_a_policy_with_functools_wraps_is_taken():
+    """The signature check read through ``functools.wraps``: an adapter
+    ``@wraps(policy) def teacher(obs, info): return policy(obs)``, the wrapping the refusal
+    itself advises, was refused as "policy takes (obs)" (the wrapped function's signature, not
+    the one called), and so was a session resumed with it. The adapter's own signature counts."""
+    import functools
+
+    env = rare_regions_world()
+
+    def policy(obs):
+        return 0
+
+    @functools.wraps(policy)
+    def teacher(obs, info):
+        return policy(obs)
+
+    ct = ConfidentTeacher(env, teacher, progress=False)
+    ct.run(max_steps=2)
+    assert [r.teacher_action for r in ct.records] == [0, 0]
+
+    # and the reverse: a one-argument wrapper of a teacher is still refused by what it takes
+    @functools.wraps(teacher)
+    def alone(obs):
+        return 0
+
+    with pytest.raises(TypeError, match=r"takes \(obs\)"):
+        ConfidentTeacher(env, alone, progress=False)
+
+
 def test_windowed_accuracy_and_phase_switch_as_specified():
     ct = make(rare_regions_world(), accuracy_window=10, target_accuracy=0.9, max_new=1)
     ct.run(max_steps=80)

@@ -164,7 +164,9 @@ def _cannot_take(fn: Any, n_args: int) -> str | None:
     (e.g. "teacher takes (obs, info)"), or None where it can or its signature is unknown (a
     builtin). Read before any call, so that a TypeError of ``fn``'s own is never reworded."""
     try:
-        params = list(inspect.signature(fn).parameters.values())
+        # follow_wrapped=False: the signature of what is called, not of what a functools.wraps
+        # adapter wraps (lambda obs, info: policy(obs) wrapped as policy would read (obs))
+        params = list(inspect.signature(fn, follow_wrapped=False).parameters.values())
     except (TypeError, ValueError):
         return None
     positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
