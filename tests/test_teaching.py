@@ -90,6 +90,13 @@ def test_a_teacher_that_wraps_a_policy_with_functools_wraps_is_taken():
 
     with pytest.raises(TypeError, match=r"takes \(obs\)"):
         ConfidentTeacher(env, alone, progress=False)
+    # a generic (*args, **kwargs) wrapper is read through to what it calls: torch.no_grad()
+    # around a teacher of the observation alone is refused up front, not at the first request
+    no_grad_alone = torch.no_grad()(policy)
+    with pytest.raises(TypeError, match=r"takes \(obs\)"):
+        ConfidentTeacher(env, no_grad_alone, progress=False)
+    ct = ConfidentTeacher(env, torch.no_grad()(teacher), progress=False)
+    ct.run(max_steps=1)
 
 
 def test_windowed_accuracy_and_phase_switch_as_specified():

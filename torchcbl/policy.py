@@ -159,15 +159,35 @@ def _check_policy_fits(policy: Any, n_features: int, n_actions: int) -> None:
             )
 
 
+def _called_parameters(fn: Any) -> list[inspect.Parameter] | None:
+    """The parameters ``fn`` is called with, or None where its signature is unknown. The
+    called function's own signature first, not that of what a ``functools.wraps`` adapter
+    wraps (``@wraps(policy) def teacher(obs, info)`` would read as the policy's ``(obs)``);
+    where it is a generic ``(*args, **kwargs)`` wrapper (``torch.no_grad()``, a decorator,
+    ``lru_cache``), the wrapped function's, which is what the call reaches."""
+    star = (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)
+    sig: inspect.Signature | None = None
+    seen: set[int] = set()
+    while fn is not None and id(fn) not in seen:  # one wrapper at a time, never in a loop
+        seen.add(id(fn))
+        try:
+            here = inspect.signature(fn, follow_wrapped=False)
+        except (TypeError, ValueError):
+            here = None
+        if here is not None:
+            sig = here
+            if not (here.parameters and all(p.kind in star for p in here.parameters.values())):
+                break
+        fn = getattr(fn, "__wrapped__", None)
+    return None if sig is None else list(sig.parameters.values())
+
+
 def _cannot_take(fn: Any, n_args: int) -> str | None:
     """Why ``fn`` cannot be called with ``n_args`` positional arguments, as its signature says
     (e.g. "teacher takes (obs, info)"), or None where it can or its signature is unknown (a
     builtin). Read before any call, so that a TypeError of ``fn``'s own is never reworded."""
-    try:
-        # follow_wrapped=False: the signature of what is called, not of what a functools.wraps
-        # adapter wraps (lambda obs, info: policy(obs) wrapped as policy would read (obs))
-        params = list(inspect.signature(fn, follow_wrapped=False).parameters.values())
-    except (TypeError, ValueError):
+    params = _called_parameters(fn)
+    if params is None:
         return None
     positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
     required = sum(p.default is p.empty for p in positional)
