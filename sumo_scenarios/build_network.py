@@ -105,8 +105,8 @@ def _failed(exe: str, exc: OSError | subprocess.CalledProcessError) -> str:
         "reinstall eclipse-sumo (pip install --force-reinstall 'eclipse-sumo>=1.22')"
         if ours
         else "install eclipse-sumo into this Python (pip install 'eclipse-sumo>=1.22', SUMO "
-        f"1.22 or newer is needed): its netconvert (beside {sys.executable}) is run before any "
-        "on PATH"
+        "1.22 or newer is needed): its netconvert (beside "
+        f"{sys.executable or 'this Python'}) is run before any on PATH"
     )
     return f"netconvert failed: {exe} ({where}), {why}; {fix}"
 
