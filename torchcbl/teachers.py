@@ -39,8 +39,6 @@ from typing import Any
 
 import numpy as np
 
-from torchcbl.policy import _cannot_take
-
 __all__ = ["HumanTiming", "HumanTimingConfig"]
 
 
@@ -128,6 +126,8 @@ class HumanTiming:
             raise TypeError(
                 f"teacher must be callable (observation, info) -> action, got {teacher!r}"
             )
+        from torchcbl.policy import _cannot_take  # here: torchcbl.policy loads torch
+
         takes = _cannot_take(teacher, 2)
         if takes is not None:  # else it failed only at the session's first request
             raise TypeError(
