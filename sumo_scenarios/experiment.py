@@ -642,7 +642,12 @@ def _run_seeds(
                     target=_seed_worker, args=(job, writer, os.getpid(), versions), daemon=True
                 )
                 with _ctrl_c_held():  # a worker started is kept before a Ctrl-C stops them
-                    proc.start()
+                    try:
+                        proc.start()
+                    except BaseException:  # an OSError (no fork): the pipe is no one's
+                        reader.close()
+                        writer.close()
+                        raise
                     writer.close()  # the worker's end: its exit makes the pipe readable
                     running[reader] = (proc, job[1])
             for reader in wait(list(running)):

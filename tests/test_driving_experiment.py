@@ -592,3 +592,34 @@ def test_a_ctrl_c_as_a_seed_worker_starts_leaves_no_worker_behind(tmp_path, monk
         for p in pids:
             if running(p):
                 os.kill(p, signal.SIGKILL)
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="lists open fds through /proc")
+def test_a_seed_worker_that_cannot_start_leaves_no_pipe_open(tmp_path, monkeypatch):
+    """A seed worker whose start raised (an OSError: no memory to fork, too many processes)
+    left that seed's result pipe open, both ends: the error came out of run_experiment and
+    the two descriptors stayed open for as long as its traceback was kept (a notebook keeps
+    the last one; a loop that retries runs out of them). Here the seed workers' start raises;
+    the OSError comes out and the process has the descriptors it had before. No seed runs."""
+    import errno
+    from multiprocessing.context import SpawnProcess
+
+    real_start = SpawnProcess.start
+    tried = []
+
+    def start(proc):
+        if getattr(getattr(proc, "_target", None), "__name__", "") != "_seed_worker":
+            return real_start(proc)  # the start-up check
+        tried.append(proc)
+        raise OSError(errno.EAGAIN, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(SpawnProcess, "start", start)
+    with pytest.raises(OSError, match="Resource temporarily unavailable"):
+        # once first: what opens once per process (multiprocessing's resource tracker)
+        run_experiment(tiny_config(), tmp_path / "first", workers=1, progress=False)
+    before = sorted(os.listdir("/proc/self/fd"))
+    with pytest.raises(OSError, match="Resource temporarily unavailable") as caught:
+        run_experiment(tiny_config(), tmp_path / "run", workers=1, progress=False)
+    after = sorted(os.listdir("/proc/self/fd"))
+    assert len(tried) == 2 and caught.value.errno == errno.EAGAIN
+    assert after == before

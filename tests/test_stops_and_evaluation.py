@@ -537,6 +537,47 @@ def test_a_ctrl_c_as_a_worker_starts_leaves_no_worker_behind(monkeypatch):
                 os.kill(p, signal.SIGKILL)
 
 
+@pytest.mark.skipif(not hasattr(signal, "pthread_kill"), reason="signals a thread (POSIX)")
+def test_a_ctrl_c_as_the_start_up_check_starts_leaves_no_process_behind(monkeypatch):
+    """check_workers_start (every worker pool's first step) started its probe process, then
+    entered the try that joins it: a Ctrl-C (SIGINT) as the start returned raised
+    KeyboardInterrupt in between, and the probe was left to itself, never terminated nor
+    reaped. Here the SIGINT comes as the probe's start returns; the probe is gone (reaped:
+    signal 0 finds no process) when the KeyboardInterrupt comes out."""
+    import multiprocessing as mp
+    import threading
+    from multiprocessing.context import SpawnProcess
+
+    from torchcbl.evaluation import check_workers_start
+
+    real_start = SpawnProcess.start
+    pids = []
+
+    def start(proc):
+        real_start(proc)
+        pids.append(proc.pid)  # a Ctrl-C to this thread: its handler runs before this returns
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+
+    def running(pid):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+
+    monkeypatch.setattr(SpawnProcess, "start", start)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            check_workers_start(mp.get_context("spawn"))
+        assert len(pids) == 1
+        assert [p for p in pids if running(p)] == []
+    finally:
+        for p in pids:
+            if running(p):
+                os.kill(p, signal.SIGKILL)
+        mp.active_children()  # reaps what was left
+
+
 def _ctrl_c_handler_here() -> str:
     return repr(signal.getsignal(signal.SIGINT))
 

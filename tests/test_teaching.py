@@ -780,6 +780,31 @@ def test_human_timing_takes_numpy_and_0d_integer_answers():
         assert HumanTiming(lambda obs, info, a=answer: a, cfg)(np.zeros(2), {"t": 0}) == 2
 
 
+def test_human_timing_refuses_a_teacher_of_the_observation_alone_up_front():
+    """HumanTiming wrapped any callable: a teacher of the observation alone (``lambda obs:``,
+    or one under torch.no_grad()) was taken, and the session failed only at its first
+    request, with Python's bare TypeError. It is refused where it is wrapped, saying what it
+    takes and what to do; a two-argument teacher (through a generic wrapper too) is taken."""
+    from torchcbl.teachers import HumanTiming
+
+    def policy(obs):
+        return 0
+
+    for alone in (policy, torch.no_grad()(policy)):
+        with pytest.raises(TypeError, match=r"HumanTiming: .*called as teacher\(observation, "):
+            HumanTiming(alone)
+        with pytest.raises(TypeError, match=r"policy takes \(obs\).*lambda obs, info: "):
+            HumanTiming(alone)
+    env = rare_regions_world(episode_length=5)
+    best = oracle(env)
+    for teacher in (best, torch.no_grad()(best), lambda obs, info, extra=0: best(obs, info)):
+        ct = ConfidentTeacher(
+            env, HumanTiming(teacher), config=TeachingConfig(max_steps=3), progress=False
+        )
+        ct.run()
+        assert ct.n_steps == 3
+
+
 def test_an_empty_run_dir_is_refused_not_taken_as_the_working_directory(tmp_path, monkeypatch):
     """Path("") is ".": run_dir="" (say os.environ.get("RUN_DIR", "") meant as "none") wrote a
     session's files among whatever the working directory held."""

@@ -58,6 +58,41 @@ def test_every_public_name_of_torchcbl_is_seen_by_a_type_checker():
     assert typed == torchcbl._EXPORTS
 
 
+def test_the_lazily_loaded_names_of_torchcbl_strategies_are_seen_by_a_type_checker():
+    """torchcbl.strategies loads ConfidenceBasedAutonomy through a module __getattr__ (its
+    module imports the package's base class), which a type checker cannot see through:
+    `from torchcbl.strategies import ConfidenceBasedAutonomy` was Any to mypy and pyright, so
+    a misspelt argument passed. Each name of __all__ that the module does not bind itself is
+    imported for type checkers alone (under TYPE_CHECKING) as `X as X` (re-exported), from a
+    module that holds the object the package hands out at run time."""
+    import importlib
+
+    import torchcbl.strategies as strategies
+
+    tree = ast.parse((ROOT / "torchcbl" / "strategies" / "__init__.py").read_text())
+    bound: set[str] = set()
+    typed: dict[str, str] = {}
+    for node in tree.body:
+        test = getattr(node, "test", None)
+        if isinstance(node, ast.If) and isinstance(test, ast.Name) and test.id == "TYPE_CHECKING":
+            for imp in node.body:
+                if isinstance(imp, ast.ImportFrom) and imp.module:
+                    typed |= {a.name: imp.module for a in imp.names if a.asname == a.name}
+        elif isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            bound.add(node.name)
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            bound |= {(a.asname or a.name).split(".")[0] for a in node.names}
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            bound |= {t.id for t in targets if isinstance(t, ast.Name)}
+    lazy = set(strategies.__all__) - bound
+    assert "ConfidenceBasedAutonomy" in lazy  # the check sees the lazy names
+    assert lazy <= set(typed), f"lazily loaded, Any to a type checker: {lazy - set(typed)}"
+    for name in lazy:
+        held = getattr(importlib.import_module(typed[name]), name)
+        assert getattr(strategies, name) is held, name
+
+
 def test_the_fitted_buffers_are_tensors_to_a_type_checker():
     """A GaussianMixtureSet's fitted state is nn.Module buffers (registered in __init__),
     which a type checker reads through nn.Module.__getattr__ as `Tensor | Module`: a user's

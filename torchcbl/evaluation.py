@@ -286,11 +286,12 @@ def check_workers_start(context: Any = None) -> None:
     """
     ctx = context if context is not None else mp.get_context()
     probe = ctx.Process(target=int, name="torchcbl-start-check")  # int(): does nothing
-    probe.start()
     try:
+        with _ctrl_c_held():  # a probe started is joined (or stopped) before a Ctrl-C acts
+            probe.start()
         probe.join()
     finally:
-        if probe.is_alive():  # a Ctrl-C during the join
+        if probe.is_alive():  # a Ctrl-C as it started or during the join
             probe.terminate()
             probe.join()
     code = probe.exitcode

@@ -108,6 +108,11 @@ class HumanTiming:
 
     Attributes:
         n_delayed, n_missed, n_doubled: counts of each kind of event so far.
+
+    Raises:
+        TypeError: ``teacher`` is not callable, or its signature cannot take
+            ``(observation, info)`` (a policy of the observation alone), or ``config`` is not
+            a :class:`HumanTimingConfig`.
     """
 
     def __init__(
@@ -120,6 +125,15 @@ class HumanTiming:
         if not callable(teacher):
             raise TypeError(
                 f"teacher must be callable (observation, info) -> action, got {teacher!r}"
+            )
+        from torchcbl.policy import _cannot_take  # here: torchcbl.policy loads torch
+
+        takes = _cannot_take(teacher, 2)
+        if takes is not None:  # else it failed only at the session's first request
+            raise TypeError(
+                f"HumanTiming: a teacher is called as teacher(observation, info), but {takes}; "
+                "give it an info parameter (it may ignore it), or wrap a policy of the "
+                "observation alone: HumanTiming(lambda obs, info: policy(obs))"
             )
         if config is not None and not isinstance(config, HumanTimingConfig):
             raise TypeError(

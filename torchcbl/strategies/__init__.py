@@ -114,6 +114,10 @@ if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
     from torchcbl.records import StepRecord
 
+    # loaded by __getattr__ at run time, which a type checker cannot see through (without
+    # this the name was Any to a user's mypy or pyright); "X as X" marks it re-exported
+    from torchcbl.strategies.cba import ConfidenceBasedAutonomy as ConfidenceBasedAutonomy
+
 __all__ = [
     "ConfidenceBasedAutonomy",
     "ConfidentExecution",
