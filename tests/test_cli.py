@@ -11,6 +11,8 @@ import re
 import select
 import subprocess
 import sys
+import termios
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -1071,6 +1073,155 @@ def test_teach_says_whether_the_person_stopped_or_the_input_ended(
     n = typed.count("w")  # each key before the end kept
     assert f"{n} demonstration{'' if n == 1 else 's'} over" in out
     assert ("Stopped by the teacher" in out) == (said == "Stopped by the teacher.")
+
+
+def _corridor_prior(path: Path, n_steps: int) -> Path:
+    """The corridor's scripted teleoperator's labels over its first ``n_steps`` from seed 0, as
+    a .npz for --prior-demonstrations. On a session of seed 0 started in confident execution,
+    400 make the agent sure enough to drive 150 steps on its own; 30 make it drive about 45
+    steps on its own, then ask now and then (seen)."""
+    import gymnasium as gym
+
+    from corridor.benchmark import teacher
+    from corridor.experiment import teaching_setup
+
+    env = gym.make("torchcbl/Corridor-v0", **teaching_setup()[0])
+    try:
+        expert = teacher(env)
+        obs, info = env.reset(seed=0)
+        observations, actions = [], []
+        for _ in range(n_steps):
+            action = expert(obs, info)
+            observations.append(obs)
+            actions.append(action)
+            obs, _, terminated, truncated, info = env.step(action)
+            if terminated or truncated:
+                obs, info = env.reset()
+    finally:
+        env.close()
+    np.savez(path, observations=np.array(observations), actions=np.array(actions))
+    return path
+
+
+class _PersonAtATerminal(threading.Thread):
+    """`torchcbl teach` run in a pseudo-terminal (its stdin and stdout), and the person at it:
+    reads all it shows, answers each request ("action? ") with "w" (forward), and types a key
+    at an env step of the agent's (:meth:`type_at`), returning once the terminal has echoed it,
+    so the key waits in the terminal's input as one typed then would."""
+
+    def __init__(self, monkeypatch) -> None:
+        super().__init__(daemon=True)
+        self.master, self.slave = pty.openpty()
+        self.shown = bytearray()
+        self.lock = threading.Lock()
+        self.done = threading.Event()
+        self.before = termios.tcgetattr(self.slave)
+        monkeypatch.setattr(sys, "stdin", open(self.slave, closefd=False))  # noqa: SIM115
+        monkeypatch.setattr(sys, "stdout", open(self.slave, "w", closefd=False))  # noqa: SIM115
+        self.start()
+
+    def run(self) -> None:
+        answered = 0
+        while not self.done.is_set():
+            if select.select([self.master], [], [], 0.02)[0]:
+                try:
+                    chunk = os.read(self.master, 4096)
+                except OSError:
+                    return
+                with self.lock:
+                    self.shown += chunk
+                    asks = self.shown.count(b"action? ")
+                if asks > answered:
+                    os.write(self.master, b"w")
+                    answered += 1
+
+    def type_at(self, monkeypatch, typed: dict[int, bytes]) -> None:
+        """Type ``typed[k]`` while the env takes the agent's k-th step (from 1)."""
+        from corridor.env import CorridorEnv
+
+        step, calls = CorridorEnv.step, []
+
+        def step_and_type(env, action):
+            calls.append(action)
+            key = typed.get(len(calls))
+            if key is not None:
+                with self.lock:
+                    start = len(self.shown)
+                os.write(self.master, key)
+                deadline = time.monotonic() + 20
+                while key not in self.shown[start:] and time.monotonic() < deadline:
+                    time.sleep(0.005)
+                assert key in self.shown[start:], "the terminal never echoed the key"
+            return step(env, action)
+
+        monkeypatch.setattr(CorridorEnv, "step", step_and_type)
+
+    def finish(self) -> str:
+        sys.stdout.flush()
+        time.sleep(0.05)
+        self.done.set()
+        self.join(timeout=10)
+        while select.select([self.master], [], [], 0.05)[0]:
+            try:
+                chunk = os.read(self.master, 4096)
+            except OSError:
+                break
+            self.shown += chunk
+        after = termios.tcgetattr(self.slave)
+        for fd in (self.master, self.slave):
+            os.close(fd)
+        assert after == self.before  # the terminal is left as it was
+        return self.shown.decode(errors="replace")
+
+
+@pytest.mark.timeout(60)
+def test_q_typed_while_the_agent_drives_on_its_own_stops_the_run_then(tmp_path, monkeypatch):
+    """The key legend's "[q/Ctrl-C] quit": q typed while the agent drove on its own (between two
+    requests, the terminal in line mode and nothing reading it) acted only at the next request,
+    so an agent sure of itself drove all of --steps with the person's q on the screen; only
+    Ctrl-C stopped it. q now stops the run after the step under way is logged, as at a request:
+    same words, exit code 0, and the session resumes."""
+    prior = _corridor_prior(tmp_path / "prior.npz", 400)
+    person = _PersonAtATerminal(monkeypatch)
+    person.type_at(monkeypatch, {10: b"q"})
+    run = tmp_path / "session"
+    argv = ["teach", "corridor", "--run-dir", str(run), "--steps", "150"]
+    try:
+        code = main([*argv, "--skip-noninteractive", "--prior-demonstrations", str(prior)])
+    finally:
+        shown = person.finish()
+    assert code == 0, shown
+    assert "action?" not in shown  # the agent drove on its own throughout
+    assert "Stopped by the teacher." in shown, shown
+    assert "0 demonstrations over 10 steps saved in" in shown and "--resume" in shown, shown
+    assert len(load_records(run)) == 10  # the step under way when q was typed, logged whole
+    monkeypatch.setattr(sys, "stdin", io.StringIO(""))  # (the terminal is closed by now)
+    monkeypatch.setattr(sys, "stdout", io.StringIO())
+    assert main([*argv[:4], "--resume", "--steps", "3"]) == 0, sys.stdout.getvalue()
+    assert len(load_records(run)) == 13
+
+
+@pytest.mark.timeout(60)
+def test_a_key_other_than_q_typed_while_the_agent_drives_on_its_own_is_not_acted_on(
+    tmp_path, monkeypatch
+):
+    """ "d" (turn right) typed while the agent drives on its own neither stops the run nor
+    answers the next request: the person answers that one ("w", forward) after seeing it."""
+    prior = _corridor_prior(tmp_path / "prior.npz", 30)
+    person = _PersonAtATerminal(monkeypatch)
+    person.type_at(monkeypatch, {5: b"d"})
+    run = tmp_path / "session"
+    argv = ["teach", "corridor", "--run-dir", str(run), "--steps", "80"]
+    try:
+        code = main([*argv, "--skip-noninteractive", "--prior-demonstrations", str(prior)])
+    finally:
+        shown = person.finish()
+    assert code == 0, shown
+    assert "(--steps done)" in shown, shown
+    records = load_records(run)
+    asked = [r for r in records if r.teacher_action is not None]
+    assert len(records) == 80 and asked and asked[0].step > 5, len(asked)
+    assert {r.teacher_action for r in asked} == {0}  # each request answered by its own "w"
 
 
 def _recorded_episodes(path: Path) -> Path:

@@ -305,6 +305,67 @@ def test_a_quit_key_typed_ahead_still_quits(terminal, typed):
     assert teacher.n_decisions == 0
 
 
+@pytest.mark.timeout(60)
+def test_check_quit_takes_the_keys_typed_since_the_last_request_without_waiting(terminal):
+    """check_quit() between requests: a key other than a quit key typed meanwhile is dropped
+    (it answers no request), a quit key raises; no key, nothing happens, at once; the terminal
+    is left in line mode, as it was, each time."""
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    teacher = _teacher(slave)
+    teacher.check_quit()  # nothing typed: returns without waiting for a key
+    os.write(master, b"d")
+    time.sleep(0.1)
+    teacher.check_quit()
+    assert termios.tcgetattr(slave) == before
+    person = Person(master, slave, [b"w"])
+    person.start()
+    assert teacher(OBS, {}) == 0  # the "d" was dropped, not taken for the answer
+    person.finish()
+    os.write(master, b"aq")
+    time.sleep(0.1)
+    with pytest.raises(TeachingInterrupted, match="stopped by the person"):
+        teacher.check_quit()
+    assert termios.tcgetattr(slave) == before
+    assert teacher.n_decisions == 1
+
+
+_CHECKED_IN_A_BACKGROUND_JOB = """
+import os, signal, sys
+sys.path.insert(0, {root!r})
+os.setsid()
+tty = os.open({slave!r}, os.O_RDWR)  # the session's controlling terminal now
+job = os.fork()
+if job == 0:  # a job in the background of that terminal (`torchcbl teach ... &`)
+    os.setpgid(0, 0)
+    from torchcbl.human import TerminalTeacher
+    TerminalTeacher({{"w": 0}}, ("stay",), input=tty, output=open(os.devnull, "w")).check_quit()
+    os._exit(0)
+_, status = os.waitpid(job, os.WUNTRACED)
+if os.WIFSTOPPED(status):
+    os.kill(job, signal.SIGKILL)
+    os.waitpid(job, 0)
+    print("stopped by", signal.Signals(os.WSTOPSIG(status)).name)
+else:
+    print("exit", os.waitstatus_to_exitcode(status))
+"""
+
+
+@pytest.mark.timeout(60)
+def test_check_quit_in_a_background_job_leaves_the_terminal_alone(terminal):
+    """A background job (`torchcbl teach ... &`) may not change its terminal's settings (the
+    system stops it with SIGTTOU), and the keys typed there are the foreground's: check_quit
+    neither stops it nor takes a "q" waiting there."""
+    master, slave = terminal
+    os.write(master, b"q")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    script = _CHECKED_IN_A_BACKGROUND_JOB.format(root=root, slave=os.ttyname(slave))
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=30, check=False
+    )
+    assert done.stdout.strip() == "exit 0", done.stdout + done.stderr
+
+
 # ------------------------------------------------------------------- line-input fallback
 
 
@@ -330,6 +391,21 @@ def test_line_input_from_a_pipe():
             teacher(OBS, {})
     assert "'x' is not a key here" in out.getvalue()
     assert "\x1b[2J" not in out.getvalue()  # no screen clearing on a non-terminal
+
+
+def test_check_quit_reads_nothing_from_a_pipe():
+    """Over a pipe (keys one line each, read at requests) check_quit leaves the input alone: a
+    "q" line waits for the next request, which it quits."""
+    read_fd, write_fd = os.pipe()
+    os.write(write_fd, b"w\nq\n")
+    os.close(write_fd)
+    with os.fdopen(read_fd, "r") as pipe:
+        teacher = TerminalTeacher({"w": 0}, ("stay",), input=pipe, output=io.StringIO())
+        teacher.check_quit()
+        assert teacher(OBS, {}) == 0
+        teacher.check_quit()
+        with pytest.raises(TeachingInterrupted, match="stopped"):
+            teacher(OBS, {})
 
 
 def test_input_without_a_file_descriptor_reads_lines():

@@ -813,6 +813,11 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     if args.resume:  # the env the session was taught in, whatever teach gives a new one today
         env_kwargs = _resume_env_kwargs(run_dir)
     teacher = human.make_teacher(title=f"torchcbl teach {args.domain}")
+    from torchcbl.human import TerminalTeacher
+
+    # q typed while the agent drives on its own stops the run after the step under way (a
+    # no-op unless the keys come from a terminal)
+    check_quit = teacher.check_quit if isinstance(teacher, TerminalTeacher) else None
     env = gym.make(env_id, **env_kwargs)
 
     def status(record: Any = None) -> None:  # after each step, and before the first
@@ -823,6 +828,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             f" | prediction accuracy {'-' if acc is None else f'{100 * acc:.0f}%'}"
             f" | autonomy {'-' if rate is None else f'{100 * rate:.0f}%'}"
         )
+        if record is not None and check_quit is not None:  # the step is logged whole by now
+            check_quit()
 
     if args.resume:
         from torchcbl.errors import IncompatibleRunDirError, SessionLockedError
@@ -839,8 +846,6 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         except IncompatibleRunDirError as exc:
             env.close()
             raise _UsageError(_one_line(exc)) from None
-        from torchcbl.human import TerminalTeacher
-
         if isinstance(teacher, TerminalTeacher):  # "decision #N" goes on from the session's
             # answered requests (read from its log, which stays as it is)
             teacher.n_decisions = sum(r.teacher_action is not None for r in ct.records)
@@ -882,7 +887,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     try:
         try:
             ct.run(max_steps=ct.n_steps + args.steps, **lifted)
-        except TeachingInterrupted as exc:  # q, Ctrl-C at a request, or no more input
+        except TeachingInterrupted as exc:  # q (at a request or between), Ctrl-C at one, EOF
             ended = str(exc).endswith("input closed")  # TerminalTeacher's words for it
             print(
                 "\nStopped: the input ended, no key left to read."

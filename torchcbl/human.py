@@ -14,7 +14,9 @@ no-echo mode for the duration of the read and its settings are always restored a
 also when the read is interrupted. Keys typed before a request is shown (while the agent acts on
 its own) are dropped, not taken as its answer; a quit key among them still quits. (Their timing
 is lost: Esc and a key typed ahead read as one Alt-key, so Esc then q typed ahead does not
-quit; q at the request does.) When the
+quit; q at the request does.) A caller that calls :meth:`TerminalTeacher.check_quit` between
+requests (``torchcbl teach`` does after each step) stops at once on a quit key typed while
+the agent acts on its own, not at the next request. When the
 input is not a terminal (a pipe, a file), one line is read per decision instead; a line may
 hold a key (``w``), a key name (``up``), an action name (``forward``) or an action number.
 
@@ -200,6 +202,16 @@ def _restored_before_a_fatal_signal(fd: int, saved: list[Any]) -> Iterator[None]
             signal.signal(signum, handler)
 
 
+def _in_foreground(fd: int) -> bool:
+    """Whether this process may use the terminal ``fd`` now: False for a background job of its
+    controlling terminal (``torchcbl teach ... &``), which changing its settings would stop
+    (SIGTTOU) and whose keys are another job's; True for any other terminal."""
+    try:
+        return os.tcgetpgrp(fd) == os.getpgrp()
+    except OSError:  # not this process's controlling terminal: no job control applies
+        return True
+
+
 def _frontend_input() -> Callable[[], str] | None:
     """``input`` where a frontend replaced Python's own (a Jupyter kernel forwards it to the
     notebook's input box while a cell runs), else None."""
@@ -343,6 +355,40 @@ class TerminalTeacher:
         self.n_decisions += 1
         self._write(f"-> {self.action_names[action]}\n")
         return action
+
+    def check_quit(self) -> None:
+        """Stop now if a quit key was typed since the last request (the agent acting on its own).
+
+        Meant to be called between requests, e.g. after each step (``torchcbl teach`` calls it
+        from the loop's ``on_step``, so a step is logged whole first). On a terminal the keys
+        typed since the last read are taken without waiting for more: a quit key among them
+        raises :class:`TeachingInterrupted`, as at a request; the others are dropped, as keys
+        typed ahead of a request are (Ctrl-D among them: in line mode it is the end of a line,
+        not a key). The terminal leaves line mode only for that read
+        (its settings are restored at once, also on an exception or a SIGTERM/SIGHUP) and keeps
+        its signal keys: Ctrl-C raises :class:`KeyboardInterrupt` as it does between requests.
+        Reads nothing and returns at once when the input is not a terminal (a pipe, a file, a
+        notebook) or this process is a background job of its terminal.
+
+        Raises:
+            TeachingInterrupted: a quit key was typed, or the terminal was closed.
+        """
+        fd = self._input_fd()
+        if fd is None or termios is None or not os.isatty(fd) or not _in_foreground(fd):
+            return
+        saved = termios.tcgetattr(fd)
+        with _restored_before_a_fatal_signal(fd, saved), _key_waits(fd) as waits:
+            try:
+                mode = termios.tcgetattr(fd)
+                # Non-canonical, so that keys typed without Enter can be read; echo and the
+                # signal keys as they were (Ctrl-C stays SIGINT).
+                mode[3] &= ~termios.ICANON
+                mode[6][termios.VMIN] = 1
+                mode[6][termios.VTIME] = 0
+                termios.tcsetattr(fd, termios.TCSANOW, mode)
+                self._drop_typed_ahead(fd, waits)
+            finally:
+                termios.tcsetattr(fd, termios.TCSANOW, saved)
 
     # ----------------------------------------------------------------- drawing
 
