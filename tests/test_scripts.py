@@ -36,6 +36,8 @@ def _run(script: str, *args: str) -> subprocess.CompletedProcess:
         ("driving_components_at_clip.py", ["--caps", "30,0"], "whole numbers >= 1"),
         ("corridor_table_search.py", ["--map", "nomap"], "unknown map 'nomap'; shipped maps"),
         ("corridor_final_policy_check.py", ["RUN", "--first-seed", "-5"], "whole number >= 0"),
+        ("benchmark_corridor_variants.py", ["--variants", "shipped,noisey"], "names from shipped"),
+        ("benchmark_corridor_variants.py", ["--workers", "0"], "whole number >= 1"),
     ],
 )
 def test_a_malformed_value_is_a_usage_error_before_anything_runs(script, args, expected):
@@ -72,6 +74,18 @@ def test_investigate_corridor_requests_writes_json_without_nan(tmp_path):
     assert None in summary["bands"]  # circuits 81-160: not reached
     assert _strict_json(out.read_text())["summaries"][0]["demonstrations"][1] is None
     assert " ± - |" in done.stdout  # the table's sd of one seed
+
+
+def test_benchmark_corridor_variants_refuses_an_out_that_is_not_a_benchmarks(tmp_path):
+    # run_benchmark would write cells/, results.json and its plot into any directory; the
+    # script refuses one that holds other files, as torchcbl benchmark --out does, before
+    # any cell runs, and leaves it as it was.
+    (tmp_path / "notes.txt").write_text("mine")
+    done = _run("benchmark_corridor_variants.py", "--out", str(tmp_path))
+    assert done.returncode == 2 and done.stdout == "" and "Traceback" not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert "error: --out " in last and "is not a benchmark's directory (no cells/)" in last
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
 
 
 def test_corridor_expert_recovery_answers_help_without_running():
