@@ -24,7 +24,7 @@ JSON line: per variant and strategy, final performance, final labels, requests, 
 steps and the teacher's performance (means over the seeds).
 
     PYTHONPATH=$PWD python scripts/benchmark_corridor_variants.py \\
-        [--variants shipped,perturbed,noisy] [--seeds 0-2] [--workers 2] \\
+        [--variants shipped,perturbed,noisy] [--seeds 0-2] [--workers 2] [--full] \\
         [--out runs/benchmark-corridor-variants]
 
 About a minute on two cores for the three variants (54 cells); ``shipped`` alone, about 12 s.
@@ -57,12 +57,14 @@ def _variants(text: str) -> list[str]:
     return names
 
 
-def variant_specs(names: list[str]) -> list[Any]:
-    """The corridor's quick EnvSpec in each named variant (see the module docstring)."""
+def variant_specs(names: list[str], full: bool = False) -> list[Any]:
+    """The corridor's EnvSpec (quick, or ``full``: the budgets and evaluation of
+    ``torchcbl benchmark`` without ``--quick``) in each named variant (see the module
+    docstring)."""
     from corridor.benchmark import env_spec
     from corridor.experiment import CorridorExperimentConfig
 
-    shipped = env_spec(quick=True)
+    shipped = env_spec(quick=not full)
     reproduction = CorridorExperimentConfig()  # its robot and its perturbed starts
     perturbed = {"start_perturbation": list(reproduction.eval_perturbation)}
     noisy = {"world_config": dataclasses.asdict(reproduction.world)}
@@ -83,6 +85,12 @@ def main() -> None:
     ap.add_argument("--variants", type=_variants, default=list(VARIANTS))
     ap.add_argument("--seeds", type=seed_list, default="0-2")
     ap.add_argument("--workers", type=int_at_least(1), default=2)
+    ap.add_argument(
+        "--full",
+        action="store_true",
+        help="the full benchmark's corridor spec (budgets to 300 labels, at most 1500 steps, "
+        "4 x 5 evaluation circuits) instead of the quick one",
+    )
     ap.add_argument("--out", type=Path, default=Path("runs/benchmark-corridor-variants"))
     args = ap.parse_args()
     if args.out.is_dir() and any(args.out.iterdir()) and not (args.out / "cells").is_dir():
@@ -95,7 +103,7 @@ def main() -> None:
 
     from torchcbl.benchmark import STRATEGY_PATHS, StrategySpec, format_table, run_benchmark
 
-    envs = variant_specs(args.variants)
+    envs = variant_specs(args.variants, full=args.full)
     t0 = time.perf_counter()
     try:
         summary = run_benchmark(
