@@ -159,34 +159,41 @@ def _check_policy_fits(policy: Any, n_features: int, n_actions: int) -> None:
             )
 
 
-def _called_parameters(fn: Any) -> list[inspect.Parameter] | None:
-    """The parameters ``fn`` is called with, or None where its signature is unknown. The
-    called function's own signature first, not that of what a ``functools.wraps`` adapter
-    wraps (``@wraps(policy) def teacher(obs, info)`` would read as the policy's ``(obs)``);
-    where it is a generic ``(*args, **kwargs)`` wrapper (``torch.no_grad()``, a decorator,
-    ``lru_cache``), the wrapped function's, which is what the call reaches."""
+_MAX_WRAPPERS = 100  # __wrapped__ hops read at most (inspect.unwrap stops at the recursion limit)
+
+
+def _called_parameters(fn: Any) -> tuple[list[inspect.Parameter] | None, bool]:
+    """The parameters ``fn`` is called with (None where its signature is unknown), and whether
+    they were read through ``__wrapped__``. The called function's own signature first, not
+    that of what a ``functools.wraps`` adapter wraps (``@wraps(policy) def teacher(obs, info)``
+    would read as the policy's ``(obs)``); where it is a generic ``(*args, **kwargs)`` wrapper
+    (``torch.no_grad()``, a decorator, ``lru_cache``), the wrapped function's, which is what
+    the call reaches, one ``__wrapped__`` at a time, at most ``_MAX_WRAPPERS`` of them."""
     star = (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)
     sig: inspect.Signature | None = None
-    seen: set[int] = set()
-    while fn is not None and id(fn) not in seen:  # one wrapper at a time, never in a loop
-        seen.add(id(fn))
+    through = False
+    seen: dict[int, Any] = {}  # the objects are kept: a freed one's id may be reused
+    for hop in range(_MAX_WRAPPERS):
+        if fn is None or id(fn) in seen:  # the end of the chain, or a loop
+            break
+        seen[id(fn)] = fn
         try:
             here = inspect.signature(fn, follow_wrapped=False)
         except (TypeError, ValueError):
             here = None
         if here is not None:
-            sig = here
+            sig, through = here, hop > 0
             if not (here.parameters and all(p.kind in star for p in here.parameters.values())):
                 break
         fn = getattr(fn, "__wrapped__", None)
-    return None if sig is None else list(sig.parameters.values())
+    return (None if sig is None else list(sig.parameters.values())), through
 
 
 def _cannot_take(fn: Any, n_args: int) -> str | None:
     """Why ``fn`` cannot be called with ``n_args`` positional arguments, as its signature says
     (e.g. "teacher takes (obs, info)"), or None where it can or its signature is unknown (a
     builtin). Read before any call, so that a TypeError of ``fn``'s own is never reworded."""
-    params = _called_parameters(fn)
+    params, through = _called_parameters(fn)
     if params is None:
         return None
     positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
@@ -197,6 +204,12 @@ def _cannot_take(fn: Any, n_args: int) -> str | None:
     shown = [p.name if p.default is p.empty else f"{p.name}=..." for p in positional]
     shown += [f"*{p.name}" for p in params if p.kind is p.VAR_POSITIONAL]
     name = getattr(fn, "__qualname__", None) or type(fn).__name__
+    if through:  # a generic (*args, **kwargs) wrapper, read as what its __wrapped__ names
+        return (
+            f"{name}, a wrapper of *args/**kwargs, wraps (its __wrapped__) a function that "
+            f"takes ({', '.join(shown)}); if the wrapper itself takes more, give it that "
+            "signature"
+        )
     return f"{name} takes ({', '.join(shown)})"
 
 
