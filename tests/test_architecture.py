@@ -21,11 +21,19 @@ ROOT = Path(__file__).resolve().parents[1]
 FORBIDDEN = ("corridor", "sumo_scenarios", "libsumo", "traci", "sumolib", "pymunk", "pygame")
 
 
-def _type_checking_only(node: ast.If) -> bool:
-    """Whether ``node`` is ``if TYPE_CHECKING:`` (or ``typing.TYPE_CHECKING``)."""
+_TYPING = ("typing", "typing_extensions")
+
+
+def _type_checking_only(node: ast.If, names: set[str]) -> bool:
+    """Whether ``node`` is ``if TYPE_CHECKING:`` with the name imported from typing (in
+    ``names``), or ``if typing.TYPE_CHECKING:``; another module's or a home-made
+    TYPE_CHECKING may be true at run time."""
     test = node.test
-    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
-        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    return (isinstance(test, ast.Name) and test.id in names) or (
+        isinstance(test, ast.Attribute)
+        and test.attr == "TYPE_CHECKING"
+        and isinstance(test.value, ast.Name)
+        and test.value.id in _TYPING
     )
 
 
@@ -34,7 +42,15 @@ def _runtime_imports(source: str) -> set[str]:
     an import under ``if TYPE_CHECKING:`` (for type checkers alone) is none (its ``else:``
     is)."""
     deps: set[str] = set()
-    todo: list[ast.AST] = [ast.parse(source)]
+    tree = ast.parse(source)
+    flags = {  # the local names of typing's TYPE_CHECKING
+        a.asname or a.name
+        for n in ast.walk(tree)
+        if isinstance(n, ast.ImportFrom) and n.module in _TYPING
+        for a in n.names
+        if a.name == "TYPE_CHECKING"
+    }
+    todo: list[ast.AST] = [tree]
     while todo:
         node = todo.pop()
         if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
@@ -44,7 +60,7 @@ def _runtime_imports(source: str) -> set[str]:
                     deps.add(f"{node.module}.{alias.name}")
         elif isinstance(node, ast.Import):
             deps |= {a.name for a in node.names if a.name.startswith("torchcbl")}
-        if isinstance(node, ast.If) and _type_checking_only(node):
+        if isinstance(node, ast.If) and _type_checking_only(node, flags):
             todo.extend(node.orelse)
         else:
             todo.extend(ast.iter_child_nodes(node))
@@ -84,6 +100,8 @@ def test_an_import_for_type_checkers_alone_is_no_import_edge():
         "    from torchcbl import _em\n"
         "    if TYPE_CHECKING:\n"
         "        from torchcbl.human import TerminalTeacher\n"
+        "if settings.TYPE_CHECKING:\n"  # another module's flag: may be true at run time
+        "    from torchcbl.confidence import DistanceRule\n"
     )
     assert _runtime_imports(source) == {
         "torchcbl.records",
@@ -92,7 +110,13 @@ def test_an_import_for_type_checkers_alone_is_no_import_edge():
         "torchcbl.policy.GreedyPolicy",
         "torchcbl",
         "torchcbl._em",
+        "torchcbl.confidence",
+        "torchcbl.confidence.DistanceRule",
     }
+    # a TYPE_CHECKING of the module's own making is no typing flag
+    assert _runtime_imports(
+        "TYPE_CHECKING = True\nif TYPE_CHECKING:\n    import torchcbl.gmm\n"
+    ) == {"torchcbl.gmm"}
 
 
 def test_no_import_cycle_inside_torchcbl():
