@@ -27,7 +27,8 @@ steps and the teacher's performance (means over the seeds).
         [--variants shipped,perturbed,noisy] [--seeds 0-2] [--workers 2] [--full] \\
         [--out runs/benchmark-corridor-variants]
 
-About a minute on two cores for the three variants (54 cells); ``shipped`` alone, about 12 s.
+About a minute on two cores for the three variants (54 cells); ``shipped`` alone, about 12 s;
+``--full --seeds 0-9`` with two variants (120 cells), about 5 minutes.
 Running again into the same ``--out`` reuses its finished cells (:func:`run_benchmark`).
 """
 
@@ -91,8 +92,16 @@ def main() -> None:
         help="the full benchmark's corridor spec (budgets to 300 labels, at most 1500 steps, "
         "4 x 5 evaluation circuits) instead of the quick one",
     )
-    ap.add_argument("--out", type=Path, default=Path("runs/benchmark-corridor-variants"))
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="the sweep's directory (default runs/benchmark-corridor-variants, with --full "
+        "runs/benchmark-corridor-variants-full)",
+    )
     args = ap.parse_args()
+    if args.out is None:  # a quick and a full sweep do not share a directory
+        args.out = Path("runs/benchmark-corridor-variants" + ("-full" if args.full else ""))
     if args.out.is_dir() and any(args.out.iterdir()) and not (args.out / "cells").is_dir():
         # (as torchcbl benchmark --out: a sweep writes results.json, cells/ and its plot there)
         ap.error(

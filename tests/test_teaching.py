@@ -122,6 +122,31 @@ def test_a_teacher_whose_wrapped_chain_never_ends_is_read_in_bounded_time():
     assert len(made) <= 1_000  # 100 a check at most (the teacher is checked more than once)
 
 
+def test_a_method_under_a_generic_wrapper_is_read_as_it_is_called():
+    """A teacher method under a generic (*args, **kwargs) wrapper, ``@torch.no_grad() def
+    act(self, obs, info)`` given as ``agent.act`` (a common PyTorch pattern), was refused as
+    "act takes (self, obs, info)": the walk read the bound method's __wrapped__, the plain
+    function, with its ``self``. It is read bound, as it is called; a method of the
+    observation alone is still refused."""
+
+    class Agent:
+        @torch.no_grad()
+        def act(self, obs, info):
+            return 0
+
+        @torch.no_grad()
+        def act_alone(self, obs):
+            return 0
+
+    env = rare_regions_world()
+    agent = Agent()
+    ct = ConfidentTeacher(env, agent.act, progress=False)
+    ct.run(max_steps=2)
+    assert [r.teacher_action for r in ct.records] == [0, 0]
+    with pytest.raises(TypeError, match=r"takes \(obs\)"):
+        ConfidentTeacher(env, agent.act_alone, progress=False)
+
+
 def test_windowed_accuracy_and_phase_switch_as_specified():
     ct = make(rare_regions_world(), accuracy_window=10, target_accuracy=0.9, max_new=1)
     ct.run(max_steps=80)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import types
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -185,7 +186,15 @@ def _called_parameters(fn: Any) -> tuple[list[inspect.Parameter] | None, bool]:
             sig, through = here, hop > 0
             if not (here.parameters and all(p.kind in star for p in here.parameters.values())):
                 break
-        fn = getattr(fn, "__wrapped__", None)
+        wrapped = getattr(fn, "__wrapped__", None)
+        if wrapped is not None and inspect.ismethod(fn) and not inspect.ismethod(wrapped):
+            # a bound method's __wrapped__ is the plain function: bind it as the call does
+            # (@torch.no_grad() def act(self, obs, info) is called as agent.act(obs, info))
+            try:
+                wrapped = types.MethodType(wrapped, fn.__self__)
+            except TypeError:  # not a function to bind
+                pass
+        fn = wrapped
     return (None if sig is None else list(sig.parameters.values())), through
 
 
