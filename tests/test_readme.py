@@ -5,6 +5,10 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import pytest
+
+from torchcbl import ConfidentTeacher, evaluate_policy
+
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
 
@@ -24,6 +28,20 @@ def test_the_python_example_runs(tmp_path, monkeypatch):
     # leaving the with block closed the step log: SQLite removes its write-ahead log then
     assert not (tmp_path / "runs" / "my-session" / "steps.sqlite-wal").exists()
     assert (tmp_path / "runs" / "my-session" / "config.json").exists()
+
+    # the teacher's signature: the example after it runs in the same scope, and what its
+    # comment and the text before it say a one-argument policy meets holds
+    block = re.search(r"```python\n(policy = ct\.policy.*?)```", README, re.S).group(1)
+    exec(compile(block, "README.md", "exec"), scope)
+    assert isinstance(scope["student"], ConfidentTeacher)
+    assert len(scope["expert_records"]) == 50
+    env, policy, teacher = scope["env"], scope["policy"], scope["teacher"]
+    with pytest.raises(TypeError, match=r"teacher\(observation, info\).*lambda obs, info"):
+        ConfidentTeacher(env, policy)
+    with pytest.raises(TypeError, match="uses_info=True"):
+        evaluate_policy(teacher, env, n_steps=5)
+    with pytest.raises(TypeError, match="leave uses_info out"):
+        evaluate_policy(lambda obs: policy(obs), env, n_steps=5, uses_info=True)
 
 
 def test_quickstart_has_two_commands_and_ci_runs_the_test_one():
