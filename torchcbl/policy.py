@@ -21,7 +21,14 @@ from torchcbl.records import StepRecord, _is_int, jsonable_info
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
 
-__all__ = ["EpisodeResult", "GreedyPolicy", "check_env", "episode_results", "evaluate_policy"]
+__all__ = [
+    "ActionAnswer",
+    "EpisodeResult",
+    "GreedyPolicy",
+    "check_env",
+    "episode_results",
+    "evaluate_policy",
+]
 
 #: What a policy or a teacher may answer as its action (:func:`as_action` takes it): an int, a
 #: numpy integer, or a 0-d integer array or tensor (e.g. ``logits.argmax()``).
