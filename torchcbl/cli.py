@@ -1467,7 +1467,9 @@ def _parser() -> argparse.ArgumentParser:
         "teach",
         help="teach an agent yourself from the terminal",
         description="You are the teacher: the agent shows you its situation and asks for an "
-        "action (one key) whenever it is unsure; every demonstration is saved to --run-dir.",
+        "action (one key) whenever it is unsure; every demonstration is saved to --run-dir. "
+        "q or Ctrl-C stops the session, at a request or while the agent drives on its own; "
+        "--resume goes on from where it stopped.",
     )
     p.add_argument("domain", choices=list(_DOMAINS), help="which agent: corridor or driving")
     p.add_argument(
