@@ -320,3 +320,26 @@ def test_a_cba_instance_taught_before_decides_a_new_session_as_a_fresh_one():
     fresh = autonomy(ConfidenceBasedAutonomy())
     assert fresh == [False] * 20  # no refit yet in this session: no gates, so it asks
     assert autonomy(cba) == fresh
+
+
+def test_a_correcting_teacher_of_the_observation_alone_is_refused_when_wrapped():
+    """correcting(teacher) hides the teacher's signature behind its own (observation, info):
+    a teacher of the observation alone passed ConfidentTeacher's check and failed at the
+    session's first request with Python's "takes 1 positional argument but 2 were given"
+    (CBA and HG-DAgger in the benchmark wrap every teacher so). correcting() reads the
+    wrapped teacher's signature: a TypeError says how a teacher is called and how to wrap a
+    policy; a two-argument teacher, or one with *args, is taken."""
+    with pytest.raises(TypeError) as e:
+        correcting(lambda obs: 0)
+    msg = str(e.value)
+    assert "teacher(observation, info)" in msg and "<lambda> takes (obs)" in msg, msg
+    assert "correcting(lambda obs, info: policy(obs))" in msg, msg
+    with pytest.raises(TypeError, match=r"takes \(obs\)"):
+        correcting(torch.no_grad()(lambda obs: 0))
+    env = rare_regions_world()
+    for teacher in (oracle(env), lambda *args: 0):
+        ct = ConfidentTeacher(
+            env, correcting(teacher), strategy=ConfidenceBasedAutonomy(), progress=False
+        )
+        ct.run(max_steps=2)
+        assert len(ct.records) == 2

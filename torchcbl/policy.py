@@ -3,9 +3,7 @@ every env and teacher answer goes through before the loop or an evaluation uses 
 
 from __future__ import annotations
 
-import inspect
 import math
-import types
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -15,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from torchcbl._signatures import cannot_take as _cannot_take
 from torchcbl.errors import EnvError
 from torchcbl.records import StepRecord, _is_int, jsonable_info
 
@@ -165,68 +164,6 @@ def _check_policy_fits(policy: Any, n_features: int, n_actions: int) -> None:
                 "it was taught on (a session's config.json names it; `torchcbl evaluate "
                 "SESSION_DIR` rebuilds it)."
             )
-
-
-_MAX_WRAPPERS = 100  # __wrapped__ hops read at most (inspect.unwrap stops at the recursion limit)
-
-
-def _called_parameters(fn: Any) -> tuple[list[inspect.Parameter] | None, bool]:
-    """The parameters ``fn`` is called with (None where its signature is unknown), and whether
-    they were read through ``__wrapped__``. The called function's own signature first, not
-    that of what a ``functools.wraps`` adapter wraps (``@wraps(policy) def teacher(obs, info)``
-    would read as the policy's ``(obs)``); where it is a generic ``(*args, **kwargs)`` wrapper
-    (``torch.no_grad()``, a decorator, ``lru_cache``), the wrapped function's, which is what
-    the call reaches, one ``__wrapped__`` at a time, at most ``_MAX_WRAPPERS`` of them."""
-    star = (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)
-    sig: inspect.Signature | None = None
-    through = False
-    seen: dict[int, Any] = {}  # the objects are kept: a freed one's id may be reused
-    for hop in range(_MAX_WRAPPERS):
-        if fn is None or id(fn) in seen:  # the end of the chain, or a loop
-            break
-        seen[id(fn)] = fn
-        try:
-            here = inspect.signature(fn, follow_wrapped=False)
-        except (TypeError, ValueError):
-            here = None
-        if here is not None:
-            sig, through = here, hop > 0
-            if not (here.parameters and all(p.kind in star for p in here.parameters.values())):
-                break
-        wrapped = getattr(fn, "__wrapped__", None)
-        if wrapped is not None and inspect.ismethod(fn) and not inspect.ismethod(wrapped):
-            # a bound method's __wrapped__ is the plain function: bind it as the call does
-            # (@torch.no_grad() def act(self, obs, info) is called as agent.act(obs, info))
-            try:
-                wrapped = types.MethodType(wrapped, fn.__self__)
-            except TypeError:  # not a function to bind
-                pass
-        fn = wrapped
-    return (None if sig is None else list(sig.parameters.values())), through
-
-
-def _cannot_take(fn: Any, n_args: int) -> str | None:
-    """Why ``fn`` cannot be called with ``n_args`` positional arguments, as its signature says
-    (e.g. "teacher takes (obs, info)"), or None where it can or its signature is unknown (a
-    builtin). Read before any call, so that a TypeError of ``fn``'s own is never reworded."""
-    params, through = _called_parameters(fn)
-    if params is None:
-        return None
-    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
-    required = sum(p.default is p.empty for p in positional)
-    varargs = any(p.kind is p.VAR_POSITIONAL for p in params)
-    if required <= n_args and (varargs or len(positional) >= n_args):
-        return None
-    shown = [p.name if p.default is p.empty else f"{p.name}=..." for p in positional]
-    shown += [f"*{p.name}" for p in params if p.kind is p.VAR_POSITIONAL]
-    name = getattr(fn, "__qualname__", None) or type(fn).__name__
-    if through:  # a generic (*args, **kwargs) wrapper, read as what its __wrapped__ names
-        return (
-            f"{name}, a wrapper of *args/**kwargs, wraps (its __wrapped__) a function that "
-            f"takes ({', '.join(shown)}); if the wrapper itself takes more, give it that "
-            "signature"
-        )
-    return f"{name} takes ({', '.join(shown)})"
 
 
 def as_action(value: Any, n_actions: int) -> int | None:

@@ -39,6 +39,8 @@ from typing import Any
 
 import numpy as np
 
+from torchcbl._signatures import cannot_take
+
 __all__ = ["HumanTiming", "HumanTimingConfig"]
 
 
@@ -126,9 +128,7 @@ class HumanTiming:
             raise TypeError(
                 f"teacher must be callable (observation, info) -> action, got {teacher!r}"
             )
-        from torchcbl.policy import _cannot_take  # here: torchcbl.policy loads torch
-
-        takes = _cannot_take(teacher, 2)
+        takes = cannot_take(teacher, 2)
         if takes is not None:  # else it failed only at the session's first request
             raise TypeError(
                 f"HumanTiming: a teacher is called as teacher(observation, info), but {takes}; "

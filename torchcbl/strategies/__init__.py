@@ -107,6 +107,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
+from torchcbl._signatures import cannot_take
 from torchcbl.confidence import DistanceRule, _json_form, rule_from_config, rule_to_config
 from torchcbl.strategies._phased import Decision, LabelKind, _Phased, _rule_takes_observations
 
@@ -480,6 +481,13 @@ class _Correcting:
     that it pickles whenever the teacher it wraps does (a process pool's arguments)."""
 
     def __init__(self, inner: Callable[[np.ndarray, dict], int]) -> None:
+        takes = cannot_take(inner, 2)
+        if takes is not None:  # else it passed the loop's check (this wrapper's signature)
+            raise TypeError(  # and failed only at the session's first request
+                f"correcting: a teacher is called as teacher(observation, info), but {takes}; "
+                "give it an info parameter (it may ignore it), or wrap a policy of the "
+                "observation alone: correcting(lambda obs, info: policy(obs))"
+            )
         self.inner = inner
 
     def __call__(self, observation: np.ndarray, info: dict) -> int:
@@ -500,5 +508,6 @@ def correcting(teacher: Callable[[np.ndarray, dict], int]) -> Any:
     """Wrap a scripted teacher so it also corrects: ``correct(obs, info, action)`` answers its
     own choice when that differs from ``action``, else None (a teacher with a ``correct`` of
     its own, such as :class:`~torchcbl.teachers.HumanTiming`, is asked through it). The
-    wrapper pickles whenever ``teacher`` does."""
+    wrapper pickles whenever ``teacher`` does. A teacher whose signature cannot take
+    ``(observation, info)`` is a TypeError here."""
     return _Correcting(teacher)
