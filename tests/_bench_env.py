@@ -23,6 +23,11 @@ if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="_bench_env:make_world")
 
 
+def policy_as_teacher(env: Any) -> Any:
+    """A factory that returns a policy of the observation alone, not a teacher (a user's slip)."""
+    return lambda obs: 0
+
+
 def pole_teacher(env: Any) -> Any:
     """CartPole's textbook controller: push toward the side the pole leans to."""
     return lambda obs, info: int(obs[2] + 0.5 * obs[3] > 0)

@@ -611,6 +611,24 @@ def test_an_env_the_loop_cannot_teach_is_named_with_what_it_needs(tmp_path, caps
     assert "Discrete action space" in err and err.count("\n") == 1
 
 
+@pytest.mark.parametrize("strategy", ["bc", "hg_dagger"])
+def test_a_factory_that_returns_a_policy_is_told_to_wrap_it(strategy, tmp_path, monkeypatch):
+    """A teacher factory returning a policy of the observation alone: CBA's and HG-DAgger's
+    cells wrap the teacher in correcting(), which hid its signature, so the cell failed at the
+    first request with "the teacher raised TypeError: <lambda>() takes 1 positional argument
+    but 2 were given"; then, once correcting() read it, the advice named correcting(), a call
+    the user never made. Every strategy's cell now says how a teacher is called and to wrap
+    the policy in the factory (docs/benchmark.md says so)."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    env = _env(teacher="_bench_env:policy_as_teacher", budgets=(5,), max_steps=10)
+    spec = [bm.StrategySpec(strategy)]
+    with pytest.raises(bm.CellError) as caught:
+        bm.run_benchmark(spec, [env], [0], tmp_path / "o", workers=1, plots=False)
+    text = str(caught.value)
+    assert "teacher(observation, info)" in text and "takes (obs)" in text, text
+    assert "lambda obs, info: policy(obs)" in text and "correcting(" not in text, text
+
+
 @pytest.mark.parametrize("workers", [1, 2])
 def test_a_failing_cell_is_named_and_the_finished_cells_are_kept(
     workers, tmp_path, monkeypatch, capsys

@@ -336,6 +336,8 @@ def test_a_correcting_teacher_of_the_observation_alone_is_refused_when_wrapped()
     assert "correcting(lambda obs, info: policy(obs))" in msg, msg
     with pytest.raises(TypeError, match=r"takes \(obs\)"):
         correcting(torch.no_grad()(lambda obs: 0))
+    with pytest.raises(TypeError, match=r"expected a callable teacher.*got None"):
+        correcting(None)  # was taken: the wrapper is callable, so only the first request failed
     env = rare_regions_world()
     for teacher in (oracle(env), lambda *args: 0):
         ct = ConfidentTeacher(

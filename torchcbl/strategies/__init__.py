@@ -481,6 +481,11 @@ class _Correcting:
     that it pickles whenever the teacher it wraps does (a process pool's arguments)."""
 
     def __init__(self, inner: Callable[[np.ndarray, dict], int]) -> None:
+        if not callable(inner):  # this wrapper is: the loop's check would pass it
+            raise TypeError(
+                f"correcting: expected a callable teacher(observation, info) -> action, got "
+                f"{inner!r}"
+            )
         takes = cannot_take(inner, 2)
         if takes is not None:  # else it passed the loop's check (this wrapper's signature)
             raise TypeError(  # and failed only at the session's first request
