@@ -67,3 +67,19 @@ def cannot_take(fn: Any, n_args: int) -> str | None:
             "signature"
         )
     return f"{name} takes ({', '.join(shown)})"
+
+
+def refuse_unless_a_teacher(
+    teacher: Any, who: str, wrap: str = "lambda obs, info: policy(obs)"
+) -> None:
+    """Raise TypeError, before any call, where ``teacher``'s signature cannot take the loop's
+    ``teacher(observation, info)``: a policy of the observation alone, given for a teacher.
+    ``who`` begins the message (what was given the teacher); ``wrap`` is the advice's wrapping
+    of a policy, in the call the user makes."""
+    takes = cannot_take(teacher, 2)
+    if takes is not None:
+        raise TypeError(
+            f"{who}: a teacher is called as teacher(observation, info), but {takes}; give it an "
+            f"info parameter (it may ignore it), or wrap a policy of the observation alone: "
+            f"{wrap}"
+        )

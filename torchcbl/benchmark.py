@@ -609,7 +609,7 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
 
     import torch
 
-    from torchcbl._signatures import cannot_take
+    from torchcbl._signatures import refuse_unless_a_teacher
     from torchcbl.gmm import GaussianMixtureSet
     from torchcbl.policy import GreedyPolicy, check_env
     from torchcbl.strategies import correcting
@@ -646,14 +646,8 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
         auditor = _make_teacher(spec.teacher, env, seed, spec.teacher_kwargs)
         strategy = sspec.build(seed)
         wants_corrections = bool(getattr(strategy, "wants_corrections", False))
-        takes = cannot_take(teacher, 2) if callable(teacher) else None
-        if takes is not None:  # here, not in correcting(): the factory is the user's to fix
-            raise TypeError(
-                f"teacher: the factory {spec.teacher!r} returned a teacher of another call: a "
-                f"teacher is called as teacher(observation, info), but {takes}; give it an "
-                "info parameter (it may ignore it), or return a policy of the observation "
-                "alone wrapped: lambda obs, info: policy(obs)"
-            )
+        if callable(teacher):  # here, not in correcting(): the factory is the user's to fix
+            refuse_unless_a_teacher(teacher, f"teacher (from the factory {spec.teacher!r})")
         if wants_corrections and not callable(getattr(teacher, "correct", None)):
             teacher = correcting(teacher)
         audited = _Audited(env, auditor)

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from torchcbl._signatures import cannot_take
+from torchcbl._signatures import refuse_unless_a_teacher
 
 __all__ = ["HumanTiming", "HumanTimingConfig"]
 
@@ -128,13 +128,10 @@ class HumanTiming:
             raise TypeError(
                 f"teacher must be callable (observation, info) -> action, got {teacher!r}"
             )
-        takes = cannot_take(teacher, 2)
-        if takes is not None:  # else it failed only at the session's first request
-            raise TypeError(
-                f"HumanTiming: a teacher is called as teacher(observation, info), but {takes}; "
-                "give it an info parameter (it may ignore it), or wrap a policy of the "
-                "observation alone: HumanTiming(lambda obs, info: policy(obs))"
-            )
+        # else it failed only at the session's first request
+        refuse_unless_a_teacher(
+            teacher, "HumanTiming", "HumanTiming(lambda obs, info: policy(obs))"
+        )
         if config is not None and not isinstance(config, HumanTimingConfig):
             raise TypeError(
                 f"config must be a HumanTimingConfig, got {type(config).__name__}; e.g. "

@@ -55,6 +55,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from torchcbl._signatures import refuse_unless_a_teacher
 from torchcbl.confidence import _np, rule_to_config
 from torchcbl.errors import (
     CorruptSessionError,
@@ -67,7 +68,6 @@ from torchcbl.errors import (
 from torchcbl.policy import (
     ActionAnswer,
     GreedyPolicy,
-    _cannot_take,
     _env_user,
     _note_env_user,
     as_action,
@@ -680,13 +680,7 @@ class ConfidentTeacher:
             raise TypeError(
                 f"teacher: expected a callable teacher(observation, info) -> int, got {teacher!r}"
             )
-        takes = _cannot_take(teacher, 2)
-        if takes is not None:
-            raise TypeError(
-                f"teacher: a teacher is called as teacher(observation, info), but {takes}; "
-                "give it an info parameter (it may ignore it), or wrap a policy of the "
-                "observation alone: lambda obs, info: policy(obs)"
-            )
+        refuse_unless_a_teacher(teacher, "teacher")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise TypeError(f"seed: expected an int, got {seed!r}")
         if seed < 0:  # checked before a run directory is written: a session must resume

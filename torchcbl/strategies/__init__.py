@@ -107,7 +107,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
-from torchcbl._signatures import cannot_take
+from torchcbl._signatures import refuse_unless_a_teacher
 from torchcbl.confidence import DistanceRule, _json_form, rule_from_config, rule_to_config
 from torchcbl.strategies._phased import Decision, LabelKind, _Phased, _rule_takes_observations
 
@@ -486,13 +486,9 @@ class _Correcting:
                 f"correcting: expected a callable teacher(observation, info) -> action, got "
                 f"{inner!r}"
             )
-        takes = cannot_take(inner, 2)
-        if takes is not None:  # else it passed the loop's check (this wrapper's signature)
-            raise TypeError(  # and failed only at the session's first request
-                f"correcting: a teacher is called as teacher(observation, info), but {takes}; "
-                "give it an info parameter (it may ignore it), or wrap a policy of the "
-                "observation alone: correcting(lambda obs, info: policy(obs))"
-            )
+        # else it passed the loop's check (this wrapper's signature) and failed at the first
+        # request
+        refuse_unless_a_teacher(inner, "correcting", "correcting(lambda obs, info: policy(obs))")
         self.inner = inner
 
     def __call__(self, observation: np.ndarray, info: dict) -> int:
