@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _driving_tiny import tiny_config
+from _processes import exists, kill_left
 
 from sumo_scenarios.experiment import (
     DrivingExperimentConfig,
@@ -575,23 +576,14 @@ def test_a_ctrl_c_as_a_seed_worker_starts_leaves_no_worker_behind(tmp_path, monk
             if len(pids) == 2:  # a Ctrl-C to this thread: its handler runs before this returns
                 signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
 
-    def running(pid):
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return False
-        return True
-
     monkeypatch.setattr(SpawnProcess, "start", start)
     try:
         with pytest.raises(KeyboardInterrupt):
             run_experiment(tiny_config(seeds=(0, 1, 2)), tmp_path, workers=3, progress=False)
         assert len(pids) == 2
-        assert [p for p in pids if running(p)] == []
+        assert [p for p in pids if exists(p)] == []
     finally:
-        for p in pids:
-            if running(p):
-                os.kill(p, signal.SIGKILL)
+        kill_left(pids)
 
 
 @pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="lists open fds through /proc")

@@ -12,6 +12,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from _processes import exists, kill_left
 from _toy_envs import oracle, rare_regions_world
 
 from torchcbl import (
@@ -516,13 +517,6 @@ def test_a_ctrl_c_as_a_worker_starts_leaves_no_worker_behind(monkeypatch):
             if len(pids) == 2:  # a Ctrl-C to this thread: its handler runs before this returns
                 signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
 
-    def running(pid):
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return False
-        return True
-
     monkeypatch.setattr(SpawnProcess, "start", start)
     try:
         with pytest.raises(KeyboardInterrupt):
@@ -530,11 +524,9 @@ def test_a_ctrl_c_as_a_worker_starts_leaves_no_worker_behind(monkeypatch):
                 for _ in range(6):
                     pool.submit(time.sleep, 5)
         assert len(pids) == 2
-        assert [p for p in pids if running(p)] == []
+        assert [p for p in pids if exists(p)] == []
     finally:
-        for p in pids:
-            if running(p):
-                os.kill(p, signal.SIGKILL)
+        kill_left(pids)
 
 
 @pytest.mark.skipif(not hasattr(signal, "pthread_kill"), reason="signals a thread (POSIX)")
@@ -558,23 +550,14 @@ def test_a_ctrl_c_as_the_start_up_check_starts_leaves_no_process_behind(monkeypa
         pids.append(proc.pid)  # a Ctrl-C to this thread: its handler runs before this returns
         signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
 
-    def running(pid):
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return False
-        return True
-
     monkeypatch.setattr(SpawnProcess, "start", start)
     try:
         with pytest.raises(KeyboardInterrupt):
             check_workers_start(mp.get_context("spawn"))
         assert len(pids) == 1
-        assert [p for p in pids if running(p)] == []
+        assert [p for p in pids if exists(p)] == []
     finally:
-        for p in pids:
-            if running(p):
-                os.kill(p, signal.SIGKILL)
+        kill_left(pids)
         mp.active_children()  # reaps what was left
 
 
