@@ -1174,6 +1174,23 @@ class _PersonAtATerminal(threading.Thread):
         return self.shown.decode(errors="replace")
 
 
+def _teach_corridor_at_a_terminal(tmp_path, monkeypatch, n_prior, steps, keys):
+    """``teach corridor`` on a pseudo-terminal, confident execution from ``n_prior`` prior
+    demonstrations, with ``keys`` typed at the given steps (see _PersonAtATerminal); returns
+    the exit code, what the terminal showed, the run directory and the command (without its
+    --skip-noninteractive and --prior-demonstrations)."""
+    prior = _corridor_prior(tmp_path / "prior.npz", n_prior)
+    person = _PersonAtATerminal(monkeypatch)
+    person.type_at(monkeypatch, keys)
+    run = tmp_path / "session"
+    argv = ["teach", "corridor", "--run-dir", str(run), "--steps", str(steps)]
+    try:
+        code = main([*argv, "--skip-noninteractive", "--prior-demonstrations", str(prior)])
+    finally:
+        shown = person.finish()
+    return code, shown, run, argv
+
+
 @pytest.mark.timeout(60)
 def test_q_typed_while_the_agent_drives_on_its_own_stops_the_run_then(tmp_path, monkeypatch):
     """The key legend's "[q/Ctrl-C] quit": q typed while the agent drove on its own (between two
@@ -1181,15 +1198,9 @@ def test_q_typed_while_the_agent_drives_on_its_own_stops_the_run_then(tmp_path, 
     so an agent sure of itself drove all of --steps with the person's q on the screen; only
     Ctrl-C stopped it. q now stops the run after the step under way is logged, as at a request:
     same words, exit code 0, and the session resumes."""
-    prior = _corridor_prior(tmp_path / "prior.npz", 400)
-    person = _PersonAtATerminal(monkeypatch)
-    person.type_at(monkeypatch, {10: b"q"})
-    run = tmp_path / "session"
-    argv = ["teach", "corridor", "--run-dir", str(run), "--steps", "150"]
-    try:
-        code = main([*argv, "--skip-noninteractive", "--prior-demonstrations", str(prior)])
-    finally:
-        shown = person.finish()
+    code, shown, run, argv = _teach_corridor_at_a_terminal(
+        tmp_path, monkeypatch, 400, 150, {10: b"q"}
+    )
     assert code == 0, shown
     assert "action?" not in shown  # the agent drove on its own throughout
     assert "Stopped by the teacher." in shown, shown
@@ -1207,15 +1218,7 @@ def test_a_key_other_than_q_typed_while_the_agent_drives_on_its_own_is_not_acted
 ):
     """ "d" (turn right) typed while the agent drives on its own neither stops the run nor
     answers the next request: the person answers that one ("w", forward) after seeing it."""
-    prior = _corridor_prior(tmp_path / "prior.npz", 30)
-    person = _PersonAtATerminal(monkeypatch)
-    person.type_at(monkeypatch, {5: b"d"})
-    run = tmp_path / "session"
-    argv = ["teach", "corridor", "--run-dir", str(run), "--steps", "80"]
-    try:
-        code = main([*argv, "--skip-noninteractive", "--prior-demonstrations", str(prior)])
-    finally:
-        shown = person.finish()
+    code, shown, run, _ = _teach_corridor_at_a_terminal(tmp_path, monkeypatch, 30, 80, {5: b"d"})
     assert code == 0, shown
     assert "(--steps done)" in shown, shown
     records = load_records(run)

@@ -13,6 +13,30 @@ import pytest
 NOTEBOOKS = Path(__file__).parents[1] / "notebooks"
 
 
+def _code_cells(name: str) -> list[str]:
+    """The sources of notebook ``name``'s code cells, in order."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    return [c.source for c in nb.cells if c.cell_type == "code"]
+
+
+def _set_up_02(max_steps: int, display) -> tuple[dict, list[str]]:
+    """Notebook 02's set-up cell run (its % magics left out), its teaching capped at
+    ``max_steps`` and ``display`` standing in for IPython's; returns the scope and the code
+    cells (the teaching cell is the third)."""
+    import dataclasses
+
+    code = _code_cells("02_corridor_teaching.ipynb")
+    scope: dict = {}
+    exec("\n".join(ln for ln in code[0].splitlines() if not ln.startswith("%")), scope)
+    experiment = scope["experiment"]
+    scope["experiment"] = dataclasses.replace(
+        experiment, teaching=dataclasses.replace(experiment.teaching, max_steps=max_steps)
+    )
+    scope["display"] = display
+    return scope, code
+
+
 def _run_until_the_first_figure(path: Path):
     """Execute ``path``'s code cells in order until one outputs a matplotlib figure; return
     that cell (executed) or None if no cell shows a figure."""
@@ -63,26 +87,17 @@ def test_notebook_02_redraws_its_live_plot_at_most_about_once_a_second():
     15 of the cell's 17 s, for a loop that teaches in under 2 s. Here its set-up and teaching cells
     run (the teaching capped at 400 steps) with a stand-in for ``display`` that counts the
     updates: at most one a second, plus the first and the last."""
-    import dataclasses
     import time
 
-    nbformat = pytest.importorskip("nbformat")
-    nb = nbformat.read(NOTEBOOKS / "02_corridor_teaching.ipynb", as_version=4)
-    setup, _, teach = [c.source for c in nb.cells if c.cell_type == "code"][:3]
-    assert "ct.run()" in teach and "on_step=" in teach
     updates: list[float] = []
 
     class Handle:
         def update(self, figure):
             updates.append(time.monotonic())
 
-    scope: dict = {}
-    exec("\n".join(ln for ln in setup.splitlines() if not ln.startswith("%")), scope)
-    experiment = scope["experiment"]
-    scope["experiment"] = dataclasses.replace(
-        experiment, teaching=dataclasses.replace(experiment.teaching, max_steps=400)
-    )
-    scope["display"] = lambda *args, **kwargs: Handle()
+    scope, code = _set_up_02(400, lambda *args, **kwargs: Handle())
+    teach = code[2]
+    assert "ct.run()" in teach and "on_step=" in teach
     start = time.monotonic()
     exec(teach, scope)
     elapsed = time.monotonic() - start
@@ -124,29 +139,16 @@ def test_notebook_02_draws_the_robot_that_drove_the_learned_policys_circuit():
     env's robot beside that path: a robot, with its sensor rays, where the evaluated one never
     ended. Here its set-up, teaching (capped at 400 steps) and evaluation cells run: the robot in
     the figure stands at the path's last pose."""
-    import dataclasses
-
     from matplotlib.patches import Circle
-
-    nbformat = pytest.importorskip("nbformat")
-    nb = nbformat.read(NOTEBOOKS / "02_corridor_teaching.ipynb", as_version=4)
-    code = [c.source for c in nb.cells if c.cell_type == "code"]
-    setup, teach = code[0], code[2]
-    evaluation = next(c for c in code if "evaluate_policy(" in c)
-    assert "map_figure(" in evaluation
 
     class Handle:
         def update(self, figure):
             pass
 
-    scope: dict = {}
-    exec("\n".join(ln for ln in setup.splitlines() if not ln.startswith("%")), scope)
-    experiment = scope["experiment"]
-    scope["experiment"] = dataclasses.replace(
-        experiment, teaching=dataclasses.replace(experiment.teaching, max_steps=400)
-    )
-    scope["display"] = lambda *args, **kwargs: Handle()
-    exec(teach, scope)
+    scope, code = _set_up_02(400, lambda *args, **kwargs: Handle())
+    evaluation = next(c for c in code if "evaluate_policy(" in c)
+    assert "map_figure(" in evaluation
+    exec(code[2], scope)
     *body, last = evaluation.rstrip().splitlines()
     exec("\n".join(body) + "\nfigure = " + last, scope)
     robots = [p for p in scope["figure"].axes[0].patches if isinstance(p, Circle)]
@@ -158,9 +160,7 @@ def test_notebook_01_round_trip_cell_runs_after_the_fit_alone():
     """Its save-and-load cell, the one a newcomer copies to keep a model, compared the two
     models on ``grid``, a name the plotting cell defines: run without that figure it failed with
     a NameError. Here only the imports, the data, the fit and that cell run."""
-    nbformat = pytest.importorskip("nbformat")
-    nb = nbformat.read(NOTEBOOKS / "01_gmm_set.ipynb", as_version=4)
-    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    code = _code_cells("01_gmm_set.ipynb")
     round_trip = next(c for c in code if "load_state_dict(" in c)
     scope: dict = {}
     exec("\n".join([*code[:3], round_trip]), scope)
@@ -172,9 +172,7 @@ def test_notebook_01_labels_the_axes_of_its_figure():
     """Its figure of the components and the ask-region had a title but no axis labels, so a
     reader could not tell which of the observation's two features runs along which axis. Here its
     cells up to the figure run (without its ``plt.show()``, so no backend is involved)."""
-    nbformat = pytest.importorskip("nbformat")
-    nb = nbformat.read(NOTEBOOKS / "01_gmm_set.ipynb", as_version=4)
-    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    code = _code_cells("01_gmm_set.ipynb")
     figure_cell = next(i for i, c in enumerate(code) if "plt.show()" in c)
     scope: dict = {}
     exec("\n".join(code[: figure_cell + 1]).replace("plt.show()", ""), scope)
@@ -188,23 +186,13 @@ def test_notebook_02_labels_both_axes_of_both_live_panels():
     """Its live plot's right-hand panel (the windowed accuracy, a share from 0 to 1) had no
     y-axis label. Here its set-up and teaching cells run, the teaching capped at 30 steps, with a
     stand-in for ``display``; every panel of the live figure names both its axes."""
-    import dataclasses
 
     class Handle:
         def update(self, figure):
             pass
 
-    nbformat = pytest.importorskip("nbformat")
-    nb = nbformat.read(NOTEBOOKS / "02_corridor_teaching.ipynb", as_version=4)
-    setup, _, teach = [c.source for c in nb.cells if c.cell_type == "code"][:3]
-    scope: dict = {}
-    exec("\n".join(ln for ln in setup.splitlines() if not ln.startswith("%")), scope)
-    experiment = scope["experiment"]
-    scope["experiment"] = dataclasses.replace(
-        experiment, teaching=dataclasses.replace(experiment.teaching, max_steps=30)
-    )
-    scope["display"] = lambda *args, **kwargs: Handle()
-    exec(teach, scope)
+    scope, code = _set_up_02(30, lambda *args, **kwargs: Handle())
+    exec(code[2], scope)
     panels = scope["live"].axes
     assert len(panels) == 2
     assert all(ax.get_xlabel() and ax.get_ylabel() for ax in panels), [
@@ -218,9 +206,7 @@ def test_notebook_03_draws_its_road_at_the_steps_its_titles_name():
     t=21, 61, 101 under code that names 20, 60, 100. Here its set-up and road cells run (120
     SUMO steps in this process, without ``plt.show()``): the frames drawn are those at steps
     20, 60 and 100."""
-    nbformat = pytest.importorskip("nbformat")
-    nb = nbformat.read(NOTEBOOKS / "03_driving.ipynb", as_version=4)
-    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    code = _code_cells("03_driving.ipynb")
     setup, road = code[0], next(c for c in code if "env.frame()" in c)
     assert "(20, 60, 100)" in road
     scope: dict = {}
@@ -246,9 +232,7 @@ def test_notebook_01_asks_by_the_confidence_rule_not_by_a_number_of_its_own(caps
 
     from torchcbl import DistanceRule
 
-    nbformat = pytest.importorskip("nbformat")
-    nb = nbformat.read(NOTEBOOKS / "01_gmm_set.ipynb", as_version=4)
-    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    code = _code_cells("01_gmm_set.ipynb")
     probe_cell = next(c for c in code if "probe =" in c)
     scope: dict = {}
     exec("\n".join(code[:3]), scope)  # imports, the data, the fit
