@@ -1067,6 +1067,41 @@ def test_a_ctrl_c_right_after_the_simulation_stepped_does_not_delay_truncation(m
         env.close()
 
 
+@pytest.mark.parametrize("stepped", [True, False])
+def test_a_frame_after_a_ctrl_c_around_the_simulation_step_names_its_own_action(
+    monkeypatch, stepped
+):
+    """A Ctrl-C that lands as HighwaySim.step returns, before DrivingEnv.step kept the step's
+    action: the new scene (step 2, after a stay) was drawn labelled with the previous step's
+    action (left). Here the KeyboardInterrupt comes as the simulation's step returns (the scene
+    is step 2's: its action is the stay), or before the simulation stepped (the scene is still
+    step 1's: its action is the left)."""
+    from sumo_scenarios.sim import HighwaySim
+
+    real = HighwaySim.step
+
+    def interrupted(self, target_lane):
+        if stepped:
+            real(self, target_lane)  # the simulation stepped; the signal comes as it returns
+        raise KeyboardInterrupt
+
+    env = DrivingEnv(scenario="train", render_mode="rgb_array")
+    try:
+        env.reset(seed=0)
+        env.step(LEFT)
+        assert (env.frame().step, env.frame().action) == (1, LEFT)
+        monkeypatch.setattr(HighwaySim, "step", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            env.step(STAY)
+        monkeypatch.setattr(HighwaySim, "step", real)
+        want = (2, STAY) if stepped else (1, LEFT)
+        assert (env.frame().step, env.frame().action) == want
+        env.step(RIGHT)  # and the env goes on
+        assert (env.frame().step, env.frame().action) == (want[0] + 1, RIGHT)
+    finally:
+        env.close()
+
+
 def test_a_lane_that_is_not_a_whole_number_is_refused_before_the_step_starts(env):
     """HighwaySim.step(2.5) passed the range check and then failed inside libsumo after the
     step had begun, so every later step refused ("the env's last step did not finish")
