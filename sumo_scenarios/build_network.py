@@ -80,34 +80,52 @@ def _netconvert() -> str:
     return exe
 
 
+def _errors(stderr: str) -> list[str]:
+    """netconvert's own "Error:" lines: what it found wrong in its input or output."""
+    return [line.strip() for line in stderr.splitlines() if line.strip().startswith("Error:")]
+
+
 def _said(stderr: str) -> str:
     """What a failed netconvert said, in one line: its "Error:" lines joined by "; ", else its
     last line other than the "Quitting (on error)." it closes every failure with."""
-    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
-    errors = [line for line in lines if line.startswith("Error:")]
+    errors = _errors(stderr)
     if errors:
         return "; ".join(errors)
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
     said = [line for line in lines if line != "Quitting (on error)."]
     return said[-1] if said else "no message"
 
 
-def _failed(exe: str, exc: OSError | subprocess.CalledProcessError) -> str:
+def _failed(exe: str, exc: OSError | subprocess.CalledProcessError, net: Path) -> str:
     """One line: which netconvert failed (this Python's eclipse-sumo one, or, where it has
-    none, the first on PATH, another SUMO install's), how, and what to do."""
+    none, the first on PATH, another SUMO install's), how, and what to do. This Python's
+    that ran and rejected its files (its "Error:" lines) is told to fix them (the sources in
+    ``net``'s directory's ``src``, the network ``net``); one that could not run at all (not
+    started, killed by a signal, or failing without an error of its own, as when a shared
+    library is missing) to reinstall eclipse-sumo."""
     wheel = _wheel_netconvert()
     ours = wheel is not None and Path(exe) == Path(wheel)
+    rejected = False
     if isinstance(exc, subprocess.CalledProcessError):
         why = f"exit status {exc.returncode}: {_said(exc.stderr or '')}"
+        rejected = exc.returncode > 0 and bool(_errors(exc.stderr or ""))
     else:
         why = str(exc)
     where = "this Python's eclipse-sumo" if ours else "the first on PATH"
-    fix = (
-        "reinstall eclipse-sumo (pip install --force-reinstall 'eclipse-sumo>=1.22')"
-        if ours
-        else "install eclipse-sumo into this Python (pip install 'eclipse-sumo>=1.22', SUMO "
-        "1.22 or newer is needed): its netconvert (beside "
-        f"{sys.executable or 'this Python'}) is run before any on PATH"
-    )
+    if ours and rejected:
+        fix = (
+            f"netconvert ran and rejected its files: fix what its error names in its input "
+            f"({net.parent / 'src'}, written by this command) or its output ({net}; the out "
+            "directory must be one you can write to)"
+        )
+    elif ours:
+        fix = "reinstall eclipse-sumo (pip install --force-reinstall 'eclipse-sumo>=1.22')"
+    else:
+        fix = (
+            "install eclipse-sumo into this Python (pip install 'eclipse-sumo>=1.22', SUMO "
+            "1.22 or newer is needed): its netconvert (beside "
+            f"{sys.executable or 'this Python'}) is run before any on PATH"
+        )
     return f"netconvert failed: {exe} ({where}), {why}; {fix}"
 
 
@@ -120,7 +138,9 @@ def build(out_dir: Path = DATA_DIR) -> Path:
     Raises:
         FileNotFoundError: no netconvert was found.
         RuntimeError: netconvert failed; the message names the one that ran, its exit status
-            and error lines, and which one to use instead.
+            and error lines, and what to do: fix the files its errors name (this Python's
+            netconvert ran and rejected them), reinstall eclipse-sumo (this Python's could not
+            run), or install it (the one that ran was the first on PATH).
     """
     src = out_dir / "src"
     src.mkdir(parents=True, exist_ok=True)
@@ -153,7 +173,7 @@ def build(out_dir: Path = DATA_DIR) -> Path:
             errors="replace",
         )
     except (OSError, subprocess.CalledProcessError) as exc:
-        raise RuntimeError(_failed(exe, exc)) from None
+        raise RuntimeError(_failed(exe, exc, net)) from None
     net.write_text(_reproducible(net.read_text()))
     return net
 

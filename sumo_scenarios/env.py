@@ -108,6 +108,9 @@ class Frame:
     ``step`` is the steps taken since reset (``info["t"]`` of the step that led here; 0 at
     reset); :func:`~sumo_scenarios.render.render_frame` titles the image ``t=<step>``.
 
+    ``action`` is the action (0 stay, 1 left, 2 right) of the step that led here; None at
+    reset.
+
     ``prev_lane`` is the ego's lane before the step (its lane at reset on the first frame): a
     contact counts cars in it as well as in ``ego_lane``; None when unknown.
     """
@@ -184,7 +187,10 @@ class DrivingEnv(gym.Env):
         self.action_space = gym.spaces.Discrete(3)
         self._sim = HighwaySim(self.scenario, config.sim)
         self._episode_seed: int | None = None
-        self._last_action: int | None = None
+        # step count -> the action that led to that step's scene (None at reset): the scene
+        # before a step and the one after it, set in one assignment before the simulation
+        # steps, so a Ctrl-C at any point labels the scene drawn with its own action
+        self._actions: dict[int, int | None] = {}
 
     # ------------------------------------------------------------------ gymnasium API
     def reset(
@@ -237,7 +243,7 @@ class DrivingEnv(gym.Env):
         self._episode_seed = None  # until the new segment is in place: no step() on a half reset
         self._sim.reset(rng, int(seed), ego_lane=lane, fcd_path=Path(fcd) if fcd else None)
         self._episode_seed = int(seed)
-        self._last_action = None
+        self._actions = {}
         return self._observe(), self._info()
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -260,8 +266,9 @@ class DrivingEnv(gym.Env):
         lane = self._sim.ego_lane
         target = lane + (1 if a == LEFT else -1 if a == RIGHT else 0)
         target = min(max(target, 0), N_LANES - 1)
+        t = self._t
+        self._actions = {t: self._actions.get(t), t + 1: a}
         self._sim.step(target)
-        self._last_action = a
         contact = self._sim.contact
         truncated = self._t >= self.config.max_episode_steps
         return self._observe(), -1.0 if contact else 0.0, False, truncated, self._info()
@@ -326,7 +333,7 @@ class DrivingEnv(gym.Env):
             s.car_pos.copy(),
             s.car_lane.copy(),
             s.contact,
-            self._last_action,
+            self._actions.get(self._t),
             s.prev_lane,
         )
 

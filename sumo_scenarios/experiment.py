@@ -628,11 +628,14 @@ def _run_seeds(
     a worker that dies without a result (killed by a signal: the out-of-memory killer) stops
     the run with a RuntimeError naming its seed (a multiprocessing.Pool waited for its result
     for ever). On any exit by an exception (Ctrl-C included, one that came as a worker
-    started too) the other workers are stopped."""
+    started too, or as a result was read) the workers not yet reaped are stopped, reaped,
+    and their pipes and process handles closed before it comes out (a kept traceback, as a
+    notebook keeps the last one, held them open)."""
     from multiprocessing.connection import wait
 
     waiting = list(jobs)
-    running: dict[Any, tuple[Any, int]] = {}  # result pipe -> (process, seed)
+    # result pipe -> (process, seed), until the process is reaped and both are closed
+    running: dict[Any, tuple[Any, int]] = {}
     try:
         while waiting or running:
             while waiting and len(running) < workers:
@@ -651,7 +654,7 @@ def _run_seeds(
                     writer.close()  # the worker's end: its exit makes the pipe readable
                     running[reader] = (proc, job[1])
             for reader in wait(list(running)):
-                proc, seed = running.pop(reader)
+                proc, seed = running[reader]  # kept there until reaped: a Ctrl-C stops it
                 try:
                     kind, value = reader.recv()
                 except (EOFError, OSError):  # OSError: it died part-way through sending
@@ -669,9 +672,11 @@ def _run_seeds(
                         "DIR, or run_experiment(..., resume=True)), with fewer workers if memory "
                         "ran out"
                     ) from None
-                finally:
-                    reader.close()
                 proc.join()
+                with _ctrl_c_held():  # no longer kept, and closed
+                    del running[reader]
+                    reader.close()
+                    proc.close()
                 if kind == "error":
                     raise value
                 done(value)
@@ -679,8 +684,10 @@ def _run_seeds(
         for proc, _ in running.values():
             if proc.is_alive():
                 proc.terminate()
-        for proc, _ in running.values():
+        for reader, (proc, _) in running.items():
             proc.join()
+            proc.close()
+            reader.close()
 
 
 def _worker_ignores_ctrl_c() -> None:

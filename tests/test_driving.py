@@ -624,9 +624,10 @@ def test_a_netconvert_that_fails_is_named_with_its_own_error(tmp_path, monkeypat
     from sumo_scenarios.build_network import build
 
     fake = _fake_netconvert(tmp_path, _FAILS_AS_NETCONVERT_DOES + "exit 3\n")
-    if which == "this Python's":
+    if which == "this Python's":  # it ran, and rejected its files: no reinstall mends that
         _as_this_pythons(monkeypatch, fake.parent)
-        where, fix = "this Python's eclipse-sumo", "reinstall eclipse-sumo"
+        out = tmp_path / "out"
+        where, fix = "this Python's eclipse-sumo", f"its input ({out / 'src'}, "
     else:
         _as_this_pythons(monkeypatch, tmp_path / "no-sumo")
         _first_on_path(monkeypatch, fake)
@@ -639,6 +640,56 @@ def test_a_netconvert_that_fails_is_named_with_its_own_error(tmp_path, monkeypat
     assert f"exit status 3: {_NETCONVERT_SAID}; " in msg, msg
     assert "Quitting" not in msg, msg
     assert fix in msg, msg
+    assert which != "this Python's" or "reinstall" not in msg, msg
+
+
+def test_a_network_file_netconvert_cannot_write_is_named_and_not_blamed_on_the_install(
+    tmp_path, capsys
+):
+    """This Python's netconvert (the real one) that ran and refused to write the network (the
+    out directory's road.net.xml is a directory) was reported with "reinstall eclipse-sumo",
+    which mends nothing. The command says, in one line on stderr and exit code 1, netconvert's
+    own error about the file and to fix its input or output, with no reinstall."""
+    from sumo_scenarios.build_network import main
+
+    (tmp_path / "road.net.xml").mkdir()
+    assert main(["--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert f"Error: Could not build output file '{tmp_path / 'road.net.xml'}'" in err, err
+    assert "its input" in err and "or its output" in err, err
+    assert "reinstall" not in err, err
+
+
+@pytest.mark.parametrize(
+    "script, said",
+    [
+        (None, "No such file or directory"),  # its interpreter gone (the wheel's is a script)
+        ("kill -SEGV $$\n", "exit status -11"),  # crashed
+        (  # a shared library missing: the loader's words, exit status 127
+            "echo 'netconvert: error while loading shared libraries: libxerces-c-3.2.so: "
+            "cannot open shared object file: No such file or directory' >&2\nexit 127\n",
+            "exit status 127: netconvert: error while loading shared libraries",
+        ),
+    ],
+)
+def test_this_pythons_netconvert_that_cannot_run_is_to_be_reinstalled(
+    tmp_path, monkeypatch, script, said
+):
+    """Where this Python's netconvert could not run at all (the interpreter its script names is
+    gone, killed by a signal, a shared library missing), the error says how, and to reinstall
+    eclipse-sumo."""
+    from sumo_scenarios.build_network import build
+
+    fake = _fake_netconvert(tmp_path, script or "")
+    if script is None:
+        fake.write_text(f"#!{tmp_path / 'gone' / 'python'}\n")
+    _as_this_pythons(monkeypatch, fake.parent)
+    with pytest.raises(RuntimeError) as e:
+        build(tmp_path / "out")
+    msg = str(e.value)
+    assert said in msg and "reinstall eclipse-sumo" in msg, msg
+    assert "its input" not in msg, msg
 
 
 def test_an_interpreter_that_does_not_know_its_own_path_builds_with_path_s_netconvert(
@@ -701,7 +752,7 @@ def test_the_build_network_command_fails_in_one_line_not_a_traceback(tmp_path, c
     if case == "netconvert fails":
         says = (
             f"netconvert failed: {fake} (this Python's eclipse-sumo), exit status 1: "
-            f"{_NETCONVERT_SAID}; reinstall"
+            f"{_NETCONVERT_SAID}; netconvert ran and rejected its files"
         )
     else:
         out.write_text("")
@@ -1063,6 +1114,41 @@ def test_a_ctrl_c_right_after_the_simulation_stepped_does_not_delay_truncation(m
         *_, truncated, info = env.step(STAY)
         assert (info["t"], truncated) == (3, True)
         assert env.frame().step == 3
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("stepped", [True, False])
+def test_a_frame_after_a_ctrl_c_around_the_simulation_step_names_its_own_action(
+    monkeypatch, stepped
+):
+    """A Ctrl-C that lands as HighwaySim.step returns, before DrivingEnv.step kept the step's
+    action: the new scene (step 2, after a stay) was drawn labelled with the previous step's
+    action (left). Here the KeyboardInterrupt comes as the simulation's step returns (the scene
+    is step 2's: its action is the stay), or before the simulation stepped (the scene is still
+    step 1's: its action is the left)."""
+    from sumo_scenarios.sim import HighwaySim
+
+    real = HighwaySim.step
+
+    def interrupted(self, target_lane):
+        if stepped:
+            real(self, target_lane)  # the simulation stepped; the signal comes as it returns
+        raise KeyboardInterrupt
+
+    env = DrivingEnv(scenario="train", render_mode="rgb_array")
+    try:
+        env.reset(seed=0)
+        env.step(LEFT)
+        assert (env.frame().step, env.frame().action) == (1, LEFT)
+        monkeypatch.setattr(HighwaySim, "step", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            env.step(STAY)
+        monkeypatch.setattr(HighwaySim, "step", real)
+        want = (2, STAY) if stepped else (1, LEFT)
+        assert (env.frame().step, env.frame().action) == want
+        env.step(RIGHT)  # and the env goes on
+        assert (env.frame().step, env.frame().action) == (want[0] + 1, RIGHT)
     finally:
         env.close()
 

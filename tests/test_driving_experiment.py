@@ -615,3 +615,79 @@ def test_a_seed_worker_that_cannot_start_leaves_no_pipe_open(tmp_path, monkeypat
     after = sorted(os.listdir("/proc/self/fd"))
     assert len(tried) == 2 and caught.value.errno == errno.EAGAIN
     assert after == before
+
+
+@pytest.mark.skipif(
+    not hasattr(signal, "pthread_kill") or not Path("/proc/self/fd").is_dir(),
+    reason="signals a thread (POSIX), lists open fds through /proc",
+)
+@pytest.mark.parametrize("where", ["waiting", "reading", "error"])
+def test_a_run_stopped_by_a_ctrl_c_or_a_seed_error_leaves_no_worker_and_no_pipe(
+    tmp_path, monkeypatch, where
+):
+    """A Ctrl-C while the run waited for its seed workers, or a seed's own error, left each
+    worker's result pipe and process handle open for as long as the exception's traceback was
+    kept (a notebook keeps the last one); a Ctrl-C while it read a worker's result (or reaped
+    it) left that worker running its seed, never terminated nor reaped. Here the SIGINT comes
+    as the run first waits for its worker ("waiting"), or as it reads the result of a worker
+    it is told has one ("reading"); or the seed fails at once ("error": its directory is a
+    file). With the exception (and its traceback) kept, the seed worker is gone (signal 0
+    finds no process) and the process has the descriptors it had before."""
+    import multiprocessing
+    import multiprocessing.connection as connection
+    import threading
+    from multiprocessing.context import SpawnProcess
+
+    from torchcbl.evaluation import check_workers_start
+
+    real_start, real_wait, real_recv = (
+        SpawnProcess.start,
+        connection.wait,
+        connection.Connection.recv,
+    )
+    pids = []
+
+    def ctrl_c():  # to this thread: its handler runs before the caller's next line
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+
+    def start(proc):
+        seed = getattr(getattr(proc, "_target", None), "__name__", "") == "_seed_worker"
+        real_start(proc)
+        if seed:  # not the start-up check
+            pids.append(proc.pid)
+
+    def wait(objects, timeout=None):
+        if where == "waiting":
+            ctrl_c()
+            return real_wait(objects, timeout)
+        return list(objects)  # "reading": as if each worker had sent its result
+
+    def recv(conn):
+        ctrl_c()
+        return real_recv(conn)
+
+    monkeypatch.setattr(SpawnProcess, "start", start)
+    if where != "error":
+        monkeypatch.setattr(connection, "wait", wait)
+        monkeypatch.setattr(connection.Connection, "recv", recv)
+    stops = FileExistsError if where == "error" else KeyboardInterrupt
+
+    def run(run_dir):
+        run_dir.mkdir()
+        (run_dir / "seed_0").write_text("a file where the seed's directory goes\n")
+        with pytest.raises(stops) as caught:
+            run_experiment(tiny_config(), run_dir, workers=1, progress=False)
+        return caught
+
+    # once first: what opens once per process (multiprocessing's resource tracker)
+    check_workers_start(multiprocessing.get_context("spawn"))
+    try:
+        before = sorted(os.listdir("/proc/self/fd"))
+        caught = run(tmp_path / "run")
+        after = sorted(os.listdir("/proc/self/fd"))
+        assert caught.value.__traceback__ is not None  # kept, with the run's frames
+        assert len(pids) == 1
+        assert [p for p in pids if exists(p)] == []
+        assert after == before
+    finally:
+        kill_left(pids)
