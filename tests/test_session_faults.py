@@ -126,8 +126,11 @@ def memory_equals_disk(ct: ConfidentTeacher, run: Path) -> None:
     assert_model_is_fit_on_log(load_model(run), run)  # which is a fresh fit on the log
 
 
-def goes_on(ct: ConfidentTeacher, env: Witness, run: Path, world=rare_regions_world) -> None:
-    """After a fault: memory == disk; run() continues; resume continues; nothing lost."""
+def goes_on(
+    ct: ConfidentTeacher, env: Witness, run: Path, world=rare_regions_world, **resume_kw
+) -> None:
+    """After a fault: memory == disk; run() continues; resume (given ``resume_kw``)
+    continues; nothing lost."""
     memory_equals_disk(ct, run)
     n = ct.n_steps
     ct.run(max_steps=n + 12)
@@ -135,7 +138,7 @@ def goes_on(ct: ConfidentTeacher, env: Witness, run: Path, world=rare_regions_wo
     memory_equals_disk(ct, run)
     assert env.lost(run) == []
     ct.close()
-    back, env2 = resume(run, world())
+    back, env2 = resume(run, world(), **resume_kw)
     assert back.records == ct.records and same_state(back.model, ct.model)
     back.run(max_steps=back.n_steps + 12)
     memory_equals_disk(back, run)
@@ -221,7 +224,8 @@ def test_an_error_in_the_strategy_after_a_durable_demonstration_keeps_it(tmp_pat
     assert last.step == 4 and last.is_demonstration and last.truncated
     assert last.info == {"torchcbl_interrupted": True} and 4 not in env.executed
     assert ct.n_demonstrations == 5 and len(load_labels(run)[1]) == 5
-    goes_on(ct, env, run)
+    # a subclass keeping its parent's to_config is stored as custom: passed again to resume
+    goes_on(ct, env, run, strategy=Flaky())
 
 
 @pytest.mark.parametrize(

@@ -323,8 +323,9 @@ def test_a_to_config_type_that_names_another_shipped_class_is_refused_at_start(
     """strategy_from_config rebuilds by the stored "type" alone: a session of a user's class
     whose to_config() said "type": "DAgger" resumed (without strategy=) as the shipped DAgger,
     another strategy, with no word. The session now refuses to start, saying what to rename;
-    a subclass of the shipped class is still taken (it resumes as its parent, documented), and
-    so is the user's class once registered under that name."""
+    a subclass of the shipped class is still taken (it is stored as custom, see
+    test_a_subclass_keeping_its_parents_to_config_does_not_resume_as_its_parent), and so is
+    the user's class once registered under that name."""
     from torchcbl.strategies.dagger import DAgger as ShippedDAgger
 
     env = rare_regions_world(episode_length=10)
@@ -397,3 +398,90 @@ def test_a_to_config_whose_type_is_not_a_name_is_refused_before_the_session_star
     with pytest.raises(TypeError, match=r'Typed.to_config\(\) gives "type": .*a string'):
         ConfidentTeacher(env, oracle(env), strategy=Typed(), run_dir=tmp_path / "r", progress=False)
     assert not (tmp_path / "r").exists()
+
+
+class AlwaysAsks(ConfidentExecution):
+    """A user's confident execution that asks at every step; it keeps ConfidentExecution's
+    to_config(), whose "type" is "ConfidentExecution"."""
+
+    def decide(self, observation, c):
+        return super().decide(observation, c)._replace(ask=True)
+
+
+def test_a_subclass_keeping_its_parents_to_config_does_not_resume_as_its_parent(tmp_path):
+    """A subclass of a shipped strategy that kept the parent's to_config() was stored as the
+    parent ("type": "ConfidentExecution"), and a resume without strategy= rebuilt the parent
+    and went on teaching with another strategy, with no word. It is stored as custom (its own
+    class, the parent's dict kept under "inherited"): the resume asks for it, the parent is
+    refused, and so is the subclass with other settings. A session stored as the parent (as
+    before) still resumes with the subclass passed."""
+    from torchcbl.confidence import DistanceRule
+
+    run = tmp_path / "r"
+    _teach(run, AlwaysAsks(), 12)
+    with pytest.raises(IncompatibleRunDirError, match=r"AlwaysAsks.*strategy=") as caught:
+        _resume(run)
+    assert "ConfidentExecution" in str(caught.value), caught.value
+    stored = load_config(run)["strategy"]
+    assert stored["type"] == "test_user_strategy.AlwaysAsks" and stored["custom"], stored
+    assert stored["inherited"] == ConfidentExecution().to_config(), stored
+    for other in (ConfidentExecution(), AlwaysAsks(DistanceRule(3.0))):
+        with pytest.raises(IncompatibleRunDirError, match="strategy: stored"):
+            _resume(run, strategy=other)
+    ct = _resume(run, strategy=AlwaysAsks())
+    ct.run(max_steps=24)
+    ct.close()
+    assert all(r.teacher_action is not None for r in load_records(run))
+    _teach(tmp_path / "old", ConfidentExecution(), 12)  # stored as the parent
+    _resume(tmp_path / "old", strategy=AlwaysAsks()).close()
+
+
+def test_a_rule_subclass_keeping_its_parents_to_config_does_not_resume_as_its_parent(tmp_path):
+    """The same for a confidence rule: a subclass of DistanceRule that kept its to_config()
+    was stored as {"type": "DistanceRule", ...} and a resume without rule= or strategy= went
+    on with the plain DistanceRule. Its session now asks for rule= on resume, and refuses
+    the parent and the subclass with another threshold."""
+    import torch
+
+    from torchcbl.confidence import DistanceRule
+
+    class NeverSure(DistanceRule):
+        def is_confident(self, c, observations=None):
+            return torch.zeros(len(c.action), dtype=torch.bool)
+
+    run = tmp_path / "r"
+    _teach(run, ConfidentExecution(NeverSure()), 12)
+    with pytest.raises(IncompatibleRunDirError, match=r"NeverSure.*rule="):
+        _resume(run)
+    rule = load_config(run)["strategy"]["rule"]
+    assert rule["custom"] and rule["type"].endswith("NeverSure"), rule
+    assert rule["inherited"] == {"type": "DistanceRule", "max_std": 2.0}, rule
+    for other in (DistanceRule(), NeverSure(3.0)):
+        with pytest.raises(IncompatibleRunDirError, match="strategy: stored"):
+            _resume(run, rule=other)
+    _resume(run, rule=NeverSure()).close()
+    _teach(tmp_path / "old", ConfidentExecution(), 12)  # stored as the parent
+    _resume(tmp_path / "old", rule=NeverSure()).close()
+
+
+def test_the_library_classes_are_stored_as_before(tmp_path):
+    """Storing subclasses as custom leaves the shipped classes' dicts as they were: a plain
+    session's strategy and rule entries, and every shipped strategy's to_config()."""
+    from torchcbl.confidence import AutoThresholdRule, DistanceRule, PosteriorRule
+    from torchcbl.strategies import strategy_to_config
+    from torchcbl.strategies.bc import BehaviourCloning
+    from torchcbl.strategies.dagger import DAgger as ShippedDAgger
+    from torchcbl.strategies.hg_dagger import HGDAgger
+    from torchcbl.strategies.novelty import NoveltyGated
+
+    _teach(tmp_path / "r", ConfidentExecution(), 4)
+    config = load_config(tmp_path / "r")
+    plain = {"type": "DistanceRule", "max_std": 2.0}
+    assert config["rule"] == plain
+    assert config["strategy"] == {"type": "ConfidentExecution", "rule": plain, "relabel": False}
+    rules = [PosteriorRule(0.8), AutoThresholdRule(3.0, 1.0), DistanceRule(quantile=0.9)]
+    others = (ConfidenceBasedAutonomy, BehaviourCloning, ShippedDAgger, HGDAgger, NoveltyGated)
+    shipped = [ConfidentExecution(r) for r in rules] + [cls() for cls in others]
+    for strategy in shipped:
+        assert strategy_to_config(strategy) == strategy.to_config(), strategy
+        assert "custom" not in strategy.to_config(), strategy

@@ -435,17 +435,51 @@ def _json_form(config: Any, what: str) -> dict[str, Any]:
         ) from None
 
 
+def _inherited_from(obj: Any, config: Mapping[str, Any]) -> type | None:
+    """The class whose ``to_config`` ``obj`` inherits, where the dict it returned (``config``)
+    does not name ``obj``'s own class: a subclass that kept a shipped class's ``to_config``,
+    whose ``"type"`` would rebuild the parent on resume. None where the method is defined by
+    ``obj``'s class (or set on ``obj``), or where its ``"type"`` names ``obj``'s class and
+    not the defining one (a ``to_config`` written with ``type(self).__name__``)."""
+    cls = type(obj)
+    if "to_config" in getattr(obj, "__dict__", {}):
+        return None
+    owner = next((c for c in cls.__mro__ if "to_config" in vars(c)), None)
+    if owner is None or owner is cls:
+        return None
+    kind = config.get("type")
+
+    def names(c: type) -> tuple[str, ...]:
+        return (c.__name__, c.__qualname__, f"{c.__module__}.{c.__qualname__}")
+
+    if kind in names(cls) and kind not in names(owner):
+        return None
+    return owner
+
+
+def _class_path(obj: Any) -> str:
+    return f"{type(obj).__module__}.{type(obj).__qualname__}"
+
+
 def rule_to_config(rule: Any) -> dict[str, Any]:
     """JSON dict describing ``rule``, as config.json reads back (numpy numbers as Python
     numbers, tuples as lists); a custom rule without ``to_config`` is named only.
+
+    A subclass that keeps its parent's ``to_config`` (whose ``"type"`` names the parent, not
+    it) is stored as custom too, its class named and the parent's dict kept under
+    ``"inherited"``: rebuilt from that dict, it would be the parent, with the parent's
+    ``is_confident``. Give it a ``to_config`` of its own to say otherwise.
 
     Raises:
         TypeError: ``to_config()`` returned no dict, or one JSON cannot hold.
     """
     to_config = getattr(rule, "to_config", None)
     if callable(to_config):
-        return _json_form(to_config(), f"{type(rule).__name__}.to_config()")
-    return {"type": f"{type(rule).__module__}.{type(rule).__qualname__}", "custom": True}
+        config = _json_form(to_config(), f"{type(rule).__name__}.to_config()")
+        if _inherited_from(rule, config) is not None:
+            return {"type": _class_path(rule), "custom": True, "inherited": config}
+        return config
+    return {"type": _class_path(rule), "custom": True}
 
 
 def rule_from_config(config: dict[str, Any]) -> ConfidenceRule:

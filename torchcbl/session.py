@@ -2322,11 +2322,14 @@ def resume_problems(
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
     ``model_args`` / ``strategy`` None means "rebuilt from the directory"; of a strategy
-    config with ``"custom": true`` (no ``to_config``) only the class name and relabel flag are
-    compared; ``env_kwargs``: what ``gymnasium.make`` was given for the env (plain values are
-    compared, ``render_mode`` aside), with its ``max_episode_steps`` (the cap in force: the
-    smallest TimeLimit's or the env's own; sessions written before 2026-11-26 do not keep it,
-    and those written before 2026-11-27 kept None for an env with a cap of its own only);
+    config with ``"custom": true`` (no ``to_config``, or a parent's) only the class name, the
+    relabel flag, the parent's dict (``"inherited"``) and the rule are compared (a session
+    stored before a subclass keeping its parent's ``to_config`` was custom holds the parent's
+    dict: that subclass given resumes it); ``env_kwargs``: what ``gymnasium.make`` was given
+    for the env (plain values are compared, ``render_mode`` aside), with its
+    ``max_episode_steps`` (the cap in force: the smallest TimeLimit's or the env's own;
+    sessions written before 2026-11-26 do not keep it, and those written before 2026-11-27
+    kept None for an env with a cap of its own only);
     ``env_inputs``: the env's ``describe_inputs()`` (None: it has none), compared with the
     session's where the session kept one (sessions written before 2026-11-27 did not)."""
     problems: list[str] = []
@@ -2400,19 +2403,47 @@ def resume_problems(
     if strategy is not None:
         want = stored_strategy(stored)
         if strategy.get("custom") or want.get("custom"):
-            # a strategy without to_config has only its class and relabel flag to compare; the
-            # class by its name, as its module reads __main__ in a script and a package's name
-            # when imported
-            def name(config: dict[str, Any]) -> tuple[str, bool]:
-                return str(config.get("type")).rpartition(".")[2], bool(config.get("relabel"))
-
-            if name(strategy) != name(want) or bool(strategy.get("custom")) != bool(
-                want.get("custom")
-            ):
-                problems.append(f"strategy: stored {want}, given {strategy}")
+            # a session stored before a subclass keeping its parent's to_config was stored as
+            # custom holds the parent's dict: the subclass passed resumes it, as it did then
+            if want.get("custom") or _as_stored_before(strategy) != want:
+                if _comparable(strategy) != _comparable(want):
+                    problems.append(f"strategy: stored {want}, given {strategy}")
         elif strategy != want:
             problems.append(f"strategy: stored {want}, given {strategy}")
     return problems
+
+
+def _comparable(config: dict[str, Any]) -> dict[str, Any]:
+    """What a resume compares of a custom strategy (or rule) config: its class by its name
+    (its module reads __main__ in a script and a package's name when imported), its relabel
+    and custom flags, and the dicts it holds of an inherited ``to_config`` and of its rule,
+    those compared alike where custom and whole otherwise."""
+    out: dict[str, Any] = {
+        "type": str(config.get("type")).rpartition(".")[2],
+        "custom": bool(config.get("custom")),
+        "relabel": bool(config.get("relabel")),
+    }
+    for key in ("inherited", "rule"):
+        value = config.get(key)
+        if isinstance(value, dict):
+            out[key] = _comparable(value) if value.get("custom") else value
+    return out
+
+
+def _as_stored_before(config: dict[str, Any]) -> dict[str, Any]:
+    """A strategy config as sessions stored it before a subclass that keeps its parent's
+    ``to_config`` (a strategy's, or its rule's) was stored as custom: the inherited dict in
+    the subclass's place."""
+    inherited = config.get("inherited")
+    if config.get("custom") and isinstance(inherited, dict):
+        return _as_stored_before(inherited)
+    rule = config.get("rule")
+    if isinstance(rule, dict) and rule.get("custom") and isinstance(rule.get("inherited"), dict):
+        out = {**config, "rule": rule["inherited"]}
+        if not out["rule"].get("custom"):  # ConfidentExecution's: custom for its rule's sake
+            out.pop("custom", None)
+        return out
+    return config
 
 
 def stored_strategy(stored: dict[str, Any]) -> dict[str, Any]:

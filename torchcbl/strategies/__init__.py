@@ -55,9 +55,12 @@ Rules a strategy must keep:
   entry that rebuilds another class (a class of one's own called ``DAgger``). Classes are
   compared by module and qualified name, so an object made before its module was reloaded
   (``importlib.reload``, IPython's autoreload) passes. A subclass
-  of that class passes: one that keeps its parent's ``to_config`` is stored as, and resumes
-  as, its parent (pass it again to ``resume``, or give it a ``"type"`` of its own and
-  register it, if it behaves otherwise). ``"relabel"`` must be the strategy's ``relabel``
+  of that class passes: one that keeps its parent's ``to_config`` (whose ``"type"`` names the
+  parent) is stored as custom, its class named and the parent's dict kept under
+  ``"inherited"``, as its rebuilt parent would go on teaching with the parent's behaviour:
+  pass it again to ``resume``, or give it a ``to_config`` and a ``"type"`` of its own and
+  register it. So is a confidence rule's subclass that keeps its parent's ``to_config``
+  (pass ``rule=`` again). ``"relabel"`` must be the strategy's ``relabel``
   attribute (it may be left out when that is False): the session's readers relabel as the
   stored dict says, so a session refuses to start with a dict that misstates it (a
   TypeError, nothing written); a session stored before that check resumes with a warning
@@ -108,7 +111,14 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 import numpy as np
 
 from torchcbl._signatures import refuse_unless_a_teacher
-from torchcbl.confidence import DistanceRule, _json_form, rule_from_config, rule_to_config
+from torchcbl.confidence import (
+    DistanceRule,
+    _class_path,
+    _inherited_from,
+    _json_form,
+    rule_from_config,
+    rule_to_config,
+)
 from torchcbl.strategies._phased import Decision, LabelKind, _Phased, _rule_takes_observations
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -261,7 +271,9 @@ def strategy_to_config(strategy: Any, *, check_relabel: bool = True) -> dict[str
     """JSON dict describing ``strategy``, as config.json reads back (numpy numbers as Python
     numbers, tuples as lists); one without ``to_config``, or whose ``to_config`` returns None
     (a subclass of :class:`Strategy` inherits the protocol's empty one), is named only
-    (custom).
+    (custom). A subclass that keeps its parent's ``to_config`` (whose ``"type"`` names the
+    parent, not it) is custom too, its class named and the parent's dict kept under
+    ``"inherited"``: rebuilt from that dict, a resume would go on with the parent.
 
     ``check_relabel=False`` skips the checks of ``"type"`` and ``"relabel"`` below: a resume
     compares the dict with a stored one, and a session stored before the checks may fail them.
@@ -298,12 +310,17 @@ def strategy_to_config(strategy: Any, *, check_relabel: bool = True) -> dict[str
                 f'would read another training set than the one taught: return "relabel": '
                 f"{relabel} in to_config()."
             )
-        return _json_form(config, f"{name}.to_config()")
-    return {
-        "type": f"{type(strategy).__module__}.{type(strategy).__qualname__}",
+        config = _json_form(config, f"{name}.to_config()")
+        if _inherited_from(strategy, config) is None:
+            return config
+    out = {
+        "type": _class_path(strategy),
         "custom": True,
         "relabel": bool(getattr(strategy, "relabel", False)),
     }
+    if config is not None:  # a subclass that keeps its parent's to_config: the parent's dict
+        out["inherited"] = config
+    return out
 
 
 def _build_ce(params: dict[str, Any]) -> Any:
@@ -361,9 +378,11 @@ def _check_rebuilt_as_itself(strategy: Any, config: Mapping[str, Any]) -> None:
     ``"DAgger"`` would resume as the shipped DAgger, with no word.
 
     An instance of the entry's class passes, and so does an instance of a subclass of it
-    (``class Mine(DAgger)`` keeping the parent's ``to_config``): it is stored as, and resumes
-    as, its parent; many such subclasses only add to the parent (a hook, a log), and refusing
-    them would break them. A function a user registered under a name is not checked (what it
+    (``class Mine(DAgger)`` with a ``to_config`` of its own that names the parent: it resumes
+    as its parent, as its ``to_config`` says; one that keeps the parent's ``to_config`` is
+    stored as custom by :func:`strategy_to_config`, and does not reach this check); many such
+    subclasses only add to the parent (a hook, a log), and refusing them would break them.
+    A function a user registered under a name is not checked (what it
     builds is the user's choice), nor is a name not in STRATEGIES (its resume asks for
     ``strategy=``), nor a custom config (never rebuilt).
 
@@ -416,6 +435,23 @@ def strategy_from_config(config: dict[str, Any]) -> Any:
     kind = config.get("type")
     if config.get("custom"):
         what = "rule" if kind == "ConfidentExecution" else "strategy"
+        described = config.get("rule", config) if what == "rule" else config
+        inherited = described.get("inherited") if isinstance(described, Mapping) else None
+        if isinstance(inherited, Mapping):  # a subclass that keeps its parent's to_config
+            own = str(described.get("type")).rpartition(".")[2]
+            # a rule of one's own is never rebuilt (rule_from_config knows the shipped ones)
+            other = (
+                f"; or give {own} a to_config() of its own and register it in "
+                "torchcbl.strategies.STRATEGIES, for the sessions it starts"
+                if what == "strategy"
+                else ""
+            )
+            raise ValueError(
+                f"cannot rebuild the {what} {described.get('type')!r} from a run directory: "
+                f"it keeps the to_config() of {inherited.get('type')!r}, whose dict would "
+                f"rebuild that class, not {own}. Pass {what}={own}(...) to resume(), made as "
+                f"the session made it{other}."
+            )
         raise ValueError(
             f"cannot rebuild the custom {what} {config.get('rule', config)!r} from a run "
             f"directory. Pass {what}=<your {what}> to resume()."
