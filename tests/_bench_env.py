@@ -158,3 +158,38 @@ def noisy_teacher(env: Any, seed: int) -> Any:
         return int(rng.integers(0, 2)) if rng.random() < 0.2 else wanted
 
     return teach
+
+
+def teacher_failing_while_told(env: Any) -> Any:
+    """The oracle, except that it raises at its third call while the environment variable
+    BENCH_TEACHER_FAILS is set: a cell that stops part-way in one run (as a Ctrl-C or a crash
+    stops it) and goes through when run again."""
+    import os
+
+    inner, calls = oracle(env.unwrapped), [0]
+
+    def teach(obs: Any, info: dict) -> int:
+        calls[0] += 1
+        if os.environ.get("BENCH_TEACHER_FAILS") and calls[0] == 3:
+            raise RuntimeError("stopped part-way")
+        return inner(obs, info)
+
+    return teach
+
+
+def teacher_killed_while_told(env: Any) -> Any:
+    """The oracle, except that its process is killed (SIGKILL) at its third call while the
+    environment variable BENCH_TEACHER_KILLED is set: a cell killed mid-way in one run (the
+    out-of-memory killer) that goes through when run again."""
+    import os
+    import signal
+
+    inner, calls = oracle(env.unwrapped), [0]
+
+    def teach(obs: Any, info: dict) -> int:
+        calls[0] += 1
+        if os.environ.get("BENCH_TEACHER_KILLED") and calls[0] == 3:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return inner(obs, info)
+
+    return teach

@@ -29,6 +29,28 @@ JSON configuration: a rerun skips finished cells, and a killed sweep resumes whe
 simulation per process: libsumo allows one per process) or on Ray (``use_ray=True``, with
 ``ray_address`` for a cluster); every cell is deterministic, so both give the same figures.
 
+Sessions (``keep_sessions=True``, ``torchcbl benchmark --keep-sessions``): each computed
+cell's teaching is also written as a session directory (:mod:`torchcbl.session`)::
+
+    OUT/sessions/<hash>/            the cell's session (same hash as its cells/<hash>.json):
+                                    config.json (the teaching env's id and make() arguments,
+                                    strategy, TeachingConfig, the cell's seed), steps.sqlite
+                                    (every step, with the teacher's label where it gave one;
+                                    corrections), checkpoints/ (the model at each refit)
+    OUT/sessions/<hash>.stale-N     a session a killed or failed cell left; set aside, not
+                                    removed, when the cell is computed again
+
+read with :func:`~torchcbl.session.load_records`, :func:`~torchcbl.session.load_labels`,
+:func:`~torchcbl.session.load_demonstrations` and :func:`~torchcbl.session.load_model`
+(``load_model(path, n_demonstrations=labels)`` is the model as the loop had it, its last
+refit; a curve point's snapshot is fitted on every label so far: the same model where
+``labels`` is a refit point). The session holds the teaching only: the evaluations, the
+auditor's answers and the attention figures stay in the cell's JSON. Keeping sessions is not
+part of a cell's configuration (the figures and the hash are the same either way); a cached
+cell keeps the session it has and is not computed again for one. With Ray, each session is
+written by the worker that runs its cell, at the absolute path of ``OUT/sessions`` on that
+worker's machine: on a cluster without a shared file system, the sessions stay on the nodes.
+
 Results: ``OUT/results.json`` with, per (strategy, environment), ``labels_to_95pct`` (labels
 at which the performance first reaches 95 % of the teacher's; mean, sd, n; runs that never
 reach it are censored at their last label count and marked), performance at each budget,
@@ -579,7 +601,9 @@ def _evaluate(
     return float(np.mean(values))
 
 
-def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
+def run_cell(
+    config: Mapping[str, Any], *, run_dir: str | os.PathLike[str] | None = None
+) -> dict[str, Any]:
     """Run one cell (see the module docstring) and return its JSON result.
 
     Deterministic given ``config`` (one torch thread, seeded model, env and strategy, and the
@@ -588,6 +612,13 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     timings. The caller's torch thread count and global torch (CPU and CUDA), numpy and
     ``random`` RNGs are as they were when it returns (``run_benchmark(workers=1)`` runs cells
     in-process).
+
+    Args:
+        config: one of :func:`cell_configs`' configurations.
+        run_dir: if given, the cell's teaching is also written there as a session directory
+            (:mod:`torchcbl.session`; ``ConfidentTeacher(run_dir=...)``: a new directory, or
+            one holding no session), closed when the cell returns or raises; the result is
+            the same with or without it (its timings apart).
     """
     import random
 
@@ -597,14 +628,16 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     np_state, py_state = np.random.get_state(), random.getstate()  # noqa: NPY002
     try:
         with torch.random.fork_rng(devices=[]):
-            return _run_cell(config)
+            return _run_cell(config, run_dir)
     finally:
         torch.set_num_threads(threads)
         np.random.set_state(np_state)  # noqa: NPY002
         random.setstate(py_state)
 
 
-def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
+def _run_cell(
+    config: Mapping[str, Any], run_dir: str | os.PathLike[str] | None = None
+) -> dict[str, Any]:
     import random
 
     import torch
@@ -637,6 +670,7 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
 
     env = gym.make(spec.env_id, **dict(spec.env_kwargs))
     snapshots: list[tuple[int, int, Any]] = []
+    loop = None
     try:
         try:  # what the loop takes (not an AttributeError on a Box action space's .n)
             n_features, n_actions = check_env(env)
@@ -654,7 +688,14 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
         model = GaussianMixtureSet(n_actions, n_features, seed=seed, **dict(spec.model))
         tc = TeachingConfig(**{**dict(spec.teaching), **dict(sspec.teaching)})
         loop = ConfidentTeacher(
-            audited, teacher, model=model, strategy=strategy, config=tc, seed=seed, progress=False
+            audited,
+            teacher,
+            model=model,
+            strategy=strategy,
+            config=tc,
+            seed=seed,
+            progress=False,
+            run_dir=run_dir,
         )
         for budget in spec.budgets:
             loop.run(max_demonstrations=budget, max_steps=spec.max_steps)
@@ -665,7 +706,11 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
         records = loop.records
         expected = audited.expected
     finally:
-        env.close()
+        try:
+            if loop is not None:  # its session, if kept, committed and closed
+                loop.close()
+        finally:
+            env.close()
     teach_wall = time.perf_counter() - wall0
 
     steps = len(records)
@@ -727,9 +772,11 @@ def _run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
-def _run_cell_in_worker(config: Mapping[str, Any]) -> dict[str, Any]:
+def _run_cell_in_worker(config: Mapping[str, Any], run_dir: str | None = None) -> dict[str, Any]:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    return run_cell(config)
+    if run_dir is not None:  # (on a Ray node of its own, what the sweep's host could not see)
+        _set_aside(Path(run_dir))
+    return run_cell(config, run_dir=run_dir)
 
 
 # -- the sweep --------------------------------------------------------------------------------
@@ -737,6 +784,22 @@ def _run_cell_in_worker(config: Mapping[str, Any]) -> dict[str, Any]:
 
 def _cell_path(out: Path, key: str) -> Path:
     return out / "cells" / f"{key}.json"
+
+
+def _session_path(out: Path, key: str) -> Path:
+    return out / "sessions" / key
+
+
+def _set_aside(path: Path) -> Path | None:
+    """Rename what is at ``path`` (a session a killed or failed cell left) to the first free
+    ``<name>.stale-N`` beside it, N = 1, 2, ...; return that new path, None if nothing was
+    there."""
+    if not os.path.lexists(path):
+        return None
+    n = 1
+    while os.path.lexists(path.with_name(f"{path.name}.stale-{n}")):
+        n += 1
+    return path.rename(path.with_name(f"{path.name}.stale-{n}"))
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -825,12 +888,18 @@ def _execute(
     ray_address: str | None,
     done: Callable[[dict[str, Any]], None],
     out: Path,
+    sessions: Path | None = None,
 ) -> None:
     """Run the cells of ``todo`` and hand each result to ``done`` as it comes; the first cell
     that raises stops the sweep with a :class:`CellError` naming it (any other cell that
-    finished meanwhile is handed to ``done`` first)."""
+    finished meanwhile is handed to ``done`` first). With ``sessions`` (an absolute path),
+    each cell writes its teaching session to ``sessions/<key>``."""
     if not todo:
         return
+
+    def run_dir(config: Mapping[str, Any]) -> str | None:
+        return None if sessions is None else str(sessions / cell_key(config))
+
     if use_ray:
         try:
             import ray
@@ -852,7 +921,7 @@ def _execute(
             # One cell per task and CPU; a cell closes its envs, so a worker process may run
             # cells one after another (libsumo: one live simulation per process).
             remote = ray.remote(num_cpus=1)(_run_cell_in_worker)
-            configs = {remote.remote(c): c for c in todo}
+            configs = {remote.remote(c, run_dir(c)): c for c in todo}
             pending = list(configs)
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
@@ -870,7 +939,7 @@ def _execute(
     if workers <= 1:
         for c in todo:  # in this process: its environment variables are left alone
             try:
-                cell = run_cell(c)
+                cell = run_cell(c, run_dir=run_dir(c))
             except Exception as exc:
                 raise CellError(c, exc, out) from exc
             done(cell)
@@ -887,7 +956,7 @@ def _execute(
     with worker_pool(
         min(workers, len(todo)), ctx, running="one of the unfinished cells", after=died
     ) as pool:  # a Ctrl-C stops the workers
-        futures = {pool.submit(_run_cell_in_worker, c): c for c in todo}
+        futures = {pool.submit(_run_cell_in_worker, c, run_dir(c)): c for c in todo}
         pending = set(futures)
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
@@ -914,6 +983,7 @@ def run_benchmark(
     ray_address: str | None = None,
     plots: bool = True,
     on_cell: Callable[[dict[str, Any], bool], None] | None = None,
+    keep_sessions: bool = False,
 ) -> dict[str, Any]:
     """Run (or resume) a sweep and write ``results.json`` and the plots into ``out_dir``.
 
@@ -931,6 +1001,11 @@ def run_benchmark(
             left in ``out_dir`` are removed first, so what is there is this sweep's or
             nothing (a sweep that stops early writes neither).
         on_cell: called as ``on_cell(cell_result, cached)`` for every cell, cached or new.
+        keep_sessions: also keep each computed cell's teaching session, a session directory
+            (:mod:`torchcbl.session`) in ``out_dir/sessions/<key>`` (see the module
+            docstring). Not part of a cell's configuration: the figures and keys are the same
+            either way, and a cached cell is not computed again for its session (a warning
+            names the cached cells that have none).
 
     Returns:
         The results dict that was written to ``results.json``.
@@ -999,6 +1074,18 @@ def run_benchmark(
                 on_cell(cached, True)
         else:
             todo.append(c)
+    for c in todo:  # what is there is a killed or failed run's, never this cell's session
+        _set_aside(_session_path(out, cell_key(c)))
+    if keep_sessions:
+        bare = [k for k in results if not _session_path(out, k).is_dir()]
+        if bare:
+            warnings.warn(
+                f"run_benchmark: keep_sessions: {len(bare)} of the {len(results)} cached cells "
+                f"have no session in {out / 'sessions'} (they were computed without "
+                f"keep_sessions), e.g. {bare[0]}; a cached cell is not computed again: delete "
+                "its cells/<key>.json to compute it again with its session",
+                stacklevel=2,
+            )
     wall0 = time.perf_counter()
 
     def done(cell: dict[str, Any]) -> None:
@@ -1008,7 +1095,16 @@ def run_benchmark(
             on_cell(cell, False)
 
     n_workers = max(1, int(workers or os.cpu_count() or 1))
-    _execute(todo, workers=n_workers, use_ray=use_ray, ray_address=ray_address, done=done, out=out)
+    _execute(
+        todo,
+        workers=n_workers,
+        use_ray=use_ray,
+        ray_address=ray_address,
+        done=done,
+        out=out,
+        # absolute: a worker (a Ray one) may run in another directory
+        sessions=(out / "sessions").resolve() if keep_sessions else None,
+    )
     cells = [results[cell_key(c)] for c in configs]
     summary = summarize(cells, envs=[e.name for e in envs], strategies=titles)
     summary["sweep"] = {

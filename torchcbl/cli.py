@@ -1070,6 +1070,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     import dataclasses
     import importlib.util
     import os
+    import warnings
 
     from torchcbl import benchmark as bm
 
@@ -1245,10 +1246,13 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         flush=True,
     )
     count = 0
+    bare: list[str] = []  # cached cells without a session, with --keep-sessions
 
     def on_cell(cell: dict, cached: bool) -> None:
         nonlocal count
         count += 1
+        if args.keep_sessions and cached and not (out / "sessions" / cell["key"]).is_dir():
+            bare.append(cell["key"])
         last = cell["curve"][-1] if cell["curve"] else {"labels": 0, "performance": float("nan")}
         print(
             f"[{count}/{n_cells}] {cell['env']:>9} {cell['strategy']:>10} seed {cell['seed']}: "
@@ -1259,16 +1263,19 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
 
     t0, c0 = time.perf_counter(), os.times()
     try:
-        summary = bm.run_benchmark(
-            strategies,
-            envs,
-            seeds,
-            out,
-            workers=args.workers,
-            use_ray=bool(args.ray or args.ray_address),
-            ray_address=args.ray_address,
-            on_cell=on_cell,
-        )
+        with warnings.catch_warnings():  # said in one line below
+            warnings.filterwarnings("ignore", message="run_benchmark: keep_sessions: ")
+            summary = bm.run_benchmark(
+                strategies,
+                envs,
+                seeds,
+                out,
+                workers=args.workers,
+                use_ray=bool(args.ray or args.ray_address),
+                ray_address=args.ray_address,
+                on_cell=on_cell,
+                keep_sessions=args.keep_sessions,
+            )
     except (RuntimeError, ValueError, ImportError) as exc:
         raise _UsageError(str(exc) + _cwd_hint(exc)) from None
     c1 = os.times()
@@ -1294,9 +1301,18 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                 f"\nwarning: the teacher scores {max(scores):g} on {env_name}: {why}",
                 file=sys.stderr,
             )
+    if bare:
+        print(
+            f"\nwarning: --keep-sessions: {len(bare)} cached cell"
+            f"{' has' if len(bare) == 1 else 's have'} no session in {out / 'sessions'} "
+            f"(computed without --keep-sessions), e.g. {bare[0]}; a cached cell is not computed "
+            f"again: delete its {out / 'cells'}/<key>.json to compute it again with its session",
+            file=sys.stderr,
+        )
     print(
         f"\nwall {time.perf_counter() - t0:.0f} s, CPU {cpu:.0f} s (this process and its "
         f"workers); results in {out / 'results.json'}, plot {out / 'learning_curves.png'}"
+        + (f", teaching sessions in {out / 'sessions'}" if args.keep_sessions else "")
     )
     return 0
 
@@ -1580,6 +1596,15 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="DIR",
         help="benchmark directory (default runs/benchmark[-quick])",
+    )
+    p.add_argument(
+        "--keep-sessions",
+        action="store_true",
+        help="also keep each computed cell's teaching session in OUT/sessions/<key> (the key of "
+        "its OUT/cells/<key>.json; read it with torchcbl.session.load_records, load_labels, "
+        "load_model, or torchcbl evaluate); the figures are the same either way. A cached cell "
+        "is not computed again for its session; one that a killed or failed run left is set "
+        "aside as <key>.stale-N",
     )
     p.add_argument(
         "--driving-teacher",

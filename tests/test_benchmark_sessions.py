@@ -1,0 +1,224 @@
+"""A benchmark cell can keep its teaching session (run_benchmark(keep_sessions=True),
+``torchcbl benchmark --keep-sessions``): the same figures and keys, a session the public readers
+read as the cell's teaching, and a stale session of a stopped cell set aside on rerun."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from torchcbl import benchmark as bm
+from torchcbl.cli import main
+from torchcbl.gmm import GaussianMixtureSet
+from torchcbl.policy import GreedyPolicy, evaluate_policy
+from torchcbl.session import (
+    load_config,
+    load_corrections,
+    load_demonstrations,
+    load_labels,
+    load_model,
+    load_records,
+)
+
+TESTS = Path(__file__).resolve().parent
+TIMINGS = ("wall_s", "cpu_s", "teach_wall_s")
+
+
+def _env(**kw):
+    """The toy env of tests/_bench_env.py: one cell of HG-DAgger on it teaches 60 steps, 19
+    labels of which 7 corrections, curve [0.5, 0.33, 0.5] at 5, 10, 19 labels."""
+    return bm.EnvSpec(
+        **{
+            "name": "toy",
+            "env_id": "_bench_env:BenchCluster-v0",
+            "teacher": "_bench_env:teacher",
+            "budgets": (5, 10, 20),
+            "max_steps": 60,
+            "env_kwargs": {"spread": 2.0},
+            "eval_seeds": (100, 101),
+            "eval_episodes": 3,
+            "teaching": {"max_new": 5},
+            "model": {"max_components": 2},
+            **kw,
+        }
+    )
+
+
+HG = [bm.StrategySpec("hg_dagger", {"warmup": 3})]
+
+
+def _cells(out: Path) -> dict[str, dict]:
+    return {p.stem: json.loads(p.read_text()) for p in (out / "cells").glob("*.json")}
+
+
+def _untimed(cell: dict) -> dict:
+    return {k: v for k, v in cell.items() if k not in TIMINGS}
+
+
+def test_keeping_sessions_changes_no_figure_and_no_key(tmp_path):
+    plain = bm.run_benchmark(HG, [_env()], [0, 1], tmp_path / "plain", workers=1, plots=False)
+    kept = bm.run_benchmark(
+        HG, [_env()], [0, 1], tmp_path / "kept", workers=1, plots=False, keep_sessions=True
+    )
+    a, b = _cells(tmp_path / "plain"), _cells(tmp_path / "kept")
+    keys = sorted(bm.cell_key(c) for c in bm.cell_configs(HG, [_env()], [0, 1]))
+    assert sorted(a) == sorted(b) == keys and len(keys) == 2
+    for key in keys:
+        assert _untimed(a[key]) == _untimed(b[key])
+        assert b[key]["config"]["format"] == bm.CELL_FORMAT
+    rows = plain["table"]["toy"]["hg_dagger"], kept["table"]["toy"]["hg_dagger"]
+    assert _untimed(rows[0]) == _untimed(rows[1])
+    assert sorted(p.name for p in (tmp_path / "kept" / "sessions").iterdir()) == keys
+    assert not (tmp_path / "plain" / "sessions").exists()
+
+
+def _performance(model, spec: bm.EnvSpec) -> float:
+    """A model's greedy performance as a cell measures it (success_rate over the eval seeds)."""
+    env = gym.make(spec.env_id, **{**spec.env_kwargs, **spec.eval_env_kwargs})
+    try:
+        return float(
+            np.mean(
+                [
+                    bm.success_rate(
+                        evaluate_policy(
+                            GreedyPolicy(model), env, n_episodes=spec.eval_episodes, seed=s
+                        )
+                    )
+                    for s in spec.eval_seeds
+                ]
+            )
+        )
+    finally:
+        env.close()
+
+
+def test_a_kept_session_is_the_cells_teaching(tmp_path):
+    spec = _env()
+    bm.run_benchmark(HG, [spec], [0], tmp_path, workers=1, plots=False, keep_sessions=True)
+    ((key, cell),) = _cells(tmp_path).items()
+    session = tmp_path / "sessions" / key
+    a = cell["attention"]
+    assert not (session / "steps.sqlite-wal").exists()  # closed as the cell ended
+    records = load_records(session)
+    assert len(records) == a["steps"] == 60
+    assert sum(r.teacher_action is not None for r in records) == a["requests"]
+    assert len(load_corrections(session)) == a["corrections"] > 0
+    assert len(load_labels(session)[1]) == len(load_demonstrations(session)[1]) == a["labels"]
+    config = load_config(session)  # the env it was taught on, not the auditing wrapper
+    assert config["env"]["id"] == "BenchCluster-v0" and config["env"]["kwargs"] == {"spread": 2.0}
+    assert config["seed"] == 0 and config["teaching"]["max_new"] == 5
+    assert config["strategy"]["type"] == "HGDAgger"
+    # the curve from the session: the loop's model at each refit point (5, 10 labels), and
+    # the last snapshot (19 labels, fitted on every one) as a fit on its training set
+    curve = [(p["labels"], p["performance"]) for p in cell["curve"]]
+    assert [n for n, _ in curve] == [5, 10, 19] and len({v for _, v in curve}) > 1
+    for n, performance in curve[:2]:
+        assert _performance(load_model(session, n_demonstrations=n), spec) == performance
+    x, y = load_demonstrations(session)
+    shape = config["env"]["n_actions"], config["env"]["n_features"]
+    last = GaussianMixtureSet(*shape, seed=0, **spec.model).fit(x, y)
+    assert _performance(last, spec) == curve[-1][1]
+    # (the loop's last model stood on 15 labels: another policy here)
+    assert _performance(load_model(session), spec) != curve[-1][1]
+
+
+def test_a_stopped_cells_session_is_set_aside_and_a_cached_cells_kept(tmp_path, monkeypatch):
+    spec = _env(teacher="_bench_env:teacher_failing_while_told")
+    (config,) = bm.cell_configs(HG, [spec], [0])
+    session = tmp_path / "sessions" / bm.cell_key(config)
+    run = lambda: bm.run_benchmark(  # noqa: E731
+        HG, [spec], [0], tmp_path, workers=1, plots=False, keep_sessions=True
+    )
+    monkeypatch.setenv("BENCH_TEACHER_FAILS", "1")
+    with pytest.raises(bm.CellError, match="stopped part-way"):
+        run()
+    assert len(load_records(session)) == 2  # what the stopped cell taught
+    monkeypatch.delenv("BENCH_TEACHER_FAILS")
+    run()  # not "already holds a teaching session", nor those 2 steps and then 60 more
+    (cell,) = _cells(tmp_path).values()
+    assert len(load_records(session)) == cell["attention"]["steps"] == 60
+    assert len(load_records(session.with_name(session.name + ".stale-1"))) == 2
+    before = {p: p.read_bytes() for p in session.rglob("*") if p.is_file()}
+    seen = []
+    bm.run_benchmark(
+        HG,
+        [spec],
+        [0],
+        tmp_path,
+        workers=1,
+        plots=False,
+        keep_sessions=True,
+        on_cell=lambda c, cached: seen.append(cached),
+    )
+    assert seen == [True]  # cached: its session as it was, nothing else set aside
+    assert {p: p.read_bytes() for p in session.rglob("*") if p.is_file()} == before
+    assert sorted(p.name for p in session.parent.iterdir()) == [
+        session.name,
+        f"{session.name}.stale-1",
+    ]
+
+
+def test_a_stale_session_is_set_aside_without_keep_sessions_too(tmp_path, monkeypatch):
+    """A stopped cell computed again without keep_sessions: its stale session must not be left
+    where a later keep_sessions run would take it for the cached cell's."""
+    spec = _env(teacher="_bench_env:teacher_failing_while_told")
+    (config,) = bm.cell_configs(HG, [spec], [0])
+    session = tmp_path / "sessions" / bm.cell_key(config)
+    monkeypatch.setenv("BENCH_TEACHER_FAILS", "1")
+    with pytest.raises(bm.CellError):
+        bm.run_benchmark(HG, [spec], [0], tmp_path, workers=1, plots=False, keep_sessions=True)
+    monkeypatch.delenv("BENCH_TEACHER_FAILS")
+    bm.run_benchmark(HG, [spec], [0], tmp_path, workers=1, plots=False)
+    assert not session.exists() and len(load_records(f"{session}.stale-1")) == 2
+    with pytest.warns(UserWarning, match=r"keep_sessions: 1 of the 1 cached cells have no session"):
+        bm.run_benchmark(HG, [spec], [0], tmp_path, workers=1, plots=False, keep_sessions=True)
+    assert not session.exists()  # cached: not computed again
+
+
+def test_the_command_keeps_sessions_and_says_where(tmp_path, capsys, monkeypatch, recwarn):
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
+    argv += ["--workers", "1", "--budgets", "5", "--max-steps", "10", "--eval-episodes", "1"]
+    out = tmp_path / "b"
+    assert main([*argv, "--out", str(out)]) == 0  # without: no session
+    capsys.readouterr()
+    assert main([*argv, "--out", str(out), "--keep-sessions"]) == 0
+    err = capsys.readouterr().err  # the cached cell is said to have none, in one line
+    assert err.startswith("\nwarning: --keep-sessions: 1 cached cell has no session in ")
+    assert err.count("\n") == 2  # (not also as a Python warning, with its file and line)
+    assert not [w for w in recwarn if "keep_sessions" in str(w.message)]
+    out2 = tmp_path / "c"
+    assert main([*argv, "--out", str(out2), "--keep-sessions"]) == 0
+    text = capsys.readouterr()
+    assert f"teaching sessions in {out2 / 'sessions'}" in text.out and not text.err
+    ((key, cell),) = _cells(out2).items()
+    assert len(load_labels(out2 / "sessions" / key)[1]) == cell["attention"]["labels"] == 5
+    with pytest.raises(SystemExit):
+        main(["benchmark", "--help"])
+    assert "--keep-sessions" in capsys.readouterr().out
+
+
+def test_a_cell_killed_in_a_worker_leaves_a_session_set_aside_on_rerun(tmp_path, monkeypatch):
+    """A worker killed outright mid-cell (SIGKILL: its session's lock, journal and -wal left as
+    they were) leaves a readable session; the rerun sets it aside and teaches the cell anew."""
+    monkeypatch.setenv(
+        "PYTHONPATH",
+        os.pathsep.join([str(TESTS), str(TESTS.parent), os.environ.get("PYTHONPATH", "")]),
+    )
+    spec = _env(teacher="_bench_env:teacher_killed_while_told")
+    (config,) = bm.cell_configs(HG, [spec], [0])
+    session = tmp_path / "sessions" / bm.cell_key(config)
+    monkeypatch.setenv("BENCH_TEACHER_KILLED", "1")
+    with pytest.raises(RuntimeError, match="killed"):
+        bm.run_benchmark(HG, [spec], [0], tmp_path, workers=2, plots=False, keep_sessions=True)
+    assert len(load_records(session)) == 2
+    monkeypatch.delenv("BENCH_TEACHER_KILLED")
+    bm.run_benchmark(HG, [spec], [0], tmp_path, workers=1, plots=False, keep_sessions=True)
+    assert len(load_records(session)) == 60
+    assert len(load_records(f"{session}.stale-1")) == 2
