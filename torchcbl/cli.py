@@ -1485,7 +1485,8 @@ def _parser() -> argparse.ArgumentParser:
         help="teach an agent yourself from the terminal",
         description="You are the teacher: the agent shows you its situation and asks for an "
         "action (one key) whenever it is unsure; every demonstration is saved to --run-dir. "
-        "q or Ctrl-C stops the session, at a request or while the agent drives on its own; "
+        "q stops the session at a request or, on a terminal, while the agent drives on its "
+        "own (after the step under way); Ctrl-C stops it at once; "
         "--resume goes on from where it stopped.",
     )
     p.add_argument("domain", choices=list(_DOMAINS), help="which agent: corridor or driving")
