@@ -61,6 +61,35 @@ def test_plot_of_a_benchmark_directory_says_where_its_plot_is(tmp_path, capsys):
     assert f"whose plot is {out / 'learning_curves.png'}" in err and "no plot" not in err
 
 
+def test_plot_of_a_folder_names_only_the_reproductions_run_directories_in_it(tmp_path, capsys):
+    """`torchcbl plot /tmp` took every */results.json below for a reproduction's run directory:
+    it said "/tmp holds one run directory per domain" and listed a benchmark's folder and
+    unrelated ones. Only a results.json naming a domain, as torchcbl reproduce writes it, is
+    listed; with none, the error says what RUN_DIR should be."""
+    bench = tmp_path / "bench"
+    other = tmp_path / "other"
+    broken = tmp_path / "broken"
+    for folder in (bench, other, broken):
+        folder.mkdir()
+    sweep = {"table": {}, "sweep": {}, "envs": [], "strategies": [], "cells": []}
+    (bench / "results.json").write_text(json.dumps(sweep))
+    (other / "results.json").write_text(json.dumps({"accuracy": 0.9}))
+    (broken / "results.json").write_bytes(b"\xff not json")
+    assert main(["plot", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert str(bench) not in err and str(other) not in err and str(broken) not in err, err
+    assert "expected a run directory written by torchcbl reproduce" in err, err
+    corridor = tmp_path / "corridor"
+    corridor.mkdir()
+    (corridor / "results.json").write_text(json.dumps({"domain": "corridor"}))
+    assert main(["plot", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert str(corridor) in err and "pass one of them" in err, err
+    assert str(bench) not in err and str(other) not in err and str(broken) not in err, err
+
+
 def _arguments(parser):
     import argparse
 
@@ -291,7 +320,10 @@ def test_benchmark_never_writes_over_another_commands_run_directory(corridor_run
 def test_plot_of_reproduces_out_directory_names_the_run_directories_in_it(corridor_run, capsys):
     assert main(["plot", str(corridor_run)]) == 2
     err = capsys.readouterr().err
-    assert "holds one run directory per domain" in err and str(corridor_run / "corridor") in err
+    assert (
+        "holds run directories of torchcbl reproduce" in err
+        and str(corridor_run / "corridor") in err
+    )
 
 
 def test_plot_into_a_read_only_run_directory_is_one_line_and_exit_2(corridor_run, tmp_path, capsys):

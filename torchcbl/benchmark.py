@@ -102,11 +102,12 @@ CELL_FORMAT = 5
 """Bumped when a cell's computation changes, so old cached cells are not reused (2: a strategy
 that takes a ``seed``, DAgger's coins, is seeded by the cell's seed unless its params give one;
 in format 1 every cell drew DAgger's coins from seed 0. 4: a timed human teacher,
-:class:`~torchcbl.teachers.HumanTiming`, the driving default, corrects only with a key press,
-and presses nothing where the learner does what it wants; in format 2 a pending or lost press
-counted as a correction to the default action, and format 3, a day's intermediate, still drew
-presses, and so doubled ones, where the learner agreed. 5: a cell's attention holds
-``wrong_autonomous_rate`` and ``auditor_disagreement``)."""
+:class:`~torchcbl.teachers.HumanTiming`, the driving default, corrects with a key press (or,
+where it wants the default action and the learner did another, with the default at once), never
+with a press still pending or lost, and presses nothing where the learner does what it wants; in
+format 2 a pending or lost press counted as a correction to the default action, and format 3,
+a day's intermediate, still drew presses, and so doubled ones, where the learner agreed. 5: a
+cell's attention holds ``wrong_autonomous_rate`` and ``auditor_disagreement``)."""
 
 #: short strategy names -> import path of the class.
 STRATEGY_PATHS: dict[str, str] = {

@@ -576,11 +576,11 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     results_path = run_dir / "results.json"
     if not results_path.is_file():
-        below = sorted(p.parent for p in run_dir.glob("*/results.json")) if run_dir.is_dir() else []
+        below = _reproduction_run_dirs(run_dir)
         if below:
             raise _UsageError(
-                f"{run_dir} holds one run directory per domain: "
-                f"{', '.join(str(p) for p in below)}; pass one of them"
+                f"{run_dir} has no results.json but holds run directories of torchcbl "
+                f"reproduce: {', '.join(str(p) for p in below)}; pass one of them"
             )
         raise _UsageError(
             f"{results_path} does not exist; expected a run directory written by "
@@ -622,6 +622,23 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     for path in written:
         print(path)
     return 0
+
+
+def _reproduction_run_dirs(folder: Path) -> list[Path]:
+    """The run directories of torchcbl reproduce directly below ``folder`` (its --out): those
+    whose results.json names a domain. A benchmark's results.json, or any other, is not one."""
+    found: list[Path] = []
+    if not folder.is_dir():
+        return found
+    for path in sorted(folder.glob("*/results.json")):
+        try:
+            results = json.loads(path.read_text())
+        except (OSError, ValueError):  # unreadable, not UTF-8 or not JSON: not a run's
+            continue
+        domain = results.get("domain") if isinstance(results, dict) else None
+        if isinstance(domain, str) and domain in _DOMAINS:
+            found.append(path.parent)
+    return found
 
 
 def _check_figures_writable(run_dir: Path) -> None:
@@ -1484,7 +1501,8 @@ def _parser() -> argparse.ArgumentParser:
         help="teach an agent yourself from the terminal",
         description="You are the teacher: the agent shows you its situation and asks for an "
         "action (one key) whenever it is unsure; every demonstration is saved to --run-dir. "
-        "q or Ctrl-C stops the session, at a request or while the agent drives on its own; "
+        "q stops the session at a request or, on a terminal, while the agent drives on its "
+        "own (after the step under way); Ctrl-C stops it at once; "
         "--resume goes on from where it stopped.",
     )
     p.add_argument("domain", choices=list(_DOMAINS), help="which agent: corridor or driving")

@@ -10,7 +10,7 @@ A :class:`CorrectionRecord` is a label that arrives after its step was executed 
 overriding an autonomous action, Confidence-Based Autonomy's corrective demonstration): it
 refers to that earlier step's observation, the state at decision time.
 
-Records are built only by the loop, :func:`torchcbl.teaching.evaluate_policy` and the session
+Records are built only by the loop, :func:`torchcbl.policy.evaluate_policy` and the session
 store; a record that breaks an invariant raises :class:`ValueError` at creation, so nothing
 inconsistent can reach the step log.
 """
@@ -107,7 +107,7 @@ class StepRecord:
         observation: the observation the decision was made on, shape [D], finite floats.
         model_action: the model's classification (Eq. 7); -1 when there was no fitted model.
         confidence: ``exp(-distance**2 / 2)`` in [0, 1]; None when the policy gave no
-            classification (a plain callable in :func:`~torchcbl.teaching.evaluate_policy`).
+            classification (a plain callable in :func:`~torchcbl.policy.evaluate_policy`).
         distance: Mahalanobis distance, in standard deviations, of the observation to the most
             likely component of the chosen mixture; ``inf`` before any model; None as above.
         posterior: p(a | o) for every action, shape [A]; None as above.

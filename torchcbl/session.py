@@ -138,9 +138,10 @@ Determinism. A refit is a deterministic function of the labels, the model's seed
 intra-op thread count (and the BLAS / CPU, see docs/reproduction.md), and of the model's device:
 the same labels with the same seed and the same thread count give bit-identical models, and so
 bit-identical step logs for the same env and teacher. With another thread count, torch's
-reductions are summed in another order: fits differ in the last bits (measured: 1e-14 on a
-3000-point 6-D fit; bit-identical on 300 points), which can flip a confidence decision near its
-threshold, after which the two step logs diverge. The count that matters is the one the EM ran
+reductions are summed in another order: fits can differ in the last bits (measured: 1.8e-15 in
+the candidates' means of a 3000-point 6-D fit, 2026-11-25, 8a2a7dd; bit-identical on 300
+points, 2026-11-23; docs/architecture.md, "The EM"), which can flip a confidence decision near
+its threshold, after which the two step logs diverge. The count that matters is the one the EM ran
 on: with more than one intra-op thread, a fit of at least
 :data:`torchcbl.gmm.SINGLE_THREAD_WORK` uses them only while the machine has a core to spare
 (the thread policy, docs/architecture.md), so such a fit's last bits also depend on the

@@ -19,7 +19,9 @@ As a correcting teacher (:meth:`HumanTiming.correct`, asked at every autonomous 
 HG-DAgger) the person corrects with a key press that differs from the learner's action: where
 the learner does what the person wants nothing is pressed, and while a press is pending, or
 after a lost one, there is none (until 2026-11-27 the default action answered then counted as a
-correction, so a learner that did what the person wanted was "corrected" to the default).
+correction, so a learner that did what the person wanted was "corrected" to the default). Where
+the person wants the default action and the learner did another, there is no key to wait for:
+the correction is the default, at once.
 
 Everything is drawn from one seeded ``numpy`` generator, so the same seed and the same inputs give
 the same answers. Consecutive calls are recognised through ``info["t"]`` (the env's step
