@@ -402,7 +402,7 @@ def _lloyd(
             break
         labels = new_labels
         flat = (labels + base).view(-1)  # global component id of each (slot, point)
-        # sums per (slot, component): one index_add over the points, in point order
+        # sums per (slot, component): one index_sum over the points, in point order
         sums = index_sum(acc.zero_(), 1, flat, weights).T.view(g, c, k, d + 1)
         counts = sums[..., d:]
         centers = torch.where(counts > 0, sums[..., :d] / counts.clamp_min(1.0), centers)
@@ -702,15 +702,15 @@ def run_em(
     M-step makes the first parameters) or, when resp0 is None, from given parameters
     ``params0`` (a warm start, :func:`params_of`).
 
-    Mirrors sklearn: each iteration is an E-step (log-likelihood of the current parameters)
-    then an M-step; a slot stops when |mean log-likelihood change| < tol. The iterations run
-    on a packed layout (:func:`_pack`): the real components of running slots side by side,
-    with per-candidate sums done by index_add over rows. A stopped slot's parameters are saved
-    at once; it stays in the batch, unwatched, until the running components fall below
-    ``_REPACK`` of the packed ones and the stopped ones hold ``_REPACK_MIN`` (component, point)
-    pairs (a re-packing costs about as much as an iteration), and then the batch is re-packed
-    without it, so late iterations cost only what still runs. The returned log-likelihood is
-    that of the final parameters (one extra E-step), as sklearn's ``score``.
+    Mirrors sklearn: each iteration is an E-step (log-likelihood of the current parameters) then an
+    M-step; a slot stops when |mean log-likelihood change| < tol. The iterations run on a packed
+    layout (:func:`_pack`): the real components of running slots side by side, with per-candidate
+    sums done by index_sum over rows (index_add_ on the CPU). A stopped slot's parameters are saved
+    at once; it stays in the batch, unwatched, until the running components fall below ``_REPACK``
+    of the packed ones and the stopped ones hold ``_REPACK_MIN`` (component, point) pairs (a
+    re-packing costs about as much as an iteration), and then the batch is re-packed without it, so
+    late iterations cost only what still runs. The returned log-likelihood is that of the final
+    parameters (one extra E-step), as sklearn's ``score``.
     """
     g0, n, _ = x.shape
     c0, k0 = cmask.shape[1:]

@@ -412,7 +412,7 @@ class GaussianMixtureSet(nn.Module):
         criterion: "aic" (free-parameter AIC, default), "bic", or "aic_paper" (Eq. 5 literally).
         var_floor: relative variance floor, see the module docstring (>= 0).
         tol: EM stops when the mean per-point log-likelihood changes less than this (nats).
-            Default 1e-3, scikit-learn's default; it keeps a refit of 1000 points (3 actions,
+            Default 1e-3, scikit-learn's default; it keeps a refit of 999 points (3 actions,
             4-D, k <= 15) under 0.1 s. Use 1e-4 or less for tighter fits.
         max_iter: EM iteration cap per candidate.
         seed: seeds the k-means++ initialisation, an int in [0, 2**64); the same seed and data
