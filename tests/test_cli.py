@@ -27,7 +27,7 @@ from torchcbl.session import load_records
 BIN = Path(sys.executable).parent / "torchcbl"
 
 
-@pytest.mark.parametrize("command", ["reproduce", "evaluate", "replay", "plot", "teach"])
+@pytest.mark.parametrize("command", ["reproduce", "evaluate", "replay", "plot", "show", "teach"])
 def test_every_command_explains_itself(command, capsys):
     with pytest.raises(SystemExit) as exc:
         main([command, "--help"])
@@ -133,6 +133,7 @@ def test_the_readme_command_lines_use_the_names_of_the_help(capsys):
         "evaluate",
         "replay",
         "plot",
+        "show",
         "teach",
         "benchmark",
     }
@@ -150,14 +151,14 @@ def test_the_readme_command_lines_use_the_names_of_the_help(capsys):
 def test_each_readme_placeholder_means_what_the_readme_says(capsys):
     """The README defines RUN_DIR as a run directory of torchcbl reproduce and SESSION_DIR as a
     teaching session. replay's directory is a driving teaching session (a reproduce run
-    directory is refused), so it is a SESSION_DIR, in the block and in replay's --help; only
-    plot takes a RUN_DIR."""
+    directory is refused), so it is a SESSION_DIR, in the block and in replay's --help; show
+    takes a session (or a folder of them, DIR); only plot takes a RUN_DIR."""
     readme = (Path(__file__).parents[1] / "README.md").read_text()
     assert "`RUN_DIR` is a run directory of\n`torchcbl reproduce`" in readme
     assert "`SESSION_DIR` is a teaching session" in readme
     lines = {ln.split()[1]: ln for ln in _readme_command_lines()}
     assert {c for c, ln in lines.items() if "RUN_DIR" in ln} == {"plot"}
-    assert {c for c, ln in lines.items() if "SESSION_DIR" in ln} == {"evaluate", "replay"}
+    assert {c for c, ln in lines.items() if "SESSION_DIR" in ln} == {"evaluate", "replay", "show"}
     with pytest.raises(SystemExit):
         main(["replay", "--help"])
     help_text = capsys.readouterr().out

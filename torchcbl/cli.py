@@ -11,6 +11,7 @@ Commands (the options in full: README.md's command block, which a test holds to 
     torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S]
     torchcbl replay EPISODES.json|SESSION_DIR [--list] [--episode N | --label TEXT] [--gif OUT] ...
     torchcbl plot RUN_DIR
+    torchcbl show SESSION_DIR|DIR [--json]
     torchcbl teach corridor|driving [--run-dir DIR] [--resume] [--seed S] [--steps N] ...
     torchcbl benchmark [--quick] [--strategies S,..] [--envs E,..] [--seeds N] [--ray] ...
 """
@@ -428,6 +429,52 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         raise _UsageError(_one_line(exc)) from None
     print(json.dumps(report, indent=2))
     return 0
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from torchcbl.session import (
+        CONFIG_NAME,
+        CorruptSessionError,
+        IncompatibleRunDirError,
+        _sessions_below,
+        describe,
+    )
+
+    path = Path(args.run_dir)
+    if path.is_dir() and not (path / CONFIG_NAME).exists() and os.access(path, os.R_OK | os.X_OK):
+        below = _sessions_below(path, limit=None, depth=_SHOW_DEPTH)
+        if not below:
+            raise _UsageError(
+                f"{path} holds no teaching session (no {CONFIG_NAME} in it, nor in a session "
+                f"directory up to {_SHOW_DEPTH} levels below); {_SESSION_HINT}"
+            )
+        entries: list[dict[str, Any]] = []
+        lines = [f"{path} holds {len(below)} teaching session{'' if len(below) == 1 else 's'}:"]
+        for session in below:
+            try:
+                summary = describe(session)
+            except (IncompatibleRunDirError, CorruptSessionError) as exc:
+                entries.append({"run_dir": str(session), "error": _one_line(exc)})
+                lines.append(f"{session}: cannot be read: {_one_line(exc)}")
+            else:
+                entries.append(summary.to_dict())
+                lines.append(summary.line())
+        if args.json:
+            print(json.dumps({"folder": str(path), "sessions": entries}, indent=2))
+        else:
+            print("\n".join(lines))
+        return 0
+    try:
+        summary = describe(path)
+    except IncompatibleRunDirError as exc:  # not a session, or one this user may not read
+        raise _UsageError(_one_line(exc)) from None
+    print(json.dumps(summary.to_dict(), indent=2) if args.json else summary.text())
+    return 0
+
+
+# How deep `torchcbl show DIR` looks for sessions: runs/reproduce/driving/seed_0/sessions/arm_a
+# from runs/ is 5 levels down
+_SHOW_DEPTH = 5
 
 
 def _load_episodes(path: Path) -> list[Any]:
@@ -1495,6 +1542,34 @@ def _parser() -> argparse.ArgumentParser:
         "runs/reproduce/corridor",
     )
     p.set_defaults(func=_cmd_plot)
+
+    p = sub.add_parser(
+        "show",
+        help="say what a teaching session directory holds (or list the sessions in a folder)",
+        description="Print what a teaching session holds, read-only (safe while its writer "
+        "runs, and on a read-only copy): its env, strategy and model, steps, episodes, labels "
+        "(demonstrations, corrections), requests (steps the teacher was asked) and autonomous "
+        "steps, requests per episode, the newest checkpoint, its writers (torch and numpy "
+        "versions, threads, device) and whether a writer holds it now or was killed. Given a "
+        "folder that holds sessions (a reproduction's run directory, a benchmark's OUT/sessions), "
+        "one line per session.",
+    )
+    p.add_argument(
+        "run_dir",
+        metavar="SESSION_DIR|DIR",
+        help="a teaching session directory (holding config.json), e.g. "
+        "runs/reproduce/corridor/sessions/seed0, the --run-dir of torchcbl teach or a "
+        "benchmark's OUT/sessions/<key>; or a folder holding sessions up to 5 levels below, "
+        "each listed in one line",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object instead (the fields of torchcbl.session.SessionSummary; "
+        'for a folder {"folder": ..., "sessions": [...]}, a session that cannot be read as '
+        '{"run_dir": ..., "error": ...})',
+    )
+    p.set_defaults(func=_cmd_show)
 
     p = sub.add_parser(
         "teach",

@@ -91,7 +91,8 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   journal and in memory, and the next commit retries them, so a session goes on once space is
   freed. A checkpoint that cannot be written is refitted from the log when needed; a new
   session's starting model (checkpoint 0) that cannot be written leaves no session.
-- Readers without write access. :func:`load_records`, :func:`load_model` etc. open the log with
+- Readers without write access. :func:`load_records`, :func:`load_model`, :func:`describe`
+  (what a session holds, ``torchcbl show``) etc. open the log with
   SQLite's ``immutable=1`` (a cleanly closed session: no ``-wal`` file), and then never write,
   lock or create a file, so a read-only mount works; or, while a writer runs or after one was
   killed (a ``-wal`` file is there), with ``mode=ro``, under which SQLite itself takes its
@@ -176,7 +177,7 @@ import threading
 import time
 import warnings
 import zlib
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -201,7 +202,9 @@ __all__ = [
     "CorruptSessionError",
     "IncompatibleRunDirError",
     "SessionLockedError",
+    "SessionSummary",
     "SessionWriteError",
+    "describe",
     "latest_checkpoint",
     "load_config",
     "load_corrections",
@@ -537,16 +540,16 @@ def _config_problem(config: dict[str, Any]) -> str | None:
     return None
 
 
-def _sessions_below(path: Path, limit: int = 5) -> list[Path]:
-    """Teaching session directories one to three levels below ``path`` (at most ``limit``),
-    as a reproduction's run directory holds them (``sessions/seed<k>``,
-    ``seed_<k>/sessions/arm_a``)."""
+def _sessions_below(path: Path, limit: int | None = 5, depth: int = 3) -> list[Path]:
+    """Teaching session directories one to ``depth`` levels below ``path`` (at most
+    ``limit``; None: all), shallower first, as a reproduction's run directory holds them
+    (``sessions/seed<k>``, ``seed_<k>/sessions/arm_a``) and a benchmark's (``sessions/<key>``)."""
     found: list[Path] = []
-    for pattern in ("*/" + CONFIG_NAME, "*/*/" + CONFIG_NAME, "*/*/*/" + CONFIG_NAME):
-        for config in sorted(path.glob(pattern)):
+    for level in range(1, depth + 1):
+        for config in sorted(path.glob("*/" * level + CONFIG_NAME)):
             if (config.parent / LOG_NAME).exists():
                 found.append(config.parent)
-                if len(found) >= limit:
+                if limit is not None and len(found) >= limit:
                     return found
     return found
 
@@ -2305,6 +2308,378 @@ def load_policy(run_dir: str | os.PathLike[str]) -> GreedyPolicy:
             "the session), or use load_model for the unfitted model"
         )
     return GreedyPolicy(model)
+
+
+#: Steps per block of :attr:`SessionSummary.requests_per_block`.
+SUMMARY_BLOCK_STEPS = 100
+
+
+@dataclass(frozen=True)
+class SessionSummary:
+    """What a teaching session directory holds, as :func:`describe` read it.
+
+    Counts are numbers of steps, episodes or labels of this session (resumes included); a
+    label is a demonstration (a step on which the teacher was asked, ``teacher_action`` set)
+    or a correction (a label for an earlier, autonomous step). Episode and block tuples are
+    indexed by episode number (from 0) and by block of :attr:`block_steps` steps.
+
+    Attributes:
+        run_dir: the session directory, as given.
+        format: the log format, ``"torchcbl.session/1"`` .. ``"/3"``.
+        env_id: the gymnasium id the env was made with (None: made directly).
+        env_kwargs: what ``gymnasium.make`` was given ({} when none).
+        n_features, n_actions: the observation's size D and the number of actions A.
+        seed: the session seed.
+        strategy: the strategy's config as stored (``"type"``, its arguments, ``"relabel"``,
+            ``"rule"``; a strategy of one's own: ``"custom": true`` and, where it keeps its
+            parent's ``to_config``, the parent's dict under ``"inherited"``).
+        model_class, model_args: the model's class name and constructor arguments.
+        starts_fitted: the session started from a fitted model.
+        n_prior: prior demonstrations the session started from (0: none); not labels of it.
+        n_steps, n_episodes: steps logged and episodes they belong to.
+        n_episodes_ended: episodes that ended (terminated or truncated); the last one may
+            still be under way.
+        n_labels: demonstrations + corrections.
+        n_demonstrations, n_corrections: the two kinds of label.
+        n_requests: steps on which the teacher was asked (each gave a demonstration).
+        n_requests_confident: of those, the ones the strategy chose to ask on (phase
+            ``"confident"``); the rest were asked by design (``"noninteractive"``).
+        n_autonomous: steps on which the teacher was not asked and the model's action ran.
+        n_interrupted: steps cut short (``info["torchcbl_interrupted"]``: a Ctrl-C in the
+            env's step, or a writer killed between a demonstration and its outcome).
+        steps_per_episode, requests_per_episode: steps and requests of episode 0, 1, ...
+        block_steps: the block size of ``requests_per_block``, in steps.
+        requests_per_block: requests in steps 0 .. block_steps - 1, then the next block, ...
+        last_checkpoint: labels the newest checkpoint's model was fitted on (None: none).
+        writers: one dict per writer (start or resume) from ``writers.jsonl``: first_step,
+            torch_num_threads, torch_num_interop_threads, torch_version, numpy_version,
+            model_device, pid, started_utc (what that writer's torchcbl recorded).
+        last_writer: ``writer.lock``'s note of its last holder ("process PID on HOST"),
+            None without one; it stays after that writer stops.
+        writer_running: whether a process holds ``writer.lock`` now, as this machine's
+            ``/proc/locks`` shows (None where it cannot be told: no ``/proc/locks``); a writer
+            on another machine of a shared file system is not seen.
+        state: ``"running"`` (a writer holds the lock), ``"closed"`` (the last writer closed
+            the session: nothing left uncommitted), ``"killed"`` (no writer holds the lock and
+            the last one left ``steps.journal`` lines or ``steps.sqlite-wal`` behind: killed,
+            or a reader held the log as it closed; the readers see every logged step and a
+            resume takes it on), or ``"running or killed"`` (such files are there and
+            ``writer_running`` is None).
+        notes: what the readers warned of (steps missing from the log, fewer steps than
+            ``writer.lock`` says were committed) and lines of ``writers.jsonl`` that could not
+            be read.
+    """
+
+    run_dir: str
+    format: str
+    env_id: str | None
+    env_kwargs: dict[str, Any]
+    n_features: int
+    n_actions: int
+    seed: int
+    strategy: dict[str, Any]
+    model_class: str
+    model_args: dict[str, Any]
+    starts_fitted: bool
+    n_prior: int
+    n_steps: int
+    n_episodes: int
+    n_episodes_ended: int
+    n_labels: int
+    n_demonstrations: int
+    n_corrections: int
+    n_requests: int
+    n_requests_confident: int
+    n_autonomous: int
+    n_interrupted: int
+    steps_per_episode: tuple[int, ...]
+    requests_per_episode: tuple[int, ...]
+    block_steps: int
+    requests_per_block: tuple[int, ...]
+    last_checkpoint: int | None
+    writers: tuple[dict[str, Any], ...]
+    last_writer: str | None
+    writer_running: bool | None
+    state: str
+    notes: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every field, as JSON-able values (tuples as lists)."""
+        return json.loads(json.dumps(asdict(self)))
+
+    def text(self, *, ends: int = 5) -> str:
+        """The summary in a screenful of lines; per-episode (or, with fewer than 4 episodes,
+        per-block) requests for the first and last ``ends`` episodes or blocks."""
+        lines = [f"{self.run_dir}: teaching session ({self.format}), {self._state_text()}"]
+        env = f"{self.env_id or 'made directly (no gymnasium id)'}, "
+        env += f"{self.n_features} features, {self.n_actions} actions"
+        if self.env_kwargs:
+            env += f", kwargs {json.dumps(self.env_kwargs, sort_keys=True)}"
+        start = ", started from a fitted model" if self.starts_fitted else ""
+        lines += [
+            f"env:        {env}",
+            f"strategy:   {_config_text(self.strategy)}",
+            f"model:      {self.model_class}({_args_text(self.model_args)}){start}",
+            f"seed:       {self.seed}",
+            f"steps:      {self.n_steps} in {self.n_episodes} episode"
+            f"{'' if self.n_episodes == 1 else 's'} ({self.n_episodes_ended} ended); "
+            f"{self.n_autonomous} autonomous",
+            f"labels:     {self.n_labels} ({self.n_demonstrations} demonstrations, "
+            f"{self.n_corrections} corrections)"
+            + (f"; {self.n_prior} prior demonstrations before them" if self.n_prior else ""),
+            f"requests:   {self.n_requests} steps the teacher was asked "
+            f"({self.n_requests - self.n_requests_confident} by design, non-interactive; "
+            f"{self.n_requests_confident} by the strategy)",
+        ]
+        if self.n_episodes >= 4 or not self.requests_per_block:
+            lines.append(
+                "per episode (requests/steps): "
+                + _ends_text(
+                    [
+                        f"{i}: {r}/{s}"
+                        for i, (r, s) in enumerate(
+                            zip(self.requests_per_episode, self.steps_per_episode, strict=True)
+                        )
+                    ],
+                    ends,
+                )
+            )
+        else:
+            lines.append(
+                f"per block of {self.block_steps} steps (requests): "
+                + _ends_text(
+                    [
+                        f"{i * self.block_steps}-{(i + 1) * self.block_steps - 1}: {r}"
+                        for i, r in enumerate(self.requests_per_block)
+                    ],
+                    ends,
+                )
+            )
+        if self.n_interrupted:
+            lines.append(
+                f"interrupted: {self.n_interrupted} step{'' if self.n_interrupted == 1 else 's'}"
+                " cut short (a Ctrl-C in the env's step, or a writer killed before the outcome)"
+            )
+        lines.append(
+            "checkpoint: "
+            + (
+                "none"
+                if self.last_checkpoint is None
+                else f"the newest fitted on {self.last_checkpoint} labels"
+            )
+        )
+        if not self.writers:
+            lines.append("writers:    none recorded")
+        for i, w in enumerate(self.writers):
+            lines.append(
+                ("writers:    " if i == 0 else "            ")
+                + f"from step {w.get('first_step', '?')}: torch {w.get('torch_version', '?')}, "
+                f"numpy {w.get('numpy_version', '?')}, torch threads "
+                f"{w.get('torch_num_threads', '?')}, {w.get('model_device', '?')}, "
+                f"pid {w.get('pid', '?')}, "
+                f"{w.get('started_utc', '?')}"
+            )
+        lines += [f"note:       {note}" for note in self.notes]
+        return "\n".join(lines)
+
+    def line(self) -> str:
+        """The summary in one line (a folder's listing)."""
+        kind = str(self.strategy.get("type", "?"))
+        episodes = f"{self.n_episodes} episode{'' if self.n_episodes == 1 else 's'}"
+        return (
+            f"{self.run_dir}: {self.state}, {self.env_id or 'env made directly'}, {kind}, "
+            f"{self.n_steps} steps, {episodes}, {self.n_labels} labels "
+            f"({self.n_requests} requests, {self.n_corrections} corrections)"
+        )
+
+    def _state_text(self) -> str:
+        who = f" ({self.last_writer})" if self.last_writer else ""
+        return {
+            "running": f"a writer holds it now{who}",
+            "closed": f"closed by its last writer{who}",
+            "killed": f"its last writer{who} stopped without closing it (killed; a resume "
+            "takes it on)",
+        }.get(self.state, f"{self.state}{who}: /proc/locks cannot tell whether a writer runs")
+
+
+def _args_text(args: dict[str, Any]) -> str:
+    return ", ".join(
+        f"{k}={_config_text(v) if isinstance(v, dict) else json.dumps(v)}" for k, v in args.items()
+    )
+
+
+def _config_text(config: dict[str, Any]) -> str:
+    """A stored ``to_config`` dict as ``Type(key=value, ...)``, nested dicts alike."""
+    rest = {k: v for k, v in config.items() if k != "type"}
+    return f"{config.get('type', '?')}({_args_text(rest)})"
+
+
+def _ends_text(items: list[str], ends: int) -> str:
+    if len(items) <= 2 * ends + 1:
+        return ", ".join(items) or "none"
+    return ", ".join(items[:ends]) + ", ..., " + ", ".join(items[-ends:])
+
+
+def _read_writers(run_dir: Path) -> tuple[list[dict[str, Any]], list[str]]:
+    """The writers of ``writers.jsonl`` and notes of what could not be read of it: the file,
+    or lines that are not JSON objects (a line torn by a kill mid-append is left out without
+    a note)."""
+    try:
+        data = (run_dir / WRITERS_NAME).read_bytes()
+    except FileNotFoundError:
+        return [], []
+    except OSError as exc:  # e.g. another user's file this user may not read
+        return [], [f"{run_dir / WRITERS_NAME} cannot be read ({exc.strerror or exc})"]
+    writers, bad = [], []
+    for number, line in enumerate(data.split(b"\n")[:-1], 1):  # after the last \n: torn
+        try:
+            entry = json.loads(line)
+        except (ValueError, UnicodeDecodeError):
+            entry = None
+        if isinstance(entry, dict):
+            writers.append(entry)
+        else:
+            bad.append(number)
+    notes = [f"{run_dir / WRITERS_NAME}: lines {bad} are not a writer's record"] if bad else []
+    return writers, notes
+
+
+def _lock_held(run_dir: Path) -> bool | None:
+    """Whether a process holds an flock on ``writer.lock`` now, read from ``/proc/locks``
+    (Linux) without opening, locking or touching the file (a reader's lock, even for an
+    instant, could turn a writer starting then away); None where it cannot be told."""
+    path = run_dir / LOCK_NAME
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        return False
+    except OSError:
+        return None
+    try:
+        table = Path("/proc/locks").read_text()
+    except OSError:
+        return None
+    holder = None  # writer.lock's note of its holder, when on this machine
+    try:
+        m = re.match(rb"process (\d+) on (\S+)\n", path.read_bytes())
+        if m and m.group(2).decode(errors="replace") == socket.gethostname():
+            holder = m.group(1).decode()
+    except OSError:
+        pass
+    for entry in table.splitlines():
+        fields = entry.split()
+        if "->" in fields or len(fields) < 6 or fields[1] != "FLOCK":
+            continue  # a waiter's line, or a lock of another kind
+        try:
+            major, minor, inode = fields[5].split(":")
+            device, inode_number = (int(major, 16), int(minor, 16)), int(inode)
+        except ValueError:
+            continue
+        if inode_number != st.st_ino:
+            continue
+        # the device as stat gives it, or (an overlay file system reports another device
+        # than the lock's) the holder writer.lock names
+        if device == (os.major(st.st_dev), os.minor(st.st_dev)) or fields[4] == holder:
+            return True
+    return False
+
+
+def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
+    """What a teaching session directory holds: its env, strategy and model, its counts of
+    steps, episodes, labels and requests, its checkpoints, its writers and whether one runs.
+
+    Read with the session's own readers (:func:`load_config` and the log's, as
+    :func:`load_records` reads it), so it is safe while a writer runs and writes nothing: the
+    directory may be read-only or another user's (where a writer runs or was killed, SQLite
+    may create its ``-shm`` index, as for every reader: the module docstring). Whether a
+    writer holds the session is read from ``/proc/locks``, never by taking its lock.
+    ``print(describe(run_dir).text())`` shows it in a screenful; ``torchcbl show SESSION_DIR``
+    does so at the command line.
+
+    Returns:
+        A :class:`SessionSummary`. What the readers would warn of (steps missing from the
+        log, fewer than ``writer.lock`` says were committed) is in its ``notes``, not warned.
+
+    Raises:
+        IncompatibleRunDirError: ``run_dir`` is not a session directory (the message names the
+            sessions below it, if any), or a file of it may not be read.
+        CorruptSessionError: a file of the session is damaged or missing (as
+            :func:`load_records`).
+    """
+    run = Path(run_dir)
+    config = load_config(run)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        records, corrections = _read_log(run)
+    notes = [" ".join(str(w.message).split()) for w in caught]
+    writers, writer_notes = _read_writers(run)
+    running = _lock_held(run)
+    n_episodes = max((r.episode for r in records), default=-1) + 1
+    steps = [0] * n_episodes
+    asked = [0] * n_episodes
+    last_step = max((r.step for r in records), default=-1)
+    blocks = [0] * (last_step // SUMMARY_BLOCK_STEPS + 1 if records else 0)
+    for r in records:
+        steps[r.episode] += 1
+        if r.teacher_action is not None:
+            asked[r.episode] += 1
+            blocks[r.step // SUMMARY_BLOCK_STEPS] += 1
+    n_corrections = len(_corrections_of(records, corrections))
+    n_demonstrations = sum(asked)
+    checkpoint = latest_checkpoint(run)
+    left = (run / LOG_NAME).with_name(LOG_NAME + "-wal").exists() or _unborn(run)
+    try:
+        left = left or (run / JOURNAL_NAME).stat().st_size > 0
+    except FileNotFoundError:
+        pass
+    if running:
+        state = "running"
+    elif not left:
+        state = "closed"
+    else:
+        state = "killed" if running is False else "running or killed"
+    try:
+        m = re.match(rb"process \d+ on [^\n]*", (run / LOCK_NAME).read_bytes())
+    except OSError:
+        m = None
+    lock_note = m.group(0).decode(errors="replace") if m else None
+    prior = config.get("prior")
+    return SessionSummary(
+        run_dir=str(run_dir),
+        format=str(config["format"]),
+        env_id=config["env"].get("id"),
+        env_kwargs=dict(config["env"].get("kwargs") or {}),
+        n_features=int(config["env"]["n_features"]),
+        n_actions=int(config["env"]["n_actions"]),
+        seed=int(config["seed"]),
+        strategy=stored_strategy(config),
+        model_class=str(config["model"].get("class")),
+        model_args=dict(config["model"]["args"]),
+        starts_fitted=config.get("starts_fitted") is True,
+        n_prior=int(prior["n_demonstrations"]) if isinstance(prior, dict) else 0,
+        n_steps=len(records),
+        n_episodes=n_episodes,
+        n_episodes_ended=sum(1 for r in records if r.terminated or r.truncated),
+        n_labels=n_demonstrations + n_corrections,
+        n_demonstrations=n_demonstrations,
+        n_corrections=n_corrections,
+        n_requests=n_demonstrations,
+        n_requests_confident=sum(
+            1 for r in records if r.teacher_action is not None and r.phase == "confident"
+        ),
+        n_autonomous=sum(1 for r in records if r.autonomous),
+        n_interrupted=sum(1 for r in records if r.info.get("torchcbl_interrupted")),
+        steps_per_episode=tuple(steps),
+        requests_per_episode=tuple(asked),
+        block_steps=SUMMARY_BLOCK_STEPS,
+        requests_per_block=tuple(blocks),
+        last_checkpoint=None if checkpoint is None else checkpoint[0],
+        writers=tuple(writers),
+        last_writer=lock_note,
+        writer_running=running,
+        state=state,
+        notes=tuple(notes + writer_notes),
+    )
 
 
 def resume_problems(

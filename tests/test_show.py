@@ -1,0 +1,298 @@
+"""`torchcbl show` and torchcbl.session.describe: what a session directory holds, read-only."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import shutil
+from collections import Counter
+from pathlib import Path
+
+import gymnasium as gym
+import pytest
+from _toy_envs import oracle, overlap_world, rare_regions_world
+
+from torchcbl import ConfidentTeacher, TeachingConfig
+from torchcbl.cli import main
+from torchcbl.session import (
+    SessionSummary,
+    describe,
+    load_config,
+    load_corrections,
+    load_labels,
+    load_records,
+)
+from torchcbl.strategies import correcting
+from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+CUT_AT = 37  # the env call a Ctrl-C lands in: step 36 is logged as interrupted
+
+
+class _CtrlCAt(gym.Wrapper):
+    """A Ctrl-C inside the env's ``at``-th step."""
+
+    def __init__(self, env: gym.Env, at: int) -> None:
+        super().__init__(env)
+        self.at, self.calls = at, 0
+
+    def step(self, action: int):
+        self.calls += 1
+        if self.calls == self.at:
+            raise KeyboardInterrupt
+        return self.env.step(action)
+
+
+@pytest.fixture(scope="module")
+def taught(tmp_path_factory) -> Path:
+    """A CBA session with corrections, one step cut by a Ctrl-C, and a second writer (resume):
+    150 steps of 1-D episodes of 10 steps."""
+    run = tmp_path_factory.mktemp("show") / "run"
+    world = overlap_world(episode_length=10)
+    ct = ConfidentTeacher(
+        _CtrlCAt(world, CUT_AT),
+        correcting(oracle(world)),
+        strategy=ConfidenceBasedAutonomy(),
+        config=TeachingConfig(max_new=3, accuracy_window=10),
+        run_dir=run,
+        seed=0,
+        progress=False,
+    )
+    with pytest.raises(KeyboardInterrupt):
+        ct.run(max_steps=80)
+    ct.close()
+    world = overlap_world(episode_length=10)
+    ct = ConfidentTeacher.resume(run, world, correcting(oracle(world)), progress=False)
+    ct.run(max_steps=150)
+    ct.close()
+    return run
+
+
+def _small_session(run: Path, steps: int = 20) -> None:
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env, oracle(env), config=TeachingConfig(max_new=3), run_dir=run, seed=0, progress=False
+    )
+    ct.run(max_steps=steps)
+    ct.close()
+
+
+def _files_of(run: Path) -> dict[str, tuple[int, int, str]]:
+    """{relative path: (mode, mtime_ns, sha256)} of every file and folder under ``run``."""
+    return {
+        str(p.relative_to(run)): (
+            p.stat().st_mode,
+            p.stat().st_mtime_ns,
+            hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "",
+        )
+        for p in sorted([run, *run.rglob("*")])
+    }
+
+
+def test_describe_counts_what_the_log_holds(taught):
+    records = load_records(taught)
+    corrections = load_corrections(taught)
+    _, labels = load_labels(taught)
+    s = describe(taught)
+    episodes = sorted({r.episode for r in records})
+    assert episodes == list(range(len(episodes)))
+    asked = Counter(r.episode for r in records if r.teacher_action is not None)
+    assert s.n_steps == len(records) == 150
+    assert s.n_episodes == len(episodes)
+    assert s.n_episodes_ended == sum(1 for r in records if r.terminated or r.truncated)
+    assert s.steps_per_episode == tuple(Counter(r.episode for r in records)[e] for e in episodes)
+    assert s.requests_per_episode == tuple(asked[e] for e in episodes)
+    assert s.n_requests == s.n_demonstrations == sum(asked.values())
+    assert s.n_requests_confident == sum(
+        1 for r in records if r.teacher_action is not None and r.phase == "confident"
+    )
+    assert 0 < s.n_requests_confident < s.n_requests  # both phases are in this session
+    assert s.n_corrections == len(corrections) > 0
+    assert s.n_labels == len(labels) == s.n_demonstrations + s.n_corrections
+    assert s.n_autonomous == sum(r.autonomous for r in records) > 0
+    assert s.n_interrupted == 1
+    assert records[CUT_AT - 1].info == {"torchcbl_interrupted": True}
+    assert s.block_steps == 100 and len(s.requests_per_block) == math.ceil(150 / 100)
+    assert s.requests_per_block[0] == sum(1 for r in records[:100] if r.teacher_action is not None)
+    assert sum(s.requests_per_block) == s.n_requests
+    checkpoints = [int(p.stem.split("-")[1]) for p in (taught / "checkpoints").glob("model-*.pt")]
+    assert s.last_checkpoint == max(checkpoints)
+    writers = [json.loads(ln) for ln in (taught / "writers.jsonl").read_text().splitlines()]
+    assert list(s.writers) == writers and [w["first_step"] for w in writers] == [0, CUT_AT]
+    config = load_config(taught)
+    assert s.format == config["format"] == "torchcbl.session/2"
+    assert s.strategy == config["strategy"] and s.strategy["type"] == "ConfidenceBasedAutonomy"
+    assert (s.model_class, s.model_args) == ("GaussianMixtureSet", config["model"]["args"])
+    assert (s.n_features, s.n_actions, s.seed, s.n_prior) == (1, 2, 0, 0)
+    assert s.env_id is None and s.env_kwargs == {}
+    assert (s.state, s.writer_running, s.notes) == ("closed", False, ())
+    assert s.last_writer is not None and s.last_writer.startswith("process ")
+
+
+def test_show_prints_the_summary_and_the_same_fields_as_json(taught, capsys):
+    s = describe(taught)
+    assert main(["show", str(taught)]) == 0
+    out = capsys.readouterr().out
+    assert len(out.splitlines()) < 25  # one screen
+    for text in (
+        "ConfidenceBasedAutonomy(",
+        f"{s.n_steps} in {s.n_episodes} episodes ({s.n_episodes_ended} ended); "
+        f"{s.n_autonomous} autonomous",
+        f"{s.n_labels} ({s.n_demonstrations} demonstrations, {s.n_corrections} corrections)",
+        f"{s.n_requests} steps the teacher was asked",
+        f"0: {s.requests_per_episode[0]}/{s.steps_per_episode[0]}, ",  # the first episodes
+        f"{s.n_episodes - 1}: {s.requests_per_episode[-1]}/{s.steps_per_episode[-1]}\n",
+        "interrupted: 1 step",
+        f"the newest fitted on {s.last_checkpoint} labels",
+        f"from step {CUT_AT}: torch ",
+        "closed by its last writer (process ",
+    ):
+        assert text in out, (text, out)
+    assert main(["show", str(taught), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown == s.to_dict()
+    assert set(shown) == set(SessionSummary.__dataclass_fields__)
+    assert shown["requests_per_episode"] == list(s.requests_per_episode)
+
+
+def test_show_reads_a_read_only_session_and_changes_nothing(taught, tmp_path, capsys):
+    """Closed, and killed with steps only in its journal: both read on a directory no one may
+    write, every file, mode and mtime left as it was."""
+    closed = tmp_path / "closed"
+    shutil.copytree(taught, closed)
+    killed = tmp_path / "killed"
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(max_new=3),
+        run_dir=killed,
+        seed=0,
+        progress=False,
+        commit_every=10**6,
+    )
+    for _ in range(25):
+        ct.step()  # into the journal only
+    _as_if_killed(ct)
+    for run in (closed, killed):
+        for p in run.rglob("*"):
+            p.chmod(0o444 if p.is_file() else 0o555)
+        run.chmod(0o555)
+    try:
+        before = {run: _files_of(run) for run in (closed, killed)}
+        assert main(["show", str(closed)]) == 0
+        assert "150 in " in capsys.readouterr().out
+        assert main(["show", str(killed), "--json"]) == 0
+        shown = json.loads(capsys.readouterr().out)
+        assert (shown["n_steps"], shown["state"]) == (25, "killed")
+        assert describe(closed).to_dict() == {**describe(taught).to_dict(), "run_dir": str(closed)}
+        assert {run: _files_of(run) for run in (closed, killed)} == before
+    finally:
+        for run in (closed, killed):
+            for p in [run, *run.rglob("*")]:
+                p.chmod(0o755 if p.is_dir() else 0o644)
+
+
+def _as_if_killed(ct: ConfidentTeacher) -> None:
+    """Leave the directory as a SIGKILL would: journal not committed, lock released (as
+    tests/test_session_faults.py's crash())."""
+    ct._store._release()
+    ct._store = None
+
+
+def test_show_says_whether_a_writer_holds_the_session_or_was_killed(tmp_path, capsys):
+    run = tmp_path / "run"
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(max_new=3),
+        run_dir=run,
+        seed=0,
+        progress=False,
+        commit_every=10**6,
+    )
+    for _ in range(25):
+        ct.step()
+    s = describe(run)
+    assert (s.state, s.writer_running, s.n_steps) == ("running", True, 25)
+    assert main(["show", str(run)]) == 0
+    assert "a writer holds it now (process " in capsys.readouterr().out
+    _as_if_killed(ct)
+    s = describe(run)
+    assert (s.state, s.writer_running, s.n_steps) == ("killed", False, 25)
+    assert main(["show", str(run)]) == 0
+    assert "stopped without closing it (killed" in capsys.readouterr().out
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    back.run(max_steps=30)
+    back.close()
+    s = describe(run)
+    assert (s.state, s.writer_running, s.n_steps, len(s.writers)) == ("closed", False, 30, 2)
+
+
+def test_show_of_a_folder_lists_the_sessions_below_it(tmp_path, capsys):
+    """A reproduction's layouts (corridor sessions/seed<k>; driving seed_<k>/sessions/arm_a, 4
+    levels below the reproduction's --out) and a benchmark's OUT/sessions/<key>, one line each;
+    a session that cannot be read is said so in its line."""
+    sessions = [
+        tmp_path / "corridor" / "sessions" / "seed0",
+        tmp_path / "driving" / "seed_0" / "sessions" / "arm_a",
+        tmp_path / "bench" / "sessions" / "0123abcd",
+    ]
+    for i, run in enumerate(sessions):
+        _small_session(run, steps=20 + i)
+    broken = tmp_path / "bench" / "sessions" / "broken"
+    shutil.copytree(sessions[2], broken)
+    (broken / "config.json").write_text("{not json")
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "config.json").write_text("{}")  # no steps.sqlite: not a session
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"{tmp_path} holds 4 teaching sessions:"
+    assert len(lines) == 5
+    for i, run in enumerate(sessions):
+        (line,) = [ln for ln in lines if ln.startswith(f"{run}: ")]
+        assert f", {20 + i} steps, " in line and "closed" in line, line
+    (line,) = [ln for ln in lines if ln.startswith(f"{broken}: ")]
+    assert "cannot be read" in line and "config.json" in line
+    assert main(["show", str(tmp_path), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    by_dir = {e["run_dir"]: e for e in shown["sessions"]}
+    assert set(by_dir) == {str(p) for p in [*sessions, broken]}
+    assert by_dir[str(sessions[1])] == describe(sessions[1]).to_dict()
+    assert "error" in by_dir[str(broken)]
+    assert main(["show", str(tmp_path / "driving")]) == 0
+    assert str(sessions[1]) in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("what", ["empty", "missing", "file"])
+def test_show_of_what_is_not_a_session_is_one_line_and_exit_2(tmp_path, capsys, what):
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    (folder / "results.json").write_text("{}")
+    path = {"empty": folder, "missing": tmp_path / "nope", "file": folder / "results.json"}[what]
+    assert main(["show", str(path)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    (line,) = captured.err.splitlines()
+    assert line.startswith("torchcbl show: error: ") and str(path) in line
+    assert "teaching session" in line
+
+
+def test_show_reads_a_format1_session(tmp_path):
+    from test_architecture import _downgrade_to_format1
+
+    run = tmp_path / "run"
+    _small_session(run, steps=30)
+    want = describe(run)
+    _downgrade_to_format1(run)
+    got = describe(run)
+    assert got.format == "torchcbl.session/1"
+    assert got.strategy == {
+        "type": "ConfidentExecution",
+        "rule": load_config(run)["rule"],
+        "relabel": False,
+    }
+    fields = ("n_steps", "n_labels", "n_requests", "n_autonomous", "requests_per_episode")
+    assert [getattr(got, f) for f in fields] == [getattr(want, f) for f in fields]
+    assert main(["show", str(run)]) == 0
