@@ -2318,10 +2318,12 @@ def resume_problems(
     env_kwargs: dict[str, Any] | None = None,
     env_max_episode_steps: int | None = None,
     env_inputs: dict[str, Any] | None = None,
+    model_class: str | None = None,
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
-    ``model_args`` / ``strategy`` None means "rebuilt from the directory"; of a strategy
+    ``model_args`` / ``strategy`` None means "rebuilt from the directory"; ``model_class``:
+    the given model's class name, compared with the one the session kept; of a strategy
     config with ``"custom": true`` (no ``to_config``, or a parent's) only the class name, the
     relabel flag, the parent's dict (``"inherited"``) and the rule are compared (a session
     stored before a subclass keeping its parent's ``to_config`` was custom holds the parent's
@@ -2385,21 +2387,23 @@ def resume_problems(
             k: (v, learning[1].get(k)) for k, v in learning[0].items() if learning[1].get(k) != v
         }
         problems.append(f"config (stored, given): {diff}; only the stop fields may change")
-    if model_args is not None and model_args != _with_default_args(stored["model"]["args"]):
-        kept = _with_default_args(stored["model"]["args"])
-        diff = {
-            k: (kept.get(k), model_args.get(k))
-            for k in sorted(set(kept) | set(model_args))
-            if kept.get(k) != model_args.get(k)
-        }
-        if "error" in model_args:  # the given model's arguments could not be read
-            problems.append(f"model: {model_args['error']}")
-        else:
+    if model_args is not None and "error" in model_args:  # its arguments could not be read
+        problems.append(f"model: {model_args['error']}")
+    elif model_args is not None:
+        kept_class = stored["model"].get("class", "GaussianMixtureSet")
+        if model_class is not None and model_class != kept_class:
             problems.append(
-                f"model args (stored, given): {diff}; build the model as the session did, "
-                f"{stored['model'].get('class', 'GaussianMixtureSet')}"
-                f"(**{stored['model']['args']}), or leave model= out"
+                f"model: the session's model is a {kept_class}, the given one a {model_class}; "
+                + _pass_model(stored)
             )
+        if model_args != _with_default_args(stored["model"]["args"]):
+            kept = _with_default_args(stored["model"]["args"])
+            diff = {
+                k: (kept.get(k), model_args.get(k))
+                for k in sorted(set(kept) | set(model_args))
+                if kept.get(k) != model_args.get(k)
+            }
+            problems.append(f"model args (stored, given): {diff}; " + _pass_model(stored))
     if strategy is not None:
         want = stored_strategy(stored)
         if strategy.get("custom") or want.get("custom"):
@@ -2411,6 +2415,17 @@ def resume_problems(
         elif strategy != want:
             problems.append(f"strategy: stored {want}, given {strategy}")
     return problems
+
+
+def _pass_model(stored: dict[str, Any]) -> str:
+    """What to pass for a session's model: its class, made with the arguments the session
+    kept (or, for the library's own class, nothing: the directory rebuilds it)."""
+    kept_class = stored["model"].get("class", "GaussianMixtureSet")
+    return (
+        f"pass model={kept_class}(...) made as the session made it, "
+        f"{kept_class}(**{stored['model']['args']})"
+        + (", or leave model= out" if kept_class == "GaussianMixtureSet" else "")
+    )
 
 
 def _comparable(config: dict[str, Any]) -> dict[str, Any]:

@@ -805,7 +805,8 @@ class ConfidentTeacher:
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
                 fields may not. ``model`` / ``rule`` / ``strategy``: optional; must match the
-                stored ones (a custom rule or strategy that cannot be rebuilt must be passed).
+                stored ones (a model: its class, by name, and its arguments; a custom rule or
+                strategy that cannot be rebuilt must be passed).
 
         Raises:
             TypeError: ``env`` is not an env (an env id: make it first with
@@ -856,6 +857,7 @@ class ConfidentTeacher:
             env_inputs=_env_inputs(env),
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
+            model_class=None if model is None else type(model).__name__,
             strategy=(
                 None
                 if given is None
