@@ -4,6 +4,7 @@ through the public API. The session keeps the model's class by its name."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 from _toy_envs import oracle, rare_regions_world
@@ -69,3 +70,58 @@ def test_a_resume_with_a_model_of_another_class_is_refused(tmp_path):
     msg = str(caught.value)
     assert "the session's model is a GaussianMixtureSet, the given one a MyGMM" in msg, msg
     assert "pass model=GaussianMixtureSet(...) made as the session made it" in msg, msg
+
+
+def test_a_session_of_a_subclass_is_read_with_the_model_passed(tmp_path):
+    """A session of MyGMM could not be read at all: resume without model=, load_model and
+    load_policy said only GaussianMixtureSet can be rebuilt from a run directory (not what to
+    do), and load_model / load_policy took no model. Each refusal now says to pass
+    model=MyGMM(...) made as the session made it; load_model and load_policy take it (a fresh
+    one, of the session's class and arguments, the session's state loaded into it) and give
+    the model and the policy the session had."""
+    from torchcbl.session import load_model, load_policy
+
+    run = tmp_path / "run"
+    ct = _teach(run)
+    told = "pass model=MyGMM(...) made as the session made it, MyGMM(**{"
+    for read in (_resume, load_model, load_policy):
+        with pytest.raises(IncompatibleRunDirError) as caught:
+            read(run)
+        assert "the session's model is a MyGMM" in str(caught.value), caught.value
+        assert told in str(caught.value), caught.value
+
+    model = MyGMM(3, 2, 4, seed=0)
+    assert load_model(run, model=model) is model
+    assert _same_state(model, ct.model)
+    at_8 = load_model(run, n_demonstrations=8, model=MyGMM(3, 2, 4, seed=0))
+    assert type(at_8) is MyGMM and at_8.n_points_.sum() == 8
+    policy = load_policy(run, model=MyGMM(3, 2, 4, seed=0))
+    x, _ = rare_regions_world().sample(50, np.random.default_rng(0))
+    assert [policy(o) for o in x] == [ct.policy(o) for o in x]
+
+
+def test_load_model_refuses_a_model_the_session_was_not_taught_with(tmp_path):
+    """The model given to load_model must be a fresh one of the session's class and
+    arguments: another class, other arguments or a fitted one are refused, saying what to
+    pass. For a session of the library's class the model given is loaded as the directory's
+    own rebuild is, and its config.json keeps the model entry it always had."""
+    from torchcbl.session import load_model
+
+    run = tmp_path / "run"
+    _teach(run)
+    with pytest.raises(IncompatibleRunDirError, match="a MyGMM, the given one a Gaussian"):
+        load_model(run, model=GaussianMixtureSet(3, 2, 4, seed=0))
+    with pytest.raises(IncompatibleRunDirError, match=r"\{'max_components': \(4, 5\)\}"):
+        load_model(run, model=MyGMM(3, 2, 5, seed=0))
+    fitted = load_model(run, model=MyGMM(3, 2, 4, seed=0))
+    with pytest.raises(ValueError, match="expected a fresh, unfitted MyGMM .* got a fitted"):
+        load_model(run, model=fitted)
+
+    plain = tmp_path / "plain"
+    _teach(plain, GaussianMixtureSet)
+    assert _same_state(
+        load_model(plain, model=GaussianMixtureSet(3, 2, 4, seed=0)), load_model(plain)
+    )
+    args = dict(n_actions=3, n_features=2, max_components=4, criterion="aic", var_floor=1e-3)
+    args.update(tol=1e-3, max_iter=200, seed=0, refit_growth=0.25)
+    assert load_config(plain)["model"] == {"class": "GaussianMixtureSet", "args": args}

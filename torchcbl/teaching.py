@@ -85,6 +85,7 @@ from torchcbl.session import (
     LabelDigest,
     SessionStore,
     _InterruptHold,
+    _model_args,
     _read_prior,
     build_model,
     label_sequence,
@@ -132,17 +133,6 @@ _NO_STOP = (
     "that succeed, autonomous_episodes_to_stop=10; the driving run after 650 demonstrations, "
     "max_demonstrations=650). Set at least one of {fields} in TeachingConfig or as run(...) "
     "arguments."
-)
-_MODEL_ARG_NAMES = (
-    "n_actions",
-    "n_features",
-    "max_components",
-    "criterion",
-    "var_floor",
-    "tol",
-    "max_iter",
-    "seed",
-    "refit_growth",
 )
 
 
@@ -268,19 +258,6 @@ class TeachingConfig:
             for f in dataclasses.fields(self)
             if f.name not in _STOP_SETTINGS
         }
-
-
-def _model_args(model: torch.nn.Module) -> dict[str, Any]:
-    args = getattr(model, "init_args", None)
-    if isinstance(args, dict):
-        return dict(args)
-    missing = [n for n in _MODEL_ARG_NAMES if not hasattr(model, n)]
-    if missing:
-        raise ValueError(
-            f"cannot record the constructor arguments of {type(model).__name__}: attributes "
-            f"{missing} are missing. Pass a torchcbl.GaussianMixtureSet as model."
-        )
-    return {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
 
 
 # every method the loop calls on a strategy (torchcbl.strategies' protocol)
