@@ -125,3 +125,30 @@ def test_load_model_refuses_a_model_the_session_was_not_taught_with(tmp_path):
     args = dict(n_actions=3, n_features=2, max_components=4, criterion="aic", var_floor=1e-3)
     args.update(tol=1e-3, max_iter=200, seed=0, refit_growth=0.25)
     assert load_config(plain)["model"] == {"class": "GaussianMixtureSet", "args": args}
+
+
+def test_the_command_line_says_to_read_a_session_of_a_subclass_in_python(tmp_path, capsys):
+    """torchcbl evaluate and teach --resume cannot make a user's model class; they printed the
+    library's Python advice (pass model=MyGMM(...)), which the command line takes no way to
+    follow. Each now says, in one line, to do it in Python, with the call to make."""
+    import gymnasium as gym
+
+    import corridor  # noqa: F401  (registers torchcbl/Corridor-v0)
+    from torchcbl.cli import main
+
+    run = tmp_path / "run"
+    env = gym.make("torchcbl/Corridor-v0")
+    model = MyGMM(4, 3, 4, seed=0)
+    ConfidentTeacher(env, lambda o, i: 0, model=model, run_dir=run, progress=False).run(
+        max_steps=3
+    ).close()
+    capsys.readouterr()
+    assert main(["evaluate", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert "model is a MyGMM" in err and "the command line cannot make" in err, err
+    assert f"torchcbl.load_policy({str(run)!r}, model=MyGMM(" in err, err
+    assert main(["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the command line cannot make" in err, err
+    assert f"torchcbl.ConfidentTeacher.resume({str(run)!r}, env, teacher, model=MyGMM(" in err
