@@ -152,3 +152,28 @@ def test_the_command_line_says_to_read_a_session_of_a_subclass_in_python(tmp_pat
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "the command line cannot make" in err, err
     assert f"torchcbl.ConfidentTeacher.resume({str(run)!r}, env, teacher, model=MyGMM(" in err
+
+
+class WithPrior(GaussianMixtureSet):
+    """A user's learner with state of its own beside the library's (a prior's weights)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.register_buffer("prior_weight_", torch.ones(self.n_actions, dtype=torch.float64))
+
+
+def test_a_fitted_model_of_a_subclass_with_state_of_its_own_resumes(tmp_path):
+    """Resume rebuilds the session's model, never taking the caller's fitted one: it first
+    cleared a fitted model with a fresh GaussianMixtureSet's state, which a subclass holding
+    state of its own refused (torch's bare RuntimeError, 'Missing key(s) in state_dict:
+    "prior_weight_"'). The library's state is cleared and the session's loaded, as for the
+    library's class."""
+    from torchcbl.session import load_model
+
+    run = tmp_path / "run"
+    ct = _teach(run, WithPrior)
+    fitted = load_model(run, model=WithPrior(3, 2, 4, seed=0))
+    assert fitted.is_fitted
+    back = _resume(run, model=fitted)
+    assert back.model is fitted and _same_state(back.model, ct.model)
+    back.close()

@@ -923,8 +923,10 @@ class ConfidentTeacher:
             # the model the session had is rebuilt from its directory (its checkpoint, else
             # a refit on its labels), never taken from the caller's fitted one: at 0 labels
             # without checkpoint 0 that one would decide where the session had no model
+            # (strict=False: a subclass's state of its own is its own, loaded from the
+            # checkpoint with the rest)
             fresh = GaussianMixtureSet(**_model_args(self.model))
-            self.model.load_state_dict(fresh.state_dict())
+            self.model.load_state_dict(fresh.state_dict(), strict=False)
         k = restore_model(
             self.run_dir,
             self.model,
