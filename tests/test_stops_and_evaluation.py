@@ -561,6 +561,53 @@ def test_a_ctrl_c_as_the_start_up_check_starts_leaves_no_process_behind(monkeypa
         mp.active_children()  # reaps what was left
 
 
+@pytest.mark.skipif(
+    not hasattr(signal, "pthread_kill") or not Path("/proc/self/fd").is_dir(),
+    reason="signals a thread (POSIX), lists open fds through /proc",
+)
+@pytest.mark.parametrize("how", ["exits-3", "ctrl-c"])
+def test_a_start_up_check_that_raises_leaves_no_pipe_open(monkeypatch, how):
+    """check_workers_start never closed its probe process: when it raised (the probe exited
+    with code 3, or a Ctrl-C came as it started), the probe's two pipe handles stayed open
+    for as long as the exception's traceback was kept (a notebook keeps the last one), as the
+    traceback's frame holds the probe. With the exception (and its traceback) kept, the
+    process has the descriptors it had before."""
+    import multiprocessing as mp
+    import threading
+    from multiprocessing.context import SpawnProcess
+
+    from torchcbl.evaluation import check_workers_start
+
+    real_start = SpawnProcess.start
+    pids = []
+
+    def start(proc):
+        if how == "exits-3":  # the probe fails, as one that cannot import the main module does
+            proc._target, proc._args = sys.exit, (3,)
+        real_start(proc)
+        pids.append(proc.pid)
+        if how == "ctrl-c":  # to this thread: its handler runs as the start-up's hold ends
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+
+    ctx = mp.get_context("spawn")
+    check_workers_start(ctx)  # once first: what opens once per process
+    monkeypatch.setattr(SpawnProcess, "start", start)
+    stops = RuntimeError if how == "exits-3" else KeyboardInterrupt
+    try:
+        before = sorted(os.listdir("/proc/self/fd"))
+        with pytest.raises(stops) as caught:
+            check_workers_start(ctx)
+        after = sorted(os.listdir("/proc/self/fd"))
+        assert caught.value.__traceback__ is not None  # kept, with the check's frame
+        if how == "exits-3":
+            assert "exited with code 3" in str(caught.value)
+        assert len(pids) == 1
+        assert [p for p in pids if exists(p)] == []
+        assert after == before
+    finally:
+        kill_left(pids)
+
+
 def _ctrl_c_handler_here() -> str:
     return repr(signal.getsignal(signal.SIGINT))
 

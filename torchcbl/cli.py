@@ -400,6 +400,21 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
                 else f"pass --domain {domain} or leave --domain out"
             )
         )
+    model = config["model"]
+    own = model.get("class", "GaussianMixtureSet")
+    if own != "GaussianMixtureSet":  # a user's class (a subclass): only Python can make it
+        made = f"model={own}(...)) made as the session made it, {own}(**{model.get('args')})"
+        raise _UsageError(
+            f"{session}'s model is a {own}, a class of its own (a run directory rebuilds "
+            "torchcbl's GaussianMixtureSet alone), which the command line cannot make; "
+            + (
+                f"resume it in Python, torchcbl.ConfidentTeacher.resume({str(session)!r}, env, "
+                f"teacher, {made}"
+                if teach
+                else f"evaluate it in Python, torchcbl.load_policy({str(session)!r}, {made}, "
+                "with torchcbl.evaluate_policy"
+            )
+        )
     return domain
 
 

@@ -290,11 +290,13 @@ def check_workers_start(context: Any = None) -> None:
         with _ctrl_c_held():  # a probe started is joined (or stopped) before a Ctrl-C acts
             probe.start()
         probe.join()
+        code = probe.exitcode
     finally:
         if probe.is_alive():  # a Ctrl-C as it started or during the join
             probe.terminate()
             probe.join()
-    code = probe.exitcode
+        if not probe.is_alive():  # its pipes closed now, not when a kept traceback goes
+            probe.close()
     if code == 0:
         return
     how = (

@@ -179,7 +179,7 @@ import warnings
 import zlib
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar, overload
 
 import numpy as np
 import torch
@@ -217,6 +217,9 @@ __all__ = [
     "repair_journal",
     "restore_model",
 ]
+
+# a model given to load_model, returned as itself
+_Model = TypeVar("_Model", bound=torch.nn.Module)
 
 FORMAT = "torchcbl.session/2"
 #: The format of a session that starts from prior demonstrations (``prior.npz``, its SHA-256
@@ -1922,6 +1925,35 @@ def latest_checkpoint(
     return best
 
 
+# the model's constructor arguments a session keeps (config.json's model.args)
+_MODEL_ARG_NAMES = (
+    "n_actions",
+    "n_features",
+    "max_components",
+    "criterion",
+    "var_floor",
+    "tol",
+    "max_iter",
+    "seed",
+    "refit_growth",
+)
+
+
+def _model_args(model: torch.nn.Module) -> dict[str, Any]:
+    """The constructor arguments of ``model`` a session keeps: its ``init_args`` dict if it
+    has one, else the attributes of GaussianMixtureSet's arguments."""
+    args = getattr(model, "init_args", None)
+    if isinstance(args, dict):
+        return dict(args)
+    missing = [n for n in _MODEL_ARG_NAMES if not hasattr(model, n)]
+    if missing:
+        raise ValueError(
+            f"cannot record the constructor arguments of {type(model).__name__}: attributes "
+            f"{missing} are missing. Pass a torchcbl.GaussianMixtureSet as model."
+        )
+    return {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
+
+
 def _with_default_args(args: dict[str, Any]) -> dict[str, Any]:
     """A stored session's model arguments, completed with the constructor's defaults for the
     arguments added since it was written (e.g. ``refit_growth``), so an older session resumes
@@ -1944,16 +1976,45 @@ _DEFAULTED = ("refit_growth",)
 
 
 def build_model(config: dict[str, Any]) -> GaussianMixtureSet:
-    """A fresh, unfitted model built from a session config's ``model`` entry."""
+    """A fresh, unfitted model built from a session config's ``model`` entry.
+
+    Raises:
+        IncompatibleRunDirError: the session's model is of another class than torchcbl's
+            GaussianMixtureSet (a user's subclass): the message says to pass it as ``model=``.
+    """
     from torchcbl.gmm import GaussianMixtureSet
 
     spec = config.get("model", {})
     if spec.get("class") != "GaussianMixtureSet":
         raise IncompatibleRunDirError(
-            f"the session's model class is {spec.get('class')!r}; only GaussianMixtureSet "
-            "can be rebuilt from a run directory."
+            f"the session's model is a {spec.get('class')}, a class other than torchcbl's "
+            "GaussianMixtureSet (the one a run directory can rebuild), so it is not rebuilt "
+            f"from the run directory: {_pass_model(config)} (a fresh one: the session's "
+            "state is loaded into it)"
         )
     return GaussianMixtureSet(**spec["args"])
+
+
+def _given_model(run_dir: str | os.PathLike[str], config: dict[str, Any], model: Any) -> None:
+    """Refuse a ``model=`` given to a reader that is not a fresh model of the session's
+    class and arguments."""
+    try:
+        args = _model_args(model)
+    except ValueError as exc:
+        args = {"error": str(exc)}
+    problems = _model_problems(config, type(model).__name__, args)
+    if problems:
+        raise IncompatibleRunDirError(
+            f"cannot load the model of the session in {run_dir} into the given one: "
+            + "; ".join(problems).rstrip(".")
+            + "."
+        )
+    if getattr(model, "is_fitted", False):
+        cls = type(model).__name__
+        raise ValueError(
+            f"model: expected a fresh, unfitted {cls} (the session's model is loaded into it),"
+            f" got a fitted one; pass a new one, {cls}(**{config['model']['args']})"
+        )
 
 
 def fit_count(n_demonstrations: int, max_new: int) -> int:
@@ -2236,29 +2297,60 @@ def restore_model(
     return k
 
 
+@overload
 def load_model(
-    run_dir: str | os.PathLike[str], *, n_demonstrations: int | None = None
-) -> GaussianMixtureSet:
+    run_dir: str | os.PathLike[str], *, n_demonstrations: int | None = None, model: None = None
+) -> GaussianMixtureSet: ...
+@overload
+def load_model(
+    run_dir: str | os.PathLike[str], *, n_demonstrations: int | None = None, model: _Model
+) -> _Model: ...
+def load_model(
+    run_dir: str | os.PathLike[str],
+    *,
+    n_demonstrations: int | None = None,
+    model: torch.nn.Module | None = None,
+) -> torch.nn.Module:
     """The session's model as the loop had it, from its checkpoint or refitted from the log.
 
     Args:
         run_dir: a session directory.
         n_demonstrations: rebuild the model as it stood when this many labels (demonstrations
             and corrections) were logged (default: all of them).
+        model: the model to load the session's into (default: a GaussianMixtureSet built
+            from the session's config.json). Needed for a session whose model is of a class
+            of the user's own (a subclass of GaussianMixtureSet), which the run directory
+            cannot rebuild: a fresh, unfitted instance of that class (its name as the session
+            kept it) made with the session's arguments (config.json's ``model.args``); the
+            checkpoint's state is loaded into it, or it is refitted. Also a way to load onto
+            a device (``GaussianMixtureSet(...).to("cuda")``).
 
     Returns:
-        A GaussianMixtureSet fitted on the labels the live model stood on after ``n`` labels,
-        a session's prior demonstrations first (unfitted when there were none and the session
-        started from neither a fitted model nor prior demonstrations),
-        see :func:`restore_model`. If the matching checkpoint is missing, damaged or stale,
-        the model is refitted deterministically on the logged labels (nothing is written).
+        A GaussianMixtureSet (``model`` itself, when given) fitted on the labels the live
+        model stood on after ``n`` labels, a session's prior demonstrations first (unfitted
+        when there were none and the session started from neither a fitted model nor prior
+        demonstrations), see :func:`restore_model`. If the matching checkpoint is missing,
+        damaged or stale, the model is refitted deterministically on the logged labels
+        (nothing is written).
+
+    Raises:
+        IncompatibleRunDirError: the session's model is of a class of the user's own and no
+            ``model`` was given, or the given one is of another class or was made with other
+            arguments (the message says what to pass).
+        ValueError: ``model`` is already fitted; or ``n_demonstrations`` is out of range.
     """
-    return _model(run_dir, n_demonstrations)
+    return _model(run_dir, n_demonstrations, model)
 
 
-def _model(run_dir: str | os.PathLike[str], n_demonstrations: int | None) -> GaussianMixtureSet:
+def _model(
+    run_dir: str | os.PathLike[str],
+    n_demonstrations: int | None,
+    given: torch.nn.Module | None = None,
+) -> Any:
     """:func:`load_model` for a public reader, its warnings pointing at that reader's caller."""
     config = load_config(run_dir)
+    if given is not None:
+        _given_model(run_dir, config, given)
     x, y = _labels(run_dir, depth=1)
     if n_demonstrations is None:
         n = len(y)
@@ -2273,7 +2365,7 @@ def _model(run_dir: str | os.PathLike[str], n_demonstrations: int | None) -> Gau
         )
     else:
         n = int(n_demonstrations)
-    model = build_model(config)
+    model = build_model(config) if given is None else given
     restore_model(
         run_dir,
         model,
@@ -2288,17 +2380,25 @@ def _model(run_dir: str | os.PathLike[str], n_demonstrations: int | None) -> Gau
     return model
 
 
-def load_policy(run_dir: str | os.PathLike[str]) -> GreedyPolicy:
+def load_policy(
+    run_dir: str | os.PathLike[str], *, model: torch.nn.Module | None = None
+) -> GreedyPolicy:
     """The latest learned policy of a session directory, as a callable obs -> action.
+
+    Args:
+        run_dir: a session directory.
+        model: as :func:`load_model`'s: a fresh model of the session's class and arguments
+            to load the session's into, needed where that class is the user's own.
 
     Raises:
         IncompatibleRunDirError: the session holds no model yet (fewer labels were logged than
             its first fit needs, ``max_new``, and it did not start from a fitted model): there
-            is nothing to act with.
+            is nothing to act with. Or as :func:`load_model` raises for ``model``.
+        ValueError: ``model`` is already fitted.
     """
     from torchcbl.policy import GreedyPolicy
 
-    model = _model(run_dir, None)
+    model = _model(run_dir, None, model)
     if not model.is_fitted:
         n = len(_labels(run_dir)[1])
         first = int(load_config(run_dir)["teaching"]["max_new"])
@@ -2694,10 +2794,12 @@ def resume_problems(
     env_kwargs: dict[str, Any] | None = None,
     env_max_episode_steps: int | None = None,
     env_inputs: dict[str, Any] | None = None,
+    model_class: str | None = None,
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
-    ``model_args`` / ``strategy`` None means "rebuilt from the directory"; of a strategy
+    ``model_args`` / ``strategy`` None means "rebuilt from the directory"; ``model_class``:
+    the given model's class name, compared with the one the session kept; of a strategy
     config with ``"custom": true`` (no ``to_config``, or a parent's) only the class name, the
     relabel flag, the parent's dict (``"inherited"``) and the rule are compared (a session
     stored before a subclass keeping its parent's ``to_config`` was custom holds the parent's
@@ -2761,21 +2863,8 @@ def resume_problems(
             k: (v, learning[1].get(k)) for k, v in learning[0].items() if learning[1].get(k) != v
         }
         problems.append(f"config (stored, given): {diff}; only the stop fields may change")
-    if model_args is not None and model_args != _with_default_args(stored["model"]["args"]):
-        kept = _with_default_args(stored["model"]["args"])
-        diff = {
-            k: (kept.get(k), model_args.get(k))
-            for k in sorted(set(kept) | set(model_args))
-            if kept.get(k) != model_args.get(k)
-        }
-        if "error" in model_args:  # the given model's arguments could not be read
-            problems.append(f"model: {model_args['error']}")
-        else:
-            problems.append(
-                f"model args (stored, given): {diff}; build the model as the session did, "
-                f"{stored['model'].get('class', 'GaussianMixtureSet')}"
-                f"(**{stored['model']['args']}), or leave model= out"
-            )
+    if model_args is not None:
+        problems += _model_problems(stored, model_class, model_args)
     if strategy is not None:
         want = stored_strategy(stored)
         if strategy.get("custom") or want.get("custom"):
@@ -2787,6 +2876,43 @@ def resume_problems(
         elif strategy != want:
             problems.append(f"strategy: stored {want}, given {strategy}")
     return problems
+
+
+def _model_problems(
+    stored: dict[str, Any], model_class: str | None, model_args: dict[str, Any]
+) -> list[str]:
+    """What keeps a given model (its class name, its arguments as :func:`_model_args` reads
+    them, or ``{"error": why}``) from being the session's."""
+    kept_class = stored["model"].get("class", "GaussianMixtureSet")
+    if "error" in model_args and kept_class == "GaussianMixtureSet":
+        return [f"model: {model_args['error']}"]  # (which says to pass a GaussianMixtureSet)
+    if model_class is not None and model_class != kept_class:
+        return [
+            f"model: the session's model is a {kept_class}, the given one a {model_class}; "
+            + _pass_model(stored)
+        ]
+    if "error" in model_args:  # its arguments could not be read
+        return [f"model: {model_args['error']}"]
+    kept = _with_default_args(stored["model"]["args"])
+    if model_args != kept:
+        diff = {
+            k: (kept.get(k), model_args.get(k))
+            for k in sorted(set(kept) | set(model_args))
+            if kept.get(k) != model_args.get(k)
+        }
+        return [f"model args (stored, given): {diff}; " + _pass_model(stored)]
+    return []
+
+
+def _pass_model(stored: dict[str, Any]) -> str:
+    """What to pass for a session's model: its class, made with the arguments the session
+    kept (or, for the library's own class, nothing: the directory rebuilds it)."""
+    kept_class = stored["model"].get("class", "GaussianMixtureSet")
+    return (
+        f"pass model={kept_class}(...) made as the session made it, "
+        f"{kept_class}(**{stored['model']['args']})"
+        + (", or leave model= out" if kept_class == "GaussianMixtureSet" else "")
+    )
 
 
 def _comparable(config: dict[str, Any]) -> dict[str, Any]:

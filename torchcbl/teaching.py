@@ -85,6 +85,7 @@ from torchcbl.session import (
     LabelDigest,
     SessionStore,
     _InterruptHold,
+    _model_args,
     _read_prior,
     build_model,
     label_sequence,
@@ -132,17 +133,6 @@ _NO_STOP = (
     "that succeed, autonomous_episodes_to_stop=10; the driving run after 650 demonstrations, "
     "max_demonstrations=650). Set at least one of {fields} in TeachingConfig or as run(...) "
     "arguments."
-)
-_MODEL_ARG_NAMES = (
-    "n_actions",
-    "n_features",
-    "max_components",
-    "criterion",
-    "var_floor",
-    "tol",
-    "max_iter",
-    "seed",
-    "refit_growth",
 )
 
 
@@ -268,19 +258,6 @@ class TeachingConfig:
             for f in dataclasses.fields(self)
             if f.name not in _STOP_SETTINGS
         }
-
-
-def _model_args(model: torch.nn.Module) -> dict[str, Any]:
-    args = getattr(model, "init_args", None)
-    if isinstance(args, dict):
-        return dict(args)
-    missing = [n for n in _MODEL_ARG_NAMES if not hasattr(model, n)]
-    if missing:
-        raise ValueError(
-            f"cannot record the constructor arguments of {type(model).__name__}: attributes "
-            f"{missing} are missing. Pass a torchcbl.GaussianMixtureSet as model."
-        )
-    return {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
 
 
 # every method the loop calls on a strategy (torchcbl.strategies' protocol)
@@ -805,7 +782,8 @@ class ConfidentTeacher:
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
                 fields may not. ``model`` / ``rule`` / ``strategy``: optional; must match the
-                stored ones (a custom rule or strategy that cannot be rebuilt must be passed).
+                stored ones (a model: its class, by name, and its arguments; a custom rule or
+                strategy that cannot be rebuilt must be passed).
 
         Raises:
             TypeError: ``env`` is not an env (an env id: make it first with
@@ -856,6 +834,7 @@ class ConfidentTeacher:
             env_inputs=_env_inputs(env),
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
+            model_class=None if model is None else type(model).__name__,
             strategy=(
                 None
                 if given is None
@@ -944,8 +923,10 @@ class ConfidentTeacher:
             # the model the session had is rebuilt from its directory (its checkpoint, else
             # a refit on its labels), never taken from the caller's fitted one: at 0 labels
             # without checkpoint 0 that one would decide where the session had no model
+            # (strict=False: a subclass's state of its own is its own, loaded from the
+            # checkpoint with the rest)
             fresh = GaussianMixtureSet(**_model_args(self.model))
-            self.model.load_state_dict(fresh.state_dict())
+            self.model.load_state_dict(fresh.state_dict(), strict=False)
         k = restore_model(
             self.run_dir,
             self.model,
