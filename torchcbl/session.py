@@ -2405,10 +2405,16 @@ def resume_problems(
         want = stored_strategy(stored)
         if strategy.get("custom") or want.get("custom"):
             # a session stored before a subclass keeping its parent's to_config was stored as
-            # custom holds the parent's dict: the subclass passed resumes it, as it did then
-            if want.get("custom") or _as_stored_before(strategy) != want:
-                if _comparable(strategy) != _comparable(want):
-                    problems.append(f"strategy: stored {want}, given {strategy}")
+            # custom holds the parent's dict: the subclass passed resumes it, as it did then.
+            # That dict is custom where the rule is a user's without to_config, and is then
+            # compared as custom dicts are (by class name: a script's module reads __main__);
+            # the library's own dicts are compared whole
+            before = _as_stored_before(strategy)
+            as_before = before == want or (
+                bool(want.get("custom")) and _comparable(before) == _comparable(want)
+            )
+            if not as_before and _comparable(strategy) != _comparable(want):
+                problems.append(f"strategy: stored {want}, given {strategy}")
         elif strategy != want:
             problems.append(f"strategy: stored {want}, given {strategy}")
     return problems
