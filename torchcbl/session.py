@@ -2326,7 +2326,10 @@ def resume_problems(
     config with ``"custom": true`` (no ``to_config``, or a parent's) only the class name, the
     relabel flag, the parent's dict (``"inherited"``) and the rule are compared (a session
     stored before a subclass keeping its parent's ``to_config`` was custom holds the parent's
-    dict: that subclass given resumes it); ``env_kwargs``: what ``gymnasium.make`` was given
+    dict: that subclass given resumes it). The rule has been compared too since 2026-11-27
+    (a custom one, without ``to_config``, by the last part of its class name, so one moved to
+    another module resumes): a custom rule renamed since the session was stored, which
+    resumed before, is refused; ``env_kwargs``: what ``gymnasium.make`` was given
     for the env (plain values are compared, ``render_mode`` aside), with its
     ``max_episode_steps`` (the cap in force: the smallest TimeLimit's or the env's own;
     sessions written before 2026-11-26 do not keep it, and those written before 2026-11-27
