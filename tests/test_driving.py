@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import gc
 import os
+import re
 
 import gymnasium as gym
 import libsumo
@@ -660,7 +661,8 @@ def test_a_network_file_netconvert_cannot_write_is_named_and_not_blamed_on_the_i
     assert main(["--out", str(tmp_path)]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1, err
-    assert f"Error: Could not build output file '{tmp_path / 'road.net.xml'}'" in err, err
+    # netconvert's own Error: line, whatever this eclipse-sumo (>= 1.22) words it as
+    assert re.search(r"exit status [1-9]\d*: Error: \S.*; netconvert ran and rejected", err), err
     assert (
         "names the output" in err and "give an out directory where that file can be written" in err
     ), err
