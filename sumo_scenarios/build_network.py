@@ -99,8 +99,10 @@ def _said(stderr: str) -> str:
 def _failed(exe: str, exc: OSError | subprocess.CalledProcessError, net: Path) -> str:
     """One line: which netconvert failed (this Python's eclipse-sumo one, or, where it has
     none, the first on PATH, another SUMO install's), how, and what to do. This Python's
-    that ran and rejected its files (its "Error:" lines) is told to fix them (the sources in
-    ``net``'s directory's ``src``, the network ``net``); one that could not run at all (not
+    that ran and rejected its files (its "Error:" lines) is told to give an out directory it
+    can write ``net`` into where its error names that file, and that its input (``net``'s
+    directory's ``src``, which :func:`build` writes afresh on every run from this module's
+    road, so edits to it are lost) points at its version; one that could not run at all (not
     started, killed by a signal, or failing without an error of its own, as when a shared
     library is missing) to reinstall eclipse-sumo."""
     wheel = _wheel_netconvert()
@@ -114,9 +116,11 @@ def _failed(exe: str, exc: OSError | subprocess.CalledProcessError, net: Path) -
     where = "this Python's eclipse-sumo" if ours else "the first on PATH"
     if ours and rejected:
         fix = (
-            f"netconvert ran and rejected its files: fix what its error names in its input "
-            f"({net.parent / 'src'}, written by this command) or its output ({net}; the out "
-            "directory must be one you can write to)"
+            f"netconvert ran and rejected its files: where its error names the output ({net}), "
+            "give an out directory where that file can be written (--out); its input "
+            f"({net.parent / 'src'}) is rewritten on every run from the road this module "
+            "defines, so edits to it are lost, and an error in it points at the netconvert: "
+            "check eclipse-sumo's version (pip show eclipse-sumo; 1.22 or newer is needed)"
         )
     elif ours:
         fix = "reinstall eclipse-sumo (pip install --force-reinstall 'eclipse-sumo>=1.22')"
@@ -138,9 +142,11 @@ def build(out_dir: Path = DATA_DIR) -> Path:
     Raises:
         FileNotFoundError: no netconvert was found.
         RuntimeError: netconvert failed; the message names the one that ran, its exit status
-            and error lines, and what to do: fix the files its errors name (this Python's
-            netconvert ran and rejected them), reinstall eclipse-sumo (this Python's could not
-            run), or install it (the one that ran was the first on PATH).
+            and error lines, and what to do: an out directory it can write to, or a check of
+            eclipse-sumo's version (this Python's netconvert ran and rejected its files; the
+            sources in ``out_dir/src`` are written afresh on every run), reinstall
+            eclipse-sumo (this Python's could not run), or install it (the one that ran was
+            the first on PATH).
     """
     src = out_dir / "src"
     src.mkdir(parents=True, exist_ok=True)

@@ -436,6 +436,54 @@ def test_a_subclass_keeping_its_parents_to_config_does_not_resume_as_its_parent(
     _resume(tmp_path / "old", strategy=AlwaysAsks()).close()
 
 
+def test_a_session_stored_before_as_the_parent_with_a_rule_of_ones_own_resumes_with_the_subclass(
+    tmp_path,
+):
+    """Before subclasses keeping their parent's to_config were stored as custom (abcd59b),
+    Mine(ConfidentExecution) with a user's rule that has no to_config was stored as the
+    parent's dict, custom for its rule's sake: {"type": "ConfidentExecution", "rule":
+    {"type": "...Lenient", "custom": true}, "custom": true}, the dict ConfidentExecution
+    (Lenient()) still stores. Resuming such a session with strategy=Mine(Lenient()), the same
+    objects, was refused ("strategy: stored ..."), though a session stored as the parent
+    resumes with the subclass passed. It resumes; the subclass with another rule class is
+    refused, and so is a subclass of ConfidenceBasedAutonomy with other settings on a session
+    stored as ConfidenceBasedAutonomy (only custom dicts are compared by class name)."""
+
+    class Lenient:  # a user's rule without to_config
+        def is_confident(self, c):
+            return (c.distance <= 2.0) & (c.action >= 0)
+
+        def update(self, *args):
+            pass
+
+    class Other(Lenient):
+        pass
+
+    class Mine(ConfidentExecution):
+        pass
+
+    class MyCBA(ConfidenceBasedAutonomy):
+        pass
+
+    old = tmp_path / "old"
+    _teach(old, ConfidentExecution(Lenient()), 12)  # what Mine(Lenient()) was stored as
+    stored = load_config(old)["strategy"]
+    assert stored["type"] == "ConfidentExecution" and stored["custom"], stored
+    assert stored["rule"]["type"].endswith("Lenient") and "inherited" not in stored, stored
+    for other in (Mine(Other()), Mine()):
+        with pytest.raises(IncompatibleRunDirError, match="strategy: stored"):
+            _resume(old, strategy=other)
+    ct = _resume(old, strategy=Mine(Lenient()))
+    ct.run(max_steps=16)
+    ct.close()
+    assert len(load_records(old)) == 16
+    cba = tmp_path / "cba"
+    _teach(cba, ConfidenceBasedAutonomy(), 4)
+    with pytest.raises(IncompatibleRunDirError, match="strategy: stored"):
+        _resume(cba, strategy=MyCBA(distance_multiplier=3.0))
+    _resume(cba, strategy=MyCBA()).close()
+
+
 def test_a_rule_subclass_keeping_its_parents_to_config_does_not_resume_as_its_parent(tmp_path):
     """The same for a confidence rule: a subclass of DistanceRule that kept its to_config()
     was stored as {"type": "DistanceRule", ...} and a resume without rule= or strategy= went

@@ -881,6 +881,23 @@ def _check_ray_address(address: str, timeout: float = 10.0) -> None:
         ) from None
 
 
+def _stop_ray_tasks(ray: Any, refs: list[Any], timeout: float = 10.0) -> None:
+    """Cancel the Ray tasks ``refs`` (killing the workers of those that run, as the process
+    pool terminates its workers) and wait up to ``timeout`` seconds for them to end. On a
+    Ray this sweep did not start (``ray.shutdown`` leaves its workers running), a cell's
+    task would otherwise go on writing its session, which a rerun sets aside as
+    ``<key>.stale-N`` while it is still written."""
+    for ref in refs:
+        try:
+            ray.cancel(ref, force=True)
+        except Exception:  # finished meanwhile, or Ray is going away: nothing to stop
+            pass
+    try:
+        ray.wait(refs, num_returns=len(refs), timeout=timeout, fetch_local=False)
+    except Exception:
+        pass
+
+
 def _execute(
     todo: list[dict[str, Any]],
     *,
@@ -893,8 +910,9 @@ def _execute(
 ) -> None:
     """Run the cells of ``todo`` and hand each result to ``done`` as it comes; the first cell
     that raises stops the sweep with a :class:`CellError` naming it (any other cell that
-    finished meanwhile is handed to ``done`` first). With ``sessions`` (an absolute path),
-    each cell writes its teaching session to ``sessions/<key>``."""
+    finished meanwhile is handed to ``done`` first) and stops the other cells (on Ray, their
+    tasks are cancelled, also on a Ray this sweep did not start). With ``sessions`` (an
+    absolute path), each cell writes its teaching session to ``sessions/<key>``."""
     if not todo:
         return
 
@@ -918,12 +936,16 @@ def _execute(
                 log_to_driver=False,
                 runtime_env={"env_vars": {"PYTHONPATH": os.environ.get("PYTHONPATH", "")}},
             )
+        configs: dict[Any, dict[str, Any]] = {}
+        pending: list[Any] = []  # the tasks not handed to done (nor raised) yet
         try:
             # One cell per task and CPU; a cell closes its envs, so a worker process may run
             # cells one after another (libsumo: one live simulation per process).
             remote = ray.remote(num_cpus=1)(_run_cell_in_worker)
-            configs = {remote.remote(c, run_dir(c)): c for c in todo}
-            pending = list(configs)
+            for c in todo:
+                ref = remote.remote(c, run_dir(c))
+                configs[ref] = c
+                pending.append(ref)
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
                 try:
@@ -934,6 +956,8 @@ def _execute(
                     raise CellError(configs[ready[0]], cause, out) from cause
                 done(cell)
         finally:
+            if pending:  # the sweep stopped (a CellError, a Ctrl-C): stop the other cells
+                _stop_ray_tasks(ray, pending)
             if started:
                 ray.shutdown()
         return

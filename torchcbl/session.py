@@ -2803,7 +2803,10 @@ def resume_problems(
     config with ``"custom": true`` (no ``to_config``, or a parent's) only the class name, the
     relabel flag, the parent's dict (``"inherited"``) and the rule are compared (a session
     stored before a subclass keeping its parent's ``to_config`` was custom holds the parent's
-    dict: that subclass given resumes it); ``env_kwargs``: what ``gymnasium.make`` was given
+    dict: that subclass given resumes it). The rule has been compared too since 2026-11-27
+    (a custom one, without ``to_config``, by the last part of its class name, so one moved to
+    another module resumes): a custom rule renamed since the session was stored, which
+    resumed before, is refused; ``env_kwargs``: what ``gymnasium.make`` was given
     for the env (plain values are compared, ``render_mode`` aside), with its
     ``max_episode_steps`` (the cap in force: the smallest TimeLimit's or the env's own;
     sessions written before 2026-11-26 do not keep it, and those written before 2026-11-27
@@ -2869,10 +2872,16 @@ def resume_problems(
         want = stored_strategy(stored)
         if strategy.get("custom") or want.get("custom"):
             # a session stored before a subclass keeping its parent's to_config was stored as
-            # custom holds the parent's dict: the subclass passed resumes it, as it did then
-            if want.get("custom") or _as_stored_before(strategy) != want:
-                if _comparable(strategy) != _comparable(want):
-                    problems.append(f"strategy: stored {want}, given {strategy}")
+            # custom holds the parent's dict: the subclass passed resumes it, as it did then.
+            # That dict is custom where the rule is a user's without to_config, and is then
+            # compared as custom dicts are (by class name: a script's module reads __main__);
+            # the library's own dicts are compared whole
+            before = _as_stored_before(strategy)
+            as_before = before == want or (
+                bool(want.get("custom")) and _comparable(before) == _comparable(want)
+            )
+            if not as_before and _comparable(strategy) != _comparable(want):
+                problems.append(f"strategy: stored {want}, given {strategy}")
         elif strategy != want:
             problems.append(f"strategy: stored {want}, given {strategy}")
     return problems

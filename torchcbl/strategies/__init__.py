@@ -66,7 +66,12 @@ Rules a strategy must keep:
   TypeError, nothing written); a session stored before that check resumes with a warning
   naming both values. A strategy without
   ``to_config`` (or whose ``to_config`` returns None, as a subclass of :class:`Strategy` that
-  does not define one) is stored as custom and must be passed again to ``resume``.
+  does not define one) is stored as custom and must be passed again to ``resume``. A resume
+  compares a custom dict by the last part of its class name (a class moved to another module
+  still resumes), its relabel flag and, since 2026-11-27, the dicts it holds of a parent's
+  ``to_config`` and of the rule (a custom rule by its class name too): a confidence rule of
+  one's own without ``to_config`` that was renamed since the session was stored, which
+  resumed before, is refused.
 
 Two attributes complete the protocol:
 
