@@ -175,6 +175,49 @@ def test_a_session_written_before_refit_growth_resumes_with_a_given_model(tmp_pa
         ConfidentTeacher.resume(run, env, oracle(env), model=GaussianMixtureSet(**other))
 
 
+def test_a_session_written_before_n_init_resumes_and_loads_as_n_init_1(tmp_path):
+    """config.json keeps the model's n_init; a session written before n_init existed (no such
+    argument kept) resumes and loads as n_init=1, the fit it was taught with, with or without a
+    model given; a model of another n_init is refused. A session taught with n_init=3 is
+    rebuilt with n_init=3."""
+    from torchcbl import GaussianMixtureSet
+
+    run = tmp_path / "run"
+    ct = make(rare_regions_world(), run, max_new=3)
+    ct.run(max_steps=40)
+    ct.close()
+    config = json.loads((run / "config.json").read_text())
+    args = dict(config["model"]["args"])
+    assert args["n_init"] == 1
+    del config["model"]["args"]["n_init"]
+    (run / "config.json").write_text(json.dumps(config))
+    assert load_model(run).n_init == 1 and same_state(load_model(run), ct.model)
+    assert build_model(load_config(run)).n_init == 1
+    env = rare_regions_world()
+    for model in (None, GaussianMixtureSet(**args)):
+        back = ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False)
+        assert back.model.n_init == 1 and same_state(back.model, ct.model)
+        back.close()
+    with pytest.raises(IncompatibleRunDirError, match=r"'n_init': \(1, 2\)"):
+        ConfidentTeacher.resume(
+            run, env, oracle(env), model=GaussianMixtureSet(**{**args, "n_init": 2})
+        )
+
+    three = tmp_path / "three"
+    env = rare_regions_world()
+    d, n_actions = env.observation_space.shape[0], int(env.action_space.n)
+    model = GaussianMixtureSet(n_actions, d, seed=0, n_init=3)
+    ct = ConfidentTeacher(
+        env, oracle(env), model=model, config=TeachingConfig(max_new=3), run_dir=three,
+        progress=False,
+    )  # fmt: skip
+    ct.run(max_steps=40)
+    ct.close()
+    assert load_config(three)["model"]["args"]["n_init"] == 3
+    loaded = load_model(three)
+    assert loaded.n_init == 3 and same_state(loaded, ct.model)
+
+
 def test_stale_checkpoint_is_refitted_from_the_log(tmp_path):
     run = tmp_path / "run"
     ct = make(rare_regions_world(), run, noninteractive=False)

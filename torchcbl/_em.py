@@ -241,12 +241,17 @@ def _splitmix_uniform(keys: np.ndarray) -> np.ndarray:
     return (z >> np.uint64(11)).astype(np.float64) * (2.0**-53)
 
 
-def candidate_uniforms(seed: int, action: np.ndarray, n_comp: np.ndarray, k: int) -> np.ndarray:
-    """Uniforms [..., k] that depend only on (seed, action, component count, draw index).
+def candidate_uniforms(
+    seed: int, action: np.ndarray, n_comp: np.ndarray, k: int, init: np.ndarray | int = 0
+) -> np.ndarray:
+    """Uniforms [..., k] that depend only on (seed, action, component count, initialisation,
+    draw index).
 
-    ``action`` and ``n_comp`` are integer arrays of the same shape. A candidate's
-    initialisation so does not depend on which other candidates share its batch: fitting all
-    actions at once equals fitting them one at a time.
+    ``action``, ``n_comp`` and ``init`` (the initialisation's index, 0 .. n_init - 1; it
+    broadcasts) are integer arrays of the same shape. A candidate's initialisation so does not
+    depend on which other candidates share its batch: fitting all actions at once equals
+    fitting them one at a time. Initialisation 0 adds nothing to the key: its draws are those
+    of the code before ``n_init`` existed.
     """
     with np.errstate(over="ignore"):
         base = (
@@ -256,6 +261,7 @@ def candidate_uniforms(seed: int, action: np.ndarray, n_comp: np.ndarray, k: int
             + np.uint64((seed >> 32) & 0xFFFFFFFF) * np.uint64(0xC2B2AE3D27D4EB4F)
             + np.asarray(action).astype(np.uint64) * np.uint64(0x9E3779B1)
             + np.asarray(n_comp).astype(np.uint64) * np.uint64(0x85EBCA77)
+            + np.asarray(init).astype(np.uint64) * np.uint64(0xD6E8FEB86659FD93)
         )
         keys = base[..., None] * np.uint64(1315423911) + np.arange(k, dtype=np.uint64)
     return _splitmix_uniform(keys)

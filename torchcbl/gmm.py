@@ -87,7 +87,7 @@ _CRITERIA = ("aic", "bic", "aic_paper")
 # the constructor's settings that decide what fit() and refit() choose, kept in the
 # ``settings_`` buffer (in this order) so that a state_dict cannot load into a model that
 # would refit differently
-_SETTINGS = ("criterion", "var_floor", "tol", "max_iter", "seed", "refit_growth")
+_SETTINGS = ("criterion", "var_floor", "tol", "max_iter", "seed", "refit_growth", "n_init")
 
 
 def _float_bits(x: float) -> int:
@@ -102,7 +102,10 @@ def _bits_float(b: int) -> float:
 def _settings_codes(model: GaussianMixtureSet) -> list[int]:
     seed = model.seed
     return [
-        _CRITERIA.index(model.criterion),
+        # the criterion and n_init share the first code: a state of n_init=1 holds the code it
+        # held before n_init existed (and one of n_init > 1 reads as an unknown criterion to
+        # the code before it, which refuses to load it)
+        _CRITERIA.index(model.criterion) + len(_CRITERIA) * (model.n_init - 1),
         _float_bits(model.var_floor),
         _float_bits(model.tol),
         model.max_iter,
@@ -115,7 +118,8 @@ def _settings_values(codes: list[int]) -> dict[str, Any]:
     """The settings that :func:`_settings_codes` encoded, by name."""
     crit, floor, tol, max_iter, seed, growth = codes
     return {
-        "criterion": _CRITERIA[crit] if 0 <= crit < len(_CRITERIA) else f"<code {crit}>",
+        "criterion": _CRITERIA[crit % len(_CRITERIA)] if crit >= 0 else f"<code {crit}>",
+        "n_init": crit // len(_CRITERIA) + 1 if crit >= 0 else f"<code {crit}>",
         "var_floor": _bits_float(floor),
         "tol": _bits_float(tol),
         "max_iter": max_iter,
@@ -401,6 +405,24 @@ def _threads(n: int) -> Iterator[None]:
         torch.set_num_threads(before)
 
 
+def _best_init(res: _em.EMResult, n_init: int) -> _em.EMResult:
+    """An EM result over [G, n_init * C] slots (initialisation i of candidate c in slot
+    i * C + c) -> the [G, C] result of each candidate's initialisation with the highest final
+    log-likelihood (the first on ties; a non-finite one only when all are)."""
+    g, slots = res.loglik.shape
+    c = slots // n_init
+    ll = res.loglik.view(g, n_init, c)
+    best = torch.where(torch.isfinite(ll), ll, -math.inf).argmax(1)  # [G, C], first maximum
+    slot = best * c + torch.arange(c, device=best.device)  # [G, C]
+    rows = torch.arange(g, device=best.device).unsqueeze(1)
+    return _em.EMResult(
+        _em.Params(*(t[rows, slot] for t in res.params)),
+        res.loglik[rows, slot],
+        res.n_iter[rows, slot],
+        res.converged[rows, slot],
+    )
+
+
 class GaussianMixtureSet(nn.Module):
     """One full-covariance Gaussian mixture per action, fitted by batched EM (Section 4.1).
 
@@ -421,6 +443,15 @@ class GaussianMixtureSet(nn.Module):
             ``1 + refit_growth`` times its count at its last from-scratch fit (> 0; default
             0.25: about 3 from-scratch fits per doubling of the data, log 2 / log 1.25, whose
             total cost is about 5 times one fit at the final size).
+        n_init: k-means++ initialisations per candidate (an int >= 1; default 1, as
+            scikit-learn's ``n_init``): every candidate fitted from scratch (by :meth:`fit`, and
+            by :meth:`refit` for an action it fits from scratch) runs EM from ``n_init``
+            initialisations, all in the same batched EM, and keeps the one whose final
+            parameters have the highest total log-likelihood (the first on ties); the
+            criterion then chooses among the kept candidates. Initialisation 0 is the one of
+            ``n_init=1``; the others are drawn from ``seed`` too, each its own. A warm refit
+            continues the kept candidate alone (one EM step), whatever ``n_init``. The cost
+            of a from-scratch fit grows about n_init times; the buffers do not change.
 
     Fitted buffers (fixed shapes, so ``state_dict`` loads into a fresh instance built with the
     same arguments, and only into one: a state of other sizes, ``n_actions``, ``n_features``
@@ -443,8 +474,9 @@ class GaussianMixtureSet(nn.Module):
     of the points ``data_print_`` [A, D]: the next warm refit adds the new points' share to
     them instead of an E-step over all the points.
     ``settings_`` [6] long holds the arguments that decide what a fit or refit chooses
-    (criterion, var_floor, tol, max_iter, seed, refit_growth; floats by their IEEE bits):
-    loading a state saved with other values is a ValueError that names them.
+    (criterion and n_init in one code, criterion index + 3 (n_init - 1), then var_floor,
+    tol, max_iter, seed, refit_growth; floats by their IEEE bits): loading a state saved
+    with other values is a ValueError that names them.
     ``fit_report_`` (a :class:`FitReport`) is a plain attribute, not part of the state_dict.
     """
 
@@ -489,6 +521,7 @@ class GaussianMixtureSet(nn.Module):
         max_iter: int = 200,
         seed: int = 0,
         refit_growth: float = 0.25,
+        n_init: int = 1,
     ) -> None:
         super().__init__()
         for name, val in (
@@ -496,6 +529,7 @@ class GaussianMixtureSet(nn.Module):
             ("n_features", n_features),
             ("max_components", max_components),
             ("max_iter", max_iter),
+            ("n_init", n_init),
         ):
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
                 raise ValueError(f"Expected {name} to be an int >= 1 but got {val!r}")
@@ -539,6 +573,7 @@ class GaussianMixtureSet(nn.Module):
         self.max_iter = int(max_iter)
         self.seed = int(seed)
         self.refit_growth = float(refit_growth)
+        self.n_init = int(n_init)
         a, k, d = self.n_actions, self.max_components, self.n_features
         f64 = torch.float64
         eye = torch.eye(d, dtype=f64).expand(a, k, d, d).clone()
@@ -579,7 +614,7 @@ class GaussianMixtureSet(nn.Module):
             f"n_actions={self.n_actions}, n_features={self.n_features}, "
             f"max_components={self.max_components}, criterion={self.criterion!r}, "
             f"var_floor={self.var_floor}, tol={self.tol}, max_iter={self.max_iter}, "
-            f"seed={self.seed}, refit_growth={self.refit_growth}"
+            f"seed={self.seed}, refit_growth={self.refit_growth}, n_init={self.n_init}"
         )
 
     # ------------------------------------------------------------------ state and caches
@@ -774,7 +809,8 @@ class GaussianMixtureSet(nn.Module):
     def fit(self, observations: Any, actions: Any) -> GaussianMixtureSet:
         """Fit one mixture per action from scratch, choosing each count by the criterion.
 
-        Every candidate of every action starts from its k-means++ initialisation.
+        Every candidate of every action starts from its k-means++ initialisation (from
+        ``n_init`` of them, keeping the best, see the constructor).
 
         Args:
             observations: [N, D] real array (numpy or torch, float32/float64), N >= 1.
@@ -1072,8 +1108,10 @@ class GaussianMixtureSet(nn.Module):
         cand: tuple[Tensor, Tensor, Tensor],
         caller_threads: int = 1,
     ) -> None:
-        """One batched EM over the given actions, each candidate from its k-means++ start;
-        writes their rows of the tables, n_comp and the kept candidates ``cand`` in place."""
+        """One batched EM over the given actions, each candidate from its ``n_init`` k-means++
+        starts (one slot each: slot i * k_pad + c holds initialisation i of the candidate with
+        c + 1 components), the start with the highest final log-likelihood kept; writes their
+        rows of the tables, n_comp and the kept candidates ``cand`` in place."""
         dev = x.device
         f64 = torch.float64
         d = self.n_features
@@ -1105,6 +1143,10 @@ class GaussianMixtureSet(nn.Module):
         slot_k_np = np.arange(1, k_pad + 1)[None, :].repeat(g_n, 0)
         real_np = slot_k_np <= k_per_action[groups_np][:, None]
         slot_k_np = np.where(real_np, slot_k_np, 1)
+        # n_init > 1: the same slots again for every further initialisation, side by side
+        n_init = self.n_init
+        slot_k_np = np.tile(slot_k_np, (1, n_init))  # [G, n_init * k_pad]
+        init_np = np.repeat(np.arange(n_init), k_pad)[None, :].repeat(g_n, 0)
         slot_k = torch.from_numpy(slot_k_np).to(dev)
         pmask = (torch.arange(n_max, device=dev) < counts_g.unsqueeze(1)).to(f64)
         cmask = (torch.arange(k_pad, device=dev) < slot_k.unsqueeze(-1)).to(f64)
@@ -1115,11 +1157,17 @@ class GaussianMixtureSet(nn.Module):
         with _threads(_em_threads(work, caller_threads)), torch.inference_mode():
             uniforms = torch.from_numpy(
                 _em.candidate_uniforms(
-                    self.seed, groups_np[:, None].repeat(k_pad, 1), slot_k_np, k_pad
+                    self.seed,
+                    groups_np[:, None].repeat(n_init * k_pad, 1),
+                    slot_k_np,
+                    k_pad,
+                    init_np,
                 )
             ).to(dev)
             resp0 = _em.kmeans_init(xg, pmask, cmask, uniforms)
             res = _em.run_em(xg, pmask, cmask, floor, resp0, self.tol, self.max_iter)
+            if n_init > 1:
+                res = _best_init(res, n_init)
         real = torch.from_numpy(real_np).to(dev)
         g_idx, c_idx = real.nonzero(as_tuple=True)
         cand_action = groups[g_idx]

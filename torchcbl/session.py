@@ -1936,6 +1936,7 @@ _MODEL_ARG_NAMES = (
     "max_iter",
     "seed",
     "refit_growth",
+    "n_init",
 )
 
 
@@ -1972,7 +1973,7 @@ def _with_default_args(args: dict[str, Any]) -> dict[str, Any]:
 
 
 # model arguments that sessions written before they existed lacked
-_DEFAULTED = ("refit_growth",)
+_DEFAULTED = ("refit_growth", "n_init")
 
 
 def build_model(config: dict[str, Any]) -> GaussianMixtureSet:
