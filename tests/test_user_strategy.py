@@ -478,10 +478,13 @@ def test_a_session_stored_before_as_the_parent_with_a_rule_of_ones_own_resumes_w
     ct.close()
     assert len(load_records(old)) == 16
     cba = tmp_path / "cba"
-    _teach(cba, ConfidenceBasedAutonomy(), 4)
+    # the oracle has no correct(): CBA says it will never be corrected (expected here)
+    with pytest.warns(UserWarning, match="never correct"):
+        _teach(cba, ConfidenceBasedAutonomy(), 4)
     with pytest.raises(IncompatibleRunDirError, match="strategy: stored"):
         _resume(cba, strategy=MyCBA(distance_multiplier=3.0))
-    _resume(cba, strategy=MyCBA()).close()
+    with pytest.warns(UserWarning, match="never correct"):
+        _resume(cba, strategy=MyCBA()).close()
 
 
 def test_a_rule_subclass_keeping_its_parents_to_config_does_not_resume_as_its_parent(tmp_path):
