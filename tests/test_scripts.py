@@ -38,6 +38,11 @@ def _run(script: str, *args: str) -> subprocess.CompletedProcess:
         ("corridor_final_policy_check.py", ["RUN", "--first-seed", "-5"], "whole number >= 0"),
         ("benchmark_corridor_variants.py", ["--variants", "shipped,noisey"], "names from shipped"),
         ("benchmark_corridor_variants.py", ["--workers", "0"], "whole number >= 1"),
+        ("benchmark_var_floor.py", ["--sets", "corridor,drivng"], "names from corridor"),
+        ("benchmark_var_floor.py", ["--search-cap", "40"], "whole number >= 41"),
+        ("benchmark_var_floor.py", ["--floors", "0.01,-1"], "finite numbers >= 0"),
+        ("benchmark_calibrated.py", ["--variants", "shipped,noisey"], "names from shipped"),
+        ("benchmark_calibrated.py", ["--seeds", "0-x"], "a range, e.g. 0-9"),
     ],
 )
 def test_a_malformed_value_is_a_usage_error_before_anything_runs(script, args, expected):
