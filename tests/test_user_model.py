@@ -177,3 +177,31 @@ def test_a_fitted_model_of_a_subclass_with_state_of_its_own_resumes(tmp_path):
     back = _resume(run, model=fitted)
     assert back.model is fitted and _same_state(back.model, ct.model)
     back.close()
+
+
+class OwnArgs(GaussianMixtureSet):
+    """A user's learner that records its constructor arguments itself (``init_args``, read by
+    the session in place of the attributes), written before ``refit_growth`` and ``n_init``
+    existed: they are not among them."""
+
+    def __init__(self, n_actions: int, n_features: int, max_components: int, seed: int) -> None:
+        super().__init__(n_actions, n_features, max_components, seed=seed)
+        self.init_args = dict(
+            n_actions=n_actions, n_features=n_features, max_components=max_components, seed=seed
+        )
+
+
+def test_a_session_of_a_model_with_init_args_of_its_own_resumes(tmp_path):
+    """A model whose ``init_args`` lack the arguments added after sessions were first written
+    (refit_growth, n_init) could never resume its own session: the stored arguments were
+    completed with those arguments' defaults, the given model's were not, and resume refused
+    with "{'n_init': (1, None), 'refit_growth': (0.25, None)}". Both sides are completed alike:
+    the session resumes, and other arguments are still refused."""
+    run = tmp_path / "run"
+    ct = _teach(run, OwnArgs)
+    assert "refit_growth" not in load_config(run)["model"]["args"]
+    back = _resume(run, model=OwnArgs(3, 2, 4, seed=0))
+    assert type(back.model) is OwnArgs and _same_state(back.model, ct.model)
+    back.close()
+    with pytest.raises(IncompatibleRunDirError, match=r"\{'max_components': \(4, 5\)\}"):
+        _resume(run, model=OwnArgs(3, 2, 5, seed=0))
