@@ -88,6 +88,8 @@ _CRITERIA = ("aic", "bic", "aic_paper")
 # ``settings_`` buffer (in this order) so that a state_dict cannot load into a model that
 # would refit differently
 _SETTINGS = ("criterion", "var_floor", "tol", "max_iter", "seed", "refit_growth", "n_init")
+# the largest n_init a state holds: its code, criterion index + 3 (n_init - 1), is an int64
+_N_INIT_MAX = (2**63 - len(_CRITERIA)) // len(_CRITERIA) + 1
 
 
 def _float_bits(x: float) -> int:
@@ -451,7 +453,8 @@ class GaussianMixtureSet(nn.Module):
             criterion then chooses among the kept candidates. Initialisation 0 is the one of
             ``n_init=1``; the others are drawn from ``seed`` too, each its own. A warm refit
             continues the kept candidate alone (one EM step), whatever ``n_init``. The cost
-            of a from-scratch fit grows about n_init times; the buffers do not change.
+            of a from-scratch fit grows about n_init times; the buffers do not change. At
+            most 3074457345618258602, the most the model's state holds.
 
     Fitted buffers (fixed shapes, so ``state_dict`` loads into a fresh instance built with the
     same arguments, and only into one: a state of other sizes, ``n_actions``, ``n_features``
@@ -533,6 +536,11 @@ class GaussianMixtureSet(nn.Module):
         ):
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
                 raise ValueError(f"Expected {name} to be an int >= 1 but got {val!r}")
+        if n_init > _N_INIT_MAX:
+            raise ValueError(
+                f"Expected n_init to be an int in [1, {_N_INIT_MAX}] (the most a model's state "
+                f"holds) but got {n_init!r}; pass a smaller n_init"
+            )
         # numpy numbers (np.float32(0.01) from a sweep) are the Python numbers they hold
         var_floor, tol, refit_growth = (
             float(v) if isinstance(v, (np.floating, np.integer)) and not isinstance(v, np.bool_)
