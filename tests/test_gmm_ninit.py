@@ -79,6 +79,37 @@ def test_n_init_must_be_an_int_of_at_least_one(bad):
     assert GaussianMixtureSet(2, 2, n_init=np.int64(3)).n_init == 3
 
 
+@pytest.mark.parametrize("big", [4 * 10**18, 2**63, 2**70, np.uint64(2**63)])
+def test_n_init_beyond_what_a_state_holds_is_refused_saying_so(big):
+    """A model keeps n_init in its state (with the criterion, in one int64 code): an n_init
+    too large for it failed in the constructor with torch's bare "Overflow when unpacking
+    long long". It is refused in the constructor's words, naming the largest n_init, which
+    the state holds whatever the criterion."""
+    top = (2**63 - 3) // 3 + 1
+    with pytest.raises(ValueError, match=rf"Expected n_init to be an int in \[1, {top}\]"):
+        GaussianMixtureSet(2, 2, n_init=big, criterion="aic_paper")
+    assert GaussianMixtureSet(2, 2, n_init=top, criterion="aic_paper").n_init == top
+
+
+@pytest.mark.parametrize("big", [10**12, 3 * 10**18])
+def test_a_fit_whose_starts_no_memory_holds_is_refused_up_front(big):
+    """A fit runs all n_init starts of every candidate in one batch, so its memory grows with
+    n_init: an n_init no machine's memory holds died in numpy's allocation ("array is too
+    big", or MemoryError "Unable to allocate 43.7 TiB"). It is refused before anything is
+    allocated, naming the memory, what the starts need at least, and how many starts would
+    fill it; the model keeps its state (here: unfitted)."""
+    x, y = _blobs(0, (10, 10), d=2)
+    model = GaussianMixtureSet(2, 2, 3, n_init=big)
+    with pytest.raises(
+        ValueError,
+        match=rf"Expected an n_init whose starts fit in the memory of cpu \(.* GiB\) but "
+        rf"got {big}: .* at least .* GiB \(even \d+ starts would fill the memory\); pass a "
+        "much smaller n_init",
+    ):
+        model.fit(x, y)
+    assert not model.is_fitted
+
+
 def test_each_candidate_keeps_its_best_initialisation():
     """Oracle: every candidate fitted alone from each of its n_init starts (the pure EM
     functions); the kept one is the best of them, and on these data the first start (the

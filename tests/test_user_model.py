@@ -177,3 +177,72 @@ def test_a_fitted_model_of_a_subclass_with_state_of_its_own_resumes(tmp_path):
     back = _resume(run, model=fitted)
     assert back.model is fitted and _same_state(back.model, ct.model)
     back.close()
+
+
+class OwnArgs(GaussianMixtureSet):
+    """A user's learner that records its constructor arguments itself (``init_args``, read by
+    the session in place of the attributes), written before ``refit_growth`` and ``n_init``
+    existed: they are not among them."""
+
+    def __init__(self, n_actions: int, n_features: int, max_components: int, seed: int) -> None:
+        super().__init__(n_actions, n_features, max_components, seed=seed)
+        self.init_args = dict(
+            n_actions=n_actions, n_features=n_features, max_components=max_components, seed=seed
+        )
+
+
+def test_a_session_of_a_model_with_init_args_of_its_own_resumes(tmp_path):
+    """A model whose ``init_args`` lack the arguments added after sessions were first written
+    (refit_growth, n_init) could never resume its own session: the stored arguments were
+    completed with those arguments' defaults, the given model's were not, and resume refused
+    with "{'n_init': (1, None), 'refit_growth': (0.25, None)}". Both sides are completed alike:
+    the session resumes, and other arguments are still refused."""
+    run = tmp_path / "run"
+    ct = _teach(run, OwnArgs)
+    assert "refit_growth" not in load_config(run)["model"]["args"]
+    back = _resume(run, model=OwnArgs(3, 2, 4, seed=0))
+    assert type(back.model) is OwnArgs and _same_state(back.model, ct.model)
+    back.close()
+    with pytest.raises(IncompatibleRunDirError, match=r"\{'max_components': \(4, 5\)\}"):
+        _resume(run, model=OwnArgs(3, 2, 5, seed=0))
+
+
+class Tempered(GaussianMixtureSet):
+    """A user's learner with a constructor argument of its own, kept in its ``init_args``."""
+
+    def __init__(
+        self,
+        n_actions: int,
+        n_features: int,
+        max_components: int,
+        *,
+        seed: int,
+        temper: float = 2.0,
+    ) -> None:
+        super().__init__(n_actions, n_features, max_components, seed=seed)
+        self.temper = temper
+        self.init_args = dict(
+            n_actions=n_actions,
+            n_features=n_features,
+            max_components=max_components,
+            seed=seed,
+            temper=temper,
+        )
+
+
+def test_a_fitted_model_with_constructor_arguments_of_its_own_resumes(tmp_path):
+    """Resume clears a fitted model given to it before loading the session's: it built the
+    fresh state from a GaussianMixtureSet made with the model's recorded arguments, which for
+    a model whose init_args hold arguments of its own (temper) raised TypeError
+    ("unexpected keyword argument 'temper'"). The session's model is restored into the given
+    one, as for any other model."""
+    from torchcbl.session import load_model
+
+    run = tmp_path / "run"
+    ct = _teach(run, Tempered)
+    assert load_config(run)["model"]["args"]["temper"] == 2.0
+    fitted = load_model(run, n_demonstrations=4, model=Tempered(3, 2, 4, seed=0))
+    assert fitted.is_fitted and not _same_state(fitted, ct.model)
+    back = _resume(run, model=fitted)
+    assert back.model is fitted and _same_state(back.model, ct.model)
+    back.close()

@@ -88,6 +88,8 @@ _CRITERIA = ("aic", "bic", "aic_paper")
 # ``settings_`` buffer (in this order) so that a state_dict cannot load into a model that
 # would refit differently
 _SETTINGS = ("criterion", "var_floor", "tol", "max_iter", "seed", "refit_growth", "n_init")
+# the largest n_init a state holds: its code, criterion index + 3 (n_init - 1), is an int64
+_N_INIT_MAX = (2**63 - len(_CRITERIA)) // len(_CRITERIA) + 1
 
 
 def _float_bits(x: float) -> int:
@@ -126,6 +128,25 @@ def _settings_values(codes: list[int]) -> dict[str, Any]:
         "seed": seed + 2**64 if seed < 0 else seed,
         "refit_growth": _bits_float(growth),
     }
+
+
+def _device_memory(dev: torch.device) -> int | None:
+    """Bytes of memory of ``dev`` (the host's physical memory for the CPU, the GPU's own for
+    CUDA), None where it cannot be read."""
+    try:
+        if dev.type == "cuda":
+            return int(torch.cuda.get_device_properties(dev).total_memory)
+        if dev.type == "cpu":
+            return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError, RuntimeError):  # no sysconf (Windows), ...
+        pass
+    return None
+
+
+# the batched EM holds at once (at least) the responsibilities [G, N, C, K] and the candidates'
+# parameters [G, C, K, Q + D^2] in float64, and as much again in their temporaries: this many
+# times their bytes is a lower bound of its peak memory (measured on the CPU: 4.6 to 7.5)
+_EM_MEMORY_FACTOR = 2
 
 
 _ABS_FLOOR = 1e-6
@@ -451,7 +472,11 @@ class GaussianMixtureSet(nn.Module):
             criterion then chooses among the kept candidates. Initialisation 0 is the one of
             ``n_init=1``; the others are drawn from ``seed`` too, each its own. A warm refit
             continues the kept candidate alone (one EM step), whatever ``n_init``. The cost
-            of a from-scratch fit grows about n_init times; the buffers do not change.
+            of a from-scratch fit grows about n_init times; the buffers do not change. At
+            most 3074457345618258602, the most the model's state holds. A fit holds all
+            its starts in memory at once (measured on the CPU: 37 to 60 bytes x n_init x
+            actions x candidates^2 x (points + D^2 + D (D + 3) / 2 + 1)): one that the
+            device's whole memory could not hold is refused up front with a ValueError.
 
     Fitted buffers (fixed shapes, so ``state_dict`` loads into a fresh instance built with the
     same arguments, and only into one: a state of other sizes, ``n_actions``, ``n_features``
@@ -533,6 +558,11 @@ class GaussianMixtureSet(nn.Module):
         ):
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
                 raise ValueError(f"Expected {name} to be an int >= 1 but got {val!r}")
+        if n_init > _N_INIT_MAX:
+            raise ValueError(
+                f"Expected n_init to be an int in [1, {_N_INIT_MAX}] (the most a model's state "
+                f"holds) but got {n_init!r}; pass a smaller n_init"
+            )
         # numpy numbers (np.float32(0.01) from a sweep) are the Python numbers they hold
         var_floor, tol, refit_growth = (
             float(v) if isinstance(v, (np.floating, np.integer)) and not isinstance(v, np.bool_)
@@ -1145,6 +1175,20 @@ class GaussianMixtureSet(nn.Module):
         slot_k_np = np.where(real_np, slot_k_np, 1)
         # n_init > 1: the same slots again for every further initialisation, side by side
         n_init = self.n_init
+        if n_init > 1:
+            # refused before anything is allocated where no memory of the device holds them
+            q = d * (d + 3) // 2 + 1
+            per_init = _EM_MEMORY_FACTOR * 8 * g_n * k_pad * k_pad * (n_max + q + d * d)
+            memory = _device_memory(dev)
+            if memory is not None and n_init * per_init > memory:
+                raise ValueError(
+                    f"Expected an n_init whose starts fit in the memory of {dev.type} "
+                    f"({memory / 2**30:.3g} GiB) but got {n_init}: this fit's batched EM runs "
+                    f"all its starts of {k_pad} candidate(s) for {g_n} action(s) of up to "
+                    f"{n_max} points at once, at least {n_init * per_init / 2**30:.3g} GiB "
+                    f"(even {memory // per_init} starts would fill the memory); pass a much "
+                    "smaller n_init"
+                )
         slot_k_np = np.tile(slot_k_np, (1, n_init))  # [G, n_init * k_pad]
         init_np = np.repeat(np.arange(n_init), k_pad)[None, :].repeat(g_n, 0)
         slot_k = torch.from_numpy(slot_k_np).to(dev)

@@ -2903,7 +2903,10 @@ def _model_problems(
         ]
     if "error" in model_args:  # its arguments could not be read
         return [f"model: {model_args['error']}"]
+    # both sides completed alike: a model's own ``init_args`` may lack the arguments added
+    # since (and then holds their defaults, as the stored session's model did)
     kept = _with_default_args(stored["model"]["args"])
+    model_args = _with_default_args(model_args)
     if model_args != kept:
         diff = {
             k: (kept.get(k), model_args.get(k))

@@ -79,6 +79,7 @@ from torchcbl.policy import (
 )
 from torchcbl.records import CorrectionRecord, StepRecord, TrainingSet, _is_int, jsonable_info
 from torchcbl.session import (
+    _MODEL_ARG_NAMES,
     FORMAT,
     PRIOR_FORMAT,
     PRIOR_NAME,
@@ -924,8 +925,10 @@ class ConfidentTeacher:
             # a refit on its labels), never taken from the caller's fitted one: at 0 labels
             # without checkpoint 0 that one would decide where the session had no model
             # (strict=False: a subclass's state of its own is its own, loaded from the
-            # checkpoint with the rest)
-            fresh = GaussianMixtureSet(**_model_args(self.model))
+            # checkpoint with the rest). The library's arguments are read from the model's
+            # attributes, not its recorded arguments: a subclass's init_args may hold
+            # arguments of its own, which GaussianMixtureSet does not take
+            fresh = GaussianMixtureSet(**{n: getattr(self.model, n) for n in _MODEL_ARG_NAMES})
             self.model.load_state_dict(fresh.state_dict(), strict=False)
         k = restore_model(
             self.run_dir,
