@@ -296,3 +296,63 @@ def test_show_reads_a_format1_session(tmp_path):
     fields = ("n_steps", "n_labels", "n_requests", "n_autonomous", "requests_per_episode")
     assert [getattr(got, f) for f in fields] == [getattr(want, f) for f in fields]
     assert main(["show", str(run)]) == 0
+
+
+def test_show_of_a_session_whose_checkpoints_cannot_be_listed(tmp_path, capsys, monkeypatch):
+    """A ``checkpoints/`` this user may not list (another user's, mode 0o700): the folder's
+    listing goes on and says so in that session's line; the session alone is one line on
+    stderr and exit 2. (Tests run as root, who may list any directory, so listing it raises
+    here what it raises for a user without read access.)"""
+    import errno
+    import os
+
+    good, locked = tmp_path / "sessions" / "good", tmp_path / "sessions" / "locked"
+    for run in (good, locked):
+        _small_session(run)
+    real_iterdir = Path.iterdir
+
+    def iterdir(self: Path):
+        if self == locked / "checkpoints":
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
+        return real_iterdir(self)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"{tmp_path} holds 2 teaching sessions:"
+    (line,) = [ln for ln in lines if ln.startswith(f"{good}: ")]
+    assert ", 20 steps, " in line
+    (line,) = [ln for ln in lines if ln.startswith(f"{locked}: ")]
+    assert "cannot be read" in line and str(locked / "checkpoints") in line
+    assert main(["show", str(locked)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    (line,) = captured.err.splitlines()
+    assert line.startswith("torchcbl show: error: ") and str(locked / "checkpoints") in line
+    assert "permission denied" in line and "Traceback" not in captured.err
+
+
+def test_show_of_a_folder_lists_every_session_when_one_fails_to_read(tmp_path, capsys, monkeypatch):
+    """A file of one session the file system fails to read (an I/O error on its journal):
+    that session's line says so and the others are listed still."""
+    import errno
+    import os
+
+    good, failing = tmp_path / "sessions" / "good", tmp_path / "sessions" / "failing"
+    for run in (good, failing):
+        _small_session(run)
+    real_stat = Path.stat
+
+    def stat(self: Path, **kwargs):
+        if self == failing / "steps.journal":
+            raise OSError(errno.EIO, os.strerror(errno.EIO), str(self))
+        return real_stat(self, **kwargs)
+
+    monkeypatch.setattr(Path, "stat", stat)
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"{tmp_path} holds 2 teaching sessions:"
+    (line,) = [ln for ln in lines if ln.startswith(f"{good}: ")]
+    assert ", 20 steps, " in line
+    (line,) = [ln for ln in lines if ln.startswith(f"{failing}: ")]
+    assert "cannot be read" in line and os.strerror(errno.EIO) in line

@@ -468,7 +468,9 @@ def _cmd_show(args: argparse.Namespace) -> int:
         for session in below:
             try:
                 summary = describe(session)
-            except (IncompatibleRunDirError, CorruptSessionError) as exc:
+            # OSError: what describe does not turn into its own errors (a file of the
+            # session the file system fails to read); the other sessions are listed still
+            except (IncompatibleRunDirError, CorruptSessionError, OSError) as exc:
                 entries.append({"run_dir": str(session), "error": _one_line(exc)})
                 lines.append(f"{session}: cannot be read: {_one_line(exc)}")
             else:

@@ -2703,7 +2703,8 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
 
     Raises:
         IncompatibleRunDirError: ``run_dir`` is not a session directory (the message names the
-            sessions below it, if any), or a file of it may not be read.
+            sessions below it, if any), or a file of it (or its ``checkpoints/``) may not be
+            read.
         CorruptSessionError: a file of the session is damaged or missing (as
             :func:`load_records`).
     """
@@ -2727,7 +2728,14 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
             blocks[r.step // SUMMARY_BLOCK_STEPS] += 1
     n_corrections = len(_corrections_of(records, corrections))
     n_demonstrations = sum(asked)
-    checkpoint = latest_checkpoint(run)
+    try:
+        checkpoint = latest_checkpoint(run)
+    except PermissionError as exc:  # e.g. another user's checkpoints/ this user may not list
+        raise _no_read_access(Path(exc.filename or run / CHECKPOINT_DIR)) from None
+    except OSError as exc:
+        raise IncompatibleRunDirError(
+            f"{exc.filename or run / CHECKPOINT_DIR} cannot be read: {exc.strerror or exc}"
+        ) from exc
     left = (run / LOG_NAME).with_name(LOG_NAME + "-wal").exists() or _unborn(run)
     try:
         left = left or (run / JOURNAL_NAME).stat().st_size > 0
