@@ -356,3 +356,40 @@ def test_show_of_a_folder_lists_every_session_when_one_fails_to_read(tmp_path, c
     assert ", 20 steps, " in line
     (line,) = [ln for ln in lines if ln.startswith(f"{failing}: ")]
     assert "cannot be read" in line and os.strerror(errno.EIO) in line
+
+
+def test_show_of_a_folder_names_the_folders_it_cannot_search(tmp_path, capsys, monkeypatch):
+    """A folder below DIR this user may not list (another user's runs, mode 0o700): the
+    sessions in it cannot be counted, so the listing says so rather than count fewer in
+    silence. (Tests run as root, who may list any directory: listing it raises here what it
+    raises for a user without read access.)"""
+    import errno
+    import os
+
+    seen, hidden = tmp_path / "mine" / "sessions" / "seed0", tmp_path / "theirs" / "seed0"
+    for run in (seen, hidden):
+        _small_session(run)
+    denied, real_scandir = tmp_path / "theirs", os.scandir
+
+    def scandir(path=".", /):
+        if isinstance(path, (str, os.PathLike)) and Path(path) == denied:
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+        return real_scandir(path)
+
+    monkeypatch.setattr(os, "scandir", scandir)
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == (
+        f"{tmp_path} holds 1 teaching session in the folders it could search (1 folder it "
+        "could not, listed last):"
+    )
+    assert lines[1].startswith(f"{seen}: ")
+    assert lines[2].startswith(f"{denied}: cannot be searched: ") and len(lines) == 3
+    assert main(["show", str(tmp_path), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert [e["run_dir"] for e in shown["sessions"]] == [str(seen)]
+    assert [e["folder"] for e in shown["not_searched"]] == [str(denied)]
+    monkeypatch.setattr(os, "scandir", real_scandir)
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"{tmp_path} holds 2 teaching sessions:" and len(lines) == 3

@@ -543,18 +543,56 @@ def _config_problem(config: dict[str, Any]) -> str | None:
     return None
 
 
-def _sessions_below(path: Path, limit: int | None = 5, depth: int = 3) -> list[Path]:
+def _sessions_below(
+    path: Path,
+    limit: int | None = 5,
+    depth: int = 3,
+    not_searched: list[tuple[Path, str]] | None = None,
+) -> list[Path]:
     """Teaching session directories one to ``depth`` levels below ``path`` (at most
     ``limit``; None: all), shallower first, as a reproduction's run directory holds them
-    (``sessions/seed<k>``, ``seed_<k>/sessions/arm_a``) and a benchmark's (``sessions/<key>``)."""
+    (``sessions/seed<k>``, ``seed_<k>/sessions/arm_a``) and a benchmark's (``sessions/<key>``).
+
+    The folders it cannot list or search (another user's, mode 0o700; ``path`` itself
+    included), whose sessions are not among those returned, are appended to ``not_searched``
+    as ``(folder, why)`` when it is given; a session's own folders (its ``checkpoints/``) are
+    not (the session's readers say what they cannot read of it)."""
     found: list[Path] = []
-    for level in range(1, depth + 1):
-        for config in sorted(path.glob("*/" * level + CONFIG_NAME)):
-            if (config.parent / LOG_NAME).exists():
-                found.append(config.parent)
+    level: list[tuple[Path, bool]] = [(path, False)]  # (folder, whether inside a session)
+    for _ in range(depth):
+        children: list[tuple[Path, bool]] = []
+        for parent, inside in level:
+            try:
+                with os.scandir(parent) as entries:
+                    names = [e.name for e in entries if _is_dir(e)]
+            except OSError as exc:
+                if not_searched is not None and not inside:
+                    not_searched.append((parent, exc.strerror or str(exc)))
+                continue
+            children.extend((parent / name, inside) for name in names)
+        level = []
+        for folder, inside in sorted(children):
+            try:
+                is_session = (folder / CONFIG_NAME).exists() and (folder / LOG_NAME).exists()
+            except OSError as exc:  # a folder this user may list but not search
+                if not_searched is not None and not inside:
+                    not_searched.append((folder, exc.strerror or str(exc)))
+                continue
+            if is_session:
+                found.append(folder)
                 if limit is not None and len(found) >= limit:
                     return found
+            level.append((folder, inside or is_session))
     return found
+
+
+def _is_dir(entry: os.DirEntry[str]) -> bool:
+    """Whether a directory entry is a folder (a link to one included); False where that
+    cannot be told (a name in a folder this user may list but not search)."""
+    try:
+        return entry.is_dir()
+    except OSError:
+        return False
 
 
 def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
