@@ -393,3 +393,53 @@ def test_show_of_a_folder_names_the_folders_it_cannot_search(tmp_path, capsys, m
     assert main(["show", str(tmp_path)]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == f"{tmp_path} holds 2 teaching sessions:" and len(lines) == 3
+
+
+def test_show_of_a_lock_it_cannot_tie_to_the_session_says_running_or_killed(
+    tmp_path, capsys, monkeypatch
+):
+    """An flock on writer.lock's inode number whose device is not the one stat gives (overlay,
+    btrfs subvolumes report another) and whose process cannot be matched with writer.lock's
+    note (/proc/locks shows pid 0 for a holder in another PID namespace): whether a writer
+    runs cannot be told, so a session left unclosed is "running or killed", not "killed"."""
+    import os
+
+    run = tmp_path / "run"
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(max_new=3),
+        run_dir=run,
+        seed=0,
+        progress=False,
+        commit_every=10**6,
+    )
+    for _ in range(25):
+        ct.step()
+    _as_if_killed(ct)
+    st = (run / "writer.lock").stat()
+    major, minor = os.major(st.st_dev), os.minor(st.st_dev)
+
+    def proc_locks(pid: int, device: tuple[int, int]) -> str:
+        return (
+            f"1: FLOCK  ADVISORY  WRITE {pid} {device[0]:02x}:{device[1]:02x}:{st.st_ino} 0 EOF\n"
+        )
+
+    real_read_text = Path.read_text
+
+    def read_text(self: Path, *args, **kwargs) -> str:
+        if self == Path("/proc/locks"):
+            return locks
+        return real_read_text(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "read_text", read_text)
+    for locks, running, state in [
+        ("", False, "killed"),  # no lock on it
+        (proc_locks(os.getpid(), (major, minor)), True, "running"),
+        (proc_locks(0, (major + 1, minor)), None, "running or killed"),
+    ]:
+        s = describe(run)
+        assert (s.writer_running, s.state) == (running, state), locks
+    assert main(["show", str(run)]) == 0
+    assert "running or killed" in capsys.readouterr().out

@@ -2496,8 +2496,10 @@ class SessionSummary:
         last_writer: ``writer.lock``'s note of its last holder ("process PID on HOST"),
             None without one; it stays after that writer stops.
         writer_running: whether a process holds ``writer.lock`` now, as this machine's
-            ``/proc/locks`` shows (None where it cannot be told: no ``/proc/locks``); a writer
-            on another machine of a shared file system is not seen.
+            ``/proc/locks`` shows (None where it cannot be told: no ``/proc/locks``, or a
+            lock on writer.lock's inode number on another device, as an overlay or btrfs
+            reports, held by a process writer.lock does not name); a writer on another
+            machine of a shared file system is not seen.
         state: ``"running"`` (a writer holds the lock), ``"closed"`` (the last writer closed
             the session: nothing left uncommitted), ``"killed"`` (no writer holds the lock and
             the last one left ``steps.journal`` lines or ``steps.sqlite-wal`` behind: killed,
@@ -2686,7 +2688,9 @@ def _read_writers(run_dir: Path) -> tuple[list[dict[str, Any]], list[str]]:
 def _lock_held(run_dir: Path) -> bool | None:
     """Whether a process holds an flock on ``writer.lock`` now, read from ``/proc/locks``
     (Linux) without opening, locking or touching the file (a reader's lock, even for an
-    instant, could turn a writer starting then away); None where it cannot be told."""
+    instant, could turn a writer starting then away); None where it cannot be told (no
+    ``/proc/locks``, or a lock on its inode number on another device whose holder is not the
+    one ``writer.lock`` names)."""
     path = run_dir / LOCK_NAME
     try:
         st = path.stat()
@@ -2705,6 +2709,7 @@ def _lock_held(run_dir: Path) -> bool | None:
             holder = m.group(1).decode()
     except OSError:
         pass
+    unsure = False
     for entry in table.splitlines():
         fields = entry.split()
         if "->" in fields or len(fields) < 6 or fields[1] != "FLOCK":
@@ -2720,7 +2725,12 @@ def _lock_held(run_dir: Path) -> bool | None:
         # than the lock's) the holder writer.lock names
         if device == (os.major(st.st_dev), os.minor(st.st_dev)) or fields[4] == holder:
             return True
-    return False
+        # writer.lock's inode number on another device, held by a process writer.lock does
+        # not name as seen here (its note is from another host, or /proc/locks shows the
+        # holder of another PID namespace as pid 0 or by another number): writer.lock on an
+        # overlay or btrfs, or another file; which, cannot be told
+        unsure = True
+    return None if unsure else False
 
 
 def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
