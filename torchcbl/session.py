@@ -1980,7 +1980,10 @@ _MODEL_ARG_NAMES = (
 
 def _model_args(model: torch.nn.Module) -> dict[str, Any]:
     """The constructor arguments of ``model`` a session keeps: its ``init_args`` dict if it
-    has one, else the attributes of GaussianMixtureSet's arguments."""
+    has one, else the attributes of GaussianMixtureSet's arguments, ``n_init`` left out where
+    it is the default 1 (a plain session's config is then the one written before n_init
+    existed, which an older torchcbl's GaussianMixtureSet, taking no n_init, still builds;
+    readers complete it with :func:`_with_default_args` or the constructor's default)."""
     args = getattr(model, "init_args", None)
     if isinstance(args, dict):
         return dict(args)
@@ -1990,7 +1993,10 @@ def _model_args(model: torch.nn.Module) -> dict[str, Any]:
             f"cannot record the constructor arguments of {type(model).__name__}: attributes "
             f"{missing} are missing. Pass a torchcbl.GaussianMixtureSet as model."
         )
-    return {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
+    kept = {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
+    if kept["n_init"] == 1:
+        del kept["n_init"]
+    return kept
 
 
 def _with_default_args(args: dict[str, Any]) -> dict[str, Any]:
