@@ -296,3 +296,150 @@ def test_show_reads_a_format1_session(tmp_path):
     fields = ("n_steps", "n_labels", "n_requests", "n_autonomous", "requests_per_episode")
     assert [getattr(got, f) for f in fields] == [getattr(want, f) for f in fields]
     assert main(["show", str(run)]) == 0
+
+
+def test_show_of_a_session_whose_checkpoints_cannot_be_listed(tmp_path, capsys, monkeypatch):
+    """A ``checkpoints/`` this user may not list (another user's, mode 0o700): the folder's
+    listing goes on and says so in that session's line; the session alone is one line on
+    stderr and exit 2. (Tests run as root, who may list any directory, so listing it raises
+    here what it raises for a user without read access.)"""
+    import errno
+    import os
+
+    good, locked = tmp_path / "sessions" / "good", tmp_path / "sessions" / "locked"
+    for run in (good, locked):
+        _small_session(run)
+    real_iterdir = Path.iterdir
+
+    def iterdir(self: Path):
+        if self == locked / "checkpoints":
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
+        return real_iterdir(self)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"{tmp_path} holds 2 teaching sessions:"
+    (line,) = [ln for ln in lines if ln.startswith(f"{good}: ")]
+    assert ", 20 steps, " in line
+    (line,) = [ln for ln in lines if ln.startswith(f"{locked}: ")]
+    assert "cannot be read" in line and str(locked / "checkpoints") in line
+    assert main(["show", str(locked)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    (line,) = captured.err.splitlines()
+    assert line.startswith("torchcbl show: error: ") and str(locked / "checkpoints") in line
+    assert "permission denied" in line and "Traceback" not in captured.err
+
+
+def test_show_of_a_folder_lists_every_session_when_one_fails_to_read(tmp_path, capsys, monkeypatch):
+    """A file of one session the file system fails to read (an I/O error on its journal):
+    that session's line says so and the others are listed still."""
+    import errno
+    import os
+
+    good, failing = tmp_path / "sessions" / "good", tmp_path / "sessions" / "failing"
+    for run in (good, failing):
+        _small_session(run)
+    real_stat = Path.stat
+
+    def stat(self: Path, **kwargs):
+        if self == failing / "steps.journal":
+            raise OSError(errno.EIO, os.strerror(errno.EIO), str(self))
+        return real_stat(self, **kwargs)
+
+    monkeypatch.setattr(Path, "stat", stat)
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"{tmp_path} holds 2 teaching sessions:"
+    (line,) = [ln for ln in lines if ln.startswith(f"{good}: ")]
+    assert ", 20 steps, " in line
+    (line,) = [ln for ln in lines if ln.startswith(f"{failing}: ")]
+    assert "cannot be read" in line and os.strerror(errno.EIO) in line
+
+
+def test_show_of_a_folder_names_the_folders_it_cannot_search(tmp_path, capsys, monkeypatch):
+    """A folder below DIR this user may not list (another user's runs, mode 0o700): the
+    sessions in it cannot be counted, so the listing says so rather than count fewer in
+    silence. (Tests run as root, who may list any directory: listing it raises here what it
+    raises for a user without read access.)"""
+    import errno
+    import os
+
+    seen, hidden = tmp_path / "mine" / "sessions" / "seed0", tmp_path / "theirs" / "seed0"
+    for run in (seen, hidden):
+        _small_session(run)
+    denied, real_scandir = tmp_path / "theirs", os.scandir
+
+    def scandir(path=".", /):
+        if isinstance(path, (str, os.PathLike)) and Path(path) == denied:
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+        return real_scandir(path)
+
+    monkeypatch.setattr(os, "scandir", scandir)
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == (
+        f"{tmp_path} holds 1 teaching session in the folders it could search (1 folder it "
+        "could not, listed last):"
+    )
+    assert lines[1].startswith(f"{seen}: ")
+    assert lines[2].startswith(f"{denied}: cannot be searched: ") and len(lines) == 3
+    assert main(["show", str(tmp_path), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert [e["run_dir"] for e in shown["sessions"]] == [str(seen)]
+    assert [e["folder"] for e in shown["not_searched"]] == [str(denied)]
+    monkeypatch.setattr(os, "scandir", real_scandir)
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"{tmp_path} holds 2 teaching sessions:" and len(lines) == 3
+
+
+def test_show_of_a_lock_it_cannot_tie_to_the_session_says_running_or_killed(
+    tmp_path, capsys, monkeypatch
+):
+    """An flock on writer.lock's inode number whose device is not the one stat gives (overlay,
+    btrfs subvolumes report another) and whose process cannot be matched with writer.lock's
+    note (/proc/locks shows pid 0 for a holder in another PID namespace): whether a writer
+    runs cannot be told, so a session left unclosed is "running or killed", not "killed"."""
+    import os
+
+    run = tmp_path / "run"
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(max_new=3),
+        run_dir=run,
+        seed=0,
+        progress=False,
+        commit_every=10**6,
+    )
+    for _ in range(25):
+        ct.step()
+    _as_if_killed(ct)
+    st = (run / "writer.lock").stat()
+    major, minor = os.major(st.st_dev), os.minor(st.st_dev)
+
+    def proc_locks(pid: int, device: tuple[int, int]) -> str:
+        return (
+            f"1: FLOCK  ADVISORY  WRITE {pid} {device[0]:02x}:{device[1]:02x}:{st.st_ino} 0 EOF\n"
+        )
+
+    real_read_text = Path.read_text
+
+    def read_text(self: Path, *args, **kwargs) -> str:
+        if self == Path("/proc/locks"):
+            return locks
+        return real_read_text(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "read_text", read_text)
+    for locks, running, state in [
+        ("", False, "killed"),  # no lock on it
+        (proc_locks(os.getpid(), (major, minor)), True, "running"),
+        (proc_locks(0, (major + 1, minor)), None, "running or killed"),
+    ]:
+        s = describe(run)
+        assert (s.writer_running, s.state) == (running, state), locks
+    assert main(["show", str(run)]) == 0
+    assert "running or killed" in capsys.readouterr().out

@@ -457,27 +457,45 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
     path = Path(args.run_dir)
     if path.is_dir() and not (path / CONFIG_NAME).exists() and os.access(path, os.R_OK | os.X_OK):
-        below = _sessions_below(path, limit=None, depth=_SHOW_DEPTH)
+        not_searched: list[tuple[Path, str]] = []
+        below = _sessions_below(path, limit=None, depth=_SHOW_DEPTH, not_searched=not_searched)
+        # folders this user may not list: the sessions in them are not counted
+        unseen = [f"{folder}: cannot be searched: {why}" for folder, why in not_searched]
         if not below:
             raise _UsageError(
                 f"{path} holds no teaching session (no {CONFIG_NAME} in it, nor in a session "
-                f"directory up to {_SHOW_DEPTH} levels below); {_SESSION_HINT}"
+                f"directory up to {_SHOW_DEPTH} levels below"
+                + (f"; not searched: {'; '.join(unseen)}" if unseen else "")
+                + f"); {_SESSION_HINT}"
             )
         entries: list[dict[str, Any]] = []
-        lines = [f"{path} holds {len(below)} teaching session{'' if len(below) == 1 else 's'}:"]
+        head = f"{path} holds {len(below)} teaching session{'' if len(below) == 1 else 's'}"
+        if unseen:
+            head += (
+                f" in the folders it could search ({len(unseen)} folder"
+                f"{'' if len(unseen) == 1 else 's'} it could not, listed last)"
+            )
+        lines = [f"{head}:"]
         for session in below:
             try:
                 summary = describe(session)
-            except (IncompatibleRunDirError, CorruptSessionError) as exc:
+            # OSError: what describe does not turn into its own errors (a file of the
+            # session the file system fails to read); the other sessions are listed still
+            except (IncompatibleRunDirError, CorruptSessionError, OSError) as exc:
                 entries.append({"run_dir": str(session), "error": _one_line(exc)})
                 lines.append(f"{session}: cannot be read: {_one_line(exc)}")
             else:
                 entries.append(summary.to_dict())
                 lines.append(summary.line())
         if args.json:
-            print(json.dumps({"folder": str(path), "sessions": entries}, indent=2))
+            skipped = [{"folder": str(folder), "error": why} for folder, why in not_searched]
+            print(
+                json.dumps(
+                    {"folder": str(path), "sessions": entries, "not_searched": skipped}, indent=2
+                )
+            )
         else:
-            print("\n".join(lines))
+            print("\n".join(lines + unseen))
         return 0
     try:
         summary = describe(path)
@@ -1567,7 +1585,8 @@ def _parser() -> argparse.ArgumentParser:
         "steps, requests per episode, the newest checkpoint, its writers (torch and numpy "
         "versions, threads, device) and whether a writer holds it now or was killed. Given a "
         "folder that holds sessions (a reproduction's run directory, a benchmark's OUT/sessions), "
-        "one line per session.",
+        "one line per session, and the folders below it this user may not list (whose "
+        "sessions are not counted).",
     )
     p.add_argument(
         "run_dir",

@@ -145,7 +145,12 @@ def _device_memory(dev: torch.device) -> int | None:
 
 # the batched EM holds at once (at least) the responsibilities [G, N, C, K] and the candidates'
 # parameters [G, C, K, Q + D^2] in float64, and as much again in their temporaries: this many
-# times their bytes is a lower bound of its peak memory (measured on the CPU: 4.6 to 7.5)
+# times their bytes is a lower bound of its peak memory (peaks measured on the CPU: 3.4 to 7.5
+# times). The n_init check refuses only what this lower bound says no memory of the device
+# holds; it is no estimate of the peak, and a fit it lets through may still run out. Not 4: a
+# peak of 3.4 times was measured, and at 4 a 16 GiB machine would refuse 20,000 points of 8
+# features in 4 actions, cap 40, n_init 5, once 17,000 of them are one action's (16.3 GiB at
+# 4, 8.2 at 2)
 _EM_MEMORY_FACTOR = 2
 
 
@@ -474,9 +479,11 @@ class GaussianMixtureSet(nn.Module):
             continues the kept candidate alone (one EM step), whatever ``n_init``. The cost
             of a from-scratch fit grows about n_init times; the buffers do not change. At
             most 3074457345618258602, the most the model's state holds. A fit holds all
-            its starts in memory at once (measured on the CPU: 37 to 60 bytes x n_init x
-            actions x candidates^2 x (points + D^2 + D (D + 3) / 2 + 1)): one that the
-            device's whole memory could not hold is refused up front with a ValueError.
+            its starts in memory at once (measured on the CPU: 27 to 60 bytes x n_init x
+            actions x candidates^2 x (the most points of one action + D^2 + D (D + 3) / 2
+            + 1)). A ValueError refuses up front only an n_init whose lower bound of memory
+            (16 bytes x the same) exceeds the device's whole memory (the host's physical
+            memory for the CPU); a fit that passes may still run out of memory.
 
     Fitted buffers (fixed shapes, so ``state_dict`` loads into a fresh instance built with the
     same arguments, and only into one: a state of other sizes, ``n_actions``, ``n_features``

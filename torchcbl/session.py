@@ -543,18 +543,56 @@ def _config_problem(config: dict[str, Any]) -> str | None:
     return None
 
 
-def _sessions_below(path: Path, limit: int | None = 5, depth: int = 3) -> list[Path]:
+def _sessions_below(
+    path: Path,
+    limit: int | None = 5,
+    depth: int = 3,
+    not_searched: list[tuple[Path, str]] | None = None,
+) -> list[Path]:
     """Teaching session directories one to ``depth`` levels below ``path`` (at most
     ``limit``; None: all), shallower first, as a reproduction's run directory holds them
-    (``sessions/seed<k>``, ``seed_<k>/sessions/arm_a``) and a benchmark's (``sessions/<key>``)."""
+    (``sessions/seed<k>``, ``seed_<k>/sessions/arm_a``) and a benchmark's (``sessions/<key>``).
+
+    The folders it cannot list or search (another user's, mode 0o700; ``path`` itself
+    included), whose sessions are not among those returned, are appended to ``not_searched``
+    as ``(folder, why)`` when it is given; a session's own folders (its ``checkpoints/``) are
+    not (the session's readers say what they cannot read of it)."""
     found: list[Path] = []
-    for level in range(1, depth + 1):
-        for config in sorted(path.glob("*/" * level + CONFIG_NAME)):
-            if (config.parent / LOG_NAME).exists():
-                found.append(config.parent)
+    level: list[tuple[Path, bool]] = [(path, False)]  # (folder, whether inside a session)
+    for _ in range(depth):
+        children: list[tuple[Path, bool]] = []
+        for parent, inside in level:
+            try:
+                with os.scandir(parent) as entries:
+                    names = [e.name for e in entries if _is_dir(e)]
+            except OSError as exc:
+                if not_searched is not None and not inside:
+                    not_searched.append((parent, exc.strerror or str(exc)))
+                continue
+            children.extend((parent / name, inside) for name in names)
+        level = []
+        for folder, inside in sorted(children):
+            try:
+                is_session = (folder / CONFIG_NAME).exists() and (folder / LOG_NAME).exists()
+            except OSError as exc:  # a folder this user may list but not search
+                if not_searched is not None and not inside:
+                    not_searched.append((folder, exc.strerror or str(exc)))
+                continue
+            if is_session:
+                found.append(folder)
                 if limit is not None and len(found) >= limit:
                     return found
+            level.append((folder, inside or is_session))
     return found
+
+
+def _is_dir(entry: os.DirEntry[str]) -> bool:
+    """Whether a directory entry is a folder (a link to one included); False where that
+    cannot be told (a name in a folder this user may list but not search)."""
+    try:
+        return entry.is_dir()
+    except OSError:
+        return False
 
 
 def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
@@ -1942,7 +1980,10 @@ _MODEL_ARG_NAMES = (
 
 def _model_args(model: torch.nn.Module) -> dict[str, Any]:
     """The constructor arguments of ``model`` a session keeps: its ``init_args`` dict if it
-    has one, else the attributes of GaussianMixtureSet's arguments."""
+    has one, else the attributes of GaussianMixtureSet's arguments, ``n_init`` left out where
+    it is the default 1 (a plain session's config is then the one written before n_init
+    existed, which an older torchcbl's GaussianMixtureSet, taking no n_init, still builds;
+    readers complete it with :func:`_with_default_args` or the constructor's default)."""
     args = getattr(model, "init_args", None)
     if isinstance(args, dict):
         return dict(args)
@@ -1952,7 +1993,10 @@ def _model_args(model: torch.nn.Module) -> dict[str, Any]:
             f"cannot record the constructor arguments of {type(model).__name__}: attributes "
             f"{missing} are missing. Pass a torchcbl.GaussianMixtureSet as model."
         )
-    return {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
+    kept = {n: getattr(model, n) for n in _MODEL_ARG_NAMES}
+    if kept["n_init"] == 1:
+        del kept["n_init"]
+    return kept
 
 
 def _with_default_args(args: dict[str, Any]) -> dict[str, Any]:
@@ -2458,8 +2502,10 @@ class SessionSummary:
         last_writer: ``writer.lock``'s note of its last holder ("process PID on HOST"),
             None without one; it stays after that writer stops.
         writer_running: whether a process holds ``writer.lock`` now, as this machine's
-            ``/proc/locks`` shows (None where it cannot be told: no ``/proc/locks``); a writer
-            on another machine of a shared file system is not seen.
+            ``/proc/locks`` shows (None where it cannot be told: no ``/proc/locks``, or a
+            lock on writer.lock's inode number on another device, as an overlay or btrfs
+            reports, held by a process writer.lock does not name); a writer on another
+            machine of a shared file system is not seen.
         state: ``"running"`` (a writer holds the lock), ``"closed"`` (the last writer closed
             the session: nothing left uncommitted), ``"killed"`` (no writer holds the lock and
             the last one left ``steps.journal`` lines or ``steps.sqlite-wal`` behind: killed,
@@ -2648,7 +2694,9 @@ def _read_writers(run_dir: Path) -> tuple[list[dict[str, Any]], list[str]]:
 def _lock_held(run_dir: Path) -> bool | None:
     """Whether a process holds an flock on ``writer.lock`` now, read from ``/proc/locks``
     (Linux) without opening, locking or touching the file (a reader's lock, even for an
-    instant, could turn a writer starting then away); None where it cannot be told."""
+    instant, could turn a writer starting then away); None where it cannot be told (no
+    ``/proc/locks``, or a lock on its inode number on another device whose holder is not the
+    one ``writer.lock`` names)."""
     path = run_dir / LOCK_NAME
     try:
         st = path.stat()
@@ -2667,6 +2715,7 @@ def _lock_held(run_dir: Path) -> bool | None:
             holder = m.group(1).decode()
     except OSError:
         pass
+    unsure = False
     for entry in table.splitlines():
         fields = entry.split()
         if "->" in fields or len(fields) < 6 or fields[1] != "FLOCK":
@@ -2682,7 +2731,12 @@ def _lock_held(run_dir: Path) -> bool | None:
         # than the lock's) the holder writer.lock names
         if device == (os.major(st.st_dev), os.minor(st.st_dev)) or fields[4] == holder:
             return True
-    return False
+        # writer.lock's inode number on another device, held by a process writer.lock does
+        # not name as seen here (its note is from another host, or /proc/locks shows the
+        # holder of another PID namespace as pid 0 or by another number): writer.lock on an
+        # overlay or btrfs, or another file; which, cannot be told
+        unsure = True
+    return None if unsure else False
 
 
 def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
@@ -2703,7 +2757,8 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
 
     Raises:
         IncompatibleRunDirError: ``run_dir`` is not a session directory (the message names the
-            sessions below it, if any), or a file of it may not be read.
+            sessions below it, if any), or a file of it (or its ``checkpoints/``) may not be
+            read.
         CorruptSessionError: a file of the session is damaged or missing (as
             :func:`load_records`).
     """
@@ -2727,7 +2782,14 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
             blocks[r.step // SUMMARY_BLOCK_STEPS] += 1
     n_corrections = len(_corrections_of(records, corrections))
     n_demonstrations = sum(asked)
-    checkpoint = latest_checkpoint(run)
+    try:
+        checkpoint = latest_checkpoint(run)
+    except PermissionError as exc:  # e.g. another user's checkpoints/ this user may not list
+        raise _no_read_access(Path(exc.filename or run / CHECKPOINT_DIR)) from None
+    except OSError as exc:
+        raise IncompatibleRunDirError(
+            f"{exc.filename or run / CHECKPOINT_DIR} cannot be read: {exc.strerror or exc}"
+        ) from exc
     left = (run / LOG_NAME).with_name(LOG_NAME + "-wal").exists() or _unborn(run)
     try:
         left = left or (run / JOURNAL_NAME).stat().st_size > 0
