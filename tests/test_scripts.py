@@ -138,3 +138,43 @@ def test_setup_refuses_a_python_older_than_3_11_before_making_anything(tmp_path)
     assert "Python 3.10.13" in proc.stderr and "3.11 or newer" in proc.stderr, proc.stderr
     assert "PYTHON" in proc.stderr  # what to do: point PYTHON at a newer one
     assert not (checkout / ".venv").exists()
+
+
+def test_benchmark_var_floor_searches_the_cap_when_the_floor_is_met_only_at_a_higher_cap(
+    tmp_path, monkeypatch, capsys
+):
+    # Before, the cap search at --search-cap ran only for a floor above the library's 1e-3:
+    # where no floor met the criterion at the shipped cap of 10 and 1e-3 met it at the
+    # experiment's cap (the driving domain's 40), it printed "the domain keeps its spec" and
+    # wrote search and max_components null, though the spec's cap of 10 had cut the AIC.
+    # Teaching is replaced by one seeded training set (16 tight clusters of "stay"), so that
+    # only the script's criterion and fits run.
+    import importlib.util
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    loader = importlib.util.spec_from_file_location(
+        "benchmark_var_floor_under_test", ROOT / "scripts" / "benchmark_var_floor.py"
+    )
+    script = importlib.util.module_from_spec(loader)
+    loader.loader.exec_module(script)
+    rng = np.random.default_rng(0)
+    centres = np.stack(np.meshgrid(np.arange(4.0), np.arange(4.0)), -1).reshape(-1, 2)
+    stay = (centres[:, None, :] + 0.05 * rng.standard_normal((16, 20, 2))).reshape(-1, 2)
+    others = rng.standard_normal((20, 2)) * 0.3 + 10.0
+    x = np.concatenate([stay, others]).astype(np.float32)
+    y = np.array([0] * len(stay) + [1] * 10 + [2] * 10)
+    one_set = {"x": x, "y": y, "seed": 0, "labels": len(y), "where": "synthetic"}
+    spec = SimpleNamespace(model={"max_components": 10, "criterion": "aic", "tol": 1e-4})
+    monkeypatch.setattr(script, "teach", lambda name, seeds, workers, out: (spec, []))
+    monkeypatch.setattr(script, "training_sets", lambda out, cells, seen: [one_set])
+    argv = ["benchmark_var_floor.py", "--sets", "driving", "--floors", "1e-3"]
+    monkeypatch.setattr(sys, "argv", [*argv, "--out", str(tmp_path)])
+    script.main()
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["domains"]["driving"]
+    assert result["at_shipped_cap"][0]["at_cap"] == 1  # 10 of the 16 clusters' components
+    assert result["criterion_cap"] == 40 and result["var_floor"] == 0.001
+    assert result["search"] is not None and result["search"]["cap"] == 60
+    most = max(result["search"]["most"])
+    assert 10 < most < 40 and result["max_components"] == (20 if most < 20 else 40)
