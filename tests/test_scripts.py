@@ -43,6 +43,7 @@ def _run(script: str, *args: str) -> subprocess.CompletedProcess:
         ("benchmark_var_floor.py", ["--floors", "0.01,-1"], "finite numbers >= 0"),
         ("benchmark_calibrated.py", ["--variants", "shipped,noisey"], "names from shipped"),
         ("benchmark_calibrated.py", ["--seeds", "0-x"], "a range, e.g. 0-9"),
+        ("benchmark_calibrated.py", ["--domain", "drivng"], "invalid choice: 'drivng'"),
     ],
 )
 def test_a_malformed_value_is_a_usage_error_before_anything_runs(script, args, expected):
@@ -91,6 +92,24 @@ def test_benchmark_corridor_variants_refuses_an_out_that_is_not_a_benchmarks(tmp
     last = done.stderr.strip().splitlines()[-1]
     assert "error: --out " in last and "is not a benchmark's directory (no cells/)" in last
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_benchmark_calibrated_refuses_a_corridor_variant_for_the_driving_domain(tmp_path):
+    # perturbed and noisy are the corridor's variants; for --domain driving the script says so
+    # before any cell runs, and writes nothing into --out.
+    done = _run(
+        "benchmark_calibrated.py",
+        "--domain",
+        "driving",
+        "--variants",
+        "noisy",
+        "--out",
+        str(tmp_path),
+    )
+    assert done.returncode == 2 and done.stdout == "" and "Traceback" not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert "error: --variants noisy: the driving domain has only the shipped variant" in last
+    assert "leave --variants out" in last and not any(tmp_path.iterdir())
 
 
 def test_corridor_expert_recovery_answers_help_without_running():
