@@ -43,6 +43,7 @@ def _run(script: str, *args: str) -> subprocess.CompletedProcess:
         ("benchmark_var_floor.py", ["--floors", "0.01,-1"], "finite numbers >= 0"),
         ("benchmark_calibrated.py", ["--variants", "shipped,noisey"], "names from shipped"),
         ("benchmark_calibrated.py", ["--seeds", "0-x"], "a range, e.g. 0-9"),
+        ("benchmark_calibrated.py", ["--domain", "drivng"], "invalid choice: 'drivng'"),
     ],
 )
 def test_a_malformed_value_is_a_usage_error_before_anything_runs(script, args, expected):
@@ -93,6 +94,24 @@ def test_benchmark_corridor_variants_refuses_an_out_that_is_not_a_benchmarks(tmp
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
 
 
+def test_benchmark_calibrated_refuses_a_corridor_variant_for_the_driving_domain(tmp_path):
+    # perturbed and noisy are the corridor's variants; for --domain driving the script says so
+    # before any cell runs, and writes nothing into --out.
+    done = _run(
+        "benchmark_calibrated.py",
+        "--domain",
+        "driving",
+        "--variants",
+        "noisy",
+        "--out",
+        str(tmp_path),
+    )
+    assert done.returncode == 2 and done.stdout == "" and "Traceback" not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert "error: --variants noisy: the driving domain has only the shipped variant" in last
+    assert "leave --variants out" in last and not any(tmp_path.iterdir())
+
+
 def test_corridor_expert_recovery_answers_help_without_running():
     # Before, it took no arguments and ignored them: --help ran its 30-second measurement.
     done = _run("corridor_expert_recovery.py", "--help")
@@ -138,3 +157,43 @@ def test_setup_refuses_a_python_older_than_3_11_before_making_anything(tmp_path)
     assert "Python 3.10.13" in proc.stderr and "3.11 or newer" in proc.stderr, proc.stderr
     assert "PYTHON" in proc.stderr  # what to do: point PYTHON at a newer one
     assert not (checkout / ".venv").exists()
+
+
+def test_benchmark_var_floor_searches_the_cap_when_the_floor_is_met_only_at_a_higher_cap(
+    tmp_path, monkeypatch, capsys
+):
+    # Before, the cap search at --search-cap ran only for a floor above the library's 1e-3:
+    # where no floor met the criterion at the shipped cap of 10 and 1e-3 met it at the
+    # experiment's cap (the driving domain's 40), it printed "the domain keeps its spec" and
+    # wrote search and max_components null, though the spec's cap of 10 had cut the AIC.
+    # Teaching is replaced by one seeded training set (16 tight clusters of "stay"), so that
+    # only the script's criterion and fits run.
+    import importlib.util
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    loader = importlib.util.spec_from_file_location(
+        "benchmark_var_floor_under_test", ROOT / "scripts" / "benchmark_var_floor.py"
+    )
+    script = importlib.util.module_from_spec(loader)
+    loader.loader.exec_module(script)
+    rng = np.random.default_rng(0)
+    centres = np.stack(np.meshgrid(np.arange(4.0), np.arange(4.0)), -1).reshape(-1, 2)
+    stay = (centres[:, None, :] + 0.05 * rng.standard_normal((16, 20, 2))).reshape(-1, 2)
+    others = rng.standard_normal((20, 2)) * 0.3 + 10.0
+    x = np.concatenate([stay, others]).astype(np.float32)
+    y = np.array([0] * len(stay) + [1] * 10 + [2] * 10)
+    one_set = {"x": x, "y": y, "seed": 0, "labels": len(y), "where": "synthetic"}
+    spec = SimpleNamespace(model={"max_components": 10, "criterion": "aic", "tol": 1e-4})
+    monkeypatch.setattr(script, "teach", lambda name, seeds, workers, out: (spec, []))
+    monkeypatch.setattr(script, "training_sets", lambda out, cells, seen: [one_set])
+    argv = ["benchmark_var_floor.py", "--sets", "driving", "--floors", "1e-3"]
+    monkeypatch.setattr(sys, "argv", [*argv, "--out", str(tmp_path)])
+    script.main()
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["domains"]["driving"]
+    assert result["at_shipped_cap"][0]["at_cap"] == 1  # 10 of the 16 clusters' components
+    assert result["criterion_cap"] == 40 and result["var_floor"] == 0.001
+    assert result["search"] is not None and result["search"]["cap"] == 60
+    most = max(result["search"]["most"])
+    assert 10 < most < 40 and result["max_components"] == (20 if most < 20 else 40)
