@@ -1729,7 +1729,8 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="also keep each computed cell's teaching session in OUT/sessions/<key> (the key of "
         "its OUT/cells/<key>.json; read it with torchcbl.session.load_records, load_labels, "
-        "load_model, or torchcbl evaluate); the figures are the same either way. A cached cell "
+        "load_model, or torchcbl evaluate (corridor and driving cells; others in Python with "
+        "torchcbl.load_policy)); the figures are the same either way. A cached cell "
         "is not computed again for its session; one that a killed or failed run left is set "
         "aside as <key>.stale-N",
     )
