@@ -253,6 +253,7 @@ def test_show_of_a_folder_lists_the_sessions_below_it(tmp_path, capsys):
     for i, run in enumerate(sessions):
         (line,) = [ln for ln in lines if ln.startswith(f"{run}: ")]
         assert f", {20 + i} steps, " in line and "closed" in line, line
+        assert ", seed 0, " in line, line  # (a benchmark's folders are hashes: say its seed)
     (line,) = [ln for ln in lines if ln.startswith(f"{broken}: ")]
     assert "cannot be read" in line and "config.json" in line
     assert main(["show", str(tmp_path), "--json"]) == 0

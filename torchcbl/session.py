@@ -2680,7 +2680,7 @@ class SessionSummary:
         episodes = f"{self.n_episodes} episode{'' if self.n_episodes == 1 else 's'}"
         return (
             f"{self.run_dir}: {self.state}, {self.env_id or 'env made directly'}, {kind}, "
-            f"{self.n_steps} steps, {episodes}, {self.n_labels} labels "
+            f"seed {self.seed}, {self.n_steps} steps, {episodes}, {self.n_labels} labels "
             f"({self.n_requests} requests, {self.n_corrections} corrections)"
         )
 
