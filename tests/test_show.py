@@ -444,3 +444,22 @@ def test_show_of_a_lock_it_cannot_tie_to_the_session_says_running_or_killed(
         assert (s.writer_running, s.state) == (running, state), locks
     assert main(["show", str(run)]) == 0
     assert "running or killed" in capsys.readouterr().out
+
+
+def test_show_clips_the_last_block_to_the_last_step(tmp_path, capsys):
+    """With fewer than 4 episodes show counts requests per block of steps; the last block's
+    label ran to the block's end ("100-199" for a log of 150 steps), past the last step. It
+    ends at the last step logged."""
+    run = tmp_path / "run"
+    env = rare_regions_world(episode_length=1000)
+    ct = ConfidentTeacher(
+        env, oracle(env), config=TeachingConfig(max_new=3), run_dir=run, seed=0, progress=False
+    )
+    ct.run(max_steps=150)
+    ct.close()
+    s = describe(run)
+    assert (s.n_steps, s.n_episodes, s.block_steps) == (150, 1, 100)
+    assert main(["show", str(run)]) == 0
+    out = capsys.readouterr().out
+    blocks = f"0-99: {s.requests_per_block[0]}, 100-149: {s.requests_per_block[1]}\n"
+    assert f"per block of 100 steps (requests): {blocks}" in out, out

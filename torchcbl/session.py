@@ -2641,7 +2641,9 @@ class SessionSummary:
                 f"per block of {self.block_steps} steps (requests): "
                 + _ends_text(
                     [
-                        f"{i * self.block_steps}-{(i + 1) * self.block_steps - 1}: {r}"
+                        # (the last block ends at the last step logged)
+                        f"{i * self.block_steps}-"
+                        f"{min((i + 1) * self.block_steps, self.n_steps) - 1}: {r}"
                         for i, r in enumerate(self.requests_per_block)
                     ],
                     ends,
