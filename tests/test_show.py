@@ -463,3 +463,40 @@ def test_show_clips_the_last_block_to_the_last_step(tmp_path, capsys):
     out = capsys.readouterr().out
     blocks = f"0-99: {s.requests_per_block[0]}, 100-149: {s.requests_per_block[1]}\n"
     assert f"per block of 100 steps (requests): {blocks}" in out, out
+
+
+def test_show_names_a_strategy_and_rule_of_ones_own_once_each(tmp_path, capsys):
+    """A strategy subclass with a rule subclass was shown as its stored dict, nesting
+    custom=true twice and the parent's dict under inherited= ("MyCE(custom=true,
+    inherited=ConfidentExecution(custom=true, ..., rule=MyRule(custom=true, inherited=..."):
+    each class of one's own is now named once, with the class whose config it keeps, and the
+    fields of that config."""
+    from torchcbl.confidence import AutoThresholdRule
+    from torchcbl.strategies import ConfidentExecution
+
+    class MyRule(AutoThresholdRule):
+        pass
+
+    class MyCE(ConfidentExecution):
+        pass
+
+    run = tmp_path / "run"
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        strategy=MyCE(MyRule()),
+        config=TeachingConfig(max_new=3),
+        run_dir=run,
+        seed=0,
+        progress=False,
+    )
+    ct.run(max_steps=5)
+    ct.close()
+    assert main(["show", str(run)]) == 0
+    (line,) = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("strategy:")]
+    own = "test_show.test_show_names_a_strategy_and_rule_of_ones_own_once_each.<locals>"
+    assert line == (
+        f"strategy:   {own}.MyCE[custom, as ConfidentExecution](relabel=false, "
+        f"rule={own}.MyRule[custom, as AutoThresholdRule](max_std=2.0, min_std=0.0))"
+    ), line

@@ -2703,9 +2703,20 @@ def _args_text(args: dict[str, Any]) -> str:
 
 
 def _config_text(config: dict[str, Any]) -> str:
-    """A stored ``to_config`` dict as ``Type(key=value, ...)``, nested dicts alike."""
-    rest = {k: v for k, v in config.items() if k != "type"}
-    return f"{config.get('type', '?')}({_args_text(rest)})"
+    """A stored ``to_config`` dict as ``Type(key=value, ...)``, nested dicts alike; a class
+    of one's own (``"custom": true``) as ``Type[custom, as Parent](...)``, the fields of the
+    parent's config it keeps (``"inherited"``) among its own, ``custom`` said once."""
+    if not config.get("custom"):
+        rest = {k: v for k, v in config.items() if k != "type"}
+        return f"{config.get('type', '?')}({_args_text(rest)})"
+    inherited = config.get("inherited")
+    fields: dict[str, Any] = {}
+    tag = "custom"
+    if isinstance(inherited, dict):
+        tag += f", as {inherited.get('type', '?')}"
+        fields.update({k: v for k, v in inherited.items() if k not in ("type", "custom")})
+    fields.update({k: v for k, v in config.items() if k not in ("type", "custom", "inherited")})
+    return f"{config.get('type', '?')}[{tag}]({_args_text(dict(sorted(fields.items())))})"
 
 
 def _ends_text(items: list[str], ends: int) -> str:
