@@ -266,18 +266,26 @@ def test_show_of_a_folder_lists_the_sessions_below_it(tmp_path, capsys):
     assert str(sessions[1]) in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("json_flag", [[], ["--json"]])
 @pytest.mark.parametrize("what", ["empty", "missing", "file"])
-def test_show_of_what_is_not_a_session_is_one_line_and_exit_2(tmp_path, capsys, what):
+def test_show_of_what_is_not_a_session_is_one_line_and_exit_2(tmp_path, capsys, what, json_flag):
+    """An error is one line on stderr and exit 2, also with --json (no JSON is printed), as
+    show's --help says."""
     folder = tmp_path / "folder"
     folder.mkdir()
     (folder / "results.json").write_text("{}")
     path = {"empty": folder, "missing": tmp_path / "nope", "file": folder / "results.json"}[what]
-    assert main(["show", str(path)]) == 2
+    assert main(["show", str(path), *json_flag]) == 2
     captured = capsys.readouterr()
     assert captured.out == ""
     (line,) = captured.err.splitlines()
     assert line.startswith("torchcbl show: error: ") and str(path) in line
     assert "teaching session" in line
+    with pytest.raises(SystemExit):
+        main(["show", "--help"])
+    assert "errors go to stderr as one line (exit 2), also with --json" in " ".join(
+        capsys.readouterr().out.split()
+    )
 
 
 def test_show_reads_a_format1_session(tmp_path):
