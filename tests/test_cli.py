@@ -1861,3 +1861,16 @@ def test_teach_counts_one_demonstration_and_one_step_in_the_singular(tmp_path, m
     assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "10"]) == 0
     out = capsys.readouterr().out
     assert "1 demonstration over 1 step saved in" in out, out
+
+
+def test_benchmark_keep_sessions_help_says_which_sessions_evaluate_reads(capsys):
+    """--keep-sessions' help said the kept sessions are read with torchcbl evaluate, which
+    refuses those of a --gym-env env torchcbl does not know; it says evaluate reads the
+    corridor and driving cells', the others are read in Python with torchcbl.load_policy."""
+    with pytest.raises(SystemExit):
+        main(["benchmark", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert (
+        "torchcbl evaluate (corridor and driving cells; others in Python with "
+        "torchcbl.load_policy)" in text
+    ), text

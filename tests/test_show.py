@@ -253,6 +253,7 @@ def test_show_of_a_folder_lists_the_sessions_below_it(tmp_path, capsys):
     for i, run in enumerate(sessions):
         (line,) = [ln for ln in lines if ln.startswith(f"{run}: ")]
         assert f", {20 + i} steps, " in line and "closed" in line, line
+        assert ", seed 0, " in line, line  # (a benchmark's folders are hashes: say its seed)
     (line,) = [ln for ln in lines if ln.startswith(f"{broken}: ")]
     assert "cannot be read" in line and "config.json" in line
     assert main(["show", str(tmp_path), "--json"]) == 0
@@ -265,18 +266,26 @@ def test_show_of_a_folder_lists_the_sessions_below_it(tmp_path, capsys):
     assert str(sessions[1]) in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("json_flag", [[], ["--json"]])
 @pytest.mark.parametrize("what", ["empty", "missing", "file"])
-def test_show_of_what_is_not_a_session_is_one_line_and_exit_2(tmp_path, capsys, what):
+def test_show_of_what_is_not_a_session_is_one_line_and_exit_2(tmp_path, capsys, what, json_flag):
+    """An error is one line on stderr and exit 2, also with --json (no JSON is printed), as
+    show's --help says."""
     folder = tmp_path / "folder"
     folder.mkdir()
     (folder / "results.json").write_text("{}")
     path = {"empty": folder, "missing": tmp_path / "nope", "file": folder / "results.json"}[what]
-    assert main(["show", str(path)]) == 2
+    assert main(["show", str(path), *json_flag]) == 2
     captured = capsys.readouterr()
     assert captured.out == ""
     (line,) = captured.err.splitlines()
     assert line.startswith("torchcbl show: error: ") and str(path) in line
     assert "teaching session" in line
+    with pytest.raises(SystemExit):
+        main(["show", "--help"])
+    assert "errors go to stderr as one line (exit 2), also with --json" in " ".join(
+        capsys.readouterr().out.split()
+    )
 
 
 def test_show_reads_a_format1_session(tmp_path):
@@ -443,3 +452,59 @@ def test_show_of_a_lock_it_cannot_tie_to_the_session_says_running_or_killed(
         assert (s.writer_running, s.state) == (running, state), locks
     assert main(["show", str(run)]) == 0
     assert "running or killed" in capsys.readouterr().out
+
+
+def test_show_clips_the_last_block_to_the_last_step(tmp_path, capsys):
+    """With fewer than 4 episodes show counts requests per block of steps; the last block's
+    label ran to the block's end ("100-199" for a log of 150 steps), past the last step. It
+    ends at the last step logged."""
+    run = tmp_path / "run"
+    env = rare_regions_world(episode_length=1000)
+    ct = ConfidentTeacher(
+        env, oracle(env), config=TeachingConfig(max_new=3), run_dir=run, seed=0, progress=False
+    )
+    ct.run(max_steps=150)
+    ct.close()
+    s = describe(run)
+    assert (s.n_steps, s.n_episodes, s.block_steps) == (150, 1, 100)
+    assert main(["show", str(run)]) == 0
+    out = capsys.readouterr().out
+    blocks = f"0-99: {s.requests_per_block[0]}, 100-149: {s.requests_per_block[1]}\n"
+    assert f"per block of 100 steps (requests): {blocks}" in out, out
+
+
+def test_show_names_a_strategy_and_rule_of_ones_own_once_each(tmp_path, capsys):
+    """A strategy subclass with a rule subclass was shown as its stored dict, nesting
+    custom=true twice and the parent's dict under inherited= ("MyCE(custom=true,
+    inherited=ConfidentExecution(custom=true, ..., rule=MyRule(custom=true, inherited=..."):
+    each class of one's own is now named once, with the class whose config it keeps, and the
+    fields of that config."""
+    from torchcbl.confidence import AutoThresholdRule
+    from torchcbl.strategies import ConfidentExecution
+
+    class MyRule(AutoThresholdRule):
+        pass
+
+    class MyCE(ConfidentExecution):
+        pass
+
+    run = tmp_path / "run"
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        strategy=MyCE(MyRule()),
+        config=TeachingConfig(max_new=3),
+        run_dir=run,
+        seed=0,
+        progress=False,
+    )
+    ct.run(max_steps=5)
+    ct.close()
+    assert main(["show", str(run)]) == 0
+    (line,) = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("strategy:")]
+    own = "test_show.test_show_names_a_strategy_and_rule_of_ones_own_once_each.<locals>"
+    assert line == (
+        f"strategy:   {own}.MyCE[custom, as ConfidentExecution](relabel=false, "
+        f"rule={own}.MyRule[custom, as AutoThresholdRule](max_std=2.0, min_std=0.0))"
+    ), line

@@ -246,3 +246,51 @@ def test_a_fitted_model_with_constructor_arguments_of_its_own_resumes(tmp_path):
     back = _resume(run, model=fitted)
     assert back.model is fitted and _same_state(back.model, ct.model)
     back.close()
+
+
+class Unrecorded(GaussianMixtureSet):
+    """A user's learner with a constructor argument of its own and no ``init_args``: the
+    session records only GaussianMixtureSet's arguments."""
+
+    def __init__(
+        self, n_actions: int, n_features: int, max_components: int, *, seed: int, temperature=1.0
+    ) -> None:
+        super().__init__(n_actions, n_features, max_components, seed=seed)
+        self.temperature = temperature
+
+
+def test_a_subclass_whose_own_arguments_are_not_recorded_is_told_so(tmp_path):
+    """A subclass's constructor argument of its own (temperature) not in an ``init_args`` was
+    lost without a word: the session started silently, and a refusal advised
+    ``Unrecorded(**{...})`` without temperature, as if the arguments shown were all. The
+    session start warns, naming the argument and init_args, and the refusal's advice says the
+    argument is not recorded and to give the class an init_args."""
+    from torchcbl.session import load_model
+
+    run = tmp_path / "run"
+    with pytest.warns(UserWarning, match=r"Unrecorded's own arguments \(temperature\).*init_args"):
+        _teach(run, Unrecorded)
+    for read in (load_model, _resume):
+        with pytest.raises(IncompatibleRunDirError) as caught:
+            read(run, model=Unrecorded(3, 2, 5, seed=0, temperature=5.0))
+        msg = str(caught.value)
+        assert "its own arguments (temperature) are not recorded" in msg, msg
+        assert "give the class an init_args" in msg, msg
+
+
+def test_a_subclass_recording_its_arguments_starts_without_a_warning(tmp_path):
+    """The warning is for arguments a session loses: a subclass that records its own in
+    init_args (Tempered), or takes none beyond the library's (MyGMM), starts silently, and its
+    refusals give the plain advice."""
+    import warnings
+
+    from torchcbl.session import load_model
+
+    for cls in (Tempered, MyGMM):
+        run = tmp_path / cls.__name__
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            _teach(run, cls)
+        with pytest.raises(IncompatibleRunDirError) as caught:
+            load_model(run, model=cls(3, 2, 5, seed=0))
+        assert "not recorded" not in str(caught.value), caught.value

@@ -1586,7 +1586,8 @@ def _parser() -> argparse.ArgumentParser:
         "versions, threads, device) and whether a writer holds it now or was killed. Given a "
         "folder that holds sessions (a reproduction's run directory, a benchmark's OUT/sessions), "
         "one line per session, and the folders below it this user may not list (whose "
-        "sessions are not counted).",
+        "sessions are not counted). A path that holds no session, or a session that cannot "
+        "be read: errors go to stderr as one line (exit 2), also with --json.",
     )
     p.add_argument(
         "run_dir",
@@ -1729,7 +1730,8 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="also keep each computed cell's teaching session in OUT/sessions/<key> (the key of "
         "its OUT/cells/<key>.json; read it with torchcbl.session.load_records, load_labels, "
-        "load_model, or torchcbl evaluate); the figures are the same either way. A cached cell "
+        "load_model, or torchcbl evaluate (corridor and driving cells; others in Python with "
+        "torchcbl.load_policy)); the figures are the same either way. A cached cell "
         "is not computed again for its session; one that a killed or failed run left is set "
         "aside as <key>.stale-N",
     )

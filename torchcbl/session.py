@@ -1999,6 +1999,49 @@ def _model_args(model: torch.nn.Module) -> dict[str, Any]:
     return kept
 
 
+def _unrecorded_args(model_type: type, recorded: dict[str, Any]) -> list[str]:
+    """The parameters of ``model_type.__init__`` beyond GaussianMixtureSet's that ``recorded``
+    (a session's model arguments) lacks: a subclass's arguments of its own that a session
+    keeps only in an ``init_args`` dict of the model's."""
+    import inspect
+
+    from torchcbl.gmm import GaussianMixtureSet
+
+    try:
+        params = inspect.signature(model_type.__init__).parameters
+    except (TypeError, ValueError):  # no signature to read: nothing to say
+        return []
+    library = inspect.signature(GaussianMixtureSet.__init__).parameters
+    plain = (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)
+    return [
+        name
+        for name, p in params.items()
+        if name != "self" and p.kind not in plain and name not in library and name not in recorded
+    ]
+
+
+def _warn_unrecorded_args(model: torch.nn.Module) -> None:
+    """Warn, as a session starts, where its model's class takes constructor arguments of its
+    own that the session will not record (no ``init_args``): a reader or a resume cannot tell
+    a model made with other values of them."""
+    if isinstance(getattr(model, "init_args", None), dict):
+        return
+    own = _unrecorded_args(type(model), {})
+    if own:
+        import warnings
+
+        name = type(model).__name__
+        warnings.warn(
+            f"{name}'s own arguments ({', '.join(own)}) are not recorded in the session's "
+            "config.json, only GaussianMixtureSet's are: a resume or load_model given a "
+            f"{name} made with other values of them accepts it. To record them, give the "
+            "model an init_args dict of all its constructor arguments (see "
+            "docs/architecture.md, 'Contract: ConfidentTeacher').",
+            UserWarning,
+            stacklevel=3,
+        )
+
+
 def _with_default_args(args: dict[str, Any]) -> dict[str, Any]:
     """A stored session's model arguments, completed with the constructor's defaults for the
     arguments added since it was written (e.g. ``refit_growth``), so an older session resumes
@@ -2047,7 +2090,7 @@ def _given_model(run_dir: str | os.PathLike[str], config: dict[str, Any], model:
         args = _model_args(model)
     except ValueError as exc:
         args = {"error": str(exc)}
-    problems = _model_problems(config, type(model).__name__, args)
+    problems = _model_problems(config, type(model).__name__, args, type(model))
     if problems:
         raise IncompatibleRunDirError(
             f"cannot load the model of the session in {run_dir} into the given one: "
@@ -2366,7 +2409,9 @@ def load_model(
             from the session's config.json). Needed for a session whose model is of a class
             of the user's own (a subclass of GaussianMixtureSet), which the run directory
             cannot rebuild: a fresh, unfitted instance of that class (its name as the session
-            kept it) made with the session's arguments (config.json's ``model.args``); the
+            kept it) made with the session's arguments (config.json's ``model.args``: the
+            subclass's ``init_args`` dict where it set one, else GaussianMixtureSet's
+            arguments only, its own then not recorded or compared); the
             checkpoint's state is loaded into it, or it is refitted. Also a way to load onto
             a device (``GaussianMixtureSet(...).to("cuda")``).
 
@@ -2596,7 +2641,9 @@ class SessionSummary:
                 f"per block of {self.block_steps} steps (requests): "
                 + _ends_text(
                     [
-                        f"{i * self.block_steps}-{(i + 1) * self.block_steps - 1}: {r}"
+                        # (the last block ends at the last step logged)
+                        f"{i * self.block_steps}-"
+                        f"{min((i + 1) * self.block_steps, self.n_steps) - 1}: {r}"
                         for i, r in enumerate(self.requests_per_block)
                     ],
                     ends,
@@ -2635,7 +2682,7 @@ class SessionSummary:
         episodes = f"{self.n_episodes} episode{'' if self.n_episodes == 1 else 's'}"
         return (
             f"{self.run_dir}: {self.state}, {self.env_id or 'env made directly'}, {kind}, "
-            f"{self.n_steps} steps, {episodes}, {self.n_labels} labels "
+            f"seed {self.seed}, {self.n_steps} steps, {episodes}, {self.n_labels} labels "
             f"({self.n_requests} requests, {self.n_corrections} corrections)"
         )
 
@@ -2656,9 +2703,20 @@ def _args_text(args: dict[str, Any]) -> str:
 
 
 def _config_text(config: dict[str, Any]) -> str:
-    """A stored ``to_config`` dict as ``Type(key=value, ...)``, nested dicts alike."""
-    rest = {k: v for k, v in config.items() if k != "type"}
-    return f"{config.get('type', '?')}({_args_text(rest)})"
+    """A stored ``to_config`` dict as ``Type(key=value, ...)``, nested dicts alike; a class
+    of one's own (``"custom": true``) as ``Type[custom, as Parent](...)``, the fields of the
+    parent's config it keeps (``"inherited"``) among its own, ``custom`` said once."""
+    if not config.get("custom"):
+        rest = {k: v for k, v in config.items() if k != "type"}
+        return f"{config.get('type', '?')}({_args_text(rest)})"
+    inherited = config.get("inherited")
+    fields: dict[str, Any] = {}
+    tag = "custom"
+    if isinstance(inherited, dict):
+        tag += f", as {inherited.get('type', '?')}"
+        fields.update({k: v for k, v in inherited.items() if k not in ("type", "custom")})
+    fields.update({k: v for k, v in config.items() if k not in ("type", "custom", "inherited")})
+    return f"{config.get('type', '?')}[{tag}]({_args_text(dict(sorted(fields.items())))})"
 
 
 def _ends_text(items: list[str], ends: int) -> str:
@@ -2858,11 +2916,14 @@ def resume_problems(
     env_max_episode_steps: int | None = None,
     env_inputs: dict[str, Any] | None = None,
     model_class: str | None = None,
+    model_type: type | None = None,
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
     ``model_args`` / ``strategy`` None means "rebuilt from the directory"; ``model_class``:
-    the given model's class name, compared with the one the session kept; of a strategy
+    the given model's class name, compared with the one the session kept (``model_type``,
+    its class, lets the advice name the class's arguments the session did not record); of a
+    strategy
     config with ``"custom": true`` (no ``to_config``, or a parent's) only the class name, the
     relabel flag, the parent's dict (``"inherited"``) and the rule are compared (a session
     stored before a subclass keeping its parent's ``to_config`` was custom holds the parent's
@@ -2930,7 +2991,7 @@ def resume_problems(
         }
         problems.append(f"config (stored, given): {diff}; only the stop fields may change")
     if model_args is not None:
-        problems += _model_problems(stored, model_class, model_args)
+        problems += _model_problems(stored, model_class, model_args, model_type)
     if strategy is not None:
         want = stored_strategy(stored)
         if strategy.get("custom") or want.get("custom"):
@@ -2951,10 +3012,13 @@ def resume_problems(
 
 
 def _model_problems(
-    stored: dict[str, Any], model_class: str | None, model_args: dict[str, Any]
+    stored: dict[str, Any],
+    model_class: str | None,
+    model_args: dict[str, Any],
+    model_type: type | None = None,
 ) -> list[str]:
     """What keeps a given model (its class name, its arguments as :func:`_model_args` reads
-    them, or ``{"error": why}``) from being the session's."""
+    them, or ``{"error": why}``; its class, where at hand) from being the session's."""
     kept_class = stored["model"].get("class", "GaussianMixtureSet")
     if "error" in model_args and kept_class == "GaussianMixtureSet":
         return [f"model: {model_args['error']}"]  # (which says to pass a GaussianMixtureSet)
@@ -2975,18 +3039,29 @@ def _model_problems(
             for k in sorted(set(kept) | set(model_args))
             if kept.get(k) != model_args.get(k)
         }
-        return [f"model args (stored, given): {diff}; " + _pass_model(stored)]
+        return [f"model args (stored, given): {diff}; " + _pass_model(stored, model_type)]
     return []
 
 
-def _pass_model(stored: dict[str, Any]) -> str:
+def _pass_model(stored: dict[str, Any], model_type: type | None = None) -> str:
     """What to pass for a session's model: its class, made with the arguments the session
-    kept (or, for the library's own class, nothing: the directory rebuilds it)."""
+    kept (or, for the library's own class, nothing: the directory rebuilds it); where
+    ``model_type`` is that class, the arguments of its own the session did not record."""
     kept_class = stored["model"].get("class", "GaussianMixtureSet")
+    unrecorded = []
+    if model_type is not None and model_type.__name__ == kept_class:
+        unrecorded = _unrecorded_args(model_type, stored["model"]["args"])
     return (
         f"pass model={kept_class}(...) made as the session made it, "
         f"{kept_class}(**{stored['model']['args']})"
         + (", or leave model= out" if kept_class == "GaussianMixtureSet" else "")
+        + (
+            f" (its own arguments ({', '.join(unrecorded)}) are not recorded: give the class "
+            "an init_args dict of all its constructor arguments, which sessions record, "
+            "and make it with the values the session had)"
+            if unrecorded
+            else ""
+        )
     )
 
 

@@ -88,6 +88,7 @@ from torchcbl.session import (
     _InterruptHold,
     _model_args,
     _read_prior,
+    _warn_unrecorded_args,
     build_model,
     label_sequence,
     load_config,
@@ -512,7 +513,11 @@ class ConfidentTeacher:
             step by strategies that take corrections (see :mod:`torchcbl.strategies`).
         model: the learner; default ``GaussianMixtureSet(n_actions, D, seed=seed)``. Its
             ``fit`` must be deterministic given the data (resume relies on it). A fitted model
-            starts the session from it (kept as checkpoint 0), until the first refit.
+            starts the session from it (kept as checkpoint 0), until the first refit. A
+            session records the model's class by name and its constructor arguments:
+            GaussianMixtureSet's, read from its attributes, or, for a subclass that sets one,
+            the dict ``model.init_args`` (all of its constructor arguments, its own included;
+            without it a subclass's own arguments are not recorded, and a warning says so).
         prior_demonstrations: labels the session starts from, e.g. logged data, an earlier
             session's (``torchcbl.session.load_demonstrations(run_dir)``) or a BC data set:
             ``(observations [N, D], actions [N])``, N >= 1, finite, actions in
@@ -600,6 +605,7 @@ class ConfidentTeacher:
             # only here, as a session starts: a stored session of such a strategy (from before
             # this check) still resumes with strategy= passed
             _check_rebuilt_as_itself(self.strategy, stored_strategy_config)
+            _warn_unrecorded_args(self.model)
             session_config = {
                 "format": FORMAT if prior is None else PRIOR_FORMAT,
                 "teaching": dataclasses.asdict(self.config),
@@ -783,7 +789,8 @@ class ConfidentTeacher:
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
                 fields may not. ``model`` / ``rule`` / ``strategy``: optional; must match the
-                stored ones (a model: its class, by name, and its arguments; a custom rule or
+                stored ones (a model: its class, by name, and its recorded arguments, its
+                ``init_args`` where it has one, see ``model`` above; a custom rule or
                 strategy that cannot be rebuilt must be passed).
 
         Raises:
@@ -836,6 +843,7 @@ class ConfidentTeacher:
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
             model_class=None if model is None else type(model).__name__,
+            model_type=None if model is None else type(model),
             strategy=(
                 None
                 if given is None
