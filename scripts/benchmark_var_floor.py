@@ -25,7 +25,8 @@ benchmark's own label sets. No policy is evaluated for the choice.
    1e-3 met only at the experiment's cap): with the chosen floor, fits again at
    ``--search-cap`` (default 60) and takes the smallest of 10, 20, 40 (the shipped cap and the
    experiments') above the most components any action took there, so that the AIC's choice is
-   not cut (a count equal to the search cap is reported as unsettled).
+   not cut (a count equal to the search cap is reported as unsettled; a count of 40 or more
+   below it has no cap of the ladder above it: the rule settles none).
 
 Prints Markdown tables and ends with one JSON line (``--json`` writes it to a file too).
 
@@ -155,6 +156,17 @@ def fit_counts(
     }
 
 
+def _no_cap(top: int, search_cap: int) -> str:
+    """Why the cap search settled no cap, given its most components ``top``."""
+    if top >= search_cap:  # the search cap may have cut the AIC's choice: a higher one may not
+        return "unsettled (raise --search-cap)"
+    ladder = ", ".join(map(str, CAP_LADDER))
+    return (
+        f"none: no cap of the ladder {ladder} is above {top} (the rule settles no cap; "
+        "a higher --search-cap cannot change that)"
+    )
+
+
 def _row(r: dict[str, Any], chosen: bool) -> str:
     cells = [f"{r['var_floor']:g}", f"{r['at_cap']} of {r['sets']}"]
     if chosen:
@@ -248,7 +260,7 @@ def main() -> None:
                 f"Criterion (no mixture at the cap of {chosen_cap_for_criterion}): "
                 f"var_floor {floor:g}. At a cap of {args.search_cap} with it: "
                 f"{search['at_cap']} sets at that cap, most components {search['most']}; "
-                f"cap {cap if cap is not None else 'unsettled (raise --search-cap)'}."
+                f"cap {cap if cap is not None else _no_cap(top, args.search_cap)}."
             )
         result["domains"][domain] = {
             "sets_from": d["from"],

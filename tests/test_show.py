@@ -508,3 +508,40 @@ def test_show_names_a_strategy_and_rule_of_ones_own_once_each(tmp_path, capsys):
         f"strategy:   {own}.MyCE[custom, as ConfidentExecution](relabel=false, "
         f"rule={own}.MyRule[custom, as AutoThresholdRule](max_std=2.0, min_std=0.0))"
     ), line
+
+
+def test_show_of_a_session_without_journal_whose_checkpoints_cannot_be_listed(
+    tmp_path, capsys, monkeypatch
+):
+    """A session with no journal and no writers file (read as possibly left by a killed
+    creation, which lists its ``checkpoints/``) whose ``checkpoints/`` this user may not list:
+    the session alone is one line on stderr naming ``checkpoints/`` and exit 2, as for the
+    other files of a session this user may not read; the folder's listing says the same in
+    that session's line. (Tests run as root: listing it raises here what it raises for a
+    user without read access.)"""
+    import errno
+    import os
+
+    run = tmp_path / "sessions" / "locked"
+    _small_session(run)
+    for name in ("steps.journal", "writers.jsonl"):
+        (run / name).unlink()
+    assert main(["show", str(run)]) == 0  # readable as it is
+    capsys.readouterr()
+    real_iterdir = Path.iterdir
+
+    def iterdir(self: Path):
+        if self == run / "checkpoints":
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
+        return real_iterdir(self)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    assert main(["show", str(run)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    (line,) = captured.err.splitlines()
+    assert line.startswith("torchcbl show: error: ") and str(run / "checkpoints") in line
+    assert "permission denied" in line and "Traceback" not in captured.err
+    assert main(["show", str(tmp_path)]) == 0
+    (line,) = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith(f"{run}: ")]
+    assert "cannot be read by this user" in line and str(run / "checkpoints") in line

@@ -1533,11 +1533,17 @@ def _unborn(run_dir: Path) -> bool:
     creates) and no writers file, no checkpoint but the starting model's 0, and a step log
     that is absent or holds no step table (SQLite creates the file, then its header, then the
     tables). Nothing of it ran, so nothing is lost: it reads as a session of no step and
-    resumes as one (the log is made whole then)."""
+    resumes as one (the log is made whole then).
+
+    Raises :class:`IncompatibleRunDirError` (the read-access error) where ``checkpoints/``
+    may not be listed."""
     if (run_dir / JOURNAL_NAME).exists() or (run_dir / WRITERS_NAME).exists():
         return False
     ckpts = run_dir / CHECKPOINT_DIR
-    kept = [e.name for e in ckpts.iterdir() if _CKPT_RE.match(e.name)] if ckpts.is_dir() else []
+    try:
+        kept = [e.name for e in ckpts.iterdir() if _CKPT_RE.match(e.name)] if ckpts.is_dir() else []
+    except PermissionError:  # e.g. another user's checkpoints/ this user may not list
+        raise _no_read_access(ckpts) from None
     if kept not in ([], [f"model-{0:08d}.pt"]):
         return False
     log = run_dir / LOG_NAME
