@@ -77,6 +77,24 @@ def _small_session(run: Path, steps: int = 20) -> None:
     ct.close()
 
 
+def _open_session(run: Path, steps: int) -> ConfidentTeacher:
+    """A session left open after ``steps`` steps, every one in its journal and none committed
+    to SQLite."""
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(max_new=3),
+        run_dir=run,
+        seed=0,
+        progress=False,
+        commit_every=10**6,
+    )
+    for _ in range(steps):
+        ct.step()
+    return ct
+
+
 def _files_of(run: Path) -> dict[str, tuple[int, int, str]]:
     """{relative path: (mode, mtime_ns, sha256)} of every file and folder under ``run``."""
     return {
@@ -161,18 +179,7 @@ def test_show_reads_a_read_only_session_and_changes_nothing(taught, tmp_path, ca
     closed = tmp_path / "closed"
     shutil.copytree(taught, closed)
     killed = tmp_path / "killed"
-    env = rare_regions_world(episode_length=10)
-    ct = ConfidentTeacher(
-        env,
-        oracle(env),
-        config=TeachingConfig(max_new=3),
-        run_dir=killed,
-        seed=0,
-        progress=False,
-        commit_every=10**6,
-    )
-    for _ in range(25):
-        ct.step()  # into the journal only
+    ct = _open_session(killed, steps=25)
     _as_if_killed(ct)
     for run in (closed, killed):
         for p in run.rglob("*"):
@@ -202,18 +209,7 @@ def _as_if_killed(ct: ConfidentTeacher) -> None:
 
 def test_show_says_whether_a_writer_holds_the_session_or_was_killed(tmp_path, capsys):
     run = tmp_path / "run"
-    env = rare_regions_world(episode_length=10)
-    ct = ConfidentTeacher(
-        env,
-        oracle(env),
-        config=TeachingConfig(max_new=3),
-        run_dir=run,
-        seed=0,
-        progress=False,
-        commit_every=10**6,
-    )
-    for _ in range(25):
-        ct.step()
+    ct = _open_session(run, steps=25)
     s = describe(run)
     assert (s.state, s.writer_running, s.n_steps) == ("running", True, 25)
     assert main(["show", str(run)]) == 0
@@ -223,6 +219,7 @@ def test_show_says_whether_a_writer_holds_the_session_or_was_killed(tmp_path, ca
     assert (s.state, s.writer_running, s.n_steps) == ("killed", False, 25)
     assert main(["show", str(run)]) == 0
     assert "stopped without closing it (killed" in capsys.readouterr().out
+    env = rare_regions_world(episode_length=10)
     back = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
     back.run(max_steps=30)
     back.close()
@@ -414,18 +411,7 @@ def test_show_of_a_lock_it_cannot_tie_to_the_session_says_running_or_killed(
     import os
 
     run = tmp_path / "run"
-    env = rare_regions_world(episode_length=10)
-    ct = ConfidentTeacher(
-        env,
-        oracle(env),
-        config=TeachingConfig(max_new=3),
-        run_dir=run,
-        seed=0,
-        progress=False,
-        commit_every=10**6,
-    )
-    for _ in range(25):
-        ct.step()
+    ct = _open_session(run, steps=25)
     _as_if_killed(ct)
     st = (run / "writer.lock").stat()
     major, minor = os.major(st.st_dev), os.minor(st.st_dev)
