@@ -40,14 +40,13 @@ import argparse
 import dataclasses
 import json
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # _args, also when loaded by path
 from _args import int_at_least  # noqa: E402
 from _args import seeds as seed_list  # noqa: E402
-from benchmark_corridor_variants import _variants, variant_specs  # noqa: E402
+from benchmark_corridor_variants import run_sweep, variant_specs, variants_arg  # noqa: E402
 
 #: the corridor's model as benchmark_var_floor.py chose it (the shipped spec's is {}: the
 #: library's floor 1e-3 and cap 10)
@@ -83,7 +82,7 @@ def _specs(domain: str, variants: list[str], full: bool) -> list[Any]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--domain", choices=DOMAINS, default="corridor")
-    ap.add_argument("--variants", type=_variants, default=["shipped"])
+    ap.add_argument("--variants", type=variants_arg, default=["shipped"])
     ap.add_argument("--seeds", type=seed_list, default="0-2")
     ap.add_argument("--workers", type=int_at_least(1), default=2)
     ap.add_argument("--full", action="store_true", help="the full spec instead of the quick one")
@@ -109,28 +108,8 @@ def main() -> None:
             "finished cells are reused)"
         )
 
-    from torchcbl.benchmark import STRATEGY_PATHS, StrategySpec, format_table, run_benchmark
-
     envs = _specs(args.domain, args.variants, args.full)
-    t0 = time.perf_counter()
-    try:
-        summary = run_benchmark(
-            [StrategySpec(s) for s in STRATEGY_PATHS],  # the 6 of torchcbl benchmark
-            envs,
-            seeds=args.seeds,
-            out_dir=args.out,
-            workers=args.workers,
-        )
-    except (RuntimeError, ValueError) as exc:  # a CellError names the cell; the rest is kept
-        raise SystemExit(f"benchmark_calibrated: {' '.join(str(exc).split())}") from None
-    wall = time.perf_counter() - t0
-    print(format_table(summary))
-    sweep = summary["sweep"]
-    print(
-        f"\n{sweep['computed']} cells computed, {sweep['cached']} cached; {wall:.0f} s wall, "
-        f"{sweep['cell_cpu_s_total']:.0f} s CPU in the cells ({args.out}/results.json)"
-    )
-    out: dict[str, Any] = {"wall_s": round(wall, 1), "cpu_s": round(sweep["cell_cpu_s_total"], 1)}
+    summary, out = run_sweep(envs, args, "benchmark_calibrated")
     for spec in envs:
         out[spec.name] = {
             strategy: {

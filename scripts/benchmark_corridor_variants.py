@@ -49,7 +49,7 @@ from _args import seeds as seed_list  # noqa: E402
 VARIANTS = ("shipped", "perturbed", "noisy")
 
 
-def _variants(text: str) -> list[str]:
+def variants_arg(text: str) -> list[str]:
     names = text.split(",")
     if not names or any(n not in VARIANTS for n in names) or len(set(names)) != len(names):
         raise argparse.ArgumentTypeError(
@@ -81,9 +81,38 @@ def variant_specs(names: list[str], full: bool = False) -> list[Any]:
     return [specs[n] for n in names]
 
 
+def run_sweep(envs: list[Any], args: argparse.Namespace, prog: str) -> tuple[dict, dict]:
+    """The 6 strategies of ``torchcbl benchmark`` on ``envs`` (``args.seeds``, ``args.out``,
+    ``args.workers``): prints the table and the cells' count and times; returns the summary and
+    the start of the JSON line (wall and CPU seconds). A failed cell ends the script with one
+    line (its finished cells are kept)."""
+    from torchcbl.benchmark import STRATEGY_PATHS, StrategySpec, format_table, run_benchmark
+
+    t0 = time.perf_counter()
+    try:
+        summary = run_benchmark(
+            [StrategySpec(s) for s in STRATEGY_PATHS],  # the 6 of torchcbl benchmark
+            envs,
+            seeds=args.seeds,
+            out_dir=args.out,
+            workers=args.workers,
+        )
+    except (RuntimeError, ValueError) as exc:  # a CellError names the cell; the rest is kept
+        raise SystemExit(f"{prog}: {' '.join(str(exc).split())}") from None
+    wall = time.perf_counter() - t0
+    print(format_table(summary))
+    sweep = summary["sweep"]
+    print(
+        f"\n{sweep['computed']} cells computed, {sweep['cached']} cached; {wall:.0f} s wall, "
+        f"{sweep['cell_cpu_s_total']:.0f} s CPU in the cells ({args.out}/results.json)"
+    )
+    out: dict[str, Any] = {"wall_s": round(wall, 1), "cpu_s": round(sweep["cell_cpu_s_total"], 1)}
+    return summary, out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--variants", type=_variants, default=list(VARIANTS))
+    ap.add_argument("--variants", type=variants_arg, default=list(VARIANTS))
     ap.add_argument("--seeds", type=seed_list, default="0-2")
     ap.add_argument("--workers", type=int_at_least(1), default=2)
     ap.add_argument(
@@ -110,28 +139,8 @@ def main() -> None:
             "finished cells are reused)"
         )
 
-    from torchcbl.benchmark import STRATEGY_PATHS, StrategySpec, format_table, run_benchmark
-
     envs = variant_specs(args.variants, full=args.full)
-    t0 = time.perf_counter()
-    try:
-        summary = run_benchmark(
-            [StrategySpec(s) for s in STRATEGY_PATHS],  # the 6 of torchcbl benchmark
-            envs,
-            seeds=args.seeds,
-            out_dir=args.out,
-            workers=args.workers,
-        )
-    except (RuntimeError, ValueError) as exc:  # a CellError names the cell; the rest is kept
-        raise SystemExit(f"benchmark_corridor_variants: {' '.join(str(exc).split())}") from None
-    wall = time.perf_counter() - t0
-    print(format_table(summary))
-    sweep = summary["sweep"]
-    print(
-        f"\n{sweep['computed']} cells computed, {sweep['cached']} cached; {wall:.0f} s wall, "
-        f"{sweep['cell_cpu_s_total']:.0f} s CPU in the cells ({args.out}/results.json)"
-    )
-    out: dict[str, Any] = {"wall_s": round(wall, 1), "cpu_s": round(sweep["cell_cpu_s_total"], 1)}
+    summary, out = run_sweep(envs, args, "benchmark_corridor_variants")
     for name, spec in zip(args.variants, envs, strict=True):
         rows = summary["table"][spec.name]
         out[name] = {
