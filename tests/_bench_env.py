@@ -23,6 +23,28 @@ if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="_bench_env:make_world")
 
 
+def toy_spec(**kw: Any) -> Any:
+    """The benchmark tests' EnvSpec of this env (cheap cells: 60 steps, budgets 5, 10, 20);
+    ``kw`` overrides its fields."""
+    from torchcbl.benchmark import EnvSpec
+
+    return EnvSpec(
+        **{
+            "name": "toy",
+            "env_id": "_bench_env:BenchCluster-v0",
+            "teacher": "_bench_env:teacher",
+            "budgets": (5, 10, 20),
+            "max_steps": 60,
+            "env_kwargs": {"spread": 2.0},
+            "eval_seeds": (100, 101),
+            "eval_episodes": 3,
+            "teaching": {"max_new": 5},
+            "model": {"max_components": 2},
+            **kw,
+        }
+    )
+
+
 def policy_as_teacher(env: Any) -> Any:
     """A factory that returns a policy of the observation alone, not a teacher (a user's slip)."""
     return lambda obs: 0

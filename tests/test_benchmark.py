@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _bench_env import toy_spec
 
 from torchcbl import benchmark as bm
 from torchcbl.cli import main
@@ -22,21 +23,7 @@ ROOT = TESTS.parent
 
 
 def _env(**kw):
-    return bm.EnvSpec(
-        **{
-            "name": "toy",
-            "env_id": "_bench_env:BenchCluster-v0",
-            "teacher": "_bench_env:teacher",
-            "budgets": (5, 10, 20),
-            "max_steps": 60,
-            "env_kwargs": {"spread": 2.0},
-            "eval_seeds": (100, 101),
-            "eval_episodes": 3,
-            "teaching": {"max_new": 5},
-            "model": {"max_components": 2},
-            **kw,
-        }
-    )
+    return toy_spec(**kw)
 
 
 STRATEGIES = [bm.StrategySpec("bc"), bm.StrategySpec("dagger", {"iteration_steps": 10})]

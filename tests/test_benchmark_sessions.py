@@ -11,6 +11,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from _bench_env import toy_spec
 
 from torchcbl import benchmark as bm
 from torchcbl.cli import main
@@ -31,23 +32,8 @@ TIMINGS = ("wall_s", "cpu_s", "teach_wall_s")
 
 
 def _env(**kw):
-    """The toy env of tests/_bench_env.py: one cell of HG-DAgger on it teaches 60 steps, 19
-    labels of which 7 corrections, curve [0.5, 0.33, 0.5] at 5, 10, 19 labels."""
-    return bm.EnvSpec(
-        **{
-            "name": "toy",
-            "env_id": "_bench_env:BenchCluster-v0",
-            "teacher": "_bench_env:teacher",
-            "budgets": (5, 10, 20),
-            "max_steps": 60,
-            "env_kwargs": {"spread": 2.0},
-            "eval_seeds": (100, 101),
-            "eval_episodes": 3,
-            "teaching": {"max_new": 5},
-            "model": {"max_components": 2},
-            **kw,
-        }
-    )
+    """The toy env of tests/_bench_env.py (at most 60 steps, budgets 5, 10, 20)."""
+    return toy_spec(**kw)
 
 
 HG = [bm.StrategySpec("hg_dagger", {"warmup": 3})]
