@@ -134,3 +134,54 @@ def test_a_cuda_fit_and_refit_repeat_bit_for_bit() -> None:
             assert torch.equal(a[key], b[key]), key
     assert torch.equal(cls_a.distance, cls_b.distance)
     assert torch.equal(cls_a.posterior, cls_b.posterior)
+
+
+def _fit_n_init(device: str, x: np.ndarray, y: np.ndarray, n_init: int) -> GaussianMixtureSet:
+    model = GaussianMixtureSet(3, x.shape[1], 8, tol=1e-6, max_iter=300, seed=3, n_init=n_init)
+    return model.to(device).fit(x, y)
+
+
+def test_an_n_init_fit_on_cuda_keeps_the_cpu_models_starts() -> None:
+    """n_init > 1 batches every start of every candidate side by side (_best_init picks the
+    best per candidate): on CUDA the same start must win as on the CPU, so the chosen model
+    and each candidate's log-likelihood agree, and the state holds the same settings code."""
+    x, y = _data(n_per=500)
+    cpu, gpu = _fit_n_init("cpu", x, y, 4), _fit_n_init("cuda", x, y, 4)
+    assert gpu.means_.device.type == "cuda"
+    assert gpu.n_components_.cpu().tolist() == cpu.n_components_.tolist()
+    real = cpu.fit_report_.candidate_mask
+    np.testing.assert_allclose(
+        gpu.fit_report_.log_likelihood.cpu()[real].numpy(),
+        cpu.fit_report_.log_likelihood[real].numpy(),
+        rtol=1e-6,
+    )
+    np.testing.assert_allclose(gpu.means_.cpu().numpy(), cpu.means_.numpy(), atol=1e-6)
+    for key, value in cpu.state_dict().items():
+        if value.dtype == torch.int64:
+            assert torch.equal(gpu.state_dict()[key].cpu(), value), key
+    q = np.random.default_rng(4).normal(scale=1.5, size=(2000, x.shape[1]))
+    assert torch.equal(gpu.classify(q).action.cpu(), cpu.classify(q).action)
+
+
+def test_an_n_init_cuda_fit_repeats_bit_for_bit() -> None:
+    x, y = _data(n_per=2000, d=5)
+    a, b = (_fit_n_init("cuda", x, y, 3).state_dict() for _ in range(2))
+    assert a.keys() == b.keys()
+    for key in a:
+        assert torch.equal(a[key], b[key]), key
+
+
+def test_an_n_init_no_gpu_memory_holds_is_refused_naming_the_gpu() -> None:
+    """The up-front n_init check reads the GPU's own memory for a CUDA model (the host's for the
+    CPU); the model stays unfitted and on the GPU."""
+    x, y = _data(n_per=50)
+    total = torch.cuda.get_device_properties(0).total_memory
+    model = GaussianMixtureSet(3, x.shape[1], 8, seed=3, n_init=10**12).to("cuda")
+    with pytest.raises(
+        ValueError,
+        match=rf"Expected an n_init whose starts fit in the memory of cuda "
+        rf"\({total / 2**30:.3g} GiB\) but got {10**12}",
+    ):
+        model.fit(x, y)
+    assert not model.is_fitted
+    assert model.means_.device.type == "cuda"
