@@ -146,9 +146,14 @@ _teach(sys.argv[1], SafeAsk(threshold=0.2), 100, on_step)
 
 
 def test_a_strategy_of_ones_own_resumes_from_a_killed_session(tmp_path):
+    # the child also sees what this process was given on PYTHONPATH (where its packages live)
+    _inherited = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
     child = subprocess.run(
         [sys.executable, "-c", _CHILD, str(tmp_path / "r")],
-        env={**os.environ, "PYTHONPATH": os.pathsep.join([str(TESTS.parent), str(TESTS)])},
+        env={
+            **os.environ,
+            "PYTHONPATH": os.pathsep.join([str(TESTS.parent), str(TESTS), *_inherited]),
+        },
         capture_output=True,
         text=True,
         timeout=120,
