@@ -426,6 +426,27 @@ def test_per_seed_follows_the_configs_order_of_seeds(two_seeds):
     assert [r["seed"] for r in res["per_seed"]] == [1, 0]
 
 
+def test_figure_9s_number_is_read_at_the_runs_own_arm_b_size(two_seeds):
+    """Figure 9's number, the non-interactive learner's windowed accuracy at arm (b)'s last
+    demonstration, is read at this run's arm_b_stages[-1] (80 here, the paper's 1000), and its
+    results.json key and summary row name that number: it was read at the 1000th demonstration
+    whatever the run's size (none here: no value) under a key and a row saying 1000."""
+    _, run_dir = two_seeds
+    on_disk = json.loads((run_dir / "results.json").read_text())
+    s = on_disk["summary"]
+    want = [r["accuracy_b"][79] for r in on_disk["per_seed"]]
+    assert [len(r["accuracy_b"]) for r in on_disk["per_seed"]] == [80, 80] and None not in want
+    assert s["ni_accuracy_at_80"] == pytest.approx(
+        {"mean": np.mean(want), "sd": np.std(want, ddof=1), "n": 2}
+    )
+    assert not [k for k in s if "1000" in k]
+    rows = [ln for ln in format_summary(on_disk).splitlines() if ln.startswith("| Fig 9 |")]
+    assert rows == [
+        f"| Fig 9 | windowed accuracy at 80 non-interactive demos | ≈ 0.8 | "
+        f"{np.mean(want):.2f} ± {np.std(want, ddof=1):.2f} |"
+    ]
+
+
 @pytest.mark.parametrize(
     "argv, says",
     [
