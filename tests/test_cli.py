@@ -1139,8 +1139,9 @@ def _corridor_prior(path: Path, n_steps: int) -> Path:
 class _PersonAtATerminal(threading.Thread):
     """`torchcbl teach` run in a pseudo-terminal (its stdin and stdout), and the person at it:
     reads all it shows, answers each request ("action? ") with "w" (forward), and types a key
-    at an env step of the agent's (:meth:`type_at`), returning once the terminal has echoed it,
-    so the key waits in the terminal's input as one typed then would."""
+    at an env step of the agent's (:meth:`type_at`), returning once the terminal has echoed it
+    (Ctrl-D, which it does not echo, once its line is there to read), so the key waits in the
+    terminal's input as one typed then would."""
 
     def __init__(self, monkeypatch) -> None:
         super().__init__(daemon=True)
@@ -1181,10 +1182,18 @@ class _PersonAtATerminal(threading.Thread):
                 with self.lock:
                     start = len(self.shown)
                 os.write(self.master, key)
+                echoed = key.replace(b"\x04", b"")  # Ctrl-D ends a line, unechoed
+
+                def there() -> bool:
+                    with self.lock:
+                        seen = echoed in self.shown[start:]
+                    ended = b"\x04" not in key or select.select([self.slave], [], [], 0)[0]
+                    return seen and bool(ended)
+
                 deadline = time.monotonic() + 20
-                while key not in self.shown[start:] and time.monotonic() < deadline:
+                while not there() and time.monotonic() < deadline:
                     time.sleep(0.005)
-                assert key in self.shown[start:], "the terminal never echoed the key"
+                assert there(), "the terminal never echoed the key"
             return step(env, action)
 
         monkeypatch.setattr(CorridorEnv, "step", step_and_type)
@@ -1243,6 +1252,31 @@ def test_q_typed_while_the_agent_drives_on_its_own_stops_the_run_then(tmp_path, 
     monkeypatch.setattr(sys, "stdout", io.StringIO())
     assert main([*argv[:4], "--resume", "--steps", "3"]) == 0, sys.stdout.getvalue()
     assert len(load_records(run)) == 13
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("typed", [b"\x04", b"d\x04"], ids=["ctrl-d", "key-then-ctrl-d"])
+def test_ctrl_d_typed_while_the_agent_drives_on_its_own_stops_the_run_then(
+    tmp_path, monkeypatch, typed
+):
+    """Ctrl-D (end of input) typed while the agent drove on its own was dropped: the agent
+    drove on through all of --steps, and the next request would have waited for a key. It
+    stops the run after the step under way, as q does: same words, exit code 0, every step
+    and demonstration so far saved, and the session resumes."""
+    code, shown, run, argv = _teach_corridor_at_a_terminal(
+        tmp_path, monkeypatch, 30, 80, {60: typed}
+    )
+    assert code == 0, shown
+    assert "Stopped by the teacher." in shown, shown
+    records = load_records(run)
+    assert len(records) == 60  # the step under way when Ctrl-D was typed, logged whole
+    asked = [r for r in records if r.teacher_action is not None]
+    assert asked and records[-1].teacher_action is None  # taught, then typed as the agent drove
+    assert f"{len(asked)} demonstrations over 60 steps saved in" in shown, shown
+    monkeypatch.setattr(sys, "stdin", io.StringIO(""))  # (the terminal is closed by now)
+    monkeypatch.setattr(sys, "stdout", io.StringIO())
+    assert main([*argv[:4], "--resume", "--steps", "3"]) == 0, sys.stdout.getvalue()
+    assert len(load_records(run)) >= 60
 
 
 @pytest.mark.timeout(60)
