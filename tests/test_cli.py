@@ -1108,6 +1108,36 @@ def test_teach_says_whether_the_person_stopped_or_the_input_ended(
     assert ("Stopped by the teacher" in out) == (said == "Stopped by the teacher.")
 
 
+@pytest.mark.parametrize("stdin", ["devnull", "closed-pipe", "closed"])
+def test_teach_on_an_input_that_has_ended_stops_at_its_first_request(
+    tmp_path, monkeypatch, capsys, stdin
+):
+    """stdin at its end (`< /dev/null`, a pipe whose writer is gone after one key, fd 0 closed:
+    Python's sys.stdin None) stops teach at the first request it cannot answer, as q would:
+    one line saying so, exit code 0, the answers read before it kept."""
+    if stdin == "devnull":
+        source = open(os.devnull)  # noqa: SIM115 - closed below
+    elif stdin == "closed-pipe":
+        read_fd, write_fd = os.pipe()
+        os.write(write_fd, b"w\n")
+        os.close(write_fd)
+        source = os.fdopen(read_fd)
+    else:
+        source = None
+    monkeypatch.setattr(sys, "stdin", source)
+    run = tmp_path / "session"
+    try:
+        assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "10"]) == 0
+    finally:
+        if source is not None:
+            source.close()
+    out = capsys.readouterr().out
+    assert "\nStopped: the input ended, no key left to read.\n" in out, out
+    n = 1 if stdin == "closed-pipe" else 0
+    assert f"{n} demonstration{'' if n == 1 else 's'} over {n} step" in out, out
+    assert len(load_records(run)) == n
+
+
 def _corridor_prior(path: Path, n_steps: int) -> Path:
     """The corridor's scripted teleoperator's labels over its first ``n_steps`` from seed 0, as
     a .npz for --prior-demonstrations. On a session of seed 0 started in confident execution,

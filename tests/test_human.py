@@ -374,6 +374,22 @@ def test_a_whole_line_typed_while_the_agent_drives_is_dropped_not_taken_for_ctrl
     _typed_ahead_then_w(master, slave, b"a\r")
 
 
+@pytest.mark.timeout(60)
+def test_ctrl_d_at_a_request_ends_the_session(terminal):
+    """Ctrl-D pressed at a request (the terminal in key-at-a-time mode) stops as q does."""
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    person = Person(master, slave, [b"w", b"\x04"])
+    teacher = _teacher(slave)
+    person.start()
+    assert teacher(OBS, {}) == 0
+    with pytest.raises(TeachingInterrupted, match=r"stopped by the person \(Ctrl-D\)"):
+        teacher(OBS, {})
+    person.finish()
+    assert termios.tcgetattr(slave) == before
+    assert teacher.n_decisions == 1
+
+
 _CHECKED_IN_A_BACKGROUND_JOB = """
 import os, signal, sys
 sys.path.insert(0, {root!r})
