@@ -1108,6 +1108,36 @@ def test_teach_says_whether_the_person_stopped_or_the_input_ended(
     assert ("Stopped by the teacher" in out) == (said == "Stopped by the teacher.")
 
 
+@pytest.mark.parametrize("stdin", ["devnull", "closed-pipe", "closed"])
+def test_teach_on_an_input_that_has_ended_stops_at_its_first_request(
+    tmp_path, monkeypatch, capsys, stdin
+):
+    """stdin at its end (`< /dev/null`, a pipe whose writer is gone after one key, fd 0 closed:
+    Python's sys.stdin None) stops teach at the first request it cannot answer, as q would:
+    one line saying so, exit code 0, the answers read before it kept."""
+    if stdin == "devnull":
+        source = open(os.devnull)  # noqa: SIM115 - closed below
+    elif stdin == "closed-pipe":
+        read_fd, write_fd = os.pipe()
+        os.write(write_fd, b"w\n")
+        os.close(write_fd)
+        source = os.fdopen(read_fd)
+    else:
+        source = None
+    monkeypatch.setattr(sys, "stdin", source)
+    run = tmp_path / "session"
+    try:
+        assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "10"]) == 0
+    finally:
+        if source is not None:
+            source.close()
+    out = capsys.readouterr().out
+    assert "\nStopped: the input ended, no key left to read.\n" in out, out
+    n = 1 if stdin == "closed-pipe" else 0
+    assert f"{n} demonstration{'' if n == 1 else 's'} over {n} step" in out, out
+    assert len(load_records(run)) == n
+
+
 def _corridor_prior(path: Path, n_steps: int) -> Path:
     """The corridor's scripted teleoperator's labels over its first ``n_steps`` from seed 0, as
     a .npz for --prior-demonstrations. On a session of seed 0 started in confident execution,
@@ -1139,8 +1169,9 @@ def _corridor_prior(path: Path, n_steps: int) -> Path:
 class _PersonAtATerminal(threading.Thread):
     """`torchcbl teach` run in a pseudo-terminal (its stdin and stdout), and the person at it:
     reads all it shows, answers each request ("action? ") with "w" (forward), and types a key
-    at an env step of the agent's (:meth:`type_at`), returning once the terminal has echoed it,
-    so the key waits in the terminal's input as one typed then would."""
+    at an env step of the agent's (:meth:`type_at`), returning once the terminal has echoed it
+    (Ctrl-D, which it does not echo, once its line is there to read), so the key waits in the
+    terminal's input as one typed then would."""
 
     def __init__(self, monkeypatch) -> None:
         super().__init__(daemon=True)
@@ -1181,10 +1212,18 @@ class _PersonAtATerminal(threading.Thread):
                 with self.lock:
                     start = len(self.shown)
                 os.write(self.master, key)
+                echoed = key.replace(b"\x04", b"")  # Ctrl-D ends a line, unechoed
+
+                def there() -> bool:
+                    with self.lock:
+                        seen = echoed in self.shown[start:]
+                    ended = b"\x04" not in key or select.select([self.slave], [], [], 0)[0]
+                    return seen and bool(ended)
+
                 deadline = time.monotonic() + 20
-                while key not in self.shown[start:] and time.monotonic() < deadline:
+                while not there() and time.monotonic() < deadline:
                     time.sleep(0.005)
-                assert key in self.shown[start:], "the terminal never echoed the key"
+                assert there(), "the terminal never echoed the key"
             return step(env, action)
 
         monkeypatch.setattr(CorridorEnv, "step", step_and_type)
@@ -1243,6 +1282,31 @@ def test_q_typed_while_the_agent_drives_on_its_own_stops_the_run_then(tmp_path, 
     monkeypatch.setattr(sys, "stdout", io.StringIO())
     assert main([*argv[:4], "--resume", "--steps", "3"]) == 0, sys.stdout.getvalue()
     assert len(load_records(run)) == 13
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("typed", [b"\x04", b"d\x04"], ids=["ctrl-d", "key-then-ctrl-d"])
+def test_ctrl_d_typed_while_the_agent_drives_on_its_own_stops_the_run_then(
+    tmp_path, monkeypatch, typed
+):
+    """Ctrl-D (end of input) typed while the agent drove on its own was dropped: the agent
+    drove on through all of --steps, and the next request would have waited for a key. It
+    stops the run after the step under way, as q does: same words, exit code 0, every step
+    and demonstration so far saved, and the session resumes."""
+    code, shown, run, argv = _teach_corridor_at_a_terminal(
+        tmp_path, monkeypatch, 30, 80, {60: typed}
+    )
+    assert code == 0, shown
+    assert "Stopped by the teacher." in shown, shown
+    records = load_records(run)
+    assert len(records) == 60  # the step under way when Ctrl-D was typed, logged whole
+    asked = [r for r in records if r.teacher_action is not None]
+    assert asked and records[-1].teacher_action is None  # taught, then typed as the agent drove
+    assert f"{len(asked)} demonstrations over 60 steps saved in" in shown, shown
+    monkeypatch.setattr(sys, "stdin", io.StringIO(""))  # (the terminal is closed by now)
+    monkeypatch.setattr(sys, "stdout", io.StringIO())
+    assert main([*argv[:4], "--resume", "--steps", "3"]) == 0, sys.stdout.getvalue()
+    assert len(load_records(run)) >= 60
 
 
 @pytest.mark.timeout(60)

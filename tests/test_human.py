@@ -330,6 +330,66 @@ def test_check_quit_takes_the_keys_typed_since_the_last_request_without_waiting(
     assert teacher.n_decisions == 1
 
 
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(
+    "typed",
+    [b"\x04", b"d\x04", b"d\r\x04", b"\x04d\r"],
+    ids=["ctrl-d", "key-then-ctrl-d", "line-then-ctrl-d", "ctrl-d-then-line"],
+)
+@pytest.mark.parametrize("at", ["check_quit", "request"])
+def test_ctrl_d_typed_while_the_agent_drives_on_its_own_ends_the_session(terminal, typed, at):
+    """Ctrl-D (end of input) typed while the agent acted on its own was dropped: the terminal,
+    in line mode then, keeps it as the end of a line, which the switch to key-at-a-time mode
+    for check_quit() or the next request turned into a NUL byte, dropped like any key typed
+    ahead; the request then waited for a key. It ends the session now, as Ctrl-D at a request
+    does, also after other keys on its line or before them; the terminal is left as it was."""
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    teacher = _teacher(slave)
+    os.write(master, typed)
+    time.sleep(0.1)
+    # a "w" pressed later answers a request that (wrongly) waits for a key, so a teacher that
+    # drops the Ctrl-D fails the test rather than hanging it
+    late = threading.Timer(1.0, os.write, (master, b"w"))
+    late.start()
+    try:
+        with pytest.raises(TeachingInterrupted, match=r"stopped by the person \(Ctrl-D\)"):
+            teacher.check_quit() if at == "check_quit" else teacher(OBS, {})
+    finally:
+        late.cancel()
+    assert termios.tcgetattr(slave) == before
+    assert teacher.n_decisions == 0
+    assert not select.select([slave], [], [], 0)[0]  # no line left for the shell to run
+
+
+@pytest.mark.timeout(60)
+def test_a_whole_line_typed_while_the_agent_drives_is_dropped_not_taken_for_ctrl_d(terminal):
+    """A line ended with Enter while the agent acts on its own is keys typed ahead (dropped),
+    not the end of input: the session goes on and the request takes the key pressed at it."""
+    master, slave = terminal
+    teacher = _teacher(slave)
+    os.write(master, b"d\r")
+    time.sleep(0.1)
+    teacher.check_quit()
+    _typed_ahead_then_w(master, slave, b"a\r")
+
+
+@pytest.mark.timeout(60)
+def test_ctrl_d_at_a_request_ends_the_session(terminal):
+    """Ctrl-D pressed at a request (the terminal in key-at-a-time mode) stops as q does."""
+    master, slave = terminal
+    before = termios.tcgetattr(slave)
+    person = Person(master, slave, [b"w", b"\x04"])
+    teacher = _teacher(slave)
+    person.start()
+    assert teacher(OBS, {}) == 0
+    with pytest.raises(TeachingInterrupted, match=r"stopped by the person \(Ctrl-D\)"):
+        teacher(OBS, {})
+    person.finish()
+    assert termios.tcgetattr(slave) == before
+    assert teacher.n_decisions == 1
+
+
 _CHECKED_IN_A_BACKGROUND_JOB = """
 import os, signal, sys
 sys.path.insert(0, {root!r})

@@ -12,19 +12,21 @@ than the view (the driving view is about 70 columns), whose lines then wrap, a l
 On a terminal the key is read without Enter: the terminal is switched to a non-canonical,
 no-echo mode for the duration of the read and its settings are always restored afterwards,
 also when the read is interrupted. Keys typed before a request is shown (while the agent acts on
-its own) are dropped, not taken as its answer; a quit key among them still quits. (Their timing
-is lost: Esc and a key typed ahead read as one Alt-key, so Esc then q typed ahead does not
-quit; q at the request does.) A caller that calls :meth:`TerminalTeacher.check_quit` between
-requests (``torchcbl teach`` does after each step) stops at once on a quit key typed while
-the agent acts on its own, not at the next request. When the
-input is not a terminal (a pipe, a file), one line is read per decision instead; a line may
-hold a key (``w``), a key name (``up``), an action name (``forward``) or an action number.
+its own) are dropped, not taken as its answer; a quit key or Ctrl-D among them still quits.
+(Their timing is lost: Esc and a key typed ahead read as one Alt-key, so Esc then q typed ahead
+does not quit; q at the request does.) A caller that calls
+:meth:`TerminalTeacher.check_quit` between requests (``torchcbl teach`` does after each step)
+stops at once on a quit key or Ctrl-D typed while the agent acts on its own, not at the next
+request. When the input is not a terminal (a pipe, a file), one line is read per decision
+instead; a line may hold a key (``w``), a key name (``up``), an action name (``forward``) or an
+action number; its end (a closed pipe, ``/dev/null``) is read at the next request.
 
 In a notebook (a Jupyter kernel, whose own stdin is a closed pipe) each key is typed into the
 notebook's input box, the kernel's ``input()``, one line per decision as from a pipe.
 
-Pressing ``q`` (or Ctrl-C, or closing the input) raises :class:`TeachingInterrupted`, so a
-teaching session can stop cleanly; the demonstrations it already recorded are on disk.
+Pressing ``q`` (or Ctrl-C, or Ctrl-D, the end of input, at a request or while the agent acts on
+its own, or closing the input) raises :class:`TeachingInterrupted`, so a teaching session can
+stop cleanly; the demonstrations it already recorded are on disk.
 
 This module is domain-free; the views live beside each domain (``corridor.human``,
 ``sumo_scenarios.human``).
@@ -157,6 +159,36 @@ def _split_keys(data: bytes) -> tuple[list[str], bytes]:
         keys.append(_decode_key(data[:length]))
         data = data[length:]
     return keys, data
+
+
+def _lines_typed(fd: int, waits: selectors.BaseSelector, mode: list[Any]) -> bytes:
+    """The lines typed on the terminal ``fd`` while it was in line mode (``mode``, its settings,
+    canonical), read without waiting, before it leaves that mode. The end of input typed among
+    them (Ctrl-D: an empty line, or one cut short, without its newline) raises
+    :class:`TeachingInterrupted`, as Ctrl-D at a request does: leaving line mode would turn it
+    into a NUL byte, a key like any other; the keys typed after it are then discarded, as
+    those after a quit key are read and dropped. Nothing is read from a terminal not in line
+    mode."""
+    if not mode[3] & termios.ICANON:
+        return b""
+    cc = mode[6]
+    ends = {b"\n"} | {c for c in (cc[termios.VEOL], cc[termios.VEOL2]) if c not in (b"\0", 0)}
+    lines = b""
+    while waits.select(0):  # in line mode: a whole line, or the end of input, is there
+        try:
+            line = os.read(fd, 4096)  # one line (a terminal's lines are at most 4095 bytes)
+        except OSError as exc:  # EIO once the other end of a pseudo-terminal is gone
+            raise TeachingInterrupted("teaching input closed") from exc
+        if not line or line[-1:] not in ends:
+            try:  # the keys typed after it answer nothing: not left for the shell to run
+                termios.tcflush(fd, termios.TCIFLUSH)
+            except (termios.error, OSError):
+                pass
+            eof = cc[termios.VEOF]
+            name = _label(eof.decode("latin-1")) if isinstance(eof, bytes) else "Ctrl-D"
+            raise TeachingInterrupted(f"teaching stopped by the person ({name})")
+        lines += line
+    return lines
 
 
 def _key_waits(fd: int) -> selectors.BaseSelector:
@@ -362,16 +394,16 @@ class TerminalTeacher:
         Meant to be called between requests, e.g. after each step (``torchcbl teach`` calls it
         from the loop's ``on_step``, so a step is logged whole first). On a terminal the keys
         typed since the last read are taken without waiting for more: a quit key among them
-        raises :class:`TeachingInterrupted`, as at a request; the others are dropped, as keys
-        typed ahead of a request are (Ctrl-D among them: in line mode it is the end of a line,
-        not a key). The terminal leaves line mode only for that read
+        raises :class:`TeachingInterrupted`, as at a request, and so does Ctrl-D (the end of
+        input, also after other keys on its line); the others are dropped, as keys typed ahead
+        of a request are. The terminal leaves line mode only for that read
         (its settings are restored at once, also on an exception or a SIGTERM/SIGHUP) and keeps
         its signal keys: Ctrl-C raises :class:`KeyboardInterrupt` as it does between requests.
         Reads nothing and returns at once when the input is not a terminal (a pipe, a file, a
         notebook) or this process is a background job of its terminal.
 
         Raises:
-            TeachingInterrupted: a quit key was typed, or the terminal was closed.
+            TeachingInterrupted: a quit key or Ctrl-D was typed, or the terminal was closed.
         """
         fd = self._input_fd()
         if fd is None or termios is None or not os.isatty(fd) or not _in_foreground(fd):
@@ -385,8 +417,9 @@ class TerminalTeacher:
                 mode[3] &= ~termios.ICANON
                 mode[6][termios.VMIN] = 1
                 mode[6][termios.VTIME] = 0
+                typed = _lines_typed(fd, waits, saved)
                 termios.tcsetattr(fd, termios.TCSANOW, mode)
-                self._drop_typed_ahead(fd, waits)
+                self._drop_typed_ahead(fd, waits, typed)
             finally:
                 termios.tcsetattr(fd, termios.TCSANOW, saved)
 
@@ -483,8 +516,9 @@ class TerminalTeacher:
             mode[3] &= ~(termios.ICANON | termios.ECHO | termios.ISIG | termios.IEXTEN)
             mode[6][termios.VMIN] = 1
             mode[6][termios.VTIME] = 0
+            typed = _lines_typed(fd, waits, saved)
             termios.tcsetattr(fd, termios.TCSANOW, mode)
-            self._drop_typed_ahead(fd, waits)
+            self._drop_typed_ahead(fd, waits, typed)
             self._prompt()
             while True:
                 key = self._read_key(fd, waits)
@@ -496,12 +530,14 @@ class TerminalTeacher:
         finally:
             termios.tcsetattr(fd, termios.TCSADRAIN, saved)
 
-    def _drop_typed_ahead(self, fd: int, waits: selectors.BaseSelector) -> None:
+    def _drop_typed_ahead(
+        self, fd: int, waits: selectors.BaseSelector, pending: bytes = b""
+    ) -> None:
         """Drop the keys typed before this request was shown (while the agent acted on its own,
         a second press, a held key's repeat): they would answer a situation the person has not
-        seen. A quit key among them still quits. The pending bytes are split into keys as at a
+        seen. A quit key among them still quits. The pending bytes (``pending``, the lines
+        already read in line mode, then those waiting) are split into keys as at a
         request, so an escape sequence ending in "q" (F2 is ESC O Q) is one key, not a quit."""
-        pending = b""
         while True:
             while waits.select(0):
                 pending += self._read_byte(fd, waits)
