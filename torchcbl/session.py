@@ -448,6 +448,23 @@ def _no_read_access(path: Path) -> IncompatibleRunDirError:
     )
 
 
+def _unreadable(path: Path, exc: OSError) -> IncompatibleRunDirError:
+    """The error for a file or folder of a session the file system fails to read (an I/O
+    error; not a directory where one was made; a loop of links): what failed, and that
+    torchcbl changed nothing. A permission is said as :func:`_no_read_access` says it."""
+    if isinstance(exc, PermissionError):
+        return _no_read_access(path)
+    name = errno.errorcode.get(exc.errno or 0)
+    return IncompatibleRunDirError(
+        f"{path} cannot be read: {exc.strerror or exc}"
+        + (f" ({name})" if name else "")
+        + ". The file system failed to read it; torchcbl changed nothing. Check the disk and "
+        f"the mount it is on (the kernel log: dmesg), and that {path.name} is what the "
+        "session made there, then run this again; if it stays unreadable, restore the run "
+        "directory from a backup."
+    )
+
+
 def _derived_actor(teacher_action: Any) -> str:
     return "agent" if teacher_action is None else "teacher"
 
@@ -1535,15 +1552,20 @@ def _unborn(run_dir: Path) -> bool:
     tables). Nothing of it ran, so nothing is lost: it reads as a session of no step and
     resumes as one (the log is made whole then).
 
-    Raises :class:`IncompatibleRunDirError` (the read-access error) where ``checkpoints/``
-    may not be listed."""
+    Raises :class:`IncompatibleRunDirError` where a file it looks at, or ``checkpoints/``,
+    cannot be read: the read-access error for a permission (e.g. another user's
+    ``checkpoints/`` this user may not list), else :func:`_unreadable`'s (an I/O error, ...).
+    It renames, deletes and writes nothing."""
+    try:
+        return _unborn_unchecked(run_dir)
+    except OSError as exc:
+        raise _unreadable(Path(exc.filename or run_dir), exc) from exc
+
+
+def _unborn_unchecked(run_dir: Path) -> bool:
     if (run_dir / JOURNAL_NAME).exists() or (run_dir / WRITERS_NAME).exists():
         return False
-    ckpts = run_dir / CHECKPOINT_DIR
-    try:
-        kept = [e.name for e in ckpts.iterdir() if _CKPT_RE.match(e.name)] if ckpts.is_dir() else []
-    except PermissionError:  # e.g. another user's checkpoints/ this user may not list
-        raise _no_read_access(ckpts) from None
+    kept = [e.name for e in _checkpoint_entries(run_dir / CHECKPOINT_DIR)]
     if kept not in ([], [f"model-{0:08d}.pt"]):
         return False
     log = run_dir / LOG_NAME
@@ -1565,12 +1587,26 @@ def _unborn(run_dir: Path) -> bool:
     return found == 0
 
 
+def _checkpoint_entries(directory: Path) -> list[Path]:
+    """The entries of a session's ``checkpoints/`` named as checkpoints
+    (``model-<8 digits>.pt``), whatever they are (none where it is no folder).
+
+    Raises:
+        IncompatibleRunDirError: the folder cannot be listed (:func:`_unreadable`).
+    """
+    try:
+        if not directory.is_dir():
+            return []
+        return [e for e in directory.iterdir() if _CKPT_RE.match(e.name)]
+    except OSError as exc:
+        raise _unreadable(directory, exc) from exc
+
+
 def _check_log_present(run_dir: Path) -> None:
     log = run_dir / LOG_NAME
     if log.is_file() or _unborn(run_dir):
         return
-    directory = run_dir / CHECKPOINT_DIR
-    n = len(list(directory.glob("model-*.pt"))) if directory.is_dir() else 0
+    n = len(_checkpoint_entries(run_dir / CHECKPOINT_DIR))
     raise CorruptSessionError(
         f"{log} is missing, but {run_dir / CONFIG_NAME}"
         + (f" and {n} checkpoints" if n else "")
