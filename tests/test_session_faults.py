@@ -701,6 +701,32 @@ def test_a_checkpoints_folder_the_file_system_fails_to_list_is_said_to_be_that(
     assert len(load_records(run)) == 20  # the session is whole once the folder reads again
 
 
+def test_a_checkpoints_folder_that_fails_to_list_in_a_session_with_its_journal(
+    tmp_path, monkeypatch
+):
+    """The same failing ``checkpoints/`` in a closed session (journal and writers file there,
+    so the readers of the log do not list it): load_model, load_policy, latest_checkpoint and
+    resume, which look for the checkpoint to load, let the bare OSError through (resume after
+    it had opened the session for writing); they now say the store's IncompatibleRunDirError,
+    as describe did, and resume says it before it opens the session: no file is touched. The
+    readers of the log read on."""
+    run = tmp_path / "run"
+    ct, _ = session(run)
+    ct.run(max_steps=20)
+    ct.close()
+    before = files_of(run)
+    _failing_listing(monkeypatch, run / "checkpoints", errno.EIO)
+    for read in (load_model, S.load_policy, S.latest_checkpoint, S.describe, resume):
+        with pytest.raises(IncompatibleRunDirError) as info:
+            read(run)
+        msg = str(info.value)
+        assert msg.startswith(f"{run / 'checkpoints'} cannot be read: {os.strerror(errno.EIO)}")
+        assert "changed nothing" in msg, msg
+    assert len(load_records(run)) == 20
+    monkeypatch.undo()
+    assert files_of(run) == before  # resume refused before it opened the session for writing
+
+
 # -- 4. damaged files -------------------------------------------------------------------------
 
 

@@ -98,7 +98,8 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   killed (a ``-wal`` file is there), with ``mode=ro``, under which SQLite itself takes its
   shared locks and may create or rewrite the ``-shm`` index beside the log (never the log, the
   journal or a checkpoint). A file of the session this user may not read (another user's
-  session) is an :class:`IncompatibleRunDirError` naming it.
+  session) is an :class:`IncompatibleRunDirError` naming it; so is a ``checkpoints/`` the
+  file system fails to list (an I/O error), naming the error, with nothing renamed.
 - Damaged files. A journal line that fails its checksum, or is valid JSON of the wrong shape,
   is reported with its line number and byte offset by readers and by resume, which then refuse
   and change nothing; :func:`repair_journal` copies the journal aside byte for byte and keeps
@@ -1565,8 +1566,8 @@ def _unborn(run_dir: Path) -> bool:
 def _unborn_unchecked(run_dir: Path) -> bool:
     if (run_dir / JOURNAL_NAME).exists() or (run_dir / WRITERS_NAME).exists():
         return False
-    kept = [e.name for e in _checkpoint_entries(run_dir / CHECKPOINT_DIR)]
-    if kept not in ([], [f"model-{0:08d}.pt"]):
+    kept = [n for n, _ in _checkpoint_entries(run_dir / CHECKPOINT_DIR)]
+    if kept not in ([], [0]):
         return False
     log = run_dir / LOG_NAME
     if not log.exists() or log.stat().st_size == 0:
@@ -1587,9 +1588,10 @@ def _unborn_unchecked(run_dir: Path) -> bool:
     return found == 0
 
 
-def _checkpoint_entries(directory: Path) -> list[Path]:
+def _checkpoint_entries(directory: Path) -> list[tuple[int, Path]]:
     """The entries of a session's ``checkpoints/`` named as checkpoints
-    (``model-<8 digits>.pt``), whatever they are (none where it is no folder).
+    (``model-<8 digits>.pt``), whatever they are, with the count of labels their names give
+    (none where it is no folder).
 
     Raises:
         IncompatibleRunDirError: the folder cannot be listed (:func:`_unreadable`).
@@ -1597,9 +1599,10 @@ def _checkpoint_entries(directory: Path) -> list[Path]:
     try:
         if not directory.is_dir():
             return []
-        return [e for e in directory.iterdir() if _CKPT_RE.match(e.name)]
+        matched = [(_CKPT_RE.match(e.name), e) for e in directory.iterdir()]
     except OSError as exc:
         raise _unreadable(directory, exc) from exc
+    return [(int(m.group(1)), e) for m, e in matched if m is not None]
 
 
 def _check_log_present(run_dir: Path) -> None:
@@ -1978,7 +1981,8 @@ def latest_checkpoint(
     None when the session has none.
 
     Raises:
-        IncompatibleRunDirError: ``run_dir`` is not a session directory (no ``config.json``).
+        IncompatibleRunDirError: ``run_dir`` is not a session directory (no ``config.json``),
+            or its ``checkpoints/`` cannot be listed (a permission, an I/O error).
         ValueError: ``at_most`` is not None or an int >= 0.
     """
     if at_most is not None and (
@@ -1992,16 +1996,10 @@ def latest_checkpoint(
         )
     if not (Path(run_dir) / CONFIG_NAME).is_file():
         load_config(run_dir)  # raises, saying what the path is
-    directory = Path(run_dir) / CHECKPOINT_DIR
     best: tuple[int, Path] | None = None
-    if directory.is_dir():
-        for entry in directory.iterdir():
-            m = _CKPT_RE.match(entry.name)
-            if m is None:
-                continue
-            n = int(m.group(1))
-            if (at_most is None or n <= at_most) and (best is None or n > best[0]):
-                best = (n, entry)
+    for n, entry in _checkpoint_entries(Path(run_dir) / CHECKPOINT_DIR):
+        if (at_most is None or n <= at_most) and (best is None or n > best[0]):
+            best = (n, entry)
     return best
 
 
@@ -2354,12 +2352,8 @@ def restore_model(
     all_xs, all_ys = px + list(xs), py + list(ys)
     last, payload, why0 = 0, None, "missing"
     directory = Path(run_dir) / CHECKPOINT_DIR
-    found = []
-    if directory.is_dir():
-        for entry in directory.iterdir():
-            m = _CKPT_RE.match(entry.name)
-            if m is not None and int(m.group(1)) <= len(ys):
-                found.append((int(m.group(1)), entry))
+    # (the store's error where checkpoints/ cannot be listed)
+    found = [(n, entry) for n, entry in _checkpoint_entries(directory) if n <= len(ys)]
     for n, path in sorted(found, reverse=True):
         payload, why = _checkpoint_payload(path, base + n, all_xs, all_ys)
         if payload is not None:
@@ -2858,7 +2852,7 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
     Raises:
         IncompatibleRunDirError: ``run_dir`` is not a session directory (the message names the
             sessions below it, if any), or a file of it (or its ``checkpoints/``) may not be
-            read.
+            read or the file system fails to read it (an I/O error).
         CorruptSessionError: a file of the session is damaged or missing (as
             :func:`load_records`).
     """
@@ -2882,14 +2876,7 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
             blocks[r.step // SUMMARY_BLOCK_STEPS] += 1
     n_corrections = len(_corrections_of(records, corrections))
     n_demonstrations = sum(asked)
-    try:
-        checkpoint = latest_checkpoint(run)
-    except PermissionError as exc:  # e.g. another user's checkpoints/ this user may not list
-        raise _no_read_access(Path(exc.filename or run / CHECKPOINT_DIR)) from None
-    except OSError as exc:
-        raise IncompatibleRunDirError(
-            f"{exc.filename or run / CHECKPOINT_DIR} cannot be read: {exc.strerror or exc}"
-        ) from exc
+    checkpoint = latest_checkpoint(run)
     left = (run / LOG_NAME).with_name(LOG_NAME + "-wal").exists() or _unborn(run)
     try:
         left = left or (run / JOURNAL_NAME).stat().st_size > 0
