@@ -400,6 +400,50 @@ def test_evaluate_names_the_problem(corridor_run, tmp_path, capsys):
     assert "sessions/seed0 holds no teaching session" in capsys.readouterr().err
 
 
+def test_a_session_whose_checkpoints_the_file_system_fails_to_list_is_one_line_and_exit_2(
+    tmp_path, capsys, monkeypatch
+):
+    """A corridor session without journal and writers file (read as possibly left by a
+    killed creation, which its ``checkpoints/`` tells) whose ``checkpoints/`` the file system
+    fails to list (an I/O error): show, evaluate and teach --resume said "error: OSError:
+    [Errno 5] ..." with exit 1 (a failure of torchcbl, no word of what to do); they now say
+    which folder and what failed in one line and exit 2, as for a folder this user may not
+    list, and leave the session as it was."""
+    import errno
+
+    import gymnasium as gym
+
+    import corridor  # noqa: F401 - registers the env id
+    from torchcbl import ConfidentTeacher
+
+    run = tmp_path / "run"
+    ConfidentTeacher(gym.make("torchcbl/Corridor-v0"), lambda o, i: 0, run_dir=run).close()
+    for name in ("steps.journal", "writers.jsonl"):
+        (run / name).unlink()
+    before = sorted((p.name, p.read_bytes()) for p in run.rglob("*") if p.is_file())
+    real_iterdir = Path.iterdir
+
+    def iterdir(self: Path):
+        if self == run / "checkpoints":
+            raise OSError(errno.EIO, os.strerror(errno.EIO), str(self))
+        return real_iterdir(self)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    for argv in (
+        ["show", str(run)],
+        ["evaluate", str(run)],
+        ["teach", "corridor", "--resume", "--run-dir", str(run)],
+    ):
+        assert main(argv) == 2, argv
+        (line,) = capsys.readouterr().err.splitlines()
+        assert line.startswith(
+            f"torchcbl {argv[0]}: error: {run / 'checkpoints'} cannot be read: Input/output error"
+        ), line
+        assert "changed nothing" in line and "OSError" not in line, line
+    monkeypatch.undo()
+    assert sorted((p.name, p.read_bytes()) for p in run.rglob("*") if p.is_file()) == before
+
+
 def test_the_domain_table_matches_the_envs():
     """evaluate tells a session's domain by its env id or its (features, actions, observation
     space): both as the domains' envs really are."""

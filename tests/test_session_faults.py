@@ -640,6 +640,93 @@ def test_a_session_this_user_may_not_read_is_said_to_be_that(tmp_path):
         shutil.rmtree(base)
 
 
+_FS_ERRORS = [errno.EIO, errno.ENOTDIR]  # a failing disk; checkpoints/ replaced by a file
+
+
+def _without_journal(run: Path) -> None:
+    """A closed session of 20 steps without its journal and writers file: read as possibly
+    left by a creation killed before its log was whole, which its ``checkpoints/`` tells."""
+    ct, _ = session(run)
+    ct.run(max_steps=20)
+    ct.close()
+    for name in ("steps.journal", "writers.jsonl"):
+        (run / name).unlink()
+
+
+def _failing_listing(monkeypatch, folder: Path, code: int) -> None:
+    """Listing ``folder`` fails as the file system fails it (``code``)."""
+    real_iterdir = Path.iterdir
+
+    def iterdir(self: Path):
+        if self == folder:
+            raise OSError(code, os.strerror(code), str(self))
+        return real_iterdir(self)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+
+
+@pytest.mark.parametrize("code", _FS_ERRORS, ids=errno.errorcode.get)
+def test_a_checkpoints_folder_the_file_system_fails_to_list_is_said_to_be_that(
+    tmp_path, monkeypatch, code
+):
+    """A session without journal and writers file, whose ``checkpoints/`` the readers list to
+    tell it from a killed creation, where the file system fails that listing (an I/O error;
+    not a directory: replaced by a file meanwhile): every reader and resume let the bare
+    OSError through (the command line: exit 1, no word of what to do). Each is now the store's
+    IncompatibleRunDirError naming the folder and the error, as a permission is, and nothing
+    in the session is renamed, deleted or written."""
+    run = tmp_path / "run"
+    _without_journal(run)
+    before = files_of(run)
+    _failing_listing(monkeypatch, run / "checkpoints", code)
+    readers = (
+        load_records,
+        load_corrections,
+        load_labels,
+        load_demonstrations,
+        load_model,
+        S.load_policy,
+        S.describe,
+        repair_journal,
+        resume,
+    )
+    for read in readers:
+        with pytest.raises(IncompatibleRunDirError) as info:
+            read(run)
+        msg = str(info.value)
+        assert msg.startswith(f"{run / 'checkpoints'} cannot be read: {os.strerror(code)}"), msg
+        assert "changed nothing" in msg, msg
+    monkeypatch.undo()
+    assert files_of(run) == before
+    assert len(load_records(run)) == 20  # the session is whole once the folder reads again
+
+
+def test_a_checkpoints_folder_that_fails_to_list_in_a_session_with_its_journal(
+    tmp_path, monkeypatch
+):
+    """The same failing ``checkpoints/`` in a closed session (journal and writers file there,
+    so the readers of the log do not list it): load_model, load_policy, latest_checkpoint and
+    resume, which look for the checkpoint to load, let the bare OSError through (resume after
+    it had opened the session for writing); they now say the store's IncompatibleRunDirError,
+    as describe did, and resume says it before it opens the session: no file is touched. The
+    readers of the log read on."""
+    run = tmp_path / "run"
+    ct, _ = session(run)
+    ct.run(max_steps=20)
+    ct.close()
+    before = files_of(run)
+    _failing_listing(monkeypatch, run / "checkpoints", errno.EIO)
+    for read in (load_model, S.load_policy, S.latest_checkpoint, S.describe, resume):
+        with pytest.raises(IncompatibleRunDirError) as info:
+            read(run)
+        msg = str(info.value)
+        assert msg.startswith(f"{run / 'checkpoints'} cannot be read: {os.strerror(errno.EIO)}")
+        assert "changed nothing" in msg, msg
+    assert len(load_records(run)) == 20
+    monkeypatch.undo()
+    assert files_of(run) == before  # resume refused before it opened the session for writing
+
+
 # -- 4. damaged files -------------------------------------------------------------------------
 
 

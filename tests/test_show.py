@@ -10,6 +10,7 @@ from collections import Counter
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 import pytest
 from _toy_envs import oracle, overlap_world, rare_regions_world
 
@@ -494,6 +495,90 @@ def test_show_names_a_strategy_and_rule_of_ones_own_once_each(tmp_path, capsys):
         f"strategy:   {own}.MyCE[custom, as ConfidentExecution](relabel=false, "
         f"rule={own}.MyRule[custom, as AutoThresholdRule](max_std=2.0, min_std=0.0))"
     ), line
+
+
+# what is put in checkpoints/ beside a session's own (3, 6, ..., 18 of its 20 labels), and
+# what show notes of it (None: no note: no reader takes it for a checkpoint)
+_ODD_CHECKPOINTS = {
+    "more-labels": ("model-00000099.pt", "names 99 labels, more than the 20 the log holds"),
+    "directory": ("model-00000019.pt", "is a directory"),
+    "empty": ("model-00000019.pt", "is an empty file"),
+    "stale": ("model-00000019.pt", "is stale"),
+    "killed-write": (".model-00000019.pt.tmp", None),
+    "not-a-count": ("model-abc.pt", None),
+}
+
+
+@pytest.mark.parametrize("odd", list(_ODD_CHECKPOINTS))
+def test_show_reports_the_checkpoint_resume_loads_not_the_newest_name(tmp_path, capsys, odd):
+    """describe / `torchcbl show` took the newest name in checkpoints/ for the session's
+    newest checkpoint: a model-00000099.pt of more labels than the log holds (which resume
+    and load_model pass over), or a directory, an empty file or a stale checkpoint named as
+    the newest (which resume sets aside as .damaged / .stale) were shown as "the newest fitted
+    on N labels". It now reports the checkpoint resume loads (the newest readable one fitted
+    on the log's labels) and notes each file resume passes over, what it is and what resume
+    does with it; it still reads only. What no reader takes for a checkpoint (the .tmp of a
+    killed write, model-abc.pt) is not mentioned."""
+    import torch
+
+    run = tmp_path / "run"
+    _small_session(run)
+    ckpts = run / "checkpoints"
+    newest = ckpts / "model-00000018.pt"
+    assert sorted(p.name for p in ckpts.iterdir())[-1] == newest.name
+    name, noted = _ODD_CHECKPOINTS[odd]
+    path = ckpts / name
+    if odd == "directory":
+        path.mkdir()
+    elif odd == "empty":
+        path.touch()
+    else:  # a complete model (stale: the one of 18 labels under the name of 19)
+        shutil.copy(newest, path)
+    before = _files_of(run)
+    s = describe(run)
+    assert s.last_checkpoint == 18
+    notes = [n for n in s.notes if name in n]
+    if noted is None:
+        assert notes == [] and s.notes == ()
+    else:
+        (note,) = notes
+        assert f"checkpoints/{name} {noted}" in note and "resume" in note, note
+    assert main(["show", str(run)]) == 0
+    out = capsys.readouterr().out
+    assert "\ncheckpoint: the newest fitted on 18 labels\n" in out
+    assert (noted is None) == ("note:" not in out)
+    assert _files_of(run) == before  # show reads only
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    state = ct.model.state_dict()  # resume loaded the checkpoint show reported
+    ct.close()
+    want = torch.load(newest, weights_only=True)["state_dict"]
+    assert state.keys() == want.keys() and all(torch.equal(state[k], want[k]) for k in want)
+    set_aside = odd in ("directory", "empty", "stale")
+    assert path.exists() is not set_aside
+    # what resume set aside is no checkpoint any more; what it passed over is still there
+    assert (describe(run).notes == ()) is (noted is None or set_aside)
+
+
+def test_show_of_a_session_with_prior_demonstrations_reports_its_newest_checkpoint(tmp_path):
+    """The checkpoints of a session with prior demonstrations carry the digest of the prior's
+    labels and then the session's: show checks them as resume does, prior first."""
+    env = rare_regions_world(episode_length=10)
+    prior = env.sample(30, np.random.default_rng(1))
+    run = tmp_path / "run"
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        prior_demonstrations=prior,
+        config=TeachingConfig(max_new=3),
+        run_dir=run,
+        seed=0,
+        progress=False,
+    )
+    ct.run(max_steps=20)
+    ct.close()
+    s = describe(run)
+    assert (s.n_prior, s.n_labels, s.last_checkpoint, s.notes) == (30, 20, 18, ())
 
 
 def test_show_of_a_session_without_journal_whose_checkpoints_cannot_be_listed(

@@ -98,7 +98,8 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   killed (a ``-wal`` file is there), with ``mode=ro``, under which SQLite itself takes its
   shared locks and may create or rewrite the ``-shm`` index beside the log (never the log, the
   journal or a checkpoint). A file of the session this user may not read (another user's
-  session) is an :class:`IncompatibleRunDirError` naming it.
+  session) is an :class:`IncompatibleRunDirError` naming it; so is a ``checkpoints/`` the
+  file system fails to list (an I/O error), naming the error, with nothing renamed.
 - Damaged files. A journal line that fails its checksum, or is valid JSON of the wrong shape,
   is reported with its line number and byte offset by readers and by resume, which then refuse
   and change nothing; :func:`repair_journal` copies the journal aside byte for byte and keeps
@@ -172,6 +173,7 @@ import re
 import signal
 import socket
 import sqlite3
+import stat
 import struct
 import threading
 import time
@@ -445,6 +447,23 @@ def _no_read_access(path: Path) -> IncompatibleRunDirError:
         "read access to its files and read and search (x) access to its directory and the "
         "ones above it; torchcbl changed nothing. Ask the session's owner for access (e.g. "
         "chmod -R a+rX on the run directory), or read a copy they make."
+    )
+
+
+def _unreadable(path: Path, exc: OSError) -> IncompatibleRunDirError:
+    """The error for a file or folder of a session the file system fails to read (an I/O
+    error; not a directory where one was made; a loop of links): what failed, and that
+    torchcbl changed nothing. A permission is said as :func:`_no_read_access` says it."""
+    if isinstance(exc, PermissionError):
+        return _no_read_access(path)
+    name = errno.errorcode.get(exc.errno or 0)
+    return IncompatibleRunDirError(
+        f"{path} cannot be read: {exc.strerror or exc}"
+        + (f" ({name})" if name else "")
+        + ". The file system failed to read it; torchcbl changed nothing. Check the disk and "
+        f"the mount it is on (the kernel log: dmesg), and that {path.name} is what the "
+        "session made there, then run this again; if it stays unreadable, restore the run "
+        "directory from a backup."
     )
 
 
@@ -1535,16 +1554,21 @@ def _unborn(run_dir: Path) -> bool:
     tables). Nothing of it ran, so nothing is lost: it reads as a session of no step and
     resumes as one (the log is made whole then).
 
-    Raises :class:`IncompatibleRunDirError` (the read-access error) where ``checkpoints/``
-    may not be listed."""
+    Raises :class:`IncompatibleRunDirError` where a file it looks at, or ``checkpoints/``,
+    cannot be read: the read-access error for a permission (e.g. another user's
+    ``checkpoints/`` this user may not list), else :func:`_unreadable`'s (an I/O error, ...).
+    It renames, deletes and writes nothing."""
+    try:
+        return _unborn_unchecked(run_dir)
+    except OSError as exc:
+        raise _unreadable(Path(exc.filename or run_dir), exc) from exc
+
+
+def _unborn_unchecked(run_dir: Path) -> bool:
     if (run_dir / JOURNAL_NAME).exists() or (run_dir / WRITERS_NAME).exists():
         return False
-    ckpts = run_dir / CHECKPOINT_DIR
-    try:
-        kept = [e.name for e in ckpts.iterdir() if _CKPT_RE.match(e.name)] if ckpts.is_dir() else []
-    except PermissionError:  # e.g. another user's checkpoints/ this user may not list
-        raise _no_read_access(ckpts) from None
-    if kept not in ([], [f"model-{0:08d}.pt"]):
+    kept = [n for n, _ in _checkpoint_entries(run_dir / CHECKPOINT_DIR)]
+    if kept not in ([], [0]):
         return False
     log = run_dir / LOG_NAME
     if not log.exists() or log.stat().st_size == 0:
@@ -1565,12 +1589,28 @@ def _unborn(run_dir: Path) -> bool:
     return found == 0
 
 
+def _checkpoint_entries(directory: Path) -> list[tuple[int, Path]]:
+    """The entries of a session's ``checkpoints/`` named as checkpoints
+    (``model-<8 digits>.pt``), whatever they are, with the count of labels their names give
+    (none where it is no folder).
+
+    Raises:
+        IncompatibleRunDirError: the folder cannot be listed (:func:`_unreadable`).
+    """
+    try:
+        if not directory.is_dir():
+            return []
+        matched = [(_CKPT_RE.match(e.name), e) for e in directory.iterdir()]
+    except OSError as exc:
+        raise _unreadable(directory, exc) from exc
+    return [(int(m.group(1)), e) for m, e in matched if m is not None]
+
+
 def _check_log_present(run_dir: Path) -> None:
     log = run_dir / LOG_NAME
     if log.is_file() or _unborn(run_dir):
         return
-    directory = run_dir / CHECKPOINT_DIR
-    n = len(list(directory.glob("model-*.pt"))) if directory.is_dir() else 0
+    n = len(_checkpoint_entries(run_dir / CHECKPOINT_DIR))
     raise CorruptSessionError(
         f"{log} is missing, but {run_dir / CONFIG_NAME}"
         + (f" and {n} checkpoints" if n else "")
@@ -1942,7 +1982,8 @@ def latest_checkpoint(
     None when the session has none.
 
     Raises:
-        IncompatibleRunDirError: ``run_dir`` is not a session directory (no ``config.json``).
+        IncompatibleRunDirError: ``run_dir`` is not a session directory (no ``config.json``),
+            or its ``checkpoints/`` cannot be listed (a permission, an I/O error).
         ValueError: ``at_most`` is not None or an int >= 0.
     """
     if at_most is not None and (
@@ -1956,16 +1997,10 @@ def latest_checkpoint(
         )
     if not (Path(run_dir) / CONFIG_NAME).is_file():
         load_config(run_dir)  # raises, saying what the path is
-    directory = Path(run_dir) / CHECKPOINT_DIR
     best: tuple[int, Path] | None = None
-    if directory.is_dir():
-        for entry in directory.iterdir():
-            m = _CKPT_RE.match(entry.name)
-            if m is None:
-                continue
-            n = int(m.group(1))
-            if (at_most is None or n <= at_most) and (best is None or n > best[0]):
-                best = (n, entry)
+    for n, entry in _checkpoint_entries(Path(run_dir) / CHECKPOINT_DIR):
+        if (at_most is None or n <= at_most) and (best is None or n > best[0]):
+            best = (n, entry)
     return best
 
 
@@ -2239,6 +2274,8 @@ def _checkpoint_payload(
     """The checkpoint's content if it is readable and was fitted on ``xs[:n], ys[:n]``;
     else (None, "damaged" | "stale")."""
     try:
+        if not path.is_file():  # a folder, a dangling link; a FIFO would block the load
+            return None, "damaged"
         # map_location: a checkpoint written with CUDA tensors (before 2026-11-26) loads on a
         # machine without CUDA instead of being set aside as damaged
         payload = torch.load(path, map_location="cpu", weights_only=True)
@@ -2250,6 +2287,41 @@ def _checkpoint_payload(
     if digest is not None and digest != labels_digest(xs[:n], ys[:n]):
         return None, "stale"
     return payload, ""
+
+
+@dataclass(frozen=True)
+class _CheckpointScan:
+    """A session's ``checkpoints/`` as resume and :func:`load_model` read it
+    (:func:`restore_model`): ``n`` and ``payload``, the newest checkpoint of at most the log's
+    labels that is readable and was fitted on them (None: none is); ``passed_over``, the
+    newer ones of at most those labels that are not, ``(count, path, "damaged" | "stale")``
+    newest first; ``beyond``, those named for more labels than the log holds, never read."""
+
+    n: int | None
+    payload: dict[str, Any] | None
+    passed_over: list[tuple[int, Path, str]]
+    beyond: list[tuple[int, Path]]
+
+
+def _scan_checkpoints(
+    directory: Path, n_labels: int, base: int, all_xs: list[np.ndarray], all_ys: list[int]
+) -> _CheckpointScan:
+    """Find the checkpoint a session's model stands on (see :class:`_CheckpointScan`); reads
+    only. ``n_labels``: the session's labels; ``base``: prior demonstrations, which come
+    first in ``all_xs, all_ys`` and in every checkpoint's digest.
+
+    Raises:
+        IncompatibleRunDirError: ``directory`` cannot be listed.
+    """
+    entries = _checkpoint_entries(directory)
+    beyond = sorted((n, path) for n, path in entries if n > n_labels)
+    passed_over: list[tuple[int, Path, str]] = []
+    for n, path in sorted(((n, p) for n, p in entries if n <= n_labels), reverse=True):
+        payload, why = _checkpoint_payload(path, base + n, all_xs, all_ys)
+        if payload is not None:
+            return _CheckpointScan(n, payload, passed_over, beyond)
+        passed_over.append((n, path, why))
+    return _CheckpointScan(None, None, passed_over, beyond)
 
 
 def _set_aside(path: Path, why: str) -> None:
@@ -2316,23 +2388,16 @@ def restore_model(
     px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
     base = len(py)  # the prior's labels come first in every fit and digest
     all_xs, all_ys = px + list(xs), py + list(ys)
-    last, payload, why0 = 0, None, "missing"
+    why0 = "missing"
     directory = Path(run_dir) / CHECKPOINT_DIR
-    found = []
-    if directory.is_dir():
-        for entry in directory.iterdir():
-            m = _CKPT_RE.match(entry.name)
-            if m is not None and int(m.group(1)) <= len(ys):
-                found.append((int(m.group(1)), entry))
-    for n, path in sorted(found, reverse=True):
-        payload, why = _checkpoint_payload(path, base + n, all_xs, all_ys)
-        if payload is not None:
-            last = n
-            break
+    # (the store's error where checkpoints/ cannot be listed; describe reads it alike)
+    scan = _scan_checkpoints(directory, len(ys), base, all_xs, all_ys)
+    for n, path, why in scan.passed_over:
         if n == 0:
             why0 = why
         if store is not None and not (n == 0 and starts_fitted):  # that one: kept as it is
             _set_aside(path, why)
+    last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
     k = last + fit_count(len(ys) - last, max_new)
     if starts_fitted and payload is None and (k == 0 or incremental):
         raise lost_start(why0)
@@ -2546,7 +2611,12 @@ class SessionSummary:
         steps_per_episode, requests_per_episode: steps and requests of episode 0, 1, ...
         block_steps: the block size of ``requests_per_block``, in steps.
         requests_per_block: requests in steps 0 .. block_steps - 1, then the next block, ...
-        last_checkpoint: labels the newest checkpoint's model was fitted on (None: none).
+        last_checkpoint: labels the newest usable checkpoint's model was fitted on, the one
+            resume and :func:`load_model` start from: of no more labels than the log holds,
+            readable, and fitted on the log's labels (its SHA-256 matches them); None: none
+            is. The name alone does not make one: a file named ``model-<n>.pt`` that is
+            damaged, empty, a directory or stale, or of more labels than the log holds, is
+            passed over and noted in ``notes``.
         writers: one dict per writer (start or resume) from ``writers.jsonl``: first_step,
             torch_num_threads, torch_num_interop_threads, torch_version, numpy_version,
             model_device, pid, started_utc (what that writer's torchcbl recorded).
@@ -2564,8 +2634,11 @@ class SessionSummary:
             resume takes it on), or ``"running or killed"`` (such files are there and
             ``writer_running`` is None).
         notes: what the readers warned of (steps missing from the log, fewer steps than
-            ``writer.lock`` says were committed) and lines of ``writers.jsonl`` that could not
-            be read.
+            ``writer.lock`` says were committed), lines of ``writers.jsonl`` that could not
+            be read, and the files named as checkpoints that resume and :func:`load_model`
+            pass over (what each is and what resume does with it; one of more labels than
+            the log holds is not noted while a writer runs, which may have saved it since
+            the log was read).
     """
 
     run_dir: str
@@ -2811,7 +2884,9 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
     :func:`load_records` reads it), so it is safe while a writer runs and writes nothing: the
     directory may be read-only or another user's (where a writer runs or was killed, SQLite
     may create its ``-shm`` index, as for every reader: the module docstring). Whether a
-    writer holds the session is read from ``/proc/locks``, never by taking its lock.
+    writer holds the session is read from ``/proc/locks``, never by taking its lock. Its
+    checkpoint is found as resume finds it: the files are read and checked against the log's
+    labels (and the prior demonstrations', read from ``prior.npz``), not taken by name.
     ``print(describe(run_dir).text())`` shows it in a screenful; ``torchcbl show SESSION_DIR``
     does so at the command line.
 
@@ -2822,7 +2897,7 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
     Raises:
         IncompatibleRunDirError: ``run_dir`` is not a session directory (the message names the
             sessions below it, if any), or a file of it (or its ``checkpoints/``) may not be
-            read.
+            read or the file system fails to read it (an I/O error).
         CorruptSessionError: a file of the session is damaged or missing (as
             :func:`load_records`).
     """
@@ -2844,16 +2919,12 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         if r.teacher_action is not None:
             asked[r.episode] += 1
             blocks[r.step // SUMMARY_BLOCK_STEPS] += 1
-    n_corrections = len(_corrections_of(records, corrections))
+    correction_records = _corrections_of(records, corrections)
+    n_corrections = len(correction_records)
     n_demonstrations = sum(asked)
-    try:
-        checkpoint = latest_checkpoint(run)
-    except PermissionError as exc:  # e.g. another user's checkpoints/ this user may not list
-        raise _no_read_access(Path(exc.filename or run / CHECKPOINT_DIR)) from None
-    except OSError as exc:
-        raise IncompatibleRunDirError(
-            f"{exc.filename or run / CHECKPOINT_DIR} cannot be read: {exc.strerror or exc}"
-        ) from exc
+    checkpoint, checkpoint_notes = _checkpoint_report(
+        run, config, records, correction_records, running
+    )
     left = (run / LOG_NAME).with_name(LOG_NAME + "-wal").exists() or _unborn(run)
     try:
         left = left or (run / JOURNAL_NAME).stat().st_size > 0
@@ -2900,13 +2971,77 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         requests_per_episode=tuple(asked),
         block_steps=SUMMARY_BLOCK_STEPS,
         requests_per_block=tuple(blocks),
-        last_checkpoint=None if checkpoint is None else checkpoint[0],
+        last_checkpoint=checkpoint,
         writers=tuple(writers),
         last_writer=lock_note,
         writer_running=running,
         state=state,
-        notes=tuple(notes + writer_notes),
+        notes=tuple(notes + writer_notes + checkpoint_notes),
     )
+
+
+def _checkpoint_report(
+    run: Path,
+    config: dict[str, Any],
+    records: list[StepRecord],
+    corrections: list[CorrectionRecord],
+    running: bool | None,
+) -> tuple[int | None, list[str]]:
+    """The checkpoint resume and :func:`load_model` start from (its count of labels; None:
+    none), found as they find it (:func:`_scan_checkpoints`), and a note on each file named as
+    a checkpoint that they pass over: what it is and what resume does with it. Reads only."""
+    xs, ys = label_sequence(records, corrections)
+    try:
+        prior = _read_prior(run, config)
+    except IncompatibleRunDirError as exc:  # missing, changed, unreadable: resume refuses
+        return None, [f"no checkpoint is usable: {' '.join(str(exc).split())}"]
+    px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
+    scan = _scan_checkpoints(run / CHECKPOINT_DIR, len(ys), len(py), px + xs, py + ys)
+    notes = []
+    for n, path, why in scan.passed_over:
+        name = f"{CHECKPOINT_DIR}/{path.name}"
+        if why == "stale":
+            what = f"is stale (not fitted on the log's first {n} labels"
+            what += ", after the prior demonstrations)" if py else ")"
+        else:
+            what = _damage_text(path)
+        if n == 0 and config.get("starts_fitted") is True:
+            notes.append(
+                f"{name} {what}: it holds the fitted model the session started from, which "
+                "no label can refit; resume and load_model cannot load it, refuse the session "
+                "where its model still stands on it, and leave the file as it is"
+            )
+        else:
+            notes.append(
+                f"{name} {what}: resume and load_model pass it over (resume renames it "
+                f"{path.name}.{why}) and rebuild the model from an earlier checkpoint or "
+                "the log"
+            )
+    if running is not True:  # (a writer may have logged and saved more since the log was read)
+        for n, path in scan.beyond:
+            notes.append(
+                f"{CHECKPOINT_DIR}/{path.name} names {n} labels, more than the {len(ys)} the "
+                "log holds: resume and load_model pass it over (a checkpoint of labels the "
+                "log lost, or a file put there by hand)"
+            )
+    return scan.n, notes
+
+
+def _damage_text(path: Path) -> str:
+    """What is wrong with a file named as a checkpoint that cannot be loaded."""
+    try:
+        st = path.stat()
+    except OSError as exc:  # a dangling link, an I/O error
+        return f"cannot be read ({exc.strerror or exc})"
+    if stat.S_ISDIR(st.st_mode):
+        return "is a directory, not a checkpoint file"
+    if not stat.S_ISREG(st.st_mode):
+        return "is not a regular file"
+    if st.st_size == 0:
+        return "is an empty file"
+    if not os.access(path, os.R_OK):
+        return "cannot be read by this user"
+    return "is damaged (cut short, or not a checkpoint torchcbl wrote)"
 
 
 def resume_problems(

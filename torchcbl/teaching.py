@@ -91,6 +91,7 @@ from torchcbl.session import (
     _warn_unrecorded_args,
     build_model,
     label_sequence,
+    latest_checkpoint,
     load_config,
     load_policy,
     prior_bytes,
@@ -867,6 +868,9 @@ class ConfidentTeacher:
         if given is not None:  # (a refused resume has said enough)
             _warn_misstated_relabel(stored_strategy(stored), given)
         prior = _read_prior(run_dir, stored)  # a missing or changed prior.npz: refused here
+        # a checkpoints/ that cannot be listed: refused here too, before the session is
+        # opened for writing (restore_model lists it after; nothing is noted or touched)
+        latest_checkpoint(run_dir)
         if model is None:
             model = build_model(stored)
         self = cls.__new__(cls)
