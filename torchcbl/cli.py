@@ -6,6 +6,7 @@ core never depends on a simulator.
 
 Commands (the options in full: README.md's command block, which a test holds to ``--help``)::
 
+    torchcbl --version
     torchcbl reproduce [corridor|driving|all] [--full] [--seeds N] [--workers N] [--out DIR]
                        [--resume]
     torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S]
@@ -1421,11 +1422,32 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     return 0
 
 
+def _version() -> str:
+    """``torchcbl --version``: torchcbl's version with torch's (read from its installed
+    metadata, so the command does not import torch for it) and Python's."""
+    import importlib.metadata
+    import platform
+
+    from torchcbl import __version__
+
+    try:
+        torch = importlib.metadata.version("torch")
+    except importlib.metadata.PackageNotFoundError:
+        torch = "not installed"
+    return f"torchcbl {__version__} (torch {torch}, Python {platform.python_version()})"
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="torchcbl",
         description="Confidence-based learning from demonstration with Gaussian mixture sets "
         "(Chernova & Veloso, AAMAS 2007).",
+    )
+    parser.add_argument(
+        "--version",
+        action="version",
+        version=_version(),
+        help="print torchcbl's version (with torch's and Python's) and exit",
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
