@@ -138,10 +138,30 @@ def test_every_argument_and_option_has_help_text():
     assert not missing
 
 
+# What the README says of its command block: which command prints what
+README_CLI_INTRO = (
+    "The command line (`torchcbl --help` lists the commands; `torchcbl COMMAND --help`, e.g.\n"
+    "`torchcbl teach --help`, prints a command's options, as below):"
+)
+
+
+def test_the_readme_says_which_help_prints_the_options_of_its_command_block(capsys):
+    """The README introduced its command block, every command's options, as "The command line
+    (`torchcbl --help`):", which prints only the list of commands."""
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    top = capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["teach", "--help"])
+    teach = capsys.readouterr().out
+    assert "--run-dir" not in top and "{reproduce,evaluate" in top and "--run-dir" in teach
+    assert README_CLI_INTRO in (Path(__file__).parents[1] / "README.md").read_text()
+
+
 def _readme_command_lines() -> list[str]:
     """The README's command block, one line per command (continuation lines joined)."""
     readme = (Path(__file__).parents[1] / "README.md").read_text()
-    block = readme.split("The command line (`torchcbl --help`):", 1)[1].split("```")[1]
+    block = readme.split(README_CLI_INTRO, 1)[1].split("```")[1]
     lines: list[str] = []
     for ln in block.splitlines():  # a command's continuation lines are indented
         if ln.startswith("torchcbl "):
