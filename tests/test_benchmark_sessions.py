@@ -214,3 +214,38 @@ def test_a_cell_killed_in_a_worker_leaves_a_session_set_aside_on_rerun(tmp_path,
     bm.run_benchmark(HG, [spec], [0], tmp_path, workers=1, plots=False, keep_sessions=True)
     assert len(load_records(session)) == 60
     assert len(load_records(f"{session}.stale-1")) == 2
+
+
+@pytest.mark.parametrize("domain", ["corridor", "driving"])
+def test_torchcbl_teach_resumes_a_session_the_benchmark_kept(domain, tmp_path, monkeypatch, capsys):
+    """`torchcbl teach DOMAIN --resume` goes on with a corridor or driving benchmark cell's kept
+    session (the --keep-sessions help calls them what torchcbl teach writes). A driving one was
+    refused: the benchmark makes its env with gymnasium.make's max_episode_steps=1000 (a
+    TimeLimit, which the session records as its cap) and teach made it without, so resume said
+    "make the env as the session did, gymnasium.make(...)", Python's words at the terminal.
+    (The driving entry at budget 5 over 20 steps: a SUMO run of a second or two.)"""
+    import importlib
+    from dataclasses import replace
+
+    package = "sumo_scenarios" if domain == "driving" else domain
+    human = importlib.import_module(f"{package}.human")
+
+    class Scripted:  # the person at the terminal, answering "stay" / "forward" to every request
+        def __call__(self, observation, info):
+            return 0
+
+        def set_status(self, text):
+            pass
+
+    monkeypatch.setattr(human, "make_teacher", lambda **kw: Scripted())
+    entry = importlib.import_module(f"{package}.benchmark")
+    spec = replace(entry.env_spec(True), budgets=(5,), max_steps=20, eval_steps=10)
+    confident = [bm.StrategySpec("confident", {})]
+    bm.run_benchmark(confident, [spec], [0], tmp_path, workers=1, plots=False, keep_sessions=True)
+    (session,) = (tmp_path / "sessions").iterdir()
+    before = len(load_records(session))
+    capsys.readouterr()
+    argv = ["teach", domain, "--resume", "--run-dir", str(session), "--steps", "3"]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert len(load_records(session)) == before + 3
+    assert load_config(session)["env"]["max_episode_steps"] == (1000 if domain == "driving" else 81)

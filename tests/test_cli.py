@@ -37,6 +37,33 @@ def test_every_command_explains_itself(command, capsys):
     assert len(out.splitlines()) > 4
 
 
+def test_version_names_torchcbl_and_torch(capsys):
+    """`torchcbl --version` (and `python -m torchcbl --version`) prints the package's version
+    with torch's and Python's, exit 0; it said "error: the following arguments are required:
+    command". It reads torch's version from its metadata, so torch is not imported for it."""
+    import importlib.metadata
+    import platform
+
+    import torchcbl
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    expected = (
+        f"torchcbl {torchcbl.__version__} (torch {importlib.metadata.version('torch')}, "
+        f"Python {platform.python_version()})"
+    )
+    assert capsys.readouterr().out == expected + "\n"
+    code = "import sys, runpy; sys.argv = ['torchcbl', '--version']\n"
+    code += "try:\n    runpy.run_module('torchcbl', run_name='__main__')\n"
+    code += "except SystemExit as e:\n    print(e.code, 'torch' in sys.modules)\n"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.stdout == expected + "\n0 False\n", done
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert "--version" in capsys.readouterr().out
+
+
 def test_plot_refuses_a_directory_without_results(tmp_path, capsys):
     assert main(["plot", str(tmp_path)]) == 2
     err = capsys.readouterr().err
@@ -111,10 +138,30 @@ def test_every_argument_and_option_has_help_text():
     assert not missing
 
 
+# What the README says of its command block: which command prints what
+README_CLI_INTRO = (
+    "The command line (`torchcbl --help` lists the commands; `torchcbl COMMAND --help`, e.g.\n"
+    "`torchcbl teach --help`, prints a command's options, as below):"
+)
+
+
+def test_the_readme_says_which_help_prints_the_options_of_its_command_block(capsys):
+    """The README introduced its command block, every command's options, as "The command line
+    (`torchcbl --help`):", which prints only the list of commands."""
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    top = capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["teach", "--help"])
+    teach = capsys.readouterr().out
+    assert "--run-dir" not in top and "{reproduce,evaluate" in top and "--run-dir" in teach
+    assert README_CLI_INTRO in (Path(__file__).parents[1] / "README.md").read_text()
+
+
 def _readme_command_lines() -> list[str]:
     """The README's command block, one line per command (continuation lines joined)."""
     readme = (Path(__file__).parents[1] / "README.md").read_text()
-    block = readme.split("The command line (`torchcbl --help`):", 1)[1].split("```")[1]
+    block = readme.split(README_CLI_INTRO, 1)[1].split("```")[1]
     lines: list[str] = []
     for ln in block.splitlines():  # a command's continuation lines are indented
         if ln.startswith("torchcbl "):
@@ -126,8 +173,16 @@ def _readme_command_lines() -> list[str]:
 
 def test_the_readme_command_lines_use_the_names_of_the_help(capsys):
     """Every placeholder (SESSION_DIR, N, ...) and option of the README's command block appears,
-    spelled the same, in that command's --help, and every option of the help in the block."""
+    spelled the same, in that command's --help, and every option of the help in the block; the
+    options of torchcbl itself (--version), on lines of their own, as `torchcbl --help` has them."""
     lines = _readme_command_lines()
+    own = [ln for ln in lines if ln.split()[1].startswith("-")]
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    usage = " ".join(capsys.readouterr().out.split("\n\n")[0].split())
+    shown = set(re.findall(r"--[a-z-]+", " ".join(own)))
+    assert shown == set(re.findall(r"--[a-z-]+", usage)) - {"--help"} == {"--version"}, own
+    lines = [ln for ln in lines if ln not in own]
     assert {ln.split()[1] for ln in lines} == {
         "reproduce",
         "evaluate",

@@ -6,6 +6,7 @@ core never depends on a simulator.
 
 Commands (the options in full: README.md's command block, which a test holds to ``--help``)::
 
+    torchcbl --version
     torchcbl reproduce [corridor|driving|all] [--full] [--seeds N] [--workers N] [--out DIR]
                        [--resume]
     torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S]
@@ -762,19 +763,26 @@ _TEACH = {
 
 
 def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
-    """What gymnasium.make was given for a session's env, to make it again on --resume."""
+    """What gymnasium.make was given for a session's env, to make it again on --resume: the
+    kwargs its config.json records and, where it records an int cap, ``max_episode_steps`` (a
+    benchmark cell's driving env was made with gymnasium.make's max_episode_steps=1000, a
+    TimeLimit that teach's own env lacks; a cap equal to the env's own, as teach's corridor
+    sessions record, changes nothing)."""
     from torchcbl.session import _kept_as_repr, load_config
 
-    kwargs = (load_config(run_dir).get("env") or {}).get("kwargs") or {}
+    env = load_config(run_dir).get("env") or {}
+    kwargs = env.get("kwargs") or {}
     kept_as_repr = sorted(k for k, v in kwargs.items() if _kept_as_repr(v))
     if kept_as_repr:
         raise _UsageError(
             f"{run_dir}'s env was made with {', '.join(kept_as_repr)} given as an object its "
             "config does not keep; resume it in Python with ConfidentTeacher.resume and that env"
         )
-    # (max_episode_steps is not needed: teach makes its env with the id's registered cap,
-    # which gymnasium.make gives again)
-    return {k: v for k, v in kwargs.items() if k != "render_mode"}
+    made = {k: v for k, v in kwargs.items() if k != "render_mode"}
+    cap = env.get("max_episode_steps")  # (None: no cap, or a session too old to keep one)
+    if isinstance(cap, int) and not isinstance(cap, bool) and cap >= 1:
+        made["max_episode_steps"] = cap
+    return made
 
 
 _PRIOR_EXPECTED = (
@@ -1414,11 +1422,32 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     return 0
 
 
+def _version() -> str:
+    """``torchcbl --version``: torchcbl's version with torch's (read from its installed
+    metadata, so the command does not import torch for it) and Python's."""
+    import importlib.metadata
+    import platform
+
+    from torchcbl import __version__
+
+    try:
+        torch = importlib.metadata.version("torch")
+    except importlib.metadata.PackageNotFoundError:
+        torch = "not installed"
+    return f"torchcbl {__version__} (torch {torch}, Python {platform.python_version()})"
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="torchcbl",
         description="Confidence-based learning from demonstration with Gaussian mixture sets "
         "(Chernova & Veloso, AAMAS 2007).",
+    )
+    parser.add_argument(
+        "--version",
+        action="version",
+        version=_version(),
+        help="print torchcbl's version (with torch's and Python's) and exit",
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
