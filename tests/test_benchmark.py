@@ -285,6 +285,12 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
             "--teacher .rel:fn:",
         ),
         (["--max-steps", "-5"], "argument --max-steps: expected a whole number >= 1"),
+        # 0 ran the default 10 seeds (a long sweep) where reproduce --seeds 0 is refused
+        (
+            ["--quick", "--envs", "corridor", "--seeds", "0"],
+            "argument --seeds: expected a whole number >= 1, got '0' (leave --seeds out for "
+            "the default: 3 with --quick, else 10)",
+        ),
         (
             ["--envs", "", "--gym-env", "_bench_env:BenchCluster-v0", "--teacher"]
             + ["_bench_env:teacher", "--max-steps", "50"],

@@ -67,9 +67,9 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
 
 
-def _int_at_least(minimum: int, below: int | None = None) -> Any:
+def _int_at_least(minimum: int, below: int | None = None, hint: str = "") -> Any:
     """An argparse type: a whole number >= ``minimum`` (and < ``below``), else a one-line
-    usage error."""
+    usage error (ending in `` (hint)`` where ``hint`` is given)."""
 
     def parse(text: str) -> int:
         try:
@@ -80,6 +80,7 @@ def _int_at_least(minimum: int, below: int | None = None) -> Any:
             upper = "" if below is None else f" and < {below}"
             raise argparse.ArgumentTypeError(
                 f"expected a whole number >= {minimum}{upper}, got {text!r}"
+                + (f" ({hint})" if hint else "")
             ) from None
         return value
 
@@ -1315,7 +1316,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             raise _UsageError(f"--gym-env: {exc}") from None
     if not envs:
         raise _UsageError("no environment: give --envs and/or --gym-env")
-    seeds = list(range(args.seeds if args.seeds else (3 if args.quick else 10)))
+    seeds = list(range(args.seeds if args.seeds is not None else (3 if args.quick else 10)))
     out = _output_dir(
         Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark")), "--out"
     )
@@ -1438,7 +1439,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--full", action="store_true", help="the paper's full sizes (slow)")
     p.add_argument(
         "--seeds",
-        type=_positive_int,
+        type=_int_at_least(1, hint="leave --seeds out for the experiment's own"),
         default=None,
         metavar="N",
         help="run seeds 0 .. N-1 (default: the experiment's own: 10 for each; with --full "
@@ -1707,10 +1708,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--seeds",
-        type=_nonnegative_int,
-        default=0,
+        # 0 is refused, as reproduce refuses it (it ran the default 10 seeds, a long sweep)
+        type=_int_at_least(1, hint="leave --seeds out for the default: 3 with --quick, else 10"),
+        default=None,
         metavar="N",
-        help="seeds 0..N-1 (default, or 0: 3 quick, 10 full)",
+        help="seeds 0..N-1 (default 3 with --quick, else 10)",
     )
     p.add_argument(
         "--workers", type=_positive_int, default=2, metavar="N", help="local processes (default 2)"
