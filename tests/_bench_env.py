@@ -23,6 +23,16 @@ if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="_bench_env:make_world")
 
 
+def endless_world(spread: float = 2.0) -> Any:
+    """The toy env with episodes that never end (no TimeLimit either: registered without
+    max_episode_steps), as a user's env that stops only where its task is done can be."""
+    return rare_regions_world(episode_length=10**12, spread=spread)
+
+
+if "BenchEndless-v0" not in registry:
+    register(id="BenchEndless-v0", entry_point="_bench_env:endless_world")
+
+
 def toy_spec(**kw: Any) -> Any:
     """The benchmark tests' EnvSpec of this env (cheap cells: 60 steps, budgets 5, 10, 20);
     ``kw`` overrides its fields."""

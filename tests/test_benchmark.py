@@ -1408,3 +1408,34 @@ def test_two_settings_of_one_strategy_without_labels_are_told_to_label_them(tmp_
     with pytest.raises(ValueError, match=r"\['cba', 'cba'\]; give each StrategySpec its own "):
         bm.run_benchmark([plain, published], [_env()], [0], tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.timeout(60)
+def test_an_evaluation_whose_episodes_never_end_is_stopped_and_said_not_run_forever(
+    tmp_path, capsys, monkeypatch
+):
+    """An env registered without max_episode_steps whose episodes do not end (the teacher
+    never finishes its task), benchmarked without --eval-steps: the greedy evaluation had no
+    step cap and ran forever after the plan line. Without eval_steps and without a TimeLimit,
+    an evaluation episode now gets at most max_steps steps (the whole teaching run); one that
+    does not end there stops the cell with one line saying what to give."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchEndless-v0", "--teacher"]
+    argv += ["_bench_env:teacher", "--strategies", "bc", "--seeds", "1", "--workers", "1"]
+    argv += ["--budgets", "5", "--max-steps", "10", "--eval-episodes", "2"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "the teacher on evaluation seed 1000000 ran 20 steps" in err, err
+    assert "0 of its 2 episodes ended" in err and "--eval-steps" in err, err
+    assert "max_episode_steps" in err, err
+    # the same through the API: the cell fails, naming the fix
+    spec = _env(env_id="_bench_env:BenchEndless-v0", budgets=(5,), max_steps=10)
+    with pytest.raises(bm.CellError, match="give eval_steps"):
+        bm.run_benchmark(STRATEGIES[:1], [spec], [0], tmp_path / "api", workers=1, plots=False)
+    # eval_steps bounds it, and so does a TimeLimit longer than max_steps
+    capped = dataclasses.replace(spec, eval_steps=12)
+    timed = dataclasses.replace(spec, env_kwargs={"spread": 2.0, "max_episode_steps": 15})
+    for s in (capped, timed):
+        out = bm.run_benchmark(STRATEGIES[:1], [s], [0], tmp_path / "ok", workers=1, plots=False)
+        assert out["table"]["toy"]["bc"]["final_labels"]["mean"] == 5

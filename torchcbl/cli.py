@@ -1768,7 +1768,9 @@ def _parser() -> argparse.ArgumentParser:
         "--eval-episodes",
         type=_positive_int,
         metavar="N",
-        help=g + "episodes per evaluation (default 10; none when --eval-steps is given alone)",
+        help=g + "episodes per evaluation (default 10; none when --eval-steps is given alone). "
+        "Without --eval-steps, on an env without a TimeLimit (registered without "
+        "max_episode_steps), an episode not ended within --max-steps steps stops the sweep",
     )
     p.add_argument(
         "--eval-steps",
