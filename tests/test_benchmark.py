@@ -1439,3 +1439,26 @@ def test_an_evaluation_whose_episodes_never_end_is_stopped_and_said_not_run_fore
     for s in (capped, timed):
         out = bm.run_benchmark(STRATEGIES[:1], [s], [0], tmp_path / "ok", workers=1, plots=False)
         assert out["table"]["toy"]["bc"]["final_labels"]["mean"] == 5
+
+
+def test_a_teacher_whose_evaluation_ends_no_episode_is_told_so_not_that_the_env_lacks_success(
+    tmp_path, capsys, monkeypatch
+):
+    """With --eval-steps shorter than an episode, no evaluation episode ends, success_rate
+    scores 0 for every evaluation, and the warning blamed the env for not setting
+    info["is_success"], which it does where an episode ends. A cell counts the teacher's
+    finished evaluation episodes, and the warning says none ended within --eval-steps."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchEndless-v0", "--teacher"]
+    argv += ["_bench_env:teacher", "--strategies", "bc", "--seeds", "1", "--workers", "1"]
+    argv += ["--budgets", "5", "--max-steps", "10", "--eval-steps", "12"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the teacher scores 0 on _bench_env:BenchEndless-v0" in err, err
+    assert "no evaluation episode of the teacher ended within its 12 steps" in err, err
+    assert "--eval-steps" in err and 'needs an env that sets info["is_success"]' not in err, err
+    (cell,) = [json.loads(p.read_text()) for p in (tmp_path / "b" / "cells").glob("*.json")]
+    assert cell["teacher_episodes_ended"] == 0
+    # where the teacher's episodes end, the count says so and the cause is the score's
+    (config,) = bm.cell_configs(STRATEGIES[:1], [_env(budgets=(5,), max_steps=10)], [0])
+    assert bm.run_cell(config)["teacher_episodes_ended"] == 2 * 3  # eval seeds x episodes

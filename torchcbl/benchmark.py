@@ -14,7 +14,9 @@ evaluates each snapshot greedily on held-out seeds of the evaluation env. A cell
 - wrong autonomous actions: steps on which the learner's action ran (autonomous steps, and
   DAgger's labelled steps executed by the learner) and differs from the teacher's choice in that
   state (asked of a second, separate teacher instance, so the teacher itself is not disturbed);
-- the teacher's own performance on the same evaluation seeds, wall and CPU time.
+- the teacher's own performance on the same evaluation seeds (``teacher_performance``) and
+  how many of its evaluation episodes ended (``teacher_episodes_ended``, over those seeds),
+  wall and CPU time.
 
 The core never imports a domain: an environment is a gymnasium id (``"module:Id"`` makes
 gymnasium import the registering module first) and a teacher is an import path
@@ -590,8 +592,9 @@ def _evaluate(
     uses_info: bool,
     what: str,
     guard: int | None = None,
-) -> float:
-    """The mean of ``score`` over the evaluations of ``policy`` on ``spec.eval_seeds``; a score
+) -> tuple[float, int]:
+    """The mean of ``score`` over the evaluations of ``policy`` on ``spec.eval_seeds``, and
+    the number of their episodes that ended (over all the seeds); a score
     that is not a finite number (NaN from a mean over no finished episode, None) is a
     ValueError naming the score, the seed and ``what`` was evaluated: it would be a NaN in
     every figure of the table (and results.json), not an error.
@@ -602,7 +605,7 @@ def _evaluate(
     ever, where none ends). Where they all end within it, the records are those without it."""
     from torchcbl.policy import evaluate_policy
 
-    values = []
+    values, ended_total = [], 0
     for s in spec.eval_seeds:
         records = evaluate_policy(
             policy,
@@ -612,8 +615,9 @@ def _evaluate(
             seed=int(s),
             uses_info=uses_info,
         )
+        ended = sum(1 for r in records if r.terminated or r.truncated)
+        ended_total += ended
         if guard is not None:
-            ended = sum(1 for r in records if r.terminated or r.truncated)
             if ended < int(spec.eval_episodes or 0):
                 raise ValueError(
                     f"EnvSpec {spec.name!r}: the evaluation of {what} on evaluation seed {s} "
@@ -639,7 +643,7 @@ def _evaluate(
                 "eval_steps long enough for an episode to end, or a score defined without one)"
             )
         values.append(number)
-    return float(np.mean(values))
+    return float(np.mean(values)), ended_total
 
 
 def run_cell(
@@ -790,7 +794,9 @@ def _run_cell(
         if spec.eval_steps is None and not _has_time_limit(eval_env):
             guard = int(spec.eval_episodes or 1) * spec.max_steps
         eval_teacher = _make_teacher(spec.teacher, eval_env, seed, spec.teacher_kwargs)
-        teacher_perf = _evaluate(eval_teacher, spec, eval_env, score, True, "the teacher", guard)
+        teacher_perf, teacher_ended = _evaluate(
+            eval_teacher, spec, eval_env, score, True, "the teacher", guard
+        )
         curve = [
             {
                 "labels": labels,
@@ -803,7 +809,7 @@ def _run_cell(
                     False,
                     f"the model of {labels} labels",
                     guard,
-                ),
+                )[0],
             }
             for labels, n_steps, m in snapshots
         ]
@@ -817,6 +823,9 @@ def _run_cell(
         "seed": seed,
         "curve": curve,
         "teacher_performance": teacher_perf,
+        # (a score of finished episodes, such as success_rate, has none to score where none
+        # ended: the command says so; absent from the cells of earlier versions)
+        "teacher_episodes_ended": teacher_ended,
         "attention": attention,
         "teach_wall_s": teach_wall,
         "wall_s": time.perf_counter() - wall0,

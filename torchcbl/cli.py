@@ -1345,10 +1345,12 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     )
     count = 0
     bare: list[str] = []  # cached cells without a session, with --keep-sessions
+    teacher_ended: dict[str, list[int | None]] = {}  # per env: each cell's finished episodes
 
     def on_cell(cell: dict, cached: bool) -> None:
         nonlocal count
         count += 1
+        teacher_ended.setdefault(cell["env"], []).append(cell.get("teacher_episodes_ended"))
         if args.keep_sessions and cached and not (out / "sessions" / cell["key"]).is_dir():
             bare.append(cell["key"])
         last = cell["curve"][-1] if cell["curve"] else {"labels": 0, "performance": float("nan")}
@@ -1385,16 +1387,32 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         scores = [r["teacher_performance"]["mean"] for r in rows.values()]
         if scores and all(s is not None and s <= 0 for s in scores):
             score = summary["envs"][env_name]["score"]
-            why = (
-                "the score measures nothing there (success_rate needs an env that sets "
-                'info["is_success"]), so every performance is 0 and "labels to 95 %" is '
-                "undefined; pass --score with a score for this env"
-                if score == "torchcbl.benchmark:success_rate" and max(scores) == 0
-                else f'"labels to 95 %" needs a teacher score above 0 (95 % of it is the '
-                f"target), so it is undefined there; give --score one that is positive for the "
-                f"teacher and higher when better (a return shifted by its worst value, say), "
-                f"not {score}"
-            )
+            eval_steps = summary["envs"][env_name].get("eval_steps")
+            # (None: a cached cell of an earlier version, which did not count them)
+            ended = teacher_ended.get(env_name, [None])
+            success = score == "torchcbl.benchmark:success_rate" and max(scores) == 0
+            if success and eval_steps is not None and all(e == 0 for e in ended):
+                why = (
+                    "no evaluation episode of the teacher ended within its "
+                    f"{eval_steps} steps (eval_steps, --eval-steps), and success_rate scores "
+                    'the episodes that end, so every performance is 0 and "labels to 95 %" is '
+                    "undefined; give --eval-steps long enough for episodes to end (or leave "
+                    "it out and give --eval-episodes), or pass --score with a score that needs no "
+                    "finished episode"
+                )
+            elif success:
+                why = (
+                    "the score measures nothing there (success_rate needs an env that sets "
+                    'info["is_success"] where an episode ends), so every performance is 0 and '
+                    '"labels to 95 %" is undefined; pass --score with a score for this env'
+                )
+            else:
+                why = (
+                    f'"labels to 95 %" needs a teacher score above 0 (95 % of it is the '
+                    f"target), so it is undefined there; give --score one that is positive for "
+                    f"the teacher and higher when better (a return shifted by its worst value, "
+                    f"say), not {score}"
+                )
             print(
                 f"\nwarning: the teacher scores {max(scores):g} on {env_name}: {why}",
                 file=sys.stderr,
