@@ -225,3 +225,20 @@ def teacher_killed_while_told(env: Any) -> Any:
         return inner(obs, info)
 
     return teach
+
+
+def teacher_once_stdout_has_no_reader(env: Any) -> Any:
+    """The oracle, made once nothing reads this process's standard output any more (its
+    pipe's reader has gone, as ``| head -2`` goes once it has its lines), or after 30 s."""
+    import select
+    import sys
+    import time
+
+    poller = select.poll()
+    poller.register(sys.stdout.fileno(), select.POLLOUT)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        if any(ev & select.POLLERR for _, ev in poller.poll(0)):
+            break
+        time.sleep(0.02)
+    return oracle(env.unwrapped)

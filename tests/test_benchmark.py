@@ -1462,3 +1462,32 @@ def test_a_teacher_whose_evaluation_ends_no_episode_is_told_so_not_that_the_env_
     # where the teacher's episodes end, the count says so and the cause is the score's
     (config,) = bm.cell_configs(STRATEGIES[:1], [_env(budgets=(5,), max_steps=10)], [0])
     assert bm.run_cell(config)["teacher_episodes_ended"] == 2 * 3  # eval seeds x episodes
+
+
+def test_a_sweep_whose_output_reader_left_finishes_and_writes_its_results(tmp_path, monkeypatch):
+    """`torchcbl benchmark ... | head -2`: the sweep removes the results an earlier one left
+    (so that one stopped early leaves none that read as its own), and its next line into the
+    closed pipe ended the command (exit 141) with no results at all. A closed standard output
+    now stops the printing only: the sweep finishes and writes its results and plot."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = [*_TOY_SWEEP, "--strategies", "bc", "--workers", "1", *_ONE_TINY_CELL]
+    out = tmp_path / "b"
+    assert main([*argv, "--teacher", "_bench_env:teacher", "--out", str(out)]) == 0
+    assert (out / "results.json").is_file() and (out / "learning_curves.png").is_file()
+    # a new sweep into it, whose reader leaves after the plan line (its teacher waits for that)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "torchcbl", *argv, "--out", str(out)]
+        + ["--teacher", "_bench_env:teacher_once_stdout_has_no_reader"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join([str(TESTS), str(ROOT)])},
+    )
+    assert proc.stdout.readline().startswith(b"benchmark: 1 strategies")
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 0, err
+    assert err == "", err
+    results = json.loads((out / "results.json").read_text())
+    assert results["envs"]["_bench_env:BenchCluster-v0"]["teacher"].endswith("no_reader")
+    assert (out / "learning_curves.png").is_file()

@@ -1328,7 +1328,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             "reused)"
         )
     n_cells = len(strategies) * len(envs) * len(seeds)
-    print(
+    _print_if_read(
         f"benchmark: {len(strategies)} strategies x {len(envs)} envs x {len(seeds)} seeds = "
         f"{n_cells} cells into {out} ("
         + (
@@ -1341,7 +1341,6 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             else "in this process"  # run_benchmark runs workers=1 in-process
         )
         + ")",
-        flush=True,
     )
     count = 0
     bare: list[str] = []  # cached cells without a session, with --keep-sessions
@@ -1354,11 +1353,10 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         if args.keep_sessions and cached and not (out / "sessions" / cell["key"]).is_dir():
             bare.append(cell["key"])
         last = cell["curve"][-1] if cell["curve"] else {"labels": 0, "performance": float("nan")}
-        print(
+        _print_if_read(
             f"[{count}/{n_cells}] {cell['env']:>9} {cell['strategy']:>10} seed {cell['seed']}: "
             + ("cached" if cached else f"{cell['wall_s']:.0f} s")
             + f", {last['labels']} labels -> performance {last['performance']:.2f}",
-            flush=True,
         )
 
     t0, c0 = time.perf_counter(), os.times()
@@ -1381,8 +1379,8 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     c1 = os.times()
     cpu = (c1.user - c0.user) + (c1.system - c0.system)
     cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
-    print()
-    print(bm.format_table(summary))
+    _print_if_read()
+    _print_if_read(bm.format_table(summary))
     for env_name, rows in summary["table"].items():
         scores = [r["teacher_performance"]["mean"] for r in rows.values()]
         if scores and all(s is not None and s <= 0 for s in scores):
@@ -1425,7 +1423,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             f"again: delete its {out / 'cells'}/<key>.json to compute it again with its session",
             file=sys.stderr,
         )
-    print(
+    _print_if_read(
         f"\nwall {time.perf_counter() - t0:.0f} s, CPU {cpu:.0f} s (this process and its "
         f"workers); results in {out / 'results.json'}, plot {out / 'learning_curves.png'}"
         + (f", teaching sessions in {out / 'sessions'}" if args.keep_sessions else "")
@@ -1854,6 +1852,20 @@ def _stdout_closed() -> bool:
         return any(ev & select.POLLERR for _, ev in poller.poll(0))
     except (AttributeError, OSError, ValueError):  # no poll (Windows) or no real stdout
         return True
+
+
+def _print_if_read(*values: object) -> None:
+    """``print(*values)`` on standard output, flushed, while something reads it: once its
+    reader has gone (a closed pipe: ``torchcbl benchmark ... | head -2``), the rest goes to
+    os.devnull and the command goes on, so a sweep still writes the results it is run for."""
+    try:
+        print(*values, flush=True)
+    except BrokenPipeError:
+        if not _stdout_closed():
+            raise
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
 
 
 def _shell(path: Path) -> str:
