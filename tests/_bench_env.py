@@ -23,6 +23,16 @@ if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="_bench_env:make_world")
 
 
+def endless_world(spread: float = 2.0) -> Any:
+    """The toy env with episodes that never end (no TimeLimit either: registered without
+    max_episode_steps), as a user's env that stops only where its task is done can be."""
+    return rare_regions_world(episode_length=10**12, spread=spread)
+
+
+if "BenchEndless-v0" not in registry:
+    register(id="BenchEndless-v0", entry_point="_bench_env:endless_world")
+
+
 def toy_spec(**kw: Any) -> Any:
     """The benchmark tests' EnvSpec of this env (cheap cells: 60 steps, budgets 5, 10, 20);
     ``kw`` overrides its fields."""
@@ -215,3 +225,20 @@ def teacher_killed_while_told(env: Any) -> Any:
         return inner(obs, info)
 
     return teach
+
+
+def teacher_once_stdout_has_no_reader(env: Any) -> Any:
+    """The oracle, made once nothing reads this process's standard output any more (its
+    pipe's reader has gone, as ``| head -2`` goes once it has its lines), or after 30 s."""
+    import select
+    import sys
+    import time
+
+    poller = select.poll()
+    poller.register(sys.stdout.fileno(), select.POLLOUT)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        if any(ev & select.POLLERR for _, ev in poller.poll(0)):
+            break
+        time.sleep(0.02)
+    return oracle(env.unwrapped)

@@ -285,6 +285,12 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
             "--teacher .rel:fn:",
         ),
         (["--max-steps", "-5"], "argument --max-steps: expected a whole number >= 1"),
+        # 0 ran the default 10 seeds (a long sweep) where reproduce --seeds 0 is refused
+        (
+            ["--quick", "--envs", "corridor", "--seeds", "0"],
+            "argument --seeds: expected a whole number >= 1, got '0' (leave --seeds out for "
+            "the default: 3 with --quick, else 10)",
+        ),
         (
             ["--envs", "", "--gym-env", "_bench_env:BenchCluster-v0", "--teacher"]
             + ["_bench_env:teacher", "--max-steps", "50"],
@@ -1402,3 +1408,86 @@ def test_two_settings_of_one_strategy_without_labels_are_told_to_label_them(tmp_
     with pytest.raises(ValueError, match=r"\['cba', 'cba'\]; give each StrategySpec its own "):
         bm.run_benchmark([plain, published], [_env()], [0], tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.timeout(60)
+def test_an_evaluation_whose_episodes_never_end_is_stopped_and_said_not_run_forever(
+    tmp_path, capsys, monkeypatch
+):
+    """An env registered without max_episode_steps whose episodes do not end (the teacher
+    never finishes its task), benchmarked without --eval-steps: the greedy evaluation had no
+    step cap and ran forever after the plan line. Without eval_steps and without a TimeLimit,
+    an evaluation episode now gets at most max_steps steps (the whole teaching run); one that
+    does not end there stops the cell with one line saying what to give."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchEndless-v0", "--teacher"]
+    argv += ["_bench_env:teacher", "--strategies", "bc", "--seeds", "1", "--workers", "1"]
+    argv += ["--budgets", "5", "--max-steps", "10", "--eval-episodes", "2"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "the teacher on evaluation seed 1000000 ran 20 steps" in err, err
+    assert "0 of its 2 episodes ended" in err and "--eval-steps" in err, err
+    assert "max_episode_steps" in err, err
+    # the same through the API: the cell fails, naming the fix
+    spec = _env(env_id="_bench_env:BenchEndless-v0", budgets=(5,), max_steps=10)
+    with pytest.raises(bm.CellError, match="give eval_steps"):
+        bm.run_benchmark(STRATEGIES[:1], [spec], [0], tmp_path / "api", workers=1, plots=False)
+    # eval_steps bounds it, and so does a TimeLimit longer than max_steps
+    capped = dataclasses.replace(spec, eval_steps=12)
+    timed = dataclasses.replace(spec, env_kwargs={"spread": 2.0, "max_episode_steps": 15})
+    for s in (capped, timed):
+        out = bm.run_benchmark(STRATEGIES[:1], [s], [0], tmp_path / "ok", workers=1, plots=False)
+        assert out["table"]["toy"]["bc"]["final_labels"]["mean"] == 5
+
+
+def test_a_teacher_whose_evaluation_ends_no_episode_is_told_so_not_that_the_env_lacks_success(
+    tmp_path, capsys, monkeypatch
+):
+    """With --eval-steps shorter than an episode, no evaluation episode ends, success_rate
+    scores 0 for every evaluation, and the warning blamed the env for not setting
+    info["is_success"], which it does where an episode ends. A cell counts the teacher's
+    finished evaluation episodes, and the warning says none ended within --eval-steps."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchEndless-v0", "--teacher"]
+    argv += ["_bench_env:teacher", "--strategies", "bc", "--seeds", "1", "--workers", "1"]
+    argv += ["--budgets", "5", "--max-steps", "10", "--eval-steps", "12"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the teacher scores 0 on _bench_env:BenchEndless-v0" in err, err
+    assert "no evaluation episode of the teacher ended within its 12 steps" in err, err
+    assert "--eval-steps" in err and 'needs an env that sets info["is_success"]' not in err, err
+    (cell,) = [json.loads(p.read_text()) for p in (tmp_path / "b" / "cells").glob("*.json")]
+    assert cell["teacher_episodes_ended"] == 0
+    # where the teacher's episodes end, the count says so and the cause is the score's
+    (config,) = bm.cell_configs(STRATEGIES[:1], [_env(budgets=(5,), max_steps=10)], [0])
+    assert bm.run_cell(config)["teacher_episodes_ended"] == 2 * 3  # eval seeds x episodes
+
+
+def test_a_sweep_whose_output_reader_left_finishes_and_writes_its_results(tmp_path, monkeypatch):
+    """`torchcbl benchmark ... | head -2`: the sweep removes the results an earlier one left
+    (so that one stopped early leaves none that read as its own), and its next line into the
+    closed pipe ended the command (exit 141) with no results at all. A closed standard output
+    now stops the printing only: the sweep finishes and writes its results and plot."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = [*_TOY_SWEEP, "--strategies", "bc", "--workers", "1", *_ONE_TINY_CELL]
+    out = tmp_path / "b"
+    assert main([*argv, "--teacher", "_bench_env:teacher", "--out", str(out)]) == 0
+    assert (out / "results.json").is_file() and (out / "learning_curves.png").is_file()
+    # a new sweep into it, whose reader leaves after the plan line (its teacher waits for that)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "torchcbl", *argv, "--out", str(out)]
+        + ["--teacher", "_bench_env:teacher_once_stdout_has_no_reader"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join([str(TESTS), str(ROOT)])},
+    )
+    assert proc.stdout.readline().startswith(b"benchmark: 1 strategies")
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 0, err
+    assert err == "", err
+    results = json.loads((out / "results.json").read_text())
+    assert results["envs"]["_bench_env:BenchCluster-v0"]["teacher"].endswith("no_reader")
+    assert (out / "learning_curves.png").is_file()

@@ -14,7 +14,9 @@ evaluates each snapshot greedily on held-out seeds of the evaluation env. A cell
 - wrong autonomous actions: steps on which the learner's action ran (autonomous steps, and
   DAgger's labelled steps executed by the learner) and differs from the teacher's choice in that
   state (asked of a second, separate teacher instance, so the teacher itself is not disturbed);
-- the teacher's own performance on the same evaluation seeds, wall and CPU time.
+- the teacher's own performance on the same evaluation seeds (``teacher_performance``) and
+  how many of its evaluation episodes ended (``teacher_episodes_ended``, over those seeds),
+  wall and CPU time.
 
 The core never imports a domain: an environment is a gymnasium id (``"module:Id"`` makes
 gymnasium import the registering module first) and a teacher is an import path
@@ -362,7 +364,12 @@ class EnvSpec:
             the evaluation records of one seed; default :func:`success_rate`.
         eval_seeds: held-out reset seeds of the evaluation env (one evaluation each).
         eval_episodes: episodes per evaluation (or None).
-        eval_steps: steps per evaluation (or None; at least one of the two).
+        eval_steps: steps per evaluation (or None; at least one of the two). Without it, on
+            an env without a TimeLimit (registered without ``max_episode_steps``), an
+            evaluation episode gets at most ``max_steps`` steps: one that has not ended by
+            then stops the cell with an error saying to give ``eval_steps`` (an episode that
+            never ends would run for ever); an env that ends its episodes itself, sooner, is
+            evaluated as without the cap.
         teaching: :class:`~torchcbl.teaching.TeachingConfig` fields, learning ones only (a
             stop criterion such as ``max_episodes`` is refused: a cell stops at its budgets
             and ``max_steps``).
@@ -566,25 +573,62 @@ class _Audited(gym.Wrapper):
         return out
 
 
+def _has_time_limit(env: Any) -> bool:
+    """Whether ``env`` (as ``gymnasium.make`` made it) is wrapped in a TimeLimit: registered
+    with ``max_episode_steps``, given it in ``make``'s arguments, or wrapped so by its entry
+    point."""
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, gym.wrappers.TimeLimit):
+            return True
+        env = env.env
+    return False
+
+
 def _evaluate(
-    policy: Any, spec: EnvSpec, env: Any, score: Callable, uses_info: bool, what: str
-) -> float:
-    """The mean of ``score`` over the evaluations of ``policy`` on ``spec.eval_seeds``; a score
+    policy: Any,
+    spec: EnvSpec,
+    env: Any,
+    score: Callable,
+    uses_info: bool,
+    what: str,
+    guard: int | None = None,
+) -> tuple[float, int]:
+    """The mean of ``score`` over the evaluations of ``policy`` on ``spec.eval_seeds``, and
+    the number of their episodes that ended (over all the seeds); a score
     that is not a finite number (NaN from a mean over no finished episode, None) is a
     ValueError naming the score, the seed and ``what`` was evaluated: it would be a NaN in
-    every figure of the table (and results.json), not an error."""
+    every figure of the table (and results.json), not an error.
+
+    ``guard`` (where nothing else bounds an evaluation: no ``eval_steps``, no TimeLimit) is
+    its step cap; an evaluation that reaches it before its ``eval_episodes`` episodes ended is
+    a ValueError saying what to give, not a loop that runs as long as an episode does (for
+    ever, where none ends). Where they all end within it, the records are those without it."""
     from torchcbl.policy import evaluate_policy
 
-    values = []
+    values, ended_total = [], 0
     for s in spec.eval_seeds:
         records = evaluate_policy(
             policy,
             env,
-            n_steps=spec.eval_steps,
+            n_steps=spec.eval_steps if guard is None else guard,
             n_episodes=spec.eval_episodes,
             seed=int(s),
             uses_info=uses_info,
         )
+        ended = sum(1 for r in records if r.terminated or r.truncated)
+        ended_total += ended
+        if guard is not None:
+            if ended < int(spec.eval_episodes or 0):
+                raise ValueError(
+                    f"EnvSpec {spec.name!r}: the evaluation of {what} on evaluation seed {s} "
+                    f"ran {len(records)} steps ({spec.eval_episodes} episodes x max_steps "
+                    f"{spec.max_steps}) and {ended} of its {spec.eval_episodes} episodes ended; "
+                    f"with eval_steps None and no TimeLimit on {spec.env_id} (registered "
+                    "without max_episode_steps), an evaluation episode gets at most max_steps "
+                    "steps, or an episode that never ends would run for ever: give eval_steps "
+                    "(the steps of one evaluation; torchcbl benchmark --eval-steps N), or "
+                    "register the env with max_episode_steps (or give it in env_kwargs)"
+                )
         value = score(records)
         try:
             number = float(value)
@@ -599,7 +643,7 @@ def _evaluate(
                 "eval_steps long enough for an episode to end, or a score defined without one)"
             )
         values.append(number)
-    return float(np.mean(values))
+    return float(np.mean(values)), ended_total
 
 
 def run_cell(
@@ -744,15 +788,28 @@ def _run_cell(
 
     eval_env = gym.make(spec.env_id, **{**dict(spec.env_kwargs), **dict(spec.eval_env_kwargs)})
     try:
+        # an evaluation always ends: at eval_steps, at the env's TimeLimit, else within
+        # max_steps steps per episode (the whole teaching run) or with an error
+        guard = None
+        if spec.eval_steps is None and not _has_time_limit(eval_env):
+            guard = int(spec.eval_episodes or 1) * spec.max_steps
         eval_teacher = _make_teacher(spec.teacher, eval_env, seed, spec.teacher_kwargs)
-        teacher_perf = _evaluate(eval_teacher, spec, eval_env, score, True, "the teacher")
+        teacher_perf, teacher_ended = _evaluate(
+            eval_teacher, spec, eval_env, score, True, "the teacher", guard
+        )
         curve = [
             {
                 "labels": labels,
                 "steps": n_steps,
                 "performance": _evaluate(
-                    GreedyPolicy(m), spec, eval_env, score, False, f"the model of {labels} labels"
-                ),
+                    GreedyPolicy(m),
+                    spec,
+                    eval_env,
+                    score,
+                    False,
+                    f"the model of {labels} labels",
+                    guard,
+                )[0],
             }
             for labels, n_steps, m in snapshots
         ]
@@ -766,6 +823,9 @@ def _run_cell(
         "seed": seed,
         "curve": curve,
         "teacher_performance": teacher_perf,
+        # (a score of finished episodes, such as success_rate, has none to score where none
+        # ended: the command says so; absent from the cells of earlier versions)
+        "teacher_episodes_ended": teacher_ended,
         "attention": attention,
         "teach_wall_s": teach_wall,
         "wall_s": time.perf_counter() - wall0,

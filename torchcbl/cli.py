@@ -68,9 +68,9 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
 
 
-def _int_at_least(minimum: int, below: int | None = None) -> Any:
+def _int_at_least(minimum: int, below: int | None = None, hint: str = "") -> Any:
     """An argparse type: a whole number >= ``minimum`` (and < ``below``), else a one-line
-    usage error."""
+    usage error (ending in `` (hint)`` where ``hint`` is given)."""
 
     def parse(text: str) -> int:
         try:
@@ -81,6 +81,7 @@ def _int_at_least(minimum: int, below: int | None = None) -> Any:
             upper = "" if below is None else f" and < {below}"
             raise argparse.ArgumentTypeError(
                 f"expected a whole number >= {minimum}{upper}, got {text!r}"
+                + (f" ({hint})" if hint else "")
             ) from None
         return value
 
@@ -1323,7 +1324,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             raise _UsageError(f"--gym-env: {exc}") from None
     if not envs:
         raise _UsageError("no environment: give --envs and/or --gym-env")
-    seeds = list(range(args.seeds if args.seeds else (3 if args.quick else 10)))
+    seeds = list(range(args.seeds if args.seeds is not None else (3 if args.quick else 10)))
     out = _output_dir(
         Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark")), "--out"
     )
@@ -1335,7 +1336,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             "reused)"
         )
     n_cells = len(strategies) * len(envs) * len(seeds)
-    print(
+    _print_if_read(
         f"benchmark: {len(strategies)} strategies x {len(envs)} envs x {len(seeds)} seeds = "
         f"{n_cells} cells into {out} ("
         + (
@@ -1348,22 +1349,22 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             else "in this process"  # run_benchmark runs workers=1 in-process
         )
         + ")",
-        flush=True,
     )
     count = 0
     bare: list[str] = []  # cached cells without a session, with --keep-sessions
+    teacher_ended: dict[str, list[int | None]] = {}  # per env: each cell's finished episodes
 
     def on_cell(cell: dict, cached: bool) -> None:
         nonlocal count
         count += 1
+        teacher_ended.setdefault(cell["env"], []).append(cell.get("teacher_episodes_ended"))
         if args.keep_sessions and cached and not (out / "sessions" / cell["key"]).is_dir():
             bare.append(cell["key"])
         last = cell["curve"][-1] if cell["curve"] else {"labels": 0, "performance": float("nan")}
-        print(
+        _print_if_read(
             f"[{count}/{n_cells}] {cell['env']:>9} {cell['strategy']:>10} seed {cell['seed']}: "
             + ("cached" if cached else f"{cell['wall_s']:.0f} s")
             + f", {last['labels']} labels -> performance {last['performance']:.2f}",
-            flush=True,
         )
 
     t0, c0 = time.perf_counter(), os.times()
@@ -1386,22 +1387,38 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     c1 = os.times()
     cpu = (c1.user - c0.user) + (c1.system - c0.system)
     cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
-    print()
-    print(bm.format_table(summary))
+    _print_if_read()
+    _print_if_read(bm.format_table(summary))
     for env_name, rows in summary["table"].items():
         scores = [r["teacher_performance"]["mean"] for r in rows.values()]
         if scores and all(s is not None and s <= 0 for s in scores):
             score = summary["envs"][env_name]["score"]
-            why = (
-                "the score measures nothing there (success_rate needs an env that sets "
-                'info["is_success"]), so every performance is 0 and "labels to 95 %" is '
-                "undefined; pass --score with a score for this env"
-                if score == "torchcbl.benchmark:success_rate" and max(scores) == 0
-                else f'"labels to 95 %" needs a teacher score above 0 (95 % of it is the '
-                f"target), so it is undefined there; give --score one that is positive for the "
-                f"teacher and higher when better (a return shifted by its worst value, say), "
-                f"not {score}"
-            )
+            eval_steps = summary["envs"][env_name].get("eval_steps")
+            # (None: a cached cell of an earlier version, which did not count them)
+            ended = teacher_ended.get(env_name, [None])
+            success = score == "torchcbl.benchmark:success_rate" and max(scores) == 0
+            if success and eval_steps is not None and all(e == 0 for e in ended):
+                why = (
+                    "no evaluation episode of the teacher ended within its "
+                    f"{eval_steps} steps (eval_steps, --eval-steps), and success_rate scores "
+                    'the episodes that end, so every performance is 0 and "labels to 95 %" is '
+                    "undefined; give --eval-steps long enough for episodes to end (or leave "
+                    "it out and give --eval-episodes), or pass --score with a score that needs no "
+                    "finished episode"
+                )
+            elif success:
+                why = (
+                    "the score measures nothing there (success_rate needs an env that sets "
+                    'info["is_success"] where an episode ends), so every performance is 0 and '
+                    '"labels to 95 %" is undefined; pass --score with a score for this env'
+                )
+            else:
+                why = (
+                    f'"labels to 95 %" needs a teacher score above 0 (95 % of it is the '
+                    f"target), so it is undefined there; give --score one that is positive for "
+                    f"the teacher and higher when better (a return shifted by its worst value, "
+                    f"say), not {score}"
+                )
             print(
                 f"\nwarning: the teacher scores {max(scores):g} on {env_name}: {why}",
                 file=sys.stderr,
@@ -1414,7 +1431,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             f"again: delete its {out / 'cells'}/<key>.json to compute it again with its session",
             file=sys.stderr,
         )
-    print(
+    _print_if_read(
         f"\nwall {time.perf_counter() - t0:.0f} s, CPU {cpu:.0f} s (this process and its "
         f"workers); results in {out / 'results.json'}, plot {out / 'learning_curves.png'}"
         + (f", teaching sessions in {out / 'sessions'}" if args.keep_sessions else "")
@@ -1467,7 +1484,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--full", action="store_true", help="the paper's full sizes (slow)")
     p.add_argument(
         "--seeds",
-        type=_positive_int,
+        type=_int_at_least(1, hint="leave --seeds out for the experiment's own"),
         default=None,
         metavar="N",
         help="run seeds 0 .. N-1 (default: the experiment's own: 10 for each; with --full "
@@ -1736,10 +1753,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--seeds",
-        type=_nonnegative_int,
-        default=0,
+        # 0 is refused, as reproduce refuses it (it ran the default 10 seeds, a long sweep)
+        type=_int_at_least(1, hint="leave --seeds out for the default: 3 with --quick, else 10"),
+        default=None,
         metavar="N",
-        help="seeds 0..N-1 (default, or 0: 3 quick, 10 full)",
+        help="seeds 0..N-1 (default 3 with --quick, else 10)",
     )
     p.add_argument(
         "--workers", type=_positive_int, default=2, metavar="N", help="local processes (default 2)"
@@ -1795,7 +1813,9 @@ def _parser() -> argparse.ArgumentParser:
         "--eval-episodes",
         type=_positive_int,
         metavar="N",
-        help=g + "episodes per evaluation (default 10; none when --eval-steps is given alone)",
+        help=g + "episodes per evaluation (default 10; none when --eval-steps is given alone). "
+        "Without --eval-steps, on an env without a TimeLimit (registered without "
+        "max_episode_steps), an episode not ended within --max-steps steps stops the sweep",
     )
     p.add_argument(
         "--eval-steps",
@@ -1861,6 +1881,20 @@ def _stdout_closed() -> bool:
         return any(ev & select.POLLERR for _, ev in poller.poll(0))
     except (AttributeError, OSError, ValueError):  # no poll (Windows) or no real stdout
         return True
+
+
+def _print_if_read(*values: object) -> None:
+    """``print(*values)`` on standard output, flushed, while something reads it: once its
+    reader has gone (a closed pipe: ``torchcbl benchmark ... | head -2``), the rest goes to
+    os.devnull and the command goes on, so a sweep still writes the results it is run for."""
+    try:
+        print(*values, flush=True)
+    except BrokenPipeError:
+        if not _stdout_closed():
+            raise
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
 
 
 def _shell(path: Path) -> str:
