@@ -727,6 +727,26 @@ def test_a_checkpoints_folder_that_fails_to_list_in_a_session_with_its_journal(
     assert files_of(run) == before  # resume refused before it opened the session for writing
 
 
+def test_a_new_session_whose_checkpoints_folder_fails_to_list_is_said_to_be_that(
+    tmp_path, monkeypatch
+):
+    """A new session in a folder holding an empty checkpoints/ (what a start that failed may
+    leave) lists it to find another session's checkpoints; where the file system failed that
+    listing (an I/O error) creating the teacher let the bare OSError through. It is the
+    store's IncompatibleRunDirError naming the folder and the error, and no session is made."""
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    _failing_listing(monkeypatch, run / "checkpoints", errno.EIO)
+    with pytest.raises(IncompatibleRunDirError) as info:
+        session(run)
+    msg = str(info.value)
+    assert msg.startswith(f"{run / 'checkpoints'} cannot be read: {os.strerror(errno.EIO)}"), msg
+    monkeypatch.undo()
+    assert not (run / "config.json").exists() and not (run / "steps.sqlite").exists()
+    ct, _ = session(run)  # the folder reads again: the session starts there
+    ct.close()
+
+
 # -- 4. damaged files -------------------------------------------------------------------------
 
 

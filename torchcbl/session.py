@@ -1186,10 +1186,8 @@ class SessionStore:
             if (path / PRIOR_NAME).exists():
                 leftovers.append(PRIOR_NAME)
             ckpts = path / CHECKPOINT_DIR
-            if ckpts.is_dir():
-                leftovers += sorted(
-                    f"{CHECKPOINT_DIR}/{e.name}" for e in ckpts.iterdir() if _CKPT_RE.match(e.name)
-                )
+            # (a folder the file system fails to list: the store's error, not a bare OSError)
+            leftovers += sorted(f"{CHECKPOINT_DIR}/{e.name}" for _, e in _checkpoint_entries(ckpts))
             if leftovers:  # a new session would take another session's steps, writers, models
                 raise IncompatibleRunDirError(
                     f"{path} holds what another session left ({', '.join(leftovers[:3])}"
