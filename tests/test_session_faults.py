@@ -1607,6 +1607,55 @@ def test_a_new_session_does_not_take_over_a_writers_file_another_session_left(tm
     assert [json.loads(line)["first_step"] for line in (run / "writers.jsonl").open()] == [0]
 
 
+def test_a_new_session_is_refused_in_a_folder_holding_files_of_ones_own(tmp_path):
+    """ConfidentTeacher(..., run_dir=folder), the folder holding one's own script, wrote
+    config.json, steps.sqlite, checkpoints/ and the rest beside it, while torchcbl teach
+    --run-dir refused the same folder. Both refuse it now, by one rule (the store's): a new
+    session needs a missing or empty folder, or one holding only what torchcbl leaves where a
+    session could not start; the error says what is there and to pick another folder, and
+    nothing is written there (no writer.lock either)."""
+    run = tmp_path / "proj"
+    run.mkdir()
+    (run / "myteach.py").write_text("print('mine')\n")
+    (run / "notes").mkdir()
+    with pytest.raises(IncompatibleRunDirError) as info:
+        session(run)
+    msg = str(info.value)
+    assert "myteach.py" in msg and "notes" in msg and "choose another run_dir" in msg, msg
+    assert sorted(p.name for p in run.iterdir()) == ["myteach.py", "notes"]
+
+
+def test_a_new_session_starts_beside_what_torchcbl_leaves_where_one_could_not_start(tmp_path):
+    """What torchcbl itself leaves in a folder that holds no session (a failed start's
+    writer.lock, a closed session's empty journal once its log went, an empty checkpoints/,
+    the temporary files of a start killed mid-write) does not keep a new session out."""
+    run = tmp_path / "run"
+    run.mkdir()
+    for name in ("writer.lock", "steps.journal", "writers.jsonl"):
+        (run / name).write_bytes(b"")
+    (run / "checkpoints").mkdir()
+    (run / "checkpoints" / ".model-00000000.pt.tmp").write_bytes(b"torn")
+    (run / "config.json.tmp").write_text("{")
+    (run / ".prior.npz.tmp").write_bytes(b"torn")
+    ct, _ = session(run)
+    ct.run(max_steps=3)
+    ct.close()
+    assert len(load_records(run)) == 3
+
+
+def test_a_session_is_still_refused_as_a_session_and_nothing_is_written(tmp_path):
+    """A session's own folder is refused as one, to be resumed, and the refusal writes nothing
+    (its writer.lock is left as it was)."""
+    run = tmp_path / "run"
+    ct, _ = session(run)
+    ct.run(max_steps=5)
+    ct.close()
+    before = files_of(run)
+    with pytest.raises(IncompatibleRunDirError, match=r"already holds a teaching session.*resume"):
+        session(run)
+    assert files_of(run) == before
+
+
 def test_resume_rebuilds_the_sessions_model_not_the_callers_fitted_one(tmp_path):
     """At 4 labels (no refit yet, max_new 50) the session has no model; a fitted model passed
     to resume must not decide in its place."""

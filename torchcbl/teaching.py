@@ -538,8 +538,11 @@ class ConfidentTeacher:
         strategy: who asks and who acts (:mod:`torchcbl.strategies`); default
             ``ConfidentExecution(rule)``. Give ``rule`` or ``strategy``, not both.
         config: a :class:`TeachingConfig`.
-        run_dir: if given, a new session directory (see :mod:`torchcbl.session`); it must not
-            already hold a session (continue one with :meth:`resume`).
+        run_dir: if given, a new session directory (see :mod:`torchcbl.session`): a folder
+            that does not exist yet, or an empty one (or one holding only what torchcbl leaves
+            where a session could not start, such as its ``writer.lock``). A folder holding a
+            session (continue it with :meth:`resume`), what another session left, or files of
+            one's own is refused with :class:`IncompatibleRunDirError`, and nothing is written.
         seed: seeds the first ``env.reset`` (and the default model).
         progress: show a tqdm bar with the live counters while :meth:`run` runs.
         on_step: called with each :class:`StepRecord` after it is recorded.
