@@ -1796,6 +1796,24 @@ def test_teach_and_python_refuse_a_run_dir_holding_files_of_ones_own_alike(
     assert len(load_records(left)) == 1
 
 
+def test_teach_in_a_folder_holding_a_config_json_of_ones_own_does_not_say_resume(
+    tmp_path, monkeypatch, capsys
+):
+    """teach --run-dir on a folder holding one's own config.json said it "already holds a
+    teaching session; add --resume", and --resume then failed ("expected a session format
+    ... got None"). It says that config.json is no torchcbl session's and to choose another
+    --run-dir, in one line, and writes nothing."""
+    _scripted_corridor_person(monkeypatch)
+    proj = tmp_path / "proj"
+    proj.mkdir()
+    (proj / "config.json").write_text('{"lr": 0.1}')
+    assert main(["teach", "corridor", "--run-dir", str(proj), "--steps", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a torchcbl session" in err, err
+    assert "--resume" not in err and "choose another --run-dir" in err, err
+    assert sorted(p.name for p in proj.iterdir()) == ["config.json"]
+
+
 def test_reproduce_on_a_full_disk_names_the_file_it_could_not_write(tmp_path, capsys):
     """reproduce on a full disk said only "error: OSError: [Errno 28] No space left on device":
     the pid written into the run directory's .run.lock stayed in the file object's buffer, and

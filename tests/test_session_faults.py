@@ -1643,6 +1643,27 @@ def test_a_new_session_starts_beside_what_torchcbl_leaves_where_one_could_not_st
     assert len(load_records(run)) == 3
 
 
+@pytest.mark.parametrize(
+    "text", ['{"lr": 0.1}\n', "not json", '["torchcbl.session/2"]'], ids=["dict", "text", "list"]
+)
+def test_a_config_json_of_ones_own_is_not_called_a_session(tmp_path, text):
+    """A folder holding one's own config.json (not a session's) was said to hold a teaching
+    session, "Continue it with ConfidentTeacher.resume", whose resume then failed ("expected a
+    session format ... got None"), and the refusal left a writer.lock there. The error now says
+    that config.json is no torchcbl session's and to choose another folder, and nothing is
+    written."""
+    run = tmp_path / "proj"
+    run.mkdir()
+    (run / "config.json").write_text(text)
+    with pytest.raises(IncompatibleRunDirError) as info:
+        session(run)
+    msg = str(info.value)
+    assert "config.json" in msg and "not a torchcbl session" in msg, msg
+    assert "resume" not in msg and "choose another run_dir" in msg, msg
+    assert sorted(p.name for p in run.iterdir()) == ["config.json"]
+    assert (run / "config.json").read_text() == text
+
+
 def test_a_session_is_still_refused_as_a_session_and_nothing_is_written(tmp_path):
     """A session's own folder is refused as one, to be resumed, and the refusal writes nothing
     (its writer.lock is left as it was)."""

@@ -829,6 +829,27 @@ def _listing(folder: Path) -> list[Path]:
         raise _unreadable(folder, exc) from exc
 
 
+def _names_a_session_format(config: Path) -> bool:
+    """Whether the file ``config`` is a session's config.json: a JSON object whose
+    ``format`` is a torchcbl session format (one this version reads or not).
+
+    Raises:
+        IncompatibleRunDirError: it cannot be read (:func:`_unreadable`).
+    """
+    try:
+        if not config.is_file():
+            return False
+        text = config.read_bytes()
+    except OSError as exc:
+        raise _unreadable(config, exc) from exc
+    try:
+        data = json.loads(text)
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        return False
+    fmt = data.get("format") if isinstance(data, dict) else None
+    return isinstance(fmt, str) and fmt.startswith("torchcbl.session/")
+
+
 def _check_new_session_dir(
     path: Path, *, name: str = "run_dir", resume: str = _RESUME_ADVICE
 ) -> None:
@@ -852,8 +873,16 @@ def _check_new_session_dir(
     entries = _listing(path)
     names = {e.name for e in entries}
     if CONFIG_NAME in names or LOG_NAME in names:
+        if LOG_NAME in names or _names_a_session_format(path / CONFIG_NAME):
+            raise IncompatibleRunDirError(
+                f"{path} already holds a teaching session. {resume} or choose a new {name}."
+            )
+        # one's own config.json (resume could only refuse it): no session to continue
         raise IncompatibleRunDirError(
-            f"{path} already holds a teaching session. {resume} or choose a new {name}."
+            f"{path} holds a {CONFIG_NAME} that is not a torchcbl session's (it names no "
+            f"torchcbl.session format), and no session; a new session writes its own "
+            f"{CONFIG_NAME} and needs a folder of its own, new or empty: choose another "
+            f"{name}. Nothing was written there."
         )
     # a journal's steps, a writers.jsonl's writers (whose step numbers and thread counts
     # would read as this session's) and checkpoints belong to another session
