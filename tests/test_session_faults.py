@@ -1664,6 +1664,26 @@ def test_a_config_json_of_ones_own_is_not_called_a_session(tmp_path, text):
     assert (run / "config.json").read_text() == text
 
 
+def test_a_log_without_its_config_is_not_said_to_be_a_session_to_resume(tmp_path):
+    """A folder holding a session's steps.sqlite whose config.json was deleted or moved was
+    refused as one that "already holds a teaching session. Continue it with
+    ConfidentTeacher.resume", and resume then said config.json is missing and to start a
+    session there first: a dead end. It now says the config is missing, to put it back to
+    continue that session or to choose another folder, and writes nothing."""
+    run = tmp_path / "run"
+    ct, _ = session(run)
+    ct.run(max_steps=5)
+    ct.close()
+    (run / "config.json").rename(tmp_path / "config.json")
+    before = files_of(run)
+    with pytest.raises(IncompatibleRunDirError) as info:
+        session(run)
+    msg = str(info.value)
+    assert "steps.sqlite" in msg and "config.json" in msg and "Put it back" in msg, msg
+    assert "choose a new run_dir" in msg and "Continue it" not in msg, msg
+    assert files_of(run) == before
+
+
 def test_a_session_is_still_refused_as_a_session_and_nothing_is_written(tmp_path):
     """A session's own folder is refused as one, to be resumed, and the refusal writes nothing
     (its writer.lock is left as it was)."""

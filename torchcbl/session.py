@@ -872,7 +872,14 @@ def _check_new_session_dir(
         raise _unreadable(path, exc) from exc
     entries = _listing(path)
     names = {e.name for e in entries}
-    if CONFIG_NAME in names or LOG_NAME in names:
+    if LOG_NAME in names and CONFIG_NAME not in names:  # resume would say no config either
+        raise IncompatibleRunDirError(
+            f"{path} holds a session's {LOG_NAME} but no {CONFIG_NAME}: that session's config "
+            "was deleted or moved. Put it back to continue that session (resume), or choose a "
+            f"new {name}; torchcbl starts no new session beside another's log. Nothing was "
+            "written there."
+        )
+    if CONFIG_NAME in names:
         if LOG_NAME in names or _names_a_session_format(path / CONFIG_NAME):
             raise IncompatibleRunDirError(
                 f"{path} already holds a teaching session. {resume} or choose a new {name}."
