@@ -424,8 +424,23 @@ def _check_prior(value: Any, n_features: int, n_actions: int) -> tuple[np.ndarra
     name = "prior_demonstrations"
     want = f"a pair (observations [N, {n_features}], actions [N]) with N >= 1"
     if isinstance(value, (str, os.PathLike)):
+        path = os.fspath(value)
+        if os.path.isdir(path):  # numpy cannot load it: a session's is read by the store
+            if os.path.isfile(os.path.join(path, "config.json")):
+                raise TypeError(
+                    f"{name}: expected {want}, got the session directory {path!r}; pass its "
+                    "demonstrations (its training set, its own prior included): "
+                    f"prior_demonstrations=torchcbl.session.load_demonstrations({path!r})."
+                )
+            raise TypeError(
+                f"{name}: expected {want}, got the directory {path!r}, which holds no teaching "
+                "session (no config.json); pass a session's demonstrations with "
+                "prior_demonstrations=torchcbl.session.load_demonstrations(session_dir), or "
+                "a .npz file's with d = numpy.load(path); "
+                "prior_demonstrations=(d['observations'], d['actions'])."
+            )
         raise TypeError(
-            f"{name}: expected {want}, got the path {os.fspath(value)!r}; load it first, e.g. "
+            f"{name}: expected {want}, got the path {path!r}; load it first, e.g. "
             "d = numpy.load(path); prior_demonstrations=(d['observations'], d['actions'])."
         )
     if isinstance(value, Mapping) or not isinstance(value, (tuple, list)) or len(value) != 2:
