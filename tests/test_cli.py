@@ -1817,6 +1817,58 @@ def test_teach_that_could_not_start_on_a_full_disk_starts_when_run_again(
     assert len(load_records(run)) == 1
 
 
+def test_teach_and_python_refuse_a_run_dir_holding_files_of_ones_own_alike(
+    tmp_path, monkeypatch, capsys
+):
+    """ConfidentTeacher(..., run_dir=folder), the folder holding one's own script, wrote the
+    session beside it, while teach --run-dir refused that folder; and teach refused a folder
+    holding the empty journal a session leaves once its log and config went, where Python
+    started. One rule (the store's) for both: each refuses the first, writing nothing there,
+    and starts in the second."""
+    import gymnasium as gym
+
+    from corridor.expert import CorridorExpert
+    from torchcbl import ConfidentTeacher
+    from torchcbl.errors import IncompatibleRunDirError
+
+    _scripted_corridor_person(monkeypatch)
+    proj = tmp_path / "proj"
+    proj.mkdir()
+    (proj / "myteach.py").write_text("print('mine')\n")
+    assert main(["teach", "corridor", "--run-dir", str(proj), "--steps", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "myteach.py" in err and "choose another --run-dir" in err, err
+    env = gym.make("torchcbl/Corridor-v0")
+    with pytest.raises(IncompatibleRunDirError, match=r"myteach\.py.*choose another run_dir"):
+        ConfidentTeacher(env, CorridorExpert(env.unwrapped.world.map), run_dir=proj)
+    env.close()
+    assert sorted(p.name for p in proj.iterdir()) == ["myteach.py"]
+    left = tmp_path / "left"  # what torchcbl leaves where no session is
+    left.mkdir()
+    (left / "writer.lock").write_bytes(b"")
+    (left / "steps.journal").write_bytes(b"")
+    assert main(["teach", "corridor", "--run-dir", str(left), "--steps", "1"]) == 0
+    assert len(load_records(left)) == 1
+
+
+def test_teach_in_a_folder_holding_a_config_json_of_ones_own_does_not_say_resume(
+    tmp_path, monkeypatch, capsys
+):
+    """teach --run-dir on a folder holding one's own config.json said it "already holds a
+    teaching session; add --resume", and --resume then failed ("expected a session format
+    ... got None"). It says that config.json is no torchcbl session's and to choose another
+    --run-dir, in one line, and writes nothing."""
+    _scripted_corridor_person(monkeypatch)
+    proj = tmp_path / "proj"
+    proj.mkdir()
+    (proj / "config.json").write_text('{"lr": 0.1}')
+    assert main(["teach", "corridor", "--run-dir", str(proj), "--steps", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a torchcbl session" in err, err
+    assert "--resume" not in err and "choose another --run-dir" in err, err
+    assert sorted(p.name for p in proj.iterdir()) == ["config.json"]
+
+
 def test_reproduce_on_a_full_disk_names_the_file_it_could_not_write(tmp_path, capsys):
     """reproduce on a full disk said only "error: OSError: [Errno 28] No space left on device":
     the pid written into the run directory's .run.lock stayed in the file object's buffer, and

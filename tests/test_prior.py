@@ -241,6 +241,31 @@ def test_a_prior_that_is_not_a_pair_is_described_in_one_line_with_the_fix(tmp_pa
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize("as_path", [False, True], ids=["str", "Path"])
+def test_a_session_directory_given_as_prior_points_to_load_demonstrations(tmp_path, as_path):
+    """A session's directory given as prior_demonstrations was told "load it first, e.g. d =
+    numpy.load(path)", which cannot load a directory. The advice is now the call that reads a
+    session's demonstrations, and following it starts the session; a folder that holds no
+    session is said to be that."""
+    earlier = tmp_path / "t1"
+    ct = make(earlier)
+    ct.run(max_steps=10)
+    ct.close()
+    given = earlier if as_path else str(earlier)
+    with pytest.raises(TypeError) as err:
+        make(tmp_path / "run", given)
+    message = str(err.value)
+    call = f"prior_demonstrations=torchcbl.session.load_demonstrations({str(earlier)!r})"
+    assert call in message and "numpy.load" not in message, message
+    assert not (tmp_path / "run").exists()
+    with make(tmp_path / "run", load_demonstrations(given)) as ct:
+        assert ct.n_prior == len(load_demonstrations(earlier)[1]) > 0
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    with pytest.raises(TypeError, match=r"directory '.*folder', which holds no teaching session"):
+        make(tmp_path / "other", folder if as_path else str(folder))
+
+
 def test_a_fitted_model_and_a_prior_are_refused_together(tmp_path):
     env = rare_regions_world()
     demos = prior()

@@ -532,15 +532,22 @@ def test_a_refit_cut_short_is_done_first_at_the_next_step(tmp_path):
         assert torch.equal(t, rebuilt.state_dict()[name]), name
 
 
-def test_a_session_that_could_not_be_created_leaves_no_half_session(tmp_path):
-    run = tmp_path / "r"
-    run.mkdir()
-    (run / "checkpoints").write_text("")  # a file where the checkpoint folder goes
-    env = rare_regions_world()
+def test_a_session_that_could_not_be_created_leaves_no_half_session(tmp_path, monkeypatch):
+    import torchcbl.session as session_module
     from torchcbl.errors import SessionWriteError
 
+    run = tmp_path / "r"
+    real_write = session_module.write_json_atomic
+
+    def write_then_block(path, data):  # config.json written, then a file where the
+        real_write(path, data)  # checkpoint folder goes: the store cannot open the session
+        (run / "checkpoints").write_text("")
+
+    monkeypatch.setattr(session_module, "write_json_atomic", write_then_block)
+    env = rare_regions_world()
     with pytest.raises(SessionWriteError):
         ConfidentTeacher(env, oracle(env), run_dir=run, progress=False)
+    monkeypatch.undo()
     assert not (run / "config.json").exists() and not (run / "steps.sqlite").exists()
     (run / "checkpoints").unlink()
     ct = ConfidentTeacher(env, oracle(env), run_dir=run, progress=False)  # starts afresh

@@ -727,6 +727,26 @@ def test_a_checkpoints_folder_that_fails_to_list_in_a_session_with_its_journal(
     assert files_of(run) == before  # resume refused before it opened the session for writing
 
 
+def test_a_new_session_whose_checkpoints_folder_fails_to_list_is_said_to_be_that(
+    tmp_path, monkeypatch
+):
+    """A new session in a folder holding an empty checkpoints/ (what a start that failed may
+    leave) lists it to find another session's checkpoints; where the file system failed that
+    listing (an I/O error) creating the teacher let the bare OSError through. It is the
+    store's IncompatibleRunDirError naming the folder and the error, and no session is made."""
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    _failing_listing(monkeypatch, run / "checkpoints", errno.EIO)
+    with pytest.raises(IncompatibleRunDirError) as info:
+        session(run)
+    msg = str(info.value)
+    assert msg.startswith(f"{run / 'checkpoints'} cannot be read: {os.strerror(errno.EIO)}"), msg
+    monkeypatch.undo()
+    assert not (run / "config.json").exists() and not (run / "steps.sqlite").exists()
+    ct, _ = session(run)  # the folder reads again: the session starts there
+    ct.close()
+
+
 # -- 4. damaged files -------------------------------------------------------------------------
 
 
@@ -1585,6 +1605,96 @@ def test_a_new_session_does_not_take_over_a_writers_file_another_session_left(tm
     ct, _ = session(run)
     ct.close()
     assert [json.loads(line)["first_step"] for line in (run / "writers.jsonl").open()] == [0]
+
+
+def test_a_new_session_is_refused_in_a_folder_holding_files_of_ones_own(tmp_path):
+    """ConfidentTeacher(..., run_dir=folder), the folder holding one's own script, wrote
+    config.json, steps.sqlite, checkpoints/ and the rest beside it, while torchcbl teach
+    --run-dir refused the same folder. Both refuse it now, by one rule (the store's): a new
+    session needs a missing or empty folder, or one holding only what torchcbl leaves where a
+    session could not start; the error says what is there and to pick another folder, and
+    nothing is written there (no writer.lock either)."""
+    run = tmp_path / "proj"
+    run.mkdir()
+    (run / "myteach.py").write_text("print('mine')\n")
+    (run / "notes").mkdir()
+    with pytest.raises(IncompatibleRunDirError) as info:
+        session(run)
+    msg = str(info.value)
+    assert "myteach.py" in msg and "notes" in msg and "choose another run_dir" in msg, msg
+    assert sorted(p.name for p in run.iterdir()) == ["myteach.py", "notes"]
+
+
+def test_a_new_session_starts_beside_what_torchcbl_leaves_where_one_could_not_start(tmp_path):
+    """What torchcbl itself leaves in a folder that holds no session (a failed start's
+    writer.lock, a closed session's empty journal once its log went, an empty checkpoints/,
+    the temporary files of a start killed mid-write) does not keep a new session out."""
+    run = tmp_path / "run"
+    run.mkdir()
+    for name in ("writer.lock", "steps.journal", "writers.jsonl"):
+        (run / name).write_bytes(b"")
+    (run / "checkpoints").mkdir()
+    (run / "checkpoints" / ".model-00000000.pt.tmp").write_bytes(b"torn")
+    (run / "config.json.tmp").write_text("{")
+    (run / ".prior.npz.tmp").write_bytes(b"torn")
+    ct, _ = session(run)
+    ct.run(max_steps=3)
+    ct.close()
+    assert len(load_records(run)) == 3
+
+
+@pytest.mark.parametrize(
+    "text", ['{"lr": 0.1}\n', "not json", '["torchcbl.session/2"]'], ids=["dict", "text", "list"]
+)
+def test_a_config_json_of_ones_own_is_not_called_a_session(tmp_path, text):
+    """A folder holding one's own config.json (not a session's) was said to hold a teaching
+    session, "Continue it with ConfidentTeacher.resume", whose resume then failed ("expected a
+    session format ... got None"), and the refusal left a writer.lock there. The error now says
+    that config.json is no torchcbl session's and to choose another folder, and nothing is
+    written."""
+    run = tmp_path / "proj"
+    run.mkdir()
+    (run / "config.json").write_text(text)
+    with pytest.raises(IncompatibleRunDirError) as info:
+        session(run)
+    msg = str(info.value)
+    assert "config.json" in msg and "not a torchcbl session" in msg, msg
+    assert "resume" not in msg and "choose another run_dir" in msg, msg
+    assert sorted(p.name for p in run.iterdir()) == ["config.json"]
+    assert (run / "config.json").read_text() == text
+
+
+def test_a_log_without_its_config_is_not_said_to_be_a_session_to_resume(tmp_path):
+    """A folder holding a session's steps.sqlite whose config.json was deleted or moved was
+    refused as one that "already holds a teaching session. Continue it with
+    ConfidentTeacher.resume", and resume then said config.json is missing and to start a
+    session there first: a dead end. It now says the config is missing, to put it back to
+    continue that session or to choose another folder, and writes nothing."""
+    run = tmp_path / "run"
+    ct, _ = session(run)
+    ct.run(max_steps=5)
+    ct.close()
+    (run / "config.json").rename(tmp_path / "config.json")
+    before = files_of(run)
+    with pytest.raises(IncompatibleRunDirError) as info:
+        session(run)
+    msg = str(info.value)
+    assert "steps.sqlite" in msg and "config.json" in msg and "Put it back" in msg, msg
+    assert "choose a new run_dir" in msg and "Continue it" not in msg, msg
+    assert files_of(run) == before
+
+
+def test_a_session_is_still_refused_as_a_session_and_nothing_is_written(tmp_path):
+    """A session's own folder is refused as one, to be resumed, and the refusal writes nothing
+    (its writer.lock is left as it was)."""
+    run = tmp_path / "run"
+    ct, _ = session(run)
+    ct.run(max_steps=5)
+    ct.close()
+    before = files_of(run)
+    with pytest.raises(IncompatibleRunDirError, match=r"already holds a teaching session.*resume"):
+        session(run)
+    assert files_of(run) == before
 
 
 def test_resume_rebuilds_the_sessions_model_not_the_callers_fitted_one(tmp_path):

@@ -857,7 +857,6 @@ def _cmd_teach(args: argparse.Namespace) -> int:
 
     from torchcbl.benchmark import _import
     from torchcbl.errors import SessionWriteError
-    from torchcbl.session import LOCK_NAME
     from torchcbl.teaching import ConfidentTeacher, TeachingConfig, TeachingInterrupted
 
     package, env_id, human_module, settings, setup_factory = _TEACH[args.domain]
@@ -895,18 +894,14 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             run_dir, args.domain, teach=True
         )  # a session of this domain, or a one-line error
         _session_map_exists(run_dir, args.domain)
-    elif (run_dir / "config.json").exists():
-        raise _UsageError(
-            f"{run_dir} already holds a teaching session; add --resume to continue it "
-            "or choose another --run-dir"
-        )
-    elif run_dir.is_dir() and any(p.name != LOCK_NAME for p in run_dir.iterdir()):
-        # (the writer lock alone is what a session that could not start leaves)
-        raise _UsageError(
-            f"--run-dir {run_dir} holds other files and no session; a new session needs a new "
-            "or empty directory"
-        )
-    else:
+    else:  # the store's rule for a new session's folder, said before anything is made
+        from torchcbl.errors import IncompatibleRunDirError
+        from torchcbl.session import _check_new_session_dir
+
+        try:
+            _check_new_session_dir(run_dir, name="--run-dir", resume="Add --resume to continue it")
+        except IncompatibleRunDirError as exc:
+            raise _UsageError(_one_line(exc)) from None
         _output_dir(run_dir, "--run-dir")
     prior = None  # read after the run directory's checks: a file that may be large
     if args.prior_demonstrations is not None:

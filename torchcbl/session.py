@@ -813,6 +813,120 @@ def _remove_new_session_files(path: Path) -> None:
         pass
 
 
+#: What torchcbl leaves in a folder where no session started, beside which a new one may
+#: start: the writer lock of a start that failed, the temporary files of a start killed while
+#: it wrote its config.json or prior.npz (and checkpoints/.model-<n>.pt.tmp, see below).
+_LEFT_WITHOUT_SESSION = (LOCK_NAME, CONFIG_NAME + ".tmp", f".{PRIOR_NAME}.tmp")
+_CKPT_TMP_RE = re.compile(r"^\.model-\d{8}\.pt\.tmp$")
+_RESUME_ADVICE = "Continue it with ConfidentTeacher.resume(run_dir, env, teacher)"
+
+
+def _listing(folder: Path) -> list[Path]:
+    """The entries of ``folder``, sorted; the store's error if it cannot be listed."""
+    try:
+        return sorted(folder.iterdir())
+    except OSError as exc:
+        raise _unreadable(folder, exc) from exc
+
+
+def _names_a_session_format(config: Path) -> bool:
+    """Whether the file ``config`` is a session's config.json: a JSON object whose
+    ``format`` is a torchcbl session format (one this version reads or not).
+
+    Raises:
+        IncompatibleRunDirError: it cannot be read (:func:`_unreadable`).
+    """
+    try:
+        if not config.is_file():
+            return False
+        text = config.read_bytes()
+    except OSError as exc:
+        raise _unreadable(config, exc) from exc
+    try:
+        data = json.loads(text)
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        return False
+    fmt = data.get("format") if isinstance(data, dict) else None
+    return isinstance(fmt, str) and fmt.startswith("torchcbl.session/")
+
+
+def _check_new_session_dir(
+    path: Path, *, name: str = "run_dir", resume: str = _RESUME_ADVICE
+) -> None:
+    """Refuse a folder a new session may not start in; reads only. A new session's folder
+    holds that session alone: it may be missing, empty, or hold only what torchcbl leaves
+    where no session started (a failed start's ``writer.lock``, a session's empty journal and
+    writers file once its log and config went, an empty ``checkpoints/``, the temporary files
+    of a start killed while it wrote). ``name`` names the path for the caller
+    (``--run-dir`` at the command line); ``resume`` says how to continue a session found there.
+
+    Raises:
+        IncompatibleRunDirError: ``path`` holds a session, what another session left (its
+            journal's steps, its writers, prior demonstrations, checkpoints), or files of
+            one's own; or it cannot be listed (:func:`_unreadable`).
+    """
+    try:
+        if not path.is_dir():
+            return  # to be made (a path that is a file is said as create makes it)
+    except OSError as exc:
+        raise _unreadable(path, exc) from exc
+    entries = _listing(path)
+    names = {e.name for e in entries}
+    if LOG_NAME in names and CONFIG_NAME not in names:  # resume would say no config either
+        raise IncompatibleRunDirError(
+            f"{path} holds a session's {LOG_NAME} but no {CONFIG_NAME}: that session's config "
+            "was deleted or moved. Put it back to continue that session (resume), or choose a "
+            f"new {name}; torchcbl starts no new session beside another's log. Nothing was "
+            "written there."
+        )
+    if CONFIG_NAME in names:
+        if LOG_NAME in names or _names_a_session_format(path / CONFIG_NAME):
+            raise IncompatibleRunDirError(
+                f"{path} already holds a teaching session. {resume} or choose a new {name}."
+            )
+        # one's own config.json (resume could only refuse it): no session to continue
+        raise IncompatibleRunDirError(
+            f"{path} holds a {CONFIG_NAME} that is not a torchcbl session's (it names no "
+            f"torchcbl.session format), and no session; a new session writes its own "
+            f"{CONFIG_NAME} and needs a folder of its own, new or empty: choose another "
+            f"{name}. Nothing was written there."
+        )
+    # a journal's steps, a writers.jsonl's writers (whose step numbers and thread counts
+    # would read as this session's) and checkpoints belong to another session
+    leftovers: list[str] = []
+    others: list[str] = []
+    for entry in entries:
+        try:
+            if entry.name in (JOURNAL_NAME, WRITERS_NAME):
+                if entry.stat().st_size:
+                    leftovers.append(entry.name)
+            elif entry.name == PRIOR_NAME or entry.name.startswith(LOG_NAME):
+                leftovers.append(entry.name)
+            elif entry.name == CHECKPOINT_DIR and entry.is_dir():
+                leftovers += [
+                    f"{CHECKPOINT_DIR}/{e.name}"
+                    for e in _listing(entry)
+                    if not _CKPT_TMP_RE.match(e.name)
+                ]
+            elif entry.name not in _LEFT_WITHOUT_SESSION:
+                others.append(entry.name + ("/" if entry.is_dir() else ""))
+        except OSError as exc:
+            raise _unreadable(entry, exc) from exc
+    if leftovers:  # a new session would take another session's steps, writers, models
+        raise IncompatibleRunDirError(
+            f"{path} holds what another session left ({', '.join(leftovers[:3])}"
+            f"{', ...' if len(leftovers) > 3 else ''}) but no session; choose a new "
+            f"{name} (or move those files away)."
+        )
+    if others:  # a session's folder holds the session alone: not beside files of one's own
+        raise IncompatibleRunDirError(
+            f"{path} holds other files ({', '.join(others[:3])}"
+            f"{f', and {len(others) - 3} more' if len(others) > 3 else ''}) and no session; a "
+            f"new session needs a folder of its own, new or empty: choose another {name}. "
+            "Nothing was written there."
+        )
+
+
 _FREE_SPACE = "Free space (or fix the file's permissions), then call run() again or resume."
 
 #: How long a closing writer waits for readers to let go of the log (seconds), see _close_wal.
@@ -1166,41 +1280,19 @@ class SessionStore:
                 "creating the run directory",
                 "Free space (or fix the directory's permissions), then create the teacher again.",
             ) from exc
+        _check_new_session_dir(path)  # before the lock: a refusal writes nothing
         # the last writer's count kept until the directory is known to hold no session: a
         # refused start must not drop the count of the session it was refused for
         lock = _acquire_lock(path)
         started = False
         try:
-            if (path / CONFIG_NAME).exists() or (path / LOG_NAME).exists():
-                raise IncompatibleRunDirError(
-                    f"{path} already holds a teaching session. Continue it with "
-                    "ConfidentTeacher.resume(run_dir, env, teacher) or choose a new run_dir."
-                )
-            # a journal's steps, a writers.jsonl's writers (whose step numbers and thread
-            # counts would read as this session's) and checkpoints belong to another session
-            leftovers = [
-                name
-                for name in (JOURNAL_NAME, WRITERS_NAME)
-                if (path / name).exists() and (path / name).stat().st_size
-            ]
-            if (path / PRIOR_NAME).exists():
-                leftovers.append(PRIOR_NAME)
-            ckpts = path / CHECKPOINT_DIR
-            if ckpts.is_dir():
-                leftovers += sorted(
-                    f"{CHECKPOINT_DIR}/{e.name}" for e in ckpts.iterdir() if _CKPT_RE.match(e.name)
-                )
-            if leftovers:  # a new session would take another session's steps, writers, models
-                raise IncompatibleRunDirError(
-                    f"{path} holds what another session left ({', '.join(leftovers[:3])}"
-                    f"{', ...' if len(leftovers) > 3 else ''}) but no session; choose a new "
-                    "run_dir (or move those files away)."
-                )
+            _check_new_session_dir(path)  # again, locked: another start may have come between
             _note_holder(lock, keep_count=False)  # a count left by no session: not this one's
             started = True
             if prior is not None:
                 _write_atomic(path / PRIOR_NAME, prior, "starting the session", _START_AGAIN)
             if initial_model is not None:  # a resume can only load it: no label refits it
+                ckpts = path / CHECKPOINT_DIR
                 try:
                     ckpts.mkdir(exist_ok=True)
                 except OSError as exc:

@@ -424,8 +424,23 @@ def _check_prior(value: Any, n_features: int, n_actions: int) -> tuple[np.ndarra
     name = "prior_demonstrations"
     want = f"a pair (observations [N, {n_features}], actions [N]) with N >= 1"
     if isinstance(value, (str, os.PathLike)):
+        path = os.fspath(value)
+        if os.path.isdir(path):  # numpy cannot load it: a session's is read by the store
+            if os.path.isfile(os.path.join(path, "config.json")):
+                raise TypeError(
+                    f"{name}: expected {want}, got the session directory {path!r}; pass its "
+                    "demonstrations (its training set, its own prior included): "
+                    f"prior_demonstrations=torchcbl.session.load_demonstrations({path!r})."
+                )
+            raise TypeError(
+                f"{name}: expected {want}, got the directory {path!r}, which holds no teaching "
+                "session (no config.json); pass a session's demonstrations with "
+                "prior_demonstrations=torchcbl.session.load_demonstrations(session_dir), or "
+                "a .npz file's with d = numpy.load(path); "
+                "prior_demonstrations=(d['observations'], d['actions'])."
+            )
         raise TypeError(
-            f"{name}: expected {want}, got the path {os.fspath(value)!r}; load it first, e.g. "
+            f"{name}: expected {want}, got the path {path!r}; load it first, e.g. "
             "d = numpy.load(path); prior_demonstrations=(d['observations'], d['actions'])."
         )
     if isinstance(value, Mapping) or not isinstance(value, (tuple, list)) or len(value) != 2:
@@ -538,8 +553,11 @@ class ConfidentTeacher:
         strategy: who asks and who acts (:mod:`torchcbl.strategies`); default
             ``ConfidentExecution(rule)``. Give ``rule`` or ``strategy``, not both.
         config: a :class:`TeachingConfig`.
-        run_dir: if given, a new session directory (see :mod:`torchcbl.session`); it must not
-            already hold a session (continue one with :meth:`resume`).
+        run_dir: if given, a new session directory (see :mod:`torchcbl.session`): a folder
+            that does not exist yet, or an empty one (or one holding only what torchcbl leaves
+            where a session could not start, such as its ``writer.lock``). A folder holding a
+            session (continue it with :meth:`resume`), what another session left, or files of
+            one's own is refused with :class:`IncompatibleRunDirError`, and nothing is written.
         seed: seeds the first ``env.reset`` (and the default model).
         progress: show a tqdm bar with the live counters while :meth:`run` runs.
         on_step: called with each :class:`StepRecord` after it is recorded.
