@@ -6,7 +6,7 @@ Run directory layout (one directory per teaching session)::
         config.json              what the session was started with: the TeachingConfig, the
                                  model's class and constructor arguments, the strategy
                                  (``to_config``) and its confidence rule, the env's id,
-                                 spaces, make() arguments, step cap and
+                                 class, spaces, make() arguments, step cap and
                                  ``describe_inputs()``, the session seed, the log format
                                  version and whether it started from a fitted model
                                  (``starts_fitted``); for a session with prior
@@ -3058,6 +3058,8 @@ def resume_problems(
     env_inputs: dict[str, Any] | None = None,
     model_class: str | None = None,
     model_type: type | None = None,
+    env_class: str | None = None,
+    env_observation_space: Any = None,
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
@@ -3077,7 +3079,11 @@ def resume_problems(
     sessions written before 2026-11-26 do not keep it, and those written before 2026-11-27
     kept None for an env with a cap of its own only);
     ``env_inputs``: the env's ``describe_inputs()`` (None: it has none), compared with the
-    session's where the session kept one (sessions written before 2026-11-27 did not)."""
+    session's where the session kept one (sessions written before 2026-11-27 did not);
+    ``env_class``: the unwrapped env's class (``module.qualname``), compared by its name with
+    the session's where the session kept one, and ``env_observation_space`` (the space),
+    compared with the one the session kept; see :func:`_env_problems`, which compares them
+    whether or not the env was made by ``gymnasium.make``."""
     problems: list[str] = []
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
@@ -3087,32 +3093,10 @@ def resume_problems(
         )
     if senv.get("id") and env_id and senv["id"] != env_id:
         problems.append(f"env id: the session used {senv['id']!r}, got {env_id!r}")
-    if env_kwargs is not None and senv.get("id") and senv.get("id") == env_id:
-        # what gymnasium.make was given, where both sides are plain values (an object is
-        # kept only as its repr, which may name a memory address); render_mode may change
-        stored_kw = senv.get("kwargs") or {}
-        given_kw = json.loads(json.dumps(env_kwargs))  # as the session stored its own
-        differ = {
-            k: (stored_kw.get(k), given_kw.get(k))
-            for k in sorted(set(stored_kw) | set(given_kw))
-            if k != "render_mode"
-            and not _kept_as_repr(stored_kw.get(k))
-            and not _kept_as_repr(given_kw.get(k))
-            and stored_kw.get(k) != given_kw.get(k)
-        }
-        if "max_episode_steps" in senv and senv["max_episode_steps"] != env_max_episode_steps:
-            differ["max_episode_steps"] = (senv["max_episode_steps"], env_max_episode_steps)
-        if differ:
-            if "max_episode_steps" not in senv:
-                cap = ""
-            elif senv["max_episode_steps"] is None:  # no TimeLimit; -1 removes a registered one
-                cap = ", max_episode_steps=-1"
-            else:
-                cap = f", max_episode_steps={senv['max_episode_steps']}"
-            problems.append(
-                f"env kwargs (stored, given): {differ}; make the env as the session did, "
-                f"gymnasium.make({senv['id']!r}{cap}, **{stored_kw})"
-            )
+    elif env_kwargs is not None:  # (another id says enough)
+        problems += _env_problems(
+            senv, env_id, env_kwargs, env_max_episode_steps, env_class, env_observation_space
+        )
     kept_inputs = senv.get("inputs")
     if isinstance(kept_inputs, dict) and kept_inputs != (env_inputs or {}):
         given = env_inputs or {}
@@ -3150,6 +3134,118 @@ def resume_problems(
         elif strategy != want:
             problems.append(f"strategy: stored {want}, given {strategy}")
     return problems
+
+
+def _env_problems(
+    senv: dict[str, Any],
+    env_id: str | None,
+    env_kwargs: dict[str, Any],
+    cap: int | None,
+    env_class: str | None,
+    space: Any,
+) -> list[str]:
+    """What tells the given env from the session's (``senv``, config.json's ``"env"``) besides
+    its id and sizes, whether either was made by ``gymnasium.make`` or directly: the class of
+    the unwrapped env (by name, so a class moved to another module resumes; kept since
+    2026-11-27), the observation space as :func:`observation_space_text` writes it (kept
+    since the first version; a wrapper that changes it makes another env), the step cap in
+    force (kept for an env with a gymnasium id since 2026-11-26, for every env since
+    2026-11-27), and ``gymnasium.make``'s plain arguments (``render_mode`` aside), which an env
+    made directly does not show: a session whose env was made with some is refused such an
+    env. Only what the session kept is compared."""
+    differ: list[str] = []
+    stored_kw = senv.get("kwargs") or {}
+    kept_class = senv.get("class")
+    if kept_class and env_class and kept_class.rsplit(".", 1)[-1] != env_class.rsplit(".", 1)[-1]:
+        differ.append(
+            f"env class: the session's env is a {kept_class}, the given one a {env_class}"
+        )
+    kept_space = senv.get("observation_space")
+    if kept_space is not None and space is not None:
+        given = observation_space_text(space)
+        if kept_space not in (given, repr(space)):  # (repr: a text kept under other options)
+            differ.append(
+                f"env observation space: the session's is {kept_space}, the given env's {given}"
+            )
+    kw_differ: dict[str, tuple[Any, Any]] = {}
+    if senv.get("id") and env_id:  # both made by gymnasium.make (the same id)
+        # what gymnasium.make was given, where both sides are plain values (an object is
+        # kept only as its repr, which may name a memory address); render_mode may change
+        given_kw = json.loads(json.dumps(env_kwargs))  # as the session stored its own
+        kw_differ = {
+            k: (stored_kw.get(k), given_kw.get(k))
+            for k in sorted(set(stored_kw) | set(given_kw))
+            if k != "render_mode"
+            and not _kept_as_repr(stored_kw.get(k))
+            and not _kept_as_repr(given_kw.get(k))
+            and stored_kw.get(k) != given_kw.get(k)
+        }
+    unshown = {k: v for k, v in stored_kw.items() if k != "render_mode"}
+    if senv.get("id") and not env_id and unshown:
+        differ.append(
+            f"env kwargs: the session's env was made by gymnasium.make with {unshown}, the "
+            "given one directly (it has no gymnasium spec), so they cannot be compared"
+        )
+    has_cap = "max_episode_steps" in senv
+    want = senv.get("max_episode_steps")
+    if has_cap and want != cap:
+        if senv.get("id"):  # as gymnasium.make's argument
+            kw_differ["max_episode_steps"] = (want, cap)
+        else:  # an env made directly: its TimeLimit's cap (or its own)
+            differ.append(f"env step cap (max_episode_steps, stored, given): {(want, cap)}")
+    if kw_differ:
+        differ.append(f"env kwargs (stored, given): {kw_differ}")
+    if not differ:
+        return []
+    if senv.get("id"):
+        capped = ""
+        if has_cap:  # None: no TimeLimit, which -1 gives where the id registers one
+            capped = f", max_episode_steps={-1 if want is None else want}"
+        how = "make the env as the session did, "
+        how += f"gymnasium.make({senv['id']!r}{capped}, **{stored_kw})"
+    else:
+        how = "give the env the session was taught in"
+        if kept_class:
+            how += f", a {kept_class.rsplit('.', 1)[-1]} ({kept_class}) made as it was"
+        if has_cap and want is not None:
+            how += f", under gymnasium.wrappers.TimeLimit(env, {want})"
+        elif has_cap:
+            how += ", without a TimeLimit (the session's env had no step cap)"
+    return ["; ".join(differ) + f"; {how}"]
+
+
+#: numpy's default print options: a Box's bounds are written with these, whatever a
+#: program set (np.set_printoptions), so that config.json keeps one text per space
+_NUMPY_PRINT_DEFAULTS: dict[str, Any] = {
+    "precision": 8,
+    "threshold": 1000,
+    "edgeitems": 3,
+    "linewidth": 75,
+    "suppress": False,
+    "nanstr": "nan",
+    "infstr": "inf",
+    "sign": "-",
+    "floatmode": "maxprec",
+    "formatter": None,
+    "legacy": False,
+}
+
+
+def observation_space_text(space: Any) -> str:
+    """An observation space as config.json keeps it (``"observation_space"``): gymnasium's
+    ``repr`` of a ``Box``, ``Box(low, high, shape, dtype)`` with a uniform bound as one number,
+    written with numpy's default print options (gymnasium's own repr follows the options in
+    force when it is first asked for); other spaces by their ``repr``."""
+    import gymnasium as gym
+
+    if not isinstance(space, gym.spaces.Box):
+        return repr(space)
+
+    def short(a: np.ndarray) -> str:  # gymnasium's array_short_repr
+        return str(np.min(a)) if a.size != 0 and np.min(a) == np.max(a) else str(a)
+
+    with np.printoptions(**_NUMPY_PRINT_DEFAULTS):
+        return f"Box({short(space.low)}, {short(space.high)}, {space.shape}, {space.dtype})"
 
 
 def _model_problems(
