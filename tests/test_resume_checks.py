@@ -3,17 +3,20 @@ no file of the session."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import sqlite3
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
+from _toy_envs import oracle, rare_regions_world
 from gymnasium import spaces
 
-from torchcbl import ConfidentTeacher, TeachingConfig
-from torchcbl.errors import IncompatibleRunDirError
+from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
+from torchcbl.errors import CorruptSessionError, IncompatibleRunDirError
 from torchcbl.session import load_config, load_records
 
 LINE_ID = "torchcbl_tests/ResumeLine-v0"
@@ -196,3 +199,63 @@ def test_a_session_stored_before_the_class_and_cap_were_kept_compares_what_it_ke
     (run / "config.json").write_text(json.dumps(config))
     _resumes(run, gym.wrappers.TimeLimit(Other(high=10.0), 30))
     _refused(run, Other(), "Box(-10.0")
+
+
+# -- 2. a refused resume touches no file ------------------------------------------------------
+
+
+def _fitted_session(run: Path, **cfg) -> None:
+    """A session started from a fitted model (its checkpoint 0), taught 30 steps."""
+    env = rare_regions_world()
+    x, y = env.sample(120, np.random.default_rng(0))
+    fitted = GaussianMixtureSet(3, 2, seed=0).fit(x, y)
+    config = TeachingConfig(noninteractive=False, **cfg)
+    with ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    ) as ct:
+        ct.run(max_steps=30)
+
+
+def _refused_untouched(run: Path, error: type[Exception], match: str) -> None:
+    before = _files_of(run)
+    env = rare_regions_world()
+    with pytest.raises(error, match=match):
+        ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    assert _files_of(run) == before
+
+
+def test_a_resume_refused_for_a_lost_starting_model_touches_no_file(tmp_path):
+    """The starting model's checkpoint 0 lost while the session still stands on it: resume
+    was refused only after it had opened the session, noting a writer in writers.jsonl and
+    rewriting writer.lock and the journal."""
+    run = tmp_path / "run"
+    _fitted_session(run, max_new=50)
+    (run / "checkpoints" / "model-00000000.pt").unlink()
+    _refused_untouched(run, CorruptSessionError, "no refit came since")
+
+
+def test_a_resume_refused_for_a_lost_starting_model_sets_no_checkpoint_aside(tmp_path):
+    """Incremental refits start from the starting model: with checkpoint 0 lost and the later
+    ones damaged, resume renamed the damaged ones to .damaged, then refused."""
+    run = tmp_path / "run"
+    _fitted_session(run, max_new=4, refit="incremental")
+    zero, *later = sorted((run / "checkpoints").glob("model-*.pt"))
+    assert later
+    zero.unlink()
+    for path in later:
+        path.write_bytes(b"not a checkpoint")
+    _refused_untouched(run, CorruptSessionError, "incremental refits start from it")
+
+
+def test_a_resume_refused_for_a_damaged_step_touches_no_file(tmp_path):
+    """A logged step that cannot be read was refused after the session had been opened for
+    writing (writer.lock and the journal rewritten)."""
+    run = tmp_path / "run"
+    _teach(run, gym.make(LINE_ID, max_episode_steps=30))
+    with contextlib.closing(sqlite3.connect(run / "steps.sqlite")) as db:
+        db.execute("UPDATE steps SET observation = ? WHERE step = 3", (b"abc",))
+        db.commit()
+    before = _files_of(run)
+    with pytest.raises(CorruptSessionError, match="the logged step 3 is not a valid step"):
+        ConfidentTeacher.resume(run, gym.make(LINE_ID, max_episode_steps=30), teacher)
+    assert _files_of(run) == before

@@ -162,6 +162,7 @@ CUDA run in a fixed order, checked on an H200 by tests/test_teaching_cuda.py);
 from __future__ import annotations
 
 import bisect
+import copy
 import datetime
 import errno
 import fcntl
@@ -179,6 +180,7 @@ import threading
 import time
 import warnings
 import zlib
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar, overload
@@ -1237,16 +1239,31 @@ class SessionStore:
 
     @classmethod
     def open_for_resume(
-        cls, run_dir: str | os.PathLike[str], *, commit_every: int = 32
+        cls,
+        run_dir: str | os.PathLike[str],
+        *,
+        commit_every: int = 32,
+        check: Callable[[list[StepRecord], list[CorrectionRecord]], None] | None = None,
     ) -> tuple[SessionStore, list[StepRecord], list[CorrectionRecord]]:
         """Open an existing session for writing: replay its journal, mark a demonstration
         whose outcome was never written as interrupted, upgrade a format-1 log, and return the
-        store with every record and correction."""
+        store with every record and correction.
+
+        Every refusal comes before anything is written (the lock, the journal, the log): the
+        log is read first, read-only, and each of its steps parsed; ``check`` is then called
+        with those records and corrections (a demonstration whose outcome never came still
+        pending), and what it raises refuses the resume with no file touched."""
+        run = Path(run_dir)
         load_config(run_dir)
-        _check_log_present(Path(run_dir))
-        committed = _read_committed(Path(run_dir))  # before the log: a writer commits first
-        steps, n_corrections = _step_numbers(Path(run_dir))
-        _check_committed(Path(run_dir), committed, steps, n_corrections, stacklevel=3)
+        _check_log_present(run)
+        committed = _read_committed(run)  # before the log: a writer commits first
+        db = _open_readonly(run)
+        try:
+            rows, corrected = _rows(db, run / JOURNAL_NAME, run / LOG_NAME)
+        finally:
+            db.close()
+        steps = [row[0] for row in rows]
+        _check_committed(run, committed, steps, len(corrected), stacklevel=3)
         missing = _missing_steps(steps)
         if missing:  # the loop numbers a new step len(records): it would take a logged number
             raise CorruptSessionError(
@@ -1256,7 +1273,10 @@ class SessionStore:
                 f"{JOURNAL_NAME} (a line removed), torchcbl.session.repair_journal(run_dir) "
                 "keeps the steps before the gap and copies the journal aside."
             )
-        store = cls(Path(run_dir), commit_every=commit_every)
+        records = _records_of(rows, run)  # a step that cannot be read: refused here
+        if check is not None:
+            check(records, _corrections_of(records, corrected))
+        store = cls(run, commit_every=commit_every)
         try:
             store.finalize_pending()
             records, corrections = store.records_and_corrections()
@@ -1813,15 +1833,9 @@ def _sqlite_steps(run: Path) -> set[int]:
         db.close()
 
 
-def _step_numbers(run: Path) -> tuple[list[int], int]:
-    """Every step number of a session, its journal's included, in order (no record is
-    parsed: the gap check of resume), and how many steps have a correction."""
-    journal = _journal_entries(run / JOURNAL_NAME)  # before the SELECT, as _rows_unchecked
-    return _logged(run, journal)
-
-
 def _logged(run: Path, journal: list[tuple[str, tuple[Any, ...]]]) -> tuple[list[int], int]:
-    """:func:`_step_numbers` with the journal's entries given (read before the log)."""
+    """Every step number of a session, the given journal entries' included (read before the
+    log), in order (no record is parsed), and how many steps have a correction."""
     db = _open_readonly(run)
     try:
         steps = {row[0] for row in db.execute("SELECT step FROM steps")}
@@ -2372,35 +2386,23 @@ def restore_model(
     so with them the model is fitted also at ``k`` = 0. Returns ``k``.
     """
 
-    def lost_start(why: str) -> CorruptSessionError:
-        on_it = (
-            "no refit came since, so the session's model is that one"
-            if k == 0
-            else "its incremental refits start from it"
-        )
-        return CorruptSessionError(
-            f"cannot rebuild the model of the session in {run_dir}: the session started from a "
-            f"fitted model, which only {CHECKPOINT_DIR}/model-{0:08d}.pt holds, and that file is "
-            f"{why} ({on_it}); no label can refit it. The file was left as it is: restore it "
-            "from a backup, or start a new session"
-        )
-
     px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
     base = len(py)  # the prior's labels come first in every fit and digest
     all_xs, all_ys = px + list(xs), py + list(ys)
-    why0 = "missing"
     directory = Path(run_dir) / CHECKPOINT_DIR
-    # (the store's error where checkpoints/ cannot be listed; describe reads it alike)
-    scan = _scan_checkpoints(directory, len(ys), base, all_xs, all_ys)
+    # (the store's error where checkpoints/ cannot be listed; describe reads it alike); a
+    # starting model that cannot be had is refused here, before anything is set aside
+    scan, k = _restore_plan(
+        run_dir, model, len(ys), base, all_xs, all_ys, max_new, incremental, starts_fitted
+    )
     for n, path, why in scan.passed_over:
-        if n == 0:
-            why0 = why
         if store is not None and not (n == 0 and starts_fitted):  # that one: kept as it is
             _set_aside(path, why)
     last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
-    k = last + fit_count(len(ys) - last, max_new)
-    if starts_fitted and payload is None and (k == 0 or incremental):
-        raise lost_start(why0)
+
+    def lost_start(why: str) -> CorruptSessionError:  # (_restore_plan raised where it comes)
+        return _lost_start(run_dir, k, why)
+
     if k == last and payload is not None:
         try:
             model.load_state_dict(payload["state_dict"])
@@ -2454,6 +2456,115 @@ def restore_model(
             except SessionWriteError as exc:
                 warnings.warn(str(exc), stacklevel=2)
     return k
+
+
+def _lost_start(run_dir: str | os.PathLike[str], k: int, why: str) -> CorruptSessionError:
+    """The error of a session started from a fitted model whose checkpoint 0 cannot be had
+    (``why``) where the model still stands on it (``k``: the labels it was last fitted on)."""
+    on_it = (
+        "no refit came since, so the session's model is that one"
+        if k == 0
+        else "its incremental refits start from it"
+    )
+    return CorruptSessionError(
+        f"cannot rebuild the model of the session in {run_dir}: the session started from a "
+        f"fitted model, which only {CHECKPOINT_DIR}/model-{0:08d}.pt holds, and that file is "
+        f"{why} ({on_it}); no label can refit it. The file was left as it is: restore it "
+        "from a backup, or start a new session"
+    )
+
+
+def _restore_plan(
+    run_dir: str | os.PathLike[str],
+    model: torch.nn.Module,
+    n_labels: int,
+    base: int,
+    all_xs: list[np.ndarray],
+    all_ys: list[int],
+    max_new: int,
+    incremental: bool,
+    starts_fitted: bool,
+) -> tuple[_CheckpointScan, int]:
+    """Where :func:`restore_model` starts: the scan of ``checkpoints/`` and ``k``, the labels
+    the model was last fitted on. Reads only. Raises the :class:`CorruptSessionError` of a
+    session started from a fitted model (``starts_fitted``) that still stands on it and whose
+    checkpoint 0 is missing, damaged or not this model's state (tried on a copy of ``model``),
+    as restore_model would after setting aside what it passes over; so a resume refuses it
+    before it opens the session (:func:`_check_restorable`).
+
+    Raises:
+        IncompatibleRunDirError: ``checkpoints/`` cannot be listed.
+    """
+    directory = Path(run_dir) / CHECKPOINT_DIR
+    scan = _scan_checkpoints(directory, n_labels, base, all_xs, all_ys)
+    last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
+    k = last + fit_count(n_labels - last, max_new)
+    if not starts_fitted:
+        return scan, k
+    why0 = next((why for n, _, why in scan.passed_over if n == 0), "missing")
+    trial = copy.deepcopy(model)
+
+    def loads(state: dict[str, Any]) -> bool:
+        try:
+            trial.load_state_dict(state)
+            return True
+        except Exception:  # e.g. saved by another model class
+            return False
+
+    # restore_model's paths to the starting model, in its order
+    if payload is None and (k == 0 or incremental):
+        raise _lost_start(run_dir, k, why0)
+    if k == last and payload is not None:
+        if loads(payload["state_dict"]):
+            return scan, k
+        if k == 0:
+            raise _lost_start(run_dir, k, "unreadable as this model's state")
+        payload = None  # set aside as damaged, then refitted
+    if (k > 0 or base) and incremental:
+        if payload is not None and loads(payload["state_dict"]):
+            return scan, k
+        if payload is not None and last == 0:
+            raise _lost_start(run_dir, k, "unreadable as this model's state")
+        zero, why = _checkpoint_payload(directory / f"model-{0:08d}.pt", base, all_xs, all_ys)
+        if zero is None:
+            raise _lost_start(run_dir, k, why)
+        if not loads(zero["state_dict"]):
+            raise _lost_start(run_dir, k, "unreadable as this model's state")
+    return scan, k
+
+
+def _check_restorable(
+    run_dir: str | os.PathLike[str],
+    model: torch.nn.Module,
+    xs: list[np.ndarray],
+    ys: list[int],
+    *,
+    max_new: int,
+    incremental: bool,
+    starts_fitted: bool,
+    prior: tuple[np.ndarray, np.ndarray] | None = None,
+) -> None:
+    """Refuse, as :func:`restore_model` would, a session whose model cannot be rebuilt from
+    the labels ``xs, ys`` (its starting model lost, see :func:`_restore_plan`), without
+    writing or setting aside anything: a resume calls it before it opens the session.
+
+    Raises:
+        CorruptSessionError: the session started from a fitted model that its checkpoint 0
+            alone holds, still stands on it, and that file is missing or damaged.
+        IncompatibleRunDirError: ``checkpoints/`` cannot be listed.
+    """
+    px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
+    _restore_plan(
+        run_dir,
+        model,
+        len(ys),
+        len(py),
+        px + list(xs),
+        py + list(ys),
+        max_new,
+        incremental,
+        starts_fitted,
+    )
 
 
 @overload

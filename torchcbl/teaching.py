@@ -85,6 +85,7 @@ from torchcbl.session import (
     PRIOR_NAME,
     LabelDigest,
     SessionStore,
+    _check_restorable,
     _InterruptHold,
     _model_args,
     _read_prior,
@@ -799,7 +800,8 @@ class ConfidentTeacher:
         A demonstration logged but never executed (the process died in between) is kept.
         The env is reset into a new episode (seeded from the session seed and episode index; a
         session that logged no step yet, e.g. stopped at its first request, is reset with the
-        session seed, as the new session was, and so goes on as it would have).
+        session seed, as the new session was, and so goes on as it would have). Every refusal
+        below comes before the session is opened for writing: a refused resume touches no file.
 
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
@@ -905,8 +907,24 @@ class ConfidentTeacher:
         self.run_dir = Path(run_dir)
         self._starts_fitted = stored.get("starts_fitted") is True
         _check_commit_every(commit_every)
+
+        def check(records: list[StepRecord], corrections: list[CorrectionRecord]) -> None:
+            # a model restore_model would refuse to rebuild (a lost starting model) is refused
+            # before the session is opened for writing: a refused resume touches no file
+            xs, ys = label_sequence(records, corrections)
+            _check_restorable(
+                run_dir,
+                self.model,
+                xs,
+                ys,
+                max_new=self.config.max_new,
+                incremental=self.config.refit == "incremental",
+                starts_fitted=self._starts_fitted,
+                prior=self._prior,
+            )
+
         self._store, records, corrections = SessionStore.open_for_resume(
-            self.run_dir, commit_every=commit_every
+            self.run_dir, commit_every=commit_every, check=check if self._starts_fitted else None
         )
         try:
             self._store.note_writer(len(records), _model_device(self.model))
