@@ -6,7 +6,7 @@ Run directory layout (one directory per teaching session)::
         config.json              what the session was started with: the TeachingConfig, the
                                  model's class and constructor arguments, the strategy
                                  (``to_config``) and its confidence rule, the env's id,
-                                 spaces, make() arguments, step cap and
+                                 class, spaces, make() arguments, step cap and
                                  ``describe_inputs()``, the session seed, the log format
                                  version and whether it started from a fitted model
                                  (``starts_fitted``); for a session with prior
@@ -162,6 +162,7 @@ CUDA run in a fixed order, checked on an H200 by tests/test_teaching_cuda.py);
 from __future__ import annotations
 
 import bisect
+import copy
 import datetime
 import errno
 import fcntl
@@ -179,6 +180,7 @@ import threading
 import time
 import warnings
 import zlib
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar, overload
@@ -1329,16 +1331,31 @@ class SessionStore:
 
     @classmethod
     def open_for_resume(
-        cls, run_dir: str | os.PathLike[str], *, commit_every: int = 32
+        cls,
+        run_dir: str | os.PathLike[str],
+        *,
+        commit_every: int = 32,
+        check: Callable[[list[StepRecord], list[CorrectionRecord]], None] | None = None,
     ) -> tuple[SessionStore, list[StepRecord], list[CorrectionRecord]]:
         """Open an existing session for writing: replay its journal, mark a demonstration
         whose outcome was never written as interrupted, upgrade a format-1 log, and return the
-        store with every record and correction."""
+        store with every record and correction.
+
+        Every refusal comes before anything is written (the lock, the journal, the log): the
+        log is read first, read-only, and each of its steps parsed; ``check`` is then called
+        with those records and corrections (a demonstration whose outcome never came still
+        pending), and what it raises refuses the resume with no file touched."""
+        run = Path(run_dir)
         load_config(run_dir)
-        _check_log_present(Path(run_dir))
-        committed = _read_committed(Path(run_dir))  # before the log: a writer commits first
-        steps, n_corrections = _step_numbers(Path(run_dir))
-        _check_committed(Path(run_dir), committed, steps, n_corrections, stacklevel=3)
+        _check_log_present(run)
+        committed = _read_committed(run)  # before the log: a writer commits first
+        db = _open_readonly(run)
+        try:
+            rows, corrected = _rows(db, run / JOURNAL_NAME, run / LOG_NAME)
+        finally:
+            db.close()
+        steps = [row[0] for row in rows]
+        _check_committed(run, committed, steps, len(corrected), stacklevel=3)
         missing = _missing_steps(steps)
         if missing:  # the loop numbers a new step len(records): it would take a logged number
             raise CorruptSessionError(
@@ -1348,7 +1365,10 @@ class SessionStore:
                 f"{JOURNAL_NAME} (a line removed), torchcbl.session.repair_journal(run_dir) "
                 "keeps the steps before the gap and copies the journal aside."
             )
-        store = cls(Path(run_dir), commit_every=commit_every)
+        records = _records_of(rows, run)  # a step that cannot be read: refused here
+        if check is not None:
+            check(records, _corrections_of(records, corrected))
+        store = cls(run, commit_every=commit_every)
         try:
             store.finalize_pending()
             records, corrections = store.records_and_corrections()
@@ -1905,15 +1925,9 @@ def _sqlite_steps(run: Path) -> set[int]:
         db.close()
 
 
-def _step_numbers(run: Path) -> tuple[list[int], int]:
-    """Every step number of a session, its journal's included, in order (no record is
-    parsed: the gap check of resume), and how many steps have a correction."""
-    journal = _journal_entries(run / JOURNAL_NAME)  # before the SELECT, as _rows_unchecked
-    return _logged(run, journal)
-
-
 def _logged(run: Path, journal: list[tuple[str, tuple[Any, ...]]]) -> tuple[list[int], int]:
-    """:func:`_step_numbers` with the journal's entries given (read before the log)."""
+    """Every step number of a session, the given journal entries' included (read before the
+    log), in order (no record is parsed), and how many steps have a correction."""
     db = _open_readonly(run)
     try:
         steps = {row[0] for row in db.execute("SELECT step FROM steps")}
@@ -2464,35 +2478,23 @@ def restore_model(
     so with them the model is fitted also at ``k`` = 0. Returns ``k``.
     """
 
-    def lost_start(why: str) -> CorruptSessionError:
-        on_it = (
-            "no refit came since, so the session's model is that one"
-            if k == 0
-            else "its incremental refits start from it"
-        )
-        return CorruptSessionError(
-            f"cannot rebuild the model of the session in {run_dir}: the session started from a "
-            f"fitted model, which only {CHECKPOINT_DIR}/model-{0:08d}.pt holds, and that file is "
-            f"{why} ({on_it}); no label can refit it. The file was left as it is: restore it "
-            "from a backup, or start a new session"
-        )
-
     px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
     base = len(py)  # the prior's labels come first in every fit and digest
     all_xs, all_ys = px + list(xs), py + list(ys)
-    why0 = "missing"
     directory = Path(run_dir) / CHECKPOINT_DIR
-    # (the store's error where checkpoints/ cannot be listed; describe reads it alike)
-    scan = _scan_checkpoints(directory, len(ys), base, all_xs, all_ys)
+    # (the store's error where checkpoints/ cannot be listed; describe reads it alike); a
+    # starting model that cannot be had is refused here, before anything is set aside
+    scan, k = _restore_plan(
+        run_dir, model, len(ys), base, all_xs, all_ys, max_new, incremental, starts_fitted
+    )
     for n, path, why in scan.passed_over:
-        if n == 0:
-            why0 = why
         if store is not None and not (n == 0 and starts_fitted):  # that one: kept as it is
             _set_aside(path, why)
     last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
-    k = last + fit_count(len(ys) - last, max_new)
-    if starts_fitted and payload is None and (k == 0 or incremental):
-        raise lost_start(why0)
+
+    def lost_start(why: str) -> CorruptSessionError:  # (_restore_plan raised where it comes)
+        return _lost_start(run_dir, k, why)
+
     if k == last and payload is not None:
         try:
             model.load_state_dict(payload["state_dict"])
@@ -2546,6 +2548,115 @@ def restore_model(
             except SessionWriteError as exc:
                 warnings.warn(str(exc), stacklevel=2)
     return k
+
+
+def _lost_start(run_dir: str | os.PathLike[str], k: int, why: str) -> CorruptSessionError:
+    """The error of a session started from a fitted model whose checkpoint 0 cannot be had
+    (``why``) where the model still stands on it (``k``: the labels it was last fitted on)."""
+    on_it = (
+        "no refit came since, so the session's model is that one"
+        if k == 0
+        else "its incremental refits start from it"
+    )
+    return CorruptSessionError(
+        f"cannot rebuild the model of the session in {run_dir}: the session started from a "
+        f"fitted model, which only {CHECKPOINT_DIR}/model-{0:08d}.pt holds, and that file is "
+        f"{why} ({on_it}); no label can refit it. The file was left as it is: restore it "
+        "from a backup, or start a new session"
+    )
+
+
+def _restore_plan(
+    run_dir: str | os.PathLike[str],
+    model: torch.nn.Module,
+    n_labels: int,
+    base: int,
+    all_xs: list[np.ndarray],
+    all_ys: list[int],
+    max_new: int,
+    incremental: bool,
+    starts_fitted: bool,
+) -> tuple[_CheckpointScan, int]:
+    """Where :func:`restore_model` starts: the scan of ``checkpoints/`` and ``k``, the labels
+    the model was last fitted on. Reads only. Raises the :class:`CorruptSessionError` of a
+    session started from a fitted model (``starts_fitted``) that still stands on it and whose
+    checkpoint 0 is missing, damaged or not this model's state (tried on a copy of ``model``),
+    as restore_model would after setting aside what it passes over; so a resume refuses it
+    before it opens the session (:func:`_check_restorable`).
+
+    Raises:
+        IncompatibleRunDirError: ``checkpoints/`` cannot be listed.
+    """
+    directory = Path(run_dir) / CHECKPOINT_DIR
+    scan = _scan_checkpoints(directory, n_labels, base, all_xs, all_ys)
+    last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
+    k = last + fit_count(n_labels - last, max_new)
+    if not starts_fitted:
+        return scan, k
+    why0 = next((why for n, _, why in scan.passed_over if n == 0), "missing")
+    trial = copy.deepcopy(model)
+
+    def loads(state: dict[str, Any]) -> bool:
+        try:
+            trial.load_state_dict(state)
+            return True
+        except Exception:  # e.g. saved by another model class
+            return False
+
+    # restore_model's paths to the starting model, in its order
+    if payload is None and (k == 0 or incremental):
+        raise _lost_start(run_dir, k, why0)
+    if k == last and payload is not None:
+        if loads(payload["state_dict"]):
+            return scan, k
+        if k == 0:
+            raise _lost_start(run_dir, k, "unreadable as this model's state")
+        payload = None  # set aside as damaged, then refitted
+    if (k > 0 or base) and incremental:
+        if payload is not None and loads(payload["state_dict"]):
+            return scan, k
+        if payload is not None and last == 0:
+            raise _lost_start(run_dir, k, "unreadable as this model's state")
+        zero, why = _checkpoint_payload(directory / f"model-{0:08d}.pt", base, all_xs, all_ys)
+        if zero is None:
+            raise _lost_start(run_dir, k, why)
+        if not loads(zero["state_dict"]):
+            raise _lost_start(run_dir, k, "unreadable as this model's state")
+    return scan, k
+
+
+def _check_restorable(
+    run_dir: str | os.PathLike[str],
+    model: torch.nn.Module,
+    xs: list[np.ndarray],
+    ys: list[int],
+    *,
+    max_new: int,
+    incremental: bool,
+    starts_fitted: bool,
+    prior: tuple[np.ndarray, np.ndarray] | None = None,
+) -> None:
+    """Refuse, as :func:`restore_model` would, a session whose model cannot be rebuilt from
+    the labels ``xs, ys`` (its starting model lost, see :func:`_restore_plan`), without
+    writing or setting aside anything: a resume calls it before it opens the session.
+
+    Raises:
+        CorruptSessionError: the session started from a fitted model that its checkpoint 0
+            alone holds, still stands on it, and that file is missing or damaged.
+        IncompatibleRunDirError: ``checkpoints/`` cannot be listed.
+    """
+    px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
+    _restore_plan(
+        run_dir,
+        model,
+        len(ys),
+        len(py),
+        px + list(xs),
+        py + list(ys),
+        max_new,
+        incremental,
+        starts_fitted,
+    )
 
 
 @overload
@@ -3150,6 +3261,8 @@ def resume_problems(
     env_inputs: dict[str, Any] | None = None,
     model_class: str | None = None,
     model_type: type | None = None,
+    env_class: str | None = None,
+    env_observation_space: Any = None,
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
@@ -3169,7 +3282,11 @@ def resume_problems(
     sessions written before 2026-11-26 do not keep it, and those written before 2026-11-27
     kept None for an env with a cap of its own only);
     ``env_inputs``: the env's ``describe_inputs()`` (None: it has none), compared with the
-    session's where the session kept one (sessions written before 2026-11-27 did not)."""
+    session's where the session kept one (sessions written before 2026-11-27 did not);
+    ``env_class``: the unwrapped env's class (``module.qualname``), compared by its name with
+    the session's where the session kept one, and ``env_observation_space`` (the space),
+    compared with the one the session kept; see :func:`_env_problems`, which compares them
+    whether or not the env was made by ``gymnasium.make``."""
     problems: list[str] = []
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
@@ -3179,32 +3296,10 @@ def resume_problems(
         )
     if senv.get("id") and env_id and senv["id"] != env_id:
         problems.append(f"env id: the session used {senv['id']!r}, got {env_id!r}")
-    if env_kwargs is not None and senv.get("id") and senv.get("id") == env_id:
-        # what gymnasium.make was given, where both sides are plain values (an object is
-        # kept only as its repr, which may name a memory address); render_mode may change
-        stored_kw = senv.get("kwargs") or {}
-        given_kw = json.loads(json.dumps(env_kwargs))  # as the session stored its own
-        differ = {
-            k: (stored_kw.get(k), given_kw.get(k))
-            for k in sorted(set(stored_kw) | set(given_kw))
-            if k != "render_mode"
-            and not _kept_as_repr(stored_kw.get(k))
-            and not _kept_as_repr(given_kw.get(k))
-            and stored_kw.get(k) != given_kw.get(k)
-        }
-        if "max_episode_steps" in senv and senv["max_episode_steps"] != env_max_episode_steps:
-            differ["max_episode_steps"] = (senv["max_episode_steps"], env_max_episode_steps)
-        if differ:
-            if "max_episode_steps" not in senv:
-                cap = ""
-            elif senv["max_episode_steps"] is None:  # no TimeLimit; -1 removes a registered one
-                cap = ", max_episode_steps=-1"
-            else:
-                cap = f", max_episode_steps={senv['max_episode_steps']}"
-            problems.append(
-                f"env kwargs (stored, given): {differ}; make the env as the session did, "
-                f"gymnasium.make({senv['id']!r}{cap}, **{stored_kw})"
-            )
+    elif env_kwargs is not None:  # (another id says enough)
+        problems += _env_problems(
+            senv, env_id, env_kwargs, env_max_episode_steps, env_class, env_observation_space
+        )
     kept_inputs = senv.get("inputs")
     if isinstance(kept_inputs, dict) and kept_inputs != (env_inputs or {}):
         given = env_inputs or {}
@@ -3242,6 +3337,118 @@ def resume_problems(
         elif strategy != want:
             problems.append(f"strategy: stored {want}, given {strategy}")
     return problems
+
+
+def _env_problems(
+    senv: dict[str, Any],
+    env_id: str | None,
+    env_kwargs: dict[str, Any],
+    cap: int | None,
+    env_class: str | None,
+    space: Any,
+) -> list[str]:
+    """What tells the given env from the session's (``senv``, config.json's ``"env"``) besides
+    its id and sizes, whether either was made by ``gymnasium.make`` or directly: the class of
+    the unwrapped env (by name, so a class moved to another module resumes; kept since
+    2026-11-27), the observation space as :func:`observation_space_text` writes it (kept
+    since the first version; a wrapper that changes it makes another env), the step cap in
+    force (kept for an env with a gymnasium id since 2026-11-26, for every env since
+    2026-11-27), and ``gymnasium.make``'s plain arguments (``render_mode`` aside), which an env
+    made directly does not show: a session whose env was made with some is refused such an
+    env. Only what the session kept is compared."""
+    differ: list[str] = []
+    stored_kw = senv.get("kwargs") or {}
+    kept_class = senv.get("class")
+    if kept_class and env_class and kept_class.rsplit(".", 1)[-1] != env_class.rsplit(".", 1)[-1]:
+        differ.append(
+            f"env class: the session's env is a {kept_class}, the given one a {env_class}"
+        )
+    kept_space = senv.get("observation_space")
+    if kept_space is not None and space is not None:
+        given = observation_space_text(space)
+        if kept_space not in (given, repr(space)):  # (repr: a text kept under other options)
+            differ.append(
+                f"env observation space: the session's is {kept_space}, the given env's {given}"
+            )
+    kw_differ: dict[str, tuple[Any, Any]] = {}
+    if senv.get("id") and env_id:  # both made by gymnasium.make (the same id)
+        # what gymnasium.make was given, where both sides are plain values (an object is
+        # kept only as its repr, which may name a memory address); render_mode may change
+        given_kw = json.loads(json.dumps(env_kwargs))  # as the session stored its own
+        kw_differ = {
+            k: (stored_kw.get(k), given_kw.get(k))
+            for k in sorted(set(stored_kw) | set(given_kw))
+            if k != "render_mode"
+            and not _kept_as_repr(stored_kw.get(k))
+            and not _kept_as_repr(given_kw.get(k))
+            and stored_kw.get(k) != given_kw.get(k)
+        }
+    unshown = {k: v for k, v in stored_kw.items() if k != "render_mode"}
+    if senv.get("id") and not env_id and unshown:
+        differ.append(
+            f"env kwargs: the session's env was made by gymnasium.make with {unshown}, the "
+            "given one directly (it has no gymnasium spec), so they cannot be compared"
+        )
+    has_cap = "max_episode_steps" in senv
+    want = senv.get("max_episode_steps")
+    if has_cap and want != cap:
+        if senv.get("id"):  # as gymnasium.make's argument
+            kw_differ["max_episode_steps"] = (want, cap)
+        else:  # an env made directly: its TimeLimit's cap (or its own)
+            differ.append(f"env step cap (max_episode_steps, stored, given): {(want, cap)}")
+    if kw_differ:
+        differ.append(f"env kwargs (stored, given): {kw_differ}")
+    if not differ:
+        return []
+    if senv.get("id"):
+        capped = ""
+        if has_cap:  # None: no TimeLimit, which -1 gives where the id registers one
+            capped = f", max_episode_steps={-1 if want is None else want}"
+        how = "make the env as the session did, "
+        how += f"gymnasium.make({senv['id']!r}{capped}, **{stored_kw})"
+    else:
+        how = "give the env the session was taught in"
+        if kept_class:
+            how += f", a {kept_class.rsplit('.', 1)[-1]} ({kept_class}) made as it was"
+        if has_cap and want is not None:
+            how += f", under gymnasium.wrappers.TimeLimit(env, {want})"
+        elif has_cap:
+            how += ", without a TimeLimit (the session's env had no step cap)"
+    return ["; ".join(differ) + f"; {how}"]
+
+
+#: numpy's default print options: a Box's bounds are written with these, whatever a
+#: program set (np.set_printoptions), so that config.json keeps one text per space
+_NUMPY_PRINT_DEFAULTS: dict[str, Any] = {
+    "precision": 8,
+    "threshold": 1000,
+    "edgeitems": 3,
+    "linewidth": 75,
+    "suppress": False,
+    "nanstr": "nan",
+    "infstr": "inf",
+    "sign": "-",
+    "floatmode": "maxprec",
+    "formatter": None,
+    "legacy": False,
+}
+
+
+def observation_space_text(space: Any) -> str:
+    """An observation space as config.json keeps it (``"observation_space"``): gymnasium's
+    ``repr`` of a ``Box``, ``Box(low, high, shape, dtype)`` with a uniform bound as one number,
+    written with numpy's default print options (gymnasium's own repr follows the options in
+    force when it is first asked for); other spaces by their ``repr``."""
+    import gymnasium as gym
+
+    if not isinstance(space, gym.spaces.Box):
+        return repr(space)
+
+    def short(a: np.ndarray) -> str:  # gymnasium's array_short_repr
+        return str(np.min(a)) if a.size != 0 and np.min(a) == np.max(a) else str(a)
+
+    with np.printoptions(**_NUMPY_PRINT_DEFAULTS):
+        return f"Box({short(space.low)}, {short(space.high)}, {space.shape}, {space.dtype})"
 
 
 def _model_problems(

@@ -85,6 +85,7 @@ from torchcbl.session import (
     PRIOR_NAME,
     LabelDigest,
     SessionStore,
+    _check_restorable,
     _InterruptHold,
     _model_args,
     _read_prior,
@@ -94,6 +95,7 @@ from torchcbl.session import (
     latest_checkpoint,
     load_config,
     load_policy,
+    observation_space_text,
     prior_bytes,
     restore_model,
     resume_problems,
@@ -405,11 +407,22 @@ def _episode_cap(env: gym.Env) -> int | None:
 
 def _resumed_cap(stored_env: Mapping[str, Any], env: gym.Env) -> int | None:
     """The cap of ``env`` to compare with a session's: the one in force, or the outermost
-    ``TimeLimit``'s as the spec reports it where the session stored that (sessions written
-    before the cap in force was kept), so that the env the session was made with resumes."""
+    ``TimeLimit``'s as the spec reports it where the session stored that (sessions of an env
+    with a gymnasium id written before the cap in force was kept), so that the env the
+    session was made with resumes. An env without a spec has no such legacy: a session of one
+    kept its cap in force from the first (2026-11-27)."""
     cap = _episode_cap(env)
-    legacy = getattr(getattr(env, "spec", None), "max_episode_steps", None)
+    spec = getattr(env, "spec", None)
+    if spec is None or not stored_env.get("id"):
+        return cap
+    legacy = spec.max_episode_steps
     return legacy if stored_env.get("max_episode_steps") == legacy else cap
+
+
+def _env_class(env: gym.Env) -> str:
+    """The unwrapped env's class as a session keeps it, ``module.qualname``."""
+    cls = type(getattr(env, "unwrapped", env))
+    return f"{cls.__module__}.{cls.__qualname__}"
 
 
 def _as_interrupted(record: StepRecord) -> StepRecord:
@@ -763,15 +776,17 @@ class ConfidentTeacher:
         spec = getattr(self.env, "spec", None)
         described = {
             "id": getattr(spec, "id", None),
+            "class": _env_class(self.env),  # compared on resume, by its name
             "n_features": self.n_features,
             "n_actions": self.n_actions,
-            "observation_space": repr(self.env.observation_space),
+            "observation_space": observation_space_text(self.env.observation_space),
         }
         kwargs = _env_kwargs(self.env)
         if kwargs:
             described["kwargs"] = kwargs
-        if spec is not None:  # the cap in force (TimeLimit or the env's own), compared on resume
-            described["max_episode_steps"] = _episode_cap(self.env)
+        # the cap in force (TimeLimit or the env's own; None: none), compared on resume, also
+        # for an env made directly (kept only for an env with a gymnasium id before 2026-11-27)
+        described["max_episode_steps"] = _episode_cap(self.env)
         inputs = _env_inputs(self.env)
         if inputs is not None:  # what the env reads beyond its arguments, compared on resume
             described["inputs"] = inputs
@@ -803,7 +818,8 @@ class ConfidentTeacher:
         A demonstration logged but never executed (the process died in between) is kept.
         The env is reset into a new episode (seeded from the session seed and episode index; a
         session that logged no step yet, e.g. stopped at its first request, is reset with the
-        session seed, as the new session was, and so goes on as it would have).
+        session seed, as the new session was, and so goes on as it would have). Every refusal
+        below comes before the session is opened for writing: a refused resume touches no file.
 
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
@@ -816,7 +832,11 @@ class ConfidentTeacher:
             TypeError: ``env`` is not an env (an env id: make it first with
                 ``gymnasium.make``).
             IncompatibleRunDirError: the directory is not a session, or it was written for a
-                different env, model, rule or learning configuration.
+                different env, model, rule or learning configuration. Of the env its class,
+                observation space and step cap are compared, and where both were made by
+                ``gymnasium.make`` its id and arguments, whether the session's env or the
+                given one was made by ``gymnasium.make`` or directly (a session whose env
+                was made with arguments refuses an env made directly).
             CorruptSessionError: a file of the session is damaged, its log lacks steps, or its
                 ``-wal`` or journal is missing while ``writer.lock`` says it held steps the log
                 lacks (nothing is changed; the message says how to recover).
@@ -859,6 +879,8 @@ class ConfidentTeacher:
             env_kwargs=_env_kwargs(env),
             env_max_episode_steps=_resumed_cap(stored.get("env") or {}, env),
             env_inputs=_env_inputs(env),
+            env_class=_env_class(env),
+            env_observation_space=env.observation_space,
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
             model_class=None if model is None else type(model).__name__,
@@ -903,8 +925,24 @@ class ConfidentTeacher:
         self.run_dir = Path(run_dir)
         self._starts_fitted = stored.get("starts_fitted") is True
         _check_commit_every(commit_every)
+
+        def check(records: list[StepRecord], corrections: list[CorrectionRecord]) -> None:
+            # a model restore_model would refuse to rebuild (a lost starting model) is refused
+            # before the session is opened for writing: a refused resume touches no file
+            xs, ys = label_sequence(records, corrections)
+            _check_restorable(
+                run_dir,
+                self.model,
+                xs,
+                ys,
+                max_new=self.config.max_new,
+                incremental=self.config.refit == "incremental",
+                starts_fitted=self._starts_fitted,
+                prior=self._prior,
+            )
+
         self._store, records, corrections = SessionStore.open_for_resume(
-            self.run_dir, commit_every=commit_every
+            self.run_dir, commit_every=commit_every, check=check if self._starts_fitted else None
         )
         try:
             self._store.note_writer(len(records), _model_device(self.model))

@@ -1,0 +1,261 @@
+"""What ConfidentTeacher.resume compares before it goes on, and that a refused resume touches
+no file of the session."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import sqlite3
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from _toy_envs import oracle, rare_regions_world
+from gymnasium import spaces
+
+from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
+from torchcbl.errors import CorruptSessionError, IncompatibleRunDirError
+from torchcbl.session import load_config, load_records
+
+LINE_ID = "torchcbl_tests/ResumeLine-v0"
+
+
+class Line(gym.Env):
+    """1-D: walk right to the end of a line of ``n`` cells; no step cap of its own."""
+
+    metadata = {"render_modes": ["human"]}
+
+    def __init__(self, n: int = 10, render_mode: str | None = None) -> None:
+        self.n = n
+        self.render_mode = render_mode
+        self.observation_space = spaces.Box(0, n, (1,), np.float32)
+        self.action_space = spaces.Discrete(2)
+        self.x = 0.0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.x = float(self.np_random.integers(0, self.n))
+        return np.array([self.x], np.float32), {}
+
+    def step(self, action):
+        self.x = max(0.0, self.x + (1 if action == 1 else -1))
+        done = self.x >= self.n
+        return np.array([self.x], np.float32), float(done), done, False, {}
+
+
+class Other(gym.Env):
+    """Another env of the same sizes (1 feature, 2 actions), other bounds, no cap."""
+
+    def __init__(self, high: float = 5.0) -> None:
+        self.observation_space = spaces.Box(-high, high, (1,), np.float32)
+        self.action_space = spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return np.zeros(1, np.float32), {}
+
+    def step(self, action):
+        return np.zeros(1, np.float32), 0.0, False, False, {}
+
+
+if LINE_ID not in gym.registry:
+    gym.register(LINE_ID, entry_point=Line)  # no time limit of its own
+
+
+def teacher(obs, info):
+    return 1
+
+
+def _teach(run: Path, env: gym.Env) -> None:
+    config = TeachingConfig(max_steps=12, max_new=4)
+    with ConfidentTeacher(env, teacher, config=config, run_dir=run, progress=False) as ct:
+        ct.run()
+
+
+def _resumes(run: Path, env: gym.Env) -> None:
+    ConfidentTeacher.resume(run, env, teacher, progress=False).close()
+
+
+def _refused(run: Path, env: gym.Env, *patterns: str) -> str:
+    before = _files_of(run)
+    with pytest.raises(IncompatibleRunDirError) as err:
+        ConfidentTeacher.resume(run, env, teacher, progress=False)
+    msg = str(err.value)
+    for pattern in patterns:
+        assert pattern in msg, msg
+    assert _files_of(run) == before  # a refusal touches no file
+    return msg
+
+
+def _files_of(run: Path) -> dict[str, tuple[int, str]]:
+    """{relative path: (mtime_ns, sha256)} of every file under a run directory."""
+    return {
+        str(p.relative_to(run)): (p.stat().st_mtime_ns, hashlib.sha256(p.read_bytes()).hexdigest())
+        for p in sorted(run.rglob("*"))
+        if p.is_file()
+    }
+
+
+# -- 1. the env: another env is refused, whether made by gymnasium.make or directly ------------
+
+
+def test_a_session_made_with_an_id_refuses_an_env_made_directly_that_is_not_its_own(tmp_path):
+    """A session made with gymnasium.make(id, max_episode_steps=30) resumed with an env of
+    another class (other bounds, no cap), made directly: it resumed, as the id, kwargs and cap
+    were compared only where both sides had an id. The same env without the cap, made
+    directly, resumed too, although gymnasium.make(id) without it was refused."""
+    run = tmp_path / "run"
+    _teach(run, gym.make(LINE_ID, max_episode_steps=30))
+    msg = _refused(run, Other(), "Line", "Other", "Box(0.0, 10.0, (1,), float32)", "Box(-5.0")
+    assert msg.startswith(f"cannot resume the session in {run}: ") and "\n" not in msg
+    _refused(run, Line(), "max_episode_steps", "30")  # no cap: not the session's env
+    _refused(run, gym.make(LINE_ID), "max_episode_steps")  # (as before)
+    _refused(run, gym.wrappers.TimeLimit(Line(), 31), "max_episode_steps", "31")
+    # the session's env made again resumes: by gymnasium.make, wrapped in what leaves its
+    # spaces as they are, or the same class with the same cap made directly
+    _resumes(run, gym.make(LINE_ID, max_episode_steps=30))
+    _resumes(run, gym.make(LINE_ID, max_episode_steps=30, render_mode="human"))
+    _resumes(run, gym.wrappers.RecordEpisodeStatistics(gym.make(LINE_ID, max_episode_steps=30)))
+    _resumes(run, gym.wrappers.TimeLimit(Line(), 30))
+    assert len(load_records(run)) == 12
+
+
+def test_a_session_made_directly_refuses_another_env(tmp_path):
+    """A session whose env was made directly (no gymnasium id) compared the sizes of the
+    spaces alone: an env of another class, other bounds or another step cap resumed it."""
+    run = tmp_path / "run"
+    _teach(run, gym.wrappers.TimeLimit(Line(), 30))
+    stored = load_config(run)["env"]
+    assert stored["id"] is None and stored["max_episode_steps"] == 30
+    assert stored["class"].endswith(".Line")
+    _refused(run, Other(), "Line", "Other")
+    _refused(run, gym.wrappers.TimeLimit(Other(high=10.0), 30), "Line", "Other")
+    _refused(run, Line(), "max_episode_steps", "30")
+    _refused(run, gym.wrappers.TimeLimit(Line(), 31), "max_episode_steps")
+    _refused(run, gym.wrappers.TimeLimit(Line(n=12), 30), "Box(0.0, 12.0")
+    _resumes(run, gym.wrappers.TimeLimit(Line(), 30))
+    _resumes(run, gym.make(LINE_ID, max_episode_steps=30))  # the same env, made by make
+    # the class as a module defines it again (a script's class moved to a package)
+    moved = type("Line", (Line,), {})
+    moved.__module__ = "pkg.envs"
+    _resumes(run, gym.wrappers.TimeLimit(moved(), 30))
+
+
+def test_a_session_made_with_arguments_refuses_an_env_whose_arguments_cannot_be_read(
+    tmp_path,
+):
+    """gymnasium.make's arguments are compared; an env made directly shows none, so it cannot
+    be told from one made with other arguments: refused, saying how to make it."""
+    run = tmp_path / "run"
+    _teach(run, gym.make(LINE_ID, n=12, max_episode_steps=30))
+    _refused(
+        run,
+        gym.wrappers.TimeLimit(Line(n=12), 30),
+        "'n': 12",
+        f"gymnasium.make('{LINE_ID}', max_episode_steps=30, **{{'n': 12}})",
+    )
+    _resumes(run, gym.make(LINE_ID, n=12, max_episode_steps=30))
+
+
+def test_the_observation_space_is_compared_whatever_numpy_prints(tmp_path):
+    """config.json keeps the observation space as gymnasium writes it, which numpy's print
+    options change (a notebook's np.set_printoptions): the same env resumes under others."""
+    run = tmp_path / "run"
+    bounds = dict(low=np.array([0.0, -2.5], np.float32), high=np.array([1 / 3, 2.5], np.float32))
+
+    class Plane(Line):
+        def __init__(self) -> None:
+            super().__init__()
+            self.observation_space = spaces.Box(**bounds, dtype=np.float32)
+
+        def reset(self, *, seed=None, options=None):
+            return np.zeros(2, np.float32), {}
+
+        def step(self, action):
+            return np.zeros(2, np.float32), 0.0, False, False, {}
+
+    _teach(run, Plane())
+    with np.printoptions(precision=2):
+        _resumes(run, Plane())
+    with np.printoptions(precision=2):
+        _teach(tmp_path / "run2", Plane())
+    _resumes(tmp_path / "run2", Plane())
+    assert (
+        load_config(run)["env"]["observation_space"]
+        == load_config(tmp_path / "run2")["env"]["observation_space"]
+    )
+
+
+def test_a_session_stored_before_the_class_and_cap_were_kept_compares_what_it_kept(tmp_path):
+    """Sessions made directly kept neither the env's class nor its step cap: they still resume
+    with an env of the same spaces, whatever its class and cap; the observation space, kept
+    since the first version, is compared."""
+    run = tmp_path / "run"
+    _teach(run, Other(high=10.0))
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["class"], config["env"]["max_episode_steps"]
+    (run / "config.json").write_text(json.dumps(config))
+    _resumes(run, gym.wrappers.TimeLimit(Other(high=10.0), 30))
+    _refused(run, Other(), "Box(-10.0")
+
+
+# -- 2. a refused resume touches no file ------------------------------------------------------
+
+
+def _fitted_session(run: Path, **cfg) -> None:
+    """A session started from a fitted model (its checkpoint 0), taught 30 steps."""
+    env = rare_regions_world()
+    x, y = env.sample(120, np.random.default_rng(0))
+    fitted = GaussianMixtureSet(3, 2, seed=0).fit(x, y)
+    config = TeachingConfig(noninteractive=False, **cfg)
+    with ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    ) as ct:
+        ct.run(max_steps=30)
+
+
+def _refused_untouched(run: Path, error: type[Exception], match: str) -> None:
+    before = _files_of(run)
+    env = rare_regions_world()
+    with pytest.raises(error, match=match):
+        ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+    assert _files_of(run) == before
+
+
+def test_a_resume_refused_for_a_lost_starting_model_touches_no_file(tmp_path):
+    """The starting model's checkpoint 0 lost while the session still stands on it: resume
+    was refused only after it had opened the session, noting a writer in writers.jsonl and
+    rewriting writer.lock and the journal."""
+    run = tmp_path / "run"
+    _fitted_session(run, max_new=50)
+    (run / "checkpoints" / "model-00000000.pt").unlink()
+    _refused_untouched(run, CorruptSessionError, "no refit came since")
+
+
+def test_a_resume_refused_for_a_lost_starting_model_sets_no_checkpoint_aside(tmp_path):
+    """Incremental refits start from the starting model: with checkpoint 0 lost and the later
+    ones damaged, resume renamed the damaged ones to .damaged, then refused."""
+    run = tmp_path / "run"
+    _fitted_session(run, max_new=4, refit="incremental")
+    zero, *later = sorted((run / "checkpoints").glob("model-*.pt"))
+    assert later
+    zero.unlink()
+    for path in later:
+        path.write_bytes(b"not a checkpoint")
+    _refused_untouched(run, CorruptSessionError, "incremental refits start from it")
+
+
+def test_a_resume_refused_for_a_damaged_step_touches_no_file(tmp_path):
+    """A logged step that cannot be read was refused after the session had been opened for
+    writing (writer.lock and the journal rewritten)."""
+    run = tmp_path / "run"
+    _teach(run, gym.make(LINE_ID, max_episode_steps=30))
+    with contextlib.closing(sqlite3.connect(run / "steps.sqlite")) as db:
+        db.execute("UPDATE steps SET observation = ? WHERE step = 3", (b"abc",))
+        db.commit()
+    before = _files_of(run)
+    with pytest.raises(CorruptSessionError, match="the logged step 3 is not a valid step"):
+        ConfidentTeacher.resume(run, gym.make(LINE_ID, max_episode_steps=30), teacher)
+    assert _files_of(run) == before
