@@ -1416,9 +1416,10 @@ def test_an_evaluation_whose_episodes_never_end_is_stopped_and_said_not_run_fore
 ):
     """An env registered without max_episode_steps whose episodes do not end (the teacher
     never finishes its task), benchmarked without --eval-steps: the greedy evaluation had no
-    step cap and ran forever after the plan line. Without eval_steps and without a TimeLimit,
-    an evaluation episode now gets at most max_steps steps (the whole teaching run); one that
-    does not end there stops the cell with one line saying what to give."""
+    step cap and ran forever after the plan line. Without eval_steps and with no cap of the
+    env's own, an evaluation now gets at most 10,000 steps per episode (max_steps where more)
+    in all; one whose episodes do not all end there stops the cell with one line saying what
+    to give."""
     monkeypatch.syspath_prepend(str(TESTS))
     argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchEndless-v0", "--teacher"]
     argv += ["_bench_env:teacher", "--strategies", "bc", "--seeds", "1", "--workers", "1"]
@@ -1426,7 +1427,7 @@ def test_an_evaluation_whose_episodes_never_end_is_stopped_and_said_not_run_fore
     assert main([*argv, "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1, err
-    assert "the teacher on evaluation seed 1000000 ran 20 steps" in err, err
+    assert "the teacher on evaluation seed 1000000 ran 20000 steps in all" in err, err
     assert "0 of its 2 episodes ended" in err and "--eval-steps" in err, err
     assert "max_episode_steps" in err, err
     # the same through the API: the cell fails, naming the fix
@@ -1435,6 +1436,7 @@ def test_an_evaluation_whose_episodes_never_end_is_stopped_and_said_not_run_fore
         bm.run_benchmark(STRATEGIES[:1], [spec], [0], tmp_path / "api", workers=1, plots=False)
     # eval_steps bounds it, and so does a TimeLimit longer than max_steps
     capped = dataclasses.replace(spec, eval_steps=12)
+    assert "ran 20000 steps" in err and "10000 steps per episode" in err, err
     timed = dataclasses.replace(spec, env_kwargs={"spread": 2.0, "max_episode_steps": 15})
     for s in (capped, timed):
         out = bm.run_benchmark(STRATEGIES[:1], [s], [0], tmp_path / "ok", workers=1, plots=False)
@@ -1491,3 +1493,21 @@ def test_a_sweep_whose_output_reader_left_finishes_and_writes_its_results(tmp_pa
     results = json.loads((out / "results.json").read_text())
     assert results["envs"]["_bench_env:BenchCluster-v0"]["teacher"].endswith("no_reader")
     assert (out / "learning_curves.png").is_file()
+
+
+def test_an_env_that_bounds_its_own_episodes_is_evaluated_whatever_max_steps():
+    """The corridor ends its own episodes (its max_episode_steps, 81 on its map) without a
+    TimeLimit; a cell of it taught for fewer steps than one episode (max_steps 20) and
+    evaluated without eval_steps was stopped by the never-ending-evaluation guard (total cap
+    eval_episodes x max_steps), the perfect teacher's own evaluation included. The guard
+    applies only where the env has no step cap at all."""
+    import corridor.benchmark
+
+    spec = dataclasses.replace(
+        corridor.benchmark.env_spec(True), budgets=(10,), max_steps=20, eval_seeds=(1000,)
+    )
+    assert spec.eval_steps is None
+    (config,) = bm.cell_configs(STRATEGIES[:1], [spec], [0])
+    cell = bm.run_cell(config)
+    assert cell["teacher_performance"] == 1.0
+    assert cell["teacher_episodes_ended"] == spec.eval_episodes

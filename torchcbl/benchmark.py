@@ -365,11 +365,13 @@ class EnvSpec:
         eval_seeds: held-out reset seeds of the evaluation env (one evaluation each).
         eval_episodes: episodes per evaluation (or None).
         eval_steps: steps per evaluation (or None; at least one of the two). Without it, on
-            an env without a TimeLimit (registered without ``max_episode_steps``), an
-            evaluation episode gets at most ``max_steps`` steps: one that has not ended by
-            then stops the cell with an error saying to give ``eval_steps`` (an episode that
-            never ends would run for ever); an env that ends its episodes itself, sooner, is
-            evaluated as without the cap.
+            an env with no step cap (no TimeLimit: registered without
+            ``max_episode_steps``; no ``max_episode_steps`` attribute of its own, as the
+            corridor's), an evaluation of ``eval_episodes`` episodes gets at most 10,000 steps
+            per episode (``max_steps`` where more) in all: if its episodes have not all ended
+            by then, the cell stops with an error saying to give ``eval_steps`` (an episode
+            that never ends would run for ever); where they end sooner, it is evaluated as
+            without the cap.
         teaching: :class:`~torchcbl.teaching.TeachingConfig` fields, learning ones only (a
             stop criterion such as ``max_episodes`` is refused: a cell stops at its budgets
             and ``max_steps``).
@@ -573,15 +575,9 @@ class _Audited(gym.Wrapper):
         return out
 
 
-def _has_time_limit(env: Any) -> bool:
-    """Whether ``env`` (as ``gymnasium.make`` made it) is wrapped in a TimeLimit: registered
-    with ``max_episode_steps``, given it in ``make``'s arguments, or wrapped so by its entry
-    point."""
-    while isinstance(env, gym.Wrapper):
-        if isinstance(env, gym.wrappers.TimeLimit):
-            return True
-        env = env.env
-    return False
+# where nothing bounds an evaluation episode (no eval_steps, no TimeLimit, no cap of the env's
+# own), it gets this many steps (or max_steps, where more) before the cell stops with an error
+_EVAL_GUARD_STEPS = 10_000
 
 
 def _evaluate(
@@ -621,13 +617,14 @@ def _evaluate(
             if ended < int(spec.eval_episodes or 0):
                 raise ValueError(
                     f"EnvSpec {spec.name!r}: the evaluation of {what} on evaluation seed {s} "
-                    f"ran {len(records)} steps ({spec.eval_episodes} episodes x max_steps "
-                    f"{spec.max_steps}) and {ended} of its {spec.eval_episodes} episodes ended; "
-                    f"with eval_steps None and no TimeLimit on {spec.env_id} (registered "
-                    "without max_episode_steps), an evaluation episode gets at most max_steps "
-                    "steps, or an episode that never ends would run for ever: give eval_steps "
-                    "(the steps of one evaluation; torchcbl benchmark --eval-steps N), or "
-                    "register the env with max_episode_steps (or give it in env_kwargs)"
+                    f"ran {len(records)} steps in all and {ended} of its "
+                    f"{spec.eval_episodes} episodes ended; {spec.env_id} has no step cap (no "
+                    "TimeLimit: registered without max_episode_steps; no max_episode_steps "
+                    "of its own) and eval_steps is None, so an evaluation gets at most "
+                    f"{guard // int(spec.eval_episodes or 1)} steps per episode in all (an "
+                    "episode that never ends would run for ever): give eval_steps (the steps "
+                    "of one evaluation; torchcbl benchmark --eval-steps N), or register the env "
+                    "with max_episode_steps (or give it in env_kwargs)"
                 )
         value = score(records)
         try:
@@ -691,7 +688,7 @@ def _run_cell(
     from torchcbl.gmm import GaussianMixtureSet
     from torchcbl.policy import GreedyPolicy, check_env
     from torchcbl.strategies import correcting
-    from torchcbl.teaching import ConfidentTeacher, TeachingConfig
+    from torchcbl.teaching import ConfidentTeacher, TeachingConfig, _episode_cap
 
     torch.set_num_threads(1)
     spec = EnvSpec(
@@ -788,11 +785,13 @@ def _run_cell(
 
     eval_env = gym.make(spec.env_id, **{**dict(spec.env_kwargs), **dict(spec.eval_env_kwargs)})
     try:
-        # an evaluation always ends: at eval_steps, at the env's TimeLimit, else within
-        # max_steps steps per episode (the whole teaching run) or with an error
+        # an evaluation always ends: at eval_steps, at a cap of the env's own (a TimeLimit,
+        # an env that bounds its episodes itself, as the corridor does), else within
+        # _EVAL_GUARD_STEPS steps per episode (max_steps where more) or with an error
         guard = None
-        if spec.eval_steps is None and not _has_time_limit(eval_env):
-            guard = int(spec.eval_episodes or 1) * spec.max_steps
+        if spec.eval_steps is None and _episode_cap(eval_env) is None:
+            per_episode = max(spec.max_steps, _EVAL_GUARD_STEPS)
+            guard = int(spec.eval_episodes or 1) * per_episode
         eval_teacher = _make_teacher(spec.teacher, eval_env, seed, spec.teacher_kwargs)
         teacher_perf, teacher_ended = _evaluate(
             eval_teacher, spec, eval_env, score, True, "the teacher", guard

@@ -1809,8 +1809,9 @@ def _parser() -> argparse.ArgumentParser:
         type=_positive_int,
         metavar="N",
         help=g + "episodes per evaluation (default 10; none when --eval-steps is given alone). "
-        "Without --eval-steps, on an env without a TimeLimit (registered without "
-        "max_episode_steps), an episode not ended within --max-steps steps stops the sweep",
+        "Without --eval-steps, on an env with no step cap (no TimeLimit, none of its own), an "
+        "evaluation whose episodes have not ended within 10,000 steps each (--max-steps where "
+        "more) stops the sweep",
     )
     p.add_argument(
         "--eval-steps",
