@@ -264,6 +264,11 @@ def test_a_session_directory_given_as_prior_points_to_load_demonstrations(tmp_pa
     folder.mkdir()
     with pytest.raises(TypeError, match=r"directory '.*folder', which holds no teaching session"):
         make(tmp_path / "other", folder if as_path else str(folder))
+    # a folder of one's own with a config.json of one's own holds no session either (the
+    # advice to load its demonstrations would fail)
+    (folder / "config.json").write_text('{"lr": 0.1}')
+    with pytest.raises(TypeError, match=r"directory '.*folder', which holds no teaching session"):
+        make(tmp_path / "other", folder if as_path else str(folder))
 
 
 def test_a_fitted_model_and_a_prior_are_refused_together(tmp_path):

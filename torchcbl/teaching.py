@@ -88,6 +88,7 @@ from torchcbl.session import (
     _check_restorable,
     _InterruptHold,
     _model_args,
+    _names_a_session_format,
     _read_prior,
     _warn_unrecorded_args,
     build_model,
@@ -439,7 +440,10 @@ def _check_prior(value: Any, n_features: int, n_actions: int) -> tuple[np.ndarra
     if isinstance(value, (str, os.PathLike)):
         path = os.fspath(value)
         if os.path.isdir(path):  # numpy cannot load it: a session's is read by the store
-            if os.path.isfile(os.path.join(path, "config.json")):
+            # a session's as the store tells one (a user's own config.json is none)
+            if _names_a_session_format(Path(path) / "config.json") or os.path.isfile(
+                os.path.join(path, "steps.sqlite")
+            ):
                 raise TypeError(
                     f"{name}: expected {want}, got the session directory {path!r}; pass its "
                     "demonstrations (its training set, its own prior included): "
@@ -447,7 +451,7 @@ def _check_prior(value: Any, n_features: int, n_actions: int) -> tuple[np.ndarra
                 )
             raise TypeError(
                 f"{name}: expected {want}, got the directory {path!r}, which holds no teaching "
-                "session (no config.json); pass a session's demonstrations with "
+                "session (no torchcbl session's config.json); pass a session's demonstrations with "
                 "prior_demonstrations=torchcbl.session.load_demonstrations(session_dir), or "
                 "a .npz file's with d = numpy.load(path); "
                 "prior_demonstrations=(d['observations'], d['actions'])."
