@@ -7,11 +7,13 @@ import contextlib
 import hashlib
 import json
 import sqlite3
+import threading
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 from _toy_envs import oracle, rare_regions_world
 from gymnasium import spaces
 
@@ -313,3 +315,30 @@ def test_an_old_session_whose_space_cannot_be_read_resumes_as_it_did(tmp_path):
     _teach(run, gym.make("CartPole-v1"))
     _as_old_session(run, "Dict('x': " + _cartpole_space_text(precision=2) + ")")
     _resumes(run, gym.make("CartPole-v1"))
+
+
+class _LoggedGMM(GaussianMixtureSet):
+    """A model holding what cannot be copied (a lock, as a logger or a writer's handle)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.log_lock = threading.Lock()
+
+
+def test_a_model_that_cannot_be_copied_resumes_its_fitted_session(tmp_path):
+    """Resume tried the starting model's checkpoint on a deep copy of the given model, so one
+    holding a lock failed with TypeError: cannot pickle '_thread.lock' object."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    x, y = env.sample(120, np.random.default_rng(0))
+    fitted = _LoggedGMM(3, 2, seed=0)
+    fitted.fit(x, y)
+    config = TeachingConfig(noninteractive=False)
+    with ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    ) as ct:
+        ct.run(max_steps=30)
+    model = _LoggedGMM(3, 2, seed=0)
+    ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
+    assert model.is_fitted
+    assert torch.equal(model.means_, fitted.means_)

@@ -2580,9 +2580,10 @@ def _restore_plan(
     """Where :func:`restore_model` starts: the scan of ``checkpoints/`` and ``k``, the labels
     the model was last fitted on. Reads only. Raises the :class:`CorruptSessionError` of a
     session started from a fitted model (``starts_fitted``) that still stands on it and whose
-    checkpoint 0 is missing, damaged or not this model's state (tried on a copy of ``model``),
-    as restore_model would after setting aside what it passes over; so a resume refuses it
-    before it opens the session (:func:`_check_restorable`).
+    checkpoint 0 is missing, damaged or not this model's state (tried on a copy of ``model``
+    where :func:`_trial_copy` makes one), as restore_model would after setting aside what it
+    passes over; so a resume refuses it before it opens the session
+    (:func:`_check_restorable`).
 
     Raises:
         IncompatibleRunDirError: ``checkpoints/`` cannot be listed.
@@ -2594,9 +2595,11 @@ def _restore_plan(
     if not starts_fitted:
         return scan, k
     why0 = next((why for n, _, why in scan.passed_over if n == 0), "missing")
-    trial = copy.deepcopy(model)
+    trial = _trial_copy(model)
 
     def loads(state: dict[str, Any]) -> bool:
+        if trial is None:  # left to restore_model's own load, which refuses it alike
+            return True
         try:
             trial.load_state_dict(state)
             return True
@@ -2623,6 +2626,21 @@ def _restore_plan(
         if not loads(zero["state_dict"]):
             raise _lost_start(run_dir, k, "unreadable as this model's state")
     return scan, k
+
+
+def _trial_copy(model: torch.nn.Module) -> torch.nn.Module | None:
+    """A copy of ``model`` to try a checkpoint on, or ``None`` where a copy would cost or
+    fail: a model with tensors off the CPU (a copy would double its accelerator memory) or
+    holding what cannot be copied (a lock, a logger). Without one, whether the checkpoint
+    loads is found by :func:`restore_model`'s own load, which raises the same error, only
+    after the session was opened."""
+    tensors = [*model.parameters(), *model.buffers()]
+    if any(t.device.type != "cpu" for t in tensors):
+        return None
+    try:
+        return copy.deepcopy(model)
+    except Exception:  # e.g. TypeError: cannot pickle '_thread.lock' object
+        return None
 
 
 def _check_restorable(
