@@ -7,11 +7,13 @@ import contextlib
 import hashlib
 import json
 import sqlite3
+import threading
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 from _toy_envs import oracle, rare_regions_world
 from gymnasium import spaces
 
@@ -259,3 +261,84 @@ def test_a_resume_refused_for_a_damaged_step_touches_no_file(tmp_path):
     with pytest.raises(CorruptSessionError, match="the logged step 3 is not a valid step"):
         ConfidentTeacher.resume(run, gym.make(LINE_ID, max_episode_steps=30), teacher)
     assert _files_of(run) == before
+
+
+# -- 3. sessions stored before the class was kept, under a program's numpy print options -------
+
+
+def _as_old_session(run: Path, space_text: str) -> None:
+    """Rewrite config.json as a session stored before the env's class was kept would be, its
+    observation space as gymnasium printed it then."""
+    config = json.loads((run / "config.json").read_text())
+    config["env"].pop("class", None)
+    config["env"]["observation_space"] = space_text
+    (run / "config.json").write_text(json.dumps(config))
+
+
+def _cartpole_space_text(scale: float = 1.0, **options) -> str:
+    """CartPole's observation space (its bounds times ``scale``) as gymnasium printed it
+    under numpy's print ``options`` (its repr follows the options in force when built)."""
+    space = gym.make("CartPole-v1").observation_space
+    with np.printoptions(**options):
+        return repr(spaces.Box(space.low * scale, space.high * scale, dtype=space.dtype))
+
+
+@pytest.mark.parametrize(
+    "options",
+    [dict(precision=3, suppress=True), dict(precision=1), dict(precision=5, floatmode="fixed")],
+)
+def test_an_old_session_resumes_whatever_numpy_printed_its_space_with(tmp_path, options):
+    """A session stored before the env's class was kept holds its observation space as
+    gymnasium printed it under the writer's numpy print options: one written after
+    np.set_printoptions(precision=3, suppress=True) (Box([-4.8 -inf -0.419 -inf], ...)) was
+    refused, as neither the default nor the current options print it so."""
+    run = tmp_path / "run"
+    _teach(run, gym.make("CartPole-v1"))
+    _as_old_session(run, _cartpole_space_text(**options))
+    _resumes(run, gym.make("CartPole-v1"))
+
+
+def test_an_old_session_refuses_another_space_whatever_numpy_printed_it_with(tmp_path):
+    """Another space (other bounds, shape or dtype) is still refused, printed as it was."""
+    run = tmp_path / "run"
+    _teach(run, gym.make("CartPole-v1"))
+    _as_old_session(run, _cartpole_space_text(scale=2.0, precision=3, suppress=True))
+    _refused(run, gym.make("CartPole-v1"), "-0.838")
+    _as_old_session(run, _cartpole_space_text(precision=3).replace("float32", "float64"))
+    _refused(run, gym.make("CartPole-v1"), "float64")
+
+
+def test_an_old_session_whose_space_cannot_be_read_resumes_as_it_did(tmp_path):
+    """An observation space text that cannot be read back as a Box (a Dict of Boxes, printed
+    under other options) was not compared before the class was kept: it resumes."""
+    run = tmp_path / "run"
+    _teach(run, gym.make("CartPole-v1"))
+    _as_old_session(run, "Dict('x': " + _cartpole_space_text(precision=2) + ")")
+    _resumes(run, gym.make("CartPole-v1"))
+
+
+class _LoggedGMM(GaussianMixtureSet):
+    """A model holding what cannot be copied (a lock, as a logger or a writer's handle)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.log_lock = threading.Lock()
+
+
+def test_a_model_that_cannot_be_copied_resumes_its_fitted_session(tmp_path):
+    """Resume tried the starting model's checkpoint on a deep copy of the given model, so one
+    holding a lock failed with TypeError: cannot pickle '_thread.lock' object."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    x, y = env.sample(120, np.random.default_rng(0))
+    fitted = _LoggedGMM(3, 2, seed=0)
+    fitted.fit(x, y)
+    config = TeachingConfig(noninteractive=False)
+    with ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    ) as ct:
+        ct.run(max_steps=30)
+    model = _LoggedGMM(3, 2, seed=0)
+    ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
+    assert model.is_fitted
+    assert torch.equal(model.means_, fitted.means_)

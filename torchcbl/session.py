@@ -2580,9 +2580,10 @@ def _restore_plan(
     """Where :func:`restore_model` starts: the scan of ``checkpoints/`` and ``k``, the labels
     the model was last fitted on. Reads only. Raises the :class:`CorruptSessionError` of a
     session started from a fitted model (``starts_fitted``) that still stands on it and whose
-    checkpoint 0 is missing, damaged or not this model's state (tried on a copy of ``model``),
-    as restore_model would after setting aside what it passes over; so a resume refuses it
-    before it opens the session (:func:`_check_restorable`).
+    checkpoint 0 is missing, damaged or not this model's state (tried on a copy of ``model``
+    where :func:`_trial_copy` makes one), as restore_model would after setting aside what it
+    passes over; so a resume refuses it before it opens the session
+    (:func:`_check_restorable`).
 
     Raises:
         IncompatibleRunDirError: ``checkpoints/`` cannot be listed.
@@ -2594,9 +2595,11 @@ def _restore_plan(
     if not starts_fitted:
         return scan, k
     why0 = next((why for n, _, why in scan.passed_over if n == 0), "missing")
-    trial = copy.deepcopy(model)
+    trial = _trial_copy(model)
 
     def loads(state: dict[str, Any]) -> bool:
+        if trial is None:  # left to restore_model's own load, which refuses it alike
+            return True
         try:
             trial.load_state_dict(state)
             return True
@@ -2623,6 +2626,21 @@ def _restore_plan(
         if not loads(zero["state_dict"]):
             raise _lost_start(run_dir, k, "unreadable as this model's state")
     return scan, k
+
+
+def _trial_copy(model: torch.nn.Module) -> torch.nn.Module | None:
+    """A copy of ``model`` to try a checkpoint on, or ``None`` where a copy would cost or
+    fail: a model with tensors off the CPU (a copy would double its accelerator memory) or
+    holding what cannot be copied (a lock, a logger). Without one, whether the checkpoint
+    loads is found by :func:`restore_model`'s own load, which raises the same error, only
+    after the session was opened."""
+    tensors = [*model.parameters(), *model.buffers()]
+    if any(t.device.type != "cpu" for t in tensors):
+        return None
+    try:
+        return copy.deepcopy(model)
+    except Exception:  # e.g. TypeError: cannot pickle '_thread.lock' object
+        return None
 
 
 def _check_restorable(
@@ -3366,7 +3384,11 @@ def _env_problems(
     kept_space = senv.get("observation_space")
     if kept_space is not None and space is not None:
         given = observation_space_text(space)
-        if kept_space not in (given, repr(space)):  # (repr: a text kept under other options)
+        if kept_class is None:  # kept before 2026-11-27, under the writer's print options
+            same = _printed_as(kept_space, space)
+        else:  # written with numpy's defaults (repr: a text kept under other options)
+            same = kept_space in (given, repr(space))
+        if same is False:
             differ.append(
                 f"env observation space: the session's is {kept_space}, the given env's {given}"
             )
@@ -3432,6 +3454,81 @@ _NUMPY_PRINT_DEFAULTS: dict[str, Any] = {
     "formatter": None,
     "legacy": False,
 }
+
+
+_BOX_TEXT = re.compile(r"Box\((?P<bounds>.*), (?P<shape>\([0-9, ]*\)), (?P<dtype>\w+)\)", re.S)
+
+
+def _printed_as(text: str, space: Any) -> bool | None:
+    """Whether ``text`` is ``space`` as gymnasium printed it under any of numpy's print
+    options (a session stored before the env's class was kept wrote the observation space's
+    ``repr`` under the options its program had set, e.g. ``precision=3, suppress=True``):
+    for a ``Box``, its shape and dtype as written, and each bound as printed, to the digits
+    printed. ``None`` where the text cannot be read so (a ``Dict``, a summarized array, ...):
+    such a session's space was not compared before, and is not now."""
+    import gymnasium as gym
+
+    if not text.startswith("Box("):
+        if "[" in text or "Box(" in text:  # a space holding numbers numpy printed
+            return None
+        return text == repr(space)  # e.g. Discrete(2): no numpy print option changes it
+    match = _BOX_TEXT.fullmatch(text)
+    if match is None:
+        return None
+    if not isinstance(space, gym.spaces.Box):
+        return False
+    if match["shape"] != str(space.shape) or match["dtype"] != str(space.dtype):
+        return False
+    bounds = _split_bounds(match["bounds"])
+    if bounds is None:
+        return None
+    for printed, given in zip(bounds, (space.low, space.high), strict=True):
+        same = _numbers_printed_as(printed, np.asarray(given, np.float64).ravel())
+        if same is not True:
+            return same
+    return True
+
+
+def _split_bounds(text: str) -> tuple[str, str] | None:
+    """``"low, high"`` of a Box's text as its two printed bounds (an array in brackets or
+    one number), or ``None``."""
+    if text.startswith("["):
+        depth = 0
+        for i, ch in enumerate(text):
+            depth += {"[": 1, "]": -1}.get(ch, 0)
+            if depth == 0:
+                rest = text[i + 1 :]
+                return (text[: i + 1], rest[2:]) if rest.startswith(", ") else None
+        return None
+    low, sep, high = text.partition(", ")
+    return (low, high) if sep else None
+
+
+def _numbers_printed_as(printed: str, values: np.ndarray) -> bool | None:
+    """Whether ``printed`` (one number or a printed array) is ``values`` to the digits it
+    shows; ``None`` where it cannot be read (a summarized array)."""
+    tokens = printed.replace("[", " ").replace("]", " ").split()
+    if "..." in tokens:
+        return None
+    try:
+        numbers = [float(t) for t in tokens]
+    except ValueError:
+        return None
+    if len(numbers) == 1:  # a uniform bound, written as one number
+        tokens, numbers = tokens * values.size, numbers * values.size
+    if len(numbers) != values.size:
+        return False
+    for token, number, value in zip(tokens, numbers, values.tolist(), strict=True):
+        if not np.isfinite(number) or not np.isfinite(value):
+            if not (number == value or (np.isnan(number) and np.isnan(value))):
+                return False
+            continue
+        mantissa, _, exponent = token.lower().partition("e")
+        digits = len(mantissa.partition(".")[2])
+        tolerance = 0.5 * 10.0 ** (int(exponent or 0) - digits)
+        if abs(number - value) > tolerance * (1 + 1e-6) + 1e-7 * abs(value):
+            return False
+    return True
 
 
 def observation_space_text(space: Any) -> str:
