@@ -852,6 +852,30 @@ def _names_a_session_format(config: Path) -> bool:
     return isinstance(fmt, str) and fmt.startswith("torchcbl.session/")
 
 
+def _a_file_in_the_way(path: Path) -> Path | None:
+    """``path`` itself or its nearest parent that is a file (a run directory cannot be made
+    there), or None; reads only."""
+    return next((p for p in (path, *path.parents) if p.is_file()), None)
+
+
+def _not_a_directory(path: Path, culprit: Path) -> IncompatibleRunDirError:
+    return IncompatibleRunDirError(
+        f"run_dir {str(path)!r} cannot be a directory: {culprit} is a file. Give a new "
+        "directory path for a new session (or a session's directory to resume it)."
+    )
+
+
+def _check_new_session_path(path: Path) -> None:
+    """What :meth:`SessionStore.create` refuses before it writes, checked before a session's
+    costly preparation (the fit on its prior demonstrations); reads only, and create checks
+    again. Raises :class:`IncompatibleRunDirError` as :func:`_check_new_session_dir` does, or
+    where ``path`` is a file or lies under one."""
+    culprit = _a_file_in_the_way(path)
+    if culprit is not None:
+        raise _not_a_directory(path, culprit)
+    _check_new_session_dir(path)
+
+
 def _check_new_session_dir(
     path: Path, *, name: str = "run_dir", resume: str = _RESUME_ADVICE
 ) -> None:
@@ -1270,11 +1294,7 @@ class SessionStore:
         try:
             path.mkdir(parents=True, exist_ok=True)
         except (FileExistsError, NotADirectoryError) as exc:  # it, or a parent, is a file
-            culprit = next((p for p in (path, *path.parents) if p.is_file()), path)
-            raise IncompatibleRunDirError(
-                f"run_dir {str(path)!r} cannot be a directory: {culprit} is a file. Give a new "
-                "directory path for a new session (or a session's directory to resume it)."
-            ) from exc
+            raise _not_a_directory(path, _a_file_in_the_way(path) or path) from exc
         except OSError as exc:
             raise _write_error(
                 exc,
