@@ -22,7 +22,7 @@ from matplotlib.patches import Circle
 
 from corridor.maps import CorridorMap
 from corridor.world import SENSOR_NAMES, CorridorWorld
-from torchcbl.evaluation import figure_style
+from torchcbl.evaluation import figure_style, save_whole
 
 __all__ = [
     "ACTION_COLORS",
@@ -159,13 +159,12 @@ def render_rgb(
 
 
 def save_png(fig_or_rgb: Figure | np.ndarray, path: str | Path) -> Path:
-    """Write a figure or an RGB array to a PNG file; returns the path."""
-    path = Path(path)
+    """Write a figure or an RGB array to a PNG file, whole or not at all (a temporary file
+    renamed over ``path``: :func:`torchcbl.evaluation.save_whole`); returns the path."""
     if isinstance(fig_or_rgb, Figure):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
 
         FigureCanvasAgg(fig_or_rgb)
-        fig_or_rgb.savefig(path)
-    else:
-        imsave(path, np.asarray(fig_or_rgb))
-    return path
+        return save_whole(path, fig_or_rgb.savefig)
+    rgb = np.asarray(fig_or_rgb)
+    return save_whole(path, lambda fname, **kwargs: imsave(fname, rgb, **kwargs))

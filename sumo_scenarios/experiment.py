@@ -60,6 +60,7 @@ from torchcbl.evaluation import (
     mean_sd,
     progress_bar,
     run_versions,
+    save_whole,
     write_atomically,
     write_seed_result,
 )
@@ -1040,7 +1041,8 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
 
     def save(fig: Figure, name: str) -> None:
         fig.tight_layout()
-        fig.savefig(run_dir / name, dpi=100, bbox_inches="tight")  # long titles kept whole
+        # long titles kept whole; the PNG whole or not at all (a temporary file renamed)
+        save_whole(run_dir / name, fig.savefig, dpi=100, bbox_inches="tight")
         written.append(run_dir / name)
 
     stages = results["stages"]

@@ -1511,3 +1511,76 @@ def test_an_env_that_bounds_its_own_episodes_is_evaluated_whatever_max_steps():
     cell = bm.run_cell(config)
     assert cell["teacher_performance"] == 1.0
     assert cell["teacher_episodes_ended"] == spec.eval_episodes
+
+
+def _curve_cells():
+    return [
+        {
+            "env": "e",
+            "strategy": "cbl",
+            "teacher_performance": 1.0,
+            "curve": [{"labels": n, "performance": p + 0.1 * s} for n, p in ((5, 0.2), (10, 0.8))],
+        }
+        for s in range(2)
+    ]
+
+
+def _half_then_fail(monkeypatch):
+    """Make Figure.savefig write half its file to whatever it is given, then fail (a sweep
+    killed, a disk filled, mid-write)."""
+    import io
+
+    from matplotlib.figure import Figure
+
+    savefig = Figure.savefig
+
+    def half(fig, fname, *args, **kwargs):
+        buf = io.BytesIO()
+        savefig(fig, buf, *args, **{"format": "png", **kwargs})
+        data = buf.getvalue()[: len(buf.getvalue()) // 2]
+        if hasattr(fname, "write"):
+            fname.write(data)
+        else:
+            Path(fname).write_bytes(data)
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Figure, "savefig", half)
+
+
+def test_plot_curves_failing_mid_write_leaves_no_partial_png(tmp_path, monkeypatch):
+    """plot_curves wrote learning_curves.png straight under its name: a sweep killed (or a
+    disk filled) while matplotlib wrote it left a truncated PNG there, while results.json
+    is written whole or not at all. The plot is put in place whole now (a temporary file in
+    the same folder renamed over it): a write that fails leaves the earlier file as it was,
+    and no temporary file."""
+    png = tmp_path / "learning_curves.png"
+    first = bm.plot_curves(_curve_cells(), png, envs=["e"]).read_bytes()
+    assert first.startswith(b"\x89PNG") and first.rstrip(b"\x00").endswith(b"IEND\xaeB`\x82")
+    _half_then_fail(monkeypatch)
+    with pytest.raises(OSError, match="No space"):
+        bm.plot_curves(_curve_cells(), png, envs=["e"])
+    assert png.read_bytes() == first  # the earlier plot, whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["learning_curves.png"]
+
+
+def test_save_whole_writes_what_savefig_writes_and_nothing_when_it_fails(tmp_path, monkeypatch):
+    """The helper every PNG writer goes through (the benchmark's plot, the reproduction's
+    figures): the same bytes as savefig writing to the path itself, and, where savefig fails
+    mid-way, no file under the name nor a temporary one beside it."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from torchcbl.evaluation import save_whole
+
+    fig = Figure(figsize=(3, 2))
+    FigureCanvasAgg(fig)
+    fig.subplots().plot([0, 1, 3], [2, 0, 1])
+    fig.savefig(tmp_path / "direct.png", dpi=77, bbox_inches="tight")
+    assert save_whole(tmp_path / "whole.png", fig.savefig, dpi=77, bbox_inches="tight") == (
+        tmp_path / "whole.png"
+    )
+    assert (tmp_path / "whole.png").read_bytes() == (tmp_path / "direct.png").read_bytes()
+    _half_then_fail(monkeypatch)
+    with pytest.raises(OSError, match="No space"):
+        save_whole(tmp_path / "failed.png", fig.savefig, dpi=77)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["direct.png", "whole.png"]

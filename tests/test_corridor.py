@@ -1440,3 +1440,36 @@ def test_prioritized_sweeping_config_takes_numpy_numbers_as_plain_ones():
     for bad in (dict(max_steps=np.bool_(True)), dict(gamma=np.float64("nan"))):
         with pytest.raises(ValueError, match=next(iter(bad))):
             PrioritizedSweepingConfig(**bad)
+
+
+@pytest.mark.parametrize("what", ["figure", "rgb"])
+def test_save_png_failing_mid_write_leaves_the_earlier_png_whole(tmp_path, monkeypatch, what):
+    """save_png (the reproduction's figure3/figure4/map.png) wrote straight under the final
+    name: a run killed while matplotlib wrote left a truncated PNG there. It is put in place
+    whole now; a failed write leaves the earlier file as it was and no temporary file."""
+    import matplotlib.image
+    from matplotlib.figure import Figure
+
+    from corridor.render import map_figure, render_rgb, save_png
+
+    world = CorridorWorld(load_map("figure2"))
+    drawing = map_figure(world) if what == "figure" else render_rgb(world)
+    png = tmp_path / "map.png"
+    first = save_png(drawing, png).read_bytes()
+    assert first.endswith(b"IEND\xaeB`\x82")
+
+    def half(fname, *args, **kwargs):
+        data = b"\x89PNG\r\n\x1a\n half a figure"
+        if hasattr(fname, "write"):
+            fname.write(data)
+        else:
+            Path(fname).write_bytes(data)
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Figure, "savefig", lambda fig, fname, *a, **k: half(fname))
+    monkeypatch.setattr(matplotlib.image, "imsave", half)
+    monkeypatch.setattr("corridor.render.imsave", half, raising=False)
+    with pytest.raises(OSError, match="No space"):
+        save_png(drawing, png)
+    assert png.read_bytes() == first
+    assert [p.name for p in tmp_path.iterdir()] == ["map.png"]

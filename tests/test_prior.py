@@ -311,3 +311,45 @@ def test_an_earlier_sessions_training_set_starts_the_next_one_relabelled_as_it_w
     nxt = make(tmp_path / "next", (tx, ty))
     assert same_state(nxt.model, snapshot)  # the next session starts where this one stood
     nxt.close()
+
+
+class CountingFits(GaussianMixtureSet):
+    """A model whose fits are counted: a refused session must not fit its prior first."""
+
+    fits = 0
+
+    def fit(self, *args, **kwargs):
+        type(self).fits += 1
+        return super().fit(*args, **kwargs)
+
+
+def _tree(path):
+    return sorted(
+        (str(p.relative_to(path)), p.read_bytes() if p.is_file() else None) for p in path.rglob("*")
+    )
+
+
+@pytest.mark.parametrize("held", ["own files", "a session", "a file"])
+def test_a_refused_run_dir_is_refused_before_the_prior_is_fitted(tmp_path, monkeypatch, held):
+    run_dir = tmp_path / "run"
+    if held == "own files":
+        run_dir.mkdir()
+        (run_dir / "notes.txt").write_text("mine\n")
+    elif held == "a session":
+        make(run_dir).close()
+    else:
+        run_dir.write_text("a file\n")
+    before = _tree(tmp_path)
+    monkeypatch.setattr(CountingFits, "fits", 0)
+    env = rare_regions_world()
+    with pytest.raises(IncompatibleRunDirError):
+        ConfidentTeacher(
+            env,
+            oracle(env),
+            model=CountingFits(3, 2, seed=3),
+            prior_demonstrations=prior(),
+            run_dir=run_dir,
+            progress=False,
+        )
+    assert CountingFits.fits == 0  # refused before the fit, not after it
+    assert _tree(tmp_path) == before  # and the folder untouched

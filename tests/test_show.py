@@ -616,3 +616,92 @@ def test_show_of_a_session_without_journal_whose_checkpoints_cannot_be_listed(
     assert main(["show", str(tmp_path)]) == 0
     (line,) = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith(f"{run}: ")]
     assert "cannot be read by this user" in line and str(run / "checkpoints") in line
+
+
+class _GmmWithMore:
+    """The state of a model of another class: a GaussianMixtureSet subclass with a buffer of
+    its own (``temperature_``), or a module that is no mixture at all."""
+
+    @staticmethod
+    def subclass_state(n_actions: int, n_features: int):
+        import torch
+
+        from torchcbl import GaussianMixtureSet
+
+        model = GaussianMixtureSet(n_actions, n_features, seed=0)
+        model.register_buffer("temperature_", torch.ones(()))
+        return model.state_dict()
+
+    @staticmethod
+    def linear_state(n_actions: int, n_features: int):
+        import torch
+
+        return torch.nn.Linear(n_features, n_actions).state_dict()
+
+
+def _with_state_of(path: Path, state) -> None:
+    """Rewrite the checkpoint at ``path`` with ``state``, its count and label digest kept: a
+    checkpoint torchcbl would take for the session's, holding another model's state."""
+    import torch
+
+    payload = torch.load(path, weights_only=True)
+    payload["state_dict"] = state
+    torch.save(payload, path)
+
+
+@pytest.mark.parametrize("other", ["subclass", "linear"])
+def test_show_notes_a_checkpoint_holding_another_model_classes_state(tmp_path, capsys, other):
+    """describe / `torchcbl show` reported a checkpoint holding the state of another model
+    class than the session's (a file of another session's, of a subclass) as the one resume
+    starts from: resume cannot load it into the session's GaussianMixtureSet, sets it aside as
+    .damaged and refits from the log, which only resume found out. Show now tries the state
+    on the session's model, as resume loads it, and notes the file, still reading only."""
+    run = tmp_path / "run"
+    _small_session(run)
+    newest = run / "checkpoints" / "model-00000018.pt"
+    _with_state_of(newest, getattr(_GmmWithMore, f"{other}_state")(3, 2))
+    before = _files_of(run)
+    s = describe(run)
+    (note,) = s.notes
+    assert note.startswith("checkpoints/model-00000018.pt holds the state of another model"), note
+    assert "GaussianMixtureSet" in note and "model-00000018.pt.damaged" in note, note
+    assert s.last_checkpoint is None  # resume starts from none: it refits on the log's labels
+    assert main(["show", str(run)]) == 0
+    out = capsys.readouterr().out
+    assert "\ncheckpoint: none\n" in out and "holds the state of another model" in out
+    assert _files_of(run) == before  # show reads only
+    env = rare_regions_world(episode_length=10)
+    ConfidentTeacher.resume(run, env, oracle(env), progress=False).close()  # as noted:
+    assert (run / "checkpoints" / "model-00000018.pt.damaged").is_file()
+    assert describe(run).notes == ()
+
+
+def test_show_notes_the_starting_model_of_another_class_that_resume_refuses(tmp_path, capsys):
+    """A session started from a fitted model stands on its checkpoint 0 until the first
+    refit; one holding another class's state makes resume refuse the session. Show says so
+    beforehand, as it does for a damaged checkpoint 0."""
+    from torchcbl import GaussianMixtureSet
+    from torchcbl.errors import CorruptSessionError
+
+    env = rare_regions_world(episode_length=10)
+    model = GaussianMixtureSet(3, 2, seed=0).fit(*env.sample(40, np.random.default_rng(2)))
+    run = tmp_path / "run"
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        model=model,
+        config=TeachingConfig(max_new=1000),
+        run_dir=run,
+        seed=0,
+        progress=False,
+    )
+    ct.run(max_steps=5)
+    ct.close()
+    _with_state_of(run / "checkpoints" / "model-00000000.pt", _GmmWithMore.subclass_state(3, 2))
+    (note,) = describe(run).notes
+    assert note.startswith("checkpoints/model-00000000.pt holds the state of another model"), note
+    assert "refuse the session" in note, note
+    assert main(["show", str(run)]) == 0
+    assert "refuse the session" in capsys.readouterr().out
+    with pytest.raises(CorruptSessionError, match="unreadable as this model's state"):
+        ConfidentTeacher.resume(run, env, oracle(env), progress=False)

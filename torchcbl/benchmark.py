@@ -82,7 +82,7 @@ import gymnasium as gym
 import numpy as np
 
 from torchcbl._durable import write_durably
-from torchcbl.evaluation import figure_style, mean_sd, run_versions, worker_pool
+from torchcbl.evaluation import figure_style, mean_sd, run_versions, save_whole, worker_pool
 from torchcbl.records import _is_int
 
 __all__ = [
@@ -1387,6 +1387,4 @@ def plot_curves(
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    out = Path(path)
-    fig.savefig(out, dpi=110)
-    return out
+    return save_whole(path, fig.savefig, dpi=110)  # whole or not at all, as results.json

@@ -30,6 +30,7 @@ __all__ = [
     "mean_sd",
     "progress_bar",
     "run_versions",
+    "save_whole",
     "worker_pool",
 ]
 
@@ -531,6 +532,36 @@ def write_atomically(path: Any, text: str) -> None:
     none, after a power cut too."""
     path = Path(path)
     write_durably(path, text.encode("utf-8"), path.with_name(path.name + ".tmp"))
+
+
+def save_whole(path: str | os.PathLike[str], save: Callable[..., Any], **kwargs: Any) -> Path:
+    """Write the file ``save(path, **kwargs)`` writes (``Figure.savefig``,
+    ``matplotlib.image.imsave``), whole or not at all: ``save`` writes into memory, in the
+    format ``path``'s extension names (as it would for the path itself, unless ``format`` is
+    given), and the bytes go to a temporary file in the same folder that is fsynced and renamed
+    over ``path``. A run killed (or a disk filled) mid-write leaves the earlier file as it was,
+    never a truncated one under the name; the bytes are those ``save`` writes to the path.
+
+    Returns ``path`` as a :class:`~pathlib.Path`. An error of ``save`` or of the write is
+    raised as it is, with no temporary file left behind.
+    """
+    import io
+
+    path = Path(path)
+    if "format" not in kwargs and path.suffix:
+        kwargs["format"] = path.suffix[1:]
+    buf = io.BytesIO()
+    save(buf, **kwargs)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        write_durably(path, buf.getvalue(), tmp)
+    except BaseException:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise
+    return path
 
 
 def _short(value: Any, width: int = 60) -> str:

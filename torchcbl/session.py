@@ -163,6 +163,7 @@ from __future__ import annotations
 
 import bisect
 import copy
+import dataclasses
 import datetime
 import errno
 import fcntl
@@ -852,6 +853,30 @@ def _names_a_session_format(config: Path) -> bool:
     return isinstance(fmt, str) and fmt.startswith("torchcbl.session/")
 
 
+def _a_file_in_the_way(path: Path) -> Path | None:
+    """``path`` itself or its nearest parent that is a file (a run directory cannot be made
+    there), or None; reads only."""
+    return next((p for p in (path, *path.parents) if p.is_file()), None)
+
+
+def _not_a_directory(path: Path, culprit: Path) -> IncompatibleRunDirError:
+    return IncompatibleRunDirError(
+        f"run_dir {str(path)!r} cannot be a directory: {culprit} is a file. Give a new "
+        "directory path for a new session (or a session's directory to resume it)."
+    )
+
+
+def _check_new_session_path(path: Path) -> None:
+    """What :meth:`SessionStore.create` refuses before it writes, checked before a session's
+    costly preparation (the fit on its prior demonstrations); reads only, and create checks
+    again. Raises :class:`IncompatibleRunDirError` as :func:`_check_new_session_dir` does, or
+    where ``path`` is a file or lies under one."""
+    culprit = _a_file_in_the_way(path)
+    if culprit is not None:
+        raise _not_a_directory(path, culprit)
+    _check_new_session_dir(path)
+
+
 def _check_new_session_dir(
     path: Path, *, name: str = "run_dir", resume: str = _RESUME_ADVICE
 ) -> None:
@@ -1270,11 +1295,7 @@ class SessionStore:
         try:
             path.mkdir(parents=True, exist_ok=True)
         except (FileExistsError, NotADirectoryError) as exc:  # it, or a parent, is a file
-            culprit = next((p for p in (path, *path.parents) if p.is_file()), path)
-            raise IncompatibleRunDirError(
-                f"run_dir {str(path)!r} cannot be a directory: {culprit} is a file. Give a new "
-                "directory path for a new session (or a session's directory to resume it)."
-            ) from exc
+            raise _not_a_directory(path, _a_file_in_the_way(path) or path) from exc
         except OSError as exc:
             raise _write_error(
                 exc,
@@ -2837,7 +2858,11 @@ class SessionSummary:
             readable, and fitted on the log's labels (its SHA-256 matches them); None: none
             is. The name alone does not make one: a file named ``model-<n>.pt`` that is
             damaged, empty, a directory or stale, or of more labels than the log holds, is
-            passed over and noted in ``notes``.
+            passed over and noted in ``notes``. Nor is one holding a state the session's
+            model cannot load (another class's, or a GaussianMixtureSet's of other sizes or
+            settings; tried where the session's model is torchcbl's GaussianMixtureSet, which
+            the directory rebuilds, not a class of the user's own): None, and noted, as resume
+            and :func:`load_model` then rebuild the model from the log.
         writers: one dict per writer (start or resume) from ``writers.jsonl``: first_step,
             torch_num_threads, torch_num_interop_threads, torch_version, numpy_version,
             model_device, pid, started_utc (what that writer's torchcbl recorded).
@@ -2857,9 +2882,9 @@ class SessionSummary:
         notes: what the readers warned of (steps missing from the log, fewer steps than
             ``writer.lock`` says were committed), lines of ``writers.jsonl`` that could not
             be read, and the files named as checkpoints that resume and :func:`load_model`
-            pass over (what each is and what resume does with it; one of more labels than
-            the log holds is not noted while a writer runs, which may have saved it since
-            the log was read).
+            pass over or cannot load (what each is and what resume does with it; one of
+            more labels than the log holds is not noted while a writer runs, which may have
+            saved it since the log was read).
     """
 
     run_dir: str
@@ -3107,7 +3132,9 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
     may create its ``-shm`` index, as for every reader: the module docstring). Whether a
     writer holds the session is read from ``/proc/locks``, never by taking its lock. Its
     checkpoint is found as resume finds it: the files are read and checked against the log's
-    labels (and the prior demonstrations', read from ``prior.npz``), not taken by name.
+    labels (and the prior demonstrations', read from ``prior.npz``), not taken by name, and
+    its state is tried on a fresh model of the session's (a GaussianMixtureSet session's: a
+    class of the user's own cannot be built here), as resume loads it.
     ``print(describe(run_dir).text())`` shows it in a screenful; ``torchcbl show SESSION_DIR``
     does so at the command line.
 
@@ -3209,8 +3236,9 @@ def _checkpoint_report(
     running: bool | None,
 ) -> tuple[int | None, list[str]]:
     """The checkpoint resume and :func:`load_model` start from (its count of labels; None:
-    none), found as they find it (:func:`_scan_checkpoints`), and a note on each file named as
-    a checkpoint that they pass over: what it is and what resume does with it. Reads only."""
+    none), found as they find it (:func:`_scan_checkpoints`) and loaded as they load it
+    (:func:`_foreign_state`), and a note on each file named as a checkpoint that they pass
+    over or cannot load: what it is and what resume does with it. Reads only."""
     xs, ys = label_sequence(records, corrections)
     try:
         prior = _read_prior(run, config)
@@ -3219,6 +3247,10 @@ def _checkpoint_report(
     px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
     scan = _scan_checkpoints(run / CHECKPOINT_DIR, len(ys), len(py), px + xs, py + ys)
     notes = []
+    foreign = None if scan.payload is None else _foreign_state(config, scan.payload)
+    if foreign is not None and scan.n is not None:
+        notes.append(_foreign_note(config, scan.n, len(ys), foreign))
+        scan = dataclasses.replace(scan, n=None, payload=None)  # resume starts from none
     for n, path, why in scan.passed_over:
         name = f"{CHECKPOINT_DIR}/{path.name}"
         if why == "stale":
@@ -3246,6 +3278,71 @@ def _checkpoint_report(
                 "log lost, or a file put there by hand)"
             )
     return scan.n, notes
+
+
+def _foreign_state(config: dict[str, Any], payload: dict[str, Any]) -> str | None:
+    """Why the session's model cannot load the checkpoint ``payload``'s state, tried as
+    resume and :func:`load_model` load it: into a fresh model built from ``config``
+    (:func:`build_model`), on the CPU; None where it loads, or where no such model can be
+    built here (a class of the user's own: only resume, given one, finds out)."""
+    try:
+        model = build_model(config)
+    except Exception:
+        return None
+    state = payload["state_dict"]
+    try:
+        model.load_state_dict(state)
+    except Exception as exc:
+        name = type(model).__name__
+        own, saved = set(model.state_dict()), {str(k) for k in state}
+
+        def few(keys: set[str]) -> str:
+            names = sorted(keys)
+            more = f" and {len(names) - 3} more" if len(names) > 3 else ""
+            return ", ".join(names[:3]) + more
+
+        if saved - own:
+            keys = "its key {} is" if len(saved - own) == 1 else "its keys {} are"
+            return f"{keys.format(few(saved - own))} not a {name}'s"
+        if "Missing key" in str(exc):
+            return f"it lacks a {name}'s {few(own - saved)}"
+        text = " ".join(str(exc).split()).removeprefix("load_state_dict: ")
+        return text.split("; ", 1)[0][:200]
+    return None
+
+
+def _foreign_note(config: dict[str, Any], n: int, n_labels: int, why: str) -> str:
+    """:func:`describe`'s note on ``checkpoints/model-<n>.pt``, the checkpoint resume would
+    start from, whose state the session's model cannot load (``why``), saying what resume
+    and :func:`load_model` do with it (as :func:`restore_model` does)."""
+    name = f"model-{n:08d}.pt"
+    model = str(config["model"].get("class"))
+    what = (
+        f"{CHECKPOINT_DIR}/{name} holds the state of another model than the session's "
+        f"{model} ({why})"
+    )
+    if n == 0 and config.get("starts_fitted") is True:
+        return (
+            f"{what}: it holds the fitted model the session started from, which no label can "
+            "refit; resume and load_model cannot load it, refuse the session where its model "
+            "still stands on it, and leave the file as it is"
+        )
+    teaching = config["teaching"]
+    k = n + fit_count(n_labels - n, int(teaching["max_new"]))  # the labels the model stood on
+    if k == n:
+        return (
+            f"{what}: resume and load_model cannot load it and refit the model on the log's "
+            f"labels (resume renames it {name}.damaged)"
+        )
+    if teaching.get("refit", "full") == "incremental":
+        return (
+            f"{what}: resume and load_model cannot load it and replay the session's refits "
+            "from the log's labels, leaving the file as it is"
+        )
+    return (
+        f"{what}: resume and load_model do not load it (they refit the model on the log's "
+        f"first {k} labels) and leave the file as it is"
+    )
 
 
 def _damage_text(path: Path) -> str:

@@ -85,6 +85,7 @@ from torchcbl.session import (
     PRIOR_NAME,
     LabelDigest,
     SessionStore,
+    _check_new_session_path,
     _check_restorable,
     _InterruptHold,
     _model_args,
@@ -574,7 +575,8 @@ class ConfidentTeacher:
             that does not exist yet, or an empty one (or one holding only what torchcbl leaves
             where a session could not start, such as its ``writer.lock``). A folder holding a
             session (continue it with :meth:`resume`), what another session left, or files of
-            one's own is refused with :class:`IncompatibleRunDirError`, and nothing is written.
+            one's own is refused with :class:`IncompatibleRunDirError`, and nothing is written
+            (checked before the model is fitted on ``prior_demonstrations``).
         seed: seeds the first ``env.reset`` (and the default model).
         progress: show a tqdm bar with the live counters while :meth:`run` runs.
         on_step: called with each :class:`StepRecord` after it is recorded.
@@ -625,6 +627,9 @@ class ConfidentTeacher:
                 "the fitted model alone."
             )
         self._setup(env, teacher, model, strategy, config, seed, progress, on_step, on_refit)
+        if run_dir is not None:  # refused before the fit on a prior (seconds to minutes), not
+            _check_new_session_path(Path(run_dir))  # after it; reads only, create checks again
+            _check_commit_every(commit_every)
         starts_fitted = _is_fitted(self.model)
         prior = None
         if prior_demonstrations is not None:
@@ -658,7 +663,6 @@ class ConfidentTeacher:
                     "sha256": hashlib.sha256(prior).hexdigest(),
                     "n_demonstrations": self.n_prior,
                 }
-            _check_commit_every(commit_every)
             # a session may start from a fitted model: its checkpoint 0, written with the
             # session (a resume can only load it, no label refits it); one with prior
             # demonstrations has its model fitted on them as checkpoint 0, and them in prior.npz
