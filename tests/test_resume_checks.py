@@ -6,9 +6,12 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import math
 import sqlite3
 import threading
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -16,6 +19,9 @@ import pytest
 import torch
 from _toy_envs import oracle, rare_regions_world
 from gymnasium import spaces
+from test_session_faults import crash
+from test_session_faults import resume as fault_resume
+from test_session_faults import session as fault_session
 
 from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
 from torchcbl.errors import CorruptSessionError, IncompatibleRunDirError
@@ -342,3 +348,134 @@ def test_a_model_that_cannot_be_copied_resumes_its_fitted_session(tmp_path):
     ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
     assert model.is_fitted
     assert torch.equal(model.means_, fitted.means_)
+
+
+# -- 4. a resume goes on from the log as it is once locked, not as it was read before ----------
+
+
+class _HookedGMM(GaussianMixtureSet):
+    """A model whose first ``load_state_dict`` runs ``between`` (then cleared): in a resume of a
+    session started fitted, that is the trial of the starting model, which comes after the log
+    was read read-only and before the session is locked. There it stands for a writer that
+    ran on, or came and went, between the two."""
+
+    between: Callable[[], None] | None = None
+
+    def load_state_dict(self, *args: Any, **kwargs: Any) -> Any:
+        hook, type(self).between = type(self).between, None
+        if hook is not None:
+            hook()
+        return super().load_state_dict(*args, **kwargs)
+
+
+def _hooked_session(run: Path) -> None:
+    env = rare_regions_world()
+    x, y = env.sample(120, np.random.default_rng(0))
+    fitted = _HookedGMM(3, 2, seed=0)
+    fitted.fit(x, y)
+    config = TeachingConfig(noninteractive=False)
+    with ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    ) as ct:
+        ct.run(max_steps=30)
+
+
+def _resume_hooked(run: Path, between: Callable[[], None]) -> ConfidentTeacher:
+    env = rare_regions_world()
+    _HookedGMM.between = between
+    try:
+        ct = ConfidentTeacher.resume(
+            run, env, oracle(env), model=_HookedGMM(3, 2, seed=0), progress=False
+        )
+    finally:
+        ran, _HookedGMM.between = _HookedGMM.between is None, None
+    assert ran  # (the hook came between the read and the lock, or the test tests nothing)
+    return ct
+
+
+def test_a_resume_goes_on_from_the_steps_a_writer_logged_after_its_read_only_read(tmp_path):
+    """Another writer resumed the session and logged 15 steps after this resume had read the
+    log and before it took the lock: this one goes on from step 45, not 30 (where it would
+    log new steps under numbers the log holds)."""
+    run = tmp_path / "run"
+    _hooked_session(run)
+
+    def other_writer() -> None:
+        env = rare_regions_world()
+        model = _HookedGMM(3, 2, seed=0)
+        with ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False) as ct:
+            ct.run(max_steps=45)
+
+    with _resume_hooked(run, other_writer) as ct:
+        assert ct.n_steps == 45
+        assert ct.records == load_records(run)
+        ct.run(max_steps=50)
+    assert [r.step for r in load_records(run)] == list(range(50))
+
+
+def test_a_resume_reads_a_demonstration_finished_after_its_read_only_read(tmp_path):
+    """A demonstration pending in the log (logged, its outcome not yet written) when the
+    resume read it, which its writer finished before the resume took the lock: the resume
+    has its outcome, not the interrupted demonstration it read."""
+    run = tmp_path / "run"
+    _hooked_session(run)
+    done = [r for r in load_records(run) if r.teacher_action is not None][-1]
+    log = run / "steps.sqlite"
+    with contextlib.closing(sqlite3.connect(log)) as db:  # as a writer between the two leaves it
+        db.execute(
+            "UPDATE steps SET pending = 1, reward = NULL, terminated = 0, truncated = 0, "
+            "info = '{}' WHERE step = ?",
+            (done.step,),
+        )
+        db.commit()
+    assert load_records(run)[done.step].info == {"torchcbl_interrupted": True}
+
+    def finish() -> None:  # what the writer's finish() commits
+        with contextlib.closing(sqlite3.connect(log)) as db:
+            db.execute(
+                "UPDATE steps SET reward = ?, terminated = ?, truncated = ?, info = ?, "
+                "pending = 0 WHERE step = ?",
+                (
+                    done.reward,
+                    int(done.terminated),
+                    int(done.truncated),
+                    json.dumps(done.info),
+                    done.step,
+                ),
+            )
+            db.commit()
+
+    with _resume_hooked(run, finish) as ct:
+        assert ct.records[done.step] == done
+        assert ct.records == load_records(run)
+
+
+class _SignedZero(gym.Wrapper):
+    """An env of no reward that returns it as -0.0 (as ``-sum([])`` gives it)."""
+
+    def step(self, action):
+        obs, _, terminated, truncated, info = self.env.step(action)
+        return obs, -0.0, terminated, truncated, info
+
+
+def _as_json(records: list) -> list[str]:
+    return [json.dumps(r.to_dict()) for r in records]  # (tells -0.0 from 0.0)
+
+
+def test_a_resume_has_the_steps_its_journal_held_as_the_log_stores_them(tmp_path):
+    """A killed writer's last steps only in its journal, with a reward of -0.0: read
+    before the lock, from the journal, it is -0.0; replayed into SQLite by the resume, 0.0.
+    The resumed records are what the log holds then, as every reader reads it after."""
+    run = tmp_path / "run"
+    ct, _ = fault_session(run, world=_SignedZero(rare_regions_world()))
+    ct.run(max_steps=20)
+    ct._store.commit_every = 10**6
+    for _ in range(30):
+        ct.step()
+    crash(ct)
+    signs = [math.copysign(1, r.reward) for r in load_records(run) if r.reward is not None]
+    assert -1 in signs  # the journal's steps, read before the lock: -0.0
+    back, _ = fault_resume(run, world=_SignedZero(rare_regions_world()))
+    with back:
+        assert back.n_steps == 50
+        assert _as_json(back.records) == _as_json(load_records(run))

@@ -1365,14 +1365,22 @@ class SessionStore:
         Every refusal comes before anything is written (the lock, the journal, the log): the
         log is read first, read-only, and each of its steps parsed; ``check`` is then called
         with those records and corrections (a demonstration whose outcome never came still
-        pending), and what it raises refuses the resume with no file touched."""
+        pending; it must not change them), and what it raises refuses the resume with no file
+        touched.
+
+        The records returned are the log as it is once locked (a writer may have logged more,
+        or finished a demonstration, between the two): it is read again then, and a row read
+        from SQLite both times and equal keeps the record parsed from it the first time (rows
+        the journal set or changed are parsed again, as are new and changed ones), so an
+        unchanged log is parsed once."""
         run = Path(run_dir)
         load_config(run_dir)
         _check_log_present(run)
         committed = _read_committed(run)  # before the log: a writer commits first
+        from_journal: set[int] = set()
         db = _open_readonly(run)
         try:
-            rows, corrected = _rows(db, run / JOURNAL_NAME, run / LOG_NAME)
+            rows, corrected = _rows(db, run / JOURNAL_NAME, run / LOG_NAME, from_journal)
         finally:
             db.close()
         steps = [row[0] for row in rows]
@@ -1389,10 +1397,20 @@ class SessionStore:
         records = _records_of(rows, run)  # a step that cannot be read: refused here
         if check is not None:
             check(records, _corrections_of(records, corrected))
+        # the records parsed from rows read from SQLite, by step: read again under the lock, a
+        # row found equal keeps its record (a pending one comes back finished or marked
+        # interrupted: unequal). A row of the journal's is parsed again: replayed into SQLite,
+        # it may come back otherwise than it was read (a reward of -0.0 as 0.0)
+        known = {
+            row[0]: (row, record)
+            for row, record in zip(rows, records, strict=True)
+            if row[0] not in from_journal
+        }
+        del rows
         store = cls(run, commit_every=commit_every)
         try:
             store.finalize_pending()
-            records, corrections = store.records_and_corrections()
+            records, corrections = store.records_and_corrections(known)
         except BaseException:
             store._release()
             raise
@@ -1638,10 +1656,15 @@ class SessionStore:
 
     # -- reading ----------------------------------------------------------------------------
 
-    def records_and_corrections(self) -> tuple[list[StepRecord], list[CorrectionRecord]]:
+    def records_and_corrections(
+        self, known: dict[int, tuple[tuple[Any, ...], StepRecord]] | None = None
+    ) -> tuple[list[StepRecord], list[CorrectionRecord]]:
+        """Every record and correction of the log, read through the writer's connection;
+        ``known``: ``{step: (row, record)}`` parsed before, each record kept where its step's
+        row is read equal to ``row`` (:func:`_records_of`)."""
         assert self._db is not None
         rows, corrections = _rows(self._db, None, self.run_dir / LOG_NAME)
-        records = _records_of(rows, self.run_dir)
+        records = _records_of(rows, self.run_dir, known)
         return records, _corrections_of(records, corrections)
 
 
@@ -1775,19 +1798,20 @@ def _table_columns(db: sqlite3.Connection, table: str) -> set[str]:
 
 
 def _rows(
-    db: sqlite3.Connection, journal: Path | None, log: Path
+    db: sqlite3.Connection, journal: Path | None, log: Path, from_journal: set[int] | None = None
 ) -> tuple[list[tuple[Any, ...]], dict[int, int]]:
     try:
-        return _rows_unchecked(db, journal)
+        return _rows_unchecked(db, journal, from_journal)
     except sqlite3.DatabaseError as exc:
         raise _db_error(exc, log) from exc
 
 
 def _rows_unchecked(
-    db: sqlite3.Connection, journal: Path | None
+    db: sqlite3.Connection, journal: Path | None, from_journal: set[int] | None = None
 ) -> tuple[list[tuple[Any, ...]], dict[int, int]]:
     """Every step row of the log in step order, with a journal's lines applied on top, and the
-    corrections ``{step: action}``.
+    corrections ``{step: action}``; the steps whose rows a journal line set or changed are
+    added to ``from_journal`` where given.
 
     The journal is read first: a writer that commits and empties it in between has then put
     those rows in SQLite, where the SELECT finds them. A finished SQLite row is never replaced
@@ -1813,20 +1837,37 @@ def _rows_unchecked(
             continue
         step = values[0] if kind == "s" else values[-1]
         if kind == "s":
-            if step not in rows or rows[step][pending]:
-                rows[step] = values
+            if step in rows and not rows[step][pending]:
+                continue  # a finished row stays
+            rows[step] = values
         elif step in rows and rows[step][pending]:
             row = list(rows[step])
             for name, v in zip(FINISH_FIELDS, values[:4], strict=True):
                 row[at[name]] = v
             row[pending] = 0
             rows[step] = tuple(row)
+        else:
+            continue  # it finishes no pending row
+        if from_journal is not None:
+            from_journal.add(step)
     return [rows[k] for k in sorted(rows)], corrections
 
 
-def _records_of(rows: list[tuple[Any, ...]], run_dir: Path) -> list[StepRecord]:
+def _records_of(
+    rows: list[tuple[Any, ...]],
+    run_dir: Path,
+    known: dict[int, tuple[tuple[Any, ...], StepRecord]] | None = None,
+) -> list[StepRecord]:
+    """The records of ``rows``; ``known``: ``{step: (row, record)}`` parsed before, a record
+    taken as it is where its row equals the one read now (SQLite's rows of one log: equal
+    values are of one type in a column of the schema), parsed otherwise."""
     out = []
     for row in rows:
+        if known is not None:
+            seen = known.get(row[0])
+            if seen is not None and seen[0] == row:
+                out.append(seen[1])
+                continue
         try:
             out.append(_record_from_row(row))
         except (ValueError, TypeError, KeyError) as exc:
