@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from sumo_scenarios import metrics
+from sumo_scenarios.scenarios import LANE_NAMES
 from torchcbl.evaluation import (
     _ctrl_c_held,
     check_workers_start,
@@ -1148,9 +1149,10 @@ def evaluate_saved_policy(
     teach. An env made without ``gymnasium.make`` keeps nothing in the session: the defaults are
     driven, whatever it was given. ``sim``, when given, is driven whatever the session kept.
 
-    Returns the collision rate (share of timesteps in contact, %), the lane shares (index 0 =
-    right shoulder ... 4 = left shoulder), and the SUMO settings and start lane driven. It takes
-    this process's one libsumo simulation: a live DrivingEnv must be reset after it.
+    Returns the collision rate (share of timesteps in contact, %), the lane shares (``lanes``,
+    index 0 = right shoulder ... 4 = left shoulder, named in that order by ``lane_names``:
+    ``sumo_scenarios.scenarios.LANE_NAMES``), and the SUMO settings and start lane driven. It
+    takes this process's one libsumo simulation: a live DrivingEnv must be reset after it.
     """
     from sumo_scenarios.env import DrivingConfig, DrivingEnv
     from sumo_scenarios.sim import SimConfig
@@ -1187,6 +1189,7 @@ def evaluate_saved_policy(
         "eval_segment": seed,
         "collision_pct": 100 * metrics.collision_rate([bool(r.info["contact"]) for r in recs]),
         "lanes": metrics.lane_distribution([int(r.info["lane"]) for r in recs]).tolist(),
+        "lane_names": list(LANE_NAMES),
         "start_lane": config.start_lane,
         "sim": dataclasses.asdict(sim),
     }

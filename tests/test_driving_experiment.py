@@ -712,3 +712,24 @@ def test_a_run_stopped_by_a_ctrl_c_or_a_seed_error_leaves_no_worker_and_no_pipe(
         assert after == before
     finally:
         kill_left(pids)
+
+
+def test_evaluate_names_the_lanes_of_its_lane_shares(tmp_path, capsys):
+    """`torchcbl evaluate` of a driving session printed "lanes": [0.02, 0.04, 0.2, 0.09, 0.65]
+    with nothing saying which share is which lane: only a docstring gave the order. The JSON
+    now has "lane_names" beside "lanes" (right shoulder first, left shoulder last) and
+    `evaluate --help` says the order; "lanes" is unchanged for its readers."""
+    from torchcbl.cli import main
+
+    _taught(tmp_path / "session")
+    capsys.readouterr()
+    assert main(["evaluate", str(tmp_path / "session"), "--steps", "20"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["lane_names"] == ["right shoulder", "right", "middle", "left", "left shoulder"]
+    assert len(report["lanes"]) == 5 and sum(report["lanes"]) == pytest.approx(1.0)
+    want = _driven(tmp_path / "session", 20)["lanes"]
+    assert report["lanes"] == [want.count(k) / 20 for k in range(5)]
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "lane_names" in help_text and "right shoulder first" in help_text

@@ -395,3 +395,20 @@ def test_kmeans_on_large_groups_uses_a_stride_and_labels_every_point():
     torch.testing.assert_close(resp[:1], alone_big, rtol=0.0, atol=0.0)
     torch.testing.assert_close(resp[1:, :n_small], alone_small, rtol=0.0, atol=0.0)
     assert n_big > _em._KMEANS_POINTS >= n_small  # both paths are exercised
+
+
+def test_calling_the_model_like_a_network_says_which_method_to_call():
+    """`GaussianMixtureSet(...).fit(X, y)(X[:2])`, as one calls any nn.Module, raised torch's
+    `NotImplementedError: Module [GaussianMixtureSet] is missing the required "forward"
+    function`, naming none of the methods that answer. It is a TypeError naming them, fitted
+    or not, and the model still classifies afterwards."""
+    x, y = _blobs(0, (40, 40, 40), d=2)
+    for model in (GaussianMixtureSet(3, 2), GaussianMixtureSet(3, 2, max_components=2).fit(x, y)):
+        for args in ((x[:2],), (torch.from_numpy(x[:2]),), ()):
+            with pytest.raises(TypeError) as info:
+                model(*args)
+            message = str(info.value)
+            assert "\n" not in message
+            for name in (".classify(", ".log_prob(", "GreedyPolicy("):
+                assert name in message, (name, message)
+    assert model.classify(x[:2]).action.tolist() == model.log_prob(x[:2]).argmax(1).tolist()

@@ -1512,7 +1512,8 @@ def _parser() -> argparse.ArgumentParser:
         help="evaluate a saved policy (a teaching session directory)",
         description="Load the latest model of a teaching session and run it greedily, never "
         "asking; print a JSON report (corridor: circuits and wall contacts; driving: collision "
-        "rate and lane shares).",
+        'rate and lane shares, "lanes", right shoulder first, left shoulder last, as '
+        '"lane_names" beside it lists them).',
     )
     p.add_argument(
         "run_dir",

@@ -72,7 +72,7 @@ import os
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any, Literal, NamedTuple, overload
+from typing import Any, Literal, NamedTuple, NoReturn, overload
 
 import numpy as np
 import torch
@@ -510,6 +510,11 @@ class GaussianMixtureSet(nn.Module):
     tol, max_iter, seed, refit_growth; floats by their IEEE bits): loading a state saved
     with other values is a ValueError that names them.
     ``fit_report_`` (a :class:`FitReport`) is a plain attribute, not part of the state_dict.
+
+    Prediction: :meth:`classify` (the action of Eq. 7 with its confidence, distance and
+    posterior) and :meth:`log_prob` (log p_a(o) + log Pr(G_a), [N, A]); for a callable
+    obs -> action, :class:`torchcbl.GreedyPolicy` (``GreedyPolicy(model)``). The model is not
+    called like a network: ``model(x)`` raises a TypeError naming these (see :meth:`forward`).
     """
 
     # The buffers registered in __init__, typed for a type checker (nn.Module's __getattr__
@@ -1457,6 +1462,22 @@ class GaussianMixtureSet(nn.Module):
         if len(blocks) == 1:
             return blocks[0]
         return Classification(*(torch.cat(field) for field in zip(*blocks, strict=True)))
+
+    def forward(self, *args: Any, **kwargs: Any) -> NoReturn:
+        """Refused: ``model(x)`` raises a TypeError that names the methods to call.
+
+        A mixture set has no one output a call could mean: the paper's decision is an action
+        with a confidence (:meth:`classify`, a :class:`Classification`, not a tensor), the
+        per-action scores [N, A] are :meth:`log_prob` (without the confidence, and scored
+        without autograd), and a policy obs [D] -> int is ``torchcbl.GreedyPolicy(model)``.
+        """
+        raise TypeError(
+            f"{type(self).__name__} is not called like a network (it has no forward): call "
+            "model.classify(observations [N, D]) for the actions of Eq. 7 with their "
+            "confidence, distance and posterior, model.log_prob(observations) for the "
+            "per-action log-likelihoods [N, A], or torchcbl.GreedyPolicy(model) for a "
+            "callable obs [D] -> action"
+        )
 
     def _predict_threads(self, n: int) -> contextlib.AbstractContextManager[None]:
         """The thread policy for scoring n rows: [N, D] @ [D, A*K*D] is the work."""
