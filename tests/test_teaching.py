@@ -863,3 +863,34 @@ def test_an_empty_run_dir_is_refused_not_taken_as_the_working_directory(tmp_path
     with pytest.raises(ValueError, match=r"run_dir: expected a directory path or None, got ''"):
         ConfidentTeacher(env, oracle(env), run_dir="", progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_a_pytorch_module_of_the_observation_alone_is_refused_as_a_teacher():
+    """``ConfidentTeacher(env, Net())`` with ``Net.forward(self, x)`` was taken: an nn.Module's
+    ``__call__`` shows ``(*args, **kwargs)``, so the check passed it, and the session stopped at
+    its first request with a TeacherError around "forward() takes 2 positional arguments but
+    3 were given". The module's forward is read: it is refused when the teacher is made (and
+    by correcting()), saying how to wrap a network; a module whose forward takes the info is
+    taken."""
+    from torchcbl.strategies import correcting
+
+    class Net(torch.nn.Module):
+        def forward(self, x):
+            return x
+
+    class InfoNet(torch.nn.Module):
+        def forward(self, obs, info):
+            return torch.tensor(0)
+
+    env = rare_regions_world()
+    for net in (Net(), torch.nn.Sequential(torch.nn.Linear(1, 2))):
+        with pytest.raises(TypeError) as e:
+            ConfidentTeacher(env, net, progress=False)
+        msg = str(e.value)
+        assert "teacher(observation, info)" in msg and ".forward takes (" in msg, msg
+        assert "lambda obs, info: int(net(torch.as_tensor(obs" in msg, msg
+        with pytest.raises(TypeError, match=r"correcting: .*\.forward takes \("):
+            correcting(net)
+    ct = ConfidentTeacher(env, InfoNet(), progress=False)
+    ct.run(max_steps=2)
+    assert [r.teacher_action for r in ct.records] == [0, 0]
