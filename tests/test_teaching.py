@@ -894,3 +894,35 @@ def test_a_pytorch_module_of_the_observation_alone_is_refused_as_a_teacher():
     ct = ConfidentTeacher(env, InfoNet(), progress=False)
     ct.run(max_steps=2)
     assert [r.teacher_action for r in ct.records] == [0, 0]
+
+
+def test_the_teacher_signature_error_names_what_is_wrong_with_the_signature():
+    """``def three(obs, info, k)`` was told "give it an info parameter", though it has one: the
+    extra required argument is the problem. ``lambda obs, *, info: 0`` was shown as taking
+    "(obs)": its keyword-only info was left out of what it takes, and it is passed by
+    position. And ``def t(obs, info, *, k)`` was taken and failed at the first request."""
+    env = rare_regions_world()
+
+    def three(obs, info, k):
+        return 0
+
+    def keyword_k(obs, info, *, k):
+        return 0
+
+    with pytest.raises(TypeError) as e:
+        ConfidentTeacher(env, three, progress=False)
+    msg = str(e.value)
+    assert "three takes (obs, info, k)" in msg and "give it an info parameter" not in msg, msg
+    assert "exactly (observation, info)" in msg and "give k a default" in msg, msg
+    assert "functools.partial" in msg, msg
+
+    with pytest.raises(TypeError) as e:
+        ConfidentTeacher(env, lambda obs, *, info: 0, progress=False)
+    msg = str(e.value)
+    assert "<lambda> takes (obs, *, info)" in msg and "positionally" in msg, msg
+    assert "give it an info parameter" not in msg, msg
+
+    with pytest.raises(TypeError) as e:
+        ConfidentTeacher(env, keyword_k, progress=False)
+    msg = str(e.value)
+    assert "keyword_k takes (obs, info, *, k)" in msg and "give k a default" in msg, msg

@@ -6,7 +6,7 @@ from __future__ import annotations
 import inspect
 import sys
 import types
-from typing import Any
+from typing import Any, NamedTuple
 
 # a torch network's action, in the advice for wrapping one as a teacher (``net`` in the call)
 _NET_ACTION = "int(net(torch.as_tensor(obs, dtype=torch.float32)).argmax())"
@@ -69,51 +69,100 @@ def called_parameters(fn: Any) -> tuple[list[inspect.Parameter] | None, str | No
     return (None if sig is None else list(sig.parameters.values())), through
 
 
-def cannot_take(fn: Any, n_args: int) -> str | None:
+class Mismatch(NamedTuple):
+    """Why a callable cannot take a call of positional arguments (see :func:`cannot_take`)."""
+
+    takes: str  #: what it takes, e.g. "three takes (obs, info, k)"
+    missing: int  #: positional arguments the call passes that it has no parameter for
+    keyword_only: tuple[str, ...]  #: its required keyword-only parameters that would take them
+    extra: tuple[str, ...]  #: its required parameters the call never gives (beyond its own)
+    positional: tuple[str, ...]  #: the names of its positional parameters
+
+    def advice(self, call: str) -> str:
+        """What to change in it for the ``call`` (e.g. "(observation, info)") bar a missing
+        parameter (the caller's own advice): a keyword-only parameter the call means to pass
+        by position, or a required one the call never passes."""
+        parts = []
+        if self.keyword_only:
+            them = "it" if len(self.keyword_only) == 1 else "them"
+            are = "is" if len(self.keyword_only) == 1 else "are"
+            want = ", ".join(self.positional + self.keyword_only)
+            parts.append(
+                f"{', '.join(self.keyword_only)} {are} keyword-only, but the call {call} passes "
+                f"its arguments positionally: make {them} positional, ({want})"
+            )
+        if self.extra:
+            one = len(self.extra) == 1
+            parts.append(
+                f"it is called with exactly {call}: give {', '.join(self.extra)} "
+                f"{'a default' if one else 'defaults'} or bind {'it' if one else 'them'} with "
+                "functools.partial"
+            )
+        return "; ".join(parts)
+
+
+def cannot_take(fn: Any, n_args: int) -> Mismatch | None:
     """Why ``fn`` cannot be called with ``n_args`` positional arguments, as its signature says
-    (e.g. "teacher takes (obs, info)"; for a torch module "Net.forward takes (x)"), or None
-    where it can or its signature is unknown (a builtin). Read before any call, so that a
-    TypeError of ``fn``'s own is never reworded."""
+    (its ``takes``, e.g. "teacher takes (obs, info)"; for a torch module "Net.forward takes
+    (x)"), or None where it can or its signature is unknown (a builtin). Read before any
+    call, so that a TypeError of ``fn``'s own is never reworded."""
     params, through = called_parameters(fn)
     if params is None:
         return None
     positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
-    required = sum(p.default is p.empty for p in positional)
     varargs = any(p.kind is p.VAR_POSITIONAL for p in params)
-    if required <= n_args and (varargs or len(positional) >= n_args):
+    keyword = [p.name for p in params if p.kind is p.KEYWORD_ONLY and p.default is p.empty]
+    slots = 0 if varargs else max(0, n_args - len(positional))  # arguments with no parameter
+    moved = keyword[:slots]  # keyword-only parameters the call's extra arguments are meant for
+    extra = [p.name for p in positional[n_args:] if p.default is p.empty] + keyword[slots:]
+    if not slots and not extra:
         return None
     shown = [p.name if p.default is p.empty else f"{p.name}=..." for p in positional]
     shown += [f"*{p.name}" for p in params if p.kind is p.VAR_POSITIONAL]
+    kw_only = [p for p in params if p.kind is p.KEYWORD_ONLY]
+    if kw_only and not varargs:
+        shown.append("*")
+    shown += [p.name if p.default is p.empty else f"{p.name}=..." for p in kw_only]
+    shown += [f"**{p.name}" for p in params if p.kind is p.VAR_KEYWORD]
     name = getattr(fn, "__qualname__", None) or type(fn).__name__
     if through == "forward":  # a torch module, read as the forward its __call__ runs
-        return f"{type(fn).__qualname__}.forward takes ({', '.join(shown)})"
-    if through:  # a generic (*args, **kwargs) wrapper, read as what its __wrapped__ names
-        return (
+        takes = f"{type(fn).__qualname__}.forward takes ({', '.join(shown)})"
+    elif through:  # a generic (*args, **kwargs) wrapper, read as what its __wrapped__ names
+        takes = (
             f"{name}, a wrapper of *args/**kwargs, wraps (its __wrapped__) a function that "
             f"takes ({', '.join(shown)}); if the wrapper itself takes more, give it that "
             "signature"
         )
-    return f"{name} takes ({', '.join(shown)})"
+    else:
+        takes = f"{name} takes ({', '.join(shown)})"
+    names = tuple(p.name for p in positional)
+    return Mismatch(takes, slots - len(moved), tuple(moved), tuple(extra), names)
 
 
 def refuse_unless_a_teacher(
     teacher: Any, who: str, wrap: str = "lambda obs, info: policy(obs)"
 ) -> None:
     """Raise TypeError, before any call, where ``teacher``'s signature cannot take the loop's
-    ``teacher(observation, info)``: a policy of the observation alone, given for a teacher.
+    ``teacher(observation, info)``: a policy of the observation alone, given for a teacher, or
+    a teacher with a required parameter the loop never gives or one it gives by keyword.
     ``who`` begins the message (what was given the teacher); ``wrap`` is the advice's wrapping
     of a policy, in the call the user makes."""
-    takes = cannot_take(teacher, 2)
-    if takes is not None and _module_forward(teacher) is not None:
+    why = cannot_take(teacher, 2)
+    if why is None:
+        return
+    head = f"{who}: a teacher is called as teacher(observation, info), but {why.takes}"
+    also = why.advice("(observation, info)")
+    also = f" ({also})" if also and why.missing else also
+    if why.missing and _module_forward(teacher) is not None:
         # a network: its forward takes a tensor and answers scores, not the loop's int
         net = wrap.replace("policy(obs)", _NET_ACTION)
         raise TypeError(
-            f"{who}: a teacher is called as teacher(observation, info), but {takes}; a network "
-            f"of the observation alone is a policy, not a teacher: wrap it, e.g. {net}"
+            f"{head}; a network of the observation alone is a policy, not a teacher: wrap it, "
+            f"e.g. {net}{also}"
         )
-    if takes is not None:
+    if why.missing:
         raise TypeError(
-            f"{who}: a teacher is called as teacher(observation, info), but {takes}; give it an "
-            f"info parameter (it may ignore it), or wrap a policy of the observation alone: "
-            f"{wrap}"
+            f"{head}; give it an info parameter (it may ignore it), or wrap a policy of the "
+            f"observation alone: {wrap}{also}"
         )
+    raise TypeError(f"{head}; {also}")

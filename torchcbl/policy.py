@@ -376,19 +376,33 @@ def evaluate_policy(
     # unless a subclass answers in a __call__ of its own (masking, exploration), which is called
     greedy = isinstance(policy, GreedyPolicy)
     own_call = not greedy or type(policy).__call__ is not GreedyPolicy.__call__
-    takes = _cannot_take(policy, 2 if uses_info else 1) if own_call else None
-    if takes is not None and not uses_info:
+    why = _cannot_take(policy, 2 if uses_info else 1) if own_call else None
+    call = "(observation, info)" if uses_info else "(observation)"
+    if (
+        why is not None
+        and not (why.missing or why.keyword_only or uses_info)
+        and len(why.extra) == 1
+        and why.extra[0] in why.positional
+    ):
+        # one required argument more than the observation: a policy of (observation, info)
         raise TypeError(
             f"evaluate_policy: the policy is called as policy(observation) (uses_info=False), "
-            f"but {takes}: it needs more arguments. For a policy of the observation and the "
+            f"but {why.takes}: it needs more arguments. For a policy of the observation and the "
             "info, called policy(observation, info) like a teacher (a scripted expert), pass "
-            "uses_info=True"
+            f"uses_info=True; else {why.advice(call)}"
         )
-    if takes is not None:
+    if why is not None and why.missing and uses_info:
+        also = why.advice(call)
         raise TypeError(
             f"evaluate_policy: with uses_info=True the policy is called as "
-            f"policy(observation, info), but {takes}. For a policy of the observation alone, "
-            "leave uses_info out (False)"
+            f"policy(observation, info), but {why.takes}. For a policy of the observation alone, "
+            f"leave uses_info out (False){f' ({also})' if also else ''}"
+        )
+    if why is not None:
+        fix = why.advice(call) or "it must take the observation"
+        raise TypeError(
+            f"evaluate_policy: the policy is called as policy{call} (uses_info={uses_info}), "
+            f"but {why.takes}; {fix}"
         )
     records: list[StepRecord] = []
     _note_env_user(env, object())  # a teaching loop mid-episode on this env starts a new one
