@@ -926,3 +926,28 @@ def test_the_teacher_signature_error_names_what_is_wrong_with_the_signature():
         ConfidentTeacher(env, keyword_k, progress=False)
     msg = str(e.value)
     assert "keyword_k takes (obs, info, *, k)" in msg and "give k a default" in msg, msg
+
+
+def test_a_vector_env_is_refused_saying_torchcbl_teaches_one_env(tmp_path):
+    """``gymnasium.make_vec("CartPole-v1", num_envs=2)`` was refused as "got MultiDiscrete([2
+    2]). Wrap the env so its actions are 0..n-1": no wrapping makes a vector env one env.
+    Everywhere an env is checked, the message says to make one env instead."""
+    vec = gym.make_vec("CartPole-v1", num_envs=2)
+    session, world = tmp_path / "session", rare_regions_world()
+    ConfidentTeacher(world, oracle(world), run_dir=session, progress=False).run(max_steps=3).close()
+    try:
+        for call in (
+            lambda: ConfidentTeacher(vec, lambda o, i: 0, run_dir=tmp_path / "new"),
+            lambda: ConfidentTeacher.resume(session, vec, oracle(world)),
+            lambda: evaluate_policy(lambda o: 0, vec, n_steps=1),
+        ):
+            with pytest.raises(ValueError) as err:
+                call()
+            message = str(err.value)
+            assert "vector env" in message and "num_envs=2" in message, message
+            assert "one env at a time" in message, message
+            assert "gymnasium.make('CartPole-v1')" in message, message
+            assert "Wrap the env" not in message, message
+    finally:
+        vec.close()
+    assert not (tmp_path / "new").exists()

@@ -96,14 +96,23 @@ def _env_user(env: Any, default: object = None) -> object:
 
 
 def check_env(env: gym.Env) -> tuple[int, int]:
-    """(n_features, n_actions) of a supported env, or a clear ValueError (a TypeError for an
-    object that is no env at all, such as an env id)."""
+    """(n_features, n_actions) of a supported env, or a clear ValueError (a vector env too:
+    one env is taught at a time; a TypeError for an object that is no env at all, such as an
+    env id)."""
     if not all(hasattr(env, name) for name in ("reset", "step", "action_space")):
         make = f" Make it first: env = gymnasium.make({env!r})." if isinstance(env, str) else ""
         raise TypeError(
             f"expected a gymnasium.Env, got {type(env).__name__} {env!r:.80}.{make}"
             " An env has reset(), step(action), a Discrete action_space and a 1-D float Box"
             " observation_space."
+        )
+    if isinstance(env, gym.vector.VectorEnv) or hasattr(env, "num_envs"):
+        spec = getattr(env, "spec", None)
+        make = f"gymnasium.make({spec.id!r})" if getattr(spec, "id", None) else "gymnasium.make(id)"
+        raise ValueError(
+            f"expected one env, got a vector env ({type(env).__name__}, "
+            f"num_envs={getattr(env, 'num_envs', '?')}): torchcbl teaches one env at a time "
+            f"(one observation, one demonstration). Pass {make} instead."
         )
     space = getattr(env, "action_space", None)
     if not isinstance(space, gym.spaces.Discrete) or int(space.start) != 0:
