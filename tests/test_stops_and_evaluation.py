@@ -655,3 +655,41 @@ def test_evaluate_policy_checks_the_env_step_answer_as_teaching_does(answer, say
     env = Odd(rare_regions_world())
     with pytest.raises(EnvError, match=says):
         evaluate_policy(lambda obs: 0, env, n_steps=5, seed=0)
+
+
+def test_evaluate_policy_with_uses_info_refuses_a_pytorch_module_of_the_observation_alone():
+    """``evaluate_policy(Net(), env, uses_info=True)`` with ``Net.forward(self, x)`` raised
+    Python's raw "forward() takes 2 positional arguments but 3 were given" at the first step:
+    an nn.Module's ``__call__`` shows ``(*args, **kwargs)``. Its forward is read first."""
+    import torch
+
+    class Net(torch.nn.Module):
+        def forward(self, x):
+            return 0
+
+    env = rare_regions_world(episode_length=5)
+    with pytest.raises(TypeError) as e:
+        evaluate_policy(Net(), env, seed=0, n_steps=5, uses_info=True)
+    msg = str(e.value)
+    assert msg.startswith("evaluate_policy: ") and "Net.forward takes (x)" in msg, msg
+    assert "leave uses_info out" in msg, msg
+    assert len(evaluate_policy(Net(), env, seed=0, n_steps=3)) == 3
+
+
+def test_evaluate_policy_names_an_extra_required_argument():
+    """A policy with a required argument the call never passes, ``def p(obs, info, k)`` with
+    uses_info=True, was told to leave uses_info out, which would not help."""
+
+    def p(obs, info, k):
+        return 0
+
+    env = rare_regions_world(episode_length=5)
+    with pytest.raises(TypeError) as e:
+        evaluate_policy(p, env, seed=0, n_steps=5, uses_info=True)
+    msg = str(e.value)
+    assert "p takes (obs, info, k)" in msg and "give k a default" in msg, msg
+    assert "leave uses_info out" not in msg, msg
+    with pytest.raises(TypeError) as e:
+        evaluate_policy(p, env, seed=0, n_steps=5)
+    msg = str(e.value)
+    assert "give info, k defaults" in msg or "give k a default" in msg, msg

@@ -863,3 +863,91 @@ def test_an_empty_run_dir_is_refused_not_taken_as_the_working_directory(tmp_path
     with pytest.raises(ValueError, match=r"run_dir: expected a directory path or None, got ''"):
         ConfidentTeacher(env, oracle(env), run_dir="", progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_a_pytorch_module_of_the_observation_alone_is_refused_as_a_teacher():
+    """``ConfidentTeacher(env, Net())`` with ``Net.forward(self, x)`` was taken: an nn.Module's
+    ``__call__`` shows ``(*args, **kwargs)``, so the check passed it, and the session stopped at
+    its first request with a TeacherError around "forward() takes 2 positional arguments but
+    3 were given". The module's forward is read: it is refused when the teacher is made (and
+    by correcting()), saying how to wrap a network; a module whose forward takes the info is
+    taken."""
+    from torchcbl.strategies import correcting
+
+    class Net(torch.nn.Module):
+        def forward(self, x):
+            return x
+
+    class InfoNet(torch.nn.Module):
+        def forward(self, obs, info):
+            return torch.tensor(0)
+
+    env = rare_regions_world()
+    for net in (Net(), torch.nn.Sequential(torch.nn.Linear(1, 2))):
+        with pytest.raises(TypeError) as e:
+            ConfidentTeacher(env, net, progress=False)
+        msg = str(e.value)
+        assert "teacher(observation, info)" in msg and ".forward takes (" in msg, msg
+        assert "lambda obs, info: int(net(torch.as_tensor(obs" in msg, msg
+        with pytest.raises(TypeError, match=r"correcting: .*\.forward takes \("):
+            correcting(net)
+    ct = ConfidentTeacher(env, InfoNet(), progress=False)
+    ct.run(max_steps=2)
+    assert [r.teacher_action for r in ct.records] == [0, 0]
+
+
+def test_the_teacher_signature_error_names_what_is_wrong_with_the_signature():
+    """``def three(obs, info, k)`` was told "give it an info parameter", though it has one: the
+    extra required argument is the problem. ``lambda obs, *, info: 0`` was shown as taking
+    "(obs)": its keyword-only info was left out of what it takes, and it is passed by
+    position. And ``def t(obs, info, *, k)`` was taken and failed at the first request."""
+    env = rare_regions_world()
+
+    def three(obs, info, k):
+        return 0
+
+    def keyword_k(obs, info, *, k):
+        return 0
+
+    with pytest.raises(TypeError) as e:
+        ConfidentTeacher(env, three, progress=False)
+    msg = str(e.value)
+    assert "three takes (obs, info, k)" in msg and "give it an info parameter" not in msg, msg
+    assert "exactly (observation, info)" in msg and "give k a default" in msg, msg
+    assert "functools.partial" in msg, msg
+
+    with pytest.raises(TypeError) as e:
+        ConfidentTeacher(env, lambda obs, *, info: 0, progress=False)
+    msg = str(e.value)
+    assert "<lambda> takes (obs, *, info)" in msg and "positionally" in msg, msg
+    assert "give it an info parameter" not in msg, msg
+
+    with pytest.raises(TypeError) as e:
+        ConfidentTeacher(env, keyword_k, progress=False)
+    msg = str(e.value)
+    assert "keyword_k takes (obs, info, *, k)" in msg and "give k a default" in msg, msg
+
+
+def test_a_vector_env_is_refused_saying_torchcbl_teaches_one_env(tmp_path):
+    """``gymnasium.make_vec("CartPole-v1", num_envs=2)`` was refused as "got MultiDiscrete([2
+    2]). Wrap the env so its actions are 0..n-1": no wrapping makes a vector env one env.
+    Everywhere an env is checked, the message says to make one env instead."""
+    vec = gym.make_vec("CartPole-v1", num_envs=2)
+    session, world = tmp_path / "session", rare_regions_world()
+    ConfidentTeacher(world, oracle(world), run_dir=session, progress=False).run(max_steps=3).close()
+    try:
+        for call in (
+            lambda: ConfidentTeacher(vec, lambda o, i: 0, run_dir=tmp_path / "new"),
+            lambda: ConfidentTeacher.resume(session, vec, oracle(world)),
+            lambda: evaluate_policy(lambda o: 0, vec, n_steps=1),
+        ):
+            with pytest.raises(ValueError) as err:
+                call()
+            message = str(err.value)
+            assert "vector env" in message and "num_envs=2" in message, message
+            assert "one env at a time" in message, message
+            assert "gymnasium.make('CartPole-v1')" in message, message
+            assert "Wrap the env" not in message, message
+    finally:
+        vec.close()
+    assert not (tmp_path / "new").exists()

@@ -96,14 +96,23 @@ def _env_user(env: Any, default: object = None) -> object:
 
 
 def check_env(env: gym.Env) -> tuple[int, int]:
-    """(n_features, n_actions) of a supported env, or a clear ValueError (a TypeError for an
-    object that is no env at all, such as an env id)."""
+    """(n_features, n_actions) of a supported env, or a clear ValueError (a vector env too:
+    one env is taught at a time; a TypeError for an object that is no env at all, such as an
+    env id)."""
     if not all(hasattr(env, name) for name in ("reset", "step", "action_space")):
         make = f" Make it first: env = gymnasium.make({env!r})." if isinstance(env, str) else ""
         raise TypeError(
             f"expected a gymnasium.Env, got {type(env).__name__} {env!r:.80}.{make}"
             " An env has reset(), step(action), a Discrete action_space and a 1-D float Box"
             " observation_space."
+        )
+    if isinstance(env, gym.vector.VectorEnv) or hasattr(env, "num_envs"):
+        spec = getattr(env, "spec", None)
+        make = f"gymnasium.make({spec.id!r})" if getattr(spec, "id", None) else "gymnasium.make(id)"
+        raise ValueError(
+            f"expected one env, got a vector env ({type(env).__name__}, "
+            f"num_envs={getattr(env, 'num_envs', '?')}): torchcbl teaches one env at a time "
+            f"(one observation, one demonstration). Pass {make} instead."
         )
     space = getattr(env, "action_space", None)
     if not isinstance(space, gym.spaces.Discrete) or int(space.start) != 0:
@@ -376,19 +385,33 @@ def evaluate_policy(
     # unless a subclass answers in a __call__ of its own (masking, exploration), which is called
     greedy = isinstance(policy, GreedyPolicy)
     own_call = not greedy or type(policy).__call__ is not GreedyPolicy.__call__
-    takes = _cannot_take(policy, 2 if uses_info else 1) if own_call else None
-    if takes is not None and not uses_info:
+    why = _cannot_take(policy, 2 if uses_info else 1) if own_call else None
+    call = "(observation, info)" if uses_info else "(observation)"
+    if (
+        why is not None
+        and not (why.missing or why.keyword_only or uses_info)
+        and len(why.extra) == 1
+        and why.extra[0] in why.positional
+    ):
+        # one required argument more than the observation: a policy of (observation, info)
         raise TypeError(
             f"evaluate_policy: the policy is called as policy(observation) (uses_info=False), "
-            f"but {takes}: it needs more arguments. For a policy of the observation and the "
+            f"but {why.takes}: it needs more arguments. For a policy of the observation and the "
             "info, called policy(observation, info) like a teacher (a scripted expert), pass "
-            "uses_info=True"
+            f"uses_info=True; else {why.advice(call)}"
         )
-    if takes is not None:
+    if why is not None and why.missing and uses_info:
+        also = why.advice(call)
         raise TypeError(
             f"evaluate_policy: with uses_info=True the policy is called as "
-            f"policy(observation, info), but {takes}. For a policy of the observation alone, "
-            "leave uses_info out (False)"
+            f"policy(observation, info), but {why.takes}. For a policy of the observation alone, "
+            f"leave uses_info out (False){f' ({also})' if also else ''}"
+        )
+    if why is not None:
+        fix = why.advice(call) or "it must take the observation"
+        raise TypeError(
+            f"evaluate_policy: the policy is called as policy{call} (uses_info={uses_info}), "
+            f"but {why.takes}; {fix}"
         )
     records: list[StepRecord] = []
     _note_env_user(env, object())  # a teaching loop mid-episode on this env starts a new one
