@@ -144,17 +144,61 @@ class _Phased(_StrategyDefaults):
         ask = int(_np(c.action)[0]) < 0 or not self._confident(observation, c)
         return Decision(ask, self._phase, self._burst if ask else 0)
 
-    def observe_label(
+    # The schedule's bookkeeping (the accuracy window, the phase, the burst) lives in the
+    # private _track_label / _track_step, which ConfidentTeacher calls through _loop_label /
+    # _loop_step before the public hook: a subclass may override observe_label / observe_step
+    # to add behaviour without calling super() (it once silently stayed non-interactive). A
+    # loop of one's own calls the public hooks, which keep the schedule themselves; while the
+    # loop's call is under way they leave it alone, so a super() call does not count twice.
+    _in_loop_hook = False
+
+    def _track_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
     ) -> None:
         if kind == "demonstration":
             self._window.append(model_action == action)
 
+    def _loop_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        """The loop's call: the schedule's bookkeeping, then the public hook."""
+        self._track_label(observation, action, model_action=model_action, kind=kind)
+        self._in_loop_hook = True
+        try:
+            self.observe_label(observation, action, model_action=model_action, kind=kind)
+        finally:
+            self._in_loop_hook = False
+
+    def observe_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        """Every label (see the protocol). Keeps the schedule's accuracy window; under
+        ConfidentTeacher the loop keeps it before this is called, so an override need not
+        call ``super()`` (calling it does no harm)."""
+        if not self._in_loop_hook:
+            self._track_label(observation, action, model_action=model_action, kind=kind)
+
     def _target_reached(self) -> bool:
         w, t = self._window, self._target
         return t is not None and len(w) == w.maxlen and sum(w) / len(w) >= t
 
+    def _loop_step(self, record: StepRecord, decision: Decision | None) -> None:
+        """The loop's call: the schedule's bookkeeping, then the public hook."""
+        self._track_step(record, decision)
+        self._in_loop_hook = True
+        try:
+            self.observe_step(record, decision)
+        finally:
+            self._in_loop_hook = False
+
     def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+        """After every step (see the protocol). Advances the phase and the burst; under
+        ConfidentTeacher the loop does so before this is called, so an override need not
+        call ``super()`` (calling it does no harm)."""
+        if not self._in_loop_hook:
+            self._track_step(record, decision)
+
+    def _track_step(self, record: StepRecord, decision: Decision | None) -> None:
         if decision is None:  # replayed on resume; a resumed session starts a new episode
             if record.phase == "confident":
                 self._phase = "confident"
