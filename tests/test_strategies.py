@@ -694,3 +694,46 @@ def test_the_public_observe_hooks_keep_the_schedule_in_ones_own_loop():
     step = SimpleNamespace(phase="noninteractive", terminated=False, truncated=False)
     s.observe_step(step, Decision(True, "noninteractive"))
     assert s.phase == "confident"
+
+
+class _NoSuperInit(ConfidentExecution):
+    def __init__(self, rule, verbose=False):
+        self.rule, self.verbose = rule, verbose
+
+
+class _NoSuperInitCBA(ConfidenceBasedAutonomy):
+    def __init__(self, tag="x"):
+        self.tag = tag
+
+
+class _InheritsTheSkippingInit(_NoSuperInit):
+    pass
+
+
+@pytest.mark.parametrize(
+    "make, named",
+    [
+        (lambda: _NoSuperInit(DistanceRule(2.0)), "_NoSuperInit"),
+        (lambda: _NoSuperInitCBA(), "_NoSuperInitCBA"),
+        (lambda: _InheritsTheSkippingInit(DistanceRule(2.0)), "_NoSuperInit"),
+    ],
+    ids=["confident execution", "cba", "inherited __init__"],
+)
+def test_a_subclass_init_that_skips_super_is_refused_when_given_to_a_session(tmp_path, make, named):
+    """A subclass whose __init__ did not call super().__init__() was taken, and failed at its
+    first confident step (step 21) with AttributeError: 'Mine' object has no attribute
+    '_with_obs' (CBA: 'distance_multiplier', as the session was written). It is now refused
+    when given to ConfidentTeacher or resume, and when bound in a loop of one's own, naming
+    the __init__ to fix; nothing is written."""
+    env = rare_regions_world(episode_length=10)
+    want = rf"{named}\.__init__ did not call super\(\)\.__init__\(\.\.\.\)"
+    with pytest.raises(TypeError, match=want):
+        ConfidentTeacher(env, oracle(env), strategy=make(), run_dir=tmp_path / "r")
+    assert not (tmp_path / "r").exists()
+    ct = ConfidentTeacher(env, oracle(env), run_dir=tmp_path / "ok", progress=False)
+    ct.run(max_steps=3)
+    ct.close()
+    with pytest.raises(TypeError, match=want):
+        ConfidentTeacher.resume(tmp_path / "ok", env, oracle(env), strategy=make())
+    with pytest.raises(TypeError, match=want):
+        make().bind(n_actions=3, n_features=2, config=TeachingConfig())

@@ -335,6 +335,8 @@ def _pick_strategy(rule: Any, strategy: Any) -> Any:
                 "the protocol in torchcbl.strategies (an episode_start that does nothing is "
                 "`def episode_start(self): pass`)."
             )
+    if isinstance(strategy, _Phased):  # a subclass whose __init__ skipped super().__init__()
+        strategy._refuse_uninitialised()
     return strategy
 
 

@@ -96,6 +96,11 @@ class _Phased(_StrategyDefaults):
     which each request starts a burst of ``config.burst`` teacher moves (cut at the end of
     an episode). Subclasses say when they are confident (:meth:`_confident`)."""
 
+    # what each shipped class's own __init__ sets (in its class body), checked by
+    # _refuse_uninitialised: a subclass __init__ skipping super().__init__() lacks them
+    _INIT_SETS: tuple[str, ...] = ("_phase", "_burst_left", "_window")
+    _bound = False
+
     def __init__(self) -> None:
         self._phase: Literal["noninteractive", "confident"] = "noninteractive"
         self._burst_left = 0
@@ -109,7 +114,40 @@ class _Phased(_StrategyDefaults):
         """The phase of the next step."""
         return self._phase
 
+    def _refuse_uninitialised(self) -> None:
+        """TypeError where a shipped class's ``__init__`` was skipped (a subclass's
+        ``__init__`` without ``super().__init__(...)``), which would otherwise fail steps later
+        on an attribute the user never heard of."""
+        for klass in type(self).__mro__:
+            missing = [n for n in vars(klass).get("_INIT_SETS", ()) if not hasattr(self, n)]
+            if missing:
+                break
+        else:
+            return
+        init = type(self).__init__
+        owner = getattr(init, "__qualname__", "").rpartition(".")[0].rpartition(".")[2]
+        try:
+            args = ", ".join(
+                p.name for p in list(inspect.signature(klass.__init__).parameters.values())[1:]
+            )
+        except (TypeError, ValueError):  # pragma: no cover - a shipped __init__ has one
+            args = "..."
+        if not owner or owner == klass.__name__:  # made without any __init__ (__new__)
+            said = f"{klass.__name__}.__init__ was not run on this {type(self).__name__}"
+            fix = f"Make it by calling {type(self).__name__}(...)."
+        else:
+            said = f"{owner}.__init__ did not call super().__init__(...)"
+            fix = (
+                f"Call super().__init__({args}) in {owner}.__init__ (with {klass.__name__}'s "
+                "arguments), before setting attributes of its own."
+            )
+        raise TypeError(
+            f"{said}: {klass.__name__}.__init__ sets up the strategy's state, which it lacks "
+            f"({', '.join(missing)}), so it would fail steps into the session. {fix}"
+        )
+
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        self._refuse_uninitialised()
         missing = [n for n in _SCHEDULE if not hasattr(config, n)]
         if missing:  # a loop of one's own may pass None or a dict
             raise TypeError(
@@ -134,6 +172,7 @@ class _Phased(_StrategyDefaults):
 
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         if not self._bound:  # unbound, the phase would never leave the non-interactive one
+            self._refuse_uninitialised()  # (or never initialised: say that first)
             raise RuntimeError(
                 f"{type(self).__name__}.decide: the strategy was not bound; call "
                 "bind(n_actions=A, n_features=D, config=TeachingConfig(...)) once before it "
