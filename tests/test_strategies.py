@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from _toy_envs import oracle, rare_regions_world
@@ -9,7 +11,14 @@ from _toy_envs import oracle, rare_regions_world
 from torchcbl import ConfidentTeacher, DistanceRule, PosteriorRule, TeachingConfig
 from torchcbl.errors import IncompatibleRunDirError
 from torchcbl.session import load_config, load_records
-from torchcbl.strategies import ConfidentExecution, Decision, Strategy, strategy_from_config
+from torchcbl.strategies import (
+    ConfidenceBasedAutonomy,
+    ConfidentExecution,
+    Decision,
+    Strategy,
+    correcting,
+    strategy_from_config,
+)
 
 
 class AlwaysAskAgentActs:
@@ -595,3 +604,136 @@ def test_a_config_whose_strategy_entry_is_not_a_strategy_dict_is_a_corrupt_sessi
     ):
         with pytest.raises(CorruptSessionError, match="'strategy'"):
             call()
+
+
+class _StepCounting(ConfidentExecution):
+    """Adds behaviour to observe_step without calling super() (as a researcher would)."""
+
+    def observe_step(self, record, decision):
+        self.seen = getattr(self, "seen", 0) + 1
+
+
+class _LabelCounting(ConfidentExecution):
+    def observe_label(self, observation, action, *, model_action, kind):
+        self.labels = getattr(self, "labels", 0) + 1
+
+
+class _BothCountingCBA(ConfidenceBasedAutonomy):
+    def observe_step(self, record, decision):
+        self.seen = getattr(self, "seen", 0) + 1
+
+    def observe_label(self, observation, action, *, model_action, kind):
+        self.labels = getattr(self, "labels", 0) + 1
+
+
+class _CallingSuper(ConfidentExecution):
+    def observe_step(self, record, decision):
+        super().observe_step(record, decision)
+        self.seen = getattr(self, "seen", 0) + 1
+
+    def observe_label(self, observation, action, *, model_action, kind):
+        self.labels = getattr(self, "labels", 0) + 1
+        super().observe_label(observation, action, model_action=model_action, kind=kind)
+
+
+def _decisions(tmp_path, name, strategy, steps=120):
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        correcting(oracle(env)),  # CBA learns from corrections too
+        strategy=strategy,
+        config=TeachingConfig(max_new=2, accuracy_window=10, burst=2),
+        run_dir=tmp_path / name,
+        progress=False,
+    )
+    ct.run(max_steps=steps)
+    ct.close()
+    return ct, [(r.phase, r.actor) for r in load_records(tmp_path / name)]
+
+
+@pytest.mark.parametrize(
+    "make, parent",
+    [
+        (lambda: _StepCounting(), ConfidentExecution),
+        (lambda: _LabelCounting(), ConfidentExecution),
+        (lambda: _CallingSuper(), ConfidentExecution),
+        (lambda: _BothCountingCBA(), ConfidenceBasedAutonomy),
+    ],
+    ids=["observe_step", "observe_label", "calling super", "cba both"],
+)
+def test_a_subclass_overriding_an_observe_hook_keeps_the_phase_schedule(tmp_path, make, parent):
+    """A subclass overriding observe_step or observe_label without calling super() asked at
+    every step and never left the non-interactive phase, silently, though its accuracy was
+    100 %: the schedule was kept in those hooks. The loop now keeps it whether or not an
+    override calls super() (once, also when it does), so the subclass decides as its parent
+    does, live and on resume, and its hook still runs at every step and label."""
+    _, want = _decisions(tmp_path, "parent", parent())
+    mine = make()
+    ct, got = _decisions(tmp_path, "mine", mine)
+    assert got == want and ("confident", "agent") in got
+    assert getattr(mine, "seen", 120) == 120
+    assert getattr(mine, "labels", ct.n_demonstrations) == ct.n_demonstrations
+    assert (len(ct.corrections) > 0) == (parent is ConfidenceBasedAutonomy)
+    env = rare_regions_world(episode_length=10)
+    again = make()
+    back = ConfidentTeacher.resume(
+        tmp_path / "mine", env, correcting(oracle(env)), strategy=again, progress=False
+    )
+    back.close()
+    assert back.phase == ct.phase == "confident"
+    assert getattr(again, "seen", 120) == 120
+
+
+def test_the_public_observe_hooks_keep_the_schedule_in_ones_own_loop():
+    """A loop of one's own calls the public hooks only: they still keep the schedule."""
+    s = ConfidentExecution()
+    s.bind(n_actions=2, n_features=1, config=TeachingConfig(accuracy_window=2))
+    for _ in range(2):
+        s.observe_label(np.zeros(1), 1, model_action=1, kind="demonstration")
+    assert s.phase == "noninteractive"
+    step = SimpleNamespace(phase="noninteractive", terminated=False, truncated=False)
+    s.observe_step(step, Decision(True, "noninteractive"))
+    assert s.phase == "confident"
+
+
+class _NoSuperInit(ConfidentExecution):
+    def __init__(self, rule, verbose=False):
+        self.rule, self.verbose = rule, verbose
+
+
+class _NoSuperInitCBA(ConfidenceBasedAutonomy):
+    def __init__(self, tag="x"):
+        self.tag = tag
+
+
+class _InheritsTheSkippingInit(_NoSuperInit):
+    pass
+
+
+@pytest.mark.parametrize(
+    "make, named",
+    [
+        (lambda: _NoSuperInit(DistanceRule(2.0)), "_NoSuperInit"),
+        (lambda: _NoSuperInitCBA(), "_NoSuperInitCBA"),
+        (lambda: _InheritsTheSkippingInit(DistanceRule(2.0)), "_NoSuperInit"),
+    ],
+    ids=["confident execution", "cba", "inherited __init__"],
+)
+def test_a_subclass_init_that_skips_super_is_refused_when_given_to_a_session(tmp_path, make, named):
+    """A subclass whose __init__ did not call super().__init__() was taken, and failed at its
+    first confident step (step 21) with AttributeError: 'Mine' object has no attribute
+    '_with_obs' (CBA: 'distance_multiplier', as the session was written). It is now refused
+    when given to ConfidentTeacher or resume, and when bound in a loop of one's own, naming
+    the __init__ to fix; nothing is written."""
+    env = rare_regions_world(episode_length=10)
+    want = rf"{named}\.__init__ did not call super\(\)\.__init__\(\.\.\.\)"
+    with pytest.raises(TypeError, match=want):
+        ConfidentTeacher(env, oracle(env), strategy=make(), run_dir=tmp_path / "r")
+    assert not (tmp_path / "r").exists()
+    ct = ConfidentTeacher(env, oracle(env), run_dir=tmp_path / "ok", progress=False)
+    ct.run(max_steps=3)
+    ct.close()
+    with pytest.raises(TypeError, match=want):
+        ConfidentTeacher.resume(tmp_path / "ok", env, oracle(env), strategy=make())
+    with pytest.raises(TypeError, match=want):
+        make().bind(n_actions=3, n_features=2, config=TeachingConfig())

@@ -110,6 +110,7 @@ from torchcbl.strategies import (
     strategy_from_config,
     strategy_to_config,
 )
+from torchcbl.strategies._phased import _Phased
 
 __all__ = [
     "ConfidentTeacher",
@@ -296,6 +297,23 @@ def _warn_misstated_relabel(stored: dict[str, Any], strategy: Any) -> None:
         )
 
 
+def _tell_label(strategy: Any, *args: Any, **kwargs: Any) -> None:
+    """``strategy.observe_label``; a shipped strategy's schedule is kept first, so that a
+    subclass overriding the hook without ``super()`` still leaves the non-interactive phase."""
+    if isinstance(strategy, _Phased):
+        strategy._loop_label(*args, **kwargs)
+    else:
+        strategy.observe_label(*args, **kwargs)
+
+
+def _tell_step(strategy: Any, record: StepRecord, decision: Decision | None) -> None:
+    """``strategy.observe_step``, with a shipped strategy's schedule kept first (as above)."""
+    if isinstance(strategy, _Phased):
+        strategy._loop_step(record, decision)
+    else:
+        strategy.observe_step(record, decision)
+
+
 def _pick_strategy(rule: Any, strategy: Any) -> Any:
     if rule is not None and strategy is not None:
         raise ValueError(
@@ -317,6 +335,8 @@ def _pick_strategy(rule: Any, strategy: Any) -> Any:
                 "the protocol in torchcbl.strategies (an episode_start that does nothing is "
                 "`def episode_start(self): pass`)."
             )
+    if isinstance(strategy, _Phased):  # a subclass whose __init__ skipped super().__init__()
+        strategy._refuse_uninitialised()
     return strategy
 
 
@@ -971,7 +991,8 @@ class ConfidentTeacher:
         for r in records:
             if r.teacher_action is not None:
                 self._acc_window.append(r.model_action == r.teacher_action)
-                strategy.observe_label(
+                _tell_label(
+                    strategy,
                     r.observation_array,
                     r.teacher_action,
                     model_action=r.model_action,
@@ -979,7 +1000,8 @@ class ConfidentTeacher:
                 )
             corr = by_step.get(r.step)
             if corr is not None:
-                strategy.observe_label(
+                _tell_label(
+                    strategy,
                     corr.observation_array,
                     corr.action,
                     model_action=r.model_action,
@@ -987,7 +1009,7 @@ class ConfidentTeacher:
                 )
             if r.phase == "confident":
                 self._auto_window.append(r.autonomous)
-            strategy.observe_step(r, None)
+            _tell_step(strategy, r, None)
         xs, ys = label_sequence(records, corrections)
         for x, y in zip(xs, ys, strict=True):
             self._train.add(x, y)
@@ -1313,7 +1335,8 @@ class ConfidentTeacher:
                 added = True
                 self._digest.update(obs, teacher_action)  # type: ignore[arg-type]
                 digested = True
-                self.strategy.observe_label(
+                _tell_label(
+                    self.strategy,
                     obs,
                     teacher_action,  # type: ignore[arg-type]
                     model_action=model_action,
@@ -1349,7 +1372,7 @@ class ConfidentTeacher:
                     self._refit()
             finally:
                 if len(self.records) > step:  # executed (also when the env failed afterwards)
-                    self.strategy.observe_step(self.records[step], decision)
+                    _tell_step(self.strategy, self.records[step], decision)
         if ask:
             self._auto_steps_streak = 0
         else:
@@ -1504,7 +1527,7 @@ class ConfidentTeacher:
             late = hold.release()  # a Ctrl-C held back (or landing now) stops the run after
         except BaseException as exc:
             late = exc
-        self.strategy.observe_label(x, action, model_action=record.model_action, kind="correction")
+        _tell_label(self.strategy, x, action, model_action=record.model_action, kind="correction")
         if self._new_since_refit >= self.config.max_new:
             self._refit()
         if late is not None:

@@ -73,6 +73,19 @@ Rules a strategy must keep:
   one's own without ``to_config`` that was renamed since the session was stored, which
   resumed before, is refused.
 
+Subclassing a shipped strategy (:class:`ConfidentExecution`,
+:class:`~torchcbl.strategies.cba.ConfidenceBasedAutonomy`): their phase schedule (the
+non-interactive phase's accuracy window, the phase, the bursts) is kept by
+:class:`~torchcbl.teaching.ConfidentTeacher` before it calls ``observe_label`` and
+``observe_step``, so an override of either hook adds behaviour and need not call ``super()``
+(calling it does no harm: nothing is counted twice). A loop of one's own that calls the public
+hooks gets the schedule kept by theirs, and there an override must call ``super()``. The
+other methods keep the usual rule: an ``__init__``, ``bind`` or ``observe_refit`` of one's own
+calls ``super()`` (``observe_refit`` updates the rule, or CBA's thresholds); an ``__init__``
+that does not call ``super().__init__(...)`` is a TypeError when the strategy is given to
+ConfidentTeacher or ``resume`` (or bound), naming it. To change when the schedule asks,
+override ``decide``.
+
 Two attributes complete the protocol:
 
 - ``relabel`` (bool): a label for an observation already in the training set (bit-for-bit
@@ -209,6 +222,8 @@ class ConfidentExecution(_Phased):
             (the paper's). A rule whose ``is_confident`` takes a second positional argument
             gets the observations [N, D] too (a nearest-neighbour or density gate needs them).
     """
+
+    _INIT_SETS = ("rule", "_with_obs")
 
     def __init__(self, rule: Any = None) -> None:
         super().__init__()

@@ -96,6 +96,11 @@ class _Phased(_StrategyDefaults):
     which each request starts a burst of ``config.burst`` teacher moves (cut at the end of
     an episode). Subclasses say when they are confident (:meth:`_confident`)."""
 
+    # what each shipped class's own __init__ sets (in its class body), checked by
+    # _refuse_uninitialised: a subclass __init__ skipping super().__init__() lacks them
+    _INIT_SETS: tuple[str, ...] = ("_phase", "_burst_left", "_window")
+    _bound = False
+
     def __init__(self) -> None:
         self._phase: Literal["noninteractive", "confident"] = "noninteractive"
         self._burst_left = 0
@@ -109,7 +114,40 @@ class _Phased(_StrategyDefaults):
         """The phase of the next step."""
         return self._phase
 
+    def _refuse_uninitialised(self) -> None:
+        """TypeError where a shipped class's ``__init__`` was skipped (a subclass's
+        ``__init__`` without ``super().__init__(...)``), which would otherwise fail steps later
+        on an attribute the user never heard of."""
+        for klass in type(self).__mro__:
+            missing = [n for n in vars(klass).get("_INIT_SETS", ()) if not hasattr(self, n)]
+            if missing:
+                break
+        else:
+            return
+        init = type(self).__init__
+        owner = getattr(init, "__qualname__", "").rpartition(".")[0].rpartition(".")[2]
+        try:
+            args = ", ".join(
+                p.name for p in list(inspect.signature(klass.__init__).parameters.values())[1:]
+            )
+        except (TypeError, ValueError):  # pragma: no cover - a shipped __init__ has one
+            args = "..."
+        if not owner or owner == klass.__name__:  # made without any __init__ (__new__)
+            said = f"{klass.__name__}.__init__ was not run on this {type(self).__name__}"
+            fix = f"Make it by calling {type(self).__name__}(...)."
+        else:
+            said = f"{owner}.__init__ did not call super().__init__(...)"
+            fix = (
+                f"Call super().__init__({args}) in {owner}.__init__ (with {klass.__name__}'s "
+                "arguments), before setting attributes of its own."
+            )
+        raise TypeError(
+            f"{said}: {klass.__name__}.__init__ sets up the strategy's state, which it lacks "
+            f"({', '.join(missing)}), so it would fail steps into the session. {fix}"
+        )
+
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        self._refuse_uninitialised()
         missing = [n for n in _SCHEDULE if not hasattr(config, n)]
         if missing:  # a loop of one's own may pass None or a dict
             raise TypeError(
@@ -134,6 +172,7 @@ class _Phased(_StrategyDefaults):
 
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         if not self._bound:  # unbound, the phase would never leave the non-interactive one
+            self._refuse_uninitialised()  # (or never initialised: say that first)
             raise RuntimeError(
                 f"{type(self).__name__}.decide: the strategy was not bound; call "
                 "bind(n_actions=A, n_features=D, config=TeachingConfig(...)) once before it "
@@ -144,17 +183,61 @@ class _Phased(_StrategyDefaults):
         ask = int(_np(c.action)[0]) < 0 or not self._confident(observation, c)
         return Decision(ask, self._phase, self._burst if ask else 0)
 
-    def observe_label(
+    # The schedule's bookkeeping (the accuracy window, the phase, the burst) lives in the
+    # private _track_label / _track_step, which ConfidentTeacher calls through _loop_label /
+    # _loop_step before the public hook: a subclass may override observe_label / observe_step
+    # to add behaviour without calling super() (it once silently stayed non-interactive). A
+    # loop of one's own calls the public hooks, which keep the schedule themselves; while the
+    # loop's call is under way they leave it alone, so a super() call does not count twice.
+    _in_loop_hook = False
+
+    def _track_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
     ) -> None:
         if kind == "demonstration":
             self._window.append(model_action == action)
 
+    def _loop_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        """The loop's call: the schedule's bookkeeping, then the public hook."""
+        self._track_label(observation, action, model_action=model_action, kind=kind)
+        self._in_loop_hook = True
+        try:
+            self.observe_label(observation, action, model_action=model_action, kind=kind)
+        finally:
+            self._in_loop_hook = False
+
+    def observe_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        """Every label (see the protocol). Keeps the schedule's accuracy window; under
+        ConfidentTeacher the loop keeps it before this is called, so an override need not
+        call ``super()`` (calling it does no harm)."""
+        if not self._in_loop_hook:
+            self._track_label(observation, action, model_action=model_action, kind=kind)
+
     def _target_reached(self) -> bool:
         w, t = self._window, self._target
         return t is not None and len(w) == w.maxlen and sum(w) / len(w) >= t
 
+    def _loop_step(self, record: StepRecord, decision: Decision | None) -> None:
+        """The loop's call: the schedule's bookkeeping, then the public hook."""
+        self._track_step(record, decision)
+        self._in_loop_hook = True
+        try:
+            self.observe_step(record, decision)
+        finally:
+            self._in_loop_hook = False
+
     def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+        """After every step (see the protocol). Advances the phase and the burst; under
+        ConfidentTeacher the loop does so before this is called, so an override need not
+        call ``super()`` (calling it does no harm)."""
+        if not self._in_loop_hook:
+            self._track_step(record, decision)
+
+    def _track_step(self, record: StepRecord, decision: Decision | None) -> None:
         if decision is None:  # replayed on resume; a resumed session starts a new episode
             if record.phase == "confident":
                 self._phase = "confident"

@@ -119,6 +119,8 @@ class ConfidenceBasedAutonomy(_Phased):
     relabel = True
     wants_corrections = True
 
+    _INIT_SETS = ("distance_multiplier", "clean_threshold")
+
     def __init__(self, distance_multiplier: float = 1.5, clean_threshold: float = 0.0) -> None:
         super().__init__()
         distance_multiplier, clean_threshold = _plain(distance_multiplier), _plain(clean_threshold)
