@@ -1208,6 +1208,8 @@ class SessionStore:
         self._corrected: set[int] = set()  # the steps that have a correction there
         self._note_at = -1  # where writer.lock's committed line starts (-1: not written)
         self._journal_noted = False  # writer.lock says the journal holds uncommitted lines
+        #: whether this store has written a journal line (a step, an outcome, a correction)
+        self.logged = False
         try:
             self._open()
         except BaseException:
@@ -1566,6 +1568,7 @@ class SessionStore:
                 f"That write is not part of the session. {_FREE_SPACE}",
             ) from exc
         self._journal_size += written
+        self.logged = True
         self._pending.append((_SQL[kind], values))
 
     @staticmethod
