@@ -1686,6 +1686,12 @@ class ConfidentTeacher:
 
         Raises:
             ValueError: unknown override, or no stop criterion at all (it would never end).
+
+        Warns:
+            UserWarning: the call took no step because a budget was already reached when it
+                began (e.g. ``run(max_steps=100)`` on a session of 150 steps, or ``run()`` on
+                a resumed session that had finished): the warning names the budget, the
+                session's count and how to ask for more.
         """
         unknown = sorted(set(stop_overrides) - set(_STOP_SETTINGS))
         if unknown:
@@ -1703,6 +1709,7 @@ class ConfidentTeacher:
 
         total = None if cfg.max_steps is None else max(cfg.max_steps - self.n_steps, 0)
         bar = progress_bar(total=total, desc="teaching", unit="step", show=bool(self.progress))
+        first_step = self.n_steps
         try:
             while True:
                 if cfg.max_demonstrations is not None and (
@@ -1741,12 +1748,29 @@ class ConfidentTeacher:
             raise
         else:
             self.flush()
+            if self.n_steps == first_step and self.stop_reason in _BUDGET_COUNTS:
+                self._warn_budget_reached(cfg)
         finally:
             self._run_config = None
             if self.progress:
                 bar.set_postfix_str(self._postfix())
             bar.close()
         return self
+
+    def _warn_budget_reached(self, cfg: TeachingConfig) -> None:
+        """Say that :meth:`run` took no step because a budget of the whole session (the
+        :attr:`stop_reason`) was reached before it began, and how to ask for more."""
+        name = self.stop_reason
+        assert name is not None
+        attr, noun = _BUDGET_COUNTS[name]
+        have = getattr(self, attr)
+        warnings.warn(
+            f"run() took no step: {name}={getattr(cfg, name)} was already reached (the session "
+            f"holds {have} {noun}; budgets count over the whole session, resumes included). "
+            f"To go on, raise it for this call, e.g. run({name}=ct.{attr} + 100), here "
+            f"run({name}={have + 100}).",
+            stacklevel=3,
+        )
 
     def _postfix(self) -> str:
         def pct(v: float | None) -> str:
@@ -1780,6 +1804,15 @@ class ConfidentTeacher:
             f"ConfidentTeacher(steps={self.n_steps}, demonstrations={self.n_demonstrations}, "
             f"phase={self.phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
         )
+
+
+#: The budgets run() stops at, by stop_reason: the counter (attribute) each one bounds and
+#: what it counts, for the warning of a run() that took no step.
+_BUDGET_COUNTS = {
+    "max_steps": ("n_steps", "steps"),
+    "max_demonstrations": ("n_demonstrations", "labels"),
+    "max_episodes": ("n_episodes", "finished episodes"),
+}
 
 
 def _jsonable(value: Any) -> bool:
