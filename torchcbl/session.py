@@ -2883,9 +2883,11 @@ class SessionSummary:
         model_class, model_args: the model's class name and constructor arguments.
         starts_fitted: the session started from a fitted model.
         n_prior: prior demonstrations the session started from (0: none); not labels of it.
-        n_steps, n_episodes: steps logged and episodes they belong to.
-        n_episodes_ended: episodes that ended (terminated or truncated); the last one may
-            still be under way.
+        n_steps, n_episodes: steps logged and episodes they belong to (every episode
+            with a logged step, the last one included while it is under way).
+        n_episodes_ended: episodes that ended (terminated or truncated), what
+            ``ConfidentTeacher.n_episodes`` and ``max_episodes`` count: ``n_episodes``
+            less the last one while it is under way.
         n_labels: demonstrations + corrections.
         n_demonstrations, n_corrections: the two kinds of label.
         n_requests: steps on which the teacher was asked (each gave a demonstration).

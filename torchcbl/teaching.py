@@ -1125,7 +1125,11 @@ class ConfidentTeacher:
 
     @property
     def n_episodes(self) -> int:
-        """Finished episodes in the session (the env ended them: terminated or truncated)."""
+        """Finished episodes in the session: those the env ended (terminated or truncated),
+        resumes included; the episode under way is not counted. This is what
+        ``max_episodes`` bounds, and ``describe(run_dir).n_episodes_ended``;
+        ``describe(run_dir).n_episodes`` counts the episodes with a logged step, the one
+        under way included (one more while an episode is under way)."""
         return self._n_episodes
 
     @property
