@@ -41,6 +41,8 @@ from torchcbl.errors import (
     IncompatibleRunDirError,
     SessionLockedError,
     SessionWriteError,
+    TeacherError,
+    TeachingInterrupted,
 )
 from torchcbl.session import (
     load_config,
@@ -2356,3 +2358,110 @@ def test_a_new_session_refused_on_an_existing_one_leaves_its_count_in_writer_loc
     db.close()
     with pytest.raises(CorruptSessionError, match="committed 20 steps"):
         load_records(run)
+
+
+# -- a session that fails at its first step ---------------------------------------------------
+
+
+class _DeclaresThree(gym.Wrapper):
+    """A 2-D world whose observation space is declared 3-D (a user's mistake): reset fails."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(3,), dtype=np.float32)
+
+
+def test_a_new_session_whose_first_step_fails_leaves_no_session_to_block_a_rerun(tmp_path):
+    """An env whose first reset failed (declared (3,), returned (2,)) left a session of no
+    step in its run_dir: re-running the cell with the env fixed was refused ("already holds a
+    teaching session") and resume refused the fixed env (its space differs). Nothing was
+    recorded, so nothing is lost: the session made by that teacher is removed again, the
+    error says so, and the same run_dir starts the fixed session."""
+    run = tmp_path / "run"
+    world = rare_regions_world()
+    ct = ConfidentTeacher(_DeclaresThree(world), oracle(world), run_dir=run, progress=False)
+    with pytest.raises(EnvError, match=r"shape \(3,\), got \(2,\)") as info:
+        ct.run(max_steps=5)
+    assert "nothing was recorded" in "\n".join(info.value.__notes__)
+    ct.close()
+    assert not (run / "config.json").exists() and not (run / "steps.sqlite").exists()
+    with pytest.raises(IncompatibleRunDirError, match="closed after its first step failed"):
+        ct.run(max_steps=5)  # closed: it does not write the session again
+    assert not (run / "config.json").exists()
+    with ConfidentTeacher(world, oracle(world), run_dir=run, progress=False) as ct:
+        ct.run(max_steps=5)
+    assert len(load_records(run)) == 5
+
+
+def test_a_teacher_error_at_step_0_lets_the_cell_run_again_with_other_model_settings(tmp_path):
+    """A teacher error at step 0 ("Nothing was recorded") left a session whose stored model
+    settings then refused both a new session and a resume with the settings changed."""
+    run = tmp_path / "run"
+    world = rare_regions_world()
+    with pytest.raises(TeacherError, match="at step 0"):
+        with ConfidentTeacher(world, lambda o, i: 7, run_dir=run, progress=False) as ct:
+            ct.run(max_steps=5)
+    model = GaussianMixtureSet(3, 2, var_floor=0.01)
+    with ConfidentTeacher(world, oracle(world), model=model, run_dir=run, progress=False) as ct:
+        ct.run(max_steps=5)
+    assert S.load_config(run)["model"]["args"]["var_floor"] == 0.01
+
+
+def test_a_retry_on_the_same_teacher_after_a_failed_first_step_records_the_session(tmp_path):
+    """The teacher whose first reset failed goes on when run() is called again (a passing
+    fault): its session is made again, with its prior demonstrations, and resumes."""
+    run = tmp_path / "run"
+    world = rare_regions_world()
+    x, y = world.sample(30, np.random.default_rng(0))
+    calls = []
+
+    class FlakyReset(gym.Wrapper):
+        def reset(self, **kw):
+            calls.append(1)
+            if len(calls) == 1:
+                raise OSError("simulator not up yet")
+            return self.env.reset(**kw)
+
+    ct = ConfidentTeacher(
+        FlakyReset(world), oracle(world), prior_demonstrations=(x, y), run_dir=run, progress=False
+    )
+    with pytest.raises(EnvError, match="simulator not up yet"):
+        ct.run(max_steps=5)
+    assert not (run / "config.json").exists()
+    ct.run(max_steps=5)
+    ct.close()
+    assert len(load_records(run)) == 5 and S.load_config(run)["prior"]["n_demonstrations"] == 30
+    ct2 = ConfidentTeacher.resume(run, world, oracle(world), progress=False)
+    assert ct2.n_steps == 5 and ct2.n_prior == 30
+    ct2.close()
+
+
+def test_a_session_of_no_step_is_kept_where_it_was_resumed_or_stopped_by_the_user(tmp_path):
+    """Only a session this teacher made and that recorded nothing is removed, and only on an
+    error: one stopped by Ctrl-C or 'q' at its first request is kept (it resumes), and a resumed
+    session of no step whose first step fails stays too (the user resumed it)."""
+    run = tmp_path / "run"
+    world = rare_regions_world()
+
+    for stop in (KeyboardInterrupt, TeachingInterrupted):
+
+        def teacher(obs, info, stop=stop):
+            raise stop("not now")
+
+        where = tmp_path / stop.__name__
+        ct = ConfidentTeacher(world, teacher, run_dir=where, progress=False)
+        with pytest.raises(stop):
+            ct.run(max_steps=5)
+        ct.close()
+        assert load_records(where) == []
+    run = tmp_path / "KeyboardInterrupt"
+    ct = ConfidentTeacher.resume(run, world, lambda o, i: 7, progress=False)
+    with pytest.raises(TeacherError):
+        ct.run(max_steps=5)
+    ct.close()
+    assert load_records(run) == []
+    with ConfidentTeacher.resume(run, world, oracle(world), progress=False) as ct:
+        ct.run(max_steps=5)
+    assert len(load_records(run)) == 5
+    with pytest.raises(IncompatibleRunDirError, match="was closed, so .*resume"):
+        ct.run(max_steps=10)

@@ -127,6 +127,36 @@ def test_max_episodes_is_a_session_budget_that_survives_resume(tmp_path):
         assert (ct.n_episodes, ct.n_steps, ct.stop_reason) == (7, 70, "max_episodes")
 
 
+@pytest.mark.parametrize(
+    "budget, says",
+    [
+        (
+            "max_steps",
+            r"max_steps=5 was already reached \(the session holds 10 steps.*"
+            r"run\(max_steps=ct\.n_steps \+ 100\), here run\(max_steps=110\)",
+        ),
+        ("max_demonstrations", r"max_demonstrations=3 was already reached \(the session holds "),
+        ("max_episodes", r"max_episodes=1 was already reached \(the session holds 1 finished"),
+    ],
+)
+def test_a_run_that_takes_no_step_because_a_budget_was_reached_says_so(budget, says):
+    """Budgets count over the whole session, so run(max_steps=5) on a session of 10 steps
+    (where a user expects 5 more) returned at once with no word; it warns, once, with the
+    budget, the session's count and how to ask for more. A run that took a step says nothing."""
+    world = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(world, oracle(world), progress=False)
+    ct.run(max_steps=10)
+    limit = {"max_steps": 5, "max_demonstrations": 3, "max_episodes": 1}[budget]
+    with pytest.warns(UserWarning, match=says) as caught:
+        ct.run(**{budget: limit})
+    assert ct.n_steps == 10 and ct.stop_reason == budget and len(caught) == 1
+    assert caught[0].filename == __file__  # points at the caller's line
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ct.run(max_steps=12)
+    assert ct.n_steps == 12
+
+
 def test_evaluate_policy_seeds_every_episode_from_a_list():
     env = rare_regions_world(episode_length=5)
     records = evaluate_policy(oracle(env), env, seed=[3, 7, 3], uses_info=True)

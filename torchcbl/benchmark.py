@@ -740,7 +740,8 @@ def _run_cell(
             run_dir=run_dir,
         )
         for budget in spec.budgets:
-            loop.run(max_demonstrations=budget, max_steps=spec.max_steps)
+            if loop.n_demonstrations < budget:  # (a step with a correction may pass one)
+                loop.run(max_demonstrations=budget, max_steps=spec.max_steps)
             if not snapshots or snapshots[-1][0] != loop.n_demonstrations:
                 snapshots.append((loop.n_demonstrations, loop.n_steps, loop.snapshot()))
             if loop.n_steps >= spec.max_steps:

@@ -1208,6 +1208,8 @@ class SessionStore:
         self._corrected: set[int] = set()  # the steps that have a correction there
         self._note_at = -1  # where writer.lock's committed line starts (-1: not written)
         self._journal_noted = False  # writer.lock says the journal holds uncommitted lines
+        #: whether this store has written a journal line (a step, an outcome, a correction)
+        self.logged = False
         try:
             self._open()
         except BaseException:
@@ -1566,6 +1568,7 @@ class SessionStore:
                 f"That write is not part of the session. {_FREE_SPACE}",
             ) from exc
         self._journal_size += written
+        self.logged = True
         self._pending.append((_SQL[kind], values))
 
     @staticmethod
@@ -2880,9 +2883,11 @@ class SessionSummary:
         model_class, model_args: the model's class name and constructor arguments.
         starts_fitted: the session started from a fitted model.
         n_prior: prior demonstrations the session started from (0: none); not labels of it.
-        n_steps, n_episodes: steps logged and episodes they belong to.
-        n_episodes_ended: episodes that ended (terminated or truncated); the last one may
-            still be under way.
+        n_steps, n_episodes: steps logged and episodes they belong to (every episode
+            with a logged step, the last one included while it is under way).
+        n_episodes_ended: episodes that ended (terminated or truncated), what
+            ``ConfidentTeacher.n_episodes`` and ``max_episodes`` count: ``n_episodes``
+            less the last one while it is under way.
         n_labels: demonstrations + corrections.
         n_demonstrations, n_corrections: the two kinds of label.
         n_requests: steps on which the teacher was asked (each gave a demonstration).

@@ -686,29 +686,70 @@ class ConfidentTeacher:
             # a session may start from a fitted model: its checkpoint 0, written with the
             # session (a resume can only load it, no label refits it); one with prior
             # demonstrations has its model fitted on them as checkpoint 0, and them in prior.npz
-            self._store = SessionStore.create(
-                self.run_dir,
-                session_config,
-                initial_model=self.model if _is_fitted(self.model) else None,
-                initial_digest=None if prior is None else self._digest.hexdigest(),
-                prior=prior,
-            )
-            self._store.commit_every = commit_every
-            try:
-                self._store.note_writer(0, _model_device(self.model))
-            except BaseException as exc:
-                # nothing is recorded yet: no half session (the directory is left without one,
-                # checkpoint 0 of a fitted starting model included)
-                store, self._store = self._store, None
-                store.discard_new()
-                if isinstance(exc, SessionWriteError):
-                    exc.add_note(
-                        f"torchcbl: nothing was recorded, and {self.run_dir} was left without "
-                        "a session; free space (or fix the permissions) and create the teacher "
-                        "again."
-                    )
-                raise
+            self._new_session = (session_config, prior, commit_every)
+            self._create_session()
         self._next_reset_seed: int | None = self.seed
+
+    def _create_session(self) -> None:
+        """Write the new session this teacher was made with into :attr:`run_dir` (at its
+        creation, or again after :meth:`_discard_unstarted` removed it)."""
+        assert self.run_dir is not None and self._new_session is not None
+        session_config, prior, commit_every = self._new_session
+        store = SessionStore.create(
+            self.run_dir,
+            session_config,
+            initial_model=self.model if _is_fitted(self.model) else None,
+            initial_digest=None if prior is None else self._digest.hexdigest(),
+            prior=prior,
+        )
+        store.commit_every = commit_every
+        try:
+            store.note_writer(0, _model_device(self.model))
+        except BaseException as exc:
+            # nothing is recorded yet: no half session (the directory is left without one,
+            # checkpoint 0 of a fitted starting model included)
+            store.discard_new()
+            if isinstance(exc, SessionWriteError):
+                exc.add_note(
+                    f"torchcbl: nothing was recorded, and {self.run_dir} was left without "
+                    "a session; free space (or fix the permissions) and create the teacher "
+                    "again."
+                )
+            raise
+        self._store = store
+        self._unstarted = self._discarded = False
+
+    def _discard_unstarted(self, exc: BaseException) -> None:
+        """After ``exc`` (an error of the env, the teacher, the strategy or the model; not
+        the user's stop nor a failing disk) ended the first step of the session this
+        teacher made, with nothing recorded (no step, outcome or correction was written):
+        remove that session again, so that a rerun of the same code with the cause fixed
+        may start it in the same run_dir. A session that was resumed, or has any line in its
+        log, is never removed; only the files its creation wrote are (see
+        :meth:`SessionStore.discard_new`), under its lock."""
+        store = self._store
+        if (
+            store is None
+            or self._new_session is None
+            or store.logged
+            or self.records
+            or self.corrections
+            # the user's stop (Ctrl-C, 'q': the session resumes as it would have gone on)
+            # and a failing disk (the removal could fail halfway) keep the session
+            or not isinstance(exc, Exception)
+            or isinstance(exc, (TeachingInterrupted, SessionWriteError))
+        ):
+            return
+        self._store = None
+        self._unstarted = self._discarded = True  # the next step() writes it again
+        try:
+            store.discard_new()
+        except Exception:  # noqa: BLE001 - the error on its way out says more
+            return
+        exc.add_note(
+            f"torchcbl: nothing was recorded, so {self.run_dir} was left without a session: "
+            "fix the cause and run the same code again (or call run() again on this teacher)."
+        )
 
     def _set_prior(self, x: np.ndarray, y: np.ndarray) -> None:
         """Take the prior demonstrations (read-only arrays) as the first labels of the
@@ -790,6 +831,11 @@ class ConfidentTeacher:
         self._auto_steps_streak = 0
         self._auto_episodes_streak = 0
         self._n_episodes = 0  # finished episodes in the session
+        # (session config.json, prior bytes, commit_every) of a session this teacher made,
+        # None for a resumed one (see _discard_unstarted); _unstarted: removed, to be made again
+        self._new_session: tuple[dict[str, Any], bytes | None, int] | None = None
+        self._unstarted = False
+        self._discarded = False  # it was removed (and stays so once closed)
         self._run_config: TeachingConfig | None = None  # the config of the running run()
         self._warned_unjudged = False
         #: why the last :meth:`run` returned: "max_demonstrations", "max_steps",
@@ -1101,7 +1147,11 @@ class ConfidentTeacher:
 
     @property
     def n_episodes(self) -> int:
-        """Finished episodes in the session (the env ended them: terminated or truncated)."""
+        """Finished episodes in the session: those the env ended (terminated or truncated),
+        resumes included; the episode under way is not counted. This is what
+        ``max_episodes`` bounds, and ``describe(run_dir).n_episodes_ended``;
+        ``describe(run_dir).n_episodes`` counts the episodes with a logged step, the one
+        under way included (one more while an episode is under way)."""
         return self._n_episodes
 
     @property
@@ -1214,7 +1264,23 @@ class ConfidentTeacher:
         Autonomous steps reach disk in batches; call :meth:`flush` (or let :meth:`run` do it)
         to commit them. Demonstrations and corrections reach disk before the loop goes on.
         """
+        if self._unstarted:
+            self._create_session()
+        try:
+            return self._step()
+        except BaseException as exc:
+            if not self.records:
+                self._discard_unstarted(exc)
+            raise
+
+    def _step(self) -> StepRecord:
         if self._store is None and self.run_dir is not None:
+            if self._discarded:
+                raise IncompatibleRunDirError(
+                    f"this ConfidentTeacher was closed after its first step failed, with "
+                    f"nothing recorded and no session left in {self.run_dir}; create the "
+                    "teacher again to start the session."
+                )
             raise IncompatibleRunDirError(
                 f"this ConfidentTeacher was closed, so {self.run_dir} no longer records its "
                 "steps; continue the session with ConfidentTeacher.resume(run_dir, env, teacher)."
@@ -1647,6 +1713,12 @@ class ConfidentTeacher:
 
         Raises:
             ValueError: unknown override, or no stop criterion at all (it would never end).
+
+        Warns:
+            UserWarning: the call took no step because a budget was already reached when it
+                began (e.g. ``run(max_steps=100)`` on a session of 150 steps, or ``run()`` on
+                a resumed session that had finished): the warning names the budget, the
+                session's count and how to ask for more.
         """
         unknown = sorted(set(stop_overrides) - set(_STOP_SETTINGS))
         if unknown:
@@ -1664,6 +1736,7 @@ class ConfidentTeacher:
 
         total = None if cfg.max_steps is None else max(cfg.max_steps - self.n_steps, 0)
         bar = progress_bar(total=total, desc="teaching", unit="step", show=bool(self.progress))
+        first_step = self.n_steps
         try:
             while True:
                 if cfg.max_demonstrations is not None and (
@@ -1702,12 +1775,29 @@ class ConfidentTeacher:
             raise
         else:
             self.flush()
+            if self.n_steps == first_step and self.stop_reason in _BUDGET_COUNTS:
+                self._warn_budget_reached(cfg)
         finally:
             self._run_config = None
             if self.progress:
                 bar.set_postfix_str(self._postfix())
             bar.close()
         return self
+
+    def _warn_budget_reached(self, cfg: TeachingConfig) -> None:
+        """Say that :meth:`run` took no step because a budget of the whole session (the
+        :attr:`stop_reason`) was reached before it began, and how to ask for more."""
+        name = self.stop_reason
+        assert name is not None
+        attr, noun = _BUDGET_COUNTS[name]
+        have = getattr(self, attr)
+        warnings.warn(
+            f"run() took no step: {name}={getattr(cfg, name)} was already reached (the session "
+            f"holds {have} {noun}; budgets count over the whole session, resumes included). "
+            f"To go on, raise it for this call, e.g. run({name}=ct.{attr} + 100), here "
+            f"run({name}={have + 100}).",
+            stacklevel=3,
+        )
 
     def _postfix(self) -> str:
         def pct(v: float | None) -> str:
@@ -1725,6 +1815,7 @@ class ConfidentTeacher:
 
     def close(self) -> None:
         """Commit and close the step log. The session can be resumed from its directory."""
+        self._unstarted = False  # a session removed after its first step failed stays so
         if self._store is not None:
             store, self._store = self._store, None
             store.close()  # releases the lock even when the final commit fails
@@ -1740,6 +1831,15 @@ class ConfidentTeacher:
             f"ConfidentTeacher(steps={self.n_steps}, demonstrations={self.n_demonstrations}, "
             f"phase={self.phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
         )
+
+
+#: The budgets run() stops at, by stop_reason: the counter (attribute) each one bounds and
+#: what it counts, for the warning of a run() that took no step.
+_BUDGET_COUNTS = {
+    "max_steps": ("n_steps", "steps"),
+    "max_demonstrations": ("n_demonstrations", "labels"),
+    "max_episodes": ("n_episodes", "finished episodes"),
+}
 
 
 def _jsonable(value: Any) -> bool:
