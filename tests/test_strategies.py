@@ -696,6 +696,39 @@ def test_the_public_observe_hooks_keep_the_schedule_in_ones_own_loop():
     assert s.phase == "confident"
 
 
+class _Lenient(ConfidentExecution):
+    """Counts every demonstration as one the model got right, through super()'s arguments."""
+
+    def observe_label(self, observation, action, *, model_action, kind):
+        super().observe_label(observation, action, model_action=action, kind=kind)
+
+
+def test_a_super_call_with_arguments_of_its_own_is_honoured(tmp_path):
+    """An override that calls super() with arguments of its own (here: every demonstration
+    counted as right) steered the schedule through them; the loop's bookkeeping first took the
+    loop's arguments and ignored super()'s (review, 2026-11-27), so a lenient subclass stayed
+    non-interactive under a random teacher. The loop keeps the schedule itself only where the
+    override never reached the base hook."""
+    env = rare_regions_world(episode_length=10)
+    rng = np.random.default_rng(0)
+
+    def random_teacher(observation, info):
+        return int(rng.integers(env.action_space.n))
+
+    mine = _Lenient()
+    ct = ConfidentTeacher(
+        env,
+        random_teacher,
+        strategy=mine,
+        config=TeachingConfig(accuracy_window=5, target_accuracy=1.0),
+        run_dir=tmp_path / "r",
+        progress=False,
+    )
+    ct.run(max_steps=12)
+    ct.close()
+    assert ct.phase == "confident"
+
+
 class _NoSuperInit(ConfidentExecution):
     def __init__(self, rule, verbose=False):
         self.rule, self.verbose = rule, verbose

@@ -76,9 +76,11 @@ Rules a strategy must keep:
 Subclassing a shipped strategy (:class:`ConfidentExecution`,
 :class:`~torchcbl.strategies.cba.ConfidenceBasedAutonomy`): their phase schedule (the
 non-interactive phase's accuracy window, the phase, the bursts) is kept by
-:class:`~torchcbl.teaching.ConfidentTeacher` before it calls ``observe_label`` and
-``observe_step``, so an override of either hook adds behaviour and need not call ``super()``
-(calling it does no harm: nothing is counted twice). A loop of one's own that calls the public
+:class:`~torchcbl.teaching.ConfidentTeacher` where an override of ``observe_label`` or
+``observe_step`` never reaches the base hook (after it returns, with the loop's arguments), so
+an override of either adds behaviour and need not call ``super()``; where it calls
+``super()``, the schedule is kept there, with the arguments it gives (nothing is counted
+twice). A loop of one's own that calls the public
 hooks gets the schedule kept by theirs, and there an override must call ``super()``. The
 other methods keep the usual rule: an ``__init__``, ``bind`` or ``observe_refit`` of one's own
 calls ``super()`` (``observe_refit`` updates the rule, or CBA's thresholds); an ``__init__``

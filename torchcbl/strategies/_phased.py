@@ -184,12 +184,15 @@ class _Phased(_StrategyDefaults):
         return Decision(ask, self._phase, self._burst if ask else 0)
 
     # The schedule's bookkeeping (the accuracy window, the phase, the burst) lives in the
-    # private _track_label / _track_step, which ConfidentTeacher calls through _loop_label /
-    # _loop_step before the public hook: a subclass may override observe_label / observe_step
-    # to add behaviour without calling super() (it once silently stayed non-interactive). A
-    # loop of one's own calls the public hooks, which keep the schedule themselves; while the
-    # loop's call is under way they leave it alone, so a super() call does not count twice.
-    _in_loop_hook = False
+    # private _track_label / _track_step, which the public hooks call. ConfidentTeacher calls
+    # the hooks through _loop_label / _loop_step: where an override of a hook never called
+    # super() (it once silently stayed non-interactive), the loop keeps the schedule itself
+    # after the hook returns, with the loop's arguments; where it did, super() kept it, with
+    # the arguments the override gave it, at the moment the override chose, as before.
+    # (None: no loop's call of that hook is under way; False / True: under way, and whether the
+    # base hook ran in it.)
+    _label_kept: bool | None = None
+    _step_kept: bool | None = None
 
     def _track_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
@@ -200,42 +203,52 @@ class _Phased(_StrategyDefaults):
     def _loop_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
     ) -> None:
-        """The loop's call: the schedule's bookkeeping, then the public hook."""
-        self._track_label(observation, action, model_action=model_action, kind=kind)
-        self._in_loop_hook = True
+        """The loop's call: the public hook, then the schedule's bookkeeping where the hook
+        did not reach the base one."""
+        self._label_kept = False
         try:
             self.observe_label(observation, action, model_action=model_action, kind=kind)
+            kept = self._label_kept
         finally:
-            self._in_loop_hook = False
+            self._label_kept = None
+        if not kept:
+            self._track_label(observation, action, model_action=model_action, kind=kind)
 
     def observe_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
     ) -> None:
-        """Every label (see the protocol). Keeps the schedule's accuracy window; under
-        ConfidentTeacher the loop keeps it before this is called, so an override need not
-        call ``super()`` (calling it does no harm)."""
-        if not self._in_loop_hook:
-            self._track_label(observation, action, model_action=model_action, kind=kind)
+        """Every label (see the protocol). Keeps the schedule's accuracy window. An override
+        under ConfidentTeacher need not call ``super()``: where it does not, the loop keeps the
+        window after it returns, with the loop's arguments; where it does, with the arguments
+        it gives (a loop of one's own that calls the hooks needs the ``super()`` call)."""
+        self._track_label(observation, action, model_action=model_action, kind=kind)
+        if self._label_kept is False:
+            self._label_kept = True
 
     def _target_reached(self) -> bool:
         w, t = self._window, self._target
         return t is not None and len(w) == w.maxlen and sum(w) / len(w) >= t
 
     def _loop_step(self, record: StepRecord, decision: Decision | None) -> None:
-        """The loop's call: the schedule's bookkeeping, then the public hook."""
-        self._track_step(record, decision)
-        self._in_loop_hook = True
+        """The loop's call: the public hook, then the schedule's bookkeeping where the hook
+        did not reach the base one."""
+        self._step_kept = False
         try:
             self.observe_step(record, decision)
+            kept = self._step_kept
         finally:
-            self._in_loop_hook = False
+            self._step_kept = None
+        if not kept:
+            self._track_step(record, decision)
 
     def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
-        """After every step (see the protocol). Advances the phase and the burst; under
-        ConfidentTeacher the loop does so before this is called, so an override need not
-        call ``super()`` (calling it does no harm)."""
-        if not self._in_loop_hook:
-            self._track_step(record, decision)
+        """After every step (see the protocol). Advances the phase and the burst. An override
+        under ConfidentTeacher need not call ``super()``: where it does not, the loop advances
+        them after it returns; where it does, when it calls it, with the arguments it gives (a
+        loop of one's own that calls the hooks needs the ``super()`` call)."""
+        self._track_step(record, decision)
+        if self._step_kept is False:
+            self._step_kept = True
 
     def _track_step(self, record: StepRecord, decision: Decision | None) -> None:
         if decision is None:  # replayed on resume; a resumed session starts a new episode
