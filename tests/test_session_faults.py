@@ -2465,3 +2465,35 @@ def test_a_session_of_no_step_is_kept_where_it_was_resumed_or_stopped_by_the_use
     assert len(load_records(run)) == 5
     with pytest.raises(IncompatibleRunDirError, match="was closed, so .*resume"):
         ct.run(max_steps=10)
+
+
+def test_a_first_step_interrupted_just_after_its_journal_line_keeps_the_session(
+    tmp_path, monkeypatch
+):
+    """An exception from a signal handler (an alarm, an async timeout) landing just after the
+    first journal line was written, before the store noted it, made the failed first step read
+    as one that recorded nothing: the session, demonstration and all, was removed, with a note
+    saying nothing was recorded (review, 2026-11-27). A store counts a line as written from the
+    moment it begins to write it."""
+    run = tmp_path / "run"
+    world = rare_regions_world()
+    real = S._write_fd
+
+    class Alarm(Exception):
+        pass
+
+    def write_then_alarm(fd, data):
+        real(fd, data)
+        raise Alarm("the alarm went off")
+
+    monkeypatch.setattr(S, "_write_fd", write_then_alarm)
+    ct = ConfidentTeacher(world, oracle(world), run_dir=run, progress=False)
+    with pytest.raises(Alarm) as info:
+        ct.run(max_steps=3)
+    assert "nothing was recorded" not in "\n".join(getattr(info.value, "__notes__", []))
+    monkeypatch.setattr(S, "_write_fd", real)
+    ct.close()
+    assert (run / "config.json").exists() and (run / "steps.journal").stat().st_size > 0
+    back = ConfidentTeacher.resume(run, world, oracle(world), progress=False)
+    assert back.n_steps == 1  # the demonstration whose line reached the journal
+    back.close()

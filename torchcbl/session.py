@@ -1208,7 +1208,8 @@ class SessionStore:
         self._corrected: set[int] = set()  # the steps that have a correction there
         self._note_at = -1  # where writer.lock's committed line starts (-1: not written)
         self._journal_noted = False  # writer.lock says the journal holds uncommitted lines
-        #: whether this store has written a journal line (a step, an outcome, a correction)
+        #: whether this store has written, or begun to write, a journal line (a step, an
+        #: outcome, a correction): a session that may hold one is never removed
         self.logged = False
         try:
             self._open()
@@ -1552,6 +1553,9 @@ class SessionStore:
         if not self._journal_noted:  # before the line: a kill after it finds the note
             self._journal_noted = True
             self._note_committed()
+        # before the write: whatever interrupts it (an error of the write, or an exception from
+        # a signal handler just after it), the line may be on disk, and the session is kept
+        self.logged = True
         try:
             written = _write_fd(self._journal, line)
             if written != len(line):
@@ -1568,7 +1572,6 @@ class SessionStore:
                 f"That write is not part of the session. {_FREE_SPACE}",
             ) from exc
         self._journal_size += written
-        self.logged = True
         self._pending.append((_SQL[kind], values))
 
     @staticmethod
