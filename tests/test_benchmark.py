@@ -1580,6 +1580,16 @@ def test_save_whole_writes_what_savefig_writes_and_nothing_when_it_fails(tmp_pat
         tmp_path / "whole.png"
     )
     assert (tmp_path / "whole.png").read_bytes() == (tmp_path / "direct.png").read_bytes()
+    # an upper-case extension names the same format, as matplotlib reads it (imsave wrote
+    # "PNG" without its metadata chunk)
+    from matplotlib.image import imsave
+
+    rgb = np.zeros((4, 5, 3), dtype=np.uint8)
+    imsave(tmp_path / "DIRECT.PNG", rgb)
+    save_whole(tmp_path / "WHOLE.PNG", lambda fname, **kw: imsave(fname, rgb, **kw))
+    assert (tmp_path / "WHOLE.PNG").read_bytes() == (tmp_path / "DIRECT.PNG").read_bytes()
+    for name in ("DIRECT.PNG", "WHOLE.PNG"):
+        (tmp_path / name).unlink()
     _half_then_fail(monkeypatch)
     with pytest.raises(OSError, match="No space"):
         save_whole(tmp_path / "failed.png", fig.savefig, dpi=77)

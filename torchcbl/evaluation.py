@@ -549,7 +549,7 @@ def save_whole(path: str | os.PathLike[str], save: Callable[..., Any], **kwargs:
 
     path = Path(path)
     if "format" not in kwargs and path.suffix:
-        kwargs["format"] = path.suffix[1:]
+        kwargs["format"] = path.suffix[1:].lower()  # "map.PNG" as savefig writes it
     buf = io.BytesIO()
     save(buf, **kwargs)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
