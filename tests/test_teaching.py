@@ -951,3 +951,7 @@ def test_a_vector_env_is_refused_saying_torchcbl_teaches_one_env(tmp_path):
     finally:
         vec.close()
     assert not (tmp_path / "new").exists()
+    # a plain env that sets num_envs = 1 (some libraries' single envs do) is one env
+    single = rare_regions_world()
+    single.num_envs = 1
+    evaluate_policy(lambda o: 0, single, n_steps=2)
