@@ -770,3 +770,46 @@ def test_a_subclass_init_that_skips_super_is_refused_when_given_to_a_session(tmp
         ConfidentTeacher.resume(tmp_path / "ok", env, oracle(env), strategy=make())
     with pytest.raises(TypeError, match=want):
         make().bind(n_actions=3, n_features=2, config=TeachingConfig())
+
+
+class _RaisesAtTheFifthLabel(ConfidentExecution):
+    calls = 0
+
+    def observe_label(self, observation, action, *, model_action, kind):
+        type(self).calls += 1
+        if type(self).calls == 5:
+            raise ValueError("strategy bug")
+        super().observe_label(observation, action, model_action=model_action, kind=kind)
+
+
+def test_an_override_that_raises_before_super_leaves_the_schedule_as_a_resume_reads_it(tmp_path):
+    """An override that raised before reaching the base hook left that label uncounted in the
+    running strategy, though the label is logged and a resume counts it: going on in the same
+    process then left the non-interactive phase a step later than the resumed session did
+    (review, 2026-11-27). The loop keeps the schedule where the hook raised too."""
+    config = TeachingConfig(max_new=2, accuracy_window=10)
+    phases = {}
+    for how in ("same process", "resumed"):
+        env = rare_regions_world()
+        run = tmp_path / how.replace(" ", "_")
+        _RaisesAtTheFifthLabel.calls = 0
+        ct = ConfidentTeacher(
+            env,
+            oracle(env),
+            strategy=_RaisesAtTheFifthLabel(),
+            config=config,
+            run_dir=run,
+            progress=False,
+        )
+        with pytest.raises(ValueError, match="strategy bug"):
+            ct.run(max_steps=40)
+        if how == "resumed":
+            ct.close()
+            ct = ConfidentTeacher.resume(
+                run, env, oracle(env), strategy=_RaisesAtTheFifthLabel(), progress=False
+            )
+        ct.run(max_steps=40)
+        ct.close()
+        phases[how] = [r.phase for r in load_records(run)]
+    assert "confident" in phases["resumed"]
+    assert phases["same process"] == phases["resumed"]

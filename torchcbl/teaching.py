@@ -298,8 +298,9 @@ def _warn_misstated_relabel(stored: dict[str, Any], strategy: Any) -> None:
 
 
 def _tell_label(strategy: Any, *args: Any, **kwargs: Any) -> None:
-    """``strategy.observe_label``; a shipped strategy's schedule is kept first, so that a
-    subclass overriding the hook without ``super()`` still leaves the non-interactive phase."""
+    """``strategy.observe_label``; a shipped strategy's schedule is kept by the loop where an
+    override never reaches the base hook (also where it raised), so that a subclass overriding
+    the hook without ``super()`` still leaves the non-interactive phase."""
     if isinstance(strategy, _Phased):
         strategy._loop_label(*args, **kwargs)
     else:
@@ -307,7 +308,7 @@ def _tell_label(strategy: Any, *args: Any, **kwargs: Any) -> None:
 
 
 def _tell_step(strategy: Any, record: StepRecord, decision: Decision | None) -> None:
-    """``strategy.observe_step``, with a shipped strategy's schedule kept first (as above)."""
+    """``strategy.observe_step``, with a shipped strategy's schedule kept as above."""
     if isinstance(strategy, _Phased):
         strategy._loop_step(record, decision)
     else:

@@ -187,7 +187,8 @@ class _Phased(_StrategyDefaults):
     # private _track_label / _track_step, which the public hooks call. ConfidentTeacher calls
     # the hooks through _loop_label / _loop_step: where an override of a hook never called
     # super() (it once silently stayed non-interactive), the loop keeps the schedule itself
-    # after the hook returns, with the loop's arguments; where it did, super() kept it, with
+    # after the hook returns (or raises: the label or step is logged, and a resume counts it),
+    # with the loop's arguments; where it did, super() kept it, with
     # the arguments the override gave it, at the moment the override chose, as before.
     # (None: no loop's call of that hook is under way; False / True: under way, and whether the
     # base hook ran in it.)
@@ -208,11 +209,10 @@ class _Phased(_StrategyDefaults):
         self._label_kept = False
         try:
             self.observe_label(observation, action, model_action=model_action, kind=kind)
-            kept = self._label_kept
-        finally:
-            self._label_kept = None
-        if not kept:
-            self._track_label(observation, action, model_action=model_action, kind=kind)
+        finally:  # also where the hook raised: the label is logged, and a resume counts it
+            kept, self._label_kept = self._label_kept, None
+            if not kept:
+                self._track_label(observation, action, model_action=model_action, kind=kind)
 
     def observe_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
@@ -235,11 +235,10 @@ class _Phased(_StrategyDefaults):
         self._step_kept = False
         try:
             self.observe_step(record, decision)
-            kept = self._step_kept
-        finally:
-            self._step_kept = None
-        if not kept:
-            self._track_step(record, decision)
+        finally:  # also where the hook raised: the step is logged, and a resume counts it
+            kept, self._step_kept = self._step_kept, None
+            if not kept:
+                self._track_step(record, decision)
 
     def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
         """After every step (see the protocol). Advances the phase and the burst. An override
