@@ -955,3 +955,18 @@ def test_a_vector_env_is_refused_saying_torchcbl_teaches_one_env(tmp_path):
     single = rare_regions_world()
     single.num_envs = 1
     evaluate_policy(lambda o: 0, single, n_steps=2)
+    # another library's vector env of one env (no gymnasium.Env; e.g. a DummyVecEnv of one)
+
+    class OneEnvVec:
+        num_envs = 1
+        action_space = single.action_space
+        observation_space = single.observation_space
+
+        def reset(self):
+            return np.zeros((1, 2))
+
+        def step(self, actions):
+            raise AssertionError("never stepped")
+
+    with pytest.raises(ValueError, match="vector env .*num_envs=1.*one env at a time"):
+        evaluate_policy(lambda o: 0, OneEnvVec(), n_steps=1)

@@ -106,10 +106,12 @@ def check_env(env: gym.Env) -> tuple[int, int]:
             " An env has reset(), step(action), a Discrete action_space and a 1-D float Box"
             " observation_space."
         )
-    # a vector env; or one of another library's vector APIs (num_envs > 1): not an env of
-    # num_envs = 1, which a plain gymnasium.Env may set
-    n_envs = getattr(env, "num_envs", 1)
-    if isinstance(env, gym.vector.VectorEnv) or (isinstance(n_envs, int) and n_envs != 1):
+    # a vector env: gymnasium's, or another library's vector API (num_envs, and no gym.Env;
+    # a plain gymnasium.Env may set num_envs = 1, and is one env)
+    vector = hasattr(env, "num_envs") and (
+        not isinstance(env, gym.Env) or getattr(env, "num_envs", 1) != 1
+    )
+    if isinstance(env, gym.vector.VectorEnv) or vector:
         spec = getattr(env, "spec", None)
         make = f"gymnasium.make({spec.id!r})" if getattr(spec, "id", None) else "gymnasium.make(id)"
         raise ValueError(
