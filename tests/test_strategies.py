@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 from _toy_envs import oracle, rare_regions_world
 
-from torchcbl import ConfidentTeacher, DistanceRule, PosteriorRule, TeachingConfig
+from torchcbl import (
+    AutoThresholdRule,
+    ConfidentTeacher,
+    DistanceRule,
+    PosteriorRule,
+    TeachingConfig,
+)
 from torchcbl.errors import IncompatibleRunDirError
 from torchcbl.session import load_config, load_records
 from torchcbl.strategies import (
@@ -19,6 +25,9 @@ from torchcbl.strategies import (
     correcting,
     strategy_from_config,
 )
+from torchcbl.strategies.dagger import DAgger
+from torchcbl.strategies.hg_dagger import HGDAgger
+from torchcbl.strategies.novelty import NoveltyGated
 
 
 class AlwaysAskAgentActs:
@@ -743,21 +752,41 @@ class _InheritsTheSkippingInit(_NoSuperInit):
     pass
 
 
+class _NoSuperInitDAgger(DAgger):
+    def __init__(self, beta0=1.0):
+        self.beta0 = beta0
+
+
+class _NoSuperInitHGDAgger(HGDAgger):
+    def __init__(self, tag="x"):
+        self.tag = tag
+
+
+class _NoSuperInitNovelty(NoveltyGated):
+    def __init__(self, target_rate=0.2):
+        self.target_rate = target_rate
+
+
 @pytest.mark.parametrize(
     "make, named",
     [
         (lambda: _NoSuperInit(DistanceRule(2.0)), "_NoSuperInit"),
         (lambda: _NoSuperInitCBA(), "_NoSuperInitCBA"),
         (lambda: _InheritsTheSkippingInit(DistanceRule(2.0)), "_NoSuperInit"),
+        (lambda: _NoSuperInitDAgger(), "_NoSuperInitDAgger"),
+        (lambda: _NoSuperInitHGDAgger(), "_NoSuperInitHGDAgger"),
+        (lambda: _NoSuperInitNovelty(), "_NoSuperInitNovelty"),
     ],
-    ids=["confident execution", "cba", "inherited __init__"],
+    ids=["confident execution", "cba", "inherited __init__", "dagger", "hg-dagger", "novelty"],
 )
 def test_a_subclass_init_that_skips_super_is_refused_when_given_to_a_session(tmp_path, make, named):
     """A subclass whose __init__ did not call super().__init__() was taken, and failed at its
     first confident step (step 21) with AttributeError: 'Mine' object has no attribute
     '_with_obs' (CBA: 'distance_multiplier', as the session was written). It is now refused
     when given to ConfidentTeacher or resume, and when bound in a loop of one's own, naming
-    the __init__ to fix; nothing is written."""
+    the __init__ to fix; nothing is written. The baselines (DAgger, HG-DAgger, the novelty
+    gate) were taken too, and failed later (HG-DAgger: AttributeError 'warmup' from to_config
+    as the session was written)."""
     env = rare_regions_world(episode_length=10)
     want = rf"{named}\.__init__ did not call super\(\)\.__init__\(\.\.\.\)"
     with pytest.raises(TypeError, match=want):
@@ -813,3 +842,79 @@ def test_an_override_that_raises_before_super_leaves_the_schedule_as_a_resume_re
         phases[how] = [r.phase for r in load_records(run)]
     assert "confident" in phases["resumed"]
     assert phases["same process"] == phases["resumed"]
+
+
+class _DAggerCounting(DAgger):
+    """Adds behaviour to observe_step without calling super()."""
+
+    def observe_step(self, record, decision):
+        self.seen = getattr(self, "seen", 0) + 1
+
+
+class _HGDAggerCounting(HGDAgger):
+    def observe_label(self, observation, action, *, model_action, kind):
+        self.labels = getattr(self, "labels", 0) + 1
+
+
+class _NoveltyCounting(NoveltyGated):
+    def observe_step(self, record, decision):
+        self.seen = getattr(self, "seen", 0) + 1
+
+    def observe_label(self, observation, action, *, model_action, kind):
+        self.labels = getattr(self, "labels", 0) + 1
+
+    def observe_refit(self, model, observations, actions):
+        self.refits = getattr(self, "refits", 0) + 1
+
+
+class _CountingRefitsCE(ConfidentExecution):
+    def observe_refit(self, model, observations, actions):
+        self.refits = getattr(self, "refits", 0) + 1
+
+
+class _CountingRefitsCBA(ConfidenceBasedAutonomy):
+    def observe_refit(self, model, observations, actions):
+        self.refits = getattr(self, "refits", 0) + 1
+
+
+@pytest.mark.parametrize(
+    "make, parent",
+    [
+        (lambda: _DAggerCounting(iteration_steps=10), lambda: DAgger(iteration_steps=10)),
+        (lambda: _HGDAggerCounting(warmup=5), lambda: HGDAgger(warmup=5)),
+        (lambda: _NoveltyCounting(warmup=5, window=20), lambda: NoveltyGated(warmup=5, window=20)),
+        (
+            lambda: _CountingRefitsCE(AutoThresholdRule()),
+            lambda: ConfidentExecution(AutoThresholdRule()),
+        ),
+        (_CountingRefitsCBA, ConfidenceBasedAutonomy),
+    ],
+    ids=["dagger observe_step", "hg-dagger observe_label", "novelty all", "ce refit", "cba refit"],
+)
+def test_a_baseline_subclass_overriding_an_observe_hook_decides_as_its_parent(
+    tmp_path, make, parent
+):
+    """The baselines kept their state in their public hooks, so a subclass overriding one
+    without super() broke them silently: DAgger's beta schedule stayed at step 0 (the teacher
+    drove forever), HG-DAgger never left its warmup, the novelty gate never filled its window
+    (it asked at every step). So did an observe_refit without super() in confident execution
+    (the rule was never updated) and CBA (no thresholds: it never acted). The loop keeps their
+    state where an override never reaches the base hook, as it does the phase schedule, so the
+    subclass decides as its parent, live and on resume, and its hooks still run."""
+    _, want = _decisions(tmp_path, "parent", parent(), steps=60)
+    mine = make()
+    ct, got = _decisions(tmp_path, "mine", mine, steps=60)
+    assert got == want and any(actor == "agent" for _, actor in got)
+    assert getattr(mine, "seen", 60) == 60
+    assert getattr(mine, "labels", ct.n_demonstrations) == ct.n_demonstrations
+    assert getattr(mine, "refits", 1) >= 1
+    if isinstance(mine, ConfidentExecution):  # its rule was updated at the refits
+        assert mine.rule.thresholds is not None
+    env = rare_regions_world(episode_length=10)
+    again, before = make(), parent()
+    for name, s in (("mine", again), ("parent", before)):
+        ConfidentTeacher.resume(
+            tmp_path / name, env, correcting(oracle(env)), strategy=s, progress=False
+        ).close()
+    assert again.phase == before.phase
+    assert getattr(again, "seen", 60) == 60

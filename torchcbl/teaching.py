@@ -110,7 +110,7 @@ from torchcbl.strategies import (
     strategy_from_config,
     strategy_to_config,
 )
-from torchcbl.strategies._phased import _Phased
+from torchcbl.strategies._phased import _StrategyDefaults
 
 __all__ = [
     "ConfidentTeacher",
@@ -298,21 +298,31 @@ def _warn_misstated_relabel(stored: dict[str, Any], strategy: Any) -> None:
 
 
 def _tell_label(strategy: Any, *args: Any, **kwargs: Any) -> None:
-    """``strategy.observe_label``; a shipped strategy's schedule is kept by the loop where an
+    """``strategy.observe_label``; a shipped strategy's state is kept by the loop where an
     override never reaches the base hook (also where it raised), so that a subclass overriding
-    the hook without ``super()`` still leaves the non-interactive phase."""
-    if isinstance(strategy, _Phased):
+    the hook without ``super()`` still leaves the non-interactive phase (or DAgger's warmup,
+    ...)."""
+    if isinstance(strategy, _StrategyDefaults):
         strategy._loop_label(*args, **kwargs)
     else:
         strategy.observe_label(*args, **kwargs)
 
 
 def _tell_step(strategy: Any, record: StepRecord, decision: Decision | None) -> None:
-    """``strategy.observe_step``, with a shipped strategy's schedule kept as above."""
-    if isinstance(strategy, _Phased):
+    """``strategy.observe_step``, with a shipped strategy's state kept as above."""
+    if isinstance(strategy, _StrategyDefaults):
         strategy._loop_step(record, decision)
     else:
         strategy.observe_step(record, decision)
+
+
+def _tell_refit(strategy: Any, model: Any, x: np.ndarray, y: np.ndarray) -> None:
+    """``strategy.observe_refit``, with a shipped strategy's state (a rule's update, CBA's
+    thresholds, the novelty scores) kept as above."""
+    if isinstance(strategy, _StrategyDefaults):
+        strategy._loop_refit(model, x, y)
+    else:
+        strategy.observe_refit(model, x, y)
 
 
 def _pick_strategy(rule: Any, strategy: Any) -> Any:
@@ -336,7 +346,9 @@ def _pick_strategy(rule: Any, strategy: Any) -> Any:
                 "the protocol in torchcbl.strategies (an episode_start that does nothing is "
                 "`def episode_start(self): pass`)."
             )
-    if isinstance(strategy, _Phased):  # a subclass whose __init__ skipped super().__init__()
+    if isinstance(
+        strategy, _StrategyDefaults
+    ):  # a subclass whose __init__ skipped super().__init__()
         strategy._refuse_uninitialised()
     return strategy
 
@@ -658,7 +670,7 @@ class ConfidentTeacher:
             prior = prior_bytes(*self._prior)
             x, y = self._train.arrays()
             self.model.fit(x, y)  # before the first decision, as a resume rebuilds it
-            self.strategy.observe_refit(self.model, x, y)
+            _tell_refit(self.strategy, self.model, x, y)
         self._env_config = self._describe_env()
         self._store: SessionStore | None = None
         self.run_dir = None if run_dir is None else Path(run_dir)
@@ -1097,7 +1109,7 @@ class ConfidentTeacher:
                 x, y = training_set(
                     [*px, *xs[:k]], [*np.asarray(py).tolist(), *ys[:k]], relabel=self._relabel
                 )
-            strategy.observe_refit(self.model, x, y)
+            _tell_refit(strategy, self.model, x, y)
         self._new_since_refit = len(ys) - k
         self._next_episode = records[-1].episode + 1 if records else 0
         # nothing logged: the session's first reset (seeded with the seed itself) is still to
@@ -1252,7 +1264,7 @@ class ConfidentTeacher:
     def _refit(self) -> None:
         x, y = self._train.arrays()
         (self.model.refit if self.config.refit == "incremental" else self.model.fit)(x, y)
-        self.strategy.observe_refit(self.model, x, y)
+        _tell_refit(self.strategy, self.model, x, y)
         self._new_since_refit = 0
         if self._store is not None:
             self._store.save_checkpoint(self.model, self._labels, self._digest.hexdigest())

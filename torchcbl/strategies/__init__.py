@@ -74,19 +74,21 @@ Rules a strategy must keep:
   resumed before, is refused.
 
 Subclassing a shipped strategy (:class:`ConfidentExecution`,
-:class:`~torchcbl.strategies.cba.ConfidenceBasedAutonomy`): their phase schedule (the
-non-interactive phase's accuracy window, the phase, the bursts) is kept by
-:class:`~torchcbl.teaching.ConfidentTeacher` where an override of ``observe_label`` or
-``observe_step`` never reaches the base hook (after it returns, with the loop's arguments), so
-an override of either adds behaviour and need not call ``super()``; where it calls
-``super()``, the schedule is kept there, with the arguments it gives (nothing is counted
-twice). A loop of one's own that calls the public
-hooks gets the schedule kept by theirs, and there an override must call ``super()``. The
-other methods keep the usual rule: an ``__init__``, ``bind`` or ``observe_refit`` of one's own
-calls ``super()`` (``observe_refit`` updates the rule, or CBA's thresholds); an ``__init__``
-that does not call ``super().__init__(...)`` is a TypeError when the strategy is given to
-ConfidentTeacher or ``resume`` (or bound), naming it. To change when the schedule asks,
-override ``decide``.
+:class:`~torchcbl.strategies.cba.ConfidenceBasedAutonomy` and the baselines below): their
+state (the phase schedule's accuracy window, phase and bursts; DAgger's step count, which
+sets its beta and coins; HG-DAgger's label count and takeover; the novelty gate's window and
+rescoring; confident execution's rule update and CBA's thresholds at each refit) is kept by
+:class:`~torchcbl.teaching.ConfidentTeacher` where an override of ``observe_label``,
+``observe_step`` or ``observe_refit`` never reaches the base hook (after it returns or
+raises, with the loop's arguments), so an override adds behaviour and need not call
+``super()``; where it calls ``super()``, the state is kept there, with the arguments it gives
+(nothing is counted twice). To replace a refit's update (CBA's ``thresholds``), call
+``super().observe_refit(...)`` first and set your own after it: without the call, the loop's
+update after the hook overwrites yours. A loop of one's own that calls the public hooks gets
+the state kept by theirs, and there an override must call ``super()``. An ``__init__`` or
+``bind`` of one's own calls ``super()``; an ``__init__`` that does not call
+``super().__init__(...)`` is a TypeError when the strategy is given to ConfidentTeacher or
+``resume`` (or bound), naming it. To change when a strategy asks, override ``decide``.
 
 Two attributes complete the protocol:
 
@@ -265,7 +267,7 @@ class ConfidentExecution(_Phased):
                 "recorded for this step."
             ) from None
 
-    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+    def _track_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
         """After every refit: the rule's ``update`` with the training set (``observations``
         [M, D], ``actions`` [M])."""
         self.rule.update(model, observations, actions)

@@ -54,65 +54,34 @@ def _rule_takes_observations(rule: Any) -> bool:
 class _StrategyDefaults:
     """The protocol's defaults, for a strategy to override what it needs: remembers the
     problem's size in ``bind``, executes the teacher's action exactly on asked steps
-    (``actor``), and ignores episode starts, labels, refits and finished steps."""
+    (``actor``), and ignores episode starts, labels, refits and finished steps.
+
+    It also holds the two protections every shipped strategy shares against a subclass that
+    skips ``super()``:
+
+    - :meth:`_refuse_uninitialised`: a subclass ``__init__`` that skips ``super().__init__()``
+      is refused (TypeError, naming it) when given to a session or bound, not steps later.
+    - The shipped state lives in the private ``_track_label`` / ``_track_step`` /
+      ``_track_refit``, which the public hooks call. ConfidentTeacher calls the hooks through
+      ``_loop_label`` / ``_loop_step`` / ``_loop_refit``: where an override of a hook never
+      reached the base hook (it once silently froze the schedule, DAgger's beta, the novelty
+      window, CBA's thresholds), the loop keeps the state itself after the hook returns (or
+      raises: the label or step is logged, and a resume counts it), with the loop's arguments;
+      where it did, ``super()`` kept it, with the arguments the override gave it, at the moment
+      the override chose.
+    """
 
     relabel = False
     wants_corrections = False
 
-    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
-        self.n_actions, self.n_features = int(n_actions), int(n_features)
-
-    def episode_start(self) -> None:
-        return None
-
-    def actor(
-        self, decision: Decision, model_action: int, teacher_action: int | None
-    ) -> Literal["teacher", "agent"]:
-        return "teacher" if decision.ask else "agent"
-
-    def observe_label(
-        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
-    ) -> None:
-        return None
-
-    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
-        """After every refit, with the training set (``observations`` [M, D], ``actions``
-        [M]); nothing to do by default."""
-        return None
-
-    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
-        return None
-
-
-# the TeachingConfig fields the phase schedule reads in bind()
-_SCHEDULE = ("noninteractive", "target_accuracy", "accuracy_window", "burst")
-
-
-class _Phased(_StrategyDefaults):
-    """The paper's schedule, shared by the shipped strategies: a non-interactive phase (the
-    teacher acts every step) that ends once the windowed prediction accuracy reaches
-    ``config.target_accuracy`` over ``config.accuracy_window`` demonstrations (never when
-    it is None; skipped when ``config.noninteractive`` is False), then per-step decisions in
-    which each request starts a burst of ``config.burst`` teacher moves (cut at the end of
-    an episode). Subclasses say when they are confident (:meth:`_confident`)."""
-
     # what each shipped class's own __init__ sets (in its class body), checked by
     # _refuse_uninitialised: a subclass __init__ skipping super().__init__() lacks them
-    _INIT_SETS: tuple[str, ...] = ("_phase", "_burst_left", "_window")
-    _bound = False
-
-    def __init__(self) -> None:
-        self._phase: Literal["noninteractive", "confident"] = "noninteractive"
-        self._burst_left = 0
-        self._burst = 1
-        self._target: float | None = None
-        self._window: deque[bool] = deque(maxlen=1)
-        self._bound = False
-
-    @property
-    def phase(self) -> str:
-        """The phase of the next step."""
-        return self._phase
+    _INIT_SETS: tuple[str, ...] = ()
+    # None: no loop's call of that hook is under way; False / True: under way, and whether
+    # the base hook ran in it
+    _label_kept: bool | None = None
+    _step_kept: bool | None = None
+    _refit_kept: bool | None = None
 
     def _refuse_uninitialised(self) -> None:
         """TypeError where a shipped class's ``__init__`` was skipped (a subclass's
@@ -145,6 +114,118 @@ class _Phased(_StrategyDefaults):
             f"{said}: {klass.__name__}.__init__ sets up the strategy's state, which it lacks "
             f"({', '.join(missing)}), so it would fail steps into the session. {fix}"
         )
+
+    def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        self._refuse_uninitialised()
+        self.n_actions, self.n_features = int(n_actions), int(n_features)
+
+    def episode_start(self) -> None:
+        return None
+
+    def actor(
+        self, decision: Decision, model_action: int, teacher_action: int | None
+    ) -> Literal["teacher", "agent"]:
+        return "teacher" if decision.ask else "agent"
+
+    def _through_loop(self, hook: str, *args: Any, **kwargs: Any) -> None:
+        """The loop's call of the public ``observe_<hook>``, then ``_track_<hook>`` with the
+        loop's arguments where the hook did not reach the base one (also where it raised)."""
+        flag = f"_{hook}_kept"
+        setattr(self, flag, False)
+        try:
+            getattr(self, f"observe_{hook}")(*args, **kwargs)
+        finally:
+            kept = getattr(self, flag)
+            setattr(self, flag, None)
+            if not kept:
+                getattr(self, f"_track_{hook}")(*args, **kwargs)
+
+    def _reached(self, hook: str) -> None:
+        """The base hook ran: a loop's call under way need not keep the state itself."""
+        flag = f"_{hook}_kept"
+        if getattr(self, flag) is False:
+            setattr(self, flag, True)
+
+    def _loop_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        """The loop's call of ``observe_label`` (see the class docstring)."""
+        self._through_loop("label", observation, action, model_action=model_action, kind=kind)
+
+    def _loop_step(self, record: StepRecord, decision: Decision | None) -> None:
+        """The loop's call of ``observe_step`` (see the class docstring)."""
+        self._through_loop("step", record, decision)
+
+    def _loop_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        """The loop's call of ``observe_refit`` (see the class docstring)."""
+        self._through_loop("refit", model, observations, actions)
+
+    def _track_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        return None
+
+    def _track_step(self, record: StepRecord, decision: Decision | None) -> None:
+        return None
+
+    def _track_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        return None
+
+    def observe_label(
+        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
+    ) -> None:
+        """Every label (see the protocol); keeps the shipped strategy's state. An override
+        under ConfidentTeacher need not call ``super()``: where it does not, the loop keeps the
+        state after it returns, with the loop's arguments; where it does, with the arguments
+        it gives (a loop of one's own that calls the hooks needs the ``super()`` call)."""
+        self._track_label(observation, action, model_action=model_action, kind=kind)
+        self._reached("label")
+
+    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+        """After every refit, with the training set (``observations`` [M, D], ``actions``
+        [M]); keeps the shipped strategy's state (a rule's update, thresholds), under
+        ConfidentTeacher also where an override does not call ``super()``, as
+        :meth:`observe_label`."""
+        self._track_refit(model, observations, actions)
+        self._reached("refit")
+
+    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+        """After every step (see the protocol); keeps the shipped strategy's state, under
+        ConfidentTeacher also where an override does not call ``super()``, as
+        :meth:`observe_label`."""
+        self._track_step(record, decision)
+        self._reached("step")
+
+
+# the TeachingConfig fields the phase schedule reads in bind()
+_SCHEDULE = ("noninteractive", "target_accuracy", "accuracy_window", "burst")
+
+
+class _Phased(_StrategyDefaults):
+    """The paper's schedule, shared by the shipped strategies: a non-interactive phase (the
+    teacher acts every step) that ends once the windowed prediction accuracy reaches
+    ``config.target_accuracy`` over ``config.accuracy_window`` demonstrations (never when
+    it is None; skipped when ``config.noninteractive`` is False), then per-step decisions in
+    which each request starts a burst of ``config.burst`` teacher moves (cut at the end of
+    an episode). Subclasses say when they are confident (:meth:`_confident`)."""
+
+    # what each shipped class's own __init__ sets (in its class body), checked by
+    # _refuse_uninitialised: a subclass __init__ skipping super().__init__() lacks them
+    _INIT_SETS = ("_phase", "_burst_left", "_window")
+    _bound = False
+
+    def __init__(self) -> None:
+        self._phase: Literal["noninteractive", "confident"] = "noninteractive"
+        self._burst_left = 0
+        self._burst = 1
+        self._target: float | None = None
+        self._window: deque[bool] = deque(maxlen=1)
+        self._bound = False
+
+    @property
+    def phase(self) -> str:
+        """The phase of the next step."""
+        return self._phase
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
         self._refuse_uninitialised()
@@ -183,17 +264,8 @@ class _Phased(_StrategyDefaults):
         ask = int(_np(c.action)[0]) < 0 or not self._confident(observation, c)
         return Decision(ask, self._phase, self._burst if ask else 0)
 
-    # The schedule's bookkeeping (the accuracy window, the phase, the burst) lives in the
-    # private _track_label / _track_step, which the public hooks call. ConfidentTeacher calls
-    # the hooks through _loop_label / _loop_step: where an override of a hook never called
-    # super() (it once silently stayed non-interactive), the loop keeps the schedule itself
-    # after the hook returns (or raises: the label or step is logged, and a resume counts it),
-    # with the loop's arguments; where it did, super() kept it, with
-    # the arguments the override gave it, at the moment the override chose, as before.
-    # (None: no loop's call of that hook is under way; False / True: under way, and whether the
-    # base hook ran in it.)
-    _label_kept: bool | None = None
-    _step_kept: bool | None = None
+    # The schedule's bookkeeping (the accuracy window, the phase, the burst) lives in
+    # _track_label / _track_step, kept by the loop as _StrategyDefaults says.
 
     def _track_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
@@ -201,53 +273,9 @@ class _Phased(_StrategyDefaults):
         if kind == "demonstration":
             self._window.append(model_action == action)
 
-    def _loop_label(
-        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
-    ) -> None:
-        """The loop's call: the public hook, then the schedule's bookkeeping where the hook
-        did not reach the base one."""
-        self._label_kept = False
-        try:
-            self.observe_label(observation, action, model_action=model_action, kind=kind)
-        finally:  # also where the hook raised: the label is logged, and a resume counts it
-            kept, self._label_kept = self._label_kept, None
-            if not kept:
-                self._track_label(observation, action, model_action=model_action, kind=kind)
-
-    def observe_label(
-        self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
-    ) -> None:
-        """Every label (see the protocol). Keeps the schedule's accuracy window. An override
-        under ConfidentTeacher need not call ``super()``: where it does not, the loop keeps the
-        window after it returns, with the loop's arguments; where it does, with the arguments
-        it gives (a loop of one's own that calls the hooks needs the ``super()`` call)."""
-        self._track_label(observation, action, model_action=model_action, kind=kind)
-        if self._label_kept is False:
-            self._label_kept = True
-
     def _target_reached(self) -> bool:
         w, t = self._window, self._target
         return t is not None and len(w) == w.maxlen and sum(w) / len(w) >= t
-
-    def _loop_step(self, record: StepRecord, decision: Decision | None) -> None:
-        """The loop's call: the public hook, then the schedule's bookkeeping where the hook
-        did not reach the base one."""
-        self._step_kept = False
-        try:
-            self.observe_step(record, decision)
-        finally:  # also where the hook raised: the step is logged, and a resume counts it
-            kept, self._step_kept = self._step_kept, None
-            if not kept:
-                self._track_step(record, decision)
-
-    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
-        """After every step (see the protocol). Advances the phase and the burst. An override
-        under ConfidentTeacher need not call ``super()``: where it does not, the loop advances
-        them after it returns; where it does, when it calls it, with the arguments it gives (a
-        loop of one's own that calls the hooks needs the ``super()`` call)."""
-        self._track_step(record, decision)
-        if self._step_kept is False:
-            self._step_kept = True
 
     def _track_step(self, record: StepRecord, decision: Decision | None) -> None:
         if decision is None:  # replayed on resume; a resumed session starts a new episode

@@ -189,7 +189,7 @@ class ConfidenceBasedAutonomy(_Phased):
 
     # -- learning ------------------------------------------------------------------------------
 
-    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+    def _track_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
         """After every refit: the per-(action, runner-up) margin thresholds and the distance
         gate from the training set (``observations`` [M, D], ``actions`` [M]) classified by the
         refitted model."""

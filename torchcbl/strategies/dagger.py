@@ -48,6 +48,8 @@ class DAgger(_StrategyDefaults):
         seed: seeds the per-step coins.
     """
 
+    _INIT_SETS = ("beta0", "decay", "iteration_steps", "seed", "_steps")
+
     def __init__(
         self,
         beta0: float = 1.0,
@@ -100,7 +102,7 @@ class DAgger(_StrategyDefaults):
             return "teacher"
         return "agent"
 
-    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+    def _track_step(self, record: StepRecord, decision: Decision | None) -> None:
         self._steps = record.step + 1
 
     def to_config(self) -> dict[str, Any]:

@@ -43,6 +43,7 @@ class HGDAgger(_StrategyDefaults):
     """
 
     wants_corrections = True
+    _INIT_SETS = ("warmup", "_labels", "_control")
 
     def __init__(self, warmup: int = 10) -> None:
         warmup = _plain(warmup)
@@ -73,7 +74,7 @@ class HGDAgger(_StrategyDefaults):
             return Decision(True, "noninteractive")
         return Decision(int(c.action[0]) < 0 or self._control, "confident")
 
-    def observe_label(
+    def _track_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
     ) -> None:
         warm = self._labels < self.warmup

@@ -57,6 +57,18 @@ class NoveltyGated(_StrategyDefaults):
         min_history: ask while fewer finite scores than this are in the window (>= 1).
     """
 
+    _INIT_SETS = (
+        "target_rate",
+        "window",
+        "warmup",
+        "min_history",
+        "_labels",
+        "_scores",
+        "_observations",
+        "_model",
+        "_rescore",
+    )
+
     def __init__(
         self,
         target_rate: float = 0.1,
@@ -121,12 +133,12 @@ class NoveltyGated(_StrategyDefaults):
         ask = int(c.action[0]) < 0 or t is None or float(c.distance[0]) > t
         return Decision(ask, "confident")
 
-    def observe_label(
+    def _track_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
     ) -> None:
         self._labels += 1
 
-    def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
+    def _track_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
         """After every refit (``observations`` [M, D], ``actions`` [M]): the recent steps'
         novelty scores are recomputed under the refitted model."""
         self._model = model
@@ -136,7 +148,7 @@ class NoveltyGated(_StrategyDefaults):
             d = _np(model.classify(x).distance).astype(np.float64)
             self._scores = deque((float(v) for v in d if math.isfinite(v)), maxlen=self.window)
 
-    def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
+    def _track_step(self, record: StepRecord, decision: Decision | None) -> None:
         x = record.observation_array
         self._observations.append(x)
         d = record.distance
