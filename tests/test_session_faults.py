@@ -2587,3 +2587,42 @@ def test_prior_demonstrations_left_without_a_config_tmp_still_keep_a_new_session
     with pytest.raises(IncompatibleRunDirError, match=r"another session left \(checkpoints/mod"):
         ConfidentTeacher(world, oracle(world), run_dir=run, progress=False)
     assert (run / "prior.npz").read_bytes() == b"another session's"
+
+
+def test_a_new_session_on_a_kept_session_of_no_step_says_it_holds_none(tmp_path):
+    """A session stopped at its first request (Ctrl-C, 'q') is kept, with no step: a new
+    session there was told only to resume it. It is now told too that the session holds no
+    step, so that the folder may be removed to start afresh; one holding a step, or prior
+    demonstrations, is not."""
+    world = rare_regions_world()
+
+    def stop(obs, info):
+        raise TeachingInterrupted("q")
+
+    empty = tmp_path / "empty"
+    with ConfidentTeacher(world, stop, run_dir=empty, progress=False) as ct:
+        with pytest.raises(TeachingInterrupted):
+            ct.run(max_steps=3)
+    x, y = world.sample(30, np.random.default_rng(0))
+    prior = tmp_path / "prior"
+    with ConfidentTeacher(
+        world, stop, prior_demonstrations=(x, y), run_dir=prior, progress=False
+    ) as ct:
+        with pytest.raises(TeachingInterrupted):
+            ct.run(max_steps=3)
+    stepped = tmp_path / "stepped"
+    with ConfidentTeacher(world, oracle(world), run_dir=stepped, progress=False) as ct:
+        ct.run(max_steps=1)
+    with pytest.raises(IncompatibleRunDirError) as info:
+        ConfidentTeacher(world, oracle(world), run_dir=empty, progress=False)
+    msg = str(info.value)
+    assert "ConfidentTeacher.resume" in msg and "holds no step" in msg, msg
+    assert "shutil.rmtree(run_dir)" in msg, msg
+    for run in (prior, stepped):
+        with pytest.raises(IncompatibleRunDirError, match="already holds") as info:
+            ConfidentTeacher(world, oracle(world), run_dir=run, progress=False)
+        assert "no step" not in str(info.value)
+    shutil.rmtree(empty)
+    with ConfidentTeacher(world, oracle(world), run_dir=empty, progress=False) as ct:
+        ct.run(max_steps=2)
+    assert len(load_records(empty)) == 2

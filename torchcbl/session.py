@@ -912,8 +912,38 @@ def _check_new_session_path(path: Path) -> None:
     _check_new_session_dir(path)
 
 
+def _holds_no_step(path: Path) -> bool:
+    """Whether the session in ``path`` holds nothing: no step in its log or journal, no
+    prior demonstrations, and no writer running there now (one stopped at its first request,
+    Ctrl-C or 'q'). Reads only (the log as the readers open it: no -wal or -shm is made);
+    False where any of it cannot be told."""
+    try:
+        config = json.loads((path / CONFIG_NAME).read_bytes())
+        if not isinstance(config, dict) or config.get("prior") or _lock_held(path) is not False:
+            return False
+        journal = path / JOURNAL_NAME
+        if journal.exists() and journal.stat().st_size:
+            return False
+        log = path / LOG_NAME
+        if not log.exists() or log.stat().st_size == 0:
+            return True
+        mode = "mode=ro" if log.with_name(LOG_NAME + "-wal").exists() else "immutable=1"
+        db = sqlite3.connect(f"{log.resolve().as_uri()}?{mode}", uri=True)
+        try:
+            tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master")}
+            return "steps" not in tables or not db.execute("SELECT 1 FROM steps").fetchone()
+        finally:
+            db.close()
+    except (OSError, ValueError, sqlite3.Error):
+        return False
+
+
 def _check_new_session_dir(
-    path: Path, *, name: str = "run_dir", resume: str = _RESUME_ADVICE
+    path: Path,
+    *,
+    name: str = "run_dir",
+    resume: str = _RESUME_ADVICE,
+    remove: str = "shutil.rmtree(run_dir)",
 ) -> None:
     """Refuse a folder a new session may not start in; reads only. A new session's folder
     holds that session alone: it may be missing, empty, or hold only what torchcbl leaves
@@ -923,7 +953,8 @@ def _check_new_session_dir(
     demonstrations and starting model of a start killed while it wrote its config, or of a
     removal killed, see :func:`_remove_new_session_files`: the new session removes them).
     ``name`` names the path for the caller (``--run-dir`` at the command line); ``resume``
-    says how to continue a session found there.
+    says how to continue a session found there, and ``remove`` how to remove the folder of a
+    session found there that holds nothing (no step, no prior demonstrations), to start anew.
 
     Raises:
         IncompatibleRunDirError: ``path`` holds a session, what another session left (its
@@ -946,8 +977,14 @@ def _check_new_session_dir(
         )
     if CONFIG_NAME in names:
         if LOG_NAME in names or _names_a_session_format(path / CONFIG_NAME):
+            empty = (
+                f" It holds no step (nor prior demonstrations): to start afresh there instead, "
+                f"remove it first ({remove})."
+                if _holds_no_step(path)
+                else ""
+            )
             raise IncompatibleRunDirError(
-                f"{path} already holds a teaching session. {resume} or choose a new {name}."
+                f"{path} already holds a teaching session. {resume} or choose a new {name}." + empty
             )
         # one's own config.json (resume could only refuse it): no session to continue
         raise IncompatibleRunDirError(
