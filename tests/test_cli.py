@@ -2089,3 +2089,29 @@ def test_benchmark_keep_sessions_help_says_which_sessions_evaluate_reads(capsys)
         "torchcbl evaluate (corridor and driving cells; others in Python with "
         "torchcbl.load_policy)" in text
     ), text
+
+
+def test_teach_on_a_kept_session_of_no_step_says_in_one_line_it_holds_none(
+    tmp_path, capsys, monkeypatch
+):
+    """`torchcbl teach --run-dir` on a session stopped at its first request: one line that
+    says to add --resume, and that the session holds no step, so the folder may be removed."""
+    from _toy_envs import rare_regions_world
+
+    from torchcbl import ConfidentTeacher
+    from torchcbl.errors import TeachingInterrupted
+
+    def stop(obs, info):
+        raise TeachingInterrupted("q")
+
+    world = rare_regions_world()
+    run = tmp_path / "run"
+    with ConfidentTeacher(world, stop, run_dir=run, progress=False) as ct:
+        with pytest.raises(TeachingInterrupted):
+            ct.run(max_steps=3)
+    monkeypatch.setenv("TORCHCBL_TRACEBACK", "")
+    assert main(["teach", "corridor", "--run-dir", str(run)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and len(captured.err.strip().splitlines()) == 1, captured.err
+    assert "--resume" in captured.err and "holds no step" in captured.err, captured.err
+    assert f"rm -r {run}" in captured.err, captured.err

@@ -2497,3 +2497,132 @@ def test_a_first_step_interrupted_just_after_its_journal_line_keeps_the_session(
     back = ConfidentTeacher.resume(run, world, oracle(world), progress=False)
     assert back.n_steps == 1  # the demonstration whose line reached the journal
     back.close()
+
+
+class _Killed(BaseException):
+    """The process killed (SIGKILL) at that point: nothing after it runs."""
+
+
+class _ResetFails(gym.Wrapper):
+    def reset(self, **kw):
+        raise OSError("simulator not up")
+
+
+def test_a_kill_while_a_failed_first_step_is_undone_leaves_a_session_or_room_for_one(
+    tmp_path, monkeypatch
+):
+    """The removal of a session whose first step failed deleted config.json first: killed
+    right after, it left steps.sqlite with no config, and the next start was refused as a
+    session whose config was deleted. Killed after any of its removals (k = 0, 1, ...), the
+    folder now either resumes as the session of no step or starts a new session."""
+    world = rare_regions_world()
+    x, y = world.sample(30, np.random.default_rng(0))  # prior.npz and checkpoint 0 too
+    done = {"n": 0, "at": None}
+    real = {f: getattr(Path, f) for f in ("unlink", "rmdir", "replace", "rename")}
+
+    def killing(f):
+        def op(self, *args, **kw):
+            if done["at"] is not None:
+                if done["n"] == done["at"]:
+                    raise _Killed
+                done["n"] += 1
+            return real[f](self, *args, **kw)
+
+        return op
+
+    real_discard = S.SessionStore.discard_new
+
+    def discard_new(self, k):
+        done["n"], done["at"] = 0, k
+        try:
+            real_discard(self)
+        finally:
+            done["at"] = None
+
+    for f in real:
+        monkeypatch.setattr(Path, f, killing(f))
+    outcomes = []
+    for k in range(20):
+        run = tmp_path / f"k{k}"
+        monkeypatch.setattr(S.SessionStore, "discard_new", lambda self, k=k: discard_new(self, k))
+        ct = ConfidentTeacher(
+            _ResetFails(world),
+            oracle(world),
+            prior_demonstrations=(x, y),
+            run_dir=run,
+            progress=False,
+        )
+        try:
+            ct.run(max_steps=3)
+        except _Killed:
+            killed = True
+        except EnvError:
+            killed = False
+        if (run / "config.json").exists():
+            with ConfidentTeacher.resume(run, world, oracle(world), progress=False) as ct2:
+                assert ct2.n_steps == 0 and ct2.n_prior == 30
+                ct2.run(max_steps=3)
+            outcomes.append("resumed")
+        else:
+            with ConfidentTeacher(world, oracle(world), run_dir=run, progress=False) as ct2:
+                ct2.run(max_steps=3)
+            assert "prior" not in S.load_config(run)  # not the removed session's
+            assert not (run / "prior.npz").exists()
+            assert not (run / "checkpoints" / "model-00000000.pt").exists()
+            outcomes.append("new")
+        assert len(load_records(run)) == 3
+        if not killed:
+            break
+    assert not killed and outcomes[0] == "resumed" and outcomes[-1] == "new", outcomes
+
+
+def test_prior_demonstrations_left_without_a_config_tmp_still_keep_a_new_session_out(tmp_path):
+    """Only beside config.json.tmp (a start or a removal killed) are a prior.npz and
+    checkpoint 0 what no session left; alone they are another session's and refuse a start."""
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "prior.npz").write_bytes(b"another session's")
+    (run / "checkpoints" / "model-00000000.pt").write_bytes(b"another session's")
+    world = rare_regions_world()
+    with pytest.raises(IncompatibleRunDirError, match=r"another session left \(checkpoints/mod"):
+        ConfidentTeacher(world, oracle(world), run_dir=run, progress=False)
+    assert (run / "prior.npz").read_bytes() == b"another session's"
+
+
+def test_a_new_session_on_a_kept_session_of_no_step_says_it_holds_none(tmp_path):
+    """A session stopped at its first request (Ctrl-C, 'q') is kept, with no step: a new
+    session there was told only to resume it. It is now told too that the session holds no
+    step, so that the folder may be removed to start afresh; one holding a step, or prior
+    demonstrations, is not."""
+    world = rare_regions_world()
+
+    def stop(obs, info):
+        raise TeachingInterrupted("q")
+
+    empty = tmp_path / "empty"
+    with ConfidentTeacher(world, stop, run_dir=empty, progress=False) as ct:
+        with pytest.raises(TeachingInterrupted):
+            ct.run(max_steps=3)
+    x, y = world.sample(30, np.random.default_rng(0))
+    prior = tmp_path / "prior"
+    with ConfidentTeacher(
+        world, stop, prior_demonstrations=(x, y), run_dir=prior, progress=False
+    ) as ct:
+        with pytest.raises(TeachingInterrupted):
+            ct.run(max_steps=3)
+    stepped = tmp_path / "stepped"
+    with ConfidentTeacher(world, oracle(world), run_dir=stepped, progress=False) as ct:
+        ct.run(max_steps=1)
+    with pytest.raises(IncompatibleRunDirError) as info:
+        ConfidentTeacher(world, oracle(world), run_dir=empty, progress=False)
+    msg = str(info.value)
+    assert "ConfidentTeacher.resume" in msg and "holds no step" in msg, msg
+    assert "shutil.rmtree(run_dir)" in msg, msg
+    for run in (prior, stepped):
+        with pytest.raises(IncompatibleRunDirError, match="already holds") as info:
+            ConfidentTeacher(world, oracle(world), run_dir=run, progress=False)
+        assert "no step" not in str(info.value)
+    shutil.rmtree(empty)
+    with ConfidentTeacher(world, oracle(world), run_dir=empty, progress=False) as ct:
+        ct.run(max_steps=2)
+    assert len(load_records(empty)) == 2

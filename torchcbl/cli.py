@@ -25,6 +25,7 @@ import importlib.util
 import json
 import os
 import re
+import shlex
 import sys
 import time
 from collections.abc import Sequence
@@ -899,7 +900,12 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         from torchcbl.session import _check_new_session_dir
 
         try:
-            _check_new_session_dir(run_dir, name="--run-dir", resume="Add --resume to continue it")
+            _check_new_session_dir(
+                run_dir,
+                name="--run-dir",
+                resume="Add --resume to continue it",
+                remove=f"rm -r {shlex.quote(str(run_dir))}",
+            )
         except IncompatibleRunDirError as exc:
             raise _UsageError(_one_line(exc)) from None
         _output_dir(run_dir, "--run-dir")

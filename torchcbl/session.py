@@ -795,16 +795,39 @@ _START_AGAIN = "free space (or fix the permissions) and start the session again"
 
 
 def _remove_new_session_files(path: Path) -> None:
-    """Undo a session creation that failed before its first step: the files it made."""
+    """Undo a session creation that failed before its first step: the files it made.
+
+    In an order where a kill at any point leaves either the whole session (a session of no
+    step, which resumes) or only what a new session may start beside
+    (:func:`_check_new_session_dir`): the writers file and the journal first, then the step
+    log (the session then reads as one whose creation was killed before its log: it resumes
+    as a session of no step, see :func:`_unborn`); then ``config.json`` is renamed to
+    ``config.json.tmp``, after which the folder holds no session (its prior demonstrations and
+    starting model, left beside that ``.tmp``, are what a start killed while writing its
+    config leaves, and a new start removes them); then those and the ``.tmp``. Deleting
+    ``config.json`` first left a step log with no config, which refused the next start as a
+    session whose config was deleted."""
     for name in (
-        CONFIG_NAME,
-        LOG_NAME,
-        LOG_NAME + "-wal",
-        LOG_NAME + "-shm",
-        JOURNAL_NAME,
         WRITERS_NAME,
+        JOURNAL_NAME,
+        LOG_NAME + "-wal",  # before the log: a -wal beside no log would apply to a new one
+        LOG_NAME + "-shm",
+        LOG_NAME,
+    ):
+        try:
+            (path / name).unlink(missing_ok=True)
+        except OSError:
+            pass
+    try:
+        (path / CONFIG_NAME).replace(path / (CONFIG_NAME + ".tmp"))  # no session from here on
+    except FileNotFoundError:
+        pass
+    except OSError:  # the folder still holds the session, which resumes as one of no step
+        return
+    for name in (
         PRIOR_NAME,  # create found none: refused as another session's leftover
         f"{CHECKPOINT_DIR}/model-{0:08d}.pt",  # the starting model (create found no checkpoint)
+        CONFIG_NAME + ".tmp",
     ):
         try:
             (path / name).unlink(missing_ok=True)
@@ -814,6 +837,18 @@ def _remove_new_session_files(path: Path) -> None:
         (path / CHECKPOINT_DIR).rmdir()  # only if empty
     except OSError:
         pass
+
+
+def _clear_unstarted(path: Path) -> None:
+    """Before a new session writes its files where :func:`_check_new_session_dir` let it
+    start (under its lock): remove the prior demonstrations and starting model that a start
+    killed while writing its config, or a removal killed (:func:`_remove_new_session_files`),
+    left beside ``config.json.tmp``; they are no session's, and the new one writes its own."""
+    for name in (PRIOR_NAME, f"{CHECKPOINT_DIR}/model-{0:08d}.pt"):
+        try:
+            (path / name).unlink(missing_ok=True)
+        except OSError as exc:
+            raise _write_error(exc, path / name, "starting the session", _START_AGAIN) from exc
 
 
 #: What torchcbl leaves in a folder where no session started, beside which a new one may
@@ -877,15 +912,49 @@ def _check_new_session_path(path: Path) -> None:
     _check_new_session_dir(path)
 
 
+def _holds_no_step(path: Path) -> bool:
+    """Whether the session in ``path`` holds nothing: no step in its log or journal, no
+    prior demonstrations, and no writer running there now (one stopped at its first request,
+    Ctrl-C or 'q'). Reads only (the log as the readers open it: no -wal or -shm is made);
+    False where any of it cannot be told."""
+    try:
+        config = json.loads((path / CONFIG_NAME).read_bytes())
+        if not isinstance(config, dict) or config.get("prior") or _lock_held(path) is not False:
+            return False
+        journal = path / JOURNAL_NAME
+        if journal.exists() and journal.stat().st_size:
+            return False
+        log = path / LOG_NAME
+        if not log.exists() or log.stat().st_size == 0:
+            return True
+        mode = "mode=ro" if log.with_name(LOG_NAME + "-wal").exists() else "immutable=1"
+        db = sqlite3.connect(f"{log.resolve().as_uri()}?{mode}", uri=True)
+        try:
+            tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master")}
+            return "steps" not in tables or not db.execute("SELECT 1 FROM steps").fetchone()
+        finally:
+            db.close()
+    except (OSError, ValueError, sqlite3.Error):
+        return False
+
+
 def _check_new_session_dir(
-    path: Path, *, name: str = "run_dir", resume: str = _RESUME_ADVICE
+    path: Path,
+    *,
+    name: str = "run_dir",
+    resume: str = _RESUME_ADVICE,
+    remove: str = "shutil.rmtree(run_dir)",
 ) -> None:
     """Refuse a folder a new session may not start in; reads only. A new session's folder
     holds that session alone: it may be missing, empty, or hold only what torchcbl leaves
     where no session started (a failed start's ``writer.lock``, a session's empty journal and
     writers file once its log and config went, an empty ``checkpoints/``, the temporary files
-    of a start killed while it wrote). ``name`` names the path for the caller
-    (``--run-dir`` at the command line); ``resume`` says how to continue a session found there.
+    of a start killed while it wrote; beside a ``config.json.tmp``, with no log, the prior
+    demonstrations and starting model of a start killed while it wrote its config, or of a
+    removal killed, see :func:`_remove_new_session_files`: the new session removes them).
+    ``name`` names the path for the caller (``--run-dir`` at the command line); ``resume``
+    says how to continue a session found there, and ``remove`` how to remove the folder of a
+    session found there that holds nothing (no step, no prior demonstrations), to start anew.
 
     Raises:
         IncompatibleRunDirError: ``path`` holds a session, what another session left (its
@@ -908,8 +977,14 @@ def _check_new_session_dir(
         )
     if CONFIG_NAME in names:
         if LOG_NAME in names or _names_a_session_format(path / CONFIG_NAME):
+            empty = (
+                f" It holds no step (nor prior demonstrations): to start afresh there instead, "
+                f"remove it first ({remove})."
+                if _holds_no_step(path)
+                else ""
+            )
             raise IncompatibleRunDirError(
-                f"{path} already holds a teaching session. {resume} or choose a new {name}."
+                f"{path} already holds a teaching session. {resume} or choose a new {name}." + empty
             )
         # one's own config.json (resume could only refuse it): no session to continue
         raise IncompatibleRunDirError(
@@ -922,11 +997,18 @@ def _check_new_session_dir(
     # would read as this session's) and checkpoints belong to another session
     leftovers: list[str] = []
     others: list[str] = []
+    # a start killed while writing its config.json (or the removal of a session that failed
+    # at its first step, killed after it renamed config.json aside) leaves config.json.tmp
+    # beside that start's prior demonstrations and starting model, and no log: no session's
+    unstarted = CONFIG_NAME + ".tmp" in names
+    starting_model = f"{CHECKPOINT_DIR}/model-{0:08d}.pt"
     for entry in entries:
         try:
             if entry.name in (JOURNAL_NAME, WRITERS_NAME):
                 if entry.stat().st_size:
                     leftovers.append(entry.name)
+            elif entry.name == PRIOR_NAME and unstarted:
+                pass
             elif entry.name == PRIOR_NAME or entry.name.startswith(LOG_NAME):
                 leftovers.append(entry.name)
             elif entry.name == CHECKPOINT_DIR and entry.is_dir():
@@ -934,6 +1016,7 @@ def _check_new_session_dir(
                     f"{CHECKPOINT_DIR}/{e.name}"
                     for e in _listing(entry)
                     if not _CKPT_TMP_RE.match(e.name)
+                    and not (unstarted and f"{CHECKPOINT_DIR}/{e.name}" == starting_model)
                 ]
             elif entry.name not in _LEFT_WITHOUT_SESSION:
                 others.append(entry.name + ("/" if entry.is_dir() else ""))
@@ -1315,6 +1398,7 @@ class SessionStore:
             _check_new_session_dir(path)  # again, locked: another start may have come between
             _note_holder(lock, keep_count=False)  # a count left by no session: not this one's
             started = True
+            _clear_unstarted(path)
             if prior is not None:
                 _write_atomic(path / PRIOR_NAME, prior, "starting the session", _START_AGAIN)
             if initial_model is not None:  # a resume can only load it: no label refits it
