@@ -918,3 +918,34 @@ def test_a_baseline_subclass_overriding_an_observe_hook_decides_as_its_parent(
         ).close()
     assert again.phase == before.phase
     assert getattr(again, "seen", 60) == 60
+
+
+class _FailingRule(DistanceRule):
+    """A rule whose update fails (a bug of one's own, a GPU out of memory), counting calls."""
+
+    updates = 0
+
+    def update(self, model, observations, actions):
+        type(self).updates += 1
+        raise RuntimeError(f"update #{type(self).updates}")
+
+
+def test_a_strategy_update_that_raises_is_not_run_again_by_the_loop(tmp_path):
+    """Where a shipped strategy's own update raised inside its base hook, the loop took the
+    hook for one that never reached the base one and ran the update again with its own
+    arguments: a rule updated twice, and the error the user saw was the second call's
+    (review, 2026-11-27). The update runs once and its error is the one raised."""
+    env = rare_regions_world()
+    _FailingRule.updates = 0
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        strategy=ConfidentExecution(_FailingRule()),
+        config=TeachingConfig(max_new=3),
+        run_dir=tmp_path / "r",
+        progress=False,
+    )
+    with pytest.raises(RuntimeError, match=r"^update #1$"):
+        ct.run(max_steps=10)
+    assert _FailingRule.updates == 1
+    ct.close()

@@ -178,23 +178,23 @@ class _StrategyDefaults:
         under ConfidentTeacher need not call ``super()``: where it does not, the loop keeps the
         state after it returns, with the loop's arguments; where it does, with the arguments
         it gives (a loop of one's own that calls the hooks needs the ``super()`` call)."""
+        self._reached("label")  # first: where the update raises, the loop does not run it again
         self._track_label(observation, action, model_action=model_action, kind=kind)
-        self._reached("label")
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
         """After every refit, with the training set (``observations`` [M, D], ``actions``
         [M]); keeps the shipped strategy's state (a rule's update, thresholds), under
         ConfidentTeacher also where an override does not call ``super()``, as
         :meth:`observe_label`."""
+        self._reached("refit")  # first: where the update raises, the loop does not run it again
         self._track_refit(model, observations, actions)
-        self._reached("refit")
 
     def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
         """After every step (see the protocol); keeps the shipped strategy's state, under
         ConfidentTeacher also where an override does not call ``super()``, as
         :meth:`observe_label`."""
+        self._reached("step")  # first: where the update raises, the loop does not run it again
         self._track_step(record, decision)
-        self._reached("step")
 
 
 # the TeachingConfig fields the phase schedule reads in bind()
