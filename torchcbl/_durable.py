@@ -47,12 +47,20 @@ def write_durably(path: Path, data: bytes, tmp: Path) -> None:
     """Put ``data`` in ``path`` whole, durably: write it to ``tmp`` (same directory), fsync
     it, rename it over ``path`` and fsync the directory.
 
-    A failure raises the OSError and may leave ``tmp`` behind (the caller removes it); ``path``
-    is then unchanged, except where only the directory's fsync failed (the rename was made).
+    A failure (an OSError, or anything raised meanwhile, a KeyboardInterrupt say) is raised
+    with ``tmp`` removed; ``path`` is then unchanged, except where only the directory's fsync
+    failed (the rename was made).
     """
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise
     fsync_directory(path.parent)

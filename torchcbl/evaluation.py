@@ -552,15 +552,7 @@ def save_whole(path: str | os.PathLike[str], save: Callable[..., Any], **kwargs:
         kwargs["format"] = path.suffix[1:].lower()  # "map.PNG" as savefig writes it
     buf = io.BytesIO()
     save(buf, **kwargs)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        write_durably(path, buf.getvalue(), tmp)
-    except BaseException:
-        try:
-            tmp.unlink(missing_ok=True)
-        except OSError:
-            pass
-        raise
+    write_durably(path, buf.getvalue(), path.with_name(f".{path.name}.{os.getpid()}.tmp"))
     return path
 
 

@@ -490,29 +490,17 @@ def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
     """Write ``data`` to ``path`` through ``<name>.tmp`` renamed over it, durably (fsynced
     before the rename, the directory after: :func:`torchcbl._durable.write_durably`); a write
     that fails (full disk) leaves neither ``path`` changed nor the ``.tmp`` behind."""
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        write_durably(path, (json.dumps(data, indent=2, sort_keys=True) + "\n").encode(), tmp)
-    except BaseException:
-        try:
-            tmp.unlink(missing_ok=True)
-        except OSError:
-            pass
-        raise
+    text = json.dumps(data, indent=2, sort_keys=True) + "\n"
+    write_durably(path, text.encode(), path.with_name(path.name + ".tmp"))
 
 
 def _write_atomic(path: Path, data: bytes, what: str, after: str) -> None:
     """Write ``data`` to ``path`` through ``.<name>.tmp`` renamed over it, durably: the file is
     whole or absent, power cut included; a failure is a :class:`SessionWriteError` ending with
     ``after``."""
-    tmp = path.with_name(f".{path.name}.tmp")
     try:
-        write_durably(path, data, tmp)
+        write_durably(path, data, path.with_name(f".{path.name}.tmp"))
     except OSError as exc:
-        try:
-            tmp.unlink(missing_ok=True)
-        except OSError:
-            pass
         raise _write_error(exc, path, what, after) from exc
 
 
@@ -1260,7 +1248,6 @@ def _write_checkpoint(
         torch.save(payload, buffer)
         write_durably(path, buffer.getvalue(), tmp)
     except (OSError, RuntimeError) as exc:
-        tmp.unlink(missing_ok=True)
         raise _write_error(
             exc, path, f"saving the model fitted on {n_demonstrations} labels", after
         ) from exc
@@ -3926,7 +3913,6 @@ def repair_journal(run_dir: str | os.PathLike[str]) -> str:
         try:
             write_durably(journal, b"".join(lines[n - 1] + b"\n" for n in kept), tmp)
         except OSError as exc:
-            tmp.unlink(missing_ok=True)
             raise _write_error(exc, journal, "rewriting the journal", _FREE_SPACE) from exc
     finally:
         lock.close()
