@@ -331,19 +331,26 @@ class _LoggedGMM(GaussianMixtureSet):
         self.log_lock = threading.Lock()
 
 
-def test_a_model_that_cannot_be_copied_resumes_its_fitted_session(tmp_path):
-    """Resume tried the starting model's checkpoint on a deep copy of the given model, so one
-    holding a lock failed with TypeError: cannot pickle '_thread.lock' object."""
-    run = tmp_path / "run"
+def _session_started_fitted(run: Path, model_class: type) -> GaussianMixtureSet:
+    """A session of 30 steps started from a ``model_class(3, 2, seed=0)`` fitted on 120
+    labelled points of the toy world (checkpoint 0 holds it); returns that model."""
     env = rare_regions_world()
-    x, y = env.sample(120, np.random.default_rng(0))
-    fitted = _LoggedGMM(3, 2, seed=0)
-    fitted.fit(x, y)
+    fitted = model_class(3, 2, seed=0)
+    fitted.fit(*env.sample(120, np.random.default_rng(0)))
     config = TeachingConfig(noninteractive=False)
     with ConfidentTeacher(
         env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
     ) as ct:
         ct.run(max_steps=30)
+    return fitted
+
+
+def test_a_model_that_cannot_be_copied_resumes_its_fitted_session(tmp_path):
+    """Resume tried the starting model's checkpoint on a deep copy of the given model, so one
+    holding a lock failed with TypeError: cannot pickle '_thread.lock' object."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    fitted = _session_started_fitted(run, _LoggedGMM)
     model = _LoggedGMM(3, 2, seed=0)
     ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
     assert model.is_fitted
@@ -369,15 +376,7 @@ class _HookedGMM(GaussianMixtureSet):
 
 
 def _hooked_session(run: Path) -> None:
-    env = rare_regions_world()
-    x, y = env.sample(120, np.random.default_rng(0))
-    fitted = _HookedGMM(3, 2, seed=0)
-    fitted.fit(x, y)
-    config = TeachingConfig(noninteractive=False)
-    with ConfidentTeacher(
-        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
-    ) as ct:
-        ct.run(max_steps=30)
+    _session_started_fitted(run, _HookedGMM)
 
 
 def _resume_hooked(run: Path, between: Callable[[], None]) -> ConfidentTeacher:
