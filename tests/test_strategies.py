@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -25,6 +26,7 @@ from torchcbl.strategies import (
     correcting,
     strategy_from_config,
 )
+from torchcbl.strategies.bc import BehaviourCloning
 from torchcbl.strategies.dagger import DAgger
 from torchcbl.strategies.hg_dagger import HGDAgger
 from torchcbl.strategies.novelty import NoveltyGated
@@ -555,6 +557,60 @@ def test_a_shipped_strategy_in_ones_own_loop_says_when_it_was_not_bound():
                 strategy.bind(n_actions=2, n_features=2, config=bad)
         strategy.bind(n_actions=2, n_features=2, config=TeachingConfig(noninteractive=False))
         strategy.decide(x[0], c)  # bound: it decides
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        ConfidentExecution,
+        ConfidenceBasedAutonomy,
+        BehaviourCloning,
+        DAgger,
+        lambda: HGDAgger(warmup=0),
+        lambda: NoveltyGated(warmup=0, min_history=1),
+    ],
+    ids=["confident execution", "cba", "bc", "dagger", "hg-dagger", "novelty"],
+)
+def test_an_unbound_shipped_strategy_never_fails_on_an_attribute_of_bind(make):
+    """A loop of one's own that replays a log before deciding (the protocol's resume order:
+    labels, steps, a refit, then decide) without calling bind() got, from CBA's observe_refit,
+    a bare AttributeError: 'ConfidenceBasedAutonomy' object has no attribute 'n_actions'.
+    Every shipped strategy's public hook either works unbound (the baselines: their state is
+    set by __init__, and bind only resets it) or says to call bind, as decide does."""
+    from torchcbl import GaussianMixtureSet
+
+    x = np.array([[0.0, 0.0], [0.1, 0.0], [3.0, 3.0], [3.1, 3.0]])
+    y = np.array([0, 0, 1, 1])
+    model = GaussianMixtureSet(2, 2, max_components=1).fit(x, y)
+    step = SimpleNamespace(
+        step=0,
+        phase="confident",
+        terminated=False,
+        truncated=False,
+        observation_array=x[0],
+        distance=0.5,
+    )
+    calls = {
+        "observe_label": lambda s: s.observe_label(x[0], 0, model_action=0, kind="demonstration"),
+        "observe_step": lambda s: s.observe_step(step, None),
+        "observe_refit": lambda s: s.observe_refit(model, x, y),
+        "episode_start": lambda s: s.episode_start(),
+        "decide": lambda s: s.decide(x[0], model.classify(x[:1])),
+    }
+    refused = []
+    strategy = make()
+    for name, call in calls.items():
+        try:
+            call(strategy)
+        except RuntimeError as exc:
+            assert re.search(rf"\.{name}: the strategy was not bound; call bind\(", str(exc))
+            refused.append(name)
+    needs_bind = isinstance(strategy, (ConfidentExecution, ConfidenceBasedAutonomy))
+    assert ("decide" in refused) == needs_bind
+    strategy = make()
+    strategy.bind(n_actions=2, n_features=2, config=TeachingConfig(noninteractive=False))
+    for call in calls.values():
+        call(strategy)  # bound: every hook works
 
 
 @pytest.mark.parametrize(

@@ -251,14 +251,21 @@ class _Phased(_StrategyDefaults):
     def _confident(self, observation: np.ndarray, c: Classification) -> bool:
         raise NotImplementedError
 
+    def _require_bound(self, where: str) -> None:
+        """RuntimeError naming ``where`` (the public method called) unless :meth:`bind` ran:
+        unbound, the phase would never leave the non-interactive one, and CBA's refit lacks
+        the number of actions. A strategy never initialised is told that first."""
+        if self._bound:
+            return
+        self._refuse_uninitialised()
+        raise RuntimeError(
+            f"{type(self).__name__}.{where}: the strategy was not bound; call "
+            "bind(n_actions=A, n_features=D, config=TeachingConfig(...)) once before it "
+            "(ConfidentTeacher does; a loop of one's own must)."
+        )
+
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
-        if not self._bound:  # unbound, the phase would never leave the non-interactive one
-            self._refuse_uninitialised()  # (or never initialised: say that first)
-            raise RuntimeError(
-                f"{type(self).__name__}.decide: the strategy was not bound; call "
-                "bind(n_actions=A, n_features=D, config=TeachingConfig(...)) once before it "
-                "(ConfidentTeacher does; a loop of one's own must)."
-            )
+        self._require_bound("decide")
         if self._phase == "noninteractive" or self._burst_left > 0:
             return Decision(True, self._phase, self._burst_left)
         ask = int(_np(c.action)[0]) < 0 or not self._confident(observation, c)

@@ -193,6 +193,7 @@ class ConfidenceBasedAutonomy(_Phased):
         """After every refit: the per-(action, runner-up) margin thresholds and the distance
         gate from the training set (``observations`` [M, D], ``actions`` [M]) classified by the
         refitted model."""
+        self._require_bound("observe_refit")  # the thresholds are [n_actions, n_actions]
         x = np.asarray(observations, dtype=np.float64)
         y = np.asarray(actions, dtype=np.int64)
         c = model.classify(x)
