@@ -1005,3 +1005,64 @@ def test_a_strategy_update_that_raises_is_not_run_again_by_the_loop(tmp_path):
         ct.run(max_steps=10)
     assert _FailingRule.updates == 1
     ct.close()
+
+
+def _class_help(cls: type) -> str:
+    """The class's own part of ``help(cls)`` (its docstring as pydoc renders it), without the
+    method listing that follows."""
+    import pydoc
+
+    text = pydoc.render_doc(cls, renderer=pydoc.plaintext)
+    head = text.split("Method resolution order:")[0]
+    return "\n".join(line.removeprefix(" |  ").removeprefix(" |") for line in head.splitlines())
+
+
+def _hooks_keeping_state(cls: type) -> list[str]:
+    """The public hooks under which ``cls`` keeps state of its own, read from its class tree:
+    a ``_track_<hook>`` below the protocol's defaults, or a ``bind`` / ``episode_start`` of
+    its own (ConfidentTeacher calls these; what they do is the strategy's behaviour)."""
+    from torchcbl.strategies._phased import _StrategyDefaults
+
+    keeps = [
+        f"observe_{hook}"
+        for hook in ("label", "step", "refit")
+        if getattr(cls, f"_track_{hook}") is not getattr(_StrategyDefaults, f"_track_{hook}")
+    ]
+    keeps += [
+        h for h in ("bind", "episode_start") if getattr(cls, h) is not vars(_StrategyDefaults)[h]
+    ]
+    return keeps
+
+
+@pytest.mark.parametrize(
+    "cls",
+    [
+        ConfidentExecution,
+        ConfidenceBasedAutonomy,
+        BehaviourCloning,
+        DAgger,
+        HGDAgger,
+        NoveltyGated,
+    ],
+    ids=lambda c: c.__name__,
+)
+def test_help_on_a_shipped_strategy_says_what_each_of_its_hooks_does(cls):
+    """help(DAgger) and help(DAgger.observe_step) showed only the protocol defaults' generic
+    text ("keeps the shipped strategy's state"): nowhere did help() say that DAgger's
+    observe_step advances the step count behind its beta and coins, HG-DAgger's observe_label
+    the takeover, the novelty gate's observe_step / observe_refit its window and rescoring, or
+    CE's / CBA's observe_refit the rule's update and the thresholds. Each hook under which a
+    shipped class keeps state (found from the class tree, not from the text) is now named in
+    the class's help, and so is decide (when it asks); the generic hook text sends the reader
+    there."""
+    import pydoc
+
+    shown = _class_help(cls)
+    for hook in ["decide", *_hooks_keeping_state(cls)]:
+        assert f"``{hook}``" in shown, (cls.__name__, hook)
+    from torchcbl.strategies._phased import _StrategyDefaults
+
+    for hook in ("observe_label", "observe_step", "observe_refit", "episode_start", "bind"):
+        if getattr(cls, hook) is vars(_StrategyDefaults)[hook]:  # the generic text: it must
+            text = pydoc.render_doc(getattr(cls, hook), renderer=pydoc.plaintext)
+            assert "class docstring" in " ".join(text.split()), (cls.__name__, hook)  # say where
