@@ -213,7 +213,9 @@ def test_chi2_quantile_is_right_in_both_tails():
 def test_a_quantile_rule_pickled_before_max_std_became_none_keeps_its_quantile():
     """Until c5f2f09 a quantile rule also held max_std = 2.0; that commit made threshold()
     and is_confident() read max_std first, so such a rule, unpickled (a notebook's saved
-    object, a process pool's argument), went on at 2.0 std instead of its quantile."""
+    object, a process pool's argument), went on at 2.0 std instead of its quantile. It also
+    went on saying max_std = 2.0 (the attribute the class documents as None with a quantile,
+    a mypy-narrowed ``float | None`` a user may branch on) with both set."""
     import pickle
 
     old = DistanceRule.__new__(DistanceRule)
@@ -227,3 +229,5 @@ def test_a_quantile_rule_pickled_before_max_std_became_none_keeps_its_quantile()
         posterior=torch.tensor([[1.0], [1.0]], dtype=torch.float64),
     )
     assert rule.is_confident(c, np.zeros((2, 4))).tolist() == [True, False]
+    assert rule.max_std is None and rule.quantile == 0.95  # as the class documents
+    assert repr(rule) == "DistanceRule(quantile=0.95)"
