@@ -64,6 +64,27 @@ def test_rules_round_trip_through_config():
         rule_from_config({"type": "my.Rule", "custom": True})
 
 
+def test_distance_rule_takes_max_std_or_quantile_and_round_trips_either():
+    """Both given is refused as the rule is made, and so is a stored dict holding both (a
+    damaged config.json), saying which values were given; either one alone (numpy numbers
+    too) comes back from its JSON config as it was. Only the type hints' overloads were
+    checked before (tests/test_typing.py), not the refusal itself."""
+    import json
+
+    both = r"DistanceRule: give max_std \(2\.0\) or quantile \(0\.95\), not both"
+    for make in (
+        lambda: DistanceRule(2.0, quantile=0.95),
+        lambda: rule_from_config({"type": "DistanceRule", "max_std": 2.0, "quantile": 0.95}),
+    ):
+        with pytest.raises(ValueError, match=both):
+            make()
+    for rule in (DistanceRule(), DistanceRule(np.float32(2.5)), DistanceRule(quantile=0.9)):
+        config = rule_to_config(rule)
+        back = rule_from_config(json.loads(json.dumps(config)))
+        assert (back.max_std, back.quantile) == (rule.max_std, rule.quantile)
+        assert rule_to_config(back) == config and len(config) == 2  # "type" and one of them
+
+
 def test_a_quantile_distance_rule_says_it_has_no_fixed_max_std():
     """DistanceRule(quantile=...) set max_std = 2.0, the paper's fixed threshold it does not
     use: reading rule.max_std said 2 std where threshold(D) gives the chi-square one (3.08 std
@@ -213,7 +234,9 @@ def test_chi2_quantile_is_right_in_both_tails():
 def test_a_quantile_rule_pickled_before_max_std_became_none_keeps_its_quantile():
     """Until c5f2f09 a quantile rule also held max_std = 2.0; that commit made threshold()
     and is_confident() read max_std first, so such a rule, unpickled (a notebook's saved
-    object, a process pool's argument), went on at 2.0 std instead of its quantile."""
+    object, a process pool's argument), went on at 2.0 std instead of its quantile. It also
+    went on saying max_std = 2.0 (the attribute the class documents as None with a quantile,
+    a mypy-narrowed ``float | None`` a user may branch on) with both set."""
     import pickle
 
     old = DistanceRule.__new__(DistanceRule)
@@ -227,3 +250,5 @@ def test_a_quantile_rule_pickled_before_max_std_became_none_keeps_its_quantile()
         posterior=torch.tensor([[1.0], [1.0]], dtype=torch.float64),
     )
     assert rule.is_confident(c, np.zeros((2, 4))).tolist() == [True, False]
+    assert rule.max_std is None and rule.quantile == 0.95  # as the class documents
+    assert repr(rule) == "DistanceRule(quantile=0.95)"

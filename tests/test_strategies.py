@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -25,6 +26,7 @@ from torchcbl.strategies import (
     correcting,
     strategy_from_config,
 )
+from torchcbl.strategies.bc import BehaviourCloning
 from torchcbl.strategies.dagger import DAgger
 from torchcbl.strategies.hg_dagger import HGDAgger
 from torchcbl.strategies.novelty import NoveltyGated
@@ -558,6 +560,60 @@ def test_a_shipped_strategy_in_ones_own_loop_says_when_it_was_not_bound():
 
 
 @pytest.mark.parametrize(
+    "make",
+    [
+        ConfidentExecution,
+        ConfidenceBasedAutonomy,
+        BehaviourCloning,
+        DAgger,
+        lambda: HGDAgger(warmup=0),
+        lambda: NoveltyGated(warmup=0, min_history=1),
+    ],
+    ids=["confident execution", "cba", "bc", "dagger", "hg-dagger", "novelty"],
+)
+def test_an_unbound_shipped_strategy_never_fails_on_an_attribute_of_bind(make):
+    """A loop of one's own that replays a log before deciding (the protocol's resume order:
+    labels, steps, a refit, then decide) without calling bind() got, from CBA's observe_refit,
+    a bare AttributeError: 'ConfidenceBasedAutonomy' object has no attribute 'n_actions'.
+    Every shipped strategy's public hook either works unbound (the baselines: their state is
+    set by __init__, and bind only resets it) or says to call bind, as decide does."""
+    from torchcbl import GaussianMixtureSet
+
+    x = np.array([[0.0, 0.0], [0.1, 0.0], [3.0, 3.0], [3.1, 3.0]])
+    y = np.array([0, 0, 1, 1])
+    model = GaussianMixtureSet(2, 2, max_components=1).fit(x, y)
+    step = SimpleNamespace(
+        step=0,
+        phase="confident",
+        terminated=False,
+        truncated=False,
+        observation_array=x[0],
+        distance=0.5,
+    )
+    calls = {
+        "observe_label": lambda s: s.observe_label(x[0], 0, model_action=0, kind="demonstration"),
+        "observe_step": lambda s: s.observe_step(step, None),
+        "observe_refit": lambda s: s.observe_refit(model, x, y),
+        "episode_start": lambda s: s.episode_start(),
+        "decide": lambda s: s.decide(x[0], model.classify(x[:1])),
+    }
+    refused = []
+    strategy = make()
+    for name, call in calls.items():
+        try:
+            call(strategy)
+        except RuntimeError as exc:
+            assert re.search(rf"\.{name}: the strategy was not bound; call bind\(", str(exc))
+            refused.append(name)
+    needs_bind = isinstance(strategy, (ConfidentExecution, ConfidenceBasedAutonomy))
+    assert ("decide" in refused) == needs_bind
+    strategy = make()
+    strategy.bind(n_actions=2, n_features=2, config=TeachingConfig(noninteractive=False))
+    for call in calls.values():
+        call(strategy)  # bound: every hook works
+
+
+@pytest.mark.parametrize(
     "damage",
     [
         lambda s: s.pop("rule"),
@@ -949,3 +1005,64 @@ def test_a_strategy_update_that_raises_is_not_run_again_by_the_loop(tmp_path):
         ct.run(max_steps=10)
     assert _FailingRule.updates == 1
     ct.close()
+
+
+def _class_help(cls: type) -> str:
+    """The class's own part of ``help(cls)`` (its docstring as pydoc renders it), without the
+    method listing that follows."""
+    import pydoc
+
+    text = pydoc.render_doc(cls, renderer=pydoc.plaintext)
+    head = text.split("Method resolution order:")[0]
+    return "\n".join(line.removeprefix(" |  ").removeprefix(" |") for line in head.splitlines())
+
+
+def _hooks_keeping_state(cls: type) -> list[str]:
+    """The public hooks under which ``cls`` keeps state of its own, read from its class tree:
+    a ``_track_<hook>`` below the protocol's defaults, or a ``bind`` / ``episode_start`` of
+    its own (ConfidentTeacher calls these; what they do is the strategy's behaviour)."""
+    from torchcbl.strategies._phased import _StrategyDefaults
+
+    keeps = [
+        f"observe_{hook}"
+        for hook in ("label", "step", "refit")
+        if getattr(cls, f"_track_{hook}") is not getattr(_StrategyDefaults, f"_track_{hook}")
+    ]
+    keeps += [
+        h for h in ("bind", "episode_start") if getattr(cls, h) is not vars(_StrategyDefaults)[h]
+    ]
+    return keeps
+
+
+@pytest.mark.parametrize(
+    "cls",
+    [
+        ConfidentExecution,
+        ConfidenceBasedAutonomy,
+        BehaviourCloning,
+        DAgger,
+        HGDAgger,
+        NoveltyGated,
+    ],
+    ids=lambda c: c.__name__,
+)
+def test_help_on_a_shipped_strategy_says_what_each_of_its_hooks_does(cls):
+    """help(DAgger) and help(DAgger.observe_step) showed only the protocol defaults' generic
+    text ("keeps the shipped strategy's state"): nowhere did help() say that DAgger's
+    observe_step advances the step count behind its beta and coins, HG-DAgger's observe_label
+    the takeover, the novelty gate's observe_step / observe_refit its window and rescoring, or
+    CE's / CBA's observe_refit the rule's update and the thresholds. Each hook under which a
+    shipped class keeps state (found from the class tree, not from the text) is now named in
+    the class's help, and so is decide (when it asks); the generic hook text sends the reader
+    there."""
+    import pydoc
+
+    shown = _class_help(cls)
+    for hook in ["decide", *_hooks_keeping_state(cls)]:
+        assert f"``{hook}``" in shown, (cls.__name__, hook)
+    from torchcbl.strategies._phased import _StrategyDefaults
+
+    for hook in ("observe_label", "observe_step", "observe_refit", "episode_start", "bind"):
+        if getattr(cls, hook) is vars(_StrategyDefaults)[hook]:  # the generic text: it must
+            text = pydoc.render_doc(getattr(cls, hook), renderer=pydoc.plaintext)
+            assert "class docstring" in " ".join(text.split()), (cls.__name__, hook)  # say where

@@ -197,6 +197,13 @@ class DistanceRule:
             self.quantile = float(quantile)
         self._dof: int | None = None
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickling: a quantile rule pickled before ``max_std`` became None with a quantile
+        (c5f2f09) held ``max_std = 2.0`` too; it reads back as None, as documented."""
+        self.__dict__.update(state)
+        if self.__dict__.get("quantile") is not None:
+            self.max_std = None
+
     def threshold(self, n_features: int | None = None) -> float:
         """The threshold in standard deviations (for D = ``n_features`` with a quantile)."""
         if self.quantile is None:

@@ -225,6 +225,28 @@ class ConfidentExecution(_Phased):
         rule: a :class:`~torchcbl.confidence.ConfidenceRule`; default ``DistanceRule(2.0)``
             (the paper's). A rule whose ``is_confident`` takes a second positional argument
             gets the observations [N, D] too (a nearest-neighbour or density gate needs them).
+
+    Hooks (what each does here; the call order is the module docstring's):
+
+    - ``bind``: starts afresh from the TeachingConfig: phase ``"noninteractive"`` (
+      ``"confident"`` with ``noninteractive=False``), an empty accuracy window of the last
+      ``accuracy_window`` demonstrations, no burst; calls the rule's ``reset()`` where it has
+      one.
+    - ``episode_start``: cuts a burst short.
+    - ``decide``: asks in the non-interactive phase and during a burst; else asks where no
+      model exists (``c.action[0] < 0``) or the rule is not confident, and that request
+      starts a burst of ``burst`` teacher moves (``Decision.state``: the burst's moves left).
+      A RuntimeError before ``bind``.
+    - ``actor``: the teacher on asked steps, the model otherwise.
+    - ``observe_label``: a demonstration adds whether the model predicted it
+      (``model_action == action``) to the accuracy window; a correction adds nothing.
+    - ``observe_step``: counts a live burst down (cut at an episode's end); ends the
+      non-interactive phase once the window is full and its accuracy reaches
+      ``target_accuracy``; a replayed step (``decision`` None) recorded ``"confident"`` sets
+      that phase.
+    - ``observe_refit``: the rule's ``update(model, observations [M, D], actions [M])`` with
+      the whole training set (an :class:`~torchcbl.confidence.AutoThresholdRule` sets its
+      thresholds there, a quantile ``DistanceRule`` notes D).
     """
 
     _INIT_SETS = ("rule", "_with_obs")
@@ -247,6 +269,8 @@ class ConfidentExecution(_Phased):
         self._with_obs = _rule_takes_observations(self.rule)
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        """Starts the phase schedule afresh from ``config`` (a TeachingConfig) and calls the
+        rule's ``reset()`` where it has one."""
         super().bind(n_actions=n_actions, n_features=n_features, config=config)
         reset = getattr(self.rule, "reset", None)
         if callable(reset):  # a rule reused from another session starts afresh

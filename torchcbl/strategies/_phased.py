@@ -116,15 +116,21 @@ class _StrategyDefaults:
         )
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        """Once per session, before any other call (see the protocol): notes ``n_actions`` and
+        ``n_features``. What a shipped strategy starts afresh here is under "Hooks" in its
+        class docstring."""
         self._refuse_uninitialised()
         self.n_actions, self.n_features = int(n_actions), int(n_features)
 
     def episode_start(self) -> None:
+        """After each ``env.reset``: nothing here (a shipped strategy's class docstring says
+        under "Hooks" what it does)."""
         return None
 
     def actor(
         self, decision: Decision, model_action: int, teacher_action: int | None
     ) -> Literal["teacher", "agent"]:
+        """``"teacher"`` on an asked step, ``"agent"`` otherwise."""
         return "teacher" if decision.ask else "agent"
 
     def _through_loop(self, hook: str, *args: Any, **kwargs: Any) -> None:
@@ -174,25 +180,26 @@ class _StrategyDefaults:
     def observe_label(
         self, observation: np.ndarray, action: int, *, model_action: int, kind: LabelKind
     ) -> None:
-        """Every label (see the protocol); keeps the shipped strategy's state. An override
-        under ConfidentTeacher need not call ``super()``: where it does not, the loop keeps the
-        state after it returns, with the loop's arguments; where it does, with the arguments
-        it gives (a loop of one's own that calls the hooks needs the ``super()`` call)."""
+        """Every label (see the protocol); keeps the shipped strategy's state (what that is,
+        per strategy: "Hooks" in its class docstring). An override under ConfidentTeacher
+        need not call ``super()``: where it does not, the loop keeps the state after it
+        returns, with the loop's arguments; where it does, with the arguments it gives (a
+        loop of one's own that calls the hooks needs the ``super()`` call)."""
         self._reached("label")  # first: where the update raises, the loop does not run it again
         self._track_label(observation, action, model_action=model_action, kind=kind)
 
     def observe_refit(self, model: Any, observations: np.ndarray, actions: np.ndarray) -> None:
         """After every refit, with the training set (``observations`` [M, D], ``actions``
-        [M]); keeps the shipped strategy's state (a rule's update, thresholds), under
-        ConfidentTeacher also where an override does not call ``super()``, as
-        :meth:`observe_label`."""
+        [M]); keeps the shipped strategy's state (per strategy: "Hooks" in its class
+        docstring), under ConfidentTeacher also where an override does not call ``super()``,
+        as :meth:`observe_label`."""
         self._reached("refit")  # first: where the update raises, the loop does not run it again
         self._track_refit(model, observations, actions)
 
     def observe_step(self, record: StepRecord, decision: Decision | None) -> None:
-        """After every step (see the protocol); keeps the shipped strategy's state, under
-        ConfidentTeacher also where an override does not call ``super()``, as
-        :meth:`observe_label`."""
+        """After every step (see the protocol); keeps the shipped strategy's state (per
+        strategy: "Hooks" in its class docstring), under ConfidentTeacher also where an
+        override does not call ``super()``, as :meth:`observe_label`."""
         self._reached("step")  # first: where the update raises, the loop does not run it again
         self._track_step(record, decision)
 
@@ -228,6 +235,14 @@ class _Phased(_StrategyDefaults):
         return self._phase
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        """Starts the schedule afresh from ``config`` (a TeachingConfig: its
+        ``noninteractive``, ``target_accuracy``, ``accuracy_window`` and ``burst``); see
+        "Hooks" in the class docstring.
+
+        Raises:
+            TypeError: ``config`` lacks those fields (None, a dict), or ``__init__`` was
+                skipped.
+        """
         self._refuse_uninitialised()
         missing = [n for n in _SCHEDULE if not hasattr(config, n)]
         if missing:  # a loop of one's own may pass None or a dict
@@ -246,19 +261,34 @@ class _Phased(_StrategyDefaults):
         self._bound = True
 
     def episode_start(self) -> None:
+        """After each ``env.reset``: cuts a burst short."""
         self._burst_left = 0
 
     def _confident(self, observation: np.ndarray, c: Classification) -> bool:
         raise NotImplementedError
 
+    def _require_bound(self, where: str) -> None:
+        """RuntimeError naming ``where`` (the public method called) unless :meth:`bind` ran:
+        unbound, the phase would never leave the non-interactive one, and CBA's refit lacks
+        the number of actions. A strategy never initialised is told that first."""
+        if self._bound:
+            return
+        self._refuse_uninitialised()
+        raise RuntimeError(
+            f"{type(self).__name__}.{where}: the strategy was not bound; call "
+            "bind(n_actions=A, n_features=D, config=TeachingConfig(...)) once before it "
+            "(ConfidentTeacher does; a loop of one's own must)."
+        )
+
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
-        if not self._bound:  # unbound, the phase would never leave the non-interactive one
-            self._refuse_uninitialised()  # (or never initialised: say that first)
-            raise RuntimeError(
-                f"{type(self).__name__}.decide: the strategy was not bound; call "
-                "bind(n_actions=A, n_features=D, config=TeachingConfig(...)) once before it "
-                "(ConfidentTeacher does; a loop of one's own must)."
-            )
+        """Pure: asks in the non-interactive phase and during a burst, else where no model
+        exists or the strategy is not confident (a request starts a burst); see "Hooks" in
+        the class docstring. ``observation`` [D], ``c`` its classification (batch of 1).
+
+        Raises:
+            RuntimeError: :meth:`bind` was not called.
+        """
+        self._require_bound("decide")
         if self._phase == "noninteractive" or self._burst_left > 0:
             return Decision(True, self._phase, self._burst_left)
         ask = int(_np(c.action)[0]) < 0 or not self._confident(observation, c)

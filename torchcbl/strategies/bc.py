@@ -23,7 +23,12 @@ __all__ = ["BehaviourCloning"]
 class BehaviourCloning(_StrategyDefaults):
     """Ask at every step and execute the teacher's action (no interaction, no state).
 
-    Every step is recorded with phase ``"noninteractive"`` (asked by design)."""
+    Every step is recorded with phase ``"noninteractive"`` (asked by design).
+
+    Hooks: ``decide`` always asks (phase ``"noninteractive"``) and ``actor`` always answers
+    ``"teacher"``; ``bind`` notes the sizes only, and ``episode_start``, ``observe_label``,
+    ``observe_step`` and ``observe_refit`` keep nothing (the loop refits the model on the
+    labels itself). It works unbound."""
 
     @property
     def phase(self) -> str:
@@ -31,11 +36,13 @@ class BehaviourCloning(_StrategyDefaults):
         return "noninteractive"
 
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
+        """Always asks, phase ``"noninteractive"``."""
         return Decision(True, "noninteractive")
 
     def actor(
         self, decision: Decision, model_action: int, teacher_action: int | None
     ) -> Literal["teacher", "agent"]:
+        """Always ``"teacher"``."""
         return "teacher"
 
     def to_config(self) -> dict[str, Any]:

@@ -114,6 +114,28 @@ class ConfidenceBasedAutonomy(_Phased):
         thresholds: [A, A] float64, ``thresholds[a, b]`` for prediction a, runner-up b;
             +inf where no demonstration was classified.
         distance_threshold: the distance gate in standardised units (0 with < 2 points: ask).
+
+    Hooks (what each does here; the call order is :mod:`torchcbl.strategies`'):
+
+    - ``bind``: a ValueError with fewer than 2 actions; starts the phase schedule afresh from
+      the TeachingConfig, as :class:`~torchcbl.strategies.ConfidentExecution`'s, and drops
+      the gates (``thresholds`` None, ``distance_threshold`` 0: it asks until its first
+      refit).
+    - ``episode_start``: cuts a burst short.
+    - ``decide``: asks in the non-interactive phase and during a burst; else asks where no
+      model exists or either gate fails (the margin does not exceed ``thresholds[a*, r]``, or
+      :meth:`nn_distance` is not below ``distance_threshold``), and that request starts a
+      burst of ``burst`` teacher moves. A RuntimeError before ``bind``.
+    - ``actor``: the teacher on asked steps, the model otherwise.
+    - ``observe_label``: a demonstration adds whether the model predicted it to the accuracy
+      window of the non-interactive phase; a correction adds nothing there.
+    - ``observe_step``: counts a live burst down (cut at an episode's end) and ends the
+      non-interactive phase once the window is full and its accuracy reaches
+      ``target_accuracy``, as confident execution's.
+    - ``observe_refit``: recomputes ``thresholds`` [A, A] (log-posterior margins) and
+      ``distance_threshold`` (standardised units) from the whole training set
+      (``observations`` [M, D], ``actions`` [M]) classified by the refitted model; a
+      RuntimeError before ``bind``.
     """
 
     relabel = True
@@ -147,6 +169,12 @@ class ConfidenceBasedAutonomy(_Phased):
         self._scale: np.ndarray | None = None
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        """Starts the phase schedule afresh from ``config`` (a TeachingConfig) and drops the
+        gates (``thresholds`` None: it asks until its first refit).
+
+        Raises:
+            ValueError: fewer than 2 actions.
+        """
         if int(n_actions) < 2:
             raise ValueError(
                 "ConfidenceBasedAutonomy needs at least 2 actions (its confidence is the margin "
@@ -193,6 +221,7 @@ class ConfidenceBasedAutonomy(_Phased):
         """After every refit: the per-(action, runner-up) margin thresholds and the distance
         gate from the training set (``observations`` [M, D], ``actions`` [M]) classified by the
         refitted model."""
+        self._require_bound("observe_refit")  # the thresholds are [n_actions, n_actions]
         x = np.asarray(observations, dtype=np.float64)
         y = np.asarray(actions, dtype=np.int64)
         c = model.classify(x)

@@ -46,6 +46,18 @@ class DAgger(_StrategyDefaults):
         decay: beta's factor per iteration, in [0, 1] (the paper's ``p``; 0.5 by default).
         iteration_steps: steps per DAgger iteration (>= 1).
         seed: seeds the per-step coins.
+
+    Hooks (its only state is the session's step count, which sets the beta and the coin):
+
+    - ``bind``: the step count back to 0 (a session, new or resumed, replays its log).
+    - ``decide``: always asks (every state is labelled), phase ``"noninteractive"``;
+      ``Decision.state`` is the step's 0-based session index.
+    - ``actor``: ``"teacher"`` where no model exists or ``coin(step) < beta(step)``, else
+      ``"agent"`` (the label is recorded either way).
+    - ``observe_step``: the step count becomes ``record.step + 1``, so the next step's beta
+      and coin are those of the next index (replayed steps too).
+    - ``episode_start``, ``observe_label``, ``observe_refit``: keep nothing (the loop refits
+      the model on all labels itself).
     """
 
     _INIT_SETS = ("beta0", "decay", "iteration_steps", "seed", "_steps")
@@ -75,6 +87,7 @@ class DAgger(_StrategyDefaults):
         self._steps = 0
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        """The step count back to 0 (``config`` is not read)."""
         super().bind(n_actions=n_actions, n_features=n_features, config=config)
         self._steps = 0  # a session (new or resumed) replays its log from here
 
@@ -92,11 +105,14 @@ class DAgger(_StrategyDefaults):
         return "noninteractive"
 
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
+        """Always asks, phase ``"noninteractive"``; ``Decision.state`` is the step's index."""
         return Decision(True, "noninteractive", self._steps)
 
     def actor(
         self, decision: Decision, model_action: int, teacher_action: int | None
     ) -> Literal["teacher", "agent"]:
+        """``"teacher"`` where no model exists (``model_action < 0``) or
+        ``coin(step) < beta(step)``, else ``"agent"``."""
         step = int(decision.state)
         if model_action < 0 or self.coin(step) < self.beta(step):
             return "teacher"

@@ -40,6 +40,20 @@ class HGDAgger(_StrategyDefaults):
 
     Args:
         warmup: demonstrations the teacher gives before the learner first drives (>= 0).
+
+    Hooks (its state is the label count and whether the teacher is in control, a function
+    of the labels alone):
+
+    - ``bind``: no labels, the learner in control.
+    - ``decide``: asks during the warmup (phase ``"noninteractive"``); then (phase
+      ``"confident"``) asks where no model exists or while the teacher is in control.
+    - ``actor``: the teacher on asked steps, the learner otherwise.
+    - ``observe_label``: counts the label (the warmup); a correction (``kind="correction"``)
+      hands control to the teacher; while the teacher is in control after the warmup, a
+      demonstration equal to the learner's prediction (``model_action == action``) hands it
+      back.
+    - ``episode_start``, ``observe_step``, ``observe_refit``: keep nothing (control is not
+      handed back at an episode's end).
     """
 
     wants_corrections = True
@@ -54,6 +68,7 @@ class HGDAgger(_StrategyDefaults):
         self._control = False
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        """No labels, the learner in control (``config`` is not read)."""
         super().bind(n_actions=n_actions, n_features=n_features, config=config)
         self._labels = 0  # a session (new or resumed) replays its log from here
         self._control = False
@@ -70,6 +85,8 @@ class HGDAgger(_StrategyDefaults):
         return "noninteractive" if self._labels < self.warmup else "confident"
 
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
+        """Asks during the warmup; then where no model exists or while the teacher is in
+        control."""
         if self._labels < self.warmup:
             return Decision(True, "noninteractive")
         return Decision(int(c.action[0]) < 0 or self._control, "confident")

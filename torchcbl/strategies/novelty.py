@@ -55,6 +55,24 @@ class NoveltyGated(_StrategyDefaults):
         window: recent steps the quantile is taken over (>= 1).
         warmup: demonstrations the teacher gives first (>= 0).
         min_history: ask while fewer finite scores than this are in the window (>= 1).
+
+    Hooks (its state: the label count, the last ``window`` steps' observations and novelty
+    scores, and the latest refitted model):
+
+    - ``bind``: no labels, an empty window, no model.
+    - ``decide``: asks during the warmup (phase ``"noninteractive"``); then (phase
+      ``"confident"``) asks where no model exists, while :meth:`threshold` is None (fewer than
+      ``min_history`` finite scores), or where the observation's novelty
+      (``c.distance[0]``, Mahalanobis standard deviations) exceeds :meth:`threshold`.
+    - ``actor``: the teacher on asked steps, the learner otherwise.
+    - ``observe_label``: counts the label (the warmup).
+    - ``observe_step``: adds the step's observation [D] to the window, and its score: the
+      recorded ``record.distance``, or the latest model's distance where a refit came after
+      the step was scored; a non-finite score is not kept.
+    - ``observe_refit``: keeps the refitted model and scores every observation in the window
+      again with it (the threshold follows the current model); the training set
+      (``observations`` [M, D], ``actions`` [M]) is not used.
+    - ``episode_start``: keeps nothing.
     """
 
     _INIT_SETS = (
@@ -107,6 +125,7 @@ class NoveltyGated(_StrategyDefaults):
         self._rescore = False
 
     def bind(self, *, n_actions: int, n_features: int, config: Any) -> None:
+        """No labels, an empty window, no model (``config`` is not read)."""
         super().bind(n_actions=n_actions, n_features=n_features, config=config)
         self._labels = 0  # a session (new or resumed) replays its log from here
         self._scores = deque(maxlen=self.window)
@@ -127,6 +146,8 @@ class NoveltyGated(_StrategyDefaults):
         return "noninteractive" if self._labels < self.warmup else "confident"
 
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
+        """Asks during the warmup; then where no model exists, while :meth:`threshold` is
+        None, or where ``c.distance[0]`` exceeds it."""
         if self._labels < self.warmup:
             return Decision(True, "noninteractive")
         t = self.threshold()
