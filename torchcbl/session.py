@@ -2761,8 +2761,8 @@ def _restore_plan(
     """Where :func:`restore_model` starts: the scan of ``checkpoints/`` and ``k``, the labels
     the model was last fitted on. Reads only. Raises the :class:`CorruptSessionError` of a
     session started from a fitted model (``starts_fitted``) that still stands on it and whose
-    checkpoint 0 is missing, damaged or not this model's state (tried on a copy of ``model``
-    where :func:`_trial_copy` makes one), as restore_model would after setting aside what it
+    checkpoint 0 is missing, damaged or not this model's state (tried on a copy or a shadow
+    of ``model``, :func:`_trial_copy`), as restore_model would after setting aside what it
     passes over; so a resume refuses it before it opens the session
     (:func:`_check_restorable`).
 
@@ -2810,18 +2810,51 @@ def _restore_plan(
 
 
 def _trial_copy(model: torch.nn.Module) -> torch.nn.Module | None:
-    """A copy of ``model`` to try a checkpoint on, or ``None`` where a copy would cost or
-    fail: a model with tensors off the CPU (a copy would double its accelerator memory) or
-    holding what cannot be copied (a lock, a logger). Without one, whether the checkpoint
-    loads is found by :func:`restore_model`'s own load, which raises the same error, only
-    after the session was opened."""
+    """A model to try a checkpoint on, never ``model`` itself: a deep copy of a model on the
+    CPU that can be copied; else (a model with tensors off the CPU, whose copy would double
+    its accelerator memory, or one holding what cannot be copied: a lock, a logger) its
+    shadow (:func:`_shadow`), its tensors copied to the CPU; ``None`` where neither can be
+    made, and then whether the checkpoint loads is found by :func:`restore_model`'s own load,
+    which raises the same error, only after the session was opened."""
     tensors = [*model.parameters(), *model.buffers()]
-    if any(t.device.type != "cpu" for t in tensors):
-        return None
+    if all(t.device.type == "cpu" for t in tensors):
+        try:
+            return copy.deepcopy(model)
+        except Exception:  # e.g. TypeError: cannot pickle '_thread.lock' object
+            pass
     try:
-        return copy.deepcopy(model)
-    except Exception:  # e.g. TypeError: cannot pickle '_thread.lock' object
+        return _shadow(model)
+    except Exception:  # a class that cannot be made without its constructor's arguments
         return None
+
+
+def _shadow(module: torch.nn.Module) -> torch.nn.Module:
+    """An instance of ``module``'s class, made without its constructor, holding its
+    attributes, with its parameters and buffers copied to the CPU and its submodules
+    shadowed alike: what ``load_state_dict`` changes (the tensors, the attributes it sets) is
+    the shadow's, never ``module``'s; what a copy cannot take (a lock, a logger) is the same
+    object in both, not copied. No accelerator memory is taken."""
+    cls = type(module)
+    shadow = cls.__new__(cls)
+    own = dict(module.__dict__)
+    own["_parameters"] = type(module._parameters)(
+        (
+            name,
+            None
+            if p is None
+            else torch.nn.Parameter(p.detach().to("cpu", copy=True), p.requires_grad),
+        )
+        for name, p in module._parameters.items()
+    )
+    own["_buffers"] = type(module._buffers)(
+        (name, None if b is None else b.detach().to("cpu", copy=True))
+        for name, b in module._buffers.items()
+    )
+    own["_modules"] = type(module._modules)(
+        (name, None if m is None else _shadow(m)) for name, m in module._modules.items()
+    )
+    shadow.__dict__.update(own)
+    return shadow
 
 
 def _check_restorable(
