@@ -1059,6 +1059,36 @@ def test_teach_corridor_on_a_map_of_ones_own_and_evaluate_drives_it(tmp_path, mo
     assert "--map applies only to teach corridor" in capsys.readouterr().err
 
 
+def test_teach_resume_of_a_session_taught_in_another_env_id_says_so(tmp_path, monkeypatch, capsys):
+    """A session taught in another registered env of corridor's space (its config.json keeps
+    that env's id) was taken for a corridor session: teach --resume made torchcbl's corridor
+    env, then the library refused it, telling to "resume with matching arguments", which
+    teach takes none of. It is refused before any env is made, in one line (exit code 2)
+    naming both ids and the Python call that resumes it; the session is left as it was."""
+    import gymnasium
+
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    config = json.loads((run / "config.json").read_text())
+    config["env"]["id"] = "mypkg/MyCorridor-v0"
+    (run / "config.json").write_text(json.dumps(config))
+    files = {p: p.read_bytes() for p in sorted(run.rglob("*")) if p.is_file()}
+
+    def make(*args, **kwargs):
+        raise AssertionError(f"an env was made: {args}")
+
+    monkeypatch.setattr(gymnasium, "make", make)
+    capsys.readouterr()
+    for domain in ("corridor", "driving"):
+        assert main(["teach", domain, "--resume", "--run-dir", str(run), "--steps", "3"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1, err
+        assert "taught in the env 'mypkg/MyCorridor-v0'" in err, err
+        assert "'torchcbl/Corridor-v0'" in err and "ConfidentTeacher.resume(" in err, err
+    assert {p: p.read_bytes() for p in sorted(run.rglob("*")) if p.is_file()} == files
+
+
 def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
     tmp_path, monkeypatch, capsys
 ):

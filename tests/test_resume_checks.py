@@ -331,13 +331,14 @@ class _LoggedGMM(GaussianMixtureSet):
         self.log_lock = threading.Lock()
 
 
-def _session_started_fitted(run: Path, model_class: type) -> GaussianMixtureSet:
+def _session_started_fitted(run: Path, model_class: type, **cfg: Any) -> GaussianMixtureSet:
     """A session of 30 steps started from a ``model_class(3, 2, seed=0)`` fitted on 120
-    labelled points of the toy world (checkpoint 0 holds it); returns that model."""
+    labelled points of the toy world (checkpoint 0 holds it), with the TeachingConfig fields
+    ``cfg``; returns that model."""
     env = rare_regions_world()
     fitted = model_class(3, 2, seed=0)
     fitted.fit(*env.sample(120, np.random.default_rng(0)))
-    config = TeachingConfig(noninteractive=False)
+    config = TeachingConfig(noninteractive=False, **cfg)
     with ConfidentTeacher(
         env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
     ) as ct:
@@ -355,6 +356,31 @@ def test_a_model_that_cannot_be_copied_resumes_its_fitted_session(tmp_path):
     ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
     assert model.is_fitted
     assert torch.equal(model.means_, fitted.means_)
+
+
+def test_a_model_that_cannot_be_copied_is_refused_a_lost_start_before_a_file_is_touched(
+    tmp_path,
+):
+    """A session started from a fitted model whose checkpoint 0 reads but does not load into
+    the model (a key missing): resume tried it on a deep copy of the given model, and of one
+    that cannot be copied (a lock) not at all, so the refusal came only after the session was
+    opened, writers.jsonl, writer.lock and the journal touched. It now comes before, and the
+    given model is left as it was."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    _session_started_fitted(run, _LoggedGMM, max_new=50)  # no refit: it stands on checkpoint 0
+    zero = run / "checkpoints" / "model-00000000.pt"
+    payload = torch.load(zero, weights_only=True)
+    del payload["state_dict"]["means_"]
+    torch.save(payload, zero)
+    before = _files_of(run)
+    model = _LoggedGMM(3, 2, seed=0)
+    state = {k: v.clone() for k, v in model.state_dict().items()}
+    with pytest.raises(CorruptSessionError, match="unreadable as this model's state"):
+        ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False)
+    assert _files_of(run) == before
+    assert not model.is_fitted
+    assert all(torch.equal(v, state[k]) for k, v in model.state_dict().items())
 
 
 # -- 4. a resume goes on from the log as it is once locked, not as it was read before ----------

@@ -2576,6 +2576,94 @@ def test_a_kill_while_a_failed_first_step_is_undone_leaves_a_session_or_room_for
     assert not killed and outcomes[0] == "resumed" and outcomes[-1] == "new", outcomes
 
 
+@pytest.mark.parametrize("when", ["starting", "undoing-a-failed-config"])
+def test_a_start_killed_at_any_point_leaves_a_session_or_room_for_one(tmp_path, monkeypatch, when):
+    """A new session from prior demonstrations killed (SIGKILL) after prior.npz was in place
+    and before config.json.tmp was made left a prior.npz with no config.json.tmp beside it,
+    and the next start there was refused as what another session left. Killed before any of
+    its file operations (k = 0, 1, ...), the folder now either resumes as the session of no
+    step or starts a new one, which keeps nothing of the killed start's; so too where its
+    config.json could not be written (a full disk: config.json.tmp removed) and the start is
+    killed while it removes what it wrote, once it has marked the folder again (k >= 1; a
+    kill between the failed write and that mark, k = 0, is the one point left)."""
+    import torchcbl._durable as D
+
+    world = rare_regions_world()
+    x, y = world.sample(30, np.random.default_rng(0))  # prior.npz and checkpoint 0 too
+    state = {"n": 0, "at": None, "dead": False, "armed": when == "starting"}
+    locks: list = []
+
+    def killing(f):
+        def op(*args, **kw):
+            if state["dead"]:  # a killed process runs nothing more
+                raise _Killed
+            if state["at"] is not None and state["armed"]:
+                if state["n"] == state["at"]:
+                    state["dead"] = True
+                    raise _Killed
+                state["n"] += 1
+            return f(*args, **kw)
+
+        return op
+
+    for name in ("mkdir", "unlink", "replace", "rename", "rmdir", "touch"):
+        monkeypatch.setattr(Path, name, killing(getattr(Path, name)))
+    monkeypatch.setattr(os, "replace", killing(os.replace))
+    monkeypatch.setattr(os, "open", killing(os.open))
+    monkeypatch.setattr(D, "open", killing(open), raising=False)  # write_durably's files
+    monkeypatch.setattr(S, "open", killing(open), raising=False)  # writers.jsonl
+    real_lock = S._acquire_lock
+    monkeypatch.setattr(S, "_acquire_lock", lambda run: locks.append(real_lock(run)) or locks[-1])
+    if when != "starting":
+        real_write, real_remove = S.write_json_atomic, S._remove_new_session_files
+
+        def write(path, data):
+            if path.name != "config.json" or state["at"] is None:
+                return real_write(path, data)
+            path.with_name("config.json.tmp").unlink(missing_ok=True)  # as write_durably does
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def remove(path):
+            state["armed"] = True
+            real_remove(path)
+
+        monkeypatch.setattr(S, "write_json_atomic", write)
+        monkeypatch.setattr(S, "_remove_new_session_files", remove)
+    outcomes = []
+    for k in range(0 if when == "starting" else 1, 40):
+        run = tmp_path / f"k{k}"
+        state.update(n=0, at=k, dead=False, armed=when == "starting")
+        try:
+            ConfidentTeacher(
+                world, oracle(world), prior_demonstrations=(x, y), run_dir=run, progress=False
+            ).close()
+            killed = False
+        except (_Killed, SessionWriteError) as exc:
+            killed = isinstance(exc, _Killed)
+        finally:
+            state.update(at=None, dead=False)
+            for lock in locks:  # the kernel closes a killed process's files
+                lock.close()
+            locks.clear()
+        if (run / "config.json").exists():
+            with ConfidentTeacher.resume(run, world, oracle(world), progress=False) as ct:
+                assert ct.n_steps == 0 and ct.n_prior == 30
+                ct.run(max_steps=3)
+            outcomes.append("resumed")
+        else:
+            with ConfidentTeacher(world, oracle(world), run_dir=run, progress=False) as ct:
+                ct.run(max_steps=3)
+            assert "prior" not in S.load_config(run)  # not the killed start's
+            assert not (run / "prior.npz").exists()
+            assert not (run / "checkpoints" / "model-00000000.pt").exists()
+            outcomes.append("new")
+        assert len(load_records(run)) == 3
+        if not killed:
+            break
+    assert not killed and len(outcomes) > 2, outcomes
+    assert set(outcomes) == ({"new", "resumed"} if when == "starting" else {"new"}), outcomes
+
+
 def test_prior_demonstrations_left_without_a_config_tmp_still_keep_a_new_session_out(tmp_path):
     """Only beside config.json.tmp (a start or a removal killed) are a prior.npz and
     checkpoint 0 what no session left; alone they are another session's and refuse a start."""

@@ -22,6 +22,7 @@ import torch
 from _toy_envs import oracle, rare_regions_world
 
 from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
+from torchcbl.errors import CorruptSessionError
 from torchcbl.session import load_records
 from torchcbl.strategies import ConfidentExecution, correcting
 from torchcbl.strategies.bc import BehaviourCloning
@@ -194,3 +195,43 @@ def test_a_session_taught_on_cuda_is_reproduced_exactly_by_a_cuda_model(tmp_path
     assert live.keys() == refit.keys()
     for key in live:
         assert torch.equal(live[key], refit[key]), key
+
+
+def test_a_cuda_model_is_refused_a_lost_start_before_a_file_is_touched(tmp_path):
+    """A session started from a fitted CUDA model whose checkpoint 0 reads but does not load
+    (a key missing): the trial load on a copy was skipped for a CUDA model (a copy doubles its
+    GPU memory), so resume refused it only after opening the session (writers.jsonl,
+    writer.lock and the journal written). It is tried on a CPU shadow now: refused before any
+    file is touched, the given model left as it was, no GPU memory taken; the checkpoint put
+    back, the session resumes on the GPU."""
+    env = rare_regions_world(episode_length=10, spread=2.0)
+    fitted = GaussianMixtureSet(3, 2, 4, seed=0).fit(*env.sample(120, np.random.default_rng(0)))
+    run = tmp_path / "gpu"
+    config = TeachingConfig(max_new=50, noninteractive=False)
+    with ConfidentTeacher(
+        env, oracle(env), model=fitted.to("cuda"), config=config, run_dir=run, progress=False
+    ) as ct:
+        ct.run(max_steps=20)
+    zero = run / "checkpoints" / "model-00000000.pt"
+    good = zero.read_bytes()
+    payload = torch.load(zero, weights_only=True)
+    del payload["state_dict"]["means_"]
+    torch.save(payload, zero)
+    files = sorted(p for p in run.rglob("*") if p.is_file())
+    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in files}
+    model = GaussianMixtureSet(3, 2, 4, seed=0).to("cuda")
+    state = {k: v.clone() for k, v in model.state_dict().items()}
+    torch.cuda.synchronize()
+    torch.cuda.reset_peak_memory_stats()
+    held = torch.cuda.memory_allocated()
+    with pytest.raises(CorruptSessionError, match="unreadable as this model's state"):
+        ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False)
+    assert torch.cuda.max_memory_allocated() == held
+    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in files} == before
+    assert sorted(p for p in run.rglob("*") if p.is_file()) == files
+    assert all(torch.equal(v, state[k]) for k, v in model.state_dict().items())
+    assert model.means_.device.type == "cuda"
+    zero.write_bytes(good)
+    with ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False) as back:
+        assert back.model.means_.device.type == "cuda"
+        torch.testing.assert_close(back.model.means_.cpu(), fitted.means_.cpu(), rtol=0, atol=0)

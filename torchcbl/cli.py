@@ -394,6 +394,15 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
             "gymnasium.make: a reproduction's or a script's session), so teach cannot make its "
             "env again; start a new session with another --run-dir"
         )
+    if teach and env.get("id") not in _ENV_IDS:  # another env of a domain's space: teach
+        # would make its domain's env, which the session was not taught in
+        made = " or ".join(repr(i) for i in _ENV_IDS)
+        raise _UsageError(
+            f"{session} was taught in the env {env.get('id')!r}, not in one teach makes "
+            f"({made}), so teach cannot make its env again; resume it in Python, "
+            f"torchcbl.ConfidentTeacher.resume({str(session)!r}, "
+            f"gymnasium.make({env.get('id')!r}, ...), teacher)"
+        )
     if asked is not None and asked != domain:
         raise _UsageError(
             f"{session} is a {domain} session ({described}), not a {asked} one; "

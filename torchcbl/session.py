@@ -64,7 +64,9 @@ before the action ran); on resume that row is kept (the demonstration counts) an
 ``truncated`` with ``info["torchcbl_interrupted"]``. A line torn by the kill (no newline) was
 never acknowledged and is ignored: its action never ran. A new session killed after its
 ``config.json`` was written and before its log was (nothing of it ran) reads as a session of no
-step and resumes as one, into the run the uninterrupted session makes.
+step and resumes as one, into the run the uninterrupted session makes; one killed before its
+``config.json`` was in place is no session, and what it wrote (its ``prior.npz`` and checkpoint
+0, beside the empty ``config.json.tmp`` it makes first) is cleared by the next start there.
 
 Why a journal: a SQLite commit rewrites at least one whole page into the WAL (tens of
 microseconds, plus periodic checkpoints), while a journal line is one small ``write()``; this
@@ -189,7 +191,7 @@ from typing import TYPE_CHECKING, Any, TypeVar, overload
 import numpy as np
 import torch
 
-from torchcbl._durable import write_durably
+from torchcbl._durable import fsync_directory, write_durably
 from torchcbl.errors import (
     CorruptSessionError,
     IncompatibleRunDirError,
@@ -787,7 +789,9 @@ def _remove_new_session_files(path: Path) -> None:
 
     In an order where a kill at any point leaves either the whole session (a session of no
     step, which resumes) or only what a new session may start beside
-    (:func:`_check_new_session_dir`): the writers file and the journal first, then the step
+    (:func:`_check_new_session_dir`): where ``config.json`` is not there (the start failed
+    writing it), ``config.json.tmp`` is made again first (:func:`_mark_unstarted`); the
+    writers file and the journal first, then the step
     log (the session then reads as one whose creation was killed before its log: it resumes
     as a session of no step, see :func:`_unborn`); then ``config.json`` is renamed to
     ``config.json.tmp``, after which the folder holds no session (its prior demonstrations and
@@ -795,6 +799,15 @@ def _remove_new_session_files(path: Path) -> None:
     config leaves, and a new start removes them); then those and the ``.tmp``. Deleting
     ``config.json`` first left a step log with no config, which refused the next start as a
     session whose config was deleted."""
+    if not (path / CONFIG_NAME).exists():
+        # a start that failed before its config.json was in place (so no log), whose failed
+        # write of it removed config.json.tmp: marked again first, so that a kill below leaves
+        # what it removes beside the mark, not a prior.npz alone (a kill before this mark,
+        # right after the failed write, is the one point left)
+        try:
+            _mark_unstarted(path)
+        except OSError:
+            pass
     for name in (
         WRITERS_NAME,
         JOURNAL_NAME,
@@ -827,11 +840,28 @@ def _remove_new_session_files(path: Path) -> None:
         pass
 
 
+def _mark_unstarted(path: Path) -> None:
+    """Make ``config.json.tmp`` (empty) in a folder where a new session starts, and fsync the
+    folder, before the start writes its prior demonstrations or starting model: those files,
+    left by a kill before its ``config.json`` is in place, are then beside it, where
+    :func:`_check_new_session_dir` takes them for no session's and a new start clears them
+    (:func:`_clear_unstarted`). (Without it a start killed between its ``prior.npz`` and its
+    config left a ``prior.npz`` alone, refused as what another session left.) ``config.json``
+    is then written through that same name, which its rename takes away.
+
+    Raises:
+        OSError: it cannot be made.
+    """
+    os.close(os.open(path / (CONFIG_NAME + ".tmp"), os.O_WRONLY | os.O_CREAT, 0o644))
+    fsync_directory(path)
+
+
 def _clear_unstarted(path: Path) -> None:
     """Before a new session writes its files where :func:`_check_new_session_dir` let it
     start (under its lock): remove the prior demonstrations and starting model that a start
-    killed while writing its config, or a removal killed (:func:`_remove_new_session_files`),
-    left beside ``config.json.tmp``; they are no session's, and the new one writes its own."""
+    killed before its config.json was in place, or a removal killed
+    (:func:`_remove_new_session_files`), left beside ``config.json.tmp``; they are no
+    session's, and the new one writes its own."""
     for name in (PRIOR_NAME, f"{CHECKPOINT_DIR}/model-{0:08d}.pt"):
         try:
             (path / name).unlink(missing_ok=True)
@@ -938,8 +968,9 @@ def _check_new_session_dir(
     where no session started (a failed start's ``writer.lock``, a session's empty journal and
     writers file once its log and config went, an empty ``checkpoints/``, the temporary files
     of a start killed while it wrote; beside a ``config.json.tmp``, with no log, the prior
-    demonstrations and starting model of a start killed while it wrote its config, or of a
-    removal killed, see :func:`_remove_new_session_files`: the new session removes them).
+    demonstrations and starting model of a start killed before its config.json was in place,
+    which makes that ``.tmp`` first (:func:`_mark_unstarted`), or of a removal killed, see
+    :func:`_remove_new_session_files`: the new session removes them).
     ``name`` names the path for the caller (``--run-dir`` at the command line); ``resume``
     says how to continue a session found there, and ``remove`` how to remove the folder of a
     session found there that holds nothing (no step, no prior demonstrations), to start anew.
@@ -985,9 +1016,10 @@ def _check_new_session_dir(
     # would read as this session's) and checkpoints belong to another session
     leftovers: list[str] = []
     others: list[str] = []
-    # a start killed while writing its config.json (or the removal of a session that failed
-    # at its first step, killed after it renamed config.json aside) leaves config.json.tmp
-    # beside that start's prior demonstrations and starting model, and no log: no session's
+    # a start killed before its config.json was in place (it makes config.json.tmp before its
+    # prior demonstrations and starting model), or the removal of a session that failed at its
+    # first step, killed after it renamed config.json aside, leaves config.json.tmp beside
+    # those, and no log: no session's
     unstarted = CONFIG_NAME + ".tmp" in names
     starting_model = f"{CHECKPOINT_DIR}/model-{0:08d}.pt"
     for entry in entries:
@@ -1363,7 +1395,11 @@ class SessionStore:
         ``config.json`` is written, so that a directory with a config always holds it (a kill
         in between leaves no session, not one without its model); ``prior``: the bytes of the
         session's prior demonstrations (:func:`prior_bytes`), written to ``prior.npz`` before
-        ``config.json`` too (under a temporary name, then renamed)."""
+        ``config.json`` too (under a temporary name, then renamed). With either, an empty
+        ``config.json.tmp`` is made before them (:func:`_mark_unstarted`): a start killed
+        before its ``config.json`` is in place leaves them beside it, which a new start clears,
+        and a kill at any point leaves a session of no step (which resumes) or a folder a new
+        session starts in."""
         path = Path(run_dir)
         try:
             path.mkdir(parents=True, exist_ok=True)
@@ -1385,6 +1421,12 @@ class SessionStore:
             _check_new_session_dir(path)  # again, locked: another start may have come between
             _note_holder(lock, keep_count=False)  # a count left by no session: not this one's
             started = True
+            if prior is not None or initial_model is not None:
+                try:  # before prior.npz and checkpoint 0: a kill leaves them beside it
+                    _mark_unstarted(path)
+                except OSError as exc:
+                    marker = path / (CONFIG_NAME + ".tmp")
+                    raise _write_error(exc, marker, "starting the session", _START_AGAIN) from exc
             _clear_unstarted(path)
             if prior is not None:
                 _write_atomic(path / PRIOR_NAME, prior, "starting the session", _START_AGAIN)
@@ -2719,8 +2761,8 @@ def _restore_plan(
     """Where :func:`restore_model` starts: the scan of ``checkpoints/`` and ``k``, the labels
     the model was last fitted on. Reads only. Raises the :class:`CorruptSessionError` of a
     session started from a fitted model (``starts_fitted``) that still stands on it and whose
-    checkpoint 0 is missing, damaged or not this model's state (tried on a copy of ``model``
-    where :func:`_trial_copy` makes one), as restore_model would after setting aside what it
+    checkpoint 0 is missing, damaged or not this model's state (tried on a copy or a shadow
+    of ``model``, :func:`_trial_copy`), as restore_model would after setting aside what it
     passes over; so a resume refuses it before it opens the session
     (:func:`_check_restorable`).
 
@@ -2768,18 +2810,51 @@ def _restore_plan(
 
 
 def _trial_copy(model: torch.nn.Module) -> torch.nn.Module | None:
-    """A copy of ``model`` to try a checkpoint on, or ``None`` where a copy would cost or
-    fail: a model with tensors off the CPU (a copy would double its accelerator memory) or
-    holding what cannot be copied (a lock, a logger). Without one, whether the checkpoint
-    loads is found by :func:`restore_model`'s own load, which raises the same error, only
-    after the session was opened."""
+    """A model to try a checkpoint on, never ``model`` itself: a deep copy of a model on the
+    CPU that can be copied; else (a model with tensors off the CPU, whose copy would double
+    its accelerator memory, or one holding what cannot be copied: a lock, a logger) its
+    shadow (:func:`_shadow`), its tensors copied to the CPU; ``None`` where neither can be
+    made, and then whether the checkpoint loads is found by :func:`restore_model`'s own load,
+    which raises the same error, only after the session was opened."""
     tensors = [*model.parameters(), *model.buffers()]
-    if any(t.device.type != "cpu" for t in tensors):
-        return None
+    if all(t.device.type == "cpu" for t in tensors):
+        try:
+            return copy.deepcopy(model)
+        except Exception:  # e.g. TypeError: cannot pickle '_thread.lock' object
+            pass
     try:
-        return copy.deepcopy(model)
-    except Exception:  # e.g. TypeError: cannot pickle '_thread.lock' object
+        return _shadow(model)
+    except Exception:  # a class that cannot be made without its constructor's arguments
         return None
+
+
+def _shadow(module: torch.nn.Module) -> torch.nn.Module:
+    """An instance of ``module``'s class, made without its constructor, holding its
+    attributes, with its parameters and buffers copied to the CPU and its submodules
+    shadowed alike: what ``load_state_dict`` changes (the tensors, the attributes it sets) is
+    the shadow's, never ``module``'s; what a copy cannot take (a lock, a logger) is the same
+    object in both, not copied. No accelerator memory is taken."""
+    cls = type(module)
+    shadow = cls.__new__(cls)
+    own = dict(module.__dict__)
+    own["_parameters"] = type(module._parameters)(
+        (
+            name,
+            None
+            if p is None
+            else torch.nn.Parameter(p.detach().to("cpu", copy=True), p.requires_grad),
+        )
+        for name, p in module._parameters.items()
+    )
+    own["_buffers"] = type(module._buffers)(
+        (name, None if b is None else b.detach().to("cpu", copy=True))
+        for name, b in module._buffers.items()
+    )
+    own["_modules"] = type(module._modules)(
+        (name, None if m is None else _shadow(m)) for name, m in module._modules.items()
+    )
+    shadow.__dict__.update(own)
+    return shadow
 
 
 def _check_restorable(
