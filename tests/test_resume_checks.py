@@ -383,6 +383,69 @@ def test_a_model_that_cannot_be_copied_is_refused_a_lost_start_before_a_file_is_
     assert all(torch.equal(v, state[k]) for k, v in model.state_dict().items())
 
 
+class _SlottedGMM(_LoggedGMM):
+    """An uncopyable model keeping state in a slot that its own load reads."""
+
+    __slots__ = ("extra",)
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.extra = 1
+
+    def _load_from_state_dict(self, *args, **kwargs) -> None:
+        assert self.extra == 1
+        super()._load_from_state_dict(*args, **kwargs)
+
+
+def test_an_uncopyable_model_whose_own_load_reads_a_slot_resumes_its_healthy_session(tmp_path):
+    """The trial load of checkpoint 0 on a shadow of the model (made without its constructor,
+    its __dict__ shared) failed where the model's own load reads what the shadow lacks (a
+    slot): a healthy session was refused as corrupt. A model of a class whose load path is
+    not the library's own is left to restore_model's own load."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    fitted = _session_started_fitted(run, _SlottedGMM, max_new=50)
+    model = _SlottedGMM(3, 2, seed=0)
+    ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
+    assert torch.equal(model.means_, fitted.means_)
+
+
+class _CountingGMM(GaussianMixtureSet):
+    """A model counting the loads into itself with a load hook that holds the model."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.loads = 0
+        self._register_load_state_dict_pre_hook(_count_load, with_module=True)
+
+
+class _LockedCountingGMM(_CountingGMM):
+    """The same, holding what cannot be copied."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.log_lock = threading.Lock()
+
+
+def _count_load(module, *args, **kwargs) -> None:
+    module.loads += 1
+
+
+def test_a_trial_load_never_runs_a_load_hook_on_the_given_model(tmp_path):
+    """A load hook registered with ``with_module=True`` holds the given model; the trial load
+    on a shadow of a model that cannot be copied ran it on the given model, which so counted
+    one load more than the same model that can be copied (whose trial runs on a copy)."""
+    env = rare_regions_world()
+    loads = []
+    for model_class in (_CountingGMM, _LockedCountingGMM):
+        run = tmp_path / model_class.__name__
+        _session_started_fitted(run, model_class, max_new=50)
+        model = model_class(3, 2, seed=0)
+        ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
+        loads.append(model.loads)
+    assert loads[1] == loads[0] >= 1
+
+
 # -- 4. a resume goes on from the log as it is once locked, not as it was read before ----------
 
 

@@ -2813,19 +2813,42 @@ def _trial_copy(model: torch.nn.Module) -> torch.nn.Module | None:
     """A model to try a checkpoint on, never ``model`` itself: a deep copy of a model on the
     CPU that can be copied; else (a model with tensors off the CPU, whose copy would double
     its accelerator memory, or one holding what cannot be copied: a lock, a logger) its
-    shadow (:func:`_shadow`), its tensors copied to the CPU; ``None`` where neither can be
-    made, and then whether the checkpoint loads is found by :func:`restore_model`'s own load,
-    which raises the same error, only after the session was opened."""
+    shadow (:func:`_shadow`), its tensors copied to the CPU, where its load is the library's
+    own (:func:`_shadow_loads_alike`); ``None`` otherwise, and then whether the checkpoint
+    loads is found by :func:`restore_model`'s own load, which raises the same error, only
+    after the session was opened."""
     tensors = [*model.parameters(), *model.buffers()]
     if all(t.device.type == "cpu" for t in tensors):
         try:
             return copy.deepcopy(model)
         except Exception:  # e.g. TypeError: cannot pickle '_thread.lock' object
             pass
+    if not _shadow_loads_alike(model):
+        return None
     try:
         return _shadow(model)
     except Exception:  # a class that cannot be made without its constructor's arguments
         return None
+
+
+def _shadow_loads_alike(model: torch.nn.Module) -> bool:
+    """Whether a load into :func:`_shadow` of ``model`` fails exactly where one into
+    ``model`` would, and touches nothing of ``model``: a GaussianMixtureSet (of a subclass
+    or not) with no submodule, no slot, no load hook and the library's own load path. A
+    model's own load may read what a shadow lacks (a slot: a healthy session would be
+    refused as corrupt), and a load hook or an override may act on ``model`` itself."""
+    from torchcbl.gmm import GaussianMixtureSet
+
+    cls = type(model)
+    return (
+        isinstance(model, GaussianMixtureSet)
+        and cls.load_state_dict is torch.nn.Module.load_state_dict
+        and cls._load_from_state_dict is GaussianMixtureSet._load_from_state_dict
+        and not any("__slots__" in vars(c) for c in cls.__mro__)
+        and not model._load_state_dict_pre_hooks
+        and not model._load_state_dict_post_hooks
+        and not model._modules
+    )
 
 
 def _shadow(module: torch.nn.Module) -> torch.nn.Module:
