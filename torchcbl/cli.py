@@ -28,6 +28,7 @@ import re
 import shlex
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -442,9 +443,13 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from torchcbl.session import IncompatibleRunDirError
 
     try:
-        report = module.evaluate_saved_policy(session, n_steps=args.steps, seed=args.seed)
+        with warnings.catch_warnings(record=True) as said:  # each one line below
+            warnings.simplefilter("always")
+            report = module.evaluate_saved_policy(session, n_steps=args.steps, seed=args.seed)
     except (IncompatibleRunDirError, ValueError) as exc:  # e.g. a robot its config lacks
         raise _UsageError(_one_line(exc)) from None
+    for w in said:  # e.g. a corridor session that does not say which robot it was taught on
+        print(f"torchcbl evaluate: warning: {_one_line(w.message)}", file=sys.stderr)
     print(json.dumps(report, indent=2))
     return 0
 
