@@ -51,6 +51,7 @@ import numpy as np
 from sumo_scenarios import metrics
 from sumo_scenarios.scenarios import LANE_NAMES
 from torchcbl.evaluation import (
+    SEED_RESULT,
     _ctrl_c_held,
     check_workers_start,
     clear_unfinished,
@@ -81,6 +82,7 @@ __all__ = [
     "plot_results",
     "resumable_seeds",
     "run_experiment",
+    "session_eval_segment",
     "stage_name",
     "teaching_setup",
 ]
@@ -1133,11 +1135,36 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     return written
 
 
+def session_eval_segment(session_dir: str | Path) -> int | None:
+    """The held-out segment :func:`run_experiment` evaluated the policies of this session's
+    seed on, ``eval_segment + k`` for seed k, read from the seed's record
+    (``run_dir/seed_<k>/seed_result.json``, beside the seed's ``sessions/arm_a`` and
+    ``arm_b``); None for a session that is not in a run's seed directory (one of ``torchcbl
+    teach driving``, or a session copied out of its run), or whose record cannot be read."""
+    session_dir = Path(session_dir)
+    if session_dir.parent.name != "sessions":
+        return None
+    try:
+        kept = json.loads((session_dir.parent.parent / SEED_RESULT).read_text(encoding="utf-8"))
+        segment = kept["config"]["eval_segment"] + kept["result"]["seed"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    whole = isinstance(segment, int) and not isinstance(segment, bool)
+    return segment if whole and segment >= 0 else None
+
+
 def evaluate_saved_policy(
-    session_dir: str | Path, *, n_steps: int = 1000, seed: int = 0, sim: SimConfig | None = None
+    session_dir: str | Path,
+    *,
+    n_steps: int = 1000,
+    seed: int | None = None,
+    sim: SimConfig | None = None,
 ) -> dict[str, Any]:
     """Drive the latest model of a driving teaching session (e.g. ``torchcbl teach driving``)
-    greedily for ``n_steps`` timesteps on held-out evaluation segment ``seed``.
+    greedily for ``n_steps`` timesteps on held-out evaluation segment ``seed``: by default,
+    for a session of :func:`run_experiment` (``run_dir/seed_<k>/sessions/arm_a``) the segment
+    its seed's policies were evaluated on (:func:`session_eval_segment`: ``eval_segment + k``,
+    so the figures compare with ``results.json``'s), else segment 0.
 
     The traffic is the held-out ``eval`` scenario; the SUMO settings (``sim``: the step length,
     which sets how far the traffic moves between two decisions) and the start lane are the
@@ -1175,6 +1202,9 @@ def evaluate_saved_policy(
                 "has no option for it)"
             )
         sim = SimConfig()
+    if seed is None:
+        seed = session_eval_segment(session_dir)
+        seed = 0 if seed is None else seed
     policy = load_policy(session_dir)
     config = DrivingConfig(
         scenario="eval", max_episode_steps=n_steps, start_lane=start_lane, sim=sim

@@ -426,6 +426,38 @@ def test_per_seed_follows_the_configs_order_of_seeds(two_seeds):
     assert [r["seed"] for r in res["per_seed"]] == [1, 0]
 
 
+def test_evaluate_drives_a_runs_session_on_the_segment_its_seed_was_evaluated_on(
+    two_seeds, tmp_path, capsys
+):
+    """The experiment evaluates seed k on held-out segment eval_segment + k; `torchcbl
+    evaluate` of seed 1's session drove segment 0 unless given --seed 1, with no word. A
+    session of a run now defaults to its seed's segment, read from the seed's record, and says
+    so in one line; --seed still picks another, and a session of no run drives segment 0."""
+    import shutil
+
+    from torchcbl.cli import main
+
+    res, run_dir = two_seeds
+    session = run_dir / "seed_1" / "sessions" / "arm_a"
+    taught = res["per_seed"][0]["stages"]["a_plus20"]["segment"]
+    assert res["per_seed"][0]["seed"] == 1 and taught == 1
+    capsys.readouterr()
+    assert main(["evaluate", str(session), "--steps", "20"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["eval_segment"] == taught
+    assert len(err.splitlines()) == 1, err
+    assert "held-out segment 1" in err and "seed_result.json" in err and "--seed" in err, err
+    assert evaluate_saved_policy(session, n_steps=20)["eval_segment"] == taught
+    assert main(["evaluate", str(session), "--steps", "20", "--seed", "0"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["eval_segment"] == 0 and err == ""
+    alone = tmp_path / "arm_a"  # copied out of its run: no record says its segment
+    shutil.copytree(session, alone)
+    assert main(["evaluate", str(alone), "--steps", "20"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["eval_segment"] == 0 and err == ""
+
+
 def test_figure_9s_number_is_read_at_the_runs_own_arm_b_size(two_seeds):
     """Figure 9's number, the non-interactive learner's windowed accuracy at arm (b)'s last
     demonstration, is read at this run's arm_b_stages[-1] (80 here, the paper's 1000), and its
