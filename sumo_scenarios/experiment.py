@@ -41,7 +41,7 @@ import multiprocessing as mp
 import numbers
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -272,6 +272,42 @@ class DrivingExperimentConfig:
     def full(cls) -> DrivingExperimentConfig:
         """The paper's sizes with a refit after every demonstration, over 20 seeds."""
         return cls(seeds=tuple(range(20)), max_new=1, extra_eval_segments=(100, 200, 300))
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> DrivingExperimentConfig:
+        """The config that :meth:`to_dict` wrote (``results.json``'s ``"config"``, or a seed's
+        ``seed_<k>/seed_result.json``'s), to replay a run or vary it, e.g. its seed 3 alone:
+        ``dataclasses.replace(DrivingExperimentConfig.from_dict(results["config"]),
+        seeds=(3,))``. A key left out takes its default.
+
+        Raises:
+            ValueError: ``data`` is not a dict of this class's fields (a whole results.json,
+                an unknown field), or a value is refused as the constructor refuses it.
+        """
+        if not isinstance(data, Mapping):
+            raise ValueError(
+                f"expected a dict of DrivingExperimentConfig's fields (results.json's "
+                f"'config'), got {type(data).__name__}"
+            )
+        if "config" in data and "per_seed" in data:
+            raise ValueError(
+                "expected a dict of DrivingExperimentConfig's fields, got a whole results.json; "
+                'pass its "config": from_dict(results["config"])'
+            )
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ValueError(
+                f"unknown DrivingExperimentConfig fields {unknown}; its fields: {sorted(names)}"
+            )
+        return cls(**data)  # (lists become tuples in __post_init__)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form, as ``results.json`` and each ``seed_result.json`` keep it
+        (:meth:`from_dict` reads it back)."""
+        return {
+            k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()
+        }
 
 
 STAGE_NAMES = {
@@ -599,7 +635,7 @@ def _seed_worker(
         result = _run_seed(*job)
         # kept with the config when the seed ends (a resume takes it), and sent back as the
         # file holds it, so that a run resumed or not aggregates the same values
-        kept = write_seed_result(seed_dir, dataclasses.asdict(cfg), result, _plain, versions)
+        kept = write_seed_result(seed_dir, cfg.to_dict(), result, _plain, versions)
         reply: tuple[str, Any] = ("ok", kept)
     except Exception as exc:  # re-raised in the parent, the worker's traceback as its cause
         error = exc
@@ -920,7 +956,7 @@ def run_experiment(
     results = {
         "domain": "driving",
         "experiment": "driving (Chernova & Veloso 2007, Section 5.2)",
-        "config": dataclasses.asdict(config),
+        "config": config.to_dict(),
         "seeds": list(config.seeds),
         "versions": versions,
         "paper": PAPER,
@@ -962,7 +998,7 @@ def resumable_seeds(config: DrivingExperimentConfig, run_dir: str | Path) -> dic
     return finished_seeds(
         run_dir,
         dirs,
-        dataclasses.asdict(config),
+        config.to_dict(),
         strays,
         "resume with the config it was started with, or choose a new run_dir",
         _versions(),

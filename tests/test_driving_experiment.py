@@ -458,6 +458,37 @@ def test_evaluate_drives_a_runs_session_on_the_segment_its_seed_was_evaluated_on
     assert json.loads(out)["eval_segment"] == 0 and err == ""
 
 
+def test_a_runs_stored_config_reads_back_as_the_config_it_ran(two_seeds):
+    """The corridor's config reads a run's results.json "config" back (from_dict), the
+    driving config had no way but DrivingExperimentConfig(**config): a round trip of the
+    stored config, results.json's and a seed's record's, gives the config that ran, and
+    to_dict writes what results.json holds."""
+    import dataclasses
+
+    _, run_dir = two_seeds
+    ran = tiny_config(seeds=(1, 0))
+    stored = json.loads((run_dir / "results.json").read_text())["config"]
+    assert stored == ran.to_dict()
+    assert DrivingExperimentConfig.from_dict(stored) == ran
+    record = json.loads((run_dir / "seed_1" / "seed_result.json").read_text())["config"]
+    assert DrivingExperimentConfig.from_dict(record) == ran
+    full = DrivingExperimentConfig.full()
+    assert full.to_dict() == json.loads(json.dumps(dataclasses.asdict(full)))
+    assert DrivingExperimentConfig.from_dict(json.loads(json.dumps(full.to_dict()))) == full
+    # seed k of a run alone, the rest its defaults
+    again = dataclasses.replace(DrivingExperimentConfig.from_dict(stored), seeds=(1,))
+    assert again.seeds == (1,) and again.eval_steps == ran.eval_steps
+    assert DrivingExperimentConfig.from_dict({"seeds": [3]}) == DrivingExperimentConfig(seeds=(3,))
+    on_disk = json.loads((run_dir / "results.json").read_text())
+    for bad, says in (
+        (on_disk, r'got a whole results.json; pass its "config"'),
+        ({**stored, "seed": 3}, r"unknown DrivingExperimentConfig fields \['seed'\]"),
+        ([stored], "expected a dict of DrivingExperimentConfig's fields"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            DrivingExperimentConfig.from_dict(bad)
+
+
 def test_figure_9s_number_is_read_at_the_runs_own_arm_b_size(two_seeds):
     """Figure 9's number, the non-interactive learner's windowed accuracy at arm (b)'s last
     demonstration, is read at this run's arm_b_stages[-1] (80 here, the paper's 1000), and its
