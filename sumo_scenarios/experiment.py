@@ -30,6 +30,11 @@ CPU seconds), ``fig6_accuracy.png``,
 ``arm_b`` (the teaching sessions, :mod:`torchcbl.session` format: ``torchcbl evaluate`` and
 ``resume`` work on them), and ``seed_<k>/seed_result.json`` (the seed's result and config,
 written as it ends: what ``run_experiment(..., resume=True)`` takes from a stopped run).
+
+Rerun seed k of a run with the config stored in its results.json, into a new run directory
+(everything is seeded; its ``per_seed[0]`` is the run's seed k but for the timing
+``arm_a_seconds``): ``run_experiment(dataclasses.replace(DrivingExperimentConfig.from_dict(
+results["config"]), seeds=(k,)), new_run_dir)`` (docs/reproduction.md, *Rerunning one seed*).
 """
 
 from __future__ import annotations

@@ -489,6 +489,22 @@ def test_a_runs_stored_config_reads_back_as_the_config_it_ran(two_seeds):
             DrivingExperimentConfig.from_dict(bad)
 
 
+def test_a_seed_rerun_alone_from_the_stored_config_gives_its_entry_again(two_seeds, tmp_path):
+    """docs/reproduction.md's *Rerunning one seed*: seed k of a run, run alone from the config
+    its results.json keeps, gives the run's entry for seed k again, but for its timing."""
+    import dataclasses
+
+    _, run_dir = two_seeds
+    results = json.loads((run_dir / "results.json").read_text())
+    config = DrivingExperimentConfig.from_dict(results["config"])
+    rerun = run_experiment(
+        dataclasses.replace(config, seeds=(1,)), tmp_path / "seed1", workers=1, progress=False
+    )
+    entry = results["per_seed"][results["seeds"].index(1)]
+    assert entry["seed"] == 1
+    assert _untimed(rerun["per_seed"][0]) == _untimed(entry)
+
+
 def test_figure_9s_number_is_read_at_the_runs_own_arm_b_size(two_seeds):
     """Figure 9's number, the non-interactive learner's windowed accuracy at arm (b)'s last
     demonstration, is read at this run's arm_b_stages[-1] (80 here, the paper's 1000), and its
