@@ -45,7 +45,9 @@ Run directory layout (``run_experiment`` writes; envs never do)::
                                 run_experiment(..., resume=True) takes from a stopped run)
 
 Replay a seed with the config and seed stored in results.json: everything is seeded
-(``run_seed(CorridorExperimentConfig.from_dict(results["config"]), seed, None)``).
+(``run_seed(CorridorExperimentConfig.from_dict(results["config"]), seed, None)``; it gives the
+seed's ``per_seed`` entry again, timing aside, plus the figures' inputs: see :func:`run_seed`
+and docs/reproduction.md, *Rerunning one seed*).
 """
 
 from __future__ import annotations
@@ -553,6 +555,14 @@ _CBA_KEYS = (
 def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | None) -> dict:
     """One seed: teaching, evaluation of the final policy, Prioritized Sweeping, and with
     ``config.cba`` the same teaching and evaluation under CBA (keys ``cba_*``).
+
+    The result is the seed's entry of ``results.json``'s ``per_seed`` plus four keys that
+    results.json does not keep, the inputs of the figures (drawn for the first seed alone):
+    ``_demo_x``, ``_demo_y`` (the demonstrations), ``_model`` (the final mixtures) and
+    ``_path`` (the first evaluation circuit's path). So a seed run again from a run's config
+    compares with its entry without them and the timing ``seconds``:
+    ``{k: v for k, v in out.items() if not k.startswith("_") and k != "seconds"}`` equals the
+    entry without ``seconds``. ``session_dir`` (None: none) receives the teaching session.
 
     Torch runs on one thread meanwhile (as in every worker, so that ``workers=1`` gives the
     results of ``workers=2``); the caller's thread count is restored after."""
