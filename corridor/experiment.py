@@ -45,7 +45,9 @@ Run directory layout (``run_experiment`` writes; envs never do)::
                                 run_experiment(..., resume=True) takes from a stopped run)
 
 Replay a seed with the config and seed stored in results.json: everything is seeded
-(``run_seed(CorridorExperimentConfig.from_dict(results["config"]), seed, None)``).
+(``run_seed(CorridorExperimentConfig.from_dict(results["config"]), seed, None)``; it gives the
+seed's ``per_seed`` entry again, timing aside, plus the figures' inputs: see :func:`run_seed`
+and docs/reproduction.md, *Rerunning one seed*).
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ import math
 import multiprocessing as mp
 import numbers
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -553,6 +556,14 @@ def run_seed(config: CorridorExperimentConfig, seed: int, session_dir: Path | No
     """One seed: teaching, evaluation of the final policy, Prioritized Sweeping, and with
     ``config.cba`` the same teaching and evaluation under CBA (keys ``cba_*``).
 
+    The result is the seed's entry of ``results.json``'s ``per_seed`` plus four keys that
+    results.json does not keep, the inputs of the figures (drawn for the first seed alone):
+    ``_demo_x``, ``_demo_y`` (the demonstrations), ``_model`` (the final mixtures) and
+    ``_path`` (the first evaluation circuit's path). So a seed run again from a run's config
+    compares with its entry without them and the timing ``seconds``:
+    ``{k: v for k, v in out.items() if not k.startswith("_") and k != "seconds"}`` equals the
+    entry without ``seconds``. ``session_dir`` (None: none) receives the teaching session.
+
     Torch runs on one thread meanwhile (as in every worker, so that ``workers=1`` gives the
     results of ``workers=2``); the caller's thread count is restored after."""
     import torch
@@ -1014,15 +1025,17 @@ def evaluate_saved_policy(
     """Run the latest model of a corridor teaching session greedily for ``n_steps`` actions.
 
     ``map_name`` and ``world_config`` default to the map and robot the session was taught on:
-    for a session of :func:`run_experiment` (``run_dir/sessions/seed<k>``) those in
-    ``run_dir/results.json`` (noisy motion by default); for a session of an env made with
-    ``gymnasium.make`` the ``corridor_map`` and ``world_config`` it was given (the session's
-    config keeps them when they are plain values: a map's name, the robot as a dict, as
-    ``torchcbl teach corridor`` gives them, :func:`teaching_setup`; given as objects they are
-    not kept, and this raises ValueError unless they are passed here); otherwise the default
-    map and ``WorldConfig()`` (exact motion, the default of ``torchcbl/Corridor-v0``). Returns
-    the map and robot (``WorldConfig``'s fields) driven, the steps, circuits completed,
-    circuits without wall contact, and wall contacts.
+    for a session of :func:`run_experiment` (``run_dir/sessions/seed<k>``) those in its own
+    ``seed_result.json`` (noisy motion by default; the session keeps it wherever it is copied),
+    or, for a run from before those records, in ``run_dir/results.json``; for a session of an
+    env made with ``gymnasium.make`` the ``corridor_map`` and ``world_config`` it was given (the
+    session's config keeps them when they are plain values: a map's name, the robot as a dict,
+    as ``torchcbl teach corridor`` gives them, :func:`teaching_setup`; given as objects they
+    are not kept, and this raises ValueError unless they are passed here); otherwise the
+    default map and ``WorldConfig()`` (exact motion, the default of ``torchcbl/Corridor-v0``),
+    with a UserWarning where the env was made without ``gymnasium.make`` (nothing then says
+    which robot it was taught on). Returns the map and robot (``WorldConfig``'s fields)
+    driven, the steps, circuits completed, circuits without wall contact, and wall contacts.
 
     Raises:
         ValueError: among others, the map the session was taught on (a map file, or a
@@ -1033,8 +1046,10 @@ def evaluate_saved_policy(
     from torchcbl import evaluate_policy, load_policy
 
     session_dir = Path(session_dir)
-    world = _session_world(session_dir) if world_config is None else world_config
+    world, unsaid = _session_world(session_dir) if world_config is None else (world_config, "")
     map_name = _session_map(session_dir) if map_name is None else map_name
+    if unsaid:  # (after the map's checks: a session refused is not warned about)
+        warnings.warn(unsaid, UserWarning, stacklevel=2)
     env = CorridorEnv(load_map(map_name), world)
     records = evaluate_policy(load_policy(session_dir), env, n_steps=n_steps, seed=seed)
     ends = [r for r in records if r.terminated]
@@ -1062,17 +1077,24 @@ def _taught_with(
     session_dir: Path, results_key: str, kwarg: str, parse: Callable[[Any], Any]
 ) -> tuple[str, Any]:
     """Where a session's map or robot is read from (see :func:`evaluate_saved_policy`):
-    ``("results", parse(value))`` from its experiment run's ``results.json`` config,
+    ``("record", parse(value))`` from the config of the session's own ``seed_result.json``
+    (a session of :func:`run_experiment` keeps its seed's result and config beside its
+    steps, so it says what it was taught on wherever it is copied), ``("results", ...)`` from
+    its experiment run's ``results.json`` config (a run from before the seed records),
     ``("kwargs", value)`` from what ``gymnasium.make`` was given (as the session's config keeps
     it, unparsed), or ``("default", None)``."""
     from torchcbl.session import load_config
 
     results = session_dir.parent.parent / "results.json"
-    if session_dir.parent.name == "sessions" and results.is_file():
-        try:
-            return "results", parse(json.loads(results.read_text())["config"][results_key])
-        except (ValueError, KeyError, TypeError):
-            pass  # not an experiment's results.json: what the env was given decides
+    for source, path, in_a_run in (
+        ("record", session_dir / SEED_RESULT, True),
+        ("results", results, session_dir.parent.name == "sessions"),
+    ):
+        if in_a_run and path.is_file():
+            try:
+                return source, parse(json.loads(path.read_text())["config"][results_key])
+            except (ValueError, KeyError, TypeError):
+                pass  # not an experiment's file: the next place decides
     given = (load_config(session_dir).get("env") or {}).get("kwargs") or {}
     return ("kwargs", given[kwarg]) if kwarg in given else ("default", None)
 
@@ -1141,8 +1163,9 @@ def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs")
     was taught on: its digest (:func:`corridor.maps.map_digest`) differs from the one the
     session's config keeps (``CorridorEnv.describe_inputs()``). ``source`` says where the name
     comes from (:func:`_taught_with`): ``"kwargs"``, the env's make() arguments (the map file,
-    or a shipped map, changed since); ``"results"``, the run's results.json (that, or the file
-    names another map than the session drove); ``"default"``, neither (the session's env was
+    or a shipped map, changed since); ``"record"`` or ``"results"``, the session's own
+    seed_result.json or the run's results.json (that, or the file names another map than the
+    session drove); ``"default"``, neither (the session's env was
     made without them, e.g. ``CorridorEnv(my_map)``). A session that kept no digest (started
     before 2026-11-27) passes."""
     from torchcbl.session import load_config
@@ -1195,12 +1218,17 @@ def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs")
             f"run this from there ({map_name} is a path relative to it, and this is another "
             "file of that name); else " + fix
         )
-    if source == "results":
+    if source in ("record", "results"):
+        named = (
+            f"its own {session_dir / SEED_RESULT}"
+            if source == "record"
+            else f"its run's {session_dir.parent.parent / 'results.json'}"
+        )
+        edited = SEED_RESULT if source == "record" else "results.json"
         raise ValueError(
-            f"{session_dir} was taught on another map than {what}, which its run's "
-            f"{session_dir.parent.parent / 'results.json'} names {digests}: {cause}, or "
-            f"results.json was edited; {fix}, or restore the run directory as the experiment "
-            "wrote it; to drive another map on purpose, "
+            f"{session_dir} was taught on another map than {what}, which {named} names "
+            f"{digests}: {cause}, or {edited} was edited; {fix}, or restore the run directory "
+            "as the experiment wrote it; to drive another map on purpose, "
             + _pass_to_evaluate("map_name", "a shipped map name or a map JSON path")
         )
     how = f": {cause}" if shipped else ""
@@ -1209,18 +1237,30 @@ def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs")
     )
 
 
-def _session_world(session_dir: Path) -> WorldConfig:
-    """The robot a session was taught with (see :func:`evaluate_saved_policy`)."""
+def _session_world(session_dir: Path) -> tuple[WorldConfig, str]:
+    """The robot a session was taught with (see :func:`evaluate_saved_policy`), and what to
+    warn of when nothing says which (else "")."""
+    from torchcbl.session import load_config
+
     source, value = _taught_with(
         session_dir, "world", "world_config", lambda fields: WorldConfig(**fields)
     )
     if source == "default":
-        return WorldConfig()
-    if source == "results":
-        return value
+        if (load_config(session_dir).get("env") or {}).get("id"):
+            return WorldConfig(), ""  # gymnasium.make without world_config drove it too
+        # an env made directly may have driven any robot, and nothing here says which
+        return WorldConfig(), (
+            f"{session_dir} keeps no record of the robot it was taught with (its env was made "
+            f"without gymnasium.make, and it has no {SEED_RESULT} of its own and no run's "
+            "results.json two folders up): driving WorldConfig() (exact motion); if it was "
+            "taught on another robot (a reproduction's is WorldConfig.legged_robot()), "
+            + _pass_to_evaluate("world_config", "a corridor.world.WorldConfig")
+        )
+    if source in ("record", "results"):
+        return value, ""
     if isinstance(value, dict) and set(value) != {"repr"}:
         try:
-            return WorldConfig(**value)
+            return WorldConfig(**value), ""
         except (TypeError, ValueError) as exc:
             raise ValueError(
                 f"{session_dir}: its env's world_config {value} is not a WorldConfig ({exc}); "

@@ -30,6 +30,11 @@ CPU seconds), ``fig6_accuracy.png``,
 ``arm_b`` (the teaching sessions, :mod:`torchcbl.session` format: ``torchcbl evaluate`` and
 ``resume`` work on them), and ``seed_<k>/seed_result.json`` (the seed's result and config,
 written as it ends: what ``run_experiment(..., resume=True)`` takes from a stopped run).
+
+Rerun seed k of a run with the config stored in its results.json, into a new run directory
+(everything is seeded; its ``per_seed[0]`` is the run's seed k but for the timing
+``arm_a_seconds``): ``run_experiment(dataclasses.replace(DrivingExperimentConfig.from_dict(
+results["config"]), seeds=(k,)), new_run_dir)`` (docs/reproduction.md, *Rerunning one seed*).
 """
 
 from __future__ import annotations
@@ -41,7 +46,7 @@ import multiprocessing as mp
 import numbers
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -51,6 +56,7 @@ import numpy as np
 from sumo_scenarios import metrics
 from sumo_scenarios.scenarios import LANE_NAMES
 from torchcbl.evaluation import (
+    SEED_RESULT,
     _ctrl_c_held,
     check_workers_start,
     clear_unfinished,
@@ -81,6 +87,7 @@ __all__ = [
     "plot_results",
     "resumable_seeds",
     "run_experiment",
+    "session_eval_segment",
     "stage_name",
     "teaching_setup",
 ]
@@ -270,6 +277,42 @@ class DrivingExperimentConfig:
     def full(cls) -> DrivingExperimentConfig:
         """The paper's sizes with a refit after every demonstration, over 20 seeds."""
         return cls(seeds=tuple(range(20)), max_new=1, extra_eval_segments=(100, 200, 300))
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> DrivingExperimentConfig:
+        """The config that :meth:`to_dict` wrote (``results.json``'s ``"config"``, or a seed's
+        ``seed_<k>/seed_result.json``'s), to replay a run or vary it, e.g. its seed 3 alone:
+        ``dataclasses.replace(DrivingExperimentConfig.from_dict(results["config"]),
+        seeds=(3,))``. A key left out takes its default.
+
+        Raises:
+            ValueError: ``data`` is not a dict of this class's fields (a whole results.json,
+                an unknown field), or a value is refused as the constructor refuses it.
+        """
+        if not isinstance(data, Mapping):
+            raise ValueError(
+                f"expected a dict of DrivingExperimentConfig's fields (results.json's "
+                f"'config'), got {type(data).__name__}"
+            )
+        if "config" in data and "per_seed" in data:
+            raise ValueError(
+                "expected a dict of DrivingExperimentConfig's fields, got a whole results.json; "
+                'pass its "config": from_dict(results["config"])'
+            )
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ValueError(
+                f"unknown DrivingExperimentConfig fields {unknown}; its fields: {sorted(names)}"
+            )
+        return cls(**data)  # (lists become tuples in __post_init__)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form, as ``results.json`` and each ``seed_result.json`` keep it
+        (:meth:`from_dict` reads it back)."""
+        return {
+            k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()
+        }
 
 
 STAGE_NAMES = {
@@ -597,7 +640,7 @@ def _seed_worker(
         result = _run_seed(*job)
         # kept with the config when the seed ends (a resume takes it), and sent back as the
         # file holds it, so that a run resumed or not aggregates the same values
-        kept = write_seed_result(seed_dir, dataclasses.asdict(cfg), result, _plain, versions)
+        kept = write_seed_result(seed_dir, cfg.to_dict(), result, _plain, versions)
         reply: tuple[str, Any] = ("ok", kept)
     except Exception as exc:  # re-raised in the parent, the worker's traceback as its cause
         error = exc
@@ -918,7 +961,7 @@ def run_experiment(
     results = {
         "domain": "driving",
         "experiment": "driving (Chernova & Veloso 2007, Section 5.2)",
-        "config": dataclasses.asdict(config),
+        "config": config.to_dict(),
         "seeds": list(config.seeds),
         "versions": versions,
         "paper": PAPER,
@@ -960,7 +1003,7 @@ def resumable_seeds(config: DrivingExperimentConfig, run_dir: str | Path) -> dic
     return finished_seeds(
         run_dir,
         dirs,
-        dataclasses.asdict(config),
+        config.to_dict(),
         strays,
         "resume with the config it was started with, or choose a new run_dir",
         _versions(),
@@ -1133,11 +1176,36 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     return written
 
 
+def session_eval_segment(session_dir: str | Path) -> int | None:
+    """The held-out segment :func:`run_experiment` evaluated the policies of this session's
+    seed on, ``eval_segment + k`` for seed k, read from the seed's record
+    (``run_dir/seed_<k>/seed_result.json``, beside the seed's ``sessions/arm_a`` and
+    ``arm_b``); None for a session that is not in a run's seed directory (one of ``torchcbl
+    teach driving``, or a session copied out of its run), or whose record cannot be read."""
+    session_dir = Path(session_dir)
+    if session_dir.parent.name != "sessions":
+        return None
+    try:
+        kept = json.loads((session_dir.parent.parent / SEED_RESULT).read_text(encoding="utf-8"))
+        segment = kept["config"]["eval_segment"] + kept["result"]["seed"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    whole = isinstance(segment, int) and not isinstance(segment, bool)
+    return segment if whole and segment >= 0 else None
+
+
 def evaluate_saved_policy(
-    session_dir: str | Path, *, n_steps: int = 1000, seed: int = 0, sim: SimConfig | None = None
+    session_dir: str | Path,
+    *,
+    n_steps: int = 1000,
+    seed: int | None = None,
+    sim: SimConfig | None = None,
 ) -> dict[str, Any]:
     """Drive the latest model of a driving teaching session (e.g. ``torchcbl teach driving``)
-    greedily for ``n_steps`` timesteps on held-out evaluation segment ``seed``.
+    greedily for ``n_steps`` timesteps on held-out evaluation segment ``seed``: by default,
+    for a session of :func:`run_experiment` (``run_dir/seed_<k>/sessions/arm_a``) the segment
+    its seed's policies were evaluated on (:func:`session_eval_segment`: ``eval_segment + k``,
+    so the figures compare with ``results.json``'s), else segment 0.
 
     The traffic is the held-out ``eval`` scenario; the SUMO settings (``sim``: the step length,
     which sets how far the traffic moves between two decisions) and the start lane are the
@@ -1175,6 +1243,9 @@ def evaluate_saved_policy(
                 "has no option for it)"
             )
         sim = SimConfig()
+    if seed is None:
+        seed = session_eval_segment(session_dir)
+        seed = 0 if seed is None else seed
     policy = load_policy(session_dir)
     config = DrivingConfig(
         scenario="eval", max_episode_steps=n_steps, start_lane=start_lane, sim=sim

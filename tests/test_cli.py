@@ -923,13 +923,15 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(
     assert results["config"]["map_name"] == "figure2"
     session = corridor_run / "corridor" / "sessions" / "seed0"
     assert evaluate_saved_policy(session, n_steps=5)["map"] == "figure2"
-    # the results.json names the map (here as a file of the same map), not the env's kwargs;
-    # one that names a map other than the session drove is refused
+    # a session without a record of its own (a run from before the seed records): the
+    # results.json names the map (here as a file of the same map), not the env's kwargs; one
+    # that names a map other than the session drove is refused
     mine = tmp_path / "mine.json"
     shutil.copy(Path(corridor.__file__).with_name("maps") / "figure2.json", mine)
     results["config"]["map_name"] = str(mine)
     copy = tmp_path / "run"
     shutil.copytree(session, copy / "sessions" / "seed0")
+    (copy / "sessions" / "seed0" / "seed_result.json").unlink()
     (copy / "results.json").write_text(json.dumps(results))
     assert evaluate_saved_policy(copy / "sessions" / "seed0", n_steps=5)["map"] == str(mine)
     results["config"]["map_name"] = "lshape"
@@ -965,6 +967,70 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(
         tmp_path / "object", n_steps=5, world_config=WorldConfig.legged_robot()
     )
     assert noisy["world"]["forward_noise"] > 0
+
+
+def test_evaluate_drives_a_corridor_session_copied_out_of_its_run_on_its_own_robot(
+    tmp_path, monkeypatch, capsys
+):
+    """A reproduction's session copied out of its run directory was driven on the exact robot
+    of the default WorldConfig(), though its own seed_result.json holds the noisy robot it was
+    taught on: evaluate read only the run's results.json two folders up. The session's own
+    record now decides; where nothing says (an env made without gymnasium.make, no record, no
+    run), one line says which robot is driven."""
+    import shutil
+
+    import corridor.experiment
+    from corridor.baseline import PrioritizedSweepingConfig
+    from corridor.env import CorridorEnv
+    from corridor.experiment import CorridorExperimentConfig, run_experiment
+    from torchcbl import ConfidentTeacher
+
+    score = corridor.experiment.score_tables  # for time: its ranking over 50 steps, not 1000
+    monkeypatch.setattr(
+        corridor.experiment, "score_tables", lambda *a, **k: score(*a, steps=50, **k)
+    )
+    cfg = CorridorExperimentConfig(  # the noisy robot, the default
+        seeds=(0,), cba=False, eval_circuits=1, ps=PrioritizedSweepingConfig(max_steps=50)
+    )
+    cfg = dataclasses.replace(cfg, teaching=dataclasses.replace(cfg.teaching, max_steps=30))
+    run_experiment(cfg, tmp_path / "run", workers=1, progress=False)
+    noisy = dataclasses.asdict(cfg.world)
+    assert noisy["forward_noise"] > 0
+    inside = tmp_path / "run" / "sessions" / "seed0"
+    elsewhere = tmp_path / "x" / "seed0"
+    shutil.copytree(inside, elsewhere)
+    for session in (inside, elsewhere):
+        capsys.readouterr()
+        assert main(["evaluate", str(session), "--steps", "20"]) == 0
+        out, err = capsys.readouterr()
+        assert json.loads(out)["world"] == noisy, session
+        assert err == ""
+    # the session's own record first: a session put into another run's folder keeps its robot
+    other = tmp_path / "other"
+    shutil.copytree(inside, other / "sessions" / "seed0")
+    results = json.loads((tmp_path / "run" / "results.json").read_text())
+    results["config"]["world"] = dataclasses.asdict(CorridorExperimentConfig.exact_motion().world)
+    (other / "results.json").write_text(json.dumps(results))
+    assert main(["evaluate", str(other / "sessions" / "seed0"), "--steps", "20"]) == 0
+    assert json.loads(capsys.readouterr().out)["world"] == noisy
+    # a record that names another map than the session drove is refused, naming the record
+    record = elsewhere / "seed_result.json"
+    kept = json.loads(record.read_text())
+    kept["config"]["map_name"] = "lshape"
+    record.write_text(json.dumps(kept))
+    assert main(["evaluate", str(elsewhere), "--steps", "20"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and f"which its own {record} names" in err, err
+    # nothing says: the env was made directly (no gymnasium.make), no record, no run
+    ConfidentTeacher(CorridorEnv(), lambda o, i: 0, run_dir=tmp_path / "own", progress=False).run(
+        max_steps=3
+    ).close()
+    assert main(["evaluate", str(tmp_path / "own"), "--steps", "5"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["world"]["forward_noise"] == 0.0
+    assert len(err.splitlines()) == 1, err
+    assert "keeps no record of the robot it was taught with" in err
+    assert "WorldConfig() (exact motion)" in err and "world_config=" in err
 
 
 def test_evaluate_of_a_session_it_cannot_rebuild_names_the_python_call(tmp_path, capsys):

@@ -434,7 +434,8 @@ def test_a_session_keeps_its_map_and_refuses_another_on_resume(tmp_path):
 
     with pytest.raises(ValueError, match="a map its config does not name .* pass map_name="):
         evaluate_saved_policy(run, n_steps=3)
-    assert evaluate_saved_policy(run, n_steps=3, map_name="lshape")["map"] == "lshape"
+    with pytest.warns(UserWarning, match="keeps no record of the robot it was taught with"):
+        assert evaluate_saved_policy(run, n_steps=3, map_name="lshape")["map"] == "lshape"
     # made by gymnasium.make on the default map, which a later torchcbl ships changed
     made = tmp_path / "made"
     with ConfidentTeacher(gym.make(corridor.ENV_ID), expert, run_dir=made, progress=False) as ct:
@@ -955,16 +956,17 @@ def test_tiny_experiment_writes_results(tmp_path):
     written = plot_results(data, tmp_path / "run")
     assert all(p.stat().st_size > 1000 for p in written)
     session = tmp_path / "run" / "sessions" / "seed0"
-    report = evaluate_saved_policy(session, n_steps=60, seed=3)  # the run's world, from results
+    report = evaluate_saved_policy(session, n_steps=60, seed=3)  # the run's world, its record's
     assert report == evaluate_saved_policy(session, n_steps=60, seed=3, world_config=cfg.world)
     assert report["steps"] == 60 and report["circuits_completed"] >= 1
     assert report["circuits_clean"] == report["circuits_completed"]
-    from corridor.experiment import _session_world
-
-    assert _session_world(session) == cfg.world == WorldConfig()
+    assert report["world"] == dataclasses.asdict(cfg.world) == dataclasses.asdict(WorldConfig())
+    # a session without its own seed_result.json (a run from before those records): the
+    # run's results.json says the robot
+    (session / "seed_result.json").unlink()
     data["config"]["world"] = dataclasses.asdict(NOISY_WORLD)  # a run of the noisy default
     (tmp_path / "run" / "results.json").write_text(json.dumps(data))
-    assert _session_world(session) == NOISY_WORLD
+    assert evaluate_saved_policy(session, n_steps=1)["world"] == dataclasses.asdict(NOISY_WORLD)
 
 
 def test_a_loop_through_corridors_the_route_does_not_take_is_no_circuit():

@@ -913,3 +913,28 @@ def test_plot_results_redraws_a_run_made_with_a_heading_offset_now_refused(tmp_p
     results["config"]["eval_perturbation"] = [0.1, math.radians(60)]
     (tmp_path / "figure3.png").unlink()
     assert tmp_path / "figure3.png" in plot_results(results, tmp_path)
+
+
+def test_a_seed_rerun_from_the_stored_config_gives_its_entry_again(tmp_path, monkeypatch):
+    """docs/reproduction.md's *Rerunning one seed*: run_seed of a run's stored config gives the
+    seed's per_seed entry again, timing aside, plus the four private keys of the figures'
+    inputs that results.json does not keep (so `out == per_seed[k]` alone is False)."""
+    import json
+
+    import corridor.experiment
+    from corridor.baseline import PrioritizedSweepingConfig
+    from corridor.experiment import CorridorExperimentConfig, run_experiment, run_seed
+
+    score = corridor.experiment.score_tables  # for time: its ranking over 50 steps, not 1000
+    monkeypatch.setattr(
+        corridor.experiment, "score_tables", lambda *a, **k: score(*a, steps=50, **k)
+    )
+    cfg = _tiny_experiment(seeds=(1,), eval_circuits=1, ps=PrioritizedSweepingConfig(max_steps=50))
+    cfg = dataclasses.replace(cfg, teaching=dataclasses.replace(cfg.teaching, max_steps=40))
+    run_experiment(cfg, tmp_path, workers=1, progress=False)
+    results = json.loads((tmp_path / "results.json").read_text())
+    out = run_seed(CorridorExperimentConfig.from_dict(results["config"]), 1, None)
+    entry = results["per_seed"][results["seeds"].index(1)]
+    assert sorted(set(out) - set(entry)) == ["_demo_x", "_demo_y", "_model", "_path"]
+    kept = {k: v for k, v in out.items() if not k.startswith("_") and k != "seconds"}
+    assert kept == {k: v for k, v in entry.items() if k != "seconds"}

@@ -426,6 +426,85 @@ def test_per_seed_follows_the_configs_order_of_seeds(two_seeds):
     assert [r["seed"] for r in res["per_seed"]] == [1, 0]
 
 
+def test_evaluate_drives_a_runs_session_on_the_segment_its_seed_was_evaluated_on(
+    two_seeds, tmp_path, capsys
+):
+    """The experiment evaluates seed k on held-out segment eval_segment + k; `torchcbl
+    evaluate` of seed 1's session drove segment 0 unless given --seed 1, with no word. A
+    session of a run now defaults to its seed's segment, read from the seed's record, and says
+    so in one line; --seed still picks another, and a session of no run drives segment 0."""
+    import shutil
+
+    from torchcbl.cli import main
+
+    res, run_dir = two_seeds
+    session = run_dir / "seed_1" / "sessions" / "arm_a"
+    taught = res["per_seed"][0]["stages"]["a_plus20"]["segment"]
+    assert res["per_seed"][0]["seed"] == 1 and taught == 1
+    capsys.readouterr()
+    assert main(["evaluate", str(session), "--steps", "20"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["eval_segment"] == taught
+    assert len(err.splitlines()) == 1, err
+    assert "held-out segment 1" in err and "seed_result.json" in err and "--seed" in err, err
+    assert evaluate_saved_policy(session, n_steps=20)["eval_segment"] == taught
+    assert main(["evaluate", str(session), "--steps", "20", "--seed", "0"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["eval_segment"] == 0 and err == ""
+    alone = tmp_path / "arm_a"  # copied out of its run: no record says its segment
+    shutil.copytree(session, alone)
+    assert main(["evaluate", str(alone), "--steps", "20"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["eval_segment"] == 0 and err == ""
+
+
+def test_a_runs_stored_config_reads_back_as_the_config_it_ran(two_seeds):
+    """The corridor's config reads a run's results.json "config" back (from_dict), the
+    driving config had no way but DrivingExperimentConfig(**config): a round trip of the
+    stored config, results.json's and a seed's record's, gives the config that ran, and
+    to_dict writes what results.json holds."""
+    import dataclasses
+
+    _, run_dir = two_seeds
+    ran = tiny_config(seeds=(1, 0))
+    stored = json.loads((run_dir / "results.json").read_text())["config"]
+    assert stored == ran.to_dict()
+    assert DrivingExperimentConfig.from_dict(stored) == ran
+    record = json.loads((run_dir / "seed_1" / "seed_result.json").read_text())["config"]
+    assert DrivingExperimentConfig.from_dict(record) == ran
+    full = DrivingExperimentConfig.full()
+    assert full.to_dict() == json.loads(json.dumps(dataclasses.asdict(full)))
+    assert DrivingExperimentConfig.from_dict(json.loads(json.dumps(full.to_dict()))) == full
+    # seed k of a run alone, the rest its defaults
+    again = dataclasses.replace(DrivingExperimentConfig.from_dict(stored), seeds=(1,))
+    assert again.seeds == (1,) and again.eval_steps == ran.eval_steps
+    assert DrivingExperimentConfig.from_dict({"seeds": [3]}) == DrivingExperimentConfig(seeds=(3,))
+    on_disk = json.loads((run_dir / "results.json").read_text())
+    for bad, says in (
+        (on_disk, r'got a whole results.json; pass its "config"'),
+        ({**stored, "seed": 3}, r"unknown DrivingExperimentConfig fields \['seed'\]"),
+        ([stored], "expected a dict of DrivingExperimentConfig's fields"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            DrivingExperimentConfig.from_dict(bad)
+
+
+def test_a_seed_rerun_alone_from_the_stored_config_gives_its_entry_again(two_seeds, tmp_path):
+    """docs/reproduction.md's *Rerunning one seed*: seed k of a run, run alone from the config
+    its results.json keeps, gives the run's entry for seed k again, but for its timing."""
+    import dataclasses
+
+    _, run_dir = two_seeds
+    results = json.loads((run_dir / "results.json").read_text())
+    config = DrivingExperimentConfig.from_dict(results["config"])
+    rerun = run_experiment(
+        dataclasses.replace(config, seeds=(1,)), tmp_path / "seed1", workers=1, progress=False
+    )
+    entry = results["per_seed"][results["seeds"].index(1)]
+    assert entry["seed"] == 1
+    assert _untimed(rerun["per_seed"][0]) == _untimed(entry)
+
+
 def test_figure_9s_number_is_read_at_the_runs_own_arm_b_size(two_seeds):
     """Figure 9's number, the non-interactive learner's windowed accuracy at arm (b)'s last
     demonstration, is read at this run's arm_b_stages[-1] (80 here, the paper's 1000), and its

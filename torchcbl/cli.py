@@ -28,6 +28,7 @@ import re
 import shlex
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -450,10 +451,26 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     module = _experiment_module(domain)
     from torchcbl.session import IncompatibleRunDirError
 
+    seed = args.seed
+    if seed is None and domain == "driving":  # a reproduction's session: its seed's segment
+        seed = module.session_eval_segment(session)
+        if seed is not None:
+            print(
+                f"torchcbl evaluate: note: driving held-out segment {seed}, the one its run "
+                f"evaluated this seed's policies on ({session.parent.parent / 'seed_result.json'}"
+                "); --seed S drives segment S",
+                file=sys.stderr,
+            )
+    if seed is None:
+        seed = 0
     try:
-        report = module.evaluate_saved_policy(session, n_steps=args.steps, seed=args.seed)
+        with warnings.catch_warnings(record=True) as said:  # each one line below
+            warnings.simplefilter("always")
+            report = module.evaluate_saved_policy(session, n_steps=args.steps, seed=seed)
     except (IncompatibleRunDirError, ValueError) as exc:  # e.g. a robot its config lacks
         raise _UsageError(_one_line(exc)) from None
+    for w in said:  # e.g. a corridor session that does not say which robot it was taught on
+        print(f"torchcbl evaluate: warning: {_one_line(w.message)}", file=sys.stderr)
     print(json.dumps(report, indent=2))
     return 0
 
@@ -1552,10 +1569,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--seed",
         type=_seed,
-        default=0,
+        default=None,
         metavar="S",
-        help="seed of the first reset (corridor: the env's noise; driving: which held-out "
-        "evaluation road segment) (default 0)",
+        help="seed of the first reset (corridor: the env's noise, default 0; driving: which "
+        "held-out evaluation road segment, default: for a reproduction's session "
+        "(RUN_DIR/seed_<k>/sessions/arm_a) the segment the run evaluated seed k on, "
+        "eval_segment + k as its seed_result.json says, else 0)",
     )
     p.set_defaults(func=_cmd_evaluate)
 
