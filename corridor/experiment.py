@@ -57,6 +57,7 @@ import json
 import math
 import multiprocessing as mp
 import numbers
+import os
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -1085,6 +1086,7 @@ def _taught_with(
     it, unparsed), or ``("default", None)``."""
     from torchcbl.session import load_config
 
+    session_dir = Path(os.path.abspath(session_dir))  # its run's folders, of `seed3`, `..`
     results = session_dir.parent.parent / "results.json"
     for source, path, in_a_run in (
         ("record", session_dir / SEED_RESULT, True),

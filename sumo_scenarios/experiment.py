@@ -1182,7 +1182,7 @@ def session_eval_segment(session_dir: str | Path) -> int | None:
     (``run_dir/seed_<k>/seed_result.json``, beside the seed's ``sessions/arm_a`` and
     ``arm_b``); None for a session that is not in a run's seed directory (one of ``torchcbl
     teach driving``, or a session copied out of its run), or whose record cannot be read."""
-    session_dir = Path(session_dir)
+    session_dir = Path(os.path.abspath(session_dir))  # its folders above, of `arm_a`, `..`
     if session_dir.parent.name != "sessions":
         return None
     try:

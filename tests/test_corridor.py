@@ -967,6 +967,14 @@ def test_tiny_experiment_writes_results(tmp_path):
     data["config"]["world"] = dataclasses.asdict(NOISY_WORLD)  # a run of the noisy default
     (tmp_path / "run" / "results.json").write_text(json.dumps(data))
     assert evaluate_saved_policy(session, n_steps=1)["world"] == dataclasses.asdict(NOISY_WORLD)
+    # ... also where the session is named relative to the working directory (`seed0`, `.`):
+    # its run's folders above were looked for in the path as given
+    here = os.getcwd()
+    try:
+        os.chdir(session)
+        assert evaluate_saved_policy(".", n_steps=1)["world"] == dataclasses.asdict(NOISY_WORLD)
+    finally:
+        os.chdir(here)
 
 
 def test_a_loop_through_corridors_the_route_does_not_take_is_no_circuit():

@@ -19,6 +19,7 @@ from sumo_scenarios.experiment import (
     format_summary,
     plot_results,
     run_experiment,
+    session_eval_segment,
 )
 
 
@@ -456,6 +457,20 @@ def test_evaluate_drives_a_runs_session_on_the_segment_its_seed_was_evaluated_on
     assert main(["evaluate", str(alone), "--steps", "20"]) == 0
     out, err = capsys.readouterr()
     assert json.loads(out)["eval_segment"] == 0 and err == ""
+
+
+def test_evaluate_finds_a_runs_segment_from_a_relative_session_path(two_seeds, monkeypatch):
+    """The segment was found from the path's parent folders as given: `torchcbl evaluate
+    arm_a` from the seed's sessions/ folder (or `.` inside the session) found no record and
+    drove segment 0, with no word."""
+    from torchcbl.cli import main
+
+    _, run_dir = two_seeds
+    monkeypatch.chdir(run_dir / "seed_1" / "sessions")
+    assert session_eval_segment("arm_a") == 1
+    assert main(["evaluate", "arm_a", "--steps", "20"]) == 0
+    monkeypatch.chdir("arm_a")
+    assert session_eval_segment(".") == session_eval_segment("../arm_a") == 1
 
 
 def test_a_runs_stored_config_reads_back_as_the_config_it_ran(two_seeds):

@@ -457,8 +457,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         if seed is not None:
             print(
                 f"torchcbl evaluate: note: driving held-out segment {seed}, the one its run "
-                f"evaluated this seed's policies on ({session.parent.parent / 'seed_result.json'}"
-                "); --seed S drives segment S",
+                "evaluated this seed's policies on "
+                f"({Path(os.path.abspath(session)).parent.parent / 'seed_result.json'}); "
+                "--seed S drives segment S",
                 file=sys.stderr,
             )
     if seed is None:
