@@ -1473,3 +1473,25 @@ def test_save_png_failing_mid_write_leaves_the_earlier_png_whole(tmp_path, monke
         save_png(drawing, png)
     assert png.read_bytes() == first
     assert [p.name for p in tmp_path.iterdir()] == ["map.png"]
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (
+            {"route": ["A", "B", "X", "A"]},
+            r"^route names unknown node 'X'; the map's nodes are A, B, C, D",
+        ),
+        (
+            {"corridors": [*SMALL["corridors"], ["C", "E"]]},
+            r"^corridor \('C', 'E'\) names unknown node 'E'; the map's nodes are A, B, C, D",
+        ),
+    ],
+)
+def test_a_route_or_corridor_through_an_unknown_node_names_it_and_the_known_ones(change, message):
+    """A route through a node the map does not have said "route step 'B' -> 'X' is not a
+    corridor", as if the corridor were missing rather than the node; and neither it nor a
+    corridor naming an unknown node said which names the map has. Both now name the unknown
+    node and list the map's nodes."""
+    with pytest.raises(ValueError, match=message):
+        map_from_dict({**SMALL, **change})
