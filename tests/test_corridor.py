@@ -1495,3 +1495,33 @@ def test_a_route_or_corridor_through_an_unknown_node_names_it_and_the_known_ones
     node and list the map's nodes."""
     with pytest.raises(ValueError, match=message):
         map_from_dict({**SMALL, **change})
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (dict(noise_sd=2.0), r"noise_sd \+ noise_sd_per_m \* max_range = 2\.03 m"),
+        (dict(noise_sd_per_m=2.0), r"noise_sd \+ noise_sd_per_m \* max_range = 3\.01 m"),
+        (dict(max_range=0.5, noise_sd=0.45), r"= 0\.46 m .*max_range - min_range = 0\.45 m"),
+        (dict(max_range=0.1, min_range=0.0), r"max_range \(0\.1 m\) must exceed robot_radius"),
+        (dict(max_range=0.12), r"max_range \(0\.12 m\) must exceed robot_radius \(0\.12 m\)"),
+        (dict(robot_radius=0.3, max_range=0.25), r"max_range \(0\.25 m\) must exceed robot_rad"),
+    ],
+)
+def test_a_sensor_that_cannot_tell_near_from_far_is_refused(bad, message):
+    """WorldConfig(noise_sd=2.0) (a 2 m spread on a 1.5 m range), noise_sd_per_m=2.0 and
+    max_range=0.1 (short of the 0.12 m robot radius: no wall comes nearer the sensors at the
+    robot's centre, so every reading is max_range) were accepted, and the env ran on readings
+    that say nothing of the walls. They are now refused, saying what fits and what was given;
+    the shipped configs, short and long sensors and a robot of one's own still load."""
+    with pytest.raises(ValueError, match=message) as caught:
+        WorldConfig(**bad)
+    assert "\n" not in str(caught.value) and "pass " in str(caught.value)
+    WorldConfig.legged_robot()
+    WorldConfig(max_range=0.5)
+    WorldConfig(max_range=2.0, noise_sd=0.5, noise_sd_per_m=0.1)
+    WorldConfig(robot_radius=0.3, max_range=5.0)
+    WorldConfig(max_range=0.13, min_range=0.12, noise_sd=0.0, noise_sd_per_m=0.0)
+    assert WorldConfig() == WorldConfig(
+        robot_radius=0.12, max_range=1.5, min_range=0.05, noise_sd=0.01, noise_sd_per_m=0.02
+    )
