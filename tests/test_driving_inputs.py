@@ -833,3 +833,20 @@ def test_a_missing_shipped_data_file_is_named_with_the_way_to_restore_it(tmp_pat
         assert "reinstall" in line and "build_network" not in line, line
     assert lines[2].startswith(f"{data / 'road.net.xml'} is missing"), lines[2]
     assert "python -m sumo_scenarios.build_network" in lines[2], lines[2]
+
+
+def test_a_name_that_is_no_shipped_data_file_is_named_with_the_shipped_ones():
+    """data_path("mynet.net.xml") said the file "is missing: the install is damaged" and gave
+    the git checkout that restores it, for a file that never shipped. It now says the name is
+    no shipped data file and lists the shipped ones; a shipped name still gives its path."""
+    from sumo_scenarios.scenarios import data_path
+
+    for name in ("mynet.net.xml", "src/mine.nod.xml"):
+        with pytest.raises(FileNotFoundError) as caught:
+            data_path(name)
+        message = str(caught.value)
+        assert message.startswith(f"{name!r} is not a data file sumo_scenarios ships"), message
+        assert "road.net.xml, driving.add.xml, src/road.nod.xml, src/road.edg.xml" in message
+        assert "damaged" not in message and "git checkout" not in message, message
+    assert data_path("road.net.xml").name == "road.net.xml"
+    assert data_path("src/road.nod.xml").is_file()
