@@ -850,3 +850,31 @@ def test_a_name_that_is_no_shipped_data_file_is_named_with_the_shipped_ones():
         assert "damaged" not in message and "git checkout" not in message, message
     assert data_path("road.net.xml").name == "road.net.xml"
     assert data_path("src/road.nod.xml").is_file()
+
+
+def test_no_lane_is_ever_empty_and_a_far_lane_reads_its_nearest_cars_side():
+    """DrivingEnv's docstring said a lane reads "+25 if a lane were empty", yet no lane can be:
+    the sparsest traffic a scenario allows (every spacing at its cap, the narrowest window)
+    still keeps a car in every normal lane at every step, and a lane whose nearest car is out
+    of sensing range reads +-25 with that car's side, as the docstring now says."""
+    sparse = TrafficScenario(
+        name="sparse", seed=0, mean_spacing_m=(1e6, 1e6, 1e6), ahead_m=60.0, behind_m=30.0
+    )
+    env = DrivingEnv(scenario=sparse, max_episode_steps=200)
+    try:
+        obs, info = env.reset(seed=0)
+        sides = set()
+        for t in range(201):
+            lanes, rel = np.asarray(info["car_lane"]), np.asarray(info["car_rel_m"])
+            for k, lane in enumerate((1, 2, 3)):
+                mine = rel[lanes == lane]
+                assert mine.size, (t, lane)
+                near = mine[np.argmin(np.abs(mine))]
+                assert obs[k] == pytest.approx(np.clip(near, -25.0, 25.0), abs=1e-4), (t, lane)
+                if abs(near) >= 25.0:
+                    sides.add(float(np.sign(near)))
+            if t < 200:
+                obs, _, _, _, info = env.step(0)
+        assert sides == {-1.0, 1.0}  # both far sides were seen
+    finally:
+        env.close()
