@@ -24,8 +24,11 @@ in the lane it is in or the lane it just left (a geometric 1-D check: SUMO's own
 unreliable). Cars are never removed on contact. Reward is ``-1`` on a contact step, else 0 (the
 learner does not use it). Episodes never terminate; they are truncated after
 ``DrivingConfig.max_episode_steps`` (1000): for longer ones pass it to the env
-(``DrivingEnv(max_episode_steps=n)``, or ``gymnasium.make(ENV_ID, config=DrivingConfig(...))``);
-``gymnasium.make``'s own ``max_episode_steps`` only adds an outer TimeLimit.
+(``DrivingEnv(max_episode_steps=n)``, or ``gymnasium.make(ENV_ID, config=DrivingConfig(
+max_episode_steps=n))``). ``gymnasium.make``'s own ``max_episode_steps`` is not passed to the
+env: gymnasium keeps it for a ``TimeLimit`` outside the env, which the env cannot see, so it can
+only shorten episodes: an n above the env's cap changes nothing (the env truncates first),
+without a warning.
 """
 
 from __future__ import annotations

@@ -1525,3 +1525,37 @@ def test_a_sensor_that_cannot_tell_near_from_far_is_refused(bad, message):
     assert WorldConfig() == WorldConfig(
         robot_radius=0.12, max_range=1.5, min_range=0.05, noise_sd=0.01, noise_sd_per_m=0.02
     )
+
+
+def test_a_step_cap_given_to_gymnasium_make_is_outside_the_env_as_documented():
+    """corridor.env's docstring said "the env warns when a circuit does not fit in a cap one
+    gives", but gymnasium.make keeps its max_episode_steps for a TimeLimit outside the env
+    (gymnasium gives the env a spec without it): on a 96-action map, make(..., max_episode_steps
+    =30) cut every episode mid-circuit without a warning, and max_episode_steps=500 truncated at
+    the env's own 192. The docstring now says what holds for each way of making the env, and
+    how to raise the env's own cap (CorridorEnv(max_episode_steps=n), or an id registered with
+    it in its kwargs); this pins it."""
+    import warnings
+
+    big = map_from_dict({**SMALL, "nodes": {"A": [0, 0], "B": [6, 0], "C": [6, 4], "D": [0, 4]}})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no warning from make, nor at reset or step
+        short = gym.make(corridor.ENV_ID, corridor_map=big, max_episode_steps=30)
+        ((actions, _, terminated, info),) = drive(short, CorridorExpert(big), seed=0, episodes=1)
+    assert len(actions) == 30 and not terminated and info["progress"] < 0.5  # cut mid-circuit
+    long = gym.make(corridor.ENV_ID, corridor_map=big, max_episode_steps=500)
+    assert long.unwrapped.max_episode_steps == 192  # the env's own cap, not make's 500
+    ((actions, _, terminated, _),) = drive(long, lambda obs, info: U, seed=0, episodes=1)
+    assert len(actions) == 192 and not terminated
+    with pytest.warns(UserWarning, match=r"about 96 actions, more than max_episode_steps=30"):
+        CorridorEnv(big, max_episode_steps=30)  # the env's own cap: it warns
+    assert CorridorEnv(big, max_episode_steps=500).max_episode_steps == 500
+    mine = "test/LongCorridor-v0"
+    gym.register(mine, entry_point="corridor.env:CorridorEnv", kwargs={"max_episode_steps": 500})
+    try:
+        assert gym.make(mine, corridor_map=big).unwrapped.max_episode_steps == 500
+    finally:
+        del gym.registry[mine]
+    doc = " ".join(corridor.env.__doc__.split())
+    assert "the env warns when a circuit does not fit in a cap one gives" not in doc
+    assert "which the env cannot see" in doc

@@ -878,3 +878,30 @@ def test_no_lane_is_ever_empty_and_a_far_lane_reads_its_nearest_cars_side():
         assert sides == {-1.0, 1.0}  # both far sides were seen
     finally:
         env.close()
+
+
+def test_a_step_cap_given_to_gymnasium_make_only_shortens_a_drive_as_documented():
+    """gymnasium.make keeps its max_episode_steps for a TimeLimit outside DrivingEnv, so a cap
+    above the env's own changes nothing (the env truncates first), without a warning; the
+    env's own cap goes through make in a DrivingConfig. The docstring now says so."""
+    import warnings
+
+    import gymnasium as gym
+
+    import sumo_scenarios
+
+    def steps(env):
+        env.reset(seed=0)
+        try:
+            for n in range(1, 100):
+                if env.step(0)[3]:
+                    return n
+        finally:
+            env.close()
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        own = DrivingConfig(scenario="light", max_episode_steps=5)
+        assert steps(gym.make(sumo_scenarios.ENV_ID, config=own, max_episode_steps=50)) == 5
+        assert steps(gym.make(sumo_scenarios.ENV_ID, scenario="light", max_episode_steps=3)) == 3
+    assert "which the env cannot see" in " ".join(sumo_scenarios.env.__doc__.split())
