@@ -9,12 +9,21 @@ Episode = one circuit. ``reset`` puts the robot at the map's start pose. The epi
 the route), with ``info["is_success"] = True`` iff no wall was touched during it; it is
 ``truncated`` after ``max_episode_steps`` actions (default 81: 3 x 27, the actions of a perfect
 circuit on the default map as first drawn; 29 since its spur was lengthened, so 2.8 circuits; on
-a map whose circuit takes more than 40 actions, two circuits; the env warns when a circuit does
-not fit in a cap one gives), with ``info["is_success"] = False``; another cap needs
-``CorridorEnv(max_episode_steps=n)`` (``gymnasium.make(ENV_ID, max_episode_steps=n)`` only wraps
-the env in a TimeLimit of n, which cannot lengthen its own default). The reward is 1 for
-completing the circuit, -1 for each wall contact, 0 otherwise (the teaching loop does not use
-it).
+a map whose circuit takes more than 40 actions, two circuits), with ``info["is_success"] =
+False``. The reward is 1 for completing the circuit, -1 for each wall contact, 0 otherwise (the
+teaching loop does not use it).
+
+Step caps. ``CorridorEnv(max_episode_steps=n)`` sets the env's own cap (``env.unwrapped.
+max_episode_steps``), and warns when a circuit of the map does not fit in it.
+``gymnasium.make(ENV_ID, max_episode_steps=n)`` does not pass n to the env: gymnasium keeps it
+for a ``TimeLimit`` wrapper outside the env, which the env cannot see (gymnasium gives it a spec
+without the cap). So an n shorter than a circuit cuts every episode mid-circuit without a
+warning, and an n above the env's own cap (its default) changes nothing: the env truncates
+first. To raise the env's own cap, make the env yourself, ``CorridorEnv(corridor_map,
+max_episode_steps=n)``, or, where a gymnasium id is needed (``make_vec``, the benchmark), register
+one whose kwargs carry it: ``gymnasium.register("mine/Corridor-v0", entry_point=
+"corridor.env:CorridorEnv", kwargs={"max_episode_steps": n})``, then ``gymnasium.make(
+"mine/Corridor-v0", ...)`` (it warns as ``CorridorEnv`` does).
 
 ``info`` after ``reset`` and every ``step``:
   ``pose`` ndarray [3] (x m, y m, heading rad); ``true_ranges`` ndarray [3] noise-free metres;
@@ -88,8 +97,10 @@ class CorridorEnv(gym.Env):
         corridor_map: a :class:`CorridorMap`, or the name of a shipped map / a JSON path.
         world_config: robot, motion and sensor parameters: a :class:`WorldConfig`, a dict of
             its fields (as ``gymnasium.make`` kwargs keep it), or None for the defaults.
-        max_episode_steps: actions before truncation; None = 81, or two circuits of a map
-            whose circuit takes more than 40 actions (see the module docstring).
+        max_episode_steps: the env's own cap, actions before truncation; None = 81, or two
+            circuits of a map whose circuit takes more than 40 actions. ``gymnasium.make``
+            keeps its own ``max_episode_steps`` for a ``TimeLimit`` outside the env, which can
+            only shorten episodes, unchecked (see the module docstring, "Step caps").
         render_mode: None or "rgb_array".
         start_perturbation: ``(metres, radians)`` half-widths of the uniform start offsets
             (metres less than half the corridor's width less the robot's radius, radians less

@@ -127,7 +127,10 @@ class CorridorMap:
         for a, b in self.corridors:
             for n in (a, b):
                 if n not in self.nodes:
-                    raise ValueError(f"corridor ({a!r}, {b!r}) names unknown node {n!r}")
+                    raise ValueError(
+                        f"corridor ({a!r}, {b!r}) names unknown node {n!r}; "
+                        f"{_known_nodes(self.nodes, n)}"
+                    )
             (ax, ay), (bx, by) = self.nodes[a], self.nodes[b]
             if (abs(ax - bx) > _EPS) == (abs(ay - by) > _EPS):
                 raise ValueError(f"corridor ({a!r}, {b!r}) must be axis-aligned and non-empty")
@@ -138,6 +141,9 @@ class CorridorMap:
                 "route must be a closed walk of at least 3 nodes, its first node repeated at "
                 f"the end (e.g. [A, B, C, A]), got {list(self.route)}"
             )
+        for n in self.route:  # (else "route step 'B' -> 'X' is not a corridor")
+            if n not in self.nodes:
+                raise ValueError(f"route names unknown node {n!r}; {_known_nodes(self.nodes, n)}")
         for a, b in zip(self.route[:-1], self.route[1:], strict=True):
             if (a, b) not in pairs:
                 raise ValueError(f"route step {a!r} -> {b!r} is not a corridor")
@@ -480,6 +486,16 @@ def _metres(value: Any, what: str = "coordinate") -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ValueError(f"map {what}: expected a number of metres, got {value!r:.80}")
     return float(value)
+
+
+def _known_nodes(nodes: Mapping[str, Any], unknown: str) -> str:
+    """What to say of a node name ``unknown`` that ``nodes`` lacks: the names it has (the first
+    20 of a larger map) and what to do."""
+    names = list(nodes)
+    shown = ", ".join(names[:20]) + (f", ... ({len(names)} in all)" if len(names) > 20 else "")
+    return (
+        f'the map\'s nodes are {shown or "none"}: add {unknown!r} to "nodes" or name one of these'
+    )
 
 
 def _names(value: Any, key: str) -> list[Any]:

@@ -87,6 +87,14 @@ class WorldConfig:
     The defaults describe a small round robot with IR range sensors of 1.5 m (like the Sharp
     GP2Y0A02, 0.2-1.5 m): per-reading noise of 1 cm + 2% of the distance, averaged over 15
     readings (so about 0.5 cm at 0.3 m and 1 cm at 1.5 m).
+
+    Sensors that cannot tell a near wall from a far one are refused (ValueError):
+    ``max_range`` must exceed ``robot_radius`` (the rays start at the robot's centre and no
+    wall comes nearer than its radius, so a shorter range reads ``max_range`` always), and one
+    standard deviation of a reading at full range, ``noise_sd + noise_sd_per_m * max_range``,
+    must be less than the span of readings, ``max_range - min_range`` (else a wall at full
+    range reads, one standard deviation off, as one at the minimum; averaging more readings
+    does not help, as each is clipped to the span first). The defaults' is 0.04 m of 1.45 m.
     """
 
     robot_radius: float = 0.12
@@ -154,6 +162,26 @@ class WorldConfig:
             raise ValueError("WorldConfig needs 0 <= min_range < max_range")
         if self.noise_sd < 0 or self.noise_sd_per_m < 0:
             raise ValueError("WorldConfig noise standard deviations must be >= 0")
+        if not self.max_range > self.robot_radius:
+            # the rays start at the robot's centre and no wall comes nearer than its radius
+            raise ValueError(
+                f"WorldConfig.max_range ({self.max_range:g} m) must exceed robot_radius "
+                f"({self.robot_radius:g} m): the sensors sit at the robot's centre and no wall "
+                "comes nearer than the robot's radius, so every reading would be max_range; "
+                f"pass a max_range above {self.robot_radius:g} m (the default is 1.5 m)"
+            )
+        far_sd = self.noise_sd + self.noise_sd_per_m * self.max_range
+        span = self.max_range - self.min_range
+        if not far_sd < span:
+            raise ValueError(
+                "WorldConfig: a reading's noise at the sensors' full range, noise_sd + "
+                f"noise_sd_per_m * max_range = {far_sd:.3g} m (one standard deviation), must be "
+                f"less than the span of readings, max_range - min_range = {span:.3g} m, or a "
+                "wall at full range reads, one standard deviation off, as one at the minimum "
+                f"(noise_sd={self.noise_sd:g}, noise_sd_per_m={self.noise_sd_per_m:g}, "
+                f"max_range={self.max_range:g}); pass a smaller noise_sd or noise_sd_per_m "
+                "(the defaults are 0.01 m and 0.02 per metre)"
+            )
         if self.n_readings < 1:
             raise ValueError("WorldConfig.n_readings must be >= 1")
         if not 0 <= self.forward_noise <= 0.3:

@@ -5,9 +5,11 @@ Observation (``float32`` [4]):
     ego to the nearest car (smallest absolute distance) in normal lane 1 (right), 2 (middle) and
     3 (left): car position minus ego position, so positive = ahead, negative = behind, clipped to
     [-25, 25]. Every car is 5 m long, so ``|d| < 5`` in the ego's lane is contact. A lane with no
-    car within the clip range reads +-25 (the sign of the nearest car, or +25 if a lane were
-    empty). ``ego_lane`` is SUMO's lane index as a float: 0 right shoulder, 1 right, 2 middle,
-    3 left, 4 left shoulder (SUMO counts from the right).
+    car within the clip range reads +25 or -25, the side of its nearest car: no normal lane is
+    ever empty (whenever a lane's frontmost car falls short of the traffic window's far end,
+    the scenario's ``ahead_m``, 60 m or more, ahead of the ego, a new car is placed beyond it).
+    ``ego_lane`` is SUMO's lane index as a float: 0 right shoulder, 1 right, 2 middle, 3 left,
+    4 left shoulder (SUMO counts from the right).
 
 Actions (``Discrete(3)``): 0 stay, 1 shift one lane left (index + 1), 2 shift one lane right
 (index - 1). A shift takes effect in the same timestep; a shift off the road is clamped (the
@@ -22,8 +24,11 @@ in the lane it is in or the lane it just left (a geometric 1-D check: SUMO's own
 unreliable). Cars are never removed on contact. Reward is ``-1`` on a contact step, else 0 (the
 learner does not use it). Episodes never terminate; they are truncated after
 ``DrivingConfig.max_episode_steps`` (1000): for longer ones pass it to the env
-(``DrivingEnv(max_episode_steps=n)``, or ``gymnasium.make(ENV_ID, config=DrivingConfig(...))``);
-``gymnasium.make``'s own ``max_episode_steps`` only adds an outer TimeLimit.
+(``DrivingEnv(max_episode_steps=n)``, or ``gymnasium.make(ENV_ID, config=DrivingConfig(
+max_episode_steps=n))``). ``gymnasium.make``'s own ``max_episode_steps`` is not passed to the
+env: gymnasium keeps it for a ``TimeLimit`` outside the env, which the env cannot see, so it can
+only shorten episodes: an n above the env's cap changes nothing (the env truncates first),
+without a warning.
 """
 
 from __future__ import annotations

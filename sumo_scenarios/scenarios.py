@@ -65,19 +65,33 @@ TRAFFIC_LANES = (1, 2, 3)
 LANE_NAMES = ("right shoulder", "right", "middle", "left", "left shoulder")
 
 
+_SHIPPED_DATA = ("road.net.xml", "driving.add.xml", "src/road.nod.xml", "src/road.edg.xml")
+"""The data files the package ships (paths under ``sumo_scenarios/data``); all but
+``driving.add.xml`` (written by hand) are written by ``python -m sumo_scenarios.build_network``."""
+
+
 def data_path(name: str) -> Path:
-    """Path of a shipped data file (``road.net.xml`` or ``driving.add.xml``).
+    """Path of a shipped data file (``road.net.xml`` or ``driving.add.xml``; also the network's
+    plain-XML sources ``src/road.nod.xml`` and ``src/road.edg.xml``).
 
     Raises:
-        FileNotFoundError: the file is missing (a damaged install), naming it and how to
-            restore it: the network is rebuilt by ``python -m sumo_scenarios.build_network``,
-            the vehicle types (written by hand) only come back with the package.
+        FileNotFoundError: the file is missing. For a shipped name (a damaged install), naming
+            it and how to restore it: the network and its sources are rebuilt by ``python -m
+            sumo_scenarios.build_network``, the vehicle types (written by hand) only come back
+            with the package. For any other name, saying it is no shipped data file and listing
+            the shipped ones.
     """
     path = Path(str(resources.files("sumo_scenarios") / "data" / name))
+    if not path.exists() and name not in _SHIPPED_DATA:
+        raise FileNotFoundError(
+            f"{name!r} is not a data file sumo_scenarios ships (no {path}); the shipped ones are "
+            f"{', '.join(_SHIPPED_DATA)}: pass one of these, or open a file of your own by its "
+            "own path"
+        )
     if not path.exists():
         fix = (
             "rebuild it with `python -m sumo_scenarios.build_network` (or reinstall the package)"
-            if name == "road.net.xml"
+            if name != "driving.add.xml"
             else "it is written by hand and shipped, not generated: reinstall the package "
             f"(sumo_scenarios), or in a git checkout restore it with `git checkout -- "
             f"sumo_scenarios/data/{name}`"

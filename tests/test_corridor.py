@@ -1483,3 +1483,89 @@ def test_save_png_failing_mid_write_leaves_the_earlier_png_whole(tmp_path, monke
         save_png(drawing, png)
     assert png.read_bytes() == first
     assert [p.name for p in tmp_path.iterdir()] == ["map.png"]
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (
+            {"route": ["A", "B", "X", "A"]},
+            r"^route names unknown node 'X'; the map's nodes are A, B, C, D",
+        ),
+        (
+            {"corridors": [*SMALL["corridors"], ["C", "E"]]},
+            r"^corridor \('C', 'E'\) names unknown node 'E'; the map's nodes are A, B, C, D",
+        ),
+    ],
+)
+def test_a_route_or_corridor_through_an_unknown_node_names_it_and_the_known_ones(change, message):
+    """A route through a node the map does not have said "route step 'B' -> 'X' is not a
+    corridor", as if the corridor were missing rather than the node; and neither it nor a
+    corridor naming an unknown node said which names the map has. Both now name the unknown
+    node and list the map's nodes."""
+    with pytest.raises(ValueError, match=message):
+        map_from_dict({**SMALL, **change})
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (dict(noise_sd=2.0), r"noise_sd \+ noise_sd_per_m \* max_range = 2\.03 m"),
+        (dict(noise_sd_per_m=2.0), r"noise_sd \+ noise_sd_per_m \* max_range = 3\.01 m"),
+        (dict(max_range=0.5, noise_sd=0.45), r"= 0\.46 m .*max_range - min_range = 0\.45 m"),
+        (dict(max_range=0.1, min_range=0.0), r"max_range \(0\.1 m\) must exceed robot_radius"),
+        (dict(max_range=0.12), r"max_range \(0\.12 m\) must exceed robot_radius \(0\.12 m\)"),
+        (dict(robot_radius=0.3, max_range=0.25), r"max_range \(0\.25 m\) must exceed robot_rad"),
+    ],
+)
+def test_a_sensor_that_cannot_tell_near_from_far_is_refused(bad, message):
+    """WorldConfig(noise_sd=2.0) (a 2 m spread on a 1.5 m range), noise_sd_per_m=2.0 and
+    max_range=0.1 (short of the 0.12 m robot radius: no wall comes nearer the sensors at the
+    robot's centre, so every reading is max_range) were accepted, and the env ran on readings
+    that say nothing of the walls. They are now refused, saying what fits and what was given;
+    the shipped configs, short and long sensors and a robot of one's own still load."""
+    with pytest.raises(ValueError, match=message) as caught:
+        WorldConfig(**bad)
+    assert "\n" not in str(caught.value) and "pass " in str(caught.value)
+    WorldConfig.legged_robot()
+    WorldConfig(max_range=0.5)
+    WorldConfig(max_range=2.0, noise_sd=0.5, noise_sd_per_m=0.1)
+    WorldConfig(robot_radius=0.3, max_range=5.0)
+    WorldConfig(max_range=0.13, min_range=0.12, noise_sd=0.0, noise_sd_per_m=0.0)
+    assert WorldConfig() == WorldConfig(
+        robot_radius=0.12, max_range=1.5, min_range=0.05, noise_sd=0.01, noise_sd_per_m=0.02
+    )
+
+
+def test_a_step_cap_given_to_gymnasium_make_is_outside_the_env_as_documented():
+    """corridor.env's docstring said "the env warns when a circuit does not fit in a cap one
+    gives", but gymnasium.make keeps its max_episode_steps for a TimeLimit outside the env
+    (gymnasium gives the env a spec without it): on a 96-action map, make(..., max_episode_steps
+    =30) cut every episode mid-circuit without a warning, and max_episode_steps=500 truncated at
+    the env's own 192. The docstring now says what holds for each way of making the env, and
+    how to raise the env's own cap (CorridorEnv(max_episode_steps=n), or an id registered with
+    it in its kwargs); this pins it."""
+    import warnings
+
+    big = map_from_dict({**SMALL, "nodes": {"A": [0, 0], "B": [6, 0], "C": [6, 4], "D": [0, 4]}})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no warning from make, nor at reset or step
+        short = gym.make(corridor.ENV_ID, corridor_map=big, max_episode_steps=30)
+        ((actions, _, terminated, info),) = drive(short, CorridorExpert(big), seed=0, episodes=1)
+    assert len(actions) == 30 and not terminated and info["progress"] < 0.5  # cut mid-circuit
+    long = gym.make(corridor.ENV_ID, corridor_map=big, max_episode_steps=500)
+    assert long.unwrapped.max_episode_steps == 192  # the env's own cap, not make's 500
+    ((actions, _, terminated, _),) = drive(long, lambda obs, info: U, seed=0, episodes=1)
+    assert len(actions) == 192 and not terminated
+    with pytest.warns(UserWarning, match=r"about 96 actions, more than max_episode_steps=30"):
+        CorridorEnv(big, max_episode_steps=30)  # the env's own cap: it warns
+    assert CorridorEnv(big, max_episode_steps=500).max_episode_steps == 500
+    mine = "test/LongCorridor-v0"
+    gym.register(mine, entry_point="corridor.env:CorridorEnv", kwargs={"max_episode_steps": 500})
+    try:
+        assert gym.make(mine, corridor_map=big).unwrapped.max_episode_steps == 500
+    finally:
+        del gym.registry[mine]
+    doc = " ".join(corridor.env.__doc__.split())
+    assert "the env warns when a circuit does not fit in a cap one gives" not in doc
+    assert "which the env cannot see" in doc

@@ -833,3 +833,75 @@ def test_a_missing_shipped_data_file_is_named_with_the_way_to_restore_it(tmp_pat
         assert "reinstall" in line and "build_network" not in line, line
     assert lines[2].startswith(f"{data / 'road.net.xml'} is missing"), lines[2]
     assert "python -m sumo_scenarios.build_network" in lines[2], lines[2]
+
+
+def test_a_name_that_is_no_shipped_data_file_is_named_with_the_shipped_ones():
+    """data_path("mynet.net.xml") said the file "is missing: the install is damaged" and gave
+    the git checkout that restores it, for a file that never shipped. It now says the name is
+    no shipped data file and lists the shipped ones; a shipped name still gives its path."""
+    from sumo_scenarios.scenarios import data_path
+
+    for name in ("mynet.net.xml", "src/mine.nod.xml"):
+        with pytest.raises(FileNotFoundError) as caught:
+            data_path(name)
+        message = str(caught.value)
+        assert message.startswith(f"{name!r} is not a data file sumo_scenarios ships"), message
+        assert "road.net.xml, driving.add.xml, src/road.nod.xml, src/road.edg.xml" in message
+        assert "damaged" not in message and "git checkout" not in message, message
+    assert data_path("road.net.xml").name == "road.net.xml"
+    assert data_path("src/road.nod.xml").is_file()
+
+
+def test_no_lane_is_ever_empty_and_a_far_lane_reads_its_nearest_cars_side():
+    """DrivingEnv's docstring said a lane reads "+25 if a lane were empty", yet no lane can be:
+    the sparsest traffic a scenario allows (every spacing at its cap, the narrowest window)
+    still keeps a car in every normal lane at every step, and a lane whose nearest car is out
+    of sensing range reads +-25 with that car's side, as the docstring now says."""
+    sparse = TrafficScenario(
+        name="sparse", seed=0, mean_spacing_m=(1e6, 1e6, 1e6), ahead_m=60.0, behind_m=30.0
+    )
+    env = DrivingEnv(scenario=sparse, max_episode_steps=200)
+    try:
+        obs, info = env.reset(seed=0)
+        sides = set()
+        for t in range(201):
+            lanes, rel = np.asarray(info["car_lane"]), np.asarray(info["car_rel_m"])
+            for k, lane in enumerate((1, 2, 3)):
+                mine = rel[lanes == lane]
+                assert mine.size, (t, lane)
+                near = mine[np.argmin(np.abs(mine))]
+                assert obs[k] == pytest.approx(np.clip(near, -25.0, 25.0), abs=1e-4), (t, lane)
+                if abs(near) >= 25.0:
+                    sides.add(float(np.sign(near)))
+            if t < 200:
+                obs, _, _, _, info = env.step(0)
+        assert sides == {-1.0, 1.0}  # both far sides were seen
+    finally:
+        env.close()
+
+
+def test_a_step_cap_given_to_gymnasium_make_only_shortens_a_drive_as_documented():
+    """gymnasium.make keeps its max_episode_steps for a TimeLimit outside DrivingEnv, so a cap
+    above the env's own changes nothing (the env truncates first), without a warning; the
+    env's own cap goes through make in a DrivingConfig. The docstring now says so."""
+    import warnings
+
+    import gymnasium as gym
+
+    import sumo_scenarios
+
+    def steps(env):
+        env.reset(seed=0)
+        try:
+            for n in range(1, 100):
+                if env.step(0)[3]:
+                    return n
+        finally:
+            env.close()
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        own = DrivingConfig(scenario="light", max_episode_steps=5)
+        assert steps(gym.make(sumo_scenarios.ENV_ID, config=own, max_episode_steps=50)) == 5
+        assert steps(gym.make(sumo_scenarios.ENV_ID, scenario="light", max_episode_steps=3)) == 3
+    assert "which the env cannot see" in " ".join(sumo_scenarios.env.__doc__.split())
