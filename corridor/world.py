@@ -90,11 +90,13 @@ class WorldConfig:
 
     Sensors that cannot tell a near wall from a far one are refused (ValueError):
     ``max_range`` must exceed ``robot_radius`` (the rays start at the robot's centre and no
-    wall comes nearer than its radius, so a shorter range reads ``max_range`` always), and one
-    standard deviation of a reading at full range, ``noise_sd + noise_sd_per_m * max_range``,
-    must be less than the span of readings, ``max_range - min_range`` (else a wall at full
-    range reads, one standard deviation off, as one at the minimum; averaging more readings
-    does not help, as each is clipped to the span first). The defaults' is 0.04 m of 1.45 m.
+    wall comes nearer than its radius, so a shorter range reads ``max_range`` but for its
+    noise, and tells nothing of the walls), and one standard deviation of a reading at full
+    range, ``noise_sd + noise_sd_per_m * max_range``, must be less than the span of readings,
+    ``max_range - min_range`` (else a wall at full range reads, one standard deviation off,
+    as one at the minimum: a rule of thumb, not a proof that such sensors are useless, since
+    the mean of many clipped readings still grows with the distance). The defaults' is 0.04 m
+    of 1.45 m.
     """
 
     robot_radius: float = 0.12
@@ -167,7 +169,8 @@ class WorldConfig:
             raise ValueError(
                 f"WorldConfig.max_range ({self.max_range:g} m) must exceed robot_radius "
                 f"({self.robot_radius:g} m): the sensors sit at the robot's centre and no wall "
-                "comes nearer than the robot's radius, so every reading would be max_range; "
+                "comes nearer than the robot's radius, so every reading would be max_range "
+                "but for its noise; "
                 f"pass a max_range above {self.robot_radius:g} m (the default is 1.5 m)"
             )
         far_sd = self.noise_sd + self.noise_sd_per_m * self.max_range
@@ -179,8 +182,9 @@ class WorldConfig:
                 f"less than the span of readings, max_range - min_range = {span:.3g} m, or a "
                 "wall at full range reads, one standard deviation off, as one at the minimum "
                 f"(noise_sd={self.noise_sd:g}, noise_sd_per_m={self.noise_sd_per_m:g}, "
-                f"max_range={self.max_range:g}); pass a smaller noise_sd or noise_sd_per_m "
-                "(the defaults are 0.01 m and 0.02 per metre)"
+                f"max_range={self.max_range:g}, min_range={self.min_range:g}); pass a "
+                "smaller noise_sd or noise_sd_per_m, or a wider span (the defaults are 0.01 m, "
+                "0.02 per metre, min_range 0.05 m and max_range 1.5 m)"
             )
         if self.n_readings < 1:
             raise ValueError("WorldConfig.n_readings must be >= 1")
