@@ -815,6 +815,40 @@ def test_damaged_outcome_line_keeps_every_later_line(tmp_path):
     goes_on(back, env2, run)
 
 
+def test_journal_line_changed_into_another_valid_step_fails_its_checksum(tmp_path):
+    """A journal line whose content changed but stays valid JSON of the right shape (one
+    action digit of a step, here its model_action: a record as valid as the one written) is
+    caught by its CRC-32 alone: the readers and resume refuse it as damaged, naming the line
+    and the checksum, and change nothing."""
+    run = tmp_path / "run"
+    _journalled(run, steps=10)
+    journal = run / "steps.journal"
+    data = journal.read_bytes()
+    lines = data.split(b"\n")
+    at, entry = next(
+        (i, json.loads(line.rpartition(b"\t")[0]))
+        for i, line in enumerate(lines)
+        if line.startswith(b'["s"') and line.rpartition(b"\t")[0].endswith(b',"teacher"]')
+    )
+    # ["s", step, episode, "observation hex", model_action, ...]: the 4th comma precedes it
+    head = lines[at].split(b",", 4)
+    assert int(head[4].split(b",", 1)[0]) == entry[4] in (0, 1, 2)
+    changed = b"%d" % ((entry[4] + 1) % 3)  # another action of the 3: a valid record
+    head[4] = changed + head[4][1:]
+    lines[at] = b",".join(head)
+    journal.write_bytes(b"\n".join(lines))
+    json.loads(lines[at].rpartition(b"\t")[0])  # still valid JSON
+    damaged = journal.read_bytes()
+    offset = sum(len(line) + 1 for line in lines[:at])
+    said = rf"line {at + 1} \(byte {offset}\) is damaged: its checksum does not match"
+    for read in (load_records, load_demonstrations, load_model):
+        with pytest.raises(CorruptSessionError, match=said):
+            read(run)
+    with pytest.raises(CorruptSessionError, match=said):
+        resume(run)
+    assert journal.read_bytes() == damaged  # every byte kept
+
+
 def test_journal_line_of_valid_json_but_the_wrong_shape(tmp_path):
     run = tmp_path / "run"
     ct, env = _journalled(run, steps=10)
