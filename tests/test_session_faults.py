@@ -997,6 +997,59 @@ def test_a_wal_lost_after_its_tables_reached_the_log_is_said_to_be_missing(tmp_p
     ct.close()
 
 
+def test_a_log_lacking_committed_corrections_alone_is_said_to_lack_them(tmp_path):
+    """writer.lock counts corrections as well as steps: a log holding every committed step
+    but fewer corrections than its writers committed (a correction's row gone, here deleted by
+    hand as a lost -wal loses rows) is refused by the readers and resume, naming both counts
+    and the missing -wal, and nothing changes; with writer.lock removed (the loss accepted)
+    the session reads with the corrections left."""
+    from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+    class Contrary:  # labels as the oracle, and corrects every fourth autonomous step
+        calls = 0
+
+        def __call__(self, obs, info):
+            return env.optimal_action(obs)
+
+        def correct(self, obs, info, action):
+            Contrary.calls += 1
+            return (action + 1) % 3 if Contrary.calls % 4 == 0 else None
+
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    cfg = TeachingConfig(max_new=2, accuracy_window=10, noninteractive=False)
+    with ConfidentTeacher(
+        env,
+        Contrary(),
+        strategy=ConfidenceBasedAutonomy(),
+        config=cfg,
+        run_dir=run,
+        progress=False,
+        commit_every=4,
+    ) as ct:
+        ct.run(max_steps=80)
+    corrections = load_corrections(run)
+    n, k = len(ct.records), len(corrections)
+    assert k >= 2 and not (run / "steps.sqlite-wal").exists()
+    db = sqlite3.connect(run / "steps.sqlite")
+    db.execute("DELETE FROM corrections WHERE step = ?", (corrections[-1].step,))
+    db.commit()
+    db.close()
+    before = files_of(run)
+    said = (
+        rf"committed {n} steps and {k} corrections .*but the log holds {n} of those steps and "
+        rf"{k - 1} corrections.* is missing"
+    )
+    for read in (load_records, load_corrections, load_labels, load_model):
+        with pytest.raises(CorruptSessionError, match=said):
+            read(run)
+    with pytest.raises(CorruptSessionError, match=said):
+        ConfidentTeacher.resume(run, rare_regions_world(), Contrary(), progress=False)
+    assert files_of(run) == before  # nothing changed
+    (run / "writer.lock").unlink()
+    assert load_corrections(run) == corrections[:-1]
+
+
 def test_a_session_copied_while_its_writer_ran_reads_and_resumes_with_a_warning(tmp_path):
     """A copy that takes writer.lock after the log (rsync does, by name order; GNU cp -a goes
     in directory order, either way) taken while the writer runs can hold a writer.lock that
