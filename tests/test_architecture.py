@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import json
+import math
 import sqlite3
 import subprocess
 import sys
@@ -302,6 +303,49 @@ def test_records_refuse_at_creation_what_would_fail_later():
             CorrectionRecord(step=0, episode=0, observation=obs, executed_action=0, action=1)
     with pytest.raises(ValueError, match=r"CorrectionRecord\.action: expected another action"):
         CorrectionRecord(step=0, episode=0, observation=(0.5,), executed_action=1, action=1)
+
+
+def _step_fields() -> dict:
+    return dict(
+        step=3,
+        episode=0,
+        observation=(0.0, 1.0),
+        model_action=1,
+        confidence=0.5,
+        posterior=(0.5, 0.5),
+        reward=1.0,
+        terminated=False,
+        truncated=False,
+    )
+
+
+def test_a_step_record_refuses_a_negative_or_nan_distance():
+    """A Mahalanobis distance is >= 0 (inf before any model): a negative one or NaN is refused
+    naming the field."""
+    from torchcbl.records import StepRecord
+
+    labelled = dict(teacher_action=1, executed_action=1, autonomous=False, phase="confident")
+    for good in (0.0, 2.5, math.inf):
+        assert StepRecord(**_step_fields(), distance=good, **labelled).distance == good
+    for bad in (-1.0, -1e-300, math.nan):
+        with pytest.raises(ValueError, match=r"StepRecord\.distance: expected a float >= 0"):
+            StepRecord(**_step_fields(), distance=bad, **labelled)
+
+
+def test_a_non_interactive_step_record_needs_a_teacher_label():
+    """A step of the non-interactive phase asks by design: one without a teacher label is
+    refused naming teacher_action; the same step in confident execution is an autonomous step,
+    and a labelled non-interactive step is accepted."""
+    from torchcbl.records import StepRecord
+
+    unlabelled = dict(teacher_action=None, executed_action=1, autonomous=True, distance=1.0)
+    assert StepRecord(**_step_fields(), **unlabelled, phase="confident").actor == "agent"
+    with pytest.raises(
+        ValueError, match=r"StepRecord\.teacher_action: expected a label on every non-interactive"
+    ):
+        StepRecord(**_step_fields(), **unlabelled, phase="noninteractive")
+    labelled = dict(teacher_action=1, executed_action=1, autonomous=False, distance=1.0)
+    assert StepRecord(**_step_fields(), **labelled, phase="noninteractive").actor == "teacher"
 
 
 def _public_modules() -> list[str]:

@@ -118,6 +118,52 @@ def test_per_boundary_thresholds_by_hand():
     assert not np.isnan(t).any()
 
 
+def _bound_cba() -> ConfidenceBasedAutonomy:
+    cba = ConfidenceBasedAutonomy()  # clean_threshold 0
+    cba.bind(n_actions=2, n_features=2, config=TeachingConfig(noninteractive=False))
+    return cba
+
+
+def _classified(model: _Fixed, observation) -> tuple[np.ndarray, object]:
+    obs = np.asarray(observation, dtype=np.float64)
+    return obs, model.classify(obs[None])
+
+
+def test_a_confidently_wrong_boundary_is_never_trusted():
+    """A demonstration the model gets wrong with posterior 1 against 0 (an infinite margin)
+    makes that boundary's threshold +inf: the agent asks at every observation predicted there,
+    however large its margin, where a finite mean of the other mistakes (or the clean value 0)
+    would trust an infinite margin at once."""
+    cba = _bound_cba()
+    # by x[0]: certain of 0; certain of 1; 0 over 1 by a finite margin (log 1.5)
+    model = _Fixed({0: [1.0, 0.0], 1: [0.0, 1.0], 2: [0.6, 0.4]})
+    x = np.array([[0, 0], [0, 1], [1, 0], [1, 1], [2, 0]], dtype=np.float64)
+    # (0, 0) is labelled 1 but predicted 0 over 1 with an infinite margin; (2, 0) is the
+    # same mistake by a finite margin
+    y = np.array([1, 0, 1, 1, 1])
+    cba.observe_refit(model, x, y)
+    assert cba.thresholds[0, 1] == math.inf
+    assert cba.thresholds[1, 0] == 0.0  # predicted 1 over 0, never wrong: the clean value
+    # on a stored point (the distance gate passes), certain of 0: it asks; certain of 1: not
+    assert cba.decide(*_classified(model, [0.0, 0.0])).ask
+    assert not cba.decide(*_classified(model, [1.0, 0.0])).ask
+
+
+@pytest.mark.parametrize("stored", [1, 2])
+def test_a_zero_distance_gate_asks_even_on_a_stored_point(stored):
+    """With one demonstration, or two identical ones, the distance gate is 0 (no spread to
+    measure), and the comparison is strict: an observation exactly on the stored point
+    (distance 0) still asks, though its margin passes."""
+    cba = _bound_cba()
+    model = _Fixed({0: [0.9, 0.1]})
+    x = np.zeros((stored, 2))
+    cba.observe_refit(model, x, np.zeros(stored, dtype=int))
+    assert cba.distance_threshold == 0.0 and cba.thresholds[0, 1] == 0.0
+    obs, c = _classified(model, [0.0, 0.0])
+    assert cba.nn_distance(obs) == 0.0
+    assert cba.decide(obs, c).ask
+
+
 def test_demonstration_in_a_stored_state_relabels_it(tmp_path):
     class Discrete(ClusterWorld):  # 4 distinct states only
         def _draw(self):

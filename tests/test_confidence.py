@@ -142,6 +142,50 @@ def test_auto_threshold_rule_follows_the_documented_rule():
     assert torch.equal(got, c.distance < rule.thresholds[c.action])
 
 
+def _one_mistake(at):
+    """Two far-apart clean actions and one point labelled 1 at ``at``, inside action 0's
+    cluster: the model's only mistake (predicted 0). (model, x, y, index of the mistake)."""
+    rng = np.random.default_rng(0)
+    x = np.r_[rng.normal([0, 0], 1, (40, 2)), rng.normal([10, 0], 1, (40, 2)), [at]]
+    y = np.r_[np.zeros(40, int), np.ones(40, int), [1]]
+    model = GaussianMixtureSet(2, 2, max_components=1, seed=0).fit(x, y)
+    c = model.classify(x)
+    assert torch.nonzero(c.action != torch.as_tensor(y)).flatten().tolist() == [80]
+    assert int(c.action[80]) == 0
+    return model, x, y, c
+
+
+def test_auto_threshold_does_not_trust_its_one_mistake_itself():
+    """With one misclassified demonstration of action 0, action 0's threshold is that point's
+    distance (the mean of one), and the comparison is strict: the rule does not trust the
+    very point it got wrong, though it trusts action 0's points nearer the mean."""
+    model, x, y, c = _one_mistake([0.3, 0.2])
+    rule = AutoThresholdRule(max_std=2.0)
+    rule.update(model, x, y)
+    mistake = float(c.distance[80])
+    assert float(rule.thresholds[0]) == mistake and float(rule.thresholds[1]) == 2.0
+    confident = rule.is_confident(c)
+    assert not bool(confident[80])
+    nearer = torch.nonzero(c.distance[:40] < mistake).flatten()
+    assert len(nearer) > 0 and bool(confident[nearer].all())
+
+
+def test_auto_threshold_never_goes_below_min_std():
+    """A mistake close to an action's mean would make its threshold that small distance;
+    ``min_std`` is the floor: AutoThresholdRule(max_std=2, min_std=1.5) with one wrong point
+    at ~0.5 std gives 1.5, and trusts action 0's points between 0.5 and 1.5 std."""
+    model, x, y, c = _one_mistake([0.5, 0.0])
+    mistake = float(c.distance[80])
+    assert mistake < 1.0
+    rule = AutoThresholdRule(max_std=2.0, min_std=1.5)
+    rule.update(model, x, y)
+    assert rule.thresholds.tolist() == [1.5, 2.0]
+    confident = rule.is_confident(c)
+    between = torch.nonzero((c.distance[:40] > mistake) & (c.distance[:40] < 1.5)).flatten()
+    assert len(between) > 0 and bool(confident[between].all())
+    assert bool(confident[80])  # the mistake too: the floor trusts everything within 1.5
+
+
 def test_a_rule_reused_in_another_session_starts_from_its_own_refits():
     """A ConfidentExecution (and its AutoThresholdRule) taught once and given to a new session
     kept the old session's per-action thresholds: on an env with more actions and a fitted

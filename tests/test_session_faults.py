@@ -815,6 +815,40 @@ def test_damaged_outcome_line_keeps_every_later_line(tmp_path):
     goes_on(back, env2, run)
 
 
+def test_journal_line_changed_into_another_valid_step_fails_its_checksum(tmp_path):
+    """A journal line whose content changed but stays valid JSON of the right shape (one
+    action digit of a step, here its model_action: a record as valid as the one written) is
+    caught by its CRC-32 alone: the readers and resume refuse it as damaged, naming the line
+    and the checksum, and change nothing."""
+    run = tmp_path / "run"
+    _journalled(run, steps=10)
+    journal = run / "steps.journal"
+    data = journal.read_bytes()
+    lines = data.split(b"\n")
+    at, entry = next(
+        (i, json.loads(line.rpartition(b"\t")[0]))
+        for i, line in enumerate(lines)
+        if line.startswith(b'["s"') and line.rpartition(b"\t")[0].endswith(b',"teacher"]')
+    )
+    # ["s", step, episode, "observation hex", model_action, ...]: the 4th comma precedes it
+    head = lines[at].split(b",", 4)
+    assert int(head[4].split(b",", 1)[0]) == entry[4] in (0, 1, 2)
+    changed = b"%d" % ((entry[4] + 1) % 3)  # another action of the 3: a valid record
+    head[4] = changed + head[4][1:]
+    lines[at] = b",".join(head)
+    journal.write_bytes(b"\n".join(lines))
+    json.loads(lines[at].rpartition(b"\t")[0])  # still valid JSON
+    damaged = journal.read_bytes()
+    offset = sum(len(line) + 1 for line in lines[:at])
+    said = rf"line {at + 1} \(byte {offset}\) is damaged: its checksum does not match"
+    for read in (load_records, load_demonstrations, load_model):
+        with pytest.raises(CorruptSessionError, match=said):
+            read(run)
+    with pytest.raises(CorruptSessionError, match=said):
+        resume(run)
+    assert journal.read_bytes() == damaged  # every byte kept
+
+
 def test_journal_line_of_valid_json_but_the_wrong_shape(tmp_path):
     run = tmp_path / "run"
     ct, env = _journalled(run, steps=10)
@@ -961,6 +995,59 @@ def test_a_wal_lost_after_its_tables_reached_the_log_is_said_to_be_missing(tmp_p
     assert back.records == want[:20]
     back.close()
     ct.close()
+
+
+def test_a_log_lacking_committed_corrections_alone_is_said_to_lack_them(tmp_path):
+    """writer.lock counts corrections as well as steps: a log holding every committed step
+    but fewer corrections than its writers committed (a correction's row gone, here deleted by
+    hand as a lost -wal loses rows) is refused by the readers and resume, naming both counts
+    and the missing -wal, and nothing changes; with writer.lock removed (the loss accepted)
+    the session reads with the corrections left."""
+    from torchcbl.strategies.cba import ConfidenceBasedAutonomy
+
+    class Contrary:  # labels as the oracle, and corrects every fourth autonomous step
+        calls = 0
+
+        def __call__(self, obs, info):
+            return env.optimal_action(obs)
+
+        def correct(self, obs, info, action):
+            Contrary.calls += 1
+            return (action + 1) % 3 if Contrary.calls % 4 == 0 else None
+
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    cfg = TeachingConfig(max_new=2, accuracy_window=10, noninteractive=False)
+    with ConfidentTeacher(
+        env,
+        Contrary(),
+        strategy=ConfidenceBasedAutonomy(),
+        config=cfg,
+        run_dir=run,
+        progress=False,
+        commit_every=4,
+    ) as ct:
+        ct.run(max_steps=80)
+    corrections = load_corrections(run)
+    n, k = len(ct.records), len(corrections)
+    assert k >= 2 and not (run / "steps.sqlite-wal").exists()
+    db = sqlite3.connect(run / "steps.sqlite")
+    db.execute("DELETE FROM corrections WHERE step = ?", (corrections[-1].step,))
+    db.commit()
+    db.close()
+    before = files_of(run)
+    said = (
+        rf"committed {n} steps and {k} corrections .*but the log holds {n} of those steps and "
+        rf"{k - 1} corrections.* is missing"
+    )
+    for read in (load_records, load_corrections, load_labels, load_model):
+        with pytest.raises(CorruptSessionError, match=said):
+            read(run)
+    with pytest.raises(CorruptSessionError, match=said):
+        ConfidentTeacher.resume(run, rare_regions_world(), Contrary(), progress=False)
+    assert files_of(run) == before  # nothing changed
+    (run / "writer.lock").unlink()
+    assert load_corrections(run) == corrections[:-1]
 
 
 def test_a_session_copied_while_its_writer_ran_reads_and_resumes_with_a_warning(tmp_path):
