@@ -1203,8 +1203,6 @@ def _strategy_params(
 def _cmd_benchmark(args: argparse.Namespace) -> int:
     import dataclasses
     import importlib.util
-    import os
-    import warnings
 
     from torchcbl import benchmark as bm
 
