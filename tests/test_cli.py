@@ -952,14 +952,18 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(
     ).close()
     plain = evaluate_saved_policy(tmp_path / "plain", n_steps=5)
     assert plain["map"] == "figure2" and plain["world"]["forward_noise"] == 0.0
-    # a robot given as an object is not kept by the session's config: evaluate says so
-    # instead of driving the default robot
+    # a robot given as an object: kept whole, and driven
     from corridor.world import WorldConfig
 
     env = gym.make("torchcbl/Corridor-v0", world_config=WorldConfig.legged_robot())
     ConfidentTeacher(env, lambda o, i: 0, run_dir=tmp_path / "object", progress=False).run(
         max_steps=3
     ).close()
+    noisy = evaluate_saved_policy(tmp_path / "object", n_steps=5)
+    assert noisy["world"] == dataclasses.asdict(WorldConfig.legged_robot())
+    # a session written before objects were kept whole keeps it only as text: evaluate says so
+    # instead of driving the default robot
+    _as_written_before_objects_were_kept(tmp_path / "object")
     with pytest.raises(ValueError, match="robot given as an object"):
         evaluate_saved_policy(tmp_path / "object", n_steps=5)
     assert main(["evaluate", str(tmp_path / "object")]) == 2
@@ -1033,10 +1037,19 @@ def test_evaluate_drives_a_corridor_session_copied_out_of_its_run_on_its_own_rob
     assert "WorldConfig() (exact motion)" in err and "world_config=" in err
 
 
+def _as_written_before_objects_were_kept(run: Path) -> None:
+    """Make ``run`` as a session written before 2026-11-27, which kept an object given to
+    gymnasium.make only as text (no ``env.kwargs_objects``)."""
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["kwargs_objects"]
+    (run / "config.json").write_text(json.dumps(config))
+
+
 def test_evaluate_of_a_session_it_cannot_rebuild_names_the_python_call(tmp_path, capsys):
-    """A session whose env was given its map, robot or SUMO settings as objects keeps them only
-    as text: `torchcbl evaluate` cannot drive it, and its one line names the function and the
-    keyword that can (it said "pass map_name=", an option the command does not have)."""
+    """A session whose env was given its map, robot or SUMO settings as objects kept them only
+    as text (before 2026-11-27): `torchcbl evaluate` cannot drive it, and its one line names
+    the function and the keyword that can (it said "pass map_name=", an option the command
+    does not have)."""
     import gymnasium as gym
 
     import sumo_scenarios  # noqa: F401  (registers torchcbl/Driving-v0)
@@ -1061,6 +1074,7 @@ def test_evaluate_of_a_session_it_cannot_rebuild_names_the_python_call(tmp_path,
             max_steps=2
         ).close()
         env.close()
+        _as_written_before_objects_were_kept(tmp_path / name)
         capsys.readouterr()
         assert main(["evaluate", str(tmp_path / name)]) == 2
         err = capsys.readouterr().err
