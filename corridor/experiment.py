@@ -1020,23 +1020,28 @@ def evaluate_saved_policy(
     *,
     n_steps: int = 1000,
     seed: int = 0,
-    map_name: str | None = None,
+    map_name: str | os.PathLike[str] | CorridorMap | None = None,
     world_config: WorldConfig | None = None,
 ) -> dict[str, Any]:
     """Run the latest model of a corridor teaching session greedily for ``n_steps`` actions.
 
-    ``map_name`` and ``world_config`` default to the map and robot the session was taught on:
+    ``map_name`` (a shipped map's name, a map JSON path or a :class:`CorridorMap`) and
+    ``world_config`` default to the map and robot the session was taught on:
     for a session of :func:`run_experiment` (``run_dir/sessions/seed<k>``) those in its own
     ``seed_result.json`` (noisy motion by default; the session keeps it wherever it is copied),
     or, for a run from before those records, in ``run_dir/results.json``; for a session of an
-    env made with ``gymnasium.make`` the ``corridor_map`` and ``world_config`` it was given (the
-    session's config keeps them when they are plain values: a map's name, the robot as a dict,
-    as ``torchcbl teach corridor`` gives them, :func:`teaching_setup`; given as objects they
-    are not kept, and this raises ValueError unless they are passed here); otherwise the
+    env made with ``gymnasium.make`` the ``corridor_map`` and ``world_config`` it was given
+    (plain values, a map's name and the robot as a dict, as ``torchcbl teach corridor`` gives
+    them, :func:`teaching_setup`, or objects, a ``CorridorMap`` and a ``WorldConfig``, which
+    the session keeps whole, :func:`torchcbl.session.env_make_argument`; a session written
+    before 2026-11-27 kept objects only as text, and this raises ValueError unless they are
+    passed here); otherwise the
     default map and ``WorldConfig()`` (exact motion, the default of ``torchcbl/Corridor-v0``),
     with a UserWarning where the env was made without ``gymnasium.make`` (nothing then says
-    which robot it was taught on). Returns the map and robot (``WorldConfig``'s fields)
-    driven, the steps, circuits completed, circuits without wall contact, and wall contacts.
+    which robot it was taught on). Returns the map driven (``map``: its name or path as given,
+    or a ``CorridorMap``'s name; ``map_sha256``: :func:`corridor.maps.map_digest` of it,
+    which tells maps of one name apart) and the robot (``world``: ``WorldConfig``'s fields),
+    the steps, circuits completed, circuits without wall contact, and wall contacts.
 
     Raises:
         ValueError: among others, the map the session was taught on (a map file, or a
@@ -1048,14 +1053,20 @@ def evaluate_saved_policy(
 
     session_dir = Path(session_dir)
     world, unsaid = _session_world(session_dir) if world_config is None else (world_config, "")
-    map_name = _session_map(session_dir) if map_name is None else map_name
+    taught = _session_map(session_dir) if map_name is None else map_name
     if unsaid:  # (after the map's checks: a session refused is not warned about)
         warnings.warn(unsaid, UserWarning, stacklevel=2)
-    env = CorridorEnv(load_map(map_name), world)
+    if isinstance(taught, CorridorMap):
+        corridor_map, named = taught, taught.name
+    else:
+        corridor_map = load_map(taught)
+        named = os.fspath(taught) if isinstance(taught, os.PathLike) else taught
+    env = CorridorEnv(corridor_map, world)
     records = evaluate_policy(load_policy(session_dir), env, n_steps=n_steps, seed=seed)
     ends = [r for r in records if r.terminated]
     return {
-        "map": map_name,
+        "map": named,
+        "map_sha256": map_digest(corridor_map),
         "world": dataclasses.asdict(world),
         "steps": len(records),
         "circuits_completed": len(ends),
@@ -1127,16 +1138,48 @@ def check_session_map(session_dir: str | Path) -> None:
     _check_session_map(session_dir, name)
 
 
-def _session_map(session_dir: Path) -> str:
-    """The map a session was taught on (see :func:`evaluate_saved_policy`); a ValueError if
-    it is not the map the session kept the digest of (:func:`_check_session_map`)."""
+#: the classes a corridor session's make arguments are rebuilt as (env_make_argument)
+_MAKE_CLASSES: dict[str, Callable[..., Any]] = {
+    "corridor.maps:CorridorMap": CorridorMap,
+    "corridor.world:WorldConfig": WorldConfig,
+}
+
+
+def _made_with(session_dir: Path, kwarg: str, what: str, want: type) -> Any:
+    """The object ``gymnasium.make`` was given as ``kwarg`` for a session's env, made again
+    from the session's config (:func:`torchcbl.session.env_make_argument`), or a ValueError
+    in one line that names it and says what to pass instead."""
+    from torchcbl.session import env_make_argument, load_config
+
+    passing = {"corridor_map": "map_name", "world_config": "world_config"}[kwarg]
+    expected = {
+        "corridor_map": "a shipped map name, a map JSON path or a corridor.maps.CorridorMap",
+        "world_config": "a corridor.world.WorldConfig",
+    }[kwarg]
+    try:
+        value = env_make_argument(load_config(session_dir), kwarg, _MAKE_CLASSES)
+    except ValueError as exc:
+        raise ValueError(
+            f"{session_dir} was taught {what} given as an object, which cannot be made "
+            f"again: {exc}; " + _pass_to_evaluate(passing, expected)
+        ) from None
+    if not isinstance(value, want):
+        raise ValueError(
+            f"{session_dir}: its env's {kwarg} is {value!r:.200}, not a {want.__name__}; "
+            + _pass_to_evaluate(passing, expected)
+        )
+    return value
+
+
+def _session_map(session_dir: Path) -> str | CorridorMap:
+    """The map a session was taught on, by name or path, or the ``CorridorMap`` it was given
+    (see :func:`evaluate_saved_policy`); a ValueError if it is not the map the session kept
+    the digest of (:func:`_check_session_map`)."""
     source, value = _taught_with(session_dir, "map_name", "corridor_map", str)
     if source == "kwargs" and not isinstance(value, str):
-        raise ValueError(
-            f"{session_dir} was taught on a map given as an object ({value}), which its config "
-            "does not keep; "
-            + _pass_to_evaluate("map_name", "a shipped map name or a map JSON path")
-        )
+        corridor_map = _made_with(session_dir, "corridor_map", "on a map", CorridorMap)
+        _check_session_map(session_dir, corridor_map, source)
+        return corridor_map
     name = DEFAULT_MAP if source == "default" else str(value)
     _check_session_map(session_dir, name, source)
     return name
@@ -1160,8 +1203,11 @@ def _relative_map_elsewhere(session_dir: Path, map_name: str) -> str:
     )
 
 
-def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs") -> None:
-    """A ValueError if ``map_name`` (a shipped name or a map file) is not the map the session
+def _check_session_map(
+    session_dir: Path, map_name: str | CorridorMap, source: str = "kwargs"
+) -> None:
+    """A ValueError if ``map_name`` (a shipped name or a map file, or the ``CorridorMap`` the
+    session's config keeps) is not the map the session
     was taught on: its digest (:func:`corridor.maps.map_digest`) differs from the one the
     session's config keeps (``CorridorEnv.describe_inputs()``). ``source`` says where the name
     comes from (:func:`_taught_with`): ``"kwargs"``, the env's make() arguments (the map file,
@@ -1175,6 +1221,16 @@ def _check_session_map(session_dir: Path, map_name: str, source: str = "kwargs")
     env = load_config(session_dir).get("env") or {}
     kept = (env.get("inputs") or {}).get("corridor_map_sha256")
     if not isinstance(kept, str):
+        return
+    if isinstance(map_name, CorridorMap):  # kept whole in the config: both can only be edited
+        now = map_digest(map_name)
+        if now != kept:
+            raise ValueError(
+                f"{session_dir}'s config keeps a map object {map_name.name!r} whose digest "
+                f"({now[:12]}...) is not the one it keeps of the map it was taught on "
+                f"({kept[:12]}...): its config.json was edited; restore it from a copy, or "
+                + _pass_to_evaluate("map_name", "the map it was taught on")
+            )
         return
     shipped = map_name in available_maps()
     what = f"the shipped map {map_name!r}" if shipped else f"the map file {map_name}"
@@ -1268,10 +1324,7 @@ def _session_world(session_dir: Path) -> tuple[WorldConfig, str]:
                 f"{session_dir}: its env's world_config {value} is not a WorldConfig ({exc}); "
                 + _pass_to_evaluate("world_config", "a corridor.world.WorldConfig")
             ) from None
-    raise ValueError(
-        f"{session_dir} was taught with a robot given as an object ({value}), which its "
-        "config does not keep; " + _pass_to_evaluate("world_config", "a corridor.world.WorldConfig")
-    )
+    return _made_with(session_dir, "world_config", "with a robot", WorldConfig), ""
 
 
 def _json_default(o: Any) -> Any:

@@ -73,6 +73,7 @@ from torchcbl.evaluation import (
 )
 
 if TYPE_CHECKING:
+    from sumo_scenarios.scenarios import TrafficScenario
     from sumo_scenarios.sim import SimConfig
     from torchcbl.gmm import Criterion, GaussianMixtureSet
 
@@ -1200,6 +1201,7 @@ def evaluate_saved_policy(
     n_steps: int = 1000,
     seed: int | None = None,
     sim: SimConfig | None = None,
+    scenario: str | TrafficScenario | None = None,
 ) -> dict[str, Any]:
     """Drive the latest model of a driving teaching session (e.g. ``torchcbl teach driving``)
     greedily for ``n_steps`` timesteps on held-out evaluation segment ``seed``: by default,
@@ -1207,48 +1209,89 @@ def evaluate_saved_policy(
     its seed's policies were evaluated on (:func:`session_eval_segment`: ``eval_segment + k``,
     so the figures compare with ``results.json``'s), else segment 0.
 
-    The traffic is the held-out ``eval`` scenario; the SUMO settings (``sim``: the step length,
-    which sets how far the traffic moves between two decisions) and the start lane are the
-    session's own: those its env was given by ``gymnasium.make`` (``sim``, ``start_lane``; the
-    session's config keeps a plain start lane, but a ``SimConfig`` or ``DrivingConfig`` only as
-    text, so such a session raises ValueError unless ``sim`` is passed here, and a
-    ``DrivingConfig``'s start lane is not known: the middle lane is driven); otherwise the
-    defaults (``SimConfig()``, the middle lane), as ``torchcbl teach driving`` and the experiment
-    teach. An env made without ``gymnasium.make`` keeps nothing in the session: the defaults are
-    driven, whatever it was given. ``sim``, when given, is driven whatever the session kept.
+    The traffic, the SUMO settings (``sim``: the step length, which sets how far the traffic
+    moves between two decisions) and the start lane are the session's own: those its env was
+    given by ``gymnasium.make`` (``scenario``, ``sim``, ``start_lane``, or a whole
+    ``DrivingConfig`` as ``config``), plain values or objects, which the session keeps whole
+    (:func:`torchcbl.session.env_make_argument`); otherwise the defaults (the ``train``
+    traffic, ``SimConfig()``, the middle lane), as ``torchcbl teach driving`` and the
+    experiment teach. A session taught on the shipped ``train`` traffic (by name, as
+    ``TRAIN``, or by default) is driven on its held-out twin ``eval`` (the same traffic, other
+    road segments), as the experiment evaluates; a session taught on other traffic (a shipped
+    name such as ``light``, or a ``TrafficScenario`` of its own) on that traffic, segment
+    ``seed``. A session written before 2026-11-27 kept objects only as text: its traffic or
+    SUMO settings given as an object are then not known, and this raises ValueError unless
+    ``scenario`` or ``sim`` is passed here (and a ``DrivingConfig``'s start lane is not known:
+    the middle lane is driven). An env made without ``gymnasium.make`` keeps nothing in the
+    session: the defaults are driven, whatever it was given. ``scenario`` (a shipped
+    scenario's name or a ``TrafficScenario``) and ``sim``, when given, are driven whatever the
+    session kept.
 
     Returns the collision rate (share of timesteps in contact, %), the lane shares (``lanes``,
     index 0 = right shoulder ... 4 = left shoulder, named in that order by ``lane_names``:
-    ``sumo_scenarios.scenarios.LANE_NAMES``), and the SUMO settings and start lane driven. It
+    ``sumo_scenarios.scenarios.LANE_NAMES``), and the traffic (``scenario``: the
+    ``TrafficScenario``'s fields, its name among them), SUMO settings and start lane driven. It
     takes this process's one libsumo simulation: a live DrivingEnv must be reset after it.
     """
     from sumo_scenarios.env import DrivingConfig, DrivingEnv
+    from sumo_scenarios.replay import _session_make_settings
+    from sumo_scenarios.scenarios import EVAL, TRAIN, TrafficScenario, get_scenario
     from sumo_scenarios.sim import SimConfig
     from torchcbl import evaluate_policy, load_policy
+    from torchcbl.session import load_config
 
     _check_whole("n_steps", n_steps, 1)  # before the env's own 'max_episode_steps' says it
     if sim is not None and not isinstance(sim, SimConfig):
         raise ValueError(
             f"sim must be a SimConfig (sumo_scenarios.sim), got {type(sim).__name__} {sim!r:.80}"
         )
-    start_lane, taught_sim = _session_settings(Path(session_dir))
-    if sim is None:
-        if taught_sim is not None:
+    if scenario is not None:
+        if not isinstance(scenario, (str, TrafficScenario)):
             raise ValueError(
-                f"{session_dir} was taught on a driving env given its SUMO settings as an "
-                f"object ({taught_sim}), which its config keeps only as text: evaluating it on "
-                "the default SimConfig() would drive other dynamics; pass sim= (a "
-                "sumo_scenarios.sim.SimConfig, as the session was given it) to "
-                "sumo_scenarios.experiment.evaluate_saved_policy in Python (torchcbl evaluate "
-                "has no option for it)"
+                "scenario must be a shipped scenario's name or a TrafficScenario "
+                f"(sumo_scenarios.scenarios), got {type(scenario).__name__} {scenario!r:.80}"
             )
-        sim = SimConfig()
+        traffic = get_scenario(scenario)  # an unknown name: its ValueError names the shipped
+    taught, unknown = _session_make_settings(load_config(Path(session_dir)))
+
+    def refused(setting: str, what: str, keyword: str, kind: str) -> ValueError:
+        return ValueError(
+            f"{session_dir} was taught on {what} as an object it cannot make again: "
+            f"{unknown[setting]}; evaluating it on the defaults would "
+            f"drive {'other traffic' if setting == 'scenario' else 'other dynamics'}; pass "
+            f"{keyword}= ({kind}, as the session was given it) to "
+            "sumo_scenarios.experiment.evaluate_saved_policy in Python (torchcbl evaluate has "
+            "no option for it)"
+        )
+
+    if sim is None:
+        if "sim" in unknown:
+            raise refused("sim", "SUMO settings", "sim", "a sumo_scenarios.sim.SimConfig")
+        sim = taught.get("sim", SimConfig())
+    if scenario is None:
+        if "scenario" in unknown:
+            raise refused(
+                "scenario",
+                "traffic",
+                "scenario",
+                "a shipped scenario's name or a sumo_scenarios.scenarios.TrafficScenario",
+            )
+        try:
+            traffic = get_scenario(taught.get("scenario", "train"))
+        except ValueError as exc:  # a name this version does not ship
+            raise ValueError(
+                f"{session_dir} was taught on traffic this version cannot make ({exc}); pass "
+                "scenario= to sumo_scenarios.experiment.evaluate_saved_policy in Python"
+            ) from None
+        if traffic == TRAIN:  # the experiment's held-out road: the same traffic elsewhere
+            traffic = EVAL
+    start_lane = taught.get("start_lane", 2)
     if seed is None:
         seed = session_eval_segment(session_dir)
         seed = 0 if seed is None else seed
     policy = load_policy(session_dir)
     config = DrivingConfig(
-        scenario="eval", max_episode_steps=n_steps, start_lane=start_lane, sim=sim
+        scenario=traffic, max_episode_steps=n_steps, start_lane=start_lane, sim=sim
     )
     env = DrivingEnv(config)
     try:
@@ -1261,28 +1304,10 @@ def evaluate_saved_policy(
         "collision_pct": 100 * metrics.collision_rate([bool(r.info["contact"]) for r in recs]),
         "lanes": metrics.lane_distribution([int(r.info["lane"]) for r in recs]).tolist(),
         "lane_names": list(LANE_NAMES),
+        "scenario": json.loads(json.dumps(dataclasses.asdict(traffic))),
         "start_lane": config.start_lane,
         "sim": dataclasses.asdict(sim),
     }
-
-
-def _session_settings(session_dir: Path) -> tuple[int, str | None]:
-    """The start lane a driving session's env was made with (2 if it kept none) and the text of
-    its SUMO settings when they were given as an object (``sim`` or ``config``; None if not)."""
-    import re
-
-    from torchcbl.session import _kept_as_repr, load_config
-
-    kwargs = (load_config(session_dir).get("env") or {}).get("kwargs") or {}
-    for name in ("sim", "config"):
-        value = kwargs.get(name)
-        if value is not None:
-            return 2, str(value["repr"]) if _kept_as_repr(value) else repr(value)
-    lane = kwargs.get("start_lane", 2)
-    if _kept_as_repr(lane):  # a numpy int: "np.int64(3)" (numpy 1: "3")
-        found = re.fullmatch(r"(?:\w+(?:\.\w+)*\()?(\d+)\)?", lane["repr"])
-        lane = int(found.group(1)) if found else 2
-    return (lane if isinstance(lane, int) and not isinstance(lane, bool) else 2), None
 
 
 def format_summary(results: dict[str, Any]) -> str:

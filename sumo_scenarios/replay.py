@@ -278,6 +278,51 @@ def replay(
 
 _DRIVING_ID = "torchcbl/Driving-v0"
 
+#: the classes a driving session's make arguments are rebuilt as (env_make_argument)
+_MAKE_CLASSES: dict[str, Any] = {
+    "sumo_scenarios.scenarios:TrafficScenario": TrafficScenario,
+    "sumo_scenarios.sim:SimConfig": SimConfig,
+    "sumo_scenarios.env:DrivingConfig": DrivingConfig,
+}
+
+
+def _session_make_settings(config: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
+    """What a driving session's env was made with: ``(settings, unknown)``, the arguments
+    ``gymnasium.make`` was given (``render_mode`` aside), objects made again
+    (:func:`torchcbl.session.env_make_argument`), a ``DrivingConfig`` (``config=``) as its
+    fields; and, by setting, why one cannot be known (given as an object the session keeps
+    only as text: a session written before 2026-11-27, or an object of another class), in
+    words. A start lane or step cap kept as the text of a numpy int is read as its int."""
+    import re
+
+    from torchcbl.session import env_make_argument
+
+    kwargs = dict((config.get("env") or {}).get("kwargs") or {})
+    kwargs.pop("render_mode", None)  # drawing only: the same traffic either way
+    settings: dict[str, Any] = {}
+    unknown: dict[str, str] = {}
+    for name, value in kwargs.items():
+        as_text = isinstance(value, dict) and set(value) == {"repr"}
+        if as_text and name in ("start_lane", "max_episode_steps"):
+            # a numpy int: "np.int64(3)" (numpy 1: "3")
+            found = re.fullmatch(r"(?:\w+(?:\.\w+)*\()?(\d+)\)?", str(value["repr"]))
+            if found:
+                settings[name] = int(found.group(1))
+                continue
+        try:
+            settings[name] = env_make_argument(config, name, _MAKE_CLASSES)
+        except ValueError as exc:
+            unknown[name] = str(exc)
+    whole = settings.pop("config", None)
+    if isinstance(whole, DrivingConfig):
+        settings.update((f.name, getattr(whole, f.name)) for f in dataclasses.fields(DrivingConfig))
+    elif "config" in unknown:  # none of its settings is known
+        why = unknown.pop("config")
+        unknown.update((f.name, why) for f in dataclasses.fields(DrivingConfig))
+    elif whole is not None:
+        settings["config"] = whole  # not a DrivingConfig: DrivingEnv's to refuse
+    return settings, unknown
+
 
 def session_episodes(
     run_dir: str | Path, *, check: bool | Sequence[int] = False
@@ -288,10 +333,11 @@ def session_episodes(
     ``ConfidentTeacher`` on ``gymnasium.make("torchcbl/Driving-v0", ...)``. Each episode's record
     holds the actions the session executed, its road segment (the ``episode_seed`` of its steps'
     ``info``), its start lane (the lane of its first observation) and the env's settings (what
-    ``gymnasium.make`` was given); its label is ``"<run_dir name>/episode <k>"`` (k: the
-    session's episode number). A step whose action may never have run (a demonstration cut by
-    a crash, ``info["torchcbl_interrupted"]``) is left out, and with it its episode when it was
-    the first.
+    ``gymnasium.make`` was given: a scenario's name, or ``TrafficScenario``, ``SimConfig`` and
+    ``DrivingConfig`` objects, which the session keeps whole); its label is
+    ``"<run_dir name>/episode <k>"`` (k: the session's episode number). A step whose action
+    may never have run (a demonstration cut by a crash, ``info["torchcbl_interrupted"]``) is
+    left out, and with it its episode when it was the first.
 
     Args:
         run_dir: the session directory.
@@ -302,10 +348,11 @@ def session_episodes(
 
     Raises:
         ValueError: not a session of the driving env, made with settings it keeps only as text
-            (an object given to ``gymnasium.make``) or that the env does not take, or
+            (an object given to ``gymnasium.make`` by a session written before 2026-11-27, or
+            one of another class than those above) or that the env does not take, or
             (``check``) a replay that diverges.
     """
-    from torchcbl.session import _kept_as_repr, load_config
+    from torchcbl.session import load_config
     from torchcbl.session import load_records as load_steps
 
     run = Path(run_dir).resolve()  # its name labels the episodes, "." included
@@ -321,18 +368,15 @@ def session_episodes(
             "the driving env made by gymnasium.make replay from their log (the driving "
             "experiment's episodes are in its seed_<k>/episodes.json)"
         )
-    kwargs = dict(env.get("kwargs") or {})
-    kwargs.pop("render_mode", None)  # drawing only: the same traffic either way
-    text = sorted(k for k, v in kwargs.items() if _kept_as_repr(v))
-    if text:
+    kwargs, unknown = _session_make_settings(load_config(run))
+    if unknown:
         raise ValueError(
-            f"{run}: its env was made with {', '.join(text)} given as an object, which the "
-            "session keeps only as text; its episodes cannot be rebuilt (wrap the env in "
-            "EpisodeRecorder to record them)"
+            f"{run}: its episodes cannot be rebuilt: {'; '.join(sorted(set(unknown.values())))}"
+            " (wrap the env in EpisodeRecorder to record them)"
         )
     try:
         config = DrivingConfig(**kwargs)
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:
         raise ValueError(
             f"{run}: its env's settings {kwargs} are not DrivingEnv's ({exc})"
         ) from None

@@ -733,6 +733,59 @@ def test_replay_a_driving_teaching_session_checked_against_its_log(tmp_path, cap
     assert err.count("\n") == 1 and not (tmp_path / "x.gif").exists()
 
 
+def test_a_driving_session_given_its_settings_as_objects_replays_and_evaluates_on_them(
+    tmp_path, capsys
+):
+    """README said a ConfidentTeacher session on gymnasium.make("torchcbl/Driving-v0", ...)
+    replays the same way, but one given a TrafficScenario, a SimConfig or a DrivingConfig was
+    refused ("its episodes cannot be rebuilt"): the session kept them only as text. It keeps
+    them rebuildably now, and its episodes replay (equal to its log) and its policy is
+    evaluated on them; a session written before is refused in one line, as it was."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.env import DrivingConfig
+    from sumo_scenarios.experiment import evaluate_saved_policy
+    from sumo_scenarios.replay import session_episodes
+    from sumo_scenarios.scenarios import TrafficScenario
+    from sumo_scenarios.sim import SimConfig
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, TeachingConfig
+
+    mine = TrafficScenario(name="mine", seed=7, mean_spacing_m=(80, 60, 200))
+    fast = SimConfig(step_length_s=0.1)
+    for name, made in (
+        ("apart", dict(scenario=mine, sim=fast)),
+        ("whole", dict(config=DrivingConfig(scenario=mine, start_lane=3, sim=fast))),
+    ):
+        run = tmp_path / name
+        env = gym.make(sumo_scenarios.ENV_ID, max_episode_steps=8, **made)
+        teacher = make_teacher(0, step_length_s=0.1)
+        with ConfidentTeacher(
+            env, teacher, config=TeachingConfig(max_new=5), run_dir=run, progress=False
+        ) as ct:
+            ct.run(max_steps=12)
+        env.close()
+        episodes = session_episodes(run, check=True)  # each replay equals the log
+        assert [len(e.actions) for e in episodes] == [8, 4]
+        assert {(e.scenario, e.sim) for e in episodes} == {(mine, fast)}
+        assert main(["replay", str(run), "--list"]) == 0, capsys.readouterr().err
+        assert f"{name}/episode 1" in capsys.readouterr().out
+        report = evaluate_saved_policy(run, n_steps=10)
+        assert report["scenario"]["name"] == "mine" and report["sim"] == dataclasses.asdict(fast)
+        assert report["start_lane"] == (3 if name == "whole" else 2)
+        # as a session written before the objects were kept: refused in one line, as before
+        _as_written_before_objects_were_kept(run)
+        assert main(["replay", str(run), "--list"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "given as an object" in err, err
+        assert main(["evaluate", str(run), "--steps", "10"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "given as an object" in err, err
+
+
 def _markdown_tables(text: str) -> dict[str, list[list[list[str]]]]:
     """The tables of a Markdown document by the ``##`` heading they follow (its first word),
     each as rows of cell texts, as markdown-it-py (CommonMark + GFM tables) parses them."""
@@ -952,14 +1005,18 @@ def test_evaluate_drives_a_corridor_session_on_the_map_it_was_taught_on(
     ).close()
     plain = evaluate_saved_policy(tmp_path / "plain", n_steps=5)
     assert plain["map"] == "figure2" and plain["world"]["forward_noise"] == 0.0
-    # a robot given as an object is not kept by the session's config: evaluate says so
-    # instead of driving the default robot
+    # a robot given as an object: kept whole, and driven
     from corridor.world import WorldConfig
 
     env = gym.make("torchcbl/Corridor-v0", world_config=WorldConfig.legged_robot())
     ConfidentTeacher(env, lambda o, i: 0, run_dir=tmp_path / "object", progress=False).run(
         max_steps=3
     ).close()
+    noisy = evaluate_saved_policy(tmp_path / "object", n_steps=5)
+    assert noisy["world"] == dataclasses.asdict(WorldConfig.legged_robot())
+    # a session written before objects were kept whole keeps it only as text: evaluate says so
+    # instead of driving the default robot
+    _as_written_before_objects_were_kept(tmp_path / "object")
     with pytest.raises(ValueError, match="robot given as an object"):
         evaluate_saved_policy(tmp_path / "object", n_steps=5)
     assert main(["evaluate", str(tmp_path / "object")]) == 2
@@ -1033,10 +1090,19 @@ def test_evaluate_drives_a_corridor_session_copied_out_of_its_run_on_its_own_rob
     assert "WorldConfig() (exact motion)" in err and "world_config=" in err
 
 
+def _as_written_before_objects_were_kept(run: Path) -> None:
+    """Make ``run`` as a session written before 2026-11-27, which kept an object given to
+    gymnasium.make only as text (no ``env.kwargs_objects``)."""
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["kwargs_objects"]
+    (run / "config.json").write_text(json.dumps(config))
+
+
 def test_evaluate_of_a_session_it_cannot_rebuild_names_the_python_call(tmp_path, capsys):
-    """A session whose env was given its map, robot or SUMO settings as objects keeps them only
-    as text: `torchcbl evaluate` cannot drive it, and its one line names the function and the
-    keyword that can (it said "pass map_name=", an option the command does not have)."""
+    """A session whose env was given its map, robot or SUMO settings as objects kept them only
+    as text (before 2026-11-27): `torchcbl evaluate` cannot drive it, and its one line names
+    the function and the keyword that can (it said "pass map_name=", an option the command
+    does not have)."""
     import gymnasium as gym
 
     import sumo_scenarios  # noqa: F401  (registers torchcbl/Driving-v0)
@@ -1061,6 +1127,7 @@ def test_evaluate_of_a_session_it_cannot_rebuild_names_the_python_call(tmp_path,
             max_steps=2
         ).close()
         env.close()
+        _as_written_before_objects_were_kept(tmp_path / name)
         capsys.readouterr()
         assert main(["evaluate", str(tmp_path / name)]) == 2
         err = capsys.readouterr().err

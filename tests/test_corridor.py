@@ -447,6 +447,42 @@ def test_a_session_keeps_its_map_and_refuses_another_on_resume(tmp_path):
         evaluate_saved_policy(made, n_steps=3)
 
 
+def test_a_session_made_with_its_map_and_robot_as_objects_is_evaluated_on_them(tmp_path, capsys):
+    """A session of gymnasium.make(ENV_ID, corridor_map=CorridorMap(...),
+    world_config=WorldConfig.legged_robot()), the documented Python way, could not be
+    evaluated: its config kept both only as text, so `torchcbl evaluate` said "taught with a
+    robot given as an object" (exit 2), and evaluate_saved_policy(map_name=<the CorridorMap>)
+    raised TypeError. The session now keeps both rebuildably; evaluate drives them and names
+    them. A session written before (text only) is refused in one line, as it was."""
+    from corridor.experiment import evaluate_saved_policy
+    from torchcbl import ConfidentTeacher
+    from torchcbl.cli import main
+
+    mine = dataclasses.replace(load_map("lshape"), name="mine", start_offset=0.3)
+    robot = WorldConfig.legged_robot()
+    run = tmp_path / "run"
+    env = gym.make(corridor.ENV_ID, corridor_map=mine, world_config=robot)
+    with ConfidentTeacher(env, CorridorExpert(mine), run_dir=run, progress=False) as ct:
+        ct.run(max_steps=12)
+    report = evaluate_saved_policy(run, n_steps=8)
+    assert report["map"] == "mine" and report["map_sha256"] == map_digest(mine)
+    assert report["world"] == dataclasses.asdict(robot)
+    assert evaluate_saved_policy(run, n_steps=8, map_name=mine, world_config=robot) == report
+    assert main(["evaluate", str(run), "--steps", "8"]) == 0
+    assert json.loads(capsys.readouterr().out) == report
+    # the same session as one written before the objects were kept: refused, not guessed
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["kwargs_objects"]
+    (run / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match="a robot given as an object.* pass world_config="):
+        evaluate_saved_policy(run, n_steps=8)
+    with pytest.raises(ValueError, match="a map given as an object.* pass map_name="):
+        evaluate_saved_policy(run, n_steps=8, world_config=robot)
+    assert main(["evaluate", str(run), "--steps", "8"]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert evaluate_saved_policy(run, n_steps=8, map_name=mine, world_config=robot) == report
+
+
 # ---------------------------------------------------------------- env
 def test_check_env_and_registration():
     check_env(CorridorEnv(), skip_render_check=True)

@@ -262,7 +262,7 @@ def _driven(session: Path, n_steps: int, **config) -> dict:
     from sumo_scenarios.env import DrivingConfig, DrivingEnv
     from torchcbl import evaluate_policy, load_policy
 
-    env = DrivingEnv(DrivingConfig(scenario="eval", max_episode_steps=n_steps, **config))
+    env = DrivingEnv(DrivingConfig(**{"scenario": "eval", "max_episode_steps": n_steps, **config}))
     try:
         recs = evaluate_policy(load_policy(session), env, n_steps=n_steps, seed=0)
     finally:
@@ -292,16 +292,85 @@ def test_a_session_is_evaluated_with_the_step_length_and_start_lane_it_was_taugh
 
     fast = SimConfig(step_length_s=0.1)
     _taught(tmp_path / "fast", sim=fast)
-    with pytest.raises(ValueError, match=r"SUMO settings as an object.*step_length_s=0\.1"):
-        evaluate_saved_policy(tmp_path / "fast", n_steps=n)
-    assert main(["evaluate", str(tmp_path / "fast"), "--steps", "10"]) == 2  # one line
-    report = evaluate_saved_policy(tmp_path / "fast", n_steps=n, sim=fast)
+    report = evaluate_saved_policy(tmp_path / "fast", n_steps=n)  # the session keeps its sim
     want = _driven(tmp_path / "fast", n, sim=fast)
     assert report["lanes"] == [want["lanes"].count(k) / n for k in range(5)]
     assert report["collision_pct"] == want["collision_pct"]
     assert report["sim"]["step_length_s"] == 0.1 and report["start_lane"] == 2
+    assert evaluate_saved_policy(tmp_path / "fast", n_steps=n, sim=fast) == report
+    _forget_objects(tmp_path / "fast")  # as a session written before kept them: text only
+    with pytest.raises(ValueError, match=r"SUMO settings as an object.*step_length_s=0\.1"):
+        evaluate_saved_policy(tmp_path / "fast", n_steps=n)
+    assert main(["evaluate", str(tmp_path / "fast"), "--steps", "10"]) == 2  # one line
+    assert evaluate_saved_policy(tmp_path / "fast", n_steps=n, sim=fast) == report
     with pytest.raises(ValueError, match="sim must be a SimConfig"):
         evaluate_saved_policy(tmp_path / "fast", n_steps=n, sim={"step_length_s": 0.1})
+
+
+def _forget_objects(session: Path) -> None:
+    """Make ``session`` as a session written before the make arguments' objects were kept
+    rebuildably: its config keeps them only as text."""
+    config = json.loads((session / "config.json").read_text())
+    del config["env"]["kwargs_objects"]
+    (session / "config.json").write_text(json.dumps(config))
+
+
+def _short(run_dir: Path, **make_kwargs) -> None:
+    """A session of a dozen steps (two refits) on ``gymnasium.make``'s driving env."""
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, TeachingConfig
+
+    env = gym.make(sumo_scenarios.ENV_ID, max_episode_steps=10, **make_kwargs)
+    with ConfidentTeacher(
+        env, make_teacher(0), config=TeachingConfig(max_new=5), run_dir=run_dir, progress=False
+    ) as ct:
+        ct.run(max_steps=12)
+    env.close()
+
+
+def test_a_session_is_evaluated_on_the_traffic_it_was_taught_on(tmp_path, capsys):
+    """A session taught on other traffic (a TrafficScenario of the user's, or the shipped
+    "light" by name) was evaluated on the shipped held-out "eval" traffic without a word, and
+    the JSON did not say which. Its own traffic is now driven and named (the shipped "train"
+    traffic's held-out twin "eval" for a session taught on "train", as before); a session
+    that kept its traffic only as text (written before) is refused in one line unless
+    ``scenario=`` says which to drive."""
+    import dataclasses
+
+    from sumo_scenarios.scenarios import EVAL, LIGHT, TrafficScenario
+    from torchcbl.cli import main
+
+    def named(scenario):  # as the report's JSON holds it
+        return json.loads(json.dumps(dataclasses.asdict(scenario)))
+
+    n = 20
+    mine = TrafficScenario(name="mine", seed=7, mean_spacing_m=(80, 60, 200))
+    _short(tmp_path / "mine", scenario=mine)
+    report = evaluate_saved_policy(tmp_path / "mine", n_steps=n)
+    assert report["scenario"] == named(mine)
+    want = _driven(tmp_path / "mine", n, scenario=mine)
+    assert report["lanes"] == [want["lanes"].count(k) / n for k in range(5)]
+    assert report["collision_pct"] == want["collision_pct"]
+    assert main(["evaluate", str(tmp_path / "mine"), "--steps", str(n)]) == 0
+    assert json.loads(capsys.readouterr().out) == report
+    _short(tmp_path / "light", scenario="light")
+    assert evaluate_saved_policy(tmp_path / "light", n_steps=n)["scenario"] == named(LIGHT)
+    _short(tmp_path / "train")  # the default traffic: its held-out twin, as before
+    assert evaluate_saved_policy(tmp_path / "train", n_steps=n)["scenario"] == named(EVAL)
+    # told which traffic to drive, it drives that
+    other = evaluate_saved_policy(tmp_path / "mine", n_steps=n, scenario="eval")
+    assert other["scenario"] == named(EVAL)
+    with pytest.raises(ValueError, match="scenario must be a shipped scenario's name or a"):
+        evaluate_saved_policy(tmp_path / "mine", n_steps=n, scenario=7)
+    _forget_objects(tmp_path / "mine")
+    with pytest.raises(ValueError, match=r"traffic as an object.*\(TrafficScenario\(name="):
+        evaluate_saved_policy(tmp_path / "mine", n_steps=n)
+    assert main(["evaluate", str(tmp_path / "mine"), "--steps", str(n)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert evaluate_saved_policy(tmp_path / "mine", n_steps=n, scenario=mine) == report
 
 
 def test_a_seed_that_never_reaches_the_target_is_reported_as_such(tmp_path):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import os
 import random
@@ -12,7 +13,9 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -798,3 +801,80 @@ def test_latest_checkpoint_refuses_an_at_most_that_is_no_count(tmp_path):
         run / "checkpoints" / "model-00000002.pt",
     )
     assert latest_checkpoint(run, at_most=0) is None
+
+
+# -- gymnasium.make arguments that are objects -------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class _Reach:
+    """A toy env's settings, a frozen dataclass as the domains' are."""
+
+    n: int = 6
+    start: tuple[int, ...] = (0, 1)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Layout:
+    reach: _Reach
+    name: str = "x"
+
+
+@dataclasses.dataclass
+class _Loose:  # not frozen: it may change after make, so it is kept only as text
+    n: int = 6
+
+
+class _Reacher(gym.Env):
+    """Walk right to the end of ``reach.n`` cells."""
+
+    def __init__(self, reach: _Reach | None = None, layout: Any = None, loose: Any = None):
+        self.reach = reach or _Reach()
+        self.observation_space = gym.spaces.Box(0, self.reach.n, (1,), np.float32)
+        self.action_space = gym.spaces.Discrete(2)
+        self.x = 0.0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.x = float(self.reach.start[0])
+        return np.array([self.x], np.float32), {}
+
+    def step(self, action):
+        self.x = max(0.0, self.x + (1 if action == 1 else -1))
+        done = self.x >= self.reach.n
+        return np.array([self.x], np.float32), float(done), done, False, {}
+
+
+_REACH_ID = "torchcbl_tests/Reacher-v0"
+if _REACH_ID not in gym.registry:
+    gym.register(_REACH_ID, entry_point=_Reacher)
+
+
+def test_a_session_keeps_each_frozen_dataclass_make_argument_rebuildably(tmp_path):
+    """An object given to gymnasium.make was kept only as its repr cut at 200 characters, so
+    nothing could make the session's env again (a domain's evaluate drove other settings or
+    refused). A frozen dataclass is now also kept as {"class", "fields"} (its init fields,
+    nested dataclasses alike), which env_make_argument rebuilds with the classes it is given;
+    the text stays beside it, and the session resumes as before."""
+    from torchcbl.session import env_make_argument
+
+    reach = _Reach(n=4, start=(1, 2))
+    made = dict(reach=reach, layout=_Layout(reach, "mine"), loose=_Loose(3))
+    run = tmp_path / "run"
+    with ConfidentTeacher(
+        gym.make(_REACH_ID, **made), lambda o, i: 1, run_dir=run, progress=False
+    ) as ct:
+        ct.run(max_steps=6)
+    config = load_config(run)
+    assert config["env"]["kwargs"]["reach"]["repr"].startswith("_Reach(n=4")  # as before
+    builders = {f"{__name__}:_Reach": _Reach, f"{__name__}:_Layout": _Layout}
+    assert env_make_argument(config, "reach", builders) == reach
+    assert env_make_argument(config, "layout", builders) == _Layout(reach, "mine")
+    assert env_make_argument(config, "absent", builders, default=7) == 7
+    with pytest.raises(ValueError, match=r"loose given as an object \(_Loose\(n=3\)\), which"):
+        env_make_argument(config, "loose", builders)
+    with pytest.raises(ValueError, match=r"layout given as a .*:_Layout, which .*rebuilds only"):
+        env_make_argument(config, "layout", {f"{__name__}:_Reach": _Reach})
+    ConfidentTeacher.resume(
+        run, gym.make(_REACH_ID, **made), lambda o, i: 1, progress=False
+    ).close()

@@ -804,8 +804,9 @@ def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
     kept_as_repr = sorted(k for k, v in kwargs.items() if _kept_as_repr(v))
     if kept_as_repr:
         raise _UsageError(
-            f"{run_dir}'s env was made with {', '.join(kept_as_repr)} given as an object its "
-            "config does not keep; resume it in Python with ConfidentTeacher.resume and that env"
+            f"{run_dir}'s env was made with {', '.join(kept_as_repr)} given as an object, "
+            "which teach --resume does not make again; resume it in Python with "
+            "ConfidentTeacher.resume and that env"
         )
     made = {k: v for k, v in kwargs.items() if k != "render_mode"}
     cap = env.get("max_episode_steps")  # (None: no cap, or a session too old to keep one)

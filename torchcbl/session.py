@@ -183,7 +183,7 @@ import threading
 import time
 import warnings
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar, overload
@@ -212,6 +212,7 @@ __all__ = [
     "SessionSummary",
     "SessionWriteError",
     "describe",
+    "env_make_argument",
     "latest_checkpoint",
     "load_config",
     "load_corrections",
@@ -691,6 +692,168 @@ def _kept_as_repr(value: Any) -> bool:
     """Whether a stored ``gymnasium.make`` argument is the ``{"repr": ...}`` a session keeps of
     an object JSON cannot hold (see ``ConfidentTeacher``'s env description)."""
     return isinstance(value, dict) and set(value) == {"repr"}
+
+
+#: what :func:`_object_form` gives for a value it cannot keep
+_UNKEPT = object()
+#: the keys of a kept object (config.json's ``env.kwargs_objects``)
+_OBJECT_KEYS = {"class", "fields"}
+
+
+def _object_form(value: Any) -> Any:
+    """A ``gymnasium.make`` argument in a form JSON holds and :func:`env_make_argument`
+    rebuilds: a frozen dataclass as ``{"class": "module:QualName", "fields": {...}}`` (its init
+    fields, each in this form: a nested frozen dataclass alike, a tuple as a list, a path as
+    its str, a numpy number as the number); plain JSON values as they are. ``_UNKEPT`` for
+    anything else (a dataclass that is not frozen may change after make, a non-finite float,
+    an object of another kind), and for a dict of non-str keys or one that reads as a kept
+    object (a dataclass holding one is not kept)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        params = getattr(type(value), "__dataclass_params__", None)
+        if not getattr(params, "frozen", False):
+            return _UNKEPT
+        fields: dict[str, Any] = {}
+        for f in dataclasses.fields(value):
+            if not f.init:  # a cache, or what __post_init__ derives
+                continue
+            kept = _object_form(getattr(value, f.name))
+            if kept is _UNKEPT:
+                return _UNKEPT
+            fields[f.name] = kept
+        return {"class": f"{type(value).__module__}:{type(value).__qualname__}", "fields": fields}
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else _UNKEPT
+    if isinstance(value, os.PathLike) and isinstance(os.fspath(value), str):
+        return os.fspath(value)
+    if isinstance(value, (list, tuple)):
+        items = [_object_form(v) for v in value]
+        return _UNKEPT if any(v is _UNKEPT for v in items) else items
+    if isinstance(value, dict) and set(value) != _OBJECT_KEYS:
+        if not all(isinstance(k, str) for k in value):  # JSON would make them str
+            return _UNKEPT
+        kept_items = {k: _object_form(v) for k, v in value.items()}
+        return _UNKEPT if any(v is _UNKEPT for v in kept_items.values()) else kept_items
+    return _UNKEPT
+
+
+def _classes_in(value: Any, found: dict[str, type]) -> dict[str, type]:
+    """``found`` with the class of each dataclass in ``value`` (nested ones too) by the name
+    :func:`_object_form` keeps it under."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        found[f"{type(value).__module__}:{type(value).__qualname__}"] = type(value)
+        for f in dataclasses.fields(value):
+            _classes_in(getattr(value, f.name), found)
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            _classes_in(v, found)
+    elif isinstance(value, dict):
+        for v in value.values():
+            _classes_in(v, found)
+    return found
+
+
+def _env_objects(kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """config.json's ``env.kwargs_objects``: of ``gymnasium.make``'s arguments, each frozen
+    dataclass in the form :func:`env_make_argument` rebuilds (see :func:`_object_form`), where
+    rebuilding it with its own classes gives an equal object (not so for a field holding a
+    list, which comes back a tuple, or for a class that compares by identity)."""
+    out = {}
+    for name, value in kwargs.items():
+        if not dataclasses.is_dataclass(value) or isinstance(value, type):
+            continue
+        kept = _object_form(value)
+        if kept is _UNKEPT:
+            continue
+        try:
+            same = _rebuild(json.loads(json.dumps(kept)), _classes_in(value, {})) == value
+        except Exception:  # a class that refuses its own fields: kept as text alone
+            same = False
+        if same is True:
+            out[str(name)] = kept
+    return out
+
+
+def _rebuild(form: Any, builders: Mapping[str, Callable[..., Any]]) -> Any:
+    """The value :func:`_object_form` kept as ``form``: a kept object made again by the
+    builder of its class (KeyError naming the class where ``builders`` has none), a JSON
+    array as a tuple (as a frozen dataclass holds a sequence)."""
+    if isinstance(form, dict) and set(form) == _OBJECT_KEYS:
+        build = builders.get(form["class"])
+        if build is None:
+            raise KeyError(form["class"])
+        return build(**{k: _rebuild(v, builders) for k, v in dict(form["fields"]).items()})
+    if isinstance(form, list):
+        return tuple(_rebuild(v, builders) for v in form)
+    if isinstance(form, dict):
+        return {k: _rebuild(v, builders) for k, v in form.items()}
+    return form
+
+
+def env_make_argument(
+    config: Mapping[str, Any],
+    name: str,
+    builders: Mapping[str, Callable[..., Any]],
+    *,
+    default: Any = None,
+) -> Any:
+    """The argument ``name`` that ``gymnasium.make`` was given for a session's env, as the
+    session keeps it: a plain value (a str, number, list or dict) as it is, an object rebuilt.
+
+    A session keeps each argument that is a frozen dataclass (a domain's settings, a
+    ``TrafficScenario`` or ``CorridorMap`` say) as ``{"class": "module:QualName", "fields":
+    {...}}`` in its config's ``env.kwargs_objects`` (its init fields; a nested frozen dataclass
+    alike), beside the shortened text ``env.kwargs`` keeps of it. It is rebuilt by
+    ``builders[class](**fields)``, nested objects first: only the classes named there are
+    made (nothing is imported by name), so a caller passes the classes it takes, e.g.
+    ``{"sumo_scenarios.scenarios:TrafficScenario": TrafficScenario}``.
+
+    Args:
+        config: the session's config (:func:`load_config`).
+        name: the argument's keyword.
+        builders: ``"module:QualName"`` -> the class (or a function of the fields) to make.
+        default: what to return when the env was made without ``name`` (or directly, without
+            ``gymnasium.make``, which keeps no argument).
+
+    Raises:
+        ValueError: the argument was kept only as text (an object that is no frozen dataclass,
+            or one holding a value JSON cannot hold, or any object of a session written before
+            2026-11-27), or as an object of a class ``builders`` does not name, or the class
+            refused its kept fields; the message names the argument and what was kept, in
+            one line.
+    """
+    env = config.get("env") or {}
+    kwargs = env.get("kwargs") or {}
+    if name not in kwargs:
+        return default
+    value = kwargs[name]
+    if not _kept_as_repr(value):
+        return value
+    text = str(value["repr"])
+    form = (env.get("kwargs_objects") or {}).get(name)
+    if not (isinstance(form, dict) and set(form) == _OBJECT_KEYS):
+        raise ValueError(
+            f"its env was made with {name} given as an object ({text}), which its config keeps "
+            "only as text (a frozen dataclass is kept whole since 2026-11-27; another object "
+            "never)"
+        )
+    try:
+        return _rebuild(form, builders)
+    except KeyError as exc:
+        raise ValueError(
+            f"its env was made with {name} given as a {exc.args[0]}, which this rebuilds only "
+            f"as one of {sorted(builders)} ({text})"
+        ) from None
+    except (TypeError, ValueError) as exc:
+        raise ValueError(
+            f"its env was made with {name} given as an object its config keeps as "
+            f"{json.dumps(form)[:300]}, which no longer makes a {form['class']} ({exc})"
+        ) from None
 
 
 # The SIGINT hook the holds install (main thread) and leave in place: outside a hold it hands

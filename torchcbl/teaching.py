@@ -87,6 +87,7 @@ from torchcbl.session import (
     SessionStore,
     _check_new_session_path,
     _check_restorable,
+    _env_objects,
     _InterruptHold,
     _model_args,
     _names_a_session_format,
@@ -871,6 +872,11 @@ class ConfidentTeacher:
         kwargs = _env_kwargs(self.env)
         if kwargs:
             described["kwargs"] = kwargs
+        # beside the text of each argument that is a frozen dataclass, a form it can be made
+        # again from (torchcbl.session.env_make_argument), for a domain's evaluate and replay
+        objects = _env_objects(getattr(getattr(self.env, "spec", None), "kwargs", None) or {})
+        if objects:
+            described["kwargs_objects"] = objects
         # the cap in force (TimeLimit or the env's own; None: none), compared on resume, also
         # for an env made directly (kept only for an env with a gymnasium id before 2026-11-27)
         described["max_episode_steps"] = _episode_cap(self.env)
