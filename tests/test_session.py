@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import collections
 import copy
 import dataclasses
+import enum
 import json
 import os
 import random
@@ -878,3 +880,51 @@ def test_a_session_keeps_each_frozen_dataclass_make_argument_rebuildably(tmp_pat
     ConfidentTeacher.resume(
         run, gym.make(_REACH_ID, **made), lambda o, i: 1, progress=False
     ).close()
+
+
+class _Kind(enum.IntEnum):
+    A = 1
+
+
+@dataclasses.dataclass(frozen=True)
+class _Odd:
+    """Settings the kept form cannot hold as they are: an enum, a namedtuple, a dict holding
+    itself, a long table."""
+
+    kind: Any = None
+    pair: Any = None
+    nest: Any = None
+    table: tuple = ()
+
+
+_Pair = collections.namedtuple("_Pair", "a b")
+
+
+def test_a_make_argument_the_kept_form_cannot_hold_as_it_is_stays_text_only(tmp_path):
+    """The kept form held an IntEnum as its int and a namedtuple as a list (rebuilt equal,
+    so kept, but env_make_argument gave back an int and a tuple: code reading ``.name``
+    broke); a dict holding itself raised RecursionError at the start of the session; a
+    table of a million numbers was kept whole (seconds, megabytes of config.json). Each is
+    now kept as text alone (env_make_argument refuses it in one line), and the session
+    starts."""
+    from torchcbl.session import env_make_argument
+
+    loop: dict = {}
+    loop["x"] = loop
+    made = dict(
+        kind=_Odd(kind=_Kind.A),
+        pair=_Odd(pair=_Pair(1, 2)),
+        nest=_Odd(nest=loop),
+        table=_Odd(table=tuple(range(1_000_000))),
+    )
+    run = tmp_path / "run"
+    env = gym.make(_REACH_ID)
+    env.spec.kwargs.update(made)  # as gymnasium.make keeps them (the env takes none of them)
+    with ConfidentTeacher(env, lambda o, i: 1, run_dir=run, progress=False) as ct:
+        ct.run(max_steps=2)
+    config = load_config(run)
+    assert config["env"].get("kwargs_objects", {}) == {}
+    assert (run / "config.json").stat().st_size < 20_000
+    for name in made:
+        with pytest.raises(ValueError, match=f"{name} given as an object"):
+            env_make_argument(config, name, {f"{__name__}:_Odd": _Odd})

@@ -700,45 +700,65 @@ _UNKEPT = object()
 _OBJECT_KEYS = {"class", "fields"}
 
 
-def _object_form(value: Any) -> Any:
+#: the most values (fields, items, numbers) a kept object holds; a larger one (a table of a
+#: million numbers) is kept as text alone, not as megabytes of config.json
+_KEPT_VALUES = 10_000
+
+
+def _object_form(value: Any, budget: list[int] | None = None) -> Any:
     """A ``gymnasium.make`` argument in a form JSON holds and :func:`env_make_argument`
     rebuilds: a frozen dataclass as ``{"class": "module:QualName", "fields": {...}}`` (its init
     fields, each in this form: a nested frozen dataclass alike, a tuple as a list, a path as
     its str, a numpy number as the number); plain JSON values as they are. ``_UNKEPT`` for
     anything else (a dataclass that is not frozen may change after make, a non-finite float,
-    an object of another kind), and for a dict of non-str keys or one that reads as a kept
-    object (a dataclass holding one is not kept)."""
+    an object of another kind, also one of a subclass of a JSON type, which would come back
+    as that type: an enum, a namedtuple), for a dict of non-str keys or one that reads as a
+    kept object (a dataclass holding one is not kept), and past ``_KEPT_VALUES`` values in
+    all (``budget``, the values left)."""
+    budget = [_KEPT_VALUES] if budget is None else budget
+    budget[0] -= 1
+    if budget[0] < 0:
+        return _UNKEPT
+    kind = type(value)
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        params = getattr(type(value), "__dataclass_params__", None)
+        params = getattr(kind, "__dataclass_params__", None)
         if not getattr(params, "frozen", False):
             return _UNKEPT
         fields: dict[str, Any] = {}
         for f in dataclasses.fields(value):
             if not f.init:  # a cache, or what __post_init__ derives
                 continue
-            kept = _object_form(getattr(value, f.name))
+            kept = _object_form(getattr(value, f.name), budget)
             if kept is _UNKEPT:
                 return _UNKEPT
             fields[f.name] = kept
-        return {"class": f"{type(value).__module__}:{type(value).__qualname__}", "fields": fields}
-    if value is None or isinstance(value, (bool, str)):
+        return {"class": f"{kind.__module__}:{kind.__qualname__}", "fields": fields}
+    if value is None or kind in (bool, str):
         return value
     if isinstance(value, np.bool_):
         return bool(value)
-    if isinstance(value, (int, np.integer)):
+    if kind is int or isinstance(value, np.integer):
         return int(value)
-    if isinstance(value, (float, np.floating)):
+    if kind is float or isinstance(value, np.floating):
         return float(value) if np.isfinite(value) else _UNKEPT
     if isinstance(value, os.PathLike) and isinstance(os.fspath(value), str):
         return os.fspath(value)
-    if isinstance(value, (list, tuple)):
-        items = [_object_form(v) for v in value]
-        return _UNKEPT if any(v is _UNKEPT for v in items) else items
-    if isinstance(value, dict) and set(value) != _OBJECT_KEYS:
-        if not all(isinstance(k, str) for k in value):  # JSON would make them str
+    if kind in (list, tuple):
+        items = []
+        for v in value:
+            items.append(_object_form(v, budget))
+            if items[-1] is _UNKEPT:
+                return _UNKEPT
+        return items
+    if kind is dict and set(value) != _OBJECT_KEYS:
+        if not all(type(k) is str for k in value):  # JSON would make them str
             return _UNKEPT
-        kept_items = {k: _object_form(v) for k, v in value.items()}
-        return _UNKEPT if any(v is _UNKEPT for v in kept_items.values()) else kept_items
+        kept_items = {}
+        for k, v in value.items():
+            kept_items[k] = _object_form(v, budget)
+            if kept_items[k] is _UNKEPT:
+                return _UNKEPT
+        return kept_items
     return _UNKEPT
 
 
@@ -767,13 +787,13 @@ def _env_objects(kwargs: Mapping[str, Any]) -> dict[str, Any]:
     for name, value in kwargs.items():
         if not dataclasses.is_dataclass(value) or isinstance(value, type):
             continue
-        kept = _object_form(value)
-        if kept is _UNKEPT:
-            continue
         try:
+            kept = _object_form(value)
+            if kept is _UNKEPT:
+                continue
             same = _rebuild(json.loads(json.dumps(kept)), _classes_in(value, {})) == value
-        except Exception:  # a class that refuses its own fields: kept as text alone
-            same = False
+        except Exception:  # a class that refuses its own fields, a dict holding itself
+            same = False  # (RecursionError): kept as text alone
         if same is True:
             out[str(name)] = kept
     return out
