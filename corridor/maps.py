@@ -74,14 +74,16 @@ class CorridorMap:
         description: free text.
     """
 
-    name: str
+    # the name and description change nothing the robot drives (map_digest leaves them out):
+    # a session resumes on the same map under another name (torchcbl.session.COMPARE_ON_RESUME)
+    name: str = field(metadata={"torchcbl.compare_on_resume": False})
     corridor_width: float
     nodes: Mapping[str, tuple[float, float]]
     corridors: tuple[tuple[str, str], ...]
     route: tuple[str, ...]
     start_offset: float = 0.2
     grid: float = 0.1
-    description: str = ""
+    description: str = field(default="", metadata={"torchcbl.compare_on_resume": False})
     # init=False: dataclasses.replace(m, route=...) builds a fresh, empty cache instead of
     # sharing (and silently reusing) the original map's walls and route.
     _cache: dict[str, Any] = field(

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -162,7 +162,9 @@ class TrafficScenario:
             ``ahead_m``.
     """
 
-    name: str
+    # the name changes nothing the traffic does: a session resumes on the same traffic under
+    # another name (torchcbl.session.COMPARE_ON_RESUME)
+    name: str = field(metadata={"torchcbl.compare_on_resume": False})
     seed: int
     speed_ranges_mph: tuple[tuple[float, float], ...] = ((20.0, 30.0), (25.0, 35.0), (30.0, 40.0))
     mean_spacing_m: tuple[float, float, float] = (40.0, 31.0, 120.0)

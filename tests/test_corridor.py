@@ -483,6 +483,45 @@ def test_a_session_made_with_its_map_and_robot_as_objects_is_evaluated_on_them(t
     assert evaluate_saved_policy(run, n_steps=8, map_name=mine, world_config=robot) == report
 
 
+def test_a_session_made_with_its_robot_as_an_object_refuses_another_robot_on_resume(tmp_path):
+    """gymnasium.make(ENV_ID, corridor_map=CorridorMap(...), world_config=WorldConfig(...)):
+    the map's digest was compared on resume (describe_inputs), the robot not at all (kept only
+    as text), so a session taught on the legged robot resumed on the default one without a
+    word. Both objects, kept whole, are now compared: another robot is refused in one line
+    naming world_config, the field and both values, touching no file; the same map under
+    another name or description (the same digest) resumes, as it did."""
+    from torchcbl import ConfidentTeacher, IncompatibleRunDirError
+
+    mine = dataclasses.replace(load_map("lshape"), name="mine")
+    robot = WorldConfig.legged_robot()
+    run = tmp_path / "run"
+    env = gym.make(corridor.ENV_ID, corridor_map=mine, world_config=robot)
+    with ConfidentTeacher(env, CorridorExpert(mine), run_dir=run, progress=False) as ct:
+        ct.run(max_steps=4)
+
+    def files() -> dict[str, tuple[int, bytes]]:
+        return {
+            str(p): (p.stat().st_mtime_ns, p.read_bytes()) for p in run.rglob("*") if p.is_file()
+        }
+
+    before = files()
+    other = dataclasses.replace(robot, forward_noise=0.2)
+    env = gym.make(corridor.ENV_ID, corridor_map=mine, world_config=other)
+    with pytest.raises(IncompatibleRunDirError) as err:
+        ConfidentTeacher.resume(run, env, CorridorExpert(mine), progress=False)
+    msg = str(err.value)
+    assert "world_config" in msg and "forward_noise" in msg and "(0.1, 0.2)" in msg, msg
+    assert "\n" not in msg and files() == before
+    renamed = dataclasses.replace(mine, name="other", description="the same corridors")
+    for same in (mine, renamed):
+        env = gym.make(corridor.ENV_ID, corridor_map=same, world_config=robot)
+        ConfidentTeacher.resume(run, env, CorridorExpert(same), progress=False).close()
+    moved = dataclasses.replace(mine, start_offset=0.3)  # another map: refused, as it was
+    env = gym.make(corridor.ENV_ID, corridor_map=moved, world_config=robot)
+    with pytest.raises(IncompatibleRunDirError, match="start_offset.*corridor_map_sha256"):
+        ConfidentTeacher.resume(run, env, CorridorExpert(moved), progress=False)
+
+
 # ---------------------------------------------------------------- env
 def test_check_env_and_registration():
     check_env(CorridorEnv(), skip_render_check=True)

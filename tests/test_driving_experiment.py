@@ -373,6 +373,38 @@ def test_a_session_is_evaluated_on_the_traffic_it_was_taught_on(tmp_path, capsys
     assert evaluate_saved_policy(tmp_path / "mine", n_steps=n, scenario=mine) == report
 
 
+def test_a_session_taught_on_a_traffic_scenario_refuses_another_on_resume(tmp_path):
+    """A TrafficScenario given to gymnasium.make was kept only as its repr, which resume did
+    not compare: a session resumed on other traffic without a word. The session keeps it
+    whole (env.kwargs_objects), and a resume on another is refused in one line naming the
+    argument, the field and both values, touching no file; the same traffic resumes, under
+    another name too (a scenario's name changes nothing the env drives)."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.scenarios import TrafficScenario
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, IncompatibleRunDirError
+
+    mine = TrafficScenario(name="mine", seed=7, mean_spacing_m=(80, 60, 200))
+    run = tmp_path / "mine"
+    _short(run, scenario=mine)
+    before = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+    env = gym.make(sumo_scenarios.ENV_ID, max_episode_steps=10, scenario=mine.with_seed(8))
+    with pytest.raises(IncompatibleRunDirError) as err:
+        ConfidentTeacher.resume(run, env, make_teacher(0), progress=False)
+    env.close()
+    msg = str(err.value)
+    assert "scenario" in msg and "seed" in msg and "(7, 8)" in msg and "\n" not in msg, msg
+    assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == before
+    for same in (mine, dataclasses.replace(mine, name="renamed")):
+        env = gym.make(sumo_scenarios.ENV_ID, max_episode_steps=10, scenario=same)
+        ConfidentTeacher.resume(run, env, make_teacher(0), progress=False).close()
+        env.close()
+
+
 def test_a_seed_that_never_reaches_the_target_is_reported_as_such(tmp_path):
     """A seed whose window never reaches the target within max_noninteractive is not counted
     as reaching it at the cap: it is left out of "demonstrations to 80 %" and counted apart,

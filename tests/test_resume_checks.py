@@ -4,6 +4,7 @@ no file of the session."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import json
 import math
@@ -207,6 +208,93 @@ def test_a_session_stored_before_the_class_and_cap_were_kept_compares_what_it_ke
     (run / "config.json").write_text(json.dumps(config))
     _resumes(run, gym.wrappers.TimeLimit(Other(high=10.0), 30))
     _refused(run, Other(), "Box(-10.0")
+
+
+# -- 1b. gymnasium.make's arguments given as objects (frozen dataclasses) ---------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class Start:
+    """Where a Walk starts: a nested frozen dataclass, as DrivingConfig holds a SimConfig."""
+
+    cell: int = 0
+
+
+@dataclasses.dataclass(frozen=True)
+class Course:
+    """A Walk's settings, a frozen dataclass as a domain's are (a TrafficScenario say)."""
+
+    start: Start = Start()
+    slip: float = 0.0
+    # what changes nothing the env does (a CorridorMap's name): not compared on resume
+    label: str = dataclasses.field(default="", metadata={"torchcbl.compare_on_resume": False})
+
+
+class Walk(Line):
+    """Line, made with a Course: its start cell (spaces and cap do not depend on it)."""
+
+    def __init__(self, course: Course = Course(), render_mode: str | None = None) -> None:
+        super().__init__(render_mode=render_mode)
+        self.course = course
+
+    def reset(self, *, seed=None, options=None):
+        gym.Env.reset(self, seed=seed)
+        self.x = float(self.course.start.cell)
+        return np.array([self.x], np.float32), {}
+
+
+WALK_ID = "torchcbl_tests/ResumeWalk-v0"
+if WALK_ID not in gym.registry:
+    gym.register(WALK_ID, entry_point=Walk)
+
+
+def test_a_session_made_with_an_object_argument_refuses_another_object(tmp_path):
+    """An argument gymnasium.make was given as an object was kept only as its repr, which
+    resume did not compare: a session resumed on other settings (a driving session on another
+    TrafficScenario) without a word. Where both the session (env.kwargs_objects) and the
+    given env keep it whole, the two are compared: a difference is refused in one line naming
+    the argument, the field and both values, touching no file."""
+    run = tmp_path / "run"
+    course = Course(Start(3), slip=0.25)
+    _teach(run, gym.make(WALK_ID, course=course))
+    assert load_config(run)["env"]["kwargs_objects"]["course"]["fields"]["slip"] == 0.25
+    msg = _refused(
+        run,
+        gym.make(WALK_ID, course=Course(Start(4), slip=0.25)),
+        "course",
+        "start.cell",
+        "(3, 4)",
+        "Course(start=Start(cell=3)",  # both values, as text
+        "Course(start=Start(cell=4)",
+    )
+    assert "\n" not in msg and "start a new session" in msg
+    _refused(run, gym.make(WALK_ID, course=Course(Start(3), slip=0.5)), "slip", "(0.25, 0.5)")
+    # the same settings resume: an equal object, one differing only where its class says a
+    # field changes nothing, and one of the class as another module defines it
+    _resumes(run, gym.make(WALK_ID, course=Course(Start(3), slip=0.25)))
+    _resumes(run, gym.make(WALK_ID, course=Course(Start(3), slip=0.25, label="mine")))
+    # a class moved to another module since (compared by name, as the env's class is)
+    config = json.loads((run / "config.json").read_text())
+    config["env"]["kwargs_objects"]["course"]["class"] = "pkg.settings:Course"
+    (run / "config.json").write_text(json.dumps(config))
+    _resumes(run, gym.make(WALK_ID, course=course))
+    assert len(load_records(run)) == 12
+
+
+def test_an_object_argument_kept_only_as_text_on_one_side_resumes_as_before(tmp_path):
+    """A session written before env.kwargs_objects existed (or a given object that cannot be
+    kept whole) keeps today's comparison: an argument kept only as text is not compared, so
+    such a session resumes as it did."""
+    run = tmp_path / "run"
+    _teach(run, gym.make(WALK_ID, course=Course(Start(3))))
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["kwargs_objects"]  # as written before 2026-11-27
+    (run / "config.json").write_text(json.dumps(config))
+    _resumes(run, gym.make(WALK_ID, course=Course(Start(4))))
+    # a given object that cannot be kept whole (a list where a tuple is kept) resumes too
+    run2 = tmp_path / "run2"
+    _teach(run2, gym.make(WALK_ID, course=Course(Start(3))))
+    _resumes(run2, gym.make(WALK_ID, course=Course(Start([3]))))
 
 
 # -- 2. a refused resume touches no file ------------------------------------------------------

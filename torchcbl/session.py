@@ -205,6 +205,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.policy import GreedyPolicy
 
 __all__ = [
+    "COMPARE_ON_RESUME",
     "FORMAT",
     "CorruptSessionError",
     "IncompatibleRunDirError",
@@ -813,6 +814,120 @@ def _rebuild(form: Any, builders: Mapping[str, Callable[..., Any]]) -> Any:
     if isinstance(form, dict):
         return {k: _rebuild(v, builders) for k, v in form.items()}
     return form
+
+
+#: a dataclass field whose ``metadata`` holds this key set to False is not compared on resume:
+#: what changes nothing the env does (a ``CorridorMap``'s name, a ``TrafficScenario``'s)
+COMPARE_ON_RESUME = "torchcbl.compare_on_resume"
+
+
+def _is_kept_object(form: Any) -> bool:
+    """Whether ``form`` is a kept object, ``{"class": str, "fields": dict}`` (one edited into
+    another shape is compared as the plain value it is)."""
+    return (
+        isinstance(form, dict)
+        and set(form) == _OBJECT_KEYS
+        and isinstance(form["class"], str)
+        and isinstance(form["fields"], dict)
+    )
+
+
+def _not_compared(value: Any) -> dict[str, set[str]]:
+    """Of each dataclass class in ``value`` (nested ones too), by its qualified name (the
+    part of the kept ``"module:QualName"`` after the colon), the fields its ``metadata`` marks
+    as not compared on resume (:data:`COMPARE_ON_RESUME`)."""
+    out: dict[str, set[str]] = {}
+    for name, cls in _classes_in(value, {}).items():
+        skip = {
+            f.name for f in dataclasses.fields(cls) if f.metadata.get(COMPARE_ON_RESUME) is False
+        }
+        if skip:
+            out[name.rsplit(":", 1)[-1]] = skip
+    return out
+
+
+#: how a field absent on one side of a comparison reads in the message
+_ABSENT = "(absent)"
+
+
+def _form_differences(
+    stored: Any, given: Any, skip: Mapping[str, set[str]], path: str
+) -> list[tuple[str, Any, Any]]:
+    """Where the kept form ``stored`` of a ``gymnasium.make`` argument differs from ``given``'s
+    (both as :func:`_object_form` writes them, read back from JSON): ``(path, stored, given)``
+    for each differing value, ``path`` the argument's name and its fields (``scenario.seed``,
+    ``course.start.cell``, ``nodes.P1[0]``). A kept object's class is compared by its
+    qualified name (one moved to another module is the same); of its fields only those both
+    sides kept, less those its class marks as not compared (``skip``). 2 and 2.0 are equal;
+    True and 1 are not."""
+    if _is_kept_object(stored) and _is_kept_object(given):
+        qualname = stored["class"].rsplit(":", 1)[-1]
+        if qualname != given["class"].rsplit(":", 1)[-1]:
+            return [(path, f"a {stored['class']}", f"a {given['class']}")]
+        out: list[tuple[str, Any, Any]] = []
+        fields, given_fields = stored["fields"], given["fields"]
+        for name, value in fields.items():
+            if name in given_fields and name not in skip.get(qualname, set()):
+                out += _form_differences(value, given_fields[name], skip, f"{path}.{name}")
+        return out
+    if _is_kept_object(stored) or _is_kept_object(given):
+        return [(path, stored, given)]
+    if isinstance(stored, dict) and isinstance(given, dict):
+        out = []
+        for key in list(stored) + [k for k in given if k not in stored]:
+            if key not in stored or key not in given:
+                out.append((f"{path}.{key}", stored.get(key, _ABSENT), given.get(key, _ABSENT)))
+            else:
+                out += _form_differences(stored[key], given[key], skip, f"{path}.{key}")
+        return out
+    if isinstance(stored, list) and isinstance(given, list) and len(stored) == len(given):
+        out = []
+        for k, (a, b) in enumerate(zip(stored, given, strict=True)):
+            out += _form_differences(a, b, skip, f"{path}[{k}]")
+        return out
+    if isinstance(stored, bool) != isinstance(given, bool) or stored != given:
+        return [(path, stored, given)]
+    return []
+
+
+def _shortened(value: Any, width: int = 60) -> Any:
+    """``value`` for a one-line message: a number, bool, None or short str as it is, anything
+    else as its JSON text cut to ``width`` characters."""
+    if value is None or isinstance(value, (bool, int, float)):
+        return value
+    text = value if isinstance(value, str) else json.dumps(value, sort_keys=True)
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def _object_problems(
+    stored_kw: Mapping[str, Any], stored_objects: Any, given: Mapping[str, Any]
+) -> list[str]:
+    """What tells the ``gymnasium.make`` arguments ``given`` (as given: the spec's kwargs)
+    that are frozen dataclasses from the session's, where both the session (config.json's
+    ``env.kwargs_objects``, ``stored_objects``) and the given env keep the argument whole
+    (:func:`_env_objects`): one line per argument naming it, each differing field with both
+    values, and both objects as text (shortened). An argument only one side keeps whole (a
+    session written before 2026-11-27, an object that cannot be kept) is not compared here,
+    as it was not before."""
+    if not isinstance(stored_objects, dict) or not stored_objects:
+        return []
+    given_forms = json.loads(json.dumps(_env_objects(given)))
+    problems = []
+    for name in sorted(set(stored_objects) & set(given_forms)):
+        differ = _form_differences(
+            stored_objects[name], given_forms[name], _not_compared(given[name]), name
+        )
+        if not differ:
+            continue
+        fields = {p: (_shortened(a), _shortened(b)) for p, a, b in differ[:6]}
+        more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
+        kept = stored_kw.get(name)
+        kept_text = kept["repr"] if _kept_as_repr(kept) else json.dumps(stored_objects[name])
+        problems.append(
+            f"env argument {name} (stored, given): {fields}{more}; the session's "
+            f"{_shortened(str(kept_text), 100)}, the given {_shortened(repr(given[name]), 100)}"
+        )
+    return problems
 
 
 def env_make_argument(
@@ -3779,6 +3894,7 @@ def resume_problems(
     model_type: type | None = None,
     env_class: str | None = None,
     env_observation_space: Any = None,
+    env_make_kwargs: Mapping[str, Any] | None = None,
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
@@ -3801,8 +3917,12 @@ def resume_problems(
     session's where the session kept one (sessions written before 2026-11-27 did not);
     ``env_class``: the unwrapped env's class (``module.qualname``), compared by its name with
     the session's where the session kept one, and ``env_observation_space`` (the space),
-    compared with the one the session kept; see :func:`_env_problems`, which compares them
-    whether or not the env was made by ``gymnasium.make``."""
+    compared with the one the session kept; ``env_make_kwargs``: what ``gymnasium.make`` was
+    given, as given (the spec's kwargs, objects whole): of each argument that both it and the
+    session (config.json's ``env.kwargs_objects``, kept since 2026-11-27) keep whole (a frozen
+    dataclass), the kept forms are compared field by field (a field its class marks
+    ``metadata={COMPARE_ON_RESUME: False}`` aside); see :func:`_env_problems`, which compares
+    them whether or not the env was made by ``gymnasium.make``."""
     problems: list[str] = []
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
@@ -3814,7 +3934,13 @@ def resume_problems(
         problems.append(f"env id: the session used {senv['id']!r}, got {env_id!r}")
     elif env_kwargs is not None:  # (another id says enough)
         problems += _env_problems(
-            senv, env_id, env_kwargs, env_max_episode_steps, env_class, env_observation_space
+            senv,
+            env_id,
+            env_kwargs,
+            env_max_episode_steps,
+            env_class,
+            env_observation_space,
+            env_make_kwargs or {},
         )
     kept_inputs = senv.get("inputs")
     if isinstance(kept_inputs, dict) and kept_inputs != (env_inputs or {}):
@@ -3862,6 +3988,7 @@ def _env_problems(
     cap: int | None,
     env_class: str | None,
     space: Any,
+    make_kwargs: Mapping[str, Any] | None = None,
 ) -> list[str]:
     """What tells the given env from the session's (``senv``, config.json's ``"env"``) besides
     its id and sizes, whether either was made by ``gymnasium.make`` or directly: the class of
@@ -3871,8 +3998,11 @@ def _env_problems(
     force (kept for an env with a gymnasium id since 2026-11-26, for every env since
     2026-11-27), and ``gymnasium.make``'s plain arguments (``render_mode`` aside), which an env
     made directly does not show: a session whose env was made with some is refused such an
-    env. Only what the session kept is compared."""
+    env; of its arguments given as frozen dataclasses, those both sides keep whole
+    (``make_kwargs``, as given; :func:`_object_problems`). Only what the session kept is
+    compared."""
     differ: list[str] = []
+    objects: list[str] = []
     stored_kw = senv.get("kwargs") or {}
     kept_class = senv.get("class")
     if kept_class and env_class and kept_class.rsplit(".", 1)[-1] != env_class.rsplit(".", 1)[-1]:
@@ -3903,6 +4033,10 @@ def _env_problems(
             and not _kept_as_repr(given_kw.get(k))
             and stored_kw.get(k) != given_kw.get(k)
         }
+        # an object both sides keep whole (a frozen dataclass: a TrafficScenario, a
+        # CorridorMap): its kept forms, where the text above is not compared
+        objects = _object_problems(stored_kw, senv.get("kwargs_objects"), make_kwargs or {})
+        differ += objects
     unshown = {k: v for k, v in stored_kw.items() if k != "render_mode"}
     if senv.get("id") and not env_id and unshown:
         differ.append(
@@ -3926,6 +4060,11 @@ def _env_problems(
             capped = f", max_episode_steps={-1 if want is None else want}"
         how = "make the env as the session did, "
         how += f"gymnasium.make({senv['id']!r}{capped}, **{stored_kw})"
+        if objects:
+            how += (
+                " with each object as its config.json keeps it in env.kwargs_objects "
+                "(torchcbl.session.env_make_argument makes it again)"
+            )
     else:
         how = "give the env the session was taught in"
         if kept_class:

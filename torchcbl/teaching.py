@@ -927,9 +927,10 @@ class ConfidentTeacher:
             IncompatibleRunDirError: the directory is not a session, or it was written for a
                 different env, model, rule or learning configuration. Of the env its class,
                 observation space and step cap are compared, and where both were made by
-                ``gymnasium.make`` its id and arguments, whether the session's env or the
-                given one was made by ``gymnasium.make`` or directly (a session whose env
-                was made with arguments refuses an env made directly).
+                ``gymnasium.make`` its id and arguments (one given as a frozen dataclass field
+                by field, where both the session and ``env`` keep it whole), whether the
+                session's env or the given one was made by ``gymnasium.make`` or directly (a
+                session whose env was made with arguments refuses an env made directly).
             CorruptSessionError: a file of the session is damaged, its log lacks steps, or its
                 ``-wal`` or journal is missing while ``writer.lock`` says it held steps the log
                 lacks (nothing is changed; the message says how to recover).
@@ -974,6 +975,7 @@ class ConfidentTeacher:
             env_inputs=_env_inputs(env),
             env_class=_env_class(env),
             env_observation_space=env.observation_space,
+            env_make_kwargs=getattr(getattr(env, "spec", None), "kwargs", None) or {},
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
             model_class=None if model is None else type(model).__name__,
