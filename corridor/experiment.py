@@ -79,6 +79,7 @@ from corridor.maps import CorridorMap, available_maps, load_map, map_digest
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
 from torchcbl.evaluation import (
     SEED_RESULT,
+    check_config_fields,
     clear_unfinished,
     figure_style,
     finished_seeds,
@@ -354,23 +355,7 @@ class CorridorExperimentConfig:
         its default."""
         from torchcbl import TeachingConfig
 
-        if not isinstance(data, Mapping):
-            raise ValueError(
-                f"expected a dict of CorridorExperimentConfig's fields (results.json's "
-                f"'config'), got {type(data).__name__}"
-            )
-        if "config" in data and "per_seed" in data:
-            raise ValueError(
-                "expected a dict of CorridorExperimentConfig's fields, got a whole results.json; "
-                'pass its "config": from_dict(results["config"])'
-            )
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - names)
-        if unknown:
-            raise ValueError(
-                f"unknown CorridorExperimentConfig fields {unknown}; its fields: {sorted(names)}"
-            )
-        kwargs = dict(data)
+        kwargs = check_config_fields(cls, data)
         for name, kind in (
             ("world", WorldConfig),
             ("teaching", TeachingConfig),

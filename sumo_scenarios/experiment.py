@@ -58,6 +58,7 @@ from sumo_scenarios.scenarios import LANE_NAMES
 from torchcbl.evaluation import (
     SEED_RESULT,
     _ctrl_c_held,
+    check_config_fields,
     check_workers_start,
     clear_unfinished,
     die_with_parent,
@@ -290,23 +291,7 @@ class DrivingExperimentConfig:
             ValueError: ``data`` is not a dict of this class's fields (a whole results.json,
                 an unknown field), or a value is refused as the constructor refuses it.
         """
-        if not isinstance(data, Mapping):
-            raise ValueError(
-                f"expected a dict of DrivingExperimentConfig's fields (results.json's "
-                f"'config'), got {type(data).__name__}"
-            )
-        if "config" in data and "per_seed" in data:
-            raise ValueError(
-                "expected a dict of DrivingExperimentConfig's fields, got a whole results.json; "
-                'pass its "config": from_dict(results["config"])'
-            )
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - names)
-        if unknown:
-            raise ValueError(
-                f"unknown DrivingExperimentConfig fields {unknown}; its fields: {sorted(names)}"
-            )
-        return cls(**data)  # (lists become tuples in __post_init__)
+        return cls(**check_config_fields(cls, data))  # (lists become tuples in __post_init__)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form, as ``results.json`` and each ``seed_result.json`` keep it

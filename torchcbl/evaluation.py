@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import hashlib
 import inspect
@@ -14,7 +15,7 @@ import shutil
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -25,6 +26,7 @@ import numpy as np
 from torchcbl._durable import write_durably
 
 __all__ = [
+    "check_config_fields",
     "check_workers_start",
     "figure_style",
     "mean_sd",
@@ -583,6 +585,33 @@ def config_differences(stored: Any, wanted: Any, prefix: str = "") -> list[str]:
     if stored == wanted:
         return []
     return [f"{prefix.rstrip('.') or 'config'} ({_short(stored)} there, {_short(wanted)} here)"]
+
+
+def check_config_fields(cls: type, data: Any) -> dict[str, Any]:
+    """``data``, an experiment config's stored form (``results.json``'s ``"config"``), as a
+    new dict, once it is a dict of the fields of ``cls`` (a dataclass): what an experiment
+    config's ``from_dict`` checks before it builds ``cls``.
+
+    Raises:
+        ValueError: ``data`` is not a mapping, is a whole ``results.json`` (its ``"config"``
+            is wanted), or names a field ``cls`` lacks.
+    """
+    name = cls.__name__
+    if not isinstance(data, Mapping):
+        raise ValueError(
+            f"expected a dict of {name}'s fields (results.json's 'config'), got "
+            f"{type(data).__name__}"
+        )
+    if "config" in data and "per_seed" in data:
+        raise ValueError(
+            f"expected a dict of {name}'s fields, got a whole results.json; "
+            'pass its "config": from_dict(results["config"])'
+        )
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ValueError(f"unknown {name} fields {unknown}; its fields: {sorted(names)}")
+    return dict(data)
 
 
 def finished_seeds(
