@@ -2595,6 +2595,26 @@ class _ResetFails(gym.Wrapper):
         raise OSError("simulator not up")
 
 
+def _resumed_or_new(run: Path, world: object) -> str:
+    """What a folder left by a killed or failed start of a session with a prior of 30 labels
+    takes: ``"resumed"`` (that session, of no step, resumes and runs 3 steps) or ``"new"``
+    (a new session starts there, keeping nothing of the killed one, and runs 3 steps)."""
+    if (run / "config.json").exists():
+        with ConfidentTeacher.resume(run, world, oracle(world), progress=False) as ct:
+            assert ct.n_steps == 0 and ct.n_prior == 30
+            ct.run(max_steps=3)
+        outcome = "resumed"
+    else:
+        with ConfidentTeacher(world, oracle(world), run_dir=run, progress=False) as ct:
+            ct.run(max_steps=3)
+        assert "prior" not in S.load_config(run)  # not the killed start's
+        assert not (run / "prior.npz").exists()
+        assert not (run / "checkpoints" / "model-00000000.pt").exists()
+        outcome = "new"
+    assert len(load_records(run)) == 3
+    return outcome
+
+
 def test_a_kill_while_a_failed_first_step_is_undone_leaves_a_session_or_room_for_one(
     tmp_path, monkeypatch
 ):
@@ -2645,19 +2665,7 @@ def test_a_kill_while_a_failed_first_step_is_undone_leaves_a_session_or_room_for
             killed = True
         except EnvError:
             killed = False
-        if (run / "config.json").exists():
-            with ConfidentTeacher.resume(run, world, oracle(world), progress=False) as ct2:
-                assert ct2.n_steps == 0 and ct2.n_prior == 30
-                ct2.run(max_steps=3)
-            outcomes.append("resumed")
-        else:
-            with ConfidentTeacher(world, oracle(world), run_dir=run, progress=False) as ct2:
-                ct2.run(max_steps=3)
-            assert "prior" not in S.load_config(run)  # not the removed session's
-            assert not (run / "prior.npz").exists()
-            assert not (run / "checkpoints" / "model-00000000.pt").exists()
-            outcomes.append("new")
-        assert len(load_records(run)) == 3
+        outcomes.append(_resumed_or_new(run, world))
         if not killed:
             break
     assert not killed and outcomes[0] == "resumed" and outcomes[-1] == "new", outcomes
@@ -2732,19 +2740,7 @@ def test_a_start_killed_at_any_point_leaves_a_session_or_room_for_one(tmp_path, 
             for lock in locks:  # the kernel closes a killed process's files
                 lock.close()
             locks.clear()
-        if (run / "config.json").exists():
-            with ConfidentTeacher.resume(run, world, oracle(world), progress=False) as ct:
-                assert ct.n_steps == 0 and ct.n_prior == 30
-                ct.run(max_steps=3)
-            outcomes.append("resumed")
-        else:
-            with ConfidentTeacher(world, oracle(world), run_dir=run, progress=False) as ct:
-                ct.run(max_steps=3)
-            assert "prior" not in S.load_config(run)  # not the killed start's
-            assert not (run / "prior.npz").exists()
-            assert not (run / "checkpoints" / "model-00000000.pt").exists()
-            outcomes.append("new")
-        assert len(load_records(run)) == 3
+        outcomes.append(_resumed_or_new(run, world))
         if not killed:
             break
     assert not killed and len(outcomes) > 2, outcomes
