@@ -24,6 +24,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from torchcbl._durable import write_durably
+from torchcbl._progress import progress_bar
 
 __all__ = [
     "check_config_fields",
@@ -37,21 +38,6 @@ __all__ = [
 ]
 
 T = TypeVar("T")
-
-
-def progress_bar(*, total: int | None, desc: str, unit: str, show: bool) -> Any:
-    """A tqdm progress bar: a notebook widget where Jupyter can draw one (ipywidgets is
-    installed), else the text bar; with ``show`` False a disabled plain bar, so that nothing
-    (not even tqdm's warning about a missing ipywidgets) is printed."""
-    if show:
-        try:
-            import ipywidgets  # noqa: F401  (tqdm.auto's notebook bar needs it)
-            from tqdm.auto import tqdm
-        except ImportError:
-            from tqdm import tqdm
-    else:
-        from tqdm import tqdm
-    return tqdm(total=total, desc=desc, unit=unit, disable=not show)
 
 
 # matplotlib's style is process-wide (rcParams): contexts entered in several threads at once

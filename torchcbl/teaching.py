@@ -1753,7 +1753,7 @@ class ConfidentTeacher:
         self._auto_steps_streak = 0
         self._auto_episodes_streak = 0
         self.stop_reason = None
-        from torchcbl.evaluation import progress_bar
+        from torchcbl._progress import progress_bar
 
         total = None if cfg.max_steps is None else max(cfg.max_steps - self.n_steps, 0)
         bar = progress_bar(total=total, desc="teaching", unit="step", show=bool(self.progress))
