@@ -901,7 +901,7 @@ def run_experiment(
         "ps_steps_first_within_0.5x_3x": _within(summary["ps_steps_first"]["mean"]),
     }
     results["acceptance"] = acc
-    (run_dir / "summary.txt").write_text(format_summary(results) + "\n")
+    (run_dir / "summary.txt").write_text(format_summary(results) + "\n", encoding="utf-8")
     _figures(config, first, run_dir)
     # last, whole or not at all: a run directory with results.json is a finished one
     write_atomically(run_dir / "results.json", json.dumps(results, indent=2, default=_json_default))
@@ -1105,7 +1105,9 @@ def _taught_with(
     ):
         if in_a_run and path.is_file():
             try:
-                return source, parse(json.loads(path.read_text())["config"][results_key])
+                return source, parse(
+                    json.loads(path.read_text(encoding="utf-8"))["config"][results_key]
+                )
             except (ValueError, KeyError, TypeError):
                 pass  # not an experiment's file: the next place decides
     given = (load_config(session_dir).get("env") or {}).get("kwargs") or {}

@@ -1268,7 +1268,10 @@ def _children(pid):
 
 def _running(pid):
     try:  # a zombie has exited (waiting for whoever adopted it to reap it)
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        return (
+            Path(f"/proc/{pid}/stat").read_text(encoding="utf-8").rsplit(")", 1)[1].split()[0]
+            != "Z"
+        )
     except OSError:
         return False
 

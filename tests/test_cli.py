@@ -9,6 +9,7 @@ import os
 import pty
 import re
 import select
+import shutil
 import subprocess
 import sys
 import termios
@@ -220,29 +221,59 @@ def test_each_readme_placeholder_means_what_the_readme_says(capsys):
     assert "RUN_DIR" not in help_text and "EPISODES.json|SESSION_DIR" in help_text
 
 
-@pytest.fixture(scope="module")
-def corridor_run(tmp_path_factory):
-    """`torchcbl reproduce corridor` into a run directory holding two sessions, at a size that
-    runs in seconds (exact motion, no CBA arm, 2 evaluation circuits, 300 PS steps: the quick
-    reproduction's two seeds took half a minute, which the CLI's readers do not need)."""
-    import torchcbl.cli as cli
+def _tiny_corridor(domain, module, args):
+    """The corridor experiment at a size that runs in seconds (exact motion, no CBA arm, 2
+    evaluation circuits, 300 PS steps), in place of the CLI's ``_experiment_config``."""
     from corridor.baseline import PrioritizedSweepingConfig
     from corridor.experiment import CorridorExperimentConfig
 
-    def tiny(domain, module, args):
-        return CorridorExperimentConfig.exact_motion(
-            seeds=tuple(range(args.seeds)),
-            cba=False,
-            eval_circuits=2,
-            ps=PrioritizedSweepingConfig(max_steps=300),
-        )
+    return CorridorExperimentConfig.exact_motion(
+        seeds=tuple(range(args.seeds)),
+        cba=False,
+        eval_circuits=2,
+        ps=PrioritizedSweepingConfig(max_steps=300),
+    )
+
+
+@pytest.fixture(scope="module")
+def corridor_run(tmp_path_factory):
+    """`torchcbl reproduce corridor` into a run directory holding two sessions, at a size that
+    runs in seconds (:func:`_tiny_corridor`: the quick reproduction's two seeds took half a
+    minute, which the CLI's readers do not need)."""
+    import torchcbl.cli as cli
 
     out = tmp_path_factory.mktemp("cli") / "runs"
     argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(cli, "_experiment_config", tiny)
+        mp.setattr(cli, "_experiment_config", _tiny_corridor)
         assert main([*argv, "--out", str(out)]) == 0
     return out
+
+
+def _stopped_before_results(run: Path, out: Path) -> Path:
+    """``out`` holding a copy of the corridor run of ``run`` (:func:`corridor_run`) as a run
+    stopped after its seeds finished, before its summary, figures and results.json."""
+    kept = shutil.ignore_patterns("results.json", "summary.txt", "*.png")
+    shutil.copytree(run / "corridor", out / "corridor", ignore=kept)
+    return out
+
+
+def test_reproduce_writes_its_files_in_utf8_whatever_the_locale(
+    corridor_run, tmp_path, monkeypatch, ascii_locale
+):
+    """Under LC_ALL=C (an ASCII locale) `torchcbl reproduce corridor` computed every seed, then
+    failed writing summary.txt ('±': UnicodeEncodeError) and wrote no results.json; under
+    latin-1 the summary came out in latin-1. Its files are UTF-8 whatever the locale."""
+    import torchcbl.cli as cli
+
+    out = _stopped_before_results(corridor_run, tmp_path / "runs")
+    monkeypatch.setattr(cli, "_experiment_config", _tiny_corridor)
+    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
+    assert main([*argv, "--resume", "--out", str(out)]) == 0
+    summary = (out / "corridor" / "summary.txt").read_bytes().decode("utf-8")
+    assert "±" in summary
+    assert summary == (corridor_run / "corridor" / "summary.txt").read_text(encoding="utf-8")
+    assert (out / "corridor" / "results.json").is_file()
 
 
 def _session_without_labels(run_dir: Path) -> Path:
@@ -920,7 +951,7 @@ def test_reproduce_resume_continues_a_stopped_run_and_refuses_other_settings(
     (out / "driving" / "results.json").unlink()
     import fcntl
 
-    with open(out / "driving" / ".run.lock", "a") as held:
+    with open(out / "driving" / ".run.lock", "a", encoding="utf-8") as held:
         fcntl.flock(held.fileno(), fcntl.LOCK_EX)
         assert "is being written by another run" in refused(str(out), "--resume")
     assert (out / "driving" / "seed_0" / "seed_result.json").is_file()
@@ -1378,7 +1409,7 @@ def test_teach_on_an_input_that_has_ended_stops_at_its_first_request(
     Python's sys.stdin None) stops teach at the first request it cannot answer, as q would:
     one line saying so, exit code 0, the answers read before it kept."""
     if stdin == "devnull":
-        source = open(os.devnull)  # noqa: SIM115 - closed below
+        source = open(os.devnull, encoding="utf-8")  # noqa: SIM115 - closed below
     elif stdin == "closed-pipe":
         read_fd, write_fd = os.pipe()
         os.write(write_fd, b"w\n")
@@ -1442,8 +1473,8 @@ class _PersonAtATerminal(threading.Thread):
         self.lock = threading.Lock()
         self.done = threading.Event()
         self.before = termios.tcgetattr(self.slave)
-        monkeypatch.setattr(sys, "stdin", open(self.slave, closefd=False))  # noqa: SIM115
-        monkeypatch.setattr(sys, "stdout", open(self.slave, "w", closefd=False))  # noqa: SIM115
+        monkeypatch.setattr(sys, "stdin", open(self.slave, encoding="utf-8", closefd=False))  # noqa: SIM115
+        monkeypatch.setattr(sys, "stdout", open(self.slave, "w", encoding="utf-8", closefd=False))  # noqa: SIM115
         self.start()
 
     def run(self) -> None:
@@ -2098,7 +2129,7 @@ def test_teach_resume_of_a_damaged_session_is_a_one_line_mistake(tmp_path, monke
     _scripted_corridor_person(monkeypatch)
     run = tmp_path / "session"
     assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
-    with open(run / "steps.journal", "a") as journal:
+    with open(run / "steps.journal", "a", encoding="utf-8") as journal:
         journal.write('garbage\n{"x":')
     files = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
     capsys.readouterr()
@@ -2222,7 +2253,9 @@ def test_teach_resume_of_a_session_being_taught_elsewhere_says_what_to_do_at_the
     run = tmp_path / "session"
     assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
     capsys.readouterr()
-    with open(run / "writer.lock", "r+") as other:  # another writer holds the session
+    with open(
+        run / "writer.lock", "r+", encoding="utf-8"
+    ) as other:  # another writer holds the session
         fcntl.flock(other.fileno(), fcntl.LOCK_EX)
         assert main(["teach", "corridor", "--resume", "--run-dir", str(run)]) == 2
     err = capsys.readouterr().err

@@ -869,7 +869,7 @@ def _write_atomic(path: Path, text: str) -> None:
 
 def _load_cell(path: Path) -> dict[str, Any] | None:
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None  # unreadable: recompute
     return data if isinstance(data, dict) and "curve" in data else None

@@ -234,7 +234,7 @@ def _resume_plan(out: Path, plan: list[tuple[str, Any, Any]]) -> dict[str, Any]:
         stored = config.to_dict() if hasattr(config, "to_dict") else dataclasses.asdict(config)
         if (run_dir / "results.json").is_file():
             try:
-                results = json.loads((run_dir / "results.json").read_text())
+                results = json.loads((run_dir / "results.json").read_text(encoding="utf-8"))
                 differ = config_differences(results["config"], plain_json(stored))
             except (OSError, ValueError, KeyError, TypeError) as exc:
                 raise _UsageError(
@@ -552,7 +552,7 @@ def _load_episodes(path: Path) -> list[Any]:
     if not path.is_file():
         raise _UsageError(f"{path} is a directory; {_EPISODES_HINT}")
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise _UsageError(f"{path} is not JSON ({exc}); {_EPISODES_HINT}") from None
     keys = {"scenario", "sim", "episode_seed", "start_lane", "actions"}
@@ -697,7 +697,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
             "torchcbl reproduce (e.g. runs/reproduce/corridor)"
         )
     try:
-        results = json.loads(results_path.read_text())
+        results = json.loads(results_path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise _UsageError(f"{results_path} is not JSON ({exc})") from None
     domain = results.get("domain") if isinstance(results, dict) else None
@@ -742,7 +742,7 @@ def _reproduction_run_dirs(folder: Path) -> list[Path]:
         return found
     for path in sorted(folder.glob("*/results.json")):
         try:
-            results = json.loads(path.read_text())
+            results = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError):  # unreadable, not UTF-8 or not JSON: not a run's
             continue
         domain = results.get("domain") if isinstance(results, dict) else None
