@@ -654,6 +654,35 @@ def test_reproduce_corridor_writes_a_summary_then_plot_and_evaluate_read_it(corr
     assert report["steps"] == 60 and report["circuits_clean"] == report["circuits_completed"] >= 1
 
 
+def test_output_a_terminal_cannot_show_is_escaped_not_a_crash(corridor_run, tmp_path):
+    """On a terminal whose encoding lacks '±' (the summaries) or '≠' (the benchmark's table),
+    printing raised UnicodeEncodeError at the very end of a command (exit 1, the summary.md
+    of a finished reproduction unwritten). Such a character is written escaped (\\xb1)."""
+    out = tmp_path / "runs"
+    (out / "corridor").mkdir(parents=True)
+    shutil.copy(corridor_run / "corridor" / "results.json", out / "corridor")
+    code = (  # the settings of the run it resumes: those of its results.json
+        "import json, sys\n"
+        "import torchcbl.cli as cli\n"
+        "from corridor.experiment import CorridorExperimentConfig as C\n"
+        "stored = json.load(open(sys.argv[1], encoding='utf-8'))['config']\n"
+        "cli._experiment_config = lambda domain, module, args: C.from_dict(stored)\n"
+        "sys.exit(cli.main(sys.argv[2:]))\n"
+    )
+    argv = ["reproduce", "corridor", "--resume", "--no-progress", "--out", str(out)]
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(out / "corridor" / "results.json"), *argv],
+        capture_output=True,
+        env={**os.environ, "PYTHONIOENCODING": "ascii"},
+        timeout=60,
+    )
+    assert done.returncode == 0, done.stderr.decode()
+    assert done.stderr == b""
+    printed = done.stdout.decode("ascii")
+    assert "\\xb1" in printed and "Summary written to" in printed
+    assert "±" in (out / "summary.md").read_text(encoding="utf-8")
+
+
 def test_reproduce_never_overwrites_a_run_directory(tmp_path):
     from torchcbl.cli import _fresh_dir
 

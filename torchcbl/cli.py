@@ -20,6 +20,7 @@ Commands (the options in full: README.md's command block, which a test holds to 
 from __future__ import annotations
 
 import argparse
+import codecs
 import dataclasses
 import importlib.util
 import json
@@ -29,7 +30,7 @@ import shlex
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -1863,8 +1864,17 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     A usage mistake (a path that is not what the command reads, a number out of range) is one
     line on stderr and exit code 2; any other failure is one line and exit code 1 (set
-    ``TORCHCBL_TRACEBACK=1`` to see its traceback instead).
+    ``TORCHCBL_TRACEBACK=1`` to see its traceback instead). What the terminal's encoding
+    cannot show (a summary's '±' under ``LC_ALL=C``) is written escaped, as ``\\xb1``.
     """
+    restore = _escape_what_the_terminal_cannot_show()
+    try:
+        return _main(argv)
+    finally:
+        restore()
+
+
+def _main(argv: Sequence[str] | None) -> int:
     args = _parser().parse_args(argv)
     prog = f"torchcbl {args.command}"
     try:
@@ -1887,6 +1897,54 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 141
     except Exception as exc:
         return _failure(prog, exc)
+
+
+_TOLERANT = "torchcbl.terminal"  # the error handler below, by the name codecs knows it by
+
+
+def _write_what_cannot_be_encoded(exc: UnicodeError) -> tuple[str | bytes, int]:
+    """The codec error handler of ``_TOLERANT``: a character the terminal's encoding lacks
+    ('±', '≠' on an ASCII or latin-1 terminal) is written escaped, as ``\\xb1``; an
+    undecodable byte of a file name (read as a surrogate, as Python reads it under such a
+    locale) is written as that byte, as Python's own "surrogateescape" writes it."""
+    try:
+        return codecs.lookup_error("surrogateescape")(exc)
+    except UnicodeError:
+        return codecs.backslashreplace_errors(exc)
+
+
+codecs.register_error(_TOLERANT, _write_what_cannot_be_encoded)
+
+
+def _escape_what_the_terminal_cannot_show() -> Callable[[], None]:
+    """Make standard output and error write what their encoding cannot show escaped
+    (``_TOLERANT``) where that encoding is not UTF-8: a summary's '±' on an ASCII terminal
+    (``LC_ALL=C``, ``PYTHONIOENCODING=ascii``) raised UnicodeEncodeError at the end of a
+    command. Returns the function that puts their error handlers back."""
+    changed: list[tuple[Any, str]] = []
+    for stream in (sys.stdout, sys.stderr):
+        encoding = getattr(stream, "encoding", None)
+        try:
+            utf8 = codecs.lookup(encoding or "utf-8").name == "utf-8"
+        except LookupError:
+            utf8 = False
+        if utf8 or not hasattr(stream, "reconfigure"):
+            continue
+        try:
+            before = stream.errors
+            stream.reconfigure(errors=_TOLERANT)
+        except (AttributeError, OSError, ValueError):  # closed, or not a text stream of io's
+            continue
+        changed.append((stream, before))
+
+    def restore() -> None:
+        for stream, before in changed:
+            try:
+                stream.reconfigure(errors=before)
+            except (OSError, ValueError):  # closed meanwhile, or its reader went away
+                pass
+
+    return restore
 
 
 def _failure(prog: str, exc: Exception) -> int:
