@@ -654,6 +654,39 @@ def test_reproduce_corridor_writes_a_summary_then_plot_and_evaluate_read_it(corr
     assert report["steps"] == 60 and report["circuits_clean"] == report["circuits_completed"] >= 1
 
 
+def test_a_figure_that_fails_loses_no_result_and_says_how_to_draw_it(
+    corridor_run, tmp_path, monkeypatch, capsys
+):
+    """reproduce computed every seed and only then drew the figures: one that failed
+    (matplotlib missing, a full disk) left no results.json, every seed's work lost to the run.
+    The results and summary are written first; the one line says they are kept, how to draw
+    the figures and how to finish the run."""
+    import torchcbl.cli as cli
+
+    out = _stopped_before_results(corridor_run, tmp_path / "runs")
+    run = out / "corridor"
+    (run / "figure4.png").mkdir()  # no figure can be written in its place
+    monkeypatch.setattr(cli, "_experiment_config", _tiny_corridor)
+    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
+    argv += ["--resume", "--out", str(out)]
+    capsys.readouterr()
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert f"the corridor figures could not be drawn into {run}" in err
+    assert f"its results are kept in {run / 'results.json'}" in err
+    assert f"torchcbl plot {run} once that is fixed; then finish the run: the same command" in err
+    whole = corridor_run / "corridor"
+    kept = json.loads((run / "results.json").read_text(encoding="utf-8"))
+    assert kept["summary"] == json.loads((whole / "results.json").read_text())["summary"]
+    assert (run / "summary.txt").read_text() == (whole / "summary.txt").read_text()
+    (run / "figure4.png").rmdir()
+    assert main(["plot", str(run)]) == 0  # as the line says
+    for name in ("figure3.png", "figure4.png", "map.png"):
+        assert (run / name).read_bytes() == (whole / name).read_bytes(), name
+    assert main(argv) == 0 and (out / "summary.md").is_file()
+
+
 def test_output_a_terminal_cannot_show_is_escaped_not_a_crash(corridor_run, tmp_path):
     """On a terminal whose encoding lacks '±' (the summaries) or '≠' (the benchmark's table),
     printing raised UnicodeEncodeError at the very end of a command (exit 1, the summary.md

@@ -160,7 +160,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
                 flush=True,
             )
             t0 = time.perf_counter()
-            from torchcbl.evaluation import RunDirLockedError
+            from torchcbl.evaluation import FigureError, RunDirLockedError
 
             try:
                 results = module.run_experiment(
@@ -172,6 +172,12 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
                 )
             except RunDirLockedError as exc:
                 raise _UsageError(f"--out {out}: {exc}") from None
+            except FigureError as exc:  # its results are written: say how to go on
+                go_on = "the same command" + ("" if args.resume else " plus --resume --out ")
+                raise FigureError(
+                    f"{exc}; then finish the run: {go_on}" + ("" if args.resume else _shell(out)),
+                    exc.run_dir,
+                ) from exc.__cause__
             elapsed = time.perf_counter() - t0
             summary = module.format_summary(results)
             summaries.append(
