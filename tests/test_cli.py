@@ -384,6 +384,36 @@ def test_a_users_mistakes_get_one_line_and_no_traceback(corridor_run, tmp_path, 
     assert not (tmp_path / "X").exists()  # a refused reproduce leaves no directory behind
 
 
+def test_a_missing_dependency_is_one_line_naming_it_and_its_install(tmp_path, monkeypatch, capsys):
+    """A missing dependency gave 'error: ModuleNotFoundError: No module named ...' (exit 1),
+    and where only a later part needs it (SUMO in reproduce's driving part and a benchmark's
+    driving cells, after the corridor's), only once the work before was done. One line names
+    the package, what needs it and how to install it (exit 2); reproduce and benchmark check
+    before anything runs or is written."""
+    monkeypatch.setitem(sys.modules, "libsumo", None)  # import libsumo: ModuleNotFoundError
+    out, bench = tmp_path / "runs", tmp_path / "bench"
+    for argv in (
+        ["benchmark", "--quick", "--envs", "driving", "--workers", "1", "--out", str(bench)],
+        ["reproduce", "all", "--no-progress", "--out", str(out)],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1, err
+        assert f"torchcbl {argv[0]}: error: libsumo is missing" in err
+        assert "the driving domain" in err and "pip install libsumo eclipse-sumo sumolib" in err
+        assert "bash scripts/setup.sh" in err
+    assert not out.exists() and not bench.exists()
+    # where the command reaches it as it goes: the figures torchcbl plot draws
+    monkeypatch.setitem(sys.modules, "matplotlib.style", None)
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "results.json").write_text(json.dumps({"domain": "corridor", "config": {}}))
+    assert main(["plot", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert "matplotlib is missing" in err and "`pip install matplotlib`" in err
+
+
 def test_an_output_directory_that_is_a_file_is_called_a_file(tmp_path, capsys):
     f = tmp_path / "afile"
     f.write_text("x")

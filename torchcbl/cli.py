@@ -60,8 +60,62 @@ _EPISODES_HINT = (
 )
 
 
+# torchcbl's declared dependencies, by the top-level module a ModuleNotFoundError names: what
+# needs it and the command that installs it (a missing one is one line, exit code 2, as --ray
+# says of a missing Ray)
+_SUMO_INSTALL = "pip install libsumo eclipse-sumo sumolib"
+_DEPENDENCIES = {
+    "libsumo": ("the driving domain (SUMO, run through libsumo)", _SUMO_INSTALL),
+    "sumolib": ("the driving domain (SUMO's network files, read with sumolib)", _SUMO_INSTALL),
+    "sumo": ("the driving domain (SUMO itself, eclipse-sumo)", _SUMO_INSTALL),
+    "pymunk": ("the corridor domain (its physics)", "pip install pymunk"),
+    "gymnasium": ("the environments and the teaching loop", "pip install gymnasium"),
+    "matplotlib": ("the figures and the replay's GIF", "pip install matplotlib"),
+    "imageio": ("the replay's GIF", "pip install imageio"),
+    "torch": ("the model (the Gaussian mixtures)", "pip install torch"),
+    "numpy": ("torchcbl", "pip install numpy"),
+    "tqdm": ("the progress bars", "pip install tqdm"),
+}
+# what a command reaches only as it goes, after work that a missing one would throw away:
+# checked before it starts (reproduce's figures come after every seed, its driving part after
+# the corridor's; a benchmark's driving cells after others, its plot after every cell)
+_REPRODUCE_NEEDS = {
+    "corridor": ("pymunk", "matplotlib"),
+    "driving": ("libsumo", "sumolib", "matplotlib"),
+}
+_BENCHMARK_NEEDS = {"corridor": ("pymunk",), "driving": ("libsumo", "sumolib")}
+
+
 class _UsageError(Exception):
     """A mistake in what the user asked for: reported as one line, exit code 2."""
+
+
+def _missing_dependency(exc: BaseException | None) -> str | None:
+    """The one line for a ModuleNotFoundError of one of torchcbl's dependencies (``exc``, or
+    the exception that caused it: a failed cell's or figure's): the package, what needs it and
+    how to install it; None for any other error."""
+    while exc is not None:
+        if isinstance(exc, ModuleNotFoundError) and exc.name:
+            top = exc.name.partition(".")[0]
+            if top in _DEPENDENCIES:
+                feature, install = _DEPENDENCIES[top]
+                return (
+                    f"{top} is missing ({_one_line(exc)}): {feature} needs it; install it into "
+                    f"this environment with `{install}` (from a checkout, `bash scripts/setup.sh` "
+                    "installs every dependency)"
+                )
+        exc = exc.__cause__
+    return None
+
+
+def _check_importable(modules: Sequence[str]) -> None:
+    """A one-line error, before anything runs, unless each of ``modules`` imports."""
+    for name in dict.fromkeys(modules):
+        try:
+            importlib.import_module(name)
+        except ImportError as exc:
+            line = _missing_dependency(exc) or f"{name} cannot be imported ({_one_line(exc)})"
+            raise _UsageError(line) from None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -137,6 +191,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     for domain in domains:
         module = _experiment_module(domain)
         plan.append((domain, module, _experiment_config(domain, module, args)))
+    _check_importable([m for domain in domains for m in _REPRODUCE_NEEDS[domain]])
     requested = _output_dir(Path(args.out), "--out")
     finished = _resume_plan(requested, plan) if args.resume else {}
     out = requested if args.resume else _fresh_dir(requested)
@@ -1358,6 +1413,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             raise _UsageError(f"--gym-env: {exc}") from None
     if not envs:
         raise _UsageError("no environment: give --envs and/or --gym-env")
+    _check_importable([m for e in env_names for m in _BENCHMARK_NEEDS[e]] + ["matplotlib"])
     seeds = list(range(args.seeds if args.seeds is not None else (3 if args.quick else 10)))
     out = _output_dir(
         Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark")), "--out"
@@ -1417,7 +1473,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                 keep_sessions=args.keep_sessions,
             )
     except (RuntimeError, ValueError, ImportError) as exc:
-        raise _UsageError(str(exc) + _cwd_hint(exc)) from None
+        raise _UsageError(_missing_dependency(exc) or str(exc) + _cwd_hint(exc)) from None
     c1 = os.times()
     cpu = (c1.user - c0.user) + (c1.system - c0.system)
     cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
@@ -1902,7 +1958,11 @@ def _main(argv: Sequence[str] | None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         return 141
     except Exception as exc:
-        return _failure(prog, exc)
+        missing = _missing_dependency(exc)
+        if missing is None or os.environ.get("TORCHCBL_TRACEBACK"):
+            return _failure(prog, exc)
+        print(f"{prog}: error: {missing}", file=sys.stderr)
+        return 2
 
 
 _TOLERANT = "torchcbl.terminal"  # the error handler below, by the name codecs knows it by
