@@ -814,6 +814,36 @@ def test_replay_lists_episodes_and_exports_one_to_gif_and_fcd(tmp_path, capsys):
     assert sorted(tmp_path.iterdir()) == before
 
 
+def test_replay_list_needs_no_simulator_and_a_replay_checks_for_one_first(tmp_path):
+    """`torchcbl replay EPISODES --list` imported the simulator (libsumo) before listing, which
+    needs none: without SUMO, listing a run's episodes failed. It lists them; a replay
+    without SUMO is one line naming it (exit 2), before anything is written."""
+    from sumo_scenarios.replay import EpisodeRecord, save_records
+    from sumo_scenarios.scenarios import get_scenario
+    from sumo_scenarios.sim import SimConfig
+
+    record = EpisodeRecord(get_scenario("eval"), SimConfig(), 0, 2, (0, 1, 0), "demo/a")
+    path = tmp_path / "episodes.json"
+    save_records([record], path)
+    code = (  # libsumo missing: `import libsumo` raises ModuleNotFoundError
+        "import sys\n"
+        "sys.modules['libsumo'] = None\n"
+        "from torchcbl.cli import main\n"
+        "print('exit', main(['replay', sys.argv[1], '--list']), flush=True)\n"
+        "print('exit', main(['replay', sys.argv[1]]), flush=True)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    listed, replayed = done.stdout.split("exit 0\n")
+    assert "demo/a" in listed and "3 steps" in listed, done.stdout
+    assert replayed == "exit 2\n", done.stdout
+    assert done.stderr.startswith("torchcbl replay: error: libsumo is missing")
+    assert done.stderr.count("\n") == 1, done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.json"]
+
+
 def test_replay_a_driving_teaching_session_checked_against_its_log(tmp_path, capsys, monkeypatch):
     import gymnasium as gym
 

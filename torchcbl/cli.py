@@ -670,6 +670,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     # EP.fcd.xml(.gz) -> EP.sumocfg
     cfg = fcd.with_name(fcd.name.removesuffix(".gz").replace(".fcd.xml", "") + ".sumocfg")
     _replay_outputs_spare(path, gif, fcd, cfg)
+    # what the replay needs (listing needs none of it), before anything runs or is written
+    _check_importable(("libsumo", "sumolib", "imageio", "matplotlib"))
     # (_refuse_commas below refuses this too, but names the fcd-replay input, not --fcd)
     if "," in fcd.name:
         raise _UsageError(
@@ -1669,7 +1671,9 @@ def _parser() -> argparse.ArgumentParser:
         metavar="TEXT",
         help="the first episode whose label contains TEXT (instead of --episode)",
     )
-    p.add_argument("--list", action="store_true", help="list the recorded episodes and stop")
+    p.add_argument(
+        "--list", action="store_true", help="list the recorded episodes and stop (needs no SUMO)"
+    )
     p.add_argument(
         "--gif",
         default=None,
