@@ -79,6 +79,7 @@ from corridor.maps import CorridorMap, available_maps, load_map, map_digest
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
 from torchcbl.evaluation import (
     SEED_RESULT,
+    FigureError,
     check_config_fields,
     clear_unfinished,
     figure_style,
@@ -708,7 +709,9 @@ def run_experiment(
     seeds this config does not run.
 
     Raises :class:`torchcbl.evaluation.RunDirLockedError` while another run writes into
-    ``run_dir`` (it holds ``run_dir/.run.lock``).
+    ``run_dir`` (it holds ``run_dir/.run.lock``). results.json is written before the figures:
+    one that fails raises :class:`torchcbl.evaluation.FigureError` (its own exception as the
+    cause) with the results kept; :func:`plot_results` draws the figures again.
     """
     config = config or CorridorExperimentConfig()
     run_dir = Path(run_dir)
@@ -886,10 +889,14 @@ def run_experiment(
         "ps_steps_first_within_0.5x_3x": _within(summary["ps_steps_first"]["mean"]),
     }
     results["acceptance"] = acc
-    (run_dir / "summary.txt").write_text(format_summary(results) + "\n")
-    _figures(config, first, run_dir)
-    # last, whole or not at all: a run directory with results.json is a finished one
+    (run_dir / "summary.txt").write_text(format_summary(results) + "\n", encoding="utf-8")
+    # whole or not at all: a run directory with results.json is a finished one. Written before
+    # the figures, so that a figure that fails loses no computed result (plot_results redraws)
     write_atomically(run_dir / "results.json", json.dumps(results, indent=2, default=_json_default))
+    try:
+        _figures(config, first, run_dir)
+    except Exception as exc:
+        raise FigureError.of("corridor", run_dir, exc) from exc
     return results
 
 
@@ -1090,7 +1097,9 @@ def _taught_with(
     ):
         if in_a_run and path.is_file():
             try:
-                return source, parse(json.loads(path.read_text())["config"][results_key])
+                return source, parse(
+                    json.loads(path.read_text(encoding="utf-8"))["config"][results_key]
+                )
             except (ValueError, KeyError, TypeError):
                 pass  # not an experiment's file: the next place decides
     given = (load_config(session_dir).get("env") or {}).get("kwargs") or {}

@@ -95,7 +95,9 @@ def teach(name: str, seeds: list[int], workers: int, out: Path) -> tuple[Any, li
         plots=False,
         keep_sessions=True,
     )
-    cells = [json.loads(p.read_text()) for p in sorted((out / "cells").glob("*.json"))]
+    cells = [
+        json.loads(p.read_text(encoding="utf-8")) for p in sorted((out / "cells").glob("*.json"))
+    ]
     return spec, [c for c in cells if c["env"] == spec.name and c["seed"] in seeds]
 
 
@@ -276,7 +278,7 @@ def main() -> None:
     line = json.dumps(result)
     print(line)
     if args.json is not None:
-        args.json.write_text(line + "\n")
+        args.json.write_text(line + "\n", encoding="utf-8")
 
 
 if __name__ == "__main__":

@@ -113,7 +113,7 @@ def main() -> None:
     if args.circuits < 2:
         raise SystemExit(f"--circuits must be >= 2 (half fit, half test), got {args.circuits}")
     try:
-        config = json.loads(results.read_text())["config"]
+        config = json.loads(results.read_text(encoding="utf-8"))["config"]
         world = WorldConfig(**config["world"])
         map_name = config["map_name"]
         # the run's threshold, read as the experiment reads it

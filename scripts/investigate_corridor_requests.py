@@ -361,7 +361,9 @@ def main() -> None:
     print(_table(summaries))
     if ns.out:
         Path(ns.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(ns.out).write_text(json.dumps(_no_nan({"summaries": summaries, "runs": all_runs})))
+        Path(ns.out).write_text(
+            json.dumps(_no_nan({"summaries": summaries, "runs": all_runs})), encoding="utf-8"
+        )
     print(
         json.dumps(
             _no_nan(

@@ -150,9 +150,9 @@ def build(out_dir: Path = DATA_DIR) -> Path:
     """
     src = out_dir / "src"
     src.mkdir(parents=True, exist_ok=True)
-    (src / "road.nod.xml").write_text(_NODES.format(length=ROAD_LENGTH_M))
+    (src / "road.nod.xml").write_text(_NODES.format(length=ROAD_LENGTH_M), encoding="utf-8")
     (src / "road.edg.xml").write_text(
-        _EDGES.format(n_lanes=N_LANES, speed=SPEED_LIMIT_MS, width=LANE_WIDTH_M)
+        _EDGES.format(n_lanes=N_LANES, speed=SPEED_LIMIT_MS, width=LANE_WIDTH_M), encoding="utf-8"
     )
     net = out_dir / "road.net.xml"
     exe = _netconvert()
@@ -180,7 +180,7 @@ def build(out_dir: Path = DATA_DIR) -> Path:
         )
     except (OSError, subprocess.CalledProcessError) as exc:
         raise RuntimeError(_failed(exe, exc, net)) from None
-    net.write_text(_reproducible(net.read_text()))
+    net.write_text(_reproducible(net.read_text(encoding="utf-8")), encoding="utf-8")
     return net
 
 

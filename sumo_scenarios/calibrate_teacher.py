@@ -178,7 +178,7 @@ def _read_history(path: Path) -> list[dict[str, Any]]:
     if not path.is_file():
         raise ValueError(f"--history {path} is not a file: expected {what}")
     try:
-        lines = path.read_text().splitlines()
+        lines = path.read_text(encoding="utf-8").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"--history {path} cannot be read ({exc}): expected {what}") from None
     history = []
@@ -299,13 +299,17 @@ def main(argv: list[str] | None = None) -> int:
         spacing = [*base["spacing"][:2], float(rng.choice(spacings))]
         jobs.append((_perturb(base["driver"], rng), spacing, seeds, a.steps))
     kept = f"{a.history} keeps the drivers measured before: run the search again to go on"
-    with _pool("one of the drivers it measures", kept) as pool, a.history.open("a") as f:
+    with (
+        _pool("one of the drivers it measures", kept) as pool,
+        a.history.open("a", encoding="utf-8") as f,
+    ):
         for done in as_completed([pool.submit(_job, job) for job in jobs]):
             f.write(json.dumps(done.result()) + "\n")
             f.flush()
-    for r in sorted([json.loads(x) for x in a.history.read_text().splitlines() if x], key=penalty)[
-        :5
-    ]:
+    for r in sorted(
+        [json.loads(x) for x in a.history.read_text(encoding="utf-8").splitlines() if x],
+        key=penalty,
+    )[:5]:
         print(f"{penalty(r):6.2f}", json.dumps({k: v for k, v in r.items() if k != "driver"}))
     return 0
 

@@ -57,6 +57,7 @@ from sumo_scenarios import metrics
 from sumo_scenarios.scenarios import LANE_NAMES
 from torchcbl.evaluation import (
     SEED_RESULT,
+    FigureError,
     _ctrl_c_held,
     check_config_fields,
     check_workers_start,
@@ -778,7 +779,9 @@ def run_experiment(
     exception is re-raised, with the worker's traceback as its cause.
 
     Raises :class:`torchcbl.evaluation.RunDirLockedError` while another run writes into
-    ``run_dir`` (it holds ``run_dir/.run.lock``).
+    ``run_dir`` (it holds ``run_dir/.run.lock``). results.json is written before the figures:
+    one that fails raises :class:`torchcbl.evaluation.FigureError` (its own exception as the
+    cause) with the results kept; :func:`plot_results` draws the figures again.
     """
     _check_whole("workers", workers, 1)
     if not isinstance(resume, bool):
@@ -958,9 +961,13 @@ def run_experiment(
         "seconds": time.perf_counter() - t0,
         "cpu_seconds": cpu_seconds(),
     }
-    plot_results(results, run_dir)
-    # last, whole or not at all: a run directory with results.json is a finished one
+    # whole or not at all: a run directory with results.json is a finished one. Written before
+    # the figures, so that a figure that fails loses no computed result (plot_results redraws)
     write_atomically(run_dir / "results.json", json.dumps(results, indent=1, default=_plain))
+    try:
+        plot_results(results, run_dir)
+    except Exception as exc:
+        raise FigureError.of("driving", run_dir, exc) from exc
     return results
 
 

@@ -144,7 +144,7 @@ class EpisodeRecord:
 
 def save_records(records: list[EpisodeRecord], path: str | Path) -> None:
     """Write records as one JSON file."""
-    Path(path).write_text(json.dumps([r.to_dict() for r in records]))
+    Path(path).write_text(json.dumps([r.to_dict() for r in records]), encoding="utf-8")
 
 
 def load_records(path: str | Path) -> list[EpisodeRecord]:
@@ -155,7 +155,7 @@ def load_records(path: str | Path) -> list[EpisodeRecord]:
         ValueError: the file is not JSON or not such a list, naming the file.
     """
     try:
-        data = json.loads(Path(path).read_text())
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path} is not JSON ({exc}): expected episode records") from None
     if not isinstance(data, list):
@@ -702,5 +702,5 @@ def write_sumocfg(record: EpisodeRecord, fcd_path: str | Path, path: str | Path)
     </gui_only>
 </configuration>
 """
-    path.write_text(text)
+    path.write_text(text, encoding="utf-8")  # as its XML declaration says
     return path

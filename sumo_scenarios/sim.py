@@ -1,4 +1,6 @@
-"""The SUMO side of the driving domain: the ONLY module that imports libsumo.
+"""The SUMO side of the driving domain: the ONLY module that imports libsumo, as its first
+:class:`HighwaySim` is made (so the settings and records of the driving domain, this module's
+:class:`SimConfig` among them, import without SUMO: listing a run's episodes needs none).
 
 :class:`HighwaySim` runs one straight five-lane edge with background traffic that keeps its lane,
 each car at its own desired speed (20-40 mph) under SUMO's car-following model, and one ego car at
@@ -34,7 +36,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import libsumo
 import numpy as np
 
 from sumo_scenarios.build_network import SPEED_LIMIT_MS
@@ -47,6 +48,19 @@ from sumo_scenarios.scenarios import (
     _is_real,
     data_path,
 )
+
+# the libsumo module, imported by the first HighwaySim (_import_libsumo)
+libsumo: Any = None
+
+
+def _import_libsumo() -> None:
+    """Import libsumo into this module (once): every use of it follows a HighwaySim's making."""
+    global libsumo
+    if libsumo is None:
+        import libsumo as module
+
+        libsumo = module
+
 
 EDGE = "road"
 ROUTE = "road"  # the one route, over EDGE (data/driving.add.xml)
@@ -241,6 +255,7 @@ class HighwaySim:
     """
 
     def __init__(self, scenario: TrafficScenario, config: SimConfig | None = None) -> None:
+        _import_libsumo()
         self.scenario = scenario
         self.config = config or SimConfig()
         # whether libsumo holds this simulation's road; shared with the finaliser (which must

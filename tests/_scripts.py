@@ -66,7 +66,7 @@ def kill_a_worker_when(marker: str) -> None:
     while not Path(marker).exists():
         time.sleep(0.02)
     me = os.getpid()
-    for pid in open(f"/proc/{me}/task/{me}/children").read().split():
+    for pid in open(f"/proc/{me}/task/{me}/children", encoding="utf-8").read().split():
         if b"spawn_main" in open(f"/proc/{pid}/cmdline", "rb").read():
             os.kill(int(pid), signal.SIGKILL)
             return

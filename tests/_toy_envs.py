@@ -245,7 +245,7 @@ def check_corrections_kept(run_dir: Any, side_log: Any) -> tuple[int, int]:
     logged = {c.step: c.action for c in load_corrections(run_dir)}
     given: dict[int, int] = {}
     last_executed = -1
-    for line in open(side_log).read().splitlines():
+    for line in open(side_log, encoding="utf-8").read().splitlines():
         kind, step, action = line.split()
         if kind == "C":
             given[int(step)] = int(action)

@@ -638,10 +638,12 @@ def test_a_failing_cell_is_named_and_the_finished_cells_are_kept(
     (config,) = bm.cell_configs(STRATEGIES[:1], [env], [1])
     text = str(caught.value)
     assert text.startswith(f"cell {bm.cell_key(config)} (env 'toy', strategy 'bc', seed 1) failed")
-    assert "sensor glitch" in text and str(tmp_path / "cells") in text
+    assert "sensor glitch" in text
     assert caught.value.config == config and "sensor glitch" in str(caught.value.__cause__)
     kept = [json.loads(p.read_text())["seed"] for p in (tmp_path / "cells").glob("*.json")]
     assert kept == ([0] if workers == 1 else [])  # the cell before it is kept
+    if kept:  # (none kept: test_a_sweep_that_stops_before_any_cell_finished_says_so)
+        assert f"the 1 finished cell is kept in {tmp_path / 'cells'}" in text
     if workers == 1:  # and at the command line: one line, the cell named
         argv = list(_TOY_SWEEP)
         argv += ["--teacher", "_bench_env:glitchy_teacher", "--strategies", "bc", "--seeds", "2"]
@@ -651,6 +653,41 @@ def test_a_failing_cell_is_named_and_the_finished_cells_are_kept(
         err = capsys.readouterr().err
         assert "(env '_bench_env:BenchCluster-v0', strategy 'bc', seed 1) failed" in err
         assert err.startswith("torchcbl benchmark: error: cell ") and err.count("\n") == 1
+
+
+def test_a_sweep_that_stops_before_any_cell_finished_says_so_and_leaves_no_empty_folder(
+    tmp_path, monkeypatch, capsys
+):
+    """A sweep whose first cell failed said "the cells finished before it are kept in
+    OUT/cells; ... run the same sweep again to compute the rest", though none had finished, and
+    left OUT/cells/ empty behind (so did --ray without Ray). It says that no cell finished, and
+    the folders it made and left empty are gone; an OUT it did not make stays."""
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    env = _env(teacher="_bench_env:glitchy_teacher", budgets=(5,), max_steps=10)
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}" / "out"
+        with pytest.raises(bm.CellError) as caught:
+            bm.run_benchmark(STRATEGIES[:1], [env], [1], out, workers=workers, plots=False)
+        text = str(caught.value)
+        assert "no cell of this sweep has finished (none is kept)" in text, text
+        assert "kept in" not in text and "the rest" not in text
+        assert not (tmp_path / f"w{workers}").exists()
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    with pytest.raises(bm.CellError):
+        bm.run_benchmark(STRATEGIES[:1], [env], [1], mine, workers=1, plots=False)
+    assert mine.is_dir() and list(mine.iterdir()) == []
+    # Ray missing: the same at the command line, one line, nothing left
+    monkeypatch.setitem(sys.modules, "ray", None)
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = [*_TOY_SWEEP, "--teacher", "_bench_env:teacher", "--strategies", "bc"]
+    argv += [*_ONE_TINY_CELL, "--ray"]
+    assert main([*argv, "--out", str(tmp_path / "ray" / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "Ray is not installed" in err and err.count("\n") == 1
+    assert not (tmp_path / "ray").exists()
 
 
 def test_a_teacher_scoring_below_zero_is_not_blamed_on_success_rate(tmp_path, capsys, monkeypatch):
@@ -1268,7 +1305,10 @@ def _children(pid):
 
 def _running(pid):
     try:  # a zombie has exited (waiting for whoever adopted it to reap it)
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        return (
+            Path(f"/proc/{pid}/stat").read_text(encoding="utf-8").rsplit(")", 1)[1].split()[0]
+            != "Z"
+        )
     except OSError:
         return False
 

@@ -9,6 +9,7 @@ import os
 import pty
 import re
 import select
+import shutil
 import subprocess
 import sys
 import termios
@@ -220,29 +221,59 @@ def test_each_readme_placeholder_means_what_the_readme_says(capsys):
     assert "RUN_DIR" not in help_text and "EPISODES.json|SESSION_DIR" in help_text
 
 
-@pytest.fixture(scope="module")
-def corridor_run(tmp_path_factory):
-    """`torchcbl reproduce corridor` into a run directory holding two sessions, at a size that
-    runs in seconds (exact motion, no CBA arm, 2 evaluation circuits, 300 PS steps: the quick
-    reproduction's two seeds took half a minute, which the CLI's readers do not need)."""
-    import torchcbl.cli as cli
+def _tiny_corridor(domain, module, args):
+    """The corridor experiment at a size that runs in seconds (exact motion, no CBA arm, 2
+    evaluation circuits, 300 PS steps), in place of the CLI's ``_experiment_config``."""
     from corridor.baseline import PrioritizedSweepingConfig
     from corridor.experiment import CorridorExperimentConfig
 
-    def tiny(domain, module, args):
-        return CorridorExperimentConfig.exact_motion(
-            seeds=tuple(range(args.seeds)),
-            cba=False,
-            eval_circuits=2,
-            ps=PrioritizedSweepingConfig(max_steps=300),
-        )
+    return CorridorExperimentConfig.exact_motion(
+        seeds=tuple(range(args.seeds)),
+        cba=False,
+        eval_circuits=2,
+        ps=PrioritizedSweepingConfig(max_steps=300),
+    )
+
+
+@pytest.fixture(scope="module")
+def corridor_run(tmp_path_factory):
+    """`torchcbl reproduce corridor` into a run directory holding two sessions, at a size that
+    runs in seconds (:func:`_tiny_corridor`: the quick reproduction's two seeds took half a
+    minute, which the CLI's readers do not need)."""
+    import torchcbl.cli as cli
 
     out = tmp_path_factory.mktemp("cli") / "runs"
     argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(cli, "_experiment_config", tiny)
+        mp.setattr(cli, "_experiment_config", _tiny_corridor)
         assert main([*argv, "--out", str(out)]) == 0
     return out
+
+
+def _stopped_before_results(run: Path, out: Path) -> Path:
+    """``out`` holding a copy of the corridor run of ``run`` (:func:`corridor_run`) as a run
+    stopped after its seeds finished, before its summary, figures and results.json."""
+    kept = shutil.ignore_patterns("results.json", "summary.txt", "*.png")
+    shutil.copytree(run / "corridor", out / "corridor", ignore=kept)
+    return out
+
+
+def test_reproduce_writes_its_files_in_utf8_whatever_the_locale(
+    corridor_run, tmp_path, monkeypatch, ascii_locale
+):
+    """Under LC_ALL=C (an ASCII locale) `torchcbl reproduce corridor` computed every seed, then
+    failed writing summary.txt ('±': UnicodeEncodeError) and wrote no results.json; under
+    latin-1 the summary came out in latin-1. Its files are UTF-8 whatever the locale."""
+    import torchcbl.cli as cli
+
+    out = _stopped_before_results(corridor_run, tmp_path / "runs")
+    monkeypatch.setattr(cli, "_experiment_config", _tiny_corridor)
+    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
+    assert main([*argv, "--resume", "--out", str(out)]) == 0
+    summary = (out / "corridor" / "summary.txt").read_bytes().decode("utf-8")
+    assert "±" in summary
+    assert summary == (corridor_run / "corridor" / "summary.txt").read_text(encoding="utf-8")
+    assert (out / "corridor" / "results.json").is_file()
 
 
 def _session_without_labels(run_dir: Path) -> Path:
@@ -351,6 +382,36 @@ def test_a_users_mistakes_get_one_line_and_no_traceback(corridor_run, tmp_path, 
         prog = "torchcbl" if argv[0] == "frobnicate" else f"torchcbl {argv[0]}"
         assert lines[0].startswith(f"{prog}: error: "), (argv, err)
     assert not (tmp_path / "X").exists()  # a refused reproduce leaves no directory behind
+
+
+def test_a_missing_dependency_is_one_line_naming_it_and_its_install(tmp_path, monkeypatch, capsys):
+    """A missing dependency gave 'error: ModuleNotFoundError: No module named ...' (exit 1),
+    and where only a later part needs it (SUMO in reproduce's driving part and a benchmark's
+    driving cells, after the corridor's), only once the work before was done. One line names
+    the package, what needs it and how to install it (exit 2); reproduce and benchmark check
+    before anything runs or is written."""
+    monkeypatch.setitem(sys.modules, "libsumo", None)  # import libsumo: ModuleNotFoundError
+    out, bench = tmp_path / "runs", tmp_path / "bench"
+    for argv in (
+        ["benchmark", "--quick", "--envs", "driving", "--workers", "1", "--out", str(bench)],
+        ["reproduce", "all", "--no-progress", "--out", str(out)],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1, err
+        assert f"torchcbl {argv[0]}: error: libsumo is missing" in err
+        assert "the driving domain" in err and "pip install libsumo eclipse-sumo sumolib" in err
+        assert "bash scripts/setup.sh" in err
+    assert not out.exists() and not bench.exists()
+    # where the command reaches it as it goes: the figures torchcbl plot draws
+    monkeypatch.setitem(sys.modules, "matplotlib.style", None)
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "results.json").write_text(json.dumps({"domain": "corridor", "config": {}}))
+    assert main(["plot", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert "matplotlib is missing" in err and "`pip install matplotlib`" in err
 
 
 def test_an_output_directory_that_is_a_file_is_called_a_file(tmp_path, capsys):
@@ -623,6 +684,68 @@ def test_reproduce_corridor_writes_a_summary_then_plot_and_evaluate_read_it(corr
     assert report["steps"] == 60 and report["circuits_clean"] == report["circuits_completed"] >= 1
 
 
+def test_a_figure_that_fails_loses_no_result_and_says_how_to_draw_it(
+    corridor_run, tmp_path, monkeypatch, capsys
+):
+    """reproduce computed every seed and only then drew the figures: one that failed
+    (matplotlib missing, a full disk) left no results.json, every seed's work lost to the run.
+    The results and summary are written first; the one line says they are kept, how to draw
+    the figures and how to finish the run."""
+    import torchcbl.cli as cli
+
+    out = _stopped_before_results(corridor_run, tmp_path / "runs")
+    run = out / "corridor"
+    (run / "figure4.png").mkdir()  # no figure can be written in its place
+    monkeypatch.setattr(cli, "_experiment_config", _tiny_corridor)
+    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
+    argv += ["--resume", "--out", str(out)]
+    capsys.readouterr()
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert f"the corridor figures could not be drawn into {run}" in err
+    assert f"its results are kept in {run / 'results.json'}" in err
+    assert f"torchcbl plot {run} once that is fixed; then finish the run: the same command" in err
+    whole = corridor_run / "corridor"
+    kept = json.loads((run / "results.json").read_text(encoding="utf-8"))
+    assert kept["summary"] == json.loads((whole / "results.json").read_text())["summary"]
+    assert (run / "summary.txt").read_text() == (whole / "summary.txt").read_text()
+    (run / "figure4.png").rmdir()
+    assert main(["plot", str(run)]) == 0  # as the line says
+    for name in ("figure3.png", "figure4.png", "map.png"):
+        assert (run / name).read_bytes() == (whole / name).read_bytes(), name
+    assert main(argv) == 0 and (out / "summary.md").is_file()
+
+
+def test_output_a_terminal_cannot_show_is_escaped_not_a_crash(corridor_run, tmp_path):
+    """On a terminal whose encoding lacks '±' (the summaries) or '≠' (the benchmark's table),
+    printing raised UnicodeEncodeError at the very end of a command (exit 1, the summary.md
+    of a finished reproduction unwritten). Such a character is written escaped (\\xb1)."""
+    out = tmp_path / "runs"
+    (out / "corridor").mkdir(parents=True)
+    shutil.copy(corridor_run / "corridor" / "results.json", out / "corridor")
+    code = (  # the settings of the run it resumes: those of its results.json
+        "import json, sys\n"
+        "import torchcbl.cli as cli\n"
+        "from corridor.experiment import CorridorExperimentConfig as C\n"
+        "stored = json.load(open(sys.argv[1], encoding='utf-8'))['config']\n"
+        "cli._experiment_config = lambda domain, module, args: C.from_dict(stored)\n"
+        "sys.exit(cli.main(sys.argv[2:]))\n"
+    )
+    argv = ["reproduce", "corridor", "--resume", "--no-progress", "--out", str(out)]
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(out / "corridor" / "results.json"), *argv],
+        capture_output=True,
+        env={**os.environ, "PYTHONIOENCODING": "ascii"},
+        timeout=60,
+    )
+    assert done.returncode == 0, done.stderr.decode()
+    assert done.stderr == b""
+    printed = done.stdout.decode("ascii")
+    assert "\\xb1" in printed and "Summary written to" in printed
+    assert "±" in (out / "summary.md").read_text(encoding="utf-8")
+
+
 def test_reproduce_never_overwrites_a_run_directory(tmp_path):
     from torchcbl.cli import _fresh_dir
 
@@ -689,6 +812,36 @@ def test_replay_lists_episodes_and_exports_one_to_gif_and_fcd(tmp_path, capsys):
         assert says in err and err.count("\n") == 1, (field, err)
         bad.unlink()
     assert sorted(tmp_path.iterdir()) == before
+
+
+def test_replay_list_needs_no_simulator_and_a_replay_checks_for_one_first(tmp_path):
+    """`torchcbl replay EPISODES --list` imported the simulator (libsumo) before listing, which
+    needs none: without SUMO, listing a run's episodes failed. It lists them; a replay
+    without SUMO is one line naming it (exit 2), before anything is written."""
+    from sumo_scenarios.replay import EpisodeRecord, save_records
+    from sumo_scenarios.scenarios import get_scenario
+    from sumo_scenarios.sim import SimConfig
+
+    record = EpisodeRecord(get_scenario("eval"), SimConfig(), 0, 2, (0, 1, 0), "demo/a")
+    path = tmp_path / "episodes.json"
+    save_records([record], path)
+    code = (  # libsumo missing: `import libsumo` raises ModuleNotFoundError
+        "import sys\n"
+        "sys.modules['libsumo'] = None\n"
+        "from torchcbl.cli import main\n"
+        "print('exit', main(['replay', sys.argv[1], '--list']), flush=True)\n"
+        "print('exit', main(['replay', sys.argv[1]]), flush=True)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    listed, replayed = done.stdout.split("exit 0\n")
+    assert "demo/a" in listed and "3 steps" in listed, done.stdout
+    assert replayed == "exit 2\n", done.stdout
+    assert done.stderr.startswith("torchcbl replay: error: libsumo is missing")
+    assert done.stderr.count("\n") == 1, done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.json"]
 
 
 def test_replay_a_driving_teaching_session_checked_against_its_log(tmp_path, capsys, monkeypatch):
@@ -920,7 +1073,7 @@ def test_reproduce_resume_continues_a_stopped_run_and_refuses_other_settings(
     (out / "driving" / "results.json").unlink()
     import fcntl
 
-    with open(out / "driving" / ".run.lock", "a") as held:
+    with open(out / "driving" / ".run.lock", "a", encoding="utf-8") as held:
         fcntl.flock(held.fileno(), fcntl.LOCK_EX)
         assert "is being written by another run" in refused(str(out), "--resume")
     assert (out / "driving" / "seed_0" / "seed_result.json").is_file()
@@ -1378,7 +1531,7 @@ def test_teach_on_an_input_that_has_ended_stops_at_its_first_request(
     Python's sys.stdin None) stops teach at the first request it cannot answer, as q would:
     one line saying so, exit code 0, the answers read before it kept."""
     if stdin == "devnull":
-        source = open(os.devnull)  # noqa: SIM115 - closed below
+        source = open(os.devnull, encoding="utf-8")  # noqa: SIM115 - closed below
     elif stdin == "closed-pipe":
         read_fd, write_fd = os.pipe()
         os.write(write_fd, b"w\n")
@@ -1442,8 +1595,8 @@ class _PersonAtATerminal(threading.Thread):
         self.lock = threading.Lock()
         self.done = threading.Event()
         self.before = termios.tcgetattr(self.slave)
-        monkeypatch.setattr(sys, "stdin", open(self.slave, closefd=False))  # noqa: SIM115
-        monkeypatch.setattr(sys, "stdout", open(self.slave, "w", closefd=False))  # noqa: SIM115
+        monkeypatch.setattr(sys, "stdin", open(self.slave, encoding="utf-8", closefd=False))  # noqa: SIM115
+        monkeypatch.setattr(sys, "stdout", open(self.slave, "w", encoding="utf-8", closefd=False))  # noqa: SIM115
         self.start()
 
     def run(self) -> None:
@@ -2098,7 +2251,7 @@ def test_teach_resume_of_a_damaged_session_is_a_one_line_mistake(tmp_path, monke
     _scripted_corridor_person(monkeypatch)
     run = tmp_path / "session"
     assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
-    with open(run / "steps.journal", "a") as journal:
+    with open(run / "steps.journal", "a", encoding="utf-8") as journal:
         journal.write('garbage\n{"x":')
     files = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
     capsys.readouterr()
@@ -2222,7 +2375,9 @@ def test_teach_resume_of_a_session_being_taught_elsewhere_says_what_to_do_at_the
     run = tmp_path / "session"
     assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
     capsys.readouterr()
-    with open(run / "writer.lock", "r+") as other:  # another writer holds the session
+    with open(
+        run / "writer.lock", "r+", encoding="utf-8"
+    ) as other:  # another writer holds the session
         fcntl.flock(other.fileno(), fcntl.LOCK_EX)
         assert main(["teach", "corridor", "--resume", "--run-dir", str(run)]) == 2
     err = capsys.readouterr().err

@@ -536,7 +536,7 @@ def test_a_stopped_run_resumes_to_the_results_and_figures_of_a_run_never_stopped
 
     from torchcbl.evaluation import RunDirLockedError
 
-    with open(stopped / ".run.lock", "a") as held:
+    with open(stopped / ".run.lock", "a", encoding="utf-8") as held:
         fcntl.flock(held.fileno(), fcntl.LOCK_EX)
         with pytest.raises(RunDirLockedError, match="is being written by another run"):
             run_experiment(cfg, stopped, workers=1, progress=False, resume=True)

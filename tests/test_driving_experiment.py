@@ -511,6 +511,34 @@ def test_a_stopped_run_resumes_to_the_results_and_figures_of_a_run_never_stopped
     ).read_bytes()
 
 
+def test_a_figure_that_fails_raises_after_the_results_are_written(two_seeds, tmp_path):
+    """The figures were drawn before results.json was written: one that failed (matplotlib
+    missing, a full disk) lost every seed's result to the run. results.json comes first; the
+    error (a FigureError, the figure's own as its cause) says so and how to draw them."""
+    import shutil
+
+    from sumo_scenarios.experiment import plot_results
+    from torchcbl.evaluation import FigureError
+
+    whole, run = two_seeds[1], tmp_path / "run"
+    pngs = sorted(p.name for p in whole.glob("*.png"))
+    shutil.copytree(whole, run)
+    for name in ("results.json", *pngs):
+        (run / name).unlink()
+    (run / pngs[-1]).mkdir()  # no figure can be written in its place
+    cfg = tiny_config(seeds=(1, 0))
+    with pytest.raises(FigureError, match="its results are kept in .*results.json") as caught:
+        run_experiment(cfg, run, workers=1, progress=False, resume=True)
+    assert isinstance(caught.value.__cause__, OSError)
+    assert f"torchcbl plot {run}" in str(caught.value) and caught.value.run_dir == run
+    results = json.loads((run / "results.json").read_text(encoding="utf-8"))
+    assert _untimed(results) == _untimed(json.loads((whole / "results.json").read_text()))
+    (run / pngs[-1]).rmdir()
+    plot_results(results, run)
+    for name in pngs:
+        assert (run / name).read_bytes() == (whole / name).read_bytes(), name
+
+
 @pytest.mark.parametrize("workers", ["2", 2.5, None, 0, True])
 def test_workers_must_be_a_whole_number_of_processes(tmp_path, workers):
     with pytest.raises(ValueError, match=r"workers must be an int >= 1, got "):

@@ -91,7 +91,7 @@ def _teacher(slave: int, **kw) -> TerminalTeacher:
     kw.setdefault("keys", {"w": 0, "up": 0, "a": 1, "left": 1, "d": 2, "right": 2})
     kw.setdefault("action_names", ("stay", "left", "right"))
     kw.setdefault("describe", _describe)
-    out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
+    out = open(slave, "w", encoding="utf-8", closefd=False)  # noqa: SIM115 - lives as long as the pty
     return TerminalTeacher(input=slave, output=out, **kw)
 
 
@@ -614,7 +614,7 @@ def test_a_view_taller_than_the_terminal_says_its_top_is_cut_off(terminal, rows)
     master, slave = terminal
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", rows, 80, 0, 0))
     person = Person(master, slave, [b"w"])
-    out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
+    out = open(slave, "w", encoding="utf-8", closefd=False)  # noqa: SIM115 - lives as long as the pty
     teacher = make_teacher(input=slave, output=out, status="step 1 | demonstrations 1")
     person.start()
     assert teacher(np.array([10.0, -25.0, 25.0, 2.0], dtype=np.float32), {}) == 0
@@ -902,7 +902,7 @@ def test_a_view_wider_than_the_terminal_says_so(terminal, columns):
     master, slave = terminal
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 60, columns, 0, 0))
     person = Person(master, slave, [b"w"])
-    out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
+    out = open(slave, "w", encoding="utf-8", closefd=False)  # noqa: SIM115 - lives as long as the pty
     teacher = make_teacher(input=slave, output=out)
     obs = np.array([10.0, -25.0, 25.0, 0.0], dtype=np.float32)  # the ego on the right shoulder
     person.start()
@@ -936,7 +936,7 @@ def test_waiting_for_a_key_leaves_the_programs_own_signal_handlers_as_they_were(
 
     try:
         person = Person(master, slave, [look_then_press])
-        out = open(slave, "w", closefd=False)  # noqa: SIM115 - lives as long as the pty
+        out = open(slave, "w", encoding="utf-8", closefd=False)  # noqa: SIM115 - lives as long as the pty
         teacher = TerminalTeacher({"w": 0}, ("stay",), input=slave, output=out)
         person.start()
         assert teacher(np.zeros(1), {}) == 0

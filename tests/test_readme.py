@@ -63,7 +63,7 @@ def _section(text: str, heading: str) -> str:
 
 def _anchors(path: Path) -> set[str]:
     """GitHub's anchors of a Markdown file's headings."""
-    headings = re.findall(r"^#+ (.*)$", path.read_text(), re.M)
+    headings = re.findall(r"^#+ (.*)$", path.read_text(encoding="utf-8"), re.M)
     return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-") for h in headings}
 
 

@@ -123,6 +123,17 @@ def test_sumocfg_is_well_formed_whatever_the_label_and_file_names(episode, tmp_p
     assert _fcd(tmp_path / "R&D--ep.rerun.xml").keys() >= _fcd(odd).keys()
 
 
+def test_sumocfg_is_utf8_as_it_declares_whatever_the_locale(episode, tmp_path, ascii_locale):
+    """Its XML declaration says UTF-8, but it was written in the locale's encoding: under
+    LC_ALL=C a label beyond ASCII raised UnicodeEncodeError (after the replay input was
+    written), and under a latin-1 locale the file was latin-1."""
+    rec, fcd, _ = episode
+    rec = dataclasses.replace(rec, label="Straße ± 1")
+    cfg = write_sumocfg(rec, fcd, tmp_path / "ep.sumocfg")
+    assert "Straße ± 1" in cfg.read_bytes().decode("utf-8")
+    ET.parse(cfg)  # as the declaration says
+
+
 def test_sumocfg_names_the_replay_input_with_the_option_every_admitted_sumo_reads(
     episode, tmp_path
 ):

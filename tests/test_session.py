@@ -381,7 +381,7 @@ def _check_nothing_lost(run: Path, side_log: Path) -> int:
     """Every demonstration whose action reached the env is in the log; returns #demos."""
     records = {r.step: r for r in load_records(run)}
     taught, executed = {}, {}
-    for line in side_log.read_text().splitlines():
+    for line in side_log.read_text(encoding="utf-8").splitlines():
         kind, step, action = line.split()
         (taught if kind == "T" else executed)[int(step)] = int(action)
     for step, action in executed.items():

@@ -384,7 +384,7 @@ def _sleep_then_write(path: str) -> None:
     import time
 
     time.sleep(2.0)
-    Path(path).write_text("done")
+    Path(path).write_text("done", encoding="utf-8")
 
 
 def test_worker_pool_stops_its_workers_when_the_block_raises(tmp_path):
@@ -414,7 +414,7 @@ def test_worker_pool_stops_its_workers_when_the_block_raises(tmp_path):
 def _alive(pid: int) -> bool:
     """Whether process ``pid`` still runs (a zombie, dead but not yet reaped, does not)."""
     try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        state = Path(f"/proc/{pid}/stat").read_text(encoding="utf-8").rsplit(")", 1)[1].split()[0]
     except (OSError, IndexError):
         return False
     return state not in ("Z", "X")
@@ -440,7 +440,7 @@ def test_worker_pool_workers_die_with_a_main_process_killed_alone(tmp_path):
         "        os.kill(os.getpid(), 9)\n"
     )
     out = tmp_path / "out.txt"  # not a pipe: a worker left alive would hold it open
-    with open(out, "w") as f:
+    with open(out, "w", encoding="utf-8") as f:
         proc = subprocess.run([sys.executable, str(script)], stdout=f, timeout=60)
     assert proc.returncode == -9
     worker = int(out.read_text().split()[0])

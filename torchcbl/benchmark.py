@@ -869,7 +869,7 @@ def _write_atomic(path: Path, text: str) -> None:
 
 def _load_cell(path: Path) -> dict[str, Any] | None:
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None  # unreadable: recompute
     return data if isinstance(data, dict) and "curve" in data else None
@@ -877,18 +877,36 @@ def _load_cell(path: Path) -> dict[str, Any] | None:
 
 class CellError(RuntimeError):
     """A cell of a sweep failed: the message names the cell (env, strategy, seed and key) and
-    the cause (also ``__cause__``); ``config`` is the cell's configuration. The cells finished
-    before it are kept, so running the same sweep again computes only the rest."""
+    the cause (also ``__cause__``), and says what is kept; ``config`` is the cell's
+    configuration. The cells finished before it are kept, so running the same sweep again
+    computes only the rest."""
 
-    def __init__(self, config: Mapping[str, Any], cause: BaseException, out: Path) -> None:
+    def __init__(
+        self, config: Mapping[str, Any], cause: BaseException, out: Path, kept: int | None = None
+    ) -> None:
+        """``kept``: how many of the sweep's cells are finished and kept in ``out/cells`` (this
+        call's and cached ones); None where it is not known."""
         self.config = dict(config)
         self.key = cell_key(config)
         text = " ".join(str(cause).split()) or type(cause).__name__
+        if kept == 0:
+            held = (
+                "no cell of this sweep has finished (none is kept); fix the cause and run it again"
+            )
+        else:
+            cells = (
+                "the cells finished before it are"
+                if kept is None
+                else (f"the {kept} finished cell{' is' if kept == 1 else 's are'}")
+            )
+            held = (
+                f"{cells} kept in {out / 'cells'}; fix the cause and run the same sweep again to "
+                "compute the rest"
+            )
         super().__init__(
             f"cell {self.key} (env {config['env']['name']!r}, strategy "
             f"{config['strategy']['label']!r}, seed {config['seed']}) failed: "
-            f"{type(cause).__name__}: {text} -- the cells finished before it are kept in "
-            f"{out / 'cells'}; fix the cause and run the same sweep again to compute the rest"
+            f"{type(cause).__name__}: {text} -- {held}"
         )
 
     def __reduce__(self) -> tuple[Any, ...]:
@@ -967,14 +985,21 @@ def _execute(
     done: Callable[[dict[str, Any]], None],
     out: Path,
     sessions: Path | None = None,
+    cached: int = 0,
 ) -> None:
     """Run the cells of ``todo`` and hand each result to ``done`` as it comes; the first cell
     that raises stops the sweep with a :class:`CellError` naming it (any other cell that
-    finished meanwhile is handed to ``done`` first) and stops the other cells (on Ray, their
+    finished meanwhile is handed to ``done`` first) and saying how many cells are kept (the
+    ``cached`` ones and those handed to ``done``), and stops the other cells (on Ray, their
     tasks are cancelled, also on a Ray this sweep did not start). With ``sessions`` (an
     absolute path), each cell writes its teaching session to ``sessions/<key>``."""
     if not todo:
         return
+    kept = [cached]  # the cells in out/cells: the cached ones, then each one done keeps
+
+    def keep(cell: dict[str, Any]) -> None:
+        done(cell)
+        kept[0] += 1
 
     def run_dir(config: Mapping[str, Any]) -> str | None:
         return None if sessions is None else str(sessions / cell_key(config))
@@ -1013,8 +1038,8 @@ def _execute(
                 except Exception as exc:  # a RayTaskError: the cell's own exception is its cause
                     cause = getattr(exc, "cause", None)
                     cause = cause if isinstance(cause, BaseException) else exc
-                    raise CellError(configs[ready[0]], cause, out) from cause
-                done(cell)
+                    raise CellError(configs[ready[0]], cause, out, kept[0]) from cause
+                keep(cell)
         finally:
             if pending:  # the sweep stopped (a CellError, a Ctrl-C): stop the other cells
                 _stop_ray_tasks(ray, pending)
@@ -1026,8 +1051,8 @@ def _execute(
             try:
                 cell = run_cell(c, run_dir=run_dir(c))
             except Exception as exc:
-                raise CellError(c, exc, out) from exc
-            done(cell)
+                raise CellError(c, exc, out, kept[0]) from exc
+            keep(cell)
         return
     import multiprocessing as mp
 
@@ -1048,13 +1073,13 @@ def _execute(
             failed = [f for f in finished if f.exception() is not None]
             for f in finished:  # the cells that finished with a failed one are kept too
                 if f.exception() is None:
-                    done(f.result())
+                    keep(f.result())
             if failed:
                 exc = failed[0].exception()
                 if isinstance(exc, BrokenProcessPool):  # every unfinished cell gets it: the
                     # dead worker's cell is not known, so naming one would blame the wrong one
                     raise exc  # worker_pool says how the worker died
-                raise CellError(futures[failed[0]], exc, out) from exc
+                raise CellError(futures[failed[0]], exc, out, kept[0]) from exc
 
 
 def run_benchmark(
@@ -1146,6 +1171,9 @@ def run_benchmark(
         # them at once. (Files of that name in a directory no sweep wrote are not a sweep's.)
         for name in ("results.json", "learning_curves.png"):
             (out / name).unlink(missing_ok=True)
+    # the folders this sweep makes (cells/, OUT and any missing above it), nearest first: one
+    # that stops before any cell is written leaves none of them behind empty
+    made = [p for p in (out / "cells", out, *out.parents) if not p.exists()]
     (out / "cells").mkdir(parents=True, exist_ok=True)
     configs = cell_configs(strategies, envs, seeds)
     results: dict[str, dict[str, Any]] = {}
@@ -1180,16 +1208,25 @@ def run_benchmark(
             on_cell(cell, False)
 
     n_workers = max(1, int(workers or os.cpu_count() or 1))
-    _execute(
-        todo,
-        workers=n_workers,
-        use_ray=use_ray,
-        ray_address=ray_address,
-        done=done,
-        out=out,
-        # absolute: a worker (a Ray one) may run in another directory
-        sessions=(out / "sessions").resolve() if keep_sessions else None,
-    )
+    try:
+        _execute(
+            todo,
+            workers=n_workers,
+            use_ray=use_ray,
+            ray_address=ray_address,
+            done=done,
+            out=out,
+            # absolute: a worker (a Ray one) may run in another directory
+            sessions=(out / "sessions").resolve() if keep_sessions else None,
+            cached=len(results),
+        )
+    except BaseException:
+        for folder in made:  # those left empty (no cell, no session written into them)
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
     cells = [results[cell_key(c)] for c in configs]
     summary = summarize(cells, envs=[e.name for e in envs], strategies=titles)
     summary["sweep"] = {

@@ -20,6 +20,7 @@ Commands (the options in full: README.md's command block, which a test holds to 
 from __future__ import annotations
 
 import argparse
+import codecs
 import dataclasses
 import importlib.util
 import json
@@ -29,7 +30,7 @@ import shlex
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -59,8 +60,62 @@ _EPISODES_HINT = (
 )
 
 
+# torchcbl's declared dependencies, by the top-level module a ModuleNotFoundError names: what
+# needs it and the command that installs it (a missing one is one line, exit code 2, as --ray
+# says of a missing Ray)
+_SUMO_INSTALL = "pip install libsumo eclipse-sumo sumolib"
+_DEPENDENCIES = {
+    "libsumo": ("the driving domain (SUMO, run through libsumo)", _SUMO_INSTALL),
+    "sumolib": ("the driving domain (SUMO's network files, read with sumolib)", _SUMO_INSTALL),
+    "sumo": ("the driving domain (SUMO itself, eclipse-sumo)", _SUMO_INSTALL),
+    "pymunk": ("the corridor domain (its physics)", "pip install pymunk"),
+    "gymnasium": ("the environments and the teaching loop", "pip install gymnasium"),
+    "matplotlib": ("the figures and the replay's GIF", "pip install matplotlib"),
+    "imageio": ("the replay's GIF", "pip install imageio"),
+    "torch": ("the model (the Gaussian mixtures)", "pip install torch"),
+    "numpy": ("torchcbl", "pip install numpy"),
+    "tqdm": ("the progress bars", "pip install tqdm"),
+}
+# what a command reaches only as it goes, after work that a missing one would throw away:
+# checked before it starts (reproduce's figures come after every seed, its driving part after
+# the corridor's; a benchmark's driving cells after others, its plot after every cell)
+_REPRODUCE_NEEDS = {
+    "corridor": ("pymunk", "matplotlib"),
+    "driving": ("libsumo", "sumolib", "matplotlib"),
+}
+_BENCHMARK_NEEDS = {"corridor": ("pymunk",), "driving": ("libsumo", "sumolib")}
+
+
 class _UsageError(Exception):
     """A mistake in what the user asked for: reported as one line, exit code 2."""
+
+
+def _missing_dependency(exc: BaseException | None) -> str | None:
+    """The one line for a ModuleNotFoundError of one of torchcbl's dependencies (``exc``, or
+    the exception that caused it: a failed cell's or figure's): the package, what needs it and
+    how to install it; None for any other error."""
+    while exc is not None:
+        if isinstance(exc, ModuleNotFoundError) and exc.name:
+            top = exc.name.partition(".")[0]
+            if top in _DEPENDENCIES:
+                feature, install = _DEPENDENCIES[top]
+                return (
+                    f"{top} is missing ({_one_line(exc)}): {feature} needs it; install it into "
+                    f"this environment with `{install}` (from a checkout, `bash scripts/setup.sh` "
+                    "installs every dependency)"
+                )
+        exc = exc.__cause__
+    return None
+
+
+def _check_importable(modules: Sequence[str]) -> None:
+    """A one-line error, before anything runs, unless each of ``modules`` imports."""
+    for name in dict.fromkeys(modules):
+        try:
+            importlib.import_module(name)
+        except ImportError as exc:
+            line = _missing_dependency(exc) or f"{name} cannot be imported ({_one_line(exc)})"
+            raise _UsageError(line) from None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -136,6 +191,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     for domain in domains:
         module = _experiment_module(domain)
         plan.append((domain, module, _experiment_config(domain, module, args)))
+    _check_importable([m for domain in domains for m in _REPRODUCE_NEEDS[domain]])
     requested = _output_dir(Path(args.out), "--out")
     finished = _resume_plan(requested, plan) if args.resume else {}
     out = requested if args.resume else _fresh_dir(requested)
@@ -159,7 +215,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
                 flush=True,
             )
             t0 = time.perf_counter()
-            from torchcbl.evaluation import RunDirLockedError
+            from torchcbl.evaluation import FigureError, RunDirLockedError
 
             try:
                 results = module.run_experiment(
@@ -171,6 +227,12 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
                 )
             except RunDirLockedError as exc:
                 raise _UsageError(f"--out {out}: {exc}") from None
+            except FigureError as exc:  # its results are written: say how to go on
+                go_on = "the same command" + ("" if args.resume else " plus --resume --out ")
+                raise FigureError(
+                    f"{exc}; then finish the run: {go_on}" + ("" if args.resume else _shell(out)),
+                    exc.run_dir,
+                ) from exc.__cause__
             elapsed = time.perf_counter() - t0
             summary = module.format_summary(results)
             summaries.append(
@@ -234,7 +296,7 @@ def _resume_plan(out: Path, plan: list[tuple[str, Any, Any]]) -> dict[str, Any]:
         stored = config.to_dict() if hasattr(config, "to_dict") else dataclasses.asdict(config)
         if (run_dir / "results.json").is_file():
             try:
-                results = json.loads((run_dir / "results.json").read_text())
+                results = json.loads((run_dir / "results.json").read_text(encoding="utf-8"))
                 differ = config_differences(results["config"], plain_json(stored))
             except (OSError, ValueError, KeyError, TypeError) as exc:
                 raise _UsageError(
@@ -552,7 +614,7 @@ def _load_episodes(path: Path) -> list[Any]:
     if not path.is_file():
         raise _UsageError(f"{path} is a directory; {_EPISODES_HINT}")
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise _UsageError(f"{path} is not JSON ({exc}); {_EPISODES_HINT}") from None
     keys = {"scenario", "sim", "episode_seed", "start_lane", "actions"}
@@ -608,6 +670,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     # EP.fcd.xml(.gz) -> EP.sumocfg
     cfg = fcd.with_name(fcd.name.removesuffix(".gz").replace(".fcd.xml", "") + ".sumocfg")
     _replay_outputs_spare(path, gif, fcd, cfg)
+    # what the replay needs (listing needs none of it), before anything runs or is written
+    _check_importable(("libsumo", "sumolib", "imageio", "matplotlib"))
     # (_refuse_commas below refuses this too, but names the fcd-replay input, not --fcd)
     if "," in fcd.name:
         raise _UsageError(
@@ -697,7 +761,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
             "torchcbl reproduce (e.g. runs/reproduce/corridor)"
         )
     try:
-        results = json.loads(results_path.read_text())
+        results = json.loads(results_path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise _UsageError(f"{results_path} is not JSON ({exc})") from None
     domain = results.get("domain") if isinstance(results, dict) else None
@@ -742,7 +806,7 @@ def _reproduction_run_dirs(folder: Path) -> list[Path]:
         return found
     for path in sorted(folder.glob("*/results.json")):
         try:
-            results = json.loads(path.read_text())
+            results = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError):  # unreadable, not UTF-8 or not JSON: not a run's
             continue
         domain = results.get("domain") if isinstance(results, dict) else None
@@ -1351,6 +1415,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             raise _UsageError(f"--gym-env: {exc}") from None
     if not envs:
         raise _UsageError("no environment: give --envs and/or --gym-env")
+    _check_importable([m for e in env_names for m in _BENCHMARK_NEEDS[e]] + ["matplotlib"])
     seeds = list(range(args.seeds if args.seeds is not None else (3 if args.quick else 10)))
     out = _output_dir(
         Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark")), "--out"
@@ -1410,7 +1475,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                 keep_sessions=args.keep_sessions,
             )
     except (RuntimeError, ValueError, ImportError) as exc:
-        raise _UsageError(str(exc) + _cwd_hint(exc)) from None
+        raise _UsageError(_missing_dependency(exc) or str(exc) + _cwd_hint(exc)) from None
     c1 = os.times()
     cpu = (c1.user - c0.user) + (c1.system - c0.system)
     cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
@@ -1606,7 +1671,9 @@ def _parser() -> argparse.ArgumentParser:
         metavar="TEXT",
         help="the first episode whose label contains TEXT (instead of --episode)",
     )
-    p.add_argument("--list", action="store_true", help="list the recorded episodes and stop")
+    p.add_argument(
+        "--list", action="store_true", help="list the recorded episodes and stop (needs no SUMO)"
+    )
     p.add_argument(
         "--gif",
         default=None,
@@ -1863,8 +1930,17 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     A usage mistake (a path that is not what the command reads, a number out of range) is one
     line on stderr and exit code 2; any other failure is one line and exit code 1 (set
-    ``TORCHCBL_TRACEBACK=1`` to see its traceback instead).
+    ``TORCHCBL_TRACEBACK=1`` to see its traceback instead). What the terminal's encoding
+    cannot show (a summary's '±' under ``LC_ALL=C``) is written escaped, as ``\\xb1``.
     """
+    restore = _escape_what_the_terminal_cannot_show()
+    try:
+        return _main(argv)
+    finally:
+        restore()
+
+
+def _main(argv: Sequence[str] | None) -> int:
     args = _parser().parse_args(argv)
     prog = f"torchcbl {args.command}"
     try:
@@ -1886,7 +1962,59 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         return 141
     except Exception as exc:
-        return _failure(prog, exc)
+        missing = _missing_dependency(exc)
+        if missing is None or os.environ.get("TORCHCBL_TRACEBACK"):
+            return _failure(prog, exc)
+        print(f"{prog}: error: {missing}", file=sys.stderr)
+        return 2
+
+
+_TOLERANT = "torchcbl.terminal"  # the error handler below, by the name codecs knows it by
+
+
+def _write_what_cannot_be_encoded(exc: UnicodeError) -> tuple[str | bytes, int]:
+    """The codec error handler of ``_TOLERANT``: a character the terminal's encoding lacks
+    ('±', '≠' on an ASCII or latin-1 terminal) is written escaped, as ``\\xb1``; an
+    undecodable byte of a file name (read as a surrogate, as Python reads it under such a
+    locale) is written as that byte, as Python's own "surrogateescape" writes it."""
+    try:
+        return codecs.lookup_error("surrogateescape")(exc)
+    except UnicodeError:
+        return codecs.backslashreplace_errors(exc)
+
+
+codecs.register_error(_TOLERANT, _write_what_cannot_be_encoded)
+
+
+def _escape_what_the_terminal_cannot_show() -> Callable[[], None]:
+    """Make standard output and error write what their encoding cannot show escaped
+    (``_TOLERANT``) where that encoding is not UTF-8: a summary's '±' on an ASCII terminal
+    (``LC_ALL=C``, ``PYTHONIOENCODING=ascii``) raised UnicodeEncodeError at the end of a
+    command. Returns the function that puts their error handlers back."""
+    changed: list[tuple[Any, str]] = []
+    for stream in (sys.stdout, sys.stderr):
+        encoding = getattr(stream, "encoding", None)
+        try:
+            utf8 = codecs.lookup(encoding or "utf-8").name == "utf-8"
+        except LookupError:
+            utf8 = False
+        if utf8 or not hasattr(stream, "reconfigure"):
+            continue
+        try:
+            before = stream.errors
+            stream.reconfigure(errors=_TOLERANT)
+        except (AttributeError, OSError, ValueError):  # closed, or not a text stream of io's
+            continue
+        changed.append((stream, before))
+
+    def restore() -> None:
+        for stream, before in changed:
+            try:
+                stream.reconfigure(errors=before)
+            except (OSError, ValueError):  # closed meanwhile, or its reader went away
+                pass
+
+    return restore
 
 
 def _failure(prog: str, exc: Exception) -> int:

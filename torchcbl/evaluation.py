@@ -27,6 +27,7 @@ from torchcbl._durable import write_durably
 from torchcbl._progress import progress_bar
 
 __all__ = [
+    "FigureError",
     "check_config_fields",
     "check_workers_start",
     "figure_style",
@@ -677,6 +678,40 @@ def _read_seed_result(seed_dir: Any) -> dict[str, Any] | None:
 
 class RunDirLockedError(RuntimeError):
     """Another process is running an experiment into the same run directory."""
+
+
+class FigureError(RuntimeError):
+    """A finished run's figures could not be drawn; its results are kept.
+
+    An experiment's ``run_experiment`` writes ``results.json`` (and its summary) before it
+    draws the figures, so a figure that fails (matplotlib missing, a full disk) loses no
+    computed result: it raises this, the figure's own exception as ``__cause__``, with
+    ``run_dir`` holding the results. The domain's ``plot_results(results, run_dir)``, or
+    ``torchcbl plot RUN_DIR``, draws the figures again from them.
+    """
+
+    def __init__(self, message: str, run_dir: str | os.PathLike[str]) -> None:
+        super().__init__(message)
+        self.run_dir = Path(run_dir)
+        """The run directory: its results.json is written."""
+
+    @classmethod
+    def of(cls, domain: str, run_dir: str | os.PathLike[str], cause: BaseException) -> FigureError:
+        """The error for ``domain``'s figures failing on ``cause`` in ``run_dir``: it names
+        the cause, where the results are and the command that draws the figures."""
+        import shlex
+
+        run_dir = Path(run_dir)
+        text = " ".join(str(cause).split()) or type(cause).__name__
+        return cls(
+            f"the {domain} figures could not be drawn into {run_dir} ({type(cause).__name__}: "
+            f"{text}); its results are kept in {run_dir / 'results.json'}: draw the figures "
+            f"with torchcbl plot {shlex.quote(str(run_dir))} once that is fixed",
+            run_dir,
+        )
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (str(self), self.run_dir))
 
 
 @contextlib.contextmanager

@@ -653,7 +653,7 @@ def load_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
             "Start a session with ConfidentTeacher(..., run_dir=...) first."
         )
     try:
-        config = json.loads(path.read_text())
+        config = json.loads(path.read_text(encoding="utf-8"))
     except PermissionError:
         raise _no_read_access(path) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -1398,7 +1398,9 @@ def _acquire_lock(run_dir: Path) -> Any:
     try:
         # held open for the writer's life; not O_APPEND, so that the committed line is
         # rewritten in place (pwrite appends on an O_APPEND file on Linux)
-        f = os.fdopen(os.open(path, os.O_RDWR | os.O_CREAT, 0o644), "r+")
+        f = os.fdopen(
+            os.open(path, os.O_RDWR | os.O_CREAT, 0o644), "r+", encoding="utf-8", errors="replace"
+        )
     except OSError as exc:
         raise _write_error(
             exc,
@@ -1849,7 +1851,7 @@ class SessionStore:
         )
         path = self.run_dir / WRITERS_NAME
         try:
-            with open(path, "a") as f:
+            with open(path, "a", encoding="utf-8") as f:
                 f.write(line + "\n")
         except OSError as exc:
             raise _write_error(exc, path, "recording the writer", _FREE_SPACE) from exc
@@ -3604,7 +3606,7 @@ def _lock_held(run_dir: Path) -> bool | None:
     except OSError:
         return None
     try:
-        table = Path("/proc/locks").read_text()
+        table = Path("/proc/locks").read_text(encoding="utf-8")
     except OSError:
         return None
     holder = None  # writer.lock's note of its holder, when on this machine
