@@ -1443,6 +1443,30 @@ def test_an_evaluation_whose_episodes_never_end_is_stopped_and_said_not_run_fore
         assert out["table"]["toy"]["bc"]["final_labels"]["mean"] == 5
 
 
+def test_an_evaluation_of_one_episode_that_never_ends_is_an_error_not_a_score_of_zero(
+    monkeypatch,
+):
+    """eval_episodes=1 on an env with no step cap (no TimeLimit, no eval_steps) whose episode
+    never ends: the guard's 10,000 steps pass with 0 of 1 episodes ended, and run_cell stops
+    with the guard's error (success_rate would score such an evaluation 0, a figure that
+    reads as a failing teacher, not an unbounded one)."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    spec = _env(
+        env_id="_bench_env:BenchEndless-v0",
+        budgets=(5,),
+        max_steps=10,
+        eval_seeds=(7,),
+        eval_episodes=1,
+    )
+    assert spec.eval_steps is None
+    (config,) = bm.cell_configs(STRATEGIES[:1], [spec], [0])
+    with pytest.raises(ValueError, match="has no step cap") as info:
+        bm.run_cell(config)
+    message = str(info.value)
+    assert "the teacher on evaluation seed 7 ran 10000 steps in all" in message, message
+    assert "0 of its 1 episodes ended" in message and "give eval_steps" in message, message
+
+
 def test_a_teacher_whose_evaluation_ends_no_episode_is_told_so_not_that_the_env_lacks_success(
     tmp_path, capsys, monkeypatch
 ):
