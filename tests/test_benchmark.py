@@ -709,6 +709,29 @@ def test_a_cell_is_the_same_whatever_the_callers_numpy_and_random_state():
     assert cells[0]["attention"]["corrections"] > 0  # the sloppy teacher's answers mattered
 
 
+def test_a_cells_global_numpy_rng_follows_its_seed():
+    """A teacher factory of one's own that draws from numpy's global RNG gets draws seeded by
+    the cell's seed: the same for two runs of one seed, others for the next seed (not one
+    fixed stream for every cell, which would make the seeds' figures share their noise)."""
+    import _bench_env
+
+    env = _env(
+        teacher="_bench_env:drawing_teacher",
+        budgets=(5,),
+        max_steps=10,
+        eval_seeds=(100,),
+        eval_episodes=1,
+    )
+    configs = bm.cell_configs(STRATEGIES[:1], [env], [0, 1])
+    first = []
+    for config in (configs[0], configs[0], configs[1]):
+        _bench_env.GLOBAL_DRAWS.clear()
+        bm.run_cell(config)
+        first.append(_bench_env.GLOBAL_DRAWS[0])  # the factory's first call of the cell
+    assert first[0] == first[1]
+    assert first[0] != first[2]
+
+
 @pytest.mark.parametrize("workers, says", [("1", "in this process"), ("2", "2 processes")])
 def test_the_command_says_where_the_cells_run(workers, says, tmp_path, monkeypatch, capsys):
     """torchcbl benchmark --workers 1 announced "(1 processes)", but such a sweep runs its
