@@ -583,6 +583,24 @@ def test_expert_drives_clean_circuits(map_name, n_actions):
         assert info["laps"] == 1
 
 
+def test_a_circuit_completed_after_touching_a_wall_is_no_success():
+    """is_success is a clean circuit: the robot turns back at the start and drives into the
+    wall behind it (one contact, exact motion), then the expert drives the circuit: the
+    episode is terminated, one lap done, and is_success is False."""
+    env = CorridorEnv("figure2")
+    expert = CorridorExpert(env.corridor_map)
+    obs, info = env.reset(seed=0)
+    contacts = []
+    for a in (U, F, F):  # the second forward step stops at the start's end wall
+        obs, reward, terminated, truncated, info = env.step(a)
+        contacts.append(info["contact"])
+    assert contacts == [False, False, True] and reward == -1.0
+    while not (terminated or truncated):
+        obs, reward, terminated, truncated, info = env.step(expert(obs, info))
+    assert terminated and not truncated and info["laps"] == 1 and reward == 1.0
+    assert info["contacts"] == 1 and info["is_success"] is False
+
+
 @pytest.mark.parametrize(
     "args, kwargs, error, message",
     [
