@@ -389,6 +389,21 @@ def test_human_driver_home_lane_drifts_among_the_left_three():
     assert 0.6 * expected < changes < 1.4 * expected, (changes, expected)
 
 
+def test_human_driver_breaks_a_tie_between_the_sides_at_random():
+    """From the middle lane, its car ahead closing in fast and both neighbours equally free
+    (no right-lane cost, home the middle lane): the two ways out tie, and the driver's choice
+    is drawn, so over 20 seeds it goes both left and right (not always the first listed)."""
+    from sumo_scenarios.teacher import HumanDriverConfig
+
+    cfg = HumanDriverConfig(home_weights=(1.0, 0.0, 0.0), right_cost_s=0.0)
+    moves = set()
+    for seed in range(20):
+        driver = HumanDriver(cfg, seed=seed)
+        moves.add(_call(driver, (25.0, 8.0, 25.0), 2, 0))
+        assert driver.last_move == "leave"
+    assert moves == {1, 2}  # left and right
+
+
 def test_human_driver_reaction_threshold_is_drawn_per_event():
     """A car closing in ahead, a free shoulder beside: the room (seconds to contact) at which the
     driver moves over spreads over more than the 0.25 s that a fixed threshold would give (the
