@@ -102,6 +102,19 @@ def sloppy_teacher(env: Any) -> Any:
     return teach
 
 
+# what each call of drawing_teacher drew from numpy's global RNG, in call order
+GLOBAL_DRAWS: list[tuple[float, ...]] = []
+
+
+def drawing_teacher(env: Any) -> Any:
+    """The oracle, from a factory that draws three numbers from numpy's global RNG as it is
+    called (as a teacher of one's own may, to perturb itself) and keeps them in GLOBAL_DRAWS."""
+    import numpy as np
+
+    GLOBAL_DRAWS.append(tuple(float(v) for v in np.random.random(3)))  # noqa: NPY002
+    return oracle(env.unwrapped)
+
+
 def mean_finished_length(records: Any) -> float:
     """The mean length of the evaluation's finished episodes: NaN (numpy's mean of nothing)
     when none finished."""

@@ -746,6 +746,29 @@ def test_a_cell_is_the_same_whatever_the_callers_numpy_and_random_state():
     assert cells[0]["attention"]["corrections"] > 0  # the sloppy teacher's answers mattered
 
 
+def test_a_cells_global_numpy_rng_follows_its_seed():
+    """A teacher factory of one's own that draws from numpy's global RNG gets draws seeded by
+    the cell's seed: the same for two runs of one seed, others for the next seed (not one
+    fixed stream for every cell, which would make the seeds' figures share their noise)."""
+    import _bench_env
+
+    env = _env(
+        teacher="_bench_env:drawing_teacher",
+        budgets=(5,),
+        max_steps=10,
+        eval_seeds=(100,),
+        eval_episodes=1,
+    )
+    configs = bm.cell_configs(STRATEGIES[:1], [env], [0, 1])
+    first = []
+    for config in (configs[0], configs[0], configs[1]):
+        _bench_env.GLOBAL_DRAWS.clear()
+        bm.run_cell(config)
+        first.append(_bench_env.GLOBAL_DRAWS[0])  # the factory's first call of the cell
+    assert first[0] == first[1]
+    assert first[0] != first[2]
+
+
 @pytest.mark.parametrize("workers, says", [("1", "in this process"), ("2", "2 processes")])
 def test_the_command_says_where_the_cells_run(workers, says, tmp_path, monkeypatch, capsys):
     """torchcbl benchmark --workers 1 announced "(1 processes)", but such a sweep runs its
@@ -1481,6 +1504,30 @@ def test_an_evaluation_whose_episodes_never_end_is_stopped_and_said_not_run_fore
     for s in (capped, timed):
         out = bm.run_benchmark(STRATEGIES[:1], [s], [0], tmp_path / "ok", workers=1, plots=False)
         assert out["table"]["toy"]["bc"]["final_labels"]["mean"] == 5
+
+
+def test_an_evaluation_of_one_episode_that_never_ends_is_an_error_not_a_score_of_zero(
+    monkeypatch,
+):
+    """eval_episodes=1 on an env with no step cap (no TimeLimit, no eval_steps) whose episode
+    never ends: the guard's 10,000 steps pass with 0 of 1 episodes ended, and run_cell stops
+    with the guard's error (success_rate would score such an evaluation 0, a figure that
+    reads as a failing teacher, not an unbounded one)."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    spec = _env(
+        env_id="_bench_env:BenchEndless-v0",
+        budgets=(5,),
+        max_steps=10,
+        eval_seeds=(7,),
+        eval_episodes=1,
+    )
+    assert spec.eval_steps is None
+    (config,) = bm.cell_configs(STRATEGIES[:1], [spec], [0])
+    with pytest.raises(ValueError, match="has no step cap") as info:
+        bm.run_cell(config)
+    message = str(info.value)
+    assert "the teacher on evaluation seed 7 ran 10000 steps in all" in message, message
+    assert "0 of its 1 episodes ended" in message and "give eval_steps" in message, message
 
 
 def test_a_teacher_whose_evaluation_ends_no_episode_is_told_so_not_that_the_env_lacks_success(

@@ -290,6 +290,36 @@ def test_6d_fixed_two_std_rule_keeps_asking():
     assert r["demos"] > 0.40, r  # ~0.68: only 32 % of a 6-D Gaussian lies within 2 std
 
 
+def test_a_run_that_ends_on_a_correction_has_refitted_on_it():
+    """With max_new=1 every label is due a refit at once, a correction's included: a
+    run(max_steps=...) that ends on the step of a correction leaves the model fitted on
+    every label (on_refit's count is the session's), not one short until the next step."""
+    env = rare_regions_world(episode_length=10)
+
+    class Corrector:
+        def __call__(self, obs, info):
+            return env.optimal_action(obs)
+
+        def correct(self, obs, info, action):
+            return (action + 1) % 3  # every autonomous action is corrected
+
+    fitted_on = []
+    ct = ConfidentTeacher(
+        env,
+        Corrector(),
+        strategy=ConfidenceBasedAutonomy(),
+        config=TeachingConfig(max_new=1, noninteractive=False),
+        progress=False,
+        on_refit=lambda model, n: fitted_on.append(n),
+    )
+    while ct.n_corrections < 3 and ct.n_steps < 200:
+        before = ct.n_corrections
+        ct.run(max_steps=ct.n_steps + 1)  # one step; the run ends after it
+        if ct.n_corrections > before:
+            assert fitted_on[-1] == ct.n_demonstrations, (ct.n_steps, fitted_on[-3:])
+    assert ct.n_corrections == 3
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_6d_corrections_mean_fewer_wrong_autonomous_actions(seed):
     with_c = _teach(strategy=ConfidenceBasedAutonomy(), corrections=True, seed=seed)

@@ -1957,6 +1957,29 @@ def test_an_output_directory_that_cannot_be_written_is_refused_before_the_run(tm
     assert sorted(p.name for p in tmp_path.iterdir() if p != locked) == ["episodes.json"]
 
 
+@pytest.mark.parametrize("budgets", ["20,10", "10,10"])
+def test_benchmark_budgets_not_increasing_are_refused_as_the_option_given(
+    budgets, tmp_path, capsys, monkeypatch
+):
+    """--budgets 20,10 (or 10,10): exit code 2 and one line naming --budgets and what was
+    typed, before anything runs or is written (not an error about the --gym-env's EnvSpec,
+    an option the user got right)."""
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent))  # tests/_bench_env.py
+    out = tmp_path / "bench"
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
+    argv += ["--workers", "1", "--budgets", budgets, "--max-steps", "30", "--out", str(out)]
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse's own refusal
+        code = exc.code
+    stdout, err = capsys.readouterr()
+    assert code == 2 and stdout == "" and err.count("\n") == 1, (code, stdout, err)
+    assert "argument --budgets: expected increasing" in err, err
+    assert f"got {budgets!r}" in err, err
+    assert not out.exists()
+
+
 def test_benchmark_names_a_non_strategy_by_its_type_not_its_repr(tmp_path, capsys):
     """--strategies builtins:object: the one line names the spec as written and the type, and
     which methods it lacks, not the object's repr. (It said "got <object object at

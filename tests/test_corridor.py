@@ -584,6 +584,43 @@ def test_expert_drives_clean_circuits(map_name, n_actions):
 
 
 @pytest.mark.parametrize(
+    "ranges, action",
+    [((1.5, 0.3, 0.3), L), ((0.3, 0.3, 1.5), R), ((0.3, 1.5, 0.3), F), ((0.3, 0.3, 0.3), U)],
+)
+def test_the_expert_off_every_corridor_falls_back_to_the_open_side(ranges, action):
+    """Where no corridor of the map runs any way the robot can face (a pose off the map,
+    given in info: in the env the free space is the corridors, so the way back always finds
+    one), the expert's reactive fallback steers by the true ranges: forward if the front is
+    open, else a turn to the open side (left before right), else a u-turn."""
+    expert = CorridorExpert(load_map("figure2"))
+    info = {
+        "pose": np.array([5.0, 5.0, 0.0]),  # beyond every corridor of figure2
+        "segment": 0,
+        "lap_position": 0.0,
+        "true_ranges": np.array(ranges),
+    }
+    assert expert(np.array(ranges, dtype=np.float32), info) == action
+
+
+def test_a_circuit_completed_after_touching_a_wall_is_no_success():
+    """is_success is a clean circuit: the robot turns back at the start and drives into the
+    wall behind it (one contact, exact motion), then the expert drives the circuit: the
+    episode is terminated, one lap done, and is_success is False."""
+    env = CorridorEnv("figure2")
+    expert = CorridorExpert(env.corridor_map)
+    obs, info = env.reset(seed=0)
+    contacts = []
+    for a in (U, F, F):  # the second forward step stops at the start's end wall
+        obs, reward, terminated, truncated, info = env.step(a)
+        contacts.append(info["contact"])
+    assert contacts == [False, False, True] and reward == -1.0
+    while not (terminated or truncated):
+        obs, reward, terminated, truncated, info = env.step(expert(obs, info))
+    assert terminated and not truncated and info["laps"] == 1 and reward == 1.0
+    assert info["contacts"] == 1 and info["is_success"] is False
+
+
+@pytest.mark.parametrize(
     "args, kwargs, error, message",
     [
         (("figure2",), {}, TypeError, "corridor_map: expected a CorridorMap"),

@@ -136,6 +136,21 @@ def test_a_person_watching_corrects_only_with_a_key_press():
     assert got == [None, 0, None]
 
 
+@pytest.mark.parametrize("delay", [1, 2])
+def test_a_pending_correction_is_dropped_when_the_learner_does_what_the_person_wants(delay):
+    """correct(): where the learner does what the person wants, a press decided earlier and
+    still pending is dropped. When the learner deviates again, the person reacts afresh: the
+    correction comes a whole delay after the new deviation, not sooner on the old press's
+    countdown."""
+    cfg = HumanTimingConfig(delay_probs=(0.0,) * delay + (1.0,), miss_prob=0.0, double_prob=0.0)
+    h = HumanTiming(lambda o, i: 1, cfg, seed=0)  # the person always wants action 1
+    # the learner deviates (a press is decided, delayed), complies, then deviates for good
+    actions = [2, 1] + [2] * (delay + 1)
+    got = [h.correct(np.zeros(2), {"t": t}, a) for t, a in enumerate(actions)]
+    assert got == [None, None] + [None] * delay + [1], got
+    assert h.stats()["delayed"] == 2  # the first press and the fresh one
+
+
 def test_human_timing_says_once_when_the_info_has_no_step_counter():
     """HumanTiming tells consecutive steps apart by info["t"]; on an env without it (the
     corridor's info counts "steps") every call is a gap, so each delayed press was silently
@@ -372,6 +387,21 @@ def test_human_driver_home_lane_drifts_among_the_left_three():
     per_step = 0.25 / driver.config.home_every_s
     expected = 4000 * per_step * (1 - np.sum(w**2))  # redraws that land on another lane
     assert 0.6 * expected < changes < 1.4 * expected, (changes, expected)
+
+
+def test_human_driver_breaks_a_tie_between_the_sides_at_random():
+    """From the middle lane, its car ahead closing in fast and both neighbours equally free
+    (no right-lane cost, home the middle lane): the two ways out tie, and the driver's choice
+    is drawn, so over 20 seeds it goes both left and right (not always the first listed)."""
+    from sumo_scenarios.teacher import HumanDriverConfig
+
+    cfg = HumanDriverConfig(home_weights=(1.0, 0.0, 0.0), right_cost_s=0.0)
+    moves = set()
+    for seed in range(20):
+        driver = HumanDriver(cfg, seed=seed)
+        moves.add(_call(driver, (25.0, 8.0, 25.0), 2, 0))
+        assert driver.last_move == "leave"
+    assert moves == {1, 2}  # left and right
 
 
 def test_human_driver_reaction_threshold_is_drawn_per_event():

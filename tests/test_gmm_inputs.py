@@ -269,6 +269,25 @@ def test_single_observation_path_matches_batch_path():
             torch.testing.assert_close(getattr(one, f)[0], getattr(batch, f)[i])
 
 
+def test_single_observation_path_weighs_unbalanced_priors_like_the_batch_path():
+    """With unbalanced classes (priors 0.8 / 0.15 / 0.05) over overlapping clusters, the
+    one-row path (the teaching loop's) gives the batch path's action, posterior, confidence
+    and distance row for row: the prior Pr(G_a) of Eq. 7 counts on both."""
+    rng = np.random.default_rng(11)
+    y = np.repeat([0, 1, 2], [160, 30, 10])
+    x = rng.normal(size=(len(y), 2)) + y[:, None] * 0.8  # overlapping: the prior can decide
+    model = GaussianMixtureSet(3, 2, 2, seed=0).fit(x, y)
+    probe = rng.normal(scale=1.5, size=(30, 2)) + 0.8
+    batch = model.classify(probe)
+    uniform = torch.softmax(model.log_prob(probe) - model.log_prior_, dim=1)
+    assert not torch.allclose(uniform, batch.posterior)  # the prior moves these posteriors
+    for i in range(len(probe)):
+        one = model.classify(probe[i : i + 1])
+        assert int(one.action[0]) == int(batch.action[i]), i
+        for f in ("confidence", "distance", "posterior"):
+            torch.testing.assert_close(getattr(one, f)[0], getattr(batch, f)[i])
+
+
 def test_aic_requires_both_or_neither_and_a_fit():
     with pytest.raises(RuntimeError, match="fit"):
         GaussianMixtureSet(2, 2).aic()

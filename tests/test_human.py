@@ -847,6 +847,27 @@ def test_a_line_teacher_says_which_number_is_which_action():
     assert "0 forward, 1 turn left, 2 turn right, 3 u-turn" in out.getvalue(), out.getvalue()
 
 
+def test_a_line_teacher_refuses_the_number_one_past_its_last_action():
+    """Action numbers count from 0: with 3 actions "3" names none (it is n_actions, not the
+    last action's number); it is an invalid entry, said so, and the next line is read."""
+    out = io.StringIO()
+    teacher = TerminalTeacher(
+        {"w": 0, "a": 1, "d": 2},
+        ("forward", "left", "right"),
+        input=io.StringIO("3\n0\n"),
+        output=out,
+    )
+    assert teacher(np.zeros(3), {}) == 0
+    assert "'3' is not a key here" in out.getvalue(), out.getvalue()
+    last = TerminalTeacher(
+        {"w": 0, "a": 1, "d": 2},
+        ("forward", "left", "right"),
+        input=io.StringIO("2\n"),
+        output=io.StringIO(),
+    )
+    assert last(np.zeros(3), {}) == 2  # the last action's number is one
+
+
 _ASKED_IN_A_PROCESS = """
 import signal, sys
 signal.signal(signal.SIGHUP, signal.SIG_DFL)  # as a terminal's process has it (not under nohup)
