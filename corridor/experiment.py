@@ -97,6 +97,7 @@ if TYPE_CHECKING:
     from torchcbl import GaussianMixtureSet, TeachingConfig
 
 __all__ = [
+    "FIGURES",
     "PAPER",
     "CorridorExperimentConfig",
     "check_session_map",
@@ -121,6 +122,9 @@ PAPER: dict[str, Any] = {
     "components": {"forward": None, "turn_left": 1, "turn_right": None, "u_turn": None},
     "actions_per_circuit": 26,
 }
+
+#: The figures :func:`run_experiment` and :func:`plot_results` draw into a run directory.
+FIGURES: tuple[str, ...] = ("figure3.png", "figure4.png", "map.png")
 
 _ACTION_NAMES = [a.name.lower() for a in Action]
 _READINGS = ("coverage", "literal")
@@ -1004,7 +1008,7 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
         "_path": [list(map(float, r.info["pose"][:2])) for r in ev],
     }
     _figures(config, first, run_dir)
-    return [run_dir / "figure3.png", run_dir / "figure4.png", run_dir / "map.png"]
+    return [run_dir / name for name in FIGURES]
 
 
 def evaluate_saved_policy(

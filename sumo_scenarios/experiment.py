@@ -80,6 +80,7 @@ if TYPE_CHECKING:
     from torchcbl.gmm import Criterion, GaussianMixtureSet
 
 __all__ = [
+    "FIGURES",
     "PAPER",
     "STAGE_NAMES",
     "DrivingExperimentConfig",
@@ -94,6 +95,15 @@ __all__ = [
     "stage_name",
     "teaching_setup",
 ]
+
+#: The figures :func:`run_experiment` and :func:`plot_results` draw into a run directory.
+FIGURES: tuple[str, ...] = (
+    "fig6_accuracy.png",
+    "fig7_middle_lane_demos.png",
+    "fig8_lanes_collisions.png",
+    "fig9_accuracy.png",
+    "fig10_confidence.png",
+)
 
 PAPER = {
     "straight_collision_pct": 30.4,

@@ -690,6 +690,26 @@ def test_a_sweep_that_stops_before_any_cell_finished_says_so_and_leaves_no_empty
     assert not (tmp_path / "ray").exists()
 
 
+def test_a_cell_finished_after_another_sweep_removed_the_empty_out_is_kept(tmp_path):
+    """Two sweeps started into the same new OUT (the cell cache is shared): the one whose first
+    cell failed removed OUT/cells and OUT, still empty, and the other's first finished cell
+    was then lost to a raw FileNotFoundError writing cells/<key>.json. The cell writer makes
+    its folder again: the sweep finishes, its cell kept."""
+    out = tmp_path / "out"
+    env = _env(
+        teacher="_bench_env:teacher_of_a_cleaned_out",
+        teacher_kwargs={"out": str(out)},
+        budgets=(5,),
+        max_steps=10,
+        eval_episodes=1,
+    )
+    summary = bm.run_benchmark(STRATEGIES[:1], [env], [0], out, workers=1, plots=False)
+    (config,) = bm.cell_configs(STRATEGIES[:1], [env], [0])
+    kept = json.loads((out / "cells" / f"{bm.cell_key(config)}.json").read_text())
+    assert kept["key"] == bm.cell_key(config) and summary["sweep"]["computed"] == 1
+    assert (out / "results.json").is_file()
+
+
 def test_a_teacher_scoring_below_zero_is_not_blamed_on_success_rate(tmp_path, capsys, monkeypatch):
     """With --score a return-like score (the teacher: -14), the warning said "success_rate
     needs an env that sets info["is_success"] ... every performance is 0 ... pass --score",

@@ -689,8 +689,8 @@ def test_a_figure_that_fails_loses_no_result_and_says_how_to_draw_it(
 ):
     """reproduce computed every seed and only then drew the figures: one that failed
     (matplotlib missing, a full disk) left no results.json, every seed's work lost to the run.
-    The results and summary are written first; the one line says they are kept, how to draw
-    the figures and how to finish the run."""
+    The results and summary are written first; the one line says they are kept and how to
+    finish the run, which draws them."""
     import torchcbl.cli as cli
 
     out = _stopped_before_results(corridor_run, tmp_path / "runs")
@@ -705,25 +705,67 @@ def test_a_figure_that_fails_loses_no_result_and_says_how_to_draw_it(
     assert len(err.strip().splitlines()) == 1, err
     assert f"the corridor figures could not be drawn into {run}" in err
     assert f"its results are kept in {run / 'results.json'}" in err
-    assert f"torchcbl plot {run} once that is fixed; then finish the run: the same command" in err
+    assert "once that is fixed, finish the run with the same command (it draws them)" in err
     whole = corridor_run / "corridor"
     kept = json.loads((run / "results.json").read_text(encoding="utf-8"))
     assert kept["summary"] == json.loads((whole / "results.json").read_text())["summary"]
     assert (run / "summary.txt").read_text() == (whole / "summary.txt").read_text()
     (run / "figure4.png").rmdir()
-    assert main(["plot", str(run)]) == 0  # as the line says
+    assert main(argv) == 0 and (out / "summary.md").is_file()  # as the line says
     for name in ("figure3.png", "figure4.png", "map.png"):
         assert (run / name).read_bytes() == (whole / name).read_bytes(), name
-    assert main(argv) == 0 and (out / "summary.md").is_file()
+
+
+def test_reproduce_resume_draws_the_missing_figures_of_a_finished_domain(
+    corridor_run, tmp_path, monkeypatch, capsys
+):
+    """A run whose figure failed (its results.json written) was told to finish with --resume,
+    but --resume took a domain with a results.json as finished whatever its figures: it wrote
+    summary.md, which marks the run finished, with figure3.png missing and nothing said. A
+    finished domain's missing figures are drawn again, said in one line; the figures there are
+    left as they are; one that still fails is the one-line error of a figure that fails."""
+    import torchcbl.cli as cli
+
+    out = tmp_path / "runs"
+    shutil.copytree(corridor_run, out)
+    run, whole = out / "corridor", corridor_run / "corridor"
+    (out / "summary.md").unlink()  # stopped after the corridor run, before the summary
+    (run / "figure3.png").unlink()
+    (run / "figure4.png").write_bytes(b"a figure of one's own")  # there: kept as it is
+    monkeypatch.setattr(cli, "_experiment_config", _tiny_corridor)
+    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
+    argv += ["--resume", "--out", str(out)]
+    capsys.readouterr()
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    notes = [ln for ln in printed.splitlines() if "figure3.png" in ln]
+    assert len(notes) == 1 and "missing" in notes[0] and "drawn again" in notes[0], printed
+    assert (run / "figure3.png").read_bytes() == (whole / "figure3.png").read_bytes()
+    assert (run / "figure4.png").read_bytes() == b"a figure of one's own"
+    assert (run / "map.png").read_bytes() == (whole / "map.png").read_bytes()
+    assert (out / "summary.md").is_file()
+    # all there: nothing is drawn, nothing said; one that cannot be drawn: the run unfinished
+    (out / "summary.md").unlink()
+    assert main(argv) == 0 and "missing" not in capsys.readouterr().out
+    (out / "summary.md").unlink()
+    (run / "map.png").unlink()
+    (run / "map.png").mkdir()  # no figure can be written in its place
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert f"the corridor figures could not be drawn into {run}" in err
+    assert f"its results are kept in {run / 'results.json'}" in err
+    assert "once that is fixed, finish the run with the same command" in err, err
+    assert not (out / "summary.md").exists()
+    assert (run / "figure4.png").read_bytes() == b"a figure of one's own"
 
 
 def test_output_a_terminal_cannot_show_is_escaped_not_a_crash(corridor_run, tmp_path):
     """On a terminal whose encoding lacks '±' (the summaries) or '≠' (the benchmark's table),
     printing raised UnicodeEncodeError at the very end of a command (exit 1, the summary.md
     of a finished reproduction unwritten). Such a character is written escaped (\\xb1)."""
-    out = tmp_path / "runs"
-    (out / "corridor").mkdir(parents=True)
-    shutil.copy(corridor_run / "corridor" / "results.json", out / "corridor")
+    out = tmp_path / "runs"  # the corridor run, stopped before its summary.md
+    shutil.copytree(corridor_run / "corridor", out / "corridor")
     code = (  # the settings of the run it resumes: those of its results.json
         "import json, sys\n"
         "import torchcbl.cli as cli\n"
@@ -1036,6 +1078,11 @@ def test_reproduce_resume_continues_a_stopped_run_and_refuses_other_settings(
     untimed = re.compile(r"\(\d+ s, ")
     summary = untimed.sub("", (out / "summary.md").read_text())
     results = (out / "driving" / "results.json").read_text()
+    from sumo_scenarios.experiment import FIGURES
+
+    assert sorted(p.name for p in (out / "driving").glob("*.png")) == sorted(FIGURES)
+    figure = out / "driving" / "fig10_confidence.png"
+    drawn = figure.read_bytes()
     capsys.readouterr()
 
     def refused(*extra: str) -> str:
@@ -1052,8 +1099,12 @@ def test_reproduce_resume_continues_a_stopped_run_and_refuses_other_settings(
     assert main(corridor) == 2
     assert "holds a driving run too, which this command does not run" in capsys.readouterr().err
     assert "does not exist" in refused(str(tmp_path / "nowhere"), "--resume")
+    figure.unlink()  # (a figure that failed after results.json): drawn again
     assert main([*argv, "--resume"]) == 0
     assert untimed.sub("", (out / "summary.md").read_text()) == summary
+    assert (
+        figure.read_bytes() == drawn and "fig10_confidence.png missing" in capsys.readouterr().out
+    )
     assert (out / "driving" / "results.json").read_text() == results
     # stopped in the driving run: seed 0 finished, no results.json
     (out / "summary.md").unlink()

@@ -864,6 +864,9 @@ def _set_aside(path: Path) -> Path | None:
 
 
 def _write_atomic(path: Path, text: str) -> None:
+    # its folder made again if need be: another sweep into the same new OUT (the cell cache is
+    # shared) that stopped before any cell finished removes OUT/cells and OUT, still empty
+    path.parent.mkdir(parents=True, exist_ok=True)
     write_durably(path, text.encode("utf-8"), path.with_name(f".{path.name}.{os.getpid()}.tmp"))
 
 

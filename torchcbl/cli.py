@@ -196,12 +196,16 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     finished = _resume_plan(requested, plan) if args.resume else {}
     out = requested if args.resume else _fresh_dir(requested)
     summaries: list[str] = []
+    # what a figure that fails says to do once its cause is fixed: go on with this command
+    plus = "" if args.resume else f" plus --resume --out {_shell(out)}"
+    go_on = f"finish the run with the same command{plus} (it draws them)"
     try:
         for domain, module, config in plan:
             run_dir = out / domain
             if domain in finished:
                 print(f"== {domain}: finished before, taken from {run_dir}", flush=True)
                 results = finished[domain]
+                _draw_missing_figures(domain, module, run_dir, results, go_on)
                 elapsed = results.get("seconds", 0.0)
                 summary = module.format_summary(results)
                 summaries.append(
@@ -228,11 +232,8 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             except RunDirLockedError as exc:
                 raise _UsageError(f"--out {out}: {exc}") from None
             except FigureError as exc:  # its results are written: say how to go on
-                go_on = "the same command" + ("" if args.resume else " plus --resume --out ")
-                raise FigureError(
-                    f"{exc}; then finish the run: {go_on}" + ("" if args.resume else _shell(out)),
-                    exc.run_dir,
-                ) from exc.__cause__
+                cause = exc if exc.__cause__ is None else exc.__cause__
+                raise FigureError.of(domain, exc.run_dir, cause, then=go_on) from cause
             elapsed = time.perf_counter() - t0
             summary = module.format_summary(results)
             summaries.append(
@@ -244,9 +245,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             out.rmdir()  # nothing was written: leave nothing behind (a resumed one is kept)
         elif isinstance(exc, KeyboardInterrupt):  # main says it in its one line
             exc.note = (  # type: ignore[attr-defined]
-                " (its finished seeds are kept: go on with the same command"
-                + ("" if args.resume else f" plus --resume --out {_shell(out)}")
-                + ")"
+                f" (its finished seeds are kept: go on with the same command{plus})"
             )
         raise
     text = "\n\n".join(summaries) + "\n"
@@ -255,6 +254,45 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     write_atomically(out / "summary.md", text)  # whole or not at all: it marks a finished run
     print(f"\nSummary written to {out / 'summary.md'}")
     return 0
+
+
+def _draw_missing_figures(
+    domain: str, module: Any, run_dir: Path, results: dict[str, Any], go_on: str
+) -> None:
+    """Draw again the figures (``module.FIGURES``) missing from the run directory of a domain
+    that finished before (its results.json written, a figure that failed after it, or one
+    deleted), saying so in one line; those there are left as they are, byte for byte. One
+    that fails raises the FigureError of a run's figures (``go_on``: what to do then)."""
+    from torchcbl._durable import write_durably
+    from torchcbl.evaluation import FigureError
+
+    missing = [name for name in module.FIGURES if not (run_dir / name).is_file()]
+    if not missing:
+        return
+    print(
+        f"== {domain}: {', '.join(missing)} missing in {run_dir}, drawn again from its results",
+        flush=True,
+    )
+    there: dict[str, bytes] = {}
+    for name in module.FIGURES:
+        if name not in missing:
+            try:
+                there[name] = (run_dir / name).read_bytes()
+            except OSError:  # unreadable: drawn again with the others
+                pass
+    try:
+        module.plot_results(results, run_dir)
+    except Exception as exc:
+        raise FigureError.of(domain, run_dir, exc, then=go_on) from exc
+    finally:  # plot_results draws them all: those that were there are put back as they were
+        for name, data in there.items():
+            path = run_dir / name
+            try:
+                same = path.read_bytes() == data
+            except OSError:
+                same = False
+            if not same:
+                write_durably(path, data, path.with_name(f".{name}.{os.getpid()}.tmp"))
 
 
 def _resume_plan(out: Path, plan: list[tuple[str, Any, Any]]) -> dict[str, Any]:

@@ -686,8 +686,9 @@ class FigureError(RuntimeError):
     An experiment's ``run_experiment`` writes ``results.json`` (and its summary) before it
     draws the figures, so a figure that fails (matplotlib missing, a full disk) loses no
     computed result: it raises this, the figure's own exception as ``__cause__``, with
-    ``run_dir`` holding the results. The domain's ``plot_results(results, run_dir)``, or
-    ``torchcbl plot RUN_DIR``, draws the figures again from them.
+    ``run_dir`` holding the results. The domain's ``plot_results(results, run_dir)``,
+    ``torchcbl plot RUN_DIR`` or ``torchcbl reproduce --resume`` draws the figures again from
+    them.
     """
 
     def __init__(self, message: str, run_dir: str | os.PathLike[str]) -> None:
@@ -696,17 +697,27 @@ class FigureError(RuntimeError):
         """The run directory: its results.json is written."""
 
     @classmethod
-    def of(cls, domain: str, run_dir: str | os.PathLike[str], cause: BaseException) -> FigureError:
+    def of(
+        cls,
+        domain: str,
+        run_dir: str | os.PathLike[str],
+        cause: BaseException,
+        *,
+        then: str | None = None,
+    ) -> FigureError:
         """The error for ``domain``'s figures failing on ``cause`` in ``run_dir``: it names
-        the cause, where the results are and the command that draws the figures."""
+        the cause, where the results are and what to do once the cause is fixed: ``then``
+        (e.g. ``torchcbl reproduce``'s "finish the run with ..."), by default the command that
+        draws the figures (``torchcbl plot RUN_DIR``)."""
         import shlex
 
         run_dir = Path(run_dir)
         text = " ".join(str(cause).split()) or type(cause).__name__
+        then = then or f"draw the figures with torchcbl plot {shlex.quote(str(run_dir))}"
         return cls(
             f"the {domain} figures could not be drawn into {run_dir} ({type(cause).__name__}: "
-            f"{text}); its results are kept in {run_dir / 'results.json'}: draw the figures "
-            f"with torchcbl plot {shlex.quote(str(run_dir))} once that is fixed",
+            f"{text}); its results are kept in {run_dir / 'results.json'}: once that is "
+            f"fixed, {then}",
             run_dir,
         )
 
