@@ -1969,7 +1969,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     A usage mistake (a path that is not what the command reads, a number out of range) is one
     line on stderr and exit code 2; any other failure is one line and exit code 1 (set
     ``TORCHCBL_TRACEBACK=1`` to see its traceback instead). What the terminal's encoding
-    cannot show (a summary's '±' under ``LC_ALL=C``) is written escaped, as ``\\xb1``.
+    cannot show (a summary's '±' under ``PYTHONIOENCODING=ascii``) is written escaped, as ``\\xb1``.
     """
     restore = _escape_what_the_terminal_cannot_show()
     try:
@@ -2027,8 +2027,9 @@ codecs.register_error(_TOLERANT, _write_what_cannot_be_encoded)
 def _escape_what_the_terminal_cannot_show() -> Callable[[], None]:
     """Make standard output and error write what their encoding cannot show escaped
     (``_TOLERANT``) where that encoding is not UTF-8: a summary's '±' on an ASCII terminal
-    (``LC_ALL=C``, ``PYTHONIOENCODING=ascii``) raised UnicodeEncodeError at the end of a
-    command. Returns the function that puts their error handlers back."""
+    (``PYTHONIOENCODING=ascii``; ``LC_ALL=C`` with ``PYTHONUTF8=0``) raised
+    UnicodeEncodeError at the end of a command. Returns the function that puts their error
+    handlers back."""
     changed: list[tuple[Any, str]] = []
     for stream in (sys.stdout, sys.stderr):
         encoding = getattr(stream, "encoding", None)
