@@ -205,7 +205,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             if domain in finished:
                 print(f"== {domain}: finished before, taken from {run_dir}", flush=True)
                 results = finished[domain]
-                _draw_missing_figures(domain, module, run_dir, results, go_on)
+                _draw_missing_figures(domain, module, run_dir, results)
                 elapsed = results.get("seconds", 0.0)
                 summary = module.format_summary(results)
                 summaries.append(
@@ -256,15 +256,14 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
-def _draw_missing_figures(
-    domain: str, module: Any, run_dir: Path, results: dict[str, Any], go_on: str
-) -> None:
+def _draw_missing_figures(domain: str, module: Any, run_dir: Path, results: dict[str, Any]) -> None:
     """Draw again the figures (``module.FIGURES``) missing from the run directory of a domain
     that finished before (its results.json written, a figure that failed after it, or one
-    deleted), saying so in one line; those there are left as they are, byte for byte. One
-    that fails raises the FigureError of a run's figures (``go_on``: what to do then)."""
+    deleted), saying so in one line; those there are left as they are, byte for byte. Where
+    they cannot be drawn (the cause not fixed yet, the sessions they read gone), one line on
+    stderr says so and how to draw them later, and the run goes on: its results
+    are whole without them."""
     from torchcbl._durable import write_durably
-    from torchcbl.evaluation import FigureError
 
     missing = [name for name in module.FIGURES if not (run_dir / name).is_file()]
     if not missing:
@@ -280,19 +279,36 @@ def _draw_missing_figures(
                 there[name] = (run_dir / name).read_bytes()
             except OSError:  # unreadable: drawn again with the others
                 pass
+    failed: Exception | None = None
     try:
         module.plot_results(results, run_dir)
-    except Exception as exc:
-        raise FigureError.of(domain, run_dir, exc, then=go_on) from exc
-    finally:  # plot_results draws them all: those that were there are put back as they were
-        for name, data in there.items():
-            path = run_dir / name
-            try:
-                same = path.read_bytes() == data
-            except OSError:
-                same = False
-            if not same:
+    except Exception as exc:  # noqa: BLE001 (any figure's failure: said in one line below)
+        failed = exc
+    kept_new = []  # plot_results draws them all: those that were there are put back
+    for name, data in there.items():
+        path = run_dir / name
+        try:
+            if path.read_bytes() != data:
                 write_durably(path, data, path.with_name(f".{name}.{os.getpid()}.tmp"))
+        except OSError:
+            kept_new.append(name)
+    warn = "torchcbl reproduce: warning:"
+    if failed is not None:
+        print(
+            f"{warn} {domain}: {', '.join(missing)} could not be drawn again "
+            f"({type(failed).__name__}: {str(failed).splitlines()[0] if str(failed) else ''}); "
+            f"the run goes on without them: draw them with `torchcbl plot {_shell(run_dir)}` "
+            "once that is fixed",
+            file=sys.stderr,
+            flush=True,
+        )
+    if kept_new:
+        print(
+            f"{warn} {domain}: {', '.join(kept_new)} could not be put back as they were: they "
+            "hold the figures as drawn now",
+            file=sys.stderr,
+            flush=True,
+        )
 
 
 def _resume_plan(out: Path, plan: list[tuple[str, Any, Any]]) -> dict[str, Any]:
