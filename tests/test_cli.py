@@ -400,7 +400,8 @@ def test_a_missing_dependency_is_one_line_naming_it_and_its_install(tmp_path, mo
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1, err
         assert f"torchcbl {argv[0]}: error: libsumo is missing" in err
-        assert "the driving domain" in err and "pip install libsumo eclipse-sumo sumolib" in err
+        assert "the driving domain" in err
+        assert "pip install 'libsumo>=1.22' 'eclipse-sumo>=1.22' 'sumolib>=1.22'" in err
         assert "bash scripts/setup.sh" in err
     assert not out.exists() and not bench.exists()
     # where the command reaches it as it goes: the figures torchcbl plot draws
@@ -411,7 +412,21 @@ def test_a_missing_dependency_is_one_line_naming_it_and_its_install(tmp_path, mo
     assert main(["plot", str(run)]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1, err
-    assert "matplotlib is missing" in err and "`pip install matplotlib`" in err
+    assert "matplotlib is missing" in err and "`pip install 'matplotlib>=3.7'`" in err
+
+
+def test_the_dependencies_the_cli_names_are_pyprojects_runtime_dependencies():
+    """The CLI's table of dependencies (what a missing one's line names and tells to install)
+    repeated pyproject.toml's without their versions, unchecked: SUMO's install line lacked
+    the >=1.22 the network builder asks for. It names exactly pyproject's requirements."""
+    import tomllib
+
+    from torchcbl import cli
+
+    pyproject = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text("utf-8"))
+    required = [requirement for requirement, _ in cli._DEPENDENCIES.values()]
+    assert sorted(required) == sorted(pyproject["project"]["dependencies"])
+    assert all(need in cli._DEPENDENCIES for needs in cli._DOMAIN_NEEDS.values() for need in needs)
 
 
 def test_an_output_directory_that_is_a_file_is_called_a_file(tmp_path, capsys):

@@ -60,30 +60,34 @@ _EPISODES_HINT = (
 )
 
 
-# torchcbl's declared dependencies, by the top-level module a ModuleNotFoundError names: what
-# needs it and the command that installs it (a missing one is one line, exit code 2, as --ray
-# says of a missing Ray)
-_SUMO_INSTALL = "pip install libsumo eclipse-sumo sumolib"
+# torchcbl's declared dependencies, by the top-level module a ModuleNotFoundError names: the
+# requirement pyproject.toml pins (tests/test_cli.py checks the two agree) and what needs it (a
+# missing one is one line, exit code 2, as --ray says of a missing Ray)
 _DEPENDENCIES = {
-    "libsumo": ("the driving domain (SUMO, run through libsumo)", _SUMO_INSTALL),
-    "sumolib": ("the driving domain (SUMO's network files, read with sumolib)", _SUMO_INSTALL),
-    "sumo": ("the driving domain (SUMO itself, eclipse-sumo)", _SUMO_INSTALL),
-    "pymunk": ("the corridor domain (its physics)", "pip install pymunk"),
-    "gymnasium": ("the environments and the teaching loop", "pip install gymnasium"),
-    "matplotlib": ("the figures and the replay's GIF", "pip install matplotlib"),
-    "imageio": ("the replay's GIF", "pip install imageio"),
-    "torch": ("the model (the Gaussian mixtures)", "pip install torch"),
-    "numpy": ("torchcbl", "pip install numpy"),
-    "tqdm": ("the progress bars", "pip install tqdm"),
+    "libsumo": ("libsumo>=1.22", "the driving domain (SUMO, run through libsumo)"),
+    "sumolib": ("sumolib>=1.22", "the driving domain (SUMO's network files, read with sumolib)"),
+    "sumo": ("eclipse-sumo>=1.22", "the driving domain (SUMO itself, eclipse-sumo)"),
+    "pymunk": ("pymunk>=7.0", "the corridor domain (its physics)"),
+    "gymnasium": ("gymnasium>=0.29", "the environments and the teaching loop"),
+    "matplotlib": ("matplotlib>=3.7", "the figures and the replay's GIF"),
+    "imageio": ("imageio>=2.30", "the replay's GIF"),
+    "torch": ("torch>=2.2", "the model (the Gaussian mixtures)"),
+    "numpy": ("numpy>=1.24", "torchcbl"),
+    "tqdm": ("tqdm>=4.60", "the progress bars"),
 }
-# what a command reaches only as it goes, after work that a missing one would throw away:
+# SUMO's three wheels, installed together (of one version)
+_SUMO_MODULES = ("libsumo", "sumo", "sumolib")
+# what each domain needs; a command adds what it needs besides (the figures, the replay's GIF).
+# What a command reaches only as it goes, after work that a missing one would throw away, is
 # checked before it starts (reproduce's figures come after every seed, its driving part after
 # the corridor's; a benchmark's driving cells after others, its plot after every cell)
-_REPRODUCE_NEEDS = {
-    "corridor": ("pymunk", "matplotlib"),
-    "driving": ("libsumo", "sumolib", "matplotlib"),
-}
-_BENCHMARK_NEEDS = {"corridor": ("pymunk",), "driving": ("libsumo", "sumolib")}
+_DOMAIN_NEEDS = {"corridor": ("pymunk",), "driving": ("libsumo", "sumolib")}
+
+
+def _install_command(module: str) -> str:
+    """The pip command that installs the dependency imported as ``module``, as pinned."""
+    modules = _SUMO_MODULES if module in _SUMO_MODULES else (module,)
+    return "pip install " + " ".join(f"'{_DEPENDENCIES[m][0]}'" for m in modules)
 
 
 class _UsageError(Exception):
@@ -98,11 +102,11 @@ def _missing_dependency(exc: BaseException | None) -> str | None:
         if isinstance(exc, ModuleNotFoundError) and exc.name:
             top = exc.name.partition(".")[0]
             if top in _DEPENDENCIES:
-                feature, install = _DEPENDENCIES[top]
+                feature = _DEPENDENCIES[top][1]
                 return (
                     f"{top} is missing ({_one_line(exc)}): {feature} needs it; install it into "
-                    f"this environment with `{install}` (from a checkout, `bash scripts/setup.sh` "
-                    "installs every dependency)"
+                    f"this environment with `{_install_command(top)}` (from a checkout, "
+                    "`bash scripts/setup.sh` installs every dependency)"
                 )
         exc = exc.__cause__
     return None
@@ -191,7 +195,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     for domain in domains:
         module = _experiment_module(domain)
         plan.append((domain, module, _experiment_config(domain, module, args)))
-    _check_importable([m for domain in domains for m in _REPRODUCE_NEEDS[domain]])
+    _check_importable([m for domain in domains for m in _DOMAIN_NEEDS[domain]] + ["matplotlib"])
     requested = _output_dir(Path(args.out), "--out")
     finished = _resume_plan(requested, plan) if args.resume else {}
     out = requested if args.resume else _fresh_dir(requested)
@@ -725,7 +729,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     cfg = fcd.with_name(fcd.name.removesuffix(".gz").replace(".fcd.xml", "") + ".sumocfg")
     _replay_outputs_spare(path, gif, fcd, cfg)
     # what the replay needs (listing needs none of it), before anything runs or is written
-    _check_importable(("libsumo", "sumolib", "imageio", "matplotlib"))
+    _check_importable([*_DOMAIN_NEEDS["driving"], "imageio", "matplotlib"])
     # (_refuse_commas below refuses this too, but names the fcd-replay input, not --fcd)
     if "," in fcd.name:
         raise _UsageError(
@@ -1469,7 +1473,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             raise _UsageError(f"--gym-env: {exc}") from None
     if not envs:
         raise _UsageError("no environment: give --envs and/or --gym-env")
-    _check_importable([m for e in env_names for m in _BENCHMARK_NEEDS[e]] + ["matplotlib"])
+    _check_importable([m for e in env_names for m in _DOMAIN_NEEDS[e]] + ["matplotlib"])
     seeds = list(range(args.seeds if args.seeds is not None else (3 if args.quick else 10)))
     out = _output_dir(
         Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark")), "--out"
