@@ -919,14 +919,14 @@ def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
     benchmark cell's driving env was made with gymnasium.make's max_episode_steps=1000, a
     TimeLimit that teach's own env lacks; a cap equal to the env's own, as teach's corridor
     sessions record, changes nothing)."""
-    from torchcbl.session import _kept_as_repr, load_config
+    from torchcbl.session import kept_as_repr, load_config
 
     env = load_config(run_dir).get("env") or {}
     kwargs = env.get("kwargs") or {}
-    kept_as_repr = sorted(k for k, v in kwargs.items() if _kept_as_repr(v))
-    if kept_as_repr:
+    as_text = sorted(k for k, v in kwargs.items() if kept_as_repr(v))
+    if as_text:
         raise _UsageError(
-            f"{run_dir}'s env was made with {', '.join(kept_as_repr)} given as an object, "
+            f"{run_dir}'s env was made with {', '.join(as_text)} given as an object, "
             "which teach --resume does not make again; resume it in Python with "
             "ConfidentTeacher.resume and that env"
         )

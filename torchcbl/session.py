@@ -214,6 +214,7 @@ __all__ = [
     "SessionWriteError",
     "describe",
     "env_make_argument",
+    "kept_as_repr",
     "latest_checkpoint",
     "load_config",
     "load_corrections",
@@ -689,9 +690,19 @@ def _write_error(exc: BaseException, path: Path, what: str, after: str) -> Sessi
 _write_fd = os.write  # the journal's write (a seam for the disk-full tests)
 
 
-def _kept_as_repr(value: Any) -> bool:
-    """Whether a stored ``gymnasium.make`` argument is the ``{"repr": ...}`` a session keeps of
-    an object JSON cannot hold (see ``ConfidentTeacher``'s env description)."""
+def kept_as_repr(value: Any) -> bool:
+    """Whether ``value``, a ``gymnasium.make`` argument as a session's config keeps it
+    (``config["env"]["kwargs"][name]``), is the ``{"repr": text}`` kept of an object JSON
+    cannot hold, rather than the plain value the env was made with.
+
+    Such an argument is made again, where it can be, by :func:`env_make_argument`.
+
+    Args:
+        value: one of the config's ``env.kwargs`` values.
+
+    Returns:
+        True for a dict whose only key is ``"repr"``, False for anything else.
+    """
     return isinstance(value, dict) and set(value) == {"repr"}
 
 
@@ -804,6 +815,8 @@ def _rebuild(form: Any, builders: Mapping[str, Callable[..., Any]]) -> Any:
     """The value :func:`_object_form` kept as ``form``: a kept object made again by the
     builder of its class (KeyError naming the class where ``builders`` has none), a JSON
     array as a tuple (as a frozen dataclass holds a sequence)."""
+    # the keys alone, not _is_kept_object: _object_form keeps no plain dict of these keys, so
+    # one edited out of shape (a class that is no str) is refused here, not built as a dict
     if isinstance(form, dict) and set(form) == _OBJECT_KEYS:
         build = builders.get(form["class"])
         if build is None:
@@ -922,7 +935,7 @@ def _object_problems(
         fields = {p: (_shortened(a), _shortened(b)) for p, a, b in differ[:6]}
         more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
         kept = stored_kw.get(name)
-        kept_text = kept["repr"] if _kept_as_repr(kept) else json.dumps(stored_objects[name])
+        kept_text = kept["repr"] if kept_as_repr(kept) else json.dumps(stored_objects[name])
         problems.append(
             f"env argument {name} (stored, given): {fields}{more}; the session's "
             f"{_shortened(str(kept_text), 100)}, the given {_shortened(repr(given[name]), 100)}"
@@ -967,11 +980,11 @@ def env_make_argument(
     if name not in kwargs:
         return default
     value = kwargs[name]
-    if not _kept_as_repr(value):
+    if not kept_as_repr(value):
         return value
     text = str(value["repr"])
     form = (env.get("kwargs_objects") or {}).get(name)
-    if not (isinstance(form, dict) and set(form) == _OBJECT_KEYS):
+    if not _is_kept_object(form):
         raise ValueError(
             f"its env was made with {name} given as an object ({text}), which its config keeps "
             "only as text (a frozen dataclass is kept whole since 2026-11-27; another object "
@@ -4031,8 +4044,8 @@ def _env_problems(
             k: (stored_kw.get(k), given_kw.get(k))
             for k in sorted(set(stored_kw) | set(given_kw))
             if k != "render_mode"
-            and not _kept_as_repr(stored_kw.get(k))
-            and not _kept_as_repr(given_kw.get(k))
+            and not kept_as_repr(stored_kw.get(k))
+            and not kept_as_repr(given_kw.get(k))
             and stored_kw.get(k) != given_kw.get(k)
         }
         # an object both sides keep whole (a frozen dataclass: a TrafficScenario, a
