@@ -786,6 +786,40 @@ def test_reproduce_resume_draws_the_missing_figures_of_a_finished_domain(
     assert (run / "figure4.png").read_bytes() == b"a figure of one's own"
 
 
+@pytest.mark.parametrize(
+    ("cause", "says"),
+    [
+        (RuntimeError("no room\n  on the device"), "(RuntimeError: no room on the device)"),
+        (RuntimeError(), "(RuntimeError: RuntimeError)"),
+    ],
+)
+def test_a_figure_not_drawn_again_names_its_whole_cause_on_one_line(
+    corridor_run, tmp_path, monkeypatch, capsys, cause, says
+):
+    """The warning of a finished domain's figure that could not be drawn again kept only the
+    first line of its cause's message, and printed a bare "RuntimeError: " for one without a
+    message; it says the cause as every other one-line error does (FigureError's too)."""
+    import corridor.experiment
+    import torchcbl.cli as cli
+
+    out = tmp_path / "runs"
+    shutil.copytree(corridor_run, out)
+    (out / "summary.md").unlink()
+    (out / "corridor" / "figure3.png").unlink()
+    monkeypatch.setattr(cli, "_experiment_config", _tiny_corridor)
+
+    def fails(results, run_dir):
+        raise cause
+
+    monkeypatch.setattr(corridor.experiment, "plot_results", fails)
+    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
+    capsys.readouterr()
+    assert main([*argv, "--resume", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert f"figure3.png could not be drawn again {says}; the run goes on" in err, err
+
+
 def test_output_a_terminal_cannot_show_is_escaped_not_a_crash(corridor_run, tmp_path):
     """On a terminal whose encoding lacks '±' (the summaries) or '≠' (the benchmark's table),
     printing raised UnicodeEncodeError at the very end of a command (exit 1, the summary.md

@@ -34,6 +34,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from torchcbl._text import one_line as _one_line
+
 _DOMAINS = {
     "corridor": "corridor.experiment",
     "driving": "sumo_scenarios.experiment",
@@ -300,7 +302,7 @@ def _draw_missing_figures(domain: str, module: Any, run_dir: Path, results: dict
     if failed is not None:
         print(
             f"{warn} {domain}: {', '.join(missing)} could not be drawn again "
-            f"({type(failed).__name__}: {str(failed).splitlines()[0] if str(failed) else ''}); "
+            f"({type(failed).__name__}: {_one_line(failed)}); "
             f"the run goes on without them: draw them with `torchcbl plot {_shell(run_dir)}` "
             "once that is fixed",
             file=sys.stderr,
@@ -2121,10 +2123,6 @@ def _shell(path: Path) -> str:
     import shlex
 
     return shlex.quote(str(path))
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":
