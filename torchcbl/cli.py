@@ -571,27 +571,26 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     domain = _session_domain(session, args.domain)
     _session_map_exists(session, domain)
     module = _experiment_module(domain)
+    from torchcbl.evaluation import SEED_RESULT
     from torchcbl.session import IncompatibleRunDirError
 
-    seed = args.seed
-    if seed is None and domain == "driving":  # a reproduction's session: its seed's segment
-        seed = module.session_eval_segment(session)
-        if seed is not None:
-            print(
-                f"torchcbl evaluate: note: driving held-out segment {seed}, the one its run "
-                "evaluated this seed's policies on "
-                f"({Path(os.path.abspath(session)).parent.parent / 'seed_result.json'}); "
-                "--seed S drives segment S",
-                file=sys.stderr,
-            )
-    if seed is None:
-        seed = 0
+    # without --seed, the domain's own default: driving's is the segment a reproduction's
+    # session's run evaluated its seed's policies on (else 0), the corridor's 0
+    seed = {} if args.seed is None else {"seed": args.seed}
     try:
         with warnings.catch_warnings(record=True) as said:  # each one line below
             warnings.simplefilter("always")
-            report = module.evaluate_saved_policy(session, n_steps=args.steps, seed=seed)
+            report = module.evaluate_saved_policy(session, n_steps=args.steps, **seed)
     except (IncompatibleRunDirError, ValueError) as exc:  # e.g. a robot its config lacks
         raise _UsageError(_one_line(exc)) from None
+    if not seed and domain == "driving" and module.session_eval_segment(session) is not None:
+        print(
+            f"torchcbl evaluate: note: driving held-out segment {report['eval_segment']}, the "
+            "one its run evaluated this seed's policies on "
+            f"({Path(os.path.abspath(session)).parent.parent / SEED_RESULT}); "
+            "--seed S drives segment S",
+            file=sys.stderr,
+        )
     for w in said:  # e.g. a corridor session that does not say which robot it was taught on
         print(f"torchcbl evaluate: warning: {_one_line(w.message)}", file=sys.stderr)
     print(json.dumps(report, indent=2))
