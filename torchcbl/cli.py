@@ -1987,8 +1987,11 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``torchcbl`` console script; returns the exit code.
 
-    A usage mistake (a path that is not what the command reads, a number out of range) is one
-    line on stderr and exit code 2; any other failure is one line and exit code 1 (set
+    A usage mistake (a path that is not what the command reads, a number out of range) or a
+    missing dependency (the line names the package and how to install it) is one line on
+    stderr and exit code 2; Ctrl-C is one line and exit code 130; a write into a pipe whose
+    reader has gone (``| head -1``) ends the command quietly with exit code 141 (``benchmark``
+    stops printing and finishes its sweep); any other failure is one line and exit code 1 (set
     ``TORCHCBL_TRACEBACK=1`` to see its traceback instead). What the terminal's encoding
     cannot show (a summary's '±' under ``PYTHONIOENCODING=ascii``) is written escaped, as ``\\xb1``.
     """

@@ -1100,14 +1100,14 @@ def _remove_new_session_files(path: Path) -> None:
 
     In an order where a kill at any point leaves either the whole session (a session of no
     step, which resumes) or only what a new session may start beside
-    (:func:`_check_new_session_dir`): where ``config.json`` is not there (the start failed
-    writing it), ``config.json.tmp`` is made again first (:func:`_mark_unstarted`); the
-    writers file and the journal first, then the step
-    log (the session then reads as one whose creation was killed before its log: it resumes
-    as a session of no step, see :func:`_unborn`); then ``config.json`` is renamed to
-    ``config.json.tmp``, after which the folder holds no session (its prior demonstrations and
-    starting model, left beside that ``.tmp``, are what a start killed while writing its
-    config leaves, and a new start removes them); then those and the ``.tmp``. Deleting
+    (:func:`_check_new_session_dir`). First, where ``config.json`` is not there (the start
+    failed writing it), ``config.json.tmp`` is made again (:func:`_mark_unstarted`); then the
+    writers file and the journal are removed, then the step log (the session then reads as
+    one whose creation was killed before its log: it resumes as a session of no step, see
+    :func:`_unborn`); then ``config.json`` is renamed to ``config.json.tmp``, after which the
+    folder holds no session (its prior demonstrations and starting model, left beside that
+    ``.tmp``, are what a start killed before its config.json was in place leaves, and a new
+    start removes them); last those and the ``.tmp``. Deleting
     ``config.json`` first left a step log with no config, which refused the next start as a
     session whose config was deleted."""
     if not (path / CONFIG_NAME).exists():
