@@ -886,10 +886,10 @@ class CellError(RuntimeError):
     computes only the rest."""
 
     def __init__(
-        self, config: Mapping[str, Any], cause: BaseException, out: Path, kept: int | None = None
+        self, config: Mapping[str, Any], cause: BaseException, out: Path, kept: int
     ) -> None:
         """``kept``: how many of the sweep's cells are finished and kept in ``out/cells`` (this
-        call's and cached ones); None where it is not known."""
+        call's and cached ones)."""
         self.config = dict(config)
         self.key = cell_key(config)
         text = one_line(cause)
@@ -898,11 +898,7 @@ class CellError(RuntimeError):
                 "no cell of this sweep has finished (none is kept); fix the cause and run it again"
             )
         else:
-            cells = (
-                "the cells finished before it are"
-                if kept is None
-                else (f"the {kept} finished cell{' is' if kept == 1 else 's are'}")
-            )
+            cells = f"the {kept} finished cell{' is' if kept == 1 else 's are'}"
             held = (
                 f"{cells} kept in {out / 'cells'}; fix the cause and run the same sweep again to "
                 "compute the rest"

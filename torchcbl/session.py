@@ -3909,7 +3909,7 @@ def resume_problems(
     model_type: type | None = None,
     env_class: str | None = None,
     env_observation_space: Any = None,
-    env_make_kwargs: Mapping[str, Any] | None = None,
+    env_make_kwargs: Mapping[str, Any],
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
@@ -3933,11 +3933,12 @@ def resume_problems(
     ``env_class``: the unwrapped env's class (``module.qualname``), compared by its name with
     the session's where the session kept one, and ``env_observation_space`` (the space),
     compared with the one the session kept; ``env_make_kwargs``: what ``gymnasium.make`` was
-    given, as given (the spec's kwargs, objects whole): of each argument that both it and the
-    session (config.json's ``env.kwargs_objects``, kept since 2026-11-27) keep whole (a frozen
-    dataclass), the kept forms are compared field by field (a field its class marks
-    ``metadata={COMPARE_ON_RESUME: False}`` aside); see :func:`_env_problems`, which compares
-    them whether or not the env was made by ``gymnasium.make``."""
+    given, as given (the spec's kwargs, objects whole; empty for an env made directly): of each
+    argument that both it and the session (config.json's ``env.kwargs_objects``, kept since
+    2026-11-27) keep whole (a frozen dataclass), the kept forms are compared field by field (a
+    field its class marks ``metadata={COMPARE_ON_RESUME: False}`` aside); see
+    :func:`_env_problems`, which compares them whether or not the env was made by
+    ``gymnasium.make``."""
     problems: list[str] = []
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
@@ -3955,7 +3956,7 @@ def resume_problems(
             env_max_episode_steps,
             env_class,
             env_observation_space,
-            env_make_kwargs or {},
+            env_make_kwargs,
         )
     kept_inputs = senv.get("inputs")
     if isinstance(kept_inputs, dict) and kept_inputs != (env_inputs or {}):
@@ -4003,7 +4004,7 @@ def _env_problems(
     cap: int | None,
     env_class: str | None,
     space: Any,
-    make_kwargs: Mapping[str, Any] | None = None,
+    make_kwargs: Mapping[str, Any],
 ) -> list[str]:
     """What tells the given env from the session's (``senv``, config.json's ``"env"``) besides
     its id and sizes, whether either was made by ``gymnasium.make`` or directly: the class of
@@ -4050,7 +4051,7 @@ def _env_problems(
         }
         # an object both sides keep whole (a frozen dataclass: a TrafficScenario, a
         # CorridorMap): its kept forms, where the text above is not compared
-        objects = _object_problems(stored_kw, senv.get("kwargs_objects"), make_kwargs or {})
+        objects = _object_problems(stored_kw, senv.get("kwargs_objects"), make_kwargs)
         differ += objects
     unshown = {k: v for k, v in stored_kw.items() if k != "render_mode"}
     if senv.get("id") and not env_id and unshown:
