@@ -485,6 +485,26 @@ def test_a_model_that_cannot_be_copied_is_refused_a_lost_start_before_a_file_is_
     assert all(torch.equal(v, state[k]) for k, v in model.state_dict().items())
 
 
+class _MadeWithArgumentsGMM(_LoggedGMM):
+    """An uncopyable model whose class cannot be made without its arguments (its __new__
+    takes them): neither a deep copy nor a shadow of it can be made."""
+
+    def __new__(cls, n_components: int, *args: Any, **kwargs: Any) -> _MadeWithArgumentsGMM:
+        return super().__new__(cls)
+
+
+def test_a_model_whose_class_needs_its_arguments_to_be_made_resumes_its_session(tmp_path):
+    """Resume tries checkpoint 0 on a shadow of a model that cannot be copied, made by its
+    class's __new__ without arguments: of a class whose __new__ needs them, there is no
+    shadow, and restore_model's own load decides (the session resumes)."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    fitted = _session_started_fitted(run, _MadeWithArgumentsGMM, max_new=50)
+    model = _MadeWithArgumentsGMM(3, 2, seed=0)
+    ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
+    assert torch.equal(model.means_, fitted.means_)
+
+
 class _SlottedGMM(_LoggedGMM):
     """An uncopyable model keeping state in a slot that its own load reads."""
 

@@ -3140,8 +3140,8 @@ def _trial_copy(model: torch.nn.Module) -> torch.nn.Module | None:
         return None
     try:
         return _shadow(model)
-    except Exception:  # a class that cannot be made without its constructor's arguments
-        return None
+    except Exception:  # a class whose __new__ needs its arguments, a tensor that cannot be
+        return None  # copied to the CPU (one on the meta device)
 
 
 def _shadow_loads_alike(model: torch.nn.Module) -> bool:
@@ -3166,10 +3166,11 @@ def _shadow_loads_alike(model: torch.nn.Module) -> bool:
 
 def _shadow(module: torch.nn.Module) -> torch.nn.Module:
     """An instance of ``module``'s class, made without its constructor, holding its
-    attributes, with its parameters and buffers copied to the CPU and its submodules
-    shadowed alike: what ``load_state_dict`` changes (the tensors, the attributes it sets) is
-    the shadow's, never ``module``'s; what a copy cannot take (a lock, a logger) is the same
-    object in both, not copied. No accelerator memory is taken."""
+    attributes, with its parameters and buffers copied to the CPU: what ``load_state_dict``
+    changes (the tensors, the attributes it sets) is the shadow's, never ``module``'s; what a
+    copy cannot take (a lock, a logger) is the same object in both, not copied. No
+    accelerator memory is taken. Only a module without submodules is shadowed (see
+    :func:`_shadow_loads_alike`): the shadow has none."""
     cls = type(module)
     shadow = cls.__new__(cls)
     own = dict(module.__dict__)
@@ -3186,9 +3187,7 @@ def _shadow(module: torch.nn.Module) -> torch.nn.Module:
         (name, None if b is None else b.detach().to("cpu", copy=True))
         for name, b in module._buffers.items()
     )
-    own["_modules"] = type(module._modules)(
-        (name, None if m is None else _shadow(m)) for name, m in module._modules.items()
-    )
+    own["_modules"] = type(module._modules)()  # its own, not the model's (empty) one
     shadow.__dict__.update(own)
     return shadow
 
