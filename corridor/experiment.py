@@ -1296,7 +1296,7 @@ def _check_session_map(
 def _session_world(session_dir: Path) -> tuple[WorldConfig, str]:
     """The robot a session was taught with (see :func:`evaluate_saved_policy`), and what to
     warn of when nothing says which (else "")."""
-    from torchcbl.session import load_config
+    from torchcbl.session import kept_as_repr, load_config
 
     source, value = _taught_with(
         session_dir, "world", "world_config", lambda fields: WorldConfig(**fields)
@@ -1314,7 +1314,7 @@ def _session_world(session_dir: Path) -> tuple[WorldConfig, str]:
         )
     if source in ("record", "results"):
         return value, ""
-    if isinstance(value, dict) and set(value) != {"repr"}:
+    if isinstance(value, dict) and not kept_as_repr(value):
         try:
             return WorldConfig(**value), ""
         except (TypeError, ValueError) as exc:

@@ -75,7 +75,8 @@ class CorridorMap:
     """
 
     # the name and description change nothing the robot drives (map_digest leaves them out):
-    # a session resumes on the same map under another name (torchcbl.session.COMPARE_ON_RESUME)
+    # a session resumes on the same map under another name (torchcbl.session.COMPARE_ON_RESUME,
+    # spelled out: importing it would import torch; tests/test_resume_checks.py checks the two)
     name: str = field(metadata={"torchcbl.compare_on_resume": False})
     corridor_width: float
     nodes: Mapping[str, tuple[float, float]]

@@ -295,15 +295,14 @@ def _session_make_settings(config: dict[str, Any]) -> tuple[dict[str, Any], dict
     words. A start lane or step cap kept as the text of a numpy int is read as its int."""
     import re
 
-    from torchcbl.session import env_make_argument
+    from torchcbl.session import env_make_argument, kept_as_repr
 
     kwargs = dict((config.get("env") or {}).get("kwargs") or {})
     kwargs.pop("render_mode", None)  # drawing only: the same traffic either way
     settings: dict[str, Any] = {}
     unknown: dict[str, str] = {}
     for name, value in kwargs.items():
-        as_text = isinstance(value, dict) and set(value) == {"repr"}
-        if as_text and name in ("start_lane", "max_episode_steps"):
+        if kept_as_repr(value) and name in ("start_lane", "max_episode_steps"):
             # a numpy int: "np.int64(3)" (numpy 1: "3")
             found = re.fullmatch(r"(?:\w+(?:\.\w+)*\()?(\d+)\)?", str(value["repr"]))
             if found:

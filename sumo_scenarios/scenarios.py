@@ -163,7 +163,8 @@ class TrafficScenario:
     """
 
     # the name changes nothing the traffic does: a session resumes on the same traffic under
-    # another name (torchcbl.session.COMPARE_ON_RESUME)
+    # another name (torchcbl.session.COMPARE_ON_RESUME, spelled out: importing it would import
+    # torch; tests/test_resume_checks.py checks the two)
     name: str = field(metadata={"torchcbl.compare_on_resume": False})
     seed: int
     speed_ranges_mph: tuple[tuple[float, float], ...] = ((20.0, 30.0), (25.0, 35.0), (30.0, 40.0))

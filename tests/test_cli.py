@@ -400,7 +400,8 @@ def test_a_missing_dependency_is_one_line_naming_it_and_its_install(tmp_path, mo
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1, err
         assert f"torchcbl {argv[0]}: error: libsumo is missing" in err
-        assert "the driving domain" in err and "pip install libsumo eclipse-sumo sumolib" in err
+        assert "the driving domain" in err
+        assert "pip install 'libsumo>=1.22' 'eclipse-sumo>=1.22' 'sumolib>=1.22'" in err
         assert "bash scripts/setup.sh" in err
     assert not out.exists() and not bench.exists()
     # where the command reaches it as it goes: the figures torchcbl plot draws
@@ -411,7 +412,21 @@ def test_a_missing_dependency_is_one_line_naming_it_and_its_install(tmp_path, mo
     assert main(["plot", str(run)]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1, err
-    assert "matplotlib is missing" in err and "`pip install matplotlib`" in err
+    assert "matplotlib is missing" in err and "`pip install 'matplotlib>=3.7'`" in err
+
+
+def test_the_dependencies_the_cli_names_are_pyprojects_runtime_dependencies():
+    """The CLI's table of dependencies (what a missing one's line names and tells to install)
+    repeated pyproject.toml's without their versions, unchecked: SUMO's install line lacked
+    the >=1.22 the network builder asks for. It names exactly pyproject's requirements."""
+    import tomllib
+
+    from torchcbl import cli
+
+    pyproject = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text("utf-8"))
+    required = [requirement for requirement, _ in cli._DEPENDENCIES.values()]
+    assert sorted(required) == sorted(pyproject["project"]["dependencies"])
+    assert all(need in cli._DEPENDENCIES for needs in cli._DOMAIN_NEEDS.values() for need in needs)
 
 
 def test_an_output_directory_that_is_a_file_is_called_a_file(tmp_path, capsys):
@@ -716,6 +731,16 @@ def test_a_figure_that_fails_loses_no_result_and_says_how_to_draw_it(
         assert (run / name).read_bytes() == (whole / name).read_bytes(), name
 
 
+def test_a_corridor_run_draws_exactly_the_figures_its_module_names(corridor_run):
+    """reproduce --resume draws a finished domain's missing figures again by its module's
+    FIGURES, which the corridor's plot_results does not save through (it names each file
+    itself): a name changed on one side only would have --resume miss a figure, or draw all
+    of them again at every resume. The PNGs a corridor run writes are FIGURES."""
+    from corridor.experiment import FIGURES
+
+    assert sorted(p.name for p in (corridor_run / "corridor").glob("*.png")) == sorted(FIGURES)
+
+
 def test_reproduce_resume_draws_the_missing_figures_of_a_finished_domain(
     corridor_run, tmp_path, monkeypatch, capsys
 ):
@@ -769,6 +794,40 @@ def test_reproduce_resume_draws_the_missing_figures_of_a_finished_domain(
     assert len(err.strip().splitlines()) == 1 and "map.png could not be drawn again" in err, err
     assert (out / "summary.md").is_file() and not (run / "map.png").exists()
     assert (run / "figure4.png").read_bytes() == b"a figure of one's own"
+
+
+@pytest.mark.parametrize(
+    ("cause", "says"),
+    [
+        (RuntimeError("no room\n  on the device"), "(RuntimeError: no room on the device)"),
+        (RuntimeError(), "(RuntimeError: RuntimeError)"),
+    ],
+)
+def test_a_figure_not_drawn_again_names_its_whole_cause_on_one_line(
+    corridor_run, tmp_path, monkeypatch, capsys, cause, says
+):
+    """The warning of a finished domain's figure that could not be drawn again kept only the
+    first line of its cause's message, and printed a bare "RuntimeError: " for one without a
+    message; it says the cause as every other one-line error does (FigureError's too)."""
+    import corridor.experiment
+    import torchcbl.cli as cli
+
+    out = tmp_path / "runs"
+    shutil.copytree(corridor_run, out)
+    (out / "summary.md").unlink()
+    (out / "corridor" / "figure3.png").unlink()
+    monkeypatch.setattr(cli, "_experiment_config", _tiny_corridor)
+
+    def fails(results, run_dir):
+        raise cause
+
+    monkeypatch.setattr(corridor.experiment, "plot_results", fails)
+    argv = ["reproduce", "corridor", "--seeds", "2", "--workers", "1", "--no-progress"]
+    capsys.readouterr()
+    assert main([*argv, "--resume", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert f"figure3.png could not be drawn again {says}; the run goes on" in err, err
 
 
 def test_output_a_terminal_cannot_show_is_escaped_not_a_crash(corridor_run, tmp_path):

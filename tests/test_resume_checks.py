@@ -26,7 +26,7 @@ from test_session_faults import session as fault_session
 
 from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
 from torchcbl.errors import CorruptSessionError, IncompatibleRunDirError
-from torchcbl.session import load_config, load_records
+from torchcbl.session import COMPARE_ON_RESUME, load_config, load_records
 
 LINE_ID = "torchcbl_tests/ResumeLine-v0"
 
@@ -227,7 +227,7 @@ class Course:
     start: Start = Start()
     slip: float = 0.0
     # what changes nothing the env does (a CorridorMap's name): not compared on resume
-    label: str = dataclasses.field(default="", metadata={"torchcbl.compare_on_resume": False})
+    label: str = dataclasses.field(default="", metadata={COMPARE_ON_RESUME: False})
 
 
 class Walk(Line):
@@ -279,6 +279,20 @@ def test_a_session_made_with_an_object_argument_refuses_another_object(tmp_path)
     (run / "config.json").write_text(json.dumps(config))
     _resumes(run, gym.make(WALK_ID, course=course))
     assert len(load_records(run)) == 12
+
+
+def test_the_domains_mark_their_names_not_compared_with_torchcbls_key():
+    """corridor.maps and sumo_scenarios.scenarios spell COMPARE_ON_RESUME as a literal (taking
+    it from torchcbl.session would import torch with them): a literal that drifted from the
+    constant would make a map's or a scenario's name compared on resume again, unnoticed."""
+    from corridor.maps import CorridorMap
+    from sumo_scenarios.scenarios import TrafficScenario
+
+    for cls, expected in ((CorridorMap, {"name", "description"}), (TrafficScenario, {"name"})):
+        fields = dataclasses.fields(cls)
+        marked = {f.name for f in fields if f.metadata.get(COMPARE_ON_RESUME) is False}
+        assert marked == expected, cls
+        assert all(set(f.metadata) <= {COMPARE_ON_RESUME} for f in fields), cls
 
 
 def test_an_object_argument_kept_only_as_text_on_one_side_resumes_as_before(tmp_path):
@@ -469,6 +483,26 @@ def test_a_model_that_cannot_be_copied_is_refused_a_lost_start_before_a_file_is_
     assert _files_of(run) == before
     assert not model.is_fitted
     assert all(torch.equal(v, state[k]) for k, v in model.state_dict().items())
+
+
+class _MadeWithArgumentsGMM(_LoggedGMM):
+    """An uncopyable model whose class cannot be made without its arguments (its __new__
+    takes them): neither a deep copy nor a shadow of it can be made."""
+
+    def __new__(cls, n_components: int, *args: Any, **kwargs: Any) -> _MadeWithArgumentsGMM:
+        return super().__new__(cls)
+
+
+def test_a_model_whose_class_needs_its_arguments_to_be_made_resumes_its_session(tmp_path):
+    """Resume tries checkpoint 0 on a shadow of a model that cannot be copied, made by its
+    class's __new__ without arguments: of a class whose __new__ needs them, there is no
+    shadow, and restore_model's own load decides (the session resumes)."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    fitted = _session_started_fitted(run, _MadeWithArgumentsGMM, max_new=50)
+    model = _MadeWithArgumentsGMM(3, 2, seed=0)
+    ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
+    assert torch.equal(model.means_, fitted.means_)
 
 
 class _SlottedGMM(_LoggedGMM):

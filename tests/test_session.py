@@ -858,7 +858,7 @@ def test_a_session_keeps_each_frozen_dataclass_make_argument_rebuildably(tmp_pat
     refused). A frozen dataclass is now also kept as {"class", "fields"} (its init fields,
     nested dataclasses alike), which env_make_argument rebuilds with the classes it is given;
     the text stays beside it, and the session resumes as before."""
-    from torchcbl.session import env_make_argument
+    from torchcbl.session import env_make_argument, kept_as_repr
 
     reach = _Reach(n=4, start=(1, 2))
     made = dict(reach=reach, layout=_Layout(reach, "mine"), loose=_Loose(3))
@@ -869,6 +869,8 @@ def test_a_session_keeps_each_frozen_dataclass_make_argument_rebuildably(tmp_pat
         ct.run(max_steps=6)
     config = load_config(run)
     assert config["env"]["kwargs"]["reach"]["repr"].startswith("_Reach(n=4")  # as before
+    assert kept_as_repr(config["env"]["kwargs"]["loose"])
+    assert not any(map(kept_as_repr, (4, "text", {"repr": "x", "n": 1}, None)))
     builders = {f"{__name__}:_Reach": _Reach, f"{__name__}:_Layout": _Layout}
     assert env_make_argument(config, "reach", builders) == reach
     assert env_make_argument(config, "layout", builders) == _Layout(reach, "mine")

@@ -82,6 +82,7 @@ import gymnasium as gym
 import numpy as np
 
 from torchcbl._durable import write_durably
+from torchcbl._text import one_line
 from torchcbl.evaluation import figure_style, mean_sd, run_versions, save_whole, worker_pool
 from torchcbl.records import _is_int
 
@@ -153,7 +154,7 @@ def _check_imports(strategies: Sequence[StrategySpec], envs: Sequence[EnvSpec]) 
         try:
             strategy = s.build(seed=0)
         except Exception as exc:  # the class's own refusal of its arguments, whatever it is
-            text = " ".join(str(exc).split()) or type(exc).__name__
+            text = one_line(exc)
             raise ValueError(
                 f"StrategySpec {s.title!r}: cannot make {s.name} with params "
                 f"{dict(s.params)}: {type(exc).__name__}: {text}; fix its params (the keyword "
@@ -885,23 +886,19 @@ class CellError(RuntimeError):
     computes only the rest."""
 
     def __init__(
-        self, config: Mapping[str, Any], cause: BaseException, out: Path, kept: int | None = None
+        self, config: Mapping[str, Any], cause: BaseException, out: Path, kept: int
     ) -> None:
         """``kept``: how many of the sweep's cells are finished and kept in ``out/cells`` (this
-        call's and cached ones); None where it is not known."""
+        call's and cached ones)."""
         self.config = dict(config)
         self.key = cell_key(config)
-        text = " ".join(str(cause).split()) or type(cause).__name__
+        text = one_line(cause)
         if kept == 0:
             held = (
                 "no cell of this sweep has finished (none is kept); fix the cause and run it again"
             )
         else:
-            cells = (
-                "the cells finished before it are"
-                if kept is None
-                else (f"the {kept} finished cell{' is' if kept == 1 else 's are'}")
-            )
+            cells = f"the {kept} finished cell{' is' if kept == 1 else 's are'}"
             held = (
                 f"{cells} kept in {out / 'cells'}; fix the cause and run the same sweep again to "
                 "compute the rest"

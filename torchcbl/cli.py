@@ -34,6 +34,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from torchcbl._text import one_line as _one_line
+
 _DOMAINS = {
     "corridor": "corridor.experiment",
     "driving": "sumo_scenarios.experiment",
@@ -60,30 +62,34 @@ _EPISODES_HINT = (
 )
 
 
-# torchcbl's declared dependencies, by the top-level module a ModuleNotFoundError names: what
-# needs it and the command that installs it (a missing one is one line, exit code 2, as --ray
-# says of a missing Ray)
-_SUMO_INSTALL = "pip install libsumo eclipse-sumo sumolib"
+# torchcbl's declared dependencies, by the top-level module a ModuleNotFoundError names: the
+# requirement pyproject.toml pins (tests/test_cli.py checks the two agree) and what needs it (a
+# missing one is one line, exit code 2, as --ray says of a missing Ray)
 _DEPENDENCIES = {
-    "libsumo": ("the driving domain (SUMO, run through libsumo)", _SUMO_INSTALL),
-    "sumolib": ("the driving domain (SUMO's network files, read with sumolib)", _SUMO_INSTALL),
-    "sumo": ("the driving domain (SUMO itself, eclipse-sumo)", _SUMO_INSTALL),
-    "pymunk": ("the corridor domain (its physics)", "pip install pymunk"),
-    "gymnasium": ("the environments and the teaching loop", "pip install gymnasium"),
-    "matplotlib": ("the figures and the replay's GIF", "pip install matplotlib"),
-    "imageio": ("the replay's GIF", "pip install imageio"),
-    "torch": ("the model (the Gaussian mixtures)", "pip install torch"),
-    "numpy": ("torchcbl", "pip install numpy"),
-    "tqdm": ("the progress bars", "pip install tqdm"),
+    "libsumo": ("libsumo>=1.22", "the driving domain (SUMO, run through libsumo)"),
+    "sumolib": ("sumolib>=1.22", "the driving domain (SUMO's network files, read with sumolib)"),
+    "sumo": ("eclipse-sumo>=1.22", "the driving domain (SUMO itself, eclipse-sumo)"),
+    "pymunk": ("pymunk>=7.0", "the corridor domain (its physics)"),
+    "gymnasium": ("gymnasium>=0.29", "the environments and the teaching loop"),
+    "matplotlib": ("matplotlib>=3.7", "the figures and the replay's GIF"),
+    "imageio": ("imageio>=2.30", "the replay's GIF"),
+    "torch": ("torch>=2.2", "the model (the Gaussian mixtures)"),
+    "numpy": ("numpy>=1.24", "torchcbl"),
+    "tqdm": ("tqdm>=4.60", "the progress bars"),
 }
-# what a command reaches only as it goes, after work that a missing one would throw away:
+# SUMO's three wheels, installed together (of one version)
+_SUMO_MODULES = ("libsumo", "sumo", "sumolib")
+# what each domain needs; a command adds what it needs besides (the figures, the replay's GIF).
+# What a command reaches only as it goes, after work that a missing one would throw away, is
 # checked before it starts (reproduce's figures come after every seed, its driving part after
 # the corridor's; a benchmark's driving cells after others, its plot after every cell)
-_REPRODUCE_NEEDS = {
-    "corridor": ("pymunk", "matplotlib"),
-    "driving": ("libsumo", "sumolib", "matplotlib"),
-}
-_BENCHMARK_NEEDS = {"corridor": ("pymunk",), "driving": ("libsumo", "sumolib")}
+_DOMAIN_NEEDS = {"corridor": ("pymunk",), "driving": ("libsumo", "sumolib")}
+
+
+def _install_command(module: str) -> str:
+    """The pip command that installs the dependency imported as ``module``, as pinned."""
+    modules = _SUMO_MODULES if module in _SUMO_MODULES else (module,)
+    return "pip install " + " ".join(f"'{_DEPENDENCIES[m][0]}'" for m in modules)
 
 
 class _UsageError(Exception):
@@ -98,11 +104,11 @@ def _missing_dependency(exc: BaseException | None) -> str | None:
         if isinstance(exc, ModuleNotFoundError) and exc.name:
             top = exc.name.partition(".")[0]
             if top in _DEPENDENCIES:
-                feature, install = _DEPENDENCIES[top]
+                feature = _DEPENDENCIES[top][1]
                 return (
                     f"{top} is missing ({_one_line(exc)}): {feature} needs it; install it into "
-                    f"this environment with `{install}` (from a checkout, `bash scripts/setup.sh` "
-                    "installs every dependency)"
+                    f"this environment with `{_install_command(top)}` (from a checkout, "
+                    "`bash scripts/setup.sh` installs every dependency)"
                 )
         exc = exc.__cause__
     return None
@@ -191,7 +197,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     for domain in domains:
         module = _experiment_module(domain)
         plan.append((domain, module, _experiment_config(domain, module, args)))
-    _check_importable([m for domain in domains for m in _REPRODUCE_NEEDS[domain]])
+    _check_importable([m for domain in domains for m in _DOMAIN_NEEDS[domain]] + ["matplotlib"])
     requested = _output_dir(Path(args.out), "--out")
     finished = _resume_plan(requested, plan) if args.resume else {}
     out = requested if args.resume else _fresh_dir(requested)
@@ -296,7 +302,7 @@ def _draw_missing_figures(domain: str, module: Any, run_dir: Path, results: dict
     if failed is not None:
         print(
             f"{warn} {domain}: {', '.join(missing)} could not be drawn again "
-            f"({type(failed).__name__}: {str(failed).splitlines()[0] if str(failed) else ''}); "
+            f"({type(failed).__name__}: {_one_line(failed)}); "
             f"the run goes on without them: draw them with `torchcbl plot {_shell(run_dir)}` "
             "once that is fixed",
             file=sys.stderr,
@@ -565,27 +571,26 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     domain = _session_domain(session, args.domain)
     _session_map_exists(session, domain)
     module = _experiment_module(domain)
+    from torchcbl.evaluation import SEED_RESULT
     from torchcbl.session import IncompatibleRunDirError
 
-    seed = args.seed
-    if seed is None and domain == "driving":  # a reproduction's session: its seed's segment
-        seed = module.session_eval_segment(session)
-        if seed is not None:
-            print(
-                f"torchcbl evaluate: note: driving held-out segment {seed}, the one its run "
-                "evaluated this seed's policies on "
-                f"({Path(os.path.abspath(session)).parent.parent / 'seed_result.json'}); "
-                "--seed S drives segment S",
-                file=sys.stderr,
-            )
-    if seed is None:
-        seed = 0
+    # without --seed, the domain's own default: driving's is the segment a reproduction's
+    # session's run evaluated its seed's policies on (else 0), the corridor's 0
+    seed = {} if args.seed is None else {"seed": args.seed}
     try:
         with warnings.catch_warnings(record=True) as said:  # each one line below
             warnings.simplefilter("always")
-            report = module.evaluate_saved_policy(session, n_steps=args.steps, seed=seed)
+            report = module.evaluate_saved_policy(session, n_steps=args.steps, **seed)
     except (IncompatibleRunDirError, ValueError) as exc:  # e.g. a robot its config lacks
         raise _UsageError(_one_line(exc)) from None
+    if not seed and domain == "driving" and module.session_eval_segment(session) is not None:
+        print(
+            f"torchcbl evaluate: note: driving held-out segment {report['eval_segment']}, the "
+            "one its run evaluated this seed's policies on "
+            f"({Path(os.path.abspath(session)).parent.parent / SEED_RESULT}); "
+            "--seed S drives segment S",
+            file=sys.stderr,
+        )
     for w in said:  # e.g. a corridor session that does not say which robot it was taught on
         print(f"torchcbl evaluate: warning: {_one_line(w.message)}", file=sys.stderr)
     print(json.dumps(report, indent=2))
@@ -725,7 +730,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     cfg = fcd.with_name(fcd.name.removesuffix(".gz").replace(".fcd.xml", "") + ".sumocfg")
     _replay_outputs_spare(path, gif, fcd, cfg)
     # what the replay needs (listing needs none of it), before anything runs or is written
-    _check_importable(("libsumo", "sumolib", "imageio", "matplotlib"))
+    _check_importable([*_DOMAIN_NEEDS["driving"], "imageio", "matplotlib"])
     # (_refuse_commas below refuses this too, but names the fcd-replay input, not --fcd)
     if "," in fcd.name:
         raise _UsageError(
@@ -915,14 +920,14 @@ def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
     benchmark cell's driving env was made with gymnasium.make's max_episode_steps=1000, a
     TimeLimit that teach's own env lacks; a cap equal to the env's own, as teach's corridor
     sessions record, changes nothing)."""
-    from torchcbl.session import _kept_as_repr, load_config
+    from torchcbl.session import kept_as_repr, load_config
 
     env = load_config(run_dir).get("env") or {}
     kwargs = env.get("kwargs") or {}
-    kept_as_repr = sorted(k for k, v in kwargs.items() if _kept_as_repr(v))
-    if kept_as_repr:
+    as_text = sorted(k for k, v in kwargs.items() if kept_as_repr(v))
+    if as_text:
         raise _UsageError(
-            f"{run_dir}'s env was made with {', '.join(kept_as_repr)} given as an object, "
+            f"{run_dir}'s env was made with {', '.join(as_text)} given as an object, "
             "which teach --resume does not make again; resume it in Python with "
             "ConfidentTeacher.resume and that env"
         )
@@ -1469,7 +1474,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             raise _UsageError(f"--gym-env: {exc}") from None
     if not envs:
         raise _UsageError("no environment: give --envs and/or --gym-env")
-    _check_importable([m for e in env_names for m in _BENCHMARK_NEEDS[e]] + ["matplotlib"])
+    _check_importable([m for e in env_names for m in _DOMAIN_NEEDS[e]] + ["matplotlib"])
     seeds = list(range(args.seeds if args.seeds is not None else (3 if args.quick else 10)))
     out = _output_dir(
         Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark")), "--out"
@@ -1982,8 +1987,11 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``torchcbl`` console script; returns the exit code.
 
-    A usage mistake (a path that is not what the command reads, a number out of range) is one
-    line on stderr and exit code 2; any other failure is one line and exit code 1 (set
+    A usage mistake (a path that is not what the command reads, a number out of range) or a
+    missing dependency (the line names the package and how to install it) is one line on
+    stderr and exit code 2; Ctrl-C is one line and exit code 130; a write into a pipe whose
+    reader has gone (``| head -1``) ends the command quietly with exit code 141 (``benchmark``
+    stops printing and finishes its sweep); any other failure is one line and exit code 1 (set
     ``TORCHCBL_TRACEBACK=1`` to see its traceback instead). What the terminal's encoding
     cannot show (a summary's '±' under ``PYTHONIOENCODING=ascii``) is written escaped, as ``\\xb1``.
     """
@@ -2117,10 +2125,6 @@ def _shell(path: Path) -> str:
     import shlex
 
     return shlex.quote(str(path))
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ import numpy as np
 
 from torchcbl._durable import write_durably
 from torchcbl._progress import progress_bar
+from torchcbl._text import one_line
 
 __all__ = [
     "FigureError",
@@ -712,7 +713,7 @@ class FigureError(RuntimeError):
         import shlex
 
         run_dir = Path(run_dir)
-        text = " ".join(str(cause).split()) or type(cause).__name__
+        text = one_line(cause)
         then = then or f"draw the figures with torchcbl plot {shlex.quote(str(run_dir))}"
         return cls(
             f"the {domain} figures could not be drawn into {run_dir} ({type(cause).__name__}: "

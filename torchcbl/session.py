@@ -214,6 +214,7 @@ __all__ = [
     "SessionWriteError",
     "describe",
     "env_make_argument",
+    "kept_as_repr",
     "latest_checkpoint",
     "load_config",
     "load_corrections",
@@ -689,9 +690,19 @@ def _write_error(exc: BaseException, path: Path, what: str, after: str) -> Sessi
 _write_fd = os.write  # the journal's write (a seam for the disk-full tests)
 
 
-def _kept_as_repr(value: Any) -> bool:
-    """Whether a stored ``gymnasium.make`` argument is the ``{"repr": ...}`` a session keeps of
-    an object JSON cannot hold (see ``ConfidentTeacher``'s env description)."""
+def kept_as_repr(value: Any) -> bool:
+    """Whether ``value``, a ``gymnasium.make`` argument as a session's config keeps it
+    (``config["env"]["kwargs"][name]``), is the ``{"repr": text}`` kept of an object JSON
+    cannot hold, rather than the plain value the env was made with.
+
+    Such an argument is made again, where it can be, by :func:`env_make_argument`.
+
+    Args:
+        value: one of the config's ``env.kwargs`` values.
+
+    Returns:
+        True for a dict whose only key is ``"repr"``, False for anything else.
+    """
     return isinstance(value, dict) and set(value) == {"repr"}
 
 
@@ -804,6 +815,8 @@ def _rebuild(form: Any, builders: Mapping[str, Callable[..., Any]]) -> Any:
     """The value :func:`_object_form` kept as ``form``: a kept object made again by the
     builder of its class (KeyError naming the class where ``builders`` has none), a JSON
     array as a tuple (as a frozen dataclass holds a sequence)."""
+    # the keys alone, not _is_kept_object: _object_form keeps no plain dict of these keys, so
+    # one edited out of shape (a class that is no str) is refused here, not built as a dict
     if isinstance(form, dict) and set(form) == _OBJECT_KEYS:
         build = builders.get(form["class"])
         if build is None:
@@ -922,7 +935,7 @@ def _object_problems(
         fields = {p: (_shortened(a), _shortened(b)) for p, a, b in differ[:6]}
         more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
         kept = stored_kw.get(name)
-        kept_text = kept["repr"] if _kept_as_repr(kept) else json.dumps(stored_objects[name])
+        kept_text = kept["repr"] if kept_as_repr(kept) else json.dumps(stored_objects[name])
         problems.append(
             f"env argument {name} (stored, given): {fields}{more}; the session's "
             f"{_shortened(str(kept_text), 100)}, the given {_shortened(repr(given[name]), 100)}"
@@ -967,11 +980,11 @@ def env_make_argument(
     if name not in kwargs:
         return default
     value = kwargs[name]
-    if not _kept_as_repr(value):
+    if not kept_as_repr(value):
         return value
     text = str(value["repr"])
     form = (env.get("kwargs_objects") or {}).get(name)
-    if not (isinstance(form, dict) and set(form) == _OBJECT_KEYS):
+    if not _is_kept_object(form):
         raise ValueError(
             f"its env was made with {name} given as an object ({text}), which its config keeps "
             "only as text (a frozen dataclass is kept whole since 2026-11-27; another object "
@@ -1087,14 +1100,14 @@ def _remove_new_session_files(path: Path) -> None:
 
     In an order where a kill at any point leaves either the whole session (a session of no
     step, which resumes) or only what a new session may start beside
-    (:func:`_check_new_session_dir`): where ``config.json`` is not there (the start failed
-    writing it), ``config.json.tmp`` is made again first (:func:`_mark_unstarted`); the
-    writers file and the journal first, then the step
-    log (the session then reads as one whose creation was killed before its log: it resumes
-    as a session of no step, see :func:`_unborn`); then ``config.json`` is renamed to
-    ``config.json.tmp``, after which the folder holds no session (its prior demonstrations and
-    starting model, left beside that ``.tmp``, are what a start killed while writing its
-    config leaves, and a new start removes them); then those and the ``.tmp``. Deleting
+    (:func:`_check_new_session_dir`). First, where ``config.json`` is not there (the start
+    failed writing it), ``config.json.tmp`` is made again (:func:`_mark_unstarted`); then the
+    writers file and the journal are removed, then the step log (the session then reads as
+    one whose creation was killed before its log: it resumes as a session of no step, see
+    :func:`_unborn`); then ``config.json`` is renamed to ``config.json.tmp``, after which the
+    folder holds no session (its prior demonstrations and starting model, left beside that
+    ``.tmp``, are what a start killed before its config.json was in place leaves, and a new
+    start removes them); last those and the ``.tmp``. Deleting
     ``config.json`` first left a step log with no config, which refused the next start as a
     session whose config was deleted."""
     if not (path / CONFIG_NAME).exists():
@@ -3127,8 +3140,8 @@ def _trial_copy(model: torch.nn.Module) -> torch.nn.Module | None:
         return None
     try:
         return _shadow(model)
-    except Exception:  # a class that cannot be made without its constructor's arguments
-        return None
+    except Exception:  # a class whose __new__ needs its arguments, a tensor that cannot be
+        return None  # copied to the CPU (one on the meta device)
 
 
 def _shadow_loads_alike(model: torch.nn.Module) -> bool:
@@ -3153,10 +3166,11 @@ def _shadow_loads_alike(model: torch.nn.Module) -> bool:
 
 def _shadow(module: torch.nn.Module) -> torch.nn.Module:
     """An instance of ``module``'s class, made without its constructor, holding its
-    attributes, with its parameters and buffers copied to the CPU and its submodules
-    shadowed alike: what ``load_state_dict`` changes (the tensors, the attributes it sets) is
-    the shadow's, never ``module``'s; what a copy cannot take (a lock, a logger) is the same
-    object in both, not copied. No accelerator memory is taken."""
+    attributes, with its parameters and buffers copied to the CPU: what ``load_state_dict``
+    changes (the tensors, the attributes it sets) is the shadow's, never ``module``'s; what a
+    copy cannot take (a lock, a logger) is the same object in both, not copied. No
+    accelerator memory is taken. Only a module without submodules is shadowed (see
+    :func:`_shadow_loads_alike`): the shadow has none."""
     cls = type(module)
     shadow = cls.__new__(cls)
     own = dict(module.__dict__)
@@ -3173,9 +3187,7 @@ def _shadow(module: torch.nn.Module) -> torch.nn.Module:
         (name, None if b is None else b.detach().to("cpu", copy=True))
         for name, b in module._buffers.items()
     )
-    own["_modules"] = type(module._modules)(
-        (name, None if m is None else _shadow(m)) for name, m in module._modules.items()
-    )
+    own["_modules"] = type(module._modules)()  # its own, not the model's (empty) one
     shadow.__dict__.update(own)
     return shadow
 
@@ -3896,7 +3908,7 @@ def resume_problems(
     model_type: type | None = None,
     env_class: str | None = None,
     env_observation_space: Any = None,
-    env_make_kwargs: Mapping[str, Any] | None = None,
+    env_make_kwargs: Mapping[str, Any],
 ) -> list[str]:
     """What keeps a session from resuming with the given env, configuration, model and
     strategy (empty list: nothing). ``learning`` is (stored, given) learning fields;
@@ -3920,11 +3932,12 @@ def resume_problems(
     ``env_class``: the unwrapped env's class (``module.qualname``), compared by its name with
     the session's where the session kept one, and ``env_observation_space`` (the space),
     compared with the one the session kept; ``env_make_kwargs``: what ``gymnasium.make`` was
-    given, as given (the spec's kwargs, objects whole): of each argument that both it and the
-    session (config.json's ``env.kwargs_objects``, kept since 2026-11-27) keep whole (a frozen
-    dataclass), the kept forms are compared field by field (a field its class marks
-    ``metadata={COMPARE_ON_RESUME: False}`` aside); see :func:`_env_problems`, which compares
-    them whether or not the env was made by ``gymnasium.make``."""
+    given, as given (the spec's kwargs, objects whole; empty for an env made directly): of each
+    argument that both it and the session (config.json's ``env.kwargs_objects``, kept since
+    2026-11-27) keep whole (a frozen dataclass), the kept forms are compared field by field (a
+    field its class marks ``metadata={COMPARE_ON_RESUME: False}`` aside); see
+    :func:`_env_problems`, which compares them whether or not the env was made by
+    ``gymnasium.make``."""
     problems: list[str] = []
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
@@ -3942,7 +3955,7 @@ def resume_problems(
             env_max_episode_steps,
             env_class,
             env_observation_space,
-            env_make_kwargs or {},
+            env_make_kwargs,
         )
     kept_inputs = senv.get("inputs")
     if isinstance(kept_inputs, dict) and kept_inputs != (env_inputs or {}):
@@ -3990,7 +4003,7 @@ def _env_problems(
     cap: int | None,
     env_class: str | None,
     space: Any,
-    make_kwargs: Mapping[str, Any] | None = None,
+    make_kwargs: Mapping[str, Any],
 ) -> list[str]:
     """What tells the given env from the session's (``senv``, config.json's ``"env"``) besides
     its id and sizes, whether either was made by ``gymnasium.make`` or directly: the class of
@@ -4031,13 +4044,13 @@ def _env_problems(
             k: (stored_kw.get(k), given_kw.get(k))
             for k in sorted(set(stored_kw) | set(given_kw))
             if k != "render_mode"
-            and not _kept_as_repr(stored_kw.get(k))
-            and not _kept_as_repr(given_kw.get(k))
+            and not kept_as_repr(stored_kw.get(k))
+            and not kept_as_repr(given_kw.get(k))
             and stored_kw.get(k) != given_kw.get(k)
         }
         # an object both sides keep whole (a frozen dataclass: a TrafficScenario, a
         # CorridorMap): its kept forms, where the text above is not compared
-        objects = _object_problems(stored_kw, senv.get("kwargs_objects"), make_kwargs or {})
+        objects = _object_problems(stored_kw, senv.get("kwargs_objects"), make_kwargs)
         differ += objects
     unshown = {k: v for k, v in stored_kw.items() if k != "render_mode"}
     if senv.get("id") and not env_id and unshown:

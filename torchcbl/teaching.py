@@ -369,11 +369,17 @@ def _seed_for(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
 
 
+def _make_kwargs(env: gym.Env) -> Mapping[str, Any]:
+    """What ``gymnasium.make`` was given for ``env``, as given (its spec's kwargs, objects
+    whole); empty for an env not made by ``gymnasium.make``."""
+    return getattr(getattr(env, "spec", None), "kwargs", None) or {}
+
+
 def _env_kwargs(env: gym.Env) -> dict[str, Any]:
     """What ``gymnasium.make`` was given for ``env`` (its spec's kwargs): a path
     (``os.PathLike``, a ``pathlib.Path`` say) as the str it names, a value JSON cannot hold as
     ``{"repr": ...}``; empty for an env not made by ``gymnasium.make``."""
-    kwargs = getattr(getattr(env, "spec", None), "kwargs", None) or {}
+    kwargs = _make_kwargs(env)
 
     def kept(v: Any) -> Any:
         if isinstance(v, os.PathLike) and isinstance(os.fspath(v), str):
@@ -874,7 +880,7 @@ class ConfidentTeacher:
             described["kwargs"] = kwargs
         # beside the text of each argument that is a frozen dataclass, a form it can be made
         # again from (torchcbl.session.env_make_argument), for a domain's evaluate and replay
-        objects = _env_objects(getattr(getattr(self.env, "spec", None), "kwargs", None) or {})
+        objects = _env_objects(_make_kwargs(self.env))
         if objects:
             described["kwargs_objects"] = objects
         # the cap in force (TimeLimit or the env's own; None: none), compared on resume, also
@@ -975,7 +981,7 @@ class ConfidentTeacher:
             env_inputs=_env_inputs(env),
             env_class=_env_class(env),
             env_observation_space=env.observation_space,
-            env_make_kwargs=getattr(getattr(env, "spec", None), "kwargs", None) or {},
+            env_make_kwargs=_make_kwargs(env),
             learning=(stored_config.learning_fields(), config.learning_fields()),
             model_args=model_args,
             model_class=None if model is None else type(model).__name__,

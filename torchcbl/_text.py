@@ -1,0 +1,10 @@
+"""The one-line text of an error, as every one-line message says its cause (no torchcbl
+imports: the ground floor)."""
+
+from __future__ import annotations
+
+
+def one_line(exc: BaseException) -> str:
+    """``exc``'s message on one line (each run of whitespace, newlines too, one space), or the
+    name of its class where it has none (a bare ``raise RuntimeError``)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
