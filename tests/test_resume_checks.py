@@ -297,6 +297,82 @@ def test_an_object_argument_kept_only_as_text_on_one_side_resumes_as_before(tmp_
     _resumes(run2, gym.make(WALK_ID, course=Course(Start([3]))))
 
 
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """A frozen dataclass of one field, holding whatever a test gives it."""
+
+    value: Any = None
+
+
+class Anything(Line):
+    """Line, made with Settings it does not read."""
+
+    def __init__(self, settings: Settings = Settings(), render_mode: str | None = None) -> None:
+        super().__init__(render_mode=render_mode)
+        self.settings = settings
+
+
+ANYTHING_ID = "torchcbl_tests/ResumeAnything-v0"
+if ANYTHING_ID not in gym.registry:
+    gym.register(ANYTHING_ID, entry_point=Anything)
+
+
+def _kept_whole(run: Path, value: Any) -> dict[str, Any]:
+    """config.json's env.kwargs_objects of a new session of Anything(Settings(value))."""
+    env = gym.make(ANYTHING_ID, settings=Settings(value))
+    ConfidentTeacher(env, teacher, run_dir=run, progress=False).close()
+    return load_config(run)["env"].get("kwargs_objects", {})
+
+
+def test_an_object_argument_is_kept_whole_up_to_its_bound_of_values(tmp_path):
+    """An object is kept whole up to _KEPT_VALUES values in all (the object, its field, each
+    number of its tuple: a tuple of _KEPT_VALUES - 2 numbers); one value more and it is kept
+    as text alone."""
+    from torchcbl.session import _KEPT_VALUES
+
+    most = tuple(range(_KEPT_VALUES - 2))
+    kept = _kept_whole(tmp_path / "most", most)
+    assert kept["settings"]["fields"]["value"] == list(most)
+    assert _kept_whole(tmp_path / "past", (*most, 0)) == {}
+
+
+def test_an_object_argument_holding_what_json_reads_back_otherwise_is_not_kept(tmp_path):
+    """A field JSON would give back as another value is not kept whole (the object is kept as
+    text alone): a StrEnum member (a str subclass, read back as the plain str) and a number
+    that is not finite (JSON has no inf or nan)."""
+    import enum
+
+    class Mode(enum.StrEnum):
+        FAST = "fast"
+
+    for name, value in [
+        ("enum", Mode.FAST),
+        ("inf", math.inf),
+        ("-inf", -math.inf),
+        ("nan", math.nan),
+    ]:
+        assert _kept_whole(tmp_path / name, value) == {}, name
+    assert _kept_whole(tmp_path / "str", "fast")["settings"]["fields"] == {"value": "fast"}
+    assert _kept_whole(tmp_path / "float", 1e308)["settings"]["fields"] == {"value": 1e308}
+
+
+def test_an_object_argument_is_compared_field_by_field_as_the_rule_says(tmp_path):
+    """True and 1 are not the same field (1 and 1.0 are), and a dict field with a key more or
+    less is another field: each is refused, naming the field and both values."""
+    run = tmp_path / "one"
+    _teach(run, gym.make(ANYTHING_ID, settings=Settings(1)))
+    _refused(run, gym.make(ANYTHING_ID, settings=Settings(True)), "'settings.value': (1, True)")
+    _resumes(run, gym.make(ANYTHING_ID, settings=Settings(1.0)))
+    run = tmp_path / "dict"
+    _teach(run, gym.make(ANYTHING_ID, settings=Settings({"a": 1})))
+    extra = Settings({"a": 1, "b": 2})
+    _refused(run, gym.make(ANYTHING_ID, settings=extra), "'settings.value.b': ('(absent)', 2)")
+    _refused(
+        run, gym.make(ANYTHING_ID, settings=Settings({})), "'settings.value.a': (1, '(absent)')"
+    )
+    _resumes(run, gym.make(ANYTHING_ID, settings=Settings({"a": 1.0})))
+
+
 # -- 2. a refused resume touches no file ------------------------------------------------------
 
 
