@@ -419,6 +419,24 @@ def test_a_resume_refused_for_a_lost_starting_model_sets_no_checkpoint_aside(tmp
     _refused_untouched(run, CorruptSessionError, "incremental refits start from it")
 
 
+def test_a_resume_refitting_past_damaged_checkpoints_keeps_the_starting_model_as_it_is(tmp_path):
+    """Full refits since the fitted start: with every checkpoint damaged the model is refitted
+    from the log, each damaged checkpoint set aside as .damaged, but checkpoint 0, the one
+    copy of the model the session started from, is left as it is, where it is."""
+    run = tmp_path / "run"
+    _fitted_session(run, max_new=4)
+    zero, *later = sorted((run / "checkpoints").glob("model-*.pt"))
+    assert zero.name == "model-00000000.pt" and later
+    for path in (zero, *later):
+        path.write_bytes(b"not a checkpoint")
+    env = rare_regions_world()
+    ConfidentTeacher.resume(run, env, oracle(env), progress=False).close()
+    assert zero.read_bytes() == b"not a checkpoint"
+    assert not zero.with_name(zero.name + ".damaged").exists()
+    for path in later:
+        assert path.with_name(path.name + ".damaged").read_bytes() == b"not a checkpoint"
+
+
 def test_a_resume_refused_for_a_damaged_step_touches_no_file(tmp_path):
     """A logged step that cannot be read was refused after the session had been opened for
     writing (writer.lock and the journal rewritten)."""
