@@ -579,17 +579,26 @@ class _SlottedGMM(_LoggedGMM):
         super()._load_from_state_dict(*args, **kwargs)
 
 
+class _SlotSizedGMM(_LoggedGMM):
+    """An uncopyable model of the library's own load path, keeping in a slot a size that
+    load reads (GaussianMixtureSet's load compares the state's sizes with its own)."""
+
+    __slots__ = ("n_actions",)
+
+
 def test_an_uncopyable_model_whose_own_load_reads_a_slot_resumes_its_healthy_session(tmp_path):
     """The trial load of checkpoint 0 on a shadow of the model (made without its constructor,
     its __dict__ shared) failed where the model's own load reads what the shadow lacks (a
     slot): a healthy session was refused as corrupt. A model of a class whose load path is
-    not the library's own is left to restore_model's own load."""
-    run = tmp_path / "run"
+    not the library's own is left to restore_model's own load, and so is one of the
+    library's load path with a slot."""
     env = rare_regions_world()
-    fitted = _session_started_fitted(run, _SlottedGMM, max_new=50)
-    model = _SlottedGMM(3, 2, seed=0)
-    ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
-    assert torch.equal(model.means_, fitted.means_)
+    for model_class in (_SlottedGMM, _SlotSizedGMM):
+        run = tmp_path / model_class.__name__
+        fitted = _session_started_fitted(run, model_class, max_new=50)
+        model = model_class(3, 2, seed=0)
+        ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
+        assert torch.equal(model.means_, fitted.means_)
 
 
 class _CountingGMM(GaussianMixtureSet):
@@ -613,19 +622,41 @@ def _count_load(module, *args, **kwargs) -> None:
     module.loads += 1
 
 
+class _PostCountingGMM(GaussianMixtureSet):
+    """A model counting the loads into itself with a load post-hook, its own bound method."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.loads = 0
+        self.register_load_state_dict_post_hook(self._loaded)
+
+    def _loaded(self, module, incompatible_keys) -> None:
+        self.loads += 1
+
+
+class _LockedPostCountingGMM(_PostCountingGMM):
+    """The same, holding what cannot be copied."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.log_lock = threading.Lock()
+
+
 def test_a_trial_load_never_runs_a_load_hook_on_the_given_model(tmp_path):
     """A load hook registered with ``with_module=True`` holds the given model; the trial load
     on a shadow of a model that cannot be copied ran it on the given model, which so counted
-    one load more than the same model that can be copied (whose trial runs on a copy)."""
+    one load more than the same model that can be copied (whose trial runs on a copy). So too
+    a load post-hook that is the model's own bound method."""
     env = rare_regions_world()
-    loads = []
-    for model_class in (_CountingGMM, _LockedCountingGMM):
-        run = tmp_path / model_class.__name__
-        _session_started_fitted(run, model_class, max_new=50)
-        model = model_class(3, 2, seed=0)
-        ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
-        loads.append(model.loads)
-    assert loads[1] == loads[0] >= 1
+    for pair in ((_CountingGMM, _LockedCountingGMM), (_PostCountingGMM, _LockedPostCountingGMM)):
+        loads = []
+        for model_class in pair:
+            run = tmp_path / model_class.__name__
+            _session_started_fitted(run, model_class, max_new=50)
+            model = model_class(3, 2, seed=0)
+            ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
+            loads.append(model.loads)
+        assert loads[1] == loads[0] >= 1, pair
 
 
 # -- 4. a resume goes on from the log as it is once locked, not as it was read before ----------
