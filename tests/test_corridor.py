@@ -80,6 +80,13 @@ def test_shipped_maps_and_walls():
     [
         ({"route": ["A", "B", "C", "A"]}, "not a corridor"),
         ({"corridors": [["A", "C"]]}, "axis-aligned"),
+        (  # two nodes at the same point: a corridor of no length
+            {
+                "nodes": {**SMALL["nodes"], "E": [0, 0]},
+                "corridors": [*SMALL["corridors"], ["A", "E"]],
+            },
+            r"corridor \('A', 'E'\) must be axis-aligned and non-empty",
+        ),
         ({"nodes": {"A": [0.05, 0], "B": [1, 0], "C": [1, 0.8], "D": [0, 0.8]}}, "grid"),
         ({"colour": "red"}, "unknown map keys"),
         ({"route": ["A", "B", "C", "D"]}, "closed walk"),
@@ -481,6 +488,37 @@ def test_a_session_made_with_its_map_and_robot_as_objects_is_evaluated_on_them(t
     assert main(["evaluate", str(run), "--steps", "8"]) == 2
     assert capsys.readouterr().err.count("\n") == 1
     assert evaluate_saved_policy(run, n_steps=8, map_name=mine, world_config=robot) == report
+
+
+def test_a_session_copied_beside_another_runs_results_is_evaluated_on_its_own(tmp_path):
+    """A run's results.json says the map and robot of the sessions in its seeds'
+    ``sessions/`` folders. A session of gymnasium.make copied to X/a/s, with another run's
+    results.json in X, is not one of them: it is driven on the map and robot its own config
+    keeps, not those that results.json names (which a copy to X/sessions/s would be read
+    against, and refused on)."""
+    import shutil
+
+    from corridor.experiment import evaluate_saved_policy
+    from torchcbl import ConfidentTeacher
+
+    robot = WorldConfig.legged_robot()
+    made = tmp_path / "made"
+    env = gym.make(corridor.ENV_ID, corridor_map="lshape", world_config=robot)
+    with ConfidentTeacher(
+        env, CorridorExpert(load_map("lshape")), run_dir=made, progress=False
+    ) as ct:
+        ct.run(max_steps=3)
+    other = {"config": {"map_name": "figure2", "world": dataclasses.asdict(WorldConfig())}}
+    (tmp_path / "X").mkdir()
+    (tmp_path / "X" / "results.json").write_text(json.dumps(other))
+    copied = tmp_path / "X" / "a" / "s"
+    shutil.copytree(made, copied)
+    report = evaluate_saved_policy(copied, n_steps=3)
+    assert report["map"] == "lshape" and report["world"] == dataclasses.asdict(robot)
+    in_a_run = tmp_path / "X" / "sessions" / "s"
+    shutil.copytree(made, in_a_run)
+    with pytest.raises(ValueError, match="another map than the shipped map 'figure2'"):
+        evaluate_saved_policy(in_a_run, n_steps=3)
 
 
 def test_a_session_made_with_its_robot_as_an_object_refuses_another_robot_on_resume(tmp_path):

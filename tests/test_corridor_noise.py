@@ -90,6 +90,22 @@ def test_noisy_world_needs_a_generator_and_bad_noise_is_refused():
         WorldConfig(heading_noise=3.0)  # degrees given where radians are expected
 
 
+def test_a_forward_heading_noise_alone_is_motion_noise():
+    """forward_heading_noise is motion noise by itself: the world then needs a generator, and
+    a forward step ends off its commanded heading (turns stay exact, heading_noise being 0)."""
+    cfg = WorldConfig(forward_heading_noise=0.01)
+    assert cfg.noisy_motion
+    w = CorridorWorld(load_map("figure2"), cfg)
+    w.set_pose(0.2, 0.0, 0.0)
+    with pytest.raises(ValueError, match="pass a numpy Generator"):
+        w.step(F)
+    rng = np.random.default_rng(0)
+    assert w.step(F, rng) is False
+    x, y, h = w.pose
+    assert 0 < abs(h) <= 3 * 0.01 and y != 0.0
+    assert math.hypot(x - 0.2, y) == pytest.approx(cfg.forward_distance)  # no length noise
+
+
 def test_noisy_env_same_seed_same_run():
     def run(seed: int) -> np.ndarray:
         env = CorridorEnv("figure2", NOISY)

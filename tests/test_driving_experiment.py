@@ -602,6 +602,19 @@ def test_evaluate_finds_a_runs_segment_from_a_relative_session_path(two_seeds, m
     assert session_eval_segment(".") == session_eval_segment("../arm_a") == 1
 
 
+def test_a_seed_record_giving_a_negative_segment_gives_no_segment(tmp_path):
+    """session_eval_segment is the seed record's eval_segment + seed, a road segment >= 0: a
+    record edited to give a negative one says no segment (None, as an unreadable record
+    does), not a segment no road has; 0 is a segment."""
+    session = tmp_path / "seed_1" / "sessions" / "arm_a"
+    session.mkdir(parents=True)
+    record = tmp_path / "seed_1" / "seed_result.json"
+    for eval_segment, segment in ((2, 3), (-1, 0), (-2, None), (-5, None)):
+        kept = {"config": {"eval_segment": eval_segment}, "result": {"seed": 1}}
+        record.write_text(json.dumps(kept), encoding="utf-8")
+        assert session_eval_segment(session) == segment, eval_segment
+
+
 def test_a_runs_stored_config_reads_back_as_the_config_it_ran(two_seeds):
     """The corridor's config reads a run's results.json "config" back (from_dict), the
     driving config had no way but DrivingExperimentConfig(**config): a round trip of the

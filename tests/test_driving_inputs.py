@@ -646,6 +646,20 @@ def test_a_record_made_with_a_scenario_name_is_saved_as_one_load_records_reads(t
         EpisodeRecord(TRAIN, {"step_length_s": 0.25}, episode_seed=5, start_lane=2, actions=(0,))
 
 
+def test_an_episode_record_takes_the_three_actions_and_refuses_a_fourth():
+    """The driving env has three actions, 0 (stay), 1 (left), 2 (right): a record holding
+    each is taken and reads back as itself; one holding 3 is refused, made or read."""
+    from sumo_scenarios.replay import EpisodeRecord
+
+    record = EpisodeRecord("train", SimConfig(), episode_seed=5, start_lane=2, actions=(0, 1, 2))
+    assert EpisodeRecord.from_dict(json.loads(json.dumps(record.to_dict()))) == record
+    says = r"actions: expected 0 \(stay\), 1 \(left\) or 2 \(right\) at every step, got \[3\]"
+    with pytest.raises(ValueError, match=says):
+        EpisodeRecord("train", SimConfig(), episode_seed=5, start_lane=2, actions=(0, 3))
+    with pytest.raises(ValueError, match=says):
+        EpisodeRecord.from_dict({**record.to_dict(), "actions": [2, 3]})
+
+
 def test_the_recorder_keeps_recording_an_episode_a_refused_reset_left_running():
     # a reset the env refuses (an unknown option) leaves its episode running, and stepping on
     # is allowed; the recorder had closed that episode before the env's reset refused, so the

@@ -311,6 +311,82 @@ def test_an_object_argument_kept_only_as_text_on_one_side_resumes_as_before(tmp_
     _resumes(run2, gym.make(WALK_ID, course=Course(Start([3]))))
 
 
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """A frozen dataclass of one field, holding whatever a test gives it."""
+
+    value: Any = None
+
+
+class Anything(Line):
+    """Line, made with Settings it does not read."""
+
+    def __init__(self, settings: Settings = Settings(), render_mode: str | None = None) -> None:
+        super().__init__(render_mode=render_mode)
+        self.settings = settings
+
+
+ANYTHING_ID = "torchcbl_tests/ResumeAnything-v0"
+if ANYTHING_ID not in gym.registry:
+    gym.register(ANYTHING_ID, entry_point=Anything)
+
+
+def _kept_whole(run: Path, value: Any) -> dict[str, Any]:
+    """config.json's env.kwargs_objects of a new session of Anything(Settings(value))."""
+    env = gym.make(ANYTHING_ID, settings=Settings(value))
+    ConfidentTeacher(env, teacher, run_dir=run, progress=False).close()
+    return load_config(run)["env"].get("kwargs_objects", {})
+
+
+def test_an_object_argument_is_kept_whole_up_to_its_bound_of_values(tmp_path):
+    """An object is kept whole up to _KEPT_VALUES values in all (the object, its field, each
+    number of its tuple: a tuple of _KEPT_VALUES - 2 numbers); one value more and it is kept
+    as text alone."""
+    from torchcbl.session import _KEPT_VALUES
+
+    most = tuple(range(_KEPT_VALUES - 2))
+    kept = _kept_whole(tmp_path / "most", most)
+    assert kept["settings"]["fields"]["value"] == list(most)
+    assert _kept_whole(tmp_path / "past", (*most, 0)) == {}
+
+
+def test_an_object_argument_holding_what_json_reads_back_otherwise_is_not_kept(tmp_path):
+    """A field JSON would give back as another value is not kept whole (the object is kept as
+    text alone): a StrEnum member (a str subclass, read back as the plain str) and a number
+    that is not finite (JSON has no inf or nan)."""
+    import enum
+
+    class Mode(enum.StrEnum):
+        FAST = "fast"
+
+    for name, value in [
+        ("enum", Mode.FAST),
+        ("inf", math.inf),
+        ("-inf", -math.inf),
+        ("nan", math.nan),
+    ]:
+        assert _kept_whole(tmp_path / name, value) == {}, name
+    assert _kept_whole(tmp_path / "str", "fast")["settings"]["fields"] == {"value": "fast"}
+    assert _kept_whole(tmp_path / "float", 1e308)["settings"]["fields"] == {"value": 1e308}
+
+
+def test_an_object_argument_is_compared_field_by_field_as_the_rule_says(tmp_path):
+    """True and 1 are not the same field (1 and 1.0 are), and a dict field with a key more or
+    less is another field: each is refused, naming the field and both values."""
+    run = tmp_path / "one"
+    _teach(run, gym.make(ANYTHING_ID, settings=Settings(1)))
+    _refused(run, gym.make(ANYTHING_ID, settings=Settings(True)), "'settings.value': (1, True)")
+    _resumes(run, gym.make(ANYTHING_ID, settings=Settings(1.0)))
+    run = tmp_path / "dict"
+    _teach(run, gym.make(ANYTHING_ID, settings=Settings({"a": 1})))
+    extra = Settings({"a": 1, "b": 2})
+    _refused(run, gym.make(ANYTHING_ID, settings=extra), "'settings.value.b': ('(absent)', 2)")
+    _refused(
+        run, gym.make(ANYTHING_ID, settings=Settings({})), "'settings.value.a': (1, '(absent)')"
+    )
+    _resumes(run, gym.make(ANYTHING_ID, settings=Settings({"a": 1.0})))
+
+
 # -- 2. a refused resume touches no file ------------------------------------------------------
 
 
@@ -355,6 +431,24 @@ def test_a_resume_refused_for_a_lost_starting_model_sets_no_checkpoint_aside(tmp
     for path in later:
         path.write_bytes(b"not a checkpoint")
     _refused_untouched(run, CorruptSessionError, "incremental refits start from it")
+
+
+def test_a_resume_refitting_past_damaged_checkpoints_keeps_the_starting_model_as_it_is(tmp_path):
+    """Full refits since the fitted start: with every checkpoint damaged the model is refitted
+    from the log, each damaged checkpoint set aside as .damaged, but checkpoint 0, the one
+    copy of the model the session started from, is left as it is, where it is."""
+    run = tmp_path / "run"
+    _fitted_session(run, max_new=4)
+    zero, *later = sorted((run / "checkpoints").glob("model-*.pt"))
+    assert zero.name == "model-00000000.pt" and later
+    for path in (zero, *later):
+        path.write_bytes(b"not a checkpoint")
+    env = rare_regions_world()
+    ConfidentTeacher.resume(run, env, oracle(env), progress=False).close()
+    assert zero.read_bytes() == b"not a checkpoint"
+    assert not zero.with_name(zero.name + ".damaged").exists()
+    for path in later:
+        assert path.with_name(path.name + ".damaged").read_bytes() == b"not a checkpoint"
 
 
 def test_a_resume_refused_for_a_damaged_step_touches_no_file(tmp_path):
@@ -519,17 +613,26 @@ class _SlottedGMM(_LoggedGMM):
         super()._load_from_state_dict(*args, **kwargs)
 
 
+class _SlotSizedGMM(_LoggedGMM):
+    """An uncopyable model of the library's own load path, keeping in a slot a size that
+    load reads (GaussianMixtureSet's load compares the state's sizes with its own)."""
+
+    __slots__ = ("n_actions",)
+
+
 def test_an_uncopyable_model_whose_own_load_reads_a_slot_resumes_its_healthy_session(tmp_path):
     """The trial load of checkpoint 0 on a shadow of the model (made without its constructor,
     its __dict__ shared) failed where the model's own load reads what the shadow lacks (a
     slot): a healthy session was refused as corrupt. A model of a class whose load path is
-    not the library's own is left to restore_model's own load."""
-    run = tmp_path / "run"
+    not the library's own is left to restore_model's own load, and so is one of the
+    library's load path with a slot."""
     env = rare_regions_world()
-    fitted = _session_started_fitted(run, _SlottedGMM, max_new=50)
-    model = _SlottedGMM(3, 2, seed=0)
-    ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
-    assert torch.equal(model.means_, fitted.means_)
+    for model_class in (_SlottedGMM, _SlotSizedGMM):
+        run = tmp_path / model_class.__name__
+        fitted = _session_started_fitted(run, model_class, max_new=50)
+        model = model_class(3, 2, seed=0)
+        ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
+        assert torch.equal(model.means_, fitted.means_)
 
 
 class _CountingGMM(GaussianMixtureSet):
@@ -553,19 +656,41 @@ def _count_load(module, *args, **kwargs) -> None:
     module.loads += 1
 
 
+class _PostCountingGMM(GaussianMixtureSet):
+    """A model counting the loads into itself with a load post-hook, its own bound method."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.loads = 0
+        self.register_load_state_dict_post_hook(self._loaded)
+
+    def _loaded(self, module, incompatible_keys) -> None:
+        self.loads += 1
+
+
+class _LockedPostCountingGMM(_PostCountingGMM):
+    """The same, holding what cannot be copied."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.log_lock = threading.Lock()
+
+
 def test_a_trial_load_never_runs_a_load_hook_on_the_given_model(tmp_path):
     """A load hook registered with ``with_module=True`` holds the given model; the trial load
     on a shadow of a model that cannot be copied ran it on the given model, which so counted
-    one load more than the same model that can be copied (whose trial runs on a copy)."""
+    one load more than the same model that can be copied (whose trial runs on a copy). So too
+    a load post-hook that is the model's own bound method."""
     env = rare_regions_world()
-    loads = []
-    for model_class in (_CountingGMM, _LockedCountingGMM):
-        run = tmp_path / model_class.__name__
-        _session_started_fitted(run, model_class, max_new=50)
-        model = model_class(3, 2, seed=0)
-        ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
-        loads.append(model.loads)
-    assert loads[1] == loads[0] >= 1
+    for pair in ((_CountingGMM, _LockedCountingGMM), (_PostCountingGMM, _LockedPostCountingGMM)):
+        loads = []
+        for model_class in pair:
+            run = tmp_path / model_class.__name__
+            _session_started_fitted(run, model_class, max_new=50)
+            model = model_class(3, 2, seed=0)
+            ConfidentTeacher.resume(run, env, oracle(env), model=model, progress=False).close()
+            loads.append(model.loads)
+        assert loads[1] == loads[0] >= 1, pair
 
 
 # -- 4. a resume goes on from the log as it is once locked, not as it was read before ----------

@@ -865,6 +865,30 @@ def test_journal_line_of_valid_json_but_the_wrong_shape(tmp_path):
     goes_on(back, env2, run)
 
 
+@pytest.mark.parametrize(
+    ("payload", "says"),
+    [
+        (b'["c",true,1]', r"its step and action \[True, 1\] are not ints >= 0"),
+        (b'["f",1.0,0,0,"{}",true]', r"its step True is not an int >= 0"),
+    ],
+    ids=["correction", "outcome"],
+)
+def test_journal_line_whose_step_is_true_is_damaged(tmp_path, payload, says):
+    """JSON's true is no step (Python reads it as 1): a checksummed correction or outcome line
+    giving its step as true is a damaged line, named, not a correction or an outcome of step
+    1; repair_journal drops it and every real line is kept."""
+    run = tmp_path / "run"
+    ct, env = _journalled(run, steps=10)
+    journal = run / "steps.journal"
+    with open(journal, "ab") as f:
+        f.write(b"%s\t%08x\n" % (payload, S._crc32(payload)))
+    n = journal.read_bytes().count(b"\n")
+    with pytest.raises(CorruptSessionError, match=f"line {n} .*damaged: {says}"):
+        load_records(run)
+    repair_journal(run)
+    assert load_records(run) == ct.records and load_corrections(run) == ct.corrections
+
+
 def test_stale_checkpoint_is_not_loaded(tmp_path):
     run, other = tmp_path / "run", tmp_path / "other"
     _closed_session(run)
@@ -1232,6 +1256,28 @@ def test_a_journal_deleted_while_it_held_steps_is_said_to_be_missing(tmp_path):
     back.close()
     (copy / "steps.journal").unlink()  # closed cleanly: the journal held nothing
     assert load_records(copy) == want
+
+
+def test_a_log_deleted_beside_its_writers_file_is_said_to_be_missing(tmp_path):
+    """writers.jsonl says a writer opened the session's log: with the log, the journal, the
+    checkpoints and writer.lock gone, the log is named as missing (the readers and resume
+    refuse, changing nothing), not taken for a session whose creation was killed before its
+    log (read as one of no step), which a folder without writers.jsonl too is."""
+    run = tmp_path / "run"
+    ct, _ = session(run)
+    ct.run(max_steps=5)
+    ct.close()
+    for path in (*run.glob("steps.*"), *run.glob("checkpoints/*"), run / "writer.lock"):
+        path.unlink()
+    names = sorted(p.name for p in run.glob("*.*"))
+    assert names == ["config.json", "writers.jsonl"], names
+    before = files_of(run)
+    for read in (load_records, load_model, resume):
+        with pytest.raises(CorruptSessionError, match="steps.sqlite is missing"):
+            read(run)
+    assert files_of(run) == before
+    (run / "writers.jsonl").unlink()  # no writer ran: a creation killed before its log
+    assert load_records(run) == []
 
 
 @pytest.mark.parametrize("key", ["teaching", "model", "env", "seed"])
@@ -2057,6 +2103,10 @@ def test_a_line_removed_from_the_journal_is_refused_then_repaired(tmp_path):
         resume(run)
     report = repair_journal(run)
     assert "a step is missing" in report and "steps.journal.damaged" in report
+    # step 25's outcome line, which followed its step line, goes with it (an outcome of no
+    # step of the log), and so does every later line: the journal keeps the lines before
+    assert b"".join(lines[at + 1 : at + 2]).startswith(b'["f",') and b",25]\t" in lines[at + 1]
+    assert journal.read_bytes() == b"".join(line + b"\n" for line in lines[:at])
     back, env2 = resume(run)
     assert back.records == ct.records[:25]  # the steps before the gap; the rest in the copy
     goes_on(back, env2, run)
@@ -2758,6 +2808,12 @@ def test_prior_demonstrations_left_without_a_config_tmp_still_keep_a_new_session
     with pytest.raises(IncompatibleRunDirError, match=r"another session left \(checkpoints/mod"):
         ConfidentTeacher(world, oracle(world), run_dir=run, progress=False)
     assert (run / "prior.npz").read_bytes() == b"another session's"
+    (run / "checkpoints" / "model-00000000.pt").unlink()
+    (run / "checkpoints").rmdir()  # prior.npz alone: refused too
+    with pytest.raises(IncompatibleRunDirError, match=r"another session left \(prior.npz\)"):
+        ConfidentTeacher(world, oracle(world), run_dir=run, progress=False)
+    assert (run / "prior.npz").read_bytes() == b"another session's"
+    assert [p.name for p in run.iterdir()] == ["prior.npz"]
 
 
 def test_a_new_session_on_a_kept_session_of_no_step_says_it_holds_none(tmp_path):

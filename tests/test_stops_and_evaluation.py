@@ -669,8 +669,13 @@ def test_a_forked_worker_takes_ctrl_c_as_the_parent_did_before_it_started_it():
         (lambda o, r, te, tr, i: (o, r, te or tr, i), r"expected the gymnasium 5-tuple"),
         (lambda o, r, te, tr, i: (o, r, te, tr, "ok"), r"returned info 'ok'; expected a dict"),
         (lambda o, r, te, tr, i: (o, r, np.array([te, te]), tr, i), r"terminated=.*a bool"),
+        (lambda o, r, te, tr, i: (o, r, 2, tr, i), r"terminated=2; expected a bool"),
+        (
+            lambda o, r, te, tr, i: (np.full(np.shape(o), np.inf), r, te, tr, i),
+            r"env.step: the observation has non-finite values \[inf, inf\]",
+        ),
     ],
-    ids=["gym-4-tuple", "info-not-a-dict", "vector-flag"],
+    ids=["gym-4-tuple", "info-not-a-dict", "vector-flag", "flag-2", "infinite-observation"],
 )
 def test_evaluate_policy_checks_the_env_step_answer_as_teaching_does(answer, says):
     """evaluate_policy unpacked env.step's answer unchecked: a gym < 0.26 4-tuple was a bare
@@ -685,6 +690,18 @@ def test_evaluate_policy_checks_the_env_step_answer_as_teaching_does(answer, say
     env = Odd(rare_regions_world())
     with pytest.raises(EnvError, match=says):
         evaluate_policy(lambda obs: 0, env, n_steps=5, seed=0)
+
+
+def test_evaluate_policy_refuses_an_action_one_past_the_last():
+    """An answer of n_actions is no action of the env's (indices run 0..n_actions-1): it is
+    refused before env.step is called with it, as -1 is; n_actions - 1 is taken."""
+    env = rare_regions_world(episode_length=5)
+    n = int(env.action_space.n)
+    for answer in (n, -1):
+        with pytest.raises(ValueError, match=rf"answered {answer}; expected an int in \[0, {n}\)"):
+            evaluate_policy(lambda obs, a=answer: a, env, n_steps=3, seed=0)
+    records = evaluate_policy(lambda obs: n - 1, env, n_steps=3, seed=0)
+    assert [r.executed_action for r in records] == [n - 1] * 3
 
 
 def test_evaluate_policy_with_uses_info_refuses_a_pytorch_module_of_the_observation_alone():
