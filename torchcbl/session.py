@@ -712,8 +712,10 @@ _UNKEPT = object()
 _OBJECT_KEYS = {"class", "fields"}
 
 
-#: the most values (fields, items, numbers) a kept object holds; a larger one (a table of a
-#: million numbers) is kept as text alone, not as megabytes of config.json
+#: the most values a kept argument counts, itself included (each object, field value,
+#: container and number counts one: a dataclass holding one tuple of n numbers counts n + 2);
+#: a larger one (a table of a million numbers) is kept as text alone, not as megabytes of
+#: config.json
 _KEPT_VALUES = 10_000
 
 
