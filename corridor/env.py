@@ -258,8 +258,10 @@ class CorridorEnv(gym.Env):
                 + (
                     ""
                     if integer
-                    else "; pass int(action) of an integer action (a 0-d tensor or array, "
-                    "e.g. GaussianMixtureSet.classify(obs[None]).action[0]); a bool or a "
+                    else "; a torch tensor is not taken as an action: pass int(action) (e.g. "
+                    "int(GaussianMixtureSet.classify(obs[None]).action[0]))"
+                    if hasattr(action, "detach")
+                    else "; pass int(action) of an integer action (a 0-d array); a bool or a "
                     "float is not rounded"
                 )
             )

@@ -590,6 +590,8 @@ def test_a_bool_is_no_action_and_a_refused_action_says_what_to_pass():
             env.step(bad)
         if not isinstance(bad, int) or isinstance(bad, bool):
             assert "int(action)" in str(err.value), bad
+        # a tensor is told it is not taken (its message read as if a 0-d tensor were)
+        assert ("torch tensor is not taken" in str(err.value)) == isinstance(bad, torch.Tensor)
     assert env.world.pose == pose  # nothing moved
     env.step(np.int64(1))  # a numpy int is an int
     env.step(np.array(2))
