@@ -919,8 +919,8 @@ class GaussianMixtureSet(nn.Module):
             # the first fit too: that fit would succeed and every later one fail
             raise TypeError(
                 f"fit/refit need the model's float64 state, but it was converted to "
-                f"{self.means_.dtype} (classification works in that dtype); call "
-                ".to(torch.float64) first"
+                f"{self.means_.dtype} (a converted model still classifies, computing in "
+                "float64 from its converted state); call .to(torch.float64) first"
             )
         x_np = self._check_observations(observations)
         y_np = self._check_actions(actions, x_np.shape[0])
