@@ -172,6 +172,26 @@ class _StrategyDefaults:
     ) -> None:
         return None
 
+    def _check_decide(self, observation: Any, c: Any) -> None:
+        """ValueError unless ``observation`` is [D] (the bound ``n_features``) and ``c`` is the
+        classification of one observation (batch 1): a [1, D] row failed inside numpy (CBA)
+        or was taken (confident execution), and a second row of ``c`` was ignored. Runs every
+        step, so it only reads shapes."""
+        shape = np.shape(observation)
+        if shape != (self.n_features,):
+            raise ValueError(
+                f"{type(self).__name__}.decide: expected one observation of shape "
+                f"({self.n_features},), got shape {tuple(shape)}; pass obs [D] (a row x[i], "
+                "not x[i:i+1]) with c = model.classify(obs[None])."
+            )
+        n = np.shape(c.action)[:1]
+        if n != (1,):
+            raise ValueError(
+                f"{type(self).__name__}.decide: expected c of batch 1 (the classification of "
+                f"this one observation, model.classify(obs[None])), got a batch of "
+                f"{n[0] if n else 0}; classify the observation alone."
+            )
+
     def _check_label(self, action: Any, kind: Any) -> None:
         """ValueError for a ``kind`` that is no :data:`LabelKind` (a typo would silently leave
         the label uncounted) and, where bound (``n_actions`` known), an action outside
@@ -315,8 +335,11 @@ class _Phased(_StrategyDefaults):
 
         Raises:
             RuntimeError: :meth:`bind` was not called.
+            ValueError: ``observation`` is not of shape (n_features,), or ``c`` is not of
+                batch 1.
         """
         self._require_bound("decide")
+        self._check_decide(observation, c)
         if self._phase == "noninteractive" or self._burst_left > 0:
             return Decision(True, self._phase, self._burst_left)
         ask = int(_np(c.action)[0]) < 0 or not self._confident(observation, c)
