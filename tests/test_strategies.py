@@ -1066,3 +1066,57 @@ def test_help_on_a_shipped_strategy_says_what_each_of_its_hooks_does(cls):
         if getattr(cls, hook) is vars(_StrategyDefaults)[hook]:  # the generic text: it must
             text = pydoc.render_doc(getattr(cls, hook), renderer=pydoc.plaintext)
             assert "class docstring" in " ".join(text.split()), (cls.__name__, hook)  # say where
+
+
+_SHIPPED = [
+    ConfidentExecution,
+    ConfidenceBasedAutonomy,
+    BehaviourCloning,
+    DAgger,
+    lambda: HGDAgger(warmup=0),
+    lambda: NoveltyGated(warmup=0, min_history=1),
+]
+_SHIPPED_IDS = ["confident execution", "cba", "bc", "dagger", "hg-dagger", "novelty"]
+
+
+@pytest.mark.parametrize("make", _SHIPPED, ids=_SHIPPED_IDS)
+def test_observe_label_refuses_an_unknown_kind_or_an_action_out_of_range(make):
+    """A loop of one's own that passed kind="demo" kept confident execution in its
+    non-interactive phase for ever (only "demonstration" was counted), and a label outside
+    [0, n_actions) was taken; every shipped strategy now refuses both, saying what it takes."""
+    s = make()
+    s.bind(n_actions=3, n_features=1, config=TeachingConfig(accuracy_window=2))
+    x = np.zeros(1)
+    for kind in ("demo", "Demonstration", None):
+        with pytest.raises(ValueError, match=r"kind: expected one of .*'demonstration'.*got"):
+            s.observe_label(x, 1, model_action=1, kind=kind)
+    for action in (-1, 3, np.int64(7), 1.5, True):
+        with pytest.raises(ValueError, match=r"action: expected an int in \[0, 3\)"):
+            s.observe_label(x, action, model_action=1, kind="demonstration")
+    s.observe_label(x, np.int64(2), model_action=1, kind="demonstration")
+    s.observe_label(x, 0, model_action=1, kind="correction")
+
+
+@pytest.mark.parametrize("make", [ConfidentExecution, ConfidenceBasedAutonomy], ids=["ce", "cba"])
+def test_decide_refuses_an_observation_that_is_not_one_d_vector_or_a_batch_of_c(make):
+    """In a loop of one's own, decide(obs [1, D], c) failed inside numpy for CBA ('matmul:
+    Input operand 1 has a mismatch') and was taken by confident execution; a wrong D gave a
+    Decision (CE) or a broadcast error (CBA); a c of 2 rows was read as its row 0."""
+    from torchcbl import GaussianMixtureSet
+
+    x = np.array([[0.0, 0.0], [0.1, 0.0], [3.0, 3.0], [3.1, 3.0]])
+    y = np.array([0, 0, 1, 1])
+    model = GaussianMixtureSet(2, 2, max_components=1).fit(x, y)
+    s = make()
+    s.bind(n_actions=2, n_features=2, config=TeachingConfig(noninteractive=False))
+    s.observe_refit(model, x, y)
+    c = model.classify(x[:1])
+    assert isinstance(s.decide(x[0], c), Decision)
+    for obs in (x[:1], x[0, :1], np.zeros(3)):
+        shape = re.escape(str(obs.shape))
+        with pytest.raises(
+            ValueError, match=rf"expected one observation of shape \(2,\), got shape {shape}"
+        ):
+            s.decide(obs, c)
+    with pytest.raises(ValueError, match=r"decide: expected c of batch 1 .* got a batch of 2"):
+        s.decide(x[0], model.classify(x[:2]))

@@ -10,9 +10,10 @@ A :class:`CorrectionRecord` is a label that arrives after its step was executed 
 overriding an autonomous action, Confidence-Based Autonomy's corrective demonstration): it
 refers to that earlier step's observation, the state at decision time.
 
-Records are built only by the loop, :func:`torchcbl.policy.evaluate_policy` and the session
-store; a record that breaks an invariant raises :class:`ValueError` at creation, so nothing
-inconsistent can reach the step log.
+Records are built by the loop, :func:`torchcbl.policy.evaluate_policy` and the session store,
+or by a loop of one's own (which may pass numpy / gymnasium values: they are stored as the
+plain Python values the loop stores); a record that breaks an invariant raises
+:class:`ValueError` at creation, so nothing inconsistent can reach the step log.
 """
 
 from __future__ import annotations
@@ -134,7 +135,10 @@ class StepRecord:
             ``"agent"`` (it equals ``model_action``). Default (None at creation): ``"teacher"``
             when labelled, else ``"agent"`` (Algorithm 1's rule).
 
-    The int fields take numpy integers too and keep them as Python ints.
+    Built by a loop of one's own, a record takes numpy values too and stores them as the plain
+    values the teaching loop passes (so its log is the same): numpy integers in the int fields;
+    numpy floats and ints (no bools) in the float fields; ``np.bool_`` in the bool fields; a
+    1-D array or a list of numbers as ``observation`` / ``posterior`` (a tuple of floats).
     """
 
     step: int
@@ -164,10 +168,17 @@ class StepRecord:
         self._validate_outcome()
         _plain_ints(self, _STEP_INTS)
 
+    def _plain_floats(self, names: tuple[str, ...]) -> None:
+        for name in names:
+            v = getattr(self, name)
+            if v is not None and type(v) is not float:
+                object.__setattr__(self, name, _as_float(v))
+
     def _bad(self, what: str, expected: str, got: Any) -> ValueError:
         return ValueError(
-            f"StepRecord.{what}: expected {expected}, got {got!r} (step {self.step!r}). "
-            "Records are built by the teaching loop; this points at a bug or a corrupted log."
+            f"StepRecord.{what}: expected {expected}, got {got!r} (step {self.step!r}); if you "
+            f"built this record yourself, pass {expected}; from the teaching loop this points "
+            "at a bug or a corrupted log."
         )
 
     def _validate_decision(self) -> None:
@@ -177,6 +188,9 @@ class StepRecord:
             if not _is_int(v) or v < 0:
                 raise bad(name, "an int >= 0", v)
         obs = self.observation
+        if type(obs) is not tuple or not all(type(x) is float for x in obs):
+            obs = _float_tuple(obs)  # an array or list from a loop of one's own
+            object.__setattr__(self, "observation", obs)
         if type(obs) is not tuple or not obs:
             raise bad("observation", "a non-empty tuple of floats", obs)
         for x in obs:
@@ -184,12 +198,18 @@ class StepRecord:
                 raise bad("observation", "finite floats only", obs)
         if not _is_int(self.model_action) or self.model_action < -1:
             raise bad("model_action", "an int >= -1 (-1: no model)", self.model_action)
+        self._plain_floats(_DECISION_FLOATS)
         conf, dist = self.confidence, self.distance
         if conf is not None and not (type(conf) is float and 0.0 <= conf <= 1.0):
             raise bad("confidence", "a float in [0, 1] or None", conf)
         if dist is not None and not (type(dist) is float and dist >= 0.0):  # rejects NaN too
             raise bad("distance", "a float >= 0 (inf allowed) or None", dist)
         post = self.posterior
+        if post is not None and (
+            type(post) is not tuple or not all(type(p) is float for p in post)
+        ):
+            post = _float_tuple(post)
+            object.__setattr__(self, "posterior", post)
         if post is not None:
             if type(post) is not tuple:
                 raise bad("posterior", "a tuple of floats in [0, 1] or None", post)
@@ -204,6 +224,8 @@ class StepRecord:
             raise bad("executed_action", "an int >= 0", self.executed_action)
         if self.phase not in PHASES:
             raise bad("phase", f"one of {PHASES}", self.phase)
+        if isinstance(self.autonomous, np.bool_):
+            object.__setattr__(self, "autonomous", bool(self.autonomous))
         if type(self.autonomous) is not bool:
             raise bad("autonomous", "a bool", self.autonomous)
         if self.actor not in ACTORS:
@@ -236,6 +258,11 @@ class StepRecord:
 
     def _validate_outcome(self) -> None:
         bad = self._bad
+        if self.reward is not None and type(self.reward) is not float:
+            object.__setattr__(self, "reward", _as_float(self.reward))
+        for name in ("terminated", "truncated"):
+            if isinstance(getattr(self, name), np.bool_):
+                object.__setattr__(self, name, bool(getattr(self, name)))
         if self.reward is not None and not (type(self.reward) is float and _isfinite(self.reward)):
             raise bad("reward", "a finite float or None", self.reward)
         if type(self.terminated) is not bool:
@@ -299,6 +326,32 @@ _STEP_INTS = (
     "teacher_action",
     "executed_action",
 )
+
+
+_DECISION_FLOATS = ("confidence", "distance", "autonomy_rate", "windowed_accuracy")
+
+
+def _as_float(v: Any) -> Any:
+    """A numpy float or an int (no bool) as the plain float it holds; anything else as is,
+    for the validation to refuse."""
+    if isinstance(v, (float, np.floating)) or _is_int(v):
+        try:
+            return float(v)
+        except OverflowError:
+            return v
+    return v
+
+
+def _float_tuple(v: Any) -> Any:
+    """A 1-D numeric array, or a list / tuple of numbers, as a tuple with plain floats where
+    :func:`_as_float` makes them; anything else as is, for the validation to refuse."""
+    if isinstance(v, np.ndarray):
+        if v.ndim != 1 or v.dtype.kind not in "iuf":
+            return v
+        v = v.tolist()
+    if isinstance(v, (list, tuple)):
+        return tuple(_as_float(x) for x in v)
+    return v
 
 
 def _plain_ints(record: Any, names: tuple[str, ...]) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import inspect
 from collections import deque
-from typing import TYPE_CHECKING, Any, Literal, NamedTuple
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, get_args
 
 import numpy as np
 
@@ -16,6 +16,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.records import StepRecord
 
 LabelKind = Literal["demonstration", "correction"]
+_LABEL_KINDS: tuple[str, ...] = get_args(LabelKind)
 
 
 class Decision(NamedTuple):
@@ -171,6 +172,47 @@ class _StrategyDefaults:
     ) -> None:
         return None
 
+    def _check_decide(self, observation: Any, c: Any) -> None:
+        """ValueError unless ``observation`` is [D] (the bound ``n_features``) and ``c`` is the
+        classification of one observation (batch 1): a [1, D] row failed inside numpy (CBA)
+        or was taken (confident execution), and a second row of ``c`` was ignored. Runs every
+        step, so it only reads shapes."""
+        shape = np.shape(observation)
+        if shape != (self.n_features,):
+            raise ValueError(
+                f"{type(self).__name__}.decide: expected one observation of shape "
+                f"({self.n_features},), got shape {tuple(shape)}; pass obs [D] (a row x[i], "
+                "not x[i:i+1]) with c = model.classify(obs[None])."
+            )
+        n = np.shape(c.action)[:1]
+        if n != (1,):
+            raise ValueError(
+                f"{type(self).__name__}.decide: expected c of batch 1 (the classification of "
+                f"this one observation, model.classify(obs[None])), got a batch of "
+                f"{n[0] if n else 0}; classify the observation alone."
+            )
+
+    def _check_label(self, action: Any, kind: Any) -> None:
+        """ValueError for a ``kind`` that is no :data:`LabelKind` (a typo would silently leave
+        the label uncounted) and, where bound (``n_actions`` known), an action outside
+        [0, n_actions)."""
+        name = type(self).__name__
+        if kind not in _LABEL_KINDS:
+            raise ValueError(
+                f"{name}.observe_label: kind: expected one of {_LABEL_KINDS}, got {kind!r}; pass "
+                "'demonstration' for a label asked for at its step, 'correction' for one that "
+                "overrides an action already executed."
+            )
+        n = getattr(self, "n_actions", None)
+        if n is None:
+            return
+        ok = isinstance(action, (int, np.integer)) and not isinstance(action, (bool, np.bool_))
+        if not ok or not 0 <= action < n:
+            raise ValueError(
+                f"{name}.observe_label: action: expected an int in [0, {n}) (the n_actions "
+                f"given to bind), got {action!r}; pass the teacher's action index."
+            )
+
     def _track_step(self, record: StepRecord, decision: Decision | None) -> None:
         return None
 
@@ -184,7 +226,13 @@ class _StrategyDefaults:
         per strategy: "Hooks" in its class docstring). An override under ConfidentTeacher
         need not call ``super()``: where it does not, the loop keeps the state after it
         returns, with the loop's arguments; where it does, with the arguments it gives (a
-        loop of one's own that calls the hooks needs the ``super()`` call)."""
+        loop of one's own that calls the hooks needs the ``super()`` call).
+
+        Raises:
+            ValueError: ``kind`` is not ``"demonstration"`` or ``"correction"``, or, once
+                bound, ``action`` is not an int in [0, n_actions).
+        """
+        self._check_label(action, kind)
         self._reached("label")  # first: where the update raises, the loop does not run it again
         self._track_label(observation, action, model_action=model_action, kind=kind)
 
@@ -287,8 +335,11 @@ class _Phased(_StrategyDefaults):
 
         Raises:
             RuntimeError: :meth:`bind` was not called.
+            ValueError: ``observation`` is not of shape (n_features,), or ``c`` is not of
+                batch 1.
         """
         self._require_bound("decide")
+        self._check_decide(observation, c)
         if self._phase == "noninteractive" or self._burst_left > 0:
             return Decision(True, self._phase, self._burst_left)
         ask = int(_np(c.action)[0]) < 0 or not self._confident(observation, c)
