@@ -1097,11 +1097,21 @@ def test_observe_label_refuses_an_unknown_kind_or_an_action_out_of_range(make):
     s.observe_label(x, 0, model_action=1, kind="correction")
 
 
-@pytest.mark.parametrize("make", [ConfidentExecution, ConfidenceBasedAutonomy], ids=["ce", "cba"])
+@pytest.mark.parametrize(
+    "make",
+    [
+        ConfidentExecution,
+        ConfidenceBasedAutonomy,
+        lambda: HGDAgger(warmup=0),
+        lambda: NoveltyGated(warmup=0, min_history=1),
+    ],
+    ids=["ce", "cba", "hg-dagger", "novelty"],
+)
 def test_decide_refuses_an_observation_that_is_not_one_d_vector_or_a_batch_of_c(make):
     """In a loop of one's own, decide(obs [1, D], c) failed inside numpy for CBA ('matmul:
     Input operand 1 has a mismatch') and was taken by confident execution; a wrong D gave a
-    Decision (CE) or a broadcast error (CBA); a c of 2 rows was read as its row 0."""
+    Decision (CE) or a broadcast error (CBA); a c of 2 rows was read as its row 0 (also by
+    HG-DAgger and the novelty gate, which read c's first row)."""
     from torchcbl import GaussianMixtureSet
 
     x = np.array([[0.0, 0.0], [0.1, 0.0], [3.0, 3.0], [3.1, 3.0]])

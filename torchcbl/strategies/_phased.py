@@ -176,13 +176,14 @@ class _StrategyDefaults:
         """ValueError unless ``observation`` is [D] (the bound ``n_features``) and ``c`` is the
         classification of one observation (batch 1): a [1, D] row failed inside numpy (CBA)
         or was taken (confident execution), and a second row of ``c`` was ignored. Runs every
-        step, so it only reads shapes."""
+        step, so it only reads shapes. Unbound (a baseline decides without ``bind``), any [D]."""
         shape = np.shape(observation)
-        if shape != (self.n_features,):
+        d = getattr(self, "n_features", None)
+        if (shape != (d,)) if d is not None else len(shape) != 1:
             raise ValueError(
                 f"{type(self).__name__}.decide: expected one observation of shape "
-                f"({self.n_features},), got shape {tuple(shape)}; pass obs [D] (a row x[i], "
-                "not x[i:i+1]) with c = model.classify(obs[None])."
+                f"({'D' if d is None else d},), got shape {tuple(shape)}; pass obs [D] (a row "
+                "x[i], not x[i:i+1]) with c = model.classify(obs[None])."
             )
         n = np.shape(c.action)[:1]
         if n != (1,):

@@ -86,7 +86,13 @@ class HGDAgger(_StrategyDefaults):
 
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         """Asks during the warmup; then where no model exists or while the teacher is in
-        control."""
+        control.
+
+        Raises:
+            ValueError: ``observation`` is not one observation [D] (of the bound
+                ``n_features``), or ``c`` is not of batch 1.
+        """
+        self._check_decide(observation, c)  # [D] and a c of batch 1, read at row 0
         if self._labels < self.warmup:
             return Decision(True, "noninteractive")
         return Decision(int(c.action[0]) < 0 or self._control, "confident")

@@ -147,7 +147,13 @@ class NoveltyGated(_StrategyDefaults):
 
     def decide(self, observation: np.ndarray, c: Classification) -> Decision:
         """Asks during the warmup; then where no model exists, while :meth:`threshold` is
-        None, or where ``c.distance[0]`` exceeds it."""
+        None, or where ``c.distance[0]`` exceeds it.
+
+        Raises:
+            ValueError: ``observation`` is not one observation [D] (of the bound
+                ``n_features``), or ``c`` is not of batch 1.
+        """
+        self._check_decide(observation, c)  # [D] and a c of batch 1, read at row 0
         if self._labels < self.warmup:
             return Decision(True, "noninteractive")
         t = self.threshold()
