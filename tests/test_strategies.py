@@ -671,24 +671,31 @@ def test_a_config_whose_strategy_entry_is_not_a_strategy_dict_is_a_corrupt_sessi
             call()
 
 
-class _StepCounting(ConfidentExecution):
-    """Adds behaviour to observe_step without calling super() (as a researcher would)."""
+class _CountsSteps:
+    """Put before a shipped strategy: adds behaviour to observe_step without calling super()
+    (as a researcher would)."""
 
     def observe_step(self, record, decision):
         self.seen = getattr(self, "seen", 0) + 1
 
 
-class _LabelCounting(ConfidentExecution):
-    def observe_label(self, observation, action, *, model_action, kind):
-        self.labels = getattr(self, "labels", 0) + 1
-
-
-class _BothCountingCBA(ConfidenceBasedAutonomy):
-    def observe_step(self, record, decision):
-        self.seen = getattr(self, "seen", 0) + 1
+class _CountsLabels:
+    """The same for observe_label."""
 
     def observe_label(self, observation, action, *, model_action, kind):
         self.labels = getattr(self, "labels", 0) + 1
+
+
+class _StepCounting(_CountsSteps, ConfidentExecution):
+    pass
+
+
+class _LabelCounting(_CountsLabels, ConfidentExecution):
+    pass
+
+
+class _BothCountingCBA(_CountsSteps, _CountsLabels, ConfidenceBasedAutonomy):
+    pass
 
 
 class _CallingSuper(ConfidentExecution):
@@ -900,24 +907,16 @@ def test_an_override_that_raises_before_super_leaves_the_schedule_as_a_resume_re
     assert phases["same process"] == phases["resumed"]
 
 
-class _DAggerCounting(DAgger):
-    """Adds behaviour to observe_step without calling super()."""
-
-    def observe_step(self, record, decision):
-        self.seen = getattr(self, "seen", 0) + 1
+class _DAggerCounting(_CountsSteps, DAgger):
+    pass
 
 
-class _HGDAggerCounting(HGDAgger):
-    def observe_label(self, observation, action, *, model_action, kind):
-        self.labels = getattr(self, "labels", 0) + 1
+class _HGDAggerCounting(_CountsLabels, HGDAgger):
+    pass
 
 
-class _NoveltyCounting(NoveltyGated):
-    def observe_step(self, record, decision):
-        self.seen = getattr(self, "seen", 0) + 1
-
-    def observe_label(self, observation, action, *, model_action, kind):
-        self.labels = getattr(self, "labels", 0) + 1
+class _NoveltyCounting(_CountsSteps, _CountsLabels, NoveltyGated):
+    pass
 
     def observe_refit(self, model, observations, actions):
         self.refits = getattr(self, "refits", 0) + 1
