@@ -1021,6 +1021,21 @@ def test_a_wal_lost_after_its_tables_reached_the_log_is_said_to_be_missing(tmp_p
     ct.close()
 
 
+class _Contrary:
+    """A teacher that labels as ``label(obs, info) -> int`` does and corrects every fourth
+    autonomous step it is shown (with another of 3 actions)."""
+
+    def __init__(self, label) -> None:
+        self.label, self.calls = label, 0
+
+    def __call__(self, obs, info):
+        return self.label(obs, info)
+
+    def correct(self, obs, info, action):
+        self.calls += 1
+        return (action + 1) % 3 if self.calls % 4 == 0 else None
+
+
 def test_a_log_lacking_committed_corrections_alone_is_said_to_lack_them(tmp_path):
     """writer.lock counts corrections as well as steps: a log holding every committed step
     but fewer corrections than its writers committed (a correction's row gone, here deleted by
@@ -1029,22 +1044,12 @@ def test_a_log_lacking_committed_corrections_alone_is_said_to_lack_them(tmp_path
     the session reads with the corrections left."""
     from torchcbl.strategies.cba import ConfidenceBasedAutonomy
 
-    class Contrary:  # labels as the oracle, and corrects every fourth autonomous step
-        calls = 0
-
-        def __call__(self, obs, info):
-            return env.optimal_action(obs)
-
-        def correct(self, obs, info, action):
-            Contrary.calls += 1
-            return (action + 1) % 3 if Contrary.calls % 4 == 0 else None
-
     run = tmp_path / "run"
     env = rare_regions_world()
     cfg = TeachingConfig(max_new=2, accuracy_window=10, noninteractive=False)
     with ConfidentTeacher(
         env,
-        Contrary(),
+        _Contrary(oracle(env)),
         strategy=ConfidenceBasedAutonomy(),
         config=cfg,
         run_dir=run,
@@ -1068,7 +1073,7 @@ def test_a_log_lacking_committed_corrections_alone_is_said_to_lack_them(tmp_path
         with pytest.raises(CorruptSessionError, match=said):
             read(run)
     with pytest.raises(CorruptSessionError, match=said):
-        ConfidentTeacher.resume(run, rare_regions_world(), Contrary(), progress=False)
+        ConfidentTeacher.resume(run, rare_regions_world(), _Contrary(oracle(env)), progress=False)
     assert files_of(run) == before  # nothing changed
     (run / "writer.lock").unlink()
     assert load_corrections(run) == corrections[:-1]
@@ -1597,22 +1602,12 @@ def test_a_real_ctrl_c_right_after_a_corrections_line(tmp_path, monkeypatch):
     the held KeyboardInterrupt stops the run (the live model then equals load_model's)."""
     from torchcbl.strategies.cba import ConfidenceBasedAutonomy
 
-    class Contrary:  # labels as the oracle, and corrects every fourth autonomous step
-        calls = 0
-
-        def __call__(self, obs, info):
-            return env.teacher(obs, info)
-
-        def correct(self, obs, info, action):
-            Contrary.calls += 1
-            return (action + 1) % 3 if Contrary.calls % 4 == 0 else None
-
     run = tmp_path / "run"
     env = Witness(rare_regions_world())
     cfg = TeachingConfig(max_new=2, accuracy_window=10, noninteractive=False)
     ct = ConfidentTeacher(
         env,
-        Contrary(),
+        _Contrary(env.teacher),
         strategy=ConfidenceBasedAutonomy(),
         config=cfg,
         run_dir=run,
