@@ -60,7 +60,7 @@ import numbers
 import os
 import time
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -956,11 +956,14 @@ _FIGURE_FIELDS = (
 
 
 @figure_style()
-def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
+def plot_results(
+    results: dict[str, Any], run_dir: str | Path, *, only: Collection[str] | None = None
+) -> list[Path]:
     """Redraw Figures 3 and 4 and the map of a run directory from its first seed's session.
 
     Reads ``run_dir/sessions/seed<first>`` (demonstrations and latest model) and the config in
-    ``results``; returns the PNG paths written.
+    ``results``; writes the figures named in ``only`` (names of :data:`FIGURES`; all by
+    default), leaving the others' files as they are; returns the PNG paths written.
     """
     from torchcbl import evaluate_policy
     from torchcbl.session import load_demonstrations, load_model
@@ -1007,8 +1010,8 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
         },
         "_path": [list(map(float, r.info["pose"][:2])) for r in ev],
     }
-    _figures(config, first, run_dir)
-    return [run_dir / name for name in FIGURES]
+    _figures(config, first, run_dir, only)
+    return [run_dir / name for name in FIGURES if only is None or name in only]
 
 
 def evaluate_saved_policy(
@@ -1568,7 +1571,12 @@ def format_summary(results: dict[str, Any]) -> str:
 # ---------------------------------------------------------------------------- figures
 
 
-def _figures(config: CorridorExperimentConfig, first: dict, run_dir: Path) -> None:
+def _figures(
+    config: CorridorExperimentConfig,
+    first: dict,
+    run_dir: Path,
+    only: Collection[str] | None = None,
+) -> None:
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
@@ -1587,7 +1595,8 @@ def _figures(config: CorridorExperimentConfig, first: dict, run_dir: Path) -> No
     _axes3d(ax, config)
     ax.set_title(f"Figure 3: training data (seed {first['seed']}, {len(y)} demonstrations)")
     ax.legend(loc="upper left", fontsize=8)
-    save_png(fig, run_dir / "figure3.png")
+    if only is None or "figure3.png" in only:
+        save_png(fig, run_dir / "figure3.png")
     # Figure 4: the fitted mixtures, 2-std ellipsoids.
     fig = Figure(figsize=(6, 5), dpi=100)
     ax = fig.add_subplot(projection="3d")
@@ -1617,7 +1626,8 @@ def _figures(config: CorridorExperimentConfig, first: dict, run_dir: Path) -> No
     _axes3d(ax, config)
     ax.set_title("Figure 4: fitted Gaussian mixtures (2 std)")
     ax.legend(handles=handles, title="action (components)", loc="upper left", fontsize=8)
-    save_png(fig, run_dir / "figure4.png")
+    if only is None or "figure4.png" in only:
+        save_png(fig, run_dir / "figure4.png")
     # Map with the final policy's first evaluation circuit.
     world = CorridorWorld(load_map(config.map_name), config.world)
     fig = map_figure(
@@ -1625,7 +1635,8 @@ def _figures(config: CorridorExperimentConfig, first: dict, run_dir: Path) -> No
         [tuple(p) for p in first["_path"]],
         title=f"{Path(config.map_name).name}: final policy, one circuit (seed {first['seed']})",
     )
-    save_png(fig, run_dir / "map.png")
+    if only is None or "map.png" in only:
+        save_png(fig, run_dir / "map.png")
 
 
 def _axes3d(ax: Any, config: CorridorExperimentConfig) -> None:

@@ -46,7 +46,7 @@ import multiprocessing as mp
 import numbers
 import os
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -1073,9 +1073,12 @@ def paired_interval(diffs: Sequence[float]) -> dict[str, Any]:
 
 
 @figure_style()
-def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
+def plot_results(
+    results: dict[str, Any], run_dir: str | Path, *, only: Collection[str] | None = None
+) -> list[Path]:
     """Draw Figures 6-10 of a run from its ``results`` into ``run_dir`` (created if need be:
-    the run's own directory, or another one to redraw the figures apart).
+    the run's own directory, or another one to redraw the figures apart): those named in
+    ``only`` (names of :data:`FIGURES`; all by default), the others' files left as they are.
 
     Returns the PNG paths written. Needs only results.json (no simulation).
     """
@@ -1087,6 +1090,8 @@ def plot_results(results: dict[str, Any], run_dir: str | Path) -> list[Path]:
     written: list[Path] = []
 
     def save(fig: Figure, name: str) -> None:
+        if only is not None and name not in only:
+            return
         fig.tight_layout()
         # long titles kept whole; the PNG whole or not at all (a temporary file renamed)
         save_whole(run_dir / name, fig.savefig, dpi=100, bbox_inches="tight")

@@ -818,7 +818,7 @@ def test_a_figure_not_drawn_again_names_its_whole_cause_on_one_line(
     (out / "corridor" / "figure3.png").unlink()
     monkeypatch.setattr(cli, "_experiment_config", _tiny_corridor)
 
-    def fails(results, run_dir):
+    def fails(results, run_dir, only=None):
         raise cause
 
     monkeypatch.setattr(corridor.experiment, "plot_results", fails)

@@ -265,12 +265,10 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 def _draw_missing_figures(domain: str, module: Any, run_dir: Path, results: dict[str, Any]) -> None:
     """Draw again the figures (``module.FIGURES``) missing from the run directory of a domain
     that finished before (its results.json written, a figure that failed after it, or one
-    deleted), saying so in one line; those there are left as they are, byte for byte. Where
-    they cannot be drawn (the cause not fixed yet, the sessions they read gone), one line on
-    stderr says so and how to draw them later, and the run goes on: its results
-    are whole without them."""
-    from torchcbl._durable import write_durably
-
+    deleted), saying so in one line; those there are not written (``plot_results``'s
+    ``only``). Where they cannot be drawn (the cause not fixed yet, the sessions they read
+    gone), one line on stderr says so and how to draw them later, and the run goes on: its
+    results are whole without them."""
     missing = [name for name in module.FIGURES if not (run_dir / name).is_file()]
     if not missing:
         return
@@ -278,40 +276,13 @@ def _draw_missing_figures(domain: str, module: Any, run_dir: Path, results: dict
         f"== {domain}: {', '.join(missing)} missing in {run_dir}, drawn again from its results",
         flush=True,
     )
-    there: dict[str, bytes] = {}
-    for name in module.FIGURES:
-        if name not in missing:
-            try:
-                there[name] = (run_dir / name).read_bytes()
-            except OSError:  # unreadable: drawn again with the others
-                pass
-    failed: Exception | None = None
     try:
-        module.plot_results(results, run_dir)
-    except Exception as exc:  # noqa: BLE001 (any figure's failure: said in one line below)
-        failed = exc
-    kept_new = []  # plot_results draws them all: those that were there are put back
-    for name, data in there.items():
-        path = run_dir / name
-        try:
-            if path.read_bytes() != data:
-                write_durably(path, data, path.with_name(f".{name}.{os.getpid()}.tmp"))
-        except OSError:
-            kept_new.append(name)
-    warn = "torchcbl reproduce: warning:"
-    if failed is not None:
+        module.plot_results(results, run_dir, only=missing)
+    except Exception as exc:  # noqa: BLE001 (any figure's failure: said in one line)
         print(
-            f"{warn} {domain}: {', '.join(missing)} could not be drawn again "
-            f"({type(failed).__name__}: {_one_line(failed)}); "
-            f"the run goes on without them: draw them with `torchcbl plot {_shell(run_dir)}` "
-            "once that is fixed",
-            file=sys.stderr,
-            flush=True,
-        )
-    if kept_new:
-        print(
-            f"{warn} {domain}: {', '.join(kept_new)} could not be put back as they were: they "
-            "hold the figures as drawn now",
+            f"torchcbl reproduce: warning: {domain}: {', '.join(missing)} could not be drawn "
+            f"again ({type(exc).__name__}: {_one_line(exc)}); the run goes on without them: "
+            f"draw them with `torchcbl plot {_shell(run_dir)}` once that is fixed",
             file=sys.stderr,
             flush=True,
         )
