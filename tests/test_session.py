@@ -45,7 +45,7 @@ from torchcbl.teaching import EnvError, TeacherError
 TESTS = Path(__file__).parent
 
 
-def make(env, run_dir, teacher=None, seed=0, **cfg):
+def make(env, run_dir, teacher=None, seed=0, keep_checkpoints=3, **cfg):
     return ConfidentTeacher(
         env,
         teacher or oracle(env),
@@ -53,6 +53,7 @@ def make(env, run_dir, teacher=None, seed=0, **cfg):
         run_dir=run_dir,
         seed=seed,
         progress=False,
+        keep_checkpoints=keep_checkpoints,
     )
 
 
@@ -77,7 +78,8 @@ def test_layout_and_log_round_trip(tmp_path):
     ct.run(max_steps=120)
     assert (run / "config.json").is_file() and (run / "steps.sqlite").is_file()
     ckpts = sorted(p.name for p in (run / "checkpoints").iterdir())
-    assert ckpts[0] == "model-00000002.pt" and len(ckpts) == ct.n_demonstrations // 2
+    n = ct.n_demonstrations - ct.n_demonstrations % 2  # the last refit's labels
+    assert n >= 8 and ckpts == [f"model-{k:08d}.pt" for k in (n - 4, n - 2, n)]  # newest 3
     config = json.loads((run / "config.json").read_text())
     assert config["teaching"]["max_new"] == 2 and config["rule"] == DistanceRule().to_config()
     assert config["model"]["args"]["n_actions"] == 3 and config["env"]["n_features"] == 2
@@ -87,6 +89,99 @@ def test_layout_and_log_round_trip(tmp_path):
     policy = load_policy(run)
     obs = np.array([0.2, 7.5])
     assert policy(obs) == ct.policy(obs) == 2
+
+
+def _checkpoint_numbers(run: Path) -> list[int]:
+    return sorted(int(p.name[6:14]) for p in (run / "checkpoints").glob("model-*.pt"))
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_session_keeps_its_newest_checkpoints_and_rebuilds_any_stage_from_its_log(
+    tmp_path, refit
+):
+    """keep_checkpoints=2: the older checkpoints go as new ones come (a session refitting
+    after every label would otherwise write ~2 MB per label); load_model at a stage whose
+    checkpoint went is the model the loop had then, bit for bit; None keeps every one."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=2, refit=refit),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=2,
+        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    ct.run(max_steps=120)
+    ct.close()
+    refits = sorted(live)
+    assert len(refits) >= 5 and _checkpoint_numbers(run) == refits[-2:]
+    for early in refits[1], refits[-3]:  # their checkpoints were removed
+        rebuilt = load_model(run, n_demonstrations=early).state_dict()
+        assert all(torch.equal(rebuilt[k], live[early][k]) for k in rebuilt), early
+    assert _checkpoint_numbers(run) == refits[-2:]  # a reader writes nothing back
+
+    if refit == "incremental":
+        return
+    everything = tmp_path / "all"
+    ct = make_kept(env, everything, keep_checkpoints=None)
+    ct.run(max_steps=120)
+    ct.close()
+    assert _checkpoint_numbers(everything) == refits  # the same session, every refit kept
+
+
+def make_kept(env, run_dir, **kwargs):
+    return ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=2),
+        run_dir=run_dir,
+        progress=False,
+        **kwargs,
+    )
+
+
+def test_a_resumed_writer_removes_what_earlier_writers_kept_beyond_its_own_count(tmp_path):
+    """A session written keeping every checkpoint and resumed with keep_checkpoints=1 keeps
+    the newest alone once it refits; checkpoint 0 of a fitted start is never removed."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    start = GaussianMixtureSet(3, 2, seed=0)
+    start.fit(
+        np.array([[0.1, 7.0], [0.3, 7.2], [5.0, 0.0], [5.2, 0.1], [9.0, 9.0], [9.1, 8.9]]),
+        np.array([0, 0, 1, 1, 2, 2]),
+    )
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        model=start,
+        config=TeachingConfig(noninteractive=False, max_new=2),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=None,
+    )
+    ct.run(max_steps=60)
+    ct.close()
+    before = _checkpoint_numbers(run)
+    assert before[0] == 0 and len(before) >= 4
+    again = ConfidentTeacher.resume(run, env, oracle(env), progress=False, keep_checkpoints=1)
+    again.run(max_steps=120)
+    again.close()
+    newest = again.n_demonstrations - again.n_demonstrations % 2
+    assert newest > before[-1] and _checkpoint_numbers(run) == [0, newest]
+    policy = load_policy(run)  # the newest checkpoint, the live model
+    obs = np.array([0.2, 7.5])
+    assert policy(obs) == again.policy(obs)
+
+
+@pytest.mark.parametrize("bad", [0, -1, 2.5, True, "3"])
+def test_keep_checkpoints_is_none_or_a_positive_int(tmp_path, bad):
+    env = rare_regions_world()
+    with pytest.raises(ValueError, match=r"keep_checkpoints: expected None .* or an int >= 1"):
+        make_kept(env, tmp_path / "run", keep_checkpoints=bad)
+    assert not (tmp_path / "run").exists()  # refused before the session is made
 
 
 def test_steps_not_yet_in_sqlite_are_in_the_journal_and_readers_see_them(tmp_path):
@@ -794,7 +889,7 @@ def test_latest_checkpoint_refuses_an_at_most_that_is_no_count(tmp_path):
     from torchcbl.session import latest_checkpoint
 
     run = tmp_path / "run"
-    make(rare_regions_world(), run, max_new=2).run(max_steps=40)
+    make(rare_regions_world(), run, max_new=2, keep_checkpoints=None).run(max_steps=40)
     for bad in ("5", -1, 2.5, True):
         with pytest.raises(ValueError, match=r"at_most must be None .* or an int >= 0"):
             latest_checkpoint(run, at_most=bad)

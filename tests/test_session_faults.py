@@ -95,7 +95,7 @@ class Witness(gym.Wrapper):
 
 
 def session(
-    run: Path, world=None, commit_every: int = 32, **cfg
+    run: Path, world=None, commit_every: int = 32, keep_checkpoints: int | None = 3, **cfg
 ) -> tuple[ConfidentTeacher, Witness]:
     env = Witness(world or rare_regions_world())
     ct = ConfidentTeacher(
@@ -105,6 +105,7 @@ def session(
         run_dir=run,
         progress=False,
         commit_every=commit_every,
+        keep_checkpoints=keep_checkpoints,
     )
     env.ct = ct
     return ct, env
@@ -892,7 +893,8 @@ def test_journal_line_whose_step_is_true_is_damaged(tmp_path, payload, says):
 def test_stale_checkpoint_is_not_loaded(tmp_path):
     run, other = tmp_path / "run", tmp_path / "other"
     _closed_session(run)
-    _closed_session(other, target_accuracy=None)  # a different log of the same size
+    # a different log of the same size (every checkpoint kept: one of the same count)
+    _closed_session(other, keep_checkpoints=None, target_accuracy=None)
     last = max((run / "checkpoints").glob("model-*.pt"))
     assert (other / "checkpoints" / last.name).exists()
     shutil.copy(other / "checkpoints" / last.name, last)  # the log no longer matches it

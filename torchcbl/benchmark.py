@@ -38,7 +38,8 @@ cell's teaching is also written as a session directory (:mod:`torchcbl.session`)
                                     config.json (the teaching env's id and make() arguments,
                                     strategy, TeachingConfig, the cell's seed), steps.sqlite
                                     (every step, with the teacher's label where it gave one;
-                                    corrections), checkpoints/ (the model at each refit)
+                                    corrections), checkpoints/ (the model at its newest
+                                    refits)
     OUT/sessions/<hash>.stale-N     a session a killed or failed cell left; set aside, not
                                     removed, when the cell is computed again
 

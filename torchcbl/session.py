@@ -39,8 +39,10 @@ Run directory layout (one directory per teaching session)::
             model-00000012.pt    ``{"n_demonstrations": 12, "labels_sha256": ...,
                                  "state_dict": ...}`` of the model fitted on the first 12
                                  labels (and the SHA-256 of those labels), its tensors on the
-                                 CPU whatever the model's device; one per refit, all kept
-                                 (snapshots at stages come for free). A session started from
+                                 CPU whatever the model's device; one per refit, the newest
+                                 ``keep_checkpoints`` kept (3 by default; None: all) and
+                                 checkpoint 0 always (an older stage is refitted from the
+                                 log, the model the loop had then). A session started from
                                  a fitted model has its model-00000000.pt, written before
                                  config.json: no label can refit it; a session with prior
                                  demonstrations has its model fitted on them alone as
@@ -1616,6 +1618,9 @@ class SessionStore:
     def __init__(self, run_dir: Path, *, commit_every: int = 32, lock: Any = None) -> None:
         self.run_dir = Path(run_dir)
         self.commit_every = commit_every
+        #: the newest checkpoints kept besides checkpoint 0 as each is written (None: all)
+        self.keep_checkpoints: int | None = None
+        self._prune_warned = False
         self._lock = _acquire_lock(self.run_dir) if lock is None else lock
         self._db: sqlite3.Connection | None = None
         self._journal = -1
@@ -2076,8 +2081,40 @@ class SessionStore:
         self, model: torch.nn.Module, n_demonstrations: int, digest: str | None = None
     ) -> Path:
         """Write the model fitted on the first ``n_demonstrations`` labels, with ``digest``
-        (:func:`labels_digest` of those labels) to tell it from a stale one later."""
-        return _write_checkpoint(self.run_dir, model, n_demonstrations, digest)
+        (:func:`labels_digest` of those labels) to tell it from a stale one later; then, with
+        :attr:`keep_checkpoints`, remove the checkpoints older than the newest that many (not
+        checkpoint 0, and none named for more labels than this one)."""
+        path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest)
+        if self.keep_checkpoints is not None:
+            self._prune_checkpoints(n_demonstrations, self.keep_checkpoints)
+        return path
+
+    def _prune_checkpoints(self, newest: int, keep: int) -> None:
+        """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
+        m; one that cannot be removed stays (harmless: readers take the newest), with one
+        warning per store."""
+        try:
+            entries = _checkpoint_entries(self.run_dir / CHECKPOINT_DIR)
+        except IncompatibleRunDirError:
+            return  # the checkpoint was just written there; a listing failure is passing
+        older = sorted((m, path) for m, path in entries if 0 < m <= newest)[:-keep]
+        for _, path in older:
+            try:
+                if path.is_file() and not path.is_symlink():
+                    path.unlink()
+            except FileNotFoundError:
+                pass
+            except OSError as exc:
+                if not self._prune_warned:
+                    self._prune_warned = True
+                    warnings.warn(
+                        f"could not remove the old checkpoint {path} ({exc}); it is harmless "
+                        "(resume and load_model read the newest checkpoints), remove it by "
+                        "hand to free its space. Older ones that cannot be removed are not "
+                        "reported again.",
+                        UserWarning,
+                        stacklevel=4,
+                    )
 
     def close(self) -> None:
         """Commit and close; the lock is released even if the commit fails (the journal
@@ -2922,6 +2959,8 @@ def _scan_checkpoints(
         payload, why = _checkpoint_payload(path, base + n, all_xs, all_ys)
         if payload is not None:
             return _CheckpointScan(n, payload, passed_over, beyond)
+        if not os.path.lexists(path):  # removed since the listing: a writer kept newer ones
+            continue
         passed_over.append((n, path, why))
     return _CheckpointScan(None, None, passed_over, beyond)
 

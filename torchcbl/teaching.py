@@ -569,6 +569,18 @@ def _check_commit_every(commit_every: Any) -> None:
         raise ValueError(f"commit_every: expected an int >= 1, got {commit_every!r}")
 
 
+#: checkpoints a session keeps besides checkpoint 0 (``ConfidentTeacher(keep_checkpoints=)``)
+DEFAULT_KEEP_CHECKPOINTS = 3
+
+
+def _check_keep_checkpoints(keep: Any) -> None:
+    if keep is not None and (not _is_int(keep) or keep < 1):
+        raise ValueError(
+            f"keep_checkpoints: expected None (keep every checkpoint) or an int >= 1 (the "
+            f"newest checkpoints kept), got {keep!r}"
+        )
+
+
 class ConfidentTeacher:
     """Teach a discrete-action policy, asking the teacher only where the model is unsure.
 
@@ -625,6 +637,15 @@ class ConfidentTeacher:
         commit_every: journal lines (steps, demonstrations' outcomes, corrections) per SQLite
             commit, an int >= 1; every line is durable in the session's journal as it is
             written, and a demonstration's before its action runs.
+        keep_checkpoints: how many of the newest checkpoints (``checkpoints/model-<n>.pt``,
+            one written per refit) the session keeps as it writes each (an int >= 1; checkpoint
+            0 is always kept); None keeps every one. A checkpoint is the refit it saves, so
+            resume and ``load_model`` load it instead of refitting; a removed one costs
+            nothing but that refit, deterministic from the log (``load_model(run_dir,
+            n_demonstrations=k)`` rebuilds the model at any k either way). Each is the
+            model's whole state: about 2 MB for the default model on 4 features and 3
+            actions (its 40 candidate sizes' statistics), so a session refitting after every
+            label writes about 1 GB per 500 labels when all are kept.
 
     Errors: a teacher that raises or answers outside the action space gives
     :class:`TeacherError`; an env that raises or returns a non-finite observation or reward
@@ -649,6 +670,7 @@ class ConfidentTeacher:
         on_step: Callable[[StepRecord], None] | None = None,
         on_refit: Callable[[Any, int], None] | None = None,
         commit_every: int = 32,
+        keep_checkpoints: int | None = DEFAULT_KEEP_CHECKPOINTS,
     ) -> None:
         if isinstance(run_dir, str) and not run_dir.strip():
             # Path("") is the working directory: the session would be written among its files
@@ -670,6 +692,7 @@ class ConfidentTeacher:
         if run_dir is not None:  # refused before the fit on a prior (seconds to minutes), not
             _check_new_session_path(Path(run_dir))  # after it; reads only, create checks again
             _check_commit_every(commit_every)
+            _check_keep_checkpoints(keep_checkpoints)
         starts_fitted = _is_fitted(self.model)
         prior = None
         if prior_demonstrations is not None:
@@ -706,7 +729,7 @@ class ConfidentTeacher:
             # a session may start from a fitted model: its checkpoint 0, written with the
             # session (a resume can only load it, no label refits it); one with prior
             # demonstrations has its model fitted on them as checkpoint 0, and them in prior.npz
-            self._new_session = (session_config, prior, commit_every)
+            self._new_session = (session_config, prior, commit_every, keep_checkpoints)
             self._create_session()
         self._next_reset_seed: int | None = self.seed
 
@@ -714,7 +737,7 @@ class ConfidentTeacher:
         """Write the new session this teacher was made with into :attr:`run_dir` (at its
         creation, or again after :meth:`_discard_unstarted` removed it)."""
         assert self.run_dir is not None and self._new_session is not None
-        session_config, prior, commit_every = self._new_session
+        session_config, prior, commit_every, keep_checkpoints = self._new_session
         store = SessionStore.create(
             self.run_dir,
             session_config,
@@ -723,6 +746,7 @@ class ConfidentTeacher:
             prior=prior,
         )
         store.commit_every = commit_every
+        store.keep_checkpoints = keep_checkpoints
         try:
             store.note_writer(0, _model_device(self.model))
         except BaseException as exc:
@@ -908,6 +932,7 @@ class ConfidentTeacher:
         on_step: Callable[[StepRecord], None] | None = None,
         on_refit: Callable[[Any, int], None] | None = None,
         commit_every: int = 32,
+        keep_checkpoints: int | None = DEFAULT_KEEP_CHECKPOINTS,
     ) -> ConfidentTeacher:
         """Continue a session from its run directory, killed or cleanly stopped.
 
@@ -926,6 +951,9 @@ class ConfidentTeacher:
                 stored ones (a model: its class, by name, and its recorded arguments, its
                 ``init_args`` where it has one, see ``model`` above; a custom rule or
                 strategy that cannot be rebuilt must be passed).
+            commit_every, keep_checkpoints: as for the constructor, for this writer (the
+                session keeps neither); with ``keep_checkpoints``, the checkpoints earlier
+                writers left beyond that many go as this one writes its first.
 
         Raises:
             TypeError: ``env`` is not an env (an env id: make it first with
@@ -1026,6 +1054,7 @@ class ConfidentTeacher:
         self.run_dir = Path(run_dir)
         self._starts_fitted = stored.get("starts_fitted") is True
         _check_commit_every(commit_every)
+        _check_keep_checkpoints(keep_checkpoints)
 
         def check(records: list[StepRecord], corrections: list[CorrectionRecord]) -> None:
             # a model restore_model would refuse to rebuild (a lost starting model) is refused
@@ -1045,6 +1074,7 @@ class ConfidentTeacher:
         self._store, records, corrections = SessionStore.open_for_resume(
             self.run_dir, commit_every=commit_every, check=check if self._starts_fitted else None
         )
+        self._store.keep_checkpoints = keep_checkpoints
         try:
             self._store.note_writer(len(records), _model_device(self.model))
             self._restore(records, corrections)
