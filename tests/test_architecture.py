@@ -298,7 +298,7 @@ def test_records_refuse_at_creation_what_would_fail_later():
     with pytest.raises(ValueError, match=r"StepRecord\.info: expected a dict JSON can hold"):
         ok.with_outcome(1.0, False, False, {"x": object()})
     CorrectionRecord(step=0, episode=0, observation=(0.5, 1.0), executed_action=0, action=1)
-    for obs in ((float("nan"), 1.0), (), [0.5, 1.0], ("a",)):
+    for obs in ((float("nan"), 1.0), (), np.array([[0.5, 1.0]]), ("a",)):  # lists are taken
         with pytest.raises(ValueError, match=r"CorrectionRecord\.observation: expected"):
             CorrectionRecord(step=0, episode=0, observation=obs, executed_action=0, action=1)
     with pytest.raises(ValueError, match=r"CorrectionRecord\.action: expected another action"):

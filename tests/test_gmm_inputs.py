@@ -257,6 +257,33 @@ def test_a_policy_reads_a_read_only_observation_without_a_warning():
     assert action == policy(x[7].copy())
 
 
+def test_a_policy_reads_a_tensor_observation_as_the_numbers_it_holds():
+    """GreedyPolicy read every observation with np.asarray, so a tensor from a network in the
+    loop failed with torch's own words: requires_grad=True "Can't call numpy() on Tensor that
+    requires grad", bfloat16 "Got unsupported ScalarType BFloat16" (the model's classify
+    takes both). It now reads it as the model does: its values as float64, without autograd."""
+    from torchcbl import GreedyPolicy
+
+    x, y = _data(n=60)
+    policy = GreedyPolicy(GaussianMixtureSet(3, 3, 2).fit(x, y))
+    for i in (0, 7, 31):
+        for t in (
+            torch.tensor(x[i], requires_grad=True),
+            torch.tensor(x[i], dtype=torch.float32, requires_grad=True),
+            torch.tensor(x[i], dtype=torch.bfloat16),
+            torch.tensor(x[i], dtype=torch.bfloat16, requires_grad=True),
+            torch.tensor(x[i], dtype=torch.float16),
+        ):
+            values = t.detach().double().numpy()  # the numbers the tensor holds
+            got, want = policy.classify(t), policy.classify(values)
+            assert all(torch.equal(a, b) for a, b in zip(got, want, strict=True)), t.dtype
+            assert policy(t) == policy(values) and not got.confidence.requires_grad
+            assert t.grad is None
+        assert policy(torch.tensor(x[i], requires_grad=True)) == policy(x[i])
+    with pytest.raises(ValueError, match=r"GreedyPolicy: expected one observation of shape"):
+        policy(torch.zeros(1, 3, requires_grad=True))  # a batch is still refused as before
+
+
 def test_single_observation_path_matches_batch_path():
     model, x, _ = _fitted()
     probe = np.random.default_rng(5).normal(scale=4, size=(40, 3)) + 3

@@ -1,5 +1,5 @@
-"""StepRecord built by a loop of one's own: numpy / gymnasium values are taken as the plain
-values the teaching loop passes, and what is wrong is still refused."""
+"""StepRecord and CorrectionRecord built by a loop of one's own: numpy / gymnasium values are
+taken as the plain values the teaching loop passes, and what is wrong is still refused."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from torchcbl.records import StepRecord
+from torchcbl.records import CorrectionRecord, StepRecord
 
 
 def _fields(**over):
@@ -86,5 +86,57 @@ def test_a_record_takes_numpy_and_gymnasium_values_and_holds_plain_ones():
 def test_a_record_still_refuses_what_is_wrong_and_says_what_to_pass(field, value):
     with pytest.raises(ValueError, match=rf"StepRecord\.{field}: expected") as err:
         StepRecord(**_fields(**{field: value}))
+    msg = str(err.value)
+    assert "if you built this record yourself" in msg and "teaching loop" in msg
+
+
+def test_a_correction_takes_numpy_values_like_a_step_record_and_holds_plain_ones():
+    """CorrectionRecord refused the observation a loop of one's own holds (an ndarray, a list,
+    numpy floats) that StepRecord takes, and said corrections 'are built by the teaching
+    loop'. It now stores them as the plain tuple of floats, as StepRecord does."""
+    plain = CorrectionRecord(
+        step=4, episode=1, observation=(0.5, -0.25), executed_action=0, action=1
+    )
+    for obs in (
+        np.array([0.5, -0.25]),
+        np.array([0.5, -0.25], dtype=np.float32),
+        [0.5, -0.25],
+        (np.float64(0.5), np.float32(-0.25)),
+    ):
+        c = CorrectionRecord(
+            step=np.int64(4),
+            episode=np.int32(1),
+            observation=obs,
+            executed_action=np.uint8(0),
+            action=np.int64(1),
+        )
+        assert c == plain, obs
+        assert type(c.observation) is tuple and all(type(x) is float for x in c.observation)
+        assert all(type(v) is int for v in (c.step, c.episode, c.executed_action, c.action))
+        assert c.observation_array.dtype == np.float64
+
+
+@pytest.mark.parametrize(
+    "field,value",
+    [
+        ("observation", np.array([[0.5, -0.25]])),
+        ("observation", np.array([0.5, math.nan])),
+        ("observation", np.array([], dtype=np.float64)),
+        ("observation", ["a", "b"]),
+        ("observation", [True, 0.5]),
+        ("observation", (np.float64(math.inf), 0.5)),
+        ("step", np.bool_(True)),
+        ("step", True),
+        ("step", np.float64(4.0)),
+        ("episode", np.int64(-1)),
+        ("action", np.bool_(True)),
+        ("executed_action", np.float32(0.0)),
+    ],
+)
+def test_a_correction_still_refuses_what_is_wrong_and_says_what_to_pass(field, value):
+    kw = dict(step=4, episode=1, observation=(0.5, -0.25), executed_action=0, action=1)
+    kw[field] = value
+    with pytest.raises(ValueError, match=rf"CorrectionRecord\.{field}: expected") as err:
+        CorrectionRecord(**kw)
     msg = str(err.value)
     assert "if you built this record yourself" in msg and "teaching loop" in msg

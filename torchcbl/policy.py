@@ -45,7 +45,15 @@ class GreedyPolicy:
         self.model = model
 
     def classify(self, observation: Any) -> Classification:
-        """The model's Classification of one observation [D] (batched fields of length 1)."""
+        """The model's Classification of one observation [D] (batched fields of length 1).
+
+        ``observation``: a numpy array, a sequence of numbers or a torch tensor, read as the
+        float64 values it holds; a tensor of any dtype (bfloat16 and float16 too) or device,
+        ``requires_grad`` or not, is read without autograd (the model scores without it).
+        """
+        if isinstance(observation, torch.Tensor):
+            # a network's output: its values (numpy has no bfloat16, nor a graph to follow)
+            observation = observation.detach().to("cpu", torch.float64)
         x = np.asarray(observation, dtype=np.float64)
         n_features = getattr(self.model, "n_features", None)
         if x.ndim != 1 or (isinstance(n_features, int) and x.shape[0] != n_features):
@@ -57,7 +65,8 @@ class GreedyPolicy:
         return self.model.classify(torch.tensor(x).reshape(1, -1))
 
     def __call__(self, observation: Any) -> int:
-        """The model's action for one observation [D] (Eq. 7); RuntimeError before any fit."""
+        """The model's action for one observation [D] (Eq. 7; read as :meth:`classify` reads
+        it); RuntimeError before any fit."""
         action = int(self.classify(observation).action[0])
         if action < 0:
             raise RuntimeError(

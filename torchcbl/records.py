@@ -373,6 +373,11 @@ class CorrectionRecord:
         observation: that step's observation (the state at decision time), shape [D].
         executed_action: the action the agent executed there.
         action: the teacher's corrected action for ``observation``.
+
+    Built by a loop of one's own, a correction takes numpy values as :class:`StepRecord` does
+    and stores the plain values the teaching loop passes: numpy integers (no bools) in the int
+    fields; a 1-D array or a list / tuple of numbers (numpy floats too) as ``observation`` (a
+    tuple of floats).
     """
 
     step: int
@@ -385,7 +390,8 @@ class CorrectionRecord:
         def bad(name: str, expected: str, got: Any) -> ValueError:
             return ValueError(
                 f"CorrectionRecord.{name}: expected {expected}, got {got!r} (step "
-                f"{self.step!r}). Corrections are built by the teaching loop."
+                f"{self.step!r}); if you built this record yourself, pass {expected}; from the "
+                "teaching loop this points at a bug or a corrupted log."
             )
 
         for name in ("step", "episode", "executed_action", "action"):
@@ -393,6 +399,9 @@ class CorrectionRecord:
             if not _is_int(v) or v < 0:
                 raise bad(name, "an int >= 0", v)
         obs = self.observation
+        if type(obs) is not tuple or not all(type(x) is float for x in obs):
+            obs = _float_tuple(obs)  # an array or list from a loop of one's own
+            object.__setattr__(self, "observation", obs)
         if (
             type(obs) is not tuple
             or not obs
