@@ -214,6 +214,7 @@ __all__ = [
     "SessionWriteError",
     "describe",
     "env_make_argument",
+    "env_make_arguments",
     "kept_as_repr",
     "latest_checkpoint",
     "load_config",
@@ -1004,6 +1005,33 @@ def env_make_argument(
             f"its env was made with {name} given as an object its config keeps as "
             f"{json.dumps(form)[:300]}, which no longer makes a {form['class']} ({exc})"
         ) from None
+
+
+def env_make_arguments(
+    config: Mapping[str, Any], builders: Mapping[str, Callable[..., Any]]
+) -> tuple[dict[str, Any], dict[str, str]]:
+    """Every argument ``gymnasium.make`` was given for a session's env, as
+    :func:`env_make_argument` makes each again, and why each of those it cannot make cannot
+    be made: what a domain's evaluate, replay and ``torchcbl teach --resume`` make the
+    session's env again with.
+
+    Args:
+        config: the session's config (:func:`load_config`).
+        builders: ``"module:QualName"`` -> the class to make (see :func:`env_make_argument`).
+
+    Returns:
+        ``(made, unknown)``: ``made`` maps each argument made again to its value (a plain
+        value as it is, an object rebuilt); ``unknown`` each other argument to
+        :func:`env_make_argument`'s one-line reason. Both are empty for an env made directly.
+    """
+    made: dict[str, Any] = {}
+    unknown: dict[str, str] = {}
+    for name in (config.get("env") or {}).get("kwargs") or {}:
+        try:
+            made[name] = env_make_argument(config, name, builders)
+        except ValueError as exc:
+            unknown[name] = str(exc)
+    return made, unknown
 
 
 # The SIGINT hook the holds install (main thread) and leave in place: outside a hold it hands
