@@ -1146,6 +1146,19 @@ _MAKE_CLASSES: dict[str, Callable[..., Any]] = {
 }
 
 
+def _session_make_kwargs(config: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
+    """What ``gymnasium.make`` was given for a corridor session's env (``render_mode`` aside),
+    a map and robot given as objects made again (:func:`torchcbl.session.env_make_arguments`),
+    and, by argument, why one cannot be, in words: ``(kwargs, unknown)``. What ``torchcbl
+    teach corridor --resume`` makes the session's env again with."""
+    from torchcbl.session import env_make_arguments
+
+    kwargs, unknown = env_make_arguments(config, _MAKE_CLASSES)
+    kwargs.pop("render_mode", None)
+    unknown.pop("render_mode", None)
+    return kwargs, unknown
+
+
 def _made_with(session_dir: Path, kwarg: str, what: str, want: type) -> Any:
     """The object ``gymnasium.make`` was given as ``kwarg`` for a session's env, made again
     from the session's config (:func:`torchcbl.session.env_make_argument`), or a ValueError

@@ -74,13 +74,19 @@ class DrivingConfig:
     """Settings of :class:`DrivingEnv`.
 
     Attributes:
-        scenario: a named scenario (``train``, ``eval``, ``light``) or a :class:`TrafficScenario`.
+        scenario: a named scenario (``train``, ``eval``, ``light``) or a :class:`TrafficScenario`,
+            kept as given; a session resumes with either spelling of the same traffic.
         max_episode_steps: timesteps before ``truncated`` (1000 = one paper evaluation trial).
         start_lane: the ego's lane at reset (2 = middle), unless ``options["ego_lane"]`` says.
         sim: SUMO settings (decision period etc.).
     """
 
-    scenario: str | TrafficScenario = "train"
+    # a name stands for the shipped scenario of that name: a session resumes with either
+    # spelling of the same traffic (torchcbl.session.RESUME_AS, spelled out: importing it would
+    # import torch; tests/test_resume_checks.py checks the two)
+    scenario: str | TrafficScenario = field(
+        default="train", metadata={"torchcbl.resume_as": get_scenario}
+    )
     max_episode_steps: int = 1000
     start_lane: int = 2
     sim: SimConfig = field(default_factory=SimConfig)

@@ -286,32 +286,35 @@ _MAKE_CLASSES: dict[str, Any] = {
 }
 
 
-def _session_make_settings(config: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
-    """What a driving session's env was made with: ``(settings, unknown)``, the arguments
-    ``gymnasium.make`` was given (``render_mode`` aside), objects made again
-    (:func:`torchcbl.session.env_make_argument`), a ``DrivingConfig`` (``config=``) as its
-    fields; and, by setting, why one cannot be known (given as an object the session keeps
-    only as text: a session written before 2026-11-27, or an object of another class), in
-    words. A start lane or step cap kept as the text of a numpy int is read as its int."""
+def _session_make_kwargs(config: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
+    """What ``gymnasium.make`` was given for a driving session's env (``render_mode`` aside),
+    objects made again (:func:`torchcbl.session.env_make_arguments`), and, by argument, why one
+    cannot be (given as an object the session keeps only as text: a session written before
+    2026-11-27, or an object of another class), in words: ``(kwargs, unknown)``. A start lane
+    or step cap kept as the text of a numpy int is read as its int. What replay, evaluate and
+    ``torchcbl teach driving --resume`` make the session's env again with."""
     import re
 
-    from torchcbl.session import env_make_argument, kept_as_repr
+    from torchcbl.session import env_make_arguments
 
-    kwargs = dict((config.get("env") or {}).get("kwargs") or {})
+    kwargs, unknown = env_make_arguments(config, _MAKE_CLASSES)
     kwargs.pop("render_mode", None)  # drawing only: the same traffic either way
-    settings: dict[str, Any] = {}
-    unknown: dict[str, str] = {}
-    for name, value in kwargs.items():
-        if kept_as_repr(value) and name in ("start_lane", "max_episode_steps"):
-            # a numpy int: "np.int64(3)" (numpy 1: "3")
-            found = re.fullmatch(r"(?:\w+(?:\.\w+)*\()?(\d+)\)?", str(value["repr"]))
+    unknown.pop("render_mode", None)
+    kept = (config.get("env") or {}).get("kwargs") or {}
+    for name in ("start_lane", "max_episode_steps"):
+        if name in unknown:  # a numpy int: "np.int64(3)" (numpy 1: "3")
+            found = re.fullmatch(r"(?:\w+(?:\.\w+)*\()?(\d+)\)?", str(kept[name]["repr"]))
             if found:
-                settings[name] = int(found.group(1))
-                continue
-        try:
-            settings[name] = env_make_argument(config, name, _MAKE_CLASSES)
-        except ValueError as exc:
-            unknown[name] = str(exc)
+                kwargs[name] = int(found.group(1))
+                del unknown[name]
+    return kwargs, unknown
+
+
+def _session_make_settings(config: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
+    """What a driving session's env was made with: ``(settings, unknown)``, the arguments
+    ``gymnasium.make`` was given (:func:`_session_make_kwargs`), a ``DrivingConfig``
+    (``config=``) as its fields; and, by setting, why one cannot be known, in words."""
+    settings, unknown = _session_make_kwargs(config)
     whole = settings.pop("config", None)
     if isinstance(whole, DrivingConfig):
         settings.update((f.name, getattr(whole, f.name)) for f in dataclasses.fields(DrivingConfig))

@@ -1496,6 +1496,88 @@ def test_teach_resume_of_a_session_taught_in_another_env_id_says_so(tmp_path, mo
     assert {p: p.read_bytes() for p in sorted(run.rglob("*")) if p.is_file()} == files
 
 
+def test_teach_resume_makes_again_the_objects_a_python_session_gave_its_env(
+    tmp_path, monkeypatch, capsys
+):
+    """A session begun in Python on gymnasium.make with objects (a CorridorMap and a
+    WorldConfig, a DrivingConfig holding its TrafficScenario) keeps them whole in config.json,
+    as evaluate and replay read them; teach --resume refused it all the same ("given as an
+    object, which teach --resume does not make again"). It makes them again as those do and
+    goes on: the same map, robot and traffic, the session's steps kept and added to."""
+    import dataclasses as dc
+
+    import gymnasium as gym
+
+    import corridor.human
+    import sumo_scenarios.human
+    from corridor.maps import load_map
+    from corridor.world import WorldConfig
+    from sumo_scenarios.env import DrivingConfig
+    from sumo_scenarios.scenarios import TRAIN
+    from torchcbl import ConfidentTeacher
+
+    class Person:
+        def __call__(self, observation, info):
+            return 0
+
+        def set_status(self, text):
+            pass
+
+    for human in (corridor.human, sumo_scenarios.human):
+        monkeypatch.setattr(human, "make_teacher", lambda **kw: Person())
+    sessions = {
+        "corridor": {
+            "corridor_map": load_map("lshape"),
+            "world_config": WorldConfig.legged_robot(),
+        },
+        "driving": {"config": DrivingConfig(scenario=dc.replace(TRAIN, seed=7), start_lane=1)},
+    }
+    made = []  # what teach gave gymnasium.make
+    monkeypatch.setattr(gym, "make", lambda *a, _m=gym.make, **kw: made.append(kw) or _m(*a, **kw))
+    for domain, kwargs in sessions.items():
+        run = tmp_path / domain
+        env = gym.make(f"torchcbl/{domain.capitalize()}-v0", **kwargs)
+        ConfidentTeacher(env, Person(), run_dir=run, progress=False).run(max_steps=3).close()
+        env.close()
+        made.clear()
+        argv = ["teach", domain, "--resume", "--run-dir", str(run), "--steps", "2"]
+        assert main(argv) == 0, capsys.readouterr().err
+        assert len(made) == 1 and {k: made[0][k] for k in kwargs} == kwargs, made
+        assert len(load_records(run)) == 5
+
+
+def test_teach_resume_of_objects_a_session_keeps_only_as_text_names_the_python_call(
+    tmp_path, monkeypatch, capsys
+):
+    """A session written before 2026-11-27 kept an object given to gymnasium.make only as
+    text: teach --resume cannot make it again, and says so in one line naming the argument
+    and the Python call that resumes it; no env is made and no file of the session changes."""
+    import gymnasium as gym
+
+    from corridor.world import WorldConfig
+    from torchcbl import ConfidentTeacher
+
+    run = tmp_path / "session"
+    env = gym.make("torchcbl/Corridor-v0", world_config=WorldConfig.legged_robot())
+    ConfidentTeacher(env, lambda o, i: 0, run_dir=run, progress=False).run(max_steps=2).close()
+    env.close()
+    _as_written_before_objects_were_kept(run)
+    files = {p: p.read_bytes() for p in sorted(run.rglob("*")) if p.is_file()}
+
+    def make(*args, **kwargs):
+        raise AssertionError(f"an env was made: {args}")
+
+    monkeypatch.setattr(gym, "make", make)
+    capsys.readouterr()
+    assert main(["teach", "corridor", "--resume", "--run-dir", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "world_config given as an object" in err and "only as text" in err, err
+    assert f"torchcbl.ConfidentTeacher.resume({str(run)!r}, " in err, err
+    assert "gymnasium.make('torchcbl/Corridor-v0', world_config=" in err, err
+    assert {p: p.read_bytes() for p in sorted(run.rglob("*")) if p.is_file()} == files
+
+
 def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
     tmp_path, monkeypatch, capsys
 ):

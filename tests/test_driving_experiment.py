@@ -405,6 +405,52 @@ def test_a_session_taught_on_a_traffic_scenario_refuses_another_on_resume(tmp_pa
         env.close()
 
 
+def test_a_driving_config_resumes_with_its_scenario_by_name_or_as_the_object(tmp_path):
+    """DrivingConfig keeps ``scenario`` as given, a name or a TrafficScenario, and resume
+    compared the kept forms as they were: a session of DrivingConfig(scenario="train") was
+    refused the same env made with DrivingConfig(scenario=TRAIN), and the other way round
+    ("config.scenario: ('train', '{...}')"). A name stands for the shipped scenario of that
+    name: either spelling of the same traffic resumes the other, and other traffic behind
+    the other spelling is refused in one line naming the fields that differ, touching no
+    file."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.env import DrivingConfig
+    from sumo_scenarios.scenarios import SCENARIOS, TRAIN
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, IncompatibleRunDirError
+    from torchcbl.session import load_records
+
+    def make(scenario):
+        config = DrivingConfig(scenario=scenario, max_episode_steps=10)
+        return gym.make(sumo_scenarios.ENV_ID, config=config)
+
+    same = ("train", TRAIN, dataclasses.replace(TRAIN, name="renamed"))
+    taught_on = {"train": dataclasses.replace(TRAIN, seed=7), TRAIN: "light"}
+    for k, (spelled, other) in enumerate(taught_on.items()):
+        run = tmp_path / f"run{k}"
+        env = make(spelled)
+        ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False).run(max_steps=2)
+        env.close()
+        before = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+        env = make(other)
+        with pytest.raises(IncompatibleRunDirError) as err:
+            ConfidentTeacher.resume(run, env, make_teacher(0), progress=False)
+        env.close()
+        msg = str(err.value)
+        seeds = (TRAIN.seed, 7) if k == 0 else (TRAIN.seed, SCENARIOS["light"].seed)
+        assert "\n" not in msg and f"'config.scenario.seed': {seeds}" in msg, msg
+        assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == before
+        for spelling in same:
+            env = make(spelling)
+            ConfidentTeacher.resume(run, env, make_teacher(0), progress=False).close()
+            env.close()
+        assert len(load_records(run)) == 2
+
+
 def test_a_seed_that_never_reaches_the_target_is_reported_as_such(tmp_path):
     """A seed whose window never reaches the target within max_noninteractive is not counted
     as reaching it at the cap: it is left out of "demonstrations to 80 %" and counted apart,

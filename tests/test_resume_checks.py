@@ -26,7 +26,7 @@ from test_session_faults import session as fault_session
 
 from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
 from torchcbl.errors import CorruptSessionError, IncompatibleRunDirError
-from torchcbl.session import COMPARE_ON_RESUME, load_config, load_records
+from torchcbl.session import COMPARE_ON_RESUME, RESUME_AS, load_config, load_records
 
 LINE_ID = "torchcbl_tests/ResumeLine-v0"
 
@@ -284,15 +284,20 @@ def test_a_session_made_with_an_object_argument_refuses_another_object(tmp_path)
 def test_the_domains_mark_their_names_not_compared_with_torchcbls_key():
     """corridor.maps and sumo_scenarios.scenarios spell COMPARE_ON_RESUME as a literal (taking
     it from torchcbl.session would import torch with them): a literal that drifted from the
-    constant would make a map's or a scenario's name compared on resume again, unnoticed."""
+    constant would make a map's or a scenario's name compared on resume again, unnoticed.
+    sumo_scenarios.env spells RESUME_AS alike, for DrivingConfig's scenario (a name or the
+    TrafficScenario)."""
     from corridor.maps import CorridorMap
-    from sumo_scenarios.scenarios import TrafficScenario
+    from sumo_scenarios.env import DrivingConfig
+    from sumo_scenarios.scenarios import TrafficScenario, get_scenario
 
     for cls, expected in ((CorridorMap, {"name", "description"}), (TrafficScenario, {"name"})):
         fields = dataclasses.fields(cls)
         marked = {f.name for f in fields if f.metadata.get(COMPARE_ON_RESUME) is False}
         assert marked == expected, cls
         assert all(set(f.metadata) <= {COMPARE_ON_RESUME} for f in fields), cls
+    spelt = {f.name: dict(f.metadata) for f in dataclasses.fields(DrivingConfig) if f.metadata}
+    assert spelt == {"scenario": {RESUME_AS: get_scenario}}
 
 
 def test_an_object_argument_kept_only_as_text_on_one_side_resumes_as_before(tmp_path):
@@ -329,6 +334,43 @@ class Anything(Line):
 ANYTHING_ID = "torchcbl_tests/ResumeAnything-v0"
 if ANYTHING_ID not in gym.registry:
     gym.register(ANYTHING_ID, entry_point=Anything)
+
+
+_STARTS = {"home": Start(0), "far": Start(5)}
+
+
+def _start_named(value: Any) -> Start:
+    """A Start, or the one a name spells."""
+    return value if isinstance(value, Start) else _STARTS[value]
+
+
+@dataclasses.dataclass(frozen=True)
+class Trail:
+    """Settings whose start is a Start or its name, as DrivingConfig's scenario is."""
+
+    start: Any = dataclasses.field(default="home", metadata={RESUME_AS: _start_named})
+
+
+def test_a_field_taking_a_name_or_its_object_resumes_either_spelling(tmp_path):
+    """A field whose class gives it a RESUME_AS function (DrivingConfig's scenario: a name or
+    the TrafficScenario) was compared as kept, the name against the object's fields: a
+    session was refused the same settings spelled the other way. A plain value against an
+    object is compared as the object it spells: the same resumes, another is refused naming
+    the fields that differ; a name the function refuses, and a name against a name, are
+    compared as they are."""
+    home = tmp_path / "home"
+    _teach(home, gym.make(ANYTHING_ID, settings=Trail("home")))
+    _resumes(home, gym.make(ANYTHING_ID, settings=Trail(Start(0))))
+    _refused(home, gym.make(ANYTHING_ID, settings=Trail(Start(5))), "'settings.start.cell': (0, 5)")
+    _refused(
+        home, gym.make(ANYTHING_ID, settings=Trail("far")), "'settings.start': ('home', 'far')"
+    )
+    far = tmp_path / "far"
+    _teach(far, gym.make(ANYTHING_ID, settings=Trail(Start(5))))
+    _resumes(far, gym.make(ANYTHING_ID, settings=Trail("far")))
+    _refused(far, gym.make(ANYTHING_ID, settings=Trail("home")), "'settings.start.cell': (5, 0)")
+    _refused(far, gym.make(ANYTHING_ID, settings=Trail("nowhere")), "'settings.start': ('{")
+    assert len(load_records(home)) == len(load_records(far)) == 12
 
 
 def _kept_whole(run: Path, value: Any) -> dict[str, Any]:

@@ -953,7 +953,7 @@ def test_a_session_keeps_each_frozen_dataclass_make_argument_rebuildably(tmp_pat
     refused). A frozen dataclass is now also kept as {"class", "fields"} (its init fields,
     nested dataclasses alike), which env_make_argument rebuilds with the classes it is given;
     the text stays beside it, and the session resumes as before."""
-    from torchcbl.session import env_make_argument, kept_as_repr
+    from torchcbl.session import env_make_argument, env_make_arguments, kept_as_repr
 
     reach = _Reach(n=4, start=(1, 2))
     made = dict(reach=reach, layout=_Layout(reach, "mine"), loose=_Loose(3))
@@ -974,6 +974,10 @@ def test_a_session_keeps_each_frozen_dataclass_make_argument_rebuildably(tmp_pat
         env_make_argument(config, "loose", builders)
     with pytest.raises(ValueError, match=r"layout given as a .*:_Layout, which .*rebuilds only"):
         env_make_argument(config, "layout", {f"{__name__}:_Reach": _Reach})
+    # all of them at once (what teach --resume makes the env with), and why each other not
+    again, unknown = env_make_arguments(config, builders)
+    assert again == {"reach": reach, "layout": _Layout(reach, "mine")}
+    assert list(unknown) == ["loose"] and "loose given as an object" in unknown["loose"]
     ConfidentTeacher.resume(
         run, gym.make(_REACH_ID, **made), lambda o, i: 1, progress=False
     ).close()

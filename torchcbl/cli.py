@@ -885,24 +885,38 @@ _TEACH = {
 }
 
 
-def _resume_env_kwargs(run_dir: Path) -> dict[str, Any]:
-    """What gymnasium.make was given for a session's env, to make it again on --resume: the
-    kwargs its config.json records and, where it records an int cap, ``max_episode_steps`` (a
-    benchmark cell's driving env was made with gymnasium.make's max_episode_steps=1000, a
-    TimeLimit that teach's own env lacks; a cap equal to the env's own, as teach's corridor
-    sessions record, changes nothing)."""
-    from torchcbl.session import kept_as_repr, load_config
+#: per domain, the "module:function" making again from a session's config what gymnasium.make
+#: was given for its env, objects too: (kwargs, {argument: why it cannot be made}), as the
+#: domain's evaluate and replay make them
+_MAKE_KWARGS = {
+    "corridor": "corridor.experiment:_session_make_kwargs",
+    "driving": "sumo_scenarios.replay:_session_make_kwargs",
+}
 
-    env = load_config(run_dir).get("env") or {}
-    kwargs = env.get("kwargs") or {}
-    as_text = sorted(k for k, v in kwargs.items() if kept_as_repr(v))
-    if as_text:
+
+def _resume_env_kwargs(run_dir: Path, domain: str) -> dict[str, Any]:
+    """What gymnasium.make was given for a session's env, to make it again on --resume: the
+    kwargs its config.json records (an object, a ``CorridorMap`` or ``DrivingConfig`` a
+    session begun in Python was given, made again from what the session keeps of it) and,
+    where it records an int cap, ``max_episode_steps`` (a benchmark cell's driving env was made
+    with gymnasium.make's max_episode_steps=1000, a TimeLimit that teach's own env lacks; a
+    cap equal to the env's own, as teach's corridor sessions record, changes nothing). A
+    one-line error naming the Python call where an argument cannot be made again."""
+    from torchcbl.benchmark import _import
+    from torchcbl.session import load_config
+
+    config = load_config(run_dir)
+    env = config.get("env") or {}
+    made, unknown = _import(_MAKE_KWARGS[domain])(config)
+    if unknown:
+        names = sorted(unknown)
+        given = ", ".join(f"{n}=<the {n} it was taught with>" for n in names)
         raise _UsageError(
-            f"{run_dir}'s env was made with {', '.join(as_text)} given as an object, "
-            "which teach --resume does not make again; resume it in Python with "
-            "ConfidentTeacher.resume and that env"
+            f"{run_dir}'s env was made with {', '.join(names)} given as an object, which teach "
+            f"--resume cannot make again: {_one_line(unknown[names[0]])}; resume it in Python, "
+            f"torchcbl.ConfidentTeacher.resume({str(run_dir)!r}, gymnasium.make("
+            f"{env.get('id')!r}, {given}), teacher)"
         )
-    made = {k: v for k, v in kwargs.items() if k != "render_mode"}
     cap = env.get("max_episode_steps")  # (None: no cap, or a session too old to keep one)
     if isinstance(cap, int) and not isinstance(cap, bool) and cap >= 1:
         made["max_episode_steps"] = cap
@@ -1040,7 +1054,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     if map_kwarg is not None:
         env_kwargs = {**env_kwargs, "corridor_map": map_kwarg}
     if args.resume:  # the env the session was taught in, whatever teach gives a new one today
-        env_kwargs = _resume_env_kwargs(run_dir)
+        env_kwargs = _resume_env_kwargs(run_dir, args.domain)
     teacher = human.make_teacher(title=f"torchcbl teach {args.domain}")
     from torchcbl.human import TerminalTeacher
 

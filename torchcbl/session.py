@@ -209,6 +209,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "COMPARE_ON_RESUME",
     "FORMAT",
+    "RESUME_AS",
     "CorruptSessionError",
     "IncompatibleRunDirError",
     "SessionLockedError",
@@ -216,6 +217,7 @@ __all__ = [
     "SessionWriteError",
     "describe",
     "env_make_argument",
+    "env_make_arguments",
     "kept_as_repr",
     "latest_checkpoint",
     "load_config",
@@ -837,6 +839,15 @@ def _rebuild(form: Any, builders: Mapping[str, Callable[..., Any]]) -> Any:
 #: what changes nothing the env does (a ``CorridorMap``'s name, a ``TrafficScenario``'s)
 COMPARE_ON_RESUME = "torchcbl.compare_on_resume"
 
+#: a dataclass field whose ``metadata`` holds this key, with a function of the field's value,
+#: takes more than one spelling of one value (a ``DrivingConfig``'s scenario: a shipped
+#: scenario's name or the ``TrafficScenario`` itself): on resume, a field kept as an object
+#: on one side and as a plain value on the other (a name) is compared as the object the
+#: function makes of the plain value (``get_scenario("train")``); a plain value it refuses is
+#: compared as it is. The function is given the plain value as JSON reads it back (a list
+#: for a tuple) and returns an object given objects as they are
+RESUME_AS = "torchcbl.resume_as"
+
 
 def _is_kept_object(form: Any) -> bool:
     """Whether ``form`` is a kept object, ``{"class": str, "fields": dict}`` (one edited into
@@ -847,6 +858,41 @@ def _is_kept_object(form: Any) -> bool:
         and isinstance(form["class"], str)
         and isinstance(form["fields"], dict)
     )
+
+
+def _resume_as(value: Any) -> dict[str, dict[str, Callable[[Any], Any]]]:
+    """Of each dataclass class in ``value`` (nested ones too), by its qualified name, the
+    fields its ``metadata`` gives a function that makes the object a plain value spells
+    (:data:`RESUME_AS`), with that function."""
+    out: dict[str, dict[str, Callable[[Any], Any]]] = {}
+    for name, cls in _classes_in(value, {}).items():
+        spelt = {
+            f.name: f.metadata[RESUME_AS]
+            for f in dataclasses.fields(cls)
+            if callable(f.metadata.get(RESUME_AS))
+        }
+        if spelt:
+            out[name.rsplit(":", 1)[-1]] = spelt
+    return out
+
+
+def _spelt_as_object(form: Any, make: Callable[[Any], Any], skip: dict[str, set[str]]) -> Any:
+    """The kept form of the object ``make`` (a field's :data:`RESUME_AS` function) makes of
+    the plain value ``form`` (a scenario's name), the fields its classes mark not compared
+    added to ``skip``; ``form`` as it is where it is a kept object already, or where ``make``
+    refuses it (a name this version does not ship) or makes what cannot be kept."""
+    if _is_kept_object(form):
+        return form
+    try:
+        made = make(form)
+        kept = _object_form(made)
+    except Exception:  # a name it does not know: compared as it is, and said so
+        return form
+    if kept is _UNKEPT or not _is_kept_object(kept):
+        return form
+    for qualname, names in _not_compared(made).items():
+        skip.setdefault(qualname, set()).update(names)
+    return json.loads(json.dumps(kept))
 
 
 def _not_compared(value: Any) -> dict[str, set[str]]:
@@ -868,15 +914,22 @@ _ABSENT = "(absent)"
 
 
 def _form_differences(
-    stored: Any, given: Any, skip: Mapping[str, set[str]], path: str
+    stored: Any,
+    given: Any,
+    skip: dict[str, set[str]],
+    path: str,
+    spelt: Mapping[str, Mapping[str, Callable[[Any], Any]]] | None = None,
 ) -> list[tuple[str, Any, Any]]:
     """Where the kept form ``stored`` of a ``gymnasium.make`` argument differs from ``given``'s
     (both as :func:`_object_form` writes them, read back from JSON): ``(path, stored, given)``
     for each differing value, ``path`` the argument's name and its fields (``scenario.seed``,
     ``course.start.cell``, ``nodes.P1[0]``). A kept object's class is compared by its
     qualified name (one moved to another module is the same); of its fields only those both
-    sides kept, less those its class marks as not compared (``skip``). 2 and 2.0 are equal;
-    True and 1 are not."""
+    sides kept, less those its class marks as not compared (``skip``); a field its class
+    gives a :data:`RESUME_AS` function (``spelt``), kept as an object on one side and as a
+    plain value on the other, is compared as the object that value spells. 2 and 2.0 are
+    equal; True and 1 are not."""
+    spelt = spelt or {}
     if _is_kept_object(stored) and _is_kept_object(given):
         qualname = stored["class"].rsplit(":", 1)[-1]
         if qualname != given["class"].rsplit(":", 1)[-1]:
@@ -884,8 +937,14 @@ def _form_differences(
         out: list[tuple[str, Any, Any]] = []
         fields, given_fields = stored["fields"], given["fields"]
         for name, value in fields.items():
-            if name in given_fields and name not in skip.get(qualname, set()):
-                out += _form_differences(value, given_fields[name], skip, f"{path}.{name}")
+            if name not in given_fields or name in skip.get(qualname, set()):
+                continue
+            other = given_fields[name]
+            make = spelt.get(qualname, {}).get(name)
+            if make is not None and _is_kept_object(value) != _is_kept_object(other):
+                value = _spelt_as_object(value, make, skip)
+                other = _spelt_as_object(other, make, skip)
+            out += _form_differences(value, other, skip, f"{path}.{name}", spelt)
         return out
     if _is_kept_object(stored) or _is_kept_object(given):
         return [(path, stored, given)]
@@ -895,12 +954,12 @@ def _form_differences(
             if key not in stored or key not in given:
                 out.append((f"{path}.{key}", stored.get(key, _ABSENT), given.get(key, _ABSENT)))
             else:
-                out += _form_differences(stored[key], given[key], skip, f"{path}.{key}")
+                out += _form_differences(stored[key], given[key], skip, f"{path}.{key}", spelt)
         return out
     if isinstance(stored, list) and isinstance(given, list) and len(stored) == len(given):
         out = []
         for k, (a, b) in enumerate(zip(stored, given, strict=True)):
-            out += _form_differences(a, b, skip, f"{path}[{k}]")
+            out += _form_differences(a, b, skip, f"{path}[{k}]", spelt)
         return out
     if isinstance(stored, bool) != isinstance(given, bool) or stored != given:
         return [(path, stored, given)]
@@ -932,7 +991,11 @@ def _object_problems(
     problems = []
     for name in sorted(set(stored_objects) & set(given_forms)):
         differ = _form_differences(
-            stored_objects[name], given_forms[name], _not_compared(given[name]), name
+            stored_objects[name],
+            given_forms[name],
+            _not_compared(given[name]),
+            name,
+            _resume_as(given[name]),
         )
         if not differ:
             continue
@@ -1006,6 +1069,33 @@ def env_make_argument(
             f"its env was made with {name} given as an object its config keeps as "
             f"{json.dumps(form)[:300]}, which no longer makes a {form['class']} ({exc})"
         ) from None
+
+
+def env_make_arguments(
+    config: Mapping[str, Any], builders: Mapping[str, Callable[..., Any]]
+) -> tuple[dict[str, Any], dict[str, str]]:
+    """Every argument ``gymnasium.make`` was given for a session's env, as
+    :func:`env_make_argument` makes each again, and why each of those it cannot make cannot
+    be made: what a domain's evaluate, replay and ``torchcbl teach --resume`` make the
+    session's env again with.
+
+    Args:
+        config: the session's config (:func:`load_config`).
+        builders: ``"module:QualName"`` -> the class to make (see :func:`env_make_argument`).
+
+    Returns:
+        ``(made, unknown)``: ``made`` maps each argument made again to its value (a plain
+        value as it is, an object rebuilt); ``unknown`` each other argument to
+        :func:`env_make_argument`'s one-line reason. Both are empty for an env made directly.
+    """
+    made: dict[str, Any] = {}
+    unknown: dict[str, str] = {}
+    for name in (config.get("env") or {}).get("kwargs") or {}:
+        try:
+            made[name] = env_make_argument(config, name, builders)
+        except ValueError as exc:
+            unknown[name] = str(exc)
+    return made, unknown
 
 
 # The SIGINT hook the holds install (main thread) and leave in place: outside a hold it hands
@@ -3976,7 +4066,9 @@ def resume_problems(
     given, as given (the spec's kwargs, objects whole; empty for an env made directly): of each
     argument that both it and the session (config.json's ``env.kwargs_objects``, kept since
     2026-11-27) keep whole (a frozen dataclass), the kept forms are compared field by field (a
-    field its class marks ``metadata={COMPARE_ON_RESUME: False}`` aside); see
+    field its class marks ``metadata={COMPARE_ON_RESUME: False}`` aside; one it gives a
+    :data:`RESUME_AS` function, kept as a plain value on one side, as the object that value
+    spells); see
     :func:`_env_problems`, which compares them whether or not the env was made by
     ``gymnasium.make``."""
     problems: list[str] = []
