@@ -176,6 +176,45 @@ def test_a_resumed_writer_removes_what_earlier_writers_kept_beyond_its_own_count
     assert policy(obs) == again.policy(obs)
 
 
+def test_a_resume_keeps_what_the_session_kept_unless_told_otherwise(tmp_path):
+    """A session that kept every checkpoint, resumed without keep_checkpoints, lost all but
+    the newest three at its first refit, without a word (the resume's default was the
+    constructor's 3). Each writer now records its retention in writers.jsonl and a resume
+    keeps the last one's by default; a session of a torchcbl that did not record it kept every
+    checkpoint, and so does its resume."""
+    env = rare_regions_world()
+    runs = {keep: tmp_path / f"keep-{keep}" for keep in (None, 2)}
+    for keep, run in runs.items():
+        ct = make_kept(env, run, keep_checkpoints=keep)
+        ct.run(max_steps=60)
+        ct.close()
+    before = _checkpoint_numbers(runs[None])
+    assert len(before) >= 6 and len(_checkpoint_numbers(runs[2])) == 2
+    for keep, run in runs.items():
+        again = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+        again.run(max_steps=120)
+        again.close()
+        after = _checkpoint_numbers(run)
+        assert after[-1] > before[-1]
+        assert after[: len(before)] == before if keep is None else len(after) == 2, (keep, after)
+        writers = [json.loads(line) for line in (run / "writers.jsonl").read_text().splitlines()]
+        assert [w["keep_checkpoints"] for w in writers] == [keep, keep]
+
+    # a session written before writers recorded it: every checkpoint kept, on resume too
+    old = runs[None]
+    lines = (old / "writers.jsonl").read_text().splitlines()
+    stripped = [json.loads(line) for line in lines]
+    for w in stripped:
+        del w["keep_checkpoints"]
+    (old / "writers.jsonl").write_text("".join(json.dumps(w) + "\n" for w in stripped))
+    kept = _checkpoint_numbers(old)
+    again = ConfidentTeacher.resume(old, env, oracle(env), progress=False)
+    again.run(max_steps=180)
+    again.close()
+    now = _checkpoint_numbers(old)
+    assert now[: len(kept)] == kept and len(now) > len(kept)
+
+
 @pytest.mark.parametrize("bad", [0, -1, 2.5, True, "3"])
 def test_keep_checkpoints_is_none_or_a_positive_int(tmp_path, bad):
     env = rare_regions_world()

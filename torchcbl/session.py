@@ -34,7 +34,8 @@ Run directory layout (one directory per teaching session)::
                                  committed (rewritten in place; kept from one writer to the
                                  next)
         writers.jsonl            one line per writer (start or resume): the first step it
-                                 wrote, torch's thread count, torch / numpy versions
+                                 wrote, torch's thread count, torch / numpy versions, the
+                                 checkpoints it keeps (``keep_checkpoints``)
         checkpoints/
             model-00000012.pt    ``{"n_demonstrations": 12, "labels_sha256": ...,
                                  "state_dict": ...}`` of the model fitted on the first 12
@@ -219,6 +220,7 @@ __all__ = [
     "env_make_argument",
     "env_make_arguments",
     "kept_as_repr",
+    "kept_checkpoints",
     "latest_checkpoint",
     "load_config",
     "load_corrections",
@@ -1708,8 +1710,10 @@ class SessionStore:
     def __init__(self, run_dir: Path, *, commit_every: int = 32, lock: Any = None) -> None:
         self.run_dir = Path(run_dir)
         self.commit_every = commit_every
-        #: the newest checkpoints kept besides checkpoint 0 as each is written (None: all)
+        #: the newest checkpoints kept besides checkpoint 0 as each is written (None: all);
+        #: recorded in writers.jsonl by :meth:`note_writer`
         self.keep_checkpoints: int | None = None
+        self._on_disk: list[int] | None = None  # checkpoints > 0 there (read once, then kept)
         self._prune_warned = False
         self._lock = _acquire_lock(self.run_dir) if lock is None else lock
         self._db: sqlite3.Connection | None = None
@@ -1945,10 +1949,11 @@ class SessionStore:
     def note_writer(self, first_step: int, model_device: str = "cpu") -> None:
         """Append who writes from ``first_step`` on to ``writers.jsonl``: torch's thread count,
         the model's device and versions (results are bit-identical only for the same thread
-        count and device)."""
+        count and device), and :attr:`keep_checkpoints` (what a resume keeps by default)."""
         line = json.dumps(
             {
                 "first_step": first_step,
+                "keep_checkpoints": self.keep_checkpoints,
                 "model_device": model_device,
                 "torch_num_threads": torch.get_num_threads(),
                 "torch_num_interop_threads": torch.get_num_interop_threads(),
@@ -2181,14 +2186,19 @@ class SessionStore:
 
     def _prune_checkpoints(self, newest: int, keep: int) -> None:
         """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
-        m; one that cannot be removed stays (harmless: readers take the newest), with one
-        warning per store."""
-        try:
-            entries = _checkpoint_entries(self.run_dir / CHECKPOINT_DIR)
-        except IncompatibleRunDirError:
-            return  # the checkpoint was just written there; a listing failure is passing
-        older = sorted((m, path) for m, path in entries if 0 < m <= newest)[:-keep]
-        for _, path in older:
+        m (the folder is listed once per store, then followed in memory); one that cannot be
+        removed stays (harmless: readers take the newest), with one warning per store."""
+        directory = self.run_dir / CHECKPOINT_DIR
+        if self._on_disk is None:
+            try:
+                self._on_disk = sorted(m for m, _ in _checkpoint_entries(directory) if m > 0)
+            except IncompatibleRunDirError:
+                return  # the checkpoint was just written there; a listing failure is passing
+        on_disk = sorted(set(self._on_disk) | {newest})
+        older = [m for m in on_disk if m <= newest][:-keep]
+        self._on_disk = [m for m in on_disk if m not in older]
+        for m in older:
+            path = directory / f"model-{m:08d}.pt"
             try:
                 if path.is_file() and not path.is_symlink():
                     path.unlink()
@@ -3733,6 +3743,19 @@ def _read_writers(run_dir: Path) -> tuple[list[dict[str, Any]], list[str]]:
             bad.append(number)
     notes = [f"{run_dir / WRITERS_NAME}: lines {bad} are not a writer's record"] if bad else []
     return writers, notes
+
+
+def kept_checkpoints(run_dir: str | os.PathLike[str]) -> int | None:
+    """How many of the newest checkpoints the session's last writer kept
+    (``ConfidentTeacher(keep_checkpoints=)``, as ``writers.jsonl`` records it), which a
+    resume keeps by default; None (every one) for a session whose writers did not record it
+    (a torchcbl before 2026-11-28 kept every checkpoint) or whose ``writers.jsonl`` cannot be
+    read."""
+    writers, _ = _read_writers(Path(run_dir))
+    keep = writers[-1].get("keep_checkpoints") if writers else None
+    if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
+        return None
+    return keep
 
 
 def _lock_held(run_dir: Path) -> bool | None:

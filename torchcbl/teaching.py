@@ -94,6 +94,7 @@ from torchcbl.session import (
     _read_prior,
     _warn_unrecorded_args,
     build_model,
+    kept_checkpoints,
     label_sequence,
     latest_checkpoint,
     load_config,
@@ -573,11 +574,12 @@ def _check_commit_every(commit_every: Any) -> None:
 DEFAULT_KEEP_CHECKPOINTS = 3
 
 
-def _check_keep_checkpoints(keep: Any) -> None:
+def _check_keep_checkpoints(keep: Any, *, resume: bool = False) -> None:
     if keep is not None and (not _is_int(keep) or keep < 1):
         raise ValueError(
-            f"keep_checkpoints: expected None (keep every checkpoint) or an int >= 1 (the "
-            f"newest checkpoints kept), got {keep!r}"
+            "keep_checkpoints: expected None (keep every checkpoint)"
+            + (', "as_before" (as the session\'s last writer),' if resume else "")
+            + f" or an int >= 1 (the newest checkpoints kept), got {keep!r}"
         )
 
 
@@ -640,12 +642,15 @@ class ConfidentTeacher:
         keep_checkpoints: how many of the newest checkpoints (``checkpoints/model-<n>.pt``,
             one written per refit) the session keeps as it writes each (an int >= 1; checkpoint
             0 is always kept); None keeps every one. A checkpoint is the refit it saves, so
-            resume and ``load_model`` load it instead of refitting; a removed one costs
-            nothing but that refit, deterministic from the log (``load_model(run_dir,
-            n_demonstrations=k)`` rebuilds the model at any k either way). Each is the
-            model's whole state: about 2 MB for the default model on 4 features and 3
-            actions (its 40 candidate sizes' statistics), so a session refitting after every
-            label writes about 1 GB per 500 labels when all are kept.
+            resume and ``load_model`` load it instead of refitting; ``load_model(run_dir,
+            n_demonstrations=k)`` rebuilds the model at a stage whose checkpoint is gone from
+            the log, the same model, at the cost of the refits it saved: one fit with
+            ``refit="full"``, every refit since the last kept checkpoint before ``k`` with
+            ``"incremental"`` (3 s at 2,000 labels, 5 features, measured 2026-11-28). Each
+            checkpoint is the model's whole state, its candidate sizes' statistics included:
+            0.14 MB for the default model on 4 features and 3 actions, 2 MB with
+            ``max_components=40`` (the driving domain's), so a session refitting after every
+            label writes 70 MB, or 1 GB, per 500 labels when all are kept.
 
     Errors: a teacher that raises or answers outside the action space gives
     :class:`TeacherError`; an env that raises or returns a non-finite observation or reward
@@ -932,7 +937,7 @@ class ConfidentTeacher:
         on_step: Callable[[StepRecord], None] | None = None,
         on_refit: Callable[[Any, int], None] | None = None,
         commit_every: int = 32,
-        keep_checkpoints: int | None = DEFAULT_KEEP_CHECKPOINTS,
+        keep_checkpoints: int | None | Literal["as_before"] = "as_before",
     ) -> ConfidentTeacher:
         """Continue a session from its run directory, killed or cleanly stopped.
 
@@ -951,9 +956,12 @@ class ConfidentTeacher:
                 stored ones (a model: its class, by name, and its recorded arguments, its
                 ``init_args`` where it has one, see ``model`` above; a custom rule or
                 strategy that cannot be rebuilt must be passed).
-            commit_every, keep_checkpoints: as for the constructor, for this writer (the
-                session keeps neither); with ``keep_checkpoints``, the checkpoints earlier
-                writers left beyond that many go as this one writes its first.
+            commit_every: as for the constructor, for this writer.
+            keep_checkpoints: as for the constructor, for this writer; by default
+                ("as_before") what the session's last writer kept (``writers.jsonl`` records
+                it; every checkpoint for a session of a torchcbl before 2026-11-28). Given a
+                number, the checkpoints earlier writers left beyond it go as this writer
+                writes its first.
 
         Raises:
             TypeError: ``env`` is not an env (an env id: make it first with
@@ -1054,7 +1062,9 @@ class ConfidentTeacher:
         self.run_dir = Path(run_dir)
         self._starts_fitted = stored.get("starts_fitted") is True
         _check_commit_every(commit_every)
-        _check_keep_checkpoints(keep_checkpoints)
+        if isinstance(keep_checkpoints, str) and keep_checkpoints == "as_before":
+            keep_checkpoints = kept_checkpoints(run_dir)
+        _check_keep_checkpoints(keep_checkpoints, resume=True)
 
         def check(records: list[StepRecord], corrections: list[CorrectionRecord]) -> None:
             # a model restore_model would refuse to rebuild (a lost starting model) is refused
@@ -1074,7 +1084,7 @@ class ConfidentTeacher:
         self._store, records, corrections = SessionStore.open_for_resume(
             self.run_dir, commit_every=commit_every, check=check if self._starts_fitted else None
         )
-        self._store.keep_checkpoints = keep_checkpoints
+        self._store.keep_checkpoints = keep_checkpoints  # before note_writer records it
         try:
             self._store.note_writer(len(records), _model_device(self.model))
             self._restore(records, corrections)
