@@ -132,6 +132,41 @@ def test_a_session_keeps_its_newest_checkpoints_and_rebuilds_any_stage_from_its_
     assert _checkpoint_numbers(everything) == refits  # the same session, every refit kept
 
 
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_hand_refit_off_the_schedule_keeps_its_checkpoint(tmp_path, refit):
+    """A refit by hand (ConfidentTeacher.refit) moves the schedule: the loop refits max_new
+    labels after it. Its checkpoint is the only record of where it fell, and pruning removed
+    it: load_model at every stage after it rebuilt another model than the loop had (at 9
+    labels one fitted on 8, not on 6). A checkpoint off the schedule of the one kept before it
+    is now kept; every stage rebuilds as the loop had it, the hand refit's checkpoint and the
+    newest ones alone on disk."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=4, refit=refit),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=1,
+        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    while ct.n_demonstrations < 6:
+        ct.step()
+    assert ct.refit()
+    while ct.n_demonstrations < 40:
+        ct.step()
+    ct.close()
+    refits = sorted(live)
+    assert refits[:3] == [4, 6, 10] and refits[-1] == 38
+    assert _checkpoint_numbers(run) == [6, 38]
+    for n in range(4, 41):
+        stood_on = max(r for r in refits if r <= n)
+        rebuilt = load_model(run, n_demonstrations=n).state_dict()
+        assert all(torch.equal(rebuilt[k], live[stood_on][k]) for k in rebuilt), (n, stood_on)
+
+
 def make_kept(env, run_dir, **kwargs):
     return ConfidentTeacher(
         env,

@@ -1714,6 +1714,7 @@ class SessionStore:
         #: recorded in writers.jsonl by :meth:`note_writer`
         self.keep_checkpoints: int | None = None
         self._on_disk: list[int] | None = None  # checkpoints > 0 there (read once, then kept)
+        self._max_new: int | None = None  # the session's refit schedule (read by _open)
         self._prune_warned = False
         self._lock = _acquire_lock(self.run_dir) if lock is None else lock
         self._db: sqlite3.Connection | None = None
@@ -1751,6 +1752,9 @@ class SessionStore:
         except sqlite3.DatabaseError as exc:
             raise _db_error(exc, log, writing=True) from exc
         config = load_config(self.run_dir)
+        max_new = config.get("teaching", {}).get("max_new") if isinstance(config, dict) else None
+        # the refit schedule, which pruning keeps rebuildable (None: not known, nothing pruned)
+        self._max_new = max_new if isinstance(max_new, int) and max_new >= 1 else None
         if upgraded or config.get("format") == "torchcbl.session/1":
             # also where an earlier open upgraded the log but could not write config.json
             # (a format-3 session, one with prior demonstrations, keeps its format)
@@ -2186,8 +2190,20 @@ class SessionStore:
 
     def _prune_checkpoints(self, newest: int, keep: int) -> None:
         """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
-        m (the folder is listed once per store, then followed in memory); one that cannot be
-        removed stays (harmless: readers take the newest), with one warning per store."""
+        m, save those off the refit schedule (the folder is listed once per store, then
+        followed in memory); one that cannot be removed stays (harmless: readers take the
+        newest), with one warning per store.
+
+        A stage whose checkpoint is gone is rebuilt from the newest checkpoint below it (or
+        from the start) on the loop's schedule, a refit every ``max_new`` labels
+        (:func:`restore_model`). A refit by hand (``ConfidentTeacher.refit``) moves that
+        schedule, and its checkpoint alone says where it fell: so a checkpoint ``c`` goes only
+        where ``c - b`` is a multiple of ``max_new``, ``b`` the checkpoint kept below it (0
+        for none). Every refit between two kept checkpoints then lies on the lower one's
+        schedule (all checkpoints there, it holds; each removal keeps it)."""
+        max_new = self._max_new
+        if max_new is None:
+            return
         directory = self.run_dir / CHECKPOINT_DIR
         if self._on_disk is None:
             try:
@@ -2195,7 +2211,13 @@ class SessionStore:
             except IncompatibleRunDirError:
                 return  # the checkpoint was just written there; a listing failure is passing
         on_disk = sorted(set(self._on_disk) | {newest})
-        older = [m for m in on_disk if m <= newest][:-keep]
+        below = 0
+        older = []
+        for m in [m for m in on_disk if m <= newest][:-keep]:
+            if (m - below) % max_new == 0:
+                older.append(m)  # on the schedule from the one kept below: rebuilt alike
+            else:
+                below = m  # where a hand refit moved the schedule: kept
         self._on_disk = [m for m in on_disk if m not in older]
         for m in older:
             path = directory / f"model-{m:08d}.pt"
