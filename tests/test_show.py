@@ -705,3 +705,87 @@ def test_show_notes_the_starting_model_of_another_class_that_resume_refuses(tmp_
     assert "refuse the session" in capsys.readouterr().out
     with pytest.raises(CorruptSessionError, match="unreadable as this model's state"):
         ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+
+
+def _writing_while_read(monkeypatch, write, times: int = 1) -> list[int]:
+    """Make describe's log read (the first ``times`` of them) let ``write`` run right after
+    it has read the log, before describe looks at the lock and the checkpoints: a writer that
+    commits, saves checkpoints and closes between the two. Returns the count of reads."""
+    import torchcbl.session as session
+
+    real, reads = session._read_log, []
+
+    def read_log(*args, **kwargs):
+        got = real(*args, **kwargs)
+        reads.append(1)
+        if len(reads) <= times:
+            write()
+        return got
+
+    monkeypatch.setattr(session, "_read_log", read_log)
+    return reads
+
+
+def _steps_then_close(ct: ConfidentTeacher, steps: int):
+    def write() -> None:
+        for _ in range(steps):
+            ct.step()
+        ct.close()
+
+    return write
+
+
+def _resume_steps_close(run: Path, steps: int):
+    def write() -> None:
+        env = rare_regions_world(episode_length=10)
+        ct = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
+        _steps_then_close(ct, steps)()
+
+    return write
+
+
+@pytest.mark.parametrize("writer", ["closes", "starts-and-closes"])
+def test_show_of_a_session_a_writer_wrote_while_it_was_read(tmp_path, capsys, monkeypatch, writer):
+    """describe read the log, then asked /proc/locks whether a writer runs, then listed the
+    checkpoints: a writer that logged more, saved a checkpoint of more labels and closed
+    between the log's read and the rest (one running at the read and closing, or one started
+    and closed in between) left a session described as closed with the steps read before
+    it finished, and its newest checkpoint noted as "more than the N the log holds ... labels
+    the log lost, or a file put there by hand". A writer that ran at any point of the read
+    now has describe read the session again, so what it reports is one consistent moment."""
+    run = tmp_path / "run"
+    if writer == "closes":
+        write = _steps_then_close(_open_session(run, steps=20), 12)
+    else:
+        _small_session(run)
+        write = _resume_steps_close(run, 12)
+    reads = _writing_while_read(monkeypatch, write)
+    s = describe(run)
+    assert reads  # (the writer ran)
+    assert not [n for n in s.notes if "more than the" in n], s.notes
+    want = describe(run)  # (nothing runs now)
+    assert (s.n_steps, s.n_labels, s.last_checkpoint) == (32, want.n_labels, want.last_checkpoint)
+    assert want.last_checkpoint > 20  # the writer saved checkpoints the first read had no labels of
+    assert (s.state, s.writer_running, s.notes) == ("closed", False, ())
+
+
+def test_show_of_a_session_a_writer_writes_to_at_every_read_says_so(tmp_path, capsys, monkeypatch):
+    """A session that writers keep opening, logging to and closing as describe reads it, at
+    every read it makes: what was read is a moment of a session being written, so it is
+    described as running (no writer holds it at the end: "wrote to it while it was read"),
+    and a checkpoint of more labels than the log it read is not called one of labels the log
+    lost or a file put there by hand."""
+    run = tmp_path / "run"
+    _small_session(run)
+    reads = _writing_while_read(monkeypatch, _resume_steps_close(run, 4), times=100)
+    s = describe(run)
+    assert (s.state, s.writer_running) == ("running", False)
+    assert len(s.writers) > 1 and s.n_steps >= 24
+    assert not [n for n in s.notes if "more than the" in n], s.notes
+    assert main(["show", str(run)]) == 0
+    out = capsys.readouterr().out
+    assert "a writer wrote to it while it was read (process " in out
+    assert "put there by hand" not in out
+    monkeypatch.undo()
+    n = len(reads)
+    assert (describe(run).state, len(reads)) == ("closed", n)  # (nothing writes now)

@@ -3065,16 +3065,26 @@ class _CheckpointScan:
 
 
 def _scan_checkpoints(
-    directory: Path, n_labels: int, base: int, all_xs: list[np.ndarray], all_ys: list[int]
+    directory: Path,
+    n_labels: int,
+    base: int,
+    all_xs: list[np.ndarray],
+    all_ys: list[int],
+    entries: list[tuple[int, Path]] | None = None,
 ) -> _CheckpointScan:
     """Find the checkpoint a session's model stands on (see :class:`_CheckpointScan`); reads
     only. ``n_labels``: the session's labels; ``base``: prior demonstrations, which come
-    first in ``all_xs, all_ys`` and in every checkpoint's digest.
+    first in ``all_xs, all_ys`` and in every checkpoint's digest; ``entries``: the listing of
+    ``directory`` to scan (:func:`_checkpoint_entries`; default: listed now). Listed before
+    the labels were read from the log, every checkpoint in it names labels the log held then
+    (a writer logs a label before it saves a checkpoint of it), so one in ``beyond`` names
+    labels the log lacks; listed after, it may be one a writer saved since the read.
 
     Raises:
         IncompatibleRunDirError: ``directory`` cannot be listed.
     """
-    entries = _checkpoint_entries(directory)
+    if entries is None:
+        entries = _checkpoint_entries(directory)
     beyond = sorted((n, path) for n, path in entries if n > n_labels)
     passed_over: list[tuple[int, Path, str]] = []
     for n, path in sorted(((n, p) for n, p in entries if n <= n_labels), reverse=True):
@@ -3566,7 +3576,9 @@ class SessionSummary:
             lock on writer.lock's inode number on another device, as an overlay or btrfs
             reports, held by a process writer.lock does not name); a writer on another
             machine of a shared file system is not seen.
-        state: ``"running"`` (a writer holds the lock), ``"closed"`` (the last writer closed
+        state: ``"running"`` (a writer holds the lock; or writers wrote to the session while
+            it was read, at each of the three reads describe makes then, ``writer_running``
+            telling whether one holds it at the end), ``"closed"`` (the last writer closed
             the session: nothing left uncommitted), ``"killed"`` (no writer holds the lock and
             the last one left ``steps.journal`` lines or ``steps.sqlite-wal`` behind: killed,
             or a reader held the log as it closed; the readers see every logged step and a
@@ -3707,7 +3719,9 @@ class SessionSummary:
     def _state_text(self) -> str:
         who = f" ({self.last_writer})" if self.last_writer else ""
         return {
-            "running": f"a writer holds it now{who}",
+            "running": f"a writer holds it now{who}"
+            if self.writer_running
+            else f"a writer wrote to it while it was read{who}",
             "closed": f"closed by its last writer{who}",
             "killed": f"its last writer{who} stopped without closing it (killed; a resume "
             "takes it on)",
@@ -3828,6 +3842,76 @@ def _lock_held(run_dir: Path) -> bool | None:
     return None if unsure else False
 
 
+#: How many times :func:`describe` reads a session that a writer writes to as it reads it (one
+#: holds ``writer.lock`` as the read starts, or the files a writer changes change) before it
+#: reports what it read as a moment of a running session.
+_DESCRIBE_READS = 3
+
+
+def _writer_traces(run: Path) -> tuple[tuple[int, int] | None, ...]:
+    """(size, mtime) of what a writer changes as it runs, read by ``stat`` alone: the log, its
+    ``-wal``, the journal, ``writer.lock`` (rewritten by each writer as it starts and as it
+    commits), ``writers.jsonl`` (a line appended by each writer as it starts) and
+    ``checkpoints/`` (a checkpoint saved or pruned)."""
+    names = (LOG_NAME, LOG_NAME + "-wal", JOURNAL_NAME, LOCK_NAME, WRITERS_NAME, CHECKPOINT_DIR)
+    return tuple(_file_state(run / name) for name in names)
+
+
+@dataclass(frozen=True)
+class _SummaryRead:
+    """What :func:`describe` reads of a session in one go (see :func:`_read_for_summary`)."""
+
+    records: list[StepRecord]
+    correction_records: list[CorrectionRecord]
+    log_notes: list[str]
+    writers: list[dict[str, Any]]
+    writer_notes: list[str]
+    checkpoint: int | None
+    checkpoint_notes: list[str]
+    beyond_notes: list[str]
+    left: bool
+    lock_note: str | None
+
+
+def _read_for_summary(run: Path, config: dict[str, Any]) -> _SummaryRead:
+    """Read what :func:`describe` reports of the session in ``run``, read-only: its log (the
+    readers' warnings as notes), its writers, its checkpoint (``checkpoints/`` listed before
+    the log is read, so that a checkpoint of more labels than the log holds is one of labels
+    the log lacks, not one a writer saved since), whether its last writer left lines or a
+    ``-wal`` behind, and ``writer.lock``'s note of its holder."""
+    entries = _checkpoint_entries(run / CHECKPOINT_DIR)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        records, corrections = _read_log(run)
+    log_notes = [" ".join(str(w.message).split()) for w in caught]
+    writers, writer_notes = _read_writers(run)
+    correction_records = _corrections_of(records, corrections)
+    checkpoint, checkpoint_notes, beyond_notes = _checkpoint_report(
+        run, config, records, correction_records, entries
+    )
+    left = (run / LOG_NAME).with_name(LOG_NAME + "-wal").exists() or _unborn(run)
+    try:
+        left = left or (run / JOURNAL_NAME).stat().st_size > 0
+    except FileNotFoundError:
+        pass
+    try:
+        m = re.match(rb"process \d+ on [^\n]*", (run / LOCK_NAME).read_bytes())
+    except OSError:
+        m = None
+    return _SummaryRead(
+        records=records,
+        correction_records=correction_records,
+        log_notes=log_notes,
+        writers=writers,
+        writer_notes=writer_notes,
+        checkpoint=checkpoint,
+        checkpoint_notes=checkpoint_notes,
+        beyond_notes=beyond_notes,
+        left=left,
+        lock_note=m.group(0).decode(errors="replace") if m else None,
+    )
+
+
 def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
     """What a teaching session directory holds: its env, strategy and model, its counts of
     steps, episodes, labels and requests, its checkpoints, its writers and whether one runs.
@@ -3844,6 +3928,15 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
     ``print(describe(run_dir).text())`` shows it in a screenful; ``torchcbl show SESSION_DIR``
     does so at the command line.
 
+    What it reports is one moment of the session: a writer that held the lock as the read
+    began, or that left a trace as it went on (a line of ``writers.jsonl``, a change to the
+    log, the journal, ``writer.lock`` or ``checkpoints/``), may have logged, saved checkpoints
+    or closed meanwhile, so the session is read again, up to three times in all, unless a
+    writer holds it at the end (``"running"``, read once); written to at every read, it is
+    ``"running"`` too. A checkpoint of more labels than the log holds is noted only where no
+    writer ran during the read, as one of labels the log lost (``checkpoints/`` is listed
+    before the log is read: a writer logs a label before it saves a checkpoint of it).
+
     Returns:
         A :class:`SessionSummary`. What the readers would warn of (steps missing from the
         log, fewer than ``writer.lock`` says were committed) is in its ``notes``, not warned.
@@ -3857,12 +3950,21 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
     """
     run = Path(run_dir)
     config = load_config(run)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        records, corrections = _read_log(run)
-    notes = [" ".join(str(w.message).split()) for w in caught]
-    writers, writer_notes = _read_writers(run)
-    running = _lock_held(run)
+    for _ in range(_DESCRIBE_READS):
+        held = _lock_held(run)
+        traces = _writer_traces(run)
+        read = _read_for_summary(run, config)
+        # after the read: a writer seen now, or at the start, or whose traces changed, may
+        # have logged, saved checkpoints or closed while the session was read
+        running = _lock_held(run)
+        settled = held is not True and _writer_traces(run) == traces
+        if settled or running is True:  # (a writer that runs on: read once, as running)
+            break
+    # a writer wrote to the session as it was read, every time: what was read is a moment of
+    # a session being written, so a checkpoint of more labels than that log held may be one
+    # the writer saved after it, and the session is not said to be closed or killed
+    writing = running is True or not settled
+    records = read.records
     n_episodes = max((r.episode for r in records), default=-1) + 1
     steps = [0] * n_episodes
     asked = [0] * n_episodes
@@ -3873,28 +3975,18 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         if r.teacher_action is not None:
             asked[r.episode] += 1
             blocks[r.step // SUMMARY_BLOCK_STEPS] += 1
-    correction_records = _corrections_of(records, corrections)
+    correction_records = read.correction_records
     n_corrections = len(correction_records)
     n_demonstrations = sum(asked)
-    checkpoint, checkpoint_notes = _checkpoint_report(
-        run, config, records, correction_records, running
-    )
-    left = (run / LOG_NAME).with_name(LOG_NAME + "-wal").exists() or _unborn(run)
-    try:
-        left = left or (run / JOURNAL_NAME).stat().st_size > 0
-    except FileNotFoundError:
-        pass
-    if running:
+    if writing:
         state = "running"
-    elif not left:
+    elif not read.left:
         state = "closed"
     else:
         state = "killed" if running is False else "running or killed"
-    try:
-        m = re.match(rb"process \d+ on [^\n]*", (run / LOCK_NAME).read_bytes())
-    except OSError:
-        m = None
-    lock_note = m.group(0).decode(errors="replace") if m else None
+    checkpoint_notes = read.checkpoint_notes + ([] if writing else read.beyond_notes)
+    writers, writer_notes, lock_note = read.writers, read.writer_notes, read.lock_note
+    notes = read.log_notes
     prior = config.get("prior")
     return SessionSummary(
         run_dir=str(run_dir),
@@ -3925,7 +4017,7 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         requests_per_episode=tuple(asked),
         block_steps=SUMMARY_BLOCK_STEPS,
         requests_per_block=tuple(blocks),
-        last_checkpoint=checkpoint,
+        last_checkpoint=read.checkpoint,
         writers=tuple(writers),
         last_writer=lock_note,
         writer_running=running,
@@ -3939,19 +4031,21 @@ def _checkpoint_report(
     config: dict[str, Any],
     records: list[StepRecord],
     corrections: list[CorrectionRecord],
-    running: bool | None,
-) -> tuple[int | None, list[str]]:
+    entries: list[tuple[int, Path]],
+) -> tuple[int | None, list[str], list[str]]:
     """The checkpoint resume and :func:`load_model` start from (its count of labels; None:
-    none), found as they find it (:func:`_scan_checkpoints`) and loaded as they load it
-    (:func:`_foreign_state`), and a note on each file named as a checkpoint that they pass
-    over or cannot load: what it is and what resume does with it. Reads only."""
+    none), found as they find it (:func:`_scan_checkpoints`, in ``entries``: ``checkpoints/``
+    listed before ``records`` were read) and loaded as they load it (:func:`_foreign_state`),
+    and a note on each file named as a checkpoint that they pass over or cannot load: what it
+    is and what resume does with it; the notes on those of more labels than the log holds
+    apart (a writer running as the log was read may have saved them since). Reads only."""
     xs, ys = label_sequence(records, corrections)
     try:
         prior = _read_prior(run, config)
     except IncompatibleRunDirError as exc:  # missing, changed, unreadable: resume refuses
-        return None, [f"no checkpoint is usable: {' '.join(str(exc).split())}"]
+        return None, [f"no checkpoint is usable: {' '.join(str(exc).split())}"], []
     px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
-    scan = _scan_checkpoints(run / CHECKPOINT_DIR, len(ys), len(py), px + xs, py + ys)
+    scan = _scan_checkpoints(run / CHECKPOINT_DIR, len(ys), len(py), px + xs, py + ys, entries)
     notes = []
     foreign = None if scan.payload is None else _foreign_state(config, scan.payload)
     if foreign is not None and scan.n is not None:
@@ -3976,14 +4070,13 @@ def _checkpoint_report(
                 f"{path.name}.{why}) and rebuild the model from an earlier checkpoint or "
                 "the log"
             )
-    if running is not True:  # (a writer may have logged and saved more since the log was read)
-        for n, path in scan.beyond:
-            notes.append(
-                f"{CHECKPOINT_DIR}/{path.name} names {n} labels, more than the {len(ys)} the "
-                "log holds: resume and load_model pass it over (a checkpoint of labels the "
-                "log lost, or a file put there by hand)"
-            )
-    return scan.n, notes
+    beyond = [
+        f"{CHECKPOINT_DIR}/{path.name} names {n} labels, more than the {len(ys)} the log "
+        "holds: resume and load_model pass it over (a checkpoint of labels the log lost, or a "
+        "file put there by hand)"
+        for n, path in scan.beyond
+    ]
+    return scan.n, notes, beyond
 
 
 def _foreign_state(config: dict[str, Any], payload: dict[str, Any]) -> str | None:
