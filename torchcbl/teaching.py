@@ -641,7 +641,8 @@ class ConfidentTeacher:
             written, and a demonstration's before its action runs.
         keep_checkpoints: how many of the newest checkpoints (``checkpoints/model-<n>.pt``,
             one written per refit) the session keeps as it writes each (an int >= 1; checkpoint
-            0 is always kept); None keeps every one. A checkpoint is the refit it saves, so
+            0 is always kept, and so is that of a refit by hand, :meth:`refit`, which moves
+            the schedule the older stages are rebuilt on); None keeps every one. A checkpoint is the refit it saves, so
             resume and ``load_model`` load it instead of refitting; ``load_model(run_dir,
             n_demonstrations=k)`` rebuilds the model at a stage whose checkpoint is gone from
             the log, the same model, at the cost of the refits it saved: one fit with
