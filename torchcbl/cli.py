@@ -167,6 +167,30 @@ def _budgets(text: str) -> tuple[int, ...]:
     return values
 
 
+def _keep_checkpoints(text: str) -> int | str:
+    """An argparse type: ``--keep-checkpoints N|all``, a whole number >= 1 (the newest
+    checkpoints kept) or ``all`` (every one), else a one-line usage error. ``all`` is returned
+    as the string: the option's absence (None) is another choice (a resume's "as before")."""
+    if text.strip().lower() == "all":
+        return "all"
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(
+            "expected a whole number >= 1 (the newest checkpoints kept, besides checkpoint 0) "
+            f"or all (every one), got {text!r}"
+        ) from None
+    return value
+
+
+def _kept(option: int | str | None, default: Any) -> Any:
+    """What ``--keep-checkpoints`` gives ``keep_checkpoints=``: ``default`` where it was left
+    out, None for ``all``, else the number."""
+    return default if option is None else None if option == "all" else option
+
+
 _nonnegative_int = _int_at_least(0)
 _seed = _int_at_least(0, 2**32)  # a seed every seeded part takes (numpy, the GMM set, SUMO)
 
@@ -994,7 +1018,12 @@ def _cmd_teach(args: argparse.Namespace) -> int:
 
     from torchcbl.benchmark import _import
     from torchcbl.errors import SessionWriteError
-    from torchcbl.teaching import ConfidentTeacher, TeachingConfig, TeachingInterrupted
+    from torchcbl.teaching import (
+        DEFAULT_KEEP_CHECKPOINTS,
+        ConfidentTeacher,
+        TeachingConfig,
+        TeachingInterrupted,
+    )
 
     package, env_id, human_module, settings, setup_factory = _TEACH[args.domain]
     run_dir = Path(args.run_dir)
@@ -1078,7 +1107,14 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         from torchcbl.errors import IncompatibleRunDirError, SessionLockedError
 
         try:  # (a session another process is teaching, a damaged log: as evaluate says them)
-            ct = ConfidentTeacher.resume(run_dir, env, teacher, progress=False, on_step=status)
+            ct = ConfidentTeacher.resume(
+                run_dir,
+                env,
+                teacher,
+                progress=False,
+                on_step=status,
+                keep_checkpoints=_kept(args.keep_checkpoints, "as_before"),
+            )
         except SessionLockedError as exc:  # the library's words are for Python: say the CLI's
             env.close()
             raise _UsageError(
@@ -1106,6 +1142,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 progress=False,
                 on_step=status,
+                keep_checkpoints=_kept(args.keep_checkpoints, DEFAULT_KEEP_CHECKPOINTS),
             )
         except (ValueError, TypeError) as exc:
             env.close()
@@ -1848,6 +1885,16 @@ def _parser() -> argparse.ArgumentParser:
         help="corridor: a shipped map's name or a map JSON of your own (default: the "
         "reproduction's figure2); the session keeps it, so evaluate drives the same map (a "
         "map file changed after teaching is refused)",
+    )
+    p.add_argument(
+        "--keep-checkpoints",
+        type=_keep_checkpoints,
+        default=None,
+        metavar="N|all",
+        help="keep the newest N checkpoints (one is written per refit; checkpoint 0 is always "
+        "kept) or all of them (default 3; with --resume what the session kept). An earlier "
+        "stage's model is rebuilt from the log by torchcbl.load_model(run_dir, "
+        "n_demonstrations=k)",
     )
     p.set_defaults(func=_cmd_teach)
 
