@@ -1352,6 +1352,12 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
 
     from torchcbl import benchmark as bm
 
+    if args.keep_checkpoints is not None and not args.keep_sessions:
+        raise _UsageError(
+            f"--keep-checkpoints {args.keep_checkpoints} applies only with --keep-sessions (it "
+            "says how many checkpoints each kept session keeps); add --keep-sessions, or leave "
+            "it out"
+        )
     # None: all shipped; "" names none (an error below), as --envs "" names no domain env
     names = [s for s in args.strategies.split(",") if s] if args.strategies is not None else None
     if names is None:
@@ -1554,6 +1560,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                 ray_address=args.ray_address,
                 on_cell=on_cell,
                 keep_sessions=args.keep_sessions,
+                keep_checkpoints=_kept(args.keep_checkpoints, bm._KEEP_CHECKPOINTS),
             )
     except (RuntimeError, ValueError, ImportError) as exc:
         raise _UsageError(_missing_dependency(exc) or str(exc) + _cwd_hint(exc)) from None
@@ -1969,6 +1976,15 @@ def _parser() -> argparse.ArgumentParser:
         "torchcbl.load_policy)); the figures are the same either way. A cached cell "
         "is not computed again for its session; one that a killed or failed run left is set "
         "aside as <key>.stale-N",
+    )
+    p.add_argument(
+        "--keep-checkpoints",
+        type=_keep_checkpoints,
+        default=None,
+        metavar="N|all",
+        help="with --keep-sessions: each session keeps its newest N checkpoints (and checkpoint "
+        "0) or all of them (default 3), as torchcbl teach --keep-checkpoints; not part of a "
+        "cell's key, the figures are the same either way",
     )
     p.add_argument(
         "--driving-teacher",
