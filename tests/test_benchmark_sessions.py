@@ -249,3 +249,63 @@ def test_torchcbl_teach_resumes_a_session_the_benchmark_kept(domain, tmp_path, m
     assert main(argv) == 0, capsys.readouterr().err
     assert len(load_records(session)) == before + 3
     assert load_config(session)["env"]["max_episode_steps"] == (1000 if domain == "driving" else 81)
+
+
+def _checkpoints_of(session: Path) -> list[int]:
+    return sorted(int(p.stem.split("-")[1]) for p in (session / "checkpoints").glob("model-*.pt"))
+
+
+def test_kept_sessions_keep_the_checkpoints_asked_for_with_the_same_figures_and_keys(tmp_path):
+    """run_benchmark(keep_sessions=True) wrote each session with ConfidentTeacher's default
+    retention (the newest 3 checkpoints) and no way to choose another; keep_checkpoints= now
+    says it (None: every one), and changes neither a figure nor a cell's key."""
+    from torchcbl.teaching import DEFAULT_KEEP_CHECKPOINTS
+
+    spec = _env(teaching={"max_new": 2})  # refits at 2, 4, ... labels
+    runs = {}
+    for name, keep in (("default", ()), ("every", (None,)), ("one", (1,))):
+        kwargs = {"keep_checkpoints": keep[0]} if keep else {}
+        out = tmp_path / name
+        bm.run_benchmark(HG, [spec], [0], out, workers=1, plots=False, keep_sessions=True, **kwargs)
+        ((key, cell),) = _cells(out).items()
+        runs[name] = (key, _untimed(cell), _checkpoints_of(out / "sessions" / key))
+    every = runs["every"][2]
+    assert len(every) > DEFAULT_KEEP_CHECKPOINTS
+    assert runs["default"][2] == every[-DEFAULT_KEEP_CHECKPOINTS:]
+    assert runs["one"][2] == every[-1:]
+    assert runs["default"][:2] == runs["every"][:2] == runs["one"][:2]
+
+
+@pytest.mark.parametrize("bad", [0, -2, True, 2.0, "all"])
+def test_run_benchmark_refuses_a_keep_checkpoints_before_anything_runs(tmp_path, bad):
+    out = tmp_path / "b"
+    with pytest.raises(ValueError, match=r"keep_checkpoints: expected None .* or an int >= 1"):
+        bm.run_benchmark(
+            HG, [_env()], [0], out, workers=1, plots=False, keep_sessions=True, keep_checkpoints=bad
+        )
+    assert not out.exists()
+
+
+def test_the_command_says_how_many_checkpoints_kept_sessions_keep(tmp_path, capsys, monkeypatch):
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher", "--strategies", "bc", "--seeds", "1"]
+    argv += ["--workers", "1", "--budgets", "5,10", "--max-steps", "20", "--eval-episodes", "1"]
+    out = tmp_path / "b"
+    assert main([*argv, "--out", str(out), "--keep-sessions", "--keep-checkpoints", "all"]) == 0
+    ((key, cell),) = _cells(out).items()
+    every = _checkpoints_of(out / "sessions" / key)
+    assert len(every) == cell["attention"]["labels"] == 10  # bc: a refit per label
+    capsys.readouterr()
+    for bad, says in (
+        (["--keep-checkpoints", "2"], "--keep-checkpoints 2 applies only with --keep-sessions"),
+        (["--keep-sessions", "--keep-checkpoints", "0"], "expected a whole number >= 1"),
+    ):
+        try:
+            code = main([*argv, "--out", str(tmp_path / "x"), *bad])
+        except SystemExit as exc:  # argparse's own refusal
+            code = exc.code
+        stdout, err = capsys.readouterr()
+        assert code == 2 and stdout == "" and err.count("\n") == 1, (bad, stdout, err)
+        assert says in err, err
+        assert not (tmp_path / "x").exists()

@@ -2659,3 +2659,48 @@ def test_teach_on_a_kept_session_of_no_step_says_in_one_line_it_holds_none(
     assert captured.out == "" and len(captured.err.strip().splitlines()) == 1, captured.err
     assert "--resume" in captured.err and "holds no step" in captured.err, captured.err
     assert f"rm -r {run}" in captured.err, captured.err
+
+
+def _checkpoints_of(run: Path) -> list[int]:
+    return sorted(int(p.stem.split("-")[1]) for p in (run / "checkpoints").glob("model-*.pt"))
+
+
+def test_teach_keeps_the_checkpoints_asked_for_and_a_resume_keeps_the_sessions_choice(
+    tmp_path, monkeypatch, capsys
+):
+    """`teach` passed no keep_checkpoints, so a person could not keep every stage's
+    checkpoint (nor fewer) outside Python. --keep-checkpoints N|all chooses it for a new
+    session; --resume without it keeps what the session kept (ConfidentTeacher.resume's
+    "as_before"), with it the new value (the stages beyond it go at the first refit)."""
+    from torchcbl.session import kept_checkpoints
+    from torchcbl.teaching import DEFAULT_KEEP_CHECKPOINTS
+
+    _scripted_corridor_person(monkeypatch)  # 5 demonstrations, a refit after each
+    default, every = tmp_path / "default", tmp_path / "every"
+    assert main(["teach", "corridor", "--run-dir", str(default), "--steps", "30"]) == 0
+    assert (kept_checkpoints(default), _checkpoints_of(default)) == (3, [3, 4, 5])
+    argv = ["teach", "corridor", "--run-dir", str(every), "--steps", "30"]
+    assert main([*argv, "--keep-checkpoints", "all"]) == 0
+    assert (kept_checkpoints(every), _checkpoints_of(every)) == (None, [1, 2, 3, 4, 5])
+    resume = ["teach", "corridor", "--run-dir", str(every), "--resume", "--steps", "3"]
+    assert main(resume) == 0  # as before: every one
+    assert (kept_checkpoints(every), _checkpoints_of(every)) == (None, list(range(1, 9)))
+    assert main([*resume, "--keep-checkpoints", "2"]) == 0
+    assert (kept_checkpoints(every), _checkpoints_of(every)) == (2, [10, 11])
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["teach", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert f"(default {DEFAULT_KEEP_CHECKPOINTS}; with --resume what the session kept)" in help_text
+
+
+@pytest.mark.parametrize("bad", ["0", "-1", "three", "none", "1.5", ""])
+def test_teach_refuses_a_keep_checkpoints_it_cannot_take_in_one_line(bad, tmp_path, capsys):
+    run = tmp_path / "session"
+    with pytest.raises(SystemExit) as exc:
+        main(["teach", "corridor", "--run-dir", str(run), "--keep-checkpoints", bad])
+    out, err = capsys.readouterr()
+    assert exc.value.code == 2 and out == "" and err.count("\n") == 1, (out, err)
+    assert "argument --keep-checkpoints: expected a whole number >= 1" in err, err
+    assert "or all" in err and f"got {bad!r}" in err, err
+    assert not run.exists()

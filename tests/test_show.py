@@ -789,3 +789,71 @@ def test_show_of_a_session_a_writer_writes_to_at_every_read_says_so(tmp_path, ca
     monkeypatch.undo()
     n = len(reads)
     assert (describe(run).state, len(reads)) == ("closed", n)  # (nothing writes now)
+
+
+def _kept_session(run: Path, keep, steps: int = 20, **cfg) -> None:
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(**cfg),
+        run_dir=run,
+        seed=0,
+        progress=False,
+        keep_checkpoints=keep,
+    )
+    ct.run(max_steps=steps)
+    ct.close()
+
+
+def _on_disk(run: Path) -> tuple[int, ...]:
+    return tuple(sorted(int(p.stem.split("-")[1]) for p in (run / "checkpoints").glob("*.pt")))
+
+
+def test_show_says_which_checkpoints_are_kept_and_how_an_earlier_stage_is_rebuilt(tmp_path, capsys):
+    """show said only "checkpoint: the newest fitted on N labels": nothing of the earlier
+    stages' checkpoints that the session's keep_checkpoints removed, nor how to get such a
+    stage back. describe now gives the checkpoints on disk and the last writer's retention,
+    and show says them in one line after the checkpoint's, with load_model's call where
+    earlier ones may be gone: one fit with full refits, a replay with incremental ones."""
+    from torchcbl.session import kept_checkpoints
+
+    hint = "earlier stages: load_model(run_dir, n_demonstrations=k) rebuilds one from the log"
+    full, incremental, every = tmp_path / "full", tmp_path / "incremental", tmp_path / "every"
+    _kept_session(full, 2, max_new=3)
+    _kept_session(incremental, 3, max_new=1, refit="incremental")
+    _kept_session(every, None, max_new=3)
+    for run, keep, text in (
+        (full, 2, f"labels), keep_checkpoints=2 (the newest 2 and 0); {hint} (one fit)\n"),
+        (incremental, 3, f"keep_checkpoints=3 (the newest 3 and 0); {hint} (replaying the refits"),
+        (every, None, "labels), keep_checkpoints=None (every one)\n"),
+    ):
+        s = describe(run)
+        assert s.keep_checkpoints == keep == kept_checkpoints(run)
+        assert s.checkpoints_on_disk == _on_disk(run) and s.checkpoints_on_disk
+        assert s.last_checkpoint == s.checkpoints_on_disk[-1]
+        assert main(["show", str(run)]) == 0
+        out = capsys.readouterr().out
+        assert f"\ncheckpoint: the newest fitted on {s.last_checkpoint} labels\n" in out, out
+        (line,) = [ln for ln in out.splitlines() if ln.startswith("            on disk: ")]
+        on_disk = s.checkpoints_on_disk
+        assert line.startswith(f"            on disk: {len(on_disk)} ("), line
+        assert text in line + "\n", line
+        assert (hint in line) is (keep is not None), line
+        assert main(["show", str(run), "--json"]) == 0
+        shown = json.loads(capsys.readouterr().out)
+        assert shown["checkpoints_on_disk"] == list(on_disk)
+        assert shown["keep_checkpoints"] == keep
+    assert describe(full).checkpoints_on_disk == (15, 18)
+    assert "on disk: 2 (15, 18 labels)" in describe(full).text()
+    # every one: their range, not a list of all
+    assert describe(every).checkpoints_on_disk == (3, 6, 9, 12, 15, 18)
+    assert "on disk: 6 (3, 6, ..., 15, 18 labels)" in describe(every).text()
+    # a session kept whole, then resumed keeping every one: the stages its first writer
+    # removed are still gone, and show still says how to rebuild them
+    env = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher.resume(full, env, oracle(env), progress=False, keep_checkpoints=None)
+    ct.run(max_steps=30)
+    ct.close()
+    text = describe(full).text()
+    assert "keep_checkpoints=None (every one); " + hint in text, text

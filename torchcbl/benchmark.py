@@ -39,7 +39,8 @@ cell's teaching is also written as a session directory (:mod:`torchcbl.session`)
                                     strategy, TeachingConfig, the cell's seed), steps.sqlite
                                     (every step, with the teacher's label where it gave one;
                                     corrections), checkpoints/ (the model at its newest
-                                    refits)
+                                    refits: 3 by default, ``keep_checkpoints=``, None for
+                                    every one; ``--keep-checkpoints N|all``)
     OUT/sessions/<hash>.stale-N     a session a killed or failed cell left; set aside, not
                                     removed, when the cell is computed again
 
@@ -112,6 +113,10 @@ with a press still pending or lost, and presses nothing where the learner does w
 format 2 a pending or lost press counted as a correction to the default action, and format 3,
 a day's intermediate, still drew presses, and so doubled ones, where the learner agreed. 5: a
 cell's attention holds ``wrong_autonomous_rate`` and ``auditor_disagreement``)."""
+
+#: ``ConfidentTeacher``'s default ``keep_checkpoints``
+#: (``torchcbl.teaching.DEFAULT_KEEP_CHECKPOINTS``, not imported: this module imports no torch)
+_KEEP_CHECKPOINTS = 3
 
 #: short strategy names -> import path of the class.
 STRATEGY_PATHS: dict[str, str] = {
@@ -646,7 +651,10 @@ def _evaluate(
 
 
 def run_cell(
-    config: Mapping[str, Any], *, run_dir: str | os.PathLike[str] | None = None
+    config: Mapping[str, Any],
+    *,
+    run_dir: str | os.PathLike[str] | None = None,
+    keep_checkpoints: int | None = _KEEP_CHECKPOINTS,
 ) -> dict[str, Any]:
     """Run one cell (see the module docstring) and return its JSON result.
 
@@ -663,6 +671,9 @@ def run_cell(
             (:mod:`torchcbl.session`; ``ConfidentTeacher(run_dir=...)``: a new directory, or
             one holding no session), closed when the cell returns or raises; the result is
             the same with or without it (its timings apart).
+        keep_checkpoints: with ``run_dir``, the checkpoints its session keeps
+            (``ConfidentTeacher(keep_checkpoints=)``: the newest that many and checkpoint 0,
+            3 by default; None: every one); the result is the same whatever it is.
     """
     import random
 
@@ -672,7 +683,7 @@ def run_cell(
     np_state, py_state = np.random.get_state(), random.getstate()  # noqa: NPY002
     try:
         with torch.random.fork_rng(devices=[]):
-            return _run_cell(config, run_dir)
+            return _run_cell(config, run_dir, keep_checkpoints)
     finally:
         torch.set_num_threads(threads)
         np.random.set_state(np_state)  # noqa: NPY002
@@ -680,7 +691,9 @@ def run_cell(
 
 
 def _run_cell(
-    config: Mapping[str, Any], run_dir: str | os.PathLike[str] | None = None
+    config: Mapping[str, Any],
+    run_dir: str | os.PathLike[str] | None = None,
+    keep_checkpoints: int | None = _KEEP_CHECKPOINTS,
 ) -> dict[str, Any]:
     import random
 
@@ -740,6 +753,7 @@ def _run_cell(
             seed=seed,
             progress=False,
             run_dir=run_dir,
+            keep_checkpoints=keep_checkpoints,
         )
         for budget in spec.budgets:
             if loop.n_demonstrations < budget:  # (a step with a correction may pass one)
@@ -835,11 +849,15 @@ def _run_cell(
     }
 
 
-def _run_cell_in_worker(config: Mapping[str, Any], run_dir: str | None = None) -> dict[str, Any]:
+def _run_cell_in_worker(
+    config: Mapping[str, Any],
+    run_dir: str | None = None,
+    keep_checkpoints: int | None = _KEEP_CHECKPOINTS,
+) -> dict[str, Any]:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     if run_dir is not None:  # (on a Ray node of its own, what the sweep's host could not see)
         _set_aside(Path(run_dir))
-    return run_cell(config, run_dir=run_dir)
+    return run_cell(config, run_dir=run_dir, keep_checkpoints=keep_checkpoints)
 
 
 # -- the sweep --------------------------------------------------------------------------------
@@ -987,13 +1005,15 @@ def _execute(
     out: Path,
     sessions: Path | None = None,
     cached: int = 0,
+    keep_checkpoints: int | None = _KEEP_CHECKPOINTS,
 ) -> None:
     """Run the cells of ``todo`` and hand each result to ``done`` as it comes; the first cell
     that raises stops the sweep with a :class:`CellError` naming it (any other cell that
     finished meanwhile is handed to ``done`` first) and saying how many cells are kept (the
     ``cached`` ones and those handed to ``done``), and stops the other cells (on Ray, their
     tasks are cancelled, also on a Ray this sweep did not start). With ``sessions`` (an
-    absolute path), each cell writes its teaching session to ``sessions/<key>``."""
+    absolute path), each cell writes its teaching session to ``sessions/<key>``, keeping
+    ``keep_checkpoints`` checkpoints (see :func:`run_cell`)."""
     if not todo:
         return
     kept = [cached]  # the cells in out/cells: the cached ones, then each one done keeps
@@ -1029,7 +1049,7 @@ def _execute(
             # cells one after another (libsumo: one live simulation per process).
             remote = ray.remote(num_cpus=1)(_run_cell_in_worker)
             for c in todo:
-                ref = remote.remote(c, run_dir(c))
+                ref = remote.remote(c, run_dir(c), keep_checkpoints)
                 configs[ref] = c
                 pending.append(ref)
             while pending:
@@ -1050,7 +1070,7 @@ def _execute(
     if workers <= 1:
         for c in todo:  # in this process: its environment variables are left alone
             try:
-                cell = run_cell(c, run_dir=run_dir(c))
+                cell = run_cell(c, run_dir=run_dir(c), keep_checkpoints=keep_checkpoints)
             except Exception as exc:
                 raise CellError(c, exc, out, kept[0]) from exc
             keep(cell)
@@ -1067,7 +1087,9 @@ def _execute(
     with worker_pool(
         min(workers, len(todo)), ctx, running="one of the unfinished cells", after=died
     ) as pool:  # a Ctrl-C stops the workers
-        futures = {pool.submit(_run_cell_in_worker, c, run_dir(c)): c for c in todo}
+        futures = {
+            pool.submit(_run_cell_in_worker, c, run_dir(c), keep_checkpoints): c for c in todo
+        }
         pending = set(futures)
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
@@ -1095,6 +1117,7 @@ def run_benchmark(
     plots: bool = True,
     on_cell: Callable[[dict[str, Any], bool], None] | None = None,
     keep_sessions: bool = False,
+    keep_checkpoints: int | None = _KEEP_CHECKPOINTS,
 ) -> dict[str, Any]:
     """Run (or resume) a sweep and write ``results.json`` and the plots into ``out_dir``.
 
@@ -1117,6 +1140,13 @@ def run_benchmark(
             docstring). Not part of a cell's configuration: the figures and keys are the same
             either way, and a cached cell is not computed again for its session (a warning
             names the cached cells that have none).
+        keep_checkpoints: with ``keep_sessions``, the checkpoints each session keeps, as
+            ``ConfidentTeacher(keep_checkpoints=)``: the newest that many (an int >= 1) and
+            checkpoint 0, 3 by default; None keeps every one (an earlier stage's model is
+            rebuilt from the log by ``load_model(path, n_demonstrations=k)`` either way). Not
+            part of a cell's configuration either: the figures and keys are the same whatever
+            it is, and a cached cell keeps the session it has. Without ``keep_sessions`` it is
+            checked, and unused.
 
     Returns:
         The results dict that was written to ``results.json``.
@@ -1160,6 +1190,11 @@ def run_benchmark(
         isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
     ):
         raise ValueError(f"workers must be None (os.cpu_count()) or an int >= 1, got {workers!r}")
+    if keep_checkpoints is not None and (not _is_int(keep_checkpoints) or keep_checkpoints < 1):
+        raise ValueError(
+            "run_benchmark: keep_checkpoints: expected None (keep every checkpoint) or an int "
+            f">= 1 (the newest checkpoints each kept session keeps), got {keep_checkpoints!r}"
+        )
     _check_imports(strategies, envs)
     if use_ray and ray_address is not None:  # before the output directory is touched
         ray = sys.modules.get("ray")  # (a Ray already started is used as it is)
@@ -1220,6 +1255,7 @@ def run_benchmark(
             # absolute: a worker (a Ray one) may run in another directory
             sessions=(out / "sessions").resolve() if keep_sessions else None,
             cached=len(results),
+            keep_checkpoints=keep_checkpoints,
         )
     except BaseException:
         for folder in made:  # those left empty (no cell, no session written into them)

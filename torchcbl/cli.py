@@ -167,6 +167,30 @@ def _budgets(text: str) -> tuple[int, ...]:
     return values
 
 
+def _keep_checkpoints(text: str) -> int | str:
+    """An argparse type: ``--keep-checkpoints N|all``, a whole number >= 1 (the newest
+    checkpoints kept) or ``all`` (every one), else a one-line usage error. ``all`` is returned
+    as the string: the option's absence (None) is another choice (a resume's "as before")."""
+    if text.strip().lower() == "all":
+        return "all"
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(
+            "expected a whole number >= 1 (the newest checkpoints kept, besides checkpoint 0) "
+            f"or all (every one), got {text!r}"
+        ) from None
+    return value
+
+
+def _kept(option: int | str | None, default: Any) -> Any:
+    """What ``--keep-checkpoints`` gives ``keep_checkpoints=``: ``default`` where it was left
+    out, None for ``all``, else the number."""
+    return default if option is None else None if option == "all" else option
+
+
 _nonnegative_int = _int_at_least(0)
 _seed = _int_at_least(0, 2**32)  # a seed every seeded part takes (numpy, the GMM set, SUMO)
 
@@ -994,7 +1018,12 @@ def _cmd_teach(args: argparse.Namespace) -> int:
 
     from torchcbl.benchmark import _import
     from torchcbl.errors import SessionWriteError
-    from torchcbl.teaching import ConfidentTeacher, TeachingConfig, TeachingInterrupted
+    from torchcbl.teaching import (
+        DEFAULT_KEEP_CHECKPOINTS,
+        ConfidentTeacher,
+        TeachingConfig,
+        TeachingInterrupted,
+    )
 
     package, env_id, human_module, settings, setup_factory = _TEACH[args.domain]
     run_dir = Path(args.run_dir)
@@ -1078,7 +1107,14 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         from torchcbl.errors import IncompatibleRunDirError, SessionLockedError
 
         try:  # (a session another process is teaching, a damaged log: as evaluate says them)
-            ct = ConfidentTeacher.resume(run_dir, env, teacher, progress=False, on_step=status)
+            ct = ConfidentTeacher.resume(
+                run_dir,
+                env,
+                teacher,
+                progress=False,
+                on_step=status,
+                keep_checkpoints=_kept(args.keep_checkpoints, "as_before"),
+            )
         except SessionLockedError as exc:  # the library's words are for Python: say the CLI's
             env.close()
             raise _UsageError(
@@ -1106,6 +1142,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 progress=False,
                 on_step=status,
+                keep_checkpoints=_kept(args.keep_checkpoints, DEFAULT_KEEP_CHECKPOINTS),
             )
         except (ValueError, TypeError) as exc:
             env.close()
@@ -1315,6 +1352,12 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
 
     from torchcbl import benchmark as bm
 
+    if args.keep_checkpoints is not None and not args.keep_sessions:
+        raise _UsageError(
+            f"--keep-checkpoints {args.keep_checkpoints} applies only with --keep-sessions (it "
+            "says how many checkpoints each kept session keeps); add --keep-sessions, or leave "
+            "it out"
+        )
     # None: all shipped; "" names none (an error below), as --envs "" names no domain env
     names = [s for s in args.strategies.split(",") if s] if args.strategies is not None else None
     if names is None:
@@ -1517,6 +1560,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                 ray_address=args.ray_address,
                 on_cell=on_cell,
                 keep_sessions=args.keep_sessions,
+                keep_checkpoints=_kept(args.keep_checkpoints, bm._KEEP_CHECKPOINTS),
             )
     except (RuntimeError, ValueError, ImportError) as exc:
         raise _UsageError(_missing_dependency(exc) or str(exc) + _cwd_hint(exc)) from None
@@ -1769,7 +1813,9 @@ def _parser() -> argparse.ArgumentParser:
         description="Print what a teaching session holds, read-only (safe while its writer "
         "runs, and on a read-only copy): its env, strategy and model, steps, episodes, labels "
         "(demonstrations, corrections), requests (steps the teacher was asked) and autonomous "
-        "steps, requests per episode, the newest checkpoint, its writers (torch and numpy "
+        "steps, requests per episode, the newest checkpoint and those on disk (with the "
+        "retention its last writer kept, and how an earlier stage is rebuilt), its writers "
+        "(torch and numpy "
         "versions, threads, device) and whether a writer holds it now or was killed. Given a "
         "folder that holds sessions (a reproduction's run directory, a benchmark's OUT/sessions), "
         "one line per session, and the folders below it this user may not list (whose "
@@ -1849,6 +1895,16 @@ def _parser() -> argparse.ArgumentParser:
         "reproduction's figure2); the session keeps it, so evaluate drives the same map (a "
         "map file changed after teaching is refused)",
     )
+    p.add_argument(
+        "--keep-checkpoints",
+        type=_keep_checkpoints,
+        default=None,
+        metavar="N|all",
+        help="keep the newest N checkpoints (one is written per refit; checkpoint 0 is always "
+        "kept) or all of them (default 3; with --resume what the session kept). An earlier "
+        "stage's model is rebuilt from the log by torchcbl.load_model(run_dir, "
+        "n_demonstrations=k)",
+    )
     p.set_defaults(func=_cmd_teach)
 
     p = sub.add_parser(
@@ -1922,6 +1978,15 @@ def _parser() -> argparse.ArgumentParser:
         "torchcbl.load_policy)); the figures are the same either way. A cached cell "
         "is not computed again for its session; one that a killed or failed run left is set "
         "aside as <key>.stale-N",
+    )
+    p.add_argument(
+        "--keep-checkpoints",
+        type=_keep_checkpoints,
+        default=None,
+        metavar="N|all",
+        help="with --keep-sessions: each session keeps its newest N checkpoints (and checkpoint "
+        "0) or all of them (default 3), as torchcbl teach --keep-checkpoints; not part of a "
+        "cell's key, the figures are the same either way",
     )
     p.add_argument(
         "--driving-teacher",

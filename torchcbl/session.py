@@ -3566,6 +3566,17 @@ class SessionSummary:
             settings; tried where the session's model is torchcbl's GaussianMixtureSet, which
             the directory rebuilds, not a class of the user's own): None, and noted, as resume
             and :func:`load_model` then rebuild the model from the log.
+        checkpoints_on_disk: the label counts of the files in ``checkpoints/`` named as
+            checkpoints (``model-<n>.pt``), ascending, whatever they are (``notes`` says which
+            resume passes over): the stages whose model is loaded, not refitted. The others
+            (those a writer's ``keep_checkpoints`` removed) are rebuilt from the log by
+            ``load_model(run_dir, n_demonstrations=k)``, bit for bit: one fit with
+            ``refit="full"``, with ``"incremental"`` a replay of the refits since the kept
+            checkpoint before ``k``.
+        keep_checkpoints: how many of the newest checkpoints (besides checkpoint 0) the last
+            writer kept (:func:`kept_checkpoints`, what a resume keeps by default); None:
+            every one.
+        refit: the session's ``TeachingConfig.refit``, ``"full"`` or ``"incremental"``.
         writers: one dict per writer (start or resume) from ``writers.jsonl``: first_step,
             torch_num_threads, torch_num_interop_threads, torch_version, numpy_version,
             model_device, pid, started_utc (what that writer's torchcbl recorded).
@@ -3619,6 +3630,9 @@ class SessionSummary:
     block_steps: int
     requests_per_block: tuple[int, ...]
     last_checkpoint: int | None
+    checkpoints_on_disk: tuple[int, ...]
+    keep_checkpoints: int | None
+    refit: str
     writers: tuple[dict[str, Any], ...]
     last_writer: str | None
     writer_running: bool | None
@@ -3692,6 +3706,7 @@ class SessionSummary:
                 else f"the newest fitted on {self.last_checkpoint} labels"
             )
         )
+        lines.append("            " + self._kept_text())
         if not self.writers:
             lines.append("writers:    none recorded")
         for i, w in enumerate(self.writers):
@@ -3715,6 +3730,29 @@ class SessionSummary:
             f"seed {self.seed}, {self.n_steps} steps, {episodes}, {self.n_labels} labels "
             f"({self.n_requests} requests, {self.n_corrections} corrections)"
         )
+
+    def _kept_text(self) -> str:
+        """The checkpoints on disk, the last writer's retention and, where a writer's
+        retention may have removed earlier stages' checkpoints, how one is rebuilt."""
+        on_disk = self.checkpoints_on_disk
+        text = "on disk: " + (
+            f"{len(on_disk)} ({_ends_text([str(n) for n in on_disk], 2)} labels)"
+            if on_disk
+            else "none"
+        )
+        keep = self.keep_checkpoints
+        text += f", keep_checkpoints={keep} (" + (
+            "every one)" if keep is None else f"the newest {keep} and 0)"
+        )
+        kept = [w.get("keep_checkpoints") for w in self.writers]
+        kept = [k for k in kept if isinstance(k, int) and not isinstance(k, bool) and k > 0]
+        if kept and sum(1 for n in on_disk if n > 0) >= min(kept):  # some may be gone
+            text += "; earlier stages: load_model(run_dir, n_demonstrations=k) rebuilds one " + (
+                "from the log (replaying the refits before it)"
+                if self.refit == "incremental"
+                else "from the log (one fit)"
+            )
+        return text
 
     def _state_text(self) -> str:
         who = f" ({self.last_writer})" if self.last_writer else ""
@@ -3785,9 +3823,13 @@ def kept_checkpoints(run_dir: str | os.PathLike[str]) -> int | None:
     """How many of the newest checkpoints the session's last writer kept
     (``ConfidentTeacher(keep_checkpoints=)``, as ``writers.jsonl`` records it), which a
     resume keeps by default; None (every one) for a session whose writers did not record it
-    (a torchcbl before 2026-11-28 kept every checkpoint) or whose ``writers.jsonl`` cannot be
+    (a torchcbl before 2026-11-27 kept every checkpoint) or whose ``writers.jsonl`` cannot be
     read."""
-    writers, _ = _read_writers(Path(run_dir))
+    return _kept_by(_read_writers(Path(run_dir))[0])
+
+
+def _kept_by(writers: list[dict[str, Any]]) -> int | None:
+    """:func:`kept_checkpoints` of the records of ``writers.jsonl``."""
     keep = writers[-1].get("keep_checkpoints") if writers else None
     if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
         return None
@@ -4018,6 +4060,9 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         block_steps=SUMMARY_BLOCK_STEPS,
         requests_per_block=tuple(blocks),
         last_checkpoint=read.checkpoint,
+        checkpoints_on_disk=tuple(sorted(n for n, _ in _checkpoint_entries(run / CHECKPOINT_DIR))),
+        keep_checkpoints=_kept_by(writers),
+        refit=str(config["teaching"].get("refit", "full")),
         writers=tuple(writers),
         last_writer=lock_note,
         writer_running=running,

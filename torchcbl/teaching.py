@@ -642,12 +642,13 @@ class ConfidentTeacher:
         keep_checkpoints: how many of the newest checkpoints (``checkpoints/model-<n>.pt``,
             one written per refit) the session keeps as it writes each (an int >= 1; checkpoint
             0 is always kept, and so is that of a refit by hand, :meth:`refit`, which moves
-            the schedule the older stages are rebuilt on); None keeps every one. A checkpoint is the refit it saves, so
-            resume and ``load_model`` load it instead of refitting; ``load_model(run_dir,
-            n_demonstrations=k)`` rebuilds the model at a stage whose checkpoint is gone from
-            the log, the same model, at the cost of the refits it saved: one fit with
+            the schedule the older stages are rebuilt on); None keeps every one. A
+            checkpoint is the refit it saves, so resume and ``load_model`` load it instead of
+            refitting; ``load_model(run_dir, n_demonstrations=k)`` rebuilds the model at a
+            stage whose checkpoint is gone from the log, the same model, at the cost of the
+            refits it saved: one fit with
             ``refit="full"``, every refit since the last kept checkpoint before ``k`` with
-            ``"incremental"`` (3 s at 2,000 labels, 5 features, measured 2026-11-28). Each
+            ``"incremental"`` (3 s at 2,000 labels, 5 features, measured 2026-11-27). Each
             checkpoint is the model's whole state, its candidate sizes' statistics included:
             0.14 MB for the default model on 4 features and 3 actions, 2 MB with
             ``max_components=40`` (the driving domain's), so a session refitting after every
@@ -960,7 +961,7 @@ class ConfidentTeacher:
             commit_every: as for the constructor, for this writer.
             keep_checkpoints: as for the constructor, for this writer; by default
                 ("as_before") what the session's last writer kept (``writers.jsonl`` records
-                it; every checkpoint for a session of a torchcbl before 2026-11-28). Given a
+                it; every checkpoint for a session of a torchcbl that kept every one, before 2026-11-27). Given a
                 number, the checkpoints earlier writers left beyond it go as this writer
                 writes its first.
 
