@@ -961,9 +961,9 @@ class ConfidentTeacher:
             commit_every: as for the constructor, for this writer.
             keep_checkpoints: as for the constructor, for this writer; by default
                 ("as_before") what the session's last writer kept (``writers.jsonl`` records
-                it; every checkpoint for a session of a torchcbl that kept every one, before 2026-11-27). Given a
-                number, the checkpoints earlier writers left beyond it go as this writer
-                writes its first.
+                it; every checkpoint for a session of a torchcbl from before 2026-11-27, which
+                kept every one). Given a number, the checkpoints earlier writers left beyond
+                it go as this writer writes its first.
 
         Raises:
             TypeError: ``env`` is not an env (an env id: make it first with
