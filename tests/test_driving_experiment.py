@@ -527,6 +527,42 @@ def test_a_session_refuses_other_traffic_given_as_a_name_against_an_object(tmp_p
     resumes(by_name, make(scenario=seed99))
 
 
+def test_a_refusal_for_other_traffic_says_how_to_make_the_sessions_env(tmp_path):
+    """A resume refused for what the env describes (other traffic) said only "give it the
+    inputs as they were", not how the session's env was made: it now names the make() call
+    (or, for an env made directly, the env's class), as a refusal for other arguments does."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.env import DrivingEnv
+    from sumo_scenarios.scenarios import LIGHT, TRAIN
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, IncompatibleRunDirError
+
+    def refusal(taught, given) -> str:
+        run = tmp_path / str(len(list(tmp_path.iterdir())))
+        with ConfidentTeacher(taught, make_teacher(0), run_dir=run, progress=False) as ct:
+            ct.run(max_steps=2)
+        taught.close()
+        with pytest.raises(IncompatibleRunDirError) as err:
+            ConfidentTeacher.resume(run, given, make_teacher(0), progress=False)
+        given.close()
+        return str(err.value)
+
+    def make(scenario):
+        return gym.make(sumo_scenarios.ENV_ID, max_episode_steps=10, scenario=scenario)
+
+    msg = refusal(make("train"), make(LIGHT))
+    made = "gymnasium.make('torchcbl/Driving-v0', max_episode_steps=10, **{'scenario': 'train'})"
+    assert "'traffic.seed': (1, 3)" in msg and made in msg, msg
+    msg = refusal(make(dataclasses.replace(TRAIN, seed=99)), make("train"))
+    assert "'traffic.seed': (99, 1)" in msg and "env.kwargs_objects" in msg, msg
+    msg = refusal(DrivingEnv(scenario=LIGHT), DrivingEnv())
+    assert "a DrivingEnv (sumo_scenarios.env.DrivingEnv) made as it was" in msg, msg
+
+
 def test_the_driving_env_describes_the_sumo_files_it_loads_less_their_comments(
     tmp_path, monkeypatch
 ):
