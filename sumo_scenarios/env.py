@@ -30,9 +30,10 @@ env: gymnasium keeps it for a ``TimeLimit`` outside the env, which the env canno
 only shorten episodes: an n above the env's cap changes nothing (the env truncates first),
 without a warning.
 
-A session taught in this env keeps a description of the traffic it drives and of the SUMO files
-it loads (:meth:`DrivingEnv.describe_inputs`), so resuming it on other traffic, given by name or
-as a ``TrafficScenario``, is refused.
+A session taught in this env keeps a description of the traffic it drives, its SUMO settings and
+start lane, and of the SUMO files it loads (:meth:`DrivingEnv.describe_inputs`), so resuming it
+on other traffic or settings, however given (a name or a ``TrafficScenario``, an argument of
+its own, inside a ``DrivingConfig`` or left to its default), is refused.
 """
 
 from __future__ import annotations
@@ -294,30 +295,34 @@ class DrivingEnv(gym.Env):
 
     def describe_inputs(self) -> dict[str, str | int | float]:
         """What this env drives, whichever way it was given (a scenario's name or its
-        :class:`TrafficScenario`, as an argument of its own or inside a :class:`DrivingConfig`):
-        ``traffic.<field>`` for each field of the scenario but its name, which changes nothing
-        the traffic does (a number as it is, a per-lane tuple as its JSON text), and
+        :class:`TrafficScenario`, as an argument of its own or inside a :class:`DrivingConfig`,
+        or not at all: the defaults): ``traffic.<field>`` for each field of the scenario but its
+        name, which changes nothing the traffic does (a number as it is, a per-lane tuple as
+        its JSON text), ``sim.<field>`` for each of the :class:`SimConfig`, ``start_lane``, and
         ``<file>_sha256`` for the SUMO files the env loads (``road.net.xml``, the road, and
         ``driving.add.xml``, the vehicle types): the SHA-256 of each less its XML comments
-        (netconvert's header names its version).
+        (netconvert's header names its version). The step cap is left out: a session keeps the
+        cap in force, and resume compares it on its own.
 
         A teaching session keeps it, and :meth:`torchcbl.ConfidentTeacher.resume` refuses an
-        env whose description differs (other traffic, or a network changed since); a session
-        stored before the env described itself keeps none and is not compared on it.
+        env whose description differs (other traffic or settings, or a network changed since);
+        a session stored before the env described itself keeps none and is not compared on it.
 
         Raises:
             FileNotFoundError: a shipped SUMO file is missing (naming it and how to restore
                 it).
         """
         described: dict[str, str | int | float] = {}
-        for f in dataclasses.fields(self.scenario):
-            # a field marked as changing nothing the traffic does (its name; the literal of
-            # torchcbl.session.COMPARE_ON_RESUME: importing it would import torch)
-            if f.metadata.get("torchcbl.compare_on_resume") is False:
-                continue
-            value = getattr(self.scenario, f.name)
-            plain = isinstance(value, int | float | str)
-            described[f"traffic.{f.name}"] = value if plain else json.dumps(value)
+        for prefix, settings in (("traffic", self.scenario), ("sim", self.config.sim)):
+            for f in dataclasses.fields(settings):
+                # a field marked as changing nothing the env does (a scenario's name; the
+                # literal of torchcbl.session.COMPARE_ON_RESUME: importing it imports torch)
+                if f.metadata.get("torchcbl.compare_on_resume") is False:
+                    continue
+                value = getattr(settings, f.name)
+                plain = isinstance(value, int | float | str)
+                described[f"{prefix}.{f.name}"] = value if plain else json.dumps(value)
+        described["start_lane"] = self.config.start_lane
         for name in ("road.net.xml", "driving.add.xml"):
             text = re.sub(rb"<!--.*?-->", b"", data_path(name).read_bytes(), flags=re.S)
             described[f"{name}_sha256"] = hashlib.sha256(text).hexdigest()

@@ -563,6 +563,43 @@ def test_a_refusal_for_other_traffic_says_how_to_make_the_sessions_env(tmp_path)
     assert "a DrivingEnv (sumo_scenarios.env.DrivingEnv) made as it was" in msg, msg
 
 
+def test_a_session_refuses_other_sumo_settings_or_start_lane_given_on_one_side_only(tmp_path):
+    """A session of gymnasium.make(ENV_ID, sim=SimConfig(ego_start_m=500)) resumed without a
+    word on gymnasium.make(ENV_ID), and one of config=DrivingConfig(start_lane=3) too: an
+    object argument the given env lacks was not compared. The env describes the SUMO settings
+    and start lane it runs as it does its traffic: refused in one line naming the field and
+    both values; the same settings resume."""
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.env import DrivingConfig
+    from sumo_scenarios.sim import SimConfig
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, IncompatibleRunDirError
+
+    def make(**kwargs):
+        return gym.make(sumo_scenarios.ENV_ID, max_episode_steps=10, **kwargs)
+
+    further = {"sim": SimConfig(ego_start_m=500)}
+    lane3 = {"config": DrivingConfig(start_lane=3, max_episode_steps=10)}
+    for k, (kwargs, named) in enumerate(
+        [(further, "'sim.ego_start_m': (500.0, 300.0)"), (lane3, "'start_lane': (3, 2)")]
+    ):
+        run = tmp_path / str(k)
+        env = make(**kwargs)
+        with ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False) as ct:
+            ct.run(max_steps=2)
+        env.close()
+        env = make()
+        with pytest.raises(IncompatibleRunDirError) as err:
+            ConfidentTeacher.resume(run, env, make_teacher(0), progress=False)
+        env.close()
+        assert named in str(err.value) and "\n" not in str(err.value), err.value
+        env = make(**kwargs)
+        ConfidentTeacher.resume(run, env, make_teacher(0), progress=False).close()
+        env.close()
+
+
 def test_the_driving_env_describes_the_sumo_files_it_loads_less_their_comments(
     tmp_path, monkeypatch
 ):
