@@ -433,7 +433,8 @@ def test_a_driving_config_resumes_with_its_scenario_by_name_or_as_the_object(tmp
     for k, (spelled, other) in enumerate(taught_on.items()):
         run = tmp_path / f"run{k}"
         env = make(spelled)
-        ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False).run(max_steps=2)
+        with ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False) as ct:
+            ct.run(max_steps=2)  # closed: a session left open held each resume's close 2 s
         env.close()
         before = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
         env = make(other)
