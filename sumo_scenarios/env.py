@@ -29,11 +29,20 @@ max_episode_steps=n))``). ``gymnasium.make``'s own ``max_episode_steps`` is not 
 env: gymnasium keeps it for a ``TimeLimit`` outside the env, which the env cannot see, so it can
 only shorten episodes: an n above the env's cap changes nothing (the env truncates first),
 without a warning.
+
+A session taught in this env keeps a description of the traffic it drives, its SUMO settings and
+start lane, and of the SUMO files it loads (:meth:`DrivingEnv.describe_inputs`), so resuming it
+on other traffic or settings, however given (a name or a ``TrafficScenario``, an argument of
+its own, inside a ``DrivingConfig`` or left to its default), is refused.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -283,6 +292,41 @@ class DrivingEnv(gym.Env):
         contact = self._sim.contact
         truncated = self._t >= self.config.max_episode_steps
         return self._observe(), -1.0 if contact else 0.0, False, truncated, self._info()
+
+    def describe_inputs(self) -> dict[str, str | int | float]:
+        """What this env drives, whichever way it was given (a scenario's name or its
+        :class:`TrafficScenario`, as an argument of its own or inside a :class:`DrivingConfig`,
+        or not at all: the defaults): ``traffic.<field>`` for each field of the scenario but its
+        name, which changes nothing the traffic does (a number as it is, a per-lane tuple as
+        its JSON text), ``sim.<field>`` for each of the :class:`SimConfig`, ``start_lane``, and
+        ``<file>_sha256`` for the SUMO files the env loads (``road.net.xml``, the road, and
+        ``driving.add.xml``, the vehicle types): the SHA-256 of each less its XML comments
+        (netconvert's header names its version). The step cap is left out: a session keeps the
+        cap in force, and resume compares it on its own.
+
+        A teaching session keeps it, and :meth:`torchcbl.ConfidentTeacher.resume` refuses an
+        env whose description differs (other traffic or settings, or a network changed since);
+        a session stored before the env described itself keeps none and is not compared on it.
+
+        Raises:
+            FileNotFoundError: a shipped SUMO file is missing (naming it and how to restore
+                it).
+        """
+        described: dict[str, str | int | float] = {}
+        for prefix, settings in (("traffic", self.scenario), ("sim", self.config.sim)):
+            for f in dataclasses.fields(settings):
+                # a field marked as changing nothing the env does (a scenario's name; the
+                # literal of torchcbl.session.COMPARE_ON_RESUME: importing it imports torch)
+                if f.metadata.get("torchcbl.compare_on_resume") is False:
+                    continue
+                value = getattr(settings, f.name)
+                plain = isinstance(value, int | float | str)
+                described[f"{prefix}.{f.name}"] = value if plain else json.dumps(value)
+        described["start_lane"] = self.config.start_lane
+        for name in ("road.net.xml", "driving.add.xml"):
+            text = re.sub(rb"<!--.*?-->", b"", data_path(name).read_bytes(), flags=re.S)
+            described[f"{name}_sha256"] = hashlib.sha256(text).hexdigest()
+        return described
 
     def __reduce_ex__(self, protocol: Any) -> Any:
         return self._sim.__reduce_ex__(protocol)  # refused, with what to do instead

@@ -433,7 +433,8 @@ def test_a_driving_config_resumes_with_its_scenario_by_name_or_as_the_object(tmp
     for k, (spelled, other) in enumerate(taught_on.items()):
         run = tmp_path / f"run{k}"
         env = make(spelled)
-        ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False).run(max_steps=2)
+        with ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False) as ct:
+            ct.run(max_steps=2)  # closed: a session left open held each resume's close 2 s
         env.close()
         before = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
         env = make(other)
@@ -449,6 +450,194 @@ def test_a_driving_config_resumes_with_its_scenario_by_name_or_as_the_object(tmp
             ConfidentTeacher.resume(run, env, make_teacher(0), progress=False).close()
             env.close()
         assert len(load_records(run)) == 2
+
+
+def test_a_session_refuses_other_traffic_given_as_a_name_against_an_object(tmp_path):
+    """A session of gymnasium.make(ENV_ID, scenario="train") resumed without a word on an env
+    made with scenario=LIGHT or scenario=dataclasses.replace(TRAIN, seed=99), and the other way
+    round: resume compared a name with a name and an object with an object, never one with the
+    other (nor an env made directly with anything). The env now describes the traffic it runs
+    (describe_inputs(): the TrafficScenario's fields but its name), so other traffic is refused
+    in one line naming the field and both values, touching no file, and the same traffic
+    resumes whichever way it is given; a session stored before it had a description resumes
+    as it did."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.env import DrivingConfig, DrivingEnv
+    from sumo_scenarios.scenarios import LIGHT, TRAIN
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, IncompatibleRunDirError
+    from torchcbl.session import load_config
+
+    seed99 = dataclasses.replace(TRAIN, seed=99)
+
+    def make(**kwargs):
+        return gym.make(sumo_scenarios.ENV_ID, max_episode_steps=10, **kwargs)
+
+    def files(run):
+        return {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+
+    def refused(run, env) -> str:
+        before = files(run)
+        with pytest.raises(IncompatibleRunDirError) as err:
+            ConfidentTeacher.resume(run, env, make_teacher(0), progress=False)
+        env.close()
+        assert files(run) == before
+        assert "\n" not in str(err.value), err.value
+        return str(err.value)
+
+    def resumes(run, env) -> None:
+        ConfidentTeacher.resume(run, env, make_teacher(0), progress=False).close()
+        env.close()
+
+    def teach(run, env) -> None:
+        with ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False) as ct:
+            ct.run(max_steps=2)
+        env.close()
+
+    by_name, by_object = tmp_path / "by_name", tmp_path / "by_object"
+    teach(by_name, make(scenario="train"))
+    teach(by_object, make(scenario=seed99))
+    msg = refused(by_name, make(scenario=seed99))
+    assert "'traffic.seed': (1, 99)" in msg, msg
+    msg = refused(by_name, make(scenario=LIGHT))
+    assert "'traffic.seed': (1, 3)" in msg and "traffic.mean_spacing_m" in msg, msg
+    assert "traffic.name" not in msg, msg
+    assert "'traffic.seed': (99, 1)" in refused(by_object, make(scenario="train"))
+    for same in ("train", TRAIN, dataclasses.replace(TRAIN, name="renamed")):
+        resumes(by_name, make(scenario=same))
+    resumes(by_object, make(scenario=dataclasses.replace(seed99, name="mine")))
+    # inside a DrivingConfig alike: a name against an object of other traffic is refused
+    in_config = tmp_path / "in_config"
+    teach(in_config, make(config=DrivingConfig(scenario="train")))
+    assert "'traffic.seed': (1, 99)" in refused(in_config, make(config=DrivingConfig(seed99)))
+    resumes(in_config, make(config=DrivingConfig(scenario=TRAIN)))
+    # an env made directly shows no make() argument: its traffic was not compared at all
+    direct = tmp_path / "direct"
+    teach(direct, DrivingEnv(scenario="light", max_episode_steps=10))
+    assert "'traffic.seed': (3, 1)" in refused(direct, DrivingEnv(max_episode_steps=10))
+    resumes(direct, DrivingEnv(scenario=LIGHT, max_episode_steps=10))
+    # a session stored before the env described its traffic resumes as it did
+    config = load_config(by_name)
+    assert config["env"]["inputs"]["traffic.seed"] == 1
+    del config["env"]["inputs"]
+    (by_name / "config.json").write_text(json.dumps(config))
+    resumes(by_name, make(scenario=seed99))
+
+
+def test_a_refusal_for_other_traffic_says_how_to_make_the_sessions_env(tmp_path):
+    """A resume refused for what the env describes (other traffic) said only "give it the
+    inputs as they were", not how the session's env was made: it now names the make() call
+    (or, for an env made directly, the env's class), as a refusal for other arguments does."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.env import DrivingEnv
+    from sumo_scenarios.scenarios import LIGHT, TRAIN
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, IncompatibleRunDirError
+
+    def refusal(taught, given) -> str:
+        run = tmp_path / str(len(list(tmp_path.iterdir())))
+        with ConfidentTeacher(taught, make_teacher(0), run_dir=run, progress=False) as ct:
+            ct.run(max_steps=2)
+        taught.close()
+        with pytest.raises(IncompatibleRunDirError) as err:
+            ConfidentTeacher.resume(run, given, make_teacher(0), progress=False)
+        given.close()
+        return str(err.value)
+
+    def make(scenario):
+        return gym.make(sumo_scenarios.ENV_ID, max_episode_steps=10, scenario=scenario)
+
+    msg = refusal(make("train"), make(LIGHT))
+    made = "gymnasium.make('torchcbl/Driving-v0', max_episode_steps=10, **{'scenario': 'train'})"
+    assert "'traffic.seed': (1, 3)" in msg and made in msg, msg
+    msg = refusal(make(dataclasses.replace(TRAIN, seed=99)), make("train"))
+    assert "'traffic.seed': (99, 1)" in msg and "env.kwargs_objects" in msg, msg
+    msg = refusal(DrivingEnv(scenario=LIGHT), DrivingEnv())
+    assert "a DrivingEnv (sumo_scenarios.env.DrivingEnv) made as it was" in msg, msg
+
+
+def test_a_session_refuses_other_sumo_settings_or_start_lane_given_on_one_side_only(tmp_path):
+    """A session of gymnasium.make(ENV_ID, sim=SimConfig(ego_start_m=500)) resumed without a
+    word on gymnasium.make(ENV_ID), and one of config=DrivingConfig(start_lane=3) too: an
+    object argument the given env lacks was not compared. The env describes the SUMO settings
+    and start lane it runs as it does its traffic: refused in one line naming the field and
+    both values; the same settings resume."""
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.env import DrivingConfig
+    from sumo_scenarios.sim import SimConfig
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, IncompatibleRunDirError
+
+    def make(**kwargs):
+        return gym.make(sumo_scenarios.ENV_ID, max_episode_steps=10, **kwargs)
+
+    further = {"sim": SimConfig(ego_start_m=500)}
+    lane3 = {"config": DrivingConfig(start_lane=3, max_episode_steps=10)}
+    for k, (kwargs, named) in enumerate(
+        [(further, "'sim.ego_start_m': (500.0, 300.0)"), (lane3, "'start_lane': (3, 2)")]
+    ):
+        run = tmp_path / str(k)
+        env = make(**kwargs)
+        with ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False) as ct:
+            ct.run(max_steps=2)
+        env.close()
+        env = make()
+        with pytest.raises(IncompatibleRunDirError) as err:
+            ConfidentTeacher.resume(run, env, make_teacher(0), progress=False)
+        env.close()
+        assert named in str(err.value) and "\n" not in str(err.value), err.value
+        env = make(**kwargs)
+        ConfidentTeacher.resume(run, env, make_teacher(0), progress=False).close()
+        env.close()
+
+
+def test_the_driving_env_describes_the_sumo_files_it_loads_less_their_comments(
+    tmp_path, monkeypatch
+):
+    """describe_inputs() names the road network and vehicle types SUMO loads by their
+    digest, so a session taught before either changed is refused naming the file; a comment
+    (netconvert's header names its version) changes nothing SUMO reads, nor the digest."""
+    import sumo_scenarios.env
+    from sumo_scenarios.env import DrivingEnv
+    from sumo_scenarios.scenarios import data_path
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher, IncompatibleRunDirError
+    from torchcbl.session import load_config
+
+    keys = ("road.net.xml_sha256", "driving.add.xml_sha256")
+    shipped = DrivingEnv().describe_inputs()
+    assert all(len(shipped[k]) == 64 for k in keys)
+    copies = {name: tmp_path / name for name in ("road.net.xml", "driving.add.xml")}
+    monkeypatch.setattr(sumo_scenarios.env, "data_path", lambda name: copies[name])
+    for name, path in copies.items():
+        text = data_path(name).read_text()
+        path.write_text(text.replace("<!--", "<!-- rebuilt by netconvert 9.9, ", 1))
+    assert DrivingEnv().describe_inputs() == shipped
+    road = copies["road.net.xml"]
+    road.write_text(road.read_text().replace('speed="33.00"', 'speed="30.00"'))
+    described = DrivingEnv().describe_inputs()
+    assert [k for k in shipped if described[k] != shipped[k]] == ["road.net.xml_sha256"]
+    monkeypatch.undo()
+    run = tmp_path / "run"
+    with ConfidentTeacher(
+        DrivingEnv(max_episode_steps=10), make_teacher(0), run_dir=run, progress=False
+    ) as ct:
+        ct.run(max_steps=2)
+    config = load_config(run)
+    config["env"]["inputs"]["road.net.xml_sha256"] = described["road.net.xml_sha256"]
+    (run / "config.json").write_text(json.dumps(config))  # as taught on that network
+    with pytest.raises(IncompatibleRunDirError, match=r"'road.net.xml_sha256': \('"):
+        ConfidentTeacher.resume(run, DrivingEnv(max_episode_steps=10), make_teacher(0))
 
 
 def test_a_seed_that_never_reaches_the_target_is_reported_as_such(tmp_path):

@@ -4261,10 +4261,11 @@ def resume_problems(
             f"env: the session has {senv['n_features']} features and {senv['n_actions']} "
             f"actions, the given env {n_features} and {n_actions}"
         )
+    env_lines: list[str] = []  # (each ends saying how to make the session's env)
     if senv.get("id") and env_id and senv["id"] != env_id:
         problems.append(f"env id: the session used {senv['id']!r}, got {env_id!r}")
     elif env_kwargs is not None:  # (another id says enough)
-        problems += _env_problems(
+        env_lines = _env_problems(
             senv,
             env_id,
             env_kwargs,
@@ -4273,6 +4274,7 @@ def resume_problems(
             env_observation_space,
             env_make_kwargs,
         )
+        problems += env_lines
     kept_inputs = senv.get("inputs")
     if isinstance(kept_inputs, dict) and kept_inputs != (env_inputs or {}):
         given = env_inputs or {}
@@ -4281,11 +4283,18 @@ def resume_problems(
             for k in sorted(set(kept_inputs) | set(given))
             if kept_inputs.get(k) != given.get(k)
         }
-        problems.append(
+        line = (
             f"env inputs (stored, given): {differ}; the env reads other inputs than the "
             "session was taught on (its describe_inputs() differs, e.g. a file edited since): "
             "give it the inputs as they were"
         )
+        if not env_lines:  # (other traffic given as a name against an object, say)
+            whole = senv.get("kwargs_objects") or {}
+            kept_objects = any(
+                kept_as_repr(v) and k in whole for k, v in (senv.get("kwargs") or {}).items()
+            )
+            line += "; " + _how_to_make(senv, objects=kept_objects)
+        problems.append(line)
     if learning is not None and learning[0] != learning[1]:
         diff = {
             k: (v, learning[1].get(k)) for k, v in learning[0].items() if learning[1].get(k) != v
@@ -4385,6 +4394,18 @@ def _env_problems(
         differ.append(f"env kwargs (stored, given): {kw_differ}")
     if not differ:
         return []
+    return ["; ".join(differ) + f"; {_how_to_make(senv, objects=bool(objects))}"]
+
+
+def _how_to_make(senv: Mapping[str, Any], *, objects: bool) -> str:
+    """How to make the session's env (``senv``, config.json's ``"env"``), as a refusal ends:
+    the ``gymnasium.make`` call with the arguments and step cap it keeps (``objects``: some
+    are objects, to take from ``env.kwargs_objects``), or for an env made directly its class
+    and step cap."""
+    stored_kw = senv.get("kwargs") or {}
+    kept_class = senv.get("class")
+    has_cap = "max_episode_steps" in senv
+    want = senv.get("max_episode_steps")
     if senv.get("id"):
         capped = ""
         if has_cap:  # None: no TimeLimit, which -1 gives where the id registers one
@@ -4396,15 +4417,15 @@ def _env_problems(
                 " with each object as its config.json keeps it in env.kwargs_objects "
                 "(torchcbl.session.env_make_argument makes it again)"
             )
-    else:
-        how = "give the env the session was taught in"
-        if kept_class:
-            how += f", a {kept_class.rsplit('.', 1)[-1]} ({kept_class}) made as it was"
-        if has_cap and want is not None:
-            how += f", under gymnasium.wrappers.TimeLimit(env, {want})"
-        elif has_cap:
-            how += ", without a TimeLimit (the session's env had no step cap)"
-    return ["; ".join(differ) + f"; {how}"]
+        return how
+    how = "give the env the session was taught in"
+    if kept_class:
+        how += f", a {kept_class.rsplit('.', 1)[-1]} ({kept_class}) made as it was"
+    if has_cap and want is not None:
+        how += f", under gymnasium.wrappers.TimeLimit(env, {want})"
+    elif has_cap:
+        how += ", without a TimeLimit (the session's env had no step cap)"
+    return how
 
 
 #: numpy's default print options: a Box's bounds are written with these, whatever a

@@ -593,7 +593,7 @@ class ConfidentTeacher:
             ``describe_inputs() -> dict`` on its unwrapped class: str keys and plain JSON
             values that identify those inputs (e.g. a file's SHA-256). The session keeps it in
             its ``config.json`` and :meth:`resume` refuses an env whose description differs
-            (``CorridorEnv`` describes its map so).
+            (``CorridorEnv`` describes its map so, ``DrivingEnv`` its traffic and SUMO files).
         teacher: ``teacher(observation [D] ndarray, info dict) -> int`` in ``[0, n_actions)``
             (or a numpy integer, or a 0-d integer array or tensor). It gets a copy of the env's
             observation and the info of the latest reset / step. Optionally it has
