@@ -1967,6 +1967,31 @@ def test_resume_refuses_an_env_whose_described_inputs_changed(tmp_path):
     ConfidentTeacher.resume(run, env, oracle(env.env), progress=False).close()
 
 
+def test_resume_compares_the_described_inputs_both_sides_describe(tmp_path, monkeypatch):
+    """A key the env describes that the session did not keep (a later version of the env
+    describing a new input, e.g. a new field of a driving scenario) refused every session kept
+    before it; the keys both describe are compared, as a kept object's fields are: a new key
+    alone resumes, a differing common one is refused (True against 1 too)."""
+    data = tmp_path / "centres.txt"
+    data.write_text("0 0\n4 4\n")
+    run = tmp_path / "run"
+    env = _FileWorld(data)
+    with ConfidentTeacher(env, oracle(env.env), run_dir=run, progress=False) as ct:
+        ct.run(max_steps=10)
+    digest = hashlib.sha256(data.read_bytes()).hexdigest()
+    later = {"centres_sha256": digest, "weather": "dry"}
+    monkeypatch.setattr(_FileWorld, "describe_inputs", lambda self: later)
+    ConfidentTeacher.resume(run, env, oracle(env.env), progress=False).close()
+    config = load_config(run)
+    config["env"]["inputs"]["lanes"] = 1
+    (run / "config.json").write_text(json.dumps(config))
+    monkeypatch.setattr(_FileWorld, "describe_inputs", lambda self: {**later, "lanes": True})
+    with pytest.raises(
+        IncompatibleRunDirError, match=r"env inputs \(stored, given\): \{'lanes': \(1, True\)\}"
+    ):
+        ConfidentTeacher.resume(run, env, oracle(env.env), progress=False)
+
+
 @pytest.mark.parametrize("value", [object(), math.nan, np.int64(3)], ids=["object", "nan", "int64"])
 def test_a_describe_inputs_that_is_no_dict_of_plain_values_is_named(tmp_path, value):
     """Also NaN, which JSON keeps but which never equals itself (every resume was refused)."""

@@ -4242,7 +4242,9 @@ def resume_problems(
     sessions written before 2026-11-26 do not keep it, and those written before 2026-11-27
     kept None for an env with a cap of its own only);
     ``env_inputs``: the env's ``describe_inputs()`` (None: it has none), compared with the
-    session's where the session kept one (sessions written before 2026-11-27 did not);
+    session's where the session kept one (sessions written before 2026-11-27 did not), on the
+    keys both hold (a key one side lacks, e.g. one a later version of the env describes, is
+    not compared);
     ``env_class``: the unwrapped env's class (``module.qualname``), compared by its name with
     the session's where the session kept one, and ``env_observation_space`` (the space),
     compared with the one the session kept; ``env_make_kwargs``: what ``gymnasium.make`` was
@@ -4276,13 +4278,16 @@ def resume_problems(
         )
         problems += env_lines
     kept_inputs = senv.get("inputs")
-    if isinstance(kept_inputs, dict) and kept_inputs != (env_inputs or {}):
-        given = env_inputs or {}
-        differ = {
-            k: (kept_inputs.get(k), given.get(k))
-            for k in sorted(set(kept_inputs) | set(given))
-            if kept_inputs.get(k) != given.get(k)
-        }
+    given = env_inputs or {}
+    # the keys both describe, as a kept object's fields: a key a later version of the env
+    # describes (a new field of its scenario, say) does not refuse the sessions kept before it
+    differ = {
+        k: (kept_inputs[k], given[k])
+        for k in sorted(set(kept_inputs) & set(given) if isinstance(kept_inputs, dict) else ())
+        if kept_inputs[k] != given[k]
+        or isinstance(kept_inputs[k], bool) != isinstance(given[k], bool)
+    }
+    if differ:
         line = (
             f"env inputs (stored, given): {differ}; the env reads other inputs than the "
             "session was taught on (its describe_inputs() differs, e.g. a file edited since): "
