@@ -301,8 +301,8 @@ class DrivingEnv(gym.Env):
         its JSON text), ``sim.<field>`` for each of the :class:`SimConfig`, ``start_lane``, and
         ``<file>_sha256`` for the SUMO files the env loads (``road.net.xml``, the road, and
         ``driving.add.xml``, the vehicle types): the SHA-256 of each less its XML comments
-        (netconvert's header names its version). The step cap is left out: a session keeps the
-        cap in force, and resume compares it on its own.
+        (netconvert's header names its version), CRLF line ends read as LF. The step cap is
+        left out: a session keeps the cap in force, and resume compares it on its own.
 
         A teaching session keeps it, and :meth:`torchcbl.ConfidentTeacher.resume` refuses an
         env whose description differs (other traffic or settings, or a network changed since);
@@ -325,6 +325,8 @@ class DrivingEnv(gym.Env):
         described["start_lane"] = self.config.start_lane
         for name in ("road.net.xml", "driving.add.xml"):
             text = re.sub(rb"<!--.*?-->", b"", data_path(name).read_bytes(), flags=re.S)
+            # CRLF as LF: a checkout that converts line ends holds the same network for SUMO
+            text = text.replace(b"\r\n", b"\n")
             described[f"{name}_sha256"] = hashlib.sha256(text).hexdigest()
         return described
 

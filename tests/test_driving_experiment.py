@@ -623,6 +623,9 @@ def test_the_driving_env_describes_the_sumo_files_it_loads_less_their_comments(
         text = data_path(name).read_text()
         path.write_text(text.replace("<!--", "<!-- rebuilt by netconvert 9.9, ", 1))
     assert DrivingEnv().describe_inputs() == shipped
+    for path in copies.values():  # a checkout that converts line ends (core.autocrlf)
+        path.write_bytes(path.read_bytes().replace(b"\n", b"\r\n"))
+    assert DrivingEnv().describe_inputs() == shipped
     road = copies["road.net.xml"]
     road.write_text(road.read_text().replace('speed="33.00"', 'speed="30.00"'))
     described = DrivingEnv().describe_inputs()
