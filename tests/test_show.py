@@ -823,9 +823,10 @@ def test_show_says_which_checkpoints_are_kept_and_how_an_earlier_stage_is_rebuil
     _kept_session(full, 2, max_new=3)
     _kept_session(incremental, 3, max_new=1, refit="incremental")
     _kept_session(every, None, max_new=3)
+    besides = "besides 0 and hand refits)"
     for run, keep, text in (
-        (full, 2, f"labels), keep_checkpoints=2 (the newest 2 and 0); {hint} (one fit)\n"),
-        (incremental, 3, f"keep_checkpoints=3 (the newest 3 and 0); {hint} (replaying the refits"),
+        (full, 2, f"labels), keep_checkpoints=2 (the newest 2, {besides}; {hint} (one fit)\n"),
+        (incremental, 3, f"keep_checkpoints=3 (the newest 3, {besides}; {hint} (replaying"),
         (every, None, "labels), keep_checkpoints=None (every one)\n"),
     ):
         s = describe(run)

@@ -34,16 +34,20 @@ Run directory layout (one directory per teaching session)::
                                  committed (rewritten in place; kept from one writer to the
                                  next)
         writers.jsonl            one line per writer (start or resume): the first step it
-                                 wrote, torch's thread count, torch / numpy versions, the
+                                 wrote, torch's thread counts, the model's device, torch /
+                                 numpy versions, its pid and start time (UTC), the
                                  checkpoints it keeps (``keep_checkpoints``)
         checkpoints/
             model-00000012.pt    ``{"n_demonstrations": 12, "labels_sha256": ...,
                                  "state_dict": ...}`` of the model fitted on the first 12
                                  labels (and the SHA-256 of those labels), its tensors on the
                                  CPU whatever the model's device; one per refit, the newest
-                                 ``keep_checkpoints`` kept (3 by default; None: all) and
-                                 checkpoint 0 always (an older stage is refitted from the
-                                 log, the model the loop had then). A session started from
+                                 ``keep_checkpoints`` kept (3 for a new session; a resume
+                                 keeps its last writer's choice; None: all), and checkpoint
+                                 0 and a refit by hand's (``ConfidentTeacher.refit``, which
+                                 moves the refit schedule) always (an older stage is
+                                 refitted from the log, the model the loop had then). A
+                                 session started from
                                  a fitted model has its model-00000000.pt, written before
                                  config.json: no label can refit it; a session with prior
                                  demonstrations has its model fitted on them alone as
@@ -3742,7 +3746,7 @@ class SessionSummary:
         )
         keep = self.keep_checkpoints
         text += f", keep_checkpoints={keep} (" + (
-            "every one)" if keep is None else f"the newest {keep} and 0)"
+            "every one)" if keep is None else f"the newest {keep}, besides 0 and hand refits)"
         )
         kept = [w.get("keep_checkpoints") for w in self.writers]
         kept = [k for k in kept if isinstance(k, int) and not isinstance(k, bool) and k > 0]
