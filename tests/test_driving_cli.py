@@ -1,5 +1,5 @@
-"""`torchcbl teach driving --scenario`: the traffic a driving session is taught on, chosen at
-the command line (a few SUMO steps each)."""
+"""`torchcbl teach driving --scenario` and `torchcbl evaluate --scenario`: the traffic a driving
+session is taught and evaluated on, chosen at the command line (a few SUMO steps each)."""
 
 from __future__ import annotations
 
@@ -149,6 +149,35 @@ def test_scenario_and_map_each_belong_to_their_own_domain(tmp_path, capsys):
     assert "--scenario NAME|FILE.json" in help_text and '"seed"' in help_text
 
 
+def test_evaluate_drives_a_driving_session_on_the_traffic_given(tmp_path, driving_person, capsys):
+    """Without --scenario evaluate drives a session taught on the train traffic on its held-out
+    twin eval, as the reproduction does; `--scenario NAME|FILE.json` drives that traffic
+    instead. A corridor session given --scenario is one line, exit 2."""
+    run = tmp_path / "session"
+    assert main(["teach", "driving", "--run-dir", str(run), "--steps", "10"]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--steps", "5"]) == 0
+    assert json.loads(capsys.readouterr().out)["scenario"]["name"] == "eval"
+    assert main(["evaluate", str(run), "--steps", "5", "--scenario", "light"]) == 0
+    assert json.loads(capsys.readouterr().out)["scenario"]["name"] == "light"
+    path = tmp_path / "held_out.json"
+    path.write_text(json.dumps({"seed": 11, "mean_spacing_m": [80, 60, 200]}))
+    assert main(["evaluate", str(run), "--steps", "5", "--scenario", str(path)]) == 0
+    scenario = json.loads(capsys.readouterr().out)["scenario"]
+    assert (scenario["name"], scenario["seed"]) == ("held_out", 11), scenario
+    assert main(["evaluate", str(run), "--scenario", str(tmp_path / "none.json")]) == 2
+    _one_line_error(capsys, "--scenario", "not found")
+    from corridor.env import CorridorEnv
+    from torchcbl import ConfidentTeacher
+
+    corridor = tmp_path / "corridor"
+    ConfidentTeacher(CorridorEnv(), lambda o, i: 0, run_dir=corridor, progress=False).run(
+        max_steps=2
+    ).close()
+    assert main(["evaluate", str(corridor), "--scenario", "light"]) == 2
+    _one_line_error(capsys, "--scenario applies only to a driving session")
+
+
 def test_teach_resume_compares_scenario_with_a_driving_config_sessions_traffic(
     tmp_path, driving_person, capsys
 ):
@@ -171,3 +200,24 @@ def test_teach_resume_compares_scenario_with_a_driving_config_sessions_traffic(
     _one_line_error(capsys, "taught on ('light')", "seed 1 (the session's: 3)")
     assert main([*argv, "--scenario", "light"]) == 0, capsys.readouterr().err
     assert len(load_records(run)) == 4
+
+
+def test_evaluate_of_traffic_a_session_kept_only_as_text_says_and_takes_scenario(
+    tmp_path, driving_person, capsys
+):
+    """A session written before 2026-11-27 kept a TrafficScenario given to gymnasium.make only
+    as text: evaluate cannot know its traffic and says so in one line, naming --scenario (it
+    said the command had no option for it); given --scenario it drives that traffic."""
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps({"seed": 7, "mean_spacing_m": [80, 60, 200]}))
+    run = tmp_path / "session"
+    argv = ["teach", "driving", "--run-dir", str(run), "--steps", "10"]
+    assert main([*argv, "--scenario", str(path)]) == 0, capsys.readouterr().err
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["kwargs_objects"]  # as written before 2026-11-27
+    (run / "config.json").write_text(json.dumps(config))
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--steps", "5"]) == 2
+    _one_line_error(capsys, "given as an object", "torchcbl evaluate --scenario NAME|FILE.json")
+    assert main(["evaluate", str(run), "--steps", "5", "--scenario", str(path)]) == 0
+    assert json.loads(capsys.readouterr().out)["scenario"]["seed"] == 7

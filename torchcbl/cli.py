@@ -9,7 +9,7 @@ Commands (the options in full: README.md's command block, which a test holds to 
     torchcbl --version
     torchcbl reproduce [corridor|driving|all] [--full] [--seeds N] [--workers N] [--out DIR]
                        [--resume]
-    torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S]
+    torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S] ...
     torchcbl replay EPISODES.json|SESSION_DIR [--list] [--episode N | --label TEXT] [--gif OUT] ...
     torchcbl plot RUN_DIR
     torchcbl show SESSION_DIR|DIR [--json]
@@ -572,13 +572,26 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     # without --seed, the domain's own default: driving's is the segment a reproduction's
     # session's run evaluated its seed's policies on (else 0), the corridor's 0
     seed = {} if args.seed is None else {"seed": args.seed}
+    traffic = {}  # driving: the session's own traffic (train's on eval) unless --scenario
+    if args.scenario is not None:
+        if domain != "driving":
+            raise _UsageError(
+                f"--scenario applies only to a driving session; {session} is a {domain} "
+                "session (it is driven on the map it was taught on)"
+            )
+        traffic = {"scenario": _scenario_option(args.scenario)}
     try:
         with warnings.catch_warnings(record=True) as said:  # each one line below
             warnings.simplefilter("always")
-            report = module.evaluate_saved_policy(session, n_steps=args.steps, **seed)
+            report = module.evaluate_saved_policy(session, n_steps=args.steps, **seed, **traffic)
     except (IncompatibleRunDirError, ValueError) as exc:  # e.g. a robot its config lacks
         raise _UsageError(_one_line(exc)) from None
-    if not seed and domain == "driving" and module.session_eval_segment(session) is not None:
+    if (
+        not seed
+        and not traffic
+        and domain == "driving"
+        and module.session_eval_segment(session) is not None
+    ):
         print(
             f"torchcbl evaluate: note: driving held-out segment {report['eval_segment']}, the "
             "one its run evaluated this seed's policies on "
@@ -1796,6 +1809,15 @@ def _parser() -> argparse.ArgumentParser:
         "held-out evaluation road segment, default: for a reproduction's session "
         "(RUN_DIR/seed_<k>/sessions/arm_a) the segment the run evaluated seed k on, "
         "eval_segment + k as its seed_result.json says, else 0)",
+    )
+    p.add_argument(
+        "--scenario",
+        default=None,
+        metavar="NAME|FILE.json",
+        help="driving: drive this traffic instead, a shipped scenario's name (train, eval, "
+        "light) or a JSON file of TrafficScenario fields, as teach --scenario takes (default: "
+        "the session's own traffic, a session taught on train on its held-out twin eval, as "
+        "the reproduction evaluates)",
     )
     p.set_defaults(func=_cmd_evaluate)
 
