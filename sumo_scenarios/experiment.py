@@ -1262,13 +1262,17 @@ def evaluate_saved_policy(
     taught, unknown = _session_make_settings(load_config(Path(session_dir)))
 
     def refused(setting: str, what: str, keyword: str, kind: str) -> ValueError:
+        command = (
+            "or give it to torchcbl evaluate --scenario NAME|FILE.json (a JSON file of its fields)"
+            if setting == "scenario"
+            else "(torchcbl evaluate has no option for it)"
+        )
         return ValueError(
             f"{session_dir} was taught on {what} as an object it cannot make again: "
             f"{unknown[setting]}; evaluating it on the defaults would "
             f"drive {'other traffic' if setting == 'scenario' else 'other dynamics'}; pass "
             f"{keyword}= ({kind}, as the session was given it) to "
-            "sumo_scenarios.experiment.evaluate_saved_policy in Python (torchcbl evaluate has "
-            "no option for it)"
+            f"sumo_scenarios.experiment.evaluate_saved_policy in Python {command}"
         )
 
     if sim is None:

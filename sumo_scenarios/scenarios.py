@@ -22,9 +22,11 @@ right lane's 40 m is unchanged.
 
 from __future__ import annotations
 
+import json
 import math
 import numbers
-from dataclasses import dataclass, field, replace
+import os
+from dataclasses import dataclass, field, fields, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -45,6 +47,7 @@ __all__ = [
     "TrafficScenario",
     "data_path",
     "get_scenario",
+    "load_scenario",
 ]
 
 MPH = 0.44704
@@ -276,3 +279,101 @@ def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:
         raise ValueError(
             f"unknown scenario {scenario!r}; known: {', '.join(sorted(SCENARIOS))}"
         ) from None
+
+
+_JSON_SHAPE = (
+    'one JSON object of TrafficScenario fields: "seed" (an int >= 0, required) and any of '
+    '"name" (default: the file\'s name less its suffix), "speed_ranges_mph" (a [low, high] per '
+    'normal lane, right, middle, left, within 20-40), "mean_spacing_m" (metres, one per normal '
+    'lane), "min_spacing_m", "ahead_m", "behind_m", "start_clear_m" (those left out: the train '
+    'traffic\'s), e.g. {"seed": 7, "mean_spacing_m": [80, 60, 200]}'
+)
+"""What a scenario file (:func:`load_scenario`) holds, in words."""
+
+
+class _GivenTwice(Exception):
+    """A key written twice in one JSON object of a scenario file."""
+
+
+def _once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object's dict (``json.loads``'s ``object_pairs_hook``); :class:`_GivenTwice` if a
+    key is written twice (JSON would keep the last silently)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _GivenTwice(key)
+        out[key] = value
+    return out
+
+
+def load_scenario(name_or_path: str | os.PathLike[str]) -> TrafficScenario:
+    """A shipped scenario by name (``train``, ``eval``, ``light``), or a :class:`TrafficScenario`
+    made from a JSON file of its fields, by path (a name ending in ``.json`` is a path; so is
+    any other existing file, unless it is a shipped scenario's bare name: ``"light"`` is the
+    shipped scenario, ``"./light"`` the file).
+
+    The file holds one JSON object of the fields: ``seed`` (required) and any of the others,
+    lists for tuples, e.g. ``{"seed": 7, "mean_spacing_m": [80, 60, 200]}``; a field left out
+    takes TrafficScenario's default (the ``train`` traffic's), and ``name`` the file's name less
+    its suffix. TrafficScenario checks the values itself.
+
+    Raises:
+        ValueError: an unknown name, a file that is missing, unreadable or not UTF-8 JSON, a key
+            given twice, not an object, a field TrafficScenario lacks, no ``seed``, or a value
+            TrafficScenario refuses (its own words); one line naming the file.
+    """
+    text_name = os.fspath(name_or_path)
+    path = Path(text_name)
+    if text_name in SCENARIOS:  # a bare shipped name, never a path
+        return SCENARIOS[text_name]
+    if path.suffix.lower() != ".json" and not path.is_file():
+        raise ValueError(
+            f"unknown scenario {text_name!r}; expected a shipped scenario's name "
+            f"({', '.join(sorted(SCENARIOS))}) or the path of a JSON file of TrafficScenario "
+            "fields (FILE.json)"
+        )
+    where = f"scenario file {text_name!r}"
+    if not path.is_file():
+        what = "is a directory" if path.is_dir() else "not found"
+        raise ValueError(
+            f"{where} {what}; give an existing JSON file of TrafficScenario fields or a shipped "
+            f"scenario's name ({', '.join(sorted(SCENARIOS))})"
+        )
+    try:
+        text = path.read_text(encoding="utf-8-sig")  # a BOM (Notepad) is no part of the JSON
+    except UnicodeDecodeError as exc:
+        raise ValueError(
+            f"{where} is not UTF-8 text ({exc.reason} at byte {exc.start}); expected {_JSON_SHAPE}"
+        ) from None
+    except OSError as exc:
+        raise ValueError(f"{where} cannot be read ({exc.strerror or exc})") from None
+    try:
+        data = json.loads(text, object_pairs_hook=_once)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{where} is not valid JSON: {exc}") from None
+    except _GivenTwice as exc:
+        raise ValueError(
+            f"{where}: the key {exc.args[0]!r} is given twice (JSON would keep the last "
+            "silently); give each once"
+        ) from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{where} holds a JSON {type(data).__name__}; expected {_JSON_SHAPE}")
+    known = [f.name for f in fields(TrafficScenario)]
+    unknown = sorted(k for k in data if k not in known)
+    if unknown:
+        is_no = (
+            "is no TrafficScenario field" if len(unknown) == 1 else "are no TrafficScenario fields"
+        )
+        raise ValueError(
+            f"{where}: {', '.join(map(repr, unknown))} {is_no}; the fields are {', '.join(known)}"
+        )
+    if "seed" not in data:
+        raise ValueError(
+            f"{where} gives no 'seed' (the base seed its road segments are drawn from, an int "
+            '>= 0), which a scenario needs; e.g. {"seed": 7}'
+        )
+    data.setdefault("name", path.stem)
+    try:
+        return TrafficScenario(**data)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None

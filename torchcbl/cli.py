@@ -9,7 +9,7 @@ Commands (the options in full: README.md's command block, which a test holds to 
     torchcbl --version
     torchcbl reproduce [corridor|driving|all] [--full] [--seeds N] [--workers N] [--out DIR]
                        [--resume]
-    torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S]
+    torchcbl evaluate SESSION_DIR [--domain corridor|driving] [--steps N] [--seed S] ...
     torchcbl replay EPISODES.json|SESSION_DIR [--list] [--episode N | --label TEXT] [--gif OUT] ...
     torchcbl plot RUN_DIR
     torchcbl show SESSION_DIR|DIR [--json]
@@ -572,13 +572,26 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     # without --seed, the domain's own default: driving's is the segment a reproduction's
     # session's run evaluated its seed's policies on (else 0), the corridor's 0
     seed = {} if args.seed is None else {"seed": args.seed}
+    traffic = {}  # driving: the session's own traffic (train's on eval) unless --scenario
+    if args.scenario is not None:
+        if domain != "driving":
+            raise _UsageError(
+                f"--scenario applies only to a driving session; {session} is a {domain} "
+                "session (it is driven on the map it was taught on)"
+            )
+        traffic = {"scenario": _scenario_option(args.scenario)}
     try:
         with warnings.catch_warnings(record=True) as said:  # each one line below
             warnings.simplefilter("always")
-            report = module.evaluate_saved_policy(session, n_steps=args.steps, **seed)
+            report = module.evaluate_saved_policy(session, n_steps=args.steps, **seed, **traffic)
     except (IncompatibleRunDirError, ValueError) as exc:  # e.g. a robot its config lacks
         raise _UsageError(_one_line(exc)) from None
-    if not seed and domain == "driving" and module.session_eval_segment(session) is not None:
+    if (
+        not seed
+        and not traffic
+        and domain == "driving"
+        and module.session_eval_segment(session) is not None
+    ):
         print(
             f"torchcbl evaluate: note: driving held-out segment {report['eval_segment']}, the "
             "one its run evaluated this seed's policies on "
@@ -918,6 +931,61 @@ _MAKE_KWARGS = {
 }
 
 
+def _scenario_option(text: str) -> Any:
+    """``--scenario NAME|FILE.json``: a shipped scenario's name as given (a session keeps it by
+    name, as it keeps teach's default), else the ``TrafficScenario`` the JSON file's fields make
+    (``sumo_scenarios.scenarios.load_scenario``, whose checks are TrafficScenario's own); a
+    one-line error for anything it refuses."""
+    from sumo_scenarios.scenarios import SCENARIOS, load_scenario
+
+    try:
+        scenario = load_scenario(text)
+    except ValueError as exc:
+        raise _UsageError(f"--scenario: {_one_line(exc)}") from None
+    return text if text in SCENARIOS else scenario
+
+
+def _traffic_fields(scenario: Any) -> dict[str, Any]:
+    """A ``TrafficScenario``'s fields but those marked as changing nothing the traffic does
+    (its name), as resume compares them."""
+    return {
+        f.name: getattr(scenario, f.name)
+        for f in dataclasses.fields(scenario)
+        if f.metadata.get("torchcbl.compare_on_resume", True) is not False
+    }
+
+
+def _check_session_traffic(
+    run_dir: Path, session_kwargs: dict[str, Any], text: str, given: Any
+) -> None:
+    """``teach driving --resume --scenario``: a one-line error unless ``given`` (a shipped
+    name or a ``TrafficScenario``) is the traffic the session drives (from what gymnasium.make
+    was given for it, ``session_kwargs``: its scenario, its DrivingConfig's, else the
+    default); its name aside, which changes nothing the traffic does."""
+    from sumo_scenarios.env import DrivingConfig
+    from sumo_scenarios.scenarios import get_scenario
+
+    config = session_kwargs.get("config")
+    kept = (
+        config.scenario
+        if isinstance(config, DrivingConfig)
+        else session_kwargs.get("scenario", DrivingConfig().scenario)
+    )
+    try:
+        own = get_scenario(kept)
+    except ValueError as exc:  # a name this version does not ship
+        raise _UsageError(f"{run_dir}: its traffic cannot be made ({_one_line(exc)})") from None
+    mine, theirs = _traffic_fields(get_scenario(given)), _traffic_fields(own)
+    differ = [f"{k} {mine[k]} (the session's: {theirs[k]})" for k in mine if mine[k] != theirs[k]]
+    if differ:
+        raise _UsageError(
+            f"--scenario {text}: its traffic differs from the traffic the session in {run_dir} "
+            f"is taught on ({own.name!r}) in {'; '.join(differ)}; a resumed session drives its "
+            "own traffic: leave --scenario out with --resume (or teach this traffic in a new "
+            "session, another --run-dir)"
+        )
+
+
 def _resume_env_kwargs(run_dir: Path, domain: str) -> dict[str, Any]:
     """What gymnasium.make was given for a session's env, to make it again on --resume: the
     kwargs its config.json records (an object, a ``CorridorMap`` or ``DrivingConfig`` a
@@ -1030,7 +1098,14 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     if run_dir.exists() and not run_dir.is_dir():
         raise _UsageError(f"--run-dir {run_dir} is a file; expected a session directory")
     if args.map is not None and args.domain != "corridor":
-        raise _UsageError("--map applies only to teach corridor (the driving road is SUMO's)")
+        raise _UsageError(
+            "--map applies only to teach corridor (the driving road is SUMO's; choose its "
+            "traffic with --scenario)"
+        )
+    if args.scenario is not None and args.domain != "driving":
+        raise _UsageError(
+            "--scenario applies only to teach driving (the corridor's course is chosen with --map)"
+        )
     if args.map is not None and args.resume:
         raise _UsageError(
             "--map: a resumed session keeps the map it was taught on; leave --map out with --resume"
@@ -1045,6 +1120,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             raise _UsageError(f"--map: {exc}") from None
         shipped = args.map in available_maps()
         map_kwarg = args.map if shipped else str(Path(args.map).resolve())
+    # a shipped scenario's name, or a TrafficScenario of one's own (the session keeps it whole)
+    scenario_kwarg = None if args.scenario is None else _scenario_option(args.scenario)
     if args.resume and args.prior_demonstrations is not None:
         raise _UsageError(
             "--prior-demonstrations: a resumed session keeps the prior demonstrations it started "
@@ -1082,8 +1159,12 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     env_kwargs, rule, make_model = _import(setup_factory)()
     if map_kwarg is not None:
         env_kwargs = {**env_kwargs, "corridor_map": map_kwarg}
+    if scenario_kwarg is not None:
+        env_kwargs = {**env_kwargs, "scenario": scenario_kwarg}
     if args.resume:  # the env the session was taught in, whatever teach gives a new one today
         env_kwargs = _resume_env_kwargs(run_dir, args.domain)
+        if scenario_kwarg is not None:  # given again: it must be the session's own traffic
+            _check_session_traffic(run_dir, env_kwargs, args.scenario, scenario_kwarg)
     teacher = human.make_teacher(title=f"torchcbl teach {args.domain}")
     from torchcbl.human import TerminalTeacher
 
@@ -1729,6 +1810,15 @@ def _parser() -> argparse.ArgumentParser:
         "(RUN_DIR/seed_<k>/sessions/arm_a) the segment the run evaluated seed k on, "
         "eval_segment + k as its seed_result.json says, else 0)",
     )
+    p.add_argument(
+        "--scenario",
+        default=None,
+        metavar="NAME|FILE.json",
+        help="driving: drive this traffic instead, a shipped scenario's name (train, eval, "
+        "light) or a JSON file of TrafficScenario fields, as teach --scenario takes (default: "
+        "the session's own traffic, a session taught on train on its held-out twin eval, as "
+        "the reproduction evaluates)",
+    )
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser(
@@ -1894,6 +1984,20 @@ def _parser() -> argparse.ArgumentParser:
         help="corridor: a shipped map's name or a map JSON of your own (default: the "
         "reproduction's figure2); the session keeps it, so evaluate drives the same map (a "
         "map file changed after teaching is refused)",
+    )
+    p.add_argument(
+        "--scenario",
+        default=None,
+        metavar="NAME|FILE.json",
+        help="driving: the traffic, a shipped scenario's name (train, the default and the "
+        "reproduction's; eval, its held-out twin; light) or a JSON file of TrafficScenario "
+        'fields, one object: "seed" (an int >= 0, required) and any of "name" (default: the '
+        'file\'s name), "speed_ranges_mph" (a [low, high] per normal lane, right, middle, '
+        'left, within 20-40), "mean_spacing_m" (metres, one per normal lane), '
+        '"min_spacing_m", "ahead_m", "behind_m", "start_clear_m" (those left out: train\'s), '
+        'e.g. {"seed": 7, "mean_spacing_m": [80, 60, 200]}. The session keeps it whole, so '
+        "--resume (no --scenario needed; another one is refused), evaluate and replay drive "
+        "the same traffic",
     )
     p.add_argument(
         "--keep-checkpoints",

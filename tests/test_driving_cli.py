@@ -1,0 +1,223 @@
+"""`torchcbl teach driving --scenario` and `torchcbl evaluate --scenario`: the traffic a driving
+session is taught and evaluated on, chosen at the command line (a few SUMO steps each)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from torchcbl.cli import main
+from torchcbl.session import load_records
+
+
+@pytest.fixture
+def driving_person(monkeypatch):
+    """`torchcbl teach driving` with a scripted person at the terminal (always "stay")."""
+    import sumo_scenarios.human
+
+    class Person:
+        def __call__(self, observation, info):
+            return 0
+
+        def set_status(self, text):
+            pass
+
+    monkeypatch.setattr(sumo_scenarios.human, "make_teacher", lambda **kw: Person())
+
+
+def _files(run: Path) -> dict[Path, bytes]:
+    return {p: p.read_bytes() for p in sorted(run.rglob("*")) if p.is_file()}
+
+
+def _one_line_error(capsys, *says: str) -> str:
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    for text in says:
+        assert text in err, (text, err)
+    return err
+
+
+def test_teach_driving_on_traffic_of_ones_own_keeps_it_for_resume_replay_and_evaluate(
+    tmp_path, driving_person, monkeypatch, capsys
+):
+    """`teach driving --scenario FILE.json` teaches on that traffic (a TrafficScenario made
+    from the file's fields, its name the file's when it gives none); the session keeps it
+    whole, so --resume drives it without --scenario (the file edited meanwhile changes
+    nothing), refuses other traffic in one line (the same traffic given again goes on),
+    replay rebuilds it and evaluate drives it."""
+    from sumo_scenarios.replay import session_episodes
+    from sumo_scenarios.scenarios import TrafficScenario
+
+    mine = TrafficScenario(name="mine", seed=7, mean_spacing_m=(80.0, 60.0, 200.0))
+    path = tmp_path / "traffic" / "mine.json"
+    path.parent.mkdir()
+    path.write_text(json.dumps({"seed": 7, "mean_spacing_m": [80, 60, 200]}))
+    run = tmp_path / "session"
+    monkeypatch.chdir(tmp_path)
+    argv = ["teach", "driving", "--run-dir", str(run), "--steps", "3"]
+    assert main([*argv[:-1], "4", "--scenario", "traffic/mine.json"]) == 0, capsys.readouterr().err
+    env = json.loads((run / "config.json").read_text())["env"]
+    assert env["inputs"]["traffic.seed"] == 7, env
+    assert env["inputs"]["traffic.mean_spacing_m"] == "[80.0, 60.0, 200.0]", env
+    assert {e.scenario for e in session_episodes(run, check=True)} == {mine}
+    # the file edited after: the session drives what it kept
+    path.write_text(json.dumps({"seed": 8}))
+    assert main([*argv, "--resume"]) == 0, capsys.readouterr().err
+    assert len(load_records(run)) == 7
+    assert {e.scenario for e in session_episodes(run)} == {mine}
+    # other traffic on resume: refused in one line, nothing of the session changes
+    kept = _files(run)
+    for other in ("light", "traffic/mine.json"):
+        capsys.readouterr()
+        assert main([*argv, "--resume", "--scenario", other]) == 2
+        _one_line_error(capsys, "--scenario", "differs from the traffic", "seed")
+        assert _files(run) == kept
+    # the same traffic given again (another name: the name changes nothing the traffic does)
+    same = tmp_path / "same.json"
+    same.write_text(json.dumps({"name": "again", "seed": 7, "mean_spacing_m": [80, 60, 200]}))
+    assert main([*argv, "--resume", "--scenario", str(same)]) == 0, capsys.readouterr().err
+    assert len(load_records(run)) == 10  # a first fit: a policy to evaluate
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--steps", "5"]) == 0, capsys.readouterr().err
+    report = json.loads(capsys.readouterr().out)
+    assert report["scenario"]["name"] == "mine" and report["scenario"]["seed"] == 7, report
+    assert main(["replay", str(run), "--list"]) == 0
+    assert "session/episode 0" in capsys.readouterr().out
+
+
+def test_teach_driving_on_a_shipped_scenario_by_name(tmp_path, driving_person, capsys):
+    """`--scenario light` teaches on the shipped light traffic, kept by its name; a resume
+    given the same name goes on, one given another is refused."""
+    run = tmp_path / "session"
+    argv = ["teach", "driving", "--run-dir", str(run), "--steps", "2"]
+    assert main([*argv, "--scenario", "light"]) == 0, capsys.readouterr().err
+    env = json.loads((run / "config.json").read_text())["env"]
+    assert env["kwargs"]["scenario"] == "light" and env["inputs"]["traffic.seed"] == 3, env
+    assert main([*argv, "--resume", "--scenario", "light"]) == 0, capsys.readouterr().err
+    assert main([*argv, "--resume"]) == 0, capsys.readouterr().err
+    assert len(load_records(run)) == 6
+    capsys.readouterr()
+    assert main([*argv, "--resume", "--scenario", "train"]) == 2
+    _one_line_error(capsys, "'light'", "leave --scenario out")
+
+
+@pytest.mark.parametrize(
+    "content, says",
+    [
+        (None, "not found"),
+        ("{not json", "is not valid JSON"),
+        ("[1, 2]", "holds a JSON list; expected one JSON object"),
+        ('{"name": "x"}', "'seed'"),
+        ('{"seed": 1, "lanes": 3}', "'lanes'"),
+        ('{"seed": -1}', "seed must be an int >= 0"),
+        ('{"seed": 1, "seed": 2}', "given twice"),
+        ('{"seed": 1, "speed_ranges_mph": [[10, 30], [25, 35], [30, 40]]}', "20 <= low"),
+        ('{"seed": 1, "mean_spacing_m": [40, 31]}', "3 in all"),
+    ],
+)
+def test_teach_driving_refuses_a_scenario_file_it_cannot_take_in_one_line(
+    content, says, tmp_path, capsys
+):
+    """A --scenario file that is missing, not JSON, not an object, lacks the seed, names a
+    field TrafficScenario lacks, gives a key twice or a value TrafficScenario refuses: one line
+    naming the file and what is wrong (TrafficScenario's own words), exit 2, nothing written."""
+    path = tmp_path / "traffic.json"
+    if content is not None:
+        path.write_text(content)
+    run = tmp_path / "session"
+    assert main(["teach", "driving", "--run-dir", str(run), "--scenario", str(path)]) == 2
+    _one_line_error(capsys, "--scenario", says)
+    assert not run.exists()
+
+
+def test_scenario_and_map_each_belong_to_their_own_domain(tmp_path, capsys):
+    """--scenario is driving's, --map the corridor's: each given to the other domain is one
+    line, exit 2, nothing written; an unknown name lists the shipped scenarios."""
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--scenario", "light"]) == 2
+    _one_line_error(capsys, "--scenario applies only to teach driving")
+    assert main(["teach", "driving", "--run-dir", str(run), "--map", "lshape"]) == 2
+    _one_line_error(capsys, "--map applies only to teach corridor", "--scenario")
+    assert main(["teach", "driving", "--run-dir", str(run), "--scenario", "atlantis"]) == 2
+    _one_line_error(capsys, "unknown scenario 'atlantis'", "eval, light, train", ".json")
+    assert not run.exists()
+    with pytest.raises(SystemExit):
+        main(["teach", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "--scenario NAME|FILE.json" in help_text and '"seed"' in help_text
+
+
+def test_evaluate_drives_a_driving_session_on_the_traffic_given(tmp_path, driving_person, capsys):
+    """Without --scenario evaluate drives a session taught on the train traffic on its held-out
+    twin eval, as the reproduction does; `--scenario NAME|FILE.json` drives that traffic
+    instead. A corridor session given --scenario is one line, exit 2."""
+    run = tmp_path / "session"
+    assert main(["teach", "driving", "--run-dir", str(run), "--steps", "10"]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--steps", "5"]) == 0
+    assert json.loads(capsys.readouterr().out)["scenario"]["name"] == "eval"
+    assert main(["evaluate", str(run), "--steps", "5", "--scenario", "light"]) == 0
+    assert json.loads(capsys.readouterr().out)["scenario"]["name"] == "light"
+    path = tmp_path / "held_out.json"
+    path.write_text(json.dumps({"seed": 11, "mean_spacing_m": [80, 60, 200]}))
+    assert main(["evaluate", str(run), "--steps", "5", "--scenario", str(path)]) == 0
+    scenario = json.loads(capsys.readouterr().out)["scenario"]
+    assert (scenario["name"], scenario["seed"]) == ("held_out", 11), scenario
+    assert main(["evaluate", str(run), "--scenario", str(tmp_path / "none.json")]) == 2
+    _one_line_error(capsys, "--scenario", "not found")
+    from corridor.env import CorridorEnv
+    from torchcbl import ConfidentTeacher
+
+    corridor = tmp_path / "corridor"
+    ConfidentTeacher(CorridorEnv(), lambda o, i: 0, run_dir=corridor, progress=False).run(
+        max_steps=2
+    ).close()
+    assert main(["evaluate", str(corridor), "--scenario", "light"]) == 2
+    _one_line_error(capsys, "--scenario applies only to a driving session")
+
+
+def test_teach_resume_compares_scenario_with_a_driving_config_sessions_traffic(
+    tmp_path, driving_person, capsys
+):
+    """A session begun in Python on gymnasium.make(..., config=DrivingConfig(scenario=...))
+    drives its DrivingConfig's traffic: teach --resume --scenario takes that traffic and
+    refuses another in one line."""
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.env import DrivingConfig
+    from torchcbl import ConfidentTeacher
+
+    run = tmp_path / "session"
+    env = gym.make(sumo_scenarios.ENV_ID, config=DrivingConfig(scenario="light", start_lane=1))
+    ConfidentTeacher(env, lambda o, i: 0, run_dir=run, progress=False).run(max_steps=2).close()
+    env.close()
+    argv = ["teach", "driving", "--run-dir", str(run), "--resume", "--steps", "2"]
+    capsys.readouterr()
+    assert main([*argv, "--scenario", "train"]) == 2
+    _one_line_error(capsys, "taught on ('light')", "seed 1 (the session's: 3)")
+    assert main([*argv, "--scenario", "light"]) == 0, capsys.readouterr().err
+    assert len(load_records(run)) == 4
+
+
+def test_evaluate_of_traffic_a_session_kept_only_as_text_says_and_takes_scenario(
+    tmp_path, driving_person, capsys
+):
+    """A session written before 2026-11-27 kept a TrafficScenario given to gymnasium.make only
+    as text: evaluate cannot know its traffic and says so in one line, naming --scenario (it
+    said the command had no option for it); given --scenario it drives that traffic."""
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps({"seed": 7, "mean_spacing_m": [80, 60, 200]}))
+    run = tmp_path / "session"
+    argv = ["teach", "driving", "--run-dir", str(run), "--steps", "10"]
+    assert main([*argv, "--scenario", str(path)]) == 0, capsys.readouterr().err
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["kwargs_objects"]  # as written before 2026-11-27
+    (run / "config.json").write_text(json.dumps(config))
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--steps", "5"]) == 2
+    _one_line_error(capsys, "given as an object", "torchcbl evaluate --scenario NAME|FILE.json")
+    assert main(["evaluate", str(run), "--steps", "5", "--scenario", str(path)]) == 0
+    assert json.loads(capsys.readouterr().out)["scenario"]["seed"] == 7
