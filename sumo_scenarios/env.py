@@ -78,6 +78,22 @@ SENSE_RANGE_M = 25.0
 """Observation distances are clipped to +-this many metres."""
 
 
+def _described(prefix: str, settings: Any) -> dict[str, str | int | float]:
+    """``<prefix>.<field>`` for each field of the dataclass ``settings`` that changes what the
+    env does (a number as it is, a tuple as its JSON text), as :meth:`DrivingEnv.describe_inputs`
+    gives them."""
+    described: dict[str, str | int | float] = {}
+    for f in dataclasses.fields(settings):
+        # a field marked as changing nothing the env does (a scenario's name; the literal of
+        # torchcbl.session.COMPARE_ON_RESUME: importing it imports torch)
+        if f.metadata.get("torchcbl.compare_on_resume") is False:
+            continue
+        value = getattr(settings, f.name)
+        plain = isinstance(value, int | float | str)
+        described[f"{prefix}.{f.name}"] = value if plain else json.dumps(value)
+    return described
+
+
 @dataclass(frozen=True)
 class DrivingConfig:
     """Settings of :class:`DrivingEnv`.
@@ -312,17 +328,11 @@ class DrivingEnv(gym.Env):
             FileNotFoundError: a shipped SUMO file is missing (naming it and how to restore
                 it).
         """
-        described: dict[str, str | int | float] = {}
-        for prefix, settings in (("traffic", self.scenario), ("sim", self.config.sim)):
-            for f in dataclasses.fields(settings):
-                # a field marked as changing nothing the env does (a scenario's name; the
-                # literal of torchcbl.session.COMPARE_ON_RESUME: importing it imports torch)
-                if f.metadata.get("torchcbl.compare_on_resume") is False:
-                    continue
-                value = getattr(settings, f.name)
-                plain = isinstance(value, int | float | str)
-                described[f"{prefix}.{f.name}"] = value if plain else json.dumps(value)
-        described["start_lane"] = self.config.start_lane
+        described = {
+            **_described("traffic", self.scenario),
+            **_described("sim", self.config.sim),
+            "start_lane": self.config.start_lane,
+        }
         for name in ("road.net.xml", "driving.add.xml"):
             text = re.sub(rb"<!--.*?-->", b"", data_path(name).read_bytes(), flags=re.S)
             # CRLF as LF: a checkout that converts line ends holds the same network for SUMO

@@ -46,6 +46,7 @@ import multiprocessing as mp
 import numbers
 import os
 import time
+import warnings
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -1202,6 +1203,42 @@ def session_eval_segment(session_dir: str | Path) -> int | None:
     return segment if whole and segment >= 0 else None
 
 
+def _taught_on(
+    session_dir: str | Path,
+    kept: Mapping[str, Any],
+    assumed: Any,
+    traffic: TrafficScenario,
+    segment: int,
+) -> str | None:
+    """Why segment ``segment`` of ``traffic`` is road the session was taught on, in words; None
+    where it is held out. The taught traffic is what the session's env described
+    (``traffic.<field>`` of its ``describe_inputs()``, on the fields both sides give), else
+    ``assumed`` (what evaluation takes it to be); a segment is taught road where one of the
+    session's logged steps drove it (``info["episode_seed"]``)."""
+    from sumo_scenarios.env import _described
+    from sumo_scenarios.scenarios import get_scenario
+    from torchcbl.session import load_records
+
+    inputs = (kept.get("env") or {}).get("inputs") or {}
+    described = {k: v for k, v in inputs.items() if k.startswith("traffic.")}
+    if "traffic.seed" not in described:  # a session stored before its env described itself
+        try:
+            described = _described("traffic", get_scenario(assumed))
+        except ValueError:
+            return None
+    driven = _described("traffic", traffic)
+    if any(driven[k] != v for k, v in described.items() if k in driven):
+        return None  # other traffic (another base seed: other road segments)
+    try:
+        records = load_records(session_dir)
+    except (OSError, ValueError) as exc:  # (a damaged log: CorruptSessionError)
+        return f"its traffic; its log, which says which segments it drove, cannot be read: {exc}"
+    for r in records:
+        if isinstance(r.info, Mapping) and r.info.get("episode_seed") == segment:
+            return f"its episode {r.episode} drove it"
+    return None
+
+
 def evaluate_saved_policy(
     session_dir: str | Path,
     *,
@@ -1211,10 +1248,11 @@ def evaluate_saved_policy(
     scenario: str | TrafficScenario | None = None,
 ) -> dict[str, Any]:
     """Drive the latest model of a driving teaching session (e.g. ``torchcbl teach driving``)
-    greedily for ``n_steps`` timesteps on held-out evaluation segment ``seed``: by default,
-    for a session of :func:`run_experiment` (``run_dir/seed_<k>/sessions/arm_a``) the segment
-    its seed's policies were evaluated on (:func:`session_eval_segment`: ``eval_segment + k``,
-    so the figures compare with ``results.json``'s), else segment 0.
+    greedily for ``n_steps`` timesteps on road it was not taught on: by default segment
+    ``seed`` of its traffic's held-out twin. The segment by default: for a session of
+    :func:`run_experiment` (``run_dir/seed_<k>/sessions/arm_a``) the one its seed's policies
+    were evaluated on (:func:`session_eval_segment`: ``eval_segment + k``, so the figures
+    compare with ``results.json``'s), else segment 0.
 
     The traffic, the SUMO settings (``sim``: the step length, which sets how far the traffic
     moves between two decisions) and the start lane are the session's own: those its env was
@@ -1222,27 +1260,35 @@ def evaluate_saved_policy(
     ``DrivingConfig`` as ``config``), plain values or objects, which the session keeps whole
     (:func:`torchcbl.session.env_make_argument`); otherwise the defaults (the ``train``
     traffic, ``SimConfig()``, the middle lane), as ``torchcbl teach driving`` and the
-    experiment teach. A session taught on the shipped ``train`` traffic (by name, as
-    ``TRAIN``, or by default) is driven on its held-out twin ``eval`` (the same traffic, other
-    road segments), as the experiment evaluates; a session taught on other traffic (a shipped
-    name such as ``light``, or a ``TrafficScenario`` of its own) on that traffic, segment
-    ``seed``. A session written before 2026-11-27 kept objects only as text: its traffic or
-    SUMO settings given as an object are then not known, and this raises ValueError unless
-    ``scenario`` or ``sim`` is passed here (and a ``DrivingConfig``'s start lane is not known:
-    the middle lane is driven). An env made without ``gymnasium.make`` keeps nothing in the
-    session: the defaults are driven, whatever it was given. ``scenario`` (a shipped
+    experiment teach. The traffic is driven on its held-out twin
+    (:func:`sumo_scenarios.scenarios.held_out_twin`: the same traffic on the next base seed,
+    whose road segments no episode on the taught traffic drives): ``eval`` for the shipped
+    ``train`` traffic, as the experiment evaluates, ``light-held-out`` (base seed 4) for
+    ``light``, ``"<name>-held-out"`` for a ``TrafficScenario`` of one's own. (Until
+    2026-11-28 a session taught on traffic other than ``train``'s was driven on that very
+    traffic, segment 0 by default: with ``torchcbl teach``'s default ``--seed 0``, the road
+    its first episode drove.) A session written before 2026-11-27 kept objects only as text:
+    its traffic or SUMO settings given as an object are then not known, and this raises
+    ValueError unless ``scenario`` or ``sim`` is passed here (and a ``DrivingConfig``'s start
+    lane is not known: the middle lane is driven). An env made without ``gymnasium.make``
+    keeps nothing in the session: the defaults are driven (``eval``), whatever it was given.
+    ``scenario`` (a shipped
     scenario's name or a ``TrafficScenario``) and ``sim``, when given, are driven whatever the
-    session kept.
+    session kept, as is ``seed``; where that is road the session was taught on (its traffic,
+    name aside, as the session describes it, and a segment one of its logged episodes drove)
+    it is driven all the same, with a UserWarning saying the figures are not held out.
 
     Returns the collision rate (share of timesteps in contact, %), the lane shares (``lanes``,
     index 0 = right shoulder ... 4 = left shoulder, named in that order by ``lane_names``:
-    ``sumo_scenarios.scenarios.LANE_NAMES``), and the traffic (``scenario``: the
-    ``TrafficScenario``'s fields, its name among them), SUMO settings and start lane driven. It
-    takes this process's one libsumo simulation: a live DrivingEnv must be reset after it.
+    ``sumo_scenarios.scenarios.LANE_NAMES``), the segment (``eval_segment``) and traffic
+    (``scenario``: the ``TrafficScenario``'s fields, its name among them) driven, whether that
+    road is held out (``held_out``: False where the session was taught on it, as the warning
+    says), and the SUMO settings and start lane driven. It takes this process's one libsumo
+    simulation: a live DrivingEnv must be reset after it.
     """
     from sumo_scenarios.env import DrivingConfig, DrivingEnv
     from sumo_scenarios.replay import _session_make_settings
-    from sumo_scenarios.scenarios import EVAL, TRAIN, TrafficScenario, get_scenario
+    from sumo_scenarios.scenarios import TrafficScenario, get_scenario, held_out_twin
     from sumo_scenarios.sim import SimConfig
     from torchcbl import evaluate_policy, load_policy
     from torchcbl.session import load_config
@@ -1259,7 +1305,8 @@ def evaluate_saved_policy(
                 f"(sumo_scenarios.scenarios), got {type(scenario).__name__} {scenario!r:.80}"
             )
         traffic = get_scenario(scenario)  # an unknown name: its ValueError names the shipped
-    taught, unknown = _session_make_settings(load_config(Path(session_dir)))
+    kept = load_config(Path(session_dir))
+    taught, unknown = _session_make_settings(kept)
 
     def refused(setting: str, what: str, keyword: str, kind: str) -> ValueError:
         command = (
@@ -1294,12 +1341,22 @@ def evaluate_saved_policy(
                 f"{session_dir} was taught on traffic this version cannot make ({exc}); pass "
                 "scenario= to sumo_scenarios.experiment.evaluate_saved_policy in Python"
             ) from None
-        if traffic == TRAIN:  # the experiment's held-out road: the same traffic elsewhere
-            traffic = EVAL
+        # the experiment's held-out road (train's twin is eval): the same traffic elsewhere
+        traffic = held_out_twin(traffic)
     start_lane = taught.get("start_lane", 2)
     if seed is None:
         seed = session_eval_segment(session_dir)
         seed = 0 if seed is None else seed
+    taught_on = _taught_on(session_dir, kept, taught.get("scenario", "train"), traffic, seed)
+    if taught_on is not None:
+        warnings.warn(
+            f"segment {seed} of the traffic {traffic.name!r} is road {session_dir} was taught on "
+            f"({taught_on}), so these figures are not held out; for held-out ones give another "
+            "segment, or leave the traffic out: evaluate then drives its held-out twin "
+            "(sumo_scenarios.scenarios.held_out_twin)",
+            UserWarning,
+            stacklevel=2,
+        )
     policy = load_policy(session_dir)
     config = DrivingConfig(
         scenario=traffic, max_episode_steps=n_steps, start_lane=start_lane, sim=sim
@@ -1316,6 +1373,7 @@ def evaluate_saved_policy(
         "lanes": metrics.lane_distribution([int(r.info["lane"]) for r in recs]).tolist(),
         "lane_names": list(LANE_NAMES),
         "scenario": json.loads(json.dumps(dataclasses.asdict(traffic))),
+        "held_out": taught_on is None,
         "start_lane": config.start_lane,
         "sim": dataclasses.asdict(sim),
     }

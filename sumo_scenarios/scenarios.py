@@ -7,6 +7,8 @@ faster car closes up behind a slower one and platoons form. The road segment an
 episode drives on is drawn from ``numpy.random.SeedSequence([scenario.seed, episode_seed])``:
 the ``train`` and ``eval`` scenarios differ only in their base seed, so no training episode ever
 sees the evaluation segment ("the same road segment" for every evaluation, paper Section 5.2.1).
+:func:`held_out_twin` generalises the pair to any traffic: the same traffic on the next base seed
+(``eval`` for ``train``), which ``torchcbl evaluate`` drives a session on by default.
 
 Density calibration: with 5 m cars, the ego overlaps a car whenever their centres are closer than
 5 m, i.e. over 10 m of relative travel per car, whatever the closing speed. Always driving straight
@@ -47,6 +49,7 @@ __all__ = [
     "TrafficScenario",
     "data_path",
     "get_scenario",
+    "held_out_twin",
     "load_scenario",
 ]
 
@@ -261,6 +264,28 @@ LIGHT = TrafficScenario(name="light", seed=3, mean_spacing_m=(60.0, 60.0, 90.0))
 
 SCENARIOS: dict[str, TrafficScenario] = {s.name: s for s in (TRAIN, EVAL, LIGHT)}
 """Named scenarios by name."""
+
+
+def held_out_twin(scenario: str | TrafficScenario) -> TrafficScenario:
+    """The held-out twin of a traffic: the same traffic on road segments none of its own
+    episodes drive, as ``eval`` is ``train``'s.
+
+    One rule: the same fields with the base seed + 1 (a segment is drawn from
+    ``SeedSequence([base seed, episode seed])``, so no episode seed of the traffic draws a
+    segment of its twin); named as the shipped scenario of those fields where there is one
+    (``train`` -> ``eval``, the reproduction's pair), else ``"<name>-held-out"`` (``light``,
+    base seed 3 -> ``light-held-out``, base seed 4).
+
+    Raises:
+        ValueError: ``scenario`` is not a shipped scenario's name or a TrafficScenario
+            (:func:`get_scenario`'s words).
+    """
+    traffic = get_scenario(scenario)
+    twin = replace(traffic, seed=traffic.seed + 1, name=f"{traffic.name}-held-out")
+    for shipped in SCENARIOS.values():
+        if replace(shipped, name=twin.name) == twin:
+            return shipped
+    return twin
 
 
 def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:

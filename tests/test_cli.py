@@ -1039,7 +1039,13 @@ def test_a_driving_session_given_its_settings_as_objects_replays_and_evaluates_o
         assert main(["replay", str(run), "--list"]) == 0, capsys.readouterr().err
         assert f"{name}/episode 1" in capsys.readouterr().out
         report = evaluate_saved_policy(run, n_steps=10)
-        assert report["scenario"]["name"] == "mine" and report["sim"] == dataclasses.asdict(fast)
+        # its traffic's held-out twin (the next base seed), its own SUMO settings
+        assert report["scenario"] == {
+            **json.loads(json.dumps(dataclasses.asdict(mine))),
+            "name": "mine-held-out",
+            "seed": 8,
+        }
+        assert report["held_out"] and report["sim"] == dataclasses.asdict(fast)
         assert report["start_lane"] == (3 if name == "whole" else 2)
         # as a session written before the objects were kept: refused in one line, as before
         _as_written_before_objects_were_kept(run)

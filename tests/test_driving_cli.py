@@ -3,6 +3,7 @@ session is taught and evaluated on, chosen at the command line (a few SUMO steps
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -46,7 +47,7 @@ def test_teach_driving_on_traffic_of_ones_own_keeps_it_for_resume_replay_and_eva
     from the file's fields, its name the file's when it gives none); the session keeps it
     whole, so --resume drives it without --scenario (the file edited meanwhile changes
     nothing), refuses other traffic in one line (the same traffic given again goes on),
-    replay rebuilds it and evaluate drives it."""
+    replay rebuilds it and evaluate drives its held-out twin."""
     from sumo_scenarios.replay import session_episodes
     from sumo_scenarios.scenarios import TrafficScenario
 
@@ -82,7 +83,9 @@ def test_teach_driving_on_traffic_of_ones_own_keeps_it_for_resume_replay_and_eva
     capsys.readouterr()
     assert main(["evaluate", str(run), "--steps", "5"]) == 0, capsys.readouterr().err
     report = json.loads(capsys.readouterr().out)
-    assert report["scenario"]["name"] == "mine" and report["scenario"]["seed"] == 7, report
+    # evaluate drives its held-out twin: the same traffic, the next base seed
+    assert report["scenario"]["name"] == "mine-held-out" and report["scenario"]["seed"] == 8
+    assert report["scenario"]["mean_spacing_m"] == [80.0, 60.0, 200.0] and report["held_out"]
     assert main(["replay", str(run), "--list"]) == 0
     assert "session/episode 0" in capsys.readouterr().out
 
@@ -157,7 +160,8 @@ def test_evaluate_drives_a_driving_session_on_the_traffic_given(tmp_path, drivin
     assert main(["teach", "driving", "--run-dir", str(run), "--steps", "10"]) == 0
     capsys.readouterr()
     assert main(["evaluate", str(run), "--steps", "5"]) == 0
-    assert json.loads(capsys.readouterr().out)["scenario"]["name"] == "eval"
+    report = json.loads(capsys.readouterr().out)
+    assert report["scenario"]["name"] == "eval" and report["held_out"] is True, report
     assert main(["evaluate", str(run), "--steps", "5", "--scenario", "light"]) == 0
     assert json.loads(capsys.readouterr().out)["scenario"]["name"] == "light"
     path = tmp_path / "held_out.json"
@@ -221,3 +225,52 @@ def test_evaluate_of_traffic_a_session_kept_only_as_text_says_and_takes_scenario
     _one_line_error(capsys, "given as an object", "torchcbl evaluate --scenario NAME|FILE.json")
     assert main(["evaluate", str(run), "--steps", "5", "--scenario", str(path)]) == 0
     assert json.loads(capsys.readouterr().out)["scenario"]["seed"] == 7
+
+
+def test_evaluate_drives_a_session_of_other_traffic_on_road_it_was_not_taught_on(
+    tmp_path, driving_person, capsys
+):
+    """A session taught on traffic other than train's (here `light`, base seed 3) was evaluated on
+    that same traffic, segment 0: with teach's default --seed 0, the very road its first
+    episode drove, a collision rate read as held out that was not. By default evaluate now
+    drives the traffic's held-out twin (the same traffic, the next base seed: as eval is
+    train's) and says so in its JSON; --scenario and --seed still choose, and a choice that
+    drives road the session was taught on is driven, with a one-line note."""
+    from sumo_scenarios.scenarios import LIGHT
+
+    run = tmp_path / "session"
+    argv = ["teach", "driving", "--run-dir", str(run), "--steps", "10", "--scenario", "light"]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert {r.info["episode_seed"] for r in load_records(run)} == {0}
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--steps", "5"]) == 0
+    out, err = capsys.readouterr()
+    report = json.loads(out)
+    light = json.loads(json.dumps(dataclasses.asdict(LIGHT)))
+    assert report["scenario"] == {**light, "name": "light-held-out", "seed": 4}, report
+    assert report["eval_segment"] == 0 and report["held_out"] is True, report
+    assert err == "", err
+    # the taught traffic given back: segment 0 is the road its episode 0 drove
+    assert main(["evaluate", str(run), "--steps", "5", "--scenario", "light"]) == 0
+    out, err = capsys.readouterr()
+    report = json.loads(out)
+    assert report["scenario"] == light and report["held_out"] is False, report
+    assert err.count("\n") == 1 and "not held out" in err and "episode 0" in err, err
+    # a segment none of its episodes drove is held out, though the traffic is the same
+    assert main(["evaluate", str(run), "--steps", "5", "--scenario", "light", "--seed", "5"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["held_out"] is True and err == "", err
+
+
+def test_held_out_twin_is_eval_for_train_and_the_next_base_seed_otherwise():
+    """One rule gives every traffic its held-out road: the same fields on the next base seed,
+    named as the shipped scenario of those fields (train -> eval), else '<name>-held-out'."""
+    from sumo_scenarios.scenarios import EVAL, LIGHT, TRAIN, TrafficScenario, held_out_twin
+
+    assert held_out_twin("train") is EVAL and held_out_twin(TRAIN) is EVAL
+    assert held_out_twin(TrafficScenario(name="mine", seed=1)) is EVAL  # train's traffic
+    assert held_out_twin(LIGHT) == dataclasses.replace(LIGHT, name="light-held-out", seed=4)
+    mine = TrafficScenario(name="mine", seed=7, mean_spacing_m=(80.0, 60.0, 200.0))
+    assert held_out_twin(mine) == dataclasses.replace(mine, name="mine-held-out", seed=8)
+    with pytest.raises(ValueError, match="unknown scenario 'atlantis'"):
+        held_out_twin("atlantis")

@@ -331,16 +331,19 @@ def _short(run_dir: Path, **make_kwargs) -> None:
     env.close()
 
 
-def test_a_session_is_evaluated_on_the_traffic_it_was_taught_on(tmp_path, capsys):
+def test_a_session_is_evaluated_on_the_held_out_twin_of_the_traffic_it_was_taught_on(
+    tmp_path, capsys
+):
     """A session taught on other traffic (a TrafficScenario of the user's, or the shipped
     "light" by name) was evaluated on the shipped held-out "eval" traffic without a word, and
-    the JSON did not say which. Its own traffic is now driven and named (the shipped "train"
-    traffic's held-out twin "eval" for a session taught on "train", as before); a session
-    that kept its traffic only as text (written before) is refused in one line unless
+    the JSON did not say which; then on its very traffic, segment 0: the road its first
+    episode drove. It is now driven on its traffic's held-out twin (the same traffic, the next
+    base seed), named in the JSON (the shipped "train" traffic's twin is "eval", as before); a
+    session that kept its traffic only as text (written before) is refused in one line unless
     ``scenario=`` says which to drive."""
     import dataclasses
 
-    from sumo_scenarios.scenarios import EVAL, LIGHT, TrafficScenario
+    from sumo_scenarios.scenarios import EVAL, LIGHT, TrafficScenario, held_out_twin
     from torchcbl.cli import main
 
     def named(scenario):  # as the report's JSON holds it
@@ -348,16 +351,18 @@ def test_a_session_is_evaluated_on_the_traffic_it_was_taught_on(tmp_path, capsys
 
     n = 20
     mine = TrafficScenario(name="mine", seed=7, mean_spacing_m=(80, 60, 200))
+    twin = dataclasses.replace(mine, name="mine-held-out", seed=8)
     _short(tmp_path / "mine", scenario=mine)
     report = evaluate_saved_policy(tmp_path / "mine", n_steps=n)
-    assert report["scenario"] == named(mine)
-    want = _driven(tmp_path / "mine", n, scenario=mine)
+    assert report["scenario"] == named(twin) and report["held_out"] is True
+    want = _driven(tmp_path / "mine", n, scenario=twin)
     assert report["lanes"] == [want["lanes"].count(k) / n for k in range(5)]
     assert report["collision_pct"] == want["collision_pct"]
     assert main(["evaluate", str(tmp_path / "mine"), "--steps", str(n)]) == 0
     assert json.loads(capsys.readouterr().out) == report
     _short(tmp_path / "light", scenario="light")
-    assert evaluate_saved_policy(tmp_path / "light", n_steps=n)["scenario"] == named(LIGHT)
+    light = dataclasses.replace(LIGHT, name="light-held-out", seed=4)
+    assert evaluate_saved_policy(tmp_path / "light", n_steps=n)["scenario"] == named(light)
     _short(tmp_path / "train")  # the default traffic: its held-out twin, as before
     assert evaluate_saved_policy(tmp_path / "train", n_steps=n)["scenario"] == named(EVAL)
     # told which traffic to drive, it drives that
@@ -370,7 +375,9 @@ def test_a_session_is_evaluated_on_the_traffic_it_was_taught_on(tmp_path, capsys
         evaluate_saved_policy(tmp_path / "mine", n_steps=n)
     assert main(["evaluate", str(tmp_path / "mine"), "--steps", str(n)]) == 2
     assert capsys.readouterr().err.count("\n") == 1
-    assert evaluate_saved_policy(tmp_path / "mine", n_steps=n, scenario=mine) == report
+    assert (
+        evaluate_saved_policy(tmp_path / "mine", n_steps=n, scenario=held_out_twin(mine)) == report
+    )
 
 
 def test_a_session_taught_on_a_traffic_scenario_refuses_another_on_resume(tmp_path):

@@ -572,7 +572,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     # without --seed, the domain's own default: driving's is the segment a reproduction's
     # session's run evaluated its seed's policies on (else 0), the corridor's 0
     seed = {} if args.seed is None else {"seed": args.seed}
-    traffic = {}  # driving: the session's own traffic (train's on eval) unless --scenario
+    traffic = {}  # driving: the held-out twin of the session's traffic (train's: eval)
     if args.scenario is not None:
         if domain != "driving":
             raise _UsageError(
@@ -1779,7 +1779,12 @@ def _parser() -> argparse.ArgumentParser:
         description="Load the latest model of a teaching session and run it greedily, never "
         "asking; print a JSON report (corridor: circuits and wall contacts; driving: collision "
         'rate and lane shares, "lanes", right shoulder first, left shoulder last, as '
-        '"lane_names" beside it lists them).',
+        '"lane_names" beside it lists them, and the road driven: "scenario", "eval_segment" '
+        'and "held_out"). A driving session is driven on road it was not taught on: its '
+        "traffic's held-out twin, the same traffic on the next base seed (train's is eval, as "
+        "the reproduction evaluates; light's light-held-out), whose road segments no episode "
+        "of the taught traffic drives. --scenario or --seed that drive road the session was "
+        "taught on are driven, with a one-line warning that the figures are not held out.",
     )
     p.add_argument(
         "run_dir",
@@ -1806,7 +1811,7 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="S",
         help="seed of the first reset (corridor: the env's noise, default 0; driving: which "
-        "held-out evaluation road segment, default: for a reproduction's session "
+        "road segment of the traffic driven, default: for a reproduction's session "
         "(RUN_DIR/seed_<k>/sessions/arm_a) the segment the run evaluated seed k on, "
         "eval_segment + k as its seed_result.json says, else 0)",
     )
@@ -1816,8 +1821,9 @@ def _parser() -> argparse.ArgumentParser:
         metavar="NAME|FILE.json",
         help="driving: drive this traffic instead, a shipped scenario's name (train, eval, "
         "light) or a JSON file of TrafficScenario fields, as teach --scenario takes (default: "
-        "the session's own traffic, a session taught on train on its held-out twin eval, as "
-        "the reproduction evaluates)",
+        "the held-out twin of the session's own traffic, the same traffic on the next base "
+        "seed: eval for train, as the reproduction evaluates, light-held-out for light, "
+        "NAME-held-out for a file's)",
     )
     p.set_defaults(func=_cmd_evaluate)
 
