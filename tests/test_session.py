@@ -258,6 +258,32 @@ def test_keep_checkpoints_is_none_or_a_positive_int(tmp_path, bad):
     assert not (tmp_path / "run").exists()  # refused before the session is made
 
 
+def test_a_session_refitting_after_every_label_keeps_only_its_newest_checkpoints(tmp_path):
+    """max_new=1 (a refit after every label, the case keep_checkpoints is for: ~2 MB a
+    label) prunes as any other schedule: the newest keep_checkpoints alone stay on disk, and
+    every stage still rebuilds from the log."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=1),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=2,
+        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    while ct.n_demonstrations < 8:
+        ct.step()
+    ct.close()
+    refits = sorted(live)
+    assert refits == list(range(1, 9))
+    assert _checkpoint_numbers(run) == [7, 8]
+    rebuilt = load_model(run, n_demonstrations=3).state_dict()
+    assert all(torch.equal(rebuilt[k], live[3][k]) for k in rebuilt)
+
+
 def test_steps_not_yet_in_sqlite_are_in_the_journal_and_readers_see_them(tmp_path):
     run = tmp_path / "run"
     ct = make(rare_regions_world(), run, noninteractive=False, max_new=4)
