@@ -284,6 +284,28 @@ def test_a_session_refitting_after_every_label_keeps_only_its_newest_checkpoints
     assert all(torch.equal(rebuilt[k], live[3][k]) for k in rebuilt)
 
 
+def test_pruning_leaves_a_checkpoint_linked_by_hand_and_what_it_links_to(tmp_path):
+    """A checkpoint a person moved elsewhere and linked back (``model-<n>.pt`` a symlink to,
+    say, an archive) is not one the writer wrote: pruning removes the writer's files alone,
+    so the link stays (removing it would free nothing) and its target is never touched."""
+    run = tmp_path / "run"
+    ct = make_kept(rare_regions_world(), run, keep_checkpoints=2)
+    while ct.n_demonstrations < 2:
+        ct.step()
+    archive = tmp_path / "archive" / "model-00000002.pt"
+    archive.parent.mkdir()
+    link = run / "checkpoints" / archive.name
+    os.replace(link, archive)
+    link.symlink_to(archive)
+    saved = archive.read_bytes()
+    while ct.n_demonstrations < 10:
+        ct.step()
+    ct.close()
+    assert archive.read_bytes() == saved
+    assert link.is_symlink() and link.resolve() == archive.resolve()
+    assert _checkpoint_numbers(run) == [2, 8, 10]  # the newest 2, and the link
+
+
 def test_steps_not_yet_in_sqlite_are_in_the_journal_and_readers_see_them(tmp_path):
     run = tmp_path / "run"
     ct = make(rare_regions_world(), run, noninteractive=False, max_new=4)
