@@ -14,6 +14,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -304,6 +305,37 @@ def test_pruning_leaves_a_checkpoint_linked_by_hand_and_what_it_links_to(tmp_pat
     assert archive.read_bytes() == saved
     assert link.is_symlink() and link.resolve() == archive.resolve()
     assert _checkpoint_numbers(run) == [2, 8, 10]  # the newest 2, and the link
+
+
+def test_checkpoints_that_cannot_be_removed_are_warned_of_once_and_the_session_goes_on(
+    tmp_path, monkeypatch
+):
+    """An old checkpoint that cannot be removed (no permission) stays, harmless: one
+    UserWarning names the first such file, the later ones are not reported again, and the
+    session goes on with nothing lost."""
+    real_unlink = Path.unlink
+
+    def refuse_checkpoints(self, missing_ok=False):
+        if self.parent.name == "checkpoints" and self.name.startswith("model-"):
+            raise PermissionError(13, "Permission denied", str(self))
+        return real_unlink(self, missing_ok=missing_ok)
+
+    run = tmp_path / "run"
+    ct = make_kept(rare_regions_world(), run, keep_checkpoints=1)
+    ct.step()  # the session made first (its start clears leftovers with unlink too)
+    monkeypatch.setattr(Path, "unlink", refuse_checkpoints)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        while ct.n_demonstrations < 10:  # refits at 2, 4, ..., 10: four prunes refused
+            ct.step()
+        ct.close()
+    said = [w for w in caught if "could not remove" in str(w.message)]
+    assert len(said) == 1, [str(w.message) for w in said]
+    assert said[0].category is UserWarning
+    assert str(run / "checkpoints" / "model-00000002.pt") in str(said[0].message)
+    assert _checkpoint_numbers(run) == [2, 4, 6, 8, 10]  # every one still there
+    assert load_records(run) == ct.records
+    assert len(load_demonstrations(run)[1]) == 10
 
 
 def test_steps_not_yet_in_sqlite_are_in_the_journal_and_readers_see_them(tmp_path):
