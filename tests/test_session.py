@@ -259,6 +259,33 @@ def test_keep_checkpoints_is_none_or_a_positive_int(tmp_path, bad):
     assert not (tmp_path / "run").exists()  # refused before the session is made
 
 
+def _files_state(run: Path) -> dict[str, tuple[int, bytes]]:
+    """{relative path: (mtime_ns, bytes)} of every file under a run directory."""
+    return {
+        str(p.relative_to(run)): (p.stat().st_mtime_ns, p.read_bytes())
+        for p in sorted(run.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.mark.parametrize("bad", [0, "3"])
+def test_resume_refuses_a_keep_checkpoints_it_cannot_take_before_touching_the_session(
+    tmp_path, bad
+):
+    """resume(keep_checkpoints=) takes what the constructor takes and "as_before"; anything
+    else is refused saying so, before the session is opened (no file of it touched)."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    ct = make_kept(env, run)
+    ct.run(max_steps=30)
+    ct.close()
+    before = _files_state(run)
+    with pytest.raises(ValueError, match=r'keep_checkpoints: expected None .*"as_before"') as err:
+        ConfidentTeacher.resume(run, env, oracle(env), progress=False, keep_checkpoints=bad)
+    assert f"got {bad!r}" in str(err.value)
+    assert _files_state(run) == before
+
+
 def test_a_session_refitting_after_every_label_keeps_only_its_newest_checkpoints(tmp_path):
     """max_new=1 (a refit after every label, the case keep_checkpoints is for: ~2 MB a
     label) prunes as any other schedule: the newest keep_checkpoints alone stay on disk, and
