@@ -286,6 +286,28 @@ def test_resume_refuses_a_keep_checkpoints_it_cannot_take_before_touching_the_se
     assert _files_state(run) == before
 
 
+def test_a_writers_record_of_keep_checkpoints_that_is_no_count_reads_as_every_one(tmp_path):
+    """writers.jsonl edited by hand (or by another program) to keep_checkpoints true, 0 or
+    "2" is no count of checkpoints: read as every one kept (None), True not taken as 1, and
+    a resume keeps every one by default."""
+    from torchcbl.session import describe, kept_checkpoints
+
+    run = tmp_path / "run"
+    ct = make_kept(rare_regions_world(), run, keep_checkpoints=2)
+    ct.run(max_steps=10)
+    ct.close()
+    assert kept_checkpoints(run) == describe(run).keep_checkpoints == 2
+    writers = run / "writers.jsonl"
+    record = json.loads(writers.read_text().splitlines()[-1])
+    for edited in (True, 0, "2"):
+        writers.write_text(json.dumps({**record, "keep_checkpoints": edited}) + "\n")
+        assert kept_checkpoints(run) is None, edited
+        assert describe(run).keep_checkpoints is None, edited
+    env = rare_regions_world()  # and a resume as before keeps every one (True was refused)
+    ConfidentTeacher.resume(run, env, oracle(env), progress=False).close()
+    assert json.loads(writers.read_text().splitlines()[-1])["keep_checkpoints"] is None
+
+
 def test_a_session_refitting_after_every_label_keeps_only_its_newest_checkpoints(tmp_path):
     """max_new=1 (a refit after every label, the case keep_checkpoints is for: ~2 MB a
     label) prunes as any other schedule: the newest keep_checkpoints alone stay on disk, and
