@@ -387,6 +387,35 @@ def test_checkpoints_that_cannot_be_removed_are_warned_of_once_and_the_session_g
     assert len(load_demonstrations(run)[1]) == 10
 
 
+def test_a_checkpoint_gone_since_the_listing_is_passed_over_without_a_note(tmp_path, monkeypatch):
+    """A checkpoint listed in checkpoints/ but removed before it is read (a running writer's
+    pruning) is no damaged file: describe notes nothing about it and reports the next older
+    checkpoint, and load_model gives the loop's model."""
+    import torchcbl.session as session
+
+    run = tmp_path / "run"
+    ct = make_kept(rare_regions_world(), run, keep_checkpoints=None)
+    while ct.n_demonstrations < 10:
+        ct.step()
+    ct.close()
+    assert _checkpoint_numbers(run) == [2, 4, 6, 8, 10]
+    gone = run / "checkpoints" / "model-00000010.pt"
+    gone.unlink()
+    listed = session._checkpoint_entries
+
+    def listed_before_it_went(directory):
+        entries = listed(directory)
+        if directory == gone.parent and gone not in [p for _, p in entries]:
+            entries.append((10, gone))
+        return entries
+
+    monkeypatch.setattr(session, "_checkpoint_entries", listed_before_it_went)
+    summary = session.describe(run)
+    assert summary.n_labels == 10 and summary.last_checkpoint == 8
+    assert not [n for n in summary.notes if gone.name in n], summary.notes
+    assert same_state(load_model(run), ct.model)
+
+
 def test_steps_not_yet_in_sqlite_are_in_the_journal_and_readers_see_them(tmp_path):
     run = tmp_path / "run"
     ct = make(rare_regions_world(), run, noninteractive=False, max_new=4)
