@@ -276,6 +276,21 @@ def test_kept_sessions_keep_the_checkpoints_asked_for_with_the_same_figures_and_
     assert runs["default"][:2] == runs["every"][:2] == runs["one"][:2]
 
 
+def test_kept_sessions_of_a_process_pool_keep_the_checkpoints_asked_for(tmp_path):
+    """keep_checkpoints= reaches the cells run in worker processes (workers=2), as it does
+    those run in the caller's: None keeps every refit's checkpoint, not the newest 3."""
+    from torchcbl.teaching import DEFAULT_KEEP_CHECKPOINTS
+
+    spec = _env(teaching={"max_new": 2})  # refits at 2, 4, ... labels
+    bm.run_benchmark(
+        HG, [spec], [0], tmp_path, workers=2, plots=False, keep_sessions=True, keep_checkpoints=None
+    )
+    ((key, cell),) = _cells(tmp_path).items()
+    every = _checkpoints_of(tmp_path / "sessions" / key)
+    last = cell["attention"]["labels"] // 2 * 2
+    assert len(every) > DEFAULT_KEEP_CHECKPOINTS and every == list(range(2, last + 1, 2)), every
+
+
 @pytest.mark.parametrize("bad", [0, -2, True, 2.0, "all"])
 def test_run_benchmark_refuses_a_keep_checkpoints_before_anything_runs(tmp_path, bad):
     out = tmp_path / "b"

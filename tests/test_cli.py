@@ -2710,3 +2710,17 @@ def test_teach_refuses_a_keep_checkpoints_it_cannot_take_in_one_line(bad, tmp_pa
     assert "argument --keep-checkpoints: expected a whole number >= 1" in err, err
     assert "or all" in err and f"got {bad!r}" in err, err
     assert not run.exists()
+
+
+@pytest.mark.parametrize("spelt", ["ALL", " all ", "All"])
+def test_teach_takes_keep_checkpoints_all_whatever_its_case_and_spaces(
+    spelt, tmp_path, monkeypatch
+):
+    """--keep-checkpoints all, as a person may type it (capitals, spaces): every one kept."""
+    from torchcbl.session import kept_checkpoints
+
+    _scripted_corridor_person(monkeypatch)  # 5 demonstrations, a refit after each
+    run = tmp_path / "session"
+    argv = ["teach", "corridor", "--run-dir", str(run), "--steps", "30"]
+    assert main([*argv, "--keep-checkpoints", spelt]) == 0
+    assert (kept_checkpoints(run), _checkpoints_of(run)) == (None, [1, 2, 3, 4, 5])

@@ -429,6 +429,68 @@ def test_an_object_argument_is_compared_field_by_field_as_the_rule_says(tmp_path
     _resumes(run, gym.make(ANYTHING_ID, settings=Settings({"a": 1.0})))
 
 
+# -- 1c. the driving domain's traffic: a name or the TrafficScenario -------------------------
+
+
+@contextlib.contextmanager
+def _driving(**kwargs: Any):
+    """gymnasium.make of the driving env (a few SUMO steps a session), closed after."""
+    import sumo_scenarios
+
+    env = gym.make(sumo_scenarios.ENV_ID, **kwargs)
+    try:
+        yield env
+    finally:
+        env.close()
+
+
+def test_a_refusal_of_other_arguments_and_inputs_says_once_how_to_make_the_env(tmp_path):
+    """Traffic taught by name and resumed by another name differs in its argument and in the
+    env's description of its inputs: the refusal names both, and says how to make the
+    session's env once (not once for each)."""
+    run = tmp_path / "run"
+    with _driving(scenario="train") as env:
+        _teach(run, env)
+    with _driving(scenario="light") as env:
+        msg = _refused(run, env, "'scenario': ('train', 'light')", "env inputs (stored, given)")
+    assert msg.count("gymnasium.make(") == 1, msg
+
+
+def test_driving_traffic_kept_as_an_object_resumes_by_the_name_of_the_same_traffic(tmp_path):
+    """DrivingConfig's scenario kept as a TrafficScenario of its own name ("mine") and given
+    as the name of the same traffic ("light"): the name spells the shipped object, whose
+    name is not compared (TrafficScenario marks it so), so the session resumes."""
+    from sumo_scenarios.env import DrivingConfig
+    from sumo_scenarios.scenarios import LIGHT
+
+    run = tmp_path / "run"
+    mine = DrivingConfig(scenario=dataclasses.replace(LIGHT, name="mine"))
+    with _driving(config=mine) as env:
+        _teach(run, env)
+    with _driving(config=DrivingConfig(scenario="light")) as env:
+        _resumes(run, env)
+    assert len(load_records(run)) == 12
+
+
+def test_a_kept_traffic_name_this_version_does_not_ship_is_refused_in_one_line(tmp_path):
+    """A DrivingConfig session whose kept scenario name is none this version ships (edited
+    in config.json, or a scenario since dropped), resumed with the traffic given as an
+    object: the name cannot spell an object and is compared as it is, so the resume is
+    refused naming config.scenario, in one line, not with get_scenario's ValueError."""
+    from sumo_scenarios.env import DrivingConfig
+    from sumo_scenarios.scenarios import LIGHT
+
+    run = tmp_path / "run"
+    with _driving(config=DrivingConfig(scenario="light")) as env:
+        _teach(run, env)
+    config = json.loads((run / "config.json").read_text())
+    config["env"]["kwargs_objects"]["config"]["fields"]["scenario"] = "nowhere"
+    (run / "config.json").write_text(json.dumps(config))
+    with _driving(config=DrivingConfig(scenario=LIGHT)) as env:
+        msg = _refused(run, env, "'config.scenario': ('nowhere', ")
+    assert "\n" not in msg, msg
+
+
 # -- 2. a refused resume touches no file ------------------------------------------------------
 
 

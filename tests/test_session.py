@@ -14,6 +14,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -256,6 +257,163 @@ def test_keep_checkpoints_is_none_or_a_positive_int(tmp_path, bad):
     with pytest.raises(ValueError, match=r"keep_checkpoints: expected None .* or an int >= 1"):
         make_kept(env, tmp_path / "run", keep_checkpoints=bad)
     assert not (tmp_path / "run").exists()  # refused before the session is made
+
+
+def _files_state(run: Path) -> dict[str, tuple[int, bytes]]:
+    """{relative path: (mtime_ns, bytes)} of every file under a run directory."""
+    return {
+        str(p.relative_to(run)): (p.stat().st_mtime_ns, p.read_bytes())
+        for p in sorted(run.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.mark.parametrize("bad", [0, "3"])
+def test_resume_refuses_a_keep_checkpoints_it_cannot_take_before_touching_the_session(
+    tmp_path, bad
+):
+    """resume(keep_checkpoints=) takes what the constructor takes and "as_before"; anything
+    else is refused saying so, before the session is opened (no file of it touched)."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    ct = make_kept(env, run)
+    ct.run(max_steps=30)
+    ct.close()
+    before = _files_state(run)
+    with pytest.raises(ValueError, match=r'keep_checkpoints: expected None .*"as_before"') as err:
+        ConfidentTeacher.resume(run, env, oracle(env), progress=False, keep_checkpoints=bad)
+    assert f"got {bad!r}" in str(err.value)
+    assert _files_state(run) == before
+
+
+def test_a_writers_record_of_keep_checkpoints_that_is_no_count_reads_as_every_one(tmp_path):
+    """writers.jsonl edited by hand (or by another program) to keep_checkpoints true, 0 or
+    "2" is no count of checkpoints: read as every one kept (None), True not taken as 1, and
+    a resume keeps every one by default."""
+    from torchcbl.session import describe, kept_checkpoints
+
+    run = tmp_path / "run"
+    ct = make_kept(rare_regions_world(), run, keep_checkpoints=2)
+    ct.run(max_steps=10)
+    ct.close()
+    assert kept_checkpoints(run) == describe(run).keep_checkpoints == 2
+    writers = run / "writers.jsonl"
+    record = json.loads(writers.read_text().splitlines()[-1])
+    for edited in (True, 0, "2"):
+        writers.write_text(json.dumps({**record, "keep_checkpoints": edited}) + "\n")
+        assert kept_checkpoints(run) is None, edited
+        assert describe(run).keep_checkpoints is None, edited
+    env = rare_regions_world()  # and a resume as before keeps every one (True was refused)
+    ConfidentTeacher.resume(run, env, oracle(env), progress=False).close()
+    assert json.loads(writers.read_text().splitlines()[-1])["keep_checkpoints"] is None
+
+
+def test_a_session_refitting_after_every_label_keeps_only_its_newest_checkpoints(tmp_path):
+    """max_new=1 (a refit after every label, the case keep_checkpoints is for: ~2 MB a
+    label) prunes as any other schedule: the newest keep_checkpoints alone stay on disk, and
+    every stage still rebuilds from the log."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=1),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=2,
+        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    while ct.n_demonstrations < 8:
+        ct.step()
+    ct.close()
+    refits = sorted(live)
+    assert refits == list(range(1, 9))
+    assert _checkpoint_numbers(run) == [7, 8]
+    rebuilt = load_model(run, n_demonstrations=3).state_dict()
+    assert all(torch.equal(rebuilt[k], live[3][k]) for k in rebuilt)
+
+
+def test_pruning_leaves_a_checkpoint_linked_by_hand_and_what_it_links_to(tmp_path):
+    """A checkpoint a person moved elsewhere and linked back (``model-<n>.pt`` a symlink to,
+    say, an archive) is not one the writer wrote: pruning removes the writer's files alone,
+    so the link stays (removing it would free nothing) and its target is never touched."""
+    run = tmp_path / "run"
+    ct = make_kept(rare_regions_world(), run, keep_checkpoints=2)
+    while ct.n_demonstrations < 2:
+        ct.step()
+    archive = tmp_path / "archive" / "model-00000002.pt"
+    archive.parent.mkdir()
+    link = run / "checkpoints" / archive.name
+    os.replace(link, archive)
+    link.symlink_to(archive)
+    saved = archive.read_bytes()
+    while ct.n_demonstrations < 10:
+        ct.step()
+    ct.close()
+    assert archive.read_bytes() == saved
+    assert link.is_symlink() and link.resolve() == archive.resolve()
+    assert _checkpoint_numbers(run) == [2, 8, 10]  # the newest 2, and the link
+
+
+def test_checkpoints_that_cannot_be_removed_are_warned_of_once_and_the_session_goes_on(
+    tmp_path, monkeypatch
+):
+    """An old checkpoint that cannot be removed (no permission) stays, harmless: one
+    UserWarning names the first such file, the later ones are not reported again, and the
+    session goes on with nothing lost."""
+    real_unlink = Path.unlink
+
+    def refuse_checkpoints(self, missing_ok=False):
+        if self.parent.name == "checkpoints" and self.name.startswith("model-"):
+            raise PermissionError(13, "Permission denied", str(self))
+        return real_unlink(self, missing_ok=missing_ok)
+
+    run = tmp_path / "run"
+    ct = make_kept(rare_regions_world(), run, keep_checkpoints=1)
+    ct.step()  # the session made first (its start clears leftovers with unlink too)
+    monkeypatch.setattr(Path, "unlink", refuse_checkpoints)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        while ct.n_demonstrations < 10:  # refits at 2, 4, ..., 10: four prunes refused
+            ct.step()
+        ct.close()
+    said = [w for w in caught if "could not remove" in str(w.message)]
+    assert len(said) == 1, [str(w.message) for w in said]
+    assert said[0].category is UserWarning
+    assert str(run / "checkpoints" / "model-00000002.pt") in str(said[0].message)
+    assert _checkpoint_numbers(run) == [2, 4, 6, 8, 10]  # every one still there
+    assert load_records(run) == ct.records
+    assert len(load_demonstrations(run)[1]) == 10
+
+
+def test_a_checkpoint_gone_since_the_listing_is_passed_over_without_a_note(tmp_path, monkeypatch):
+    """A checkpoint listed in checkpoints/ but removed before it is read (a running writer's
+    pruning) is no damaged file: describe notes nothing about it and reports the next older
+    checkpoint, and load_model gives the loop's model."""
+    import torchcbl.session as session
+
+    run = tmp_path / "run"
+    ct = make_kept(rare_regions_world(), run, keep_checkpoints=None)
+    while ct.n_demonstrations < 10:
+        ct.step()
+    ct.close()
+    assert _checkpoint_numbers(run) == [2, 4, 6, 8, 10]
+    gone = run / "checkpoints" / "model-00000010.pt"
+    gone.unlink()
+    listed = session._checkpoint_entries
+
+    def listed_before_it_went(directory):
+        entries = listed(directory)
+        if directory == gone.parent and gone not in [p for _, p in entries]:
+            entries.append((10, gone))
+        return entries
+
+    monkeypatch.setattr(session, "_checkpoint_entries", listed_before_it_went)
+    summary = session.describe(run)
+    assert summary.n_labels == 10 and summary.last_checkpoint == 8
+    assert not [n for n in summary.notes if gone.name in n], summary.notes
+    assert same_state(load_model(run), ct.model)
 
 
 def test_steps_not_yet_in_sqlite_are_in_the_journal_and_readers_see_them(tmp_path):

@@ -2196,7 +2196,9 @@ class SessionStore:
         """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
         m, save those off the refit schedule (the folder is listed once per store, then
         followed in memory); one that cannot be removed stays (harmless: readers take the
-        newest), with one warning per store.
+        newest), with one warning per store. Only regular files go, the ones a writer wrote:
+        a link a person put there stays (removing it would free nothing), and so does what
+        it links to.
 
         A stage whose checkpoint is gone is rebuilt from the newest checkpoint below it (or
         from the start) on the loop's schedule, a refit every ``max_new`` labels
