@@ -648,7 +648,9 @@ class ConfidentTeacher:
             stage whose checkpoint is gone from the log, the same model, at the cost of the
             refits it saved: one fit with
             ``refit="full"``, every refit since the last kept checkpoint before ``k`` with
-            ``"incremental"`` (3 s at 2,000 labels, 5 features, measured 2026-11-27). Each
+            ``"incremental"`` (3 s at 2,000 labels, 5 features, measured 2026-11-27; so a
+            learning curve over many stages of such a session, each rebuilt so, costs the sum:
+            keep every checkpoint, or score the stages as the session runs, ``on_refit``). Each
             checkpoint is the model's whole state, its candidate sizes' statistics included:
             0.14 MB for the default model on 4 features and 3 actions, 2 MB with
             ``max_components=40`` (the driving domain's), so a session refitting after every
