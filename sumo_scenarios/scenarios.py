@@ -47,7 +47,9 @@ __all__ = [
     "TRAFFIC_LANES",
     "TRAIN",
     "TrafficScenario",
+    "compared_fields",
     "data_path",
+    "described_fields",
     "get_scenario",
     "held_out_twin",
     "load_scenario",
@@ -104,6 +106,12 @@ def data_path(name: str) -> Path:
         )
         raise FileNotFoundError(f"{path} is missing: the install is damaged; {fix}")
     return path
+
+
+#: a dataclass field whose metadata marks this key False is not compared on resume
+#: (torchcbl.session.COMPARE_ON_RESUME, spelled out: importing it would import torch;
+#: tests/test_resume_checks.py checks the two)
+_COMPARE_ON_RESUME = "torchcbl.compare_on_resume"
 
 
 def _as_int(value: Any) -> int | None:
@@ -169,9 +177,8 @@ class TrafficScenario:
     """
 
     # the name changes nothing the traffic does: a session resumes on the same traffic under
-    # another name (torchcbl.session.COMPARE_ON_RESUME, spelled out: importing it would import
-    # torch; tests/test_resume_checks.py checks the two)
-    name: str = field(metadata={"torchcbl.compare_on_resume": False})
+    # another name
+    name: str = field(metadata={_COMPARE_ON_RESUME: False})
     seed: int
     speed_ranges_mph: tuple[tuple[float, float], ...] = ((20.0, 30.0), (25.0, 35.0), (30.0, 40.0))
     mean_spacing_m: tuple[float, float, float] = (40.0, 31.0, 120.0)
@@ -304,6 +311,28 @@ def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:
         raise ValueError(
             f"unknown scenario {scenario!r}; known: {', '.join(sorted(SCENARIOS))}"
         ) from None
+
+
+def compared_fields(settings: Any) -> dict[str, Any]:
+    """The fields of the dataclass ``settings`` (a :class:`TrafficScenario`, a ``SimConfig``)
+    by name, as they are, but those whose metadata marks ``torchcbl.compare_on_resume`` False
+    (a scenario's name, which changes nothing the traffic does): what a resume compares
+    (``torchcbl.session.COMPARE_ON_RESUME``)."""
+    return {
+        f.name: getattr(settings, f.name)
+        for f in fields(settings)
+        if f.metadata.get(_COMPARE_ON_RESUME) is not False
+    }
+
+
+def described_fields(prefix: str, settings: Any) -> dict[str, str | int | float]:
+    """:func:`compared_fields` of ``settings`` as ``DrivingEnv.describe_inputs`` gives them:
+    ``<prefix>.<field>``, a number or str as it is, anything else (a tuple) as its JSON
+    text."""
+    return {
+        f"{prefix}.{name}": value if isinstance(value, int | float | str) else json.dumps(value)
+        for name, value in compared_fields(settings).items()
+    }
 
 
 _JSON_SHAPE = (

@@ -945,16 +945,6 @@ def _scenario_option(text: str) -> Any:
     return text if text in SCENARIOS else scenario
 
 
-def _traffic_fields(scenario: Any) -> dict[str, Any]:
-    """A ``TrafficScenario``'s fields but those marked as changing nothing the traffic does
-    (its name), as resume compares them."""
-    return {
-        f.name: getattr(scenario, f.name)
-        for f in dataclasses.fields(scenario)
-        if f.metadata.get("torchcbl.compare_on_resume", True) is not False
-    }
-
-
 def _check_session_traffic(
     run_dir: Path, session_kwargs: dict[str, Any], text: str, given: Any
 ) -> None:
@@ -963,7 +953,7 @@ def _check_session_traffic(
     was given for it, ``session_kwargs``: its scenario, its DrivingConfig's, else the
     default); its name aside, which changes nothing the traffic does."""
     from sumo_scenarios.env import DrivingConfig
-    from sumo_scenarios.scenarios import get_scenario
+    from sumo_scenarios.scenarios import compared_fields, get_scenario
 
     config = session_kwargs.get("config")
     kept = (
@@ -975,7 +965,7 @@ def _check_session_traffic(
         own = get_scenario(kept)
     except ValueError as exc:  # a name this version does not ship
         raise _UsageError(f"{run_dir}: its traffic cannot be made ({_one_line(exc)})") from None
-    mine, theirs = _traffic_fields(get_scenario(given)), _traffic_fields(own)
+    mine, theirs = compared_fields(get_scenario(given)), compared_fields(own)
     differ = [f"{k} {mine[k]} (the session's: {theirs[k]})" for k in mine if mine[k] != theirs[k]]
     if differ:
         raise _UsageError(
