@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from torchcbl import _jsonfile
+
 __all__ = [
     "CAR_LENGTH_M",
     "EGO_SPEED_MS",
@@ -345,26 +347,11 @@ _JSON_SHAPE = (
 """What a scenario file (:func:`load_scenario`) holds, in words."""
 
 
-class _GivenTwice(Exception):
-    """A key written twice in one JSON object of a scenario file."""
-
-
-def _once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    """A JSON object's dict (``json.loads``'s ``object_pairs_hook``); :class:`_GivenTwice` if a
-    key is written twice (JSON would keep the last silently)."""
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise _GivenTwice(key)
-        out[key] = value
-    return out
-
-
 def load_scenario(name_or_path: str | os.PathLike[str]) -> TrafficScenario:
     """A shipped scenario by name (``train``, ``eval``, ``light``), or a :class:`TrafficScenario`
-    made from a JSON file of its fields, by path (a name ending in ``.json`` is a path; so is
-    any other existing file, unless it is a shipped scenario's bare name: ``"light"`` is the
-    shipped scenario, ``"./light"`` the file).
+    made from a JSON file of its fields, by path (a name ending in ``.json``, in any case, is a
+    path; so is any other existing file, unless it is a shipped scenario's bare name:
+    ``"light"`` is the shipped scenario, ``"./light"`` the file).
 
     The file holds one JSON object of the fields: ``seed`` (required) and any of the others,
     lists for tuples, e.g. ``{"seed": 7, "mean_spacing_m": [80, 60, 200]}``; a field left out
@@ -393,23 +380,23 @@ def load_scenario(name_or_path: str | os.PathLike[str]) -> TrafficScenario:
             f"{where} {what}; give an existing JSON file of TrafficScenario fields or a shipped "
             f"scenario's name ({', '.join(sorted(SCENARIOS))})"
         )
-    try:
-        text = path.read_text(encoding="utf-8-sig")  # a BOM (Notepad) is no part of the JSON
-    except UnicodeDecodeError as exc:
-        raise ValueError(
-            f"{where} is not UTF-8 text ({exc.reason} at byte {exc.start}); expected {_JSON_SHAPE}"
-        ) from None
-    except OSError as exc:
-        raise ValueError(f"{where} cannot be read ({exc.strerror or exc})") from None
-    try:
-        data = json.loads(text, object_pairs_hook=_once)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{where} is not valid JSON: {exc}") from None
-    except _GivenTwice as exc:
-        raise ValueError(
-            f"{where}: the key {exc.args[0]!r} is given twice (JSON would keep the last "
-            "silently); give each once"
-        ) from None
+    shipped = f"give a shipped scenario's name ({', '.join(sorted(SCENARIOS))})"
+    text = _jsonfile.read_text(
+        path,
+        not_text=lambda why: f"{where} is not UTF-8 text ({why}); expected {_JSON_SHAPE}",
+        unreadable=lambda why: (
+            f"{where} cannot be read ({why}); give a JSON file of TrafficScenario fields this "
+            "user can read"
+        ),
+    )
+    data = _jsonfile.loads(
+        text,
+        not_json=lambda why: f"{where} is not valid JSON: {why}; fix the file, or {shipped}",
+        given_twice=lambda key: (
+            f"{where}: the key {key!r} is given twice (JSON would keep the last silently); "
+            "give each once"
+        ),
+    )
     if not isinstance(data, dict):
         raise ValueError(f"{where} holds a JSON {type(data).__name__}; expected {_JSON_SHAPE}")
     known = [f.name for f in fields(TrafficScenario)]

@@ -4,7 +4,9 @@ session is taught and evaluated on, chosen at the command line (a few SUMO steps
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -132,6 +134,41 @@ def test_teach_driving_refuses_a_scenario_file_it_cannot_take_in_one_line(
     run = tmp_path / "session"
     assert main(["teach", "driving", "--run-dir", str(run), "--scenario", str(path)]) == 2
     _one_line_error(capsys, "--scenario", says)
+    assert not run.exists()
+
+
+def test_a_scenario_file_that_cannot_be_read_or_parsed_says_what_to_do(
+    tmp_path, monkeypatch, capsys
+):
+    """A --scenario file that is not JSON, or that cannot be read (an I/O error), was refused
+    saying only what was wrong ("is not valid JSON: ...", "cannot be read (...)"); each now
+    says what to do, as a map file's does. A missing FILE.JSON, whatever the suffix's case, is
+    a scenario file not found, as a map file's is."""
+    run = tmp_path / "session"
+    argv = ["teach", "driving", "--run-dir", str(run), "--scenario"]
+    path = tmp_path / "traffic.json"
+    path.write_text("{not json")
+    assert main([*argv, str(path)]) == 2
+    shipped = "give a shipped scenario's name (eval, light, train)"
+    _one_line_error(capsys, "is not valid JSON: ", f"; fix the file, or {shipped}")
+    path.write_text('{"seed": 7}')
+    read_text = Path.read_text
+
+    def failing(self, *args, **kwargs):
+        if self == path:
+            raise OSError(errno.EIO, os.strerror(errno.EIO), str(self))
+        return read_text(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "read_text", failing)
+    assert main([*argv, str(path)]) == 2
+    _one_line_error(
+        capsys,
+        f"cannot be read ({os.strerror(errno.EIO)}); ",
+        "give a JSON file of TrafficScenario fields this user can read",
+    )
+    monkeypatch.undo()
+    assert main([*argv, str(tmp_path / "TRAFFIC.JSON")]) == 2
+    _one_line_error(capsys, "scenario file ", "TRAFFIC.JSON' not found")
     assert not run.exists()
 
 
