@@ -34,6 +34,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from torchcbl._checkpoints import DEFAULT_KEEP_CHECKPOINTS, is_keep_count
 from torchcbl._text import one_line as _one_line
 
 _DOMAINS = {
@@ -177,7 +178,7 @@ def _keep_checkpoints(text: str) -> int | str:
         value = int(text)
     except ValueError:
         value = 0
-    if value < 1:
+    if not is_keep_count(value):
         raise argparse.ArgumentTypeError(
             "expected a whole number >= 1 (the newest checkpoints kept, besides checkpoint 0) "
             f"or all (every one), got {text!r}"
@@ -1077,7 +1078,6 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     from torchcbl.benchmark import _import
     from torchcbl.errors import SessionWriteError
     from torchcbl.teaching import (
-        DEFAULT_KEEP_CHECKPOINTS,
         ConfidentTeacher,
         TeachingConfig,
         TeachingInterrupted,
@@ -1631,7 +1631,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                 ray_address=args.ray_address,
                 on_cell=on_cell,
                 keep_sessions=args.keep_sessions,
-                keep_checkpoints=_kept(args.keep_checkpoints, bm._KEEP_CHECKPOINTS),
+                keep_checkpoints=_kept(args.keep_checkpoints, DEFAULT_KEEP_CHECKPOINTS),
             )
     except (RuntimeError, ValueError, ImportError) as exc:
         raise _UsageError(_missing_dependency(exc) or str(exc) + _cwd_hint(exc)) from None
@@ -2001,9 +2001,9 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N|all",
         help="keep the newest N checkpoints (one is written per refit; checkpoint 0 is always "
-        "kept) or all of them (default 3; with --resume what the session kept). An earlier "
-        "stage's model is rebuilt from the log by torchcbl.load_model(run_dir, "
-        "n_demonstrations=k)",
+        f"kept) or all of them (default {DEFAULT_KEEP_CHECKPOINTS}; with --resume what the "
+        "session kept). An earlier stage's model is rebuilt from the log by "
+        "torchcbl.load_model(run_dir, n_demonstrations=k)",
     )
     p.set_defaults(func=_cmd_teach)
 
@@ -2085,8 +2085,8 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N|all",
         help="with --keep-sessions: each session keeps its newest N checkpoints (and checkpoint "
-        "0) or all of them (default 3), as torchcbl teach --keep-checkpoints; not part of a "
-        "cell's key, the figures are the same either way",
+        f"0) or all of them (default {DEFAULT_KEEP_CHECKPOINTS}), as torchcbl teach "
+        "--keep-checkpoints; not part of a cell's key, the figures are the same either way",
     )
     p.add_argument(
         "--driving-teacher",

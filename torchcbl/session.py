@@ -198,6 +198,7 @@ from typing import TYPE_CHECKING, Any, TypeVar, overload
 import numpy as np
 import torch
 
+from torchcbl._checkpoints import is_keep_count
 from torchcbl._durable import fsync_directory, write_durably
 from torchcbl.errors import (
     CorruptSessionError,
@@ -3751,7 +3752,7 @@ class SessionSummary:
             "every one)" if keep is None else f"the newest {keep}, besides 0 and hand refits)"
         )
         kept = [w.get("keep_checkpoints") for w in self.writers]
-        kept = [k for k in kept if isinstance(k, int) and not isinstance(k, bool) and k > 0]
+        kept = [k for k in kept if is_keep_count(k)]
         if kept and sum(1 for n in on_disk if n > 0) >= min(kept):  # some may be gone
             text += "; earlier stages: load_model(run_dir, n_demonstrations=k) rebuilds one " + (
                 "from the log (replaying the refits before it)"
@@ -3837,7 +3838,7 @@ def kept_checkpoints(run_dir: str | os.PathLike[str]) -> int | None:
 def _kept_by(writers: list[dict[str, Any]]) -> int | None:
     """:func:`kept_checkpoints` of the records of ``writers.jsonl``."""
     keep = writers[-1].get("keep_checkpoints") if writers else None
-    if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
+    if not is_keep_count(keep):
         return None
     return keep
 
