@@ -190,7 +190,7 @@ import threading
 import time
 import warnings
 import zlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar, overload
@@ -1079,16 +1079,22 @@ def env_make_argument(
 
 
 def env_make_arguments(
-    config: Mapping[str, Any], builders: Mapping[str, Callable[..., Any]]
+    config: Mapping[str, Any],
+    builders: Mapping[str, Callable[..., Any]],
+    *,
+    skip: Collection[str] = ("render_mode",),
 ) -> tuple[dict[str, Any], dict[str, str]]:
-    """Every argument ``gymnasium.make`` was given for a session's env, as
-    :func:`env_make_argument` makes each again, and why each of those it cannot make cannot
+    """Every argument ``gymnasium.make`` was given for a session's env but those in ``skip``,
+    as :func:`env_make_argument` makes each again, and why each of those it cannot make cannot
     be made: what a domain's evaluate, replay and ``torchcbl teach --resume`` make the
     session's env again with.
 
     Args:
         config: the session's config (:func:`load_config`).
         builders: ``"module:QualName"`` -> the class to make (see :func:`env_make_argument`).
+        skip: arguments left out of both (neither made nor reported): by default
+            ``render_mode``, which only draws (resume compares it neither) and which each
+            caller chooses itself; ``()`` for every one.
 
     Returns:
         ``(made, unknown)``: ``made`` maps each argument made again to its value (a plain
@@ -1098,6 +1104,8 @@ def env_make_arguments(
     made: dict[str, Any] = {}
     unknown: dict[str, str] = {}
     for name in (config.get("env") or {}).get("kwargs") or {}:
+        if name in skip:
+            continue
         try:
             made[name] = env_make_argument(config, name, builders)
         except ValueError as exc:
