@@ -186,7 +186,18 @@ def test_scenario_and_map_each_belong_to_their_own_domain(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["teach", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
-    assert "--scenario NAME|FILE.json" in help_text and '"seed"' in help_text
+    assert "--scenario NAME|FILE.json" in help_text
+    # the help names the one field a file must give and where the others are described, the
+    # README, which names every TrafficScenario field (a copy of the list in the help drifts)
+    assert '"seed" (an int >= 0, required)' in help_text, help_text
+    assert "fields left out take train's values" in help_text, help_text
+    assert "README.md" in help_text and "mean_spacing_m" in help_text, help_text
+    from sumo_scenarios.scenarios import TrafficScenario
+
+    readme = " ".join((Path(__file__).parents[1] / "README.md").read_text().split())
+    described = readme.split("`teach driving --scenario NAME|FILE.json`", 1)[1][:1000]
+    for f in dataclasses.fields(TrafficScenario):
+        assert f'`"{f.name}"`' in described, f.name
 
 
 def test_evaluate_drives_a_driving_session_on_the_traffic_given(tmp_path, driving_person, capsys):
@@ -216,7 +227,7 @@ def test_evaluate_drives_a_driving_session_on_the_traffic_given(tmp_path, drivin
         max_steps=2
     ).close()
     assert main(["evaluate", str(corridor), "--scenario", "light"]) == 2
-    _one_line_error(capsys, "--scenario applies only to a driving session")
+    _one_line_error(capsys, "--scenario applies only to a driving session", "leave --scenario out")
 
 
 def test_teach_resume_compares_scenario_with_a_driving_config_sessions_traffic(

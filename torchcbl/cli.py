@@ -578,7 +578,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         if domain != "driving":
             raise _UsageError(
                 f"--scenario applies only to a driving session; {session} is a {domain} "
-                "session (it is driven on the map it was taught on)"
+                "session (it is driven on the map it was taught on): leave --scenario out"
             )
         traffic = {"scenario": _scenario_option(args.scenario)}
     try:
@@ -1987,13 +1987,11 @@ def _parser() -> argparse.ArgumentParser:
         metavar="NAME|FILE.json",
         help="driving: the traffic, a shipped scenario's name (train, the default and the "
         "reproduction's; eval, its held-out twin; light) or a JSON file of TrafficScenario "
-        'fields, one object: "seed" (an int >= 0, required) and any of "name" (default: the '
-        'file\'s name), "speed_ranges_mph" (a [low, high] per normal lane, right, middle, '
-        'left, within 20-40), "mean_spacing_m" (metres, one per normal lane), '
-        '"min_spacing_m", "ahead_m", "behind_m", "start_clear_m" (those left out: train\'s), '
-        'e.g. {"seed": 7, "mean_spacing_m": [80, 60, 200]}. The session keeps it whole, so '
-        "--resume (no --scenario needed; another one is refused), evaluate and replay drive "
-        "the same traffic",
+        'fields, one object with "seed" (an int >= 0, required), e.g. {"seed": 7, '
+        '"mean_spacing_m": [80, 60, 200]}; fields left out take train\'s values (the fields: '
+        "README.md, teach driving --scenario). The session keeps it whole, so --resume (no "
+        "--scenario needed; another one is refused), evaluate and replay drive the same "
+        "traffic",
     )
     p.add_argument(
         "--keep-checkpoints",
