@@ -1153,10 +1153,7 @@ def _session_make_kwargs(config: dict[str, Any]) -> tuple[dict[str, Any], dict[s
     teach corridor --resume`` makes the session's env again with."""
     from torchcbl.session import env_make_arguments
 
-    kwargs, unknown = env_make_arguments(config, _MAKE_CLASSES)
-    kwargs.pop("render_mode", None)
-    unknown.pop("render_mode", None)
-    return kwargs, unknown
+    return env_make_arguments(config, _MAKE_CLASSES)
 
 
 def _made_with(session_dir: Path, kwarg: str, what: str, want: type) -> Any:

@@ -40,6 +40,8 @@ from typing import Any
 
 import numpy as np
 
+from torchcbl import _jsonfile
+
 __all__ = [
     "CorridorMap",
     "Route",
@@ -530,28 +532,28 @@ def available_maps() -> list[str]:
 def _read_map_file(path: Path) -> str:
     """A map file's text (UTF-8, as JSON is); a ValueError naming the file if it is not text
     (e.g. a PNG of the map given for its JSON) or cannot be read."""
-    try:
-        return path.read_text(encoding="utf-8-sig")  # a BOM (Notepad) is no part of the JSON
-    except UnicodeDecodeError as exc:
-        raise ValueError(
-            f"map file {str(path)!r} is not a map JSON file (not UTF-8 text: {exc.reason} at "
-            f"byte {exc.start}); give the JSON file of the map (see corridor.maps)"
-        ) from None
-    except OSError as exc:
-        raise ValueError(
-            f"map file {str(path)!r} cannot be read ({exc.strerror or exc}); give a map JSON "
-            "file this user can read"
-        ) from None
+    return _jsonfile.read_text(
+        path,
+        not_text=lambda why: (
+            f"map file {str(path)!r} is not a map JSON file (not UTF-8 text: {why}); give the "
+            "JSON file of the map (see corridor.maps)"
+        ),
+        unreadable=lambda why: (
+            f"map file {str(path)!r} cannot be read ({why}); give a map JSON file this user "
+            "can read"
+        ),
+    )
 
 
 def load_map(name_or_path: str | os.PathLike[str]) -> CorridorMap:
     """Load a shipped map by name (``"figure2"``, ``"lshape"``) or any map JSON file by path
-    (a name ending in ``.json`` is a path; so is any other existing file, unless it is a
-    shipped map's bare name: ``"figure2"`` is the shipped map, ``"./figure2"`` the file)."""
+    (a name ending in ``.json``, in any case, is a path; so is any other existing file, unless
+    it is a shipped map's bare name: ``"figure2"`` is the shipped map, ``"./figure2"`` the
+    file)."""
     path = Path(name_or_path)
     shipped = str(name_or_path) in available_maps()  # a bare shipped name, never a path
     res = resources.files("corridor") / "maps" / f"{name_or_path}.json"
-    if path.suffix == ".json":  # a file path
+    if path.suffix.lower() == ".json":  # a file path (mine.json, MINE.JSON)
         if not path.is_file():
             raise ValueError(
                 f"map file {str(path)!r} not found; give an existing map JSON file or one of the "
@@ -567,29 +569,16 @@ def load_map(name_or_path: str | os.PathLike[str]) -> CorridorMap:
             f"unknown map {str(name_or_path)!r}; shipped maps: {available_maps()}, or the path "
             "of a map JSON file"
         )
-    try:
-        data = json.loads(text, object_pairs_hook=_once)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"map {str(name_or_path)!r} is not valid JSON: {exc}") from None
-    except _GivenTwice as exc:
-        raise ValueError(
-            f"map {str(name_or_path)!r}: the key {exc.args[0]!r} is given twice in one object "
-            "(a map key or a node name written twice; JSON would keep the last silently); "
-            "give each once"
-        ) from None
+    data = _jsonfile.loads(
+        text,
+        not_json=lambda why: (
+            f"map {str(name_or_path)!r} is not valid JSON: {why}; fix the file, or give one of "
+            f"the shipped map names {available_maps()}"
+        ),
+        given_twice=lambda key: (
+            f"map {str(name_or_path)!r}: the key {key!r} is given twice in one object (a map "
+            "key or a node name written twice; JSON would keep the last silently); give each "
+            "once"
+        ),
+    )
     return map_from_dict(data)
-
-
-class _GivenTwice(Exception):
-    """A key written twice in one JSON object of a map file."""
-
-
-def _once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    """A JSON object's dict (``json.loads``'s ``object_pairs_hook``); :class:`_GivenTwice` if
-    a key is written twice."""
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise _GivenTwice(key)
-        out[key] = value
-    return out

@@ -38,9 +38,7 @@ its own, inside a ``DrivingConfig`` or left to its default), is refused.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
-import json
 import os
 import re
 from dataclasses import dataclass, field
@@ -57,6 +55,7 @@ from sumo_scenarios.scenarios import (
     TrafficScenario,
     _as_int,
     data_path,
+    described_fields,
     get_scenario,
 )
 from sumo_scenarios.sim import HighwaySim, SimConfig
@@ -76,22 +75,6 @@ STAY, LEFT, RIGHT = 0, 1, 2
 ACTION_NAMES = ("stay", "left", "right")
 SENSE_RANGE_M = 25.0
 """Observation distances are clipped to +-this many metres."""
-
-
-def _described(prefix: str, settings: Any) -> dict[str, str | int | float]:
-    """``<prefix>.<field>`` for each field of the dataclass ``settings`` that changes what the
-    env does (a number as it is, a tuple as its JSON text), as :meth:`DrivingEnv.describe_inputs`
-    gives them."""
-    described: dict[str, str | int | float] = {}
-    for f in dataclasses.fields(settings):
-        # a field marked as changing nothing the env does (a scenario's name; the literal of
-        # torchcbl.session.COMPARE_ON_RESUME: importing it imports torch)
-        if f.metadata.get("torchcbl.compare_on_resume") is False:
-            continue
-        value = getattr(settings, f.name)
-        plain = isinstance(value, int | float | str)
-        described[f"{prefix}.{f.name}"] = value if plain else json.dumps(value)
-    return described
 
 
 @dataclass(frozen=True)
@@ -329,8 +312,8 @@ class DrivingEnv(gym.Env):
                 it).
         """
         described = {
-            **_described("traffic", self.scenario),
-            **_described("sim", self.config.sim),
+            **described_fields("traffic", self.scenario),
+            **described_fields("sim", self.config.sim),
             "start_lane": self.config.start_lane,
         }
         for name in ("road.net.xml", "driving.add.xml"):

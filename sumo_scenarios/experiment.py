@@ -1215,18 +1215,17 @@ def _taught_on(
     (``traffic.<field>`` of its ``describe_inputs()``, on the fields both sides give), else
     ``assumed`` (what evaluation takes it to be); a segment is taught road where one of the
     session's logged steps drove it (``info["episode_seed"]``)."""
-    from sumo_scenarios.env import _described
-    from sumo_scenarios.scenarios import get_scenario
+    from sumo_scenarios.scenarios import described_fields, get_scenario
     from torchcbl.session import load_records
 
     inputs = (kept.get("env") or {}).get("inputs") or {}
     described = {k: v for k, v in inputs.items() if k.startswith("traffic.")}
     if "traffic.seed" not in described:  # a session stored before its env described itself
         try:
-            described = _described("traffic", get_scenario(assumed))
+            described = described_fields("traffic", get_scenario(assumed))
         except ValueError:
             return None
-    driven = _described("traffic", traffic)
+    driven = described_fields("traffic", traffic)
     if any(driven[k] != v for k, v in described.items() if k in driven):
         return None  # other traffic (another base seed: other road segments)
     try:

@@ -297,9 +297,7 @@ def _session_make_kwargs(config: dict[str, Any]) -> tuple[dict[str, Any], dict[s
 
     from torchcbl.session import env_make_arguments
 
-    kwargs, unknown = env_make_arguments(config, _MAKE_CLASSES)
-    kwargs.pop("render_mode", None)  # drawing only: the same traffic either way
-    unknown.pop("render_mode", None)
+    kwargs, unknown = env_make_arguments(config, _MAKE_CLASSES)  # render_mode aside
     kept = (config.get("env") or {}).get("kwargs") or {}
     for name in ("start_lane", "max_episode_steps"):
         if name in unknown:  # a numpy int: "np.int64(3)" (numpy 1: "3")

@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from torchcbl import _jsonfile
+
 __all__ = [
     "CAR_LENGTH_M",
     "EGO_SPEED_MS",
@@ -47,7 +49,9 @@ __all__ = [
     "TRAFFIC_LANES",
     "TRAIN",
     "TrafficScenario",
+    "compared_fields",
     "data_path",
+    "described_fields",
     "get_scenario",
     "held_out_twin",
     "load_scenario",
@@ -104,6 +108,12 @@ def data_path(name: str) -> Path:
         )
         raise FileNotFoundError(f"{path} is missing: the install is damaged; {fix}")
     return path
+
+
+#: a dataclass field whose metadata marks this key False is not compared on resume
+#: (torchcbl.session.COMPARE_ON_RESUME, spelled out: importing it would import torch;
+#: tests/test_resume_checks.py checks the two)
+_COMPARE_ON_RESUME = "torchcbl.compare_on_resume"
 
 
 def _as_int(value: Any) -> int | None:
@@ -169,9 +179,8 @@ class TrafficScenario:
     """
 
     # the name changes nothing the traffic does: a session resumes on the same traffic under
-    # another name (torchcbl.session.COMPARE_ON_RESUME, spelled out: importing it would import
-    # torch; tests/test_resume_checks.py checks the two)
-    name: str = field(metadata={"torchcbl.compare_on_resume": False})
+    # another name
+    name: str = field(metadata={_COMPARE_ON_RESUME: False})
     seed: int
     speed_ranges_mph: tuple[tuple[float, float], ...] = ((20.0, 30.0), (25.0, 35.0), (30.0, 40.0))
     mean_spacing_m: tuple[float, float, float] = (40.0, 31.0, 120.0)
@@ -306,6 +315,28 @@ def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:
         ) from None
 
 
+def compared_fields(settings: Any) -> dict[str, Any]:
+    """The fields of the dataclass ``settings`` (a :class:`TrafficScenario`, a ``SimConfig``)
+    by name, as they are, but those whose metadata marks ``torchcbl.compare_on_resume`` False
+    (a scenario's name, which changes nothing the traffic does): what a resume compares
+    (``torchcbl.session.COMPARE_ON_RESUME``)."""
+    return {
+        f.name: getattr(settings, f.name)
+        for f in fields(settings)
+        if f.metadata.get(_COMPARE_ON_RESUME) is not False
+    }
+
+
+def described_fields(prefix: str, settings: Any) -> dict[str, str | int | float]:
+    """:func:`compared_fields` of ``settings`` as ``DrivingEnv.describe_inputs`` gives them:
+    ``<prefix>.<field>``, a number or str as it is, anything else (a tuple) as its JSON
+    text."""
+    return {
+        f"{prefix}.{name}": value if isinstance(value, int | float | str) else json.dumps(value)
+        for name, value in compared_fields(settings).items()
+    }
+
+
 _JSON_SHAPE = (
     'one JSON object of TrafficScenario fields: "seed" (an int >= 0, required) and any of '
     '"name" (default: the file\'s name less its suffix), "speed_ranges_mph" (a [low, high] per '
@@ -316,26 +347,11 @@ _JSON_SHAPE = (
 """What a scenario file (:func:`load_scenario`) holds, in words."""
 
 
-class _GivenTwice(Exception):
-    """A key written twice in one JSON object of a scenario file."""
-
-
-def _once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    """A JSON object's dict (``json.loads``'s ``object_pairs_hook``); :class:`_GivenTwice` if a
-    key is written twice (JSON would keep the last silently)."""
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise _GivenTwice(key)
-        out[key] = value
-    return out
-
-
 def load_scenario(name_or_path: str | os.PathLike[str]) -> TrafficScenario:
     """A shipped scenario by name (``train``, ``eval``, ``light``), or a :class:`TrafficScenario`
-    made from a JSON file of its fields, by path (a name ending in ``.json`` is a path; so is
-    any other existing file, unless it is a shipped scenario's bare name: ``"light"`` is the
-    shipped scenario, ``"./light"`` the file).
+    made from a JSON file of its fields, by path (a name ending in ``.json``, in any case, is a
+    path; so is any other existing file, unless it is a shipped scenario's bare name:
+    ``"light"`` is the shipped scenario, ``"./light"`` the file).
 
     The file holds one JSON object of the fields: ``seed`` (required) and any of the others,
     lists for tuples, e.g. ``{"seed": 7, "mean_spacing_m": [80, 60, 200]}``; a field left out
@@ -364,23 +380,23 @@ def load_scenario(name_or_path: str | os.PathLike[str]) -> TrafficScenario:
             f"{where} {what}; give an existing JSON file of TrafficScenario fields or a shipped "
             f"scenario's name ({', '.join(sorted(SCENARIOS))})"
         )
-    try:
-        text = path.read_text(encoding="utf-8-sig")  # a BOM (Notepad) is no part of the JSON
-    except UnicodeDecodeError as exc:
-        raise ValueError(
-            f"{where} is not UTF-8 text ({exc.reason} at byte {exc.start}); expected {_JSON_SHAPE}"
-        ) from None
-    except OSError as exc:
-        raise ValueError(f"{where} cannot be read ({exc.strerror or exc})") from None
-    try:
-        data = json.loads(text, object_pairs_hook=_once)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{where} is not valid JSON: {exc}") from None
-    except _GivenTwice as exc:
-        raise ValueError(
-            f"{where}: the key {exc.args[0]!r} is given twice (JSON would keep the last "
-            "silently); give each once"
-        ) from None
+    shipped = f"give a shipped scenario's name ({', '.join(sorted(SCENARIOS))})"
+    text = _jsonfile.read_text(
+        path,
+        not_text=lambda why: f"{where} is not UTF-8 text ({why}); expected {_JSON_SHAPE}",
+        unreadable=lambda why: (
+            f"{where} cannot be read ({why}); give a JSON file of TrafficScenario fields this "
+            "user can read"
+        ),
+    )
+    data = _jsonfile.loads(
+        text,
+        not_json=lambda why: f"{where} is not valid JSON: {why}; fix the file, or {shipped}",
+        given_twice=lambda key: (
+            f"{where}: the key {key!r} is given twice (JSON would keep the last silently); "
+            "give each once"
+        ),
+    )
     if not isinstance(data, dict):
         raise ValueError(f"{where} holds a JSON {type(data).__name__}; expected {_JSON_SHAPE}")
     known = [f.name for f in fields(TrafficScenario)]

@@ -126,8 +126,11 @@ def test_malformed_map_json_is_named(change, message, tmp_path):
     with pytest.raises(ValueError, match=message):
         load_map(path)
     path.write_text(json.dumps(SMALL)[:-1])
-    with pytest.raises(ValueError, match="mine.json' is not valid JSON"):
+    with pytest.raises(ValueError, match="mine.json' is not valid JSON") as caught:
         load_map(path)
+    assert str(caught.value).endswith(
+        f"; fix the file, or give one of the shipped map names {available_maps()}"
+    )
     with pytest.raises(ValueError, match="a map is a JSON object"):
         map_from_dict([SMALL])
 
@@ -963,6 +966,10 @@ def test_prioritized_sweeping_config_rejects_bad_values():
 def test_a_map_file_that_is_not_there_and_a_fractional_step_cap_are_named(tmp_path):
     with pytest.raises(ValueError, match="map file .*missing.json.* not found"):
         load_map(tmp_path / "missing.json")
+    # a .json path whatever its suffix's case: missing, a map file not found (it was an
+    # "unknown map", as if a shipped map's name had been mistyped)
+    with pytest.raises(ValueError, match="map file .*MISSING.JSON.* not found"):
+        load_map(tmp_path / "MISSING.JSON")
     with pytest.raises(ValueError, match="unknown map 'nope'"):
         load_map("nope")
     with pytest.raises(ValueError, match="max_episode_steps must be an int >= 1, got 2.7"):

@@ -4,7 +4,9 @@ session is taught and evaluated on, chosen at the command line (a few SUMO steps
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -135,6 +137,41 @@ def test_teach_driving_refuses_a_scenario_file_it_cannot_take_in_one_line(
     assert not run.exists()
 
 
+def test_a_scenario_file_that_cannot_be_read_or_parsed_says_what_to_do(
+    tmp_path, monkeypatch, capsys
+):
+    """A --scenario file that is not JSON, or that cannot be read (an I/O error), was refused
+    saying only what was wrong ("is not valid JSON: ...", "cannot be read (...)"); each now
+    says what to do, as a map file's does. A missing FILE.JSON, whatever the suffix's case, is
+    a scenario file not found, as a map file's is."""
+    run = tmp_path / "session"
+    argv = ["teach", "driving", "--run-dir", str(run), "--scenario"]
+    path = tmp_path / "traffic.json"
+    path.write_text("{not json")
+    assert main([*argv, str(path)]) == 2
+    shipped = "give a shipped scenario's name (eval, light, train)"
+    _one_line_error(capsys, "is not valid JSON: ", f"; fix the file, or {shipped}")
+    path.write_text('{"seed": 7}')
+    read_text = Path.read_text
+
+    def failing(self, *args, **kwargs):
+        if self == path:
+            raise OSError(errno.EIO, os.strerror(errno.EIO), str(self))
+        return read_text(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "read_text", failing)
+    assert main([*argv, str(path)]) == 2
+    _one_line_error(
+        capsys,
+        f"cannot be read ({os.strerror(errno.EIO)}); ",
+        "give a JSON file of TrafficScenario fields this user can read",
+    )
+    monkeypatch.undo()
+    assert main([*argv, str(tmp_path / "TRAFFIC.JSON")]) == 2
+    _one_line_error(capsys, "scenario file ", "TRAFFIC.JSON' not found")
+    assert not run.exists()
+
+
 def test_scenario_and_map_each_belong_to_their_own_domain(tmp_path, capsys):
     """--scenario is driving's, --map the corridor's: each given to the other domain is one
     line, exit 2, nothing written; an unknown name lists the shipped scenarios."""
@@ -149,7 +186,18 @@ def test_scenario_and_map_each_belong_to_their_own_domain(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["teach", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
-    assert "--scenario NAME|FILE.json" in help_text and '"seed"' in help_text
+    assert "--scenario NAME|FILE.json" in help_text
+    # the help names the one field a file must give and where the others are described, the
+    # README, which names every TrafficScenario field (a copy of the list in the help drifts)
+    assert '"seed" (an int >= 0, required)' in help_text, help_text
+    assert "fields left out take train's values" in help_text, help_text
+    assert "README.md" in help_text and "mean_spacing_m" in help_text, help_text
+    from sumo_scenarios.scenarios import TrafficScenario
+
+    readme = " ".join((Path(__file__).parents[1] / "README.md").read_text().split())
+    described = readme.split("`teach driving --scenario NAME|FILE.json`", 1)[1][:1000]
+    for f in dataclasses.fields(TrafficScenario):
+        assert f'`"{f.name}"`' in described, f.name
 
 
 def test_evaluate_drives_a_driving_session_on_the_traffic_given(tmp_path, driving_person, capsys):
@@ -179,7 +227,7 @@ def test_evaluate_drives_a_driving_session_on_the_traffic_given(tmp_path, drivin
         max_steps=2
     ).close()
     assert main(["evaluate", str(corridor), "--scenario", "light"]) == 2
-    _one_line_error(capsys, "--scenario applies only to a driving session")
+    _one_line_error(capsys, "--scenario applies only to a driving session", "leave --scenario out")
 
 
 def test_teach_resume_compares_scenario_with_a_driving_config_sessions_traffic(

@@ -1210,6 +1210,12 @@ def test_a_session_keeps_each_frozen_dataclass_make_argument_rebuildably(tmp_pat
     again, unknown = env_make_arguments(config, builders)
     assert again == {"reach": reach, "layout": _Layout(reach, "mine")}
     assert list(unknown) == ["loose"] and "loose given as an object" in unknown["loose"]
+    # render_mode (drawing only: each caller picks its own) is left out unless asked for
+    config["env"]["kwargs"]["render_mode"] = "human"
+    assert env_make_arguments(config, builders) == (again, unknown)
+    with_mode, _ = env_make_arguments(config, builders, skip=())
+    assert with_mode == {**again, "render_mode": "human"}
+    assert "reach" not in env_make_arguments(config, builders, skip=("reach",))[0]
     ConfidentTeacher.resume(
         run, gym.make(_REACH_ID, **made), lambda o, i: 1, progress=False
     ).close()

@@ -83,6 +83,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from torchcbl._checkpoints import DEFAULT_KEEP_CHECKPOINTS, is_keep_count
 from torchcbl._durable import write_durably
 from torchcbl._text import one_line
 from torchcbl.evaluation import figure_style, mean_sd, run_versions, save_whole, worker_pool
@@ -113,10 +114,6 @@ with a press still pending or lost, and presses nothing where the learner does w
 format 2 a pending or lost press counted as a correction to the default action, and format 3,
 a day's intermediate, still drew presses, and so doubled ones, where the learner agreed. 5: a
 cell's attention holds ``wrong_autonomous_rate`` and ``auditor_disagreement``)."""
-
-#: ``ConfidentTeacher``'s default ``keep_checkpoints``
-#: (``torchcbl.teaching.DEFAULT_KEEP_CHECKPOINTS``, not imported: this module imports no torch)
-_KEEP_CHECKPOINTS = 3
 
 #: short strategy names -> import path of the class.
 STRATEGY_PATHS: dict[str, str] = {
@@ -654,7 +651,7 @@ def run_cell(
     config: Mapping[str, Any],
     *,
     run_dir: str | os.PathLike[str] | None = None,
-    keep_checkpoints: int | None = _KEEP_CHECKPOINTS,
+    keep_checkpoints: int | None = DEFAULT_KEEP_CHECKPOINTS,
 ) -> dict[str, Any]:
     """Run one cell (see the module docstring) and return its JSON result.
 
@@ -693,7 +690,7 @@ def run_cell(
 def _run_cell(
     config: Mapping[str, Any],
     run_dir: str | os.PathLike[str] | None = None,
-    keep_checkpoints: int | None = _KEEP_CHECKPOINTS,
+    keep_checkpoints: int | None = DEFAULT_KEEP_CHECKPOINTS,
 ) -> dict[str, Any]:
     import random
 
@@ -852,7 +849,7 @@ def _run_cell(
 def _run_cell_in_worker(
     config: Mapping[str, Any],
     run_dir: str | None = None,
-    keep_checkpoints: int | None = _KEEP_CHECKPOINTS,
+    keep_checkpoints: int | None = DEFAULT_KEEP_CHECKPOINTS,
 ) -> dict[str, Any]:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     if run_dir is not None:  # (on a Ray node of its own, what the sweep's host could not see)
@@ -1005,7 +1002,7 @@ def _execute(
     out: Path,
     sessions: Path | None = None,
     cached: int = 0,
-    keep_checkpoints: int | None = _KEEP_CHECKPOINTS,
+    keep_checkpoints: int | None = DEFAULT_KEEP_CHECKPOINTS,
 ) -> None:
     """Run the cells of ``todo`` and hand each result to ``done`` as it comes; the first cell
     that raises stops the sweep with a :class:`CellError` naming it (any other cell that
@@ -1117,7 +1114,7 @@ def run_benchmark(
     plots: bool = True,
     on_cell: Callable[[dict[str, Any], bool], None] | None = None,
     keep_sessions: bool = False,
-    keep_checkpoints: int | None = _KEEP_CHECKPOINTS,
+    keep_checkpoints: int | None = DEFAULT_KEEP_CHECKPOINTS,
 ) -> dict[str, Any]:
     """Run (or resume) a sweep and write ``results.json`` and the plots into ``out_dir``.
 
@@ -1190,7 +1187,7 @@ def run_benchmark(
         isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
     ):
         raise ValueError(f"workers must be None (os.cpu_count()) or an int >= 1, got {workers!r}")
-    if keep_checkpoints is not None and (not _is_int(keep_checkpoints) or keep_checkpoints < 1):
+    if keep_checkpoints is not None and not is_keep_count(keep_checkpoints):
         raise ValueError(
             "run_benchmark: keep_checkpoints: expected None (keep every checkpoint) or an int "
             f">= 1 (the newest checkpoints each kept session keeps), got {keep_checkpoints!r}"

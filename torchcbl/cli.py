@@ -34,6 +34,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from torchcbl._checkpoints import DEFAULT_KEEP_CHECKPOINTS, is_keep_count
 from torchcbl._text import one_line as _one_line
 
 _DOMAINS = {
@@ -177,7 +178,7 @@ def _keep_checkpoints(text: str) -> int | str:
         value = int(text)
     except ValueError:
         value = 0
-    if value < 1:
+    if not is_keep_count(value):
         raise argparse.ArgumentTypeError(
             "expected a whole number >= 1 (the newest checkpoints kept, besides checkpoint 0) "
             f"or all (every one), got {text!r}"
@@ -577,7 +578,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         if domain != "driving":
             raise _UsageError(
                 f"--scenario applies only to a driving session; {session} is a {domain} "
-                "session (it is driven on the map it was taught on)"
+                "session (it is driven on the map it was taught on): leave --scenario out"
             )
         traffic = {"scenario": _scenario_option(args.scenario)}
     try:
@@ -945,16 +946,6 @@ def _scenario_option(text: str) -> Any:
     return text if text in SCENARIOS else scenario
 
 
-def _traffic_fields(scenario: Any) -> dict[str, Any]:
-    """A ``TrafficScenario``'s fields but those marked as changing nothing the traffic does
-    (its name), as resume compares them."""
-    return {
-        f.name: getattr(scenario, f.name)
-        for f in dataclasses.fields(scenario)
-        if f.metadata.get("torchcbl.compare_on_resume", True) is not False
-    }
-
-
 def _check_session_traffic(
     run_dir: Path, session_kwargs: dict[str, Any], text: str, given: Any
 ) -> None:
@@ -963,7 +954,7 @@ def _check_session_traffic(
     was given for it, ``session_kwargs``: its scenario, its DrivingConfig's, else the
     default); its name aside, which changes nothing the traffic does."""
     from sumo_scenarios.env import DrivingConfig
-    from sumo_scenarios.scenarios import get_scenario
+    from sumo_scenarios.scenarios import compared_fields, get_scenario
 
     config = session_kwargs.get("config")
     kept = (
@@ -975,7 +966,7 @@ def _check_session_traffic(
         own = get_scenario(kept)
     except ValueError as exc:  # a name this version does not ship
         raise _UsageError(f"{run_dir}: its traffic cannot be made ({_one_line(exc)})") from None
-    mine, theirs = _traffic_fields(get_scenario(given)), _traffic_fields(own)
+    mine, theirs = compared_fields(get_scenario(given)), compared_fields(own)
     differ = [f"{k} {mine[k]} (the session's: {theirs[k]})" for k in mine if mine[k] != theirs[k]]
     if differ:
         raise _UsageError(
@@ -1087,7 +1078,6 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     from torchcbl.benchmark import _import
     from torchcbl.errors import SessionWriteError
     from torchcbl.teaching import (
-        DEFAULT_KEEP_CHECKPOINTS,
         ConfidentTeacher,
         TeachingConfig,
         TeachingInterrupted,
@@ -1641,7 +1631,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
                 ray_address=args.ray_address,
                 on_cell=on_cell,
                 keep_sessions=args.keep_sessions,
-                keep_checkpoints=_kept(args.keep_checkpoints, bm._KEEP_CHECKPOINTS),
+                keep_checkpoints=_kept(args.keep_checkpoints, DEFAULT_KEEP_CHECKPOINTS),
             )
     except (RuntimeError, ValueError, ImportError) as exc:
         raise _UsageError(_missing_dependency(exc) or str(exc) + _cwd_hint(exc)) from None
@@ -1997,13 +1987,11 @@ def _parser() -> argparse.ArgumentParser:
         metavar="NAME|FILE.json",
         help="driving: the traffic, a shipped scenario's name (train, the default and the "
         "reproduction's; eval, its held-out twin; light) or a JSON file of TrafficScenario "
-        'fields, one object: "seed" (an int >= 0, required) and any of "name" (default: the '
-        'file\'s name), "speed_ranges_mph" (a [low, high] per normal lane, right, middle, '
-        'left, within 20-40), "mean_spacing_m" (metres, one per normal lane), '
-        '"min_spacing_m", "ahead_m", "behind_m", "start_clear_m" (those left out: train\'s), '
-        'e.g. {"seed": 7, "mean_spacing_m": [80, 60, 200]}. The session keeps it whole, so '
-        "--resume (no --scenario needed; another one is refused), evaluate and replay drive "
-        "the same traffic",
+        'fields, one object with "seed" (an int >= 0, required), e.g. {"seed": 7, '
+        '"mean_spacing_m": [80, 60, 200]}; fields left out take train\'s values (the fields: '
+        "README.md, teach driving --scenario). The session keeps it whole, so --resume (no "
+        "--scenario needed; another one is refused), evaluate and replay drive the same "
+        "traffic",
     )
     p.add_argument(
         "--keep-checkpoints",
@@ -2011,9 +1999,9 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N|all",
         help="keep the newest N checkpoints (one is written per refit; checkpoint 0 is always "
-        "kept) or all of them (default 3; with --resume what the session kept). An earlier "
-        "stage's model is rebuilt from the log by torchcbl.load_model(run_dir, "
-        "n_demonstrations=k)",
+        f"kept) or all of them (default {DEFAULT_KEEP_CHECKPOINTS}; with --resume what the "
+        "session kept). An earlier stage's model is rebuilt from the log by "
+        "torchcbl.load_model(run_dir, n_demonstrations=k)",
     )
     p.set_defaults(func=_cmd_teach)
 
@@ -2095,8 +2083,8 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N|all",
         help="with --keep-sessions: each session keeps its newest N checkpoints (and checkpoint "
-        "0) or all of them (default 3), as torchcbl teach --keep-checkpoints; not part of a "
-        "cell's key, the figures are the same either way",
+        f"0) or all of them (default {DEFAULT_KEEP_CHECKPOINTS}), as torchcbl teach "
+        "--keep-checkpoints; not part of a cell's key, the figures are the same either way",
     )
     p.add_argument(
         "--driving-teacher",

@@ -190,7 +190,7 @@ import threading
 import time
 import warnings
 import zlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar, overload
@@ -198,6 +198,7 @@ from typing import TYPE_CHECKING, Any, TypeVar, overload
 import numpy as np
 import torch
 
+from torchcbl._checkpoints import is_keep_count
 from torchcbl._durable import fsync_directory, write_durably
 from torchcbl.errors import (
     CorruptSessionError,
@@ -1078,16 +1079,22 @@ def env_make_argument(
 
 
 def env_make_arguments(
-    config: Mapping[str, Any], builders: Mapping[str, Callable[..., Any]]
+    config: Mapping[str, Any],
+    builders: Mapping[str, Callable[..., Any]],
+    *,
+    skip: Collection[str] = ("render_mode",),
 ) -> tuple[dict[str, Any], dict[str, str]]:
-    """Every argument ``gymnasium.make`` was given for a session's env, as
-    :func:`env_make_argument` makes each again, and why each of those it cannot make cannot
+    """Every argument ``gymnasium.make`` was given for a session's env but those in ``skip``,
+    as :func:`env_make_argument` makes each again, and why each of those it cannot make cannot
     be made: what a domain's evaluate, replay and ``torchcbl teach --resume`` make the
     session's env again with.
 
     Args:
         config: the session's config (:func:`load_config`).
         builders: ``"module:QualName"`` -> the class to make (see :func:`env_make_argument`).
+        skip: arguments left out of both (neither made nor reported): by default
+            ``render_mode``, which only draws (resume compares it neither) and which each
+            caller chooses itself; ``()`` for every one.
 
     Returns:
         ``(made, unknown)``: ``made`` maps each argument made again to its value (a plain
@@ -1097,6 +1104,8 @@ def env_make_arguments(
     made: dict[str, Any] = {}
     unknown: dict[str, str] = {}
     for name in (config.get("env") or {}).get("kwargs") or {}:
+        if name in skip:
+            continue
         try:
             made[name] = env_make_argument(config, name, builders)
         except ValueError as exc:
@@ -3751,7 +3760,7 @@ class SessionSummary:
             "every one)" if keep is None else f"the newest {keep}, besides 0 and hand refits)"
         )
         kept = [w.get("keep_checkpoints") for w in self.writers]
-        kept = [k for k in kept if isinstance(k, int) and not isinstance(k, bool) and k > 0]
+        kept = [k for k in kept if is_keep_count(k)]
         if kept and sum(1 for n in on_disk if n > 0) >= min(kept):  # some may be gone
             text += "; earlier stages: load_model(run_dir, n_demonstrations=k) rebuilds one " + (
                 "from the log (replaying the refits before it)"
@@ -3837,7 +3846,7 @@ def kept_checkpoints(run_dir: str | os.PathLike[str]) -> int | None:
 def _kept_by(writers: list[dict[str, Any]]) -> int | None:
     """:func:`kept_checkpoints` of the records of ``writers.jsonl``."""
     keep = writers[-1].get("keep_checkpoints") if writers else None
-    if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
+    if not is_keep_count(keep):
         return None
     return keep
 

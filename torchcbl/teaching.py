@@ -55,6 +55,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from torchcbl._checkpoints import DEFAULT_KEEP_CHECKPOINTS, is_keep_count
 from torchcbl._signatures import refuse_unless_a_teacher
 from torchcbl.confidence import _np, rule_to_config
 from torchcbl.errors import (
@@ -570,12 +571,8 @@ def _check_commit_every(commit_every: Any) -> None:
         raise ValueError(f"commit_every: expected an int >= 1, got {commit_every!r}")
 
 
-#: checkpoints a session keeps besides checkpoint 0 (``ConfidentTeacher(keep_checkpoints=)``)
-DEFAULT_KEEP_CHECKPOINTS = 3
-
-
 def _check_keep_checkpoints(keep: Any, *, resume: bool = False) -> None:
-    if keep is not None and (not _is_int(keep) or keep < 1):
+    if keep is not None and not is_keep_count(keep):
         raise ValueError(
             "keep_checkpoints: expected None (keep every checkpoint)"
             + (', "as_before" (as the session\'s last writer),' if resume else "")
