@@ -179,6 +179,7 @@ import fcntl
 import hashlib
 import io
 import json
+import keyword
 import os
 import re
 import signal
@@ -1102,6 +1103,124 @@ def env_make_arguments(
         except ValueError as exc:
             unknown[name] = str(exc)
     return made, unknown
+
+
+#: the most characters of one object argument a refusal writes out as its constructor call
+#: (a TrafficScenario takes about 200, a CorridorMap about 1,000); a longer one (a table of
+#: thousands of numbers) is named by the env_make_argument call that makes it again
+_CALL_CHARS = 2_000
+#: where the text :func:`_call_source` writes may be wrapped (after each ", " of a call,
+#: tuple or dict): a space on one line, a line break in ``torchcbl show``
+_BREAK = "\0"
+
+
+def _call_source(form: Any, imports: dict[str, set[str]]) -> str:
+    """Python source making again what :func:`_object_form` kept as ``form``, as
+    :func:`env_make_argument` makes it: a kept object as its class's constructor call with its
+    kept fields as keywords (``TrafficScenario(name='rushhour', seed=11, ...)``; nested objects
+    alike, a field that is no Python name in a ``**{...}``), a JSON array as a tuple, a JSON
+    object as a dict, anything else as its repr. The name each class is imported by is added
+    to ``imports`` (module -> names); ``_BREAK`` follows each separating ", "."""
+    sep = "," + _BREAK
+    if _is_kept_object(form):
+        module, _, qualname = form["class"].rpartition(":")
+        if module:
+            imports.setdefault(module, set()).add(qualname.split(".")[0])
+        args = [
+            f"{k}={_call_source(v, imports)}"
+            for k, v in form["fields"].items()
+            if k.isidentifier() and not keyword.iskeyword(k)
+        ]
+        odd = {
+            k: v
+            for k, v in form["fields"].items()
+            if not (k.isidentifier() and not keyword.iskeyword(k))
+        }
+        if odd:
+            args.append("**" + _call_source(odd, imports))
+        return f"{qualname}({sep.join(args)})"
+    if isinstance(form, list):  # rebuilt as a tuple
+        items = [_call_source(v, imports) for v in form]
+        return "(" + sep.join(items) + ("," if len(items) == 1 else "") + ")"
+    if isinstance(form, dict):
+        return "{" + sep.join(f"{k!r}: {_call_source(v, imports)}" for k, v in form.items()) + "}"
+    return repr(form)
+
+
+def _kept_text(value: Mapping[str, Any]) -> str:
+    """The text of an argument kept only as ``{"repr": text}``, ending with "..." where it may
+    have been cut (a session keeps at most 200 characters of it)."""
+    text = str(value["repr"])
+    return text if len(text) < 200 or text.endswith("...") else text + "..."
+
+
+def _make_arguments_source(
+    kwargs: Mapping[str, Any], objects: Mapping[str, Any], *, limit: int
+) -> tuple[list[str], list[str]]:
+    """How to pass again the ``gymnasium.make`` arguments a session keeps (``kwargs``,
+    config.json's ``env.kwargs``; ``objects``, its ``env.kwargs_objects``) as Python source:
+    ``(arguments, notes)``. Each argument is ``name=source``: a plain value as its repr, an
+    object kept whole as its constructor call (:func:`_call_source`), or, where that is longer
+    than ``limit`` characters, as the :func:`env_make_argument` call that makes it from the
+    session's config (``load_config(run_dir)``); an object kept only as text as
+    ``<text>``, which no call makes again. Arguments that are no Python name come last, in one
+    ``**{...}``. ``notes``: what a reader needs besides (why an argument is not written out)
+    and, last, the imports of the classes the source names, ``from module import A, B``."""
+    imports: dict[str, set[str]] = {}
+    notes: list[str] = []
+    named: list[str] = []
+    odd: list[str] = []
+    for name, value in kwargs.items():
+        form = objects.get(name)
+        if kept_as_repr(value) and _is_kept_object(form):
+            mine: dict[str, set[str]] = {}
+            source = _call_source(form, mine)
+            written = len(source.replace(_BREAK, " "))
+            if written > limit:
+                classes = sorted(_kept_classes(form, set()))
+                builders = ", ".join(f"{c!r}: {c.rpartition(':')[2]}" for c in classes)
+                source = f"env_make_argument(load_config(run_dir), {name!r}, {{{builders}}})"
+                mine = {"torchcbl.session": {"env_make_argument", "load_config"}}
+                for c in classes:
+                    module, _, qualname = c.rpartition(":")
+                    if module:
+                        mine.setdefault(module, set()).add(qualname.split(".")[0])
+                notes.append(
+                    f"{name} is too long to print ({written} characters written out): "
+                    "env_make_argument makes it from the session's config"
+                )
+            for module, names in mine.items():
+                imports.setdefault(module, set()).update(names)
+        elif kept_as_repr(value):
+            source = f"<{_kept_text(value)}>"
+            notes.append(
+                f"{name} was given as an object the session keeps only as this text: make it "
+                "as it was"
+            )
+        else:
+            source = repr(value)
+        if name.isidentifier() and not keyword.iskeyword(name):
+            named.append(f"{name}={source}")
+        else:
+            odd.append(f"{name!r}: {source}")
+    if odd:
+        named.append("**{" + ("," + _BREAK).join(odd) + "}")
+    notes += [f"from {m} import {', '.join(sorted(imports[m]))}" for m in sorted(imports)]
+    return named, notes
+
+
+def _kept_classes(form: Any, found: set[str]) -> set[str]:
+    """``found`` with the class (``"module:QualName"``) of each kept object in ``form``."""
+    if _is_kept_object(form):
+        found.add(form["class"])
+        _kept_classes(form["fields"], found)
+    elif isinstance(form, dict):
+        for v in form.values():
+            _kept_classes(v, found)
+    elif isinstance(form, list):
+        for v in form:
+            _kept_classes(v, found)
+    return found
 
 
 # The SIGINT hook the holds install (main thread) and leave in place: outside a hold it hands
@@ -4300,11 +4419,7 @@ def resume_problems(
             "give it the inputs as they were"
         )
         if not env_lines:  # (other traffic given as a name against an object, say)
-            whole = senv.get("kwargs_objects") or {}
-            kept_objects = any(
-                kept_as_repr(v) and k in whole for k, v in (senv.get("kwargs") or {}).items()
-            )
-            line += "; " + _how_to_make(senv, objects=kept_objects)
+            line += "; " + _how_to_make(senv)
         problems.append(line)
     if learning is not None and learning[0] != learning[1]:
         diff = {
@@ -4405,14 +4520,14 @@ def _env_problems(
         differ.append(f"env kwargs (stored, given): {kw_differ}")
     if not differ:
         return []
-    return ["; ".join(differ) + f"; {_how_to_make(senv, objects=bool(objects))}"]
+    return ["; ".join(differ) + f"; {_how_to_make(senv)}"]
 
 
-def _how_to_make(senv: Mapping[str, Any], *, objects: bool) -> str:
+def _how_to_make(senv: Mapping[str, Any]) -> str:
     """How to make the session's env (``senv``, config.json's ``"env"``), as a refusal ends:
-    the ``gymnasium.make`` call with the arguments and step cap it keeps (``objects``: some
-    are objects, to take from ``env.kwargs_objects``), or for an env made directly its class
-    and step cap."""
+    the ``gymnasium.make`` call with the arguments and step cap it keeps, each object kept
+    whole written as its constructor call, with the imports it needs
+    (:func:`_make_arguments_source`), or for an env made directly its class and step cap."""
     stored_kw = senv.get("kwargs") or {}
     kept_class = senv.get("class")
     has_cap = "max_episode_steps" in senv
@@ -4421,14 +4536,15 @@ def _how_to_make(senv: Mapping[str, Any], *, objects: bool) -> str:
         capped = ""
         if has_cap:  # None: no TimeLimit, which -1 gives where the id registers one
             capped = f", max_episode_steps={-1 if want is None else want}"
-        how = "make the env as the session did, "
-        how += f"gymnasium.make({senv['id']!r}{capped}, **{stored_kw})"
-        if objects:
-            how += (
-                " with each object as its config.json keeps it in env.kwargs_objects "
-                "(torchcbl.session.env_make_argument makes it again)"
-            )
-        return how
+        objects = senv.get("kwargs_objects")
+        args, notes = _make_arguments_source(
+            stored_kw if isinstance(stored_kw, dict) else {},
+            objects if isinstance(objects, dict) else {},
+            limit=_CALL_CHARS,
+        )
+        call = "".join(f", {a}" for a in args).replace(_BREAK, " ")
+        how = f"make the env as the session did, gymnasium.make({senv['id']!r}{capped}{call})"
+        return how + (f" ({'; '.join(notes)})" if notes else "")
     how = "give the env the session was taught in"
     if kept_class:
         how += f", a {kept_class.rsplit('.', 1)[-1]} ({kept_class}) made as it was"
