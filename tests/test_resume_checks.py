@@ -494,6 +494,10 @@ def test_a_kept_traffic_name_this_version_does_not_ship_is_refused_in_one_line(t
 
 # -- 1d. how a refusal says to make the session's env ----------------------------------------
 
+CAPPED_ID = "torchcbl_tests/ResumeWalkCapped-v0"
+if CAPPED_ID not in gym.registry:
+    gym.register(CAPPED_ID, entry_point=Walk, max_episode_steps=50)
+
 
 def _compiles(text: str) -> bool:
     try:
@@ -530,9 +534,35 @@ def test_a_refusal_writes_the_sessions_objects_as_a_call_one_can_run(tmp_path):
     assert "from test_resume_checks import Course, Start" in msg, msg
     assert "course=Course(" in msg and "start=Start(cell=3)" in msg, msg
     assert "render_mode='human'" in msg, msg
+    # neither the session nor the id has a step cap: none is given
+    assert "max_episode_steps" not in msg[msg.index("gymnasium.make(") :], msg
     env = _advised(msg)
     assert env.spec.kwargs == {"course": course, "render_mode": "human"}
     _resumes(run, env)
+
+
+def test_a_refusal_gives_the_step_cap_as_gymnasium_make_takes_it(tmp_path, monkeypatch):
+    """A session without a step cap was advised max_episode_steps=-1 whatever its id: needless
+    for an id that registers no cap (torchcbl/Driving-v0), and before gymnasium 1.0 a
+    TimeLimit of -1 steps (every step truncated). -1 is now given only where the id registers
+    a cap, saying it needs gymnasium 1.0 where the one installed is older; a cap is given as
+    it was."""
+    run = tmp_path / "run"
+    _teach(run, gym.make(CAPPED_ID, course=Course(Start(3)), max_episode_steps=-1))
+    assert load_config(run)["env"]["max_episode_steps"] is None
+    other = gym.make(CAPPED_ID, course=Course(Start(4)))
+    msg = _refused(run, other, "start.cell", "'max_episode_steps': (None, 50)")
+    assert f"gymnasium.make('{CAPPED_ID}', max_episode_steps=-1, course=" in msg, msg
+    assert "gymnasium 1.0" not in msg, msg
+    _resumes(run, _advised(msg))
+    monkeypatch.setattr(gym, "__version__", "0.29.1")
+    msg = _refused(run, other, "max_episode_steps=-1")
+    assert "gymnasium 1.0" in msg and "0.29.1" in msg, msg
+    monkeypatch.undo()
+    capped = tmp_path / "capped"
+    _teach(capped, gym.make(CAPPED_ID, course=Course(Start(3)), max_episode_steps=20))
+    msg = _refused(capped, other, f"gymnasium.make('{CAPPED_ID}', max_episode_steps=20, course=")
+    _resumes(capped, _advised(msg))
 
 
 def test_a_refusal_names_the_call_that_makes_an_object_too_long_to_print(tmp_path):
@@ -566,7 +596,7 @@ def test_a_driving_refusal_says_how_to_make_the_env_on_the_sessions_own_traffic(
         msg = _refused(run, env, "'scenario.seed': (11, 12)")
     advice = msg[msg.index("gymnasium.make(") :]
     assert "from sumo_scenarios.scenarios import TrafficScenario" in msg, msg
-    assert "start_clear_m=30.0" in advice, msg
+    assert "start_clear_m=30.0" in advice and "max_episode_steps" not in advice, msg
     env = _advised(msg)
     try:
         assert env.spec.kwargs == {"scenario": rush}

@@ -4533,15 +4533,14 @@ def _how_to_make(senv: Mapping[str, Any]) -> str:
     has_cap = "max_episode_steps" in senv
     want = senv.get("max_episode_steps")
     if senv.get("id"):
-        capped = ""
-        if has_cap:  # None: no TimeLimit, which -1 gives where the id registers one
-            capped = f", max_episode_steps={-1 if want is None else want}"
+        capped, cap_notes = _cap_argument(senv["id"], want) if has_cap else ("", [])
         objects = senv.get("kwargs_objects")
         args, notes = _make_arguments_source(
             stored_kw if isinstance(stored_kw, dict) else {},
             objects if isinstance(objects, dict) else {},
             limit=_CALL_CHARS,
         )
+        notes = cap_notes + notes
         call = "".join(f", {a}" for a in args).replace(_BREAK, " ")
         how = f"make the env as the session did, gymnasium.make({senv['id']!r}{capped}{call})"
         return how + (f" ({'; '.join(notes)})" if notes else "")
@@ -4553,6 +4552,29 @@ def _how_to_make(senv: Mapping[str, Any]) -> str:
     elif has_cap:
         how += ", without a TimeLimit (the session's env had no step cap)"
     return how
+
+
+def _cap_argument(env_id: str, want: int | None) -> tuple[str, list[str]]:
+    """The ``max_episode_steps`` argument (``", max_episode_steps=n"``, or ``""``) that makes
+    ``gymnasium.make(env_id, ...)`` give the session's step cap ``want`` (None: no cap), and a
+    note where the installed gymnasium cannot: ``want`` where it is one; for no cap, nothing
+    where the id registers none here (torchcbl/Driving-v0), else -1, which leaves gymnasium's
+    TimeLimit off from gymnasium 1.0 on (before, it made a TimeLimit of -1 steps)."""
+    import gymnasium
+
+    if want is not None:
+        return f", max_episode_steps={want}", []
+    spec = gymnasium.envs.registration.registry.get(env_id)
+    if spec is not None and spec.max_episode_steps is None:
+        return "", []
+    version = str(getattr(gymnasium, "__version__", ""))
+    major = version.split(".", 1)[0]
+    if major.isdigit() and int(major) < 1:
+        return ", max_episode_steps=-1", [
+            f"max_episode_steps=-1 leaves the TimeLimit off from gymnasium 1.0 on; gymnasium "
+            f"{version} is installed: upgrade it"
+        ]
+    return ", max_episode_steps=-1", []
 
 
 #: numpy's default print options: a Box's bounds are written with these, whatever a
