@@ -1056,7 +1056,7 @@ def env_make_argument(
     value = kwargs[name]
     if not kept_as_repr(value):
         return value
-    text = str(value["repr"])
+    text = _kept_text(value)
     form = (env.get("kwargs_objects") or {}).get(name)
     if not _is_kept_object(form):
         raise ValueError(
@@ -1147,6 +1147,26 @@ def _call_source(form: Any, imports: dict[str, set[str]]) -> str:
     return repr(form)
 
 
+#: ``torchcbl show``'s width for an env's arguments, and the most characters of one argument
+#: it writes out (a longer one: the env_make_argument call that makes it; --json gives it whole)
+_SHOW_WIDTH = 100
+_SHOW_CALL_CHARS = 6_000
+
+
+def _wrapped(source: str, first: str, rest: str, width: int) -> list[str]:
+    """``source`` (:func:`_call_source`'s text) in lines of at most ``width`` characters where
+    it can be (a str longer than a line is not cut), broken only where ``_BREAK`` marks, the
+    first line after ``first``, the others after ``rest``."""
+    chunks = source.split(_BREAK)
+    lines = [first + chunks[0]]
+    for chunk in chunks[1:]:
+        if len(lines[-1]) + 1 + len(chunk) <= width:
+            lines[-1] += " " + chunk
+        else:
+            lines.append(rest + chunk)
+    return lines
+
+
 def _kept_text(value: Mapping[str, Any]) -> str:
     """The text of an argument kept only as ``{"repr": text}``, ending with "..." where it may
     have been cut (a session keeps at most 200 characters of it)."""
@@ -1154,25 +1174,41 @@ def _kept_text(value: Mapping[str, Any]) -> str:
     return text if len(text) < 200 or text.endswith("...") else text + "..."
 
 
-def _make_arguments_source(
-    kwargs: Mapping[str, Any], objects: Mapping[str, Any], *, limit: int
-) -> tuple[list[str], list[str]]:
-    """How to pass again the ``gymnasium.make`` arguments a session keeps (``kwargs``,
-    config.json's ``env.kwargs``; ``objects``, its ``env.kwargs_objects``) as Python source:
-    ``(arguments, notes)``. Each argument is ``name=source``: a plain value as its repr, an
-    object kept whole as its constructor call (:func:`_call_source`), or, where that is longer
-    than ``limit`` characters, as the :func:`env_make_argument` call that makes it from the
-    session's config (``load_config(run_dir)``); an object kept only as text as
-    ``<text>``, which no call makes again. Arguments that are no Python name come last, in one
-    ``**{...}``. ``notes``: what a reader needs besides (why an argument is not written out)
-    and, last, the imports of the classes the source names, ``from module import A, B``."""
+def _kept_arguments(senv: Mapping[str, Any]) -> dict[str, Any]:
+    """Each ``gymnasium.make`` argument a session keeps (``senv``, config.json's ``"env"``),
+    as whole as it keeps it: an object kept whole as its kept form (``{"class": ..., "fields":
+    ...}``, from ``env.kwargs_objects``), one kept only as text as ``{"repr": text}``, the text
+    ending with "..." where it may have been cut (:func:`_kept_text`), a plain value as it is."""
+    kwargs = senv.get("kwargs")
+    objects = senv.get("kwargs_objects")
+    objects = objects if isinstance(objects, dict) else {}
+    kept: dict[str, Any] = {}
+    for name, value in (kwargs if isinstance(kwargs, dict) else {}).items():
+        if kept_as_repr(value) and _is_kept_object(objects.get(name)):
+            kept[name] = objects[name]
+        elif kept_as_repr(value):
+            kept[name] = {"repr": _kept_text(value)}
+        else:
+            kept[name] = value
+    return kept
+
+
+def _make_arguments_source(kept: Mapping[str, Any], *, limit: int) -> tuple[list[str], list[str]]:
+    """How to pass again the ``gymnasium.make`` arguments a session keeps (``kept``, as
+    :func:`_kept_arguments` gives them) as Python source: ``(arguments, notes)``. Each argument
+    is ``name=source``: a plain value as its repr, an object kept whole as its constructor call
+    (:func:`_call_source`), or, where that is longer than ``limit`` characters, as the
+    :func:`env_make_argument` call that makes it from the session's config
+    (``load_config(run_dir)``); an object kept only as text as ``<text>``, which no call makes
+    again. Arguments that are no Python name come last, in one ``**{...}``. ``notes``: what a
+    reader needs besides (why an argument is not written out) and, last, the imports of the
+    classes the source names, ``from module import A, B``."""
     imports: dict[str, set[str]] = {}
     notes: list[str] = []
     named: list[str] = []
     odd: list[str] = []
-    for name, value in kwargs.items():
-        form = objects.get(name)
-        if kept_as_repr(value) and _is_kept_object(form):
+    for name, form in kept.items():
+        if _is_kept_object(form):
             mine: dict[str, set[str]] = {}
             source = _call_source(form, mine)
             written = len(source.replace(_BREAK, " "))
@@ -1191,14 +1227,14 @@ def _make_arguments_source(
                 )
             for module, names in mine.items():
                 imports.setdefault(module, set()).update(names)
-        elif kept_as_repr(value):
-            source = f"<{_kept_text(value)}>"
+        elif kept_as_repr(form):
+            source = f"<{form['repr']}>"
             notes.append(
                 f"{name} was given as an object the session keeps only as this text: make it "
                 "as it was"
             )
         else:
-            source = repr(value)
+            source = repr(form)
         if name.isidentifier() and not keyword.iskeyword(name):
             named.append(f"{name}={source}")
         else:
@@ -3656,7 +3692,13 @@ class SessionSummary:
         run_dir: the session directory, as given.
         format: the log format, ``"torchcbl.session/1"`` .. ``"/3"``.
         env_id: the gymnasium id the env was made with (None: made directly).
-        env_kwargs: what ``gymnasium.make`` was given ({} when none).
+        env_kwargs: what ``gymnasium.make`` was given ({} when none), each argument as whole
+            as the session keeps it: a plain value as it is; an object kept whole (a frozen
+            dataclass, since 2026-11-27) as its kept fields, ``{"class": "module:QualName",
+            "fields": {...}}`` (config.json's ``env.kwargs_objects``, which
+            :func:`env_make_argument` makes again); one kept only as text as ``{"repr":
+            text}``, the text ending with "..." where it may have been cut (a session keeps 200
+            characters of it).
         n_features, n_actions: the observation's size D and the number of actions A.
         seed: the session seed.
         strategy: the strategy's config as stored (``"type"``, its arguments, ``"relabel"``,
@@ -3774,11 +3816,16 @@ class SessionSummary:
         lines = [f"{self.run_dir}: teaching session ({self.format}), {self._state_text()}"]
         env = f"{self.env_id or 'made directly (no gymnasium id)'}, "
         env += f"{self.n_features} features, {self.n_actions} actions"
-        if self.env_kwargs:
-            env += f", kwargs {json.dumps(self.env_kwargs, sort_keys=True)}"
         start = ", started from a fitted model" if self.starts_fitted else ""
+        lines.append(f"env:        {env}")
+        if self.env_kwargs:  # as the Python that passes them again, each object written out
+            args, notes = _make_arguments_source(self.env_kwargs, limit=_SHOW_CALL_CHARS)
+            for i, arg in enumerate(args):
+                comma = "," if i < len(args) - 1 else ""
+                label = "kwargs:     " if i == 0 else " " * 12
+                lines += _wrapped(arg + comma, label, " " * 14, _SHOW_WIDTH)
+            lines += [f"            ({note})" for note in notes]
         lines += [
-            f"env:        {env}",
             f"strategy:   {_config_text(self.strategy)}",
             f"model:      {self.model_class}({_args_text(self.model_args)}){start}",
             f"seed:       {self.seed}",
@@ -4159,7 +4206,7 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         run_dir=str(run_dir),
         format=str(config["format"]),
         env_id=config["env"].get("id"),
-        env_kwargs=dict(config["env"].get("kwargs") or {}),
+        env_kwargs=_kept_arguments(config["env"]),
         n_features=int(config["env"]["n_features"]),
         n_actions=int(config["env"]["n_actions"]),
         seed=int(config["seed"]),
@@ -4528,18 +4575,12 @@ def _how_to_make(senv: Mapping[str, Any]) -> str:
     the ``gymnasium.make`` call with the arguments and step cap it keeps, each object kept
     whole written as its constructor call, with the imports it needs
     (:func:`_make_arguments_source`), or for an env made directly its class and step cap."""
-    stored_kw = senv.get("kwargs") or {}
     kept_class = senv.get("class")
     has_cap = "max_episode_steps" in senv
     want = senv.get("max_episode_steps")
     if senv.get("id"):
         capped, cap_notes = _cap_argument(senv["id"], want) if has_cap else ("", [])
-        objects = senv.get("kwargs_objects")
-        args, notes = _make_arguments_source(
-            stored_kw if isinstance(stored_kw, dict) else {},
-            objects if isinstance(objects, dict) else {},
-            limit=_CALL_CHARS,
-        )
+        args, notes = _make_arguments_source(_kept_arguments(senv), limit=_CALL_CHARS)
         notes = cap_notes + notes
         call = "".join(f", {a}" for a in args).replace(_BREAK, " ")
         how = f"make the env as the session did, gymnasium.make({senv['id']!r}{capped}{call})"
