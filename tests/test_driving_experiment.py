@@ -563,10 +563,11 @@ def test_a_refusal_for_other_traffic_says_how_to_make_the_sessions_env(tmp_path)
         return gym.make(sumo_scenarios.ENV_ID, max_episode_steps=10, scenario=scenario)
 
     msg = refusal(make("train"), make(LIGHT))
-    made = "gymnasium.make('torchcbl/Driving-v0', max_episode_steps=10, **{'scenario': 'train'})"
+    made = "gymnasium.make('torchcbl/Driving-v0', max_episode_steps=10, scenario='train')"
     assert "'traffic.seed': (1, 3)" in msg and made in msg, msg
     msg = refusal(make(dataclasses.replace(TRAIN, seed=99)), make("train"))
-    assert "'traffic.seed': (99, 1)" in msg and "env.kwargs_objects" in msg, msg
+    assert "'traffic.seed': (99, 1)" in msg and "scenario=TrafficScenario(" in msg, msg
+    assert "seed=99" in msg and "from sumo_scenarios.scenarios import TrafficScenario" in msg, msg
     msg = refusal(DrivingEnv(scenario=LIGHT), DrivingEnv())
     assert "a DrivingEnv (sumo_scenarios.env.DrivingEnv) made as it was" in msg, msg
 

@@ -8,6 +8,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import re
 import sqlite3
 import threading
 from collections.abc import Callable
@@ -163,7 +164,7 @@ def test_a_session_made_with_arguments_refuses_an_env_whose_arguments_cannot_be_
         run,
         gym.wrappers.TimeLimit(Line(n=12), 30),
         "'n': 12",
-        f"gymnasium.make('{LINE_ID}', max_episode_steps=30, **{{'n': 12}})",
+        f"gymnasium.make('{LINE_ID}', max_episode_steps=30, n=12)",
     )
     _resumes(run, gym.make(LINE_ID, n=12, max_episode_steps=30))
 
@@ -489,6 +490,119 @@ def test_a_kept_traffic_name_this_version_does_not_ship_is_refused_in_one_line(t
     with _driving(config=DrivingConfig(scenario=LIGHT)) as env:
         msg = _refused(run, env, "'config.scenario': ('nowhere', ")
     assert "\n" not in msg, msg
+
+
+# -- 1d. how a refusal says to make the session's env ----------------------------------------
+
+CAPPED_ID = "torchcbl_tests/ResumeWalkCapped-v0"
+if CAPPED_ID not in gym.registry:
+    gym.register(CAPPED_ID, entry_point=Walk, max_episode_steps=50)
+
+
+def _compiles(text: str) -> bool:
+    try:
+        compile(text, "<advice>", "eval")
+    except SyntaxError:
+        return False
+    return True
+
+
+def _advised(msg: str, **names: Any) -> gym.Env:
+    """The env a refusal's advice makes: its ``gymnasium.make(...)`` call, run as Python after
+    the imports the advice names (``from M import C, D``), with ``names`` (run_dir) in scope."""
+    start = msg.index("gymnasium.make(")
+    ends = [k + 1 for k in range(start, len(msg)) if msg[k] == ")"]
+    call = next(msg[start:end] for end in ends if _compiles(msg[start:end]))
+    scope: dict[str, Any] = {"gymnasium": gym, **names}
+    for module, classes in re.findall(r"from ([\w.]+) import (\w+(?:, \w+)*)", msg):
+        exec(f"from {module} import {classes}", scope)
+    return eval(call, scope)
+
+
+def test_a_refusal_writes_the_sessions_objects_as_a_call_one_can_run(tmp_path):
+    """A refusal ended "gymnasium.make('id', max_episode_steps=-1, **{'course': {'repr':
+    'Course(...'}}) with each object as its config.json keeps it in env.kwargs_objects": the
+    object as a text cut at 200 characters, not a call one can run. An object the session
+    keeps whole is now written as its constructor call from the kept fields (nested objects
+    alike), with the import of each class once; that call makes an env the session resumes
+    with."""
+    run = tmp_path / "run"
+    course = Course(Start(3), slip=0.25, label="mine")
+    _teach(run, gym.make(WALK_ID, course=course, render_mode="human"))
+    msg = _refused(run, gym.make(WALK_ID, course=Course(Start(4))), "start.cell")
+    assert "\n" not in msg and "'repr'" not in msg and "kwargs_objects" not in msg, msg
+    assert "from test_resume_checks import Course, Start" in msg, msg
+    assert "course=Course(" in msg and "start=Start(cell=3)" in msg, msg
+    assert "render_mode='human'" in msg, msg
+    # neither the session nor the id has a step cap: none is given
+    assert "max_episode_steps" not in msg[msg.index("gymnasium.make(") :], msg
+    env = _advised(msg)
+    assert env.spec.kwargs == {"course": course, "render_mode": "human"}
+    _resumes(run, env)
+
+
+def test_a_refusal_gives_the_step_cap_as_gymnasium_make_takes_it(tmp_path, monkeypatch):
+    """A session without a step cap was advised max_episode_steps=-1 whatever its id: needless
+    for an id that registers no cap (torchcbl/Driving-v0), and before gymnasium 1.0 a
+    TimeLimit of -1 steps (every step truncated). -1 is now given only where the id registers
+    a cap, saying it needs gymnasium 1.0 where the one installed is older; a cap is given as
+    it was."""
+    run = tmp_path / "run"
+    _teach(run, gym.make(CAPPED_ID, course=Course(Start(3)), max_episode_steps=-1))
+    assert load_config(run)["env"]["max_episode_steps"] is None
+    other = gym.make(CAPPED_ID, course=Course(Start(4)))
+    msg = _refused(run, other, "start.cell", "'max_episode_steps': (None, 50)")
+    assert f"gymnasium.make('{CAPPED_ID}', max_episode_steps=-1, course=" in msg, msg
+    assert "gymnasium 1.0" not in msg, msg
+    _resumes(run, _advised(msg))
+    monkeypatch.setattr(gym, "__version__", "0.29.1")
+    msg = _refused(run, other, "max_episode_steps=-1")
+    assert "gymnasium 1.0" in msg and "0.29.1" in msg, msg
+    monkeypatch.undo()
+    capped = tmp_path / "capped"
+    _teach(capped, gym.make(CAPPED_ID, course=Course(Start(3)), max_episode_steps=20))
+    msg = _refused(capped, other, f"gymnasium.make('{CAPPED_ID}', max_episode_steps=20, course=")
+    _resumes(capped, _advised(msg))
+
+
+def test_a_refusal_names_the_call_that_makes_an_object_too_long_to_print(tmp_path):
+    """An object of thousands of values is not written out in a one-line refusal: the advice
+    says it is too long to print and gives the env_make_argument call that makes it from the
+    session's config, which makes an env the session resumes with."""
+    many = tuple(range(5000))
+    run = tmp_path / "run"
+    _teach(run, gym.make(ANYTHING_ID, settings=Settings(many)))
+    given = gym.make(ANYTHING_ID, settings=Settings((*many[:-1], 0)))
+    msg = _refused(run, given, "'settings.value[4999]': (4999, 0)", "too long to print")
+    assert len(msg) < 3000 and "\n" not in msg, msg
+    assert "from torchcbl.session import env_make_argument, load_config" in msg, msg
+    env = _advised(msg, run_dir=run)
+    assert env.spec.kwargs["settings"] == Settings(many)
+    _resumes(run, env)
+
+
+def test_a_driving_refusal_says_how_to_make_the_env_on_the_sessions_own_traffic(tmp_path):
+    """A session taught on traffic of one's own (gymnasium.make(Driving-v0, scenario=
+    TrafficScenario(...))) resumed on other traffic was advised gymnasium.make(...,
+    max_episode_steps=-1, **{'scenario': {'repr': "TrafficScenario(...start_clear"}}): the
+    scenario is now written out whole, and the call resumes the session."""
+    from sumo_scenarios.scenarios import TrafficScenario
+
+    rush = TrafficScenario(name="rushhour", seed=11, mean_spacing_m=(50, 40, 120))
+    run = tmp_path / "run"
+    with _driving(scenario=rush) as env:
+        _teach(run, env)
+    with _driving(scenario=dataclasses.replace(rush, seed=12)) as env:
+        msg = _refused(run, env, "'scenario.seed': (11, 12)")
+    advice = msg[msg.index("gymnasium.make(") :]
+    assert "from sumo_scenarios.scenarios import TrafficScenario" in msg, msg
+    assert "start_clear_m=30.0" in advice and "max_episode_steps" not in advice, msg
+    env = _advised(msg)
+    try:
+        assert env.spec.kwargs == {"scenario": rush}
+        _resumes(run, env)
+    finally:
+        env.close()
 
 
 # -- 2. a refused resume touches no file ------------------------------------------------------

@@ -1267,3 +1267,6 @@ def test_a_make_argument_the_kept_form_cannot_hold_as_it_is_stays_text_only(tmp_
     for name in made:
         with pytest.raises(ValueError, match=f"{name} given as an object"):
             env_make_argument(config, name, {f"{__name__}:_Odd": _Odd})
+    # the text kept is cut at 200 characters: the message says it may be cut
+    with pytest.raises(ValueError, match=r"table given as an object \(_Odd\(.{150,}\.\.\.\), "):
+        env_make_argument(config, "table", {f"{__name__}:_Odd": _Odd})

@@ -858,3 +858,88 @@ def test_show_says_which_checkpoints_are_kept_and_how_an_earlier_stage_is_rebuil
     ct.close()
     text = describe(full).text()
     assert "keep_checkpoints=None (every one); " + hint in text, text
+
+
+def _kwargs_shown(out: str) -> tuple[dict, str]:
+    """The ``gymnasium.make`` arguments `torchcbl show` prints (its ``kwargs:`` lines, run as
+    the Python they write after the imports they name), and those lines."""
+    import re
+
+    lines = out.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("kwargs:     "))
+    block = [lines[start][12:]]
+    for line in lines[start + 1 :]:
+        if not line.startswith(" " * 12):
+            break
+        block.append(line[12:])
+    text = "\n".join(block)
+    source = "\n".join(line for line in block if not line.startswith("("))
+    scope: dict = {}
+    for module, classes in re.findall(r"from ([\w.]+) import (\w+(?:, \w+)*)", text):
+        exec(f"from {module} import {classes}", scope)
+    return eval(f"dict({source})", scope), text
+
+
+def test_show_prints_an_object_the_session_keeps_whole_in_full(tmp_path, capsys):
+    """`torchcbl show` printed an object given to gymnasium.make (a CorridorMap of one's own)
+    as the text config.json keeps beside it, cut at 200 characters with no ellipsis, and
+    --json alike, as if that were the whole object. An object kept whole is now printed as
+    its constructor call from the kept fields, wrapped, with its imports, and --json gives
+    the kept fields; where only the text was kept (a session written before 2026-11-27), a
+    cut text ends with "..."."""
+    import dataclasses
+
+    import corridor
+    from corridor.maps import load_map
+    from corridor.world import WorldConfig
+
+    mine = dataclasses.replace(load_map("figure2"), name="mine", start_offset=0.3)
+    robot = WorldConfig.legged_robot()
+    run = tmp_path / "runs" / "mine"
+    env = gym.make(corridor.ENV_ID, corridor_map=mine, world_config=robot)
+    ConfidentTeacher(env, lambda o, i: 0, run_dir=run, progress=False).run(max_steps=2).close()
+    config = load_config(run)
+    assert len(config["env"]["kwargs"]["corridor_map"]["repr"]) == 200  # the text is cut
+    assert main(["show", str(run)]) == 0
+    shown, text = _kwargs_shown(capsys.readouterr().out)
+    assert shown == {"corridor_map": mine, "world_config": robot}, text
+    assert "from corridor.maps import CorridorMap" in text, text
+    assert max(len(line) for line in text.splitlines() if "description=" not in line) <= 100
+    kept = config["env"]["kwargs_objects"]
+    assert main(["show", str(run), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["env_kwargs"] == kept
+    assert describe(run).env_kwargs["corridor_map"]["fields"]["description"] == mine.description
+    assert main(["show", str(tmp_path / "runs"), "--json"]) == 0
+    (entry,) = json.loads(capsys.readouterr().out)["sessions"]
+    assert entry["env_kwargs"] == kept
+    # as a session written before the objects were kept: the text, said to be cut
+    del config["env"]["kwargs_objects"]
+    (run / "config.json").write_text(json.dumps(config))
+    cut = config["env"]["kwargs"]["corridor_map"]["repr"] + "..."
+    assert main(["show", str(run)]) == 0
+    out = capsys.readouterr().out
+    assert f"corridor_map=<{cut}>" in out and "keeps only as this text" in out, out
+    assert main(["show", str(run), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["env_kwargs"]["corridor_map"] == {"repr": cut}
+
+
+def test_show_prints_traffic_of_ones_own_in_full(tmp_path, capsys):
+    """A driving session on a TrafficScenario of one's own: show printed the scenario cut
+    before its last field; it now prints every field, as a call that makes it again."""
+    import sumo_scenarios
+    from sumo_scenarios.scenarios import TrafficScenario
+
+    rush = TrafficScenario(name="rushhour", seed=11, mean_spacing_m=(50, 40, 120))
+    run = tmp_path / "run"
+    env = gym.make(sumo_scenarios.ENV_ID, scenario=rush)
+    try:
+        ConfidentTeacher(env, lambda o, i: 1, run_dir=run, progress=False).run(max_steps=3).close()
+    finally:
+        env.close()
+    assert main(["show", str(run)]) == 0
+    shown, text = _kwargs_shown(capsys.readouterr().out)
+    assert shown == {"scenario": rush} and "start_clear_m=30.0" in text, text
+    assert "from sumo_scenarios.scenarios import TrafficScenario" in text, text
+    assert main(["show", str(run), "--json"]) == 0
+    fields = json.loads(capsys.readouterr().out)["env_kwargs"]["scenario"]["fields"]
+    assert fields["start_clear_m"] == 30.0 and fields["mean_spacing_m"] == [50.0, 40.0, 120.0]

@@ -179,6 +179,7 @@ import fcntl
 import hashlib
 import io
 import json
+import keyword
 import os
 import re
 import signal
@@ -1056,7 +1057,7 @@ def env_make_argument(
     value = kwargs[name]
     if not kept_as_repr(value):
         return value
-    text = str(value["repr"])
+    text = _kept_text(value)
     form = (env.get("kwargs_objects") or {}).get(name)
     if not _is_kept_object(form):
         raise ValueError(
@@ -1111,6 +1112,160 @@ def env_make_arguments(
         except ValueError as exc:
             unknown[name] = str(exc)
     return made, unknown
+
+
+#: the most characters of one object argument a refusal writes out as its constructor call
+#: (a TrafficScenario takes about 200, a CorridorMap about 1,000); a longer one (a table of
+#: thousands of numbers) is named by the env_make_argument call that makes it again
+_CALL_CHARS = 2_000
+#: where the text :func:`_call_source` writes may be wrapped (after each ", " of a call,
+#: tuple or dict): a space on one line, a line break in ``torchcbl show``
+_BREAK = "\0"
+
+
+def _call_source(form: Any, imports: dict[str, set[str]]) -> str:
+    """Python source making again what :func:`_object_form` kept as ``form``, as
+    :func:`env_make_argument` makes it: a kept object as its class's constructor call with its
+    kept fields as keywords (``TrafficScenario(name='rushhour', seed=11, ...)``; nested objects
+    alike, a field that is no Python name in a ``**{...}``), a JSON array as a tuple, a JSON
+    object as a dict, anything else as its repr. The name each class is imported by is added
+    to ``imports`` (module -> names); ``_BREAK`` follows each separating ", "."""
+    sep = "," + _BREAK
+    if _is_kept_object(form):
+        module, _, qualname = form["class"].rpartition(":")
+        if module:
+            imports.setdefault(module, set()).add(qualname.split(".")[0])
+        args = [
+            f"{k}={_call_source(v, imports)}"
+            for k, v in form["fields"].items()
+            if k.isidentifier() and not keyword.iskeyword(k)
+        ]
+        odd = {
+            k: v
+            for k, v in form["fields"].items()
+            if not (k.isidentifier() and not keyword.iskeyword(k))
+        }
+        if odd:
+            args.append("**" + _call_source(odd, imports))
+        return f"{qualname}({sep.join(args)})"
+    if isinstance(form, list):  # rebuilt as a tuple
+        items = [_call_source(v, imports) for v in form]
+        return "(" + sep.join(items) + ("," if len(items) == 1 else "") + ")"
+    if isinstance(form, dict):
+        return "{" + sep.join(f"{k!r}: {_call_source(v, imports)}" for k, v in form.items()) + "}"
+    return repr(form)
+
+
+#: ``torchcbl show``'s width for an env's arguments, and the most characters of one argument
+#: it writes out (a longer one: the env_make_argument call that makes it; --json gives it whole)
+_SHOW_WIDTH = 100
+_SHOW_CALL_CHARS = 6_000
+
+
+def _wrapped(source: str, first: str, rest: str, width: int) -> list[str]:
+    """``source`` (:func:`_call_source`'s text) in lines of at most ``width`` characters where
+    it can be (a str longer than a line is not cut), broken only where ``_BREAK`` marks, the
+    first line after ``first``, the others after ``rest``."""
+    chunks = source.split(_BREAK)
+    lines = [first + chunks[0]]
+    for chunk in chunks[1:]:
+        if len(lines[-1]) + 1 + len(chunk) <= width:
+            lines[-1] += " " + chunk
+        else:
+            lines.append(rest + chunk)
+    return lines
+
+
+def _kept_text(value: Mapping[str, Any]) -> str:
+    """The text of an argument kept only as ``{"repr": text}``, ending with "..." where it may
+    have been cut (a session keeps at most 200 characters of it)."""
+    text = str(value["repr"])
+    return text if len(text) < 200 or text.endswith("...") else text + "..."
+
+
+def _kept_arguments(senv: Mapping[str, Any]) -> dict[str, Any]:
+    """Each ``gymnasium.make`` argument a session keeps (``senv``, config.json's ``"env"``),
+    as whole as it keeps it: an object kept whole as its kept form (``{"class": ..., "fields":
+    ...}``, from ``env.kwargs_objects``), one kept only as text as ``{"repr": text}``, the text
+    ending with "..." where it may have been cut (:func:`_kept_text`), a plain value as it is."""
+    kwargs = senv.get("kwargs")
+    objects = senv.get("kwargs_objects")
+    objects = objects if isinstance(objects, dict) else {}
+    kept: dict[str, Any] = {}
+    for name, value in (kwargs if isinstance(kwargs, dict) else {}).items():
+        if kept_as_repr(value) and _is_kept_object(objects.get(name)):
+            kept[name] = objects[name]
+        elif kept_as_repr(value):
+            kept[name] = {"repr": _kept_text(value)}
+        else:
+            kept[name] = value
+    return kept
+
+
+def _make_arguments_source(kept: Mapping[str, Any], *, limit: int) -> tuple[list[str], list[str]]:
+    """How to pass again the ``gymnasium.make`` arguments a session keeps (``kept``, as
+    :func:`_kept_arguments` gives them) as Python source: ``(arguments, notes)``. Each argument
+    is ``name=source``: a plain value as its repr, an object kept whole as its constructor call
+    (:func:`_call_source`), or, where that is longer than ``limit`` characters, as the
+    :func:`env_make_argument` call that makes it from the session's config
+    (``load_config(run_dir)``); an object kept only as text as ``<text>``, which no call makes
+    again. Arguments that are no Python name come last, in one ``**{...}``. ``notes``: what a
+    reader needs besides (why an argument is not written out) and, last, the imports of the
+    classes the source names, ``from module import A, B``."""
+    imports: dict[str, set[str]] = {}
+    notes: list[str] = []
+    named: list[str] = []
+    odd: list[str] = []
+    for name, form in kept.items():
+        if _is_kept_object(form):
+            mine: dict[str, set[str]] = {}
+            source = _call_source(form, mine)
+            written = len(source.replace(_BREAK, " "))
+            if written > limit:
+                classes = sorted(_kept_classes(form, set()))
+                builders = ", ".join(f"{c!r}: {c.rpartition(':')[2]}" for c in classes)
+                source = f"env_make_argument(load_config(run_dir), {name!r}, {{{builders}}})"
+                mine = {"torchcbl.session": {"env_make_argument", "load_config"}}
+                for c in classes:
+                    module, _, qualname = c.rpartition(":")
+                    if module:
+                        mine.setdefault(module, set()).add(qualname.split(".")[0])
+                notes.append(
+                    f"{name} is too long to print ({written} characters written out): "
+                    "env_make_argument makes it from the session's config"
+                )
+            for module, names in mine.items():
+                imports.setdefault(module, set()).update(names)
+        elif kept_as_repr(form):
+            source = f"<{form['repr']}>"
+            notes.append(
+                f"{name} was given as an object the session keeps only as this text: make it "
+                "as it was"
+            )
+        else:
+            source = repr(form)
+        if name.isidentifier() and not keyword.iskeyword(name):
+            named.append(f"{name}={source}")
+        else:
+            odd.append(f"{name!r}: {source}")
+    if odd:
+        named.append("**{" + ("," + _BREAK).join(odd) + "}")
+    notes += [f"from {m} import {', '.join(sorted(imports[m]))}" for m in sorted(imports)]
+    return named, notes
+
+
+def _kept_classes(form: Any, found: set[str]) -> set[str]:
+    """``found`` with the class (``"module:QualName"``) of each kept object in ``form``."""
+    if _is_kept_object(form):
+        found.add(form["class"])
+        _kept_classes(form["fields"], found)
+    elif isinstance(form, dict):
+        for v in form.values():
+            _kept_classes(v, found)
+    elif isinstance(form, list):
+        for v in form:
+            _kept_classes(v, found)
+    return found
 
 
 # The SIGINT hook the holds install (main thread) and leave in place: outside a hold it hands
@@ -3546,7 +3701,13 @@ class SessionSummary:
         run_dir: the session directory, as given.
         format: the log format, ``"torchcbl.session/1"`` .. ``"/3"``.
         env_id: the gymnasium id the env was made with (None: made directly).
-        env_kwargs: what ``gymnasium.make`` was given ({} when none).
+        env_kwargs: what ``gymnasium.make`` was given ({} when none), each argument as whole
+            as the session keeps it: a plain value as it is; an object kept whole (a frozen
+            dataclass, since 2026-11-27) as its kept fields, ``{"class": "module:QualName",
+            "fields": {...}}`` (config.json's ``env.kwargs_objects``, which
+            :func:`env_make_argument` makes again); one kept only as text as ``{"repr":
+            text}``, the text ending with "..." where it may have been cut (a session keeps 200
+            characters of it).
         n_features, n_actions: the observation's size D and the number of actions A.
         seed: the session seed.
         strategy: the strategy's config as stored (``"type"``, its arguments, ``"relabel"``,
@@ -3664,11 +3825,16 @@ class SessionSummary:
         lines = [f"{self.run_dir}: teaching session ({self.format}), {self._state_text()}"]
         env = f"{self.env_id or 'made directly (no gymnasium id)'}, "
         env += f"{self.n_features} features, {self.n_actions} actions"
-        if self.env_kwargs:
-            env += f", kwargs {json.dumps(self.env_kwargs, sort_keys=True)}"
         start = ", started from a fitted model" if self.starts_fitted else ""
+        lines.append(f"env:        {env}")
+        if self.env_kwargs:  # as the Python that passes them again, each object written out
+            args, notes = _make_arguments_source(self.env_kwargs, limit=_SHOW_CALL_CHARS)
+            for i, arg in enumerate(args):
+                comma = "," if i < len(args) - 1 else ""
+                label = "kwargs:     " if i == 0 else " " * 12
+                lines += _wrapped(arg + comma, label, " " * 14, _SHOW_WIDTH)
+            lines += [f"            ({note})" for note in notes]
         lines += [
-            f"env:        {env}",
             f"strategy:   {_config_text(self.strategy)}",
             f"model:      {self.model_class}({_args_text(self.model_args)}){start}",
             f"seed:       {self.seed}",
@@ -4049,7 +4215,7 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         run_dir=str(run_dir),
         format=str(config["format"]),
         env_id=config["env"].get("id"),
-        env_kwargs=dict(config["env"].get("kwargs") or {}),
+        env_kwargs=_kept_arguments(config["env"]),
         n_features=int(config["env"]["n_features"]),
         n_actions=int(config["env"]["n_actions"]),
         seed=int(config["seed"]),
@@ -4309,11 +4475,7 @@ def resume_problems(
             "give it the inputs as they were"
         )
         if not env_lines:  # (other traffic given as a name against an object, say)
-            whole = senv.get("kwargs_objects") or {}
-            kept_objects = any(
-                kept_as_repr(v) and k in whole for k, v in (senv.get("kwargs") or {}).items()
-            )
-            line += "; " + _how_to_make(senv, objects=kept_objects)
+            line += "; " + _how_to_make(senv)
         problems.append(line)
     if learning is not None and learning[0] != learning[1]:
         diff = {
@@ -4414,30 +4576,24 @@ def _env_problems(
         differ.append(f"env kwargs (stored, given): {kw_differ}")
     if not differ:
         return []
-    return ["; ".join(differ) + f"; {_how_to_make(senv, objects=bool(objects))}"]
+    return ["; ".join(differ) + f"; {_how_to_make(senv)}"]
 
 
-def _how_to_make(senv: Mapping[str, Any], *, objects: bool) -> str:
+def _how_to_make(senv: Mapping[str, Any]) -> str:
     """How to make the session's env (``senv``, config.json's ``"env"``), as a refusal ends:
-    the ``gymnasium.make`` call with the arguments and step cap it keeps (``objects``: some
-    are objects, to take from ``env.kwargs_objects``), or for an env made directly its class
-    and step cap."""
-    stored_kw = senv.get("kwargs") or {}
+    the ``gymnasium.make`` call with the arguments and step cap it keeps, each object kept
+    whole written as its constructor call, with the imports it needs
+    (:func:`_make_arguments_source`), or for an env made directly its class and step cap."""
     kept_class = senv.get("class")
     has_cap = "max_episode_steps" in senv
     want = senv.get("max_episode_steps")
     if senv.get("id"):
-        capped = ""
-        if has_cap:  # None: no TimeLimit, which -1 gives where the id registers one
-            capped = f", max_episode_steps={-1 if want is None else want}"
-        how = "make the env as the session did, "
-        how += f"gymnasium.make({senv['id']!r}{capped}, **{stored_kw})"
-        if objects:
-            how += (
-                " with each object as its config.json keeps it in env.kwargs_objects "
-                "(torchcbl.session.env_make_argument makes it again)"
-            )
-        return how
+        capped, cap_notes = _cap_argument(senv["id"], want) if has_cap else ("", [])
+        args, notes = _make_arguments_source(_kept_arguments(senv), limit=_CALL_CHARS)
+        notes = cap_notes + notes
+        call = "".join(f", {a}" for a in args).replace(_BREAK, " ")
+        how = f"make the env as the session did, gymnasium.make({senv['id']!r}{capped}{call})"
+        return how + (f" ({'; '.join(notes)})" if notes else "")
     how = "give the env the session was taught in"
     if kept_class:
         how += f", a {kept_class.rsplit('.', 1)[-1]} ({kept_class}) made as it was"
@@ -4446,6 +4602,29 @@ def _how_to_make(senv: Mapping[str, Any], *, objects: bool) -> str:
     elif has_cap:
         how += ", without a TimeLimit (the session's env had no step cap)"
     return how
+
+
+def _cap_argument(env_id: str, want: int | None) -> tuple[str, list[str]]:
+    """The ``max_episode_steps`` argument (``", max_episode_steps=n"``, or ``""``) that makes
+    ``gymnasium.make(env_id, ...)`` give the session's step cap ``want`` (None: no cap), and a
+    note where the installed gymnasium cannot: ``want`` where it is one; for no cap, nothing
+    where the id registers none here (torchcbl/Driving-v0), else -1, which leaves gymnasium's
+    TimeLimit off from gymnasium 1.0 on (before, it made a TimeLimit of -1 steps)."""
+    import gymnasium
+
+    if want is not None:
+        return f", max_episode_steps={want}", []
+    spec = gymnasium.envs.registration.registry.get(env_id)
+    if spec is not None and spec.max_episode_steps is None:
+        return "", []
+    version = str(getattr(gymnasium, "__version__", ""))
+    major = version.split(".", 1)[0]
+    if major.isdigit() and int(major) < 1:
+        return ", max_episode_steps=-1", [
+            f"max_episode_steps=-1 leaves the TimeLimit off from gymnasium 1.0 on; gymnasium "
+            f"{version} is installed: upgrade it"
+        ]
+    return ", max_episode_steps=-1", []
 
 
 #: numpy's default print options: a Box's bounds are written with these, whatever a
