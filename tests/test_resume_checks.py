@@ -541,6 +541,29 @@ def test_a_refusal_writes_the_sessions_objects_as_a_call_one_can_run(tmp_path):
     _resumes(run, env)
 
 
+def test_a_refusal_names_a_class_made_in_a_function_as_one_can_write_it(tmp_path):
+    """A settings class defined inside a function (a test, a notebook cell's helper) was
+    written as "f.<locals>.Cfg(...)" with "from M import f": advice that is a SyntaxError.
+    It is now written by its own name, with a note that it must be in scope; with that class
+    in scope, the call makes an env the session resumes with."""
+
+    def settings():
+        @dataclasses.dataclass(frozen=True)
+        class MyCourse:
+            start: Start = Start(3)
+
+        return MyCourse
+
+    mine = settings()
+    run = tmp_path / "run"
+    _teach(run, gym.make(WALK_ID, course=mine(Start(3))))
+    msg = _refused(run, gym.make(WALK_ID, course=mine(Start(4))), "start.cell")
+    call = msg[msg.index("gymnasium.make(") :]
+    assert "<locals>" not in call[: call.index("))") + 2], msg
+    assert "course=MyCourse(start=Start(cell=3))" in msg and "in scope" in msg, msg
+    _resumes(run, _advised(msg, MyCourse=mine))
+
+
 def test_a_refusal_gives_the_step_cap_as_gymnasium_make_takes_it(tmp_path, monkeypatch):
     """A session without a step cap was advised max_episode_steps=-1 whatever its id: needless
     for an id that registers no cap (torchcbl/Driving-v0), and before gymnasium 1.0 a

@@ -1123,6 +1123,23 @@ _CALL_CHARS = 2_000
 _BREAK = "\0"
 
 
+#: the ``imports`` key under which :func:`_importable_name` notes classes made in a function
+_LOCAL_CLASSES = "<locals>"
+
+
+def _importable_name(module: str, qualname: str, imports: dict[str, set[str]]) -> str:
+    """The name a call writes for the class ``module:qualname``, its import added to
+    ``imports``; a class defined inside a function (``f.<locals>.Cfg``), which no import
+    reaches, by its own name, noted under :data:`_LOCAL_CLASSES` for the reader to have it in
+    scope."""
+    if "<locals>" in qualname:
+        imports.setdefault(_LOCAL_CLASSES, set()).add(f"{module}:{qualname}")
+        return qualname.rpartition(".")[2]
+    if module:
+        imports.setdefault(module, set()).add(qualname.split(".")[0])
+    return qualname
+
+
 def _call_source(form: Any, imports: dict[str, set[str]]) -> str:
     """Python source making again what :func:`_object_form` kept as ``form``, as
     :func:`env_make_argument` makes it: a kept object as its class's constructor call with its
@@ -1133,8 +1150,7 @@ def _call_source(form: Any, imports: dict[str, set[str]]) -> str:
     sep = "," + _BREAK
     if _is_kept_object(form):
         module, _, qualname = form["class"].rpartition(":")
-        if module:
-            imports.setdefault(module, set()).add(qualname.split(".")[0])
+        qualname = _importable_name(module, qualname, imports)
         args = [
             f"{k}={_call_source(v, imports)}"
             for k, v in form["fields"].items()
@@ -1223,13 +1239,11 @@ def _make_arguments_source(kept: Mapping[str, Any], *, limit: int) -> tuple[list
             written = len(source.replace(_BREAK, " "))
             if written > limit:
                 classes = sorted(_kept_classes(form, set()))
-                builders = ", ".join(f"{c!r}: {c.rpartition(':')[2]}" for c in classes)
-                source = f"env_make_argument(load_config(run_dir), {name!r}, {{{builders}}})"
                 mine = {"torchcbl.session": {"env_make_argument", "load_config"}}
-                for c in classes:
-                    module, _, qualname = c.rpartition(":")
-                    if module:
-                        mine.setdefault(module, set()).add(qualname.split(".")[0])
+                builders = ", ".join(
+                    f"{c!r}: {_importable_name(*c.rpartition(':')[::2], mine)}" for c in classes
+                )
+                source = f"env_make_argument(load_config(run_dir), {name!r}, {{{builders}}})"
                 notes.append(
                     f"{name} is too long to print ({written} characters written out): "
                     "env_make_argument makes it from the session's config"
@@ -1250,6 +1264,12 @@ def _make_arguments_source(kept: Mapping[str, Any], *, limit: int) -> tuple[list
             odd.append(f"{name!r}: {source}")
     if odd:
         named.append("**{" + ("," + _BREAK).join(odd) + "}")
+    local = sorted(imports.pop(_LOCAL_CLASSES, set()))
+    notes += [
+        f"{c.rpartition('.')[2]} is {c.replace(':', '.')}, a class defined inside a function: "
+        "the call needs that class in scope under this name"
+        for c in local
+    ]
     notes += [f"from {m} import {', '.join(sorted(imports[m]))}" for m in sorted(imports)]
     return named, notes
 
