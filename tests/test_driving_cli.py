@@ -322,3 +322,36 @@ def test_held_out_twin_is_eval_for_train_and_the_next_base_seed_otherwise():
     assert held_out_twin(mine) == dataclasses.replace(mine, name="mine-held-out", seed=8)
     with pytest.raises(ValueError, match="unknown scenario 'atlantis'"):
         held_out_twin("atlantis")
+
+
+def test_a_segment_driven_on_the_taught_base_seed_and_episode_seed_is_not_held_out(
+    tmp_path, driving_person, capsys
+):
+    """A segment's random stream is SeedSequence([base seed, episode seed]), whatever the other
+    fields: traffic that differs from the taught one only in a spacing or a speed range, driven
+    on a segment the session drove, reuses the taught road's draws (a speed range 1 mph off
+    puts every car where it was). `held_out` said True there, judging by every field; it is
+    now False, with the one-line warning. Another segment, or another base seed (the twin), is
+    held out."""
+    taught = tmp_path / "taught.json"
+    taught.write_text(json.dumps({"seed": 7}))
+    run = tmp_path / "session"
+    argv = ["teach", "driving", "--run-dir", str(run), "--steps", "10", "--seed", "3"]
+    assert main([*argv, "--scenario", str(taught)]) == 0, capsys.readouterr().err
+    assert {r.info["episode_seed"] for r in load_records(run)} == {3}
+    edited = tmp_path / "edited.json"
+    evaluate = ["evaluate", str(run), "--steps", "5", "--scenario", str(edited)]
+    for fields in ({"min_spacing_m": 15}, {"speed_ranges_mph": [[21, 31], [25, 35], [30, 40]]}):
+        edited.write_text(json.dumps({"seed": 7, **fields}))
+        capsys.readouterr()
+        assert main([*evaluate, "--seed", "3"]) == 0
+        out, err = capsys.readouterr()
+        assert json.loads(out)["held_out"] is False, (fields, out)
+        assert err.count("\n") == 1 and "not held out" in err and "episode 0" in err, err
+        assert main([*evaluate, "--seed", "4"]) == 0
+        out, err = capsys.readouterr()
+        assert json.loads(out)["held_out"] is True and err == "", (fields, err)
+    edited.write_text(json.dumps({"seed": 8, "min_spacing_m": 15}))
+    assert main([*evaluate, "--seed", "3"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["held_out"] is True and err == "", err
