@@ -1254,7 +1254,7 @@ def evaluate_saved_policy(
     n_steps: int = 1000,
     seed: int | None = None,
     sim: SimConfig | None = None,
-    scenario: str | TrafficScenario | None = None,
+    scenario: str | os.PathLike[str] | TrafficScenario | None = None,
 ) -> dict[str, Any]:
     """Drive the latest model of a driving teaching session (e.g. ``torchcbl teach driving``)
     greedily for ``n_steps`` timesteps on road it was not taught on: by default segment
@@ -1281,12 +1281,14 @@ def evaluate_saved_policy(
     ValueError unless ``scenario`` or ``sim`` is passed here (and a ``DrivingConfig``'s start
     lane is not known: the middle lane is driven). An env made without ``gymnasium.make``
     keeps nothing in the session: the defaults are driven (``eval``), whatever it was given.
-    ``scenario`` (a shipped
-    scenario's name or a ``TrafficScenario``) and ``sim``, when given, are driven whatever the
-    session kept, as is ``seed``; where that is road the session was taught on (its base seed,
-    as the session describes it, and a segment one of its logged episodes drove, whatever the
-    other fields: they only turn the same random draws into other metres and speeds) it is
-    driven all the same, with a UserWarning saying the figures are not held out.
+    ``scenario`` (a shipped scenario's name, the path of a JSON file of ``TrafficScenario``
+    fields, read by :func:`sumo_scenarios.scenarios.load_scenario` as ``torchcbl evaluate
+    --scenario`` reads it, or a ``TrafficScenario``) and ``sim``, when given, are driven
+    whatever the session kept, as is ``seed``; where that is road the session was taught on
+    (its base seed, as the session describes it, and a segment one of its logged episodes
+    drove, whatever the other fields: they only turn the same random draws into other metres
+    and speeds) it is driven all the same, with a UserWarning saying the figures are not held
+    out.
 
     Returns the collision rate (share of timesteps in contact, %), the lane shares (``lanes``,
     index 0 = right shoulder ... 4 = left shoulder, named in that order by ``lane_names``:
@@ -1298,7 +1300,12 @@ def evaluate_saved_policy(
     """
     from sumo_scenarios.env import DrivingConfig, DrivingEnv
     from sumo_scenarios.replay import _session_make_settings
-    from sumo_scenarios.scenarios import TrafficScenario, get_scenario, held_out_twin
+    from sumo_scenarios.scenarios import (
+        TrafficScenario,
+        get_scenario,
+        held_out_twin,
+        load_scenario,
+    )
     from sumo_scenarios.sim import SimConfig
     from torchcbl import evaluate_policy, load_policy
     from torchcbl.session import load_config
@@ -1309,12 +1316,18 @@ def evaluate_saved_policy(
             f"sim must be a SimConfig (sumo_scenarios.sim), got {type(sim).__name__} {sim!r:.80}"
         )
     if scenario is not None:
-        if not isinstance(scenario, (str, TrafficScenario)):
+        if isinstance(scenario, TrafficScenario):
+            traffic = scenario
+        elif isinstance(scenario, (str, os.PathLike)):
+            # the CLI's --scenario reading: a shipped name, else a JSON file's fields (an
+            # unknown name or a bad file: its ValueError says which and what is taken)
+            traffic = load_scenario(scenario)
+        else:
             raise ValueError(
-                "scenario must be a shipped scenario's name or a TrafficScenario "
-                f"(sumo_scenarios.scenarios), got {type(scenario).__name__} {scenario!r:.80}"
+                "scenario must be a shipped scenario's name, the path of a JSON file of "
+                "TrafficScenario fields or a TrafficScenario (sumo_scenarios.scenarios), got "
+                f"{type(scenario).__name__} {scenario!r:.80}"
             )
-        traffic = get_scenario(scenario)  # an unknown name: its ValueError names the shipped
     kept = load_config(Path(session_dir))
     taught, unknown = _session_make_settings(kept)
 
@@ -1342,7 +1355,8 @@ def evaluate_saved_policy(
                 "scenario",
                 "traffic",
                 "scenario",
-                "a shipped scenario's name or a sumo_scenarios.scenarios.TrafficScenario",
+                "a shipped scenario's name, a JSON file's path or a "
+                "sumo_scenarios.scenarios.TrafficScenario",
             )
         try:
             traffic = get_scenario(taught.get("scenario", "train"))

@@ -298,7 +298,13 @@ def held_out_twin(scenario: str | TrafficScenario) -> TrafficScenario:
 
 
 def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:
-    """Look a scenario up by name (or pass one through)."""
+    """Look a shipped scenario up by name (or pass a TrafficScenario through); no path: a JSON
+    file of TrafficScenario fields is :func:`load_scenario`'s.
+
+    Raises:
+        ValueError: an unknown name (listing the shipped ones and pointing to
+            :func:`load_scenario` for a file), or neither a str nor a TrafficScenario.
+    """
     if isinstance(scenario, TrafficScenario):
         return scenario
     if not isinstance(scenario, str):  # a dict or list was "unhashable type", a TypeError
@@ -311,7 +317,9 @@ def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:
         return SCENARIOS[scenario]
     except KeyError:
         raise ValueError(
-            f"unknown scenario {scenario!r}; known: {', '.join(sorted(SCENARIOS))}"
+            f"unknown scenario {scenario!r}; known: {', '.join(sorted(SCENARIOS))}; for "
+            "traffic of your own give a TrafficScenario, e.g. load_scenario(path) "
+            "(sumo_scenarios.scenarios) of a JSON file of its fields"
         ) from None
 
 

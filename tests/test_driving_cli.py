@@ -355,3 +355,33 @@ def test_a_segment_driven_on_the_taught_base_seed_and_episode_seed_is_not_held_o
     assert main([*evaluate, "--seed", "3"]) == 0
     out, err = capsys.readouterr()
     assert json.loads(out)["held_out"] is True and err == "", err
+
+
+def test_evaluate_saved_policy_takes_a_scenario_file_as_the_cli_does(
+    tmp_path, driving_person, capsys
+):
+    """evaluate_saved_policy(run, scenario="mytraffic.json") was refused as an "unknown
+    scenario ...; known: eval, light, train" though `evaluate --scenario FILE.json` drives it:
+    Python now takes a path (str or os.PathLike) too, through load_scenario as the CLI does,
+    and an unknown name says a JSON file is taken. get_scenario, which takes no path, points
+    to load_scenario(path) for one."""
+    from sumo_scenarios.experiment import evaluate_saved_policy
+    from sumo_scenarios.scenarios import get_scenario
+
+    run = tmp_path / "session"
+    assert main(["teach", "driving", "--run-dir", str(run), "--steps", "10"]) == 0
+    path = tmp_path / "mytraffic.json"
+    path.write_text(json.dumps({"seed": 11, "mean_spacing_m": [80, 60, 200]}))
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--steps", "5", "--scenario", str(path)]) == 0
+    from_cli = json.loads(capsys.readouterr().out)
+    for given in (str(path), path):
+        report = evaluate_saved_policy(run, n_steps=5, scenario=given)
+        assert report == from_cli, report
+    assert report["scenario"]["name"] == "mytraffic" and report["scenario"]["seed"] == 11
+    with pytest.raises(ValueError, match=r"unknown scenario 'atlantis'.*FILE\.json"):
+        evaluate_saved_policy(run, n_steps=5, scenario="atlantis")
+    with pytest.raises(ValueError, match="scenario file .*none.json' not found"):
+        evaluate_saved_policy(run, n_steps=5, scenario=str(tmp_path / "none.json"))
+    with pytest.raises(ValueError, match=r"known: eval, light, train; .*load_scenario\(path\)"):
+        get_scenario(str(path))
