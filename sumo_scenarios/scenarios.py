@@ -158,7 +158,8 @@ class TrafficScenario:
     """Background traffic on the five-lane road.
 
     Attributes:
-        name: scenario name (``train``, ``eval``, ...).
+        name: scenario name (``train``, ``eval``, ...): not empty or blank (it names the
+            traffic in reports and its held-out twin, ``"<name>-held-out"``).
         seed: base seed; combined with the episode seed to draw the road segment.
         speed_ranges_mph: per normal lane 1, 2, 3 (right, middle, left), the (low, high) range,
             in mph, each car's desired speed is drawn from (uniformly, once per car), inside the
@@ -190,8 +191,12 @@ class TrafficScenario:
     start_clear_m: float = 30.0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str):
-            raise ValueError(f"name must be a str, got {self.name!r}")
+        if not isinstance(self.name, str) or not self.name.strip():
+            # it names the traffic in reports and names its held-out twin: "" made "-held-out"
+            raise ValueError(
+                "name must be a non-blank str (it names the traffic in reports, and its "
+                f"held-out twin '<name>-held-out'), got {self.name!r}; give one, e.g. 'mine'"
+            )
         if _as_int(self.seed) is None or self.seed < 0:
             raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
         for name in ("min_spacing_m", "ahead_m", "behind_m", "start_clear_m"):

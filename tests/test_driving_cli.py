@@ -7,6 +7,7 @@ import dataclasses
 import errno
 import json
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -120,6 +121,8 @@ def test_teach_driving_on_a_shipped_scenario_by_name(tmp_path, driving_person, c
         ('{"seed": 1, "seed": 2}', "given twice"),
         ('{"seed": 1, "speed_ranges_mph": [[10, 30], [25, 35], [30, 40]]}', "20 <= low"),
         ('{"seed": 1, "mean_spacing_m": [40, 31]}', "3 in all"),
+        ('{"seed": 1, "name": ""}', "name must be a non-blank str"),
+        ('{"seed": 1, "name": " \\t"}', "name must be a non-blank str"),
     ],
 )
 def test_teach_driving_refuses_a_scenario_file_it_cannot_take_in_one_line(
@@ -385,3 +388,16 @@ def test_evaluate_saved_policy_takes_a_scenario_file_as_the_cli_does(
         evaluate_saved_policy(run, n_steps=5, scenario=str(tmp_path / "none.json"))
     with pytest.raises(ValueError, match=r"known: eval, light, train; .*load_scenario\(path\)"):
         get_scenario(str(path))
+
+
+def test_a_traffic_scenario_needs_a_name_that_is_not_blank():
+    """A TrafficScenario named "" (a scenario file's "name": "") was taken: its held-out twin
+    was "-held-out" and reports named no traffic. An empty or blank name is refused as the
+    other fields are, saying what was given; a file that leaves "name" out takes its own."""
+    from sumo_scenarios.scenarios import TrafficScenario
+
+    for blank in ("", "   ", "\n"):
+        with pytest.raises(ValueError, match=rf"non-blank str .* got {re.escape(repr(blank))}"):
+            TrafficScenario(name=blank, seed=0)
+    with pytest.raises(ValueError, match="name must be a non-blank str"):
+        dataclasses.replace(TrafficScenario(name="mine", seed=0), name="")
