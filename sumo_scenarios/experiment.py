@@ -1311,6 +1311,9 @@ def evaluate_saved_policy(
     from torchcbl.session import load_config
 
     _check_whole("n_steps", n_steps, 1)  # before the env's own 'max_episode_steps' says it
+    if seed is not None:  # before the session is read, in its own name (not evaluate_policy's)
+        _check_whole("seed", seed, 0)
+        seed = int(seed)  # a numpy int: the report's JSON takes a Python int
     if sim is not None and not isinstance(sim, SimConfig):
         raise ValueError(
             f"sim must be a SimConfig (sumo_scenarios.sim), got {type(sim).__name__} {sim!r:.80}"

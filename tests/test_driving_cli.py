@@ -401,3 +401,23 @@ def test_a_traffic_scenario_needs_a_name_that_is_not_blank():
             TrafficScenario(name=blank, seed=0)
     with pytest.raises(ValueError, match="name must be a non-blank str"):
         dataclasses.replace(TrafficScenario(name="mine", seed=0), name="")
+
+
+@pytest.mark.parametrize("domain", ["driving", "corridor"])
+def test_evaluate_refuses_a_negative_seed_in_its_own_words(domain, tmp_path, capsys):
+    """evaluate_saved_policy(..., seed=-1) was refused by evaluate_policy, deep inside, as
+    "evaluate_policy: seeds must be ints >= 0 ..." after the session had been read; each
+    domain's evaluate_saved_policy now checks its own `seed` first, naming it, and `torchcbl
+    evaluate --seed -1` is one line naming --seed."""
+    import importlib
+
+    evaluate = importlib.import_module(f"{domain}.experiment".replace("driving", "sumo_scenarios"))
+    for bad in (-1, True, 2.0, "3"):
+        with pytest.raises(ValueError, match=rf"^seed must be an int >= 0, got {bad!r}$"):
+            evaluate.evaluate_saved_policy(tmp_path / "no session", n_steps=5, seed=bad)
+    with pytest.raises(SystemExit) as exc:  # argparse's usage error
+        main(["evaluate", str(tmp_path), "--domain", domain, "--seed", "-1"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "argument --seed: " in err and "got '-1'" in err, err
+    assert "evaluate_policy" not in err, err
