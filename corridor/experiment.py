@@ -1043,13 +1043,15 @@ def evaluate_saved_policy(
     the steps, circuits completed, circuits without wall contact, and wall contacts.
 
     Raises:
-        ValueError: among others, the map the session was taught on (a map file, or a
-            shipped map of another torchcbl version) changed since the session started: the
-            session keeps its digest, ``CorridorEnv.describe_inputs()`` (unless ``map_name``
-            is given).
+        ValueError: among others, a ``seed`` that is not an int >= 0 (checked first), or the
+            map the session was taught on (a map file, or a shipped map of another torchcbl
+            version) changed since the session started: the session keeps its digest,
+            ``CorridorEnv.describe_inputs()`` (unless ``map_name`` is given).
     """
     from torchcbl import evaluate_policy, load_policy
 
+    # before the session is read, in its own name (evaluate_policy's says "seeds")
+    _check_whole("seed", seed, 0)
     session_dir = Path(session_dir)
     world, unsaid = _session_world(session_dir) if world_config is None else (world_config, "")
     taught = _session_map(session_dir) if map_name is None else map_name

@@ -1211,30 +1211,40 @@ def _taught_on(
     segment: int,
 ) -> str | None:
     """Why segment ``segment`` of ``traffic`` is road the session was taught on, in words; None
-    where it is held out. The taught traffic is what the session's env described
-    (``traffic.<field>`` of its ``describe_inputs()``, on the fields both sides give), else
-    ``assumed`` (what evaluation takes it to be); a segment is taught road where one of the
-    session's logged steps drove it (``info["episode_seed"]``)."""
-    from sumo_scenarios.scenarios import described_fields, get_scenario
+    where it is held out.
+
+    What makes road held out is its random stream alone: a segment's cars (where each starts,
+    its desired speed, the spacing of each car recycled ahead) are drawn from
+    ``SeedSequence([base seed, episode seed])`` (``DrivingEnv.reset``), and the other fields
+    (speed ranges, spacings, the traffic window) only turn those same draws into metres and
+    speeds; the name changes nothing. So ``traffic`` driven on the taught base seed and a
+    segment one of the session's logged steps drove (``info["episode_seed"]``) is taught road,
+    whatever its other fields: with a speed range 1 mph off every car starts where it did.
+    Another base seed, or a segment none of its episodes drove, is another stream, held out
+    (the held-out twin: the base seed + 1). The SUMO settings and the start lane are not
+    road: they do not count either.
+
+    The taught base seed is the one the session's env described (``traffic.seed`` of its
+    ``describe_inputs()``), else ``assumed``'s (what evaluation takes the traffic to be)."""
+    from sumo_scenarios.scenarios import get_scenario
     from torchcbl.session import load_records
 
     inputs = (kept.get("env") or {}).get("inputs") or {}
-    described = {k: v for k, v in inputs.items() if k.startswith("traffic.")}
-    if "traffic.seed" not in described:  # a session stored before its env described itself
+    base = inputs.get("traffic.seed")
+    if base is None:  # a session stored before its env described itself
         try:
-            described = described_fields("traffic", get_scenario(assumed))
+            base = get_scenario(assumed).seed
         except ValueError:
             return None
-    driven = described_fields("traffic", traffic)
-    if any(driven[k] != v for k, v in described.items() if k in driven):
-        return None  # other traffic (another base seed: other road segments)
+    if base != traffic.seed:
+        return None  # another base seed: another random stream, other road segments
     try:
         records = load_records(session_dir)
     except (OSError, ValueError) as exc:  # (a damaged log: CorruptSessionError)
-        return f"its traffic; its log, which says which segments it drove, cannot be read: {exc}"
+        return f"its base seed; its log, which says which segments it drove, cannot be read: {exc}"
     for r in records:
         if isinstance(r.info, Mapping) and r.info.get("episode_seed") == segment:
-            return f"its episode {r.episode} drove it"
+            return f"its episode {r.episode} drove it on its base seed {base}"
     return None
 
 
@@ -1244,7 +1254,7 @@ def evaluate_saved_policy(
     n_steps: int = 1000,
     seed: int | None = None,
     sim: SimConfig | None = None,
-    scenario: str | TrafficScenario | None = None,
+    scenario: str | os.PathLike[str] | TrafficScenario | None = None,
 ) -> dict[str, Any]:
     """Drive the latest model of a driving teaching session (e.g. ``torchcbl teach driving``)
     greedily for ``n_steps`` timesteps on road it was not taught on: by default segment
@@ -1271,11 +1281,14 @@ def evaluate_saved_policy(
     ValueError unless ``scenario`` or ``sim`` is passed here (and a ``DrivingConfig``'s start
     lane is not known: the middle lane is driven). An env made without ``gymnasium.make``
     keeps nothing in the session: the defaults are driven (``eval``), whatever it was given.
-    ``scenario`` (a shipped
-    scenario's name or a ``TrafficScenario``) and ``sim``, when given, are driven whatever the
-    session kept, as is ``seed``; where that is road the session was taught on (its traffic,
-    name aside, as the session describes it, and a segment one of its logged episodes drove)
-    it is driven all the same, with a UserWarning saying the figures are not held out.
+    ``scenario`` (a shipped scenario's name, the path of a JSON file of ``TrafficScenario``
+    fields, read by :func:`sumo_scenarios.scenarios.load_scenario` as ``torchcbl evaluate
+    --scenario`` reads it, or a ``TrafficScenario``) and ``sim``, when given, are driven
+    whatever the session kept, as is ``seed``; where that is road the session was taught on
+    (its base seed, as the session describes it, and a segment one of its logged episodes
+    drove, whatever the other fields: they only turn the same random draws into other metres
+    and speeds) it is driven all the same, with a UserWarning saying the figures are not held
+    out.
 
     Returns the collision rate (share of timesteps in contact, %), the lane shares (``lanes``,
     index 0 = right shoulder ... 4 = left shoulder, named in that order by ``lane_names``:
@@ -1287,23 +1300,37 @@ def evaluate_saved_policy(
     """
     from sumo_scenarios.env import DrivingConfig, DrivingEnv
     from sumo_scenarios.replay import _session_make_settings
-    from sumo_scenarios.scenarios import TrafficScenario, get_scenario, held_out_twin
+    from sumo_scenarios.scenarios import (
+        TrafficScenario,
+        get_scenario,
+        held_out_twin,
+        load_scenario,
+    )
     from sumo_scenarios.sim import SimConfig
     from torchcbl import evaluate_policy, load_policy
     from torchcbl.session import load_config
 
     _check_whole("n_steps", n_steps, 1)  # before the env's own 'max_episode_steps' says it
+    if seed is not None:  # before the session is read, in its own name (not evaluate_policy's)
+        _check_whole("seed", seed, 0)
+        seed = int(seed)  # a numpy int: the report's JSON takes a Python int
     if sim is not None and not isinstance(sim, SimConfig):
         raise ValueError(
             f"sim must be a SimConfig (sumo_scenarios.sim), got {type(sim).__name__} {sim!r:.80}"
         )
     if scenario is not None:
-        if not isinstance(scenario, (str, TrafficScenario)):
+        if isinstance(scenario, TrafficScenario):
+            traffic = scenario
+        elif isinstance(scenario, (str, os.PathLike)):
+            # the CLI's --scenario reading: a shipped name, else a JSON file's fields (an
+            # unknown name or a bad file: its ValueError says which and what is taken)
+            traffic = load_scenario(scenario)
+        else:
             raise ValueError(
-                "scenario must be a shipped scenario's name or a TrafficScenario "
-                f"(sumo_scenarios.scenarios), got {type(scenario).__name__} {scenario!r:.80}"
+                "scenario must be a shipped scenario's name, the path of a JSON file of "
+                "TrafficScenario fields or a TrafficScenario (sumo_scenarios.scenarios), got "
+                f"{type(scenario).__name__} {scenario!r:.80}"
             )
-        traffic = get_scenario(scenario)  # an unknown name: its ValueError names the shipped
     kept = load_config(Path(session_dir))
     taught, unknown = _session_make_settings(kept)
 
@@ -1331,7 +1358,8 @@ def evaluate_saved_policy(
                 "scenario",
                 "traffic",
                 "scenario",
-                "a shipped scenario's name or a sumo_scenarios.scenarios.TrafficScenario",
+                "a shipped scenario's name, a JSON file's path or a "
+                "sumo_scenarios.scenarios.TrafficScenario",
             )
         try:
             traffic = get_scenario(taught.get("scenario", "train"))
@@ -1351,8 +1379,8 @@ def evaluate_saved_policy(
         warnings.warn(
             f"segment {seed} of the traffic {traffic.name!r} is road {session_dir} was taught on "
             f"({taught_on}), so these figures are not held out; for held-out ones give another "
-            "segment, or leave the traffic out: evaluate then drives its held-out twin "
-            "(sumo_scenarios.scenarios.held_out_twin)",
+            "segment or base seed, or leave the traffic out: evaluate then drives its held-out "
+            "twin (sumo_scenarios.scenarios.held_out_twin)",
             UserWarning,
             stacklevel=2,
         )

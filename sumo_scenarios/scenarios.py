@@ -158,7 +158,8 @@ class TrafficScenario:
     """Background traffic on the five-lane road.
 
     Attributes:
-        name: scenario name (``train``, ``eval``, ...).
+        name: scenario name (``train``, ``eval``, ...): not empty or blank (it names the
+            traffic in reports and its held-out twin, ``"<name>-held-out"``).
         seed: base seed; combined with the episode seed to draw the road segment.
         speed_ranges_mph: per normal lane 1, 2, 3 (right, middle, left), the (low, high) range,
             in mph, each car's desired speed is drawn from (uniformly, once per car), inside the
@@ -190,8 +191,12 @@ class TrafficScenario:
     start_clear_m: float = 30.0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str):
-            raise ValueError(f"name must be a str, got {self.name!r}")
+        if not isinstance(self.name, str) or not self.name.strip():
+            # it names the traffic in reports and names its held-out twin: "" made "-held-out"
+            raise ValueError(
+                "name must be a non-blank str (it names the traffic in reports, and its "
+                f"held-out twin '<name>-held-out'), got {self.name!r}; give one, e.g. 'mine'"
+            )
         if _as_int(self.seed) is None or self.seed < 0:
             raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
         for name in ("min_spacing_m", "ahead_m", "behind_m", "start_clear_m"):
@@ -298,7 +303,13 @@ def held_out_twin(scenario: str | TrafficScenario) -> TrafficScenario:
 
 
 def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:
-    """Look a scenario up by name (or pass one through)."""
+    """Look a shipped scenario up by name (or pass a TrafficScenario through); no path: a JSON
+    file of TrafficScenario fields is :func:`load_scenario`'s.
+
+    Raises:
+        ValueError: an unknown name (listing the shipped ones and pointing to
+            :func:`load_scenario` for a file), or neither a str nor a TrafficScenario.
+    """
     if isinstance(scenario, TrafficScenario):
         return scenario
     if not isinstance(scenario, str):  # a dict or list was "unhashable type", a TypeError
@@ -311,7 +322,9 @@ def get_scenario(scenario: str | TrafficScenario) -> TrafficScenario:
         return SCENARIOS[scenario]
     except KeyError:
         raise ValueError(
-            f"unknown scenario {scenario!r}; known: {', '.join(sorted(SCENARIOS))}"
+            f"unknown scenario {scenario!r}; known: {', '.join(sorted(SCENARIOS))}; for "
+            "traffic of your own give a TrafficScenario, e.g. load_scenario(path) "
+            "(sumo_scenarios.scenarios) of a JSON file of its fields"
         ) from None
 
 

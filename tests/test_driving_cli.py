@@ -7,6 +7,7 @@ import dataclasses
 import errno
 import json
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -120,6 +121,8 @@ def test_teach_driving_on_a_shipped_scenario_by_name(tmp_path, driving_person, c
         ('{"seed": 1, "seed": 2}', "given twice"),
         ('{"seed": 1, "speed_ranges_mph": [[10, 30], [25, 35], [30, 40]]}', "20 <= low"),
         ('{"seed": 1, "mean_spacing_m": [40, 31]}', "3 in all"),
+        ('{"seed": 1, "name": ""}', "name must be a non-blank str"),
+        ('{"seed": 1, "name": " \\t"}', "name must be a non-blank str"),
     ],
 )
 def test_teach_driving_refuses_a_scenario_file_it_cannot_take_in_one_line(
@@ -322,3 +325,99 @@ def test_held_out_twin_is_eval_for_train_and_the_next_base_seed_otherwise():
     assert held_out_twin(mine) == dataclasses.replace(mine, name="mine-held-out", seed=8)
     with pytest.raises(ValueError, match="unknown scenario 'atlantis'"):
         held_out_twin("atlantis")
+
+
+def test_a_segment_driven_on_the_taught_base_seed_and_episode_seed_is_not_held_out(
+    tmp_path, driving_person, capsys
+):
+    """A segment's random stream is SeedSequence([base seed, episode seed]), whatever the other
+    fields: traffic that differs from the taught one only in a spacing or a speed range, driven
+    on a segment the session drove, reuses the taught road's draws (a speed range 1 mph off
+    puts every car where it was). `held_out` said True there, judging by every field; it is
+    now False, with the one-line warning. Another segment, or another base seed (the twin), is
+    held out."""
+    taught = tmp_path / "taught.json"
+    taught.write_text(json.dumps({"seed": 7}))
+    run = tmp_path / "session"
+    argv = ["teach", "driving", "--run-dir", str(run), "--steps", "10", "--seed", "3"]
+    assert main([*argv, "--scenario", str(taught)]) == 0, capsys.readouterr().err
+    assert {r.info["episode_seed"] for r in load_records(run)} == {3}
+    edited = tmp_path / "edited.json"
+    evaluate = ["evaluate", str(run), "--steps", "5", "--scenario", str(edited)]
+    for fields in ({"min_spacing_m": 15}, {"speed_ranges_mph": [[21, 31], [25, 35], [30, 40]]}):
+        edited.write_text(json.dumps({"seed": 7, **fields}))
+        capsys.readouterr()
+        assert main([*evaluate, "--seed", "3"]) == 0
+        out, err = capsys.readouterr()
+        assert json.loads(out)["held_out"] is False, (fields, out)
+        assert err.count("\n") == 1 and "not held out" in err and "episode 0" in err, err
+        assert main([*evaluate, "--seed", "4"]) == 0
+        out, err = capsys.readouterr()
+        assert json.loads(out)["held_out"] is True and err == "", (fields, err)
+    edited.write_text(json.dumps({"seed": 8, "min_spacing_m": 15}))
+    assert main([*evaluate, "--seed", "3"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["held_out"] is True and err == "", err
+
+
+def test_evaluate_saved_policy_takes_a_scenario_file_as_the_cli_does(
+    tmp_path, driving_person, capsys
+):
+    """evaluate_saved_policy(run, scenario="mytraffic.json") was refused as an "unknown
+    scenario ...; known: eval, light, train" though `evaluate --scenario FILE.json` drives it:
+    Python now takes a path (str or os.PathLike) too, through load_scenario as the CLI does,
+    and an unknown name says a JSON file is taken. get_scenario, which takes no path, points
+    to load_scenario(path) for one."""
+    from sumo_scenarios.experiment import evaluate_saved_policy
+    from sumo_scenarios.scenarios import get_scenario
+
+    run = tmp_path / "session"
+    assert main(["teach", "driving", "--run-dir", str(run), "--steps", "10"]) == 0
+    path = tmp_path / "mytraffic.json"
+    path.write_text(json.dumps({"seed": 11, "mean_spacing_m": [80, 60, 200]}))
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--steps", "5", "--scenario", str(path)]) == 0
+    from_cli = json.loads(capsys.readouterr().out)
+    for given in (str(path), path):
+        report = evaluate_saved_policy(run, n_steps=5, scenario=given)
+        assert report == from_cli, report
+    assert report["scenario"]["name"] == "mytraffic" and report["scenario"]["seed"] == 11
+    with pytest.raises(ValueError, match=r"unknown scenario 'atlantis'.*FILE\.json"):
+        evaluate_saved_policy(run, n_steps=5, scenario="atlantis")
+    with pytest.raises(ValueError, match="scenario file .*none.json' not found"):
+        evaluate_saved_policy(run, n_steps=5, scenario=str(tmp_path / "none.json"))
+    with pytest.raises(ValueError, match=r"known: eval, light, train; .*load_scenario\(path\)"):
+        get_scenario(str(path))
+
+
+def test_a_traffic_scenario_needs_a_name_that_is_not_blank():
+    """A TrafficScenario named "" (a scenario file's "name": "") was taken: its held-out twin
+    was "-held-out" and reports named no traffic. An empty or blank name is refused as the
+    other fields are, saying what was given; a file that leaves "name" out takes its own."""
+    from sumo_scenarios.scenarios import TrafficScenario
+
+    for blank in ("", "   ", "\n"):
+        with pytest.raises(ValueError, match=rf"non-blank str .* got {re.escape(repr(blank))}"):
+            TrafficScenario(name=blank, seed=0)
+    with pytest.raises(ValueError, match="name must be a non-blank str"):
+        dataclasses.replace(TrafficScenario(name="mine", seed=0), name="")
+
+
+@pytest.mark.parametrize("domain", ["driving", "corridor"])
+def test_evaluate_refuses_a_negative_seed_in_its_own_words(domain, tmp_path, capsys):
+    """evaluate_saved_policy(..., seed=-1) was refused by evaluate_policy, deep inside, as
+    "evaluate_policy: seeds must be ints >= 0 ..." after the session had been read; each
+    domain's evaluate_saved_policy now checks its own `seed` first, naming it, and `torchcbl
+    evaluate --seed -1` is one line naming --seed."""
+    import importlib
+
+    evaluate = importlib.import_module(f"{domain}.experiment".replace("driving", "sumo_scenarios"))
+    for bad in (-1, True, 2.0, "3"):
+        with pytest.raises(ValueError, match=rf"^seed must be an int >= 0, got {bad!r}$"):
+            evaluate.evaluate_saved_policy(tmp_path / "no session", n_steps=5, seed=bad)
+    with pytest.raises(SystemExit) as exc:  # argparse's usage error
+        main(["evaluate", str(tmp_path), "--domain", domain, "--seed", "-1"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "argument --seed: " in err and "got '-1'" in err, err
+    assert "evaluate_policy" not in err, err

@@ -368,7 +368,9 @@ def test_a_session_is_evaluated_on_the_held_out_twin_of_the_traffic_it_was_taugh
     # told which traffic to drive, it drives that
     other = evaluate_saved_policy(tmp_path / "mine", n_steps=n, scenario="eval")
     assert other["scenario"] == named(EVAL)
-    with pytest.raises(ValueError, match="scenario must be a shipped scenario's name or a"):
+    with pytest.raises(
+        ValueError, match="scenario must be a shipped scenario's name, the path of a JSON"
+    ):
         evaluate_saved_policy(tmp_path / "mine", n_steps=n, scenario=7)
     _forget_objects(tmp_path / "mine")
     with pytest.raises(ValueError, match=r"traffic as an object.*\(TrafficScenario\(name="):
