@@ -1462,7 +1462,6 @@ def test_teach_corridor_on_a_map_of_ones_own_and_evaluate_drives_it(tmp_path, mo
     for extra, says in (
         (["--map", "nowhere.json"], "--map: map file 'nowhere.json' not found"),
         (["--map", "atlantis"], "--map: unknown map 'atlantis'"),
-        (["--map", "lshape", "--resume"], "a resumed session keeps the map"),
     ):
         assert main([*argv[:3], str(tmp_path / "other"), *argv[4:], *extra]) == 2, extra
         err = capsys.readouterr().err
@@ -2342,6 +2341,68 @@ def test_a_session_whose_own_map_file_changed_refuses_it(tmp_path, monkeypatch, 
     (run / "config.json").write_text(json.dumps(config))
     mine.write_text(json.dumps(edited))
     assert main(["evaluate", str(run), "--steps", "3"]) == 0
+
+
+def test_teach_resume_takes_the_sessions_own_map_again_and_refuses_another(
+    tmp_path, monkeypatch, capsys
+):
+    """teach corridor --map NAME|PATH --resume was refused outright ("a resumed session keeps
+    the map it was taught on"), so re-running one's teach command with --resume appended
+    failed, while teach driving --scenario --resume takes the session's own traffic. --map is
+    taken now where it is the map the session was taught on (by its digest, as resume
+    compares the map: the same file by another path, or the shipped map it copies, its name
+    aside), and another map is refused in one line (exit code 2) naming what differs and to
+    leave --map out; nothing is recorded on it."""
+    import corridor
+
+    mine, run, original = _teach_on_a_map_file(tmp_path, monkeypatch)  # a copy of lshape
+    monkeypatch.chdir(tmp_path)
+    resume = ["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"]
+    copy = tmp_path / "copy.json"
+    copy.write_text(json.dumps({**json.loads(original), "name": "renamed"}))
+    capsys.readouterr()
+    for given in (str(mine), "mine.json", "lshape", str(copy)):
+        assert main([*resume, "--map", given]) == 0, capsys.readouterr().err
+    assert len(load_records(run)) == 3 + 4 * 3
+    config = json.loads((run / "config.json").read_text())
+    assert config["env"]["kwargs"]["corridor_map"] == str(mine)  # still the session's own map
+
+    edited = json.loads(original)
+    edited["corridor_width"] = 0.8
+    edited["nodes"]["B"] = [2.5, 0.0]  # a longer first corridor
+    edited["nodes"]["C"] = [2.5, 1.0]
+    (tmp_path / "wider.json").write_text(json.dumps(edited))
+    for given, says in (
+        ("figure2", "--map figure2: "),
+        ("wider.json", "corridor_width 0.8 (the session's: 0.6)"),
+    ):
+        assert main([*resume, "--map", given]) == 2, given
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1, err
+        assert says in err and f"{run}" in err and str(mine) in err, err
+        assert "leave --map out with --resume" in err, err
+    assert "nodes.B[0] 2.5 (the session's: 2.0)" in err, err
+    assert len(load_records(run)) == 15  # nothing recorded on another map
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["inputs"]  # a session that kept no digest: its own map's is compared
+    (run / "config.json").write_text(json.dumps(config))
+    assert main([*resume, "--map", "figure2"]) == 2
+    assert "nodes (12 values)" in capsys.readouterr().err
+    assert main([*resume, "--map", "lshape"]) == 0
+    assert len(load_records(run)) == 18
+
+    # a session on the default map (no --map when it began): figure2 again, lshape refused
+    shipped = Path(corridor.__file__).with_name("maps")
+    default = tmp_path / "default"
+    assert main(["teach", "corridor", "--run-dir", str(default), "--steps", "3"]) == 0
+    resume_default = ["teach", "corridor", "--resume", "--run-dir", str(default)]
+    assert main([*resume_default, "--steps", "3", "--map", "figure2"]) == 0
+    assert main([*resume_default, "--steps", "3", "--map", str(shipped / "figure2.json")]) == 0
+    capsys.readouterr()
+    assert main([*resume_default, "--steps", "3", "--map", "lshape"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'figure2'" in err and "leave --map out" in err, err
+    assert len(load_records(default)) == 9
 
 
 def test_teach_that_could_not_start_on_a_full_disk_starts_when_run_again(

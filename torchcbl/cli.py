@@ -977,6 +977,70 @@ def _check_session_traffic(
         )
 
 
+def _check_session_map_given(
+    run_dir: Path, session_kwargs: dict[str, Any], text: str, given: Any
+) -> None:
+    """``teach corridor --resume --map``: a one-line error unless ``given`` (the
+    ``CorridorMap`` that ``--map text`` names) is the map the session is taught on: the same
+    digest (``corridor.maps.map_digest``, which ``CorridorEnv.describe_inputs()`` gives and
+    resume compares) as the one the session's config keeps, or, for a session that keeps
+    none, as its own map's (from what gymnasium.make was given for it, ``session_kwargs``:
+    a name, a path or a ``CorridorMap``, else the env's default); its name and description
+    aside, which change nothing the robot drives. What differs is said field by field, as
+    resume says a kept object's fields (``torchcbl.session``)."""
+    from corridor.env import DEFAULT_MAP
+    from corridor.maps import CorridorMap, load_map, map_digest
+    from torchcbl.session import (
+        _form_differences,
+        _not_compared,
+        _object_form,
+        _shortened,
+        load_config,
+    )
+
+    own = session_kwargs.get("corridor_map", DEFAULT_MAP)
+    try:
+        own_map = own if isinstance(own, CorridorMap) else load_map(own)
+    except ValueError as exc:  # (its own map file is checked before: a shipped map gone)
+        raise _UsageError(f"{run_dir}: its map cannot be made ({_one_line(exc)})") from None
+    inputs = (load_config(run_dir).get("env") or {}).get("inputs") or {}
+    kept = inputs.get("corridor_map_sha256")
+    kept = kept if isinstance(kept, str) else map_digest(own_map)
+    now = map_digest(given)
+    if now == kept:
+        return
+    mine, theirs = (json.loads(json.dumps(_object_form(m))) for m in (given, own_map))
+    differ = [  # (path, the session's, given's), e.g. ("nodes.B[0]", 2.0, 2.5)
+        (path.lstrip("."), b, a)
+        for path, b, a in _form_differences(theirs, mine, _not_compared(given), "")
+    ]
+    by_field: dict[str, list[tuple[str, Any, Any]]] = {}
+    for entry in differ:  # a few values each with both sides; many (another map) by field
+        by_field.setdefault(re.split(r"[.\[]", entry[0], maxsplit=1)[0], []).append(entry)
+    fields: list[str] = []
+    for field, entries in by_field.items():
+        if len(differ) > 4 and len(entries) > 1:
+            fields.append(f"{field} ({len(entries)} values)")
+        else:
+            fields += [
+                f"{p} {_shortened(a)} (the session's: {_shortened(b)})" for p, b, a in entries
+            ]
+    what = (
+        "; ".join(fields)
+        or (  # its own map is not the one it kept the digest of
+            f"its digest {now[:12]}... (the session's map's: {kept[:12]}...)"
+        )
+    )
+    named = (
+        f"the map {own_map.name!r} it keeps whole" if isinstance(own, CorridorMap) else repr(own)
+    )
+    raise _UsageError(
+        f"--map {text}: another map than the one the session in {run_dir} is taught on "
+        f"({named}), differing in {what}; a resumed session drives its own map: leave --map "
+        "out with --resume (or teach this map in a new session, another --run-dir)"
+    )
+
+
 def _resume_env_kwargs(run_dir: Path, domain: str) -> dict[str, Any]:
     """What gymnasium.make was given for a session's env, to make it again on --resume: the
     kwargs its config.json records (an object, a ``CorridorMap`` or ``DrivingConfig`` a
@@ -1096,16 +1160,13 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         raise _UsageError(
             "--scenario applies only to teach driving (the corridor's course is chosen with --map)"
         )
-    if args.map is not None and args.resume:
-        raise _UsageError(
-            "--map: a resumed session keeps the map it was taught on; leave --map out with --resume"
-        )
     map_kwarg = None
+    given_map = None  # with --resume: it must be the session's own map (checked below)
     if args.map is not None:  # a map of one's own, kept with the session by name or full path
         from corridor.maps import available_maps, load_map
 
         try:
-            load_map(args.map)
+            given_map = load_map(args.map)
         except ValueError as exc:
             raise _UsageError(f"--map: {exc}") from None
         shipped = args.map in available_maps()
@@ -1155,6 +1216,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         env_kwargs = _resume_env_kwargs(run_dir, args.domain)
         if scenario_kwarg is not None:  # given again: it must be the session's own traffic
             _check_session_traffic(run_dir, env_kwargs, args.scenario, scenario_kwarg)
+        if given_map is not None:  # given again: it must be the session's own map
+            _check_session_map_given(run_dir, env_kwargs, args.map, given_map)
     teacher = human.make_teacher(title=f"torchcbl teach {args.domain}")
     from torchcbl.human import TerminalTeacher
 
@@ -1978,8 +2041,9 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="NAME|PATH",
         help="corridor: a shipped map's name or a map JSON of your own (default: the "
-        "reproduction's figure2); the session keeps it, so evaluate drives the same map (a "
-        "map file changed after teaching is refused)",
+        "reproduction's figure2); the session keeps it, so --resume (no --map needed; another "
+        "map is refused, the same one by another name or path is not) and evaluate drive the "
+        "same map (a map file changed after teaching is refused)",
     )
     p.add_argument(
         "--scenario",
