@@ -48,6 +48,20 @@ def test_refit_before_any_fit_is_fit():
     assert a.fit_report_.refit_kind == ("scratch",) * 3
 
 
+def test_fit_on_a_fitted_model_is_a_fit_from_scratch_bit_for_bit():
+    """fit() of a model fitted before gave the state a fresh model's fit gives, except the
+    refit statistics: an action without points in the new data kept the old data's
+    fingerprint, and every action the old warm refits' statistics (unused, stats_valid_
+    False, but a session whose first refit after a fitted start lacked an action was not
+    rebuilt from its log bit for bit). They now start from a fresh model's values."""
+    x, y = _stream(200)
+    m = _replay(GaussianMixtureSet(3, 3, 5, seed=3), x, y, range(20, 201, 5))
+    assert bool(m.cand_stats_.any())  # warm refits kept their statistics
+    keep = y[:60] != 1  # and the new data lacks action 1
+    m.fit(x[:60][keep], y[:60][keep])
+    _assert_same_state(m, GaussianMixtureSet(3, 3, 5, seed=3).fit(x[:60][keep], y[:60][keep]))
+
+
 def test_refit_on_unchanged_data_keeps_every_mixture():
     x, y = _stream(150)
     m = GaussianMixtureSet(3, 3, 5).fit(x, y)

@@ -39,6 +39,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.records import StepRecord as StepRecord
     from torchcbl.session import load_corrections as load_corrections
     from torchcbl.session import load_model as load_model
+    from torchcbl.session import load_models as load_models
     from torchcbl.session import load_policy as load_policy
     from torchcbl.session import load_records as load_records
     from torchcbl.strategies import ConfidentExecution as ConfidentExecution
@@ -69,6 +70,7 @@ _EXPORTS = {
     "EnvError": "torchcbl.errors",
     "load_policy": "torchcbl.session",
     "load_model": "torchcbl.session",
+    "load_models": "torchcbl.session",
     "load_records": "torchcbl.session",
     "load_corrections": "torchcbl.session",
     "IncompatibleRunDirError": "torchcbl.errors",

@@ -314,6 +314,10 @@ _REFIT_BUFFERS = (
 )
 
 
+# the refit statistics of the incremental EM, in the order of _fit's stats tables
+_STATS_BUFFERS = ("cand_stats_", "cand_coef_", "stats_valid_", "ref_center_", "data_print_")
+
+
 _PRINT_WEIGHTS = np.ones(0)
 
 
@@ -852,7 +856,8 @@ class GaussianMixtureSet(nn.Module):
         """Fit one mixture per action from scratch, choosing each count by the criterion.
 
         Every candidate of every action starts from its k-means++ initialisation (from
-        ``n_init`` of them, keeping the best, see the constructor).
+        ``n_init`` of them, keeping the best, see the constructor). Nothing of an earlier fit
+        stays: a fitted model's fit gives the state a fresh model's gives, bit for bit.
 
         Args:
             observations: [N, D] real array (numpy or torch, float32/float64), N >= 1.
@@ -1021,6 +1026,11 @@ class GaussianMixtureSet(nn.Module):
             iter_tab.fill_(0)
             n_comp.zero_()
             full_n_new.zero_()
+            # a fit from scratch is a function of the data alone: no refit statistics or
+            # fingerprint of earlier data stays (an action without points here kept its old
+            # fingerprint), so it is the state a fresh model's fit has, bit for bit
+            for table, name in zip(stats_tab, _STATS_BUFFERS, strict=True):
+                table.copy_(_initial_buffer(self, name))
 
         if groups_np.size:
             scratch_groups = np.flatnonzero(scratch_np)

@@ -191,7 +191,7 @@ import threading
 import time
 import warnings
 import zlib
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar, overload
@@ -233,6 +233,7 @@ __all__ = [
     "load_demonstrations",
     "load_labels",
     "load_model",
+    "load_models",
     "load_policy",
     "load_prior_demonstrations",
     "load_records",
@@ -3605,6 +3606,10 @@ def load_model(
 ) -> torch.nn.Module:
     """The session's model as the loop had it, from its checkpoint or refitted from the log.
 
+    For the model at many stages (a learning curve after the fact), :func:`load_models`
+    gives them in one pass: with ``refit="incremental"`` each call here replays the refits
+    since the newest kept checkpoint below its stage, that pass replays them once for all.
+
     Args:
         run_dir: a session directory.
         n_demonstrations: rebuild the model as it stood when this many labels (demonstrations
@@ -3672,6 +3677,235 @@ def _model(
         prior=_read_prior(run_dir, config),
     )
     return model
+
+
+@overload
+def load_models(
+    run_dir: str | os.PathLike[str], n_demonstrations: Iterable[int], *, model: None = None
+) -> Iterator[tuple[int, GaussianMixtureSet]]: ...
+@overload
+def load_models(
+    run_dir: str | os.PathLike[str], n_demonstrations: Iterable[int], *, model: _Model
+) -> Iterator[tuple[int, _Model]]: ...
+def load_models(
+    run_dir: str | os.PathLike[str],
+    n_demonstrations: Iterable[int],
+    *,
+    model: torch.nn.Module | None = None,
+) -> Iterator[tuple[int, torch.nn.Module]]:
+    """The session's model at several stages in one pass: for a learning curve after the fact.
+
+    Each model is exactly what ``load_model(run_dir, n_demonstrations=n, model=...)`` gives
+    (the live model's state after its last refit at or before ``n`` labels, bit for bit), but
+    the stages are read together: a stage whose checkpoint is kept is loaded from it, and with
+    ``TeachingConfig(refit="incremental")`` the refits between kept checkpoints are replayed
+    once across the stages, not from the checkpoint below each stage again (for ``S`` stages of
+    an ``N``-label session that kept only its newest checkpoints, ``load_model`` at each
+    replays about ``S * N / 2`` refits, this at most ``N``). With ``refit="full"`` a stage
+    whose checkpoint is gone is one fit, as with ``load_model`` (stages on the same refit share
+    it). Reads only: no checkpoint is written or set aside, and the logged labels are read once,
+    at the call.
+
+    Args:
+        run_dir: a session directory.
+        n_demonstrations: the stages: counts of labels logged (demonstrations and
+            corrections), from 0 to all of them, in increasing order, e.g.
+            ``range(0, n + 1, 50)``. The models come in the order asked, each with its count,
+            so stages out of order or repeated are refused, at the call (before any model is
+            read), not sorted: pass ``sorted(set(stages))``.
+        model: as :func:`load_model`'s, a fresh, unfitted model of the session's class and
+            arguments (needed where that class is the user's own, or to read onto a device):
+            a template, left as it is; each stage's model is a ``copy.deepcopy`` of it holding
+            the session's state, so it must be one that can be copied.
+
+    Returns:
+        An iterator of ``(n, model)``, one per stage in the order given, each model an object
+        of its own that a caller may keep (each holds the model's whole state: 0.14 MB for
+        the default model on 4 features and 3 actions, 2 MB with ``max_components=40``; on
+        ``model``'s device). A stage is computed when the iterator reaches it.
+
+    Raises:
+        ValueError: ``n_demonstrations`` is not increasing ints in range, or ``model`` is
+            fitted or cannot be copied (at the call).
+        IncompatibleRunDirError: as :func:`load_model` raises for ``model`` (at the call).
+        CorruptSessionError: as :func:`load_model`: the session's ``prior.npz`` is missing or
+            changed (at the call); a stage stands on the starting model of a session started
+            from a fitted one, and its checkpoint 0 is lost (when the iterator reaches it).
+
+    Example (a learning curve of a session after the fact)::
+
+        from torchcbl.policy import GreedyPolicy, evaluate_policy
+
+        for n, model in load_models(run_dir, range(0, n_labels + 1, 50)):
+            records = evaluate_policy(GreedyPolicy(model), env, n_episodes=20, seed=0)
+    """
+    config = load_config(run_dir)
+    if model is not None:
+        _given_model(run_dir, config, model)
+    x, y = _labels(run_dir)
+    stages = _stage_counts(run_dir, n_demonstrations, len(y))
+    prior = _read_prior(run_dir, config)
+    if model is None:
+        template: torch.nn.Module = build_model(config)
+    else:
+        try:  # (a copy: the given model stays the caller's, as it is)
+            template = copy.deepcopy(model)
+        except Exception as exc:  # e.g. TypeError: cannot pickle '_thread.lock' object
+            cls = type(model).__name__
+            raise ValueError(
+                f"model: expected a model copy.deepcopy can copy (load_models gives each stage "
+                f"a copy of it), got a {cls} that cannot be copied ({type(exc).__name__}: "
+                f"{exc}); read the stages one at a time with load_model(run_dir, "
+                f"n_demonstrations=n, model={cls}(...)), a fresh model for each"
+            ) from exc
+    return _stage_models(run_dir, config, template, x, y, prior, stages)
+
+
+def _stage_counts(
+    run_dir: str | os.PathLike[str], n_demonstrations: Any, n_labels: int
+) -> list[int]:
+    """:func:`load_models`'s stages as a list of ints, refused unless increasing and from 0 to
+    ``n_labels``."""
+    expected = (
+        f"n_demonstrations: expected increasing ints from 0 to {n_labels} (counts of the "
+        f"labels logged in {run_dir}, each at most once)"
+    )
+    example = f"e.g. range(0, {n_labels + 1}, 10)"
+    if isinstance(n_demonstrations, str | bytes):
+        raise ValueError(f"{expected}, got {n_demonstrations!r}; pass a list or a range, {example}")
+    try:
+        values = list(n_demonstrations)
+    except TypeError:
+        raise ValueError(
+            f"{expected}, got {n_demonstrations!r}, which is no list of them; pass a list or a "
+            f"range ([{n_demonstrations!r}] for one stage), {example}"
+        ) from None
+    counts: list[int] = []
+    for value in values:
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | np.integer)
+            or not 0 <= value <= n_labels
+        ):
+            raise ValueError(f"{expected}, got {value!r}; {example}")
+        if counts and value <= counts[-1]:
+            raise ValueError(
+                f"{expected}, got {int(value)} after {counts[-1]}; pass them sorted, each once "
+                "(sorted(set(stages))): the models come in the order asked"
+            )
+        counts.append(int(value))
+    return counts
+
+
+def _stage_models(
+    run_dir: str | os.PathLike[str],
+    config: dict[str, Any],
+    template: torch.nn.Module,
+    x: np.ndarray,
+    y: np.ndarray,
+    prior: tuple[np.ndarray, np.ndarray] | None,
+    stages: list[int],
+) -> Iterator[tuple[int, torch.nn.Module]]:
+    """:func:`load_models`' pass: at each stage the model :func:`restore_model` gives (reads
+    only), from the checkpoint it would load and the refits it would replay, the replay kept
+    from one stage to the next. Where that path does more than the plain cases (a checkpoint
+    this model cannot load, a session's starting model not on disk), restore_model itself
+    gives the stage."""
+    if not stages:
+        return
+    max_new = int(config["teaching"]["max_new"])
+    relabel = _relabels(config)
+    incremental = config["teaching"].get("refit", "full") == "incremental"
+    starts_fitted = config.get("starts_fitted") is True
+    px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
+    base = len(py)  # the prior's labels come first in every fit and digest
+    xs, ys = list(x), y.tolist()
+    all_xs, all_ys = px + xs, py + ys
+    entries = sorted(
+        (n, path)
+        for n, path in _checkpoint_entries(Path(run_dir) / CHECKPOINT_DIR)
+        if n <= stages[-1]
+    )
+
+    def fresh() -> torch.nn.Module:
+        return copy.deepcopy(template)
+
+    def data(n: int) -> tuple[np.ndarray, np.ndarray]:  # the training set of n labels
+        return training_set(all_xs[: base + n], all_ys[: base + n], relabel=relabel)
+
+    def loaded(state: dict[str, Any]) -> torch.nn.Module | None:
+        m = fresh()
+        try:
+            m.load_state_dict(state["state_dict"])
+        except Exception:  # e.g. saved by another model class: restore_model's case
+            return None
+        return m
+
+    # the checkpoint restore_model would start from: the newest one read so far that is
+    # readable and fitted on the log's labels; the checkpoints up to `scanned` were read
+    last: int | None = None
+    payload: dict[str, Any] | None = None
+    scanned = -1
+    made: tuple[Any, torch.nn.Module] | None = None  # the previous stage's model, its key
+    # incremental refits: (model, the checkpoint it started from (None: none), its labels,
+    # whether it is fitted), carried from stage to stage
+    replay: tuple[torch.nn.Module, int | None, int, bool] | None = None
+    for n in stages:
+        for c, path in reversed([e for e in entries if scanned < e[0] <= n]):
+            found, _ = _checkpoint_payload(path, base + c, all_xs, all_ys)
+            if found is not None:
+                last, payload = c, found
+                break
+        scanned = n
+        start = 0 if last is None else last
+        k = start + fit_count(n - start, max_new)  # the labels the model stood on
+        key: Any = None
+        model: torch.nn.Module | None = None
+        if payload is None and starts_fitted:
+            pass  # checkpoint 0 is not on disk: restore_model refuses or refits the stage
+        elif k == start and payload is not None:
+            key = ("checkpoint", start)
+            model = made[1] if made is not None and made[0] == key else loaded(payload)
+            if model is not None and incremental and (replay is None or replay[1] != start):
+                replay = (copy.deepcopy(model), start, start, True)
+        elif (k > 0 or base) and incremental:
+            anchor = None if payload is None else start
+            if replay is None or replay[1] != anchor or replay[2] > k:
+                if payload is not None:
+                    work = loaded(payload)
+                    replay = None if work is None else (work, anchor, start, True)
+                elif base:  # the loop fitted on the prior alone before its first step
+                    replay = (fresh().fit(*data(0)), None, 0, True)
+                else:
+                    replay = (fresh(), None, 0, False)
+            if replay is not None:
+                work, _, at, ready = replay
+                for j in range(at + max_new, k + 1, max_new):
+                    (work.refit if ready else work.fit)(*data(j))
+                    ready = True
+                replay = (work, anchor, k, ready)
+                key, model = ("replay", anchor, k), work
+        elif k > 0 or base:
+            key = ("fit", k)
+            model = made[1] if made is not None and made[0] == key else fresh().fit(*data(k))
+        else:
+            key = ("unfitted",)
+            model = made[1] if made is not None and made[0] == key else fresh()
+        if model is None:  # restore_model's own path, at this stage alone, writing nothing
+            key, model, replay = None, fresh(), None
+            restore_model(
+                run_dir,
+                model,
+                xs[:n],
+                ys[:n],
+                max_new=max_new,
+                relabel=relabel,
+                incremental=incremental,
+                starts_fitted=starts_fitted,
+                prior=prior,
+            )
+        made = (key, model)
+        yield n, copy.deepcopy(model)  # the caller's own: the replay goes on with `model`
 
 
 def load_policy(

@@ -645,13 +645,15 @@ class ConfidentTeacher:
             stage whose checkpoint is gone from the log, the same model, at the cost of the
             refits it saved: one fit with
             ``refit="full"``, every refit since the last kept checkpoint before ``k`` with
-            ``"incremental"`` (3 s at 2,000 labels, 5 features, measured 2026-11-27; so a
-            learning curve over many stages of such a session, each rebuilt so, costs the sum:
-            keep every checkpoint, or score the stages as the session runs, ``on_refit``). Each
-            checkpoint is the model's whole state, its candidate sizes' statistics included:
-            0.14 MB for the default model on 4 features and 3 actions, 2 MB with
-            ``max_components=40`` (the driving domain's), so a session refitting after every
-            label writes 70 MB, or 1 GB, per 500 labels when all are kept.
+            ``"incremental"`` (3 s at 2,000 labels, 5 features, measured 2026-11-27). For a
+            learning curve over many stages, ``torchcbl.load_models(run_dir, stages)``
+            rebuilds them in one pass, the incremental refits replayed once for all of them
+            (at most one per label), not once per stage; or score the stages as the session
+            runs, ``on_refit``. Each checkpoint is the model's whole state, its candidate
+            sizes' statistics included: 0.14 MB for the default model on 4 features and 3
+            actions, 2 MB with ``max_components=40`` (the driving domain's), so a session
+            refitting after every label writes 70 MB, or 1 GB, per 500 labels when all are
+            kept.
 
     Errors: a teacher that raises or answers outside the action space gives
     :class:`TeacherError`; an env that raises or returns a non-finite observation or reward
