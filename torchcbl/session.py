@@ -4346,6 +4346,7 @@ class _SummaryRead:
     checkpoint: int | None
     checkpoint_notes: list[str]
     beyond_notes: list[str]
+    on_disk: tuple[int, ...]  # the checkpoints' label counts, as listed before the log's read
     left: bool
     lock_note: str | None
 
@@ -4384,6 +4385,7 @@ def _read_for_summary(run: Path, config: dict[str, Any]) -> _SummaryRead:
         checkpoint=checkpoint,
         checkpoint_notes=checkpoint_notes,
         beyond_notes=beyond_notes,
+        on_disk=tuple(sorted(n for n, _ in entries)),
         left=left,
         lock_note=m.group(0).decode(errors="replace") if m else None,
     )
@@ -4495,7 +4497,7 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         block_steps=SUMMARY_BLOCK_STEPS,
         requests_per_block=tuple(blocks),
         last_checkpoint=read.checkpoint,
-        checkpoints_on_disk=tuple(sorted(n for n, _ in _checkpoint_entries(run / CHECKPOINT_DIR))),
+        checkpoints_on_disk=read.on_disk,
         keep_checkpoints=_kept_by(writers),
         refit=str(config["teaching"].get("refit", "full")),
         writers=tuple(writers),
