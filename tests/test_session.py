@@ -96,6 +96,24 @@ def _checkpoint_numbers(run: Path) -> list[int]:
     return sorted(int(p.name[6:14]) for p in (run / "checkpoints").glob("model-*.pt"))
 
 
+def _recorded(
+    env, run: Path, *, keep_checkpoints: int | None, **cfg
+) -> tuple[ConfidentTeacher, dict[int, dict[str, torch.Tensor]]]:
+    """A session in ``run`` (no non-interactive phase) and the live model's state at each
+    refit, by its label count (filled by ``on_refit`` as the session runs)."""
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, **cfg),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=keep_checkpoints,
+        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    return ct, live
+
+
 @pytest.mark.parametrize("refit", ["full", "incremental"])
 def test_a_session_keeps_its_newest_checkpoints_and_rebuilds_any_stage_from_its_log(
     tmp_path, refit
@@ -105,16 +123,7 @@ def test_a_session_keeps_its_newest_checkpoints_and_rebuilds_any_stage_from_its_
     checkpoint went is the model the loop had then, bit for bit; None keeps every one."""
     run = tmp_path / "run"
     env = rare_regions_world()
-    live: dict[int, dict[str, torch.Tensor]] = {}
-    ct = ConfidentTeacher(
-        env,
-        oracle(env),
-        config=TeachingConfig(noninteractive=False, max_new=2, refit=refit),
-        run_dir=run,
-        progress=False,
-        keep_checkpoints=2,
-        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
-    )
+    ct, live = _recorded(env, run, keep_checkpoints=2, max_new=2, refit=refit)
     ct.run(max_steps=120)
     ct.close()
     refits = sorted(live)
@@ -143,16 +152,7 @@ def test_a_hand_refit_off_the_schedule_keeps_its_checkpoint(tmp_path, refit):
     newest ones alone on disk."""
     run = tmp_path / "run"
     env = rare_regions_world()
-    live: dict[int, dict[str, torch.Tensor]] = {}
-    ct = ConfidentTeacher(
-        env,
-        oracle(env),
-        config=TeachingConfig(noninteractive=False, max_new=4, refit=refit),
-        run_dir=run,
-        progress=False,
-        keep_checkpoints=1,
-        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
-    )
+    ct, live = _recorded(env, run, keep_checkpoints=1, max_new=4, refit=refit)
     while ct.n_demonstrations < 6:
         ct.step()
     assert ct.refit()
@@ -314,16 +314,7 @@ def test_a_session_refitting_after_every_label_keeps_only_its_newest_checkpoints
     every stage still rebuilds from the log."""
     run = tmp_path / "run"
     env = rare_regions_world()
-    live: dict[int, dict[str, torch.Tensor]] = {}
-    ct = ConfidentTeacher(
-        env,
-        oracle(env),
-        config=TeachingConfig(noninteractive=False, max_new=1),
-        run_dir=run,
-        progress=False,
-        keep_checkpoints=2,
-        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
-    )
+    ct, live = _recorded(env, run, keep_checkpoints=2, max_new=1)
     while ct.n_demonstrations < 8:
         ct.step()
     ct.close()

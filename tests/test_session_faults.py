@@ -1938,16 +1938,23 @@ class _FileWorld(gym.Wrapper):
         return self
 
 
-def test_resume_refuses_an_env_whose_described_inputs_changed(tmp_path):
-    """An env that reads more than its make() arguments (a file) describes it: the session
-    keeps the description and a resume on the file edited since is refused, naming what
-    differs; the file put back resumes, and a session that kept none resumes as before."""
+def _file_world_session(tmp_path: Path) -> tuple[Path, Path, _FileWorld]:
+    """(the file, the run, the env) of a 10-step session of a _FileWorld on a file of two
+    centres, closed."""
     data = tmp_path / "centres.txt"
     data.write_text("0 0\n4 4\n")
     run = tmp_path / "run"
     env = _FileWorld(data)
     with ConfidentTeacher(env, oracle(env.env), run_dir=run, progress=False) as ct:
         ct.run(max_steps=10)
+    return data, run, env
+
+
+def test_resume_refuses_an_env_whose_described_inputs_changed(tmp_path):
+    """An env that reads more than its make() arguments (a file) describes it: the session
+    keeps the description and a resume on the file edited since is refused, naming what
+    differs; the file put back resumes, and a session that kept none resumes as before."""
+    data, run, env = _file_world_session(tmp_path)
     kept = load_config(run)["env"]["inputs"]
     assert kept == {"centres_sha256": hashlib.sha256(data.read_bytes()).hexdigest()}
     data.write_text("0 0\n5 5\n")
@@ -1972,12 +1979,7 @@ def test_resume_compares_the_described_inputs_both_sides_describe(tmp_path, monk
     describing a new input, e.g. a new field of a driving scenario) refused every session kept
     before it; the keys both describe are compared, as a kept object's fields are: a new key
     alone resumes, a differing common one is refused (True against 1 too)."""
-    data = tmp_path / "centres.txt"
-    data.write_text("0 0\n4 4\n")
-    run = tmp_path / "run"
-    env = _FileWorld(data)
-    with ConfidentTeacher(env, oracle(env.env), run_dir=run, progress=False) as ct:
-        ct.run(max_steps=10)
+    data, run, env = _file_world_session(tmp_path)
     digest = hashlib.sha256(data.read_bytes()).hexdigest()
     later = {"centres_sha256": digest, "weather": "dry"}
     monkeypatch.setattr(_FileWorld, "describe_inputs", lambda self: later)
