@@ -49,7 +49,9 @@ pi/4 (45 degrees): the first action turns the robot back to the start heading's 
 steers by the axis the robot faces.
 
 A session taught in this env keeps the digest of its map (:meth:`CorridorEnv.describe_inputs`),
-so resuming it on a map edited since is refused.
+so resuming it on a map edited since is refused. Each writer of the session records the pymunk
+it ran (:meth:`CorridorEnv.describe_versions`); a resume under another one is warned of, not
+refused.
 
 Envs never write files; rendering returns RGB arrays (see :mod:`corridor.render` to save PNGs).
 """
@@ -67,7 +69,7 @@ import numpy as np
 from gymnasium import spaces
 
 from corridor.maps import CorridorMap, map_digest
-from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig
+from corridor.world import N_ACTIONS, CorridorWorld, WorldConfig, pymunk_versions
 
 __all__ = ["CorridorEnv", "DEFAULT_MAP"]
 
@@ -196,6 +198,13 @@ class CorridorEnv(gym.Env):
         :meth:`torchcbl.ConfidentTeacher.resume` refuses an env whose map differs (a map file
         edited since, or another ``CorridorMap`` object)."""
         return {"corridor_map_sha256": map_digest(self.world.map)}
+
+    def describe_versions(self) -> dict[str, str]:
+        """What this env runs on: ``{"pymunk": version}`` (:func:`corridor.world.pymunk_versions`).
+        Each writer of a teaching session records it in ``writers.jsonl``, and
+        :meth:`torchcbl.ConfidentTeacher.resume` warns where it differs from the last
+        writer's (a resume under it is not refused)."""
+        return pymunk_versions()
 
     @property
     def path(self) -> list[tuple[float, float]]:

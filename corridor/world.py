@@ -60,7 +60,7 @@ import pymunk
 
 from corridor.maps import CorridorMap, RouteProgress, load_map
 
-__all__ = ["Action", "CorridorWorld", "WorldConfig", "N_ACTIONS", "SENSOR_NAMES"]
+__all__ = ["Action", "CorridorWorld", "WorldConfig", "N_ACTIONS", "SENSOR_NAMES", "pymunk_versions"]
 
 SENSOR_NAMES = ("left", "front", "right")
 _SENSOR_ANGLES = (math.pi / 2, 0.0, -math.pi / 2)
@@ -199,6 +199,13 @@ class WorldConfig:
                     f"WorldConfig.{name} is in radians, in [0, {math.radians(20):.3f}] "
                     f"(20 deg), got {getattr(self, name)}; pass math.radians(degrees)"
                 )
+
+
+def pymunk_versions() -> dict[str, str]:
+    """What the corridor world runs on: ``{"pymunk": version}``, the pymunk imported here (it
+    ships the Chipmunk2D it runs). A teaching session's writers record it
+    (:meth:`corridor.env.CorridorEnv.describe_versions`)."""
+    return {"pymunk": str(pymunk.version)}
 
 
 def _wrap(angle: float) -> float:

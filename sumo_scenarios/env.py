@@ -33,7 +33,9 @@ without a warning.
 A session taught in this env keeps a description of the traffic it drives, its SUMO settings and
 start lane, and of the SUMO files it loads (:meth:`DrivingEnv.describe_inputs`), so resuming it
 on other traffic or settings, however given (a name or a ``TrafficScenario``, an argument of
-its own, inside a ``DrivingConfig`` or left to its default), is refused.
+its own, inside a ``DrivingConfig`` or left to its default), is refused. Each writer of the
+session records the SUMO release it ran (:meth:`DrivingEnv.describe_versions`); a resume under
+another one is warned of, not refused.
 """
 
 from __future__ import annotations
@@ -58,7 +60,7 @@ from sumo_scenarios.scenarios import (
     described_fields,
     get_scenario,
 )
-from sumo_scenarios.sim import HighwaySim, SimConfig
+from sumo_scenarios.sim import HighwaySim, SimConfig, sumo_versions
 
 __all__ = [
     "ACTION_NAMES",
@@ -322,6 +324,14 @@ class DrivingEnv(gym.Env):
             text = text.replace(b"\r\n", b"\n")
             described[f"{name}_sha256"] = hashlib.sha256(text).hexdigest()
         return described
+
+    def describe_versions(self) -> dict[str, str]:
+        """What this env runs on: ``{"sumo": release}``, the SUMO release libsumo runs
+        (:func:`sumo_scenarios.sim.sumo_versions`). Each writer of a teaching session records
+        it in ``writers.jsonl``, and :meth:`torchcbl.ConfidentTeacher.resume` warns where it
+        differs from the last writer's (another release follows cars and places traffic
+        otherwise; a resume under it is not refused)."""
+        return sumo_versions()
 
     def __reduce_ex__(self, protocol: Any) -> Any:
         return self._sim.__reduce_ex__(protocol)  # refused, with what to do instead

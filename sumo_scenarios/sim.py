@@ -650,6 +650,16 @@ class HighwaySim:
         return out
 
 
+def sumo_versions() -> dict[str, str]:
+    """The SUMO release libsumo runs, as libsumo itself reports it: ``{"sumo": "1.28.0"}``
+    (a build from SUMO's sources names its commit). A teaching session's writers record it
+    (:meth:`sumo_scenarios.env.DrivingEnv.describe_versions`): another release follows cars
+    and places traffic otherwise."""
+    _import_libsumo()
+    release = str(libsumo.getVersion()[1])  # (API level, "SUMO 1.28.0")
+    return {"sumo": release.removeprefix("SUMO ").strip()}
+
+
 def libsumo_lane_length_from_net() -> float:
     """Length of the road edge in the shipped network, metres (read with sumolib).
 

@@ -1618,6 +1618,29 @@ def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
     assert report["world"] == dataclasses.asdict(cfg.world) and report["world"]["forward_noise"] > 0
 
 
+def test_teach_resume_under_another_pymunk_says_so_in_one_line(tmp_path, monkeypatch, capsys):
+    """A resume under another simulator release than the session's last writer ran warns
+    (UserWarning); `teach --resume` left it to Python, which printed it as the file and line
+    of the library's warn call and that line's source. It is one line on stderr now, and the
+    session goes on (not a refusal)."""
+    import corridor.env
+
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+    ran = corridor.env.pymunk_versions()["pymunk"]
+    monkeypatch.setattr(corridor.env, "pymunk_versions", lambda: {"pymunk": "6.0.0"})
+    capsys.readouterr()
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")  # as Python shows a UserWarning by default
+        assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "2"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert err.startswith("torchcbl teach: warning: "), err
+    assert f"pymunk {ran}" in err and "pymunk 6.0.0" in err and "steps from 3 on" in err, err
+    assert len(load_records(run)) == 5
+
+
 def test_ctrl_c_between_two_requests_stops_as_at_a_request(tmp_path, monkeypatch, capsys):
     """Ctrl-C (the help's "[q/Ctrl-C] quit") pressed while no key is awaited (the env steps, the
     agent drives on its own between two requests) ended with "torchcbl teach: interrupted" and

@@ -414,6 +414,38 @@ def test_a_map_file_may_be_given_as_a_path():
     np.testing.assert_array_equal(by_path.reset(seed=4)[0], by_name.reset(seed=4)[0])
 
 
+def test_each_writer_records_the_pymunk_it_ran_and_a_resume_under_another_warns(
+    tmp_path, monkeypatch
+):
+    """A session recorded nothing of the physics under it: one taught under one pymunk resumed
+    under another without a word. Each writer records it now (writers.jsonl's env_versions),
+    and a resume under another release than the last writer's warns, naming both."""
+    import warnings
+    from importlib.metadata import version
+
+    import corridor.env
+    from torchcbl import ConfidentTeacher
+
+    lshape = load_map("lshape")
+    expert = CorridorExpert(lshape)
+    run = tmp_path / "run"
+    with ConfidentTeacher(CorridorEnv(lshape), expert, run_dir=run, progress=False) as ct:
+        ct.run(max_steps=3)
+    monkeypatch.setattr(corridor.env, "pymunk_versions", lambda: {"pymunk": "6.0.0"})
+    with pytest.warns(UserWarning, match="taught under another simulator") as said:
+        ConfidentTeacher.resume(run, CorridorEnv(lshape), expert, progress=False).close()
+    (text,) = [str(w.message) for w in said]
+    assert f"pymunk {version('pymunk')}" in text and "pymunk 6.0.0" in text, text
+    writers = [json.loads(line) for line in (run / "writers.jsonl").read_text().splitlines()]
+    assert [w["env_versions"] for w in writers] == [
+        {"pymunk": version("pymunk")},
+        {"pymunk": "6.0.0"},
+    ]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the same release again: no word
+        ConfidentTeacher.resume(run, CorridorEnv(lshape), expert, progress=False).close()
+
+
 def test_a_session_keeps_its_map_and_refuses_another_on_resume(tmp_path):
     """CorridorEnv describes its map by a digest of what the robot drives, the same for the
     map by name, by file and as an object; a session made in Python keeps it, and resuming

@@ -611,6 +611,28 @@ def test_a_session_refuses_other_sumo_settings_or_start_lane_given_on_one_side_o
         env.close()
 
 
+def test_each_writer_of_a_driving_session_records_the_sumo_release_it_ran(tmp_path):
+    """A driving session recorded nothing of the SUMO under it: one begun under one release
+    resumed under another (another car-following, other traffic) without a word. Each writer
+    records the release libsumo runs now (writers.jsonl's env_versions)."""
+    from importlib.metadata import version
+
+    from sumo_scenarios.env import DrivingEnv
+    from sumo_scenarios.teacher import make_teacher
+    from torchcbl import ConfidentTeacher
+
+    run = tmp_path / "run"
+    env = DrivingEnv(max_episode_steps=10)
+    try:
+        assert env.describe_versions() == {"sumo": version("libsumo")}
+        with ConfidentTeacher(env, make_teacher(0), run_dir=run, progress=False) as ct:
+            ct.run(max_steps=2)
+    finally:
+        env.close()
+    (writer,) = [json.loads(line) for line in (run / "writers.jsonl").read_text().splitlines()]
+    assert writer["env_versions"] == {"sumo": version("libsumo")}
+
+
 def test_the_driving_env_describes_the_sumo_files_it_loads_less_their_comments(
     tmp_path, monkeypatch
 ):

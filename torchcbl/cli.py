@@ -1240,15 +1240,20 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     if args.resume:
         from torchcbl.errors import IncompatibleRunDirError, SessionLockedError
 
+        said: list[warnings.WarningMessage] = []
         try:  # (a session another process is teaching, a damaged log: as evaluate says them)
-            ct = ConfidentTeacher.resume(
-                run_dir,
-                env,
-                teacher,
-                progress=False,
-                on_step=status,
-                keep_checkpoints=_kept(args.keep_checkpoints, "as_before"),
-            )
+            # its warnings (another simulator release than the last writer's, steps fewer than
+            # writer.lock says were committed) each one line below, not Python's two; the
+            # filters in force kept (a library's DeprecationWarning stays unsaid, -W error raises)
+            with warnings.catch_warnings(record=True) as said:
+                ct = ConfidentTeacher.resume(
+                    run_dir,
+                    env,
+                    teacher,
+                    progress=False,
+                    on_step=status,
+                    keep_checkpoints=_kept(args.keep_checkpoints, "as_before"),
+                )
         except SessionLockedError as exc:  # the library's words are for Python: say the CLI's
             env.close()
             raise _UsageError(
@@ -1259,6 +1264,9 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         except IncompatibleRunDirError as exc:
             env.close()
             raise _UsageError(_one_line(exc)) from None
+        finally:
+            for w in said:
+                print(f"torchcbl teach: warning: {_one_line(w.message)}", file=sys.stderr)
         if isinstance(teacher, TerminalTeacher):  # "decision #N" goes on from the session's
             # answered requests (read from its log, which stays as it is)
             teacher.n_decisions = sum(r.teacher_action is not None for r in ct.records)

@@ -36,7 +36,10 @@ Run directory layout (one directory per teaching session)::
         writers.jsonl            one line per writer (start or resume): the first step it
                                  wrote, torch's thread counts, the model's device, torch /
                                  numpy versions, its pid and start time (UTC), the
-                                 checkpoints it keeps (``keep_checkpoints``)
+                                 checkpoints it keeps (``keep_checkpoints``), and what its
+                                 env runs on (``env_versions``, the env's
+                                 ``describe_versions()``, e.g. ``{"sumo": "1.28.0"}``; None
+                                 for an env without it)
         checkpoints/
             model-00000012.pt    ``{"n_demonstrations": 12, "labels_sha256": ...,
                                  "state_dict": ...}`` of the model fitted on the first 12
@@ -2139,13 +2142,22 @@ class SessionStore:
             raise
         return store, records, corrections
 
-    def note_writer(self, first_step: int, model_device: str = "cpu") -> None:
+    def note_writer(
+        self,
+        first_step: int,
+        model_device: str = "cpu",
+        *,
+        env_versions: dict[str, str] | None = None,
+    ) -> None:
         """Append who writes from ``first_step`` on to ``writers.jsonl``: torch's thread count,
         the model's device and versions (results are bit-identical only for the same thread
-        count and device), and :attr:`keep_checkpoints` (what a resume keeps by default)."""
+        count and device), :attr:`keep_checkpoints` (what a resume keeps by default) and
+        ``env_versions``, what the env runs on as its ``describe_versions()`` says (None: the
+        env has no such hook)."""
         line = json.dumps(
             {
                 "first_step": first_step,
+                "env_versions": env_versions,
                 "keep_checkpoints": self.keep_checkpoints,
                 "model_device": model_device,
                 "torch_num_threads": torch.get_num_threads(),
@@ -4009,7 +4021,10 @@ class SessionSummary:
         refit: the session's ``TeachingConfig.refit``, ``"full"`` or ``"incremental"``.
         writers: one dict per writer (start or resume) from ``writers.jsonl``: first_step,
             torch_num_threads, torch_num_interop_threads, torch_version, numpy_version,
-            model_device, pid, started_utc (what that writer's torchcbl recorded).
+            model_device, keep_checkpoints, env_versions (what the env ran on, as its
+            ``describe_versions()`` said, e.g. ``{"sumo": "1.28.0"}``; None: the env has no
+            such hook), pid, started_utc (what that writer's torchcbl recorded: a writer of
+            an older torchcbl lacks the later keys).
         last_writer: ``writer.lock``'s note of its last holder ("process PID on HOST"),
             None without one; it stays after that writer stops.
         writer_running: whether a process holds ``writer.lock`` now, as this machine's
@@ -4148,7 +4163,7 @@ class SessionSummary:
             lines.append(
                 ("writers:    " if i == 0 else "            ")
                 + f"from step {w.get('first_step', '?')}: torch {w.get('torch_version', '?')}, "
-                f"numpy {w.get('numpy_version', '?')}, torch threads "
+                f"numpy {w.get('numpy_version', '?')}, {_env_versions_text(w)}torch threads "
                 f"{w.get('torch_num_threads', '?')}, {w.get('model_device', '?')}, "
                 f"pid {w.get('pid', '?')}, "
                 f"{w.get('started_utc', '?')}"
@@ -4199,6 +4214,15 @@ class SessionSummary:
             "killed": f"its last writer{who} stopped without closing it (killed; a resume "
             "takes it on)",
         }.get(self.state, f"{self.state}{who}: /proc/locks cannot tell whether a writer runs")
+
+
+def _env_versions_text(writer: dict[str, Any]) -> str:
+    """A writer's ``env_versions`` as ``"sumo 1.28.0, "`` (what its env ran on, each name
+    and version); empty where it recorded none."""
+    versions = writer.get("env_versions")
+    if not isinstance(versions, dict):
+        return ""
+    return "".join(f"{k} {v}, " for k, v in versions.items())
 
 
 def _args_text(args: dict[str, Any]) -> str:
@@ -4252,6 +4276,13 @@ def _read_writers(run_dir: Path) -> tuple[list[dict[str, Any]], list[str]]:
             bad.append(number)
     notes = [f"{run_dir / WRITERS_NAME}: lines {bad} are not a writer's record"] if bad else []
     return writers, notes
+
+
+def _last_env_versions(run_dir: str | os.PathLike[str]) -> Any:
+    """The ``env_versions`` the session's last writer recorded in ``writers.jsonl`` as it was
+    read (None: that writer recorded none, or the file has no writer or cannot be read)."""
+    writers = _read_writers(Path(run_dir))[0]
+    return writers[-1].get("env_versions") if writers else None
 
 
 def kept_checkpoints(run_dir: str | os.PathLike[str]) -> int | None:

@@ -90,6 +90,7 @@ from torchcbl.session import (
     _check_restorable,
     _env_objects,
     _InterruptHold,
+    _last_env_versions,
     _model_args,
     _names_a_session_format,
     _read_prior,
@@ -428,6 +429,61 @@ def _env_inputs(env: gym.Env) -> dict[str, Any] | None:
     return {k: float(v) if isinstance(v, float) else v for k, v in inputs.items()}
 
 
+def _env_versions(env: gym.Env) -> dict[str, str] | None:
+    """What the unwrapped env's ``describe_versions()`` says it runs on (a simulator and its
+    bindings, each by name: ``{"sumo": "1.28.0"}``), or None for an env without one.
+
+    Raises:
+        TypeError: ``describe_versions()`` gave something other than a dict of str keys and
+            str values.
+        EnvError: ``describe_versions()`` raised (its exception is the cause).
+    """
+    unwrapped = getattr(env, "unwrapped", env)
+    describe = getattr(unwrapped, "describe_versions", None)
+    if not callable(describe):
+        return None
+    try:
+        versions = describe()
+    except Exception as exc:
+        raise EnvError(
+            f"{type(unwrapped).__name__}.describe_versions() raised {type(exc).__name__}: "
+            f"{exc} (what the env runs on cannot be told now; nothing was changed)"
+        ) from exc
+    if not (
+        isinstance(versions, dict)
+        and all(type(k) is str and type(v) is str for k, v in versions.items())
+    ):
+        raise TypeError(
+            f"{type(unwrapped).__name__}.describe_versions() must return a dict of str keys "
+            f"and str values (what the env runs on, each with its version), got {versions!r}; "
+            "return e.g. {'mysim': importlib.metadata.version('mysim')}"
+        )
+    return dict(versions)
+
+
+def _warn_changed_versions(
+    run_dir: Path, previous: Any, versions: dict[str, str] | None, first_step: int
+) -> None:
+    """Warn where the env of a resume runs on other versions (``versions``) than the session's
+    last writer recorded (``previous``, its ``env_versions``) on a key both give; silent where
+    either recorded none (a writer of an env without the hook, or of an older torchcbl)."""
+    if not isinstance(previous, dict) or versions is None:
+        return
+    differ = [k for k in versions if k in previous and previous[k] != versions[k]]
+    if not differ:
+        return
+    old = ", ".join(f"{k} {previous[k]}" for k in differ)
+    new = ", ".join(f"{k} {versions[k]}" for k in differ)
+    warnings.warn(
+        f"the session in {run_dir} was last taught under {old} and is resumed under {new}: "
+        f"steps from {first_step} on are taught under another simulator, so the env may "
+        f"behave differently (torchcbl show lists what each writer ran on); resume under "
+        f"{old} to continue as taught",
+        UserWarning,
+        stacklevel=3,
+    )
+
+
 def _episode_cap(env: gym.Env) -> int | None:
     """The step cap in force on ``env``: the smallest of its ``TimeLimit`` wrappers' (an outer
     ``TimeLimit(gymnasium.make(id), n)`` reports ``n`` in its spec whatever the inner cap) and
@@ -591,6 +647,11 @@ class ConfidentTeacher:
             values that identify those inputs (e.g. a file's SHA-256). The session keeps it in
             its ``config.json`` and :meth:`resume` refuses an env whose description differs
             (``CorridorEnv`` describes its map so, ``DrivingEnv`` its traffic and SUMO files).
+            An env that runs on a simulator may define ``describe_versions() -> dict[str,
+            str]`` on its unwrapped class: the versions of what it runs on, each by name
+            (``DrivingEnv``'s ``{"sumo": "1.28.0"}``, ``CorridorEnv``'s pymunk). Each writer
+            of the session records them in ``writers.jsonl`` (``torchcbl show`` lists them),
+            and :meth:`resume` warns where they differ from the last writer's.
         teacher: ``teacher(observation [D] ndarray, info dict) -> int`` in ``[0, n_actions)``
             (or a numpy integer, or a 0-d integer array or tensor). It gets a copy of the env's
             observation and the info of the latest reset / step. Optionally it has
@@ -710,6 +771,8 @@ class ConfidentTeacher:
             self.model.fit(x, y)  # before the first decision, as a resume rebuilds it
             _tell_refit(self.strategy, self.model, x, y)
         self._env_config = self._describe_env()
+        # what the env runs on, for writers.jsonl (a bad hook refused before anything is written)
+        self._env_versions = _env_versions(self.env)
         self._store: SessionStore | None = None
         self.run_dir = None if run_dir is None else Path(run_dir)
         if self.run_dir is not None:
@@ -756,7 +819,7 @@ class ConfidentTeacher:
         store.commit_every = commit_every
         store.keep_checkpoints = keep_checkpoints
         try:
-            store.note_writer(0, _model_device(self.model))
+            store.note_writer(0, _model_device(self.model), env_versions=self._env_versions)
         except BaseException as exc:
             # nothing is recorded yet: no half session (the directory is left without one,
             # checkpoint 0 of a fitted starting model included)
@@ -968,7 +1031,8 @@ class ConfidentTeacher:
 
         Raises:
             TypeError: ``env`` is not an env (an env id: make it first with
-                ``gymnasium.make``).
+                ``gymnasium.make``), or its ``describe_inputs()`` or ``describe_versions()``
+                gives what the constructor refuses (:class:`EnvError` where one raises).
             IncompatibleRunDirError: the directory is not a session, or it was written for a
                 different env, model, rule or learning configuration. Of the env its class,
                 observation space and step cap are compared, and where both were made by
@@ -987,6 +1051,11 @@ class ConfidentTeacher:
                 session goes on from what the files hold. Or the stored strategy's
                 ``"relabel"`` is not the strategy's (a session stored before a new session
                 refused that): the loop relabels as the strategy says, the readers as stored.
+                Or the env's ``describe_versions()`` differs from what the session's last
+                writer recorded on a key both give (another simulator release, say): the
+                steps from here on are taught under it, and the env may behave otherwise.
+                Not a refusal: a patch release usually changes nothing. Silent where either
+                recorded none.
         """
         stored = load_config(run_dir)
         n_features, n_actions = check_env(env)
@@ -1062,6 +1131,7 @@ class ConfidentTeacher:
                 a.flags.writeable = False
             self._set_prior(*prior)
         self._env_config = self._describe_env()
+        self._env_versions = _env_versions(env)  # refused here, before the session is opened
         self.run_dir = Path(run_dir)
         self._starts_fitted = stored.get("starts_fitted") is True
         _check_commit_every(commit_every)
@@ -1089,7 +1159,13 @@ class ConfidentTeacher:
         )
         self._store.keep_checkpoints = keep_checkpoints  # before note_writer records it
         try:
-            self._store.note_writer(len(records), _model_device(self.model))
+            # under the lock, before this writer's own line: the last writer's versions
+            _warn_changed_versions(
+                self.run_dir, _last_env_versions(self.run_dir), self._env_versions, len(records)
+            )
+            self._store.note_writer(
+                len(records), _model_device(self.model), env_versions=self._env_versions
+            )
             self._restore(records, corrections)
         except BaseException:
             self.close()
