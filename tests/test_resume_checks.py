@@ -169,6 +169,25 @@ def test_a_session_made_with_arguments_refuses_an_env_whose_arguments_cannot_be_
     _resumes(run, gym.make(LINE_ID, n=12, max_episode_steps=30))
 
 
+def test_a_refusal_says_an_argument_one_side_did_not_give_was_not_given(tmp_path):
+    """A gymnasium.make argument one side left to the env's default was written None in the
+    refusal, ``'n': (None, 12)``, though the session ran with the default (10), not None; it
+    says "not given (the env's default)" there. An argument given as None is still None."""
+    run = tmp_path / "run"
+    _teach(run, gym.make(LINE_ID, max_episode_steps=30))
+    msg = _refused(run, gym.make(LINE_ID, n=12, max_episode_steps=30), "env kwargs (stored, ")
+    assert "'n': (not given (the env's default), 12)" in msg, msg
+    assert "None" not in msg, msg
+    other = tmp_path / "other"
+    _teach(other, gym.make(LINE_ID, n=12, max_episode_steps=30))
+    msg = _refused(other, gym.make(LINE_ID, max_episode_steps=30))
+    assert "'n': (12, not given (the env's default))" in msg, msg
+    msg = _refused(other, gym.make(LINE_ID, n=12, render_mode=None, max_episode_steps=31))
+    assert "'max_episode_steps': (30, 31)" in msg, msg  # (render_mode is not compared)
+    msg = _refused(run, gym.make(LINE_ID, render_mode="human", max_episode_steps=None))
+    assert "'max_episode_steps': (30, None)" in msg, msg  # None: no cap, as before
+
+
 def test_the_observation_space_is_compared_whatever_numpy_prints(tmp_path):
     """config.json keeps the observation space as gymnasium writes it, which numpy's print
     options change (a notebook's np.set_printoptions): the same env resumes under others."""

@@ -4841,6 +4841,16 @@ def resume_problems(
     return problems
 
 
+class _NotGiven:
+    """A ``gymnasium.make`` argument one side did not give, as a refusal writes it."""
+
+    def __repr__(self) -> str:
+        return "not given (the env's default)"
+
+
+_NOT_GIVEN = _NotGiven()
+
+
 def _env_problems(
     senv: dict[str, Any],
     env_id: str | None,
@@ -4885,8 +4895,9 @@ def _env_problems(
         # what gymnasium.make was given, where both sides are plain values (an object is
         # kept only as its repr, which may name a memory address); render_mode may change
         given_kw = json.loads(json.dumps(env_kwargs))  # as the session stored its own
+        # (one side's argument left to the env's default is written so, not as None)
         kw_differ = {
-            k: (stored_kw.get(k), given_kw.get(k))
+            k: (stored_kw.get(k, _NOT_GIVEN), given_kw.get(k, _NOT_GIVEN))
             for k in sorted(set(stored_kw) | set(given_kw))
             if k != "render_mode"
             and not kept_as_repr(stored_kw.get(k))
