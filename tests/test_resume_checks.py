@@ -169,6 +169,53 @@ def test_a_session_made_with_arguments_refuses_an_env_whose_arguments_cannot_be_
     _resumes(run, gym.make(LINE_ID, n=12, max_episode_steps=30))
 
 
+def test_a_refusal_says_an_argument_one_side_did_not_give_was_not_given(tmp_path):
+    """A gymnasium.make argument one side left to the env's default was written None in the
+    refusal, ``'n': (None, 12)``, though the session ran with the default (10), not None; it
+    says "not given (the env's default)" there. An argument given as None is still None."""
+    run = tmp_path / "run"
+    _teach(run, gym.make(LINE_ID, max_episode_steps=30))
+    msg = _refused(run, gym.make(LINE_ID, n=12, max_episode_steps=30), "env kwargs (stored, ")
+    assert "'n': (not given (the env's default), 12)" in msg, msg
+    assert "None" not in msg, msg
+    other = tmp_path / "other"
+    _teach(other, gym.make(LINE_ID, n=12, max_episode_steps=30))
+    msg = _refused(other, gym.make(LINE_ID, max_episode_steps=30))
+    assert "'n': (12, not given (the env's default))" in msg, msg
+    msg = _refused(other, gym.make(LINE_ID, n=12, render_mode=None, max_episode_steps=31))
+    assert "'max_episode_steps': (30, 31)" in msg, msg  # (render_mode is not compared)
+    msg = _refused(run, gym.make(LINE_ID, render_mode="human", max_episode_steps=None))
+    assert "'max_episode_steps': (30, None)" in msg, msg  # None: no cap, as before
+
+
+class Stride(Line):
+    """A Line whose step is an argument of its constructor the observation space does not
+    show; ``described`` (a class attribute): whether its ``describe_inputs()`` gives it."""
+
+    described = False
+
+    def __init__(self, stride: float = 1.0) -> None:
+        super().__init__()
+        self.stride = stride
+
+    def describe_inputs(self) -> dict:
+        return {"stride": self.stride} if self.described else {}
+
+
+def test_an_env_made_directly_is_compared_on_what_it_shows_alone(tmp_path):
+    """What README's resume table says: of an env made directly, only its class, spaces, step
+    cap and describe_inputs() are compared, so one made with another constructor argument of
+    the same class, space and cap resumes; given in describe_inputs(), the argument refuses."""
+    run = tmp_path / "run"
+    _teach(run, gym.wrappers.TimeLimit(Stride(), 30))
+    _resumes(run, gym.wrappers.TimeLimit(Stride(stride=3.0), 30))
+    described = type("Stride", (Stride,), {"described": True})
+    told = tmp_path / "told"
+    _teach(told, gym.wrappers.TimeLimit(described(), 30))
+    _refused(told, gym.wrappers.TimeLimit(described(stride=3.0), 30), "'stride': (1.0, 3.0)")
+    _resumes(told, gym.wrappers.TimeLimit(described(), 30))
+
+
 def test_the_observation_space_is_compared_whatever_numpy_prints(tmp_path):
     """config.json keeps the observation space as gymnasium writes it, which numpy's print
     options change (a notebook's np.set_printoptions): the same env resumes under others."""

@@ -943,3 +943,96 @@ def test_show_prints_traffic_of_ones_own_in_full(tmp_path, capsys):
     assert main(["show", str(run), "--json"]) == 0
     fields = json.loads(capsys.readouterr().out)["env_kwargs"]["scenario"]["fields"]
     assert fields["start_clear_m"] == 30.0 and fields["mean_spacing_m"] == [50.0, 40.0, 120.0]
+
+
+class Dial(gym.Env):
+    """An env of one's own, made directly (no gymnasium id): 1 feature, 2 actions."""
+
+    def __init__(self) -> None:
+        self.observation_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+        self.action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return self.np_random.uniform(-1, 1, 1).astype(np.float32), {}
+
+    def step(self, action):
+        return self.np_random.uniform(-1, 1, 1).astype(np.float32), 0.0, False, False, {}
+
+
+def _taught_in(run: Path, env: gym.Env) -> None:
+    with ConfidentTeacher(
+        env,
+        lambda o, i: int(o[-1] > 0),
+        config=TeachingConfig(max_new=3),
+        run_dir=run,
+        progress=False,
+    ) as ct:
+        ct.run(max_steps=6)
+
+
+def test_show_names_the_env_class_and_step_cap_resume_compares(tmp_path, capsys):
+    """A session of gymnasium.make("CartPole-v1", max_episode_steps=100) (as the benchmark's
+    env_kwargs={"max_episode_steps": 100} makes it) showed "CartPole-v1", its env_kwargs {},
+    yet a resume with gymnasium.make("CartPole-v1") is refused on its cap; one made directly
+    showed "made directly (no gymnasium id)", though resume compares its class. show, its
+    --json and describe() now give the class and the cap as config.json keeps them; a session
+    written before they were kept says "not recorded"."""
+    made = tmp_path / "made"
+    _taught_in(made, gym.make("CartPole-v1", max_episode_steps=100))
+    s = describe(made)
+    assert s.env_class == "gymnasium.envs.classic_control.cartpole.CartPoleEnv"
+    assert (s.env_max_episode_steps, s.env_max_episode_steps_recorded) == (100, True)
+    assert main(["show", str(made)]) == 0
+    out = capsys.readouterr().out
+    assert "\nclass:      gymnasium.envs.classic_control.cartpole.CartPoleEnv\n" in out, out
+    assert "\nstep cap:   100 (max_episode_steps)\n" in out, out
+    assert main(["show", str(made), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown == s.to_dict()
+    assert (shown["env_class"], shown["env_max_episode_steps"]) == (s.env_class, 100)
+    direct = tmp_path / "direct"
+    _taught_in(direct, Dial())  # no TimeLimit, no cap of its own
+    s = describe(direct)
+    assert (s.env_id, s.env_class) == (None, f"{Dial.__module__}.Dial")
+    assert (s.env_max_episode_steps, s.env_max_episode_steps_recorded) == (None, True)
+    assert main(["show", str(direct)]) == 0
+    out = capsys.readouterr().out
+    assert f"\nclass:      {Dial.__module__}.Dial\n" in out, out
+    assert "\nstep cap:   none (no TimeLimit, and no cap of its own)\n" in out, out
+    assert main(["show", str(tmp_path)]) == 0  # a folder's listing names the class
+    assert f"{direct}: closed, Dial made directly, " in capsys.readouterr().out
+    # a session written before the class and the cap were kept
+    config = json.loads((direct / "config.json").read_text())
+    del config["env"]["class"], config["env"]["max_episode_steps"]
+    (direct / "config.json").write_text(json.dumps(config))
+    s = describe(direct)
+    assert (s.env_class, s.env_max_episode_steps, s.env_max_episode_steps_recorded) == (
+        None,
+        None,
+        False,
+    )
+    assert main(["show", str(direct)]) == 0
+    out = capsys.readouterr().out
+    assert "\nclass:      not recorded (an older session: resume does not compare it)\n" in out
+    assert "\nstep cap:   not recorded (an older session: resume does not compare it)\n" in out
+    assert main(["show", str(direct), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert (shown["env_class"], shown["env_max_episode_steps_recorded"]) == (None, False)
+
+
+def test_evaluate_names_the_class_of_an_env_made_directly(tmp_path, capsys):
+    """evaluate refused a session of an env of one's own made directly saying "env id None";
+    it names the env's class, which resume compares, where there is no id."""
+    run = tmp_path / "run"
+    _taught_in(run, Dial())
+    assert main(["evaluate", str(run)]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert f"env {Dial.__module__}.Dial made directly (no gymnasium id), 1 features" in line
+    assert "None" not in line, line
+    config = json.loads((run / "config.json").read_text())
+    del config["env"]["class"]
+    (run / "config.json").write_text(json.dumps(config))
+    assert main(["evaluate", str(run)]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert "env made directly (no gymnasium id; its class not recorded)" in line, line

@@ -466,6 +466,17 @@ def _replace_seeds(config: Any, n_seeds: int) -> Any:
     raise _UsageError(f"--seeds is not supported by {type(config).__name__}")
 
 
+def _env_named(env: dict[str, Any]) -> str:
+    """A session's env (config.json's ``"env"``) by its gymnasium id, else by its class (what
+    resume compares of an env made directly), as a message names it."""
+    if env.get("id"):
+        return f"env id {env['id']!r}"
+    kept = env.get("class")
+    if isinstance(kept, str) and kept:
+        return f"env {kept} made directly (no gymnasium id)"
+    return "env made directly (no gymnasium id; its class not recorded)"
+
+
 def _session_domain(session: Path, asked: str | None, *, teach: bool = False) -> str:
     """The domain a teaching session was taught in, read from its config.json; ``asked`` (the
     user's --domain, if any) must agree with it."""
@@ -495,7 +506,7 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
     if space is not None:  # (a session too old to have stored it goes by its shape alone)
         by_space = {k: d for k, d in by_space.items() if k[2] == space}
     domain = _ENV_IDS.get(env.get("id") or "") or next(iter(by_space.values()), None)
-    described = f"env id {env.get('id')!r}, {shape[0]} features, {shape[1]} actions" + (
+    described = f"{_env_named(env)}, {shape[0]} features, {shape[1]} actions" + (
         f", observations {space}" if space else ""
     )
     if domain is None:

@@ -3974,6 +3974,17 @@ class SessionSummary:
             :func:`env_make_argument` makes again); one kept only as text as ``{"repr":
             text}``, the text ending with "..." where it may have been cut (a session keeps 200
             characters of it).
+        env_class: the unwrapped env's class, ``module.qualname``, as config.json's
+            ``env.class`` keeps it (resume compares it by its name, whether the env was made
+            by ``gymnasium.make`` or directly); None: not recorded (a session written before
+            2026-11-27, which resume does not compare on it).
+        env_max_episode_steps: the step cap in force on the session's env (its smallest
+            ``TimeLimit``'s or the env's own), as config.json's ``env.max_episode_steps``
+            keeps it, which resume compares (a cap ``gymnasium.make`` was given is here, not
+            in ``env_kwargs``); None: no cap, or not recorded (see the next field).
+        env_max_episode_steps_recorded: whether config.json keeps the cap (sessions of an env
+            with a gymnasium id keep it since 2026-11-26, of every env since 2026-11-27; a
+            session that does not is not compared on it).
         n_features, n_actions: the observation's size D and the number of actions A.
         seed: the session seed.
         strategy: the strategy's config as stored (``"type"``, its arguments, ``"relabel"``,
@@ -4052,6 +4063,9 @@ class SessionSummary:
     format: str
     env_id: str | None
     env_kwargs: dict[str, Any]
+    env_class: str | None
+    env_max_episode_steps: int | None
+    env_max_episode_steps_recorded: bool
     n_features: int
     n_actions: int
     seed: int
@@ -4096,6 +4110,8 @@ class SessionSummary:
         env += f"{self.n_features} features, {self.n_actions} actions"
         start = ", started from a fitted model" if self.starts_fitted else ""
         lines.append(f"env:        {env}")
+        lines.append(f"class:      {self.env_class or _NOT_RECORDED}")
+        lines.append(f"step cap:   {self._cap_text()}")
         if self.env_kwargs:  # as the Python that passes them again, each object written out
             args, notes = _make_arguments_source(self.env_kwargs, limit=_SHOW_CALL_CHARS)
             for i, arg in enumerate(args):
@@ -4176,10 +4192,26 @@ class SessionSummary:
         kind = str(self.strategy.get("type", "?"))
         episodes = f"{self.n_episodes} episode{'' if self.n_episodes == 1 else 's'}"
         return (
-            f"{self.run_dir}: {self.state}, {self.env_id or 'env made directly'}, {kind}, "
+            f"{self.run_dir}: {self.state}, {self._env_name()}, {kind}, "
             f"seed {self.seed}, {self.n_steps} steps, {episodes}, {self.n_labels} labels "
             f"({self.n_requests} requests, {self.n_corrections} corrections)"
         )
+
+    def _env_name(self) -> str:
+        """The env in a folder's listing: its gymnasium id, else its class (by its name)."""
+        if self.env_id:
+            return self.env_id
+        if self.env_class:
+            return f"{self.env_class.rsplit('.', 1)[-1]} made directly"
+        return "env made directly"
+
+    def _cap_text(self) -> str:
+        """The step cap as config.json keeps it, in words."""
+        if not self.env_max_episode_steps_recorded:
+            return _NOT_RECORDED
+        if self.env_max_episode_steps is None:
+            return "none (no TimeLimit, and no cap of its own)"
+        return f"{self.env_max_episode_steps} (max_episode_steps)"
 
     def _kept_text(self) -> str:
         """The checkpoints on disk, the last writer's retention and, where a writer's
@@ -4214,6 +4246,10 @@ class SessionSummary:
             "killed": f"its last writer{who} stopped without closing it (killed; a resume "
             "takes it on)",
         }.get(self.state, f"{self.state}{who}: /proc/locks cannot tell whether a writer runs")
+
+
+#: what ``torchcbl show`` says of what a session's config.json does not keep (an older one's)
+_NOT_RECORDED = "not recorded (an older session: resume does not compare it)"
 
 
 def _env_versions_text(writer: dict[str, Any]) -> str:
@@ -4503,6 +4539,9 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         format=str(config["format"]),
         env_id=config["env"].get("id"),
         env_kwargs=_kept_arguments(config["env"]),
+        env_class=_stored_class(config["env"]),
+        env_max_episode_steps=_stored_cap(config["env"]),
+        env_max_episode_steps_recorded="max_episode_steps" in config["env"],
         n_features=int(config["env"]["n_features"]),
         n_actions=int(config["env"]["n_actions"]),
         seed=int(config["seed"]),
@@ -4537,6 +4576,18 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         state=state,
         notes=tuple(notes + writer_notes + checkpoint_notes),
     )
+
+
+def _stored_class(senv: Mapping[str, Any]) -> str | None:
+    """The env's class config.json keeps (``senv``: its ``"env"``), None where it keeps none."""
+    kept = senv.get("class")
+    return kept if isinstance(kept, str) and kept else None
+
+
+def _stored_cap(senv: Mapping[str, Any]) -> int | None:
+    """The step cap config.json keeps (``senv``: its ``"env"``), None where it keeps none."""
+    kept = senv.get("max_episode_steps")
+    return int(kept) if isinstance(kept, int) and not isinstance(kept, bool) else None
 
 
 def _checkpoint_report(
@@ -4790,6 +4841,16 @@ def resume_problems(
     return problems
 
 
+class _NotGiven:
+    """A ``gymnasium.make`` argument one side did not give, as a refusal writes it."""
+
+    def __repr__(self) -> str:
+        return "not given (the env's default)"
+
+
+_NOT_GIVEN = _NotGiven()
+
+
 def _env_problems(
     senv: dict[str, Any],
     env_id: str | None,
@@ -4834,8 +4895,9 @@ def _env_problems(
         # what gymnasium.make was given, where both sides are plain values (an object is
         # kept only as its repr, which may name a memory address); render_mode may change
         given_kw = json.loads(json.dumps(env_kwargs))  # as the session stored its own
+        # (one side's argument left to the env's default is written so, not as None)
         kw_differ = {
-            k: (stored_kw.get(k), given_kw.get(k))
+            k: (stored_kw.get(k, _NOT_GIVEN), given_kw.get(k, _NOT_GIVEN))
             for k in sorted(set(stored_kw) | set(given_kw))
             if k != "render_mode"
             and not kept_as_repr(stored_kw.get(k))
