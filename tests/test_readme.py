@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+import torchcbl
 from torchcbl import ConfidentTeacher, evaluate_policy
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -28,6 +29,17 @@ def test_the_python_example_runs(tmp_path, monkeypatch):
     # leaving the with block closed the step log: SQLite removes its write-ahead log then
     assert not (tmp_path / "runs" / "my-session" / "steps.sqlite-wal").exists()
     assert (tmp_path / "runs" / "my-session" / "config.json").exists()
+
+    # what the text says of the session's counts, with the names it calls on run_dir: each is
+    # runnable as written after `import torchcbl` (describe was written bare, and torchcbl had
+    # no describe to import)
+    spans = re.findall(r"`([^`]*\bdescribe\(run_dir\)[^`]*)`", README)
+    assert spans
+    names = {"torchcbl": torchcbl, "run_dir": "runs/my-session"}
+    said = {span: eval(span, names) for span in spans}  # noqa: S307 - the README's own code
+    ct = scope["ct"]
+    assert said["torchcbl.describe(run_dir).n_episodes_ended"] == ct.n_episodes
+    assert said["torchcbl.describe(run_dir).n_episodes"] >= ct.n_episodes
 
     # the teacher's signature: the example after it runs in the same scope, and what its
     # comment and the text before it say a one-argument policy meets holds

@@ -214,3 +214,11 @@ def test_a_missing_prior_is_refused_at_the_call(tmp_path):
 
 def test_load_models_is_exported_beside_load_model():
     assert torchcbl.load_models is load_models
+
+
+def test_describe_and_its_summary_are_exported_beside_load_model():
+    """The README writes torchcbl.describe(run_dir); torchcbl had no describe."""
+    from torchcbl.session import SessionSummary, describe
+
+    assert torchcbl.describe is describe and torchcbl.SessionSummary is SessionSummary
+    assert {"describe", "SessionSummary"} <= set(torchcbl.__all__)
