@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import inspect
 import re
+import textwrap
 from pathlib import Path
 
 import pytest
 
-from torchcbl import ConfidentTeacher, evaluate_policy
+import torchcbl
+from torchcbl import ConfidentTeacher, GreedyPolicy, evaluate_policy, load_models
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -29,6 +32,17 @@ def test_the_python_example_runs(tmp_path, monkeypatch):
     assert not (tmp_path / "runs" / "my-session" / "steps.sqlite-wal").exists()
     assert (tmp_path / "runs" / "my-session" / "config.json").exists()
 
+    # what the text says of the session's counts, with the names it calls on run_dir: each is
+    # runnable as written after `import torchcbl` (describe was written bare, and torchcbl had
+    # no describe to import)
+    spans = re.findall(r"`([^`\n]*\bdescribe\(run_dir\)[^`\n]*)`", README)
+    assert spans
+    names = {"torchcbl": torchcbl, "run_dir": "runs/my-session"}
+    said = {span: eval(span, names) for span in spans}  # noqa: S307 - the README's own code
+    ct = scope["ct"]
+    assert said["torchcbl.describe(run_dir).n_episodes_ended"] == ct.n_episodes
+    assert said["torchcbl.describe(run_dir).n_episodes"] >= ct.n_episodes
+
     # the teacher's signature: the example after it runs in the same scope, and what its
     # comment and the text before it say a one-argument policy meets holds
     block = re.search(r"```python\n(policy = ct\.policy.*?)```", README, re.S).group(1)
@@ -42,6 +56,23 @@ def test_the_python_example_runs(tmp_path, monkeypatch):
         evaluate_policy(teacher, env, n_steps=5)
     with pytest.raises(TypeError, match="leave uses_info out"):
         evaluate_policy(lambda obs: policy(obs), env, n_steps=5, uses_info=True)
+
+    # the learning curve of that session, as the README and load_models' docstring write it,
+    # runs as written: from the first fitted stage (stage 0 has no model: the examples began
+    # there and stopped at once, evaluate_policy refusing the unfitted model's -1)
+    block = re.search(r"```python\n(# a learning curve.*?)```", README, re.S).group(1)
+    exec(compile(block, "README.md", "exec"), scope)
+    n_labels = scope["ct"].n_demonstrations
+    assert scope["first"] == 1  # the default max_new, no prior demonstrations
+    assert [n for n, _ in scope["curve"]] == list(range(1, n_labels + 1, 10))
+    assert all(0.0 <= rate <= 1.0 for _, rate in scope["curve"])
+    ((_, unfitted),) = load_models("runs/my-session", [0])
+    assert not unfitted.is_fitted
+    with pytest.raises(RuntimeError, match="not fitted"):  # what the text says of stage 0
+        evaluate_policy(GreedyPolicy(unfitted), env, n_steps=5)
+    doc = inspect.getdoc(load_models).split("Example (a learning curve", 1)[1]
+    example = textwrap.dedent(doc.split("::", 1)[1]).strip("\n")
+    exec(compile(example, "load_models", "exec"), {**scope, "run_dir": "runs/my-session"})
 
 
 def test_quickstart_has_two_commands_and_ci_runs_the_test_one():

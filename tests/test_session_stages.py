@@ -183,6 +183,9 @@ def test_stages_that_are_not_increasing_counts_of_the_log_are_refused_at_the_cal
     msg = str(caught.value)
     assert msg.startswith("n_demonstrations: expected increasing ints from 0 to 12"), msg
     assert said in msg, msg
+    if "after" not in said:  # the stages it suggests start at the first fit (max_new): the
+        # range(0, ...) it gave began with the unfitted model, which no GreedyPolicy can run
+        assert "e.g. range(4, 13, 10) (the session's first refit is due at max_new=4" in msg
     assert list(load_models(run, [])) == []
 
 
@@ -214,3 +217,11 @@ def test_a_missing_prior_is_refused_at_the_call(tmp_path):
 
 def test_load_models_is_exported_beside_load_model():
     assert torchcbl.load_models is load_models
+
+
+def test_describe_and_its_summary_are_exported_beside_load_model():
+    """The README writes torchcbl.describe(run_dir); torchcbl had no describe."""
+    from torchcbl.session import SessionSummary, describe
+
+    assert torchcbl.describe is describe and torchcbl.SessionSummary is SessionSummary
+    assert {"describe", "SessionSummary"} <= set(torchcbl.__all__)

@@ -313,6 +313,42 @@ def test_policy_stands_alone_and_evaluates():
     assert again == recs
 
 
+def test_an_unfitted_greedy_policy_has_no_action_on_every_path():
+    """GreedyPolicy's one contract for a model not fitted yet (a session's stage 0, before its
+    first fit): no action. Called directly it raised RuntimeError, but evaluate_policy, which
+    reads the action from classify, reset the env, stepped nowhere and raised a ValueError
+    saying the policy answered -1. Now it raises the same RuntimeError, before the reset;
+    classify (one observation, or the model's for a batch) reports action -1."""
+    resets = []
+
+    class Counted(gym.Wrapper):
+        def reset(self, **kwargs):
+            resets.append(kwargs)
+            return super().reset(**kwargs)
+
+    env = Counted(rare_regions_world(episode_length=10))
+    policy = GreedyPolicy(GaussianMixtureSet(3, 2))
+    with pytest.raises(RuntimeError, match="not fitted") as direct:
+        policy(np.zeros(2))
+    with pytest.raises(RuntimeError, match="not fitted") as evaluated:
+        evaluate_policy(policy, env, n_steps=5, seed=0)
+    assert resets == []  # refused before the env moved
+    assert str(evaluated.value) == f"evaluate_policy: {direct.value}"
+    assert policy.classify(np.zeros(2)).action.tolist() == [-1]
+    assert policy.model.classify(np.zeros((4, 2))).action.tolist() == [-1] * 4
+
+    class NoFlag(torch.nn.Module):  # a model of one's own that does not say is_fitted
+        def __init__(self):
+            super().__init__()
+            self.inner = GaussianMixtureSet(3, 2)
+
+        def classify(self, x):
+            return self.inner.classify(x)
+
+    with pytest.raises(RuntimeError, match="not fitted"):
+        evaluate_policy(GreedyPolicy(NoFlag()), env, n_steps=5, seed=0)
+
+
 class _ActedOn(gym.Wrapper):
     """Notes, for every env.step, the observation the env was in when the action ran."""
 

@@ -37,6 +37,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.policy import evaluate_policy as evaluate_policy
     from torchcbl.records import CorrectionRecord as CorrectionRecord
     from torchcbl.records import StepRecord as StepRecord
+    from torchcbl.session import SessionSummary as SessionSummary
+    from torchcbl.session import describe as describe
     from torchcbl.session import load_corrections as load_corrections
     from torchcbl.session import load_model as load_model
     from torchcbl.session import load_models as load_models
@@ -73,6 +75,8 @@ _EXPORTS = {
     "load_models": "torchcbl.session",
     "load_records": "torchcbl.session",
     "load_corrections": "torchcbl.session",
+    "describe": "torchcbl.session",
+    "SessionSummary": "torchcbl.session",
     "IncompatibleRunDirError": "torchcbl.errors",
     "CorruptSessionError": "torchcbl.errors",
     "SessionLockedError": "torchcbl.errors",

@@ -34,11 +34,27 @@ __all__ = [
 ActionAnswer = int | np.integer[Any] | np.ndarray | torch.Tensor
 
 
+# What every path says of a GreedyPolicy whose model is not fitted (its one contract, below)
+_UNFITTED = (
+    "GreedyPolicy: the model is not fitted yet, so it has no action to give. Teach it first "
+    "(ConfidentTeacher.run) or load a fitted stage; a learning curve starts at a session's "
+    "first fitted stage (model.is_fitted; see torchcbl.load_models)."
+)
+
+
 class GreedyPolicy:
     """A learned policy standing on its own: ``policy(obs [D]) -> int`` (Eq. 7, no asking).
 
     Holds the model by reference (the live model of a session keeps learning); deep-copy the
     policy or the model to freeze a snapshot. Picklable.
+
+    A model not fitted yet has no action to give: a fresh one, or a session's model before
+    its first fit (``load_model(run_dir, n_demonstrations=0)``, stage 0 of
+    :func:`~torchcbl.load_models`, for a session without prior demonstrations or a fitted
+    starting model). Then calling the policy raises RuntimeError, and so does
+    :func:`evaluate_policy` given it, before it resets the env (where a subclass has a
+    ``__call__`` of its own, that is called and decides); :meth:`classify` reports the model's
+    Classification, action -1, as ``policy.model.classify(batch)`` does for a batch [N, D].
     """
 
     def __init__(self, model: torch.nn.Module) -> None:
@@ -66,13 +82,10 @@ class GreedyPolicy:
 
     def __call__(self, observation: Any) -> int:
         """The model's action for one observation [D] (Eq. 7; read as :meth:`classify` reads
-        it); RuntimeError before any fit."""
+        it); RuntimeError where the model is not fitted (the class's contract)."""
         action = int(self.classify(observation).action[0])
         if action < 0:
-            raise RuntimeError(
-                "GreedyPolicy: the model is not fitted yet, so it has no action to give. "
-                "Teach it first (ConfidentTeacher.run) or load a fitted checkpoint."
-            )
+            raise RuntimeError(_UNFITTED)
         return action
 
     def __repr__(self) -> str:
@@ -341,7 +354,9 @@ def evaluate_policy(
 
     Records have ``phase="evaluation"``, ``autonomous=True`` and ``episode`` counting from 0;
     a :class:`GreedyPolicy` (a subclass too, whose own ``__call__`` then gives the action) also
-    fills the confidence fields, any other callable leaves them None. :func:`episode_results`
+    fills the confidence fields, any other callable leaves them None. A GreedyPolicy whose
+    model is not fitted (a session's stage 0: see the class) is a RuntimeError before the env
+    is reset. :func:`episode_results`
     turns them into per-episode returns and successes.
 
     The env is reset first. Evaluating on the env a :class:`~torchcbl.teaching.ConfidentTeacher`
@@ -427,6 +442,9 @@ def evaluate_policy(
             f"evaluate_policy: the policy is called as policy{call} (uses_info={uses_info}), "
             f"but {why.takes}; {fix}"
         )
+    fitted = getattr(getattr(policy, "model", None), "is_fitted", None)
+    if greedy and not own_call and fitted is False:  # (a model that says so)
+        raise RuntimeError(f"evaluate_policy: {_UNFITTED}")
     records: list[StepRecord] = []
     _note_env_user(env, object())  # a teaching loop mid-episode on this env starts a new one
     raw, info = reset_answer(env.reset(seed=seeds[0] if seeds is not None else seed))
@@ -440,6 +458,8 @@ def evaluate_policy(
         if greedy:
             c = policy.classify(obs)  # type: ignore[attr-defined]
             answer = int(c.action[0])
+            if answer < 0 and not own_call:  # a model that does not say is_fitted
+                raise RuntimeError(f"evaluate_policy: {_UNFITTED}")
             confidence, distance = float(c.confidence[0]), float(c.distance[0])
             posterior = tuple(c.posterior[0].tolist())
         if own_call and uses_info:
@@ -450,7 +470,7 @@ def evaluate_policy(
         if action is None:
             raise ValueError(
                 f"evaluate_policy: the policy answered {answer!r}; expected an int in "
-                f"[0, {n_actions}) (an unfitted GreedyPolicy answers -1)."
+                f"[0, {n_actions})."
             )
         out = env.step(action)
         reward, term, trunc, info = step_outcome(out)

@@ -3722,7 +3722,8 @@ def load_models(
         run_dir: a session directory.
         n_demonstrations: the stages: counts of labels logged (demonstrations and
             corrections), from 0 to all of them, in increasing order, e.g.
-            ``range(0, n + 1, 50)``. The models come in the order asked, each with its count,
+            ``range(first, n + 1, 50)`` from the first fitted stage (the example). The models
+            come in the order asked, each with its count,
             so stages out of order or repeated are refused, at the call (before any model is
             read), not sorted: pass ``sorted(set(stages))``.
         model: as :func:`load_model`'s, a fresh, unfitted model of the session's class and
@@ -3734,7 +3735,12 @@ def load_models(
         An iterator of ``(n, model)``, one per stage in the order given, each model an object
         of its own that a caller may keep (each holds the model's whole state: 0.14 MB for
         the default model on 4 features and 3 actions, 2 MB with ``max_components=40``; on
-        ``model``'s device). A stage is computed when the iterator reaches it.
+        ``model``'s device). A stage is computed when the iterator reaches it. A stage before
+        the session's first refit (at ``max_new`` labels, ``TeachingConfig.max_new``; earlier
+        where a refit was asked by hand; none for a session with prior demonstrations or a
+        fitted starting model) is an unfitted model, ``model.is_fitted`` False, of which a
+        :class:`~torchcbl.GreedyPolicy` has no action to give (a RuntimeError, called or in
+        :func:`~torchcbl.evaluate_policy`).
 
     Raises:
         ValueError: ``n_demonstrations`` is not increasing ints in range, or ``model`` is
@@ -3744,18 +3750,22 @@ def load_models(
             changed (at the call); a stage stands on the starting model of a session started
             from a fitted one, and its checkpoint 0 is lost (when the iterator reaches it).
 
-    Example (a learning curve of a session after the fact)::
+    Example (a learning curve of a session after the fact, from its first fitted stage;
+    ``next`` reads the stages lazily up to it, those before it unfitted models that cost
+    nothing to make, and raises StopIteration where the session's first fit has not come)::
 
-        from torchcbl.policy import GreedyPolicy, evaluate_policy
+        from torchcbl import GreedyPolicy, describe, evaluate_policy, load_models
 
-        for n, model in load_models(run_dir, range(0, n_labels + 1, 50)):
+        n_labels = describe(run_dir).n_labels
+        first = next(n for n, m in load_models(run_dir, range(n_labels + 1)) if m.is_fitted)
+        for n, model in load_models(run_dir, range(first, n_labels + 1, 50)):
             records = evaluate_policy(GreedyPolicy(model), env, n_episodes=20, seed=0)
     """
     config = load_config(run_dir)
     if model is not None:
         _given_model(run_dir, config, model)
     x, y = _labels(run_dir)
-    stages = _stage_counts(run_dir, n_demonstrations, len(y))
+    stages = _stage_counts(run_dir, n_demonstrations, len(y), _stages_example(config, len(y)))
     prior = _read_prior(run_dir, config)
     if model is None:
         template: torch.nn.Module = build_model(config)
@@ -3773,16 +3783,33 @@ def load_models(
     return _stage_models(run_dir, config, template, x, y, prior, stages)
 
 
+def _stages_example(config: dict[str, Any], n_labels: int) -> str:
+    """The stages :func:`load_models`' refusals give as an example: from a fitted one, 0 for a
+    session with prior demonstrations or a fitted starting model, else its first scheduled
+    refit, ``max_new`` (a refit by hand may have come earlier), where the log reaches it."""
+    if config.get("starts_fitted") is True or isinstance(config.get("prior"), dict):
+        return f"e.g. range(0, {n_labels + 1}, 10)"
+    max_new = int(config["teaching"]["max_new"])
+    first = max_new if max_new <= n_labels else 0
+    return (
+        f"e.g. range({first}, {n_labels + 1}, 10) (the session's first refit is due at "
+        f"max_new={max_new} labels: a stage before it is an unfitted model, which has no action)"
+    )
+
+
 def _stage_counts(
-    run_dir: str | os.PathLike[str], n_demonstrations: Any, n_labels: int
+    run_dir: str | os.PathLike[str],
+    n_demonstrations: Any,
+    n_labels: int,
+    example: str | None = None,
 ) -> list[int]:
     """:func:`load_models`'s stages as a list of ints, refused unless increasing and from 0 to
-    ``n_labels``."""
+    ``n_labels``; ``example``: the stages the refusal suggests (default from 0)."""
     expected = (
         f"n_demonstrations: expected increasing ints from 0 to {n_labels} (counts of the "
         f"labels logged in {run_dir}, each at most once)"
     )
-    example = f"e.g. range(0, {n_labels + 1}, 10)"
+    example = example or f"e.g. range(0, {n_labels + 1}, 10)"
     if isinstance(n_demonstrations, str | bytes):
         raise ValueError(f"{expected}, got {n_demonstrations!r}; pass a list or a range, {example}")
     try:
