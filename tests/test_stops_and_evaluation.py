@@ -127,6 +127,116 @@ def test_max_episodes_is_a_session_budget_that_survives_resume(tmp_path):
         assert (ct.n_episodes, ct.n_steps, ct.stop_reason) == (7, 70, "max_episodes")
 
 
+def _streak_session(run_dir: Path, *, stop: int = 3, **run_kw) -> int:
+    """A session in ``run_dir`` taught until ``run(**run_kw)`` returns (by default on its
+    streak of ``stop`` successful autonomous episodes) and closed; its step count."""
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=stop)
+    with ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run_dir, progress=False
+    ) as ct:
+        ct.run(**run_kw)
+        return ct.n_steps
+
+
+def _resumed(run_dir: Path, **kw) -> ConfidentTeacher:
+    world = rare_regions_world(episode_length=10)
+    return ConfidentTeacher.resume(run_dir, world, oracle(world), progress=False, **kw)
+
+
+def test_a_resumed_session_that_had_met_its_streak_takes_no_step_and_says_so(tmp_path):
+    """A session that stopped on autonomous_episodes_to_stop, resumed, taught on: run() began
+    a new streak from zero and taught until another one, with no word, as often as it was
+    resumed. A resume knows its stop from its log (the episodes its last writer ended on):
+    stop_reason says it; run() takes no step and warns, as for a budget already reached;
+    a raised stop goes on until it holds."""
+    run_dir = tmp_path / "s"
+    n = _streak_session(run_dir)
+    for _ in range(2):  # every resume of it, not only the first
+        with _resumed(run_dir) as ct:
+            assert ct.stop_reason == "autonomous_episodes"
+            with pytest.warns(UserWarning) as caught:
+                ct.run()
+            assert (ct.n_steps, ct.stop_reason, len(caught)) == (n, "autonomous_episodes", 1)
+            msg = str(caught[0].message)
+            assert msg.startswith("run() took no step: autonomous_episodes_to_stop=3"), msg
+            assert (
+                "ends on 3 successful episodes" in msg
+                and "run(autonomous_episodes_to_stop=13)" in msg
+            )
+            assert caught[0].filename == __file__  # points at the caller's line
+    # a stop the log has not met (a raised one, here for one call) teaches until it holds,
+    # its streak counted within the call as in every run()
+    with _resumed(run_dir) as ct, warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ct.run(autonomous_episodes_to_stop=4)
+        assert ct.stop_reason == "autonomous_episodes" and ct.n_steps >= n + 40
+        assert ct.autonomous_episodes_streak == 4
+    # a resume with a raised stop in its config has met nothing yet
+    with _resumed(
+        run_dir, config=TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=9)
+    ) as ct:
+        assert ct.stop_reason is None
+
+
+def test_a_resumed_session_that_had_met_its_autonomous_steps_takes_no_step(tmp_path):
+    """The same for autonomous_steps_to_stop: a resume of a session that stopped on it takes
+    no step and says how many autonomous steps the log ends on."""
+    run_dir = tmp_path / "s"
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_steps_to_stop=15)
+    with ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run_dir, progress=False
+    ) as ct:
+        ct.run()
+        n = ct.n_steps
+    with _resumed(run_dir) as ct:
+        assert ct.stop_reason == "autonomous_steps"
+        with pytest.warns(UserWarning, match=r"autonomous_steps_to_stop=15 was already met"):
+            ct.run()
+        assert ct.n_steps == n and ct.stop_reason == "autonomous_steps"
+        ct.run(autonomous_steps_to_stop=20)
+        assert ct.n_steps >= n + 20 and ct.stop_reason == "autonomous_steps"
+
+
+def test_a_session_stopped_mid_streak_starts_its_streak_again_on_resume(tmp_path):
+    """What a resume did before, kept: a session stopped (Ctrl-C, a kill: its log is the same)
+    before its streak reached the stop has not met it, and the resumed run() counts its streak
+    from zero; nor do episodes of two writers, each short of the stop, add up to it."""
+    run_dir = tmp_path / "s"
+    holder: dict[str, ConfidentTeacher] = {}
+
+    def stop_at(k: int):
+        def on_step(record):
+            if holder["ct"].autonomous_episodes_streak == k and record.step % 10 == 4:
+                raise KeyboardInterrupt  # mid-episode, k episodes into the streak
+
+        return on_step
+
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=3)
+    ct = ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run_dir, progress=False, on_step=stop_at(2)
+    )
+    holder["ct"] = ct
+    with ct, pytest.raises(KeyboardInterrupt):
+        ct.run()
+    world = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher.resume(run_dir, world, oracle(world), progress=False, on_step=stop_at(1))
+    holder["ct"] = ct
+    with ct:
+        assert ct.stop_reason is None
+        with pytest.raises(KeyboardInterrupt):
+            ct.run()
+    with _resumed(run_dir) as ct, warnings.catch_warnings():
+        warnings.simplefilter("error")
+        n = ct.n_steps
+        assert ct.stop_reason is None
+        ct.run()
+        assert ct.stop_reason == "autonomous_episodes" and ct.n_steps >= n + 30
+        assert all(r.autonomous for r in ct.records[-30:])
+
+
 @pytest.mark.parametrize(
     "budget, says",
     [

@@ -91,6 +91,7 @@ from torchcbl.session import (
     _env_objects,
     _InterruptHold,
     _last_env_versions,
+    _last_writer_start,
     _model_args,
     _names_a_session_format,
     _read_prior,
@@ -207,7 +208,9 @@ class TeachingConfig:
 
     The stop fields count over the whole session for the three budgets and within one
     ``run`` call for the two streaks; ``run(**overrides)`` may change them (and
-    ``time_limit_is_success``) per call, and a resumed session may use other values.
+    ``time_limit_is_success``) per call, and a resumed session may use other values. A
+    resumed session that had met a streak of its config before it was stopped takes no step
+    (see :meth:`ConfidentTeacher.run`).
     """
 
     max_new: int = 1
@@ -952,9 +955,14 @@ class ConfidentTeacher:
         self._unstarted = False
         self._discarded = False  # it was removed (and stays so once closed)
         self._run_config: TeachingConfig | None = None  # the config of the running run()
+        # a resumed session's (first step of its last writer, steps logged): the log's steps
+        # of the run it was stopped in, whose streaks say whether it had met its stop
+        self._resumed_at: tuple[int, int] | None = None
         self._warned_unjudged = False
         #: why the last :meth:`run` returned: "max_demonstrations", "max_steps",
         #: "max_episodes", "autonomous_steps", "autonomous_episodes", or None before any run.
+        #: After :meth:`resume`: the stop of its config the session had already met, as its
+        #: log shows (a budget, or a streak its last writer's steps end on), else None.
         self.stop_reason: str | None = None
         self._obs: np.ndarray | None = None
         self._env_token = object()  # noted on the env at each reset (torchcbl.policy)
@@ -1015,6 +1023,9 @@ class ConfidentTeacher:
         session that logged no step yet, e.g. stopped at its first request, is reset with the
         session seed, as the new session was, and so goes on as it would have). Every refusal
         below comes before the session is opened for writing: a refused resume touches no file.
+        :attr:`stop_reason` says the stop of ``config`` the session had already met (a budget,
+        or a streak its last writer's steps end on; None: none), where :meth:`run` takes no
+        step; the streaks of a session stopped before they held count from zero.
 
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
@@ -1163,6 +1174,7 @@ class ConfidentTeacher:
             _warn_changed_versions(
                 self.run_dir, _last_env_versions(self.run_dir), self._env_versions, len(records)
             )
+            last_run = (_last_writer_start(self.run_dir, len(records)), len(records))
             self._store.note_writer(
                 len(records), _model_device(self.model), env_versions=self._env_versions
             )
@@ -1170,6 +1182,8 @@ class ConfidentTeacher:
         except BaseException:
             self.close()
             raise
+        self._resumed_at = last_run
+        self.stop_reason = self._budget_met(self.config) or self._streak_met(self.config)
         return self
 
     def _restore(self, records: list[StepRecord], corrections: list[CorrectionRecord]) -> None:
@@ -1637,11 +1651,11 @@ class ConfidentTeacher:
     def _episode_succeeded(self, record: StepRecord, info: dict) -> bool:
         """Success is never assumed: the env's ``info["is_success"]`` decides; without it, a
         time-limit end counts only with ``time_limit_is_success`` (see TeachingConfig)."""
-        if info.get("is_success") is not None:  # None: the env does not say, as absent
-            return bool(info["is_success"])
         cfg = self._run_config or self.config
-        if cfg.time_limit_is_success and record.truncated and not record.terminated:
-            return True
+        if info.get("is_success") is not None or (
+            cfg.time_limit_is_success and record.truncated and not record.terminated
+        ):
+            return _judged(record, info, cfg)
         if cfg.autonomous_episodes_to_stop is not None and not self._warned_unjudged:
             self._warned_unjudged = True
             warnings.warn(
@@ -1849,6 +1863,12 @@ class ConfidentTeacher:
         The budgets (``max_steps``, ``max_demonstrations``, ``max_episodes``) count over the
         whole session, so ``run(max_steps=ct.n_steps + 500)`` teaches 500 more steps; the
         streaks start from zero in each call. ``stop_reason`` then says which criterion held.
+        A resumed session that had met a streak in the run it was stopped in (its log, from
+        its last writer's first step, ends on that many autonomous steps, or successful
+        episodes with no request) is done: its first ``run()`` takes no step, as for a
+        budget reached; a longer streak is one it has not met, and goes on until it holds,
+        counted from zero. A session stopped before its streak held (Ctrl-C, a kill) counts
+        it from zero on resume.
 
         Args:
             **stop_overrides: any of ``autonomous_steps_to_stop``,
@@ -1864,7 +1884,9 @@ class ConfidentTeacher:
             UserWarning: the call took no step because a budget was already reached when it
                 began (e.g. ``run(max_steps=100)`` on a session of 150 steps, or ``run()`` on
                 a resumed session that had finished): the warning names the budget, the
-                session's count and how to ask for more.
+                session's count and how to ask for more. Or a resumed session had met its
+                streak (above): the warning names it, the streak its log ends on and how to
+                ask for a longer one.
         """
         unknown = sorted(set(stop_overrides) - set(_STOP_SETTINGS))
         if unknown:
@@ -1883,18 +1905,14 @@ class ConfidentTeacher:
         total = None if cfg.max_steps is None else max(cfg.max_steps - self.n_steps, 0)
         bar = progress_bar(total=total, desc="teaching", unit="step", show=bool(self.progress))
         first_step = self.n_steps
+        # a resumed session whose last run had met a streak of cfg's is done, as one whose
+        # budget is reached: no step (a raised streak is not met: it goes on until it holds)
+        already = self._streak_met(cfg)
         try:
             while True:
-                if cfg.max_demonstrations is not None and (
-                    self.n_demonstrations >= cfg.max_demonstrations
-                ):
-                    self.stop_reason = "max_demonstrations"
-                    break
-                if cfg.max_steps is not None and self.n_steps >= cfg.max_steps:
-                    self.stop_reason = "max_steps"
-                    break
-                if cfg.max_episodes is not None and self._n_episodes >= cfg.max_episodes:
-                    self.stop_reason = "max_episodes"
+                reached = self._budget_met(cfg) or already
+                if reached is not None:
+                    self.stop_reason = reached
                     break
                 self.step()
                 if self.progress:
@@ -1923,12 +1941,79 @@ class ConfidentTeacher:
             self.flush()
             if self.n_steps == first_step and self.stop_reason in _BUDGET_COUNTS:
                 self._warn_budget_reached(cfg)
+            elif self.n_steps == first_step and self.stop_reason in _STREAK_COUNTS:
+                self._warn_streak_met(cfg)
         finally:
             self._run_config = None
             if self.progress:
                 bar.set_postfix_str(self._postfix())
             bar.close()
         return self
+
+    def _budget_met(self, cfg: TeachingConfig) -> str | None:
+        """The budget of ``cfg`` the session has reached (as :attr:`stop_reason` names it),
+        in the order run() checks them; None: none."""
+        if cfg.max_demonstrations is not None and self.n_demonstrations >= cfg.max_demonstrations:
+            return "max_demonstrations"
+        if cfg.max_steps is not None and self.n_steps >= cfg.max_steps:
+            return "max_steps"
+        if cfg.max_episodes is not None and self._n_episodes >= cfg.max_episodes:
+            return "max_episodes"
+        return None
+
+    def _last_run_streaks(self, cfg: TeachingConfig) -> tuple[int, int]:
+        """The streaks (autonomous steps, successful autonomous episodes) a resumed session's
+        log ends on, counted as run() counts them over the steps of its last writer (a run()
+        ends with its writer; one that raised ends its streaks too), success judged as ``cfg``
+        says."""
+        assert self._resumed_at is not None
+        start, end = self._resumed_at
+        corrected = {c.step for c in self.corrections}
+        steps = episodes = 0
+        episode, labelled = None, False
+        for r in self.records[start:end]:
+            if r.episode != episode:
+                episode, labelled = r.episode, False
+            label = r.teacher_action is not None or r.step in corrected
+            labelled |= label
+            steps = 0 if label else steps + 1
+            if "torchcbl_interrupted" in r.info or "torchcbl_error" in r.info:
+                steps = episodes = 0  # the run() it was in raised: the next counts afresh
+            elif r.terminated or r.truncated:
+                clean = not labelled and r.phase == "confident" and _judged(r, r.info, cfg)
+                episodes = episodes + 1 if clean else 0
+        return steps, episodes
+
+    def _streak_met(self, cfg: TeachingConfig) -> str | None:
+        """The streak of ``cfg`` (as :attr:`stop_reason` names it) a resumed session that has
+        taken no step yet had met in the run it was stopped in; None: none (a streak counts
+        within one run(), so a run() after a step of this writer counts its own)."""
+        if self._resumed_at is None or self.n_steps != self._resumed_at[1]:
+            return None
+        steps, episodes = self._last_run_streaks(cfg)
+        if cfg.autonomous_steps_to_stop is not None and steps >= cfg.autonomous_steps_to_stop:
+            return "autonomous_steps"
+        if (
+            cfg.autonomous_episodes_to_stop is not None
+            and episodes >= cfg.autonomous_episodes_to_stop
+        ):
+            return "autonomous_episodes"
+        return None
+
+    def _warn_streak_met(self, cfg: TeachingConfig) -> None:
+        """Say that :meth:`run` took no step because the resumed session had met its streak
+        (the :attr:`stop_reason`) before it was resumed, and how to teach on."""
+        reason = self.stop_reason
+        assert reason is not None
+        name, noun, more = _STREAK_COUNTS[reason]
+        have = self._last_run_streaks(cfg)[reason == "autonomous_episodes"]
+        warnings.warn(
+            f"run() took no step: {name}={getattr(cfg, name)} was already met (this resumed "
+            f"session's log ends on {have} {noun} in a row, of the run it was stopped in: its "
+            f"teaching is done). A streak counts within one run() call: to teach on, ask for "
+            f"a longer one, counted from here, e.g. run({name}={have + more}).",
+            stacklevel=3,
+        )
 
     def _warn_budget_reached(self, cfg: TeachingConfig) -> None:
         """Say that :meth:`run` took no step because a budget of the whole session (the
@@ -1978,6 +2063,26 @@ class ConfidentTeacher:
             f"phase={self.phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
         )
 
+
+def _judged(record: StepRecord, info: Mapping[str, Any], cfg: TeachingConfig) -> bool:
+    """Whether the episode ``record`` ends (with the env's ``info``) succeeded for ``cfg``:
+    ``info["is_success"]`` where the env says (not None), else a time-limit end with
+    ``time_limit_is_success``."""
+    if info.get("is_success") is not None:  # None: the env does not say, as absent
+        return bool(info["is_success"])
+    return cfg.time_limit_is_success and record.truncated and not record.terminated
+
+
+#: The streaks run() stops at, by stop_reason: the stop field, what it counts, and how many
+#: more the warning of a run() that took no step suggests.
+_STREAK_COUNTS = {
+    "autonomous_steps": ("autonomous_steps_to_stop", "autonomous steps", 100),
+    "autonomous_episodes": (
+        "autonomous_episodes_to_stop",
+        "successful episodes with no request",
+        10,
+    ),
+}
 
 #: The budgets run() stops at, by stop_reason: the counter (attribute) each one bounds and
 #: what it counts, for the warning of a run() that took no step.
