@@ -85,6 +85,60 @@ def test_an_episode_counts_as_a_success_only_when_the_env_says_so():
     assert ct.stop_reason == "max_steps"
 
 
+class _ToGoal(gym.Env):
+    """Walk right to x = 3: the episode ends there (terminated: the goal, as MountainCar's and
+    Acrobot's end), or is cut by its time limit (10 steps); the env never sets is_success."""
+
+    observation_space = gym.spaces.Box(-20, 20, shape=(1,), dtype=np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.x = 0.0
+        return np.array([self.x], np.float32), {}
+
+    def step(self, action):
+        self.x += 1.0 if action == 1 else -1.0
+        return np.array([self.x], np.float32), -1.0, self.x >= 3, False, {}
+
+
+def _to_goal(**cfg) -> ConfidentTeacher:
+    env = gym.wrappers.TimeLimit(_ToGoal(), 10)
+    config = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=3, **cfg)
+    return ConfidentTeacher(env, lambda obs, info: 1, config=config, progress=False)
+
+
+def test_an_env_whose_episodes_end_at_their_goal_is_told_how_to_say_so():
+    """MountainCar taught all its steps: its episodes end (terminated) at the goal, and an
+    episode the env does not judge never counts. The warning said to set
+    time_limit_is_success=True (wrong for such an env: its failures are the time-limit ends)
+    and pointed at teaching.py's `return self._step()`. It names both kinds of env and what
+    each does (a goal reached by termination: set info["is_success"]; a time limit to survive:
+    time_limit_is_success), and points at the caller's line, from run() or step()."""
+    ct = _to_goal(max_steps=200)
+    with pytest.warns(UserWarning) as caught:
+        ct.run()
+    assert ct.stop_reason == "max_steps" and len(caught) == 1
+    msg = str(caught[0].message)
+    assert caught[0].filename == __file__, caught[0].filename
+    assert "ended (terminated) without info['is_success']" in msg, msg
+    assert "info['is_success'] = terminated" in msg and "(MountainCar, Acrobot)" in msg, msg
+    assert "(CartPole), set TeachingConfig(time_limit_is_success=True)" in msg, msg
+    ct = _to_goal()
+    with pytest.warns(UserWarning, match="without info") as caught:
+        for _ in range(60):
+            ct.step()
+    assert caught[0].filename == __file__, caught[0].filename
+    # the advice followed the wrong way round: goal episodes count as failures, and it says so
+    ct = _to_goal(max_steps=200, time_limit_is_success=True)
+    with pytest.warns(UserWarning) as caught:
+        ct.run()
+    assert ct.stop_reason == "max_steps" and len(caught) == 1
+    msg = str(caught[0].message)
+    assert "with time_limit_is_success=True it counts as a failure" in msg, msg
+    assert "leave time_limit_is_success False" in msg and "= terminated" in msg, msg
+
+
 def test_an_is_success_of_none_is_the_env_not_saying_as_episode_results_reads_it():
     """info["is_success"] = None counted as a failure the env reported (no warning, and
     time_limit_is_success ignored), where episode_results reads None as "not said"."""

@@ -44,6 +44,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import warnings
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -195,16 +196,21 @@ class TeachingConfig:
             when the env says so at its end (``info["is_success"]`` truthy), or, if the env
             does not say (no ``"is_success"`` key, or None), when it was cut by the time limit
             (``truncated``) and ``time_limit_is_success`` is True. An episode the env does not
-            judge counts as a failure otherwise (a warning says so once).
+            judge counts as a failure otherwise (a warning says so once). An env whose
+            episodes end (``terminated``) on reaching their goal (gymnasium's MountainCar,
+            Acrobot) says so with a wrapper setting ``info["is_success"] = terminated`` at
+            each episode's end (the README's ``GoalIsSuccess``), which evaluations read too.
         max_demonstrations: stop when the session holds this many demonstrations (its own
             labels, as :attr:`ConfidentTeacher.n_demonstrations`: prior demonstrations do not
             count).
         max_steps: stop when the session holds this many steps.
         max_episodes: stop when the session holds this many finished episodes (ended by the
             env, terminated or truncated).
-        time_limit_is_success: for envs that never set ``info["is_success"]``: an episode
+        time_limit_is_success: for envs that never set ``info["is_success"]`` and whose goal
+            is to last until the time limit (CartPole, "drive 1000 steps" tasks): an episode
             that reaches its time limit (truncated, not terminated) counts as a success for
-            ``autonomous_episodes_to_stop`` (e.g. "drive 1000 steps" tasks). Default False.
+            ``autonomous_episodes_to_stop``, a terminated one as a failure. Not for an env
+            whose episodes end (terminated) at their goal (above). Default False.
 
     The stop fields count over the whole session for the three budgets and within one
     ``run`` call for the two streaks; ``run(**overrides)`` may change them (and
@@ -1658,14 +1664,7 @@ class ConfidentTeacher:
             return _judged(record, info, cfg)
         if cfg.autonomous_episodes_to_stop is not None and not self._warned_unjudged:
             self._warned_unjudged = True
-            warnings.warn(
-                f"episode {record.episode} ended without info['is_success'], so it does not "
-                "count towards autonomous_episodes_to_stop (success is never assumed). If "
-                "reaching the time limit is success for this env, set "
-                "TeachingConfig(time_limit_is_success=True); else have the env set "
-                "info['is_success'] at the end of an episode.",
-                stacklevel=3,
-            )
+            warnings.warn(_unjudged_text(record, cfg), stacklevel=_caller_level())
         return False
 
     def _record(
@@ -2062,6 +2061,45 @@ class ConfidentTeacher:
             f"ConfidentTeacher(steps={self.n_steps}, demonstrations={self.n_demonstrations}, "
             f"phase={self.phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
         )
+
+
+def _caller_level() -> int:
+    """The ``stacklevel`` that makes a warning raised by the function calling this one point
+    at the first frame outside this module: the user's ``run()`` or ``step()`` line."""
+    frame, level = sys._getframe(1), 1
+    while frame.f_back is not None and frame.f_code.co_filename == __file__:
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+#: How an env whose episodes end at their goal says so, for the warning of an episode the
+#: env does not judge.
+_WRAP_GOAL = (
+    "wrap the env to set info['is_success'] = terminated at each episode's end (the README's "
+    "GoalIsSuccess, under 'Success is never assumed')"
+)
+
+
+def _unjudged_text(record: StepRecord, cfg: TeachingConfig) -> str:
+    """The warning for the episode ``record`` ends, which the env does not judge (no
+    ``info["is_success"]``) and ``cfg.time_limit_is_success`` does not count: it names both
+    kinds of env, a goal reached by termination and a time limit to survive."""
+    how = "(terminated)" if record.terminated else "at its time limit (truncated)"
+    if cfg.time_limit_is_success:  # so it ended terminated, and that counts as a failure
+        return (
+            f"episode {record.episode} ended {how} without info['is_success']: with "
+            "time_limit_is_success=True it counts as a failure (only an episode cut by its "
+            "time limit succeeds, as for CartPole). If this env's episodes end (terminated) on "
+            "reaching their goal (MountainCar, Acrobot), that is the wrong way round: leave "
+            f"time_limit_is_success False and {_WRAP_GOAL}."
+        )
+    return (
+        f"episode {record.episode} ended {how} without info['is_success'], so it does not "
+        "count towards autonomous_episodes_to_stop (success is never assumed). Say what "
+        "success is for this env: where an episode ends (terminated) on reaching its goal "
+        f"(MountainCar, Acrobot), {_WRAP_GOAL}; where the goal is to last until the time "
+        "limit (CartPole), set TeachingConfig(time_limit_is_success=True)."
+    )
 
 
 def _judged(record: StepRecord, info: Mapping[str, Any], cfg: TeachingConfig) -> bool:
