@@ -1635,7 +1635,7 @@ class ConfidentTeacher:
             "env no longer shows the observation the loop holds; that episode is left unfinished "
             "(as a resume leaves one) and teaching goes on from a fresh episode. Evaluate on an "
             "env of its own (gymnasium.make it again) to keep the session's episodes whole.",
-            stacklevel=3,
+            stacklevel=_caller_level(),
         )
 
     def _keep_interrupted(self, record: StepRecord) -> None:
