@@ -1618,6 +1618,38 @@ def test_teach_says_why_it_stopped_and_resume_goes_past_the_sessions_budget(
     assert report["world"] == dataclasses.asdict(cfg.world) and report["world"]["forward_noise"] > 0
 
 
+def test_teach_resume_of_a_session_that_met_its_streak_says_it_is_done(
+    tmp_path, monkeypatch, capsys
+):
+    """A session that stopped on its streak said "teaching is done; continue with: ...
+    --resume", and that resume taught on until another streak. The session is done now: its
+    end says how to evaluate it, and --resume is a one-line refusal saying so and what to do,
+    before a step is taught."""
+    from torchcbl import cli
+
+    _scripted_corridor_person(monkeypatch, max_demonstrations=None)
+    package, env_id, human, settings, model = cli._TEACH["corridor"]
+    streak = {**settings, "accuracy_window": 3, "autonomous_steps_to_stop": 3}
+    monkeypatch.setitem(cli._TEACH, "corridor", (package, env_id, human, streak, model))
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "200"]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "teaching is done); evaluate it with: torchcbl evaluate " in out and "--resume" not in out
+    )
+    n = len(load_records(run))
+    assert n < 200
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "50"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured
+    assert captured.err.startswith(
+        f"torchcbl teach: error: --resume: the session in {run} is done: the agent drove its "
+        "last 3 steps on its own (autonomous_steps_to_stop=3), so there is nothing to resume"
+    ), captured.err
+    assert "--prior-demonstrations" in captured.err
+    assert len(load_records(run)) == n
+
+
 def test_teach_resume_under_another_pymunk_says_so_in_one_line(tmp_path, monkeypatch, capsys):
     """A resume under another simulator release than the session's last writer ran warns
     (UserWarning); `teach --resume` left it to Python, which printed it as the file and line

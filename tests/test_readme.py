@@ -75,6 +75,26 @@ def test_the_python_example_runs(tmp_path, monkeypatch):
     exec(compile(example, "load_models", "exec"), {**scope, "run_dir": "runs/my-session"})
 
 
+def test_the_goal_is_success_example_runs_and_counts_mountaincars_goals():
+    """The README's wrapper for an env whose episodes end (terminated) at the goal, the one the
+    warning of an unjudged episode names: MountainCar taught with it stops on its streak, its
+    last episodes goals, and an evaluation reads its goals as successes (the warning's tests
+    are in test_stops_and_evaluation.py)."""
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", README, re.S) if "GoalIsSuccess" in b]
+    assert len(blocks) == 1 and "Success is never assumed:" in README
+    scope: dict = {}
+    exec(compile(blocks[0], "README.md", "exec"), scope)
+    ct = scope["ct"]
+    assert ct.stop_reason == "autonomous_episodes" and ct.n_steps < 20_000
+    ends = [r for r in ct.records if r.terminated or r.truncated][-5:]
+    assert all(r.terminated and r.info["is_success"] is True for r in ends)
+    # evaluation reads it too: a greedy episode that reaches the goal is a success
+    from torchcbl import episode_results
+
+    results = episode_results(evaluate_policy(ct.policy, scope["env"], seed=0, n_episodes=1))
+    assert [e.success for e in results] == [True]
+
+
 def test_quickstart_has_two_commands_and_ci_runs_the_test_one():
     block = re.search(r"## Quickstart.*?```bash\n(.*?)```", README, re.S).group(1)
     commands = [line.split("#")[0].strip() for line in block.splitlines() if line.strip()]

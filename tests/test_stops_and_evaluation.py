@@ -85,6 +85,60 @@ def test_an_episode_counts_as_a_success_only_when_the_env_says_so():
     assert ct.stop_reason == "max_steps"
 
 
+class _ToGoal(gym.Env):
+    """Walk right to x = 3: the episode ends there (terminated: the goal, as MountainCar's and
+    Acrobot's end), or is cut by its time limit (10 steps); the env never sets is_success."""
+
+    observation_space = gym.spaces.Box(-20, 20, shape=(1,), dtype=np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.x = 0.0
+        return np.array([self.x], np.float32), {}
+
+    def step(self, action):
+        self.x += 1.0 if action == 1 else -1.0
+        return np.array([self.x], np.float32), -1.0, self.x >= 3, False, {}
+
+
+def _to_goal(**cfg) -> ConfidentTeacher:
+    env = gym.wrappers.TimeLimit(_ToGoal(), 10)
+    config = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=3, **cfg)
+    return ConfidentTeacher(env, lambda obs, info: 1, config=config, progress=False)
+
+
+def test_an_env_whose_episodes_end_at_their_goal_is_told_how_to_say_so():
+    """MountainCar taught all its steps: its episodes end (terminated) at the goal, and an
+    episode the env does not judge never counts. The warning said to set
+    time_limit_is_success=True (wrong for such an env: its failures are the time-limit ends)
+    and pointed at teaching.py's `return self._step()`. It names both kinds of env and what
+    each does (a goal reached by termination: set info["is_success"]; a time limit to survive:
+    time_limit_is_success), and points at the caller's line, from run() or step()."""
+    ct = _to_goal(max_steps=200)
+    with pytest.warns(UserWarning) as caught:
+        ct.run()
+    assert ct.stop_reason == "max_steps" and len(caught) == 1
+    msg = str(caught[0].message)
+    assert caught[0].filename == __file__, caught[0].filename
+    assert "ended (terminated) without info['is_success']" in msg, msg
+    assert "info['is_success'] = terminated" in msg and "(MountainCar, Acrobot)" in msg, msg
+    assert "(CartPole), set TeachingConfig(time_limit_is_success=True)" in msg, msg
+    ct = _to_goal()
+    with pytest.warns(UserWarning, match="without info") as caught:
+        for _ in range(60):
+            ct.step()
+    assert caught[0].filename == __file__, caught[0].filename
+    # the advice followed the wrong way round: goal episodes count as failures, and it says so
+    ct = _to_goal(max_steps=200, time_limit_is_success=True)
+    with pytest.warns(UserWarning) as caught:
+        ct.run()
+    assert ct.stop_reason == "max_steps" and len(caught) == 1
+    msg = str(caught[0].message)
+    assert "with time_limit_is_success=True it counts as a failure" in msg, msg
+    assert "leave time_limit_is_success False" in msg and "= terminated" in msg, msg
+
+
 def test_an_is_success_of_none_is_the_env_not_saying_as_episode_results_reads_it():
     """info["is_success"] = None counted as a failure the env reported (no warning, and
     time_limit_is_success ignored), where episode_results reads None as "not said"."""
@@ -125,6 +179,116 @@ def test_max_episodes_is_a_session_budget_that_survives_resume(tmp_path):
         assert ct.n_episodes == 6
         ct.run(max_episodes=7)
         assert (ct.n_episodes, ct.n_steps, ct.stop_reason) == (7, 70, "max_episodes")
+
+
+def _streak_session(run_dir: Path, *, stop: int = 3, **run_kw) -> int:
+    """A session in ``run_dir`` taught until ``run(**run_kw)`` returns (by default on its
+    streak of ``stop`` successful autonomous episodes) and closed; its step count."""
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=stop)
+    with ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run_dir, progress=False
+    ) as ct:
+        ct.run(**run_kw)
+        return ct.n_steps
+
+
+def _resumed(run_dir: Path, **kw) -> ConfidentTeacher:
+    world = rare_regions_world(episode_length=10)
+    return ConfidentTeacher.resume(run_dir, world, oracle(world), progress=False, **kw)
+
+
+def test_a_resumed_session_that_had_met_its_streak_takes_no_step_and_says_so(tmp_path):
+    """A session that stopped on autonomous_episodes_to_stop, resumed, taught on: run() began
+    a new streak from zero and taught until another one, with no word, as often as it was
+    resumed. A resume knows its stop from its log (the episodes its last writer ended on):
+    stop_reason says it; run() takes no step and warns, as for a budget already reached;
+    a raised stop goes on until it holds."""
+    run_dir = tmp_path / "s"
+    n = _streak_session(run_dir)
+    for _ in range(2):  # every resume of it, not only the first
+        with _resumed(run_dir) as ct:
+            assert ct.stop_reason == "autonomous_episodes"
+            with pytest.warns(UserWarning) as caught:
+                ct.run()
+            assert (ct.n_steps, ct.stop_reason, len(caught)) == (n, "autonomous_episodes", 1)
+            msg = str(caught[0].message)
+            assert msg.startswith("run() took no step: autonomous_episodes_to_stop=3"), msg
+            assert (
+                "ends on 3 successful episodes" in msg
+                and "run(autonomous_episodes_to_stop=13)" in msg
+            )
+            assert caught[0].filename == __file__  # points at the caller's line
+    # a stop the log has not met (a raised one, here for one call) teaches until it holds,
+    # its streak counted within the call as in every run()
+    with _resumed(run_dir) as ct, warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ct.run(autonomous_episodes_to_stop=4)
+        assert ct.stop_reason == "autonomous_episodes" and ct.n_steps >= n + 40
+        assert ct.autonomous_episodes_streak == 4
+    # a resume with a raised stop in its config has met nothing yet
+    with _resumed(
+        run_dir, config=TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=9)
+    ) as ct:
+        assert ct.stop_reason is None
+
+
+def test_a_resumed_session_that_had_met_its_autonomous_steps_takes_no_step(tmp_path):
+    """The same for autonomous_steps_to_stop: a resume of a session that stopped on it takes
+    no step and says how many autonomous steps the log ends on."""
+    run_dir = tmp_path / "s"
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_steps_to_stop=15)
+    with ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run_dir, progress=False
+    ) as ct:
+        ct.run()
+        n = ct.n_steps
+    with _resumed(run_dir) as ct:
+        assert ct.stop_reason == "autonomous_steps"
+        with pytest.warns(UserWarning, match=r"autonomous_steps_to_stop=15 was already met"):
+            ct.run()
+        assert ct.n_steps == n and ct.stop_reason == "autonomous_steps"
+        ct.run(autonomous_steps_to_stop=20)
+        assert ct.n_steps >= n + 20 and ct.stop_reason == "autonomous_steps"
+
+
+def test_a_session_stopped_mid_streak_starts_its_streak_again_on_resume(tmp_path):
+    """What a resume did before, kept: a session stopped (Ctrl-C, a kill: its log is the same)
+    before its streak reached the stop has not met it, and the resumed run() counts its streak
+    from zero; nor do episodes of two writers, each short of the stop, add up to it."""
+    run_dir = tmp_path / "s"
+    holder: dict[str, ConfidentTeacher] = {}
+
+    def stop_at(k: int):
+        def on_step(record):
+            if holder["ct"].autonomous_episodes_streak == k and record.step % 10 == 4:
+                raise KeyboardInterrupt  # mid-episode, k episodes into the streak
+
+        return on_step
+
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=3)
+    ct = ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run_dir, progress=False, on_step=stop_at(2)
+    )
+    holder["ct"] = ct
+    with ct, pytest.raises(KeyboardInterrupt):
+        ct.run()
+    world = rare_regions_world(episode_length=10)
+    ct = ConfidentTeacher.resume(run_dir, world, oracle(world), progress=False, on_step=stop_at(1))
+    holder["ct"] = ct
+    with ct:
+        assert ct.stop_reason is None
+        with pytest.raises(KeyboardInterrupt):
+            ct.run()
+    with _resumed(run_dir) as ct, warnings.catch_warnings():
+        warnings.simplefilter("error")
+        n = ct.n_steps
+        assert ct.stop_reason is None
+        ct.run()
+        assert ct.stop_reason == "autonomous_episodes" and ct.n_steps >= n + 30
+        assert all(r.autonomous for r in ct.records[-30:])
 
 
 @pytest.mark.parametrize(

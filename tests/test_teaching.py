@@ -379,8 +379,9 @@ def test_evaluating_on_the_teaching_env_mid_episode_starts_a_new_episode(tmp_pat
     )  # fmt: skip
     ct.run(max_steps=15)  # stops in the middle of episode 1
     evaluate_policy(ct.policy, env, n_steps=3, seed=7)
-    with pytest.warns(UserWarning, match="left unfinished"):
+    with pytest.warns(UserWarning, match="left unfinished") as caught:
         ct.run(max_steps=20)
+    assert caught[0].filename == __file__  # the caller's run() line, not the loop's
     recs = ct.records
     # every step's record holds the observation its action ran in
     teaching = env.acted_on[:15] + env.acted_on[18:]

@@ -1278,6 +1278,19 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         finally:
             for w in said:
                 print(f"torchcbl teach: warning: {_one_line(w.message)}", file=sys.stderr)
+        done = _STREAK_DONE.get(ct.stop_reason or "")
+        if done is not None:  # its run met its streak: run() would take no step (budgets are
+            # lifted below: --resume asks for more; a streak cannot be, or it would never end)
+            stop = getattr(ct.config, done[0])
+            ct.close()
+            env.close()
+            raise _UsageError(
+                f"--resume: the session in {run_dir} is done: {done[1].format(stop)} "
+                f"({done[0]}={stop}), so there is nothing to resume; evaluate it "
+                f"(torchcbl evaluate {_shell(run_dir)}), or teach on from its demonstrations "
+                f"in a new session (torchcbl teach {args.domain} --run-dir NEW_DIR "
+                f"--prior-demonstrations {_shell(run_dir)})"
+            )
         if isinstance(teacher, TerminalTeacher):  # "decision #N" goes on from the session's
             # answered requests (read from its log, which stays as it is)
             teacher.n_decisions = sum(r.teacher_action is not None for r in ct.records)
@@ -1342,6 +1355,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         )
         return 1
     why = _STOP_REASONS.get(ct.stop_reason or "", "")
+    if ct.stop_reason in _STREAK_DONE:  # done: a --resume of it would have nothing to teach
+        go_on = f"evaluate it with: torchcbl evaluate {_shell(run_dir)}"
     print(f"{_saved(ct)} saved in {run_dir}" + (f" ({why})" if why else "") + f"; {go_on}")
     return 0
 
@@ -1358,6 +1373,20 @@ _STOP_REASONS = {
     "max_episodes": "the session's episode budget is reached; --resume goes past it",
     "autonomous_steps": "the agent drove on its own long enough: teaching is done",
     "autonomous_episodes": "the agent drove its episodes on its own: teaching is done",
+}
+
+
+#: The streaks a teach session stops at, by stop_reason: the stop field, and what meeting it
+#: says (of its value), for a --resume of a session that met it.
+_STREAK_DONE = {
+    "autonomous_steps": (
+        "autonomous_steps_to_stop",
+        "the agent drove its last {} steps on its own",
+    ),
+    "autonomous_episodes": (
+        "autonomous_episodes_to_stop",
+        "the agent drove its last {} episodes on its own, each a success",
+    ),
 }
 
 

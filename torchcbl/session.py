@@ -4348,6 +4348,18 @@ def _last_env_versions(run_dir: str | os.PathLike[str]) -> Any:
     return writers[-1].get("env_versions") if writers else None
 
 
+def _last_writer_start(run_dir: str | os.PathLike[str], n_steps: int) -> int:
+    """The first step of the writer that wrote the last of the session's ``n_steps`` logged
+    steps, as ``writers.jsonl`` records it (a writer that wrote no step passed over); 0 where
+    none says (no file, or one of a torchcbl before writers were recorded). A run() ends with
+    its writer, so the steps from here on hold the last run's streaks."""
+    starts = [w.get("first_step") for w in _read_writers(Path(run_dir))[0]]
+    return max(
+        (s for s in starts if type(s) is int and 0 <= s < n_steps),
+        default=0,
+    )
+
+
 def kept_checkpoints(run_dir: str | os.PathLike[str]) -> int | None:
     """How many of the newest checkpoints the session's last writer kept
     (``ConfidentTeacher(keep_checkpoints=)``, as ``writers.jsonl`` records it), which a

@@ -44,6 +44,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import warnings
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -91,6 +92,7 @@ from torchcbl.session import (
     _env_objects,
     _InterruptHold,
     _last_env_versions,
+    _last_writer_start,
     _model_args,
     _names_a_session_format,
     _read_prior,
@@ -194,20 +196,27 @@ class TeachingConfig:
             when the env says so at its end (``info["is_success"]`` truthy), or, if the env
             does not say (no ``"is_success"`` key, or None), when it was cut by the time limit
             (``truncated``) and ``time_limit_is_success`` is True. An episode the env does not
-            judge counts as a failure otherwise (a warning says so once).
+            judge counts as a failure otherwise (a warning says so once). An env whose
+            episodes end (``terminated``) on reaching their goal (gymnasium's MountainCar,
+            Acrobot) says so with a wrapper setting ``info["is_success"] = terminated`` at
+            each episode's end (the README's ``GoalIsSuccess``), which evaluations read too.
         max_demonstrations: stop when the session holds this many demonstrations (its own
             labels, as :attr:`ConfidentTeacher.n_demonstrations`: prior demonstrations do not
             count).
         max_steps: stop when the session holds this many steps.
         max_episodes: stop when the session holds this many finished episodes (ended by the
             env, terminated or truncated).
-        time_limit_is_success: for envs that never set ``info["is_success"]``: an episode
+        time_limit_is_success: for envs that never set ``info["is_success"]`` and whose goal
+            is to last until the time limit (CartPole, "drive 1000 steps" tasks): an episode
             that reaches its time limit (truncated, not terminated) counts as a success for
-            ``autonomous_episodes_to_stop`` (e.g. "drive 1000 steps" tasks). Default False.
+            ``autonomous_episodes_to_stop``, a terminated one as a failure. Not for an env
+            whose episodes end (terminated) at their goal (above). Default False.
 
     The stop fields count over the whole session for the three budgets and within one
     ``run`` call for the two streaks; ``run(**overrides)`` may change them (and
-    ``time_limit_is_success``) per call, and a resumed session may use other values.
+    ``time_limit_is_success``) per call, and a resumed session may use other values. A
+    resumed session that had met a streak of its config before it was stopped takes no step
+    (see :meth:`ConfidentTeacher.run`).
     """
 
     max_new: int = 1
@@ -952,9 +961,14 @@ class ConfidentTeacher:
         self._unstarted = False
         self._discarded = False  # it was removed (and stays so once closed)
         self._run_config: TeachingConfig | None = None  # the config of the running run()
+        # a resumed session's (first step of its last writer, steps logged): the log's steps
+        # of the run it was stopped in, whose streaks say whether it had met its stop
+        self._resumed_at: tuple[int, int] | None = None
         self._warned_unjudged = False
         #: why the last :meth:`run` returned: "max_demonstrations", "max_steps",
         #: "max_episodes", "autonomous_steps", "autonomous_episodes", or None before any run.
+        #: After :meth:`resume`: the stop of its config the session had already met, as its
+        #: log shows (a budget, or a streak its last writer's steps end on), else None.
         self.stop_reason: str | None = None
         self._obs: np.ndarray | None = None
         self._env_token = object()  # noted on the env at each reset (torchcbl.policy)
@@ -1015,6 +1029,9 @@ class ConfidentTeacher:
         session that logged no step yet, e.g. stopped at its first request, is reset with the
         session seed, as the new session was, and so goes on as it would have). Every refusal
         below comes before the session is opened for writing: a refused resume touches no file.
+        :attr:`stop_reason` says the stop of ``config`` the session had already met (a budget,
+        or a streak its last writer's steps end on; None: none), where :meth:`run` takes no
+        step; the streaks of a session stopped before they held count from zero.
 
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
@@ -1163,6 +1180,7 @@ class ConfidentTeacher:
             _warn_changed_versions(
                 self.run_dir, _last_env_versions(self.run_dir), self._env_versions, len(records)
             )
+            last_run = (_last_writer_start(self.run_dir, len(records)), len(records))
             self._store.note_writer(
                 len(records), _model_device(self.model), env_versions=self._env_versions
             )
@@ -1170,6 +1188,8 @@ class ConfidentTeacher:
         except BaseException:
             self.close()
             raise
+        self._resumed_at = last_run
+        self.stop_reason = self._budget_met(self.config) or self._streak_met(self.config)
         return self
 
     def _restore(self, records: list[StepRecord], corrections: list[CorrectionRecord]) -> None:
@@ -1615,7 +1635,7 @@ class ConfidentTeacher:
             "env no longer shows the observation the loop holds; that episode is left unfinished "
             "(as a resume leaves one) and teaching goes on from a fresh episode. Evaluate on an "
             "env of its own (gymnasium.make it again) to keep the session's episodes whole.",
-            stacklevel=3,
+            stacklevel=_caller_level(),
         )
 
     def _keep_interrupted(self, record: StepRecord) -> None:
@@ -1637,21 +1657,14 @@ class ConfidentTeacher:
     def _episode_succeeded(self, record: StepRecord, info: dict) -> bool:
         """Success is never assumed: the env's ``info["is_success"]`` decides; without it, a
         time-limit end counts only with ``time_limit_is_success`` (see TeachingConfig)."""
-        if info.get("is_success") is not None:  # None: the env does not say, as absent
-            return bool(info["is_success"])
         cfg = self._run_config or self.config
-        if cfg.time_limit_is_success and record.truncated and not record.terminated:
-            return True
+        if info.get("is_success") is not None or (
+            cfg.time_limit_is_success and record.truncated and not record.terminated
+        ):
+            return _judged(record, info, cfg)
         if cfg.autonomous_episodes_to_stop is not None and not self._warned_unjudged:
             self._warned_unjudged = True
-            warnings.warn(
-                f"episode {record.episode} ended without info['is_success'], so it does not "
-                "count towards autonomous_episodes_to_stop (success is never assumed). If "
-                "reaching the time limit is success for this env, set "
-                "TeachingConfig(time_limit_is_success=True); else have the env set "
-                "info['is_success'] at the end of an episode.",
-                stacklevel=3,
-            )
+            warnings.warn(_unjudged_text(record, cfg), stacklevel=_caller_level())
         return False
 
     def _record(
@@ -1849,6 +1862,12 @@ class ConfidentTeacher:
         The budgets (``max_steps``, ``max_demonstrations``, ``max_episodes``) count over the
         whole session, so ``run(max_steps=ct.n_steps + 500)`` teaches 500 more steps; the
         streaks start from zero in each call. ``stop_reason`` then says which criterion held.
+        A resumed session that had met a streak in the run it was stopped in (its log, from
+        its last writer's first step, ends on that many autonomous steps, or successful
+        episodes with no request) is done: its first ``run()`` takes no step, as for a
+        budget reached; a longer streak is one it has not met, and goes on until it holds,
+        counted from zero. A session stopped before its streak held (Ctrl-C, a kill) counts
+        it from zero on resume.
 
         Args:
             **stop_overrides: any of ``autonomous_steps_to_stop``,
@@ -1864,7 +1883,9 @@ class ConfidentTeacher:
             UserWarning: the call took no step because a budget was already reached when it
                 began (e.g. ``run(max_steps=100)`` on a session of 150 steps, or ``run()`` on
                 a resumed session that had finished): the warning names the budget, the
-                session's count and how to ask for more.
+                session's count and how to ask for more. Or a resumed session had met its
+                streak (above): the warning names it, the streak its log ends on and how to
+                ask for a longer one.
         """
         unknown = sorted(set(stop_overrides) - set(_STOP_SETTINGS))
         if unknown:
@@ -1883,18 +1904,14 @@ class ConfidentTeacher:
         total = None if cfg.max_steps is None else max(cfg.max_steps - self.n_steps, 0)
         bar = progress_bar(total=total, desc="teaching", unit="step", show=bool(self.progress))
         first_step = self.n_steps
+        # a resumed session whose last run had met a streak of cfg's is done, as one whose
+        # budget is reached: no step (a raised streak is not met: it goes on until it holds)
+        already = self._streak_met(cfg)
         try:
             while True:
-                if cfg.max_demonstrations is not None and (
-                    self.n_demonstrations >= cfg.max_demonstrations
-                ):
-                    self.stop_reason = "max_demonstrations"
-                    break
-                if cfg.max_steps is not None and self.n_steps >= cfg.max_steps:
-                    self.stop_reason = "max_steps"
-                    break
-                if cfg.max_episodes is not None and self._n_episodes >= cfg.max_episodes:
-                    self.stop_reason = "max_episodes"
+                reached = self._budget_met(cfg) or already
+                if reached is not None:
+                    self.stop_reason = reached
                     break
                 self.step()
                 if self.progress:
@@ -1923,12 +1940,79 @@ class ConfidentTeacher:
             self.flush()
             if self.n_steps == first_step and self.stop_reason in _BUDGET_COUNTS:
                 self._warn_budget_reached(cfg)
+            elif self.n_steps == first_step and self.stop_reason in _STREAK_COUNTS:
+                self._warn_streak_met(cfg)
         finally:
             self._run_config = None
             if self.progress:
                 bar.set_postfix_str(self._postfix())
             bar.close()
         return self
+
+    def _budget_met(self, cfg: TeachingConfig) -> str | None:
+        """The budget of ``cfg`` the session has reached (as :attr:`stop_reason` names it),
+        in the order run() checks them; None: none."""
+        if cfg.max_demonstrations is not None and self.n_demonstrations >= cfg.max_demonstrations:
+            return "max_demonstrations"
+        if cfg.max_steps is not None and self.n_steps >= cfg.max_steps:
+            return "max_steps"
+        if cfg.max_episodes is not None and self._n_episodes >= cfg.max_episodes:
+            return "max_episodes"
+        return None
+
+    def _last_run_streaks(self, cfg: TeachingConfig) -> tuple[int, int]:
+        """The streaks (autonomous steps, successful autonomous episodes) a resumed session's
+        log ends on, counted as run() counts them over the steps of its last writer (a run()
+        ends with its writer; one that raised ends its streaks too), success judged as ``cfg``
+        says."""
+        assert self._resumed_at is not None
+        start, end = self._resumed_at
+        corrected = {c.step for c in self.corrections}
+        steps = episodes = 0
+        episode, labelled = None, False
+        for r in self.records[start:end]:
+            if r.episode != episode:
+                episode, labelled = r.episode, False
+            label = r.teacher_action is not None or r.step in corrected
+            labelled |= label
+            steps = 0 if label else steps + 1
+            if "torchcbl_interrupted" in r.info or "torchcbl_error" in r.info:
+                steps = episodes = 0  # the run() it was in raised: the next counts afresh
+            elif r.terminated or r.truncated:
+                clean = not labelled and r.phase == "confident" and _judged(r, r.info, cfg)
+                episodes = episodes + 1 if clean else 0
+        return steps, episodes
+
+    def _streak_met(self, cfg: TeachingConfig) -> str | None:
+        """The streak of ``cfg`` (as :attr:`stop_reason` names it) a resumed session that has
+        taken no step yet had met in the run it was stopped in; None: none (a streak counts
+        within one run(), so a run() after a step of this writer counts its own)."""
+        if self._resumed_at is None or self.n_steps != self._resumed_at[1]:
+            return None
+        steps, episodes = self._last_run_streaks(cfg)
+        if cfg.autonomous_steps_to_stop is not None and steps >= cfg.autonomous_steps_to_stop:
+            return "autonomous_steps"
+        if (
+            cfg.autonomous_episodes_to_stop is not None
+            and episodes >= cfg.autonomous_episodes_to_stop
+        ):
+            return "autonomous_episodes"
+        return None
+
+    def _warn_streak_met(self, cfg: TeachingConfig) -> None:
+        """Say that :meth:`run` took no step because the resumed session had met its streak
+        (the :attr:`stop_reason`) before it was resumed, and how to teach on."""
+        reason = self.stop_reason
+        assert reason is not None
+        name, noun, more = _STREAK_COUNTS[reason]
+        have = self._last_run_streaks(cfg)[reason == "autonomous_episodes"]
+        warnings.warn(
+            f"run() took no step: {name}={getattr(cfg, name)} was already met (this resumed "
+            f"session's log ends on {have} {noun} in a row, of the run it was stopped in: its "
+            f"teaching is done). A streak counts within one run() call: to teach on, ask for "
+            f"a longer one, counted from here, e.g. run({name}={have + more}).",
+            stacklevel=3,
+        )
 
     def _warn_budget_reached(self, cfg: TeachingConfig) -> None:
         """Say that :meth:`run` took no step because a budget of the whole session (the
@@ -1978,6 +2062,65 @@ class ConfidentTeacher:
             f"phase={self.phase!r}, run_dir={str(self.run_dir) if self.run_dir else None!r})"
         )
 
+
+def _caller_level() -> int:
+    """The ``stacklevel`` that makes a warning raised by the function calling this one point
+    at the first frame outside this module: the user's ``run()`` or ``step()`` line."""
+    frame, level = sys._getframe(1), 1
+    while frame.f_back is not None and frame.f_code.co_filename == __file__:
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+#: How an env whose episodes end at their goal says so, for the warning of an episode the
+#: env does not judge.
+_WRAP_GOAL = (
+    "wrap the env to set info['is_success'] = terminated at each episode's end (the README's "
+    "GoalIsSuccess, under 'Success is never assumed')"
+)
+
+
+def _unjudged_text(record: StepRecord, cfg: TeachingConfig) -> str:
+    """The warning for the episode ``record`` ends, which the env does not judge (no
+    ``info["is_success"]``) and ``cfg.time_limit_is_success`` does not count: it names both
+    kinds of env, a goal reached by termination and a time limit to survive."""
+    how = "(terminated)" if record.terminated else "at its time limit (truncated)"
+    if cfg.time_limit_is_success:  # so it ended terminated, and that counts as a failure
+        return (
+            f"episode {record.episode} ended {how} without info['is_success']: with "
+            "time_limit_is_success=True it counts as a failure (only an episode cut by its "
+            "time limit succeeds, as for CartPole). If this env's episodes end (terminated) on "
+            "reaching their goal (MountainCar, Acrobot), that is the wrong way round: leave "
+            f"time_limit_is_success False and {_WRAP_GOAL}."
+        )
+    return (
+        f"episode {record.episode} ended {how} without info['is_success'], so it does not "
+        "count towards autonomous_episodes_to_stop (success is never assumed). Say what "
+        "success is for this env: where an episode ends (terminated) on reaching its goal "
+        f"(MountainCar, Acrobot), {_WRAP_GOAL}; where the goal is to last until the time "
+        "limit (CartPole), set TeachingConfig(time_limit_is_success=True)."
+    )
+
+
+def _judged(record: StepRecord, info: Mapping[str, Any], cfg: TeachingConfig) -> bool:
+    """Whether the episode ``record`` ends (with the env's ``info``) succeeded for ``cfg``:
+    ``info["is_success"]`` where the env says (not None), else a time-limit end with
+    ``time_limit_is_success``."""
+    if info.get("is_success") is not None:  # None: the env does not say, as absent
+        return bool(info["is_success"])
+    return cfg.time_limit_is_success and record.truncated and not record.terminated
+
+
+#: The streaks run() stops at, by stop_reason: the stop field, what it counts, and how many
+#: more the warning of a run() that took no step suggests.
+_STREAK_COUNTS = {
+    "autonomous_steps": ("autonomous_steps_to_stop", "autonomous steps", 100),
+    "autonomous_episodes": (
+        "autonomous_episodes_to_stop",
+        "successful episodes with no request",
+        10,
+    ),
+}
 
 #: The budgets run() stops at, by stop_reason: the counter (attribute) each one bounds and
 #: what it counts, for the warning of a run() that took no step.
