@@ -4,18 +4,27 @@ post-hoc learning curve over a session that kept only its newest checkpoints."""
 from __future__ import annotations
 
 import copy
+import shutil
 import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from _toy_envs import oracle, rare_regions_world
+from _toy_envs import ClusterWorld, oracle, rare_regions_world
 
 import torchcbl
 from torchcbl import ConfidentTeacher, GaussianMixtureSet, TeachingConfig
 from torchcbl.errors import CorruptSessionError
-from torchcbl.session import load_model, load_models
+from torchcbl.session import (
+    load_corrections,
+    load_demonstrations,
+    load_labels,
+    load_model,
+    load_models,
+)
+from torchcbl.strategies import correcting
+from torchcbl.strategies.cba import ConfidenceBasedAutonomy
 
 
 def _state(model: torch.nn.Module) -> dict[str, torch.Tensor]:
@@ -118,6 +127,181 @@ def test_the_stages_are_replayed_once_not_from_the_checkpoint_for_each(tmp_path)
     for n, model in got.items():
         assert type(model) is Counting and model is not template
         assert _equal(model.state_dict(), live[max(r for r in live if r <= n)]), n
+
+
+class _FewStates(ClusterWorld):
+    """rare_regions_world's layout (3 regions, 3 actions) whose observations are 12 fixed
+    points, so they recur: CBA relabels a point taught again, and a correction relabels one."""
+
+    def __init__(self) -> None:
+        super().__init__([[0, 0], [6, 0], [0, 6]], [0, 1, 2], [0.6, 0.2, 0.2], episode_length=10)
+        jitter = np.random.default_rng(0).standard_normal((12, 2))
+        self.points = (np.repeat(self.centers, 4, axis=0) + jitter).astype(np.float32)
+
+    def _draw(self) -> np.ndarray:
+        self._obs = self.points[int(self.np_random.integers(12))].copy()
+        return self._obs.copy()
+
+
+def _fickle(env: _FewStates):
+    """The optimal teacher, except that in every other block of 20 calls it wants action 1
+    in the right half of region 0: the agent, confident there, is corrected again and again."""
+    calls = [0]
+
+    def teacher(obs, info):
+        calls[0] += 1
+        if (calls[0] // 20) % 2 and env.region_of(obs) == 0 and obs[0] > 0:
+            return 1
+        return env.optimal_action(obs)
+
+    return teacher
+
+
+class _Snapping(GaussianMixtureSet):
+    """Calls ``before_fit`` (when set) as each fit or refit starts (once: a refit's own fit
+    from scratch is part of it)."""
+
+    before_fit = None
+    _fitting = False
+
+    def _around(self, fit, *args):
+        if self.before_fit is not None and not self._fitting:
+            self.before_fit()
+        outer, self._fitting = self._fitting, True
+        try:
+            return fit(*args)
+        finally:
+            self._fitting = outer
+
+    def fit(self, *args):
+        return self._around(super().fit, *args)
+
+    def refit(self, *args):
+        return self._around(super().refit, *args)
+
+
+def _teach_corrected(run, refit, max_new, start="none", model=None, on_step=None, live=None):
+    """A CBA session taught by a correcting teacher, most of its labels corrections, keeping
+    one checkpoint, with a hand refit at 7 labels (off the schedule of max_new 3 and 5);
+    returns (the teacher, ``live``: {labels: the live model's state after each refit, 0: its
+    start}, filled as the session runs, the label counts a correction brought).
+    ``on_step(teacher, record)``: called after each step."""
+    env = _FewStates()
+    live = {} if live is None else live
+    ct = ConfidentTeacher(
+        env,
+        correcting(_fickle(env)),
+        strategy=ConfidenceBasedAutonomy(),
+        model=_fitted_start() if start == "fitted" else model or GaussianMixtureSet(3, 2, seed=0),
+        prior_demonstrations=(
+            env.sample(20, np.random.default_rng(1)) if start == "prior" else None
+        ),
+        config=TeachingConfig(noninteractive=False, max_new=max_new, refit=refit),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=1,
+        on_refit=lambda m, n: live.__setitem__(n, _state(m)),
+        on_step=None if on_step is None else lambda record: on_step(ct, record),
+    )
+    live[0] = _state(ct.model)
+    while ct.n_demonstrations < 7:
+        ct.step()
+    assert ct.refit()  # by hand
+    while ct.n_demonstrations < 40:
+        ct.step()
+    ct.close()
+    corrected, n = [], 0
+    by_step = {c.step for c in load_corrections(run)}
+    for r in ct.records:
+        assert not (r.is_demonstration and r.step in by_step)  # one label a step at most
+        n += r.is_demonstration + (r.step in by_step)
+        if r.step in by_step:
+            corrected.append(n)
+    assert n == ct.n_demonstrations == 40
+    return ct, live, corrected
+
+
+@pytest.mark.parametrize("start", ["none", "prior", "fitted"])
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+@pytest.mark.parametrize("max_new", [3, 5])
+def test_a_session_learning_from_corrections_is_rebuilt_at_every_stage(
+    tmp_path, max_new, refit, start
+):
+    """CBA with a correcting teacher: a correction is a label of its own, so a refit falls
+    due on one (here most of them do) and the schedule counts it like a demonstration; the
+    stored points are relabelled (12 points at most for 40 labels). The loop refits every
+    max_new labels from the last refit (by hand at 7), with or without a prior or a fitted
+    start, and load_model and load_models rebuild the model it had at every stage, bit for
+    bit (a rebuild on multiples of max_new counted from 0 would not: 7 is none)."""
+    run = tmp_path / "run"
+    ct, live, corrected = _teach_corrected(run, refit, max_new, start)
+    assert sorted(live)[1:] == [*range(max_new, 7, max_new), *range(7, 41, max_new)]
+    assert len(set(corrected) & set(live)) >= 3  # refits due on a correction
+    # relabelled: 40 labels of at most 12 distinct observations (the prior's points first)
+    assert len(load_demonstrations(run)[1]) <= (20 if start == "prior" else 0) + 12
+    stages = list(range(41))
+    for n, model in load_models(run, stages):
+        stood_on = live[max(r for r in live if r <= n)]
+        assert _equal(model.state_dict(), stood_on), n
+        assert _equal(load_model(run, n_demonstrations=n).state_dict(), stood_on), n
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+@pytest.mark.parametrize("max_new", [3, 5])
+def test_a_session_learning_from_corrections_resumes_after_a_kill_at_any_label(
+    tmp_path, max_new, refit
+):
+    """The run directory copied as a SIGKILL leaves it (its writer holding it, steps in the
+    journal) after every step that recorded a label, and as every refit starts (its label,
+    most often a correction, durable, the refit not done): each copy resumes with the model
+    the live loop had then, or had after the refit it was doing, bit for bit, and the
+    resumed loop refits next where the live schedule puts it."""
+    run = tmp_path / "run"
+    model = _Snapping(3, 2, seed=0)
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    # (copy, the labels the live model stood on then, its state then; None for a refit the
+    # loop had due: the state that refit gives)
+    copies: list[tuple[Path, int, dict[str, torch.Tensor] | None]] = []
+    seen = [0]
+
+    def copy_now(refitting: bool) -> None:
+        path = tmp_path / f"kill{len(copies)}"
+        shutil.copytree(run, path)
+        n = len(load_labels(path)[1])
+        if refitting and n == max(live) + max_new:  # due: its label is durable, so it stands
+            copies.append((path, n, None))
+        else:  # between steps, or as the refit by hand starts (undone by the kill)
+            copies.append((path, max(live), _state(model)))
+
+    def on_step(ct, record) -> None:
+        if ct.n_demonstrations != seen[0]:  # the step recorded a label
+            seen[0] = ct.n_demonstrations
+            copy_now(False)
+
+    _Snapping.before_fit = staticmethod(lambda: copy_now(True))
+    try:
+        _teach_corrected(run, refit, max_new, model=model, on_step=on_step, live=live)
+    finally:
+        _Snapping.before_fit = None
+    assert len(copies) == 40 + len(live) - 1  # after each label, as each refit starts
+    refits: list[int] = []
+    for path, stood_on, state in copies:
+        env = _FewStates()
+        refits.clear()
+        back = ConfidentTeacher.resume(
+            path,
+            env,
+            correcting(_fickle(env)),
+            model=_Snapping(3, 2, seed=0),
+            progress=False,
+            on_refit=lambda m, k: refits.append(k),
+        )
+        want = live[stood_on] if state is None else state
+        assert _equal(back.model.state_dict(), want), (path.name, stood_on)
+        while not refits:
+            back.step()
+        assert refits[0] == stood_on + max_new, (path.name, stood_on, refits)
+        back.close()
 
 
 def test_damaged_and_foreign_checkpoints_give_what_load_model_gives(tmp_path):
