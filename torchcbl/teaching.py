@@ -401,6 +401,18 @@ def _env_kwargs(env: gym.Env) -> dict[str, Any]:
     return {str(k): kept(v) for k, v in kwargs.items()}
 
 
+def _call_env_hook(unwrapped: Any, name: str, cannot: str) -> Any:
+    """``unwrapped.<name>()`` (an env's describe hook), its exception an :class:`EnvError`
+    saying ``cannot`` and that nothing was changed (the exception is the cause)."""
+    try:
+        return getattr(unwrapped, name)()
+    except Exception as exc:
+        raise EnvError(
+            f"{type(unwrapped).__name__}.{name}() raised {type(exc).__name__}: {exc} "
+            f"({cannot}; nothing was changed)"
+        ) from exc
+
+
 def _env_inputs(env: gym.Env) -> dict[str, Any] | None:
     """What the unwrapped env's ``describe_inputs()`` says identifies what it reads beyond its
     ``gymnasium.make`` arguments (a map file's digest, say), or None for an env without one.
@@ -411,16 +423,11 @@ def _env_inputs(env: gym.Env) -> dict[str, Any] | None:
         EnvError: ``describe_inputs()`` raised (its exception is the cause).
     """
     unwrapped = getattr(env, "unwrapped", env)
-    describe = getattr(unwrapped, "describe_inputs", None)
-    if not callable(describe):
+    if not callable(getattr(unwrapped, "describe_inputs", None)):
         return None
-    try:
-        inputs = describe()
-    except Exception as exc:
-        raise EnvError(
-            f"{type(unwrapped).__name__}.describe_inputs() raised {type(exc).__name__}: {exc} "
-            "(what the env reads, e.g. a file, cannot be described now; nothing was changed)"
-        ) from exc
+    inputs = _call_env_hook(
+        unwrapped, "describe_inputs", "what the env reads, e.g. a file, cannot be described now"
+    )
 
     def plain(v: Any) -> bool:  # what JSON keeps and gives back equal (no NaN: NaN != NaN)
         if isinstance(v, float):
@@ -448,16 +455,11 @@ def _env_versions(env: gym.Env) -> dict[str, str] | None:
         EnvError: ``describe_versions()`` raised (its exception is the cause).
     """
     unwrapped = getattr(env, "unwrapped", env)
-    describe = getattr(unwrapped, "describe_versions", None)
-    if not callable(describe):
+    if not callable(getattr(unwrapped, "describe_versions", None)):
         return None
-    try:
-        versions = describe()
-    except Exception as exc:
-        raise EnvError(
-            f"{type(unwrapped).__name__}.describe_versions() raised {type(exc).__name__}: "
-            f"{exc} (what the env runs on cannot be told now; nothing was changed)"
-        ) from exc
+    versions = _call_env_hook(
+        unwrapped, "describe_versions", "what the env runs on cannot be told now"
+    )
     if not (
         isinstance(versions, dict)
         and all(type(k) is str and type(v) is str for k, v in versions.items())
