@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -1701,3 +1702,35 @@ def test_save_whole_writes_what_savefig_writes_and_nothing_when_it_fails(tmp_pat
     with pytest.raises(OSError, match="No space"):
         save_whole(tmp_path / "failed.png", fig.savefig, dpi=77)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["direct.png", "whole.png"]
+
+
+def test_the_goal_is_success_registration_of_the_docs_makes_success_rate_count_goals(
+    tmp_path, monkeypatch
+):
+    """success_rate scores 0 on an env that never sets info["is_success"] (MountainCar: its
+    episodes end, terminated, at the goal). docs/benchmark.md registers MountainCar wrapped in
+    the README's GoalIsSuccess under an id of one's own: its command, run on that module
+    (fewer labels and evaluation episodes, for time), scores the teacher's goals."""
+    import shlex
+
+    import gymnasium as gym
+
+    doc = (ROOT / "docs" / "benchmark.md").read_text()
+    (module,) = [b for b in re.findall(r"```python\n(.*?)```", doc, re.S) if "GoalIsSuccess" in b]
+    (command,) = [b for b in re.findall(r"```bash\n(.*?)```", doc, re.S) if "goalenvs" in b]
+    (tmp_path / "goalenvs.py").write_text(module)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    argv = shlex.split(command.replace("\\\n", " "))
+    assert argv[:3] == ["python", "-m", "torchcbl"]
+    fast = {"--budgets": "5,10", "--eval-episodes": "1", "--out": str(tmp_path / "out")}
+    argv = argv[3:]
+    for option, value in fast.items():
+        argv[argv.index(option) + 1] = value
+    try:
+        assert main([*argv, "--workers", "1"]) == 0
+    finally:
+        gym.registry.pop("goalenvs/MountainCar-v0", None)
+        sys.modules.pop("goalenvs", None)
+    results = json.loads((tmp_path / "out" / "results.json").read_text())
+    (cell,) = results["table"].values()
+    assert cell["bc"]["teacher_performance"]["mean"] == 1.0  # 0.0 without the wrapper

@@ -1639,6 +1639,7 @@ def test_teach_resume_of_a_session_that_met_its_streak_says_it_is_done(
     )
     n = len(load_records(run))
     assert n < 200
+    before = _bytes_of(run)
     assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "50"]) == 2
     captured = capsys.readouterr()
     assert captured.out == "" and captured.err.count("\n") == 1, captured
@@ -1647,7 +1648,20 @@ def test_teach_resume_of_a_session_that_met_its_streak_says_it_is_done(
         "last 3 steps on its own (autonomous_steps_to_stop=3), so there is nothing to resume"
     ), captured.err
     assert "--prior-demonstrations" in captured.err
+    # a refused command changes nothing: the session was not opened as a writer (no line in
+    # writers.jsonl for a writer with no step, no lock taken, no -wal or journal left)
+    assert _bytes_of(run) == before
     assert len(load_records(run)) == n
+
+
+def _bytes_of(run: Path) -> dict[str, tuple[bytes | None, int]]:
+    """{relative path: (its bytes, None for a folder; its mtime in ns)} of ``run`` and
+    everything under it (a file written again with the same bytes, or one made and removed
+    in a folder, changes an mtime)."""
+    return {
+        str(p.relative_to(run)): (p.read_bytes() if p.is_file() else None, p.stat().st_mtime_ns)
+        for p in sorted([run, *run.rglob("*")])
+    }
 
 
 def test_teach_resume_under_another_pymunk_says_so_in_one_line(tmp_path, monkeypatch, capsys):

@@ -1036,3 +1036,93 @@ def test_evaluate_names_the_class_of_an_env_made_directly(tmp_path, capsys):
     assert main(["evaluate", str(run)]) == 2
     (line,) = capsys.readouterr().err.splitlines()
     assert "env made directly (no gymnasium id; its class not recorded)" in line, line
+
+
+def _streak_session(run: Path, config: TeachingConfig, **run_kw) -> ConfidentTeacher:
+    """A session of ``config`` taught until ``run(**run_kw)`` returns, closed."""
+    world = rare_regions_world(episode_length=10)
+    with ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run, seed=0, progress=False
+    ) as ct:
+        ct.run(**run_kw)
+    return ct
+
+
+def test_show_says_a_session_that_met_its_streak_is_done_as_resume_counts_it(tmp_path, capsys):
+    """show and describe() could not say that a session had met its streak stop (what makes
+    resume take no step and teach --resume refuse it). streak_met names the stop met, as
+    resume's stop_reason does, counted the same way; None for a session stopped short of it,
+    and for a session with no streak stop; the stops are those config.json keeps."""
+    episodes = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=3)
+    steps = TeachingConfig(noninteractive=False, autonomous_steps_to_stop=15)
+    runs = {
+        "autonomous_episodes": (tmp_path / "episodes", episodes, {}),
+        "autonomous_steps": (tmp_path / "steps", steps, {}),
+        None: (tmp_path / "short", episodes, {"max_steps": 25}),  # stopped short of its streak
+        "budget": (tmp_path / "budget", TeachingConfig(noninteractive=False, max_steps=40), {}),
+    }
+    for want, (run, config, run_kw) in runs.items():
+        ct = _streak_session(run, config, **run_kw)
+        s = describe(run)
+        world = rare_regions_world(episode_length=10)
+        with ConfidentTeacher.resume(run, world, oracle(world), progress=False) as back:
+            resumed = back.stop_reason
+        met = None if want == "budget" else want
+        assert s.streak_met == met, (want, s.streak_met)
+        assert resumed == (want if want != "budget" else "max_steps")  # the same count
+        if met is not None:
+            assert ct.stop_reason == met
+        stored = load_config(run)["teaching"]
+        assert s.stops == {
+            k: stored[k]
+            for k in (
+                "autonomous_steps_to_stop",
+                "autonomous_episodes_to_stop",
+                "max_demonstrations",
+                "max_steps",
+                "max_episodes",
+                "time_limit_is_success",
+            )
+        }
+        assert main(["show", str(run), "--json"]) == 0
+        shown = json.loads(capsys.readouterr().out)
+        assert shown["streak_met"] == met and shown["stops"] == s.stops
+        assert main(["show", str(run)]) == 0
+        out = capsys.readouterr().out
+        if met is None:
+            assert "done:" not in out, out
+        else:
+            (line,) = [ln for ln in out.splitlines() if ln.startswith("done:")]
+            field = f"{met}_to_stop"
+            assert line.startswith(f"done:       {field}={getattr(config, field)} met ("), line
+            assert "teaching is done; a resume takes no step (teach --resume refuses it)" in line
+        kept = {
+            "autonomous_episodes": "autonomous_episodes_to_stop=3",
+            "autonomous_steps": "autonomous_steps_to_stop=15",
+            None: "autonomous_episodes_to_stop=3",
+            "budget": "max_steps=40",
+        }[want]
+        assert f"\nstops:      {kept}\n" in out, out
+    # the resumes above (a writer each, none of which took a step) leave it done
+    assert describe(tmp_path / "episodes").streak_met == "autonomous_episodes"
+
+
+def test_show_of_a_format1_session_with_no_writers_says_its_streak(tmp_path):
+    """An older session (format 1, no writers.jsonl) is counted over its whole log, as resume
+    counts it."""
+    from test_architecture import _downgrade_to_format1
+
+    run = tmp_path / "run"
+    _streak_session(run, TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=3))
+    _downgrade_to_format1(run)
+    (run / "writers.jsonl").unlink()
+    config = json.loads((run / "config.json").read_text())
+    del config["teaching"]["time_limit_is_success"]  # a field older sessions do not keep
+    (run / "config.json").write_text(json.dumps(config))
+    s = describe(run)
+    assert s.format == "torchcbl.session/1" and s.writers == ()
+    assert s.streak_met == "autonomous_episodes" and s.stops["time_limit_is_success"] is False
+    assert main(["show", str(run)]) == 0
+    world = rare_regions_world(episode_length=10)
+    with ConfidentTeacher.resume(run, world, oracle(world), progress=False) as back:
+        assert back.stop_reason == s.streak_met

@@ -1199,6 +1199,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
             run_dir, args.domain, teach=True
         )  # a session of this domain, or a one-line error
         _session_map_exists(run_dir, args.domain)
+        _refuse_a_done_session(run_dir, args.domain)  # before the session is opened
     else:  # the store's rule for a new session's folder, said before anything is made
         from torchcbl.errors import IncompatibleRunDirError
         from torchcbl.session import _check_new_session_dir
@@ -1278,19 +1279,6 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         finally:
             for w in said:
                 print(f"torchcbl teach: warning: {_one_line(w.message)}", file=sys.stderr)
-        done = _STREAK_DONE.get(ct.stop_reason or "")
-        if done is not None:  # its run met its streak: run() would take no step (budgets are
-            # lifted below: --resume asks for more; a streak cannot be, or it would never end)
-            stop = getattr(ct.config, done[0])
-            ct.close()
-            env.close()
-            raise _UsageError(
-                f"--resume: the session in {run_dir} is done: {done[1].format(stop)} "
-                f"({done[0]}={stop}), so there is nothing to resume; evaluate it "
-                f"(torchcbl evaluate {_shell(run_dir)}), or teach on from its demonstrations "
-                f"in a new session (torchcbl teach {args.domain} --run-dir NEW_DIR "
-                f"--prior-demonstrations {_shell(run_dir)})"
-            )
         if isinstance(teacher, TerminalTeacher):  # "decision #N" goes on from the session's
             # answered requests (read from its log, which stays as it is)
             teacher.n_decisions = sum(r.teacher_action is not None for r in ct.records)
@@ -1355,6 +1343,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         )
         return 1
     why = _STOP_REASONS.get(ct.stop_reason or "", "")
+    from torchcbl.session import _STREAK_DONE
+
     if ct.stop_reason in _STREAK_DONE:  # done: a --resume of it would have nothing to teach
         go_on = f"evaluate it with: torchcbl evaluate {_shell(run_dir)}"
     print(f"{_saved(ct)} saved in {run_dir}" + (f" ({why})" if why else "") + f"; {go_on}")
@@ -1376,18 +1366,37 @@ _STOP_REASONS = {
 }
 
 
-#: The streaks a teach session stops at, by stop_reason: the stop field, and what meeting it
-#: says (of its value), for a --resume of a session that met it.
-_STREAK_DONE = {
-    "autonomous_steps": (
-        "autonomous_steps_to_stop",
-        "the agent drove its last {} steps on its own",
-    ),
-    "autonomous_episodes": (
-        "autonomous_episodes_to_stop",
-        "the agent drove its last {} episodes on its own, each a success",
-    ),
-}
+def _refuse_a_done_session(run_dir: Path, domain: str) -> None:
+    """Refuse ``teach --resume`` of a session that had met its streak stop (``describe``'s
+    ``streak_met``, counted as a resume counts it: a resume would take no step), read-only,
+    before it is opened as a writer, so that the refused command changes no file of it. The
+    budgets are not asked: ``--resume`` lifts them (it asks for more); a streak cannot be
+    lifted, or it would never end. A session that cannot be read, or that a writer holds, is
+    left to the resume to say so."""
+    from torchcbl.session import (
+        _STREAK_DONE,
+        CorruptSessionError,
+        IncompatibleRunDirError,
+        describe,
+    )
+
+    try:
+        with warnings.catch_warnings():  # what the readers warn of, the resume says again
+            warnings.simplefilter("ignore")
+            summary = describe(run_dir)
+    except (IncompatibleRunDirError, CorruptSessionError, OSError):
+        return  # the resume says what is wrong with it, as it always did
+    if summary.streak_met is None or summary.writer_running is True:
+        return
+    field, says = _STREAK_DONE[summary.streak_met]
+    stop = summary.stops[field]
+    raise _UsageError(
+        f"--resume: the session in {run_dir} is done: {says.format(stop)} "
+        f"({field}={stop}), so there is nothing to resume; evaluate it "
+        f"(torchcbl evaluate {_shell(run_dir)}), or teach on from its demonstrations "
+        f"in a new session (torchcbl teach {domain} --run-dir NEW_DIR "
+        f"--prior-demonstrations {_shell(run_dir)})"
+    )
 
 
 # The benchmark's environments: each domain ships its EnvSpec (teacher, budgets, score) in a
@@ -2011,7 +2020,9 @@ def _parser() -> argparse.ArgumentParser:
         "runs, and on a read-only copy): its env, strategy and model, steps, episodes, labels "
         "(demonstrations, corrections), requests (steps the teacher was asked) and autonomous "
         "steps, requests per episode, the newest checkpoint and those on disk (with the "
-        "retention its last writer kept, and how an earlier stage is rebuilt), its writers "
+        "retention its last writer kept, and how an earlier stage is rebuilt), the stops its "
+        "config.json keeps and whether it is done (its log ends on the streak it stops at, "
+        "counted as a resume counts it: a resume takes no step), its writers "
         "(torch and numpy "
         "versions, threads, device) and whether a writer holds it now or was killed. Given a "
         "folder that holds sessions (a reproduction's run directory, a benchmark's OUT/sessions), "

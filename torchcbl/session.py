@@ -4057,6 +4057,20 @@ class SessionSummary:
             writer kept (:func:`kept_checkpoints`, what a resume keeps by default); None:
             every one.
         refit: the session's ``TeachingConfig.refit``, ``"full"`` or ``"incremental"``.
+        stops: the session's stop settings as config.json keeps them (its ``TeachingConfig``'s:
+            ``autonomous_steps_to_stop``, ``autonomous_episodes_to_stop``,
+            ``max_demonstrations``, ``max_steps``, ``max_episodes``,
+            ``time_limit_is_success``; one an older session does not keep: its default, None,
+            or False). Stops given to ``run()``, or to a resume's config, are not kept there.
+        streak_met: the streak stop of ``stops`` the session had met, as
+            ``ConfidentTeacher.stop_reason`` names it (``"autonomous_steps"``,
+            ``"autonomous_episodes"``): its log ends on that many autonomous steps, or
+            successful episodes with no request, in a row, counted over its last writer's
+            steps as a resume counts them (the same count: a resume then says it in
+            ``stop_reason`` and takes no step, and ``torchcbl teach --resume`` refuses the
+            session as done). None: none met (stopped short of it, by a budget, a Ctrl-C or a
+            kill, or no streak stop kept); a session without ``writers.jsonl`` (older ones) is
+            counted over its whole log, as resume counts it.
         writers: one dict per writer (start or resume) from ``writers.jsonl``: first_step,
             torch_num_threads, torch_num_interop_threads, torch_version, numpy_version,
             model_device, keep_checkpoints, env_versions (what the env ran on, as its
@@ -4119,6 +4133,8 @@ class SessionSummary:
     checkpoints_on_disk: tuple[int, ...]
     keep_checkpoints: int | None
     refit: str
+    stops: dict[str, Any]
+    streak_met: str | None
     writers: tuple[dict[str, Any], ...]
     last_writer: str | None
     writer_running: bool | None
@@ -4159,7 +4175,10 @@ class SessionSummary:
             f"requests:   {self.n_requests} steps the teacher was asked "
             f"({self.n_requests - self.n_requests_confident} by design, non-interactive; "
             f"{self.n_requests_confident} by the strategy)",
+            f"stops:      {self._stops_text()}",
         ]
+        if self.streak_met is not None:
+            lines.append(f"done:       {self._done_text()}")
         if self.n_episodes >= 4 or not self.requests_per_block:
             lines.append(
                 "per episode (requests/steps): "
@@ -4231,6 +4250,26 @@ class SessionSummary:
         if self.env_class:
             return f"{self.env_class.rsplit('.', 1)[-1]} made directly"
         return "env made directly"
+
+    def _stops_text(self) -> str:
+        """The stop settings config.json keeps, those set."""
+        kept = [
+            f"{k}={json.dumps(v)}"
+            for k, v in self.stops.items()
+            if v is not None and v is not False  # (a budget of 0 is one)
+        ]
+        return ", ".join(kept) or "none kept (a stop given to run() is not kept)"
+
+    def _done_text(self) -> str:
+        """The streak stop the session had met, what that says, and what a resume does."""
+        assert self.streak_met is not None
+        field, says = _STREAK_DONE[self.streak_met]
+        stop = self.stops[field]
+        return (
+            f"{field}={stop} met ({says.format(stop)}): teaching is done; a resume takes no "
+            "step (teach --resume refuses it), evaluate it or teach on from its "
+            "demonstrations in a new session"
+        )
 
     def _cap_text(self) -> str:
         """The step cap as config.json keeps it, in words."""
@@ -4349,15 +4388,110 @@ def _last_env_versions(run_dir: str | os.PathLike[str]) -> Any:
 
 
 def _last_writer_start(run_dir: str | os.PathLike[str], n_steps: int) -> int:
+    """:func:`_run_start` of the session's ``writers.jsonl`` as it is now."""
+    return _run_start(_read_writers(Path(run_dir))[0], n_steps)
+
+
+def _run_start(writers: Iterable[Mapping[str, Any]], n_steps: int) -> int:
     """The first step of the writer that wrote the last of the session's ``n_steps`` logged
-    steps, as ``writers.jsonl`` records it (a writer that wrote no step passed over); 0 where
-    none says (no file, or one of a torchcbl before writers were recorded). A run() ends with
-    its writer, so the steps from here on hold the last run's streaks."""
-    starts = [w.get("first_step") for w in _read_writers(Path(run_dir))[0]]
+    steps, as its records of ``writers.jsonl`` (``writers``) say (a writer that wrote no step
+    passed over); 0 where none says (no file, or one of a torchcbl before writers were
+    recorded). A run() ends with its writer, so the steps from here on hold the last run's
+    streaks."""
+    starts = [w.get("first_step") for w in writers]
     return max(
         (s for s in starts if type(s) is int and 0 <= s < n_steps),
         default=0,
     )
+
+
+#: The stop criteria of a TeachingConfig (torchcbl.teaching takes them from here): two
+#: streaks, counted within one run(), and three budgets of the whole session.
+STOP_FIELDS = (
+    "autonomous_steps_to_stop",
+    "autonomous_episodes_to_stop",
+    "max_demonstrations",
+    "max_steps",
+    "max_episodes",
+)
+# The stop criteria plus the settings that only say when to stop: a resumed session and a
+# run() call may change these; every other field is part of what the session learned with.
+# (TeachingConfig's defaults: None for the stops, False for time_limit_is_success.)
+_STOP_SETTINGS = (*STOP_FIELDS, "time_limit_is_success")
+
+
+def _judged(record: StepRecord, info: Mapping[str, Any], time_limit_is_success: bool) -> bool:
+    """Whether the episode ``record`` ends (with the env's ``info``) succeeded:
+    ``info["is_success"]`` where the env says (not None), else a time-limit end with
+    ``time_limit_is_success`` (TeachingConfig's)."""
+    if info.get("is_success") is not None:  # None: the env does not say, as absent
+        return bool(info["is_success"])
+    return time_limit_is_success and record.truncated and not record.terminated
+
+
+def _last_run_streaks(
+    records: Iterable[StepRecord],
+    corrected: Collection[int],
+    start: int,
+    *,
+    time_limit_is_success: bool,
+) -> tuple[int, int]:
+    """The streaks (autonomous steps, successful autonomous episodes) a session's log ends
+    on, counted as run() counts them over its steps from ``start`` on, the first step of its
+    last writer (:func:`_run_start`: a run() ends with its writer; one that raised ends its
+    streaks too), ``corrected`` the steps a correction labels, success judged with
+    ``time_limit_is_success``. The one count resume (its ``stop_reason``) and
+    :func:`describe` (``streak_met``) make."""
+    steps = episodes = 0
+    episode, labelled = None, False
+    for r in records:
+        if r.step < start:
+            continue
+        if r.episode != episode:
+            episode, labelled = r.episode, False
+        label = r.teacher_action is not None or r.step in corrected
+        labelled |= label
+        steps = 0 if label else steps + 1
+        if "torchcbl_interrupted" in r.info or "torchcbl_error" in r.info:
+            steps = episodes = 0  # the run() it was in raised: the next counts afresh
+        elif r.terminated or r.truncated:
+            clean = (
+                not labelled
+                and r.phase == "confident"
+                and _judged(r, r.info, time_limit_is_success)
+            )
+            episodes = episodes + 1 if clean else 0
+    return steps, episodes
+
+
+def _streak_met(
+    streaks: tuple[int, int],
+    autonomous_steps_to_stop: int | None,
+    autonomous_episodes_to_stop: int | None,
+) -> str | None:
+    """The streak stop met by ``streaks`` (:func:`_last_run_streaks`), as
+    ``ConfidentTeacher.stop_reason`` names it ("autonomous_steps", "autonomous_episodes");
+    None: none (a stop of None is none)."""
+    steps, episodes = streaks
+    if autonomous_steps_to_stop is not None and steps >= autonomous_steps_to_stop:
+        return "autonomous_steps"
+    if autonomous_episodes_to_stop is not None and episodes >= autonomous_episodes_to_stop:
+        return "autonomous_episodes"
+    return None
+
+
+#: The streak stops by ``stop_reason``: the stop field, and what meeting it says of the agent
+#: (of the stop's value), for ``torchcbl show`` and a ``teach --resume`` refused.
+_STREAK_DONE = {
+    "autonomous_steps": (
+        "autonomous_steps_to_stop",
+        "the agent drove its last {} steps on its own",
+    ),
+    "autonomous_episodes": (
+        "autonomous_episodes_to_stop",
+        "the agent drove its last {} episodes on its own, each a success",
+    ),
+}
 
 
 def kept_checkpoints(run_dir: str | os.PathLike[str]) -> int | None:
@@ -4573,6 +4707,10 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
     writers, writer_notes, lock_note = read.writers, read.writer_notes, read.lock_note
     notes = read.log_notes
     prior = config.get("prior")
+    teaching = config["teaching"]
+    stops = {
+        k: teaching.get(k, False if k == "time_limit_is_success" else None) for k in _STOP_SETTINGS
+    }
     return SessionSummary(
         run_dir=str(run_dir),
         format=str(config["format"]),
@@ -4609,12 +4747,29 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         checkpoints_on_disk=read.on_disk,
         keep_checkpoints=_kept_by(writers),
         refit=str(config["teaching"].get("refit", "full")),
+        stops=stops,
+        streak_met=_streak_met(
+            _last_run_streaks(
+                records,
+                {c.step for c in correction_records},
+                _run_start(writers, len(records)),
+                time_limit_is_success=stops["time_limit_is_success"] is True,
+            ),
+            _stop_value(stops["autonomous_steps_to_stop"]),
+            _stop_value(stops["autonomous_episodes_to_stop"]),
+        ),
         writers=tuple(writers),
         last_writer=lock_note,
         writer_running=running,
         state=state,
         notes=tuple(notes + writer_notes + checkpoint_notes),
     )
+
+
+def _stop_value(kept: Any) -> int | None:
+    """A streak stop config.json keeps, as run() takes it: an int >= 1, else None (none; a
+    value no TeachingConfig takes, which resume refuses, is none here)."""
+    return kept if type(kept) is int and kept >= 1 else None
 
 
 def _stored_class(senv: Mapping[str, Any]) -> str | None:

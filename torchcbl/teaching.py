@@ -82,20 +82,25 @@ from torchcbl.policy import (
 from torchcbl.records import CorrectionRecord, StepRecord, TrainingSet, _is_int, jsonable_info
 from torchcbl.session import (
     _MODEL_ARG_NAMES,
+    _STOP_SETTINGS,
     FORMAT,
     PRIOR_FORMAT,
     PRIOR_NAME,
+    STOP_FIELDS,
     LabelDigest,
     SessionStore,
     _check_new_session_path,
     _check_restorable,
     _env_objects,
     _InterruptHold,
+    _judged,
     _last_env_versions,
+    _last_run_streaks,
     _last_writer_start,
     _model_args,
     _names_a_session_format,
     _read_prior,
+    _streak_met,
     _warn_unrecorded_args,
     build_model,
     kept_checkpoints,
@@ -131,16 +136,9 @@ __all__ = [
 
 # an int action, or what as_action takes for one (a numpy integer, a 0-d array or tensor)
 Teacher = Callable[[np.ndarray, dict[str, Any]], ActionAnswer]
-STOP_FIELDS = (
-    "autonomous_steps_to_stop",
-    "autonomous_episodes_to_stop",
-    "max_demonstrations",
-    "max_steps",
-    "max_episodes",
-)
-# The stop criteria plus the settings that only say when to stop: a resumed session and a
-# run() call may change these; every other field is part of what the session learned with.
-_STOP_SETTINGS = (*STOP_FIELDS, "time_limit_is_success")
+# STOP_FIELDS, the stop criteria, and _STOP_SETTINGS, those plus the settings that only say
+# when to stop (a resumed session and a run() call may change these; every other field is part
+# of what the session learned with), are torchcbl.session's: describe() reads them too.
 _NO_STOP = (
     "no stop criterion is set, so it would never end. TeachingConfig has no default stop (the "
     "paper ties it to its domains: the corridor stops after 10 consecutive autonomous circuits "
@@ -1663,7 +1661,7 @@ class ConfidentTeacher:
         if info.get("is_success") is not None or (
             cfg.time_limit_is_success and record.truncated and not record.terminated
         ):
-            return _judged(record, info, cfg)
+            return _judged(record, info, cfg.time_limit_is_success)
         if cfg.autonomous_episodes_to_stop is not None and not self._warned_unjudged:
             self._warned_unjudged = True
             warnings.warn(_unjudged_text(record, cfg), stacklevel=_caller_level())
@@ -1969,21 +1967,12 @@ class ConfidentTeacher:
         says."""
         assert self._resumed_at is not None
         start, end = self._resumed_at
-        corrected = {c.step for c in self.corrections}
-        steps = episodes = 0
-        episode, labelled = None, False
-        for r in self.records[start:end]:
-            if r.episode != episode:
-                episode, labelled = r.episode, False
-            label = r.teacher_action is not None or r.step in corrected
-            labelled |= label
-            steps = 0 if label else steps + 1
-            if "torchcbl_interrupted" in r.info or "torchcbl_error" in r.info:
-                steps = episodes = 0  # the run() it was in raised: the next counts afresh
-            elif r.terminated or r.truncated:
-                clean = not labelled and r.phase == "confident" and _judged(r, r.info, cfg)
-                episodes = episodes + 1 if clean else 0
-        return steps, episodes
+        return _last_run_streaks(
+            self.records[:end],
+            {c.step for c in self.corrections},
+            start,
+            time_limit_is_success=cfg.time_limit_is_success,
+        )
 
     def _streak_met(self, cfg: TeachingConfig) -> str | None:
         """The streak of ``cfg`` (as :attr:`stop_reason` names it) a resumed session that has
@@ -1991,15 +1980,11 @@ class ConfidentTeacher:
         within one run(), so a run() after a step of this writer counts its own)."""
         if self._resumed_at is None or self.n_steps != self._resumed_at[1]:
             return None
-        steps, episodes = self._last_run_streaks(cfg)
-        if cfg.autonomous_steps_to_stop is not None and steps >= cfg.autonomous_steps_to_stop:
-            return "autonomous_steps"
-        if (
-            cfg.autonomous_episodes_to_stop is not None
-            and episodes >= cfg.autonomous_episodes_to_stop
-        ):
-            return "autonomous_episodes"
-        return None
+        return _streak_met(
+            self._last_run_streaks(cfg),
+            cfg.autonomous_steps_to_stop,
+            cfg.autonomous_episodes_to_stop,
+        )
 
     def _warn_streak_met(self, cfg: TeachingConfig) -> None:
         """Say that :meth:`run` took no step because the resumed session had met its streak
@@ -2102,15 +2087,6 @@ def _unjudged_text(record: StepRecord, cfg: TeachingConfig) -> str:
         f"(MountainCar, Acrobot), {_WRAP_GOAL}; where the goal is to last until the time "
         "limit (CartPole), set TeachingConfig(time_limit_is_success=True)."
     )
-
-
-def _judged(record: StepRecord, info: Mapping[str, Any], cfg: TeachingConfig) -> bool:
-    """Whether the episode ``record`` ends (with the env's ``info``) succeeded for ``cfg``:
-    ``info["is_success"]`` where the env says (not None), else a time-limit end with
-    ``time_limit_is_success``."""
-    if info.get("is_success") is not None:  # None: the env does not say, as absent
-        return bool(info["is_success"])
-    return cfg.time_limit_is_success and record.truncated and not record.terminated
 
 
 #: The streaks run() stops at, by stop_reason: the stop field, what it counts, and how many
