@@ -13,15 +13,17 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from _processes import exists, kill_left
-from _toy_envs import oracle, rare_regions_world
+from _toy_envs import FaultyWorld, oracle, rare_regions_world
 
 from torchcbl import (
     ConfidentTeacher,
+    EnvError,
     EpisodeResult,
     TeacherError,
     TeachingConfig,
     episode_results,
     evaluate_policy,
+    load_records,
 )
 
 
@@ -251,6 +253,70 @@ def test_a_resumed_session_that_had_met_its_autonomous_steps_takes_no_step(tmp_p
         assert ct.n_steps == n and ct.stop_reason == "autonomous_steps"
         ct.run(autonomous_steps_to_stop=20)
         assert ct.n_steps >= n + 20 and ct.stop_reason == "autonomous_steps"
+
+
+def test_a_resumed_done_session_teaches_on_in_a_run_after_one_that_took_steps(tmp_path):
+    """A done session is done only until this writer takes a step: once a run() with a
+    longer streak has taught on, a later run() counts its streak within itself, as every
+    run() does, and teaches until it holds (the log of the last writer before the resume,
+    which still ends on its old streak, is not read again)."""
+    run_dir = tmp_path / "s"
+    _streak_session(run_dir)
+    with _resumed(run_dir) as ct, warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "took no step" warning
+        ct.run(autonomous_episodes_to_stop=4)
+        n = ct.n_steps
+        ct.run()
+        assert ct.stop_reason == "autonomous_episodes" and ct.n_steps >= n + 30
+        assert ct.autonomous_episodes_streak == 3
+
+
+def test_a_resumed_session_that_had_met_its_autonomous_steps_says_its_streak_of_steps(tmp_path):
+    """The warning of a resumed session done on autonomous_steps_to_stop counts the autonomous
+    steps its log ends on (not its episodes), and the longer stop it suggests teaches on."""
+    run_dir = tmp_path / "s"
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_steps_to_stop=15)
+    with ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run_dir, progress=False
+    ) as ct:
+        ct.run()
+        n = ct.n_steps
+    assert all(r.teacher_action is None for r in ct.records[-15:])
+    with _resumed(run_dir) as ct:
+        with pytest.warns(UserWarning) as caught:
+            ct.run()
+        (msg,) = [str(w.message) for w in caught]
+        assert "this resumed session's log ends on 15 autonomous steps in a row" in msg, msg
+        assert msg.endswith("e.g. run(autonomous_steps_to_stop=115)."), msg
+        ct.run(autonomous_steps_to_stop=115)
+        assert ct.stop_reason == "autonomous_steps" and ct.n_steps >= n + 115
+
+
+def test_a_session_whose_env_raised_on_the_step_that_met_its_streak_is_not_done(tmp_path):
+    """A run() whose env raised on the step that would have met autonomous_steps_to_stop ended
+    by the error, not the streak (the step is logged, the episode cut): a resume has met no
+    streak and teaches on, its streak counted from zero."""
+    config = TeachingConfig(noninteractive=False, autonomous_steps_to_stop=15)
+    world = rare_regions_world(episode_length=10)
+    clean = ConfidentTeacher(world, oracle(world), config=config, progress=False).run()
+    n = clean.n_steps  # the same session, deterministic: its step n - 1 meets the streak
+    run_dir = tmp_path / "s"
+    world = rare_regions_world(episode_length=10)
+    faulty = FaultyWorld(world, fail_at=n, mode="raise")
+    with ConfidentTeacher(
+        faulty, oracle(world), config=config, run_dir=run_dir, progress=False
+    ) as ct:
+        with pytest.raises(EnvError, match="simulator connection lost"):
+            ct.run()
+    records = load_records(run_dir)
+    assert len(records) == n and "torchcbl_error" in records[-1].info
+    assert all(r.teacher_action is None for r in records[-15:])  # 15 unasked, the last failed
+    with _resumed(run_dir) as ct, warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert ct.stop_reason is None
+        ct.run()
+        assert ct.stop_reason == "autonomous_steps" and ct.n_steps >= n + 15
 
 
 def test_a_session_stopped_mid_streak_starts_its_streak_again_on_resume(tmp_path):
