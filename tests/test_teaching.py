@@ -350,6 +350,32 @@ def test_an_unfitted_greedy_policy_has_no_action_on_every_path():
         evaluate_policy(GreedyPolicy(NoFlag()), env, n_steps=5, seed=0)
 
 
+def test_a_greedy_policy_with_a_call_of_its_own_evaluates_with_an_unfitted_model():
+    """As documented (GreedyPolicy, evaluate_policy): where a subclass has a ``__call__`` of
+    its own, that is called and decides, also while the model is not fitted (one that falls
+    back on a default action, say), for a model that says is_fitted and one that does not;
+    the confidence fields are filled from the unfitted model's classification."""
+
+    class Fallback(GreedyPolicy):
+        def __call__(self, observation):
+            action = int(self.classify(observation).action[0])
+            return 0 if action < 0 else action
+
+    class NoFlag(torch.nn.Module):  # a model of one's own that does not say is_fitted
+        def __init__(self):
+            super().__init__()
+            self.inner = GaussianMixtureSet(3, 2)
+
+        def classify(self, x):
+            return self.inner.classify(x)
+
+    for model in (GaussianMixtureSet(3, 2), NoFlag()):
+        policy = Fallback(model)
+        records = evaluate_policy(policy, rare_regions_world(episode_length=5), n_steps=5, seed=0)
+        assert [r.executed_action for r in records] == [0] * 5
+        assert all(r.confidence is not None and r.posterior is not None for r in records)
+
+
 class _ActedOn(gym.Wrapper):
     """Notes, for every env.step, the observation the env was in when the action ran."""
 
