@@ -3,7 +3,9 @@ records come to per episode (issue 16 item 3, issue 13 item 5)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import re
 import signal
 import sys
 import warnings
@@ -139,6 +141,38 @@ def test_an_env_whose_episodes_end_at_their_goal_is_told_how_to_say_so():
     msg = str(caught[0].message)
     assert "with time_limit_is_success=True it counts as a failure" in msg, msg
     assert "leave time_limit_is_success False" in msg and "= terminated" in msg, msg
+
+
+@pytest.mark.parametrize("time_limit_is_success", [False, True])
+def test_an_episode_that_reaches_its_goal_on_its_last_step_is_no_time_limit_success(
+    tmp_path, time_limit_is_success
+):
+    """An episode that ends both terminated and truncated (the goal reached on the step its
+    time limit cuts) ended at its goal: the warning names it "(terminated)", and with
+    time_limit_is_success it is no time-limit success (a failure, as the warning says), so
+    no streak of such episodes stops the run, nor makes a resume of it done."""
+    env = gym.wrappers.TimeLimit(_ToGoal(), 3)  # x = 3 on the 3rd step: both ends at once
+    config = TeachingConfig(
+        noninteractive=False,
+        autonomous_episodes_to_stop=3,
+        max_steps=90,
+        time_limit_is_success=time_limit_is_success,
+    )
+    run_dir = tmp_path / "s"
+    ct = ConfidentTeacher(env, lambda obs, info: 1, config=config, run_dir=run_dir, progress=False)
+    with ct, pytest.warns(UserWarning) as caught:
+        ct.run()
+    assert ct.records[2].terminated and ct.records[2].truncated
+    assert ct.stop_reason == "max_steps" and ct.n_steps == 90 and len(caught) == 1
+    msg = str(caught[0].message)
+    assert re.match(r"episode \d+ ended \(terminated\) without info\['is_success'\]", msg), msg
+    assert ("counts as a failure" in msg) == time_limit_is_success, msg
+    env = gym.wrappers.TimeLimit(_ToGoal(), 3)
+    streak_only = dataclasses.replace(config, max_steps=None)
+    with ConfidentTeacher.resume(
+        run_dir, env, lambda obs, info: 1, config=streak_only, progress=False
+    ) as ct:
+        assert ct.stop_reason is None
 
 
 def test_an_is_success_of_none_is_the_env_not_saying_as_episode_results_reads_it():
