@@ -1687,6 +1687,32 @@ def test_teach_resume_under_another_pymunk_says_so_in_one_line(tmp_path, monkeyp
     assert len(load_records(run)) == 5
 
 
+def test_teach_resume_says_each_of_its_warnings_in_a_line_of_its_own(tmp_path, monkeypatch, capsys):
+    """Every warning a resume gives is said, one line each: here the env's describe_versions()
+    warns on its own (a simulator's binding saying something as it is asked its release) and
+    the release differs from the last writer's, so two lines, the version change among them."""
+    import corridor.env
+
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "3"]) == 0
+
+    def versions() -> dict[str, str]:
+        warnings.warn("pymunk: this build is a test build", UserWarning, stacklevel=2)
+        return {"pymunk": "6.0.0"}
+
+    monkeypatch.setattr(corridor.env, "pymunk_versions", versions)
+    capsys.readouterr()
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")  # as Python shows a UserWarning by default
+        assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "2"]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2 and all(ln.startswith("torchcbl teach: warning: ") for ln in lines)
+    assert lines[0].endswith("pymunk: this build is a test build"), lines
+    assert "pymunk 6.0.0" in lines[1] and "steps from 3 on" in lines[1], lines
+    assert len(load_records(run)) == 5
+
+
 def test_ctrl_c_between_two_requests_stops_as_at_a_request(tmp_path, monkeypatch, capsys):
     """Ctrl-C (the help's "[q/Ctrl-C] quit") pressed while no key is awaited (the env steps, the
     agent drives on its own between two requests) ended with "torchcbl teach: interrupted" and

@@ -141,3 +141,61 @@ def test_a_describe_versions_that_raises_is_an_env_error_and_nothing_is_written(
     with pytest.raises(EnvError, match=r"describe_versions\(\) raised OSError"):
         ConfidentTeacher.resume(run, env, oracle(env.env), progress=False)
     assert _files(run) == before
+
+
+def test_a_resume_warns_only_on_a_key_both_writers_give_and_points_at_the_callers_line(tmp_path):
+    """The comparison is of the keys both the last writer and the resuming env give: a key
+    the env gives now that the last writer did not (a binding it has begun to report) is no
+    change, and the warning of a change points at the line that called resume()."""
+    run = tmp_path / "run"
+    _session(run, {"sim": "1"}, steps=3)
+    assert _resume(run, {"sim": "1", "bindings": "2"}) == []
+    assert _writers(run)[-1]["env_versions"] == {"sim": "1", "bindings": "2"}
+    (said,) = _recorded(run, {"sim": "3", "bindings": "2"})
+    assert "last taught under sim 1 and is resumed under sim 3" in str(said.message)
+    assert "bindings" not in str(said.message)
+    assert said.filename == __file__, said.filename  # the caller's resume() line
+
+
+def _recorded(run: Path, versions: object) -> list[warnings.WarningMessage]:
+    env = _SimWorld(versions)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        ConfidentTeacher.resume(run, env, oracle(env.env), progress=False).close()
+    return [w for w in said if issubclass(w.category, UserWarning)]
+
+
+def test_a_last_writer_whose_env_versions_is_no_dict_resumes_silently(tmp_path):
+    """A writers.jsonl edited by hand (or by another tool) whose last writer's env_versions is
+    no dict, e.g. a list of names, is as a writer that recorded none: the resume says nothing
+    and records its own versions (it did not fail on the list)."""
+    run = tmp_path / "run"
+    _session(run, {"sim": "1.2.0"}, steps=3)
+    edited = _writers(run)
+    edited[-1]["env_versions"] = ["sim"]
+    (run / "writers.jsonl").write_text("".join(json.dumps(w) + "\n" for w in edited))
+    assert _resume(run, {"sim": "9.9.9"}) == []
+    assert _writers(run)[-1]["env_versions"] == {"sim": "9.9.9"}
+    assert len(load_records(run)) == 5
+
+
+def test_a_describe_versions_that_is_no_method_is_no_hook(tmp_path):
+    """``describe_versions`` is read as ``describe_inputs`` is: an attribute of that name that
+    cannot be called (a subclass setting it to a plain value) is no hook, so the writer records
+    None, as for an env without it, rather than failing on the call."""
+    run = tmp_path / "run"
+    env = _SimWorld({"sim": "1.2.0"})
+    env.describe_versions = "sim 1.2.0"  # type: ignore[method-assign,assignment]
+    with ConfidentTeacher(env, oracle(env.env), run_dir=run, progress=False) as ct:
+        ct.run(max_steps=3)
+    assert _writers(run)[0]["env_versions"] is None
+
+
+def test_a_describe_versions_of_an_empty_dict_is_recorded_as_given(tmp_path):
+    """An env that runs on nothing it reports a version of gives ``{}``: the writer records
+    ``{}`` (what the hook said), not None (no hook); show and a resume treat both alike."""
+    run = tmp_path / "run"
+    _session(run, {}, steps=3)
+    assert _writers(run)[0]["env_versions"] == {}
+    assert describe(run).writers[0]["env_versions"] == {}
+    assert _resume(run, {"sim": "1.2.0"}) == []

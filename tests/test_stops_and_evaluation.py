@@ -3,7 +3,9 @@ records come to per episode (issue 16 item 3, issue 13 item 5)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import re
 import signal
 import sys
 import warnings
@@ -13,15 +15,17 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from _processes import exists, kill_left
-from _toy_envs import oracle, rare_regions_world
+from _toy_envs import FaultyWorld, oracle, rare_regions_world
 
 from torchcbl import (
     ConfidentTeacher,
+    EnvError,
     EpisodeResult,
     TeacherError,
     TeachingConfig,
     episode_results,
     evaluate_policy,
+    load_records,
 )
 
 
@@ -139,6 +143,38 @@ def test_an_env_whose_episodes_end_at_their_goal_is_told_how_to_say_so():
     assert "leave time_limit_is_success False" in msg and "= terminated" in msg, msg
 
 
+@pytest.mark.parametrize("time_limit_is_success", [False, True])
+def test_an_episode_that_reaches_its_goal_on_its_last_step_is_no_time_limit_success(
+    tmp_path, time_limit_is_success
+):
+    """An episode that ends both terminated and truncated (the goal reached on the step its
+    time limit cuts) ended at its goal: the warning names it "(terminated)", and with
+    time_limit_is_success it is no time-limit success (a failure, as the warning says), so
+    no streak of such episodes stops the run, nor makes a resume of it done."""
+    env = gym.wrappers.TimeLimit(_ToGoal(), 3)  # x = 3 on the 3rd step: both ends at once
+    config = TeachingConfig(
+        noninteractive=False,
+        autonomous_episodes_to_stop=3,
+        max_steps=90,
+        time_limit_is_success=time_limit_is_success,
+    )
+    run_dir = tmp_path / "s"
+    ct = ConfidentTeacher(env, lambda obs, info: 1, config=config, run_dir=run_dir, progress=False)
+    with ct, pytest.warns(UserWarning) as caught:
+        ct.run()
+    assert ct.records[2].terminated and ct.records[2].truncated
+    assert ct.stop_reason == "max_steps" and ct.n_steps == 90 and len(caught) == 1
+    msg = str(caught[0].message)
+    assert re.match(r"episode \d+ ended \(terminated\) without info\['is_success'\]", msg), msg
+    assert ("counts as a failure" in msg) == time_limit_is_success, msg
+    env = gym.wrappers.TimeLimit(_ToGoal(), 3)
+    streak_only = dataclasses.replace(config, max_steps=None)
+    with ConfidentTeacher.resume(
+        run_dir, env, lambda obs, info: 1, config=streak_only, progress=False
+    ) as ct:
+        assert ct.stop_reason is None
+
+
 def test_an_is_success_of_none_is_the_env_not_saying_as_episode_results_reads_it():
     """info["is_success"] = None counted as a failure the env reported (no warning, and
     time_limit_is_success ignored), where episode_results reads None as "not said"."""
@@ -251,6 +287,70 @@ def test_a_resumed_session_that_had_met_its_autonomous_steps_takes_no_step(tmp_p
         assert ct.n_steps == n and ct.stop_reason == "autonomous_steps"
         ct.run(autonomous_steps_to_stop=20)
         assert ct.n_steps >= n + 20 and ct.stop_reason == "autonomous_steps"
+
+
+def test_a_resumed_done_session_teaches_on_in_a_run_after_one_that_took_steps(tmp_path):
+    """A done session is done only until this writer takes a step: once a run() with a
+    longer streak has taught on, a later run() counts its streak within itself, as every
+    run() does, and teaches until it holds (the log of the last writer before the resume,
+    which still ends on its old streak, is not read again)."""
+    run_dir = tmp_path / "s"
+    _streak_session(run_dir)
+    with _resumed(run_dir) as ct, warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "took no step" warning
+        ct.run(autonomous_episodes_to_stop=4)
+        n = ct.n_steps
+        ct.run()
+        assert ct.stop_reason == "autonomous_episodes" and ct.n_steps >= n + 30
+        assert ct.autonomous_episodes_streak == 3
+
+
+def test_a_resumed_session_that_had_met_its_autonomous_steps_says_its_streak_of_steps(tmp_path):
+    """The warning of a resumed session done on autonomous_steps_to_stop counts the autonomous
+    steps its log ends on (not its episodes), and the longer stop it suggests teaches on."""
+    run_dir = tmp_path / "s"
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_steps_to_stop=15)
+    with ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run_dir, progress=False
+    ) as ct:
+        ct.run()
+        n = ct.n_steps
+    assert all(r.teacher_action is None for r in ct.records[-15:])
+    with _resumed(run_dir) as ct:
+        with pytest.warns(UserWarning) as caught:
+            ct.run()
+        (msg,) = [str(w.message) for w in caught]
+        assert "this resumed session's log ends on 15 autonomous steps in a row" in msg, msg
+        assert msg.endswith("e.g. run(autonomous_steps_to_stop=115)."), msg
+        ct.run(autonomous_steps_to_stop=115)
+        assert ct.stop_reason == "autonomous_steps" and ct.n_steps >= n + 115
+
+
+def test_a_session_whose_env_raised_on_the_step_that_met_its_streak_is_not_done(tmp_path):
+    """A run() whose env raised on the step that would have met autonomous_steps_to_stop ended
+    by the error, not the streak (the step is logged, the episode cut): a resume has met no
+    streak and teaches on, its streak counted from zero."""
+    config = TeachingConfig(noninteractive=False, autonomous_steps_to_stop=15)
+    world = rare_regions_world(episode_length=10)
+    clean = ConfidentTeacher(world, oracle(world), config=config, progress=False).run()
+    n = clean.n_steps  # the same session, deterministic: its step n - 1 meets the streak
+    run_dir = tmp_path / "s"
+    world = rare_regions_world(episode_length=10)
+    faulty = FaultyWorld(world, fail_at=n, mode="raise")
+    with ConfidentTeacher(
+        faulty, oracle(world), config=config, run_dir=run_dir, progress=False
+    ) as ct:
+        with pytest.raises(EnvError, match="simulator connection lost"):
+            ct.run()
+    records = load_records(run_dir)
+    assert len(records) == n and "torchcbl_error" in records[-1].info
+    assert all(r.teacher_action is None for r in records[-15:])  # 15 unasked, the last failed
+    with _resumed(run_dir) as ct, warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert ct.stop_reason is None
+        ct.run()
+        assert ct.stop_reason == "autonomous_steps" and ct.n_steps >= n + 15
 
 
 def test_a_session_stopped_mid_streak_starts_its_streak_again_on_resume(tmp_path):

@@ -24,6 +24,7 @@ from torchcbl import (
     PosteriorRule,
     TeachingConfig,
     evaluate_policy,
+    load_records,
 )
 from torchcbl.teaching import GreedyPolicy
 
@@ -347,6 +348,32 @@ def test_an_unfitted_greedy_policy_has_no_action_on_every_path():
 
     with pytest.raises(RuntimeError, match="not fitted"):
         evaluate_policy(GreedyPolicy(NoFlag()), env, n_steps=5, seed=0)
+
+
+def test_a_greedy_policy_with_a_call_of_its_own_evaluates_with_an_unfitted_model():
+    """As documented (GreedyPolicy, evaluate_policy): where a subclass has a ``__call__`` of
+    its own, that is called and decides, also while the model is not fitted (one that falls
+    back on a default action, say), for a model that says is_fitted and one that does not;
+    the confidence fields are filled from the unfitted model's classification."""
+
+    class Fallback(GreedyPolicy):
+        def __call__(self, observation):
+            action = int(self.classify(observation).action[0])
+            return 0 if action < 0 else action
+
+    class NoFlag(torch.nn.Module):  # a model of one's own that does not say is_fitted
+        def __init__(self):
+            super().__init__()
+            self.inner = GaussianMixtureSet(3, 2)
+
+        def classify(self, x):
+            return self.inner.classify(x)
+
+    for model in (GaussianMixtureSet(3, 2), NoFlag()):
+        policy = Fallback(model)
+        records = evaluate_policy(policy, rare_regions_world(episode_length=5), n_steps=5, seed=0)
+        assert [r.executed_action for r in records] == [0] * 5
+        assert all(r.confidence is not None and r.posterior is not None for r in records)
 
 
 class _ActedOn(gym.Wrapper):
@@ -705,6 +732,45 @@ def test_a_decide_that_is_no_decision_of_a_known_phase_is_refused_before_the_tea
     ct.close()
     # nothing recorded: the session, failed at its first step, was removed again
     assert asked == [] and not (tmp_path / "r" / "config.json").exists()
+
+
+def test_a_decide_not_to_ask_in_the_noninteractive_phase_is_refused_as_the_strategys(tmp_path):
+    """The "noninteractive" phase is for steps on which the teacher is asked by design (a
+    StepRecord holds a label on every one). A strategy of one's own that decided not to ask
+    in it, once a model existed, failed in the record's own check: a ValueError telling to
+    pass a label "if you built this record yourself" and that "from the teaching loop this
+    points at a bug or a corrupted log". It is refused as the strategy's, as the other
+    checks of a decision are, before anything of the step is recorded; the steps before it
+    are kept."""
+    from torchcbl.strategies import Decision
+    from torchcbl.strategies.bc import BehaviourCloning
+
+    class Mine(BehaviourCloning):
+        def bind(self, **kw):
+            super().bind(**kw)
+            self.decided = 0
+
+        def decide(self, obs, c):
+            self.decided += 1
+            return Decision(self.decided <= 5, "noninteractive")
+
+        def actor(self, decision, model_action, teacher_action):
+            return "teacher" if decision.ask else "agent"
+
+    env = rare_regions_world()
+    run = tmp_path / "r"
+    ct = ConfidentTeacher(
+        env, oracle(env), strategy=Mine(), config=TeachingConfig(max_new=2), run_dir=run,
+        progress=False,
+    )  # fmt: skip
+    with ct, pytest.raises(RuntimeError) as caught:
+        ct.run(max_steps=10)
+    text = str(caught.value)
+    assert (
+        text.startswith("strategy ") and "decided not to ask in the 'noninteractive' phase" in text
+    )
+    assert "decide with phase 'confident'" in text and "Nothing was recorded" in text, text
+    assert ct.n_steps == 5 and len(load_records(run)) == 5
 
 
 class _Observing(gym.Env):

@@ -1484,6 +1484,13 @@ class ConfidentTeacher:
                 "'noninteractive' or 'confident' (see torchcbl.strategies). Nothing was "
                 "recorded for this step."
             )
+        if not ask and phase == "noninteractive":  # a StepRecord holds a label on each one
+            raise RuntimeError(
+                f"strategy {self.strategy!r} decided not to ask in the 'noninteractive' phase, "
+                "which is for steps on which the teacher is asked by design; ask there, or "
+                "decide with phase 'confident' for a step the agent takes on its own (see "
+                "torchcbl.strategies). Nothing was recorded for this step."
+            )
         if not ask and model_action < 0:
             raise RuntimeError(
                 f"strategy {self.strategy!r} decided not to ask before any model exists; a "

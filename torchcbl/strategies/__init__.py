@@ -98,7 +98,8 @@ Two attributes complete the protocol:
   correct it (see "Corrections" below).
 
 The ``Decision.phase`` is recorded on the step (``StepRecord.phase``): ``"noninteractive"``
-for steps on which the teacher is asked by design, ``"confident"`` for steps on which the
+for steps on which the teacher is asked by design (a decision not to ask in it is a
+RuntimeError, before anything of the step is recorded), ``"confident"`` for steps on which the
 strategy decided. Only confident-phase steps count towards ``autonomy_rate`` and the
 autonomous-episode stop.
 
