@@ -490,6 +490,7 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
         TeachingConfig,
         evaluate_policy,
     )
+    from torchcbl.session import load_demonstrations
 
     torch.manual_seed(seed)
     out = Path(seed_dir)
@@ -564,6 +565,13 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     ta.close()
     env.close()
     episodes += env.episodes
+    # Figure 7: "the data representing the policy for driving in the middle lane" of the final
+    # learned model (paper 5.2), arm (a)'s: its training set as its session keeps it, what its
+    # every fit stood on (relabelled points once, had its strategy relabelled), the final
+    # snapshot's (no step follows it), its middle-lane points
+    x_a, y_a = load_demonstrations(out / "sessions" / "arm_a")
+    middle = np.rint(x_a[:, 3]) == 2 if len(y_a) else np.zeros(0, dtype=bool)
+    fig7 = {"arm": "a", "x": x_a[middle, :3].tolist(), "action": y_a[middle].tolist()}
     acc_a = [r.windowed_accuracy for r in recs_a if r.teacher_action is not None]
     conf_recs = recs_a[steps_at_switch:]
     autonomy_a = float(np.mean([r.autonomous for r in conf_recs])) if conf_recs else None
@@ -577,11 +585,6 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
         snap(tb, f"b_{n}")
     demo_recs = [r for r in tb.records if r.teacher_action is not None]
     acc_b = [r.windowed_accuracy for r in demo_recs]
-    middle = [r for r in demo_recs if int(round(r.observation[3])) == 2]
-    fig7 = {
-        "x": [[float(v) for v in r.observation[:3]] for r in middle],
-        "action": [int(r.teacher_action) for r in middle],
-    }
     tb.close()
     env.close()
     episodes += env.episodes
@@ -1198,7 +1201,12 @@ def plot_results(
     ax.set_ylabel("middle lane (m)")
     ax.set_zlabel("left lane (m)")
     ax.legend(fontsize=7)
-    ax.set_title(f"Figure 7: middle-lane demonstrations (seed {first['seed']}, arm b)")
+    if f7.get("arm") == "a":
+        ax.set_title(
+            f"Figure 7: middle-lane training data of arm (a)'s final model (seed {first['seed']})"
+        )
+    else:  # a results.json from before Figure 7 drew arm (a) (no "arm"): arm (b)'s demos
+        ax.set_title(f"Figure 7: middle-lane demonstrations (seed {first['seed']}, arm b)")
     save(fig, "fig7_middle_lane_demos.png")
     # Figure 10: the paper's policy (FIG10_STAGE) of the seed whose trace holds the most contacts
     # (ties: the lowest seed), over the 300-step stretch holding the most of them

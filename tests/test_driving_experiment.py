@@ -1317,3 +1317,54 @@ def test_a_run_under_the_coverage_reading_asks_and_counts_figure_10_at_its_thres
     row = [ln for ln in format_summary(old).splitlines() if "contact onsets" in ln]
     assert len(row) == 1 and "by distance > 2 (all steps)" in row[0], row
     assert len(plot_results(old, tmp_path / "old")) == 5
+
+
+def _figure_7_title(results, run_dir, monkeypatch) -> str:
+    """plot_results' Figure 7, drawn into ``run_dir``: the title it was drawn with."""
+    import sumo_scenarios.experiment as experiment
+
+    titles = []
+    drawn = experiment.save_whole
+
+    def keep_title(path, save, **kwargs):
+        titles.append(save.__self__.axes[0].get_title())
+        return drawn(path, save, **kwargs)
+
+    monkeypatch.setattr(experiment, "save_whole", keep_title)
+    assert plot_results(results, run_dir, only=["fig7_middle_lane_demos.png"])
+    assert len(titles) == 1
+    return titles[0]
+
+
+def test_figure_7_draws_the_data_of_arm_as_final_model_and_an_old_run_still_redraws(
+    two_seeds, tmp_path, monkeypatch
+):
+    """Paper 5.2: "The final learned model consisted of 34 Gaussian components ... Figure 7
+    shows a sample of the data representing the policy for driving in the middle lane": the
+    training data of confident execution's final model, arm (a)'s (non-interactive and
+    confident demonstrations). Figure 7 drew arm (b)'s demonstrations. It now draws the first
+    seed's arm (a) training set (the points its final model was fitted on, as its session
+    keeps them) in the middle lane, and says so; a results.json written before (arm (b)'s
+    points, no "arm" key) still redraws, its title saying arm b."""
+    from torchcbl.session import load_demonstrations
+
+    _, run_dir = two_seeds
+    results = json.loads((run_dir / "results.json").read_text())
+    first = results["per_seed"][0]
+    assert first["seed"] == 1  # the config's first seed
+    x, y = load_demonstrations(run_dir / "seed_1" / "sessions" / "arm_a")
+    final = first["stages"]["a_plus20"]
+    assert len(y) == final["fitted_on"] == final["demonstrations"]
+    middle = np.rint(x[:, 3]) == 2
+    assert middle.any() and not middle.all()
+    f7 = first["fig7_middle_lane_demos"]
+    assert f7["arm"] == "a"
+    assert f7["x"] == x[middle, :3].tolist() and f7["action"] == y[middle].tolist()
+    title = _figure_7_title(results, tmp_path / "new", monkeypatch)
+    assert "arm (a)" in title and "seed 1" in title and "arm b" not in title, title
+    # a run from before: arm (b)'s middle-lane demonstrations under the same key, no "arm"
+    xb, yb = load_demonstrations(run_dir / "seed_1" / "sessions" / "arm_b")
+    mb = np.rint(xb[:, 3]) == 2
+    first["fig7_middle_lane_demos"] = {"x": xb[mb, :3].tolist(), "action": yb[mb].tolist()}
+    title = _figure_7_title(results, tmp_path / "old", monkeypatch)
+    assert title == "Figure 7: middle-lane demonstrations (seed 1, arm b)"
