@@ -4,7 +4,8 @@ Per seed (each in its own process: libsumo holds one simulation per process):
 
 - arm (a): the teacher (``teacher``: the consistent scripted expert, or the human-like one)
   demonstrates non-interactively on the ``train`` scenario until the model predicts 80 % of the
-  last 150 demonstrations, then confident execution (2-std distance rule, bursts of 10 teacher
+  last 150 demonstrations, then confident execution (a distance rule: by default a
+  Mahalanobis distance of ``max_std`` = 2 std, see ``threshold_reading``; bursts of 10 teacher
   moves) for ``confident_demos`` more demonstrations; the model is snapshotted (deep copy)
   every ``ni_stage_every`` non-interactive demonstrations, at the switch, and every
   ``stage_every`` confident demonstrations.
@@ -35,6 +36,14 @@ Rerun seed k of a run with the config stored in its results.json, into a new run
 (everything is seeded; its ``per_seed[0]`` is the run's seed k but for the timing
 ``arm_a_seconds``): ``run_experiment(dataclasses.replace(DrivingExperimentConfig.from_dict(
 results["config"]), seeds=(k,)), new_run_dir)`` (docs/reproduction.md, *Rerunning one seed*).
+
+The threshold: Section 5.2 names none. The paper's "two standard deviations for the most
+likely Gaussian component" is Section 5.1's, the corridor's. This experiment reads it literally
+by default, a Mahalanobis distance of 2 (``threshold_reading="literal"``, which holds 59 % of a
+4-D Gaussian's own points); ``threshold_reading="coverage"`` reads it as the corridor
+experiment does, the share of a 1-D Gaussian within 2 std (0.9545) as a chi-square quantile in
+the D = 4 features, 3.12 std: ``run_experiment(dataclasses.replace(DrivingExperimentConfig(),
+threshold_reading="coverage"), run_dir)``.
 """
 
 from __future__ import annotations
@@ -78,6 +87,7 @@ from torchcbl.evaluation import (
 if TYPE_CHECKING:
     from sumo_scenarios.scenarios import TrafficScenario
     from sumo_scenarios.sim import SimConfig
+    from torchcbl.confidence import DistanceRule
     from torchcbl.gmm import Criterion, GaussianMixtureSet
 
 __all__ = [
@@ -123,6 +133,10 @@ def _plain(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON serializable")
 
 
+_READINGS = ("literal", "coverage")
+_N_FEATURES = 4  # the driving env's observation: the 3 lanes' distances and the lane index
+
+
 def _check_whole(name: str, value: Any, minimum: int) -> None:
     """A setting that counts: an int (not a bool) >= ``minimum``, else a ValueError."""
     whole = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
@@ -150,7 +164,18 @@ class DrivingExperimentConfig:
             chose at most 31 "stay" components on any of the 30 training sets of 2026-11-25's
             sessions, searched up to 60, so 40 leaves it room and the report says when a mixture
             reaches it).
-        max_std: the confidence rule's threshold in standard deviations (the paper: 2).
+        max_std: the confidence rule's threshold in standard deviations (2; Section 5.2 names
+            no threshold: the paper's 2, "two standard deviations for the most likely Gaussian
+            component", is the corridor's, Section 5.1).
+        threshold_reading: how ``max_std`` becomes a Mahalanobis threshold in the D = 4
+            features. ``"literal"`` (default): a distance of ``max_std`` itself,
+            ``DistanceRule(max_std)`` (2 std holds 59 % of a 4-D Gaussian's own points);
+            ``"coverage"``: the corridor experiment's reading, the share of a 1-D Gaussian's
+            points within ``max_std`` std (0.9545 for 2) as a chi-square quantile with D
+            degrees of freedom, ``DistanceRule(quantile=...)`` (3.12 std in 4-D). Figure 10's
+            count and line use the threshold in force (:meth:`rule`). A config stored before
+            this setting existed (a results.json, a seed_result.json) ran the literal reading
+            and reads back as it (:meth:`from_dict`).
         train_episode_steps: training episodes are this long before the road is redrawn.
         eval_segment: run seed ``s`` evaluates every one of its policies on the ONE held-out
             road segment ``eval_segment + s`` of the ``eval`` scenario (the paper: "the same
@@ -199,6 +224,7 @@ class DrivingExperimentConfig:
     max_new: int = 10
     max_components: int = 40
     max_std: float = 2.0
+    threshold_reading: Literal["literal", "coverage"] = "literal"
     train_episode_steps: int = 1000
     eval_segment: int = 0
     extra_eval_segments: tuple[int, ...] = ()
@@ -286,6 +312,28 @@ class DrivingExperimentConfig:
             )
         if self.teacher not in ("expert", "human"):
             raise ValueError(f"teacher must be 'expert' or 'human', got {self.teacher!r}")
+        if self.threshold_reading not in _READINGS:
+            raise ValueError(
+                f"threshold_reading: expected one of {_READINGS}, got {self.threshold_reading!r}"
+            )
+        # what each worker would only find after its non-interactive phase, checked now
+        try:
+            self.rule()
+        except ValueError as exc:
+            raise ValueError(
+                f"max_std = {self.max_std} gives no usable threshold with threshold_reading="
+                f"{self.threshold_reading!r} ({exc})"
+            ) from None
+
+    def rule(self) -> DistanceRule:
+        """A fresh :class:`torchcbl.DistanceRule` that ``max_std`` and ``threshold_reading``
+        give: arm (a)'s confidence rule (``rule().threshold(4)``: its threshold in standard
+        deviations in the driving env's 4 features, Figure 10's)."""
+        from torchcbl import DistanceRule
+
+        if self.threshold_reading == "literal":
+            return DistanceRule(self.max_std)
+        return DistanceRule(quantile=math.erf(self.max_std / math.sqrt(2.0)))
 
     @classmethod
     def full(cls) -> DrivingExperimentConfig:
@@ -297,13 +345,16 @@ class DrivingExperimentConfig:
         """The config that :meth:`to_dict` wrote (``results.json``'s ``"config"``, or a seed's
         ``seed_<k>/seed_result.json``'s), to replay a run or vary it, e.g. its seed 3 alone:
         ``dataclasses.replace(DrivingExperimentConfig.from_dict(results["config"]),
-        seeds=(3,))``. A key left out takes its default.
+        seeds=(3,))``. A key left out takes its default, but for ``threshold_reading``: a
+        config stored before it existed ran the literal reading, and reads back as it.
 
         Raises:
             ValueError: ``data`` is not a dict of this class's fields (a whole results.json,
                 an unknown field), or a value is refused as the constructor refuses it.
         """
-        return cls(**check_config_fields(cls, data))  # (lists become tuples in __post_init__)
+        kwargs = check_config_fields(cls, data)
+        kwargs.setdefault("threshold_reading", "literal")  # stored before the setting existed
+        return cls(**kwargs)  # (lists become tuples in __post_init__)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form, as ``results.json`` and each ``seed_result.json`` keep it
@@ -349,17 +400,16 @@ def teaching_setup(
 
     Returns:
         The ``gymnasium.make`` kwargs of ``torchcbl/Driving-v0`` (none: its defaults), the
-        confidence rule (``DistanceRule(config.max_std)``, as the experiment's arm (a)) and
+        confidence rule (``config.rule()``, as the experiment's arm (a):
+        ``DistanceRule(config.max_std)`` with the default literal reading) and
         the learner's factory ``make(seed=0)`` (:func:`make_model`).
     """
-    from torchcbl import DistanceRule
-
     config = config or DrivingExperimentConfig()
 
     def make(seed: int = 0) -> GaussianMixtureSet:
         return make_model(config, seed)
 
-    return {}, DistanceRule(config.max_std), make
+    return {}, config.rule(), make
 
 
 def make_model(config: DrivingExperimentConfig | None = None, seed: int = 0) -> GaussianMixtureSet:
@@ -436,11 +486,11 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     from sumo_scenarios.replay import EpisodeRecorder, save_records
     from torchcbl import (
         ConfidentTeacher,
-        DistanceRule,
         GreedyPolicy,
         TeachingConfig,
         evaluate_policy,
     )
+    from torchcbl.session import load_demonstrations
 
     torch.manual_seed(seed)
     out = Path(seed_dir)
@@ -466,7 +516,7 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
             env,
             _make_teacher(cfg, seed),
             model=model,
-            rule=DistanceRule(cfg.max_std),
+            rule=cfg.rule(),
             config=tc,
             seed=seed,
             progress=False,
@@ -506,7 +556,8 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
                     f"seed {seed}: arm (a)'s confident phase took max_confident_steps "
                     f"({cfg.max_confident_steps}) steps and collected {got} of "
                     f"{cfg.confident_demos} demonstrations: the learner almost never asks at "
-                    f"max_std={cfg.max_std}; lower max_std or raise max_confident_steps"
+                    f"max_std={cfg.max_std} (threshold_reading={cfg.threshold_reading!r}); "
+                    "lower max_std or raise max_confident_steps"
                 )
             ta.step()
         snap(ta, f"a_plus{k}")
@@ -514,6 +565,13 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     ta.close()
     env.close()
     episodes += env.episodes
+    # Figure 7: "the data representing the policy for driving in the middle lane" of the final
+    # learned model (paper 5.2), arm (a)'s: its training set as its session keeps it, what its
+    # every fit stood on (relabelled points once, had its strategy relabelled), the final
+    # snapshot's (no step follows it), its middle-lane points
+    x_a, y_a = load_demonstrations(out / "sessions" / "arm_a")
+    middle = np.rint(x_a[:, 3]) == 2 if len(y_a) else np.zeros(0, dtype=bool)
+    fig7 = {"arm": "a", "x": x_a[middle, :3].tolist(), "action": y_a[middle].tolist()}
     acc_a = [r.windowed_accuracy for r in recs_a if r.teacher_action is not None]
     conf_recs = recs_a[steps_at_switch:]
     autonomy_a = float(np.mean([r.autonomous for r in conf_recs])) if conf_recs else None
@@ -527,11 +585,6 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
         snap(tb, f"b_{n}")
     demo_recs = [r for r in tb.records if r.teacher_action is not None]
     acc_b = [r.windowed_accuracy for r in demo_recs]
-    middle = [r for r in demo_recs if int(round(r.observation[3])) == 2]
-    fig7 = {
-        "x": [[float(v) for v in r.observation[:3]] for r in middle],
-        "action": [int(r.teacher_action) for r in middle],
-    }
     tb.close()
     env.close()
     episodes += env.episodes
@@ -591,8 +644,9 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
             entry["all_segments"]["tv_to_expert"] = metrics.total_variation(
                 entry["all_segments"]["lanes"], expert["all_segments"]["lanes"]
             )
+    threshold = cfg.rule().threshold(_N_FEATURES)  # the threshold in force (std)
     fig10_counts = {
-        label: _low_confidence_counts(tr["distance"], tr["contact"], cfg.max_std)
+        label: _low_confidence_counts(tr["distance"], tr["contact"], threshold)
         for label, tr in traces.items()
     }
     # a seed whose window never reached the target ran no confident phase: its "a_plus" stages
@@ -1147,7 +1201,12 @@ def plot_results(
     ax.set_ylabel("middle lane (m)")
     ax.set_zlabel("left lane (m)")
     ax.legend(fontsize=7)
-    ax.set_title(f"Figure 7: middle-lane demonstrations (seed {first['seed']}, arm b)")
+    if f7.get("arm") == "a":
+        ax.set_title(
+            f"Figure 7: middle-lane training data of arm (a)'s final model (seed {first['seed']})"
+        )
+    else:  # a results.json from before Figure 7 drew arm (a) (no "arm"): arm (b)'s demos
+        ax.set_title(f"Figure 7: middle-lane demonstrations (seed {first['seed']}, arm b)")
     save(fig, "fig7_middle_lane_demos.png")
     # Figure 10: the paper's policy (FIG10_STAGE) of the seed whose trace holds the most contacts
     # (ties: the lowest seed), over the 300-step stretch holding the most of them
@@ -1158,13 +1217,14 @@ def plot_results(
     # the 300-step stretch holding the most contacts
     counts = np.convolve(c.astype(float), np.ones(n), mode="valid")
     start = int(np.argmax(counts)) if counts.size else 0
+    threshold = _threshold_in_force(cfg)
     fig = Figure(figsize=(8, 3))
     ax = fig.add_subplot()
     metrics.plot_confidence_trace(
         ax,
         tr["distance"][start : start + n],
         tr["contact"][start : start + n],
-        threshold=cfg["max_std"],
+        threshold=threshold,
         start=start,
     )
     s = results["summary"]
@@ -1175,7 +1235,7 @@ def plot_results(
         f"seed {shown['seed']}, steps {start}-{start + n - 1}\n"
         + (
             f"this policy, all seeds: contact onsets preceded within 5 steps by distance > "
-            f"{cfg['max_std']:g}: {100 * share:.0f}% (all steps: {100 * base:.0f}%)"
+            f"{threshold:.3g}: {100 * share:.0f}% (all steps: {100 * base:.0f}%)"
             if share is not None
             else "no contacts"
         ),
@@ -1183,6 +1243,15 @@ def plot_results(
     )
     save(fig, "fig10_confidence.png")
     return written
+
+
+def _threshold_in_force(cfg: Mapping[str, Any]) -> float:
+    """Figure 10's threshold (std) of a run from its stored config (results.json's
+    ``"config"``): its ``max_std`` under its ``threshold_reading``, the literal reading for a
+    config stored before that setting existed."""
+    reading = cfg.get("threshold_reading", "literal")
+    fields = {"max_std": cfg["max_std"], "threshold_reading": reading}
+    return DrivingExperimentConfig.from_dict(fields).rule().threshold(_N_FEATURES)
 
 
 def session_eval_segment(session_dir: str | Path) -> int | None:
@@ -1506,7 +1575,8 @@ def format_summary(results: dict[str, Any]) -> str:
         ),
         (
             "Fig 10",
-            f"contact onsets preceded within 5 steps by distance > {cfg['max_std']:g} (all "
+            f"contact onsets preceded within 5 steps by distance > "
+            f"{_threshold_in_force(cfg):.3g} (all "
             f"steps), {stage_name(s['fig10_stage'])}, pooled over the seeds",
             "most",
             "–"

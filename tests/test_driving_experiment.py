@@ -1239,3 +1239,132 @@ def test_evaluate_names_the_lanes_of_its_lane_shares(tmp_path, capsys):
         main(["evaluate", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
     assert "lane_names" in help_text and "right shoulder first" in help_text
+
+
+def test_the_threshold_is_read_literally_by_default_and_as_the_corridors_coverage_on_request():
+    """The paper fixes its threshold, "two standard deviations for the most likely Gaussian
+    component", in Section 5.1 (the corridor) only; Section 5.2 names none. The driving
+    experiment keeps reading ``max_std`` literally by default (a Mahalanobis distance of 2),
+    and with ``threshold_reading="coverage"`` reads it as the corridor does: the share of a
+    1-D Gaussian within ``max_std`` std as a chi-square quantile, here in the driving env's
+    D = 4 features (3.12 std). A config stored before the setting existed ran the literal
+    reading and reads back as it."""
+    import dataclasses
+    import math
+
+    from scipy.stats import chi2
+
+    from sumo_scenarios.experiment import teaching_setup
+
+    cfg = DrivingExperimentConfig()
+    assert cfg.threshold_reading == "literal" and cfg.max_std == 2.0
+    assert cfg.rule().quantile is None and cfg.rule().threshold(4) == 2.0
+    assert teaching_setup()[1].quantile is None and teaching_setup()[1].threshold(4) == 2.0
+    coverage = dataclasses.replace(cfg, threshold_reading="coverage")
+    want = math.sqrt(chi2.ppf(chi2.cdf(4.0, 1), 4))  # P(|z| <= 2) = 0.9545, in 4-D
+    assert want == pytest.approx(3.117, abs=1e-3)
+    assert coverage.rule().threshold(4) == pytest.approx(want, rel=1e-9)
+    assert teaching_setup(coverage)[1].threshold(4) == pytest.approx(want, rel=1e-9)
+    stored = json.loads(json.dumps(coverage.to_dict()))
+    assert stored["threshold_reading"] == "coverage"
+    assert DrivingExperimentConfig.from_dict(stored) == coverage
+    before = {k: v for k, v in stored.items() if k != "threshold_reading"}
+    assert DrivingExperimentConfig.from_dict(before).threshold_reading == "literal"
+    says = r"^threshold_reading: expected one of \('literal', 'coverage'\), got '2std'"
+    with pytest.raises(ValueError, match=says):
+        DrivingExperimentConfig(threshold_reading="2std")
+    # a max_std whose coverage rounds to 1 gives no threshold: refused now, not in each worker
+    with pytest.raises(
+        ValueError, match=r"max_std = 9.0 gives no usable threshold with threshold_reading='cov"
+    ):
+        DrivingExperimentConfig(max_std=9.0, threshold_reading="coverage")
+    assert DrivingExperimentConfig(max_std=9.0).rule().threshold(4) == 9.0
+
+
+def test_a_run_under_the_coverage_reading_asks_and_counts_figure_10_at_its_threshold(
+    tmp_path, two_seeds
+):
+    """run_experiment(replace(config, threshold_reading="coverage"), ...) teaches arm (a) with
+    the quantile rule, records the reading in results.json, and counts Figure 10's share
+    ("contact onsets preceded within 5 steps by a distance above the threshold") and draws its
+    dashed line at the threshold in force (3.12 std), not at max_std; a results.json from
+    before the setting existed is read as the literal 2 std it ran."""
+    from torchcbl.session import load_config
+
+    cfg = tiny_config(threshold_reading="coverage")
+    thr = cfg.rule().threshold(4)
+    run_experiment(cfg, tmp_path, workers=1, progress=False)
+    on_disk = json.loads((tmp_path / "results.json").read_text())
+    assert on_disk["config"]["threshold_reading"] == "coverage"
+    rule = json.dumps(load_config(tmp_path / "seed_0" / "sessions" / "arm_a"))
+    assert '"quantile": 0.9544997' in rule, rule
+    s = on_disk["summary"]
+    tr = on_disk["per_seed"][0]["fig10"]
+    dist = tr["distance"]
+
+    def base_rate(threshold):
+        low = [any(d > threshold for d in dist[max(0, t - 4) : t + 1]) for t in range(len(dist))]
+        return sum(low) / len(low)
+
+    assert base_rate(thr) != base_rate(2.0)  # (the test tells the two apart)
+    assert s["fig10_base_rate"] == pytest.approx(base_rate(thr))
+    row = [ln for ln in format_summary(on_disk).splitlines() if "contact onsets" in ln]
+    assert len(row) == 1 and "by distance > 3.12 (all steps)" in row[0], row
+    assert len(plot_results(on_disk, tmp_path / "redrawn")) == 5
+    # a results.json written before threshold_reading was stored: the literal reading
+    old = json.loads((two_seeds[1] / "results.json").read_text())
+    del old["config"]["threshold_reading"]
+    row = [ln for ln in format_summary(old).splitlines() if "contact onsets" in ln]
+    assert len(row) == 1 and "by distance > 2 (all steps)" in row[0], row
+    assert len(plot_results(old, tmp_path / "old")) == 5
+
+
+def _figure_7_title(results, run_dir, monkeypatch) -> str:
+    """plot_results' Figure 7, drawn into ``run_dir``: the title it was drawn with."""
+    import sumo_scenarios.experiment as experiment
+
+    titles = []
+    drawn = experiment.save_whole
+
+    def keep_title(path, save, **kwargs):
+        titles.append(save.__self__.axes[0].get_title())
+        return drawn(path, save, **kwargs)
+
+    monkeypatch.setattr(experiment, "save_whole", keep_title)
+    assert plot_results(results, run_dir, only=["fig7_middle_lane_demos.png"])
+    assert len(titles) == 1
+    return titles[0]
+
+
+def test_figure_7_draws_the_data_of_arm_as_final_model_and_an_old_run_still_redraws(
+    two_seeds, tmp_path, monkeypatch
+):
+    """Paper 5.2: "The final learned model consisted of 34 Gaussian components ... Figure 7
+    shows a sample of the data representing the policy for driving in the middle lane": the
+    training data of confident execution's final model, arm (a)'s (non-interactive and
+    confident demonstrations). Figure 7 drew arm (b)'s demonstrations. It now draws the first
+    seed's arm (a) training set (the points its final model was fitted on, as its session
+    keeps them) in the middle lane, and says so; a results.json written before (arm (b)'s
+    points, no "arm" key) still redraws, its title saying arm b."""
+    from torchcbl.session import load_demonstrations
+
+    _, run_dir = two_seeds
+    results = json.loads((run_dir / "results.json").read_text())
+    first = results["per_seed"][0]
+    assert first["seed"] == 1  # the config's first seed
+    x, y = load_demonstrations(run_dir / "seed_1" / "sessions" / "arm_a")
+    final = first["stages"]["a_plus20"]
+    assert len(y) == final["fitted_on"] == final["demonstrations"]
+    middle = np.rint(x[:, 3]) == 2
+    assert middle.any() and not middle.all()
+    f7 = first["fig7_middle_lane_demos"]
+    assert f7["arm"] == "a"
+    assert f7["x"] == x[middle, :3].tolist() and f7["action"] == y[middle].tolist()
+    title = _figure_7_title(results, tmp_path / "new", monkeypatch)
+    assert "arm (a)" in title and "seed 1" in title and "arm b" not in title, title
+    # a run from before: arm (b)'s middle-lane demonstrations under the same key, no "arm"
+    xb, yb = load_demonstrations(run_dir / "seed_1" / "sessions" / "arm_b")
+    mb = np.rint(xb[:, 3]) == 2
+    first["fig7_middle_lane_demos"] = {"x": xb[mb, :3].tolist(), "action": yb[mb].tolist()}
+    title = _figure_7_title(results, tmp_path / "old", monkeypatch)
+    assert title == "Figure 7: middle-lane demonstrations (seed 1, arm b)"

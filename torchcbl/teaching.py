@@ -168,13 +168,15 @@ class TeachingConfig:
         max_new: refit after this many new labels (>= 1): demonstrations, and corrections
             with a strategy that takes them. With ``refit="full"`` every refit fits on all the
             labels so far, so with ``max_new=1`` a session of N labels costs about N**2 / 2
-            point-fits in all: it grows quadratically. The paper names maxNew without a
-            value (Algorithm 1; Section 4.3 relearns "after maxNew new datapoints"): the
-            default 1, a refit after each label, is its tightest reading (fine for the
-            corridor's ~50); for long sessions (hundreds or thousands of labels) raise
-            it, e.g. 10 for the driving domain's 650, which divides the total cost by about
-            10, or use ``refit="incremental"``. Requests are still decided with the latest
-            fitted model.
+            point-fits in all: it grows quadratically. The refit comes once ``max_new`` new
+            labels have accumulated (``>=``), as Section 4.2's prose has it, "relearning the
+            mixture parameters after maxNew new datapoints are obtained"; Algorithm 1 writes
+            "if numNewDatapoints > maxNew", which would refit only at ``max_new + 1``. The
+            paper names maxNew without a value: the default 1, a refit after each label, is
+            its tightest reading (fine for the corridor's ~50); for long sessions (hundreds
+            or thousands of labels) raise it, e.g. 10 for the driving domain's 650, which
+            divides the total cost by about 10, or use ``refit="incremental"``. Requests are
+            still decided with the latest fitted model.
         refit: "full" (default) fits the model from scratch at every refit, so it is a function
             of the labels alone; "incremental" uses ``GaussianMixtureSet.refit``: only the
             actions whose data changed are refitted, each candidate warm-started from its
