@@ -1277,7 +1277,7 @@ def test_a_log_deleted_beside_its_writers_file_is_said_to_be_missing(tmp_path):
     for path in (*run.glob("steps.*"), *run.glob("checkpoints/*"), run / "writer.lock"):
         path.unlink()
     names = sorted(p.name for p in run.glob("*.*"))
-    assert names == ["config.json", "writers.jsonl"], names
+    assert names == ["config.json", "runs.jsonl", "writers.jsonl"], names
     before = files_of(run)
     for read in (load_records, load_model, resume):
         with pytest.raises(CorruptSessionError, match="steps.sqlite is missing"):
@@ -1715,7 +1715,9 @@ def test_a_new_session_does_not_take_over_a_writers_file_another_session_left(tm
     the other's: its first line said that writer started at the other's step 0, and the
     other's resumes read as this session's writers (thread counts, devices, from which step),
     the record that says which thread count reproduces which step. It is refused, as a
-    journal or checkpoints left there are, and the file is left as it was."""
+    journal or checkpoints left there are, and the file is left as it was; so is its
+    runs.jsonl (where its run() calls began, which would move where this session's streak
+    is counted from)."""
     run = tmp_path / "run"
     ct, _ = session(run)
     ct.run(max_steps=10)
@@ -1726,14 +1728,17 @@ def test_a_new_session_does_not_take_over_a_writers_file_another_session_left(tm
     for name in ("config.json", "steps.sqlite"):  # "starting over" by hand
         (run / name).unlink()
     shutil.rmtree(run / "checkpoints")
-    before = (run / "writers.jsonl").read_bytes()
-    with pytest.raises(
-        IncompatibleRunDirError, match=r"holds what another session left \(writers.jsonl\)"
-    ):
-        session(run)
-    assert (run / "writers.jsonl").read_bytes() == before
-    assert not (run / "config.json").exists()
-    (run / "writers.jsonl").unlink()  # moved away: a new session starts there
+    before = files_of(run)
+    for left in ("runs.jsonl, writers.jsonl", "runs.jsonl"):
+        with pytest.raises(
+            IncompatibleRunDirError, match=rf"holds what another session left \({left}\)"
+        ):
+            session(run)
+        assert files_of(run) == before
+        assert not (run / "config.json").exists()
+        (run / "writers.jsonl").unlink(missing_ok=True)  # moved away: runs.jsonl is still there
+        before = files_of(run)
+    (run / "runs.jsonl").unlink()  # moved away: a new session starts there
     ct, _ = session(run)
     ct.close()
     assert [json.loads(line)["first_step"] for line in (run / "writers.jsonl").open()] == [0]

@@ -4,6 +4,7 @@ records come to per episode (issue 16 item 3, issue 13 item 5)."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import re
 import signal
@@ -23,6 +24,7 @@ from torchcbl import (
     EpisodeResult,
     TeacherError,
     TeachingConfig,
+    describe,
     episode_results,
     evaluate_policy,
     load_records,
@@ -389,6 +391,116 @@ def test_a_session_stopped_mid_streak_starts_its_streak_again_on_resume(tmp_path
         ct.run()
         assert ct.stop_reason == "autonomous_episodes" and ct.n_steps >= n + 30
         assert all(r.autonomous for r in ct.records[-30:])
+
+
+#: Where :func:`_streak_session` (its stop of 3 episodes met in one run()) stops on its own.
+_STREAK_AT = 190
+
+
+def _chunked_session(run_dir: Path, *calls: dict) -> ConfidentTeacher:
+    """The session of :func:`_streak_session` (a stop of 3 episodes) taught by one process in
+    several run() calls, ``run(**kw)`` for each of ``calls``, and closed."""
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=3)
+    with ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run_dir, progress=False
+    ) as ct:
+        for kw in calls:
+            ct.run(**kw)
+    return ct
+
+
+def _runs(run_dir: Path) -> list[dict]:
+    return [json.loads(line) for line in (run_dir / "runs.jsonl").read_text().splitlines()]
+
+
+def test_a_session_taught_in_several_run_calls_is_done_only_by_its_last_runs_streak(tmp_path):
+    """A streak counts within one run(), but a resume and describe() counted it over the
+    steps of the session's last writer, as if a run() ended with its writer: a session taught
+    in chunks by one process, run(max_steps=180) (2 episodes in a row) then run(max_steps=190)
+    (1), read as one streak of 3, was "done" (show printed done:, the resume took no step,
+    teach --resume refused it) though no run() of it met its stop. Each run() now records the
+    step it began at (runs.jsonl) before its first step, and the count starts there."""
+    n = _STREAK_AT  # where the same session taught in one run() stops on its own
+    run_dir = tmp_path / "chunks"
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=3)
+    with ConfidentTeacher(
+        world, oracle(world), config=config, run_dir=run_dir, progress=False
+    ) as ct:
+        ct.run(max_steps=n - 10)
+        assert (ct.stop_reason, ct.autonomous_episodes_streak) == ("max_steps", 2)
+        ct.run(max_steps=n)
+        assert (ct.stop_reason, ct.autonomous_episodes_streak) == ("max_steps", 1)
+    assert [(r["first_step"], r["stops"]["max_steps"]) for r in _runs(run_dir)] == [
+        (0, n - 10),
+        (n - 10, n),
+    ]
+    assert describe(run_dir).streak_met is None
+    with _resumed(run_dir) as ct, warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "took no step" warning
+        assert ct.stop_reason is None
+        ct.run()
+        assert ct.stop_reason == "autonomous_episodes" and ct.n_steps >= n + 30
+
+
+def test_a_session_that_met_its_streak_in_the_last_of_several_run_calls_is_done(tmp_path):
+    """The other side: a session whose last run() of several stopped on its streak is done,
+    for describe() and a resume, as one taught in a single run() is."""
+    run_dir = tmp_path / "s"
+    ct = _chunked_session(run_dir, {"max_steps": 100}, {"max_steps": 150}, {})
+    assert ct.stop_reason == "autonomous_episodes"
+    assert [r["first_step"] for r in _runs(run_dir)] == [0, 100, 150]
+    assert describe(run_dir).streak_met == "autonomous_episodes"
+    with _resumed(run_dir) as back:
+        assert back.stop_reason == "autonomous_episodes"
+
+
+def test_a_session_without_runs_jsonl_is_counted_over_its_last_writers_steps(tmp_path):
+    """A session of a torchcbl before runs.jsonl is read as before: its streak counted over
+    the steps of its last writer (which cannot tell that writer's run() calls apart)."""
+    run_dir = tmp_path / "s"  # the session of the test above, of the same two run() calls
+    _chunked_session(run_dir, {"max_steps": _STREAK_AT - 10}, {"max_steps": _STREAK_AT})
+    (run_dir / "runs.jsonl").unlink()
+    assert describe(run_dir).streak_met == "autonomous_episodes"
+    with _resumed(run_dir) as back:
+        assert back.stop_reason == "autonomous_episodes"
+
+
+class _ResetFails(gym.Wrapper):
+    def reset(self, **kw):
+        raise OSError("simulator connection lost")
+
+
+def test_a_run_record_past_the_logs_end_is_passed_over(tmp_path):
+    """A run() records where it begins before its first step: one that took no step (its
+    first step failed with nothing logged, or the process was killed in between) leaves a
+    record past the log's end, which is passed over: the session is read as it was, done
+    here. A line torn by a kill (no newline) is passed over too, without a note, and the next
+    run()'s record starts on a line of its own."""
+    run_dir = tmp_path / "s"
+    n = _streak_session(run_dir)
+    assert n == _STREAK_AT  # (the premise of the tests above)
+    world = rare_regions_world(episode_length=10)
+    with ConfidentTeacher.resume(run_dir, _ResetFails(world), oracle(world), progress=False) as ct:
+        with pytest.raises(EnvError, match="simulator connection lost"):
+            ct.run(autonomous_episodes_to_stop=4)
+    assert ct.n_steps == n and [r["first_step"] for r in _runs(run_dir)] == [0, n]
+    with (run_dir / "runs.jsonl").open("a") as f:
+        f.write('{"first_step": ')  # torn
+    s = describe(run_dir)
+    assert (s.streak_met, s.n_steps, s.notes) == ("autonomous_episodes", n, ())
+    with _resumed(run_dir) as back:
+        assert back.stop_reason == "autonomous_episodes"
+        back.run(autonomous_episodes_to_stop=4)
+        assert back.n_steps >= n + 40
+    assert [r["first_step"] for r in _runs(run_dir)] == [0, n, n]
+    assert describe(run_dir).streak_met == "autonomous_episodes"  # 4 in a row: 3 met
+    with (run_dir / "runs.jsonl").open("a") as f:
+        f.write("not json\n")  # a whole line that is no record: noted, passed over
+    s = describe(run_dir)
+    assert s.streak_met == "autonomous_episodes"
+    assert s.notes == (f"{run_dir / 'runs.jsonl'}: lines [4] are not a run()'s record",)
 
 
 @pytest.mark.parametrize(

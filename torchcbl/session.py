@@ -40,6 +40,15 @@ Run directory layout (one directory per teaching session)::
                                  env runs on (``env_versions``, the env's
                                  ``describe_versions()``, e.g. ``{"sumo": "1.28.0"}``; None
                                  for an env without it)
+        runs.jsonl               one line per ``ConfidentTeacher.run()`` call that went as
+                                 far as its first step, written before that step: the step
+                                 it began at (``first_step``), the stop settings in force
+                                 for it (``stops``: the config's with run()'s overrides,
+                                 which config.json does not keep) and its start time (UTC).
+                                 A resume and :func:`describe` count the streak the log
+                                 ends on from the last one inside the log (absent in
+                                 sessions written before 2026-11-28: from their last
+                                 writer's first step)
         checkpoints/
             model-00000012.pt    ``{"n_demonstrations": 12, "labels_sha256": ...,
                                  "state_dict": ...}`` of the model fitted on the first 12
@@ -263,6 +272,7 @@ LOG_NAME = "steps.sqlite"
 JOURNAL_NAME = "steps.journal"
 LOCK_NAME = "writer.lock"
 WRITERS_NAME = "writers.jsonl"
+RUNS_NAME = "runs.jsonl"
 CHECKPOINT_DIR = "checkpoints"
 _CKPT_RE = re.compile(r"^model-(\d{8})\.pt$")
 
@@ -1390,13 +1400,13 @@ def _remove_new_session_files(path: Path) -> None:
     step, which resumes) or only what a new session may start beside
     (:func:`_check_new_session_dir`). First, where ``config.json`` is not there (the start
     failed writing it), ``config.json.tmp`` is made again (:func:`_mark_unstarted`); then the
-    writers file and the journal are removed, then the step log (the session then reads as
-    one whose creation was killed before its log: it resumes as a session of no step, see
-    :func:`_unborn`); then ``config.json`` is renamed to ``config.json.tmp``, after which the
-    folder holds no session (its prior demonstrations and starting model, left beside that
-    ``.tmp``, are what a start killed before its config.json was in place leaves, and a new
-    start removes them); last those and the ``.tmp``. Deleting
-    ``config.json`` first left a step log with no config, which refused the next start as a
+    runs file, the writers file and the journal are removed, then the step log (the session
+    then reads as one whose creation was killed before its log: it resumes as a session of no
+    step, see :func:`_unborn`); then ``config.json`` is renamed to ``config.json.tmp``, after
+    which the folder holds no session (its prior demonstrations and starting model, left
+    beside that ``.tmp``, are what a start killed before its config.json was in place leaves,
+    and a new start removes them); last those and the ``.tmp``. Deleting ``config.json``
+    first left a step log with no config, which refused the next start as a
     session whose config was deleted."""
     if not (path / CONFIG_NAME).exists():
         # a start that failed before its config.json was in place (so no log), whose failed
@@ -1408,6 +1418,7 @@ def _remove_new_session_files(path: Path) -> None:
         except OSError:
             pass
     for name in (
+        RUNS_NAME,
         WRITERS_NAME,
         JOURNAL_NAME,
         LOG_NAME + "-wal",  # before the log: a -wal beside no log would apply to a new one
@@ -1611,8 +1622,9 @@ def _check_new_session_dir(
             f"{CONFIG_NAME} and needs a folder of its own, new or empty: choose another "
             f"{name}. Nothing was written there."
         )
-    # a journal's steps, a writers.jsonl's writers (whose step numbers and thread counts
-    # would read as this session's) and checkpoints belong to another session
+    # a journal's steps, a writers.jsonl's writers and a runs.jsonl's run() calls (whose step
+    # numbers and thread counts would read as this session's) and checkpoints belong to
+    # another session
     leftovers: list[str] = []
     others: list[str] = []
     # a start killed before its config.json was in place (it makes config.json.tmp before its
@@ -1623,7 +1635,7 @@ def _check_new_session_dir(
     starting_model = f"{CHECKPOINT_DIR}/model-{0:08d}.pt"
     for entry in entries:
         try:
-            if entry.name in (JOURNAL_NAME, WRITERS_NAME):
+            if entry.name in (JOURNAL_NAME, WRITERS_NAME, RUNS_NAME):
                 if entry.stat().st_size:
                     leftovers.append(entry.name)
             elif entry.name == PRIOR_NAME and unstarted:
@@ -2175,6 +2187,62 @@ class SessionStore:
                 f.write(line + "\n")
         except OSError as exc:
             raise _write_error(exc, path, "recording the writer", _FREE_SPACE) from exc
+
+    def note_run(self, first_step: int, stops: Mapping[str, Any]) -> None:
+        """Append the ``run()`` call whose first step is ``first_step`` to ``runs.jsonl``,
+        with ``stops``, the stop settings in force for it; called before that step is taken,
+        so a kill in between leaves a record past the log's end (passed over by the readers).
+
+        A line left torn by a kill (no newline at the file's end: never acknowledged, its
+        run() took no step) is cut off first, so that this one starts a line of its own. A
+        write that fails is cut back likewise (nothing of it stays) and raises.
+
+        Raises:
+            SessionWriteError: the line could not be written (e.g. disk full); nothing of
+                the run() is recorded and it takes no step.
+        """
+        line = (
+            json.dumps(
+                {
+                    "first_step": first_step,
+                    "stops": dict(stops),
+                    "started_utc": datetime.datetime.now(datetime.UTC).isoformat(),
+                },
+                sort_keys=True,
+            )
+            + "\n"
+        ).encode()
+        path = self.run_dir / RUNS_NAME
+        what = f"recording the run() from step {first_step}"
+        after = f"That run() took no step. {_FREE_SPACE}"
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o666)
+        except OSError as exc:
+            raise _write_error(exc, path, what, after) from exc
+        size: int | None = None
+        try:
+            size = os.fstat(fd).st_size
+            if size:
+                tail = os.pread(fd, min(size, 4096), max(size - 4096, 0))
+                if not tail.endswith(b"\n"):  # torn by a kill: its run() took no step
+                    cut = tail.rfind(b"\n")
+                    if cut >= 0 or size <= 4096:
+                        size = max(size - 4096, 0) + cut + 1
+                        os.ftruncate(fd, size)
+                    else:  # a line longer than any run() writes: kept, as a bad line
+                        line = b"\n" + line
+            written = os.write(fd, line)
+            if written != len(line):
+                raise OSError(errno.ENOSPC, f"short write ({written} of {len(line)} bytes)")
+        except OSError as exc:
+            try:  # cut a partly written line off
+                if size is not None:
+                    os.ftruncate(fd, size)
+            except OSError:
+                pass
+            raise _write_error(exc, path, what, after) from exc
+        finally:
+            os.close(fd)
 
     # -- writing ----------------------------------------------------------------------------
 
@@ -4065,12 +4133,15 @@ class SessionSummary:
         streak_met: the streak stop of ``stops`` the session had met, as
             ``ConfidentTeacher.stop_reason`` names it (``"autonomous_steps"``,
             ``"autonomous_episodes"``): its log ends on that many autonomous steps, or
-            successful episodes with no request, in a row, counted over its last writer's
-            steps as a resume counts them (the same count: a resume then says it in
-            ``stop_reason`` and takes no step, and ``torchcbl teach --resume`` refuses the
-            session as done). None: none met (stopped short of it, by a budget, a Ctrl-C or a
-            kill, or no streak stop kept); a session without ``writers.jsonl`` (older ones) is
-            counted over its whole log, as resume counts it.
+            successful episodes with no request, in a row, counted over the steps of its last
+            ``run()`` call (where ``runs.jsonl`` says it began) as a resume counts them (the
+            same count: a resume then says it in ``stop_reason`` and takes no step, and
+            ``torchcbl teach --resume`` refuses the session as done). Judged by the stop
+            ``config.json`` keeps, whatever stop that run() was given: a last run() that
+            stopped on a streak of 20 has met a kept stop of 3. None: none met (stopped short
+            of it, by a budget, a Ctrl-C or a kill, or no streak stop kept); a session without
+            ``runs.jsonl`` (older ones) is counted over its last writer's steps, one without
+            ``writers.jsonl`` either over its whole log, as resume counts them.
         writers: one dict per writer (start or resume) from ``writers.jsonl``: first_step,
             torch_num_threads, torch_num_interop_threads, torch_version, numpy_version,
             model_device, keep_checkpoints, env_versions (what the env ran on, as its
@@ -4093,11 +4164,11 @@ class SessionSummary:
             resume takes it on), or ``"running or killed"`` (such files are there and
             ``writer_running`` is None).
         notes: what the readers warned of (steps missing from the log, fewer steps than
-            ``writer.lock`` says were committed), lines of ``writers.jsonl`` that could not
-            be read, and the files named as checkpoints that resume and :func:`load_model`
-            pass over or cannot load (what each is and what resume does with it; one of
-            more labels than the log holds is not noted while a writer runs, which may have
-            saved it since the log was read).
+            ``writer.lock`` says were committed), lines of ``writers.jsonl`` and
+            ``runs.jsonl`` that could not be read, and the files named as checkpoints that
+            resume and :func:`load_model` pass over or cannot load (what each is and what
+            resume does with it; one of more labels than the log holds is not noted while a
+            writer runs, which may have saved it since the log was read).
     """
 
     run_dir: str
@@ -4360,24 +4431,36 @@ def _read_writers(run_dir: Path) -> tuple[list[dict[str, Any]], list[str]]:
     """The writers of ``writers.jsonl`` and notes of what could not be read of it: the file,
     or lines that are not JSON objects (a line torn by a kill mid-append is left out without
     a note)."""
+    return _read_lines(run_dir / WRITERS_NAME, "a writer's record")
+
+
+def _read_runs(run_dir: Path) -> tuple[list[dict[str, Any]], list[str]]:
+    """The run() calls of ``runs.jsonl`` (:meth:`SessionStore.note_run`), and notes of what
+    could not be read of it, as :func:`_read_writers`."""
+    return _read_lines(run_dir / RUNS_NAME, "a run()'s record")
+
+
+def _read_lines(path: Path, what: str) -> tuple[list[dict[str, Any]], list[str]]:
+    """The JSON objects of the lines of ``path`` (none where it is missing), and notes of
+    what could not be read of it: the file, or lines that are not JSON objects (``what``
+    each line should be); a line torn by a kill mid-append is left out without a note."""
     try:
-        data = (run_dir / WRITERS_NAME).read_bytes()
+        data = path.read_bytes()
     except FileNotFoundError:
         return [], []
     except OSError as exc:  # e.g. another user's file this user may not read
-        return [], [f"{run_dir / WRITERS_NAME} cannot be read ({exc.strerror or exc})"]
-    writers, bad = [], []
+        return [], [f"{path} cannot be read ({exc.strerror or exc})"]
+    entries, bad = [], []
     for number, line in enumerate(data.split(b"\n")[:-1], 1):  # after the last \n: torn
         try:
             entry = json.loads(line)
         except (ValueError, UnicodeDecodeError):
             entry = None
         if isinstance(entry, dict):
-            writers.append(entry)
+            entries.append(entry)
         else:
             bad.append(number)
-    notes = [f"{run_dir / WRITERS_NAME}: lines {bad} are not a writer's record"] if bad else []
-    return writers, notes
+    return entries, [f"{path}: lines {bad} are not {what}"] if bad else []
 
 
 def _last_env_versions(run_dir: str | os.PathLike[str]) -> Any:
@@ -4387,22 +4470,36 @@ def _last_env_versions(run_dir: str | os.PathLike[str]) -> Any:
     return writers[-1].get("env_versions") if writers else None
 
 
-def _last_writer_start(run_dir: str | os.PathLike[str], n_steps: int) -> int:
-    """:func:`_run_start` of the session's ``writers.jsonl`` as it is now."""
-    return _run_start(_read_writers(Path(run_dir))[0], n_steps)
+def _last_run_start(run_dir: str | os.PathLike[str], n_steps: int) -> int:
+    """:func:`_run_start` of the session's ``writers.jsonl`` and ``runs.jsonl`` as they
+    are now."""
+    run = Path(run_dir)
+    return _run_start(_read_writers(run)[0], n_steps, _read_runs(run)[0])
 
 
-def _run_start(writers: Iterable[Mapping[str, Any]], n_steps: int) -> int:
-    """The first step of the writer that wrote the last of the session's ``n_steps`` logged
-    steps, as its records of ``writers.jsonl`` (``writers``) say (a writer that wrote no step
-    passed over); 0 where none says (no file, or one of a torchcbl before writers were
-    recorded). A run() ends with its writer, so the steps from here on hold the last run's
-    streaks."""
-    starts = [w.get("first_step") for w in writers]
-    return max(
-        (s for s in starts if type(s) is int and 0 <= s < n_steps),
-        default=0,
-    )
+def _run_start(
+    writers: Iterable[Mapping[str, Any]],
+    n_steps: int,
+    runs: Iterable[Mapping[str, Any]] = (),
+) -> int:
+    """The first step of the run() call that wrote the last of the session's ``n_steps``
+    logged steps: where the last record of ``runs.jsonl`` (``runs``) that is inside the log
+    says it began (a record past the log's end, of a run() that took no step, passed over),
+    or where the writer that wrote that step began (``writers.jsonl``'s records,
+    ``writers``; a writer that wrote no step passed over), whichever is later: a run() ends
+    with its writer. 0 where none says (no such file: a torchcbl before writers, or runs,
+    were recorded; a session without ``runs.jsonl`` is counted from its last writer's first
+    step, which cannot tell that writer's run() calls apart). The steps from here on hold the
+    last run's streaks."""
+
+    def inside(starts: Iterable[Any]) -> list[int]:
+        return [s for s in starts if type(s) is int and 0 <= s < n_steps]
+
+    writer = max(inside(w.get("first_step") for w in writers), default=0)
+    # the last one appended, not the highest: a log cut back (repair_journal) and taught on
+    # has older records of steps numbered again
+    run = (inside(r.get("first_step") for r in runs) or [0])[-1]
+    return max(writer, run)
 
 
 #: The stop criteria of a TeachingConfig (torchcbl.teaching takes them from here): two
@@ -4438,10 +4535,9 @@ def _last_run_streaks(
 ) -> tuple[int, int]:
     """The streaks (autonomous steps, successful autonomous episodes) a session's log ends
     on, counted as run() counts them over its steps from ``start`` on, the first step of its
-    last writer (:func:`_run_start`: a run() ends with its writer; one that raised ends its
-    streaks too), ``corrected`` the steps a correction labels, success judged with
-    ``time_limit_is_success``. The one count resume (its ``stop_reason``) and
-    :func:`describe` (``streak_met``) make."""
+    last run() (:func:`_run_start`; one that raised ends its streaks too), ``corrected`` the
+    steps a correction labels, success judged with ``time_limit_is_success``. The one count
+    resume (its ``stop_reason``) and :func:`describe` (``streak_met``) make."""
     steps = episodes = 0
     episode, labelled = None, False
     for r in records:
@@ -4568,9 +4664,18 @@ _DESCRIBE_READS = 3
 def _writer_traces(run: Path) -> tuple[tuple[int, int] | None, ...]:
     """(size, mtime) of what a writer changes as it runs, read by ``stat`` alone: the log, its
     ``-wal``, the journal, ``writer.lock`` (rewritten by each writer as it starts and as it
-    commits), ``writers.jsonl`` (a line appended by each writer as it starts) and
-    ``checkpoints/`` (a checkpoint saved or pruned)."""
-    names = (LOG_NAME, LOG_NAME + "-wal", JOURNAL_NAME, LOCK_NAME, WRITERS_NAME, CHECKPOINT_DIR)
+    commits), ``writers.jsonl`` (a line appended by each writer as it starts),
+    ``runs.jsonl`` (a line appended as each run() begins) and ``checkpoints/`` (a checkpoint
+    saved or pruned)."""
+    names = (
+        LOG_NAME,
+        LOG_NAME + "-wal",
+        JOURNAL_NAME,
+        LOCK_NAME,
+        WRITERS_NAME,
+        RUNS_NAME,
+        CHECKPOINT_DIR,
+    )
     return tuple(_file_state(run / name) for name in names)
 
 
@@ -4583,6 +4688,8 @@ class _SummaryRead:
     log_notes: list[str]
     writers: list[dict[str, Any]]
     writer_notes: list[str]
+    runs: list[dict[str, Any]]
+    run_notes: list[str]
     checkpoint: int | None
     checkpoint_notes: list[str]
     beyond_notes: list[str]
@@ -4603,6 +4710,7 @@ def _read_for_summary(run: Path, config: dict[str, Any]) -> _SummaryRead:
         records, corrections = _read_log(run)
     log_notes = [" ".join(str(w.message).split()) for w in caught]
     writers, writer_notes = _read_writers(run)
+    runs, run_notes = _read_runs(run)
     correction_records = _corrections_of(records, corrections)
     checkpoint, checkpoint_notes, beyond_notes = _checkpoint_report(
         run, config, records, correction_records, entries
@@ -4622,6 +4730,8 @@ def _read_for_summary(run: Path, config: dict[str, Any]) -> _SummaryRead:
         log_notes=log_notes,
         writers=writers,
         writer_notes=writer_notes,
+        runs=runs,
+        run_notes=run_notes,
         checkpoint=checkpoint,
         checkpoint_notes=checkpoint_notes,
         beyond_notes=beyond_notes,
@@ -4752,7 +4862,7 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
             _last_run_streaks(
                 records,
                 {c.step for c in correction_records},
-                _run_start(writers, len(records)),
+                _run_start(writers, len(records), read.runs),
                 time_limit_is_success=stops["time_limit_is_success"] is True,
             ),
             _stop_value(stops["autonomous_steps_to_stop"]),
@@ -4762,7 +4872,7 @@ def describe(run_dir: str | os.PathLike[str]) -> SessionSummary:
         last_writer=lock_note,
         writer_running=running,
         state=state,
-        notes=tuple(notes + writer_notes + checkpoint_notes),
+        notes=tuple(notes + writer_notes + read.run_notes + checkpoint_notes),
     )
 
 

@@ -95,8 +95,8 @@ from torchcbl.session import (
     _InterruptHold,
     _judged,
     _last_env_versions,
+    _last_run_start,
     _last_run_streaks,
-    _last_writer_start,
     _model_args,
     _names_a_session_format,
     _read_prior,
@@ -963,14 +963,17 @@ class ConfidentTeacher:
         self._unstarted = False
         self._discarded = False  # it was removed (and stays so once closed)
         self._run_config: TeachingConfig | None = None  # the config of the running run()
-        # a resumed session's (first step of its last writer, steps logged): the log's steps
+        # a resumed session's (first step of its last run(), steps logged): the log's steps
         # of the run it was stopped in, whose streaks say whether it had met its stop
         self._resumed_at: tuple[int, int] | None = None
+        # the stop settings of the running run() while it has not yet recorded where it
+        # began (runs.jsonl, before its first step); None once it has, or outside run()
+        self._run_unnoted: dict[str, Any] | None = None
         self._warned_unjudged = False
         #: why the last :meth:`run` returned: "max_demonstrations", "max_steps",
         #: "max_episodes", "autonomous_steps", "autonomous_episodes", or None before any run.
         #: After :meth:`resume`: the stop of its config the session had already met, as its
-        #: log shows (a budget, or a streak its last writer's steps end on), else None.
+        #: log shows (a budget, or a streak its last run()'s steps end on), else None.
         self.stop_reason: str | None = None
         self._obs: np.ndarray | None = None
         self._env_token = object()  # noted on the env at each reset (torchcbl.policy)
@@ -1032,7 +1035,7 @@ class ConfidentTeacher:
         session seed, as the new session was, and so goes on as it would have). Every refusal
         below comes before the session is opened for writing: a refused resume touches no file.
         :attr:`stop_reason` says the stop of ``config`` the session had already met (a budget,
-        or a streak its last writer's steps end on; None: none), where :meth:`run` takes no
+        or a streak its last run()'s steps end on; None: none), where :meth:`run` takes no
         step; the streaks of a session stopped before they held count from zero.
 
         Args:
@@ -1182,7 +1185,7 @@ class ConfidentTeacher:
             _warn_changed_versions(
                 self.run_dir, _last_env_versions(self.run_dir), self._env_versions, len(records)
             )
-            last_run = (_last_writer_start(self.run_dir, len(records)), len(records))
+            last_run = (_last_run_start(self.run_dir, len(records)), len(records))
             self._store.note_writer(
                 len(records), _model_device(self.model), env_versions=self._env_versions
             )
@@ -1453,6 +1456,11 @@ class ConfidentTeacher:
                 f"this ConfidentTeacher was closed, so {self.run_dir} no longer records its "
                 "steps; continue the session with ConfidentTeacher.resume(run_dir, env, teacher)."
             )
+        if self._run_unnoted is not None and self._store is not None:
+            # where this run() begins, before its first step (a resume counts the streak the
+            # log ends on from there): a step of this run() is never logged without it
+            self._store.note_run(len(self.records), self._run_unnoted)
+            self._run_unnoted = None
         if self._new_since_refit >= self.config.max_new:
             # a refit owed since the last step (it raised, or was interrupted): done first, on
             # the labels it was due on, as load_model and a resume rebuild it
@@ -1872,11 +1880,14 @@ class ConfidentTeacher:
         whole session, so ``run(max_steps=ct.n_steps + 500)`` teaches 500 more steps; the
         streaks start from zero in each call. ``stop_reason`` then says which criterion held.
         A resumed session that had met a streak in the run it was stopped in (its log, from
-        its last writer's first step, ends on that many autonomous steps, or successful
-        episodes with no request) is done: its first ``run()`` takes no step, as for a
-        budget reached; a longer streak is one it has not met, and goes on until it holds,
-        counted from zero. A session stopped before its streak held (Ctrl-C, a kill) counts
-        it from zero on resume.
+        the step its last ``run()`` began at, which each call records in ``runs.jsonl`` before
+        its first step, ends on that many autonomous steps, or successful episodes with no
+        request) is done: its first ``run()`` takes no step, as for a budget reached; a longer
+        streak is one it has not met, and goes on until it holds, counted from zero. Met is
+        judged by this call's stop, not the one the last run() was given (a last run() that
+        stopped on 20 in a row has met a stop of 3). A session stopped before its streak held
+        (Ctrl-C, a kill), or taught in several run() calls none of which met it, counts it
+        from zero on resume.
 
         Args:
             **stop_overrides: any of ``autonomous_steps_to_stop``,
@@ -1905,6 +1916,7 @@ class ConfidentTeacher:
         if all(getattr(cfg, name) is None for name in STOP_FIELDS):
             raise ValueError("run(): " + _NO_STOP.format(fields=STOP_FIELDS))
         self._run_config = cfg
+        self._run_unnoted = {name: getattr(cfg, name) for name in _STOP_SETTINGS}
         self._auto_steps_streak = 0
         self._auto_episodes_streak = 0
         self.stop_reason = None
@@ -1952,7 +1964,7 @@ class ConfidentTeacher:
             elif self.n_steps == first_step and self.stop_reason in _STREAK_COUNTS:
                 self._warn_streak_met(cfg)
         finally:
-            self._run_config = None
+            self._run_config = self._run_unnoted = None
             if self.progress:
                 bar.set_postfix_str(self._postfix())
             bar.close()
@@ -1971,9 +1983,10 @@ class ConfidentTeacher:
 
     def _last_run_streaks(self, cfg: TeachingConfig) -> tuple[int, int]:
         """The streaks (autonomous steps, successful autonomous episodes) a resumed session's
-        log ends on, counted as run() counts them over the steps of its last writer (a run()
-        ends with its writer; one that raised ends its streaks too), success judged as ``cfg``
-        says."""
+        log ends on, counted as run() counts them over the steps of its last run() (where
+        ``runs.jsonl`` says it began; in an older session, its last writer's first step: a
+        run() ends with its writer; one that raised ends its streaks too), success judged as
+        ``cfg`` says."""
         assert self._resumed_at is not None
         start, end = self._resumed_at
         return _last_run_streaks(
