@@ -1654,6 +1654,54 @@ def test_teach_resume_of_a_session_that_met_its_streak_says_it_is_done(
     assert len(load_records(run)) == n
 
 
+def _done_corridor_session(run: Path, monkeypatch) -> None:
+    """A corridor session taught by the scripted person until it met its streak (3 steps the
+    agent drove on its own, with a window of 3): done, ``describe(run).streak_met`` set."""
+    from torchcbl import cli, describe
+
+    _scripted_corridor_person(monkeypatch, max_demonstrations=None)
+    package, env_id, human, settings, model = cli._TEACH["corridor"]
+    streak = {**settings, "accuracy_window": 3, "autonomous_steps_to_stop": 3}
+    monkeypatch.setitem(cli._TEACH, "corridor", (package, env_id, human, streak, model))
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "200"]) == 0
+    assert describe(run).streak_met == "autonomous_steps"
+
+
+def test_teach_resume_of_a_done_session_in_the_other_domain_says_it_is_done(
+    tmp_path, monkeypatch, capsys
+):
+    """`teach driving --resume` of a done corridor session said "resume it with torchcbl teach
+    corridor --resume --run-dir ...", a command refused next as done. Where the session is
+    done the domain mistake says so and gives the done refusal's ways on (evaluate it, or
+    teach on from its demonstrations), each of which runs as printed; no file changes."""
+    import shlex
+
+    from torchcbl import describe
+
+    run = tmp_path / "my runs" / "c1"
+    run.parent.mkdir()
+    _done_corridor_session(run, monkeypatch)
+    capsys.readouterr()
+    before = _bytes_of(run)
+    assert main(["teach", "driving", "--resume", "--run-dir", str(run)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured
+    err = captured.err
+    assert "is a corridor session" in err and "not a driving one" in err, err
+    assert "is done: the agent drove its last 3 steps on its own" in err, err
+    assert "--resume --run-dir" not in err, err
+    assert _bytes_of(run) == before
+    evaluate = shlex.split(re.search(r"\(torchcbl (evaluate [^)]*)\)", err)[1])
+    assert main([*evaluate, "--steps", "5"]) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    teach = shlex.split(re.search(r"\(torchcbl (teach [^)]*)\)", err)[1])
+    assert teach[:2] == ["teach", "corridor"] and "--prior-demonstrations" in teach, teach
+    new = tmp_path / "new"
+    teach[teach.index("NEW_DIR")] = str(new)
+    assert main([*teach, "--steps", "3"]) == 0, capsys.readouterr().err
+    assert describe(new).n_prior == describe(run).n_labels
+
+
 def _bytes_of(run: Path) -> dict[str, tuple[bytes | None, int]]:
     """{relative path: (its bytes, None for a folder; its mtime in ns)} of ``run`` and
     everything under it (a file written again with the same bytes, or one made and removed

@@ -534,8 +534,12 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
             f"gymnasium.make({env.get('id')!r}, ...), teacher)"
         )
     if asked is not None and asked != domain:
+        mistake = f"{session} is a {domain} session ({described}), not a {asked} one"
+        done = _done_text(session, domain) if teach else None
+        if done is not None:  # resuming it in its own domain is refused too: say what is left
+            raise _UsageError(f"{mistake}, and it is done: {done}")
         raise _UsageError(
-            f"{session} is a {domain} session ({described}), not a {asked} one; "
+            f"{mistake}; "
             + (
                 f"resume it with torchcbl teach {domain} --resume --run-dir {_shell(session)}"
                 if teach
@@ -1373,6 +1377,16 @@ def _refuse_a_done_session(run_dir: Path, domain: str) -> None:
     budgets are not asked: ``--resume`` lifts them (it asks for more); a streak cannot be
     lifted, or it would never end. A session that cannot be read, or that a writer holds, is
     left to the resume to say so."""
+    done = _done_text(run_dir, domain)
+    if done is not None:
+        raise _UsageError(f"--resume: the session in {run_dir} is done: {done}")
+
+
+def _done_text(run_dir: Path, domain: str) -> str | None:
+    """Where the session in ``run_dir`` (of ``domain``) is done (see
+    :func:`_refuse_a_done_session`): the streak it met, and the commands that go on from it
+    (evaluate it, or teach on from its demonstrations in a new session); None where it is not
+    done, cannot be read, or a writer holds it."""
     from torchcbl.session import (
         _STREAK_DONE,
         CorruptSessionError,
@@ -1385,14 +1399,13 @@ def _refuse_a_done_session(run_dir: Path, domain: str) -> None:
             warnings.simplefilter("ignore")
             summary = describe(run_dir)
     except (IncompatibleRunDirError, CorruptSessionError, OSError):
-        return  # the resume says what is wrong with it, as it always did
+        return None  # the resume says what is wrong with it, as it always did
     if summary.streak_met is None or summary.writer_running is True:
-        return
+        return None
     field, says = _STREAK_DONE[summary.streak_met]
     stop = summary.stops[field]
-    raise _UsageError(
-        f"--resume: the session in {run_dir} is done: {says.format(stop)} "
-        f"({field}={stop}), so there is nothing to resume; evaluate it "
+    return (
+        f"{says.format(stop)} ({field}={stop}), so there is nothing to resume; evaluate it "
         f"(torchcbl evaluate {_shell(run_dir)}), or teach on from its demonstrations "
         f"in a new session (torchcbl teach {domain} --run-dir NEW_DIR "
         f"--prior-demonstrations {_shell(run_dir)})"
