@@ -1854,6 +1854,31 @@ def test_a_resumed_session_says_where_it_stands_before_the_agent_drives(
     assert "new episode" in first and "2 more steps" in first
 
 
+@pytest.mark.parametrize("skip", [False, True], ids=["noninteractive", "confident"])
+def test_a_resumed_session_says_what_the_agent_does_in_its_phase(
+    tmp_path, monkeypatch, capsys, skip
+):
+    """teach --resume said "phase noninteractive ...: the agent acts on its own where it is
+    sure and asks you where it is not", while in that phase it asks at every step. It says
+    what the phase it names does: asking at every step until the accuracy window (20 of the
+    corridor's) reaches its target (90%), or, in confident execution, acting where sure."""
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    start = ["teach", "corridor", "--run-dir", str(run), "--steps", "3"]
+    assert main([*start, *(["--skip-noninteractive"] if skip else [])]) == 0
+    capsys.readouterr()
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "2"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    if skip:
+        assert "phase confident" in first, first
+        assert "the agent acts on its own where it is sure and asks you where it is not" in first
+        assert "every step" not in first, first
+    else:
+        assert "phase noninteractive" in first, first
+        assert "episode: the agent asks you at every step until its prediction accuracy" in first
+        assert "your last 20 demonstrations reaches 90%, then acts on its own" in first, first
+
+
 @pytest.mark.parametrize(
     ("typed", "said"),
     [("w\nw\n", "Stopped: the input ended"), ("w\nq\n", "Stopped by the teacher.")],

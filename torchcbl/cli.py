@@ -1317,8 +1317,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     if args.resume:  # before the agent drives: it may go on alone for all of --steps
         print(
             f"Resuming the session in {run_dir} at step {ct.n_steps} ({ct.n_demonstrations} "
-            f"demonstrations, phase {ct.phase}), in a new episode: the agent acts on its own "
-            f"where it is sure and asks you where it is not; {args.steps} more steps at most.",
+            f"demonstrations, phase {ct.phase}), in a new episode: {_phase_text(ct)}; "
+            f"{args.steps} more steps at most.",
             flush=True,
         )
     go_on = f"continue with: torchcbl teach {args.domain} --run-dir {_shell(run_dir)} --resume"
@@ -1353,6 +1353,25 @@ def _cmd_teach(args: argparse.Namespace) -> int:
         go_on = f"evaluate it with: torchcbl evaluate {_shell(run_dir)}"
     print(f"{_saved(ct)} saved in {run_dir}" + (f" ({why})" if why else "") + f"; {go_on}")
     return 0
+
+
+def _phase_text(ct: Any) -> str:
+    """What the agent of ``ct`` (a ConfidentTeacher) does in the phase it is in: in the
+    non-interactive phase it asks at every step until its accuracy window reaches the
+    target, in confident execution it acts on its own where it is sure."""
+    confident = "acts on its own where it is sure and asks you where it is not"
+    if ct.phase != "noninteractive":
+        return f"the agent {confident}"
+    target = ct.config.target_accuracy
+    if target is None:  # (a session of Python's: teach always sets one)
+        return (
+            "the agent asks you at every step (this session's non-interactive phase has no "
+            "accuracy target, so it does not end)"
+        )
+    return (
+        "the agent asks you at every step until its prediction accuracy over your last "
+        f"{ct.config.accuracy_window} demonstrations reaches {100 * target:g}%, then {confident}"
+    )
 
 
 def _saved(ct: Any) -> str:
