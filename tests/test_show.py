@@ -1143,6 +1143,18 @@ def test_show_says_a_session_that_met_its_streak_is_done_as_resume_counts_it(tmp
         assert f"\nstops:      {kept}\n" in out, out
     # the resumes above (a writer each, none of which took a step) leave it done
     assert describe(tmp_path / "episodes").streak_met == "autonomous_episodes"
+    # a folder's listing tells the done sessions from the others (it listed them alike)
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()[1:]
+    by_run = {ln.split(": ", 1)[0]: ln for ln in lines}
+    assert set(by_run) == {str(run) for run, _, _ in runs.values()}, lines
+    for want, (run, config, _) in runs.items():
+        line = by_run[str(run)]
+        if want in ("autonomous_episodes", "autonomous_steps"):
+            field = f"{want}_to_stop"
+            assert line.endswith(f"; done: {field}={getattr(config, field)} met"), line
+        else:
+            assert "done" not in line, line
 
 
 def test_show_of_a_format1_session_with_no_writers_says_its_streak(tmp_path):

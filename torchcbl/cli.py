@@ -2058,9 +2058,10 @@ def _parser() -> argparse.ArgumentParser:
         "(torch and numpy "
         "versions, threads, device) and whether a writer holds it now or was killed. Given a "
         "folder that holds sessions (a reproduction's run directory, a benchmark's OUT/sessions), "
-        "one line per session, and the folders below it this user may not list (whose "
-        "sessions are not counted). A path that holds no session, or a session that cannot "
-        "be read: errors go to stderr as one line (exit 2), also with --json.",
+        'one line per session (a done one ending "; done: ..."), and the folders below it this '
+        "user may not list (whose sessions are not counted). A path that holds no session, or "
+        "a session that cannot be read: errors go to stderr as one line (exit 2), also with "
+        "--json.",
     )
     p.add_argument(
         "run_dir",

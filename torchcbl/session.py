@@ -4235,13 +4235,18 @@ class SessionSummary:
         return "\n".join(lines)
 
     def line(self) -> str:
-        """The summary in one line (a folder's listing)."""
+        """The summary in one line (a folder's listing); a session that met its streak stop
+        (:attr:`streak_met`) ends with "; done: FIELD=N met"."""
         kind = str(self.strategy.get("type", "?"))
         episodes = f"{self.n_episodes} episode{'' if self.n_episodes == 1 else 's'}"
+        done = ""
+        if self.streak_met is not None:
+            field = _STREAK_DONE[self.streak_met][0]
+            done = f"; done: {field}={self.stops[field]} met"
         return (
             f"{self.run_dir}: {self.state}, {self._env_name()}, {kind}, "
             f"seed {self.seed}, {self.n_steps} steps, {episodes}, {self.n_labels} labels "
-            f"({self.n_requests} requests, {self.n_corrections} corrections)"
+            f"({self.n_requests} requests, {self.n_corrections} corrections){done}"
         )
 
     def _env_name(self) -> str:
