@@ -1702,6 +1702,50 @@ def test_teach_resume_of_a_done_session_in_the_other_domain_says_it_is_done(
     assert describe(new).n_prior == describe(run).n_labels
 
 
+@pytest.mark.parametrize("what", ["missing", "empty"])
+def test_show_and_teach_resume_of_no_session_say_how_to_start_one_at_the_command_line(
+    tmp_path, monkeypatch, capsys, what
+):
+    """`torchcbl show` of a path that does not exist said to "start a session there with
+    ConfidentTeacher(..., run_dir=...)", a Python call, and `teach --resume` of a path holding
+    no session said only what it expected. Each says the command line's way now, in one line
+    (exit 2): show names `torchcbl teach corridor --run-dir PATH`, teach --resume says to
+    leave --resume out; the commands run as printed and start a session there."""
+    import shlex
+
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "my runs" / "it's"
+    if what == "empty":
+        run.mkdir(parents=True)
+
+    def one_line(argv: list[str]) -> str:
+        assert main(argv) == 2
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.count("\n") == 1, captured
+        assert "ConfidentTeacher" not in captured.err, captured.err
+        return captured.err
+
+    said = one_line(["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"])
+    assert "so there is no session to resume" in said, said
+    told = said.rsplit("leave out --resume to start a new session there: ", 1)[1].strip()
+    assert shlex.split(told) == ["torchcbl", "teach", "corridor", "--run-dir", str(run)], told
+    if what == "missing":
+        assert f"(relative paths are taken from the working directory, {os.getcwd()})" in said
+        said = one_line(["show", str(run)])
+        assert f"{run} does not exist" in said and os.getcwd() in said, said
+        told = said.rsplit("or start a session there: ", 1)[1]
+        command, other = told.rsplit(" (or ", 1)
+        assert other.strip() == "teach driving)", told
+        assert shlex.split(command) == ["torchcbl", "teach", "corridor", "--run-dir", str(run)]
+        # a '~' the shell did not expand: no session is offered in a folder named '~'
+        for argv in (["show", "~/nowhere"], ["teach", "corridor", "--resume", "--run-dir", "~/n"]):
+            said = one_line(argv)
+            assert "a '~' in quotes is not expanded" in said and "teach corridor --" not in said
+    assert not run.exists() or not any(run.iterdir())  # nothing written
+    assert main([*shlex.split(told.split(" (or ")[0])[1:], "--steps", "3"]) == 0
+    assert len(load_records(run)) == 3
+
+
 def _bytes_of(run: Path) -> dict[str, tuple[bytes | None, int]]:
     """{relative path: (its bytes, None for a folder; its mtime in ns)} of ``run`` and
     everything under it (a file written again with the same bytes, or one made and removed

@@ -483,6 +483,12 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
     from torchcbl.session import IncompatibleRunDirError, _sessions_below, load_config
 
     if not session.exists():
+        if teach and asked is not None:  # a typo, or a session not started yet
+            raise _UsageError(
+                f"--resume: {session} does not exist {_cwd_said(session)}, so there is no "
+                "session to resume; check the path"
+                + ("" if "~" in str(session) else f", or {_start_without_resume(session, asked)}")
+            )
         raise _UsageError(f"{session} does not exist; {_SESSION_HINT}")
     if not session.is_dir():
         raise _UsageError(f"{session} is a file; {_SESSION_HINT}")
@@ -493,6 +499,11 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
             raise _UsageError(
                 f"{session} is not a teaching session but holds sessions: {shown}"
                 f"{' ...' if len(below) == 5 else ''}; pass one of them"
+            )
+        if teach and asked is not None and _new_session_may_start(session):
+            raise _UsageError(
+                f"--resume: {session} holds no config.json, so there is no session to resume; "
+                f"{_start_without_resume(session, asked)}"
             )
         raise _UsageError(f"{session} holds no config.json; {_SESSION_HINT}")
     try:
@@ -562,6 +573,35 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
             )
         )
     return domain
+
+
+def _cwd_said(path: Path) -> str:
+    """Where a path that does not exist was looked for: "(relative paths are taken from the
+    working directory, CWD)", and that a '~' the shell was not let expand stays a '~'."""
+    tilde = "; a '~' in quotes is not expanded: leave it unquoted" if "~" in str(path) else ""
+    return f"(relative paths are taken from the working directory, {os.getcwd()}{tilde})"
+
+
+def _start_without_resume(run_dir: Path, domain: str) -> str:
+    """How ``teach --resume`` of a folder holding no session starts one there instead."""
+    return (
+        "leave out --resume to start a new session there: "
+        f"torchcbl teach {domain} --run-dir {_shell(run_dir)}"
+    )
+
+
+def _new_session_may_start(run_dir: Path) -> bool:
+    """Whether ``teach`` (without --resume) would start a new session in ``run_dir`` (the
+    store's rule: missing, empty, or holding only what torchcbl leaves where no session
+    started), read-only."""
+    from torchcbl.errors import IncompatibleRunDirError
+    from torchcbl.session import _check_new_session_dir
+
+    try:
+        _check_new_session_dir(run_dir)
+    except IncompatibleRunDirError:
+        return False
+    return True
 
 
 def _session_map_exists(session: Path, domain: str) -> None:
@@ -672,6 +712,20 @@ def _cmd_show(args: argparse.Namespace) -> int:
         else:
             print("\n".join(lines + unseen))
         return 0
+    try:
+        os.stat(path)
+    except FileNotFoundError:  # (describe's words for it name the Python call)
+        raise _UsageError(
+            f"{path} does not exist; {_SESSION_HINT}. Check the path {_cwd_said(path)}"
+            + (
+                ""
+                if "~" in str(path)
+                else f", or start a session there: torchcbl teach corridor --run-dir "
+                f"{_shell(path)} (or teach driving)"
+            )
+        ) from None
+    except OSError:
+        pass  # (a permission, a loop of links: describe says it)
     try:
         summary = describe(path)
     except IncompatibleRunDirError as exc:  # not a session, or one this user may not read
