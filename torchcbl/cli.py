@@ -656,7 +656,20 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     for w in said:  # e.g. a corridor session that does not say which robot it was taught on
-        print(f"torchcbl evaluate: warning: {_one_line(w.message)}", file=sys.stderr)
+        text = _one_line(w.message)
+        held = getattr(module, "NotHeldOutWarning", None)  # (driving's; said the CLI's way)
+        if held is not None and isinstance(w.message, held):
+            text = (
+                f"{_one_line(w.message.road)}; for held-out ones give another segment (--seed S) "
+                "or base seed (--scenario NAME|FILE.json)"
+                + (
+                    ""
+                    if args.scenario is None
+                    else ", or leave --scenario out: evaluate then drives the held-out twin of "
+                    "the session's traffic"
+                )
+            )
+        print(f"torchcbl evaluate: warning: {text}", file=sys.stderr)
     print(json.dumps(report, indent=2))
     return 0
 
