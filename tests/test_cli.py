@@ -38,6 +38,67 @@ def test_every_command_explains_itself(command, capsys):
     assert len(out.splitlines()) > 4
 
 
+def _help_of(command: str, capsys) -> str:
+    """``torchcbl COMMAND --help`` as one line (argparse wraps it at the terminal's width)."""
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_teach_help_says_what_the_status_line_counts(capsys):
+    """teach's status line ("prediction accuracy 85% | autonomy 40%") was explained nowhere a
+    command-line user looks: over what window the accuracy is taken, the target that ends
+    the non-interactive phase, what autonomy measures. teach --help says it, each domain's
+    window and target as teach sets them, and so does README."""
+    from torchcbl import cli
+
+    said = _help_of("teach", capsys)
+    readme = " ".join((Path(__file__).parents[1] / "README.md").read_text().split())
+    for text in (said, readme):
+        assert "prediction accuracy (the share of your last W demonstrations" in text, text
+        assert "autonomy (the share of the last W confident-phase steps" in text, text
+        for domain, (*_, settings, _) in cli._TEACH.items():
+            window, target = settings["accuracy_window"], 100 * settings["target_accuracy"]
+            assert f"{domain} W = {window} and {target:g}%" in text, (domain, text)
+
+
+def test_every_field_evaluate_prints_is_defined_in_its_help_and_the_readme(
+    tmp_path, monkeypatch, capsys
+):
+    """evaluate's JSON (corridor: circuits_completed, circuits_clean, wall_contacts; driving:
+    collision_pct, lanes) was defined neither in evaluate --help nor in README: whether a
+    clean circuit is a success, whether wall_contacts counts steps or touches, whether
+    collision_pct is a percent or a share. Each field of both reports is defined in both."""
+    import sumo_scenarios.human
+
+    class Person:
+        def __call__(self, observation, info):
+            return 0
+
+        def set_status(self, text):
+            pass
+
+    _scripted_corridor_person(monkeypatch)
+    monkeypatch.setattr(sumo_scenarios.human, "make_teacher", lambda **kw: Person())
+    keys = set()
+    for domain in ("corridor", "driving"):
+        run = tmp_path / domain
+        assert main(["teach", domain, "--run-dir", str(run), "--steps", "10"]) == 0
+        capsys.readouterr()
+        assert main(["evaluate", str(run), "--steps", "5"]) == 0, capsys.readouterr().err
+        keys |= set(json.loads(capsys.readouterr().out))
+    said = _help_of("evaluate", capsys)
+    readme = " ".join((Path(__file__).parents[1] / "README.md").read_text().split())
+    for key in sorted(keys):
+        assert f"{key} (" in said, (key, said)
+        assert f"`{key}` (" in readme, key
+    for text in (said.replace("`", ""), readme.replace("`", "")):
+        assert "circuits_clean (those of them without a wall contact: each a success)" in text
+        assert "wall_contacts (the steps on which the robot touched a wall" in text, text
+        assert "collision_pct (the percentage, 0 to 100, of timesteps" in text, text
+        assert "lanes (the fraction, 0 to 1, of timesteps in each lane" in text, text
+
+
 def test_version_names_torchcbl_and_torch(capsys):
     """`torchcbl --version` (and `python -m torchcbl --version`) prints the package's version
     with torch's and Python's, exit 0; it said "error: the following arguments are required:

@@ -1005,6 +1005,50 @@ _TEACH = {
 }
 
 
+def _teach_epilog() -> str:
+    """teach --help's epilog: what the status line shown at each request counts, each
+    domain's accuracy window and target, and when a domain's teaching ends (from
+    :data:`_TEACH`'s settings)."""
+    windows = "; ".join(
+        f"{domain} W = {s['accuracy_window']} and {100 * s['target_accuracy']:g}%"
+        for domain, (*_, s, _) in _TEACH.items()
+    )
+    corridor, driving = _TEACH["corridor"][3], _TEACH["driving"][3]
+    return (
+        "At each request a status line says where the session stands: decision #N (the "
+        "requests you have answered), step (the steps taken), phase (noninteractive: the agent "
+        "asks you at every step; confident: it acts on its own where it is sure and asks you "
+        "where it is not), demonstrations (the keys you gave), prediction accuracy (the share "
+        "of your last W demonstrations on which the agent's own choice, made before it learned "
+        "from them, was your key; the non-interactive phase ends once W demonstrations are in "
+        "that window and it reaches the target) and autonomy (the share of the last W "
+        "confident-phase steps the agent took on its own, without asking; - before the "
+        f"confident phase). The window and the target: {windows}. Teaching ends after --steps, "
+        f"and in the corridor, done, once the agent drove "
+        f"{corridor['autonomous_episodes_to_stop']} circuits in a row on its own, each without "
+        f"a wall contact; in driving at {driving['max_demonstrations']} demonstrations "
+        "(--resume goes past it)."
+    )
+
+
+_EVALUATE_EPILOG = (
+    "The report's fields. Corridor: map (the map driven: a shipped map's name or a map file's "
+    "path), map_sha256 (its digest, which tells maps of one name apart), world (the robot's "
+    "settings, WorldConfig's fields), steps (the actions run; an episode ends at the end of a "
+    "circuit or at the env's step cap, and another begins), circuits_completed (the circuits "
+    "the robot completed: back at its start, along the route), circuits_clean (those of them "
+    "without a wall contact: each a success), wall_contacts (the steps on which the robot "
+    "touched a wall, over every episode: a step counts once). Driving: steps (the timesteps "
+    "driven), eval_segment (the road segment driven, --seed), collision_pct (the percentage, "
+    "0 to 100, of timesteps on which the car overlapped another car), lanes (the fraction, "
+    "0 to 1, of timesteps in each lane, summing to 1, in the order of lane_names), lane_names "
+    "(the lanes' names, right shoulder first), scenario (the traffic driven, its "
+    "TrafficScenario fields), held_out (false where that is road the session was taught on), "
+    "start_lane (the lane it started in, 0 the right shoulder), sim (the SUMO settings, "
+    "SimConfig's fields)."
+)
+
+
 #: per domain, the "module:function" making again from a session's config what gymnasium.make
 #: was given for its env, objects too: (kwargs, {argument: why it cannot be made}), as the
 #: domain's evaluate and replay make them
@@ -1994,6 +2038,7 @@ def _parser() -> argparse.ArgumentParser:
         "the reproduction evaluates; light's light-held-out), whose road segments no episode "
         "of the taught traffic drives. --scenario or --seed that drive road the session was "
         "taught on are driven, with a one-line warning that the figures are not held out.",
+        epilog=_EVALUATE_EPILOG,
     )
     p.add_argument(
         "run_dir",
@@ -2155,6 +2200,7 @@ def _parser() -> argparse.ArgumentParser:
         "q stops the session at a request or, on a terminal, while the agent drives on its "
         "own (after the step under way); Ctrl-C stops it at once; "
         "--resume goes on from where it stopped.",
+        epilog=_teach_epilog(),
     )
     p.add_argument("domain", choices=list(_DOMAINS), help="which agent: corridor or driving")
     p.add_argument(
