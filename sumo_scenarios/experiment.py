@@ -95,6 +95,7 @@ __all__ = [
     "PAPER",
     "STAGE_NAMES",
     "DrivingExperimentConfig",
+    "NotHeldOutWarning",
     "evaluate_saved_policy",
     "format_summary",
     "make_model",
@@ -1272,6 +1273,18 @@ def session_eval_segment(session_dir: str | Path) -> int | None:
     return segment if whole and segment >= 0 else None
 
 
+class NotHeldOutWarning(UserWarning):
+    """:func:`evaluate_saved_policy` drove road the session was taught on (its report says
+    ``"held_out": false``). ``road``: which road and why it is taught road, the message's first
+    clause, so that a caller (``torchcbl evaluate``) can say its own way to held-out road."""
+
+    def __init__(self, road: str, advice: str) -> None:
+        """``road``: which road was driven and why it is not held out; ``advice``: how to
+        drive held-out road instead."""
+        super().__init__(f"{road}; {advice}")
+        self.road = road
+
+
 def _taught_on(
     session_dir: str | Path,
     kept: Mapping[str, Any],
@@ -1356,8 +1369,8 @@ def evaluate_saved_policy(
     whatever the session kept, as is ``seed``; where that is road the session was taught on
     (its base seed, as the session describes it, and a segment one of its logged episodes
     drove, whatever the other fields: they only turn the same random draws into other metres
-    and speeds) it is driven all the same, with a UserWarning saying the figures are not held
-    out.
+    and speeds) it is driven all the same, with a :class:`NotHeldOutWarning` (a UserWarning)
+    saying the figures are not held out.
 
     Returns the collision rate (share of timesteps in contact, %), the lane shares (``lanes``,
     index 0 = right shoulder ... 4 = left shoulder, named in that order by ``lane_names``:
@@ -1446,11 +1459,17 @@ def evaluate_saved_policy(
     taught_on = _taught_on(session_dir, kept, taught.get("scenario", "train"), traffic, seed)
     if taught_on is not None:
         warnings.warn(
-            f"segment {seed} of the traffic {traffic.name!r} is road {session_dir} was taught on "
-            f"({taught_on}), so these figures are not held out; for held-out ones give another "
-            "segment or base seed, or leave the traffic out: evaluate then drives its held-out "
-            "twin (sumo_scenarios.scenarios.held_out_twin)",
-            UserWarning,
+            NotHeldOutWarning(
+                f"segment {seed} of the traffic {traffic.name!r} is road {session_dir} was "
+                f"taught on ({taught_on}), so these figures are not held out",
+                "for held-out ones pass another segment (seed=) or base seed (scenario=)"
+                + (
+                    ""
+                    if scenario is None
+                    else ", or leave scenario out: evaluate_saved_policy then drives its "
+                    "held-out twin (sumo_scenarios.scenarios.held_out_twin)"
+                ),
+            ),
             stacklevel=2,
         )
     policy = load_policy(session_dir)

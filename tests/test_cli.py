@@ -38,6 +38,67 @@ def test_every_command_explains_itself(command, capsys):
     assert len(out.splitlines()) > 4
 
 
+def _help_of(command: str, capsys) -> str:
+    """``torchcbl COMMAND --help`` as one line (argparse wraps it at the terminal's width)."""
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_teach_help_says_what_the_status_line_counts(capsys):
+    """teach's status line ("prediction accuracy 85% | autonomy 40%") was explained nowhere a
+    command-line user looks: over what window the accuracy is taken, the target that ends
+    the non-interactive phase, what autonomy measures. teach --help says it, each domain's
+    window and target as teach sets them, and so does README."""
+    from torchcbl import cli
+
+    said = _help_of("teach", capsys)
+    readme = " ".join((Path(__file__).parents[1] / "README.md").read_text().split())
+    for text in (said, readme):
+        assert "prediction accuracy (the share of your last W demonstrations" in text, text
+        assert "autonomy (the share of the last W confident-phase steps" in text, text
+        for domain, (*_, settings, _) in cli._TEACH.items():
+            window, target = settings["accuracy_window"], 100 * settings["target_accuracy"]
+            assert f"{domain} W = {window} and {target:g}%" in text, (domain, text)
+
+
+def test_every_field_evaluate_prints_is_defined_in_its_help_and_the_readme(
+    tmp_path, monkeypatch, capsys
+):
+    """evaluate's JSON (corridor: circuits_completed, circuits_clean, wall_contacts; driving:
+    collision_pct, lanes) was defined neither in evaluate --help nor in README: whether a
+    clean circuit is a success, whether wall_contacts counts steps or touches, whether
+    collision_pct is a percent or a share. Each field of both reports is defined in both."""
+    import sumo_scenarios.human
+
+    class Person:
+        def __call__(self, observation, info):
+            return 0
+
+        def set_status(self, text):
+            pass
+
+    _scripted_corridor_person(monkeypatch)
+    monkeypatch.setattr(sumo_scenarios.human, "make_teacher", lambda **kw: Person())
+    keys = set()
+    for domain in ("corridor", "driving"):
+        run = tmp_path / domain
+        assert main(["teach", domain, "--run-dir", str(run), "--steps", "10"]) == 0
+        capsys.readouterr()
+        assert main(["evaluate", str(run), "--steps", "5"]) == 0, capsys.readouterr().err
+        keys |= set(json.loads(capsys.readouterr().out))
+    said = _help_of("evaluate", capsys)
+    readme = " ".join((Path(__file__).parents[1] / "README.md").read_text().split())
+    for key in sorted(keys):
+        assert f"{key} (" in said, (key, said)
+        assert f"`{key}` (" in readme, key
+    for text in (said.replace("`", ""), readme.replace("`", "")):
+        assert "circuits_clean (those of them without a wall contact: each a success)" in text
+        assert "wall_contacts (the steps on which the robot touched a wall" in text, text
+        assert "collision_pct (the percentage, 0 to 100, of timesteps" in text, text
+        assert "lanes (the fraction, 0 to 1, of timesteps in each lane" in text, text
+
+
 def test_version_names_torchcbl_and_torch(capsys):
     """`torchcbl --version` (and `python -m torchcbl --version`) prints the package's version
     with torch's and Python's, exit 0; it said "error: the following arguments are required:
@@ -1654,6 +1715,98 @@ def test_teach_resume_of_a_session_that_met_its_streak_says_it_is_done(
     assert len(load_records(run)) == n
 
 
+def _done_corridor_session(run: Path, monkeypatch) -> None:
+    """A corridor session taught by the scripted person until it met its streak (3 steps the
+    agent drove on its own, with a window of 3): done, ``describe(run).streak_met`` set."""
+    from torchcbl import cli, describe
+
+    _scripted_corridor_person(monkeypatch, max_demonstrations=None)
+    package, env_id, human, settings, model = cli._TEACH["corridor"]
+    streak = {**settings, "accuracy_window": 3, "autonomous_steps_to_stop": 3}
+    monkeypatch.setitem(cli._TEACH, "corridor", (package, env_id, human, streak, model))
+    assert main(["teach", "corridor", "--run-dir", str(run), "--steps", "200"]) == 0
+    assert describe(run).streak_met == "autonomous_steps"
+
+
+def test_teach_resume_of_a_done_session_in_the_other_domain_says_it_is_done(
+    tmp_path, monkeypatch, capsys
+):
+    """`teach driving --resume` of a done corridor session said "resume it with torchcbl teach
+    corridor --resume --run-dir ...", a command refused next as done. Where the session is
+    done the domain mistake says so and gives the done refusal's ways on (evaluate it, or
+    teach on from its demonstrations), each of which runs as printed; no file changes."""
+    import shlex
+
+    from torchcbl import describe
+
+    run = tmp_path / "my runs" / "c1"
+    run.parent.mkdir()
+    _done_corridor_session(run, monkeypatch)
+    capsys.readouterr()
+    before = _bytes_of(run)
+    assert main(["teach", "driving", "--resume", "--run-dir", str(run)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured
+    err = captured.err
+    assert "is a corridor session" in err and "not a driving one" in err, err
+    assert "is done: the agent drove its last 3 steps on its own" in err, err
+    assert "--resume --run-dir" not in err, err
+    assert _bytes_of(run) == before
+    evaluate = shlex.split(re.search(r"\(torchcbl (evaluate [^)]*)\)", err)[1])
+    assert main([*evaluate, "--steps", "5"]) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    teach = shlex.split(re.search(r"\(torchcbl (teach [^)]*)\)", err)[1])
+    assert teach[:2] == ["teach", "corridor"] and "--prior-demonstrations" in teach, teach
+    new = tmp_path / "new"
+    teach[teach.index("NEW_DIR")] = str(new)
+    assert main([*teach, "--steps", "3"]) == 0, capsys.readouterr().err
+    assert describe(new).n_prior == describe(run).n_labels
+
+
+@pytest.mark.parametrize("what", ["missing", "empty"])
+def test_show_and_teach_resume_of_no_session_say_how_to_start_one_at_the_command_line(
+    tmp_path, monkeypatch, capsys, what
+):
+    """`torchcbl show` of a path that does not exist said to "start a session there with
+    ConfidentTeacher(..., run_dir=...)", a Python call, and `teach --resume` of a path holding
+    no session said only what it expected. Each says the command line's way now, in one line
+    (exit 2): show names `torchcbl teach corridor --run-dir PATH`, teach --resume says to
+    leave --resume out; the commands run as printed and start a session there."""
+    import shlex
+
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "my runs" / "it's"
+    if what == "empty":
+        run.mkdir(parents=True)
+
+    def one_line(argv: list[str]) -> str:
+        assert main(argv) == 2
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.count("\n") == 1, captured
+        assert "ConfidentTeacher" not in captured.err, captured.err
+        return captured.err
+
+    said = one_line(["teach", "corridor", "--resume", "--run-dir", str(run), "--steps", "3"])
+    assert "so there is no session to resume" in said, said
+    told = said.rsplit("leave out --resume to start a new session there: ", 1)[1].strip()
+    assert shlex.split(told) == ["torchcbl", "teach", "corridor", "--run-dir", str(run)], told
+    if what == "missing":
+        assert f"(relative paths are taken from the working directory, {os.getcwd()})" in said
+        said = one_line(["show", str(run)])
+        assert f"{run} does not exist" in said and os.getcwd() in said, said
+        told = said.rsplit("or start a session there: ", 1)[1]
+        command, other = told.rsplit(" (or ", 1)
+        assert other.strip() == "teach driving)", told
+        assert shlex.split(command) == ["torchcbl", "teach", "corridor", "--run-dir", str(run)]
+        # a '~' the shell did not expand: no session is offered in a folder named '~'
+        for argv in (["show", "~/nowhere"], ["teach", "corridor", "--resume", "--run-dir", "~/n"]):
+            said = one_line(argv)
+            assert "a '~' in quotes is not expanded" in said and "teach corridor --" not in said
+    assert not run.exists() or not any(run.iterdir())  # nothing written
+    assert main([*shlex.split(told.split(" (or ")[0])[1:], "--steps", "3"]) == 0
+    assert len(load_records(run)) == 3
+
+
 def _bytes_of(run: Path) -> dict[str, tuple[bytes | None, int]]:
     """{relative path: (its bytes, None for a folder; its mtime in ns)} of ``run`` and
     everything under it (a file written again with the same bytes, or one made and removed
@@ -1804,6 +1957,31 @@ def test_a_resumed_session_says_where_it_stands_before_the_agent_drives(
     assert first.startswith(f"Resuming the session in {run} at step 3"), first
     assert "3 demonstrations" in first and "phase noninteractive" in first
     assert "new episode" in first and "2 more steps" in first
+
+
+@pytest.mark.parametrize("skip", [False, True], ids=["noninteractive", "confident"])
+def test_a_resumed_session_says_what_the_agent_does_in_its_phase(
+    tmp_path, monkeypatch, capsys, skip
+):
+    """teach --resume said "phase noninteractive ...: the agent acts on its own where it is
+    sure and asks you where it is not", while in that phase it asks at every step. It says
+    what the phase it names does: asking at every step until the accuracy window (20 of the
+    corridor's) reaches its target (90%), or, in confident execution, acting where sure."""
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "session"
+    start = ["teach", "corridor", "--run-dir", str(run), "--steps", "3"]
+    assert main([*start, *(["--skip-noninteractive"] if skip else [])]) == 0
+    capsys.readouterr()
+    assert main(["teach", "corridor", "--run-dir", str(run), "--resume", "--steps", "2"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    if skip:
+        assert "phase confident" in first, first
+        assert "the agent acts on its own where it is sure and asks you where it is not" in first
+        assert "every step" not in first, first
+    else:
+        assert "phase noninteractive" in first, first
+        assert "episode: the agent asks you at every step until its prediction accuracy" in first
+        assert "your last 20 demonstrations reaches 90%, then acts on its own" in first, first
 
 
 @pytest.mark.parametrize(

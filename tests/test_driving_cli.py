@@ -307,10 +307,44 @@ def test_evaluate_drives_a_session_of_other_traffic_on_road_it_was_not_taught_on
     report = json.loads(out)
     assert report["scenario"] == light and report["held_out"] is False, report
     assert err.count("\n") == 1 and "not held out" in err and "episode 0" in err, err
+    # ... naming the options that drive held-out road (it named none), in Python the keywords
+    assert "another segment (--seed S)" in err and "leave --scenario out" in err, err
+    assert "seed=" not in err and "scenario=" not in err, err
+    from sumo_scenarios.experiment import NotHeldOutWarning, evaluate_saved_policy
+
+    with pytest.warns(NotHeldOutWarning, match="episode 0") as said:
+        evaluate_saved_policy(run, n_steps=5, scenario="light")
+    (warning,) = said
+    assert "another segment (seed=)" in str(warning.message), warning.message
+    assert "leave scenario out" in str(warning.message), warning.message
     # a segment none of its episodes drove is held out, though the traffic is the same
     assert main(["evaluate", str(run), "--steps", "5", "--scenario", "light", "--seed", "5"]) == 0
     out, err = capsys.readouterr()
     assert json.loads(out)["held_out"] is True and err == "", err
+
+
+def test_evaluate_of_a_session_made_directly_on_eval_says_no_leave_scenario_out(tmp_path, capsys):
+    """A session whose env was made directly (nothing kept but what it described) on the eval
+    traffic is driven, by default, on the defaults' held-out traffic, eval itself: road it
+    was taught on. The warning names --seed and --scenario, not "leave --scenario out", which
+    was left out already."""
+    from sumo_scenarios.env import DrivingConfig, DrivingEnv
+    from sumo_scenarios.experiment import NotHeldOutWarning, evaluate_saved_policy
+    from sumo_scenarios.scenarios import EVAL
+    from torchcbl import ConfidentTeacher
+
+    run = tmp_path / "session"
+    env = DrivingEnv(DrivingConfig(scenario=EVAL))
+    ConfidentTeacher(env, lambda o, i: 0, run_dir=run, progress=False).run(max_steps=3).close()
+    env.close()
+    assert main(["evaluate", str(run), "--steps", "5"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["held_out"] is False
+    assert err.count("\n") == 1 and "not held out" in err and "(--seed S)" in err, err
+    assert "--scenario NAME|FILE.json" in err and "leave --scenario out" not in err, err
+    with pytest.warns(NotHeldOutWarning) as said:
+        evaluate_saved_policy(run, n_steps=5)
+    assert "(scenario=)" in str(said[0].message) and "leave" not in str(said[0].message)
 
 
 def test_held_out_twin_is_eval_for_train_and_the_next_base_seed_otherwise():

@@ -581,6 +581,44 @@ def test_show_of_a_session_with_prior_demonstrations_reports_its_newest_checkpoi
     assert (s.n_prior, s.n_labels, s.last_checkpoint, s.notes) == (30, 20, 18, ())
 
 
+def test_show_says_the_checkpoints_of_a_session_with_prior_demonstrations_include_them(
+    tmp_path, capsys
+):
+    """show said "checkpoint: the newest fitted on 0 labels" and "on disk: 1 (0 labels)" of a
+    session started from prior demonstrations, whose every model was fitted on them too: it
+    reads as an untrained model. The checkpoint lines add the prior."""
+    env = rare_regions_world(episode_length=10)
+    prior = env.sample(30, np.random.default_rng(1))
+    runs = {0: tmp_path / "fresh", 20: tmp_path / "taught"}
+    for steps, run in runs.items():
+        ct = ConfidentTeacher(
+            env,
+            oracle(env),
+            prior_demonstrations=prior,
+            config=TeachingConfig(max_new=3),
+            run_dir=run,
+            seed=0,
+            progress=False,
+        )
+        if steps:
+            ct.run(max_steps=steps)
+        ct.close()
+    assert main(["show", str(runs[0])]) == 0
+    out = capsys.readouterr().out
+    assert "\ncheckpoint: the newest fitted on 0 labels + 30 prior demonstrations\n" in out, out
+    assert "\n            on disk: 1 (0 labels + 30 prior demonstrations), " in out, out
+    on_disk = describe(runs[20]).checkpoints_on_disk
+    assert len(on_disk) > 1, on_disk
+    assert main(["show", str(runs[20])]) == 0
+    out = capsys.readouterr().out
+    assert "\ncheckpoint: the newest fitted on 18 labels + 30 prior demonstrations\n" in out, out
+    assert f"{on_disk[-1]} labels, each + 30 prior demonstrations), " in out, out
+    _small_session(tmp_path / "plain")  # a session without a prior says labels alone
+    assert main(["show", str(tmp_path / "plain")]) == 0
+    out = capsys.readouterr().out
+    assert "prior" not in out and " labels)" in out, out
+
+
 def test_show_of_a_session_without_journal_whose_checkpoints_cannot_be_listed(
     tmp_path, capsys, monkeypatch
 ):
@@ -1105,6 +1143,18 @@ def test_show_says_a_session_that_met_its_streak_is_done_as_resume_counts_it(tmp
         assert f"\nstops:      {kept}\n" in out, out
     # the resumes above (a writer each, none of which took a step) leave it done
     assert describe(tmp_path / "episodes").streak_met == "autonomous_episodes"
+    # a folder's listing tells the done sessions from the others (it listed them alike)
+    assert main(["show", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()[1:]
+    by_run = {ln.split(": ", 1)[0]: ln for ln in lines}
+    assert set(by_run) == {str(run) for run, _, _ in runs.values()}, lines
+    for want, (run, config, _) in runs.items():
+        line = by_run[str(run)]
+        if want in ("autonomous_episodes", "autonomous_steps"):
+            field = f"{want}_to_stop"
+            assert line.endswith(f"; done: {field}={getattr(config, field)} met"), line
+        else:
+            assert "done" not in line, line
 
 
 def test_show_of_a_format1_session_with_no_writers_says_its_streak(tmp_path):

@@ -483,6 +483,12 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
     from torchcbl.session import IncompatibleRunDirError, _sessions_below, load_config
 
     if not session.exists():
+        if teach and asked is not None:  # a typo, or a session not started yet
+            raise _UsageError(
+                f"--resume: {session} does not exist {_cwd_said(session)}, so there is no "
+                "session to resume; check the path"
+                + ("" if "~" in str(session) else f", or {_start_without_resume(session, asked)}")
+            )
         raise _UsageError(f"{session} does not exist; {_SESSION_HINT}")
     if not session.is_dir():
         raise _UsageError(f"{session} is a file; {_SESSION_HINT}")
@@ -493,6 +499,11 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
             raise _UsageError(
                 f"{session} is not a teaching session but holds sessions: {shown}"
                 f"{' ...' if len(below) == 5 else ''}; pass one of them"
+            )
+        if teach and asked is not None and _new_session_may_start(session):
+            raise _UsageError(
+                f"--resume: {session} holds no config.json, so there is no session to resume; "
+                f"{_start_without_resume(session, asked)}"
             )
         raise _UsageError(f"{session} holds no config.json; {_SESSION_HINT}")
     try:
@@ -534,8 +545,12 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
             f"gymnasium.make({env.get('id')!r}, ...), teacher)"
         )
     if asked is not None and asked != domain:
+        mistake = f"{session} is a {domain} session ({described}), not a {asked} one"
+        done = _done_text(session, domain) if teach else None
+        if done is not None:  # resuming it in its own domain is refused too: say what is left
+            raise _UsageError(f"{mistake}, and it is done: {done}")
         raise _UsageError(
-            f"{session} is a {domain} session ({described}), not a {asked} one; "
+            f"{mistake}; "
             + (
                 f"resume it with torchcbl teach {domain} --resume --run-dir {_shell(session)}"
                 if teach
@@ -558,6 +573,35 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
             )
         )
     return domain
+
+
+def _cwd_said(path: Path) -> str:
+    """Where a path that does not exist was looked for: "(relative paths are taken from the
+    working directory, CWD)", and that a '~' the shell was not let expand stays a '~'."""
+    tilde = "; a '~' in quotes is not expanded: leave it unquoted" if "~" in str(path) else ""
+    return f"(relative paths are taken from the working directory, {os.getcwd()}{tilde})"
+
+
+def _start_without_resume(run_dir: Path, domain: str) -> str:
+    """How ``teach --resume`` of a folder holding no session starts one there instead."""
+    return (
+        "leave out --resume to start a new session there: "
+        f"torchcbl teach {domain} --run-dir {_shell(run_dir)}"
+    )
+
+
+def _new_session_may_start(run_dir: Path) -> bool:
+    """Whether ``teach`` (without --resume) would start a new session in ``run_dir`` (the
+    store's rule: missing, empty, or holding only what torchcbl leaves where no session
+    started), read-only."""
+    from torchcbl.errors import IncompatibleRunDirError
+    from torchcbl.session import _check_new_session_dir
+
+    try:
+        _check_new_session_dir(run_dir)
+    except IncompatibleRunDirError:
+        return False
+    return True
 
 
 def _session_map_exists(session: Path, domain: str) -> None:
@@ -612,7 +656,20 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     for w in said:  # e.g. a corridor session that does not say which robot it was taught on
-        print(f"torchcbl evaluate: warning: {_one_line(w.message)}", file=sys.stderr)
+        text = _one_line(w.message)
+        held = getattr(module, "NotHeldOutWarning", None)  # (driving's; said the CLI's way)
+        if held is not None and isinstance(w.message, held):
+            text = (
+                f"{_one_line(w.message.road)}; for held-out ones give another segment (--seed S) "
+                "or base seed (--scenario NAME|FILE.json)"
+                + (
+                    ""
+                    if args.scenario is None
+                    else ", or leave --scenario out: evaluate then drives the held-out twin of "
+                    "the session's traffic"
+                )
+            )
+        print(f"torchcbl evaluate: warning: {text}", file=sys.stderr)
     print(json.dumps(report, indent=2))
     return 0
 
@@ -668,6 +725,20 @@ def _cmd_show(args: argparse.Namespace) -> int:
         else:
             print("\n".join(lines + unseen))
         return 0
+    try:
+        os.stat(path)
+    except FileNotFoundError:  # (describe's words for it name the Python call)
+        raise _UsageError(
+            f"{path} does not exist; {_SESSION_HINT}. Check the path {_cwd_said(path)}"
+            + (
+                ""
+                if "~" in str(path)
+                else f", or start a session there: torchcbl teach corridor --run-dir "
+                f"{_shell(path)} (or teach driving)"
+            )
+        ) from None
+    except OSError:
+        pass  # (a permission, a loop of links: describe says it)
     try:
         summary = describe(path)
     except IncompatibleRunDirError as exc:  # not a session, or one this user may not read
@@ -932,6 +1003,50 @@ _TEACH = {
         "sumo_scenarios.experiment:teaching_setup",
     ),
 }
+
+
+def _teach_epilog() -> str:
+    """teach --help's epilog: what the status line shown at each request counts, each
+    domain's accuracy window and target, and when a domain's teaching ends (from
+    :data:`_TEACH`'s settings)."""
+    windows = "; ".join(
+        f"{domain} W = {s['accuracy_window']} and {100 * s['target_accuracy']:g}%"
+        for domain, (*_, s, _) in _TEACH.items()
+    )
+    corridor, driving = _TEACH["corridor"][3], _TEACH["driving"][3]
+    return (
+        "At each request a status line says where the session stands: decision #N (the "
+        "requests you have answered), step (the steps taken), phase (noninteractive: the agent "
+        "asks you at every step; confident: it acts on its own where it is sure and asks you "
+        "where it is not), demonstrations (the keys you gave), prediction accuracy (the share "
+        "of your last W demonstrations on which the agent's own choice, made before it learned "
+        "from them, was your key; the non-interactive phase ends once W demonstrations are in "
+        "that window and it reaches the target) and autonomy (the share of the last W "
+        "confident-phase steps the agent took on its own, without asking; - before the "
+        f"confident phase). The window and the target: {windows}. Teaching ends after --steps, "
+        f"and in the corridor, done, once the agent drove "
+        f"{corridor['autonomous_episodes_to_stop']} circuits in a row on its own, each without "
+        f"a wall contact; in driving at {driving['max_demonstrations']} demonstrations "
+        "(--resume goes past it)."
+    )
+
+
+_EVALUATE_EPILOG = (
+    "The report's fields. Corridor: map (the map driven: a shipped map's name or a map file's "
+    "path), map_sha256 (its digest, which tells maps of one name apart), world (the robot's "
+    "settings, WorldConfig's fields), steps (the actions run; an episode ends at the end of a "
+    "circuit or at the env's step cap, and another begins), circuits_completed (the circuits "
+    "the robot completed: back at its start, along the route), circuits_clean (those of them "
+    "without a wall contact: each a success), wall_contacts (the steps on which the robot "
+    "touched a wall, over every episode: a step counts once). Driving: steps (the timesteps "
+    "driven), eval_segment (the road segment driven, --seed), collision_pct (the percentage, "
+    "0 to 100, of timesteps on which the car overlapped another car), lanes (the fraction, "
+    "0 to 1, of timesteps in each lane, summing to 1, in the order of lane_names), lane_names "
+    "(the lanes' names, right shoulder first), scenario (the traffic driven, its "
+    "TrafficScenario fields), held_out (false where that is road the session was taught on), "
+    "start_lane (the lane it started in, 0 the right shoulder), sim (the SUMO settings, "
+    "SimConfig's fields)."
+)
 
 
 #: per domain, the "module:function" making again from a session's config what gymnasium.make
@@ -1313,8 +1428,8 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     if args.resume:  # before the agent drives: it may go on alone for all of --steps
         print(
             f"Resuming the session in {run_dir} at step {ct.n_steps} ({ct.n_demonstrations} "
-            f"demonstrations, phase {ct.phase}), in a new episode: the agent acts on its own "
-            f"where it is sure and asks you where it is not; {args.steps} more steps at most.",
+            f"demonstrations, phase {ct.phase}), in a new episode: {_phase_text(ct)}; "
+            f"{args.steps} more steps at most.",
             flush=True,
         )
     go_on = f"continue with: torchcbl teach {args.domain} --run-dir {_shell(run_dir)} --resume"
@@ -1351,6 +1466,25 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     return 0
 
 
+def _phase_text(ct: Any) -> str:
+    """What the agent of ``ct`` (a ConfidentTeacher) does in the phase it is in: in the
+    non-interactive phase it asks at every step until its accuracy window reaches the
+    target, in confident execution it acts on its own where it is sure."""
+    confident = "acts on its own where it is sure and asks you where it is not"
+    if ct.phase != "noninteractive":
+        return f"the agent {confident}"
+    target = ct.config.target_accuracy
+    if target is None:  # (a session of Python's: teach always sets one)
+        return (
+            "the agent asks you at every step (this session's non-interactive phase has no "
+            "accuracy target, so it does not end)"
+        )
+    return (
+        "the agent asks you at every step until its prediction accuracy over your last "
+        f"{ct.config.accuracy_window} demonstrations reaches {100 * target:g}%, then {confident}"
+    )
+
+
 def _saved(ct: Any) -> str:
     """ "N demonstrations over M steps", in the singular where a count is 1."""
     d, n = ct.n_demonstrations, ct.n_steps
@@ -1373,6 +1507,16 @@ def _refuse_a_done_session(run_dir: Path, domain: str) -> None:
     budgets are not asked: ``--resume`` lifts them (it asks for more); a streak cannot be
     lifted, or it would never end. A session that cannot be read, or that a writer holds, is
     left to the resume to say so."""
+    done = _done_text(run_dir, domain)
+    if done is not None:
+        raise _UsageError(f"--resume: the session in {run_dir} is done: {done}")
+
+
+def _done_text(run_dir: Path, domain: str) -> str | None:
+    """Where the session in ``run_dir`` (of ``domain``) is done (see
+    :func:`_refuse_a_done_session`): the streak it met, and the commands that go on from it
+    (evaluate it, or teach on from its demonstrations in a new session); None where it is not
+    done, cannot be read, or a writer holds it."""
     from torchcbl.session import (
         _STREAK_DONE,
         CorruptSessionError,
@@ -1385,14 +1529,13 @@ def _refuse_a_done_session(run_dir: Path, domain: str) -> None:
             warnings.simplefilter("ignore")
             summary = describe(run_dir)
     except (IncompatibleRunDirError, CorruptSessionError, OSError):
-        return  # the resume says what is wrong with it, as it always did
+        return None  # the resume says what is wrong with it, as it always did
     if summary.streak_met is None or summary.writer_running is True:
-        return
+        return None
     field, says = _STREAK_DONE[summary.streak_met]
     stop = summary.stops[field]
-    raise _UsageError(
-        f"--resume: the session in {run_dir} is done: {says.format(stop)} "
-        f"({field}={stop}), so there is nothing to resume; evaluate it "
+    return (
+        f"{says.format(stop)} ({field}={stop}), so there is nothing to resume; evaluate it "
         f"(torchcbl evaluate {_shell(run_dir)}), or teach on from its demonstrations "
         f"in a new session (torchcbl teach {domain} --run-dir NEW_DIR "
         f"--prior-demonstrations {_shell(run_dir)})"
@@ -1895,6 +2038,7 @@ def _parser() -> argparse.ArgumentParser:
         "the reproduction evaluates; light's light-held-out), whose road segments no episode "
         "of the taught traffic drives. --scenario or --seed that drive road the session was "
         "taught on are driven, with a one-line warning that the figures are not held out.",
+        epilog=_EVALUATE_EPILOG,
     )
     p.add_argument(
         "run_dir",
@@ -2026,9 +2170,10 @@ def _parser() -> argparse.ArgumentParser:
         "(torch and numpy "
         "versions, threads, device) and whether a writer holds it now or was killed. Given a "
         "folder that holds sessions (a reproduction's run directory, a benchmark's OUT/sessions), "
-        "one line per session, and the folders below it this user may not list (whose "
-        "sessions are not counted). A path that holds no session, or a session that cannot "
-        "be read: errors go to stderr as one line (exit 2), also with --json.",
+        'one line per session (a done one ending "; done: ..."), and the folders below it this '
+        "user may not list (whose sessions are not counted). A path that holds no session, or "
+        "a session that cannot be read: errors go to stderr as one line (exit 2), also with "
+        "--json.",
     )
     p.add_argument(
         "run_dir",
@@ -2055,6 +2200,7 @@ def _parser() -> argparse.ArgumentParser:
         "q stops the session at a request or, on a terminal, while the agent drives on its "
         "own (after the step under way); Ctrl-C stops it at once; "
         "--resume goes on from where it stopped.",
+        epilog=_teach_epilog(),
     )
     p.add_argument("domain", choices=list(_DOMAINS), help="which agent: corridor or driving")
     p.add_argument(

@@ -4104,7 +4104,8 @@ class SessionSummary:
         steps_per_episode, requests_per_episode: steps and requests of episode 0, 1, ...
         block_steps: the block size of ``requests_per_block``, in steps.
         requests_per_block: requests in steps 0 .. block_steps - 1, then the next block, ...
-        last_checkpoint: labels the newest usable checkpoint's model was fitted on, the one
+        last_checkpoint: labels the newest usable checkpoint's model was fitted on (besides
+            the ``n_prior`` prior demonstrations, which every fit includes), the one
             resume and :func:`load_model` start from: of no more labels than the log holds,
             readable, and fitted on the log's labels (its SHA-256 matches them); None: none
             is. The name alone does not make one: a file named ``model-<n>.pt`` that is
@@ -4286,7 +4287,7 @@ class SessionSummary:
             + (
                 "none"
                 if self.last_checkpoint is None
-                else f"the newest fitted on {self.last_checkpoint} labels"
+                else f"the newest fitted on {self.last_checkpoint} labels{self._prior_text()}"
             )
         )
         lines.append("            " + self._kept_text())
@@ -4305,13 +4306,18 @@ class SessionSummary:
         return "\n".join(lines)
 
     def line(self) -> str:
-        """The summary in one line (a folder's listing)."""
+        """The summary in one line (a folder's listing); a session that met its streak stop
+        (:attr:`streak_met`) ends with "; done: FIELD=N met"."""
         kind = str(self.strategy.get("type", "?"))
         episodes = f"{self.n_episodes} episode{'' if self.n_episodes == 1 else 's'}"
+        done = ""
+        if self.streak_met is not None:
+            field = _STREAK_DONE[self.streak_met][0]
+            done = f"; done: {field}={self.stops[field]} met"
         return (
             f"{self.run_dir}: {self.state}, {self._env_name()}, {kind}, "
             f"seed {self.seed}, {self.n_steps} steps, {episodes}, {self.n_labels} labels "
-            f"({self.n_requests} requests, {self.n_corrections} corrections)"
+            f"({self.n_requests} requests, {self.n_corrections} corrections){done}"
         )
 
     def _env_name(self) -> str:
@@ -4342,6 +4348,11 @@ class SessionSummary:
             "demonstrations in a new session"
         )
 
+    def _prior_text(self) -> str:
+        """What every fit of the session includes besides its labels: " + N prior
+        demonstrations", empty for a session without them."""
+        return f" + {self.n_prior} prior demonstrations" if self.n_prior else ""
+
     def _cap_text(self) -> str:
         """The step cap as config.json keeps it, in words."""
         if not self.env_max_episode_steps_recorded:
@@ -4354,8 +4365,10 @@ class SessionSummary:
         """The checkpoints on disk, the last writer's retention and, where a writer's
         retention may have removed earlier stages' checkpoints, how one is rebuilt."""
         on_disk = self.checkpoints_on_disk
+        each = ", each" if len(on_disk) > 1 and self.n_prior else ""
         text = "on disk: " + (
-            f"{len(on_disk)} ({_ends_text([str(n) for n in on_disk], 2)} labels)"
+            f"{len(on_disk)} ({_ends_text([str(n) for n in on_disk], 2)} labels"
+            f"{each}{self._prior_text()})"
             if on_disk
             else "none"
         )
