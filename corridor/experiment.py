@@ -348,9 +348,7 @@ class CorridorExperimentConfig:
         """The :class:`torchcbl.DistanceRule` that ``max_std`` and ``threshold_reading`` give."""
         from torchcbl import DistanceRule
 
-        if self.threshold_reading == "literal":
-            return DistanceRule(self.max_std)
-        return DistanceRule(quantile=math.erf(self.max_std / math.sqrt(2.0)))
+        return DistanceRule.from_std(self.max_std, self.threshold_reading)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> CorridorExperimentConfig:

@@ -332,9 +332,7 @@ class DrivingExperimentConfig:
         deviations in the driving env's 4 features, Figure 10's)."""
         from torchcbl import DistanceRule
 
-        if self.threshold_reading == "literal":
-            return DistanceRule(self.max_std)
-        return DistanceRule(quantile=math.erf(self.max_std / math.sqrt(2.0)))
+        return DistanceRule.from_std(self.max_std, self.threshold_reading)
 
     @classmethod
     def full(cls) -> DrivingExperimentConfig:

@@ -296,3 +296,22 @@ def test_a_quantile_rule_pickled_before_max_std_became_none_keeps_its_quantile()
     assert rule.is_confident(c, np.zeros((2, 4))).tolist() == [True, False]
     assert rule.max_std is None and rule.quantile == 0.95  # as the class documents
     assert repr(rule) == "DistanceRule(quantile=0.95)"
+
+
+def test_from_std_reads_the_papers_standard_deviations_literally_or_as_a_coverage():
+    """DistanceRule.from_std: "2 standard deviations" as a Mahalanobis distance of 2, or as
+    the share within 2 std in one dimension (0.9545) taken as a chi-square quantile in D:
+    against scipy's chi-square, 2.83 in 3-D and 3.12 in 4-D."""
+    from scipy.stats import chi2
+
+    assert DistanceRule.from_std(2.0).threshold(4) == 2.0
+    assert DistanceRule.from_std(2.0, "literal").max_std == 2.0
+    coverage = DistanceRule.from_std(2.0, "coverage")
+    assert coverage.max_std is None and coverage.quantile == pytest.approx(0.954499736)
+    for d, expected in ((1, 2.0), (3, 2.83), (4, 3.12)):
+        assert coverage.threshold(d) == pytest.approx(math.sqrt(chi2.ppf(0.954499736, d)))
+        assert round(coverage.threshold(d), 2) == expected
+    with pytest.raises(ValueError, match=r"reading must be 'literal' or 'coverage', got 'lit'"):
+        DistanceRule.from_std(2.0, "lit")
+    with pytest.raises(ValueError, match=r"DistanceRule.max_std: expected a value > 0, got -1"):
+        DistanceRule.from_std(-1, "coverage")

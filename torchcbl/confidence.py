@@ -197,6 +197,28 @@ class DistanceRule:
             self.quantile = float(quantile)
         self._dof: int | None = None
 
+    @classmethod
+    def from_std(cls, max_std: float, reading: str = "literal") -> DistanceRule:
+        """The paper's "``max_std`` standard deviations for the most likely Gaussian
+        component" as a rule, read ``"literal"`` (a Mahalanobis distance of ``max_std``:
+        ``DistanceRule(max_std)``) or as a ``"coverage"``: the share of a Gaussian's points
+        within ``max_std`` standard deviations in one dimension (0.9545 for 2), taken as a
+        chi-square quantile in the observations' D dimensions
+        (``DistanceRule(quantile=erf(max_std / sqrt(2)))``: 2.83 std in 3-D, 3.12 in 4-D).
+
+        Raises:
+            ValueError: ``reading`` is neither, or ``max_std`` is not a finite number > 0 (or
+                so large that its coverage rounds to 1).
+        """
+        if reading == "literal":
+            return cls(max_std)
+        if reading != "coverage":
+            raise ValueError(
+                f"DistanceRule.from_std: reading must be 'literal' or 'coverage', got {reading!r}"
+            )
+        _check_positive("DistanceRule.max_std", max_std)
+        return cls(quantile=math.erf(float(max_std) / math.sqrt(2.0)))
+
     def __setstate__(self, state: dict[str, Any]) -> None:
         """Unpickling: a quantile rule pickled before ``max_std`` became None with a quantile
         (c5f2f09) held ``max_std = 2.0`` too; it reads back as None, as documented."""
