@@ -197,13 +197,23 @@ def test_local_ray_gives_the_same_cells_as_the_process_pool(tmp_path, monkeypatc
         "PYTHONPATH", os.pathsep.join([str(TESTS), str(ROOT), os.environ.get("PYTHONPATH", "")])
     )
     grid = (STRATEGIES[1:], [_env()], [0, 1])
-    pool = bm.run_benchmark(*grid, tmp_path / "pool", workers=2, plots=False)
-    ray = bm.run_benchmark(*grid, tmp_path / "ray", workers=2, use_ray=True, plots=False)
+    # the sessions kept too, one checkpoint each beside checkpoint 0: a Ray task is given the
+    # retention as a pool worker is (keep_checkpoints reaches run_cell through ray.remote)
+    kept = {"plots": False, "keep_sessions": True, "keep_checkpoints": 1}
+    pool = bm.run_benchmark(*grid, tmp_path / "pool", workers=2, **kept)
+    ray = bm.run_benchmark(*grid, tmp_path / "ray", workers=2, use_ray=True, **kept)
     assert pool["sweep"]["engine"] == "process_pool" and ray["sweep"]["engine"] == "ray"
     for key in pool["cells"]:
         a = json.loads((tmp_path / "pool" / "cells" / f"{key}.json").read_text())
         b = json.loads((tmp_path / "ray" / "cells" / f"{key}.json").read_text())
         assert _figures(a) == _figures(b)
+        on_disk = [
+            sorted(p.name for p in (tmp_path / engine / "sessions" / key / "checkpoints").iterdir())
+            for engine in ("pool", "ray")
+        ]
+        assert on_disk[0] == on_disk[1] and 1 <= len(on_disk[0]) <= 2, on_disk
+        writers = (tmp_path / "ray" / "sessions" / key / "writers.jsonl").read_text()
+        assert [json.loads(w)["keep_checkpoints"] for w in writers.splitlines()] == [1]
     strip = ("wall_s", "cpu_s")
     for env, rows in pool["table"].items():
         for s, r in rows.items():
