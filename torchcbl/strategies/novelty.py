@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, get_args
 
 import numpy as np
 
@@ -44,7 +44,12 @@ if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification
     from torchcbl.records import StepRecord
 
-__all__ = ["NoveltyGated"]
+__all__ = ["NoveltyGated", "ScoresFrom"]
+
+#: which steps' novelty scores the window keeps, and so set the threshold: ``"all"`` every
+#: step's, ``"agent"`` the warm-up's and those the learner drove (see :class:`NoveltyGated`)
+ScoresFrom = Literal["all", "agent"]
+_SCORES_FROM: tuple[str, ...] = get_args(ScoresFrom)
 
 
 class NoveltyGated(_StrategyDefaults):
@@ -55,9 +60,17 @@ class NoveltyGated(_StrategyDefaults):
         window: recent steps the quantile is taken over (>= 1).
         warmup: demonstrations the teacher gives first (>= 0).
         min_history: ask while fewer finite scores than this are in the window (>= 1).
+        scores_from: which steps the window keeps, and so which scores set the threshold:
+            ``"all"`` (the default, as shipped and benchmarked) every step, the asked ones
+            included; ``"agent"`` the warm-up's steps and then only those the learner drove
+            (``record.actor == "agent"``), ThriftyDAgger's ``if not expert_mode`` read as
+            "leave out the steps the teacher drove" (how each relates to its code: the
+            module docstring). With ``"agent"`` an asked step is kept too while the window
+            holds fewer than ``min_history`` observations: the gate asks while the history
+            is short, and would otherwise never fill it.
 
-    Hooks (its state: the label count, the last ``window`` steps' observations and novelty
-    scores, and the latest refitted model):
+    Hooks (its state: the label count, the last ``window`` kept steps' observations and
+    novelty scores, and the latest refitted model):
 
     - ``bind``: no labels, an empty window, no model.
     - ``decide``: asks during the warmup (phase ``"noninteractive"``); then (phase
@@ -68,7 +81,10 @@ class NoveltyGated(_StrategyDefaults):
     - ``observe_label``: counts the label (the warmup).
     - ``observe_step``: adds the step's observation [D] to the window, and its score: the
       recorded ``record.distance``, or the latest model's distance where a refit came after
-      the step was scored; a non-finite score is not kept.
+      the step was scored; a non-finite score is not kept. With ``scores_from="agent"``, a
+      step after the warm-up (``record.phase == "confident"``) that the teacher drove
+      (``record.actor == "teacher"``) is not added once the window holds ``min_history``
+      observations.
     - ``observe_refit``: keeps the refitted model and scores every observation in the window
       again with it (the threshold follows the current model); the training set
       (``observations`` [M, D], ``actions`` [M]) is not used.
@@ -80,6 +96,7 @@ class NoveltyGated(_StrategyDefaults):
         "window",
         "warmup",
         "min_history",
+        "scores_from",
         "_labels",
         "_scores",
         "_observations",
@@ -93,6 +110,7 @@ class NoveltyGated(_StrategyDefaults):
         window: int = 200,
         warmup: int = 10,
         min_history: int = 10,
+        scores_from: ScoresFrom = "all",
     ) -> None:
         target_rate, window, warmup, min_history = map(
             _plain, (target_rate, window, warmup, min_history)
@@ -114,10 +132,17 @@ class NoveltyGated(_StrategyDefaults):
             raise ValueError(
                 f"NoveltyGated: min_history must be <= window, got {min_history} > {window}"
             )
+        if not isinstance(scores_from, str) or scores_from not in _SCORES_FROM:
+            raise ValueError(
+                f"NoveltyGated: scores_from must be one of {_SCORES_FROM}, got {scores_from!r}; "
+                "pass 'all' (every step's score sets the threshold, the default) or 'agent' "
+                "(only the warm-up's and the steps the learner drove)"
+            )
         self.target_rate = float(target_rate)
         self.window = window
         self.warmup = warmup
         self.min_history = min_history
+        self.scores_from: ScoresFrom = scores_from
         self._labels = 0
         self._scores: deque[float] = deque(maxlen=window)
         self._observations: deque[np.ndarray] = deque(maxlen=window)
@@ -176,6 +201,14 @@ class NoveltyGated(_StrategyDefaults):
             self._scores = deque((float(v) for v in d if math.isfinite(v)), maxlen=self.window)
 
     def _track_step(self, record: StepRecord, decision: Decision | None) -> None:
+        if (
+            self.scores_from == "agent"
+            and record.phase == "confident"
+            and record.actor == "teacher"
+            and len(self._observations) >= self.min_history
+        ):  # (read from the record alone: a resume's replay keeps the same steps)
+            self._rescore = False  # the next step is scored with the current model
+            return
         x = record.observation_array
         self._observations.append(x)
         d = record.distance
@@ -192,11 +225,13 @@ class NoveltyGated(_StrategyDefaults):
             "window": self.window,
             "warmup": self.warmup,
             "min_history": self.min_history,
+            "scores_from": self.scores_from,
             "relabel": False,
         }
 
     def __repr__(self) -> str:
         return (
             f"NoveltyGated(target_rate={self.target_rate}, window={self.window}, "
-            f"warmup={self.warmup}, min_history={self.min_history})"
+            f"warmup={self.warmup}, min_history={self.min_history}, "
+            f"scores_from={self.scores_from!r})"
         )
