@@ -232,6 +232,138 @@ def test_novelty_rescores_recent_states_with_the_new_model():
     assert list(s._scores) == [0.5] * 4
 
 
+def _driven(step: int, distance: float, actor: str, phase: str = "confident") -> StepRecord:
+    """A step the teacher (labelled, its label executed) or the learner drove."""
+    teacher = actor == "teacher"
+    return StepRecord(
+        step=step,
+        episode=0,
+        observation=(float(step), 0.0),
+        model_action=0,
+        confidence=None,
+        distance=distance,
+        posterior=None,
+        teacher_action=1 if teacher else None,
+        executed_action=1 if teacher else 0,
+        phase=phase,
+        autonomous=not teacher,
+        reward=0.0,
+        terminated=False,
+        truncated=False,
+        info={},
+        actor=actor,
+    )
+
+
+def test_novelty_scores_from_agent_takes_the_quantile_over_the_steps_the_learner_drove():
+    """ThriftyDAgger's code adds a novelty score only while the robot drives; the shipped gate
+    ("all") adds every step's, the asked ones included. With scores_from="agent" the window
+    keeps the warm-up's steps (ThriftyDAgger seeds from offline data), the steps the learner
+    drove, and an asked step only while it holds fewer than min_history observations (the
+    gate asks while the history is short: it would never fill it otherwise)."""
+    steps = [  # (distance, actor, phase)
+        (1.0, "teacher", "noninteractive"),  # the warm-up: kept
+        (2.0, "teacher", "noninteractive"),
+        (50.0, "teacher", "confident"),  # asked, 2 < min_history observations: kept
+        (3.0, "agent", "confident"),
+        (40.0, "teacher", "confident"),  # asked, 3 observations: not kept
+        (4.0, "agent", "confident"),
+        (30.0, "teacher", "confident"),  # not kept
+        (5.0, "agent", "confident"),
+    ]
+    gates = {
+        how: NoveltyGated(target_rate=0.25, window=10, warmup=2, min_history=3, scores_from=how)
+        for how in ("all", "agent")
+    }
+    for s in gates.values():
+        for t, (d, actor, phase) in enumerate(steps):
+            if actor == "teacher":
+                s.observe_label(np.zeros(2), 1, model_action=0, kind="demonstration")
+            s.observe_step(_driven(t, d, actor, phase), None)
+    # agent: 1, 2, 3, 4, 5, 50 -> position 0.75 * 5 = 3.75 -> 4 + 0.75 * (5 - 4) = 4.75
+    assert gates["agent"].threshold() == pytest.approx(4.75)
+    # all: 1, 2, 3, 4, 5, 30, 40, 50 -> position 0.75 * 7 = 5.25 -> 30 + 0.25 * 10 = 32.5
+    assert gates["all"].threshold() == pytest.approx(32.5)
+    assert gates["agent"].decide(np.zeros(2), _classification(0, 10.0)).ask
+    assert not gates["all"].decide(np.zeros(2), _classification(0, 10.0)).ask
+
+    class Model:  # scores an observation by its first feature (the step index)
+        def classify(self, x):
+            d = torch.as_tensor(np.asarray(x)[:, 0], dtype=torch.float64)
+            return _classification(0, 0.0)._replace(distance=d)
+
+    for s in gates.values():  # the refit rescores the window's observations, and only those
+        s.observe_refit(Model(), np.zeros((1, 2)), np.zeros(1))
+    # agent: steps 0, 1, 2, 3, 5, 7 -> 3 + 0.75 * (5 - 3) = 4.5; all: 0..7 -> 5.25
+    assert gates["agent"].threshold() == pytest.approx(4.5)
+    assert gates["all"].threshold() == pytest.approx(5.25)
+
+
+def test_novelty_scores_from_is_checked_and_kept_in_the_config():
+    for bad in ("robot", "Agent", None, 1):
+        with pytest.raises(ValueError, match=r"scores_from must be one of \('all', 'agent'\)"):
+            NoveltyGated(scores_from=bad)
+    assert NoveltyGated().to_config()["scores_from"] == "all"
+    s = strategy_from_config(NoveltyGated(scores_from="agent").to_config())
+    assert s.scores_from == "agent" and "scores_from='agent'" in repr(s)
+
+
+@pytest.mark.parametrize("how", ["all", "agent"])
+def test_novelty_threshold_in_a_session_is_the_quantile_of_the_kept_steps(tmp_path, how):
+    """Live and resumed, the threshold is the (1 - target_rate) quantile of the final model's
+    scores of the window's steps: the last ``window`` steps ("all"), or of those the learner
+    drove, after the first ``min_history`` ("agent"); with warmup=0 the gate asks until it has
+    them, and then lets the learner drive."""
+    env = rare_regions_world(episode_length=10, spread=1.5)
+    s = NoveltyGated(target_rate=0.2, window=30, warmup=0, min_history=5, scores_from=how)
+    ct = _teach(env, s, 80, run_dir=tmp_path / "r")
+    kept = []
+    for r in ct.records:
+        if how == "all" or r.actor == "agent" or len(kept) < 5:
+            kept.append(r.observation_array)
+    assert len(kept) > 30 and any(r.actor == "agent" for r in ct.records)
+    d = ct.model.classify(np.stack(kept[-30:])).distance.numpy()
+    want = np.quantile(d[np.isfinite(d)], 0.8)
+    assert s.threshold() == pytest.approx(want)
+    ct.close()
+    again = ConfidentTeacher.resume(tmp_path / "r", env, oracle(env), progress=False)
+    assert again.strategy.to_config() == s.to_config()  # rebuilt from the run directory
+    assert again.strategy.threshold() == pytest.approx(want)
+    again.close()
+
+
+def test_a_novelty_session_stored_without_scores_from_resumes_as_all(tmp_path):
+    """Sessions stored before NoveltyGated took scores_from lack the key in config.json; they
+    taught with every step's score, so they read as "all": rebuilt so, resumed by a
+    NoveltyGated() given, and refused to one given scores_from="agent", as any other setting
+    of the strategy that differs."""
+    import json
+
+    from torchcbl.errors import IncompatibleRunDirError
+
+    env = rare_regions_world(episode_length=10)
+    _teach(env, NoveltyGated(warmup=3, min_history=3), 12, run_dir=tmp_path / "r").close()
+    path = tmp_path / "r" / "config.json"
+    config = json.loads(path.read_text())
+    assert config["strategy"].pop("scores_from") == "all"
+    path.write_text(json.dumps(config))
+    ct = ConfidentTeacher.resume(tmp_path / "r", env, oracle(env), progress=False)
+    assert ct.strategy.scores_from == "all"
+    ct.close()
+    given = NoveltyGated(warmup=3, min_history=3)
+    ConfidentTeacher.resume(
+        tmp_path / "r", env, oracle(env), strategy=given, progress=False
+    ).close()
+    with pytest.raises(IncompatibleRunDirError, match=r"strategy: stored .*'scores_from': 'all'"):
+        ConfidentTeacher.resume(
+            tmp_path / "r",
+            env,
+            oracle(env),
+            strategy=NoveltyGated(warmup=3, min_history=3, scores_from="agent"),
+            progress=False,
+        )
+
+
 def test_novelty_asks_about_its_target_rate_after_warmup():
     env = rare_regions_world(episode_length=20, spread=1.5)
     s = NoveltyGated(target_rate=0.2, window=100, warmup=10, min_history=10)
@@ -247,6 +379,7 @@ def test_baselines_roundtrip_through_their_config():
         DAgger(beta0=0.9, decay=0.7, iteration_steps=3, seed=5),
         HGDAgger(warmup=4),
         NoveltyGated(target_rate=0.05, window=50, warmup=2, min_history=7),
+        NoveltyGated(min_history=3, scores_from="agent"),
     ):
         again = strategy_from_config(s.to_config())
         assert type(again) is type(s) and again.to_config() == s.to_config()

@@ -5141,6 +5141,8 @@ def resume_problems(
         problems += _model_problems(stored, model_class, model_args, model_type)
     if strategy is not None:
         want = stored_strategy(stored)
+        # (a subclass's own to_config naming "NoveltyGated" may lack the key: read alike)
+        strategy = _with_added_keys(strategy)
         if strategy.get("custom") or want.get("custom"):
             # a session stored before a subclass keeping its parent's to_config was stored as
             # custom holds the parent's dict: the subclass passed resumes it, as it did then.
@@ -5489,11 +5491,31 @@ def _as_stored_before(config: dict[str, Any]) -> dict[str, Any]:
     return config
 
 
+# keys a shipped strategy's to_config gained after sessions were first stored, each with the
+# value a session stored without it taught with (NoveltyGated's scores_from: 2026-11-28)
+_ADDED_STRATEGY_KEYS: dict[str, dict[str, Any]] = {"NoveltyGated": {"scores_from": "all"}}
+
+
+def _with_added_keys(config: dict[str, Any]) -> dict[str, Any]:
+    """A shipped strategy's config (also as a custom subclass's ``"inherited"`` dict) with the
+    keys :data:`_ADDED_STRATEGY_KEYS` names that it lacks, at the value it taught with."""
+    out = dict(config)
+    if not out.get("custom"):
+        for key, value in _ADDED_STRATEGY_KEYS.get(str(out.get("type")), {}).items():
+            out.setdefault(key, value)
+    inherited = out.get("inherited")
+    if isinstance(inherited, dict):
+        out["inherited"] = _with_added_keys(inherited)
+    return out
+
+
 def stored_strategy(stored: dict[str, Any]) -> dict[str, Any]:
     """The strategy config of a session; a format-1 session (no ``strategy`` entry) used
-    confident execution with its stored rule."""
+    confident execution with its stored rule. A key a shipped strategy's ``to_config`` gained
+    since the session was stored reads as the value it taught with (a NoveltyGated session
+    stored without ``scores_from``: ``"all"``)."""
     if "strategy" in stored:
-        return dict(stored["strategy"])
+        return _with_added_keys(dict(stored["strategy"]))
     return {"type": "ConfidentExecution", "rule": stored["rule"], "relabel": False}
 
 
