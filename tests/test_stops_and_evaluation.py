@@ -467,6 +467,22 @@ def test_a_session_without_runs_jsonl_is_counted_over_its_last_writers_steps(tmp
         assert back.stop_reason == "autonomous_episodes"
 
 
+def test_a_session_without_runs_jsonl_is_counted_from_its_last_writers_first_step(tmp_path):
+    """The same two run() calls made by two writers (the second a resume) in a session
+    without runs.jsonl: the streak is counted from where the last writer began (step
+    _STREAK_AT - 10: 1 episode in a row), not from step 0 (which reads the 2 episodes of the
+    first writer and the 1 of the second as a streak of 3 the session never met)."""
+    run_dir = tmp_path / "s"
+    _chunked_session(run_dir, {"max_steps": _STREAK_AT - 10})
+    with _resumed(run_dir) as ct:
+        ct.run(max_steps=_STREAK_AT)
+        assert (ct.stop_reason, ct.autonomous_episodes_streak) == ("max_steps", 1)
+    (run_dir / "runs.jsonl").unlink()
+    assert describe(run_dir).streak_met is None
+    with _resumed(run_dir) as back:
+        assert back.stop_reason is None
+
+
 class _ResetFails(gym.Wrapper):
     def reset(self, **kw):
         raise OSError("simulator connection lost")
