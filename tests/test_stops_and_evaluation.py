@@ -7,6 +7,7 @@ import dataclasses
 import json
 import os
 import re
+import shutil
 import signal
 import sys
 import warnings
@@ -29,6 +30,7 @@ from torchcbl import (
     evaluate_policy,
     load_records,
 )
+from torchcbl.session import repair_journal
 
 
 class _Unjudged(gym.Wrapper):
@@ -481,6 +483,53 @@ def test_a_session_without_runs_jsonl_is_counted_from_its_last_writers_first_ste
     assert describe(run_dir).streak_met is None
     with _resumed(run_dir) as back:
         assert back.stop_reason is None
+
+
+def test_a_log_cut_back_and_taught_on_counts_its_streak_from_the_last_run_recorded(tmp_path):
+    """runs.jsonl's last record says where the last run() began, not its highest: a log cut
+    back by repair_journal below where a run() had begun, then taught on, holds that run()'s
+    record (now inside the log again) before the new one's, which begins lower. The session
+    is copied while a run() from step 230 is under way with steps 170 on only in the journal
+    (as a kill leaves it); the copy's journal loses step 170's line, repair_journal cuts the
+    log back to 170 steps, and a resume's run() from 170 meets its streak of 3 episodes, the
+    first of which began before step 230: done, counted from 170 (from 230: 2 episodes)."""
+    source, copy = tmp_path / "a", tmp_path / "b"
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=3)
+
+    def copy_while_running(record):
+        if record.step == 231:
+            shutil.copytree(source, copy)
+
+    with ConfidentTeacher(
+        world,
+        oracle(world),
+        config=config,
+        run_dir=source,
+        progress=False,
+        commit_every=10**6,  # the steps after run()'s flush stay in the journal alone
+        on_step=copy_while_running,
+    ) as ct:
+        ct.run(max_steps=170)
+        while ct.n_steps < 230:
+            ct.step()
+        ct.run()
+    assert [r["first_step"] for r in _runs(copy)] == [0, 230]
+    journal = copy / "steps.journal"
+    lines = journal.read_bytes().split(b"\n")
+    assert lines[0].startswith(b'["s",170,'), lines[0]
+    journal.write_bytes(b"\n".join(lines[1:]))  # step 170's line is gone
+    repair_journal(copy)
+    with _resumed(copy) as ct:
+        assert (ct.n_steps, ct.stop_reason) == (170, None)
+        ct.run()
+        n = ct.n_steps
+        assert ct.stop_reason == "autonomous_episodes"
+    assert n - 30 < 230 < n  # (the premise: the streak's first episode began before 230)
+    assert [r["first_step"] for r in _runs(copy)] == [0, 230, 170]
+    assert describe(copy).streak_met == "autonomous_episodes"
+    with _resumed(copy) as back:
+        assert back.stop_reason == "autonomous_episodes"
 
 
 class _ResetFails(gym.Wrapper):
