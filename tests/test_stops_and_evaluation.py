@@ -569,6 +569,31 @@ def test_a_run_record_past_the_logs_end_is_passed_over(tmp_path):
 
 
 @pytest.mark.parametrize(
+    "torn, noted",
+    [(b'{"first_step": ', []), (b"x" * 5000, [1])],
+    ids=["torn-first-line", "torn-line-over-4kb"],
+)
+def test_a_run_records_itself_on_a_line_of_its_own_after_a_torn_last_line(tmp_path, torn, noted):
+    """A runs.jsonl ending in a line with no newline (a kill mid-append): a torn line of a
+    run() record (here the file's only line, which has no newline before it) is cut off
+    without a note; a line over 4 KB, longer than any record, is kept, as a bad line noted,
+    and the new record starts a line of its own after it. Either way the next run()'s
+    record is read."""
+    run_dir = tmp_path / "s"
+    _chunked_session(run_dir, {"max_steps": 10})
+    runs = run_dir / "runs.jsonl"
+    runs.write_bytes(torn)
+    with _resumed(run_dir) as ct:
+        ct.run(max_steps=20)
+    lines = runs.read_bytes().split(b"\n")
+    assert lines[-1] == b"" and lines[-2].startswith(b'{"first_step": 10, '), lines[-2][:80]
+    assert json.loads(lines[-2])["stops"]["max_steps"] == 20
+    assert lines[:-2] == ([torn] if noted else [])
+    said = (f"{runs}: lines {noted} are not a run()'s record",) if noted else ()
+    assert describe(run_dir).notes == said
+
+
+@pytest.mark.parametrize(
     "budget, says",
     [
         (
