@@ -623,6 +623,21 @@ def test_a_run_that_takes_no_step_because_a_budget_was_reached_says_so(budget, s
     assert ct.n_steps == 12
 
 
+def test_a_step_after_a_run_that_took_no_step_records_no_run(tmp_path):
+    """A run() records where it begins before its first step; one that took none (its
+    budget already reached) records nothing, and a step() taken after it, outside any
+    run(), records no run() either: runs.jsonl holds the run() calls that took steps."""
+    run_dir = tmp_path / "s"
+    world = rare_regions_world(episode_length=10)
+    with ConfidentTeacher(world, oracle(world), run_dir=run_dir, progress=False) as ct:
+        ct.run(max_steps=10)
+        with pytest.warns(UserWarning, match="max_steps=5 was already reached"):
+            ct.run(max_steps=5)
+        ct.step()
+        assert ct.n_steps == 11
+    assert [(r["first_step"], r["stops"]["max_steps"]) for r in _runs(run_dir)] == [(0, 10)]
+
+
 def test_evaluate_policy_seeds_every_episode_from_a_list():
     env = rare_regions_world(episode_length=5)
     records = evaluate_policy(oracle(env), env, seed=[3, 7, 3], uses_info=True)
