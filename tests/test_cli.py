@@ -1807,6 +1807,29 @@ def test_show_and_teach_resume_of_no_session_say_how_to_start_one_at_the_command
     assert len(load_records(run)) == 3
 
 
+def test_teach_resume_of_a_folder_of_ones_own_files_does_not_offer_a_start_there(
+    tmp_path, monkeypatch, capsys
+):
+    """`teach --resume` of a folder holding no session says to leave out --resume only where
+    a new session may start; a folder of one's own files (x.txt) is refused for a start too,
+    so the resume's refusal does not offer it: each command is one line (exit 2) and the
+    folder is left as it was."""
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "mine"
+    run.mkdir()
+    (run / "x.txt").write_text("my notes\n")
+    before = _bytes_of(run)
+    for argv, says in (
+        (["--resume"], f"{run} holds no config.json; expected a teaching session directory"),
+        (["--steps", "3"], f"{run} holds other files (x.txt) and no session"),
+    ):
+        assert main(["teach", "corridor", "--run-dir", str(run), *argv]) == 2
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.count("\n") == 1, captured
+        assert says in captured.err and "leave out --resume" not in captured.err, captured.err
+    assert _bytes_of(run) == before
+
+
 def _bytes_of(run: Path) -> dict[str, tuple[bytes | None, int]]:
     """{relative path: (its bytes, None for a folder; its mtime in ns)} of ``run`` and
     everything under it (a file written again with the same bytes, or one made and removed
