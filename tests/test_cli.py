@@ -2976,6 +2976,26 @@ def test_teach_resume_of_a_session_being_taught_elsewhere_says_what_to_do_at_the
     assert "(process " in err, err  # the holder, as writer.lock names it
 
 
+def test_teach_resume_of_a_done_session_another_writer_holds_says_it_is_held(
+    tmp_path, monkeypatch, capsys
+):
+    """A done session that another process holds (writer.lock locked: e.g. a Python resume
+    teaching it on under a raised stop) is not refused as done from a log that writer is
+    changing: `teach --resume` says it is being taught by another writer, in one line."""
+    import fcntl
+
+    run = tmp_path / "session"
+    _done_corridor_session(run, monkeypatch)
+    capsys.readouterr()
+    with open(run / "writer.lock", "r+", encoding="utf-8") as other:
+        fcntl.flock(other.fileno(), fcntl.LOCK_EX)
+        assert main(["teach", "corridor", "--resume", "--run-dir", str(run)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured
+    assert "is being taught by another writer" in captured.err, captured.err
+    assert "is done" not in captured.err, captured.err
+
+
 def test_teach_counts_one_demonstration_and_one_step_in_the_singular(tmp_path, monkeypatch, capsys):
     """A teach stopped after its first key said "1 demonstrations over 1 steps saved"."""
     monkeypatch.setattr(sys, "stdin", io.StringIO("w\n"))
