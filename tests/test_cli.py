@@ -1807,6 +1807,29 @@ def test_show_and_teach_resume_of_no_session_say_how_to_start_one_at_the_command
     assert len(load_records(run)) == 3
 
 
+def test_teach_resume_of_a_folder_of_ones_own_files_does_not_offer_a_start_there(
+    tmp_path, monkeypatch, capsys
+):
+    """`teach --resume` of a folder holding no session says to leave out --resume only where
+    a new session may start; a folder of one's own files (x.txt) is refused for a start too,
+    so the resume's refusal does not offer it: each command is one line (exit 2) and the
+    folder is left as it was."""
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "mine"
+    run.mkdir()
+    (run / "x.txt").write_text("my notes\n")
+    before = _bytes_of(run)
+    for argv, says in (
+        (["--resume"], f"{run} holds no config.json; expected a teaching session directory"),
+        (["--steps", "3"], f"{run} holds other files (x.txt) and no session"),
+    ):
+        assert main(["teach", "corridor", "--run-dir", str(run), *argv]) == 2
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.count("\n") == 1, captured
+        assert says in captured.err and "leave out --resume" not in captured.err, captured.err
+    assert _bytes_of(run) == before
+
+
 def _bytes_of(run: Path) -> dict[str, tuple[bytes | None, int]]:
     """{relative path: (its bytes, None for a folder; its mtime in ns)} of ``run`` and
     everything under it (a file written again with the same bytes, or one made and removed
@@ -2951,6 +2974,26 @@ def test_teach_resume_of_a_session_being_taught_elsewhere_says_what_to_do_at_the
     assert "with-block" not in err and "close()" not in err, err
     assert "is being taught by another writer" in err and "q or Ctrl-C" in err, err
     assert "(process " in err, err  # the holder, as writer.lock names it
+
+
+def test_teach_resume_of_a_done_session_another_writer_holds_says_it_is_held(
+    tmp_path, monkeypatch, capsys
+):
+    """A done session that another process holds (writer.lock locked: e.g. a Python resume
+    teaching it on under a raised stop) is not refused as done from a log that writer is
+    changing: `teach --resume` says it is being taught by another writer, in one line."""
+    import fcntl
+
+    run = tmp_path / "session"
+    _done_corridor_session(run, monkeypatch)
+    capsys.readouterr()
+    with open(run / "writer.lock", "r+", encoding="utf-8") as other:
+        fcntl.flock(other.fileno(), fcntl.LOCK_EX)
+        assert main(["teach", "corridor", "--resume", "--run-dir", str(run)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured
+    assert "is being taught by another writer" in captured.err, captured.err
+    assert "is done" not in captured.err, captured.err
 
 
 def test_teach_counts_one_demonstration_and_one_step_in_the_singular(tmp_path, monkeypatch, capsys):

@@ -318,6 +318,44 @@ def test_journal_write_fails_disk_full(tmp_path, monkeypatch, which, short):
     goes_on(ct, env, run)
 
 
+@pytest.mark.parametrize("short", [False, True], ids=["enospc", "short-write"])
+def test_a_run_record_that_cannot_be_written_leaves_runs_jsonl_as_it_was(
+    tmp_path, monkeypatch, short
+):
+    """A run() records where it begins in runs.jsonl before its first step; a write of
+    that line that fails (the disk full: nothing written, or part of the line) raises
+    SessionWriteError naming the file, takes no step, and leaves runs.jsonl byte for byte
+    as it was (a part written is cut off); once writes go through the session goes on."""
+    run = tmp_path / "run"
+    ct, env = session(run)
+    ct.run(max_steps=10)
+    runs = run / "runs.jsonl"
+    before = runs.read_bytes()
+    real = os.write
+
+    def write(fd, data):
+        if os.readlink(f"/proc/self/fd/{fd}") == str(runs):
+            if short:  # the disk fills up mid-line: part of it reaches the file
+                return real(fd, data[: len(data) // 2])
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real(fd, data)
+
+    monkeypatch.setattr(os, "write", write)
+    with pytest.raises(SessionWriteError) as err:
+        ct.run(max_steps=20)
+    monkeypatch.undo()
+    msg = str(err.value)
+    assert f"writing {runs} failed" in msg and "recording the run() from step 10" in msg, msg
+    assert "That run() took no step" in msg and err.value.errno == errno.ENOSPC, msg
+    assert ct.n_steps == 10 and runs.read_bytes() == before
+    goes_on(ct, env, run)
+    assert [json.loads(line)["first_step"] for line in runs.read_text().splitlines()] == [
+        0,
+        10,
+        22,
+    ]
+
+
 class FullDisk:
     """A connection proxy whose COMMITs fail like SQLite's on a full disk (SQLite rolls the
     transaction back itself), ``n`` times."""

@@ -7,6 +7,7 @@ import dataclasses
 import json
 import os
 import re
+import shutil
 import signal
 import sys
 import warnings
@@ -29,6 +30,7 @@ from torchcbl import (
     evaluate_policy,
     load_records,
 )
+from torchcbl.session import repair_journal
 
 
 class _Unjudged(gym.Wrapper):
@@ -467,6 +469,69 @@ def test_a_session_without_runs_jsonl_is_counted_over_its_last_writers_steps(tmp
         assert back.stop_reason == "autonomous_episodes"
 
 
+def test_a_session_without_runs_jsonl_is_counted_from_its_last_writers_first_step(tmp_path):
+    """The same two run() calls made by two writers (the second a resume) in a session
+    without runs.jsonl: the streak is counted from where the last writer began (step
+    _STREAK_AT - 10: 1 episode in a row), not from step 0 (which reads the 2 episodes of the
+    first writer and the 1 of the second as a streak of 3 the session never met)."""
+    run_dir = tmp_path / "s"
+    _chunked_session(run_dir, {"max_steps": _STREAK_AT - 10})
+    with _resumed(run_dir) as ct:
+        ct.run(max_steps=_STREAK_AT)
+        assert (ct.stop_reason, ct.autonomous_episodes_streak) == ("max_steps", 1)
+    (run_dir / "runs.jsonl").unlink()
+    assert describe(run_dir).streak_met is None
+    with _resumed(run_dir) as back:
+        assert back.stop_reason is None
+
+
+def test_a_log_cut_back_and_taught_on_counts_its_streak_from_the_last_run_recorded(tmp_path):
+    """runs.jsonl's last record says where the last run() began, not its highest: a log cut
+    back by repair_journal below where a run() had begun, then taught on, holds that run()'s
+    record (now inside the log again) before the new one's, which begins lower. The session
+    is copied while a run() from step 230 is under way with steps 170 on only in the journal
+    (as a kill leaves it); the copy's journal loses step 170's line, repair_journal cuts the
+    log back to 170 steps, and a resume's run() from 170 meets its streak of 3 episodes, the
+    first of which began before step 230: done, counted from 170 (from 230: 2 episodes)."""
+    source, copy = tmp_path / "a", tmp_path / "b"
+    world = rare_regions_world(episode_length=10)
+    config = TeachingConfig(noninteractive=False, autonomous_episodes_to_stop=3)
+
+    def copy_while_running(record):
+        if record.step == 231:
+            shutil.copytree(source, copy)
+
+    with ConfidentTeacher(
+        world,
+        oracle(world),
+        config=config,
+        run_dir=source,
+        progress=False,
+        commit_every=10**6,  # the steps after run()'s flush stay in the journal alone
+        on_step=copy_while_running,
+    ) as ct:
+        ct.run(max_steps=170)
+        while ct.n_steps < 230:
+            ct.step()
+        ct.run()
+    assert [r["first_step"] for r in _runs(copy)] == [0, 230]
+    journal = copy / "steps.journal"
+    lines = journal.read_bytes().split(b"\n")
+    assert lines[0].startswith(b'["s",170,'), lines[0]
+    journal.write_bytes(b"\n".join(lines[1:]))  # step 170's line is gone
+    repair_journal(copy)
+    with _resumed(copy) as ct:
+        assert (ct.n_steps, ct.stop_reason) == (170, None)
+        ct.run()
+        n = ct.n_steps
+        assert ct.stop_reason == "autonomous_episodes"
+    assert n - 30 < 230 < n  # (the premise: the streak's first episode began before 230)
+    assert [r["first_step"] for r in _runs(copy)] == [0, 230, 170]
+    assert describe(copy).streak_met == "autonomous_episodes"
+    with _resumed(copy) as back:
+        assert back.stop_reason == "autonomous_episodes"
+
+
 class _ResetFails(gym.Wrapper):
     def reset(self, **kw):
         raise OSError("simulator connection lost")
@@ -504,6 +569,31 @@ def test_a_run_record_past_the_logs_end_is_passed_over(tmp_path):
 
 
 @pytest.mark.parametrize(
+    "torn, noted",
+    [(b'{"first_step": ', []), (b"x" * 5000, [1])],
+    ids=["torn-first-line", "torn-line-over-4kb"],
+)
+def test_a_run_records_itself_on_a_line_of_its_own_after_a_torn_last_line(tmp_path, torn, noted):
+    """A runs.jsonl ending in a line with no newline (a kill mid-append): a torn line of a
+    run() record (here the file's only line, which has no newline before it) is cut off
+    without a note; a line over 4 KB, longer than any record, is kept, as a bad line noted,
+    and the new record starts a line of its own after it. Either way the next run()'s
+    record is read."""
+    run_dir = tmp_path / "s"
+    _chunked_session(run_dir, {"max_steps": 10})
+    runs = run_dir / "runs.jsonl"
+    runs.write_bytes(torn)
+    with _resumed(run_dir) as ct:
+        ct.run(max_steps=20)
+    lines = runs.read_bytes().split(b"\n")
+    assert lines[-1] == b"" and lines[-2].startswith(b'{"first_step": 10, '), lines[-2][:80]
+    assert json.loads(lines[-2])["stops"]["max_steps"] == 20
+    assert lines[:-2] == ([torn] if noted else [])
+    said = (f"{runs}: lines {noted} are not a run()'s record",) if noted else ()
+    assert describe(run_dir).notes == said
+
+
+@pytest.mark.parametrize(
     "budget, says",
     [
         (
@@ -531,6 +621,21 @@ def test_a_run_that_takes_no_step_because_a_budget_was_reached_says_so(budget, s
         warnings.simplefilter("error")
         ct.run(max_steps=12)
     assert ct.n_steps == 12
+
+
+def test_a_step_after_a_run_that_took_no_step_records_no_run(tmp_path):
+    """A run() records where it begins before its first step; one that took none (its
+    budget already reached) records nothing, and a step() taken after it, outside any
+    run(), records no run() either: runs.jsonl holds the run() calls that took steps."""
+    run_dir = tmp_path / "s"
+    world = rare_regions_world(episode_length=10)
+    with ConfidentTeacher(world, oracle(world), run_dir=run_dir, progress=False) as ct:
+        ct.run(max_steps=10)
+        with pytest.warns(UserWarning, match="max_steps=5 was already reached"):
+            ct.run(max_steps=5)
+        ct.step()
+        assert ct.n_steps == 11
+    assert [(r["first_step"], r["stops"]["max_steps"]) for r in _runs(run_dir)] == [(0, 10)]
 
 
 def test_evaluate_policy_seeds_every_episode_from_a_list():
