@@ -275,7 +275,8 @@ def test_a_resumed_session_that_had_met_its_streak_takes_no_step_and_says_so(tmp
 
 def test_a_resumed_session_that_had_met_its_autonomous_steps_takes_no_step(tmp_path):
     """The same for autonomous_steps_to_stop: a resume of a session that stopped on it takes
-    no step and says how many autonomous steps the log ends on."""
+    no step, and its warning counts the autonomous steps its log ends on (not its episodes);
+    the longer stop it suggests teaches on."""
     run_dir = tmp_path / "s"
     world = rare_regions_world(episode_length=10)
     config = TeachingConfig(noninteractive=False, autonomous_steps_to_stop=15)
@@ -284,13 +285,18 @@ def test_a_resumed_session_that_had_met_its_autonomous_steps_takes_no_step(tmp_p
     ) as ct:
         ct.run()
         n = ct.n_steps
+    assert all(r.teacher_action is None for r in ct.records[-15:])
     with _resumed(run_dir) as ct:
         assert ct.stop_reason == "autonomous_steps"
-        with pytest.warns(UserWarning, match=r"autonomous_steps_to_stop=15 was already met"):
+        with pytest.warns(UserWarning) as caught:
             ct.run()
         assert ct.n_steps == n and ct.stop_reason == "autonomous_steps"
-        ct.run(autonomous_steps_to_stop=20)
-        assert ct.n_steps >= n + 20 and ct.stop_reason == "autonomous_steps"
+        (msg,) = [str(w.message) for w in caught]
+        assert msg.startswith("run() took no step: autonomous_steps_to_stop=15 was already met")
+        assert "this resumed session's log ends on 15 autonomous steps in a row" in msg, msg
+        assert msg.endswith("e.g. run(autonomous_steps_to_stop=115)."), msg
+        ct.run(autonomous_steps_to_stop=115)
+        assert ct.stop_reason == "autonomous_steps" and ct.n_steps >= n + 115
 
 
 def test_a_resumed_done_session_teaches_on_in_a_run_after_one_that_took_steps(tmp_path):
@@ -307,28 +313,6 @@ def test_a_resumed_done_session_teaches_on_in_a_run_after_one_that_took_steps(tm
         ct.run()
         assert ct.stop_reason == "autonomous_episodes" and ct.n_steps >= n + 30
         assert ct.autonomous_episodes_streak == 3
-
-
-def test_a_resumed_session_that_had_met_its_autonomous_steps_says_its_streak_of_steps(tmp_path):
-    """The warning of a resumed session done on autonomous_steps_to_stop counts the autonomous
-    steps its log ends on (not its episodes), and the longer stop it suggests teaches on."""
-    run_dir = tmp_path / "s"
-    world = rare_regions_world(episode_length=10)
-    config = TeachingConfig(noninteractive=False, autonomous_steps_to_stop=15)
-    with ConfidentTeacher(
-        world, oracle(world), config=config, run_dir=run_dir, progress=False
-    ) as ct:
-        ct.run()
-        n = ct.n_steps
-    assert all(r.teacher_action is None for r in ct.records[-15:])
-    with _resumed(run_dir) as ct:
-        with pytest.warns(UserWarning) as caught:
-            ct.run()
-        (msg,) = [str(w.message) for w in caught]
-        assert "this resumed session's log ends on 15 autonomous steps in a row" in msg, msg
-        assert msg.endswith("e.g. run(autonomous_steps_to_stop=115)."), msg
-        ct.run(autonomous_steps_to_stop=115)
-        assert ct.stop_reason == "autonomous_steps" and ct.n_steps >= n + 115
 
 
 def test_a_session_whose_env_raised_on_the_step_that_met_its_streak_is_not_done(tmp_path):
