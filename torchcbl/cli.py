@@ -1015,8 +1015,9 @@ def _teach_epilog() -> str:
     )
     corridor, driving = _TEACH["corridor"][3], _TEACH["driving"][3]
     return (
-        "At each request a status line says where the session stands: decision #N (the "
-        "requests you have answered), step (the steps taken), phase (noninteractive: the agent "
+        "At each request a status line says where the session stands: decision #N (this "
+        "request's number: one more than the requests you have answered), step (the steps "
+        "taken), phase (noninteractive: the agent "
         "asks you at every step; confident: it acts on its own where it is sure and asks you "
         "where it is not), demonstrations (the keys you gave), prediction accuracy (the share "
         "of your last W demonstrations on which the agent's own choice, made before it learned "

@@ -52,8 +52,10 @@ class GreedyPolicy:
     its first fit (``load_model(run_dir, n_demonstrations=0)``, stage 0 of
     :func:`~torchcbl.load_models`, for a session without prior demonstrations or a fitted
     starting model). Then calling the policy raises RuntimeError, and so does
-    :func:`evaluate_policy` given it, before it resets the env (where a subclass has a
-    ``__call__`` of its own, that is called and decides); :meth:`classify` reports the model's
+    :func:`evaluate_policy` given it, before it resets the env where the model says
+    ``is_fitted`` False (a model of one's own without that flag: at the first step, once its
+    answer is -1; where a subclass has a ``__call__`` of its own, that is called and
+    decides); :meth:`classify` reports the model's
     Classification, action -1, as ``policy.model.classify(batch)`` does for a batch [N, D].
     """
 
@@ -355,9 +357,9 @@ def evaluate_policy(
     Records have ``phase="evaluation"``, ``autonomous=True`` and ``episode`` counting from 0;
     a :class:`GreedyPolicy` (a subclass too, whose own ``__call__`` then gives the action) also
     fills the confidence fields, any other callable leaves them None. A GreedyPolicy whose
-    model is not fitted (a session's stage 0: see the class) is a RuntimeError before the env
-    is reset. :func:`episode_results`
-    turns them into per-episode returns and successes.
+    model is not fitted (a session's stage 0: see the class) is a RuntimeError, before the env
+    is reset where the model says ``is_fitted`` False (else at the first step).
+    :func:`episode_results` turns them into per-episode returns and successes.
 
     The env is reset first. Evaluating on the env a :class:`~torchcbl.teaching.ConfidentTeacher`
     teaches on, between its steps, moves that env away from the observation the loop holds:
