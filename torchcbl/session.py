@@ -5170,6 +5170,22 @@ class _NotGiven:
 _NOT_GIVEN = _NotGiven()
 
 
+class _NoCap:
+    """A step cap (``max_episode_steps``) of None, as a refusal writes it: no cap, not an
+    argument left out."""
+
+    def __repr__(self) -> str:
+        return "no cap"
+
+
+_NO_CAP = _NoCap()
+
+
+def _cap_text(cap: int | None) -> int | _NoCap:
+    """A step cap as a refusal writes it: the number, or "no cap" for None."""
+    return _NO_CAP if cap is None else cap
+
+
 def _env_problems(
     senv: dict[str, Any],
     env_id: str | None,
@@ -5235,11 +5251,12 @@ def _env_problems(
         )
     has_cap = "max_episode_steps" in senv
     want = senv.get("max_episode_steps")
-    if has_cap and want != cap:
+    if has_cap and want != cap:  # (written with "no cap" for None, on either side)
+        caps = (_cap_text(want), _cap_text(cap))
         if senv.get("id"):  # as gymnasium.make's argument
-            kw_differ["max_episode_steps"] = (want, cap)
+            kw_differ["max_episode_steps"] = caps
         else:  # an env made directly: its TimeLimit's cap (or its own)
-            differ.append(f"env step cap (max_episode_steps, stored, given): {(want, cap)}")
+            differ.append(f"env step cap (max_episode_steps, stored, given): {caps}")
     if kw_differ:
         differ.append(f"env kwargs (stored, given): {kw_differ}")
     if not differ:
