@@ -192,6 +192,20 @@ def test_a_refusal_says_an_argument_one_side_did_not_give_was_not_given(tmp_path
     assert "'max_episode_steps': (30, no cap)" in msg and "None" not in msg, msg
 
 
+def test_a_refusal_of_an_env_of_other_sizes_counts_one_feature_as_one(tmp_path):
+    """A resume with an env of other sizes said "the session has 1 features" of a one-feature
+    session; it says "1 feature"."""
+
+    class Wide(Other):
+        def __init__(self) -> None:
+            super().__init__()
+            self.observation_space = spaces.Box(-5.0, 5.0, (2,), np.float32)
+
+    run = tmp_path / "run"
+    _teach(run, gym.make(LINE_ID, max_episode_steps=30))
+    _refused(run, Wide(), "the session has 1 feature and 2 actions, the given env 2 and 2")
+
+
 class Stride(Line):
     """A Line whose step is an argument of its constructor the observation space does not
     show; ``described`` (a class attribute): whether its ``describe_inputs()`` gives it."""

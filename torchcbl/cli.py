@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from torchcbl._checkpoints import DEFAULT_KEEP_CHECKPOINTS, is_keep_count
+from torchcbl._text import counted as _counted
 from torchcbl._text import one_line as _one_line
 
 _DOMAINS = {
@@ -523,9 +524,8 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
     if space is not None:  # (a session too old to have stored it goes by its shape alone)
         by_space = {k: d for k, d in by_space.items() if k[2] == space}
     domain = _ENV_IDS.get(env.get("id") or "") or next(iter(by_space.values()), None)
-    described = f"{_env_named(env)}, {shape[0]} features, {shape[1]} actions" + (
-        f", observations {space}" if space else ""
-    )
+    sizes = f"{_counted(shape[0], 'feature')}, {_counted(shape[1], 'action')}"
+    described = f"{_env_named(env)}, {sizes}" + (f", observations {space}" if space else "")
     if domain is None:
         raise _UsageError(
             f"{session} was taught in an env torchcbl does not know ({described}); "

@@ -213,6 +213,7 @@ import torch
 
 from torchcbl._checkpoints import is_keep_count
 from torchcbl._durable import fsync_directory, write_durably
+from torchcbl._text import counted
 from torchcbl.errors import (
     CorruptSessionError,
     IncompatibleRunDirError,
@@ -4222,7 +4223,7 @@ class SessionSummary:
         per-block) requests for the first and last ``ends`` episodes or blocks."""
         lines = [f"{self.run_dir}: teaching session ({self.format}), {self._state_text()}"]
         env = f"{self.env_id or 'made directly (no gymnasium id)'}, "
-        env += f"{self.n_features} features, {self.n_actions} actions"
+        env += f"{counted(self.n_features, 'feature')}, {counted(self.n_actions, 'action')}"
         start = ", started from a fitted model" if self.starts_fitted else ""
         lines.append(f"env:        {env}")
         lines.append(f"class:      {self.env_class or _NOT_RECORDED}")
@@ -5096,8 +5097,8 @@ def resume_problems(
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
         problems.append(
-            f"env: the session has {senv['n_features']} features and {senv['n_actions']} "
-            f"actions, the given env {n_features} and {n_actions}"
+            f"env: the session has {counted(senv['n_features'], 'feature')} and "
+            f"{counted(senv['n_actions'], 'action')}, the given env {n_features} and {n_actions}"
         )
     env_lines: list[str] = []  # (each ends saying how to make the session's env)
     if senv.get("id") and env_id and senv["id"] != env_id:
