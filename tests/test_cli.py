@@ -1812,21 +1812,44 @@ def test_teach_resume_of_a_folder_of_ones_own_files_does_not_offer_a_start_there
 ):
     """`teach --resume` of a folder holding no session says to leave out --resume only where
     a new session may start; a folder of one's own files (x.txt) is refused for a start too,
-    so the resume's refusal does not offer it: each command is one line (exit 2) and the
-    folder is left as it was."""
+    so the resume's refusal does not offer it: it says that no new session can start there
+    either, why, and what to do (another --run-dir, new or empty). Each command is one line
+    (exit 2) and the folder is left as it was."""
     _scripted_corridor_person(monkeypatch)
     run = tmp_path / "mine"
     run.mkdir()
     (run / "x.txt").write_text("my notes\n")
     before = _bytes_of(run)
+    start_refused = f"{run} holds other files (x.txt) and no session"
     for argv, says in (
-        (["--resume"], f"{run} holds no config.json; expected a teaching session directory"),
-        (["--steps", "3"], f"{run} holds other files (x.txt) and no session"),
+        (["--resume"], f"--resume: there is no session to resume in {run} (it holds no "),
+        (["--resume"], "no new session can start there either: " + start_refused),
+        (["--resume"], "new or empty: choose another --run-dir"),
+        (["--steps", "3"], start_refused),
     ):
         assert main(["teach", "corridor", "--run-dir", str(run), *argv]) == 2
         captured = capsys.readouterr()
         assert captured.out == "" and captured.err.count("\n") == 1, captured
         assert says in captured.err and "leave out --resume" not in captured.err, captured.err
+    assert _bytes_of(run) == before
+
+
+def test_teach_resume_of_a_session_log_without_its_config_says_to_put_it_back(
+    tmp_path, monkeypatch, capsys
+):
+    """`teach --resume` of a folder holding a session's log but no config.json (moved away)
+    says to put the config back, not only that the folder is no session: one line, exit 2,
+    the folder unchanged."""
+    _scripted_corridor_person(monkeypatch)
+    run = tmp_path / "lost"
+    run.mkdir()
+    (run / "steps.sqlite").write_bytes(b"")
+    before = _bytes_of(run)
+    assert main(["teach", "corridor", "--resume", "--run-dir", str(run)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured
+    assert "no new session can start there either" in captured.err, captured.err
+    assert "Put it back to continue that session" in captured.err, captured.err
     assert _bytes_of(run) == before
 
 

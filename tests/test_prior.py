@@ -213,6 +213,24 @@ def test_bad_prior_demonstrations_say_what_was_expected(tmp_path, demos, error, 
     assert not (tmp_path / "run").exists()  # refused before a session was written
 
 
+def test_a_prior_of_other_width_for_a_one_feature_env_says_one_feature(tmp_path):
+    """A prior whose rows are not as wide as a one-feature env's observations said "the
+    env's 1 features"; it says "1 feature"."""
+    from _toy_envs import ClusterWorld
+
+    env = ClusterWorld([[0.0], [5.0]], [0, 1], [0.5, 0.5], episode_length=5)
+    with pytest.raises(ValueError) as err:
+        ConfidentTeacher(
+            env,
+            oracle(env),
+            prior_demonstrations=(np.zeros((3, 2)), np.zeros(3, int)),
+            run_dir=tmp_path / "run",
+            progress=False,
+        )
+    assert "shape [N, 1] (the env's 1 feature), got float64 (3, 2)" in str(err.value), err.value
+    assert not (tmp_path / "run").exists()
+
+
 @pytest.mark.parametrize("kind", ["npz", "dict", "array", "triple"])
 def test_a_prior_that_is_not_a_pair_is_described_in_one_line_with_the_fix(tmp_path, kind):
     """A prior given as the .npz file `teach --prior-demonstrations` reads (numpy.load), a dict

@@ -120,7 +120,8 @@ def test_a_session_made_with_an_id_refuses_an_env_made_directly_that_is_not_its_
     _teach(run, gym.make(LINE_ID, max_episode_steps=30))
     msg = _refused(run, Other(), "Line", "Other", "Box(0.0, 10.0, (1,), float32)", "Box(-5.0")
     assert msg.startswith(f"cannot resume the session in {run}: ") and "\n" not in msg
-    _refused(run, Line(), "max_episode_steps", "30")  # no cap: not the session's env
+    # no cap: not the session's env (a cap of None is written "no cap", not None)
+    _refused(run, Line(), "'max_episode_steps': (30, no cap)")
     _refused(run, gym.make(LINE_ID), "max_episode_steps")  # (as before)
     _refused(run, gym.wrappers.TimeLimit(Line(), 31), "max_episode_steps", "31")
     # the session's env made again resumes: by gymnasium.make, wrapped in what leaves its
@@ -144,6 +145,8 @@ def test_a_session_made_directly_refuses_another_env(tmp_path):
     _refused(run, gym.wrappers.TimeLimit(Other(high=10.0), 30), "Line", "Other")
     _refused(run, Line(), "max_episode_steps", "30")
     _refused(run, gym.wrappers.TimeLimit(Line(), 31), "max_episode_steps")
+    # no cap is written so, not None (which reads as an argument left out)
+    _refused(run, Line(), "env step cap (max_episode_steps, stored, given): (30, no cap)")
     _refused(run, gym.wrappers.TimeLimit(Line(n=12), 30), "Box(0.0, 12.0")
     _resumes(run, gym.wrappers.TimeLimit(Line(), 30))
     _resumes(run, gym.make(LINE_ID, max_episode_steps=30))  # the same env, made by make
@@ -172,7 +175,8 @@ def test_a_session_made_with_arguments_refuses_an_env_whose_arguments_cannot_be_
 def test_a_refusal_says_an_argument_one_side_did_not_give_was_not_given(tmp_path):
     """A gymnasium.make argument one side left to the env's default was written None in the
     refusal, ``'n': (None, 12)``, though the session ran with the default (10), not None; it
-    says "not given (the env's default)" there. An argument given as None is still None."""
+    says "not given (the env's default)" there. A step cap of None (no cap) was written None
+    too, which reads as not given: it says "no cap"."""
     run = tmp_path / "run"
     _teach(run, gym.make(LINE_ID, max_episode_steps=30))
     msg = _refused(run, gym.make(LINE_ID, n=12, max_episode_steps=30), "env kwargs (stored, ")
@@ -185,7 +189,21 @@ def test_a_refusal_says_an_argument_one_side_did_not_give_was_not_given(tmp_path
     msg = _refused(other, gym.make(LINE_ID, n=12, render_mode=None, max_episode_steps=31))
     assert "'max_episode_steps': (30, 31)" in msg, msg  # (render_mode is not compared)
     msg = _refused(run, gym.make(LINE_ID, render_mode="human", max_episode_steps=None))
-    assert "'max_episode_steps': (30, None)" in msg, msg  # None: no cap, as before
+    assert "'max_episode_steps': (30, no cap)" in msg and "None" not in msg, msg
+
+
+def test_a_refusal_of_an_env_of_other_sizes_counts_one_feature_as_one(tmp_path):
+    """A resume with an env of other sizes said "the session has 1 features" of a one-feature
+    session; it says "1 feature"."""
+
+    class Wide(Other):
+        def __init__(self) -> None:
+            super().__init__()
+            self.observation_space = spaces.Box(-5.0, 5.0, (2,), np.float32)
+
+    run = tmp_path / "run"
+    _teach(run, gym.make(LINE_ID, max_episode_steps=30))
+    _refused(run, Wide(), "the session has 1 feature and 2 actions, the given env 2 and 2")
 
 
 class Stride(Line):
@@ -621,7 +639,7 @@ def test_a_refusal_gives_the_step_cap_as_gymnasium_make_takes_it(tmp_path, monke
     _teach(run, gym.make(CAPPED_ID, course=Course(Start(3)), max_episode_steps=-1))
     assert load_config(run)["env"]["max_episode_steps"] is None
     other = gym.make(CAPPED_ID, course=Course(Start(4)))
-    msg = _refused(run, other, "start.cell", "'max_episode_steps': (None, 50)")
+    msg = _refused(run, other, "start.cell", "'max_episode_steps': (no cap, 50)")
     assert f"gymnasium.make('{CAPPED_ID}', max_episode_steps=-1, course=" in msg, msg
     assert "gymnasium 1.0" not in msg, msg
     _resumes(run, _advised(msg))

@@ -162,6 +162,7 @@ def test_show_prints_the_summary_and_the_same_fields_as_json(taught, capsys):
         f"0: {s.requests_per_episode[0]}/{s.steps_per_episode[0]}, ",  # the first episodes
         f"{s.n_episodes - 1}: {s.requests_per_episode[-1]}/{s.steps_per_episode[-1]}\n",
         "interrupted: 1 step",
+        "\nenv:        made directly (no gymnasium id), 1 feature, 2 actions\n",  # not "1 features"
         f"the newest fitted on {s.last_checkpoint} labels",
         f"from step {CUT_AT}: torch ",
         "closed by its last writer (process ",
@@ -1061,12 +1062,13 @@ def test_show_names_the_env_class_and_step_cap_resume_compares(tmp_path, capsys)
 
 def test_evaluate_names_the_class_of_an_env_made_directly(tmp_path, capsys):
     """evaluate refused a session of an env of one's own made directly saying "env id None";
-    it names the env's class, which resume compares, where there is no id."""
+    it names the env's class, which resume compares, where there is no id (and counts its one
+    feature as one: it said "1 features")."""
     run = tmp_path / "run"
     _taught_in(run, Dial())
     assert main(["evaluate", str(run)]) == 2
     (line,) = capsys.readouterr().err.splitlines()
-    assert f"env {Dial.__module__}.Dial made directly (no gymnasium id), 1 features" in line
+    assert f"env {Dial.__module__}.Dial made directly (no gymnasium id), 1 feature, 2" in line
     assert "None" not in line, line
     config = json.loads((run / "config.json").read_text())
     del config["env"]["class"]

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from torchcbl._checkpoints import DEFAULT_KEEP_CHECKPOINTS, is_keep_count
+from torchcbl._text import counted as _counted
 from torchcbl._text import one_line as _one_line
 
 _DOMAINS = {
@@ -500,10 +501,16 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
                 f"{session} is not a teaching session but holds sessions: {shown}"
                 f"{' ...' if len(below) == 5 else ''}; pass one of them"
             )
-        if teach and asked is not None and _new_session_may_start(session):
-            raise _UsageError(
-                f"--resume: {session} holds no config.json, so there is no session to resume; "
-                f"{_start_without_resume(session, asked)}"
+        if teach and asked is not None:
+            refused = _new_session_refusal(session)
+            if refused is None:
+                raise _UsageError(
+                    f"--resume: {session} holds no config.json, so there is no session to "
+                    f"resume; {_start_without_resume(session, asked)}"
+                )
+            raise _UsageError(  # the start's refusal says why and what to do
+                f"--resume: there is no session to resume in {session} (it holds no "
+                f"config.json), and no new session can start there either: {refused}"
             )
         raise _UsageError(f"{session} holds no config.json; {_SESSION_HINT}")
     try:
@@ -517,9 +524,8 @@ def _session_domain(session: Path, asked: str | None, *, teach: bool = False) ->
     if space is not None:  # (a session too old to have stored it goes by its shape alone)
         by_space = {k: d for k, d in by_space.items() if k[2] == space}
     domain = _ENV_IDS.get(env.get("id") or "") or next(iter(by_space.values()), None)
-    described = f"{_env_named(env)}, {shape[0]} features, {shape[1]} actions" + (
-        f", observations {space}" if space else ""
-    )
+    sizes = f"{_counted(shape[0], 'feature')}, {_counted(shape[1], 'action')}"
+    described = f"{_env_named(env)}, {sizes}" + (f", observations {space}" if space else "")
     if domain is None:
         raise _UsageError(
             f"{session} was taught in an env torchcbl does not know ({described}); "
@@ -590,18 +596,18 @@ def _start_without_resume(run_dir: Path, domain: str) -> str:
     )
 
 
-def _new_session_may_start(run_dir: Path) -> bool:
-    """Whether ``teach`` (without --resume) would start a new session in ``run_dir`` (the
-    store's rule: missing, empty, or holding only what torchcbl leaves where no session
-    started), read-only."""
+def _new_session_refusal(run_dir: Path) -> str | None:
+    """Why ``teach`` (without --resume) would not start a new session in ``run_dir``, as one
+    line naming ``--run-dir``, or None where it would (the store's rule: missing, empty, or
+    holding only what torchcbl leaves where no session started); read-only."""
     from torchcbl.errors import IncompatibleRunDirError
     from torchcbl.session import _check_new_session_dir
 
     try:
-        _check_new_session_dir(run_dir)
-    except IncompatibleRunDirError:
-        return False
-    return True
+        _check_new_session_dir(run_dir, name="--run-dir")
+    except IncompatibleRunDirError as exc:
+        return _one_line(exc)
+    return None
 
 
 def _session_map_exists(session: Path, domain: str) -> None:

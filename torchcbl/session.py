@@ -213,6 +213,7 @@ import torch
 
 from torchcbl._checkpoints import is_keep_count
 from torchcbl._durable import fsync_directory, write_durably
+from torchcbl._text import counted
 from torchcbl.errors import (
     CorruptSessionError,
     IncompatibleRunDirError,
@@ -4222,7 +4223,7 @@ class SessionSummary:
         per-block) requests for the first and last ``ends`` episodes or blocks."""
         lines = [f"{self.run_dir}: teaching session ({self.format}), {self._state_text()}"]
         env = f"{self.env_id or 'made directly (no gymnasium id)'}, "
-        env += f"{self.n_features} features, {self.n_actions} actions"
+        env += f"{counted(self.n_features, 'feature')}, {counted(self.n_actions, 'action')}"
         start = ", started from a fitted model" if self.starts_fitted else ""
         lines.append(f"env:        {env}")
         lines.append(f"class:      {self.env_class or _NOT_RECORDED}")
@@ -5096,8 +5097,8 @@ def resume_problems(
     senv = stored["env"]
     if (senv["n_features"], senv["n_actions"]) != (n_features, n_actions):
         problems.append(
-            f"env: the session has {senv['n_features']} features and {senv['n_actions']} "
-            f"actions, the given env {n_features} and {n_actions}"
+            f"env: the session has {counted(senv['n_features'], 'feature')} and "
+            f"{counted(senv['n_actions'], 'action')}, the given env {n_features} and {n_actions}"
         )
     env_lines: list[str] = []  # (each ends saying how to make the session's env)
     if senv.get("id") and env_id and senv["id"] != env_id:
@@ -5170,6 +5171,22 @@ class _NotGiven:
 _NOT_GIVEN = _NotGiven()
 
 
+class _NoCap:
+    """A step cap (``max_episode_steps``) of None, as a refusal writes it: no cap, not an
+    argument left out."""
+
+    def __repr__(self) -> str:
+        return "no cap"
+
+
+_NO_CAP = _NoCap()
+
+
+def _cap_text(cap: int | None) -> int | _NoCap:
+    """A step cap as a refusal writes it: the number, or "no cap" for None."""
+    return _NO_CAP if cap is None else cap
+
+
 def _env_problems(
     senv: dict[str, Any],
     env_id: str | None,
@@ -5235,11 +5252,12 @@ def _env_problems(
         )
     has_cap = "max_episode_steps" in senv
     want = senv.get("max_episode_steps")
-    if has_cap and want != cap:
+    if has_cap and want != cap:  # (written with "no cap" for None, on either side)
+        caps = (_cap_text(want), _cap_text(cap))
         if senv.get("id"):  # as gymnasium.make's argument
-            kw_differ["max_episode_steps"] = (want, cap)
+            kw_differ["max_episode_steps"] = caps
         else:  # an env made directly: its TimeLimit's cap (or its own)
-            differ.append(f"env step cap (max_episode_steps, stored, given): {(want, cap)}")
+            differ.append(f"env step cap (max_episode_steps, stored, given): {caps}")
     if kw_differ:
         differ.append(f"env kwargs (stored, given): {kw_differ}")
     if not differ:

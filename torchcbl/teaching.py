@@ -58,6 +58,7 @@ import torch
 
 from torchcbl._checkpoints import DEFAULT_KEEP_CHECKPOINTS, is_keep_count
 from torchcbl._signatures import refuse_unless_a_teacher
+from torchcbl._text import counted
 from torchcbl.confidence import _np, rule_to_config
 from torchcbl.errors import (
     CorruptSessionError,
@@ -592,7 +593,7 @@ def _check_prior(value: Any, n_features: int, n_actions: int) -> tuple[np.ndarra
     if x.dtype.kind not in "iuf" or x.ndim != 2 or x.shape[1] != n_features:
         raise ValueError(
             f"{name}: expected observations as a real-number array of shape [N, {n_features}] "
-            f"(the env's {n_features} features), got {x.dtype} {x.shape}"
+            f"(the env's {counted(n_features, 'feature')}), got {x.dtype} {x.shape}"
             + ("; one feature per row: observations.reshape(-1, 1)" if x.ndim == 1 else "")
             + "."
         )
