@@ -39,7 +39,9 @@ def _classification(action: int, distance: float) -> Classification:
     )
 
 
-def _record(step: int, distance: float) -> StepRecord:
+def _driven(step: int, distance: float, actor: str, phase: str = "confident") -> StepRecord:
+    """A step the teacher (labelled, its label executed) or the learner drove."""
+    teacher = actor == "teacher"
     return StepRecord(
         step=step,
         episode=0,
@@ -48,15 +50,21 @@ def _record(step: int, distance: float) -> StepRecord:
         confidence=None,
         distance=distance,
         posterior=None,
-        teacher_action=None,
-        executed_action=0,
-        phase="confident",
-        autonomous=True,
+        teacher_action=1 if teacher else None,
+        executed_action=1 if teacher else 0,
+        phase=phase,
+        autonomous=not teacher,
         reward=0.0,
         terminated=False,
         truncated=False,
         info={},
+        actor=actor,
     )
+
+
+def _record(step: int, distance: float) -> StepRecord:
+    """A step the learner drove in the confident phase."""
+    return _driven(step, distance, "agent")
 
 
 # -- behaviour cloning ---------------------------------------------------------------------------
@@ -230,29 +238,6 @@ def test_novelty_rescores_recent_states_with_the_new_model():
     assert s.threshold() == pytest.approx(0.5)  # every recent state scored by the new model
     s.observe_step(_record(4, 99.0), None)  # the refit's own step: rescored too
     assert list(s._scores) == [0.5] * 4
-
-
-def _driven(step: int, distance: float, actor: str, phase: str = "confident") -> StepRecord:
-    """A step the teacher (labelled, its label executed) or the learner drove."""
-    teacher = actor == "teacher"
-    return StepRecord(
-        step=step,
-        episode=0,
-        observation=(float(step), 0.0),
-        model_action=0,
-        confidence=None,
-        distance=distance,
-        posterior=None,
-        teacher_action=1 if teacher else None,
-        executed_action=1 if teacher else 0,
-        phase=phase,
-        autonomous=not teacher,
-        reward=0.0,
-        terminated=False,
-        truncated=False,
-        info={},
-        actor=actor,
-    )
 
 
 def test_novelty_scores_from_agent_takes_the_quantile_over_the_steps_the_learner_drove():

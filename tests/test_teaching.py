@@ -314,6 +314,18 @@ def test_policy_stands_alone_and_evaluates():
     assert again == recs
 
 
+class _NoFlag(torch.nn.Module):
+    """A model of one's own that does not say is_fitted (an unfitted GaussianMixtureSet's
+    classification behind it)."""
+
+    def __init__(self):
+        super().__init__()
+        self.inner = GaussianMixtureSet(3, 2)
+
+    def classify(self, x):
+        return self.inner.classify(x)
+
+
 def test_an_unfitted_greedy_policy_has_no_action_on_every_path():
     """GreedyPolicy's one contract for a model not fitted yet (a session's stage 0, before its
     first fit): no action. Called directly it raised RuntimeError, but evaluate_policy, which
@@ -338,16 +350,8 @@ def test_an_unfitted_greedy_policy_has_no_action_on_every_path():
     assert policy.classify(np.zeros(2)).action.tolist() == [-1]
     assert policy.model.classify(np.zeros((4, 2))).action.tolist() == [-1] * 4
 
-    class NoFlag(torch.nn.Module):  # a model of one's own that does not say is_fitted
-        def __init__(self):
-            super().__init__()
-            self.inner = GaussianMixtureSet(3, 2)
-
-        def classify(self, x):
-            return self.inner.classify(x)
-
     with pytest.raises(RuntimeError, match="not fitted"):
-        evaluate_policy(GreedyPolicy(NoFlag()), env, n_steps=5, seed=0)
+        evaluate_policy(GreedyPolicy(_NoFlag()), env, n_steps=5, seed=0)
 
 
 def test_a_greedy_policy_with_a_call_of_its_own_evaluates_with_an_unfitted_model():
@@ -361,15 +365,7 @@ def test_a_greedy_policy_with_a_call_of_its_own_evaluates_with_an_unfitted_model
             action = int(self.classify(observation).action[0])
             return 0 if action < 0 else action
 
-    class NoFlag(torch.nn.Module):  # a model of one's own that does not say is_fitted
-        def __init__(self):
-            super().__init__()
-            self.inner = GaussianMixtureSet(3, 2)
-
-        def classify(self, x):
-            return self.inner.classify(x)
-
-    for model in (GaussianMixtureSet(3, 2), NoFlag()):
+    for model in (GaussianMixtureSet(3, 2), _NoFlag()):
         policy = Fallback(model)
         records = evaluate_policy(policy, rare_regions_world(episode_length=5), n_steps=5, seed=0)
         assert [r.executed_action for r in records] == [0] * 5
