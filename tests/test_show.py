@@ -561,13 +561,10 @@ def test_show_reports_the_checkpoint_resume_loads_not_the_newest_name(tmp_path, 
     assert (describe(run).notes == ()) is (noted is None or set_aside)
 
 
-def test_show_of_a_session_with_prior_demonstrations_reports_its_newest_checkpoint(tmp_path):
-    """The checkpoints of a session with prior demonstrations carry the digest of the prior's
-    labels and then the session's: show checks them as resume does, prior first."""
-    env = rare_regions_world(episode_length=10)
-    prior = env.sample(30, np.random.default_rng(1))
-    run = tmp_path / "run"
-    ct = ConfidentTeacher(
+def _prior_session(run: Path, env, prior, *, steps: int) -> None:
+    """A session in ``run`` begun from ``prior`` demonstrations (refit every 3 labels), taught
+    ``steps`` steps (none: only its starting checkpoint) and closed."""
+    with ConfidentTeacher(
         env,
         oracle(env),
         prior_demonstrations=prior,
@@ -575,9 +572,18 @@ def test_show_of_a_session_with_prior_demonstrations_reports_its_newest_checkpoi
         run_dir=run,
         seed=0,
         progress=False,
-    )
-    ct.run(max_steps=20)
-    ct.close()
+    ) as ct:
+        if steps:
+            ct.run(max_steps=steps)
+
+
+def test_show_of_a_session_with_prior_demonstrations_reports_its_newest_checkpoint(tmp_path):
+    """The checkpoints of a session with prior demonstrations carry the digest of the prior's
+    labels and then the session's: show checks them as resume does, prior first."""
+    env = rare_regions_world(episode_length=10)
+    prior = env.sample(30, np.random.default_rng(1))
+    run = tmp_path / "run"
+    _prior_session(run, env, prior, steps=20)
     s = describe(run)
     assert (s.n_prior, s.n_labels, s.last_checkpoint, s.notes) == (30, 20, 18, ())
 
@@ -592,18 +598,7 @@ def test_show_says_the_checkpoints_of_a_session_with_prior_demonstrations_includ
     prior = env.sample(30, np.random.default_rng(1))
     runs = {0: tmp_path / "fresh", 20: tmp_path / "taught"}
     for steps, run in runs.items():
-        ct = ConfidentTeacher(
-            env,
-            oracle(env),
-            prior_demonstrations=prior,
-            config=TeachingConfig(max_new=3),
-            run_dir=run,
-            seed=0,
-            progress=False,
-        )
-        if steps:
-            ct.run(max_steps=steps)
-        ct.close()
+        _prior_session(run, env, prior, steps=steps)
     assert main(["show", str(runs[0])]) == 0
     out = capsys.readouterr().out
     assert "\ncheckpoint: the newest fitted on 0 labels + 30 prior demonstrations\n" in out, out
