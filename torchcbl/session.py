@@ -4477,18 +4477,15 @@ def _read_lines(path: Path, what: str) -> tuple[list[dict[str, Any]], list[str]]
     return entries, [f"{path}: lines {bad} are not {what}"] if bad else []
 
 
-def _last_env_versions(run_dir: str | os.PathLike[str]) -> Any:
-    """The ``env_versions`` the session's last writer recorded in ``writers.jsonl`` as it was
-    read (None: that writer recorded none, or the file has no writer or cannot be read)."""
-    writers = _read_writers(Path(run_dir))[0]
-    return writers[-1].get("env_versions") if writers else None
-
-
-def _last_run_start(run_dir: str | os.PathLike[str], n_steps: int) -> int:
-    """:func:`_run_start` of the session's ``writers.jsonl`` and ``runs.jsonl`` as they
-    are now."""
+def _last_writer_reading(run_dir: str | os.PathLike[str], n_steps: int) -> tuple[Any, int]:
+    """What a resume reads of the session's ``writers.jsonl`` and ``runs.jsonl`` as they are
+    now, each read once: the ``env_versions`` its last writer recorded (None: that writer
+    recorded none, or the file has no writer or cannot be read), and :func:`_run_start` of
+    its ``n_steps`` logged steps."""
     run = Path(run_dir)
-    return _run_start(_read_writers(run)[0], n_steps, _read_runs(run)[0])
+    writers = _read_writers(run)[0]
+    versions = writers[-1].get("env_versions") if writers else None
+    return versions, _run_start(writers, n_steps, _read_runs(run)[0])
 
 
 def _run_start(

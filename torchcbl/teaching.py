@@ -95,9 +95,8 @@ from torchcbl.session import (
     _env_objects,
     _InterruptHold,
     _judged,
-    _last_env_versions,
-    _last_run_start,
     _last_run_streaks,
+    _last_writer_reading,
     _model_args,
     _names_a_session_format,
     _read_prior,
@@ -1182,11 +1181,11 @@ class ConfidentTeacher:
         )
         self._store.keep_checkpoints = keep_checkpoints  # before note_writer records it
         try:
-            # under the lock, before this writer's own line: the last writer's versions
-            _warn_changed_versions(
-                self.run_dir, _last_env_versions(self.run_dir), self._env_versions, len(records)
-            )
-            last_run = (_last_run_start(self.run_dir, len(records)), len(records))
+            # under the lock, before this writer's own line: the last writer's versions, and
+            # where the run() that wrote the log's last step began
+            versions, run_start = _last_writer_reading(self.run_dir, len(records))
+            _warn_changed_versions(self.run_dir, versions, self._env_versions, len(records))
+            last_run = (run_start, len(records))
             self._store.note_writer(
                 len(records), _model_device(self.model), env_versions=self._env_versions
             )
