@@ -569,7 +569,7 @@ def _run_seed(cfg: DrivingExperimentConfig, seed: int, seed_dir: str) -> dict[st
     # every fit stood on (relabelled points once, had its strategy relabelled), the final
     # snapshot's (no step follows it), its middle-lane points
     x_a, y_a = load_demonstrations(out / "sessions" / "arm_a")
-    middle = np.rint(x_a[:, 3]) == 2 if len(y_a) else np.zeros(0, dtype=bool)
+    middle = np.rint(x_a[:, 3]) == 2  # (no demonstration: x_a is [0, 4], middle empty)
     fig7 = {"arm": "a", "x": x_a[middle, :3].tolist(), "action": y_a[middle].tolist()}
     acc_a = [r.windowed_accuracy for r in recs_a if r.teacher_action is not None]
     conf_recs = recs_a[steps_at_switch:]
@@ -1248,9 +1248,10 @@ def _threshold_in_force(cfg: Mapping[str, Any]) -> float:
     """Figure 10's threshold (std) of a run from its stored config (results.json's
     ``"config"``): its ``max_std`` under its ``threshold_reading``, the literal reading for a
     config stored before that setting existed."""
+    from torchcbl import DistanceRule
+
     reading = cfg.get("threshold_reading", "literal")
-    fields = {"max_std": cfg["max_std"], "threshold_reading": reading}
-    return DrivingExperimentConfig.from_dict(fields).rule().threshold(_N_FEATURES)
+    return DistanceRule.from_std(cfg["max_std"], reading).threshold(_N_FEATURES)
 
 
 def session_eval_segment(session_dir: str | Path) -> int | None:

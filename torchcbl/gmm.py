@@ -298,6 +298,9 @@ def _rows_preview(rows: np.ndarray) -> str:
     return f"[{shown}]{more}"
 
 
+# the refit statistics of the incremental EM, in the order of _fit's stats tables
+_STATS_BUFFERS = ("cand_stats_", "cand_coef_", "stats_valid_", "ref_center_", "data_print_")
+
 _REFIT_BUFFERS = (
     "converged_",
     "n_iter_",
@@ -306,16 +309,8 @@ _REFIT_BUFFERS = (
     "cand_means_",
     "cand_covariances_",
     "full_fit_points_",
-    "cand_stats_",
-    "cand_coef_",
-    "stats_valid_",
-    "ref_center_",
-    "data_print_",
+    *_STATS_BUFFERS,
 )
-
-
-# the refit statistics of the incremental EM, in the order of _fit's stats tables
-_STATS_BUFFERS = ("cand_stats_", "cand_coef_", "stats_valid_", "ref_center_", "data_print_")
 
 
 _PRINT_WEIGHTS = np.ones(0)
