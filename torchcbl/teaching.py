@@ -1675,10 +1675,9 @@ class ConfidentTeacher:
         """Success is never assumed: the env's ``info["is_success"]`` decides; without it, a
         time-limit end counts only with ``time_limit_is_success`` (see TeachingConfig)."""
         cfg = self._run_config or self.config
-        if info.get("is_success") is not None or (
-            cfg.time_limit_is_success and record.truncated and not record.terminated
-        ):
-            return _judged(record, info, cfg.time_limit_is_success)
+        judged = _judged(record, info, cfg.time_limit_is_success)
+        if judged or info.get("is_success") is not None:  # the env said, or the time limit
+            return judged
         if cfg.autonomous_episodes_to_stop is not None and not self._warned_unjudged:
             self._warned_unjudged = True
             warnings.warn(_unjudged_text(record, cfg), stacklevel=_caller_level())
