@@ -703,11 +703,11 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 + f"); {_SESSION_HINT}"
             )
         entries: list[dict[str, Any]] = []
-        head = f"{path} holds {len(below)} teaching session{'' if len(below) == 1 else 's'}"
+        head = f"{path} holds {_counted(len(below), 'teaching session')}"
         if unseen:
             head += (
-                f" in the folders it could search ({len(unseen)} folder"
-                f"{'' if len(unseen) == 1 else 's'} it could not, listed last)"
+                f" in the folders it could search ({_counted(len(unseen), 'folder')} it could "
+                "not, listed last)"
             )
         lines = [f"{head}:"]
         for session in below:
@@ -1495,7 +1495,7 @@ def _phase_text(ct: Any) -> str:
 def _saved(ct: Any) -> str:
     """ "N demonstrations over M steps", in the singular where a count is 1."""
     d, n = ct.n_demonstrations, ct.n_steps
-    return f"{d} demonstration{'' if d == 1 else 's'} over {n} step{'' if n == 1 else 's'}"
+    return f"{_counted(d, 'demonstration')} over {_counted(n, 'step')}"
 
 
 _STOP_REASONS = {
