@@ -457,7 +457,9 @@ class GaussianMixtureSet(nn.Module):
         n_features: observation dimension D.
         max_components: largest component count tried per action; the candidates of an action
             with n_a points are k = 1..min(max_components, n_a), all fitted at once (a fit's
-            memory grows with their count squared times n_a: see ``n_init``).
+            memory grows with their count squared times n_a: see ``n_init``). The model keeps
+            every candidate's parameters (the ``cand_*_`` buffers, A x max_components^2 rows):
+            sizes whose buffers exceed the host's memory are a ValueError.
         criterion: "aic" (free-parameter AIC, default), "bic", or "aic_paper" (Eq. 5 literally).
         var_floor: relative variance floor, see the module docstring (>= 0).
         tol: EM stops when the mean per-point log-likelihood changes less than this (nats).
@@ -620,6 +622,19 @@ class GaussianMixtureSet(nn.Module):
         self.refit_growth = float(refit_growth)
         self.n_init = int(n_init)
         a, k, d = self.n_actions, self.max_components, self.n_features
+        # every candidate's parameters and statistics (cand_*_: [A, K, K, ...] float64) are
+        # buffers: refused before anything is allocated where no memory of the host holds them
+        q = d * (d + 3) // 2 + 1
+        need, memory = 8 * a * k * k * (1 + d + d * d + 2 * q), _device_memory(torch.device("cpu"))
+        if memory is not None and need > memory:
+            raise ValueError(
+                f"Expected sizes whose model fits in the memory of the host "
+                f"({memory / 2**30:.3g} GiB) but got n_actions={a}, n_features={d}, "
+                f"max_components={k}: the model keeps every candidate's parameters, "
+                "n_actions x max_components^2 x (n_features^2 + ...) float64 values, at least "
+                f"{need / 2**30:.3g} GiB; pass a smaller max_components (the memory grows with "
+                "its square) or fewer features"
+            )
         f64 = torch.float64
         eye = torch.eye(d, dtype=f64).expand(a, k, d, d).clone()
         self.register_buffer("weights_", torch.zeros(a, k, dtype=f64))
