@@ -565,6 +565,9 @@ class GaussianMixtureSet(nn.Module):
         refit_growth: float = 0.25,
         n_init: int = 1,
     ) -> None:
+        """An unfitted set of ``n_actions`` mixtures over ``n_features`` features (the
+        arguments: see the class docstring); :meth:`fit` fits it. Raises ValueError for an
+        argument out of its range, or sizes whose buffers exceed the host's memory."""
         super().__init__()
         for name, val in (
             ("n_actions", n_actions),
