@@ -315,3 +315,32 @@ def test_from_std_reads_the_papers_standard_deviations_literally_or_as_a_coverag
         DistanceRule.from_std(2.0, "lit")
     with pytest.raises(ValueError, match=r"DistanceRule.max_std: expected a value > 0, got -1"):
         DistanceRule.from_std(-1, "coverage")
+
+
+def test_a_quantile_rule_refuses_observations_that_are_not_the_classified_ones():
+    """A quantile rule reads D, and so its threshold, from the observations it is given.
+    Observations of another shape than the classified ones were read all the same: a 1-D
+    model's 40 observations kept as x [40] (classified as x[:, None]) gave D = 40, a
+    threshold of 7.5 std instead of 1.96, and 38 of the 40 came out confident instead of 10;
+    three observations for five answers gave no error either. Such observations are refused,
+    naming the shape expected; one observation [D] for one answer is read as before."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=40)
+    model = GaussianMixtureSet(1, 1).fit(x[:, None], np.zeros(40, dtype=np.int64))
+    far = np.linspace(-6.0, 6.0, 40)
+    c = model.classify(far[:, None])
+    rule = DistanceRule(quantile=0.95)
+    right = rule.is_confident(c, far[:, None])
+    assert 0 < int(right.sum()) < 40  # the far ends ask
+    with pytest.raises(
+        ValueError,
+        match=r"DistanceRule\(quantile=0.95\)\.is_confident: expected the classified "
+        r"observations, shape \[40, D\], but got shape \(40,\)",
+    ):
+        rule.is_confident(c, far)
+    with pytest.raises(ValueError, match=r"shape \[5, D\], but got shape \(3, 1\)"):
+        rule.is_confident(model.classify(far[:5, None]), far[:3, None])
+    one = model.classify(far[:1, None])
+    assert (
+        rule.is_confident(one, far[:1]).tolist() == rule.is_confident(one, far[:1, None]).tolist()
+    )

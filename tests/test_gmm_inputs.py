@@ -49,6 +49,24 @@ def test_constructor_rejects_bad_arguments(kwargs, match):
         GaussianMixtureSet(**args)
 
 
+@pytest.mark.parametrize(("n_features", "cap"), [(4, 10**6), (1, 10**9), (200, 10**5), (10**5, 10)])
+def test_sizes_whose_model_no_memory_holds_are_refused_naming_them(n_features, cap):
+    """The model keeps every candidate's parameters in buffers of n_actions x max_components^2
+    rows (``cand_covariances_`` [A, K, K, D, D], ...), allocated by the constructor: a cap of
+    a million components in 4-D (a petabyte), or 100,000 features, died in torch's allocator
+    ("DefaultCPUAllocator: can't allocate memory", naming no argument), or got the process
+    killed where the OS overcommits. They are refused before anything is allocated, naming
+    the sizes, the memory and what the buffers need at least; sizes that fit build as before."""
+    with pytest.raises(
+        ValueError,
+        match=rf"Expected sizes whose model fits in the memory of the host \(.* GiB\) but got "
+        rf"n_actions=3, n_features={n_features}, max_components={cap}: .* at least .* GiB; "
+        "pass a smaller max_components .* or fewer features",
+    ):
+        GaussianMixtureSet(3, n_features, cap)
+    assert GaussianMixtureSet(3, min(n_features, 50), 20).max_components == 20
+
+
 def _fitted():
     x, y = _data()
     return GaussianMixtureSet(3, 3, 4).fit(x, y), x, y

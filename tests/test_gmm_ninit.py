@@ -243,3 +243,25 @@ def test_ties_keep_the_first_initialisation_and_a_failed_one_is_never_kept():
     assert best.n_iter.tolist() == [[0, 1]] and best.params.weights[0, :, 0].tolist() == [0.0, 1.0]
     all_bad = res._replace(loglik=torch.full((1, s), float("nan"), dtype=torch.float64))
     assert _best_init(all_bad, 3).n_iter.tolist() == [[0, 1]]  # reported as a failure later
+
+
+@pytest.mark.parametrize("n_init", [1, 2])
+def test_a_fit_whose_candidates_no_memory_holds_even_once_is_refused_naming_the_cap(n_init):
+    """A cap of 1,000 components on 100,000 points of one action is an EM of 1,000 candidates
+    over every point at once (at least 3 TB): with n_init=1 it was not checked and died in
+    torch's allocator ("DefaultCPUAllocator: can't allocate memory", naming no argument, or
+    the OS killed the process), and with n_init=2 it was refused saying "even 0 starts would
+    fill the memory; pass a much smaller n_init", which no n_init mends. Either is refused
+    before anything is allocated, naming the cap and the points; the model keeps its state."""
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(size=(100_000, 1)), np.zeros(100_000, dtype=np.int64)
+    model = GaussianMixtureSet(1, 1, 1000, n_init=n_init)
+    with pytest.raises(
+        ValueError,
+        match=r"Expected a max_components whose candidates fit in the memory of cpu "
+        r"\(.* GiB\) but got 1000: this fit's batched EM runs 1000 candidate\(s\) for 1 "
+        r"action\(s\) of up to 100000 points at once, at least .* GiB for one start; pass a "
+        r"smaller max_components \(or fit fewer points\)",
+    ):
+        model.fit(x, y)
+    assert not model.is_fitted

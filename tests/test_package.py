@@ -227,3 +227,22 @@ def test_the_packages_ship_their_type_hints(monkeypatch):
         assert files(package).joinpath("py.typed").is_file(), package
         assert "py.typed" in declared["package-data"].get(package, []), package
         assert (package, "py.typed") in shipped, package
+
+
+def test_help_on_a_public_constructor_never_shows_another_librarys_text():
+    """``GaussianMixtureSet?`` in IPython (and an editor's hover) shows the class's docstring
+    and its ``__init__``'s: GaussianMixtureSet's was torch's inherited "Initialize internal
+    Module state, shared by both nn.Module and ScriptModule.", which says nothing of the
+    model a user builds. A public class's constructor help is its own, or Python's default
+    pointer to the class's help."""
+    import inspect
+
+    python_default = inspect.getdoc(object.__init__)
+    for name in torchcbl.__all__:
+        obj = getattr(torchcbl, name)
+        if not inspect.isclass(obj):
+            continue
+        doc = inspect.getdoc(obj.__init__)  # its own, else the nearest base's
+        assert doc in (None, python_default) or obj.__init__.__doc__, name
+    doc = inspect.getdoc(torchcbl.GaussianMixtureSet.__init__)
+    assert "unfitted" in doc and "n_actions" in doc and "ValueError" in doc

@@ -244,17 +244,31 @@ class DistanceRule:
     def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
         """Bool tensor [N]: True where the model's action may be executed without asking
         (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
-        when known)."""
+        when known, or one observation [D] for N = 1). A quantile rule reads D from the
+        observations: a ValueError refuses observations of another shape."""
         if self.quantile is None:
             thr = float(self.max_std)  # type: ignore[arg-type]
         else:
-            d = None if observations is None else int(np.shape(observations)[-1])
             action = _np(c.action)
+            d = None if observations is None else self._features(observations, len(action))
             if d is None and self._dof is None and not (action >= 0).any():
                 return torch.zeros(len(action), dtype=torch.bool)  # no model: ask anyway
             thr = self.threshold(d)
         ok = (_np(c.distance) <= thr) & (_np(c.action) >= 0)
         return torch.from_numpy(ok)
+
+    def _features(self, observations: Any, n: int) -> int:
+        """D of the ``observations`` given with a classification of ``n`` rows: [n, D], or one
+        observation [D] for one row; any other shape is no classified observations (a 1-D
+        model's [N] would read as D = N), a ValueError."""
+        shape = np.shape(observations)
+        if not ((len(shape) == 2 and shape[0] == n) or (len(shape) == 1 and n == 1)):
+            raise ValueError(
+                f"{self!r}.is_confident: expected the classified observations, shape [{n}, D], "
+                f"but got shape {tuple(shape)}; pass the observations given to "
+                "model.classify (their D sets the threshold)"
+            )
+        return int(shape[-1])
 
     def update(self, model: GaussianMixtureSet, observations: Any, actions: Any) -> None:
         """Called after every refit (``observations`` [M, D], ``actions`` [M]): notes the

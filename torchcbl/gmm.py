@@ -146,8 +146,9 @@ def _device_memory(dev: torch.device) -> int | None:
 # the batched EM holds at once (at least) the responsibilities [G, N, C, K] and the candidates'
 # parameters [G, C, K, Q + D^2] in float64, and as much again in their temporaries: this many
 # times their bytes is a lower bound of its peak memory (peaks measured on the CPU: 3.4 to 7.5
-# times). The n_init check refuses only what this lower bound says no memory of the device
-# holds; it is no estimate of the peak, and a fit it lets through may still run out. Not 4: a
+# times). The memory check (naming n_init, or max_components where one start is too many)
+# refuses only what this lower bound says no memory of the device holds; it is no estimate
+# of the peak, and a fit it lets through may still run out. Not 4: a
 # peak of 3.4 times was measured, and at 4 a 16 GiB machine would refuse 20,000 points of 8
 # features in 4 actions, cap 40, n_init 5, once 17,000 of them are one action's (16.3 GiB at
 # 4, 8.2 at 2)
@@ -455,7 +456,10 @@ class GaussianMixtureSet(nn.Module):
         n_actions: number of discrete actions A (labels 0..A-1).
         n_features: observation dimension D.
         max_components: largest component count tried per action; the candidates of an action
-            with n_a points are k = 1..min(max_components, n_a).
+            with n_a points are k = 1..min(max_components, n_a), all fitted at once (a fit's
+            memory grows with their count squared times n_a: see ``n_init``). The model keeps
+            every candidate's parameters (the ``cand_*_`` buffers, A x max_components^2 rows):
+            sizes whose buffers exceed the host's memory are a ValueError.
         criterion: "aic" (free-parameter AIC, default), "bic", or "aic_paper" (Eq. 5 literally).
         var_floor: relative variance floor, see the module docstring (>= 0).
         tol: EM stops when the mean per-point log-likelihood changes less than this (nats).
@@ -480,9 +484,11 @@ class GaussianMixtureSet(nn.Module):
             most 3074457345618258602, the most the model's state holds. A fit holds all
             its starts in memory at once (measured on the CPU: 27 to 60 bytes x n_init x
             actions x candidates^2 x (the most points of one action + D^2 + D (D + 3) / 2
-            + 1)). A ValueError refuses up front only an n_init whose lower bound of memory
+            + 1)). A ValueError refuses up front only a fit whose lower bound of memory
             (16 bytes x the same) exceeds the device's whole memory (the host's physical
-            memory for the CPU); a fit that passes may still run out of memory.
+            memory for the CPU): it names ``n_init``, or ``max_components`` where even one
+            start does not fit (whatever ``n_init``); a fit that passes may still run out
+            of memory.
 
     Fitted buffers (fixed shapes, so ``state_dict`` loads into a fresh instance built with the
     same arguments, and only into one: a state of other sizes, ``n_actions``, ``n_features``
@@ -559,6 +565,9 @@ class GaussianMixtureSet(nn.Module):
         refit_growth: float = 0.25,
         n_init: int = 1,
     ) -> None:
+        """An unfitted set of ``n_actions`` mixtures over ``n_features`` features (the
+        arguments: see the class docstring); :meth:`fit` fits it. Raises ValueError for an
+        argument out of its range, or sizes whose buffers exceed the host's memory."""
         super().__init__()
         for name, val in (
             ("n_actions", n_actions),
@@ -616,6 +625,19 @@ class GaussianMixtureSet(nn.Module):
         self.refit_growth = float(refit_growth)
         self.n_init = int(n_init)
         a, k, d = self.n_actions, self.max_components, self.n_features
+        # every candidate's parameters and statistics (cand_*_: [A, K, K, ...] float64) are
+        # buffers: refused before anything is allocated where no memory of the host holds them
+        q = d * (d + 3) // 2 + 1
+        need, memory = 8 * a * k * k * (1 + d + d * d + 2 * q), _device_memory(torch.device("cpu"))
+        if memory is not None and need > memory:
+            raise ValueError(
+                f"Expected sizes whose model fits in the memory of the host "
+                f"({memory / 2**30:.3g} GiB) but got n_actions={a}, n_features={d}, "
+                f"max_components={k}: the model keeps every candidate's parameters, "
+                "n_actions x max_components^2 x (n_features^2 + ...) float64 values, at least "
+                f"{need / 2**30:.3g} GiB; pass a smaller max_components (the memory grows with "
+                "its square) or fewer features"
+            )
         f64 = torch.float64
         eye = torch.eye(d, dtype=f64).expand(a, k, d, d).clone()
         self.register_buffer("weights_", torch.zeros(a, k, dtype=f64))
@@ -1192,20 +1214,28 @@ class GaussianMixtureSet(nn.Module):
         slot_k_np = np.where(real_np, slot_k_np, 1)
         # n_init > 1: the same slots again for every further initialisation, side by side
         n_init = self.n_init
-        if n_init > 1:
-            # refused before anything is allocated where no memory of the device holds them
-            q = d * (d + 3) // 2 + 1
-            per_init = _EM_MEMORY_FACTOR * 8 * g_n * k_pad * k_pad * (n_max + q + d * d)
-            memory = _device_memory(dev)
-            if memory is not None and n_init * per_init > memory:
+        # refused before anything is allocated where no memory of the device holds the EM:
+        # one start of every candidate (the cap's fault, not n_init's), or all n_init of them
+        q = d * (d + 3) // 2 + 1
+        per_init = _EM_MEMORY_FACTOR * 8 * g_n * k_pad * k_pad * (n_max + q + d * d)
+        memory = _device_memory(dev)
+        if memory is not None and n_init * per_init > memory:
+            if per_init > memory:
                 raise ValueError(
-                    f"Expected an n_init whose starts fit in the memory of {dev.type} "
-                    f"({memory / 2**30:.3g} GiB) but got {n_init}: this fit's batched EM runs "
-                    f"all its starts of {k_pad} candidate(s) for {g_n} action(s) of up to "
-                    f"{n_max} points at once, at least {n_init * per_init / 2**30:.3g} GiB "
-                    f"(even {memory // per_init} starts would fill the memory); pass a much "
-                    "smaller n_init"
+                    f"Expected a max_components whose candidates fit in the memory of "
+                    f"{dev.type} ({memory / 2**30:.3g} GiB) but got {self.max_components}: "
+                    f"this fit's batched EM runs {k_pad} candidate(s) for {g_n} action(s) of "
+                    f"up to {n_max} points at once, at least {per_init / 2**30:.3g} GiB for "
+                    "one start; pass a smaller max_components (or fit fewer points)"
                 )
+            raise ValueError(
+                f"Expected an n_init whose starts fit in the memory of {dev.type} "
+                f"({memory / 2**30:.3g} GiB) but got {n_init}: this fit's batched EM runs "
+                f"all its starts of {k_pad} candidate(s) for {g_n} action(s) of up to "
+                f"{n_max} points at once, at least {n_init * per_init / 2**30:.3g} GiB "
+                f"(even {memory // per_init} starts would fill the memory); pass a much "
+                "smaller n_init"
+            )
         slot_k_np = np.tile(slot_k_np, (1, n_init))  # [G, n_init * k_pad]
         init_np = np.repeat(np.arange(n_init), k_pad)[None, :].repeat(g_n, 0)
         slot_k = torch.from_numpy(slot_k_np).to(dev)
