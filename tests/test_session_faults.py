@@ -11,6 +11,7 @@ the env was lost (:class:`Witness`).
 from __future__ import annotations
 
 import contextlib
+import copy
 import errno
 import hashlib
 import json
@@ -956,6 +957,67 @@ def test_damaged_checkpoint_is_refitted_from_the_log(tmp_path, damage):
     assert_model_is_fit_on_log(back.model, run)
     assert (run / "checkpoints" / (last.name + ".damaged")).exists()
     goes_on(back, env, run)
+
+
+def _hand_refit_session(run: Path, refit: str, keep: int | None = 3):
+    """A session refitting every 5 labels, refitted by hand at 7 (off that schedule) and
+    taught on to 9 labels, so its model stands on the hand refit; returns the live model and
+    {labels: the live model's state after each refit, 0: unfitted}."""
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=5, refit=refit),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=keep,
+        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    ct.run(max_demonstrations=7)
+    assert ct.refit()  # by hand, at 7: the loop's next refit is at 12, not 10
+    ct.run(max_demonstrations=9)
+    ct.close()
+    assert sorted(live) == [0, 5, 7]
+    return ct.model, live
+
+
+def _same(model: torch.nn.Module, state: dict[str, torch.Tensor]) -> bool:
+    own = model.state_dict()
+    return own.keys() == state.keys() and all(torch.equal(own[k], state[k]) for k in own)
+
+
+@pytest.mark.parametrize("damage", ["cut", "empty"])
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_damaged_checkpoint_of_a_refit_by_hand_still_says_where_the_schedule_went(
+    tmp_path, refit, damage
+):
+    """A refit by hand moves the refit schedule, and its checkpoint alone records it. That
+    checkpoint damaged (cut short, emptied), load_model, load_models and resume rebuilt the
+    model on the regular schedule from the checkpoint below it (on 5 labels, the live one
+    stood on 7), silently. The damaged file's name still records the refit: the model is
+    rebuilt on it, bit for bit, before and after resume set the file aside as .damaged, and
+    the resumed loop refits next where the live one would have (at 12)."""
+    run = tmp_path / "run"
+    model, live = _hand_refit_session(run, refit)
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()
+    hand.write_bytes(data[: len(data) // 2] if damage == "cut" else b"")
+    assert _same(load_model(run), live[7])
+    for n, staged in S.load_models(run, range(10)):
+        assert _same(staged, live[max(r for r in live if r <= n)]), n
+    (note,) = S.describe(run).notes
+    assert "model-00000007.pt" in note and "records a refit on 7 labels" in note, note
+    back, env = resume(run)
+    assert _same(back.model, live[7]) and same_state(back.model, model)
+    assert (run / "checkpoints" / "model-00000007.pt.damaged").exists()
+    assert _same(load_model(run), live[7])  # the set-aside file still records the refit
+    back.run(max_demonstrations=11)
+    assert _same(back.model, live[7])  # no refit at 10
+    back.run(max_demonstrations=12)
+    assert int(back.model.n_points_.sum()) == 12
+    back.close()
 
 
 def test_damaged_sqlite_file(tmp_path):
