@@ -1020,6 +1020,51 @@ def test_a_damaged_checkpoint_of_a_refit_by_hand_still_says_where_the_schedule_w
     back.close()
 
 
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_pruning_keeps_what_a_set_aside_checkpoint_leaves_off_the_schedule(tmp_path, refit):
+    """A checkpoint set aside as .damaged records a refit by its name, which may have moved
+    the schedule (a refit by hand): pruning removed a later checkpoint as lying on the
+    schedule of the one kept below it, counted from there and not from the set-aside one.
+    Here (max_new=5, keeping 1) a hand refit at 7, damaged and set aside by a resume, then
+    another by hand at 10 (on the schedule from 0, off the one from 7): the loop's refit at 15
+    removed checkpoint 10, and the stages from 10 to 14 were rebuilt on 7's schedule, on 12
+    labels where the live model stood on 10."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+
+    def on_refit(m: torch.nn.Module, n: int) -> None:
+        live[n] = copy.deepcopy(m.state_dict())
+
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=5, refit=refit),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=1,
+        on_refit=on_refit,
+    )
+    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    ct.run(max_demonstrations=7)
+    assert ct.refit()  # by hand, at 7
+    ct.run(max_demonstrations=8)
+    ct.close()
+    hand = run / "checkpoints" / "model-00000007.pt"
+    hand.write_bytes(hand.read_bytes()[:100])
+    env = rare_regions_world()
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False, on_refit=on_refit)
+    assert (run / "checkpoints" / "model-00000007.pt.damaged").exists()
+    back.run(max_demonstrations=10)
+    assert back.refit()  # by hand, at 10
+    back.run(max_demonstrations=16)  # the loop refits at 15
+    back.close()
+    assert sorted(live) == [0, 5, 7, 10, 15]
+    for n, model in S.load_models(run, range(17)):
+        assert _same(model, live[max(r for r in live if r <= n)]), n
+        assert _same(load_model(run, n_demonstrations=n), live[max(r for r in live if r <= n)]), n
+
+
 def test_damaged_sqlite_file(tmp_path):
     run = tmp_path / "run"
     _closed_session(run)

@@ -1931,6 +1931,7 @@ class SessionStore:
         #: recorded in writers.jsonl by :meth:`note_writer`
         self.keep_checkpoints: int | None = None
         self._on_disk: list[int] | None = None  # checkpoints > 0 there (read once, then kept)
+        self._set_aside: list[int] = []  # the counts of those set aside as .damaged (as listed)
         self._max_new: int | None = None  # the session's refit schedule (read by _open)
         self._prune_warned = False
         self._lock = _acquire_lock(self.run_dir) if lock is None else lock
@@ -2481,10 +2482,12 @@ class SessionStore:
         A stage whose checkpoint is gone is rebuilt from the newest checkpoint below it (or
         from the start) on the loop's schedule, a refit every ``max_new`` labels
         (:func:`restore_model`). A refit by hand (``ConfidentTeacher.refit``) moves that
-        schedule, and its checkpoint alone says where it fell: so a checkpoint ``c`` goes only
-        where ``c - b`` is a multiple of ``max_new``, ``b`` the checkpoint kept below it (0
-        for none). Every refit between two kept checkpoints then lies on the lower one's
-        schedule (all checkpoints there, it holds; each removal keeps it)."""
+        schedule, and its checkpoint alone says where it fell (by its name, even damaged or set
+        aside as ``.damaged``, never removed here): so a checkpoint ``c`` goes only where
+        ``c - b`` is a multiple of ``max_new``, ``b`` the refit recorded below it (a kept
+        checkpoint or a set-aside one; 0 for none). Every refit between two recorded ones then
+        lies on the lower one's schedule (all checkpoints there, it holds; each removal keeps
+        it)."""
         max_new = self._max_new
         if max_new is None:
             return
@@ -2492,16 +2495,18 @@ class SessionStore:
         if self._on_disk is None:
             try:
                 self._on_disk = sorted(m for m, _ in _checkpoint_entries(directory) if m > 0)
+                self._set_aside = [m for m in _set_aside_refits(directory) if m > 0]
             except IncompatibleRunDirError:
                 return  # the checkpoint was just written there; a listing failure is passing
         on_disk = sorted(set(self._on_disk) | {newest})
+        candidates = set([m for m in on_disk if m <= newest][:-keep])
         below = 0
         older = []
-        for m in [m for m in on_disk if m <= newest][:-keep]:
-            if (m - below) % max_new == 0:
-                older.append(m)  # on the schedule from the one kept below: rebuilt alike
+        for m in sorted(candidates | {m for m in self._set_aside if m <= newest}):
+            if m in candidates and (m - below) % max_new == 0:
+                older.append(m)  # on the schedule from the refit recorded below: rebuilt alike
             else:
-                below = m  # where a hand refit moved the schedule: kept
+                below = m  # where a hand refit may have moved the schedule: kept
         self._on_disk = [m for m in on_disk if m not in older]
         for m in older:
             path = directory / f"model-{m:08d}.pt"
