@@ -503,6 +503,29 @@ def test_a_checkpoint_that_does_not_fit_on_the_disk_says_the_disk_is_full(tmp_pa
     goes_on(ct, env, run)
 
 
+def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses(tmp_path):
+    """A refit by hand moves the refit schedule and only its checkpoint records it. That
+    checkpoint failing to be written (a full disk), the error said "a missing checkpoint is
+    refitted from the log on resume and by load_model" and to resume: but they rebuild the
+    model on the regular schedule until the loop's next refit is saved (here on 5 labels where
+    the model in memory stands on 7). It now says so, names the refit due next, and the
+    session goes on from memory."""
+    run = tmp_path / "run"
+    ct, env = session(run, max_new=5, noninteractive=False)
+    ct.run(max_demonstrations=7)
+    with file_size_limit(1000), pytest.raises(SessionWriteError) as err:  # a line fits
+        ct.refit()
+    msg = " ".join(str(err.value).split())
+    assert str(run / "checkpoints" / "model-00000007.pt") in msg, msg
+    assert "refit by hand" in msg and "next refit, due at 12 labels" in msg, msg
+    assert "refitted from the log on resume" not in msg and "or resume" not in msg, msg
+    assert int(ct.model.n_points_.sum()) == 7  # the refit itself happened
+    assert int(load_model(run).n_points_.sum()) == 5  # what the message warns of
+    ct.run(max_demonstrations=12)  # space freed: the loop's refit at 12 is saved
+    assert same_state(load_model(run), ct.model)
+    ct.close()
+
+
 # -- 3. readers never write -------------------------------------------------------------------
 
 

@@ -1877,6 +1877,19 @@ _CHECKPOINT_LATER = (
 )
 
 
+def _lost_hand_refit(n: int, max_new: int) -> str:
+    """What a failed write of the checkpoint of a refit by hand on ``n`` labels leaves: the
+    ``after`` of its :class:`SessionWriteError` (see :func:`_write_error`)."""
+    return (
+        "The session and its model in memory are intact and the step log is complete, but "
+        "this was a refit by hand, which moved the refit schedule, and only its checkpoint "
+        "records it: until the loop's next refit, due at "
+        f"{n + max_new} labels, is saved, resume and load_model rebuild the model on the "
+        f"regular schedule instead, not on these {n} labels. Free space (or fix the file's "
+        "permissions), then call run() again: the model in memory is the session's."
+    )
+
+
 def _write_checkpoint(
     run_dir: Path,
     model: torch.nn.Module,
@@ -2460,13 +2473,23 @@ class SessionStore:
         return cur.rowcount
 
     def save_checkpoint(
-        self, model: torch.nn.Module, n_demonstrations: int, digest: str | None = None
+        self,
+        model: torch.nn.Module,
+        n_demonstrations: int,
+        digest: str | None = None,
+        *,
+        by_hand: bool = False,
     ) -> Path:
         """Write the model fitted on the first ``n_demonstrations`` labels, with ``digest``
         (:func:`labels_digest` of those labels) to tell it from a stale one later; then, with
         :attr:`keep_checkpoints`, remove the checkpoints older than the newest that many (not
-        checkpoint 0, and none named for more labels than this one)."""
-        path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest)
+        checkpoint 0, and none named for more labels than this one). ``by_hand``: the model of
+        a refit asked by hand (``ConfidentTeacher.refit``), which this checkpoint alone
+        records: a failed write says what its loss costs (:func:`_lost_hand_refit`)."""
+        after = _CHECKPOINT_LATER
+        if by_hand and self._max_new is not None:
+            after = _lost_hand_refit(n_demonstrations, self._max_new)
+        path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest, after)
         if self.keep_checkpoints is not None:
             self._prune_checkpoints(n_demonstrations, self.keep_checkpoints)
         return path
