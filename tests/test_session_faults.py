@@ -2578,6 +2578,38 @@ def test_a_later_checkpoint_this_model_cannot_load_replays_from_the_starting_mod
     back.close()
 
 
+def test_a_replay_from_the_starting_model_goes_through_a_refit_by_hand_below(tmp_path):
+    """refit="incremental" from a fitted model, refitted by hand at 6 (max_new=4): its newest
+    checkpoint (10) holds a state this model cannot load, so the refits are replayed from
+    checkpoint 0. That replay went 4, 8, 10 (the regular schedule, then the count it ends
+    on), not 4, 6, 10 as the live loop refitted: the checkpoints below the one it could not
+    load record the refit by hand, and the replay now goes through them. (Two components at
+    most, each action fitted on about 40 points: the refits are warm, so the path shows.)"""
+    env = rare_regions_world()
+    x, y = env.sample(120, np.random.default_rng(0))
+    fitted = GaussianMixtureSet(3, 2, max_components=2, seed=0).fit(x, y)
+    run = tmp_path / "run"
+    config = TeachingConfig(max_new=4, refit="incremental", noninteractive=False)
+    ct = ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    )
+    ct.run(max_demonstrations=6)
+    assert ct.refit()  # by hand, at 6
+    ct.run(max_demonstrations=11)  # the loop refits at 10
+    ct.close()
+    assert sorted(p.name for p in (run / "checkpoints").iterdir())[1:] == [
+        f"model-{n:08d}.pt" for n in (4, 6, 10)
+    ]
+    newest = run / "checkpoints" / "model-00000010.pt"
+    payload = torch.load(newest, weights_only=True)
+    payload["state_dict"] = {"not_this_model": torch.zeros(1)}
+    torch.save(payload, newest)
+    assert same_state(load_model(run), ct.model)
+    back, _ = resume(run)
+    assert same_state(back.model, ct.model)
+    back.close()
+
+
 # -- power cuts: every file put in place is on the disk ---------------------------------------
 
 
