@@ -4261,11 +4261,12 @@ class SessionSummary:
             damaged, empty, a directory or stale, or of more labels than the log holds, is
             passed over and noted in ``notes`` (a damaged or empty file's name still records
             a refit at its count, which resume and :func:`load_model` rebuild from the log:
-            one asked by hand moved the refit schedule). Nor is one holding a state the session's
-            model cannot load (another class's, or a GaussianMixtureSet's of other sizes or
-            settings; tried where the session's model is torchcbl's GaussianMixtureSet, which
-            the directory rebuilds, not a class of the user's own): None, and noted, as resume
-            and :func:`load_model` then rebuild the model from the log.
+            one asked by hand moved the refit schedule). Nor is one holding a state the
+            session's model cannot load (another class's, or a GaussianMixtureSet's of other
+            sizes or settings; tried where the session's model is torchcbl's
+            GaussianMixtureSet, which the directory rebuilds, not a class of the user's own):
+            None, and noted, as resume and :func:`load_model` then rebuild the model from the
+            log.
         checkpoints_on_disk: the label counts of the files in ``checkpoints/`` named as
             checkpoints (``model-<n>.pt``), ascending, whatever they are (``notes`` says which
             resume passes over): the stages whose model is loaded, not refitted. The others
