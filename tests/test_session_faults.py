@@ -11,6 +11,7 @@ the env was lost (:class:`Witness`).
 from __future__ import annotations
 
 import contextlib
+import copy
 import errno
 import hashlib
 import json
@@ -502,6 +503,29 @@ def test_a_checkpoint_that_does_not_fit_on_the_disk_says_the_disk_is_full(tmp_pa
     goes_on(ct, env, run)
 
 
+def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses(tmp_path):
+    """A refit by hand moves the refit schedule and only its checkpoint records it. That
+    checkpoint failing to be written (a full disk), the error said "a missing checkpoint is
+    refitted from the log on resume and by load_model" and to resume: but they rebuild the
+    model on the regular schedule until the loop's next refit is saved (here on 5 labels where
+    the model in memory stands on 7). It now says so, names the refit due next, and the
+    session goes on from memory."""
+    run = tmp_path / "run"
+    ct, env = session(run, max_new=5, noninteractive=False)
+    ct.run(max_demonstrations=7)
+    with file_size_limit(1000), pytest.raises(SessionWriteError) as err:  # a line fits
+        ct.refit()
+    msg = " ".join(str(err.value).split())
+    assert str(run / "checkpoints" / "model-00000007.pt") in msg, msg
+    assert "refit by hand" in msg and "next refit, due at 12 labels" in msg, msg
+    assert "refitted from the log on resume" not in msg and "or resume" not in msg, msg
+    assert int(ct.model.n_points_.sum()) == 7  # the refit itself happened
+    assert int(load_model(run).n_points_.sum()) == 5  # what the message warns of
+    ct.run(max_demonstrations=12)  # space freed: the loop's refit at 12 is saved
+    assert same_state(load_model(run), ct.model)
+    ct.close()
+
+
 # -- 3. readers never write -------------------------------------------------------------------
 
 
@@ -956,6 +980,112 @@ def test_damaged_checkpoint_is_refitted_from_the_log(tmp_path, damage):
     assert_model_is_fit_on_log(back.model, run)
     assert (run / "checkpoints" / (last.name + ".damaged")).exists()
     goes_on(back, env, run)
+
+
+def _hand_refit_session(run: Path, refit: str, keep: int | None = 3):
+    """A session refitting every 5 labels, refitted by hand at 7 (off that schedule) and
+    taught on to 9 labels, so its model stands on the hand refit; returns the live model and
+    {labels: the live model's state after each refit, 0: unfitted}."""
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=5, refit=refit),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=keep,
+        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    ct.run(max_demonstrations=7)
+    assert ct.refit()  # by hand, at 7: the loop's next refit is at 12, not 10
+    ct.run(max_demonstrations=9)
+    ct.close()
+    assert sorted(live) == [0, 5, 7]
+    return ct.model, live
+
+
+def _same(model: torch.nn.Module, state: dict[str, torch.Tensor]) -> bool:
+    own = model.state_dict()
+    return own.keys() == state.keys() and all(torch.equal(own[k], state[k]) for k in own)
+
+
+@pytest.mark.parametrize("damage", ["cut", "empty"])
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_damaged_checkpoint_of_a_refit_by_hand_still_says_where_the_schedule_went(
+    tmp_path, refit, damage
+):
+    """A refit by hand moves the refit schedule, and its checkpoint alone records it. That
+    checkpoint damaged (cut short, emptied), load_model, load_models and resume rebuilt the
+    model on the regular schedule from the checkpoint below it (on 5 labels, the live one
+    stood on 7), silently. The damaged file's name still records the refit: the model is
+    rebuilt on it, bit for bit, before and after resume set the file aside as .damaged, and
+    the resumed loop refits next where the live one would have (at 12)."""
+    run = tmp_path / "run"
+    model, live = _hand_refit_session(run, refit)
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()
+    hand.write_bytes(data[: len(data) // 2] if damage == "cut" else b"")
+    assert _same(load_model(run), live[7])
+    for n, staged in S.load_models(run, range(10)):
+        assert _same(staged, live[max(r for r in live if r <= n)]), n
+    (note,) = S.describe(run).notes
+    assert "model-00000007.pt" in note and "records a refit on 7 labels" in note, note
+    back, env = resume(run)
+    assert _same(back.model, live[7]) and same_state(back.model, model)
+    assert (run / "checkpoints" / "model-00000007.pt.damaged").exists()
+    assert _same(load_model(run), live[7])  # the set-aside file still records the refit
+    back.run(max_demonstrations=11)
+    assert _same(back.model, live[7])  # no refit at 10
+    back.run(max_demonstrations=12)
+    assert int(back.model.n_points_.sum()) == 12
+    back.close()
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_pruning_keeps_what_a_set_aside_checkpoint_leaves_off_the_schedule(tmp_path, refit):
+    """A checkpoint set aside as .damaged records a refit by its name, which may have moved
+    the schedule (a refit by hand): pruning removed a later checkpoint as lying on the
+    schedule of the one kept below it, counted from there and not from the set-aside one.
+    Here (max_new=5, keeping 1) a hand refit at 7, damaged and set aside by a resume, then
+    another by hand at 10 (on the schedule from 0, off the one from 7): the loop's refit at 15
+    removed checkpoint 10, and the stages from 10 to 14 were rebuilt on 7's schedule, on 12
+    labels where the live model stood on 10."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+
+    def on_refit(m: torch.nn.Module, n: int) -> None:
+        live[n] = copy.deepcopy(m.state_dict())
+
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=5, refit=refit),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=1,
+        on_refit=on_refit,
+    )
+    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    ct.run(max_demonstrations=7)
+    assert ct.refit()  # by hand, at 7
+    ct.run(max_demonstrations=8)
+    ct.close()
+    hand = run / "checkpoints" / "model-00000007.pt"
+    hand.write_bytes(hand.read_bytes()[:100])
+    env = rare_regions_world()
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False, on_refit=on_refit)
+    assert (run / "checkpoints" / "model-00000007.pt.damaged").exists()
+    back.run(max_demonstrations=10)
+    assert back.refit()  # by hand, at 10
+    back.run(max_demonstrations=16)  # the loop refits at 15
+    back.close()
+    assert sorted(live) == [0, 5, 7, 10, 15]
+    for n, model in S.load_models(run, range(17)):
+        assert _same(model, live[max(r for r in live if r <= n)]), n
+        assert _same(load_model(run, n_demonstrations=n), live[max(r for r in live if r <= n)]), n
 
 
 def test_damaged_sqlite_file(tmp_path):
@@ -2439,6 +2569,38 @@ def test_a_later_checkpoint_this_model_cannot_load_replays_from_the_starting_mod
     ct.close()
     newest = max((run / "checkpoints").glob("model-*.pt"))
     assert newest.name != "model-00000000.pt"
+    payload = torch.load(newest, weights_only=True)
+    payload["state_dict"] = {"not_this_model": torch.zeros(1)}
+    torch.save(payload, newest)
+    assert same_state(load_model(run), ct.model)
+    back, _ = resume(run)
+    assert same_state(back.model, ct.model)
+    back.close()
+
+
+def test_a_replay_from_the_starting_model_goes_through_a_refit_by_hand_below(tmp_path):
+    """refit="incremental" from a fitted model, refitted by hand at 6 (max_new=4): its newest
+    checkpoint (10) holds a state this model cannot load, so the refits are replayed from
+    checkpoint 0. That replay went 4, 8, 10 (the regular schedule, then the count it ends
+    on), not 4, 6, 10 as the live loop refitted: the checkpoints below the one it could not
+    load record the refit by hand, and the replay now goes through them. (Two components at
+    most, each action fitted on about 40 points: the refits are warm, so the path shows.)"""
+    env = rare_regions_world()
+    x, y = env.sample(120, np.random.default_rng(0))
+    fitted = GaussianMixtureSet(3, 2, max_components=2, seed=0).fit(x, y)
+    run = tmp_path / "run"
+    config = TeachingConfig(max_new=4, refit="incremental", noninteractive=False)
+    ct = ConfidentTeacher(
+        env, oracle(env), model=fitted, config=config, run_dir=run, progress=False
+    )
+    ct.run(max_demonstrations=6)
+    assert ct.refit()  # by hand, at 6
+    ct.run(max_demonstrations=11)  # the loop refits at 10
+    ct.close()
+    assert sorted(p.name for p in (run / "checkpoints").iterdir())[1:] == [
+        f"model-{n:08d}.pt" for n in (4, 6, 10)
+    ]
+    newest = run / "checkpoints" / "model-00000010.pt"
     payload = torch.load(newest, weights_only=True)
     payload["state_dict"] = {"not_this_model": torch.zeros(1)}
     torch.save(payload, newest)

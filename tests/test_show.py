@@ -18,9 +18,11 @@ from torchcbl import ConfidentTeacher, TeachingConfig
 from torchcbl.cli import main
 from torchcbl.session import (
     SessionSummary,
+    build_model,
     describe,
     load_config,
     load_corrections,
+    load_demonstrations,
     load_labels,
     load_records,
 )
@@ -519,7 +521,10 @@ def test_show_reports_the_checkpoint_resume_loads_not_the_newest_name(tmp_path, 
     on N labels". It now reports the checkpoint resume loads (the newest readable one fitted
     on the log's labels) and notes each file resume passes over, what it is and what resume
     does with it; it still reads only. What no reader takes for a checkpoint (the .tmp of a
-    killed write, model-abc.pt) is not mentioned."""
+    killed write, model-abc.pt) is not mentioned. An empty file, which a writer never leaves
+    but a checkpoint truncated to nothing is, still records by its name a refit on 19 labels
+    (one asked by hand would be off the schedule): resume refits the model there, as its note
+    says, and writes that model's checkpoint in its place."""
     import torch
 
     run = tmp_path / "run"
@@ -553,10 +558,17 @@ def test_show_reports_the_checkpoint_resume_loads_not_the_newest_name(tmp_path, 
     ct = ConfidentTeacher.resume(run, env, oracle(env), progress=False)
     state = ct.model.state_dict()  # resume loaded the checkpoint show reported
     ct.close()
-    want = torch.load(newest, weights_only=True)["state_dict"]
+    if odd == "empty":
+        assert "records a refit on 19 labels" in note, note
+        x, y = load_demonstrations(run)
+        want = build_model(load_config(run)).fit(x[:19], y[:19]).state_dict()
+    else:
+        want = torch.load(newest, weights_only=True)["state_dict"]
     assert state.keys() == want.keys() and all(torch.equal(state[k], want[k]) for k in want)
     set_aside = odd in ("directory", "empty", "stale")
-    assert path.exists() is not set_aside
+    assert path.with_name(path.name + ".damaged").exists() is (odd in ("directory", "empty"))
+    # set aside, then (empty) the refit on 19 labels written in its place
+    assert path.exists() is (not set_aside or odd == "empty")
     # what resume set aside is no checkpoint any more; what it passed over is still there
     assert (describe(run).notes == ()) is (noted is None or set_aside)
 

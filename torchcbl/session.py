@@ -58,7 +58,11 @@ Run directory layout (one directory per teaching session)::
                                  keeps its last writer's choice; None: all), and checkpoint
                                  0 and a refit by hand's (``ConfidentTeacher.refit``, which
                                  moves the refit schedule) always (an older stage is
-                                 refitted from the log, the model the loop had then). A
+                                 refitted from the log, the model the loop had then). The
+                                 schedule is read from the names: a refit at every
+                                 checkpoint's count, readable or damaged (cut short,
+                                 emptied; set aside as ``.damaged`` too), none at a
+                                 ``.stale`` one's, then one every ``max_new`` labels. A
                                  session started from
                                  a fitted model has its model-00000000.pt, written before
                                  config.json: no label can refit it; a session with prior
@@ -129,7 +133,13 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   the log and the file renamed ``.damaged`` / ``.stale``; except the checkpoint 0 of a session
   started from a fitted model, which no label can refit: where the session still stands on it
   (no refit since, or incremental refits) it is a :class:`CorruptSessionError` naming the file,
-  left as it is. A ``prior.npz`` that is missing, or whose SHA-256 is not the one config.json
+  left as it is. A damaged checkpoint's name (a regular file's, in place or set aside as
+  ``.damaged``) still records a refit at its count, which may have been one asked by hand off
+  the schedule: the model is refitted on that count's labels (``refit="incremental"``: the
+  refits are replayed through it), as the live loop had it. A checkpoint deleted outright
+  takes that record with it: past a refit by hand whose file is gone, and up to the next
+  refit kept on disk, the model is rebuilt on the regular schedule, not the live one's.
+  A ``prior.npz`` that is missing, or whose SHA-256 is not the one config.json
   recorded, is a :class:`CorruptSessionError` naming it for every reader of the training set
   or the model and for resume (never a model fitted without the prior). An unreadable
   ``steps.sqlite``, a ``config.json`` missing a key, or a missing ``steps.sqlite`` beside a
@@ -276,6 +286,8 @@ WRITERS_NAME = "writers.jsonl"
 RUNS_NAME = "runs.jsonl"
 CHECKPOINT_DIR = "checkpoints"
 _CKPT_RE = re.compile(r"^model-(\d{8})\.pt$")
+# a checkpoint a resume set aside as damaged (:func:`_set_aside`): its name still records a refit
+_SET_ASIDE_RE = re.compile(r"^model-(\d{8})\.pt\.damaged(?:-\d+)?$")
 
 _COLUMNS = (
     "step",
@@ -1865,6 +1877,19 @@ _CHECKPOINT_LATER = (
 )
 
 
+def _lost_hand_refit(n: int, max_new: int) -> str:
+    """What a failed write of the checkpoint of a refit by hand on ``n`` labels leaves: the
+    ``after`` of its :class:`SessionWriteError` (see :func:`_write_error`)."""
+    return (
+        "The session and its model in memory are intact and the step log is complete, but "
+        "this was a refit by hand, which moved the refit schedule, and only its checkpoint "
+        "records it: until the loop's next refit, due at "
+        f"{n + max_new} labels, is saved, resume and load_model rebuild the model on the "
+        f"regular schedule instead, not on these {n} labels. Free space (or fix the file's "
+        "permissions), then call run() again: the model in memory is the session's."
+    )
+
+
 def _write_checkpoint(
     run_dir: Path,
     model: torch.nn.Module,
@@ -1919,6 +1944,7 @@ class SessionStore:
         #: recorded in writers.jsonl by :meth:`note_writer`
         self.keep_checkpoints: int | None = None
         self._on_disk: list[int] | None = None  # checkpoints > 0 there (read once, then kept)
+        self._set_aside: list[int] = []  # the counts of those set aside as .damaged (as listed)
         self._max_new: int | None = None  # the session's refit schedule (read by _open)
         self._prune_warned = False
         self._lock = _acquire_lock(self.run_dir) if lock is None else lock
@@ -2447,13 +2473,23 @@ class SessionStore:
         return cur.rowcount
 
     def save_checkpoint(
-        self, model: torch.nn.Module, n_demonstrations: int, digest: str | None = None
+        self,
+        model: torch.nn.Module,
+        n_demonstrations: int,
+        digest: str | None = None,
+        *,
+        by_hand: bool = False,
     ) -> Path:
         """Write the model fitted on the first ``n_demonstrations`` labels, with ``digest``
         (:func:`labels_digest` of those labels) to tell it from a stale one later; then, with
         :attr:`keep_checkpoints`, remove the checkpoints older than the newest that many (not
-        checkpoint 0, and none named for more labels than this one)."""
-        path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest)
+        checkpoint 0, and none named for more labels than this one). ``by_hand``: the model of
+        a refit asked by hand (``ConfidentTeacher.refit``), which this checkpoint alone
+        records: a failed write says what its loss costs (:func:`_lost_hand_refit`)."""
+        after = _CHECKPOINT_LATER
+        if by_hand and self._max_new is not None:
+            after = _lost_hand_refit(n_demonstrations, self._max_new)
+        path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest, after)
         if self.keep_checkpoints is not None:
             self._prune_checkpoints(n_demonstrations, self.keep_checkpoints)
         return path
@@ -2469,10 +2505,12 @@ class SessionStore:
         A stage whose checkpoint is gone is rebuilt from the newest checkpoint below it (or
         from the start) on the loop's schedule, a refit every ``max_new`` labels
         (:func:`restore_model`). A refit by hand (``ConfidentTeacher.refit``) moves that
-        schedule, and its checkpoint alone says where it fell: so a checkpoint ``c`` goes only
-        where ``c - b`` is a multiple of ``max_new``, ``b`` the checkpoint kept below it (0
-        for none). Every refit between two kept checkpoints then lies on the lower one's
-        schedule (all checkpoints there, it holds; each removal keeps it)."""
+        schedule, and its checkpoint alone says where it fell (by its name, even damaged or set
+        aside as ``.damaged``, never removed here): so a checkpoint ``c`` goes only where
+        ``c - b`` is a multiple of ``max_new``, ``b`` the refit recorded below it (a kept
+        checkpoint or a set-aside one; 0 for none). Every refit between two recorded ones then
+        lies on the lower one's schedule (all checkpoints there, it holds; each removal keeps
+        it)."""
         max_new = self._max_new
         if max_new is None:
             return
@@ -2480,16 +2518,18 @@ class SessionStore:
         if self._on_disk is None:
             try:
                 self._on_disk = sorted(m for m, _ in _checkpoint_entries(directory) if m > 0)
+                self._set_aside = [m for m in _set_aside_refits(directory) if m > 0]
             except IncompatibleRunDirError:
                 return  # the checkpoint was just written there; a listing failure is passing
         on_disk = sorted(set(self._on_disk) | {newest})
+        candidates = set([m for m in on_disk if m <= newest][:-keep])
         below = 0
         older = []
-        for m in [m for m in on_disk if m <= newest][:-keep]:
-            if (m - below) % max_new == 0:
-                older.append(m)  # on the schedule from the one kept below: rebuilt alike
+        for m in sorted(candidates | {m for m in self._set_aside if m <= newest}):
+            if m in candidates and (m - below) % max_new == 0:
+                older.append(m)  # on the schedule from the refit recorded below: rebuilt alike
             else:
-                below = m  # where a hand refit moved the schedule: kept
+                below = m  # where a hand refit may have moved the schedule: kept
         self._on_disk = [m for m in on_disk if m not in older]
         for m in older:
             path = directory / f"model-{m:08d}.pt"
@@ -2625,6 +2665,52 @@ def _checkpoint_entries(directory: Path) -> list[tuple[int, Path]]:
     except OSError as exc:
         raise _unreadable(directory, exc) from exc
     return [(int(m.group(1)), e) for m, e in matched if m is not None]
+
+
+def _set_aside_refits(directory: Path) -> list[int]:
+    """The counts of labels named by the files of a session's ``checkpoints/`` that a resume
+    set aside as damaged (``model-<8 digits>.pt.damaged[-i]``, :func:`_set_aside`), regular
+    files only (a directory put there under a checkpoint's name records no refit), ascending,
+    each once: each records a refit at its count (see :func:`_recorded_refits`).
+
+    Raises:
+        IncompatibleRunDirError: the folder cannot be listed (:func:`_unreadable`).
+    """
+    try:
+        if not directory.is_dir():
+            return []
+        matched = [(_SET_ASIDE_RE.match(e.name), e) for e in directory.iterdir()]
+    except OSError as exc:
+        raise _unreadable(directory, exc) from exc
+    return sorted({int(m.group(1)) for m, e in matched if m is not None and _written_file(e)})
+
+
+def _written_file(path: Path) -> bool:
+    """Whether ``path``, listed under a checkpoint's name, may be a file a writer wrote: a
+    regular file (followed through a link), or one whose kind cannot be told (an I/O error);
+    not a directory, a FIFO or a dangling link, which no writer makes."""
+    try:
+        return stat.S_ISREG(os.stat(path).st_mode)
+    except FileNotFoundError:  # a dangling link, or removed since the listing
+        return False
+    except OSError:
+        return True
+
+
+def _refit_schedule(start: int, k: int, recorded: Iterable[int], max_new: int) -> list[int]:
+    """The loop's refits after the one at ``start`` labels up to the one at ``k``: every
+    ``max_new`` labels from the last refit, which a refit recorded at a count in between
+    (``recorded``: counts with a checkpoint's name, :func:`_recorded_refits`; a refit by hand
+    may be one) moves. Ends at ``k``, itself a refit of that schedule (or a recorded one)."""
+    if k <= start:
+        return []
+    counts: list[int] = []
+    at = start
+    for point in sorted({p for p in recorded if start < p <= k} | {k}):
+        counts.extend(range(at + max_new, point, max_new))
+        counts.append(point)
+        at = point
+    return counts
 
 
 def _check_log_present(run_dir: Path) -> None:
@@ -3328,12 +3414,23 @@ class _CheckpointScan:
     (:func:`restore_model`): ``n`` and ``payload``, the newest checkpoint of at most the log's
     labels that is readable and was fitted on them (None: none is); ``passed_over``, the
     newer ones of at most those labels that are not, ``(count, path, "damaged" | "stale")``
-    newest first; ``beyond``, those named for more labels than the log holds, never read."""
+    newest first; ``beyond``, those named for more labels than the log holds, never read;
+    ``refits``, the counts above ``n`` (above 0 for none) and of at most the log's labels at
+    which the names of files that cannot be loaded record a refit, ascending
+    (:func:`_recorded_refits`)."""
 
     n: int | None
     payload: dict[str, Any] | None
     passed_over: list[tuple[int, Path, str]]
     beyond: list[tuple[int, Path]]
+    refits: tuple[int, ...] = ()
+
+    def stood_on(self, n_labels: int, max_new: int) -> int:
+        """The labels the session's model stood on after ``n_labels``: its last refit, the
+        newest recorded (this checkpoint's, or a later one's :attr:`refits`) then one every
+        ``max_new`` labels."""
+        last = max((self.n or 0, *self.refits))
+        return last + fit_count(n_labels - last, max_new)
 
 
 def _scan_checkpoints(
@@ -3359,14 +3456,41 @@ def _scan_checkpoints(
         entries = _checkpoint_entries(directory)
     beyond = sorted((n, path) for n, path in entries if n > n_labels)
     passed_over: list[tuple[int, Path, str]] = []
+    found: tuple[int, dict[str, Any]] | None = None
     for n, path in sorted(((n, p) for n, p in entries if n <= n_labels), reverse=True):
         payload, why = _checkpoint_payload(path, base + n, all_xs, all_ys)
         if payload is not None:
-            return _CheckpointScan(n, payload, passed_over, beyond)
+            found = (n, payload)
+            break
         if not os.path.lexists(path):  # removed since the listing: a writer kept newer ones
             continue
         passed_over.append((n, path, why))
-    return _CheckpointScan(None, None, passed_over, beyond)
+    last = 0 if found is None else found[0]
+    refits = _recorded_refits(directory, passed_over, last, n_labels)
+    if found is None:
+        return _CheckpointScan(None, None, passed_over, beyond, refits)
+    return _CheckpointScan(found[0], found[1], passed_over, beyond, refits)
+
+
+def _recorded_refits(
+    directory: Path, passed_over: list[tuple[int, Path, str]], above: int, n_labels: int
+) -> tuple[int, ...]:
+    """The counts of labels in (``above``, ``n_labels``] at which a file that cannot be loaded
+    records a refit by its name, ascending: a checkpoint passed over as damaged
+    (``passed_over``, as :func:`_scan_checkpoints` finds them) that is a regular file (cut
+    short, emptied, unreadable: torchcbl wrote it at a refit; a directory or a dangling link
+    it never wrote), or one a resume set aside as ``.damaged`` (:func:`_set_aside_refits`).
+    A refit by hand (``ConfidentTeacher.refit``) moves the refit schedule and only its
+    checkpoint records it, so its name counts even where its content is lost. A stale one
+    (``.stale``, or passed over as stale: fitted on other labels than the log's) records
+    none of this session's refits.
+
+    Raises:
+        IncompatibleRunDirError: ``directory`` cannot be listed.
+    """
+    named = {n for n, path, why in passed_over if why == "damaged" and _written_file(path)}
+    named.update(_set_aside_refits(directory))
+    return tuple(sorted(n for n in named if above < n <= n_labels))
 
 
 def _set_aside(path: Path, why: str) -> None:
@@ -3398,16 +3522,20 @@ def restore_model(
     THE one "load the checkpoint or refit" path (resume and :func:`load_model` both use it).
 
     The last refit the directory knows of is its newest checkpoint with at most ``len(ys)``
-    labels that is readable and was fitted on the log's labels (a refit may also be asked for
-    by hand, :meth:`ConfidentTeacher.refit`, at any count); from there the loop refits every
-    ``max_new`` labels, so the model stood on the first ``k`` labels. That checkpoint is
-    loaded when ``k`` is its count; otherwise (the process died between logging and saving, or
-    the checkpoint is damaged or stale) the model is refitted deterministically on the
-    training set of those labels, and with ``store`` the checkpoint is written (a damaged or
-    stale one is first renamed ``<name>.damaged`` / ``<name>.stale``, never deleted).
+    labels that is readable and was fitted on the log's labels, or a later one recorded by
+    the name of a checkpoint that cannot be loaded (damaged: cut short, emptied, unreadable;
+    in place or set aside as ``.damaged``; not a stale one): a refit may also be asked for by
+    hand, :meth:`ConfidentTeacher.refit`, at any count, and only its checkpoint says so.
+    From there the loop refits every ``max_new`` labels, so the model stood on the first
+    ``k`` labels. That checkpoint is loaded when ``k`` is its count; otherwise (the process
+    died between logging and saving, or the checkpoint is damaged or stale) the model is
+    refitted deterministically on the training set of those labels, and with ``store`` the
+    checkpoint is written (a damaged or stale one is first renamed ``<name>.damaged`` /
+    ``<name>.stale``, never deleted).
     With ``incremental`` (``TeachingConfig.refit="incremental"``) the loop's incremental
     refits (``GaussianMixtureSet.refit``, a pure function of the state and the data) are
-    replayed from that checkpoint's state instead, so the model is the live one bit for bit.
+    replayed from that checkpoint's state instead, through every refit the names record, so
+    the model is the live one bit for bit.
     ``starts_fitted``: the session started from a fitted model (config.json's
     ``"starts_fitted"``), which only checkpoint 0 holds and no label can refit: where the model
     still stands on it (``k`` is 0, or the refits are incremental) and it cannot be loaded,
@@ -3468,10 +3596,10 @@ def restore_model(
         if base and not loaded:  # the loop fitted on the prior alone before its first step
             model.fit(*training_set(px, py, relabel=relabel))
             start, loaded = 0, True
-        counts = list(range(start + max_new, k + 1, max_new))
-        if k > start and (not counts or counts[-1] != k):  # a hand refit off the schedule
-            counts.append(k)
-        for i, j in enumerate(counts):
+        recorded = scan.refits
+        if start < last:  # replayed from below the checkpoint: its refits, and those below
+            recorded += _refits_below(directory, last, base, all_xs, all_ys)
+        for i, j in enumerate(_refit_schedule(start, k, recorded, max_new)):
             x, y = training_set(all_xs[: base + j], all_ys[: base + j], relabel=relabel)
             # with no checkpoint loaded, the first refit is a fit from scratch (whatever a
             # failed load left in the buffers); from a loaded one, even the pre-fit state of
@@ -3487,6 +3615,22 @@ def restore_model(
             except SessionWriteError as exc:
                 warnings.warn(str(exc), stacklevel=2)
     return k
+
+
+def _refits_below(
+    directory: Path, last: int, base: int, all_xs: list[np.ndarray], all_ys: list[int]
+) -> tuple[int, ...]:
+    """The refits in (0, ``last``] that the files of ``directory`` record by their names, for
+    a replay from the start through the checkpoint of ``last`` labels (which it could not
+    load): ``last`` itself, each checkpoint below it but a stale one (each read to tell), and
+    each set aside as damaged (see :func:`_recorded_refits`)."""
+    named = {last, *(n for n in _set_aside_refits(directory) if 0 < n < last)}
+    for n, path in _checkpoint_entries(directory):
+        if 0 < n < last and n not in named:
+            payload, why = _checkpoint_payload(path, base + n, all_xs, all_ys)
+            if payload is not None or (why == "damaged" and _written_file(path)):
+                named.add(n)
+    return tuple(sorted(named))
 
 
 def _lost_start(run_dir: str | os.PathLike[str], k: int, why: str) -> CorruptSessionError:
@@ -3530,7 +3674,7 @@ def _restore_plan(
     directory = Path(run_dir) / CHECKPOINT_DIR
     scan = _scan_checkpoints(directory, n_labels, base, all_xs, all_ys)
     last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
-    k = last + fit_count(n_labels - last, max_new)
+    k = scan.stood_on(n_labels, max_new)
     if not starts_fitted:
         return scan, k
     why0 = next((why for n, _, why in scan.passed_over if n == 0), "missing")
@@ -3711,7 +3855,8 @@ def load_model(
         when there were none and the session started from neither a fitted model nor prior
         demonstrations), see :func:`restore_model`. If the matching checkpoint is missing,
         damaged or stale, the model is refitted deterministically on the logged labels
-        (nothing is written).
+        (nothing is written); a damaged one's name still says a refit came at its count (a
+        refit by hand moves the schedule), so the model is rebuilt on the labels it stood on.
 
     Raises:
         IncompatibleRunDirError: the session's model is of a class of the user's own and no
@@ -3929,11 +4074,11 @@ def _stage_models(
     base = len(py)  # the prior's labels come first in every fit and digest
     xs, ys = list(x), y.tolist()
     all_xs, all_ys = px + xs, py + ys
-    entries = sorted(
-        (n, path)
-        for n, path in _checkpoint_entries(Path(run_dir) / CHECKPOINT_DIR)
-        if n <= stages[-1]
-    )
+    directory = Path(run_dir) / CHECKPOINT_DIR
+    entries = sorted((n, path) for n, path in _checkpoint_entries(directory) if n <= stages[-1])
+    # the refits recorded by the names of files that cannot be loaded (_recorded_refits):
+    # those set aside as damaged, and the checkpoints found damaged as the stages are read
+    recorded = set(_set_aside_refits(directory))
 
     def fresh() -> torch.nn.Module:
         return copy.deepcopy(template)
@@ -3960,13 +4105,16 @@ def _stage_models(
     replay: tuple[torch.nn.Module, int | None, int, bool] | None = None
     for n in stages:
         for c, path in reversed([e for e in entries if scanned < e[0] <= n]):
-            found, _ = _checkpoint_payload(path, base + c, all_xs, all_ys)
+            found, why = _checkpoint_payload(path, base + c, all_xs, all_ys)
             if found is not None:
                 last, payload = c, found
                 break
+            if why == "damaged" and c > 0 and _written_file(path):
+                recorded.add(c)
         scanned = n
         start = 0 if last is None else last
-        k = start + fit_count(n - start, max_new)  # the labels the model stood on
+        moved = max((start, *(r for r in recorded if start < r <= n)))  # the last recorded
+        k = moved + fit_count(n - moved, max_new)  # the labels the model stood on
         key: Any = None
         model: torch.nn.Module | None = None
         if payload is None and starts_fitted:
@@ -3988,7 +4136,7 @@ def _stage_models(
                     replay = (fresh(), None, 0, False)
             if replay is not None:
                 work, _, at, ready = replay
-                for j in range(at + max_new, k + 1, max_new):
+                for j in _refit_schedule(at, k, recorded, max_new):
                     (work.refit if ready else work.fit)(*data(j))
                     ready = True
                 replay = (work, anchor, k, ready)
@@ -4111,11 +4259,14 @@ class SessionSummary:
             readable, and fitted on the log's labels (its SHA-256 matches them); None: none
             is. The name alone does not make one: a file named ``model-<n>.pt`` that is
             damaged, empty, a directory or stale, or of more labels than the log holds, is
-            passed over and noted in ``notes``. Nor is one holding a state the session's
-            model cannot load (another class's, or a GaussianMixtureSet's of other sizes or
-            settings; tried where the session's model is torchcbl's GaussianMixtureSet, which
-            the directory rebuilds, not a class of the user's own): None, and noted, as resume
-            and :func:`load_model` then rebuild the model from the log.
+            passed over and noted in ``notes`` (a damaged or empty file's name still records
+            a refit at its count, which resume and :func:`load_model` rebuild from the log:
+            one asked by hand moved the refit schedule). Nor is one holding a state the
+            session's model cannot load (another class's, or a GaussianMixtureSet's of other
+            sizes or settings; tried where the session's model is torchcbl's
+            GaussianMixtureSet, which the directory rebuilds, not a class of the user's own):
+            None, and noted, as resume and :func:`load_model` then rebuild the model from the
+            log.
         checkpoints_on_disk: the label counts of the files in ``checkpoints/`` named as
             checkpoints (``model-<n>.pt``), ascending, whatever they are (``notes`` says which
             resume passes over): the stages whose model is loaded, not refitted. The others
@@ -4928,7 +5079,8 @@ def _checkpoint_report(
     notes = []
     foreign = None if scan.payload is None else _foreign_state(config, scan.payload)
     if foreign is not None and scan.n is not None:
-        notes.append(_foreign_note(config, scan.n, len(ys), foreign))
+        k = scan.stood_on(len(ys), int(config["teaching"]["max_new"]))
+        notes.append(_foreign_note(config, scan.n, k, foreign))
         scan = dataclasses.replace(scan, n=None, payload=None)  # resume starts from none
     for n, path, why in scan.passed_over:
         name = f"{CHECKPOINT_DIR}/{path.name}"
@@ -4942,6 +5094,13 @@ def _checkpoint_report(
                 f"{name} {what}: it holds the fitted model the session started from, which "
                 "no label can refit; resume and load_model cannot load it, refuse the session "
                 "where its model still stands on it, and leave the file as it is"
+            )
+        elif n in scan.refits:
+            notes.append(
+                f"{name} {what}: resume and load_model pass it over (resume renames it "
+                f"{path.name}.{why}); its name still records a refit on {n} labels (where "
+                "a refit by hand may have moved the refit schedule), which they rebuild "
+                "from an earlier checkpoint or the log"
             )
         else:
             notes.append(
@@ -4989,10 +5148,11 @@ def _foreign_state(config: dict[str, Any], payload: dict[str, Any]) -> str | Non
     return None
 
 
-def _foreign_note(config: dict[str, Any], n: int, n_labels: int, why: str) -> str:
+def _foreign_note(config: dict[str, Any], n: int, k: int, why: str) -> str:
     """:func:`describe`'s note on ``checkpoints/model-<n>.pt``, the checkpoint resume would
     start from, whose state the session's model cannot load (``why``), saying what resume
-    and :func:`load_model` do with it (as :func:`restore_model` does)."""
+    and :func:`load_model` do with it (as :func:`restore_model` does); ``k``: the labels the
+    session's model stood on (:meth:`_CheckpointScan.stood_on`)."""
     name = f"model-{n:08d}.pt"
     model = str(config["model"].get("class"))
     what = (
@@ -5006,7 +5166,6 @@ def _foreign_note(config: dict[str, Any], n: int, n_labels: int, why: str) -> st
             "still stands on it, and leave the file as it is"
         )
     teaching = config["teaching"]
-    k = n + fit_count(n_labels - n, int(teaching["max_new"]))  # the labels the model stood on
     if k == n:
         return (
             f"{what}: resume and load_model cannot load it and refit the model on the log's "

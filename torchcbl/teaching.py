@@ -1392,10 +1392,18 @@ class ConfidentTeacher:
 
         The refit schedule then counts ``max_new`` from here. To evaluate a stage without
         changing the session, use :meth:`snapshot` instead. Returns whether a refit happened.
+        In a session on disk its checkpoint (kept whatever ``keep_checkpoints`` says) is the
+        only record of where the schedule moved, which resume and ``load_model`` read from
+        its name (even damaged).
+
+        Raises:
+            SessionWriteError: its checkpoint could not be written (a full disk); the refit
+                is done in memory, and the message says what resume and ``load_model`` give
+                until the loop's next refit is saved.
         """
         if self._new_since_refit == 0 or not len(self._train):
             return False
-        self._refit()
+        self._refit(by_hand=True)
         return True
 
     def snapshot(self) -> Any:
@@ -1419,13 +1427,15 @@ class ConfidentTeacher:
         """Consecutive autonomous steps in the current :meth:`run`."""
         return self._auto_steps_streak
 
-    def _refit(self) -> None:
+    def _refit(self, by_hand: bool = False) -> None:
         x, y = self._train.arrays()
         (self.model.refit if self.config.refit == "incremental" else self.model.fit)(x, y)
         _tell_refit(self.strategy, self.model, x, y)
         self._new_since_refit = 0
         if self._store is not None:
-            self._store.save_checkpoint(self.model, self._labels, self._digest.hexdigest())
+            self._store.save_checkpoint(
+                self.model, self._labels, self._digest.hexdigest(), by_hand=by_hand
+            )
         if self.on_refit is not None:
             self.on_refit(self.model, self._labels)
 
