@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -344,3 +345,22 @@ def test_a_quantile_rule_refuses_observations_that_are_not_the_classified_ones()
     assert (
         rule.is_confident(one, far[:1]).tolist() == rule.is_confident(one, far[:1, None]).tolist()
     )
+
+
+@pytest.mark.parametrize("bad", [2.7, 2.0, True, "3", 0, -1, np.float64(4.0)])
+def test_threshold_refuses_a_feature_count_that_is_not_a_whole_number_of_features(bad):
+    """DistanceRule(quantile=...).threshold(2.7) truncated the feature count to 2 and answered
+    the 2-D threshold (2.45 std) silently; threshold(True) answered the 1-D one and
+    threshold("3") the 3-D one. threshold(0) failed in chi2_quantile ("chi2_quantile: expected
+    an int dof >= 1"), naming neither the method called nor its argument. Each is refused
+    naming threshold and n_features; a fixed rule, which does not read D, refuses them too."""
+    for rule in (DistanceRule(quantile=0.95), DistanceRule(2.0)):
+        with pytest.raises(
+            ValueError,
+            match=rf"DistanceRule.threshold: expected n_features as an int >= 1 .*, got "
+            rf"{re.escape(repr(bad))}",
+        ):
+            rule.threshold(bad)
+    rule = DistanceRule(quantile=0.95)
+    assert rule.threshold(np.int64(4)) == rule.threshold(4) == pytest.approx(3.0802, abs=1e-4)
+    assert DistanceRule(2.0).threshold(4) == DistanceRule(2.0).threshold() == 2.0

@@ -227,7 +227,25 @@ class DistanceRule:
             self.max_std = None
 
     def threshold(self, n_features: int | None = None) -> float:
-        """The threshold in standard deviations (for D = ``n_features`` with a quantile)."""
+        """The threshold in standard deviations (for D = ``n_features`` with a quantile).
+
+        ``n_features``: the observations' feature count D, an int >= 1 (a fixed threshold
+        does not depend on it); None for the D noted by :meth:`update` or read by
+        :meth:`is_confident`.
+
+        Raises:
+            ValueError: ``n_features`` is not an int >= 1 (a float such as 2.7 is not
+                truncated, a bool is no count), or D is not known yet.
+        """
+        if n_features is not None and (
+            isinstance(n_features, (bool, np.bool_))
+            or not isinstance(n_features, (int, np.integer))
+            or n_features < 1
+        ):
+            raise ValueError(
+                "DistanceRule.threshold: expected n_features as an int >= 1 (the observations' "
+                f"feature count D), got {n_features!r}; pass the model's n_features"
+            )
         if self.quantile is None:
             return float(self.max_std)  # type: ignore[arg-type]
         d = self._dof if n_features is None else int(n_features)
