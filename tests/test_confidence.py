@@ -364,3 +364,31 @@ def test_threshold_refuses_a_feature_count_that_is_not_a_whole_number_of_feature
     rule = DistanceRule(quantile=0.95)
     assert rule.threshold(np.int64(4)) == rule.threshold(4) == pytest.approx(3.0802, abs=1e-4)
     assert DistanceRule(2.0).threshold(4) == DistanceRule(2.0).threshold() == 2.0
+
+
+def test_auto_threshold_rule_refuses_a_classification_of_another_action_count():
+    """An AutoThresholdRule updated on a 3-action model and then given a 4-action model's
+    classification raised a bare IndexError ('index 3 is out of bounds for dimension 0 with
+    size 3'), and a 2-action model's was judged on the 3-action thresholds, silently. Both
+    are a ValueError naming the two counts and what to do; update or reset mends it."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(60, 2)) + np.repeat(np.arange(3), 20)[:, None] * 3.0
+    y3 = np.repeat(np.arange(3), 20)
+    for n_actions in (4, 2):
+        rule = AutoThresholdRule()
+        rule.update(GaussianMixtureSet(3, 2, 2).fit(x, y3), x, y3)
+        y = np.repeat(np.arange(n_actions), 60 // n_actions)
+        other = GaussianMixtureSet(n_actions, 2, 2).fit(x, y)
+        c = other.classify(x)
+        with pytest.raises(
+            ValueError,
+            match=rf"AutoThresholdRule.is_confident: its thresholds are for 3 actions \(set by "
+            rf"update\) but the classification has {n_actions}; call rule.update\(model, ",
+        ):
+            rule.is_confident(c, x)
+        fresh = AutoThresholdRule()
+        fresh.update(other, x, y)
+        rule.update(other, x, y)  # an update with the new model mends it
+        assert torch.equal(rule.is_confident(c, x), fresh.is_confident(c, x))
+        rule.reset()  # so does a reset (every threshold max_std until the next update)
+        assert torch.equal(rule.is_confident(c, x), DistanceRule(2.0).is_confident(c, x))

@@ -39,6 +39,8 @@ from typing import TYPE_CHECKING, Any, Protocol, overload, runtime_checkable
 import numpy as np
 import torch
 
+from torchcbl._text import counted
+
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification, GaussianMixtureSet
 
@@ -425,11 +427,27 @@ class AutoThresholdRule:
     def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
         """Bool tensor [N]: True where the model's action may be executed without asking
         (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
-        when known)."""
+        when known).
+
+        Raises:
+            ValueError: the thresholds (set by :meth:`update`) are for another number of
+                actions than the classification's model has.
+        """
         action, distance = c.action.cpu(), c.distance.cpu()  # a CUDA model's answer too
         ok = action >= 0
         if self.thresholds is None:
             return (distance <= self.max_std) & ok
+        n = len(self.thresholds)
+        posterior = getattr(c, "posterior", None)  # [N, A]; a look-alike may have none
+        given = posterior.shape[-1] if getattr(posterior, "ndim", 0) == 2 else None
+        if (given is not None and given != n) or (len(action) and int(action.max()) >= n):
+            has = given if given is not None else f"action {int(action.max())}"
+            raise ValueError(
+                f"AutoThresholdRule.is_confident: its thresholds are for {counted(n, 'action')} "
+                f"(set by update) but the classification has {has}; call rule.update(model, "
+                "observations, actions) with the model that classified and its "
+                "demonstrations, or rule.reset() to start again from max_std"
+            )
         thr = self.thresholds.to(distance.dtype)[action.clamp(min=0)]
         return (distance < thr) & ok
 
