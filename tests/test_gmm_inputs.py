@@ -157,6 +157,20 @@ def test_failed_fit_leaves_the_previous_model_untouched():
     assert model.fit_report_ is report
 
 
+def test_fit_report_counts_one_point_and_one_candidate_in_the_singular():
+    """FitReport's text said "1 points", "of 1 candidates" and "1 candidate(s) did not
+    converge"; it counts as the other messages do (torchcbl._text.counted)."""
+    rng = np.random.default_rng(0)
+    x = np.r_[rng.normal(size=(1, 2)), rng.normal(size=(30, 2)) + 5]
+    y = np.r_[0, np.ones(30, dtype=np.int64)]
+    text = str(GaussianMixtureSet(2, 2, 2, max_iter=2).fit(x, y).fit_report_)
+    assert "action 0: 1 point, chose k=1 of 1 candidate (1 converged, scratch)" in text, text
+    assert "action 1: 30 points, chose k=1 of 2 candidates (1 converged, scratch)" in text, text
+    assert "note: 1 candidate did not converge in max_iter=2: (action 1, k=2)" in text, text
+    text = str(GaussianMixtureSet(2, 2, 2, max_iter=1).fit(x, y).fit_report_)
+    assert "note: 3 candidates did not converge in max_iter=1" in text, text
+
+
 def test_action_without_data_is_never_predicted_and_reported():
     x, y = _data(a=2)  # labels 0, 1 only, model has 3 actions
     model = GaussianMixtureSet(3, 3, 4).fit(x, y)
