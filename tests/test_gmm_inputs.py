@@ -316,6 +316,49 @@ def test_a_policy_reads_a_tensor_observation_as_the_numbers_it_holds():
         policy(torch.zeros(1, 3, requires_grad=True))  # a batch is still refused as before
 
 
+@pytest.mark.parametrize(
+    "obs",
+    [
+        [True, False, True],
+        np.array([True, False, True]),
+        torch.tensor([True, False, True]),
+        ["1", "2", "3"],
+        np.array(["1", "2", "3"]),
+        np.array([1 + 1j, 2, 3]),
+        torch.tensor([1 + 1j, 2, 3]),
+        [1 + 0j, 2, 3],
+    ],
+    ids=["bools", "bool array", "bool tensor", "strings", "str array", "complex array",
+         "complex tensor", "complex list"],
+)  # fmt: skip
+def test_a_policy_refuses_the_observations_classify_refuses(obs):
+    """GreedyPolicy read every observation as float64: bools as 0/1, strings ("1") as the
+    numbers they spell, and complex arrays and tensors without their imaginary part (numpy's
+    ComplexWarning, torch's UserWarning), answering an action where model.classify refuses
+    the same observation as a batch; a list of Python complex numbers failed with float()'s
+    own words. It refuses them as classify does: a TypeError naming the dtype and the
+    conversion, and no warning."""
+    from torchcbl import GreedyPolicy
+
+    x, y = _data(n=60)
+    model = GaussianMixtureSet(3, 3, 2).fit(x, y)
+    policy = GreedyPolicy(model)
+    batch = obs[None] if isinstance(obs, (np.ndarray, torch.Tensor)) else [obs]
+    with pytest.raises(TypeError, match=r"observations: expected real numbers .* but got dtype"):
+        model.classify(batch)
+    for call in (policy, policy.classify):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(
+                TypeError,
+                match=r"GreedyPolicy: expected an observation of real numbers \(float32/float64 "
+                r"or integers\) but got dtype \S+; convert with ",
+            ):
+                call(obs)
+    for fine in ([1, 2, 3], np.array([1, 2, 3], dtype=np.uint8), torch.tensor([1, 2, 3])):
+        assert policy(fine) == policy(np.array([1.0, 2.0, 3.0]))
+
+
 def test_single_observation_path_matches_batch_path():
     model, x, _ = _fitted()
     probe = np.random.default_rng(5).normal(scale=4, size=(40, 3)) + 3
