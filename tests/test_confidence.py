@@ -392,3 +392,35 @@ def test_auto_threshold_rule_refuses_a_classification_of_another_action_count():
         assert torch.equal(rule.is_confident(c, x), fresh.is_confident(c, x))
         rule.reset()  # so does a reset (every threshold max_std until the next update)
         assert torch.equal(rule.is_confident(c, x), DistanceRule(2.0).is_confident(c, x))
+
+
+@pytest.mark.parametrize(
+    "rule, fields",
+    [
+        (DistanceRule(), "action, distance"),
+        (DistanceRule(quantile=0.95), "action, distance"),
+        (PosteriorRule(), "action, posterior"),
+        (AutoThresholdRule(), "action, distance"),
+    ],
+    ids=repr,
+)
+def test_a_rule_given_no_classification_says_what_it_expected(rule, fields):
+    """rule.is_confident(something that is not a Classification) failed with an
+    AttributeError on .distance or .action (e.g. "'numpy.ndarray' object has no attribute
+    'distance'"), not saying what a rule reads. It is a TypeError naming the fields expected,
+    those missing and what was given. A look-alike with those fields (a custom model's own
+    answer type) is read as before: the class is not required."""
+    from collections import namedtuple
+
+    for bad, missing in ((np.array([0, 1]), fields), ({"action": 1}, fields)):
+        with pytest.raises(
+            TypeError,
+            match=rf"{re.escape(repr(rule))}\.is_confident: expected the model's Classification "
+            rf"\(fields {fields}\) but got {type(bad).__name__} .* without {missing}; ",
+        ):
+            rule.is_confident(bad, np.zeros((2, 4)))
+    Answer = namedtuple("Answer", "action distance posterior")
+    alike = Answer(C.action, C.distance, C.posterior)
+    assert torch.equal(
+        rule.is_confident(alike, np.zeros((5, 4))), rule.is_confident(C, np.zeros((5, 4)))
+    )

@@ -78,6 +78,23 @@ def _np(t: torch.Tensor | np.ndarray) -> np.ndarray:
         return t.numpy(force=True)
 
 
+def _read(c: Any, rule: object, *names: str) -> tuple[Any, ...]:
+    """The fields ``names`` of the classification ``c`` given to ``rule.is_confident``; a
+    TypeError naming them where ``c`` lacks one. Any object with those fields is read (a
+    custom model may answer with a look-alike of :class:`~torchcbl.gmm.Classification`)."""
+    try:
+        return tuple(getattr(c, name) for name in names)
+    except AttributeError:
+        missing = [name for name in names if not hasattr(c, name)]
+        if not missing:  # raised inside a property of c's own: its error, as it was
+            raise
+        raise TypeError(
+            f"{rule!r}.is_confident: expected the model's Classification (fields "
+            f"{', '.join(names)}) but got {type(c).__name__} {c!r:.60} without "
+            f"{', '.join(missing)}; pass the answer of model.classify(observations)"
+        ) from None
+
+
 def _check_positive(name: str, value: float, *, upper: float | None = None) -> float:
     if (
         isinstance(value, (bool, np.bool_))
@@ -265,16 +282,18 @@ class DistanceRule:
         """Bool tensor [N]: True where the model's action may be executed without asking
         (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
         when known, or one observation [D] for N = 1). A quantile rule reads D from the
-        observations: a ValueError refuses observations of another shape."""
+        observations: a ValueError refuses observations of another shape. ``c`` may be any
+        object with ``action`` and ``distance`` (a TypeError names those it lacks)."""
+        c_action, c_distance = _read(c, self, "action", "distance")
         if self.quantile is None:
             thr = float(self.max_std)  # type: ignore[arg-type]
         else:
-            action = _np(c.action)
+            action = _np(c_action)
             d = None if observations is None else self._features(observations, len(action))
             if d is None and self._dof is None and not (action >= 0).any():
                 return torch.zeros(len(action), dtype=torch.bool)  # no model: ask anyway
             thr = self.threshold(d)
-        ok = (_np(c.distance) <= thr) & (_np(c.action) >= 0)
+        ok = (_np(c_distance) <= thr) & (_np(c_action) >= 0)
         return torch.from_numpy(ok)
 
     def _features(self, observations: Any, n: int) -> int:
@@ -333,9 +352,11 @@ class PosteriorRule:
     def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
         """Bool tensor [N]: True where the model's action may be executed without asking
         (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
-        when known)."""
-        action = _np(c.action)
-        post = _np(c.posterior)
+        when known). ``c`` may be any object with ``action`` and ``posterior`` (a TypeError
+        names those it lacks)."""
+        c_action, c_posterior = _read(c, self, "action", "posterior")
+        action = _np(c_action)
+        post = _np(c_posterior)
         chosen = post[np.arange(len(action)), np.maximum(action, 0)]
         return torch.from_numpy((chosen >= self.min_posterior) & (action >= 0))
 
@@ -430,10 +451,12 @@ class AutoThresholdRule:
         when known).
 
         Raises:
+            TypeError: ``c`` lacks ``action`` or ``distance`` (any object with both is read).
             ValueError: the thresholds (set by :meth:`update`) are for another number of
                 actions than the classification's model has.
         """
-        action, distance = c.action.cpu(), c.distance.cpu()  # a CUDA model's answer too
+        c_action, c_distance = _read(c, self, "action", "distance")
+        action, distance = c_action.cpu(), c_distance.cpu()  # a CUDA model's answer too
         ok = action >= 0
         if self.thresholds is None:
             return (distance <= self.max_std) & ok
