@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -343,4 +344,83 @@ def test_a_quantile_rule_refuses_observations_that_are_not_the_classified_ones()
     one = model.classify(far[:1, None])
     assert (
         rule.is_confident(one, far[:1]).tolist() == rule.is_confident(one, far[:1, None]).tolist()
+    )
+
+
+@pytest.mark.parametrize("bad", [2.7, 2.0, True, "3", 0, -1, np.float64(4.0)])
+def test_threshold_refuses_a_feature_count_that_is_not_a_whole_number_of_features(bad):
+    """DistanceRule(quantile=...).threshold(2.7) truncated the feature count to 2 and answered
+    the 2-D threshold (2.45 std) silently; threshold(True) answered the 1-D one and
+    threshold("3") the 3-D one. threshold(0) failed in chi2_quantile ("chi2_quantile: expected
+    an int dof >= 1"), naming neither the method called nor its argument. Each is refused
+    naming threshold and n_features; a fixed rule, which does not read D, refuses them too."""
+    for rule in (DistanceRule(quantile=0.95), DistanceRule(2.0)):
+        with pytest.raises(
+            ValueError,
+            match=rf"DistanceRule.threshold: expected n_features as an int >= 1 .*, got "
+            rf"{re.escape(repr(bad))}",
+        ):
+            rule.threshold(bad)
+    rule = DistanceRule(quantile=0.95)
+    assert rule.threshold(np.int64(4)) == rule.threshold(4) == pytest.approx(3.0802, abs=1e-4)
+    assert DistanceRule(2.0).threshold(4) == DistanceRule(2.0).threshold() == 2.0
+
+
+def test_auto_threshold_rule_refuses_a_classification_of_another_action_count():
+    """An AutoThresholdRule updated on a 3-action model and then given a 4-action model's
+    classification raised a bare IndexError ('index 3 is out of bounds for dimension 0 with
+    size 3'), and a 2-action model's was judged on the 3-action thresholds, silently. Both
+    are a ValueError naming the two counts and what to do; update or reset mends it."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(60, 2)) + np.repeat(np.arange(3), 20)[:, None] * 3.0
+    y3 = np.repeat(np.arange(3), 20)
+    for n_actions in (4, 2):
+        rule = AutoThresholdRule()
+        rule.update(GaussianMixtureSet(3, 2, 2).fit(x, y3), x, y3)
+        y = np.repeat(np.arange(n_actions), 60 // n_actions)
+        other = GaussianMixtureSet(n_actions, 2, 2).fit(x, y)
+        c = other.classify(x)
+        with pytest.raises(
+            ValueError,
+            match=rf"AutoThresholdRule.is_confident: its thresholds are for 3 actions \(set by "
+            rf"update\) but the classification has {n_actions}; call rule.update\(model, ",
+        ):
+            rule.is_confident(c, x)
+        fresh = AutoThresholdRule()
+        fresh.update(other, x, y)
+        rule.update(other, x, y)  # an update with the new model mends it
+        assert torch.equal(rule.is_confident(c, x), fresh.is_confident(c, x))
+        rule.reset()  # so does a reset (every threshold max_std until the next update)
+        assert torch.equal(rule.is_confident(c, x), DistanceRule(2.0).is_confident(c, x))
+
+
+@pytest.mark.parametrize(
+    "rule, fields",
+    [
+        (DistanceRule(), "action, distance"),
+        (DistanceRule(quantile=0.95), "action, distance"),
+        (PosteriorRule(), "action, posterior"),
+        (AutoThresholdRule(), "action, distance"),
+    ],
+    ids=repr,
+)
+def test_a_rule_given_no_classification_says_what_it_expected(rule, fields):
+    """rule.is_confident(something that is not a Classification) failed with an
+    AttributeError on .distance or .action (e.g. "'numpy.ndarray' object has no attribute
+    'distance'"), not saying what a rule reads. It is a TypeError naming the fields expected,
+    those missing and what was given. A look-alike with those fields (a custom model's own
+    answer type) is read as before: the class is not required."""
+    from collections import namedtuple
+
+    for bad, missing in ((np.array([0, 1]), fields), ({"action": 1}, fields)):
+        with pytest.raises(
+            TypeError,
+            match=rf"{re.escape(repr(rule))}\.is_confident: expected the model's Classification "
+            rf"\(fields {fields}\) but got {type(bad).__name__} .* without {missing}; ",
+        ):
+            rule.is_confident(bad, np.zeros((2, 4)))
+    Answer = namedtuple("Answer", "action distance posterior")
+    alike = Answer(C.action, C.distance, C.posterior)
+    assert torch.equal(
+        rule.is_confident(alike, np.zeros((5, 4))), rule.is_confident(C, np.zeros((5, 4)))
     )

@@ -157,6 +157,20 @@ def test_failed_fit_leaves_the_previous_model_untouched():
     assert model.fit_report_ is report
 
 
+def test_fit_report_counts_one_point_and_one_candidate_in_the_singular():
+    """FitReport's text said "1 points", "of 1 candidates" and "1 candidate(s) did not
+    converge"; it counts as the other messages do (torchcbl._text.counted)."""
+    rng = np.random.default_rng(0)
+    x = np.r_[rng.normal(size=(1, 2)), rng.normal(size=(30, 2)) + 5]
+    y = np.r_[0, np.ones(30, dtype=np.int64)]
+    text = str(GaussianMixtureSet(2, 2, 2, max_iter=2).fit(x, y).fit_report_)
+    assert "action 0: 1 point, chose k=1 of 1 candidate (1 converged, scratch)" in text, text
+    assert "action 1: 30 points, chose k=1 of 2 candidates (1 converged, scratch)" in text, text
+    assert "note: 1 candidate did not converge in max_iter=2: (action 1, k=2)" in text, text
+    text = str(GaussianMixtureSet(2, 2, 2, max_iter=1).fit(x, y).fit_report_)
+    assert "note: 3 candidates did not converge in max_iter=1" in text, text
+
+
 def test_action_without_data_is_never_predicted_and_reported():
     x, y = _data(a=2)  # labels 0, 1 only, model has 3 actions
     model = GaussianMixtureSet(3, 3, 4).fit(x, y)
@@ -300,6 +314,49 @@ def test_a_policy_reads_a_tensor_observation_as_the_numbers_it_holds():
         assert policy(torch.tensor(x[i], requires_grad=True)) == policy(x[i])
     with pytest.raises(ValueError, match=r"GreedyPolicy: expected one observation of shape"):
         policy(torch.zeros(1, 3, requires_grad=True))  # a batch is still refused as before
+
+
+@pytest.mark.parametrize(
+    "obs",
+    [
+        [True, False, True],
+        np.array([True, False, True]),
+        torch.tensor([True, False, True]),
+        ["1", "2", "3"],
+        np.array(["1", "2", "3"]),
+        np.array([1 + 1j, 2, 3]),
+        torch.tensor([1 + 1j, 2, 3]),
+        [1 + 0j, 2, 3],
+    ],
+    ids=["bools", "bool array", "bool tensor", "strings", "str array", "complex array",
+         "complex tensor", "complex list"],
+)  # fmt: skip
+def test_a_policy_refuses_the_observations_classify_refuses(obs):
+    """GreedyPolicy read every observation as float64: bools as 0/1, strings ("1") as the
+    numbers they spell, and complex arrays and tensors without their imaginary part (numpy's
+    ComplexWarning, torch's UserWarning), answering an action where model.classify refuses
+    the same observation as a batch; a list of Python complex numbers failed with float()'s
+    own words. It refuses them as classify does: a TypeError naming the dtype and the
+    conversion, and no warning."""
+    from torchcbl import GreedyPolicy
+
+    x, y = _data(n=60)
+    model = GaussianMixtureSet(3, 3, 2).fit(x, y)
+    policy = GreedyPolicy(model)
+    batch = obs[None] if isinstance(obs, (np.ndarray, torch.Tensor)) else [obs]
+    with pytest.raises(TypeError, match=r"observations: expected real numbers .* but got dtype"):
+        model.classify(batch)
+    for call in (policy, policy.classify):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(
+                TypeError,
+                match=r"GreedyPolicy: expected an observation of real numbers \(float32/float64 "
+                r"or integers\) but got dtype \S+; convert with ",
+            ):
+                call(obs)
+    for fine in ([1, 2, 3], np.array([1, 2, 3], dtype=np.uint8), torch.tensor([1, 2, 3])):
+        assert policy(fine) == policy(np.array([1.0, 2.0, 3.0]))
 
 
 def test_single_observation_path_matches_batch_path():

@@ -39,6 +39,8 @@ from typing import TYPE_CHECKING, Any, Protocol, overload, runtime_checkable
 import numpy as np
 import torch
 
+from torchcbl._text import counted
+
 if TYPE_CHECKING:  # pragma: no cover
     from torchcbl.gmm import Classification, GaussianMixtureSet
 
@@ -74,6 +76,23 @@ def _np(t: torch.Tensor | np.ndarray) -> np.ndarray:
         return t.numpy()
     except (TypeError, RuntimeError):  # on an accelerator, or requires grad
         return t.numpy(force=True)
+
+
+def _read(c: Any, rule: object, *names: str) -> tuple[Any, ...]:
+    """The fields ``names`` of the classification ``c`` given to ``rule.is_confident``; a
+    TypeError naming them where ``c`` lacks one. Any object with those fields is read (a
+    custom model may answer with a look-alike of :class:`~torchcbl.gmm.Classification`)."""
+    try:
+        return tuple(getattr(c, name) for name in names)
+    except AttributeError:
+        missing = [name for name in names if not hasattr(c, name)]
+        if not missing:  # raised inside a property of c's own: its error, as it was
+            raise
+        raise TypeError(
+            f"{rule!r}.is_confident: expected the model's Classification (fields "
+            f"{', '.join(names)}) but got {type(c).__name__} {c!r:.60} without "
+            f"{', '.join(missing)}; pass the answer of model.classify(observations)"
+        ) from None
 
 
 def _check_positive(name: str, value: float, *, upper: float | None = None) -> float:
@@ -227,7 +246,25 @@ class DistanceRule:
             self.max_std = None
 
     def threshold(self, n_features: int | None = None) -> float:
-        """The threshold in standard deviations (for D = ``n_features`` with a quantile)."""
+        """The threshold in standard deviations (for D = ``n_features`` with a quantile).
+
+        ``n_features``: the observations' feature count D, an int >= 1 (a fixed threshold
+        does not depend on it); None for the D noted by :meth:`update` or read by
+        :meth:`is_confident`.
+
+        Raises:
+            ValueError: ``n_features`` is not an int >= 1 (a float such as 2.7 is not
+                truncated, a bool is no count), or D is not known yet.
+        """
+        if n_features is not None and (
+            isinstance(n_features, (bool, np.bool_))
+            or not isinstance(n_features, (int, np.integer))
+            or n_features < 1
+        ):
+            raise ValueError(
+                "DistanceRule.threshold: expected n_features as an int >= 1 (the observations' "
+                f"feature count D), got {n_features!r}; pass the model's n_features"
+            )
         if self.quantile is None:
             return float(self.max_std)  # type: ignore[arg-type]
         d = self._dof if n_features is None else int(n_features)
@@ -245,16 +282,18 @@ class DistanceRule:
         """Bool tensor [N]: True where the model's action may be executed without asking
         (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
         when known, or one observation [D] for N = 1). A quantile rule reads D from the
-        observations: a ValueError refuses observations of another shape."""
+        observations: a ValueError refuses observations of another shape. ``c`` may be any
+        object with ``action`` and ``distance`` (a TypeError names those it lacks)."""
+        c_action, c_distance = _read(c, self, "action", "distance")
         if self.quantile is None:
             thr = float(self.max_std)  # type: ignore[arg-type]
         else:
-            action = _np(c.action)
+            action = _np(c_action)
             d = None if observations is None else self._features(observations, len(action))
             if d is None and self._dof is None and not (action >= 0).any():
                 return torch.zeros(len(action), dtype=torch.bool)  # no model: ask anyway
             thr = self.threshold(d)
-        ok = (_np(c.distance) <= thr) & (_np(c.action) >= 0)
+        ok = (_np(c_distance) <= thr) & (_np(c_action) >= 0)
         return torch.from_numpy(ok)
 
     def _features(self, observations: Any, n: int) -> int:
@@ -313,9 +352,11 @@ class PosteriorRule:
     def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
         """Bool tensor [N]: True where the model's action may be executed without asking
         (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
-        when known)."""
-        action = _np(c.action)
-        post = _np(c.posterior)
+        when known). ``c`` may be any object with ``action`` and ``posterior`` (a TypeError
+        names those it lacks)."""
+        c_action, c_posterior = _read(c, self, "action", "posterior")
+        action = _np(c_action)
+        post = _np(c_posterior)
         chosen = post[np.arange(len(action)), np.maximum(action, 0)]
         return torch.from_numpy((chosen >= self.min_posterior) & (action >= 0))
 
@@ -407,11 +448,29 @@ class AutoThresholdRule:
     def is_confident(self, c: Classification, observations: Any = None) -> torch.Tensor:
         """Bool tensor [N]: True where the model's action may be executed without asking
         (``c``: the model's :class:`Classification` of N observations; ``observations`` [N, D]
-        when known)."""
-        action, distance = c.action.cpu(), c.distance.cpu()  # a CUDA model's answer too
+        when known).
+
+        Raises:
+            TypeError: ``c`` lacks ``action`` or ``distance`` (any object with both is read).
+            ValueError: the thresholds (set by :meth:`update`) are for another number of
+                actions than the classification's model has.
+        """
+        c_action, c_distance = _read(c, self, "action", "distance")
+        action, distance = c_action.cpu(), c_distance.cpu()  # a CUDA model's answer too
         ok = action >= 0
         if self.thresholds is None:
             return (distance <= self.max_std) & ok
+        n = len(self.thresholds)
+        posterior = getattr(c, "posterior", None)  # [N, A]; a look-alike may have none
+        given = posterior.shape[-1] if getattr(posterior, "ndim", 0) == 2 else None
+        if (given is not None and given != n) or (len(action) and int(action.max()) >= n):
+            has = given if given is not None else f"action {int(action.max())}"
+            raise ValueError(
+                f"AutoThresholdRule.is_confident: its thresholds are for {counted(n, 'action')} "
+                f"(set by update) but the classification has {has}; call rule.update(model, "
+                "observations, actions) with the model that classified and its "
+                "demonstrations, or rule.reset() to start again from max_std"
+            )
         thr = self.thresholds.to(distance.dtype)[action.clamp(min=0)]
         return (distance < thr) & ok
 

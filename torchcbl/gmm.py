@@ -79,6 +79,7 @@ import torch
 from torch import Tensor, nn
 
 from torchcbl import _em
+from torchcbl._text import counted
 
 __all__ = ["SINGLE_THREAD_WORK", "Classification", "FitReport", "GaussianMixtureSet"]
 
@@ -225,7 +226,8 @@ class FitReport:
             conv = int(self.converged[a][m].sum())
             how = f", {self.refit_kind[a]}" if self.refit_kind else ""
             lines.append(
-                f"  action {a}: {n} points, chose k={k} of {int(m.sum())} candidates "
+                f"  action {a}: {counted(n, 'point')}, chose k={k} of "
+                f"{counted(int(m.sum()), 'candidate')} "
                 f"({conv} converged{how}), log-likelihood "
                 f"{float(self.log_likelihood[a, k - 1]):.4g}"
             )
@@ -1109,7 +1111,8 @@ class GaussianMixtureSet(nn.Module):
         if len(not_conv):
             pairs = ", ".join(f"(action {i}, k={j + 1})" for i, j in not_conv[:10])
             notes.append(
-                f"{len(not_conv)} candidate(s) did not converge in max_iter={self.max_iter}: "
+                f"{counted(len(not_conv), 'candidate')} did not converge in "
+                f"max_iter={self.max_iter}: "
                 f"{pairs}"
             )
         report = FitReport(

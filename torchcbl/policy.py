@@ -15,6 +15,7 @@ import torch
 
 from torchcbl._signatures import cannot_take as _cannot_take
 from torchcbl.errors import EnvError
+from torchcbl.gmm import _conversion, _is_real_dtype, _to_numpy
 from torchcbl.records import StepRecord, _is_int, jsonable_info
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -66,13 +67,20 @@ class GreedyPolicy:
         """The model's Classification of one observation [D] (batched fields of length 1).
 
         ``observation``: a numpy array, a sequence of numbers or a torch tensor, read as the
-        float64 values it holds; a tensor of any dtype (bfloat16 and float16 too) or device,
-        ``requires_grad`` or not, is read without autograd (the model scores without it).
+        float64 values it holds; a tensor of any real dtype (bfloat16 and float16 too) or
+        device, ``requires_grad`` or not, is read without autograd (the model scores without
+        it). What :meth:`GaussianMixtureSet.classify <torchcbl.gmm.GaussianMixtureSet.classify>`
+        refuses is refused alike: bools, strings and complex numbers are a TypeError naming
+        the dtype (never read as 0/1, parsed, or stripped of their imaginary part).
         """
-        if isinstance(observation, torch.Tensor):
-            # a network's output: its values (numpy has no bfloat16, nor a graph to follow)
-            observation = observation.detach().to("cpu", torch.float64)
-        x = np.asarray(observation, dtype=np.float64)
+        x = _to_numpy(observation, "GreedyPolicy: observation")  # a tensor without autograd
+        if not _is_real_dtype(x.dtype.kind):
+            raise TypeError(
+                "GreedyPolicy: expected an observation of real numbers (float32/float64 or "
+                f"integers) but got dtype {x.dtype}; convert with "
+                f"{_conversion(observation, 'observation', 'float')}"
+            )
+        x = x.astype(np.float64, copy=False)
         n_features = getattr(self.model, "n_features", None)
         if x.ndim != 1 or (isinstance(n_features, int) and x.shape[0] != n_features):
             raise ValueError(
