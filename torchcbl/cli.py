@@ -1687,6 +1687,20 @@ def _strategy_params(
     return params
 
 
+def _benchmark_dir(out: Path) -> bool:
+    """Whether ``out`` is a directory a benchmark wrote: it has ``cells/``, or (a sweep with
+    ``--keep-sessions`` stopped before its first cell finished, which leaves no ``cells/``) it
+    holds only ``sessions/``, and that only the sessions of cells, named by their keys (20
+    hex digits, ``.stale-N`` for one set aside)."""
+    if (out / "cells").is_dir():
+        return True
+    sessions = out / "sessions"
+    if [p.name for p in out.iterdir()] != ["sessions"] or not sessions.is_dir():
+        return False
+    names = [p.name for p in sessions.iterdir()]
+    return bool(names) and all(re.fullmatch(r"[0-9a-f]{20}(\.stale-\d+)?", n) for n in names)
+
+
 def _cmd_benchmark(args: argparse.Namespace) -> int:
     import dataclasses
     import importlib.util
@@ -1848,7 +1862,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     out = _output_dir(
         Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark")), "--out"
     )
-    if out.is_dir() and any(out.iterdir()) and not (out / "cells").is_dir():
+    if out.is_dir() and any(out.iterdir()) and not _benchmark_dir(out):
         # a benchmark writes results.json, cells/ and its plot here: never over another run
         raise _UsageError(
             f"--out {out} holds files and is not a benchmark's directory (no cells/); choose a "
