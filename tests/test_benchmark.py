@@ -1744,3 +1744,22 @@ def test_the_goal_is_success_registration_of_the_docs_makes_success_rate_count_g
     results = json.loads((tmp_path / "out" / "results.json").read_text())
     (cell,) = results["table"].values()
     assert cell["bc"]["teacher_performance"]["mean"] == 1.0  # 0.0 without the wrapper
+
+
+def test_ctrl_c_says_the_finished_cells_are_kept_and_how_to_go_on(tmp_path, monkeypatch, capsys):
+    """Ctrl-C during a sweep printed "torchcbl benchmark: interrupted" alone, though the cells
+    finished before it are kept and the same command goes on from them (reproduce's line says
+    how it goes on). The line says how many are kept and what to run; the rerun computes only
+    the rest."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher_ctrl_c_on_seed_1", "--strategies", "bc"]
+    argv += ["--seeds", "2", "--workers", "1", "--budgets", "5", "--max-steps", "10"]
+    out = tmp_path / "b"
+    assert main([*argv, "--eval-episodes", "1", "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert err == (
+        f"torchcbl benchmark: interrupted (1 finished cell kept in {out / 'cells'}: go on with "
+        "the same command)\n"
+    )
+    assert len(list((out / "cells").glob("*.json"))) == 1

@@ -1919,6 +1919,14 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             )
     except (RuntimeError, ValueError, ImportError) as exc:
         raise _UsageError(_missing_dependency(exc) or str(exc) + _cwd_hint(exc)) from None
+    except KeyboardInterrupt as exc:  # main says it in its one line, with how to go on
+        exc.note = (  # type: ignore[attr-defined]
+            f" ({_counted(count, 'finished cell')} kept in {out / 'cells'}: go on with the same "
+            "command)"
+            if count
+            else " (no cell had finished: the same command starts the sweep again)"
+        )
+        raise
     c1 = os.times()
     cpu = (c1.user - c0.user) + (c1.system - c0.system)
     cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
