@@ -1763,3 +1763,27 @@ def test_ctrl_c_says_the_finished_cells_are_kept_and_how_to_go_on(tmp_path, monk
         "the same command)\n"
     )
     assert len(list((out / "cells").glob("*.json"))) == 1
+
+
+def test_the_learning_curves_say_what_their_line_band_and_axis_are(tmp_path, monkeypatch):
+    """learning_curves.png showed a line and a band per strategy, titled with the env's name
+    alone and its y axis "performance": nothing on the figure said the line is a mean over
+    seeds, over how many, that the band is +-1 sd, nor which score "performance" is (the
+    driving panel's contact-free share, the corridor's success rate). A reader of the PNG
+    alone (the README's embeds it) could not tell. Each panel now says the seeds and the band,
+    and its y axis names the score."""
+    from matplotlib.figure import Figure
+
+    drawn = []
+    savefig = Figure.savefig
+
+    def keep(fig, *args, **kwargs):
+        drawn.append(fig)
+        return savefig(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    bm.run_benchmark(STRATEGIES[:2], [_env()], [0, 1, 2], tmp_path / "o", workers=1)
+    (ax,) = drawn[0].axes
+    assert ax.get_title() == "toy: mean over 3 seeds, band ±1 sd"
+    assert ax.get_ylabel() == "success_rate (greedy, held-out eval seeds)"
+    assert ax.get_xlabel() == "teacher labels"
