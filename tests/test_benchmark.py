@@ -1787,3 +1787,19 @@ def test_the_learning_curves_say_what_their_line_band_and_axis_are(tmp_path, mon
     assert ax.get_title() == "toy: mean over 3 seeds, band ±1 sd"
     assert ax.get_ylabel() == "success_rate (greedy, held-out eval seeds)"
     assert ax.get_xlabel() == "teacher labels"
+
+
+def test_the_command_says_what_its_table_figures_are(tmp_path, capsys, monkeypatch):
+    """The command printed its table of "30 ± 0" figures with no word of what they are: a mean
+    over the seeds, the spread a sample sd, over how many seeds, what "≥" and "(k/n)" mean, and
+    that a rate is a mean over the seeds that have one (the README says so in prose above its
+    copy; a reviewer of a fresh run had only the numbers). A line under the table says it."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = [*_TOY_SWEEP, "--teacher", "_bench_env:teacher", "--strategies", "bc,dagger"]
+    argv += ["--seeds", "2", "--workers", "1", "--budgets", "5", "--max-steps", "10"]
+    assert main([*argv, "--eval-episodes", "1", "--out", str(tmp_path / "b")]) == 0
+    out = capsys.readouterr().out
+    table_end = out.index("\n\n", out.index("| env | strategy |"))
+    note = out[table_end:].strip().splitlines()[0]
+    assert note.startswith("Each figure: mean ± sd over the 2 seeds of its row (sample sd, n − 1;")
+    assert "≥: a lower bound" in note and "(rate), auditor ≠ teacher:" in note
