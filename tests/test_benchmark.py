@@ -1803,3 +1803,17 @@ def test_the_command_says_what_its_table_figures_are(tmp_path, capsys, monkeypat
     note = out[table_end:].strip().splitlines()[0]
     assert note.startswith("Each figure: mean ± sd over the 2 seeds of its row (sample sd, n − 1;")
     assert "≥: a lower bound" in note and "(rate), auditor ≠ teacher:" in note
+
+
+def test_performance_at_a_budget_says_how_many_seeds_reached_it(tmp_path):
+    """results.json's performance_at_budget["20"] of an HG-DAgger that stopped asking at 15
+    and 19 labels read {"mean": 0.58, "n": 2}: "at 20 labels, 2 seeds", though neither seed
+    held 20 labels (the figure is each seed's last model below the budget). Each entry now
+    counts the seeds that reached the budget, n_reached; the figures are as they were."""
+    strategies = [bm.StrategySpec("hg_dagger", {"warmup": 3}), bm.StrategySpec("bc")]
+    r = bm.run_benchmark(strategies, [_env()], [0, 1], tmp_path, workers=1, plots=False)
+    hg, bc = r["table"]["toy"]["hg_dagger"], r["table"]["toy"]["bc"]
+    assert hg["final_labels"]["mean"] < 20 and bc["final_labels"]["mean"] == 20
+    assert [hg["performance_at_budget"][b]["n_reached"] for b in ("5", "10", "20")] == [2, 2, 0]
+    assert [bc["performance_at_budget"][b]["n_reached"] for b in ("5", "10", "20")] == [2, 2, 2]
+    assert hg["performance_at_budget"]["20"]["n"] == 2  # the figure itself: as before

@@ -57,7 +57,8 @@ worker's machine: on a cluster without a shared file system, the sessions stay o
 
 Results: ``OUT/results.json`` with, per (strategy, environment), ``labels_to_95pct`` (labels
 at which the performance first reaches 95 % of the teacher's; mean, sd, n; runs that never
-reach it are censored at their last label count and marked), performance at each budget,
+reach it are censored at their last label count and marked), performance at each budget
+(each seed's model of at most that many labels; ``n_reached``: the seeds that held them),
 ``final_performance``, attention and times; ``OUT/learning_curves.png`` (performance vs labels,
 one panel per environment, a line per strategy with a band of +-1 sd over seeds).
 """
@@ -1354,8 +1355,16 @@ def summarize(
                 "final_labels": mean_sd(
                     c["curve"][-1]["labels"] if c["curve"] else None for c in mine
                 ),
+                # each seed's model of at most b labels; n_reached: the seeds that held b (the
+                # others, stopped or capped below it, count with their last model)
                 "performance_at_budget": {
-                    str(b): mean_sd(_perf_at(c, b) for c in mine) for b in budgets
+                    str(b): {
+                        **mean_sd(_perf_at(c, b) for c in mine),
+                        "n_reached": sum(
+                            1 for c in mine if c["curve"] and c["curve"][-1]["labels"] >= b
+                        ),
+                    }
+                    for b in budgets
                 },
                 "teacher_performance": mean_sd(teacher),
                 "attention": att,
