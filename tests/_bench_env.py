@@ -269,3 +269,16 @@ def teacher_of_a_cleaned_out(env: Any, out: str) -> Any:
         except OSError:  # not there, or not empty (a cell is written): left as it is
             pass
     return oracle(env.unwrapped)
+
+
+def teacher_ctrl_c_on_seed_1(env: Any, seed: int) -> Any:
+    """The oracle, except that on seed 1 its first call raises KeyboardInterrupt: a Ctrl-C
+    while the second cell of an in-process sweep (workers=1) teaches."""
+    inner = oracle(env.unwrapped)
+
+    def teach(obs: Any, info: dict) -> int:
+        if seed == 1:
+            raise KeyboardInterrupt
+        return inner(obs, info)
+
+    return teach

@@ -1744,3 +1744,76 @@ def test_the_goal_is_success_registration_of_the_docs_makes_success_rate_count_g
     results = json.loads((tmp_path / "out" / "results.json").read_text())
     (cell,) = results["table"].values()
     assert cell["bc"]["teacher_performance"]["mean"] == 1.0  # 0.0 without the wrapper
+
+
+def test_ctrl_c_says_the_finished_cells_are_kept_and_how_to_go_on(tmp_path, monkeypatch, capsys):
+    """Ctrl-C during a sweep printed "torchcbl benchmark: interrupted" alone, though the cells
+    finished before it are kept and the same command goes on from them (reproduce's line says
+    how it goes on). The line says how many are kept and what to run; the rerun computes only
+    the rest."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher_ctrl_c_on_seed_1", "--strategies", "bc"]
+    argv += ["--seeds", "2", "--workers", "1", "--budgets", "5", "--max-steps", "10"]
+    out = tmp_path / "b"
+    assert main([*argv, "--eval-episodes", "1", "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert err == (
+        f"torchcbl benchmark: interrupted (1 finished cell kept in {out / 'cells'}: go on with "
+        "the same command)\n"
+    )
+    assert len(list((out / "cells").glob("*.json"))) == 1
+
+
+def test_the_learning_curves_say_what_their_line_band_and_axis_are(tmp_path, monkeypatch):
+    """learning_curves.png showed a line and a band per strategy, titled with the env's name
+    alone and its y axis "performance": nothing on the figure said the line is a mean over
+    seeds, over how many, that the band is +-1 sd, nor which score "performance" is (the
+    driving panel's contact-free share, the corridor's success rate). A reader of the PNG
+    alone (the README's embeds it) could not tell. Each panel now says the seeds and the band,
+    and its y axis names the score."""
+    from matplotlib.figure import Figure
+
+    drawn = []
+    savefig = Figure.savefig
+
+    def keep(fig, *args, **kwargs):
+        drawn.append(fig)
+        return savefig(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    bm.run_benchmark(STRATEGIES[:2], [_env()], [0, 1, 2], tmp_path / "o", workers=1)
+    (ax,) = drawn[0].axes
+    assert ax.get_title() == "toy: mean over 3 seeds, band ±1 sd"
+    assert ax.get_ylabel() == "success_rate (greedy, held-out eval seeds)"
+    assert ax.get_xlabel() == "teacher labels"
+
+
+def test_the_command_says_what_its_table_figures_are(tmp_path, capsys, monkeypatch):
+    """The command printed its table of "30 ± 0" figures with no word of what they are: a mean
+    over the seeds, the spread a sample sd, over how many seeds, what "≥" and "(k/n)" mean, and
+    that a rate is a mean over the seeds that have one (the README says so in prose above its
+    copy; a reviewer of a fresh run had only the numbers). A line under the table says it."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = [*_TOY_SWEEP, "--teacher", "_bench_env:teacher", "--strategies", "bc,dagger"]
+    argv += ["--seeds", "2", "--workers", "1", "--budgets", "5", "--max-steps", "10"]
+    assert main([*argv, "--eval-episodes", "1", "--out", str(tmp_path / "b")]) == 0
+    out = capsys.readouterr().out
+    table_end = out.index("\n\n", out.index("| env | strategy |"))
+    note = out[table_end:].strip().splitlines()[0]
+    assert note.startswith("Each figure: mean ± sd over the 2 seeds of its row (sample sd, n − 1;")
+    assert "≥: a lower bound" in note and "(rate), auditor ≠ teacher:" in note
+
+
+def test_performance_at_a_budget_says_how_many_seeds_reached_it(tmp_path):
+    """results.json's performance_at_budget["20"] of an HG-DAgger that stopped asking at 15
+    and 19 labels read {"mean": 0.58, "n": 2}: "at 20 labels, 2 seeds", though neither seed
+    held 20 labels (the figure is each seed's last model below the budget). Each entry now
+    counts the seeds that reached the budget, n_reached; the figures are as they were."""
+    strategies = [bm.StrategySpec("hg_dagger", {"warmup": 3}), bm.StrategySpec("bc")]
+    r = bm.run_benchmark(strategies, [_env()], [0, 1], tmp_path, workers=1, plots=False)
+    hg, bc = r["table"]["toy"]["hg_dagger"], r["table"]["toy"]["bc"]
+    assert hg["final_labels"]["mean"] < 20 and bc["final_labels"]["mean"] == 20
+    assert [hg["performance_at_budget"][b]["n_reached"] for b in ("5", "10", "20")] == [2, 2, 0]
+    assert [bc["performance_at_budget"][b]["n_reached"] for b in ("5", "10", "20")] == [2, 2, 2]
+    assert hg["performance_at_budget"]["20"]["n"] == 2  # the figure itself: as before

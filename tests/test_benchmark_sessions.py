@@ -324,3 +324,27 @@ def test_the_command_says_how_many_checkpoints_kept_sessions_keep(tmp_path, caps
         assert code == 2 and stdout == "" and err.count("\n") == 1, (bad, stdout, err)
         assert says in err, err
         assert not (tmp_path / "x").exists()
+
+
+def test_the_command_goes_on_after_its_first_cell_stopped_with_keep_sessions(
+    tmp_path, capsys, monkeypatch
+):
+    """A sweep with --keep-sessions stopped before its first cell finished (Ctrl-C, a failed
+    cell) left OUT holding only sessions/ (its empty cells/ removed), and the same command run
+    again, as the error and the docs say to, was refused: "--out ... is not a benchmark's
+    directory (no cells/)". It goes on, and the stopped cell's session is set aside."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = ["benchmark", "--envs", "", "--gym-env", "_bench_env:BenchCluster-v0"]
+    argv += ["--teacher", "_bench_env:teacher_failing_while_told", "--strategies", "bc"]
+    argv += ["--seeds", "1", "--workers", "1", "--budgets", "5", "--max-steps", "10"]
+    argv += ["--eval-episodes", "1", "--keep-sessions"]
+    out = tmp_path / "b"
+    monkeypatch.setenv("BENCH_TEACHER_FAILS", "1")
+    assert main([*argv, "--out", str(out)]) == 2
+    assert "fix the cause and run it again" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["sessions"]
+    monkeypatch.delenv("BENCH_TEACHER_FAILS")
+    assert main([*argv, "--out", str(out)]) == 0, capsys.readouterr().err
+    ((key, cell),) = _cells(out).items()
+    assert len(load_labels(out / "sessions" / key)[1]) == cell["attention"]["labels"] == 5
+    assert len(load_records(out / "sessions" / f"{key}.stale-1")) == 2

@@ -57,7 +57,8 @@ worker's machine: on a cluster without a shared file system, the sessions stay o
 
 Results: ``OUT/results.json`` with, per (strategy, environment), ``labels_to_95pct`` (labels
 at which the performance first reaches 95 % of the teacher's; mean, sd, n; runs that never
-reach it are censored at their last label count and marked), performance at each budget,
+reach it are censored at their last label count and marked), performance at each budget
+(each seed's model of at most that many labels; ``n_reached``: the seeds that held them),
 ``final_performance``, attention and times; ``OUT/learning_curves.png`` (performance vs labels,
 one panel per environment, a line per strategy with a band of +-1 sd over seeds).
 """
@@ -1354,8 +1355,16 @@ def summarize(
                 "final_labels": mean_sd(
                     c["curve"][-1]["labels"] if c["curve"] else None for c in mine
                 ),
+                # each seed's model of at most b labels; n_reached: the seeds that held b (the
+                # others, stopped or capped below it, count with their last model)
                 "performance_at_budget": {
-                    str(b): mean_sd(_perf_at(c, b) for c in mine) for b in budgets
+                    str(b): {
+                        **mean_sd(_perf_at(c, b) for c in mine),
+                        "n_reached": sum(
+                            1 for c in mine if c["curve"] and c["curve"][-1]["labels"] >= b
+                        ),
+                    }
+                    for b in budgets
                 },
                 "teacher_performance": mean_sd(teacher),
                 "attention": att,
@@ -1410,7 +1419,8 @@ def plot_curves(
 ) -> Path:
     """Performance vs labels: one panel per env, a line per strategy (mean over seeds, each
     seed's curve held constant after its last point) with a +-1 sd band, clipped to [0, 1]
-    for the shipped scores (:func:`success_rate`, :func:`no_penalty_share`: shares).
+    for the shipped scores (:func:`success_rate`, :func:`no_penalty_share`: shares). Each
+    panel's title says how many seeds and the band, its y axis names the score.
 
     Drawn on a bare :class:`matplotlib.figure.Figure` with an Agg canvas, never through pyplot:
     the caller's backend (a notebook's inline plots) and open figures are left as they were.
@@ -1453,9 +1463,19 @@ def plot_curves(
             ax.axhline(t, color="k", lw=0.8, ls="--", label="teacher")
             if t > 0:  # no target for a teacher at or below 0: 0.95 x -100 is above it
                 ax.axhline(0.95 * t, color="k", lw=0.6, ls=":", label="95 % of teacher")
-        ax.set_title(env)
+        # what the line and band are, and which score: a reader of the PNG alone sees them
+        # (one cell per strategy and seed: a strategy's cells are the seeds)
+        n = max((sum(1 for c in mine if c["strategy"] == s) for s in strategies), default=0)
+        ax.set_title(
+            f"{env}: mean over {n} seeds, band ±1 sd" if n > 1 else f"{env}: 1 seed (no band)"
+        )
+        scores = {c.get("config", {}).get("env", {}).get("score") for c in mine}
+        score = scores.pop() if len(scores) == 1 else None
         ax.set_xlabel("teacher labels")
-        ax.set_ylabel("performance (greedy, held-out seeds)")
+        ax.set_ylabel(
+            f"{score.rpartition(':')[2] if isinstance(score, str) else 'performance'} "
+            "(greedy, held-out eval seeds)"
+        )
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()

@@ -1687,6 +1687,20 @@ def _strategy_params(
     return params
 
 
+def _benchmark_dir(out: Path) -> bool:
+    """Whether ``out`` is a directory a benchmark wrote: it has ``cells/``, or (a sweep with
+    ``--keep-sessions`` stopped before its first cell finished, which leaves no ``cells/``) it
+    holds only ``sessions/``, and that only the sessions of cells, named by their keys (20
+    hex digits, ``.stale-N`` for one set aside)."""
+    if (out / "cells").is_dir():
+        return True
+    sessions = out / "sessions"
+    if [p.name for p in out.iterdir()] != ["sessions"] or not sessions.is_dir():
+        return False
+    names = [p.name for p in sessions.iterdir()]
+    return bool(names) and all(re.fullmatch(r"[0-9a-f]{20}(\.stale-\d+)?", n) for n in names)
+
+
 def _cmd_benchmark(args: argparse.Namespace) -> int:
     import dataclasses
     import importlib.util
@@ -1848,7 +1862,7 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     out = _output_dir(
         Path(args.out or ("runs/benchmark-quick" if args.quick else "runs/benchmark")), "--out"
     )
-    if out.is_dir() and any(out.iterdir()) and not (out / "cells").is_dir():
+    if out.is_dir() and any(out.iterdir()) and not _benchmark_dir(out):
         # a benchmark writes results.json, cells/ and its plot here: never over another run
         raise _UsageError(
             f"--out {out} holds files and is not a benchmark's directory (no cells/); choose a "
@@ -1905,11 +1919,27 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
             )
     except (RuntimeError, ValueError, ImportError) as exc:
         raise _UsageError(_missing_dependency(exc) or str(exc) + _cwd_hint(exc)) from None
+    except KeyboardInterrupt as exc:  # main says it in its one line, with how to go on
+        exc.note = (  # type: ignore[attr-defined]
+            f" ({_counted(count, 'finished cell')} kept in {out / 'cells'}: go on with the same "
+            "command)"
+            if count
+            else " (no cell had finished: the same command starts the sweep again)"
+        )
+        raise
     c1 = os.times()
     cpu = (c1.user - c0.user) + (c1.system - c0.system)
     cpu += (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
     _print_if_read()
     _print_if_read(bm.format_table(summary))
+    _print_if_read(  # what the figures are: the table alone does not say
+        f"\nEach figure: mean ± sd over the {_counted(len(seeds), 'seed')} of its row (sample "
+        'sd, n − 1; "(n = 1)": one seed, no spread), no difference between rows computed; '
+        "≥: a lower bound, (k/n) of the seeds never reached 95 % of the teacher and count at "
+        "their last labels; perf. "
+        "at a budget: the model of the last snapshot at or below it; (rate), auditor ≠ "
+        "teacher: means over the seeds that have one."
+    )
     for env_name, rows in summary["table"].items():
         scores = [r["teacher_performance"]["mean"] for r in rows.values()]
         if scores and all(s is not None and s <= 0 for s in scores):
