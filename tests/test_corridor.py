@@ -75,6 +75,30 @@ def test_shipped_maps_and_walls():
     assert map_from_dict(m.to_dict()).walls() == m.walls()
 
 
+def test_a_square_loops_walls_are_its_outer_and_inner_rectangles_whole():
+    """The walls of SMALL, by hand: the outer rectangle x in [-0.3, 1.3], y in [-0.3, 1.1]
+    (the corridors' 0.3 m half-width past the nodes) and the hole x in [0.3, 0.7], y in
+    [0.3, 0.5], each side one segment, and the outer ones reaching the bounding box's corners
+    (a wall one grid cell short there would leave a 0.1 m hole at the corner)."""
+    outer = [
+        ((-0.3, -0.3), (-0.3, 1.1)),
+        ((1.3, -0.3), (1.3, 1.1)),
+        ((-0.3, -0.3), (1.3, -0.3)),
+        ((-0.3, 1.1), (1.3, 1.1)),
+    ]
+    inner = [
+        ((0.3, 0.3), (0.3, 0.5)),
+        ((0.7, 0.3), (0.7, 0.5)),
+        ((0.3, 0.3), (0.7, 0.3)),
+        ((0.3, 0.5), (0.7, 0.5)),
+    ]
+    m = map_from_dict(SMALL)
+    assert sorted(m.walls()) == sorted(outer + inner)
+    assert m.bounds() == (-0.3, -0.3, 1.3, 1.1)
+    length = sum(math.dist(a, b) for a, b in m.walls())
+    assert length == pytest.approx(2 * (1.6 + 1.4) + 2 * (0.4 + 0.2))
+
+
 @pytest.mark.parametrize(
     "change, message",
     [
