@@ -1418,6 +1418,8 @@ def test_a_start_heading_offset_of_45_degrees_or_more_is_refused():
     [
         ({"start_offset": 0}, r"start_offset .*in \(0, 1\) m.*got 0\.0"),
         ({"start_offset": 1.5}, r"start_offset .*'A' -> 'B'.*in \(0, 1\) m.*got 1\.5"),
+        # at the first corridor's far node (its length) is not inside it either
+        ({"start_offset": 1.0}, r"start_offset .*'A' -> 'B'.*in \(0, 1\) m.*got 1\.0"),
         ({"route": ["A", "B", "C", "D"]}, r"closed walk.*got \['A', 'B', 'C', 'D'\]"),
         ({"route": ["A", "B", "A"]}, r"at least 3 nodes.*got \['A', 'B', 'A'\]"),
     ],
