@@ -1301,6 +1301,12 @@ def test_a_sub_step_longer_than_the_robot_is_refused():
     both values; a sub-step just under the diameter is taken, and stops at the wall."""
     with pytest.raises(ValueError, match=r"substep.*0\.25.*robot_radius"):
         WorldConfig(robot_radius=0.05, substep=0.25, forward_distance=0.25)
+    # the rule is substep < 2 * robot_radius: between the diameter (0.1 m) and twice it, and
+    # at the diameter itself, refused; just under it, taken
+    for substep in (0.15, 0.1):
+        with pytest.raises(ValueError, match=rf"substep \({substep:g} m\).*diameter.*= 0\.1 m"):
+            WorldConfig(robot_radius=0.05, substep=substep, forward_distance=0.25)
+    assert WorldConfig(robot_radius=0.05, substep=0.0999, forward_distance=0.25).substep == 0.0999
     m = load_map("lshape")
     w = CorridorWorld(m, WorldConfig(robot_radius=0.05, substep=0.099, forward_distance=0.25))
     w.reset()
