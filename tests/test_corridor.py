@@ -370,6 +370,19 @@ def test_actions_geometry():
         w.set_pose(0.2, 0.25, 0.0)
 
 
+def test_a_heading_of_minus_pi_is_reported_as_pi():
+    """Headings are in (-pi, pi] (CorridorWorld.pose): two right turns from east, clockwise
+    round figure2's J and P1 corners, land exactly on -pi, reported as +pi; so is a pose
+    placed at -pi."""
+    w = CorridorWorld(load_map("figure2"))
+    w.set_pose(1.2, 1.2, 0.0)  # east along the top corridor, before J
+    assert [w.step(a) for a in (R, F, F, F, F, R)] == [False] * 6
+    assert w.pose == pytest.approx((1.2, 0.0, math.pi))
+    assert w.pose[2] == math.pi and w.commanded_heading == math.pi
+    w.set_pose(0.6, 0.0, -math.pi)
+    assert w.pose == (0.6, 0.0, math.pi) and w.commanded_heading == math.pi
+
+
 def test_world_config_validation():
     with pytest.raises(ValueError, match="max_range"):
         WorldConfig(min_range=2.0)
