@@ -817,6 +817,13 @@ def test_episode_results_of_joined_evaluations_keep_their_episodes_apart():
     got = episode_results(cut[0] + cut[1])
     assert got == episode_results(cut[0]) + episode_results(cut[1])
     assert [(e.steps, e.finished) for e in got] == [(4, False), (4, False)]
+    # evaluations of one step each: two episodes of one step, not one of two
+    ones = [evaluate_policy(teacher, world, n_steps=1, seed=s, uses_info=True) for s in (0, 1)]
+    assert [(r.step, r.episode) for r in ones[0] + ones[1]] == [(0, 0), (0, 0)]
+    assert [(e.steps, e.finished) for e in episode_results(ones[0] + ones[1])] == [
+        (1, False),
+        (1, False),
+    ]
 
 
 def test_evaluate_policy_calls_a_greedypolicy_subclass_of_ones_own():
