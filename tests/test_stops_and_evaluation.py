@@ -798,6 +798,28 @@ def test_episode_results_are_the_per_episode_returns_and_successes():
     assert episode_results([]) == []
 
 
+class _SaysSuccessAtEveryStep(gym.Wrapper):
+    """The world with ``info["is_success"] = True`` at every step, not only at an episode's
+    end (as some envs report a running judgement)."""
+
+    def step(self, action):
+        obs, r, term, trunc, info = self.env.step(action)
+        return obs, r, term, trunc, {**info, "is_success": True}
+
+
+def test_an_episode_cut_by_n_steps_has_no_success_whatever_its_info_said():
+    """EpisodeResult.success is the env's is_success at the episode's end, None where the
+    episode did not end in the records: an is_success the env gives at every step is not read
+    off the last step of an episode n_steps cut."""
+    env = _SaysSuccessAtEveryStep(rare_regions_world(episode_length=5))
+    records = evaluate_policy(lambda obs: 0, env, seed=0, n_steps=8)
+    assert all(r.info["is_success"] is True for r in records)
+    done, cut = episode_results(records)
+    assert (done.steps, done.finished, done.success) == (5, True, True)
+    assert (cut.steps, cut.finished, cut.success) == (3, False, None)
+    assert not cut.terminated and not cut.truncated
+
+
 def test_episode_results_of_joined_evaluations_keep_their_episodes_apart():
     """Joining the records of several evaluations (one per seed, each numbering its episodes
     from 0) made episode_results merge them into one episode: 3 circuits of 10 steps came out
