@@ -848,6 +848,50 @@ def test_episode_results_of_joined_evaluations_keep_their_episodes_apart():
     ]
 
 
+class _OneBuffer(gym.Env):
+    """An env that returns its one state buffer (float64) and rewrites it in place each step;
+    the reward is the state's first value as the env holds it when the action runs."""
+
+    observation_space = gym.spaces.Box(-10, 10, (2,), np.float64)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self) -> None:
+        self.buf = np.zeros(2)
+        self.t = 0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        self.buf[:] = self.np_random.uniform(-1, 1, 2)
+        return self.buf, {}
+
+    def step(self, action):
+        reward = float(self.buf[0])
+        self.t += 1
+        self.buf[:] = self.np_random.uniform(-1, 1, 2)
+        return self.buf, reward, False, self.t >= 4, {}
+
+
+@pytest.mark.parametrize("uses_info", [False, True])
+def test_an_evaluation_records_and_the_env_keep_the_state_the_policy_was_given(uses_info):
+    """evaluate_policy gives the policy a copy of the observation and records its own: on an
+    env that rewrites its observation buffer in place, each record holds the state the action
+    was chosen on (not the next one, which step wrote into the same buffer), and a policy that
+    writes into its observation (normalising it in place, here zeroing it) leaves the env's
+    state as it was (the reward, read from it, is the state the policy saw)."""
+    seen = []
+
+    def policy(obs, info=None):
+        seen.append(tuple(obs.tolist()))
+        obs[:] = 0.0
+        return 0
+
+    records = evaluate_policy(policy, _OneBuffer(), n_steps=6, seed=3, uses_info=uses_info)
+    assert [r.observation for r in records] == seen
+    assert [r.reward for r in records] == [o[0] for o in seen]
+    assert len(set(seen)) == 6 and 0.0 not in {o[0] for o in seen}
+
+
 def test_evaluate_policy_calls_a_greedypolicy_subclass_of_ones_own():
     """A GreedyPolicy subclass that answers in its own __call__ (an action mask, exploration)
     is called, as evaluate_policy says a policy is; its action was ignored for the model's,
