@@ -991,6 +991,10 @@ def test_a_pytorch_module_of_the_observation_alone_is_refused_as_a_teacher():
         assert "lambda obs, info: int(net(torch.as_tensor(obs" in msg, msg
         with pytest.raises(TypeError, match=r"correcting: .*\.forward takes \("):
             correcting(net)
+    # a network under a generic wrapper (torch.no_grad()) is named by its class too, not as
+    # "function.forward" (the wrapper's type)
+    with pytest.raises(TypeError, match=r"\bNet\.forward takes \(x\)"):
+        ConfidentTeacher(env, torch.no_grad()(Net()), progress=False)
     ct = ConfidentTeacher(env, InfoNet(), progress=False)
     ct.run(max_steps=2)
     assert [r.teacher_action for r in ct.records] == [0, 0]
