@@ -75,6 +75,30 @@ def test_shipped_maps_and_walls():
     assert map_from_dict(m.to_dict()).walls() == m.walls()
 
 
+def test_a_square_loops_walls_are_its_outer_and_inner_rectangles_whole():
+    """The walls of SMALL, by hand: the outer rectangle x in [-0.3, 1.3], y in [-0.3, 1.1]
+    (the corridors' 0.3 m half-width past the nodes) and the hole x in [0.3, 0.7], y in
+    [0.3, 0.5], each side one segment, and the outer ones reaching the bounding box's corners
+    (a wall one grid cell short there would leave a 0.1 m hole at the corner)."""
+    outer = [
+        ((-0.3, -0.3), (-0.3, 1.1)),
+        ((1.3, -0.3), (1.3, 1.1)),
+        ((-0.3, -0.3), (1.3, -0.3)),
+        ((-0.3, 1.1), (1.3, 1.1)),
+    ]
+    inner = [
+        ((0.3, 0.3), (0.3, 0.5)),
+        ((0.7, 0.3), (0.7, 0.5)),
+        ((0.3, 0.3), (0.7, 0.3)),
+        ((0.3, 0.5), (0.7, 0.5)),
+    ]
+    m = map_from_dict(SMALL)
+    assert sorted(m.walls()) == sorted(outer + inner)
+    assert m.bounds() == (-0.3, -0.3, 1.3, 1.1)
+    length = sum(math.dist(a, b) for a, b in m.walls())
+    assert length == pytest.approx(2 * (1.6 + 1.4) + 2 * (0.4 + 0.2))
+
+
 @pytest.mark.parametrize(
     "change, message",
     [
@@ -344,6 +368,19 @@ def test_actions_geometry():
         w.step(4)
     with pytest.raises(ValueError, match="overlaps"):
         w.set_pose(0.2, 0.25, 0.0)
+
+
+def test_a_heading_of_minus_pi_is_reported_as_pi():
+    """Headings are in (-pi, pi] (CorridorWorld.pose): two right turns from east, clockwise
+    round figure2's J and P1 corners, land exactly on -pi, reported as +pi; so is a pose
+    placed at -pi."""
+    w = CorridorWorld(load_map("figure2"))
+    w.set_pose(1.2, 1.2, 0.0)  # east along the top corridor, before J
+    assert [w.step(a) for a in (R, F, F, F, F, R)] == [False] * 6
+    assert w.pose == pytest.approx((1.2, 0.0, math.pi))
+    assert w.pose[2] == math.pi and w.commanded_heading == math.pi
+    w.set_pose(0.6, 0.0, -math.pi)
+    assert w.pose == (0.6, 0.0, math.pi) and w.commanded_heading == math.pi
 
 
 def test_world_config_validation():
@@ -1277,6 +1314,12 @@ def test_a_sub_step_longer_than_the_robot_is_refused():
     both values; a sub-step just under the diameter is taken, and stops at the wall."""
     with pytest.raises(ValueError, match=r"substep.*0\.25.*robot_radius"):
         WorldConfig(robot_radius=0.05, substep=0.25, forward_distance=0.25)
+    # the rule is substep < 2 * robot_radius: between the diameter (0.1 m) and twice it, and
+    # at the diameter itself, refused; just under it, taken
+    for substep in (0.15, 0.1):
+        with pytest.raises(ValueError, match=rf"substep \({substep:g} m\).*diameter.*= 0\.1 m"):
+            WorldConfig(robot_radius=0.05, substep=substep, forward_distance=0.25)
+    assert WorldConfig(robot_radius=0.05, substep=0.0999, forward_distance=0.25).substep == 0.0999
     m = load_map("lshape")
     w = CorridorWorld(m, WorldConfig(robot_radius=0.05, substep=0.099, forward_distance=0.25))
     w.reset()
@@ -1394,6 +1437,8 @@ def test_a_start_heading_offset_of_45_degrees_or_more_is_refused():
     [
         ({"start_offset": 0}, r"start_offset .*in \(0, 1\) m.*got 0\.0"),
         ({"start_offset": 1.5}, r"start_offset .*'A' -> 'B'.*in \(0, 1\) m.*got 1\.5"),
+        # at the first corridor's far node (its length) is not inside it either
+        ({"start_offset": 1.0}, r"start_offset .*'A' -> 'B'.*in \(0, 1\) m.*got 1\.0"),
         ({"route": ["A", "B", "C", "D"]}, r"closed walk.*got \['A', 'B', 'C', 'D'\]"),
         ({"route": ["A", "B", "A"]}, r"at least 3 nodes.*got \['A', 'B', 'A'\]"),
     ],

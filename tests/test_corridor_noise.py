@@ -64,6 +64,28 @@ def test_forward_step_length_and_heading_spread_match_the_config():
     assert y == pytest.approx((x - 0.2) * math.tan(h), abs=1e-12)
 
 
+class _Draws:
+    """A generator stand-in whose ``standard_normal`` gives the same draws every call."""
+
+    def __init__(self, *z: float) -> None:
+        self.z = np.array(z, dtype=float)
+
+    def standard_normal(self, size: int) -> np.ndarray:
+        assert size == len(self.z)
+        return self.z.copy()
+
+
+@pytest.mark.parametrize("z, length", [(100.0, 0.3), (-100.0, 0.1)])
+def test_a_forward_steps_length_factor_is_clipped_to_half_and_one_and_a_half(z, length):
+    """The module docstring's clip of the length factor 1 + forward_noise * z to [0.5, 1.5]:
+    a draw 100 sd out makes a 0.2 m step 0.3 m (or 0.1 m), straight ahead, not 2.2 m into
+    the wall (or 1.8 m backwards)."""
+    w = CorridorWorld(load_map("figure2"), WorldConfig(forward_noise=0.1))
+    w.set_pose(0.2, 0.0, 0.0)  # 1.5 m of free corridor ahead
+    assert w.step(F, _Draws(z, 0.0)) is False
+    assert w.pose == pytest.approx((0.2 + length, 0.0, 0.0))
+
+
 def test_heading_errors_do_not_add_up():
     """After 100 u-turns (3 degrees sd each) the heading is still within 3 sd of the commanded
     one: the error is redrawn around the commanded heading, not accumulated (a random walk would

@@ -504,6 +504,17 @@ def test_recorder_labels_episodes_at_reset_and_skips_empty_ones():
     ]
 
 
+def test_figure_8_writes_each_policys_collision_rate_as_a_percent():
+    """plot_lane_bars takes collision rates as shares and writes each beside its bar as a
+    percent with one decimal (0.025 is "2.5%", not "0.0%")."""
+    from matplotlib.figure import Figure
+
+    ax = Figure().add_subplot()
+    share = [0.1, 0.2, 0.3, 0.4, 0.0]
+    metrics.plot_lane_bars(ax, ["expert", "learned"], [share, share], [0.025, 0.0])
+    assert sorted(t.get_text() for t in ax.texts) == ["0.0%", "2.5%"]
+
+
 def test_metrics():
     assert metrics.total_variation([1, 0, 0, 0, 0], [0, 1, 0, 0, 0]) == 1.0
     assert metrics.total_variation([0.5, 0.5], [0.5, 0.5]) == 0.0

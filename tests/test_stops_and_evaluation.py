@@ -798,6 +798,28 @@ def test_episode_results_are_the_per_episode_returns_and_successes():
     assert episode_results([]) == []
 
 
+class _SaysSuccessAtEveryStep(gym.Wrapper):
+    """The world with ``info["is_success"] = True`` at every step, not only at an episode's
+    end (as some envs report a running judgement)."""
+
+    def step(self, action):
+        obs, r, term, trunc, info = self.env.step(action)
+        return obs, r, term, trunc, {**info, "is_success": True}
+
+
+def test_an_episode_cut_by_n_steps_has_no_success_whatever_its_info_said():
+    """EpisodeResult.success is the env's is_success at the episode's end, None where the
+    episode did not end in the records: an is_success the env gives at every step is not read
+    off the last step of an episode n_steps cut."""
+    env = _SaysSuccessAtEveryStep(rare_regions_world(episode_length=5))
+    records = evaluate_policy(lambda obs: 0, env, seed=0, n_steps=8)
+    assert all(r.info["is_success"] is True for r in records)
+    done, cut = episode_results(records)
+    assert (done.steps, done.finished, done.success) == (5, True, True)
+    assert (cut.steps, cut.finished, cut.success) == (3, False, None)
+    assert not cut.terminated and not cut.truncated
+
+
 def test_episode_results_of_joined_evaluations_keep_their_episodes_apart():
     """Joining the records of several evaluations (one per seed, each numbering its episodes
     from 0) made episode_results merge them into one episode: 3 circuits of 10 steps came out
@@ -817,6 +839,57 @@ def test_episode_results_of_joined_evaluations_keep_their_episodes_apart():
     got = episode_results(cut[0] + cut[1])
     assert got == episode_results(cut[0]) + episode_results(cut[1])
     assert [(e.steps, e.finished) for e in got] == [(4, False), (4, False)]
+    # evaluations of one step each: two episodes of one step, not one of two
+    ones = [evaluate_policy(teacher, world, n_steps=1, seed=s, uses_info=True) for s in (0, 1)]
+    assert [(r.step, r.episode) for r in ones[0] + ones[1]] == [(0, 0), (0, 0)]
+    assert [(e.steps, e.finished) for e in episode_results(ones[0] + ones[1])] == [
+        (1, False),
+        (1, False),
+    ]
+
+
+class _OneBuffer(gym.Env):
+    """An env that returns its one state buffer (float64) and rewrites it in place each step;
+    the reward is the state's first value as the env holds it when the action runs."""
+
+    observation_space = gym.spaces.Box(-10, 10, (2,), np.float64)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self) -> None:
+        self.buf = np.zeros(2)
+        self.t = 0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        self.buf[:] = self.np_random.uniform(-1, 1, 2)
+        return self.buf, {}
+
+    def step(self, action):
+        reward = float(self.buf[0])
+        self.t += 1
+        self.buf[:] = self.np_random.uniform(-1, 1, 2)
+        return self.buf, reward, False, self.t >= 4, {}
+
+
+@pytest.mark.parametrize("uses_info", [False, True])
+def test_an_evaluation_records_and_the_env_keep_the_state_the_policy_was_given(uses_info):
+    """evaluate_policy gives the policy a copy of the observation and records its own: on an
+    env that rewrites its observation buffer in place, each record holds the state the action
+    was chosen on (not the next one, which step wrote into the same buffer), and a policy that
+    writes into its observation (normalising it in place, here zeroing it) leaves the env's
+    state as it was (the reward, read from it, is the state the policy saw)."""
+    seen = []
+
+    def policy(obs, info=None):
+        seen.append(tuple(obs.tolist()))
+        obs[:] = 0.0
+        return 0
+
+    records = evaluate_policy(policy, _OneBuffer(), n_steps=6, seed=3, uses_info=uses_info)
+    assert [r.observation for r in records] == seen
+    assert [r.reward for r in records] == [o[0] for o in seen]
+    assert len(set(seen)) == 6 and 0.0 not in {o[0] for o in seen}
 
 
 def test_evaluate_policy_calls_a_greedypolicy_subclass_of_ones_own():

@@ -50,7 +50,8 @@ def test_a_teacher_of_the_observation_alone_is_refused_before_anything_runs(tmp_
     Python's "takes 1 positional argument but 2 were given", its run directory already
     written. Its signature is read first: a TypeError says how a teacher is called, what
     this one takes and how to wrap it, and no run directory is made. A teacher with an
-    optional info, or *args, is taken."""
+    optional info, or *args, or a keyword-only parameter of its own with a default, is
+    taken."""
     env = rare_regions_world()
     with pytest.raises(TypeError) as e:
         ConfidentTeacher(env, lambda obs: 0, run_dir=tmp_path / "s", progress=False)
@@ -58,7 +59,7 @@ def test_a_teacher_of_the_observation_alone_is_refused_before_anything_runs(tmp_
     assert "teacher(observation, info)" in msg and "<lambda> takes (obs)" in msg, msg
     assert "lambda obs, info:" in msg, msg
     assert not (tmp_path / "s").exists()
-    for teacher in (lambda obs, info=None: 0, lambda *args: 0):
+    for teacher in (lambda obs, info=None: 0, lambda *args: 0, lambda obs, info, *, k=0: k):
         ct = ConfidentTeacher(env, teacher, progress=False)
         ct.run(max_steps=2)
         assert [r.teacher_action for r in ct.records] == [0, 0]
@@ -990,6 +991,10 @@ def test_a_pytorch_module_of_the_observation_alone_is_refused_as_a_teacher():
         assert "lambda obs, info: int(net(torch.as_tensor(obs" in msg, msg
         with pytest.raises(TypeError, match=r"correcting: .*\.forward takes \("):
             correcting(net)
+    # a network under a generic wrapper (torch.no_grad()) is named by its class too, not as
+    # "function.forward" (the wrapper's type)
+    with pytest.raises(TypeError, match=r"\bNet\.forward takes \(x\)"):
+        ConfidentTeacher(env, torch.no_grad()(Net()), progress=False)
     ct = ConfidentTeacher(env, InfoNet(), progress=False)
     ct.run(max_steps=2)
     assert [r.teacher_action for r in ct.records] == [0, 0]

@@ -34,11 +34,21 @@ def called_parameters(fn: Any) -> tuple[list[inspect.Parameter] | None, str | No
     function's, which is what the call reaches, one ``__wrapped__`` at a time, at most
     ``_MAX_WRAPPERS`` of them; for a ``torch.nn.Module`` (whose ``__call__`` is such a
     wrapper), its ``forward``'s."""
+    params, through, _ = _called(fn)
+    return params, through
+
+
+def _called(fn: Any) -> tuple[list[inspect.Parameter] | None, str | None, Any]:
+    """:func:`called_parameters`, and the torch module whose ``forward`` was read where it was
+    (the object at the end of a ``__wrapped__`` chain, e.g. ``torch.no_grad()(net)``'s net),
+    else None."""
     star = (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)
     sig: inspect.Signature | None = None
     through: str | None = None
     hops: list[str] = []  # how each hop so far went on: "__wrapped__" or "forward"
     seen: dict[int, Any] = {}  # the objects are kept: a freed one's id may be reused
+    module: Any = None  # the module whose forward the walk went on to
+    owner: Any = None  # that module, where the signature read is its forward's
     for _ in range(_MAX_WRAPPERS):
         if fn is None or id(fn) in seen:  # the end of the chain, or a loop
             break
@@ -50,12 +60,15 @@ def called_parameters(fn: Any) -> tuple[list[inspect.Parameter] | None, str | No
         if here is not None:
             sig = here
             through = "forward" if "forward" in hops else (hops[0] if hops else None)
+            owner = module if through == "forward" else None
             if not (here.parameters and all(p.kind in star for p in here.parameters.values())):
                 break
         wrapped = getattr(fn, "__wrapped__", None)
         if wrapped is None:  # an nn.Module's __call__ runs its forward
             wrapped = _module_forward(fn)
             hops.append("forward")
+            if wrapped is not None and module is None:
+                module = fn
         else:
             hops.append("__wrapped__")
         if wrapped is not None and inspect.ismethod(fn) and not inspect.ismethod(wrapped):
@@ -66,7 +79,7 @@ def called_parameters(fn: Any) -> tuple[list[inspect.Parameter] | None, str | No
             except TypeError:  # not a function to bind
                 pass
         fn = wrapped
-    return (None if sig is None else list(sig.parameters.values())), through
+    return (None if sig is None else list(sig.parameters.values())), through, owner
 
 
 class Mismatch(NamedTuple):
@@ -106,7 +119,7 @@ def cannot_take(fn: Any, n_args: int) -> Mismatch | None:
     (its ``takes``, e.g. "teacher takes (obs, info)"; for a torch module "Net.forward takes
     (x)"), or None where it can or its signature is unknown (a builtin). Read before any
     call, so that a TypeError of ``fn``'s own is never reworded."""
-    params, through = called_parameters(fn)
+    params, through, module = _called(fn)
     if params is None:
         return None
     positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
@@ -126,7 +139,9 @@ def cannot_take(fn: Any, n_args: int) -> Mismatch | None:
     shown += [f"**{p.name}" for p in params if p.kind is p.VAR_KEYWORD]
     name = getattr(fn, "__qualname__", None) or type(fn).__name__
     if through == "forward":  # a torch module, read as the forward its __call__ runs
-        takes = f"{type(fn).__qualname__}.forward takes ({', '.join(shown)})"
+        # named by the module's class, also under a wrapper (torch.no_grad()(net)), whose
+        # own type (a function) says nothing
+        takes = f"{type(module).__qualname__}.forward takes ({', '.join(shown)})"
     elif through:  # a generic (*args, **kwargs) wrapper, read as what its __wrapped__ names
         takes = (
             f"{name}, a wrapper of *args/**kwargs, wraps (its __wrapped__) a function that "
