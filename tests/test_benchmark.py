@@ -1817,3 +1817,110 @@ def test_performance_at_a_budget_says_how_many_seeds_reached_it(tmp_path):
     assert [hg["performance_at_budget"][b]["n_reached"] for b in ("5", "10", "20")] == [2, 2, 0]
     assert [bc["performance_at_budget"][b]["n_reached"] for b in ("5", "10", "20")] == [2, 2, 2]
     assert hg["performance_at_budget"]["20"]["n"] == 2  # the figure itself: as before
+
+
+def _perf_at_by_hand(cell, budget):
+    """A cell's figure at ``budget``: its last curve point at or below it (None: none)."""
+    below = [p["performance"] for p in cell["curve"] if p["labels"] <= budget]
+    return below[-1] if below else None
+
+
+def test_every_strategy_is_compared_with_confident_execution_seed_by_seed(tmp_path):
+    """Every strategy runs on the same seeds, yet results.json gave only mean ± sd per
+    strategy, so two strategies' rows could not be told apart where their spreads overlap even
+    when one was ahead on every seed. results.json's ``paired`` now holds, against the paper's
+    method (the strategy named "confident", whatever its label), each strategy's per-seed
+    difference at each budget: mean, sd, n and a 95 % t interval."""
+    cells = []
+    strategies = [
+        bm.StrategySpec("bc"),
+        bm.StrategySpec("hg_dagger", {"warmup": 3}),
+        bm.StrategySpec("confident", label="CE"),
+    ]
+    r = bm.run_benchmark(
+        strategies,
+        [_env(env_kwargs={"spread": 1.0})],
+        [0, 1, 2],
+        tmp_path,
+        workers=1,
+        plots=False,
+        on_cell=lambda cell, cached: cells.append(cell),
+    )
+    paired = r["paired"]
+    assert paired["reference"] == "CE"
+    assert set(paired["table"]["toy"]) == {"bc", "hg_dagger"}
+    by = {(c["strategy"], c["seed"]): c for c in cells}
+    moved = False
+    for strat in ("bc", "hg_dagger"):
+        for b in (5, 10, 20):
+            d = [
+                _perf_at_by_hand(by[strat, s], b) - _perf_at_by_hand(by["CE", s], b)
+                for s in (0, 1, 2)
+            ]
+            half = 4.303 * np.std(d, ddof=1) / np.sqrt(3)  # t(0.975, 2 df)
+            e = paired["table"]["toy"][strat][str(b)]
+            assert e["n"] == 3 and e["mean"] == pytest.approx(np.mean(d))
+            assert e["sd"] == pytest.approx(np.std(d, ddof=1))
+            assert e["ci95"] == pytest.approx([np.mean(d) - half, np.mean(d) + half], abs=1e-3)
+            moved |= any(x != 0 for x in d)
+    assert moved  # HG-DAgger's curve is not confident execution's: the check can fail
+    assert json.loads((tmp_path / "results.json").read_text())["paired"] == paired
+
+
+def test_a_paired_difference_of_one_seed_has_no_interval_and_one_seed_short_is_left_out():
+    """n < 2: no sd and no interval (None, never NaN); a seed where either strategy has no
+    figure at a budget is not counted there; a sweep without confident execution has no
+    reference and no pairs."""
+
+    def cell(strategy, seed, curve, name=None):
+        return {
+            "env": "e",
+            "strategy": strategy,
+            "seed": seed,
+            "teacher_performance": 1.0,
+            "curve": [{"labels": n, "performance": p} for n, p in curve],
+            "config": {"env": {"budgets": [5, 10]}, "strategy": {"name": name or strategy}},
+            "attention": {},
+            "wall_s": 1.0,
+            "cpu_s": 1.0,
+        }
+
+    cells = [
+        cell("confident", 0, [(5, 0.5), (10, 0.75)]),
+        cell("confident", 1, [(10, 0.5)]),  # no model of 5 labels or fewer
+        cell("bc", 0, [(5, 0.25), (10, 1.0)]),
+        cell("bc", 1, [(5, 0.5), (10, 1.0)]),
+    ]
+    paired = bm.summarize(cells, envs=["e"], strategies=["bc", "confident"])["paired"]
+    assert paired["reference"] == "confident"
+    assert paired["table"]["e"]["bc"]["5"] == {"mean": -0.25, "sd": None, "n": 1, "ci95": None}
+    ten = paired["table"]["e"]["bc"]["10"]
+    assert ten["n"] == 2 and ten["mean"] == pytest.approx(0.375) and ten["ci95"] is not None
+    table = bm.format_paired(bm.summarize(cells, envs=["e"], strategies=["bc", "confident"]))
+    assert "| e | bc | 5 | -0.25 (n = 1) | 1 | none (n < 2) |" in table
+    assert "nan" not in table.lower()
+    alone = bm.summarize(cells[2:], envs=["e"], strategies=["bc"])
+    assert alone["paired"] == {"reference": None, "table": {}}
+    assert "no strategy named confident" in bm.format_paired(alone)
+
+
+def test_the_command_prints_the_paired_comparison_with_confident(tmp_path, capsys, monkeypatch):
+    """The command's output had only the per-strategy table (and said "no difference between
+    rows computed"); it now prints each strategy's per-seed difference from confident
+    execution at each budget, with its 95 % interval, under the table."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = [*_TOY_SWEEP, "--teacher", "_bench_env:teacher", "--strategies", "bc,confident"]
+    argv += ["--seeds", "2", "--workers", "1", "--budgets", "5,10", "--max-steps", "10"]
+    assert main([*argv, "--eval-episodes", "1", "--out", str(tmp_path / "b")]) == 0
+    out = capsys.readouterr().out
+    r = json.loads((tmp_path / "b" / "results.json").read_text())
+    env = "_bench_env:BenchCluster-v0"
+    assert "no difference between rows computed" not in out
+    head = "| env | strategy − confident | labels | difference (mean ± sd) | n | 95 % interval |"
+    assert head in out
+    for b in ("5", "10"):
+        e = r["paired"]["table"][env]["bc"][b]
+        lo, hi = e["ci95"]
+        diff = f"{e['mean']:+.2f} ± {e['sd']:.2f}"
+        row = f"| {env} | bc | {b} | {diff} | 2 | [{lo:+.2f}, {hi:+.2f}] |"
+        assert row in out, out

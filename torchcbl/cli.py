@@ -1934,12 +1934,14 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     _print_if_read(bm.format_table(summary))
     _print_if_read(  # what the figures are: the table alone does not say
         f"\nEach figure: mean ± sd over the {_counted(len(seeds), 'seed')} of its row (sample "
-        'sd, n − 1; "(n = 1)": one seed, no spread), no difference between rows computed; '
+        'sd, n − 1; "(n = 1)": one seed, no spread; differences between rows: below); '
         "≥: a lower bound, (k/n) of the seeds never reached 95 % of the teacher and count at "
         "their last labels; perf. "
         "at a budget: the model of the last snapshot at or below it; (rate), auditor ≠ "
         "teacher: means over the seeds that have one."
     )
+    _print_if_read()
+    _print_if_read(bm.format_paired(summary))
     for env_name, rows in summary["table"].items():
         scores = [r["teacher_performance"]["mean"] for r in rows.values()]
         if scores and all(s is not None and s <= 0 for s in scores):
