@@ -1924,3 +1924,25 @@ def test_the_command_prints_the_paired_comparison_with_confident(tmp_path, capsy
         diff = f"{e['mean']:+.2f} ± {e['sd']:.2f}"
         row = f"| {env} | bc | {b} | {diff} | 2 | [{lo:+.2f}, {hi:+.2f}] |"
         assert row in out, out
+
+
+def test_the_tables_budget_column_names_the_budget_it_shows(tmp_path, capsys, monkeypatch):
+    """`--budgets 10` printed its one budget's figure under "perf. at 2nd budget": there is no
+    2nd budget. The header now says which budget the column shows: the 2nd where every row has
+    two or more, the only one where every row has one, and says both where the rows differ."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = [*_TOY_SWEEP, "--teacher", "_bench_env:teacher", "--strategies", "bc", "--workers", "1"]
+    assert main([*argv, *_ONE_TINY_CELL, "--out", str(tmp_path / "one")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    header = next(x for x in lines if x.startswith("| env |"))
+    assert "| perf. at its only budget |" in header and "2nd" not in header, header
+    row = lines[lines.index(header) + 2]
+    assert " @ 5 |" in row, row  # and each row says which budget that is
+
+    def header_of(envs):
+        r = bm.run_benchmark(STRATEGIES[:1], envs, [0], tmp_path / "api", workers=1, plots=False)
+        return bm.format_table(r).splitlines()[0]
+
+    assert "| perf. at 2nd budget |" in header_of([_env()])
+    mixed = header_of([_env(), _env(name="toy1", budgets=(5,))])
+    assert "| perf. at 2nd budget (or the only one) |" in mixed, mixed

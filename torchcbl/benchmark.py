@@ -1473,9 +1473,21 @@ def _paired(
 
 
 def format_table(summary: Mapping[str, Any]) -> str:
-    """A Markdown table of the results (one row per environment and strategy)."""
+    """A Markdown table of the results (one row per environment and strategy). The column of
+    performance at a budget shows each row's 2nd budget, or its only one (its header says which;
+    each cell names its budget, ``@ 20``)."""
+    counts = {
+        len(r["performance_at_budget"]) for s in summary["table"].values() for r in s.values()
+    }
+    at_header = (
+        "perf. at its only budget"
+        if counts and max(counts) == 1
+        else "perf. at 2nd budget (or the only one)"
+        if counts and min(counts) == 1
+        else "perf. at 2nd budget"
+    )
     rows = [
-        "| env | strategy | labels to 95 % (censored) | perf. at 2nd budget | final perf. "
+        f"| env | strategy | labels to 95 % (censored) | {at_header} | final perf. "
         "(labels) | teacher perf. | requests | monitored | context switches | "
         "wrong auto. actions (rate) | auditor ≠ teacher | wall s |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
