@@ -1946,3 +1946,36 @@ def test_the_tables_budget_column_names_the_budget_it_shows(tmp_path, capsys, mo
     assert "| perf. at 2nd budget |" in header_of([_env()])
     mixed = header_of([_env(), _env(name="toy1", budgets=(5,))])
     assert "| perf. at 2nd budget (or the only one) |" in mixed, mixed
+
+
+def test_a_count_below_ten_keeps_its_fraction_in_the_table():
+    """The table printed counts with no decimals, and Python rounds half to even: a mean of
+    0.5 wrong actions (one seed 0, the other 1) read "0 ± 1", as if none. A count's mean that
+    is not whole and below 10 is now printed to two significant digits, its sd to as many
+    decimals; whole means and means of 10 or more are printed as before."""
+
+    def cell(seed, wrong, switches, labels):
+        return {
+            "env": "e",
+            "strategy": "s",
+            "seed": seed,
+            "teacher_performance": 1.0,
+            "curve": [{"labels": labels, "performance": 1.0}],
+            "config": {"env": {"budgets": [5, 10]}, "strategy": {"name": "s"}},
+            "attention": {
+                "requests": labels,
+                "monitored_steps": 40,
+                "context_switches": switches,
+                "wrong_autonomous_actions": wrong,
+            },
+            "wall_s": 1.0,
+            "cpu_s": 1.0,
+        }
+
+    cells = [cell(0, 0, 44, 10), cell(1, 1, 45, 11)]
+    row = bm.format_table(bm.summarize(cells, envs=["e"], strategies=["s"])).splitlines()[-1]
+    # requests 10.5 (>= 10: whole, half to even), monitored 40 (whole), switches 44.5
+    assert "| 10 ± 1 | 40 ± 0 | 44 ± 1 | 0.50 ± 0.71 (-) |" in row, row
+    few = [cell(0, 0, 4, 10), cell(1, 0, 3, 10), cell(2, 0, 3, 10)]
+    row = bm.format_table(bm.summarize(few, envs=["e"], strategies=["s"])).splitlines()[-1]
+    assert "| 3.3 ± 0.6 | 0 ± 0 (-) |" in row, row  # 10/3 switches: not "3 ± 1"

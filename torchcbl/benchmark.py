@@ -73,6 +73,7 @@ import hashlib
 import importlib
 import inspect
 import json
+import math
 import os
 import sys
 import time
@@ -1493,9 +1494,15 @@ def format_table(summary: Mapping[str, Any]) -> str:
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
 
-    def ms(d: Mapping[str, Any], fmt: str = "{:.0f}") -> str:
+    def ms(d: Mapping[str, Any], fmt: str | None = None) -> str:
+        """``mean ± sd``; without ``fmt``, a count's: whole or >= 10, no decimals; else two
+        significant digits, the sd to as many decimals (a mean of 0.5 is not "0")."""
         if d.get("mean") is None:
             return "-"
+        if fmt is None:
+            mean = float(d["mean"])
+            whole = abs(mean - round(mean)) < 1e-9 or abs(mean) >= 10
+            fmt = "{:.0f}" if whole else f"{{:.{max(1, 1 - math.floor(math.log10(abs(mean))))}f}}"
         if d.get("sd") is None:
             return f"{fmt.format(d['mean'])} (n = 1)"
         return f"{fmt.format(d['mean'])} ± {fmt.format(d['sd'])}"
@@ -1518,7 +1525,7 @@ def format_table(summary: Mapping[str, Any]) -> str:
                 f"{ms(r['teacher_performance'], '{:.2f}')} | {ms(a['requests'])} | "
                 f"{ms(a['monitored_steps'])} | {ms(a['context_switches'])} | "
                 f"{ms(a['wrong_autonomous_actions'])} ({rate(a.get('wrong_autonomous_rate'))}) | "
-                f"{rate(a.get('auditor_disagreement'))} | {ms(r['wall_s'])} |"
+                f"{rate(a.get('auditor_disagreement'))} | {ms(r['wall_s'], '{:.0f}')} |"
             )
     return "\n".join(rows)
 
