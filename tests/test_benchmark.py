@@ -299,8 +299,13 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
         # 0 ran the default 10 seeds (a long sweep) where reproduce --seeds 0 is refused
         (
             ["--quick", "--envs", "corridor", "--seeds", "0"],
-            "argument --seeds: expected a whole number >= 1, got '0' (leave --seeds out for "
-            "the default: 3 with --quick, else 10)",
+            "argument --seeds: expected a whole number from 1 to 10000, got '0' (leave --seeds "
+            "out for the default: 3 with --quick, else 10)",
+        ),
+        (  # it ended in a one-line "MemoryError" with exit 1 (a list of 1e11 seeds)
+            ["--quick", "--envs", "corridor", "--seeds", "99999999999"],
+            "argument --seeds: expected a whole number from 1 to 10000, got '99999999999' "
+            "(leave --seeds out for the default: 3 with --quick, else 10)",
         ),
         (
             ["--envs", "", "--gym-env", "_bench_env:BenchCluster-v0", "--teacher"]

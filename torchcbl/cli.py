@@ -133,9 +133,13 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
 
 
-def _int_at_least(minimum: int, below: int | None = None, hint: str = "") -> Any:
-    """An argparse type: a whole number >= ``minimum`` (and < ``below``), else a one-line
-    usage error (ending in `` (hint)`` where ``hint`` is given)."""
+def _int_at_least(
+    minimum: int, below: int | None = None, hint: str = "", at_most: int | None = None
+) -> Any:
+    """An argparse type: a whole number >= ``minimum`` (and < ``below``, and <= ``at_most``),
+    else a one-line usage error (ending in `` (hint)`` where ``hint`` is given)."""
+    if at_most is not None:
+        below = at_most + 1
 
     def parse(text: str) -> int:
         try:
@@ -143,10 +147,13 @@ def _int_at_least(minimum: int, below: int | None = None, hint: str = "") -> Any
         except ValueError:
             value = None
         if value is None or value < minimum or (below is not None and value >= below):
-            upper = "" if below is None else f" and < {below}"
+            expected = (
+                f"from {minimum} to {at_most}"
+                if at_most is not None
+                else f">= {minimum}" + ("" if below is None else f" and < {below}")
+            )
             raise argparse.ArgumentTypeError(
-                f"expected a whole number >= {minimum}{upper}, got {text!r}"
-                + (f" ({hint})" if hint else "")
+                f"expected a whole number {expected}, got {text!r}" + (f" ({hint})" if hint else "")
             ) from None
         return value
 
@@ -154,6 +161,12 @@ def _int_at_least(minimum: int, below: int | None = None, hint: str = "") -> Any
 
 
 _positive_int = _int_at_least(1)
+
+# The most seeds `torchcbl benchmark --seeds` takes: each seed is a cell of every strategy and
+# env (10,000 seeds of the shipped 6 strategies x 2 envs: 120,000 cells, about 0.2 GB of cell
+# configurations before the first runs). A count far above it, a slip of the keyboard, made a
+# list of that many seeds and ended in a bare MemoryError.
+_MAX_SEEDS = 10_000
 
 
 def _budgets(text: str) -> tuple[int, ...]:
@@ -2357,10 +2370,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--seeds",
         # 0 is refused, as reproduce refuses it (it ran the default 10 seeds, a long sweep)
-        type=_int_at_least(1, hint="leave --seeds out for the default: 3 with --quick, else 10"),
+        type=_int_at_least(
+            1,
+            at_most=_MAX_SEEDS,
+            hint="leave --seeds out for the default: 3 with --quick, else 10",
+        ),
         default=None,
         metavar="N",
-        help="seeds 0..N-1 (default 3 with --quick, else 10)",
+        help=f"seeds 0..N-1, N at most {_MAX_SEEDS} (default 3 with --quick, else 10)",
     )
     p.add_argument(
         "--workers", type=_positive_int, default=2, metavar="N", help="local processes (default 2)"
