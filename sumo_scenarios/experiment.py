@@ -77,6 +77,7 @@ from torchcbl.evaluation import (
     finished_seeds,
     holding_run_dir,
     mean_sd,
+    paired_interval,
     progress_bar,
     run_versions,
     save_whole,
@@ -1074,56 +1075,6 @@ def cpu_seconds() -> float:
     own = resource.getrusage(resource.RUSAGE_SELF)
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
-
-
-_T975 = (
-    12.706,
-    4.303,
-    3.182,
-    2.776,
-    2.571,
-    2.447,
-    2.365,
-    2.306,
-    2.262,
-    2.228,
-    2.201,
-    2.179,
-    2.160,
-    2.145,
-    2.131,
-    2.120,
-    2.110,
-    2.101,
-    2.093,
-    2.086,
-    2.080,
-    2.074,
-    2.069,
-    2.064,
-    2.060,
-    2.056,
-    2.052,
-    2.048,
-    2.045,
-    2.042,
-)  # Student t, 97.5 %, df = 1..30
-
-
-def paired_interval(diffs: Sequence[float]) -> dict[str, Any]:
-    """Mean of paired differences and its 95 % t interval: ``{mean, sd, n, ci95: [lo, hi]}``.
-
-    With one value there is no spread: ``sd`` and ``ci95`` are None."""
-    d = np.asarray(diffs, dtype=np.float64)
-    if d.size == 0:
-        raise ValueError("paired_interval needs at least one difference")
-    m = float(d.mean())
-    if d.size == 1:
-        return {"mean": m, "sd": None, "n": 1, "ci95": None}
-    sd = float(d.std(ddof=1))
-    t = _T975[d.size - 2] if d.size - 1 <= len(_T975) else 1.96
-    half = float(t * sd / np.sqrt(d.size))
-    return {"mean": m, "sd": sd, "n": int(d.size), "ci95": [m - half, m + half]}
 
 
 @figure_style()

@@ -299,8 +299,13 @@ def test_cli_benchmark_on_a_registered_gym_env(tmp_path, capsys, monkeypatch):
         # 0 ran the default 10 seeds (a long sweep) where reproduce --seeds 0 is refused
         (
             ["--quick", "--envs", "corridor", "--seeds", "0"],
-            "argument --seeds: expected a whole number >= 1, got '0' (leave --seeds out for "
-            "the default: 3 with --quick, else 10)",
+            "argument --seeds: expected a whole number from 1 to 10000, got '0' (leave --seeds "
+            "out for the default: 3 with --quick, else 10)",
+        ),
+        (  # it ended in a one-line "MemoryError" with exit 1 (a list of 1e11 seeds)
+            ["--quick", "--envs", "corridor", "--seeds", "99999999999"],
+            "argument --seeds: expected a whole number from 1 to 10000, got '99999999999' "
+            "(leave --seeds out for the default: 3 with --quick, else 10)",
         ),
         (
             ["--envs", "", "--gym-env", "_bench_env:BenchCluster-v0", "--teacher"]
@@ -1817,3 +1822,165 @@ def test_performance_at_a_budget_says_how_many_seeds_reached_it(tmp_path):
     assert [hg["performance_at_budget"][b]["n_reached"] for b in ("5", "10", "20")] == [2, 2, 0]
     assert [bc["performance_at_budget"][b]["n_reached"] for b in ("5", "10", "20")] == [2, 2, 2]
     assert hg["performance_at_budget"]["20"]["n"] == 2  # the figure itself: as before
+
+
+def _perf_at_by_hand(cell, budget):
+    """A cell's figure at ``budget``: its last curve point at or below it (None: none)."""
+    below = [p["performance"] for p in cell["curve"] if p["labels"] <= budget]
+    return below[-1] if below else None
+
+
+def test_every_strategy_is_compared_with_confident_execution_seed_by_seed(tmp_path):
+    """Every strategy runs on the same seeds, yet results.json gave only mean ± sd per
+    strategy, so two strategies' rows could not be told apart where their spreads overlap even
+    when one was ahead on every seed. results.json's ``paired`` now holds, against the paper's
+    method (the strategy named "confident", whatever its label), each strategy's per-seed
+    difference at each budget: mean, sd, n and a 95 % t interval."""
+    cells = []
+    strategies = [
+        bm.StrategySpec("bc"),
+        bm.StrategySpec("hg_dagger", {"warmup": 3}),
+        bm.StrategySpec("confident", label="CE"),
+    ]
+    r = bm.run_benchmark(
+        strategies,
+        [_env(env_kwargs={"spread": 1.0})],
+        [0, 1, 2],
+        tmp_path,
+        workers=1,
+        plots=False,
+        on_cell=lambda cell, cached: cells.append(cell),
+    )
+    paired = r["paired"]
+    assert paired["reference"] == "CE"
+    assert set(paired["table"]["toy"]) == {"bc", "hg_dagger"}
+    by = {(c["strategy"], c["seed"]): c for c in cells}
+    moved = False
+    for strat in ("bc", "hg_dagger"):
+        for b in (5, 10, 20):
+            d = [
+                _perf_at_by_hand(by[strat, s], b) - _perf_at_by_hand(by["CE", s], b)
+                for s in (0, 1, 2)
+            ]
+            half = 4.303 * np.std(d, ddof=1) / np.sqrt(3)  # t(0.975, 2 df)
+            e = paired["table"]["toy"][strat][str(b)]
+            assert e["n"] == 3 and e["mean"] == pytest.approx(np.mean(d))
+            assert e["sd"] == pytest.approx(np.std(d, ddof=1))
+            assert e["ci95"] == pytest.approx([np.mean(d) - half, np.mean(d) + half], abs=1e-3)
+            moved |= any(x != 0 for x in d)
+    assert moved  # HG-DAgger's curve is not confident execution's: the check can fail
+    assert json.loads((tmp_path / "results.json").read_text())["paired"] == paired
+
+
+def test_a_paired_difference_of_one_seed_has_no_interval_and_one_seed_short_is_left_out():
+    """n < 2: no sd and no interval (None, never NaN); a seed where either strategy has no
+    figure at a budget is not counted there; a sweep without confident execution has no
+    reference and no pairs."""
+
+    def cell(strategy, seed, curve, name=None):
+        return {
+            "env": "e",
+            "strategy": strategy,
+            "seed": seed,
+            "teacher_performance": 1.0,
+            "curve": [{"labels": n, "performance": p} for n, p in curve],
+            "config": {"env": {"budgets": [5, 10]}, "strategy": {"name": name or strategy}},
+            "attention": {},
+            "wall_s": 1.0,
+            "cpu_s": 1.0,
+        }
+
+    cells = [
+        cell("confident", 0, [(5, 0.5), (10, 0.75)]),
+        cell("confident", 1, [(10, 0.5)]),  # no model of 5 labels or fewer
+        cell("bc", 0, [(5, 0.25), (10, 1.0)]),
+        cell("bc", 1, [(5, 0.5), (10, 1.0)]),
+    ]
+    paired = bm.summarize(cells, envs=["e"], strategies=["bc", "confident"])["paired"]
+    assert paired["reference"] == "confident"
+    assert paired["table"]["e"]["bc"]["5"] == {"mean": -0.25, "sd": None, "n": 1, "ci95": None}
+    ten = paired["table"]["e"]["bc"]["10"]
+    assert ten["n"] == 2 and ten["mean"] == pytest.approx(0.375) and ten["ci95"] is not None
+    table = bm.format_paired(bm.summarize(cells, envs=["e"], strategies=["bc", "confident"]))
+    assert "| e | bc | 5 | -0.25 (n = 1) | 1 | none (n < 2) |" in table
+    assert "nan" not in table.lower()
+    alone = bm.summarize(cells[2:], envs=["e"], strategies=["bc"])
+    assert alone["paired"] == {"reference": None, "table": {}}
+    assert "no strategy named confident" in bm.format_paired(alone)
+
+
+def test_the_command_prints_the_paired_comparison_with_confident(tmp_path, capsys, monkeypatch):
+    """The command's output had only the per-strategy table (and said "no difference between
+    rows computed"); it now prints each strategy's per-seed difference from confident
+    execution at each budget, with its 95 % interval, under the table."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = [*_TOY_SWEEP, "--teacher", "_bench_env:teacher", "--strategies", "bc,confident"]
+    argv += ["--seeds", "2", "--workers", "1", "--budgets", "5,10", "--max-steps", "10"]
+    assert main([*argv, "--eval-episodes", "1", "--out", str(tmp_path / "b")]) == 0
+    out = capsys.readouterr().out
+    r = json.loads((tmp_path / "b" / "results.json").read_text())
+    env = "_bench_env:BenchCluster-v0"
+    assert "no difference between rows computed" not in out
+    head = "| env | strategy − confident | labels | difference (mean ± sd) | n | 95 % interval |"
+    assert head in out
+    for b in ("5", "10"):
+        e = r["paired"]["table"][env]["bc"][b]
+        lo, hi = e["ci95"]
+        diff = f"{e['mean']:+.2f} ± {e['sd']:.2f}"
+        row = f"| {env} | bc | {b} | {diff} | 2 | [{lo:+.2f}, {hi:+.2f}] |"
+        assert row in out, out
+
+
+def test_the_tables_budget_column_names_the_budget_it_shows(tmp_path, capsys, monkeypatch):
+    """`--budgets 10` printed its one budget's figure under "perf. at 2nd budget": there is no
+    2nd budget. The header now says which budget the column shows: the 2nd where every row has
+    two or more, the only one where every row has one, and says both where the rows differ."""
+    monkeypatch.syspath_prepend(str(TESTS))
+    argv = [*_TOY_SWEEP, "--teacher", "_bench_env:teacher", "--strategies", "bc", "--workers", "1"]
+    assert main([*argv, *_ONE_TINY_CELL, "--out", str(tmp_path / "one")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    header = next(x for x in lines if x.startswith("| env |"))
+    assert "| perf. at its only budget |" in header and "2nd" not in header, header
+    row = lines[lines.index(header) + 2]
+    assert " @ 5 |" in row, row  # and each row says which budget that is
+
+    def header_of(envs):
+        r = bm.run_benchmark(STRATEGIES[:1], envs, [0], tmp_path / "api", workers=1, plots=False)
+        return bm.format_table(r).splitlines()[0]
+
+    assert "| perf. at 2nd budget |" in header_of([_env()])
+    mixed = header_of([_env(), _env(name="toy1", budgets=(5,))])
+    assert "| perf. at 2nd budget (or the only one) |" in mixed, mixed
+
+
+def test_a_count_below_ten_keeps_its_fraction_in_the_table():
+    """The table printed counts with no decimals, and Python rounds half to even: a mean of
+    0.5 wrong actions (one seed 0, the other 1) read "0 ± 1", as if none. A count's mean that
+    is not whole and below 10 is now printed to two significant digits, its sd to as many
+    decimals; whole means and means of 10 or more are printed as before."""
+
+    def cell(seed, wrong, switches, labels):
+        return {
+            "env": "e",
+            "strategy": "s",
+            "seed": seed,
+            "teacher_performance": 1.0,
+            "curve": [{"labels": labels, "performance": 1.0}],
+            "config": {"env": {"budgets": [5, 10]}, "strategy": {"name": "s"}},
+            "attention": {
+                "requests": labels,
+                "monitored_steps": 40,
+                "context_switches": switches,
+                "wrong_autonomous_actions": wrong,
+            },
+            "wall_s": 1.0,
+            "cpu_s": 1.0,
+        }
+
+    cells = [cell(0, 0, 44, 10), cell(1, 1, 45, 11)]
+    row = bm.format_table(bm.summarize(cells, envs=["e"], strategies=["s"])).splitlines()[-1]
+    # requests 10.5 (>= 10: whole, half to even), monitored 40 (whole), switches 44.5
+    assert "| 10 ± 1 | 40 ± 0 | 44 ± 1 | 0.50 ± 0.71 (-) |" in row, row
+    few = [cell(0, 0, 4, 10), cell(1, 0, 3, 10), cell(2, 0, 3, 10)]
+    row = bm.format_table(bm.summarize(few, envs=["e"], strategies=["s"])).splitlines()[-1]
+    assert "| 3.3 ± 0.6 | 0 ± 0 (-) |" in row, row  # 10/3 switches: not "3 ± 1"

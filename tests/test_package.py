@@ -42,6 +42,18 @@ def test_mean_sd_by_hand():
     assert v["sim"] == "1.2" and v["torchcbl"] == torchcbl.__version__
 
 
+def test_paired_interval_is_one_function_of_the_core_that_the_driving_experiment_uses():
+    """The benchmark and the driving experiment report a paired difference's 95 % t interval
+    with the same code: the core's (the core never imports a domain, so it lives there)."""
+    import sumo_scenarios.experiment
+    from torchcbl.evaluation import paired_interval
+
+    assert sumo_scenarios.experiment.paired_interval is paired_interval
+    d = paired_interval([1.0, 2.0, 3.0, 4.0])  # t(0.975, 3) = 3.182, sd 1.291
+    assert d["n"] == 4 and d["ci95"] == pytest.approx([0.4457, 4.5543], abs=1e-3)
+    assert paired_interval([0.5]) == {"mean": 0.5, "sd": None, "n": 1, "ci95": None}
+
+
 def test_run_versions_name_the_commit_of_the_checkout_that_ran():
     """A results.json said torchcbl 0.1.0 for every commit of the project, so two run
     directories made by different code (whose figures differ) could not be told apart, nor

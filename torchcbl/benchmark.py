@@ -59,8 +59,11 @@ Results: ``OUT/results.json`` with, per (strategy, environment), ``labels_to_95p
 at which the performance first reaches 95 % of the teacher's; mean, sd, n; runs that never
 reach it are censored at their last label count and marked), performance at each budget
 (each seed's model of at most that many labels; ``n_reached``: the seeds that held them),
-``final_performance``, attention and times; ``OUT/learning_curves.png`` (performance vs labels,
-one panel per environment, a line per strategy with a band of +-1 sd over seeds).
+``final_performance``, attention and times; ``paired``: each strategy against
+:data:`REFERENCE_STRATEGY` (confident execution) seed by seed, at each budget the per-seed
+difference's mean, sd, n and 95 % t interval (:func:`summarize`); ``OUT/learning_curves.png``
+(performance vs labels, one panel per environment, a line per strategy with a band of +-1 sd
+over seeds).
 """
 
 from __future__ import annotations
@@ -70,6 +73,7 @@ import hashlib
 import importlib
 import inspect
 import json
+import math
 import os
 import sys
 import time
@@ -87,7 +91,14 @@ import numpy as np
 from torchcbl._checkpoints import DEFAULT_KEEP_CHECKPOINTS, is_keep_count
 from torchcbl._durable import write_durably
 from torchcbl._text import one_line
-from torchcbl.evaluation import figure_style, mean_sd, run_versions, save_whole, worker_pool
+from torchcbl.evaluation import (
+    figure_style,
+    mean_sd,
+    paired_interval,
+    run_versions,
+    save_whole,
+    worker_pool,
+)
 from torchcbl.records import _is_int
 
 __all__ = [
@@ -95,6 +106,7 @@ __all__ = [
     "CellError",
     "EnvSpec",
     "STRATEGY_PATHS",
+    "REFERENCE_STRATEGY",
     "StrategySpec",
     "cell_configs",
     "cell_key",
@@ -125,6 +137,11 @@ STRATEGY_PATHS: dict[str, str] = {
     "confident": "torchcbl.strategies:ConfidentExecution",
     "cba": "torchcbl.strategies.cba:ConfidenceBasedAutonomy",
 }
+
+
+#: the strategy every other is paired with, seed by seed, in ``results.json``'s ``paired``: the
+#: paper's confident execution (a :class:`StrategySpec` of this name, whatever its label).
+REFERENCE_STRATEGY = "confident"
 
 
 def _import(path: str) -> Any:
@@ -1319,10 +1336,39 @@ def _perf_at(cell: Mapping[str, Any], budget: int) -> float | None:
 
 
 def summarize(
-    cells: Iterable[Mapping[str, Any]], *, envs: Sequence[str], strategies: Sequence[str]
+    cells: Iterable[Mapping[str, Any]],
+    *,
+    envs: Sequence[str],
+    strategies: Sequence[str],
+    reference: str | None = None,
 ) -> dict[str, Any]:
-    """The results table from cell results: per env, per strategy, the figures over seeds."""
+    """The results from cell results: ``table`` (per env, per strategy, the figures over
+    seeds) and ``paired`` (each strategy against the reference, seed by seed).
+
+    Args:
+        cells: cell results (:func:`run_cell`'s).
+        envs, strategies: the env names and strategy titles (labels) to summarize, in order.
+        reference: the strategy title every other is paired with; None: the first of
+            ``strategies`` whose cells are a :data:`REFERENCE_STRATEGY` spec's (confident
+            execution, whatever its label), and no pairs where there is none.
+
+    ``paired`` is ``{"reference": title or None, "table": {env: {strategy: {budget: {mean,
+    sd, n, ci95}}}}}``: at each budget, over the seeds where both the strategy and the
+    reference have a figure (each seed's model of at most that many labels), the differences
+    strategy − reference of the same seed's two figures (every strategy runs on the same
+    seeds: the same env, evaluation and teacher seeds), their mean, sample sd and a 95 % t
+    interval (:func:`~torchcbl.evaluation.paired_interval`; sd and ci95 None where n < 2). A
+    budget where no seed has both figures is left out.
+
+    Raises:
+        ValueError: ``reference`` is not one of ``strategies``.
+    """
     cells = list(cells)
+    if reference is not None and reference not in strategies:
+        raise ValueError(
+            f"summarize: reference must be one of the strategies {list(strategies)}, got "
+            f"{reference!r}"
+        )
     table: dict[str, dict[str, Any]] = {}
     for env in envs:
         table[env] = {}
@@ -1371,21 +1417,92 @@ def summarize(
                 "wall_s": mean_sd(c["wall_s"] for c in mine),
                 "cpu_s": mean_sd(c["cpu_s"] for c in mine),
             }
-    return {"table": table}
+    if reference is None:
+        reference = _reference(cells, strategies)
+    return {
+        "table": table,
+        "paired": {
+            "reference": reference,
+            "table": {} if reference is None else _paired(cells, envs, strategies, reference),
+        },
+    }
+
+
+def _reference(cells: Sequence[Mapping[str, Any]], strategies: Sequence[str]) -> str | None:
+    """The first of ``strategies`` whose cells are a :data:`REFERENCE_STRATEGY` spec's."""
+    for strat in strategies:
+        for c in cells:
+            spec = c.get("config", {}).get("strategy", {})
+            if c["strategy"] == strat and spec.get("name") == REFERENCE_STRATEGY:
+                return strat
+    return None
+
+
+def _paired(
+    cells: Sequence[Mapping[str, Any]],
+    envs: Sequence[str],
+    strategies: Sequence[str],
+    reference: str,
+) -> dict[str, dict[str, dict[str, dict[str, Any]]]]:
+    """``summarize``'s ``paired["table"]``: per env, per other strategy, per budget, the
+    per-seed differences strategy − reference."""
+    out: dict[str, dict[str, dict[str, dict[str, Any]]]] = {}
+    for env in envs:
+        ref = {c["seed"]: c for c in cells if c["env"] == env and c["strategy"] == reference}
+        if not ref:
+            continue
+        budgets = next(iter(ref.values()))["config"]["env"]["budgets"]
+        rows: dict[str, dict[str, dict[str, Any]]] = {}
+        for strat in strategies:
+            if strat == reference:
+                continue
+            mine = {c["seed"]: c for c in cells if c["env"] == env and c["strategy"] == strat}
+            at_budget = {}
+            for b in budgets:
+                diffs = []
+                for seed in sorted(mine.keys() & ref.keys()):
+                    a, r = _perf_at(mine[seed], b), _perf_at(ref[seed], b)
+                    if a is not None and r is not None:
+                        diffs.append(float(a) - float(r))
+                if diffs:
+                    at_budget[str(b)] = paired_interval(diffs)
+            if at_budget:
+                rows[strat] = at_budget
+        if rows:
+            out[env] = rows
+    return out
 
 
 def format_table(summary: Mapping[str, Any]) -> str:
-    """A Markdown table of the results (one row per environment and strategy)."""
+    """A Markdown table of the results (one row per environment and strategy). The column of
+    performance at a budget shows each row's 2nd budget, or its only one (its header says which;
+    each cell names its budget, ``@ 20``)."""
+    counts = {
+        len(r["performance_at_budget"]) for s in summary["table"].values() for r in s.values()
+    }
+    at_header = (
+        "perf. at its only budget"
+        if counts and max(counts) == 1
+        else "perf. at 2nd budget (or the only one)"
+        if counts and min(counts) == 1
+        else "perf. at 2nd budget"
+    )
     rows = [
-        "| env | strategy | labels to 95 % (censored) | perf. at 2nd budget | final perf. "
+        f"| env | strategy | labels to 95 % (censored) | {at_header} | final perf. "
         "(labels) | teacher perf. | requests | monitored | context switches | "
         "wrong auto. actions (rate) | auditor ≠ teacher | wall s |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
 
-    def ms(d: Mapping[str, Any], fmt: str = "{:.0f}") -> str:
+    def ms(d: Mapping[str, Any], fmt: str | None = None) -> str:
+        """``mean ± sd``; without ``fmt``, a count's: whole or >= 10, no decimals; else two
+        significant digits, the sd to as many decimals (a mean of 0.5 is not "0")."""
         if d.get("mean") is None:
             return "-"
+        if fmt is None:
+            mean = float(d["mean"])
+            whole = abs(mean - round(mean)) < 1e-9 or abs(mean) >= 10
+            fmt = "{:.0f}" if whole else f"{{:.{max(1, 1 - math.floor(math.log10(abs(mean))))}f}}"
         if d.get("sd") is None:
             return f"{fmt.format(d['mean'])} (n = 1)"
         return f"{fmt.format(d['mean'])} ± {fmt.format(d['sd'])}"
@@ -1408,8 +1525,44 @@ def format_table(summary: Mapping[str, Any]) -> str:
                 f"{ms(r['teacher_performance'], '{:.2f}')} | {ms(a['requests'])} | "
                 f"{ms(a['monitored_steps'])} | {ms(a['context_switches'])} | "
                 f"{ms(a['wrong_autonomous_actions'])} ({rate(a.get('wrong_autonomous_rate'))}) | "
-                f"{rate(a.get('auditor_disagreement'))} | {ms(r['wall_s'])} |"
+                f"{rate(a.get('auditor_disagreement'))} | {ms(r['wall_s'], '{:.0f}')} |"
             )
+    return "\n".join(rows)
+
+
+def format_paired(summary: Mapping[str, Any]) -> str:
+    """The paired comparison of ``summary["paired"]`` (:func:`summarize`): a Markdown table,
+    one row per env, strategy and budget, of the per-seed difference strategy − reference
+    (mean ± sd, n, 95 % t interval), under a line that says what it is; or one line saying why
+    there is none."""
+    paired = summary.get("paired") or {}
+    reference = paired.get("reference")
+    if reference is None:
+        return (
+            f"No paired comparison: no strategy named {REFERENCE_STRATEGY} in this sweep (each "
+            f"strategy is paired seed by seed with {REFERENCE_STRATEGY}, the paper's method)."
+        )
+    if not paired.get("table"):
+        return f"No paired comparison: no other strategy has a figure beside {reference}'s."
+    rows = [
+        f"Paired by seed with {reference} (every strategy ran on the same seeds): at each "
+        f"budget, the difference strategy − {reference} of a seed's two performances (each the "
+        "model of the last snapshot at or below the budget), mean ± sd over the n seeds where "
+        "both have one, and its 95 % t interval (none where n < 2); an interval that excludes "
+        f"0 says the strategy is ahead of (above 0) or behind (below 0) {reference} there.",
+        "",
+        f"| env | strategy − {reference} | labels | difference (mean ± sd) | n | 95 % interval |",
+        "|---|---|---|---|---|---|",
+    ]
+    for env, strategies in paired["table"].items():
+        for strat, budgets in strategies.items():
+            for b, d in budgets.items():
+                if d["sd"] is None:
+                    diff, ci = f"{d['mean']:+.2f} (n = 1)", "none (n < 2)"
+                else:
+                    lo, hi = d["ci95"]
+                    diff, ci = f"{d['mean']:+.2f} ± {d['sd']:.2f}", f"[{lo:+.2f}, {hi:+.2f}]"
+                rows.append(f"| {env} | {strat} | {b} | {diff} | {d['n']} | {ci} |")
     return "\n".join(rows)
 
 

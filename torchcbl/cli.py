@@ -133,9 +133,13 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
 
 
-def _int_at_least(minimum: int, below: int | None = None, hint: str = "") -> Any:
-    """An argparse type: a whole number >= ``minimum`` (and < ``below``), else a one-line
-    usage error (ending in `` (hint)`` where ``hint`` is given)."""
+def _int_at_least(
+    minimum: int, below: int | None = None, hint: str = "", at_most: int | None = None
+) -> Any:
+    """An argparse type: a whole number >= ``minimum`` (and < ``below``, and <= ``at_most``),
+    else a one-line usage error (ending in `` (hint)`` where ``hint`` is given)."""
+    if at_most is not None:
+        below = at_most + 1
 
     def parse(text: str) -> int:
         try:
@@ -143,10 +147,13 @@ def _int_at_least(minimum: int, below: int | None = None, hint: str = "") -> Any
         except ValueError:
             value = None
         if value is None or value < minimum or (below is not None and value >= below):
-            upper = "" if below is None else f" and < {below}"
+            expected = (
+                f"from {minimum} to {at_most}"
+                if at_most is not None
+                else f">= {minimum}" + ("" if below is None else f" and < {below}")
+            )
             raise argparse.ArgumentTypeError(
-                f"expected a whole number >= {minimum}{upper}, got {text!r}"
-                + (f" ({hint})" if hint else "")
+                f"expected a whole number {expected}, got {text!r}" + (f" ({hint})" if hint else "")
             ) from None
         return value
 
@@ -154,6 +161,12 @@ def _int_at_least(minimum: int, below: int | None = None, hint: str = "") -> Any
 
 
 _positive_int = _int_at_least(1)
+
+# The most seeds `torchcbl benchmark --seeds` takes: each seed is a cell of every strategy and
+# env (10,000 seeds of the shipped 6 strategies x 2 envs: 120,000 cells, about 0.2 GB of cell
+# configurations before the first runs). A count far above it, a slip of the keyboard, made a
+# list of that many seeds and ended in a bare MemoryError.
+_MAX_SEEDS = 10_000
 
 
 def _budgets(text: str) -> tuple[int, ...]:
@@ -1934,12 +1947,14 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     _print_if_read(bm.format_table(summary))
     _print_if_read(  # what the figures are: the table alone does not say
         f"\nEach figure: mean ± sd over the {_counted(len(seeds), 'seed')} of its row (sample "
-        'sd, n − 1; "(n = 1)": one seed, no spread), no difference between rows computed; '
+        'sd, n − 1; "(n = 1)": one seed, no spread; differences between rows: below); '
         "≥: a lower bound, (k/n) of the seeds never reached 95 % of the teacher and count at "
         "their last labels; perf. "
         "at a budget: the model of the last snapshot at or below it; (rate), auditor ≠ "
         "teacher: means over the seeds that have one."
     )
+    _print_if_read()
+    _print_if_read(bm.format_paired(summary))
     for env_name, rows in summary["table"].items():
         scores = [r["teacher_performance"]["mean"] for r in rows.values()]
         if scores and all(s is not None and s <= 0 for s in scores):
@@ -2355,10 +2370,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--seeds",
         # 0 is refused, as reproduce refuses it (it ran the default 10 seeds, a long sweep)
-        type=_int_at_least(1, hint="leave --seeds out for the default: 3 with --quick, else 10"),
+        type=_int_at_least(
+            1,
+            at_most=_MAX_SEEDS,
+            hint="leave --seeds out for the default: 3 with --quick, else 10",
+        ),
         default=None,
         metavar="N",
-        help="seeds 0..N-1 (default 3 with --quick, else 10)",
+        help=f"seeds 0..N-1, N at most {_MAX_SEEDS} (default 3 with --quick, else 10)",
     )
     p.add_argument(
         "--workers", type=_positive_int, default=2, metavar="N", help="local processes (default 2)"

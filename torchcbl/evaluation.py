@@ -15,7 +15,7 @@ import shutil
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -33,6 +33,7 @@ __all__ = [
     "check_workers_start",
     "figure_style",
     "mean_sd",
+    "paired_interval",
     "progress_bar",
     "run_versions",
     "save_whole",
@@ -76,6 +77,63 @@ def mean_sd(values: Iterable[float | None]) -> dict[str, float | int | None]:
         "sd": float(np.std(v, ddof=1)) if len(v) > 1 else None,
         "n": len(v),
     }
+
+
+_T975 = (
+    12.706,
+    4.303,
+    3.182,
+    2.776,
+    2.571,
+    2.447,
+    2.365,
+    2.306,
+    2.262,
+    2.228,
+    2.201,
+    2.179,
+    2.160,
+    2.145,
+    2.131,
+    2.120,
+    2.110,
+    2.101,
+    2.093,
+    2.086,
+    2.080,
+    2.074,
+    2.069,
+    2.064,
+    2.060,
+    2.056,
+    2.052,
+    2.048,
+    2.045,
+    2.042,
+)  # Student t, 97.5 %, df = 1..30
+
+
+def paired_interval(diffs: Sequence[float]) -> dict[str, Any]:
+    """Mean of paired differences and its 95 % t interval: ``{mean, sd, n, ci95: [lo, hi]}``.
+
+    ``diffs``: one difference a pair (a seed's figure of one arm or strategy minus the other's,
+    the same seed's). ``sd`` is the sample sd (ddof=1); the interval is the mean ± t(0.975,
+    n − 1) · sd / √n. With one value there is no spread: ``sd`` and ``ci95`` are None (never
+    NaN). The driving experiment's arm (a) − arm (b) and the benchmark's strategy −
+    confident execution (``results.json``'s ``paired``) both come from here.
+
+    Raises:
+        ValueError: ``diffs`` is empty."""
+    d = np.asarray(diffs, dtype=np.float64)
+    if d.size == 0:
+        raise ValueError("paired_interval needs at least one difference")
+    m = float(d.mean())
+    if d.size == 1:
+        return {"mean": m, "sd": None, "n": 1, "ci95": None}
+    sd = float(d.std(ddof=1))
+    t = _T975[d.size - 2] if d.size - 1 <= len(_T975) else 1.96
+    half = float(t * sd / np.sqrt(d.size))
+    return {"mean": m, "sd": sd, "n": int(d.size), "ci95": [m - half, m + half]}
 
 
 _PACKAGES = ("torchcbl", "corridor", "sumo_scenarios")  # the code a run's figures come from
