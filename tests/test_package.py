@@ -54,6 +54,23 @@ def test_paired_interval_is_one_function_of_the_core_that_the_driving_experiment
     assert paired_interval([0.5]) == {"mean": 0.5, "sd": None, "n": 1, "ci95": None}
 
 
+@pytest.mark.parametrize("n", [2, 5, 31, 32, 41, 101, 1001, 10_000])
+def test_paired_interval_takes_t_at_every_n_as_scipy_does(n):
+    """The interval is the mean +- t(0.975, n - 1) sd / sqrt(n) at every n: beyond 31 pairs
+    it took 1.96 (z), 4 % too narrow at 32 (t(31) = 2.040), and the benchmark allows 10,000
+    seeds. scipy's Student t is the oracle."""
+    import numpy as np
+
+    from torchcbl.evaluation import paired_interval
+
+    stats = pytest.importorskip("scipy.stats")
+    diffs = np.linspace(-1.0, 2.0, n) ** 2
+    d = paired_interval(diffs.tolist())
+    half = stats.t.ppf(0.975, n - 1) * np.std(diffs, ddof=1) / np.sqrt(n)
+    assert d["ci95"][1] - d["mean"] == pytest.approx(half, rel=2e-4)
+    assert d["mean"] - d["ci95"][0] == pytest.approx(half, rel=2e-4)
+
+
 def test_run_versions_name_the_commit_of_the_checkout_that_ran():
     """A results.json said torchcbl 0.1.0 for every commit of the project, so two run
     directories made by different code (whose figures differ) could not be told apart, nor

@@ -113,6 +113,18 @@ _T975 = (
 )  # Student t, 97.5 %, df = 1..30
 
 
+def _t975(df: int) -> float:
+    """Student t's 97.5 % quantile for ``df`` > 30 degrees of freedom: the Cornish-Fisher
+    expansion about the normal's 1.959964 to 1/df^4 (Abramowitz & Stegun 26.7.5), within
+    1e-5 of the exact value from df = 30 on (2.0423 at 30, 2.0211 at 40, 1.9799 at 120)."""
+    z = 1.959963984540054
+    g1 = (z**3 + z) / 4
+    g2 = (5 * z**5 + 16 * z**3 + 3 * z) / 96
+    g3 = (3 * z**7 + 19 * z**5 + 17 * z**3 - 15 * z) / 384
+    g4 = (79 * z**9 + 776 * z**7 + 1482 * z**5 - 1920 * z**3 - 945 * z) / 92160
+    return z + g1 / df + g2 / df**2 + g3 / df**3 + g4 / df**4
+
+
 def paired_interval(diffs: Sequence[float]) -> dict[str, Any]:
     """Mean of paired differences and its 95 % t interval: ``{mean, sd, n, ci95: [lo, hi]}``.
 
@@ -131,7 +143,7 @@ def paired_interval(diffs: Sequence[float]) -> dict[str, Any]:
     if d.size == 1:
         return {"mean": m, "sd": None, "n": 1, "ci95": None}
     sd = float(d.std(ddof=1))
-    t = _T975[d.size - 2] if d.size - 1 <= len(_T975) else 1.96
+    t = _T975[d.size - 2] if d.size - 1 <= len(_T975) else _t975(d.size - 1)
     half = float(t * sd / np.sqrt(d.size))
     return {"mean": m, "sd": sd, "n": int(d.size), "ci95": [m - half, m + half]}
 
