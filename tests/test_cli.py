@@ -371,6 +371,8 @@ def _user_mistakes(run: Path, tmp: Path) -> list[list[str]]:
         ["replay", str(run / "corridor" / "results.json")],  # JSON, but not episodes
         ["replay", str(tmp)],  # a directory
         ["reproduce", "corridor", "--seeds", "0", "--out", str(tmp / "X")],
+        # it ended in "MemoryError" with exit 1 (a tuple of 1e11 seeds)
+        ["reproduce", "corridor", "--seeds", "99999999999", "--out", str(tmp / "X")],
         ["reproduce", "corridor", "--workers", "0", "--out", str(tmp / "X")],
         ["reproduce", "corridor", "--seeds", "1", "--out", str(not_json / "X")],  # under a file
         ["reproduce", "corridor", "--seeds", "1", "--out", str(not_json)],  # a file

@@ -162,10 +162,10 @@ def _int_at_least(
 
 _positive_int = _int_at_least(1)
 
-# The most seeds `torchcbl benchmark --seeds` takes: each seed is a cell of every strategy and
-# env (10,000 seeds of the shipped 6 strategies x 2 envs: 120,000 cells, about 0.2 GB of cell
-# configurations before the first runs). A count far above it, a slip of the keyboard, made a
-# list of that many seeds and ended in a bare MemoryError.
+# The most seeds `torchcbl benchmark --seeds` and `torchcbl reproduce --seeds` take: each seed
+# is a cell of every strategy and env (10,000 seeds of the shipped 6 strategies x 2 envs:
+# 120,000 cells, about 0.2 GB of cell configurations before the first runs). A count far above
+# it, a slip of the keyboard, made a list of that many seeds and ended in a bare MemoryError.
 _MAX_SEEDS = 10_000
 
 
@@ -2050,11 +2050,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--full", action="store_true", help="the paper's full sizes (slow)")
     p.add_argument(
         "--seeds",
-        type=_int_at_least(1, hint="leave --seeds out for the experiment's own"),
+        type=_int_at_least(
+            1, at_most=_MAX_SEEDS, hint="leave --seeds out for the experiment's own"
+        ),
         default=None,
         metavar="N",
-        help="run seeds 0 .. N-1 (default: the experiment's own: 10 for each; with --full "
-        "30 corridor, 20 driving)",
+        help=f"run seeds 0 .. N-1, N at most {_MAX_SEEDS} (default: the experiment's own: 10 "
+        "for each; with --full 30 corridor, 20 driving)",
     )
     p.add_argument(
         "--workers",
