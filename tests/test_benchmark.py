@@ -1984,3 +1984,39 @@ def test_a_count_below_ten_keeps_its_fraction_in_the_table():
     few = [cell(0, 0, 4, 10), cell(1, 0, 3, 10), cell(2, 0, 3, 10)]
     row = bm.format_table(bm.summarize(few, envs=["e"], strategies=["s"])).splitlines()[-1]
     assert "| 3.3 ± 0.6 | 0 ± 0 (-) |" in row, row  # 10/3 switches: not "3 ± 1"
+
+
+def test_the_tables_budget_cell_says_when_seeds_stopped_below_that_budget():
+    """The README's table read "1.00 ± 0.00 @ 20" for a corridor HG-DAgger whose seeds all
+    stopped asking at 18 labels: each seed's model of at most 20 labels, though none held 20.
+    results.json's n_reached counted them; the table cell now says so, "(0/3 reached)", where
+    some seed stopped below the budget, and nothing where every seed reached it."""
+
+    def cell(seed, labels):
+        return {
+            "env": "e",
+            "strategy": "s",
+            "seed": seed,
+            "teacher_performance": 1.0,
+            "curve": [
+                {"labels": 5, "performance": 0.0},
+                {"labels": labels, "performance": 1.0},
+            ],
+            "config": {"env": {"budgets": [5, 20]}, "strategy": {"name": "s"}},
+            "attention": {
+                "requests": labels,
+                "monitored_steps": 40,
+                "context_switches": 1,
+                "wrong_autonomous_actions": 0,
+            },
+            "wall_s": 1.0,
+            "cpu_s": 1.0,
+        }
+
+    def row(labels):
+        cells = [cell(s, n) for s, n in enumerate(labels)]
+        return bm.format_table(bm.summarize(cells, envs=["e"], strategies=["s"])).splitlines()[-1]
+
+    assert "| 1.00 ± 0.00 @ 20 (0/3 reached) |" in row([18, 18, 18])
+    assert "| 1.00 ± 0.00 @ 20 (1/3 reached) |" in row([18, 20, 19])
+    assert "| 1.00 ± 0.00 @ 20 |" in row([20, 20, 20])

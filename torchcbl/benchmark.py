@@ -1476,7 +1476,8 @@ def _paired(
 def format_table(summary: Mapping[str, Any]) -> str:
     """A Markdown table of the results (one row per environment and strategy). The column of
     performance at a budget shows each row's 2nd budget, or its only one (its header says which;
-    each cell names its budget, ``@ 20``)."""
+    each cell names its budget, ``@ 20``, and where some seeds stopped below it, how many
+    reached it: ``(0/3 reached)``, the others' figure is their last model's)."""
     counts = {
         len(r["performance_at_budget"]) for s in summary["table"].values() for r in s.values()
     }
@@ -1518,7 +1519,10 @@ def format_table(summary: Mapping[str, Any]) -> str:
             prefix = "≥ " if lt["lower_bound"] else ""
             budgets = list(r["performance_at_budget"])
             second = budgets[min(1, len(budgets) - 1)]
-            at = f"{ms(r['performance_at_budget'][second], '{:.2f}')} @ {second}"
+            pab = r["performance_at_budget"][second]
+            at = f"{ms(pab, '{:.2f}')} @ {second}"
+            if pab.get("n_reached") is not None and pab["n"] and pab["n_reached"] < pab["n"]:
+                at += f" ({pab['n_reached']}/{pab['n']} reached)"  # the others stopped below
             rows.append(
                 f"| {env} | {strat} | {prefix}{ms(lt)}{cens} | {at} | "
                 f"{ms(r['final_performance'], '{:.2f}')} ({ms(r['final_labels'])}) | "

@@ -1950,7 +1950,8 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         'sd, n − 1; "(n = 1)": one seed, no spread; differences between rows: below); '
         "≥: a lower bound, (k/n) of the seeds never reached 95 % of the teacher and count at "
         "their last labels; perf. "
-        "at a budget: the model of the last snapshot at or below it; (rate), auditor ≠ "
+        "at a budget: the model of the last snapshot at or below it, (k/n reached): only k "
+        "seeds held that many labels; (rate), auditor ≠ "
         "teacher: means over the seeds that have one."
     )
     _print_if_read()
