@@ -1394,7 +1394,7 @@ class ConfidentTeacher:
         changing the session, use :meth:`snapshot` instead. Returns whether a refit happened.
         In a session on disk its checkpoint (kept whatever ``keep_checkpoints`` says) is the
         only record of where the schedule moved, which resume and ``load_model`` read from
-        its name (even damaged).
+        its name (even damaged: a resume then writes the rebuilt model in its place).
 
         Raises:
             SessionWriteError: its checkpoint could not be written (a full disk); the refit
