@@ -1201,6 +1201,65 @@ def test_an_older_resume_that_set_a_refit_by_hand_aside_kept_the_regular_schedul
     assert (run / "checkpoints" / aside.name).read_bytes() == data
 
 
+@pytest.mark.parametrize("damage", ["cut", "whole"])
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_checkpoint_of_labels_the_log_lost_is_set_aside_as_stale(tmp_path, refit, damage):
+    """A writer logs a label before it saves a checkpoint of it, so a checkpoint named for
+    more labels than the log holds belongs to labels the log lost (here the log restored from
+    a backup of 5 labels, after a refit by hand at 7 whose checkpoint stayed). Resume passed
+    it over and left it, and once the session was taught past 7 again (the loop refitting at
+    10, no refit by hand) readers took it for a refit at 7: damaged, by its name; whole, by
+    its labels' SHA-256, the same labels taught again. load_model gave a model on 7 labels
+    where the live one stood on 5. Resume now sets it aside as .stale, its bytes kept, and
+    every stage reads as the loop had it."""
+    run, backup = tmp_path / "run", tmp_path / "backup"
+    live: dict[int, dict[str, torch.Tensor]] = {}
+
+    def on_refit(m: torch.nn.Module, n: int) -> None:
+        live[n] = copy.deepcopy(m.state_dict())
+
+    env = rare_regions_world()
+    config = TeachingConfig(noninteractive=False, max_new=5, refit=refit)
+    ct = ConfidentTeacher(
+        env, oracle(env), config=config, run_dir=run, progress=False, on_refit=on_refit
+    )
+    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    ct.run(max_demonstrations=5)
+    ct.close()
+    shutil.copytree(run, backup)
+    ct, _ = resume(run, rare_regions_world())
+    ct.run(max_demonstrations=7)
+    assert ct.refit()  # by hand, at 7
+    ct.run(max_demonstrations=9)
+    ct.close()
+    hand = run / "checkpoints" / "model-00000007.pt"
+    if damage == "cut":
+        hand.write_bytes(hand.read_bytes()[:100])
+    data = hand.read_bytes()
+    for path in run.iterdir():  # the log and the rest from the backup, checkpoints/ kept
+        if path.name != "checkpoints":
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+    for path in backup.iterdir():
+        if path.name != "checkpoints":
+            shutil.copy2(path, run / path.name)
+    assert int(load_model(run).n_points_.sum()) == 5  # not read: more than the log's labels
+    env = rare_regions_world()
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False, on_refit=on_refit)
+    assert back.n_demonstrations == 5 and _same(back.model, live[5])
+    assert not hand.exists()
+    assert hand.with_name(hand.name + ".stale").read_bytes() == data
+    back.run(max_demonstrations=9)
+    assert _same(back.model, live[5])  # no refit since 5: the next is due at 10
+    for n, staged in S.load_models(run, range(10)):
+        stood = live[max(r for r in (0, 5) if r <= n)]
+        assert _same(staged, stood), n
+        assert _same(load_model(run, n_demonstrations=n), stood), n
+    back.run(max_demonstrations=12)
+    back.close()
+    assert sorted(live) == [0, 5, 10]
+    assert _same(load_model(run), live[10])
+
+
 def test_damaged_sqlite_file(tmp_path):
     run = tmp_path / "run"
     _closed_session(run)

@@ -143,7 +143,10 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   checkpoints aside and taught on on the regular schedule, and its sessions read as it read
   them. A checkpoint deleted outright takes its record with it: past a refit by hand whose
   file is gone, and up to the next refit kept on disk, the model is rebuilt on the regular
-  schedule, not the live one's.
+  schedule, not the live one's. A checkpoint named for more labels than the log holds (the
+  log lost its tail: a backup restored, a power cut; a writer logs a label before it saves
+  its checkpoint) is never read, and a resume renames it ``.stale``: once the session was
+  taught that far again, it would read as a refit the new loop never made.
   A ``prior.npz`` that is missing, or whose SHA-256 is not the one config.json
   recorded, is a :class:`CorruptSessionError` naming it for every reader of the training set
   or the model and for resume (never a model fitted without the prior). An unreadable
@@ -3396,7 +3399,8 @@ class _CheckpointScan:
     (:func:`restore_model`): ``n`` and ``payload``, the newest checkpoint of at most the log's
     labels that is readable and was fitted on them (None: none is); ``passed_over``, the
     newer ones of at most those labels that are not, ``(count, path, "damaged" | "stale")``
-    newest first; ``beyond``, those named for more labels than the log holds, never read;
+    newest first; ``beyond``, those named for more labels than the log holds, never read
+    (resume sets them aside as ``.stale``: they belong to labels the log lost);
     ``refits``, the counts above ``n`` (above 0 for none) and of at most the log's labels at
     which the names of files that cannot be loaded record a refit, ascending
     (:func:`_recorded_refits`)."""
@@ -3512,7 +3516,10 @@ def restore_model(
     died between logging and saving, or the checkpoint is damaged or stale) the model is
     refitted deterministically on the training set of those labels, and with ``store`` the
     checkpoint is written (a damaged or stale one is first renamed ``<name>.damaged`` /
-    ``<name>.stale``, never deleted). With ``store``, a damaged checkpoint set aside whose
+    ``<name>.stale``, never deleted). With ``store``, a file named for more labels than
+    ``ys`` holds (a checkpoint of labels the log lost: a writer logs a label before it
+    saves its checkpoint) is renamed ``<name>.stale`` too, so that no reader takes it for a
+    refit once the session is taught that far again; a damaged checkpoint set aside whose
     name recorded a refit gets the model rebuilt at its count written in its place (a fit on
     those labels; ``incremental``: the replayed state there), so that a real checkpoint
     records the refit (a write that fails puts the damaged file back under its name).
@@ -3538,6 +3545,11 @@ def restore_model(
     scan, k = _restore_plan(
         run_dir, model, len(ys), base, all_xs, all_ys, max_new, incremental, starts_fitted
     )
+    if store is not None:
+        # a writer logs a label before it saves its checkpoint: one named for more labels
+        # than the log holds is of labels the log lost, and no refit of what is taught next
+        for _, path in scan.beyond:
+            _set_aside(path, "stale")
     # the refits recorded by damaged files set aside here: {count: (its name, where it went)}
     aside: dict[int, tuple[Path, Path]] = {}
     for n, path, why in scan.passed_over:
@@ -5115,8 +5127,9 @@ def _checkpoint_report(
             )
     beyond = [
         f"{CHECKPOINT_DIR}/{path.name} names {n} labels, more than the {len(ys)} the log "
-        "holds: resume and load_model pass it over (a checkpoint of labels the log lost, or a "
-        "file put there by hand)"
+        "holds (a checkpoint of labels the log lost, or a file put there by hand): load_model "
+        f"passes it over and resume renames it {path.name}.stale, so that no reader takes it "
+        "for a refit once the session is taught that far again"
         for n, path in scan.beyond
     ]
     return scan.n, notes, beyond
