@@ -509,7 +509,9 @@ def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses
     refitted from the log on resume and by load_model" and to resume: but they rebuild the
     model on the regular schedule until the loop's next refit is saved (here on 5 labels where
     the model in memory stands on 7). It now says so, names the refit due next, and the
-    session goes on from memory."""
+    session goes on from memory. It said they do so "until the loop's next refit ... is
+    saved", but the stages from 7 to 11 stay on the regular schedule for good (at 11 on 10
+    labels where the loop stood on 7): it says that too."""
     run = tmp_path / "run"
     ct, env = session(run, max_new=5, noninteractive=False)
     ct.run(max_demonstrations=7)
@@ -519,11 +521,13 @@ def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses
     assert str(run / "checkpoints" / "model-00000007.pt") in msg, msg
     assert "refit by hand" in msg and "next refit, due at 12 labels" in msg, msg
     assert "refitted from the log on resume" not in msg and "or resume" not in msg, msg
+    assert "from 7 labels up to the loop's next refit" in msg and "for good" in msg, msg
     assert int(ct.model.n_points_.sum()) == 7  # the refit itself happened
     assert int(load_model(run).n_points_.sum()) == 5  # what the message warns of
     ct.run(max_demonstrations=12)  # space freed: the loop's refit at 12 is saved
     assert same_state(load_model(run), ct.model)
     ct.close()
+    assert int(load_model(run, n_demonstrations=11).n_points_.sum()) == 10  # for good
 
 
 # -- 3. readers never write -------------------------------------------------------------------

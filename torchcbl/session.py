@@ -1890,10 +1890,11 @@ def _lost_hand_refit(n: int, max_new: int) -> str:
     return (
         "The session and its model in memory are intact and the step log is complete, but "
         "this was a refit by hand, which moved the refit schedule, and only its checkpoint "
-        "records it: until the loop's next refit, due at "
-        f"{n + max_new} labels, is saved, resume and load_model rebuild the model on the "
-        f"regular schedule instead, not on these {n} labels. Free space (or fix the file's "
-        "permissions), then call run() again: the model in memory is the session's."
+        f"records it: resume and load_model rebuild the stages from {n} labels up to the "
+        f"loop's next refit, due at {n + max_new} labels, on the regular schedule instead, "
+        f"not on these {n} labels (the session's newest model too, until that refit is saved; "
+        "those stages for good). Free space (or fix the file's permissions), then call run() "
+        "again: the model in memory is the session's."
     )
 
 

@@ -1399,7 +1399,7 @@ class ConfidentTeacher:
         Raises:
             SessionWriteError: its checkpoint could not be written (a full disk); the refit
                 is done in memory, and the message says what resume and ``load_model`` give
-                until the loop's next refit is saved.
+                for the stages up to the loop's next refit (those stages for good).
         """
         if self._new_since_refit == 0 or not len(self._train):
             return False
