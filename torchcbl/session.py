@@ -3415,9 +3415,18 @@ class _CheckpointScan:
     def stood_on(self, n_labels: int, max_new: int) -> int:
         """The labels the session's model stood on after ``n_labels``: its last refit, the
         newest recorded (this checkpoint's, or a later one's :attr:`refits`) then one every
-        ``max_new`` labels."""
-        last = max((self.n or 0, *self.refits))
-        return last + fit_count(n_labels - last, max_new)
+        ``max_new`` labels (:func:`_stood_on`)."""
+        return _stood_on(self.n or 0, self.refits, n_labels, max_new)
+
+
+def _stood_on(last: int, refits: Iterable[int], n_labels: int, max_new: int) -> int:
+    """The labels a session's model stood on after ``n_labels``: its last refit, the newest
+    of ``last`` (a checkpoint's count; 0 for none) and the ``refits`` recorded by names above
+    it and of at most ``n_labels`` (:func:`_recorded_refits`), then one every ``max_new``
+    labels. The one rule of resume, :func:`load_model`, :func:`load_models` and
+    :func:`describe`."""
+    moved = max((last, *(r for r in refits if last < r <= n_labels)))
+    return moved + fit_count(n_labels - moved, max_new)
 
 
 def _scan_checkpoints(
@@ -4131,8 +4140,7 @@ def _stage_models(
                 recorded.add(c)
         scanned = n
         start = 0 if last is None else last
-        moved = max((start, *(r for r in recorded if start < r <= n)))  # the last recorded
-        k = moved + fit_count(n - moved, max_new)  # the labels the model stood on
+        k = _stood_on(start, recorded, n, max_new)  # the labels the model stood on
         key: Any = None
         model: torch.nn.Module | None = None
         if payload is None and starts_fitted:
