@@ -509,7 +509,9 @@ def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses
     refitted from the log on resume and by load_model" and to resume: but they rebuild the
     model on the regular schedule until the loop's next refit is saved (here on 5 labels where
     the model in memory stands on 7). It now says so, names the refit due next, and the
-    session goes on from memory."""
+    session goes on from memory. It said they do so "until the loop's next refit ... is
+    saved", but the stages from 7 to 11 stay on the regular schedule for good (at 11 on 10
+    labels where the loop stood on 7): it says that too."""
     run = tmp_path / "run"
     ct, env = session(run, max_new=5, noninteractive=False)
     ct.run(max_demonstrations=7)
@@ -519,11 +521,13 @@ def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses
     assert str(run / "checkpoints" / "model-00000007.pt") in msg, msg
     assert "refit by hand" in msg and "next refit, due at 12 labels" in msg, msg
     assert "refitted from the log on resume" not in msg and "or resume" not in msg, msg
+    assert "from 7 labels up to the loop's next refit" in msg and "for good" in msg, msg
     assert int(ct.model.n_points_.sum()) == 7  # the refit itself happened
     assert int(load_model(run).n_points_.sum()) == 5  # what the message warns of
     ct.run(max_demonstrations=12)  # space freed: the loop's refit at 12 is saved
     assert same_state(load_model(run), ct.model)
     ct.close()
+    assert int(load_model(run, n_demonstrations=11).n_points_.sum()) == 10  # for good
 
 
 # -- 3. readers never write -------------------------------------------------------------------
@@ -1035,7 +1039,7 @@ def test_a_damaged_checkpoint_of_a_refit_by_hand_still_says_where_the_schedule_w
     back, env = resume(run)
     assert _same(back.model, live[7]) and same_state(back.model, model)
     assert (run / "checkpoints" / "model-00000007.pt.damaged").exists()
-    assert _same(load_model(run), live[7])  # the set-aside file still records the refit
+    assert _same(load_model(run), live[7])  # the model rebuilt on 7, written in its place
     back.run(max_demonstrations=11)
     assert _same(back.model, live[7])  # no refit at 10
     back.run(max_demonstrations=12)
@@ -1043,15 +1047,84 @@ def test_a_damaged_checkpoint_of_a_refit_by_hand_still_says_where_the_schedule_w
     back.close()
 
 
+@pytest.mark.parametrize("full_disk", [False, True])
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_resume_past_a_damaged_refit_by_hand_writes_its_model_in_its_place(
+    tmp_path, monkeypatch, refit, full_disk
+):
+    """A refit by hand at 7 (max_new=5), taught on to 13: the loop's refit at 12 never saved
+    (killed between logging and saving) and the checkpoint of 7 damaged. Resume rebuilt the
+    model on 12 and set the damaged file aside, whose .damaged name was then the only record
+    of the refit at 7. It now writes the model rebuilt on 7 labels in its place, so a real
+    checkpoint records the refit and a .damaged name need record nothing; where that write
+    fails (a full disk), the damaged file goes back under its name, which still records it,
+    with a warning. Either way every stage reads as the loop had it."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=5, refit=refit),
+        run_dir=run,
+        progress=False,
+        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    ct.run(max_demonstrations=7)
+    assert ct.refit()  # by hand, at 7
+    ct.run(max_demonstrations=13)
+    ct.close()
+    assert sorted(live) == [0, 5, 7, 12]
+    (run / "checkpoints" / "model-00000012.pt").unlink()  # never saved
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()[:100]
+    hand.write_bytes(data)
+    real = torch.save
+
+    def full(obj, f, *args, **kw):
+        if isinstance(obj, dict) and "n_demonstrations" in obj:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(obj, f, *args, **kw)
+
+    if full_disk:
+        monkeypatch.setattr(S.torch, "save", full)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            back, env = resume(run)
+        monkeypatch.setattr(S.torch, "save", real)
+        assert [w for w in caught if "model-00000007.pt failed" in str(w.message)], caught
+        assert hand.read_bytes() == data and not hand.with_name(hand.name + ".damaged").exists()
+    else:
+        back, env = resume(run)
+        assert hand.with_name(hand.name + ".damaged").read_bytes() == data
+        assert _same_payload(hand, live[7])
+    assert _same(back.model, live[12])
+    for n, staged in S.load_models(run, range(14)):
+        stood = live[max(r for r in live if r <= n)]
+        assert _same(staged, stood), n
+        assert _same(load_model(run, n_demonstrations=n), stood), n
+    back.run(max_demonstrations=17)
+    assert int(back.model.n_points_.sum()) == 17  # the loop's next refit, on 7's schedule
+    back.close()
+
+
+def _same_payload(path: Path, state: dict[str, torch.Tensor]) -> bool:
+    """Whether the checkpoint at ``path`` holds ``state``."""
+    saved = torch.load(path, weights_only=True)["state_dict"]
+    return saved.keys() == state.keys() and all(torch.equal(saved[k], state[k]) for k in saved)
+
+
 @pytest.mark.parametrize("refit", ["full", "incremental"])
 def test_pruning_keeps_what_a_set_aside_checkpoint_leaves_off_the_schedule(tmp_path, refit):
-    """A checkpoint set aside as .damaged records a refit by its name, which may have moved
-    the schedule (a refit by hand): pruning removed a later checkpoint as lying on the
-    schedule of the one kept below it, counted from there and not from the set-aside one.
-    Here (max_new=5, keeping 1) a hand refit at 7, damaged and set aside by a resume, then
-    another by hand at 10 (on the schedule from 0, off the one from 7): the loop's refit at 15
-    removed checkpoint 10, and the stages from 10 to 14 were rebuilt on 7's schedule, on 12
-    labels where the live model stood on 10."""
+    """A damaged checkpoint records a refit by its name, which may have moved the schedule (a
+    refit by hand): pruning removed a later checkpoint as lying on the schedule of the one
+    kept below it, counted from there and not from the damaged one once a resume set it
+    aside. Here (max_new=5, keeping 1) a hand refit at 7, damaged and set aside by a resume
+    (which now writes the model rebuilt on 7 labels in its place), then another by hand at 10
+    (on the schedule from 0, off the one from 7): the loop's refit at 15 removed checkpoint
+    10, and the stages from 10 to 14 were rebuilt on 7's schedule, on 12 labels where the
+    live model stood on 10."""
     run = tmp_path / "run"
     env = rare_regions_world()
     live: dict[int, dict[str, torch.Tensor]] = {}
@@ -1086,6 +1159,109 @@ def test_pruning_keeps_what_a_set_aside_checkpoint_leaves_off_the_schedule(tmp_p
     for n, model in S.load_models(run, range(17)):
         assert _same(model, live[max(r for r in live if r <= n)]), n
         assert _same(load_model(run, n_demonstrations=n), live[max(r for r in live if r <= n)]), n
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_an_older_resume_that_set_a_refit_by_hand_aside_kept_the_regular_schedule(tmp_path, refit):
+    """A torchcbl before bce98c3 resuming a session whose checkpoint of a refit by hand was
+    damaged set it aside as .damaged and taught on on the regular schedule: here a hand refit
+    at 7 (max_new=5, keeping 1), damaged and set aside by a resume at 9 labels, which stood on
+    5 and refitted at 10, 15 and 20. Read as a record of a refit at 7, the .damaged name had
+    load_model and load_models rebuild the stages from 7 to 19 on 7, 12 and 17 labels, a
+    schedule no loop had. The directory is built here as that resume left it (the set-aside
+    file out of sight while it runs, so it teaches on the regular schedule, then put back):
+    a .damaged name records nothing now, every stage reads as the loop had it (as that
+    torchcbl read it), and the file stays."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, refit, keep=1)
+    hand = run / "checkpoints" / "model-00000007.pt"
+    assert sorted(p.name for p in hand.parent.iterdir()) == [hand.name]
+    data = hand.read_bytes()[:100]
+    hand.write_bytes(data)
+    aside = tmp_path / (hand.name + ".damaged")  # renamed by the older resume
+    hand.rename(aside)
+    env = rare_regions_world()
+    again: dict[int, dict[str, torch.Tensor]] = {}
+    back = ConfidentTeacher.resume(
+        run,
+        env,
+        oracle(env),
+        progress=False,
+        on_refit=lambda m, n: again.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    assert _same(back.model, live[5])  # the older resume: on the regular schedule
+    back.run(max_demonstrations=21)
+    back.close()
+    assert sorted(again) == [10, 15, 20]
+    aside.rename(run / "checkpoints" / aside.name)
+    want = {0: live[0], 5: live[5], **again}  # the schedule the session's loops had
+    for n, staged in S.load_models(run, range(22)):
+        stood = want[max(r for r in want if r <= n)]
+        assert _same(staged, stood), n
+        assert _same(load_model(run, n_demonstrations=n), stood), n
+    back, _ = resume(run)
+    assert _same(back.model, again[20])
+    back.close()
+    assert (run / "checkpoints" / aside.name).read_bytes() == data
+
+
+@pytest.mark.parametrize("damage", ["cut", "whole"])
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_checkpoint_of_labels_the_log_lost_is_set_aside_as_stale(tmp_path, refit, damage):
+    """A writer logs a label before it saves a checkpoint of it, so a checkpoint named for
+    more labels than the log holds belongs to labels the log lost (here the log restored from
+    a backup of 5 labels, after a refit by hand at 7 whose checkpoint stayed). Resume passed
+    it over and left it, and once the session was taught past 7 again (the loop refitting at
+    10, no refit by hand) readers took it for a refit at 7: damaged, by its name; whole, by
+    its labels' SHA-256, the same labels taught again. load_model gave a model on 7 labels
+    where the live one stood on 5. Resume now sets it aside as .stale, its bytes kept, and
+    every stage reads as the loop had it."""
+    run, backup = tmp_path / "run", tmp_path / "backup"
+    live: dict[int, dict[str, torch.Tensor]] = {}
+
+    def on_refit(m: torch.nn.Module, n: int) -> None:
+        live[n] = copy.deepcopy(m.state_dict())
+
+    env = rare_regions_world()
+    config = TeachingConfig(noninteractive=False, max_new=5, refit=refit)
+    ct = ConfidentTeacher(
+        env, oracle(env), config=config, run_dir=run, progress=False, on_refit=on_refit
+    )
+    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    ct.run(max_demonstrations=5)
+    ct.close()
+    shutil.copytree(run, backup)
+    ct, _ = resume(run, rare_regions_world())
+    ct.run(max_demonstrations=7)
+    assert ct.refit()  # by hand, at 7
+    ct.run(max_demonstrations=9)
+    ct.close()
+    hand = run / "checkpoints" / "model-00000007.pt"
+    if damage == "cut":
+        hand.write_bytes(hand.read_bytes()[:100])
+    data = hand.read_bytes()
+    for path in run.iterdir():  # the log and the rest from the backup, checkpoints/ kept
+        if path.name != "checkpoints":
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+    for path in backup.iterdir():
+        if path.name != "checkpoints":
+            shutil.copy2(path, run / path.name)
+    assert int(load_model(run).n_points_.sum()) == 5  # not read: more than the log's labels
+    env = rare_regions_world()
+    back = ConfidentTeacher.resume(run, env, oracle(env), progress=False, on_refit=on_refit)
+    assert back.n_demonstrations == 5 and _same(back.model, live[5])
+    assert not hand.exists()
+    assert hand.with_name(hand.name + ".stale").read_bytes() == data
+    back.run(max_demonstrations=9)
+    assert _same(back.model, live[5])  # no refit since 5: the next is due at 10
+    for n, staged in S.load_models(run, range(10)):
+        stood = live[max(r for r in (0, 5) if r <= n)]
+        assert _same(staged, stood), n
+        assert _same(load_model(run, n_demonstrations=n), stood), n
+    back.run(max_demonstrations=12)
+    back.close()
+    assert sorted(live) == [0, 5, 10]
+    assert _same(load_model(run), live[10])
 
 
 def test_damaged_sqlite_file(tmp_path):

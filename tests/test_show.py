@@ -524,7 +524,8 @@ def test_show_reports_the_checkpoint_resume_loads_not_the_newest_name(tmp_path, 
     killed write, model-abc.pt) is not mentioned. An empty file, which a writer never leaves
     but a checkpoint truncated to nothing is, still records by its name a refit on 19 labels
     (one asked by hand would be off the schedule): resume refits the model there, as its note
-    says, and writes that model's checkpoint in its place."""
+    says, and writes that model's checkpoint in its place. The one of more labels than the log
+    holds resume sets aside as .stale, as its note says."""
     import torch
 
     run = tmp_path / "run"
@@ -549,6 +550,8 @@ def test_show_reports_the_checkpoint_resume_loads_not_the_newest_name(tmp_path, 
     else:
         (note,) = notes
         assert f"checkpoints/{name} {noted}" in note and "resume" in note, note
+        if odd == "more-labels":
+            assert f"resume renames it {name}.stale" in note, note
     assert main(["show", str(run)]) == 0
     out = capsys.readouterr().out
     assert "\ncheckpoint: the newest fitted on 18 labels\n" in out
@@ -565,8 +568,10 @@ def test_show_reports_the_checkpoint_resume_loads_not_the_newest_name(tmp_path, 
     else:
         want = torch.load(newest, weights_only=True)["state_dict"]
     assert state.keys() == want.keys() and all(torch.equal(state[k], want[k]) for k in want)
-    set_aside = odd in ("directory", "empty", "stale")
+    set_aside = odd in ("more-labels", "directory", "empty", "stale")
     assert path.with_name(path.name + ".damaged").exists() is (odd in ("directory", "empty"))
+    # of labels the log lost: renamed, so no reader takes it for a refit once taught that far
+    assert path.with_name(path.name + ".stale").exists() is (odd in ("more-labels", "stale"))
     # set aside, then (empty) the refit on 19 labels written in its place
     assert path.exists() is (not set_aside or odd == "empty")
     # what resume set aside is no checkpoint any more; what it passed over is still there

@@ -463,8 +463,16 @@ class AutoThresholdRule:
         n = len(self.thresholds)
         posterior = getattr(c, "posterior", None)  # [N, A]; a look-alike may have none
         given = posterior.shape[-1] if getattr(posterior, "ndim", 0) == 2 else None
-        if (given is not None and given != n) or (len(action) and int(action.max()) >= n):
-            has = given if given is not None else f"action {int(action.max())}"
+        # the model's action count is the posterior's width (the action, its argmax, lies
+        # below it); only without a posterior is the largest action read (a tensor's max
+        # and its int() cost about 3 us, at every step of the loop)
+        if given is not None:
+            other = given != n
+        else:
+            top = int(action.max()) if len(action) else -1
+            other = top >= n
+        if other:
+            has = given if given is not None else f"action {top}"
             raise ValueError(
                 f"AutoThresholdRule.is_confident: its thresholds are for {counted(n, 'action')} "
                 f"(set by update) but the classification has {has}; call rule.update(model, "

@@ -60,9 +60,9 @@ Run directory layout (one directory per teaching session)::
                                  moves the refit schedule) always (an older stage is
                                  refitted from the log, the model the loop had then). The
                                  schedule is read from the names: a refit at every
-                                 checkpoint's count, readable or damaged (cut short,
-                                 emptied; set aside as ``.damaged`` too), none at a
-                                 ``.stale`` one's, then one every ``max_new`` labels. A
+                                 checkpoint's count, readable or damaged in place (cut
+                                 short, emptied), none at a file set aside (``.damaged``,
+                                 ``.stale``), then one every ``max_new`` labels. A
                                  session started from
                                  a fitted model has its model-00000000.pt, written before
                                  config.json: no label can refit it; a session with prior
@@ -133,12 +133,20 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   the log and the file renamed ``.damaged`` / ``.stale``; except the checkpoint 0 of a session
   started from a fitted model, which no label can refit: where the session still stands on it
   (no refit since, or incremental refits) it is a :class:`CorruptSessionError` naming the file,
-  left as it is. A damaged checkpoint's name (a regular file's, in place or set aside as
-  ``.damaged``) still records a refit at its count, which may have been one asked by hand off
-  the schedule: the model is refitted on that count's labels (``refit="incremental"``: the
-  refits are replayed through it), as the live loop had it. A checkpoint deleted outright
-  takes that record with it: past a refit by hand whose file is gone, and up to the next
-  refit kept on disk, the model is rebuilt on the regular schedule, not the live one's.
+  left as it is. A damaged checkpoint's name (a regular file's, in place) still records a
+  refit at its count, which may have been one asked by hand off the schedule: the model is
+  refitted on that count's labels (``refit="incremental"``: the refits are replayed through
+  it), as the live loop had it, and a resume that sets the file aside writes the model
+  rebuilt at its count in its place, so a real checkpoint records the refit again (where
+  that write fails, the damaged file goes back under its name). A name set aside
+  (``.damaged``, ``.stale``) records nothing: an older torchcbl's resume set damaged
+  checkpoints aside and taught on on the regular schedule, and its sessions read as it read
+  them. A checkpoint deleted outright takes its record with it: past a refit by hand whose
+  file is gone, and up to the next refit kept on disk, the model is rebuilt on the regular
+  schedule, not the live one's. A checkpoint named for more labels than the log holds (the
+  log lost its tail: a backup restored, a power cut; a writer logs a label before it saves
+  its checkpoint) is never read, and a resume renames it ``.stale``: once the session was
+  taught that far again, it would read as a refit the new loop never made.
   A ``prior.npz`` that is missing, or whose SHA-256 is not the one config.json
   recorded, is a :class:`CorruptSessionError` naming it for every reader of the training set
   or the model and for resume (never a model fitted without the prior). An unreadable
@@ -193,6 +201,7 @@ CUDA run in a fixed order, checked on an H200 by tests/test_teaching_cuda.py);
 from __future__ import annotations
 
 import bisect
+import contextlib
 import copy
 import dataclasses
 import datetime
@@ -286,8 +295,6 @@ WRITERS_NAME = "writers.jsonl"
 RUNS_NAME = "runs.jsonl"
 CHECKPOINT_DIR = "checkpoints"
 _CKPT_RE = re.compile(r"^model-(\d{8})\.pt$")
-# a checkpoint a resume set aside as damaged (:func:`_set_aside`): its name still records a refit
-_SET_ASIDE_RE = re.compile(r"^model-(\d{8})\.pt\.damaged(?:-\d+)?$")
 
 _COLUMNS = (
     "step",
@@ -1883,10 +1890,11 @@ def _lost_hand_refit(n: int, max_new: int) -> str:
     return (
         "The session and its model in memory are intact and the step log is complete, but "
         "this was a refit by hand, which moved the refit schedule, and only its checkpoint "
-        "records it: until the loop's next refit, due at "
-        f"{n + max_new} labels, is saved, resume and load_model rebuild the model on the "
-        f"regular schedule instead, not on these {n} labels. Free space (or fix the file's "
-        "permissions), then call run() again: the model in memory is the session's."
+        f"records it: resume and load_model rebuild the stages from {n} labels up to the "
+        f"loop's next refit, due at {n + max_new} labels, on the regular schedule instead, "
+        f"not on these {n} labels (the session's newest model too, until that refit is saved; "
+        "those stages for good). Free space (or fix the file's permissions), then call run() "
+        "again: the model in memory is the session's."
     )
 
 
@@ -1944,7 +1952,6 @@ class SessionStore:
         #: recorded in writers.jsonl by :meth:`note_writer`
         self.keep_checkpoints: int | None = None
         self._on_disk: list[int] | None = None  # checkpoints > 0 there (read once, then kept)
-        self._set_aside: list[int] = []  # the counts of those set aside as .damaged (as listed)
         self._max_new: int | None = None  # the session's refit schedule (read by _open)
         self._prune_warned = False
         self._lock = _acquire_lock(self.run_dir) if lock is None else lock
@@ -2505,12 +2512,11 @@ class SessionStore:
         A stage whose checkpoint is gone is rebuilt from the newest checkpoint below it (or
         from the start) on the loop's schedule, a refit every ``max_new`` labels
         (:func:`restore_model`). A refit by hand (``ConfidentTeacher.refit``) moves that
-        schedule, and its checkpoint alone says where it fell (by its name, even damaged or set
-        aside as ``.damaged``, never removed here): so a checkpoint ``c`` goes only where
-        ``c - b`` is a multiple of ``max_new``, ``b`` the refit recorded below it (a kept
-        checkpoint or a set-aside one; 0 for none). Every refit between two recorded ones then
-        lies on the lower one's schedule (all checkpoints there, it holds; each removal keeps
-        it)."""
+        schedule, and its checkpoint alone says where it fell (by its name, even damaged in
+        place): so a checkpoint ``c`` goes only where ``c - b`` is a multiple of ``max_new``,
+        ``b`` the checkpoint kept below it (0 for none). Every refit between two kept
+        checkpoints then lies on the lower one's schedule (all checkpoints there, it holds;
+        each removal keeps it)."""
         max_new = self._max_new
         if max_new is None:
             return
@@ -2518,16 +2524,14 @@ class SessionStore:
         if self._on_disk is None:
             try:
                 self._on_disk = sorted(m for m, _ in _checkpoint_entries(directory) if m > 0)
-                self._set_aside = [m for m in _set_aside_refits(directory) if m > 0]
             except IncompatibleRunDirError:
                 return  # the checkpoint was just written there; a listing failure is passing
         on_disk = sorted(set(self._on_disk) | {newest})
-        candidates = set([m for m in on_disk if m <= newest][:-keep])
         below = 0
         older = []
-        for m in sorted(candidates | {m for m in self._set_aside if m <= newest}):
-            if m in candidates and (m - below) % max_new == 0:
-                older.append(m)  # on the schedule from the refit recorded below: rebuilt alike
+        for m in [m for m in on_disk if m <= newest][:-keep]:
+            if (m - below) % max_new == 0:
+                older.append(m)  # on the schedule from the one kept below: rebuilt alike
             else:
                 below = m  # where a hand refit may have moved the schedule: kept
         self._on_disk = [m for m in on_disk if m not in older]
@@ -2665,24 +2669,6 @@ def _checkpoint_entries(directory: Path) -> list[tuple[int, Path]]:
     except OSError as exc:
         raise _unreadable(directory, exc) from exc
     return [(int(m.group(1)), e) for m, e in matched if m is not None]
-
-
-def _set_aside_refits(directory: Path) -> list[int]:
-    """The counts of labels named by the files of a session's ``checkpoints/`` that a resume
-    set aside as damaged (``model-<8 digits>.pt.damaged[-i]``, :func:`_set_aside`), regular
-    files only (a directory put there under a checkpoint's name records no refit), ascending,
-    each once: each records a refit at its count (see :func:`_recorded_refits`).
-
-    Raises:
-        IncompatibleRunDirError: the folder cannot be listed (:func:`_unreadable`).
-    """
-    try:
-        if not directory.is_dir():
-            return []
-        matched = [(_SET_ASIDE_RE.match(e.name), e) for e in directory.iterdir()]
-    except OSError as exc:
-        raise _unreadable(directory, exc) from exc
-    return sorted({int(m.group(1)) for m, e in matched if m is not None and _written_file(e)})
 
 
 def _written_file(path: Path) -> bool:
@@ -3414,7 +3400,8 @@ class _CheckpointScan:
     (:func:`restore_model`): ``n`` and ``payload``, the newest checkpoint of at most the log's
     labels that is readable and was fitted on them (None: none is); ``passed_over``, the
     newer ones of at most those labels that are not, ``(count, path, "damaged" | "stale")``
-    newest first; ``beyond``, those named for more labels than the log holds, never read;
+    newest first; ``beyond``, those named for more labels than the log holds, never read
+    (resume sets them aside as ``.stale``: they belong to labels the log lost);
     ``refits``, the counts above ``n`` (above 0 for none) and of at most the log's labels at
     which the names of files that cannot be loaded record a refit, ascending
     (:func:`_recorded_refits`)."""
@@ -3428,9 +3415,18 @@ class _CheckpointScan:
     def stood_on(self, n_labels: int, max_new: int) -> int:
         """The labels the session's model stood on after ``n_labels``: its last refit, the
         newest recorded (this checkpoint's, or a later one's :attr:`refits`) then one every
-        ``max_new`` labels."""
-        last = max((self.n or 0, *self.refits))
-        return last + fit_count(n_labels - last, max_new)
+        ``max_new`` labels (:func:`_stood_on`)."""
+        return _stood_on(self.n or 0, self.refits, n_labels, max_new)
+
+
+def _stood_on(last: int, refits: Iterable[int], n_labels: int, max_new: int) -> int:
+    """The labels a session's model stood on after ``n_labels``: its last refit, the newest
+    of ``last`` (a checkpoint's count; 0 for none) and the ``refits`` recorded by names above
+    it and of at most ``n_labels`` (:func:`_recorded_refits`), then one every ``max_new``
+    labels. The one rule of resume, :func:`load_model`, :func:`load_models` and
+    :func:`describe`."""
+    moved = max((last, *(r for r in refits if last < r <= n_labels)))
+    return moved + fit_count(n_labels - moved, max_new)
 
 
 def _scan_checkpoints(
@@ -3466,43 +3462,42 @@ def _scan_checkpoints(
             continue
         passed_over.append((n, path, why))
     last = 0 if found is None else found[0]
-    refits = _recorded_refits(directory, passed_over, last, n_labels)
+    refits = _recorded_refits(passed_over, last, n_labels)
     if found is None:
         return _CheckpointScan(None, None, passed_over, beyond, refits)
     return _CheckpointScan(found[0], found[1], passed_over, beyond, refits)
 
 
 def _recorded_refits(
-    directory: Path, passed_over: list[tuple[int, Path, str]], above: int, n_labels: int
+    passed_over: list[tuple[int, Path, str]], above: int, n_labels: int
 ) -> tuple[int, ...]:
     """The counts of labels in (``above``, ``n_labels``] at which a file that cannot be loaded
     records a refit by its name, ascending: a checkpoint passed over as damaged
     (``passed_over``, as :func:`_scan_checkpoints` finds them) that is a regular file (cut
     short, emptied, unreadable: torchcbl wrote it at a refit; a directory or a dangling link
-    it never wrote), or one a resume set aside as ``.damaged`` (:func:`_set_aside_refits`).
-    A refit by hand (``ConfidentTeacher.refit``) moves the refit schedule and only its
-    checkpoint records it, so its name counts even where its content is lost. A stale one
-    (``.stale``, or passed over as stale: fitted on other labels than the log's) records
-    none of this session's refits.
-
-    Raises:
-        IncompatibleRunDirError: ``directory`` cannot be listed.
+    it never wrote), still in place. A refit by hand (``ConfidentTeacher.refit``) moves the
+    refit schedule and only its checkpoint records it, so its name counts even where its
+    content is lost. A stale one (fitted on other labels than the log's) records none of this
+    session's refits; nor does a file set aside (``.damaged``, ``.stale``): a resume that sets
+    a damaged one aside writes the model of its count in its place (:func:`restore_model`),
+    and an older torchcbl's resume that set one aside taught on on the regular schedule.
     """
     named = {n for n, path, why in passed_over if why == "damaged" and _written_file(path)}
-    named.update(_set_aside_refits(directory))
     return tuple(sorted(n for n in named if above < n <= n_labels))
 
 
-def _set_aside(path: Path, why: str) -> None:
-    """Rename a checkpoint that cannot be used, keeping its bytes (``<name>.<why>[-i]``)."""
+def _set_aside(path: Path, why: str) -> Path | None:
+    """Rename a checkpoint that cannot be used, keeping its bytes (``<name>.<why>[-i]``);
+    returns its new path (None: it could not be renamed, and stays)."""
     for i in range(1000):
         target = path.with_name(f"{path.name}.{why}" + (f"-{i}" if i else ""))
         if not target.exists():
             try:
                 os.replace(path, target)
             except OSError:
-                pass
-            return
+                return None
+            return target
+    return None
 
 
 def restore_model(
@@ -3523,15 +3518,21 @@ def restore_model(
 
     The last refit the directory knows of is its newest checkpoint with at most ``len(ys)``
     labels that is readable and was fitted on the log's labels, or a later one recorded by
-    the name of a checkpoint that cannot be loaded (damaged: cut short, emptied, unreadable;
-    in place or set aside as ``.damaged``; not a stale one): a refit may also be asked for by
+    the name of a checkpoint that cannot be loaded (damaged in place: cut short, emptied,
+    unreadable; not a stale one, nor a file set aside): a refit may also be asked for by
     hand, :meth:`ConfidentTeacher.refit`, at any count, and only its checkpoint says so.
     From there the loop refits every ``max_new`` labels, so the model stood on the first
     ``k`` labels. That checkpoint is loaded when ``k`` is its count; otherwise (the process
     died between logging and saving, or the checkpoint is damaged or stale) the model is
     refitted deterministically on the training set of those labels, and with ``store`` the
     checkpoint is written (a damaged or stale one is first renamed ``<name>.damaged`` /
-    ``<name>.stale``, never deleted).
+    ``<name>.stale``, never deleted). With ``store``, a file named for more labels than
+    ``ys`` holds (a checkpoint of labels the log lost: a writer logs a label before it
+    saves its checkpoint) is renamed ``<name>.stale`` too, so that no reader takes it for a
+    refit once the session is taught that far again; a damaged checkpoint set aside whose
+    name recorded a refit gets the model rebuilt at its count written in its place (a fit on
+    those labels; ``incremental``: the replayed state there), so that a real checkpoint
+    records the refit (a write that fails puts the damaged file back under its name).
     With ``incremental`` (``TeachingConfig.refit="incremental"``) the loop's incremental
     refits (``GaussianMixtureSet.refit``, a pure function of the state and the data) are
     replayed from that checkpoint's state instead, through every refit the names record, so
@@ -3554,10 +3555,33 @@ def restore_model(
     scan, k = _restore_plan(
         run_dir, model, len(ys), base, all_xs, all_ys, max_new, incremental, starts_fitted
     )
+    if store is not None:
+        # a writer logs a label before it saves its checkpoint: one named for more labels
+        # than the log holds is of labels the log lost, and no refit of what is taught next
+        for _, path in scan.beyond:
+            _set_aside(path, "stale")
+    # the refits recorded by damaged files set aside here: {count: (its name, where it went)}
+    aside: dict[int, tuple[Path, Path]] = {}
     for n, path, why in scan.passed_over:
         if store is not None and not (n == 0 and starts_fitted):  # that one: kept as it is
-            _set_aside(path, why)
+            target = _set_aside(path, why)
+            if target is not None and n in scan.refits:
+                aside[n] = (path, target)
     last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
+
+    def save(j: int) -> None:
+        """With ``store``, write the checkpoint of the model refitted on ``j`` labels; where
+        it records a refit whose damaged file was set aside here and cannot be written, the
+        damaged file goes back under its name, which records that refit."""
+        assert store is not None
+        try:
+            store.save_checkpoint(model, j, labels_digest(all_xs[: base + j], all_ys[: base + j]))
+        except SessionWriteError as exc:
+            warnings.warn(str(exc), stacklevel=3)
+            if j in aside:
+                with contextlib.suppress(OSError):
+                    if not os.path.lexists(aside[j][0]):
+                        os.replace(aside[j][1], aside[j][0])
 
     def lost_start(why: str) -> CorruptSessionError:  # (_restore_plan raised where it comes)
         return _lost_start(run_dir, k, why)
@@ -3570,7 +3594,10 @@ def restore_model(
             if starts_fitted and k == 0:
                 raise lost_start("unreadable as this model's state") from None
             if store is not None:
-                _set_aside(directory / f"model-{k:08d}.pt", "damaged")
+                own = directory / f"model-{k:08d}.pt"
+                target = _set_aside(own, "damaged")
+                if target is not None and k > 0:  # its refit, now recorded by its rebuilt model
+                    aside[k] = (own, target)
         payload = None
     if (k > 0 or base) and incremental:
         start, loaded = 0, False
@@ -3605,15 +3632,15 @@ def restore_model(
             # failed load left in the buffers); from a loaded one, even the pre-fit state of
             # a session that started from a fitted model (checkpoint 0), the loop refitted
             (model.refit if i > 0 or loaded else model.fit)(x, y)
+            if j in aside:  # a refit recorded by a damaged file set aside: its model in place
+                save(j)
     elif k > 0 or base:
-        x, y = training_set(all_xs[: base + k], all_ys[: base + k], relabel=relabel)
-        model.fit(x, y)
-        if store is not None:
-            try:
-                digest = labels_digest(all_xs[: base + k], all_ys[: base + k])
-                store.save_checkpoint(model, k, digest)
-            except SessionWriteError as exc:
-                warnings.warn(str(exc), stacklevel=2)
+        # a refit recorded by a damaged file set aside below k: its model in place first
+        for j in [*(j for j in sorted(aside) if j < k), k]:
+            x, y = training_set(all_xs[: base + j], all_ys[: base + j], relabel=relabel)
+            model.fit(x, y)
+            if store is not None:
+                save(j)
     return k
 
 
@@ -3622,9 +3649,9 @@ def _refits_below(
 ) -> tuple[int, ...]:
     """The refits in (0, ``last``] that the files of ``directory`` record by their names, for
     a replay from the start through the checkpoint of ``last`` labels (which it could not
-    load): ``last`` itself, each checkpoint below it but a stale one (each read to tell), and
-    each set aside as damaged (see :func:`_recorded_refits`)."""
-    named = {last, *(n for n in _set_aside_refits(directory) if 0 < n < last)}
+    load): ``last`` itself and each checkpoint below it but a stale one (each read to tell;
+    a damaged one in place too, see :func:`_recorded_refits`)."""
+    named = {last}
     for n, path in _checkpoint_entries(directory):
         if 0 < n < last and n not in named:
             payload, why = _checkpoint_payload(path, base + n, all_xs, all_ys)
@@ -4077,8 +4104,8 @@ def _stage_models(
     directory = Path(run_dir) / CHECKPOINT_DIR
     entries = sorted((n, path) for n, path in _checkpoint_entries(directory) if n <= stages[-1])
     # the refits recorded by the names of files that cannot be loaded (_recorded_refits):
-    # those set aside as damaged, and the checkpoints found damaged as the stages are read
-    recorded = set(_set_aside_refits(directory))
+    # the checkpoints found damaged in place as the stages are read
+    recorded: set[int] = set()
 
     def fresh() -> torch.nn.Module:
         return copy.deepcopy(template)
@@ -4113,8 +4140,7 @@ def _stage_models(
                 recorded.add(c)
         scanned = n
         start = 0 if last is None else last
-        moved = max((start, *(r for r in recorded if start < r <= n)))  # the last recorded
-        k = moved + fit_count(n - moved, max_new)  # the labels the model stood on
+        k = _stood_on(start, recorded, n, max_new)  # the labels the model stood on
         key: Any = None
         model: torch.nn.Module | None = None
         if payload is None and starts_fitted:
@@ -4260,13 +4286,13 @@ class SessionSummary:
             is. The name alone does not make one: a file named ``model-<n>.pt`` that is
             damaged, empty, a directory or stale, or of more labels than the log holds, is
             passed over and noted in ``notes`` (a damaged or empty file's name still records
-            a refit at its count, which resume and :func:`load_model` rebuild from the log:
-            one asked by hand moved the refit schedule). Nor is one holding a state the
-            session's model cannot load (another class's, or a GaussianMixtureSet's of other
-            sizes or settings; tried where the session's model is torchcbl's
-            GaussianMixtureSet, which the directory rebuilds, not a class of the user's own):
-            None, and noted, as resume and :func:`load_model` then rebuild the model from the
-            log.
+            a refit at its count, which resume and :func:`load_model` rebuild from the log,
+            resume writing the rebuilt model in its place: one asked by hand moved the refit
+            schedule). Nor is one holding a state the session's model cannot load (another
+            class's, or a GaussianMixtureSet's of other sizes or settings; tried where the
+            session's model is torchcbl's GaussianMixtureSet, which the directory rebuilds,
+            not a class of the user's own): None, and noted, as resume and
+            :func:`load_model` then rebuild the model from the log.
         checkpoints_on_disk: the label counts of the files in ``checkpoints/`` named as
             checkpoints (``model-<n>.pt``), ascending, whatever they are (``notes`` says which
             resume passes over): the stages whose model is loaded, not refitted. The others
@@ -5097,10 +5123,10 @@ def _checkpoint_report(
             )
         elif n in scan.refits:
             notes.append(
-                f"{name} {what}: resume and load_model pass it over (resume renames it "
-                f"{path.name}.{why}); its name still records a refit on {n} labels (where "
-                "a refit by hand may have moved the refit schedule), which they rebuild "
-                "from an earlier checkpoint or the log"
+                f"{name} {what}: resume and load_model pass it over; its name still records "
+                f"a refit on {n} labels (where a refit by hand may have moved the refit "
+                "schedule), which they rebuild from an earlier checkpoint or the log (resume "
+                f"renames it {path.name}.{why} and writes the rebuilt model in its place)"
             )
         else:
             notes.append(
@@ -5110,8 +5136,9 @@ def _checkpoint_report(
             )
     beyond = [
         f"{CHECKPOINT_DIR}/{path.name} names {n} labels, more than the {len(ys)} the log "
-        "holds: resume and load_model pass it over (a checkpoint of labels the log lost, or a "
-        "file put there by hand)"
+        "holds (a checkpoint of labels the log lost, or a file put there by hand): load_model "
+        f"passes it over and resume renames it {path.name}.stale, so that no reader takes it "
+        "for a refit once the session is taught that far again"
         for n, path in scan.beyond
     ]
     return scan.n, notes, beyond

@@ -1394,12 +1394,12 @@ class ConfidentTeacher:
         changing the session, use :meth:`snapshot` instead. Returns whether a refit happened.
         In a session on disk its checkpoint (kept whatever ``keep_checkpoints`` says) is the
         only record of where the schedule moved, which resume and ``load_model`` read from
-        its name (even damaged).
+        its name (even damaged: a resume then writes the rebuilt model in its place).
 
         Raises:
             SessionWriteError: its checkpoint could not be written (a full disk); the refit
                 is done in memory, and the message says what resume and ``load_model`` give
-                until the loop's next refit is saved.
+                for the stages up to the loop's next refit (those stages for good).
         """
         if self._new_since_refit == 0 or not len(self._train):
             return False
