@@ -442,6 +442,28 @@ def test_expert_timing_varies_inside_the_safe_window_and_is_seeded():
         ScriptedExpert()(np.zeros(4), {})
 
 
+def _decides(expert: ScriptedExpert, lane: int, cars: list[tuple[int, float, float]], t=0) -> int:
+    """The expert's action in ``lane`` among hand-placed ``cars`` (lane, metres relative to the
+    ego, closing speed m/s: ego speed minus the car's), as DrivingEnv's info gives them."""
+    info = {
+        "lane": lane,
+        "t": t,
+        "car_rel_m": np.array([c[1] for c in cars], dtype=np.float64),
+        "car_lane": np.array([c[0] for c in cars], dtype=np.int64),
+        "car_closing_ms": np.array([c[2] for c in cars], dtype=np.float64),
+        "step_length_s": 0.25,
+    }
+    return expert(np.zeros(4, dtype=np.float32), info)
+
+
+def test_expert_a_car_closing_within_two_steps_of_min_gap_forces_a_squeeze():
+    """A car 13 m ahead closing at 8.9 m/s (2.2 m a step) leaves no safe step (13 < 10 + 2 x
+    2.2): the expert squeezes into the left shoulder, whose car 13 m ahead is nearer than
+    enter_ahead_m (16 m) but beyond min_gap_m, whatever its timing draw."""
+    cars = [(3, 13.0, 8.9), (4, 13.0, 0.0), (2, 0.0, 0.0)]
+    assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(20)] == [LEFT] * 20
+
+
 def test_replay_bit_identical_fcd_and_gif(tmp_path):
     env = EpisodeRecorder(DrivingEnv(scenario="train", max_episode_steps=40), label="t")
     expert = ScriptedExpert(seed=1)
