@@ -464,6 +464,18 @@ def test_expert_a_car_closing_within_two_steps_of_min_gap_forces_a_squeeze():
     assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(20)] == [LEFT] * 20
 
 
+def test_expert_pressed_squeezes_in_beyond_min_gap_but_never_nearer():
+    """Pressed (a car 11 m ahead closing at 4 m/s), with no lane open to enter_ahead_m, the
+    expert takes a lane whose nearest car is beyond min_gap_m (12 m ahead; left first, then
+    right) and stays when that car is within it (9 m)."""
+    pressed = (3, 11.0, 4.0)
+    for squeeze, action in [((4, 12.0, 0.0), LEFT), ((4, 9.0, 0.0), STAY)]:
+        cars = [pressed, squeeze, (2, 0.0, 0.0)]
+        assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(10)] == [action] * 10
+    cars = [pressed, (4, 5.0, 0.0), (2, 12.0, 0.0)]
+    assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(10)] == [RIGHT] * 10
+
+
 def test_replay_bit_identical_fcd_and_gif(tmp_path):
     env = EpisodeRecorder(DrivingEnv(scenario="train", max_episode_steps=40), label="t")
     expert = ScriptedExpert(seed=1)
