@@ -476,6 +476,14 @@ def test_expert_pressed_squeezes_in_beyond_min_gap_but_never_nearer():
     assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(10)] == [RIGHT] * 10
 
 
+def test_expert_judges_a_lane_by_where_its_cars_will_be_after_the_step():
+    """A car 12 m behind on the left shoulder, 10 m/s faster than the ego, will be 9.5 m behind
+    after the step (within min_gap_m): it blocks the change; as fast as the ego, it does not."""
+    for closing, action in [(-10.0, STAY), (0.0, LEFT)]:
+        cars = [(3, 11.0, 4.0), (4, -12.0, closing), (2, 0.0, 0.0)]
+        assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(10)] == [action] * 10
+
+
 def test_replay_bit_identical_fcd_and_gif(tmp_path):
     env = EpisodeRecorder(DrivingEnv(scenario="train", max_episode_steps=40), label="t")
     expert = ScriptedExpert(seed=1)
