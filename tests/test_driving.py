@@ -484,6 +484,31 @@ def test_expert_judges_a_lane_by_where_its_cars_will_be_after_the_step():
         assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(10)] == [action] * 10
 
 
+def _leaves_for_car_b(seed: int, before: list[tuple[int, list[tuple[int, float, float]]]]) -> float:
+    """Gap at which ScriptedExpert(seed) leaves the left lane for a car B closing in from 30 m
+    at 8.9 m/s, after the consecutive steps ``before`` (lane, cars)."""
+    expert = ScriptedExpert(seed=seed)
+    for t, (lane, cars) in enumerate(before):
+        assert _decides(expert, lane, cars, t) == STAY
+    for k in range(20):
+        gap = 30.0 - 2.225 * k
+        if _decides(expert, 3, [(3, gap, 8.9)], len(before) + k) == LEFT:
+            return gap
+    raise AssertionError("the expert never left the lane of a closing car")
+
+
+def test_expert_draws_a_new_moment_for_a_new_car_ahead():
+    """Car A closes in from 30 to 25.5 m and changes lane before the expert acts; car B then
+    arrives at 30 m: a new event, whose moment is drawn afresh (as after a lane change), not
+    the one drawn for A."""
+    car_a = [(3, [(3, 30.0 - 2.225 * k, 8.9)]) for k in range(3)]
+    after_a = [_leaves_for_car_b(s, car_a) for s in range(20)]
+    after_lane_change = [_leaves_for_car_b(s, [(4, [(3, 0.0, 0.0)])]) for s in range(20)]
+    fresh = [_leaves_for_car_b(s, []) for s in range(20)]
+    assert after_a == after_lane_change
+    assert after_a != fresh
+
+
 def test_replay_bit_identical_fcd_and_gif(tmp_path):
     env = EpisodeRecorder(DrivingEnv(scenario="train", max_episode_steps=40), label="t")
     expert = ScriptedExpert(seed=1)
