@@ -509,6 +509,14 @@ def test_expert_draws_a_new_moment_for_a_new_car_ahead():
     assert after_a != fresh
 
 
+def test_expert_returns_home_after_a_passed_car_by_a_drawn_margin():
+    """On the left shoulder, a passed car 12 m behind in the home lane is min_gap_m plus 2 of
+    the return_spread_m's 4 m behind: across seeds some return home now, some wait."""
+    acts = {_decides(ScriptedExpert(seed=s), 4, [(3, -12.0, 0.0)]) for s in range(20)}
+    assert acts == {RIGHT, STAY}
+    assert _decides(ScriptedExpert(seed=0), 4, [(3, -9.0, 0.0)]) == STAY  # never within min_gap
+
+
 def test_replay_bit_identical_fcd_and_gif(tmp_path):
     env = EpisodeRecorder(DrivingEnv(scenario="train", max_episode_steps=40), label="t")
     expert = ScriptedExpert(seed=1)
