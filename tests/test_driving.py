@@ -517,6 +517,13 @@ def test_expert_returns_home_after_a_passed_car_by_a_drawn_margin():
     assert _decides(ScriptedExpert(seed=0), 4, [(3, -9.0, 0.0)]) == STAY  # never within min_gap
 
 
+def test_expert_on_an_empty_road_heads_for_the_home_lane_from_either_side():
+    """Home is the left lane (3): from the left shoulder it moves right, from the lanes to its
+    right it moves left, and at home it stays."""
+    acts = [_decides(ScriptedExpert(seed=0), lane, []) for lane in range(5)]
+    assert acts == [LEFT, LEFT, LEFT, STAY, RIGHT]
+
+
 def test_replay_bit_identical_fcd_and_gif(tmp_path):
     env = EpisodeRecorder(DrivingEnv(scenario="train", max_episode_steps=40), label="t")
     expert = ScriptedExpert(seed=1)
