@@ -17,7 +17,7 @@ from gymnasium.utils.env_checker import check_env
 import sumo_scenarios
 from sumo_scenarios import metrics
 from sumo_scenarios.env import LEFT, RIGHT, STAY, DrivingEnv
-from sumo_scenarios.expert import ScriptedExpert
+from sumo_scenarios.expert import ExpertConfig, ScriptedExpert
 from sumo_scenarios.replay import EpisodeRecorder, export_fcd, render_gif, replay
 from sumo_scenarios.scenarios import CAR_LENGTH_M, TrafficScenario, data_path
 
@@ -522,6 +522,18 @@ def test_expert_on_an_empty_road_heads_for_the_home_lane_from_either_side():
     right it moves left, and at home it stays."""
     acts = [_decides(ScriptedExpert(seed=0), lane, []) for lane in range(5)]
     assert acts == [LEFT, LEFT, LEFT, STAY, RIGHT]
+
+
+def test_expert_with_middle_pass_passes_in_a_free_middle_lane_first():
+    """With middle_pass, a car closing in ahead is passed in the middle lane (2) when it is
+    visibly free, though the left shoulder is free too; a car 20 m ahead in the middle lane
+    sends the pass to the shoulder. Without middle_pass the shoulder is always first."""
+    ahead = (3, 11.0, 4.0)
+    middle = ExpertConfig(middle_pass=True)
+    assert [_decides(ScriptedExpert(middle, seed=s), 3, [ahead]) for s in range(5)] == [RIGHT] * 5
+    cars = [ahead, (2, 20.0, 0.0)]
+    assert [_decides(ScriptedExpert(middle, seed=s), 3, cars) for s in range(5)] == [LEFT] * 5
+    assert [_decides(ScriptedExpert(seed=s), 3, [ahead]) for s in range(5)] == [LEFT] * 5
 
 
 def test_replay_bit_identical_fcd_and_gif(tmp_path):
