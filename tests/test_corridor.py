@@ -697,7 +697,14 @@ def test_expert_drives_clean_circuits(map_name, n_actions):
 
 @pytest.mark.parametrize(
     "ranges, action",
-    [((1.5, 0.3, 0.3), L), ((0.3, 0.3, 1.5), R), ((0.3, 1.5, 0.3), F), ((0.3, 0.3, 0.3), U)],
+    [
+        ((1.5, 0.3, 0.3), L),
+        ((0.3, 0.3, 1.5), R),
+        ((1.5, 0.3, 1.5), L),  # both sides open: left before right
+        ((0.3, 1.5, 0.3), F),
+        ((1.5, 1.5, 1.5), F),
+        ((0.3, 0.3, 0.3), U),
+    ],
 )
 def test_the_expert_off_every_corridor_falls_back_to_the_open_side(ranges, action):
     """Where no corridor of the map runs any way the robot can face (a pose off the map,
