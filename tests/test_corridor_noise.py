@@ -305,6 +305,30 @@ def test_expert_off_the_route_takes_the_shortest_way_back_on_the_map():
     assert answer(0.3, 0.0, math.pi) == R
 
 
+def test_expert_past_the_node_by_more_than_half_a_step_takes_the_way_back():
+    """The route's left turn at P1 (figure2, exact motion) made two steps late: the second
+    forward step stops against P1's end wall, 0.18 m past the node with the progress still on
+    segment 0. A turn from there would sweep the robot into that wall again; the expert takes
+    the way back (a u-turn, then right at P1) and the circuit ends with the learner's contact
+    only."""
+    env = CorridorEnv("figure2", WorldConfig(), max_episode_steps=80)
+    expert = CorridorExpert(env.corridor_map, WorldConfig())
+    obs, info = env.reset(seed=0)
+    for _ in range(5):  # to the decision point, 0.2 m before P1
+        obs, _, _, _, info = env.step(expert(obs, info))
+    assert expert(obs, info) == L
+    for _ in range(2):  # the learner drives on
+        obs, _, _, _, info = env.step(F)
+    assert info["contact"] and info["segment"] == 0
+    assert info["pose"][0] - 1.4 == pytest.approx(0.18)
+    assert expert(obs, info) == U
+    while True:
+        obs, _, terminated, truncated, info = env.step(expert(obs, info))
+        if terminated or truncated:
+            break
+    assert terminated and info["laps"] == 1 and info["contacts"] == 1
+
+
 def test_expert_way_back_goal_walls_and_contacts():
     """The way back's goal is where the route's progress stands, and its first action is one
     the walls allow. Hand-placed on figure2 with exact motion; the headings 0.5 rad off the
