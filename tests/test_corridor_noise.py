@@ -329,6 +329,35 @@ def test_expert_past_the_node_by_more_than_half_a_step_takes_the_way_back():
     assert terminated and info["laps"] == 1 and info["contacts"] == 1
 
 
+def test_expert_way_back_counts_a_step_for_every_turn():
+    """The way back's cost is metres driven plus one step (0.2 m) per turn, the turn made now
+    as well as those at the nodes; hand-placed with exact motion, where the two ways differ by
+    less than a step in metres."""
+
+    def answer(map_name, x, y, heading, segment, lap) -> int:
+        world = CorridorWorld(load_map(map_name), WorldConfig())
+        world.set_pose(x, y, heading)
+        info = {
+            "pose": np.array(world.pose),
+            "segment": segment,
+            "lap_position": lap,
+            "true_ranges": world.true_ranges(),
+            "blocked": [0, 0, 0, 0],
+        }
+        return CorridorExpert(world.map, WorldConfig())(world.sense(np.random.default_rng(0)), info)
+
+    # figure2, 0.3 m above P0 heading south, the progress at J on segment 2 (into the spur,
+    # north): left now and on by P1 is 2.4 m and two turns (now, P1); back up by P3 is 2.3 m
+    # and three turns (the u-turn, P3, J). Counted in metres alone the u-turn would win.
+    assert answer("figure2", 0.0, 0.3, -math.pi / 2, 2, 2.4) == L
+    # lshape's corridors are one 8 m loop; heading east on A - B with the progress at E on
+    # segment 4 (west to F), either way round is four turns (on: B, C, D, E; back: the u-turn
+    # now, A, F and a u-turn at E) and the nearer way wins: on from x = 1.05 (3.95 m against
+    # 4.05 m), back from x = 0.95.
+    assert answer("lshape", 1.05, 0.0, 0.0, 4, 4.8) == F
+    assert answer("lshape", 0.95, 0.0, 0.0, 4, 4.8) == U
+
+
 def test_expert_way_back_goal_walls_and_contacts():
     """The way back's goal is where the route's progress stands, and its first action is one
     the walls allow. Hand-placed on figure2 with exact motion; the headings 0.5 rad off the
