@@ -848,6 +848,27 @@ def test_frames_keep_their_look_whatever_the_callers_style():
         assert map_figure(world).get_facecolor()[:3] == (0.0, 0.0, 0.0)  # the caller's style
 
 
+def test_draw_robot_draws_each_ray_to_its_side_as_long_as_its_reading():
+    """Heading east (0 rad) from (0.4, 0), the left ray runs north (+y), the front ray east
+    and the right ray south, each to its reading."""
+    from matplotlib.figure import Figure
+
+    from corridor.render import draw_robot
+
+    world = CorridorWorld("figure2")
+    world.set_pose(0.4, 0.0, 0.0)
+    ax = Figure().add_subplot()
+    draw_robot(ax, world, readings=[0.3, 1.2, 0.2])
+    ends = {}
+    for line in ax.get_lines():
+        name = line.get_label().split(" ")[0]
+        if line.get_label().endswith("sensor ray (to the reading)"):
+            ends[name] = (line.get_xdata()[1], line.get_ydata()[1])
+    assert ends["left"] == pytest.approx((0.4, 0.3))
+    assert ends["front"] == pytest.approx((1.6, 0.0))
+    assert ends["right"] == pytest.approx((0.4, -0.2))
+
+
 def test_render_rgb_names_readings_of_the_wrong_length():
     """Readings that are not the three ranges gave zip's 'argument 3 is shorter than
     arguments 1-2'; now a ValueError that says what readings are."""
