@@ -354,6 +354,9 @@ def test_held_out_twin_is_eval_for_train_and_the_next_base_seed_otherwise():
 
     assert held_out_twin("train") is EVAL and held_out_twin(TRAIN) is EVAL
     assert held_out_twin(TrafficScenario(name="mine", seed=1)) is EVAL  # train's traffic
+    # train's base seed but other traffic: not eval's road, its own twin on seed 2
+    sparse = TrafficScenario(name="m", seed=1, mean_spacing_m=(80.0, 80.0, 80.0))
+    assert held_out_twin(sparse) == dataclasses.replace(sparse, name="m-held-out", seed=2)
     assert held_out_twin(LIGHT) == dataclasses.replace(LIGHT, name="light-held-out", seed=4)
     mine = TrafficScenario(name="mine", seed=7, mean_spacing_m=(80.0, 60.0, 200.0))
     assert held_out_twin(mine) == dataclasses.replace(mine, name="mine-held-out", seed=8)
