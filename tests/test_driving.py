@@ -354,6 +354,19 @@ def test_road_is_long_enough_that_a_1000_step_episode_has_no_jump(env):
     assert sim.distance_m == pytest.approx(1500 * dt * 26.8224, rel=1e-6)
 
 
+def test_reset_leaves_no_car_from_15_m_behind_to_start_clear_m_ahead(env):
+    """At reset no car is within 15 m behind or start_clear_m (30 m) ahead of the ego, in any
+    lane, over 30 road segments (the cars beyond that zone lie close to it)."""
+    clear = env.scenario.start_clear_m
+    nearest_behind = []
+    for seed in range(30):
+        _, info = env.reset(seed=seed)
+        rel = np.asarray(info["car_rel_m"])
+        assert not np.any((rel > -15.0) & (rel < clear)), seed
+        nearest_behind.append(rel[rel <= -15.0].max())
+    assert max(nearest_behind) > -20.0  # the zone's edge is where traffic starts
+
+
 def test_new_cars_enter_far_ahead_never_beside_the_ego(env):
     """Regression: a lane that ran out of cars ahead used to get a recycled car dropped right
     next to the ego (eval segment 0, lane 3, step 350: a car appeared at -2.3 m, a spurious
