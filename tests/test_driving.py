@@ -367,6 +367,32 @@ def test_reset_leaves_no_car_from_15_m_behind_to_start_clear_m_ahead(env):
     assert max(nearest_behind) > -20.0  # the zone's edge is where traffic starts
 
 
+def _drive_past_shifts(steps: int = 130):
+    """(each step's info, n_shifts) for ``steps`` steps of STAY from 9 km along the
+    10 km edge: the road is moved back about every 60 steps (by about 400 m)."""
+    from sumo_scenarios.sim import SimConfig
+
+    env = DrivingEnv(sim=SimConfig(ego_start_m=9000.0), max_episode_steps=10**6)
+    try:
+        env.reset(seed=0)
+        infos = [env.step(STAY)[4] for _ in range(steps)]
+        return infos, env._sim.n_shifts
+    finally:
+        env.close()
+
+
+def test_lanes_stay_filled_ahead_across_a_shift_back():
+    """After every step, shifts included, each traffic lane has a car ahead within ahead_m
+    (200 m): the lanes' fronts, where new cars enter, move back with the road."""
+    infos, n_shifts = _drive_past_shifts()
+    assert n_shifts >= 2
+    for info in infos:
+        rel, lanes = np.asarray(info["car_rel_m"]), np.asarray(info["car_lane"])
+        for lane in (1, 2, 3):
+            r = rel[lanes == lane]
+            assert np.any((r > 0) & (r <= 200.0)), (info["t"], lane)
+
+
 def test_new_cars_enter_far_ahead_never_beside_the_ego(env):
     """Regression: a lane that ran out of cars ahead used to get a recycled car dropped right
     next to the ego (eval segment 0, lane 3, step 350: a car appeared at -2.3 m, a spurious
