@@ -393,6 +393,17 @@ def test_lanes_stay_filled_ahead_across_a_shift_back():
             assert np.any((r > 0) & (r <= 200.0)), (info["t"], lane)
 
 
+def test_car_speeds_stay_within_0_to_40_mph_across_a_shift_back():
+    """The speeds measured over each step (info's car_closing_ms = ego speed - car speed) stay
+    inside the traffic's 0-40 mph at the steps where the road is moved back as elsewhere."""
+    from sumo_scenarios.scenarios import EGO_SPEED_MS, MPH
+
+    infos, n_shifts = _drive_past_shifts()
+    assert n_shifts >= 2
+    speeds = np.concatenate([EGO_SPEED_MS - np.asarray(i["car_closing_ms"]) for i in infos])
+    assert speeds.min() >= 0.0 and speeds.max() <= 40.0 * MPH + 1e-6
+
+
 def test_new_cars_enter_far_ahead_never_beside_the_ego(env):
     """Regression: a lane that ran out of cars ahead used to get a recycled car dropped right
     next to the ego (eval segment 0, lane 3, step 350: a car appeared at -2.3 m, a spurious
