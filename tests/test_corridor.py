@@ -697,7 +697,14 @@ def test_expert_drives_clean_circuits(map_name, n_actions):
 
 @pytest.mark.parametrize(
     "ranges, action",
-    [((1.5, 0.3, 0.3), L), ((0.3, 0.3, 1.5), R), ((0.3, 1.5, 0.3), F), ((0.3, 0.3, 0.3), U)],
+    [
+        ((1.5, 0.3, 0.3), L),
+        ((0.3, 0.3, 1.5), R),
+        ((1.5, 0.3, 1.5), L),  # both sides open: left before right
+        ((0.3, 1.5, 0.3), F),
+        ((1.5, 1.5, 1.5), F),
+        ((0.3, 0.3, 0.3), U),
+    ],
 )
 def test_the_expert_off_every_corridor_falls_back_to_the_open_side(ranges, action):
     """Where no corridor of the map runs any way the robot can face (a pose off the map,
@@ -839,6 +846,27 @@ def test_frames_keep_their_look_whatever_the_callers_style():
                 np.testing.assert_array_equal(frame, plain)
         assert matplotlib.rcParams["lines.linewidth"] == 6  # the caller's, back
         assert map_figure(world).get_facecolor()[:3] == (0.0, 0.0, 0.0)  # the caller's style
+
+
+def test_draw_robot_draws_each_ray_to_its_side_as_long_as_its_reading():
+    """Heading east (0 rad) from (0.4, 0), the left ray runs north (+y), the front ray east
+    and the right ray south, each to its reading."""
+    from matplotlib.figure import Figure
+
+    from corridor.render import draw_robot
+
+    world = CorridorWorld("figure2")
+    world.set_pose(0.4, 0.0, 0.0)
+    ax = Figure().add_subplot()
+    draw_robot(ax, world, readings=[0.3, 1.2, 0.2])
+    ends = {}
+    for line in ax.get_lines():
+        name = line.get_label().split(" ")[0]
+        if line.get_label().endswith("sensor ray (to the reading)"):
+            ends[name] = (line.get_xdata()[1], line.get_ydata()[1])
+    assert ends["left"] == pytest.approx((0.4, 0.3))
+    assert ends["front"] == pytest.approx((1.6, 0.0))
+    assert ends["right"] == pytest.approx((0.4, -0.2))
 
 
 def test_render_rgb_names_readings_of_the_wrong_length():

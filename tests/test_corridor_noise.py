@@ -305,6 +305,59 @@ def test_expert_off_the_route_takes_the_shortest_way_back_on_the_map():
     assert answer(0.3, 0.0, math.pi) == R
 
 
+def test_expert_past_the_node_by_more_than_half_a_step_takes_the_way_back():
+    """The route's left turn at P1 (figure2, exact motion) made two steps late: the second
+    forward step stops against P1's end wall, 0.18 m past the node with the progress still on
+    segment 0. A turn from there would sweep the robot into that wall again; the expert takes
+    the way back (a u-turn, then right at P1) and the circuit ends with the learner's contact
+    only."""
+    env = CorridorEnv("figure2", WorldConfig(), max_episode_steps=80)
+    expert = CorridorExpert(env.corridor_map, WorldConfig())
+    obs, info = env.reset(seed=0)
+    for _ in range(5):  # to the decision point, 0.2 m before P1
+        obs, _, _, _, info = env.step(expert(obs, info))
+    assert expert(obs, info) == L
+    for _ in range(2):  # the learner drives on
+        obs, _, _, _, info = env.step(F)
+    assert info["contact"] and info["segment"] == 0
+    assert info["pose"][0] - 1.4 == pytest.approx(0.18)
+    assert expert(obs, info) == U
+    while True:
+        obs, _, terminated, truncated, info = env.step(expert(obs, info))
+        if terminated or truncated:
+            break
+    assert terminated and info["laps"] == 1 and info["contacts"] == 1
+
+
+def test_expert_way_back_counts_a_step_for_every_turn():
+    """The way back's cost is metres driven plus one step (0.2 m) per turn, the turn made now
+    as well as those at the nodes; hand-placed with exact motion, where the two ways differ by
+    less than a step in metres."""
+
+    def answer(map_name, x, y, heading, segment, lap) -> int:
+        world = CorridorWorld(load_map(map_name), WorldConfig())
+        world.set_pose(x, y, heading)
+        info = {
+            "pose": np.array(world.pose),
+            "segment": segment,
+            "lap_position": lap,
+            "true_ranges": world.true_ranges(),
+            "blocked": [0, 0, 0, 0],
+        }
+        return CorridorExpert(world.map, WorldConfig())(world.sense(np.random.default_rng(0)), info)
+
+    # figure2, 0.3 m above P0 heading south, the progress at J on segment 2 (into the spur,
+    # north): left now and on by P1 is 2.4 m and two turns (now, P1); back up by P3 is 2.3 m
+    # and three turns (the u-turn, P3, J). Counted in metres alone the u-turn would win.
+    assert answer("figure2", 0.0, 0.3, -math.pi / 2, 2, 2.4) == L
+    # lshape's corridors are one 8 m loop; heading east on A - B with the progress at E on
+    # segment 4 (west to F), either way round is four turns (on: B, C, D, E; back: the u-turn
+    # now, A, F and a u-turn at E) and the nearer way wins: on from x = 1.05 (3.95 m against
+    # 4.05 m), back from x = 0.95.
+    assert answer("lshape", 1.05, 0.0, 0.0, 4, 4.8) == F
+    assert answer("lshape", 0.95, 0.0, 0.0, 4, 4.8) == U
+
+
 def test_expert_way_back_goal_walls_and_contacts():
     """The way back's goal is where the route's progress stands, and its first action is one
     the walls allow. Hand-placed on figure2 with exact motion; the headings 0.5 rad off the

@@ -17,7 +17,7 @@ from gymnasium.utils.env_checker import check_env
 import sumo_scenarios
 from sumo_scenarios import metrics
 from sumo_scenarios.env import LEFT, RIGHT, STAY, DrivingEnv
-from sumo_scenarios.expert import ScriptedExpert
+from sumo_scenarios.expert import ExpertConfig, ScriptedExpert
 from sumo_scenarios.replay import EpisodeRecorder, export_fcd, render_gif, replay
 from sumo_scenarios.scenarios import CAR_LENGTH_M, TrafficScenario, data_path
 
@@ -354,6 +354,56 @@ def test_road_is_long_enough_that_a_1000_step_episode_has_no_jump(env):
     assert sim.distance_m == pytest.approx(1500 * dt * 26.8224, rel=1e-6)
 
 
+def test_reset_leaves_no_car_from_15_m_behind_to_start_clear_m_ahead(env):
+    """At reset no car is within 15 m behind or start_clear_m (30 m) ahead of the ego, in any
+    lane, over 30 road segments (the cars beyond that zone lie close to it)."""
+    clear = env.scenario.start_clear_m
+    nearest_behind = []
+    for seed in range(30):
+        _, info = env.reset(seed=seed)
+        rel = np.asarray(info["car_rel_m"])
+        assert not np.any((rel > -15.0) & (rel < clear)), seed
+        nearest_behind.append(rel[rel <= -15.0].max())
+    assert max(nearest_behind) > -20.0  # the zone's edge is where traffic starts
+
+
+def _drive_past_shifts(steps: int = 130):
+    """(each step's info, n_shifts) for ``steps`` steps of STAY from 9 km along the
+    10 km edge: the road is moved back about every 60 steps (by about 400 m)."""
+    from sumo_scenarios.sim import SimConfig
+
+    env = DrivingEnv(sim=SimConfig(ego_start_m=9000.0), max_episode_steps=10**6)
+    try:
+        env.reset(seed=0)
+        infos = [env.step(STAY)[4] for _ in range(steps)]
+        return infos, env._sim.n_shifts
+    finally:
+        env.close()
+
+
+def test_lanes_stay_filled_ahead_across_a_shift_back():
+    """After every step, shifts included, each traffic lane has a car ahead within ahead_m
+    (200 m): the lanes' fronts, where new cars enter, move back with the road."""
+    infos, n_shifts = _drive_past_shifts()
+    assert n_shifts >= 2
+    for info in infos:
+        rel, lanes = np.asarray(info["car_rel_m"]), np.asarray(info["car_lane"])
+        for lane in (1, 2, 3):
+            r = rel[lanes == lane]
+            assert np.any((r > 0) & (r <= 200.0)), (info["t"], lane)
+
+
+def test_car_speeds_stay_within_0_to_40_mph_across_a_shift_back():
+    """The speeds measured over each step (info's car_closing_ms = ego speed - car speed) stay
+    inside the traffic's 0-40 mph at the steps where the road is moved back as elsewhere."""
+    from sumo_scenarios.scenarios import EGO_SPEED_MS, MPH
+
+    infos, n_shifts = _drive_past_shifts()
+    assert n_shifts >= 2
+    speeds = np.concatenate([EGO_SPEED_MS - np.asarray(i["car_closing_ms"]) for i in infos])
+    assert speeds.min() >= 0.0 and speeds.max() <= 40.0 * MPH + 1e-6
+
+
 def test_new_cars_enter_far_ahead_never_beside_the_ego(env):
     """Regression: a lane that ran out of cars ahead used to get a recycled car dropped right
     next to the ego (eval segment 0, lane 3, step 350: a car appeared at -2.3 m, a spurious
@@ -440,6 +490,100 @@ def test_expert_timing_varies_inside_the_safe_window_and_is_seeded():
     assert min(gaps) >= last_safe - 2.2 and max(gaps) <= 24.0  # but always inside the window
     with pytest.raises(ValueError, match="missing"):
         ScriptedExpert()(np.zeros(4), {})
+
+
+def _decides(expert: ScriptedExpert, lane: int, cars: list[tuple[int, float, float]], t=0) -> int:
+    """The expert's action in ``lane`` among hand-placed ``cars`` (lane, metres relative to the
+    ego, closing speed m/s: ego speed minus the car's), as DrivingEnv's info gives them."""
+    info = {
+        "lane": lane,
+        "t": t,
+        "car_rel_m": np.array([c[1] for c in cars], dtype=np.float64),
+        "car_lane": np.array([c[0] for c in cars], dtype=np.int64),
+        "car_closing_ms": np.array([c[2] for c in cars], dtype=np.float64),
+        "step_length_s": 0.25,
+    }
+    return expert(np.zeros(4, dtype=np.float32), info)
+
+
+def test_expert_a_car_closing_within_two_steps_of_min_gap_forces_a_squeeze():
+    """A car 13 m ahead closing at 8.9 m/s (2.2 m a step) leaves no safe step (13 < 10 + 2 x
+    2.2): the expert squeezes into the left shoulder, whose car 13 m ahead is nearer than
+    enter_ahead_m (16 m) but beyond min_gap_m, whatever its timing draw."""
+    cars = [(3, 13.0, 8.9), (4, 13.0, 0.0), (2, 0.0, 0.0)]
+    assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(20)] == [LEFT] * 20
+
+
+def test_expert_pressed_squeezes_in_beyond_min_gap_but_never_nearer():
+    """Pressed (a car 11 m ahead closing at 4 m/s), with no lane open to enter_ahead_m, the
+    expert takes a lane whose nearest car is beyond min_gap_m (12 m ahead; left first, then
+    right) and stays when that car is within it (9 m)."""
+    pressed = (3, 11.0, 4.0)
+    for squeeze, action in [((4, 12.0, 0.0), LEFT), ((4, 9.0, 0.0), STAY)]:
+        cars = [pressed, squeeze, (2, 0.0, 0.0)]
+        assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(10)] == [action] * 10
+    cars = [pressed, (4, 5.0, 0.0), (2, 12.0, 0.0)]
+    assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(10)] == [RIGHT] * 10
+
+
+def test_expert_judges_a_lane_by_where_its_cars_will_be_after_the_step():
+    """A car 12 m behind on the left shoulder, 10 m/s faster than the ego, will be 9.5 m behind
+    after the step (within min_gap_m): it blocks the change; as fast as the ego, it does not."""
+    for closing, action in [(-10.0, STAY), (0.0, LEFT)]:
+        cars = [(3, 11.0, 4.0), (4, -12.0, closing), (2, 0.0, 0.0)]
+        assert [_decides(ScriptedExpert(seed=s), 3, cars) for s in range(10)] == [action] * 10
+
+
+def _leaves_for_car_b(seed: int, before: list[tuple[int, list[tuple[int, float, float]]]]) -> float:
+    """Gap at which ScriptedExpert(seed) leaves the left lane for a car B closing in from 30 m
+    at 8.9 m/s, after the consecutive steps ``before`` (lane, cars)."""
+    expert = ScriptedExpert(seed=seed)
+    for t, (lane, cars) in enumerate(before):
+        assert _decides(expert, lane, cars, t) == STAY
+    for k in range(20):
+        gap = 30.0 - 2.225 * k
+        if _decides(expert, 3, [(3, gap, 8.9)], len(before) + k) == LEFT:
+            return gap
+    raise AssertionError("the expert never left the lane of a closing car")
+
+
+def test_expert_draws_a_new_moment_for_a_new_car_ahead():
+    """Car A closes in from 30 to 25.5 m and changes lane before the expert acts; car B then
+    arrives at 30 m: a new event, whose moment is drawn afresh (as after a lane change), not
+    the one drawn for A."""
+    car_a = [(3, [(3, 30.0 - 2.225 * k, 8.9)]) for k in range(3)]
+    after_a = [_leaves_for_car_b(s, car_a) for s in range(20)]
+    after_lane_change = [_leaves_for_car_b(s, [(4, [(3, 0.0, 0.0)])]) for s in range(20)]
+    fresh = [_leaves_for_car_b(s, []) for s in range(20)]
+    assert after_a == after_lane_change
+    assert after_a != fresh
+
+
+def test_expert_returns_home_after_a_passed_car_by_a_drawn_margin():
+    """On the left shoulder, a passed car 12 m behind in the home lane is min_gap_m plus 2 of
+    the return_spread_m's 4 m behind: across seeds some return home now, some wait."""
+    acts = {_decides(ScriptedExpert(seed=s), 4, [(3, -12.0, 0.0)]) for s in range(20)}
+    assert acts == {RIGHT, STAY}
+    assert _decides(ScriptedExpert(seed=0), 4, [(3, -9.0, 0.0)]) == STAY  # never within min_gap
+
+
+def test_expert_on_an_empty_road_heads_for_the_home_lane_from_either_side():
+    """Home is the left lane (3): from the left shoulder it moves right, from the lanes to its
+    right it moves left, and at home it stays."""
+    acts = [_decides(ScriptedExpert(seed=0), lane, []) for lane in range(5)]
+    assert acts == [LEFT, LEFT, LEFT, STAY, RIGHT]
+
+
+def test_expert_with_middle_pass_passes_in_a_free_middle_lane_first():
+    """With middle_pass, a car closing in ahead is passed in the middle lane (2) when it is
+    visibly free, though the left shoulder is free too; a car 20 m ahead in the middle lane
+    sends the pass to the shoulder. Without middle_pass the shoulder is always first."""
+    ahead = (3, 11.0, 4.0)
+    middle = ExpertConfig(middle_pass=True)
+    assert [_decides(ScriptedExpert(middle, seed=s), 3, [ahead]) for s in range(5)] == [RIGHT] * 5
+    cars = [ahead, (2, 20.0, 0.0)]
+    assert [_decides(ScriptedExpert(middle, seed=s), 3, cars) for s in range(5)] == [LEFT] * 5
+    assert [_decides(ScriptedExpert(seed=s), 3, [ahead]) for s in range(5)] == [LEFT] * 5
 
 
 def test_replay_bit_identical_fcd_and_gif(tmp_path):

@@ -93,6 +93,32 @@ def test_teach_driving_on_traffic_of_ones_own_keeps_it_for_resume_replay_and_eva
     assert "session/episode 0" in capsys.readouterr().out
 
 
+def test_a_session_episode_replays_from_the_lane_it_started_in(tmp_path, monkeypatch, capsys):
+    """A person who moves left at every step takes the ego from the middle lane (2) to the
+    left shoulder: the session's episode is rebuilt starting in lane 2, its first logged
+    observation's lane, not the lane it ended in, and its replay equals the log."""
+    import sumo_scenarios.human
+    from sumo_scenarios.env import LEFT
+    from sumo_scenarios.replay import session_episodes
+
+    class LeftMover:
+        def __call__(self, observation, info):
+            return LEFT
+
+        def set_status(self, text):
+            pass
+
+    monkeypatch.setattr(sumo_scenarios.human, "make_teacher", lambda **kw: LeftMover())
+    run = tmp_path / "session"
+    assert main(["teach", "driving", "--run-dir", str(run), "--steps", "3"]) == 0, (
+        capsys.readouterr().err
+    )
+    lanes = [int(r.observation[3]) for r in load_records(run)]
+    assert lanes[0] == 2 and lanes[-1] == 4, lanes
+    (episode,) = session_episodes(run, check=True)
+    assert episode.start_lane == 2
+
+
 def test_teach_driving_on_a_shipped_scenario_by_name(tmp_path, driving_person, capsys):
     """`--scenario light` teaches on the shipped light traffic, kept by its name; a resume
     given the same name goes on, one given another is refused."""
@@ -354,6 +380,9 @@ def test_held_out_twin_is_eval_for_train_and_the_next_base_seed_otherwise():
 
     assert held_out_twin("train") is EVAL and held_out_twin(TRAIN) is EVAL
     assert held_out_twin(TrafficScenario(name="mine", seed=1)) is EVAL  # train's traffic
+    # train's base seed but other traffic: not eval's road, its own twin on seed 2
+    sparse = TrafficScenario(name="m", seed=1, mean_spacing_m=(80.0, 80.0, 80.0))
+    assert held_out_twin(sparse) == dataclasses.replace(sparse, name="m-held-out", seed=2)
     assert held_out_twin(LIGHT) == dataclasses.replace(LIGHT, name="light-held-out", seed=4)
     mine = TrafficScenario(name="mine", seed=7, mean_spacing_m=(80.0, 60.0, 200.0))
     assert held_out_twin(mine) == dataclasses.replace(mine, name="mine-held-out", seed=8)

@@ -164,6 +164,9 @@ def test_per_step_flags_that_are_not_flags_are_refused():
     assert metrics.collision_rate(np.array([True, False, False, False])) == 0.25
 
 
+_ONE = ["--seeds", "1", "--steps", "1"]  # were a mistake let through: one short measurement
+
+
 @pytest.mark.parametrize(
     ("argv", "says"),
     [
@@ -172,6 +175,10 @@ def test_per_step_flags_that_are_not_flags_are_refused():
         (["--search", "2", "--keep", "0", "--first-seed", "100"], "--steps and --keep"),  # % 0
         (["--search", "1", "--left-spacings", "abc", "--first-seed", "100"], "--left-spacings"),
         (["--search", "1", "--left-spacings", "5", "--first-seed", "100"], "at least 12"),
+        # the check's segments are 0-99: a search or rescore from 99 would share segment 99
+        (["--search", "1", *_ONE, "--first-seed", "99"], "other segments than the check's 0-99"),
+        (["--rescore", "1", *_ONE, "--first-seed", "99"], "other segments than the check's 0-99"),
+        (["--rescore", "1", *_ONE, "--first-seed", "100"], "needs a search history"),  # other
     ],
 )
 def test_calibration_command_reports_a_mistake_in_one_line(argv, says, tmp_path, capsys):

@@ -537,6 +537,33 @@ def test_calibration_rescore_remeasures_the_best_of_a_history(tmp_path, capsys):
     assert "other segments than the check's 0-99" in capsys.readouterr().err
 
 
+def test_calibration_measures_on_eval_with_the_teacher_seeded_as_the_experiment_seeds_it():
+    """``measure(scenario="eval")`` drives segment s of eval with the teacher of seed
+    10,000 + s, as the driving experiment's evaluation does (not the training seed s)."""
+    from sumo_scenarios import metrics
+    from sumo_scenarios.env import DrivingEnv
+    from sumo_scenarios.teacher import make_teacher
+
+    def by_hand(teacher_seed: int) -> list[float]:
+        env = DrivingEnv(scenario="eval", max_episode_steps=10**6)
+        teacher = make_teacher(teacher_seed)
+        answers, lanes = [], []
+        try:
+            obs, info = env.reset(seed=1)
+            for _ in range(150):
+                answers.append(teacher(obs, info))
+                obs, _, _, _, info = env.step(answers[-1])
+                lanes.append(info["lane"])
+        finally:
+            env.close()
+        return [*metrics.lane_distribution(lanes).tolist(), answers.count(0) / 150]
+
+    r = measure({}, seeds=[1], steps=150, scenario="eval")
+    got = [*r["lanes"], r["stay"]]
+    assert got == pytest.approx(by_hand(10_001))
+    assert got != pytest.approx(by_hand(1))
+
+
 def test_contact_classification_counts_every_contact_of_the_teacher(capsys):
     """scripts/driving_teacher_contacts.py drives the teacher as its calibration does (same
     seeding: the same contact share as ``measure``) and gives each contact event one cause."""
