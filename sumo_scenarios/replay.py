@@ -525,7 +525,7 @@ def _read_fcd(fcd: Path, record: EpisodeRecord) -> Any:
     return root
 
 
-def _write_replay_input(root: Any, out: Path, road_end_m: float) -> int:
+def _write_replay_input(root: Any, out: Path, road_end_m: float) -> None:
     """Write the recorded FCD (its parsed ``root``) for SUMO's fcd-replay device to ``out``, adding
     one entry per vanished car.
 
@@ -533,8 +533,7 @@ def _write_replay_input(root: Any, out: Path, road_end_m: float) -> int:
     each recorded place in turn, but it never removes a vehicle whose trajectory ends: it leaves
     only when it reaches the end of its route. A car the episode took off (recycled) is
     therefore moved, one step after its last recorded one, to the end of its lane
-    (``road_end_m``), where it arrives and leaves in that same step. Returns how many cars got
-    such an entry.
+    (``road_end_m``), where it arrives and leaves in that same step.
     """
     import xml.etree.ElementTree as ET
 
@@ -543,15 +542,12 @@ def _write_replay_input(root: Any, out: Path, road_end_m: float) -> int:
     for i, ts in enumerate(steps):
         for v in ts.findall("vehicle"):
             last[v.get("id", "")] = (i, v)
-    n = 0
     for i, v in last.values():
         if i + 1 < len(steps):
             e = ET.SubElement(steps[i + 1], "vehicle", dict(v.attrib))
             e.set("x", f"{road_end_m:.2f}")
             e.set("pos", f"{road_end_m:.2f}")
-            n += 1
     ET.ElementTree(root).write(out, xml_declaration=True, encoding="UTF-8")
-    return n
 
 
 def _beside_fcd(fcd: Path, suffix: str) -> Path:
