@@ -96,6 +96,7 @@ __all__ = [
     "PAPER",
     "STAGE_NAMES",
     "DrivingExperimentConfig",
+    "HeldOutUnknownWarning",
     "NotHeldOutWarning",
     "evaluate_saved_policy",
     "format_summary",
@@ -1224,9 +1225,11 @@ def session_eval_segment(session_dir: str | Path) -> int | None:
 
 
 class NotHeldOutWarning(UserWarning):
-    """:func:`evaluate_saved_policy` drove road the session was taught on (its report says
-    ``"held_out": false``). ``road``: which road and why it is taught road, the message's first
-    clause, so that a caller (``torchcbl evaluate``) can say its own way to held-out road."""
+    """:func:`evaluate_saved_policy` drove road the session was taught on, or its prior
+    demonstrations were (its report says ``"held_out": false``). ``road``: which road and why
+    it is taught road, the message's first clause, so that a caller (``torchcbl evaluate``)
+    can say its own way to held-out road. Its subclass :class:`HeldOutUnknownWarning` says
+    where that cannot be told."""
 
     def __init__(self, road: str, advice: str) -> None:
         """``road``: which road was driven and why it is not held out; ``advice``: how to
@@ -1235,15 +1238,31 @@ class NotHeldOutWarning(UserWarning):
         self.road = road
 
 
+class HeldOutUnknownWarning(NotHeldOutWarning):
+    """:func:`evaluate_saved_policy` drove road the session was not taught on, but that its
+    prior demonstrations may have been taught on, which cannot be told (its report says
+    ``"held_out": None``): they were given as arrays, so nothing of where they were taught is
+    recorded, or the session they were read from is not there any more, or no longer holds
+    them (:func:`torchcbl.session.prior_source`). ``road``: which road and why it cannot be
+    told; ``advice``: how it could be. A :class:`NotHeldOutWarning`, so that a filter that
+    stops at figures that are not held out (``warnings.simplefilter("error",
+    NotHeldOutWarning)``) stops at these too."""
+
+
 def _taught_on(
     session_dir: str | Path,
     kept: Mapping[str, Any],
     assumed: Any,
     traffic: TrafficScenario,
     segment: int,
+    *,
+    at_steps: int | None = None,
+    whose: str = "its",
 ) -> str | None:
     """Why segment ``segment`` of ``traffic`` is road the session was taught on, in words; None
-    where it is held out.
+    where it is held out. ``at_steps``: its log's steps before that step only (those a prior
+    was read at, :func:`_prior_taught_on`); ``whose``: how the words name the session's
+    episode ("its", "whose").
 
     What makes road held out is its random stream alone: a segment's cars (where each starts,
     its desired speed, the spacing of each car recycled ahead) are drawn from
@@ -1275,9 +1294,58 @@ def _taught_on(
     except (OSError, ValueError) as exc:  # (a damaged log: CorruptSessionError)
         return f"its base seed; its log, which says which segments it drove, cannot be read: {exc}"
     for r in records:
+        if at_steps is not None and r.step >= at_steps:
+            break
         if isinstance(r.info, Mapping) and r.info.get("episode_seed") == segment:
-            return f"its episode {r.episode} drove it on its base seed {base}"
+            return f"{whose} episode {r.episode} drove it on its base seed {base}"
     return None
+
+
+def _prior_taught_on(
+    session_dir: str | Path, traffic: TrafficScenario, segment: int
+) -> tuple[str | None, str | None, str | None]:
+    """Whether segment ``segment`` of ``traffic`` is road the session's prior demonstrations
+    were taught on, following the session they were read from (its first steps then,
+    :func:`torchcbl.session.prior_source`) and that session's own prior in turn: ``(why it
+    is, None, None)``; ``(None, why it cannot be told, how it could be)`` where a prior's
+    origin is not recorded or its session cannot be read as it was; ``(None, None, None)``
+    where it is not (or the session has no prior demonstrations)."""
+    from sumo_scenarios.replay import _session_make_settings
+    from torchcbl.session import load_config, prior_source
+
+    run, said, seen = Path(session_dir), "its", set()
+    while True:
+        source = prior_source(run)
+        if source is None:
+            return None, None, None
+        if source.session is None:
+            entry = load_config(run)["prior"]
+            fix = (
+                "where they came from a session, start from that session's directory, which "
+                "is then recorded (torchcbl teach --prior-demonstrations SESSION_DIR; in "
+                "Python, prior_demonstrations=torchcbl.session.load_demonstrations(session_dir) "
+                "as it returns them)"
+                if "source" not in entry
+                else "put that session back where it was (or beside this one, as it was) to "
+                "have its road told"
+            )
+            return (
+                None,
+                f"{said} {entry['n_demonstrations']} prior demonstrations {source.unknown}",
+                fix,
+            )
+        where = f"{said} prior demonstrations were read from {source.session}"
+        kept = load_config(source.session)
+        assumed = _session_make_settings(kept)[0].get("scenario", "train")
+        road = _taught_on(
+            source.session, kept, assumed, traffic, segment, at_steps=source.n_steps, whose="whose"
+        )
+        if road is not None:
+            return f"{where}, {road}", None, None
+        seen.add(os.path.realpath(run))
+        if os.path.realpath(source.session) in seen:  # (a loop of moved folders: told)
+            return None, None, None
+        run, said = source.session, f"{where}, whose"
 
 
 def evaluate_saved_policy(
@@ -1322,12 +1390,24 @@ def evaluate_saved_policy(
     and speeds) it is driven all the same, with a :class:`NotHeldOutWarning` (a UserWarning)
     saying the figures are not held out.
 
+    Road a session's prior demonstrations were taught on is taught road too: where they were
+    read from a session (``torchcbl teach --prior-demonstrations DIR``, or
+    ``prior_demonstrations=torchcbl.session.load_demonstrations(DIR)`` as it returns them),
+    the session records it, and that session's episodes over the steps they were read at
+    (and its own prior's, in turn) count as the session's own, where
+    :func:`torchcbl.session.prior_source` finds it still holding them. Where the prior's road
+    cannot be told (arrays given in Python or a ``.npz`` file's, which record no origin; a
+    session that is not there any more, or holds other demonstrations now) and the session's
+    own episodes did not drive the road, ``held_out`` is None, with a
+    :class:`HeldOutUnknownWarning` saying why: never True on a guess.
+
     Returns the collision rate (share of timesteps in contact, %), the lane shares (``lanes``,
     index 0 = right shoulder ... 4 = left shoulder, named in that order by ``lane_names``:
     ``sumo_scenarios.scenarios.LANE_NAMES``), the segment (``eval_segment``) and traffic
     (``scenario``: the ``TrafficScenario``'s fields, its name among them) driven, whether that
-    road is held out (``held_out``: False where the session was taught on it, as the warning
-    says), and the SUMO settings and start lane driven. It takes this process's one libsumo
+    road is held out (``held_out``: False where the session or its prior demonstrations were
+    taught on it, as the warning says; None where its prior's road cannot be told), and the
+    SUMO settings and start lane driven. It takes this process's one libsumo
     simulation: a live DrivingEnv must be reset after it.
     """
     from sumo_scenarios.env import DrivingConfig, DrivingEnv
@@ -1407,6 +1487,19 @@ def evaluate_saved_policy(
         seed = session_eval_segment(session_dir)
         seed = 0 if seed is None else seed
     taught_on = _taught_on(session_dir, kept, taught.get("scenario", "train"), traffic, seed)
+    unknown = fix = None
+    if taught_on is None:  # road its prior demonstrations were taught on is taught road too
+        taught_on, unknown, fix = _prior_taught_on(session_dir, traffic, seed)
+    if unknown is not None:
+        warnings.warn(
+            HeldOutUnknownWarning(
+                f"whether segment {seed} of the traffic {traffic.name!r} is road "
+                f"{session_dir} was taught on is not known ({unknown}), so these figures "
+                "cannot be said to be held out",
+                str(fix),
+            ),
+            stacklevel=2,
+        )
     if taught_on is not None:
         warnings.warn(
             NotHeldOutWarning(
@@ -1438,7 +1531,7 @@ def evaluate_saved_policy(
         "lanes": metrics.lane_distribution([int(r.info["lane"]) for r in recs]).tolist(),
         "lane_names": list(LANE_NAMES),
         "scenario": json.loads(json.dumps(dataclasses.asdict(traffic))),
-        "held_out": taught_on is None,
+        "held_out": None if unknown is not None else taught_on is None,
         "start_lane": config.start_lane,
         "sim": dataclasses.asdict(sim),
     }

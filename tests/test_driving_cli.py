@@ -423,6 +423,69 @@ def test_a_segment_driven_on_the_taught_base_seed_and_episode_seed_is_not_held_o
     assert json.loads(out)["held_out"] is True and err == "", err
 
 
+def test_road_the_prior_demonstrations_were_taught_on_is_not_held_out(
+    tmp_path, driving_person, capsys
+):
+    """A session started from prior demonstrations (`teach --prior-demonstrations DIR`) was
+    judged by its own episodes alone: driven on a segment the prior's session drove, it
+    reported `held_out: true`, silently. That road now counts as taught (the warning names
+    the prior's session, also when both sessions moved together); where the prior's road
+    cannot be known (its session gone, a .npz file's arrays) `held_out` is null, with a
+    one-line warning saying so, never true."""
+    import numpy as np
+
+    from sumo_scenarios.experiment import NotHeldOutWarning, evaluate_saved_policy
+    from torchcbl.session import load_demonstrations
+
+    runs = tmp_path / "runs"
+    a, b = runs / "a", runs / "b"
+    teach, prior = ["teach", "driving", "--steps"], "--prior-demonstrations"
+    assert main([*teach, "10", "--run-dir", str(a), "--seed", "3", "--scenario", "light"]) == 0
+    assert main([*teach, "5", "--run-dir", str(b), "--seed", "6", prior, str(a)]) == 0
+    assert {r.info["episode_seed"] for r in load_records(b)} == {6}
+    capsys.readouterr()
+
+    def evaluated(run: Path, seed: int) -> tuple[object, str]:
+        """`evaluate RUN --scenario light --seed SEED`: (held_out, stderr)."""
+        argv = ["evaluate", str(run), "--steps", "5", "--scenario", "light"]
+        assert main([*argv, "--seed", str(seed)]) == 0
+        out, err = capsys.readouterr()
+        return json.loads(out)["held_out"], err
+
+    held, err = evaluated(b, 3)  # segment 3 of light: road a's episode drove
+    assert held is False, err
+    assert err.count("\n") == 1 and "not held out" in err and "prior" in err and str(a) in err, err
+    assert evaluated(b, 6) == (True, "")  # b drove segment 6 of train, not of light
+    assert evaluated(b, 4) == (True, "")
+    with pytest.warns(NotHeldOutWarning, match="prior demonstrations"):
+        report = evaluate_saved_policy(b, n_steps=5, scenario="light", seed=3)
+    assert report["held_out"] is False
+    # a taught further since: its first steps, those b's prior was read at, still count
+    assert main([*teach, "3", "--run-dir", str(a), "--resume"]) == 0
+    capsys.readouterr()
+    held, err = evaluated(b, 3)
+    assert held is False and str(a) in err, err
+    runs.rename(tmp_path / "moved")  # both moved together: b finds a beside it
+    b = tmp_path / "moved" / "b"
+    held, err = evaluated(b, 3)
+    assert held is False and str(tmp_path / "moved" / "a") in err, err
+    (tmp_path / "moved" / "a").rename(tmp_path / "gone")  # the prior's session is not there
+    for seed in (3, 4):
+        held, err = evaluated(b, seed)
+        assert held is None and err.count("\n") == 1 and "not known" in err, err
+        assert "Traceback" not in err
+    # arrays from a file: where they were taught is not recorded
+    x, y = load_demonstrations(tmp_path / "gone")
+    np.savez(tmp_path / "prior.npz", observations=x, actions=y)
+    c = tmp_path / "c"
+    assert main([*teach, "2", "--run-dir", str(c), prior, str(tmp_path / "prior.npz")]) == 0
+    capsys.readouterr()
+    held, err = evaluated(c, 3)
+    assert held is None and "not known" in err and "not read from a session" in err, err
+    with pytest.warns(NotHeldOutWarning, match="not known"):
+        assert evaluate_saved_policy(c, n_steps=5)["held_out"] is None
+
+
 def test_evaluate_saved_policy_takes_a_scenario_file_as_the_cli_does(
     tmp_path, driving_person, capsys
 ):

@@ -21,6 +21,7 @@ from torchcbl.session import (
     load_policy,
     load_prior_demonstrations,
     load_records,
+    prior_source,
 )
 from torchcbl.strategies import ConfidenceBasedAutonomy, correcting
 
@@ -372,3 +373,43 @@ def test_a_refused_run_dir_is_refused_before_the_prior_is_fitted(tmp_path, monke
         )
     assert CountingFits.fits == 0  # refused before the fit, not after it
     assert _tree(tmp_path) == before  # and the folder untouched
+
+
+def test_a_prior_read_from_a_session_records_that_session_and_arrays_record_none(tmp_path):
+    """A session kept only its prior's count and SHA-256, nothing of where it came from, so an
+    evaluation could not tell the road it was taught on (and said held out). Given as
+    load_demonstrations returns it, the new session records the session and its steps then:
+    prior_source finds it (taught further since, or both moved together) where its first
+    steps still give that prior; the two arrays apart record nothing; a session gone or
+    holding other demonstrations is told as unknown, never as a source."""
+    import pickle
+    import shutil
+
+    first = make(tmp_path / "runs" / "first")
+    first.run(max_steps=20)
+    first.close()
+    demos = load_demonstrations(tmp_path / "runs" / "first")
+    assert pickle.loads(pickle.dumps(demos)).source == demos.source  # kept in a copy too
+    make(tmp_path / "runs" / "next", demos).close()
+    make(tmp_path / "runs" / "arrays", tuple(demos)).close()
+    assert prior_source(tmp_path / "runs" / "first") is None  # no prior demonstrations
+    found = prior_source(tmp_path / "runs" / "next")
+    assert found.session == tmp_path / "runs" / "first" and found.n_steps == 20, found
+    again = ConfidentTeacher.resume(
+        tmp_path / "runs" / "first", rare_regions_world(), lambda o, i: 0, progress=False
+    )
+    again.run(max_steps=25)  # taught further: its first 20 steps still give the prior
+    assert len(load_records(tmp_path / "runs" / "first")) == 25
+    again.close()
+    assert prior_source(tmp_path / "runs" / "next").session == found.session
+    arrays = prior_source(tmp_path / "runs" / "arrays")
+    assert arrays.session is None and "given as arrays" in arrays.unknown, arrays
+    (tmp_path / "runs").rename(tmp_path / "moved")
+    moved = prior_source(tmp_path / "moved" / "next")
+    assert moved.session == tmp_path / "moved" / "first", moved
+    shutil.rmtree(tmp_path / "moved" / "first")
+    other = make(tmp_path / "moved" / "first", seed=9)  # another session where it was
+    other.run(max_steps=20)
+    other.close()
+    gone = prior_source(tmp_path / "moved" / "next")
+    assert gone.session is None and "no longer holds them" in gone.unknown, gone

@@ -677,7 +677,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     for w in said:  # e.g. a corridor session that does not say which robot it was taught on
         text = _one_line(w.message)
         held = getattr(module, "NotHeldOutWarning", None)  # (driving's; said the CLI's way)
-        if held is not None and isinstance(w.message, held):
+        unknown = getattr(module, "HeldOutUnknownWarning", None)  # (its advice is the CLI's)
+        if held is not None and isinstance(w.message, held) and not isinstance(w.message, unknown):
             text = (
                 f"{_one_line(w.message.road)}; for held-out ones give another segment (--seed S) "
                 "or base seed (--scenario NAME|FILE.json)"
@@ -1063,7 +1064,10 @@ _EVALUATE_EPILOG = (
     "0 to 100, of timesteps on which the car overlapped another car), lanes (the fraction, "
     "0 to 1, of timesteps in each lane, summing to 1, in the order of lane_names), lane_names "
     "(the lanes' names, right shoulder first), scenario (the traffic driven, its "
-    "TrafficScenario fields), held_out (false where that is road the session was taught on), "
+    "TrafficScenario fields), held_out (false where that is road the session was taught on, "
+    "or the session its prior demonstrations were read from was; null where that cannot be "
+    "told, with a warning: prior demonstrations from a .npz file, or whose session is not "
+    "there any more), "
     "start_lane (the lane it started in, 0 the right shoulder), sim (the SUMO settings, "
     "SimConfig's fields)."
 )
@@ -1246,15 +1250,16 @@ def _read_prior_demonstrations(path: Path) -> tuple[Any, Any]:
         from torchcbl.session import load_demonstrations
 
         try:  # its training set: its own prior first, relabelled as its strategy relabels
-            x, y = load_demonstrations(path)
+            demonstrations = load_demonstrations(path)
         except (IncompatibleRunDirError, CorruptSessionError) as exc:
             raise _UsageError(f"{flag}: {_one_line(exc)}") from None
-        if not len(y):  # (ConfidentTeacher's refusal says "leave it out (None)", Python's)
+        if not len(demonstrations[1]):  # (ConfidentTeacher's says "leave it out (None)")
             raise _UsageError(
                 f"{flag}: that session holds no demonstrations yet; teach it first (torchcbl "
                 "teach ... --resume), or leave --prior-demonstrations out"
             )
-        return x, y
+        # as read: the new session records which session and steps they came from
+        return demonstrations
     if not path.is_file():
         raise _UsageError(f"{flag}: no such file or directory; {_PRIOR_EXPECTED}")
     try:
@@ -2290,8 +2295,10 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         metavar="FILE.npz|DIR",
         help="start from demonstrations you already have: a .npz with arrays 'observations' "
-        "[N, D] and 'actions' [N], or an earlier session's directory (its training set); every "
-        "fit includes them, the session keeps them, and they do not count as its "
+        "[N, D] and 'actions' [N], or an earlier session's directory (its training set; the "
+        "session records which, so that a driving evaluate counts the road it was taught on "
+        "as taught, where a .npz's origin is not known: held_out null); every fit includes "
+        "them, the session keeps them, and they do not count as its "
         "demonstrations (the non-interactive phase still asks at every step until its window "
         "is full and its accuracy reaches the target: with a good prior, add "
         "--skip-noninteractive)",

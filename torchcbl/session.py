@@ -12,7 +12,10 @@ Run directory layout (one directory per teaching session)::
                                  (``starts_fitted``); for a session with prior
                                  demonstrations, ``"prior"``: their count and the
                                  SHA-256 of prior.npz (and format 3, which a torchcbl
-                                 without prior demonstrations refuses to read)
+                                 without prior demonstrations refuses to read), and,
+                                 where they were read from a session
+                                 (:class:`Demonstrations`), ``"source"``: its path,
+                                 absolute and relative, and its step count then
         prior.npz                the prior demonstrations the session started from
                                  (``observations`` [N, D] float64, ``actions`` [N] int64),
                                  written with the session, before config.json; the first
@@ -250,6 +253,7 @@ __all__ = [
     "FORMAT",
     "RESUME_AS",
     "CorruptSessionError",
+    "Demonstrations",
     "IncompatibleRunDirError",
     "SessionLockedError",
     "SessionSummary",
@@ -269,6 +273,8 @@ __all__ = [
     "load_policy",
     "load_prior_demonstrations",
     "load_records",
+    "prior_source",
+    "PriorSource",
     "repair_journal",
     "restore_model",
 ]
@@ -3056,28 +3062,177 @@ def _labels(run_dir: str | os.PathLike[str], *, depth: int = 0) -> tuple[np.ndar
     return np.stack(xs), np.asarray(ys, dtype=np.int64)
 
 
-def load_demonstrations(run_dir: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+class Demonstrations(tuple[np.ndarray, np.ndarray]):
+    """A session's training set as :func:`load_demonstrations` returns it: the pair
+    ``(observations, actions)``, unpacked or indexed as any tuple, which also says where it
+    was read. ``source``: the session directory, absolute; ``n_steps``: the steps its log held
+    then (the training set is that of its first ``n_steps`` steps).
+
+    A session started from it as it is returned (``ConfidentTeacher(...,
+    prior_demonstrations=load_demonstrations(run_dir))``, as ``torchcbl teach
+    --prior-demonstrations DIR`` starts one) records both in its config.json, so that where
+    its prior demonstrations were taught can be told later (:func:`prior_source`: a driving
+    evaluation counts the road they were taught on as taught). The two arrays taken apart, or
+    changed, record nothing of it."""
+
+    source: Path
+    n_steps: int
+
+    def __new__(
+        cls,
+        observations: np.ndarray,
+        actions: np.ndarray,
+        *,
+        source: str | os.PathLike[str],
+        n_steps: int,
+    ) -> Demonstrations:
+        """``(observations, actions)`` read from the session ``source`` at ``n_steps`` steps."""
+        self = super().__new__(cls, (observations, actions))
+        self.source = Path(os.path.abspath(source))
+        self.n_steps = int(n_steps)
+        return self
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled and copied with its source (a tuple's own would drop the keywords)."""
+        return (_demonstrations, (self[0], self[1], str(self.source), self.n_steps))
+
+
+def _demonstrations(x: np.ndarray, y: np.ndarray, source: str, n_steps: int) -> Demonstrations:
+    """A :class:`Demonstrations` again (pickle's and copy's)."""
+    return Demonstrations(x, y, source=source, n_steps=n_steps)
+
+
+def load_demonstrations(run_dir: str | os.PathLike[str]) -> Demonstrations:
     """The session's training set, what its model's every fit stands on: observations [M, D]
-    float64 and labels [M] int64 ([0, D] and [0] when the session has none).
+    float64 and labels [M] int64 ([0, D] and [0] when the session has none), as a
+    :class:`Demonstrations` pair, which also names the session and the steps it was read at.
 
     The prior demonstrations the session started from, if any (:func:`load_prior_demonstrations`),
     then its own labels in arrival order (:func:`load_labels`); with a strategy that relabels
     (``"relabel": true`` in the stored strategy, e.g. Confidence-Based Autonomy), a label for
     an observation already stored, a prior one included, replaces that point's label instead
     of adding a point. So ``prior_demonstrations=load_demonstrations(earlier_run_dir)`` starts
-    a session from everything an earlier one was fitted on.
+    a session from everything an earlier one was fitted on (and records which session that
+    was, :func:`prior_source`).
 
     Raises:
         CorruptSessionError: the session's ``prior.npz`` is missing or changed.
     """
+    x, y, n_steps = _training_set(run_dir)
+    return Demonstrations(x, y, source=run_dir, n_steps=n_steps)
+
+
+def _training_set(
+    run_dir: str | os.PathLike[str], *, at_steps: int | None = None, depth: int = 0
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`load_demonstrations`'s training set and the steps the log held (the last
+    step's number + 1; 0 for none); with ``at_steps``, that of the log's steps before step
+    ``at_steps`` only (and their corrections). Warnings point at the caller of the public
+    reader, ``depth`` frames of torchcbl's own between them."""
     config = load_config(run_dir)
     prior = _read_prior(run_dir, config)  # (this config: not read again for the prior)
-    x, y = _labels(run_dir)
+    records, corrections = _read_log(run_dir, depth=depth + 1)
+    n_steps = records[-1].step + 1 if records else 0
+    if at_steps is not None:
+        records = [r for r in records if r.step < at_steps]
+        corrections = {s: a for s, a in corrections.items() if s < at_steps}
+    xs, ys = label_sequence(records, _corrections_of(records, corrections))
+    if ys:
+        x, y = np.stack(xs), np.asarray(ys, dtype=np.int64)
+    else:
+        n_features = int(config["env"]["n_features"])
+        x, y = np.zeros((0, n_features), dtype=np.float64), np.zeros(0, dtype=np.int64)
     if prior is not None:
         x, y = np.concatenate([prior[0], x]), np.concatenate([prior[1], y])
-    if not len(y) or not _relabels(config):
-        return x, y
-    return training_set(list(x), y.tolist(), relabel=True)
+    if len(y) and _relabels(config):
+        x, y = training_set(list(x), y.tolist(), relabel=True)
+    return x, y, n_steps
+
+
+@dataclass(frozen=True)
+class PriorSource:
+    """Where a session's prior demonstrations were read from, as far as it can be told
+    (:func:`prior_source`).
+
+    Attributes:
+        session: the session directory they were read from (:class:`Demonstrations`), found
+            where the session's config.json records it, or else where it was beside this
+            session (both moved together), and checked: its training set over its first
+            ``n_steps`` steps is, row for row, the prior this session keeps. None where that
+            cannot be told.
+        n_steps: the steps of that session's log they were read at; None with ``session``.
+        unknown: why ``session`` is None, a clause that follows "its N prior demonstrations"
+            (given as arrays, so that nothing of their origin is recorded; or read from a
+            session that is not there any more, or no longer holds them); None otherwise.
+    """
+
+    session: Path | None
+    n_steps: int | None
+    unknown: str | None
+
+
+def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
+    """Where the prior demonstrations of the session ``run_dir`` were read from; None for a
+    session without prior demonstrations.
+
+    A session records the session its prior was read from when it was given them as
+    :func:`load_demonstrations` returns them (``torchcbl teach --prior-demonstrations
+    SESSION_DIR``): that session's path, absolute and relative to this session's directory,
+    and its step count then. It is sought at the recorded path, then at the relative one, and
+    taken only where its first steps still give exactly the prior this session keeps (read
+    only; its own warnings, a damaged log's, are not passed on). A prior given as arrays
+    (a ``.npz`` file's, or arrays of one's own), or that of a session written before the
+    source was recorded, has no known source: ``PriorSource(None, None, why)``.
+
+    Raises:
+        CorruptSessionError: this session's ``prior.npz`` is missing or changed.
+    """
+    config = load_config(run_dir)
+    prior = _read_prior(run_dir, config)
+    if prior is None:
+        return None
+    entry = config["prior"]
+    source = entry.get("source")
+    if not (
+        isinstance(source, dict)
+        and isinstance(source.get("session"), str)
+        and type(source.get("n_steps")) is int
+        and source["n_steps"] >= 0
+    ):
+        return PriorSource(
+            None,
+            None,
+            "were given as arrays, not read from a session, so where they were taught is not "
+            "recorded",
+        )
+    recorded, at_steps = Path(source["session"]), source["n_steps"]
+    places = [recorded]
+    relative = source.get("relative")
+    if isinstance(relative, str):
+        beside = Path(os.path.normpath(os.path.join(os.path.abspath(run_dir), relative)))
+        if beside != recorded:
+            places.append(beside)
+    found: list[str] = []
+    for place in places:
+        if not place.exists():
+            found.append(f"{place} is not there")
+            continue
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                x, y, _ = _training_set(place, at_steps=at_steps)
+        except (OSError, ValueError) as exc:  # (IncompatibleRunDirError, CorruptSessionError)
+            found.append(f"{place} cannot be read ({str(exc).split('. ')[0]})")
+            continue
+        if np.array_equal(x, prior[0]) and np.array_equal(y, prior[1]):
+            return PriorSource(place, at_steps, None)
+        found.append(f"{place} no longer holds them in its first {at_steps} steps")
+    return PriorSource(
+        None,
+        None,
+        f"were read from the session {recorded} (its first {at_steps} steps), which is not "
+        f"there as it was: {'; '.join(found)}",
+    )
 
 
 def latest_checkpoint(

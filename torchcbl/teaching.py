@@ -38,6 +38,7 @@ target is None; it is skipped when ``noninteractive=False``.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import hashlib
@@ -88,6 +89,7 @@ from torchcbl.session import (
     PRIOR_FORMAT,
     PRIOR_NAME,
     STOP_FIELDS,
+    Demonstrations,
     LabelDigest,
     SessionStore,
     _check_new_session_path,
@@ -542,6 +544,17 @@ def _as_interrupted(record: StepRecord) -> StepRecord:
     return record.with_outcome(None, False, True, {"torchcbl_interrupted": True})
 
 
+def _prior_source_entry(demonstrations: Demonstrations, run_dir: Path) -> dict[str, Any]:
+    """config.json's ``prior.source``: the session the prior was read from, by its absolute
+    path and by its path relative to the new session's directory (found there where both
+    moved together), and the steps its log held then."""
+    entry: dict[str, Any] = {"session": str(demonstrations.source)}
+    with contextlib.suppress(ValueError):  # (another drive than run_dir's: no relative path)
+        entry["relative"] = os.path.relpath(demonstrations.source, os.path.abspath(run_dir))
+    entry["n_steps"] = demonstrations.n_steps
+    return entry
+
+
 def _check_prior(value: Any, n_features: int, n_actions: int) -> tuple[np.ndarray, np.ndarray]:
     """``prior_demonstrations`` as (observations [N, D] float64, actions [N] int64), read-only
     copies; a ValueError / TypeError saying what was expected, what was given and what to do."""
@@ -686,9 +699,14 @@ class ConfidentTeacher:
             (:attr:`n_prior` and :attr:`prior_demonstrations` say what the prior holds). The
             session keeps them in its directory (``prior.npz``, its SHA-256 in config.json),
             so :meth:`resume` and ``load_model`` use them without being given them again, and
-            refuse a session whose file is missing or changed. Not with a fitted ``model``
-            (the first refit would replace it by a fit on the prior anyway): pass an unfitted
-            one, or the prior alone.
+            refuse a session whose file is missing or changed. Given as
+            ``load_demonstrations`` returns them (a :class:`~torchcbl.session.Demonstrations`),
+            the session also records the session they were read from and its step count then
+            (:func:`~torchcbl.session.prior_source`), so that the road they were taught on
+            counts as taught where a driving policy is evaluated; arrays of one's own record
+            no origin, and such an evaluation cannot say it is held out (``held_out``: None).
+            Not with a fitted ``model`` (the first refit would replace it by a fit on the
+            prior anyway): pass an unfitted one, or the prior alone.
         rule: the confidence rule of the default strategy; default ``DistanceRule(2.0)``
             (the paper's). Shorthand for ``strategy=ConfidentExecution(rule)``.
         strategy: who asks and who acts (:mod:`torchcbl.strategies`); default
@@ -808,6 +826,11 @@ class ConfidentTeacher:
                     "sha256": hashlib.sha256(prior).hexdigest(),
                     "n_demonstrations": self.n_prior,
                 }
+                if isinstance(prior_demonstrations, Demonstrations):
+                    # where they were read (torchcbl.session.prior_source checks it is still so)
+                    session_config["prior"]["source"] = _prior_source_entry(
+                        prior_demonstrations, self.run_dir
+                    )
             # a session may start from a fitted model: its checkpoint 0, written with the
             # session (a resume can only load it, no label refits it); one with prior
             # demonstrations has its model fitted on them as checkpoint 0, and them in prior.npz
