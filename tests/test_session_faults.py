@@ -1057,7 +1057,7 @@ def test_a_resume_past_a_damaged_refit_by_hand_writes_its_model_in_its_place(
     model on 12 and set the damaged file aside, whose .damaged name was then the only record
     of the refit at 7. It now writes the model rebuilt on 7 labels in its place, so a real
     checkpoint records the refit and a .damaged name need record nothing; where that write
-    fails (a full disk), the damaged file goes back under its name, which still records it,
+    fails (a full disk), the damaged file stays under its name, which still records it,
     with a warning. Either way every stage reads as the loop had it."""
     run = tmp_path / "run"
     env = rare_regions_world()
@@ -1107,6 +1107,88 @@ def test_a_resume_past_a_damaged_refit_by_hand_writes_its_model_in_its_place(
     back.run(max_demonstrations=17)
     assert int(back.model.n_points_.sum()) == 17  # the loop's next refit, on 7's schedule
     back.close()
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_resume_interrupted_while_it_rebuilds_a_damaged_refit_by_hand_keeps_its_record(
+    tmp_path, monkeypatch, refit
+):
+    """A refit by hand at 7 (max_new=5) whose checkpoint is damaged: its name alone records
+    the refit. Resume renamed the file .damaged first and wrote the model rebuilt on 7 labels
+    under the name only after its refits, so a Ctrl-C (or a kill, an out-of-memory) in
+    between left nothing recording the refit: load_model, and every later resume, rebuilt
+    on 5 labels where the live loop stood on 7; and a reader meanwhile read 5 too. The name
+    now stays in place until the rebuilt model replaces it (the damaged bytes copied to
+    .damaged first): here the refit is interrupted, and a reader during it, load_model after
+    it and the next resume all stand on 7, which then writes the model in its place."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, refit)
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()[:100]
+    hand.write_bytes(data)
+    read = []
+
+    def interrupted(self, *args, **kw):
+        monkeypatch.undo()  # the reader below fits as it would
+        read.append(load_model(run))  # another process reading while the resume refits
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(GaussianMixtureSet, "fit", interrupted)
+    monkeypatch.setattr(GaussianMixtureSet, "refit", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        resume(run)
+    assert len(read) == 1 and _same(read[0], live[7])
+    assert hand.read_bytes() == data  # still in place, still recording the refit
+    assert _same(load_model(run), live[7])
+    back, _ = resume(run)
+    assert _same(back.model, live[7])
+    back.close()
+    assert _same_payload(hand, live[7])  # the rebuilt model in its place
+    assert hand.with_name(hand.name + ".damaged").read_bytes() == data  # every byte kept
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_damaged_refit_by_hand_whose_bytes_cannot_be_kept_stays_in_place(
+    tmp_path, monkeypatch, refit
+):
+    """A resume writes the model rebuilt over a damaged checkpoint only once its bytes are
+    kept as .damaged. Where neither a hard link (here refused, as on file systems without
+    them) nor a copy (the file cannot be read) can be made, the file stays as it is, still
+    recording its refit, with a warning naming it and saying what to do; every stage reads
+    as the loop had it, and a later resume that can keep the bytes writes the model."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, refit)
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()[:100]
+    hand.write_bytes(data)
+    real_read = Path.read_bytes
+
+    def no_link(*args, **kw):
+        raise OSError(errno.EPERM, "Operation not permitted")
+
+    def unreadable(path):
+        if path == hand:
+            raise OSError(errno.EIO, "Input/output error")
+        return real_read(path)
+
+    monkeypatch.setattr(S.os, "link", no_link)
+    monkeypatch.setattr(Path, "read_bytes", unreadable)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        back, _ = resume(run)
+    monkeypatch.undo()
+    (said,) = [str(w.message) for w in caught if str(hand) in str(w.message)]
+    assert "could not be kept as model-00000007.pt.damaged (Input/output error)" in said, said
+    assert "the refit there" in said and "resume again" in said, said
+    assert _same(back.model, live[7])
+    back.close()
+    assert hand.read_bytes() == data
+    assert sorted(p.name for p in hand.parent.iterdir() if "00000007" in p.name) == [hand.name]
+    assert _same(load_model(run), live[7])
+    back, _ = resume(run)
+    back.close()
+    assert _same_payload(hand, live[7])
+    assert hand.with_name(hand.name + ".damaged").read_bytes() == data
 
 
 def _same_payload(path: Path, state: dict[str, torch.Tensor]) -> bool:
