@@ -1093,7 +1093,14 @@ def test_a_resume_past_a_damaged_refit_by_hand_writes_its_model_in_its_place(
             warnings.simplefilter("always")
             back, env = resume(run)
         monkeypatch.setattr(S.torch, "save", real)
-        assert [w for w in caught if "model-00000007.pt failed" in str(w.message)], caught
+        (said,) = [str(w.message) for w in caught if "model-00000007.pt failed" in str(w.message)]
+        # not "a missing checkpoint is refitted": the damaged file stayed, recording the refit
+        assert "missing" not in said, said
+        assert (
+            "The damaged model-00000007.pt stays under its name, which still records the refit "
+            "on 7 labels: resume and load_model rebuild that model from the log" in said
+        ), said
+        assert said.endswith("then resume again to have the model written in its place."), said
         assert hand.read_bytes() == data and not hand.with_name(hand.name + ".damaged").exists()
     else:
         back, env = resume(run)
@@ -1187,6 +1194,40 @@ def test_a_damaged_refit_by_hand_whose_bytes_cannot_be_kept_stays_in_place(
     assert _same(load_model(run), live[7])
     back, _ = resume(run)
     back.close()
+    assert _same_payload(hand, live[7])
+    assert hand.with_name(hand.name + ".damaged").read_bytes() == data
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="reads /proc/self/fd")
+def test_a_rebuilt_refit_by_hand_whose_folder_cannot_be_flushed_says_so(tmp_path, monkeypatch):
+    """Where the rebuilt model of a damaged refit by hand was renamed over its name but the
+    folder could not be flushed to the disk (an I/O error), the warning says that, not that
+    the damaged file stays: the name holds the model now, a power cut may bring the damaged
+    file back (which records the refit too), and its bytes are kept as .damaged."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, "full")
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()[:100]
+    hand.write_bytes(data)
+    real_fsync, armed = os.fsync, []
+
+    def fsync(fd):
+        if armed and os.path.isdir(os.readlink(f"/proc/self/fd/{fd}")):
+            armed.clear()
+            raise OSError(errno.EIO, "Input/output error")
+        real_fsync(fd)
+        if os.readlink(f"/proc/self/fd/{fd}").endswith(".model-00000007.pt.tmp"):
+            armed.append(None)  # the rebuilt model's file: the folder's flush after it fails
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        back, _ = resume(run)
+    monkeypatch.undo()
+    back.close()
+    (said,) = [str(w.message) for w in caught if "model-00000007.pt failed" in str(w.message)]
+    assert "(Input/output error)" in said and "stays" not in said, said
+    assert "may not be on the disk" in said and "kept as model-00000007.pt.damaged" in said
     assert _same_payload(hand, live[7])
     assert hand.with_name(hand.name + ".damaged").read_bytes() == data
 

@@ -2489,14 +2489,18 @@ class SessionStore:
         digest: str | None = None,
         *,
         by_hand: bool = False,
+        after: str | None = None,
     ) -> Path:
         """Write the model fitted on the first ``n_demonstrations`` labels, with ``digest``
         (:func:`labels_digest` of those labels) to tell it from a stale one later; then, with
         :attr:`keep_checkpoints`, remove the checkpoints older than the newest that many (not
         checkpoint 0, and none named for more labels than this one). ``by_hand``: the model of
         a refit asked by hand (``ConfidentTeacher.refit``), which this checkpoint alone
-        records: a failed write says what its loss costs (:func:`_lost_hand_refit`)."""
-        after = _CHECKPOINT_LATER
+        records: a failed write says what its loss costs (:func:`_lost_hand_refit`).
+        ``after``: what a failed write's message says it leaves (default: the checkpoint is
+        refitted from the log where it is missing)."""
+        if after is None:
+            after = _CHECKPOINT_LATER
         if by_hand and self._max_new is not None:
             after = _lost_hand_refit(n_demonstrations, self._max_new)
         path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest, after)
@@ -3650,13 +3654,32 @@ def restore_model(
                     stacklevel=3,
                 )
                 return
+        digest = labels_digest(all_xs[: base + j], all_ys[: base + j])
         try:
-            store.save_checkpoint(model, j, labels_digest(all_xs[: base + j], all_ys[: base + j]))
+            # over a damaged file kept in place, the message says what stays (below)
+            store.save_checkpoint(model, j, digest, after="" if kept is not None else None)
         except SessionWriteError as exc:
-            warnings.warn(str(exc), stacklevel=3)
-            if kept is not None and _holds_same(own, kept):  # the damaged file, in place
+            if kept is None:  # the checkpoint missing (or set aside): refitted from the log
+                warnings.warn(str(exc), stacklevel=3)
+            elif _holds_same(own, kept):  # the write left the name as it was
                 with contextlib.suppress(OSError):
-                    kept.unlink()
+                    kept.unlink()  # the same bytes, still under the name
+                warnings.warn(
+                    f"{exc}The damaged {own.name} stays under its name, which still records "
+                    f"the refit on {j} labels: resume and load_model rebuild that model from "
+                    "the log, as this resume did (the session and its model in memory are "
+                    "intact). Free space (or fix the folder's permissions), then resume again "
+                    "to have the model written in its place.",
+                    stacklevel=3,
+                )
+            else:  # renamed over the name, the folder not flushed: a power cut may undo it
+                warnings.warn(
+                    f"{exc}The model was put in its place but may not be on the disk: after "
+                    f"a power cut the name may hold the damaged file again (which records the "
+                    f"refit on {j} labels too; its bytes are kept as {kept.name}). Nothing is "
+                    "lost either way.",
+                    stacklevel=3,
+                )
 
     def lost_start(why: str) -> CorruptSessionError:  # (_restore_plan raised where it comes)
         return _lost_start(run_dir, k, why)
