@@ -1328,6 +1328,52 @@ def test_an_older_resume_that_set_a_refit_by_hand_aside_kept_the_regular_schedul
     assert (run / "checkpoints" / aside.name).read_bytes() == data
 
 
+@pytest.mark.parametrize("where", ["beyond", "stale"])
+def test_a_checkpoint_resume_cannot_set_aside_is_said_and_left_as_it_is(
+    tmp_path, monkeypatch, where
+):
+    """Resume renames a checkpoint named for more labels than the log holds ``.stale`` (read
+    as a refit once the session is taught that far again: here a damaged one at 7 in a
+    session of 5 labels), and a stale one ``.stale``; where the rename failed, the file
+    stayed, silently, and the stale one of the count the model stands on was written over
+    (its bytes lost). Each now stays as it is, with a warning naming it and what to do."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    config = TeachingConfig(noninteractive=False, max_new=5)
+    ct = ConfidentTeacher(env, oracle(env), config=config, run_dir=run, progress=False)
+    ct.run(max_demonstrations=5)
+    live = copy.deepcopy(ct.model.state_dict())
+    ct.close()
+    five = run / "checkpoints" / "model-00000005.pt"
+    if where == "beyond":
+        odd = run / "checkpoints" / "model-00000007.pt"
+        odd.write_bytes(five.read_bytes()[:100])
+    else:
+        odd = five
+        payload = torch.load(five, weights_only=True)
+        torch.save({**payload, "labels_sha256": "0" * 64}, five)  # fitted on other labels
+    data = odd.read_bytes()
+    real = os.replace
+
+    def replace(src, dst, *args, **kw):
+        if Path(src) == odd and str(dst).endswith(".stale"):
+            raise OSError(errno.EACCES, "Permission denied")
+        return real(src, dst, *args, **kw)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        back, _ = resume(run)
+    monkeypatch.undo()
+    back.close()
+    said = [str(w.message) for w in caught if str(odd) in str(w.message)]
+    assert len(said) == 1, [str(w.message) for w in caught]
+    assert f"could not be renamed {odd.name}.stale (Permission denied)" in said[0], said
+    assert f"move it out of {odd.parent}" in said[0], said
+    assert odd.read_bytes() == data and not odd.with_name(odd.name + ".stale").exists()
+    assert _same(back.model, live)
+
+
 @pytest.mark.parametrize("damage", ["cut", "whole"])
 @pytest.mark.parametrize("refit", ["full", "incremental"])
 def test_a_checkpoint_of_labels_the_log_lost_is_set_aside_as_stale(tmp_path, refit, damage):

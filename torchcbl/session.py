@@ -149,7 +149,8 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   schedule, not the live one's. A checkpoint named for more labels than the log holds (the
   log lost its tail: a backup restored, a power cut; a writer logs a label before it saves
   its checkpoint) is never read, and a resume renames it ``.stale``: once the session was
-  taught that far again, it would read as a refit the new loop never made.
+  taught that far again, it would read as a refit the new loop never made. A file a resume
+  cannot rename stays as it is (never written over), with a warning naming it.
   A ``prior.npz`` that is missing, or whose SHA-256 is not the one config.json
   recorded, is a :class:`CorruptSessionError` naming it for every reader of the training set
   or the model and for resume (never a model fitted without the prior). An unreadable
@@ -3494,18 +3495,19 @@ def _recorded_refits(
     return tuple(sorted(n for n in named if above < n <= n_labels))
 
 
-def _set_aside(path: Path, why: str) -> Path | None:
+def _set_aside(path: Path, why: str) -> Path:
     """Rename a checkpoint that cannot be used, keeping its bytes (``<name>.<why>[-i]``);
-    returns its new path (None: it could not be renamed, and stays)."""
+    returns its new path.
+
+    Raises:
+        OSError: it could not be renamed, and stays.
+    """
     for i in range(1000):
         target = path.with_name(f"{path.name}.{why}" + (f"-{i}" if i else ""))
-        if not target.exists():
-            try:
-                os.replace(path, target)
-            except OSError:
-                return None
+        if not os.path.lexists(target):
+            os.replace(path, target)
             return target
-    return None
+    raise OSError(errno.EEXIST, f"{path.name}.{why} and its 999 numbered names are taken")
 
 
 def _keep_a_copy(path: Path) -> Path:
@@ -3586,7 +3588,8 @@ def restore_model(
     ``<name>.stale``, never deleted). With ``store``, a file named for more labels than
     ``ys`` holds (a checkpoint of labels the log lost: a writer logs a label before it
     saves its checkpoint) is renamed ``<name>.stale`` too, so that no reader takes it for a
-    refit once the session is taught that far again; a damaged checkpoint whose name records
+    refit once the session is taught that far again (a file that cannot be renamed stays as
+    it is, never written over, with a warning naming it); a damaged checkpoint whose name records
     a refit (or the checkpoint of ``k`` that this model cannot load) stays in place,
     recording it, until the model rebuilt at its count (a fit on those labels;
     ``incremental``: the replayed state there) replaces it: its bytes are first kept as
@@ -3615,11 +3618,42 @@ def restore_model(
     scan, k = _restore_plan(
         run_dir, model, len(ys), base, all_xs, all_ys, max_new, incremental, starts_fitted
     )
+    # the counts whose files could not be set aside: left as they are, never written over
+    pinned: set[int] = set()
+
+    def set_aside(n: int, path: Path, why: str) -> None:
+        """Rename the file of ``n`` labels at ``path`` ``<name>.<why>``; where that fails,
+        warn (the file stays, and ``pinned`` keeps save from writing over it)."""
+        try:
+            _set_aside(path, why)
+        except FileNotFoundError:  # gone since the listing: nothing to set aside
+            return
+        except OSError as exc:
+            pinned.add(n)
+            failed = f"could not be renamed {path.name}.{why} ({exc.strerror or exc})"
+            if n > len(ys):
+                said = (
+                    f"{path} names {n} labels, more than the {len(ys)} the session's log "
+                    f"holds (a checkpoint of labels the log lost), and {failed}: move it out "
+                    f"of {path.parent} yourself, or once the session is taught to {n} labels "
+                    "again readers take it for a refit there."
+                )
+            else:
+                what = "cannot be loaded"
+                if why == "stale":
+                    what = "is stale (not fitted on the log's labels)"
+                said = (
+                    f"{path} {what} and {failed}: it stays as it is (resume and load_model "
+                    f"pass it over, and nothing is written over it); move it out of "
+                    f"{path.parent} yourself."
+                )
+            warnings.warn(said, stacklevel=3)
+
     if store is not None:
         # a writer logs a label before it saves its checkpoint: one named for more labels
         # than the log holds is of labels the log lost, and no refit of what is taught next
-        for _, path in scan.beyond:
-            _set_aside(path, "stale")
+        for n, path in scan.beyond:
+            set_aside(n, path, "stale")
     # the counts whose files cannot be loaded but stay in place until the model rebuilt at
     # their count replaces them (their bytes kept as .damaged first, by save): the damaged
     # ones whose names record a refit, which they go on recording meanwhile (for a reader
@@ -3630,7 +3664,7 @@ def restore_model(
             if n in scan.refits:
                 in_place.add(n)
             else:
-                _set_aside(path, why)
+                set_aside(n, path, why)
     last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
 
     def save(j: int) -> None:
@@ -3638,6 +3672,8 @@ def restore_model(
         file kept in place (``in_place``), only once its bytes are kept as ``.damaged``, so
         that it records the refit until the rebuilt model does."""
         assert store is not None
+        if j in pinned:  # a file that could not be set aside: left as it is (said)
+            return
         own = directory / f"model-{j:08d}.pt"
         kept = None
         if j in in_place:
@@ -3694,7 +3730,7 @@ def restore_model(
             if store is not None and k > 0:  # its rebuilt model in its place, its bytes kept
                 in_place.add(k)
             elif store is not None:
-                _set_aside(directory / f"model-{k:08d}.pt", "damaged")
+                set_aside(k, directory / f"model-{k:08d}.pt", "damaged")
         payload = None
     if (k > 0 or base) and incremental:
         start, loaded = 0, False
