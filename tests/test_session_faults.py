@@ -1328,6 +1328,27 @@ def test_an_older_resume_that_set_a_refit_by_hand_aside_kept_the_regular_schedul
     assert (run / "checkpoints" / aside.name).read_bytes() == data
 
 
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_resume_writes_a_missing_checkpoint_only_of_full_refits(tmp_path, refit):
+    """restore_model's docstring said a resume writes the checkpoint of the labels the model
+    stands on where it is missing (the process killed between logging and saving); only a
+    resume of full refits does. One of incremental refits replays them to that count, bit
+    for bit, and leaves it missing (it writes only the models of refits recorded by damaged
+    files). The docstring now says so; either way the model is the live one."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    config = TeachingConfig(noninteractive=False, max_new=5, refit=refit)
+    ct = ConfidentTeacher(env, oracle(env), config=config, run_dir=run, progress=False)
+    ct.run(max_demonstrations=11)
+    ct.close()
+    ten = run / "checkpoints" / "model-00000010.pt"
+    ten.unlink()  # never saved
+    back, _ = resume(run)
+    assert same_state(back.model, ct.model)
+    back.close()
+    assert ten.exists() == (refit == "full")
+
+
 @pytest.mark.parametrize("where", ["beyond", "stale"])
 def test_a_checkpoint_resume_cannot_set_aside_is_said_and_left_as_it_is(
     tmp_path, monkeypatch, where

@@ -3580,26 +3580,29 @@ def restore_model(
     the name of a checkpoint that cannot be loaded (damaged in place: cut short, emptied,
     unreadable; not a stale one, nor a file set aside): a refit may also be asked for by
     hand, :meth:`ConfidentTeacher.refit`, at any count, and only its checkpoint says so.
-    From there the loop refits every ``max_new`` labels, so the model stood on the first
-    ``k`` labels. That checkpoint is loaded when ``k`` is its count; otherwise (the process
-    died between logging and saving, or the checkpoint is damaged or stale) the model is
-    refitted deterministically on the training set of those labels, and with ``store`` the
-    checkpoint is written (a damaged or stale one is first renamed ``<name>.damaged`` /
-    ``<name>.stale``, never deleted). With ``store``, a file named for more labels than
-    ``ys`` holds (a checkpoint of labels the log lost: a writer logs a label before it
-    saves its checkpoint) is renamed ``<name>.stale`` too, so that no reader takes it for a
-    refit once the session is taught that far again (a file that cannot be renamed stays as
-    it is, never written over, with a warning naming it); a damaged checkpoint whose name records
-    a refit (or the checkpoint of ``k`` that this model cannot load) stays in place,
-    recording it, until the model rebuilt at its count (a fit on those labels;
-    ``incremental``: the replayed state there) replaces it: its bytes are first kept as
-    ``<name>.damaged`` (a hard link, else a copy), then the rebuilt model is renamed over the
-    name. Where the bytes cannot be kept, or that write fails, the file stays as it is (with
-    a warning), so an interruption at any point (a Ctrl-C, a kill) leaves the refit recorded.
+    From there the loop refits every ``max_new`` labels, so the model stood on the first ``k``
+    labels. That checkpoint is loaded when ``k`` is its count; otherwise (the process died
+    between logging and saving, or the checkpoint is damaged or stale) the model is refitted
+    deterministically on the training set of those labels, and with ``store`` (of full refits;
+    see ``incremental`` below) the checkpoint is written (a stale one is first renamed
+    ``<name>.stale``, a damaged one kept as ``<name>.damaged``, never deleted; see below). With
+    ``store``, a file named for more labels than ``ys`` holds (a checkpoint of labels the log
+    lost: a writer logs a label before it saves its checkpoint) is renamed ``<name>.stale``
+    too, so that no reader takes it for a refit once the session is taught that far again (a
+    file that cannot be renamed stays as it is, never written over, with a warning naming it);
+    a damaged checkpoint whose name records a refit (or the checkpoint of ``k`` that this model
+    cannot load) stays in place, recording it, until the model rebuilt at its count (a fit on
+    those labels; ``incremental``: the replayed state there) replaces it: its bytes are first
+    kept as ``<name>.damaged`` (a hard link, else a copy), then the rebuilt model is renamed
+    over the name. Where the bytes cannot be kept, or that write fails, the file stays as it is
+    (with a warning), so an interruption at any point (a Ctrl-C, a kill) leaves the refit
+    recorded.
     With ``incremental`` (``TeachingConfig.refit="incremental"``) the loop's incremental
     refits (``GaussianMixtureSet.refit``, a pure function of the state and the data) are
     replayed from that checkpoint's state instead, through every refit the names record, so
-    the model is the live one bit for bit.
+    the model is the live one bit for bit; with ``store`` only the models of refits recorded
+    by damaged files (and of ``k`` where this model cannot load its checkpoint) are written
+    then, in their place: a missing checkpoint stays missing, the replay rebuilding it.
     ``starts_fitted``: the session started from a fitted model (config.json's
     ``"starts_fitted"``), which only checkpoint 0 holds and no label can refit: where the model
     still stands on it (``k`` is 0, or the refits are incremental) and it cannot be loaded,
