@@ -424,3 +424,30 @@ def test_a_rule_given_no_classification_says_what_it_expected(rule, fields):
     assert torch.equal(
         rule.is_confident(alike, np.zeros((5, 4))), rule.is_confident(C, np.zeros((5, 4)))
     )
+
+
+def test_auto_threshold_rule_refuses_a_look_alike_whose_action_is_beyond_its_posterior():
+    """A look-alike classification (a custom model's own answer type) whose posterior is as
+    wide as the rule's thresholds but whose action lies beyond them raised a ValueError since
+    1c30b8c, then a bare IndexError ('index 2 is out of bounds for dimension 0 with size 2')
+    once only the posterior's width was read (38ea69e): only the library's Classification,
+    whose action is its posterior's argmax, need not be checked. A look-alike's action is."""
+    from collections import namedtuple
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(40, 2)) + np.repeat(np.arange(2), 20)[:, None] * 3.0
+    y = np.repeat(np.arange(2), 20)
+    model = GaussianMixtureSet(2, 2, 2).fit(x, y)
+    rule = AutoThresholdRule()
+    rule.update(model, x, y)
+    c = model.classify(x[:3])
+    Answer = namedtuple("Answer", "action distance posterior")
+    beyond = Answer(torch.tensor([0, 2, 1]), c.distance, c.posterior)
+    with pytest.raises(
+        ValueError,
+        match=r"AutoThresholdRule.is_confident: its thresholds are for 2 actions \(set by "
+        r"update\) but the classification has action 2; call rule.update\(model, ",
+    ):
+        rule.is_confident(beyond, x[:3])
+    alike = Answer(c.action, c.distance, c.posterior)  # in range: read as the library's own
+    assert torch.equal(rule.is_confident(alike, x[:3]), rule.is_confident(c, x[:3]))

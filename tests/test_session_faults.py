@@ -1057,7 +1057,7 @@ def test_a_resume_past_a_damaged_refit_by_hand_writes_its_model_in_its_place(
     model on 12 and set the damaged file aside, whose .damaged name was then the only record
     of the refit at 7. It now writes the model rebuilt on 7 labels in its place, so a real
     checkpoint records the refit and a .damaged name need record nothing; where that write
-    fails (a full disk), the damaged file goes back under its name, which still records it,
+    fails (a full disk), the damaged file stays under its name, which still records it,
     with a warning. Either way every stage reads as the loop had it."""
     run = tmp_path / "run"
     env = rare_regions_world()
@@ -1093,7 +1093,14 @@ def test_a_resume_past_a_damaged_refit_by_hand_writes_its_model_in_its_place(
             warnings.simplefilter("always")
             back, env = resume(run)
         monkeypatch.setattr(S.torch, "save", real)
-        assert [w for w in caught if "model-00000007.pt failed" in str(w.message)], caught
+        (said,) = [str(w.message) for w in caught if "model-00000007.pt failed" in str(w.message)]
+        # not "a missing checkpoint is refitted": the damaged file stayed, recording the refit
+        assert "missing" not in said, said
+        assert (
+            "The damaged model-00000007.pt stays under its name, which still records the refit "
+            "on 7 labels: resume and load_model rebuild that model from the log" in said
+        ), said
+        assert said.endswith("then resume again to have the model written in its place."), said
         assert hand.read_bytes() == data and not hand.with_name(hand.name + ".damaged").exists()
     else:
         back, env = resume(run)
@@ -1107,6 +1114,122 @@ def test_a_resume_past_a_damaged_refit_by_hand_writes_its_model_in_its_place(
     back.run(max_demonstrations=17)
     assert int(back.model.n_points_.sum()) == 17  # the loop's next refit, on 7's schedule
     back.close()
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_resume_interrupted_while_it_rebuilds_a_damaged_refit_by_hand_keeps_its_record(
+    tmp_path, monkeypatch, refit
+):
+    """A refit by hand at 7 (max_new=5) whose checkpoint is damaged: its name alone records
+    the refit. Resume renamed the file .damaged first and wrote the model rebuilt on 7 labels
+    under the name only after its refits, so a Ctrl-C (or a kill, an out-of-memory) in
+    between left nothing recording the refit: load_model, and every later resume, rebuilt
+    on 5 labels where the live loop stood on 7; and a reader meanwhile read 5 too. The name
+    now stays in place until the rebuilt model replaces it (the damaged bytes copied to
+    .damaged first): here the refit is interrupted, and a reader during it, load_model after
+    it and the next resume all stand on 7, which then writes the model in its place."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, refit)
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()[:100]
+    hand.write_bytes(data)
+    read = []
+
+    def interrupted(self, *args, **kw):
+        monkeypatch.undo()  # the reader below fits as it would
+        read.append(load_model(run))  # another process reading while the resume refits
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(GaussianMixtureSet, "fit", interrupted)
+    monkeypatch.setattr(GaussianMixtureSet, "refit", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        resume(run)
+    assert len(read) == 1 and _same(read[0], live[7])
+    assert hand.read_bytes() == data  # still in place, still recording the refit
+    assert _same(load_model(run), live[7])
+    back, _ = resume(run)
+    assert _same(back.model, live[7])
+    back.close()
+    assert _same_payload(hand, live[7])  # the rebuilt model in its place
+    assert hand.with_name(hand.name + ".damaged").read_bytes() == data  # every byte kept
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_damaged_refit_by_hand_whose_bytes_cannot_be_kept_stays_in_place(
+    tmp_path, monkeypatch, refit
+):
+    """A resume writes the model rebuilt over a damaged checkpoint only once its bytes are
+    kept as .damaged. Where neither a hard link (here refused, as on file systems without
+    them) nor a copy (the file cannot be read) can be made, the file stays as it is, still
+    recording its refit, with a warning naming it and saying what to do; every stage reads
+    as the loop had it, and a later resume that can keep the bytes writes the model."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, refit)
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()[:100]
+    hand.write_bytes(data)
+    real_read = Path.read_bytes
+
+    def no_link(*args, **kw):
+        raise OSError(errno.EPERM, "Operation not permitted")
+
+    def unreadable(path):
+        if path == hand:
+            raise OSError(errno.EIO, "Input/output error")
+        return real_read(path)
+
+    monkeypatch.setattr(S.os, "link", no_link)
+    monkeypatch.setattr(Path, "read_bytes", unreadable)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        back, _ = resume(run)
+    monkeypatch.undo()
+    (said,) = [str(w.message) for w in caught if str(hand) in str(w.message)]
+    assert "could not be kept as model-00000007.pt.damaged (Input/output error)" in said, said
+    assert "the refit there" in said and "resume again" in said, said
+    assert _same(back.model, live[7])
+    back.close()
+    assert hand.read_bytes() == data
+    assert sorted(p.name for p in hand.parent.iterdir() if "00000007" in p.name) == [hand.name]
+    assert _same(load_model(run), live[7])
+    back, _ = resume(run)
+    back.close()
+    assert _same_payload(hand, live[7])
+    assert hand.with_name(hand.name + ".damaged").read_bytes() == data
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="reads /proc/self/fd")
+def test_a_rebuilt_refit_by_hand_whose_folder_cannot_be_flushed_says_so(tmp_path, monkeypatch):
+    """Where the rebuilt model of a damaged refit by hand was renamed over its name but the
+    folder could not be flushed to the disk (an I/O error), the warning says that, not that
+    the damaged file stays: the name holds the model now, a power cut may bring the damaged
+    file back (which records the refit too), and its bytes are kept as .damaged."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, "full")
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()[:100]
+    hand.write_bytes(data)
+    real_fsync, armed = os.fsync, []
+
+    def fsync(fd):
+        if armed and os.path.isdir(os.readlink(f"/proc/self/fd/{fd}")):
+            armed.clear()
+            raise OSError(errno.EIO, "Input/output error")
+        real_fsync(fd)
+        if os.readlink(f"/proc/self/fd/{fd}").endswith(".model-00000007.pt.tmp"):
+            armed.append(None)  # the rebuilt model's file: the folder's flush after it fails
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        back, _ = resume(run)
+    monkeypatch.undo()
+    back.close()
+    (said,) = [str(w.message) for w in caught if "model-00000007.pt failed" in str(w.message)]
+    assert "(Input/output error)" in said and "stays" not in said, said
+    assert "may not be on the disk" in said and "kept as model-00000007.pt.damaged" in said
+    assert _same_payload(hand, live[7])
+    assert hand.with_name(hand.name + ".damaged").read_bytes() == data
 
 
 def _same_payload(path: Path, state: dict[str, torch.Tensor]) -> bool:
@@ -1203,6 +1326,73 @@ def test_an_older_resume_that_set_a_refit_by_hand_aside_kept_the_regular_schedul
     assert _same(back.model, again[20])
     back.close()
     assert (run / "checkpoints" / aside.name).read_bytes() == data
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_a_resume_writes_a_missing_checkpoint_only_of_full_refits(tmp_path, refit):
+    """restore_model's docstring said a resume writes the checkpoint of the labels the model
+    stands on where it is missing (the process killed between logging and saving); only a
+    resume of full refits does. One of incremental refits replays them to that count, bit
+    for bit, and leaves it missing (it writes only the models of refits recorded by damaged
+    files). The docstring now says so; either way the model is the live one."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    config = TeachingConfig(noninteractive=False, max_new=5, refit=refit)
+    ct = ConfidentTeacher(env, oracle(env), config=config, run_dir=run, progress=False)
+    ct.run(max_demonstrations=11)
+    ct.close()
+    ten = run / "checkpoints" / "model-00000010.pt"
+    ten.unlink()  # never saved
+    back, _ = resume(run)
+    assert same_state(back.model, ct.model)
+    back.close()
+    assert ten.exists() == (refit == "full")
+
+
+@pytest.mark.parametrize("where", ["beyond", "stale"])
+def test_a_checkpoint_resume_cannot_set_aside_is_said_and_left_as_it_is(
+    tmp_path, monkeypatch, where
+):
+    """Resume renames a checkpoint named for more labels than the log holds ``.stale`` (read
+    as a refit once the session is taught that far again: here a damaged one at 7 in a
+    session of 5 labels), and a stale one ``.stale``; where the rename failed, the file
+    stayed, silently, and the stale one of the count the model stands on was written over
+    (its bytes lost). Each now stays as it is, with a warning naming it and what to do."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    config = TeachingConfig(noninteractive=False, max_new=5)
+    ct = ConfidentTeacher(env, oracle(env), config=config, run_dir=run, progress=False)
+    ct.run(max_demonstrations=5)
+    live = copy.deepcopy(ct.model.state_dict())
+    ct.close()
+    five = run / "checkpoints" / "model-00000005.pt"
+    if where == "beyond":
+        odd = run / "checkpoints" / "model-00000007.pt"
+        odd.write_bytes(five.read_bytes()[:100])
+    else:
+        odd = five
+        payload = torch.load(five, weights_only=True)
+        torch.save({**payload, "labels_sha256": "0" * 64}, five)  # fitted on other labels
+    data = odd.read_bytes()
+    real = os.replace
+
+    def replace(src, dst, *args, **kw):
+        if Path(src) == odd and str(dst).endswith(".stale"):
+            raise OSError(errno.EACCES, "Permission denied")
+        return real(src, dst, *args, **kw)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        back, _ = resume(run)
+    monkeypatch.undo()
+    back.close()
+    said = [str(w.message) for w in caught if str(odd) in str(w.message)]
+    assert len(said) == 1, [str(w.message) for w in caught]
+    assert f"could not be renamed {odd.name}.stale (Permission denied)" in said[0], said
+    assert f"move it out of {odd.parent}" in said[0], said
+    assert odd.read_bytes() == data and not odd.with_name(odd.name + ".stale").exists()
+    assert _same(back.model, live)
 
 
 @pytest.mark.parametrize("damage", ["cut", "whole"])

@@ -40,9 +40,10 @@ import numpy as np
 import torch
 
 from torchcbl._text import counted
+from torchcbl.gmm import Classification
 
 if TYPE_CHECKING:  # pragma: no cover
-    from torchcbl.gmm import Classification, GaussianMixtureSet
+    from torchcbl.gmm import GaussianMixtureSet
 
 __all__ = [
     "AutoThresholdRule",
@@ -453,7 +454,8 @@ class AutoThresholdRule:
         Raises:
             TypeError: ``c`` lacks ``action`` or ``distance`` (any object with both is read).
             ValueError: the thresholds (set by :meth:`update`) are for another number of
-                actions than the classification's model has.
+                actions than the classification's model has (or a look-alike's action lies
+                beyond them).
         """
         c_action, c_distance = _read(c, self, "action", "distance")
         action, distance = c_action.cpu(), c_distance.cpu()  # a CUDA model's answer too
@@ -463,16 +465,17 @@ class AutoThresholdRule:
         n = len(self.thresholds)
         posterior = getattr(c, "posterior", None)  # [N, A]; a look-alike may have none
         given = posterior.shape[-1] if getattr(posterior, "ndim", 0) == 2 else None
-        # the model's action count is the posterior's width (the action, its argmax, lies
-        # below it); only without a posterior is the largest action read (a tensor's max
-        # and its int() cost about 3 us, at every step of the loop)
-        if given is not None:
-            other = given != n
-        else:
+        # the model's action count is the posterior's width; the library's Classification's
+        # action, the posterior's argmax, lies below it, so only a look-alike's (a custom
+        # model's own answer type: any action) or one without a posterior has its largest
+        # action read (a tensor's max and its int() cost about 3 us, at every step)
+        top = -1
+        other = given is not None and given != n
+        if not other and (given is None or type(c) is not Classification):
             top = int(action.max()) if len(action) else -1
             other = top >= n
         if other:
-            has = given if given is not None else f"action {top}"
+            has = given if given is not None and given != n else f"action {top}"
             raise ValueError(
                 f"AutoThresholdRule.is_confident: its thresholds are for {counted(n, 'action')} "
                 f"(set by update) but the classification has {has}; call rule.update(model, "

@@ -133,15 +133,18 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   and change nothing; :func:`repair_journal` copies the journal aside byte for byte and keeps
   every line that does not depend on a damaged one. A checkpoint that cannot be read, or whose
   ``labels_sha256`` does not match the log (stale), is never loaded: the model is refitted from
-  the log and the file renamed ``.damaged`` / ``.stale``; except the checkpoint 0 of a session
+  the log and a resume renames the file ``.damaged`` / ``.stale`` (a damaged one that records
+  a refit, below, stays in place); except the checkpoint 0 of a session
   started from a fitted model, which no label can refit: where the session still stands on it
   (no refit since, or incremental refits) it is a :class:`CorruptSessionError` naming the file,
   left as it is. A damaged checkpoint's name (a regular file's, in place) still records a
   refit at its count, which may have been one asked by hand off the schedule: the model is
   refitted on that count's labels (``refit="incremental"``: the refits are replayed through
-  it), as the live loop had it, and a resume that sets the file aside writes the model
-  rebuilt at its count in its place, so a real checkpoint records the refit again (where
-  that write fails, the damaged file goes back under its name). A name set aside
+  it), as the live loop had it, and a resume writes the model rebuilt at its count in its
+  place, so a real checkpoint records the refit again. The damaged file stays under its name
+  until then (its bytes kept first as ``<name>.damaged``, a hard link or a copy; where neither
+  can be made, or the write fails, it stays as it is, with a warning): a reader racing the
+  resume, and a resume interrupted (a Ctrl-C, a kill), leave the refit recorded. A name set aside
   (``.damaged``, ``.stale``) records nothing: an older torchcbl's resume set damaged
   checkpoints aside and taught on on the regular schedule, and its sessions read as it read
   them. A checkpoint deleted outright takes its record with it: past a refit by hand whose
@@ -149,7 +152,8 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   schedule, not the live one's. A checkpoint named for more labels than the log holds (the
   log lost its tail: a backup restored, a power cut; a writer logs a label before it saves
   its checkpoint) is never read, and a resume renames it ``.stale``: once the session was
-  taught that far again, it would read as a refit the new loop never made.
+  taught that far again, it would read as a refit the new loop never made. A file a resume
+  cannot rename stays as it is (never written over), with a warning naming it.
   A ``prior.npz`` that is missing, or whose SHA-256 is not the one config.json
   recorded, is a :class:`CorruptSessionError` naming it for every reader of the training set
   or the model and for resume (never a model fitted without the prior). An unreadable
@@ -2492,14 +2496,18 @@ class SessionStore:
         digest: str | None = None,
         *,
         by_hand: bool = False,
+        after: str | None = None,
     ) -> Path:
         """Write the model fitted on the first ``n_demonstrations`` labels, with ``digest``
         (:func:`labels_digest` of those labels) to tell it from a stale one later; then, with
         :attr:`keep_checkpoints`, remove the checkpoints older than the newest that many (not
         checkpoint 0, and none named for more labels than this one). ``by_hand``: the model of
         a refit asked by hand (``ConfidentTeacher.refit``), which this checkpoint alone
-        records: a failed write says what its loss costs (:func:`_lost_hand_refit`)."""
-        after = _CHECKPOINT_LATER
+        records: a failed write says what its loss costs (:func:`_lost_hand_refit`).
+        ``after``: what a failed write's message says it leaves (default: the checkpoint is
+        refitted from the log where it is missing)."""
+        if after is None:
+            after = _CHECKPOINT_LATER
         if by_hand and self._max_new is not None:
             after = _lost_hand_refit(n_demonstrations, self._max_new)
         path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest, after)
@@ -3633,26 +3641,77 @@ def _recorded_refits(
     it never wrote), still in place. A refit by hand (``ConfidentTeacher.refit``) moves the
     refit schedule and only its checkpoint records it, so its name counts even where its
     content is lost. A stale one (fitted on other labels than the log's) records none of this
-    session's refits; nor does a file set aside (``.damaged``, ``.stale``): a resume that sets
-    a damaged one aside writes the model of its count in its place (:func:`restore_model`),
-    and an older torchcbl's resume that set one aside taught on on the regular schedule.
+    session's refits; nor does a file set aside (``.damaged``, ``.stale``): a resume keeps a
+    damaged one in place until the model of its count replaces it, its bytes kept as
+    ``.damaged`` (:func:`restore_model`), and an older torchcbl's resume that set one aside
+    taught on on the regular schedule.
     """
     named = {n for n, path, why in passed_over if why == "damaged" and _written_file(path)}
     return tuple(sorted(n for n in named if above < n <= n_labels))
 
 
-def _set_aside(path: Path, why: str) -> Path | None:
+def _set_aside(path: Path, why: str) -> Path:
     """Rename a checkpoint that cannot be used, keeping its bytes (``<name>.<why>[-i]``);
-    returns its new path (None: it could not be renamed, and stays)."""
+    returns its new path.
+
+    Raises:
+        OSError: it could not be renamed, and stays.
+    """
     for i in range(1000):
         target = path.with_name(f"{path.name}.{why}" + (f"-{i}" if i else ""))
-        if not target.exists():
-            try:
-                os.replace(path, target)
-            except OSError:
-                return None
+        if not os.path.lexists(target):
+            os.replace(path, target)
             return target
-    return None
+    raise OSError(errno.EEXIST, f"{path.name}.{why} and its 999 numbered names are taken")
+
+
+def _keep_a_copy(path: Path) -> Path:
+    """Keep the bytes of ``path``, a checkpoint that cannot be loaded, under
+    ``<name>.damaged[-i]`` while ``path`` stays in place until a rebuilt model replaces it:
+    a hard link where the file system allows (to the link itself where ``path`` is a
+    symbolic link), else a durable copy. Returns the copy's path.
+
+    Raises:
+        OSError: neither could be made (nothing is left behind).
+    """
+    target = next(
+        (
+            t
+            for i in range(1000)
+            if not os.path.lexists(
+                t := path.with_name(f"{path.name}.damaged" + (f"-{i}" if i else ""))
+            )
+        ),
+        None,
+    )
+    if target is None:
+        raise OSError(errno.EEXIST, f"{path.name}.damaged and its 999 numbered names are taken")
+    try:
+        try:
+            os.link(path, target, follow_symlinks=False)
+        except (OSError, NotImplementedError):  # no hard links here (FAT, some shares)
+            if path.is_symlink():
+                os.symlink(os.readlink(path), target)
+            else:
+                write_durably(target, path.read_bytes(), target.with_name(f".{target.name}.tmp"))
+                return target
+        fsync_directory(path.parent)  # the copy on the disk before the name is written over
+    except OSError:
+        with contextlib.suppress(OSError):
+            if os.path.lexists(target) and os.path.lexists(path):
+                target.unlink()
+        raise
+    return target
+
+
+def _holds_same(path: Path, other: Path) -> bool:
+    """Whether ``path`` still holds what ``other`` does: the same file, or the same bytes."""
+    try:
+        if os.path.samefile(path, other):
+            return True
+        return path.read_bytes() == other.read_bytes()
+    except OSError:
+        return False
 
 
 def restore_model(
@@ -3676,22 +3735,29 @@ def restore_model(
     the name of a checkpoint that cannot be loaded (damaged in place: cut short, emptied,
     unreadable; not a stale one, nor a file set aside): a refit may also be asked for by
     hand, :meth:`ConfidentTeacher.refit`, at any count, and only its checkpoint says so.
-    From there the loop refits every ``max_new`` labels, so the model stood on the first
-    ``k`` labels. That checkpoint is loaded when ``k`` is its count; otherwise (the process
-    died between logging and saving, or the checkpoint is damaged or stale) the model is
-    refitted deterministically on the training set of those labels, and with ``store`` the
-    checkpoint is written (a damaged or stale one is first renamed ``<name>.damaged`` /
-    ``<name>.stale``, never deleted). With ``store``, a file named for more labels than
-    ``ys`` holds (a checkpoint of labels the log lost: a writer logs a label before it
-    saves its checkpoint) is renamed ``<name>.stale`` too, so that no reader takes it for a
-    refit once the session is taught that far again; a damaged checkpoint set aside whose
-    name recorded a refit gets the model rebuilt at its count written in its place (a fit on
-    those labels; ``incremental``: the replayed state there), so that a real checkpoint
-    records the refit (a write that fails puts the damaged file back under its name).
+    From there the loop refits every ``max_new`` labels, so the model stood on the first ``k``
+    labels. That checkpoint is loaded when ``k`` is its count; otherwise (the process died
+    between logging and saving, or the checkpoint is damaged or stale) the model is refitted
+    deterministically on the training set of those labels, and with ``store`` (of full refits;
+    see ``incremental`` below) the checkpoint is written (a stale one is first renamed
+    ``<name>.stale``, a damaged one kept as ``<name>.damaged``, never deleted; see below). With
+    ``store``, a file named for more labels than ``ys`` holds (a checkpoint of labels the log
+    lost: a writer logs a label before it saves its checkpoint) is renamed ``<name>.stale``
+    too, so that no reader takes it for a refit once the session is taught that far again (a
+    file that cannot be renamed stays as it is, never written over, with a warning naming it);
+    a damaged checkpoint whose name records a refit (or the checkpoint of ``k`` that this model
+    cannot load) stays in place, recording it, until the model rebuilt at its count (a fit on
+    those labels; ``incremental``: the replayed state there) replaces it: its bytes are first
+    kept as ``<name>.damaged`` (a hard link, else a copy), then the rebuilt model is renamed
+    over the name. Where the bytes cannot be kept, or that write fails, the file stays as it is
+    (with a warning), so an interruption at any point (a Ctrl-C, a kill) leaves the refit
+    recorded.
     With ``incremental`` (``TeachingConfig.refit="incremental"``) the loop's incremental
     refits (``GaussianMixtureSet.refit``, a pure function of the state and the data) are
     replayed from that checkpoint's state instead, through every refit the names record, so
-    the model is the live one bit for bit.
+    the model is the live one bit for bit; with ``store`` only the models of refits recorded
+    by damaged files (and of ``k`` where this model cannot load its checkpoint) are written
+    then, in their place: a missing checkpoint stays missing, the replay rebuilding it.
     ``starts_fitted``: the session started from a fitted model (config.json's
     ``"starts_fitted"``), which only checkpoint 0 holds and no label can refit: where the model
     still stands on it (``k`` is 0, or the refits are incremental) and it cannot be loaded,
@@ -3710,33 +3776,104 @@ def restore_model(
     scan, k = _restore_plan(
         run_dir, model, len(ys), base, all_xs, all_ys, max_new, incremental, starts_fitted
     )
+    # the counts whose files could not be set aside: left as they are, never written over
+    pinned: set[int] = set()
+
+    def set_aside(n: int, path: Path, why: str) -> None:
+        """Rename the file of ``n`` labels at ``path`` ``<name>.<why>``; where that fails,
+        warn (the file stays, and ``pinned`` keeps save from writing over it)."""
+        try:
+            _set_aside(path, why)
+        except FileNotFoundError:  # gone since the listing: nothing to set aside
+            return
+        except OSError as exc:
+            pinned.add(n)
+            failed = f"could not be renamed {path.name}.{why} ({exc.strerror or exc})"
+            if n > len(ys):
+                said = (
+                    f"{path} names {n} labels, more than the {len(ys)} the session's log "
+                    f"holds (a checkpoint of labels the log lost), and {failed}: move it out "
+                    f"of {path.parent} yourself, or once the session is taught to {n} labels "
+                    "again readers take it for a refit there."
+                )
+            else:
+                what = "cannot be loaded"
+                if why == "stale":
+                    what = "is stale (not fitted on the log's labels)"
+                said = (
+                    f"{path} {what} and {failed}: it stays as it is (resume and load_model "
+                    f"pass it over, and nothing is written over it); move it out of "
+                    f"{path.parent} yourself."
+                )
+            warnings.warn(said, stacklevel=3)
+
     if store is not None:
         # a writer logs a label before it saves its checkpoint: one named for more labels
         # than the log holds is of labels the log lost, and no refit of what is taught next
-        for _, path in scan.beyond:
-            _set_aside(path, "stale")
-    # the refits recorded by damaged files set aside here: {count: (its name, where it went)}
-    aside: dict[int, tuple[Path, Path]] = {}
+        for n, path in scan.beyond:
+            set_aside(n, path, "stale")
+    # the counts whose files cannot be loaded but stay in place until the model rebuilt at
+    # their count replaces them (their bytes kept as .damaged first, by save): the damaged
+    # ones whose names record a refit, which they go on recording meanwhile (for a reader
+    # racing this resume, and if it is interrupted: a Ctrl-C, a kill, an exception)
+    in_place: set[int] = set()
     for n, path, why in scan.passed_over:
         if store is not None and not (n == 0 and starts_fitted):  # that one: kept as it is
-            target = _set_aside(path, why)
-            if target is not None and n in scan.refits:
-                aside[n] = (path, target)
+            if n in scan.refits:
+                in_place.add(n)
+            else:
+                set_aside(n, path, why)
     last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
 
     def save(j: int) -> None:
-        """With ``store``, write the checkpoint of the model refitted on ``j`` labels; where
-        it records a refit whose damaged file was set aside here and cannot be written, the
-        damaged file goes back under its name, which records that refit."""
+        """With ``store``, write the checkpoint of the model refitted on ``j`` labels; over a
+        file kept in place (``in_place``), only once its bytes are kept as ``.damaged``, so
+        that it records the refit until the rebuilt model does."""
         assert store is not None
+        if j in pinned:  # a file that could not be set aside: left as it is (said)
+            return
+        own = directory / f"model-{j:08d}.pt"
+        kept = None
+        if j in in_place:
+            try:
+                kept = _keep_a_copy(own)
+            except OSError as exc:
+                warnings.warn(
+                    f"{own} cannot be loaded and its bytes could not be kept as "
+                    f"{own.name}.damaged ({exc.strerror or exc}), so the model rebuilt on {j} "
+                    "labels was not written over it: it stays as it is, its name still "
+                    "recording the refit there, which resume and load_model rebuild from the "
+                    "log. Free space (or fix the folder's permissions), then resume again to "
+                    "have the model written in its place.",
+                    stacklevel=3,
+                )
+                return
+        digest = labels_digest(all_xs[: base + j], all_ys[: base + j])
         try:
-            store.save_checkpoint(model, j, labels_digest(all_xs[: base + j], all_ys[: base + j]))
+            # over a damaged file kept in place, the message says what stays (below)
+            store.save_checkpoint(model, j, digest, after="" if kept is not None else None)
         except SessionWriteError as exc:
-            warnings.warn(str(exc), stacklevel=3)
-            if j in aside:
+            if kept is None:  # the checkpoint missing (or set aside): refitted from the log
+                warnings.warn(str(exc), stacklevel=3)
+            elif _holds_same(own, kept):  # the write left the name as it was
                 with contextlib.suppress(OSError):
-                    if not os.path.lexists(aside[j][0]):
-                        os.replace(aside[j][1], aside[j][0])
+                    kept.unlink()  # the same bytes, still under the name
+                warnings.warn(
+                    f"{exc}The damaged {own.name} stays under its name, which still records "
+                    f"the refit on {j} labels: resume and load_model rebuild that model from "
+                    "the log, as this resume did (the session and its model in memory are "
+                    "intact). Free space (or fix the folder's permissions), then resume again "
+                    "to have the model written in its place.",
+                    stacklevel=3,
+                )
+            else:  # renamed over the name, the folder not flushed: a power cut may undo it
+                warnings.warn(
+                    f"{exc}The model was put in its place but may not be on the disk: after "
+                    f"a power cut the name may hold the damaged file again (which records the "
+                    f"refit on {j} labels too; its bytes are kept as {kept.name}). Nothing is "
+                    "lost either way.",
+                    stacklevel=3,
+                )
 
     def lost_start(why: str) -> CorruptSessionError:  # (_restore_plan raised where it comes)
         return _lost_start(run_dir, k, why)
@@ -3748,11 +3885,10 @@ def restore_model(
         except Exception:  # e.g. saved by another model class: refit below
             if starts_fitted and k == 0:
                 raise lost_start("unreadable as this model's state") from None
-            if store is not None:
-                own = directory / f"model-{k:08d}.pt"
-                target = _set_aside(own, "damaged")
-                if target is not None and k > 0:  # its refit, now recorded by its rebuilt model
-                    aside[k] = (own, target)
+            if store is not None and k > 0:  # its rebuilt model in its place, its bytes kept
+                in_place.add(k)
+            elif store is not None:
+                set_aside(k, directory / f"model-{k:08d}.pt", "damaged")
         payload = None
     if (k > 0 or base) and incremental:
         start, loaded = 0, False
@@ -3787,11 +3923,11 @@ def restore_model(
             # failed load left in the buffers); from a loaded one, even the pre-fit state of
             # a session that started from a fitted model (checkpoint 0), the loop refitted
             (model.refit if i > 0 or loaded else model.fit)(x, y)
-            if j in aside:  # a refit recorded by a damaged file set aside: its model in place
+            if j in in_place:  # a refit recorded by a damaged file: its model in its place
                 save(j)
     elif k > 0 or base:
-        # a refit recorded by a damaged file set aside below k: its model in place first
-        for j in [*(j for j in sorted(aside) if j < k), k]:
+        # a refit recorded by a damaged file below k: its model in its place first
+        for j in [*(j for j in sorted(in_place) if j < k), k]:
             x, y = training_set(all_xs[: base + j], all_ys[: base + j], relabel=relabel)
             model.fit(x, y)
             if store is not None:
@@ -3879,7 +4015,7 @@ def _restore_plan(
             return scan, k
         if k == 0:
             raise _lost_start(run_dir, k, "unreadable as this model's state")
-        payload = None  # set aside as damaged, then refitted
+        payload = None  # refitted (and with a store written in its place, or set aside at 0)
     if (k > 0 or base) and incremental:
         if payload is not None and loads(payload["state_dict"]):
             return scan, k
@@ -5281,7 +5417,7 @@ def _checkpoint_report(
                 f"{name} {what}: resume and load_model pass it over; its name still records "
                 f"a refit on {n} labels (where a refit by hand may have moved the refit "
                 "schedule), which they rebuild from an earlier checkpoint or the log (resume "
-                f"renames it {path.name}.{why} and writes the rebuilt model in its place)"
+                f"writes the rebuilt model in its place, keeping this file as {path.name}.{why})"
             )
         else:
             notes.append(
@@ -5349,9 +5485,14 @@ def _foreign_note(config: dict[str, Any], n: int, k: int, why: str) -> str:
         )
     teaching = config["teaching"]
     if k == n:
+        kept = (
+            f"writes the rebuilt model in its place, keeping this file as {name}.damaged"
+            if n > 0
+            else f"renames it {name}.damaged"
+        )
         return (
             f"{what}: resume and load_model cannot load it and refit the model on the log's "
-            f"labels (resume renames it {name}.damaged)"
+            f"labels (resume {kept})"
         )
     if teaching.get("refit", "full") == "incremental":
         return (
