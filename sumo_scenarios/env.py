@@ -40,9 +40,11 @@ another one is warned of, not refused.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -122,6 +124,50 @@ class DrivingConfig:
         object.__setattr__(self, "start_lane", int(self.start_lane))
 
 
+def _from_fields(cls: type, value: Mapping[Any, Any], where: str) -> Any:
+    """``cls(**value)``: the dataclass ``cls`` made from a dict of its fields (as gymnasium's
+    ``EnvSpec.to_json`` writes one), a ValueError naming ``where`` for a key that is no field
+    of it or a field it needs that is left out."""
+    known = [f.name for f in dataclasses.fields(cls)]
+    unknown = [k for k in value if k not in known]
+    if unknown:
+        is_no = (
+            f"is no {cls.__name__} field" if len(unknown) == 1 else f"are no {cls.__name__} fields"
+        )
+        raise ValueError(
+            f"{where}: {', '.join(map(repr, unknown))} {is_no}; the fields are {', '.join(known)}"
+        )
+    needed = [
+        f.name
+        for f in dataclasses.fields(cls)
+        if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    ]
+    missing = [k for k in needed if k not in value]
+    if missing:
+        raise ValueError(
+            f"{where}: no {', '.join(map(repr, missing))}, which a {cls.__name__} needs; give "
+            f"a dict of its fields ({', '.join(known)}) or a {cls.__name__}"
+        )
+    return cls(**value)
+
+
+def _settings_made(settings: Mapping[str, Any], where: str = "") -> dict[str, Any]:
+    """``settings`` (keyword settings of :class:`DrivingEnv`, or a ``DrivingConfig``'s fields)
+    with ``config``, ``scenario`` and ``sim`` given as a dict of the fields of a
+    :class:`DrivingConfig`, :class:`TrafficScenario` or :class:`SimConfig` made into that
+    object. gymnasium's ``EnvSpec.to_json`` writes such an argument as that dict
+    (``dataclasses.asdict``), so ``gymnasium.make(EnvSpec.from_json(text))`` (Minari's
+    ``recover_environment``) gives it to the env; a name and an object pass as they are."""
+    made = dict(settings)
+    for name, cls in (("scenario", TrafficScenario), ("sim", SimConfig)):
+        if isinstance(made.get(name), Mapping):
+            made[name] = _from_fields(cls, made[name], f"{where}{name}")
+    if isinstance(made.get("config"), Mapping):
+        fields = _settings_made(made["config"], f"{where}config.")
+        made["config"] = _from_fields(DrivingConfig, fields, f"{where}config")
+    return made
+
+
 @dataclass(frozen=True)
 class Frame:
     """What a drawing needs of one timestep (positions: front bumpers, metres along the road).
@@ -158,6 +204,12 @@ class DrivingEnv(gym.Env):
     forked from one with a running simulation is refused), and so is a reset while a
     simulation of your own (``libsumo.start``) runs in the process. Always ``close()`` an env.
 
+    The settings come as a :class:`DrivingConfig` (``config``) or as its fields by keyword
+    (``scenario``, ``max_episode_steps``, ``start_lane``, ``sim``). A ``DrivingConfig``,
+    ``TrafficScenario`` or ``SimConfig`` may also be given as a dict of its fields: how
+    gymnasium's ``EnvSpec.to_json`` writes one, so ``gymnasium.make(EnvSpec.from_json(
+    env.spec.to_json()))`` (Minari's ``recover_environment``) makes the same env again.
+
     ``reset(seed=s)`` fixes the road segment: the traffic is drawn from
     ``SeedSequence([scenario.seed, s])``. ``reset(options={"ego_lane": k})`` starts in lane k.
     ``reset(options={"fcd_output": path})`` asks SUMO to write FCD XML for that episode (the only
@@ -168,11 +220,17 @@ class DrivingEnv(gym.Env):
 
     def __init__(
         self,
-        config: DrivingConfig | None = None,
+        config: DrivingConfig | Mapping[str, Any] | None = None,
         *,
         render_mode: Literal["rgb_array"] | None = None,
         **kwargs: Any,
     ) -> None:
+        # a DrivingConfig, TrafficScenario or SimConfig as a dict of its fields: how
+        # gymnasium's EnvSpec.to_json writes it, and so how gymnasium.make(EnvSpec.from_json())
+        # gives it
+        settings = _settings_made({"config": config, **kwargs})
+        config = settings.pop("config")
+        kwargs = settings
         if config is not None and not isinstance(config, DrivingConfig):  # (with keywords too)
             hint = (
                 f"DrivingEnv(scenario={config!r}) for a scenario by name"
@@ -182,8 +240,8 @@ class DrivingEnv(gym.Env):
                 "scenario='eval', ...)"
             )
             raise TypeError(
-                f"config: expected a DrivingConfig (sumo_scenarios.env), got "
-                f"{type(config).__name__} {config!r:.60}; e.g. {hint}"
+                "config: expected a DrivingConfig (sumo_scenarios.env) or a dict of its fields, "
+                f"got {type(config).__name__} {config!r:.60}; e.g. {hint}"
             )
         if config is None:
             config = DrivingConfig(**kwargs)
