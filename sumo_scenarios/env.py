@@ -333,7 +333,8 @@ class DrivingEnv(gym.Env):
         ``config.max_episode_steps`` steps. ``info``: ``lane`` (the ego's, 0 right shoulder to
         4 left shoulder), ``contact`` (bool), ``t`` (steps since reset), ``episode_seed``,
         ``position_m`` (metres the ego has driven since reset, not SUMO's lane position),
-        ``step_length_s``, ``closing_speed_ms`` (per lane, m/s) and the hidden traffic state
+        ``step_length_s``, ``closing_speed_ms`` (per lane, m/s, keyed ``"1"``-``"3"``) and
+        the hidden traffic state
         ``car_rel_m`` / ``car_lane`` / ``car_closing_ms`` (for scripted experts only)."""
         if self.closed:
             raise RuntimeError("this DrivingEnv is closed; create a new one")
@@ -474,9 +475,12 @@ class DrivingEnv(gym.Env):
         state: only scripted experts may read them). Tuples, not arrays: the number of cars
         varies, and gymnasium's vector envs stack an array info into one fixed-shape array (an
         AsyncVectorEnv of two driving envs failed at its first reset); a tuple they keep as is;
-        ``closing_speed_ms`` maps each normal lane to the closing speed (m/s, ego speed minus
-        the car's speed over the last step) of the car the observation reports for that lane,
-        which a driver sees (0 when no car is within sensing range)."""
+        ``closing_speed_ms`` maps each normal lane, by its number as text (``"1"``, ``"2"``,
+        ``"3"``), to the closing speed (m/s, ego speed minus the car's speed over the last
+        step) of the car the observation reports for that lane, which a driver sees (0 when no
+        car is within sensing range). Text, not ints: gymnasium's vector envs and their info
+        wrappers (``DictInfoToList``) take an info's keys, nested ones too, as text (an int key
+        failed there), and a session's JSON log holds them so."""
         s = self._sim
         rel = s.car_pos - s.ego_pos
         car_closing = EGO_SPEED_MS - s.car_speed
@@ -484,10 +488,10 @@ class DrivingEnv(gym.Env):
         for lane in TRAFFIC_LANES:
             m = np.flatnonzero(s.car_lane == lane)
             if m.size == 0:
-                closing[lane] = 0.0
+                closing[str(lane)] = 0.0
                 continue
             k = m[np.argmin(np.abs(rel[m]))]
-            closing[lane] = float(car_closing[k]) if abs(rel[k]) < SENSE_RANGE_M else 0.0
+            closing[str(lane)] = float(car_closing[k]) if abs(rel[k]) < SENSE_RANGE_M else 0.0
         return {
             "lane": s.ego_lane,
             "contact": s.contact,

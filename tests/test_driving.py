@@ -122,6 +122,46 @@ def test_settings_given_as_a_dict_of_fields_name_a_field_that_is_not_there():
             gym.make(sumo_scenarios.ENV_ID, **kwargs)
 
 
+def test_the_info_goes_through_gymnasiums_vector_info_wrappers():
+    """gymnasium's vector envs merge the envs' infos key by key, nested dicts too, and its
+    ``DictInfoToList`` splits them again by key name: ``closing_speed_ms``, keyed by the lane as
+    an int, failed there ("'int' object has no attribute 'startswith'"). Its keys are the
+    lanes' numbers as text, as a session's JSON log holds them; the human-like teacher reads
+    either."""
+    from gymnasium.wrappers.vector import DictInfoToList
+
+    from sumo_scenarios.teacher import HumanDriver
+
+    venv = DictInfoToList(gym.make_vec(sumo_scenarios.ENV_ID, num_envs=1))  # one per process
+    try:
+        obs, infos = venv.reset(seed=3)
+        obs, _, _, _, infos = venv.step(np.array([LEFT]))
+    finally:
+        venv.close()
+    single = DrivingEnv()
+    try:
+        single.reset(seed=3)
+        single_obs, _, _, _, info = single.step(LEFT)
+    finally:
+        single.close()
+    np.testing.assert_array_equal(obs[0], single_obs)
+    assert infos[0]["closing_speed_ms"] == info["closing_speed_ms"]
+    assert list(info["closing_speed_ms"]) == ["1", "2", "3"]
+    # the human-like driver answers the same to either key: a drive on its own answers
+    drivers, answers = (HumanDriver(seed=1), HumanDriver(seed=1)), []
+    env = DrivingEnv()
+    try:
+        obs, info = env.reset(seed=3)
+        for _ in range(200):
+            as_ints = {int(k): v for k, v in info["closing_speed_ms"].items()}
+            pair = (drivers[0](obs, info), drivers[1](obs, {**info, "closing_speed_ms": as_ints}))
+            answers.append(pair)
+            obs, _, _, _, info = env.step(pair[0])
+    finally:
+        env.close()
+    assert all(a == b for a, b in answers) and {a for a, _ in answers} >= {STAY, LEFT}
+
+
 def test_a_second_env_takes_the_simulation_over_and_the_first_says_so(env):
     a_obs = env.reset(seed=4)[0]
     other = DrivingEnv()  # may exist beside a live one
