@@ -199,9 +199,11 @@ class DrivingEnv(gym.Env):
     (``gymnasium.utils.env_checker.check_env`` makes a second one), but the simulation belongs to
     the one reset last: an env whose road another env's reset took over raises ``RuntimeError``
     on ``step`` (saying so) until it is reset again, and so does an env whose last step was cut
-    short (a Ctrl-C inside it). Two envs driving at once need two processes
-    made with 'spawn' (e.g. gymnasium's ``AsyncVectorEnv(..., context="spawn")``; a process
-    forked from one with a running simulation is refused), and so is a reset while a
+    short (a Ctrl-C inside it). Two envs driving at once need two processes: gymnasium's
+    ``AsyncVectorEnv`` (``gymnasium.make_vec(..., vectorization_mode="async")``) runs each in
+    its own, while a ``SyncVectorEnv`` (``make_vec``'s default) of two raises that
+    ``RuntimeError`` at its first step. A process forked from one whose simulation runs is
+    refused (there give ``AsyncVectorEnv`` ``context="spawn"``), and so is a reset while a
     simulation of your own (``libsumo.start``) runs in the process. Always ``close()`` an env.
 
     The settings come as a :class:`DrivingConfig` (``config``) or as its fields by keyword
