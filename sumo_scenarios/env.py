@@ -40,9 +40,11 @@ another one is warned of, not refused.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -122,6 +124,50 @@ class DrivingConfig:
         object.__setattr__(self, "start_lane", int(self.start_lane))
 
 
+def _from_fields(cls: type, value: Mapping[Any, Any], where: str) -> Any:
+    """``cls(**value)``: the dataclass ``cls`` made from a dict of its fields (as gymnasium's
+    ``EnvSpec.to_json`` writes one), a ValueError naming ``where`` for a key that is no field
+    of it or a field it needs that is left out."""
+    known = [f.name for f in dataclasses.fields(cls)]
+    unknown = [k for k in value if k not in known]
+    if unknown:
+        is_no = (
+            f"is no {cls.__name__} field" if len(unknown) == 1 else f"are no {cls.__name__} fields"
+        )
+        raise ValueError(
+            f"{where}: {', '.join(map(repr, unknown))} {is_no}; the fields are {', '.join(known)}"
+        )
+    needed = [
+        f.name
+        for f in dataclasses.fields(cls)
+        if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    ]
+    missing = [k for k in needed if k not in value]
+    if missing:
+        raise ValueError(
+            f"{where}: no {', '.join(map(repr, missing))}, which a {cls.__name__} needs; give "
+            f"a dict of its fields ({', '.join(known)}) or a {cls.__name__}"
+        )
+    return cls(**value)
+
+
+def _settings_made(settings: Mapping[str, Any], where: str = "") -> dict[str, Any]:
+    """``settings`` (keyword settings of :class:`DrivingEnv`, or a ``DrivingConfig``'s fields)
+    with ``config``, ``scenario`` and ``sim`` given as a dict of the fields of a
+    :class:`DrivingConfig`, :class:`TrafficScenario` or :class:`SimConfig` made into that
+    object. gymnasium's ``EnvSpec.to_json`` writes such an argument as that dict
+    (``dataclasses.asdict``), so ``gymnasium.make(EnvSpec.from_json(text))`` (Minari's
+    ``recover_environment``) gives it to the env; a name and an object pass as they are."""
+    made = dict(settings)
+    for name, cls in (("scenario", TrafficScenario), ("sim", SimConfig)):
+        if isinstance(made.get(name), Mapping):
+            made[name] = _from_fields(cls, made[name], f"{where}{name}")
+    if isinstance(made.get("config"), Mapping):
+        fields = _settings_made(made["config"], f"{where}config.")
+        made["config"] = _from_fields(DrivingConfig, fields, f"{where}config")
+    return made
+
+
 @dataclass(frozen=True)
 class Frame:
     """What a drawing needs of one timestep (positions: front bumpers, metres along the road).
@@ -153,10 +199,18 @@ class DrivingEnv(gym.Env):
     (``gymnasium.utils.env_checker.check_env`` makes a second one), but the simulation belongs to
     the one reset last: an env whose road another env's reset took over raises ``RuntimeError``
     on ``step`` (saying so) until it is reset again, and so does an env whose last step was cut
-    short (a Ctrl-C inside it). Two envs driving at once need two processes
-    made with 'spawn' (e.g. gymnasium's ``AsyncVectorEnv(..., context="spawn")``; a process
-    forked from one with a running simulation is refused), and so is a reset while a
+    short (a Ctrl-C inside it). Two envs driving at once need two processes: gymnasium's
+    ``AsyncVectorEnv`` (``gymnasium.make_vec(..., vectorization_mode="async")``) runs each in
+    its own, while a ``SyncVectorEnv`` (``make_vec``'s default) of two raises that
+    ``RuntimeError`` at its first step. A process forked from one whose simulation runs is
+    refused (there give ``AsyncVectorEnv`` ``context="spawn"``), and so is a reset while a
     simulation of your own (``libsumo.start``) runs in the process. Always ``close()`` an env.
+
+    The settings come as a :class:`DrivingConfig` (``config``) or as its fields by keyword
+    (``scenario``, ``max_episode_steps``, ``start_lane``, ``sim``). A ``DrivingConfig``,
+    ``TrafficScenario`` or ``SimConfig`` may also be given as a dict of its fields: how
+    gymnasium's ``EnvSpec.to_json`` writes one, so ``gymnasium.make(EnvSpec.from_json(
+    env.spec.to_json()))`` (Minari's ``recover_environment``) makes the same env again.
 
     ``reset(seed=s)`` fixes the road segment: the traffic is drawn from
     ``SeedSequence([scenario.seed, s])``. ``reset(options={"ego_lane": k})`` starts in lane k.
@@ -168,11 +222,17 @@ class DrivingEnv(gym.Env):
 
     def __init__(
         self,
-        config: DrivingConfig | None = None,
+        config: DrivingConfig | Mapping[str, Any] | None = None,
         *,
         render_mode: Literal["rgb_array"] | None = None,
         **kwargs: Any,
     ) -> None:
+        # a DrivingConfig, TrafficScenario or SimConfig as a dict of its fields: how
+        # gymnasium's EnvSpec.to_json writes it, and so how gymnasium.make(EnvSpec.from_json())
+        # gives it
+        settings = _settings_made({"config": config, **kwargs})
+        config = settings.pop("config")
+        kwargs = settings
         if config is not None and not isinstance(config, DrivingConfig):  # (with keywords too)
             hint = (
                 f"DrivingEnv(scenario={config!r}) for a scenario by name"
@@ -182,8 +242,8 @@ class DrivingEnv(gym.Env):
                 "scenario='eval', ...)"
             )
             raise TypeError(
-                f"config: expected a DrivingConfig (sumo_scenarios.env), got "
-                f"{type(config).__name__} {config!r:.60}; e.g. {hint}"
+                "config: expected a DrivingConfig (sumo_scenarios.env) or a dict of its fields, "
+                f"got {type(config).__name__} {config!r:.60}; e.g. {hint}"
             )
         if config is None:
             config = DrivingConfig(**kwargs)
@@ -275,7 +335,8 @@ class DrivingEnv(gym.Env):
         ``config.max_episode_steps`` steps. ``info``: ``lane`` (the ego's, 0 right shoulder to
         4 left shoulder), ``contact`` (bool), ``t`` (steps since reset), ``episode_seed``,
         ``position_m`` (metres the ego has driven since reset, not SUMO's lane position),
-        ``step_length_s``, ``closing_speed_ms`` (per lane, m/s) and the hidden traffic state
+        ``step_length_s``, ``closing_speed_ms`` (per lane, m/s, keyed ``"1"``-``"3"``) and
+        the hidden traffic state
         ``car_rel_m`` / ``car_lane`` / ``car_closing_ms`` (for scripted experts only)."""
         if self.closed:
             raise RuntimeError("this DrivingEnv is closed; create a new one")
@@ -416,9 +477,12 @@ class DrivingEnv(gym.Env):
         state: only scripted experts may read them). Tuples, not arrays: the number of cars
         varies, and gymnasium's vector envs stack an array info into one fixed-shape array (an
         AsyncVectorEnv of two driving envs failed at its first reset); a tuple they keep as is;
-        ``closing_speed_ms`` maps each normal lane to the closing speed (m/s, ego speed minus
-        the car's speed over the last step) of the car the observation reports for that lane,
-        which a driver sees (0 when no car is within sensing range)."""
+        ``closing_speed_ms`` maps each normal lane, by its number as text (``"1"``, ``"2"``,
+        ``"3"``), to the closing speed (m/s, ego speed minus the car's speed over the last
+        step) of the car the observation reports for that lane, which a driver sees (0 when no
+        car is within sensing range). Text, not ints: gymnasium's vector envs and their info
+        wrappers (``DictInfoToList``) take an info's keys, nested ones too, as text (an int key
+        failed there), and a session's JSON log holds them so."""
         s = self._sim
         rel = s.car_pos - s.ego_pos
         car_closing = EGO_SPEED_MS - s.car_speed
@@ -426,10 +490,10 @@ class DrivingEnv(gym.Env):
         for lane in TRAFFIC_LANES:
             m = np.flatnonzero(s.car_lane == lane)
             if m.size == 0:
-                closing[lane] = 0.0
+                closing[str(lane)] = 0.0
                 continue
             k = m[np.argmin(np.abs(rel[m]))]
-            closing[lane] = float(car_closing[k]) if abs(rel[k]) < SENSE_RANGE_M else 0.0
+            closing[str(lane)] = float(car_closing[k]) if abs(rel[k]) < SENSE_RANGE_M else 0.0
         return {
             "lane": s.ego_lane,
             "contact": s.contact,

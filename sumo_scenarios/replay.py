@@ -21,7 +21,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from sumo_scenarios.env import DrivingConfig, DrivingEnv
+from sumo_scenarios.env import DrivingConfig, DrivingEnv, _settings_made
 from sumo_scenarios.scenarios import (
     N_LANES,
     TrafficScenario,
@@ -312,7 +312,10 @@ def _session_make_settings(config: dict[str, Any]) -> tuple[dict[str, Any], dict
     """What a driving session's env was made with: ``(settings, unknown)``, the arguments
     ``gymnasium.make`` was given (:func:`_session_make_kwargs`), a ``DrivingConfig``
     (``config=``) as its fields; and, by setting, why one cannot be known, in words."""
-    settings, unknown = _session_make_kwargs(config)
+    kwargs, unknown = _session_make_kwargs(config)
+    # a DrivingConfig, TrafficScenario or SimConfig given as a dict of its fields (an env made
+    # again from its spec as JSON), as the env made it
+    settings = _settings_made(kwargs)
     whole = settings.pop("config", None)
     if isinstance(whole, DrivingConfig):
         settings.update((f.name, getattr(whole, f.name)) for f in dataclasses.fields(DrivingConfig))

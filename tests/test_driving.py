@@ -12,14 +12,16 @@ import libsumo
 import numpy as np
 import pytest
 import sumolib
+from gymnasium.envs.registration import EnvSpec
 from gymnasium.utils.env_checker import check_env
 
 import sumo_scenarios
 from sumo_scenarios import metrics
-from sumo_scenarios.env import LEFT, RIGHT, STAY, DrivingEnv
+from sumo_scenarios.env import LEFT, RIGHT, STAY, DrivingConfig, DrivingEnv
 from sumo_scenarios.expert import ExpertConfig, ScriptedExpert
 from sumo_scenarios.replay import EpisodeRecorder, export_fcd, render_gif, replay
 from sumo_scenarios.scenarios import CAR_LENGTH_M, TrafficScenario, data_path
+from sumo_scenarios.sim import SimConfig
 
 
 @pytest.fixture
@@ -64,6 +66,100 @@ def test_check_env_in_full_on_the_registered_env():
         check_env(e.unwrapped)
     finally:
         e.close()
+
+
+_MINE = TrafficScenario(name="mine", seed=7, mean_spacing_m=(50.0, 40.0, 90.0))
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {
+            "config": DrivingConfig(
+                scenario=_MINE, max_episode_steps=40, start_lane=3, sim=SimConfig(0.1)
+            )
+        },
+        {"scenario": _MINE, "sim": SimConfig(step_length_s=0.1), "start_lane": 1},
+    ],
+    ids=["config", "scenario-and-sim"],
+)
+def test_the_env_is_made_again_from_its_spec_as_json(kwargs):
+    """gymnasium's ``EnvSpec.to_json`` writes an argument that is a dataclass as a dict of its
+    fields (``dataclasses.asdict``), and ``gymnasium.make(EnvSpec.from_json(text))`` (what
+    Minari's ``recover_environment`` does with a dataset's env) gives the env that dict: a
+    ``DrivingConfig``, ``TrafficScenario`` or ``SimConfig`` came back as "expected a
+    DrivingConfig, got dict" or "sim must be a SimConfig, got dict". The env made again is the
+    same env: its settings and, from the same seed and actions, its observations."""
+    made = gym.make(sumo_scenarios.ENV_ID, **kwargs)
+    try:
+        again = gym.make(EnvSpec.from_json(made.spec.to_json()))
+        try:
+            assert again.unwrapped.config == made.unwrapped.config
+            runs = []
+            for e in (made, again):  # each reset takes the one simulation over in turn
+                obs = [e.reset(seed=3)[0]] + [e.step(a)[0] for a in (LEFT, STAY, RIGHT, STAY)]
+                runs.append(np.stack(obs))
+            np.testing.assert_array_equal(runs[0], runs[1])
+        finally:
+            again.close()
+    finally:
+        made.close()
+
+
+def test_settings_given_as_a_dict_of_fields_name_a_field_that_is_not_there():
+    """A dict that is not the fields of the setting it stands for is refused naming the key
+    and the fields there are, before any simulation starts."""
+    for kwargs, what in (
+        ({"sim": {"step_length": 0.1}}, r"sim: 'step_length' is no SimConfig field"),
+        ({"config": {"scenario": "eval", "steps": 5}}, r"config: 'steps' is no DrivingConfig"),
+        (
+            {"config": {"sim": {"step": 0.1}}},
+            r"config\.sim: 'step' is no SimConfig field; the fields are step_length_s, ",
+        ),
+        ({"scenario": {"name": "mine"}}, r"scenario: no 'seed'.*TrafficScenario"),
+    ):
+        with pytest.raises(ValueError, match=what):
+            gym.make(sumo_scenarios.ENV_ID, **kwargs)
+
+
+def test_the_info_goes_through_gymnasiums_vector_info_wrappers():
+    """gymnasium's vector envs merge the envs' infos key by key, nested dicts too, and its
+    ``DictInfoToList`` splits them again by key name: ``closing_speed_ms``, keyed by the lane as
+    an int, failed there ("'int' object has no attribute 'startswith'"). Its keys are the
+    lanes' numbers as text, as a session's JSON log holds them; the human-like teacher reads
+    either."""
+    from gymnasium.wrappers.vector import DictInfoToList
+
+    from sumo_scenarios.teacher import HumanDriver
+
+    venv = DictInfoToList(gym.make_vec(sumo_scenarios.ENV_ID, num_envs=1))  # one per process
+    try:
+        obs, infos = venv.reset(seed=3)
+        obs, _, _, _, infos = venv.step(np.array([LEFT]))
+    finally:
+        venv.close()
+    single = DrivingEnv()
+    try:
+        single.reset(seed=3)
+        single_obs, _, _, _, info = single.step(LEFT)
+    finally:
+        single.close()
+    np.testing.assert_array_equal(obs[0], single_obs)
+    assert infos[0]["closing_speed_ms"] == info["closing_speed_ms"]
+    assert list(info["closing_speed_ms"]) == ["1", "2", "3"]
+    # the human-like driver answers the same to either key: a drive on its own answers
+    drivers, answers = (HumanDriver(seed=1), HumanDriver(seed=1)), []
+    env = DrivingEnv()
+    try:
+        obs, info = env.reset(seed=3)
+        for _ in range(200):
+            as_ints = {int(k): v for k, v in info["closing_speed_ms"].items()}
+            pair = (drivers[0](obs, info), drivers[1](obs, {**info, "closing_speed_ms": as_ints}))
+            answers.append(pair)
+            obs, _, _, _, info = env.step(pair[0])
+    finally:
+        env.close()
+    assert all(a == b for a, b in answers) and {a for a, _ in answers} >= {STAY, LEFT}
 
 
 def test_a_second_env_takes_the_simulation_over_and_the_first_says_so(env):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import json
 import os
@@ -305,6 +306,31 @@ def test_a_session_is_evaluated_with_the_step_length_and_start_lane_it_was_taugh
     assert evaluate_saved_policy(tmp_path / "fast", n_steps=n, sim=fast) == report
     with pytest.raises(ValueError, match="sim must be a SimConfig"):
         evaluate_saved_policy(tmp_path / "fast", n_steps=n, sim={"step_length_s": 0.1})
+
+
+def test_a_session_of_an_env_given_its_settings_as_dicts_is_evaluated_and_replayed(tmp_path):
+    """An env made again from its spec as JSON (gymnasium's ``EnvSpec.from_json``, e.g.
+    Minari's ``recover_environment``) is given its ``SimConfig``, ``TrafficScenario`` and
+    ``DrivingConfig`` as dicts of their fields, and a session keeps those dicts: evaluate and
+    replay drive it on the settings they hold, as they do a session given the objects."""
+    from sumo_scenarios.replay import session_episodes
+    from sumo_scenarios.sim import SimConfig
+
+    n = 60
+    fast = SimConfig(step_length_s=0.1)
+    sim = dataclasses.asdict(fast)
+    _taught(tmp_path / "sim", sim=sim, start_lane=4)
+    report = evaluate_saved_policy(tmp_path / "sim", n_steps=n)
+    want = _driven(tmp_path / "sim", n, sim=fast, start_lane=4)
+    assert report["lanes"] == [want["lanes"].count(k) / n for k in range(5)]
+    assert report["collision_pct"] == want["collision_pct"]
+    assert report["sim"] == sim and report["start_lane"] == 4
+    assert session_episodes(tmp_path / "sim", check=True)[0].sim == fast
+
+    config = {"scenario": "train", "max_episode_steps": 100, "start_lane": 4, "sim": sim}
+    _taught(tmp_path / "config", config=config)
+    assert evaluate_saved_policy(tmp_path / "config", n_steps=n) == report
+    assert session_episodes(tmp_path / "config", check=True)[0].start_lane == 4
 
 
 def _forget_objects(session: Path) -> None:

@@ -403,8 +403,10 @@ def test_a_scenario_that_is_neither_a_name_nor_a_traffic_scenario_is_named():
     for bad in ({"name": "mine", "seed": 0}, ["train"]):
         with pytest.raises(ValueError, match=r"scenario must be a name \(eval, light, train\) or"):
             DrivingConfig(scenario=bad)
-    with pytest.raises(ValueError, match=r"got dict \{'name': 'mine'"):
-        DrivingEnv(scenario={"name": "mine", "seed": 0})
+    # DrivingEnv takes a dict of TrafficScenario fields (gymnasium's EnvSpec.to_json writes
+    # one; tests/test_driving.py); a list is no scenario there either
+    with pytest.raises(ValueError, match=r"got list \['train'\]"):
+        DrivingEnv(scenario=["train"])
     with pytest.raises(ValueError, match="unknown scenario 'busy'; known: eval, light, train"):
         DrivingConfig(scenario="busy")
 
@@ -699,8 +701,12 @@ def test_a_config_that_is_no_driving_config_is_named():
         TypeError, match=r"expected a DrivingConfig .*, got str 'eval'; .*scenario='eval'"
     ):
         DrivingEnv("eval")
-    with pytest.raises(TypeError, match=r"expected a DrivingConfig .*, got dict .*keywords"):
-        gymnasium.make(sumo_scenarios.ENV_ID, config={"scenario": "eval"})
+    # a dict of DrivingConfig fields is taken (gymnasium's EnvSpec.to_json writes one); a list
+    # is no config
+    with pytest.raises(
+        TypeError, match=r"expected a DrivingConfig .* or a dict of its fields, got list"
+    ):
+        gymnasium.make(sumo_scenarios.ENV_ID, config=["eval"])
     # with keyword settings beside it, too (it said "not both" of a DrivingConfig never given)
     with pytest.raises(TypeError, match=r"expected a DrivingConfig .*, got str 'eval'"):
         DrivingEnv("eval", max_episode_steps=200)
