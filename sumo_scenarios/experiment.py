@@ -1243,7 +1243,8 @@ class HeldOutUnknownWarning(NotHeldOutWarning):
     prior demonstrations may have been taught on, which cannot be told (its report says
     ``"held_out": None``): they were given as arrays, so nothing of where they were taught is
     recorded, or the session they were read from is not there any more, or no longer holds
-    them (:func:`torchcbl.session.prior_source`). ``road``: which road and why it cannot be
+    them (:func:`torchcbl.session.prior_source`), or the sessions they were read from lead
+    back to one another (moved over one another's places). ``road``: which road and why it cannot be
     told; ``advice``: how it could be. A :class:`NotHeldOutWarning`, so that a filter that
     stops at figures that are not held out (``warnings.simplefilter("error",
     NotHeldOutWarning)``) stops at these too."""
@@ -1308,12 +1309,14 @@ def _prior_taught_on(
     were taught on, following the session they were read from (its first steps then,
     :func:`torchcbl.session.prior_source`) and that session's own prior in turn: ``(why it
     is, None, None)``; ``(None, why it cannot be told, how it could be)`` where a prior's
-    origin is not recorded or its session cannot be read as it was; ``(None, None, None)``
-    where it is not (or the session has no prior demonstrations)."""
+    origin is not recorded or its session cannot be read as it was, or the chain leads back
+    to a session it passed (sessions moved over one another's places); ``(None, None,
+    None)`` where it is not (or the session has no prior demonstrations)."""
     from sumo_scenarios.replay import _session_make_settings
     from torchcbl.session import load_config, prior_source
 
-    run, said, seen = Path(session_dir), "its", set()
+    run, said = Path(session_dir), "its"
+    seen = {os.path.realpath(run)}  # the sessions passed, for a loop of moved folders
     while True:
         source = prior_source(run)
         if source is None:
@@ -1335,6 +1338,17 @@ def _prior_taught_on(
                 fix,
             )
         where = f"{said} prior demonstrations were read from {source.session}"
+        if os.path.realpath(source.session) in seen:
+            # sessions moved over one another's places: the chain leads back to one passed
+            # already, and where the first of these demonstrations were taught is lost
+            return (
+                None,
+                f"{where}, a session this chain of priors passed already (a loop of sessions "
+                "moved over one another's places), so where they were first taught is not "
+                "recorded",
+                "put the session they were first read from back where it was to have its road told",
+            )
+        seen.add(os.path.realpath(source.session))
         kept = load_config(source.session)
         assumed = _session_make_settings(kept)[0].get("scenario", "train")
         road = _taught_on(
@@ -1342,9 +1356,6 @@ def _prior_taught_on(
         )
         if road is not None:
             return f"{where}, {road}", None, None
-        seen.add(os.path.realpath(run))
-        if os.path.realpath(source.session) in seen:  # (a loop of moved folders: told)
-            return None, None, None
         run, said = source.session, f"{where}, whose"
 
 

@@ -486,6 +486,54 @@ def test_road_the_prior_demonstrations_were_taught_on_is_not_held_out(
         assert evaluate_saved_policy(c, n_steps=5)["held_out"] is None
 
 
+def test_a_loop_of_prior_sessions_moved_over_one_another_is_not_held_out(
+    tmp_path, driving_person, capsys
+):
+    """Sessions moved over one another's places can name each other as their prior's source
+    (x deleted, z, made from y, renamed x: y's prior reads as x's, x's as y's). Following the
+    chain then met a session it had passed and stopped with "not taught", so evaluate said
+    `held_out: true` although where the prior was taught is lost. A loop is unknown: null,
+    with a one-line warning saying so."""
+    import shutil
+
+    import gymnasium as gym
+
+    import sumo_scenarios
+    from sumo_scenarios.experiment import teaching_setup
+    from torchcbl import ConfidentTeacher
+    from torchcbl.session import load_demonstrations
+
+    a = tmp_path / "a"
+    argv = ["teach", "driving", "--steps", "10", "--run-dir", str(a), "--seed", "3"]
+    assert main([*argv, "--scenario", "light"]) == 0
+    _, _, make_model = teaching_setup()
+
+    def started(run: Path, prior: object) -> None:
+        """A session started from ``prior`` and closed at once (its training set: the prior)."""
+        env = gym.make(sumo_scenarios.ENV_ID, scenario="light")
+        ConfidentTeacher(
+            env,
+            lambda o, i: 0,
+            model=make_model(),
+            run_dir=run,
+            prior_demonstrations=prior,
+            progress=False,
+        ).close()
+        env.close()
+
+    x, y, z = tmp_path / "x", tmp_path / "y", tmp_path / "z"
+    started(x, load_demonstrations(a))
+    started(y, load_demonstrations(x))
+    started(z, load_demonstrations(y))
+    shutil.rmtree(x)  # a drove segment 3 of light, but nothing leads to it any more
+    z.rename(x)
+    capsys.readouterr()
+    assert main(["evaluate", str(y), "--steps", "5", "--scenario", "light", "--seed", "3"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["held_out"] is None, err
+    assert err.count("\n") == 1 and "not known" in err and "loop" in err, err
+
+
 def test_evaluate_saved_policy_takes_a_scenario_file_as_the_cli_does(
     tmp_path, driving_person, capsys
 ):

@@ -413,3 +413,21 @@ def test_a_prior_read_from_a_session_records_that_session_and_arrays_record_none
     other.close()
     gone = prior_source(tmp_path / "moved" / "next")
     assert gone.session is None and "no longer holds them" in gone.unknown, gone
+
+
+def test_a_session_moved_over_its_priors_source_is_not_its_own_source(tmp_path):
+    """A session moved to where its prior's session was (that one deleted) found itself there:
+    its first steps give its own prior, so prior_source named the session as its own source
+    (and a driving evaluation then said held out). A place that is the session itself is not
+    its source: where none other holds them, the source is unknown."""
+    import shutil
+
+    first = make(tmp_path / "first", prior())
+    first.close()  # no steps: its training set is its prior alone
+    then = make(tmp_path / "then", load_demonstrations(tmp_path / "first"))
+    then.run(max_steps=5)
+    then.close()
+    shutil.rmtree(tmp_path / "first")
+    (tmp_path / "then").rename(tmp_path / "first")
+    found = prior_source(tmp_path / "first")
+    assert found.session is None and "this session itself" in found.unknown, found

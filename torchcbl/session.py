@@ -3171,7 +3171,8 @@ class PriorSource:
         n_steps: the steps of that session's log they were read at; None with ``session``.
         unknown: why ``session`` is None, a clause that follows "its N prior demonstrations"
             (given as arrays, so that nothing of their origin is recorded; or read from a
-            session that is not there any more, or no longer holds them); None otherwise.
+            session that is not there any more, or no longer holds them, or is this session
+            itself, moved to where that one was); None otherwise.
     """
 
     session: Path | None
@@ -3188,9 +3189,10 @@ def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
     SESSION_DIR``): that session's path, absolute and relative to this session's directory,
     and its step count then. It is sought at the recorded path, then at the relative one, and
     taken only where its first steps still give exactly the prior this session keeps (read
-    only; its own warnings, a damaged log's, are not passed on). A prior given as arrays
-    (a ``.npz`` file's, or arrays of one's own), or that of a session written before the
-    source was recorded, has no known source: ``PriorSource(None, None, why)``.
+    only; its own warnings, a damaged log's, are not passed on) and it is not this session
+    itself (moved to where that one was, its first steps can give its own prior). A prior
+    given as arrays (a ``.npz`` file's, or arrays of one's own), or that of a session written
+    before the source was recorded, has no known source: ``PriorSource(None, None, why)``.
 
     Raises:
         CorruptSessionError: this session's ``prior.npz`` is missing or changed.
@@ -3225,6 +3227,9 @@ def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
         if not place.exists():
             found.append(f"{place} is not there")
             continue
+        if _same_directory(place, run_dir):  # moved where that session was: not its source
+            found.append(f"{place} is this session itself")
+            continue
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -3241,6 +3246,15 @@ def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
         f"were read from the session {recorded} (its first {at_steps} steps), which is not "
         f"there as it was: {'; '.join(found)}",
     )
+
+
+def _same_directory(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    """Whether ``a`` and ``b`` are one directory (by any path or link); False where either
+    cannot be looked at."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def latest_checkpoint(
