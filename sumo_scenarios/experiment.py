@@ -1241,10 +1241,11 @@ class NotHeldOutWarning(UserWarning):
 class HeldOutUnknownWarning(NotHeldOutWarning):
     """:func:`evaluate_saved_policy` drove road the session was not taught on, but that its
     prior demonstrations may have been taught on, which cannot be told (its report says
-    ``"held_out": None``): they were given as arrays, so nothing of where they were taught is
-    recorded, or the session they were read from is not there any more, or no longer holds
-    them (:func:`torchcbl.session.prior_source`), or the sessions they were read from lead
-    back to one another (moved over one another's places). ``road``: which road and why it cannot be
+    ``"held_out": None``): they were given as arrays (or read by a torchcbl that did not
+    record their session), so nothing of where they were taught is recorded, or the session
+    they were read from is not there any more, or no longer holds them
+    (:func:`torchcbl.session.prior_source`), or the sessions they were read from lead back to
+    one another (moved over one another's places). ``road``: which road and why it cannot be
     told; ``advice``: how it could be. A :class:`NotHeldOutWarning`, so that a filter that
     stops at figures that are not held out (``warnings.simplefilter("error",
     NotHeldOutWarning)``) stops at these too."""

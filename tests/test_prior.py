@@ -431,3 +431,20 @@ def test_a_session_moved_over_its_priors_source_is_not_its_own_source(tmp_path):
     (tmp_path / "then").rename(tmp_path / "first")
     found = prior_source(tmp_path / "first")
     assert found.session is None and "this session itself" in found.unknown, found
+
+
+def test_a_session_from_before_the_source_was_recorded_is_not_said_given_as_arrays(tmp_path):
+    """A session written before prior.source was recorded (`teach --prior-demonstrations DIR`
+    by an older torchcbl) was told its prior "were given as arrays, not read from a session",
+    which may be false: either may be so, and its reason says both."""
+    first = make(tmp_path / "first")
+    first.run(max_steps=20)
+    first.close()
+    make(tmp_path / "next", load_demonstrations(tmp_path / "first")).close()
+    path = tmp_path / "next" / "config.json"
+    config = json.loads(path.read_text())
+    del config["prior"]["source"]  # as the older torchcbl wrote it
+    path.write_text(json.dumps(config))
+    older = prior_source(tmp_path / "next")
+    assert older.session is None and "not read from a session" not in older.unknown, older
+    assert "given as arrays, or read by a torchcbl that did not record" in older.unknown, older

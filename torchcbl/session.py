@@ -3170,9 +3170,10 @@ class PriorSource:
             cannot be told.
         n_steps: the steps of that session's log they were read at; None with ``session``.
         unknown: why ``session`` is None, a clause that follows "its N prior demonstrations"
-            (given as arrays, so that nothing of their origin is recorded; or read from a
-            session that is not there any more, or no longer holds them, or is this session
-            itself, moved to where that one was); None otherwise.
+            (given as arrays, or read by a torchcbl that did not record their session, so
+            that nothing of their origin is recorded; or read from a session that is not
+            there any more, or no longer holds them, or is this session itself, moved to
+            where that one was); None otherwise.
     """
 
     session: Path | None
@@ -3212,8 +3213,9 @@ def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
         return PriorSource(
             None,
             None,
-            "were given as arrays, not read from a session, so where they were taught is not "
-            "recorded",
+            # (a session written before the source was recorded reads as one given arrays)
+            "were given as arrays, or read by a torchcbl that did not record their session, "
+            "so where they were taught is not recorded",
         )
     recorded, at_steps = Path(source["session"]), source["n_steps"]
     places = [recorded]
