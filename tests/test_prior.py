@@ -448,3 +448,27 @@ def test_a_session_from_before_the_source_was_recorded_is_not_said_given_as_arra
     older = prior_source(tmp_path / "next")
     assert older.session is None and "not read from a session" not in older.unknown, older
     assert "given as arrays, or read by a torchcbl that did not record" in older.unknown, older
+
+
+def test_arrays_changed_after_they_were_read_record_no_source(tmp_path):
+    """load_demonstrations' arrays scaled in place and then given as the prior still recorded
+    the session they were read from, whose first steps then did not give them: the session was
+    later said to "no longer hold them", blaming it for a change made to the arrays. The pair
+    keeps a digest of what was read, and a session started from arrays that no longer match
+    it records no source (they are arrays of one's own); unchanged arrays still do."""
+    import copy
+
+    first = make(tmp_path / "first")
+    first.run(max_steps=20)
+    first.close()
+    demos = load_demonstrations(tmp_path / "first")
+    make(tmp_path / "kept", demos).close()
+    demos[0][:] = demos[0] * 2.0  # changed in place: no longer the session's
+    make(tmp_path / "scaled", demos).close()
+    make(tmp_path / "copied", copy.deepcopy(demos)).close()  # a copy keeps what was read
+    assert "source" in load_config(tmp_path / "kept")["prior"]
+    assert "source" not in load_config(tmp_path / "scaled")["prior"]
+    assert "source" not in load_config(tmp_path / "copied")["prior"]
+    scaled = prior_source(tmp_path / "scaled")
+    assert scaled.session is None and "given as arrays" in scaled.unknown, scaled
+    assert "no longer holds" not in scaled.unknown

@@ -3081,10 +3081,12 @@ class Demonstrations(tuple[np.ndarray, np.ndarray]):
     --prior-demonstrations DIR`` starts one) records both in its config.json, so that where
     its prior demonstrations were taught can be told later (:func:`prior_source`: a driving
     evaluation counts the road they were taught on as taught). The two arrays taken apart, or
-    changed, record nothing of it."""
+    changed (in place too: ``digest``, the :func:`labels_digest` of the pair as it was read,
+    no longer matches them), record nothing of it."""
 
     source: Path
     n_steps: int
+    digest: str | None
 
     def __new__(
         cls,
@@ -3098,16 +3100,31 @@ class Demonstrations(tuple[np.ndarray, np.ndarray]):
         self = super().__new__(cls, (observations, actions))
         self.source = Path(os.path.abspath(source))
         self.n_steps = int(n_steps)
+        self.digest = _pair_digest(observations, actions)
         return self
 
     def __reduce__(self) -> tuple[Any, ...]:
-        """Pickled and copied with its source (a tuple's own would drop the keywords)."""
-        return (_demonstrations, (self[0], self[1], str(self.source), self.n_steps))
+        """Pickled and copied with its source and digest (a tuple's own would drop them)."""
+        return (_demonstrations, (self[0], self[1], str(self.source), self.n_steps, self.digest))
 
 
-def _demonstrations(x: np.ndarray, y: np.ndarray, source: str, n_steps: int) -> Demonstrations:
-    """A :class:`Demonstrations` again (pickle's and copy's)."""
-    return Demonstrations(x, y, source=source, n_steps=n_steps)
+def _pair_digest(observations: Any, actions: Any) -> str | None:
+    """:func:`labels_digest` of a pair of arrays (observations [N, D], actions [N]); None where
+    they are no such pair (what a teacher refuses anyway)."""
+    try:
+        return labels_digest(list(np.asarray(observations)), np.asarray(actions).tolist())
+    except (ValueError, TypeError):
+        return None
+
+
+def _demonstrations(
+    x: np.ndarray, y: np.ndarray, source: str, n_steps: int, digest: str | None = None
+) -> Demonstrations:
+    """A :class:`Demonstrations` again (pickle's and copy's), with the digest it had."""
+    made = Demonstrations(x, y, source=source, n_steps=n_steps)
+    if digest is not None:  # (the arrays as read, not as they may have been changed since)
+        made.digest = digest
+    return made
 
 
 def load_demonstrations(run_dir: str | os.PathLike[str]) -> Demonstrations:
