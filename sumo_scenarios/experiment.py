@@ -90,6 +90,7 @@ if TYPE_CHECKING:
     from sumo_scenarios.sim import SimConfig
     from torchcbl.confidence import DistanceRule
     from torchcbl.gmm import Criterion, GaussianMixtureSet
+    from torchcbl.records import StepRecord
 
 __all__ = [
     "FIGURES",
@@ -1259,12 +1260,14 @@ def _taught_on(
     segment: int,
     *,
     at_steps: int | None = None,
+    records: Sequence[StepRecord] | None = None,
     whose: str = "its",
 ) -> str | None:
     """Why segment ``segment`` of ``traffic`` is road the session was taught on, in words; None
     where it is held out. ``at_steps``: its log's steps before that step only (those a prior
-    was read at, :func:`_prior_taught_on`); ``whose``: how the words name the session's
-    episode ("its", "whose").
+    was read at, :func:`_prior_taught_on`); ``records``: those steps' records, read already
+    (else its log is read); ``whose``: how the words name the session's episode ("its",
+    "whose").
 
     What makes road held out is its random stream alone: a segment's cars (where each starts,
     its desired speed, the spacing of each car recycled ahead) are drawn from
@@ -1292,7 +1295,8 @@ def _taught_on(
     if base != traffic.seed:
         return None  # another base seed: another random stream, other road segments
     try:
-        records = load_records(session_dir)
+        if records is None:
+            records = load_records(session_dir)
     except (OSError, ValueError) as exc:  # (a damaged log: CorruptSessionError)
         return f"its base seed; its log, which says which segments it drove, cannot be read: {exc}"
     for r in records:
@@ -1314,12 +1318,13 @@ def _prior_taught_on(
     to a session it passed (sessions moved over one another's places); ``(None, None,
     None)`` where it is not (or the session has no prior demonstrations)."""
     from sumo_scenarios.replay import _session_make_settings
-    from torchcbl.session import load_config, prior_source
+    from torchcbl.session import _prior_source, load_config
 
     run, said = Path(session_dir), "its"
     seen = {os.path.realpath(run)}  # the sessions passed, for a loop of moved folders
     while True:
-        source = prior_source(run)
+        # (its first steps, read once: checked against the prior, then scanned for segments)
+        source, records = _prior_source(run)
         if source is None:
             return None, None, None
         if source.session is None:
@@ -1353,7 +1358,14 @@ def _prior_taught_on(
         kept = load_config(source.session)
         assumed = _session_make_settings(kept)[0].get("scenario", "train")
         road = _taught_on(
-            source.session, kept, assumed, traffic, segment, at_steps=source.n_steps, whose="whose"
+            source.session,
+            kept,
+            assumed,
+            traffic,
+            segment,
+            at_steps=source.n_steps,
+            records=records,
+            whose="whose",
         )
         if road is not None:
             return f"{where}, {road}", None, None

@@ -534,6 +534,36 @@ def test_a_loop_of_prior_sessions_moved_over_one_another_is_not_held_out(
     assert err.count("\n") == 1 and "not known" in err and "loop" in err, err
 
 
+def test_evaluate_reads_a_prior_session_once_and_only_its_steps_then(
+    tmp_path, driving_person, monkeypatch, capsys
+):
+    """For each session up the prior chain, evaluate read the whole log twice (its training
+    set, to check it, then every record again for the segments its episodes drove): a
+    500,000-step prior took 15 s and about 1 GB before SUMO started. It now reads the steps
+    the prior was read at, once, and scans those. (Counted where the log's rows are made
+    records, the cost that grew with the log.)"""
+    import torchcbl.session as session
+
+    a, b = tmp_path / "a", tmp_path / "b"
+    teach = ["teach", "driving", "--steps"]
+    assert main([*teach, "10", "--run-dir", str(a), "--seed", "3", "--scenario", "light"]) == 0
+    assert main([*teach, "2", "--run-dir", str(b), "--prior-demonstrations", str(a)]) == 0
+    assert main([*teach, "30", "--run-dir", str(a), "--resume"]) == 0  # 40 steps now
+    capsys.readouterr()
+    made: dict[Path, int] = {}
+    records_of = session._records_of
+
+    def counted(rows, run_dir, *args):
+        made[Path(run_dir)] = made.get(Path(run_dir), 0) + len(rows)
+        return records_of(rows, run_dir, *args)
+
+    monkeypatch.setattr(session, "_records_of", counted)
+    assert main(["evaluate", str(b), "--steps", "5", "--scenario", "light", "--seed", "4"]) == 0
+    assert json.loads(capsys.readouterr().out)["held_out"] is True
+    assert made[a] == 10, made  # its first 10 steps, once (was 40 twice)
+    assert made[b] == 2, made
+
+
 def test_evaluate_saved_policy_takes_a_scenario_file_as_the_cli_does(
     tmp_path, driving_person, capsys
 ):

@@ -2967,11 +2967,13 @@ def _gap_text(missing: list[int]) -> str:
 
 
 def _read_log(
-    run_dir: str | os.PathLike[str], *, depth: int = 0
+    run_dir: str | os.PathLike[str], *, depth: int = 0, below: int | None = None
 ) -> tuple[list[StepRecord], dict[int, int]]:
     """Every record and the corrections ``{step: action}`` of a run directory, read-only;
     warns when steps are missing. The warnings point at the caller of the public reader that
-    called this, ``depth`` frames of torchcbl's own between them."""
+    called this, ``depth`` frames of torchcbl's own between them. ``below``: the records and
+    corrections of the steps before that step only (the log is checked whole, but only those
+    rows are made records)."""
     run = Path(run_dir)
     wal = run / (LOG_NAME + "-wal")
     log = run / LOG_NAME
@@ -2995,6 +2997,9 @@ def _read_log(
         # again, checkpointing into the log): read again.
     steps = [row[0] for row in rows]
     _check_committed(run, committed, steps, len(corrections), stacklevel=3 + depth)
+    if below is not None:  # (rows in step order)
+        rows = rows[: bisect.bisect_left(steps, below)]
+        corrections = {s: a for s, a in corrections.items() if s < below}
     records = _records_of(rows, run)
     missing = _missing_steps([r.step for r in records])
     if missing:  # never transient: the journal is read before the SELECT (_rows_unchecked)
@@ -3143,24 +3148,22 @@ def load_demonstrations(run_dir: str | os.PathLike[str]) -> Demonstrations:
     Raises:
         CorruptSessionError: the session's ``prior.npz`` is missing or changed.
     """
-    x, y, n_steps = _training_set(run_dir)
+    x, y, n_steps, _ = _training_set(run_dir)
     return Demonstrations(x, y, source=run_dir, n_steps=n_steps)
 
 
 def _training_set(
     run_dir: str | os.PathLike[str], *, at_steps: int | None = None, depth: int = 0
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """:func:`load_demonstrations`'s training set and the steps the log held (the last
-    step's number + 1; 0 for none); with ``at_steps``, that of the log's steps before step
-    ``at_steps`` only (and their corrections). Warnings point at the caller of the public
-    reader, ``depth`` frames of torchcbl's own between them."""
+) -> tuple[np.ndarray, np.ndarray, int, list[StepRecord]]:
+    """:func:`load_demonstrations`'s training set, the steps the log held (the last step's
+    number + 1; 0 for none) and the records read; with ``at_steps``, those of the log's steps
+    before step ``at_steps`` only (and their corrections: no later row is made a record).
+    Warnings point at the caller of the public reader, ``depth`` frames of torchcbl's own
+    between them."""
     config = load_config(run_dir)
     prior = _read_prior(run_dir, config)  # (this config: not read again for the prior)
-    records, corrections = _read_log(run_dir, depth=depth + 1)
+    records, corrections = _read_log(run_dir, depth=depth + 1, below=at_steps)
     n_steps = records[-1].step + 1 if records else 0
-    if at_steps is not None:
-        records = [r for r in records if r.step < at_steps]
-        corrections = {s: a for s, a in corrections.items() if s < at_steps}
     xs, ys = label_sequence(records, _corrections_of(records, corrections))
     if ys:
         x, y = np.stack(xs), np.asarray(ys, dtype=np.int64)
@@ -3171,7 +3174,7 @@ def _training_set(
         x, y = np.concatenate([prior[0], x]), np.concatenate([prior[1], y])
     if len(y) and _relabels(config):
         x, y = training_set(list(x), y.tolist(), relabel=True)
-    return x, y, n_steps
+    return x, y, n_steps, records
 
 
 @dataclass(frozen=True)
@@ -3215,10 +3218,20 @@ def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
     Raises:
         CorruptSessionError: this session's ``prior.npz`` is missing or changed.
     """
+    return _prior_source(run_dir)[0]
+
+
+def _prior_source(
+    run_dir: str | os.PathLike[str],
+) -> tuple[PriorSource | None, list[StepRecord]]:
+    """:func:`prior_source`, and the records of the source session's first ``n_steps`` steps
+    as read to check it (``[]`` where none is found): what a reader of those steps (a
+    driving evaluation's scan of the segments they drove) takes instead of reading its log
+    again."""
     config = load_config(run_dir)
     prior = _read_prior(run_dir, config)
     if prior is None:
-        return None
+        return None, []
     entry = config["prior"]
     source = entry.get("source")
     if not (
@@ -3227,13 +3240,12 @@ def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
         and type(source.get("n_steps")) is int
         and source["n_steps"] >= 0
     ):
-        return PriorSource(
-            None,
-            None,
-            # (a session written before the source was recorded reads as one given arrays)
+        # (a session written before the source was recorded reads as one given arrays)
+        unknown = (
             "were given as arrays, or read by a torchcbl that did not record their session, "
-            "so where they were taught is not recorded",
+            "so where they were taught is not recorded"
         )
+        return PriorSource(None, None, unknown), []
     recorded, at_steps = Path(source["session"]), source["n_steps"]
     places = [recorded]
     relative = source.get("relative")
@@ -3252,19 +3264,18 @@ def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                x, y, _ = _training_set(place, at_steps=at_steps)
+                x, y, _, records = _training_set(place, at_steps=at_steps)
         except (OSError, ValueError) as exc:  # (IncompatibleRunDirError, CorruptSessionError)
             found.append(f"{place} cannot be read ({str(exc).split('. ')[0]})")
             continue
         if np.array_equal(x, prior[0]) and np.array_equal(y, prior[1]):
-            return PriorSource(place, at_steps, None)
+            return PriorSource(place, at_steps, None), records
         found.append(f"{place} no longer holds them in its first {at_steps} steps")
-    return PriorSource(
-        None,
-        None,
+    unknown = (
         f"were read from the session {recorded} (its first {at_steps} steps), which is not "
-        f"there as it was: {'; '.join(found)}",
+        f"there as it was: {'; '.join(found)}"
     )
+    return PriorSource(None, None, unknown), []
 
 
 def _same_directory(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
