@@ -472,3 +472,30 @@ def test_arrays_changed_after_they_were_read_record_no_source(tmp_path):
     scaled = prior_source(tmp_path / "scaled")
     assert scaled.session is None and "given as arrays" in scaled.unknown, scaled
     assert "no longer holds" not in scaled.unknown
+
+
+def test_demonstrations_is_made_from_one_iterable_as_a_tuple_is(tmp_path):
+    """Demonstrations required its arrays and keywords, so what makes a tuple's own type again
+    from one iterable (dataclasses.asdict of a dataclass holding one, type(d)(iterable))
+    raised TypeError. It takes the one iterable too, with no source (nothing recorded); its
+    arrays are the pair given, and a session started from it records no source."""
+    import dataclasses
+
+    first = make(tmp_path / "first")
+    first.run(max_steps=20)
+    first.close()
+    demos = load_demonstrations(tmp_path / "first")
+
+    @dataclasses.dataclass
+    class Holder:
+        demos: tuple
+
+    again = dataclasses.asdict(Holder(demos))["demos"]
+    assert type(again) is type(demos) and again.source is None and again.n_steps is None
+    assert np.array_equal(again[0], demos[0]) and np.array_equal(again[1], demos[1])
+    remade = type(demos)(iter(demos))
+    assert remade.source is None and len(remade) == 2 and remade[0] is demos[0]
+    make(tmp_path / "next", remade).close()
+    assert "source" not in load_config(tmp_path / "next")["prior"]
+    with pytest.raises(TypeError, match="observations, actions"):
+        type(demos)([demos[0]])

@@ -3075,11 +3075,17 @@ def _labels(run_dir: str | os.PathLike[str], *, depth: int = 0) -> tuple[np.ndar
     return np.stack(xs), np.asarray(ys, dtype=np.int64)
 
 
+#: Demonstrations' ``actions`` not given: made as a tuple is, from one iterable
+_ONE_ITERABLE: Any = object()
+
+
 class Demonstrations(tuple[np.ndarray, np.ndarray]):
     """A session's training set as :func:`load_demonstrations` returns it: the pair
     ``(observations, actions)``, unpacked or indexed as any tuple, which also says where it
     was read. ``source``: the session directory, absolute; ``n_steps``: the steps its log held
-    then (the training set is that of its first ``n_steps`` steps).
+    then (the training set is that of its first ``n_steps`` steps). Both None for one made
+    as a tuple is, from one iterable of the two arrays (``Demonstrations(pair)``, as
+    ``dataclasses.asdict`` or ``type(d)(...)`` make one again), which names no session.
 
     A session started from it as it is returned (``ConfidentTeacher(...,
     prior_demonstrations=load_demonstrations(run_dir))``, as ``torchcbl teach
@@ -3089,28 +3095,52 @@ class Demonstrations(tuple[np.ndarray, np.ndarray]):
     changed (in place too: ``digest``, the :func:`labels_digest` of the pair as it was read,
     no longer matches them), record nothing of it."""
 
-    source: Path
-    n_steps: int
+    source: Path | None
+    n_steps: int | None
     digest: str | None
 
     def __new__(
         cls,
-        observations: np.ndarray,
-        actions: np.ndarray,
+        observations: Any,
+        actions: Any = _ONE_ITERABLE,
         *,
-        source: str | os.PathLike[str],
-        n_steps: int,
+        source: str | os.PathLike[str] | None = None,
+        n_steps: int | None = None,
     ) -> Demonstrations:
-        """``(observations, actions)`` read from the session ``source`` at ``n_steps`` steps."""
-        self = super().__new__(cls, (observations, actions))
-        self.source = Path(os.path.abspath(source))
-        self.n_steps = int(n_steps)
-        self.digest = _pair_digest(observations, actions)
+        """``(observations, actions)`` read from the session ``source`` at ``n_steps`` steps;
+        ``Demonstrations(pair)``: the two items of the iterable ``pair``, as ``tuple(pair)``
+        takes them. Without ``source`` and ``n_steps`` (they go together) it names no session,
+        and a session started from it records none.
+
+        Raises:
+            TypeError: one iterable that is not of two items, or ``source`` without
+                ``n_steps`` (or the other way round).
+        """
+        if actions is _ONE_ITERABLE:
+            pair = tuple(observations)
+            if len(pair) != 2:
+                raise TypeError(
+                    "Demonstrations is a pair (observations, actions): expected one iterable "
+                    f"of 2 items, got {len(pair)}; or give them as Demonstrations(observations, "
+                    "actions)"
+                )
+        else:
+            pair = (observations, actions)
+        if (source is None) != (n_steps is None):
+            raise TypeError(
+                "Demonstrations takes source= (the session read) and n_steps= (its steps "
+                f"then) together, or neither; got source={source!r}, n_steps={n_steps!r}"
+            )
+        self = super().__new__(cls, pair)
+        self.source = None if source is None else Path(os.path.abspath(source))
+        self.n_steps = None if n_steps is None else int(n_steps)
+        self.digest = None if source is None else _pair_digest(*pair)
         return self
 
     def __reduce__(self) -> tuple[Any, ...]:
         """Pickled and copied with its source and digest (a tuple's own would drop them)."""
-        return (_demonstrations, (self[0], self[1], str(self.source), self.n_steps, self.digest))
+        source = None if self.source is None else str(self.source)
+        return (_demonstrations, (self[0], self[1], source, self.n_steps, self.digest))
 
 
 def _pair_digest(observations: Any, actions: Any) -> str | None:
@@ -3123,7 +3153,11 @@ def _pair_digest(observations: Any, actions: Any) -> str | None:
 
 
 def _demonstrations(
-    x: np.ndarray, y: np.ndarray, source: str, n_steps: int, digest: str | None = None
+    x: np.ndarray,
+    y: np.ndarray,
+    source: str | None,
+    n_steps: int | None,
+    digest: str | None = None,
 ) -> Demonstrations:
     """A :class:`Demonstrations` again (pickle's and copy's), with the digest it had."""
     made = Demonstrations(x, y, source=source, n_steps=n_steps)
