@@ -564,6 +564,46 @@ def test_evaluate_reads_a_prior_session_once_and_only_its_steps_then(
     assert made[b] == 2, made
 
 
+def test_a_session_that_kept_its_traffic_as_text_drove_road_of_an_unknown_base_seed(
+    tmp_path, driving_person, capsys
+):
+    """A session written before its env described its traffic (no traffic.seed) and before
+    objects were kept whole (its TrafficScenario only as text) does not record its base seed.
+    Evaluate took it for train's: a segment its episodes drove, on the base seed it was in fact
+    taught on, was said held out (`true`), for the session and for one whose prior was read
+    from it. Where one of its episodes drove the segment, whether that is taught road cannot
+    be told: null, with a one-line warning; a segment none drove is still held out."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    mine = tmp_path / "mine.json"
+    mine.write_text(json.dumps({"name": "mine", "seed": 7}))
+    teach = ["teach", "driving", "--steps"]
+    assert main([*teach, "10", "--run-dir", str(a), "--seed", "3", "--scenario", str(mine)]) == 0
+    prior = ["--prior-demonstrations", str(a)]
+    assert main([*teach, "5", "--run-dir", str(b), "--seed", "6", *prior]) == 0
+    assert {r.info["episode_seed"] for r in load_records(a)} == {3}
+    path = a / "config.json"  # as a torchcbl before 2026-11-27 wrote it
+    config = json.loads(path.read_text())
+    del config["env"]["kwargs_objects"]
+    config["env"]["kwargs"]["scenario"] = {"repr": "TrafficScenario(name='mine', seed=7)"}
+    inputs = config["env"]["inputs"]
+    config["env"]["inputs"] = {k: v for k, v in inputs.items() if not k.startswith("traffic.")}
+    path.write_text(json.dumps(config))
+    capsys.readouterr()
+
+    def evaluated(run: Path, seed: int) -> tuple[object, str]:
+        """`evaluate RUN --scenario mine.json --seed SEED`: (held_out, stderr)."""
+        argv = ["evaluate", str(run), "--steps", "5", "--scenario", str(mine)]
+        assert main([*argv, "--seed", str(seed)]) == 0
+        out, err = capsys.readouterr()
+        return json.loads(out)["held_out"], err
+
+    for run in (a, b):
+        held, err = evaluated(run, 3)  # segment 3 of base seed 7: a's episode 0 drove it
+        assert held is None and err.count("\n") == 1 and "not known" in err, (run, err)
+        assert "Traceback" not in err
+        assert evaluated(run, 4) == (True, "")  # no episode drove segment 4
+
+
 def test_evaluate_saved_policy_takes_a_scenario_file_as_the_cli_does(
     tmp_path, driving_person, capsys
 ):
