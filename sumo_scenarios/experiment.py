@@ -90,6 +90,7 @@ if TYPE_CHECKING:
     from sumo_scenarios.sim import SimConfig
     from torchcbl.confidence import DistanceRule
     from torchcbl.gmm import Criterion, GaussianMixtureSet
+    from torchcbl.records import StepRecord
 
 __all__ = [
     "FIGURES",
@@ -1239,11 +1240,14 @@ class NotHeldOutWarning(UserWarning):
 
 
 class HeldOutUnknownWarning(NotHeldOutWarning):
-    """:func:`evaluate_saved_policy` drove road the session was not taught on, but that its
-    prior demonstrations may have been taught on, which cannot be told (its report says
-    ``"held_out": None``): they were given as arrays, so nothing of where they were taught is
-    recorded, or the session they were read from is not there any more, or no longer holds
-    them (:func:`torchcbl.session.prior_source`). ``road``: which road and why it cannot be
+    """:func:`evaluate_saved_policy` drove road that may be road the session was taught on,
+    which cannot be told (its report says ``"held_out": None``): its prior demonstrations
+    were given as arrays (or read by a torchcbl that did not record their session), so
+    nothing of where they were taught is recorded, or the session they were read from is not
+    there any more, or no longer holds them (:func:`torchcbl.session.prior_source`), or the
+    sessions they were read from lead back to one another (moved over one another's places);
+    or the session, or one its prior was read from, drove that segment on a base seed it does
+    not record (its traffic kept only as text). ``road``: which road and why it cannot be
     told; ``advice``: how it could be. A :class:`NotHeldOutWarning`, so that a filter that
     stops at figures that are not held out (``warnings.simplefilter("error",
     NotHeldOutWarning)``) stops at these too."""
@@ -1257,12 +1261,15 @@ def _taught_on(
     segment: int,
     *,
     at_steps: int | None = None,
+    records: Sequence[StepRecord] | None = None,
     whose: str = "its",
-) -> str | None:
-    """Why segment ``segment`` of ``traffic`` is road the session was taught on, in words; None
-    where it is held out. ``at_steps``: its log's steps before that step only (those a prior
-    was read at, :func:`_prior_taught_on`); ``whose``: how the words name the session's
-    episode ("its", "whose").
+) -> tuple[str | None, str | None]:
+    """Whether segment ``segment`` of ``traffic`` is road the session was taught on: ``(why it
+    is, in words, None)``; ``(None, None)`` where it is held out; ``(None, why that cannot be
+    told)`` where one of its episodes drove that segment on a base seed it does not record.
+    ``at_steps``: its log's steps before that step only (those a prior was read at,
+    :func:`_prior_taught_on`); ``records``: those steps' records, read already (else its log
+    is read); ``whose``: how the words name the session's episode ("its", "whose").
 
     What makes road held out is its random stream alone: a segment's cars (where each starts,
     its desired speed, the spacing of each car recycled ahead) are drawn from
@@ -1276,29 +1283,47 @@ def _taught_on(
     road: they do not count either.
 
     The taught base seed is the one the session's env described (``traffic.seed`` of its
-    ``describe_inputs()``), else ``assumed``'s (what evaluation takes the traffic to be)."""
+    ``describe_inputs()``), else ``assumed``'s (the traffic it was made with); ``assumed``
+    None where that is not known either (a session stored before 2026-11-27 kept a
+    ``TrafficScenario`` only as text, and before its env described itself, no base seed)."""
     from sumo_scenarios.scenarios import get_scenario
     from torchcbl.session import load_records
 
     inputs = (kept.get("env") or {}).get("inputs") or {}
     base = inputs.get("traffic.seed")
-    if base is None:  # a session stored before its env described itself
+    if base is None and assumed is not None:  # a session stored before its env described itself
         try:
             base = get_scenario(assumed).seed
-        except ValueError:
-            return None
-    if base != traffic.seed:
-        return None  # another base seed: another random stream, other road segments
+        except ValueError:  # (a name this version does not ship: its base seed is not known)
+            pass
+    if base is not None and base != traffic.seed:
+        return None, None  # another base seed: another random stream, other road segments
     try:
-        records = load_records(session_dir)
+        if records is None:
+            records = load_records(session_dir)
     except (OSError, ValueError) as exc:  # (a damaged log: CorruptSessionError)
-        return f"its base seed; its log, which says which segments it drove, cannot be read: {exc}"
+        why = f"its log, which says which segments it drove, cannot be read: {exc}"
+        return (f"its base seed; {why}", None) if base is not None else (None, why)
     for r in records:
         if at_steps is not None and r.step >= at_steps:
             break
         if isinstance(r.info, Mapping) and r.info.get("episode_seed") == segment:
-            return f"{whose} episode {r.episode} drove it on its base seed {base}"
-    return None
+            if base is None:  # the segment driven, on a stream that cannot be told
+                return None, (
+                    f"{whose} episode {r.episode} drove that segment on a base seed it does not "
+                    "record, its traffic kept only as text"
+                )
+            return f"{whose} episode {r.episode} drove it on its base seed {base}", None
+    return None, None  # a segment none of its episodes drove: another stream on any base seed
+
+
+def _assumed_traffic(kept: Mapping[str, Any]) -> Any:
+    """The traffic a driving session was made with, as :func:`_taught_on` takes it: its
+    ``scenario`` (train's name where it was given none), None where it kept it only as text."""
+    from sumo_scenarios.replay import _session_make_settings
+
+    settings, unknown = _session_make_settings(dict(kept))
+    return None if "scenario" in unknown else settings.get("scenario", "train")
 
 
 def _prior_taught_on(
@@ -1308,14 +1333,24 @@ def _prior_taught_on(
     were taught on, following the session they were read from (its first steps then,
     :func:`torchcbl.session.prior_source`) and that session's own prior in turn: ``(why it
     is, None, None)``; ``(None, why it cannot be told, how it could be)`` where a prior's
-    origin is not recorded or its session cannot be read as it was; ``(None, None, None)``
-    where it is not (or the session has no prior demonstrations)."""
-    from sumo_scenarios.replay import _session_make_settings
-    from torchcbl.session import load_config, prior_source
+    origin is not recorded or its session cannot be read as it was, or the chain leads back
+    to a session it passed (sessions moved over one another's places), or a session of the
+    chain drove that segment on a base seed it does not record (and none further up is
+    taught on it); ``(None, None, None)`` where it is not (or the session has no prior
+    demonstrations)."""
+    from torchcbl.session import _prior_source, load_config
 
-    run, said, seen = Path(session_dir), "its", set()
+    run, said = Path(session_dir), "its"
+    seen = {os.path.realpath(run)}  # the sessions passed, for a loop of moved folders
+    # the first road of the chain that cannot be told: said where none further up is taught
+    unsure: tuple[str, str] | None = None
     while True:
-        source = prior_source(run)
+        # (its first steps, read once: checked against the prior, then scanned for segments)
+        source, records = _prior_source(run)
+        if unsure is not None and (
+            source is None or source.session is None or os.path.realpath(source.session) in seen
+        ):  # none further up is taught road: the first that cannot be told is said
+            return None, *unsure
         if source is None:
             return None, None, None
         if source.session is None:
@@ -1335,16 +1370,36 @@ def _prior_taught_on(
                 fix,
             )
         where = f"{said} prior demonstrations were read from {source.session}"
+        if os.path.realpath(source.session) in seen:
+            # sessions moved over one another's places: the chain leads back to one passed
+            # already, and where the first of these demonstrations were taught is lost
+            return (
+                None,
+                f"{where}, a session this chain of priors passed already (a loop of sessions "
+                "moved over one another's places), so where they were first taught is not "
+                "recorded",
+                "put the session they were first read from back where it was to have its road told",
+            )
+        seen.add(os.path.realpath(source.session))
         kept = load_config(source.session)
-        assumed = _session_make_settings(kept)[0].get("scenario", "train")
-        road = _taught_on(
-            source.session, kept, assumed, traffic, segment, at_steps=source.n_steps, whose="whose"
+        road, not_told = _taught_on(
+            source.session,
+            kept,
+            _assumed_traffic(kept),
+            traffic,
+            segment,
+            at_steps=source.n_steps,
+            records=records,
+            whose="whose",
         )
         if road is not None:
             return f"{where}, {road}", None, None
-        seen.add(os.path.realpath(run))
-        if os.path.realpath(source.session) in seen:  # (a loop of moved folders: told)
-            return None, None, None
+        if not_told is not None and unsure is None:
+            unsure = (
+                f"{where}, {not_told}",
+                "for figures that are held out give a segment that session's episodes did "
+                "not drive (torchcbl evaluate --seed S; in Python seed=)",
+            )
         run, said = source.session, f"{where}, whose"
 
 
@@ -1399,14 +1454,17 @@ def evaluate_saved_policy(
     cannot be told (arrays given in Python or a ``.npz`` file's, which record no origin; a
     session that is not there any more, or holds other demonstrations now) and the session's
     own episodes did not drive the road, ``held_out`` is None, with a
-    :class:`HeldOutUnknownWarning` saying why: never True on a guess.
+    :class:`HeldOutUnknownWarning` saying why: never True on a guess. So it is where the
+    session, or a session its prior was read from, drove that segment on a base seed it does
+    not record (written before 2026-11-27, its traffic kept only as text, and before its env
+    described itself); a segment none of its episodes drove is held out on any base seed.
 
     Returns the collision rate (share of timesteps in contact, %), the lane shares (``lanes``,
     index 0 = right shoulder ... 4 = left shoulder, named in that order by ``lane_names``:
     ``sumo_scenarios.scenarios.LANE_NAMES``), the segment (``eval_segment``) and traffic
     (``scenario``: the ``TrafficScenario``'s fields, its name among them) driven, whether that
     road is held out (``held_out``: False where the session or its prior demonstrations were
-    taught on it, as the warning says; None where its prior's road cannot be told), and the
+    taught on it, as the warning says; None where that cannot be told), and the
     SUMO settings and start lane driven. It takes this process's one libsumo
     simulation: a live DrivingEnv must be reset after it.
     """
@@ -1486,10 +1544,16 @@ def evaluate_saved_policy(
     if seed is None:
         seed = session_eval_segment(session_dir)
         seed = 0 if seed is None else seed
-    taught_on = _taught_on(session_dir, kept, taught.get("scenario", "train"), traffic, seed)
+    taught_on, not_told = _taught_on(session_dir, kept, _assumed_traffic(kept), traffic, seed)
     unknown = fix = None
     if taught_on is None:  # road its prior demonstrations were taught on is taught road too
         taught_on, unknown, fix = _prior_taught_on(session_dir, traffic, seed)
+    if taught_on is None and not_told is not None:  # (its own before its prior's)
+        unknown = not_told
+        fix = (
+            "for figures that are held out give a segment its episodes did not drive "
+            "(torchcbl evaluate --seed S; in Python seed=)"
+        )
     if unknown is not None:
         warnings.warn(
             HeldOutUnknownWarning(

@@ -413,3 +413,89 @@ def test_a_prior_read_from_a_session_records_that_session_and_arrays_record_none
     other.close()
     gone = prior_source(tmp_path / "moved" / "next")
     assert gone.session is None and "no longer holds them" in gone.unknown, gone
+
+
+def test_a_session_moved_over_its_priors_source_is_not_its_own_source(tmp_path):
+    """A session moved to where its prior's session was (that one deleted) found itself there:
+    its first steps give its own prior, so prior_source named the session as its own source
+    (and a driving evaluation then said held out). A place that is the session itself is not
+    its source: where none other holds them, the source is unknown."""
+    import shutil
+
+    first = make(tmp_path / "first", prior())
+    first.close()  # no steps: its training set is its prior alone
+    then = make(tmp_path / "then", load_demonstrations(tmp_path / "first"))
+    then.run(max_steps=5)
+    then.close()
+    shutil.rmtree(tmp_path / "first")
+    (tmp_path / "then").rename(tmp_path / "first")
+    found = prior_source(tmp_path / "first")
+    assert found.session is None and "this session itself" in found.unknown, found
+
+
+def test_a_session_from_before_the_source_was_recorded_is_not_said_given_as_arrays(tmp_path):
+    """A session written before prior.source was recorded (`teach --prior-demonstrations DIR`
+    by an older torchcbl) was told its prior "were given as arrays, not read from a session",
+    which may be false: either may be so, and its reason says both."""
+    first = make(tmp_path / "first")
+    first.run(max_steps=20)
+    first.close()
+    make(tmp_path / "next", load_demonstrations(tmp_path / "first")).close()
+    path = tmp_path / "next" / "config.json"
+    config = json.loads(path.read_text())
+    del config["prior"]["source"]  # as the older torchcbl wrote it
+    path.write_text(json.dumps(config))
+    older = prior_source(tmp_path / "next")
+    assert older.session is None and "not read from a session" not in older.unknown, older
+    assert "given as arrays, or read by a torchcbl that did not record" in older.unknown, older
+
+
+def test_arrays_changed_after_they_were_read_record_no_source(tmp_path):
+    """load_demonstrations' arrays scaled in place and then given as the prior still recorded
+    the session they were read from, whose first steps then did not give them: the session was
+    later said to "no longer hold them", blaming it for a change made to the arrays. The pair
+    keeps a digest of what was read, and a session started from arrays that no longer match
+    it records no source (they are arrays of one's own); unchanged arrays still do."""
+    import copy
+
+    first = make(tmp_path / "first")
+    first.run(max_steps=20)
+    first.close()
+    demos = load_demonstrations(tmp_path / "first")
+    make(tmp_path / "kept", demos).close()
+    demos[0][:] = demos[0] * 2.0  # changed in place: no longer the session's
+    make(tmp_path / "scaled", demos).close()
+    make(tmp_path / "copied", copy.deepcopy(demos)).close()  # a copy keeps what was read
+    assert "source" in load_config(tmp_path / "kept")["prior"]
+    assert "source" not in load_config(tmp_path / "scaled")["prior"]
+    assert "source" not in load_config(tmp_path / "copied")["prior"]
+    scaled = prior_source(tmp_path / "scaled")
+    assert scaled.session is None and "given as arrays" in scaled.unknown, scaled
+    assert "no longer holds" not in scaled.unknown
+
+
+def test_demonstrations_is_made_from_one_iterable_as_a_tuple_is(tmp_path):
+    """Demonstrations required its arrays and keywords, so what makes a tuple's own type again
+    from one iterable (dataclasses.asdict of a dataclass holding one, type(d)(iterable))
+    raised TypeError. It takes the one iterable too, with no source (nothing recorded); its
+    arrays are the pair given, and a session started from it records no source."""
+    import dataclasses
+
+    first = make(tmp_path / "first")
+    first.run(max_steps=20)
+    first.close()
+    demos = load_demonstrations(tmp_path / "first")
+
+    @dataclasses.dataclass
+    class Holder:
+        demos: tuple
+
+    again = dataclasses.asdict(Holder(demos))["demos"]
+    assert type(again) is type(demos) and again.source is None and again.n_steps is None
+    assert np.array_equal(again[0], demos[0]) and np.array_equal(again[1], demos[1])
+    remade = type(demos)(iter(demos))
+    assert remade.source is None and len(remade) == 2 and remade[0] is demos[0]
+    make(tmp_path / "next", remade).close()
+    assert "source" not in load_config(tmp_path / "next")["prior"]
+    with pytest.raises(TypeError, match="observations, actions"):
+        type(demos)([demos[0]])

@@ -1066,8 +1066,9 @@ _EVALUATE_EPILOG = (
     "(the lanes' names, right shoulder first), scenario (the traffic driven, its "
     "TrafficScenario fields), held_out (false where that is road the session was taught on, "
     "or the session its prior demonstrations were read from was; null where that cannot be "
-    "told, with a warning: prior demonstrations from a .npz file, or whose session is not "
-    "there any more), "
+    "told, with a warning: prior demonstrations from a .npz file or arrays, or read by a "
+    "torchcbl before 2026-11-28, whose session is not recorded, or whose session is not "
+    "there any more or holds others now; else true), "
     "start_lane (the lane it started in, 0 the right shoulder), sim (the SUMO settings, "
     "SimConfig's fields)."
 )
@@ -2097,7 +2098,9 @@ def _parser() -> argparse.ArgumentParser:
         "traffic's held-out twin, the same traffic on the next base seed (train's is eval, as "
         "the reproduction evaluates; light's light-held-out), whose road segments no episode "
         "of the taught traffic drives. --scenario or --seed that drive road the session was "
-        "taught on are driven, with a one-line warning that the figures are not held out.",
+        "taught on are driven, with a one-line warning that the figures are not held out "
+        '("held_out": false). Road its prior demonstrations were taught on counts as taught; '
+        'where that cannot be told, "held_out" is null, with a one-line warning saying why.',
         epilog=_EVALUATE_EPILOG,
     )
     p.add_argument(

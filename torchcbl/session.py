@@ -2967,11 +2967,13 @@ def _gap_text(missing: list[int]) -> str:
 
 
 def _read_log(
-    run_dir: str | os.PathLike[str], *, depth: int = 0
+    run_dir: str | os.PathLike[str], *, depth: int = 0, below: int | None = None
 ) -> tuple[list[StepRecord], dict[int, int]]:
     """Every record and the corrections ``{step: action}`` of a run directory, read-only;
     warns when steps are missing. The warnings point at the caller of the public reader that
-    called this, ``depth`` frames of torchcbl's own between them."""
+    called this, ``depth`` frames of torchcbl's own between them. ``below``: the records and
+    corrections of the steps before that step only (the log is checked whole, but only those
+    rows are made records)."""
     run = Path(run_dir)
     wal = run / (LOG_NAME + "-wal")
     log = run / LOG_NAME
@@ -2995,6 +2997,9 @@ def _read_log(
         # again, checkpointing into the log): read again.
     steps = [row[0] for row in rows]
     _check_committed(run, committed, steps, len(corrections), stacklevel=3 + depth)
+    if below is not None:  # (rows in step order)
+        rows = rows[: bisect.bisect_left(steps, below)]
+        corrections = {s: a for s, a in corrections.items() if s < below}
     records = _records_of(rows, run)
     missing = _missing_steps([r.step for r in records])
     if missing:  # never transient: the journal is read before the SELECT (_rows_unchecked)
@@ -3070,44 +3075,95 @@ def _labels(run_dir: str | os.PathLike[str], *, depth: int = 0) -> tuple[np.ndar
     return np.stack(xs), np.asarray(ys, dtype=np.int64)
 
 
+#: Demonstrations' ``actions`` not given: made as a tuple is, from one iterable
+_ONE_ITERABLE: Any = object()
+
+
 class Demonstrations(tuple[np.ndarray, np.ndarray]):
     """A session's training set as :func:`load_demonstrations` returns it: the pair
     ``(observations, actions)``, unpacked or indexed as any tuple, which also says where it
     was read. ``source``: the session directory, absolute; ``n_steps``: the steps its log held
-    then (the training set is that of its first ``n_steps`` steps).
+    then (the training set is that of its first ``n_steps`` steps). Both None for one made
+    as a tuple is, from one iterable of the two arrays (``Demonstrations(pair)``, as
+    ``dataclasses.asdict`` or ``type(d)(...)`` make one again), which names no session.
 
     A session started from it as it is returned (``ConfidentTeacher(...,
     prior_demonstrations=load_demonstrations(run_dir))``, as ``torchcbl teach
     --prior-demonstrations DIR`` starts one) records both in its config.json, so that where
     its prior demonstrations were taught can be told later (:func:`prior_source`: a driving
     evaluation counts the road they were taught on as taught). The two arrays taken apart, or
-    changed, record nothing of it."""
+    changed (in place too: ``digest``, the :func:`labels_digest` of the pair as it was read,
+    no longer matches them), record nothing of it."""
 
-    source: Path
-    n_steps: int
+    source: Path | None
+    n_steps: int | None
+    digest: str | None
 
     def __new__(
         cls,
-        observations: np.ndarray,
-        actions: np.ndarray,
+        observations: Any,
+        actions: Any = _ONE_ITERABLE,
         *,
-        source: str | os.PathLike[str],
-        n_steps: int,
+        source: str | os.PathLike[str] | None = None,
+        n_steps: int | None = None,
     ) -> Demonstrations:
-        """``(observations, actions)`` read from the session ``source`` at ``n_steps`` steps."""
-        self = super().__new__(cls, (observations, actions))
-        self.source = Path(os.path.abspath(source))
-        self.n_steps = int(n_steps)
+        """``(observations, actions)`` read from the session ``source`` at ``n_steps`` steps;
+        ``Demonstrations(pair)``: the two items of the iterable ``pair``, as ``tuple(pair)``
+        takes them. Without ``source`` and ``n_steps`` (they go together) it names no session,
+        and a session started from it records none.
+
+        Raises:
+            TypeError: one iterable that is not of two items, or ``source`` without
+                ``n_steps`` (or the other way round).
+        """
+        if actions is _ONE_ITERABLE:
+            pair = tuple(observations)
+            if len(pair) != 2:
+                raise TypeError(
+                    "Demonstrations is a pair (observations, actions): expected one iterable "
+                    f"of 2 items, got {len(pair)}; or give them as Demonstrations(observations, "
+                    "actions)"
+                )
+        else:
+            pair = (observations, actions)
+        if (source is None) != (n_steps is None):
+            raise TypeError(
+                "Demonstrations takes source= (the session read) and n_steps= (its steps "
+                f"then) together, or neither; got source={source!r}, n_steps={n_steps!r}"
+            )
+        self = super().__new__(cls, pair)
+        self.source = None if source is None else Path(os.path.abspath(source))
+        self.n_steps = None if n_steps is None else int(n_steps)
+        self.digest = None if source is None else _pair_digest(*pair)
         return self
 
     def __reduce__(self) -> tuple[Any, ...]:
-        """Pickled and copied with its source (a tuple's own would drop the keywords)."""
-        return (_demonstrations, (self[0], self[1], str(self.source), self.n_steps))
+        """Pickled and copied with its source and digest (a tuple's own would drop them)."""
+        source = None if self.source is None else str(self.source)
+        return (_demonstrations, (self[0], self[1], source, self.n_steps, self.digest))
 
 
-def _demonstrations(x: np.ndarray, y: np.ndarray, source: str, n_steps: int) -> Demonstrations:
-    """A :class:`Demonstrations` again (pickle's and copy's)."""
-    return Demonstrations(x, y, source=source, n_steps=n_steps)
+def _pair_digest(observations: Any, actions: Any) -> str | None:
+    """:func:`labels_digest` of a pair of arrays (observations [N, D], actions [N]); None where
+    they are no such pair (what a teacher refuses anyway)."""
+    try:
+        return labels_digest(list(np.asarray(observations)), np.asarray(actions).tolist())
+    except (ValueError, TypeError):
+        return None
+
+
+def _demonstrations(
+    x: np.ndarray,
+    y: np.ndarray,
+    source: str | None,
+    n_steps: int | None,
+    digest: str | None = None,
+) -> Demonstrations:
+    """A :class:`Demonstrations` again (pickle's and copy's), with the digest it had."""
+    made = Demonstrations(x, y, source=source, n_steps=n_steps)
+    if digest is not None:  # (the arrays as read, not as they may have been changed since)
+        made.digest = digest
+    return made
 
 
 def load_demonstrations(run_dir: str | os.PathLike[str]) -> Demonstrations:
@@ -3126,24 +3182,22 @@ def load_demonstrations(run_dir: str | os.PathLike[str]) -> Demonstrations:
     Raises:
         CorruptSessionError: the session's ``prior.npz`` is missing or changed.
     """
-    x, y, n_steps = _training_set(run_dir)
+    x, y, n_steps, _ = _training_set(run_dir)
     return Demonstrations(x, y, source=run_dir, n_steps=n_steps)
 
 
 def _training_set(
     run_dir: str | os.PathLike[str], *, at_steps: int | None = None, depth: int = 0
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """:func:`load_demonstrations`'s training set and the steps the log held (the last
-    step's number + 1; 0 for none); with ``at_steps``, that of the log's steps before step
-    ``at_steps`` only (and their corrections). Warnings point at the caller of the public
-    reader, ``depth`` frames of torchcbl's own between them."""
+) -> tuple[np.ndarray, np.ndarray, int, list[StepRecord]]:
+    """:func:`load_demonstrations`'s training set, the steps the log held (the last step's
+    number + 1; 0 for none) and the records read; with ``at_steps``, those of the log's steps
+    before step ``at_steps`` only (and their corrections: no later row is made a record).
+    Warnings point at the caller of the public reader, ``depth`` frames of torchcbl's own
+    between them."""
     config = load_config(run_dir)
     prior = _read_prior(run_dir, config)  # (this config: not read again for the prior)
-    records, corrections = _read_log(run_dir, depth=depth + 1)
+    records, corrections = _read_log(run_dir, depth=depth + 1, below=at_steps)
     n_steps = records[-1].step + 1 if records else 0
-    if at_steps is not None:
-        records = [r for r in records if r.step < at_steps]
-        corrections = {s: a for s, a in corrections.items() if s < at_steps}
     xs, ys = label_sequence(records, _corrections_of(records, corrections))
     if ys:
         x, y = np.stack(xs), np.asarray(ys, dtype=np.int64)
@@ -3154,7 +3208,7 @@ def _training_set(
         x, y = np.concatenate([prior[0], x]), np.concatenate([prior[1], y])
     if len(y) and _relabels(config):
         x, y = training_set(list(x), y.tolist(), relabel=True)
-    return x, y, n_steps
+    return x, y, n_steps, records
 
 
 @dataclass(frozen=True)
@@ -3170,8 +3224,10 @@ class PriorSource:
             cannot be told.
         n_steps: the steps of that session's log they were read at; None with ``session``.
         unknown: why ``session`` is None, a clause that follows "its N prior demonstrations"
-            (given as arrays, so that nothing of their origin is recorded; or read from a
-            session that is not there any more, or no longer holds them); None otherwise.
+            (given as arrays, or read by a torchcbl that did not record their session, so
+            that nothing of their origin is recorded; or read from a session that is not
+            there any more, or no longer holds them, or is this session itself, moved to
+            where that one was); None otherwise.
     """
 
     session: Path | None
@@ -3188,17 +3244,28 @@ def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
     SESSION_DIR``): that session's path, absolute and relative to this session's directory,
     and its step count then. It is sought at the recorded path, then at the relative one, and
     taken only where its first steps still give exactly the prior this session keeps (read
-    only; its own warnings, a damaged log's, are not passed on). A prior given as arrays
-    (a ``.npz`` file's, or arrays of one's own), or that of a session written before the
-    source was recorded, has no known source: ``PriorSource(None, None, why)``.
+    only; its own warnings, a damaged log's, are not passed on) and it is not this session
+    itself (moved to where that one was, its first steps can give its own prior). A prior
+    given as arrays (a ``.npz`` file's, or arrays of one's own), or that of a session written
+    before the source was recorded, has no known source: ``PriorSource(None, None, why)``.
 
     Raises:
         CorruptSessionError: this session's ``prior.npz`` is missing or changed.
     """
+    return _prior_source(run_dir)[0]
+
+
+def _prior_source(
+    run_dir: str | os.PathLike[str],
+) -> tuple[PriorSource | None, list[StepRecord]]:
+    """:func:`prior_source`, and the records of the source session's first ``n_steps`` steps
+    as read to check it (``[]`` where none is found): what a reader of those steps (a
+    driving evaluation's scan of the segments they drove) takes instead of reading its log
+    again."""
     config = load_config(run_dir)
     prior = _read_prior(run_dir, config)
     if prior is None:
-        return None
+        return None, []
     entry = config["prior"]
     source = entry.get("source")
     if not (
@@ -3207,12 +3274,12 @@ def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
         and type(source.get("n_steps")) is int
         and source["n_steps"] >= 0
     ):
-        return PriorSource(
-            None,
-            None,
-            "were given as arrays, not read from a session, so where they were taught is not "
-            "recorded",
+        # (a session written before the source was recorded reads as one given arrays)
+        unknown = (
+            "were given as arrays, or read by a torchcbl that did not record their session, "
+            "so where they were taught is not recorded"
         )
+        return PriorSource(None, None, unknown), []
     recorded, at_steps = Path(source["session"]), source["n_steps"]
     places = [recorded]
     relative = source.get("relative")
@@ -3225,22 +3292,33 @@ def prior_source(run_dir: str | os.PathLike[str]) -> PriorSource | None:
         if not place.exists():
             found.append(f"{place} is not there")
             continue
+        if _same_directory(place, run_dir):  # moved where that session was: not its source
+            found.append(f"{place} is this session itself")
+            continue
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                x, y, _ = _training_set(place, at_steps=at_steps)
+                x, y, _, records = _training_set(place, at_steps=at_steps)
         except (OSError, ValueError) as exc:  # (IncompatibleRunDirError, CorruptSessionError)
             found.append(f"{place} cannot be read ({str(exc).split('. ')[0]})")
             continue
         if np.array_equal(x, prior[0]) and np.array_equal(y, prior[1]):
-            return PriorSource(place, at_steps, None)
+            return PriorSource(place, at_steps, None), records
         found.append(f"{place} no longer holds them in its first {at_steps} steps")
-    return PriorSource(
-        None,
-        None,
+    unknown = (
         f"were read from the session {recorded} (its first {at_steps} steps), which is not "
-        f"there as it was: {'; '.join(found)}",
+        f"there as it was: {'; '.join(found)}"
     )
+    return PriorSource(None, None, unknown), []
+
+
+def _same_directory(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    """Whether ``a`` and ``b`` are one directory (by any path or link); False where either
+    cannot be looked at."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def latest_checkpoint(

@@ -101,6 +101,7 @@ from torchcbl.session import (
     _last_writer_reading,
     _model_args,
     _names_a_session_format,
+    _pair_digest,
     _read_prior,
     _streak_met,
     _warn_unrecorded_args,
@@ -544,14 +545,14 @@ def _as_interrupted(record: StepRecord) -> StepRecord:
     return record.with_outcome(None, False, True, {"torchcbl_interrupted": True})
 
 
-def _prior_source_entry(demonstrations: Demonstrations, run_dir: Path) -> dict[str, Any]:
+def _prior_source_entry(source: Path, n_steps: int, run_dir: Path) -> dict[str, Any]:
     """config.json's ``prior.source``: the session the prior was read from, by its absolute
     path and by its path relative to the new session's directory (found there where both
     moved together), and the steps its log held then."""
-    entry: dict[str, Any] = {"session": str(demonstrations.source)}
+    entry: dict[str, Any] = {"session": str(source)}
     with contextlib.suppress(ValueError):  # (another drive than run_dir's: no relative path)
-        entry["relative"] = os.path.relpath(demonstrations.source, os.path.abspath(run_dir))
-    entry["n_steps"] = demonstrations.n_steps
+        entry["relative"] = os.path.relpath(source, os.path.abspath(run_dir))
+    entry["n_steps"] = n_steps
     return entry
 
 
@@ -700,11 +701,12 @@ class ConfidentTeacher:
             session keeps them in its directory (``prior.npz``, its SHA-256 in config.json),
             so :meth:`resume` and ``load_model`` use them without being given them again, and
             refuse a session whose file is missing or changed. Given as
-            ``load_demonstrations`` returns them (a :class:`~torchcbl.session.Demonstrations`),
-            the session also records the session they were read from and its step count then
-            (:func:`~torchcbl.session.prior_source`), so that the road they were taught on
-            counts as taught where a driving policy is evaluated; arrays of one's own record
-            no origin, and such an evaluation cannot say it is held out (``held_out``: None).
+            ``load_demonstrations`` returns them (a :class:`~torchcbl.session.Demonstrations`,
+            its arrays unchanged since), the session also records the session they were read
+            from and its step count then (:func:`~torchcbl.session.prior_source`), so that the
+            road they were taught on counts as taught where a driving policy is evaluated;
+            arrays of one's own (changed ones too) record no origin, and such an evaluation
+            cannot say it is held out (``held_out``: None).
             Not with a fitted ``model`` (the first refit would replace it by a fit on the
             prior anyway): pass an unfitted one, or the prior alone.
         rule: the confidence rule of the default strategy; default ``DistanceRule(2.0)``
@@ -826,10 +828,15 @@ class ConfidentTeacher:
                     "sha256": hashlib.sha256(prior).hexdigest(),
                     "n_demonstrations": self.n_prior,
                 }
-                if isinstance(prior_demonstrations, Demonstrations):
-                    # where they were read (torchcbl.session.prior_source checks it is still so)
+                read = prior_demonstrations
+                if (
+                    isinstance(read, Demonstrations)
+                    and read.source is not None
+                    and read.n_steps is not None
+                    and read.digest == _pair_digest(*self._prior)
+                ):  # where they were read, unchanged since (prior_source checks it is still so)
                     session_config["prior"]["source"] = _prior_source_entry(
-                        prior_demonstrations, self.run_dir
+                        read.source, read.n_steps, self.run_dir
                     )
             # a session may start from a fitted model: its checkpoint 0, written with the
             # session (a resume can only load it, no label refits it); one with prior
