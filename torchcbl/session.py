@@ -62,16 +62,26 @@ Run directory layout (one directory per teaching session)::
                                  0 and a refit by hand's (``ConfidentTeacher.refit``, which
                                  moves the refit schedule) always (an older stage is
                                  refitted from the log, the model the loop had then). The
-                                 schedule is read from the names: a refit at every
-                                 checkpoint's count, readable or damaged in place (cut
-                                 short, emptied), none at a file set aside (``.damaged``,
-                                 ``.stale``), then one every ``max_new`` labels. A
-                                 session started from
+                                 schedule is read from the names: a refit at the count of
+                                 every checkpoint readable and fitted on the log's labels,
+                                 or a regular file damaged in place (cut short, emptied);
+                                 none at a stale one, one named for more labels than the
+                                 log holds, a folder, a dangling link or a file set aside
+                                 (``.damaged``, ``.stale``); then one every ``max_new``
+                                 labels. A session started from
                                  a fitted model has its model-00000000.pt, written before
                                  config.json: no label can refit it; a session with prior
                                  demonstrations has its model fitted on them alone as
                                  model-00000000.pt, and its checkpoints' SHA-256 covers
                                  the prior's labels first
+            model-00000007.pt.damaged
+                                 the bytes of a checkpoint that could not be loaded, kept
+                                 by a resume (``-1``, ``-2``, ... where the name is taken
+                                 already); never read
+            model-00000015.pt.stale
+                                 a checkpoint a resume set aside as not fitted on the
+                                 log's labels, or named for more labels than the log holds
+                                 (numbered alike); never read
 
 Durability. Every step is appended to ``steps.journal`` with one ``write()`` before the loop
 goes on: a demonstration (teacher label, observation, model output, counters) before its action
