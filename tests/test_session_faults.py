@@ -1155,6 +1155,44 @@ def test_a_resume_interrupted_while_it_rebuilds_a_damaged_refit_by_hand_keeps_it
 
 
 @pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_resumes_interrupted_at_the_write_back_keep_one_copy_of_the_damaged_bytes(
+    tmp_path, monkeypatch, refit
+):
+    """A resume interrupted after it kept a damaged refit by hand's bytes as .damaged and
+    before it wrote the rebuilt model over the name left the copy; each retry made another,
+    .damaged-1, -2, ..., of the same bytes. A copy holding the same bytes is used again: two
+    interrupted resumes and a third that completes leave one .damaged, as describe says.
+    A .damaged of other bytes (another file's, put there by hand) is kept, and describe and
+    resume name the next free one."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, refit)
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()[:100]
+    hand.write_bytes(data)
+    other = hand.with_name(hand.name + ".damaged")
+    other.write_bytes(b"another file's bytes")
+
+    def interrupted(obj, f, *args, **kw):
+        raise KeyboardInterrupt
+
+    (note,) = S.describe(run).notes
+    assert "keeping this file as model-00000007.pt.damaged-1)" in note, note
+    for _ in range(2):
+        monkeypatch.setattr(S.torch, "save", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            resume(run)
+        monkeypatch.undo()
+        assert hand.read_bytes() == data
+    back, _ = resume(run)
+    back.close()
+    assert _same_payload(hand, live[7])
+    names = sorted(p.name for p in hand.parent.iterdir() if "00000007" in p.name)
+    assert names == [hand.name, other.name, other.name + "-1"], names
+    assert other.read_bytes() == b"another file's bytes"
+    assert hand.with_name(other.name + "-1").read_bytes() == data
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
 def test_a_damaged_refit_by_hand_whose_bytes_cannot_be_kept_stays_in_place(
     tmp_path, monkeypatch, refit
 ):

@@ -3675,27 +3675,37 @@ def _set_aside(path: Path, why: str) -> Path:
     raise OSError(errno.EEXIST, f"{path.name}.{why} and its 999 numbered names are taken")
 
 
+def _copy_name(path: Path) -> tuple[Path | None, bool]:
+    """Where :func:`_keep_a_copy` keeps the bytes of ``path``: the first ``<name>.damaged[-i]``
+    that already holds them (the same file or the same bytes: kept by a resume interrupted
+    before it wrote the rebuilt model over ``path``), ``True``; else the first free one,
+    ``False``; ``(None, False)`` where all 1000 are taken. Reads only."""
+    free = None
+    for i in range(1000):
+        target = path.with_name(f"{path.name}.damaged" + (f"-{i}" if i else ""))
+        if not os.path.lexists(target):
+            free = target if free is None else free
+        elif not target.is_symlink() and _holds_same(target, path):
+            return target, True
+    return free, False
+
+
 def _keep_a_copy(path: Path) -> Path:
     """Keep the bytes of ``path``, a checkpoint that cannot be loaded, under
     ``<name>.damaged[-i]`` while ``path`` stays in place until a rebuilt model replaces it:
     a hard link where the file system allows (to the link itself where ``path`` is a
-    symbolic link), else a durable copy. Returns the copy's path.
+    symbolic link), else a durable copy; one that already holds them is used again
+    (:func:`_copy_name`), so retried resumes leave one copy. Returns the copy's path.
 
     Raises:
         OSError: neither could be made (nothing is left behind).
     """
-    target = next(
-        (
-            t
-            for i in range(1000)
-            if not os.path.lexists(
-                t := path.with_name(f"{path.name}.damaged" + (f"-{i}" if i else ""))
-            )
-        ),
-        None,
-    )
+    target, held = _copy_name(path)
     if target is None:
         raise OSError(errno.EEXIST, f"{path.name}.damaged and its 999 numbered names are taken")
+    if held:
+        fsync_directory(path.parent)  # a link made by the interrupted resume: on the disk
+        return target
     try:
         try:
             os.link(path, target, follow_symlinks=False)
@@ -5407,7 +5417,8 @@ def _checkpoint_report(
     foreign = None if scan.payload is None else _foreign_state(config, scan.payload)
     if foreign is not None and scan.n is not None:
         k = scan.stood_on(len(ys), int(config["teaching"]["max_new"]))
-        notes.append(_foreign_note(config, scan.n, k, foreign))
+        copy_name = _copy_name(run / CHECKPOINT_DIR / f"model-{scan.n:08d}.pt")[0]
+        notes.append(_foreign_note(config, scan.n, k, foreign, copy_name))
         scan = dataclasses.replace(scan, n=None, payload=None)  # resume starts from none
     for n, path, why in scan.passed_over:
         name = f"{CHECKPOINT_DIR}/{path.name}"
@@ -5423,11 +5434,12 @@ def _checkpoint_report(
                 "where its model still stands on it, and leave the file as it is"
             )
         elif n in scan.refits:
+            kept = (_copy_name(path)[0] or path.with_name(f"{path.name}.damaged")).name
             notes.append(
                 f"{name} {what}: resume and load_model pass it over; its name still records "
                 f"a refit on {n} labels (where a refit by hand may have moved the refit "
                 "schedule), which they rebuild from an earlier checkpoint or the log (resume "
-                f"writes the rebuilt model in its place, keeping this file as {path.name}.{why})"
+                f"writes the rebuilt model in its place, keeping this file as {kept})"
             )
         else:
             notes.append(
@@ -5476,12 +5488,16 @@ def _foreign_state(config: dict[str, Any], payload: dict[str, Any]) -> str | Non
     return None
 
 
-def _foreign_note(config: dict[str, Any], n: int, k: int, why: str) -> str:
+def _foreign_note(
+    config: dict[str, Any], n: int, k: int, why: str, copy_name: Path | None = None
+) -> str:
     """:func:`describe`'s note on ``checkpoints/model-<n>.pt``, the checkpoint resume would
     start from, whose state the session's model cannot load (``why``), saying what resume
     and :func:`load_model` do with it (as :func:`restore_model` does); ``k``: the labels the
-    session's model stood on (:meth:`_CheckpointScan.stood_on`)."""
+    session's model stood on (:meth:`_CheckpointScan.stood_on`); ``copy_name``: where a
+    resume would keep its bytes (:func:`_copy_name`; default ``<name>.damaged``)."""
     name = f"model-{n:08d}.pt"
+    kept_as = f"{name}.damaged" if copy_name is None else copy_name.name
     model = str(config["model"].get("class"))
     what = (
         f"{CHECKPOINT_DIR}/{name} holds the state of another model than the session's "
@@ -5496,7 +5512,7 @@ def _foreign_note(config: dict[str, Any], n: int, k: int, why: str) -> str:
     teaching = config["teaching"]
     if k == n:
         kept = (
-            f"writes the rebuilt model in its place, keeping this file as {name}.damaged"
+            f"writes the rebuilt model in its place, keeping this file as {kept_as}"
             if n > 0
             else f"renames it {name}.damaged"
         )
