@@ -1192,6 +1192,62 @@ def test_resumes_interrupted_at_the_write_back_keep_one_copy_of_the_damaged_byte
     assert hand.with_name(other.name + "-1").read_bytes() == data
 
 
+def test_a_full_refit_resume_rebuilds_only_the_damaged_checkpoints_off_the_schedule(
+    tmp_path, monkeypatch
+):
+    """A resume of full refits fitted and wrote back every damaged checkpoint above the
+    newest readable one, though one on the regular schedule from the refit recorded below it
+    records nothing new: with checkpoints 5, 10, 15, 20 and a hand refit's 22 all damaged it
+    made five fits where the model (on 22 labels) needed one. Only those off that schedule
+    (22) are now rebuilt in place; the others are set aside as .damaged, as before, and every
+    stage reads as the loop had it."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=5),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=None,
+        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    ct.run(max_demonstrations=22)
+    assert ct.refit()  # by hand, at 22
+    ct.run(max_demonstrations=24)
+    ct.close()
+    assert sorted(live) == [0, 5, 10, 15, 20, 22]
+    ck = run / "checkpoints"
+    damaged = {n: ck / f"model-{n:08d}.pt" for n in (5, 10, 15, 20, 22)}
+    for path in damaged.values():
+        path.write_bytes(path.read_bytes()[:100])
+    notes = S.describe(run).notes
+    assert [n for n in notes if "model-00000022.pt" in n and "in its place" in n], notes
+    assert [n for n in notes if "model-00000020.pt" in n and "renames it" in n], notes
+    fits = []
+    real_fit = GaussianMixtureSet.fit
+
+    def counted(self, *args, **kw):
+        fits.append(len(args[1]))
+        return real_fit(self, *args, **kw)
+
+    monkeypatch.setattr(GaussianMixtureSet, "fit", counted)
+    back, _ = resume(run)
+    monkeypatch.undo()
+    back.close()
+    assert fits == [22] and _same(back.model, live[22])
+    assert _same_payload(damaged[22], live[22])
+    assert damaged[22].with_name(damaged[22].name + ".damaged").exists()
+    for n in (5, 10, 15, 20):
+        assert (
+            not damaged[n].exists() and damaged[n].with_name(f"{damaged[n].name}.damaged").exists()
+        )
+    for n, staged in S.load_models(run, range(25)):
+        assert _same(staged, live[max(r for r in live if r <= n)]), n
+
+
 @pytest.mark.parametrize("refit", ["full", "incremental"])
 def test_a_damaged_refit_by_hand_whose_bytes_cannot_be_kept_stays_in_place(
     tmp_path, monkeypatch, refit

@@ -151,9 +151,12 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   refit at its count, which may have been one asked by hand off the schedule: the model is
   refitted on that count's labels (``refit="incremental"``: the refits are replayed through
   it), as the live loop had it, and a resume writes the model rebuilt at its count in its
-  place, so a real checkpoint records the refit again. The damaged file stays under its name
-  until then (its bytes kept first as ``<name>.damaged``, a hard link or a copy; where neither
-  can be made, or the write fails, it stays as it is, with a warning): a reader racing the
+  place, so a real checkpoint records the refit again (with full refits only where the
+  refit lies off the regular schedule from the one recorded below it; one on it records
+  nothing the schedule does not, and is renamed ``.damaged`` at no fit's cost). The
+  damaged file stays under its name until then (its bytes kept first as ``<name>.damaged``,
+  a hard link or a copy; where neither can be made, or the write fails, it stays as it is,
+  with a warning): a reader racing the
   resume, and a resume interrupted (a Ctrl-C, a kill), leave the refit recorded. A name set aside
   (``.damaged``, ``.stale``) records nothing: an older torchcbl's resume set damaged
   checkpoints aside and taught on on the regular schedule, and its sessions read as it read
@@ -3660,6 +3663,27 @@ def _recorded_refits(
     return tuple(sorted(n for n in named if above < n <= n_labels))
 
 
+def _rebuilt_in_place(
+    refits: tuple[int, ...], last: int, max_new: int, incremental: bool
+) -> tuple[int, ...]:
+    """The counts among ``refits`` (recorded by the names of damaged files above ``last``,
+    the newest readable checkpoint's count, 0 for none: :func:`_recorded_refits`) whose
+    files a resume keeps in place and writes the rebuilt model over (:func:`restore_model`).
+    With full refits, only those off the regular schedule from the refit recorded below
+    them (``(j - prev) % max_new != 0``: where a refit by hand moved it): one on it records
+    nothing the schedule does not say, so it is set aside, as a resume did before such names
+    counted, and costs no fit. With ``incremental`` every one: the replay passes through
+    each refit anyway, and its model costs a write only."""
+    if incremental:
+        return refits
+    moved, prev = [], last
+    for j in refits:
+        if (j - prev) % max_new:
+            moved.append(j)
+        prev = j
+    return tuple(moved)
+
+
 def _set_aside(path: Path, why: str) -> Path:
     """Rename a checkpoint that cannot be used, keeping its bytes (``<name>.<why>[-i]``);
     returns its new path.
@@ -3765,9 +3789,11 @@ def restore_model(
     lost: a writer logs a label before it saves its checkpoint) is renamed ``<name>.stale``
     too, so that no reader takes it for a refit once the session is taught that far again (a
     file that cannot be renamed stays as it is, never written over, with a warning naming it);
-    a damaged checkpoint whose name records a refit (or the checkpoint of ``k`` that this model
-    cannot load) stays in place, recording it, until the model rebuilt at its count (a fit on
-    those labels; ``incremental``: the replayed state there) replaces it: its bytes are first
+    a damaged checkpoint whose name records a refit (with full refits, one off the regular
+    schedule from the refit recorded below it, :func:`_rebuilt_in_place`; the others are
+    renamed ``.damaged``), or the checkpoint of ``k`` that this model cannot load, stays in
+    place, recording it, until the model rebuilt at its count (a fit on those labels;
+    ``incremental``: the replayed state there) replaces it: its bytes are first
     kept as ``<name>.damaged`` (a hard link, else a copy), then the rebuilt model is renamed
     over the name. Where the bytes cannot be kept, or that write fails, the file stays as it is
     (with a warning), so an interruption at any point (a Ctrl-C, a kill) leaves the refit
@@ -3836,14 +3862,16 @@ def restore_model(
     # their count replaces them (their bytes kept as .damaged first, by save): the damaged
     # ones whose names record a refit, which they go on recording meanwhile (for a reader
     # racing this resume, and if it is interrupted: a Ctrl-C, a kill, an exception)
+    # (with full refits only those off the schedule: _rebuilt_in_place)
+    last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
+    rebuilt = _rebuilt_in_place(scan.refits, last, max_new, incremental)
     in_place: set[int] = set()
     for n, path, why in scan.passed_over:
         if store is not None and not (n == 0 and starts_fitted):  # that one: kept as it is
-            if n in scan.refits:
+            if n in rebuilt:
                 in_place.add(n)
             else:
                 set_aside(n, path, why)
-    last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
 
     def save(j: int) -> None:
         """With ``store``, write the checkpoint of the model refitted on ``j`` labels; over a
@@ -5414,6 +5442,9 @@ def _checkpoint_report(
     px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
     scan = _scan_checkpoints(run / CHECKPOINT_DIR, len(ys), len(py), px + xs, py + ys, entries)
     notes = []
+    max_new = int(config["teaching"]["max_new"])
+    incremental = config["teaching"].get("refit", "full") == "incremental"
+    rebuilt = _rebuilt_in_place(scan.refits, scan.n or 0, max_new, incremental)
     foreign = None if scan.payload is None else _foreign_state(config, scan.payload)
     if foreign is not None and scan.n is not None:
         k = scan.stood_on(len(ys), int(config["teaching"]["max_new"]))
@@ -5432,6 +5463,12 @@ def _checkpoint_report(
                 f"{name} {what}: it holds the fitted model the session started from, which "
                 "no label can refit; resume and load_model cannot load it, refuse the session "
                 "where its model still stands on it, and leave the file as it is"
+            )
+        elif n in scan.refits and n not in rebuilt:
+            notes.append(
+                f"{name} {what}: resume and load_model pass it over; its name records a refit "
+                f"on {n} labels, where the refit schedule puts one anyway, which they rebuild "
+                f"from an earlier checkpoint or the log (resume renames it {path.name}.{why})"
             )
         elif n in scan.refits:
             kept = (_copy_name(path)[0] or path.with_name(f"{path.name}.damaged")).name

@@ -1065,11 +1065,12 @@ class ConfidentTeacher:
         (:func:`torchcbl.session.restore_model`, the module's notes on damaged files): a
         checkpoint it cannot use is renamed ``<name>.stale`` (not fitted on the log's labels,
         or named for more labels than the log holds) or ``<name>.damaged`` (one whose name
-        records no refit: a folder, a dangling link); a damaged checkpoint whose name records
-        a refit, or one of another model's state at the count the model stands on, stays
-        under its name, its bytes kept as ``<name>.damaged``, and the rebuilt model is
-        written over it; with full refits the checkpoint of the labels the model stands on
-        is written where it is missing. No checkpoint's bytes are lost: a file is never
+        records no refit: a folder, a dangling link; with full refits, also one whose refit
+        lies on the regular schedule); a damaged checkpoint whose name records a refit, or
+        one of another model's state at the count the model stands on, stays under its
+        name, its bytes kept as ``<name>.damaged``, and the rebuilt model is written over it;
+        with full refits the checkpoint of the labels the model stands on is written where
+        it is missing. No checkpoint's bytes are lost: a file is never
         written over before they are kept.
 
         Args:
