@@ -986,12 +986,25 @@ def test_damaged_checkpoint_is_refitted_from_the_log(tmp_path, damage):
     goes_on(back, env, run)
 
 
-def _hand_refit_session(run: Path, refit: str, keep: int | None = 3):
+def _hand_refit_session(
+    run: Path,
+    refit: str,
+    keep: int | None = 3,
+    upto: int = 9,
+    live: dict[int, dict[str, torch.Tensor]] | None = None,
+    backup: Path | None = None,
+):
     """A session refitting every 5 labels, refitted by hand at 7 (off that schedule) and
-    taught on to 9 labels, so its model stands on the hand refit; returns the live model and
-    {labels: the live model's state after each refit, 0: unfitted}."""
+    taught on to ``upto`` labels (9: its model stands on the hand refit), keeping ``keep``
+    checkpoints; with ``backup``, closed at 5 labels, copied there and resumed. Returns the
+    live model and ``live`` (made where not given): {labels: the live model's state after
+    each refit, 0: unfitted}."""
+    live = {} if live is None else live
+
+    def on_refit(m: torch.nn.Module, n: int) -> None:
+        live[n] = copy.deepcopy(m.state_dict())
+
     env = rare_regions_world()
-    live: dict[int, dict[str, torch.Tensor]] = {}
     ct = ConfidentTeacher(
         env,
         oracle(env),
@@ -999,14 +1012,20 @@ def _hand_refit_session(run: Path, refit: str, keep: int | None = 3):
         run_dir=run,
         progress=False,
         keep_checkpoints=keep,
-        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+        on_refit=on_refit,
     )
     live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    if backup is not None:
+        ct.run(max_demonstrations=5)
+        ct.close()
+        shutil.copytree(run, backup)
+        env = rare_regions_world()
+        ct = ConfidentTeacher.resume(run, env, oracle(env), progress=False, on_refit=on_refit)
     ct.run(max_demonstrations=7)
     assert ct.refit()  # by hand, at 7: the loop's next refit is at 12, not 10
-    ct.run(max_demonstrations=9)
+    ct.run(max_demonstrations=upto)
     ct.close()
-    assert sorted(live) == [0, 5, 7]
+    assert sorted(live) == [0, 5, 7, *range(12, upto + 1, 5)]
     return ct.model, live
 
 
@@ -1060,22 +1079,7 @@ def test_a_resume_past_a_damaged_refit_by_hand_writes_its_model_in_its_place(
     fails (a full disk), the damaged file stays under its name, which still records it,
     with a warning. Either way every stage reads as the loop had it."""
     run = tmp_path / "run"
-    env = rare_regions_world()
-    live: dict[int, dict[str, torch.Tensor]] = {}
-    ct = ConfidentTeacher(
-        env,
-        oracle(env),
-        config=TeachingConfig(noninteractive=False, max_new=5, refit=refit),
-        run_dir=run,
-        progress=False,
-        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
-    )
-    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
-    ct.run(max_demonstrations=7)
-    assert ct.refit()  # by hand, at 7
-    ct.run(max_demonstrations=13)
-    ct.close()
-    assert sorted(live) == [0, 5, 7, 12]
+    _, live = _hand_refit_session(run, refit, upto=13)
     (run / "checkpoints" / "model-00000012.pt").unlink()  # never saved
     hand = run / "checkpoints" / "model-00000007.pt"
     data = hand.read_bytes()[:100]
@@ -1343,26 +1347,11 @@ def test_pruning_keeps_what_a_set_aside_checkpoint_leaves_off_the_schedule(tmp_p
     10, and the stages from 10 to 14 were rebuilt on 7's schedule, on 12 labels where the
     live model stood on 10."""
     run = tmp_path / "run"
-    env = rare_regions_world()
-    live: dict[int, dict[str, torch.Tensor]] = {}
+    _, live = _hand_refit_session(run, refit, keep=1, upto=8)
 
     def on_refit(m: torch.nn.Module, n: int) -> None:
         live[n] = copy.deepcopy(m.state_dict())
 
-    ct = ConfidentTeacher(
-        env,
-        oracle(env),
-        config=TeachingConfig(noninteractive=False, max_new=5, refit=refit),
-        run_dir=run,
-        progress=False,
-        keep_checkpoints=1,
-        on_refit=on_refit,
-    )
-    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
-    ct.run(max_demonstrations=7)
-    assert ct.refit()  # by hand, at 7
-    ct.run(max_demonstrations=8)
-    ct.close()
     hand = run / "checkpoints" / "model-00000007.pt"
     hand.write_bytes(hand.read_bytes()[:100])
     env = rare_regions_world()
@@ -1506,20 +1495,8 @@ def test_a_checkpoint_of_labels_the_log_lost_is_set_aside_as_stale(tmp_path, ref
     def on_refit(m: torch.nn.Module, n: int) -> None:
         live[n] = copy.deepcopy(m.state_dict())
 
-    env = rare_regions_world()
-    config = TeachingConfig(noninteractive=False, max_new=5, refit=refit)
-    ct = ConfidentTeacher(
-        env, oracle(env), config=config, run_dir=run, progress=False, on_refit=on_refit
-    )
-    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
-    ct.run(max_demonstrations=5)
-    ct.close()
-    shutil.copytree(run, backup)
-    ct, _ = resume(run, rare_regions_world())
-    ct.run(max_demonstrations=7)
-    assert ct.refit()  # by hand, at 7
-    ct.run(max_demonstrations=9)
-    ct.close()
+    _hand_refit_session(run, refit, live=live, backup=backup)
+    live.pop(7)  # the refit the log lost with the backup
     hand = run / "checkpoints" / "model-00000007.pt"
     if damage == "cut":
         hand.write_bytes(hand.read_bytes()[:100])
