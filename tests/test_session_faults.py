@@ -509,9 +509,10 @@ def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses
     refitted from the log on resume and by load_model" and to resume: but they rebuild the
     model on the regular schedule until the loop's next refit is saved (here on 5 labels where
     the model in memory stands on 7). It now says so, names the refit due next, and the
-    session goes on from memory. It said they do so "until the loop's next refit ... is
-    saved", but the stages from 7 to 11 stay on the regular schedule for good (at 11 on 10
-    labels where the loop stood on 7): it says that too."""
+    session goes on from memory. Freeing space then left the stages from 7 to 11 on the
+    regular schedule for good (at 11 on 10 labels where the loop stood on 7): the teacher now
+    keeps the unsaved checkpoint and writes it at its next checkpoint save, so freeing space
+    is enough, and the message says so (and that a process ending first loses it)."""
     run = tmp_path / "run"
     ct, env = session(run, max_new=5, noninteractive=False)
     ct.run(max_demonstrations=7)
@@ -521,13 +522,53 @@ def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses
     assert str(run / "checkpoints" / "model-00000007.pt") in msg, msg
     assert "refit by hand" in msg and "next refit, due at 12 labels" in msg, msg
     assert "refitted from the log on resume" not in msg and "or resume" not in msg, msg
-    assert "from 7 labels up to the loop's next refit" in msg and "for good" in msg, msg
+    assert "from 7 labels up to the loop's next refit" in msg, msg
+    assert "writes it with its next checkpoint or at close()" in msg, msg
+    assert "for good where the process ends before" in msg, msg
     assert int(ct.model.n_points_.sum()) == 7  # the refit itself happened
     assert int(load_model(run).n_points_.sum()) == 5  # what the message warns of
+    live7 = copy.deepcopy(ct.model.state_dict())
     ct.run(max_demonstrations=12)  # space freed: the loop's refit at 12 is saved
     assert same_state(load_model(run), ct.model)
     ct.close()
-    assert int(load_model(run, n_demonstrations=11).n_points_.sum()) == 10  # for good
+    assert _same_payload(run / "checkpoints" / "model-00000007.pt", live7)
+    assert _same(load_model(run, n_demonstrations=11), live7)  # the loop's model there
+
+
+def test_an_unsaved_refit_by_hand_is_written_at_close_or_said_lost(tmp_path, monkeypatch):
+    """The checkpoint of a refit by hand that a full disk refused is written when the
+    teacher closes, where no refit came since (space freed); where the disk is still full
+    then, close() warns that the stages from 7 labels are rebuilt on the regular schedule
+    for good, and closes the session all the same."""
+    for still_full in (False, True):
+        run = tmp_path / f"run-{still_full}"
+        ct, env = session(run, max_new=5, noninteractive=False)
+        ct.run(max_demonstrations=7)
+        with file_size_limit(1000), pytest.raises(SessionWriteError):
+            ct.refit()
+        live7 = copy.deepcopy(ct.model.state_dict())
+        ct.run(max_demonstrations=9)
+        hand = run / "checkpoints" / "model-00000007.pt"
+        assert not hand.exists()
+        if still_full:
+
+            def full(path, data, tmp):
+                raise OSError(errno.ENOSPC, "No space left on device")
+
+            monkeypatch.setattr(S, "write_durably", full)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            ct.close()
+        monkeypatch.undo()
+        said = [str(w.message) for w in caught if str(hand) in str(w.message)]
+        if still_full:
+            assert len(said) == 1 and "for good" in said[0], said
+            assert not hand.exists() and int(load_model(run).n_points_.sum()) == 5
+        else:
+            assert not said, said
+            assert _same_payload(hand, live7) and _same(load_model(run), live7)
+        back, _ = resume(run)  # the session closed either way
+        back.close()
 
 
 # -- 3. readers never write -------------------------------------------------------------------

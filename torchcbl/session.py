@@ -127,8 +127,13 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   demonstration whose outcome line failed is kept, as interrupted, since its label was durable
   before its action ran). A SQLite commit that fails is rolled back; its rows stay in the
   journal and in memory, and the next commit retries them, so a session goes on once space is
-  freed. A checkpoint that cannot be written is refitted from the log when needed; a new
-  session's starting model (checkpoint 0) that cannot be written leaves no session.
+  freed. A checkpoint that cannot be written is refitted from the log when needed, save a
+  refit by hand's (``ConfidentTeacher.refit``): only its checkpoint records where it moved
+  the refit schedule, so the writer keeps its model and writes it with its next checkpoint
+  and at close, and freeing space is enough; where the process ends first (killed) or that
+  write fails at close too (a warning), the stages from its count to the loop's next refit
+  are rebuilt on the regular schedule for good. A new session's starting model
+  (checkpoint 0) that cannot be written leaves no session.
 - Readers without write access. :func:`load_records`, :func:`load_model`, :func:`describe`
   (what a session holds, ``torchcbl show``) etc. open the log with
   SQLite's ``immutable=1`` (a cleanly closed session: no ``-wal`` file), and then never write,
@@ -1913,32 +1918,57 @@ def _lost_hand_refit(n: int, max_new: int) -> str:
     return (
         "The session and its model in memory are intact and the step log is complete, but "
         "this was a refit by hand, which moved the refit schedule, and only its checkpoint "
-        f"records it: resume and load_model rebuild the stages from {n} labels up to the "
-        f"loop's next refit, due at {n + max_new} labels, on the regular schedule instead, "
-        f"not on these {n} labels (the session's newest model too, until that refit is saved; "
-        "those stages for good). Free space (or fix the file's permissions), then call run() "
-        "again: the model in memory is the session's."
+        f"records it: until it is written, resume and load_model rebuild the stages from {n} "
+        f"labels up to the loop's next refit, due at {n + max_new} labels, on the regular "
+        f"schedule instead, not on these {n} labels (the session's newest model too, until "
+        "that refit is saved). The teacher keeps this model and writes it with its next "
+        "checkpoint or at close(): free space (or fix the file's permissions), then call "
+        "run() again. Those stages stay on the regular schedule for good where the process "
+        "ends before (killed), or where the write fails at close() too."
     )
+
+
+def _lost_at_close(n: int, max_new: int | None) -> str:
+    """The warning's tail where :meth:`SessionStore.close` could not write the checkpoint
+    of a refit by hand on ``n`` labels that an earlier write failed to save."""
+    due = "" if max_new is None else f", due at {n + max_new} labels"
+    return (
+        "This was a refit by hand whose checkpoint an earlier write could not save either, "
+        "and the teacher closed without it: resume and load_model rebuild the stages from "
+        f"{n} labels up to the loop's next refit{due}, on the regular schedule, not on these "
+        f"{n} labels, for good. The step log is complete."
+    )
+
+
+def _cpu_state(model: torch.nn.Module, *, clone: bool = False) -> dict[str, Any]:
+    """``model``'s state dict (a new OrderedDict, its _metadata kept) with its tensors on the
+    CPU whatever the model's device: a session taught on a GPU resumes, and its policy
+    loads, on a machine without one. ``clone``: copies, which later refits leave alone."""
+    state = model.state_dict()
+    for name, value in state.items():
+        if isinstance(value, torch.Tensor):
+            value = value.detach().cpu()
+            state[name] = value.clone() if clone else value
+    return state
 
 
 def _write_checkpoint(
     run_dir: Path,
-    model: torch.nn.Module,
+    model: torch.nn.Module | None,
     n_demonstrations: int,
     digest: str | None,
     after: str = _CHECKPOINT_LATER,
+    state: dict[str, Any] | None = None,
 ) -> Path:
     """Write ``checkpoints/model-<n>.pt`` under a temporary name, then rename it into place;
-    a failure is a :class:`SessionWriteError` ending with ``after``."""
+    a failure is a :class:`SessionWriteError` ending with ``after``. ``state``: the state to
+    write (:func:`_cpu_state`) instead of ``model``'s."""
     directory = run_dir / CHECKPOINT_DIR
     path = directory / f"model-{n_demonstrations:08d}.pt"
     tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
-    state = model.state_dict()  # a new OrderedDict (its _metadata kept)
-    for name, value in state.items():
-        # on the CPU whatever the model's device: a session taught on a GPU resumes, and
-        # its policy loads, on a machine without one
-        if isinstance(value, torch.Tensor):
-            state[name] = value.detach().cpu()
+    if state is None:
+        assert model is not None
+        state = _cpu_state(model)
     payload: dict[str, Any] = {"n_demonstrations": n_demonstrations, "state_dict": state}
     if digest is not None:
         payload["labels_sha256"] = digest
@@ -1977,6 +2007,9 @@ class SessionStore:
         self._on_disk: list[int] | None = None  # checkpoints > 0 there (read once, then kept)
         self._max_new: int | None = None  # the session's refit schedule (read by _open)
         self._prune_warned = False
+        #: the refits by hand whose checkpoint a write failed to save: (labels, digest, CPU
+        #: state), written again with the next checkpoint and at close
+        self._unsaved: list[tuple[int, str | None, dict[str, Any]]] = []
         self._lock = _acquire_lock(self.run_dir) if lock is None else lock
         self._db: sqlite3.Connection | None = None
         self._journal = -1
@@ -2523,10 +2556,34 @@ class SessionStore:
             after = _CHECKPOINT_LATER
         if by_hand and self._max_new is not None:
             after = _lost_hand_refit(n_demonstrations, self._max_new)
-        path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest, after)
+        self._write_unsaved()
+        try:
+            path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest, after)
+        except SessionWriteError:
+            if by_hand:  # only its checkpoint records it: kept, to be written again
+                self._unsaved.append((n_demonstrations, digest, _cpu_state(model, clone=True)))
+            raise
         if self.keep_checkpoints is not None:
             self._prune_checkpoints(n_demonstrations, self.keep_checkpoints)
         return path
+
+    def _write_unsaved(self, *, closing: bool = False) -> None:
+        """Write the checkpoints of refits by hand that an earlier write failed to save
+        (:meth:`save_checkpoint`), oldest first, each pruning as its own write would have;
+        one that fails again is kept for the next try, or at ``closing`` said lost (a
+        warning)."""
+        for entry in list(self._unsaved):
+            n, digest, state = entry
+            try:
+                after = _lost_at_close(n, self._max_new) if closing else ""
+                _write_checkpoint(self.run_dir, None, n, digest, after, state=state)
+            except SessionWriteError as exc:
+                if closing:
+                    warnings.warn(str(exc), stacklevel=4)
+                continue
+            self._unsaved.remove(entry)
+            if self.keep_checkpoints is not None:
+                self._prune_checkpoints(n, self.keep_checkpoints)
 
     def _prune_checkpoints(self, newest: int, keep: int) -> None:
         """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
@@ -2583,10 +2640,16 @@ class SessionStore:
 
     def close(self) -> None:
         """Commit and close; the lock is released even if the commit fails (the journal
-        keeps what the commit could not write, and resume replays it)."""
+        keeps what the commit could not write, and resume replays it). A refit by hand's
+        checkpoint that a write failed to save is written first (a warning where it fails
+        again: :meth:`_write_unsaved`)."""
         try:
-            if self._db is not None:
-                self.commit()
+            try:
+                self._write_unsaved(closing=True)
+            finally:
+                self._unsaved = []
+                if self._db is not None:
+                    self.commit()
         finally:
             self._release()
 

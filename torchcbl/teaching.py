@@ -1441,7 +1441,10 @@ class ConfidentTeacher:
         Raises:
             SessionWriteError: its checkpoint could not be written (a full disk); the refit
                 is done in memory, and the message says what resume and ``load_model`` give
-                for the stages up to the loop's next refit (those stages for good).
+                for the stages up to the loop's next refit until the checkpoint is written:
+                the teacher writes it with its next checkpoint and at :meth:`close` (a
+                warning where that fails too; then, or where the process ends first, those
+                stages stay so for good).
         """
         if self._new_since_refit == 0 or not len(self._train):
             return False
@@ -2104,7 +2107,10 @@ class ConfidentTeacher:
             self._store.commit()
 
     def close(self) -> None:
-        """Commit and close the step log. The session can be resumed from its directory."""
+        """Commit and close the step log. The session can be resumed from its directory.
+
+        A refit by hand's checkpoint that a write failed to save (:meth:`refit`) is written
+        first; where that fails again, a warning says what is lost."""
         self._unstarted = False  # a session removed after its first step failed stays so
         if self._store is not None:
             store, self._store = self._store, None
