@@ -509,9 +509,10 @@ def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses
     refitted from the log on resume and by load_model" and to resume: but they rebuild the
     model on the regular schedule until the loop's next refit is saved (here on 5 labels where
     the model in memory stands on 7). It now says so, names the refit due next, and the
-    session goes on from memory. It said they do so "until the loop's next refit ... is
-    saved", but the stages from 7 to 11 stay on the regular schedule for good (at 11 on 10
-    labels where the loop stood on 7): it says that too."""
+    session goes on from memory. Freeing space then left the stages from 7 to 11 on the
+    regular schedule for good (at 11 on 10 labels where the loop stood on 7): the teacher now
+    keeps the unsaved checkpoint and writes it at its next checkpoint save, so freeing space
+    is enough, and the message says so (and that a process ending first loses it)."""
     run = tmp_path / "run"
     ct, env = session(run, max_new=5, noninteractive=False)
     ct.run(max_demonstrations=7)
@@ -521,13 +522,53 @@ def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses
     assert str(run / "checkpoints" / "model-00000007.pt") in msg, msg
     assert "refit by hand" in msg and "next refit, due at 12 labels" in msg, msg
     assert "refitted from the log on resume" not in msg and "or resume" not in msg, msg
-    assert "from 7 labels up to the loop's next refit" in msg and "for good" in msg, msg
+    assert "from 7 labels up to the loop's next refit" in msg, msg
+    assert "writes it with its next checkpoint or at close()" in msg, msg
+    assert "for good where the process ends before" in msg, msg
     assert int(ct.model.n_points_.sum()) == 7  # the refit itself happened
     assert int(load_model(run).n_points_.sum()) == 5  # what the message warns of
+    live7 = copy.deepcopy(ct.model.state_dict())
     ct.run(max_demonstrations=12)  # space freed: the loop's refit at 12 is saved
     assert same_state(load_model(run), ct.model)
     ct.close()
-    assert int(load_model(run, n_demonstrations=11).n_points_.sum()) == 10  # for good
+    assert _same_payload(run / "checkpoints" / "model-00000007.pt", live7)
+    assert _same(load_model(run, n_demonstrations=11), live7)  # the loop's model there
+
+
+def test_an_unsaved_refit_by_hand_is_written_at_close_or_said_lost(tmp_path, monkeypatch):
+    """The checkpoint of a refit by hand that a full disk refused is written when the
+    teacher closes, where no refit came since (space freed); where the disk is still full
+    then, close() warns that the stages from 7 labels are rebuilt on the regular schedule
+    for good, and closes the session all the same."""
+    for still_full in (False, True):
+        run = tmp_path / f"run-{still_full}"
+        ct, env = session(run, max_new=5, noninteractive=False)
+        ct.run(max_demonstrations=7)
+        with file_size_limit(1000), pytest.raises(SessionWriteError):
+            ct.refit()
+        live7 = copy.deepcopy(ct.model.state_dict())
+        ct.run(max_demonstrations=9)
+        hand = run / "checkpoints" / "model-00000007.pt"
+        assert not hand.exists()
+        if still_full:
+
+            def full(path, data, tmp):
+                raise OSError(errno.ENOSPC, "No space left on device")
+
+            monkeypatch.setattr(S, "write_durably", full)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            ct.close()
+        monkeypatch.undo()
+        said = [str(w.message) for w in caught if str(hand) in str(w.message)]
+        if still_full:
+            assert len(said) == 1 and "for good" in said[0], said
+            assert not hand.exists() and int(load_model(run).n_points_.sum()) == 5
+        else:
+            assert not said, said
+            assert _same_payload(hand, live7) and _same(load_model(run), live7)
+        back, _ = resume(run)  # the session closed either way
+        back.close()
 
 
 # -- 3. readers never write -------------------------------------------------------------------
@@ -986,12 +1027,25 @@ def test_damaged_checkpoint_is_refitted_from_the_log(tmp_path, damage):
     goes_on(back, env, run)
 
 
-def _hand_refit_session(run: Path, refit: str, keep: int | None = 3):
+def _hand_refit_session(
+    run: Path,
+    refit: str,
+    keep: int | None = 3,
+    upto: int = 9,
+    live: dict[int, dict[str, torch.Tensor]] | None = None,
+    backup: Path | None = None,
+):
     """A session refitting every 5 labels, refitted by hand at 7 (off that schedule) and
-    taught on to 9 labels, so its model stands on the hand refit; returns the live model and
-    {labels: the live model's state after each refit, 0: unfitted}."""
+    taught on to ``upto`` labels (9: its model stands on the hand refit), keeping ``keep``
+    checkpoints; with ``backup``, closed at 5 labels, copied there and resumed. Returns the
+    live model and ``live`` (made where not given): {labels: the live model's state after
+    each refit, 0: unfitted}."""
+    live = {} if live is None else live
+
+    def on_refit(m: torch.nn.Module, n: int) -> None:
+        live[n] = copy.deepcopy(m.state_dict())
+
     env = rare_regions_world()
-    live: dict[int, dict[str, torch.Tensor]] = {}
     ct = ConfidentTeacher(
         env,
         oracle(env),
@@ -999,14 +1053,20 @@ def _hand_refit_session(run: Path, refit: str, keep: int | None = 3):
         run_dir=run,
         progress=False,
         keep_checkpoints=keep,
-        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+        on_refit=on_refit,
     )
     live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    if backup is not None:
+        ct.run(max_demonstrations=5)
+        ct.close()
+        shutil.copytree(run, backup)
+        env = rare_regions_world()
+        ct = ConfidentTeacher.resume(run, env, oracle(env), progress=False, on_refit=on_refit)
     ct.run(max_demonstrations=7)
     assert ct.refit()  # by hand, at 7: the loop's next refit is at 12, not 10
-    ct.run(max_demonstrations=9)
+    ct.run(max_demonstrations=upto)
     ct.close()
-    assert sorted(live) == [0, 5, 7]
+    assert sorted(live) == [0, 5, 7, *range(12, upto + 1, 5)]
     return ct.model, live
 
 
@@ -1060,22 +1120,7 @@ def test_a_resume_past_a_damaged_refit_by_hand_writes_its_model_in_its_place(
     fails (a full disk), the damaged file stays under its name, which still records it,
     with a warning. Either way every stage reads as the loop had it."""
     run = tmp_path / "run"
-    env = rare_regions_world()
-    live: dict[int, dict[str, torch.Tensor]] = {}
-    ct = ConfidentTeacher(
-        env,
-        oracle(env),
-        config=TeachingConfig(noninteractive=False, max_new=5, refit=refit),
-        run_dir=run,
-        progress=False,
-        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
-    )
-    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
-    ct.run(max_demonstrations=7)
-    assert ct.refit()  # by hand, at 7
-    ct.run(max_demonstrations=13)
-    ct.close()
-    assert sorted(live) == [0, 5, 7, 12]
+    _, live = _hand_refit_session(run, refit, upto=13)
     (run / "checkpoints" / "model-00000012.pt").unlink()  # never saved
     hand = run / "checkpoints" / "model-00000007.pt"
     data = hand.read_bytes()[:100]
@@ -1152,6 +1197,100 @@ def test_a_resume_interrupted_while_it_rebuilds_a_damaged_refit_by_hand_keeps_it
     back.close()
     assert _same_payload(hand, live[7])  # the rebuilt model in its place
     assert hand.with_name(hand.name + ".damaged").read_bytes() == data  # every byte kept
+
+
+@pytest.mark.parametrize("refit", ["full", "incremental"])
+def test_resumes_interrupted_at_the_write_back_keep_one_copy_of_the_damaged_bytes(
+    tmp_path, monkeypatch, refit
+):
+    """A resume interrupted after it kept a damaged refit by hand's bytes as .damaged and
+    before it wrote the rebuilt model over the name left the copy; each retry made another,
+    .damaged-1, -2, ..., of the same bytes. A copy holding the same bytes is used again: two
+    interrupted resumes and a third that completes leave one .damaged, as describe says.
+    A .damaged of other bytes (another file's, put there by hand) is kept, and describe and
+    resume name the next free one."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, refit)
+    hand = run / "checkpoints" / "model-00000007.pt"
+    data = hand.read_bytes()[:100]
+    hand.write_bytes(data)
+    other = hand.with_name(hand.name + ".damaged")
+    other.write_bytes(b"another file's bytes")
+
+    def interrupted(obj, f, *args, **kw):
+        raise KeyboardInterrupt
+
+    (note,) = S.describe(run).notes
+    assert "keeping this file as model-00000007.pt.damaged-1)" in note, note
+    for _ in range(2):
+        monkeypatch.setattr(S.torch, "save", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            resume(run)
+        monkeypatch.undo()
+        assert hand.read_bytes() == data
+    back, _ = resume(run)
+    back.close()
+    assert _same_payload(hand, live[7])
+    names = sorted(p.name for p in hand.parent.iterdir() if "00000007" in p.name)
+    assert names == [hand.name, other.name, other.name + "-1"], names
+    assert other.read_bytes() == b"another file's bytes"
+    assert hand.with_name(other.name + "-1").read_bytes() == data
+
+
+def test_a_full_refit_resume_rebuilds_only_the_damaged_checkpoints_off_the_schedule(
+    tmp_path, monkeypatch
+):
+    """A resume of full refits fitted and wrote back every damaged checkpoint above the
+    newest readable one, though one on the regular schedule from the refit recorded below it
+    records nothing new: with checkpoints 5, 10, 15, 20 and a hand refit's 22 all damaged it
+    made five fits where the model (on 22 labels) needed one. Only those off that schedule
+    (22) are now rebuilt in place; the others are set aside as .damaged, as before, and every
+    stage reads as the loop had it."""
+    run = tmp_path / "run"
+    env = rare_regions_world()
+    live: dict[int, dict[str, torch.Tensor]] = {}
+    ct = ConfidentTeacher(
+        env,
+        oracle(env),
+        config=TeachingConfig(noninteractive=False, max_new=5),
+        run_dir=run,
+        progress=False,
+        keep_checkpoints=None,
+        on_refit=lambda m, n: live.__setitem__(n, copy.deepcopy(m.state_dict())),
+    )
+    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
+    ct.run(max_demonstrations=22)
+    assert ct.refit()  # by hand, at 22
+    ct.run(max_demonstrations=24)
+    ct.close()
+    assert sorted(live) == [0, 5, 10, 15, 20, 22]
+    ck = run / "checkpoints"
+    damaged = {n: ck / f"model-{n:08d}.pt" for n in (5, 10, 15, 20, 22)}
+    for path in damaged.values():
+        path.write_bytes(path.read_bytes()[:100])
+    notes = S.describe(run).notes
+    assert [n for n in notes if "model-00000022.pt" in n and "in its place" in n], notes
+    assert [n for n in notes if "model-00000020.pt" in n and "renames it" in n], notes
+    fits = []
+    real_fit = GaussianMixtureSet.fit
+
+    def counted(self, *args, **kw):
+        fits.append(len(args[1]))
+        return real_fit(self, *args, **kw)
+
+    monkeypatch.setattr(GaussianMixtureSet, "fit", counted)
+    back, _ = resume(run)
+    monkeypatch.undo()
+    back.close()
+    assert fits == [22] and _same(back.model, live[22])
+    assert _same_payload(damaged[22], live[22])
+    assert damaged[22].with_name(damaged[22].name + ".damaged").exists()
+    for n in (5, 10, 15, 20):
+        assert (
+            not damaged[n].exists() and damaged[n].with_name(f"{damaged[n].name}.damaged").exists()
+        )
+    for n, staged in S.load_models(run, range(25)):
+        assert _same(staged, live[max(r for r in live if r <= n)]), n
 
 
 @pytest.mark.parametrize("refit", ["full", "incremental"])
@@ -1249,26 +1388,11 @@ def test_pruning_keeps_what_a_set_aside_checkpoint_leaves_off_the_schedule(tmp_p
     10, and the stages from 10 to 14 were rebuilt on 7's schedule, on 12 labels where the
     live model stood on 10."""
     run = tmp_path / "run"
-    env = rare_regions_world()
-    live: dict[int, dict[str, torch.Tensor]] = {}
+    _, live = _hand_refit_session(run, refit, keep=1, upto=8)
 
     def on_refit(m: torch.nn.Module, n: int) -> None:
         live[n] = copy.deepcopy(m.state_dict())
 
-    ct = ConfidentTeacher(
-        env,
-        oracle(env),
-        config=TeachingConfig(noninteractive=False, max_new=5, refit=refit),
-        run_dir=run,
-        progress=False,
-        keep_checkpoints=1,
-        on_refit=on_refit,
-    )
-    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
-    ct.run(max_demonstrations=7)
-    assert ct.refit()  # by hand, at 7
-    ct.run(max_demonstrations=8)
-    ct.close()
     hand = run / "checkpoints" / "model-00000007.pt"
     hand.write_bytes(hand.read_bytes()[:100])
     env = rare_regions_world()
@@ -1412,20 +1536,8 @@ def test_a_checkpoint_of_labels_the_log_lost_is_set_aside_as_stale(tmp_path, ref
     def on_refit(m: torch.nn.Module, n: int) -> None:
         live[n] = copy.deepcopy(m.state_dict())
 
-    env = rare_regions_world()
-    config = TeachingConfig(noninteractive=False, max_new=5, refit=refit)
-    ct = ConfidentTeacher(
-        env, oracle(env), config=config, run_dir=run, progress=False, on_refit=on_refit
-    )
-    live[0] = copy.deepcopy(ct.model.state_dict())  # unfitted
-    ct.run(max_demonstrations=5)
-    ct.close()
-    shutil.copytree(run, backup)
-    ct, _ = resume(run, rare_regions_world())
-    ct.run(max_demonstrations=7)
-    assert ct.refit()  # by hand, at 7
-    ct.run(max_demonstrations=9)
-    ct.close()
+    _hand_refit_session(run, refit, live=live, backup=backup)
+    live.pop(7)  # the refit the log lost with the backup
     hand = run / "checkpoints" / "model-00000007.pt"
     if damage == "cut":
         hand.write_bytes(hand.read_bytes()[:100])

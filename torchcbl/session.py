@@ -62,16 +62,26 @@ Run directory layout (one directory per teaching session)::
                                  0 and a refit by hand's (``ConfidentTeacher.refit``, which
                                  moves the refit schedule) always (an older stage is
                                  refitted from the log, the model the loop had then). The
-                                 schedule is read from the names: a refit at every
-                                 checkpoint's count, readable or damaged in place (cut
-                                 short, emptied), none at a file set aside (``.damaged``,
-                                 ``.stale``), then one every ``max_new`` labels. A
-                                 session started from
+                                 schedule is read from the names: a refit at the count of
+                                 every checkpoint readable and fitted on the log's labels,
+                                 or a regular file damaged in place (cut short, emptied);
+                                 none at a stale one, one named for more labels than the
+                                 log holds, a folder, a dangling link or a file set aside
+                                 (``.damaged``, ``.stale``); then one every ``max_new``
+                                 labels. A session started from
                                  a fitted model has its model-00000000.pt, written before
                                  config.json: no label can refit it; a session with prior
                                  demonstrations has its model fitted on them alone as
                                  model-00000000.pt, and its checkpoints' SHA-256 covers
                                  the prior's labels first
+            model-00000007.pt.damaged
+                                 the bytes of a checkpoint that could not be loaded, kept
+                                 by a resume (``-1``, ``-2``, ... where the name is taken
+                                 already); never read
+            model-00000015.pt.stale
+                                 a checkpoint a resume set aside as not fitted on the
+                                 log's labels, or named for more labels than the log holds
+                                 (numbered alike); never read
 
 Durability. Every step is appended to ``steps.journal`` with one ``write()`` before the loop
 goes on: a demonstration (teacher label, observation, model output, counters) before its action
@@ -117,8 +127,13 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   demonstration whose outcome line failed is kept, as interrupted, since its label was durable
   before its action ran). A SQLite commit that fails is rolled back; its rows stay in the
   journal and in memory, and the next commit retries them, so a session goes on once space is
-  freed. A checkpoint that cannot be written is refitted from the log when needed; a new
-  session's starting model (checkpoint 0) that cannot be written leaves no session.
+  freed. A checkpoint that cannot be written is refitted from the log when needed, save a
+  refit by hand's (``ConfidentTeacher.refit``): only its checkpoint records where it moved
+  the refit schedule, so the writer keeps its model and writes it with its next checkpoint
+  and at close, and freeing space is enough; where the process ends first (killed) or that
+  write fails at close too (a warning), the stages from its count to the loop's next refit
+  are rebuilt on the regular schedule for good. A new session's starting model
+  (checkpoint 0) that cannot be written leaves no session.
 - Readers without write access. :func:`load_records`, :func:`load_model`, :func:`describe`
   (what a session holds, ``torchcbl show``) etc. open the log with
   SQLite's ``immutable=1`` (a cleanly closed session: no ``-wal`` file), and then never write,
@@ -141,9 +156,12 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   refit at its count, which may have been one asked by hand off the schedule: the model is
   refitted on that count's labels (``refit="incremental"``: the refits are replayed through
   it), as the live loop had it, and a resume writes the model rebuilt at its count in its
-  place, so a real checkpoint records the refit again. The damaged file stays under its name
-  until then (its bytes kept first as ``<name>.damaged``, a hard link or a copy; where neither
-  can be made, or the write fails, it stays as it is, with a warning): a reader racing the
+  place, so a real checkpoint records the refit again (with full refits only where the
+  refit lies off the regular schedule from the one recorded below it; one on it records
+  nothing the schedule does not, and is renamed ``.damaged`` at no fit's cost). The
+  damaged file stays under its name until then (its bytes kept first as ``<name>.damaged``,
+  a hard link or a copy; where neither can be made, or the write fails, it stays as it is,
+  with a warning): a reader racing the
   resume, and a resume interrupted (a Ctrl-C, a kill), leave the refit recorded. A name set aside
   (``.damaged``, ``.stale``) records nothing: an older torchcbl's resume set damaged
   checkpoints aside and taught on on the regular schedule, and its sessions read as it read
@@ -1900,32 +1918,57 @@ def _lost_hand_refit(n: int, max_new: int) -> str:
     return (
         "The session and its model in memory are intact and the step log is complete, but "
         "this was a refit by hand, which moved the refit schedule, and only its checkpoint "
-        f"records it: resume and load_model rebuild the stages from {n} labels up to the "
-        f"loop's next refit, due at {n + max_new} labels, on the regular schedule instead, "
-        f"not on these {n} labels (the session's newest model too, until that refit is saved; "
-        "those stages for good). Free space (or fix the file's permissions), then call run() "
-        "again: the model in memory is the session's."
+        f"records it: until it is written, resume and load_model rebuild the stages from {n} "
+        f"labels up to the loop's next refit, due at {n + max_new} labels, on the regular "
+        f"schedule instead, not on these {n} labels (the session's newest model too, until "
+        "that refit is saved). The teacher keeps this model and writes it with its next "
+        "checkpoint or at close(): free space (or fix the file's permissions), then call "
+        "run() again. Those stages stay on the regular schedule for good where the process "
+        "ends before (killed), or where the write fails at close() too."
     )
+
+
+def _lost_at_close(n: int, max_new: int | None) -> str:
+    """The warning's tail where :meth:`SessionStore.close` could not write the checkpoint
+    of a refit by hand on ``n`` labels that an earlier write failed to save."""
+    due = "" if max_new is None else f", due at {n + max_new} labels"
+    return (
+        "This was a refit by hand whose checkpoint an earlier write could not save either, "
+        "and the teacher closed without it: resume and load_model rebuild the stages from "
+        f"{n} labels up to the loop's next refit{due}, on the regular schedule, not on these "
+        f"{n} labels, for good. The step log is complete."
+    )
+
+
+def _cpu_state(model: torch.nn.Module, *, clone: bool = False) -> dict[str, Any]:
+    """``model``'s state dict (a new OrderedDict, its _metadata kept) with its tensors on the
+    CPU whatever the model's device: a session taught on a GPU resumes, and its policy
+    loads, on a machine without one. ``clone``: copies, which later refits leave alone."""
+    state = model.state_dict()
+    for name, value in state.items():
+        if isinstance(value, torch.Tensor):
+            value = value.detach().cpu()
+            state[name] = value.clone() if clone else value
+    return state
 
 
 def _write_checkpoint(
     run_dir: Path,
-    model: torch.nn.Module,
+    model: torch.nn.Module | None,
     n_demonstrations: int,
     digest: str | None,
     after: str = _CHECKPOINT_LATER,
+    state: dict[str, Any] | None = None,
 ) -> Path:
     """Write ``checkpoints/model-<n>.pt`` under a temporary name, then rename it into place;
-    a failure is a :class:`SessionWriteError` ending with ``after``."""
+    a failure is a :class:`SessionWriteError` ending with ``after``. ``state``: the state to
+    write (:func:`_cpu_state`) instead of ``model``'s."""
     directory = run_dir / CHECKPOINT_DIR
     path = directory / f"model-{n_demonstrations:08d}.pt"
     tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
-    state = model.state_dict()  # a new OrderedDict (its _metadata kept)
-    for name, value in state.items():
-        # on the CPU whatever the model's device: a session taught on a GPU resumes, and
-        # its policy loads, on a machine without one
-        if isinstance(value, torch.Tensor):
-            state[name] = value.detach().cpu()
+    if state is None:
+        assert model is not None
+        state = _cpu_state(model)
     payload: dict[str, Any] = {"n_demonstrations": n_demonstrations, "state_dict": state}
     if digest is not None:
         payload["labels_sha256"] = digest
@@ -1964,6 +2007,9 @@ class SessionStore:
         self._on_disk: list[int] | None = None  # checkpoints > 0 there (read once, then kept)
         self._max_new: int | None = None  # the session's refit schedule (read by _open)
         self._prune_warned = False
+        #: the refits by hand whose checkpoint a write failed to save: (labels, digest, CPU
+        #: state), written again with the next checkpoint and at close
+        self._unsaved: list[tuple[int, str | None, dict[str, Any]]] = []
         self._lock = _acquire_lock(self.run_dir) if lock is None else lock
         self._db: sqlite3.Connection | None = None
         self._journal = -1
@@ -2510,10 +2556,34 @@ class SessionStore:
             after = _CHECKPOINT_LATER
         if by_hand and self._max_new is not None:
             after = _lost_hand_refit(n_demonstrations, self._max_new)
-        path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest, after)
+        self._write_unsaved()
+        try:
+            path = _write_checkpoint(self.run_dir, model, n_demonstrations, digest, after)
+        except SessionWriteError:
+            if by_hand:  # only its checkpoint records it: kept, to be written again
+                self._unsaved.append((n_demonstrations, digest, _cpu_state(model, clone=True)))
+            raise
         if self.keep_checkpoints is not None:
             self._prune_checkpoints(n_demonstrations, self.keep_checkpoints)
         return path
+
+    def _write_unsaved(self, *, closing: bool = False) -> None:
+        """Write the checkpoints of refits by hand that an earlier write failed to save
+        (:meth:`save_checkpoint`), oldest first, each pruning as its own write would have;
+        one that fails again is kept for the next try, or at ``closing`` said lost (a
+        warning)."""
+        for entry in list(self._unsaved):
+            n, digest, state = entry
+            try:
+                after = _lost_at_close(n, self._max_new) if closing else ""
+                _write_checkpoint(self.run_dir, None, n, digest, after, state=state)
+            except SessionWriteError as exc:
+                if closing:
+                    warnings.warn(str(exc), stacklevel=4)
+                continue
+            self._unsaved.remove(entry)
+            if self.keep_checkpoints is not None:
+                self._prune_checkpoints(n, self.keep_checkpoints)
 
     def _prune_checkpoints(self, newest: int, keep: int) -> None:
         """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
@@ -2570,10 +2640,16 @@ class SessionStore:
 
     def close(self) -> None:
         """Commit and close; the lock is released even if the commit fails (the journal
-        keeps what the commit could not write, and resume replays it)."""
+        keeps what the commit could not write, and resume replays it). A refit by hand's
+        checkpoint that a write failed to save is written first (a warning where it fails
+        again: :meth:`_write_unsaved`)."""
         try:
-            if self._db is not None:
-                self.commit()
+            try:
+                self._write_unsaved(closing=True)
+            finally:
+                self._unsaved = []
+                if self._db is not None:
+                    self.commit()
         finally:
             self._release()
 
@@ -3728,6 +3804,27 @@ def _recorded_refits(
     return tuple(sorted(n for n in named if above < n <= n_labels))
 
 
+def _rebuilt_in_place(
+    refits: tuple[int, ...], last: int, max_new: int, incremental: bool
+) -> tuple[int, ...]:
+    """The counts among ``refits`` (recorded by the names of damaged files above ``last``,
+    the newest readable checkpoint's count, 0 for none: :func:`_recorded_refits`) whose
+    files a resume keeps in place and writes the rebuilt model over (:func:`restore_model`).
+    With full refits, only those off the regular schedule from the refit recorded below
+    them (``(j - prev) % max_new != 0``: where a refit by hand moved it): one on it records
+    nothing the schedule does not say, so it is set aside, as a resume did before such names
+    counted, and costs no fit. With ``incremental`` every one: the replay passes through
+    each refit anyway, and its model costs a write only."""
+    if incremental:
+        return refits
+    moved, prev = [], last
+    for j in refits:
+        if (j - prev) % max_new:
+            moved.append(j)
+        prev = j
+    return tuple(moved)
+
+
 def _set_aside(path: Path, why: str) -> Path:
     """Rename a checkpoint that cannot be used, keeping its bytes (``<name>.<why>[-i]``);
     returns its new path.
@@ -3743,27 +3840,37 @@ def _set_aside(path: Path, why: str) -> Path:
     raise OSError(errno.EEXIST, f"{path.name}.{why} and its 999 numbered names are taken")
 
 
+def _copy_name(path: Path) -> tuple[Path | None, bool]:
+    """Where :func:`_keep_a_copy` keeps the bytes of ``path``: the first ``<name>.damaged[-i]``
+    that already holds them (the same file or the same bytes: kept by a resume interrupted
+    before it wrote the rebuilt model over ``path``), ``True``; else the first free one,
+    ``False``; ``(None, False)`` where all 1000 are taken. Reads only."""
+    free = None
+    for i in range(1000):
+        target = path.with_name(f"{path.name}.damaged" + (f"-{i}" if i else ""))
+        if not os.path.lexists(target):
+            free = target if free is None else free
+        elif not target.is_symlink() and _holds_same(target, path):
+            return target, True
+    return free, False
+
+
 def _keep_a_copy(path: Path) -> Path:
     """Keep the bytes of ``path``, a checkpoint that cannot be loaded, under
     ``<name>.damaged[-i]`` while ``path`` stays in place until a rebuilt model replaces it:
     a hard link where the file system allows (to the link itself where ``path`` is a
-    symbolic link), else a durable copy. Returns the copy's path.
+    symbolic link), else a durable copy; one that already holds them is used again
+    (:func:`_copy_name`), so retried resumes leave one copy. Returns the copy's path.
 
     Raises:
         OSError: neither could be made (nothing is left behind).
     """
-    target = next(
-        (
-            t
-            for i in range(1000)
-            if not os.path.lexists(
-                t := path.with_name(f"{path.name}.damaged" + (f"-{i}" if i else ""))
-            )
-        ),
-        None,
-    )
+    target, held = _copy_name(path)
     if target is None:
         raise OSError(errno.EEXIST, f"{path.name}.damaged and its 999 numbered names are taken")
+    if held:
+        fsync_directory(path.parent)  # a link made by the interrupted resume: on the disk
+        return target
     try:
         try:
             os.link(path, target, follow_symlinks=False)
@@ -3823,9 +3930,11 @@ def restore_model(
     lost: a writer logs a label before it saves its checkpoint) is renamed ``<name>.stale``
     too, so that no reader takes it for a refit once the session is taught that far again (a
     file that cannot be renamed stays as it is, never written over, with a warning naming it);
-    a damaged checkpoint whose name records a refit (or the checkpoint of ``k`` that this model
-    cannot load) stays in place, recording it, until the model rebuilt at its count (a fit on
-    those labels; ``incremental``: the replayed state there) replaces it: its bytes are first
+    a damaged checkpoint whose name records a refit (with full refits, one off the regular
+    schedule from the refit recorded below it, :func:`_rebuilt_in_place`; the others are
+    renamed ``.damaged``), or the checkpoint of ``k`` that this model cannot load, stays in
+    place, recording it, until the model rebuilt at its count (a fit on those labels;
+    ``incremental``: the replayed state there) replaces it: its bytes are first
     kept as ``<name>.damaged`` (a hard link, else a copy), then the rebuilt model is renamed
     over the name. Where the bytes cannot be kept, or that write fails, the file stays as it is
     (with a warning), so an interruption at any point (a Ctrl-C, a kill) leaves the refit
@@ -3894,14 +4003,16 @@ def restore_model(
     # their count replaces them (their bytes kept as .damaged first, by save): the damaged
     # ones whose names record a refit, which they go on recording meanwhile (for a reader
     # racing this resume, and if it is interrupted: a Ctrl-C, a kill, an exception)
+    # (with full refits only those off the schedule: _rebuilt_in_place)
+    last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
+    rebuilt = _rebuilt_in_place(scan.refits, last, max_new, incremental)
     in_place: set[int] = set()
     for n, path, why in scan.passed_over:
         if store is not None and not (n == 0 and starts_fitted):  # that one: kept as it is
-            if n in scan.refits:
+            if n in rebuilt:
                 in_place.add(n)
             else:
                 set_aside(n, path, why)
-    last, payload = (0, None) if scan.n is None else (scan.n, scan.payload)
 
     def save(j: int) -> None:
         """With ``store``, write the checkpoint of the model refitted on ``j`` labels; over a
@@ -5472,10 +5583,14 @@ def _checkpoint_report(
     px, py = ([], []) if prior is None else (list(prior[0]), prior[1].tolist())
     scan = _scan_checkpoints(run / CHECKPOINT_DIR, len(ys), len(py), px + xs, py + ys, entries)
     notes = []
+    max_new = int(config["teaching"]["max_new"])
+    incremental = config["teaching"].get("refit", "full") == "incremental"
+    rebuilt = _rebuilt_in_place(scan.refits, scan.n or 0, max_new, incremental)
     foreign = None if scan.payload is None else _foreign_state(config, scan.payload)
     if foreign is not None and scan.n is not None:
         k = scan.stood_on(len(ys), int(config["teaching"]["max_new"]))
-        notes.append(_foreign_note(config, scan.n, k, foreign))
+        copy_name = _copy_name(run / CHECKPOINT_DIR / f"model-{scan.n:08d}.pt")[0]
+        notes.append(_foreign_note(config, scan.n, k, foreign, copy_name))
         scan = dataclasses.replace(scan, n=None, payload=None)  # resume starts from none
     for n, path, why in scan.passed_over:
         name = f"{CHECKPOINT_DIR}/{path.name}"
@@ -5490,12 +5605,19 @@ def _checkpoint_report(
                 "no label can refit; resume and load_model cannot load it, refuse the session "
                 "where its model still stands on it, and leave the file as it is"
             )
+        elif n in scan.refits and n not in rebuilt:
+            notes.append(
+                f"{name} {what}: resume and load_model pass it over; its name records a refit "
+                f"on {n} labels, where the refit schedule puts one anyway, which they rebuild "
+                f"from an earlier checkpoint or the log (resume renames it {path.name}.{why})"
+            )
         elif n in scan.refits:
+            kept = (_copy_name(path)[0] or path.with_name(f"{path.name}.damaged")).name
             notes.append(
                 f"{name} {what}: resume and load_model pass it over; its name still records "
                 f"a refit on {n} labels (where a refit by hand may have moved the refit "
                 "schedule), which they rebuild from an earlier checkpoint or the log (resume "
-                f"writes the rebuilt model in its place, keeping this file as {path.name}.{why})"
+                f"writes the rebuilt model in its place, keeping this file as {kept})"
             )
         else:
             notes.append(
@@ -5544,12 +5666,16 @@ def _foreign_state(config: dict[str, Any], payload: dict[str, Any]) -> str | Non
     return None
 
 
-def _foreign_note(config: dict[str, Any], n: int, k: int, why: str) -> str:
+def _foreign_note(
+    config: dict[str, Any], n: int, k: int, why: str, copy_name: Path | None = None
+) -> str:
     """:func:`describe`'s note on ``checkpoints/model-<n>.pt``, the checkpoint resume would
     start from, whose state the session's model cannot load (``why``), saying what resume
     and :func:`load_model` do with it (as :func:`restore_model` does); ``k``: the labels the
-    session's model stood on (:meth:`_CheckpointScan.stood_on`)."""
+    session's model stood on (:meth:`_CheckpointScan.stood_on`); ``copy_name``: where a
+    resume would keep its bytes (:func:`_copy_name`; default ``<name>.damaged``)."""
     name = f"model-{n:08d}.pt"
+    kept_as = f"{name}.damaged" if copy_name is None else copy_name.name
     model = str(config["model"].get("class"))
     what = (
         f"{CHECKPOINT_DIR}/{name} holds the state of another model than the session's "
@@ -5564,7 +5690,7 @@ def _foreign_note(config: dict[str, Any], n: int, k: int, why: str) -> str:
     teaching = config["teaching"]
     if k == n:
         kept = (
-            f"writes the rebuilt model in its place, keeping this file as {name}.damaged"
+            f"writes the rebuilt model in its place, keeping this file as {kept_as}"
             if n > 0
             else f"renames it {name}.damaged"
         )

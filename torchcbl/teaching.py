@@ -1068,6 +1068,18 @@ class ConfidentTeacher:
         or a streak its last run()'s steps end on; None: none), where :meth:`run` takes no
         step; the streaks of a session stopped before they held count from zero.
 
+        Once the session is open, resume changes files in its ``checkpoints/``
+        (:func:`torchcbl.session.restore_model`, the module's notes on damaged files): a
+        checkpoint it cannot use is renamed ``<name>.stale`` (not fitted on the log's labels,
+        or named for more labels than the log holds) or ``<name>.damaged`` (one whose name
+        records no refit: a folder, a dangling link; with full refits, also one whose refit
+        lies on the regular schedule); a damaged checkpoint whose name records a refit, or
+        one of another model's state at the count the model stands on, stays under its
+        name, its bytes kept as ``<name>.damaged``, and the rebuilt model is written over it;
+        with full refits the checkpoint of the labels the model stands on is written where
+        it is missing. No checkpoint's bytes are lost: a file is never
+        written over before they are kept.
+
         Args:
             config: optional; its stop fields may differ from the stored ones, the learning
                 fields may not. ``model`` / ``rule`` / ``strategy``: optional; must match the
@@ -1107,7 +1119,14 @@ class ConfidentTeacher:
                 writer recorded on a key both give (another simulator release, say): the
                 steps from here on are taught under it, and the env may behave otherwise.
                 Not a refusal: a patch release usually changes nothing. Silent where either
-                recorded none.
+                recorded none. Or a checkpoint resume rebuilt could not be written (a full
+                disk; the message says what resume and ``load_model`` give meanwhile: a
+                damaged file kept in place still records its refit), or the rebuilt model was
+                written but its folder could not be flushed; or a damaged checkpoint's bytes
+                could not be kept as ``.damaged``, so the rebuilt model was not written over
+                it; or a file could not be renamed ``.stale`` / ``.damaged`` and stays as it
+                is, never written over. Each names the file and what to do (free space, or
+                move the file out of ``checkpoints/``); the session goes on.
         """
         stored = load_config(run_dir)
         n_features, n_actions = check_env(env)
@@ -1429,7 +1448,10 @@ class ConfidentTeacher:
         Raises:
             SessionWriteError: its checkpoint could not be written (a full disk); the refit
                 is done in memory, and the message says what resume and ``load_model`` give
-                for the stages up to the loop's next refit (those stages for good).
+                for the stages up to the loop's next refit until the checkpoint is written:
+                the teacher writes it with its next checkpoint and at :meth:`close` (a
+                warning where that fails too; then, or where the process ends first, those
+                stages stay so for good).
         """
         if self._new_since_refit == 0 or not len(self._train):
             return False
@@ -2092,7 +2114,10 @@ class ConfidentTeacher:
             self._store.commit()
 
     def close(self) -> None:
-        """Commit and close the step log. The session can be resumed from its directory."""
+        """Commit and close the step log. The session can be resumed from its directory.
+
+        A refit by hand's checkpoint that a write failed to save (:meth:`refit`) is written
+        first; where that fails again, a warning says what is lost."""
         self._unstarted = False  # a session removed after its first step failed stays so
         if self._store is not None:
             store, self._store = self._store, None
