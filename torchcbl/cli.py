@@ -1068,7 +1068,9 @@ _EVALUATE_EPILOG = (
     "or the session its prior demonstrations were read from was; null where that cannot be "
     "told, with a warning: prior demonstrations from a .npz file or arrays, or read by a "
     "torchcbl before 2026-11-28, whose session is not recorded, or whose session is not "
-    "there any more or holds others now; else true), "
+    "there any more or holds others now; or a session written before 2026-11-27 whose traffic "
+    "was kept only as text, so its base seed is not known, on a segment its own episodes "
+    "drove; else true), "
     "start_lane (the lane it started in, 0 the right shoulder), sim (the SUMO settings, "
     "SimConfig's fields)."
 )
