@@ -344,7 +344,15 @@ class DrivingEnv(gym.Env):
             raise RuntimeError("call reset() before step() (none ran, or the last one failed)")
         a = _as_int(action)  # 1.7, "1" or True is no action: refused, not rounded
         if a not in (STAY, LEFT, RIGHT):
-            raise ValueError(f"action must be 0 (stay), 1 (left) or 2 (right), got {action!r}")
+            raise ValueError(
+                f"action must be 0 (stay), 1 (left) or 2 (right), got {action!r}"
+                + (
+                    "; a torch tensor is not taken as an action: pass int(action) (e.g. "
+                    "int(GaussianMixtureSet.classify(obs[None]).action[0]))"
+                    if hasattr(action, "detach")
+                    else ""
+                )
+            )
         lane = self._sim.ego_lane
         target = lane + (1 if a == LEFT else -1 if a == RIGHT else 0)
         target = min(max(target, 0), N_LANES - 1)

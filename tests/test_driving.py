@@ -323,6 +323,11 @@ def test_bad_action_and_options(env):
     for bad in (3, -1, 1.7, np.float64(2.0), "1", True, None):  # refused, never rounded
         with pytest.raises(ValueError, match="action must be 0"):
             env.step(bad)
+    # a 0-d tensor (GaussianMixtureSet.classify(...).action[0]) is told what to pass, as the
+    # corridor tells it (the message named the tensor and no way out)
+    torch = pytest.importorskip("torch")
+    with pytest.raises(ValueError, match=r"torch tensor is not taken as an action: pass int"):
+        env.step(torch.tensor(1))
     assert env.step(np.int64(0))[4]["lane"] == lane and env.step(np.array(0))[4]["lane"] == lane
     with pytest.raises(ValueError, match="unknown reset options"):
         env.reset(seed=0, options={"lane": 1})
