@@ -571,6 +571,44 @@ def test_an_unsaved_refit_by_hand_is_written_at_close_or_said_lost(tmp_path, mon
         back.close()
 
 
+def _two_unsaved_hand_refits(run: Path) -> ConfidentTeacher:
+    """A session refitting every 5 labels whose refits by hand at 7 and at 8 a full disk
+    refused, taught on to 9 labels (open)."""
+    ct, env = session(run, max_new=5, noninteractive=False)
+    for n in (7, 8):
+        ct.run(max_demonstrations=n)
+        with file_size_limit(1000), pytest.raises(SessionWriteError):
+            ct.refit()
+    ct.run(max_demonstrations=9)
+    return ct
+
+
+def test_close_writes_every_unsaved_refit_by_hand_with_warnings_as_errors(tmp_path, monkeypatch):
+    """close() warned inside its loop over the unsaved refits by hand: with warnings as errors
+    the first one that could not be written raised, and the later ones were never tried (the
+    refit at 8 lost where the disk had room for it). Every one is tried, then the warning."""
+    run = tmp_path / "run"
+    ct = _two_unsaved_hand_refits(run)
+    real = S.write_durably
+
+    def seven_full(path, data, tmp):
+        if "00000007" in path.name:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, data, tmp)
+
+    monkeypatch.setattr(S, "write_durably", seven_full)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(UserWarning, match="model-00000007.pt"):
+            ct.close()
+    monkeypatch.undo()
+    checkpoints = run / "checkpoints"
+    assert not (checkpoints / "model-00000007.pt").exists()
+    assert (checkpoints / "model-00000008.pt").exists()
+    back, _ = resume(run)  # the session closed all the same
+    back.close()
+
+
 # -- 3. readers never write -------------------------------------------------------------------
 
 

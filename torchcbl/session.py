@@ -2571,7 +2571,9 @@ class SessionStore:
         """Write the checkpoints of refits by hand that an earlier write failed to save
         (:meth:`save_checkpoint`), oldest first, each pruning as its own write would have;
         one that fails again is kept for the next try, or at ``closing`` said lost (a
-        warning)."""
+        warning, given once every one was tried: with warnings as errors it raises only
+        then)."""
+        lost: list[str] = []
         for entry in list(self._unsaved):
             n, digest, state = entry
             try:
@@ -2579,11 +2581,13 @@ class SessionStore:
                 _write_checkpoint(self.run_dir, None, n, digest, after, state=state)
             except SessionWriteError as exc:
                 if closing:
-                    warnings.warn(str(exc), stacklevel=4)
+                    lost.append(str(exc))
                 continue
             self._unsaved.remove(entry)
             if self.keep_checkpoints is not None:
                 self._prune_checkpoints(n, self.keep_checkpoints)
+        for said in lost:
+            warnings.warn(said, stacklevel=4)
 
     def _prune_checkpoints(self, newest: int, keep: int) -> None:
         """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
