@@ -609,6 +609,44 @@ def test_close_writes_every_unsaved_refit_by_hand_with_warnings_as_errors(tmp_pa
     back.close()
 
 
+@pytest.mark.parametrize("where", ["close", "next checkpoint"])
+def test_a_ctrl_c_while_an_unsaved_refit_by_hand_is_written_again_says_so(
+    tmp_path, monkeypatch, where
+):
+    """A Ctrl-C while the teacher wrote again a refit by hand's checkpoint that a full disk
+    had refused (at close, or before the loop's next checkpoint) went out with no word of it:
+    at close that checkpoint was lost for good, silently. A warning now names it and says
+    what that leaves, and the Ctrl-C goes on."""
+    run = tmp_path / "run"
+    ct = _two_unsaved_hand_refits(run)
+
+    def interrupted(path, data, tmp):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(S, "write_durably", interrupted)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if where == "close":
+            with pytest.raises(KeyboardInterrupt):
+                ct.close()
+        else:  # (the loop's own handler stops it there)
+            with contextlib.suppress(KeyboardInterrupt):
+                ct.run(max_demonstrations=13)  # the loop's refit: 5 labels after 8
+    monkeypatch.undo()
+    said = [" ".join(str(w.message).split()) for w in caught]
+    for n in (7, 8):
+        (one,) = [m for m in said if f"model-{n:08d}.pt" in m]
+        assert "interrupted" in one, one
+        if where == "close":
+            assert "for good" in one, one
+        else:
+            assert "with its next checkpoint or at close()" in one, one
+    if where != "close":
+        ct.close()  # space and time enough: both written now
+        assert (run / "checkpoints" / "model-00000007.pt").exists()
+        assert (run / "checkpoints" / "model-00000008.pt").exists()
+
+
 # -- 3. readers never write -------------------------------------------------------------------
 
 

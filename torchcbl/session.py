@@ -2574,18 +2574,31 @@ class SessionStore:
         warning, given once every one was tried: with warnings as errors it raises only
         then)."""
         lost: list[str] = []
-        for entry in list(self._unsaved):
-            n, digest, state = entry
-            try:
-                after = _lost_at_close(n, self._max_new) if closing else ""
-                _write_checkpoint(self.run_dir, None, n, digest, after, state=state)
-            except SessionWriteError as exc:
+        try:
+            for entry in list(self._unsaved):
+                n, digest, state = entry
+                try:
+                    after = _lost_at_close(n, self._max_new) if closing else ""
+                    _write_checkpoint(self.run_dir, None, n, digest, after, state=state)
+                except SessionWriteError as exc:
+                    if closing:
+                        lost.append(str(exc))
+                    continue
+                self._unsaved.remove(entry)
+                if self.keep_checkpoints is not None:
+                    self._prune_checkpoints(n, self.keep_checkpoints)
+        except BaseException:  # a Ctrl-C: what it left unwritten said, then it goes on out
+            for n, _, _ in self._unsaved:
+                path = self.run_dir / CHECKPOINT_DIR / f"model-{n:08d}.pt"
                 if closing:
-                    lost.append(str(exc))
-                continue
-            self._unsaved.remove(entry)
-            if self.keep_checkpoints is not None:
-                self._prune_checkpoints(n, self.keep_checkpoints)
+                    then = _lost_at_close(n, self._max_new)
+                else:
+                    then = _lost_hand_refit(n, self._max_new) if self._max_new else ""
+                lost.append(f"writing {path} was interrupted. {then}")
+            with contextlib.suppress(Exception):  # (warnings as errors: the Ctrl-C first)
+                for said in lost:
+                    warnings.warn(said, stacklevel=4)
+            raise
         for said in lost:
             warnings.warn(said, stacklevel=4)
 
