@@ -647,6 +647,36 @@ def test_a_ctrl_c_while_an_unsaved_refit_by_hand_is_written_again_says_so(
         assert (run / "checkpoints" / "model-00000008.pt").exists()
 
 
+def test_an_unsaved_refit_by_hand_lost_at_close_names_where_its_stages_end(tmp_path, monkeypatch):
+    """close() could not write a refit by hand's checkpoint (7 labels) and said the stages
+    from 7 are rebuilt on the regular schedule up to the loop's refit "due at 12 labels";
+    a later refit by hand at 9 was saved, so they end there: it says so."""
+    run = tmp_path / "run"
+    ct, env = session(run, max_new=5, noninteractive=False)
+    ct.run(max_demonstrations=7)
+    with file_size_limit(1000), pytest.raises(SessionWriteError):
+        ct.refit()
+    real = S.write_durably
+
+    def seven_full(path, data, tmp):
+        if "00000007" in path.name:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, data, tmp)
+
+    monkeypatch.setattr(S, "write_durably", seven_full)
+    ct.run(max_demonstrations=9)
+    assert ct.refit()  # at 9: saved (7 tried again first, refused again)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ct.close()
+    monkeypatch.undo()
+    (said,) = [" ".join(str(w.message).split()) for w in caught if "00000007" in str(w.message)]
+    assert "due at 12" not in said, said
+    assert "from 7 labels up to the refit saved at 9 labels" in said, said
+    assert int(load_model(run, n_demonstrations=8).n_points_.sum()) == 5  # what it says
+    assert int(load_model(run, n_demonstrations=9).n_points_.sum()) == 9
+
+
 # -- 3. readers never write -------------------------------------------------------------------
 
 

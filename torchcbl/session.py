@@ -1928,14 +1928,21 @@ def _lost_hand_refit(n: int, max_new: int) -> str:
     )
 
 
-def _lost_at_close(n: int, max_new: int | None) -> str:
+def _lost_at_close(n: int, max_new: int | None, saved: int | None = None) -> str:
     """The warning's tail where :meth:`SessionStore.close` could not write the checkpoint
-    of a refit by hand on ``n`` labels that an earlier write failed to save."""
-    due = "" if max_new is None else f", due at {n + max_new} labels"
+    of a refit by hand on ``n`` labels that an earlier write failed to save; ``saved``: the
+    smallest count above ``n`` whose checkpoint is there (where the affected stages end, if
+    before the loop's next refit)."""
+    if saved is not None and (max_new is None or saved < n + max_new):
+        end = f"the refit saved at {saved} labels"
+    else:
+        end = "the loop's next refit" + (
+            "" if max_new is None else f", due at {n + max_new} labels"
+        )
     return (
         "This was a refit by hand whose checkpoint an earlier write could not save either, "
         "and the teacher closed without it: resume and load_model rebuild the stages from "
-        f"{n} labels up to the loop's next refit{due}, on the regular schedule, not on these "
+        f"{n} labels up to {end}, on the regular schedule, not on these "
         f"{n} labels, for good. The step log is complete."
     )
 
@@ -2578,11 +2585,10 @@ class SessionStore:
             for entry in list(self._unsaved):
                 n, digest, state = entry
                 try:
-                    after = _lost_at_close(n, self._max_new) if closing else ""
-                    _write_checkpoint(self.run_dir, None, n, digest, after, state=state)
+                    _write_checkpoint(self.run_dir, None, n, digest, "", state=state)
                 except SessionWriteError as exc:
                     if closing:
-                        lost.append(str(exc))
+                        lost.append(f"{exc}{self._lost_at_close(n)}")
                     continue
                 self._unsaved.remove(entry)
                 if self.keep_checkpoints is not None:
@@ -2591,7 +2597,7 @@ class SessionStore:
             for n, _, _ in self._unsaved:
                 path = self.run_dir / CHECKPOINT_DIR / f"model-{n:08d}.pt"
                 if closing:
-                    then = _lost_at_close(n, self._max_new)
+                    then = self._lost_at_close(n)
                 else:
                     then = _lost_hand_refit(n, self._max_new) if self._max_new else ""
                 lost.append(f"writing {path} was interrupted. {then}")
@@ -2601,6 +2607,15 @@ class SessionStore:
             raise
         for said in lost:
             warnings.warn(said, stacklevel=4)
+
+    def _lost_at_close(self, n: int) -> str:
+        """:func:`_lost_at_close` for the refit by hand on ``n`` labels, its stages ending at
+        the first checkpoint above ``n`` there now (a later refit by hand that was saved)."""
+        try:
+            above = [m for m, _ in _checkpoint_entries(self.run_dir / CHECKPOINT_DIR) if m > n]
+        except IncompatibleRunDirError:
+            above = []
+        return _lost_at_close(n, self._max_new, min(above, default=None))
 
     def _prune_checkpoints(self, newest: int, keep: int) -> None:
         """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
