@@ -1399,6 +1399,37 @@ def test_a_full_refit_resume_rebuilds_only_the_damaged_checkpoints_off_the_sched
         assert _same(staged, live[max(r for r in live if r <= n)]), n
 
 
+def test_resumes_interrupted_at_the_write_back_of_a_linked_checkpoint_keep_one_link(
+    tmp_path, monkeypatch
+):
+    """A damaged refit by hand whose checkpoint is a symbolic link is kept as a link to the
+    same file, ``.damaged``; a retried resume did not know its own link again (only regular
+    files were compared) and made another each time: ``.damaged-1``, ``-2``. Links are
+    compared by what they point to."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, "full")
+    hand = run / "checkpoints" / "model-00000007.pt"
+    outside = tmp_path / "elsewhere.pt"
+    outside.write_bytes(hand.read_bytes()[:100])
+    hand.unlink()
+    hand.symlink_to(outside)
+
+    def interrupted(obj, f, *args, **kw):
+        raise KeyboardInterrupt
+
+    for _ in range(2):
+        monkeypatch.setattr(S.torch, "save", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            resume(run)
+        monkeypatch.undo()
+    back, _ = resume(run)
+    back.close()
+    assert _same_payload(hand, live[7]) and not hand.is_symlink()
+    names = sorted(p.name for p in hand.parent.iterdir() if "00000007" in p.name)
+    assert names == [hand.name, hand.name + ".damaged"], names
+    assert os.readlink(hand.with_name(hand.name + ".damaged")) == str(outside)
+
+
 @pytest.mark.parametrize("refit", ["full", "incremental"])
 def test_a_damaged_refit_by_hand_whose_bytes_cannot_be_kept_stays_in_place(
     tmp_path, monkeypatch, refit

@@ -3874,17 +3874,30 @@ def _set_aside(path: Path, why: str) -> Path:
 
 def _copy_name(path: Path) -> tuple[Path | None, bool]:
     """Where :func:`_keep_a_copy` keeps the bytes of ``path``: the first ``<name>.damaged[-i]``
-    that already holds them (the same file or the same bytes: kept by a resume interrupted
-    before it wrote the rebuilt model over ``path``), ``True``; else the first free one,
-    ``False``; ``(None, False)`` where all 1000 are taken. Reads only."""
+    that already holds them (the same file or the same bytes, or where ``path`` is a symbolic
+    link the same link: kept by a resume interrupted before it wrote the rebuilt model over
+    ``path``), ``True``; else the first free one, ``False``; ``(None, False)`` where all 1000
+    are taken. Reads only."""
     free = None
+    link = _link_of(path)
     for i in range(1000):
         target = path.with_name(f"{path.name}.damaged" + (f"-{i}" if i else ""))
         if not os.path.lexists(target):
             free = target if free is None else free
-        elif not target.is_symlink() and _holds_same(target, path):
+        elif target.is_symlink():
+            if link is not None and _link_of(target) == link:
+                return target, True
+        elif _holds_same(target, path):
             return target, True
     return free, False
+
+
+def _link_of(path: Path) -> str | None:
+    """What the symbolic link ``path`` points to; None where it is none (or unreadable)."""
+    try:
+        return os.readlink(path)
+    except OSError:
+        return None
 
 
 def _keep_a_copy(path: Path) -> Path:
