@@ -1430,6 +1430,38 @@ def test_resumes_interrupted_at_the_write_back_of_a_linked_checkpoint_keep_one_l
     assert os.readlink(hand.with_name(hand.name + ".damaged")) == str(outside)
 
 
+def test_a_checkpoint_linked_to_its_own_damaged_copy_keeps_it_when_the_write_back_fails(
+    tmp_path, monkeypatch
+):
+    """``model-7.pt`` a link a person made to ``model-7.pt.damaged`` (damaged bytes): the
+    resume took that file for its own copy (the same file, through the link), and when
+    writing the rebuilt model failed it removed the "copy", the only one of those bytes,
+    leaving the name a dangling link. Only a link is a link's copy now, and the file stays."""
+    run = tmp_path / "run"
+    _hand_refit_session(run, "full")
+    hand = run / "checkpoints" / "model-00000007.pt"
+    theirs = hand.with_name(hand.name + ".damaged")
+    data = hand.read_bytes()[:100]
+    theirs.write_bytes(data)
+    hand.unlink()
+    hand.symlink_to(theirs.name)
+    real = S.write_durably
+
+    def seven_full(path, data, tmp):
+        if path.name == hand.name:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, data, tmp)
+
+    monkeypatch.setattr(S, "write_durably", seven_full)
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        back, _ = resume(run)
+        back.close()
+    monkeypatch.undo()
+    assert theirs.read_bytes() == data
+    assert hand.is_symlink() and hand.read_bytes() == data
+
+
 @pytest.mark.parametrize("refit", ["full", "incremental"])
 def test_a_damaged_refit_by_hand_whose_bytes_cannot_be_kept_stays_in_place(
     tmp_path, monkeypatch, refit

@@ -3874,8 +3874,8 @@ def _set_aside(path: Path, why: str) -> Path:
 
 def _copy_name(path: Path) -> tuple[Path | None, bool]:
     """Where :func:`_keep_a_copy` keeps the bytes of ``path``: the first ``<name>.damaged[-i]``
-    that already holds them (the same file or the same bytes, or where ``path`` is a symbolic
-    link the same link: kept by a resume interrupted before it wrote the rebuilt model over
+    that already holds them (the same file or the same bytes; where ``path`` is a symbolic
+    link, only the same link: kept by a resume interrupted before it wrote the rebuilt model over
     ``path``), ``True``; else the first free one, ``False``; ``(None, False)`` where all 1000
     are taken. Reads only."""
     free = None
@@ -3887,7 +3887,9 @@ def _copy_name(path: Path) -> tuple[Path | None, bool]:
         elif target.is_symlink():
             if link is not None and _link_of(target) == link:
                 return target, True
-        elif _holds_same(target, path):
+        elif link is None and _holds_same(target, path):
+            # (not for a link: the file it points to, maybe this very target, is no copy
+            # of the link, and a failed write would remove it as one)
             return target, True
     return free, False
 
