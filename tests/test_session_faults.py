@@ -524,7 +524,7 @@ def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses
     assert "refitted from the log on resume" not in msg and "or resume" not in msg, msg
     assert "from 7 labels up to the loop's next refit" in msg, msg
     assert "writes it with its next checkpoint or at close()" in msg, msg
-    assert "for good where the process ends before" in msg, msg
+    assert "for good where the process ends before close()" in msg, msg
     assert int(ct.model.n_points_.sum()) == 7  # the refit itself happened
     assert int(load_model(run).n_points_.sum()) == 5  # what the message warns of
     live7 = copy.deepcopy(ct.model.state_dict())
