@@ -14,6 +14,7 @@ import contextlib
 import copy
 import errno
 import hashlib
+import io
 import json
 import math
 import os
@@ -675,6 +676,26 @@ def test_an_unsaved_refit_by_hand_lost_at_close_names_where_its_stages_end(tmp_p
     assert "from 7 labels up to the refit saved at 9 labels" in said, said
     assert int(load_model(run, n_demonstrations=8).n_points_.sum()) == 5  # what it says
     assert int(load_model(run, n_demonstrations=9).n_points_.sum()) == 9
+
+
+def test_a_refused_checkpoint_s_error_holds_no_copy_of_the_model(tmp_path):
+    """A checkpoint a full disk refused raised its SessionWriteError with the serialised
+    bytes, the payload and the state still alive in the failed frame: a caller keeping the
+    error (or its traceback, as a REPL does) kept the model's size over again."""
+    run = tmp_path / "run"
+    ct, env = session(run, max_new=5, noninteractive=False)
+    ct.run(max_demonstrations=7)
+    with file_size_limit(1000), pytest.raises(SessionWriteError) as err:
+        ct.refit()
+    held = []
+    tb = err.value.__traceback__
+    while tb is not None:
+        for name, value in tb.tb_frame.f_locals.items():
+            if isinstance(value, io.BytesIO) or (isinstance(value, dict) and "state_dict" in value):
+                held.append((tb.tb_frame.f_code.co_name, name))
+        tb = tb.tb_next
+    assert not held, held
+    ct.close()
 
 
 # -- 3. readers never write -------------------------------------------------------------------

@@ -1989,6 +1989,9 @@ def _write_checkpoint(
         torch.save(payload, buffer)
         write_durably(path, buffer.getvalue(), tmp)
     except (OSError, RuntimeError) as exc:
+        # not kept alive by the error's traceback (held by a caller, a REPL): the model's
+        # size over again (its copy on the CPU where it is on a GPU) for each of these
+        del buffer, payload, state
         raise _write_error(
             exc, path, f"saving the model fitted on {n_demonstrations} labels", after
         ) from exc
