@@ -14,6 +14,7 @@ import contextlib
 import copy
 import errno
 import hashlib
+import io
 import json
 import math
 import os
@@ -524,7 +525,7 @@ def test_a_refit_by_hand_whose_checkpoint_cannot_be_written_says_what_that_loses
     assert "refitted from the log on resume" not in msg and "or resume" not in msg, msg
     assert "from 7 labels up to the loop's next refit" in msg, msg
     assert "writes it with its next checkpoint or at close()" in msg, msg
-    assert "for good where the process ends before" in msg, msg
+    assert "for good where the process ends before close()" in msg, msg
     assert int(ct.model.n_points_.sum()) == 7  # the refit itself happened
     assert int(load_model(run).n_points_.sum()) == 5  # what the message warns of
     live7 = copy.deepcopy(ct.model.state_dict())
@@ -569,6 +570,132 @@ def test_an_unsaved_refit_by_hand_is_written_at_close_or_said_lost(tmp_path, mon
             assert _same_payload(hand, live7) and _same(load_model(run), live7)
         back, _ = resume(run)  # the session closed either way
         back.close()
+
+
+def _two_unsaved_hand_refits(run: Path) -> ConfidentTeacher:
+    """A session refitting every 5 labels whose refits by hand at 7 and at 8 a full disk
+    refused, taught on to 9 labels (open)."""
+    ct, env = session(run, max_new=5, noninteractive=False)
+    for n in (7, 8):
+        ct.run(max_demonstrations=n)
+        with file_size_limit(1000), pytest.raises(SessionWriteError):
+            ct.refit()
+    ct.run(max_demonstrations=9)
+    return ct
+
+
+def test_close_writes_every_unsaved_refit_by_hand_with_warnings_as_errors(tmp_path, monkeypatch):
+    """close() warned inside its loop over the unsaved refits by hand: with warnings as errors
+    the first one that could not be written raised, and the later ones were never tried (the
+    refit at 8 lost where the disk had room for it). Every one is tried, then the warning."""
+    run = tmp_path / "run"
+    ct = _two_unsaved_hand_refits(run)
+    real = S.write_durably
+
+    def seven_full(path, data, tmp):
+        if "00000007" in path.name:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, data, tmp)
+
+    monkeypatch.setattr(S, "write_durably", seven_full)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(UserWarning, match="model-00000007.pt"):
+            ct.close()
+    monkeypatch.undo()
+    checkpoints = run / "checkpoints"
+    assert not (checkpoints / "model-00000007.pt").exists()
+    assert (checkpoints / "model-00000008.pt").exists()
+    back, _ = resume(run)  # the session closed all the same
+    back.close()
+
+
+@pytest.mark.parametrize("where", ["close", "next checkpoint"])
+def test_a_ctrl_c_while_an_unsaved_refit_by_hand_is_written_again_says_so(
+    tmp_path, monkeypatch, where
+):
+    """A Ctrl-C while the teacher wrote again a refit by hand's checkpoint that a full disk
+    had refused (at close, or before the loop's next checkpoint) went out with no word of it:
+    at close that checkpoint was lost for good, silently. A warning now names it and says
+    what that leaves, and the Ctrl-C goes on."""
+    run = tmp_path / "run"
+    ct = _two_unsaved_hand_refits(run)
+
+    def interrupted(path, data, tmp):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(S, "write_durably", interrupted)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if where == "close":
+            with pytest.raises(KeyboardInterrupt):
+                ct.close()
+        else:  # (the loop's own handler stops it there)
+            with contextlib.suppress(KeyboardInterrupt):
+                ct.run(max_demonstrations=13)  # the loop's refit: 5 labels after 8
+    monkeypatch.undo()
+    said = [" ".join(str(w.message).split()) for w in caught]
+    for n in (7, 8):
+        (one,) = [m for m in said if f"model-{n:08d}.pt" in m]
+        assert "interrupted" in one, one
+        if where == "close":
+            assert "for good" in one, one
+        else:
+            assert "with its next checkpoint or at close()" in one, one
+    if where != "close":
+        ct.close()  # space and time enough: both written now
+        assert (run / "checkpoints" / "model-00000007.pt").exists()
+        assert (run / "checkpoints" / "model-00000008.pt").exists()
+
+
+def test_an_unsaved_refit_by_hand_lost_at_close_names_where_its_stages_end(tmp_path, monkeypatch):
+    """close() could not write a refit by hand's checkpoint (7 labels) and said the stages
+    from 7 are rebuilt on the regular schedule up to the loop's refit "due at 12 labels";
+    a later refit by hand at 9 was saved, so they end there: it says so."""
+    run = tmp_path / "run"
+    ct, env = session(run, max_new=5, noninteractive=False)
+    ct.run(max_demonstrations=7)
+    with file_size_limit(1000), pytest.raises(SessionWriteError):
+        ct.refit()
+    real = S.write_durably
+
+    def seven_full(path, data, tmp):
+        if "00000007" in path.name:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, data, tmp)
+
+    monkeypatch.setattr(S, "write_durably", seven_full)
+    ct.run(max_demonstrations=9)
+    assert ct.refit()  # at 9: saved (7 tried again first, refused again)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ct.close()
+    monkeypatch.undo()
+    (said,) = [" ".join(str(w.message).split()) for w in caught if "00000007" in str(w.message)]
+    assert "due at 12" not in said, said
+    assert "from 7 labels up to the refit saved at 9 labels" in said, said
+    assert int(load_model(run, n_demonstrations=8).n_points_.sum()) == 5  # what it says
+    assert int(load_model(run, n_demonstrations=9).n_points_.sum()) == 9
+
+
+def test_a_refused_checkpoint_s_error_holds_no_copy_of_the_model(tmp_path):
+    """A checkpoint a full disk refused raised its SessionWriteError with the serialised
+    bytes, the payload and the state still alive in the failed frame: a caller keeping the
+    error (or its traceback, as a REPL does) kept the model's size over again."""
+    run = tmp_path / "run"
+    ct, env = session(run, max_new=5, noninteractive=False)
+    ct.run(max_demonstrations=7)
+    with file_size_limit(1000), pytest.raises(SessionWriteError) as err:
+        ct.refit()
+    held = []
+    tb = err.value.__traceback__
+    while tb is not None:
+        for name, value in tb.tb_frame.f_locals.items():
+            if isinstance(value, io.BytesIO) or (isinstance(value, dict) and "state_dict" in value):
+                held.append((tb.tb_frame.f_code.co_name, name))
+        tb = tb.tb_next
+    assert not held, held
+    ct.close()
 
 
 # -- 3. readers never write -------------------------------------------------------------------
@@ -1291,6 +1418,69 @@ def test_a_full_refit_resume_rebuilds_only_the_damaged_checkpoints_off_the_sched
         )
     for n, staged in S.load_models(run, range(25)):
         assert _same(staged, live[max(r for r in live if r <= n)]), n
+
+
+def test_resumes_interrupted_at_the_write_back_of_a_linked_checkpoint_keep_one_link(
+    tmp_path, monkeypatch
+):
+    """A damaged refit by hand whose checkpoint is a symbolic link is kept as a link to the
+    same file, ``.damaged``; a retried resume did not know its own link again (only regular
+    files were compared) and made another each time: ``.damaged-1``, ``-2``. Links are
+    compared by what they point to."""
+    run = tmp_path / "run"
+    _, live = _hand_refit_session(run, "full")
+    hand = run / "checkpoints" / "model-00000007.pt"
+    outside = tmp_path / "elsewhere.pt"
+    outside.write_bytes(hand.read_bytes()[:100])
+    hand.unlink()
+    hand.symlink_to(outside)
+
+    def interrupted(obj, f, *args, **kw):
+        raise KeyboardInterrupt
+
+    for _ in range(2):
+        monkeypatch.setattr(S.torch, "save", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            resume(run)
+        monkeypatch.undo()
+    back, _ = resume(run)
+    back.close()
+    assert _same_payload(hand, live[7]) and not hand.is_symlink()
+    names = sorted(p.name for p in hand.parent.iterdir() if "00000007" in p.name)
+    assert names == [hand.name, hand.name + ".damaged"], names
+    assert os.readlink(hand.with_name(hand.name + ".damaged")) == str(outside)
+
+
+def test_a_checkpoint_linked_to_its_own_damaged_copy_keeps_it_when_the_write_back_fails(
+    tmp_path, monkeypatch
+):
+    """``model-7.pt`` a link a person made to ``model-7.pt.damaged`` (damaged bytes): the
+    resume took that file for its own copy (the same file, through the link), and when
+    writing the rebuilt model failed it removed the "copy", the only one of those bytes,
+    leaving the name a dangling link. Only a link is a link's copy now, and the file stays."""
+    run = tmp_path / "run"
+    _hand_refit_session(run, "full")
+    hand = run / "checkpoints" / "model-00000007.pt"
+    theirs = hand.with_name(hand.name + ".damaged")
+    data = hand.read_bytes()[:100]
+    theirs.write_bytes(data)
+    hand.unlink()
+    hand.symlink_to(theirs.name)
+    real = S.write_durably
+
+    def seven_full(path, data, tmp):
+        if path.name == hand.name:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, data, tmp)
+
+    monkeypatch.setattr(S, "write_durably", seven_full)
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        back, _ = resume(run)
+        back.close()
+    monkeypatch.undo()
+    assert theirs.read_bytes() == data
+    assert hand.is_symlink() and hand.read_bytes() == data
 
 
 @pytest.mark.parametrize("refit", ["full", "incremental"])

@@ -130,8 +130,9 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   freed. A checkpoint that cannot be written is refitted from the log when needed, save a
   refit by hand's (``ConfidentTeacher.refit``): only its checkpoint records where it moved
   the refit schedule, so the writer keeps its model and writes it with its next checkpoint
-  and at close, and freeing space is enough; where the process ends first (killed) or that
-  write fails at close too (a warning), the stages from its count to the loop's next refit
+  and at close, and freeing space is enough; where the process ends without close() (killed,
+  or exiting without calling it: nothing writes it on the way out) or that write fails at
+  close too (a warning), the stages from its count to the loop's next refit
   are rebuilt on the regular schedule for good. A new session's starting model
   (checkpoint 0) that cannot be written leaves no session.
 - Readers without write access. :func:`load_records`, :func:`load_model`, :func:`describe`
@@ -1924,18 +1925,26 @@ def _lost_hand_refit(n: int, max_new: int) -> str:
         "that refit is saved). The teacher keeps this model and writes it with its next "
         "checkpoint or at close(): free space (or fix the file's permissions), then call "
         "run() again. Those stages stay on the regular schedule for good where the process "
-        "ends before (killed), or where the write fails at close() too."
+        "ends before close() (killed, or exiting without calling it: nothing writes it on "
+        "the way out), or where the write fails at close() too."
     )
 
 
-def _lost_at_close(n: int, max_new: int | None) -> str:
+def _lost_at_close(n: int, max_new: int | None, saved: int | None = None) -> str:
     """The warning's tail where :meth:`SessionStore.close` could not write the checkpoint
-    of a refit by hand on ``n`` labels that an earlier write failed to save."""
-    due = "" if max_new is None else f", due at {n + max_new} labels"
+    of a refit by hand on ``n`` labels that an earlier write failed to save; ``saved``: the
+    smallest count above ``n`` whose checkpoint is there (where the affected stages end, if
+    before the loop's next refit)."""
+    if saved is not None and (max_new is None or saved < n + max_new):
+        end = f"the refit saved at {saved} labels"
+    else:
+        end = "the loop's next refit" + (
+            "" if max_new is None else f", due at {n + max_new} labels"
+        )
     return (
         "This was a refit by hand whose checkpoint an earlier write could not save either, "
         "and the teacher closed without it: resume and load_model rebuild the stages from "
-        f"{n} labels up to the loop's next refit{due}, on the regular schedule, not on these "
+        f"{n} labels up to {end}, on the regular schedule, not on these "
         f"{n} labels, for good. The step log is complete."
     )
 
@@ -1980,6 +1989,9 @@ def _write_checkpoint(
         torch.save(payload, buffer)
         write_durably(path, buffer.getvalue(), tmp)
     except (OSError, RuntimeError) as exc:
+        # not kept alive by the error's traceback (held by a caller, a REPL): the model's
+        # size over again (its copy on the CPU where it is on a GPU) for each of these
+        del buffer, payload, state
         raise _write_error(
             exc, path, f"saving the model fitted on {n_demonstrations} labels", after
         ) from exc
@@ -2571,19 +2583,44 @@ class SessionStore:
         """Write the checkpoints of refits by hand that an earlier write failed to save
         (:meth:`save_checkpoint`), oldest first, each pruning as its own write would have;
         one that fails again is kept for the next try, or at ``closing`` said lost (a
-        warning)."""
-        for entry in list(self._unsaved):
-            n, digest, state = entry
-            try:
-                after = _lost_at_close(n, self._max_new) if closing else ""
-                _write_checkpoint(self.run_dir, None, n, digest, after, state=state)
-            except SessionWriteError as exc:
+        warning, given once every one was tried: with warnings as errors it raises only
+        then)."""
+        lost: list[str] = []
+        try:
+            for entry in list(self._unsaved):
+                n, digest, state = entry
+                try:
+                    _write_checkpoint(self.run_dir, None, n, digest, "", state=state)
+                except SessionWriteError as exc:
+                    if closing:
+                        lost.append(f"{exc}{self._lost_at_close(n)}")
+                    continue
+                self._unsaved.remove(entry)
+                if self.keep_checkpoints is not None:
+                    self._prune_checkpoints(n, self.keep_checkpoints)
+        except BaseException:  # a Ctrl-C: what it left unwritten said, then it goes on out
+            for n, _, _ in self._unsaved:
+                path = self.run_dir / CHECKPOINT_DIR / f"model-{n:08d}.pt"
                 if closing:
-                    warnings.warn(str(exc), stacklevel=4)
-                continue
-            self._unsaved.remove(entry)
-            if self.keep_checkpoints is not None:
-                self._prune_checkpoints(n, self.keep_checkpoints)
+                    then = self._lost_at_close(n)
+                else:
+                    then = _lost_hand_refit(n, self._max_new) if self._max_new else ""
+                lost.append(f"writing {path} was interrupted. {then}")
+            with contextlib.suppress(Exception):  # (warnings as errors: the Ctrl-C first)
+                for said in lost:
+                    warnings.warn(said, stacklevel=4)
+            raise
+        for said in lost:
+            warnings.warn(said, stacklevel=4)
+
+    def _lost_at_close(self, n: int) -> str:
+        """:func:`_lost_at_close` for the refit by hand on ``n`` labels, its stages ending at
+        the first checkpoint above ``n`` there now (a later refit by hand that was saved)."""
+        try:
+            above = [m for m, _ in _checkpoint_entries(self.run_dir / CHECKPOINT_DIR) if m > n]
+        except IncompatibleRunDirError:
+            above = []
+        return _lost_at_close(n, self._max_new, min(above, default=None))
 
     def _prune_checkpoints(self, newest: int, keep: int) -> None:
         """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
@@ -3842,17 +3879,32 @@ def _set_aside(path: Path, why: str) -> Path:
 
 def _copy_name(path: Path) -> tuple[Path | None, bool]:
     """Where :func:`_keep_a_copy` keeps the bytes of ``path``: the first ``<name>.damaged[-i]``
-    that already holds them (the same file or the same bytes: kept by a resume interrupted
-    before it wrote the rebuilt model over ``path``), ``True``; else the first free one,
-    ``False``; ``(None, False)`` where all 1000 are taken. Reads only."""
+    that already holds them (the same file or the same bytes; where ``path`` is a symbolic
+    link, only the same link: kept by a resume interrupted before it wrote the rebuilt model over
+    ``path``), ``True``; else the first free one, ``False``; ``(None, False)`` where all 1000
+    are taken. Reads only."""
     free = None
+    link = _link_of(path)
     for i in range(1000):
         target = path.with_name(f"{path.name}.damaged" + (f"-{i}" if i else ""))
         if not os.path.lexists(target):
             free = target if free is None else free
-        elif not target.is_symlink() and _holds_same(target, path):
+        elif target.is_symlink():
+            if link is not None and _link_of(target) == link:
+                return target, True
+        elif link is None and _holds_same(target, path):
+            # (not for a link: the file it points to, maybe this very target, is no copy
+            # of the link, and a failed write would remove it as one)
             return target, True
     return free, False
+
+
+def _link_of(path: Path) -> str | None:
+    """What the symbolic link ``path`` points to; None where it is none (or unreadable)."""
+    try:
+        return os.readlink(path)
+    except OSError:
+        return None
 
 
 def _keep_a_copy(path: Path) -> Path:

@@ -1072,8 +1072,9 @@ class ConfidentTeacher:
         (:func:`torchcbl.session.restore_model`, the module's notes on damaged files): a
         checkpoint it cannot use is renamed ``<name>.stale`` (not fitted on the log's labels,
         or named for more labels than the log holds) or ``<name>.damaged`` (one whose name
-        records no refit: a folder, a dangling link; with full refits, also one whose refit
-        lies on the regular schedule); a damaged checkpoint whose name records a refit, or
+        records no refit: a folder, a dangling link, checkpoint 0 where the session did not
+        start from a fitted model; with full refits, also one whose refit lies on the regular
+        schedule); a damaged checkpoint whose name records a refit, or
         one of another model's state at the count the model stands on, stays under its
         name, its bytes kept as ``<name>.damaged``, and the rebuilt model is written over it;
         with full refits the checkpoint of the labels the model stands on is written where
@@ -1450,8 +1451,8 @@ class ConfidentTeacher:
                 is done in memory, and the message says what resume and ``load_model`` give
                 for the stages up to the loop's next refit until the checkpoint is written:
                 the teacher writes it with its next checkpoint and at :meth:`close` (a
-                warning where that fails too; then, or where the process ends first, those
-                stages stay so for good).
+                warning where that fails too; then, or where the process ends without
+                :meth:`close`, those stages stay so for good).
         """
         if self._new_since_refit == 0 or not len(self._train):
             return False
