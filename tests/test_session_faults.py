@@ -678,6 +678,39 @@ def test_an_unsaved_refit_by_hand_lost_at_close_names_where_its_stages_end(tmp_p
     assert int(load_model(run, n_demonstrations=9).n_points_.sum()) == 9
 
 
+@pytest.mark.parametrize("eight", ["written", "lost"])
+def test_a_refit_by_hand_lost_at_close_is_worded_after_every_one_was_tried(
+    tmp_path, monkeypatch, eight
+):
+    """close() worded a lost refit by hand's warning as soon as its write failed, before the
+    later ones were tried: with 7 refused and 8 then written, 7's said its stages end at the
+    loop's refit "due at 12 labels" (they end at 8, whose model load_model gives); with 8 lost
+    too, "due at 12" where the refit at 8 moved the loop's next refit to 13."""
+    run = tmp_path / "run"
+    ct = _two_unsaved_hand_refits(run)
+    real = S.write_durably
+    refused = ("00000007",) if eight == "written" else ("00000007", "00000008")
+
+    def full(path, data, tmp):
+        if any(n in path.name for n in refused):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, data, tmp)
+
+    monkeypatch.setattr(S, "write_durably", full)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ct.close()
+    monkeypatch.undo()
+    said = " ".join(" ".join(str(w.message).split()) for w in caught)
+    assert "due at 12" not in said, said
+    if eight == "written":
+        assert "from 7 labels up to the refit saved at 8 labels" in said, said
+        assert int(load_model(run, n_demonstrations=8).n_points_.sum()) == 8  # what it says
+    else:
+        assert "from 7 labels up to the loop's next refit, due at 13 labels" in said, said
+        assert "from 8 labels up to the loop's next refit, due at 13 labels" in said, said
+
+
 def test_a_refused_checkpoint_s_error_holds_no_copy_of_the_model(tmp_path):
     """A checkpoint a full disk refused raised its SessionWriteError with the serialised
     bytes, the payload and the state still alive in the failed frame: a caller keeping the

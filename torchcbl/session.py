@@ -1930,16 +1930,22 @@ def _lost_hand_refit(n: int, max_new: int) -> str:
     )
 
 
-def _lost_at_close(n: int, max_new: int | None, saved: int | None = None) -> str:
+def _lost_at_close(
+    n: int, max_new: int | None, saved: int | None = None, last: int | None = None
+) -> str:
     """The warning's tail where :meth:`SessionStore.close` could not write the checkpoint
     of a refit by hand on ``n`` labels that an earlier write failed to save; ``saved``: the
     smallest count above ``n`` whose checkpoint is there (where the affected stages end, if
-    before the loop's next refit)."""
-    if saved is not None and (max_new is None or saved < n + max_new):
+    before the loop's next refit); ``last``: the last refit by hand from ``n`` on also lost,
+    each within ``max_new`` labels of the one before (the loop's next refit is due
+    ``max_new`` labels after it; ``n`` where none)."""
+    if last is None:
+        last = n
+    if saved is not None and (max_new is None or saved < last + max_new):
         end = f"the refit saved at {saved} labels"
     else:
         end = "the loop's next refit" + (
-            "" if max_new is None else f", due at {n + max_new} labels"
+            "" if max_new is None else f", due at {last + max_new} labels"
         )
     return (
         "This was a refit by hand whose checkpoint an earlier write could not save either, "
@@ -2583,9 +2589,10 @@ class SessionStore:
         """Write the checkpoints of refits by hand that an earlier write failed to save
         (:meth:`save_checkpoint`), oldest first, each pruning as its own write would have;
         one that fails again is kept for the next try, or at ``closing`` said lost (a
-        warning, given once every one was tried: with warnings as errors it raises only
+        warning, worded and given once every one was tried: where each one's stages end
+        depends on which later ones were written, and with warnings as errors it raises only
         then)."""
-        lost: list[str] = []
+        failed: list[tuple[int, str]] = []  # (n, what the failed write said)
         try:
             for entry in list(self._unsaved):
                 n, digest, state = entry
@@ -2593,34 +2600,65 @@ class SessionStore:
                     _write_checkpoint(self.run_dir, None, n, digest, "", state=state)
                 except SessionWriteError as exc:
                     if closing:
-                        lost.append(f"{exc}{self._lost_at_close(n)}")
+                        failed.append((n, str(exc)))
                     continue
                 self._unsaved.remove(entry)
                 if self.keep_checkpoints is not None:
                     self._prune_checkpoints(n, self.keep_checkpoints)
         except BaseException:  # a Ctrl-C: what it left unwritten said, then it goes on out
-            for n, _, _ in self._unsaved:
-                path = self.run_dir / CHECKPOINT_DIR / f"model-{n:08d}.pt"
-                if closing:
-                    then = self._lost_at_close(n)
-                else:
+            lost: list[str] = []
+            if closing:
+                interrupted = [
+                    (n, f"writing {self._path_of(n)} was interrupted. ")
+                    for n, _, _ in self._unsaved
+                ]
+                ends = self._lost_ends([n for n, _ in failed + interrupted])
+                lost = [
+                    f"{said}{_lost_at_close(n, self._max_new, *ends[n])}"
+                    for n, said in failed + interrupted
+                ]
+            else:
+                for n, _, _ in self._unsaved:
                     then = _lost_hand_refit(n, self._max_new) if self._max_new else ""
-                lost.append(f"writing {path} was interrupted. {then}")
+                    lost.append(f"writing {self._path_of(n)} was interrupted. {then}")
             with contextlib.suppress(Exception):  # (warnings as errors: the Ctrl-C first)
                 for said in lost:
                     warnings.warn(said, stacklevel=4)
             raise
-        for said in lost:
-            warnings.warn(said, stacklevel=4)
+        ends = self._lost_ends([n for n, _ in failed])
+        for n, said in failed:
+            warnings.warn(f"{said}{_lost_at_close(n, self._max_new, *ends[n])}", stacklevel=4)
 
-    def _lost_at_close(self, n: int) -> str:
-        """:func:`_lost_at_close` for the refit by hand on ``n`` labels, its stages ending at
-        the first checkpoint above ``n`` there now (a later refit by hand that was saved)."""
+    def _path_of(self, n: int) -> Path:
+        """The checkpoint of the model fitted on ``n`` labels."""
+        return self.run_dir / CHECKPOINT_DIR / f"model-{n:08d}.pt"
+
+    def _lost_ends(self, lost: list[int]) -> dict[int, tuple[int | None, int | None]]:
+        """For each refit by hand on ``n`` labels in ``lost`` (those whose checkpoints close()
+        leaves unwritten, all of them tried): ``(saved, last)``, the arguments of
+        :func:`_lost_at_close` saying where its stages end. Those stages are rebuilt on the
+        regular schedule from the checkpoint below them up to the first checkpoint above
+        ``n`` there now (a later refit saved), or where none comes before it, up to the
+        loop's next refit; each later lost refit by hand before that moved it, to
+        ``max_new`` labels after ``last``, the last of them."""
         try:
-            above = [m for m, _ in _checkpoint_entries(self.run_dir / CHECKPOINT_DIR) if m > n]
+            above = sorted(m for m, _ in _checkpoint_entries(self.run_dir / CHECKPOINT_DIR))
         except IncompatibleRunDirError:
             above = []
-        return _lost_at_close(n, self._max_new, min(above, default=None))
+        max_new = self._max_new
+        ends: dict[int, tuple[int | None, int | None]] = {}
+        for n in lost:
+            last = n
+            saved = min((m for m in above if m > n), default=None)
+            for m in sorted(set(lost)):
+                if m <= last or (saved is not None and m > saved):
+                    continue
+                if max_new is None or m < last + max_new:
+                    last = m  # the loop's refit moved again, unsaved
+                else:
+                    break
+            ends[n] = (saved, last)
+        return ends
 
     def _prune_checkpoints(self, newest: int, keep: int) -> None:
         """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
