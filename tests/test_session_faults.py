@@ -711,6 +711,30 @@ def test_a_refit_by_hand_lost_at_close_is_worded_after_every_one_was_tried(
         assert "from 8 labels up to the loop's next refit, due at 13 labels" in said, said
 
 
+def test_every_refit_by_hand_lost_at_close_is_named_with_warnings_as_errors(tmp_path, monkeypatch):
+    """close() gave one warning per lost refit by hand: with warnings as errors only the
+    first was raised, and the refit at 8, lost as well, went with no word. One warning now
+    names every lost checkpoint and where each one's stages end."""
+    run = tmp_path / "run"
+    ct = _two_unsaved_hand_refits(run)
+
+    def full(path, data, tmp):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(S, "write_durably", full)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(UserWarning) as err:
+            ct.close()
+    monkeypatch.undo()
+    said = " ".join(str(err.value).split())
+    for n in (7, 8):
+        assert str(run / "checkpoints" / f"model-{n:08d}.pt") in said, said
+        assert f"from {n} labels up to the loop's next refit, due at 13 labels" in said, said
+    back, _ = resume(run)  # the session closed all the same
+    back.close()
+
+
 def test_a_refused_checkpoint_s_error_holds_no_copy_of_the_model(tmp_path):
     """A checkpoint a full disk refused raised its SessionWriteError with the serialised
     bytes, the payload and the state still alive in the failed frame: a caller keeping the

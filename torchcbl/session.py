@@ -1955,6 +1955,20 @@ def _lost_at_close(
     )
 
 
+def _warn_unwritten(said: list[str]) -> None:
+    """One warning (stacklevel: the caller of ``ConfidentTeacher.close`` or ``run``) for the
+    checkpoints of refits by hand left unwritten, ``said`` one text each: every one named,
+    even with warnings as errors (which raise the first warning given). None for none."""
+    if not said:
+        return
+    if len(said) > 1:
+        said = [
+            f"{len(said)} checkpoints of refits by hand were not written:",
+            *(f"({i}) {one}" for i, one in enumerate(said, 1)),
+        ]
+    warnings.warn(" ".join(said), UserWarning, stacklevel=5)
+
+
 def _cpu_state(model: torch.nn.Module, *, clone: bool = False) -> dict[str, Any]:
     """``model``'s state dict (a new OrderedDict, its _metadata kept) with its tensors on the
     CPU whatever the model's device: a session taught on a GPU resumes, and its policy
@@ -2622,12 +2636,12 @@ class SessionStore:
                     then = _lost_hand_refit(n, self._max_new) if self._max_new else ""
                     lost.append(f"writing {self._path_of(n)} was interrupted. {then}")
             with contextlib.suppress(Exception):  # (warnings as errors: the Ctrl-C first)
-                for said in lost:
-                    warnings.warn(said, stacklevel=4)
+                _warn_unwritten(lost)
             raise
         ends = self._lost_ends([n for n, _ in failed])
-        for n, said in failed:
-            warnings.warn(f"{said}{_lost_at_close(n, self._max_new, *ends[n])}", stacklevel=4)
+        _warn_unwritten(
+            [f"{said}{_lost_at_close(n, self._max_new, *ends[n])}" for n, said in failed]
+        )
 
     def _path_of(self, n: int) -> Path:
         """The checkpoint of the model fitted on ``n`` labels."""
