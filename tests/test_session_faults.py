@@ -648,6 +648,31 @@ def test_a_ctrl_c_while_an_unsaved_refit_by_hand_is_written_again_says_so(
         assert (run / "checkpoints" / "model-00000008.pt").exists()
 
 
+def test_a_ctrl_c_at_close_names_a_refused_refit_by_hand_once(tmp_path, monkeypatch):
+    """A Ctrl-C while close() wrote the refit by hand at 8 again, after the disk had refused
+    the one at 7, warned of 7 twice: refused, then "interrupted" too (the handler walked
+    every entry still pending, the failed ones included). 7 is said refused, 8 interrupted."""
+    run = tmp_path / "run"
+    ct = _two_unsaved_hand_refits(run)
+
+    def full_then_ctrl_c(path, data, tmp):
+        if "00000007" in path.name:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(S, "write_durably", full_then_ctrl_c)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(KeyboardInterrupt):
+            ct.close()
+    monkeypatch.undo()
+    said = " ".join(" ".join(str(w.message).split()) for w in caught)
+    seven = str(run / "checkpoints" / "model-00000007.pt")
+    eight = str(run / "checkpoints" / "model-00000008.pt")
+    assert said.count(seven) == 1 and f"{seven} failed (No space left on device)" in said, said
+    assert said.count(eight) == 1 and f"{eight} was interrupted" in said, said
+
+
 def test_an_unsaved_refit_by_hand_lost_at_close_names_where_its_stages_end(tmp_path, monkeypatch):
     """close() could not write a refit by hand's checkpoint (7 labels) and said the stages
     from 7 are rebuilt on the regular schedule up to the loop's refit "due at 12 labels";

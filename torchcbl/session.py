@@ -2607,37 +2607,40 @@ class SessionStore:
         depends on which later ones were written, and with warnings as errors it raises only
         then)."""
         failed: list[tuple[int, str]] = []  # (n, what the failed write said)
+        refused: list[int] = []  # the id of each entry whose write failed (not interrupted)
         try:
             for entry in list(self._unsaved):
                 n, digest, state = entry
                 try:
                     _write_checkpoint(self.run_dir, None, n, digest, "", state=state)
                 except SessionWriteError as exc:
-                    if closing:
-                        failed.append((n, str(exc)))
+                    refused.append(id(entry))
+                    failed.append((n, str(exc)))
                     continue
                 self._unsaved.remove(entry)
                 if self.keep_checkpoints is not None:
                     self._prune_checkpoints(n, self.keep_checkpoints)
         except BaseException:  # a Ctrl-C: what it left unwritten said, then it goes on out
             lost: list[str] = []
+            untried = [e for e in self._unsaved if id(e) not in refused]  # (or the one cut)
             if closing:
                 interrupted = [
-                    (n, f"writing {self._path_of(n)} was interrupted. ")
-                    for n, _, _ in self._unsaved
+                    (n, f"writing {self._path_of(n)} was interrupted. ") for n, _, _ in untried
                 ]
                 ends = self._lost_ends([n for n, _ in failed + interrupted])
                 lost = [
                     f"{said}{_lost_at_close(n, self._max_new, *ends[n])}"
                     for n, said in failed + interrupted
                 ]
-            else:
-                for n, _, _ in self._unsaved:
+            else:  # a refused one is kept as it was, to be tried again: no word
+                for n, _, _ in untried:
                     then = _lost_hand_refit(n, self._max_new) if self._max_new else ""
                     lost.append(f"writing {self._path_of(n)} was interrupted. {then}")
             with contextlib.suppress(Exception):  # (warnings as errors: the Ctrl-C first)
                 _warn_unwritten(lost)
             raise
+        if not closing:
+            return  # each refused one kept for the next try
         ends = self._lost_ends([n for n, _ in failed])
         _warn_unwritten(
             [f"{said}{_lost_at_close(n, self._max_new, *ends[n])}" for n, said in failed]
