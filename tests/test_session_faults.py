@@ -763,19 +763,33 @@ def test_every_refit_by_hand_lost_at_close_is_named_with_warnings_as_errors(tmp_
 def test_a_refused_checkpoint_s_error_holds_no_copy_of_the_model(tmp_path):
     """A checkpoint a full disk refused raised its SessionWriteError with the serialised
     bytes, the payload and the state still alive in the failed frame: a caller keeping the
-    error (or its traceback, as a REPL does) kept the model's size over again."""
+    error (or its traceback, as a REPL does) kept the model's size over again. The OSError
+    it is raised from kept them too, through its own traceback (write_durably's ``data``):
+    no frame reachable from the error, its causes and contexts included, holds them."""
     run = tmp_path / "run"
     ct, env = session(run, max_new=5, noninteractive=False)
     ct.run(max_demonstrations=7)
     with file_size_limit(1000), pytest.raises(SessionWriteError) as err:
         ct.refit()
     held = []
-    tb = err.value.__traceback__
-    while tb is not None:
-        for name, value in tb.tb_frame.f_locals.items():
-            if isinstance(value, io.BytesIO) or (isinstance(value, dict) and "state_dict" in value):
-                held.append((tb.tb_frame.f_code.co_name, name))
-        tb = tb.tb_next
+    chain, seen = [err.value], set()
+    while chain:
+        exc = chain.pop()
+        if exc is None or id(exc) in seen:
+            continue
+        seen.add(id(exc))
+        chain += [exc.__cause__, exc.__context__]
+        tb = exc.__traceback__
+        while tb is not None:
+            for name, value in tb.tb_frame.f_locals.items():
+                if (
+                    isinstance(value, io.BytesIO)
+                    or (isinstance(value, (bytes, bytearray, memoryview)) and len(value) > 500)
+                    or (isinstance(value, dict) and "state_dict" in value)
+                ):
+                    held.append((type(exc).__name__, tb.tb_frame.f_code.co_name, name))
+            tb = tb.tb_next
+    assert isinstance(err.value.__cause__, OSError)  # the cause is kept, its errno said
     assert not held, held
     ct.close()
 

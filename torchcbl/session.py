@@ -244,6 +244,7 @@ import socket
 import sqlite3
 import stat
 import struct
+import sys
 import threading
 import time
 import warnings
@@ -1981,6 +1982,21 @@ def _cpu_state(model: torch.nn.Module, *, clone: bool = False) -> dict[str, Any]
     return state
 
 
+def _drop_tracebacks(exc: BaseException, outer: BaseException | None) -> None:
+    """Drop the traceback of ``exc`` and of every exception in its ``__cause__`` and
+    ``__context__`` chains: their frames (and what those hold) are then freed with them.
+    ``outer``: the exception a caller was handling already (its context), left as it is."""
+    chain: list[BaseException | None] = [exc]
+    seen: set[int] = set()
+    while chain:
+        one = chain.pop()
+        if one is None or one is outer or id(one) in seen:
+            continue
+        seen.add(id(one))
+        one.with_traceback(None)
+        chain += [one.__cause__, one.__context__]
+
+
 def _write_checkpoint(
     run_dir: Path,
     model: torch.nn.Module | None,
@@ -1995,6 +2011,7 @@ def _write_checkpoint(
     directory = run_dir / CHECKPOINT_DIR
     path = directory / f"model-{n_demonstrations:08d}.pt"
     tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
+    outer = sys.exc_info()[1]  # one a caller is handling: not this write's to change
     if state is None:
         assert model is not None
         state = _cpu_state(model)
@@ -2010,8 +2027,10 @@ def _write_checkpoint(
         write_durably(path, buffer.getvalue(), tmp)
     except (OSError, RuntimeError) as exc:
         # not kept alive by the error's traceback (held by a caller, a REPL): the model's
-        # size over again (its copy on the CPU where it is on a GPU) for each of these
+        # size over again (its copy on the CPU where it is on a GPU) for each of these; nor
+        # by its cause's (write_durably's ``data``, torch.save's payload), dropped
         del buffer, payload, state
+        _drop_tracebacks(exc, outer)
         raise _write_error(
             exc, path, f"saving the model fitted on {n_demonstrations} labels", after
         ) from exc
