@@ -131,8 +131,9 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   refit by hand's (``ConfidentTeacher.refit``): only its checkpoint records where it moved
   the refit schedule, so the writer keeps its model and writes it with its next checkpoint
   and at close, and freeing space is enough; where the process ends without close() (killed,
-  or exiting without calling it: nothing writes it on the way out) or that write fails at
-  close too (a warning), the stages from its count to the loop's next refit
+  or exiting without calling it: nothing writes it on the way out), that write fails at
+  close too, or a Ctrl-C interrupts close() before it is written (a warning, for the last
+  two, naming every such checkpoint), the stages from its count to the loop's next refit
   are rebuilt on the regular schedule for good. A new session's starting model
   (checkpoint 0) that cannot be written leaves no session.
 - Readers without write access. :func:`load_records`, :func:`load_model`, :func:`describe`
@@ -1927,7 +1928,8 @@ def _lost_hand_refit(n: int, max_new: int) -> str:
         "checkpoint or at close(): free space (or fix the file's permissions), then call "
         "run() again. Those stages stay on the regular schedule for good where the process "
         "ends before close() (killed, or exiting without calling it: nothing writes it on "
-        "the way out), or where the write fails at close() too."
+        "the way out), where the write fails at close() too, or where a Ctrl-C interrupts "
+        "close() before it is written."
     )
 
 
