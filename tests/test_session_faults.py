@@ -648,6 +648,31 @@ def test_a_ctrl_c_while_an_unsaved_refit_by_hand_is_written_again_says_so(
         assert (run / "checkpoints" / "model-00000008.pt").exists()
 
 
+def test_a_ctrl_c_at_close_names_a_refused_refit_by_hand_once(tmp_path, monkeypatch):
+    """A Ctrl-C while close() wrote the refit by hand at 8 again, after the disk had refused
+    the one at 7, warned of 7 twice: refused, then "interrupted" too (the handler walked
+    every entry still pending, the failed ones included). 7 is said refused, 8 interrupted."""
+    run = tmp_path / "run"
+    ct = _two_unsaved_hand_refits(run)
+
+    def full_then_ctrl_c(path, data, tmp):
+        if "00000007" in path.name:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(S, "write_durably", full_then_ctrl_c)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(KeyboardInterrupt):
+            ct.close()
+    monkeypatch.undo()
+    said = " ".join(" ".join(str(w.message).split()) for w in caught)
+    seven = str(run / "checkpoints" / "model-00000007.pt")
+    eight = str(run / "checkpoints" / "model-00000008.pt")
+    assert said.count(seven) == 1 and f"{seven} failed (No space left on device)" in said, said
+    assert said.count(eight) == 1 and f"{eight} was interrupted" in said, said
+
+
 def test_an_unsaved_refit_by_hand_lost_at_close_names_where_its_stages_end(tmp_path, monkeypatch):
     """close() could not write a refit by hand's checkpoint (7 labels) and said the stages
     from 7 are rebuilt on the regular schedule up to the loop's refit "due at 12 labels";
@@ -678,22 +703,93 @@ def test_an_unsaved_refit_by_hand_lost_at_close_names_where_its_stages_end(tmp_p
     assert int(load_model(run, n_demonstrations=9).n_points_.sum()) == 9
 
 
+@pytest.mark.parametrize("eight", ["written", "lost"])
+def test_a_refit_by_hand_lost_at_close_is_worded_after_every_one_was_tried(
+    tmp_path, monkeypatch, eight
+):
+    """close() worded a lost refit by hand's warning as soon as its write failed, before the
+    later ones were tried: with 7 refused and 8 then written, 7's said its stages end at the
+    loop's refit "due at 12 labels" (they end at 8, whose model load_model gives); with 8 lost
+    too, "due at 12" where the refit at 8 moved the loop's next refit to 13."""
+    run = tmp_path / "run"
+    ct = _two_unsaved_hand_refits(run)
+    real = S.write_durably
+    refused = ("00000007",) if eight == "written" else ("00000007", "00000008")
+
+    def full(path, data, tmp):
+        if any(n in path.name for n in refused):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, data, tmp)
+
+    monkeypatch.setattr(S, "write_durably", full)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ct.close()
+    monkeypatch.undo()
+    said = " ".join(" ".join(str(w.message).split()) for w in caught)
+    assert "due at 12" not in said, said
+    if eight == "written":
+        assert "from 7 labels up to the refit saved at 8 labels" in said, said
+        assert int(load_model(run, n_demonstrations=8).n_points_.sum()) == 8  # what it says
+    else:
+        assert "from 7 labels up to the loop's next refit, due at 13 labels" in said, said
+        assert "from 8 labels up to the loop's next refit, due at 13 labels" in said, said
+
+
+def test_every_refit_by_hand_lost_at_close_is_named_with_warnings_as_errors(tmp_path, monkeypatch):
+    """close() gave one warning per lost refit by hand: with warnings as errors only the
+    first was raised, and the refit at 8, lost as well, went with no word. One warning now
+    names every lost checkpoint and where each one's stages end."""
+    run = tmp_path / "run"
+    ct = _two_unsaved_hand_refits(run)
+
+    def full(path, data, tmp):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(S, "write_durably", full)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(UserWarning) as err:
+            ct.close()
+    monkeypatch.undo()
+    said = " ".join(str(err.value).split())
+    for n in (7, 8):
+        assert str(run / "checkpoints" / f"model-{n:08d}.pt") in said, said
+        assert f"from {n} labels up to the loop's next refit, due at 13 labels" in said, said
+    back, _ = resume(run)  # the session closed all the same
+    back.close()
+
+
 def test_a_refused_checkpoint_s_error_holds_no_copy_of_the_model(tmp_path):
     """A checkpoint a full disk refused raised its SessionWriteError with the serialised
     bytes, the payload and the state still alive in the failed frame: a caller keeping the
-    error (or its traceback, as a REPL does) kept the model's size over again."""
+    error (or its traceback, as a REPL does) kept the model's size over again. The OSError
+    it is raised from kept them too, through its own traceback (write_durably's ``data``):
+    no frame reachable from the error, its causes and contexts included, holds them."""
     run = tmp_path / "run"
     ct, env = session(run, max_new=5, noninteractive=False)
     ct.run(max_demonstrations=7)
     with file_size_limit(1000), pytest.raises(SessionWriteError) as err:
         ct.refit()
     held = []
-    tb = err.value.__traceback__
-    while tb is not None:
-        for name, value in tb.tb_frame.f_locals.items():
-            if isinstance(value, io.BytesIO) or (isinstance(value, dict) and "state_dict" in value):
-                held.append((tb.tb_frame.f_code.co_name, name))
-        tb = tb.tb_next
+    chain, seen = [err.value], set()
+    while chain:
+        exc = chain.pop()
+        if exc is None or id(exc) in seen:
+            continue
+        seen.add(id(exc))
+        chain += [exc.__cause__, exc.__context__]
+        tb = exc.__traceback__
+        while tb is not None:
+            for name, value in tb.tb_frame.f_locals.items():
+                if (
+                    isinstance(value, io.BytesIO)
+                    or (isinstance(value, (bytes, bytearray, memoryview)) and len(value) > 500)
+                    or (isinstance(value, dict) and "state_dict" in value)
+                ):
+                    held.append((type(exc).__name__, tb.tb_frame.f_code.co_name, name))
+            tb = tb.tb_next
+    assert isinstance(err.value.__cause__, OSError)  # the cause is kept, its errno said
     assert not held, held
     ct.close()
 

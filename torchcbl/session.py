@@ -131,8 +131,9 @@ What else can go wrong, and what happens (every case is tested in tests/test_ses
   refit by hand's (``ConfidentTeacher.refit``): only its checkpoint records where it moved
   the refit schedule, so the writer keeps its model and writes it with its next checkpoint
   and at close, and freeing space is enough; where the process ends without close() (killed,
-  or exiting without calling it: nothing writes it on the way out) or that write fails at
-  close too (a warning), the stages from its count to the loop's next refit
+  or exiting without calling it: nothing writes it on the way out), that write fails at
+  close too, or a Ctrl-C interrupts close() before it is written (a warning, for the last
+  two, naming every such checkpoint), the stages from its count to the loop's next refit
   are rebuilt on the regular schedule for good. A new session's starting model
   (checkpoint 0) that cannot be written leaves no session.
 - Readers without write access. :func:`load_records`, :func:`load_model`, :func:`describe`
@@ -244,6 +245,7 @@ import socket
 import sqlite3
 import stat
 import struct
+import sys
 import threading
 import time
 import warnings
@@ -1926,20 +1928,27 @@ def _lost_hand_refit(n: int, max_new: int) -> str:
         "checkpoint or at close(): free space (or fix the file's permissions), then call "
         "run() again. Those stages stay on the regular schedule for good where the process "
         "ends before close() (killed, or exiting without calling it: nothing writes it on "
-        "the way out), or where the write fails at close() too."
+        "the way out), where the write fails at close() too, or where a Ctrl-C interrupts "
+        "close() before it is written."
     )
 
 
-def _lost_at_close(n: int, max_new: int | None, saved: int | None = None) -> str:
+def _lost_at_close(
+    n: int, max_new: int | None, saved: int | None = None, last: int | None = None
+) -> str:
     """The warning's tail where :meth:`SessionStore.close` could not write the checkpoint
     of a refit by hand on ``n`` labels that an earlier write failed to save; ``saved``: the
     smallest count above ``n`` whose checkpoint is there (where the affected stages end, if
-    before the loop's next refit)."""
-    if saved is not None and (max_new is None or saved < n + max_new):
+    before the loop's next refit); ``last``: the last refit by hand from ``n`` on also lost,
+    each within ``max_new`` labels of the one before (the loop's next refit is due
+    ``max_new`` labels after it; ``n`` where none)."""
+    if last is None:
+        last = n
+    if saved is not None and (max_new is None or saved < last + max_new):
         end = f"the refit saved at {saved} labels"
     else:
         end = "the loop's next refit" + (
-            "" if max_new is None else f", due at {n + max_new} labels"
+            "" if max_new is None else f", due at {last + max_new} labels"
         )
     return (
         "This was a refit by hand whose checkpoint an earlier write could not save either, "
@@ -1947,6 +1956,20 @@ def _lost_at_close(n: int, max_new: int | None, saved: int | None = None) -> str
         f"{n} labels up to {end}, on the regular schedule, not on these "
         f"{n} labels, for good. The step log is complete."
     )
+
+
+def _warn_unwritten(said: list[str]) -> None:
+    """One warning (stacklevel: the caller of ``ConfidentTeacher.close`` or ``run``) for the
+    checkpoints of refits by hand left unwritten, ``said`` one text each: every one named,
+    even with warnings as errors (which raise the first warning given). None for none."""
+    if not said:
+        return
+    if len(said) > 1:
+        said = [
+            f"{len(said)} checkpoints of refits by hand were not written:",
+            *(f"({i}) {one}" for i, one in enumerate(said, 1)),
+        ]
+    warnings.warn(" ".join(said), UserWarning, stacklevel=5)
 
 
 def _cpu_state(model: torch.nn.Module, *, clone: bool = False) -> dict[str, Any]:
@@ -1959,6 +1982,21 @@ def _cpu_state(model: torch.nn.Module, *, clone: bool = False) -> dict[str, Any]
             value = value.detach().cpu()
             state[name] = value.clone() if clone else value
     return state
+
+
+def _drop_tracebacks(exc: BaseException, outer: BaseException | None) -> None:
+    """Drop the traceback of ``exc`` and of every exception in its ``__cause__`` and
+    ``__context__`` chains: their frames (and what those hold) are then freed with them.
+    ``outer``: the exception a caller was handling already (its context), left as it is."""
+    chain: list[BaseException | None] = [exc]
+    seen: set[int] = set()
+    while chain:
+        one = chain.pop()
+        if one is None or one is outer or id(one) in seen:
+            continue
+        seen.add(id(one))
+        one.with_traceback(None)
+        chain += [one.__cause__, one.__context__]
 
 
 def _write_checkpoint(
@@ -1975,6 +2013,7 @@ def _write_checkpoint(
     directory = run_dir / CHECKPOINT_DIR
     path = directory / f"model-{n_demonstrations:08d}.pt"
     tmp = directory / f".model-{n_demonstrations:08d}.pt.tmp"
+    outer = sys.exc_info()[1]  # one a caller is handling: not this write's to change
     if state is None:
         assert model is not None
         state = _cpu_state(model)
@@ -1990,8 +2029,10 @@ def _write_checkpoint(
         write_durably(path, buffer.getvalue(), tmp)
     except (OSError, RuntimeError) as exc:
         # not kept alive by the error's traceback (held by a caller, a REPL): the model's
-        # size over again (its copy on the CPU where it is on a GPU) for each of these
+        # size over again (its copy on the CPU where it is on a GPU) for each of these; nor
+        # by its cause's (write_durably's ``data``, torch.save's payload), dropped
         del buffer, payload, state
+        _drop_tracebacks(exc, outer)
         raise _write_error(
             exc, path, f"saving the model fitted on {n_demonstrations} labels", after
         ) from exc
@@ -2583,44 +2624,79 @@ class SessionStore:
         """Write the checkpoints of refits by hand that an earlier write failed to save
         (:meth:`save_checkpoint`), oldest first, each pruning as its own write would have;
         one that fails again is kept for the next try, or at ``closing`` said lost (a
-        warning, given once every one was tried: with warnings as errors it raises only
+        warning, worded and given once every one was tried: where each one's stages end
+        depends on which later ones were written, and with warnings as errors it raises only
         then)."""
-        lost: list[str] = []
+        failed: list[tuple[int, str]] = []  # (n, what the failed write said)
+        refused: list[int] = []  # the id of each entry whose write failed (not interrupted)
         try:
             for entry in list(self._unsaved):
                 n, digest, state = entry
                 try:
                     _write_checkpoint(self.run_dir, None, n, digest, "", state=state)
                 except SessionWriteError as exc:
-                    if closing:
-                        lost.append(f"{exc}{self._lost_at_close(n)}")
+                    refused.append(id(entry))
+                    failed.append((n, str(exc)))
                     continue
                 self._unsaved.remove(entry)
                 if self.keep_checkpoints is not None:
                     self._prune_checkpoints(n, self.keep_checkpoints)
         except BaseException:  # a Ctrl-C: what it left unwritten said, then it goes on out
-            for n, _, _ in self._unsaved:
-                path = self.run_dir / CHECKPOINT_DIR / f"model-{n:08d}.pt"
-                if closing:
-                    then = self._lost_at_close(n)
-                else:
+            lost: list[str] = []
+            untried = [e for e in self._unsaved if id(e) not in refused]  # (or the one cut)
+            if closing:
+                interrupted = [
+                    (n, f"writing {self._path_of(n)} was interrupted. ") for n, _, _ in untried
+                ]
+                ends = self._lost_ends([n for n, _ in failed + interrupted])
+                lost = [
+                    f"{said}{_lost_at_close(n, self._max_new, *ends[n])}"
+                    for n, said in failed + interrupted
+                ]
+            else:  # a refused one is kept as it was, to be tried again: no word
+                for n, _, _ in untried:
                     then = _lost_hand_refit(n, self._max_new) if self._max_new else ""
-                lost.append(f"writing {path} was interrupted. {then}")
+                    lost.append(f"writing {self._path_of(n)} was interrupted. {then}")
             with contextlib.suppress(Exception):  # (warnings as errors: the Ctrl-C first)
-                for said in lost:
-                    warnings.warn(said, stacklevel=4)
+                _warn_unwritten(lost)
             raise
-        for said in lost:
-            warnings.warn(said, stacklevel=4)
+        if not closing:
+            return  # each refused one kept for the next try
+        ends = self._lost_ends([n for n, _ in failed])
+        _warn_unwritten(
+            [f"{said}{_lost_at_close(n, self._max_new, *ends[n])}" for n, said in failed]
+        )
 
-    def _lost_at_close(self, n: int) -> str:
-        """:func:`_lost_at_close` for the refit by hand on ``n`` labels, its stages ending at
-        the first checkpoint above ``n`` there now (a later refit by hand that was saved)."""
+    def _path_of(self, n: int) -> Path:
+        """The checkpoint of the model fitted on ``n`` labels."""
+        return self.run_dir / CHECKPOINT_DIR / f"model-{n:08d}.pt"
+
+    def _lost_ends(self, lost: list[int]) -> dict[int, tuple[int | None, int | None]]:
+        """For each refit by hand on ``n`` labels in ``lost`` (those whose checkpoints close()
+        leaves unwritten, all of them tried): ``(saved, last)``, the arguments of
+        :func:`_lost_at_close` saying where its stages end. Those stages are rebuilt on the
+        regular schedule from the checkpoint below them up to the first checkpoint above
+        ``n`` there now (a later refit saved), or where none comes before it, up to the
+        loop's next refit; each later lost refit by hand before that moved it, to
+        ``max_new`` labels after ``last``, the last of them."""
         try:
-            above = [m for m, _ in _checkpoint_entries(self.run_dir / CHECKPOINT_DIR) if m > n]
+            above = sorted(m for m, _ in _checkpoint_entries(self.run_dir / CHECKPOINT_DIR))
         except IncompatibleRunDirError:
             above = []
-        return _lost_at_close(n, self._max_new, min(above, default=None))
+        max_new = self._max_new
+        ends: dict[int, tuple[int | None, int | None]] = {}
+        for n in lost:
+            last = n
+            saved = min((m for m in above if m > n), default=None)
+            for m in sorted(set(lost)):
+                if m <= last or (saved is not None and m > saved):
+                    continue
+                if max_new is None or m < last + max_new:
+                    last = m  # the loop's refit moved again, unsaved
+                else:
+                    break
+            ends[n] = (saved, last)
+        return ends
 
     def _prune_checkpoints(self, newest: int, keep: int) -> None:
         """Remove the files ``model-<m>.pt`` with 0 < m <= ``newest`` but the ``keep`` largest
