@@ -77,6 +77,7 @@ from corridor.env import DEFAULT_MAP, CorridorEnv, _circuit_actions
 from corridor.expert import CorridorExpert
 from corridor.maps import CorridorMap, available_maps, load_map, map_digest
 from corridor.world import SENSOR_NAMES, Action, WorldConfig
+from torchcbl.confidence import _check_std_reading
 from torchcbl.evaluation import (
     SEED_RESULT,
     FigureError,
@@ -269,10 +270,6 @@ class CorridorExperimentConfig:
             or not (math.isfinite(self.max_std) and self.max_std > 0)
         ):
             raise ValueError(f"max_std must be a finite number > 0, got {self.max_std!r}")
-        if self.threshold_reading not in _READINGS:
-            raise ValueError(
-                f"threshold_reading: expected one of {_READINGS}, got {self.threshold_reading!r}"
-            )
         # a map file by its absolute path, so that results.json names it from any directory
         # (plot_results, evaluate_saved_policy, a replay); a shipped map by its name
         if not isinstance(self.map_name, (str, Path)):
@@ -283,13 +280,7 @@ class CorridorExperimentConfig:
             object.__setattr__(self, "map_name", str(Path(self.map_name).resolve()))
         object.__setattr__(self, "map_name", str(self.map_name))
         # what the workers would only find after each seed's teaching, checked now
-        try:
-            self.rule()
-        except ValueError as exc:
-            raise ValueError(
-                f"max_std = {self.max_std} gives no usable threshold with threshold_reading="
-                f"{self.threshold_reading!r} ({exc})"
-            ) from None
+        _check_std_reading(self.max_std, self.threshold_reading, _READINGS)
         pert = self.eval_perturbation
         pair = isinstance(pert, (Sequence, np.ndarray)) and not isinstance(pert, (str, bytes))
         if not pair or len(pert) != 2:

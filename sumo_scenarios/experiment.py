@@ -65,6 +65,7 @@ import numpy as np
 
 from sumo_scenarios import metrics
 from sumo_scenarios.scenarios import LANE_NAMES
+from torchcbl.confidence import _check_std_reading
 from torchcbl.evaluation import (
     SEED_RESULT,
     FigureError,
@@ -316,18 +317,8 @@ class DrivingExperimentConfig:
             )
         if self.teacher not in ("expert", "human"):
             raise ValueError(f"teacher must be 'expert' or 'human', got {self.teacher!r}")
-        if self.threshold_reading not in _READINGS:
-            raise ValueError(
-                f"threshold_reading: expected one of {_READINGS}, got {self.threshold_reading!r}"
-            )
         # what each worker would only find after its non-interactive phase, checked now
-        try:
-            self.rule()
-        except ValueError as exc:
-            raise ValueError(
-                f"max_std = {self.max_std} gives no usable threshold with threshold_reading="
-                f"{self.threshold_reading!r} ({exc})"
-            ) from None
+        _check_std_reading(self.max_std, self.threshold_reading, _READINGS)
 
     def rule(self) -> DistanceRule:
         """A fresh :class:`torchcbl.DistanceRule` that ``max_std`` and ``threshold_reading``

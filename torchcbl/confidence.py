@@ -611,3 +611,22 @@ def rule_from_config(config: dict[str, Any]) -> ConfidenceRule:
         f"cannot rebuild confidence rule {kind!r} from a run directory: it is not one of "
         f"DistanceRule, PosteriorRule, AutoThresholdRule. Pass rule=<your rule> to resume()."
     )
+
+
+def _check_std_reading(max_std: float, reading: str, readings: tuple[str, ...]) -> None:
+    """An experiment config's check of its ``max_std`` and ``threshold_reading`` (``readings``:
+    the config's, its default first), made when the config is built, not after a worker's
+    teaching: the reading is one of them, and :meth:`DistanceRule.from_std` gives a rule.
+
+    Raises:
+        ValueError: naming the field and what was given.
+    """
+    if reading not in readings:
+        raise ValueError(f"threshold_reading: expected one of {readings}, got {reading!r}")
+    try:
+        DistanceRule.from_std(max_std, reading)
+    except ValueError as exc:
+        raise ValueError(
+            f"max_std = {max_std} gives no usable threshold with threshold_reading="
+            f"{reading!r} ({exc})"
+        ) from None
