@@ -572,6 +572,19 @@ def test_an_unsaved_refit_by_hand_is_written_at_close_or_said_lost(tmp_path, mon
         back.close()
 
 
+def _disk_full_for(monkeypatch, *names: str) -> None:
+    """Make every write of a file named one of ``names`` fail as a full disk would
+    (``write_durably`` raises ENOSPC); other writes go through."""
+    real = S.write_durably
+
+    def full(path, data, tmp):
+        if path.name in names:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, data, tmp)
+
+    monkeypatch.setattr(S, "write_durably", full)
+
+
 def _two_unsaved_hand_refits(run: Path) -> ConfidentTeacher:
     """A session refitting every 5 labels whose refits by hand at 7 and at 8 a full disk
     refused, taught on to 9 labels (open)."""
@@ -590,14 +603,7 @@ def test_close_writes_every_unsaved_refit_by_hand_with_warnings_as_errors(tmp_pa
     refit at 8 lost where the disk had room for it). Every one is tried, then the warning."""
     run = tmp_path / "run"
     ct = _two_unsaved_hand_refits(run)
-    real = S.write_durably
-
-    def seven_full(path, data, tmp):
-        if "00000007" in path.name:
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return real(path, data, tmp)
-
-    monkeypatch.setattr(S, "write_durably", seven_full)
+    _disk_full_for(monkeypatch, "model-00000007.pt")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with pytest.raises(UserWarning, match="model-00000007.pt"):
@@ -682,14 +688,7 @@ def test_an_unsaved_refit_by_hand_lost_at_close_names_where_its_stages_end(tmp_p
     ct.run(max_demonstrations=7)
     with file_size_limit(1000), pytest.raises(SessionWriteError):
         ct.refit()
-    real = S.write_durably
-
-    def seven_full(path, data, tmp):
-        if "00000007" in path.name:
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return real(path, data, tmp)
-
-    monkeypatch.setattr(S, "write_durably", seven_full)
+    _disk_full_for(monkeypatch, "model-00000007.pt")
     ct.run(max_demonstrations=9)
     assert ct.refit()  # at 9: saved (7 tried again first, refused again)
     with warnings.catch_warnings(record=True) as caught:
@@ -713,15 +712,9 @@ def test_a_refit_by_hand_lost_at_close_is_worded_after_every_one_was_tried(
     too, "due at 12" where the refit at 8 moved the loop's next refit to 13."""
     run = tmp_path / "run"
     ct = _two_unsaved_hand_refits(run)
-    real = S.write_durably
-    refused = ("00000007",) if eight == "written" else ("00000007", "00000008")
-
-    def full(path, data, tmp):
-        if any(n in path.name for n in refused):
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return real(path, data, tmp)
-
-    monkeypatch.setattr(S, "write_durably", full)
+    refused = ("model-00000007.pt",)
+    refused += () if eight == "written" else ("model-00000008.pt",)
+    _disk_full_for(monkeypatch, *refused)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         ct.close()
@@ -1562,14 +1555,7 @@ def test_a_checkpoint_linked_to_its_own_damaged_copy_keeps_it_when_the_write_bac
     theirs.write_bytes(data)
     hand.unlink()
     hand.symlink_to(theirs.name)
-    real = S.write_durably
-
-    def seven_full(path, data, tmp):
-        if path.name == hand.name:
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return real(path, data, tmp)
-
-    monkeypatch.setattr(S, "write_durably", seven_full)
+    _disk_full_for(monkeypatch, hand.name)
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
         back, _ = resume(run)
