@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import json
 import math
+import operator
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, Protocol, overload, runtime_checkable
 
@@ -84,7 +85,7 @@ def _read(c: Any, rule: object, *names: str) -> tuple[Any, ...]:
     TypeError naming them where ``c`` lacks one. Any object with those fields is read (a
     custom model may answer with a look-alike of :class:`~torchcbl.gmm.Classification`)."""
     try:
-        return tuple(getattr(c, name) for name in names)
+        return operator.attrgetter(*names)(c)  # a tuple of the fields, for two or more
     except AttributeError:
         missing = [name for name in names if not hasattr(c, name)]
         if not missing:  # raised inside a property of c's own: its error, as it was
@@ -286,15 +287,15 @@ class DistanceRule:
         observations: a ValueError refuses observations of another shape. ``c`` may be any
         object with ``action`` and ``distance`` (a TypeError names those it lacks)."""
         c_action, c_distance = _read(c, self, "action", "distance")
+        action = _np(c_action)
         if self.quantile is None:
             thr = float(self.max_std)  # type: ignore[arg-type]
         else:
-            action = _np(c_action)
             d = None if observations is None else self._features(observations, len(action))
             if d is None and self._dof is None and not (action >= 0).any():
                 return torch.zeros(len(action), dtype=torch.bool)  # no model: ask anyway
             thr = self.threshold(d)
-        ok = (_np(c_distance) <= thr) & (_np(c_action) >= 0)
+        ok = (_np(c_distance) <= thr) & (action >= 0)
         return torch.from_numpy(ok)
 
     def _features(self, observations: Any, n: int) -> int:
