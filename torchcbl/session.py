@@ -2886,6 +2886,13 @@ def _written_file(path: Path) -> bool:
         return True
 
 
+def _records_refit(path: Path, why: str) -> bool:
+    """Whether a checkpoint that could not be loaded (``why``, as
+    :func:`_checkpoint_payload` says) still records a refit at its count by its name: a
+    damaged one (not a stale one) that a writer may have written (:func:`_written_file`)."""
+    return why == "damaged" and _written_file(path)
+
+
 def _refit_schedule(start: int, k: int, recorded: Iterable[int], max_new: int) -> list[int]:
     """The loop's refits after the one at ``start`` labels up to the one at ``k``: every
     ``max_new`` labels from the last refit, which a refit recorded at a count in between
@@ -3348,10 +3355,12 @@ def _demonstrations(
     n_steps: int | None,
     digest: str | None = None,
 ) -> Demonstrations:
-    """A :class:`Demonstrations` again (pickle's and copy's), with the digest it had."""
-    made = Demonstrations(x, y, source=source, n_steps=n_steps)
-    if digest is not None:  # (the arrays as read, not as they may have been changed since)
-        made.digest = digest
+    """A :class:`Demonstrations` again (pickle's and copy's), with the digest it had (of the
+    arrays as read, not as they may have been changed since: kept, not hashed again)."""
+    if source is None or digest is None:
+        return Demonstrations(x, y, source=source, n_steps=n_steps)
+    made = tuple.__new__(Demonstrations, (x, y))
+    made.source, made.n_steps, made.digest = Path(os.path.abspath(source)), n_steps, digest
     return made
 
 
@@ -3913,7 +3922,7 @@ def _recorded_refits(
     ``.damaged`` (:func:`restore_model`), and an older torchcbl's resume that set one aside
     taught on on the regular schedule.
     """
-    named = {n for n, path, why in passed_over if why == "damaged" and _written_file(path)}
+    named = {n for n, path, why in passed_over if _records_refit(path, why)}
     return tuple(sorted(n for n in named if above < n <= n_labels))
 
 
@@ -4263,7 +4272,7 @@ def _refits_below(
     for n, path in _checkpoint_entries(directory):
         if 0 < n < last and n not in named:
             payload, why = _checkpoint_payload(path, base + n, all_xs, all_ys)
-            if payload is not None or (why == "damaged" and _written_file(path)):
+            if payload is not None or _records_refit(path, why):
                 named.add(n)
     return tuple(sorted(named))
 
@@ -4744,7 +4753,7 @@ def _stage_models(
             if found is not None:
                 last, payload = c, found
                 break
-            if why == "damaged" and c > 0 and _written_file(path):
+            if c > 0 and _records_refit(path, why):
                 recorded.add(c)
         scanned = n
         start = 0 if last is None else last
