@@ -2052,7 +2052,7 @@ class ConfidentTeacher:
         assert self._resumed_at is not None
         start, end = self._resumed_at
         return _last_run_streaks(
-            self.records[:end],
+            self.records[start:end],  # resume refuses a log with a gap: record i is step i
             {c.step for c in self.corrections},
             start,
             time_limit_is_success=cfg.time_limit_is_success,
