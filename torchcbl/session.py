@@ -3970,8 +3970,15 @@ def _copy_name(path: Path) -> tuple[Path | None, bool]:
     are taken. Reads only."""
     free = None
     link = _link_of(path)
+    try:  # the folder listed once: 1000 names each looked up cost 1000 system calls
+        there = {e.name for e in os.scandir(path.parent)}
+    except OSError:
+        there = None  # each name looked up, as below
     for i in range(1000):
         target = path.with_name(f"{path.name}.damaged" + (f"-{i}" if i else ""))
+        if there is not None and target.name not in there:
+            free = target if free is None else free
+            continue
         if not os.path.lexists(target):
             free = target if free is None else free
         elif target.is_symlink():
