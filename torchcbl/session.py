@@ -3263,7 +3263,15 @@ def _labels(run_dir: str | os.PathLike[str], *, depth: int = 0) -> tuple[np.ndar
     """:func:`load_labels` for torchcbl's readers, its warnings pointing at the caller of the
     public reader that called it, ``depth`` frames of torchcbl's own between them."""
     config = load_config(run_dir)
-    records, corrections = _read_log(run_dir, depth=depth + 1)
+    return _label_arrays(config, *_read_log(run_dir, depth=depth + 1))
+
+
+def _label_arrays(
+    config: Mapping[str, Any], records: list[StepRecord], corrections: dict[int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The labels of ``records`` and their ``corrections`` in arrival order
+    (:func:`label_sequence`) as arrays: observations [M, D] float64 and labels [M] int64,
+    [0, D] and [0] (D from ``config``) for none."""
     xs, ys = label_sequence(records, _corrections_of(records, corrections))
     if not ys:
         n_features = int(config["env"]["n_features"])
@@ -3396,12 +3404,7 @@ def _training_set(
     prior = _read_prior(run_dir, config)  # (this config: not read again for the prior)
     records, corrections = _read_log(run_dir, depth=depth + 1, below=at_steps)
     n_steps = records[-1].step + 1 if records else 0
-    xs, ys = label_sequence(records, _corrections_of(records, corrections))
-    if ys:
-        x, y = np.stack(xs), np.asarray(ys, dtype=np.int64)
-    else:
-        n_features = int(config["env"]["n_features"])
-        x, y = np.zeros((0, n_features), dtype=np.float64), np.zeros(0, dtype=np.int64)
+    x, y = _label_arrays(config, records, corrections)
     if prior is not None:
         x, y = np.concatenate([prior[0], x]), np.concatenate([prior[1], y])
     if len(y) and _relabels(config):
