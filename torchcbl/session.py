@@ -3905,9 +3905,8 @@ def _scan_checkpoints(
         passed_over.append((n, path, why))
     last = 0 if found is None else found[0]
     refits = _recorded_refits(passed_over, last, n_labels)
-    if found is None:
-        return _CheckpointScan(None, None, passed_over, beyond, refits)
-    return _CheckpointScan(found[0], found[1], passed_over, beyond, refits)
+    n, payload = found or (None, None)
+    return _CheckpointScan(n, payload, passed_over, beyond, refits)
 
 
 def _recorded_refits(
@@ -5991,28 +5990,23 @@ def resume_problems(
     return problems
 
 
-class _NotGiven:
-    """A ``gymnasium.make`` argument one side did not give, as a refusal writes it."""
+class _Said:
+    """A value a refusal writes as words, not as a Python value (its ``repr`` is ``text``)."""
+
+    def __init__(self, text: str) -> None:
+        self.text = text
 
     def __repr__(self) -> str:
-        return "not given (the env's default)"
+        return self.text
 
 
-_NOT_GIVEN = _NotGiven()
+#: a ``gymnasium.make`` argument one side did not give
+_NOT_GIVEN = _Said("not given (the env's default)")
+#: a step cap (``max_episode_steps``) of None: no cap, not an argument left out
+_NO_CAP = _Said("no cap")
 
 
-class _NoCap:
-    """A step cap (``max_episode_steps``) of None, as a refusal writes it: no cap, not an
-    argument left out."""
-
-    def __repr__(self) -> str:
-        return "no cap"
-
-
-_NO_CAP = _NoCap()
-
-
-def _cap_text(cap: int | None) -> int | _NoCap:
+def _cap_text(cap: int | None) -> int | _Said:
     """A step cap as a refusal writes it: the number, or "no cap" for None."""
     return _NO_CAP if cap is None else cap
 
