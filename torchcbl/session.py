@@ -5734,7 +5734,7 @@ def _checkpoint_report(
     rebuilt = _rebuilt_in_place(scan.refits, scan.n or 0, max_new, incremental)
     foreign = None if scan.payload is None else _foreign_state(config, scan.payload)
     if foreign is not None and scan.n is not None:
-        k = scan.stood_on(len(ys), int(config["teaching"]["max_new"]))
+        k = scan.stood_on(len(ys), max_new)
         copy_name = _copy_name(run / CHECKPOINT_DIR / f"model-{scan.n:08d}.pt")[0]
         notes.append(_foreign_note(config, scan.n, k, foreign, copy_name))
         scan = dataclasses.replace(scan, n=None, payload=None)  # resume starts from none
